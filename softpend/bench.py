@@ -1,0 +1,45 @@
+"""Benchmarks: measured performance figures, printed by ``softpend bench --json``.
+
+Each benchmark is a function ``() -> dict[str, float]`` listed in :data:`BENCHMARKS` as
+``"module:function"``; ``softpend bench`` runs them in order (or only those named with ``--only``) and
+merges their figures into one JSON object.  Ratios are measured inside one function so that both sides
+see the same machine load.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from typing import Callable, Iterable
+
+#: ``(name, "module:function")`` pairs; one line per benchmark group.
+BENCHMARKS: list[tuple[str, str]] = [
+    ("plant", "softpend.plant.benchmarks:bench_plant"),
+]
+
+
+def resolve(target: str) -> Callable[[], dict[str, float]]:
+    module_name, function_name = target.split(":")
+    return getattr(importlib.import_module(module_name), function_name)
+
+
+def run_benchmarks(only: Iterable[str] | None = None, progress: bool = True) -> dict[str, float]:
+    """Run the selected benchmark groups and return all their figures in one dict."""
+    selected = list(only) if only else [name for name, _ in BENCHMARKS]
+    known = {name for name, _ in BENCHMARKS}
+    unknown = [name for name in selected if name not in known]
+    if unknown:
+        raise ValueError(f"unknown benchmark group(s) {unknown}; known: {sorted(known)}")
+    results: dict[str, float] = {}
+    for name, target in BENCHMARKS:
+        if name not in selected:
+            continue
+        start = time.perf_counter()
+        if progress:
+            import sys
+
+            print(f"[bench] {name} ...", file=sys.stderr, flush=True)
+        results.update(resolve(target)())
+        if progress:
+            print(f"[bench] {name} done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    return results

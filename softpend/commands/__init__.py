@@ -1,0 +1,1 @@
+"""Subcommands of the ``softpend`` command line (one module each)."""

@@ -1,0 +1,30 @@
+"""``softpend bench``: print measured performance figures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from ..bench import BENCHMARKS
+
+    parser = subparsers.add_parser("bench", help="measure performance figures (see softpend.bench)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object (default: a table)")
+    parser.add_argument(
+        "--only", action="append", metavar="GROUP", help=f"run only this group (repeatable): {[n for n, _ in BENCHMARKS]}"
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..bench import run_benchmarks
+
+    results = run_benchmarks(args.only)
+    if args.json:
+        print(json.dumps(results, indent=2, sort_keys=True))
+    else:
+        width = max(map(len, results), default=0)
+        for key, value in results.items():
+            print(f"{key:<{width}}  {value:.6g}" if isinstance(value, float) else f"{key:<{width}}  {value}")
+    return 0

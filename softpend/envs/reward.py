@@ -1,0 +1,81 @@
+"""The report's reward (eqs. 4-5): a clipped cot|theta| shaping term plus a decaying bonus near upright.
+
+    r_t  = clip(cos(theta)/|sin(theta)|, -c, c) / c  +  w * r*_t
+    r*_t = 1                           if |theta_t| < epsilon
+         = r*_{t-1} * exp(-k * dt)      otherwise
+
+``theta`` is the tip angle from upright.  The shaping term is divided by its clip value ``c`` (the report
+only states proportionality) so that it lies in ``[-1, 1]``: -1 hanging, about 0 horizontal, and it climbs
+steeply near upright (``cot|theta| = c`` at ``|theta| = atan(1/c)``, 0.02 rad for ``c = 50``).  The bonus
+``r*`` pays ``w`` per step while the tip is within ``epsilon`` of upright and then decays at rate ``k``
+[1/s], which rewards staying up rather than swinging through.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RewardParams:
+    """Parameters of the report's reward.
+
+    Parameters
+    ----------
+    clip_value : float
+        ``c``: the shaping term ``cos/|sin|`` is clipped to ``[-c, c]`` (the report: 50).
+    epsilon_rad : float
+        Half-width of the bonus region around upright [rad].
+    bonus_weight : float
+        ``w``: reward per step while inside the bonus region.
+    bonus_decay_per_s : float
+        ``k``: decay rate of the bonus after leaving the region [1/s].
+    """
+
+    clip_value: float = 50.0
+    epsilon_rad: float = 0.1
+    bonus_weight: float = 1.0
+    bonus_decay_per_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("clip_value", "epsilon_rad"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        for name in ("bonus_weight", "bonus_decay_per_s"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
+
+
+def shaping_reward(theta_rad: np.ndarray | float, clip_value: float = 50.0) -> np.ndarray | float:
+    """``clip(cos(theta)/|sin(theta)|, -c, c) / c`` (vectorised; ``theta = 0`` gives 1)."""
+    theta = np.asarray(theta_rad, dtype=float)
+    sin_abs = np.abs(np.sin(theta))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(sin_abs > 0, np.cos(theta) / np.maximum(sin_abs, 1e-300), np.sign(np.cos(theta)) * np.inf)
+    value = np.clip(ratio, -clip_value, clip_value) / clip_value
+    return float(value) if np.ndim(theta_rad) == 0 else value
+
+
+def next_bonus(theta_rad: np.ndarray | float, previous_bonus: np.ndarray | float, dt_s: float, params: RewardParams) -> np.ndarray | float:
+    """Bonus ``r*_t`` from the tip angle and the previous bonus (vectorised)."""
+    inside = np.abs(theta_rad) < params.epsilon_rad
+    value = np.where(inside, 1.0, np.asarray(previous_bonus, dtype=float) * math.exp(-params.bonus_decay_per_s * dt_s))
+    return float(value) if np.ndim(value) == 0 else value
+
+
+def step_reward(theta_rad, previous_bonus, dt_s: float, params: RewardParams = RewardParams()):
+    """One step of the report's reward.
+
+    Returns
+    -------
+    reward, bonus : float or array
+        The reward ``r_t`` and the new bonus state ``r*_t`` (feed it back as ``previous_bonus``).
+    """
+    bonus = next_bonus(theta_rad, previous_bonus, dt_s, params)
+    reward = shaping_reward(theta_rad, params.clip_value) + params.bonus_weight * np.asarray(bonus)
+    return (float(reward) if np.ndim(reward) == 0 else reward), bonus

@@ -1,0 +1,219 @@
+"""Gymnasium environments: swing the soft rod up from hanging and balance it upright."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Optional
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from ..plant import Observation, RodParams, SimulationDiverged, make_plant
+from .reward import RewardParams
+
+#: Angular rates and tip velocities are divided by this before entering the observation vector [1/s].
+VELOCITY_SCALE_PER_S = 10.0
+
+OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
+    "cos_phi",
+    "sin_phi",
+    "cos_theta",
+    "sin_theta",
+    "ex_over_L",
+    "ey_over_L",
+    "phi_dot_over_10",
+    "theta_dot_over_10",
+    "ex_dot_over_10L",
+    "ey_dot_over_10L",
+    "bonus",
+)
+
+
+class SoftPendulumEnv(gym.Env):
+    """Swing-up and balance of a soft rod driven by a torque-limited motor at its base.
+
+    ## Description
+    A motor hub drives the base of a soft rod (a pseudo-rigid-body chain simulated with Exudyn, see
+    :class:`softpend.plant.PRBPlant`).  The rod starts hanging down; the goal is to bring the *tip* above
+    the hub and keep it there.  The torque limit is smaller than the torque needed to hold the rod
+    horizontal, so the controller has to pump energy over several swings.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``: the base torque as a fraction of ``torque_limit_nm``.
+
+    ## Observation Space
+    ``Box(-bound, bound, (11,), float32)`` with, in order, ``cos(phi), sin(phi), cos(theta), sin(theta),
+    ex/L, ey/L, phi_dot/10, theta_dot/10, ex_dot/(10 L), ey_dot/(10 L), bonus``: base angle ``phi`` and tip
+    angle ``theta`` from upright, tip position ``(ex, ey)`` relative to the hub [m], their rates, and the
+    reward's bonus state ``r*`` (so that the reward is a function of the observation).  Velocity entries
+    are clipped to ``[-5, 5]`` (50 rad/s).  ``info["observation"]`` holds the report's raw variables
+    (:data:`softpend.plant.OBSERVATION_NAMES`).
+
+    ## Rewards
+    The report's eqs. 4-5 (:mod:`softpend.envs.reward`): ``clip(cot|theta|, -50, 50)/50`` plus a bonus of
+    1 per step inside ``|theta| < epsilon`` that decays at ``bonus_decay_per_s`` after leaving it.
+
+    ## Starting State
+    ``start="hanging"`` (default): ``phi = pi`` plus uniform noise of ``start_noise_rad`` on the hub angle
+    and rate; ``"upright"``: straight up plus the same noise; ``"random"``: hub angle uniform in
+    ``[-pi, pi)``.  All draws use ``self.np_random``.
+
+    ## Episode End
+    No terminal state: episodes are truncated after ``max_episode_steps`` (1000 steps = 10 s when made
+    with ``gymnasium.make``).  If the simulation diverges the step returns ``truncated=True`` with
+    ``info["truncation_reason"]`` and the last valid observation.
+
+    ## Arguments
+    ``params`` (RodParams), ``dt_s`` (0.01), ``substeps`` (2), ``torque_limit_nm`` (overrides
+    ``params.torque_limit_nm``), ``reward_params`` (RewardParams), ``start``, ``start_noise_rad``
+    (0.05), ``plant`` (``"prb"``; any name of :func:`softpend.plant.make_plant`).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(
+        self,
+        params: Optional[RodParams] = None,
+        dt_s: float = 0.01,
+        substeps: int = 2,
+        torque_limit_nm: Optional[float] = None,
+        reward_params: Optional[RewardParams] = None,
+        start: str = "hanging",
+        start_noise_rad: float = 0.05,
+        plant: str = "prb",
+        render_mode: Optional[str] = None,
+    ) -> None:
+        params = params if params is not None else RodParams()
+        if torque_limit_nm is not None:
+            params = params.replace(torque_limit_nm=torque_limit_nm)
+        if start not in ("hanging", "upright", "random"):
+            raise ValueError(f"start must be 'hanging', 'upright' or 'random', got {start!r}")
+        if not math.isfinite(start_noise_rad) or start_noise_rad < 0:
+            raise ValueError(f"start_noise_rad must be non-negative and finite, got {start_noise_rad!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.params = params
+        self.reward_params = reward_params if reward_params is not None else RewardParams()
+        self.plant = make_plant(plant, params=params, dt_s=dt_s, substeps=substeps)
+        self.dt_s = self.plant.dt_s
+        self.torque_limit_nm = params.torque_limit_nm
+        self.start = start
+        self.start_noise_rad = float(start_noise_rad)
+        self.render_mode = render_mode
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        bound = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32)
+        self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
+        self._bound = bound
+        self._bonus = 0.0
+        self._bonus_decay = math.exp(-self.reward_params.bonus_decay_per_s * self.dt_s)
+        self._observation: Optional[Observation] = None
+
+    # ------------------------------------------------------------------ helpers
+    def _vector(self, o: Observation) -> np.ndarray:
+        inv_l = 1.0 / self.params.length_m
+        v = VELOCITY_SCALE_PER_S
+        vec = np.array(
+            [
+                math.cos(o.phi_rad),
+                math.sin(o.phi_rad),
+                math.cos(o.theta_rad),
+                math.sin(o.theta_rad),
+                o.ex_m * inv_l,
+                o.ey_m * inv_l,
+                o.phi_dot_rad_s / v,
+                o.theta_dot_rad_s / v,
+                o.ex_dot_m_s * inv_l / v,
+                o.ey_dot_m_s * inv_l / v,
+                self._bonus,
+            ],
+            dtype=np.float32,
+        )
+        return np.clip(vec, -self._bound, self._bound)
+
+    def _reward(self, theta: float) -> float:
+        rp = self.reward_params
+        if abs(theta) < rp.epsilon_rad:
+            self._bonus = 1.0
+        else:
+            self._bonus *= self._bonus_decay
+        s = abs(math.sin(theta))
+        c = math.cos(theta)
+        ratio = c / s if s > 0 else math.copysign(math.inf, c)
+        shaping = min(max(ratio, -rp.clip_value), rp.clip_value) / rp.clip_value
+        return shaping + rp.bonus_weight * self._bonus
+
+    def torque_from_action(self, action: np.ndarray) -> float:
+        """Base torque [N m] for an action of this environment."""
+        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+        if not math.isfinite(a):
+            raise ValueError(f"action must be finite, got {action!r}")
+        return min(max(a, -1.0), 1.0) * self.torque_limit_nm
+
+    @property
+    def report_observation(self) -> Observation:
+        """The report's raw observed variables at the current step."""
+        if self._observation is None:
+            raise RuntimeError("call reset() first")
+        return self._observation
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
+        super().reset(seed=seed)
+        start = (options or {}).get("start", self.start)
+        q, qd = self.plant.hanging_state()
+        noise = self.start_noise_rad
+        if start == "upright":
+            q[0] = 0.0
+        elif start == "random":
+            q[0] = float(self.np_random.uniform(-math.pi, math.pi))
+        elif start != "hanging":
+            raise ValueError(f"options['start'] must be 'hanging', 'upright' or 'random', got {start!r}")
+        q[0] += float(self.np_random.uniform(-noise, noise))
+        qd[0] += float(self.np_random.uniform(-noise, noise))
+        self._observation = self.plant.reset(q, qd)
+        self._bonus = 1.0 if abs(self._observation.theta_rad) < self.reward_params.epsilon_rad else 0.0
+        return self._vector(self._observation), {"observation": self._observation.as_array()}
+
+    def step(self, action):
+        if self._observation is None:
+            raise RuntimeError("call reset() before step()")
+        torque = self.torque_from_action(action)
+        info: dict[str, Any] = {"torque_nm": torque}
+        try:
+            self._observation = self.plant.step(torque)
+        except SimulationDiverged as exc:
+            info["truncation_reason"] = f"simulation diverged: {exc.reason}"
+            return self._vector(self._observation), 0.0, False, True, info
+        reward = self._reward(self._observation.theta_rad)
+        return self._vector(self._observation), reward, False, False, info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from ..plotting import render_rod_rgb
+
+        return render_rod_rgb(self.plant.link_points_m(), self.params.length_m)
+
+
+class SoftPendulumDiscreteEnv(SoftPendulumEnv):
+    """:class:`SoftPendulumEnv` with ``Discrete(n_torque_levels)`` actions for DQN.
+
+    Action ``i`` applies ``torque_limit_nm * (-1 + 2 i / (n_torque_levels - 1))``: evenly spaced levels
+    from ``-torque_limit_nm`` to ``+torque_limit_nm`` (zero included when the count is odd).
+    Extra argument: ``n_torque_levels`` (default 5, at least 2).
+    """
+
+    def __init__(self, n_torque_levels: int = 5, **kwargs: Any) -> None:
+        if isinstance(n_torque_levels, bool) or int(n_torque_levels) != n_torque_levels or n_torque_levels < 2:
+            raise ValueError(f"n_torque_levels must be an integer >= 2, got {n_torque_levels!r}")
+        super().__init__(**kwargs)
+        self.n_torque_levels = int(n_torque_levels)
+        self.torque_levels_nm = np.linspace(-1.0, 1.0, self.n_torque_levels) * self.torque_limit_nm
+        self.action_space = spaces.Discrete(self.n_torque_levels)
+
+    def torque_from_action(self, action) -> float:
+        index = int(np.asarray(action).reshape(-1)[0])
+        if not 0 <= index < self.n_torque_levels:
+            raise ValueError(f"action must be in [0, {self.n_torque_levels}), got {action!r}")
+        return float(self.torque_levels_nm[index])

@@ -1,0 +1,239 @@
+"""A small snake_case adapter over Exudyn's CamelCase API.
+
+Everything in softpend that touches Exudyn for the pseudo-rigid-body chain goes through
+:class:`KinematicChain2D`: it builds a planar ``ObjectKinematicTree`` (minimal coordinates, one
+``RevoluteZ`` joint per link), owns the implicit (generalized-alpha) solver, and advances it by one
+control step of ``dt_s`` split into ``substeps`` solver steps.  Joint springs and dampers use the tree's
+built-in P/D joint control (``tau_i = -k_i*q_i - d_i*q_t_i``), the actuation torque uses
+``jointForceVector``, and gravity uses the tree's ``gravity`` vector, so no Python user function runs in
+the solver loop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import exudyn as exu
+import numpy as np
+from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
+
+__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure"]
+
+
+class SolverFailure(RuntimeError):
+    """The Exudyn solver failed (Newton did not converge or the state became non-finite)."""
+
+
+@dataclass(frozen=True)
+class ChainLink:
+    """One link of a planar serial chain, hinged at its parent's joint frame.
+
+    Parameters
+    ----------
+    joint_offset_m : float
+        Distance from the parent joint to this joint along the parent link's axis (+y) [m].
+    mass_kg : float
+        Link mass [kg].
+    com_m : float
+        Centre of mass along the link's own axis, from its joint [m].
+    inertia_com_kgm2 : float
+        Moment of inertia about the centre of mass, about z [kg m^2].
+    stiffness_nm_per_rad : float
+        Torsional spring at this joint [N m/rad] (rest angle 0).
+    damping_nms_per_rad : float
+        Viscous damper at this joint [N m s/rad].
+    """
+
+    joint_offset_m: float
+    mass_kg: float
+    com_m: float
+    inertia_com_kgm2: float
+    stiffness_nm_per_rad: float = 0.0
+    damping_nms_per_rad: float = 0.0
+
+
+@dataclass
+class KinematicChain2D:
+    """A planar serial chain on Exudyn, stepped with the implicit solver.
+
+    Link ``i`` rotates about joint ``i`` (``RevoluteZ``); with all joint angles zero the chain points
+    up (+y) and gravity acts along -y.  Joint 0 sits at the origin, rotated by ``base_angle_rad``.
+
+    Parameters
+    ----------
+    links : sequence of ChainLink
+        The links, base first.
+    gravity_mps2 : float
+        Gravitational acceleration along -y [m/s^2].
+    dt_s : float
+        Control step [s].
+    substeps : int
+        Implicit solver steps per control step (>= 2 keeps stiff chains stable).
+    base_angle_rad : float
+        Fixed rotation of joint 0's frame (used to clamp a rod at a given angle).
+    spectral_radius : float
+        Generalized-alpha spectral radius at infinity (1 = no numerical damping).
+    """
+
+    links: Sequence[ChainLink]
+    gravity_mps2: float
+    dt_s: float
+    substeps: int = 2
+    base_angle_rad: float = 0.0
+    spectral_radius: float = 0.95
+    newton_relative_tolerance: float = 1e-8
+    _force: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.dt_s <= 0 or not np.isfinite(self.dt_s):
+            raise ValueError(f"dt_s must be positive and finite, got {self.dt_s!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
+        n = len(self.links)
+        if n < 1:
+            raise ValueError("links must not be empty")
+        self.n = n
+        self._force = np.zeros(n)
+        self.time_s = 0.0
+        self._build()
+
+    # ------------------------------------------------------------------ construction
+    def _build(self) -> None:
+        n = self.n
+        self._sc = exu.SystemContainer()
+        mbs = self._sc.AddSystem()
+        self._mbs = mbs
+        self._node = mbs.AddNode(
+            NodeGenericODE2(
+                referenceCoordinates=[0.0] * n,
+                initialCoordinates=[0.0] * n,
+                initialCoordinates_t=[0.0] * n,
+                numberOfODE2Coordinates=n,
+            )
+        )
+        c, s = np.cos(self.base_angle_rad), np.sin(self.base_angle_rad)
+        base_rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        transformations = exu.Matrix3DList([base_rotation] + [np.eye(3)] * (n - 1))
+        offsets = exu.Vector3DList([[0.0, link.joint_offset_m, 0.0] for link in self.links])
+        inertias = exu.Matrix3DList(
+            [np.diag([link.inertia_com_kgm2, link.inertia_com_kgm2, link.inertia_com_kgm2]) for link in self.links]
+        )
+        coms = exu.Vector3DList([[0.0, link.com_m, 0.0] for link in self.links])
+        self._tree = mbs.AddObject(
+            ObjectKinematicTree(
+                nodeNumber=self._node,
+                jointTypes=[exu.JointType.RevoluteZ] * n,
+                linkParents=list(range(-1, n - 1)),
+                jointTransformations=transformations,
+                jointOffsets=offsets,
+                linkInertiasCOM=inertias,
+                linkCOMs=coms,
+                linkMasses=[link.mass_kg for link in self.links],
+                gravity=[0.0, -self.gravity_mps2, 0.0],
+                jointForceVector=[0.0] * n,
+                jointPositionOffsetVector=[0.0] * n,
+                jointVelocityOffsetVector=[0.0] * n,
+                jointPControlVector=[link.stiffness_nm_per_rad for link in self.links],
+                jointDControlVector=[link.damping_nms_per_rad for link in self.links],
+            )
+        )
+        mbs.Assemble()
+
+        settings = exu.SimulationSettings()
+        settings.timeIntegration.numberOfSteps = int(self.substeps)
+        settings.timeIntegration.startTime = 0.0
+        settings.timeIntegration.endTime = self.dt_s
+        settings.timeIntegration.verboseMode = 0
+        settings.timeIntegration.adaptiveStep = False
+        settings.timeIntegration.generalizedAlpha.spectralRadius = self.spectral_radius
+        settings.timeIntegration.newton.relativeTolerance = self.newton_relative_tolerance
+        settings.timeIntegration.newton.absoluteTolerance = 1e-10
+        settings.timeIntegration.newton.useModifiedNewton = True
+        settings.timeIntegration.newton.maxIterations = 50
+        settings.solutionSettings.writeSolutionToFile = False
+        settings.solutionSettings.sensorsWritePeriod = 1e9
+        settings.displayComputationTime = False
+        settings.displayStatistics = False
+        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        self._settings = settings
+        self._solver = exu.MainSolverImplicitSecondOrder()
+        self._solver.InitializeSolver(mbs, settings)
+
+    # ------------------------------------------------------------------ state
+    def set_state(self, q: np.ndarray, q_t: np.ndarray) -> None:
+        """Set joint angles [rad] and joint rates [rad/s] and restart the integrator from them."""
+        q = np.asarray(q, dtype=float).reshape(self.n)
+        q_t = np.asarray(q_t, dtype=float).reshape(self.n)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(q_t))):
+            raise ValueError("joint state must be finite")
+        data = self._mbs.systemData
+        for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
+            data.SetODE2Coordinates(coordinates=q.tolist(), configuration=configuration)
+            data.SetODE2Coordinates_t(coordinates=q_t.tolist(), configuration=configuration)
+        self.time_s = 0.0
+        self._settings.timeIntegration.startTime = 0.0
+        self._settings.timeIntegration.endTime = self.dt_s
+        self._solver.InitializeSolver(self._mbs, self._settings)
+
+    def get_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles [rad] and rates [rad/s] (copies)."""
+        data = self._mbs.systemData
+        return np.array(data.GetODE2Coordinates()), np.array(data.GetODE2Coordinates_t())
+
+    def get_state_lists(self) -> tuple[list[float], list[float]]:
+        """Joint angles and rates as Python lists (fast path for small chains)."""
+        data = self._mbs.systemData
+        return list(data.GetODE2Coordinates()), list(data.GetODE2Coordinates_t())
+
+    def set_joint_forces(self, forces: np.ndarray) -> None:
+        """Generalised joint forces (torques) [N m] applied during the following steps."""
+        self._force[:] = forces
+        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._force)
+
+    # ------------------------------------------------------------------ stepping
+    def advance(self) -> None:
+        """Advance by one control step ``dt_s`` (``substeps`` implicit solver steps).
+
+        Raises
+        ------
+        SolverFailure
+            If Newton fails or the new state is not finite.
+        """
+        settings = self._settings
+        mbs = self._mbs
+        settings.timeIntegration.startTime = self.time_s
+        settings.timeIntegration.endTime = self.time_s + self.dt_s
+        self._solver.InitializeSolverInitialConditions(mbs, settings)
+        ok = self._solver.SolveSteps(mbs, settings)
+        data = mbs.systemData
+        state = data.GetSystemState()
+        if not ok:
+            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
+        if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
+            raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
+        data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)
+        data.SetODE2Coordinates_tt(
+            coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial
+        )
+        self.time_s += self.dt_s
+
+    def solve_static(self) -> np.ndarray:
+        """Static equilibrium under gravity, springs and the current joint forces; returns joint angles."""
+        ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)
+        if not ok:
+            raise SolverFailure("Exudyn static solver did not converge")
+        q, _ = self.get_state()
+        self.set_state(q, np.zeros(self.n))
+        return q
+
+    def _static_settings(self) -> exu.SimulationSettings:
+        settings = exu.SimulationSettings()
+        settings.staticSolver.numberOfLoadSteps = 20
+        settings.staticSolver.verboseMode = 0
+        settings.staticSolver.newton.relativeTolerance = 1e-12
+        settings.solutionSettings.writeSolutionToFile = False
+        settings.displayComputationTime = False
+        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        return settings

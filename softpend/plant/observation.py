@@ -1,0 +1,71 @@
+"""What the plant reports: the report's observed variables and their time derivatives."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+#: Order of :meth:`Observation.as_array` (the report's ``q = [phi, theta, e_x, e_y]`` plus the tip rotation
+#: ``e_r``, followed by the time derivatives).
+OBSERVATION_NAMES: tuple[str, ...] = (
+    "phi_rad",
+    "theta_rad",
+    "ex_m",
+    "ey_m",
+    "er_rad",
+    "phi_dot_rad_s",
+    "theta_dot_rad_s",
+    "ex_dot_m_s",
+    "ey_dot_m_s",
+    "er_dot_rad_s",
+)
+
+
+def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
+    """Wrap an angle to ``[-pi, pi)``."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi if np.ndim(angle) else (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One sample of the observed variables (angles from upright, counter-clockwise positive).
+
+    Attributes
+    ----------
+    phi_rad : float
+        Base (motor hub) angle, wrapped to ``[-pi, pi)``; 0 = rod clamped pointing up, pi = hanging.
+    theta_rad : float
+        Tip angle: angle of the tip position vector (seen from the hub axis) from upright, ``[-pi, pi)``.
+    ex_m, ey_m : float
+        Tip position relative to the hub axis [m] (y up).
+    er_rad : float
+        Tip rotation: absolute angle of the last link from upright, ``[-pi, pi)``.
+    *_dot : float
+        Time derivatives of the above [rad/s, m/s].
+    """
+
+    phi_rad: float
+    theta_rad: float
+    ex_m: float
+    ey_m: float
+    er_rad: float
+    phi_dot_rad_s: float
+    theta_dot_rad_s: float
+    ex_dot_m_s: float
+    ey_dot_m_s: float
+    er_dot_rad_s: float
+
+    def as_array(self) -> np.ndarray:
+        """The values in :data:`OBSERVATION_NAMES` order (float64)."""
+        return np.array([getattr(self, name) for name in OBSERVATION_NAMES], dtype=np.float64)
+
+    @classmethod
+    def from_array(cls, values: np.ndarray) -> "Observation":
+        values = np.asarray(values, dtype=float).reshape(-1)
+        if values.shape[0] != len(OBSERVATION_NAMES):
+            raise ValueError(f"expected {len(OBSERVATION_NAMES)} values, got {values.shape[0]}")
+        return cls(*map(float, values))
+
+
+assert tuple(f.name for f in fields(Observation)) == OBSERVATION_NAMES

@@ -1,0 +1,319 @@
+"""The pseudo-rigid-body (PRB) soft pendulum on Exudyn.
+
+A motor hub (rotor inertia ``J``, viscous friction ``b``, base torque ``tau``) carries a rod of ``n`` equal
+rigid links joined by torsional springs and dampers (see :mod:`softpend.plant.params` for the mapping
+from ``E, W, D`` to the spring constants).  Generalised coordinates are the hub angle ``phi`` measured
+from upright and the ``n`` spring angles (the first between hub and link 1), all counter-clockwise
+positive, so the chain has ``n + 1`` degrees of freedom.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from .exudyn_adapter import ChainLink, KinematicChain2D, SolverFailure
+from .observation import Observation, wrap_angle_rad
+from .params import RodParams
+
+__all__ = ["PRBPlant", "SimulationDiverged"]
+
+
+class SimulationDiverged(RuntimeError):
+    """The simulation could not continue (solver failure or non-finite state); ``reason`` says why."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _check_finite_positive(name: str, value: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be positive and finite, got {value!r}")
+    return float(value)
+
+
+class PRBPlant:
+    """Soft pendulum as a PRB chain on Exudyn's ``ObjectKinematicTree`` with the implicit solver.
+
+    Parameters
+    ----------
+    params : RodParams, optional
+        Physical parameters (defaults: the project's default rod, see the book's introduction).
+    dt_s : float
+        Control step [s]; the torque is held constant (zero-order hold) over each step.
+    substeps : int
+        Implicit solver steps per control step (at least 2).
+    hub_locked_at_rad : float, optional
+        If given, the hub is clamped at this angle (no hub degree of freedom): a cantilever test rig.
+    spectral_radius : float
+        Generalized-alpha spectral radius (1 = energy-conserving trapezoidal rule for linear systems).
+
+    Notes
+    -----
+    :meth:`step` clips the torque to ``params.torque_limit_nm`` (the motor saturates) and raises
+    :class:`SimulationDiverged` instead of ever returning a non-finite state.
+    """
+
+    def __init__(
+        self,
+        params: Optional[RodParams] = None,
+        dt_s: float = 0.01,
+        substeps: int = 2,
+        hub_locked_at_rad: Optional[float] = None,
+        spectral_radius: float = 0.95,
+    ) -> None:
+        self.params = params if params is not None else RodParams()
+        if not isinstance(self.params, RodParams):
+            raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
+        self.dt_s = _check_finite_positive("dt_s", dt_s)
+        if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
+        if hub_locked_at_rad is not None and not math.isfinite(hub_locked_at_rad):
+            raise ValueError(f"hub_locked_at_rad must be finite, got {hub_locked_at_rad!r}")
+        self.substeps = int(substeps)
+        self.hub_locked = hub_locked_at_rad is not None
+        self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
+        p = self.params
+        n = p.n_links
+        length = p.link_length_m
+        # masses, COMs and inertias of the n rod links (the tip mass rides on the last link)
+        masses = np.full(n, p.link_mass_kg)
+        coms = np.full(n, length / 2)
+        inertias = np.full(n, p.link_mass_kg * length**2 / 12)
+        if p.tip_mass_kg > 0:
+            m_l, m_t = p.link_mass_kg, p.tip_mass_kg
+            c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
+            inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
+            masses[-1] = m_l + m_t
+            coms[-1] = c
+        self.link_masses_kg = masses
+        self.link_coms_m = coms
+        self.link_inertias_kgm2 = inertias
+        stiffness = p.spring_stiffnesses_nm_per_rad()
+        damping = p.spring_dampings_nms_per_rad()
+        rod_links = [
+            ChainLink(
+                joint_offset_m=0.0 if i == 0 else length,
+                mass_kg=float(masses[i]),
+                com_m=float(coms[i]),
+                inertia_com_kgm2=float(inertias[i]),
+                stiffness_nm_per_rad=stiffness[i],
+                damping_nms_per_rad=damping[i],
+            )
+            for i in range(n)
+        ]
+        if self.hub_locked:
+            links = rod_links
+            base_angle = self._hub_angle_locked
+        else:
+            hub = ChainLink(
+                joint_offset_m=0.0,
+                mass_kg=0.0,
+                com_m=0.0,
+                inertia_com_kgm2=p.hub_inertia_kgm2,
+                stiffness_nm_per_rad=0.0,
+                damping_nms_per_rad=p.hub_friction_nms_per_rad,
+            )
+            links = [hub] + rod_links
+            base_angle = 0.0
+        self._hub_offset = 0 if self.hub_locked else 1
+        self._chain = KinematicChain2D(
+            links=links,
+            gravity_mps2=p.gravity_mps2,
+            dt_s=self.dt_s,
+            substeps=self.substeps,
+            base_angle_rad=base_angle,
+            spectral_radius=spectral_radius,
+        )
+        self.n_coordinates = self._chain.n
+        self.last_torque_nm = 0.0
+        self._forces = np.zeros(self.n_coordinates)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time_s(self) -> float:
+        """Simulated time since the last reset [s]."""
+        return self._chain.time_s
+
+    def reset(
+        self,
+        joint_angles_rad: Optional[np.ndarray] = None,
+        joint_velocities_rad_s: Optional[np.ndarray] = None,
+    ) -> Observation:
+        """Restart from a joint state (default: all zero, the straight rod pointing up).
+
+        Parameters
+        ----------
+        joint_angles_rad : array of shape (n_coordinates,)
+            ``[phi, q_1, ..., q_n]`` (hub angle first unless the hub is locked) [rad].
+        joint_velocities_rad_s : array of shape (n_coordinates,)
+            Their rates [rad/s].
+        """
+        q = np.zeros(self.n_coordinates) if joint_angles_rad is None else self._check_state(joint_angles_rad, "joint_angles_rad")
+        qd = np.zeros(self.n_coordinates) if joint_velocities_rad_s is None else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
+        self._chain.set_state(q, qd)
+        self.last_torque_nm = 0.0
+        self._forces[:] = 0.0
+        self._chain.set_joint_forces(self._forces)
+        return self.observe()
+
+    def _check_state(self, values: np.ndarray, name: str) -> np.ndarray:
+        values = np.asarray(values, dtype=float)
+        if values.shape != (self.n_coordinates,):
+            raise ValueError(f"{name} must have shape ({self.n_coordinates},), got {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"{name} must be finite, got {values}")
+        return values.copy()
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Full joint state ``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
+        return self._chain.get_state()
+
+    def set_joint_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
+        """Alias of :meth:`reset` keeping the current time base; used to branch from a stored state."""
+        return self.reset(q, q_dot)
+
+    def hanging_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint state of the straight rod hanging down at rest (``phi = pi``)."""
+        q = np.zeros(self.n_coordinates)
+        if not self.hub_locked:
+            q[0] = np.pi
+        return q, np.zeros(self.n_coordinates)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, torque_nm: float) -> Observation:
+        """Apply a base torque (clipped to the limit) for one step ``dt_s`` and return the observation.
+
+        Raises
+        ------
+        ValueError
+            If ``torque_nm`` is not finite.
+        SimulationDiverged
+            If the solver fails or the state stops being finite.
+        """
+        torque = float(torque_nm)
+        if not math.isfinite(torque):
+            raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")
+        limit = self.params.torque_limit_nm
+        torque = min(max(torque, -limit), limit)
+        self.last_torque_nm = torque
+        if not self.hub_locked:
+            self._forces[0] = torque
+            self._chain.set_joint_forces(self._forces)
+        try:
+            self._chain.advance()
+        except SolverFailure as exc:
+            raise SimulationDiverged(str(exc)) from exc
+        return self.observe()
+
+    # ------------------------------------------------------------------ kinematics
+    def _absolute_angles(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Absolute angle (from upright) and rate of each rod link."""
+        if self.hub_locked:
+            a = self._hub_angle_locked + np.cumsum(q)
+            ad = np.cumsum(qd)
+        else:
+            a = np.cumsum(q)[1:]
+            ad = np.cumsum(qd)[1:]
+        return a, ad
+
+    def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
+        """Positions ``(n + 1, 2)`` of the hub axis, every joint and the tip [m] (for drawing)."""
+        if q is None:
+            q, _ = self.joint_state()
+        a, _ = self._absolute_angles(np.asarray(q, float), np.zeros_like(q, dtype=float))
+        length = self.params.link_length_m
+        steps = np.stack([-length * np.sin(a), length * np.cos(a)], axis=1)
+        return np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
+
+    def observe(self) -> Observation:
+        """The report's observed variables for the current state."""
+        q, qd = self._chain.get_state_lists()
+        return self.observation_from_state(q, qd)
+
+    def observation_from_state(self, q, qd) -> Observation:
+        """Observation for a given joint state (does not change the plant).
+
+        Written with scalar ``math`` on purpose: for chains of a few links it is several times faster
+        than NumPy, and it runs once per environment step.
+        """
+        length = self.params.link_length_m
+        if self.hub_locked:
+            angle, rate = self._hub_angle_locked, 0.0
+            phi, phi_dot = self._hub_angle_locked, 0.0
+            start = 0
+        else:
+            angle, rate = float(q[0]), float(qd[0])
+            phi, phi_dot = angle, rate
+            start = 1
+        ex = ey = ex_dot = ey_dot = 0.0
+        sin, cos = math.sin, math.cos
+        for i in range(start, len(q)):
+            if self.hub_locked and i == 0:
+                angle = self._hub_angle_locked + float(q[0])
+                rate = float(qd[0])
+            else:
+                angle += float(q[i])
+                rate += float(qd[i])
+            s_a, c_a = sin(angle), cos(angle)
+            ex -= length * s_a
+            ey += length * c_a
+            ex_dot -= length * c_a * rate
+            ey_dot -= length * s_a * rate
+        r2 = ex * ex + ey * ey
+        theta = math.atan2(-ex, ey)
+        theta_dot = (ex * ey_dot - ey * ex_dot) / r2 if r2 > 0 else 0.0
+        two_pi = 2 * math.pi
+        return Observation(
+            (phi + math.pi) % two_pi - math.pi,
+            (theta + math.pi) % two_pi - math.pi,
+            ex,
+            ey,
+            (angle + math.pi) % two_pi - math.pi,
+            phi_dot,
+            theta_dot,
+            ex_dot,
+            ey_dot,
+            rate,
+        )
+
+    # ------------------------------------------------------------------ energy
+    def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:
+        """Kinetic, gravitational and elastic energy [J], computed from the geometry (not by Exudyn)."""
+        if q is None or qd is None:
+            q, qd = self.joint_state()
+        a, ad = self._absolute_angles(q, qd)
+        length = self.params.link_length_m
+        g = self.params.gravity_mps2
+        # joint positions and velocities (start of each link)
+        ux, uy = -np.sin(a), np.cos(a)
+        joint_x = np.concatenate([[0.0], np.cumsum(length * ux)[:-1]])
+        joint_y = np.concatenate([[0.0], np.cumsum(length * uy)[:-1]])
+        vx_step = -length * np.cos(a) * ad
+        vy_step = -length * np.sin(a) * ad
+        joint_vx = np.concatenate([[0.0], np.cumsum(vx_step)[:-1]])
+        joint_vy = np.concatenate([[0.0], np.cumsum(vy_step)[:-1]])
+        c = self.link_coms_m
+        com_y = joint_y + c * uy
+        com_vx = joint_vx - c * np.cos(a) * ad
+        com_vy = joint_vy - c * np.sin(a) * ad
+        m = self.link_masses_kg
+        kinetic = float(np.sum(0.5 * m * (com_vx**2 + com_vy**2) + 0.5 * self.link_inertias_kgm2 * ad**2))
+        if not self.hub_locked:
+            kinetic += 0.5 * self.params.hub_inertia_kgm2 * float(qd[0]) ** 2
+        gravity = float(np.sum(m * g * com_y))
+        springs = np.asarray(self.params.spring_stiffnesses_nm_per_rad())
+        bend = q[self._hub_offset :]
+        elastic = float(0.5 * np.sum(springs * bend**2))
+        return {
+            "kinetic_j": kinetic,
+            "gravity_j": gravity,
+            "elastic_j": elastic,
+            "total_j": kinetic + gravity + elastic,
+        }

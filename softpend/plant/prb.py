@@ -212,6 +212,22 @@ class PRBPlant:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()
 
+    def static_equilibrium(self) -> Observation:
+        """Solve for static equilibrium under gravity and the springs (zero torque) with Exudyn's static
+        solver, starting from the current joint state, and make it the current (resting) state.
+
+        Most useful with ``hub_locked_at_rad`` set (a cantilever); with a free hub the result is whichever
+        equilibrium the Newton iteration reaches from the current state.
+        """
+        if not self.hub_locked:
+            self._forces[:] = 0.0
+            self._chain.set_joint_forces(self._forces)
+        try:
+            self._chain.solve_static()
+        except SolverFailure as exc:
+            raise SimulationDiverged(str(exc)) from exc
+        return self.observe()
+
     # ------------------------------------------------------------------ kinematics
     def _absolute_angles(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Absolute angle (from upright) and rate of each rod link."""

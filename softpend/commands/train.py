@@ -1,0 +1,61 @@
+"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder.
+
+The algorithms are looked up in :data:`ALGORITHMS` (``name -> "module:function"``); each function takes the
+parsed :class:`argparse.Namespace` and returns an exit code.  Common options are defined here; anything
+algorithm-specific goes through repeatable ``--set NAME=VALUE`` overrides of that algorithm's config.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from typing import Callable
+
+#: Training entry points, one line per algorithm: ``name -> "module:function(args) -> int"``.
+ALGORITHMS: dict[str, str] = {
+    "dqn": "softpend.rl.cli:train_dqn_from_args",
+    "mbpo": "softpend.rl.cli:train_mbpo_from_args",
+    "pilco": "softpend.pilco.cli:train_pilco_from_args",
+}
+
+
+def resolve(algo: str) -> Callable[[argparse.Namespace], int]:
+    """The training function registered for ``algo``."""
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo must be one of {sorted(ALGORITHMS)}, got {algo!r}")
+    module_name, function_name = ALGORITHMS[algo].split(":")
+    return getattr(importlib.import_module(module_name), function_name)
+
+
+def parse_overrides(items: list[str] | None) -> dict[str, str]:
+    """``["a=1", "b=x"] -> {"a": "1", "b": "x"}`` (values stay strings; each algorithm converts them)."""
+    overrides: dict[str, str] = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
+        overrides[name.strip()] = value.strip()
+    return overrides
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("train", help="train a controller (DQN, DQN-MBPO, PILCO)")
+    parser.add_argument("--algo", required=True, choices=sorted(ALGORITHMS), help="training algorithm")
+    parser.add_argument("--out", default=None, help="run folder (default: runs/<algo>-seed<SEED>)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw of the run")
+    parser.add_argument("--episodes", type=int, default=None, help="training episodes (default: the algorithm's)")
+    parser.add_argument("--torque-limit-nm", type=float, default=None, help="motor torque limit [N m]")
+    parser.add_argument("--n-links", type=int, default=None, help="links of the PRB rod (default: RodParams)")
+    parser.add_argument("--resume", action="store_true", help="continue from the latest checkpoint in --out")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument(
+        "--set", action="append", metavar="NAME=VALUE", dest="overrides", help="override a config field (repeatable)"
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.out is None:
+        args.out = f"runs/{args.algo}-seed{args.seed}"
+    args.overrides = parse_overrides(args.overrides)
+    return int(resolve(args.algo)(args) or 0)

@@ -112,24 +112,24 @@ class SoftPendulumEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
     def _vector(self, o: Observation) -> np.ndarray:
         inv_l = 1.0 / self.params.length_m
-        v = VELOCITY_SCALE_PER_S
-        vec = np.array(
-            [
+        inv_v = 1.0 / VELOCITY_SCALE_PER_S
+        cap = 5.0
+        return np.array(
+            (
                 math.cos(o.phi_rad),
                 math.sin(o.phi_rad),
                 math.cos(o.theta_rad),
                 math.sin(o.theta_rad),
                 o.ex_m * inv_l,
                 o.ey_m * inv_l,
-                o.phi_dot_rad_s / v,
-                o.theta_dot_rad_s / v,
-                o.ex_dot_m_s * inv_l / v,
-                o.ey_dot_m_s * inv_l / v,
+                min(max(o.phi_dot_rad_s * inv_v, -cap), cap),
+                min(max(o.theta_dot_rad_s * inv_v, -cap), cap),
+                min(max(o.ex_dot_m_s * inv_l * inv_v, -cap), cap),
+                min(max(o.ey_dot_m_s * inv_l * inv_v, -cap), cap),
                 self._bonus,
-            ],
+            ),
             dtype=np.float32,
         )
-        return np.clip(vec, -self._bound, self._bound)
 
     def _reward(self, theta: float) -> float:
         rp = self.reward_params
@@ -145,7 +145,10 @@ class SoftPendulumEnv(gym.Env):
 
     def torque_from_action(self, action: np.ndarray) -> float:
         """Base torque [N m] for an action of this environment."""
-        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+        try:
+            a = float(action[0]) if len(action) == 1 else math.nan
+        except TypeError:  # a scalar
+            a = float(action)
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {action!r}")
         return min(max(a, -1.0), 1.0) * self.torque_limit_nm

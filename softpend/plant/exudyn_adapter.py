@@ -152,11 +152,11 @@ class KinematicChain2D:
         settings.timeIntegration.newton.absoluteTolerance = 1e-10
         settings.timeIntegration.newton.useModifiedNewton = True
         settings.timeIntegration.newton.maxIterations = 50
-        settings.solutionSettings.writeSolutionToFile = False
-        settings.solutionSettings.sensorsWritePeriod = 1e9
-        settings.displayComputationTime = False
-        settings.displayStatistics = False
-        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        settings.solution.file.write = False
+        settings.solution.sensors.writePeriod = 1e9
+        settings.show.computationTime = False
+        settings.show.statistics = False
+        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
         self._settings = settings
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(mbs, settings)
@@ -173,19 +173,18 @@ class KinematicChain2D:
             data.SetODE2Coordinates(coordinates=q.tolist(), configuration=configuration)
             data.SetODE2Coordinates_t(coordinates=q_t.tolist(), configuration=configuration)
         self.time_s = 0.0
+        self._q, self._q_t = q.copy(), q_t.copy()
         self._settings.timeIntegration.startTime = 0.0
         self._settings.timeIntegration.endTime = self.dt_s
         self._solver.InitializeSolver(self._mbs, self._settings)
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint angles [rad] and rates [rad/s] (copies)."""
-        data = self._mbs.systemData
-        return np.array(data.GetODE2Coordinates()), np.array(data.GetODE2Coordinates_t())
+        return np.array(self._q, dtype=float), np.array(self._q_t, dtype=float)
 
-    def get_state_lists(self) -> tuple[list[float], list[float]]:
-        """Joint angles and rates as Python lists (fast path for small chains)."""
-        data = self._mbs.systemData
-        return list(data.GetODE2Coordinates()), list(data.GetODE2Coordinates_t())
+    def get_state_views(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles and rates without copying (read-only use; valid until the next step)."""
+        return self._q, self._q_t
 
     def set_joint_forces(self, forces: np.ndarray) -> None:
         """Generalised joint forces (torques) [N m] applied during the following steps."""
@@ -213,6 +212,7 @@ class KinematicChain2D:
             raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
         if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
+        self._q, self._q_t = state[0], state[1]
         data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)
         data.SetODE2Coordinates_tt(
             coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial
@@ -224,7 +224,7 @@ class KinematicChain2D:
         ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)
         if not ok:
             raise SolverFailure("Exudyn static solver did not converge")
-        q, _ = self.get_state()
+        q = np.array(self._mbs.systemData.GetODE2Coordinates())
         self.set_state(q, np.zeros(self.n))
         return q
 
@@ -233,7 +233,7 @@ class KinematicChain2D:
         settings.staticSolver.numberOfLoadSteps = 20
         settings.staticSolver.verboseMode = 0
         settings.staticSolver.newton.relativeTolerance = 1e-12
-        settings.solutionSettings.writeSolutionToFile = False
-        settings.displayComputationTime = False
-        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        settings.solution.file.write = False
+        settings.show.computationTime = False
+        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
         return settings

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,9 +27,10 @@ def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi if np.ndim(angle) else (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-@dataclass(frozen=True)
-class Observation:
+class Observation(NamedTuple):
     """One sample of the observed variables (angles from upright, counter-clockwise positive).
+
+    An immutable named tuple (cheap to build once per simulation step).
 
     Attributes
     ----------
@@ -58,7 +59,7 @@ class Observation:
 
     def as_array(self) -> np.ndarray:
         """The values in :data:`OBSERVATION_NAMES` order (float64)."""
-        return np.array([getattr(self, name) for name in OBSERVATION_NAMES], dtype=np.float64)
+        return np.array(self, dtype=np.float64)
 
     @classmethod
     def from_array(cls, values: np.ndarray) -> "Observation":
@@ -68,4 +69,4 @@ class Observation:
         return cls(*map(float, values))
 
 
-assert tuple(f.name for f in fields(Observation)) == OBSERVATION_NAMES
+assert Observation._fields == OBSERVATION_NAMES

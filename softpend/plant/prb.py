@@ -250,8 +250,8 @@ class PRBPlant:
 
     def observe(self) -> Observation:
         """The report's observed variables for the current state."""
-        q, qd = self._chain.get_state_lists()
-        return self.observation_from_state(q, qd)
+        q, qd = self._chain.get_state_views()
+        return self.observation_from_state(q.tolist(), qd.tolist())
 
     def observation_from_state(self, q, qd) -> Observation:
         """Observation for a given joint state (does not change the plant).

@@ -1,0 +1,1 @@
+"""Classical control baselines: linearisation, LQR, PID and energy swing-up."""

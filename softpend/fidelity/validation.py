@@ -1,0 +1,304 @@
+"""Cantilever experiments on either plant (hub locked): free-vibration bending frequencies and static sag.
+
+Both experiments run the plant itself -- a free-vibration simulation or Exudyn's static solver -- and
+compare with Euler-Bernoulli theory; nothing here computes the plant's frequencies from a formula.
+
+* Frequencies: the hub is locked upright, gravity and damping are switched off, the rod starts at rest
+  bent into the sum of the first two Euler-Bernoulli cantilever mode shapes (small amplitude, so the
+  response is linear), and the tip's lateral displacement ``e_x(t)`` is recorded.  The frequencies are
+  then fitted to that signal: a Hann-windowed, zero-padded FFT gives a starting value for each mode (the
+  largest peak in a band around the theoretical value, which is only used to pick the band), and a
+  nonlinear least-squares fit of ``sum_k a_k cos(2 pi f_k t) + b_k sin(2 pi f_k t) + c`` refines them.
+* Sag: the hub is locked horizontal (``phi = pi/2``) and the static solver finds the equilibrium under
+  gravity; the tip's vertical drop is compared with ``w L^4/(8 E I) + P L^3/(3 E I)``
+  (:attr:`RodParams.static_sag_euler_bernoulli_m`), valid for small deflections.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from ..plant import RodParams, make_plant
+
+__all__ = [
+    "EULER_BERNOULLI_BETA_L",
+    "FreeVibration",
+    "cantilever_free_vibration",
+    "euler_bernoulli_frequencies_hz",
+    "euler_bernoulli_mode_shape",
+    "fit_modal_frequencies_hz",
+    "measured_bending_frequencies",
+    "static_tip_sag",
+    "deflected_state",
+]
+
+#: Roots ``beta_k L`` of ``1 + cos(beta L) cosh(beta L) = 0`` (clamped-free beam), first three modes.
+EULER_BERNOULLI_BETA_L: tuple[float, ...] = (1.875104068711961, 4.694091132974175, 7.854757438237613)
+
+
+def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.ndarray:
+    """Bending frequencies ``f_k = (beta_k L)^2/(2 pi L^2) sqrt(E I/(rho A))`` of the clamped-free rod
+    without tip mass [Hz]."""
+    if not 1 <= n_modes <= len(EULER_BERNOULLI_BETA_L):
+        raise ValueError(f"n_modes must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {n_modes!r}")
+    mu = params.mass_kg / params.length_m
+    beta_l = np.asarray(EULER_BERNOULLI_BETA_L[:n_modes])
+    return beta_l**2 / (2 * math.pi * params.length_m**2) * math.sqrt(params.bending_stiffness_nm2 / mu)
+
+
+def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cantilever mode shape ``w_k(s)`` (tip value 2 in magnitude) and its slope ``L dw_k/ds``.
+
+    Parameters
+    ----------
+    mode : int
+        Mode number (1-based).
+    s_over_l : array
+        Arc length from the clamp over the rod length.
+    """
+    if not 1 <= mode <= len(EULER_BERNOULLI_BETA_L):
+        raise ValueError(f"mode must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {mode!r}")
+    b = EULER_BERNOULLI_BETA_L[mode - 1]
+    x = b * np.asarray(s_over_l, dtype=float)
+    sigma = (math.cosh(b) + math.cos(b)) / (math.sinh(b) + math.sin(b))
+    shape = np.cosh(x) - np.cos(x) - sigma * (np.sinh(x) - np.sin(x))
+    slope = b * (np.sinh(x) + np.sin(x) - sigma * (np.cosh(x) - np.cos(x)))
+    return shape, slope
+
+
+def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarray]:
+    """State of a hub-locked plant whose rod follows a lateral deflection ``u(s)`` (across the rod, in
+    the hub frame), at rest.
+
+    Parameters
+    ----------
+    plant : BeamPlant or PRBPlant
+        A plant with ``hub_locked`` set.
+    lateral_m : callable
+        ``u(s)`` [m] for arc length ``s`` [m].
+    slope : callable
+        ``du/ds(s)`` (used for the beam's cross-section rotations).
+    """
+    if not getattr(plant, "hub_locked", False):
+        raise ValueError("plant must have its hub locked (hub_locked_at_rad set)")
+    p = plant.params
+    q = np.zeros(plant.n_coordinates)
+    if hasattr(plant, "n_elements"):  # the beam: (u, v, psi) per node after the hub
+        s = np.linspace(0.0, p.length_m, plant.n_elements + 1)[1:]
+        local = q.reshape(plant.n_elements, 3)
+        local[:, 0] = lateral_m(s)
+        local[:, 2] = -np.arctan(slope(s))  # the tangent (-sin psi, cos psi) follows (u', 1)
+    else:  # the PRB chain: joints at s_j = j L/n, link angles follow the chords of u(s)
+        n = p.n_links
+        s = np.linspace(0.0, p.length_m, n + 1)
+        u = lateral_m(s)
+        absolute = -np.arctan2(np.diff(u), np.diff(s))
+        q[:] = np.diff(np.concatenate([[0.0], absolute]))
+    return q, np.zeros(plant.n_coordinates)
+
+
+@dataclass
+class FreeVibration:
+    """A free-vibration run of a cantilever: tip signal and the frequencies fitted to it."""
+
+    plant: str
+    resolution: int
+    time_s: np.ndarray
+    tip_x_m: np.ndarray
+    frequencies_hz: np.ndarray
+    theory_hz: np.ndarray
+
+    @property
+    def error_pct(self) -> np.ndarray:
+        """Relative error of the measured frequencies against Euler-Bernoulli [%]."""
+        return 100.0 * (self.frequencies_hz / self.theory_hz - 1.0)
+
+
+def _plant_kwargs(plant: str, resolution: int) -> dict[str, Any]:
+    return {"n_elements": resolution} if plant == "beam" else {}
+
+
+def _check_plant_resolution(plant: str, params: RodParams, resolution: Optional[int]) -> tuple[RodParams, int]:
+    if plant not in ("beam", "prb"):
+        raise ValueError(f"plant must be 'beam' or 'prb', got {plant!r}")
+    if resolution is None:
+        from ..plant.beam import DEFAULT_N_ELEMENTS
+
+        resolution = DEFAULT_N_ELEMENTS if plant == "beam" else params.n_links
+    if isinstance(resolution, bool) or int(resolution) != resolution or resolution < 1:
+        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
+    if plant == "prb":
+        params = params.replace(n_links=int(resolution))
+    return params, int(resolution)
+
+
+def cantilever_free_vibration(
+    plant: str = "beam",
+    params: Optional[RodParams] = None,
+    resolution: Optional[int] = None,
+    duration_s: Optional[float] = None,
+    dt_s: float = 5e-4,
+    amplitude_m: Optional[float] = None,
+    modes: Sequence[int] = (1, 2),
+) -> FreeVibration:
+    """Release the hub-locked, gravity-free, undamped rod from a bent shape and fit its frequencies.
+
+    Parameters
+    ----------
+    plant : {"beam", "prb"}
+        Which plant.
+    params : RodParams, optional
+        Rod parameters (gravity, damping and the tip mass are set to zero here).
+    resolution : int, optional
+        ``n_elements`` of the beam or ``n_links`` of the PRB chain (default: the plant's default).
+    duration_s : float, optional
+        Simulated time (default: six periods of the first Euler-Bernoulli mode).
+    dt_s : float
+        Solver step [s] (small, so the integrator's period error ``~(omega dt)^2/12`` stays below 0.05 %).
+    amplitude_m : float, optional
+        Tip amplitude of each mode in the initial shape (default ``L/500``: linear regime).
+    modes : sequence of int
+        Mode shapes superposed in the initial condition; one frequency is fitted per mode.
+
+    Returns
+    -------
+    FreeVibration
+    """
+    params = (params or RodParams()).replace(gravity_mps2=0.0, joint_damping_nms_per_rad=0.0, tip_mass_kg=0.0)
+    params, resolution = _check_plant_resolution(plant, params, resolution)
+    modes = [int(m) for m in modes]
+    theory = euler_bernoulli_frequencies_hz(params, max(modes))[np.asarray(modes) - 1]
+    if duration_s is None:
+        duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be positive and finite, got {duration_s!r}")
+    length = params.length_m
+    amplitude = length / 500.0 if amplitude_m is None else float(amplitude_m)
+    kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)
+    if plant == "beam":
+        kwargs["newton_relative_tolerance"] = 1e-10
+    sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
+
+    def lateral(s):
+        return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[0] for m in modes)
+
+    def slope(s):
+        return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[1] / length for m in modes)
+
+    sim.reset(*deflected_state(sim, lateral, slope))
+    n_steps = int(round(duration_s / dt_s))
+    tip = np.empty(n_steps + 1)
+    tip[0] = sim.observe().ex_m
+    for k in range(n_steps):
+        tip[k + 1] = sim.step(0.0).ex_m
+    time = np.arange(n_steps + 1) * dt_s
+    measured = fit_modal_frequencies_hz(time, tip, theory)
+    return FreeVibration(plant, resolution, time, tip, measured, theory)
+
+
+def _fft_peak_hz(time_s: np.ndarray, signal: np.ndarray, band_hz: tuple[float, float]) -> float:
+    """Largest peak of the Hann-windowed, 16x zero-padded spectrum inside ``band_hz`` (parabolic
+    interpolation on the log magnitude)."""
+    dt = float(time_s[1] - time_s[0])
+    x = (signal - np.mean(signal)) * np.hanning(len(signal))
+    n_fft = 16 * int(2 ** math.ceil(math.log2(len(x))))
+    spectrum = np.abs(np.fft.rfft(x, n_fft))
+    freq = np.fft.rfftfreq(n_fft, dt)
+    inside = np.flatnonzero((freq >= band_hz[0]) & (freq <= band_hz[1]))
+    if inside.size < 3:
+        raise ValueError(f"band {band_hz} Hz holds no spectral line; run longer or sample faster")
+    i = int(inside[np.argmax(spectrum[inside])])
+    if 0 < i < len(spectrum) - 1:
+        a, b, c = np.log(spectrum[i - 1 : i + 2] + 1e-300)
+        denom = a - 2 * b + c
+        offset = 0.5 * (a - c) / denom if denom != 0 else 0.0
+        return float(freq[i] + offset * (freq[1] - freq[0]))
+    return float(freq[i])
+
+
+def fit_modal_frequencies_hz(time_s: np.ndarray, signal: np.ndarray, centres_hz: Sequence[float]) -> np.ndarray:
+    """Frequencies of the sinusoids that make up a free-vibration signal [Hz].
+
+    Parameters
+    ----------
+    time_s, signal : arrays (T,)
+        Uniformly sampled signal.
+    centres_hz : sequence of float
+        Rough location of each mode: the starting value of mode ``k`` is the largest FFT peak within
+        ``[centre_k / 2, 2 centre_k]`` (bands are cut half-way between neighbouring centres).
+
+    Returns
+    -------
+    array
+        The least-squares frequencies, one per centre.
+    """
+    from scipy.optimize import least_squares
+
+    t = np.asarray(time_s, dtype=float)
+    y = np.asarray(signal, dtype=float)
+    if t.shape != y.shape or t.ndim != 1 or len(t) < 16:
+        raise ValueError("time_s and signal must be 1-D arrays of the same length (>= 16 samples)")
+    centres = np.sort(np.asarray(centres_hz, dtype=float))
+    edges = [c / 2 for c in centres] + [centres[-1] * 2]
+    lows = [edges[0]] + [math.sqrt(a * b) for a, b in zip(centres[:-1], centres[1:])]
+    highs = lows[1:] + [edges[-1]]
+    start = np.array([_fft_peak_hz(t, y, (lo, hi)) for lo, hi in zip(lows, highs)])
+    scale = float(np.max(np.abs(y))) or 1.0
+
+    def design(freqs):
+        cols = [np.ones_like(t)]
+        for f in freqs:
+            cols += [np.cos(2 * math.pi * f * t), np.sin(2 * math.pi * f * t)]
+        return np.stack(cols, axis=1)
+
+    def residual(freqs):
+        a = design(freqs)
+        coef, *_ = np.linalg.lstsq(a, y / scale, rcond=None)
+        return a @ coef - y / scale
+
+    fit = least_squares(residual, start, x_scale=start * 1e-3, xtol=1e-12, ftol=1e-12)
+    return np.asarray(fit.x)
+
+
+def measured_bending_frequencies(
+    plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None, **kwargs: Any
+) -> dict[str, float]:
+    """First two cantilever frequencies from a free-vibration run and their error against theory."""
+    run = cantilever_free_vibration(plant, params, resolution, **kwargs)
+    return {
+        "f1_hz": float(run.frequencies_hz[0]),
+        "f2_hz": float(run.frequencies_hz[1]),
+        "f1_theory_hz": float(run.theory_hz[0]),
+        "f2_theory_hz": float(run.theory_hz[1]),
+        "f1_error_pct": float(run.error_pct[0]),
+        "f2_error_pct": float(run.error_pct[1]),
+    }
+
+
+def static_tip_sag(plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None) -> dict[str, float]:
+    """Tip drop of the horizontally clamped rod under gravity from the plant's static solver.
+
+    Returns
+    -------
+    dict
+        ``sag_m`` (vertical tip drop), ``tip_x_m``/``tip_y_m`` (tip position relative to the hub),
+        ``theory_m`` (small-deflection Euler-Bernoulli) and ``error_pct``.
+    """
+    params = params or RodParams()
+    params, resolution = _check_plant_resolution(plant, params, resolution)
+    kwargs = dict(params=params, hub_locked_at_rad=math.pi / 2)
+    sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
+    observation = sim.static_equilibrium()
+    theory = params.static_sag_euler_bernoulli_m
+    sag = -observation.ey_m
+    return {
+        "sag_m": float(sag),
+        "tip_x_m": float(observation.ex_m),
+        "tip_y_m": float(observation.ey_m),
+        "theory_m": float(theory),
+        "error_pct": float(100.0 * (sag / theory - 1.0)),
+    }

@@ -1,0 +1,312 @@
+"""A snake_case adapter over Exudyn for the continuum-beam rod (the beam counterpart of
+:mod:`softpend.plant.exudyn_adapter`).
+
+:class:`HubBeam2D` builds a planar rod of ``n`` ``ObjectBeamGeometricallyExact2D`` elements (Simo-Reissner
+beam: axial, shear and bending deformation, linear interpolation, ``NodeRigidBody2D`` nodes with
+coordinates ``(x, y, rotation)``) pointing up (+y) in the reference configuration.  Node 0 is the motor hub:
+its position is held at the origin by two coordinate constraints and its rotation is the hub angle, which
+carries the rotor inertia (an ``ObjectRigidBody2D`` sharing the node), the viscous bearing friction (a
+coordinate spring-damper to ground with zero stiffness) and the base torque (a ``LoadCoordinate``).  With
+``hub_locked_at_rad`` the hub rotation is constrained instead (a clamped cantilever).  A tip mass is an
+``ObjectMassPoint2D`` on the last node; gravity acts on every body through ``LoadMassProportional``.
+
+The adapter works in Exudyn's *global* nodal coordinates (displacements from the reference configuration);
+the plant (:mod:`softpend.plant.beam`) maps them to and from its hub-frame state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import exudyn as exu
+import numpy as np
+from exudyn.itemInterface import (
+    LoadCoordinate,
+    LoadMassProportional,
+    MarkerBodyMass,
+    MarkerNodeCoordinate,
+    NodePointGround,
+    NodeRigidBody2D,
+    ObjectBeamGeometricallyExact2D,
+    ObjectConnectorCoordinate,
+    ObjectConnectorCoordinateSpringDamper,
+    ObjectMassPoint2D,
+    ObjectRigidBody2D,
+)
+
+from .exudyn_adapter import SolverFailure
+
+__all__ = ["BeamSection", "HubBeam2D"]
+
+
+@dataclass(frozen=True)
+class BeamSection:
+    """Cross-section properties of a uniform beam (per unit length, SI units).
+
+    Parameters
+    ----------
+    mass_per_length_kg_m : float
+        ``rho*A`` [kg/m].
+    rotary_inertia_kg_m : float
+        Cross-section mass moment of inertia per length ``rho*I`` [kg m].
+    bending_stiffness_nm2 : float
+        ``E*I`` [N m^2].
+    axial_stiffness_n : float
+        ``E*A`` [N].
+    shear_stiffness_n : float
+        ``kappa*G*A`` [N].
+    bending_damping_nm2s, axial_damping_ns, shear_damping_ns : float
+        Kelvin-Voigt damping of curvature, axial strain and shear strain rates [N m^2 s, N s, N s].
+    """
+
+    mass_per_length_kg_m: float
+    rotary_inertia_kg_m: float
+    bending_stiffness_nm2: float
+    axial_stiffness_n: float
+    shear_stiffness_n: float
+    bending_damping_nm2s: float = 0.0
+    axial_damping_ns: float = 0.0
+    shear_damping_ns: float = 0.0
+
+
+@dataclass
+class HubBeam2D:
+    """A planar beam clamped to a driven hub, stepped with Exudyn's implicit (generalized-alpha) solver.
+
+    Parameters
+    ----------
+    section : BeamSection
+        Beam properties.
+    length_m : float
+        Beam length [m].
+    n_elements : int
+        Number of beam elements (``n_elements + 1`` nodes, node 0 = hub).
+    tip_mass_kg : float
+        Point mass on the last node [kg].
+    hub_inertia_kgm2, hub_friction_nms_per_rad : float
+        Rotor inertia [kg m^2] and viscous friction [N m s/rad] of the hub (unused when locked).
+    gravity_mps2 : float
+        Gravity along -y [m/s^2].
+    dt_s : float
+        Control step [s].
+    substeps : int
+        Solver steps per control step.
+    hub_locked_at_rad : float, optional
+        Constrain the hub rotation to this angle (cantilever).
+    spectral_radius : float
+        Generalized-alpha spectral radius at infinity (1 = no numerical damping).
+    """
+
+    section: BeamSection
+    length_m: float
+    n_elements: int
+    tip_mass_kg: float
+    hub_inertia_kgm2: float
+    hub_friction_nms_per_rad: float
+    gravity_mps2: float
+    dt_s: float
+    substeps: int = 2
+    hub_locked_at_rad: Optional[float] = None
+    spectral_radius: float = 0.95
+    newton_relative_tolerance: float = 1e-8
+    time_s: float = field(init=False, default=0.0)
+
+    def __post_init__(self) -> None:
+        if int(self.n_elements) != self.n_elements or self.n_elements < 1:
+            raise ValueError(f"n_elements must be an integer >= 1, got {self.n_elements!r}")
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise ValueError(f"dt_s must be positive and finite, got {self.dt_s!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
+        if not 0.0 <= self.spectral_radius <= 1.0:
+            raise ValueError(f"spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
+        self.n_elements = int(self.n_elements)
+        self.n_nodes = self.n_elements + 1
+        self.n_ode2 = 3 * self.n_nodes
+        self.element_length_m = self.length_m / self.n_elements
+        #: reference arc-length position of each node [m]
+        self.node_s_m = np.linspace(0.0, self.length_m, self.n_nodes)
+        self._build()
+
+    # ------------------------------------------------------------------ construction
+    def _build(self) -> None:
+        sec = self.section
+        self._sc = exu.SystemContainer()
+        mbs = self._sc.AddSystem()
+        self._mbs = mbs
+        gravity = [0.0, -self.gravity_mps2, 0.0]
+        ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+        self._nodes = [
+            mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[0.0, float(s), 0.0], initialVelocities=[0.0, 0.0, 0.0]))
+            for s in self.node_s_m
+        ]
+        for i in range(self.n_elements):
+            element = mbs.AddObject(
+                ObjectBeamGeometricallyExact2D(
+                    nodeNumbers=[self._nodes[i], self._nodes[i + 1]],
+                    length=self.element_length_m,
+                    massPerLength=sec.mass_per_length_kg_m,
+                    crossSectionInertia=sec.rotary_inertia_kg_m,
+                    bendingStiffness=sec.bending_stiffness_nm2,
+                    axialStiffness=sec.axial_stiffness_n,
+                    shearStiffness=sec.shear_stiffness_n,
+                    bendingDamping=sec.bending_damping_nm2s,
+                    axialDamping=sec.axial_damping_ns,
+                    shearDamping=sec.shear_damping_ns,
+                )
+            )
+            if self.gravity_mps2 != 0:
+                marker = mbs.AddMarker(MarkerBodyMass(bodyNumber=element))
+                mbs.AddLoad(LoadMassProportional(markerNumber=marker, loadVector=gravity))
+        if self.tip_mass_kg > 0:
+            tip = mbs.AddObject(ObjectMassPoint2D(nodeNumber=self._nodes[-1], mass=self.tip_mass_kg))
+            if self.gravity_mps2 != 0:
+                marker = mbs.AddMarker(MarkerBodyMass(bodyNumber=tip))
+                mbs.AddLoad(LoadMassProportional(markerNumber=marker, loadVector=gravity))
+        ground_marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground, coordinate=0))
+        hub = self._nodes[0]
+        for coordinate in (0, 1):  # the hub axis stays at the origin
+            marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=coordinate))
+            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, marker]))
+        hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
+        self._torque_load = None
+        if self.hub_locked_at_rad is not None:
+            # constraint: q_hub - q_ground = offset
+            mbs.AddObject(
+                ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=float(self.hub_locked_at_rad))
+            )
+        else:
+            if self.hub_inertia_kgm2 > 0:
+                mbs.AddObject(ObjectRigidBody2D(nodeNumber=hub, mass=0.0, inertia=self.hub_inertia_kgm2))
+            if self.hub_friction_nms_per_rad > 0:
+                mbs.AddObject(
+                    ObjectConnectorCoordinateSpringDamper(
+                        markerNumbers=[ground_marker, hub_rotation], stiffness=0.0, damping=self.hub_friction_nms_per_rad
+                    )
+                )
+            self._torque_load = mbs.AddLoad(LoadCoordinate(markerNumber=hub_rotation, load=0.0))
+        mbs.Assemble()
+        self._mass_matrix = self._compute_mass_matrix()
+
+        settings = exu.SimulationSettings()
+        ti = settings.timeIntegration
+        ti.numberOfSteps = int(self.substeps)
+        ti.startTime = 0.0
+        ti.endTime = self.dt_s
+        ti.verboseMode = 0
+        ti.adaptiveStep = False
+        ti.generalizedAlpha.spectralRadius = float(self.spectral_radius)
+        ti.newton.relativeTolerance = self.newton_relative_tolerance
+        ti.newton.absoluteTolerance = 1e-10
+        ti.newton.useModifiedNewton = True
+        ti.newton.maxIterations = 50
+        settings.solutionSettings.writeSolutionToFile = False
+        settings.solutionSettings.sensorsWritePeriod = 1e9
+        settings.displayComputationTime = False
+        settings.displayStatistics = False
+        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        self._settings = settings
+        self._solver = exu.MainSolverImplicitSecondOrder()
+        self._solver.InitializeSolver(mbs, settings)
+
+    # ------------------------------------------------------------------ state (global nodal coordinates)
+    def set_coordinates(self, c: np.ndarray, c_t: np.ndarray) -> None:
+        """Set the nodal coordinates (displacements ``x, y`` [m] and rotation [rad] per node, node 0 first,
+        relative to the upright straight reference) and their rates, and restart the integrator."""
+        c = np.asarray(c, dtype=float).reshape(self.n_ode2)
+        c_t = np.asarray(c_t, dtype=float).reshape(self.n_ode2)
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(c_t))):
+            raise ValueError("beam coordinates must be finite")
+        data = self._mbs.systemData
+        n_ae = len(data.GetAECoordinates())
+        for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
+            data.SetODE2Coordinates(coordinates=c.tolist(), configuration=configuration)
+            data.SetODE2Coordinates_t(coordinates=c_t.tolist(), configuration=configuration)
+            data.SetODE2Coordinates_tt(coordinates=[0.0] * self.n_ode2, configuration=configuration)
+            if n_ae:
+                data.SetAECoordinates(coordinates=[0.0] * n_ae, configuration=configuration)
+        self.time_s = 0.0
+        self._settings.timeIntegration.startTime = 0.0
+        self._settings.timeIntegration.endTime = self.dt_s
+        self._solver.InitializeSolver(self._mbs, self._settings)
+
+    def get_coordinates(self) -> tuple[np.ndarray, np.ndarray]:
+        """Nodal coordinates and their rates (copies, see :meth:`set_coordinates`)."""
+        data = self._mbs.systemData
+        return np.array(data.GetODE2Coordinates()), np.array(data.GetODE2Coordinates_t())
+
+    def set_hub_torque(self, torque_nm: float) -> None:
+        """Base torque on the hub [N m] for the following steps (ignored when the hub is locked)."""
+        if self._torque_load is not None:
+            self._mbs.SetLoadParameter(self._torque_load, "load", float(torque_nm))
+
+    def _compute_mass_matrix(self) -> np.ndarray:
+        settings = exu.SimulationSettings()
+        settings.solutionSettings.writeSolutionToFile = False
+        settings.staticSolver.verboseMode = 0
+        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        solver = exu.MainSolverStatic()
+        solver.InitializeSolver(self._mbs, settings)
+        solver.ComputeMassMatrix(self._mbs)
+        return np.array(solver.GetSystemMassMatrix(), dtype=float)[: self.n_ode2, : self.n_ode2]
+
+    def mass_matrix(self) -> np.ndarray:
+        """The mass matrix of the nodal coordinates, from Exudyn (constant for these elements; computed
+        once at construction)."""
+        return self._mass_matrix
+
+    # ------------------------------------------------------------------ stepping
+    def advance(self) -> None:
+        """Advance by one control step ``dt_s``.
+
+        Raises
+        ------
+        SolverFailure
+            If Newton fails or the new state is not finite.
+        """
+        settings = self._settings
+        mbs = self._mbs
+        settings.timeIntegration.startTime = self.time_s
+        settings.timeIntegration.endTime = self.time_s + self.dt_s
+        self._solver.InitializeSolverInitialConditions(mbs, settings)
+        try:
+            ok = self._solver.SolveSteps(mbs, settings)
+        except Exception as exc:  # Exudyn raises on e.g. singular Jacobians
+            raise SolverFailure(f"Exudyn solver error at t = {self.time_s:.4f} s: {exc}") from exc
+        data = mbs.systemData
+        state = data.GetSystemState()
+        if not ok:
+            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
+        if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
+            raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
+        data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)
+        data.SetODE2Coordinates_tt(coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial)
+        self.time_s += self.dt_s
+
+    def solve_static(self) -> np.ndarray:
+        """Static equilibrium under gravity, elasticity and the current hub torque; returns the nodal
+        coordinates and makes them the current (resting) state."""
+        start, _ = self.get_coordinates()
+        # one full load step converges for the cantilever cases we need; load stepping is the fallback
+        for load_steps in (1, 20):
+            settings = exu.SimulationSettings()
+            settings.staticSolver.numberOfLoadSteps = load_steps
+            settings.staticSolver.verboseMode = 0
+            settings.staticSolver.newton.relativeTolerance = 1e-8
+            settings.solutionSettings.writeSolutionToFile = False
+            settings.displayComputationTime = False
+            settings.linearSolverType = exu.LinearSolverType.EXUdense
+            try:
+                ok = exu.SolveStatic(self._mbs, settings, updateInitialValues=True)
+            except Exception:  # Exudyn raises when Newton fails; retry, then report
+                ok = False
+            if ok:
+                break
+            self.set_coordinates(start, np.zeros(self.n_ode2))
+        if not ok:
+            raise SolverFailure("Exudyn static solver did not converge")
+        c, _ = self.get_coordinates()
+        self.set_coordinates(c, np.zeros(self.n_ode2))
+        return c

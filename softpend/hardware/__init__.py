@@ -1,0 +1,34 @@
+"""The hardware rig: serial motor link, rig emulator (digital twin), host control loop, crash-safe logs,
+and time synchronisation of the motor and camera streams."""
+
+from .driver import (
+    DeviceError,
+    DeviceInfo,
+    HandshakeError,
+    LinkChecksumError,
+    LinkDisconnected,
+    LinkError,
+    LinkTimeout,
+    MotorLink,
+    MotorState,
+)
+from .emulator import EmulatorProcess, RigConfig, RigEmulator, start_emulator_process
+from .samplelog import SampleLog, read_sample_log
+
+__all__ = [
+    "DeviceError",
+    "DeviceInfo",
+    "EmulatorProcess",
+    "HandshakeError",
+    "LinkChecksumError",
+    "LinkDisconnected",
+    "LinkError",
+    "LinkTimeout",
+    "MotorLink",
+    "MotorState",
+    "RigConfig",
+    "RigEmulator",
+    "SampleLog",
+    "read_sample_log",
+    "start_emulator_process",
+]

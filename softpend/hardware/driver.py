@@ -1,0 +1,461 @@
+"""Host-side driver for the motor link (pyserial).
+
+:class:`MotorLink` opens the serial port, performs the version handshake and then exchanges the
+messages of :mod:`softpend.hardware.protocol`: it sends torque commands (clamped to the torque limit
+*before* they leave the host) and reads the device's time-stamped encoder states.  Safety is part of the
+driver:
+
+* every torque is clamped to ``min(host limit, device limit)``; a non-finite torque stops the motor and
+  raises ``ValueError``;
+* zero torque on every exit path: ``close()`` (and so the context manager) sends STOP, an ``atexit`` hook
+  and SIGTERM/SIGINT handlers send STOP for links still open, and any link error sends STOP before it is
+  raised (best effort: a dead link cannot carry it, which is what the device-side watchdog is for);
+* clear errors: :class:`LinkTimeout` (no state within the timeout), :class:`LinkDisconnected` (the port
+  went away), :class:`LinkChecksumError` (too many consecutive frames failed their CRC),
+  :class:`HandshakeError` (wrong protocol version or no answer), :class:`DeviceError` (the device reported
+  an error).
+"""
+
+from __future__ import annotations
+
+import atexit
+import math
+import os
+import signal
+import threading
+import time
+import weakref
+from dataclasses import dataclass
+from typing import Optional
+
+from . import protocol as proto
+
+__all__ = [
+    "DeviceError",
+    "DeviceInfo",
+    "HandshakeError",
+    "LinkChecksumError",
+    "LinkDisconnected",
+    "LinkError",
+    "LinkTimeout",
+    "MotorLink",
+    "MotorState",
+]
+
+
+class LinkError(RuntimeError):
+    """Base class of every motor-link failure."""
+
+
+class LinkTimeout(LinkError):
+    """The device did not answer within the timeout."""
+
+
+class LinkDisconnected(LinkError):
+    """The serial port went away (device unplugged, emulator killed)."""
+
+
+class LinkChecksumError(LinkError):
+    """Too many consecutive frames failed their CRC or framing."""
+
+
+class HandshakeError(LinkError):
+    """The version handshake failed."""
+
+
+class DeviceError(LinkError):
+    """The device reported an error."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What the device announced in its HELLO_ACK."""
+
+    protocol_version: int
+    counts_per_rev: int
+    torque_limit_nm: float
+    watchdog_s: float
+    state_rate_hz: float
+
+
+@dataclass(frozen=True)
+class MotorState:
+    """One STATE message, converted to SI units.
+
+    Attributes
+    ----------
+    host_time_s : float
+        ``time.monotonic()`` when the host decoded the frame [s].
+    device_time_s : float
+        Device clock at the encoder sample [s].
+    phi_rad : float
+        Hub angle from upright, unwrapped [rad] (``phi_at_zero_counts_rad`` + counts).
+    phi_dot_rad_s : float
+        Hub rate reported by the device [rad/s].
+    applied_torque_nm : float
+        Torque the device is applying [N m] (0 after the watchdog or STOP).
+    encoder_counts : int
+        Raw encoder counts since the device started.
+    last_cmd_seq : int
+        Sequence number of the torque command in force.
+    flags : int
+        ``protocol.FLAG_*`` bits.
+    seq : int
+        Sequence number of this STATE frame.
+    """
+
+    host_time_s: float
+    device_time_s: float
+    phi_rad: float
+    phi_dot_rad_s: float
+    applied_torque_nm: float
+    encoder_counts: int
+    last_cmd_seq: int
+    flags: int
+    seq: int
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        return bool(self.flags & proto.FLAG_WATCHDOG)
+
+    @property
+    def saturated(self) -> bool:
+        return bool(self.flags & proto.FLAG_SATURATED)
+
+
+_OPEN_LINKS: "weakref.WeakSet[MotorLink]" = weakref.WeakSet()
+_HANDLERS_LOCK = threading.Lock()
+_PREVIOUS_HANDLERS: dict[int, object] = {}
+
+
+def _stop_all_open_links() -> None:
+    for link in list(_OPEN_LINKS):
+        link.emergency_stop()
+
+
+def _signal_handler(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess test
+    _stop_all_open_links()
+    previous = _PREVIOUS_HANDLERS.get(signum)
+    if callable(previous):
+        previous(signum, frame)
+    elif signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    else:
+        raise SystemExit(128 + signum)
+
+
+def _install_exit_hooks() -> None:
+    with _HANDLERS_LOCK:
+        if _PREVIOUS_HANDLERS or threading.current_thread() is not threading.main_thread():
+            return
+        atexit.register(_stop_all_open_links)
+        for signum in (signal.SIGTERM, signal.SIGINT):
+            _PREVIOUS_HANDLERS[signum] = signal.getsignal(signum)
+            signal.signal(signum, _signal_handler)
+
+
+class MotorLink:
+    """A session with the motor controller over a serial port.
+
+    Parameters
+    ----------
+    port : str
+        Serial device (``/dev/ttyACM0`` for the V5 brain, or the pty path printed by ``softpend rig``).
+    torque_limit_nm : float
+        Host-side torque limit [N m]; the effective limit is the smaller of this and the device's.
+    baudrate : int
+        Serial baud rate (ignored by pseudo-terminals).
+    timeout_s : float
+        How long :meth:`read_state` and the handshake wait before raising :class:`LinkTimeout` [s].
+    phi_at_zero_counts_rad : float
+        Hub angle when the encoder reads zero [rad] (pi: the rod hangs down when the device starts).
+    max_consecutive_bad_frames : int
+        This many bad frames in a row raise :class:`LinkChecksumError`; isolated ones are only counted.
+    install_exit_hooks : bool
+        Register the atexit and SIGTERM/SIGINT hooks that stop the motor (main thread only).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        torque_limit_nm: float,
+        baudrate: int = 115200,
+        timeout_s: float = 0.25,
+        phi_at_zero_counts_rad: float = math.pi,
+        max_consecutive_bad_frames: int = 3,
+        install_exit_hooks: bool = True,
+    ) -> None:
+        if not isinstance(port, str) or not port:
+            raise ValueError(f"port must be a non-empty string, got {port!r}")
+        if not (isinstance(torque_limit_nm, (int, float)) and math.isfinite(torque_limit_nm) and torque_limit_nm > 0):
+            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        if not (math.isfinite(timeout_s) and timeout_s > 0):
+            raise ValueError(f"timeout_s must be positive and finite, got {timeout_s!r}")
+        if int(max_consecutive_bad_frames) < 1:
+            raise ValueError(f"max_consecutive_bad_frames must be >= 1, got {max_consecutive_bad_frames!r}")
+        self.port = port
+        self.host_torque_limit_nm = float(torque_limit_nm)
+        self.baudrate = int(baudrate)
+        self.timeout_s = float(timeout_s)
+        self.phi_at_zero_counts_rad = float(phi_at_zero_counts_rad)
+        self.max_consecutive_bad_frames = int(max_consecutive_bad_frames)
+        self.install_exit_hooks = install_exit_hooks
+        self.device: Optional[DeviceInfo] = None
+        self._serial = None
+        self._decoder = proto.FrameDecoder()
+        self._seq = 0
+        self._pending: list[tuple[int, int, tuple]] = []
+        self.last_command_nm = 0.0
+        self.commands_sent = 0
+        self._write_lock = threading.Lock()
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def is_open(self) -> bool:
+        return self._serial is not None
+
+    @property
+    def torque_limit_nm(self) -> float:
+        """Effective limit: the smaller of the host's and the device's [N m]."""
+        if self.device is None:
+            return self.host_torque_limit_nm
+        return min(self.host_torque_limit_nm, self.device.torque_limit_nm)
+
+    @property
+    def bad_frames(self) -> int:
+        """Frames received so far that failed CRC or framing."""
+        return self._decoder.bad_frames
+
+    # ------------------------------------------------------------------ open / close
+    def open(self) -> "MotorLink":
+        """Open the port and perform the version handshake.
+
+        Raises
+        ------
+        LinkDisconnected
+            If the port cannot be opened.
+        HandshakeError
+            On a version mismatch or if the device does not answer within ``timeout_s``.
+        """
+        import serial
+
+        try:
+            self._serial = serial.Serial(self.port, self.baudrate, timeout=0, write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError) as exc:
+            raise LinkDisconnected(f"cannot open serial port {self.port!r}: {exc}") from exc
+        _OPEN_LINKS.add(self)
+        if self.install_exit_hooks:
+            _install_exit_hooks()
+        try:
+            self._handshake()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _handshake(self) -> None:
+        nonce = int.from_bytes(os.urandom(4), "little")
+        self._write(proto.MSG_HELLO, (proto.PROTOCOL_VERSION, nonce))
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            try:
+                msg_type, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK, proto.MSG_ERROR))
+            except LinkTimeout as exc:
+                raise HandshakeError(f"no HELLO_ACK from {self.port!r} within {self.timeout_s:.3f} s") from exc
+            if msg_type == proto.MSG_ERROR:
+                code = values[0]
+                if code == proto.ERR_VERSION:
+                    raise HandshakeError(
+                        f"device rejected protocol version {proto.PROTOCOL_VERSION} (version mismatch)"
+                    )
+                raise HandshakeError(f"device answered HELLO with error code {code}")
+            version, echoed, cpr, limit, watchdog_ms, rate_hz = values
+            if echoed != nonce:
+                continue  # a stale answer to an earlier session
+            if version != proto.PROTOCOL_VERSION:
+                raise HandshakeError(f"device speaks protocol version {version}, host {proto.PROTOCOL_VERSION}")
+            self.device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
+            return
+
+    def close(self) -> None:
+        """Send STOP (zero torque) and close the port.  Safe to call more than once."""
+        if self._serial is None:
+            return
+        self.emergency_stop()
+        try:
+            self._serial.close()
+        finally:
+            self._serial = None
+            _OPEN_LINKS.discard(self)
+
+    def __enter__(self) -> "MotorLink":
+        if not self.is_open:
+            self.open()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - garbage collection timing
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # ------------------------------------------------------------------ commands
+    def send_torque(self, torque_nm: float) -> int:
+        """Command a base torque, clamped to :attr:`torque_limit_nm` here on the host; returns its seq.
+
+        Raises
+        ------
+        ValueError
+            If ``torque_nm`` is not finite (the motor is stopped first).
+        """
+        torque = float(torque_nm)
+        if not math.isfinite(torque):
+            self.emergency_stop()
+            raise ValueError(f"torque_nm must be finite, got {torque_nm!r} (motor stopped)")
+        limit = self.torque_limit_nm
+        torque = min(max(torque, -limit), limit)
+        seq = self._write(proto.MSG_TORQUE, (torque,))
+        self.last_command_nm = torque
+        self.commands_sent += 1
+        return seq
+
+    def stop(self) -> None:
+        """Zero torque now (STOP message)."""
+        self._write(proto.MSG_STOP, ())
+        self.last_command_nm = 0.0
+
+    def ping(self) -> float:
+        """Round-trip time of a HEARTBEAT [s]."""
+        start = time.monotonic()
+        seq = self._write(proto.MSG_HEARTBEAT, ())
+        deadline = start + self.timeout_s
+        while True:
+            _, ack_seq, _ = self._next_message(deadline, (proto.MSG_HEARTBEAT_ACK,))
+            if ack_seq == seq:
+                return time.monotonic() - start
+
+    def read_state(self, timeout_s: Optional[float] = None) -> MotorState:
+        """Wait for the next STATE frame and return it.
+
+        Raises
+        ------
+        LinkTimeout, LinkDisconnected, LinkChecksumError, DeviceError
+            See the module docstring; the motor is stopped (best effort) before any of them is raised.
+        """
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else float(timeout_s))
+        _, seq, values = self._next_message(deadline, (proto.MSG_STATE,))
+        return self._state_from(seq, values)
+
+    def drain_states(self) -> list[MotorState]:
+        """Every STATE frame already received (without waiting), oldest first."""
+        self._pump_nonblocking()
+        states = [self._state_from(s, v) for t, s, v in self._pending if t == proto.MSG_STATE]
+        self._pending = [m for m in self._pending if m[0] != proto.MSG_STATE]
+        return states
+
+    # ------------------------------------------------------------------ internals
+    def _state_from(self, seq: int, values: tuple) -> MotorState:
+        device_us, counts, velocity, applied, last_cmd, flags = values
+        cpr = self.device.counts_per_rev if self.device else 1
+        return MotorState(
+            host_time_s=time.monotonic(),
+            device_time_s=device_us * 1e-6,
+            phi_rad=self.phi_at_zero_counts_rad + counts * (2 * math.pi / cpr),
+            phi_dot_rad_s=float(velocity),
+            applied_torque_nm=float(applied),
+            encoder_counts=int(counts),
+            last_cmd_seq=int(last_cmd),
+            flags=int(flags),
+            seq=int(seq),
+        )
+
+    def _require_open(self):
+        if self._serial is None:
+            raise LinkDisconnected(f"link to {self.port!r} is not open")
+        return self._serial
+
+    def _write(self, msg_type: int, values: tuple) -> int:
+        ser = self._require_open()
+        self._seq = (self._seq + 1) & 0xFFFF
+        frame = proto.encode_message(msg_type, self._seq, values)
+        import serial
+
+        try:
+            with self._write_lock:
+                ser.write(frame)
+        except (serial.SerialException, OSError) as exc:
+            raise self._fail(LinkDisconnected(f"write to {self.port!r} failed: {exc}")) from exc
+        return self._seq
+
+    def emergency_stop(self) -> None:
+        """Send STOP if the port is open, swallowing any error (for exit and failure paths)."""
+        ser = self._serial
+        if ser is None:
+            return
+        try:
+            self._seq = (self._seq + 1) & 0xFFFF
+            with self._write_lock:
+                ser.write(proto.encode_message(proto.MSG_STOP, self._seq, ()))
+                ser.flush()
+        except Exception:
+            pass
+        self.last_command_nm = 0.0
+
+    def _fail(self, error: LinkError) -> LinkError:
+        self.emergency_stop()
+        return error
+
+    def _read_bytes(self, wait_s: float) -> bytes:
+        import serial
+
+        ser = self._require_open()
+        try:
+            ser.timeout = max(0.0, wait_s)
+            first = ser.read(1)
+            if not first:
+                return b""
+            waiting = ser.in_waiting
+            return first + (ser.read(waiting) if waiting else b"")
+        except (serial.SerialException, OSError, TypeError) as exc:
+            raise self._fail(LinkDisconnected(f"serial port {self.port!r} disconnected: {exc}")) from exc
+
+    def _accept(self, data: bytes) -> None:
+        messages, errors = self._decoder.feed(data)
+        for message in messages:
+            if message[0] == proto.MSG_ERROR:
+                raise self._fail(DeviceError(f"device reported error code {message[2][0]}"))
+        self._pending.extend(messages)
+        if errors and self._decoder.consecutive_bad >= self.max_consecutive_bad_frames:
+                raise self._fail(
+                    LinkChecksumError(
+                        f"{self._decoder.consecutive_bad} consecutive bad frames from {self.port!r} "
+                        f"(last: {self._decoder.last_error}); motor stopped"
+                    )
+                )
+
+    def _pump_nonblocking(self) -> None:
+        data = self._read_bytes(0.0)
+        if data:
+            self._accept(data)
+
+    def _next_message(self, deadline: float, wanted: tuple[int, ...]) -> tuple[int, int, tuple]:
+        while True:
+            for i, message in enumerate(self._pending):
+                if message[0] in wanted:
+                    del self._pending[i]
+                    return message
+            # keep the backlog bounded: STATE frames nobody waits for are superseded by newer ones
+            if len(self._pending) > 256:
+                self._pending = self._pending[-64:]
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)
+                raise self._fail(
+                    LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped")
+                )
+            data = self._read_bytes(remaining)
+            if data:
+                self._accept(data)

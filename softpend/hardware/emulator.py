@@ -1,0 +1,383 @@
+"""The rig emulator: the motor controller's protocol on a pseudo-terminal, backed by the simulated plant.
+
+:class:`RigEmulator` opens a pseudo-terminal (``os.openpty``), and serves the protocol of
+:mod:`softpend.hardware.protocol` on it with the *same* device-side logic as the VEX program
+(:class:`~softpend.hardware.protocol.DeviceSession`: handshake, torque clamp, watchdog).  The plant
+(:func:`softpend.plant.make_plant`) advances in real time, one control step per tick; each tick the
+emulator applies the session's torque, samples a quantised encoder and streams a STATE frame.  Link
+imperfections are configurable (:class:`RigConfig`): encoder resolution, latency in both directions,
+dropped and garbled frames.  The true joint state is recorded in a crash-safe truth log (for the
+synthetic camera and for checking).
+
+Run it as a process with ``softpend rig`` (or :func:`start_emulator_process`), which prints the pty
+path, and point :class:`~softpend.hardware.driver.MotorLink` at that path like at a real rig.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import heapq
+import json
+import math
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+import tty
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..plant import RodParams, make_plant
+from . import protocol as proto
+from .samplelog import SampleLog
+
+__all__ = ["EmulatorProcess", "RigConfig", "RigEmulator", "start_emulator_process", "truth_columns"]
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Settings of the emulated rig.
+
+    Parameters
+    ----------
+    params : RodParams
+        The simulated rod.
+    plant : str
+        Plant name for :func:`softpend.plant.make_plant`.
+    dt_s : float
+        Control (and STATE) period [s].
+    counts_per_rev : int
+        Encoder counts per hub revolution (quantisation of the reported angle).
+    latency_s : float
+        One-way link latency [s], applied to received commands and to sent states.
+    drop_probability : float
+        Probability that a STATE frame is lost.
+    garble_probability : float
+        Probability that a STATE frame has one byte corrupted (fails its CRC at the host).
+    watchdog_ms : int
+        Device watchdog [ms].
+    seed : int
+        Seed for the drop/garble draws and the initial-state noise.
+    start_noise_rad : float
+        Uniform noise on the initial hub angle and rate (the rod starts hanging) [rad, rad/s].
+    duration_s : float or None
+        Stop after this much device time [s] (None: run until killed or stopped).
+    """
+
+    params: RodParams = field(default_factory=RodParams)
+    plant: str = "prb"
+    dt_s: float = 0.01
+    counts_per_rev: int = 4096
+    latency_s: float = 0.002
+    drop_probability: float = 0.0
+    garble_probability: float = 0.0
+    watchdog_ms: int = 100
+    seed: int = 0
+    start_noise_rad: float = 0.0
+    duration_s: Optional[float] = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.dt_s) and 0.001 <= self.dt_s <= 0.1):
+            raise ValueError(f"dt_s must be in [0.001, 0.1] s, got {self.dt_s!r}")
+        if int(self.counts_per_rev) != self.counts_per_rev or self.counts_per_rev < 4:
+            raise ValueError(f"counts_per_rev must be an integer >= 4, got {self.counts_per_rev!r}")
+        if not (math.isfinite(self.latency_s) and 0 <= self.latency_s <= 1):
+            raise ValueError(f"latency_s must be in [0, 1] s, got {self.latency_s!r}")
+        for name in ("drop_probability", "garble_probability"):
+            value = getattr(self, name)
+            if not (0 <= value <= 1):
+                raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+        if int(self.watchdog_ms) != self.watchdog_ms or not 1 <= self.watchdog_ms <= 65535:
+            raise ValueError(f"watchdog_ms must be an integer in [1, 65535], got {self.watchdog_ms!r}")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f"duration_s must be positive or None, got {self.duration_s!r}")
+        if not (math.isfinite(self.start_noise_rad) and self.start_noise_rad >= 0):
+            raise ValueError(f"start_noise_rad must be >= 0, got {self.start_noise_rad!r}")
+
+    def to_dict(self) -> dict:
+        data = dataclasses.asdict(self)
+        data["params"] = self.params.to_dict()
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "RigConfig":
+        data = dict(data)
+        data["params"] = RodParams.from_dict(data.get("params", {}))
+        return cls(**data)
+
+
+def truth_columns(n_coordinates: int) -> list[str]:
+    """Columns of the emulator's truth log: device time, torque, then the full joint state."""
+    return (
+        ["device_time_s", "applied_torque_nm"]
+        + [f"q{i}_rad" for i in range(n_coordinates)]
+        + [f"q{i}_dot_rad_s" for i in range(n_coordinates)]
+    )
+
+
+class RigEmulator:
+    """Serve the motor protocol on a pseudo-terminal, backed by the plant in real time.
+
+    Parameters
+    ----------
+    config : RigConfig
+        Rig settings.
+    truth_log : path, optional
+        Where to record the true joint state every tick (crash-safe :class:`SampleLog`).
+    link_path : path, optional
+        Also expose the pty at this path (a symlink), like a fixed device name.
+    """
+
+    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
+                 link_path: Optional[str | os.PathLike] = None) -> None:
+        self.config = config if config is not None else RigConfig()
+        cfg = self.config
+        self.plant = make_plant(cfg.plant, params=cfg.params, dt_s=cfg.dt_s)
+        self._rng = np.random.default_rng(cfg.seed)
+        q, qd = self.plant.hanging_state()
+        q[0] += self._rng.uniform(-cfg.start_noise_rad, cfg.start_noise_rad)
+        qd[0] += self._rng.uniform(-cfg.start_noise_rad, cfg.start_noise_rad)
+        self.plant.reset(q, qd)
+        self._phi0_rad = math.pi  # the encoder reads zero with the rod hanging, as on the rig
+        self.session = proto.DeviceSession(
+            cfg.counts_per_rev, cfg.params.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.dt_s))
+        )
+        self.master_fd, self._slave_fd = os.openpty()
+        tty.setraw(self._slave_fd)
+        self.port = os.ttyname(self._slave_fd)
+        self.link_path = Path(link_path) if link_path else None
+        if self.link_path is not None:
+            if self.link_path.is_symlink() or self.link_path.exists():
+                self.link_path.unlink()
+            self.link_path.symlink_to(self.port)
+        self._truth = (
+            SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
+                      metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
+            if truth_log is not None else None
+        )
+        self._running = False
+        self.ticks = 0
+        self.states_sent = 0
+        self.states_dropped = 0
+        self.states_garbled = 0
+        self.tick_lateness_s: list[float] = []
+
+    # ------------------------------------------------------------------ encoder model
+    def encoder_counts(self, phi_unwrapped_rad: float) -> int:
+        """Quantised encoder reading for a hub angle [rad]."""
+        return int(math.floor((phi_unwrapped_rad - self._phi0_rad) * self.config.counts_per_rev / (2 * math.pi) + 0.5))
+
+    # ------------------------------------------------------------------ main loop
+    def stop(self) -> None:
+        self._running = False
+
+    def serve(self) -> None:
+        """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
+        cfg = self.config
+        session = self.session
+        dt = cfg.dt_s
+        latency = cfg.latency_s
+        start = time.monotonic()
+        inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
+        outbound: list[tuple[float, int, bytes]] = []
+        order = 0
+        next_tick = start + dt
+        self._running = True
+        forces_time_us = lambda now: int((now - start) * 1e6)  # noqa: E731  device clock [us]
+        try:
+            while self._running:
+                now = time.monotonic()
+                wake = next_tick
+                if inbound:
+                    wake = min(wake, inbound[0][0])
+                if outbound:
+                    wake = min(wake, outbound[0][0])
+                ready, _, _ = select.select([self.master_fd], [], [], max(0.0, wake - now))
+                now = time.monotonic()
+                if ready:
+                    try:
+                        data = os.read(self.master_fd, 4096)
+                    except OSError:
+                        data = b""  # no host has the pty open (EIO): nothing to read
+                        time.sleep(min(dt, max(0.0, next_tick - now)))
+                    if data:
+                        order += 1
+                        heapq.heappush(inbound, (now + latency, order, data))
+                while inbound and inbound[0][0] <= now:
+                    _, _, data = heapq.heappop(inbound)
+                    for reply in session.receive(data, forces_time_us(now)):
+                        order += 1
+                        heapq.heappush(outbound, (now + latency, order, reply))
+                if now >= next_tick:
+                    self.tick_lateness_s.append(now - next_tick)
+                    frame = self._tick(forces_time_us(now))
+                    next_tick += dt
+                    if next_tick < now:  # fell behind by more than a tick: skip, do not burst
+                        next_tick = now + dt
+                    if frame is not None:
+                        order += 1
+                        heapq.heappush(outbound, (now + latency, order, frame))
+                    if cfg.duration_s is not None and now - start >= cfg.duration_s:
+                        self._running = False
+                while outbound and outbound[0][0] <= now:
+                    _, _, frame = heapq.heappop(outbound)
+                    try:
+                        os.write(self.master_fd, frame)
+                    except OSError:
+                        pass
+        finally:
+            self._running = False
+
+    def _tick(self, now_us: int) -> Optional[bytes]:
+        cfg = self.config
+        torque = self.session.torque_nm(now_us)
+        observation_before = self.plant.observe()
+        if self._truth is not None:
+            q, qd = self.plant.joint_state()
+            self._truth.append([now_us * 1e-6, torque, *q, *qd])
+        counts = self.encoder_counts(self.plant.joint_state()[0][0])
+        frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque)
+        self.plant.step(torque)
+        self.ticks += 1
+        if frame is None:
+            return None
+        if cfg.drop_probability and self._rng.random() < cfg.drop_probability:
+            self.states_dropped += 1
+            return None
+        if cfg.garble_probability and self._rng.random() < cfg.garble_probability:
+            self.states_garbled += 1
+            position = int(self._rng.integers(0, len(frame) - 1))
+            garbled = bytearray(frame)
+            garbled[position] = (garbled[position] ^ (1 << int(self._rng.integers(0, 8)))) or 0x5A
+            frame = bytes(garbled)
+        self.states_sent += 1
+        return frame
+
+    def close(self) -> None:
+        for fd in (self.master_fd, self._slave_fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        if self._truth is not None:
+            self._truth.close()
+        if self.link_path is not None and self.link_path.is_symlink():
+            self.link_path.unlink()
+
+    def stats(self) -> dict[str, float]:
+        lateness = np.asarray(self.tick_lateness_s) * 1e3
+        return {
+            "ticks": float(self.ticks),
+            "states_sent": float(self.states_sent),
+            "states_dropped": float(self.states_dropped),
+            "states_garbled": float(self.states_garbled),
+            "tick_lateness_ms_p95": float(np.percentile(lateness, 95)) if lateness.size else float("nan"),
+        }
+
+
+# ---------------------------------------------------------------------- process helpers
+def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path: Optional[str] = None,
+                  stats_path: Optional[str] = None, out=sys.stdout) -> int:
+    """Create an emulator, print its pty path (one line, flushed), serve until SIGTERM/duration."""
+    emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path)
+
+    def _terminate(signum, frame):
+        emulator.stop()
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    print(emulator.port if link_path is None else f"{emulator.port} -> {link_path}", file=out, flush=True)
+    try:
+        emulator.serve()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if stats_path:
+            Path(stats_path).write_text(json.dumps(emulator.stats()))
+        emulator.close()
+    return 0
+
+
+class EmulatorProcess:
+    """A rig emulator running in a child process (``python -m softpend.hardware.emulator``).
+
+    Use as a context manager; :attr:`port` is the pty path to open with
+    :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.
+    """
+
+    def __init__(self, config: RigConfig, truth_log: Optional[str | os.PathLike] = None,
+                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0) -> None:
+        cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]
+        if truth_log is not None:
+            cmd += ["--truth-log", str(truth_log)]
+        if stats_path is not None:
+            cmd += ["--stats", str(stats_path)]
+        self.stats_path = Path(stats_path) if stats_path else None
+        import tempfile
+
+        self._stderr = tempfile.TemporaryFile(mode="w+")
+        self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
+        ready, _, _ = select.select([self.process.stdout], [], [], start_timeout_s)
+        line = self.process.stdout.readline().strip() if ready else ""
+        if not line.startswith("/dev/"):
+            self.process.kill()
+            self.process.wait()
+            self._stderr.seek(0)
+            err = self._stderr.read()
+            raise RuntimeError(f"rig emulator did not start within {start_timeout_s} s: {line!r} {err[-2000:]}")
+        self.port = line.split()[0]
+
+    def kill(self) -> None:
+        """SIGKILL the emulator (the link dies without a goodbye)."""
+        self.process.kill()
+        self.process.wait()
+
+    def terminate(self, timeout_s: float = 5.0) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+
+    def stats(self) -> dict[str, float]:
+        """The emulator's counters (after :meth:`terminate`)."""
+        if self.stats_path is None or not self.stats_path.exists():
+            return {}
+        return json.loads(self.stats_path.read_text())
+
+    def __enter__(self) -> "EmulatorProcess":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.terminate()
+        if self.process.stdout:
+            self.process.stdout.close()
+        self._stderr.close()
+
+
+def start_emulator_process(config: Optional[RigConfig] = None, **kwargs) -> EmulatorProcess:
+    """Start :class:`EmulatorProcess` with ``config`` (default :class:`RigConfig`)."""
+    return EmulatorProcess(config if config is not None else RigConfig(), **kwargs)
+
+
+def _main(argv: Optional[list[str]] = None) -> int:  # the child process entry point
+    parser = argparse.ArgumentParser(prog="python -m softpend.hardware.emulator")
+    parser.add_argument("--config-json", default="{}")
+    parser.add_argument("--truth-log")
+    parser.add_argument("--link")
+    parser.add_argument("--stats")
+    args = parser.parse_args(argv)
+    config = RigConfig.from_dict(json.loads(args.config_json))
+    return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats)
+
+
+if __name__ == "__main__":
+    sys.exit(_main())

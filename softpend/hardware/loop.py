@@ -1,0 +1,229 @@
+"""The host-side control loop: any controller against a rig (real or emulated) through :class:`MotorLink`.
+
+The loop is paced by the device's STATE stream (100 Hz): for each state it builds a
+:class:`RigObservation`, optionally adds the camera's tip measurement, asks the controller for a torque,
+sends it (clamped by the driver) and appends the sample to a crash-safe :class:`SampleLog` *before*
+anything else can fail.  Whatever goes wrong -- controller exception, link error, lost tip -- the motor
+gets zero torque: a lost tip sends 0 for that tick, and any exception sends STOP and propagates (the
+sample that was being processed is still logged, with the torque actually commanded).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Optional, Protocol
+
+import numpy as np
+
+from ..plant import Observation, wrap_angle_rad
+from .driver import MotorLink, MotorState
+from .samplelog import SampleLog
+
+__all__ = [
+    "LOOP_LOG_COLUMNS",
+    "LoopResult",
+    "RigObservation",
+    "TipMeasurement",
+    "TipSource",
+    "project_controller",
+    "run_control_loop",
+]
+
+#: Columns of the motor log written by :func:`run_control_loop`.
+LOOP_LOG_COLUMNS: tuple[str, ...] = (
+    "host_time_s",
+    "device_time_s",
+    "state_seq",
+    "phi_rad",
+    "phi_dot_rad_s",
+    "applied_torque_nm",
+    "command_torque_nm",
+    "flags",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_lost",
+)
+
+
+@dataclass(frozen=True)
+class TipMeasurement:
+    """The camera's tip position relative to the hub [m] (NaN and ``lost=True`` when no blob qualified)."""
+
+    x_m: float
+    y_m: float
+    lost: bool
+
+
+class TipSource(Protocol):
+    """Anything that returns the latest tip measurement (a camera + tracker, a video file)."""
+
+    def __call__(self) -> TipMeasurement: ...
+
+
+@dataclass(frozen=True)
+class RigObservation:
+    """What a controller sees on the rig.
+
+    Attributes
+    ----------
+    time_s : float
+        Device time since the start of the loop [s].
+    phi_rad : float
+        Hub angle from upright, unwrapped [rad].
+    phi_dot_rad_s : float
+        Hub rate [rad/s].
+    tip_x_m, tip_y_m : float
+        Tip position relative to the hub from the camera [m] (NaN without a camera or when lost).
+    tip_lost : bool
+        The tracker found no tip in this frame.
+    """
+
+    time_s: float
+    phi_rad: float
+    phi_dot_rad_s: float
+    tip_x_m: float = math.nan
+    tip_y_m: float = math.nan
+    tip_lost: bool = False
+
+    @property
+    def theta_rad(self) -> float:
+        """Tip angle from upright (NaN without a tip measurement) [rad]."""
+        return math.atan2(-self.tip_x_m, self.tip_y_m) if math.isfinite(self.tip_x_m) else math.nan
+
+    def as_observation(self) -> Observation:
+        """The plant's :class:`~softpend.plant.Observation` with what the rig measures (rates of the tip
+        and the tip rotation are not measured here and are NaN)."""
+        nan = math.nan
+        return Observation(
+            float(wrap_angle_rad(self.phi_rad)), self.theta_rad, self.tip_x_m, self.tip_y_m, nan,
+            self.phi_dot_rad_s, nan, nan, nan, nan,
+        )
+
+
+def project_controller(controller: Any) -> Callable[[RigObservation, float], float]:
+    """Adapt a project :class:`softpend.evaluation.Controller` (``(observation, q, q_dot, t)``) to the rig
+    loop.  Only the hub coordinate of the joint state is measured: ``q = [phi]``, ``q_dot = [phi_dot]``."""
+    if hasattr(controller, "reset"):
+        controller.reset()
+
+    def _call(observation: RigObservation, time_s: float) -> float:
+        return float(controller(observation.as_observation(), np.array([observation.phi_rad]),
+                                np.array([observation.phi_dot_rad_s]), time_s))
+
+    return _call
+
+
+@dataclass
+class LoopResult:
+    """Summary of one loop run: samples processed, periods between commands, lost/dropped counts."""
+
+    samples: int
+    command_periods_s: np.ndarray
+    dropped_states: int
+    tip_lost: int
+    bad_frames: int
+    watchdog_trips: int
+
+    @property
+    def jitter_ms_p95(self) -> float:
+        """95th percentile of ``|period - nominal|`` between consecutive torque commands [ms]."""
+        if self.command_periods_s.size == 0:
+            return math.nan
+        nominal = float(np.median(self.command_periods_s))
+        return float(np.percentile(np.abs(self.command_periods_s - nominal), 95) * 1e3)
+
+
+def run_control_loop(
+    link: MotorLink,
+    controller: Callable[[RigObservation, float], float],
+    duration_s: float,
+    log: Optional[SampleLog] = None,
+    tip_source: Optional[TipSource] = None,
+    progress: bool = False,
+) -> LoopResult:
+    """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time.
+
+    Parameters
+    ----------
+    link : MotorLink
+        An open link.
+    controller : callable
+        ``controller(observation: RigObservation, time_s) -> torque_nm``.
+    duration_s : float
+        Run length in device time [s].
+    log : SampleLog, optional
+        Log with columns :data:`LOOP_LOG_COLUMNS`; one line per received state, written before the next.
+    tip_source : callable, optional
+        Camera: returns a :class:`TipMeasurement` each tick; a lost tip commands zero torque that tick.
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    LoopResult
+
+    Raises
+    ------
+    LinkError
+        From the driver (the motor has been stopped); the samples up to the failure are in ``log``.
+    """
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be positive and finite, got {duration_s!r}")
+    if not link.is_open:
+        raise ValueError("link must be open")
+    if log is not None and list(log.columns) != list(LOOP_LOG_COLUMNS):
+        raise ValueError(f"log must have the columns LOOP_LOG_COLUMNS, got {log.columns}")
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=round(duration_s, 2), unit="s", desc="rig loop")
+    send_times: list[float] = []
+    samples = dropped = lost_count = watchdog = 0
+    t0_device: Optional[float] = None
+    last_state: Optional[MotorState] = None
+    nominal_period = 1.0 / link.device.state_rate_hz if link.device else 0.01
+    try:
+        while True:
+            state = link.read_state()
+            if t0_device is None:
+                t0_device = state.device_time_s
+            t = state.device_time_s - t0_device
+            if last_state is not None:
+                gap = state.device_time_s - last_state.device_time_s
+                dropped += max(0, int(round(gap / nominal_period)) - 1)
+            last_state = state
+            watchdog += int(state.watchdog_tripped)
+            tip = tip_source() if tip_source is not None else TipMeasurement(math.nan, math.nan, False)
+            observation = RigObservation(t, state.phi_rad, state.phi_dot_rad_s, tip.x_m, tip.y_m, tip.lost)
+            command = 0.0
+            try:
+                if tip.lost:
+                    lost_count += 1
+                    link.send_torque(0.0)
+                else:
+                    command = float(controller(observation, t))
+                    link.send_torque(command)
+                    command = link.last_command_nm
+            finally:
+                send_times.append(time.monotonic())
+                if log is not None:
+                    log.append([state.host_time_s, state.device_time_s, state.seq, state.phi_rad,
+                                state.phi_dot_rad_s, state.applied_torque_nm, link.last_command_nm,
+                                state.flags, tip.x_m, tip.y_m, tip.lost])
+            samples += 1
+            if bar is not None:
+                bar.n = round(min(t, duration_s), 2)
+                bar.refresh()
+            if t >= duration_s:
+                break
+    except BaseException:
+        link.emergency_stop()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    link.send_torque(0.0)
+    return LoopResult(samples, np.diff(send_times), dropped, lost_count, link.bad_frames, watchdog)

@@ -1,0 +1,154 @@
+"""Crash-safe sample logs: append-only CSV, one ``write(2)`` per sample.
+
+A :class:`SampleLog` opens its file with ``O_APPEND`` and writes every sample as one complete CSV line in a
+single system call, so the moment :meth:`SampleLog.append` returns the line is in the kernel: a crash or
+``SIGKILL`` of the logging process leaves every appended sample readable.  ``fsync_every_s`` sets how
+often the data is also forced to the disk (protection against power loss, which costs a disk flush):
+``0`` fsyncs every sample, ``None`` never.  :func:`read_sample_log` reads a log back and ignores (and
+reports) a torn last line, which only a power loss can produce.
+
+The header line is ``# softpend-log v1 <json metadata>`` followed by the CSV column names.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+__all__ = ["SampleLog", "LogContents", "read_sample_log"]
+
+_MAGIC = "# softpend-log v1 "
+
+
+def _format(value: Any) -> str:
+    if isinstance(value, (bool, np.bool_)):
+        return "1" if value else "0"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    value = float(value)
+    if math.isnan(value):
+        return "nan"
+    return repr(value)
+
+
+class SampleLog:
+    """Append-only, per-sample-flushed CSV log.
+
+    Parameters
+    ----------
+    path : str or Path
+        File to create (or append to, if it exists with the same columns).
+    columns : sequence of str
+        Column names (with units, e.g. ``phi_rad``).
+    metadata : dict, optional
+        JSON-serialisable metadata stored in the first line.
+    fsync_every_s : float or None
+        Force data to disk at most this often [s] (0: every sample; None: never).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        columns: Sequence[str],
+        metadata: Optional[dict] = None,
+        fsync_every_s: Optional[float] = 1.0,
+    ) -> None:
+        columns = [str(c) for c in columns]
+        if not columns or any((not c) or ("," in c) or ("\n" in c) for c in columns):
+            raise ValueError(f"columns must be non-empty names without commas or newlines, got {columns!r}")
+        if fsync_every_s is not None and not (math.isfinite(fsync_every_s) and fsync_every_s >= 0):
+            raise ValueError(f"fsync_every_s must be None or a non-negative number, got {fsync_every_s!r}")
+        self.path = Path(path)
+        self.columns = columns
+        self.fsync_every_s = fsync_every_s
+        self.rows_written = 0
+        exists = self.path.exists() and self.path.stat().st_size > 0
+        if exists:
+            existing = read_sample_log(self.path)
+            if existing.columns != columns:
+                raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
+        self._fd: Optional[int] = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        self._last_sync = time.monotonic()
+        if not exists:
+            header = _MAGIC + json.dumps(metadata or {}, sort_keys=True) + "\n" + ",".join(columns) + "\n"
+            os.write(self._fd, header.encode())
+            os.fsync(self._fd)
+
+    def append(self, row: Sequence[Any] | dict) -> None:
+        """Write one sample (a sequence in column order or a dict by column name)."""
+        if self._fd is None:
+            raise ValueError("append to a closed SampleLog")
+        if isinstance(row, dict):
+            missing = [c for c in self.columns if c not in row]
+            if missing:
+                raise ValueError(f"row is missing columns {missing}")
+            values = [row[c] for c in self.columns]
+        else:
+            values = list(row)
+            if len(values) != len(self.columns):
+                raise ValueError(f"row has {len(values)} values, the log has {len(self.columns)} columns")
+        line = (",".join(_format(v) for v in values) + "\n").encode()
+        os.write(self._fd, line)  # one syscall: the whole line reaches the kernel or nothing does
+        self.rows_written += 1
+        if self.fsync_every_s is not None:
+            now = time.monotonic()
+            if now - self._last_sync >= self.fsync_every_s:
+                os.fsync(self._fd)
+                self._last_sync = now
+
+    def close(self) -> None:
+        if self._fd is not None:
+            try:
+                os.fsync(self._fd)
+            finally:
+                os.close(self._fd)
+                self._fd = None
+
+    def __enter__(self) -> "SampleLog":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class LogContents:
+    """A log read back: ``data[column]`` arrays, the metadata, and whether a torn last line was dropped."""
+
+    columns: list[str]
+    data: dict[str, np.ndarray]
+    metadata: dict = field(default_factory=dict)
+    torn_lines: int = 0
+
+    def __len__(self) -> int:
+        return len(next(iter(self.data.values()))) if self.data else 0
+
+    def __getitem__(self, column: str) -> np.ndarray:
+        return self.data[column]
+
+
+def read_sample_log(path: str | os.PathLike) -> LogContents:
+    """Read a :class:`SampleLog` file (every complete line; a torn last line is counted, not parsed)."""
+    path = Path(path)
+    text = path.read_bytes().decode(errors="replace")
+    lines = text.split("\n")
+    if not lines or not lines[0].startswith(_MAGIC):
+        raise ValueError(f"path {path} is not a softpend sample log (missing {_MAGIC.strip()!r} header)")
+    metadata = json.loads(lines[0][len(_MAGIC):])
+    if len(lines) < 2 or not lines[1]:
+        raise ValueError(f"path {path} has no column line")
+    columns = lines[1].split(",")
+    body = lines[2:]
+    torn = 0
+    if body and body[-1] != "":
+        torn = 1  # the file does not end with a newline: the last line is incomplete
+    rows = [line for line in body[:-1] if line]
+    values = np.array([[float(v) for v in line.split(",")] for line in rows], dtype=float).reshape(-1, len(columns))
+    return LogContents(columns, {c: values[:, i] for i, c in enumerate(columns)}, metadata, torn)

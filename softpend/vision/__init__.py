@@ -1,0 +1,25 @@
+"""Vision: the report's tip tracker (Algorithm 1), affine calibration, the synthetic camera, and tracking
+video files into time-stamped CSV logs."""
+
+from .calibration import AffineCalibration, calibrate_from_markers, fit_affine, tip_angle_rad
+from .camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, read_sidecar, render_video
+from .tracker import BLUE_HSV, GREEN_HSV, ColourRange, Detection, TipTracker, find_blobs
+
+__all__ = [
+    "AffineCalibration",
+    "BLUE_HSV",
+    "CameraEffects",
+    "CameraModel",
+    "ColourRange",
+    "DEFAULT_MARKERS_M",
+    "Detection",
+    "GREEN_HSV",
+    "SyntheticCamera",
+    "TipTracker",
+    "calibrate_from_markers",
+    "find_blobs",
+    "fit_affine",
+    "read_sidecar",
+    "render_video",
+    "tip_angle_rad",
+]

@@ -1,0 +1,158 @@
+"""Affine pixel-to-metre calibration from reference markers.
+
+The rod moves in one plane, so the camera maps that plane to the image by an affine map (the report's
+affine projection).  Reference markers at known positions in the rod's plane (metres, hub axis at the
+origin, y up) are detected in a frame (:func:`softpend.vision.tracker.find_blobs`), matched to the known
+positions, and the 2x3 affine map pixel -> metre is fitted by least squares.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .tracker import GREEN_HSV, ColourRange, find_blobs
+
+__all__ = ["AffineCalibration", "calibrate_from_markers", "fit_affine", "tip_angle_rad"]
+
+
+def fit_affine(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Least-squares 2x3 affine ``A`` with ``target ~ A @ [source, 1]`` (needs >= 3 non-collinear points)."""
+    source = np.asarray(source, dtype=float)
+    target = np.asarray(target, dtype=float)
+    if source.ndim != 2 or source.shape[1] != 2 or source.shape != target.shape:
+        raise ValueError(f"source and target must both have shape (n, 2), got {source.shape} and {target.shape}")
+    if source.shape[0] < 3:
+        raise ValueError(f"need at least 3 point pairs, got {source.shape[0]}")
+    design = np.column_stack([source, np.ones(len(source))])
+    if np.linalg.matrix_rank(design) < 3:
+        raise ValueError("source points are collinear: the affine map is not determined")
+    solution, *_ = np.linalg.lstsq(design, target, rcond=None)
+    return solution.T
+
+
+def tip_angle_rad(x_m: np.ndarray | float, y_m: np.ndarray | float) -> np.ndarray | float:
+    """Tip angle from upright, counter-clockwise positive, of a tip at ``(x, y)`` from the hub [rad]."""
+    return np.arctan2(-np.asarray(x_m, dtype=float), np.asarray(y_m, dtype=float))
+
+
+@dataclass(frozen=True)
+class AffineCalibration:
+    """Pixel <-> metre affine map.
+
+    Attributes
+    ----------
+    pixel_to_metre : ndarray, shape (2, 3)
+        ``[x_m, y_m] = A @ [x_px, y_px, 1]``.
+    residual_rms_m : float
+        RMS residual of the markers after the fit [m] (0 for an exact map).
+    """
+
+    pixel_to_metre: np.ndarray
+    residual_rms_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        a = np.asarray(self.pixel_to_metre, dtype=float)
+        if a.shape != (2, 3) or not np.all(np.isfinite(a)):
+            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got {a.shape}")
+        if abs(np.linalg.det(a[:, :2])) < 1e-15:
+            raise ValueError("pixel_to_metre is singular")
+        object.__setattr__(self, "pixel_to_metre", a)
+
+    @property
+    def metre_to_pixel(self) -> np.ndarray:
+        """The inverse map as a 2x3 matrix."""
+        linear = np.linalg.inv(self.pixel_to_metre[:, :2])
+        return np.column_stack([linear, -linear @ self.pixel_to_metre[:, 2]])
+
+    def to_metres(self, points_px: np.ndarray) -> np.ndarray:
+        """Map ``(..., 2)`` pixel coordinates to metres (NaN stays NaN)."""
+        p = np.asarray(points_px, dtype=float)
+        return p @ self.pixel_to_metre[:, :2].T + self.pixel_to_metre[:, 2]
+
+    def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
+        """Map ``(..., 2)`` metre coordinates to pixels."""
+        inverse = self.metre_to_pixel
+        return np.asarray(points_m, dtype=float) @ inverse[:, :2].T + inverse[:, 2]
+
+    @property
+    def metres_per_pixel(self) -> float:
+        """Mean scale [m/px] (square root of the area scale)."""
+        return math.sqrt(abs(np.linalg.det(self.pixel_to_metre[:, :2])))
+
+    def to_json(self) -> str:
+        return json.dumps({"pixel_to_metre": self.pixel_to_metre.tolist(), "residual_rms_m": self.residual_rms_m})
+
+    @classmethod
+    def from_json(cls, text: str) -> "AffineCalibration":
+        data = json.loads(text)
+        return cls(np.array(data["pixel_to_metre"], dtype=float), float(data.get("residual_rms_m", 0.0)))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_json())
+
+    @classmethod
+    def load(cls, path: str | Path) -> "AffineCalibration":
+        return cls.from_json(Path(path).read_text())
+
+
+def calibrate_from_markers(
+    frame_bgr: np.ndarray,
+    marker_positions_m: Sequence[Sequence[float]],
+    colour: ColourRange = GREEN_HSV,
+    min_area_px: float = 10.0,
+) -> AffineCalibration:
+    """Detect the reference markers in ``frame_bgr`` and fit the pixel -> metre map.
+
+    Parameters
+    ----------
+    frame_bgr : ndarray
+        A BGR frame showing all markers.
+    marker_positions_m : sequence of (x, y)
+        Known marker positions in the rod plane [m] (hub axis at the origin, y up); 3 to 6 markers.
+    colour : ColourRange
+        Marker colour.
+    min_area_px : float
+        Smallest marker blob [px^2].
+
+    Returns
+    -------
+    AffineCalibration
+        The fit with the marker correspondence (tried over all orderings) of smallest residual.
+
+    Raises
+    ------
+    ValueError
+        If the number of markers is out of range or fewer markers than expected are visible.
+    """
+    known = np.asarray(marker_positions_m, dtype=float)
+    if known.ndim != 2 or known.shape[1] != 2 or not 3 <= len(known) <= 6:
+        raise ValueError(f"marker_positions_m must be 3 to 6 (x, y) pairs, got shape {known.shape}")
+    blobs = find_blobs(frame_bgr, colour, min_area_px)[: len(known)]
+    if len(blobs) < len(known):
+        raise ValueError(f"marker_positions_m lists {len(known)} markers but only {len(blobs)} are visible")
+    pixels = np.array([[b.x_px, b.y_px] for b in blobs])
+    best = None
+    for order in itertools.permutations(range(len(known))):
+        target = known[list(order)]
+        try:
+            a = fit_affine(pixels, target)
+        except ValueError:
+            continue
+        residual = target - (pixels @ a[:, :2].T + a[:, 2])
+        rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+        # a mirror image fits as well as the truth; keep maps that preserve handedness
+        # (image y points down, metre y up, so det(A) < 0)
+        if np.linalg.det(a[:, :2]) >= 0:
+            continue
+        if best is None or rms < best[0]:
+            best = (rms, a)
+    if best is None:
+        raise ValueError("marker_positions_m: no marker correspondence gives a valid affine map")
+    return AffineCalibration(best[1], best[0])

@@ -1,0 +1,175 @@
+"""The tip tracker: the report's Algorithm 1 with OpenCV.
+
+1. convert the frame to HSV and keep the pixels inside a colour range (a binary image);
+2. apply a 3x3 Gaussian blur;
+3. extract the external contours;
+4. take the contour with the largest area as the tracked object (if it reaches ``min_area_px``;
+   otherwise the frame is *lost*: no position is guessed);
+5. its centre (the centroid of the blurred mask inside the contour) is the tip position in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+
+__all__ = ["BLUE_HSV", "GREEN_HSV", "ColourRange", "Detection", "TipTracker", "find_blobs"]
+
+
+@dataclass(frozen=True)
+class ColourRange:
+    """An HSV box in OpenCV units (H in [0, 180), S and V in [0, 255])."""
+
+    lower_hsv: tuple[int, int, int]
+    upper_hsv: tuple[int, int, int]
+
+    def __post_init__(self) -> None:
+        for name in ("lower_hsv", "upper_hsv"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(0 <= int(v) <= 255 for v in value):
+                raise ValueError(f"{name} must be three integers in [0, 255], got {value!r}")
+        if any(lo > hi for lo, hi in zip(self.lower_hsv, self.upper_hsv)):
+            raise ValueError(f"lower_hsv {self.lower_hsv} must not exceed upper_hsv {self.upper_hsv}")
+
+    def mask(self, frame_bgr: np.ndarray) -> np.ndarray:
+        """Binary (0/255) mask of the pixels in range."""
+        hsv = cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2HSV)
+        return cv2.inRange(hsv, np.array(self.lower_hsv, np.uint8), np.array(self.upper_hsv, np.uint8))
+
+
+#: The blue tip dot.
+BLUE_HSV = ColourRange((100, 120, 50), (130, 255, 255))
+#: The green reference markers used for calibration.
+GREEN_HSV = ColourRange((45, 120, 50), (75, 255, 255))
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The tracker's answer for one frame (pixel coordinates: x right, y down; NaN when lost)."""
+
+    x_px: float
+    y_px: float
+    area_px: float
+    lost: bool
+    contour: Optional[np.ndarray] = None
+
+
+def _validate_frame(frame_bgr: np.ndarray) -> None:
+    if not isinstance(frame_bgr, np.ndarray) or frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
+        shape = getattr(frame_bgr, "shape", None)
+        raise ValueError(f"frame_bgr must be an (H, W, 3) uint8 BGR image, got {shape}")
+
+
+def _blobs(blurred: np.ndarray, min_area_px: float) -> list[tuple[float, np.ndarray]]:
+    _, binary = cv2.threshold(blurred, 127, 255, cv2.THRESH_BINARY)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    out = []
+    for contour in contours:
+        area = cv2.contourArea(contour)
+        if area >= min_area_px:
+            out.append((area, contour))
+    out.sort(key=lambda item: -item[0])
+    return out
+
+
+def _centroid(blurred: np.ndarray, contour: np.ndarray) -> tuple[float, float]:
+    """Weighted centroid of the blurred mask over the contour's bounding box (sub-pixel)."""
+    x, y, w, h = cv2.boundingRect(contour)
+    x0, y0 = max(x - 1, 0), max(y - 1, 0)
+    roi = blurred[y0 : y + h + 1, x0 : x + w + 1]
+    m = cv2.moments(roi, binaryImage=False)
+    if m["m00"] <= 0:
+        m = cv2.moments(contour)
+        return m["m10"] / m["m00"], m["m01"] / m["m00"]
+    return x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"]
+
+
+def find_blobs(frame_bgr: np.ndarray, colour: ColourRange, min_area_px: float = 10.0) -> list[Detection]:
+    """Every blob of ``colour`` with at least ``min_area_px`` (Algorithm 1 without the final 'largest'
+    step), largest first; used to find calibration markers."""
+    _validate_frame(frame_bgr)
+    blurred = cv2.GaussianBlur(colour.mask(frame_bgr), (3, 3), 0)
+    detections = []
+    for area, contour in _blobs(blurred, min_area_px):
+        x, y = _centroid(blurred, contour)
+        detections.append(Detection(x, y, area, False, contour))
+    return detections
+
+
+class TipTracker:
+    """Track the blue tip dot in camera frames (Algorithm 1).
+
+    Parameters
+    ----------
+    colour : ColourRange
+        HSV range of the dot (default :data:`BLUE_HSV`).
+    min_area_px : float
+        Smallest blob area accepted as the dot [px^2]; below it the frame is reported lost.
+    max_area_px : float, optional
+        Largest acceptable area [px^2] (a big blue object is not the dot): larger blobs mean lost.
+    search_radius_px : float, optional
+        If set, after a successful frame the next one is searched only in a window of this radius
+        around the last position (faster); the whole frame is searched again after a loss.
+    """
+
+    def __init__(
+        self,
+        colour: ColourRange = BLUE_HSV,
+        min_area_px: float = 20.0,
+        max_area_px: Optional[float] = None,
+        search_radius_px: Optional[float] = None,
+    ) -> None:
+        if not (math.isfinite(min_area_px) and min_area_px >= 0):
+            raise ValueError(f"min_area_px must be a non-negative number, got {min_area_px!r}")
+        if max_area_px is not None and not (max_area_px > min_area_px):
+            raise ValueError(f"max_area_px must exceed min_area_px, got {max_area_px!r}")
+        if search_radius_px is not None and not (search_radius_px > 0):
+            raise ValueError(f"search_radius_px must be positive, got {search_radius_px!r}")
+        self.colour = colour
+        self.min_area_px = float(min_area_px)
+        self.max_area_px = None if max_area_px is None else float(max_area_px)
+        self.search_radius_px = search_radius_px
+        self._last: Optional[tuple[float, float]] = None
+
+    def reset(self) -> None:
+        """Forget the last position (search the whole next frame)."""
+        self._last = None
+
+    def track(self, frame_bgr: np.ndarray) -> Detection:
+        """Locate the dot in one BGR frame; ``lost=True`` (NaN position) when no blob qualifies."""
+        _validate_frame(frame_bgr)
+        x_off = y_off = 0
+        image = frame_bgr
+        if self.search_radius_px is not None and self._last is not None:
+            r = int(math.ceil(self.search_radius_px))
+            h, w = frame_bgr.shape[:2]
+            cx, cy = int(round(self._last[0])), int(round(self._last[1]))
+            x_off, y_off = max(cx - r, 0), max(cy - r, 0)
+            image = frame_bgr[y_off : min(cy + r + 1, h), x_off : min(cx + r + 1, w)]
+        detection = self._track_image(image)
+        if detection.lost and image is not frame_bgr:
+            detection = self._track_image(frame_bgr)
+            x_off = y_off = 0
+        if detection.lost:
+            self._last = None
+            return detection
+        x, y = detection.x_px + x_off, detection.y_px + y_off
+        self._last = (x, y)
+        contour = detection.contour + np.array([[x_off, y_off]], dtype=detection.contour.dtype)
+        return Detection(x, y, detection.area_px, False, contour)
+
+    def _track_image(self, image: np.ndarray) -> Detection:
+        mask = self.colour.mask(image)                  # 1-2: colour range -> binary image
+        blurred = cv2.GaussianBlur(mask, (3, 3), 0)     # 3: 3x3 Gaussian blur
+        blobs = _blobs(blurred, self.min_area_px)       # 4-5: contours, sorted by area
+        if not blobs:
+            return Detection(math.nan, math.nan, 0.0, True, None)
+        area, contour = blobs[0]
+        if self.max_area_px is not None and area > self.max_area_px:
+            return Detection(math.nan, math.nan, area, True, contour)
+        x, y = _centroid(blurred, contour)              # 6: centre of the region
+        return Detection(x, y, area, False, contour)

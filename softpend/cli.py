@@ -15,6 +15,7 @@ from typing import Sequence
 #: Modules that contribute subcommands (one line per module).
 COMMAND_MODULES: list[str] = [
     "softpend.commands.bench",
+    "softpend.commands.book",
     "softpend.commands.train",
 ]
 

@@ -202,11 +202,11 @@ class HubBeam2D:
         ti.newton.absoluteTolerance = 1e-10
         ti.newton.useModifiedNewton = True
         ti.newton.maxIterations = 50
-        settings.solutionSettings.writeSolutionToFile = False
-        settings.solutionSettings.sensorsWritePeriod = 1e9
-        settings.displayComputationTime = False
-        settings.displayStatistics = False
-        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        settings.solution.file.write = False
+        settings.solution.sensors.writePeriod = 1e9
+        settings.show.computationTime = False
+        settings.show.statistics = False
+        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
         self._settings = settings
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(mbs, settings)
@@ -244,9 +244,9 @@ class HubBeam2D:
 
     def _compute_mass_matrix(self) -> np.ndarray:
         settings = exu.SimulationSettings()
-        settings.solutionSettings.writeSolutionToFile = False
+        settings.solution.file.write = False
         settings.staticSolver.verboseMode = 0
-        settings.linearSolverType = exu.LinearSolverType.EXUdense
+        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
         solver = exu.MainSolverStatic()
         solver.InitializeSolver(self._mbs, settings)
         solver.ComputeMassMatrix(self._mbs)
@@ -295,9 +295,9 @@ class HubBeam2D:
             settings.staticSolver.numberOfLoadSteps = load_steps
             settings.staticSolver.verboseMode = 0
             settings.staticSolver.newton.relativeTolerance = 1e-8
-            settings.solutionSettings.writeSolutionToFile = False
-            settings.displayComputationTime = False
-            settings.linearSolverType = exu.LinearSolverType.EXUdense
+            settings.solution.file.write = False
+            settings.show.computationTime = False
+            settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
             try:
                 ok = exu.SolveStatic(self._mbs, settings, updateInitialValues=True)
             except Exception:  # Exudyn raises when Newton fails; retry, then report

@@ -1,0 +1,159 @@
+"""How the pseudo-rigid-body chain approaches the continuum beam as the number of links grows.
+
+For each ``n_links`` the PRB plant (``k = E I/(L/n)``, ``2k`` at the clamp, see :mod:`softpend.plant.params`)
+is compared with the beam plant (the reference, at its default element count) on
+
+* the first two cantilever frequencies, measured from free-vibration runs of both plants
+  (:func:`~softpend.fidelity.validation.cantilever_free_vibration`), against Euler-Bernoulli;
+* the static tip sag of the horizontally clamped rod: a stiff rod (small deflection, against
+  ``w L^4/(8 E I) + P L^3/(3 E I)``) and the default soft rod (large deflection, against the beam);
+* the tip trajectory ``(e_x, e_y)`` under the same open-loop torque from hanging (RMS distance to the
+  beam's tip over the run, relative to ``L``).
+
+:func:`recommend_n_links` picks the smallest ``n`` that meets given tolerances on all of these.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..plant import RodParams, make_plant
+from .validation import measured_bending_frequencies, static_tip_sag
+
+__all__ = [
+    "SMALL_DEFLECTION_STIFFNESS_SCALE",
+    "convergence_table",
+    "open_loop_torque_nm",
+    "recommend_n_links",
+    "tip_trajectory_m",
+]
+
+#: ``stiffness_scale`` of the small-deflection sag case (tip drop ~0.2 % of ``L`` for the default rod).
+SMALL_DEFLECTION_STIFFNESS_SCALE = 100.0
+
+
+def open_loop_torque_nm(params: RodParams, duration_s: float, dt_s: float = 0.01) -> np.ndarray:
+    """A deterministic test input: ``tau_max * clip(sin(2 pi 1.0 t) + 0.4 sin(2 pi 3.1 t), -1, 1)``,
+    which pumps the pendulum swing (about 1 Hz) and excites the first bending mode (about 3 Hz)."""
+    t = np.arange(int(round(duration_s / dt_s))) * dt_s
+    u = np.sin(2 * math.pi * 1.0 * t) + 0.4 * np.sin(2 * math.pi * 3.1 * t)
+    return params.torque_limit_nm * np.clip(u, -1.0, 1.0)
+
+
+def tip_trajectory_m(
+    plant: str, params: RodParams, torques_nm: np.ndarray, dt_s: float = 0.01, resolution: Optional[int] = None
+) -> np.ndarray:
+    """Tip positions ``(T + 1, 2)`` [m] of a plant started hanging at rest and driven by ``torques_nm``.
+
+    ``resolution`` is the beam's ``n_elements`` or the PRB chain's ``n_links``.
+    """
+    kwargs = {}
+    if plant == "prb" and resolution is not None:
+        params = params.replace(n_links=int(resolution))
+    elif plant == "beam" and resolution is not None:
+        kwargs["n_elements"] = int(resolution)
+    sim = make_plant(plant, params=params, dt_s=dt_s, **kwargs)
+    observation = sim.reset(*sim.hanging_state())
+    tips = np.empty((len(torques_nm) + 1, 2))
+    tips[0] = observation.ex_m, observation.ey_m
+    for k, torque in enumerate(torques_nm):
+        observation = sim.step(float(torque))
+        tips[k + 1] = observation.ex_m, observation.ey_m
+    return tips
+
+
+@dataclass
+class ConvergenceRow:
+    """One line of :func:`convergence_table` (errors in %, trajectory error relative to ``L``)."""
+
+    plant: str
+    resolution: int
+    f1_error_pct: float
+    f2_error_pct: float
+    sag_small_error_pct: float
+    sag_large_vs_beam_pct: float
+    tip_rms_over_l: float
+    tip_max_over_l: float
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(self.__dict__)
+
+
+def convergence_table(
+    n_links: Sequence[int] = (1, 2, 3, 4, 6, 8, 12, 16),
+    beam_elements: Sequence[int] = (4, 8, 12, 16, 24),
+    params: Optional[RodParams] = None,
+    trajectory_s: float = 4.0,
+    reference_elements: Optional[int] = None,
+    progress: bool = True,
+) -> list[ConvergenceRow]:
+    """PRB chains of ``n_links`` and beams of ``beam_elements`` against theory and the reference beam.
+
+    Parameters
+    ----------
+    n_links, beam_elements : sequences of int
+        PRB and beam resolutions to test.
+    params : RodParams, optional
+        The rod (default: the project's default rod).
+    trajectory_s : float
+        Length of the open-loop tip-trajectory comparison [s].
+    reference_elements : int, optional
+        Element count of the reference beam (default: the beam plant's default).
+
+    Returns
+    -------
+    list of ConvergenceRow
+        Beam rows first, then PRB rows; a PRB chain of one link has no second mode (``nan``).
+    """
+    from ..plant.beam import DEFAULT_N_ELEMENTS
+
+    params = params or RodParams()
+    reference = reference_elements or DEFAULT_N_ELEMENTS
+    stiff = params.replace(stiffness_scale=params.stiffness_scale * SMALL_DEFLECTION_STIFFNESS_SCALE)
+    torques = open_loop_torque_nm(params, trajectory_s)
+    beam_sag = static_tip_sag("beam", params, reference)["sag_m"]
+    beam_tip = tip_trajectory_m("beam", params, torques, resolution=reference)
+    jobs = [("beam", int(n)) for n in beam_elements] + [("prb", int(n)) for n in n_links]
+    rows = []
+    for plant, n in tqdm(jobs, desc="PRB vs beam", disable=not progress):
+        if plant == "prb" and n == 1:
+            from .validation import cantilever_free_vibration
+
+            f1 = float(cantilever_free_vibration("prb", params, 1, modes=(1,)).error_pct[0])
+            f2 = math.nan
+        else:
+            freqs = measured_bending_frequencies(plant, params, n)
+            f1, f2 = freqs["f1_error_pct"], freqs["f2_error_pct"]
+        sag_small = static_tip_sag(plant, stiff, n)["error_pct"]
+        sag_large = 100.0 * (static_tip_sag(plant, params, n)["sag_m"] / beam_sag - 1.0)
+        tip = tip_trajectory_m(plant, params, torques, resolution=n)
+        distance = np.linalg.norm(tip - beam_tip, axis=1) / params.length_m
+        rows.append(
+            ConvergenceRow(plant, n, f1, f2, sag_small, sag_large, float(np.sqrt(np.mean(distance**2))), float(distance.max()))
+        )
+    return rows
+
+
+def recommend_n_links(
+    rows: Sequence[ConvergenceRow], tolerance_pct: float = 2.0, tip_rms_tolerance: float = 0.05
+) -> Optional[int]:
+    """Smallest PRB ``n_links`` whose first-frequency error, both sag errors (within ``tolerance_pct``)
+    and tip-trajectory RMS distance to the beam (within ``tip_rms_tolerance * L``) all pass, and which
+    also passes at every larger ``n`` tested; ``None`` if none does."""
+    prb = sorted((r for r in rows if r.plant == "prb"), key=lambda r: r.resolution)
+    ok = [
+        abs(r.f1_error_pct) <= tolerance_pct
+        and abs(r.sag_small_error_pct) <= tolerance_pct
+        and abs(r.sag_large_vs_beam_pct) <= tolerance_pct
+        and r.tip_rms_over_l <= tip_rms_tolerance
+        for r in prb
+    ]
+    for i, r in enumerate(prb):
+        if all(ok[i:]):
+            return r.resolution
+    return None

@@ -1,0 +1,152 @@
+"""Sim-to-"real" transfer: controllers designed on the PRB plant, evaluated on the continuum beam.
+
+The beam plant plays the real rod.  Every controller goes through the project's one evaluation,
+:func:`softpend.evaluation.evaluate_controller`, on the PRB plant it was designed for and on the beam, at
+the nominal parameters and with the *plant's* parameters perturbed by ``+-fraction`` (the controller keeps
+its nominal design):
+
+* ``stiffness``: ``stiffness_scale * (1 +- f)`` (``E I``, and the beam's ``E A``, ``G A``);
+* ``mass``: rod mass and tip mass ``* (1 +- f)``;
+* ``damping``: material/joint damping and hub friction ``* (1 +- f)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Optional, Sequence
+
+from tqdm.auto import tqdm
+
+from ..evaluation import evaluate_controller
+from ..plant import RodParams
+
+__all__ = ["TransferCase", "default_transfer_cases", "perturbations", "transfer_table"]
+
+
+def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodParams]:
+    """The nominal parameters and the six one-at-a-time perturbations (see the module docstring).
+
+    Raises
+    ------
+    ValueError
+        If ``fraction`` is not in ``[0, 1)``.
+    """
+    if not 0.0 <= fraction < 1.0:
+        raise ValueError(f"fraction must be in [0, 1), got {fraction!r}")
+    out = {"nominal": params}
+    for sign, label in ((+1, "+"), (-1, "-")):
+        s = 1.0 + sign * fraction
+        pct = f"{label}{100 * fraction:g}%"
+        out[f"stiffness {pct}"] = params.replace(stiffness_scale=params.stiffness_scale * s)
+        out[f"mass {pct}"] = params.replace(mass_kg=params.mass_kg * s, tip_mass_kg=params.tip_mass_kg * s)
+        out[f"damping {pct}"] = params.replace(
+            joint_damping_nms_per_rad=params.joint_damping_nms_per_rad * s,
+            hub_friction_nms_per_rad=params.hub_friction_nms_per_rad * s,
+        )
+    return out
+
+
+@dataclass
+class TransferCase:
+    """A controller and the task it is evaluated on.
+
+    Attributes
+    ----------
+    name : str
+        Label in the table.
+    make_controller : callable
+        ``() -> Controller``, designed on the nominal PRB plant (called once per case).
+    start : {"hanging", "upright", "random"}
+        Start distribution of the evaluation.
+    duration_s : float
+        Episode length [s].
+    start_noise_rad : float
+        Start noise on the hub angle and rate.
+    """
+
+    name: str
+    make_controller: Callable[[], Any]
+    start: str = "hanging"
+    duration_s: float = 10.0
+    start_noise_rad: float = 0.05
+
+
+def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.01) -> list[TransferCase]:
+    """The classical controllers of :mod:`softpend.control` that run on observations only (so they can
+    run on any plant): the observation-feedback LQR from a tilted start (``+-0.2 rad`` hub noise) and the
+    energy swing-up with that LQR from hanging."""
+    from ..control.lqr import LQRController
+    from ..control.swingup import EnergySwingUpController
+
+    params = params or RodParams()
+    return [
+        TransferCase(
+            "LQR (observations), balance",
+            lambda: LQRController.from_params(params, dt_s=dt_s, state="observation"),
+            start="upright",
+            duration_s=3.0,
+            start_noise_rad=0.2,
+        ),
+        TransferCase(
+            "energy swing-up + LQR (observations)",
+            lambda: EnergySwingUpController(params, dt_s=dt_s, lqr_state="observation"),
+            start="hanging",
+            duration_s=10.0,
+        ),
+    ]
+
+
+def transfer_table(
+    cases: Sequence[TransferCase],
+    params: Optional[RodParams] = None,
+    plants: Sequence[str] = ("prb", "beam"),
+    fraction: float = 0.2,
+    seeds: Sequence[int] = (0, 1, 2),
+    duration_scale: float = 1.0,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Evaluate every case on every plant and parameter perturbation.
+
+    Parameters
+    ----------
+    cases : sequence of TransferCase
+        Controllers and tasks (see :func:`default_transfer_cases`).
+    params : RodParams, optional
+        Nominal parameters (the controllers' design point).
+    plants : sequence of str
+        Plant names (``make_plant``).
+    fraction : float
+        Perturbation size (0.2 = +-20 %).
+    seeds : sequence of int
+        Evaluation seeds.
+    duration_scale : float
+        Multiplies every case's duration (shorter runs for quick profiles).
+
+    Returns
+    -------
+    list of dict
+        One row per (case, plant, perturbation): :meth:`EvaluationSummary.row` plus ``plant``,
+        ``perturbation`` and ``diverged`` (episodes that ended in a solver failure).
+    """
+    params = params or RodParams()
+    if duration_scale <= 0:
+        raise ValueError(f"duration_scale must be positive, got {duration_scale!r}")
+    variants = perturbations(params, fraction)
+    jobs = [(case, plant, label) for case in cases for plant in plants for label in variants]
+    controllers = {case.name: case.make_controller() for case in cases}
+    rows = []
+    for case, plant, label in tqdm(jobs, desc="transfer", disable=not progress):
+        summary = evaluate_controller(
+            controllers[case.name],
+            name=case.name,
+            seeds=seeds,
+            duration_s=case.duration_s * duration_scale,
+            start=case.start,
+            params=variants[label],
+            plant=plant,
+            start_noise_rad=case.start_noise_rad,
+        )
+        row = summary.row()
+        row.update(plant=plant, perturbation=label, diverged=sum(r.diverged is not None for r in summary.results))
+        rows.append(row)
+    return rows

@@ -1,0 +1,14 @@
+"""Reinforcement learning: model-free DQN and model-based DQN-MBPO that swing the soft rod up and balance it.
+
+* :mod:`softpend.rl.config` -- every hyperparameter (``DQNConfig``, ``MBPOConfig``);
+* :mod:`softpend.rl.training_env` -- the training environment (action repeat, episode length) and the
+  controller that runs an agent through the shared evaluation;
+* :mod:`softpend.rl.dqn` -- the training loop (progress bar, periodic evaluation, resumable checkpoints);
+* :mod:`softpend.rl.mbpo` -- DQN-MBPO (model rollouts branched from real states, ensemble refits);
+* :mod:`softpend.rl.curves` -- learning curves in plant time and the "asymptotic reward" definition.
+"""
+
+from .config import DQNConfig, MBPOConfig
+from .training_log import BALANCE_STD_RAD, TrainingLog
+
+__all__ = ["BALANCE_STD_RAD", "DQNConfig", "MBPOConfig", "TrainingLog"]

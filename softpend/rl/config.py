@@ -1,0 +1,257 @@
+"""Every hyperparameter of DQN and DQN-MBPO, in one documented place.
+
+:class:`DQNConfig` holds the task (torque levels, episode length, action repeat), the stable-baselines3
+DQN settings and the bookkeeping (evaluation and checkpoint intervals).  :class:`MBPOConfig` adds what
+model-based policy optimisation needs (model rollouts per real step, rollout-length schedule, model
+refit interval, ensemble size, real-data ratio).  Both are frozen dataclasses, saved as JSON next to every
+run (``config.json``) and overridable field by field (``softpend train --set NAME=VALUE``,
+:func:`config_from_overrides`).
+
+Choices that differ from the registered environments
+----------------------------------------------------
+* **Episode length** ``episode_s = 5 s`` (the registered envs truncate at 10 s).  Swinging up takes about
+  2-3 s, so a 5 s episode covers the swing-up and a few seconds of balancing; evaluation always runs the
+  full 10 s from hanging.  Plant seconds are counted from the steps actually simulated.
+* **Action repeat** ``action_repeat = 4``: the agent picks one of ``n_torque_levels`` torques every 4 plant
+  steps (25 Hz, the torque is held in between), so that the discount ``gamma = 0.99`` spans ~4 s, long
+  enough to credit the pumping swing-up.  The reward of an agent step is the sum over its plant steps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, TypeVar
+
+__all__ = ["DQNConfig", "MBPOConfig", "config_from_overrides", "load_config", "save_config"]
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """Model-free DQN on ``SoftPendulumDiscreteEnv``.
+
+    Task
+    ----
+    n_links : int
+        Links of the PRB rod.
+    torque_limit_nm : float
+        Motor torque limit [N m] (the report's rig: 0.06).
+    n_torque_levels : int
+        Discrete actions, evenly spaced in ``[-torque_limit_nm, torque_limit_nm]``.
+    episode_s : float
+        Training episode length [s] (truncation; there is no terminal state).
+    action_repeat : int
+        Plant steps (``dt_s = 0.01 s`` each) per agent decision.
+
+    DQN (stable-baselines3 names; counted in agent steps)
+    ------------------------------------------------------
+    learning_rate, buffer_size, learning_starts, batch_size, gamma, train_freq, gradient_steps,
+    target_update_interval, exploration_fraction, exploration_initial_eps, exploration_final_eps,
+    max_grad_norm : as in :class:`stable_baselines3.DQN` (``exploration_fraction`` is the fraction of the
+    whole run over which epsilon decays linearly).
+    net_arch : tuple of int
+        Hidden layer widths of the Q-network.
+
+    Bookkeeping
+    -----------
+    eval_every_episodes : int
+        Evaluate the greedy policy on the true plant (:func:`softpend.evaluation.evaluate_controller`)
+        every this many episodes.
+    eval_seeds : tuple of int
+        Start-noise seeds of each evaluation (10 s from hanging).
+    eval_duration_s : float
+        Evaluation episode length [s].
+    checkpoint_every_episodes : int
+        Save agent, replay buffer and training log every this many episodes.
+    """
+
+    n_links: int = 4
+    torque_limit_nm: float = 0.06
+    n_torque_levels: int = 5
+    episode_s: float = 5.0
+    action_repeat: int = 4
+    learning_rate: float = 6.3e-4
+    buffer_size: int = 100_000
+    learning_starts: int = 500
+    batch_size: int = 128
+    gamma: float = 0.99
+    train_freq: int = 4
+    gradient_steps: int = 2
+    target_update_interval: int = 500
+    exploration_fraction: float = 0.2
+    exploration_initial_eps: float = 1.0
+    exploration_final_eps: float = 0.02
+    max_grad_norm: float = 10.0
+    net_arch: tuple[int, ...] = (256, 256)
+    eval_every_episodes: int = 10
+    eval_seeds: tuple[int, ...] = (1000, 1001)
+    eval_duration_s: float = 10.0
+    checkpoint_every_episodes: int = 10
+
+    def __post_init__(self) -> None:
+        _check_positive_ints(
+            self,
+            ("n_links", "n_torque_levels", "action_repeat", "buffer_size", "batch_size", "train_freq",
+             "gradient_steps", "target_update_interval", "eval_every_episodes",
+             "checkpoint_every_episodes"),
+        )
+        if self.n_torque_levels < 2:
+            raise ValueError(f"n_torque_levels must be >= 2, got {self.n_torque_levels!r}")
+        if isinstance(self.learning_starts, bool) or int(self.learning_starts) != self.learning_starts or self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be a non-negative integer, got {self.learning_starts!r}")
+        for name in ("torque_limit_nm", "episode_s", "learning_rate", "eval_duration_s", "max_grad_norm"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must lie in [0, 1], got {value!r}")
+        if not self.net_arch or any(int(w) != w or w < 1 for w in self.net_arch):
+            raise ValueError(f"net_arch must be a non-empty tuple of positive integers, got {self.net_arch!r}")
+        if len(self.eval_seeds) == 0:
+            raise ValueError("eval_seeds must not be empty")
+        object.__setattr__(self, "net_arch", tuple(int(w) for w in self.net_arch))
+        object.__setattr__(self, "eval_seeds", tuple(int(s) for s in self.eval_seeds))
+
+    @property
+    def dt_s(self) -> float:
+        """Plant step [s] (the environments' default)."""
+        return 0.01
+
+    @property
+    def agent_dt_s(self) -> float:
+        """Time between agent decisions [s]."""
+        return self.dt_s * self.action_repeat
+
+    @property
+    def episode_agent_steps(self) -> int:
+        """Agent steps per training episode."""
+        return max(1, int(round(self.episode_s / self.agent_dt_s)))
+
+
+@dataclass(frozen=True)
+class MBPOConfig(DQNConfig):
+    """DQN-MBPO: DQN trained on short rollouts of a learned dynamics ensemble branched from real states.
+
+    Model-based fields
+    ------------------
+    rollouts_per_real_step : int
+        Model rollouts started per real agent step (the report: 9).  Rollouts are generated in batches of
+        ``rollouts_per_real_step * rollout_every_steps`` every ``rollout_every_steps`` real steps, each
+        branched from a state drawn uniformly from the real replay buffer, one random ensemble member per
+        rollout.
+    rollout_every_steps : int
+        Real agent steps between rollout batches.
+    rollout_schedule : (first_episode, last_episode, min_length, max_length)
+        mbrl-lib's ``rollout_schedule``: the rollout length (agent steps) grows linearly from
+        ``min_length`` at ``first_episode`` to ``max_length`` at ``last_episode``.
+    model_buffer_size : int
+        Capacity of the model-transition buffer (older model data are overwritten, as MBPO's retain epochs).
+    real_ratio : float
+        Fraction of each DQN batch drawn from real transitions (the rest from model rollouts).
+    initial_random_episodes : int
+        Episodes of uniformly random actions before the first model fit (motor babbling).
+    model_refit_every_episodes : int
+        Refit the dynamics ensemble on all real data every this many episodes.
+    ensemble_size : int
+        Members of the dynamics ensemble.
+    model_epochs : int
+        Maximum training epochs per refit (early stopping on a held-out episode).
+    model_hidden_widths : tuple of int
+        Hidden layers of each ensemble member (:class:`softpend.sysid.DynamicsModel`).
+    """
+
+    rollouts_per_real_step: int = 9
+    rollout_every_steps: int = 125
+    rollout_schedule: tuple[int, int, int, int] = (3, 20, 1, 5)
+    model_buffer_size: int = 60_000
+    real_ratio: float = 0.1
+    initial_random_episodes: int = 3
+    model_refit_every_episodes: int = 2
+    ensemble_size: int = 5
+    model_epochs: int = 40
+    model_hidden_widths: tuple[int, ...] = (64, 64)
+    target_update_interval: int = 125
+    gradient_steps: int = 4
+    train_freq: int = 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_positive_ints(
+            self,
+            ("rollouts_per_real_step", "rollout_every_steps", "model_buffer_size", "model_refit_every_episodes",
+             "ensemble_size", "model_epochs"),
+        )
+        if int(self.initial_random_episodes) != self.initial_random_episodes or self.initial_random_episodes < 1:
+            raise ValueError(f"initial_random_episodes must be an integer >= 1, got {self.initial_random_episodes!r}")
+        if not 0.0 <= self.real_ratio <= 1.0:
+            raise ValueError(f"real_ratio must lie in [0, 1], got {self.real_ratio!r}")
+        schedule = tuple(int(v) for v in self.rollout_schedule)
+        if len(schedule) != 4 or schedule[0] < 0 or schedule[1] < schedule[0] or schedule[2] < 1 or schedule[3] < 1:
+            raise ValueError(
+                "rollout_schedule must be (first_episode >= 0, last_episode >= first_episode, min_length >= 1, "
+                f"max_length >= 1), got {self.rollout_schedule!r}"
+            )
+        object.__setattr__(self, "rollout_schedule", schedule)
+        if not self.model_hidden_widths or any(int(w) != w or w < 1 for w in self.model_hidden_widths):
+            raise ValueError(f"model_hidden_widths must be a non-empty tuple of positive integers, got {self.model_hidden_widths!r}")
+        object.__setattr__(self, "model_hidden_widths", tuple(int(w) for w in self.model_hidden_widths))
+
+    def rollout_length(self, episode: int) -> int:
+        """Rollout length (agent steps) at a training episode (mbrl-lib's linear schedule)."""
+        first, last, low, high = self.rollout_schedule
+        if episode <= first or last == first:
+            return low if episode <= first else high
+        if episode >= last:
+            return high
+        return int(round(low + (episode - first) / (last - first) * (high - low)))
+
+
+def _check_positive_ints(config: Any, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(config, name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        object.__setattr__(config, name, int(value))
+
+
+C = TypeVar("C", DQNConfig, MBPOConfig)
+
+
+def config_from_overrides(base: C, overrides: Mapping[str, Any]) -> C:
+    """A copy of ``base`` with fields replaced; string values (from the command line) are parsed as JSON
+    (``"1e-3"``, ``"[64, 64]"``), tuples accept lists."""
+    fields = {f.name: f for f in dataclasses.fields(base)}
+    changes: dict[str, Any] = {}
+    for name, value in overrides.items():
+        if name not in fields:
+            raise ValueError(f"unknown {type(base).__name__} field {name!r}; known: {sorted(fields)}")
+        if isinstance(value, str):
+            try:
+                value = json.loads(value)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{name}: cannot parse {value!r} as a JSON value") from exc
+        if isinstance(value, list):
+            value = tuple(value)
+        changes[name] = value
+    return dataclasses.replace(base, **changes)
+
+
+def save_config(config: DQNConfig, path: Path) -> None:
+    """Write ``config`` as JSON (with its class name)."""
+    data = {"class": type(config).__name__, **dataclasses.asdict(config)}
+    Path(path).write_text(json.dumps(data, indent=2))
+
+
+def load_config(path: Path) -> DQNConfig:
+    """Read a config written by :func:`save_config`."""
+    data = json.loads(Path(path).read_text())
+    cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(data.pop("class", "DQNConfig"))
+    if cls is None:
+        raise ValueError(f"{path}: unknown config class")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+

@@ -1,0 +1,364 @@
+"""Model-free DQN (stable-baselines3) that swings the soft rod up and balances it, with plant-time bookkeeping.
+
+:func:`train_dqn` trains on :func:`softpend.rl.training_env.make_training_env` with the settings of a
+:class:`~softpend.rl.config.DQNConfig`, shows a progress bar over episodes, evaluates the greedy policy on
+the true plant every ``eval_every_episodes`` episodes (shared :func:`softpend.evaluation.evaluate_controller`),
+saves a resumable checkpoint (agent, replay buffer, training log) every ``checkpoint_every_episodes`` and the
+final agent as ``<run_dir>/agent.zip``.  :mod:`softpend.rl.mbpo` reuses the same loop with a model-based
+replay buffer.
+
+Run folder layout::
+
+    config.json          the config (softpend.rl.config.save_config)
+    agent.zip            final agent (stable-baselines3 DQN.save)
+    log.json             TrainingLog: episode and evaluation rows
+    checkpoint/          latest checkpoint: agent.zip, replay_buffer.pkl, log.json (+ extra files of MBPO)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+import torch
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback
+from tqdm.auto import tqdm
+
+from ..evaluation import evaluate_controller, metrics_from_trajectory
+from ..plant import OBSERVATION_NAMES
+from .config import DQNConfig, load_config, save_config
+from .training_env import make_training_env, policy_controller
+from .training_log import TrainingLog
+
+__all__ = ["TrainingCallback", "build_dqn", "evaluate_agent", "load_agent", "train_dqn", "run_training"]
+
+_THETA = OBSERVATION_NAMES.index("theta_rad")
+_PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
+
+
+def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
+    """A stable-baselines3 DQN with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
+    return DQN(
+        "MlpPolicy",
+        env,
+        learning_rate=config.learning_rate,
+        buffer_size=config.buffer_size,
+        learning_starts=config.learning_starts,
+        batch_size=config.batch_size,
+        gamma=config.gamma,
+        train_freq=config.train_freq,
+        gradient_steps=config.gradient_steps,
+        target_update_interval=config.target_update_interval,
+        exploration_fraction=config.exploration_fraction,
+        exploration_initial_eps=config.exploration_initial_eps,
+        exploration_final_eps=config.exploration_final_eps,
+        max_grad_norm=config.max_grad_norm,
+        policy_kwargs={"net_arch": list(config.net_arch)},
+        seed=int(seed),
+        device="cpu",
+        verbose=0,
+        **kwargs,
+    )
+
+
+def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None, duration_s: Optional[float] = None, name: str = "agent"):
+    """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent from hanging."""
+    return evaluate_controller(
+        policy_controller(model, config),
+        name=name,
+        seeds=tuple(seeds if seeds is not None else config.eval_seeds),
+        duration_s=float(duration_s if duration_s is not None else config.eval_duration_s),
+        params=None if config.n_links == 4 else _params(config),
+        torque_limit_nm=config.torque_limit_nm,
+    )
+
+
+def _params(config: DQNConfig):
+    from ..plant import RodParams
+
+    return RodParams(n_links=config.n_links)
+
+
+class TrainingCallback(BaseCallback):
+    """Episode bookkeeping, periodic evaluation, checkpoints and the progress bar of a training run.
+
+    Parameters
+    ----------
+    config : DQNConfig
+        The run's config.
+    log : TrainingLog
+        Log to append to (may already hold the rows of a resumed run).
+    episodes : int
+        Stop once the log holds this many episodes.
+    run_dir : Path
+        Run folder (checkpoints go to ``run_dir / "checkpoint"``).
+    progress : bool
+        Show a tqdm bar over episodes.
+    on_episode_end : callable, optional
+        ``f(callback)`` after each episode's row is logged (MBPO refits its model there).
+    extra_checkpoint : callable, optional
+        ``f(folder)`` writes algorithm-specific files into a checkpoint folder.
+    model_steps : callable, optional
+        ``() -> int`` total model steps so far (0 for model-free).
+    """
+
+    def __init__(
+        self,
+        config: DQNConfig,
+        log: TrainingLog,
+        episodes: int,
+        run_dir: Path,
+        progress: bool = True,
+        on_episode_end: Optional[Callable[["TrainingCallback"], None]] = None,
+        extra_checkpoint: Optional[Callable[[Path], None]] = None,
+        model_steps: Optional[Callable[[], int]] = None,
+    ) -> None:
+        super().__init__()
+        self.config = config
+        self.log = log
+        self.episodes = int(episodes)
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        self.on_episode_end = on_episode_end
+        self.extra_checkpoint = extra_checkpoint
+        self.model_steps = model_steps or (lambda: 0)
+        self.on_step_hook: Optional[Callable[["TrainingCallback"], None]] = None
+        self._pending_eval = False
+        self._pending_checkpoint = False
+        self._started = time.perf_counter()
+        self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
+        self._reset_episode()
+        self.bar: Optional[tqdm] = None
+
+    def _reset_episode(self) -> None:
+        self._return = 0.0
+        self._observations: list[np.ndarray] = []
+        self._torques: list[float] = []
+
+    def wall_s(self) -> float:
+        return self._wall_offset + time.perf_counter() - self._started
+
+    def _on_training_start(self) -> None:
+        self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, desc=f"{self.log.algo} seed {self.log.seed}",
+                        unit="episode", disable=not self.progress, leave=False)
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+    def _on_step(self) -> bool:
+        info = self.locals["infos"][0]
+        plant = info["plant_observations"]
+        self._observations.append(plant if not self._observations else plant[1:])
+        self._torques.extend([info["torque_nm"]] * int(info["plant_steps"]))
+        self._return += float(self.locals["rewards"][0])
+        if self.on_step_hook is not None:
+            self.on_step_hook(self)
+        if self.locals["dones"][0]:
+            self._end_episode()
+            if self.log.n_episodes >= self.episodes:
+                return False
+        return True
+
+    def _end_episode(self) -> None:
+        observations = np.concatenate(self._observations)
+        plant_steps = len(observations) - 1
+        dt = self.config.dt_s
+        row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return,
+                               "plant_s": self.log.plant_s + plant_steps * dt}
+        if plant_steps >= 2:
+            torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
+            metrics = metrics_from_trajectory(np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT])
+            row["upright_std_rad"] = metrics["upright_std_rad"]
+            row["swing_up_time_s"] = metrics["swing_up_time_s"]
+        else:
+            row["upright_std_rad"], row["swing_up_time_s"] = math.pi, math.inf
+        row["model_steps"] = int(self.model_steps())
+        row["wall_s"] = self.wall_s()
+        self.last_episode_observations = observations
+        self.last_episode_torques = np.asarray(self._torques, dtype=float)
+        self.log.episodes.append(row)
+        self._reset_episode()
+        if self.on_episode_end is not None:
+            self.on_episode_end(self)
+        n = self.log.n_episodes
+        if n % self.config.eval_every_episodes == 0 or n >= self.episodes:
+            self._pending_eval = True
+        if n % self.config.checkpoint_every_episodes == 0:
+            self._pending_checkpoint = True
+        if self.bar is not None:
+            last_eval = self.log.evaluations[-1]["max_upright_std_rad"] if self.log.evaluations else math.nan
+            self.bar.update(1)
+            self.bar.set_postfix(ret=f"{row['return']:.0f}", plant_s=f"{row['plant_s']:.0f}", eval_std=f"{last_eval:.2f}")
+        if n >= self.episodes:  # the run ends inside this step: evaluate now (no further rollout end)
+            self.flush()
+
+    def _on_rollout_end(self) -> None:
+        self.flush()
+
+    def flush(self) -> None:
+        """Run a pending evaluation and write a pending checkpoint."""
+        if self._pending_eval:
+            self._pending_eval = False
+            self.evaluate()
+        if self._pending_checkpoint:
+            self._pending_checkpoint = False
+            self.checkpoint()
+
+    def evaluate(self) -> dict[str, Any]:
+        """Evaluate the greedy policy on the true plant and append an evaluation row."""
+        summary = evaluate_agent(self.model, self.config)
+        stds = [r.upright_std_rad for r in summary.results]
+        row = {
+            "episode": self.log.n_episodes,
+            "plant_s": self.log.plant_s,
+            "model_steps": int(self.model_steps()),
+            "median_upright_std_rad": float(np.median(stds)),
+            "max_upright_std_rad": float(np.max(stds)),
+            "median_swing_up_time_s": summary.median("swing_up_time_s"),
+            "all_swung_up": bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
+            "success_rate": summary.success_rate,
+            "wall_s": self.wall_s(),
+        }
+        self.log.evaluations.append(row)
+        return row
+
+    def checkpoint(self) -> Path:
+        """Write agent, replay buffer, log (and extra files) to ``run_dir/checkpoint`` atomically."""
+        final = self.run_dir / "checkpoint"
+        tmp = self.run_dir / "checkpoint.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        self.model.save(tmp / "agent.zip")
+        self.model.save_replay_buffer(tmp / "replay_buffer.pkl")
+        self.log.save(tmp / "log.json")
+        if self.extra_checkpoint is not None:
+            self.extra_checkpoint(tmp)
+        old = self.run_dir / "checkpoint.old"
+        shutil.rmtree(old, ignore_errors=True)
+        if final.exists():
+            final.rename(old)
+        tmp.rename(final)
+        shutil.rmtree(old, ignore_errors=True)
+        return final
+
+
+def _check_run_args(episodes: int, run_dir: Path | str) -> Path:
+    if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    return Path(run_dir)
+
+
+def run_training(
+    algo: str,
+    config: DQNConfig,
+    seed: int,
+    episodes: int,
+    run_dir: Path | str,
+    resume: bool,
+    progress: bool,
+    make_model: Callable[[Any, int], DQN],
+    hooks: Optional[Callable[[DQN, TrainingCallback], None]] = None,
+    extra_checkpoint: Optional[Callable[[DQN], Callable[[Path], None]]] = None,
+    restore: Optional[Callable[[DQN, Path], None]] = None,
+    model_steps: Optional[Callable[[DQN], int]] = None,
+) -> tuple[DQN, TrainingLog]:
+    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`)."""
+    run_dir = _check_run_args(episodes, run_dir)
+    torch.set_num_threads(1)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint = run_dir / "checkpoint"
+    env = make_training_env(config)
+    if resume and (checkpoint / "agent.zip").exists():
+        saved = load_config(run_dir / "config.json")
+        if saved != config:
+            raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
+        log = TrainingLog.load(checkpoint / "log.json")
+        model = DQN.load(checkpoint / "agent.zip", env=env, device="cpu")
+        model.load_replay_buffer(checkpoint / "replay_buffer.pkl")
+        if restore is not None:
+            restore(model, checkpoint)
+    else:
+        save_config(config, run_dir / "config.json")
+        log = TrainingLog(algo=algo, seed=int(seed))
+        model = make_model(env, int(seed))
+    # a resumed run continues with fresh start-noise draws (one seed per episode count)
+    env.reset(seed=int(seed) * 100_003 + log.n_episodes)
+    remaining = int(episodes) - log.n_episodes
+    callback = TrainingCallback(
+        config, log, episodes, run_dir, progress=progress,
+        extra_checkpoint=extra_checkpoint(model) if extra_checkpoint else None,
+        model_steps=(lambda: model_steps(model)) if model_steps else None,
+    )
+    if hooks is not None:
+        hooks(model, callback)
+    if remaining > 0:
+        # total steps: the SB3 schedules (exploration) run over the whole run, resumed or not
+        margin = 2  # the last episode ends one step before SB3's own limit
+        model.learn(
+            total_timesteps=remaining * config.episode_agent_steps + margin,
+            callback=callback,
+            reset_num_timesteps=log.n_episodes == 0,
+            progress_bar=False,
+        )
+        callback.flush()
+        callback.model = model
+        if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:
+            callback.evaluate()
+        callback.checkpoint()  # so that a longer run can resume from the end of this one
+    model.save(run_dir / "agent.zip")
+    log.save(run_dir / "log.json")
+    return model, log
+
+
+def train_dqn(
+    config: DQNConfig = DQNConfig(),
+    seed: int = 0,
+    episodes: int = 150,
+    run_dir: Path | str = "runs/dqn-seed0",
+    resume: bool = False,
+    progress: bool = True,
+) -> tuple[DQN, TrainingLog]:
+    """Train model-free DQN for ``episodes`` training episodes (see the module docstring).
+
+    Parameters
+    ----------
+    config : DQNConfig
+        Hyperparameters and task settings.
+    seed : int
+        Seed of the network initialisation, exploration and start-noise draws.
+    episodes : int
+        Training episodes (each ``config.episode_s`` of plant time).
+    run_dir : path
+        Run folder (created).
+    resume : bool
+        Continue from ``run_dir/checkpoint`` if it exists (the config must match the saved one).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    (DQN, TrainingLog)
+        The trained agent and its log (also saved in ``run_dir``).
+    """
+    return run_training(
+        "dqn", config, seed, episodes, run_dir, resume, progress,
+        make_model=lambda env, s: build_dqn(config, env, s, episodes),
+    )
+
+
+def load_agent(run_dir: Path | str) -> tuple[DQN, DQNConfig]:
+    """The final agent of a run folder (or ``agent.zip`` path) and its config."""
+    path = Path(run_dir)
+    folder = path.parent if path.suffix == ".zip" else path
+    agent = path if path.suffix == ".zip" else path / "agent.zip"
+    if not agent.exists():
+        raise FileNotFoundError(f"no agent at {agent}")
+    config = load_config(folder / "config.json")
+    return DQN.load(agent, device="cpu"), config

@@ -1,0 +1,305 @@
+"""DQN-MBPO: DQN trained mostly on short rollouts of a learned dynamics ensemble branched from real states.
+
+The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-lib implements it:
+
+1. The agent acts on the real plant (:func:`softpend.rl.training_env.make_training_env`); real transitions go
+   to the real part of :class:`MBPOReplayBuffer` together with the plant observation they start from.
+   The first ``initial_random_episodes`` episodes use uniformly random torques (motor babbling).
+2. Every ``model_refit_every_episodes`` episodes the dynamics ensemble of the system-identification
+   package (:func:`softpend.sysid.fit_dynamics_model`, full-information state, one step of ``dt_s``) is
+   refitted from scratch on *all* real episodes so far (written as a :class:`softpend.sysid.TrajectoryDataset`
+   to ``<run_dir>/real_data.npz``).
+3. Every ``rollout_every_steps`` real agent steps, ``rollouts_per_real_step * rollout_every_steps`` model
+   rollouts are branched from real states drawn uniformly from the real buffer; each rollout step takes the
+   current epsilon-greedy action, advances the model ``action_repeat`` plant steps (a random ensemble member
+   per rollout and step, as mbrl-lib's ``random_model`` propagation), and computes the observation vector and
+   the report's reward from the *predicted* plant observation with the environment's own conventions
+   (:func:`softpend.rl.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
+   rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).
+4. Each DQN gradient step samples ``real_ratio`` of its batch from real transitions and the rest from the
+   model buffer (FIFO, ``model_buffer_size``).
+
+Real plant seconds (training episodes on the true plant) and model steps are counted separately in the
+:class:`~softpend.rl.training_log.TrainingLog`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.type_aliases import ReplayBufferSamples
+
+from ..envs import step_reward
+from ..plant import OBSERVATION_NAMES
+from .config import MBPOConfig
+from .dqn import TrainingCallback, build_dqn, run_training
+from .observation_vector import observation_vector
+from .training_env import make_base_env
+from .training_log import TrainingLog
+
+__all__ = ["MBPOReplayBuffer", "MBPOTrainer", "train_mbpo"]
+
+_THETA = OBSERVATION_NAMES.index("theta_rad")
+
+
+class MBPOReplayBuffer(ReplayBuffer):
+    """Replay buffer with a real part (this buffer, as stable-baselines3 fills it) and a model part.
+
+    The real part also stores, per transition, the plant observation the transition starts from
+    (``plant_observations``; from ``info["plant_observations"][0]`` of :class:`~softpend.rl.training_env.ActionRepeat`),
+    so that model rollouts can branch from real states.  :meth:`sample` draws ``real_ratio`` of a batch
+    from the real part and the rest from :attr:`model_buffer` (all real while the model part is empty).
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: Any = "cpu",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        model_buffer_size: int = 60_000,
+        real_ratio: float = 0.1,
+    ) -> None:
+        if n_envs != 1:
+            raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
+        if not 0.0 <= real_ratio <= 1.0:
+            raise ValueError(f"real_ratio must lie in [0, 1], got {real_ratio!r}")
+        super().__init__(buffer_size, observation_space, action_space, device=device, n_envs=1,
+                         optimize_memory_usage=False, handle_timeout_termination=handle_timeout_termination)
+        self.real_ratio = float(real_ratio)
+        self.plant_observations = np.zeros((self.buffer_size, len(OBSERVATION_NAMES)), dtype=np.float64)
+        self.model_buffer = ReplayBuffer(model_buffer_size, observation_space, action_space, device=device, n_envs=1,
+                                         handle_timeout_termination=False)
+
+    def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D102 (SB3 API)
+        self.plant_observations[self.pos] = infos[0]["plant_observations"][0]
+        super().add(obs, next_obs, action, reward, done, infos)
+
+    def add_model_transitions(self, obs: np.ndarray, next_obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray) -> None:
+        """Append a batch of model transitions (no terminal states) to the model part (FIFO)."""
+        buf = self.model_buffer
+        n = len(obs)
+        if n > buf.buffer_size:  # keep the newest
+            obs, next_obs, actions, rewards = obs[-buf.buffer_size :], next_obs[-buf.buffer_size :], actions[-buf.buffer_size :], rewards[-buf.buffer_size :]
+            n = buf.buffer_size
+        index = (buf.pos + np.arange(n)) % buf.buffer_size
+        buf.observations[index, 0] = obs
+        buf.next_observations[index, 0] = next_obs
+        buf.actions[index, 0] = actions.reshape(n, -1)
+        buf.rewards[index, 0] = rewards
+        buf.dones[index, 0] = 0.0
+        if buf.pos + n >= buf.buffer_size:
+            buf.full = True
+        buf.pos = int((buf.pos + n) % buf.buffer_size)
+
+    def sample_real_states(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` real starting states drawn uniformly: (plant observations (n, 10), env vectors (n, 11))."""
+        index = rng.integers(0, self.size(), size=n)
+        return self.plant_observations[index].copy(), self.observations[index, 0].copy()
+
+    def sample(self, batch_size: int, env: Any = None) -> ReplayBufferSamples:
+        n_model_available = self.model_buffer.size()
+        n_real = batch_size if n_model_available == 0 else int(round(self.real_ratio * batch_size))
+        parts = []
+        if n_real > 0:
+            parts.append(super().sample(n_real, env=env))
+        if batch_size - n_real > 0:
+            parts.append(self.model_buffer.sample(batch_size - n_real, env=env))
+        if len(parts) == 1:
+            return parts[0]
+        return ReplayBufferSamples(*[None if a is None else torch.cat([a, b]) for a, b in zip(parts[0], parts[1])])
+
+
+class MBPOTrainer:
+    """The model-based part of DQN-MBPO: real-episode store, model refits and model rollouts.
+
+    Parameters
+    ----------
+    config : MBPOConfig
+        Settings.
+    seed : int
+        Seeds the branching-state draws, the ensemble members and the rollout member choice.
+    run_dir : Path
+        Where ``real_data.npz`` and the fitted model are written.
+    progress : bool
+        Progress bars of the model fits.
+    """
+
+    def __init__(self, config: MBPOConfig, seed: int, run_dir: Path, progress: bool = False) -> None:
+        self.config = config
+        self.seed = int(seed)
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        self.env = make_base_env(config)
+        self.rng = np.random.default_rng([self.seed, 1])
+        self.generator = torch.Generator().manual_seed(self.seed * 7919 + 1)
+        self.trials_observations: list[np.ndarray] = []
+        self.trials_torques: list[np.ndarray] = []
+        self.dynamics: Optional[torch.nn.Module] = None
+        self.n_fits = 0
+        self.model_steps = 0
+        self.steps_since_rollout = 0
+
+    # ------------------------------------------------------------------ the model
+    def add_episode(self, observations: np.ndarray, torques_nm: np.ndarray) -> None:
+        """Store one real episode (plant observations (N, 10), torques (N - 1,))."""
+        expected = self.config.episode_agent_steps * self.config.action_repeat + 1
+        if len(observations) == expected:  # a diverged (shortened) episode is left out of the dataset
+            self.trials_observations.append(np.asarray(observations, dtype=np.float64))
+            self.trials_torques.append(np.asarray(torques_nm, dtype=np.float64))
+
+    def dataset(self):
+        """All stored real episodes as a :class:`softpend.sysid.TrajectoryDataset` (written to the run folder)."""
+        from ..sysid import save_dataset
+
+        obs = np.stack(self.trials_observations)
+        p = 5  # positions then velocities in OBSERVATION_NAMES order
+        return save_dataset(
+            self.run_dir / "real_data.npz", obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques),
+            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant="prb",
+            plant_params=self.env.params, seed=self.seed, protocol={"kind": "dqn-mbpo training episodes"},
+            differentiation="exact (simulator velocities, as the environment observes them)",
+            notes="real plant episodes of a DQN-MBPO run",
+        )
+
+    def refit(self) -> None:
+        """Refit the dynamics ensemble from scratch on all real episodes so far."""
+        from ..sysid import TrainConfig, fit_dynamics_model, save_model
+
+        if len(self.trials_observations) < 2:
+            raise ValueError("need at least 2 complete real episodes to fit the dynamics model")
+        c = self.config
+        result = fit_dynamics_model(
+            self.dataset(),
+            TrainConfig(information="full", hidden_widths=c.model_hidden_widths, ensemble_size=c.ensemble_size,
+                        max_epochs=c.model_epochs, patience=max(3, c.model_epochs // 4), batch_size=256,
+                        learning_rate=3e-3, seed=self.seed * 1000 + self.n_fits),
+            progress=self.progress,
+        )
+        self.dynamics = result.model.eval()
+        self.n_fits += 1
+        save_model(self.run_dir / "dynamics", self.dynamics, {"fits": self.n_fits, "episodes": len(self.trials_observations)})
+
+    # ------------------------------------------------------------------ rollouts
+    @torch.no_grad()
+    def rollouts(self, agent: DQN, buffer: MBPOReplayBuffer, n_rollouts: int, length: int, epsilon: float) -> int:
+        """Branch ``n_rollouts`` model rollouts of ``length`` agent steps from real states into the model
+        buffer; returns the number of model transitions added."""
+        if self.dynamics is None or buffer.size() == 0:
+            return 0
+        c = self.config
+        env = self.env
+        raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
+        bonus = vec[:, -1].astype(np.float64)
+        levels = env.torque_levels_nm
+        state = torch.as_tensor(raw, dtype=torch.float32)
+        added = 0
+        alive = np.ones(n_rollouts, dtype=bool)
+        for _ in range(length):
+            q = agent.q_net(torch.as_tensor(vec, dtype=torch.float32))
+            actions = q.argmax(dim=1).numpy()
+            explore = self.rng.random(len(actions)) < epsilon
+            actions[explore] = self.rng.integers(0, len(levels), size=int(explore.sum()))
+            torque = torch.as_tensor(levels[actions], dtype=torch.float32)
+            reward = np.zeros(len(actions))
+            for _ in range(c.action_repeat):
+                state = self.dynamics.predict_next(state, torque, generator=self.generator)
+                theta = state[:, _THETA].double().numpy()
+                r, bonus = step_reward(theta, bonus, c.dt_s, env.reward_params)
+                reward += r
+            plant = state.double().numpy()
+            finite = np.all(np.isfinite(plant), axis=1) & np.isfinite(reward)
+            alive &= finite
+            if not alive.any():
+                break
+            plant[~finite] = 0.0
+            next_vec = observation_vector(plant, np.asarray(bonus), env)
+            buffer.add_model_transitions(vec[alive], next_vec[alive], actions[alive], reward[alive])
+            added += int(alive.sum())
+            vec = next_vec
+            state = torch.as_tensor(plant, dtype=torch.float32)
+        self.model_steps += added
+        return added
+
+    # ------------------------------------------------------------------ hooks into the training loop
+    def attach(self, agent: DQN, callback: TrainingCallback) -> None:
+        """Hook the refits and rollouts into a :class:`~softpend.rl.dqn.TrainingCallback`."""
+        c = self.config
+        buffer = agent.replay_buffer
+        if not isinstance(buffer, MBPOReplayBuffer):
+            raise ValueError("the agent's replay buffer must be an MBPOReplayBuffer")
+
+        def on_episode_end(cb: TrainingCallback) -> None:
+            self.add_episode(cb.last_episode_observations, cb.last_episode_torques)
+            n = cb.log.n_episodes
+            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model_refit_every_episodes == 0:
+                self.refit()
+
+        def on_step(cb: TrainingCallback) -> None:
+            self.steps_since_rollout += 1
+            if self.steps_since_rollout >= c.rollout_every_steps and self.dynamics is not None:
+                self.steps_since_rollout = 0
+                length = c.rollout_length(cb.log.n_episodes)
+                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length, agent.exploration_rate)
+
+        callback.on_episode_end = on_episode_end
+        callback.on_step_hook = on_step
+
+    def save(self, folder: Path) -> None:
+        """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
+        np.savez(folder / "mbpo_state.npz", observations=np.array(self.trials_observations), torques=np.array(self.trials_torques),
+                 counters=np.array([self.n_fits, self.model_steps, self.steps_since_rollout]))
+
+    def restore(self, folder: Path) -> None:
+        """Inverse of :meth:`save`; refits the model on the restored episodes."""
+        with np.load(folder / "mbpo_state.npz", allow_pickle=False) as data:
+            self.trials_observations = list(data["observations"])
+            self.trials_torques = list(data["torques"])
+            self.n_fits, self.model_steps, self.steps_since_rollout = (int(v) for v in data["counters"])
+        if len(self.trials_observations) >= 2:
+            self.refit()
+
+
+def train_mbpo(
+    config: MBPOConfig = MBPOConfig(),
+    seed: int = 0,
+    episodes: int = 60,
+    run_dir: Path | str = "runs/mbpo-seed0",
+    resume: bool = False,
+    progress: bool = True,
+) -> tuple[DQN, TrainingLog]:
+    """Train DQN-MBPO for ``episodes`` real training episodes (see the module docstring; arguments as
+    :func:`softpend.rl.dqn.train_dqn`)."""
+    if not isinstance(config, MBPOConfig):
+        raise ValueError(f"config must be an MBPOConfig, got {type(config).__name__}")
+    run_dir = Path(run_dir)
+    trainer = MBPOTrainer(config, seed, run_dir, progress=False)
+    learning_starts = max(config.learning_starts, config.initial_random_episodes * config.episode_agent_steps)
+
+    def make_model(env: Any, s: int) -> DQN:
+        dqn = build_dqn(
+            config, env, s, episodes,
+            replay_buffer_class=MBPOReplayBuffer,
+            replay_buffer_kwargs={"model_buffer_size": config.model_buffer_size, "real_ratio": config.real_ratio},
+        )
+        dqn.learning_starts = learning_starts
+        return dqn
+
+    return run_training(
+        "mbpo", config, seed, episodes, run_dir, resume, progress,
+        make_model=make_model,
+        hooks=trainer.attach,
+        extra_checkpoint=lambda model: trainer.save,
+        restore=lambda model, folder: trainer.restore(folder),
+        model_steps=lambda model: trainer.model_steps,
+    )
+

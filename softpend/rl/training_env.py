@@ -1,0 +1,102 @@
+"""The training environment of DQN and DQN-MBPO, and the matching evaluation controller.
+
+:func:`make_training_env` wraps ``SoftPendulumDiscreteEnv`` (the registered ``softpend/SoftPendulumDiscrete-v0``
+class) in :class:`ActionRepeat` and a ``TimeLimit`` of ``config.episode_s``.  :class:`HeldActionController`
+runs a trained agent through the shared :func:`softpend.evaluation.evaluate_controller` with the same
+action repeat.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.wrappers import TimeLimit
+
+from ..envs import SoftPendulumDiscreteEnv
+from ..evaluation import GymPolicyController
+from ..plant import RodParams
+from .config import DQNConfig
+
+__all__ = ["ActionRepeat", "HeldActionController", "make_base_env", "make_training_env", "policy_controller"]
+
+
+class ActionRepeat(gym.Wrapper):
+    """Hold each action for ``repeat`` plant steps; the reward is the sum over those steps.
+
+    ``info["plant_observations"]`` is the ``(k + 1, 10)`` array of plant observations from before the
+    action to after it (:data:`softpend.plant.OBSERVATION_NAMES` order), ``info["torque_nm"]`` the torque
+    applied, ``info["plant_steps"] = k`` the plant steps simulated (``k < repeat`` only if the simulation
+    diverged).  Model-based learning and the learning curves read these.
+    """
+
+    def __init__(self, env: gym.Env, repeat: int) -> None:
+        super().__init__(env)
+        if isinstance(repeat, bool) or int(repeat) != repeat or repeat < 1:
+            raise ValueError(f"repeat must be a positive integer, got {repeat!r}")
+        self.repeat = int(repeat)
+
+    def step(self, action: Any):
+        base = self.env.unwrapped
+        observations = [base.report_observation.as_array()]
+        total = 0.0
+        for _ in range(self.repeat):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            if "truncation_reason" in info:
+                break
+            observations.append(base.report_observation.as_array())
+            if terminated or truncated:
+                break
+        info = dict(info)
+        info["plant_observations"] = np.array(observations)
+        info["plant_steps"] = len(observations) - 1
+        return obs, total, terminated, truncated, info
+
+
+def make_base_env(config: DQNConfig, start: str = "hanging") -> SoftPendulumDiscreteEnv:
+    """The discrete-torque environment with the config's rod, torque limit and torque levels."""
+    return SoftPendulumDiscreteEnv(
+        n_torque_levels=config.n_torque_levels,
+        params=RodParams(n_links=config.n_links),
+        torque_limit_nm=config.torque_limit_nm,
+        start=start,
+    )
+
+
+def make_training_env(config: DQNConfig, start: str = "hanging") -> gym.Env:
+    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(...)), episode_agent_steps)`` for a config."""
+    return TimeLimit(ActionRepeat(make_base_env(config, start), config.action_repeat), config.episode_agent_steps)
+
+
+class HeldActionController(GymPolicyController):
+    """:class:`~softpend.evaluation.GymPolicyController` that queries the policy every ``repeat`` plant steps
+    and holds the torque in between (the reward's bonus state is still advanced every step, as in
+    training)."""
+
+    def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
+        super().__init__(predict, env)
+        if isinstance(repeat, bool) or int(repeat) != repeat or repeat < 1:
+            raise ValueError(f"repeat must be a positive integer, got {repeat!r}")
+        self.repeat = int(repeat)
+        self._step = 0
+        self._held_action: Any = None
+        self._inner_predict = predict
+        self.predict = self._held_predict
+
+    def _held_predict(self, vector: np.ndarray) -> Any:
+        if self._step % self.repeat == 0 or self._held_action is None:
+            self._held_action = self._inner_predict(vector)
+        self._step += 1
+        return self._held_action
+
+    def reset(self) -> None:
+        super().reset()
+        self._step = 0
+        self._held_action = None
+
+
+def policy_controller(model: Any, config: DQNConfig) -> HeldActionController:
+    """Controller for :func:`softpend.evaluation.evaluate_controller` from a stable-baselines3 model."""
+    return HeldActionController(lambda o: model.predict(o, deterministic=True)[0], make_base_env(config), config.action_repeat)

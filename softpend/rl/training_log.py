@@ -1,0 +1,90 @@
+"""What a training run records: one row per training episode and per evaluation, in plant time.
+
+Each training episode row holds its return, the upright error of the episode's tip angle (the shared
+:func:`softpend.evaluation.metrics_from_trajectory`), and the *cumulative* real plant seconds and model
+steps consumed so far.  Each evaluation row holds the shared :func:`softpend.evaluation.evaluate_controller`
+metrics of the greedy policy on the true plant (10 s from hanging, a few start-noise seeds).  Evaluation
+episodes are a measurement: the agent never learns from them, and they are not counted as training plant
+time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+__all__ = ["TrainingLog", "BALANCE_STD_RAD"]
+
+#: An evaluation "balances" when every seed swings up and holds ``upright_std_rad`` at most this [rad].
+BALANCE_STD_RAD = 0.2
+
+
+@dataclass
+class TrainingLog:
+    """Episode and evaluation records of one run (JSON round-trip with :meth:`save` / :meth:`load`)."""
+
+    algo: str
+    seed: int
+    episodes: list[dict[str, float]] = field(default_factory=list)
+    evaluations: list[dict[str, Any]] = field(default_factory=list)
+
+    # ------------------------------------------------------------------ counters
+    @property
+    def n_episodes(self) -> int:
+        return len(self.episodes)
+
+    @property
+    def plant_s(self) -> float:
+        """Real plant seconds consumed by training so far."""
+        return float(self.episodes[-1]["plant_s"]) if self.episodes else 0.0
+
+    @property
+    def model_steps(self) -> int:
+        """Model (simulated-by-the-learned-model) agent steps generated so far."""
+        return int(self.episodes[-1]["model_steps"]) if self.episodes else 0
+
+    def column(self, name: str, table: str = "episodes") -> np.ndarray:
+        """One field of every episode (or evaluation) row as an array."""
+        rows = self.episodes if table == "episodes" else self.evaluations
+        return np.array([row[name] for row in rows], dtype=float)
+
+    # ------------------------------------------------------------------ derived figures
+    def first_balanced(self, std_rad: float = BALANCE_STD_RAD) -> Optional[dict[str, Any]]:
+        """The first evaluation in which every seed swung up and held ``upright_std_rad <= std_rad``."""
+        for row in self.evaluations:
+            if row["all_swung_up"] and row["max_upright_std_rad"] <= std_rad:
+                return row
+        return None
+
+    def real_s_to_balance(self, std_rad: float = BALANCE_STD_RAD) -> float:
+        """Training plant seconds at the first balanced evaluation (``inf`` if none)."""
+        row = self.first_balanced(std_rad)
+        return float(row["plant_s"]) if row is not None else math.inf
+
+    def episodes_to_balance(self, std_rad: float = BALANCE_STD_RAD) -> float:
+        """Training episodes at the first balanced evaluation (``inf`` if none)."""
+        row = self.first_balanced(std_rad)
+        return float(row["episode"]) if row is not None else math.inf
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: Path) -> None:
+        data = {"algo": self.algo, "seed": self.seed, "episodes": self.episodes, "evaluations": self.evaluations}
+        Path(path).write_text(json.dumps(data, indent=1, default=_json_default))
+
+    @classmethod
+    def load(cls, path: Path) -> "TrainingLog":
+        data = json.loads(Path(path).read_text())
+        return cls(algo=data["algo"], seed=int(data["seed"]), episodes=data["episodes"], evaluations=data["evaluations"])
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.bool_):
+        return bool(value)
+    raise TypeError(f"cannot serialise {type(value).__name__}")

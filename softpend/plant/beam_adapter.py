@@ -259,26 +259,40 @@ class HubBeam2D:
 
     # ------------------------------------------------------------------ stepping
     def advance(self) -> None:
-        """Advance by one control step ``dt_s``.
+        """Advance by one control step ``dt_s`` (``substeps`` solver steps).
+
+        If Newton fails (fast hub motion can outrun the default step), the control step is retried from
+        its start with 4x and then 16x as many solver steps before giving up.
 
         Raises
         ------
         SolverFailure
-            If Newton fails or the new state is not finite.
+            If Newton fails at every refinement or the new state is not finite.
         """
         settings = self._settings
         mbs = self._mbs
-        settings.timeIntegration.startTime = self.time_s
-        settings.timeIntegration.endTime = self.time_s + self.dt_s
-        self._solver.InitializeSolverInitialConditions(mbs, settings)
-        try:
-            ok = self._solver.SolveSteps(mbs, settings)
-        except Exception as exc:  # Exudyn raises on e.g. singular Jacobians
-            raise SolverFailure(f"Exudyn solver error at t = {self.time_s:.4f} s: {exc}") from exc
         data = mbs.systemData
-        state = data.GetSystemState()
+        start_state = data.GetSystemState()
+        ti = settings.timeIntegration
+        ok = False
+        for refinement in (1, 4, 16):
+            if refinement > 1:  # back to the start of the control step
+                for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
+                    data.SetSystemState(systemStateList=start_state, configuration=configuration)
+            ti.numberOfSteps = int(self.substeps) * refinement
+            ti.startTime = self.time_s
+            ti.endTime = self.time_s + self.dt_s
+            self._solver.InitializeSolverInitialConditions(mbs, settings)
+            try:
+                ok = bool(self._solver.SolveSteps(mbs, settings))
+            except Exception:  # Exudyn raises on e.g. singular Jacobians; treat like a failed step
+                ok = False
+            if ok:
+                break
+        ti.numberOfSteps = int(self.substeps)
         if not ok:
             raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
+        state = data.GetSystemState()
         if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
         data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)

@@ -63,9 +63,11 @@ class NotebookExecutionError(RuntimeError):
     notebook : str
         Notebook name (``notebooks/<notebook>.md``).
     cell_index : int
-        Index of the failing cell in the executed notebook (the injected-parameters cell counts).
+        Index of the failing cell among the cells of the source notebook (0-based, markdown cells count).
+    code_cell_number : int
+        The failing cell counted among the source's code cells (1-based, the parameters cell is 1 if first).
     execution_count : int or None
-        Its ``In [n]`` number.
+        Its ``In [n]`` number in the executed notebook.
     output_path : pathlib.Path
         The partially executed notebook.
     """
@@ -74,6 +76,7 @@ class NotebookExecutionError(RuntimeError):
         self,
         notebook: str,
         cell_index: int,
+        code_cell_number: int,
         execution_count: Optional[int],
         source: str,
         error: str,
@@ -81,13 +84,26 @@ class NotebookExecutionError(RuntimeError):
     ) -> None:
         first_line = next((line for line in source.splitlines() if line.strip()), "")
         super().__init__(
-            f"notebook {notebook!r} failed in cell {cell_index} (In [{execution_count}], starting "
-            f"{first_line!r}): {error}; the partially executed notebook is kept in {output_path}"
+            f"notebook {notebook!r} failed in code cell {code_cell_number} of notebooks/{notebook}.md "
+            f"(In [{execution_count}], starting {first_line!r}): {error}; "
+            f"the partially executed notebook is kept in {output_path}"
         )
         self.notebook = notebook
         self.cell_index = cell_index
+        self.code_cell_number = code_cell_number
         self.execution_count = execution_count
         self.output_path = output_path
+
+
+def _locate_cell(source_nb, executed_index: int, cell_source: str) -> tuple[int, int]:
+    """Map a cell of the executed notebook (which has papermill's injected-parameters cell) back to the
+    source notebook: ``(cell_index, code_cell_number)``; ``(-1, 0)`` when it cannot be found."""
+    matches = [i for i, cell in enumerate(source_nb.cells) if cell.cell_type == "code" and cell.source == cell_source]
+    if not matches:
+        return -1, 0
+    index = min(matches, key=lambda i: abs(i - executed_index))
+    code_number = sum(cell.cell_type == "code" for cell in source_nb.cells[: index + 1])
+    return index, code_number
 
 
 @dataclass(frozen=True)
@@ -312,8 +328,10 @@ def _execute_one(
             extra_arguments=list(_KERNEL_ARGUMENTS),
         )
     except PapermillExecutionError as exc:
+        source_nb = nbformat.read(str(converted_path), as_version=4)
+        cell_index, code_number = _locate_cell(source_nb, exc.cell_index, exc.source)
         raise NotebookExecutionError(
-            name, exc.cell_index, exc.exec_count, exc.source, f"{exc.ename}: {exc.evalue}", output_path
+            name, cell_index, code_number, exc.exec_count, exc.source, f"{exc.ename}: {exc.evalue}", output_path
         ) from None
     key_path.write_text(key + "\n", encoding="utf-8")
 

@@ -1,0 +1,194 @@
+"""The notebook runner (softpend.book) on tiny synthetic books: validation, execution, failures, cache."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from softpend import book
+from softpend.book import NotebookExecutionError, cache_key, package_source_hash, run_notebooks, toc_notebooks
+from softpend.cli import main as cli_main
+
+HEADER = """\
+---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+---
+"""
+
+
+def notebook_source(*cells: str, parameters: str | None = "greeting = 'hello'\nrepeat = 1") -> str:
+    """A jupytext MyST notebook with an optional parameters cell followed by code cells."""
+    parts = [HEADER, "# A test notebook\n"]
+    if parameters is not None:
+        parts.append(f"```{{code-cell}} ipython3\n:tags: [parameters]\n\n{parameters}\n```\n")
+    for cell in cells:
+        parts.append(f"```{{code-cell}} ipython3\n{textwrap.dedent(cell).strip()}\n```\n")
+    return "\n".join(parts)
+
+
+OK_CELL = "print(greeting * repeat)"
+
+
+def make_book(root: Path, notebooks: dict[str, str], profiles: dict) -> Path:
+    """Write a minimal project (toc, profiles, notebook sources) under ``root``."""
+    (root / "notebooks").mkdir(parents=True)
+    (root / "book").mkdir()
+    chapters = "\n".join(f"      - file: book/_generated/{name}" for name in notebooks)
+    (root / "_toc.yml").write_text(f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n")
+    (root / "book" / "profiles.yml").write_text(json.dumps(profiles))  # JSON is YAML
+    for name, source in notebooks.items():
+        (root / "notebooks" / f"{name}.md").write_text(source)
+    return root
+
+
+def outputs_text(path: Path) -> str:
+    nb = nbformat.read(str(path), as_version=4)
+    return "".join(out.get("text", "") for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", []))
+
+
+# ----------------------------------------------------------------------------- configuration
+def test_toc_notebooks_keeps_reading_order_and_skips_plain_chapters(tmp_path):
+    toc = tmp_path / "_toc.yml"
+    toc.write_text(
+        "format: jb-book\nroot: book/intro\nparts:\n"
+        "  - caption: A\n    chapters:\n      - file: book/_generated/fig02\n      - file: book/method\n"
+        "        sections:\n          - file: book/_generated/fig01.ipynb\n"
+        "  - caption: B\n    chapters:\n      - file: book/_generated/fig03\n"
+    )
+    assert toc_notebooks(toc) == ["fig02", "fig01", "fig03"]
+    toc.write_text("format: jb-book\nroot: book/intro\nchapters:\n  - file: book/_generated/a\n  - file: book/_generated/a\n")
+    with pytest.raises(ValueError, match="more than once"):
+        toc_notebooks(toc)
+
+
+@pytest.mark.parametrize(
+    "profiles, match",
+    [
+        ({"quick": {}}, "unknown profile 'full'"),
+        ({"full": {"nb": {"nonexistent_parameter": 3}}}, "nonexistent_parameter"),
+        ({"full": {"typo_notebook": {}}}, "typo_notebook"),
+        ({"full": ["not", "a", "mapping"]}, "profile 'full'"),
+        ({"full": {"nb": [1, 2]}}, "notebook 'nb'"),
+    ],
+)
+def test_bad_profiles_raise_before_anything_runs(tmp_path, profiles, match):
+    root = make_book(tmp_path, {"nb": notebook_source(OK_CELL)}, profiles)
+    with pytest.raises(ValueError, match=match):
+        run_notebooks(root, profile="full", progress=False)
+    assert not (root / "book" / "_generated" / "nb.ipynb").exists()
+
+
+def test_notebook_without_parameters_cell_is_rejected(tmp_path):
+    root = make_book(tmp_path, {"good": notebook_source(OK_CELL), "bare": notebook_source(OK_CELL, parameters=None)}, {"full": {}})
+    with pytest.raises(ValueError, match="'bare' has no code cell tagged 'parameters'"):
+        run_notebooks(root, progress=False)
+    # validation happens before execution: the valid notebook listed first was not run either
+    assert not (root / "book" / "_generated" / "good.ipynb").exists()
+
+
+def test_unknown_only_name_and_missing_source(tmp_path):
+    root = make_book(tmp_path, {"nb": notebook_source(OK_CELL)}, {"full": {}})
+    with pytest.raises(ValueError, match="nope"):
+        run_notebooks(root, only=["nope"], progress=False)
+    (root / "notebooks" / "nb.md").unlink()
+    with pytest.raises(FileNotFoundError, match="nb.md"):
+        run_notebooks(root, progress=False)
+    with pytest.raises(FileNotFoundError, match="_toc.yml"):
+        run_notebooks(tmp_path / "elsewhere", progress=False)
+
+
+def test_cli_reports_bad_profile_as_an_error(tmp_path, capsys):
+    root = make_book(tmp_path, {"nb": notebook_source(OK_CELL)}, {"full": {}})
+    assert cli_main(["book", "--root", str(root), "--profile", "nonexistent"]) == 2
+    assert "unknown profile 'nonexistent'" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- execution and cache
+def test_execution_injects_parameters_and_caches(tmp_path, monkeypatch):
+    # the package is edited by others while tests run: pin its hash (its own test is below)
+    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "pinned")
+    profiles = {"full": {"nb": {"greeting": "full-profile ", "repeat": 2}}, "quick": {"nb": {"greeting": "quick "}}}
+    root = make_book(tmp_path, {"nb": notebook_source(OK_CELL, "import os\nprint('cwd=' + os.getcwd())")}, profiles)
+    output = root / "book" / "_generated" / "nb.ipynb"
+
+    [first] = run_notebooks(root, profile="full", progress=False)
+    assert first.status == "executed" and first.output_path == output
+    text = outputs_text(output)
+    assert "full-profile full-profile " in text
+    assert f"cwd={root.resolve()}" in text  # notebooks run from the project root
+    nb = nbformat.read(str(output), as_version=4)
+    assert any("injected-parameters" in cell.metadata.get("tags", []) for cell in nb.cells)
+    assert nb.metadata["softpend"]["profile"] == "full"
+
+    # unchanged source, parameters and package: served from the cache, output untouched
+    mtime = output.stat().st_mtime_ns
+    [second] = run_notebooks(root, profile="full", progress=False)
+    assert second.status == "cached" and output.stat().st_mtime_ns == mtime
+
+    # different parameters (another profile) -> executed again
+    [third] = run_notebooks(root, profile="quick", progress=False)
+    assert third.status == "executed" and "quick " in outputs_text(output)
+
+    # edited source -> executed again; --force executes even when up to date
+    source = root / "notebooks" / "nb.md"
+    source.write_text(source.read_text().replace(OK_CELL, OK_CELL + "\nprint('edited')"))
+    [fourth] = run_notebooks(root, profile="quick", progress=False)
+    assert fourth.status == "executed" and "edited" in outputs_text(output)
+    assert run_notebooks(root, profile="quick", progress=False)[0].status == "cached"
+    assert run_notebooks(root, profile="quick", force=True, progress=False)[0].status == "executed"
+
+
+def test_cache_key_covers_source_parameters_and_package(tmp_path):
+    key = cache_key("source", {"a": 1}, "pkg")
+    assert cache_key("source", {"a": 1}, "pkg") == key
+    assert cache_key("source!", {"a": 1}, "pkg") != key
+    assert cache_key("source", {"a": 2}, "pkg") != key
+    assert cache_key("source", {"a": 1}, "pkg2") != key
+    package = tmp_path / "pkg"
+    (package / "sub").mkdir(parents=True)
+    (package / "sub" / "mod.py").write_text("x = 1\n")
+    before = package_source_hash(package)
+    (package / "sub" / "__pycache__").mkdir()
+    (package / "sub" / "__pycache__" / "mod.cpython-311.pyc").write_bytes(b"junk")
+    assert package_source_hash(package) == before  # bytecode does not count
+    (package / "sub" / "mod.py").write_text("x = 2\n")
+    assert package_source_hash(package) != before
+    assert len(package_source_hash()) == 64  # the installed softpend package
+
+
+def test_package_change_invalidates_the_cache(tmp_path, monkeypatch):
+    root = make_book(tmp_path, {"nb": notebook_source(OK_CELL)}, {"full": {}})
+    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "one package")
+    assert run_notebooks(root, progress=False)[0].status == "executed"
+    assert run_notebooks(root, progress=False)[0].status == "cached"
+    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "a different package")
+    assert run_notebooks(root, progress=False)[0].status == "executed"
+
+
+def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_path):
+    source = notebook_source(OK_CELL, "print('before the failure')", "raise RuntimeError('deliberate failure')", "print('never')")
+    root = make_book(tmp_path, {"broken": source}, {"full": {}})
+    with pytest.raises(NotebookExecutionError) as info:
+        run_notebooks(root, progress=False)
+    error = info.value
+    message = str(error)
+    assert "'broken'" in message and "deliberate failure" in message and "RuntimeError" in message
+    assert "raise RuntimeError" in message  # the failing cell's first line
+    assert error.code_cell_number == 4  # parameters, print, print, raise
+    assert "code cell 4 of notebooks/broken.md" in message
+    assert "raise RuntimeError" in book.read_notebook(root / "notebooks" / "broken.md").cells[error.cell_index].source
+    text = outputs_text(error.output_path)
+    assert "before the failure" in text and "never" not in text
+    assert not (root / "book" / "_generated" / "broken.sha256").exists()  # a failure is never cached
+    assert cli_main(["book", "--root", str(root)]) == 1  # and the CLI exits non-zero

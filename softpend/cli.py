@@ -17,6 +17,7 @@ COMMAND_MODULES: list[str] = [
     "softpend.commands.bench",
     "softpend.commands.book",
     "softpend.commands.train",
+    "softpend.commands.evaluate",
 ]
 
 

@@ -1,0 +1,65 @@
+"""Command-line entry points of ``softpend train --algo dqn|mbpo`` (see :mod:`softpend.commands.train`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+from .config import DQNConfig, MBPOConfig, config_from_overrides
+
+__all__ = ["DEFAULT_EPISODES", "config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
+
+#: Training episodes when ``--episodes`` is not given (the report: ~150 model-free, ~100 model-based).
+DEFAULT_EPISODES = {"dqn": 150, "mbpo": 100}
+
+
+def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:
+    """The default config with ``--n-links``, ``--torque-limit-nm`` and ``--set`` overrides applied."""
+    overrides: dict[str, Any] = dict(getattr(args, "overrides", None) or {})
+    if getattr(args, "n_links", None) is not None:
+        overrides["n_links"] = args.n_links
+    if getattr(args, "torque_limit_nm", None) is not None:
+        overrides["torque_limit_nm"] = args.torque_limit_nm
+    return config_from_overrides(base, overrides)
+
+
+def _summary(log) -> dict[str, Any]:
+    last = log.evaluations[-1] if log.evaluations else {}
+    to_balance = log.real_s_to_balance()
+    return {
+        "algo": log.algo,
+        "seed": log.seed,
+        "episodes": log.n_episodes,
+        "plant_s": log.plant_s,
+        "model_steps": log.model_steps,
+        "final_eval_max_upright_std_rad": last.get("max_upright_std_rad"),
+        "final_eval_median_swing_up_time_s": last.get("median_swing_up_time_s"),
+        "real_s_to_balance": None if math.isinf(to_balance) else to_balance,
+        "episodes_to_balance": None if math.isinf(log.episodes_to_balance()) else log.episodes_to_balance(),
+    }
+
+
+def _train(algo: str, args: argparse.Namespace) -> int:
+    from .dqn import train_dqn
+    from .mbpo import train_mbpo
+
+    base = DQNConfig() if algo == "dqn" else MBPOConfig()
+    config = config_from_args(base, args)
+    episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[algo]
+    train = train_dqn if algo == "dqn" else train_mbpo
+    _, log = train(config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress)
+    print(json.dumps(_summary(log), indent=2))
+    print(f"saved {args.out}/agent.zip")
+    return 0
+
+
+def train_dqn_from_args(args: argparse.Namespace) -> int:
+    """``softpend train --algo dqn``."""
+    return _train("dqn", args)
+
+
+def train_mbpo_from_args(args: argparse.Namespace) -> int:
+    """``softpend train --algo mbpo``."""
+    return _train("mbpo", args)

@@ -36,8 +36,8 @@ $(STAMP): environment.lock pyproject.toml
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install -q -r environment.lock $(PIP_QUIET)
 	$(VENV)/bin/pip install -q --no-deps -e . $(PIP_QUIET)
-	@# fails when pyproject.toml names a dependency that environment.lock lacks: run `make lock`
-	$(VENV)/bin/pip check $(PIP_QUIET)
+	@# fails when pyproject.toml names a dependency that environment.lock lacks
+	$(VENV)/bin/pip check $(PIP_QUIET) || { echo "[make] .venv does not satisfy pyproject.toml: run 'make lock'" >&2; exit 1; }
 	touch $(STAMP)
 
 book: $(STAMP)

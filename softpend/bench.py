@@ -16,6 +16,7 @@ from typing import Callable, Iterable
 BENCHMARKS: list[tuple[str, str]] = [
     ("plant", "softpend.plant.benchmarks:bench_plant"),
     ("beam", "softpend.fidelity.benchmarks:bench_beam"),
+    ("rl", "softpend.rl.benchmarks:bench_rl"),
 ]
 
 

@@ -1,0 +1,52 @@
+"""``softpend bench --only rl``: DQN training speed and plant seconds until the agents balance.
+
+* ``dqn_train_steps_per_s`` -- agent steps per wall-clock second of model-free DQN training (environment
+  with action repeat, replay, gradient steps; 10 episodes after a short warm-up).
+* ``dqn_real_s_to_balance`` / ``mbpo_real_s_to_balance`` -- median over seeds (0, 1, 2) of the real plant
+  seconds of training until the periodic evaluation balances (every evaluation seed swings up and holds
+  ``upright_std_rad <= 0.2``); ``inf`` when a run never does.  Runs are trained with the default configs
+  (150 DQN episodes, 100 DQN-MBPO episodes) into ``runs/bench-rl`` and reused when present.
+* ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+
+from .cli import DEFAULT_EPISODES
+from .config import DQNConfig, MBPOConfig
+
+SEEDS = (0, 1, 2)
+ROOT = "runs/bench-rl"
+
+
+def dqn_train_steps_per_s(episodes: int = 10) -> float:
+    """Agent steps per second of DQN training (learning already started)."""
+    from .dqn import train_dqn
+
+    config = DQNConfig(learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000, eval_seeds=(0,), eval_duration_s=0.1)
+    with tempfile.TemporaryDirectory() as tmp:
+        _, warm = train_dqn(config, seed=0, episodes=1, run_dir=tmp, progress=False)
+        start = time.perf_counter()
+        train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, resume=True, progress=False)
+        elapsed = time.perf_counter() - start
+    return episodes * config.episode_agent_steps / elapsed
+
+
+def bench_rl() -> dict[str, float]:
+    """The "rl" benchmark group (see the module docstring)."""
+    from .experiments import median_real_s_to_balance, train_seeds
+
+    steps_per_s = dqn_train_steps_per_s()
+    dqn_logs = train_seeds("dqn", DQNConfig(), SEEDS, DEFAULT_EPISODES["dqn"], ROOT, progress=True)
+    mbpo_logs = train_seeds("mbpo", MBPOConfig(), SEEDS, DEFAULT_EPISODES["mbpo"], ROOT, progress=True)
+    dqn_s = median_real_s_to_balance(dqn_logs)
+    mbpo_s = median_real_s_to_balance(mbpo_logs)
+    return {
+        "dqn_train_steps_per_s": steps_per_s,
+        "dqn_real_s_to_balance": dqn_s,
+        "mbpo_real_s_to_balance": mbpo_s,
+        "mbpo_over_dqn_real_s_ratio": dqn_s / mbpo_s if math.isfinite(mbpo_s) and mbpo_s > 0 else math.nan,
+    }

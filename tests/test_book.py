@@ -78,3 +78,5 @@ def test_intro_quotes_the_design_numbers_computed_by_the_figure_1_notebook(quick
     assert f"{design.tip_sag_horizontal_m * 1e3:.0f} mm" in text
     assert f"{100 * design.tip_sag_fraction:.0f} %" in text
     assert f"{design.torque_ratio:.2f}" in text
+    figure_1 = (html_dir / "book" / "_generated" / "fig01_prb_rod.html").read_text(encoding="utf-8")
+    assert "<table" in figure_1 and "buckling load factor" in figure_1  # the design table renders as a table

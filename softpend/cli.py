@@ -18,6 +18,8 @@ COMMAND_MODULES: list[str] = [
     "softpend.commands.book",
     "softpend.commands.train",
     "softpend.commands.evaluate",
+    "softpend.commands.rig",
+    "softpend.commands.track",
 ]
 
 

@@ -40,6 +40,7 @@ DEFAULT_MARKERS_M: tuple[tuple[float, float], ...] = ((-0.42, 0.31), (0.42, 0.31
 _TIP_BGR = (200, 70, 20)        # the blue dot
 _MARKER_BGR = (40, 170, 30)     # green markers
 _ROD_BGR = (70, 70, 70)
+_HUB_MARKER_BGR = (180, 0, 220)  # magenta
 _HUB_BGR = (20, 20, 20)
 
 
@@ -157,6 +158,9 @@ class SyntheticCamera:
         Radius of the blue tip dot [m].
     rod_width_m : float
         Drawn rod width [m].
+    hub_marker_radius_m : float or None
+        Distance of the magenta hub marker (on the rod clamp, turning with the hub) from the hub axis
+        [m]; None draws no marker.
     seed : int
         Seed for clutter and noise.
     """
@@ -168,6 +172,7 @@ class SyntheticCamera:
         markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M,
         dot_radius_m: float = 0.011,
         rod_width_m: float = 0.01,
+        hub_marker_radius_m: Optional[float] = 0.035,
         seed: int = 0,
     ) -> None:
         self.model = model if model is not None else CameraModel()
@@ -177,12 +182,14 @@ class SyntheticCamera:
             raise ValueError(f"dot_radius_m must be positive, got {dot_radius_m!r}")
         self.dot_radius_m = float(dot_radius_m)
         self.rod_width_m = float(rod_width_m)
+        self.hub_marker_radius_m = hub_marker_radius_m
         self.seed = int(seed)
         self._rng = np.random.default_rng(seed)
         self._background = self._make_background()
         m = self.model
         yy, xx = np.mgrid[0 : m.height_px, 0 : m.width_px].astype(np.float32)
-        self._gradient = (1.0 + self.effects.gradient * ((xx / m.width_px) - 0.5)).astype(np.float32)[..., None]
+        gradient = (1.0 + self.effects.gradient * ((xx / m.width_px) - 0.5)).astype(np.float32)
+        self._gradient3 = cv2.merge([gradient, gradient, gradient])
         # sensor noise: per frame a random crop of one larger noise field (fast, and distinct per frame)
         self._noise_margin = 97
         self._noise_field = (
@@ -197,8 +204,8 @@ class SyntheticCamera:
         image = np.full((m.height_px, m.width_px, 3), (205, 210, 215), dtype=np.uint8)
         if self.effects.clutter:
             rng = np.random.default_rng(self.seed + 7919)
-            palette = [(60, 60, 200), (40, 140, 220), (30, 200, 230), (150, 150, 150), (90, 60, 120), (180, 200, 230),
-                       (80, 110, 140)]  # reds, oranges, yellows, greys, browns: no blue, no green
+            palette = [(60, 60, 200), (40, 140, 220), (30, 200, 230), (150, 150, 150), (100, 90, 120), (180, 200, 230),
+                       (80, 110, 140)]  # reds, oranges, yellows, greys, browns: no blue, green or magenta
             for _ in range(25):
                 colour = palette[rng.integers(len(palette))]
                 kind = rng.integers(3)
@@ -217,9 +224,10 @@ class SyntheticCamera:
             _circle(image, centre, 7.0, _MARKER_BGR)
         return image
 
-    def draw(self, link_points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One sharp, noise-free frame of the rod at ``link_points_m`` ``(n + 1, 2)`` (hub first) [m];
-        returns the frame and the tip's pixel position."""
+    def draw(self, link_points_m: np.ndarray, hub_angle_rad: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
+        """One sharp, noise-free frame of the rod at ``link_points_m`` ``(n + 1, 2)`` (hub first) [m]
+        with the hub at ``hub_angle_rad`` (default: the first link's direction); returns the frame and the
+        tip's pixel position."""
         points = np.asarray(link_points_m, dtype=float)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
             raise ValueError(f"link_points_m must have shape (n + 1, 2), got {points.shape}")
@@ -232,6 +240,13 @@ class SyntheticCamera:
         hub = pixels[0]
         half = 0.6 * width + 3
         cv2.rectangle(image, (int(hub[0] - half), int(hub[1] - half)), (int(hub[0] + half), int(hub[1] + half)), _HUB_BGR, -1)
+        if self.hub_marker_radius_m:
+            if hub_angle_rad is None:
+                d = points[1] - points[0]
+                hub_angle_rad = math.atan2(-d[0], d[1])
+            r = self.hub_marker_radius_m
+            marker = self.model.to_pixels(points[0] + r * np.array([-math.sin(hub_angle_rad), math.cos(hub_angle_rad)]))
+            _circle(image, marker, 0.45 * width + 1.5, _HUB_MARKER_BGR)
         _circle(image, pixels[-1], self.dot_radius_m * self.model.px_per_m, _TIP_BGR)
         return image, pixels[-1]
 
@@ -241,7 +256,8 @@ class SyntheticCamera:
         Parameters
         ----------
         sample_points_m : callable
-            ``sample_points_m(t) -> (n + 1, 2)`` link points at time ``t`` [m].
+            ``sample_points_m(t) -> (points, hub_angle_rad)``: link points ``(n + 1, 2)`` [m] and the hub
+            angle [rad] (or None) at time ``t``.
         time_s : float
             End of the exposure (the frame's timestamp on the scene clock) [s].
 
@@ -256,24 +272,35 @@ class SyntheticCamera:
             times = time_s - fx.exposure_s * (1 - (np.arange(fx.blur_subframes) + 0.5) / fx.blur_subframes)
         else:
             times = np.array([time_s])
-        accumulator = None
         tips = []
+        frames = []
         for t in times:
-            frame, tip = self.draw(sample_points_m(float(t)))
+            frame, tip = self.draw(*sample_points_m(float(t)))
             tips.append(tip)
-            accumulator = frame.astype(np.float32) if accumulator is None else accumulator + frame
-        image = accumulator / len(times)
+            frames.append(frame)
+        tip = np.mean(tips, axis=0)
         gain = 1.0 + fx.lighting_amplitude * math.sin(2 * math.pi * fx.lighting_frequency_hz * time_s)
-        if gain != 1.0 or fx.gradient:
-            image = image * (gain * self._gradient)
+        if len(frames) == 1 and gain == 1.0 and not fx.gradient and self._noise_field is None:
+            return frames[0], tip
+        image = np.zeros(frames[0].shape, np.float32)
+        for frame in frames:
+            cv2.accumulate(frame, image)
+        scale = np.float32(gain / len(frames))
+        if fx.gradient:
+            image = cv2.multiply(image, self._gradient3, scale=float(scale))
+        else:
+            image *= scale
         if self._noise_field is not None:
             dy, dx = self._rng.integers(0, self._noise_margin, size=2)
-            flip = self._rng.integers(0, 2) * 2 - 1  # also flip the sign: 2 x margin^2 distinct fields
             h, w = image.shape[:2]
-            image = image + flip * self._noise_field[dy : dy + h, dx : dx + w]
-        return np.clip(image + 0.5, 0, 255).astype(np.uint8), np.mean(tips, axis=0)
+            crop = self._noise_field[dy : dy + h, dx : dx + w]
+            image = cv2.add(image, crop) if self._rng.integers(0, 2) else cv2.subtract(image, crop)
+        image += np.float32(0.5)
+        np.clip(image, 0, 255, out=image)
+        return image.astype(np.uint8), tip
 
-    def frames(self, times_s: np.ndarray, link_points_m: np.ndarray, frame_times_s: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    def frames(self, times_s: np.ndarray, link_points_m: np.ndarray, frame_times_s: np.ndarray,
+               hub_angles_rad: Optional[np.ndarray] = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """Frames for a sampled trajectory.
 
         Parameters
@@ -284,6 +311,8 @@ class SyntheticCamera:
             Link points at those times [m]; linearly interpolated in between.
         frame_times_s : ndarray (F,)
             Exposure end times of the frames on the same clock [s].
+        hub_angles_rad : ndarray (T,), optional
+            Hub angle at the sample times [rad] (unwrapped; default: from the first link).
         """
         times_s = np.asarray(times_s, dtype=float)
         link_points_m = np.asarray(link_points_m, dtype=float)
@@ -292,12 +321,17 @@ class SyntheticCamera:
         if len(times_s) < 2 or np.any(np.diff(times_s) <= 0):
             raise ValueError("times_s must be increasing with at least 2 samples")
         flat = link_points_m.reshape(len(times_s), -1)
+        if hub_angles_rad is not None:
+            hub_angles_rad = np.asarray(hub_angles_rad, dtype=float)
+            if hub_angles_rad.shape != times_s.shape:
+                raise ValueError(f"hub_angles_rad must have shape {times_s.shape}, got {hub_angles_rad.shape}")
 
         def sample(t: float) -> np.ndarray:
             i = int(np.clip(np.searchsorted(times_s, t) - 1, 0, len(times_s) - 2))
             w = (t - times_s[i]) / (times_s[i + 1] - times_s[i])
             w = min(max(w, 0.0), 1.0)
-            return ((1 - w) * flat[i] + w * flat[i + 1]).reshape(-1, 2)
+            hub = None if hub_angles_rad is None else (1 - w) * hub_angles_rad[i] + w * hub_angles_rad[i + 1]
+            return ((1 - w) * flat[i] + w * flat[i + 1]).reshape(-1, 2), hub
 
         for t in np.asarray(frame_times_s, dtype=float):
             yield self.render(sample, float(t))
@@ -315,6 +349,7 @@ def render_video(
     camera: SyntheticCamera,
     times_s: np.ndarray,
     link_points_m: np.ndarray,
+    hub_angles_rad: Optional[np.ndarray] = None,
     fps: float = 100.0,
     clock_offset_s: float = 0.0,
     timestamp_jitter_s: float = 0.0,
@@ -339,6 +374,8 @@ def render_video(
         The renderer.
     times_s, link_points_m : ndarray
         The trajectory (see :meth:`SyntheticCamera.frames`), on the scene (= motor) clock [s, m].
+    hub_angles_rad : ndarray, optional
+        Hub angle at ``times_s`` [rad] (for the hub marker).
     fps : float
         Frame rate [1/s].
     clock_offset_s : float
@@ -372,7 +409,7 @@ def render_video(
     hidden = set(int(i) for i in drop_dot_frames)
     tips = np.empty((len(frame_times), 2))
     kept = [] if keep_frames else None
-    iterator = camera.frames(times_s, link_points_m, frame_times)
+    iterator = camera.frames(times_s, link_points_m, frame_times, hub_angles_rad)
     if progress:
         from tqdm.auto import tqdm
 
@@ -394,6 +431,7 @@ def render_video(
         "scene_times_s": frame_times.tolist(),
         "tip_px": [[None if not np.isfinite(v) else float(v) for v in row] for row in tips],
         "markers_m": camera.markers_m.tolist(),
+        "hub_marker_radius_m": camera.hub_marker_radius_m,
         "clock_offset_s": clock_offset_s,
         "camera_model": asdict(camera.model),
         "effects": asdict(camera.effects),

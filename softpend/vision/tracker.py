@@ -17,7 +17,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-__all__ = ["BLUE_HSV", "GREEN_HSV", "ColourRange", "Detection", "TipTracker", "find_blobs"]
+__all__ = ["BLUE_HSV", "GREEN_HSV", "MAGENTA_HSV", "ColourRange", "Detection", "TipTracker", "find_blobs"]
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,8 @@ class ColourRange:
 BLUE_HSV = ColourRange((100, 120, 50), (130, 255, 255))
 #: The green reference markers used for calibration.
 GREEN_HSV = ColourRange((45, 120, 50), (75, 255, 255))
+#: The magenta hub marker on the rod clamp (gives the hub angle to the camera, for clock synchronisation).
+MAGENTA_HSV = ColourRange((145, 150, 50), (170, 255, 255))
 
 
 @dataclass(frozen=True)
@@ -114,6 +116,8 @@ class TipTracker:
     search_radius_px : float, optional
         If set, after a successful frame the next one is searched only in a window of this radius
         around the last position (faster); the whole frame is searched again after a loss.
+    region_px : (x0, y0, x1, y1), optional
+        Only ever search this rectangle of the frame (e.g. around the hub for the hub marker).
     """
 
     def __init__(
@@ -122,6 +126,7 @@ class TipTracker:
         min_area_px: float = 20.0,
         max_area_px: Optional[float] = None,
         search_radius_px: Optional[float] = None,
+        region_px: Optional[tuple[int, int, int, int]] = None,
     ) -> None:
         if not (math.isfinite(min_area_px) and min_area_px >= 0):
             raise ValueError(f"min_area_px must be a non-negative number, got {min_area_px!r}")
@@ -133,6 +138,12 @@ class TipTracker:
         self.min_area_px = float(min_area_px)
         self.max_area_px = None if max_area_px is None else float(max_area_px)
         self.search_radius_px = search_radius_px
+        if region_px is not None:
+            x0, y0, x1, y1 = (int(v) for v in region_px)
+            if x1 <= x0 or y1 <= y0 or x0 < 0 or y0 < 0:
+                raise ValueError(f"region_px must be (x0, y0, x1, y1) with x0 < x1, y0 < y1, got {region_px!r}")
+            region_px = (x0, y0, x1, y1)
+        self.region_px = region_px
         self._last: Optional[tuple[float, float]] = None
 
     def reset(self) -> None:
@@ -142,6 +153,13 @@ class TipTracker:
     def track(self, frame_bgr: np.ndarray) -> Detection:
         """Locate the dot in one BGR frame; ``lost=True`` (NaN position) when no blob qualifies."""
         _validate_frame(frame_bgr)
+        if self.region_px is not None:
+            x0, y0, x1, y1 = self.region_px
+            detection = self._track_image(frame_bgr[y0:y1, x0:x1])
+            if detection.lost:
+                return detection
+            return Detection(detection.x_px + x0, detection.y_px + y0, detection.area_px, False,
+                             detection.contour + np.array([[x0, y0]], dtype=detection.contour.dtype))
         x_off = y_off = 0
         image = frame_bgr
         if self.search_radius_px is not None and self._last is not None:

@@ -1,0 +1,468 @@
+# softpend motor controller for the VEX V5 brain (VEXcode / V5 Python, MicroPython-based).
+#
+# Serves the softpend motor-link protocol (documented in the embedded protocol section below) on the
+# brain's USB serial port: HELLO/HELLO_ACK handshake, TORQUE commands, HEARTBEAT, STOP, and a STATE
+# stream (encoder angle and velocity with device timestamps) at STATE_RATE_HZ.  The session logic, the
+# torque clamp and the 100 ms watchdog are the shared DeviceSession class, the same code the rig
+# emulator (softpend.hardware.emulator) runs, so host tests against the emulator exercise it.
+#
+# This file cannot run off the brain (the `vex` module exists only there); it is kept importable-free of
+# host packages on purpose.  The protocol section is a verbatim copy of softpend/hardware/protocol.py,
+# checked by tests/test_hardware_protocol.py; refresh it with
+#     python -m softpend.hardware.firmware --update
+#
+# Hardware assumptions (edit to match the rig): V5 Smart Motor on PORT1 with the 18:1 cartridge
+# (green), the rod clamped to its output shaft, rod hanging down at power-up (encoder zero = hanging).
+# The V5 motor has no torque mode; the commanded torque is turned into a voltage with the DC motor
+# model  V = R * tau / k_t + k_e * omega  (constants below, from the V5 motor's published curves:
+# stall torque 2.1 N m at 12 V with 18:1, free speed 200 rpm).
+
+# ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----
+# softpend motor-link protocol, version 1.
+#
+# This module is shared VERBATIM by three programs: the host driver (softpend.hardware.driver), the rig
+# emulator (softpend.hardware.emulator) and the device program for the VEX V5 brain
+# (firmware/vex_v5_motor.py, which embeds a copy between marker lines; tests/test_hardware_protocol.py
+# checks that the copy is identical).  It therefore uses only what MicroPython on the V5 brain offers:
+# the ``struct`` module, plain classes, bytes/bytearray.  No numpy, typing, dataclasses or f-string tricks.
+#
+# Wire format
+# -----------
+# Every message is one frame::
+#
+#     COBS( payload || CRC16(payload) ) || 0x00
+#
+# * ``payload`` = ``type:u8, seq:u16`` followed by the message body (little-endian, see MESSAGE_FORMATS).
+# * ``CRC16`` is CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), appended big-endian.
+# * COBS (consistent overhead byte stuffing) removes every 0x00 from the frame, so 0x00 is an unambiguous
+#   delimiter: a receiver that joins mid-stream or sees a garbled byte resynchronises at the next 0x00.
+#
+# Messages (host -> device: 0x0_, device -> host: 0x8_)
+# -----------------------------------------------------
+# HELLO      0x01  version:u16, nonce:u32                      host opens the session
+# TORQUE     0x02  torque_nm:f32                                torque command (feeds the watchdog)
+# HEARTBEAT  0x03  (empty)                                      liveness probe; device echoes the seq
+# STOP       0x04  (empty)                                      zero torque now (every host exit path)
+# HELLO_ACK  0x81  version:u16, nonce:u32, counts_per_rev:u32,  device answers HELLO; a version mismatch is
+#                  torque_limit_nm:f32, watchdog_ms:u16,         answered with ERROR(ERR_VERSION) instead
+#                  state_rate_hz:u16
+# STATE      0x82  device_time_us:u64, encoder_counts:i32,      streamed at state_rate_hz once a session is
+#                  velocity_rad_s:f32, applied_torque_nm:f32,    open; ``last_cmd_seq`` is the seq of the
+#                  last_cmd_seq:u16, flags:u8                    torque command in force
+# HEARTBEAT_ACK 0x83 (empty, echoes the seq)
+# ERROR      0x84  code:u8                                      device-side error report
+#
+# STATE flags: bit 0 = watchdog tripped (no TORQUE for watchdog_ms, torque forced to 0),
+#              bit 1 = torque command saturated at the device limit, bit 2 = stopped by STOP.
+# The watchdog is fed only by TORQUE messages (never by HEARTBEAT): a host that stops commanding stops
+# the motor.
+
+import struct
+
+PROTOCOL_VERSION = 1
+
+MSG_HELLO = 0x01
+MSG_TORQUE = 0x02
+MSG_HEARTBEAT = 0x03
+MSG_STOP = 0x04
+MSG_HELLO_ACK = 0x81
+MSG_STATE = 0x82
+MSG_HEARTBEAT_ACK = 0x83
+MSG_ERROR = 0x84
+
+FLAG_WATCHDOG = 0x01
+FLAG_SATURATED = 0x02
+FLAG_STOPPED = 0x04
+
+ERR_VERSION = 1
+ERR_NO_SESSION = 2
+ERR_BAD_MESSAGE = 3
+
+HEADER_FORMAT = "<BH"
+HEADER_SIZE = 3
+MESSAGE_FORMATS = {
+    MSG_HELLO: "<HI",
+    MSG_TORQUE: "<f",
+    MSG_HEARTBEAT: "<",
+    MSG_STOP: "<",
+    MSG_HELLO_ACK: "<HIIfHH",
+    MSG_STATE: "<QiffHB",
+    MSG_HEARTBEAT_ACK: "<",
+    MSG_ERROR: "<B",
+}
+MESSAGE_NAMES = {
+    MSG_HELLO: "HELLO",
+    MSG_TORQUE: "TORQUE",
+    MSG_HEARTBEAT: "HEARTBEAT",
+    MSG_STOP: "STOP",
+    MSG_HELLO_ACK: "HELLO_ACK",
+    MSG_STATE: "STATE",
+    MSG_HEARTBEAT_ACK: "HEARTBEAT_ACK",
+    MSG_ERROR: "ERROR",
+}
+MAX_FRAME_BYTES = 64
+
+
+class ProtocolError(Exception):
+    """A frame that cannot be decoded (bad COBS, bad CRC, unknown type, wrong length)."""
+
+
+class ChecksumMismatch(ProtocolError):
+    """The CRC of a frame does not match its payload."""
+
+
+def crc16_ccitt(data, crc=0xFFFF):
+    """CRC-16/CCITT-FALSE of ``data`` (poly 0x1021, init 0xFFFF, no reflection, no final xor).
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes to check.
+    crc : int
+        Initial value (0xFFFF; pass a previous result to continue a running CRC).
+
+    Returns
+    -------
+    int
+        The 16-bit CRC.
+    """
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            if crc & 0x8000:
+                crc = ((crc << 1) ^ 0x1021) & 0xFFFF
+            else:
+                crc = (crc << 1) & 0xFFFF
+    return crc
+
+
+def cobs_encode(data):
+    """COBS-encode ``data`` (the result contains no 0x00 byte; the delimiter is not added)."""
+    out = bytearray()
+    block = bytearray()
+    for byte in data:
+        if byte == 0:
+            out.append(len(block) + 1)
+            out.extend(block)
+            block = bytearray()
+        else:
+            block.append(byte)
+            if len(block) == 254:
+                out.append(255)
+                out.extend(block)
+                block = bytearray()
+    out.append(len(block) + 1)
+    out.extend(block)
+    return bytes(out)
+
+
+def cobs_decode(data):
+    """Inverse of :func:`cobs_encode`; raises :class:`ProtocolError` on a malformed block."""
+    out = bytearray()
+    i = 0
+    n = len(data)
+    while i < n:
+        code = data[i]
+        if code == 0:
+            raise ProtocolError("COBS: zero byte inside a frame")
+        end = i + code
+        if end > n:
+            raise ProtocolError("COBS: block runs past the end of the frame")
+        out.extend(data[i + 1 : end])
+        i = end
+        if code < 255 and i < n:
+            out.append(0)
+    return bytes(out)
+
+
+def encode_message(msg_type, seq, values=()):
+    """Build one complete wire frame (COBS, CRC and the trailing 0x00 delimiter).
+
+    Parameters
+    ----------
+    msg_type : int
+        One of the ``MSG_*`` constants.
+    seq : int
+        Sequence number, taken modulo 65536.
+    values : tuple
+        The body fields in the order of ``MESSAGE_FORMATS[msg_type]`` (SI units: N m, rad, rad/s, us).
+
+    Returns
+    -------
+    bytes
+        The frame, ready to write to the serial port.
+    """
+    if msg_type not in MESSAGE_FORMATS:
+        raise ValueError("msg_type: unknown message type %r" % (msg_type,))
+    payload = struct.pack(HEADER_FORMAT, msg_type, seq & 0xFFFF) + struct.pack(MESSAGE_FORMATS[msg_type], *values)
+    crc = crc16_ccitt(payload)
+    return cobs_encode(payload + bytes(((crc >> 8) & 0xFF, crc & 0xFF))) + b"\x00"
+
+
+def decode_frame(frame):
+    """Decode one frame (without its 0x00 delimiter) into ``(msg_type, seq, values)``.
+
+    Raises
+    ------
+    ChecksumMismatch
+        If the CRC does not match.
+    ProtocolError
+        If the frame is malformed, of unknown type or of the wrong length.
+    """
+    raw = cobs_decode(frame)
+    if len(raw) < HEADER_SIZE + 2:
+        raise ProtocolError("frame too short (%d bytes)" % len(raw))
+    payload = raw[:-2]
+    received = (raw[-2] << 8) | raw[-1]
+    if crc16_ccitt(payload) != received:
+        raise ChecksumMismatch("CRC mismatch (got 0x%04x, computed 0x%04x)" % (received, crc16_ccitt(payload)))
+    msg_type, seq = struct.unpack(HEADER_FORMAT, payload[:HEADER_SIZE])
+    fmt = MESSAGE_FORMATS.get(msg_type)
+    if fmt is None:
+        raise ProtocolError("unknown message type 0x%02x" % msg_type)
+    body = payload[HEADER_SIZE:]
+    if len(body) != struct.calcsize(fmt):
+        raise ProtocolError(
+            "%s body has %d bytes, expected %d" % (MESSAGE_NAMES[msg_type], len(body), struct.calcsize(fmt))
+        )
+    return msg_type, seq, struct.unpack(fmt, body)
+
+
+class FrameDecoder:
+    """Incremental receiver: feed it bytes as they arrive, get decoded messages back.
+
+    Bytes are buffered until a 0x00 delimiter; each complete frame is decoded.  Frames that fail are
+    counted (``bad_frames``, ``checksum_errors``) and reported through ``errors`` instead of raising, so
+    one garbled frame never desynchronises the stream; the caller decides what a bad frame means
+    (``consecutive_bad`` counts bad frames since the last good one).
+    """
+
+    def __init__(self):
+        self._frame = bytearray()
+        self._overflow = False
+        self.bad_frames = 0
+        self.checksum_errors = 0
+        self.good_frames = 0
+        self.consecutive_bad = 0
+        self.last_error = None
+
+    def feed(self, data):
+        """Add received bytes; return ``(messages, errors)``: a list of ``(msg_type, seq, values)`` for
+        each good frame completed by these bytes and a list of error strings for each bad one."""
+        messages = []
+        errors = []
+        for byte in data:
+            if byte != 0:
+                if len(self._frame) < MAX_FRAME_BYTES:
+                    self._frame.append(byte)
+                else:
+                    self._overflow = True
+                continue
+            frame = bytes(self._frame)
+            overflow = self._overflow
+            self._frame = bytearray()
+            self._overflow = False
+            if not frame:
+                continue
+            if overflow:
+                self.consecutive_bad += 1
+                self.bad_frames += 1
+                self.last_error = "frame longer than %d bytes" % MAX_FRAME_BYTES
+                errors.append(self.last_error)
+                continue
+            try:
+                messages.append(decode_frame(frame))
+                self.good_frames += 1
+                self.consecutive_bad = 0
+            except ChecksumMismatch as exc:
+                self.consecutive_bad += 1
+                self.bad_frames += 1
+                self.checksum_errors += 1
+                self.last_error = str(exc)
+                errors.append(self.last_error)
+            except (ProtocolError, ValueError, struct.error) as exc:
+                self.consecutive_bad += 1
+                self.bad_frames += 1
+                self.last_error = str(exc)
+                errors.append(self.last_error)
+        return messages, errors
+
+
+class DeviceSession:
+    """The device side of the protocol: session state, torque clamp and watchdog.
+
+    Shared by the VEX V5 program and the rig emulator, so the two cannot behave differently.  The
+    caller owns the clock (microseconds), the motor and the encoder: it feeds received bytes to
+    :meth:`receive` (and writes back the frames it returns), asks :meth:`torque_nm` for the torque to
+    apply at each motor update, and sends :meth:`state_frame` at ``state_rate_hz``.
+
+    Parameters
+    ----------
+    counts_per_rev : int
+        Encoder counts per revolution of the hub.
+    torque_limit_nm : float
+        Device-side torque limit [N m]; commands beyond it are clamped and flagged.
+    watchdog_ms : int
+        Torque is forced to zero when no TORQUE message arrived for this long [ms].
+    state_rate_hz : int
+        Rate at which the caller streams STATE frames [Hz] (announced in HELLO_ACK).
+    """
+
+    def __init__(self, counts_per_rev, torque_limit_nm, watchdog_ms=100, state_rate_hz=100):
+        self.counts_per_rev = int(counts_per_rev)
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.watchdog_us = int(watchdog_ms) * 1000
+        self.watchdog_ms = int(watchdog_ms)
+        self.state_rate_hz = int(state_rate_hz)
+        self.decoder = FrameDecoder()
+        self.session_open = False
+        self.command_nm = 0.0
+        self.last_cmd_seq = 0
+        self.last_cmd_us = None
+        self.stopped = False
+        self.saturated = False
+        self.tx_seq = 0
+
+    def _next_seq(self):
+        self.tx_seq = (self.tx_seq + 1) & 0xFFFF
+        return self.tx_seq
+
+    def receive(self, data, now_us):
+        """Process received bytes at device time ``now_us``; return the reply frames to send (list)."""
+        replies = []
+        messages, _errors = self.decoder.feed(data)
+        for msg_type, seq, values in messages:
+            if msg_type == MSG_HELLO:
+                if values[0] != PROTOCOL_VERSION:
+                    replies.append(encode_message(MSG_ERROR, seq, (ERR_VERSION,)))
+                    continue
+                self.session_open = True
+                self.command_nm = 0.0
+                self.last_cmd_us = None
+                self.stopped = False
+                replies.append(
+                    encode_message(
+                        MSG_HELLO_ACK,
+                        seq,
+                        (PROTOCOL_VERSION, values[1], self.counts_per_rev, self.torque_limit_nm,
+                         self.watchdog_ms, self.state_rate_hz),
+                    )
+                )
+            elif not self.session_open:
+                replies.append(encode_message(MSG_ERROR, seq, (ERR_NO_SESSION,)))
+            elif msg_type == MSG_TORQUE:
+                torque = values[0]
+                if not (torque == torque) or torque in (float("inf"), float("-inf")):
+                    torque = 0.0
+                limit = self.torque_limit_nm
+                self.saturated = torque > limit or torque < -limit
+                self.command_nm = min(max(torque, -limit), limit)
+                self.last_cmd_seq = seq
+                self.last_cmd_us = now_us
+                self.stopped = False
+            elif msg_type == MSG_STOP:
+                self.command_nm = 0.0
+                self.stopped = True
+            elif msg_type == MSG_HEARTBEAT:
+                replies.append(encode_message(MSG_HEARTBEAT_ACK, seq, ()))
+            else:
+                replies.append(encode_message(MSG_ERROR, seq, (ERR_BAD_MESSAGE,)))
+        return replies
+
+    def watchdog_tripped(self, now_us):
+        """True when commands were received but none for ``watchdog_ms`` (torque is then zero)."""
+        return self.last_cmd_us is not None and now_us - self.last_cmd_us > self.watchdog_us
+
+    def torque_nm(self, now_us):
+        """Torque to apply now [N m]: the clamped command, or 0 after STOP or a watchdog trip."""
+        if not self.session_open or self.stopped or self.watchdog_tripped(now_us):
+            return 0.0
+        return self.command_nm
+
+    def flags(self, now_us):
+        """STATE flag bits at ``now_us``."""
+        bits = 0
+        if self.watchdog_tripped(now_us):
+            bits |= FLAG_WATCHDOG
+        if self.saturated:
+            bits |= FLAG_SATURATED
+        if self.stopped:
+            bits |= FLAG_STOPPED
+        return bits
+
+    def state_frame(self, now_us, encoder_counts, velocity_rad_s, applied_torque_nm):
+        """A STATE frame for an encoder sample taken at ``now_us`` (or None before the handshake)."""
+        if not self.session_open:
+            return None
+        return encode_message(
+            MSG_STATE,
+            self._next_seq(),
+            (now_us, encoder_counts, velocity_rad_s, applied_torque_nm, self.last_cmd_seq, self.flags(now_us)),
+        )
+# ---- END softpend/hardware/protocol.py ----
+
+import sys
+
+try:
+    from vex import Brain, Motor, Ports, GearSetting, FORWARD, VOLT, DEGREES, RPM, BRAKE, COAST  # noqa: F401
+except ImportError:  # pragma: no cover - only on the host, where this file is never run
+    Brain = None
+
+PORT = "PORT1"
+COUNTS_PER_REV = 1800            # V5 encoder, 18:1 cartridge: 900 ticks per output rev x 2 (degrees mode: 0.2 deg)
+TORQUE_LIMIT_NM = 0.06           # the project's default rod torque limit
+WATCHDOG_MS = 100
+STATE_RATE_HZ = 100
+SUPPLY_V = 12.0
+STALL_TORQUE_NM = 2.1            # at 12 V, 18:1 output
+FREE_SPEED_RAD_S = 200.0 * 2 * 3.141592653589793 / 60.0
+K_T = STALL_TORQUE_NM / SUPPLY_V             # N m per volt at stall (lumped R / k_t)
+K_E = SUPPLY_V / FREE_SPEED_RAD_S            # back-EMF volts per rad/s
+
+
+def torque_to_volts(torque_nm, omega_rad_s):
+    """Voltage that produces ``torque_nm`` at speed ``omega_rad_s`` (DC motor model), clamped to supply."""
+    volts = torque_nm / K_T + K_E * omega_rad_s
+    return max(-SUPPLY_V, min(SUPPLY_V, volts))
+
+
+def main():
+    brain = Brain()
+    motor = Motor(getattr(Ports, PORT), GearSetting.RATIO_18_1, False)
+    motor.reset_position()
+    motor.set_stopping(COAST)
+    session = DeviceSession(COUNTS_PER_REV, TORQUE_LIMIT_NM, WATCHDOG_MS, STATE_RATE_HZ)  # noqa: F821
+    port_in = sys.stdin.buffer if hasattr(sys.stdin, "buffer") else sys.stdin
+    port_out = sys.stdout.buffer if hasattr(sys.stdout, "buffer") else sys.stdout
+    period_us = 1000000 // STATE_RATE_HZ
+    next_us = brain.timer.system_high_res() + period_us
+    while True:
+        now_us = brain.timer.system_high_res()
+        # non-blocking read of whatever the host sent (the V5 USB serial is line-buffer free in raw mode)
+        data = port_in.read(64) if _bytes_waiting(port_in) else b""
+        for reply in session.receive(data or b"", now_us):
+            port_out.write(reply)
+        omega = motor.velocity(RPM) * 2 * 3.141592653589793 / 60.0
+        torque = session.torque_nm(now_us)      # 0 after STOP or when the watchdog trips
+        if torque == 0.0:
+            motor.stop()
+        else:
+            motor.spin(FORWARD, torque_to_volts(torque, omega), VOLT)
+        if now_us >= next_us:
+            counts = int(motor.position(DEGREES) * COUNTS_PER_REV / 360.0)
+            frame = session.state_frame(now_us, counts, omega, torque)
+            if frame is not None:
+                port_out.write(frame)
+            next_us += period_us
+
+
+def _bytes_waiting(stream):
+    try:
+        import select
+        return bool(select.select([stream], [], [], 0)[0])
+    except Exception:
+        return True
+
+
+if __name__ == "__main__" and Brain is not None:
+    main()

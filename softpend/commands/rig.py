@@ -1,0 +1,41 @@
+"""``softpend rig``: serve the emulated rig (the digital twin of the motor controller) on a pseudo-terminal.
+
+Prints the pty path (one line), then serves until Ctrl-C/SIGTERM or ``--duration``.  Point any host
+program at that path, e.g. ``MotorLink(path, torque_limit_nm=0.06)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
+    parser.add_argument("--port", metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")
+    parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run until killed)")
+    parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (default 4096)")
+    parser.add_argument("--latency-ms", type=float, default=2.0, help="one-way link latency [ms] (default 2)")
+    parser.add_argument("--drop", type=float, default=0.0, help="probability that a STATE frame is dropped")
+    parser.add_argument("--garble", type=float, default=0.0, help="probability that a STATE frame is corrupted")
+    parser.add_argument("--watchdog-ms", type=int, default=100, help="device watchdog [ms] (default 100)")
+    parser.add_argument("--n-links", type=int, default=4, help="PRB links of the simulated rod")
+    parser.add_argument("--seed", type=int, default=0, help="seed for drops, garbling and start noise")
+    parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..hardware.emulator import RigConfig, serve_forever
+    from ..plant import RodParams
+
+    config = RigConfig(
+        params=RodParams(n_links=args.n_links),
+        counts_per_rev=args.counts_per_rev,
+        latency_s=args.latency_ms / 1000.0,
+        drop_probability=args.drop,
+        garble_probability=args.garble,
+        watchdog_ms=args.watchdog_ms,
+        seed=args.seed,
+        duration_s=args.duration,
+    )
+    return serve_forever(config, truth_log=args.truth_log, link_path=args.port)

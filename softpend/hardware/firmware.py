@@ -1,0 +1,48 @@
+"""The device program for the VEX V5 brain, and the tool that keeps its protocol copy in sync.
+
+The V5 runs one Python file, so ``firmware/vex_v5_motor.py`` embeds :mod:`softpend.hardware.protocol`
+verbatim between two marker lines.  :func:`embedded_protocol` extracts that copy,
+:func:`check_firmware` says whether it is identical to the package's module, and :func:`update_firmware`
+rewrites it (``python -m softpend.hardware.firmware --update``).  A test fails if the copy drifts.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+__all__ = ["BEGIN_MARKER", "END_MARKER", "FIRMWARE_PATH", "check_firmware", "embedded_protocol", "update_firmware"]
+
+BEGIN_MARKER = "# ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----\n"
+END_MARKER = "# ---- END softpend/hardware/protocol.py ----\n"
+FIRMWARE_PATH = Path(__file__).resolve().parents[2] / "firmware" / "vex_v5_motor.py"
+PROTOCOL_PATH = Path(__file__).resolve().parent / "protocol.py"
+
+
+def embedded_protocol(firmware_path: Path = FIRMWARE_PATH) -> str:
+    """The protocol source embedded in the firmware file (raises ValueError without the markers)."""
+    text = Path(firmware_path).read_text()
+    if BEGIN_MARKER not in text or END_MARKER not in text:
+        raise ValueError(f"firmware_path {firmware_path} lacks the protocol marker lines")
+    return text.split(BEGIN_MARKER, 1)[1].split(END_MARKER, 1)[0]
+
+
+def check_firmware(firmware_path: Path = FIRMWARE_PATH) -> bool:
+    """True if the firmware's embedded protocol equals ``softpend/hardware/protocol.py`` byte for byte."""
+    return embedded_protocol(firmware_path) == PROTOCOL_PATH.read_text()
+
+
+def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
+    """Replace the embedded copy with the current protocol module."""
+    text = Path(firmware_path).read_text()
+    head = text.split(BEGIN_MARKER, 1)[0]
+    tail = text.split(END_MARKER, 1)[1]
+    Path(firmware_path).write_text(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    if "--update" in sys.argv:
+        update_firmware()
+    ok = check_firmware()
+    print("firmware protocol copy is", "up to date" if ok else "OUT OF DATE (run with --update)")
+    sys.exit(0 if ok else 1)

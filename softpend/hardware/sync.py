@@ -1,0 +1,346 @@
+"""Time synchronisation: merge the motor log and the camera CSV into a system-identification dataset.
+
+The motor controller and the camera have separate clocks.  :func:`estimate_clock_offset` finds
+``offset_s = camera clock - motor clock`` from the data: over a window that contains the deliberate
+start-up wiggle (a pseudo-random torque burst, see :func:`startup_wiggle_torque`), the hub rate from the
+encoder and the hub rate seen by the camera (a magenta marker on the rod clamp) are cross-correlated
+over candidate offsets (1 ms grid, refined by a parabola through the peak).  Both measure the same
+rigid body, so the peak sits at the clock offset.  Without a hub marker the tip angle is used instead;
+that is biased by the rod's own lag between hub and tip (about 60 ms for the default rod, measured in
+the tests), so the hub marker is the recommended set-up.
+
+:func:`synchronise` then maps camera times onto the motor clock, resamples both streams onto a grid of
+``dt_s`` (0.01 s) aligned with the motor samples (linear interpolation of positions, zero-order hold of
+the applied torque), marks grid points that fall in a gap (dropped motor states, lost or missing camera
+frames), cuts the valid stretches into trials of ``trial_length_s`` and computes backward-difference
+velocities as :mod:`softpend.sysid` does.  :func:`build_rig_dataset` writes the result with
+:func:`softpend.sysid.save_dataset` (``source="rig"``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..plant import RodParams, wrap_angle_rad
+from .samplelog import LogContents, read_sample_log
+
+__all__ = [
+    "ClockOffset",
+    "Gap",
+    "SyncResult",
+    "build_rig_dataset",
+    "estimate_clock_offset",
+    "startup_wiggle_torque",
+    "synchronise",
+]
+
+#: Position columns of a rig dataset (the camera tracks only the tip dot, so no ``er_rad``).
+RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
+
+
+def startup_wiggle_torque(duration_s: float, torque_nm: float, seed: int, dt_s: float = 0.01,
+                          min_hold_s: float = 0.08, max_hold_s: float = 0.3) -> np.ndarray:
+    """A pseudo-random +-``torque_nm`` sequence (random hold times): the deliberate start-up wiggle whose
+    non-periodic pattern gives a single, sharp cross-correlation peak.
+
+    Returns the torque per control step [N m], ``round(duration_s / dt_s)`` values.
+    """
+    if not (duration_s > 0 and torque_nm > 0 and dt_s > 0 and 0 < min_hold_s <= max_hold_s):
+        raise ValueError("duration_s, torque_nm, dt_s must be positive and min_hold_s <= max_hold_s")
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s / dt_s))
+    out = np.empty(n)
+    k, sign = 0, 1.0
+    while k < n:
+        hold = max(1, int(round(rng.uniform(min_hold_s, max_hold_s) / dt_s)))
+        out[k : k + hold] = sign * torque_nm
+        k += hold
+        sign = -sign
+    return out
+
+
+@dataclass(frozen=True)
+class ClockOffset:
+    """Estimated ``camera clock - motor clock`` [s] and the normalised correlation at the peak."""
+
+    offset_s: float
+    peak_correlation: float
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A stretch of motor-clock time without usable data."""
+
+    start_s: float
+    end_s: float
+    reason: str
+
+    @property
+    def duration_s(self) -> float:
+        return self.end_s - self.start_s
+
+
+@dataclass
+class SyncResult:
+    """Synchronised, resampled trials (see :mod:`softpend.sysid.dataset` for the array conventions)."""
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    torques_nm: np.ndarray
+    dt_s: float
+    offset: ClockOffset
+    gaps: list[Gap] = field(default_factory=list)
+    grid_valid_fraction: float = 1.0
+    trial_start_s: list[float] = field(default_factory=list)
+
+    @property
+    def n_trials(self) -> int:
+        return int(self.positions.shape[0])
+
+
+def _fill_nan(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    good = np.isfinite(x)
+    if good.sum() < 2:
+        raise ValueError("camera log has fewer than 2 tracked frames")
+    return np.interp(t, t[good], x[good])
+
+
+def estimate_clock_offset(
+    motor_time_s: np.ndarray,
+    motor_phi_rad: np.ndarray,
+    camera_time_s: np.ndarray,
+    camera_theta_rad: np.ndarray,
+    window_s: Optional[tuple[float, float]] = None,
+    max_offset_s: float = 1.0,
+    resolution_s: float = 0.001,
+) -> ClockOffset:
+    """Estimate ``camera clock - motor clock`` by cross-correlating hub and tip-angle rates.
+
+    Parameters
+    ----------
+    motor_time_s, motor_phi_rad : ndarray
+        Encoder samples on the motor clock [s, rad] (unwrapped or wrapped).
+    camera_time_s, camera_theta_rad : ndarray
+        Tip angle from the camera on the camera clock [s, rad]; NaN where the tip was lost.
+    window_s : (start, end), optional
+        Motor-clock window to correlate (the start-up wiggle); default the whole motor record.
+    max_offset_s : float
+        Largest offset searched [s].
+    resolution_s : float
+        Grid step of the search and of the resampled signals [s].
+    """
+    tm = np.asarray(motor_time_s, float)
+    tc = np.asarray(camera_time_s, float)
+    if tm.size < 10 or tc.size < 10:
+        raise ValueError("need at least 10 motor and 10 camera samples")
+    if not (max_offset_s > 0 and resolution_s > 0):
+        raise ValueError("max_offset_s and resolution_s must be positive")
+    phi = np.unwrap(np.asarray(motor_phi_rad, float))
+    theta_raw = np.asarray(camera_theta_rad, float)
+    good = np.isfinite(theta_raw)
+    theta = np.full_like(theta_raw, np.nan)
+    theta[good] = np.unwrap(theta_raw[good])
+    theta = _fill_nan(tc, theta)
+    start, end = (tm[0], tm[-1]) if window_s is None else (float(window_s[0]), float(window_s[1]))
+    if end - start < 20 * resolution_s:
+        raise ValueError(f"window_s {window_s} is too short")
+    grid = np.arange(start, end, resolution_s)
+    motor_rate = np.gradient(np.interp(grid, tm, phi), resolution_s)
+    motor_rate -= motor_rate.mean()
+    n_lag = int(round(max_offset_s / resolution_s))
+    offsets = np.arange(-n_lag, n_lag + 1) * resolution_s
+    # camera rate on the window extended by the search range; outside the camera record it is undefined
+    extended = np.arange(-n_lag, grid.size + n_lag) * resolution_s + start
+    inside = (extended >= tc[0]) & (extended <= tc[-1])
+    cam_rate = np.where(inside, np.gradient(np.interp(extended, tc, theta), resolution_s), 0.0)
+    # for every lag: correlation of the motor window with the camera segment it overlaps (FFT, all lags at once)
+    from scipy.signal import correlate
+
+    m = grid.size
+    dot = correlate(cam_rate, motor_rate, mode="valid", method="fft")  # length 2 n_lag + 1
+    csum = np.concatenate([[0.0], np.cumsum(cam_rate)])
+    csum2 = np.concatenate([[0.0], np.cumsum(cam_rate**2)])
+    count = np.concatenate([[0], np.cumsum(inside)])
+    seg_sum = csum[m:] - csum[:-m]
+    seg_sq = csum2[m:] - csum2[:-m]
+    seg_n = count[m:] - count[:-m]
+    seg_var = np.maximum(seg_sq - seg_sum**2 / m, 0.0)
+    denominator = np.sqrt(seg_var * float(motor_rate @ motor_rate))
+    scores = np.where((seg_n >= 0.9 * m) & (denominator > 0), dot / np.where(denominator > 0, denominator, 1.0), -np.inf)
+    best = int(np.argmax(scores))
+    if not np.isfinite(scores[best]):
+        raise ValueError("the camera and motor records do not overlap for any offset within max_offset_s")
+    refined = offsets[best]
+    if 0 < best < len(offsets) - 1 and np.all(np.isfinite(scores[best - 1 : best + 2])):
+        y0, y1, y2 = scores[best - 1 : best + 2]
+        curvature = y0 - 2 * y1 + y2
+        if curvature < 0:
+            refined += 0.5 * (y0 - y2) / curvature * resolution_s
+    return ClockOffset(float(refined), float(scores[best]))
+
+
+def _gaps_from_times(t: np.ndarray, nominal_s: float, factor: float, reason: str) -> list[Gap]:
+    steps = np.diff(t)
+    idx = np.nonzero(steps > factor * nominal_s)[0]
+    return [Gap(float(t[i]), float(t[i + 1]), reason) for i in idx]
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Half-open index ranges of consecutive True values."""
+    padded = np.concatenate([[False], mask, [False]]).astype(int)
+    edges = np.diff(padded)
+    return list(zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]))
+
+
+def synchronise(
+    motor: LogContents,
+    camera: LogContents,
+    dt_s: float = 0.01,
+    trial_length_s: float = 5.0,
+    offset: Optional[ClockOffset] = None,
+    wiggle_window_s: Optional[float] = 4.0,
+    max_offset_s: float = 1.0,
+    gap_factor: float = 1.6,
+) -> SyncResult:
+    """Merge a motor log (:data:`softpend.hardware.loop.LOOP_LOG_COLUMNS`) and a camera CSV
+    (:data:`softpend.vision.track_video.TRACK_COLUMNS`) into resampled trials.
+
+    Parameters
+    ----------
+    motor, camera : LogContents
+        The two logs (:func:`softpend.hardware.read_sample_log`).
+    dt_s : float
+        Output sampling step [s].
+    trial_length_s : float
+        Length of each output trial [s] (``N = round(trial_length_s / dt_s)`` samples).
+    offset : ClockOffset, optional
+        Known clock offset; estimated from the data when omitted.
+    wiggle_window_s : float, optional
+        Correlate only the first this many seconds of the motor record (the start-up wiggle); None for all.
+    max_offset_s : float
+        Largest clock offset searched [s].
+    gap_factor : float
+        A spacing larger than ``gap_factor`` times the median sample period is a gap.
+
+    Raises
+    ------
+    ValueError
+        If the logs lack columns, do not overlap, or contain no gap-free stretch of one trial.
+    """
+    for name, log, needed in (("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
+                              ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost"))):
+        missing = [c for c in needed if c not in log.columns]
+        if missing:
+            raise ValueError(f"{name} log is missing columns {missing}")
+    if not (dt_s > 0 and trial_length_s >= 2 * dt_s):
+        raise ValueError(f"dt_s must be positive and trial_length_s >= 2 dt_s, got {dt_s}, {trial_length_s}")
+    tm = motor["device_time_s"]
+    phi = np.unwrap(motor["phi_rad"])
+    torque = motor["applied_torque_nm"]
+    tc_cam = camera["camera_time_s"]
+    lost = camera["lost"] > 0.5
+    x_m, y_m = camera["x_m"].copy(), camera["y_m"].copy()
+    if offset is None:
+        window = None if wiggle_window_s is None else (tm[0], tm[0] + wiggle_window_s)
+        if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
+            reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
+        else:  # no hub marker: the tip angle (biased by the rod's lag, see the module docstring)
+            reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
+        offset = estimate_clock_offset(tm, phi, tc_cam, reference, window, max_offset_s)
+    tc = tc_cam - offset.offset_s  # camera frames on the motor clock
+
+    motor_period = float(np.median(np.diff(tm)))
+    camera_period = float(np.median(np.diff(tc)))
+    gaps = _gaps_from_times(tm, motor_period, gap_factor, "motor states missing")
+    gaps += _gaps_from_times(tc, camera_period, gap_factor, "camera frames missing")
+    for a, b in _runs(lost):
+        start = tc[a - 1] if a > 0 else tc[a]
+        end = tc[b] if b < len(tc) else tc[b - 1]
+        gaps.append(Gap(float(start), float(end), f"tip lost in {b - a} frame(s)"))
+    gaps.sort(key=lambda g: g.start_s)
+
+    good = ~lost
+    start = max(tm[0], tc[good][0])
+    end = min(tm[-1], tc[good][-1])
+    if end - start < trial_length_s:
+        raise ValueError(f"the motor and camera records overlap for {max(end - start, 0):.3f} s, less than one trial")
+    first = tm[0] + math.ceil((start - tm[0]) / dt_s - 1e-9) * dt_s
+    grid = np.arange(first, end + 1e-12, dt_s)
+    valid = np.ones(grid.size, dtype=bool)
+    for gap in gaps:
+        valid &= ~((grid > gap.start_s) & (grid < gap.end_s))
+
+    phi_g = np.interp(grid, tm, phi)
+    ex_g = np.interp(grid, tc[good], x_m[good])
+    ey_g = np.interp(grid, tc[good], y_m[good])
+    theta_g = np.arctan2(-ex_g, ey_g)
+    held = np.clip(np.searchsorted(tm, grid + 1e-9, side="right") - 1, 0, len(tm) - 1)
+    torque_g = torque[held]
+
+    from ..sysid.differentiation import backward_difference
+
+    n = int(round(trial_length_s / dt_s))
+    raw = np.column_stack([wrap_angle_rad(phi_g), wrap_angle_rad(theta_g), ex_g, ey_g])
+    angle_mask = np.array([True, True, False, False])
+    positions, velocities, torques, starts = [], [], [], []
+    for a, b in _runs(valid):
+        k = a
+        while k + n + 1 <= b:
+            chunk = raw[k : k + n + 1]
+            positions.append(chunk[1:])
+            velocities.append(backward_difference(chunk, dt_s, angle_mask))
+            torques.append(torque_g[k + 1 : k + n])
+            starts.append(float(grid[k + 1]))
+            k += n + 1
+    if not positions:
+        raise ValueError(f"no gap-free stretch of {trial_length_s} s in the synchronised record")
+    return SyncResult(
+        positions=np.stack(positions),
+        velocities=np.stack(velocities),
+        torques_nm=np.stack(torques),
+        dt_s=dt_s,
+        offset=offset,
+        gaps=gaps,
+        grid_valid_fraction=float(valid.mean()),
+        trial_start_s=starts,
+    )
+
+
+def build_rig_dataset(
+    motor_log: str | Path,
+    camera_csv: str | Path,
+    out_path: str | Path,
+    params: Optional[RodParams] = None,
+    dt_s: float = 0.01,
+    trial_length_s: float = 5.0,
+    notes: str = "",
+    **sync_kwargs,
+):
+    """Synchronise a motor log and a camera CSV and save them as a ``source="rig"`` dataset.
+
+    Returns ``(dataset, sync_result)``; the offset and gaps are recorded in the dataset's ``protocol``.
+    """
+    from ..sysid.dataset import save_dataset
+
+    result = synchronise(read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s,
+                         trial_length_s=trial_length_s, **sync_kwargs)
+    protocol = {
+        "kind": "rig babbling, motor log + tracked camera (softpend.hardware.sync)",
+        "clock_offset_s": result.offset.offset_s,
+        "offset_peak_correlation": result.offset.peak_correlation,
+        "gaps": [[g.start_s, g.end_s, g.reason] for g in result.gaps],
+        "grid_valid_fraction": result.grid_valid_fraction,
+        "trial_start_s": result.trial_start_s,
+        "motor_log": str(motor_log),
+        "camera_csv": str(camera_csv),
+    }
+    dataset = save_dataset(
+        out_path, result.positions, result.velocities, result.torques_nm, dt_s=dt_s,
+        position_names=RIG_POSITION_NAMES, source="rig", plant_params=params, protocol=protocol, notes=notes,
+    )
+    return dataset, result

@@ -1,0 +1,221 @@
+"""End to end on the digital twin: babble over the emulated serial link, film it, track, synchronise.
+
+:func:`run_twin_session` does what a session on the real rig does, with the emulator and the synthetic
+camera standing in for the hardware:
+
+1. start the rig emulator (:class:`~softpend.hardware.emulator.EmulatorProcess`) with a truth log;
+2. over :class:`~softpend.hardware.driver.MotorLink`, run the babbling program
+   (:func:`rig_babble_controller`: a start-up wiggle, then band-limited random torque, the same noise
+   process as :func:`softpend.sysid.babble`) in :func:`~softpend.hardware.loop.run_control_loop`,
+   logging every state to a crash-safe motor log;
+3. render the true motion (from the truth log) with the synthetic camera, on a camera clock offset from
+   the motor clock, to a video file;
+4. track the video (Algorithm 1) into the camera CSV;
+5. synchronise the two logs into a ``source="rig"`` dataset (:func:`~softpend.hardware.sync.build_rig_dataset`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from ..plant import RodParams, make_plant
+from .driver import MotorLink
+from .emulator import RigConfig, start_emulator_process
+from .loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
+from .samplelog import SampleLog, read_sample_log
+from .sync import SyncResult, build_rig_dataset, startup_wiggle_torque
+
+__all__ = ["TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
+
+
+def rig_babble_controller(
+    duration_s: float,
+    torque_limit_nm: float,
+    seed: int,
+    wiggle_s: float = 2.0,
+    wiggle_fraction: float = 0.8,
+    torque_std_fraction: float = 0.5,
+    torque_bandwidth_hz: float = 2.0,
+    dt_s: float = 0.01,
+) -> Callable[[RigObservation, float], float]:
+    """The rig's babbling program: a pseudo-random start-up wiggle of ``wiggle_fraction`` times the limit
+    for ``wiggle_s``, then band-limited Gaussian torque (:func:`softpend.sysid.band_limited_noise`,
+    standard deviation ``torque_std_fraction`` times the limit) -- a function of time only."""
+    from ..sysid.babble import band_limited_noise
+
+    rng = np.random.default_rng(seed)
+    n = int(math.ceil((duration_s + 1.0) / dt_s))
+    wiggle = startup_wiggle_torque(wiggle_s, wiggle_fraction * torque_limit_nm, seed=seed + 1, dt_s=dt_s)
+    noise = band_limited_noise(rng, n, torque_std_fraction * torque_limit_nm, torque_bandwidth_hz, dt_s)
+    sequence = np.concatenate([wiggle, noise])
+
+    def controller(observation: RigObservation, time_s: float) -> float:
+        k = min(int(time_s / dt_s + 0.5), len(sequence) - 1)
+        return float(sequence[k])
+
+    return controller
+
+
+def truth_link_points(truth_log: str | Path, params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times [s] (device clock), link points ``(T, n + 1, 2)`` [m] and hub angles [rad] from an emulator
+    truth log."""
+    log = read_sample_log(truth_log)
+    plant = make_plant("prb", params=params)
+    n = plant.n_coordinates
+    q = np.column_stack([log[f"q{i}_rad"] for i in range(n)])
+    points = np.stack([plant.link_points_m(row) for row in q])
+    return log["device_time_s"], points, q[:, 0]
+
+
+@dataclass
+class TwinSession:
+    """Paths and figures of one end-to-end twin session."""
+
+    workdir: Path
+    motor_log: Path
+    truth_log: Path
+    video: Path
+    camera_csv: Path
+    dataset_path: Path
+    loop: LoopResult
+    sync: SyncResult
+    dataset: object
+    true_clock_offset_s: float
+    emulator_stats: dict = field(default_factory=dict)
+
+    @property
+    def offset_error_s(self) -> float:
+        return self.sync.offset.offset_s - self.true_clock_offset_s
+
+
+def run_twin_session(
+    workdir: str | Path,
+    duration_s: float = 30.0,
+    seed: int = 0,
+    rig: Optional[RigConfig] = None,
+    camera_effects=None,
+    camera_fps: float = 100.0,
+    clock_offset_s: float = 0.137,
+    timestamp_jitter_s: float = 0.0005,
+    trial_length_s: float = 5.0,
+    progress: bool = True,
+) -> TwinSession:
+    """Run the whole rig pipeline on the digital twin (see the module docstring); takes about
+    ``duration_s`` of real time plus rendering and tracking.
+
+    Parameters
+    ----------
+    workdir : path
+        Folder for the logs, the video, the CSV and the dataset.
+    duration_s : float
+        Babbling time on the rig [s].
+    seed : int
+        Seed of the babbling torques, the emulator and the camera noise.
+    rig : RigConfig, optional
+        Emulator settings (default: 4096-count encoder, 2 ms latency, no drops).
+    camera_effects : CameraEffects, optional
+        Synthetic camera imperfections (default: mild noise, 4 ms exposure blur, lighting drift).
+    camera_fps : float
+        Camera frame rate [1/s].
+    clock_offset_s : float
+        Camera clock minus motor clock [s] (the synchronisation must recover it).
+    timestamp_jitter_s : float
+        Camera timestamp noise [s].
+    trial_length_s : float
+        Trial length of the output dataset [s].
+    progress : bool
+        Progress bars.
+    """
+    from ..vision.camera import CameraEffects, SyntheticCamera, render_video
+    from ..vision.track_video import track_video
+
+    if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
+        raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    rig = rig if rig is not None else RigConfig(seed=seed)
+    effects = camera_effects if camera_effects is not None else CameraEffects(
+        noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
+    paths = {name: workdir / name for name in ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz")}
+    for path in paths.values():
+        path.unlink(missing_ok=True)
+    stats_path = workdir / "emulator_stats.json"
+    limit = rig.params.torque_limit_nm
+    controller = rig_babble_controller(duration_s, limit, seed)
+    with start_emulator_process(rig, truth_log=paths["truth_log.csv"], stats_path=stats_path) as emulator:
+        with MotorLink(emulator.port, torque_limit_nm=limit) as link, \
+                SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log:
+            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
+        emulator.terminate()
+        emulator_stats = emulator.stats()
+    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.params)
+    camera = SyntheticCamera(effects=effects, seed=seed)
+    render_video(paths["camera.avi"], camera, times, points, hub, fps=camera_fps, clock_offset_s=clock_offset_s,
+                 timestamp_jitter_s=timestamp_jitter_s, progress=progress)
+    track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
+    dataset, sync = build_rig_dataset(paths["motor_log.csv"], paths["camera.csv"], paths["rig_dataset.npz"],
+                                      params=rig.params, trial_length_s=trial_length_s,
+                                      notes="digital twin: emulated serial link + synthetic camera")
+    return TwinSession(workdir, paths["motor_log.csv"], paths["truth_log.csv"], paths["camera.avi"],
+                       paths["camera.csv"], paths["rig_dataset.npz"], loop, sync, dataset, clock_offset_s,
+                       emulator_stats)
+
+
+def compare_with_simulator_model(
+    rig_dataset,
+    params: Optional[RodParams] = None,
+    seed: int = 0,
+    n_test_trials: int = 6,
+    history: int = 2,
+    max_epochs: int = 150,
+    horizon_s: float = 1.0,
+    progress: bool = False,
+) -> dict[str, object]:
+    """Train the same limited-information dynamics model (:func:`softpend.sysid.fit_dynamics_model`) on
+    the twin's rig dataset and on clean simulator babbling of the same size and torque process (hanging
+    start, no feedback, no sensor noise), and compare their open-loop rollout errors at ``horizon_s`` on
+    held-out clean simulator trials.
+
+    Returns a dict with ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, ``ratio`` (twin / sim),
+    ``hold_tip_rmse_m`` (the "rod stays put" yardstick), the two :class:`RolloutErrors`, and the models.
+    """
+    import torch
+
+    from ..sysid import BabbleProtocol, babble
+    from ..sysid.metrics import rollout_errors
+    from ..sysid.training import fit_dynamics_model
+
+    torch.set_num_threads(1)
+    params = params if params is not None else (rig_dataset.params or RodParams())
+    trial_length_s = rig_dataset.n_samples * rig_dataset.dt_s
+    protocol = BabbleProtocol(
+        n_trials=rig_dataset.n_trials, trial_length_s=trial_length_s, dt_s=rig_dataset.dt_s, start="hanging",
+        start_angle_std_rad=0.3, start_rate_std_rad_s=1.0, feedback_trial_fraction=0.0,
+        torque_std_fraction=0.5, torque_bandwidth_hz=2.0,
+    )
+    sim_train = babble(protocol, params=params, seed=seed + 1000, progress=progress)
+    sim_test = babble(protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0)),
+                      params=params, seed=seed + 2000, progress=progress)
+    fits = {}
+    for name, data in (("twin", rig_dataset), ("sim", sim_train)):
+        fits[name] = fit_dynamics_model(data, information="limited", history=history, max_epochs=max_epochs,
+                                        patience=20, seed=seed, progress=progress)
+    errors = {name: rollout_errors(fit.model, sim_test, horizon_s=horizon_s) for name, fit in fits.items()}
+    twin = errors["twin"].at(horizon_s)
+    sim = errors["sim"].at(horizon_s)
+    return {
+        "tip_rmse_m_twin": twin["tip_rmse_m"],
+        "tip_rmse_m_sim": sim["tip_rmse_m"],
+        "ratio": twin["tip_rmse_m"] / sim["tip_rmse_m"],
+        "hold_tip_rmse_m": sim["hold_tip_rmse_m"],
+        "errors_twin": errors["twin"],
+        "errors_sim": errors["sim"],
+        "model_twin": fits["twin"].model,
+        "model_sim": fits["sim"].model,
+        "sim_test": sim_test,
+    }

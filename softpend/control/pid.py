@@ -1,0 +1,249 @@
+"""PID on the tip angle with a filtered derivative and back-calculation anti-windup, and its tuning.
+
+Control law (setpoint ``theta = 0``, error ``e = theta``, sampled every ``dt_s``)::
+
+    D[k] = (T_f D[k-1] + (e[k] - e[k-1])) / (T_f + dt)        # derivative through 1/(T_f s + 1)
+    u[k] = K_p e[k] + I[k] + K_d D[k]
+    tau[k] = -sat(u[k], tau_max)
+    I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) - u[k]) / T_t)   # back-calculation anti-windup
+
+The derivative acts on the measured tip angle (differences of wrapped angles, unwrapped step by step),
+not on a velocity sensor, because a rig only measures positions.  While the motor saturates, the
+back-calculation term bleeds the integrator towards the value that makes ``u`` equal to the limit, with
+tracking time constant ``T_t`` (default ``sqrt(T_i T_d)``, Astrom and Hagglund), so the integrator does
+not wind up.
+
+:func:`tune_pid` chooses ``K_p, K_i, K_d`` by minimising a quadratic cost of closed-loop rollouts on any
+one-step model (the learned dynamics model, per the report's suggestion, or the true plant), with
+Nelder-Mead on the logarithms of the gains.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..plant import Observation, wrap_angle_rad
+
+__all__ = ["PIDController", "PIDGains", "PIDTuningResult", "pid_rollout_cost", "plant_simulator", "tune_pid"]
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """PID gains on the tip angle.
+
+    Attributes
+    ----------
+    kp_nm_per_rad : float
+    ki_nm_per_rad_s : float
+    kd_nms_per_rad : float
+    """
+
+    kp_nm_per_rad: float
+    ki_nm_per_rad_s: float
+    kd_nms_per_rad: float
+
+    def __post_init__(self) -> None:
+        for name in ("kp_nm_per_rad", "ki_nm_per_rad_s", "kd_nms_per_rad"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.kp_nm_per_rad, self.ki_nm_per_rad_s, self.kd_nms_per_rad])
+
+
+class PIDController:
+    """Discrete PID on the tip angle ``theta`` (see the module docstring).
+
+    Parameters
+    ----------
+    gains : PIDGains
+    dt_s : float
+        Control step [s].
+    torque_limit_nm : float
+        Saturation of the command [N m]; the anti-windup tracks it.
+    derivative_filter_s : float
+        Derivative filter time constant ``T_f`` [s] (0 = unfiltered difference).
+    tracking_time_s : float, optional
+        Anti-windup tracking time constant ``T_t`` [s] (default ``sqrt(T_i T_d)`` with ``T_i = K_p/K_i``,
+        ``T_d = K_d/K_p``, or ``10 dt`` when that is undefined).
+    anti_windup : bool
+        Switch the back-calculation off (for comparison: plain integration).
+    name : str
+        Label for tables.
+    """
+
+    def __init__(
+        self,
+        gains: PIDGains,
+        dt_s: float = 0.01,
+        torque_limit_nm: float = 0.06,
+        derivative_filter_s: float = 0.02,
+        tracking_time_s: Optional[float] = None,
+        anti_windup: bool = True,
+        name: str = "PID",
+    ) -> None:
+        if not isinstance(gains, PIDGains):
+            raise ValueError(f"gains must be a PIDGains, got {type(gains).__name__}")
+        for label, value in (("dt_s", dt_s), ("torque_limit_nm", torque_limit_nm)):
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{label} must be positive and finite, got {value!r}")
+        if not math.isfinite(derivative_filter_s) or derivative_filter_s < 0:
+            raise ValueError(f"derivative_filter_s must be non-negative and finite, got {derivative_filter_s!r}")
+        if tracking_time_s is None:
+            kp, ki, kd = gains.as_array()
+            if kp > 0 and ki > 0 and kd > 0:
+                tracking_time_s = math.sqrt((kp / ki) * (kd / kp))
+            else:
+                tracking_time_s = 10 * dt_s
+        if not math.isfinite(tracking_time_s) or tracking_time_s <= 0:
+            raise ValueError(f"tracking_time_s must be positive and finite, got {tracking_time_s!r}")
+        self.gains = gains
+        self.dt_s = float(dt_s)
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.derivative_filter_s = float(derivative_filter_s)
+        self.tracking_time_s = float(tracking_time_s)
+        self.anti_windup = bool(anti_windup)
+        self.name = name
+        self.reset()
+
+    def reset(self) -> None:
+        """Zero the integrator and the derivative filter."""
+        self.integral_nm = 0.0
+        self.derivative_rad_s = 0.0
+        self._last_error_rad: Optional[float] = None
+
+    def update(self, theta_rad: float) -> float:
+        """Advance the controller by one step with the measured tip angle; returns the torque [N m]."""
+        if not math.isfinite(theta_rad):
+            raise ValueError(f"theta_rad must be finite, got {theta_rad!r}")
+        kp, ki, kd = self.gains.as_array()
+        error = float(wrap_angle_rad(theta_rad))  # the target is upright whichever way round the rod went
+        increment = 0.0 if self._last_error_rad is None else float(wrap_angle_rad(error - self._last_error_rad))
+        self._last_error_rad = error
+        tf, dt = self.derivative_filter_s, self.dt_s
+        self.derivative_rad_s = (tf * self.derivative_rad_s + increment) / (tf + dt)
+        effort = kp * error + self.integral_nm + kd * self.derivative_rad_s
+        saturated = min(max(effort, -self.torque_limit_nm), self.torque_limit_nm)
+        tracking = (saturated - effort) / self.tracking_time_s if self.anti_windup else 0.0
+        self.integral_nm += dt * (ki * error + tracking)
+        return -saturated
+
+    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
+        return self.update(observation.theta_rad)
+
+
+@dataclass
+class PIDTuningResult:
+    """Outcome of :func:`tune_pid`."""
+
+    gains: PIDGains
+    cost: float
+    initial_cost: float
+    n_evaluations: int
+
+
+#: ``simulate(controller, tilt_rad, duration_s) -> (theta_rad[T], torque_nm[T])`` on some model.
+Simulator = Callable[[PIDController, float, float], tuple[np.ndarray, np.ndarray]]
+
+
+def pid_rollout_cost(
+    controller: PIDController,
+    simulate: Simulator,
+    tilts_rad: Sequence[float] = (0.1, -0.2),
+    duration_s: float = 3.0,
+    torque_weight: float = 0.1,
+    fall_angle_rad: float = 1.0,
+) -> float:
+    """Mean over starts of ``mean(theta^2) + torque_weight * mean((tau / tau_max)^2)``; a rollout whose tip
+    leaves ``fall_angle_rad`` (or that returns non-finite values) costs ``10`` (a fallen rod)."""
+    total = 0.0
+    for tilt in tilts_rad:
+        controller.reset()
+        theta, torque = simulate(controller, float(tilt), duration_s)
+        theta = np.asarray(theta, float)
+        torque = np.asarray(torque, float)
+        if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > fall_angle_rad):
+            total += 10.0
+            continue
+        total += float(np.mean(theta**2) + torque_weight * np.mean((torque / controller.torque_limit_nm) ** 2))
+    return total / len(tilts_rad)
+
+
+def tune_pid(
+    simulate: Simulator,
+    initial_gains: PIDGains = PIDGains(0.5, 0.5, 0.05),
+    dt_s: float = 0.01,
+    torque_limit_nm: float = 0.06,
+    derivative_filter_s: float = 0.02,
+    tilts_rad: Sequence[float] = (0.1, -0.2),
+    duration_s: float = 3.0,
+    torque_weight: float = 0.1,
+    max_evaluations: int = 120,
+    progress: bool = False,
+) -> PIDTuningResult:
+    """Tune ``K_p, K_i, K_d`` by Nelder-Mead on ``log(gains)`` minimising :func:`pid_rollout_cost`.
+
+    Parameters
+    ----------
+    simulate : callable
+        Closed-loop simulator on the tuning model (see :func:`softpend.control.learned.learned_model_simulator`
+        and :func:`plant_simulator`).
+    initial_gains : PIDGains
+        Starting point (all gains must be positive).
+    max_evaluations : int
+        Budget of cost evaluations.
+    progress : bool
+        Show a tqdm bar over the evaluations.
+    """
+    import scipy.optimize
+
+    if np.any(initial_gains.as_array() <= 0):
+        raise ValueError("initial_gains must all be positive (the search is on their logarithms)")
+    if int(max_evaluations) < 1:
+        raise ValueError(f"max_evaluations must be >= 1, got {max_evaluations!r}")
+    bar = tqdm(total=int(max_evaluations), desc="PID tuning", disable=not progress, leave=False)
+
+    def cost(log_gains: np.ndarray) -> float:
+        gains = PIDGains(*np.exp(np.clip(log_gains, -12, 6)))
+        controller = PIDController(gains, dt_s=dt_s, torque_limit_nm=torque_limit_nm,
+                                   derivative_filter_s=derivative_filter_s)
+        bar.update(1)
+        return pid_rollout_cost(controller, simulate, tilts_rad, duration_s, torque_weight)
+
+    x0 = np.log(initial_gains.as_array())
+    initial_cost = cost(x0)
+    result = scipy.optimize.minimize(
+        cost, x0, method="Nelder-Mead",
+        options={"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + np.vstack([np.zeros(3), np.eye(3)])},
+    )
+    bar.close()
+    best = result.x if result.fun <= initial_cost else x0
+    return PIDTuningResult(PIDGains(*np.exp(np.clip(best, -12, 6))), float(min(result.fun, initial_cost)), initial_cost, int(result.nfev) + 1)
+
+
+def plant_simulator(params=None, plant: str = "prb", dt_s: float = 0.01) -> Simulator:
+    """Closed-loop simulator on a true plant (straight rod released at rest at the given tilt), for tuning
+    on the true model and for tests; built on :func:`softpend.evaluation.evaluate_controller`."""
+    from ..evaluation import evaluate_controller
+    from ..plant import RodParams
+
+    params = params if params is not None else RodParams()
+
+    def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
+        n = params.n_links + 1
+        q = np.zeros(n)
+        q[0] = tilt_rad
+        result = evaluate_controller(
+            controller, seeds=(0,), duration_s=duration_s, start="upright", params=params, plant=plant, dt_s=dt_s,
+            torque_limit_nm=controller.torque_limit_nm, initial_state=(q, np.zeros(n)),
+        ).results[0]
+        theta = result.theta_rad if result.diverged is None else np.append(result.theta_rad, np.nan)
+        return theta, result.torque_nm
+
+    return simulate

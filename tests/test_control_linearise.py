@@ -1,0 +1,109 @@
+"""Linearisation about upright: Exudyn vs the hand derivation (n = 1), vs the simulator's step map, the
+observation-coordinate condensation, and autograd linearisation of a learned model."""
+
+import numpy as np
+import pytest
+import torch
+
+from softpend.control.linearise import (
+    analytic_linearisation_one_link,
+    discretise,
+    linearise_exudyn,
+    linearise_step_map,
+    observation_coordinates_matrix,
+    reduce_to_observation_coordinates,
+)
+from softpend.plant import PRBPlant, RodParams
+
+
+def _unstable(eig: np.ndarray) -> float:
+    return float(np.max(np.abs(eig)) if np.iscomplexobj(eig) else np.max(eig))
+
+
+def test_exudyn_matches_analytic_one_link():
+    params = RodParams(n_links=1)
+    exu_model = linearise_exudyn(params)
+    hand = analytic_linearisation_one_link(params)
+    for name in ("mass", "stiffness", "damping", "input_vector"):
+        np.testing.assert_allclose(getattr(exu_model, name), getattr(hand, name), rtol=1e-9, atol=1e-12, err_msg=name)
+    # the upright rod is unstable: exactly one eigenvalue in the right half-plane, at sqrt(m g c / I) scale
+    eig = hand.state_space().eigenvalues()
+    assert np.sum(eig.real > 0) == 1
+
+
+def test_analytic_rejects_more_links():
+    with pytest.raises(ValueError, match="n_links"):
+        analytic_linearisation_one_link(RodParams(n_links=2))
+
+
+def test_step_map_matches_exudyn_one_link():
+    params = RodParams(n_links=1)
+    zoh = discretise(linearise_exudyn(params).state_space(), 0.01)
+    step = linearise_step_map(params, dt_s=0.01)
+    np.testing.assert_allclose(step.a, zoh.a, atol=0.01 * np.abs(zoh.a).max())
+    np.testing.assert_allclose(step.b, zoh.b, rtol=0.01, atol=0.01 * np.abs(zoh.b).max())
+
+
+def test_step_map_matches_exudyn_default_rod_slow_modes():
+    params = RodParams()
+    zoh = discretise(linearise_exudyn(params).state_space(), 0.01)
+    step = linearise_step_map(params, dt_s=0.01)
+    # the unstable (falling) mode and the slowest stable mode agree; the fast bending modes are where
+    # the implicit integrator (2 sub-steps, numerical damping) differs from the exact ZOH map
+    z, s = np.sort(np.abs(zoh.eigenvalues())), np.sort(np.abs(step.eigenvalues()))
+    assert z[-1] > 1.05 and abs(s[-1] - z[-1]) < 1e-3
+    # hub response to the torque over one step
+    assert step.b[0, 0] == pytest.approx(zoh.b[0, 0], rel=0.03)
+    n = params.n_links + 1
+    assert step.b[n, 0] == pytest.approx(zoh.b[n, 0], rel=0.03)
+
+
+def test_observation_matrix_matches_plant_kinematics():
+    params = RodParams()
+    plant = PRBPlant(params)
+    c = observation_coordinates_matrix(params)
+    q = 1e-6 * np.array([1.0, -2.0, 0.5, 3.0, -1.0])
+    o = plant.observation_from_state(q, np.zeros_like(q))
+    np.testing.assert_allclose(c @ q, [o.phi_rad, o.theta_rad, o.er_rad], rtol=1e-5, atol=1e-12)
+    with pytest.raises(ValueError, match="names"):
+        observation_coordinates_matrix(params, ("psi",))
+
+
+def test_condensation_keeps_the_unstable_mode():
+    params = RodParams()
+    full = linearise_exudyn(params)
+    reduced, shape, names = reduce_to_observation_coordinates(full, params)
+    assert names == ("phi_rad", "theta_rad", "er_rad")
+    np.testing.assert_allclose(observation_coordinates_matrix(params) @ shape, np.eye(3), atol=1e-9)
+    full_eig = full.state_space().eigenvalues()
+    red_eig = reduced.state_space().eigenvalues()
+    assert _unstable(red_eig.real) == pytest.approx(_unstable(full_eig.real), rel=0.01)
+    # n = 1: theta and e_r coincide, so one is dropped
+    _, _, names1 = reduce_to_observation_coordinates(linearise_exudyn(RodParams(n_links=1)), RodParams(n_links=1))
+    assert names1 == ("phi_rad", "theta_rad")
+
+
+def test_learned_linearisation_is_the_jacobian_of_the_model():
+    """Autograd Jacobians equal central differences of ``predict_next`` on a real DynamicsModel."""
+    from softpend.control.learned import linearise_learned_model, upright_state_vector
+    from softpend.sysid.layout import StateLayout
+    from softpend.sysid.model import DynamicsModel
+
+    torch.manual_seed(0)
+    model = DynamicsModel(StateLayout.full(), dt_s=0.01, torque_limit_nm=0.06).double()
+    params = RodParams()
+    lin = linearise_learned_model(model, params)
+    x0 = upright_state_vector(model, params)
+    assert x0[model.layout.index("ey_m")] == pytest.approx(params.length_m)
+
+    def f(x, u):
+        with torch.no_grad():
+            return model.predict_next(torch.as_tensor(x).reshape(1, -1), torch.tensor([u], dtype=torch.float64)).numpy()[0]
+
+    h = 1e-6
+    for i in (0, 1, 6):
+        e = np.zeros_like(x0)
+        e[i] = h
+        np.testing.assert_allclose(lin.a[:, i], (f(x0 + e, 0.0) - f(x0 - e, 0.0)) / (2 * h), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(lin.b[:, 0], (f(x0, h) - f(x0, -h)) / (2 * h), rtol=1e-5, atol=1e-7)
+    assert lin.dt_s == 0.01 and lin.state_names == model.layout.names

@@ -78,7 +78,7 @@ class DQNConfig:
     learning_starts: int = 500
     batch_size: int = 128
     gamma: float = 0.99
-    train_freq: int = 4
+    train_freq: int = 1
     gradient_steps: int = 2
     target_update_interval: int = 500
     exploration_fraction: float = 0.2
@@ -115,6 +115,11 @@ class DQNConfig:
         if len(self.eval_seeds) == 0:
             raise ValueError("eval_seeds must not be empty")
         object.__setattr__(self, "net_arch", tuple(int(w) for w in self.net_arch))
+        if self.episode_agent_steps % self.train_freq:
+            raise ValueError(
+                f"train_freq ({self.train_freq}) must divide the agent steps of an episode ({self.episode_agent_steps}), "
+                "so that a run ends exactly at an episode boundary"
+            )
         object.__setattr__(self, "eval_seeds", tuple(int(s) for s in self.eval_seeds))
 
     @property

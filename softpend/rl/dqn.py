@@ -162,7 +162,7 @@ class TrainingCallback(BaseCallback):
             self.on_step_hook(self)
         if self.locals["dones"][0]:
             self._end_episode()
-            if self.log.n_episodes >= self.episodes:
+            if self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps:
                 return False
         return True
 
@@ -299,10 +299,11 @@ def run_training(
     if hooks is not None:
         hooks(model, callback)
     if remaining > 0:
-        # total steps: the SB3 schedules (exploration) run over the whole run, resumed or not
-        margin = 2  # the last episode ends one step before SB3's own limit
+        # exactly the remaining episodes' steps, so that SB3 stores the last transition and stops by itself
+        # (the callback also stops at the episode count, which matters only if an episode diverged early);
+        # the SB3 schedules (exploration) run over the whole run, resumed or not
         model.learn(
-            total_timesteps=remaining * config.episode_agent_steps + margin,
+            total_timesteps=remaining * config.episode_agent_steps,
             callback=callback,
             reset_num_timesteps=log.n_episodes == 0,
             progress_bar=False,

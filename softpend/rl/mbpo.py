@@ -147,7 +147,6 @@ class MBPOTrainer:
         self.dynamics: Optional[torch.nn.Module] = None
         self.n_fits = 0
         self.model_steps = 0
-        self.steps_since_rollout = 0
 
     # ------------------------------------------------------------------ the model
     def add_episode(self, observations: np.ndarray, torques_nm: np.ndarray) -> None:
@@ -245,9 +244,7 @@ class MBPOTrainer:
                 self.refit()
 
         def on_step(cb: TrainingCallback) -> None:
-            self.steps_since_rollout += 1
-            if self.steps_since_rollout >= c.rollout_every_steps and self.dynamics is not None:
-                self.steps_since_rollout = 0
+            if agent.num_timesteps % c.rollout_every_steps == 0 and self.dynamics is not None:
                 length = c.rollout_length(cb.log.n_episodes)
                 self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length, agent.exploration_rate)
 
@@ -257,14 +254,14 @@ class MBPOTrainer:
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
         np.savez(folder / "mbpo_state.npz", observations=np.array(self.trials_observations), torques=np.array(self.trials_torques),
-                 counters=np.array([self.n_fits, self.model_steps, self.steps_since_rollout]))
+                 counters=np.array([self.n_fits, self.model_steps]))
 
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""
         with np.load(folder / "mbpo_state.npz", allow_pickle=False) as data:
             self.trials_observations = list(data["observations"])
             self.trials_torques = list(data["torques"])
-            self.n_fits, self.model_steps, self.steps_since_rollout = (int(v) for v in data["counters"])
+            self.n_fits, self.model_steps = (int(v) for v in data["counters"])
         if len(self.trials_observations) >= 2:
             self.refit()
 

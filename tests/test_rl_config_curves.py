@@ -1,0 +1,94 @@
+"""RL configs, the learning-curve helpers and the "balanced" / "asymptote" definitions on hand-made data."""
+
+import math
+
+import numpy as np
+import pytest
+
+from softpend.evaluation import metrics_from_trajectory
+from softpend.rl.config import DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
+from softpend.rl.curves import aggregate, episodes_to_asymptote, moving_average
+from softpend.rl.training_log import TrainingLog
+
+
+def test_config_validation_names_the_field():
+    with pytest.raises(ValueError, match="n_torque_levels"):
+        DQNConfig(n_torque_levels=1)
+    with pytest.raises(ValueError, match="gamma"):
+        DQNConfig(gamma=1.5)
+    with pytest.raises(ValueError, match="rollout_schedule"):
+        MBPOConfig(rollout_schedule=(5, 2, 1, 3))
+    with pytest.raises(ValueError, match="real_ratio"):
+        MBPOConfig(real_ratio=-0.1)
+    with pytest.raises(ValueError, match="unknown"):
+        config_from_overrides(DQNConfig(), {"no_such_field": "1"})
+
+
+def test_overrides_and_json_round_trip(tmp_path):
+    config = config_from_overrides(MBPOConfig(), {"learning_rate": "1e-3", "net_arch": "[32, 32]", "rollouts_per_real_step": 9})
+    assert config.learning_rate == 1e-3 and config.net_arch == (32, 32)
+    save_config(config, tmp_path / "c.json")
+    assert load_config(tmp_path / "c.json") == config
+
+
+def test_rollout_schedule_is_linear_like_mbrl_lib():
+    config = MBPOConfig(rollout_schedule=(10, 20, 1, 11))
+    assert [config.rollout_length(e) for e in (0, 10, 15, 20, 50)] == [1, 1, 6, 11, 11]
+
+
+def test_episode_steps_follow_action_repeat():
+    config = DQNConfig(episode_s=5.0, action_repeat=4)
+    assert config.episode_agent_steps == 125 and config.agent_dt_s == pytest.approx(0.04)
+
+
+def test_metrics_on_hand_made_swing_up():
+    """Hanging for 2 s, then a sinusoid of amplitude 0.1 rad about upright: swing-up at 2 s, std 0.1/sqrt(2)."""
+    t = np.arange(0, 10.0 + 1e-9, 0.01)
+    theta = np.where(t < 2.0, np.pi - 0.01, 0.1 * np.sin(2 * np.pi * 1.0 * (t - 2.0)))
+    m = metrics_from_trajectory(t, theta, np.full_like(t, 0.03), np.ones_like(t))
+    assert m["swing_up_time_s"] == pytest.approx(2.0, abs=0.011)
+    assert m["upright_std_rad"] == pytest.approx(0.1 / math.sqrt(2), rel=0.02)
+    assert m["success"] and m["peak_torque_nm"] == pytest.approx(0.03)
+    # a rod that only passes through the top never counts as swung up
+    spinning = np.angle(np.exp(1j * 2 * np.pi * 0.5 * t))
+    m = metrics_from_trajectory(t, spinning, np.zeros_like(t), np.zeros_like(t))
+    assert math.isinf(m["swing_up_time_s"]) and not m["success"]
+
+
+def _log(returns, evals):
+    log = TrainingLog("dqn", 0)
+    for i, r in enumerate(returns):
+        log.episodes.append({"episode": i + 1, "return": r, "plant_s": 5.0 * (i + 1), "upright_std_rad": 1.0, "model_steps": 0})
+    log.evaluations = evals
+    return log
+
+
+def test_real_s_to_balance_needs_every_seed_up_and_steady():
+    evals = [
+        {"episode": 10, "plant_s": 50.0, "all_swung_up": False, "max_upright_std_rad": 0.1},
+        {"episode": 20, "plant_s": 100.0, "all_swung_up": True, "max_upright_std_rad": 0.3},
+        {"episode": 30, "plant_s": 150.0, "all_swung_up": True, "max_upright_std_rad": 0.15},
+    ]
+    log = _log(np.zeros(30), evals)
+    assert log.real_s_to_balance() == 150.0 and log.episodes_to_balance() == 30
+    assert math.isinf(log.real_s_to_balance(std_rad=0.1))
+
+
+def test_asymptote_of_a_saturating_curve():
+    episodes = np.arange(1, 201)
+    returns = 1000 * (1 - np.exp(-episodes / 30.0))
+    e = episodes_to_asymptote(returns, window=1, level=0.9)
+    # the final 20 % average ~ 998; 90 % of the rise from ~33 is reached near -30 ln(0.1) ~ 69 episodes
+    assert 60 <= e <= 75
+    assert episodes_to_asymptote(np.full(50, 3.0)) == 1.0
+    # a straight line 0..99: the final-20 % mean is 89.5, 90 % of it (80.55) is first exceeded at episode 82
+    assert episodes_to_asymptote(np.arange(100.0), window=1) == 82.0
+
+
+def test_moving_average_and_aggregate():
+    np.testing.assert_allclose(moving_average(np.array([1.0, 3.0, 5.0, 7.0]), 2), [1.0, 2.0, 4.0, 6.0])
+    logs = [_log(np.arange(10.0) + k, []) for k in range(3)]
+    agg = aggregate(logs, "return", axis="plant_s", grid=np.array([5.0, 50.0]))
+    np.testing.assert_allclose(agg["mean"], [1.0, 10.0])
+    np.testing.assert_allclose(agg["min"], [0.0, 9.0])
+    np.testing.assert_allclose(agg["max"], [2.0, 11.0])

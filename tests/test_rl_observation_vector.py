@@ -1,0 +1,49 @@
+"""The vectorised observation vector of model rollouts equals the environment's own."""
+
+import numpy as np
+import pytest
+
+from softpend.envs import SoftPendulumDiscreteEnv
+from softpend.plant import OBSERVATION_NAMES
+from softpend.rl.observation_vector import observation_vector, observations_from_vector
+
+
+def _trajectory(n_steps: int = 120):
+    env = SoftPendulumDiscreteEnv(start="random")
+    vec, _ = env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    raws, bonuses, vecs = [env.report_observation.as_array()], [env._bonus], [vec]
+    for _ in range(n_steps):
+        vec, *_ = env.step(int(rng.integers(0, env.n_torque_levels)))
+        raws.append(env.report_observation.as_array())
+        bonuses.append(env._bonus)
+        vecs.append(vec)
+    return env, np.array(raws), np.array(bonuses), np.array(vecs)
+
+
+def test_matches_environment_vector():
+    env, raws, bonuses, vecs = _trajectory()
+    np.testing.assert_allclose(observation_vector(raws, bonuses, env), vecs, rtol=0, atol=1e-6)
+
+
+def test_clipped_like_environment():
+    env = SoftPendulumDiscreteEnv()
+    raw = np.zeros((1, len(OBSERVATION_NAMES)))
+    raw[0, OBSERVATION_NAMES.index("phi_dot_rad_s")] = 400.0  # far beyond the 50 rad/s bound
+    vec = observation_vector(raw, np.zeros(1), env)
+    assert vec[0, 6] == pytest.approx(env.observation_space.high[6])
+
+
+def test_inverse_recovers_observed_variables():
+    env, raws, bonuses, vecs = _trajectory(60)
+    back = observations_from_vector(vecs, env)
+    keep = [OBSERVATION_NAMES.index(n) for n in OBSERVATION_NAMES if not n.startswith("er")]
+    np.testing.assert_allclose(back[:, keep], raws[:, keep], atol=2e-5)
+
+
+def test_bad_shape_raises():
+    env = SoftPendulumDiscreteEnv()
+    with pytest.raises(ValueError, match="observations"):
+        observation_vector(np.zeros((3, 4)), np.zeros(3), env)
+    with pytest.raises(ValueError, match="vectors"):
+        observations_from_vector(np.zeros((3, 4)), env)

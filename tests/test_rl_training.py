@@ -1,0 +1,120 @@
+"""DQN and DQN-MBPO training loops on tiny budgets: they run, log plant time, checkpoint and resume, and the
+MBPO buffer holds model transitions branched from real states."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from softpend.cli import main
+from softpend.envs import step_reward
+from softpend.plant import OBSERVATION_NAMES
+from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
+from softpend.rl.mbpo import MBPOReplayBuffer, train_mbpo
+from softpend.rl.observation_vector import observation_vector
+from softpend.rl.training_env import HeldActionController, make_base_env, make_training_env
+
+TINY = dict(episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=1.5)
+
+
+def test_action_repeat_env_reports_plant_observations():
+    env = make_training_env(DQNConfig(episode_s=0.2, action_repeat=4))
+    env.reset(seed=0)
+    _, reward, _, _, info = env.step(4)
+    assert info["plant_observations"].shape == (5, len(OBSERVATION_NAMES)) and info["plant_steps"] == 4
+    steps = 1
+    while True:
+        *_, terminated, truncated, _ = env.step(0)
+        steps += 1
+        if terminated or truncated:
+            break
+    assert steps == 5  # 0.2 s = 20 plant steps = 5 agent steps
+
+
+def test_held_action_controller_queries_every_repeat_steps():
+    calls = []
+    env = make_base_env(DQNConfig())
+    controller = HeldActionController(lambda v: calls.append(1) or 4, env, repeat=4)
+    from softpend.evaluation import evaluate_controller
+
+    evaluate_controller(controller, seeds=(0,), duration_s=0.4)
+    assert len(calls) == 10  # 40 plant steps / 4
+
+
+def test_dqn_trains_checkpoints_and_resumes(tmp_path):
+    config = DQNConfig(learning_starts=20, **TINY)
+    model, log = train_dqn(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
+    assert [row["episode"] for row in log.episodes] == [1, 2, 3]
+    assert log.plant_s == pytest.approx(3.0) and log.model_steps == 0
+    assert [row["episode"] for row in log.evaluations] == [2, 3]
+    assert (tmp_path / "agent.zip").exists() and (tmp_path / "checkpoint" / "replay_buffer.pkl").exists()
+    assert model.num_timesteps == 3 * config.episode_agent_steps
+    weights_before = [p.detach().clone() for p in model.q_net.parameters()]
+    buffer_before = model.replay_buffer.size()
+    # resume: the run continues from the checkpoint (episode 3) with its replay buffer and weights
+    model2, log2 = train_dqn(config, seed=0, episodes=5, run_dir=tmp_path, resume=True, progress=False)
+    assert [row["episode"] for row in log2.episodes] == [1, 2, 3, 4, 5]
+    assert log2.episodes[:3] == log.episodes
+    assert log2.plant_s == pytest.approx(5.0)
+    assert model2.replay_buffer.size() == buffer_before + 2 * config.episode_agent_steps
+    assert any(not torch.equal(a, b) for a, b in zip(weights_before, model2.q_net.parameters()))  # it kept learning
+    agent, loaded_config = load_agent(tmp_path)
+    assert loaded_config == config
+    summary = evaluate_agent(agent, loaded_config, seeds=(0,), duration_s=0.5)
+    assert len(summary.results) == 1 and summary.results[0].time_s[-1] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="config differs"):
+        train_dqn(DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False)
+
+
+def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
+    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_epochs=3, ensemble_size=2,
+                        model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
+                        rollout_schedule=(0, 1, 1, 1), **TINY)
+    model, log = train_mbpo(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
+    buffer = model.replay_buffer
+    assert isinstance(buffer, MBPOReplayBuffer)
+    assert log.plant_s == pytest.approx(3.0)  # real plant time only
+    n_model = buffer.model_buffer.size()
+    # model fitted after episode 2; episode 3 has 25 agent steps -> 2 rollout batches of 9 * 10, length 1
+    assert n_model == 2 * 90 and log.model_steps == n_model
+    real_obs = buffer.observations[: buffer.size(), 0]
+    model_obs = buffer.model_buffer.observations[:n_model, 0]
+    # every model transition (rollout length 1) starts from a state stored in the real buffer
+    matches = (np.abs(model_obs[:, None, :] - real_obs[None, :, :]).max(axis=2) < 1e-7).any(axis=1)
+    assert matches.all()
+    # and is not a copy of a real transition: its next state comes from the learned model
+    real_next = buffer.next_observations[: buffer.size(), 0]
+    model_next = buffer.model_buffer.next_observations[:n_model, 0]
+    copies = (np.abs(model_next[:, None, :] - real_next[None, :, :]).max(axis=2) < 1e-7).any(axis=1)
+    assert not copies.all()
+    # the real plant observation stored with each real transition reproduces its env vector
+    env = make_base_env(config)
+    vec = observation_vector(buffer.plant_observations[: buffer.size()], real_obs[:, -1], env)
+    np.testing.assert_allclose(vec, real_obs, atol=1e-5)
+    # model rewards are the report's reward of the predicted tip angle (one model step = 4 plant steps)
+    assert np.all(buffer.model_buffer.rewards[:n_model, 0] <= 4 * 2.0 + 1e-6)
+    assert (tmp_path / "dynamics.pt").exists() and (tmp_path / "real_data.npz").exists()
+    # sampling mixes real and model data
+    batch = buffer.sample(100)
+    assert batch.observations.shape == (100, 11)
+    # resume refits the model and continues
+    model2, log2 = train_mbpo(config, seed=0, episodes=4, run_dir=tmp_path, resume=True, progress=False)
+    assert log2.n_episodes == 4 and log2.model_steps > log.model_steps
+
+
+def test_mbpo_rejects_a_dqn_config(tmp_path):
+    with pytest.raises(ValueError, match="MBPOConfig"):
+        train_mbpo(DQNConfig(), episodes=1, run_dir=tmp_path, progress=False)
+
+
+def test_command_line_train_and_evaluate(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["train", "--algo", "dqn", "--episodes", "2", "--out", str(out), "--no-progress",
+            "--set", "episode_s=0.5", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.5", "--set", "learning_starts=10"]
+    assert main(args) == 0
+    assert (out / "agent.zip").exists()
+    assert main(["evaluate", str(out), "--seeds", "0", "--duration-s", "0.5", "--json"]) == 0
+    assert '"success_rate"' in capsys.readouterr().out
+    assert main(["train", "--algo", "dqn", "--out", str(out), "--set", "bogus=1"]) == 2

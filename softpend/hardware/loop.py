@@ -198,7 +198,6 @@ def run_control_loop(
             watchdog += int(state.watchdog_tripped)
             tip = tip_source() if tip_source is not None else TipMeasurement(math.nan, math.nan, False)
             observation = RigObservation(t, state.phi_rad, state.phi_dot_rad_s, tip.x_m, tip.y_m, tip.lost)
-            command = 0.0
             try:
                 if tip.lost:
                     lost_count += 1
@@ -206,7 +205,9 @@ def run_control_loop(
                 else:
                     command = float(controller(observation, t))
                     link.send_torque(command)
-                    command = link.last_command_nm
+            except BaseException:
+                link.emergency_stop()  # zero torque first, so the log records what is in force
+                raise
             finally:
                 send_times.append(time.monotonic())
                 if log is not None:

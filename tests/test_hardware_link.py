@@ -1,0 +1,255 @@
+"""The motor link end to end through a real pseudo-terminal: round trip, safety and every fault.
+
+The emulator serves the protocol on an ``os.openpty`` pair, in a thread of the test process (or, for
+the killed-link and host-signal faults, in a separate process); the host side is the real
+:class:`MotorLink` on pyserial.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from softpend.hardware import (
+    HandshakeError,
+    LinkChecksumError,
+    LinkDisconnected,
+    LinkTimeout,
+    MotorLink,
+    RigConfig,
+    RigEmulator,
+    SampleLog,
+    read_sample_log,
+    start_emulator_process,
+)
+from softpend.hardware.loop import LOOP_LOG_COLUMNS, TipMeasurement, run_control_loop
+from softpend.hardware import protocol as proto
+
+
+class ThreadedRig:
+    """A RigEmulator served from a thread (a real pty, the same code as the process)."""
+
+    def __init__(self, **config):
+        self.emulator = RigEmulator(RigConfig(**config))
+        self.thread = threading.Thread(target=self.emulator.serve, daemon=True)
+        self.thread.start()
+
+    @property
+    def port(self) -> str:
+        return self.emulator.port
+
+    def close(self):
+        self.emulator.stop()
+        self.thread.join(2.0)
+        self.emulator.close()
+
+
+@pytest.fixture
+def rig():
+    rigs = []
+
+    def make(**config):
+        r = ThreadedRig(**config)
+        rigs.append(r)
+        return r
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def test_round_trip_handshake_states_and_encoder(rig):
+    r = rig(counts_per_rev=512, latency_s=0.001)
+    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+        assert link.device.protocol_version == proto.PROTOCOL_VERSION
+        assert link.device.counts_per_rev == 512 and link.device.watchdog_s == pytest.approx(0.1)
+        assert 0 < link.ping() < 0.1
+        states = []
+        for _ in range(40):
+            states.append(link.read_state())
+            link.send_torque(0.05)
+        t = np.array([s.device_time_s for s in states])
+        assert np.median(np.diff(t)) == pytest.approx(0.01, abs=0.002)
+        # the applied torque follows the command after the link latency, and the hub turns that way
+        assert states[-1].applied_torque_nm == pytest.approx(0.05, rel=1e-6)
+        assert states[-1].phi_rad > states[0].phi_rad + 0.01
+        # quantised encoder: phi = pi + counts * 2 pi / cpr exactly
+        counts = (np.array([s.phi_rad for s in states]) - math.pi) / (2 * math.pi / 512)
+        np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
+        assert states[-1].last_cmd_seq > 0 and not states[-1].watchdog_tripped
+
+
+def test_torque_is_clamped_on_the_host_and_nan_stops(rig):
+    r = rig()
+    with MotorLink(r.port, torque_limit_nm=0.02, install_exit_hooks=False) as link:
+        assert link.torque_limit_nm == pytest.approx(0.02)
+        link.read_state()
+        link.send_torque(5.0)
+        assert link.last_command_nm == pytest.approx(0.02)
+        time.sleep(0.05)
+        applied = [s.applied_torque_nm for s in link.drain_states()]
+        assert applied and applied[-1] == pytest.approx(0.02, rel=1e-6)
+        assert not link.read_state().saturated  # the device never saw more than its limit
+        with pytest.raises(ValueError, match="torque_nm"):
+            link.send_torque(float("nan"))
+        time.sleep(0.05)
+        assert r.emulator.session.torque_nm(0) == 0.0 and r.emulator.session.stopped
+
+
+def test_stalled_host_trips_the_watchdog(rig):
+    r = rig(watchdog_ms=100)
+    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+        for _ in range(10):
+            link.read_state()
+            link.send_torque(0.04)
+        stall_start = link.read_state().device_time_s
+        time.sleep(0.35)  # the host hangs: no commands
+        states = link.drain_states()
+        late = [s for s in states if s.device_time_s > stall_start + 0.13]
+        early = [s for s in states if s.device_time_s < stall_start + 0.08]
+        assert early and all(s.applied_torque_nm == pytest.approx(0.04) for s in early)
+        assert late and all(s.applied_torque_nm == 0.0 and s.watchdog_tripped for s in late)
+        link.send_torque(0.01)  # commands resume: so does the torque
+        time.sleep(0.05)
+        assert link.drain_states()[-1].applied_torque_nm == pytest.approx(0.01)
+
+
+def test_garbled_link_raises_clear_error_and_stops_motor(rig):
+    r = rig(garble_probability=1.0)
+    link = MotorLink(r.port, torque_limit_nm=0.06, max_consecutive_bad_frames=3, install_exit_hooks=False)
+    link.open()  # the handshake reply is not garbled (only STATE frames are)
+    link.send_torque(0.03)
+    with pytest.raises(LinkChecksumError, match="3 consecutive bad frames.*motor stopped"):
+        for _ in range(10):
+            link.read_state()
+    time.sleep(0.05)
+    assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
+    link.close()
+
+
+def test_isolated_garbled_frames_are_counted_not_fatal(rig, tmp_path):
+    r = rig(garble_probability=0.15, drop_probability=0.1, seed=3)
+    with MotorLink(r.port, torque_limit_nm=0.06, max_consecutive_bad_frames=4, install_exit_hooks=False) as link, \
+            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+        result = run_control_loop(link, lambda obs, t: 0.01, duration_s=0.6, log=log)
+    assert result.bad_frames > 0 and result.dropped_states > 0
+    assert len(read_sample_log(tmp_path / "log.csv")) == result.samples
+
+
+def test_lost_tip_commands_zero_torque_and_is_logged(rig, tmp_path):
+    r = rig()
+    ticks = iter(range(10**6))
+
+    def camera() -> TipMeasurement:
+        k = next(ticks)
+        lost = 10 <= k < 15  # five frames without a dot
+        return TipMeasurement(math.nan if lost else 0.01, math.nan if lost else -0.29, lost)
+
+    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
+            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+        result = run_control_loop(link, lambda obs, t: 0.03, duration_s=0.4, log=log, tip_source=camera)
+    data = read_sample_log(tmp_path / "log.csv")
+    lost = data["tip_lost"] > 0.5
+    assert result.tip_lost == 5 and lost.sum() == 5
+    assert np.all(data["command_torque_nm"][lost] == 0.0)
+    assert np.all(data["command_torque_nm"][~lost] == pytest.approx(0.03))
+    assert np.all(np.isnan(data["tip_x_m"][lost]))
+
+
+def test_controller_exception_stops_motor_and_keeps_samples(rig, tmp_path):
+    r = rig()
+    calls = []
+
+    def controller(obs, t):
+        calls.append(t)
+        if len(calls) == 20:
+            raise RuntimeError("controller bug")
+        return 0.04
+
+    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
+            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+        with pytest.raises(RuntimeError, match="controller bug"):
+            run_control_loop(link, controller, duration_s=2.0, log=log)
+        time.sleep(0.05)
+        assert r.emulator.session.stopped  # STOP went out before the exception left the loop
+    data = read_sample_log(tmp_path / "log.csv")
+    assert len(data) == 20 and data["command_torque_nm"][-1] == 0.0
+
+
+def test_handshake_timeout_when_nothing_answers():
+    master, slave = os.openpty()
+    try:
+        link = MotorLink(os.ttyname(slave), torque_limit_nm=0.06, timeout_s=0.15, install_exit_hooks=False)
+        with pytest.raises(HandshakeError, match="no HELLO_ACK"):
+            link.open()
+        assert not link.is_open
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_missing_port_is_a_clear_disconnect():
+    with pytest.raises(LinkDisconnected, match="cannot open serial port"):
+        MotorLink("/dev/does-not-exist-softpend", torque_limit_nm=0.06, install_exit_hooks=False).open()
+    with pytest.raises(ValueError, match="torque_limit_nm"):
+        MotorLink("/dev/null", torque_limit_nm=-1.0)
+
+
+def test_killed_emulator_is_a_clear_disconnect_and_no_sample_is_lost(tmp_path):
+    calls = []
+    with start_emulator_process(RigConfig(), truth_log=tmp_path / "truth.csv") as emulator:
+        with MotorLink(emulator.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
+                SampleLog(tmp_path / "motor.csv", LOOP_LOG_COLUMNS) as log:
+            killer = threading.Timer(0.5, emulator.kill)
+            killer.start()
+
+            def controller(obs, t):
+                calls.append(t)
+                return 0.02
+
+            with pytest.raises((LinkDisconnected, LinkTimeout), match="disconnected|no STATE"):
+                run_control_loop(link, controller, duration_s=5.0, log=log)
+            killer.join()
+    motor = read_sample_log(tmp_path / "motor.csv")
+    assert len(motor) == len(calls) > 20  # every sample the host processed is on disk
+    truth = read_sample_log(tmp_path / "truth.csv")  # the SIGKILLed emulator's log is readable too
+    assert len(truth) >= len(motor) and truth.torn_lines == 0
+    assert np.all(np.diff(truth["device_time_s"]) > 0)
+
+
+_HOST_SCRIPT = """
+import sys, time
+from softpend.hardware.driver import MotorLink
+link = MotorLink(sys.argv[1], torque_limit_nm=0.06).open()
+link.read_state()
+link.send_torque(0.05)
+print("commanding", flush=True)
+while True:  # keep commanding until SIGTERM
+    link.read_state()
+    link.send_torque(0.05)
+"""
+
+
+def test_sigterm_on_the_host_sends_stop(rig):
+    r = rig(watchdog_ms=5000)  # a long watchdog: only the host's own STOP can zero the torque quickly
+    host = subprocess.Popen([sys.executable, "-c", _HOST_SCRIPT, r.port], stdout=subprocess.PIPE, text=True)
+    try:
+        assert host.stdout.readline().strip() == "commanding"
+        time.sleep(0.1)
+        assert r.emulator.session.torque_nm(0) == pytest.approx(0.05)
+        host.send_signal(signal.SIGTERM)
+        host.wait(5)
+        time.sleep(0.05)
+        assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
+    finally:
+        if host.poll() is None:
+            host.kill()
+        host.stdout.close()

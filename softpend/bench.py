@@ -15,6 +15,7 @@ from typing import Callable, Iterable
 #: ``(name, "module:function")`` pairs; one line per benchmark group.
 BENCHMARKS: list[tuple[str, str]] = [
     ("plant", "softpend.plant.benchmarks:bench_plant"),
+    ("control", "softpend.control.benchmarks:bench_control"),
     ("beam", "softpend.fidelity.benchmarks:bench_beam"),
     ("rl", "softpend.rl.benchmarks:bench_rl"),
 ]

@@ -18,6 +18,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("control", "softpend.control.benchmarks:bench_control"),
     ("beam", "softpend.fidelity.benchmarks:bench_beam"),
     ("rl", "softpend.rl.benchmarks:bench_rl"),
+    ("hardware", "softpend.hardware.benchmarks:bench_hardware"),
 ]
 
 

@@ -79,7 +79,7 @@ def test_no_dot_or_too_small_dot_is_lost_not_guessed(swing):
 def test_search_window_tracking_matches_full_frame(swing):
     times, points, hub = swing
     camera = SyntheticCamera(seed=0)
-    full, windowed = TipTracker(), TipTracker(search_radius_px=40)
+    full, windowed = TipTracker(search_radius_px=None), TipTracker(search_radius_px=40)
     for frame, _ in camera.frames(times, points, times[1:20], hub):
         a, b = full.track(frame), windowed.track(frame)
         assert (a.x_px, a.y_px) == pytest.approx((b.x_px, b.y_px), abs=1e-9)

@@ -166,6 +166,7 @@ class RigEmulator:
         self.states_sent = 0
         self.states_dropped = 0
         self.states_garbled = 0
+        self.ticks_skipped = 0
         self.tick_lateness_s: list[float] = []
 
     # ------------------------------------------------------------------ encoder model
@@ -216,10 +217,15 @@ class RigEmulator:
                         heapq.heappush(outbound, (now + latency, order, reply))
                 if now >= next_tick:
                     self.tick_lateness_s.append(now - next_tick)
-                    frame = self._tick(forces_time_us(now))
-                    next_tick += dt
-                    if next_tick < now:  # fell behind by more than a tick: skip, do not burst
-                        next_tick = now + dt
+                    # the physics does not wait: if the emulator fell behind, the plant catches up
+                    # (steps with the torque held, truth logged) and one STATE reports the latest sample
+                    due = int((now - next_tick) / dt) + 1
+                    frame = None
+                    for k in range(due):
+                        sample_us = int(round((self.ticks + 1) * dt * 1e6))
+                        frame = self._tick(sample_us, emit=k == due - 1)
+                    self.ticks_skipped += due - 1
+                    next_tick += due * dt
                     if frame is not None:
                         order += 1
                         heapq.heappush(outbound, (now + latency, order, frame))
@@ -234,7 +240,9 @@ class RigEmulator:
         finally:
             self._running = False
 
-    def _tick(self, now_us: int) -> Optional[bytes]:
+    def _tick(self, now_us: int, emit: bool = True) -> Optional[bytes]:
+        """Sample the encoder at device time ``now_us`` (= plant time), apply the session's torque for one
+        step; return the STATE frame (or None if dropped)."""
         cfg = self.config
         torque = self.session.torque_nm(now_us)
         observation_before = self.plant.observe()
@@ -242,7 +250,7 @@ class RigEmulator:
             q, qd = self.plant.joint_state()
             self._truth.append([now_us * 1e-6, torque, *q, *qd])
         counts = self.encoder_counts(self.plant.joint_state()[0][0])
-        frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque)
+        frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque) if emit else None
         self.plant.step(torque)
         self.ticks += 1
         if frame is None:
@@ -277,6 +285,7 @@ class RigEmulator:
             "states_sent": float(self.states_sent),
             "states_dropped": float(self.states_dropped),
             "states_garbled": float(self.states_garbled),
+            "ticks_caught_up": float(self.ticks_skipped),
             "tick_lateness_ms_p95": float(np.percentile(lateness, 95)) if lateness.size else float("nan"),
         }
 

@@ -206,6 +206,7 @@ def synchronise(
     wiggle_window_s: Optional[float] = 4.0,
     max_offset_s: float = 1.0,
     gap_factor: float = 1.6,
+    min_gap_s: float = 0.03,
 ) -> SyncResult:
     """Merge a motor log (:data:`softpend.hardware.loop.LOOP_LOG_COLUMNS`) and a camera CSV
     (:data:`softpend.vision.track_video.TRACK_COLUMNS`) into resampled trials.
@@ -224,8 +225,9 @@ def synchronise(
         Correlate only the first this many seconds of the motor record (the start-up wiggle); None for all.
     max_offset_s : float
         Largest clock offset searched [s].
-    gap_factor : float
-        A spacing larger than ``gap_factor`` times the median sample period is a gap.
+    gap_factor, min_gap_s : float
+        A spacing larger than ``gap_factor`` times the median sample period and than ``min_gap_s`` [s]
+        is a gap (one missed sample is interpolated over; longer holes are not).
 
     Raises
     ------
@@ -256,8 +258,8 @@ def synchronise(
 
     motor_period = float(np.median(np.diff(tm)))
     camera_period = float(np.median(np.diff(tc)))
-    gaps = _gaps_from_times(tm, motor_period, gap_factor, "motor states missing")
-    gaps += _gaps_from_times(tc, camera_period, gap_factor, "camera frames missing")
+    gaps = _gaps_from_times(tm, max(gap_factor * motor_period, min_gap_s), 1.0, "motor states missing")
+    gaps += _gaps_from_times(tc, max(gap_factor * camera_period, min_gap_s), 1.0, "camera frames missing")
     for a, b in _runs(lost):
         start = tc[a - 1] if a > 0 else tc[a]
         end = tc[b] if b < len(tc) else tc[b - 1]

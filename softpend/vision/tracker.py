@@ -114,8 +114,10 @@ class TipTracker:
     max_area_px : float, optional
         Largest acceptable area [px^2] (a big blue object is not the dot): larger blobs mean lost.
     search_radius_px : float, optional
-        If set, after a successful frame the next one is searched only in a window of this radius
-        around the last position (faster); the whole frame is searched again after a loss.
+        After a successful frame the next one is searched only in a window of this radius around the
+        last position (about ten times faster at 640x480); the whole frame is searched on the first
+        frame and whenever the window holds no qualifying blob.  The default 48 px covers a tip moving at
+        7 m/s at 100 frames/s on the default camera.  None searches every frame whole.
     region_px : (x0, y0, x1, y1), optional
         Only ever search this rectangle of the frame (e.g. around the hub for the hub marker).
     """
@@ -125,7 +127,7 @@ class TipTracker:
         colour: ColourRange = BLUE_HSV,
         min_area_px: float = 20.0,
         max_area_px: Optional[float] = None,
-        search_radius_px: Optional[float] = None,
+        search_radius_px: Optional[float] = 48.0,
         region_px: Optional[tuple[int, int, int, int]] = None,
     ) -> None:
         if not (math.isfinite(min_area_px) and min_area_px >= 0):

@@ -13,38 +13,13 @@ N_FRAMES = 300
 LOOP_SECONDS = 5.0
 
 
-def _trajectory(n_steps: int, seed: int = 0):
-    """A babbling trajectory of the default rod: times [s], link points [m], hub angles [rad]."""
-    from ..plant import RodParams, make_plant
-    from ..sysid.babble import band_limited_noise
-
-    params = RodParams()
-    plant = make_plant("prb", params=params)
-    q, qd = plant.hanging_state()
-    q[0] = 2.2
-    plant.reset(q, qd)
-    torque = np.clip(band_limited_noise(np.random.default_rng(seed), n_steps, 0.04, 2.0, 0.01), -0.06, 0.06)
-    times, points, hub = [], [], []
-    for k in range(n_steps):
-        times.append(k * plant.dt_s)
-        points.append(plant.link_points_m())
-        hub.append(plant.joint_state()[0][0])
-        plant.step(float(torque[k]))
-    return np.array(times), np.array(points), np.array(hub)
-
-
 def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, float, float]:
     """(RMS error [px], frames/s with the default search window, frames/s searching every frame whole,
     lost frames) over N_FRAMES rendered frames."""
-    from ..vision.camera import SyntheticCamera
+    from ..vision.accuracy import tracking_errors
     from ..vision.tracker import TipTracker
 
-    times, points, hub = trajectory
-    camera = SyntheticCamera(effects=effects, seed=seed)
-    frames, truth = [], []
-    for frame, tip in camera.frames(times, points, times[1 : N_FRAMES + 1], hub):
-        frames.append(frame)
-        truth.append(tip)
+    errors, frames = tracking_errors(trajectory, effects, N_FRAMES, seed, keep_frames=True)
     fps = {}
     for name, radius in (("window", TipTracker().search_radius_px), ("full", None)):
         best = math.inf
@@ -54,10 +29,7 @@ def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, floa
             detections = [tracker.track(f) for f in frames]
             best = min(best, time.perf_counter() - start)
         fps[name] = len(frames) / best
-        if name == "window":
-            err = np.array([[d.x_px - t[0], d.y_px - t[1]] for d, t in zip(detections, truth)])
-            lost = float(sum(d.lost for d in detections))
-    return float(np.sqrt(np.nanmean(np.sum(err**2, axis=1)))), fps["window"], fps["full"], lost
+    return errors.rmse_px, fps["window"], fps["full"], float(errors.lost.sum())
 
 
 def _rig_loop_jitter() -> dict[str, float]:
@@ -93,10 +65,11 @@ def bench_hardware() -> dict[str, float]:
     ``|command period - median period|``."""
     import cv2
 
+    from ..vision.accuracy import babbling_trajectory
     from ..vision.camera import CameraEffects
 
     cv2.setNumThreads(1)
-    trajectory = _trajectory(N_FRAMES + 2)
+    trajectory = babbling_trajectory(N_FRAMES + 2)
     rmse_clean, fps_clean, fps_full, lost_clean = _tracker_figures(CameraEffects(), 0, trajectory)
     rmse_noisy, fps_noisy, fps_noisy_full, lost_noisy = _tracker_figures(CameraEffects.noisy(), 1, trajectory)
     out = {

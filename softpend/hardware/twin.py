@@ -142,7 +142,7 @@ def run_twin_session(
     effects = camera_effects if camera_effects is not None else CameraEffects(
         noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
     paths = {name: workdir / name for name in ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz")}
-    for path in paths.values():
+    for path in list(paths.values()) + [workdir / "camera.avi.json"]:
         path.unlink(missing_ok=True)
     stats_path = workdir / "emulator_stats.json"
     limit = rig.params.torque_limit_nm

@@ -1,0 +1,77 @@
+"""Tracker accuracy against the synthetic camera's ground truth (used by the benchmark and Figure 9)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .camera import CameraEffects, SyntheticCamera
+from .tracker import TipTracker
+
+__all__ = ["TrackingErrors", "babbling_trajectory", "tracking_errors"]
+
+
+def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.2):
+    """A simulated babbling trajectory of the default rod (band-limited random torque, as
+    :func:`softpend.sysid.babble`): times [s], link points ``(T, n + 1, 2)`` [m], hub angles [rad]."""
+    from ..plant import RodParams, make_plant
+    from ..sysid.babble import band_limited_noise
+
+    if n_steps < 2:
+        raise ValueError(f"n_steps must be >= 2, got {n_steps!r}")
+    plant = make_plant("prb", params=RodParams())
+    q, qd = plant.hanging_state()
+    q[0] = start_angle_rad
+    plant.reset(q, qd)
+    limit = plant.params.torque_limit_nm
+    torque = np.clip(band_limited_noise(np.random.default_rng(seed), n_steps, 0.7 * limit, 2.0, plant.dt_s), -limit, limit)
+    times, points, hub = [], [], []
+    for k in range(n_steps):
+        times.append(k * plant.dt_s)
+        points.append(plant.link_points_m())
+        hub.append(plant.joint_state()[0][0])
+        plant.step(float(torque[k]))
+    return np.array(times), np.array(points), np.array(hub)
+
+
+@dataclass
+class TrackingErrors:
+    """Per-frame tracking error: ``error_px`` (F, 2) tracked minus true pixel position (NaN when lost)."""
+
+    time_s: np.ndarray
+    error_px: np.ndarray
+    lost: np.ndarray
+
+    @property
+    def rmse_px(self) -> float:
+        """Root-mean-square Euclidean error over the tracked frames [px]."""
+        return float(np.sqrt(np.nanmean(np.sum(self.error_px**2, axis=1))))
+
+
+def tracking_errors(
+    trajectory,
+    effects: Optional[CameraEffects] = None,
+    n_frames: int = 300,
+    seed: int = 0,
+    tracker: Optional[TipTracker] = None,
+    keep_frames: bool = False,
+):
+    """Render ``n_frames`` frames of ``trajectory`` (from :func:`babbling_trajectory`) at its sample
+    times and track them; returns :class:`TrackingErrors` (and the frames if ``keep_frames``)."""
+    times, points, hub = trajectory
+    if not 1 <= n_frames < len(times):
+        raise ValueError(f"n_frames must be in [1, {len(times) - 1}], got {n_frames!r}")
+    camera = SyntheticCamera(effects=effects, seed=seed)
+    tracker = tracker if tracker is not None else TipTracker()
+    frame_times = times[1 : n_frames + 1]
+    errors, lost, frames = [], [], []
+    for frame, truth in camera.frames(times, points, frame_times, hub):
+        d = tracker.track(frame)
+        errors.append([d.x_px - truth[0], d.y_px - truth[1]])
+        lost.append(d.lost)
+        if keep_frames:
+            frames.append(frame)
+    result = TrackingErrors(frame_times, np.array(errors), np.array(lost))
+    return (result, frames) if keep_frames else result

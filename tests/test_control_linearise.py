@@ -107,3 +107,56 @@ def test_learned_linearisation_is_the_jacobian_of_the_model():
         np.testing.assert_allclose(lin.a[:, i], (f(x0 + e, 0.0) - f(x0 - e, 0.0)) / (2 * h), rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(lin.b[:, 0], (f(x0, h) - f(x0, -h)) / (2 * h), rtol=1e-5, atol=1e-7)
     assert lin.dt_s == 0.01 and lin.state_names == model.layout.names
+
+
+def test_reduction_matrices_are_consistent():
+    from softpend.control.learned import reduction_matrices
+    from softpend.sysid.layout import StateLayout
+
+    params = RodParams()
+    for layout in (StateLayout.full(), StateLayout.limited(2)):
+        s, p, z = reduction_matrices(layout.names, params, 0.01)
+        np.testing.assert_allclose(s @ p, np.eye(len(z)), atol=1e-12)
+        assert z[:2] == ("phi_rad", "theta_rad")
+        # the straight rod tilted by a small angle: ex = -L theta, lagged frames one step behind
+        z0 = np.zeros(len(z))
+        z0[z.index("theta_rad")] = 0.01
+        z0[z.index("theta_dot_rad_s")] = 1.0
+        x = p @ z0
+        assert x[layout.index("ex_m")] == pytest.approx(-params.length_m * 0.01)
+        assert x[layout.index("ex_dot_m_s")] == pytest.approx(-params.length_m)
+        if layout.history:
+            assert x[layout.index("ex_m_lag1")] == pytest.approx(-params.length_m * (0.01 - 0.01 * 1.0))
+
+
+@pytest.fixture(scope="module")
+def trained_model():
+    from softpend.control.comparison import train_learned_model
+
+    torch.set_num_threads(1)
+    return train_learned_model(RodParams(), n_trials=60, max_epochs=300, seed=0)
+
+
+@pytest.mark.expensive
+def test_learned_linearisation_agrees_with_true_model(trained_model):
+    from softpend.control.learned import linearise_learned_model, reduce_learned_model
+
+    params = RodParams()
+    reduced, _ = reduce_learned_model(linearise_learned_model(trained_model, params), params)
+    true = discretise(linearise_exudyn(params).state_space(), 0.01)
+    assert np.max(np.abs(reduced.eigenvalues())) == pytest.approx(np.max(np.abs(true.eigenvalues())), abs=0.03)
+
+
+@pytest.mark.expensive
+def test_lqr_from_learned_model_stabilises_true_plant(trained_model):
+    from softpend.control.learned import lqr_from_learned_model
+    from softpend.evaluation import evaluate_controller
+
+    params = RodParams()
+    controller = lqr_from_learned_model(trained_model, params)
+    assert controller.design_model.is_stable_closed_loop(controller.design_gain)
+    q = np.zeros(params.n_links + 1)
+    q[0] = 0.2
+    result = evaluate_controller(controller, seeds=(0,), duration_s=6.0, start="upright", initial_state=(q, 0 * q)).results[0]
+    assert result.diverged is None and result.upright_std_rad < 0.02
+    assert np.all(np.abs(result.theta_rad[-100:]) < 0.01)

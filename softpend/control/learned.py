@@ -33,6 +33,7 @@ __all__ = [
     "linearise_learned_model",
     "lqr_from_learned_model",
     "reduce_learned_model",
+    "reduced_coordinate_names",
     "reduction_matrices",
     "upright_state_vector",
 ]
@@ -168,57 +169,68 @@ class _TrackedLQR(LQRController):
         self.tracker.reset()
 
 
-#: Coordinates of the reduced learned model: hub and tip angle and their rates.
-REDUCED_STATE_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "phi_dot_rad_s", "theta_dot_rad_s")
+def reduced_coordinate_names(names: tuple[str, ...]) -> tuple[str, ...]:
+    """Angles of the reduced learned model: hub angle, tip angle and, when the model observes it, tip
+    rotation (full information); the state is these angles followed by their rates."""
+    return ("phi_rad", "theta_rad", "er_rad") if "er_rad" in names else ("phi_rad", "theta_rad")
 
 
-def reduction_matrices(names: tuple[str, ...], params: RodParams, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Maps between the learned model's state ``x`` and ``z = [phi, theta, phi_dot, theta_dot]`` about upright.
+def reduction_matrices(names: tuple[str, ...], params: RodParams, dt_s: float) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Maps between the learned model's state ``x`` and ``z = [angles, rates]`` about upright.
 
-    ``P`` embeds ``z`` as the straight rigid rod: ``ex = -L theta``, ``ey`` unchanged, ``e_r = theta``, rates
-    alike, and a frame lagged by ``k`` steps at ``position - k dt rate``.  ``S`` reads ``z`` back from ``x``
+    The angles are :func:`reduced_coordinate_names`.  ``P`` embeds ``z`` to first order: ``ex = -L theta``,
+    ``ey`` unchanged, ``e_r = theta`` when the model has no ``e_r`` coordinate of its own, rates alike, and a
+    frame lagged by ``k`` steps at ``position - k dt rate``.  ``S`` reads ``z`` back from ``x``
     (``theta = -ex/L`` for a model without ``theta``).  ``S P = I``.
 
     Returns
     -------
-    S : (4, d) array
-    P : (d, 4) array
+    S : (2k, d) array
+    P : (d, 2k) array
+    z_names : tuple of str
     """
+    angles = reduced_coordinate_names(names)
+    k = len(angles)
     length = params.length_m
-    embed = {  # position name -> (coefficient on phi, coefficient on theta)
-        "phi_rad": (1.0, 0.0), "theta_rad": (0.0, 1.0), "er_rad": (0.0, 1.0), "ex_m": (0.0, -length), "ey_m": (0.0, 0.0),
-    }
-    p = np.zeros((len(names), 4))
+    embed = {name: np.eye(k)[i] for i, name in enumerate(angles)}
+    embed.setdefault("er_rad", embed["theta_rad"])
+    embed["ex_m"] = -length * embed["theta_rad"]
+    embed["ey_m"] = np.zeros(k)
+    p = np.zeros((len(names), 2 * k))
     for i, name in enumerate(names):
         base, _, lag = name.partition("_lag")
         lag_steps = int(lag) if lag else 0
-        position = base
-        is_rate = False
-        for candidate in embed:
-            if velocity_name(candidate) == base:
-                position, is_rate = candidate, True
-        if position not in embed:
-            raise ValueError(f"model state entry {name!r} is not an observed variable")
-        c_phi, c_theta = embed[position]
-        if is_rate:
-            p[i, 2:] = (c_phi, c_theta)
+        rate_of = {velocity_name(position): position for position in embed}
+        if base in rate_of:
+            p[i, k:] = embed[rate_of[base]]
+        elif base in embed:
+            p[i, :k] = embed[base]
+            p[i, k:] = -lag_steps * dt_s * embed[base]
         else:
-            p[i, :2] = (c_phi, c_theta)
-            p[i, 2:] = (-lag_steps * dt_s * c_phi, -lag_steps * dt_s * c_theta)
-    out = _output_map(names, params)  # rows [theta, phi, theta_dot, phi_dot]
-    s = out[[1, 0, 3, 2]]
-    return s, p
+            raise ValueError(f"model state entry {name!r} is not an observed variable")
+    s = np.zeros((2 * k, len(names)))
+    for offset, to_name in ((0, lambda a: a), (k, velocity_name)):
+        for j, angle in enumerate(angles):
+            name = to_name(angle)
+            if name in names:
+                s[offset + j, names.index(name)] = 1.0
+            else:  # theta from the tip position
+                s[offset + j, names.index(to_name("ex_m"))] = -1.0 / length
+    z_names = angles + tuple(velocity_name(a) for a in angles)
+    return s, p, z_names
 
 
 def reduce_learned_model(model_lin: LinearModel, params: RodParams) -> tuple[LinearModel, np.ndarray]:
     """Project the learned linearisation onto ``z`` (:func:`reduction_matrices`): ``A_z = S A P``, ``B_z = S B``.
 
+    Returns the reduced model and ``S``.
+
     The observed variables are redundant (``ex`` and ``theta`` carry the same first-order information,
     ``ey`` none), and a network's Jacobian along such directions is unconstrained by the data; the
     projection keeps the dynamics the data does constrain.
     """
-    s, p = reduction_matrices(model_lin.state_names, params, model_lin.dt_s)
-    reduced = LinearModel(a=s @ model_lin.a @ p, b=s @ model_lin.b, dt_s=model_lin.dt_s, state_names=REDUCED_STATE_NAMES)
+    s, p, z_names = reduction_matrices(model_lin.state_names, params, model_lin.dt_s)
+    reduced = LinearModel(a=s @ model_lin.a @ p, b=s @ model_lin.b, dt_s=model_lin.dt_s, state_names=z_names)
     return reduced, s
 
 
@@ -233,8 +245,8 @@ def lqr_from_learned_model(
 
     ``Q`` penalises ``[theta, phi, theta_dot, phi_dot]`` (same :class:`~softpend.control.lqr.LQRWeights` as
     the true-model design).  With ``reduced=True`` (default) the design model is the linearisation
-    projected onto ``z = [phi, theta, phi_dot, theta_dot]`` (:func:`reduce_learned_model`) and the feedback
-    is ``z`` read from the model's state; with ``reduced=False`` the design uses the model's full state
+    projected onto ``z = [phi, theta, (e_r,) rates]`` (:func:`reduce_learned_model`) and the feedback is
+    ``z`` read from the model's state; with ``reduced=False`` the design uses the model's full state
     (redundant directions included, which a network leaves unconstrained, so the Riccati solve may fail or
     give large gains).  The model's state is built from observations as in training
     (:class:`LearnedStateTracker`), minus its upright value.
@@ -250,7 +262,10 @@ def lqr_from_learned_model(
     limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
     if reduced:
         design, select = reduce_learned_model(model_lin, params)
-        output_map = np.eye(4)[[1, 0, 3, 2]]  # z = [phi, theta, ...] -> y = [theta, phi, ...]
+        z = design.state_names
+        output_map = np.zeros((4, len(z)))  # y = [theta, phi, theta_dot, phi_dot] from z
+        for row, name in enumerate(("theta_rad", "phi_rad", "theta_dot_rad_s", "phi_dot_rad_s")):
+            output_map[row, z.index(name)] = 1.0
     else:
         design, select = model_lin, np.eye(model_lin.n_states)
         output_map = _output_map(model_lin.state_names, params)

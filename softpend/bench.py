@@ -19,6 +19,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("beam", "softpend.fidelity.benchmarks:bench_beam"),
     ("rl", "softpend.rl.benchmarks:bench_rl"),
     ("hardware", "softpend.hardware.benchmarks:bench_hardware"),
+    ("sysid", "softpend.sysid.benchmarks:bench_sysid"),
 ]
 
 

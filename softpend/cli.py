@@ -20,6 +20,8 @@ COMMAND_MODULES: list[str] = [
     "softpend.commands.evaluate",
     "softpend.commands.rig",
     "softpend.commands.track",
+    "softpend.commands.babble",
+    "softpend.commands.fit_model",
 ]
 
 

@@ -1,0 +1,44 @@
+"""System identification: motor babbling, datasets and learned dynamics models."""
+
+from .babble import BabbleProtocol, babble, band_limited_noise
+from .dataset import SCHEMA_VERSION, TrajectoryDataset, load_dataset, save_dataset, write_dataset
+from .differentiation import backward_difference, unwrap_angles
+
+__all__ = [
+    "BabbleProtocol",
+    "SCHEMA_VERSION",
+    "TrajectoryDataset",
+    "babble",
+    "backward_difference",
+    "band_limited_noise",
+    "load_dataset",
+    "save_dataset",
+    "unwrap_angles",
+    "write_dataset",
+]
+
+from .layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
+from .metrics import RolloutErrors, one_step_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
+from .model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
+from .rollout import rollout  # noqa: E402
+from .training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402
+
+__all__ += [
+    "INFORMATION_LEVELS",
+    "StateLayout",
+    "TransitionData",
+    "RolloutErrors",
+    "one_step_errors",
+    "rollout_errors",
+    "rollout_trial",
+    "tip_angle_rad",
+    "DynamicsEnsemble",
+    "DynamicsModel",
+    "load_model",
+    "save_model",
+    "rollout",
+    "FitResult",
+    "TrainConfig",
+    "fit_dynamics_model",
+    "split_trials",
+]

@@ -1,0 +1,73 @@
+"""System-identification speed and accuracy (``softpend bench --only sysid``).
+
+Runs the default protocol end to end on one torch thread: babble 60 x 5 s (seed 0), train the default
+full-information model and the limited-information model, babble 12 held-out trials (seed 12345) and
+measure one-step and open-loop rollout errors on them, then time batched rollouts.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from .babble import BabbleProtocol, babble
+from .metrics import evaluate_model
+from .rollout import rollout
+from .training import TrainConfig, fit_dynamics_model
+
+#: Seed of the training data and of the held-out data.
+TRAIN_SEED = 0
+TEST_SEED = 12345
+ROLLOUT_BATCH = 4096
+ROLLOUT_STEPS = 100
+
+
+def rollout_steps_per_s(model: torch.nn.Module, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3) -> float:
+    """Model steps per second of :func:`softpend.sysid.rollout` on ``batch`` rows (best of ``repeats``)."""
+    generator = torch.Generator().manual_seed(0)
+    dtype = model.feature_mean.dtype if hasattr(model, "feature_mean") else torch.float32
+    x0 = torch.randn(batch, model.layout.dim, generator=generator, dtype=dtype) * 0.1
+    torques = (torch.rand(batch, steps, generator=generator, dtype=dtype) * 2 - 1) * model.torque_limit_nm
+    best = float("inf")
+    with torch.inference_mode():
+        rollout(model, x0, torques[:, :5])  # warm-up
+        for _ in range(repeats):
+            start = time.perf_counter()
+            rollout(model, x0, torques, generator=generator)
+            best = min(best, time.perf_counter() - start)
+    return batch * steps / best
+
+
+def bench_sysid() -> dict[str, float]:
+    """Babbling rate, training time, rollout rate and held-out accuracy of the default pipeline."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        protocol = BabbleProtocol()
+        start = time.perf_counter()
+        data = babble(protocol, seed=TRAIN_SEED, progress=False)
+        babble_s = time.perf_counter() - start
+        test = babble(protocol.replace(n_trials=12), seed=TEST_SEED, progress=False)
+        out: dict[str, float] = {
+            "babble_default_protocol_s": babble_s,
+            "babble_transitions_per_s": data.n_transitions / babble_s,
+        }
+        for information, config in (("full", TrainConfig()), ("limited", TrainConfig(information="limited", history=3))):
+            fit = fit_dynamics_model(data, config, progress=False)
+            metrics = evaluate_model(fit.model, test)
+            prefix = "model" if information == "full" else "model_limited"
+            out[f"{prefix}_train_s"] = fit.train_time_s
+            for key in ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"):
+                out[f"{prefix}_one_step_{key}"] = metrics[key]
+            for h in ("0.5", "1", "2"):
+                out[f"{prefix}_tip_rmse_m_{h}s"] = metrics[f"tip_rmse_m@{h}s"]
+                out[f"{prefix}_phi_rmse_rad_{h}s"] = metrics[f"phi_rmse_rad@{h}s"]
+                out[f"{prefix}_hold_tip_rmse_m_{h}s"] = metrics[f"hold_tip_rmse_m@{h}s"]
+            out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
+            if information == "full":
+                out["model_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
+        return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
+    finally:
+        torch.set_num_threads(threads)

@@ -1,0 +1,362 @@
+"""Learned dynamics ``x[t+1] = f(x[t], tau[t])`` in PyTorch: one network, or an ensemble of them.
+
+Network
+-------
+The report's multilayer perceptron (default 3 hidden layers of 16, ``tanh``) maps *features* of the
+state and torque to the normalised *change* of the core state (positions and velocities):
+
+* features: ``sin`` and ``cos`` of each absolute angle (``phi, theta, er``; no seam at ``+-pi``), the
+  other positions and every velocity as they are, for each past frame the position change since
+  then (angle differences wrapped), and the torque [N m]; each feature is standardised with the
+  training set's mean and standard deviation (stored buffers);
+* output: the standardised change of the core state over one step (angle increments wrapped to
+  ``[-pi, pi)``), de-standardised and added to the state; angles are wrapped again and the lagged
+  frames are shifted in.
+
+Both classes offer the same batched API in the report's units (state layout: :mod:`softpend.sysid.layout`)::
+
+    next_state = model.predict_next(state, torque_nm)        # (B, d), (B,) -> (B, d)
+
+It is differentiable (``torch.func.jacrev`` or ``torch.autograd.functional.jacobian`` give the
+linearisation at upright).  :class:`DynamicsEnsemble` adds ``member=`` and random-member selection per
+row (``generator=``) for model-based RL.  Models are saved as a state dict (``.pt``) plus JSON metadata
+(``.json``) by :func:`save_model` and read back with ``torch.load(..., weights_only=True)`` by
+:func:`load_model`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from .layout import StateLayout
+
+__all__ = [
+    "ACTIVATIONS",
+    "DynamicsModel",
+    "DynamicsEnsemble",
+    "save_model",
+    "load_model",
+    "MODEL_SCHEMA_NAME",
+    "MODEL_SCHEMA_VERSION",
+]
+
+MODEL_SCHEMA_NAME = "softpend.sysid.model"
+MODEL_SCHEMA_VERSION = 1
+ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "silu": nn.SiLU, "elu": nn.ELU}
+
+
+def _wrap(x: Tensor) -> Tensor:
+    return torch.remainder(x + math.pi, 2 * math.pi) - math.pi
+
+
+def _check_widths(hidden_widths: Sequence[int]) -> tuple[int, ...]:
+    widths = tuple(int(w) for w in hidden_widths)
+    if not widths or any(w < 1 or w != v for w, v in zip(widths, hidden_widths)):
+        raise ValueError(f"hidden_widths must be a non-empty list of positive integers, got {hidden_widths!r}")
+    return widths
+
+
+class DynamicsModel(nn.Module):
+    """One learned one-step dynamics model (see the module docstring).
+
+    Parameters
+    ----------
+    layout : StateLayout
+        State vector layout (information level, history).
+    dt_s : float
+        Time step the model was trained for [s].
+    torque_limit_nm : float
+        Torque limit of the plant [N m]; :meth:`predict_next` clips torques to it like the motor.
+    hidden_widths : sequence of int
+        Hidden layer widths (default: the report's ``(16, 16, 16)``).
+    activation : str
+        One of :data:`ACTIVATIONS`.
+    """
+
+    def __init__(
+        self,
+        layout: StateLayout,
+        dt_s: float,
+        torque_limit_nm: float,
+        hidden_widths: Sequence[int] = (16, 16, 16),
+        activation: str = "silu",
+        integrate_positions: bool = True,
+    ) -> None:
+        super().__init__()
+        if not isinstance(layout, StateLayout):
+            raise ValueError(f"layout must be a StateLayout, got {type(layout).__name__}")
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
+        for name, value in (("dt_s", dt_s), ("torque_limit_nm", torque_limit_nm)):
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        self.layout = layout
+        self.dt_s = float(dt_s)
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.hidden_widths = _check_widths(hidden_widths)
+        self.activation = activation
+        self.integrate_positions = bool(integrate_positions)
+        p = layout.n_positions
+        mask = layout.position_angle_mask
+        self._p = p
+        self._h = layout.history
+        self._core = layout.core_dim
+        self.n_outputs = p if self.integrate_positions else self._core
+        self.register_buffer("_angle_idx", torch.as_tensor(np.flatnonzero(mask), dtype=torch.long), persistent=False)
+        self.register_buffer("_linear_idx", torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long), persistent=False)
+        self.register_buffer("_core_angle_mask", torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])), persistent=False)
+        self.register_buffer("_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False)
+        n_angles = int(mask.sum())
+        self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
+        self.register_buffer("feature_mean", torch.zeros(self.n_features, dtype=torch.float32))
+        self.register_buffer("feature_std", torch.ones(self.n_features, dtype=torch.float32))
+        self.register_buffer("delta_mean", torch.zeros(self.n_outputs, dtype=torch.float32))
+        self.register_buffer("delta_std", torch.ones(self.n_outputs, dtype=torch.float32))
+        layers: list[nn.Module] = []
+        width_in = self.n_features
+        for width in self.hidden_widths:
+            layers += [nn.Linear(width_in, width, dtype=torch.float32), ACTIVATIONS[activation]()]
+            width_in = width
+        layers.append(nn.Linear(width_in, self.n_outputs, dtype=torch.float32))
+        self.net = nn.Sequential(*layers)
+
+    # ------------------------------------------------------------------ pieces
+    def features(self, state: Tensor, torque_nm: Tensor) -> Tensor:
+        """Raw (not standardised) network input features, shape ``(B, n_features)``."""
+        p, h = self._p, self._h
+        pos = state[:, :p]
+        angles = pos.index_select(1, self._angle_idx)
+        parts = [torch.sin(angles), torch.cos(angles), pos.index_select(1, self._linear_idx), state[:, p : 2 * p]]
+        if h:
+            lags = state[:, 2 * p :]
+            rel = pos.repeat(1, h) - lags
+            parts.append(torch.where(self._lag_angle_mask, _wrap(rel), rel))
+        parts.append(torque_nm.reshape(-1, 1))
+        return torch.cat(parts, dim=1)
+
+    def target_delta(self, state: Tensor, next_state: Tensor) -> Tensor:
+        """What the network learns to predict (before standardisation): the velocity change ``(B, P)``
+        with ``integrate_positions``, else the core-state change ``(B, 2P)`` (angle increments wrapped)."""
+        if self.integrate_positions:
+            p = self._p
+            return next_state[:, p : 2 * p] - state[:, p : 2 * p]
+        delta = next_state[:, : self._core] - state[:, : self._core]
+        return torch.where(self._core_angle_mask, _wrap(delta), delta)
+
+    def forward(self, features_normalised: Tensor) -> Tensor:
+        """Network on standardised features -> standardised core-state change."""
+        return self.net(features_normalised)
+
+    def normalise_features(self, features: Tensor) -> Tensor:
+        """Standardise features with the stored training statistics."""
+        return (features - self.feature_mean) / self.feature_std
+
+    def set_normalisation(self, feature_mean: Tensor, feature_std: Tensor, delta_mean: Tensor, delta_std: Tensor) -> None:
+        """Store the training-set statistics (standard deviations below 1e-12 are replaced by 1)."""
+        for name, value in (("feature_mean", feature_mean), ("feature_std", feature_std), ("delta_mean", delta_mean), ("delta_std", delta_std)):
+            buffer = getattr(self, name)
+            value = torch.as_tensor(value, dtype=buffer.dtype)
+            if value.shape != buffer.shape or not torch.all(torch.isfinite(value)):
+                raise ValueError(f"{name} must be finite with shape {tuple(buffer.shape)}, got {tuple(value.shape)}")
+            if name.endswith("std"):
+                value = torch.where(value > 1e-12, value, torch.ones_like(value))
+            buffer.copy_(value)
+
+    # ------------------------------------------------------------------ public API
+    def _check(self, state: Tensor, torque_nm: Tensor) -> tuple[Tensor, Tensor]:
+        if state.ndim != 2 or state.shape[1] != self.layout.dim:
+            raise ValueError(f"state must have shape (B, {self.layout.dim}), got {tuple(state.shape)}")
+        torque_nm = torque_nm.reshape(-1)
+        if torque_nm.shape[0] != state.shape[0]:
+            raise ValueError(f"torque_nm must have shape ({state.shape[0]},), got {tuple(torque_nm.shape)}")
+        dtype = self.feature_mean.dtype  # float32 by default; follows model.double()
+        return state.to(dtype), torque_nm.to(dtype)
+
+    def predict_delta(self, state: Tensor, torque_nm: Tensor) -> Tensor:
+        """Predicted core-state change over one step, in the report's units, shape ``(B, 2P)``."""
+        state, torque_nm = self._check(state, torque_nm)
+        torque_nm = torque_nm.clamp(-self.torque_limit_nm, self.torque_limit_nm)
+        z = self.net(self.normalise_features(self.features(state, torque_nm)))
+        out = z * self.delta_std + self.delta_mean
+        if not self.integrate_positions:
+            return out
+        p = self._p
+        # backward-difference velocities: x[t+1] = x[t] + dt * v[t+1] holds exactly in the data
+        return torch.cat([self.dt_s * (state[:, p : 2 * p] + out), out], dim=1)
+
+    def next_from_delta(self, state: Tensor, delta: Tensor) -> Tensor:
+        """Apply a core-state change: add, wrap angles, shift the lagged frames."""
+        core = state[:, : self._core] + delta
+        core = torch.where(self._core_angle_mask, _wrap(core), core)
+        if not self._h:
+            return core
+        p = self._p
+        return torch.cat([core, state[:, :p], state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
+
+    def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
+        """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m] (clipped to the limit).
+
+        ``generator`` is accepted (and ignored) so that a single model and an ensemble can be used
+        interchangeably.
+        """
+        state, torque_nm = self._check(state, torque_nm)
+        return self.next_from_delta(state, self.predict_delta(state, torque_nm))
+
+    def config(self) -> dict[str, Any]:
+        """Constructor arguments (for JSON metadata)."""
+        return {
+            "layout": self.layout.to_dict(),
+            "dt_s": self.dt_s,
+            "torque_limit_nm": self.torque_limit_nm,
+            "hidden_widths": list(self.hidden_widths),
+            "activation": self.activation,
+            "integrate_positions": self.integrate_positions,
+        }
+
+
+class DynamicsEnsemble(nn.Module):
+    """Several :class:`DynamicsModel` members with the same layout (trained from different seeds and
+    bootstrap resamples).
+
+    :meth:`predict_next` picks, for every row independently, one member uniformly at random (drawn
+    from ``generator``), as in MBPO-style model rollouts; ``member=k`` uses member ``k`` for all rows
+    and ``member="mean"`` averages the members' predicted changes.
+    """
+
+    def __init__(self, members: Sequence[DynamicsModel]) -> None:
+        super().__init__()
+        members = list(members)
+        if not members or not all(isinstance(m, DynamicsModel) for m in members):
+            raise ValueError("members must be a non-empty list of DynamicsModel")
+        first = members[0].config()
+        for m in members[1:]:
+            if m.config() != first:
+                raise ValueError(f"all members must share one configuration; {m.config()} != {first}")
+        self.members = nn.ModuleList(members)
+        self.layout = members[0].layout
+        self.dt_s = members[0].dt_s
+        self.torque_limit_nm = members[0].torque_limit_nm
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def predict_next_all(self, state: Tensor, torque_nm: Tensor) -> Tensor:
+        """Every member's next state, shape ``(K, B, d)``."""
+        return torch.stack([m.predict_next(state, torque_nm) for m in self.members])
+
+    def predict_next(
+        self,
+        state: Tensor,
+        torque_nm: Tensor,
+        generator: Optional[torch.Generator] = None,
+        member: int | str | None = None,
+    ) -> Tensor:
+        """Next state ``(B, d)``: a random member per row (default), member ``k``, or ``"mean"``."""
+        if isinstance(member, int) and not isinstance(member, bool):
+            if not 0 <= member < len(self.members):
+                raise ValueError(f"member must be in [0, {len(self.members)}), got {member}")
+            return self.members[member].predict_next(state, torque_nm)
+        first = self.members[0]
+        state, torque_nm = first._check(state, torque_nm)
+        if member == "mean":
+            delta = torch.stack([m.predict_delta(state, torque_nm) for m in self.members]).mean(0)
+            return first.next_from_delta(state, delta)
+        if member is not None:
+            raise ValueError(f"member must be an int, 'mean' or None, got {member!r}")
+        if len(self.members) == 1:
+            return first.predict_next(state, torque_nm)
+        deltas = torch.stack([m.predict_delta(state, torque_nm) for m in self.members])  # (K, B, 2P)
+        pick = torch.randint(len(self.members), (state.shape[0],), generator=generator, device=state.device)
+        delta = deltas[pick, torch.arange(state.shape[0], device=state.device)]
+        return first.next_from_delta(state, delta)
+
+    def config(self) -> dict[str, Any]:
+        """Members' constructor arguments plus the ensemble size."""
+        return dict(self.members[0].config(), ensemble_size=len(self.members))
+
+
+# ---------------------------------------------------------------------------------------- files
+def _paths(path: str | Path) -> tuple[Path, Path]:
+    path = Path(path)
+    if path.suffix in (".pt", ".json"):
+        path = path.with_suffix("")
+    return path.with_name(path.name + ".pt"), path.with_name(path.name + ".json")
+
+
+def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None) -> tuple[Path, Path]:
+    """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``).
+
+    Returns
+    -------
+    (Path, Path)
+        The two files written.
+    """
+    from .. import __version__
+
+    if not isinstance(model, (DynamicsModel, DynamicsEnsemble)):
+        raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")
+    weights, meta_path = _paths(path)
+    weights.parent.mkdir(parents=True, exist_ok=True)
+    kind = "ensemble" if isinstance(model, DynamicsEnsemble) else "single"
+    config = model.config()
+    meta = {
+        "schema": MODEL_SCHEMA_NAME,
+        "schema_version": MODEL_SCHEMA_VERSION,
+        "softpend_version": __version__,
+        "kind": kind,
+        "config": config,
+        "metadata": metadata or {},
+    }
+    text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)
+    torch.save(model.state_dict(), weights)
+    meta_path.write_text(text + "\n")
+    return weights, meta_path
+
+
+def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict[str, Any]]:
+    """Read a model written by :func:`save_model` (``torch.load(..., weights_only=True)``).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``<path>``, ``<path>.pt`` or ``<path>.json``.
+
+    Returns
+    -------
+    (model, metadata)
+        The model in eval mode, and the ``metadata`` dict given to :func:`save_model`.
+
+    Raises
+    ------
+    ValueError
+        If the files are missing, of another schema, or do not match each other.
+    """
+    weights, meta_path = _paths(path)
+    for p in (weights, meta_path):
+        if not p.exists():
+            raise ValueError(f"model file not found: {p}")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{meta_path}: not valid JSON: {exc}") from exc
+    if meta.get("schema") != MODEL_SCHEMA_NAME or meta.get("schema_version") != MODEL_SCHEMA_VERSION:
+        raise ValueError(f"{meta_path}: not a {MODEL_SCHEMA_NAME} v{MODEL_SCHEMA_VERSION} file")
+    config = dict(meta["config"])
+    size = int(config.pop("ensemble_size", 1))
+    config["layout"] = StateLayout.from_dict(config["layout"])
+    members = [DynamicsModel(**config) for _ in range(size)]
+    model: DynamicsModel | DynamicsEnsemble = DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+    try:
+        state = torch.load(weights, weights_only=True, map_location="cpu")
+        model.load_state_dict(state, strict=True)
+    except (RuntimeError, OSError, EOFError, KeyError) as exc:
+        raise ValueError(f"{weights}: weights do not match {meta_path}: {exc}") from exc
+    model.eval()
+    return model, meta["metadata"]

@@ -179,7 +179,7 @@ def run_control_loop(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=round(duration_s, 2), unit="s", desc="rig loop")
+        bar = tqdm(total=round(duration_s, 1), unit="s", desc="rig loop", mininterval=0.5)
     send_times: list[float] = []
     samples = dropped = lost_count = watchdog = 0
     t0_device: Optional[float] = None
@@ -216,8 +216,9 @@ def run_control_loop(
                                 state.flags, tip.x_m, tip.y_m, tip.lost])
             samples += 1
             if bar is not None:
-                bar.n = round(min(t, duration_s), 2)
-                bar.refresh()
+                shown = round(min(t, duration_s), 1)
+                if shown > bar.n:
+                    bar.update(round(shown - bar.n, 1))  # respects mininterval: no redraw every tick
             if t >= duration_s:
                 break
     except BaseException:

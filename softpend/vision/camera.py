@@ -413,7 +413,7 @@ def render_video(
     if progress:
         from tqdm.auto import tqdm
 
-        iterator = tqdm(iterator, total=len(frame_times), desc="rendering", unit="frame")
+        iterator = tqdm(iterator, total=len(frame_times), desc="rendering", unit="frame", mininterval=1.0)
     try:
         for i, (frame, tip) in enumerate(iterator):
             if i in hidden:

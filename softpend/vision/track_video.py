@@ -176,7 +176,7 @@ def track_video(
             from tqdm.auto import tqdm
 
             total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None
-            iterator = tqdm(iterator, total=total, desc="tracking", unit="frame")
+            iterator = tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0)
         with SampleLog(out_csv, TRACK_COLUMNS, metadata={"video": str(video), "calibration": calibration.to_json()},
                        fsync_every_s=1.0) as log:
             hub = hub_marker_tracker(calibration, first.shape) if track_hub else None

@@ -60,8 +60,11 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
     assert log2.plant_s == pytest.approx(5.0)
     assert model2.replay_buffer.size() == buffer_before + 2 * config.episode_agent_steps
     assert any(not torch.equal(a, b) for a, b in zip(weights_before, model2.q_net.parameters()))  # it kept learning
-    agent, loaded_config = load_agent(tmp_path)
+    agent, loaded_config = load_agent(tmp_path, which="final")
     assert loaded_config == config
+    assert (tmp_path / "best_agent.zip").exists()
+    with pytest.raises(ValueError, match="which"):
+        load_agent(tmp_path, which="latest")
     summary = evaluate_agent(agent, loaded_config, seeds=(0,), duration_s=0.5)
     assert len(summary.results) == 1 and summary.results[0].time_s[-1] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="config differs"):

@@ -12,6 +12,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("agent", metavar="AGENT", help="run folder of softpend train, or its agent.zip")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="start-noise seeds (one episode each)")
     parser.add_argument("--duration-s", type=float, default=10.0, help="episode length [s]")
+    parser.add_argument("--which", choices=["best", "final"], default="best",
+                        help="the agent of the best periodic evaluation (default) or the final one")
     parser.add_argument("--json", action="store_true", help="print JSON (per-seed metrics and the summary row)")
     parser.set_defaults(func=run)
 
@@ -19,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..rl.dqn import evaluate_agent, load_agent
 
-    model, config = load_agent(args.agent)
+    model, config = load_agent(args.agent, which=args.which)
     summary = evaluate_agent(model, config, seeds=tuple(args.seeds), duration_s=args.duration_s, name=str(args.agent))
     if args.json:
         clean = lambda v: None if isinstance(v, float) and math.isinf(v) else v  # noqa: E731

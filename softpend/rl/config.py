@@ -12,6 +12,10 @@ Choices that differ from the registered environments
 * **Episode length** ``episode_s = 5 s`` (the registered envs truncate at 10 s).  Swinging up takes about
   2-3 s, so a 5 s episode covers the swing-up and a few seconds of balancing; evaluation always runs the
   full 10 s from hanging.  Plant seconds are counted from the steps actually simulated.
+* **Training starts** ``training_start = "random"``: each training episode starts with the straight rod at
+  rest at a uniformly random hub angle (the environment's ``start="random"``), as an operator could place it;
+  evaluation always starts hanging.  From hanging only, DQN finds the "spin over the top" local optimum of
+  the reward first and takes much longer to discover catching and balancing.
 * **Action repeat** ``action_repeat = 4``: the agent picks one of ``n_torque_levels`` torques every 4 plant
   steps (25 Hz, the torque is held in between), so that the discount ``gamma = 0.99`` spans ~4 s, long
   enough to credit the pumping swing-up.  The reward of an agent step is the sum over its plant steps.
@@ -45,6 +49,9 @@ class DQNConfig:
         Training episode length [s] (truncation; there is no terminal state).
     action_repeat : int
         Plant steps (``dt_s = 0.01 s`` each) per agent decision.
+    training_start : {"random", "hanging", "upright"}
+        Start distribution of *training* episodes (:class:`softpend.envs.SoftPendulumEnv` ``start``);
+        evaluation always starts hanging.
 
     DQN (stable-baselines3 names; counted in agent steps)
     ------------------------------------------------------
@@ -73,6 +80,7 @@ class DQNConfig:
     n_torque_levels: int = 5
     episode_s: float = 5.0
     action_repeat: int = 4
+    training_start: str = "random"
     learning_rate: float = 6.3e-4
     buffer_size: int = 100_000
     learning_starts: int = 500
@@ -98,6 +106,8 @@ class DQNConfig:
              "gradient_steps", "target_update_interval", "eval_every_episodes",
              "checkpoint_every_episodes"),
         )
+        if self.training_start not in ("random", "hanging", "upright"):
+            raise ValueError(f"training_start must be 'random', 'hanging' or 'upright', got {self.training_start!r}")
         if self.n_torque_levels < 2:
             raise ValueError(f"n_torque_levels must be >= 2, got {self.n_torque_levels!r}")
         if isinstance(self.learning_starts, bool) or int(self.learning_starts) != self.learning_starts or self.learning_starts < 0:

@@ -11,6 +11,7 @@ Run folder layout::
 
     config.json          the config (softpend.rl.config.save_config)
     agent.zip            final agent (stable-baselines3 DQN.save)
+    best_agent.zip       agent of the best periodic evaluation (see load_agent)
     log.json             TrainingLog: episode and evaluation rows
     checkpoint/          latest checkpoint: agent.zip, replay_buffer.pkl, log.json (+ extra files of MBPO)
 """
@@ -28,7 +29,7 @@ import numpy as np
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from ..evaluation import evaluate_controller, metrics_from_trajectory
 from ..plant import OBSERVATION_NAMES
@@ -135,6 +136,7 @@ class TrainingCallback(BaseCallback):
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
         self._reset_episode()
         self.bar: Optional[tqdm] = None
+        self.best_score = min((_score(row) for row in log.evaluations), default=None)
 
     def _reset_episode(self) -> None:
         self._return = 0.0
@@ -227,6 +229,9 @@ class TrainingCallback(BaseCallback):
             "wall_s": self.wall_s(),
         }
         self.log.evaluations.append(row)
+        if self.best_score is None or _score(row) <= self.best_score:
+            self.best_score = _score(row)
+            self.model.save(self.run_dir / "best_agent.zip")
         return row
 
     def checkpoint(self) -> Path:
@@ -247,6 +252,11 @@ class TrainingCallback(BaseCallback):
         tmp.rename(final)
         shutil.rmtree(old, ignore_errors=True)
         return final
+
+
+def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:
+    """Order of evaluations for keeping the best agent: all seeds swung up first, then the worst std."""
+    return (not evaluation["all_swung_up"], float(evaluation["max_upright_std_rad"]))
 
 
 def _check_run_args(episodes: int, run_dir: Path | str) -> Path:
@@ -354,11 +364,24 @@ def train_dqn(
     )
 
 
-def load_agent(run_dir: Path | str) -> tuple[DQN, DQNConfig]:
-    """The final agent of a run folder (or ``agent.zip`` path) and its config."""
+def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:
+    """An agent of a run folder and its config.
+
+    Parameters
+    ----------
+    run_dir : path
+        Run folder, or the path of an agent ``.zip`` inside it.
+    which : {"best", "final"}
+        ``"best"``: the agent of the best periodic evaluation (``best_agent.zip``: every evaluation seed
+        swung up, then the smallest worst-seed upright std; later wins ties) -- model selection on the
+        evaluation seeds, as stable-baselines3's ``EvalCallback``; ``"final"``: the agent at the end of
+        training (``agent.zip``).
+    """
+    if which not in ("best", "final"):
+        raise ValueError(f"which must be 'best' or 'final', got {which!r}")
     path = Path(run_dir)
     folder = path.parent if path.suffix == ".zip" else path
-    agent = path if path.suffix == ".zip" else path / "agent.zip"
+    agent = path if path.suffix == ".zip" else path / ("best_agent.zip" if which == "best" else "agent.zip")
     if not agent.exists():
         raise FileNotFoundError(f"no agent at {agent}")
     config = load_config(folder / "config.json")

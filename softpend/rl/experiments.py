@@ -16,7 +16,7 @@ import numpy as np
 from .config import DQNConfig, MBPOConfig, load_config
 from .training_log import BALANCE_STD_RAD, TrainingLog
 
-__all__ = ["median_real_s_to_balance", "train_seeds", "summary_table"]
+__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians", "run_folder", "summary_table", "train_seeds"]
 
 
 def train_seeds(
@@ -39,7 +39,7 @@ def train_seeds(
         raise ValueError("algo 'mbpo' needs an MBPOConfig")
     logs = []
     for seed in seeds:
-        run_dir = Path(root) / f"{algo}-seed{seed}"
+        run_dir = run_folder(root, algo, int(seed))
         log_path = run_dir / "log.json"
         if log_path.exists() and (run_dir / "config.json").exists() and load_config(run_dir / "config.json") == config:
             log = TrainingLog.load(log_path)
@@ -83,3 +83,44 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
 def median_real_s_to_balance(logs: Sequence[TrainingLog], std_rad: float = BALANCE_STD_RAD) -> float:
     """Median over seeds of the plant seconds until the evaluation balances (``inf`` counts as never)."""
     return float(np.median([log.real_s_to_balance(std_rad) for log in logs]))
+
+
+def figure_configs(torque_limit_nm: float = 0.06, episode_s: float = 5.0, rollouts_per_real_step: int = 9,
+                   mbpo_random_episodes: int = 3) -> dict[str, DQNConfig]:
+    """The configs of the book's Figures 4-6 (defaults otherwise): ``{"dqn": ..., "mbpo": ...}``."""
+    return {
+        "dqn": DQNConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s),
+        "mbpo": MBPOConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
+                           initial_random_episodes=mbpo_random_episodes),
+    }
+
+
+#: Method names used in the figures, by algorithm.
+METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
+
+
+def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
+                progress: bool = True, **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
+    """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`)."""
+    configs = figure_configs(**config_kwargs)
+    return {
+        METHOD_NAMES["dqn"]: train_seeds("dqn", configs["dqn"], seeds, episodes_dqn, runs_root, progress),
+        METHOD_NAMES["mbpo"]: train_seeds("mbpo", configs["mbpo"], seeds, episodes_mbpo, runs_root, progress),
+    }
+
+
+def run_folder(runs_root: Path | str, algo: str, seed: int) -> Path:
+    """Folder of one run made by :func:`train_seeds`."""
+    return Path(runs_root) / f"{algo}-seed{seed}"
+
+
+def method_medians(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Median over seeds of every numeric column of :func:`summary_table` rows, per method."""
+    methods: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        methods.setdefault(row["method"], []).append(row)
+    out = {}
+    for method, group in methods.items():
+        keys = [k for k, v in group[0].items() if isinstance(v, (int, float)) and not isinstance(v, bool) and k != "seed"]
+        out[method] = {"method": method, **{k: float(np.median([g[k] for g in group])) for k in keys}}
+    return out

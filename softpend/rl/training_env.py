@@ -65,9 +65,10 @@ def make_base_env(config: DQNConfig, start: str = "hanging") -> SoftPendulumDisc
     )
 
 
-def make_training_env(config: DQNConfig, start: str = "hanging") -> gym.Env:
-    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(...)), episode_agent_steps)`` for a config."""
-    return TimeLimit(ActionRepeat(make_base_env(config, start), config.action_repeat), config.episode_agent_steps)
+def make_training_env(config: DQNConfig) -> gym.Env:
+    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(start=config.training_start)), episode_agent_steps)``."""
+    env = make_base_env(config, config.training_start)
+    return TimeLimit(ActionRepeat(env, config.action_repeat), config.episode_agent_steps)
 
 
 class HeldActionController(GymPolicyController):

@@ -1,0 +1,157 @@
+"""Figures 4-6 of the report: learning curves, the swing-up time course, and the upright error over time.
+
+Thin matplotlib helpers for the notebooks; the numbers come from :mod:`softpend.rl.curves` and the shared
+evaluation results (:class:`softpend.evaluation.EvaluationResult`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping, Optional, Sequence
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ..evaluation import EvaluationResult
+from ..plotting import draw_rod
+from .curves import aggregate, episodes_to_asymptote, moving_average
+from .training_log import BALANCE_STD_RAD, TrainingLog
+
+__all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
+
+COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
+
+
+def _band(ax, agg, color, label):
+    ax.plot(agg["x"], agg["mean"], color=color, label=label)
+    ax.fill_between(agg["x"], agg["min"], agg["max"], color=color, alpha=0.2, lw=0)
+
+
+def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], window: int = 10, fig: Optional[plt.Figure] = None):
+    """Figure 4: return and evaluation upright std against episodes and real plant seconds.
+
+    Mean over seeds (line) and min-max spread (band); returns smoothed with a trailing ``window``-episode
+    moving average; dotted vertical lines mark each method's median episode of reaching the asymptotic
+    reward (:func:`softpend.rl.curves.episodes_to_asymptote`).
+    """
+    fig = fig or plt.figure(figsize=(11, 7))
+    axes = fig.subplots(2, 2, sharey="row")
+    for i, (method, logs) in enumerate(logs_by_method.items()):
+        color = COLORS.get(method, f"C{i}")
+        for col, axis in enumerate(("episode", "plant_s")):
+            _band(axes[0, col], aggregate(logs, "return", axis=axis, window=window), color, method)
+            _band(axes[1, col], aggregate(logs, "max_upright_std_rad", axis=axis, table="evaluations"), color, method)
+        asym = float(np.median([episodes_to_asymptote(log.column("return"), window=window) for log in logs]))
+        if math.isfinite(asym):
+            axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
+    axes[0, 0].set_ylabel(f"episode return ({window}-episode mean)")
+    axes[1, 0].set_ylabel("evaluation upright std [rad]\n(worst of the evaluation seeds)")
+    for col in range(2):
+        axes[1, col].axhline(BALANCE_STD_RAD, color="k", ls="--", lw=0.8)
+        axes[1, col].set_yscale("log")
+    axes[1, 0].set_xlabel("training episodes")
+    axes[1, 1].set_xlabel("real plant time [s]")
+    axes[0, 0].legend()
+    fig.tight_layout()
+    return fig
+
+
+def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: Optional[plt.Figure] = None):
+    """Figure 5: tip angle, hub angle and torque against time, and a filmstrip of rod shapes.
+
+    Parameters
+    ----------
+    result : EvaluationResult
+        One evaluation episode (from the shared evaluation).
+    link_points : callable
+        ``q -> (n + 1, 2)`` joint positions [m] (``plant.link_points_m``).
+    n_frames : int
+        Rod shapes in the filmstrip, evenly spaced over the swing-up (and one second after it).
+    """
+    fig = fig or plt.figure(figsize=(11, 8))
+    grid = fig.add_gridspec(4, 1, height_ratios=[1, 1, 1, 1.3])
+    t = result.time_s
+    ax = [fig.add_subplot(grid[i]) for i in range(3)]
+    ax[0].plot(t, _break_at_wraps(result.theta_rad), color="C0")
+    ax[0].axhspan(-0.2, 0.2, color="C2", alpha=0.15, lw=0)
+    ax[0].set_ylabel(r"tip angle $\theta$ [rad]")
+    ax[1].plot(t, _break_at_wraps(result.phi_rad), color="C1")
+    ax[1].set_ylabel(r"hub angle $\phi$ [rad]")
+    ax[2].step(t, result.torque_nm, where="post", color="C3")
+    ax[2].set_ylabel("torque [N m]")
+    ax[2].set_xlabel("time [s]")
+    if math.isfinite(result.swing_up_time_s):
+        for a in ax:
+            a.axvline(result.swing_up_time_s, color="k", ls=":", lw=1)
+    end = min(t[-1], (result.swing_up_time_s + 1.0) if math.isfinite(result.swing_up_time_s) else t[-1])
+    times = np.linspace(0.0, end, n_frames)
+    strip = fig.add_subplot(grid[3])
+    spacing = 0.7
+    for k, time_s in enumerate(times):
+        i = int(np.argmin(np.abs(t - time_s)))
+        points = np.asarray(link_points(result.joint_angles_rad[i])) + np.array([k * spacing, 0.0])
+        draw_rod(strip, points, color="C0", joints=True)
+        strip.plot(k * spacing, 0, "s", color="k", ms=6)
+        strip.text(k * spacing, -0.42, f"{t[i]:.2f} s", ha="center", fontsize=8)
+    strip.set_ylim(-0.48, 0.36)
+    strip.set_xlim(-0.4, (n_frames - 1) * spacing + 0.4)
+    strip.axis("off")
+    fig.tight_layout()
+    return fig
+
+
+def _break_at_wraps(angle_rad: np.ndarray) -> np.ndarray:
+    """A copy with NaN where a wrapped angle jumps across +-pi, so plotted lines do not draw the jump."""
+    out = np.asarray(angle_rad, dtype=float).copy()
+    jumps = np.flatnonzero(np.abs(np.diff(out)) > np.pi) + 1
+    out[jumps] = np.nan
+    return out
+
+
+def animate_swingup(result: EvaluationResult, link_points, length_m: float, every: int = 4):
+    """An animation of the rod over an evaluation episode (``every`` plant steps per frame), for the HTML book."""
+    from matplotlib import animation
+
+    fig, ax = plt.subplots(figsize=(4, 4))
+    ax.set_xlim(-1.2 * length_m, 1.2 * length_m)
+    ax.set_ylim(-1.2 * length_m, 1.2 * length_m)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    (line,) = ax.plot([], [], "-o", color="C0", lw=2.5, ms=3)
+    text = ax.text(0.02, 0.95, "", transform=ax.transAxes)
+    frames = range(0, len(result.time_s), every)
+
+    def update(i):
+        points = np.asarray(link_points(result.joint_angles_rad[i]))
+        line.set_data(points[:, 0], points[:, 1])
+        text.set_text(f"t = {result.time_s[i]:.2f} s")
+        return line, text
+
+    anim = animation.FuncAnimation(fig, update, frames=frames, interval=1000 * every * float(result.time_s[1] - result.time_s[0]), blit=True)
+    plt.close(fig)
+    return anim
+
+
+def upright_error_over_time(results: Sequence[EvaluationResult], window_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Time-averaged upright error ``|theta|`` (trailing ``window_s`` moving average), mean over episodes."""
+    if len(results) == 0:
+        raise ValueError("results must not be empty")
+    n = min(len(r.time_s) for r in results)
+    dt = float(results[0].time_s[1] - results[0].time_s[0])
+    window = max(1, int(round(window_s / dt)))
+    errors = np.array([moving_average(np.abs(r.theta_rad[:n]), window) for r in results])
+    return results[0].time_s[:n], errors.mean(axis=0)
+
+
+def plot_upright_error(results_by_method: Mapping[str, Sequence[EvaluationResult]], window_s: float = 0.5, ax=None):
+    """Figure 6: the time-averaged upright error of each method's controller (mean over evaluation seeds)."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4))
+    for i, (method, results) in enumerate(results_by_method.items()):
+        t, err = upright_error_over_time(results, window_s)
+        ax.plot(t, err, color=COLORS.get(method, f"C{i}"), label=method)
+    ax.axhline(BALANCE_STD_RAD, color="k", ls="--", lw=0.8, label=f"{BALANCE_STD_RAD} rad")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(rf"$|\theta|$, {window_s:g} s moving average [rad]")
+    ax.legend()
+    return ax

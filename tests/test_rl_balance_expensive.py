@@ -1,0 +1,37 @@
+"""Expensive: the default DQN (and DQN-MBPO) configs train controllers that swing the rod up and balance it.
+
+Run with ``make test-expensive`` (or ``pytest -m expensive tests/test_rl_balance_expensive.py``); each takes
+several minutes on two cores.
+"""
+
+import math
+
+import pytest
+
+from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.dqn import evaluate_agent, train_dqn
+from softpend.rl.mbpo import train_mbpo
+from softpend.rl.training_log import BALANCE_STD_RAD
+
+
+def _balances(agent, config) -> None:
+    summary = evaluate_agent(agent, config, seeds=(10, 11, 12), duration_s=10.0)
+    for result in summary.results:
+        assert math.isfinite(result.swing_up_time_s), f"seed {result.seed} never swung up"
+        assert result.upright_std_rad <= BALANCE_STD_RAD, f"seed {result.seed}: std {result.upright_std_rad:.3f} rad"
+
+
+@pytest.mark.expensive
+def test_dqn_learns_to_swing_up_and_balance(tmp_path):
+    config = DQNConfig()
+    agent, log = train_dqn(config, seed=0, episodes=150, run_dir=tmp_path, progress=False)
+    assert math.isfinite(log.real_s_to_balance())
+    _balances(agent, config)
+
+
+@pytest.mark.expensive
+def test_mbpo_learns_to_swing_up_and_balance(tmp_path):
+    config = MBPOConfig()
+    agent, log = train_mbpo(config, seed=0, episodes=100, run_dir=tmp_path, progress=False)
+    assert math.isfinite(log.real_s_to_balance())
+    _balances(agent, config)

@@ -1,0 +1,32 @@
+"""PILCO (Deisenroth & Rasmussen, 2011) on the soft pendulum, in PyTorch.
+
+* :mod:`~softpend.pilco.moments` -- exact moment matching (GP prediction at a Gaussian input, sin/cos of
+  Gaussian angles, the sine saturation, the saturating cost);
+* :mod:`~softpend.pilco.gp` -- GP dynamics model (SE-ARD, one GP per output, penalised marginal likelihood);
+* :mod:`~softpend.pilco.policy` -- the saturated RBF-network policy;
+* :mod:`~softpend.pilco.propagation` -- state representation and the moment-matching rollout with its cost;
+* :mod:`~softpend.pilco.controller` -- a policy as a :class:`softpend.evaluation.Controller` (zero-order hold);
+* :mod:`~softpend.pilco.loop` -- the PILCO loop on the plant.
+"""
+
+from .controller import PilcoController, RandomTorqueController
+from .gp import GPHyperparameters, MultiOutputGP
+from .loop import PilcoConfig, PilcoResult, TrialRecord, run_pilco
+from .policy import RBFPolicy
+from .propagation import STATE_SPECS, Propagator, StateSpec, state_spec
+
+__all__ = [
+    "GPHyperparameters",
+    "MultiOutputGP",
+    "PilcoConfig",
+    "PilcoController",
+    "PilcoResult",
+    "Propagator",
+    "RBFPolicy",
+    "RandomTorqueController",
+    "STATE_SPECS",
+    "StateSpec",
+    "TrialRecord",
+    "run_pilco",
+    "state_spec",
+]

@@ -1,0 +1,93 @@
+"""A PILCO policy (or random torques) as a :class:`softpend.evaluation.Controller` with a zero-order hold.
+
+The plant steps at ``dt_s`` (0.01 s by default) while PILCO acts at its control period ``control_dt_s``
+(default 0.05 s): the controller recomputes the torque when ``time_s`` reaches the next multiple of
+``control_dt_s`` and holds it in between.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..plant import Observation
+from .policy import RBFPolicy
+from .propagation import StateSpec
+
+__all__ = ["PilcoController", "RandomTorqueController"]
+
+
+class _HoldController:
+    def __init__(self, control_dt_s: float) -> None:
+        if not math.isfinite(control_dt_s) or control_dt_s <= 0:
+            raise ValueError(f"control_dt_s must be positive and finite, got {control_dt_s!r}")
+        self.control_dt_s = float(control_dt_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self._next_update_s = 0.0
+        self._torque_nm = 0.0
+        self._n_updates = 0
+
+    def _compute(self, observation: Observation) -> float:
+        raise NotImplementedError
+
+    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
+        if time_s >= self._next_update_s - 1e-9:
+            self._torque_nm = float(self._compute(observation))
+            self._n_updates += 1
+            self._next_update_s = self._n_updates * self.control_dt_s
+        return self._torque_nm
+
+
+class PilcoController(_HoldController):
+    """Run an :class:`RBFPolicy` on the observed variables of :class:`StateSpec` ``spec``.
+
+    Parameters
+    ----------
+    policy : RBFPolicy
+    spec : StateSpec
+        Which observed variables the policy sees (only rates and sin/cos of angles enter it, so the
+        wrapped angles of the observation are used as they are).
+    control_dt_s : float
+        Control period [s] (zero-order hold in between).
+    """
+
+    def __init__(self, policy: RBFPolicy, spec: StateSpec, control_dt_s: float) -> None:
+        if policy.n_inputs != spec.n_model_inputs:
+            raise ValueError(f"policy takes {policy.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
+        self.policy = policy
+        self.spec = spec
+        super().__init__(control_dt_s)
+
+    def _compute(self, observation: Observation) -> float:
+        values = observation.as_array()
+        state = self.spec.from_observations(values[None, :])
+        return float(self.policy.torque_nm(self.spec.model_inputs(state))[0])
+
+
+class RandomTorqueController(_HoldController):
+    """Uniform random torques in ``[-torque_limit_nm, torque_limit_nm]``, a new draw every control period.
+
+    Parameters
+    ----------
+    torque_limit_nm : float
+    control_dt_s : float
+    seed : int
+        Seed of the draws (re-seeded on every :meth:`reset`, so an episode is reproducible).
+    """
+
+    def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int) -> None:
+        if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
+            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.seed = int(seed)
+        super().__init__(control_dt_s)
+
+    def reset(self) -> None:
+        super().reset()
+        self._rng = np.random.default_rng(self.seed)
+
+    def _compute(self, observation: Observation) -> float:
+        return float(self._rng.uniform(-self.torque_limit_nm, self.torque_limit_nm))

@@ -1,0 +1,217 @@
+"""Gaussian-process regression for PILCO's dynamics model: one GP per output, squared-exponential ARD kernel.
+
+Each output ``a`` has its own hyperparameters: log length-scales ``log l_a`` (one per input), the log signal
+standard deviation ``log sf_a`` and the log noise standard deviation ``log sn_a``; the kernel is
+``k(x, x') = sf^2 exp(-sum_d (x_d - x'_d)^2 / (2 l_d^2))`` and the prior mean is zero (the targets are state
+differences, so zero mean means "the state stays where it is").
+
+Hyperparameters maximise the log marginal likelihood plus the robustness penalty of the PILCO MATLAB code
+(``hypCurb.m``): ``((log l_d - log std(x_d)) / log 100)^30`` keeps every length-scale within a factor of about
+100 of the spread of its input, and ``((log sf - log sn) / log 500)^30`` keeps the signal-to-noise ratio
+below about 500 (noise-free simulator data would otherwise drive the noise to zero and the kernel matrix to
+singularity).  The optimiser is SciPy's L-BFGS-B with PyTorch gradients, in float64.
+
+When the data set grows beyond ``max_points`` the model keeps a subset (data subsampling instead of a sparse
+GP approximation): the points of the most recent trial are always kept (that is where the current policy
+goes) and the rest is drawn uniformly at random, with an explicit seed, from the older data.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import scipy.optimize
+import torch
+
+from .moments import gp_moments
+
+__all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset"]
+
+DTYPE = torch.float64
+
+
+@dataclass
+class GPHyperparameters:
+    """Hyperparameters of ``E`` independent GPs on ``D`` inputs (natural logs)."""
+
+    log_lengthscales: np.ndarray  # (E, D)
+    log_signal_std: np.ndarray  # (E,)
+    log_noise_std: np.ndarray  # (E,)
+
+    def to_dict(self) -> dict[str, list]:
+        return {k: np.asarray(v).tolist() for k, v in self.__dict__.items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "GPHyperparameters":
+        return cls(**{k: np.asarray(v, dtype=float) for k, v in data.items()})
+
+
+def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.ndarray:
+    """Indices of at most ``max_points`` of ``n_points`` data points: the last ``recent`` always, the rest at random.
+
+    Parameters
+    ----------
+    n_points : int
+        Size of the data set (points are in chronological order).
+    max_points : int
+        Largest subset size.
+    recent : int
+        Number of most recent points that are always kept (capped at ``max_points``).
+    seed : int
+        Seed of the random draw.
+    """
+    if max_points < 1:
+        raise ValueError(f"max_points must be >= 1, got {max_points!r}")
+    if n_points <= max_points:
+        return np.arange(n_points)
+    recent = min(max(int(recent), 0), max_points)
+    newest = np.arange(n_points - recent, n_points)
+    older = np.random.default_rng(seed).choice(n_points - recent, size=max_points - recent, replace=False)
+    return np.sort(np.concatenate([np.sort(older), newest]))
+
+
+class MultiOutputGP:
+    """``E`` independent GP regressors sharing the training inputs (SE-ARD kernel, zero prior mean).
+
+    Parameters
+    ----------
+    inputs : array (N, D)
+        Training inputs.
+    targets : array (N, E)
+        Training targets.
+    hyperparameters : GPHyperparameters, optional
+        Start values (default: length-scales = input standard deviations, ``sf = std(y)``, ``sn = sf / 10``).
+    """
+
+    def __init__(self, inputs: np.ndarray, targets: np.ndarray, hyperparameters: Optional[GPHyperparameters] = None):
+        inputs = np.asarray(inputs, dtype=float)
+        targets = np.asarray(targets, dtype=float)
+        if inputs.ndim != 2 or targets.ndim != 2 or len(inputs) != len(targets):
+            raise ValueError(
+                f"inputs must be (N, D) and targets (N, E) with the same N, got {inputs.shape} and {targets.shape}"
+            )
+        if len(inputs) < 2:
+            raise ValueError(f"inputs must hold at least 2 points, got {len(inputs)}")
+        if not (np.all(np.isfinite(inputs)) and np.all(np.isfinite(targets))):
+            raise ValueError("inputs and targets must be finite")
+        self.inputs_np = inputs
+        self.targets_np = targets
+        self.n_inputs = inputs.shape[1]
+        self.n_outputs = targets.shape[1]
+        self.input_std = np.maximum(inputs.std(axis=0), 1e-6)
+        if hyperparameters is None:
+            target_std = np.maximum(targets.std(axis=0), 1e-6)
+            hyperparameters = GPHyperparameters(
+                log_lengthscales=np.tile(np.log(self.input_std), (self.n_outputs, 1)),
+                log_signal_std=np.log(target_std),
+                log_noise_std=np.log(target_std / 10.0),
+            )
+        self.hyperparameters = hyperparameters
+        self._update_cache()
+
+    # ------------------------------------------------------------------ fitting
+    @staticmethod
+    def _neg_log_likelihood(
+        params: torch.Tensor, x: torch.Tensor, y: torch.Tensor, log_input_std: torch.Tensor,
+        lengthscale_curb: float, snr_curb: float,
+    ) -> torch.Tensor:
+        d = x.shape[1]
+        log_ell, log_sf, log_sn = params[:d], params[d], params[d + 1]
+        scaled = x / torch.exp(log_ell)
+        sq = torch.sum(scaled**2, dim=1)
+        dist2 = torch.clamp(sq.unsqueeze(1) + sq.unsqueeze(0) - 2.0 * scaled @ scaled.T, min=0.0)
+        n = x.shape[0]
+        k = torch.exp(2 * log_sf - 0.5 * dist2) + (torch.exp(2 * log_sn) + 1e-10) * torch.eye(n, dtype=x.dtype)
+        chol = torch.linalg.cholesky(k)
+        alpha = torch.cholesky_solve(y.unsqueeze(1), chol).squeeze(1)
+        nll = 0.5 * y @ alpha + torch.sum(torch.log(torch.diagonal(chol))) + 0.5 * n * math.log(2 * math.pi)
+        p = 30
+        penalty = torch.sum(((log_ell - log_input_std) / math.log(lengthscale_curb)) ** p)
+        penalty = penalty + ((log_sf - log_sn) / math.log(snr_curb)) ** p
+        return nll + penalty
+
+    def fit(self, max_iterations: int = 100, lengthscale_curb: float = 100.0, snr_curb: float = 500.0) -> list[float]:
+        """Maximise each output's penalised log marginal likelihood (L-BFGS-B); returns the final objectives."""
+        if max_iterations < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {max_iterations!r}")
+        x = torch.as_tensor(self.inputs_np, dtype=DTYPE)
+        log_input_std = torch.as_tensor(np.log(self.input_std), dtype=DTYPE)
+        h = self.hyperparameters
+        objectives = []
+        for a in range(self.n_outputs):
+            y = torch.as_tensor(self.targets_np[:, a], dtype=DTYPE)
+            start = np.concatenate([h.log_lengthscales[a], [h.log_signal_std[a], h.log_noise_std[a]]])
+
+            def objective(theta: np.ndarray) -> tuple[float, np.ndarray]:
+                params = torch.tensor(theta, dtype=DTYPE, requires_grad=True)
+                try:
+                    value = self._neg_log_likelihood(params, x, y, log_input_std, lengthscale_curb, snr_curb)
+                except torch.linalg.LinAlgError:
+                    return 1e10, np.zeros_like(theta)
+                (grad,) = torch.autograd.grad(value, params)
+                return float(value.detach()), grad.numpy().astype(float)
+
+            result = scipy.optimize.minimize(
+                objective, start, jac=True, method="L-BFGS-B", options={"maxiter": int(max_iterations)}
+            )
+            theta = result.x
+            d = self.n_inputs
+            h.log_lengthscales[a] = theta[:d]
+            h.log_signal_std[a] = theta[d]
+            h.log_noise_std[a] = theta[d + 1]
+            objectives.append(float(result.fun))
+        self._update_cache()
+        return objectives
+
+    # ------------------------------------------------------------------ prediction
+    def _update_cache(self) -> None:
+        """Precompute ``beta = (K + sn^2 I)^{-1} y`` and ``(K + sn^2 I)^{-1}`` per output (constants for the policy search)."""
+        h = self.hyperparameters
+        x = torch.as_tensor(self.inputs_np, dtype=DTYPE)
+        y = torch.as_tensor(self.targets_np, dtype=DTYPE)
+        n = x.shape[0]
+        self.inputs = x
+        self.log_lengthscales = torch.as_tensor(h.log_lengthscales, dtype=DTYPE).clone()
+        self.log_signal_var = 2.0 * torch.as_tensor(h.log_signal_std, dtype=DTYPE)
+        betas, inv_ks = [], []
+        eye = torch.eye(n, dtype=DTYPE)
+        for a in range(self.n_outputs):
+            k = self._kernel(x, x, a) + (math.exp(2 * h.log_noise_std[a]) + 1e-10) * eye
+            chol = torch.linalg.cholesky(k)
+            inv_k = torch.cholesky_inverse(chol)
+            inv_ks.append(inv_k)
+            betas.append(inv_k @ y[:, a])
+        self.beta = torch.stack(betas)  # (E, N)
+        self.inv_kernel = torch.stack(inv_ks)  # (E, N, N)
+
+    def _kernel(self, x1: torch.Tensor, x2: torch.Tensor, a: int) -> torch.Tensor:
+        ell = torch.exp(self.log_lengthscales[a])
+        d = (x1.unsqueeze(1) - x2.unsqueeze(0)) / ell
+        return torch.exp(self.log_signal_var[a] - 0.5 * torch.sum(d * d, dim=2))
+
+    def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean and variance of the latent function at deterministic inputs ``x`` (M, D).
+
+        Returns
+        -------
+        mean, var : arrays (M, E)
+        """
+        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
+        if xt.shape[1] != self.n_inputs:
+            raise ValueError(f"x must have {self.n_inputs} columns, got {xt.shape[1]}")
+        means, variances = [], []
+        with torch.no_grad():
+            for a in range(self.n_outputs):
+                ks = self._kernel(xt, self.inputs, a)
+                means.append(ks @ self.beta[a])
+                variances.append(torch.exp(self.log_signal_var[a]) - torch.sum((ks @ self.inv_kernel[a]) * ks, dim=1))
+        return torch.stack(means, 1).numpy(), torch.clamp(torch.stack(variances, 1), min=0.0).numpy()
+
+    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Exact moment matching at a Gaussian input, with model uncertainty (see :func:`~softpend.pilco.moments.gp_moments`)."""
+        return gp_moments(
+            mean, cov, self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel
+        )

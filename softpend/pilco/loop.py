@@ -1,0 +1,419 @@
+"""The PILCO loop on the simulated plant: one random trial, then alternate model learning, policy search and a trial.
+
+Control rate and trials
+-----------------------
+The plant (:func:`softpend.plant.make_plant`) steps at ``plant_dt_s = 0.01`` s; PILCO acts every
+``control_dt_s = 0.05`` s (20 Hz) and the torque is held constant over the five plant steps in between
+(:class:`~softpend.pilco.controller.PilcoController`).  Every trial -- the initial random-torque trial and
+each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
+perturbed by up to ``start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
+:func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
+other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
+
+After each policy trial the new policy is also tested with
+:func:`softpend.evaluation.evaluate_controller` (``eval_seeds``, ``eval_duration_s``); these test episodes
+are not used for learning and are not counted as interaction (as in a learning curve of an RL agent).
+The policy *balances* when every test episode swings up and keeps ``upright_std_rad <= target_std_rad``.
+
+Model learning and policy search
+--------------------------------
+GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled to ``max_gp_points`` (the
+latest trial always kept), hyperparameters by penalised marginal likelihood; then the RBF policy
+(:class:`~softpend.pilco.policy.RBFPolicy`, warm-started from the previous one) minimises the predicted
+expected cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the
+whole moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+import scipy.optimize
+import torch
+
+from ..evaluation import EvaluationResult, evaluate_controller, run_episode
+from ..plant import RodParams
+from .controller import PilcoController, RandomTorqueController
+from .gp import GPHyperparameters, MultiOutputGP, select_subset
+from .policy import RBFPolicy
+from .propagation import Propagator, StateSpec, state_spec
+
+__all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
+
+DTYPE = torch.float64
+
+
+@dataclass
+class PilcoConfig:
+    """Settings of a PILCO run (SI units).
+
+    Parameters
+    ----------
+    params : RodParams
+        The plant (default: the project's soft rod, ``n_links = 4``).
+    plant : str
+        Plant name for :func:`softpend.plant.make_plant`.
+    state : {"hub_tip", "tip"}
+        State representation (see :mod:`softpend.pilco.propagation`).
+    plant_dt_s, control_dt_s : float
+        Plant step and PILCO's control period (zero-order hold) [s].
+    horizon_s : float
+        Prediction horizon and length of every trial [s].
+    n_policy_trials : int
+        Largest number of policy trials after the random one.
+    cost_width_m : float
+        Width ``w`` of the saturating cost [m].
+    initial_std : float
+        Standard deviation of every state variable in ``S0`` (rad or rad/s); PILCO plans for a slightly
+        wider start distribution than the plant's (robustness).
+    n_basis : int
+        RBF basis functions of the policy.
+    max_gp_points : int
+        Largest GP training set (data subsampling beyond it).
+    gp_iterations, policy_iterations : int
+        L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search.
+    start_noise_rad : float
+        Half-width of the uniform start perturbation of the hub angle and rate (the environment's).
+    eval_seeds : tuple of int
+        Seeds of the test episodes after each policy trial (empty: no tests).
+    eval_duration_s : float
+        Length of each test episode [s].
+    target_std_rad : float
+        Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
+    stop_when_balanced : bool
+        End the run at the first policy that balances.
+    seed : int
+        Seed of every random draw of the run (start noise, random trial, subsets, policy init).
+    """
+
+    params: RodParams = field(default_factory=RodParams)
+    plant: str = "prb"
+    state: str = "hub_tip"
+    plant_dt_s: float = 0.01
+    control_dt_s: float = 0.05
+    horizon_s: float = 3.0
+    n_policy_trials: int = 15
+    cost_width_m: float = 0.1
+    initial_std: float = 0.05
+    n_basis: int = 30
+    max_gp_points: int = 300
+    gp_iterations: int = 100
+    policy_iterations: int = 50
+    start_noise_rad: float = 0.05
+    eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
+    eval_duration_s: float = 8.0
+    target_std_rad: float = 0.1
+    stop_when_balanced: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.params, RodParams):
+            raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
+        state_spec(self.state)
+        for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
+                     "target_std_rad"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        if not math.isfinite(self.start_noise_rad) or self.start_noise_rad < 0:
+            raise ValueError(f"start_noise_rad must be non-negative and finite, got {self.start_noise_rad!r}")
+        ratio = self.control_dt_s / self.plant_dt_s
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"control_dt_s must be a whole multiple of plant_dt_s, got {self.control_dt_s!r}")
+        if self.n_horizon_steps < 2:
+            raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
+        for name, low in (("n_policy_trials", 0), ("n_basis", 1), ("max_gp_points", 10), ("gp_iterations", 1),
+                          ("policy_iterations", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        self.eval_seeds = tuple(int(s) for s in self.eval_seeds)
+
+    @property
+    def hold_steps(self) -> int:
+        """Plant steps per control step."""
+        return int(round(self.control_dt_s / self.plant_dt_s))
+
+    @property
+    def n_horizon_steps(self) -> int:
+        """Control steps per trial / prediction horizon."""
+        return int(round(self.horizon_s / self.control_dt_s))
+
+    def to_dict(self) -> dict[str, Any]:
+        data = dataclasses.asdict(self)
+        data["params"] = self.params.to_dict()
+        data["eval_seeds"] = list(self.eval_seeds)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
+        data = dict(data)
+        data["params"] = RodParams.from_dict(data["params"])
+        data["eval_seeds"] = tuple(data.get("eval_seeds", ()))
+        return cls(**data)
+
+
+@dataclass
+class TrialRecord:
+    """One real trial and what PILCO predicted for it.
+
+    ``predicted_cost`` is the policy search's expected total cost for the policy that ran the trial (NaN for
+    the random trial); ``real_cost`` the same cost summed along the real trajectory.
+    """
+
+    index: int
+    kind: str
+    duration_s: float
+    plant_seconds_total: float
+    predicted_cost: float
+    real_cost: float
+    swing_up_time_s: float
+    upright_std_rad: float
+    n_gp_points: int
+    wall_s_total: float
+    eval_success_rate: float = float("nan")
+    eval_upright_std_rad: float = float("nan")
+    balanced: bool = False
+
+
+@dataclass
+class PilcoResult:
+    """Outcome of :func:`run_pilco`."""
+
+    config: PilcoConfig
+    records: list[TrialRecord]
+    policy: RBFPolicy
+    gp_hyperparameters: Optional[GPHyperparameters]
+    predicted_means: list[np.ndarray] = field(default_factory=list, repr=False)  # per policy trial (H+1, d)
+    predicted_stds: list[np.ndarray] = field(default_factory=list, repr=False)
+    real_states: list[np.ndarray] = field(default_factory=list, repr=False)  # per trial (H+1, d)
+
+    @property
+    def real_seconds_to_balance(self) -> float:
+        """Plant seconds of interaction up to the first policy that balances (``inf`` if none did)."""
+        for record in self.records:
+            if record.balanced:
+                return record.plant_seconds_total
+        return math.inf
+
+    @property
+    def train_wall_s(self) -> float:
+        return self.records[-1].wall_s_total if self.records else 0.0
+
+    @property
+    def plant_seconds_total(self) -> float:
+        return self.records[-1].plant_seconds_total if self.records else 0.0
+
+    def controller(self) -> PilcoController:
+        """The final policy as a :class:`~softpend.evaluation.Controller`."""
+        return PilcoController(self.policy, state_spec(self.config.state), self.config.control_dt_s)
+
+    def save(self, directory: str | Path) -> Path:
+        """Write ``policy.pt`` (state dict) and ``pilco.json`` (config, trial records, GP hyperparameters)."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        torch.save(self.policy.state_dict(), directory / "policy.pt")
+        meta = {
+            "config": self.config.to_dict(),
+            "records": [dataclasses.asdict(r) for r in self.records],
+            "gp_hyperparameters": self.gp_hyperparameters.to_dict() if self.gp_hyperparameters else None,
+            "real_seconds_to_balance": self.real_seconds_to_balance,
+            "train_wall_s": self.train_wall_s,
+        }
+        (directory / "pilco.json").write_text(json.dumps(meta, indent=2, default=float))
+        return directory
+
+    @classmethod
+    def load(cls, directory: str | Path) -> "PilcoResult":
+        """Inverse of :meth:`save` (predicted and real trajectories are not stored)."""
+        directory = Path(directory)
+        meta = json.loads((directory / "pilco.json").read_text())
+        config = PilcoConfig.from_dict(meta["config"])
+        state = torch.load(directory / "policy.pt", weights_only=True)
+        spec = state_spec(config.state)
+        policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),
+                           config.params.torque_limit_nm)
+        policy.load_state_dict(state)
+        hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
+        return cls(config=config, records=[TrialRecord(**r) for r in meta["records"]], policy=policy,
+                   gp_hyperparameters=hyper)
+
+
+def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float) -> np.ndarray:
+    """The saturating cost of :class:`~softpend.pilco.propagation.Propagator` at deterministic tip angles."""
+    d2 = 2.0 * length_m**2 * (1.0 - np.cos(np.asarray(theta_rad, dtype=float)))
+    return 1.0 - np.exp(-0.5 * d2 / cost_width_m**2)
+
+
+def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Hanging at rest: rates 0, angles pi; ``S0 = std^2 I``."""
+    m0 = torch.zeros(spec.dim, dtype=DTYPE)
+    m0[spec.angle_indices] = math.pi
+    return m0, (std**2) * torch.eye(spec.dim, dtype=DTYPE)
+
+
+def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
+    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,)."""
+    episode = run_episode(controller, env, seed=seed, duration_s=config.horizon_s)
+    if episode.diverged:
+        raise RuntimeError(f"the plant diverged during a PILCO trial: {episode.diverged}")
+    k = config.hold_steps
+    spec = state_spec(config.state)
+    states = spec.from_observations(episode.observations[::k])
+    torques = episode.torque_nm[::k][: len(states) - 1]
+    return episode, states, torques
+
+
+def _optimise_policy(
+    propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
+) -> float:
+    """L-BFGS-B on the policy parameters; returns the predicted total cost of the final policy."""
+
+    def objective(vector: np.ndarray) -> tuple[float, np.ndarray]:
+        leaf = torch.tensor(vector, dtype=DTYPE, requires_grad=True)
+        policy.set_vector(leaf, requires_grad=True)
+        try:
+            _, _, _, total = propagator.rollout(m0, s0, n_steps)
+        except torch.linalg.LinAlgError:
+            return 1e6, np.zeros_like(vector)
+        (grad,) = torch.autograd.grad(total, leaf)
+        if not torch.all(torch.isfinite(grad)) or not math.isfinite(float(total.detach())):
+            return 1e6, np.zeros_like(vector)
+        return float(total.detach()), grad.numpy().copy()
+
+    start = policy.get_vector()
+    start_value = objective(start)[0]
+    result = scipy.optimize.minimize(
+        objective, start, jac=True, method="L-BFGS-B",
+        options={"maxiter": int(iterations), "maxfun": int(2 * iterations)},
+    )
+    if result.fun <= start_value:
+        policy.set_vector(result.x)
+        return float(result.fun)
+    policy.set_vector(start)
+    return float(start_value)
+
+
+def run_pilco(
+    config: Optional[PilcoConfig] = None,
+    progress: bool = True,
+    callback: Optional[Callable[[TrialRecord], None]] = None,
+) -> PilcoResult:
+    """Run PILCO on the plant (see the module docstring).
+
+    Parameters
+    ----------
+    config : PilcoConfig, optional
+    progress : bool
+        Show a tqdm progress bar over the trials.
+    callback : callable, optional
+        Called with each :class:`TrialRecord` as it is completed.
+
+    Returns
+    -------
+    PilcoResult
+    """
+    from tqdm.auto import tqdm
+
+    from ..envs import SoftPendulumEnv
+
+    config = config if config is not None else PilcoConfig()
+    spec = state_spec(config.state)
+    params = config.params
+    torque_limit = params.torque_limit_nm
+    env = SoftPendulumEnv(params=params, dt_s=config.plant_dt_s, start="hanging",
+                          start_noise_rad=config.start_noise_rad, plant=config.plant)
+    rng = np.random.default_rng(config.seed)
+    trial_seeds = rng.integers(0, 2**31 - 1, size=config.n_policy_trials + 1)
+    start_wall = time.perf_counter()
+    n_steps = config.n_horizon_steps
+
+    # ---- trial 0: random torques
+    random_controller = RandomTorqueController(torque_limit, config.control_dt_s, seed=int(trial_seeds[0]))
+    episode, states, torques = _run_trial(config, random_controller, int(trial_seeds[0]), env)
+    inputs = [np.hstack([spec.model_inputs(states[:-1]), torques[:, None]])]
+    targets = [states[1:] - states[:-1]]
+    plant_seconds = config.horizon_s
+    records = [TrialRecord(
+        index=0, kind="random", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
+        predicted_cost=float("nan"), real_cost=float(real_cost(states[1:, spec.tip_angle_index], params.length_m,
+                                                               config.cost_width_m).sum()),
+        swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
+        n_gp_points=0, wall_s_total=time.perf_counter() - start_wall,
+    )]
+    if callback:
+        callback(records[0])
+    result = PilcoResult(config=config, records=records, policy=None, gp_hyperparameters=None,  # type: ignore[arg-type]
+                         real_states=[states])
+
+    # ---- the policy: centres from the initial state distribution (as in PILCO), length-scales from the data
+    m0, s0 = _initial_distribution(spec, config.initial_std)
+    init_states = rng.multivariate_normal(m0.numpy(), s0.numpy(), size=config.n_basis)
+    all_inputs = inputs[0][:, :-1]
+    lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
+                            np.maximum(all_inputs.std(axis=0), 1e-3), 0.7)
+    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=int(rng.integers(2**31)))
+    result.policy = policy
+    hyper: Optional[GPHyperparameters] = None
+
+    bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
+    for trial in bar:
+        # ---- learn the dynamics
+        x_all = np.vstack(inputs)
+        y_all = np.vstack(targets)
+        subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]), seed=int(rng.integers(2**31)))
+        gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=hyper)
+        gp.fit(config.gp_iterations)
+        hyper = gp.hyperparameters
+        # ---- learn the policy
+        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m)
+        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+        with torch.no_grad():
+            means, covs, _, _ = propagator.rollout(m0, s0, n_steps)
+        result.predicted_means.append(means.numpy())
+        result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
+        # ---- run it on the plant
+        controller = PilcoController(policy, spec, config.control_dt_s)
+        episode, states, torques = _run_trial(config, controller, int(trial_seeds[trial]), env)
+        inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
+        targets.append(states[1:] - states[:-1])
+        result.real_states.append(states)
+        plant_seconds += config.horizon_s
+        record = TrialRecord(
+            index=trial, kind="policy", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
+            predicted_cost=predicted,
+            real_cost=float(real_cost(states[1:, spec.tip_angle_index], params.length_m, config.cost_width_m).sum()),
+            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
+            n_gp_points=len(subset), wall_s_total=float("nan"),
+        )
+        # ---- test it (not counted as interaction, not used for learning)
+        if config.eval_seeds:
+            summary = evaluate_controller(
+                PilcoController(policy, spec, config.control_dt_s), name="pilco", seeds=config.eval_seeds,
+                duration_s=config.eval_duration_s, params=params, plant=config.plant, dt_s=config.plant_dt_s,
+                start_noise_rad=config.start_noise_rad,
+            )
+            stds = [r.upright_std_rad for r in summary.results]
+            record.eval_success_rate = summary.success_rate
+            record.eval_upright_std_rad = float(np.max(stds))
+            record.balanced = bool(
+                all(math.isfinite(r.swing_up_time_s) for r in summary.results) and max(stds) <= config.target_std_rad
+            )
+        record.wall_s_total = time.perf_counter() - start_wall
+        records.append(record)
+        if callback:
+            callback(record)
+        bar.set_postfix(real_s=f"{plant_seconds:.0f}", cost=f"{record.real_cost:.1f}/{predicted:.1f}",
+                        std=f"{record.eval_upright_std_rad:.2f}")
+        if record.balanced and config.stop_when_balanced:
+            break
+    bar.close()
+    result.gp_hyperparameters = hyper
+    return result

@@ -1,0 +1,228 @@
+"""Exact moment matching of Gaussian inputs through the pieces of PILCO (Deisenroth & Rasmussen, 2011).
+
+Every function maps a Gaussian ``x ~ N(m, s)`` to the mean ``M`` and covariance ``S`` of an output
+``y = f(x)`` and to ``C = s^{-1} cov(x, y)`` (the "input-output covariance times the inverse input
+covariance" of the PILCO MATLAB code), so that covariances with any other variable ``z`` that is jointly
+Gaussian with ``x`` follow as ``cov(z, y) = cov(z, x) @ C`` (see :func:`chain_covariance`).  That is how a
+whole rollout ``state -> (sin, cos) -> policy -> saturation -> GP dynamics -> next state`` is propagated
+while keeping the state-control-successor correlations.
+
+The functions are written in PyTorch and differentiable, so the expected long-term cost can be optimised
+with gradients through the whole prediction by autograd.  They mirror ``gp0.m`` / ``gp2.m`` (GP
+prediction at an uncertain input, with and without model uncertainty), ``gTrig.m`` (sine and cosine of
+Gaussian angles), ``gSat.m`` (the sine saturation ``u_max (9 sin x + sin 3x) / 8``) and ``lossSat.m``
+(the saturating cost ``1 - exp(-|z - z*|^2_W / 2)``) of the PILCO MATLAB code.
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = [
+    "chain_covariance",
+    "gp_moments",
+    "saturating_cost_moments",
+    "sin_saturation_moments",
+    "trig_moments",
+]
+
+
+def _pair_indices(n_outputs: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    rows, cols = torch.triu_indices(n_outputs, n_outputs, device=device)
+    return rows, cols
+
+
+def gp_moments(
+    mean: torch.Tensor,
+    cov: torch.Tensor,
+    inputs: torch.Tensor,
+    beta: torch.Tensor,
+    log_lengthscales: torch.Tensor,
+    log_signal_var: torch.Tensor,
+    inv_kernel: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Moments of GP predictions at a Gaussian input (squared-exponential ARD kernel, zero prior mean).
+
+    With ``inv_kernel`` given this is ``gp0`` of the PILCO code: the output is the GP's latent function
+    and its variance includes the model uncertainty (``sf2 - tr(K^{-1} L)`` terms).  Without it this is
+    ``gp2``: the posterior mean function only, as used for the RBF policy.
+
+    Parameters
+    ----------
+    mean : tensor (D,)
+        Input mean.
+    cov : tensor (D, D)
+        Input covariance (may be singular).
+    inputs : tensor (N, D)
+        Training (or basis-function) inputs.
+    beta : tensor (E, N)
+        ``(K + sn2 I)^{-1} y`` for each of the ``E`` outputs.
+    log_lengthscales : tensor (E, D)
+        Log length-scales per output and input dimension.
+    log_signal_var : tensor (E,)
+        Log signal variance ``log sf2`` per output.
+    inv_kernel : tensor (E, N, N), optional
+        ``(K + sn2 I)^{-1}`` per output (include to add the model uncertainty).
+
+    Returns
+    -------
+    M : tensor (E,)
+        Predictive mean.
+    S : tensor (E, E)
+        Predictive covariance.
+    C : tensor (D, E)
+        ``cov^{-1} cov(x, f(x))``.
+    """
+    n_outputs, dim = log_lengthscales.shape
+    eye = torch.eye(dim, dtype=mean.dtype, device=mean.device)
+    inp = inputs - mean  # (N, D)
+    inv_ell = torch.exp(-log_lengthscales)  # (E, D)
+    scaled = inp.unsqueeze(0) * inv_ell.unsqueeze(1)  # (E, N, D)
+    b_mat = inv_ell.unsqueeze(2) * cov.unsqueeze(0) * inv_ell.unsqueeze(1) + eye  # (E, D, D)
+    t = torch.linalg.solve(b_mat, scaled.transpose(1, 2)).transpose(1, 2)  # (E, N, D) = scaled @ B^-1
+    ell_weights = torch.exp(-0.5 * torch.sum(scaled * t, dim=2))  # (E, N)
+    lb = ell_weights * beta
+    signal_var = torch.exp(log_signal_var)
+    c = signal_var / torch.sqrt(torch.linalg.det(b_mat))  # (E,)
+    mean_out = torch.sum(lb, dim=1) * c
+    t_scaled = t * inv_ell.unsqueeze(1)  # (E, N, D)
+    io_cov = torch.einsum("end,en->de", t_scaled, lb) * c  # (D, E)
+
+    # second moments for each pair (i <= j) of outputs
+    log_k = log_signal_var.unsqueeze(1) - 0.5 * torch.sum(scaled * scaled, dim=2)  # (E, N)
+    rows, cols = _pair_indices(n_outputs, mean.device)
+    inv_ell2 = torch.exp(-2.0 * log_lengthscales)  # (E, D)
+    r_mat = cov.unsqueeze(0) * (inv_ell2[rows] + inv_ell2[cols]).unsqueeze(1) + eye  # (P, D, D)
+    t_pair = 1.0 / torch.sqrt(torch.linalg.det(r_mat))  # (P,)
+    q_mat = 0.5 * torch.linalg.solve(r_mat, cov.expand_as(r_mat))  # (P, D, D), symmetric
+    ii = inp.unsqueeze(0) * inv_ell2[rows].unsqueeze(1)  # (P, N, D)
+    ij = inp.unsqueeze(0) * inv_ell2[cols].unsqueeze(1)
+    ii_q = ii @ q_mat
+    ij_q = ij @ q_mat
+    quad_i = torch.sum(ii_q * ii, dim=2)  # (P, N)
+    quad_j = torch.sum(ij_q * ij, dim=2)
+    exponent = (
+        (log_k[rows] + quad_i).unsqueeze(2)
+        + (log_k[cols] + quad_j).unsqueeze(1)
+        + 2.0 * ii_q @ ij.transpose(1, 2)
+    )
+    big_l = torch.exp(exponent)  # (P, N, N)
+    second = torch.sum((big_l @ beta[cols].unsqueeze(2)).squeeze(2) * beta[rows], dim=1)  # beta_i' L beta_j
+    if inv_kernel is not None:
+        # model uncertainty, diagonal pairs only: - tr(K_i^{-1} L_ii), then + sf2_i after scaling by t
+        diag = torch.nonzero(rows == cols).squeeze(1)
+        trace_term = torch.sum(inv_kernel * big_l[diag], dim=(1, 2))
+        second = second.index_add(0, diag, -trace_term)
+    second = second * t_pair
+    if inv_kernel is not None:
+        second = second.index_add(0, diag, signal_var)
+    s_mat = torch.zeros(n_outputs, n_outputs, dtype=mean.dtype, device=mean.device)
+    s_mat = s_mat.index_put((rows, cols), second).index_put((cols, rows), second)
+    s_mat = s_mat - torch.outer(mean_out, mean_out)
+    s_mat = 0.5 * (s_mat + s_mat.T)
+    return mean_out, s_mat, io_cov
+
+
+def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Moments of ``(sin a_1, cos a_1, sin a_2, cos a_2, ...)`` for Gaussian angles ``a ~ N(mean, cov)``.
+
+    Parameters
+    ----------
+    mean : tensor (A,)
+        Angle means [rad].
+    cov : tensor (A, A)
+        Angle covariance [rad^2].
+
+    Returns
+    -------
+    M : tensor (2A,)
+    S : tensor (2A, 2A)
+    C : tensor (A, 2A)
+        ``cov^{-1} cov(a, trig(a))`` (``C[i, 2i] = E cos a_i``, ``C[i, 2i+1] = -E sin a_i``).
+    """
+    n = mean.shape[0]
+    var = torch.diagonal(cov)
+    decay = torch.exp(-0.5 * var)
+    e_sin = decay * torch.sin(mean)
+    e_cos = decay * torch.cos(mean)
+    lq = -0.5 * (var.unsqueeze(1) + var.unsqueeze(0))
+    q = torch.exp(lq)
+    plus = torch.exp(lq + cov) - q
+    minus = torch.exp(lq - cov) - q
+    diff = mean.unsqueeze(1) - mean.unsqueeze(0)
+    summ = mean.unsqueeze(1) + mean.unsqueeze(0)
+    u1 = plus * torch.sin(diff)
+    u2 = minus * torch.sin(summ)
+    u3 = plus * torch.cos(diff)
+    u4 = minus * torch.cos(summ)
+    ss = 0.5 * (u3 - u4)
+    cc = 0.5 * (u3 + u4)
+    sc = 0.5 * (u1 + u2)  # cov(sin a_i, cos a_j)
+    s_out = torch.stack([torch.stack([ss, sc], dim=2), torch.stack([sc.T, cc], dim=2)], dim=1)  # (A, 2, A, 2)
+    s_out = s_out.reshape(2 * n, 2 * n)
+    m_out = torch.stack([e_sin, e_cos], dim=1).reshape(2 * n)
+    eye = torch.eye(n, dtype=mean.dtype, device=mean.device)
+    c_out = torch.stack([eye * e_cos, -eye * e_sin], dim=2).reshape(n, 2 * n)
+    return m_out, s_out, c_out
+
+
+def sin_saturation_moments(
+    mean: torch.Tensor, var: torch.Tensor, limit: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Moments of the smooth saturation ``u = limit (9 sin x + sin 3x) / 8`` of a scalar ``x ~ N(mean, var)``.
+
+    The map is odd, monotone on ``[-pi/2, pi/2]`` and flat at ``+-limit`` there (``gSat.m``).
+
+    Returns
+    -------
+    M, S : tensor ()
+        Mean and variance of ``u``.
+    C : tensor ()
+        ``var^{-1} cov(x, u)`` (by Stein's lemma ``E[u'(x)]``).
+    """
+    e = lambda k: torch.exp(-0.5 * k * k * var)  # noqa: E731  (E[cos kx] = e(k) cos(k m))
+    a = limit / 8.0
+    m_u = a * (9.0 * e(1.0) * torch.sin(mean) + e(3.0) * torch.sin(3.0 * mean))
+    cos2 = e(2.0) * torch.cos(2.0 * mean)
+    cos4 = e(4.0) * torch.cos(4.0 * mean)
+    cos6 = e(6.0) * torch.cos(6.0 * mean)
+    second = a * a * (40.5 * (1.0 - cos2) + 9.0 * (cos2 - cos4) + 0.5 * (1.0 - cos6))
+    s_u = torch.clamp(second - m_u * m_u, min=0.0)
+    c_u = a * (9.0 * e(1.0) * torch.cos(mean) + 3.0 * e(3.0) * torch.cos(3.0 * mean))
+    return m_u, s_u, c_u
+
+
+def saturating_cost_moments(
+    mean: torch.Tensor, cov: torch.Tensor, target: torch.Tensor, width: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and variance of the saturating cost ``1 - exp(-|z - target|^2 / (2 width^2))``, ``z ~ N(mean, cov)``.
+
+    Parameters
+    ----------
+    mean : tensor (K,)
+    cov : tensor (K, K)
+    target : tensor (K,)
+    width : float
+        Cost width (same units as ``z``).
+
+    Returns
+    -------
+    E, V : tensor ()
+        Expected cost (in ``[0, 1]``) and its variance.
+    """
+    k = mean.shape[0]
+    eye = torch.eye(k, dtype=mean.dtype, device=mean.device)
+    w = eye / width**2
+    delta = mean - target
+    sw = cov @ w + eye
+    s1 = w @ torch.linalg.inv(sw)
+    e_exp = torch.exp(-0.5 * delta @ s1 @ delta) / torch.sqrt(torch.linalg.det(sw))
+    s2w = 2.0 * cov @ w + eye
+    s2 = w @ torch.linalg.inv(s2w)
+    e2 = torch.exp(-delta @ s2 @ delta) / torch.sqrt(torch.linalg.det(s2w))
+    return 1.0 - e_exp, torch.clamp(e2 - e_exp * e_exp, min=0.0)
+
+
+def chain_covariance(cov_with_input: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+    """``cov(z, y) = cov(z, x) @ C`` for ``y = f(x)`` with ``C = cov(x)^{-1} cov(x, y)`` (jointly Gaussian ``z, x``)."""
+    return cov_with_input @ c

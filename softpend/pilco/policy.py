@@ -1,0 +1,132 @@
+"""PILCO's controller: a radial-basis-function network squashed by a sine saturation.
+
+The pre-saturation output is ``pi~(x) = sum_i beta_i exp(-|x - c_i|^2_Lambda / 2)`` with
+``beta = (K_cc + sn^2 I)^{-1} t``: the posterior mean of a GP with unit signal variance and noise
+``sn = 0.01`` whose "training set" is the learnable pseudo-inputs ``c_i`` (centres) and pseudo-targets
+``t_i`` (the PILCO code's ``congp``).  The torque is ``u = u_max (9 sin pi~ + sin 3 pi~) / 8`` (``gSat``),
+which never exceeds ``u_max`` and has exact Gaussian moments, so the policy can be propagated by moment
+matching (:func:`~softpend.pilco.moments.gp_moments` without model uncertainty, then
+:func:`~softpend.pilco.moments.sin_saturation_moments`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from .moments import gp_moments, sin_saturation_moments
+
+__all__ = ["RBFPolicy"]
+
+DTYPE = torch.float64
+
+
+class RBFPolicy:
+    """Saturated RBF-network policy on ``D`` inputs with one scalar output (the base torque).
+
+    Parameters
+    ----------
+    centers : array (n_basis, D)
+        Initial basis-function centres (pseudo-inputs).
+    lengthscales : array (D,)
+        Initial length-scales (same units as the inputs).
+    torque_limit_nm : float
+        Saturation level ``u_max`` [N m].
+    seed : int
+        Seed of the initial pseudo-targets ``t ~ 0.1 N(0, 1)``.
+    noise_std : float
+        Pseudo-noise of the underlying GP (regularises ``beta``).
+    """
+
+    def __init__(
+        self,
+        centers: np.ndarray,
+        lengthscales: np.ndarray,
+        torque_limit_nm: float,
+        seed: int = 0,
+        noise_std: float = 0.01,
+    ) -> None:
+        centers = np.asarray(centers, dtype=float)
+        lengthscales = np.asarray(lengthscales, dtype=float)
+        if centers.ndim != 2 or centers.shape[0] < 1:
+            raise ValueError(f"centers must be a non-empty (n_basis, D) array, got shape {centers.shape}")
+        if lengthscales.shape != (centers.shape[1],) or np.any(lengthscales <= 0):
+            raise ValueError(f"lengthscales must be {centers.shape[1]} positive numbers, got {lengthscales}")
+        if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
+            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.noise_var = float(noise_std) ** 2
+        generator = torch.Generator().manual_seed(int(seed))
+        self.centers = torch.tensor(centers, dtype=DTYPE)
+        self.targets = 0.1 * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
+        self.log_lengthscales = torch.log(torch.tensor(lengthscales, dtype=DTYPE))
+
+    @property
+    def n_inputs(self) -> int:
+        return self.centers.shape[1]
+
+    # ------------------------------------------------------------------ parameters as one vector
+    def parameters(self) -> list[torch.Tensor]:
+        return [self.centers, self.targets, self.log_lengthscales]
+
+    def get_vector(self) -> np.ndarray:
+        """All parameters flattened (centres, targets, log length-scales)."""
+        return torch.cat([p.reshape(-1) for p in self.parameters()]).detach().numpy().copy()
+
+    def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
+        """Inverse of :meth:`get_vector`; with ``requires_grad`` the parameters become autograd leaves' views."""
+        v = torch.as_tensor(vector, dtype=DTYPE)
+        n, d = self.centers.shape
+        self.centers = v[: n * d].reshape(n, d)
+        self.targets = v[n * d : n * d + n]
+        self.log_lengthscales = v[n * d + n :]
+        if not requires_grad:
+            self.centers, self.targets, self.log_lengthscales = (
+                p.detach().clone() for p in (self.centers, self.targets, self.log_lengthscales)
+            )
+
+    # ------------------------------------------------------------------ evaluation
+    def _beta(self) -> torch.Tensor:
+        ell = torch.exp(self.log_lengthscales)
+        d = (self.centers.unsqueeze(1) - self.centers.unsqueeze(0)) / ell
+        k = torch.exp(-0.5 * torch.sum(d * d, dim=2))
+        k = k + self.noise_var * torch.eye(k.shape[0], dtype=DTYPE)
+        return torch.linalg.solve(k, self.targets)
+
+    def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
+        """``pi~(x)`` for inputs ``x`` (M, D)."""
+        d = (x.unsqueeze(1) - self.centers.unsqueeze(0)) / torch.exp(self.log_lengthscales)
+        return torch.exp(-0.5 * torch.sum(d * d, dim=2)) @ self._beta()
+
+    def torque_nm(self, x: np.ndarray) -> np.ndarray:
+        """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
+        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
+        with torch.no_grad():
+            z = self.pre_saturation(xt)
+            u = self.torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
+        u = u.numpy()
+        return u if np.ndim(x) == 2 else u[:1].reshape(())
+
+    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
+        beta = self._beta().unsqueeze(0)
+        m_z, s_z, c_z = gp_moments(
+            mean, cov, self.centers, beta, self.log_lengthscales.unsqueeze(0), torch.zeros(1, dtype=DTYPE)
+        )
+        m_u, s_u, c_u = sin_saturation_moments(m_z[0], s_z[0, 0], self.torque_limit_nm)
+        return m_u, s_u, c_z[:, 0] * c_u
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {"centers": self.centers.detach().clone(), "targets": self.targets.detach().clone(),
+                "log_lengthscales": self.log_lengthscales.detach().clone()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        for key in ("centers", "targets", "log_lengthscales"):
+            if key not in state:
+                raise ValueError(f"policy state dict lacks {key!r}")
+        self.centers = state["centers"].to(DTYPE).clone()
+        self.targets = state["targets"].to(DTYPE).clone()
+        self.log_lengthscales = state["log_lengthscales"].to(DTYPE).clone()

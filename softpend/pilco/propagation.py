@@ -1,0 +1,187 @@
+"""State representation, one-step moment-matching propagation and the expected long-term cost.
+
+State representation
+--------------------
+PILCO models the plant in the report's *observed* variables (limited information), sampled at the control
+rate.  Two representations are offered (:data:`STATE_SPECS`):
+
+``"hub_tip"`` (default)
+    ``x = [phi_dot, theta_dot, phi, theta]``: hub angle ``phi`` and tip angle ``theta`` (from upright) and
+    their rates.  For a one-link rod this *is* the full state (``theta`` is the link angle), for ``n > 1``
+    links it is the report's limited information (the bending shape is only seen through ``theta - phi``).
+``"tip"``
+    ``x = [theta_dot, theta]``: a rigid pendulum's state (used for the stiff one-link validation).
+
+Angles are handled as in PILCO: the Gaussian state holds the angles themselves (unwrapped), and every
+model input uses ``(sin, cos)`` of each angle instead of the angle (moments by
+:func:`~softpend.pilco.moments.trig_moments`).  The GP inputs are ``[rates, sin/cos of angles, u]`` and
+its targets the state differences over one control step.
+
+Cost
+----
+The saturating cost of the tip's distance from upright, ``c = 1 - exp(-d^2 / (2 w^2))`` with
+``d^2 = |L (-sin theta, cos theta) - (0, L)|^2 = 2 L^2 (1 - cos theta)`` (``L`` the rod length, ``w`` the
+cost width in metres): the point at distance ``L`` from the hub in the tip's direction against the
+upright tip position.  Its expectation under the predicted Gaussian is exact
+(:func:`~softpend.pilco.moments.saturating_cost_moments`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..plant import OBSERVATION_NAMES
+from .moments import saturating_cost_moments, trig_moments
+
+__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "state_spec"]
+
+DTYPE = torch.float64
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    """Which observed variables form PILCO's state; non-angle variables first, then the angles.
+
+    Attributes
+    ----------
+    name : str
+    variables : tuple of str
+        Names from :data:`softpend.plant.OBSERVATION_NAMES`.
+    n_angles : int
+        The last ``n_angles`` variables are angles [rad].
+    tip_angle_index : int
+        Index (in ``variables``) of the tip angle ``theta`` used by the cost.
+    """
+
+    name: str
+    variables: tuple[str, ...]
+    n_angles: int
+    tip_angle_index: int
+
+    @property
+    def dim(self) -> int:
+        return len(self.variables)
+
+    @property
+    def angle_indices(self) -> list[int]:
+        return list(range(self.dim - self.n_angles, self.dim))
+
+    @property
+    def n_model_inputs(self) -> int:
+        """Policy input size: non-angle variables plus a (sin, cos) pair per angle."""
+        return self.dim - self.n_angles + 2 * self.n_angles
+
+    def from_observations(self, observations: np.ndarray) -> np.ndarray:
+        """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time."""
+        obs = np.atleast_2d(np.asarray(observations, dtype=float))
+        columns = [OBSERVATION_NAMES.index(v) for v in self.variables]
+        states = obs[:, columns].copy()
+        states[:, self.angle_indices] = np.unwrap(states[:, self.angle_indices], axis=0)
+        return states
+
+    def model_inputs(self, states: np.ndarray) -> np.ndarray:
+        """``[non-angle variables, sin a_1, cos a_1, ...]`` for deterministic states ``(T, dim)``."""
+        states = np.atleast_2d(np.asarray(states, dtype=float))
+        k = self.dim - self.n_angles
+        angles = states[:, k:]
+        trig = np.stack([np.sin(angles), np.cos(angles)], axis=2).reshape(len(states), -1)
+        return np.concatenate([states[:, :k], trig], axis=1)
+
+
+STATE_SPECS: dict[str, StateSpec] = {
+    "hub_tip": StateSpec("hub_tip", ("phi_dot_rad_s", "theta_dot_rad_s", "phi_rad", "theta_rad"), 2, 3),
+    "tip": StateSpec("tip", ("theta_dot_rad_s", "theta_rad"), 1, 1),
+}
+
+
+def state_spec(name: str) -> StateSpec:
+    """The :class:`StateSpec` called ``name``; unknown names raise ``ValueError``."""
+    if name not in STATE_SPECS:
+        raise ValueError(f"state must be one of {sorted(STATE_SPECS)}, got {name!r}")
+    return STATE_SPECS[name]
+
+
+class Propagator:
+    """Moment-matching rollout of a Gaussian state through policy and GP dynamics, with the expected cost.
+
+    Parameters
+    ----------
+    spec : StateSpec
+    dynamics : object with ``moments(mean, cov) -> (M, S, C)``
+        The GP model of the state differences (inputs ``[model inputs, u]``).
+    policy : object with ``moments(mean, cov) -> (m_u, s_u, c_u)``
+        The controller on the model inputs.
+    length_m : float
+        Rod length ``L`` used by the cost [m].
+    cost_width_m : float
+        Cost width ``w`` [m].
+    """
+
+    def __init__(self, spec: StateSpec, dynamics, policy, length_m: float, cost_width_m: float) -> None:
+        if not length_m > 0:
+            raise ValueError(f"length_m must be positive, got {length_m!r}")
+        if not cost_width_m > 0:
+            raise ValueError(f"cost_width_m must be positive, got {cost_width_m!r}")
+        self.spec = spec
+        self.dynamics = dynamics
+        self.policy = policy
+        self.length_m = float(length_m)
+        self.cost_width_m = float(cost_width_m)
+        d = spec.dim
+        k = d - spec.n_angles
+        self._angles = torch.tensor(spec.angle_indices)
+        # positions in the augmented vector [state (d), trig (2A), u]
+        self._model_inputs = torch.tensor(list(range(k)) + list(range(d, d + 2 * spec.n_angles)))
+        self._dyn_inputs = torch.cat([self._model_inputs, torch.tensor([d + 2 * spec.n_angles])])
+        self._target = torch.tensor([0.0, self.length_m], dtype=DTYPE)
+        # (ex, ey) = A @ (sin theta, cos theta) for the point at distance L in the tip's direction
+        self._tip_projection = torch.tensor([[-self.length_m, 0.0], [0.0, self.length_m]], dtype=DTYPE)
+
+    @staticmethod
+    def _augment(m: torch.Tensor, s: torch.Tensor, m_new: torch.Tensor, s_new: torch.Tensor, cross: torch.Tensor):
+        """Append variables with mean ``m_new``, covariance ``s_new`` and ``cov(old, new) = cross``."""
+        m_out = torch.cat([m, m_new])
+        s_out = torch.cat([torch.cat([s, cross], dim=1), torch.cat([cross.T, s_new], dim=1)], dim=0)
+        return m_out, s_out
+
+    def step(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Distribution of the next state given ``x_t ~ N(m, s)`` under the current policy."""
+        ang = self._angles
+        m_t, s_t, c_t = trig_moments(m[ang], s[ang][:, ang])
+        m_a, s_a = self._augment(m, s, m_t, s_t, s[:, ang] @ c_t)
+        pi = self._model_inputs
+        m_u, s_u, c_u = self.policy.moments(m_a[pi], s_a[pi][:, pi])
+        cross_u = (s_a[:, pi] @ c_u).unsqueeze(1)
+        m_f, s_f = self._augment(m_a, s_a, m_u.reshape(1), s_u.reshape(1, 1), cross_u)
+        di = self._dyn_inputs
+        m_d, s_d, c_d = self.dynamics.moments(m_f[di], s_f[di][:, di])
+        cross_x = s_f[: self.spec.dim, di] @ c_d  # cov(x_t, delta)
+        m_next = m + m_d
+        s_next = s + s_d + cross_x + cross_x.T
+        return m_next, 0.5 * (s_next + s_next.T)
+
+    def cost(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Expected saturating cost and its variance for ``x ~ N(m, s)``."""
+        i = self.spec.tip_angle_index
+        m_t, s_t, _ = trig_moments(m[i : i + 1], s[i : i + 1, i : i + 1])
+        a = self._tip_projection
+        return saturating_cost_moments(a @ m_t, a @ s_t @ a.T, self._target, self.cost_width_m)
+
+    def rollout(
+        self, m0: torch.Tensor, s0: torch.Tensor, n_steps: int
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Predicted state means (H+1, d), covariances (H+1, d, d), expected costs (H,) and their total."""
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps!r}")
+        means, covs, costs = [m0], [s0], []
+        m, s = m0, s0
+        for _ in range(n_steps):
+            m, s = self.step(m, s)
+            means.append(m)
+            covs.append(s)
+            costs.append(self.cost(m, s)[0])
+        cost_t = torch.stack(costs)
+        return torch.stack(means), torch.stack(covs), cost_t, cost_t.sum()

@@ -1,0 +1,147 @@
+"""PILCO's moment matching against Monte Carlo sampling through the same functions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from softpend.pilco.gp import MultiOutputGP
+from softpend.pilco.moments import gp_moments, saturating_cost_moments, sin_saturation_moments, trig_moments
+from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.propagation import Propagator, state_spec
+
+F64 = torch.float64
+N_MC = 200_000
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+
+
+@pytest.fixture(scope="module")
+def gp() -> MultiOutputGP:
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-2, 2, (80, 3))
+    y = np.stack([np.sin(x[:, 0]) * np.cos(x[:, 1]), 0.5 * x[:, 2] + np.sin(2 * x[:, 1])], 1)
+    model = MultiOutputGP(x, y + 0.01 * rng.normal(size=y.shape))
+    model.fit(60)
+    return model
+
+
+@pytest.fixture(scope="module")
+def gaussian_input():
+    rng = np.random.default_rng(1)
+    a = 0.3 * rng.normal(size=(3, 3))
+    m = torch.tensor([0.3, -0.2, 0.5], dtype=F64)
+    s = torch.tensor(a @ a.T + 0.01 * np.eye(3), dtype=F64)
+    xs = rng.multivariate_normal(m.numpy(), s.numpy(), N_MC)
+    return m, s, xs
+
+
+def test_gp_moments_with_model_uncertainty_match_monte_carlo(gp, gaussian_input):
+    m, s, xs = gaussian_input
+    mean, cov, c = gp.moments(m, s)
+    mu, var = gp.predict(xs)
+    f = mu + np.sqrt(var) * np.random.default_rng(2).normal(size=mu.shape)  # samples of the latent GP
+    assert _rel(mean, f.mean(0)) < 0.03
+    assert _rel(cov, np.cov(f.T)) < 0.03
+    cross = np.cov(np.hstack([xs, f]).T)[:3, 3:]
+    assert _rel(s @ c, cross) < 0.03
+    # the model uncertainty is really in there: the mean-function-only variance is smaller
+    _, cov_mean_only, _ = gp_moments(m, s, gp.inputs, gp.beta, gp.log_lengthscales, gp.log_signal_var)
+    assert np.all(np.diag(cov_mean_only.numpy()) < np.diag(cov.numpy()))
+    assert _rel(cov_mean_only, np.cov(mu.T)) < 0.03
+
+
+def test_trig_moments_match_monte_carlo(gaussian_input):
+    m, s, xs = gaussian_input
+    mean, cov, c = trig_moments(m[:2], s[:2, :2])
+    a = xs[:, :2]
+    trig = np.stack([np.sin(a[:, 0]), np.cos(a[:, 0]), np.sin(a[:, 1]), np.cos(a[:, 1])], 1)
+    assert np.max(np.abs(mean.numpy() - trig.mean(0))) < 0.005
+    assert _rel(cov, np.cov(trig.T)) < 0.02
+    assert _rel(s[:2, :2] @ c, np.cov(np.hstack([a, trig]).T)[:2, 2:]) < 0.02
+
+
+@pytest.mark.parametrize("mean,var", [(0.4, 0.5), (-1.2, 0.05), (3.0, 2.0)])
+def test_sin_saturation_moments_match_monte_carlo(mean, var):
+    limit = 0.06
+    m_u, s_u, c_u = sin_saturation_moments(torch.tensor(mean, dtype=F64), torch.tensor(var, dtype=F64), limit)
+    x = np.random.default_rng(3).normal(mean, np.sqrt(var), N_MC)
+    u = limit * (9 * np.sin(x) + np.sin(3 * x)) / 8
+    assert abs(float(m_u) - u.mean()) < 0.01 * limit
+    assert float(s_u) == pytest.approx(u.var(), rel=0.02)
+    assert float(c_u) * var == pytest.approx(np.cov(x, u)[0, 1], rel=0.03, abs=1e-4 * limit)
+    assert np.max(np.abs(u)) <= limit * (1 + 1e-12)
+
+
+def test_saturating_cost_moments_match_monte_carlo():
+    m = torch.tensor([0.05, 0.25], dtype=F64)
+    s = torch.tensor([[0.004, 0.001], [0.001, 0.002]], dtype=F64)
+    target = torch.tensor([0.0, 0.3], dtype=F64)
+    e, v = saturating_cost_moments(m, s, target, 0.1)
+    z = np.random.default_rng(4).multivariate_normal(m.numpy(), s.numpy(), N_MC)
+    cost = 1 - np.exp(-0.5 * np.sum((z - target.numpy()) ** 2, 1) / 0.1**2)
+    assert float(e) == pytest.approx(cost.mean(), rel=0.01)
+    assert float(v) == pytest.approx(cost.var(), rel=0.03)
+
+
+def test_one_step_propagation_close_to_monte_carlo():
+    """State -> sin/cos -> policy -> GP -> next state, against sampling states through the same maps."""
+    spec = state_spec("tip")
+    rng = np.random.default_rng(5)
+    states = np.column_stack([rng.uniform(-6, 6, 150), rng.uniform(-np.pi, np.pi, 150)])
+    u = rng.uniform(-0.06, 0.06, 150)
+    x = np.hstack([spec.model_inputs(states), u[:, None]])
+    # a smooth pendulum-like map of state differences
+    dy = np.column_stack([0.05 * (9.81 / 0.3 * np.sin(states[:, 1]) + 300 * u), 0.05 * states[:, 0]])
+    gp = MultiOutputGP(x, dy + 1e-3 * rng.normal(size=dy.shape))
+    gp.fit(60)
+    policy = RBFPolicy(spec.model_inputs(states[:10]), np.array([3.0, 0.7, 0.7]), 0.06, seed=0)
+    policy.targets = torch.tensor(rng.normal(size=10), dtype=F64)
+    prop = Propagator(spec, gp, policy, 0.3, 0.1)
+    m0 = torch.tensor([0.5, 2.5], dtype=F64)
+    s0 = torch.diag(torch.tensor([0.05**2, 0.05**2], dtype=F64))
+    m1, s1 = prop.step(m0, s0)
+    xs = rng.multivariate_normal(m0.numpy(), s0.numpy(), 50_000)
+    us = policy.torque_nm(spec.model_inputs(xs))
+    mu, var = gp.predict(np.hstack([spec.model_inputs(xs), us[:, None]]))
+    nxt = xs + mu + np.sqrt(var) * rng.normal(size=mu.shape)
+    assert np.max(np.abs(m1.numpy() - nxt.mean(0)) / np.sqrt(np.diag(np.cov(nxt.T)))) < 0.05
+    assert np.diag(s1.numpy()) == pytest.approx(np.diag(np.cov(nxt.T)), rel=0.05)
+    # expected cost of the predicted state against sampling it
+    e, _ = prop.cost(m1, s1)
+    d2 = 2 * 0.3**2 * (1 - np.cos(nxt[:, 1]))
+    assert float(e) == pytest.approx(np.mean(1 - np.exp(-0.5 * d2 / 0.1**2)), abs=0.01)
+
+
+def test_rollout_gradient_matches_finite_differences():
+    spec = state_spec("tip")
+    rng = np.random.default_rng(6)
+    states = np.column_stack([rng.uniform(-6, 6, 60), rng.uniform(-np.pi, np.pi, 60)])
+    u = rng.uniform(-0.06, 0.06, 60)
+    x = np.hstack([spec.model_inputs(states), u[:, None]])
+    dy = np.column_stack([0.05 * (30 * np.sin(states[:, 1]) + 300 * u), 0.05 * states[:, 0]])
+    gp = MultiOutputGP(x, dy)
+    policy = RBFPolicy(spec.model_inputs(states[:5]), np.array([3.0, 0.7, 0.7]), 0.06, seed=1)
+    prop = Propagator(spec, gp, policy, 0.3, 0.1)
+    m0 = torch.tensor([0.0, np.pi], dtype=F64)
+    s0 = 0.01 * torch.eye(2, dtype=F64)
+    vector = policy.get_vector()
+    leaf = torch.tensor(vector, requires_grad=True)
+    policy.set_vector(leaf, requires_grad=True)
+    total = prop.rollout(m0, s0, 5)[3]
+    (grad,) = torch.autograd.grad(total, leaf)
+
+    def value(v):
+        policy.set_vector(v)
+        return float(prop.rollout(m0, s0, 5)[3])
+
+    eps = 1e-6
+    for i in rng.choice(len(vector), 5, replace=False):
+        step = np.zeros_like(vector)
+        step[i] = eps
+        fd = (value(vector + step) - value(vector - step)) / (2 * eps)
+        assert float(grad[i]) == pytest.approx(fd, rel=1e-4, abs=1e-7)

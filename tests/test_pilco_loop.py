@@ -1,0 +1,123 @@
+"""The PILCO loop on the plant, on a small budget; the classical rigid-pendulum result as an expensive check."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from softpend.cli import main
+from softpend.evaluation import evaluate_controller
+from softpend.pilco import PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
+from softpend.pilco.gp import MultiOutputGP
+from softpend.pilco.loop import _optimise_policy, real_cost
+from softpend.pilco.propagation import Propagator
+from softpend.plant import RodParams
+
+torch.set_num_threads(1)
+
+#: A rigid pendulum on the hub: one link with a very stiff clamp spring (a free link, stiffness 0, would
+#: not be driven by the hub at all).
+RIGID = RodParams(n_links=1, stiffness_scale=100.0)
+
+TINY = dict(
+    state="tip", control_dt_s=0.1, horizon_s=1.0, n_policy_trials=2, n_basis=5, max_gp_points=15,
+    gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0,
+)
+
+
+@pytest.fixture(scope="module")
+def tiny_run() -> PilcoResult:
+    return run_pilco(PilcoConfig(**TINY, seed=3), progress=False)
+
+
+def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
+    records = tiny_run.records
+    assert [r.kind for r in records] == ["random", "policy", "policy"]
+    np.testing.assert_allclose([r.plant_seconds_total for r in records], [1.0, 2.0, 3.0])
+    assert [r.n_gp_points for r in records] == [0, 10, 15]  # data grows, then is subsampled to max_gp_points
+    h = TINY["horizon_s"] / TINY["control_dt_s"]
+    for r in records[1:]:
+        assert 0.0 <= r.predicted_cost <= h and 0.0 <= r.real_cost <= h
+        assert 0.0 <= r.eval_success_rate <= 1.0 and math.isfinite(r.eval_upright_std_rad)
+    assert records[-1].wall_s_total >= records[1].wall_s_total > 0
+    assert len(tiny_run.real_states) == 3 and tiny_run.real_states[0].shape == (11, 2)
+    assert len(tiny_run.predicted_means) == 2 and tiny_run.predicted_means[0].shape == (11, 2)
+    # the recorded real cost is the cost of the recorded real trajectory
+    theta = tiny_run.real_states[1][1:, 1]
+    assert records[1].real_cost == pytest.approx(real_cost(theta, 0.3, tiny_run.config.cost_width_m).sum())
+
+
+def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
+    tiny_run.save(tmp_path)
+    loaded = PilcoResult.load(tmp_path)
+    assert loaded.config == tiny_run.config
+    assert [r.real_cost for r in loaded.records] == [r.real_cost for r in tiny_run.records]
+    x = np.random.default_rng(0).normal(size=(7, 3))
+    np.testing.assert_allclose(loaded.policy.torque_nm(x), tiny_run.policy.torque_nm(x))
+    summary = evaluate_controller(loaded.controller(), seeds=(0,), duration_s=1.0)
+    torques = summary.results[0].torque_nm[:-1]
+    # zero-order hold: the torque changes only every control period (10 plant steps)
+    assert np.all(torques.reshape(-1, 10) == torques.reshape(-1, 10)[:, :1])
+    assert np.max(np.abs(torques)) <= RodParams().torque_limit_nm + 1e-12
+
+
+def test_policy_search_lowers_the_predicted_cost():
+    spec = state_spec("tip")
+    rng = np.random.default_rng(0)
+    states = np.column_stack([rng.uniform(-8, 8, 120), rng.uniform(-np.pi, np.pi, 120)])
+    u = rng.uniform(-0.06, 0.06, 120)
+    # rigid-pendulum-like differences over 0.1 s (theta from upright, so gravity pushes away from 0)
+    dy = np.column_stack([0.1 * (30.0 * np.sin(states[:, 1]) + 400.0 * u), 0.1 * states[:, 0]])
+    gp = MultiOutputGP(np.hstack([spec.model_inputs(states), u[:, None]]), dy)
+    # start tilted by 0.5 rad: falls over unless the policy catches it
+    m0 = torch.tensor([0.0, 0.5], dtype=torch.float64)
+    s0 = 0.05**2 * torch.eye(2, dtype=torch.float64)
+    policy = RBFPolicy(spec.model_inputs(rng.multivariate_normal(m0.numpy(), s0.numpy(), 10)),
+                       np.array([5.0, 0.7, 0.7]), 0.06, seed=0)
+    prop = Propagator(spec, gp, policy, 0.3, 0.15)
+    before = float(prop.rollout(m0, s0, 10)[3])
+    after = _optimise_policy(prop, policy, m0, s0, 10, iterations=10)
+    assert after < 0.7 * before
+    assert float(prop.rollout(m0, s0, 10)[3]) == pytest.approx(after)
+
+
+def test_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="state"):
+        PilcoConfig(state="joint")
+    with pytest.raises(ValueError, match="control_dt_s"):
+        PilcoConfig(control_dt_s=0.055)
+    with pytest.raises(ValueError, match="horizon_s"):
+        PilcoConfig(horizon_s=0.05)
+    with pytest.raises(ValueError, match="n_basis"):
+        PilcoConfig(n_basis=0)
+    with pytest.raises(ValueError, match="cost_width_m"):
+        PilcoConfig(cost_width_m=-1.0)
+
+
+def test_softpend_train_algo_pilco(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["train", "--algo", "pilco", "--episodes", "1", "--out", str(out), "--no-progress", "--seed", "1"]
+    for key, value in TINY.items():
+        if key not in ("n_policy_trials",):
+            value = ",".join(map(str, value)) if isinstance(value, tuple) else value
+            args += ["--set", f"{key}={value}"]
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["trials"] == 2 and summary["plant_seconds_total"] == pytest.approx(2.0)
+    assert (out / "policy.pt").exists() and (out / "pilco.json").exists()
+    assert main(["train", "--algo", "pilco", "--out", str(out), "--set", "no_such_field=1"]) == 2
+
+
+@pytest.mark.expensive
+def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
+    """The classical PILCO result: swing-up and balance within 10 trials of at most 4 s (random one included)."""
+    config = PilcoConfig(params=RIGID, state="tip", control_dt_s=0.1, horizon_s=4.0, n_policy_trials=9,
+                         eval_seeds=(1000, 1001, 1002), eval_duration_s=6.0, seed=0)
+    result = run_pilco(config, progress=False)
+    assert len(result.records) <= 10
+    assert result.records[-1].balanced, [(r.index, r.eval_upright_std_rad) for r in result.records]
+    assert result.real_seconds_to_balance <= 40.0

@@ -2,7 +2,9 @@
 
 Runs the default protocol end to end on one torch thread: babble 60 x 5 s (seed 0), train the default
 full-information model and the limited-information model, babble 12 held-out trials (seed 12345) and
-measure one-step and open-loop rollout errors on them, then time batched rollouts.
+measure one-step and open-loop rollout errors on them, then time batched rollouts.  Three models: the
+report's (full information, state without history, 3 x 16), full information with 3 past frames, and
+limited information with 3 past frames.
 """
 
 from __future__ import annotations
@@ -54,10 +56,14 @@ def bench_sysid() -> dict[str, float]:
             "babble_default_protocol_s": babble_s,
             "babble_transitions_per_s": data.n_transitions / babble_s,
         }
-        for information, config in (("full", TrainConfig()), ("limited", TrainConfig(information="limited", history=3))):
+        configs = (
+            ("model", TrainConfig()),  # the report's state and network
+            ("model_history3", TrainConfig(history=3)),
+            ("model_limited", TrainConfig(information="limited", history=3)),
+        )
+        for prefix, config in configs:
             fit = fit_dynamics_model(data, config, progress=False)
             metrics = evaluate_model(fit.model, test)
-            prefix = "model" if information == "full" else "model_limited"
             out[f"{prefix}_train_s"] = fit.train_time_s
             for key in ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"):
                 out[f"{prefix}_one_step_{key}"] = metrics[key]
@@ -66,7 +72,7 @@ def bench_sysid() -> dict[str, float]:
                 out[f"{prefix}_phi_rmse_rad_{h}s"] = metrics[f"phi_rmse_rad@{h}s"]
                 out[f"{prefix}_hold_tip_rmse_m_{h}s"] = metrics[f"hold_tip_rmse_m@{h}s"]
             out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
-            if information == "full":
+            if prefix == "model":
                 out["model_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
         return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
     finally:

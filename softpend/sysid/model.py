@@ -198,7 +198,9 @@ class DynamicsModel(nn.Module):
         if not self._h:
             return core
         p = self._p
-        return torch.cat([core, state[:, :p], state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
+        previous = state[:, :p]
+        previous = torch.where(self._core_angle_mask[:p], _wrap(previous), previous)
+        return torch.cat([core, previous, state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
 
     def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
         """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m] (clipped to the limit).

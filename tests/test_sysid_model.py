@@ -1,0 +1,239 @@
+"""Learned dynamics model: state layouts, training, metrics, rollouts, files, command line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from softpend.sysid import (
+    BabbleProtocol,
+    DynamicsEnsemble,
+    DynamicsModel,
+    StateLayout,
+    TrajectoryDataset,
+    babble,
+    fit_dynamics_model,
+    load_model,
+    one_step_errors,
+    rollout,
+    rollout_errors,
+    rollout_trial,
+    save_model,
+)
+
+
+@pytest.fixture(scope="module")
+def data() -> tuple[TrajectoryDataset, TrajectoryDataset]:
+    torch.set_num_threads(1)
+    protocol = BabbleProtocol(n_trials=10, trial_length_s=2.0)
+    return babble(protocol, seed=1, progress=False), babble(protocol.replace(n_trials=3), seed=2, progress=False)
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    train, _ = data
+    # full information with 3 past frames (the recommended setting; see test_default_state_is_the_reports)
+    return fit_dynamics_model(train, history=3, max_epochs=60, batch_size=128, learning_rate=5e-3, patience=60, seed=0, progress=False)
+
+
+# ------------------------------------------------------------------ layouts
+def test_layouts_and_history(data):
+    train, _ = data
+    full, limited = StateLayout.full(), StateLayout.limited(history=2)
+    assert full.dim == 10 and full.names[:5] == ("phi_rad", "theta_rad", "ex_m", "ey_m", "er_rad")
+    assert limited.dim == 12 and limited.names[6:9] == ("phi_rad_lag1", "ex_m_lag1", "ey_m_lag1")
+    states = limited.states(train)
+    assert states.shape == (10, train.n_samples - 2, 12)
+    # lag k of state i is the position of dataset sample i + history - k
+    np.testing.assert_array_equal(states[:, :, limited.index("ex_m_lag2")], train.column("ex_m")[:, :-2])
+    np.testing.assert_array_equal(states[:, :, limited.index("ex_m_lag1")], train.column("ex_m")[:, 1:-1])
+    assert limited.torques(train).shape == (10, train.n_samples - 3)
+    with pytest.raises(ValueError, match="information"):
+        StateLayout("partial")
+    rig_like = train.select_trials([0])
+    rig_like = TrajectoryDataset(
+        positions=rig_like.positions[..., [0, 2, 3]],
+        velocities=rig_like.velocities[..., [0, 2, 3]],
+        torques_nm=rig_like.torques_nm,
+        metadata=dict(rig_like.metadata, position_names=["phi_rad", "ex_m", "ey_m"], velocity_names=["phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"]),
+    )
+    with pytest.raises(ValueError, match="use information='limited'"):
+        full.states(rig_like)
+    assert limited.states(rig_like).shape[-1] == 12
+
+
+# ------------------------------------------------------------------ training and metrics
+def test_training_beats_the_trivial_predictor_on_held_out_trials(fitted, data):
+    _, test = data
+    assert fitted.val_loss[0][fitted.best_epochs[0] - 1] == min(fitted.val_loss[0])  # best weights kept
+    errors = one_step_errors(fitted.model, test)
+    # held-out trials: far below "next = current" in the network's loss and in the report's units
+    assert errors["mse_normalised"] < 0.3 * errors["mse_normalised_trivial"]
+    assert errors["mse"] < 0.4 * errors["mse_trivial"]
+    assert errors["n_transitions"] == 3 * (test.n_samples - 1 - 3)  # 3 samples feed the first lags
+    # split by trial, no overlap
+    assert set(fitted.train_trials).isdisjoint(fitted.val_trials)
+    assert len(fitted.train_trials) + len(fitted.val_trials) == 10
+
+
+def test_default_state_is_the_reports(data):
+    """The default model uses the report's state (no history); it also beats "next = current"."""
+    train, test = data
+    fit = fit_dynamics_model(train, max_epochs=30, batch_size=128, learning_rate=5e-3, seed=0, progress=False)
+    assert fit.model.layout == StateLayout.full() and fit.model.hidden_widths == (16, 16, 16)
+    errors = one_step_errors(fit.model, test)
+    assert errors["mse_normalised"] < 0.9 * errors["mse_normalised_trivial"]
+    assert errors["mse"] < errors["mse_trivial"]
+
+
+def test_training_is_deterministic(data):
+    train, _ = data
+    small = train.select_trials([0, 1, 2])
+    a = fit_dynamics_model(small, max_epochs=3, seed=4, progress=False)
+    b = fit_dynamics_model(small, max_epochs=3, seed=4, progress=False)
+    for (name, pa), pb in zip(a.model.state_dict().items(), b.model.state_dict().values()):
+        assert torch.equal(pa, pb), name
+    c = fit_dynamics_model(small, max_epochs=3, seed=5, progress=False)
+    assert not torch.equal(a.model.net[0].weight, c.model.net[0].weight)
+
+
+class _Drift:
+    """Hand-made model for a resting rod: the tip moves +c in x and the hub +a per step."""
+
+    def __init__(self, c: float, a: float) -> None:
+        self.layout = StateLayout.limited()
+        self.c, self.a = c, a
+
+    def predict_next(self, state, torque_nm, generator=None):
+        out = state.clone()
+        out[:, self.layout.index("ex_m")] += self.c
+        out[:, self.layout.index("phi_rad")] += self.a
+        return out
+
+
+def test_rollout_errors_on_a_hand_made_case():
+    n_trials, n_samples = 2, 40
+    positions = np.zeros((n_trials, n_samples, 3))
+    positions[..., 2] = 0.3  # rod at rest, upright
+    data = TrajectoryDataset(
+        positions=positions,
+        velocities=np.zeros_like(positions),
+        torques_nm=np.zeros((n_trials, n_samples - 1)),
+        metadata={
+            "schema": "softpend.sysid.dataset", "schema_version": 1, "softpend_version": "test", "source": "rig",
+            "dt_s": 0.01, "n_trials": n_trials, "n_samples": n_samples, "position_names": ["phi_rad", "ex_m", "ey_m"],
+            "velocity_names": ["phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"], "differentiation": "backward",
+            "plant": None, "plant_params": None, "seed": None, "protocol": {}, "notes": "",
+        },
+    )
+    errors = rollout_errors(_Drift(c=0.001, a=0.002), data, horizon_s=0.2, start_stride=5)
+    k = np.arange(21)
+    np.testing.assert_allclose(errors.horizon_s, k * 0.01)
+    np.testing.assert_allclose(errors.tip_rmse_m, 0.001 * k, atol=1e-12)
+    np.testing.assert_allclose(errors.phi_rmse_rad, 0.002 * k, atol=1e-12)
+    np.testing.assert_allclose(errors.hold_tip_rmse_m, 0.0, atol=1e-15)
+    assert errors.n_rollouts == 2 * len(range(0, 40 - 20, 5))
+    assert errors.at(0.1)["tip_rmse_m"] == pytest.approx(0.01)
+    with pytest.raises(ValueError, match="horizon_s"):
+        rollout_errors(_Drift(0.0, 0.0), data, horizon_s=1.0)
+
+
+def test_rollout_api_batched_and_wrap_aware(fitted, data):
+    model = fitted.model
+    _, test = data
+    x0 = torch.as_tensor(model.layout.states(test)[:, 0], dtype=torch.float32)
+    torques = torch.as_tensor(model.layout.torques(test)[:, :15], dtype=torch.float32)
+    with torch.inference_mode():
+        path = rollout(model, x0, torques)
+        assert path.shape == (3, 16, 10 + 3 * 5)
+        # lagged frames are shifted in: lag 1 of step t + 1 is the position of step t
+        torch.testing.assert_close(path[:, 1:, 10:15], path[:, :-1, :5])
+        torch.testing.assert_close(path[:, 0], x0)
+        x = x0
+        for t in range(15):  # batched rollout == stepping row by row
+            x = torch.cat([model.predict_next(x[i : i + 1], torques[i : i + 1, t]) for i in range(3)])
+        torch.testing.assert_close(path[:, -1], x, rtol=1e-4, atol=1e-5)  # float32 matmul order
+        # angles stay wrapped; a state just across the seam gives the same prediction as its twin
+        near = x0.clone()
+        near[:, 0] = np.pi - 1e-4
+        twin = near.clone()
+        twin[:, 0] = near[:, 0] - 2 * np.pi  # the same angle, unwrapped the other way
+        a, b = model.predict_next(near, torques[:, 0]), model.predict_next(twin, torques[:, 0])
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-5)
+        assert torch.all(path[..., [0, 1, 4]].abs() <= np.pi + 1e-6)
+    with pytest.raises(ValueError, match="state must have shape"):
+        model.predict_next(torch.zeros(2, 7), torch.zeros(2))
+    with pytest.raises(ValueError, match="torques_nm must have shape"):
+        rollout(model, x0, torques[:2])
+    # the figure helper: theta from the tip position at limited information too
+    curves = rollout_trial(model, test, trial=0, start_s=0.1, duration_s=0.5)
+    assert curves["phi_rad_model"].shape == (51,) and curves["phi_rad"][0] == pytest.approx(curves["phi_rad_model"][0], abs=1e-6)
+    assert curves["time_s"][0] == pytest.approx(0.1 + 0.03)  # start_s counts from the first full state
+
+
+def test_jacobian_at_upright_is_finite(fitted):
+    model = fitted.model.double()
+    try:
+        d = model.layout.dim
+        x0 = torch.zeros(d, dtype=torch.float64)
+        for name in ("ey_m", "ey_m_lag1", "ey_m_lag2", "ey_m_lag3"):
+            x0[model.layout.index(name)] = 0.3
+        jac = torch.autograd.functional.jacobian(lambda x: model.predict_next(x[None], torch.zeros(1, dtype=torch.float64))[0], x0)
+        assert jac.shape == (d, d) and torch.all(torch.isfinite(jac))
+        # d(next phi)/d(phi) is about 1 for a small step
+        assert abs(float(jac[0, 0]) - 1.0) < 0.2
+    finally:
+        model.float()
+
+
+def test_ensemble_rollouts_and_files(tmp_path, data):
+    train, test = data
+    small = train.select_trials([0, 1, 2, 3])
+    fit = fit_dynamics_model(small, max_epochs=3, ensemble_size=3, hidden_widths=(8, 8), seed=1, progress=False)
+    ensemble = fit.model
+    assert isinstance(ensemble, DynamicsEnsemble) and len(ensemble) == 3
+    x0 = torch.as_tensor(StateLayout.full().states(test)[:, 0], dtype=torch.float32).repeat(20, 1)
+    torques = torch.zeros(60, 10)
+    with torch.inference_mode():
+        a = rollout(ensemble, x0, torques, generator=torch.Generator().manual_seed(0))
+        b = rollout(ensemble, x0, torques, generator=torch.Generator().manual_seed(0))
+        c = rollout(ensemble, x0, torques, generator=torch.Generator().manual_seed(1))
+        torch.testing.assert_close(a, b)
+        assert not torch.equal(a, c)  # members differ and are drawn per row
+        all_members = ensemble.predict_next_all(x0[:4], torques[:4, 0])
+        assert all_members.shape == (3, 4, 10)
+        torch.testing.assert_close(ensemble.predict_next(x0[:4], torques[:4, 0], member=2), all_members[2])
+    weights, meta = save_model(tmp_path / "ens", ensemble, fit.metadata())
+    loaded, metadata = load_model(weights)
+    assert isinstance(loaded, DynamicsEnsemble) and metadata["train_trials"] == fit.train_trials.tolist()
+    for key, value in ensemble.state_dict().items():
+        torch.testing.assert_close(loaded.state_dict()[key], value)
+    # weights that do not match the metadata are refused with a clear error
+    info = json.loads(meta.read_text())
+    info["config"]["hidden_widths"] = [16, 16]
+    meta.write_text(json.dumps(info))
+    with pytest.raises(ValueError, match="do not match"):
+        load_model(tmp_path / "ens")
+    with pytest.raises(ValueError, match="member"):
+        ensemble.predict_next(x0[:2], torques[:2, 0], member=5)
+
+
+def test_limited_information_model_and_cli(tmp_path, data):
+    from softpend.cli import main
+
+    train, _ = data
+    fit = fit_dynamics_model(train, information="limited", history=2, max_epochs=5, progress=False)
+    assert isinstance(fit.model, DynamicsModel) and fit.model.layout.dim == 12
+    # the command line: babble a tiny set, fit, evaluate on a held-out file
+    assert main(["babble", str(tmp_path / "d.npz"), "--n-trials", "3", "--trial-length-s", "1", "--no-progress"]) == 0
+    assert main(["babble", str(tmp_path / "t.npz"), "--n-trials", "2", "--trial-length-s", "1", "--seed", "9", "--no-progress"]) == 0
+    code = main(["fit-model", str(tmp_path / "d.npz"), str(tmp_path / "m"), "--max-epochs", "2", "--hidden-widths", "8,8",
+                 "--test-data", str(tmp_path / "t.npz"), "--no-progress"])
+    assert code == 0
+    model, metadata = load_model(tmp_path / "m")
+    assert model.hidden_widths == (8, 8)
+    assert np.isfinite(metadata["metrics"]["test"]["mse"]) and "tip_rmse_m@0.5s" in metadata["metrics"]["test"]
+    assert main(["fit-model", str(tmp_path / "d.npz"), str(tmp_path / "m"), "--hidden-widths", "8,x"]) == 2

@@ -1,0 +1,83 @@
+"""Matplotlib drawings of Figure 3 (model rollout against the data; rollout error against the horizon)."""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .metrics import RolloutErrors
+
+__all__ = ["plot_rollout", "plot_rollout_errors"]
+
+_LABELS = {
+    "phi_rad": r"base angle $\phi$ [rad]",
+    "theta_rad": r"tip angle $\theta$ [rad]",
+    "ex_m": r"tip $e_x$ [m]",
+    "ey_m": r"tip $e_y$ [m]",
+}
+
+
+def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence] = None, title: str = ""):
+    """Four panels (phi, theta, ex, ey): data (solid) and open-loop model rollout (dashed).
+
+    Parameters
+    ----------
+    curves : dict
+        Output of :func:`softpend.sysid.rollout_trial`.
+    axes : sequence of 4 matplotlib Axes, optional
+        Where to draw (default: a new 2 x 2 figure).
+    """
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), sharex=True, constrained_layout=True)
+        axes = np.ravel(axes)
+    t = curves["time_s"]
+    for ax, name in zip(axes, ("phi_rad", "theta_rad", "ex_m", "ey_m")):
+        ax.plot(t, curves[name], color="k", lw=1.5, label="simulator")
+        ax.plot(t, curves[f"{name}_model"], color="tab:orange", lw=1.5, ls="--", label="model rollout")
+        ax.set_ylabel(_LABELS[name])
+        ax.grid(alpha=0.3)
+    for ax in axes[-2:]:
+        ax.set_xlabel("time in trial [s]")
+    axes[0].legend(loc="best", fontsize=8)
+    if title:
+        axes[0].figure.suptitle(title)
+    return axes
+
+
+def plot_rollout_errors(errors: dict[str, RolloutErrors], axes: Optional[Sequence] = None, length_m: Optional[float] = None):
+    """Tip-position and base-angle RMSE against the horizon, one line per model, with the "hold" yardstick.
+
+    Parameters
+    ----------
+    errors : dict
+        Label -> :class:`softpend.sysid.RolloutErrors`.
+    axes : sequence of 2 Axes, optional
+        Where to draw (default: a new 1 x 2 figure).
+    length_m : float, optional
+        Rod length; draws the 5 % target line on the tip panel.
+    """
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
+    first = next(iter(errors.values()))
+    for label, err in errors.items():
+        axes[0].semilogy(err.horizon_s[1:], err.tip_rmse_m[1:], lw=1.8, label=label)
+        axes[1].semilogy(err.horizon_s[1:], err.phi_rmse_rad[1:], lw=1.8, label=label)
+    axes[0].semilogy(first.horizon_s[1:], first.hold_tip_rmse_m[1:], color="grey", ls=":", label="hold (no model)")
+    axes[1].semilogy(first.horizon_s[1:], first.hold_phi_rmse_rad[1:], color="grey", ls=":", label="hold (no model)")
+    if length_m is not None:
+        axes[0].axhline(0.05 * length_m, color="tab:red", lw=0.8, ls="--", label="5% of rod length")
+    # a diverged rollout leaves the physical range; clip there (tip errors above 2 L, angles above pi)
+    axes[0].set_ylim(top=2 * length_m if length_m is not None else 1.0)
+    axes[1].set_ylim(top=np.pi)
+    axes[0].set_ylabel("tip-position RMSE [m]")
+    axes[1].set_ylabel("base-angle RMSE [rad]")
+    for ax in axes:
+        ax.set_xlabel("open-loop horizon [s]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    return axes

@@ -4,8 +4,9 @@
   with action repeat, replay, gradient steps; 10 episodes after a short warm-up).
 * ``dqn_real_s_to_balance`` / ``mbpo_real_s_to_balance`` -- median over seeds (0, 1, 2) of the real plant
   seconds of training until the periodic evaluation balances (every evaluation seed swings up and holds
-  ``upright_std_rad <= 0.2``); ``inf`` when a run never does.  Runs are trained with the default configs
-  (150 DQN episodes, 100 DQN-MBPO episodes) into ``runs/bench-rl`` and reused when present.
+  ``upright_std_rad <= 0.2``); ``inf`` when a run never does.  The runs are those of the book's full
+  profile (:func:`softpend.rl.experiments.figure_configs`, ``DEFAULT_EPISODES``, folder ``runs/rl-book``):
+  reused when present, trained otherwise.
 * ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
 """
 
@@ -13,35 +14,35 @@ from __future__ import annotations
 
 import math
 import tempfile
-import time
 
 from .cli import DEFAULT_EPISODES
-from .config import DQNConfig, MBPOConfig
+from .config import DQNConfig
 
 SEEDS = (0, 1, 2)
-ROOT = "runs/bench-rl"
+ROOT = "runs/rl-book"
 
 
 def dqn_train_steps_per_s(episodes: int = 10) -> float:
-    """Agent steps per second of DQN training (learning already started)."""
+    """Agent steps per second of DQN training, learning already started: timed between the ends of the first
+    and the last episode of a ``1 + episodes`` run (the training log's ``wall_s``), so that start-up,
+    evaluation and checkpoint writing are excluded."""
     from .dqn import train_dqn
 
     config = DQNConfig(learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000, eval_seeds=(0,), eval_duration_s=0.1)
     with tempfile.TemporaryDirectory() as tmp:
-        _, warm = train_dqn(config, seed=0, episodes=1, run_dir=tmp, progress=False)
-        start = time.perf_counter()
-        train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, resume=True, progress=False)
-        elapsed = time.perf_counter() - start
+        _, log = train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, progress=False)
+    elapsed = log.episodes[-1]["wall_s"] - log.episodes[0]["wall_s"]
     return episodes * config.episode_agent_steps / elapsed
 
 
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
-    from .experiments import median_real_s_to_balance, train_seeds
+    from .experiments import figure_configs, median_real_s_to_balance, train_seeds
 
     steps_per_s = dqn_train_steps_per_s()
-    dqn_logs = train_seeds("dqn", DQNConfig(), SEEDS, DEFAULT_EPISODES["dqn"], ROOT, progress=True)
-    mbpo_logs = train_seeds("mbpo", MBPOConfig(), SEEDS, DEFAULT_EPISODES["mbpo"], ROOT, progress=True)
+    configs = figure_configs()
+    dqn_logs = train_seeds("dqn", configs["dqn"], SEEDS, DEFAULT_EPISODES["dqn"], ROOT, progress=True)
+    mbpo_logs = train_seeds("mbpo", configs["mbpo"], SEEDS, DEFAULT_EPISODES["mbpo"], ROOT, progress=True)
     dqn_s = median_real_s_to_balance(dqn_logs)
     mbpo_s = median_real_s_to_balance(mbpo_logs)
     return {

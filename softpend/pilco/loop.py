@@ -353,9 +353,11 @@ def run_pilco(
     result = PilcoResult(config=config, records=records, policy=None, gp_hyperparameters=None,  # type: ignore[arg-type]
                          real_states=[states])
 
-    # ---- the policy: centres from the initial state distribution (as in PILCO), length-scales from the data
+    # ---- the policy: centres on states of the random trial (PILCO draws them from the initial state
+    # distribution; spreading them over the visited states lets the first policy act away from hanging),
+    # length-scales: the spread of each rate in the data, 0.7 for every sin/cos input (as in PILCO)
     m0, s0 = _initial_distribution(spec, config.initial_std)
-    init_states = rng.multivariate_normal(m0.numpy(), s0.numpy(), size=config.n_basis)
+    init_states = states[rng.choice(len(states), size=config.n_basis, replace=config.n_basis > len(states))]
     all_inputs = inputs[0][:, :-1]
     lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
                             np.maximum(all_inputs.std(axis=0), 1e-3), 0.7)

@@ -1,0 +1,134 @@
+"""PILCO against DQN and DQN-MBPO in real plant seconds (Figure 10).
+
+All three methods are measured the same way: after each training trial/episode block the current policy is
+run by the shared :func:`softpend.evaluation.evaluate_controller` on the true plant from hanging (these test
+episodes are not learned from and are not counted), and the curve is plotted against the *training* plant
+seconds consumed so far.  PILCO's points come from :class:`~softpend.pilco.loop.TrialRecord` (one per policy
+trial), DQN's and DQN-MBPO's from the evaluation rows of :class:`softpend.rl.training_log.TrainingLog`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .loop import PilcoConfig, PilcoResult, run_pilco
+
+__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "seconds_to_balance_table"]
+
+
+def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
+               progress: bool = True) -> list[PilcoResult]:
+    """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-seed<k>``.
+
+    A folder is reused when it holds a finished run with the same config (the seed replaced); otherwise the
+    run is done and saved there.
+    """
+    if len(seeds) == 0:
+        raise ValueError("seeds must not be empty")
+    results = []
+    for seed in seeds:
+        seeded = dataclasses.replace(config, seed=int(seed))
+        folder = Path(runs_root) / f"pilco-seed{seed}"
+        if (folder / "pilco.json").exists():
+            try:
+                previous = PilcoResult.load(folder)
+            except (ValueError, KeyError, TypeError):
+                previous = None
+            if previous is not None and previous.config == seeded:
+                results.append(previous)
+                continue
+        result = run_pilco(seeded, progress=progress)
+        result.save(folder)
+        results.append(result)
+    return results
+
+
+def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> list[dict[str, Any]]:
+    """One row per evaluated PILCO policy: ``method, seed, plant_s, success_rate, max_upright_std_rad``."""
+    rows = []
+    for result in results:
+        for record in result.records:
+            if record.kind != "policy" or math.isnan(record.eval_success_rate):
+                continue
+            rows.append({"method": method, "seed": result.config.seed, "plant_s": record.plant_seconds_total,
+                         "success_rate": record.eval_success_rate,
+                         "max_upright_std_rad": record.eval_upright_std_rad})
+    return rows
+
+
+def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
+    """The same rows from the evaluation tables of :class:`softpend.rl.training_log.TrainingLog` objects."""
+    rows = []
+    for method, logs in logs_by_method.items():
+        for log in logs:
+            for row in log.evaluations:
+                rows.append({"method": method, "seed": log.seed, "plant_s": float(row["plant_s"]),
+                             "success_rate": float(row["success_rate"]),
+                             "max_upright_std_rad": float(row["max_upright_std_rad"])})
+    return rows
+
+
+def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
+    for row in sorted(rows, key=lambda r: r["plant_s"]):
+        if row["success_rate"] >= 1.0 and row["max_upright_std_rad"] <= std_rad:
+            return float(row["plant_s"])
+    return math.inf
+
+
+def seconds_to_balance_table(rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)) -> list[dict[str, Any]]:
+    """Per method: median over seeds of the training plant seconds until an evaluation on which every seed
+    succeeds with ``max_upright_std_rad`` at most each level (``inf`` when a seed never does), plus the
+    final evaluation's success rate and upright error (medians over seeds)."""
+    table = []
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == method]
+        seeds = sorted({r["seed"] for r in mine})
+        entry: dict[str, Any] = {"method": method, "seeds": len(seeds)}
+        for level in std_levels_rad:
+            per_seed = [_first_balanced_s([r for r in mine if r["seed"] == s], level) for s in seeds]
+            entry[f"plant_s_to_std_{level:g}_rad"] = float(np.median(per_seed))
+        finals = [max((r for r in mine if r["seed"] == s), key=lambda r: r["plant_s"]) for s in seeds]
+        entry["training_plant_s"] = float(np.median([f["plant_s"] for f in finals]))
+        entry["final_success_rate"] = float(np.median([f["success_rate"] for f in finals]))
+        entry["final_max_upright_std_rad"] = float(np.median([f["max_upright_std_rad"] for f in finals]))
+        table.append(entry)
+    return table
+
+
+def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.1):
+    """Success rate and upright error against training plant seconds, one colour per method, a line per seed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, (ax_s, ax_e) = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, method in enumerate(dict.fromkeys(r["method"] for r in rows)):
+        colour = colours[i % len(colours)]
+        mine = [r for r in rows if r["method"] == method]
+        for j, seed in enumerate(sorted({r["seed"] for r in mine})):
+            seq = sorted((r for r in mine if r["seed"] == seed), key=lambda r: r["plant_s"])
+            t = [max(r["plant_s"], 1e-3) for r in seq]
+            label = method if j == 0 else None
+            ax_s.plot(t, [r["success_rate"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
+            ax_e.plot(t, [r["max_upright_std_rad"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
+    for ax in (ax_s, ax_e):
+        ax.set_xscale("log")
+        ax.set_xlabel("training plant time [s]")
+        ax.grid(True, which="both", alpha=0.3)
+    ax_s.set_ylabel("evaluation success rate")
+    ax_s.set_ylim(-0.05, 1.05)
+    ax_e.set_yscale("log")
+    ax_e.set_ylabel("worst-seed upright error (std of theta) [rad]")
+    ax_e.axhline(target_std_rad, color="k", ls="--", lw=1, label=f"target {target_std_rad:g} rad")
+    ax_s.legend(loc="upper left")
+    ax_e.legend(loc="lower left")
+    return fig

@@ -18,6 +18,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("control", "softpend.control.benchmarks:bench_control"),
     ("beam", "softpend.fidelity.benchmarks:bench_beam"),
     ("rl", "softpend.rl.benchmarks:bench_rl"),
+    ("pilco", "softpend.pilco.benchmarks:bench_pilco"),
     ("hardware", "softpend.hardware.benchmarks:bench_hardware"),
     ("sysid", "softpend.sysid.benchmarks:bench_sysid"),
 ]

@@ -3,8 +3,9 @@
 Control rate and trials
 -----------------------
 The plant (:func:`softpend.plant.make_plant`) steps at ``plant_dt_s = 0.01`` s; PILCO acts every
-``control_dt_s = 0.05`` s (20 Hz) and the torque is held constant over the five plant steps in between
-(:class:`~softpend.pilco.controller.PilcoController`).  Every trial -- the initial random-torque trial and
+``control_dt_s = 0.1`` s (10 Hz, as in PILCO's pendulum) and the torque is held constant over the ten plant
+steps in between (:class:`~softpend.pilco.controller.PilcoController`).  Trials and the prediction horizon
+are ``horizon_s = 4`` s (40 control steps): the 0.06 N m motor needs two to three swings to pump the rod up.  Every trial -- the initial random-torque trial and
 each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
 perturbed by up to ``start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
 :func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
@@ -95,17 +96,17 @@ class PilcoConfig:
 
     params: RodParams = field(default_factory=RodParams)
     plant: str = "prb"
-    state: str = "hub_tip"
+    state: str = "tip"
     plant_dt_s: float = 0.01
-    control_dt_s: float = 0.05
-    horizon_s: float = 3.0
+    control_dt_s: float = 0.1
+    horizon_s: float = 4.0
     n_policy_trials: int = 15
-    cost_width_m: float = 0.1
+    cost_width_m: float = 0.15
     initial_std: float = 0.05
     n_basis: int = 30
-    max_gp_points: int = 300
+    max_gp_points: int = 200
     gp_iterations: int = 100
-    policy_iterations: int = 50
+    policy_iterations: int = 40
     start_noise_rad: float = 0.05
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0

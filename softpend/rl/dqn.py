@@ -32,7 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
 from ..evaluation import evaluate_controller, metrics_from_trajectory
-from ..plant import OBSERVATION_NAMES
+from ..plant import OBSERVATION_NAMES, RodParams
 from .config import DQNConfig, load_config, save_config
 from .training_env import make_training_env, policy_controller
 from .training_log import TrainingLog
@@ -75,15 +75,9 @@ def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...
         name=name,
         seeds=tuple(seeds if seeds is not None else config.eval_seeds),
         duration_s=float(duration_s if duration_s is not None else config.eval_duration_s),
-        params=None if config.n_links == 4 else _params(config),
+        params=RodParams(n_links=config.n_links),
         torque_limit_nm=config.torque_limit_nm,
     )
-
-
-def _params(config: DQNConfig):
-    from ..plant import RodParams
-
-    return RodParams(n_links=config.n_links)
 
 
 class TrainingCallback(BaseCallback):

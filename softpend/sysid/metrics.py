@@ -17,7 +17,7 @@ from .layout import StateLayout
 from .model import DynamicsEnsemble, DynamicsModel
 from .rollout import rollout
 
-__all__ = ["evaluate_model", "one_step_errors", "RolloutErrors", "rollout_errors", "rollout_trial", "tip_angle_rad"]
+__all__ = ["evaluate_model", "one_step_errors", "perturbed_simulator_errors", "RolloutErrors", "rollout_errors", "rollout_trial", "tip_angle_rad"]
 
 
 class _MeanOf:
@@ -271,3 +271,68 @@ def evaluate_model(
             if key in out:
                 out[f"tip_rmse_over_length@{h:g}s"] = out[key] / params.length_m
     return out
+
+
+def perturbed_simulator_errors(
+    dataset: TrajectoryDataset,
+    trials: Optional[np.ndarray] = None,
+    hub_offset_rad: float = 1e-4,
+    horizon_s: float = 2.0,
+    start_stride: int = 10,
+    history: int = 0,
+) -> RolloutErrors:
+    """Yardstick for open-loop errors: the simulator itself, restarted from the recorded joint state with
+    the hub angle off by ``hub_offset_rad`` and driven by the recorded torques, against the data.
+
+    Near upright the rod is unstable, so even this "perfect model with a tiny state error" drifts away;
+    a learned model cannot be expected to do much better over the same horizon.  Start points are the
+    same as :func:`rollout_errors` with ``history`` (use the model's ``layout.history``).  Needs a
+    simulated dataset (joint arrays and ``plant_params``).
+    """
+    from ..plant import make_plant
+
+    if dataset.joint_positions_rad is None or dataset.params is None:
+        raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
+    if isinstance(start_stride, bool) or not isinstance(start_stride, (int, np.integer)) or start_stride < 1:
+        raise ValueError(f"start_stride must be a positive integer, got {start_stride!r}")
+    steps = int(round(horizon_s / dataset.dt_s))
+    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
+    n_states = dataset.n_samples - history
+    if steps < 1 or n_states < steps + 1:
+        raise ValueError(f"horizon_s={horizon_s} does not fit in trials of {n_states} states")
+    protocol = dataset.metadata.get("protocol", {})
+    plant = make_plant(
+        dataset.metadata.get("plant") or "prb", params=dataset.params, dt_s=dataset.dt_s, substeps=int(protocol.get("substeps", 2))
+    )
+    names = dataset.position_names
+    i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
+    tip_sq = np.zeros(steps + 1)
+    phi_sq = np.zeros(steps + 1)
+    hold_tip_sq = np.zeros(steps + 1)
+    hold_phi_sq = np.zeros(steps + 1)
+    count = 0
+    for trial in trials:
+        for start in range(history, history + n_states - steps, start_stride):
+            q = dataset.joint_positions_rad[trial, start].copy()
+            q[0] += hub_offset_rad
+            plant.reset(q, dataset.joint_velocities_rad_s[trial, start])
+            path = [plant.observe()]
+            for k in range(steps):
+                path.append(plant.step(dataset.torques_nm[trial, start + k]))
+            truth = dataset.positions[trial, start : start + steps + 1]
+            ex = np.array([o.ex_m for o in path])
+            ey = np.array([o.ey_m for o in path])
+            phi = np.array([o.phi_rad for o in path])
+            tip_sq += (ex - truth[:, i_ex]) ** 2 + (ey - truth[:, i_ey]) ** 2
+            phi_sq += _wrap(phi - truth[:, i_phi]) ** 2
+            hold_tip_sq += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
+            hold_phi_sq += _wrap(truth[0, i_phi] - truth[:, i_phi]) ** 2
+            count += 1
+    return RolloutErrors(
+        horizon_s=np.arange(steps + 1) * dataset.dt_s,
+        tip_rmse_m=np.sqrt(tip_sq / count),
+        phi_rmse_rad=np.sqrt(phi_sq / count),
+        hold_tip_rmse_m=np.sqrt(hold_tip_sq / count),
+        hold_phi_rmse_rad=np.sqrt(hold_phi_sq / count),
+        n_rollouts=count,
+    )

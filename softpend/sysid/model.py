@@ -11,7 +11,10 @@ state and torque to the normalised *change* of the core state (positions and vel
   training set's mean and standard deviation (stored buffers);
 * output: the standardised change of the core state over one step (angle increments wrapped to
   ``[-pi, pi)``), de-standardised and added to the state; angles are wrapped again and the lagged
-  frames are shifted in.
+  frames are shifted in.  With differenced velocities (``integrate_positions``, the default) the network
+  predicts only the velocity change and positions follow from ``x[t+1] = x[t] + dt v[t+1]``, which is
+  exact for backward differences.  ``theta`` (and its rate) is not predicted but derived from the
+  predicted tip position, ``theta = atan2(-ex, ey)``, as in the data.
 
 Both classes offer the same batched API in the report's units (state layout: :mod:`softpend.sysid.layout`)::
 
@@ -49,7 +52,7 @@ __all__ = [
 
 MODEL_SCHEMA_NAME = "softpend.sysid.model"
 MODEL_SCHEMA_VERSION = 1
-ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "silu": nn.SiLU, "elu": nn.ELU}
+ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "softsign": nn.Softsign, "relu": nn.ReLU, "silu": nn.SiLU, "elu": nn.ELU}
 
 
 def _wrap(x: Tensor) -> Tensor:
@@ -78,6 +81,8 @@ class DynamicsModel(nn.Module):
         Hidden layer widths (default: the report's ``(16, 16, 16)``).
     activation : str
         One of :data:`ACTIVATIONS`.
+    integrate_positions : bool
+        Predict only the velocity change and integrate positions (for backward-difference velocities).
     """
 
     def __init__(
@@ -113,6 +118,12 @@ class DynamicsModel(nn.Module):
         self.register_buffer("_linear_idx", torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long), persistent=False)
         self.register_buffer("_core_angle_mask", torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])), persistent=False)
         self.register_buffer("_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False)
+        # theta is a function of the tip position (theta = atan2(-ex, ey) in the data): derive it, and its
+        # rate, from the predicted tip instead of letting a redundant prediction drift away from it
+        names = layout.names
+        self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
+        if self._derive_theta:
+            self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
         n_angles = int(mask.sum())
         self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
         self.register_buffer("feature_mean", torch.zeros(self.n_features, dtype=torch.float32))
@@ -195,12 +206,25 @@ class DynamicsModel(nn.Module):
         """Apply a core-state change: add, wrap angles, shift the lagged frames."""
         core = state[:, : self._core] + delta
         core = torch.where(self._core_angle_mask, _wrap(core), core)
+        if self._derive_theta:
+            core = self._with_derived_theta(state, core)
         if not self._h:
             return core
         p = self._p
         previous = state[:, :p]
         previous = torch.where(self._core_angle_mask[:p], _wrap(previous), previous)
         return torch.cat([core, previous, state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
+
+    def _with_derived_theta(self, state: Tensor, core: Tensor) -> Tensor:
+        p, i = self._p, self._i_theta
+        ex, ey = core[:, self._i_ex], core[:, self._i_ey]
+        theta = torch.atan2(-ex, ey)
+        if self.integrate_positions:  # differenced velocities: the rate is the wrapped increment over dt
+            rate = _wrap(theta - state[:, i]) / self.dt_s
+        else:  # true velocities: d/dt atan2(-ex, ey)
+            ex_dot, ey_dot = core[:, p + self._i_ex], core[:, p + self._i_ey]
+            rate = (ex * ey_dot - ey * ex_dot) / (ex * ex + ey * ey).clamp_min(1e-12)
+        return torch.cat([core[:, :i], theta[:, None], core[:, i + 1 : p + i], rate[:, None], core[:, p + i + 1 :]], dim=1)
 
     def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
         """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m] (clipped to the limit).

@@ -58,7 +58,10 @@ class TrainConfig:
     batch_size : int
         Minibatch size.
     learning_rate : float
-        Initial Adam step size (halved after ``patience // 3`` epochs without improvement).
+        Initial Adam step size.
+    lr_schedule : {"cosine", "plateau"}
+        Cosine annealing of the step size to 1 % over ``max_epochs``, or halving after ``patience // 3``
+        epochs without a validation improvement.
     weight_decay : float
         Adam weight decay.
     patience : int
@@ -80,8 +83,9 @@ class TrainConfig:
     max_epochs: int = 300
     rollout_steps: int = 0
     rollout_epochs: int = 0
-    batch_size: int = 256
-    learning_rate: float = 3e-3
+    batch_size: int = 512
+    learning_rate: float = 5e-3
+    lr_schedule: str = "cosine"
     weight_decay: float = 0.0
     patience: int = 30
     validation_fraction: float = 0.2
@@ -110,6 +114,8 @@ class TrainConfig:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
+        if self.lr_schedule not in ("cosine", "plateau"):
+            raise ValueError(f"lr_schedule must be 'cosine' or 'plateau', got {self.lr_schedule!r}")
         if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
             raise ValueError(f"weight_decay must be non-negative, got {self.weight_decay!r}")
         if not 0 < self.validation_fraction < 1:
@@ -220,7 +226,10 @@ def _train_member(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     net = model.net
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
-    scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimiser, factor=0.5, patience=max(1, config.patience // 3))
+    if config.lr_schedule == "cosine":
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100)
+    else:
+        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimiser, factor=0.5, patience=max(1, config.patience // 3))
     n = x_train.shape[0]
     best = (math.inf, 0, copy.deepcopy(net.state_dict()))
     train_losses: list[float] = []
@@ -242,7 +251,7 @@ def _train_member(
             val = float(torch.mean((net(x_val) - y_val) ** 2))
         train_losses.append(total / n)
         val_losses.append(val)
-        scheduler.step(val)
+        scheduler.step(val) if config.lr_schedule == "plateau" else scheduler.step()
         if val < best[0] * (1 - 1e-4):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
         bar.set_postfix(train=f"{total / n:.2e}", val=f"{val:.2e}", best=best[1])

@@ -11,10 +11,15 @@ rate.  Two representations are offered (:data:`STATE_SPECS`):
     bending (about 3 Hz, excited by every torque step) and the light hub's fast oscillation against the
     clamp spring are not in the state and show up as GP noise (about 0.8 rad/s on the 0.1 s change of
     ``theta_dot``), which PILCO's probabilistic model carries into its predictions.
+``"tip_bend"``
+    ``x = [theta_dot, bend_dot, bend, theta]`` with ``bend = wrap(phi - theta)``: the tip plus the rod's
+    bending seen from the observations (hub angle against the tip direction) -- the report's limited
+    information with the bending mode in the state.  Only ``theta`` is an angle; ``bend`` stays small.
 ``"hub_tip"``
-    ``x = [phi_dot, theta_dot, phi, theta]``: hub and tip angles and rates, which also see the bending
-    (``theta - phi``).  Four GP outputs instead of two make the policy search about three times dearer, and
-    at a 10 Hz control rate the hub's fast mode is aliased, so it is not the default.
+    ``x = [phi_dot, theta_dot, phi, theta]``: the same information with both angles as angles (two sin/cos
+    pairs), for comparison.
+
+Four GP outputs instead of two make the policy search about three times dearer than with ``"tip"``.
 
 Angles are handled as in PILCO: the Gaussian state holds the angles themselves (unwrapped), and every
 model input uses ``(sin, cos)`` of each angle instead of the angle (moments by
@@ -43,6 +48,17 @@ from .moments import saturating_cost_moments, trig_moments
 __all__ = ["STATE_SPECS", "Propagator", "StateSpec", "state_spec"]
 
 DTYPE = torch.float64
+
+
+def _column(obs: np.ndarray, name: str) -> np.ndarray:
+    return obs[:, OBSERVATION_NAMES.index(name)]
+
+
+#: Variables computed from the observation: the rod's bending seen as hub angle minus tip angle.
+DERIVED_VARIABLES = {
+    "bend_rad": lambda obs: (_column(obs, "phi_rad") - _column(obs, "theta_rad") + np.pi) % (2 * np.pi) - np.pi,
+    "bend_dot_rad_s": lambda obs: _column(obs, "phi_dot_rad_s") - _column(obs, "theta_dot_rad_s"),
+}
 
 
 @dataclass(frozen=True)
@@ -79,10 +95,19 @@ class StateSpec:
         return self.dim - self.n_angles + 2 * self.n_angles
 
     def from_observations(self, observations: np.ndarray) -> np.ndarray:
-        """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time."""
+        """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time.
+
+        Besides the observed variables, ``bend_rad = wrap(phi - theta)`` and
+        ``bend_dot_rad_s = phi_dot - theta_dot`` (hub against tip direction: the rod's bending) are available.
+        """
         obs = np.atleast_2d(np.asarray(observations, dtype=float))
-        columns = [OBSERVATION_NAMES.index(v) for v in self.variables]
-        states = obs[:, columns].copy()
+        columns = []
+        for name in self.variables:
+            if name in DERIVED_VARIABLES:
+                columns.append(DERIVED_VARIABLES[name](obs))
+            else:
+                columns.append(obs[:, OBSERVATION_NAMES.index(name)])
+        states = np.stack(columns, axis=1)
         states[:, self.angle_indices] = np.unwrap(states[:, self.angle_indices], axis=0)
         return states
 
@@ -98,6 +123,7 @@ class StateSpec:
 STATE_SPECS: dict[str, StateSpec] = {
     "hub_tip": StateSpec("hub_tip", ("phi_dot_rad_s", "theta_dot_rad_s", "phi_rad", "theta_rad"), 2, 3),
     "tip": StateSpec("tip", ("theta_dot_rad_s", "theta_rad"), 1, 1),
+    "tip_bend": StateSpec("tip_bend", ("theta_dot_rad_s", "bend_dot_rad_s", "bend_rad", "theta_rad"), 1, 3),
 }
 
 

@@ -72,7 +72,7 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
 
 
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
-    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_epochs=3, ensemble_size=2,
+    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
                         model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
                         rollout_schedule=(0, 1, 1, 1), **TINY)
     model, log = train_mbpo(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)

@@ -174,8 +174,11 @@ class MBPOConfig(DQNConfig):
         Refit the dynamics ensemble on all real data every this many episodes.
     ensemble_size : int
         Members of the dynamics ensemble.
-    model_epochs : int
-        Maximum training epochs per refit (early stopping on a held-out episode).
+    model_fit_steps : int
+        Minibatch gradient steps per ensemble member and refit (the epochs are set so that a refit costs
+        about this many steps whatever the data size; early stopping on held-out episodes still applies).
+    model_batch_size : int
+        Minibatch size of the model fits.
     model_hidden_widths : tuple of int
         Hidden layers of each ensemble member (:class:`softpend.sysid.DynamicsModel`).
     """
@@ -187,8 +190,9 @@ class MBPOConfig(DQNConfig):
     real_ratio: float = 0.1
     initial_random_episodes: int = 3
     model_refit_every_episodes: int = 2
-    ensemble_size: int = 5
-    model_epochs: int = 40
+    ensemble_size: int = 3
+    model_fit_steps: int = 1500
+    model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
     target_update_interval: int = 125
     gradient_steps: int = 4
@@ -199,7 +203,7 @@ class MBPOConfig(DQNConfig):
         _check_positive_ints(
             self,
             ("rollouts_per_real_step", "rollout_every_steps", "model_buffer_size", "model_refit_every_episodes",
-             "ensemble_size", "model_epochs"),
+             "ensemble_size", "model_fit_steps", "model_batch_size"),
         )
         if int(self.initial_random_episodes) != self.initial_random_episodes or self.initial_random_episodes < 1:
             raise ValueError(f"initial_random_episodes must be an integer >= 1, got {self.initial_random_episodes!r}")

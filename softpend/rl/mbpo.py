@@ -25,6 +25,7 @@ Real plant seconds (training episodes on the true plant) and model steps are cou
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Optional
 
@@ -177,10 +178,12 @@ class MBPOTrainer:
         if len(self.trials_observations) < 2:
             raise ValueError("need at least 2 complete real episodes to fit the dynamics model")
         c = self.config
+        n_transitions = sum(len(t) for t in self.trials_torques)
+        epochs = max(3, math.ceil(c.model_fit_steps * c.model_batch_size / n_transitions))
         result = fit_dynamics_model(
             self.dataset(),
             TrainConfig(information="full", hidden_widths=c.model_hidden_widths, ensemble_size=c.ensemble_size,
-                        max_epochs=c.model_epochs, patience=max(3, c.model_epochs // 4), batch_size=256,
+                        max_epochs=epochs, patience=max(3, epochs // 4), batch_size=c.model_batch_size,
                         learning_rate=3e-3, seed=self.seed * 1000 + self.n_fits),
             progress=self.progress,
         )

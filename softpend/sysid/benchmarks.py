@@ -2,9 +2,11 @@
 
 Runs the default protocol end to end on one torch thread: babble 60 x 5 s (seed 0), train the default
 full-information model and the limited-information model, babble 12 held-out trials (seed 12345) and
-measure one-step and open-loop rollout errors on them, then time batched rollouts.  Three models: the
-report's (full information, state without history, 3 x 16), full information with 3 past frames, and
-limited information with 3 past frames.
+measure one-step and open-loop rollout errors on them (all held-out trials, and the near-upright ones
+that had the stabilising feedback), then time batched rollouts.  Four models: the report's (full
+information, state without history, 3 x 16), full information with 3 past frames (3 x 16 and 3 x 64),
+and limited information with 3 past frames.  The yardstick ``simulator_1e-4rad_off_*`` is the simulator
+itself restarted 1e-4 rad off in hub angle (:func:`softpend.sysid.perturbed_simulator_errors`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import torch
 
 from .babble import BabbleProtocol, babble
-from .metrics import evaluate_model
+from .metrics import evaluate_model, perturbed_simulator_errors
 from .rollout import rollout
 from .training import TrainConfig, fit_dynamics_model
 
@@ -59,11 +61,17 @@ def bench_sysid() -> dict[str, float]:
         configs = (
             ("model", TrainConfig()),  # the report's state and network
             ("model_history3", TrainConfig(history=3)),
+            ("model_wide", TrainConfig(history=3, hidden_widths=(64, 64, 64))),
             ("model_limited", TrainConfig(information="limited", history=3)),
         )
+        # held-out trials with the stabilising feedback: the rod stays near upright
+        upright = np.flatnonzero(np.array(test.metadata["protocol"]["feedback_trials"], dtype=bool))
         for prefix, config in configs:
             fit = fit_dynamics_model(data, config, progress=False)
             metrics = evaluate_model(fit.model, test)
+            near = evaluate_model(fit.model, test, upright, horizons_s=(0.5, 1.0))
+            out[f"{prefix}_upright_trials_tip_rmse_m_0.5s"] = near["tip_rmse_m@0.5s"]
+            out[f"{prefix}_upright_trials_tip_rmse_m_1s"] = near["tip_rmse_m@1s"]
             out[f"{prefix}_train_s"] = fit.train_time_s
             for key in ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"):
                 out[f"{prefix}_one_step_{key}"] = metrics[key]
@@ -74,6 +82,11 @@ def bench_sysid() -> dict[str, float]:
             out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
             if prefix == "model":
                 out["model_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
+            if prefix == "model_wide":
+                out["model_wide_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
+        sim = perturbed_simulator_errors(test, hub_offset_rad=1e-4, horizon_s=2.0)
+        for h in ("0.5", "1", "2"):
+            out[f"simulator_1e-4rad_off_tip_rmse_m_{h}s"] = sim.at(float(h))["tip_rmse_m"]
         return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
     finally:
         torch.set_num_threads(threads)

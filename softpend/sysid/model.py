@@ -128,6 +128,10 @@ class DynamicsModel(nn.Module):
         self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
         self.register_buffer("feature_mean", torch.zeros(self.n_features, dtype=torch.float32))
         self.register_buffer("feature_std", torch.ones(self.n_features, dtype=torch.float32))
+        # the box of standardised features seen in training (plus a margin); inputs are clamped to it so
+        # that a rollout drifting off the data cannot make the network extrapolate without bound
+        self.register_buffer("feature_low", torch.full((self.n_features,), -math.inf, dtype=torch.float32))
+        self.register_buffer("feature_high", torch.full((self.n_features,), math.inf, dtype=torch.float32))
         self.register_buffer("delta_mean", torch.zeros(self.n_outputs, dtype=torch.float32))
         self.register_buffer("delta_std", torch.ones(self.n_outputs, dtype=torch.float32))
         layers: list[nn.Module] = []
@@ -166,8 +170,18 @@ class DynamicsModel(nn.Module):
         return self.net(features_normalised)
 
     def normalise_features(self, features: Tensor) -> Tensor:
-        """Standardise features with the stored training statistics."""
-        return (features - self.feature_mean) / self.feature_std
+        """Standardise features with the stored training statistics and clamp them to the training box."""
+        return torch.clamp((features - self.feature_mean) / self.feature_std, self.feature_low, self.feature_high)
+
+    def set_feature_box(self, low: Tensor, high: Tensor, margin: float = 0.1) -> None:
+        """Clamp standardised features to ``[low, high]`` widened by ``margin`` of the range on each side."""
+        low = torch.as_tensor(low, dtype=self.feature_low.dtype)
+        high = torch.as_tensor(high, dtype=self.feature_high.dtype)
+        if low.shape != self.feature_low.shape or high.shape != low.shape or not torch.all(high >= low):
+            raise ValueError(f"low and high must have shape {tuple(self.feature_low.shape)} with high >= low")
+        span = (high - low).clamp_min(1e-6)
+        self.feature_low.copy_(low - margin * span)
+        self.feature_high.copy_(high + margin * span)
 
     def set_normalisation(self, feature_mean: Tensor, feature_std: Tensor, delta_mean: Tensor, delta_std: Tensor) -> None:
         """Store the training-set statistics (standard deviations below 1e-12 are replaced by 1)."""

@@ -384,6 +384,8 @@ def fit_dynamics_model(
         m.set_normalisation(*stats)
     x_train, y_train = _tensors(members[0], train)
     x_val, y_val = _tensors(members[0], val)
+    for m in members:
+        m.set_feature_box(x_train.min(0).values, x_train.max(0).values)
     result = FitResult(model=members[0], config=config, train_trials=train_trials, val_trials=val_trials)
     if config.rollout_steps and config.rollout_epochs:
         windows_train = _windows(layout, dataset, train_trials, config.rollout_steps)

@@ -2,7 +2,7 @@
 
 Network
 -------
-The report's multilayer perceptron (default 3 hidden layers of 16, ``tanh``) maps *features* of the
+The report's multilayer perceptron (default 3 hidden layers of 16, SiLU: smooth for linearisation and cheap on a CPU) maps *features* of the
 state and torque to the normalised *change* of the core state (positions and velocities):
 
 * features: ``sin`` and ``cos`` of each absolute angle (``phi, theta, er``; no seam at ``+-pi``), the

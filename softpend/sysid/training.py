@@ -371,7 +371,10 @@ def fit_dynamics_model(
     train = layout.transitions(dataset, train_trials)
     val = layout.transitions(dataset, val_trials)
     params = dataset.params
+    # without plant parameters (a rig file), the largest recorded torque stands in for the limit
     limit = params.torque_limit_nm if params is not None else float(np.abs(dataset.torques_nm).max())
+    if limit <= 0:
+        raise ValueError("dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from")
 
     def new_member(index: int) -> DynamicsModel:
         with torch.random.fork_rng(devices=[]):

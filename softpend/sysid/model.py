@@ -2,13 +2,16 @@
 
 Network
 -------
-The report's multilayer perceptron (default 3 hidden layers of 16, SiLU: smooth for linearisation and cheap on a CPU) maps *features* of the
-state and torque to the normalised *change* of the core state (positions and velocities):
+The report's multilayer perceptron (default 3 hidden layers of 16; SiLU, smooth for linearisation and
+cheap on a CPU) maps *features* of the state and torque to the normalised *change* of the core state
+(positions and velocities):
 
 * features: ``sin`` and ``cos`` of each absolute angle (``phi, theta, er``; no seam at ``+-pi``), the
   other positions and every velocity as they are, for each past frame the position change since
   then (angle differences wrapped), and the torque [N m]; each feature is standardised with the
-  training set's mean and standard deviation (stored buffers);
+  training set's mean and standard deviation (stored buffers) and clamped to the box seen in training
+  plus a 10 % margin (so a rollout that drifts off the data cannot make the network extrapolate
+  without bound);
 * output: the standardised change of the core state over one step (angle increments wrapped to
   ``[-pi, pi)``), de-standardised and added to the state; angles are wrapped again and the lagged
   frames are shifted in.  With differenced velocities (``integrate_positions``, the default) the network

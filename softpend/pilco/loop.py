@@ -61,7 +61,7 @@ class PilcoConfig:
         The plant (default: the project's soft rod, ``n_links = 4``).
     plant : str
         Plant name for :func:`softpend.plant.make_plant`.
-    state : {"hub_tip", "tip"}
+    state : {"tip_bend", "tip", "hub_tip"}
         State representation (see :mod:`softpend.pilco.propagation`).
     plant_dt_s, control_dt_s : float
         Plant step and PILCO's control period (zero-order hold) [s].
@@ -96,7 +96,7 @@ class PilcoConfig:
 
     params: RodParams = field(default_factory=RodParams)
     plant: str = "prb"
-    state: str = "tip"
+    state: str = "tip_bend"
     plant_dt_s: float = 0.01
     control_dt_s: float = 0.1
     horizon_s: float = 4.0
@@ -106,7 +106,7 @@ class PilcoConfig:
     n_basis: int = 30
     max_gp_points: int = 200
     gp_iterations: int = 100
-    policy_iterations: int = 40
+    policy_iterations: int = 80
     start_noise_rad: float = 0.05
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0

@@ -5,13 +5,13 @@ State representation
 PILCO models the plant in the report's *observed* variables (limited information), sampled at the control
 rate.  Two representations are offered (:data:`STATE_SPECS`):
 
-``"tip"`` (default)
+``"tip"``
     ``x = [theta_dot, theta]``: the tip angle ``theta`` from upright and its rate -- a pendulum's state.
-    For a stiff one-link rod it is the full state; for the soft rod it is limited information: the
-    bending (about 3 Hz, excited by every torque step) and the light hub's fast oscillation against the
-    clamp spring are not in the state and show up as GP noise (about 0.8 rad/s on the 0.1 s change of
-    ``theta_dot``), which PILCO's probabilistic model carries into its predictions.
-``"tip_bend"``
+    For a stiff one-link rod it is (nearly) the full state and PILCO learns the swing-up with it; for the
+    soft rod it is too little: the bending (about 3 Hz, excited by every torque step) is not in the state
+    and shows up as GP noise (about 0.8 rad/s on the 0.1 s change of ``theta_dot``), and in our runs the
+    policy search then never found a swing-up.
+``"tip_bend"`` (default)
     ``x = [theta_dot, bend_dot, bend, theta]`` with ``bend = wrap(phi - theta)``: the tip plus the rod's
     bending seen from the observations (hub angle against the tip direction) -- the report's limited
     information with the bending mode in the state.  Only ``theta`` is an angle; ``bend`` stays small.

@@ -173,7 +173,7 @@ def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
     """
     params = params if params is not None else RodParams()
     plant = _upright_plant(params)
-    mass, stiffness, damping = plant._chain._mbs.ComputeLinearizedSystem()
+    mass, stiffness, damping = plant.linearized_matrices()
     n = plant.n_coordinates
     input_vector = np.zeros(n)
     input_vector[0] = 1.0

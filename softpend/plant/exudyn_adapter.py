@@ -219,6 +219,12 @@ class KinematicChain2D:
         )
         self.time_s += self.dt_s
 
+    def linearized_system(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Mass, stiffness and damping matrices ``(M, K, D)`` of the chain linearised at the current
+        state (Exudyn's ``ComputeLinearizedSystem``): ``M dq_dd + D dq_d + K dq = forces``."""
+        mass, stiffness, damping = self._mbs.ComputeLinearizedSystem()
+        return np.asarray(mass), np.asarray(stiffness), np.asarray(damping)
+
     def solve_static(self) -> np.ndarray:
         """Static equilibrium under gravity, springs and the current joint forces; returns joint angles."""
         ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)

@@ -228,6 +228,13 @@ class PRBPlant:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()
 
+    def linearized_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(M, K, D)`` of the joint-space dynamics linearised at the current state by Exudyn.
+
+        ``M dq_dd + D dq_d + K dq = B tau`` with ``B = e_0`` (the torque acts on the hub coordinate).
+        """
+        return self._chain.linearized_system()
+
     # ------------------------------------------------------------------ kinematics
     def _absolute_angles(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Absolute angle (from upright) and rate of each rod link."""

@@ -2,7 +2,8 @@
 
 from .observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
 from .params import GRAVITY_MPS2, RodParams
-from .prb import PRBPlant, SimulationDiverged
+from .base import SimulationDiverged
+from .prb import PRBPlant
 from .registry import make_plant, plant_names, register_plant
 
 __all__ = [

@@ -36,10 +36,9 @@ from typing import Optional
 import numpy as np
 
 from .beam_adapter import BeamSection, HubBeam2D
-from .exudyn_adapter import SolverFailure
 from .observation import Observation
 from .params import RodParams
-from .prb import SimulationDiverged
+from .base import PlantBase, check_positive
 from .registry import register_plant
 
 __all__ = ["BeamPlant", "DEFAULT_N_ELEMENTS", "POISSON_RATIO", "SHEAR_CORRECTION", "beam_section_from_params"]
@@ -88,15 +87,7 @@ def beam_section_from_params(params: RodParams) -> BeamSection:
     )
 
 
-def _check_positive(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return float(value)
-
-
-class BeamPlant:
+class BeamPlant(PlantBase):
     """Soft pendulum with the rod as a continuum beam (Exudyn geometrically exact 2D beam elements).
 
     Offers the interface of :class:`~softpend.plant.PRBPlant` (same observations, torque input,
@@ -131,22 +122,12 @@ class BeamPlant:
         spectral_radius: float = 0.95,
         newton_relative_tolerance: float = 1e-6,
     ) -> None:
-        self.params = params if params is not None else RodParams()
-        if not isinstance(self.params, RodParams):
-            raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
-        self.dt_s = _check_positive("dt_s", dt_s)
-        if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
+        self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         if isinstance(n_elements, bool) or int(n_elements) != n_elements or n_elements < 1:
             raise ValueError(f"n_elements must be an integer >= 1, got {n_elements!r}")
-        if hub_locked_at_rad is not None and not math.isfinite(hub_locked_at_rad):
-            raise ValueError(f"hub_locked_at_rad must be finite, got {hub_locked_at_rad!r}")
         if not 0.0 <= spectral_radius <= 1.0:
             raise ValueError(f"spectral_radius must be in [0, 1], got {spectral_radius!r}")
-        self.substeps = int(substeps)
         self.n_elements = int(n_elements)
-        self.hub_locked = hub_locked_at_rad is not None
-        self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
         p = self.params
         self.section = beam_section_from_params(p)
         self._beam = HubBeam2D(
@@ -161,12 +142,11 @@ class BeamPlant:
             substeps=self.substeps,
             hub_locked_at_rad=hub_locked_at_rad,
             spectral_radius=spectral_radius,
-            newton_relative_tolerance=_check_positive("newton_relative_tolerance", newton_relative_tolerance),
+            newton_relative_tolerance=check_positive("newton_relative_tolerance", newton_relative_tolerance),
         )
         self._s = self._beam.node_s_m  # reference arc length of the nodes [m]
         self._hub_offset = 0 if self.hub_locked else 1
         self.n_coordinates = 3 * self.n_elements + self._hub_offset
-        self.last_torque_nm = 0.0
         self.reset()
 
     # ------------------------------------------------------------------ state mapping
@@ -264,66 +244,18 @@ class BeamPlant:
         self._beam.set_hub_torque(0.0)
         return self.observe()
 
-    def _check_state(self, values: np.ndarray, name: str) -> np.ndarray:
-        values = np.asarray(values, dtype=float)
-        if values.shape != (self.n_coordinates,):
-            raise ValueError(f"{name} must have shape ({self.n_coordinates},), got {values.shape}")
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} must be finite, got {values}")
-        return values.copy()
-
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Full state ``(q, q_dot)`` (see the module docstring; hub angle unwrapped)."""
         return self.state_from_global(*self._beam.get_coordinates())
 
-    def set_joint_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
-        """Alias of :meth:`reset`; used to branch from a stored state."""
-        return self.reset(q, q_dot)
-
-    def hanging_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """State of the straight rod hanging down at rest (``phi = pi``; no sag)."""
-        q = np.zeros(self.n_coordinates)
-        if not self.hub_locked:
-            q[0] = np.pi
-        return q, np.zeros(self.n_coordinates)
-
     # ------------------------------------------------------------------ stepping
-    def step(self, torque_nm: float) -> Observation:
-        """Apply a base torque (clipped to the limit) for one step ``dt_s`` and return the observation.
+    def _advance(self, torque_nm: float) -> None:
+        self._beam.set_hub_torque(torque_nm)
+        self._beam.advance()
 
-        Raises
-        ------
-        ValueError
-            If ``torque_nm`` is not finite.
-        SimulationDiverged
-            If the solver fails or the state stops being finite.
-        """
-        torque = float(torque_nm)
-        if not math.isfinite(torque):
-            raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")
-        limit = self.params.torque_limit_nm
-        torque = min(max(torque, -limit), limit)
-        self.last_torque_nm = torque
-        self._beam.set_hub_torque(torque)
-        try:
-            self._beam.advance()
-        except SolverFailure as exc:
-            raise SimulationDiverged(str(exc)) from exc
-        return self.observe()
-
-    def static_equilibrium(self) -> Observation:
-        """Solve for static equilibrium under gravity and elasticity (zero torque) with Exudyn's static
-        solver, starting from the current state, and make it the current (resting) state.
-
-        Most useful with ``hub_locked_at_rad`` set (a cantilever).
-        """
-        self.last_torque_nm = 0.0
+    def _solve_static(self) -> None:
         self._beam.set_hub_torque(0.0)
-        try:
-            self._beam.solve_static()
-        except SolverFailure as exc:
-            raise SimulationDiverged(str(exc)) from exc
-        return self.observe()
+        self._beam.solve_static()
 
     # ------------------------------------------------------------------ kinematics
     def node_positions_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:

@@ -14,30 +14,15 @@ from typing import Optional
 
 import numpy as np
 
-from .exudyn_adapter import ChainLink, KinematicChain2D, SolverFailure
-from .observation import Observation, wrap_angle_rad
+from .base import PlantBase, SimulationDiverged
+from .exudyn_adapter import ChainLink, KinematicChain2D
+from .observation import Observation
 from .params import RodParams
 
 __all__ = ["PRBPlant", "SimulationDiverged"]
 
 
-class SimulationDiverged(RuntimeError):
-    """The simulation could not continue (solver failure or non-finite state); ``reason`` says why."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
-
-
-def _check_finite_positive(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return float(value)
-
-
-class PRBPlant:
+class PRBPlant(PlantBase):
     """Soft pendulum as a PRB chain on Exudyn's ``ObjectKinematicTree`` with the implicit solver.
 
     Parameters
@@ -67,17 +52,7 @@ class PRBPlant:
         hub_locked_at_rad: Optional[float] = None,
         spectral_radius: float = 0.95,
     ) -> None:
-        self.params = params if params is not None else RodParams()
-        if not isinstance(self.params, RodParams):
-            raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
-        self.dt_s = _check_finite_positive("dt_s", dt_s)
-        if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
-        if hub_locked_at_rad is not None and not math.isfinite(hub_locked_at_rad):
-            raise ValueError(f"hub_locked_at_rad must be finite, got {hub_locked_at_rad!r}")
-        self.substeps = int(substeps)
-        self.hub_locked = hub_locked_at_rad is not None
-        self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
+        self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         p = self.params
         n = p.n_links
         length = p.link_length_m
@@ -163,70 +138,22 @@ class PRBPlant:
         self._chain.set_joint_forces(self._forces)
         return self.observe()
 
-    def _check_state(self, values: np.ndarray, name: str) -> np.ndarray:
-        values = np.asarray(values, dtype=float)
-        if values.shape != (self.n_coordinates,):
-            raise ValueError(f"{name} must have shape ({self.n_coordinates},), got {values.shape}")
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} must be finite, got {values}")
-        return values.copy()
-
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Full joint state ``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
         return self._chain.get_state()
 
-    def set_joint_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
-        """Alias of :meth:`reset` keeping the current time base; used to branch from a stored state."""
-        return self.reset(q, q_dot)
-
-    def hanging_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Joint state of the straight rod hanging down at rest (``phi = pi``)."""
-        q = np.zeros(self.n_coordinates)
-        if not self.hub_locked:
-            q[0] = np.pi
-        return q, np.zeros(self.n_coordinates)
-
     # ------------------------------------------------------------------ stepping
-    def step(self, torque_nm: float) -> Observation:
-        """Apply a base torque (clipped to the limit) for one step ``dt_s`` and return the observation.
-
-        Raises
-        ------
-        ValueError
-            If ``torque_nm`` is not finite.
-        SimulationDiverged
-            If the solver fails or the state stops being finite.
-        """
-        torque = float(torque_nm)
-        if not math.isfinite(torque):
-            raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")
-        limit = self.params.torque_limit_nm
-        torque = min(max(torque, -limit), limit)
-        self.last_torque_nm = torque
+    def _advance(self, torque_nm: float) -> None:
         if not self.hub_locked:
-            self._forces[0] = torque
+            self._forces[0] = torque_nm
             self._chain.set_joint_forces(self._forces)
-        try:
-            self._chain.advance()
-        except SolverFailure as exc:
-            raise SimulationDiverged(str(exc)) from exc
-        return self.observe()
+        self._chain.advance()
 
-    def static_equilibrium(self) -> Observation:
-        """Solve for static equilibrium under gravity and the springs (zero torque) with Exudyn's static
-        solver, starting from the current joint state, and make it the current (resting) state.
-
-        Most useful with ``hub_locked_at_rad`` set (a cantilever); with a free hub the result is whichever
-        equilibrium the Newton iteration reaches from the current state.
-        """
+    def _solve_static(self) -> None:
         if not self.hub_locked:
             self._forces[:] = 0.0
             self._chain.set_joint_forces(self._forces)
-        try:
-            self._chain.solve_static()
-        except SolverFailure as exc:
-            raise SimulationDiverged(str(exc)) from exc
-        return self.observe()
+        self._chain.solve_static()
 
     def linearized_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(M, K, D)`` of the joint-space dynamics linearised at the current state by Exudyn.
@@ -314,9 +241,8 @@ class PRBPlant:
         a, ad = self._absolute_angles(q, qd)
         length = self.params.link_length_m
         g = self.params.gravity_mps2
-        # joint positions and velocities (start of each link)
-        ux, uy = -np.sin(a), np.cos(a)
-        joint_x = np.concatenate([[0.0], np.cumsum(length * ux)[:-1]])
+        # joint heights and velocities (start of each link)
+        uy = np.cos(a)
         joint_y = np.concatenate([[0.0], np.cumsum(length * uy)[:-1]])
         vx_step = -length * np.cos(a) * ad
         vy_step = -length * np.sin(a) * ad

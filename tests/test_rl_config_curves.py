@@ -31,6 +31,12 @@ def test_overrides_and_json_round_trip(tmp_path):
     assert load_config(tmp_path / "c.json") == config
 
 
+def test_config_of_another_version_is_a_clear_error(tmp_path):
+    (tmp_path / "c.json").write_text('{"class": "MBPOConfig", "model_epochs": 3}')
+    with pytest.raises(ValueError, match="not a config of this version"):
+        load_config(tmp_path / "c.json")
+
+
 def test_rollout_schedule_is_linear_like_mbrl_lib():
     config = MBPOConfig(rollout_schedule=(10, 20, 1, 11))
     assert [config.rollout_length(e) for e in (0, 10, 15, 20, 50)] == [1, 1, 6, 11, 11]

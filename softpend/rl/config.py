@@ -272,5 +272,8 @@ def load_config(path: Path) -> DQNConfig:
     cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(data.pop("class", "DQNConfig"))
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+    try:
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+    except TypeError as exc:  # a config written by another version (renamed or removed fields)
+        raise ValueError(f"{path}: not a config of this version: {exc}") from exc
 

@@ -369,13 +369,15 @@ def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig
         ``"best"``: the agent of the best periodic evaluation (``best_agent.zip``: every evaluation seed
         swung up, then the smallest worst-seed upright std; later wins ties) -- model selection on the
         evaluation seeds, as stable-baselines3's ``EvalCallback``; ``"final"``: the agent at the end of
-        training (``agent.zip``).
+        training (``agent.zip``, also used when a run has no ``best_agent.zip``).
     """
     if which not in ("best", "final"):
         raise ValueError(f"which must be 'best' or 'final', got {which!r}")
     path = Path(run_dir)
     folder = path.parent if path.suffix == ".zip" else path
     agent = path if path.suffix == ".zip" else path / ("best_agent.zip" if which == "best" else "agent.zip")
+    if which == "best" and path.suffix != ".zip" and not agent.exists():  # a run without evaluations
+        agent = path / "agent.zip"
     if not agent.exists():
         raise FileNotFoundError(f"no agent at {agent}")
     config = load_config(folder / "config.json")

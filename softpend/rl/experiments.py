@@ -41,7 +41,7 @@ def train_seeds(
     for seed in seeds:
         run_dir = run_folder(root, algo, int(seed))
         log_path = run_dir / "log.json"
-        if log_path.exists() and (run_dir / "config.json").exists() and load_config(run_dir / "config.json") == config:
+        if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
             log = TrainingLog.load(log_path)
             if log.n_episodes == episodes:
                 logs.append(log)
@@ -53,6 +53,14 @@ def train_seeds(
         _, log = train(config, seed=int(seed), episodes=int(episodes), run_dir=run_dir, resume=resume, progress=progress)
         logs.append(log)
     return logs
+
+
+def _saved_config(run_dir: Path) -> DQNConfig | None:
+    """The config saved in a run folder, or None if it was written by an incompatible version."""
+    try:
+        return load_config(run_dir / "config.json")
+    except ValueError:
+        return None
 
 
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = BALANCE_STD_RAD) -> list[dict[str, Any]]:

@@ -32,6 +32,6 @@ def test_dqn_learns_to_swing_up_and_balance(tmp_path):
 @pytest.mark.expensive
 def test_mbpo_learns_to_swing_up_and_balance(tmp_path):
     config = MBPOConfig()
-    agent, log = train_mbpo(config, seed=0, episodes=70, run_dir=tmp_path, progress=False)
+    agent, log = train_mbpo(config, seed=0, episodes=50, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
     _balances(agent, config)

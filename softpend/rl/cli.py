@@ -13,7 +13,7 @@ __all__ = ["DEFAULT_EPISODES", "config_from_args", "train_dqn_from_args", "train
 
 #: Training episodes when ``--episodes`` is not given, also the book's full profile and the benchmark runs
 #: (the report needed ~150 model-free and ~100 model-based episodes; our model-free DQN balances after ~60-90).
-DEFAULT_EPISODES = {"dqn": 100, "mbpo": 70}
+DEFAULT_EPISODES = {"dqn": 100, "mbpo": 50}
 
 
 def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:

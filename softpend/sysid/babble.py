@@ -165,12 +165,18 @@ def band_limited_noise(rng: np.random.Generator, n_steps: int, std: float, bandw
     return u
 
 
-def _start_state(rng: np.random.Generator, protocol: BabbleProtocol, n_coordinates: int) -> tuple[np.ndarray, np.ndarray]:
+def _start_state(
+    rng: np.random.Generator, protocol: BabbleProtocol, n_coordinates: int, bend_joints: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random start state; ``bend_joints`` perturbs the spring angles too (PRB chains only: other plants,
+    such as the continuum beam, have coordinates that are not joint angles and start straight)."""
     q = np.zeros(n_coordinates)
     qd = np.zeros(n_coordinates)
     centre = {"upright": 0.0, "hanging": math.pi}.get(protocol.start)
     q[0] = rng.uniform(-math.pi, math.pi) if centre is None else centre + protocol.start_angle_std_rad * rng.standard_normal()
-    q[1:] = protocol.start_bend_std_rad * rng.standard_normal(n_coordinates - 1)
+    bends = protocol.start_bend_std_rad * rng.standard_normal(n_coordinates - 1)
+    if bend_joints:
+        q[1:] = bends
     qd[0] = protocol.start_rate_std_rad_s * rng.standard_normal()
     return q, qd
 
@@ -181,7 +187,9 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     delay = protocol.camera_delay_steps
     n_steps = n + delay  # raw samples 0 .. n + delay (one extra sample for the first backward difference)
     limit = plant.params.torque_limit_nm
-    q0, qd0 = _start_state(rng, protocol, plant.n_coordinates)
+    from ..plant import PRBPlant
+
+    q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, bend_joints=isinstance(plant, PRBPlant))
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
     babble = band_limited_noise(rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s)
     kp = protocol.feedback_kp_nm_per_rad if use_feedback else 0.0

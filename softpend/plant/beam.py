@@ -36,7 +36,7 @@ from typing import Optional
 import numpy as np
 
 from .beam_adapter import BeamSection, HubBeam2D
-from .observation import Observation
+from .observation import Observation, observation_from_tip
 from .params import RodParams
 from .base import PlantBase, check_positive
 from .registry import register_plant
@@ -287,22 +287,7 @@ class BeamPlant(PlantBase):
         ey = float(c[-2]) + self.params.length_m
         er, er_dot = float(c[-1]), float(c_t[-1])
         ex_dot, ey_dot = float(c_t[-3]), float(c_t[-2])
-        r2 = ex * ex + ey * ey
-        theta = math.atan2(-ex, ey)
-        theta_dot = (ex * ey_dot - ey * ex_dot) / r2 if r2 > 0 else 0.0
-        two_pi = 2 * math.pi
-        return Observation(
-            (phi + math.pi) % two_pi - math.pi,
-            (theta + math.pi) % two_pi - math.pi,
-            ex,
-            ey,
-            (er + math.pi) % two_pi - math.pi,
-            phi_dot,
-            theta_dot,
-            ex_dot,
-            ey_dot,
-            er_dot,
-        )
+        return observation_from_tip(phi, phi_dot, ex, ey, ex_dot, ey_dot, er, er_dot)
 
     # ------------------------------------------------------------------ energy
     def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:

@@ -36,7 +36,7 @@ from exudyn.itemInterface import (
     ObjectRigidBody2D,
 )
 
-from .exudyn_adapter import SolverFailure
+from .exudyn_adapter import SolverFailure, implicit_solver_settings
 
 __all__ = ["BeamSection", "HubBeam2D"]
 
@@ -190,23 +190,7 @@ class HubBeam2D:
         mbs.Assemble()
         self._mass_matrix = self._compute_mass_matrix()
 
-        settings = exu.SimulationSettings()
-        ti = settings.timeIntegration
-        ti.numberOfSteps = int(self.substeps)
-        ti.startTime = 0.0
-        ti.endTime = self.dt_s
-        ti.verboseMode = 0
-        ti.adaptiveStep = False
-        ti.generalizedAlpha.spectralRadius = float(self.spectral_radius)
-        ti.newton.relativeTolerance = self.newton_relative_tolerance
-        ti.newton.absoluteTolerance = 1e-10
-        ti.newton.useModifiedNewton = True
-        ti.newton.maxIterations = 50
-        settings.solution.file.write = False
-        settings.solution.sensors.writePeriod = 1e9
-        settings.show.computationTime = False
-        settings.show.statistics = False
-        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
+        settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
         self._settings = settings
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(mbs, settings)

@@ -13,8 +13,11 @@ from .prb import PRBPlant
 N_STEPS = 4000
 
 
-def _env_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
-    env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links))
+def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb") -> float:
+    """Steps per second through the Gymnasium API (``gym.make``, random actions from a seeded generator)."""
+    import softpend  # noqa: F401  (registers the environments)
+
+    env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links), plant=plant)
     actions = np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32)
     env.reset(seed=0)
     start = time.perf_counter()
@@ -46,11 +49,9 @@ def bench_plant() -> dict[str, float]:
     The env and solver loops for n = 4 are interleaved twice and the best of each kept, so that the
     wrapper-cost ratio compares like with like on a noisy machine.
     """
-    import softpend  # noqa: F401  (registers the environments)
-
-    env4 = max(_env_steps_per_s(4) for _ in range(2))
+    env4 = max(env_steps_per_s(4) for _ in range(2))
     solver4 = max(_solver_steps_per_s(4) for _ in range(2))
-    env10 = _env_steps_per_s(10)
+    env10 = env_steps_per_s(10)
     dt_s = 0.01
     return {
         "env_steps_per_s_n4": env4,

@@ -19,11 +19,39 @@ import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
-__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure"]
+__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings"]
 
 
 class SolverFailure(RuntimeError):
     """The Exudyn solver failed (Newton did not converge or the state became non-finite)."""
+
+
+def implicit_solver_settings(
+    dt_s: float, substeps: int, spectral_radius: float, newton_relative_tolerance: float
+) -> exu.SimulationSettings:
+    """Settings of the generalized-alpha solver stepped once per control step by softpend's plants.
+
+    ``substeps`` fixed steps per ``dt_s`` (no adaptive step), modified Newton (the Jacobian is updated only
+    when convergence slows), no solution files, quiet output, dense linear algebra (small systems).
+    """
+    settings = exu.SimulationSettings()
+    ti = settings.timeIntegration
+    ti.numberOfSteps = int(substeps)
+    ti.startTime = 0.0
+    ti.endTime = dt_s
+    ti.verboseMode = 0
+    ti.adaptiveStep = False
+    ti.generalizedAlpha.spectralRadius = float(spectral_radius)
+    ti.newton.relativeTolerance = newton_relative_tolerance
+    ti.newton.absoluteTolerance = 1e-10
+    ti.newton.useModifiedNewton = True
+    ti.newton.maxIterations = 50
+    settings.solution.file.write = False
+    settings.solution.sensors.writePeriod = 1e9
+    settings.show.computationTime = False
+    settings.show.statistics = False
+    settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
+    return settings
 
 
 @dataclass(frozen=True)
@@ -141,22 +169,7 @@ class KinematicChain2D:
         )
         mbs.Assemble()
 
-        settings = exu.SimulationSettings()
-        settings.timeIntegration.numberOfSteps = int(self.substeps)
-        settings.timeIntegration.startTime = 0.0
-        settings.timeIntegration.endTime = self.dt_s
-        settings.timeIntegration.verboseMode = 0
-        settings.timeIntegration.adaptiveStep = False
-        settings.timeIntegration.generalizedAlpha.spectralRadius = self.spectral_radius
-        settings.timeIntegration.newton.relativeTolerance = self.newton_relative_tolerance
-        settings.timeIntegration.newton.absoluteTolerance = 1e-10
-        settings.timeIntegration.newton.useModifiedNewton = True
-        settings.timeIntegration.newton.maxIterations = 50
-        settings.solution.file.write = False
-        settings.solution.sensors.writePeriod = 1e9
-        settings.show.computationTime = False
-        settings.show.statistics = False
-        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
+        settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
         self._settings = settings
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(mbs, settings)

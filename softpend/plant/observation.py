@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -70,3 +71,35 @@ class Observation(NamedTuple):
 
 
 assert Observation._fields == OBSERVATION_NAMES
+
+_TWO_PI = 2 * math.pi
+
+
+def observation_from_tip(
+    phi_rad: float,
+    phi_dot_rad_s: float,
+    ex_m: float,
+    ey_m: float,
+    ex_dot_m_s: float,
+    ey_dot_m_s: float,
+    er_rad: float,
+    er_dot_rad_s: float,
+) -> Observation:
+    """Build an :class:`Observation` from the hub angle, the tip position and the tip rotation (all with
+    rates): derives the tip angle ``theta = atan2(-ex, ey)`` and its rate, and wraps the angles to
+    ``[-pi, pi)``.  Scalar ``math`` on purpose: it runs once per simulation step."""
+    r2 = ex_m * ex_m + ey_m * ey_m
+    theta = math.atan2(-ex_m, ey_m)
+    theta_dot = (ex_m * ey_dot_m_s - ey_m * ex_dot_m_s) / r2 if r2 > 0 else 0.0
+    return Observation(
+        (phi_rad + math.pi) % _TWO_PI - math.pi,
+        (theta + math.pi) % _TWO_PI - math.pi,
+        ex_m,
+        ey_m,
+        (er_rad + math.pi) % _TWO_PI - math.pi,
+        phi_dot_rad_s,
+        theta_dot,
+        ex_dot_m_s,
+        ey_dot_m_s,
+        er_dot_rad_s,
+    )

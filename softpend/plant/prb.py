@@ -16,7 +16,7 @@ import numpy as np
 
 from .base import PlantBase, SimulationDiverged
 from .exudyn_adapter import ChainLink, KinematicChain2D
-from .observation import Observation
+from .observation import Observation, observation_from_tip
 from .params import RodParams
 
 __all__ = ["PRBPlant", "SimulationDiverged"]
@@ -216,22 +216,7 @@ class PRBPlant(PlantBase):
             ey += length * c_a
             ex_dot -= length * c_a * rate
             ey_dot -= length * s_a * rate
-        r2 = ex * ex + ey * ey
-        theta = math.atan2(-ex, ey)
-        theta_dot = (ex * ey_dot - ey * ex_dot) / r2 if r2 > 0 else 0.0
-        two_pi = 2 * math.pi
-        return Observation(
-            (phi + math.pi) % two_pi - math.pi,
-            (theta + math.pi) % two_pi - math.pi,
-            ex,
-            ey,
-            (angle + math.pi) % two_pi - math.pi,
-            phi_dot,
-            theta_dot,
-            ex_dot,
-            ey_dot,
-            rate,
-        )
+        return observation_from_tip(phi, phi_dot, ex, ey, ex_dot, ey_dot, angle, rate)
 
     # ------------------------------------------------------------------ energy
     def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import matplotlib.ticker
+
 import math
 from typing import Any, Sequence
 
@@ -55,7 +57,11 @@ def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recomm
             ax.axhline(2.0, color="k", ls=":", lw=1, label="2 %")
         if recommended is not None:
             ax.axvline(recommended, color="C2", ls="--", lw=1, label=f"recommended n = {recommended}")
-        ax.set_xlabel("n")
+        resolutions = sorted({r.resolution for r in rows})
+        ax.set_xticks(resolutions)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("n (links or elements)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=8)

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from softpend.rl.config import DQNConfig, MBPOConfig
-from softpend.rl.dqn import evaluate_agent, train_dqn
+from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import train_mbpo
 from softpend.rl.training_log import BALANCE_STD_RAD
 
@@ -32,6 +32,10 @@ def test_dqn_learns_to_swing_up_and_balance(tmp_path):
 @pytest.mark.expensive
 def test_mbpo_learns_to_swing_up_and_balance(tmp_path):
     config = MBPOConfig()
-    agent, log = train_mbpo(config, seed=0, episodes=50, run_dir=tmp_path, progress=False)
+    _, log = train_mbpo(config, seed=0, episodes=50, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
+    # the agent of the best periodic evaluation (seeds 1000, 1001), as the book's figures use it, checked on
+    # other start seeds: with the default high update-to-data ratio the final agent of seed 0 has collapsed
+    # again (balanced at episodes 30-35, not at 40-50)
+    agent, _ = load_agent(tmp_path)
     _balances(agent, config)

@@ -29,9 +29,13 @@ SWINGUP_SEEDS = (0, 1, 2, 3, 4)
 TILT_RAD = 0.2
 
 
-def tilt_state(params: RodParams, tilt_rad: float) -> tuple[np.ndarray, np.ndarray]:
-    """Straight rod at rest, hub and tip tilted by ``tilt_rad`` from upright."""
-    q = np.zeros(params.n_links + 1)
+def tilt_state(params: RodParams, tilt_rad: float, plant: str = "prb") -> tuple[np.ndarray, np.ndarray]:
+    """Straight rod at rest, hub and tip tilted by ``tilt_rad`` from upright (on any registered plant: its
+    state is the hub angle followed by coordinates that are zero for the straight rod)."""
+    from ..plant import make_plant
+
+    n = params.n_links + 1 if plant == "prb" else make_plant(plant, params=params).n_coordinates
+    q = np.zeros(n)
     q[0] = tilt_rad
     return q, np.zeros_like(q)
 

@@ -55,20 +55,21 @@ class ClassicalComparison:
 
 
 def train_learned_model(params: Optional[RodParams] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
-                        progress: bool = False):
-    """Babble (report protocol, ``n_trials`` x 5 s) and fit the default learned model (3 x 16) with ``seed``."""
+                        progress: bool = False, plant: str = "prb"):
+    """Babble (report protocol, ``n_trials`` x 5 s) on ``plant`` and fit the default learned model (3 x 16)."""
     from ..sysid import BabbleProtocol, babble
     from ..sysid.training import fit_dynamics_model
 
-    dataset = babble(BabbleProtocol(n_trials=n_trials), params=params, seed=seed, progress=progress)
+    dataset = babble(BabbleProtocol(n_trials=n_trials), params=params, seed=seed, plant=plant, progress=progress)
     return fit_dynamics_model(dataset, progress=progress, max_epochs=max_epochs, seed=seed).model
 
 
-def _run(controller, params, tilts, duration_s, limit) -> EvaluationSummary:
+def _run(controller, params, tilts, duration_s, limit, plant) -> EvaluationSummary:
     results = []
     for tilt in tilts:
         results += evaluate_controller(controller, seeds=(0,), duration_s=duration_s, start="upright", params=params,
-                                       torque_limit_nm=limit, initial_state=tilt_state(params, tilt)).results
+                                       torque_limit_nm=limit, plant=plant,
+                                       initial_state=tilt_state(params, tilt, plant)).results
     return EvaluationSummary(name=getattr(controller, "name", "controller"), results=results)
 
 
@@ -83,6 +84,7 @@ def classical_comparison(
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
     progress: bool = False,
+    plant: str = "prb",
 ) -> ClassicalComparison:
     """Evaluate every classical controller (see the module docstring).
 
@@ -106,6 +108,10 @@ def classical_comparison(
         Cost evaluations of the PID tuning.
     pid_gains : PIDGains, optional
         Skip the tuning and use these gains.
+    plant : str
+        The true plant (any name of :func:`softpend.plant.make_plant`).  On plants other than the PRB chain
+        the controllers that read the chain's joint state (joint-state LQR, joint-energy swing-up) are
+        replaced by their observation-only versions, and ``notes`` says so.
     """
     params = params if params is not None else RodParams()
     limit = params.torque_limit_nm
@@ -114,7 +120,7 @@ def classical_comparison(
     rows: list[dict[str, Any]] = []
 
     def add(label: str, controller, torque_limit: float) -> None:
-        summary = _run(controller, params, tilts_rad, duration_s, torque_limit)
+        summary = _run(controller, params, tilts_rad, duration_s, torque_limit, plant)
         summary.name = label
         near[label] = summary
         for tilt, result in zip(tilts_rad, summary.results):
@@ -122,17 +128,23 @@ def classical_comparison(
             row.update(start=f"tilt {tilt:g} rad", torque_limit_nm=torque_limit)
             rows.append(row)
 
-    add("LQR (true model)", LQRController.from_params(params), limit)
-    add("LQR (true model), no limit", LQRController.from_params(params, torque_limit_nm=unlimited_torque_nm),
-        unlimited_torque_nm)
-    add("LQR (observations)", LQRController.from_params(params, state="observation"), limit)
+    joint_state = plant == "prb"
+    if not joint_state:
+        notes.append(f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only versions")
+    lqr_state = "joint" if joint_state else "observation"
+    add("LQR (true model)", LQRController.from_params(params, state=lqr_state), limit)
+    add("LQR (true model), no limit",
+        LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm), unlimited_torque_nm)
+    if joint_state:
+        add("LQR (observations)", LQRController.from_params(params, state="observation"), limit)
     if learned_model is not None:
         try:
             add("LQR (learned model)", lqr_from_learned_model(learned_model, params), limit)
         except ValueError as exc:
             notes.append(f"LQR on the learned model: design failed ({exc})")
     if pid_gains is None:
-        simulator = learned_model_simulator(learned_model, params) if learned_model is not None else plant_simulator(params)
+        simulator = (learned_model_simulator(learned_model, params) if learned_model is not None
+                     else plant_simulator(params, plant=plant))
         tuned_on = "learned model" if learned_model is not None else "true plant"
         if learned_model is None:
             notes.append("no learned model given: PID tuned on the true plant")
@@ -142,8 +154,9 @@ def classical_comparison(
         tuned_on = "given"
     add("PID", PIDController(pid_gains, torque_limit_nm=limit), limit)
     add("PID, no limit", PIDController(pid_gains, torque_limit_nm=unlimited_torque_nm), unlimited_torque_nm)
-    swing = evaluate_controller(EnergySwingUpController(params), name="energy swing-up + LQR", seeds=swingup_seeds,
-                                duration_s=swingup_duration_s, start="hanging", params=params)
+    swing_controller = EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params)
+    swing = evaluate_controller(swing_controller, name="energy swing-up + LQR", seeds=swingup_seeds,
+                                duration_s=swingup_duration_s, start="hanging", params=params, plant=plant)
     row = swing.row()
     row.update(start="hanging", torque_limit_nm=limit)
     rows.append(row)

@@ -235,13 +235,12 @@ def plant_simulator(params=None, plant: str = "prb", dt_s: float = 0.01) -> Simu
 
     params = params if params is not None else RodParams()
 
+    from .benchmarks import tilt_state
+
     def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
-        n = params.n_links + 1
-        q = np.zeros(n)
-        q[0] = tilt_rad
         result = evaluate_controller(
             controller, seeds=(0,), duration_s=duration_s, start="upright", params=params, plant=plant, dt_s=dt_s,
-            torque_limit_nm=controller.torque_limit_nm, initial_state=(q, np.zeros(n)),
+            torque_limit_nm=controller.torque_limit_nm, initial_state=tilt_state(params, tilt_rad, plant),
         ).results[0]
         theta = result.theta_rad if result.diverged is None else np.append(result.theta_rad, np.nan)
         return theta, result.torque_nm

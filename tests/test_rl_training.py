@@ -13,7 +13,7 @@ from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import MBPOReplayBuffer, train_mbpo
-from softpend.rl.observation_vector import observation_vector
+from softpend.envs.observation_vector import observation_vector
 from softpend.rl.training_env import HeldActionController, make_base_env, make_training_env
 
 TINY = dict(episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=1.5)

@@ -111,6 +111,8 @@ class SoftPendulumEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _vector(self, o: Observation) -> np.ndarray:
+        # scalar fast path (once per step); the batched twin for model rollouts is
+        # softpend.envs.observation_vector, tested equal to this one
         inv_l = 1.0 / self.params.length_m
         inv_v = 1.0 / VELOCITY_SCALE_PER_S
         cap = 5.0

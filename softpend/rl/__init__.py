@@ -5,8 +5,6 @@
   controller that runs an agent through the shared evaluation;
 * :mod:`softpend.rl.dqn` -- the training loop (progress bar, periodic evaluation, resumable checkpoints);
 * :mod:`softpend.rl.mbpo` -- DQN-MBPO (model rollouts branched from real states, ensemble refits);
-* :mod:`softpend.rl.observation_vector` -- the environment's observation vector for batches of predicted
-  plant observations (model rollouts);
 * :mod:`softpend.rl.training_log` -- per-episode and per-evaluation records in plant time;
 * :mod:`softpend.rl.curves` -- learning curves in plant time and the "asymptotic reward" definition;
 * :mod:`softpend.rl.experiments` -- multi-seed runs shared by Figures 4-6 and the benchmarks;

@@ -14,7 +14,7 @@ The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-li
    current epsilon-greedy action, advances the model ``action_repeat`` plant steps (a random ensemble member
    per rollout and step, as mbrl-lib's ``random_model`` propagation), and computes the observation vector and
    the report's reward from the *predicted* plant observation with the environment's own conventions
-   (:func:`softpend.rl.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
+   (:func:`softpend.envs.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
    rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).
 4. Each DQN gradient step samples ``real_ratio`` of its batch from real transitions and the rest from the
    model buffer (FIFO, ``model_buffer_size``).
@@ -40,7 +40,7 @@ from ..envs import step_reward
 from ..plant import OBSERVATION_NAMES
 from .config import MBPOConfig
 from .dqn import TrainingCallback, build_dqn, run_training
-from .observation_vector import observation_vector
+from ..envs.observation_vector import observation_vector
 from .training_env import make_base_env
 from .training_log import TrainingLog
 

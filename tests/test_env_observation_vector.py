@@ -5,7 +5,7 @@ import pytest
 
 from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.plant import OBSERVATION_NAMES
-from softpend.rl.observation_vector import observation_vector, observations_from_vector
+from softpend.envs.observation_vector import observation_vector, observations_from_vector
 
 
 def _trajectory(n_steps: int = 120):

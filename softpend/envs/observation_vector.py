@@ -5,7 +5,7 @@
 vector for thousands of *predicted* observations at once.  This module computes it with the environment's
 own constants (:data:`~softpend.envs.soft_pendulum.OBSERVATION_VECTOR_NAMES`, ``VELOCITY_SCALE_PER_S``, the
 observation-space bound) (the reward comes from the shared vectorised :func:`~softpend.envs.step_reward`), so
-that a model transition looks exactly like a real one.  ``tests/test_rl_observation_vector.py`` checks the
+that a model transition looks exactly like a real one.  ``tests/test_env_observation_vector.py`` checks the
 equality against the environment.
 """
 
@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..envs import SoftPendulumEnv
-from ..envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S
+from .soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S, SoftPendulumEnv
 from ..plant import OBSERVATION_NAMES
 
 __all__ = ["observation_vector", "observations_from_vector"]

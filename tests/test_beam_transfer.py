@@ -44,3 +44,31 @@ class _Idle:
 
     def __call__(self, observation, q, q_dot, time_s):
         return 0.0
+
+
+def test_rl_agents_run_in_the_transfer_study(tmp_path):
+    """A (tiny) DQN run becomes a transfer case, evaluated on the beam; a mismatched rod is refused."""
+    from softpend.fidelity.transfer import rl_transfer_cases, transfer_matrix
+    from softpend.rl.config import DQNConfig
+    from softpend.rl.dqn import train_dqn
+    from softpend.rl.experiments import run_folder
+
+    config = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=100, checkpoint_every_episodes=100)
+    train_dqn(config, seed=0, episodes=2, run_dir=run_folder(tmp_path, "dqn", 0), progress=False)
+    params = RodParams()
+    cases = rl_transfer_cases(tmp_path, algos=("dqn",), seeds=(0,), which="final", params=params, duration_s=2.0)
+    assert [c.name for c in cases] == ["model-free DQN (seed 0)"]
+    rows = transfer_table(cases, params, plants=("beam",), seeds=(0,), fraction=0.2, progress=False)
+    assert len(rows) == 7 and all(r["diverged"] == 0 for r in rows)
+    controllers, labels, values = transfer_matrix(rows, "beam", "success_rate")
+    assert controllers == ["model-free DQN (seed 0)"] and len(labels) == 7 and values.shape == (1, 7)
+    assert ((values >= 0) & (values <= 1)).all()
+
+    with pytest.raises(ValueError, match="n_links"):
+        rl_transfer_cases(tmp_path, algos=("dqn",), seeds=(0,), which="final", params=params.replace(n_links=6))
+    with pytest.raises(ValueError, match="algos"):
+        rl_transfer_cases(tmp_path, algos=("ppo",), seeds=(0,))
+    with pytest.raises(FileNotFoundError):
+        rl_transfer_cases(tmp_path, algos=("dqn",), seeds=(1,))
+    with pytest.raises(ValueError, match="plant"):
+        transfer_matrix(rows, "real")

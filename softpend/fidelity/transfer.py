@@ -13,7 +13,10 @@ its nominal design):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
 
 from tqdm.auto import tqdm
 
@@ -23,7 +26,15 @@ from ..plant import RodParams
 #: Shortest episode :func:`transfer_table` runs [s] (swing-up needs a 1 s hold to count).
 MIN_DURATION_S = 2.0
 
-__all__ = ["MIN_DURATION_S", "TransferCase", "default_transfer_cases", "perturbations", "transfer_table"]
+__all__ = [
+    "MIN_DURATION_S",
+    "TransferCase",
+    "default_transfer_cases",
+    "perturbations",
+    "rl_transfer_cases",
+    "transfer_matrix",
+    "transfer_table",
+]
 
 
 def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodParams]:
@@ -97,6 +108,90 @@ def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.0
             duration_s=10.0,
         ),
     ]
+
+
+def rl_transfer_cases(
+    runs_root: str | Path,
+    algos: Sequence[str] = ("dqn", "mbpo"),
+    seeds: Sequence[int] = (0, 1, 2),
+    which: str = "best",
+    params: Optional[RodParams] = None,
+    duration_s: float = 10.0,
+) -> list[TransferCase]:
+    """The RL agents of :mod:`softpend.rl` (trained on the PRB plant) as transfer cases: swing-up from hanging.
+
+    Parameters
+    ----------
+    runs_root : path
+        Folder of the runs made by :func:`softpend.rl.experiments.train_seeds` (``<root>/<algo>-seed<k>``).
+    algos : sequence of {"dqn", "mbpo"}
+        Methods to include.
+    seeds : sequence of int
+        Training seeds: one case per (method, seed), each the agent of that run.
+    which : {"best", "final"}
+        Which agent of a run (see :func:`softpend.rl.dqn.load_agent`).
+    params : RodParams, optional
+        Nominal parameters of the transfer study; the agents must have been trained on a rod with the same
+        number of links and torque limit.
+    duration_s : float
+        Episode length [s].
+
+    Raises
+    ------
+    FileNotFoundError
+        If a run folder has no agent.
+    ValueError
+        If an algorithm is unknown or an agent was trained on a different rod.
+    """
+    from ..rl.dqn import load_agent
+    from ..rl.experiments import METHOD_NAMES, run_folder
+    from ..rl.training_env import policy_controller
+
+    params = params or RodParams()
+    cases = []
+    for algo in algos:
+        if algo not in METHOD_NAMES:
+            raise ValueError(f"algos must be among {sorted(METHOD_NAMES)}, got {algo!r}")
+        for seed in seeds:
+            model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
+            if config.n_links != params.n_links or abs(config.torque_limit_nm - params.torque_limit_nm) > 1e-12:
+                raise ValueError(
+                    f"{algo} seed {seed}: agent trained with n_links={config.n_links}, torque_limit_nm="
+                    f"{config.torque_limit_nm}, transfer study uses n_links={params.n_links}, "
+                    f"torque_limit_nm={params.torque_limit_nm}"
+                )
+            cases.append(TransferCase(
+                f"{METHOD_NAMES[algo]} (seed {seed})",
+                lambda model=model, config=config: policy_controller(model, config),
+                start="hanging",
+                duration_s=duration_s,
+            ))
+    return cases
+
+
+def transfer_matrix(
+    rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate"
+) -> tuple[list[str], list[str], np.ndarray]:
+    """One metric of :func:`transfer_table` rows on one plant as a (controller x perturbation) matrix.
+
+    Returns
+    -------
+    controllers, perturbations : list of str
+        Row and column labels, in the order they first appear.
+    values : ndarray, shape (len(controllers), len(perturbations))
+        The metric (NaN where a combination is missing).
+    """
+    sel = [r for r in rows if r["plant"] == plant]
+    if not sel:
+        raise ValueError(f"no rows for plant {plant!r}")
+    if metric not in sel[0]:
+        raise ValueError(f"unknown metric {metric!r}; rows have {sorted(sel[0])}")
+    controllers = list(dict.fromkeys(r["controller"] for r in sel))
+    labels = list(dict.fromkeys(r["perturbation"] for r in sel))
+    values = np.full((len(controllers), len(labels)), np.nan)
+    for r in sel:
+        values[controllers.index(r["controller"]), labels.index(r["perturbation"])] = float(r[metric])
+    return controllers, labels, values
 
 
 def transfer_table(

@@ -58,6 +58,21 @@ def test_poses_come_from_the_plant_geometry():
     assert np.all(np.diff(poses["horizontal"][:, 1]) < 0)  # every joint lower than the previous one
 
 
+def test_beam_poses_agree_with_the_prb_chain():
+    """The same three poses from the continuum beam's nodes: straight poses coincide, and the horizontal sag
+    of the beam and of a fine PRB chain agree within a few percent (issue 8: the beam chapter measures it)."""
+    params = RodParams(n_links=16)
+    beam = rod_poses_m(params, plant="beam")
+    prb = rod_poses_m(params)
+    np.testing.assert_allclose(beam["hanging"][-1], prb["hanging"][-1], atol=1e-9)
+    np.testing.assert_allclose(beam["upright"][-1], prb["upright"][-1], atol=1e-9)
+    sag_beam, sag_prb = -beam["horizontal"][-1, 1], -prb["horizontal"][-1, 1]
+    assert sag_beam > 0.1 * params.length_m
+    assert sag_prb == pytest.approx(sag_beam, rel=0.03)
+    with pytest.raises(ValueError, match="plant"):
+        rod_poses_m(params, plant="rubber")
+
+
 def test_rod_design_rejects_bad_params():
     with pytest.raises(ValueError, match="params"):
         rod_design({"length_m": 0.3})

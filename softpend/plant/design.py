@@ -23,8 +23,10 @@ from typing import Optional
 
 import numpy as np
 
+from .base import PlantBase
 from .params import RodParams
 from .prb import PRBPlant
+from .registry import make_plant
 
 __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantilever", "rod_design", "rod_poses_m"]
 
@@ -32,22 +34,24 @@ __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantileve
 HORIZONTAL_HUB_ANGLE_RAD = -math.pi / 2
 
 
-def horizontal_cantilever(params: Optional[RodParams] = None) -> PRBPlant:
+def horizontal_cantilever(params: Optional[RodParams] = None, plant: str = "prb") -> PlantBase:
     """The rod clamped horizontally (hub locked at ``-pi/2``) and resting in its deflected static equilibrium.
 
     Parameters
     ----------
     params : RodParams, optional
         Rod parameters (default: the project's default rod).
+    plant : {"prb", "beam"}
+        Which simulator (:func:`softpend.plant.make_plant`).
 
     Returns
     -------
-    PRBPlant
+    PlantBase
         A hub-locked plant whose current state is the static equilibrium under gravity.
     """
-    plant = PRBPlant(params if params is not None else RodParams(), hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
-    plant.static_equilibrium()
-    return plant
+    sim = make_plant(plant, params=params if params is not None else RodParams(), hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
+    sim.static_equilibrium()
+    return sim
 
 
 def _hessian(function, n: int, step: float) -> np.ndarray:
@@ -205,8 +209,16 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
     )
 
 
-def rod_poses_m(params: Optional[RodParams] = None) -> dict[str, np.ndarray]:
-    """Joint positions ``(n + 1, 2)`` [m] of three poses, from the plant's own geometry.
+def rod_poses_m(params: Optional[RodParams] = None, plant: str = "prb") -> dict[str, np.ndarray]:
+    """Points along the rod ``(k, 2)`` [m] of three poses, from the plant's own geometry (the PRB joints,
+    or the beam nodes).
+
+    Parameters
+    ----------
+    params : RodParams, optional
+        Rod parameters (default: the project's default rod).
+    plant : {"prb", "beam"}
+        Which simulator (:func:`softpend.plant.make_plant`).
 
     Returns
     -------
@@ -215,10 +227,10 @@ def rod_poses_m(params: Optional[RodParams] = None) -> dict[str, np.ndarray]:
         gravity: the static equilibrium of :func:`horizontal_cantilever`) and ``"upright"`` (straight up).
     """
     params = params if params is not None else RodParams()
-    plant = PRBPlant(params)
-    hanging_q, _ = plant.hanging_state()
+    sim = make_plant(plant, params=params)
+    hanging_q, _ = sim.hanging_state()
     return {
-        "hanging": plant.link_points_m(hanging_q),
-        "horizontal": horizontal_cantilever(params).link_points_m(),
-        "upright": plant.link_points_m(np.zeros(plant.n_coordinates)),
+        "hanging": sim.link_points_m(hanging_q),
+        "horizontal": horizontal_cantilever(params, plant).link_points_m(),
+        "upright": sim.link_points_m(np.zeros(sim.n_coordinates)),
     }

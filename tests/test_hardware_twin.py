@@ -42,6 +42,32 @@ def test_models_train_on_twin_and_simulator_data(session):
         assert np.isfinite(result[key]) and result[key] > 0
 
 
+def test_truth_log_of_a_beam_twin_draws_the_beam(tmp_path):
+    """The emulator logs the plant's full state; the twin redraws the rod with the same plant (PRB joints or
+    beam nodes), so the camera films the plant the rig ran."""
+    from softpend.hardware.emulator import RigConfig, truth_columns
+    from softpend.hardware.samplelog import SampleLog
+    from softpend.plant import RodParams, make_plant
+
+    beam = make_plant("beam", params=RodParams())
+    q, qd = beam.hanging_state()
+    beam.reset(q, qd)
+    rows = []
+    for k in range(5):
+        beam.step(0.05)
+        q, qd = beam.joint_state()
+        rows.append([0.01 * (k + 1), 0.05, *q, *qd])
+    with SampleLog(tmp_path / "truth.csv", truth_columns(beam.n_coordinates)) as log:
+        for row in rows:
+            log.append(row)
+    times, points, hub = truth_link_points(tmp_path / "truth.csv", RodParams(), plant="beam")
+    assert points.shape == (5, len(beam.link_points_m()), 2)
+    np.testing.assert_allclose(points[-1], beam.link_points_m(), atol=1e-6)
+    np.testing.assert_allclose(np.hypot(*points[:, -1].T), RodParams().length_m, rtol=0.02)  # nearly straight
+    with pytest.raises(ValueError, match="plant"):
+        RigConfig(plant="rubber")
+
+
 @pytest.mark.expensive
 def test_twin_model_is_within_2x_of_the_simulator_model(tmp_path):
     session = run_twin_session(tmp_path, duration_s=65.0, seed=0, progress=False)

@@ -61,11 +61,13 @@ def rig_babble_controller(
     return controller
 
 
-def truth_link_points(truth_log: str | Path, params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Times [s] (device clock), link points ``(T, n + 1, 2)`` [m] and hub angles [rad] from an emulator
-    truth log."""
+def truth_link_points(
+    truth_log: str | Path, params: RodParams, plant: str = "prb"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times [s] (device clock), points along the rod ``(T, k, 2)`` [m] (the PRB joints or the beam nodes)
+    and hub angles [rad] from an emulator truth log written by the ``plant`` simulator."""
     log = read_sample_log(truth_log)
-    plant = make_plant("prb", params=params)
+    plant = make_plant(plant, params=params)
     n = plant.n_coordinates
     q = np.column_stack([log[f"q{i}_rad"] for i in range(n)])
     points = np.stack([plant.link_points_m(row) for row in q])
@@ -153,7 +155,7 @@ def run_twin_session(
             loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
         emulator.terminate()
         emulator_stats = emulator.stats()
-    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.params)
+    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.params, rig.plant)
     camera = SyntheticCamera(effects=effects, seed=seed)
     render_video(paths["camera.avi"], camera, times, points, hub, fps=camera_fps, clock_offset_s=clock_offset_s,
                  timestamp_jitter_s=timestamp_jitter_s, progress=progress)
@@ -175,6 +177,7 @@ def compare_with_simulator_model(
     max_epochs: int = 150,
     horizon_s: float = 1.0,
     progress: bool = False,
+    plant: str = "prb",
 ) -> dict[str, object]:
     """Train the same limited-information dynamics model (:func:`softpend.sysid.fit_dynamics_model`) on
     the twin's rig dataset and on clean simulator babbling of the same size and torque process (hanging
@@ -183,6 +186,7 @@ def compare_with_simulator_model(
 
     Returns a dict with ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, ``ratio`` (twin / sim),
     ``hold_tip_rmse_m`` (the "rod stays put" yardstick), the two :class:`RolloutErrors`, and the models.
+    ``plant`` names the simulator of the clean babbling (the one the twin ran, for a like-for-like test).
     """
     import torch
 
@@ -198,9 +202,9 @@ def compare_with_simulator_model(
         start_angle_std_rad=0.3, start_rate_std_rad_s=1.0, feedback_trial_fraction=0.0,
         torque_std_fraction=0.5, torque_bandwidth_hz=2.0,
     )
-    sim_train = babble(protocol, params=params, seed=seed + 1000, progress=progress)
+    sim_train = babble(protocol, params=params, seed=seed + 1000, progress=progress, plant=plant)
     sim_test = babble(protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0)),
-                      params=params, seed=seed + 2000, progress=progress)
+                      params=params, seed=seed + 2000, progress=progress, plant=plant)
     fits = {}
     for name, data in (("twin", rig_dataset), ("sim", sim_train)):
         fits[name] = fit_dynamics_model(data, information="limited", history=history, max_epochs=max_epochs,

@@ -1,6 +1,7 @@
 # softpend: set-up, tests and the executable book.
 #
-#   make book [PROFILE=full|quick]   build the HTML book into _build/html (executes the notebooks first)
+#   make book [PROFILE=full|quick]   build the HTML book into _build/html (executes the notebooks first);
+#                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
 #   make test                        fast test suite (pytest -m 'not expensive', set in pyproject.toml)
 #   make test-expensive              only the long checks
 #   make bench                       measured performance figures (softpend bench --json)
@@ -19,6 +20,7 @@ VENV := .venv
 STAMP := $(VENV)/.softpend-installed
 PROFILE ?= full
 PYTEST_ARGS ?=
+BOOK_ARGS ?=
 
 # pip on these machines prints one "Location ... is ignored" warning per configured index; drop those lines only.
 # `|| true` keeps grep's "no lines left" status from failing the recipe; with pipefail pip's own status still does.
@@ -27,7 +29,7 @@ PIP_QUIET := 2>&1 | { grep -v -E 'Location .* is ignored' || true; }
 .PHONY: help venv book test test-expensive bench lock clean
 
 help:
-	@sed -n '3,9p' Makefile | sed 's/^# \{0,1\}//'
+	@sed -n '3,10p' Makefile | sed 's/^# \{0,1\}//'
 
 venv: $(STAMP)
 
@@ -41,7 +43,7 @@ $(STAMP): environment.lock pyproject.toml
 	touch $(STAMP)
 
 book: $(STAMP)
-	$(VENV)/bin/softpend book --profile $(PROFILE) --html
+	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)

@@ -342,6 +342,7 @@ def run_notebooks(
     only: Optional[Sequence[str]] = None,
     force: bool = False,
     progress: bool = True,
+    overrides: Optional[dict[str, Any]] = None,
 ) -> list[NotebookRun]:
     """Execute the book's notebooks (toc order) with a profile's parameters into ``book/_generated/``.
 
@@ -357,6 +358,9 @@ def run_notebooks(
         Execute even when the cached output is up to date.
     progress : bool
         Show a progress bar over the notebooks and one line per notebook.
+    overrides : dict, optional
+        Parameter values set on top of the profile in every selected notebook whose ``parameters`` cell
+        defines them (e.g. ``{"plant": "beam"}`` regenerates the figure set on the continuum beam).
 
     Returns
     -------
@@ -366,8 +370,9 @@ def run_notebooks(
     Raises
     ------
     ValueError
-        Unknown profile or notebook name, a notebook without a ``parameters`` cell, or a profile parameter
-        that the notebook's ``parameters`` cell does not define.  All notebooks are validated before any
+        Unknown profile or notebook name, a notebook without a ``parameters`` cell, a profile parameter
+        that the notebook's ``parameters`` cell does not define, or an override that no selected notebook
+        defines.  All notebooks are validated before any
         is executed.
     NotebookExecutionError
         A notebook raised; its partially executed output is kept for inspection.
@@ -394,6 +399,8 @@ def run_notebooks(
     runs: list[NotebookRun] = []
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
         # validate everything first: a typo in profiles.yml should not surface after an hour of execution
+        overrides = dict(overrides or {})
+        used_overrides: dict[str, Any] = {}
         plan = []
         for name in names:
             nb = read_notebook(layout.source_path(name))
@@ -401,9 +408,15 @@ def run_notebooks(
             nb.metadata["softpend"] = {"profile": profile, "source": f"notebooks/{name}.md"}
             converted = Path(scratch) / f"{name}.ipynb"
             nbformat.write(nb, str(converted))
-            check_parameters(converted, name, parameters)
+            declared = check_parameters(converted, name, parameters)
+            applied = {key: value for key, value in overrides.items() if key in declared}
+            used_overrides.update(applied)
+            parameters.update(applied)
             source_text = layout.source_path(name).read_text(encoding="utf-8")
             plan.append((name, parameters, converted, cache_key(source_text, parameters, package_hash)))
+        unused = sorted(set(overrides) - set(used_overrides))
+        if unused:
+            raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({names})")
 
         bar = tqdm(plan, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
         for name, parameters, converted, key in bar:

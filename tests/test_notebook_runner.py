@@ -149,6 +149,30 @@ def test_execution_injects_parameters_and_caches(tmp_path, monkeypatch):
     assert run_notebooks(root, profile="quick", force=True, progress=False)[0].status == "executed"
 
 
+def test_overrides_apply_where_defined_and_unknown_ones_fail(tmp_path, monkeypatch, capsys):
+    """``--set NAME=VALUE`` (e.g. ``plant=beam``) lands in every notebook that defines NAME, on top of the
+    profile; a notebook without it runs with its profile; a NAME no notebook defines fails before running."""
+    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "pinned")
+    notebooks = {
+        "with_plant": notebook_source("print('plant=' + plant)", parameters="plant = 'prb'"),
+        "without": notebook_source(OK_CELL),
+    }
+    root = make_book(tmp_path, notebooks, {"full": {"with_plant": {"plant": "prb"}}})
+    runs = run_notebooks(root, profile="full", progress=False, overrides={"plant": "beam"})
+    assert [r.status for r in runs] == ["executed", "executed"]
+    assert "plant=beam" in outputs_text(root / "book" / "_generated" / "with_plant.ipynb")
+    assert "hello" in outputs_text(root / "book" / "_generated" / "without.ipynb")
+    # the override is part of the cache key: back to the profile value re-executes
+    assert run_notebooks(root, profile="full", progress=False, only=["with_plant"])[0].status == "executed"
+
+    with pytest.raises(ValueError, match="plnat"):
+        run_notebooks(root, profile="full", progress=False, overrides={"plnat": "beam"})
+    assert cli_main(["book", "--root", str(root), "--set", "plant"]) == 2
+    assert "NAME=VALUE" in capsys.readouterr().err
+    assert cli_main(["book", "--root", str(root), "--only", "without", "--set", "plant=beam"]) == 2
+    assert "not parameters of any selected notebook" in capsys.readouterr().err
+
+
 def test_cache_key_covers_source_parameters_and_package(tmp_path):
     key = cache_key("source", {"a": 1}, "pkg")
     assert cache_key("source", {"a": 1}, "pkg") == key

@@ -52,13 +52,21 @@ class DQNConfig:
     training_start : {"random", "hanging", "upright"}
         Start distribution of *training* episodes (:class:`softpend.envs.SoftPendulumEnv` ``start``);
         evaluation always starts hanging.
+    plant : {"prb", "beam"}
+        The true plant trained on and evaluated on (:func:`softpend.plant.make_plant`; ``"prb"``: the PRB
+        chain of ``n_links`` links, ``"beam"``: the continuum beam with the same rod parameters).
 
     DQN (stable-baselines3 names; counted in agent steps)
     ------------------------------------------------------
     learning_rate, buffer_size, learning_starts, batch_size, gamma, train_freq, gradient_steps,
     target_update_interval, exploration_fraction, exploration_initial_eps, exploration_final_eps,
-    max_grad_norm : as in :class:`stable_baselines3.DQN` (``exploration_fraction`` is the fraction of the
-    whole run over which epsilon decays linearly).
+    max_grad_norm, tau : as in :class:`stable_baselines3.DQN` (``exploration_fraction`` is the fraction of the
+    whole run over which epsilon decays linearly; ``tau`` is the Polyak coefficient of the target-network
+    update made every ``target_update_interval`` agent steps, 1 = hard copy).
+    double_q : bool
+        Double DQN targets (van Hasselt et al. 2016: the online network picks the next action, the target
+        network values it; :class:`softpend.rl.double_dqn.DoubleDQN`) instead of stable-baselines3's
+        max over the target network.
     net_arch : tuple of int
         Hidden layer widths of the Q-network.
 
@@ -81,6 +89,7 @@ class DQNConfig:
     episode_s: float = 5.0
     action_repeat: int = 4
     training_start: str = "random"
+    plant: str = "prb"
     learning_rate: float = 6.3e-4
     buffer_size: int = 100_000
     learning_starts: int = 500
@@ -93,6 +102,8 @@ class DQNConfig:
     exploration_initial_eps: float = 1.0
     exploration_final_eps: float = 0.02
     max_grad_norm: float = 10.0
+    tau: float = 1.0
+    double_q: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     eval_every_episodes: int = 10
     eval_seeds: tuple[int, ...] = (1000, 1001)
@@ -108,6 +119,10 @@ class DQNConfig:
         )
         if self.training_start not in ("random", "hanging", "upright"):
             raise ValueError(f"training_start must be 'random', 'hanging' or 'upright', got {self.training_start!r}")
+        if self.plant not in ("prb", "beam"):
+            raise ValueError(f"plant must be 'prb' or 'beam', got {self.plant!r}")
+        if not isinstance(self.double_q, bool):
+            raise ValueError(f"double_q must be a bool, got {self.double_q!r}")
         if self.n_torque_levels < 2:
             raise ValueError(f"n_torque_levels must be >= 2, got {self.n_torque_levels!r}")
         if isinstance(self.learning_starts, bool) or int(self.learning_starts) != self.learning_starts or self.learning_starts < 0:
@@ -116,6 +131,8 @@ class DQNConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        if not isinstance(self.tau, (int, float)) or not 0.0 < self.tau <= 1.0:
+            raise ValueError(f"tau must lie in (0, 1], got {self.tau!r}")
         for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:

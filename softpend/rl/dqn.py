@@ -34,18 +34,24 @@ from tqdm import tqdm
 from ..evaluation import evaluate_controller, metrics_from_trajectory
 from ..plant import OBSERVATION_NAMES, RodParams
 from .config import DQNConfig, load_config, save_config
+from .double_dqn import DoubleDQN
 from .training_env import make_training_env, policy_controller
 from .training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "build_dqn", "evaluate_agent", "load_agent", "train_dqn", "run_training"]
+__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "load_agent", "train_dqn", "run_training"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
+def agent_class(config: DQNConfig) -> type[DQN]:
+    """:class:`~softpend.rl.double_dqn.DoubleDQN` if ``config.double_q``, else stable-baselines3's ``DQN``."""
+    return DoubleDQN if config.double_q else DQN
+
+
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
-    """A stable-baselines3 DQN with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
-    return DQN(
+    """A stable-baselines3 DQN (or Double DQN) with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
+    return agent_class(config)(
         "MlpPolicy",
         env,
         learning_rate=config.learning_rate,
@@ -56,6 +62,7 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
         train_freq=config.train_freq,
         gradient_steps=config.gradient_steps,
         target_update_interval=config.target_update_interval,
+        tau=config.tau,
         exploration_fraction=config.exploration_fraction,
         exploration_initial_eps=config.exploration_initial_eps,
         exploration_final_eps=config.exploration_final_eps,
@@ -76,6 +83,7 @@ def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...
         seeds=tuple(seeds if seeds is not None else config.eval_seeds),
         duration_s=float(duration_s if duration_s is not None else config.eval_duration_s),
         params=RodParams(n_links=config.n_links),
+        plant=config.plant,
         torque_limit_nm=config.torque_limit_nm,
     )
 
@@ -127,7 +135,9 @@ class TrainingCallback(BaseCallback):
         self._pending_eval = False
         self._pending_checkpoint = False
         self._started = time.perf_counter()
+        self._cpu_started = time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
+        self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
         self._reset_episode()
         self.bar: Optional[tqdm] = None
         self.best_score = min((_score(row) for row in log.evaluations), default=None)
@@ -138,7 +148,13 @@ class TrainingCallback(BaseCallback):
         self._torques: list[float] = []
 
     def wall_s(self) -> float:
+        """Wall-clock seconds of training so far (over resumed sessions)."""
         return self._wall_offset + time.perf_counter() - self._started
+
+    def cpu_s(self) -> float:
+        """CPU seconds of this process spent training so far (over resumed sessions; ``nan`` if a resumed run
+        started before this was logged) -- the cost of a run independent of other load on the machine."""
+        return self._cpu_offset + time.process_time() - self._cpu_started
 
     def _on_training_start(self) -> None:
         self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, desc=f"{self.log.algo} seed {self.log.seed}",
@@ -177,6 +193,7 @@ class TrainingCallback(BaseCallback):
             row["upright_std_rad"], row["swing_up_time_s"] = math.pi, math.inf
         row["model_steps"] = int(self.model_steps())
         row["wall_s"] = self.wall_s()
+        row["cpu_s"] = self.cpu_s()
         self.last_episode_observations = observations
         self.last_episode_torques = np.asarray(self._torques, dtype=float)
         self.log.episodes.append(row)
@@ -221,6 +238,7 @@ class TrainingCallback(BaseCallback):
             "all_swung_up": bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
             "success_rate": summary.success_rate,
             "wall_s": self.wall_s(),
+            "cpu_s": self.cpu_s(),
         }
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
@@ -284,7 +302,7 @@ def run_training(
         if saved != config:
             raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
         log = TrainingLog.load(checkpoint / "log.json")
-        model = DQN.load(checkpoint / "agent.zip", env=env, device="cpu")
+        model = agent_class(config).load(checkpoint / "agent.zip", env=env, device="cpu")
         model.load_replay_buffer(checkpoint / "replay_buffer.pkl")
         if restore is not None:
             restore(model, checkpoint)
@@ -381,4 +399,4 @@ def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig
     if not agent.exists():
         raise FileNotFoundError(f"no agent at {agent}")
     config = load_config(folder / "config.json")
-    return DQN.load(agent, device="cpu"), config
+    return agent_class(config).load(agent, device="cpu"), config

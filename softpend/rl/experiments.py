@@ -16,7 +16,8 @@ import numpy as np
 from .config import DQNConfig, MBPOConfig, load_config
 from .training_log import BALANCE_STD_RAD, TrainingLog
 
-__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians", "run_folder", "summary_table", "train_seeds"]
+__all__ = ["METHOD_NAMES", "PLANTS", "check_plant", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians",
+           "plant_runs_root", "run_folder", "summary_table", "train_seeds"]
 
 
 def train_seeds(
@@ -94,13 +95,36 @@ def median_real_s_to_balance(logs: Sequence[TrainingLog], std_rad: float = BALAN
 
 
 def figure_configs(torque_limit_nm: float = 0.06, episode_s: float = 5.0, rollouts_per_real_step: int = 9,
-                   mbpo_random_episodes: int = 3) -> dict[str, DQNConfig]:
-    """The configs of the book's Figures 4-6 (defaults otherwise): ``{"dqn": ..., "mbpo": ...}``."""
+                   mbpo_random_episodes: int = 3, plant: str = "prb") -> dict[str, DQNConfig]:
+    """The configs of the book's Figures 4-6 (defaults otherwise): ``{"dqn": ..., "mbpo": ...}``.
+
+    ``plant`` (``"prb"`` or ``"beam"``) is the true plant the agents train and are evaluated on.
+    """
+    check_plant(plant)
     return {
-        "dqn": DQNConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s),
+        "dqn": DQNConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, plant=plant),
         "mbpo": MBPOConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
-                           initial_random_episodes=mbpo_random_episodes),
+                           initial_random_episodes=mbpo_random_episodes, plant=plant),
     }
+
+
+#: True plants the RL figures can be made on (:func:`softpend.plant.make_plant` names).
+PLANTS = ("prb", "beam")
+
+
+def check_plant(plant: str) -> str:
+    """``plant`` if it is one of :data:`PLANTS`, else a ``ValueError`` naming the parameter."""
+    if plant not in PLANTS:
+        raise ValueError(f"plant must be one of {list(PLANTS)}, got {plant!r}")
+    return plant
+
+
+def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
+    """The run folder root of one plant: ``runs_root`` itself for the PRB rod (the book's default runs), a
+    sibling ``<runs_root>-<plant>`` for any other plant, so that runs on different plants never share a cache."""
+    check_plant(plant)
+    root = Path(runs_root)
+    return root if plant == "prb" else root.with_name(f"{root.name}-{plant}")
 
 
 #: Method names used in the figures, by algorithm.
@@ -108,12 +132,16 @@ METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
 
 
 def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
-                progress: bool = True, **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
-    """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`)."""
-    configs = figure_configs(**config_kwargs)
+                progress: bool = True, plant: str = "prb", **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
+    """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).
+
+    The runs of ``plant`` live under :func:`plant_runs_root` ``(runs_root, plant)``.
+    """
+    configs = figure_configs(plant=plant, **config_kwargs)
+    root = plant_runs_root(runs_root, plant)
     return {
-        METHOD_NAMES["dqn"]: train_seeds("dqn", configs["dqn"], seeds, episodes_dqn, runs_root, progress),
-        METHOD_NAMES["mbpo"]: train_seeds("mbpo", configs["mbpo"], seeds, episodes_mbpo, runs_root, progress),
+        METHOD_NAMES["dqn"]: train_seeds("dqn", configs["dqn"], seeds, episodes_dqn, root, progress),
+        METHOD_NAMES["mbpo"]: train_seeds("mbpo", configs["mbpo"], seeds, episodes_mbpo, root, progress),
     }
 
 

@@ -165,7 +165,7 @@ class MBPOTrainer:
         p = 5  # positions then velocities in OBSERVATION_NAMES order
         return save_dataset(
             self.run_dir / "real_data.npz", obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques),
-            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant="prb",
+            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant=self.config.plant,
             plant_params=self.env.params, seed=self.seed, protocol={"kind": "dqn-mbpo training episodes"},
             differentiation="exact (simulator velocities, as the environment observes them)",
             notes="real plant episodes of a DQN-MBPO run",

@@ -56,10 +56,11 @@ class ActionRepeat(gym.Wrapper):
 
 
 def make_base_env(config: DQNConfig, start: str = "hanging") -> SoftPendulumDiscreteEnv:
-    """The discrete-torque environment with the config's rod, torque limit and torque levels."""
+    """The discrete-torque environment with the config's plant, rod, torque limit and torque levels."""
     return SoftPendulumDiscreteEnv(
         n_torque_levels=config.n_torque_levels,
         params=RodParams(n_links=config.n_links),
+        plant=config.plant,
         torque_limit_nm=config.torque_limit_nm,
         start=start,
     )

@@ -1,7 +1,7 @@
 """A PILCO policy (or random torques) as a :class:`softpend.evaluation.Controller` with a zero-order hold.
 
 The plant steps at ``dt_s`` (0.01 s by default) while PILCO acts at its control period ``control_dt_s``
-(default 0.05 s): the controller recomputes the torque when ``time_s`` reaches the next multiple of
+(default 0.1 s): the controller recomputes the torque when ``time_s`` reaches the next multiple of
 ``control_dt_s`` and holds it in between.
 """
 
@@ -68,7 +68,13 @@ class PilcoController(_HoldController):
 
 
 class RandomTorqueController(_HoldController):
-    """Uniform random torques in ``[-torque_limit_nm, torque_limit_nm]``, a new draw every control period.
+    """Random torques in ``[-torque_limit_nm, torque_limit_nm]``, each held for a random whole number of control periods.
+
+    PILCO's first trial: with a new uniform draw every control period (``hold_s = (control_dt_s,
+    control_dt_s)``, ``bang_bang=False``) the torque averages out and the 0.06 N m motor barely moves the
+    hanging rod, so the first GP model knows only the hanging region.  Holding a full +-limit torque for a
+    random 0.2-0.6 s (about half the rod's swing period) pumps energy in: the rod swings through large
+    angles and often over the top, and the first model sees the whole swing-up region.
 
     Parameters
     ----------
@@ -76,18 +82,39 @@ class RandomTorqueController(_HoldController):
     control_dt_s : float
     seed : int
         Seed of the draws (re-seeded on every :meth:`reset`, so an episode is reproducible).
+    hold_s : tuple of float
+        Shortest and longest hold ``(min, max)`` [s]; rounded to whole control periods (at least one).
+    bang_bang : bool
+        Draw the sign only (torque ``+-torque_limit_nm``) instead of a uniform torque.
     """
 
-    def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int) -> None:
+    def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int,
+                 hold_s: tuple[float, float] | None = None, bang_bang: bool = False) -> None:
         if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
             raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        if not math.isfinite(control_dt_s) or control_dt_s <= 0:
+            raise ValueError(f"control_dt_s must be positive and finite, got {control_dt_s!r}")
+        hold = (control_dt_s, control_dt_s) if hold_s is None else tuple(float(h) for h in hold_s)
+        if len(hold) != 2 or not all(math.isfinite(h) and h > 0 for h in hold) or hold[0] > hold[1]:
+            raise ValueError(f"hold_s must be (min, max) with 0 < min <= max, got {hold_s!r}")
         self.torque_limit_nm = float(torque_limit_nm)
         self.seed = int(seed)
+        self.bang_bang = bool(bang_bang)
+        self.hold_periods = (max(1, int(round(hold[0] / control_dt_s))), max(1, int(round(hold[1] / control_dt_s))))
         super().__init__(control_dt_s)
 
     def reset(self) -> None:
         super().reset()
         self._rng = np.random.default_rng(self.seed)
+        self._periods_left = 0
+        self._held_nm = 0.0
 
     def _compute(self, observation: Observation) -> float:
-        return float(self._rng.uniform(-self.torque_limit_nm, self.torque_limit_nm))
+        if self._periods_left <= 0:
+            if self.bang_bang:
+                self._held_nm = self.torque_limit_nm * float(self._rng.choice((-1.0, 1.0)))
+            else:
+                self._held_nm = float(self._rng.uniform(-self.torque_limit_nm, self.torque_limit_nm))
+            self._periods_left = int(self._rng.integers(self.hold_periods[0], self.hold_periods[1] + 1))
+        self._periods_left -= 1
+        return self._held_nm

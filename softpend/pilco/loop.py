@@ -33,14 +33,14 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import scipy.optimize
 import torch
 
 from ..evaluation import EvaluationResult, evaluate_controller, run_episode
-from ..plant import RodParams
+from ..plant import RodParams, plant_names
 from .controller import PilcoController, RandomTorqueController
 from .gp import GPHyperparameters, MultiOutputGP, select_subset
 from .policy import RBFPolicy
@@ -69,6 +69,11 @@ class PilcoConfig:
         Prediction horizon and length of every trial [s].
     n_policy_trials : int
         Largest number of policy trials after the random one.
+    random_hold_min_s, random_hold_max_s : float
+        Each torque of the initial random trial is held for a random time in this range [s] (whole control
+        periods; see :class:`~softpend.pilco.controller.RandomTorqueController`).
+    random_bang_bang : bool
+        The random trial's torques are ``+-torque_limit_nm`` (else uniform in between).
     cost_width_m : float
         Width ``w`` of the saturating cost [m].
     initial_std : float
@@ -80,6 +85,15 @@ class PilcoConfig:
         Largest GP training set (data subsampling beyond it).
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search.
+    policy_candidates : int
+        Random policies (centres on visited states, pseudo-targets ``N(0, 1)``: torques over the whole
+        range) whose predicted cost is computed (one rollout each, no gradient) before every policy search;
+        the search starts from the best of them and the previous policy.  This gets the search off the flat
+        plateau of the saturating cost (a policy that predicts the rod to stay hanging has a cost gradient
+        of about ``exp(-8)``).
+    policy_restarts : int
+        Extra full policy searches per trial, each from the next-best random candidate (or a fresh random
+        policy); the policy with the lowest predicted cost runs the trial.
     start_noise_rad : float
         Half-width of the uniform start perturbation of the hub angle and rate (the environment's).
     eval_seeds : tuple of int
@@ -101,12 +115,17 @@ class PilcoConfig:
     control_dt_s: float = 0.1
     horizon_s: float = 4.0
     n_policy_trials: int = 15
+    random_hold_min_s: float = 0.2
+    random_hold_max_s: float = 0.6
+    random_bang_bang: bool = True
     cost_width_m: float = 0.15
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
     gp_iterations: int = 100
     policy_iterations: int = 80
+    policy_candidates: int = 0
+    policy_restarts: int = 0
     start_noise_rad: float = 0.05
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0
@@ -118,20 +137,25 @@ class PilcoConfig:
         if not isinstance(self.params, RodParams):
             raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
         state_spec(self.state)
+        if self.plant not in plant_names():
+            raise ValueError(f"plant must be one of {plant_names()}, got {self.plant!r}")
         for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad"):
+                     "target_std_rad", "random_hold_min_s", "random_hold_max_s"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
         if not math.isfinite(self.start_noise_rad) or self.start_noise_rad < 0:
             raise ValueError(f"start_noise_rad must be non-negative and finite, got {self.start_noise_rad!r}")
+        if self.random_hold_max_s < self.random_hold_min_s:
+            raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
         ratio = self.control_dt_s / self.plant_dt_s
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
             raise ValueError(f"control_dt_s must be a whole multiple of plant_dt_s, got {self.control_dt_s!r}")
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         for name, low in (("n_policy_trials", 0), ("n_basis", 1), ("max_gp_points", 10), ("gp_iterations", 1),
-                          ("policy_iterations", 1)):
+                          ("policy_iterations", 1), ("policy_restarts", 0),
+                          ("policy_candidates", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or int(value) != value or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -182,6 +206,7 @@ class TrialRecord:
     eval_success_rate: float = float("nan")
     eval_upright_std_rad: float = float("nan")
     balanced: bool = False
+    cpu_s_total: float = float("nan")
 
 
 @dataclass
@@ -207,6 +232,11 @@ class PilcoResult:
     @property
     def train_wall_s(self) -> float:
         return self.records[-1].wall_s_total if self.records else 0.0
+
+    @property
+    def train_cpu_s(self) -> float:
+        """CPU seconds of this process over the run (``wall_s_total`` counts waiting for a busy machine too)."""
+        return self.records[-1].cpu_s_total if self.records else 0.0
 
     @property
     def plant_seconds_total(self) -> float:
@@ -272,10 +302,11 @@ def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[Evaluat
     return episode, states, torques
 
 
-def _optimise_policy(
+def _minimise(
     propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
 ) -> float:
-    """L-BFGS-B on the policy parameters; returns the predicted total cost of the final policy."""
+    """L-BFGS-B on the policy parameters from the policy's current ones; keeps and returns the better of the
+    start and the result (predicted total cost)."""
 
     def objective(vector: np.ndarray) -> tuple[float, np.ndarray]:
         leaf = torch.tensor(vector, dtype=DTYPE, requires_grad=True)
@@ -300,6 +331,42 @@ def _optimise_policy(
         return float(result.fun)
     policy.set_vector(start)
     return float(start_value)
+
+
+def _predicted_cost(propagator: Propagator, policy: RBFPolicy, vector: np.ndarray, m0: torch.Tensor,
+                    s0: torch.Tensor, n_steps: int) -> float:
+    """Predicted total cost of the policy with parameters ``vector`` (``inf`` when the rollout fails)."""
+    policy.set_vector(vector)
+    try:
+        with torch.no_grad():
+            value = float(propagator.rollout(m0, s0, n_steps)[3])
+    except torch.linalg.LinAlgError:
+        return math.inf
+    return value if math.isfinite(value) else math.inf
+
+
+def _optimise_policy(
+    propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int,
+    candidates: Sequence[np.ndarray] = (), restarts: int = 0,
+) -> float:
+    """Policy search from the best start, plus ``restarts`` more searches; keeps the lowest predicted cost.
+
+    The starts are the policy's current parameters and the vectors in ``candidates``, ranked by their
+    predicted cost (one rollout each); L-BFGS-B runs from the ``1 + restarts`` best of them.  The policy
+    ends with the parameters of the lowest predicted total cost, which is returned.
+    """
+    starts = [policy.get_vector()] + [np.asarray(c, dtype=float) for c in candidates]
+    if len(starts) > 1:
+        values = [_predicted_cost(propagator, policy, v, m0, s0, n_steps) for v in starts]
+        starts = [starts[i] for i in np.argsort(values, kind="stable")]
+    best_value, best_vector = math.inf, starts[0]
+    for vector in starts[: 1 + int(restarts)]:
+        policy.set_vector(vector)
+        value = _minimise(propagator, policy, m0, s0, n_steps, iterations)
+        if value < best_value:
+            best_value, best_vector = value, policy.get_vector()
+    policy.set_vector(best_vector)
+    return best_value
 
 
 def run_pilco(
@@ -334,10 +401,14 @@ def run_pilco(
     rng = np.random.default_rng(config.seed)
     trial_seeds = rng.integers(0, 2**31 - 1, size=config.n_policy_trials + 1)
     start_wall = time.perf_counter()
+    start_cpu = time.process_time()
     n_steps = config.n_horizon_steps
 
     # ---- trial 0: random torques
-    random_controller = RandomTorqueController(torque_limit, config.control_dt_s, seed=int(trial_seeds[0]))
+    random_controller = RandomTorqueController(
+        torque_limit, config.control_dt_s, seed=int(trial_seeds[0]),
+        hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
+    )
     episode, states, torques = _run_trial(config, random_controller, int(trial_seeds[0]), env)
     inputs = [np.hstack([spec.model_inputs(states[:-1]), torques[:, None]])]
     targets = [states[1:] - states[:-1]]
@@ -347,7 +418,7 @@ def run_pilco(
         predicted_cost=float("nan"), real_cost=float(real_cost(states[1:, spec.tip_angle_index], params.length_m,
                                                                config.cost_width_m).sum()),
         swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-        n_gp_points=0, wall_s_total=time.perf_counter() - start_wall,
+        n_gp_points=0, wall_s_total=time.perf_counter() - start_wall, cpu_s_total=time.process_time() - start_cpu,
     )]
     if callback:
         callback(records[0])
@@ -365,6 +436,7 @@ def run_pilco(
     policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=int(rng.integers(2**31)))
     result.policy = policy
     hyper: Optional[GPHyperparameters] = None
+    restart_rng = np.random.default_rng([config.seed, 1])  # its own stream: restarts leave the other draws alone
 
     bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
     for trial in bar:
@@ -377,7 +449,14 @@ def run_pilco(
         hyper = gp.hyperparameters
         # ---- learn the policy
         propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m)
-        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+        visited = np.vstack(result.real_states)
+        candidates = [
+            RBFPolicy(spec.model_inputs(visited[restart_rng.choice(len(visited), size=config.n_basis)]), lengthscales,
+                      torque_limit, seed=int(restart_rng.integers(2**31)), target_std=1.0).get_vector()
+            for _ in range(max(config.policy_candidates, config.policy_restarts))
+        ]
+        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations, candidates,
+                                     config.policy_restarts)
         with torch.no_grad():
             means, covs, _, _ = propagator.rollout(m0, s0, n_steps)
         result.predicted_means.append(means.numpy())
@@ -410,6 +489,7 @@ def run_pilco(
                 all(math.isfinite(r.swing_up_time_s) for r in summary.results) and max(stds) <= config.target_std_rad
             )
         record.wall_s_total = time.perf_counter() - start_wall
+        record.cpu_s_total = time.process_time() - start_cpu
         records.append(record)
         if callback:
             callback(record)

@@ -35,9 +35,12 @@ class RBFPolicy:
     torque_limit_nm : float
         Saturation level ``u_max`` [N m].
     seed : int
-        Seed of the initial pseudo-targets ``t ~ 0.1 N(0, 1)``.
+        Seed of the initial pseudo-targets ``t ~ target_std N(0, 1)``.
     noise_std : float
         Pseudo-noise of the underlying GP (regularises ``beta``).
+    target_std : float
+        Spread of the initial pseudo-targets (pre-saturation; 0.1 gives small torques, about 1 a policy
+        that uses the whole torque range).
     """
 
     def __init__(
@@ -47,6 +50,7 @@ class RBFPolicy:
         torque_limit_nm: float,
         seed: int = 0,
         noise_std: float = 0.01,
+        target_std: float = 0.1,
     ) -> None:
         centers = np.asarray(centers, dtype=float)
         lengthscales = np.asarray(lengthscales, dtype=float)
@@ -56,11 +60,13 @@ class RBFPolicy:
             raise ValueError(f"lengthscales must be {centers.shape[1]} positive numbers, got {lengthscales}")
         if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
             raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        if not math.isfinite(target_std) or target_std < 0:
+            raise ValueError(f"target_std must be non-negative and finite, got {target_std!r}")
         self.torque_limit_nm = float(torque_limit_nm)
         self.noise_var = float(noise_std) ** 2
         generator = torch.Generator().manual_seed(int(seed))
         self.centers = torch.tensor(centers, dtype=DTYPE)
-        self.targets = 0.1 * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
+        self.targets = float(target_std) * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
         self.log_lengthscales = torch.log(torch.tensor(lengthscales, dtype=DTYPE))
 
     @property

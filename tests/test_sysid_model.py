@@ -253,3 +253,67 @@ def test_perturbed_simulator_yardstick_grows_with_the_offset(data):
     assert exact.tip_rmse_m[-1] < 1e-3  # restarting the simulator from a recorded state reproduces the data
     assert off.phi_rmse_rad[0] == pytest.approx(1e-2)
     assert off.tip_rmse_m[-1] > 10 * exact.tip_rmse_m[-1] + 1e-3
+
+
+def test_tip_is_kept_within_the_rods_reach(tmp_path, fitted, data):
+    layout = StateLayout.full()
+    model = DynamicsModel(layout, dt_s=0.01, torque_limit_nm=0.06, hidden_widths=(4,), tip_reach_m=0.3)
+    free = DynamicsModel(layout, dt_s=0.01, torque_limit_nm=0.06, hidden_widths=(4,))
+    with torch.no_grad():
+        for m in (model, free):  # a network that predicts no velocity change: positions coast on
+            m.net[-1].weight.zero_()
+            m.net[-1].bias.zero_()
+    ex, ey, ex_dot, ey_dot = (layout.index(n) for n in ("ex_m", "ey_m", "ex_dot_m_s", "ey_dot_m_s"))
+    x = torch.zeros(3, layout.dim)
+    angle = 0.4
+    x[0, ey], x[0, ey_dot] = 0.3, 1.0  # straight up, moving outwards: would reach 0.31 m
+    x[1, ex], x[1, ey] = -0.3 * np.sin(angle), 0.3 * np.cos(angle)  # tilted, moving outwards along the rod
+    x[1, ex_dot], x[1, ey_dot] = -2.0 * np.sin(angle), 2.0 * np.cos(angle)
+    x[2, ey], x[2, ey_dot] = 0.2, 1.0  # well inside: untouched
+    with torch.no_grad():
+        y, y_free = model.predict_next(x, torch.zeros(3)), free.predict_next(x, torch.zeros(3))
+    radius = torch.hypot(y[:, ex], y[:, ey])
+    assert float(torch.hypot(y_free[0, ex], y_free[0, ey])) == pytest.approx(0.31, abs=1e-6)
+    torch.testing.assert_close(radius[:2], torch.full((2,), 0.3))
+    assert float(torch.atan2(-y[1, ex], y[1, ey])) == pytest.approx(angle, abs=1e-6)  # pulled back radially
+    assert float(y[1, layout.index("theta_rad")]) == pytest.approx(angle, abs=1e-6)  # theta follows the tip
+    # differenced velocities stay consistent with the corrected positions: the radial motion is stopped
+    torch.testing.assert_close(y[:, [ex_dot, ey_dot]], (y[:, [ex, ey]] - x[:, [ex, ey]]) / 0.01)
+    assert abs(float(y[0, ey_dot])) < 1e-4
+    torch.testing.assert_close(y[2], y_free[2])
+    # kept in the file; trained models get the rod length plus the slack
+    save_model(tmp_path / "reach", model)
+    assert load_model(tmp_path / "reach")[0].tip_reach_m == 0.3
+    from softpend.sysid.training import TIP_REACH_SLACK
+
+    assert fitted.model.tip_reach_m == pytest.approx(data[0].params.length_m * (1 + TIP_REACH_SLACK))
+    assert fit_dynamics_model(data[0].select_trials([0, 1]), max_epochs=1, limit_tip_reach=False, progress=False).model.tip_reach_m is None
+    with pytest.raises(ValueError, match="tip_reach_m"):
+        DynamicsModel(layout, dt_s=0.01, torque_limit_nm=0.06, tip_reach_m=-0.3)
+
+
+def test_perturbed_simulator_rate_offset_and_torque_noise(data):
+    from softpend.sysid import perturbed_simulator_errors
+
+    _, test = data
+    one = test.select_trials([0])
+    dt, length = test.dt_s, test.params.length_m
+    kwargs = dict(hub_offset_rad=0.0, horizon_s=0.3, start_stride=50)
+    # the hub 1e-2 rad/s faster with the springs' rates unchanged: the whole rod turns faster and the tip
+    # is about dt * L * 1e-2 off after one step; near upright the error then grows
+    rate = perturbed_simulator_errors(one, hub_rate_offset_rad_s=1e-2, **kwargs)
+    assert rate.tip_rmse_m[1] == pytest.approx(dt * length * 1e-2, rel=0.2)
+    assert rate.tip_rmse_m[-1] > 5 * rate.tip_rmse_m[1]
+    # an unmodelled hub torque of sigma for one step turns the hub by at most sigma dt^2 / (2 J_hub) (less:
+    # the clamp spring already drags the rod along)
+    sigma = 1e-3
+    one_step = perturbed_simulator_errors(one, hub_offset_rad=0.0, horizon_s=dt, start_stride=1, torque_noise_std_nm=sigma)
+    free_hub = sigma * dt**2 / (2 * test.params.hub_inertia_kgm2)
+    assert one_step.n_rollouts > 150 and 0.6 * free_hub < one_step.phi_rmse_rad[1] < 1.05 * free_hub
+    noisy = perturbed_simulator_errors(one, torque_noise_std_nm=sigma, seed=3, **kwargs)
+    again = perturbed_simulator_errors(one, torque_noise_std_nm=sigma, seed=3, **kwargs)
+    np.testing.assert_array_equal(noisy.tip_rmse_m, again.tip_rmse_m)
+    louder = perturbed_simulator_errors(one, torque_noise_std_nm=10 * sigma, seed=3, **kwargs)
+    assert louder.tip_rmse_m[-1] > 5 * noisy.tip_rmse_m[-1]
+    with pytest.raises(ValueError, match="torque_noise_std_nm"):
+        perturbed_simulator_errors(one, torque_noise_std_nm=-1.0, **kwargs)

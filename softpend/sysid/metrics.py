@@ -6,6 +6,7 @@ the dataset was recorded with sensor noise).  Ensembles are evaluated through th
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -280,6 +281,9 @@ def perturbed_simulator_errors(
     horizon_s: float = 2.0,
     start_stride: int = 10,
     history: int = 0,
+    hub_rate_offset_rad_s: float = 0.0,
+    torque_noise_std_nm: float = 0.0,
+    seed: int = 0,
 ) -> RolloutErrors:
     """Yardstick for open-loop errors: the simulator itself, restarted from the recorded joint state with
     the hub angle off by ``hub_offset_rad`` and driven by the recorded torques, against the data.
@@ -288,6 +292,13 @@ def perturbed_simulator_errors(
     a learned model cannot be expected to do much better over the same horizon.  Start points are the
     same as :func:`rollout_errors` with ``history`` (use the model's ``layout.history``).  Needs a
     simulated dataset (joint arrays and ``plant_params``).
+
+    ``hub_rate_offset_rad_s`` also starts the hub rate off (with the springs' rates unchanged the whole
+    rod turns that much faster: the error a model makes in one step of the tip angle's rate).
+    ``torque_noise_std_nm`` adds an independent Gaussian torque error [N m] (seeded by ``seed``) to the
+    hub at every step, not clipped by the motor limit: the simulator as a "model" whose only fault is a
+    small unmodelled generalised force, i.e. a one-step error that keeps being made, as a learned
+    model's is.
     """
     from ..plant import make_plant
 
@@ -295,15 +306,21 @@ def perturbed_simulator_errors(
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
     if isinstance(start_stride, bool) or not isinstance(start_stride, (int, np.integer)) or start_stride < 1:
         raise ValueError(f"start_stride must be a positive integer, got {start_stride!r}")
+    if not np.isfinite(hub_offset_rad) or not np.isfinite(hub_rate_offset_rad_s):
+        raise ValueError(f"hub_offset_rad and hub_rate_offset_rad_s must be finite, got {hub_offset_rad!r}, {hub_rate_offset_rad_s!r}")
+    if not (np.isfinite(torque_noise_std_nm) and torque_noise_std_nm >= 0):
+        raise ValueError(f"torque_noise_std_nm must be non-negative and finite, got {torque_noise_std_nm!r}")
     steps = int(round(horizon_s / dataset.dt_s))
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     n_states = dataset.n_samples - history
     if steps < 1 or n_states < steps + 1:
         raise ValueError(f"horizon_s={horizon_s} does not fit in trials of {n_states} states")
     protocol = dataset.metadata.get("protocol", {})
-    plant = make_plant(
-        dataset.metadata.get("plant") or "prb", params=dataset.params, dt_s=dataset.dt_s, substeps=int(protocol.get("substeps", 2))
-    )
+    params = dataset.params
+    if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
+        params = dataclasses.replace(params, torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
+    plant = make_plant(dataset.metadata.get("plant") or "prb", params=params, dt_s=dataset.dt_s, substeps=int(protocol.get("substeps", 2)))
+    rng = np.random.default_rng(seed)
     names = dataset.position_names
     i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
     tip_sq = np.zeros(steps + 1)
@@ -315,10 +332,13 @@ def perturbed_simulator_errors(
         for start in range(history, history + n_states - steps, start_stride):
             q = dataset.joint_positions_rad[trial, start].copy()
             q[0] += hub_offset_rad
-            plant.reset(q, dataset.joint_velocities_rad_s[trial, start])
+            qd = dataset.joint_velocities_rad_s[trial, start].copy()
+            qd[0] += hub_rate_offset_rad_s
+            plant.reset(q, qd)
             path = [plant.observe()]
             for k in range(steps):
-                path.append(plant.step(dataset.torques_nm[trial, start + k]))
+                noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
+                path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
             truth = dataset.positions[trial, start : start + steps + 1]
             ex = np.array([o.ex_m for o in path])
             ey = np.array([o.ey_m for o in path])

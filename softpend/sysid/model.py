@@ -86,6 +86,10 @@ class DynamicsModel(nn.Module):
         One of :data:`ACTIVATIONS`.
     integrate_positions : bool
         Predict only the velocity change and integrate positions (for backward-difference velocities).
+    tip_reach_m : float, optional
+        Largest distance of the tip from the hub axis [m] (the rod length): a predicted tip position
+        beyond it is pulled back radially onto that circle (and, with differenced velocities, the tip
+        rate follows from the corrected position).  ``None``: no limit.
     """
 
     def __init__(
@@ -96,6 +100,7 @@ class DynamicsModel(nn.Module):
         hidden_widths: Sequence[int] = (16, 16, 16),
         activation: str = "silu",
         integrate_positions: bool = True,
+        tip_reach_m: Optional[float] = None,
     ) -> None:
         super().__init__()
         if not isinstance(layout, StateLayout):
@@ -111,6 +116,9 @@ class DynamicsModel(nn.Module):
         self.hidden_widths = _check_widths(hidden_widths)
         self.activation = activation
         self.integrate_positions = bool(integrate_positions)
+        if tip_reach_m is not None and not (isinstance(tip_reach_m, (int, float)) and math.isfinite(tip_reach_m) and tip_reach_m > 0):
+            raise ValueError(f"tip_reach_m must be positive and finite or None, got {tip_reach_m!r}")
+        self.tip_reach_m = None if tip_reach_m is None else float(tip_reach_m)
         p = layout.n_positions
         mask = layout.position_angle_mask
         self._p = p
@@ -125,6 +133,9 @@ class DynamicsModel(nn.Module):
         # rate, from the predicted tip instead of letting a redundant prediction drift away from it
         names = layout.names
         self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
+        self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
+        if self._has_tip:
+            self._i_ex_tip, self._i_ey_tip = names.index("ex_m"), names.index("ey_m")
         if self._derive_theta:
             self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
         n_angles = int(mask.sum())
@@ -223,6 +234,8 @@ class DynamicsModel(nn.Module):
         """Apply a core-state change: add, wrap angles, shift the lagged frames."""
         core = state[:, : self._core] + delta
         core = torch.where(self._core_angle_mask, _wrap(core), core)
+        if self.tip_reach_m is not None and self._has_tip:
+            core = self._within_reach(state, core)
         if self._derive_theta:
             core = self._with_derived_theta(state, core)
         if not self._h:
@@ -231,6 +244,19 @@ class DynamicsModel(nn.Module):
         previous = state[:, :p]
         previous = torch.where(self._core_angle_mask[:p], _wrap(previous), previous)
         return torch.cat([core, previous, state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
+
+    def _within_reach(self, state: Tensor, core: Tensor) -> Tensor:
+        """Pull a tip predicted beyond ``tip_reach_m`` radially back onto the circle of that radius."""
+        p, i, j = self._p, self._i_ex_tip, self._i_ey_tip
+        radius = torch.sqrt(core[:, i] ** 2 + core[:, j] ** 2)
+        shrink = (self.tip_reach_m / radius.clamp_min(1e-12)).clamp(max=1.0)
+        ex, ey = core[:, i] * shrink, core[:, j] * shrink
+        columns = list(core.unbind(1))
+        columns[i], columns[j] = ex, ey
+        if self.integrate_positions:  # the backward-difference rate of the corrected position
+            columns[p + i] = (ex - state[:, i]) / self.dt_s
+            columns[p + j] = (ey - state[:, j]) / self.dt_s
+        return torch.stack(columns, dim=1)
 
     def _with_derived_theta(self, state: Tensor, core: Tensor) -> Tensor:
         p, i = self._p, self._i_theta
@@ -261,6 +287,7 @@ class DynamicsModel(nn.Module):
             "hidden_widths": list(self.hidden_widths),
             "activation": self.activation,
             "integrate_positions": self.integrate_positions,
+            "tip_reach_m": self.tip_reach_m,
         }
 
 

@@ -317,3 +317,19 @@ def test_perturbed_simulator_rate_offset_and_torque_noise(data):
     assert louder.tip_rmse_m[-1] > 5 * noisy.tip_rmse_m[-1]
     with pytest.raises(ValueError, match="torque_noise_std_nm"):
         perturbed_simulator_errors(one, torque_noise_std_nm=-1.0, **kwargs)
+
+
+def test_simulator_yardsticks_match_the_model_one_step_error(data):
+    from softpend.sysid.benchmarks import simulator_yardsticks
+
+    _, test = data
+    one = test.select_trials([0])
+    out = simulator_yardsticks(one, model_one_step_tip_m=2e-5, history=3, horizon_s=0.5)
+    # the calibrated hub-rate offset makes the perfect simulator miss by the model's one-step error once
+    assert out["simulator_one_best_model_step_one_step_tip_rmse_m"] == pytest.approx(2e-5, rel=0.1)
+    assert out["simulator_one_best_model_step_hub_rate_offset_rad_s"] == pytest.approx(2e-5 / (test.dt_s * test.params.length_m), rel=0.2)
+    for prefix in ("simulator_1e-4rad_off", "simulator_one_best_model_step", "simulator_torque_noise_1e-4nm"):
+        assert out[f"{prefix}_tip_rmse_m_0.5s"] > out[f"{prefix}_one_step_tip_rmse_m"]  # errors grow near upright
+    assert "simulator_1e-4rad_off_tip_rmse_m_1s" not in out  # beyond the horizon asked for
+    with pytest.raises(ValueError, match="model_one_step_tip_m"):
+        simulator_yardsticks(one, model_one_step_tip_m=0.0)

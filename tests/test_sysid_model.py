@@ -74,6 +74,8 @@ def test_training_beats_the_trivial_predictor_on_held_out_trials(fitted, data):
     assert errors["mse_normalised"] < 0.3 * errors["mse_normalised_trivial"]
     assert errors["mse"] < 0.4 * errors["mse_trivial"]
     assert errors["n_transitions"] == 3 * (test.n_samples - 1 - 3)  # 3 samples feed the first lags
+    by_variable = errors["mse_by_variable"]
+    assert errors["one_step_tip_rmse_m"] == pytest.approx(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))
     # split by trial, no overlap
     assert set(fitted.train_trials).isdisjoint(fitted.val_trials)
     assert len(fitted.train_trials) + len(fitted.val_trials) == 10

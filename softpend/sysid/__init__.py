@@ -18,7 +18,7 @@ __all__ = [
 ]
 
 from .layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
-from .metrics import RolloutErrors, evaluate_model, one_step_errors, perturbed_simulator_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
+from .metrics import RolloutErrors, evaluate_model, hub_rate_offset_for_tip_error, one_step_errors, perturbed_simulator_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
 from .model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
 from .rollout import rollout  # noqa: E402
 from .training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402
@@ -29,6 +29,7 @@ __all__ += [
     "TransitionData",
     "RolloutErrors",
     "evaluate_model",
+    "hub_rate_offset_for_tip_error",
     "one_step_errors",
     "perturbed_simulator_errors",
     "rollout_errors",

@@ -27,7 +27,7 @@ import torch
 
 from .babble import BabbleProtocol, babble
 from .dataset import TrajectoryDataset
-from .metrics import evaluate_model, one_step_errors, perturbed_simulator_errors
+from .metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
 from .rollout import rollout
 from .training import TrainConfig, fit_dynamics_model
 
@@ -98,8 +98,7 @@ def bench_sysid() -> dict[str, float]:
             if prefix == "model_wide":
                 out["model_wide_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
             if prefix == "model_best":
-                by_variable = one_step_errors(fit.model, test)["mse_by_variable"]
-                out["model_best_one_step_tip_rmse_m"] = float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))
+                out["model_best_one_step_tip_rmse_m"] = metrics["one_step_tip_rmse_m"]
         out.update(simulator_yardsticks(test, out["model_best_one_step_tip_rmse_m"], BEST_FULL_CONFIG.history))
         return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
     finally:
@@ -128,12 +127,7 @@ def simulator_yardsticks(
         raise ValueError(f"model_one_step_tip_m must be positive, got {model_one_step_tip_m!r}")
     out: dict[str, float] = {}
     runs: dict[str, dict] = {"simulator_1e-4rad_off": dict(hub_offset_rad=1e-4)}
-    # calibration: the first-step tip error is proportional to the hub-rate offset (the rod turns rigidly)
-    reference_rad_s = 1e-2
-    calibration = perturbed_simulator_errors(
-        test, hub_offset_rad=0.0, hub_rate_offset_rad_s=reference_rad_s, horizon_s=test.dt_s, start_stride=1, history=history
-    )
-    rate_rad_s = reference_rad_s * model_one_step_tip_m / float(calibration.tip_rmse_m[1])
+    rate_rad_s = hub_rate_offset_for_tip_error(test, model_one_step_tip_m, history)
     out["simulator_one_best_model_step_hub_rate_offset_rad_s"] = rate_rad_s
     runs["simulator_one_best_model_step"] = dict(hub_offset_rad=0.0, hub_rate_offset_rad_s=rate_rad_s)
     runs["simulator_torque_noise_1e-4nm"] = dict(hub_offset_rad=0.0, torque_noise_std_nm=1e-4, seed=0)

@@ -335,3 +335,47 @@ def test_simulator_yardsticks_match_the_model_one_step_error(data):
     assert "simulator_1e-4rad_off_tip_rmse_m_1s" not in out  # beyond the horizon asked for
     with pytest.raises(ValueError, match="model_one_step_tip_m"):
         simulator_yardsticks(one, model_one_step_tip_m=0.0)
+
+
+class _TorquePush:
+    """Hand-made exact model of a hand-made system: the tip moves by ``c * torque`` per step."""
+
+    def __init__(self, c: float, history: int) -> None:
+        self.layout = StateLayout.limited(history)
+        self.c = c
+
+    def predict_next(self, state, torque_nm, generator=None):
+        p = self.layout.n_positions
+        out = state.clone()
+        out[:, self.layout.index("ex_m")] += self.c * torque_nm
+        if self.layout.history:  # shift the lags
+            out[:, 3 * p :] = state[:, 2 * p : -p]
+            out[:, 2 * p : 3 * p] = state[:, :p]
+        return out
+
+
+def test_rollout_metric_aligns_torques_and_history():
+    """An exact model scores zero only if each torque is paired with the state it acts on (with lags)."""
+    rng = np.random.default_rng(0)
+    n_trials, n_samples, c = 2, 60, 0.01
+    torques = rng.normal(size=(n_trials, n_samples - 1))
+    positions = np.zeros((n_trials, n_samples, 3))
+    positions[..., 2] = 0.3
+    positions[:, 1:, 1] = c * np.cumsum(torques, axis=1)  # ex[t + 1] = ex[t] + c * torque[t]
+    data = TrajectoryDataset(
+        positions=positions,
+        velocities=np.concatenate([np.zeros((n_trials, 1, 3)), np.diff(positions, axis=1) / 0.01], axis=1),
+        torques_nm=torques,
+        metadata={
+            "schema": "softpend.sysid.dataset", "schema_version": 1, "softpend_version": "test", "source": "rig",
+            "dt_s": 0.01, "n_trials": n_trials, "n_samples": n_samples, "position_names": ["phi_rad", "ex_m", "ey_m"],
+            "velocity_names": ["phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"], "differentiation": "backward",
+            "plant": None, "plant_params": None, "seed": None, "protocol": {}, "notes": "",
+        },
+    )
+    for history in (0, 2):
+        errors = rollout_errors(_TorquePush(c, history), data, horizon_s=0.3, start_stride=7)
+        np.testing.assert_allclose(errors.tip_rmse_m, 0.0, atol=1e-12)
+        assert errors.hold_tip_rmse_m[-1] > 0.01  # the tip does move
+    shifted = TrajectoryDataset(positions=positions, velocities=data.velocities, torques_nm=np.roll(torques, 1, axis=1), metadata=data.metadata)
+    assert rollout_errors(_TorquePush(c, 2), shifted, horizon_s=0.3, start_stride=7).tip_rmse_m[1] > 1e-3  # one step off: caught

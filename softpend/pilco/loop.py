@@ -42,7 +42,7 @@ import torch
 from ..evaluation import EvaluationResult, evaluate_controller, run_episode
 from ..plant import RodParams, plant_names
 from .controller import PilcoController, RandomTorqueController
-from .gp import GPHyperparameters, MultiOutputGP, select_subset
+from .gp import GPHyperparameters, MultiOutputGP, select_subset, spread_subset
 from .policy import RBFPolicy
 from .propagation import Propagator, StateSpec, state_spec
 
@@ -82,7 +82,10 @@ class PilcoConfig:
     n_basis : int
         RBF basis functions of the policy.
     max_gp_points : int
-        Largest GP training set (data subsampling beyond it).
+        Largest GP training set (data subsampling beyond it; the latest trial is always kept).
+    gp_subset : {"random", "spread"}
+        How the older points are subsampled: uniformly at random, or farthest-point in the GP's
+        length-scale units (:func:`~softpend.pilco.gp.spread_subset`).
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search.
     policy_candidates : int
@@ -122,6 +125,7 @@ class PilcoConfig:
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
+    gp_subset: str = "random"
     gp_iterations: int = 100
     policy_iterations: int = 80
     policy_candidates: int = 0
@@ -137,6 +141,8 @@ class PilcoConfig:
         if not isinstance(self.params, RodParams):
             raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
         state_spec(self.state)
+        if self.gp_subset not in ("random", "spread"):
+            raise ValueError(f"gp_subset must be 'random' or 'spread', got {self.gp_subset!r}")
         if self.plant not in plant_names():
             raise ValueError(f"plant must be one of {plant_names()}, got {self.plant!r}")
         for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
@@ -444,6 +450,10 @@ def run_pilco(
         x_all = np.vstack(inputs)
         y_all = np.vstack(targets)
         subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]), seed=int(rng.integers(2**31)))
+        if config.gp_subset == "spread" and hyper is not None:
+            # length-scales of the last fit, averaged over the outputs (geometric mean)
+            scales = np.exp(np.mean(hyper.log_lengthscales, axis=0))
+            subset = spread_subset(x_all, config.max_gp_points, recent=len(inputs[-1]), lengthscales=scales)
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=hyper)
         gp.fit(config.gp_iterations)
         hyper = gp.hyperparameters

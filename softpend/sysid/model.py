@@ -135,7 +135,7 @@ class DynamicsModel(nn.Module):
         self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
         self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
         if self._has_tip:
-            self._i_ex_tip, self._i_ey_tip = names.index("ex_m"), names.index("ey_m")
+            self.register_buffer("_tip_idx", torch.tensor([names.index("ex_m"), names.index("ey_m")]), persistent=False)
         if self._derive_theta:
             self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
         n_angles = int(mask.sum())
@@ -247,16 +247,18 @@ class DynamicsModel(nn.Module):
 
     def _within_reach(self, state: Tensor, core: Tensor) -> Tensor:
         """Pull a tip predicted beyond ``tip_reach_m`` radially back onto the circle of that radius."""
-        p, i, j = self._p, self._i_ex_tip, self._i_ey_tip
-        radius = torch.sqrt(core[:, i] ** 2 + core[:, j] ** 2)
-        shrink = (self.tip_reach_m / radius.clamp_min(1e-12)).clamp(max=1.0)
-        ex, ey = core[:, i] * shrink, core[:, j] * shrink
-        columns = list(core.unbind(1))
-        columns[i], columns[j] = ex, ey
+        p, tip = self._p, self._tip_idx
+        radius = torch.hypot(core[:, tip[0]], core[:, tip[1]])
+        over = radius > self.tip_reach_m
+        if not bool(over.any()):  # the usual case: nothing to do (and no copy)
+            return core
+        shrink = torch.where(over, self.tip_reach_m / radius.clamp_min(1e-12), torch.ones_like(radius))
+        corrected = core[:, tip] * shrink[:, None]
+        core = core.clone()
+        core[:, tip] = corrected
         if self.integrate_positions:  # the backward-difference rate of the corrected position
-            columns[p + i] = (ex - state[:, i]) / self.dt_s
-            columns[p + j] = (ey - state[:, j]) / self.dt_s
-        return torch.stack(columns, dim=1)
+            core[:, p + tip] = (corrected - state[:, tip]) / self.dt_s
+        return core
 
     def _with_derived_theta(self, state: Tensor, core: Tensor) -> Tensor:
         p, i = self._p, self._i_theta

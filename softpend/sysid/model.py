@@ -17,7 +17,9 @@ cheap on a CPU) maps *features* of the state and torque to the normalised *chang
   frames are shifted in.  With differenced velocities (``integrate_positions``, the default) the network
   predicts only the velocity change and positions follow from ``x[t+1] = x[t] + dt v[t+1]``, which is
   exact for backward differences.  ``theta`` (and its rate) is not predicted but derived from the
-  predicted tip position, ``theta = atan2(-ex, ey)``, as in the data.
+  predicted tip position, ``theta = atan2(-ex, ey)``, as in the data.  A predicted tip beyond
+  ``tip_reach_m`` (the rod length plus 1 % when trained by :func:`softpend.sysid.fit_dynamics_model`)
+  is pulled back radially onto that circle, so a rollout that has lost the rod stays on its scale.
 
 Both classes offer the same batched API in the report's units (state layout: :mod:`softpend.sysid.layout`)::
 

@@ -379,3 +379,22 @@ def test_rollout_metric_aligns_torques_and_history():
         assert errors.hold_tip_rmse_m[-1] > 0.01  # the tip does move
     shifted = TrajectoryDataset(positions=positions, velocities=data.velocities, torques_nm=np.roll(torques, 1, axis=1), metadata=data.metadata)
     assert rollout_errors(_TorquePush(c, 2), shifted, horizon_s=0.3, start_stride=7).tip_rmse_m[1] > 1e-3  # one step off: caught
+
+
+@pytest.mark.expensive
+def test_best_full_information_model_accuracy_on_the_default_protocol():
+    """The published Figure 3 setting on the report's protocol: the measured accuracy holds (the issue's
+    target, 15 mm at 1 s, is not reached; see the fig03 notebook for why)."""
+    from softpend.sysid import evaluate_model
+    from softpend.sysid.benchmarks import BEST_FULL_CONFIG, TEST_SEED, TRAIN_SEED
+
+    torch.set_num_threads(1)
+    protocol = BabbleProtocol()
+    train = babble(protocol, seed=TRAIN_SEED, progress=False)
+    test = babble(protocol.replace(n_trials=12), seed=TEST_SEED, progress=False)
+    fit = fit_dynamics_model(train, BEST_FULL_CONFIG, progress=False)
+    metrics = evaluate_model(fit.model, test, horizons_s=(0.5, 1.0, 2.0))
+    assert metrics["tip_rmse_m@0.5s"] < 0.01  # measured 5.6 mm
+    assert metrics["tip_rmse_m@1s"] < 0.1 < metrics["hold_tip_rmse_m@1s"]  # measured 62 mm; "hold" 176 mm
+    assert metrics["tip_rmse_m@2s"] < 2 * test.params.length_m  # kept within the rod's reach
+    assert metrics["mse_normalised"] < 0.002 * metrics["mse_normalised_trivial"]

@@ -80,3 +80,21 @@ def test_intro_quotes_the_design_numbers_computed_by_the_figure_1_notebook(quick
     assert f"{design.torque_ratio:.2f}" in text
     figure_1 = (html_dir / "book" / "_generated" / "fig01_prb_rod.html").read_text(encoding="utf-8")
     assert "<table" in figure_1 and "buckling load factor" in figure_1  # the design table renders as a table
+
+
+#: Notebooks that simulate nothing (the reward function): they need no ``plant`` parameter.
+NO_PLANT = {"fig02_reward"}
+
+
+def test_every_simulating_notebook_takes_a_plant_parameter(tmp_path):
+    """Issue 8: the figure set is regenerated on the beam by one parameter (``softpend book --set plant=beam``)."""
+    import papermill
+
+    for name in toc_notebooks(REPO_ROOT / "_toc.yml"):
+        if name in NO_PLANT:
+            continue
+        path = tmp_path / f"{name}.ipynb"
+        nbformat.write(book.read_notebook(REPO_ROOT / "notebooks" / f"{name}.md"), str(path))
+        declared = papermill.inspect_notebook(str(path))
+        assert "plant" in declared, f"{name} has no `plant` parameter"
+        assert declared["plant"]["default"].strip("'\"") in ("prb", "beam"), name

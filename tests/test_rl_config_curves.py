@@ -98,3 +98,14 @@ def test_moving_average_and_aggregate():
     np.testing.assert_allclose(agg["mean"], [1.0, 10.0])
     np.testing.assert_allclose(agg["min"], [0.0, 9.0])
     np.testing.assert_allclose(agg["max"], [2.0, 11.0])
+
+
+def test_training_cpu_s_of_a_log():
+    from softpend.rl.benchmarks import training_cpu_s
+
+    log = _log(np.zeros(3), [{"episode": 3, "cpu_s": 7.5}])
+    for row, cpu in zip(log.episodes, (2.0, 4.0, 6.0)):
+        row["cpu_s"] = cpu
+    assert training_cpu_s(log) == 7.5  # the final evaluation included
+    del log.episodes[0]["cpu_s"]  # a run started before CPU time was logged
+    assert math.isnan(training_cpu_s(log))

@@ -58,6 +58,8 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
     assert [row["episode"] for row in log2.episodes] == [1, 2, 3, 4, 5]
     assert log2.episodes[:3] == log.episodes
     assert log2.plant_s == pytest.approx(5.0)
+    cpu = log2.column("cpu_s")  # CPU seconds of training accumulate over the resumed session
+    assert np.all(cpu > 0) and np.all(np.diff(cpu) > 0)
     assert model2.replay_buffer.size() == buffer_before + 2 * config.episode_agent_steps
     assert any(not torch.equal(a, b) for a, b in zip(weights_before, model2.q_net.parameters()))  # it kept learning
     agent, loaded_config = load_agent(tmp_path, which="final")

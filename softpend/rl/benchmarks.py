@@ -8,6 +8,10 @@
   profile (:func:`softpend.rl.experiments.figure_configs`, ``DEFAULT_EPISODES``, folder ``runs/rl-book``):
   reused when present, trained otherwise.
 * ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
+* ``full_profile_train_cpu_s`` -- CPU seconds of training all six runs (the training logs' ``cpu_s``,
+  ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time of the
+  full profile on two otherwise idle cores running two single-threaded runs at a time, if the runs pack
+  perfectly (a lower bound; the target is <= 1200 s).
 """
 
 from __future__ import annotations
@@ -35,6 +39,12 @@ def dqn_train_steps_per_s(episodes: int = 10) -> float:
     return episodes * config.episode_agent_steps / elapsed
 
 
+def training_cpu_s(log) -> float:
+    """CPU seconds a run spent training, final evaluation included (``nan`` for a run without ``cpu_s``)."""
+    values = [row.get("cpu_s", math.nan) for row in log.episodes + log.evaluations]
+    return float(max(values)) if values and all(math.isfinite(v) for v in values) else math.nan
+
+
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
     from .experiments import figure_configs, median_real_s_to_balance, train_seeds
@@ -43,6 +53,7 @@ def bench_rl() -> dict[str, float]:
     configs = figure_configs()
     dqn_logs = train_seeds("dqn", configs["dqn"], SEEDS, DEFAULT_EPISODES["dqn"], ROOT, progress=True)
     mbpo_logs = train_seeds("mbpo", configs["mbpo"], SEEDS, DEFAULT_EPISODES["mbpo"], ROOT, progress=True)
+    cpu_s = sum(training_cpu_s(log) for log in dqn_logs + mbpo_logs)
     dqn_s = median_real_s_to_balance(dqn_logs)
     mbpo_s = median_real_s_to_balance(mbpo_logs)
     return {
@@ -50,4 +61,6 @@ def bench_rl() -> dict[str, float]:
         "dqn_real_s_to_balance": dqn_s,
         "mbpo_real_s_to_balance": mbpo_s,
         "mbpo_over_dqn_real_s_ratio": dqn_s / mbpo_s if math.isfinite(mbpo_s) and mbpo_s > 0 else math.nan,
+        "full_profile_train_cpu_s": cpu_s,
+        "full_profile_train_2core_s": cpu_s / 2.0,
     }

@@ -203,10 +203,19 @@ class MBPOConfig(DQNConfig):
 
     DQN fields that differ from :class:`DQNConfig`
     ----------------------------------------------
-    gradient_steps = 12, target_update_interval = 40 (agent steps): three times the update-to-data ratio
-    of the first MBPO setting (4 and 125), with the target network refreshed after about as many gradient
-    steps (~500) as before.  Measured (50 episodes, seeds 0/1/2, evaluation every 5 episodes): plant seconds
-    to balance 150 / never / 100 s, against 200 / never / never s with 4 and 125.
+    gradient_steps = 20 (ten times model-free DQN's 2 per agent step; the model data are what make a high
+    update-to-data ratio affordable), double_q = True, tau = 0.05 with
+    target_update_interval = 1 (a Polyak-averaged target network updated every agent step, time constant
+    ~20 agent steps = 400 gradient steps, instead of a hard copy every 40): Double DQN is the DQN
+    counterpart of the clipped double-Q critic of MBPO's SAC and keeps the many updates on partly
+    model-generated data from inflating the values.  eval_every_episodes = 5 (the plant seconds to balance
+    are read at the evaluations; DQN's 10 is twice as coarse).
+
+    Measured (50 episodes, seeds 0 / 1 / 2, evaluation every 5 episodes, plant seconds to the first
+    balanced evaluation): hard target every 40 agent steps, 12 gradient steps: 150 / never / 100 s;
+    Double DQN + Polyak, 12 steps: not balanced by episode 25 / not by 25 / 125 s (stopped at 25);
+    Double DQN + Polyak, 20 steps (these defaults): see ``softpend bench --json --only rl`` and the
+    closing note of issue 4.
     """
 
     rollouts_per_real_step: int = 9
@@ -220,9 +229,12 @@ class MBPOConfig(DQNConfig):
     model_fit_steps: int = 1500
     model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
-    target_update_interval: int = 40
-    gradient_steps: int = 12
+    gradient_steps: int = 20
+    double_q: bool = True
+    tau: float = 0.05
+    target_update_interval: int = 1
     train_freq: int = 1
+    eval_every_episodes: int = 5
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -19,10 +19,13 @@ The policy *balances* when every test episode swings up and keeps ``upright_std_
 Model learning and policy search
 --------------------------------
 GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled to ``max_gp_points`` (the
-latest trial always kept), hyperparameters by penalised marginal likelihood; then the RBF policy
-(:class:`~softpend.pilco.policy.RBFPolicy`, warm-started from the previous one) minimises the predicted
-expected cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the
-whole moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`).
+latest trial always kept, the older points farthest-point in the last fit's length-scale units), hyperparameters
+by penalised marginal likelihood; then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the
+predicted expected cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients
+through the whole moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`).  The search runs
+from the previous policy and, ``policy_restarts`` times, from a fresh random policy; the lowest predicted cost
+wins.  Optional exploration aids (off by default, see :class:`PilcoConfig`): a random first trial of held
+bang-bang torques, and screening random candidate policies by their predicted cost before the search.
 """
 
 from __future__ import annotations
@@ -89,14 +92,18 @@ class PilcoConfig:
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search.
     policy_candidates : int
-        Random policies (centres on visited states, pseudo-targets ``N(0, 1)``: torques over the whole
-        range) whose predicted cost is computed (one rollout each, no gradient) before every policy search;
+        Random policies (centres on visited states, pseudo-targets ``restart_target_std N(0, 1)``) whose
+        predicted cost is computed (one rollout each, no gradient) before every policy search;
         the search starts from the best of them and the previous policy.  This gets the search off the flat
         plateau of the saturating cost (a policy that predicts the rod to stay hanging has a cost gradient
         of about ``exp(-8)``).
     policy_restarts : int
         Extra full policy searches per trial, each from the next-best random candidate (or a fresh random
         policy); the policy with the lowest predicted cost runs the trial.
+    restart_target_std : float
+        Spread of the random candidates' pseudo-targets (pre-saturation): 0.1 as the first policy (small
+        torques, live gradients), about 1 for policies that use the whole torque range (the sine saturation
+        then flattens the gradient).
     start_noise_rad : float
         Half-width of the uniform start perturbation of the hub angle and rate (the environment's).
     eval_seeds : tuple of int
@@ -118,18 +125,19 @@ class PilcoConfig:
     control_dt_s: float = 0.1
     horizon_s: float = 4.0
     n_policy_trials: int = 15
-    random_hold_min_s: float = 0.2
-    random_hold_max_s: float = 0.6
-    random_bang_bang: bool = True
+    random_hold_min_s: float = 0.1
+    random_hold_max_s: float = 0.1
+    random_bang_bang: bool = False
     cost_width_m: float = 0.15
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
-    gp_subset: str = "random"
+    gp_subset: str = "spread"
     gp_iterations: int = 100
-    policy_iterations: int = 80
+    policy_iterations: int = 50
     policy_candidates: int = 0
-    policy_restarts: int = 0
+    policy_restarts: int = 1
+    restart_target_std: float = 0.1
     start_noise_rad: float = 0.05
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0
@@ -146,7 +154,7 @@ class PilcoConfig:
         if self.plant not in plant_names():
             raise ValueError(f"plant must be one of {plant_names()}, got {self.plant!r}")
         for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad", "random_hold_min_s", "random_hold_max_s"):
+                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
@@ -462,7 +470,7 @@ def run_pilco(
         visited = np.vstack(result.real_states)
         candidates = [
             RBFPolicy(spec.model_inputs(visited[restart_rng.choice(len(visited), size=config.n_basis)]), lengthscales,
-                      torque_limit, seed=int(restart_rng.integers(2**31)), target_std=1.0).get_vector()
+                      torque_limit, seed=int(restart_rng.integers(2**31)), target_std=config.restart_target_std).get_vector()
             for _ in range(max(config.policy_candidates, config.policy_restarts))
         ]
         predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations, candidates,

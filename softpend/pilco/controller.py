@@ -115,6 +115,7 @@ class RandomTorqueController(_HoldController):
                 self._held_nm = self.torque_limit_nm * float(self._rng.choice((-1.0, 1.0)))
             else:
                 self._held_nm = float(self._rng.uniform(-self.torque_limit_nm, self.torque_limit_nm))
-            self._periods_left = int(self._rng.integers(self.hold_periods[0], self.hold_periods[1] + 1))
+            low, high = self.hold_periods
+            self._periods_left = low if low == high else int(self._rng.integers(low, high + 1))
         self._periods_left -= 1
         return self._held_nm

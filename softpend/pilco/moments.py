@@ -101,8 +101,10 @@ def gp_moments(
     ij_q = ij @ q_mat
     quad_i = torch.sum(ii_q * ii, dim=2)  # (P, N)
     quad_j = torch.sum(ij_q * ij, dim=2)
-    exponent = torch.baddbmm(
-        (log_k[rows] + quad_i).unsqueeze(2) + (log_k[cols] + quad_j).unsqueeze(1), ii_q, ij.transpose(1, 2), alpha=2.0
+    exponent = (
+        (log_k[rows] + quad_i).unsqueeze(2)
+        + (log_k[cols] + quad_j).unsqueeze(1)
+        + 2.0 * ii_q @ ij.transpose(1, 2)
     )
     big_l = torch.exp(exponent)  # (P, N, N)
     second = torch.sum((big_l @ beta[cols].unsqueeze(2)).squeeze(2) * beta[rows], dim=1)  # beta_i' L beta_j

@@ -35,7 +35,6 @@ def test_mbpo_learns_to_swing_up_and_balance(tmp_path):
     _, log = train_mbpo(config, seed=0, episodes=50, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
     # the agent of the best periodic evaluation (seeds 1000, 1001), as the book's figures use it, checked on
-    # other start seeds: with the default high update-to-data ratio the final agent of seed 0 has collapsed
-    # again (balanced at episodes 30-35, not at 40-50)
+    # other start seeds (the final agent may have collapsed again after balancing)
     agent, _ = load_agent(tmp_path)
     _balances(agent, config)

@@ -200,6 +200,10 @@ class MBPOConfig(DQNConfig):
         Minibatch size of the model fits.
     model_hidden_widths : tuple of int
         Hidden layers of each ensemble member (:class:`softpend.sysid.DynamicsModel`).
+    model_limit_tip_reach : bool
+        Keep the model's predicted tip within the rod's reach
+        (:attr:`softpend.sysid.TrainConfig.limit_tip_reach`).  Off: with it on, the defaults balanced
+        1 of 3 seeds instead of 2 of 3 (table below).
 
     DQN fields that differ from :class:`DQNConfig`
     ----------------------------------------------
@@ -215,7 +219,8 @@ class MBPOConfig(DQNConfig):
     DQN settings                                                          plant s to balance
     ====================================================================  =============================
     gradient_steps 4, target every 125 (first setting)                    200 / never / never
-    gradient_steps 12, target every 40 (**these defaults**)               never / never / 200
+    gradient_steps 12, target every 40 (**these defaults**)               150 / never / 100
+    the same, with the sysid tip-reach guard on in the model              never / never / 200
     the same, with the sysid and env code before 2026-11-22 10:00         150 / never / 100
     gradient_steps 20, target every 25                                    >125 / >125 / 75 (stopped at 25)
     Double DQN, Polyak tau 0.05 every step, gradient_steps 12             >125 / >125 / 125 (stopped at 25)
@@ -223,9 +228,9 @@ class MBPOConfig(DQNConfig):
     same + rollouts every 25 steps, rollout length 1 -> 10 by episode 15  >50 / >50 / >50 (stopped at 10)
     ====================================================================  =============================
 
-    The rows above the last two ran before the dynamics model kept the tip within the rod's reach
-    (``softpend.sysid.TrainConfig.limit_tip_reach``, on since 10:23); the last two and the defaults' first
-    row ran with it.  Neither setting meets the target (balanced on every seed, median <= ~115 s).  The
+    The sysid tip-reach guard (``softpend.sysid.TrainConfig.limit_tip_reach``) was on in the third row and
+    the last two; the defaults keep it off for MBPO (``model_limit_tip_reach``), which reproduces the
+    pre-guard run (fourth row).  Neither setting meets the target (balanced on every seed, median <= ~115 s).  The
     Double DQN + Polyak learner (``double_q``, ``tau``) is kept as an option: it balanced the seed that the
     defaults never balance (at 75 s), but not the other two.
     """
@@ -241,6 +246,7 @@ class MBPOConfig(DQNConfig):
     model_fit_steps: int = 1500
     model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
+    model_limit_tip_reach: bool = False
     gradient_steps: int = 12
     target_update_interval: int = 40
     train_freq: int = 1
@@ -257,6 +263,8 @@ class MBPOConfig(DQNConfig):
             raise ValueError(f"initial_random_episodes must be an integer >= 1, got {self.initial_random_episodes!r}")
         if not 0.0 <= self.real_ratio <= 1.0:
             raise ValueError(f"real_ratio must lie in [0, 1], got {self.real_ratio!r}")
+        if not isinstance(self.model_limit_tip_reach, bool):
+            raise ValueError(f"model_limit_tip_reach must be a bool, got {self.model_limit_tip_reach!r}")
         schedule = tuple(int(v) for v in self.rollout_schedule)
         if len(schedule) != 4 or schedule[0] < 0 or schedule[1] < schedule[0] or schedule[2] < 1 or schedule[3] < 1:
             raise ValueError(

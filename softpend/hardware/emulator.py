@@ -33,7 +33,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..plant import RodParams, make_plant
+from ..plant import RodParams, check_plant_name, make_plant
 from . import protocol as proto
 from .samplelog import SampleLog
 
@@ -83,10 +83,7 @@ class RigConfig:
     duration_s: Optional[float] = None
 
     def __post_init__(self) -> None:
-        from ..plant import plant_names
-
-        if self.plant not in plant_names():
-            raise ValueError(f"plant must be one of {sorted(plant_names())}, got {self.plant!r}")
+        check_plant_name(self.plant)
         if not (math.isfinite(self.dt_s) and 0.001 <= self.dt_s <= 0.1):
             raise ValueError(f"dt_s must be in [0.001, 0.1] s, got {self.dt_s!r}")
         if int(self.counts_per_rev) != self.counts_per_rev or self.counts_per_rev < 4:

@@ -66,7 +66,7 @@ import scipy.optimize
 import torch
 
 from ..evaluation import EvaluationResult, evaluate_controller, run_episode
-from ..plant import RodParams, plant_names
+from ..plant import RodParams, check_plant_name
 from .controller import PilcoController, RandomTorqueController
 from .gp import GPHyperparameters, MultiOutputGP, select_subset, spread_subset
 from .policy import RBFPolicy
@@ -174,8 +174,7 @@ class PilcoConfig:
         state_spec(self.state)
         if self.gp_subset not in ("random", "spread"):
             raise ValueError(f"gp_subset must be 'random' or 'spread', got {self.gp_subset!r}")
-        if self.plant not in plant_names():
-            raise ValueError(f"plant must be one of {plant_names()}, got {self.plant!r}")
+        check_plant_name(self.plant)
         for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
                      "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
             value = getattr(self, name)

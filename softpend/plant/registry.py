@@ -23,6 +23,15 @@ def plant_names() -> list[str]:
     return sorted(_PLANTS)
 
 
+def check_plant_name(plant: Any, parameter: str = "plant") -> str:
+    """``plant`` if :func:`make_plant` knows it, else a ``ValueError`` naming ``parameter`` and the known plants
+    (the one check every config, notebook and command uses before any work starts)."""
+    names = plant_names()
+    if plant not in names:
+        raise ValueError(f"{parameter} must be one of {names}, got {plant!r}")
+    return plant
+
+
 def make_plant(name: str = "prb", **kwargs: Any) -> Any:
     """Build a plant by name (``"prb"``; other plants register themselves on import).
 
@@ -31,9 +40,7 @@ def make_plant(name: str = "prb", **kwargs: Any) -> Any:
     ValueError
         If ``name`` is unknown.
     """
-    _load_builtin()
-    if name not in _PLANTS:
-        raise ValueError(f"unknown plant {name!r}; known plants: {sorted(_PLANTS)}")
+    check_plant_name(name)
     return _PLANTS[name](**kwargs)
 
 

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, TypeVar
 
+from ..plant import check_plant_name
+
 __all__ = ["DQNConfig", "MBPOConfig", "config_from_overrides", "load_config", "save_config"]
 
 
@@ -119,8 +121,7 @@ class DQNConfig:
         )
         if self.training_start not in ("random", "hanging", "upright"):
             raise ValueError(f"training_start must be 'random', 'hanging' or 'upright', got {self.training_start!r}")
-        if self.plant not in ("prb", "beam"):
-            raise ValueError(f"plant must be 'prb' or 'beam', got {self.plant!r}")
+        check_plant_name(self.plant)
         if not isinstance(self.double_q, bool):
             raise ValueError(f"double_q must be a bool, got {self.double_q!r}")
         if self.n_torque_levels < 2:

@@ -13,10 +13,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..plant import check_plant_name
 from .config import DQNConfig, MBPOConfig, load_config
 from .training_log import BALANCE_STD_RAD, TrainingLog
 
-__all__ = ["METHOD_NAMES", "PLANTS", "check_plant", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians",
+__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians",
            "plant_runs_root", "run_folder", "summary_table", "train_seeds"]
 
 
@@ -100,7 +101,7 @@ def figure_configs(torque_limit_nm: float = 0.06, episode_s: float = 5.0, rollou
 
     ``plant`` (``"prb"`` or ``"beam"``) is the true plant the agents train and are evaluated on.
     """
-    check_plant(plant)
+    check_plant_name(plant)
     return {
         "dqn": DQNConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, plant=plant),
         "mbpo": MBPOConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
@@ -108,21 +109,10 @@ def figure_configs(torque_limit_nm: float = 0.06, episode_s: float = 5.0, rollou
     }
 
 
-#: True plants the RL figures can be made on (:func:`softpend.plant.make_plant` names).
-PLANTS = ("prb", "beam")
-
-
-def check_plant(plant: str) -> str:
-    """``plant`` if it is one of :data:`PLANTS`, else a ``ValueError`` naming the parameter."""
-    if plant not in PLANTS:
-        raise ValueError(f"plant must be one of {list(PLANTS)}, got {plant!r}")
-    return plant
-
-
 def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
     """The run folder root of one plant: ``runs_root`` itself for the PRB rod (the book's default runs), a
     sibling ``<runs_root>-<plant>`` for any other plant, so that runs on different plants never share a cache."""
-    check_plant(plant)
+    check_plant_name(plant)
     root = Path(runs_root)
     return root if plant == "prb" else root.with_name(f"{root.name}-{plant}")
 

@@ -46,9 +46,13 @@ def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
     assert records[-1].wall_s_total >= records[1].wall_s_total > 0
     assert len(tiny_run.real_states) == 3 and tiny_run.real_states[0].shape == (11, 2)
     assert len(tiny_run.predicted_means) == 2 and tiny_run.predicted_means[0].shape == (11, 2)
-    # the recorded real cost is the cost of the recorded real trajectory
-    theta = tiny_run.real_states[1][1:, 1]
-    assert records[1].real_cost == pytest.approx(real_cost(theta, 0.3, tiny_run.config.cost_width_m).sum())
+    # the recorded real cost is the cost of the recorded real trajectory (tip angle and, by default, tip rate)
+    theta, theta_dot = tiny_run.real_states[1][1:, 1], tiny_run.real_states[1][1:, 0]
+    config = tiny_run.config
+    assert config.cost_rate_width_rad_s is not None
+    assert records[1].real_cost == pytest.approx(
+        real_cost(theta, 0.3, config.cost_width_m, theta_dot, config.cost_rate_width_rad_s).sum())
+    assert records[1].real_cost >= real_cost(theta, 0.3, config.cost_width_m).sum()
 
 
 def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
@@ -63,6 +67,31 @@ def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
     # zero-order hold: the torque changes only every control period (10 plant steps)
     assert np.all(torques.reshape(-1, 10) == torques.reshape(-1, 10)[:, :1])
     assert np.max(np.abs(torques)) <= RodParams().torque_limit_nm + 1e-12
+
+
+def test_several_random_trials_and_a_linear_policy_term(tmp_path):
+    """``n_random_trials`` random trials come first and count as interaction; the linear term is saved and loaded."""
+    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, n_random_trials=3, policy_linear=True, seed=4)
+    result = run_pilco(config, progress=False)
+    assert [r.kind for r in result.records] == ["random", "random", "random", "policy"]
+    assert [r.index for r in result.records] == [0, 1, 2, 3]
+    np.testing.assert_allclose([r.plant_seconds_total for r in result.records], [1.0, 2.0, 3.0, 4.0])
+    assert result.records[-1].n_gp_points == 15  # 30 random points, subsampled
+    randoms = result.real_states[:3]
+    assert not np.allclose(randoms[1], randoms[2])  # each random trial draws its own torques and start
+    # the first random trial is the one a single-random-trial run makes (same seed stream)
+    single = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
+    np.testing.assert_array_equal(single.real_states[0], randoms[0])
+    assert result.policy.linear and result.policy.linear_weights.shape == (3,)
+    result.save(tmp_path)
+    loaded = PilcoResult.load(tmp_path)
+    assert loaded.config == config and loaded.policy.linear
+    x = np.random.default_rng(0).normal(size=(7, 3))
+    np.testing.assert_allclose(loaded.policy.torque_nm(x), result.policy.torque_nm(x))
+    with pytest.raises(ValueError, match="n_random_trials"):
+        PilcoConfig(n_random_trials=0)
+    with pytest.raises(ValueError, match="policy_linear"):
+        PilcoConfig(policy_linear=1)
 
 
 def test_policy_search_lowers_the_predicted_cost():
@@ -96,6 +125,10 @@ def test_config_rejects_bad_values():
         PilcoConfig(n_basis=0)
     with pytest.raises(ValueError, match="cost_width_m"):
         PilcoConfig(cost_width_m=-1.0)
+    with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
+        PilcoConfig(cost_rate_width_rad_s=0.0)
+    with pytest.raises(ValueError, match="theta_dot_rad_s"):
+        real_cost(np.zeros(3), 0.3, 0.15, cost_rate_width_rad_s=3.0)
 
 
 def test_softpend_train_algo_pilco(tmp_path, capsys):
@@ -105,10 +138,11 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
         if key not in ("n_policy_trials",):
             value = ",".join(map(str, value)) if isinstance(value, tuple) else value
             args += ["--set", f"{key}={value}"]
-    assert main(args) == 0
+    assert main(args + ["--set", "cost_rate_width_rad_s=none"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["trials"] == 2 and summary["plant_seconds_total"] == pytest.approx(2.0)
     assert (out / "policy.pt").exists() and (out / "pilco.json").exists()
+    assert PilcoResult.load(out).config.cost_rate_width_rad_s is None
     assert main(["train", "--algo", "pilco", "--out", str(out), "--set", "no_such_field=1"]) == 2
 
 
@@ -116,7 +150,8 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
 def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
     """The classical PILCO result: swing-up and balance within 10 trials of at most 4 s (random one included)."""
     config = PilcoConfig(params=RIGID, state="tip", control_dt_s=0.1, horizon_s=4.0, n_policy_trials=9,
-                         policy_iterations=40, eval_seeds=(1000, 1001, 1002), eval_duration_s=6.0, seed=0)
+                         cost_rate_width_rad_s=None, policy_iterations=40, eval_seeds=(1000, 1001, 1002),
+                         eval_duration_s=6.0, seed=0)
     result = run_pilco(config, progress=False)
     assert len(result.records) <= 10
     assert result.records[-1].balanced, [(r.index, r.eval_upright_std_rad) for r in result.records]

@@ -145,3 +145,51 @@ def test_rollout_gradient_matches_finite_differences():
         step[i] = eps
         fd = (value(vector + step) - value(vector - step)) / (2 * eps)
         assert float(grad[i]) == pytest.approx(fd, rel=1e-4, abs=1e-7)
+
+
+def test_linear_policy_term_moments_are_exact_against_monte_carlo():
+    """With zero pseudo-targets the pre-saturation output is ``w^T x``, Gaussian: the moments are exact."""
+    rng = np.random.default_rng(7)
+    dim = 5
+    policy = RBFPolicy(rng.normal(size=(6, dim)), np.ones(dim), 0.06, seed=0, target_std=0.0, linear=True)
+    vector = policy.get_vector()
+    assert np.all(vector[-dim:] == 0.0)  # the linear term starts switched off
+    vector[-dim:] = 0.5 * rng.normal(size=dim)
+    policy.set_vector(vector)
+    a = 0.3 * rng.normal(size=(dim, dim))
+    m = torch.tensor(0.5 * rng.normal(size=dim), dtype=F64)
+    s = torch.tensor(a @ a.T + 0.05 * np.eye(dim), dtype=F64)
+    m_u, s_u, c_u = policy.moments(m, s)
+    xs = rng.multivariate_normal(m.numpy(), s.numpy(), N_MC)
+    u = policy.torque_nm(xs)
+    assert abs(float(m_u) - u.mean()) < 0.005 * 0.06
+    assert float(s_u) == pytest.approx(u.var(), rel=0.02)
+    assert _rel(s @ c_u, np.cov(np.hstack([xs, u[:, None]]).T)[:dim, dim]) < 0.03
+    # the RBF part adds to it: non-zero targets change the output
+    policy.targets = torch.ones(6, dtype=F64)
+    assert abs(float(policy.moments(m, s)[0]) - float(m_u)) > 1e-4
+
+
+@pytest.mark.parametrize("spec_name", ["tip", "tip_bend"])
+def test_cost_with_a_tip_rate_width_against_monte_carlo(spec_name):
+    """The expected cost with the tip-rate factor against sampling the (correlated) state; off, it is the position cost."""
+    spec = state_spec(spec_name)
+    rng = np.random.default_rng(8)
+    d = spec.dim
+    a = 0.15 * rng.normal(size=(d, d))
+    s = torch.tensor(a @ a.T + 0.01 * np.eye(d), dtype=F64)
+    m = torch.zeros(d, dtype=F64)
+    m[spec.tip_angle_index] = 0.3
+    m[spec.tip_rate_index] = -0.8
+    prop = Propagator(spec, None, None, 0.3, 0.15, cost_rate_width_rad_s=1.5)
+    e, _ = prop.cost(m, s)
+    xs = rng.multivariate_normal(m.numpy(), s.numpy(), N_MC)
+    theta, rate = xs[:, spec.tip_angle_index], xs[:, spec.tip_rate_index]
+    d2 = 2 * 0.3**2 * (1 - np.cos(theta))
+    sampled = 1 - np.exp(-0.5 * d2 / 0.15**2 - 0.5 * (rate / 1.5) ** 2)
+    assert float(e) == pytest.approx(sampled.mean(), abs=0.01)
+    position_only = float(Propagator(spec, None, None, 0.3, 0.15).cost(m, s)[0])
+    assert position_only == pytest.approx(np.mean(1 - np.exp(-0.5 * d2 / 0.15**2)), abs=0.01)
+    assert float(e) > position_only + 0.05  # the rate is really in there
+    with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
+        Propagator(spec, None, None, 0.3, 0.15, cost_rate_width_rad_s=0.0)

@@ -3,7 +3,7 @@
 Common options of :mod:`softpend.commands.train` map onto :class:`~softpend.pilco.loop.PilcoConfig`:
 ``--seed`` -> ``seed``, ``--episodes`` -> ``n_policy_trials``, ``--torque-limit-nm`` and ``--n-links`` ->
 ``params``; every other field is set with ``--set NAME=VALUE`` (e.g. ``--set horizon_s=3.0``,
-``--set state=tip``, ``--set eval_seeds=1000,1001``).  ``--resume`` is not supported (a run is short).
+``--set state=tip``, ``--set eval_seeds=1000,1001``, ``--set cost_rate_width_rad_s=none``).  ``--resume`` is not supported (a run is short).
 """
 
 from __future__ import annotations
@@ -21,8 +21,12 @@ from .loop import PilcoConfig, run_pilco
 __all__ = ["config_from_args", "train_pilco_from_args"]
 
 
-def _convert(name: str, value: str, default: Any) -> Any:
+def _convert(name: str, value: str, default: Any, optional: bool = False) -> Any:
     try:
+        if optional and value.lower() == "none":  # optional fields (e.g. cost_rate_width_rad_s=none: off)
+            return None
+        if default is None:
+            return float(value)
         if isinstance(default, bool):
             if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
                 raise ValueError(value)
@@ -60,7 +64,7 @@ def config_from_args(args: argparse.Namespace) -> PilcoConfig:
         if name not in base or name == "params":
             known = sorted(n for n in base if n != "params")
             raise ValueError(f"--set {name}: PilcoConfig has no field {name!r}; known: {known} and params.<field>")
-        changes[name] = _convert(name, value, getattr(defaults, name))
+        changes[name] = _convert(name, value, getattr(defaults, name), optional="Optional" in str(base[name].type))
     return dataclasses.replace(defaults, params=params, **changes)
 
 

@@ -33,6 +33,11 @@ The saturating cost of the tip's distance from upright, ``c = 1 - exp(-d^2 / (2 
 cost width in metres): the point at distance ``L`` from the hub in the tip's direction against the
 upright tip position.  Its expectation under the predicted Gaussian is exact
 (:func:`~softpend.pilco.moments.saturating_cost_moments`).
+
+With a rate width ``w_r`` [rad/s] the cost also asks the tip to be slow:
+``c = 1 - exp(-d^2 / (2 w^2) - theta_dot^2 / (2 w_r^2))``, so passing the top at speed (a rod that spins
+over and over) earns little and only arriving slowly -- balancing -- earns the whole reward.  Its
+expectation is taken over the moment-matched Gaussian of ``(sin theta, cos theta, theta_dot)``.
 """
 
 from __future__ import annotations
@@ -84,6 +89,11 @@ class StateSpec:
     @property
     def dim(self) -> int:
         return len(self.variables)
+
+    @property
+    def tip_rate_index(self) -> int:
+        """Index (in ``variables``) of the tip rate ``theta_dot`` [rad/s]."""
+        return self.variables.index("theta_dot_rad_s")
 
     @property
     def angle_indices(self) -> list[int]:
@@ -148,13 +158,19 @@ class Propagator:
         Rod length ``L`` used by the cost [m].
     cost_width_m : float
         Cost width ``w`` [m].
+    cost_rate_width_rad_s : float, optional
+        Width ``w_r`` of the tip-rate factor of the cost [rad/s] (``None``: position only).
     """
 
-    def __init__(self, spec: StateSpec, dynamics, policy, length_m: float, cost_width_m: float) -> None:
+    def __init__(self, spec: StateSpec, dynamics, policy, length_m: float, cost_width_m: float,
+                 cost_rate_width_rad_s: float | None = None) -> None:
         if not length_m > 0:
             raise ValueError(f"length_m must be positive, got {length_m!r}")
         if not cost_width_m > 0:
             raise ValueError(f"cost_width_m must be positive, got {cost_width_m!r}")
+        if cost_rate_width_rad_s is not None and not cost_rate_width_rad_s > 0:
+            raise ValueError(f"cost_rate_width_rad_s must be positive or None, got {cost_rate_width_rad_s!r}")
+        self.cost_rate_width_rad_s = None if cost_rate_width_rad_s is None else float(cost_rate_width_rad_s)
         self.spec = spec
         self.dynamics = dynamics
         self.policy = policy
@@ -196,9 +212,20 @@ class Propagator:
     def cost(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Expected saturating cost and its variance for ``x ~ N(m, s)``."""
         i = self.spec.tip_angle_index
-        m_t, s_t, _ = trig_moments(m[i : i + 1], s[i : i + 1, i : i + 1])
+        m_t, s_t, c_t = trig_moments(m[i : i + 1], s[i : i + 1, i : i + 1])
         a = self._tip_projection
-        return saturating_cost_moments(a @ m_t, a @ s_t @ a.T, self._target, self.cost_width_m)
+        m_z, s_z = a @ m_t, a @ s_t @ a.T
+        if self.cost_rate_width_rad_s is None:
+            return saturating_cost_moments(m_z, s_z, self._target, self.cost_width_m)
+        # append the tip rate scaled by w / w_r, so that one width w applies to all three coordinates
+        j = self.spec.tip_rate_index
+        k = self.cost_width_m / self.cost_rate_width_rad_s
+        cross = k * (a @ (s[j, i] * c_t[0]))  # cov(position, k theta_dot) = cov(theta_dot, theta) C_trig, projected
+        m_z = torch.cat([m_z, k * m[j : j + 1]])
+        s_z = torch.cat([torch.cat([s_z, cross.unsqueeze(1)], dim=1),
+                         torch.cat([cross, (k * k) * s[j, j].reshape(1)]).unsqueeze(0)], dim=0)
+        target = torch.cat([self._target, torch.zeros(1, dtype=DTYPE)])
+        return saturating_cost_moments(m_z, s_z, target, self.cost_width_m)
 
     def rollout(
         self, m0: torch.Tensor, s0: torch.Tensor, n_steps: int

@@ -7,7 +7,7 @@ import torch.nn.functional as F
 
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import agent_class, build_dqn
-from softpend.rl.double_dqn import DoubleDQN, double_q_targets
+from softpend.rl.double_dqn import DoubleDQN, TargetDQN, double_q_targets
 from softpend.rl.training_env import make_training_env
 
 
@@ -47,3 +47,33 @@ def test_double_dqn_gradient_step_regresses_on_the_double_target(tmp_path):
     with torch.no_grad():
         q_after = model.q_net(s)[0, 3].item()
     assert abs(q_after - target.item()) < abs(q_before - target.item())  # one step towards the double target
+
+
+def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
+    config = DQNConfig(episode_s=0.4, clip_q_targets=True, learning_starts=0)
+    low, high = config.q_target_bounds
+    # an agent step's reward lies in action_repeat * [-1, 2] (shaping in [-1, 1] plus a bonus up to 1)
+    assert (low, high) == pytest.approx((-4.0 / (1 - config.gamma), 8.0 / (1 - config.gamma)))
+    assert agent_class(config) is TargetDQN and agent_class(DQNConfig(double_q=True, clip_q_targets=True)) is DoubleDQN
+    model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
+    assert model.q_target_bounds == pytest.approx((low, high))
+    with torch.no_grad():
+        for layer in model.q_net_target.modules():  # a target network that values every action at 1e4
+            if isinstance(layer, torch.nn.Linear):
+                layer.weight.zero_()
+                layer.bias.fill_(1e4)
+    next_obs = torch.zeros(3, 11)
+    rewards = torch.tensor([[1.0], [-1e5], [2.0]])
+    dones = torch.tensor([[0.0], [1.0], [1.0]])
+    targets = model.td_targets(rewards, dones, config.gamma, next_obs)
+    np.testing.assert_allclose(targets.numpy(), [[high], [low], [2.0]], rtol=1e-6)
+    # without bounds the target is stable-baselines3's r + gamma * max_a Q_target(s', a)
+    model.q_target_bounds = None
+    np.testing.assert_allclose(model.td_targets(rewards, dones, config.gamma, next_obs).numpy(),
+                               [[1.0 + config.gamma * 1e4], [-1e5], [2.0]], rtol=1e-6)
+    with pytest.raises(ValueError, match="q_target_bounds"):
+        TargetDQN("MlpPolicy", make_training_env(config), q_target_bounds=(1.0, -1.0))
+    # the bounds survive saving and loading
+    model.q_target_bounds = (low, high)
+    model.save(tmp_path / "agent.zip")
+    assert TargetDQN.load(tmp_path / "agent.zip", device="cpu").q_target_bounds == pytest.approx((low, high))

@@ -1,6 +1,7 @@
 """DQN and DQN-MBPO training loops on tiny budgets: they run, log plant time, checkpoint and resume, and the
 MBPO buffer holds model transitions branched from real states."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -74,9 +75,11 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
 
 
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
+    # MBPO's own branching (every rollout from a real state, none cut short); the start-state branching and the
+    # data box of the defaults are tested below
     config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
                         model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
-                        rollout_schedule=(0, 1, 1, 1), **TINY)
+                        rollout_schedule=(0, 1, 1, 1), start_branch_fraction=0.0, rollouts_within_data=False, **TINY)
     model, log = train_mbpo(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
     buffer = model.replay_buffer
     assert isinstance(buffer, MBPOReplayBuffer)
@@ -123,3 +126,54 @@ def test_command_line_train_and_evaluate(tmp_path, capsys):
     assert main(["evaluate", str(out), "--seeds", "0", "--duration-s", "0.5", "--json"]) == 0
     assert '"success_rate"' in capsys.readouterr().out
     assert main(["train", "--algo", "dqn", "--out", str(out), "--set", "bogus=1"]) == 2
+
+
+class _DriftingModel:
+    """A stand-in dynamics model whose every step adds 5 rad/s to the hub rate (leaves the data quickly)."""
+
+    def predict_next(self, state, torque, generator=None):
+        out = state.clone()
+        out[:, OBSERVATION_NAMES.index("phi_dot_rad_s")] += 5.0
+        return out
+
+
+def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tmp_path):
+    from softpend.rl.mbpo import MBPOTrainer
+
+    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
+                        model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
+                        rollout_schedule=(0, 1, 1, 1), **TINY)
+    model, _ = train_mbpo(config, seed=0, episodes=2, run_dir=tmp_path, progress=False)
+    buffer = model.replay_buffer
+    low, high = buffer.real_observation_box()
+    real = buffer.observations[: buffer.size(), 0]
+    assert np.all(low <= real.min(axis=0)) and np.all(high >= real.max(axis=0))
+    added = {}
+    for within in (False, True):
+        buffer.model_buffer.reset()
+        trainer = MBPOTrainer(dataclasses.replace(config, rollouts_within_data=within), seed=0, run_dir=tmp_path)
+        trainer.dynamics = _DriftingModel()
+        added[within] = trainer.rollouts(model, buffer, n_rollouts=50, length=6, epsilon=0.0)
+        next_obs = buffer.model_buffer.next_observations[: added[within], 0]
+        inside = np.all((next_obs >= low) & (next_obs <= high), axis=1)
+        assert inside.all() if within else not inside.all()
+    assert 0 < added[True] < added[False] == 50 * 6
+    # branching from the training start distribution: the first share of the rollouts starts at fresh draws of
+    # the start environment (the straight rod at rest at a random hub angle), the rest at real states
+    buffer.model_buffer.reset()
+    trainer = MBPOTrainer(dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False), seed=3,
+                          run_dir=tmp_path)
+    trainer.dynamics = _DriftingModel()
+    assert trainer.rollouts(model, buffer, n_rollouts=10, length=1, epsilon=0.0) == 10
+    starts = make_base_env(config, "random")
+    starts.reset(seed=3 * 1_000_003 + 17)
+    expected = np.array([starts.reset()[0] for _ in range(5)])
+    np.testing.assert_allclose(buffer.model_buffer.observations[:5, 0], expected, atol=1e-6)
+    assert (np.abs(buffer.model_buffer.observations[5:10, 0][:, None, :] - real[None]).max(axis=2) < 1e-7).any(axis=1).all()
+    # branching near upright: the requested share of starting states has |theta| < 0.5 rad
+    rng = np.random.default_rng(0)
+    buffer.plant_observations[: buffer.size() // 4, OBSERVATION_NAMES.index("theta_rad")] = 0.1  # some upright states
+    raw, vec = buffer.sample_real_states(200, rng, upright_fraction=0.5)
+    assert np.all(np.abs(raw[100:, OBSERVATION_NAMES.index("theta_rad")]) < 0.5) and raw.shape == (200, 10)
+    with pytest.raises(ValueError, match="upright_fraction"):
+        buffer.sample_real_states(2, rng, upright_fraction=1.5)

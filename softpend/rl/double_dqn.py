@@ -1,21 +1,33 @@
-"""Double DQN: stable-baselines3's DQN with van Hasselt et al.'s (2016) decoupled target.
+"""DQN with a configurable TD target: Double DQN and clipping to the bounds of the return.
 
 Vanilla DQN regresses on ``r + gamma * max_a Q_target(s', a)``, which overestimates the value wherever the
 target network's errors are positive -- and with many gradient steps per real step on partly model-generated
-data (DQN-MBPO) those errors are large.  Double DQN lets the *online* network choose the next action and the
-target network value it, ``r + gamma * Q_target(s', argmax_a Q(s', a))``, the DQN counterpart of the clipped
-double-Q critic that MBPO's SAC uses.  Everything else (Huber loss, gradient clipping, n-step discounts,
-Polyak target updates) is stable-baselines3's.
+data (DQN-MBPO) those errors are large.  Two remedies, each optional (:class:`TargetDQN`):
+
+* **Double DQN** lets the *online* network choose the next action and the target network value it,
+  ``r + gamma * Q_target(s', argmax_a Q(s', a))`` (van Hasselt et al. 2016), the DQN counterpart of the
+  clipped double-Q critic that MBPO's SAC uses (:class:`DoubleDQN`).
+* **Target clipping** clamps every TD target to ``[r_min, r_max] / (1 - gamma)``, the range of discounted
+  returns that rewards bounded by ``[r_min, r_max]`` per agent step allow (``q_target_bounds``).  A Q-value
+  outside it is an error by construction; clamping stops such errors from feeding back through
+  bootstrapping, which is how DQN-MBPO's Q-values diverged (to 30x the achievable return, see
+  :class:`softpend.rl.config.MBPOConfig`).
+
+Everything else (Huber loss, gradient clipping, n-step discounts, Polyak target updates) is
+stable-baselines3's.
 """
 
 from __future__ import annotations
+
+import math
+from typing import Optional
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from stable_baselines3 import DQN
 
-__all__ = ["DoubleDQN", "double_q_targets"]
+__all__ = ["DoubleDQN", "TargetDQN", "double_q_targets"]
 
 
 def double_q_targets(rewards: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor | float,
@@ -38,8 +50,42 @@ def double_q_targets(rewards: torch.Tensor, dones: torch.Tensor, discounts: torc
     return rewards + (1 - dones) * discounts * torch.gather(next_q_target, 1, best)
 
 
-class DoubleDQN(DQN):
-    """:class:`stable_baselines3.DQN` whose gradient steps use :func:`double_q_targets`."""
+class TargetDQN(DQN):
+    """:class:`stable_baselines3.DQN` whose gradient steps use :func:`double_q_targets` (if the class
+    attribute ``double_q``) and clamp the TD targets to ``q_target_bounds``.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        As :class:`stable_baselines3.DQN`.
+    q_target_bounds : (float, float), optional
+        ``(low, high)``: every TD target is clamped to this range (``None``: no clamping).
+    """
+
+    double_q: bool = False
+
+    def __init__(self, *args, q_target_bounds: Optional[tuple[float, float]] = None, **kwargs) -> None:
+        if q_target_bounds is not None:
+            low, high = (float(v) for v in q_target_bounds)
+            if not (math.isfinite(low) and math.isfinite(high) and low < high):
+                raise ValueError(f"q_target_bounds must be finite (low, high) with low < high, got {q_target_bounds!r}")
+            q_target_bounds = (low, high)
+        self.q_target_bounds = q_target_bounds
+        super().__init__(*args, **kwargs)
+
+    def td_targets(self, rewards: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor | float,
+                   next_observations: torch.Tensor) -> torch.Tensor:
+        """TD targets of a batch (no gradient)."""
+        with torch.no_grad():
+            next_q_target = self.q_net_target(next_observations)
+            if self.double_q:
+                target = double_q_targets(rewards, dones, discounts, self.q_net(next_observations), next_q_target)
+            else:
+                target = rewards + (1 - dones) * discounts * next_q_target.max(dim=1, keepdim=True)[0]
+            bounds = getattr(self, "q_target_bounds", None)  # agents saved before the option existed have none
+            if bounds is not None:
+                target = target.clamp(bounds[0], bounds[1])
+        return target
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:  # noqa: D102 (SB3 API)
         self.policy.set_training_mode(True)
@@ -48,9 +94,7 @@ class DoubleDQN(DQN):
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
             discounts = data.discounts if data.discounts is not None else self.gamma
-            with torch.no_grad():
-                target = double_q_targets(data.rewards, data.dones, discounts,
-                                          self.q_net(data.next_observations), self.q_net_target(data.next_observations))
+            target = self.td_targets(data.rewards, data.dones, discounts, data.next_observations)
             current = torch.gather(self.q_net(data.observations), dim=1, index=data.actions.long())
             loss = F.smooth_l1_loss(current, target)
             losses.append(loss.item())
@@ -61,3 +105,9 @@ class DoubleDQN(DQN):
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", float(np.mean(losses)) if losses else float("nan"))
+
+
+class DoubleDQN(TargetDQN):
+    """:class:`TargetDQN` with Double DQN targets (:func:`double_q_targets`)."""
+
+    double_q = True

@@ -34,7 +34,7 @@ from tqdm import tqdm
 from ..evaluation import evaluate_controller, metrics_from_trajectory
 from ..plant import OBSERVATION_NAMES, RodParams
 from .config import DQNConfig, load_config, save_config
-from .double_dqn import DoubleDQN
+from .double_dqn import DoubleDQN, TargetDQN
 from .training_env import make_training_env, policy_controller
 from .training_log import TrainingLog
 
@@ -45,13 +45,19 @@ _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
 def agent_class(config: DQNConfig) -> type[DQN]:
-    """:class:`~softpend.rl.double_dqn.DoubleDQN` if ``config.double_q``, else stable-baselines3's ``DQN``."""
-    return DoubleDQN if config.double_q else DQN
+    """:class:`~softpend.rl.double_dqn.DoubleDQN` if ``config.double_q``, else
+    :class:`~softpend.rl.double_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
+    if config.double_q:
+        return DoubleDQN
+    return TargetDQN if config.clip_q_targets else DQN
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
     """A stable-baselines3 DQN (or Double DQN) with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
-    return agent_class(config)(
+    cls = agent_class(config)
+    if issubclass(cls, TargetDQN):
+        kwargs["q_target_bounds"] = config.q_target_bounds if config.clip_q_targets else None
+    return cls(
         "MlpPolicy",
         env,
         learning_rate=config.learning_rate,

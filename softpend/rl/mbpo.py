@@ -10,12 +10,17 @@ The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-li
    refitted from scratch on *all* real episodes so far (written as a :class:`softpend.sysid.TrajectoryDataset`
    to ``<run_dir>/real_data.npz``).
 3. Every ``rollout_every_steps`` real agent steps, ``rollouts_per_real_step * rollout_every_steps`` model
-   rollouts are branched from real states drawn uniformly from the real buffer; each rollout step takes the
-   current epsilon-greedy action, advances the model ``action_repeat`` plant steps (a random ensemble member
-   per rollout and step, as mbrl-lib's ``random_model`` propagation), and computes the observation vector and
-   the report's reward from the *predicted* plant observation with the environment's own conventions
+   rollouts are branched from real states drawn uniformly from the real buffer, or, for a share
+   ``start_branch_fraction`` of them, from fresh draws of the training episodes' start distribution (the
+   straight rod at rest at a random hub angle, which a real episode starts from: the agent need not wait for
+   the plant's episodes to happen to start near upright, see :class:`~softpend.rl.config.MBPOConfig`).
+   Each rollout step takes the current epsilon-greedy action, advances the model ``action_repeat`` plant
+   steps (a random ensemble member per rollout and step, as mbrl-lib's ``random_model`` propagation), and
+   computes the observation vector and the report's reward from the *predicted* plant observation with the environment's own conventions
    (:func:`softpend.envs.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
-   rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).
+   rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).  With
+   ``rollouts_within_data`` a rollout ends at its first predicted observation outside the box of the real
+   ones, where neither the model nor the Q-network has data.
 4. Each DQN gradient step samples ``real_ratio`` of its batch from real transitions and the rest from the
    model buffer (FIFO, ``model_buffer_size``).
 
@@ -102,10 +107,45 @@ class MBPOReplayBuffer(ReplayBuffer):
             buf.full = True
         buf.pos = int((buf.pos + n) % buf.buffer_size)
 
-    def sample_real_states(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """``n`` real starting states drawn uniformly: (plant observations (n, 10), env vectors (n, 11))."""
-        index = rng.integers(0, self.size(), size=n)
+    def sample_real_states(
+        self, n: int, rng: np.random.Generator, upright_fraction: float = 0.0, upright_rad: float = 0.5
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` real starting states: (plant observations (n, 10), env vectors (n, 11)).
+
+        Parameters
+        ----------
+        n : int
+            Number of states.
+        rng : numpy.random.Generator
+            Source of the draws.
+        upright_fraction : float
+            Share of the states (the last ones) drawn uniformly from the real states with
+            ``|theta| < upright_rad``; the rest (all of them if there is no such state) uniformly from the
+            whole real buffer.
+        upright_rad : float
+            Tip angle from upright [rad] below which a state counts as near upright.
+        """
+        if not 0.0 <= upright_fraction <= 1.0:
+            raise ValueError(f"upright_fraction must lie in [0, 1], got {upright_fraction!r}")
+        size = self.size()
+        index = rng.integers(0, size, size=n)
+        n_upright = int(round(upright_fraction * n))
+        if n_upright > 0:
+            near = np.flatnonzero(np.abs(self.plant_observations[:size, _THETA]) < upright_rad)
+            if len(near):
+                index[n - n_upright :] = near[rng.integers(0, len(near), size=n_upright)]
         return self.plant_observations[index].copy(), self.observations[index, 0].copy()
+
+    def real_observation_box(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+        """Per-component ``(low, high)`` of the real observation vectors (both ends of each transition),
+        widened by ``margin`` of the range on each side."""
+        size = self.size()
+        if size == 0:
+            raise ValueError("the real buffer is empty")
+        both = np.concatenate([self.observations[:size, 0], self.next_observations[:size, 0]])
+        low, high = both.min(axis=0), both.max(axis=0)
+        span = high - low
+        return low - margin * span, high + margin * span
 
     def sample(self, batch_size: int, env: Any = None) -> ReplayBufferSamples:
         n_model_available = self.model_buffer.size()
@@ -142,6 +182,9 @@ class MBPOTrainer:
         self.progress = progress
         self.env = make_base_env(config)
         self.rng = np.random.default_rng([self.seed, 1])
+        # draws of the training episodes' start distribution, for rollouts branched from start states
+        self.start_env = make_base_env(config, config.training_start)
+        self.start_env.reset(seed=self.seed * 1_000_003 + 17)
         self.generator = torch.Generator().manual_seed(self.seed * 7919 + 1)
         self.trials_observations: list[np.ndarray] = []
         self.trials_torques: list[np.ndarray] = []
@@ -201,7 +244,11 @@ class MBPOTrainer:
             return 0
         c = self.config
         env = self.env
-        raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
+        raw, vec = buffer.sample_real_states(n_rollouts, self.rng, c.upright_branch_fraction)
+        for i in range(int(round(c.start_branch_fraction * n_rollouts))):  # the first rows (upright ones come last)
+            vec[i], info = self.start_env.reset()
+            raw[i] = info["observation"]
+        box = buffer.real_observation_box() if c.rollouts_within_data else None
         bonus = vec[:, -1].astype(np.float64)
         levels = env.torque_levels_nm
         state = torch.as_tensor(raw, dtype=torch.float32)
@@ -226,6 +273,10 @@ class MBPOTrainer:
                 break
             plant[~finite] = 0.0
             next_vec = observation_vector(plant, np.asarray(bonus), env)
+            if box is not None:
+                alive &= np.all((next_vec >= box[0]) & (next_vec <= box[1]), axis=1)
+                if not alive.any():
+                    break
             buffer.add_model_transitions(vec[alive], next_vec[alive], actions[alive], reward[alive])
             added += int(alive.sum())
             vec = next_vec
@@ -250,7 +301,8 @@ class MBPOTrainer:
         def on_step(cb: TrainingCallback) -> None:
             if agent.num_timesteps % c.rollout_every_steps == 0 and self.dynamics is not None:
                 length = c.rollout_length(cb.log.n_episodes)
-                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length, agent.exploration_rate)
+                epsilon = max(agent.exploration_rate, c.model_rollout_epsilon)
+                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length, epsilon)
 
         callback.on_episode_end = on_episode_end
         callback.on_step_hook = on_step

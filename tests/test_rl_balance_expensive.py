@@ -30,9 +30,11 @@ def test_dqn_learns_to_swing_up_and_balance(tmp_path):
 
 
 @pytest.mark.expensive
-def test_mbpo_learns_to_swing_up_and_balance(tmp_path):
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mbpo_learns_to_swing_up_and_balance(tmp_path, seed):
+    # the target is every seed (the book's runs: 65 / 85 / 75 plant s to balance)
     config = MBPOConfig()
-    _, log = train_mbpo(config, seed=0, episodes=50, run_dir=tmp_path, progress=False)
+    _, log = train_mbpo(config, seed=seed, episodes=50, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
     # the agent of the best periodic evaluation (seeds 1000, 1001), as the book's figures use it, checked on
     # other start seeds (the final agent may have collapsed again after balancing)

@@ -341,8 +341,8 @@ class MBPOConfig(DQNConfig):
                 raise ValueError(f"{name} must lie in [0, 1], got {value!r}")
         if self.upright_branch_fraction + self.start_branch_fraction > 1.0:
             raise ValueError(
-                f"upright_branch_fraction + start_branch_fraction must be at most 1, got {self.upright_branch_fraction!r} "
-                f"+ {self.start_branch_fraction!r}"
+                "upright_branch_fraction + start_branch_fraction must be at most 1, got "
+                f"{self.upright_branch_fraction!r} + {self.start_branch_fraction!r}"
             )
         for name in ("model_limit_tip_reach", "rollouts_within_data"):
             if not isinstance(getattr(self, name), bool):

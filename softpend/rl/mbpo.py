@@ -16,7 +16,8 @@ The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-li
    the plant's episodes to happen to start near upright, see :class:`~softpend.rl.config.MBPOConfig`).
    Each rollout step takes the current epsilon-greedy action, advances the model ``action_repeat`` plant
    steps (a random ensemble member per rollout and step, as mbrl-lib's ``random_model`` propagation), and
-   computes the observation vector and the report's reward from the *predicted* plant observation with the environment's own conventions
+   computes the observation vector and the report's reward from the *predicted* plant observation with the
+   environment's own conventions
    (:func:`softpend.envs.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
    rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).  With
    ``rollouts_within_data`` a rollout ends at its first predicted observation outside the box of the real

@@ -25,9 +25,11 @@ latest trial always kept, the older points drawn at random or, with ``gp_subset=
 in the last fit's length-scale units), hyperparameters by penalised marginal likelihood; then the RBF policy
 (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost summed over the horizon from
 ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole moment-matching rollout
-(:class:`~softpend.pilco.propagation.Propagator`).  The cost is saturating in the tip's distance from upright
-times a factor in the tip rate (``cost_rate_width_rad_s = 3`` rad/s): a rod that spins over the top at 7-15
-rad/s earns almost nothing, one that arrives slowly and stays earns all of it.  The search runs from the previous policy and, with
+(:class:`~softpend.pilco.propagation.Propagator`).  The cost is saturating in the tip's distance from upright;
+once a real trial has brought the tip within ``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by
+a factor in the tip rate (``cost_rate_width_rad_s = 3`` rad/s): a rod that spins over the top at 7-15 rad/s
+then earns almost nothing, one that arrives slowly and stays earns all of it.  Before that, the position cost
+alone rewards getting up at any speed, which is what the first policies need.  The search runs from the previous policy and, with
 ``policy_restarts > 0``, also from fresh random policies; the lowest predicted cost wins.  Optional
 exploration aids (off by default, see :class:`PilcoConfig`): a random first trial of held bang-bang torques,
 and screening random candidate policies by their predicted cost before the search.
@@ -124,6 +126,10 @@ class PilcoConfig:
     cost_rate_width_rad_s : float, optional
         Width of the cost's tip-rate factor [rad/s] (``None``: the cost depends on the tip position only; see
         :mod:`softpend.pilco.propagation`).
+    cost_rate_after_rad : float, optional
+        Switch the tip-rate factor on only once a real trial's tip has come within this angle of upright
+        [rad] (the searches before use the position cost, which rewards getting up at any speed; ``None``:
+        the factor is on from the start).
     initial_std : float
         Standard deviation of every state variable in ``S0`` (rad or rad/s); PILCO plans for a slightly
         wider start distribution than the plant's (robustness).
@@ -178,6 +184,7 @@ class PilcoConfig:
     random_bang_bang: bool = False
     cost_width_m: float = 0.15
     cost_rate_width_rad_s: Optional[float] = 3.0
+    cost_rate_after_rad: Optional[float] = 0.5
     initial_std: float = 0.05
     n_basis: int = 30
     policy_linear: bool = False
@@ -227,6 +234,10 @@ class PilcoConfig:
                 isinstance(self.cost_rate_width_rad_s, bool) or not isinstance(self.cost_rate_width_rad_s, (int, float))
                 or not math.isfinite(self.cost_rate_width_rad_s) or self.cost_rate_width_rad_s <= 0):
             raise ValueError(f"cost_rate_width_rad_s must be positive and finite or None, got {self.cost_rate_width_rad_s!r}")
+        if self.cost_rate_after_rad is not None and (
+                isinstance(self.cost_rate_after_rad, bool) or not isinstance(self.cost_rate_after_rad, (int, float))
+                or not math.isfinite(self.cost_rate_after_rad) or self.cost_rate_after_rad <= 0):
+            raise ValueError(f"cost_rate_after_rad must be positive and finite or None, got {self.cost_rate_after_rad!r}")
         if not isinstance(self.policy_linear, bool):
             raise ValueError(f"policy_linear must be a bool, got {self.policy_linear!r}")
 
@@ -259,7 +270,8 @@ class TrialRecord:
     """One real trial and what PILCO predicted for it.
 
     ``predicted_cost`` is the policy search's expected total cost for the policy that ran the trial (NaN for
-    the random trial); ``real_cost`` the same cost summed along the real trajectory.
+    the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_rate_width_rad_s``
+    the tip-rate width of that cost (``None``: position only).
     """
 
     index: int
@@ -276,6 +288,7 @@ class TrialRecord:
     eval_upright_std_rad: float = float("nan")
     balanced: bool = False
     cpu_s_total: float = float("nan")
+    cost_rate_width_rad_s: Optional[float] = None
 
 
 @dataclass
@@ -359,10 +372,17 @@ def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta
     return 1.0 - np.exp(-exponent)
 
 
-def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray) -> float:
-    """The run's cost summed along a real trial's states (H+1, d), the start excluded."""
+def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray, rate_width: Optional[float]) -> float:
+    """The cost (tip-rate factor of width ``rate_width`` or none) summed along a real trial's states (H+1, d),
+    the start excluded."""
     return float(real_cost(states[1:, spec.tip_angle_index], config.params.length_m, config.cost_width_m,
-                           states[1:, spec.tip_rate_index], config.cost_rate_width_rad_s).sum())
+                           states[1:, spec.tip_rate_index], rate_width).sum())
+
+
+def _came_near_upright(spec: StateSpec, states: np.ndarray, within_rad: float) -> bool:
+    """Whether the tip angle of a real trial came within ``within_rad`` of upright."""
+    theta = states[:, spec.tip_angle_index]
+    return bool(np.min(np.abs((theta + np.pi) % (2 * np.pi) - np.pi)) < within_rad)
 
 
 def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -493,6 +513,7 @@ def run_pilco(
     records: list[TrialRecord] = []
     random_states: list[np.ndarray] = []
     plant_seconds = 0.0
+    rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
     for index, trial_seed in enumerate([int(trial_seeds[0])] + [int(v) for v in extra_seeds]):
         random_controller = RandomTorqueController(
             torque_limit, config.control_dt_s, seed=trial_seed,
@@ -505,9 +526,11 @@ def run_pilco(
         plant_seconds += config.horizon_s
         records.append(TrialRecord(
             index=index, kind="random", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
-            predicted_cost=float("nan"), real_cost=_trial_cost(config, spec, states),
+            predicted_cost=float("nan"),
+            real_cost=_trial_cost(config, spec, states, config.cost_rate_width_rad_s if rate_on else None),
             swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
             n_gp_points=0, wall_s_total=time.perf_counter() - start_wall, cpu_s_total=time.process_time() - start_cpu,
+            cost_rate_width_rad_s=config.cost_rate_width_rad_s if rate_on else None,
         ))
         if callback:
             callback(records[-1])
@@ -544,7 +567,10 @@ def run_pilco(
         gp.fit(config.gp_iterations)
         hyper = gp.hyperparameters
         # ---- learn the policy
-        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, config.cost_rate_width_rad_s)
+        if not rate_on and config.cost_rate_width_rad_s is not None:
+            rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
+        rate_width = config.cost_rate_width_rad_s if rate_on else None
+        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width)
         visited = np.vstack(result.real_states)
         candidates = [
             RBFPolicy(spec.model_inputs(visited[restart_rng.choice(len(visited), size=config.n_basis)]), lengthscales,
@@ -568,9 +594,9 @@ def run_pilco(
         record = TrialRecord(
             index=index, kind="policy", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
             predicted_cost=predicted,
-            real_cost=_trial_cost(config, spec, states),
+            real_cost=_trial_cost(config, spec, states, rate_width),
             swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-            n_gp_points=len(subset), wall_s_total=float("nan"),
+            n_gp_points=len(subset), wall_s_total=float("nan"), cost_rate_width_rad_s=rate_width,
         )
         # ---- test it (not counted as interaction, not used for learning)
         if config.eval_seeds:

@@ -244,8 +244,8 @@ class MBPOConfig(DQNConfig):
         extrapolate.
     model_limit_tip_reach : bool
         Keep the model's predicted tip within the rod's reach
-        (:attr:`softpend.sysid.TrainConfig.limit_tip_reach`).  Off: with it on, the defaults balanced
-        1 of 3 seeds instead of 2 of 3 (table below).
+        (:attr:`softpend.sysid.TrainConfig.limit_tip_reach`).  Off: with it on, the session-2 defaults
+        balanced 1 of 3 seeds instead of 2 of 3 (table below).
 
     DQN fields that differ from :class:`DQNConfig`
     ----------------------------------------------
@@ -300,9 +300,9 @@ class MBPOConfig(DQNConfig):
     defaults the first evaluation within 0.1 rad came at 65 / 90 / 105 plant s; seeds 0 and 2 stayed balanced
     in 31 of 38 and 35 of 36 later evaluations, seed 1 in 8 of 34 (it lost the balance after episode 28).
     Model-free DQN (:class:`DQNConfig`, evaluated after every episode) balances after 245 / 340 / 240 plant s
-    (median 245; DQN-MBPO's median 75 s is 3.3x fewer).  The options
-    that did not help (``double_q``, ``tau``, ``model_rollout_epsilon``, ``upright_branch_fraction``) are kept,
-    off, with the measurements above.
+    (median 245; DQN-MBPO's median 75 s is 3.3x fewer).  The options that did not help (``double_q``,
+    ``tau``, ``model_rollout_epsilon``, ``upright_branch_fraction``) are kept, off, with the measurements
+    above.
     """
 
     rollouts_per_real_step: int = 9

@@ -53,6 +53,20 @@ def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
     assert all(r.cost_rate_width_rad_s is None for r in records)
 
 
+def test_budget_leaves_the_first_trials_alone(tiny_run):
+    """Every purpose draws from its own stream: a run with a smaller ``n_policy_trials`` makes exactly the first
+    trials of the larger one (random trial, GP subset, policy search, policy trial start)."""
+    shorter = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False)
+    assert len(shorter.records) == 2
+    for mine, theirs in zip(shorter.real_states, tiny_run.real_states[:2]):
+        np.testing.assert_array_equal(mine, theirs)
+    assert shorter.records[1].predicted_cost == tiny_run.records[1].predicted_cost
+    assert shorter.records[1].real_cost == tiny_run.records[1].real_cost
+    # and the seed does change them
+    other = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
+    assert not np.allclose(other.real_states[0], tiny_run.real_states[0])
+
+
 def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
     tiny_run.save(tmp_path)
     loaded = PilcoResult.load(tmp_path)

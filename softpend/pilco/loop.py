@@ -74,8 +74,10 @@ every trial to the printed digit):
   cost 33-35 of 40 (the default's 27-29 at the same trials).
 * ``n_random_trials > 1`` (several random trials before the first search) is implemented and tested but
   was not measured on the soft rod.
-* The budget changes the random draws: ``n_policy_trials`` sets the length of the trial-seed array drawn
-  from the run's generator, and every later draw (policy initialisation, GP subsets) follows it.  The
+* The budget changed the random draws (fixed since issue 7's fourth session, where each purpose got its own
+  stream of ``SeedSequence(seed)``; every run measured before that, the table above included, used the old
+  draws): ``n_policy_trials`` set the length of the trial-seed array drawn
+  from the run's generator, and every later draw (policy initialisation, GP subsets) followed it.  The
   lead's book run of the old defaults with 8 trials and the engineer's with 15 were therefore different
   runs (first predicted cost 33.945 against 33.92), not only a rounding effect.  The fig10 full profile
   uses the same budget as the defaults, so the book, the benchmark and the expensive test run the
@@ -132,8 +134,8 @@ class PilcoConfig:
     horizon_s : float
         Prediction horizon and length of every trial [s].
     n_policy_trials : int
-        Largest number of policy trials after the random ones.  It also sets how many trial seeds are drawn
-        first from the run's generator, so it changes every later random draw of the run.
+        Largest number of policy trials after the random ones (the random draws of the trials it allows are
+        the same whatever its value: every purpose has its own stream, see ``seed``).
     n_random_trials : int
         Random-torque trials before the first policy search (each ``horizon_s`` long, counted as
         interaction); more of them give the first GP model more of the state space.
@@ -189,7 +191,9 @@ class PilcoConfig:
     stop_when_balanced : bool
         End the run at the first policy that balances.
     seed : int
-        Seed of every random draw of the run (start noise, random trial, subsets, policy init).
+        Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
+        starts and torques, policy-trial starts, policy init, GP subsets, restart candidates), so neither
+        ``n_policy_trials`` nor ``n_random_trials`` changes the draws of the other purposes.
     """
 
     params: RodParams = field(default_factory=RodParams)
@@ -492,6 +496,26 @@ def _optimise_policy(
     return best_value
 
 
+#: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
+RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "restarts")
+
+
+def _random_streams(seed: int) -> dict[str, np.random.Generator]:
+    """One independent generator per purpose (:data:`RANDOM_STREAMS`), spawned from ``SeedSequence(seed)``.
+
+    Each stream is drawn from in order, one draw per trial or search, so the budget (``n_policy_trials``,
+    ``n_random_trials``) changes none of the draws made before it runs out: the first trials of two runs that
+    differ only in the budget are the same.
+    """
+    children = np.random.SeedSequence(int(seed)).spawn(len(RANDOM_STREAMS))
+    return {name: np.random.default_rng(child) for name, child in zip(RANDOM_STREAMS, children)}
+
+
+def _draw_seed(rng: np.random.Generator) -> int:
+    """One seed in ``[0, 2**31 - 1)`` from ``rng``."""
+    return int(rng.integers(0, 2**31 - 1))
+
+
 def run_pilco(
     config: Optional[PilcoConfig] = None,
     progress: bool = True,
@@ -521,26 +545,25 @@ def run_pilco(
     torque_limit = params.torque_limit_nm
     env = SoftPendulumEnv(params=params, dt_s=config.plant_dt_s, start="hanging",
                           start_noise_rad=config.start_noise_rad, plant=config.plant)
-    rng = np.random.default_rng(config.seed)
-    trial_seeds = rng.integers(0, 2**31 - 1, size=config.n_policy_trials + 1)
+    streams = _random_streams(config.seed)
     start_wall = time.perf_counter()
     start_cpu = time.process_time()
     n_steps = config.n_horizon_steps
 
-    # ---- random-torque trials (the first one's seed from the run's stream, as always; the others from their own)
-    extra_seeds = np.random.default_rng([config.seed, 2]).integers(0, 2**31 - 1, size=config.n_random_trials - 1)
+    # ---- random-torque trials (start and torques each from their own stream: trial k is the same whatever
+    # the number of trials)
     inputs: list[np.ndarray] = []
     targets: list[np.ndarray] = []
     records: list[TrialRecord] = []
     random_states: list[np.ndarray] = []
     plant_seconds = 0.0
     rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
-    for index, trial_seed in enumerate([int(trial_seeds[0])] + [int(v) for v in extra_seeds]):
+    for index in range(config.n_random_trials):
         random_controller = RandomTorqueController(
-            torque_limit, config.control_dt_s, seed=trial_seed,
+            torque_limit, config.control_dt_s, seed=_draw_seed(streams["random_torques"]),
             hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
         )
-        episode, states, torques = _run_trial(config, random_controller, trial_seed, env)
+        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         random_states.append(states)
@@ -563,15 +586,16 @@ def run_pilco(
     # length-scales: the spread of each rate in the data, 0.7 for every sin/cos input (as in PILCO)
     m0, s0 = _initial_distribution(spec, config.initial_std)
     states = np.vstack(random_states)
-    init_states = states[rng.choice(len(states), size=config.n_basis, replace=config.n_basis > len(states))]
+    init_rng = streams["policy_init"]
+    init_states = states[init_rng.choice(len(states), size=config.n_basis, replace=config.n_basis > len(states))]
     all_inputs = np.vstack(inputs)[:, :-1]
     lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
                             np.maximum(all_inputs.std(axis=0), 1e-3), 0.7)
-    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=int(rng.integers(2**31)),
+    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=_draw_seed(init_rng),
                        linear=config.policy_linear)
     result.policy = policy
     hyper: Optional[GPHyperparameters] = None
-    restart_rng = np.random.default_rng([config.seed, 1])  # its own stream: restarts leave the other draws alone
+    restart_rng = streams["restarts"]
 
     bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
     for trial in bar:
@@ -579,7 +603,8 @@ def run_pilco(
         # ---- learn the dynamics
         x_all = np.vstack(inputs)
         y_all = np.vstack(targets)
-        subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]), seed=int(rng.integers(2**31)))
+        subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]),
+                               seed=_draw_seed(streams["gp_subsets"]))
         if config.gp_subset == "spread" and hyper is not None:
             # length-scales of the last fit, averaged over the outputs (geometric mean)
             scales = np.exp(np.mean(hyper.log_lengthscales, axis=0))
@@ -607,7 +632,7 @@ def run_pilco(
         result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
         # ---- run it on the plant
         controller = PilcoController(policy, spec, config.control_dt_s)
-        episode, states, torques = _run_trial(config, controller, int(trial_seeds[trial]), env)
+        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         result.real_states.append(states)

@@ -105,12 +105,6 @@ def test_several_random_trials_and_a_linear_policy_term(tmp_path):
     assert loaded.config == config and loaded.policy.linear
     x = np.random.default_rng(0).normal(size=(7, 3))
     np.testing.assert_allclose(loaded.policy.torque_nm(x), result.policy.torque_nm(x))
-    with pytest.raises(ValueError, match="n_random_trials"):
-        PilcoConfig(n_random_trials=0)
-    with pytest.raises(ValueError, match="policy_linear"):
-        PilcoConfig(policy_linear=1)
-    with pytest.raises(ValueError, match="cost_rate_after_rad"):
-        PilcoConfig(cost_rate_after_rad=-0.5)
 
 
 def test_came_near_upright_sees_a_fast_pass_through_the_top():
@@ -155,6 +149,12 @@ def test_config_rejects_bad_values():
         PilcoConfig(cost_width_m=-1.0)
     with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
         PilcoConfig(cost_rate_width_rad_s=0.0)
+    with pytest.raises(ValueError, match="n_random_trials"):
+        PilcoConfig(n_random_trials=0)
+    with pytest.raises(ValueError, match="policy_linear"):
+        PilcoConfig(policy_linear=1)
+    with pytest.raises(ValueError, match="cost_rate_after_rad"):
+        PilcoConfig(cost_rate_after_rad=-0.5)
     with pytest.raises(ValueError, match="theta_dot_rad_s"):
         real_cost(np.zeros(3), 0.3, 0.15, cost_rate_width_rad_s=3.0)
 

@@ -238,18 +238,49 @@ while True:  # keep commanding until SIGTERM
 """
 
 
-def test_sigterm_on_the_host_sends_stop(rig):
+# The signal lands while the host's main thread is inside its own frame write (holding the write lock):
+# the handler must neither deadlock on the lock nor cut the frame in two.
+_HOST_SCRIPT_SIGNAL_MID_WRITE = """
+import os, signal, sys
+from softpend.hardware.driver import MotorLink
+link = MotorLink(sys.argv[1], torque_limit_nm=0.06).open()
+link.read_state()
+link.send_torque(0.05)
+print("commanding", flush=True)
+sys.stdin.readline()
+write = link._serial.write
+def write_then_signal(frame):  # the next write is interrupted by SIGTERM, once
+    link._serial.write = write
+    os.kill(os.getpid(), signal.SIGTERM)
+    return write(frame)
+link._serial.write = write_then_signal
+link.send_torque(0.05)
+print("not reached", flush=True)
+"""
+
+
+@pytest.mark.parametrize("script", [_HOST_SCRIPT, _HOST_SCRIPT_SIGNAL_MID_WRITE], ids=["loop", "mid_write"])
+def test_sigterm_on_the_host_sends_stop(rig, script):
     r = rig(watchdog_ms=5000)  # a long watchdog: only the host's own STOP can zero the torque quickly
-    host = subprocess.Popen([sys.executable, "-c", _HOST_SCRIPT, r.port], stdout=subprocess.PIPE, text=True)
+    host = subprocess.Popen(
+        [sys.executable, "-c", script, r.port], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     try:
         assert host.stdout.readline().strip() == "commanding"
         time.sleep(0.1)
         assert r.emulator.session.torque_nm(0) == pytest.approx(0.05)
-        host.send_signal(signal.SIGTERM)
-        host.wait(5)
+        if script is _HOST_SCRIPT:
+            host.send_signal(signal.SIGTERM)
+        else:
+            host.stdin.write("go\n")
+            host.stdin.flush()
+        assert host.wait(5) == 128 + signal.SIGTERM
+        assert host.stdout.read() == ""
         time.sleep(0.05)
         assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
+        assert r.emulator.session.decoder.bad_frames == 0  # no frame was cut in two by the STOP
     finally:
         if host.poll() is None:
             host.kill()
         host.stdout.close()
+        host.stdin.close()

@@ -128,13 +128,16 @@ _HANDLERS_LOCK = threading.Lock()
 _PREVIOUS_HANDLERS: dict[int, object] = {}
 
 
-def _stop_all_open_links() -> None:
+def _stop_all_open_links(wait: bool = True) -> None:
     for link in list(_OPEN_LINKS):
-        link.emergency_stop()
+        link.emergency_stop(wait=wait)
 
 
 def _signal_handler(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess test
-    _stop_all_open_links()
+    # The handler runs in the main thread, possibly in the middle of that thread's own frame write
+    # (holding the write lock): it must not wait for the lock, or the process deadlocks.  A link that is
+    # mid-write gets its STOP as soon as the write ends (or from the atexit hook while unwinding).
+    _stop_all_open_links(wait=False)
     previous = _PREVIOUS_HANDLERS.get(signum)
     if callable(previous):
         previous(signum, frame)
@@ -208,6 +211,7 @@ class MotorLink:
         self.last_command_nm = 0.0
         self.commands_sent = 0
         self._write_lock = threading.Lock()
+        self._stop_pending = False
 
     # ------------------------------------------------------------------ properties
     @property
@@ -388,20 +392,37 @@ class MotorLink:
                 ser.write(frame)
         except (serial.SerialException, OSError) as exc:
             raise self._fail(LinkDisconnected(f"write to {self.port!r} failed: {exc}")) from exc
+        finally:
+            if self._stop_pending:  # a signal arrived during the write above
+                self.emergency_stop()
         return self._seq
 
-    def emergency_stop(self) -> None:
-        """Send STOP if the port is open, swallowing any error (for exit and failure paths)."""
+    def emergency_stop(self, wait: bool = True) -> None:
+        """Send STOP if the port is open, swallowing any error (for exit and failure paths).
+
+        Parameters
+        ----------
+        wait : bool
+            Wait (up to ``timeout_s``) for a frame another thread is writing.  With ``False`` (signal
+            handlers) a link whose write lock is held is only marked: the write in progress sends STOP
+            when it ends, so a frame is never cut in two and the handler never deadlocks.
+        """
         ser = self._serial
         if ser is None:
             return
+        acquired = self._write_lock.acquire(timeout=self.timeout_s) if wait else self._write_lock.acquire(blocking=False)
+        if not acquired:
+            self._stop_pending = True
+            return
         try:
+            self._stop_pending = False
             self._seq = (self._seq + 1) & 0xFFFF
-            with self._write_lock:
-                ser.write(proto.encode_message(proto.MSG_STOP, self._seq, ()))
-                ser.flush()
+            ser.write(proto.encode_message(proto.MSG_STOP, self._seq, ()))
+            ser.flush()
         except Exception:
             pass
+        finally:
+            self._write_lock.release()
         self.last_command_nm = 0.0
 
     def _fail(self, error: LinkError) -> LinkError:

@@ -52,6 +52,22 @@ class ThreadedRig:
         self.emulator.close()
 
 
+def eventually(predicate, timeout_s: float = 2.0) -> bool:
+    """Poll ``predicate`` until it holds or ``timeout_s`` passes (the emulator runs in real time)."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def applied_now(link: MotorLink) -> float:
+    """The applied torque in the newest STATE frame received [N m] (NaN when none arrived)."""
+    states = link.drain_states()
+    return states[-1].applied_torque_nm if states else math.nan
+
+
 @pytest.fixture
 def rig():
     rigs = []
@@ -94,14 +110,11 @@ def test_torque_is_clamped_on_the_host_and_nan_stops(rig):
         link.read_state()
         link.send_torque(5.0)
         assert link.last_command_nm == pytest.approx(0.02)
-        time.sleep(0.05)
-        applied = [s.applied_torque_nm for s in link.drain_states()]
-        assert applied and applied[-1] == pytest.approx(0.02, rel=1e-6)
+        assert eventually(lambda: applied_now(link) == pytest.approx(0.02, rel=1e-6))
         assert not link.read_state().saturated  # the device never saw more than its limit
         with pytest.raises(ValueError, match="torque_nm"):
             link.send_torque(float("nan"))
-        time.sleep(0.05)
-        assert r.emulator.session.torque_nm(0) == 0.0 and r.emulator.session.stopped
+        assert eventually(lambda: r.emulator.session.torque_nm(0) == 0.0 and r.emulator.session.stopped)
 
 
 def test_stalled_host_trips_the_watchdog(rig):
@@ -118,8 +131,7 @@ def test_stalled_host_trips_the_watchdog(rig):
         assert early and all(s.applied_torque_nm == pytest.approx(0.04) for s in early)
         assert late and all(s.applied_torque_nm == 0.0 and s.watchdog_tripped for s in late)
         link.send_torque(0.01)  # commands resume: so does the torque
-        time.sleep(0.05)
-        assert link.drain_states()[-1].applied_torque_nm == pytest.approx(0.01)
+        assert eventually(lambda: applied_now(link) == pytest.approx(0.01))
 
 
 def test_garbled_link_raises_clear_error_and_stops_motor(rig):
@@ -130,8 +142,7 @@ def test_garbled_link_raises_clear_error_and_stops_motor(rig):
     with pytest.raises(LinkChecksumError, match="3 consecutive bad frames.*motor stopped"):
         for _ in range(10):
             link.read_state()
-    time.sleep(0.05)
-    assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
+    assert eventually(lambda: r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0)
     link.close()
 
 
@@ -178,8 +189,7 @@ def test_controller_exception_stops_motor_and_keeps_samples(rig, tmp_path):
             SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         with pytest.raises(RuntimeError, match="controller bug"):
             run_control_loop(link, controller, duration_s=2.0, log=log)
-        time.sleep(0.05)
-        assert r.emulator.session.stopped  # STOP went out before the exception left the loop
+        assert eventually(lambda: r.emulator.session.stopped)  # STOP went out before the exception left the loop
     data = read_sample_log(tmp_path / "log.csv")
     assert len(data) == 20 and data["command_torque_nm"][-1] == 0.0
 
@@ -276,8 +286,7 @@ def test_sigterm_on_the_host_sends_stop(rig, script):
             host.stdin.flush()
         assert host.wait(5) == 128 + signal.SIGTERM
         assert host.stdout.read() == ""
-        time.sleep(0.05)
-        assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
+        assert eventually(lambda: r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0)
         assert r.emulator.session.decoder.bad_frames == 0  # no frame was cut in two by the STOP
     finally:
         if host.poll() is None:

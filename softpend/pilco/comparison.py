@@ -12,40 +12,51 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from ..parallel import run_in_processes
 from .loop import PilcoConfig, PilcoResult, run_pilco
 
 __all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "seconds_to_balance_table"]
 
 
 def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
-               progress: bool = True) -> list[PilcoResult]:
+               progress: bool = True, workers: Optional[int] = None) -> list[PilcoResult]:
     """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-seed<k>``.
 
-    A folder is reused when it holds a finished run with the same config (the seed replaced); otherwise the
-    run is done and saved there.
+    A folder is reused when it holds a finished run with the same config (the seed replaced); the other seeds
+    run in parallel, up to ``workers`` at a time (default: one per CPU core, see
+    :func:`softpend.parallel.default_workers`), each with one torch thread.
     """
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
-    results = []
+    jobs, names = [], []
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
         folder = Path(runs_root) / f"pilco-seed{seed}"
-        if (folder / "pilco.json").exists():
-            try:
-                previous = PilcoResult.load(folder)
-            except (ValueError, KeyError, TypeError):
-                previous = None
-            if previous is not None and previous.config == seeded:
-                results.append(previous)
-                continue
-        result = run_pilco(seeded, progress=progress)
-        result.save(folder)
-        results.append(result)
-    return results
+        if _saved_run(folder, seeded) is None:
+            jobs.append((seeded, folder))
+            names.append(folder.name)
+    run_in_processes(_run_and_save, jobs, names, workers, progress, desc="PILCO runs")
+    return [PilcoResult.load(Path(runs_root) / f"pilco-seed{seed}") for seed in seeds]
+
+
+def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
+    """The finished run saved in ``folder`` if it was made with ``config``, else None."""
+    if not (folder / "pilco.json").exists():
+        return None
+    try:
+        previous = PilcoResult.load(folder)
+    except (ValueError, KeyError, TypeError):
+        return None
+    return previous if previous.config == config else None
+
+
+def _run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
+    """One PILCO run saved to ``folder`` (a job of :func:`softpend.parallel.run_in_processes`)."""
+    run_pilco(config, progress=progress).save(folder)
 
 
 def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> list[dict[str, Any]]:

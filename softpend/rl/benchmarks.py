@@ -10,8 +10,9 @@
 * ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
 * ``full_profile_train_cpu_s`` -- CPU seconds of training all six runs (the training logs' ``cpu_s``,
   ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time of the
-  full profile on two otherwise idle cores running two single-threaded runs at a time, if the runs pack
-  perfectly (a lower bound; the target is <= 1200 s).
+  full profile on two otherwise idle cores running two single-threaded runs at a time (as
+  :func:`~softpend.rl.experiments.figure_runs` does), if the runs pack perfectly (a lower bound; the target
+  is <= 1200 s).
 """
 
 from __future__ import annotations
@@ -47,12 +48,11 @@ def training_cpu_s(log) -> float:
 
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
-    from .experiments import figure_configs, median_real_s_to_balance, train_seeds
+    from .experiments import METHOD_NAMES, figure_runs, median_real_s_to_balance
 
     steps_per_s = dqn_train_steps_per_s()
-    configs = figure_configs()
-    dqn_logs = train_seeds("dqn", configs["dqn"], SEEDS, DEFAULT_EPISODES["dqn"], ROOT, progress=True)
-    mbpo_logs = train_seeds("mbpo", configs["mbpo"], SEEDS, DEFAULT_EPISODES["mbpo"], ROOT, progress=True)
+    runs = figure_runs(DEFAULT_EPISODES["dqn"], DEFAULT_EPISODES["mbpo"], SEEDS, ROOT, progress=True)
+    dqn_logs, mbpo_logs = runs[METHOD_NAMES["dqn"]], runs[METHOD_NAMES["mbpo"]]
     cpu_s = sum(training_cpu_s(log) for log in dqn_logs + mbpo_logs)
     dqn_s = median_real_s_to_balance(dqn_logs)
     mbpo_s = median_real_s_to_balance(mbpo_logs)

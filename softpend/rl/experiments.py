@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from ..parallel import run_in_processes
 from ..plant import check_plant_name
 from .config import DQNConfig, MBPOConfig, load_config
 from .training_log import BALANCE_STD_RAD, TrainingLog
@@ -28,33 +29,55 @@ def train_seeds(
     episodes: int,
     root: Path | str = "runs/rl",
     progress: bool = True,
+    workers: Optional[int] = None,
 ) -> list[TrainingLog]:
-    """Train (or reuse) one run per seed; returns their logs in seed order."""
+    """Train (or reuse) one run per seed; returns their logs in seed order.
+
+    Runs that need training are trained in parallel, up to ``workers`` at a time (default: one per CPU core,
+    see :func:`softpend.parallel.default_workers`).
+    """
+    return _train_runs([(algo, config, seeds, episodes)], root, progress, workers)[0]
+
+
+def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str, progress: bool,
+                workers: Optional[int]) -> list[list[TrainingLog]]:
+    """Train what ``specs`` (``(algo, config, seeds, episodes)`` each) need, in one pool; logs per spec."""
+    jobs, names = [], []
+    for algo, config, seeds, episodes in specs:
+        if algo not in ("dqn", "mbpo"):
+            raise ValueError(f"algo must be 'dqn' or 'mbpo', got {algo!r}")
+        if len(seeds) == 0:
+            raise ValueError("seeds must not be empty")
+        if algo == "mbpo" and not isinstance(config, MBPOConfig):
+            raise ValueError("algo 'mbpo' needs an MBPOConfig")
+        for seed in seeds:
+            run_dir = run_folder(root, algo, int(seed))
+            log_path = run_dir / "log.json"
+            if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
+                n_done = TrainingLog.load(log_path).n_episodes
+                if n_done == episodes:
+                    continue
+                resume = n_done < episodes
+            else:
+                resume = False
+            jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
+            names.append(run_dir.name)
+    # longest first: a DQN-MBPO run costs about 2.5 DQN runs of twice its episodes
+    order = sorted(range(len(jobs)), key=lambda i: (jobs[i][0] != "mbpo", i))
+    run_in_processes(_train_run, [jobs[i] for i in order], [names[i] for i in order], workers, progress,
+                     desc="RL runs")
+    return [[TrainingLog.load(run_folder(root, algo, int(seed)) / "log.json") for seed in seeds]
+            for algo, _, seeds, _ in specs]
+
+
+def _train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
+               progress: bool = True) -> None:
+    """Train one run into ``run_dir`` (a job of :func:`softpend.parallel.run_in_processes`)."""
     from .dqn import train_dqn
     from .mbpo import train_mbpo
 
-    if algo not in ("dqn", "mbpo"):
-        raise ValueError(f"algo must be 'dqn' or 'mbpo', got {algo!r}")
-    if len(seeds) == 0:
-        raise ValueError("seeds must not be empty")
-    if algo == "mbpo" and not isinstance(config, MBPOConfig):
-        raise ValueError("algo 'mbpo' needs an MBPOConfig")
-    logs = []
-    for seed in seeds:
-        run_dir = run_folder(root, algo, int(seed))
-        log_path = run_dir / "log.json"
-        if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
-            log = TrainingLog.load(log_path)
-            if log.n_episodes == episodes:
-                logs.append(log)
-                continue
-            resume = log.n_episodes < episodes
-        else:
-            resume = False
-        train = train_dqn if algo == "dqn" else train_mbpo
-        _, log = train(config, seed=int(seed), episodes=int(episodes), run_dir=run_dir, resume=resume, progress=progress)
-        logs.append(log)
-    return logs
+    train = train_dqn if algo == "dqn" else train_mbpo
+    train(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
 def _saved_config(run_dir: Path) -> DQNConfig | None:
@@ -122,17 +145,20 @@ METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
 
 
 def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
-                progress: bool = True, plant: str = "prb", **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
+                progress: bool = True, plant: str = "prb", workers: Optional[int] = None,
+                **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).
 
-    The runs of ``plant`` live under :func:`plant_runs_root` ``(runs_root, plant)``.
+    The runs of ``plant`` live under :func:`plant_runs_root` ``(runs_root, plant)``.  The runs to train (both
+    methods, every seed) share one pool of ``workers`` processes (see :func:`train_seeds`).
     """
     configs = figure_configs(plant=plant, **config_kwargs)
     root = plant_runs_root(runs_root, plant)
-    return {
-        METHOD_NAMES["dqn"]: train_seeds("dqn", configs["dqn"], seeds, episodes_dqn, root, progress),
-        METHOD_NAMES["mbpo"]: train_seeds("mbpo", configs["mbpo"], seeds, episodes_mbpo, root, progress),
-    }
+    dqn_logs, mbpo_logs = _train_runs(
+        [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)],
+        root, progress, workers,
+    )
+    return {METHOD_NAMES["dqn"]: dqn_logs, METHOD_NAMES["mbpo"]: mbpo_logs}
 
 
 def run_folder(runs_root: Path | str, algo: str, seed: int) -> Path:

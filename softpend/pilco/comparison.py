@@ -19,7 +19,8 @@ import numpy as np
 from ..parallel import run_in_processes
 from .loop import PilcoConfig, PilcoResult, run_pilco
 
-__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "seconds_to_balance_table"]
+__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "plot_predicted_and_real_cost",
+           "seconds_to_balance_table"]
 
 
 def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
@@ -142,4 +143,29 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
     ax_e.axhline(target_std_rad, color="k", ls="--", lw=1, label=f"target {target_std_rad:g} rad")
     ax_s.legend(loc="upper left")
     ax_e.legend(loc="lower left")
+    return fig
+
+
+def plot_predicted_and_real_cost(results: Sequence[PilcoResult]):
+    """PILCO's predicted (dashed, crosses) and real (solid, dots) summed cost of each policy trial, per seed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, ax = plt.subplots(figsize=(6, 3.5), constrained_layout=True)
+    for result in results:
+        records = [r for r in result.records if r.kind == "policy"]
+        trials = [r.index for r in records]
+        line, = ax.plot(trials, [r.predicted_cost for r in records], "x--", alpha=0.8)
+        ax.plot(trials, [r.real_cost for r in records], "o-", color=line.get_color(), alpha=0.8,
+                label=f"seed {result.config.seed}")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("trial")
+    ax.set_ylabel("summed cost over the trial")
+    ax.set_title("predicted (dashed) and real (solid) cost per trial")
+    ax.legend()
     return fig

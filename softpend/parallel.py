@@ -6,6 +6,10 @@ one thread).  :func:`run_in_processes` runs such jobs in a pool of ``spawn``-sta
 return nothing, and the caller reads the results back from disk, so nothing is lost when one job fails and no
 result crosses a process boundary as a pickle.
 
+Workers are started with ``spawn``, which imports the caller's main module again in each worker: a script
+that trains in parallel must keep its top-level code under ``if __name__ == "__main__":`` (notebooks, the
+``softpend`` command and ``python -c`` need nothing), or set ``SOFTPEND_WORKERS=1``.
+
 A job's numbers do not depend on where it runs: each run seeds everything it draws from its own seed, and a
 test checks that a run trained in a worker equals the same run trained in the calling process.
 """

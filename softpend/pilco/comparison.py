@@ -37,7 +37,7 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
         folder = Path(runs_root) / f"pilco-seed{seed}"
-        if _saved_run(folder, seeded) is None:
+        if folder.name not in names and _saved_run(folder, seeded) is None:
             jobs.append((seeded, folder))
             names.append(folder.name)
     run_in_processes(_run_and_save, jobs, names, workers, progress, desc="PILCO runs")

@@ -52,6 +52,8 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
             raise ValueError("algo 'mbpo' needs an MBPOConfig")
         for seed in seeds:
             run_dir = run_folder(root, algo, int(seed))
+            if run_dir.name in names:
+                continue  # a seed listed twice is trained once (two workers must not share a folder)
             log_path = run_dir / "log.json"
             if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
                 n_done = TrainingLog.load(log_path).n_episodes

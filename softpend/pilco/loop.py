@@ -56,7 +56,9 @@ So the target (std <= 0.1 rad with < 90 plant s, < 15 min compute) holds on seed
 (4 of 7; the book runs seeds 0-2), with 12-30 plant s and at most 430 CPU s; not on seeds 3, 5 and 6.
 Seed 3 gets off the hanging plateau (predicted 55 -> 41 of 60 over its 6 trials) but does not get up; seed 6
 creeps down the same way (predicted 57 -> 52); seed 5 never leaves the plateau (predicted 58-60, real 60.0
-in every policy trial: the policy holds the rod hanging).  Seeds 5 and 6 were run two at a time.
+in every policy trial: the policy holds the rod hanging).  Seeds 5 and 6 were run two at a time.  With a
+position-only cost (``cost_rate_width_rad_s=None``) neither seed 5 nor seed 6 balances either (worst test std
+2.62 rad after 6 policy trials, 661 and 658 CPU s): the tip-rate factor is not what keeps seed 5 down.
 How we got there (each line one change; the runs are deterministic: equal configurations reproduce
 every trial to the printed digit):
 

@@ -136,25 +136,16 @@ def test_policy_search_lowers_the_predicted_cost():
     assert float(prop.rollout(m0, s0, 10)[3]) == pytest.approx(after)
 
 
-def test_config_rejects_bad_values():
-    with pytest.raises(ValueError, match="state"):
-        PilcoConfig(state="joint")
-    with pytest.raises(ValueError, match="control_dt_s"):
-        PilcoConfig(control_dt_s=0.055)
-    with pytest.raises(ValueError, match="horizon_s"):
-        PilcoConfig(horizon_s=0.05)
-    with pytest.raises(ValueError, match="n_basis"):
-        PilcoConfig(n_basis=0)
-    with pytest.raises(ValueError, match="cost_width_m"):
-        PilcoConfig(cost_width_m=-1.0)
-    with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
-        PilcoConfig(cost_rate_width_rad_s=0.0)
-    with pytest.raises(ValueError, match="n_random_trials"):
-        PilcoConfig(n_random_trials=0)
-    with pytest.raises(ValueError, match="policy_linear"):
-        PilcoConfig(policy_linear=1)
-    with pytest.raises(ValueError, match="cost_rate_after_rad"):
-        PilcoConfig(cost_rate_after_rad=-0.5)
+@pytest.mark.parametrize("field, value", [
+    ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
+    ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("policy_linear", 1), ("cost_rate_after_rad", -0.5),
+])
+def test_config_rejects_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        PilcoConfig(**{field: value})
+
+
+def test_real_cost_rejects_a_state_without_the_tip_rate():
     with pytest.raises(ValueError, match="theta_dot_rad_s"):
         real_cost(np.zeros(3), 0.3, 0.15, cost_rate_width_rad_s=3.0)
 

@@ -26,7 +26,7 @@ COMMAND_MODULES: list[str] = [
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from softpend import __version__
 
     parser = argparse.ArgumentParser(prog="softpend", description="Learning to control a soft robotic pendulum.")
     parser.add_argument("--version", action="version", version=f"softpend {__version__}")

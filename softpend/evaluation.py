@@ -23,7 +23,7 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from .plant import OBSERVATION_NAMES, Observation, RodParams, SimulationDiverged
+from softpend.plant import OBSERVATION_NAMES, Observation, RodParams, SimulationDiverged
 
 __all__ = [
     "Controller",
@@ -325,7 +325,7 @@ def evaluate_controller(
     EvaluationSummary
         Per-seed :class:`EvaluationResult` objects (metrics and trajectories).
     """
-    from .envs import SoftPendulumEnv
+    from softpend.envs import SoftPendulumEnv
 
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")

@@ -155,7 +155,7 @@ def test_fast_swing_does_not_diverge():
     """The swing-up controller drives the beam's hub to > 10 rad/s; the solver refines its step instead
     of failing (this episode failed at t = 1.77 s with a fixed 2-substep solver)."""
     from softpend.evaluation import evaluate_controller
-    from softpend.fidelity.transfer import default_transfer_cases
+    from softpend.study.transfer import default_transfer_cases
 
     controller = default_transfer_cases()[1].make_controller()
     summary = evaluate_controller(controller, seeds=(0,), duration_s=2.5, start="hanging", plant="beam")

@@ -2,7 +2,7 @@
 
 import pytest
 
-from softpend.fidelity.transfer import TransferCase, perturbations, transfer_table
+from softpend.study.transfer import TransferCase, perturbations, transfer_table
 from softpend.plant import RodParams
 
 
@@ -48,10 +48,10 @@ class _Idle:
 
 def test_rl_agents_run_in_the_transfer_study(tmp_path):
     """A (tiny) DQN run becomes a transfer case, evaluated on the beam; a mismatched rod is refused."""
-    from softpend.fidelity.transfer import rl_transfer_cases, transfer_matrix
+    from softpend.study.transfer import rl_transfer_cases, transfer_matrix
     from softpend.rl.config import DQNConfig
     from softpend.rl.dqn import train_dqn
-    from softpend.rl.experiments import run_folder
+    from softpend.study.rl_runs import run_folder
 
     config = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=100, checkpoint_every_episodes=100)
     train_dqn(config, seed=0, episodes=2, run_dir=run_folder(tmp_path, "dqn", 0), progress=False)

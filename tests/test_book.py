@@ -10,8 +10,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from softpend import book
-from softpend.book import build_html, load_profiles, run_notebooks, toc_notebooks
+from softpend.study import book
+from softpend.study.book import build_html, load_profiles, run_notebooks, toc_notebooks
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,7 +70,7 @@ def test_html_pages_exist_and_embed_png_figures(quick_book):
 
 
 def test_intro_quotes_the_design_numbers_computed_by_the_figure_1_notebook(quick_book):
-    from softpend.plant.design import rod_design
+    from softpend.study.rod_design import rod_design
 
     _, _, html_dir = quick_book
     text = re.sub(r"<[^>]+>", "", (html_dir / "book" / "intro.html").read_text(encoding="utf-8"))

@@ -131,7 +131,7 @@ def test_reduction_matrices_are_consistent():
 
 @pytest.fixture(scope="module")
 def trained_model():
-    from softpend.control.comparison import train_learned_model
+    from softpend.study.classical import train_learned_model
 
     torch.set_num_threads(1)
     return train_learned_model(RodParams(), n_trials=60, max_epochs=300, seed=0)

@@ -1,4 +1,4 @@
-"""The design figures of the default rod (softpend.plant.design), checked against beam theory."""
+"""The design figures of the default rod (softpend.study.rod_design), checked against beam theory."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from softpend.plant import RodParams
-from softpend.plant.design import clamped_upright_buckling_factor, rod_design, rod_poses_m
+from softpend.study.rod_design import clamped_upright_buckling_factor, rod_design, rod_poses_m
 
 
 def test_default_rod_meets_the_design_targets():

@@ -10,11 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from softpend.hardware.samplelog import SampleLog, read_sample_log
+from softpend.io.samplelog import SampleLog, read_sample_log
 
 _WRITER = """
 import sys, time
-from softpend.hardware.samplelog import SampleLog
+from softpend.io.samplelog import SampleLog
 log = SampleLog(sys.argv[1], ["i", "t_s", "value"], metadata={"run": "kill-test"}, fsync_every_s=None)
 i = 0
 while True:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from softpend.hardware.loop import LOOP_LOG_COLUMNS
-from softpend.hardware.samplelog import SampleLog, read_sample_log
+from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import build_rig_dataset, estimate_clock_offset, startup_wiggle_torque, synchronise
 from softpend.plant import RodParams, make_plant
 from softpend.vision.track_video import TRACK_COLUMNS

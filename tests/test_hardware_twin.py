@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from softpend.hardware.samplelog import read_sample_log
+from softpend.io.samplelog import read_sample_log
 from softpend.hardware.twin import compare_with_simulator_model, run_twin_session, truth_link_points
 
 
@@ -46,7 +46,7 @@ def test_truth_log_of_a_beam_twin_draws_the_beam(tmp_path):
     """The emulator logs the plant's full state; the twin redraws the rod with the same plant (PRB joints or
     beam nodes), so the camera films the plant the rig ran."""
     from softpend.hardware.emulator import RigConfig, truth_columns
-    from softpend.hardware.samplelog import SampleLog
+    from softpend.io.samplelog import SampleLog
     from softpend.plant import RodParams, make_plant
 
     beam = make_plant("beam", params=RodParams())

@@ -1,4 +1,4 @@
-"""The notebook runner (softpend.book) on tiny synthetic books: validation, execution, failures, cache."""
+"""The notebook runner (softpend.study.book) on tiny synthetic books: validation, execution, failures, cache."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from softpend import book
-from softpend.book import NotebookExecutionError, cache_key, package_source_hash, run_notebooks, toc_notebooks
+from softpend.study import book
+from softpend.study.book import NotebookExecutionError, cache_key, package_source_hash, run_notebooks, toc_notebooks
 from softpend.cli import main as cli_main
 
 HEADER = """\

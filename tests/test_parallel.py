@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from softpend.parallel import default_workers, run_in_processes
+from softpend.study.parallel import default_workers, run_in_processes
 from softpend.rl.config import DQNConfig
-from softpend.rl.experiments import run_folder, train_seeds
+from softpend.study.rl_runs import run_folder, train_seeds
 
 
 def write_pid(folder: Path, value: int, progress: bool = True) -> None:

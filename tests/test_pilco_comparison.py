@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import numpy as np
 import pytest
 
-from softpend.pilco.comparison import curve_rows_pilco, plot_predicted_and_real_cost, seconds_to_balance_table
+from softpend.study.head_to_head import curve_rows_pilco, plot_predicted_and_real_cost, seconds_to_balance_table
 from softpend.pilco.loop import TrialRecord
 
 

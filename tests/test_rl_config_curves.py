@@ -107,7 +107,7 @@ def test_moving_average_and_aggregate():
 
 
 def test_training_cpu_s_of_a_log():
-    from softpend.rl.benchmarks import training_cpu_s
+    from softpend.study.bench.rl import training_cpu_s
 
     log = _log(np.zeros(3), [{"episode": 3, "cpu_s": 7.5}])
     for row, cpu in zip(log.episodes, (2.0, 4.0, 6.0)):

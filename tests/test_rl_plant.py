@@ -8,7 +8,7 @@ import pytest
 from softpend.plant.beam import BeamPlant
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import load_agent, train_dqn
-from softpend.rl.experiments import figure_configs, figure_runs, plant_runs_root, run_folder
+from softpend.study.rl_runs import figure_configs, figure_runs, plant_runs_root, run_folder
 from softpend.rl.training_env import make_training_env
 
 

@@ -104,7 +104,7 @@ def test_calibration_recovers_a_skewed_camera():
 
 def test_softpend_track_writes_a_timestamped_csv(tmp_path, swing, capsys):
     from softpend.cli import main
-    from softpend.hardware.samplelog import read_sample_log
+    from softpend.io.samplelog import read_sample_log
 
     times, points, hub = swing
     video = tmp_path / "clip.avi"

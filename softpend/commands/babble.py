@@ -8,7 +8,7 @@ import time
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ..sysid import BabbleProtocol
+    from softpend.sysid import BabbleProtocol
 
     d = BabbleProtocol()
     parser = subparsers.add_parser(
@@ -39,8 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..plant import RodParams
-    from ..sysid import BabbleProtocol, babble
+    from softpend.plant import RodParams
+    from softpend.sysid import BabbleProtocol, babble
 
     protocol = BabbleProtocol(
         n_trials=args.n_trials,

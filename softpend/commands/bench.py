@@ -7,9 +7,9 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ..bench import BENCHMARKS
+    from softpend.study.bench import BENCHMARKS
 
-    parser = subparsers.add_parser("bench", help="measure performance figures (see softpend.bench)")
+    parser = subparsers.add_parser("bench", help="measure performance figures (see softpend.study.bench)")
     parser.add_argument("--json", action="store_true", help="print one JSON object (default: a table)")
     parser.add_argument(
         "--only", action="append", metavar="GROUP", help=f"run only this group (repeatable): {[n for n, _ in BENCHMARKS]}"
@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench import run_benchmarks
+    from softpend.study.bench import run_benchmarks
 
     results = run_benchmarks(args.only)
     if args.json:

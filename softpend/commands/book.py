@@ -7,7 +7,7 @@ import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ..book import DEFAULT_PROFILE
+    from softpend.study.book import DEFAULT_PROFILE
 
     parser = subparsers.add_parser(
         "book",
@@ -54,7 +54,7 @@ def parse_overrides(items: list[str]) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..book import NotebookExecutionError, build_html, run_notebooks, summary
+    from softpend.study.book import NotebookExecutionError, build_html, run_notebooks, summary
 
     try:
         overrides = parse_overrides(args.set)

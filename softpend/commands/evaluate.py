@@ -19,7 +19,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..rl.dqn import evaluate_agent, load_agent
+    from softpend.rl.dqn import evaluate_agent, load_agent
 
     model, config = load_agent(args.agent, which=args.which)
     summary = evaluate_agent(model, config, seeds=tuple(args.seeds), duration_s=args.duration_s, name=str(args.agent))

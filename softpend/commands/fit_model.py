@@ -7,7 +7,7 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ..sysid import TrainConfig
+    from softpend.sysid import TrainConfig
 
     d = TrainConfig()
     parser = subparsers.add_parser(
@@ -40,9 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from ..sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
-    from ..sysid.metrics import evaluate_model
-    from ..sysid.training import parse_widths
+    from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
+    from softpend.sysid.metrics import evaluate_model
+    from softpend.sysid.training import parse_widths
 
     if args.threads < 1:
         raise ValueError(f"threads must be >= 1, got {args.threads}")

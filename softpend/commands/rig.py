@@ -25,8 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..hardware.emulator import RigConfig, serve_forever
-    from ..plant import RodParams
+    from softpend.hardware.emulator import RigConfig, serve_forever
+    from softpend.plant import RodParams
 
     config = RigConfig(
         params=RodParams(n_links=args.n_links),

@@ -23,9 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ..vision.calibration import AffineCalibration
-    from ..vision.track_video import track_video
-    from ..vision.tracker import TipTracker
+    from softpend.vision.calibration import AffineCalibration
+    from softpend.vision.track_video import track_video
+    from softpend.vision.tracker import TipTracker
 
     markers = None
     if args.markers:

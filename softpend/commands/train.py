@@ -13,9 +13,9 @@ from typing import Callable
 
 #: Training entry points, one line per algorithm: ``name -> "module:function(args) -> int"``.
 ALGORITHMS: dict[str, str] = {
-    "dqn": "softpend.rl.cli:train_dqn_from_args",
-    "mbpo": "softpend.rl.cli:train_mbpo_from_args",
-    "pilco": "softpend.pilco.cli:train_pilco_from_args",
+    "dqn": "softpend.commands.train_rl:train_dqn_from_args",
+    "mbpo": "softpend.commands.train_rl:train_mbpo_from_args",
+    "pilco": "softpend.commands.train_pilco:train_pilco_from_args",
 }
 
 

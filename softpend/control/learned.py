@@ -23,9 +23,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
-from .linearise import LinearModel
-from .lqr import LQRController, LQRWeights, design_lqr, output_weight_matrix
+from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
+from softpend.control.linearise import LinearModel
+from softpend.control.lqr import LQRController, LQRWeights, design_lqr, output_weight_matrix
 
 __all__ = [
     "LearnedStateTracker",
@@ -110,7 +110,7 @@ def _output_map(names: tuple[str, ...], params: RodParams) -> np.ndarray:
 
 def velocity_name(position_name: str) -> str:
     """Observed rate belonging to a position variable (``phi_rad -> phi_dot_rad_s``, ``ex_m -> ex_dot_m_s``)."""
-    from ..sysid.variables import velocity_name as name
+    from softpend.sysid.variables import velocity_name as name
 
     return name(position_name)
 

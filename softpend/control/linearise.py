@@ -26,7 +26,7 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg
 
-from ..plant import PRBPlant, RodParams
+from softpend.plant import PRBPlant, RodParams
 
 __all__ = [
     "LinearModel",

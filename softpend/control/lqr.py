@@ -34,8 +34,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..plant import Observation, RodParams, wrap_angle_rad
-from .linearise import (
+from softpend.plant import Observation, RodParams, wrap_angle_rad
+from softpend.control.linearise import (
     LinearModel,
     discretise,
     linearise_exudyn,

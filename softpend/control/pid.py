@@ -27,7 +27,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..plant import Observation, wrap_angle_rad
+from softpend.plant import Observation, wrap_angle_rad
 
 __all__ = ["PIDController", "PIDGains", "PIDTuningResult", "pid_rollout_cost", "plant_simulator", "tune_pid"]
 
@@ -230,12 +230,12 @@ def tune_pid(
 def plant_simulator(params=None, plant: str = "prb", dt_s: float = 0.01) -> Simulator:
     """Closed-loop simulator on a true plant (straight rod released at rest at the given tilt), for tuning
     on the true model and for tests; built on :func:`softpend.evaluation.evaluate_controller`."""
-    from ..evaluation import evaluate_controller
-    from ..plant import RodParams
+    from softpend.evaluation import evaluate_controller
+    from softpend.plant import RodParams
 
     params = params if params is not None else RodParams()
 
-    from .benchmarks import tilt_state
+    from softpend.plant import tilt_state
 
     def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
         result = evaluate_controller(

@@ -9,8 +9,8 @@ from typing import Optional
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..evaluation import Controller, evaluate_controller
-from ..plant import RodParams
+from softpend.evaluation import Controller, evaluate_controller
+from softpend.plant import RodParams
 
 __all__ = ["RegionOfAttraction", "recovers_from", "region_of_attraction_rad"]
 

@@ -37,8 +37,8 @@ from typing import Optional
 
 import numpy as np
 
-from ..plant import Observation, PRBPlant, RodParams
-from .lqr import LQRController, LQRWeights
+from softpend.plant import Observation, PRBPlant, RodParams
+from softpend.control.lqr import LQRController, LQRWeights
 
 __all__ = ["EnergySwingUpController", "pendulum_energy_j"]
 

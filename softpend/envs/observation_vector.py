@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S, SoftPendulumEnv
-from ..plant import OBSERVATION_NAMES
+from softpend.envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S, SoftPendulumEnv
+from softpend.plant import OBSERVATION_NAMES
 
 __all__ = ["observation_vector", "observations_from_vector"]
 

@@ -9,8 +9,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..plant import Observation, RodParams, SimulationDiverged, make_plant
-from .reward import RewardParams
+from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
+from softpend.envs.reward import RewardParams
 
 #: Angular rates and tip velocities are divided by this before entering the observation vector [1/s].
 VELOCITY_SCALE_PER_S = 10.0
@@ -196,7 +196,7 @@ class SoftPendulumEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from ..plotting import render_rod_rgb
+        from softpend.plotting import render_rod_rgb
 
         return render_rod_rgb(self.plant.link_points_m(), self.params.length_m)
 

@@ -1,7 +1,7 @@
 """Model fidelity: the continuum-beam plant validated against beam theory, the PRB chain compared with it,
 and controllers designed on the PRB plant evaluated on the beam (the project's stand-in for the real rod)."""
 
-from .validation import (
+from softpend.fidelity.validation import (
     EULER_BERNOULLI_BETA_L,
     FreeVibration,
     cantilever_free_vibration,

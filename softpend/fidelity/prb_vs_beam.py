@@ -22,8 +22,8 @@ from typing import Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..plant import RodParams, make_plant
-from .validation import measured_bending_frequencies, static_tip_sag
+from softpend.plant import RodParams, make_plant
+from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
 
 __all__ = [
     "SMALL_DEFLECTION_STIFFNESS_SCALE",
@@ -110,7 +110,7 @@ def convergence_table(
     list of ConvergenceRow
         Beam rows first, then PRB rows; a PRB chain of one link has no second mode (``nan``).
     """
-    from ..plant.beam import DEFAULT_N_ELEMENTS
+    from softpend.plant.beam import DEFAULT_N_ELEMENTS
 
     params = params or RodParams()
     reference = reference_elements or DEFAULT_N_ELEMENTS
@@ -122,7 +122,7 @@ def convergence_table(
     rows = []
     for plant, n in tqdm(jobs, desc="PRB vs beam", disable=not progress):
         if plant == "prb" and n == 1:
-            from .validation import cantilever_free_vibration
+            from softpend.fidelity.validation import cantilever_free_vibration
 
             f1 = float(cantilever_free_vibration("prb", params, 1, modes=(1,)).error_pct[0])
             f2 = math.nan

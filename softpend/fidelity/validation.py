@@ -22,7 +22,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from ..plant import RodParams, make_plant
+from softpend.plant import RodParams, make_plant
 
 __all__ = [
     "EULER_BERNOULLI_BETA_L",
@@ -126,7 +126,7 @@ def _check_plant_resolution(plant: str, params: RodParams, resolution: Optional[
     if plant not in ("beam", "prb"):
         raise ValueError(f"plant must be 'beam' or 'prb', got {plant!r}")
     if resolution is None:
-        from ..plant.beam import DEFAULT_N_ELEMENTS
+        from softpend.plant.beam import DEFAULT_N_ELEMENTS
 
         resolution = DEFAULT_N_ELEMENTS if plant == "beam" else params.n_links
     if isinstance(resolution, bool) or int(resolution) != resolution or resolution < 1:

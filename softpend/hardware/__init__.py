@@ -1,7 +1,7 @@
 """The hardware rig: serial motor link, rig emulator (digital twin), host control loop, crash-safe logs,
 and time synchronisation of the motor and camera streams."""
 
-from .driver import (
+from softpend.hardware.driver import (
     DeviceError,
     DeviceInfo,
     HandshakeError,
@@ -12,8 +12,8 @@ from .driver import (
     MotorLink,
     MotorState,
 )
-from .emulator import EmulatorProcess, RigConfig, RigEmulator, start_emulator_process
-from .samplelog import SampleLog, read_sample_log
+from softpend.hardware.emulator import EmulatorProcess, RigConfig, RigEmulator, start_emulator_process
+from softpend.io.samplelog import SampleLog, read_sample_log
 
 __all__ = [
     "DeviceError",

@@ -28,7 +28,7 @@ import weakref
 from dataclasses import dataclass
 from typing import Optional
 
-from . import protocol as proto
+from softpend.hardware import protocol as proto
 
 __all__ = [
     "DeviceError",

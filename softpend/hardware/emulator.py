@@ -33,9 +33,9 @@ from typing import Optional
 
 import numpy as np
 
-from ..plant import RodParams, check_plant_name, make_plant
-from . import protocol as proto
-from .samplelog import SampleLog
+from softpend.plant import RodParams, check_plant_name, make_plant
+from softpend.hardware import protocol as proto
+from softpend.io.samplelog import SampleLog
 
 __all__ = ["EmulatorProcess", "RigConfig", "RigEmulator", "start_emulator_process", "truth_columns"]
 

@@ -17,9 +17,9 @@ from typing import Any, Callable, Optional, Protocol
 
 import numpy as np
 
-from ..plant import Observation, wrap_angle_rad
-from .driver import MotorLink, MotorState
-from .samplelog import SampleLog
+from softpend.plant import Observation, wrap_angle_rad
+from softpend.hardware.driver import MotorLink, MotorState
+from softpend.io.samplelog import SampleLog
 
 __all__ = [
     "LOOP_LOG_COLUMNS",

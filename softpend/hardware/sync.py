@@ -26,8 +26,8 @@ from typing import Optional
 
 import numpy as np
 
-from ..plant import RodParams, wrap_angle_rad
-from .samplelog import LogContents, read_sample_log
+from softpend.plant import RodParams, wrap_angle_rad
+from softpend.io.samplelog import LogContents, read_sample_log
 
 __all__ = [
     "ClockOffset",
@@ -284,7 +284,7 @@ def synchronise(
     held = np.clip(np.searchsorted(tm, grid + 1e-9, side="right") - 1, 0, len(tm) - 1)
     torque_g = torque[held]
 
-    from ..sysid.differentiation import backward_difference
+    from softpend.sysid.differentiation import backward_difference
 
     n = int(round(trial_length_s / dt_s))
     raw = np.column_stack([wrap_angle_rad(phi_g), wrap_angle_rad(theta_g), ex_g, ey_g])
@@ -327,7 +327,7 @@ def build_rig_dataset(
 
     Returns ``(dataset, sync_result)``; the offset and gaps are recorded in the dataset's ``protocol``.
     """
-    from ..sysid.dataset import save_dataset
+    from softpend.sysid.dataset import save_dataset
 
     result = synchronise(read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s,
                          trial_length_s=trial_length_s, **sync_kwargs)

@@ -23,12 +23,12 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..plant import RodParams, make_plant
-from .driver import MotorLink
-from .emulator import RigConfig, start_emulator_process
-from .loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
-from .samplelog import SampleLog, read_sample_log
-from .sync import SyncResult, build_rig_dataset, startup_wiggle_torque
+from softpend.plant import RodParams, make_plant
+from softpend.hardware.driver import MotorLink
+from softpend.hardware.emulator import RigConfig, start_emulator_process
+from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
+from softpend.io.samplelog import SampleLog, read_sample_log
+from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
 
 __all__ = ["TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
 
@@ -46,7 +46,7 @@ def rig_babble_controller(
     """The rig's babbling program: a pseudo-random start-up wiggle of ``wiggle_fraction`` times the limit
     for ``wiggle_s``, then band-limited Gaussian torque (:func:`softpend.sysid.band_limited_noise`,
     standard deviation ``torque_std_fraction`` times the limit) -- a function of time only."""
-    from ..sysid.babble import band_limited_noise
+    from softpend.sysid.babble import band_limited_noise
 
     rng = np.random.default_rng(seed)
     n = int(math.ceil((duration_s + 1.0) / dt_s))
@@ -133,8 +133,8 @@ def run_twin_session(
     progress : bool
         Progress bars.
     """
-    from ..vision.camera import CameraEffects, SyntheticCamera, render_video
-    from ..vision.track_video import track_video
+    from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
+    from softpend.vision.track_video import track_video
 
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
@@ -190,9 +190,9 @@ def compare_with_simulator_model(
     """
     import torch
 
-    from ..sysid import BabbleProtocol, babble
-    from ..sysid.metrics import rollout_errors
-    from ..sysid.training import fit_dynamics_model
+    from softpend.sysid import BabbleProtocol, babble
+    from softpend.sysid.metrics import rollout_errors
+    from softpend.sysid.training import fit_dynamics_model
 
     torch.set_num_threads(1)
     params = params if params is not None else (rig_dataset.params or RodParams())

@@ -9,11 +9,11 @@
 * :mod:`~softpend.pilco.loop` -- the PILCO loop on the plant.
 """
 
-from .controller import PilcoController, RandomTorqueController
-from .gp import GPHyperparameters, MultiOutputGP
-from .loop import PilcoConfig, PilcoResult, TrialRecord, run_pilco
-from .policy import RBFPolicy
-from .propagation import STATE_SPECS, Propagator, StateSpec, state_spec
+from softpend.pilco.controller import PilcoController, RandomTorqueController
+from softpend.pilco.gp import GPHyperparameters, MultiOutputGP
+from softpend.pilco.loop import PilcoConfig, PilcoResult, TrialRecord, run_pilco
+from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.propagation import STATE_SPECS, Propagator, StateSpec, state_spec
 
 __all__ = [
     "GPHyperparameters",

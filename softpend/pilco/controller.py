@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from ..plant import Observation
-from .policy import RBFPolicy
-from .propagation import StateSpec
+from softpend.plant import Observation
+from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.propagation import StateSpec
 
 __all__ = ["PilcoController", "RandomTorqueController"]
 

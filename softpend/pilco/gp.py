@@ -29,7 +29,7 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from .moments import gp_moments
+from softpend.pilco.moments import gp_moments
 
 __all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset", "spread_subset"]
 

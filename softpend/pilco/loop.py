@@ -119,12 +119,12 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from ..evaluation import EvaluationResult, evaluate_controller, run_episode
-from ..plant import RodParams, check_plant_name
-from .controller import PilcoController, RandomTorqueController
-from .gp import GPHyperparameters, MultiOutputGP, select_subset, spread_subset
-from .policy import RBFPolicy
-from .propagation import Propagator, StateSpec, state_spec
+from softpend.evaluation import EvaluationResult, evaluate_controller, run_episode
+from softpend.plant import RodParams, check_plant_name
+from softpend.pilco.controller import PilcoController, RandomTorqueController
+from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset, spread_subset
+from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.propagation import Propagator, StateSpec, state_spec
 
 __all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
 
@@ -551,7 +551,7 @@ def run_pilco(
     """
     from tqdm.auto import tqdm
 
-    from ..envs import SoftPendulumEnv
+    from softpend.envs import SoftPendulumEnv
 
     config = config if config is not None else PilcoConfig()
     spec = state_spec(config.state)

@@ -21,7 +21,7 @@ import math
 import numpy as np
 import torch
 
-from .moments import gp_moments, sin_saturation_moments
+from softpend.pilco.moments import gp_moments, sin_saturation_moments
 
 __all__ = ["RBFPolicy"]
 

@@ -47,8 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..plant import OBSERVATION_NAMES
-from .moments import saturating_cost_moments, trig_moments
+from softpend.plant import OBSERVATION_NAMES
+from softpend.pilco.moments import saturating_cost_moments, trig_moments
 
 __all__ = ["STATE_SPECS", "Propagator", "StateSpec", "state_spec"]
 

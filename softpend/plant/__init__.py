@@ -1,15 +1,16 @@
 """Plants: the simulated soft pendulum and its parameters."""
 
-from .observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
-from .params import GRAVITY_MPS2, RodParams
-from .base import SimulationDiverged
-from .prb import PRBPlant
-from .registry import check_plant_name, make_plant, plant_names, register_plant
+from softpend.plant.observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
+from softpend.plant.params import GRAVITY_MPS2, RodParams
+from softpend.plant.base import Plant, SimulationDiverged, tilt_state
+from softpend.plant.prb import PRBPlant
+from softpend.plant.registry import check_plant_name, make_plant, plant_names, register_plant
 
 __all__ = [
     "GRAVITY_MPS2",
     "OBSERVATION_NAMES",
     "Observation",
+    "Plant",
     "PRBPlant",
     "RodParams",
     "SimulationDiverged",
@@ -18,4 +19,5 @@ __all__ = [
     "make_plant",
     "plant_names",
     "register_plant",
+    "tilt_state",
 ]

@@ -13,11 +13,12 @@ from typing import Optional
 
 import numpy as np
 
-from .exudyn_adapter import SolverFailure
-from .observation import Observation
-from .params import RodParams
+from softpend.plant.exudyn_adapter import SolverFailure
+from softpend.plant.observation import Observation
+from softpend.plant.params import RodParams
+from softpend.plant.protocol import Plant
 
-__all__ = ["PlantBase", "SimulationDiverged", "check_positive"]
+__all__ = ["Plant", "PlantBase", "SimulationDiverged", "check_positive", "tilt_state"]
 
 
 class SimulationDiverged(RuntimeError):
@@ -68,7 +69,8 @@ class PlantBase:
         self.last_torque_nm = 0.0
 
     # ------------------------------------------------------------------ hooks of the subclasses
-    def reset(self, joint_angles_rad: Optional[np.ndarray] = None, joint_velocities_rad_s: Optional[np.ndarray] = None) -> Observation:
+    def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+        """Make the checked state ``(q, q_dot)`` the solver's current state with zero hub torque."""
         raise NotImplementedError
 
     def observe(self) -> Observation:
@@ -90,6 +92,33 @@ class PlantBase:
         if not np.all(np.isfinite(values)):
             raise ValueError(f"{name} must be finite, got {values}")
         return values.copy()
+
+    def reset(
+        self,
+        joint_angles_rad: Optional[np.ndarray] = None,
+        joint_velocities_rad_s: Optional[np.ndarray] = None,
+    ) -> Observation:
+        """Restart from a state (default: all zero, the straight rod pointing up at rest).
+
+        Parameters
+        ----------
+        joint_angles_rad : array of shape (n_coordinates,)
+            The plant's coordinates ``q``, hub angle first unless the hub is locked [rad; m for the beam's
+            transverse coordinates].
+        joint_velocities_rad_s : array of shape (n_coordinates,)
+            Their rates ``q_dot`` [rad/s; m/s].
+
+        Raises
+        ------
+        ValueError
+            If a state has the wrong shape or is not finite.
+        """
+        q = np.zeros(self.n_coordinates) if joint_angles_rad is None else self._check_state(joint_angles_rad, "joint_angles_rad")
+        qd = (np.zeros(self.n_coordinates) if joint_velocities_rad_s is None
+              else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s"))
+        self._set_state(q, qd)
+        self.last_torque_nm = 0.0
+        return self.observe()
 
     def set_joint_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
         """Alias of :meth:`reset`; used to branch from a stored state."""
@@ -137,3 +166,15 @@ class PlantBase:
         except SolverFailure as exc:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()
+
+
+def tilt_state(params: RodParams, tilt_rad: float, plant: str = "prb") -> tuple[np.ndarray, np.ndarray]:
+    """Straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright, as ``(q, q_dot)`` of the
+    plant named ``plant`` (any registered plant: its state is the hub angle followed by coordinates that are
+    zero for the straight rod)."""
+    from softpend.plant.registry import make_plant
+
+    n = params.n_links + 1 if plant == "prb" else make_plant(plant, params=params).n_coordinates
+    q = np.zeros(n)
+    q[0] = tilt_rad
+    return q, np.zeros_like(q)

@@ -35,11 +35,10 @@ from typing import Optional
 
 import numpy as np
 
-from .beam_adapter import BeamSection, HubBeam2D
-from .observation import Observation, observation_from_tip
-from .params import RodParams
-from .base import PlantBase, check_positive
-from .registry import register_plant
+from softpend.plant.beam_adapter import BeamSection, HubBeam2D
+from softpend.plant.observation import Observation, observation_from_tip
+from softpend.plant.params import RodParams
+from softpend.plant.base import PlantBase, check_positive
 
 __all__ = ["BeamPlant", "DEFAULT_N_ELEMENTS", "POISSON_RATIO", "SHEAR_CORRECTION", "beam_section_from_params"]
 
@@ -217,32 +216,10 @@ class BeamPlant(PlantBase):
         return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
 
     # ------------------------------------------------------------------ state
-    def reset(
-        self,
-        joint_angles_rad: Optional[np.ndarray] = None,
-        joint_velocities_rad_s: Optional[np.ndarray] = None,
-    ) -> Observation:
-        """Restart from a state (default: all zero, the straight rod pointing up).
-
-        Parameters
-        ----------
-        joint_angles_rad : array of shape (n_coordinates,)
-            The state ``q`` (see the module docstring; named as in :meth:`PRBPlant.reset` so that
-            callers can treat both plants alike) [rad, m].
-        joint_velocities_rad_s : array of shape (n_coordinates,)
-            Its rate ``q_dot`` [rad/s, m/s].
-        """
-        q = np.zeros(self.n_coordinates) if joint_angles_rad is None else self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = (
-            np.zeros(self.n_coordinates)
-            if joint_velocities_rad_s is None
-            else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        )
-        c, c_t = self.global_coordinates(q, qd)
+    def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+        c, c_t = self.global_coordinates(q, q_dot)
         self._beam.set_coordinates(c, c_t)
-        self.last_torque_nm = 0.0
         self._beam.set_hub_torque(0.0)
-        return self.observe()
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Full state ``(q, q_dot)`` (see the module docstring; hub angle unwrapped)."""
@@ -329,5 +306,3 @@ class BeamPlant(PlantBase):
             "total_j": kinetic + gravity + elastic,
         }
 
-
-register_plant("beam", BeamPlant)

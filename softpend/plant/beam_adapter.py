@@ -36,7 +36,7 @@ from exudyn.itemInterface import (
     ObjectRigidBody2D,
 )
 
-from .exudyn_adapter import SolverFailure, implicit_solver_settings
+from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings
 
 __all__ = ["BeamSection", "HubBeam2D"]
 

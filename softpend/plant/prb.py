@@ -14,10 +14,10 @@ from typing import Optional
 
 import numpy as np
 
-from .base import PlantBase, SimulationDiverged
-from .exudyn_adapter import ChainLink, KinematicChain2D
-from .observation import Observation, observation_from_tip
-from .params import RodParams
+from softpend.plant.base import PlantBase, SimulationDiverged
+from softpend.plant.exudyn_adapter import ChainLink, KinematicChain2D
+from softpend.plant.observation import Observation, observation_from_tip
+from softpend.plant.params import RodParams
 
 __all__ = ["PRBPlant", "SimulationDiverged"]
 
@@ -116,27 +116,10 @@ class PRBPlant(PlantBase):
         """Simulated time since the last reset [s]."""
         return self._chain.time_s
 
-    def reset(
-        self,
-        joint_angles_rad: Optional[np.ndarray] = None,
-        joint_velocities_rad_s: Optional[np.ndarray] = None,
-    ) -> Observation:
-        """Restart from a joint state (default: all zero, the straight rod pointing up).
-
-        Parameters
-        ----------
-        joint_angles_rad : array of shape (n_coordinates,)
-            ``[phi, q_1, ..., q_n]`` (hub angle first unless the hub is locked) [rad].
-        joint_velocities_rad_s : array of shape (n_coordinates,)
-            Their rates [rad/s].
-        """
-        q = np.zeros(self.n_coordinates) if joint_angles_rad is None else self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = np.zeros(self.n_coordinates) if joint_velocities_rad_s is None else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        self._chain.set_state(q, qd)
-        self.last_torque_nm = 0.0
+    def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+        self._chain.set_state(q, q_dot)
         self._forces[:] = 0.0
         self._chain.set_joint_forces(self._forces)
-        return self.observe()
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Full joint state ``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""

@@ -1,25 +1,42 @@
-"""Name -> plant constructor, so environments, controllers and the rig emulator can run on any plant.
+"""Plant registry: name -> ``"module:Class"`` entry point, as Gymnasium registers environments.
 
-Every plant takes ``(params, dt_s, **options)`` and offers the interface of :class:`~softpend.plant.PRBPlant`:
-``reset(q, q_dot)``, ``step(torque_nm) -> Observation``, ``observe()``, ``joint_state()``,
-``hanging_state()``, ``link_points_m()``, ``energy_j()``, ``time_s``, ``n_coordinates``, ``params``.
+Every plant takes ``(params, dt_s, **options)`` and implements :class:`~softpend.plant.protocol.Plant`.  Entry
+points are imported only when a plant of that name is made, so the registry imports no plant module and an
+import error of a plant (a broken Exudyn install) surfaces when that plant is asked for, with its cause.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import importlib
+from typing import TYPE_CHECKING, Any, Callable, Union
 
-_PLANTS: dict[str, Callable[..., Any]] = {}
+if TYPE_CHECKING:
+    from softpend.plant.protocol import Plant
+
+__all__ = ["check_plant_name", "make_plant", "plant_names", "register_plant"]
+
+EntryPoint = Union[str, Callable[..., "Plant"]]
+
+_PLANTS: dict[str, EntryPoint] = {
+    "prb": "softpend.plant.prb:PRBPlant",
+    "beam": "softpend.plant.beam:BeamPlant",
+}
 
 
-def register_plant(name: str, factory: Callable[..., Any]) -> None:
-    """Make ``make_plant(name, ...)`` call ``factory(...)``."""
-    _PLANTS[name] = factory
+def register_plant(name: str, entry_point: EntryPoint) -> None:
+    """Make ``make_plant(name, ...)`` build ``entry_point`` (a ``"module:Class"`` string or a callable)."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"plant name must be a non-empty string, got {name!r}")
+    if isinstance(entry_point, str):
+        if entry_point.count(":") != 1 or not all(entry_point.split(":")):
+            raise ValueError(f"entry_point must look like 'module:Class', got {entry_point!r}")
+    elif not callable(entry_point):
+        raise ValueError(f"entry_point must be a 'module:Class' string or a callable, got {entry_point!r}")
+    _PLANTS[name] = entry_point
 
 
 def plant_names() -> list[str]:
     """Names accepted by :func:`make_plant`."""
-    _load_builtin()
     return sorted(_PLANTS)
 
 
@@ -32,23 +49,26 @@ def check_plant_name(plant: Any, parameter: str = "plant") -> str:
     return plant
 
 
-def make_plant(name: str = "prb", **kwargs: Any) -> Any:
-    """Build a plant by name (``"prb"``; other plants register themselves on import).
+def plant_class(name: str) -> Callable[..., "Plant"]:
+    """The constructor registered under ``name`` (its module imported now)."""
+    check_plant_name(name)
+    entry = _PLANTS[name]
+    if not isinstance(entry, str):
+        return entry
+    module_name, attribute = entry.split(":")
+    module = importlib.import_module(module_name)
+    try:
+        return getattr(module, attribute)
+    except AttributeError as exc:
+        raise ValueError(f"plant {name!r}: {module_name} has no {attribute!r} (entry point {entry!r})") from exc
+
+
+def make_plant(name: str = "prb", **kwargs: Any) -> "Plant":
+    """Build the plant registered as ``name`` with ``kwargs`` (``params``, ``dt_s``, plant options).
 
     Raises
     ------
     ValueError
         If ``name`` is unknown.
     """
-    check_plant_name(name)
-    return _PLANTS[name](**kwargs)
-
-
-def _load_builtin() -> None:
-    from .prb import PRBPlant
-
-    _PLANTS.setdefault("prb", PRBPlant)
-    try:  # the continuum-beam plant is optional until it exists
-        from . import beam  # noqa: F401
-    except ImportError:
-        pass
+    return plant_class(name)(**kwargs)

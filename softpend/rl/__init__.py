@@ -7,13 +7,13 @@
 * :mod:`softpend.rl.mbpo` -- DQN-MBPO (model rollouts branched from real states, ensemble refits);
 * :mod:`softpend.rl.training_log` -- per-episode and per-evaluation records in plant time;
 * :mod:`softpend.rl.curves` -- learning curves in plant time and the "asymptotic reward" definition;
-* :mod:`softpend.rl.experiments` -- multi-seed runs shared by Figures 4-6 and the benchmarks;
-* :mod:`softpend.rl.figures` -- the plotting helpers of Figures 4-6;
-* :mod:`softpend.rl.benchmarks` -- ``softpend bench --only rl``;
-* :mod:`softpend.rl.cli` -- ``softpend train --algo dqn|mbpo``.
+* :mod:`softpend.study.rl_runs` -- multi-seed runs shared by Figures 4-6 and the benchmarks;
+* :mod:`softpend.study.figures.rl` -- the plotting helpers of Figures 4-6;
+* :mod:`softpend.study.bench.rl` -- ``softpend bench --only rl``;
+* :mod:`softpend.commands.train_rl` -- ``softpend train --algo dqn|mbpo``.
 """
 
-from .config import DQNConfig, MBPOConfig
-from .training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["BALANCE_STD_RAD", "DQNConfig", "MBPOConfig", "TrainingLog"]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, TypeVar
 
-from ..plant import check_plant_name
+from softpend.plant import check_plant_name
 
 __all__ = ["DQNConfig", "MBPOConfig", "config_from_overrides", "load_config", "save_config"]
 
@@ -175,7 +175,7 @@ class DQNConfig:
         step's in ``action_repeat`` times that, and a discounted sum of those in that range over
         ``1 - gamma`` (truncated episodes bootstrap, so the horizon is infinite).
         """
-        from ..envs.reward import RewardParams
+        from softpend.envs.reward import RewardParams
 
         low, high = -1.0, 1.0 + RewardParams().bonus_weight
         scale = self.action_repeat / (1.0 - self.gamma) if self.gamma < 1.0 else math.inf

@@ -21,7 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .training_log import TrainingLog
+from softpend.rl.training_log import TrainingLog
 
 __all__ = ["moving_average", "episodes_to_asymptote", "aggregate", "plant_s_at_episode"]
 

@@ -31,12 +31,12 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
-from ..evaluation import evaluate_controller, metrics_from_trajectory
-from ..plant import OBSERVATION_NAMES, RodParams
-from .config import DQNConfig, load_config, save_config
-from .double_dqn import DoubleDQN, TargetDQN
-from .training_env import make_training_env, policy_controller
-from .training_log import TrainingLog
+from softpend.evaluation import evaluate_controller, metrics_from_trajectory
+from softpend.plant import OBSERVATION_NAMES, RodParams
+from softpend.rl.config import DQNConfig, load_config, save_config
+from softpend.rl.double_dqn import DoubleDQN, TargetDQN
+from softpend.rl.training_env import make_training_env, policy_controller
+from softpend.rl.training_log import TrainingLog
 
 __all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "load_agent", "train_dqn", "run_training"]
 

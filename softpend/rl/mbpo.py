@@ -42,13 +42,13 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
-from ..envs import step_reward
-from ..plant import OBSERVATION_NAMES
-from .config import MBPOConfig
-from .dqn import TrainingCallback, build_dqn, run_training
-from ..envs.observation_vector import observation_vector
-from .training_env import make_base_env
-from .training_log import TrainingLog
+from softpend.envs import step_reward
+from softpend.plant import OBSERVATION_NAMES
+from softpend.rl.config import MBPOConfig
+from softpend.rl.dqn import TrainingCallback, build_dqn, run_training
+from softpend.envs.observation_vector import observation_vector
+from softpend.rl.training_env import make_base_env
+from softpend.rl.training_log import TrainingLog
 
 __all__ = ["MBPOReplayBuffer", "MBPOTrainer", "train_mbpo"]
 
@@ -203,7 +203,7 @@ class MBPOTrainer:
 
     def dataset(self):
         """All stored real episodes as a :class:`softpend.sysid.TrajectoryDataset` (written to the run folder)."""
-        from ..sysid import save_dataset
+        from softpend.sysid import save_dataset
 
         obs = np.stack(self.trials_observations)
         p = 5  # positions then velocities in OBSERVATION_NAMES order
@@ -217,7 +217,7 @@ class MBPOTrainer:
 
     def refit(self) -> None:
         """Refit the dynamics ensemble from scratch on all real episodes so far."""
-        from ..sysid import TrainConfig, fit_dynamics_model, save_model
+        from softpend.sysid import TrainConfig, fit_dynamics_model, save_model
 
         if len(self.trials_observations) < 2:
             raise ValueError("need at least 2 complete real episodes to fit the dynamics model")

@@ -14,10 +14,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import TimeLimit
 
-from ..envs import SoftPendulumDiscreteEnv
-from ..evaluation import GymPolicyController
-from ..plant import RodParams
-from .config import DQNConfig
+from softpend.envs import SoftPendulumDiscreteEnv
+from softpend.evaluation import GymPolicyController
+from softpend.plant import RodParams
+from softpend.rl.config import DQNConfig
 
 __all__ = ["ActionRepeat", "HeldActionController", "make_base_env", "make_training_env", "policy_controller"]
 

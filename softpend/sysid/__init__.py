@@ -1,8 +1,8 @@
 """System identification: motor babbling, datasets and learned dynamics models."""
 
-from .babble import BabbleProtocol, babble, band_limited_noise
-from .dataset import SCHEMA_VERSION, TrajectoryDataset, load_dataset, save_dataset, write_dataset
-from .differentiation import backward_difference, unwrap_angles
+from softpend.sysid.babble import BabbleProtocol, babble, band_limited_noise
+from softpend.sysid.dataset import SCHEMA_VERSION, TrajectoryDataset, load_dataset, save_dataset, write_dataset
+from softpend.sysid.differentiation import backward_difference, unwrap_angles
 
 __all__ = [
     "BabbleProtocol",
@@ -17,11 +17,11 @@ __all__ = [
     "write_dataset",
 ]
 
-from .layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
-from .metrics import RolloutErrors, evaluate_model, hub_rate_offset_for_tip_error, one_step_errors, perturbed_simulator_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
-from .model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
-from .rollout import rollout  # noqa: E402
-from .training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402
+from softpend.sysid.layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
+from softpend.sysid.metrics import RolloutErrors, evaluate_model, hub_rate_offset_for_tip_error, one_step_errors, perturbed_simulator_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
+from softpend.sysid.rollout import rollout  # noqa: E402
+from softpend.sysid.training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402
 
 __all__ += [
     "INFORMATION_LEVELS",

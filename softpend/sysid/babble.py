@@ -43,10 +43,10 @@ from typing import Any, Optional
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..plant import OBSERVATION_NAMES, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
-from .dataset import TrajectoryDataset, write_dataset
-from .differentiation import backward_difference
-from .variables import POSITION_NAMES, VELOCITY_NAMES, is_angle
+from softpend.plant import OBSERVATION_NAMES, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
+from softpend.sysid.dataset import TrajectoryDataset, write_dataset
+from softpend.sysid.differentiation import backward_difference
+from softpend.sysid.variables import POSITION_NAMES, VELOCITY_NAMES, is_angle
 
 __all__ = ["BabbleProtocol", "babble", "band_limited_noise"]
 
@@ -187,7 +187,7 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     delay = protocol.camera_delay_steps
     n_steps = n + delay  # raw samples 0 .. n + delay (one extra sample for the first backward difference)
     limit = plant.params.torque_limit_nm
-    from ..plant import PRBPlant
+    from softpend.plant import PRBPlant
 
     q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, bend_joints=isinstance(plant, PRBPlant))
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
@@ -321,6 +321,6 @@ def babble(
 
 
 def _version() -> str:
-    from .. import __version__
+    from softpend import __version__
 
     return __version__

@@ -49,8 +49,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..plant import OBSERVATION_NAMES, RodParams
-from .variables import POSITION_NAMES, velocity_name
+from softpend.plant import OBSERVATION_NAMES, RodParams
+from softpend.sysid.variables import POSITION_NAMES, velocity_name
 
 __all__ = [
     "SCHEMA_NAME",
@@ -333,7 +333,7 @@ def save_dataset(
     ValueError
         If any array or metadata entry is invalid (the message names it).
     """
-    from .. import __version__
+    from softpend import __version__
 
     if isinstance(plant_params, RodParams):
         plant_params = plant_params.to_dict()

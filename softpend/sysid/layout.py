@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .dataset import TrajectoryDataset
-from .variables import POSITION_NAMES, is_angle, velocity_name
+from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.variables import POSITION_NAMES, is_angle, velocity_name
 
 __all__ = ["INFORMATION_LEVELS", "StateLayout", "TransitionData"]
 

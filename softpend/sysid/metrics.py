@@ -13,10 +13,10 @@ from typing import Any, Optional
 import numpy as np
 import torch
 
-from .dataset import TrajectoryDataset
-from .layout import StateLayout
-from .model import DynamicsEnsemble, DynamicsModel
-from .rollout import rollout
+from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.layout import StateLayout
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
+from softpend.sysid.rollout import rollout
 
 __all__ = ["evaluate_model", "hub_rate_offset_for_tip_error", "one_step_errors", "perturbed_simulator_errors", "RolloutErrors", "rollout_errors", "rollout_trial", "tip_angle_rad"]
 
@@ -304,7 +304,7 @@ def perturbed_simulator_errors(
     small unmodelled generalised force, i.e. a one-step error that keeps being made, as a learned
     model's is.
     """
-    from ..plant import make_plant
+    from softpend.plant import make_plant
 
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")

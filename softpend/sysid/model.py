@@ -43,7 +43,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from .layout import StateLayout
+from softpend.sysid.layout import StateLayout
 
 __all__ = [
     "ACTIVATIONS",
@@ -372,7 +372,7 @@ def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metada
     (Path, Path)
         The two files written.
     """
-    from .. import __version__
+    from softpend import __version__
 
     if not isinstance(model, (DynamicsModel, DynamicsEnsemble)):
         raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")

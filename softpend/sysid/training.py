@@ -19,9 +19,9 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .dataset import TrajectoryDataset
-from .layout import StateLayout, TransitionData
-from .model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
+from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.layout import StateLayout, TransitionData
+from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
 
 __all__ = ["TrainConfig", "FitResult", "fit_dynamics_model", "split_trials"]
 

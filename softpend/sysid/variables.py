@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..plant import OBSERVATION_NAMES
+from softpend.plant import OBSERVATION_NAMES
 
 __all__ = ["POSITION_NAMES", "VELOCITY_NAMES", "ANGLE_NAMES", "velocity_name", "is_angle"]
 

@@ -1,9 +1,9 @@
 """Vision: the report's tip tracker (Algorithm 1), affine calibration, the synthetic camera, and tracking
 video files into time-stamped CSV logs."""
 
-from .calibration import AffineCalibration, calibrate_from_markers, fit_affine, tip_angle_rad
-from .camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, read_sidecar, render_video
-from .tracker import BLUE_HSV, GREEN_HSV, ColourRange, Detection, TipTracker, find_blobs
+from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, fit_affine, tip_angle_rad
+from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, read_sidecar, render_video
+from softpend.vision.tracker import BLUE_HSV, GREEN_HSV, ColourRange, Detection, TipTracker, find_blobs
 
 __all__ = [
     "AffineCalibration",

@@ -7,8 +7,8 @@ from typing import Optional
 
 import numpy as np
 
-from .camera import CameraEffects, SyntheticCamera
-from .tracker import TipTracker
+from softpend.vision.camera import CameraEffects, SyntheticCamera
+from softpend.vision.tracker import TipTracker
 
 __all__ = ["TrackingErrors", "babbling_trajectory", "tracking_errors"]
 
@@ -16,8 +16,8 @@ __all__ = ["TrackingErrors", "babbling_trajectory", "tracking_errors"]
 def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.2):
     """A simulated babbling trajectory of the default rod (band-limited random torque, as
     :func:`softpend.sysid.babble`): times [s], link points ``(T, n + 1, 2)`` [m], hub angles [rad]."""
-    from ..plant import RodParams, make_plant
-    from ..sysid.babble import band_limited_noise
+    from softpend.plant import RodParams, make_plant
+    from softpend.sysid.babble import band_limited_noise
 
     if n_steps < 2:
         raise ValueError(f"n_steps must be >= 2, got {n_steps!r}")

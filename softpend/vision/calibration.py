@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .tracker import GREEN_HSV, ColourRange, find_blobs
+from softpend.vision.tracker import GREEN_HSV, ColourRange, find_blobs
 
 __all__ = ["AffineCalibration", "calibrate_from_markers", "fit_affine", "tip_angle_rad"]
 

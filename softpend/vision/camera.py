@@ -22,7 +22,7 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from .calibration import AffineCalibration
+from softpend.vision.calibration import AffineCalibration
 
 __all__ = [
     "DEFAULT_MARKERS_M",

@@ -9,9 +9,9 @@ from typing import Callable, Optional, Sequence
 import cv2
 import numpy as np
 
-from ..hardware.samplelog import SampleLog
-from .calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
-from .tracker import MAGENTA_HSV, Detection, TipTracker
+from softpend.io.samplelog import SampleLog
+from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
+from softpend.vision.tracker import MAGENTA_HSV, Detection, TipTracker
 
 __all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_video"]
 

@@ -24,7 +24,7 @@ import dataclasses
 
 import torch
 
-from .loop import PilcoConfig, run_pilco
+from softpend.pilco.loop import PilcoConfig, run_pilco
 
 ROOT = "runs/bench-pilco"
 #: Seeds of the benchmark runs.

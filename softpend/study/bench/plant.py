@@ -7,8 +7,8 @@ import time
 import gymnasium as gym
 import numpy as np
 
-from .params import RodParams
-from .prb import PRBPlant
+from softpend.plant.params import RodParams
+from softpend.plant.prb import PRBPlant
 
 N_STEPS = 4000
 

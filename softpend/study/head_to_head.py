@@ -16,8 +16,8 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from ..parallel import run_in_processes
-from .loop import PilcoConfig, PilcoResult, run_pilco
+from softpend.study.parallel import run_in_processes
+from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 
 __all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "plot_predicted_and_real_cost",
            "seconds_to_balance_table"]
@@ -29,7 +29,7 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
 
     A folder is reused when it holds a finished run with the same config (the seed replaced); the other seeds
     run in parallel, up to ``workers`` at a time (default: one per CPU core, see
-    :func:`softpend.parallel.default_workers`), each with one torch thread.
+    :func:`softpend.study.parallel.default_workers`), each with one torch thread.
     """
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
@@ -56,7 +56,7 @@ def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
 
 
 def _run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
-    """One PILCO run saved to ``folder`` (a job of :func:`softpend.parallel.run_in_processes`)."""
+    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.parallel.run_in_processes`)."""
     run_pilco(config, progress=progress).save(folder)
 
 

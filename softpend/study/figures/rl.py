@@ -12,10 +12,10 @@ from typing import Mapping, Optional, Sequence
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..evaluation import EvaluationResult
-from ..plotting import draw_rod
-from .curves import aggregate, episodes_to_asymptote, moving_average
-from .training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.evaluation import EvaluationResult
+from softpend.plotting import draw_rod
+from softpend.rl.curves import aggregate, episodes_to_asymptote, moving_average
+from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
 

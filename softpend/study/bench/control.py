@@ -21,33 +21,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluation import evaluate_controller
-from ..plant import RodParams
+from softpend.evaluation import evaluate_controller
+from softpend.plant import RodParams, tilt_state
 
 #: Start seeds of the swing-up benchmark.
 SWINGUP_SEEDS = (0, 1, 2, 3, 4)
 TILT_RAD = 0.2
 
 
-def tilt_state(params: RodParams, tilt_rad: float, plant: str = "prb") -> tuple[np.ndarray, np.ndarray]:
-    """Straight rod at rest, hub and tip tilted by ``tilt_rad`` from upright (on any registered plant: its
-    state is the hub angle followed by coordinates that are zero for the straight rod)."""
-    from ..plant import make_plant
-
-    n = params.n_links + 1 if plant == "prb" else make_plant(plant, params=params).n_coordinates
-    q = np.zeros(n)
-    q[0] = tilt_rad
-    return q, np.zeros_like(q)
-
-
 def bench_control(include_learned: bool = True) -> dict[str, float]:
     """Measure the classical baselines (see the module docstring)."""
     import torch
 
-    from .learned import lqr_from_learned_model
-    from .lqr import LQRController
-    from .region import region_of_attraction_rad
-    from .swingup import EnergySwingUpController
+    from softpend.control.learned import lqr_from_learned_model
+    from softpend.control.lqr import LQRController
+    from softpend.control.region import region_of_attraction_rad
+    from softpend.control.swingup import EnergySwingUpController
 
     torch.set_num_threads(1)
     params = RodParams()
@@ -68,8 +57,8 @@ def bench_control(include_learned: bool = True) -> dict[str, float]:
     out["swingup_lqr_median_time_s"] = swing.median("swing_up_time_s")
     out["swingup_lqr_std_rad"] = float(max(r.upright_std_rad for r in swing.results))
     if include_learned:
-        from ..sysid import babble
-        from ..sysid.training import fit_dynamics_model
+        from softpend.sysid import babble
+        from softpend.sysid.training import fit_dynamics_model
 
         dataset = babble(params=params, seed=0, progress=False)
         model = fit_dynamics_model(dataset, progress=False).model

@@ -14,13 +14,13 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from ..evaluation import EvaluationSummary, evaluate_controller
-from ..plant import RodParams
-from .benchmarks import tilt_state
-from .learned import learned_model_simulator, lqr_from_learned_model
-from .lqr import LQRController
-from .pid import PIDController, PIDGains, plant_simulator, tune_pid
-from .swingup import EnergySwingUpController
+from softpend.evaluation import EvaluationSummary, evaluate_controller
+from softpend.plant import RodParams
+from softpend.plant import tilt_state
+from softpend.control.learned import learned_model_simulator, lqr_from_learned_model
+from softpend.control.lqr import LQRController
+from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
+from softpend.control.swingup import EnergySwingUpController
 
 __all__ = ["ClassicalComparison", "classical_comparison", "plot_abs_theta", "table_markdown", "train_learned_model"]
 
@@ -57,8 +57,8 @@ class ClassicalComparison:
 def train_learned_model(params: Optional[RodParams] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
                         progress: bool = False, plant: str = "prb"):
     """Babble (report protocol, ``n_trials`` x 5 s) on ``plant`` and fit the default learned model (3 x 16)."""
-    from ..sysid import BabbleProtocol, babble
-    from ..sysid.training import fit_dynamics_model
+    from softpend.sysid import BabbleProtocol, babble
+    from softpend.sysid.training import fit_dynamics_model
 
     dataset = babble(BabbleProtocol(n_trials=n_trials), params=params, seed=seed, plant=plant, progress=progress)
     return fit_dynamics_model(dataset, progress=progress, max_epochs=max_epochs, seed=seed).model

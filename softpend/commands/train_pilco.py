@@ -15,8 +15,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..plant import RodParams
-from .loop import PilcoConfig, run_pilco
+from softpend.plant import RodParams
+from softpend.pilco.loop import PilcoConfig, run_pilco
 
 __all__ = ["config_from_args", "train_pilco_from_args"]
 

@@ -13,10 +13,10 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from ..parallel import run_in_processes
-from ..plant import check_plant_name
-from .config import DQNConfig, MBPOConfig, load_config
-from .training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.study.parallel import run_in_processes
+from softpend.plant import check_plant_name
+from softpend.rl.config import DQNConfig, MBPOConfig, load_config
+from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians",
            "plant_runs_root", "run_folder", "summary_table", "train_seeds"]
@@ -34,7 +34,7 @@ def train_seeds(
     """Train (or reuse) one run per seed; returns their logs in seed order.
 
     Runs that need training are trained in parallel, up to ``workers`` at a time (default: one per CPU core,
-    see :func:`softpend.parallel.default_workers`).
+    see :func:`softpend.study.parallel.default_workers`).
     """
     return _train_runs([(algo, config, seeds, episodes)], root, progress, workers)[0]
 
@@ -74,9 +74,9 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
 
 def _train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
                progress: bool = True) -> None:
-    """Train one run into ``run_dir`` (a job of :func:`softpend.parallel.run_in_processes`)."""
-    from .dqn import train_dqn
-    from .mbpo import train_mbpo
+    """Train one run into ``run_dir`` (a job of :func:`softpend.study.parallel.run_in_processes`)."""
+    from softpend.rl.dqn import train_dqn
+    from softpend.rl.mbpo import train_mbpo
 
     train = train_dqn if algo == "dqn" else train_mbpo
     train(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
@@ -92,7 +92,7 @@ def _saved_config(run_dir: Path) -> DQNConfig | None:
 
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = BALANCE_STD_RAD) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance, to the asymptote, final std."""
-    from .curves import episodes_to_asymptote, plant_s_at_episode
+    from softpend.rl.curves import episodes_to_asymptote, plant_s_at_episode
 
     rows = []
     for method, logs in logs_by_method.items():

@@ -9,8 +9,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .prb_vs_beam import ConvergenceRow
-from .validation import FreeVibration
+from softpend.fidelity.prb_vs_beam import ConvergenceRow
+from softpend.fidelity.validation import FreeVibration
 
 __all__ = ["plot_free_vibration", "plot_convergence", "plot_transfer_matrix", "markdown_table"]
 
@@ -71,7 +71,7 @@ def plot_transfer_matrix(ax, rows: Sequence[dict[str, Any]], plant: str, metric:
                          vmax: float | None = None) -> Any:
     """Heat map of one transfer metric (controllers x parameter perturbations) on one plant, the values
     written in the cells; returns the image for a colour bar."""
-    from .transfer import transfer_matrix
+    from softpend.study.transfer import transfer_matrix
 
     controllers, labels, values = transfer_matrix(rows, plant, metric)
     shown = np.where(np.isfinite(values), values, np.nan)

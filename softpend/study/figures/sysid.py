@@ -6,7 +6,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .metrics import RolloutErrors
+from softpend.sysid.metrics import RolloutErrors
 
 __all__ = ["plot_rollout", "plot_rollout_errors"]
 

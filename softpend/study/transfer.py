@@ -20,8 +20,8 @@ import numpy as np
 
 from tqdm.auto import tqdm
 
-from ..evaluation import evaluate_controller
-from ..plant import RodParams
+from softpend.evaluation import evaluate_controller
+from softpend.plant import RodParams
 
 #: Shortest episode :func:`transfer_table` runs [s] (swing-up needs a 1 s hold to count).
 MIN_DURATION_S = 2.0
@@ -89,8 +89,8 @@ def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.0
     """The classical controllers of :mod:`softpend.control` that run on observations only (so they can
     run on any plant): the observation-feedback LQR from a tilted start (``+-0.2 rad`` hub noise) and the
     energy swing-up with that LQR from hanging."""
-    from ..control.lqr import LQRController
-    from ..control.swingup import EnergySwingUpController
+    from softpend.control.lqr import LQRController
+    from softpend.control.swingup import EnergySwingUpController
 
     params = params or RodParams()
     return [
@@ -123,7 +123,7 @@ def rl_transfer_cases(
     Parameters
     ----------
     runs_root : path
-        Folder of the runs made by :func:`softpend.rl.experiments.train_seeds` (``<root>/<algo>-seed<k>``).
+        Folder of the runs made by :func:`softpend.study.rl_runs.train_seeds` (``<root>/<algo>-seed<k>``).
     algos : sequence of {"dqn", "mbpo"}
         Methods to include.
     seeds : sequence of int
@@ -143,9 +143,9 @@ def rl_transfer_cases(
     ValueError
         If an algorithm is unknown or an agent was trained on a different rod.
     """
-    from ..rl.dqn import load_agent
-    from ..rl.experiments import METHOD_NAMES, run_folder
-    from ..rl.training_env import policy_controller
+    from softpend.rl.dqn import load_agent
+    from softpend.study.rl_runs import METHOD_NAMES, run_folder
+    from softpend.rl.training_env import policy_controller
 
     params = params or RodParams()
     cases = []

@@ -280,7 +280,7 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
 def package_source_hash(package_dir: Optional[Path] = None) -> str:
     """SHA-256 of every file of the ``softpend`` package (paths and contents, ``__pycache__`` excluded)."""
     if package_dir is None:
-        package_dir = Path(__file__).resolve().parent
+        package_dir = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for path in sorted(package_dir.rglob("*")):
         if path.is_file() and "__pycache__" not in path.parts and path.suffix not in (".pyc", ".pyo"):

@@ -25,11 +25,11 @@ import time
 import numpy as np
 import torch
 
-from .babble import BabbleProtocol, babble
-from .dataset import TrajectoryDataset
-from .metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
-from .rollout import rollout
-from .training import TrainConfig, fit_dynamics_model
+from softpend.sysid.babble import BabbleProtocol, babble
+from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
+from softpend.sysid.rollout import rollout
+from softpend.sysid.training import TrainConfig, fit_dynamics_model
 
 #: Seed of the training data and of the held-out data.
 TRAIN_SEED = 0

@@ -5,13 +5,13 @@
 * ``dqn_real_s_to_balance`` / ``mbpo_real_s_to_balance`` -- median over seeds (0, 1, 2) of the real plant
   seconds of training until the periodic evaluation balances (every evaluation seed swings up and holds
   ``upright_std_rad <= 0.2``); ``inf`` when a run never does.  The runs are those of the book's full
-  profile (:func:`softpend.rl.experiments.figure_configs`, ``DEFAULT_EPISODES``, folder ``runs/rl-book``):
+  profile (:func:`softpend.study.rl_runs.figure_configs`, ``RL_EPISODES``, folder ``runs/rl-book``):
   reused when present, trained otherwise.
 * ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
 * ``full_profile_train_cpu_s`` -- CPU seconds of training all six runs (the training logs' ``cpu_s``,
   ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time of the
   full profile on two otherwise idle cores running two single-threaded runs at a time (as
-  :func:`~softpend.rl.experiments.figure_runs` does), if the runs pack perfectly (a lower bound; the target
+  :func:`~softpend.study.rl_runs.figure_runs` does), if the runs pack perfectly (a lower bound; the target
   is <= 1200 s).
 """
 
@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 import tempfile
 
-from .cli import DEFAULT_EPISODES
-from .config import DQNConfig
+from softpend.study.presets import RL_EPISODES
+from softpend.rl.config import DQNConfig
 
 SEEDS = (0, 1, 2)
 ROOT = "runs/rl-book"
@@ -31,7 +31,7 @@ def dqn_train_steps_per_s(episodes: int = 10) -> float:
     """Agent steps per second of DQN training, learning already started: timed between the ends of the first
     and the last episode of a ``1 + episodes`` run (the training log's ``wall_s``), so that start-up,
     evaluation and checkpoint writing are excluded."""
-    from .dqn import train_dqn
+    from softpend.rl.dqn import train_dqn
 
     config = DQNConfig(learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000, eval_seeds=(0,), eval_duration_s=0.1)
     with tempfile.TemporaryDirectory() as tmp:
@@ -48,10 +48,10 @@ def training_cpu_s(log) -> float:
 
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
-    from .experiments import METHOD_NAMES, figure_runs, median_real_s_to_balance
+    from softpend.study.rl_runs import METHOD_NAMES, figure_runs, median_real_s_to_balance
 
     steps_per_s = dqn_train_steps_per_s()
-    runs = figure_runs(DEFAULT_EPISODES["dqn"], DEFAULT_EPISODES["mbpo"], SEEDS, ROOT, progress=True)
+    runs = figure_runs(RL_EPISODES["dqn"], RL_EPISODES["mbpo"], SEEDS, ROOT, progress=True)
     dqn_logs, mbpo_logs = runs[METHOD_NAMES["dqn"]], runs[METHOD_NAMES["mbpo"]]
     cpu_s = sum(training_cpu_s(log) for log in dqn_logs + mbpo_logs)
     dqn_s = median_real_s_to_balance(dqn_logs)

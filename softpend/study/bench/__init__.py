@@ -14,13 +14,13 @@ from typing import Callable, Iterable
 
 #: ``(name, "module:function")`` pairs; one line per benchmark group.
 BENCHMARKS: list[tuple[str, str]] = [
-    ("plant", "softpend.plant.benchmarks:bench_plant"),
-    ("control", "softpend.control.benchmarks:bench_control"),
-    ("beam", "softpend.fidelity.benchmarks:bench_beam"),
-    ("rl", "softpend.rl.benchmarks:bench_rl"),
-    ("pilco", "softpend.pilco.benchmarks:bench_pilco"),
-    ("hardware", "softpend.hardware.benchmarks:bench_hardware"),
-    ("sysid", "softpend.sysid.benchmarks:bench_sysid"),
+    ("plant", "softpend.study.bench.plant:bench_plant"),
+    ("control", "softpend.study.bench.control:bench_control"),
+    ("beam", "softpend.study.bench.beam:bench_beam"),
+    ("rl", "softpend.study.bench.rl:bench_rl"),
+    ("pilco", "softpend.study.bench.pilco:bench_pilco"),
+    ("hardware", "softpend.study.bench.hardware:bench_hardware"),
+    ("sysid", "softpend.study.bench.sysid:bench_sysid"),
 ]
 
 

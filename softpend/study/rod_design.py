@@ -23,10 +23,10 @@ from typing import Optional
 
 import numpy as np
 
-from .base import PlantBase
-from .params import RodParams
-from .prb import PRBPlant
-from .registry import make_plant
+from softpend.plant.base import PlantBase
+from softpend.plant.params import RodParams
+from softpend.plant.prb import PRBPlant
+from softpend.plant.registry import make_plant
 
 __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantilever", "rod_design", "rod_poses_m"]
 

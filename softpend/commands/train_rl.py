@@ -7,13 +7,11 @@ import json
 import math
 from typing import Any
 
-from .config import DQNConfig, MBPOConfig, config_from_overrides
+from softpend.rl.config import DQNConfig, MBPOConfig, config_from_overrides
 
-__all__ = ["DEFAULT_EPISODES", "config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
+from softpend.study.presets import RL_EPISODES
 
-#: Training episodes when ``--episodes`` is not given, also the book's full profile and the benchmark runs
-#: (the report needed ~150 model-free and ~100 model-based episodes; our model-free DQN balances after ~60-90).
-DEFAULT_EPISODES = {"dqn": 100, "mbpo": 50}
+__all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
 
 
 def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:
@@ -43,12 +41,12 @@ def _summary(log) -> dict[str, Any]:
 
 
 def _train(algo: str, args: argparse.Namespace) -> int:
-    from .dqn import train_dqn
-    from .mbpo import train_mbpo
+    from softpend.rl.dqn import train_dqn
+    from softpend.rl.mbpo import train_mbpo
 
     base = DQNConfig() if algo == "dqn" else MBPOConfig()
     config = config_from_args(base, args)
-    episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[algo]
+    episodes = args.episodes if args.episodes is not None else RL_EPISODES[algo]
     train = train_dqn if algo == "dqn" else train_mbpo
     _, log = train(config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress)
     print(json.dumps(_summary(log), indent=2))

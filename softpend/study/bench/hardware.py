@@ -16,8 +16,8 @@ LOOP_SECONDS = 5.0
 def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, float, float]:
     """(RMS error [px], frames/s with the default search window, frames/s searching every frame whole,
     lost frames) over N_FRAMES rendered frames."""
-    from ..vision.accuracy import tracking_errors
-    from ..vision.tracker import TipTracker
+    from softpend.vision.accuracy import tracking_errors
+    from softpend.vision.tracker import TipTracker
 
     errors, frames = tracking_errors(trajectory, effects, N_FRAMES, seed, keep_frames=True)
     fps = {}
@@ -33,9 +33,9 @@ def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, floa
 
 
 def _rig_loop_jitter() -> dict[str, float]:
-    from .driver import MotorLink
-    from .emulator import RigConfig, start_emulator_process
-    from .loop import run_control_loop
+    from softpend.hardware.driver import MotorLink
+    from softpend.hardware.emulator import RigConfig, start_emulator_process
+    from softpend.hardware.loop import run_control_loop
 
     with tempfile.TemporaryDirectory() as tmp:
         stats = Path(tmp) / "stats.json"
@@ -65,8 +65,8 @@ def bench_hardware() -> dict[str, float]:
     ``|command period - median period|``."""
     import cv2
 
-    from ..vision.accuracy import babbling_trajectory
-    from ..vision.camera import CameraEffects
+    from softpend.vision.accuracy import babbling_trajectory
+    from softpend.vision.camera import CameraEffects
 
     cv2.setNumThreads(1)
     trajectory = babbling_trajectory(N_FRAMES + 2)

@@ -1,0 +1,1 @@
+"""File formats shared by the rig, the tracker and the study (sample logs)."""

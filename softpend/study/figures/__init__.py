@@ -1,0 +1,1 @@
+"""Figures of the book: plotting functions over the results of the study."""

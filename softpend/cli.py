@@ -3,13 +3,20 @@
 Each subcommand lives in its own module under :mod:`softpend.commands` and exposes
 ``register(subparsers)``, which adds an ``argparse`` sub-parser whose ``func`` default runs the command
 and returns an exit code.  To add a command, create the module and list it in :data:`COMMAND_MODULES`.
+
+Errors: a usage error, and any error of the project or of its input (:func:`is_reported`: invalid values,
+files that cannot be read or written, a diverged simulation, a refused file, non-finite training) is printed
+as one line ``softpend COMMAND: error: ...`` on stderr with exit status 2; ``--debug`` (before or after the
+command) prints the traceback instead.  Anything else is a bug and propagates with its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import pickle
 import sys
+import zipfile
 from typing import Sequence
 
 #: Modules that contribute subcommands (one line per module).
@@ -25,27 +32,71 @@ COMMAND_MODULES: list[str] = [
 ]
 
 
+class CommandParser(argparse.ArgumentParser):
+    """``ArgumentParser`` whose usage errors are one line on stderr (``softpend train: error: ...``), exit 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from softpend import __version__
 
-    parser = argparse.ArgumentParser(prog="softpend", description="Learning to control a soft robotic pendulum.")
+    parser = CommandParser(prog="softpend", description="Learning to control a soft robotic pendulum.")
     parser.add_argument("--version", action="version", version=f"softpend {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error instead of one line")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
+    for subparser in subparsers.choices.values():
+        subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                               help="show the traceback of an error instead of one line")
     return parser
+
+
+#: Exception types that are the input's or the environment's fault, reported in one line.
+REPORTED_ERRORS: tuple[type[BaseException], ...] = (
+    ValueError, OSError, EOFError, RecursionError, MemoryError, zipfile.BadZipFile, pickle.UnpicklingError,
+)
+
+
+def is_reported(exc: BaseException) -> bool:
+    """Whether ``exc`` gets a one-line message: one of :data:`REPORTED_ERRORS`, or an error class defined by
+    softpend itself (``SimulationDiverged``, the hardware link errors, ...) or by Exudyn (its solver errors)."""
+    if isinstance(exc, REPORTED_ERRORS):
+        return True
+    module = type(exc).__module__ or ""
+    return module.split(".")[0] in ("softpend", "exudyn")
+
+
+def error_line(exc: BaseException) -> str:
+    """``exc`` as one line: its message with whitespace collapsed, prefixed by its class name unless it is a
+    plain ``ValueError``."""
+    message = " ".join(str(exc).split())
+    if type(exc) is ValueError and message:
+        return message
+    if isinstance(exc, MemoryError):
+        message = message or "not enough memory"
+    elif isinstance(exc, RecursionError):
+        message = message or "input nested too deeply"
+    return f"{type(exc).__name__}: {message}" if message else type(exc).__name__
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error already reported on stderr
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"softpend {args.command}: error: {exc}", file=sys.stderr)
+    except Exception as exc:
+        if getattr(args, "debug", False) or not is_reported(exc):
+            raise
+        print(f"softpend {args.command}: error: {error_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"softpend {args.command}: interrupted", file=sys.stderr)

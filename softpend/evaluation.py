@@ -23,7 +23,10 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from softpend.plant import OBSERVATION_NAMES, Observation, RodParams, SimulationDiverged
+from softpend.checks import positive
+from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged
+from softpend.stats import wilson_interval
+from softpend.task import Task
 
 __all__ = [
     "Controller",
@@ -209,6 +212,15 @@ class EvaluationSummary:
     def success_rate(self) -> float:
         return float(np.mean([r.success for r in self.results]))
 
+    @property
+    def successes(self) -> int:
+        """Episodes that succeeded."""
+        return int(sum(r.success for r in self.results))
+
+    def success_interval(self, confidence: float = 0.95) -> tuple[float, float]:
+        """Wilson score interval of the success rate over these episodes (:func:`softpend.stats.wilson_interval`)."""
+        return wilson_interval(self.successes, len(self.results), confidence)
+
     def median(self, metric: str) -> float:
         return float(np.median([getattr(r, metric) for r in self.results]))
 
@@ -221,6 +233,8 @@ class EvaluationSummary:
             "controller": self.name,
             "seeds": len(self.results),
             "success_rate": self.success_rate,
+            "success_low": self.success_interval()[0],
+            "success_high": self.success_interval()[1],
             "swing_up_time_s": self.median("swing_up_time_s"),
             "upright_std_rad": self.median("upright_std_rad"),
             "upright_mean_abs_rad": self.median("upright_mean_abs_rad"),
@@ -289,36 +303,30 @@ def run_episode(
 
 def evaluate_controller(
     controller: Controller,
+    task: Optional[Task] = None,
     *,
     name: str = "controller",
     seeds: Sequence[int] = (0, 1, 2),
     duration_s: float = 10.0,
-    start: str = "hanging",
-    params: Optional[RodParams] = None,
-    plant: str = "prb",
-    dt_s: float = 0.01,
-    substeps: int = 2,
-    torque_limit_nm: Optional[float] = None,
-    start_noise_rad: float = 0.05,
     initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
     env_kwargs: Optional[dict[str, Any]] = None,
 ) -> EvaluationSummary:
-    """Evaluate a controller on the true plant over several seeds.
+    """Evaluate a controller on the true plant of ``task`` over several seeds.
 
     Parameters
     ----------
     controller : Controller
         The controller under test (its ``reset()`` is called before each episode).
+    task : Task, optional
+        Plant, rod, time step and start distribution (default: ``Task()``, the default rod hanging).
     seeds : sequence of int
         One episode per seed; the seed draws the start-state noise through the environment's ``reset``.
     duration_s : float
         Episode length [s].
-    start : {"hanging", "upright", "random"}
-        Start distribution (as in :class:`softpend.envs.SoftPendulumEnv`).
-    params, plant, dt_s, substeps, torque_limit_nm, start_noise_rad, env_kwargs
-        Plant and environment settings (``plant`` is any name of :func:`softpend.plant.make_plant`).
     initial_state : (q, q_dot), optional
-        Exact initial joint state, overriding ``start`` (e.g. a 0.2 rad tilt for LQR).
+        Exact initial joint state, overriding the task's start distribution (e.g. a 0.2 rad tilt for LQR).
+    env_kwargs : dict, optional
+        Further :class:`softpend.envs.SoftPendulumEnv` arguments (e.g. ``reward_params``).
 
     Returns
     -------
@@ -327,13 +335,12 @@ def evaluate_controller(
     """
     from softpend.envs import SoftPendulumEnv
 
+    task = task if task is not None else Task()
+    if not isinstance(task, Task):
+        raise ValueError(f"task must be a Task, got {type(task).__name__}")
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
-    if not math.isfinite(duration_s) or duration_s <= 0:
-        raise ValueError(f"duration_s must be positive and finite, got {duration_s!r}")
-    env = SoftPendulumEnv(
-        params=params, dt_s=dt_s, substeps=substeps, torque_limit_nm=torque_limit_nm, start=start,
-        start_noise_rad=start_noise_rad, plant=plant, **(env_kwargs or {}),
-    )
+    positive("duration_s", duration_s)
+    env = SoftPendulumEnv(**task.env_kwargs(), **(env_kwargs or {}))
     results = [run_episode(controller, env, seed, duration_s, initial_state=initial_state) for seed in seeds]
     return EvaluationSummary(name=name, results=results)

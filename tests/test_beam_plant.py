@@ -11,6 +11,7 @@ import softpend  # noqa: F401  (registers the environments)
 from softpend.plant import Observation, PRBPlant, RodParams, SimulationDiverged, make_plant, plant_names
 from softpend.plant.beam import BeamPlant
 from softpend.plant.exudyn_adapter import SolverFailure
+from softpend.task import Task
 
 
 def test_registry_and_state_layout():
@@ -158,7 +159,7 @@ def test_fast_swing_does_not_diverge():
     from softpend.study.transfer import default_transfer_cases
 
     controller = default_transfer_cases()[1].make_controller()
-    summary = evaluate_controller(controller, seeds=(0,), duration_s=2.5, start="hanging", plant="beam")
+    summary = evaluate_controller(controller, Task(plant="beam"), seeds=(0,), duration_s=2.5)
     result = summary.results[0]
     assert result.diverged is None
     assert np.abs(result.observations[:, 5]).max() > 5.0  # it really moved fast

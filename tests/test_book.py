@@ -19,10 +19,19 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def quick_book(tmp_path_factory):
     """Copy the book sources, execute every toc notebook with the quick profile, build the HTML."""
-    # others edit the package while the tests run: take its hash once, so the cache check below is stable
-    package_hash = book.package_source_hash()
+    # others edit the package while the tests run: hash each notebook's code once, so the cache check below
+    # is stable
+    hash_code = book.PackageCode.code_hashes
+    hashes: dict[tuple[str, ...], dict[str, str]] = {}
+
+    def code_hashes_once(self, cells):
+        cells = tuple(cells)
+        if cells not in hashes:
+            hashes[cells] = hash_code(self, cells)
+        return hashes[cells]
+
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(book, "package_source_hash", lambda package_dir=None: package_hash)
+        patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
         yield _build_quick_book(tmp_path_factory.mktemp("book"))
 
 

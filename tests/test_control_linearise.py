@@ -14,6 +14,7 @@ from softpend.control.linearise import (
     reduce_to_observation_coordinates,
 )
 from softpend.plant import PRBPlant, RodParams
+from softpend.task import Task
 
 
 def _unstable(eig: np.ndarray) -> float:
@@ -134,7 +135,7 @@ def trained_model():
     from softpend.study.classical import train_learned_model
 
     torch.set_num_threads(1)
-    return train_learned_model(RodParams(), n_trials=60, max_epochs=300, seed=0)
+    return train_learned_model(n_trials=60, max_epochs=300, seed=0)
 
 
 @pytest.mark.expensive
@@ -157,6 +158,6 @@ def test_lqr_from_learned_model_stabilises_true_plant(trained_model):
     assert controller.design_model.is_stable_closed_loop(controller.design_gain)
     q = np.zeros(params.n_links + 1)
     q[0] = 0.2
-    result = evaluate_controller(controller, seeds=(0,), duration_s=6.0, start="upright", initial_state=(q, 0 * q)).results[0]
+    result = evaluate_controller(controller, Task(start="upright"), seeds=(0,), duration_s=6.0, initial_state=(q, 0 * q)).results[0]
     assert result.diverged is None and result.upright_std_rad < 0.02
     assert np.all(np.abs(result.theta_rad[-100:]) < 0.01)

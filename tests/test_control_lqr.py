@@ -8,6 +8,7 @@ from softpend.control.lqr import LQRController, LQRWeights, design_lqr
 from softpend.control.region import region_of_attraction_rad
 from softpend.evaluation import evaluate_controller
 from softpend.plant import Observation, RodParams
+from softpend.task import Task
 
 PARAMS = RodParams()
 
@@ -63,7 +64,7 @@ def test_saturation(joint_lqr):
 @pytest.mark.parametrize("which", ["joint", "observation"])
 def test_recovers_from_tilt_and_stays_upright(which, joint_lqr, observation_lqr):
     controller = joint_lqr if which == "joint" else observation_lqr
-    result = evaluate_controller(controller, seeds=(0,), duration_s=4.0, start="upright", initial_state=_tilt(0.2)).results[0]
+    result = evaluate_controller(controller, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=_tilt(0.2)).results[0]
     assert result.diverged is None
     assert result.swing_up_time_s < 0.5
     assert result.upright_std_rad < 0.02
@@ -72,7 +73,7 @@ def test_recovers_from_tilt_and_stays_upright(which, joint_lqr, observation_lqr)
 
 
 def test_region_of_attraction_is_bounded_by_the_torque_limit(joint_lqr):
-    roa = region_of_attraction_rad(joint_lqr, PARAMS, step_rad=0.1, resolution_rad=0.02, duration_s=3.0)
+    roa = region_of_attraction_rad(joint_lqr, Task(rod=PARAMS), step_rad=0.1, resolution_rad=0.02, duration_s=3.0)
     static_bound = np.arcsin(PARAMS.torque_limit_nm / PARAMS.gravity_torque_horizontal_nm)
     assert 0.3 < roa.largest_recovered_rad <= static_bound + 0.02
     assert roa.smallest_failed_rad - roa.largest_recovered_rad <= 0.02 + 1e-9

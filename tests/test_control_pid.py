@@ -6,6 +6,7 @@ import pytest
 from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
 from softpend.evaluation import evaluate_controller
 from softpend.plant import RodParams
+from softpend.task import Task
 
 
 def test_filtered_derivative_of_a_step():
@@ -43,7 +44,7 @@ def test_pid_holds_the_true_plant_upright():
     pid = PIDController(PIDGains(0.19, 0.0005, 0.014))
     q = np.zeros(params.n_links + 1)
     q[0] = 0.2
-    result = evaluate_controller(pid, seeds=(0,), duration_s=4.0, start="upright", initial_state=(q, 0 * q)).results[0]
+    result = evaluate_controller(pid, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=(q, 0 * q)).results[0]
     assert result.diverged is None
     assert result.swing_up_time_s < 1.0
     assert np.all(np.abs(result.theta_rad[-100:]) < 0.02)

@@ -18,7 +18,7 @@ def test_pendulum_energy_reference_points():
 
 def test_swings_up_from_hanging_and_balances():
     controller = EnergySwingUpController(RodParams())
-    result = evaluate_controller(controller, seeds=(0,), duration_s=6.0, start="hanging").results[0]
+    result = evaluate_controller(controller, seeds=(0,), duration_s=6.0).results[0]
     assert result.diverged is None
     assert result.swing_up_time_s < 5.0
     assert result.upright_std_rad < 0.02
@@ -28,7 +28,7 @@ def test_swings_up_from_hanging_and_balances():
 
 def test_joint_energy_rises_while_pumping():
     controller = EnergySwingUpController(RodParams())
-    result = evaluate_controller(controller, seeds=(1,), duration_s=1.5, start="hanging").results[0]
+    result = evaluate_controller(controller, seeds=(1,), duration_s=1.5).results[0]
     energies = [controller.energy_j(None, q, qd) for q, qd in _states(result)]
     assert energies[0] < -0.2 and energies[-1] > energies[0] + 0.05
 

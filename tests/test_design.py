@@ -9,6 +9,7 @@ import pytest
 
 from softpend.plant import RodParams
 from softpend.study.rod_design import clamped_upright_buckling_factor, rod_design, rod_poses_m
+from softpend.task import Task
 
 
 def test_default_rod_meets_the_design_targets():
@@ -46,7 +47,7 @@ def test_buckling_factor_limits_and_scaling():
 
 def test_poses_come_from_the_plant_geometry():
     params = RodParams(n_links=4)
-    poses = rod_poses_m(params)
+    poses = rod_poses_m(Task(rod=params))
     for name, points in poses.items():
         assert points.shape == (5, 2), name
         segment_lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -62,15 +63,15 @@ def test_beam_poses_agree_with_the_prb_chain():
     """The same three poses from the continuum beam's nodes: straight poses coincide, and the horizontal sag
     of the beam and of a fine PRB chain agree within a few percent (issue 8: the beam chapter measures it)."""
     params = RodParams(n_links=16)
-    beam = rod_poses_m(params, plant="beam")
-    prb = rod_poses_m(params)
+    beam = rod_poses_m(Task(plant="beam", rod=params))
+    prb = rod_poses_m(Task(rod=params))
     np.testing.assert_allclose(beam["hanging"][-1], prb["hanging"][-1], atol=1e-9)
     np.testing.assert_allclose(beam["upright"][-1], prb["upright"][-1], atol=1e-9)
     sag_beam, sag_prb = -beam["horizontal"][-1, 1], -prb["horizontal"][-1, 1]
     assert sag_beam > 0.1 * params.length_m
     assert sag_prb == pytest.approx(sag_beam, rel=0.03)
     with pytest.raises(ValueError, match="plant"):
-        rod_poses_m(params, plant="rubber")
+        rod_poses_m(Task(plant="rubber", rod=params))
 
 
 def test_rod_design_rejects_bad_params():

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import FunctionController, evaluate_controller, metrics_from_trajectory
+from softpend.task import Task
 
 
 def _trajectory(theta: np.ndarray, dt: float = 0.01):
@@ -63,7 +64,7 @@ def test_metric_input_validation() -> None:
 def test_closed_loop_hub_feedback_keeps_the_soft_rod_upright() -> None:
     # a PD loop on the hub angle: the rod is stiff enough to stand when its base is held
     controller = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
-    summary = evaluate_controller(controller, start="upright", seeds=[0, 1], duration_s=3.0)
+    summary = evaluate_controller(controller, Task(start="upright"), seeds=[0, 1], duration_s=3.0)
     assert summary.success_rate == 1.0
     assert summary.median("upright_std_rad") < 0.1
     assert summary.results[0].observations.shape == (301, 10)

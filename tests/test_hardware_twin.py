@@ -7,6 +7,7 @@ import pytest
 
 from softpend.io.samplelog import read_sample_log
 from softpend.hardware.twin import compare_with_simulator_model, run_twin_session, truth_link_points
+from softpend.task import Task
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +66,7 @@ def test_truth_log_of_a_beam_twin_draws_the_beam(tmp_path):
     np.testing.assert_allclose(points[-1], beam.link_points_m(), atol=1e-6)
     np.testing.assert_allclose(np.hypot(*points[:, -1].T), RodParams().length_m, rtol=0.02)  # nearly straight
     with pytest.raises(ValueError, match="plant"):
-        RigConfig(plant="rubber")
+        RigConfig(task=Task(plant="rubber"))
 
 
 @pytest.mark.expensive

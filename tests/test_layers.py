@@ -12,8 +12,10 @@ PACKAGE = Path(__file__).resolve().parents[1] / "softpend"
 
 #: Floors from the bottom; a module may import its own unit and units of lower floors only.
 FLOORS = [
-    ["softpend", "softpend.io", "softpend.plant"],
-    ["softpend.task", "softpend.sysid", "softpend.fidelity", "softpend.plotting"],
+    ["softpend", "softpend.checks", "softpend.stats"],
+    ["softpend.io", "softpend.plant"],
+    ["softpend.task"],
+    ["softpend.sysid", "softpend.fidelity", "softpend.plotting"],
     ["softpend.envs", "softpend.vision"],
     ["softpend.evaluation", "softpend.hardware"],
     ["softpend.control", "softpend.rl", "softpend.pilco"],

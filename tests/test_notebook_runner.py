@@ -10,7 +10,7 @@ import nbformat
 import pytest
 
 from softpend.study import book
-from softpend.study.book import NotebookExecutionError, cache_key, package_source_hash, run_notebooks, toc_notebooks
+from softpend.study.book import NotebookExecutionError, PackageCode, cache_key, code_cells, run_notebooks, toc_notebooks
 from softpend.cli import main as cli_main
 
 HEADER = """\
@@ -115,9 +115,8 @@ def test_cli_reports_bad_profile_as_an_error(tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- execution and cache
-def test_execution_injects_parameters_and_caches(tmp_path, monkeypatch):
-    # the package is edited by others while tests run: pin its hash (its own test is below)
-    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "pinned")
+def test_execution_injects_parameters_and_caches(tmp_path):
+    # the notebook imports nothing from softpend, so edits of the package cannot touch its cache key
     profiles = {"full": {"nb": {"greeting": "full-profile ", "repeat": 2}}, "quick": {"nb": {"greeting": "quick "}}}
     root = make_book(tmp_path, {"nb": notebook_source(OK_CELL, "import os\nprint('cwd=' + os.getcwd())")}, profiles)
     output = root / "book" / "_generated" / "nb.ipynb"
@@ -149,10 +148,9 @@ def test_execution_injects_parameters_and_caches(tmp_path, monkeypatch):
     assert run_notebooks(root, profile="quick", force=True, progress=False)[0].status == "executed"
 
 
-def test_overrides_apply_where_defined_and_unknown_ones_fail(tmp_path, monkeypatch, capsys):
+def test_overrides_apply_where_defined_and_unknown_ones_fail(tmp_path, capsys):
     """``--set NAME=VALUE`` (e.g. ``plant=beam``) lands in every notebook that defines NAME, on top of the
     profile; a notebook without it runs with its profile; a NAME no notebook defines fails before running."""
-    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "pinned")
     notebooks = {
         "with_plant": notebook_source("print('plant=' + plant)", parameters="plant = 'prb'"),
         "without": notebook_source(OK_CELL),
@@ -173,30 +171,147 @@ def test_overrides_apply_where_defined_and_unknown_ones_fail(tmp_path, monkeypat
     assert "not parameters of any selected notebook" in capsys.readouterr().err
 
 
-def test_cache_key_covers_source_parameters_and_package(tmp_path):
-    key = cache_key("source", {"a": 1}, "pkg")
-    assert cache_key("source", {"a": 1}, "pkg") == key
-    assert cache_key("source!", {"a": 1}, "pkg") != key
-    assert cache_key("source", {"a": 2}, "pkg") != key
-    assert cache_key("source", {"a": 1}, "pkg2") != key
-    package = tmp_path / "pkg"
-    (package / "sub").mkdir(parents=True)
-    (package / "sub" / "mod.py").write_text("x = 1\n")
-    before = package_source_hash(package)
-    (package / "sub" / "__pycache__").mkdir()
-    (package / "sub" / "__pycache__" / "mod.cpython-311.pyc").write_bytes(b"junk")
-    assert package_source_hash(package) == before  # bytecode does not count
-    (package / "sub" / "mod.py").write_text("x = 2\n")
-    assert package_source_hash(package) != before
-    assert len(package_source_hash()) == 64  # the installed softpend package
+def test_cache_key_covers_source_parameters_and_code():
+    key = cache_key("source", {"a": 1}, {"pkg": "h"})
+    assert cache_key("source", {"a": 1}, {"pkg": "h"}) == key
+    assert cache_key("source!", {"a": 1}, {"pkg": "h"}) != key
+    assert cache_key("source", {"a": 2}, {"pkg": "h"}) != key
+    assert cache_key("source", {"a": 1}, {"pkg": "h2"}) != key
+    assert cache_key("source", {"a": 1}, {"pkg": "h", "pkg.mod": "h"}) != key
 
 
-def test_package_change_invalidates_the_cache(tmp_path, monkeypatch):
+def write_package(root: Path, files: dict[str, str]) -> Path:
+    """A fake package ``root/fakepkg`` with ``files`` (relative path -> source); returns its directory."""
+    package = root / "fakepkg"
+    for relative, text in files.items():
+        path = package / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(text))
+    return package
+
+
+FAKE_PACKAGE = {
+    "__init__.py": '''\
+        """The fake package."""
+        ENTRY = {"thing": "fakepkg.plants.model:Model"}  # an entry point, imported by name when used
+        ''',
+    "plants/__init__.py": "from fakepkg.plants.registry import make\n",
+    "plants/registry.py": '''\
+        """Registry: names -> entry points."""
+        _PLANTS = {"model": "fakepkg.plants.model:Model"}
+
+        def make(name):
+            from .helpers import load  # relative, inside a function
+            return load(_PLANTS[name])
+        ''',
+    "plants/helpers.py": "import importlib\n\ndef load(entry):\n    return importlib.import_module(entry.split(':')[0])\n",
+    "plants/model.py": '''\
+        """The model."""
+        from fakepkg.maths import gain
+
+
+        class Model:
+            """A model."""
+
+            def step(self, x):
+                """One step."""
+                return gain.K * x  # scaled
+        ''',
+    "maths/__init__.py": "",
+    "maths/gain.py": '''\
+        """Gains."""
+        K = 2.0  #: the gain
+        ''',
+    "unused/__init__.py": "",
+    "unused/loop.py": "from fakepkg.maths import gain\nLOOPS = 3\n",
+}
+
+#: A notebook's code cells: one imports a submodule through ``from package import submodule``.
+CELLS = ["value = 1", "from fakepkg.plants import registry\nregistry.make('model')"]
+
+
+def test_closure_follows_imports_entry_points_and_parents(tmp_path):
+    code = PackageCode(write_package(tmp_path, FAKE_PACKAGE))
+    used = code.closure(CELLS)
+    # the registry, its parent package, the root __init__, the relative import inside a function, and the
+    # model that only an entry-point string names, with the model's own import and that one's package
+    assert used == {
+        "fakepkg",
+        "fakepkg.plants",
+        "fakepkg.plants.registry",
+        "fakepkg.plants.helpers",
+        "fakepkg.plants.model",
+        "fakepkg.maths",
+        "fakepkg.maths.gain",
+    }
+    # any import runs the root __init__, whose entry point reaches the model (and so the plants package)
+    assert code.closure(["import fakepkg.unused.loop"]) == used | {"fakepkg.unused", "fakepkg.unused.loop"}
+    assert code.closure(["import numpy as np\nfrom os import path"]) == set()
+
+
+def key_of(package: Path) -> str:
+    return cache_key("notebook source", {"p": 1}, PackageCode(package).code_hashes(CELLS))
+
+
+@pytest.mark.parametrize(
+    "path, old, new, changes",
+    [
+        ("maths/gain.py", "K = 2.0", "K = 3.0", True),  # code of a module used through two imports
+        ("plants/model.py", "gain.K * x", "gain.K * x + 1", True),  # reached only through an entry point
+        ("plants/helpers.py", "split(':')[0]", "split(':')[-1]", True),  # imported inside a function
+        ("maths/gain.py", '"""Gains."""', '"""Gains, rewritten."""', False),  # module docstring
+        ("plants/model.py", '"""One step."""', '"""One step of the model."""', False),  # method docstring
+        ("plants/model.py", "# scaled", "# scaled by the gain", False),  # comment
+        ("plants/model.py", "class Model:", "\n\nclass Model:", False),  # blank lines
+        ("unused/loop.py", "LOOPS = 3", "LOOPS = 4", False),  # code of a module the notebook does not use
+    ],
+)
+def test_cache_key_follows_the_code_a_notebook_uses(tmp_path, path, old, new, changes):
+    package = write_package(tmp_path, FAKE_PACKAGE)
+    before = key_of(package)
+    target = package / path
+    text = target.read_text()
+    assert old in text
+    target.write_text(text.replace(old, new))
+    assert (key_of(package) != before) == changes
+
+
+def test_cache_key_ignores_bytecode_and_counts_data_files(tmp_path):
+    package = write_package(tmp_path, FAKE_PACKAGE)
+    before = key_of(package)
+    (package / "maths" / "__pycache__").mkdir()
+    (package / "maths" / "__pycache__" / "gain.cpython-311.pyc").write_bytes(b"junk")
+    assert key_of(package) == before
+    (package / "maths" / "table.json").write_text("[1, 2]")
+    with_data = key_of(package)
+    assert with_data != before
+    (package / "maths" / "table.json").write_text("[1, 3]")
+    assert key_of(package) != with_data
+
+
+def test_unparsable_cell_uses_every_module(tmp_path):
+    code = PackageCode(write_package(tmp_path, FAKE_PACKAGE))
+    assert code.closure(["def broken(:"]) == set(code.modules)
+    assert code.closure(["%time x = 1"]) == set()  # IPython magics are translated before parsing
+
+
+def test_real_notebook_closure_reaches_the_plant_and_not_pilco():
+    root = Path(__file__).resolve().parents[1]
+    code = PackageCode()
+    assert code.name == "softpend"
+    used = code.closure(code_cells(book.read_notebook(root / "notebooks" / "fig01_prb_rod.md")))
+    assert {"softpend", "softpend.plant", "softpend.plant.registry", "softpend.plant.prb", "softpend.study.rod_design"} <= used
+    assert "softpend.plant.beam" in used  # named only by the registry's entry point
+    assert "softpend.pilco.loop" not in used and "softpend.rl.dqn" not in used
+    assert all(len(value) == 64 for value in code.code_hashes(["import softpend.plant"]).values())
+
+
+def test_code_change_invalidates_the_cache(tmp_path, monkeypatch):
     root = make_book(tmp_path, {"nb": notebook_source(OK_CELL)}, {"full": {}})
-    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "one package")
+    monkeypatch.setattr(book.PackageCode, "code_hashes", lambda self, cells: {"softpend.plant": "one"})
     assert run_notebooks(root, progress=False)[0].status == "executed"
     assert run_notebooks(root, progress=False)[0].status == "cached"
-    monkeypatch.setattr(book, "package_source_hash", lambda package_dir=None: "a different package")
+    monkeypatch.setattr(book.PackageCode, "code_hashes", lambda self, cells: {"softpend.plant": "two"})
     assert run_notebooks(root, progress=False)[0].status == "executed"
 
 
@@ -216,3 +331,17 @@ def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_p
     assert "before the failure" in text and "never" not in text
     assert not (root / "book" / "_generated" / "broken.sha256").exists()  # a failure is never cached
     assert cli_main(["book", "--root", str(root)]) == 1  # and the CLI exits non-zero
+
+
+def test_records_files_enter_the_key_of_the_notebooks_that_read_them(tmp_path):
+    """Notebooks using softpend.study.records read book/records/: editing a record changes their key."""
+    from softpend.study.book import BookLayout, _records_hashes
+
+    (tmp_path / "book" / "records").mkdir(parents=True)
+    layout = BookLayout(tmp_path)
+    assert _records_hashes(layout) == {}
+    record = tmp_path / "book" / "records" / "what_we_tried.yml"
+    record.write_text("dqn: []\n")
+    first = _records_hashes(layout)
+    record.write_text("dqn: [1]\n")
+    assert set(first) == {"book/records/what_we_tried.yml"} and _records_hashes(layout) != first

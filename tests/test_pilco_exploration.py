@@ -1,4 +1,4 @@
-"""PILCO's exploration aids: the held random-torque first trial and the screened random policy starts."""
+"""PILCO's exploration: the random-torque first trial with held bang-bang torques."""
 
 from __future__ import annotations
 
@@ -8,10 +8,7 @@ import torch
 
 from softpend.envs import SoftPendulumEnv
 from softpend.evaluation import run_episode
-from softpend.pilco import PilcoConfig, RBFPolicy, RandomTorqueController, state_spec
-from softpend.pilco.gp import MultiOutputGP
-from softpend.pilco.loop import _optimise_policy
-from softpend.pilco.propagation import Propagator
+from softpend.pilco import PilcoConfig, RandomTorqueController
 from softpend.plant import OBSERVATION_NAMES, Observation
 
 torch.set_num_threads(1)
@@ -56,41 +53,3 @@ def test_held_random_torques_swing_the_soft_rod_further_than_per_period_draws():
     plain = [swing_rad(RandomTorqueController(LIMIT_NM, 0.1, s), s) for s in range(3)]
     assert np.mean(held) > 1.5 * np.mean(plain), (held, plain)
     assert max(held) > np.pi / 2  # at least one random trial takes the tip above the horizontal
-
-
-def test_policy_search_starts_from_the_best_screened_candidate_and_keeps_the_best_restart():
-    spec = state_spec("tip")
-    rng = np.random.default_rng(0)
-    states = np.column_stack([rng.uniform(-8, 8, 60), rng.uniform(-np.pi, np.pi, 60)])
-    u = rng.uniform(-LIMIT_NM, LIMIT_NM, 60)
-    # a weak-motor pendulum (theta from upright): 0.1 s differences
-    dy = np.column_stack([0.1 * (20.0 * np.sin(states[:, 1]) + 500.0 * u), 0.1 * states[:, 0]])
-    gp = MultiOutputGP(np.hstack([spec.model_inputs(states), u[:, None]]), dy)
-    m0 = torch.tensor([0.0, 2.0], dtype=torch.float64)
-    s0 = 0.05**2 * torch.eye(2, dtype=torch.float64)
-    lengthscales = np.array([5.0, 0.7, 0.7])
-    n_steps = 8
-
-    def fresh(seed: int, target_std: float) -> RBFPolicy:
-        centers = spec.model_inputs(states[np.random.default_rng(seed).choice(60, 8)])
-        return RBFPolicy(centers, lengthscales, LIMIT_NM, seed=seed, target_std=target_std)
-
-    def predicted(vector: np.ndarray) -> float:
-        policy = fresh(0, 0.1)
-        policy.set_vector(vector)
-        with torch.no_grad():
-            return float(Propagator(spec, gp, policy, 0.3, 0.15).rollout(m0, s0, n_steps)[3])
-
-    candidates = [fresh(s, 1.0).get_vector() for s in range(1, 9)]
-    start_costs = [predicted(fresh(0, 0.1).get_vector())] + [predicted(c) for c in candidates]
-    assert min(start_costs[1:]) < start_costs[0] - 0.5  # some random full-range policy is far better
-    policy = fresh(0, 0.1)
-    cost = _optimise_policy(Propagator(spec, gp, policy, 0.3, 0.15), policy, m0, s0, n_steps, iterations=2,
-                            candidates=candidates)
-    assert cost <= min(start_costs) + 1e-9
-    assert predicted(policy.get_vector()) == pytest.approx(cost)
-    # a restart (the second-best start) never ends worse than the single search
-    restarted = fresh(0, 0.1)
-    restarted_cost = _optimise_policy(Propagator(spec, gp, restarted, 0.3, 0.15), restarted, m0, s0, n_steps,
-                                      iterations=2, candidates=candidates, restarts=1)
-    assert restarted_cost <= cost + 1e-9

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from softpend.pilco.gp import MultiOutputGP, select_subset, spread_subset
+from softpend.pilco.gp import MultiOutputGP, select_subset
 
 torch.set_num_threads(1)
 
@@ -70,25 +70,3 @@ def test_bad_inputs_raise_value_errors():
         gp.predict(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="max_iterations"):
         gp.fit(0)
-
-
-def test_spread_subset_keeps_a_rare_region_that_a_random_subset_loses():
-    rng = np.random.default_rng(0)
-    common = rng.normal(0.0, 1.0, (600, 2))  # hanging-like data, many times over
-    rare = rng.normal(8.0, 0.3, (5, 2))  # five upright samples of an early swing-up
-    recent = rng.normal(0.0, 1.0, (40, 2))
-    x = np.vstack([rare, common, recent])
-    idx = spread_subset(x, 100, recent=40, lengthscales=np.array([1.0, 1.0]))
-    assert len(idx) == 100 and len(set(idx.tolist())) == 100
-    assert set(range(len(x) - 40, len(x))) <= set(idx.tolist())
-    assert np.sum(idx < 5) >= 4  # the rare region stays covered
-    kept_rare = [np.sum(select_subset(len(x), 100, recent=40, seed=s) < 5) for s in range(20)]
-    assert np.mean(kept_rare) < 2.0  # a uniform draw keeps about 0.5 of them
-    # length-scales set the metric: a huge scale on the second input ignores it
-    line = np.column_stack([np.linspace(0, 1, 300), np.r_[np.zeros(299), 50.0]])
-    wide = spread_subset(line, 10, recent=0, lengthscales=np.array([1.0, 1.0]))
-    flat = spread_subset(line, 10, recent=0, lengthscales=np.array([1.0, 1e6]))
-    assert 299 in wide and np.ptp(line[flat, 0]) > 0.9
-    np.testing.assert_array_equal(spread_subset(x[:50], 100, recent=40, lengthscales=np.ones(2)), np.arange(50))
-    with pytest.raises(ValueError, match="lengthscales"):
-        spread_subset(x, 100, recent=40, lengthscales=np.array([1.0, -1.0]))

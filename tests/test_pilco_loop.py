@@ -16,6 +16,7 @@ from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.loop import _came_near_upright, _optimise_policy, real_cost
 from softpend.pilco.propagation import Propagator
 from softpend.plant import RodParams
+from softpend.task import Task
 
 torch.set_num_threads(1)
 
@@ -81,10 +82,10 @@ def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
     assert np.max(np.abs(torques)) <= RodParams().torque_limit_nm + 1e-12
 
 
-def test_several_random_trials_and_a_linear_policy_term(tmp_path):
-    """``n_random_trials`` random trials come first and count as interaction; the linear term is saved and loaded;
+def test_several_random_trials_come_first(tmp_path):
+    """``n_random_trials`` random trials come first and count as interaction; the run is saved and loaded;
     the tip-rate factor waits for a trial that came near upright (none does in 1 s)."""
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, n_random_trials=3, policy_linear=True,
+    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, n_random_trials=3,
                          cost_rate_width_rad_s=3.0, cost_rate_after_rad=0.5, seed=4)
     result = run_pilco(config, progress=False)
     assert all(r.cost_rate_width_rad_s is None for r in result.records)
@@ -99,12 +100,17 @@ def test_several_random_trials_and_a_linear_policy_term(tmp_path):
     # the first random trial is the one a single-random-trial run makes (same seed stream)
     single = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
     np.testing.assert_array_equal(single.real_states[0], randoms[0])
-    assert result.policy.linear and result.policy.linear_weights.shape == (3,)
     result.save(tmp_path)
     loaded = PilcoResult.load(tmp_path)
-    assert loaded.config == config and loaded.policy.linear
+    assert loaded.config == config
     x = np.random.default_rng(0).normal(size=(7, 3))
     np.testing.assert_allclose(loaded.policy.torque_nm(x), result.policy.torque_nm(x))
+    # a saved policy with parameters this policy does not have is refused, not silently dropped
+    state = result.policy.state_dict()
+    with pytest.raises(ValueError, match="linear_weights"):
+        loaded.policy.load_state_dict({**state, "linear_weights": torch.zeros(3)})
+    with pytest.raises(ValueError, match="targets"):
+        loaded.policy.load_state_dict({k: v for k, v in state.items() if k != "targets"})
 
 
 def test_came_near_upright_sees_a_fast_pass_through_the_top():
@@ -138,7 +144,7 @@ def test_policy_search_lowers_the_predicted_cost():
 
 @pytest.mark.parametrize("field, value", [
     ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
-    ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("policy_linear", 1), ("cost_rate_after_rad", -0.5),
+    ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):
@@ -155,9 +161,9 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
     args = ["train", "--algo", "pilco", "--episodes", "1", "--out", str(out), "--no-progress", "--seed", "1"]
     for key, value in TINY.items():
         if key not in ("n_policy_trials",):
-            value = ",".join(map(str, value)) if isinstance(value, tuple) else value
+            value = json.dumps(list(value)) if isinstance(value, tuple) else value  # eval_seeds=[1000]
             args += ["--set", f"{key}={value}"]
-    assert main(args + ["--set", "cost_rate_width_rad_s=2.5", "--set", "cost_rate_after_rad=none"]) == 0
+    assert main(args + ["--set", "cost_rate_width_rad_s=2.5", "--set", "cost_rate_after_rad=null"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["trials"] == 2 and summary["plant_seconds_total"] == pytest.approx(2.0)
     assert (out / "policy.pt").exists() and (out / "pilco.json").exists()
@@ -170,7 +176,7 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
 @pytest.mark.expensive
 def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
     """The classical PILCO result: swing-up and balance within 10 trials of at most 4 s (random one included)."""
-    config = PilcoConfig(params=RIGID, state="tip", control_dt_s=0.1, horizon_s=4.0, n_policy_trials=9,
+    config = PilcoConfig(task=Task(rod=RIGID), state="tip", control_dt_s=0.1, horizon_s=4.0, n_policy_trials=9,
                          cost_rate_width_rad_s=None, policy_iterations=40, eval_seeds=(1000, 1001, 1002),
                          eval_duration_s=6.0, seed=0)
     result = run_pilco(config, progress=False)

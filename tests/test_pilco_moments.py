@@ -147,29 +147,6 @@ def test_rollout_gradient_matches_finite_differences():
         assert float(grad[i]) == pytest.approx(fd, rel=1e-4, abs=1e-7)
 
 
-def test_linear_policy_term_moments_are_exact_against_monte_carlo():
-    """With zero pseudo-targets the pre-saturation output is ``w^T x``, Gaussian: the moments are exact."""
-    rng = np.random.default_rng(7)
-    dim = 5
-    policy = RBFPolicy(rng.normal(size=(6, dim)), np.ones(dim), 0.06, seed=0, target_std=0.0, linear=True)
-    vector = policy.get_vector()
-    assert np.all(vector[-dim:] == 0.0)  # the linear term starts switched off
-    vector[-dim:] = 0.5 * rng.normal(size=dim)
-    policy.set_vector(vector)
-    a = 0.3 * rng.normal(size=(dim, dim))
-    m = torch.tensor(0.5 * rng.normal(size=dim), dtype=F64)
-    s = torch.tensor(a @ a.T + 0.05 * np.eye(dim), dtype=F64)
-    m_u, s_u, c_u = policy.moments(m, s)
-    xs = rng.multivariate_normal(m.numpy(), s.numpy(), N_MC)
-    u = policy.torque_nm(xs)
-    assert abs(float(m_u) - u.mean()) < 0.005 * 0.06
-    assert float(s_u) == pytest.approx(u.var(), rel=0.02)
-    assert _rel(s @ c_u, np.cov(np.hstack([xs, u[:, None]]).T)[:dim, dim]) < 0.03
-    # the RBF part adds to it: non-zero targets change the output
-    policy.targets = torch.ones(6, dtype=F64)
-    assert abs(float(policy.moments(m, s)[0]) - float(m_u)) > 1e-4
-
-
 @pytest.mark.parametrize("spec_name", ["tip", "tip_bend"])
 def test_cost_with_a_tip_rate_width_against_monte_carlo(spec_name):
     """The expected cost with the tip-rate factor against sampling the (correlated) state; off, it is the position cost."""

@@ -21,7 +21,7 @@ def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="real_ratio"):
         MBPOConfig(real_ratio=-0.1)
     with pytest.raises(ValueError, match="start_branch_fraction"):
-        MBPOConfig(start_branch_fraction=0.75, upright_branch_fraction=0.5)
+        MBPOConfig(start_branch_fraction=1.5)
     with pytest.raises(ValueError, match="clip_q_targets"):
         DQNConfig(clip_q_targets=1)
     with pytest.raises(ValueError, match="rollouts_within_data"):

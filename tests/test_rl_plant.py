@@ -7,6 +7,7 @@ import pytest
 
 from softpend.plant.beam import BeamPlant
 from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.task import Task
 from softpend.rl.dqn import load_agent, train_dqn
 from softpend.study.rl_runs import figure_configs, figure_runs, plant_runs_root, run_folder
 from softpend.rl.training_env import make_training_env
@@ -14,7 +15,7 @@ from softpend.rl.training_env import make_training_env
 
 def test_plant_is_validated_with_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="plant"):
-        DQNConfig(plant="rigid")
+        DQNConfig(task=Task(plant="rigid"))
     with pytest.raises(ValueError, match="plant"):
         figure_configs(plant="Beam")
     with pytest.raises(ValueError, match="plant"):
@@ -28,18 +29,19 @@ def test_runs_of_different_plants_live_in_different_folders():
     assert beam == Path("runs/rl-book-beam")
     assert run_folder(beam, "dqn", 0) != run_folder("runs/rl-book", "dqn", 0)
     configs = figure_configs(plant="beam")
-    assert configs["dqn"].plant == "beam" and isinstance(configs["mbpo"], MBPOConfig) and configs["mbpo"].plant == "beam"
+    assert configs["dqn"].task.plant == "beam" and isinstance(configs["mbpo"], MBPOConfig)
+    assert configs["mbpo"].task.plant == "beam"
     assert figure_configs()["dqn"] == DQNConfig()  # the PRB default runs keep their config (and cache)
 
 
 def test_dqn_trains_and_evaluates_on_the_beam(tmp_path):
-    config = DQNConfig(plant="beam", episode_s=0.4, learning_starts=5, eval_every_episodes=1, checkpoint_every_episodes=1,
+    config = DQNConfig(task=Task(plant="beam"), episode_s=0.4, learning_starts=5, eval_every_episodes=1, checkpoint_every_episodes=1,
                        eval_seeds=(0,), eval_duration_s=0.3)
     assert isinstance(make_training_env(config).unwrapped.plant, BeamPlant)
     _, log = train_dqn(config, seed=0, episodes=1, run_dir=tmp_path, progress=False)
     assert log.plant_s == pytest.approx(0.4) and len(log.evaluations) == 1
     _, loaded = load_agent(tmp_path)
-    assert loaded.plant == "beam"
+    assert loaded.task.plant == "beam"
     # the beam rod, unlike the 4-link PRB chain, has no 4-link joint state: the evaluation ran on the beam
     from softpend.rl.dqn import evaluate_agent
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 
@@ -39,8 +38,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from softpend.io.outputs import check_output_file, json_text
     from softpend.plant import RodParams
     from softpend.sysid import BabbleProtocol, babble
+    from softpend.sysid.dataset import is_dataset_file
+
+    output = args.output if args.output.endswith(".npz") else args.output + ".npz"
+    check_output_file(output, what="dataset", owned=is_dataset_file)  # before the work: a dataset may be replaced
 
     protocol = BabbleProtocol(
         n_trials=args.n_trials,
@@ -59,14 +63,14 @@ def run(args: argparse.Namespace) -> int:
     )
     params = RodParams() if args.n_links is None else RodParams(n_links=args.n_links)
     started = time.perf_counter()
-    dataset = babble(protocol, params=params, seed=args.seed, path=args.output, progress=not args.no_progress)
+    dataset = babble(protocol, params=params, seed=args.seed, path=output, progress=not args.no_progress)
     elapsed = time.perf_counter() - started
     summary = {
-        "path": args.output if args.output.endswith(".npz") else args.output + ".npz",
+        "path": output,
         "n_trials": dataset.n_trials,
         "n_samples": dataset.n_samples,
         "n_transitions": dataset.n_transitions,
         "wall_s": round(elapsed, 2),
     }
-    print(json.dumps(summary))
+    print(json_text(summary))
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -18,11 +17,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from softpend.io.outputs import json_text
     from softpend.study.bench import run_benchmarks
 
     results = run_benchmarks(args.only)
     if args.json:
-        print(json.dumps(results, indent=2, sort_keys=True))
+        print(json_text(results, indent=2, sort_keys=True))
     else:
         width = max(map(len, results), default=0)
         for key, value in results.items():

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from softpend.commands.options import add_set_option
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.book import DEFAULT_PROFILE
@@ -20,13 +22,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)")
     parser.add_argument("--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="set a parameter (VALUE parsed as YAML) in every notebook that defines it, on top of the profile; "
-        "repeatable. Example: --set plant=beam regenerates the figure set on the continuum beam",
+    add_set_option(
+        parser,
+        dest="set",
+        help="set a parameter (VALUE parsed as JSON, else kept as a string) in every notebook that defines it, "
+        "on top of the profile; repeatable. Example: --set plant=beam regenerates the figure set on the "
+        "continuum beam",
     )
     parser.add_argument("--force", action="store_true", help="execute even if the cached output is up to date")
     parser.add_argument("--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)")
@@ -37,27 +38,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def parse_overrides(items: list[str]) -> dict:
-    """``["NAME=VALUE", ...]`` -> ``{NAME: VALUE}`` with each VALUE parsed as YAML (``3`` -> 3, ``beam`` -> "beam")."""
-    import yaml
-
-    overrides = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip().isidentifier():
-            raise ValueError(f"--set expects NAME=VALUE with NAME a Python identifier, got {item!r}")
-        try:
-            overrides[name.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError as exc:
-            raise ValueError(f"--set {item!r}: VALUE is not valid YAML ({exc})") from None
-    return overrides
-
-
 def run(args: argparse.Namespace) -> int:
     from softpend.study.book import NotebookExecutionError, build_html, run_notebooks, summary
 
     try:
-        overrides = parse_overrides(args.set)
+        overrides = dict(args.set)
         runs = run_notebooks(args.root, profile=args.profile, only=args.only, force=args.force, overrides=overrides)
     except NotebookExecutionError as exc:
         print(f"softpend book: error: {exc}", file=sys.stderr)

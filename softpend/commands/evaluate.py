@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,14 +17,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from softpend.io.outputs import json_text
     from softpend.rl.dqn import evaluate_agent, load_agent
 
     model, config = load_agent(args.agent, which=args.which)
     summary = evaluate_agent(model, config, seeds=tuple(args.seeds), duration_s=args.duration_s, name=str(args.agent))
     if args.json:
-        clean = lambda v: None if isinstance(v, float) and math.isinf(v) else v  # noqa: E731
-        print(json.dumps({"summary": {k: clean(v) for k, v in summary.row().items()},
-                          "per_seed": [{k: clean(v) for k, v in r.metrics().items()} for r in summary.results]}, indent=2))
+        print(json_text({"summary": summary.row(), "per_seed": [r.metrics() for r in summary.results]}, indent=2))
     else:
         for r in summary.results:
             m = r.metrics()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,13 +39,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from softpend.io.outputs import check_output_file, finite_or_none, json_text
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
+    from softpend.sysid.model import is_model_file, model_paths
     from softpend.sysid.training import parse_widths
 
-    if args.threads < 1:
-        raise ValueError(f"threads must be >= 1, got {args.threads}")
-    torch.set_num_threads(args.threads)
+    if not 1 <= args.threads <= 1024:
+        raise ValueError(f"threads must lie in [1, 1024], got {args.threads}")
+    for path in model_paths(args.output):  # before the work: a model of ours may be replaced, nothing else
+        check_output_file(path, what="model file", owned=is_model_file)
     config = TrainConfig(
         information=args.information,
         history=args.history,
@@ -62,12 +64,14 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     dataset = load_dataset(args.dataset)
-    test = load_dataset(args.test_data) if args.test_data else None
+    # a model predicts one step of the training data's dt_s: held-out data at another step is not a test of it
+    test = load_dataset(args.test_data, expected_dt_s=dataset.dt_s) if args.test_data else None
+    torch.set_num_threads(args.threads)
     result = fit_dynamics_model(dataset, config, progress=not args.no_progress)
     metrics = {"validation": evaluate_model(result.model, dataset, result.val_trials)}
     if test is not None:
         metrics["test"] = evaluate_model(result.model, test)
-    metadata = dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data)
+    metadata = finite_or_none(dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data))
     weights, meta = save_model(args.output, result.model, metadata)
-    print(json.dumps({"weights": str(weights), "metadata": str(meta), "train_time_s": round(result.train_time_s, 2), "metrics": metrics}, indent=2))
+    print(json_text({"weights": str(weights), "metadata": str(meta), "train_time_s": round(result.train_time_s, 2), "metrics": metrics}, indent=2))
     return 0

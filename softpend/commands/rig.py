@@ -26,10 +26,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig, serve_forever
-    from softpend.plant import RodParams
+    from softpend.task import Task
 
     config = RigConfig(
-        params=RodParams(n_links=args.n_links),
+        task=Task(start_noise_rad=0.0).replace(n_links=args.n_links),
         counts_per_rev=args.counts_per_rev,
         latency_s=args.latency_ms / 1000.0,
         drop_probability=args.drop,

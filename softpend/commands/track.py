@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("track", help="track the tip dot in a video file into a time-stamped CSV")
     parser.add_argument("video", help="video file (the synthetic camera's sidecar VIDEO.json is used if present)")
-    parser.add_argument("--out", required=True, metavar="CSV", help="output CSV (crash-safe sample log; overwritten)")
+    parser.add_argument("--out", required=True, metavar="CSV",
+                        help="output CSV (crash-safe sample log; replaced only once the whole video is tracked)")
     parser.add_argument("--markers", metavar="JSON",
                         help='marker positions in the rod plane [m], JSON list [[x, y], ...] or file (hub axis at 0, y up)')
     parser.add_argument("--calibration", metavar="JSON", help="a saved AffineCalibration instead of markers")
@@ -23,17 +23,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from softpend.vision.calibration import AffineCalibration
+    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
     from softpend.vision.track_video import track_video
     from softpend.vision.tracker import TipTracker
 
     markers = None
     if args.markers:
-        text = Path(args.markers).read_text() if Path(args.markers).exists() else args.markers
-        try:
-            markers = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"--markers is neither a JSON list nor a JSON file: {exc}") from exc
+        if args.markers.lstrip().startswith("["):
+            try:
+                markers = json.loads(args.markers)
+            except (ValueError, RecursionError) as exc:
+                raise ValueError(f"--markers is not a valid JSON list: {exc}") from None
+        else:
+            markers = read_json_file("--markers", args.markers, MAX_CALIBRATION_BYTES)
+        markers = points_array("--markers", markers, 3, 6).tolist()
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
     rows = track_video(args.video, args.out, marker_positions_m=markers, fps=args.fps,
                        tracker=TipTracker(min_area_px=args.min_area), calibration=calibration,

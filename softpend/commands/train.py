@@ -11,6 +11,8 @@ import argparse
 import importlib
 from typing import Callable
 
+from softpend.commands.options import add_set_option
+
 #: Training entry points, one line per algorithm: ``name -> "module:function(args) -> int"``.
 ALGORITHMS: dict[str, str] = {
     "dqn": "softpend.commands.train_rl:train_dqn_from_args",
@@ -27,17 +29,6 @@ def resolve(algo: str) -> Callable[[argparse.Namespace], int]:
     return getattr(importlib.import_module(module_name), function_name)
 
 
-def parse_overrides(items: list[str] | None) -> dict[str, str]:
-    """``["a=1", "b=x"] -> {"a": "1", "b": "x"}`` (values stay strings; each algorithm converts them)."""
-    overrides: dict[str, str] = {}
-    for item in items or []:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
-        overrides[name.strip()] = value.strip()
-    return overrides
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("train", help="train a controller (DQN, DQN-MBPO, PILCO)")
     parser.add_argument("--algo", required=True, choices=sorted(ALGORITHMS), help="training algorithm")
@@ -48,8 +39,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--n-links", type=int, default=None, help="links of the PRB rod (default: RodParams)")
     parser.add_argument("--resume", action="store_true", help="continue from the latest checkpoint in --out")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.add_argument(
-        "--set", action="append", metavar="NAME=VALUE", dest="overrides", help="override a config field (repeatable)"
+    add_set_option(
+        parser,
+        help="override a field of the algorithm's config (repeatable; VALUE parsed as JSON, else a string; "
+        "a dotted NAME reaches a nested field, e.g. task.rod.mass_kg=0.07)",
     )
     parser.set_defaults(func=run)
 
@@ -57,5 +50,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.out is None:
         args.out = f"runs/{args.algo}-seed{args.seed}"
-    args.overrides = parse_overrides(args.overrides)
+    args.overrides = dict(args.overrides or [])
     return int(resolve(args.algo)(args) or 0)

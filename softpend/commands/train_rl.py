@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import Any
 
-from softpend.rl.config import DQNConfig, MBPOConfig, config_from_overrides
+from softpend.io.outputs import json_text
+from softpend.io.overrides import apply_overrides
+from softpend.rl.config import DQNConfig, MBPOConfig
 
 from softpend.study.presets import RL_EPISODES
 
@@ -15,13 +16,13 @@ __all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
 
 
 def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:
-    """The default config with ``--n-links``, ``--torque-limit-nm`` and ``--set`` overrides applied."""
+    """``base`` with the ``--set`` overrides (``args.overrides``, ``NAME -> parsed value``) applied, then
+    ``--n-links`` and ``--torque-limit-nm`` (as ``task.rod.n_links`` and ``task.rod.torque_limit_nm``)."""
     overrides: dict[str, Any] = dict(getattr(args, "overrides", None) or {})
-    if getattr(args, "n_links", None) is not None:
-        overrides["n_links"] = args.n_links
-    if getattr(args, "torque_limit_nm", None) is not None:
-        overrides["torque_limit_nm"] = args.torque_limit_nm
-    return config_from_overrides(base, overrides)
+    for name in ("n_links", "torque_limit_nm"):
+        if getattr(args, name, None) is not None:
+            overrides[f"task.rod.{name}"] = getattr(args, name)
+    return apply_overrides(base, overrides)
 
 
 def _summary(log) -> dict[str, Any]:
@@ -49,7 +50,7 @@ def _train(algo: str, args: argparse.Namespace) -> int:
     episodes = args.episodes if args.episodes is not None else RL_EPISODES[algo]
     train = train_dqn if algo == "dqn" else train_mbpo
     _, log = train(config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress)
-    print(json.dumps(_summary(log), indent=2))
+    print(json_text(_summary(log), indent=2))
     print(f"saved {args.out}/agent.zip")
     return 0
 

@@ -19,13 +19,13 @@ controller can run on observations alone (any plant, e.g. the continuum beam).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
 import scipy.linalg
 
+from softpend.checks import optional_positive, positive
 from softpend.plant import PRBPlant, RodParams
 
 __all__ = [
@@ -102,8 +102,7 @@ class LinearModel:
             raise ValueError(f"a must be square, got shape {a.shape}")
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
             raise ValueError("a and b must be finite")
-        if self.dt_s is not None and (not math.isfinite(self.dt_s) or self.dt_s <= 0):
-            raise ValueError(f"dt_s must be positive and finite or None, got {self.dt_s!r}")
+        optional_positive("dt_s", self.dt_s)
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
         if self.state_names and len(self.state_names) != a.shape[0]:
@@ -145,8 +144,7 @@ def discretise(model: LinearModel, dt_s: float) -> LinearModel:
 
     if model.is_discrete:
         raise ValueError("model is already discrete")
-    if not math.isfinite(dt_s) or dt_s <= 0:
-        raise ValueError(f"dt_s must be positive and finite, got {dt_s!r}")
+    positive("dt_s", dt_s)
     sys_d = control.c2d(model.to_control(), dt_s, method="zoh")
     return LinearModel(a=np.asarray(sys_d.A), b=np.asarray(sys_d.B), dt_s=float(dt_s), state_names=model.state_names)
 

@@ -28,12 +28,12 @@ modes are stable and damped); a tiny ``regularisation`` on the whole state keeps
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
+from softpend.checks import non_negative, positive
 from softpend.plant import Observation, RodParams, wrap_angle_rad
 from softpend.control.linearise import (
     LinearModel,
@@ -71,16 +71,13 @@ class LQRWeights:
     phi_max_rad: float = 0.5
     theta_dot_max_rad_s: float = 2.0
     phi_dot_max_rad_s: float = 10.0
-    torque_max_nm: float = 0.06
+    torque_max_nm: float = RodParams.torque_limit_nm
     regularisation: float = 1e-6
 
     def __post_init__(self) -> None:
         for name in ("theta_max_rad", "phi_max_rad", "theta_dot_max_rad_s", "phi_dot_max_rad_s", "torque_max_nm"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
-        if not math.isfinite(self.regularisation) or self.regularisation < 0:
-            raise ValueError(f"regularisation must be non-negative, got {self.regularisation!r}")
+            positive(name, getattr(self, name))
+        non_negative("regularisation", self.regularisation)
 
     def output_weights(self) -> np.ndarray:
         """``diag(Q_y)`` for ``y = [theta, phi, theta_dot, phi_dot]``."""
@@ -116,8 +113,7 @@ def design_lqr(model: LinearModel, q: np.ndarray, r: float) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape != (model.n_states, model.n_states):
         raise ValueError(f"q must have shape {(model.n_states, model.n_states)}, got {q.shape}")
-    if not math.isfinite(r) or r <= 0:
-        raise ValueError(f"r must be positive and finite, got {r!r}")
+    positive("r", r)
     try:
         if model.is_discrete:
             gain, _, _ = control.dlqr(model.a, model.b, q, np.array([[r]]))
@@ -174,8 +170,7 @@ class LQRController:
         gain = np.asarray(gain, dtype=float).reshape(1, -1)
         if not np.all(np.isfinite(gain)):
             raise ValueError("gain must be finite")
-        if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
-            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        positive("torque_limit_nm", torque_limit_nm)
         if model is not None and model.n_states != gain.shape[1]:
             raise ValueError(f"gain has {gain.shape[1]} columns but the model has {model.n_states} states")
         self.gain = gain

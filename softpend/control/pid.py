@@ -27,7 +27,9 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from softpend.plant import Observation, wrap_angle_rad
+from softpend.checks import non_negative, positive
+from softpend.plant import Observation, RodParams, wrap_angle_rad
+from softpend.task import Task
 
 __all__ = ["PIDController", "PIDGains", "PIDTuningResult", "pid_rollout_cost", "plant_simulator", "tune_pid"]
 
@@ -49,9 +51,7 @@ class PIDGains:
 
     def __post_init__(self) -> None:
         for name in ("kp_nm_per_rad", "ki_nm_per_rad_s", "kd_nms_per_rad"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
+            non_negative(name, getattr(self, name))
 
     def as_array(self) -> np.ndarray:
         return np.array([self.kp_nm_per_rad, self.ki_nm_per_rad_s, self.kd_nms_per_rad])
@@ -82,7 +82,7 @@ class PIDController:
         self,
         gains: PIDGains,
         dt_s: float = 0.01,
-        torque_limit_nm: float = 0.06,
+        torque_limit_nm: float = RodParams.torque_limit_nm,
         derivative_filter_s: float = 0.02,
         tracking_time_s: Optional[float] = None,
         anti_windup: bool = True,
@@ -90,24 +90,17 @@ class PIDController:
     ) -> None:
         if not isinstance(gains, PIDGains):
             raise ValueError(f"gains must be a PIDGains, got {type(gains).__name__}")
-        for label, value in (("dt_s", dt_s), ("torque_limit_nm", torque_limit_nm)):
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{label} must be positive and finite, got {value!r}")
-        if not math.isfinite(derivative_filter_s) or derivative_filter_s < 0:
-            raise ValueError(f"derivative_filter_s must be non-negative and finite, got {derivative_filter_s!r}")
+        self.dt_s = positive("dt_s", dt_s)
+        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
+        self.derivative_filter_s = non_negative("derivative_filter_s", derivative_filter_s)
         if tracking_time_s is None:
             kp, ki, kd = gains.as_array()
             if kp > 0 and ki > 0 and kd > 0:
                 tracking_time_s = math.sqrt((kp / ki) * (kd / kp))
             else:
                 tracking_time_s = 10 * dt_s
-        if not math.isfinite(tracking_time_s) or tracking_time_s <= 0:
-            raise ValueError(f"tracking_time_s must be positive and finite, got {tracking_time_s!r}")
+        self.tracking_time_s = positive("tracking_time_s", tracking_time_s)
         self.gains = gains
-        self.dt_s = float(dt_s)
-        self.torque_limit_nm = float(torque_limit_nm)
-        self.derivative_filter_s = float(derivative_filter_s)
-        self.tracking_time_s = float(tracking_time_s)
         self.anti_windup = bool(anti_windup)
         self.name = name
         self.reset()
@@ -179,7 +172,7 @@ def tune_pid(
     simulate: Simulator,
     initial_gains: PIDGains = PIDGains(0.5, 0.5, 0.05),
     dt_s: float = 0.01,
-    torque_limit_nm: float = 0.06,
+    torque_limit_nm: float = RodParams.torque_limit_nm,
     derivative_filter_s: float = 0.02,
     tilts_rad: Sequence[float] = (0.1, -0.2),
     duration_s: float = 3.0,
@@ -227,20 +220,18 @@ def tune_pid(
     return PIDTuningResult(PIDGains(*np.exp(np.clip(best, -12, 6))), float(min(result.fun, initial_cost)), initial_cost, int(result.nfev) + 1)
 
 
-def plant_simulator(params=None, plant: str = "prb", dt_s: float = 0.01) -> Simulator:
-    """Closed-loop simulator on a true plant (straight rod released at rest at the given tilt), for tuning
-    on the true model and for tests; built on :func:`softpend.evaluation.evaluate_controller`."""
+def plant_simulator(task: Optional[Task] = None) -> Simulator:
+    """Closed-loop simulator on the true plant of ``task`` (straight rod released at rest at the given tilt,
+    the controller's own torque limit), for tuning on the true model and for tests; built on
+    :func:`softpend.evaluation.evaluate_controller`."""
     from softpend.evaluation import evaluate_controller
-    from softpend.plant import RodParams
 
-    params = params if params is not None else RodParams()
-
-    from softpend.plant import tilt_state
+    base = (task if task is not None else Task()).replace(start="upright")
 
     def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
+        run_task = base.replace(torque_limit_nm=controller.torque_limit_nm)
         result = evaluate_controller(
-            controller, seeds=(0,), duration_s=duration_s, start="upright", params=params, plant=plant, dt_s=dt_s,
-            torque_limit_nm=controller.torque_limit_nm, initial_state=tilt_state(params, tilt_rad, plant),
+            controller, run_task, seeds=(0,), duration_s=duration_s, initial_state=run_task.tilt_state(tilt_rad),
         ).results[0]
         theta = result.theta_rad if result.diverged is None else np.append(result.theta_rad, np.nan)
         return theta, result.torque_nm

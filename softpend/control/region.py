@@ -9,8 +9,9 @@ from typing import Optional
 import numpy as np
 from tqdm.auto import tqdm
 
+from softpend.checks import positive
 from softpend.evaluation import Controller, evaluate_controller
-from softpend.plant import RodParams
+from softpend.task import Task
 
 __all__ = ["RegionOfAttraction", "recovers_from", "region_of_attraction_rad"]
 
@@ -39,33 +40,27 @@ class RegionOfAttraction:
 def recovers_from(
     controller: Controller,
     tilt_rad: float,
-    params: Optional[RodParams] = None,
-    plant: str = "prb",
+    task: Optional[Task] = None,
     duration_s: float = 4.0,
     tolerance_rad: float = 0.02,
-    dt_s: float = 0.01,
 ) -> bool:
-    """Whether ``controller`` brings the rod released at rest, straight and tilted by ``tilt_rad`` (hub and
-    tip at that angle), back to ``|theta| < tolerance_rad`` for the whole last second of ``duration_s``."""
-    params = params if params is not None else RodParams()
-    n = params.n_links + 1
-    q = np.zeros(n)
-    q[0] = float(tilt_rad)
+    """Whether ``controller`` brings the rod of ``task`` released at rest, straight and tilted by ``tilt_rad``
+    (hub and tip at that angle), back to ``|theta| < tolerance_rad`` for the whole last second of
+    ``duration_s``."""
+    task = (task if task is not None else Task()).replace(start="upright")
     summary = evaluate_controller(
-        controller, seeds=(0,), duration_s=duration_s, start="upright", params=params, plant=plant, dt_s=dt_s,
-        initial_state=(q, np.zeros(n)),
+        controller, task, seeds=(0,), duration_s=duration_s, initial_state=task.tilt_state(float(tilt_rad)),
     )
     result = summary.results[0]
     if result.diverged is not None:
         return False
-    last = result.theta_rad[-int(round(1.0 / dt_s)) :]
+    last = result.theta_rad[-int(round(1.0 / task.dt_s)) :]
     return bool(np.all(np.abs(last) < tolerance_rad))
 
 
 def region_of_attraction_rad(
     controller: Controller,
-    params: Optional[RodParams] = None,
-    plant: str = "prb",
+    task: Optional[Task] = None,
     step_rad: float = 0.05,
     resolution_rad: float = 0.005,
     max_angle_rad: float = math.pi / 2,
@@ -80,10 +75,8 @@ def region_of_attraction_rad(
     Parameters
     ----------
     controller : Controller
-    params : RodParams, optional
-        Plant parameters (its ``torque_limit_nm`` is the saturation).
-    plant : str
-        Plant name for :func:`softpend.plant.make_plant`.
+    task : Task, optional
+        Plant and rod (its ``torque_limit_nm`` is the saturation); default ``Task()``.
     step_rad, resolution_rad, max_angle_rad : float
         Coarse step, final resolution and upper end of the scan [rad].
     duration_s : float
@@ -92,13 +85,12 @@ def region_of_attraction_rad(
         Show a tqdm progress bar over the coarse scan.
     """
     for name, value in (("step_rad", step_rad), ("resolution_rad", resolution_rad), ("max_angle_rad", max_angle_rad)):
-        if not math.isfinite(value) or value <= 0:
-            raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        positive(name, value)
     tested: list[float] = []
     outcome: list[bool] = []
 
     def trial(angle: float) -> bool:
-        ok = recovers_from(controller, angle, params=params, plant=plant, duration_s=duration_s)
+        ok = recovers_from(controller, angle, task, duration_s=duration_s)
         tested.append(angle)
         outcome.append(ok)
         return ok

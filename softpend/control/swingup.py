@@ -37,6 +37,7 @@ from typing import Optional
 
 import numpy as np
 
+from softpend.checks import finite, one_of, positive
 from softpend.plant import Observation, PRBPlant, RodParams
 from softpend.control.lqr import LQRController, LQRWeights
 
@@ -94,24 +95,21 @@ class EnergySwingUpController:
         lqr_weights: Optional[LQRWeights] = None,
     ) -> None:
         self.params = params if params is not None else RodParams()
-        if energy_source not in ("observation", "joint"):
-            raise ValueError(f"energy_source must be 'observation' or 'joint', got {energy_source!r}")
+        one_of("energy_source", energy_source, ("observation", "joint"))
         for name, value in (
             ("energy_gain_per_j_rad_s", energy_gain_per_j_rad_s),
             ("capture_angle_rad", capture_angle_rad),
             ("release_angle_rad", release_angle_rad),
         ):
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+            positive(name, value)
         if release_angle_rad < capture_angle_rad:
             raise ValueError(
                 f"release_angle_rad ({release_angle_rad}) must not be smaller than capture_angle_rad ({capture_angle_rad})"
             )
-        if not math.isfinite(energy_margin_j):
-            raise ValueError(f"energy_margin_j must be finite, got {energy_margin_j!r}")
-        self.torque_limit_nm = float(self.params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm)
-        if not math.isfinite(self.torque_limit_nm) or self.torque_limit_nm <= 0:
-            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
+        finite("energy_margin_j", energy_margin_j)
+        self.torque_limit_nm = positive(
+            "torque_limit_nm", self.params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
+        )
         self.balance = (
             balance
             if balance is not None

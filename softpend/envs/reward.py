@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from softpend.checks import non_negative, positive
+
 
 @dataclass(frozen=True)
 class RewardParams:
@@ -42,13 +44,9 @@ class RewardParams:
 
     def __post_init__(self) -> None:
         for name in ("clip_value", "epsilon_rad"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+            positive(name, getattr(self, name))
         for name in ("bonus_weight", "bonus_decay_per_s"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
+            non_negative(name, getattr(self, name))
 
 
 def shaping_reward(theta_rad: np.ndarray | float, clip_value: float = 50.0) -> np.ndarray | float:

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from softpend.checks import int_at_least, non_negative, one_of
 from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
 from softpend.envs.reward import RewardParams
 
@@ -87,12 +88,10 @@ class SoftPendulumEnv(gym.Env):
         params = params if params is not None else RodParams()
         if torque_limit_nm is not None:
             params = params.replace(torque_limit_nm=torque_limit_nm)
-        if start not in ("hanging", "upright", "random"):
-            raise ValueError(f"start must be 'hanging', 'upright' or 'random', got {start!r}")
-        if not math.isfinite(start_noise_rad) or start_noise_rad < 0:
-            raise ValueError(f"start_noise_rad must be non-negative and finite, got {start_noise_rad!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        one_of("start", start, ("hanging", "upright", "random"))
+        non_negative("start_noise_rad", start_noise_rad)
+        if render_mode is not None:
+            one_of("render_mode", render_mode, self.metadata["render_modes"])
         self.params = params
         self.reward_params = reward_params if reward_params is not None else RewardParams()
         self.plant = make_plant(plant, params=params, dt_s=dt_s, substeps=substeps)
@@ -148,9 +147,12 @@ class SoftPendulumEnv(gym.Env):
     def torque_from_action(self, action: np.ndarray) -> float:
         """Base torque [N m] for an action of this environment."""
         try:
-            a = float(action[0]) if len(action) == 1 else math.nan
-        except TypeError:  # a scalar
-            a = float(action)
+            try:
+                a = float(action[0]) if len(action) == 1 else math.nan
+            except TypeError:  # a scalar
+                a = float(action)
+        except (TypeError, ValueError, IndexError, KeyError):
+            raise ValueError(f"action must be a number or a one-element array, got {action!r}") from None
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {action!r}")
         return min(max(a, -1.0), 1.0) * self.torque_limit_nm
@@ -210,15 +212,24 @@ class SoftPendulumDiscreteEnv(SoftPendulumEnv):
     """
 
     def __init__(self, n_torque_levels: int = 5, **kwargs: Any) -> None:
-        if isinstance(n_torque_levels, bool) or int(n_torque_levels) != n_torque_levels or n_torque_levels < 2:
-            raise ValueError(f"n_torque_levels must be an integer >= 2, got {n_torque_levels!r}")
+        n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
         super().__init__(**kwargs)
-        self.n_torque_levels = int(n_torque_levels)
+        self.n_torque_levels = n_torque_levels
         self.torque_levels_nm = np.linspace(-1.0, 1.0, self.n_torque_levels) * self.torque_limit_nm
         self.action_space = spaces.Discrete(self.n_torque_levels)
 
     def torque_from_action(self, action) -> float:
-        index = int(np.asarray(action).reshape(-1)[0])
+        """Torque [N m] of action ``action``: an integer in ``[0, n_torque_levels)`` (a Python or NumPy integer,
+        or an integer array holding one element, as policies return it); anything else -- a float such as
+        2.7, several elements, a bool -- is refused with ``ValueError``."""
+        value = action
+        if isinstance(value, (list, tuple)):
+            value = np.asarray(value) if all(isinstance(v, (int, np.integer)) for v in value) else None
+        if isinstance(value, np.ndarray):
+            value = value.reshape(-1)[0] if value.size == 1 and value.dtype.kind in "iu" else None
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise ValueError(f"action must be an integer in [0, {self.n_torque_levels}), got {action!r}")
+        index = int(value)
         if not 0 <= index < self.n_torque_levels:
             raise ValueError(f"action must be in [0, {self.n_torque_levels}), got {action!r}")
         return float(self.torque_levels_nm[index])

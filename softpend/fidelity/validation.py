@@ -22,6 +22,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from softpend.checks import int_at_least, one_of, positive
 from softpend.plant import RodParams, make_plant
 
 __all__ = [
@@ -123,17 +124,15 @@ def _plant_kwargs(plant: str, resolution: int) -> dict[str, Any]:
 
 
 def _check_plant_resolution(plant: str, params: RodParams, resolution: Optional[int]) -> tuple[RodParams, int]:
-    if plant not in ("beam", "prb"):
-        raise ValueError(f"plant must be 'beam' or 'prb', got {plant!r}")
+    one_of("plant", plant, ("beam", "prb"))
     if resolution is None:
         from softpend.plant.beam import DEFAULT_N_ELEMENTS
 
         resolution = DEFAULT_N_ELEMENTS if plant == "beam" else params.n_links
-    if isinstance(resolution, bool) or int(resolution) != resolution or resolution < 1:
-        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
+    resolution = int_at_least("resolution", resolution, 1)
     if plant == "prb":
-        params = params.replace(n_links=int(resolution))
-    return params, int(resolution)
+        params = params.replace(n_links=resolution)
+    return params, resolution
 
 
 def cantilever_free_vibration(
@@ -174,8 +173,7 @@ def cantilever_free_vibration(
     theory = euler_bernoulli_frequencies_hz(params, max(modes))[np.asarray(modes) - 1]
     if duration_s is None:
         duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
-    if not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be positive and finite, got {duration_s!r}")
+    positive("duration_s", duration_s)
     length = params.length_m
     amplitude = length / 500.0 if amplitude_m is None else float(amplitude_m)
     kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)

@@ -5,15 +5,20 @@ messages of :mod:`softpend.hardware.protocol`: it sends torque commands (clamped
 *before* they leave the host) and reads the device's time-stamped encoder states.  Safety is part of the
 driver:
 
-* every torque is clamped to ``min(host limit, device limit)``; a non-finite torque stops the motor and
-  raises ``ValueError``;
+* every torque is clamped to ``min(host limit, device limit)`` (as the float32 that goes on the wire:
+  never a hair above); a non-finite torque stops the motor and raises ``ValueError``;
+* what the device announces and reports is checked before it is used: a HELLO_ACK with an impossible
+  value (a torque limit of -1, NaN or 1e30, zero counts per revolution, no watchdog, a state rate of 0)
+  is refused with :class:`HandshakeError` naming the field; a STATE frame whose values are not finite or
+  out of range (a NaN velocity, an applied torque beyond the device's limit, undefined flag bits) is a bad
+  frame like a corrupt one (counted, never passed on);
 * zero torque on every exit path: ``close()`` (and so the context manager) sends STOP, an ``atexit`` hook
   and SIGTERM/SIGINT handlers send STOP for links still open, and any link error sends STOP before it is
   raised (best effort: a dead link cannot carry it, which is what the device-side watchdog is for);
 * clear errors: :class:`LinkTimeout` (no state within the timeout), :class:`LinkDisconnected` (the port
   went away), :class:`LinkChecksumError` (too many consecutive frames failed their CRC),
-  :class:`HandshakeError` (wrong protocol version or no answer), :class:`DeviceError` (the device reported
-  an error).
+  :class:`HandshakeError` (wrong protocol version, impossible announced values or no answer),
+  :class:`DeviceError` (the device reported an error; the message says what the code means).
 """
 
 from __future__ import annotations
@@ -22,12 +27,14 @@ import atexit
 import math
 import os
 import signal
+import struct
 import threading
 import time
 import weakref
 from dataclasses import dataclass
 from typing import Optional
 
+from softpend.checks import positive, positive_int
 from softpend.hardware import protocol as proto
 
 __all__ = [
@@ -38,9 +45,23 @@ __all__ = [
     "LinkDisconnected",
     "LinkError",
     "LinkTimeout",
+    "MAX_COUNTS_PER_REV",
+    "MAX_DEVICE_TORQUE_LIMIT_NM",
+    "MAX_HUB_SPEED_RAD_S",
+    "MAX_STATE_RATE_HZ",
     "MotorLink",
     "MotorState",
 ]
+
+#: Largest torque limit a device may announce [N m] (the V5 Smart Motor stalls at 2.1 N m); beyond it the
+#: HELLO_ACK is refused as garbage.
+MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
+#: Largest encoder resolution a device may announce [counts per revolution].
+MAX_COUNTS_PER_REV = 1 << 24
+#: Largest STATE rate a device may announce [Hz] (a serial link carries a few thousand frames/s at most).
+MAX_STATE_RATE_HZ = 10000
+#: Largest hub rate a STATE frame may report [rad/s] (about 9500 rpm); faster is a corrupt value.
+MAX_HUB_SPEED_RAD_S = 1000.0
 
 
 class LinkError(RuntimeError):
@@ -56,7 +77,7 @@ class LinkDisconnected(LinkError):
 
 
 class LinkChecksumError(LinkError):
-    """Too many consecutive frames failed their CRC or framing."""
+    """Too many consecutive frames failed their CRC, framing or value checks."""
 
 
 class HandshakeError(LinkError):
@@ -69,13 +90,32 @@ class DeviceError(LinkError):
 
 @dataclass(frozen=True)
 class DeviceInfo:
-    """What the device announced in its HELLO_ACK."""
+    """What the device announced in its HELLO_ACK.
+
+    Raises ``ValueError`` naming the field when a value is impossible: ``counts_per_rev`` outside
+    [1, :data:`MAX_COUNTS_PER_REV`], ``torque_limit_nm`` not in (0, :data:`MAX_DEVICE_TORQUE_LIMIT_NM`],
+    ``watchdog_s`` not in (0, 65.535] s, ``state_rate_hz`` not in [1, :data:`MAX_STATE_RATE_HZ`].
+    """
 
     protocol_version: int
     counts_per_rev: int
     torque_limit_nm: float
     watchdog_s: float
     state_rate_hz: float
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("counts_per_rev", self.counts_per_rev, 1, MAX_COUNTS_PER_REV, True),
+            ("torque_limit_nm", self.torque_limit_nm, 0.0, MAX_DEVICE_TORQUE_LIMIT_NM, False),
+            ("watchdog_s", self.watchdog_s, 0.0, 65.535, False),
+            ("state_rate_hz", self.state_rate_hz, 1, MAX_STATE_RATE_HZ, True),
+        )
+        for name, value, low, high, closed_low in checks:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            ok = ok and (low <= value if closed_low else low < value) and value <= high
+            if not ok:
+                interval = f"[{low}, {high}]" if closed_low else f"({low}, {high}]"
+                raise ValueError(f"{name} must be in {interval}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -190,12 +230,9 @@ class MotorLink:
     ) -> None:
         if not isinstance(port, str) or not port:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
-        if not (isinstance(torque_limit_nm, (int, float)) and math.isfinite(torque_limit_nm) and torque_limit_nm > 0):
-            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
-        if not (math.isfinite(timeout_s) and timeout_s > 0):
-            raise ValueError(f"timeout_s must be positive and finite, got {timeout_s!r}")
-        if int(max_consecutive_bad_frames) < 1:
-            raise ValueError(f"max_consecutive_bad_frames must be >= 1, got {max_consecutive_bad_frames!r}")
+        positive("torque_limit_nm", torque_limit_nm)
+        positive("timeout_s", timeout_s)
+        positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
         self.port = port
         self.host_torque_limit_nm = float(torque_limit_nm)
         self.baudrate = int(baudrate)
@@ -205,7 +242,7 @@ class MotorLink:
         self.install_exit_hooks = install_exit_hooks
         self.device: Optional[DeviceInfo] = None
         self._serial = None
-        self._decoder = proto.FrameDecoder()
+        self._decoder = proto.FrameDecoder(validate=self._check_message)
         self._seq = 0
         self._pending: list[tuple[int, int, tuple]] = []
         self.last_command_nm = 0.0
@@ -220,10 +257,15 @@ class MotorLink:
 
     @property
     def torque_limit_nm(self) -> float:
-        """Effective limit: the smaller of the host's and the device's [N m]."""
+        """Effective limit: the smaller of the host's and the (validated) device's [N m]."""
         if self.device is None:
             return self.host_torque_limit_nm
         return min(self.host_torque_limit_nm, self.device.torque_limit_nm)
+
+    @property
+    def rejected_states(self) -> int:
+        """Frames received so far with a valid CRC but impossible values (counted in :attr:`bad_frames`)."""
+        return self._decoder.value_errors
 
     @property
     def bad_frames(self) -> int:
@@ -239,7 +281,8 @@ class MotorLink:
         LinkDisconnected
             If the port cannot be opened.
         HandshakeError
-            On a version mismatch or if the device does not answer within ``timeout_s``.
+            On a version mismatch, a HELLO_ACK with impossible values (the message names the field), or
+            if the device does not answer within ``timeout_s``.
         """
         import serial
 
@@ -266,19 +309,18 @@ class MotorLink:
                 msg_type, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK, proto.MSG_ERROR))
             except LinkTimeout as exc:
                 raise HandshakeError(f"no HELLO_ACK from {self.port!r} within {self.timeout_s:.3f} s") from exc
-            if msg_type == proto.MSG_ERROR:
-                code = values[0]
-                if code == proto.ERR_VERSION:
-                    raise HandshakeError(
-                        f"device rejected protocol version {proto.PROTOCOL_VERSION} (version mismatch)"
-                    )
-                raise HandshakeError(f"device answered HELLO with error code {code}")
+            if msg_type == proto.MSG_ERROR:  # only reached if _accept queued it (it raises during a handshake)
+                raise HandshakeError(f"device {self.port!r} refused the handshake: {_error_meaning(values[0])}")
             version, echoed, cpr, limit, watchdog_ms, rate_hz = values
             if echoed != nonce:
                 continue  # a stale answer to an earlier session
             if version != proto.PROTOCOL_VERSION:
                 raise HandshakeError(f"device speaks protocol version {version}, host {proto.PROTOCOL_VERSION}")
-            self.device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
+            try:
+                device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
+            except ValueError as exc:
+                raise HandshakeError(f"device {self.port!r} announced an impossible HELLO_ACK: {exc}") from exc
+            self.device = device
             return
 
     def close(self) -> None:
@@ -313,14 +355,20 @@ class MotorLink:
         Raises
         ------
         ValueError
-            If ``torque_nm`` is not finite (the motor is stopped first).
+            If ``torque_nm`` is not a finite number (the motor is stopped first).
         """
-        torque = float(torque_nm)
+        try:
+            torque = math.nan if isinstance(torque_nm, (str, bytes, bool)) else float(torque_nm)
+        except (TypeError, ValueError):
+            torque = math.nan
         if not math.isfinite(torque):
             self.emergency_stop()
-            raise ValueError(f"torque_nm must be finite, got {torque_nm!r} (motor stopped)")
+            raise ValueError(f"torque_nm must be a finite number, got {torque_nm!r} (motor stopped)")
         limit = self.torque_limit_nm
-        torque = min(max(torque, -limit), limit)
+        if not (math.isfinite(limit) and limit > 0):  # unreachable with a validated device; never send then
+            self.emergency_stop()
+            raise LinkError(f"effective torque limit {limit!r} N m is not a positive number (motor stopped)")
+        torque = _float32_within(min(max(torque, -limit), limit), limit)
         seq = self._write(proto.MSG_TORQUE, (torque,))
         self.last_command_nm = torque
         self.commands_sent += 1
@@ -361,6 +409,21 @@ class MotorLink:
         return states
 
     # ------------------------------------------------------------------ internals
+    def _check_message(self, msg_type: int, values: tuple) -> Optional[str]:
+        """What is impossible about a decoded message's values (None when nothing): the decoder's
+        ``validate`` hook, so a refused frame counts as a bad frame."""
+        if msg_type != proto.MSG_STATE:
+            return None
+        _, _, velocity, applied, _, flags = values
+        if not (math.isfinite(velocity) and abs(velocity) <= MAX_HUB_SPEED_RAD_S):
+            return f"velocity_rad_s {velocity!r} is not finite or beyond {MAX_HUB_SPEED_RAD_S} rad/s"
+        limit = self.device.torque_limit_nm if self.device is not None else MAX_DEVICE_TORQUE_LIMIT_NM
+        if not (math.isfinite(applied) and abs(applied) <= limit * (1 + 1e-6)):
+            return f"applied_torque_nm {applied!r} is not finite or beyond the device limit {limit!r} N m"
+        if flags & ~proto.FLAG_MASK:
+            return f"flags 0x{flags:02x} has undefined bits"
+        return None
+
     def _state_from(self, seq: int, values: tuple) -> MotorState:
         device_us, counts, velocity, applied, last_cmd, flags = values
         cpr = self.device.counts_per_rev if self.device else 1
@@ -447,7 +510,10 @@ class MotorLink:
         messages, errors = self._decoder.feed(data)
         for message in messages:
             if message[0] == proto.MSG_ERROR:
-                raise self._fail(DeviceError(f"device reported error code {message[2][0]}"))
+                meaning = _error_meaning(message[2][0])
+                if self.device is None:  # the answer to our HELLO
+                    raise self._fail(HandshakeError(f"device {self.port!r} refused the handshake: {meaning}"))
+                raise self._fail(DeviceError(f"device {self.port!r} reported an error: {meaning}"))
         self._pending.extend(messages)
         if errors and self._decoder.consecutive_bad >= self.max_consecutive_bad_frames:
                 raise self._fail(
@@ -480,3 +546,23 @@ class MotorLink:
             data = self._read_bytes(remaining)
             if data:
                 self._accept(data)
+
+
+def _error_meaning(code: int) -> str:
+    """What a device ERROR code means, for the error message."""
+    meaning = proto.ERROR_MEANINGS.get(code)
+    if meaning is None:
+        return f"unknown error code {code} (not defined by protocol version {proto.PROTOCOL_VERSION})"
+    if code == proto.ERR_VERSION:
+        meaning += (f"; the host speaks version {proto.PROTOCOL_VERSION}: flash firmware/vex_v5_motor.py from "
+                    "this package, or use the package version that matches the device")
+    return meaning
+
+
+def _float32_within(value: float, limit: float) -> float:
+    """``value`` rounded to float32 (as it goes on the wire), moved one float32 step towards zero when the
+    rounding took it beyond ``limit`` (0.05 rounds up to 0.0500000007 in float32)."""
+    (bits,) = struct.unpack("<I", struct.pack("<f", value))
+    if abs(struct.unpack("<f", struct.pack("<I", bits))[0]) > limit:
+        bits -= 1  # the magnitude bits of an IEEE float: one step towards zero
+    return struct.unpack("<f", struct.pack("<I", bits))[0]

@@ -21,6 +21,7 @@ import heapq
 import json
 import math
 import os
+import re
 import select
 import signal
 import subprocess
@@ -33,7 +34,8 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.plant import RodParams, check_plant_name, make_plant
+from softpend.checks import in_unit_interval, int_at_least, optional_positive
+from softpend.task import Task
 from softpend.hardware import protocol as proto
 from softpend.io.samplelog import SampleLog
 
@@ -46,12 +48,10 @@ class RigConfig:
 
     Parameters
     ----------
-    params : RodParams
-        The simulated rod.
-    plant : str
-        Plant name for :func:`softpend.plant.make_plant`.
-    dt_s : float
-        Control (and STATE) period [s].
+    task : Task
+        The simulated plant and rod; ``task.dt_s`` is the control (and STATE) period [s] (in [0.001, 0.1]),
+        ``task.start_noise_rad`` the uniform noise on the initial hub angle and rate (the rod starts
+        hanging) [rad, rad/s]; default: the default rod, no start noise.
     counts_per_rev : int
         Encoder counts per hub revolution (quantisation of the reported angle).
     latency_s : float
@@ -64,52 +64,41 @@ class RigConfig:
         Device watchdog [ms].
     seed : int
         Seed for the drop/garble draws and the initial-state noise.
-    start_noise_rad : float
-        Uniform noise on the initial hub angle and rate (the rod starts hanging) [rad, rad/s].
     duration_s : float or None
         Stop after this much device time [s] (None: run until killed or stopped).
     """
 
-    params: RodParams = field(default_factory=RodParams)
-    plant: str = "prb"
-    dt_s: float = 0.01
+    task: Task = field(default_factory=lambda: Task(start_noise_rad=0.0))
     counts_per_rev: int = 4096
     latency_s: float = 0.002
     drop_probability: float = 0.0
     garble_probability: float = 0.0
     watchdog_ms: int = 100
     seed: int = 0
-    start_noise_rad: float = 0.0
     duration_s: Optional[float] = None
 
     def __post_init__(self) -> None:
-        check_plant_name(self.plant)
-        if not (math.isfinite(self.dt_s) and 0.001 <= self.dt_s <= 0.1):
-            raise ValueError(f"dt_s must be in [0.001, 0.1] s, got {self.dt_s!r}")
-        if int(self.counts_per_rev) != self.counts_per_rev or self.counts_per_rev < 4:
-            raise ValueError(f"counts_per_rev must be an integer >= 4, got {self.counts_per_rev!r}")
-        if not (math.isfinite(self.latency_s) and 0 <= self.latency_s <= 1):
-            raise ValueError(f"latency_s must be in [0, 1] s, got {self.latency_s!r}")
-        for name in ("drop_probability", "garble_probability"):
-            value = getattr(self, name)
-            if not (0 <= value <= 1):
-                raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+        if not isinstance(self.task, Task):
+            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        if not 0.001 <= self.task.dt_s <= 0.1:
+            raise ValueError(f"task.dt_s must be in [0.001, 0.1] s, got {self.task.dt_s!r}")
+        int_at_least("counts_per_rev", self.counts_per_rev, 4)
+        for name in ("latency_s", "drop_probability", "garble_probability"):
+            in_unit_interval(name, getattr(self, name))
         if int(self.watchdog_ms) != self.watchdog_ms or not 1 <= self.watchdog_ms <= 65535:
             raise ValueError(f"watchdog_ms must be an integer in [1, 65535], got {self.watchdog_ms!r}")
-        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f"duration_s must be positive or None, got {self.duration_s!r}")
-        if not (math.isfinite(self.start_noise_rad) and self.start_noise_rad >= 0):
-            raise ValueError(f"start_noise_rad must be >= 0, got {self.start_noise_rad!r}")
+        optional_positive("duration_s", self.duration_s)
 
     def to_dict(self) -> dict:
         data = dataclasses.asdict(self)
-        data["params"] = self.params.to_dict()
+        data["task"] = self.task.to_dict()
         return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "RigConfig":
         data = dict(data)
-        data["params"] = RodParams.from_dict(data.get("params", {}))
+        if "task" in data:
+            data["task"] = Task.from_dict(data["task"])
         return cls(**data)
 
 
@@ -132,36 +121,48 @@ class RigEmulator:
     truth_log : path, optional
         Where to record the true joint state every tick (crash-safe :class:`SampleLog`).
     link_path : path, optional
-        Also expose the pty at this path (a symlink), like a fixed device name.
+        Also expose the pty at this path (a symlink), like a fixed device name.  Only a symlink to a
+        pseudo-terminal (one an earlier emulator left behind) is replaced; anything else at the path
+        raises ``ValueError`` and is left as it is.  :meth:`close` removes the symlink if it still points
+        to this emulator's pty.
     """
 
     def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
                  link_path: Optional[str | os.PathLike] = None) -> None:
         self.config = config if config is not None else RigConfig()
         cfg = self.config
-        self.plant = make_plant(cfg.plant, params=cfg.params, dt_s=cfg.dt_s)
+        self.link_path = Path(link_path) if link_path else None
+        if self.link_path is not None:
+            _check_link_path(self.link_path)
+        self.plant = cfg.task.make_plant()
         self._rng = np.random.default_rng(cfg.seed)
         q, qd = self.plant.hanging_state()
-        q[0] += self._rng.uniform(-cfg.start_noise_rad, cfg.start_noise_rad)
-        qd[0] += self._rng.uniform(-cfg.start_noise_rad, cfg.start_noise_rad)
+        noise = cfg.task.start_noise_rad
+        q[0] += self._rng.uniform(-noise, noise)
+        qd[0] += self._rng.uniform(-noise, noise)
         self.plant.reset(q, qd)
         self._phi0_rad = math.pi  # the encoder reads zero with the rod hanging, as on the rig
         self.session = proto.DeviceSession(
-            cfg.counts_per_rev, cfg.params.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.dt_s))
+            cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s))
         )
         self.master_fd, self._slave_fd = os.openpty()
         tty.setraw(self._slave_fd)
         self.port = os.ttyname(self._slave_fd)
-        self.link_path = Path(link_path) if link_path else None
-        if self.link_path is not None:
-            if self.link_path.is_symlink() or self.link_path.exists():
-                self.link_path.unlink()
-            self.link_path.symlink_to(self.port)
-        self._truth = (
-            SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
-                      metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
-            if truth_log is not None else None
-        )
+        self._truth = None
+        self._linked = False
+        try:
+            if self.link_path is not None:
+                _check_link_path(self.link_path)  # again: something may have appeared meanwhile
+                if self.link_path.is_symlink():
+                    self.link_path.unlink()  # a pty symlink an earlier emulator left behind
+                self.link_path.symlink_to(self.port)
+                self._linked = True
+            if truth_log is not None:
+                self._truth = SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
+                                        metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
+        except BaseException:
+            self.close()
+            raise
         self._running = False
         self.ticks = 0
         self.states_sent = 0
@@ -183,7 +184,7 @@ class RigEmulator:
         """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
         cfg = self.config
         session = self.session
-        dt = cfg.dt_s
+        dt = cfg.task.dt_s
         latency = cfg.latency_s
         start = time.monotonic()
         inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
@@ -276,8 +277,9 @@ class RigEmulator:
                 pass
         if self._truth is not None:
             self._truth.close()
-        if self.link_path is not None and self.link_path.is_symlink():
+        if self._linked and self.link_path.is_symlink() and os.readlink(self.link_path) == self.port:
             self.link_path.unlink()
+        self._linked = False
 
     def stats(self) -> dict[str, float]:
         lateness = np.asarray(self.tick_lateness_s) * 1e3
@@ -289,6 +291,27 @@ class RigEmulator:
             "ticks_caught_up": float(self.ticks_skipped),
             "tick_lateness_ms_p95": float(np.percentile(lateness, 95)) if lateness.size else float("nan"),
         }
+
+
+def _is_pty_name(target: str) -> bool:
+    """True for a pseudo-terminal device path (``/dev/pts/N`` on Linux, ``/dev/ttysN`` on macOS)."""
+    return re.fullmatch(r"/dev/pts/\d+|/dev/ttys\d+", target) is not None
+
+
+def _check_link_path(path: Path) -> None:
+    """Refuse a ``link_path`` that holds anything but a symlink to a pseudo-terminal (never replaced)."""
+    if path.is_symlink():
+        target = os.readlink(path)
+        if _is_pty_name(target):
+            return
+        raise ValueError(f"link_path (--port) {path} is a symlink to {target!r}, not to a pseudo-terminal; "
+                         "refusing to replace it (remove it or choose another path)")
+    if path.exists():
+        kind = "folder" if path.is_dir() else "file"
+        raise ValueError(f"link_path (--port) {path} is an existing {kind}; refusing to replace it "
+                         "(remove it or choose another path)")
+    if not path.parent.is_dir():
+        raise ValueError(f"link_path (--port) {path}: folder {path.parent} does not exist")
 
 
 # ---------------------------------------------------------------------- process helpers

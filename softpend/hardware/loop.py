@@ -17,6 +17,7 @@ from typing import Any, Callable, Optional, Protocol
 
 import numpy as np
 
+from softpend.checks import positive
 from softpend.plant import Observation, wrap_angle_rad
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.io.samplelog import SampleLog
@@ -169,8 +170,7 @@ def run_control_loop(
     LinkError
         From the driver (the motor has been stopped); the samples up to the failure are in ``log``.
     """
-    if not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be positive and finite, got {duration_s!r}")
+    positive("duration_s", duration_s)
     if not link.is_open:
         raise ValueError("link must be open")
     if log is not None and list(log.columns) != list(LOOP_LOG_COLUMNS):

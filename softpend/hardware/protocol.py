@@ -33,7 +33,11 @@
 # ERROR      0x84  code:u8                                      device-side error report
 #
 # STATE flags: bit 0 = watchdog tripped (no TORQUE for watchdog_ms, torque forced to 0),
-#              bit 1 = torque command saturated at the device limit, bit 2 = stopped by STOP.
+#              bit 1 = torque command saturated at the device limit, bit 2 = stopped by STOP;
+#              the other bits are always 0.
+# ERROR codes: 1 = ERR_VERSION (HELLO carried a protocol version the device does not speak),
+#              2 = ERR_NO_SESSION (a command arrived before a HELLO opened the session, e.g. after a
+#              device restart), 3 = ERR_BAD_MESSAGE (a message type the device does not accept).
 # The watchdog is fed only by TORQUE messages (never by HEARTBEAT): a host that stops commanding stops
 # the motor.
 
@@ -53,10 +57,17 @@ MSG_ERROR = 0x84
 FLAG_WATCHDOG = 0x01
 FLAG_SATURATED = 0x02
 FLAG_STOPPED = 0x04
+FLAG_MASK = FLAG_WATCHDOG | FLAG_SATURATED | FLAG_STOPPED
 
 ERR_VERSION = 1
 ERR_NO_SESSION = 2
 ERR_BAD_MESSAGE = 3
+ERROR_MEANINGS = {
+    ERR_VERSION: "protocol version mismatch (ERR_VERSION): the device does not speak this protocol version",
+    ERR_NO_SESSION: "no session open (ERR_NO_SESSION): a command arrived before the HELLO handshake"
+                    " (did the device restart?)",
+    ERR_BAD_MESSAGE: "message type not accepted by the device (ERR_BAD_MESSAGE)",
+}
 
 HEADER_FORMAT = "<BH"
 HEADER_SIZE = 3
@@ -215,13 +226,22 @@ class FrameDecoder:
     counted (``bad_frames``, ``checksum_errors``) and reported through ``errors`` instead of raising, so
     one garbled frame never desynchronises the stream; the caller decides what a bad frame means
     (``consecutive_bad`` counts bad frames since the last good one).
+
+    Parameters
+    ----------
+    validate : callable, optional
+        ``validate(msg_type, values)`` returns None for an acceptable message or a string saying what is
+        wrong with its values (a NaN velocity, a torque beyond the limit); a frame it refuses is a bad
+        frame like a corrupt one (counted in ``bad_frames`` and ``value_errors``, never returned).
     """
 
-    def __init__(self):
+    def __init__(self, validate=None):
         self._frame = bytearray()
         self._overflow = False
+        self._validate = validate
         self.bad_frames = 0
         self.checksum_errors = 0
+        self.value_errors = 0
         self.good_frames = 0
         self.consecutive_bad = 0
         self.last_error = None
@@ -251,7 +271,16 @@ class FrameDecoder:
                 errors.append(self.last_error)
                 continue
             try:
-                messages.append(decode_frame(frame))
+                message = decode_frame(frame)
+                problem = self._validate(message[0], message[2]) if self._validate is not None else None
+                if problem is not None:
+                    self.consecutive_bad += 1
+                    self.bad_frames += 1
+                    self.value_errors += 1
+                    self.last_error = "%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem)
+                    errors.append(self.last_error)
+                    continue
+                messages.append(message)
                 self.good_frames += 1
                 self.consecutive_bad = 0
             except ChecksumMismatch as exc:

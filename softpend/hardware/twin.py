@@ -30,7 +30,7 @@ from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation,
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
 
-__all__ = ["TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
+__all__ = ["TWIN_MARKER", "TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
 
 
 def rig_babble_controller(
@@ -113,7 +113,9 @@ def run_twin_session(
     Parameters
     ----------
     workdir : path
-        Folder for the logs, the video, the CSV and the dataset.
+        Folder for the logs, the video, the CSV and the dataset: a new or empty folder, or one an earlier
+        session wrote (it holds the marker file ``.softpend-twin``; its earlier outputs are replaced).  A
+        non-empty folder without the marker raises ``ValueError`` and nothing in it is touched.
     duration_s : float
         Babbling time on the rig [s].
     seed : int
@@ -138,16 +140,15 @@ def run_twin_session(
 
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
+    workdir = _claim_workdir(Path(workdir))
     rig = rig if rig is not None else RigConfig(seed=seed)
     effects = camera_effects if camera_effects is not None else CameraEffects(
         noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
-    paths = {name: workdir / name for name in ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz")}
-    for path in list(paths.values()) + [workdir / "camera.avi.json"]:
-        path.unlink(missing_ok=True)
+    paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
+    for name in _OUTPUTS:  # the workdir is ours (empty or marked): these are an earlier session's outputs
+        (workdir / name).unlink(missing_ok=True)
     stats_path = workdir / "emulator_stats.json"
-    limit = rig.params.torque_limit_nm
+    limit = rig.task.torque_limit_nm
     controller = rig_babble_controller(duration_s, limit, seed)
     with start_emulator_process(rig, truth_log=paths["truth_log.csv"], stats_path=stats_path) as emulator:
         with MotorLink(emulator.port, torque_limit_nm=limit) as link, \
@@ -155,17 +156,40 @@ def run_twin_session(
             loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
         emulator.terminate()
         emulator_stats = emulator.stats()
-    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.params, rig.plant)
+    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=effects, seed=seed)
     render_video(paths["camera.avi"], camera, times, points, hub, fps=camera_fps, clock_offset_s=clock_offset_s,
                  timestamp_jitter_s=timestamp_jitter_s, progress=progress)
     track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
     dataset, sync = build_rig_dataset(paths["motor_log.csv"], paths["camera.csv"], paths["rig_dataset.npz"],
-                                      params=rig.params, trial_length_s=trial_length_s,
+                                      params=rig.task.rod, trial_length_s=trial_length_s,
                                       notes="digital twin: emulated serial link + synthetic camera")
     return TwinSession(workdir, paths["motor_log.csv"], paths["truth_log.csv"], paths["camera.avi"],
                        paths["camera.csv"], paths["rig_dataset.npz"], loop, sync, dataset, clock_offset_s,
                        emulator_stats)
+
+
+#: Marker file of a folder written by :func:`run_twin_session`.
+TWIN_MARKER = ".softpend-twin"
+#: Every file :func:`run_twin_session` writes in its folder (besides the marker).
+_OUTPUTS = ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz", "camera.avi.json",
+            "emulator_stats.json")
+
+
+def _claim_workdir(workdir: Path) -> Path:
+    """Create ``workdir`` or check that it is empty or marked as a twin folder; mark it; return it."""
+    marker = workdir / TWIN_MARKER
+    if workdir.exists() or workdir.is_symlink():
+        if not workdir.is_dir():
+            raise ValueError(f"workdir {workdir} exists and is not a folder")
+        if not marker.is_file() and any(workdir.iterdir()):
+            raise ValueError(f"workdir {workdir} is not empty and was not written by run_twin_session "
+                             f"(no {TWIN_MARKER} marker); pass a new or empty folder (nothing was changed)")
+    else:
+        workdir.mkdir(parents=True)
+    if not marker.is_file():
+        marker.write_text("written by softpend.hardware.twin.run_twin_session\n")
+    return workdir
 
 
 def compare_with_simulator_model(

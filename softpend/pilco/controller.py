@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from softpend.checks import positive
 from softpend.plant import Observation
 from softpend.pilco.policy import RBFPolicy
 from softpend.pilco.propagation import StateSpec
@@ -20,9 +21,7 @@ __all__ = ["PilcoController", "RandomTorqueController"]
 
 class _HoldController:
     def __init__(self, control_dt_s: float) -> None:
-        if not math.isfinite(control_dt_s) or control_dt_s <= 0:
-            raise ValueError(f"control_dt_s must be positive and finite, got {control_dt_s!r}")
-        self.control_dt_s = float(control_dt_s)
+        self.control_dt_s = positive("control_dt_s", control_dt_s)
         self.reset()
 
     def reset(self) -> None:
@@ -90,10 +89,8 @@ class RandomTorqueController(_HoldController):
 
     def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int,
                  hold_s: tuple[float, float] | None = None, bang_bang: bool = False) -> None:
-        if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
-            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
-        if not math.isfinite(control_dt_s) or control_dt_s <= 0:
-            raise ValueError(f"control_dt_s must be positive and finite, got {control_dt_s!r}")
+        positive("torque_limit_nm", torque_limit_nm)
+        positive("control_dt_s", control_dt_s)
         hold = (control_dt_s, control_dt_s) if hold_s is None else tuple(float(h) for h in hold_s)
         if len(hold) != 2 or not all(math.isfinite(h) and h > 0 for h in hold) or hold[0] > hold[1]:
             raise ValueError(f"hold_s must be (min, max) with 0 < min <= max, got {hold_s!r}")

@@ -13,10 +13,8 @@ singularity).  The optimiser is SciPy's L-BFGS-B with PyTorch gradients, in floa
 
 When the data set grows beyond ``max_points`` the model keeps a subset (data subsampling instead of a sparse
 GP approximation): the points of the most recent trial are always kept (that is where the current policy
-goes) and the rest is drawn from the older data, either uniformly at random with an explicit seed, or
-(:func:`spread_subset`) greedily as the points farthest, in the length-scale-scaled input space, from those
-already kept -- a cheap stand-in for picking the points of largest posterior variance, which keeps rare
-regions (the few upright samples of an early swing-up) that a uniform draw can lose.
+goes) and the rest is drawn uniformly at random from the older data, with an explicit seed
+(:func:`select_subset`).
 """
 
 from __future__ import annotations
@@ -31,7 +29,7 @@ import torch
 
 from softpend.pilco.moments import gp_moments
 
-__all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset", "spread_subset"]
+__all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset"]
 
 DTYPE = torch.float64
 
@@ -74,50 +72,6 @@ def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.
     newest = np.arange(n_points - recent, n_points)
     older = np.random.default_rng(seed).choice(n_points - recent, size=max_points - recent, replace=False)
     return np.sort(np.concatenate([np.sort(older), newest]))
-
-
-def spread_subset(inputs: np.ndarray, max_points: int, recent: int, lengthscales: np.ndarray) -> np.ndarray:
-    """Indices of at most ``max_points`` rows of ``inputs``: the last ``recent`` always, the rest by farthest-point.
-
-    Each further point is the older one farthest from every point kept so far, with distances measured in
-    units of ``lengthscales`` (a GP's length-scales, so "far" means "poorly covered by the kernel").
-
-    Parameters
-    ----------
-    inputs : array (N, D)
-        All training inputs, in chronological order.
-    max_points : int
-        Largest subset size.
-    recent : int
-        Number of most recent points that are always kept (capped at ``max_points``).
-    lengthscales : array (D,)
-        Positive distance scale per input dimension.
-    """
-    inputs = np.asarray(inputs, dtype=float)
-    lengthscales = np.asarray(lengthscales, dtype=float)
-    if max_points < 1:
-        raise ValueError(f"max_points must be >= 1, got {max_points!r}")
-    if inputs.ndim != 2 or lengthscales.shape != (inputs.shape[1],) or np.any(lengthscales <= 0):
-        raise ValueError(f"lengthscales must be {inputs.shape[-1]} positive numbers, got {lengthscales}")
-    n_points = len(inputs)
-    if n_points <= max_points:
-        return np.arange(n_points)
-    recent = min(max(int(recent), 0), max_points)
-    scaled = inputs / lengthscales
-    kept = list(range(n_points - recent, n_points))
-    n_old = n_points - recent
-    if kept:
-        d2 = np.min(((scaled[:n_old, None, :] - scaled[None, kept, :]) ** 2).sum(axis=2), axis=1)
-    else:
-        kept.append(n_old - 1)
-        d2 = ((scaled[:n_old] - scaled[n_old - 1]) ** 2).sum(axis=1)
-    d2[[k for k in kept if k < n_old]] = -np.inf
-    while len(kept) < max_points:
-        pick = int(np.argmax(d2))
-        kept.append(pick)
-        d2 = np.minimum(d2, ((scaled[:n_old] - scaled[pick]) ** 2).sum(axis=1))
-        d2[pick] = -np.inf
-    return np.sort(np.asarray(kept))
 
 
 class MultiOutputGP:

@@ -2,14 +2,14 @@
 
 Control rate and trials
 -----------------------
-The plant (:func:`softpend.plant.make_plant`) steps at ``plant_dt_s = 0.01`` s; PILCO acts every
+The plant (``task.make_plant()``) steps at ``task.dt_s = 0.01`` s; PILCO acts every
 ``control_dt_s = 0.1`` s (10 Hz, as in PILCO's pendulum) and the torque is held constant over the ten plant
 steps in between (:class:`~softpend.pilco.controller.PilcoController`).  Trials and the prediction horizon
 are ``horizon_s = 6`` s (60 control steps): the 0.06 N m motor needs about 2 s (two to three swings) to pump
-the rod up, so a 4 s horizon leaves only 2 s in which balancing is worth more than swinging through the top
-(see "Measured" below).  Every trial -- the random-torque trial(s) and
+the rod up, so a 4 s horizon leaves only 2 s in which balancing is worth more than swinging through the top.
+Every trial -- the random-torque trial(s) and
 each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
-perturbed by up to ``start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
+perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
 :func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
 other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
 
@@ -21,108 +21,43 @@ The policy *balances* when every test episode swings up and keeps ``upright_std_
 Model learning and policy search
 --------------------------------
 GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled to ``max_gp_points`` (the
-latest trial always kept, the older points drawn at random or, with ``gp_subset="spread"``, farthest-point
-in the last fit's length-scale units), hyperparameters by penalised marginal likelihood; then the RBF policy
-(:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost summed over the horizon from
-``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole moment-matching rollout
-(:class:`~softpend.pilco.propagation.Propagator`).  The cost is saturating in the tip's distance from upright;
-once a real trial has brought the tip within ``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by
-a factor in the tip rate (``cost_rate_width_rad_s = 3`` rad/s): a rod that spins over the top at 7-15 rad/s
-then earns almost nothing, one that arrives slowly and stays earns all of it.  Before that, the position cost
-alone rewards getting up at any speed, which is what the first policies need.  The search runs from the previous policy and, with
-``policy_restarts > 0``, also from fresh random policies; the lowest predicted cost wins.  Optional
-exploration aids (see :class:`PilcoConfig`): a random first trial of bang-bang torques, each held 0.2-0.6 s
-(on by default: it swings the rod far enough for the first GP to see more than the hanging plateau), and screening random candidate policies by their predicted cost before the search.
+latest trial always kept, the older points drawn at random), hyperparameters by penalised marginal
+likelihood; then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
+cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
+moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy.
+The cost is saturating in the tip's distance from upright; once a real trial has brought the tip within
+``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by a factor in the tip rate
+(``cost_rate_width_rad_s = 3`` rad/s): a rod that spins fast over the top then earns almost nothing, one that
+arrives slowly and stays earns all of it.  Before that, the position cost alone rewards getting up at any
+speed, which is what the first policies need.  The random first trial holds bang-bang torques for 0.2-0.6 s
+each: it swings the rod far enough for the first GP to see more than the hanging plateau.
 
-Measured (soft rod, one torch thread, 2-core machine shared with one other job; issue 7)
----------------------------------------------------------------------------------------
-The defaults (a bang-bang random trial with torques held 0.2-0.6 s, 6 s horizon, tip-rate factor 3 rad/s once a
-trial came within 0.5 rad of upright, one search of 80 iterations, uniform GP subset, at most 6 policy trials,
-one random stream per purpose), ``run_pilco(PilcoConfig(seed=k))``:
-
-====  =====================  =============  ====================  =====  ======
-seed  plant s to balance     policy trials  worst test std [rad]  CPU s  wall s
-====  =====================  =============  ====================  =====  ======
-0     18                     2              0.026                 217    387
-1     18                     2              0.041                 184    179
-2     12                     1              0.051                 83     83
-3     not within 42 s        6              1.42                  601    742
-4     30                     4              0.046                 430    418
-5     not within 42 s        6              2.87                  158    158
-6     not within 42 s        6              1.51                  664    635
-====  =====================  =============  ====================  =====  ======
-
-So the target (std <= 0.1 rad with < 90 plant s, < 15 min compute) holds on seeds 0, 1, 2 and 4
-(4 of 7; the book runs seeds 0-2), with 12-30 plant s and at most 430 CPU s; not on seeds 3, 5 and 6.
-Seed 3 gets off the hanging plateau (predicted 55 -> 41 of 60 over its 6 trials) but does not get up; seed 6
-creeps down the same way (predicted 57 -> 52); seed 5 never leaves the plateau (predicted 58-60, real 60.0
-in every policy trial: the policy holds the rod hanging).  Seeds 5 and 6 were run two at a time.  With a
-position-only cost (``cost_rate_width_rad_s=None``) neither seed 5 nor seed 6 balances either (worst test std
-2.62 rad after 6 policy trials, 661 and 658 CPU s): the tip-rate factor is not what keeps seed 5 down.
-How we got there (each line one change; the runs are deterministic: equal configurations reproduce
-every trial to the printed digit):
-
-* The same with the random trial of the previous defaults (uniform torques, each held 0.1 s, which barely
-  move the rod: real cost 59.9 of 60) and one random stream per purpose, ``n_random_trials=2``: neither
-  seed 0 (worst test std 1.95 after 6 policy trials, 48 plant s, 775 CPU s) nor seed 3 (std 1.12, 48 s,
-  794 CPU s) balanced; seed 3 did leave the plateau (first predicted cost 49.8 instead of 59.8).
-* The same with ``n_random_trials=1`` and the old draws (all from one generator, the budget setting the
-  trial-seed array; the defaults of issue 7's third session): seeds 1, 2 and 4 balanced after 24 plant s
-  (3 policy trials, std 0.054, 0.029, 0.026, 289-328 CPU s); seed 0 got up but did not settle (std 1.22,
-  646 CPU s); seed 3 never left the hanging plateau (predicted 59.8 of 60 for the first two searches, std
-  2.65, 591 CPU s).
-
-* 4 s horizon, position-only cost (the defaults until issue 7's third session): seed 0 balanced after 16
-  plant s in one run and not within 8 trials in another (a different budget, see below); seeds 1 and 2
-  did not (predicted cost stuck at 28-36 of 40).  The failed policies either *spin* -- after a 2 s swing-up
-  the rod goes over the top again and again, one turn every 1.3-1.4 s (seeds 0 and 2 of the book run) --
-  each pass through upright lowering the position cost, or come up to about 0.2 rad and fall back (seed
-  1).  Predicted and real cost agreed within 1 of 40, so the model was right about these policies: a
-  local optimum of the search, not model error.
-* 6 s horizon, position-only cost: seed 2 balanced after 24 plant s (3 policy trials, 269 CPU s), seed 1
-  after 36 s (5 trials, 391 CPU s, std 0.076 rad); seed 0 spun (tip rate 7-15 rad/s) for all 6 trials
-  (predicted cost 45 of 60, 543 CPU s).
-* 6 s horizon, tip-rate factor 3 rad/s from the first search: seed 0 balanced after 18 plant s (2 trials,
-  187 CPU s, std 0.055 rad); seed 1 did not within 6 trials (590 CPU s): its first policies never got
-  up (real cost 51-58 of 60), since passing the top fast no longer pays either.  Hence the switch (the
-  defaults): position cost until a trial has been near upright, then the rate factor.
-* 4 s horizon with a linear term in the policy (``policy_linear``), seed 1: no balance in 4 trials, real
-  cost 33-35 of 40 (the default's 27-29 at the same trials).
-* The budget changed the random draws (fixed since issue 7's fourth session, where each purpose got its own
-  stream of ``SeedSequence(seed)``; every run measured before that, the table above included, used the old
-  draws): ``n_policy_trials`` set the length of the trial-seed array drawn
-  from the run's generator, and every later draw (policy initialisation, GP subsets) followed it.  The
-  lead's book run of the old defaults with 8 trials and the engineer's with 15 were therefore different
-  runs (first predicted cost 33.945 against 33.92), not only a rounding effect.  The fig10 full profile
-  uses the same budget as the defaults, so the book, the benchmark and the expensive test run the
-  measured runs.
-* Earlier sessions (4 s horizon, position-only cost): restarts (``policy_restarts=1``, 50 iterations each)
-  with ``gp_subset="spread"`` balanced seed 2 after 20 plant s but not seeds 0 and 1 in 7-8 trials; a held
-  bang-bang first trial or 16 screened random candidates swung no seed up within 2-3 trials; 200 instead
-  of 80 iterations gave the same predicted cost on seed 1 (36.1 against 36.2); fusing two additions of
-  the GP second moments into one ``baddbmm`` moved seed 0's first predicted cost from 33.92 to 34.12 and
-  its outcome from balancing to not.  A policy known to balance was predicted to cost 35-40 of 40 by a GP
-  fitted on one random trial.
+The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
+import pickle
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional
 
 import numpy as np
 import scipy.optimize
 import torch
 
+from softpend.checks import boolean, check_work_size, int_at_least, optional_positive, positive
 from softpend.evaluation import EvaluationResult, evaluate_controller, run_episode
-from softpend.plant import RodParams, check_plant_name
+from softpend.io.outputs import atomic_write
+from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController
-from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset, spread_subset
+from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
 from softpend.pilco.policy import RBFPolicy
 from softpend.pilco.propagation import Propagator, StateSpec, state_spec
 
@@ -137,13 +72,12 @@ class PilcoConfig:
 
     Parameters
     ----------
-    params : RodParams
-        The plant (default: the project's soft rod, ``n_links = 4``).
-    plant : str
-        Plant name for :func:`softpend.plant.make_plant`.
+    task : softpend.task.Task
+        Plant, rod, plant step ``task.dt_s``, sub-steps and the start distribution of every trial and test
+        episode (default: the project's soft rod hanging, ``n_links = 4``).
     state : {"tip_bend", "tip", "hub_tip"}
         State representation (see :mod:`softpend.pilco.propagation`).
-    plant_dt_s, control_dt_s : float
+    control_dt_s : float
         Plant step and PILCO's control period (zero-order hold) [s].
     horizon_s : float
         Prediction horizon and length of every trial [s].
@@ -172,30 +106,12 @@ class PilcoConfig:
         wider start distribution than the plant's (robustness).
     n_basis : int
         RBF basis functions of the policy.
-    policy_linear : bool
-        Add a learnable linear term to the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`).
     max_gp_points : int
-        Largest GP training set (data subsampling beyond it; the latest trial is always kept).
-    gp_subset : {"random", "spread"}
-        How the older points are subsampled: uniformly at random, or farthest-point in the GP's
-        length-scale units (:func:`~softpend.pilco.gp.spread_subset`).
+        Largest GP training set (beyond it the older points are subsampled uniformly at random; the latest
+        trial is always kept).
     gp_iterations, policy_iterations : int
-        L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search.
-    policy_candidates : int
-        Random policies (centres on visited states, pseudo-targets ``restart_target_std N(0, 1)``) whose
-        predicted cost is computed (one rollout each, no gradient) before every policy search;
-        the search starts from the best of them and the previous policy.  This gets the search off the flat
-        plateau of the saturating cost (a policy that predicts the rod to stay hanging has a cost gradient
-        of about ``exp(-8)``).
-    policy_restarts : int
-        Extra full policy searches per trial, each from the next-best random candidate (or a fresh random
-        policy); the policy with the lowest predicted cost runs the trial.
-    restart_target_std : float
-        Spread of the random candidates' pseudo-targets (pre-saturation): 0.1 as the first policy (small
-        torques, live gradients), about 1 for policies that use the whole torque range (the sine saturation
-        then flattens the gradient).
-    start_noise_rad : float
-        Half-width of the uniform start perturbation of the hub angle and rate (the environment's).
+        L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search (one search per
+        trial, from the previous policy).
     eval_seeds : tuple of int
         Seeds of the test episodes after each policy trial (empty: no tests).
     eval_duration_s : float
@@ -206,14 +122,12 @@ class PilcoConfig:
         End the run at the first policy that balances.
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
-        starts and torques, policy-trial starts, policy init, GP subsets, restart candidates), so neither
+        starts and torques, policy-trial starts, policy init, GP subsets; :data:`RANDOM_STREAMS`), so neither
         ``n_policy_trials`` nor ``n_random_trials`` changes the draws of the other purposes.
     """
 
-    params: RodParams = field(default_factory=RodParams)
-    plant: str = "prb"
+    task: Task = field(default_factory=Task)
     state: str = "tip_bend"
-    plant_dt_s: float = 0.01
     control_dt_s: float = 0.1
     horizon_s: float = 6.0
     n_policy_trials: int = 6
@@ -226,15 +140,9 @@ class PilcoConfig:
     cost_rate_after_rad: Optional[float] = 0.5
     initial_std: float = 0.05
     n_basis: int = 30
-    policy_linear: bool = False
     max_gp_points: int = 200
-    gp_subset: str = "random"
     gp_iterations: int = 100
     policy_iterations: int = 80
-    policy_candidates: int = 0
-    policy_restarts: int = 0
-    restart_target_std: float = 0.1
-    start_noise_rad: float = 0.05
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0
     target_std_rad: float = 0.1
@@ -242,48 +150,35 @@ class PilcoConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.params, RodParams):
-            raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
+        if not isinstance(self.task, Task):
+            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         state_spec(self.state)
-        if self.gp_subset not in ("random", "spread"):
-            raise ValueError(f"gp_subset must be 'random' or 'spread', got {self.gp_subset!r}")
-        check_plant_name(self.plant)
-        for name in ("plant_dt_s", "control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
-        if not math.isfinite(self.start_noise_rad) or self.start_noise_rad < 0:
-            raise ValueError(f"start_noise_rad must be non-negative and finite, got {self.start_noise_rad!r}")
+        for name in ("control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
+                     "target_std_rad", "random_hold_min_s", "random_hold_max_s"):
+            positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
-        ratio = self.control_dt_s / self.plant_dt_s
+        ratio = self.control_dt_s / self.task.dt_s
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ValueError(f"control_dt_s must be a whole multiple of plant_dt_s, got {self.control_dt_s!r}")
+            raise ValueError(f"control_dt_s must be a whole multiple of task.dt_s, got {self.control_dt_s!r}")
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
-        for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10), ("gp_iterations", 1),
-                          ("policy_iterations", 1), ("policy_restarts", 0),
-                          ("policy_candidates", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < low:
-                raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-        self.eval_seeds = tuple(int(s) for s in self.eval_seeds)
-        if self.cost_rate_width_rad_s is not None and (
-                isinstance(self.cost_rate_width_rad_s, bool) or not isinstance(self.cost_rate_width_rad_s, (int, float))
-                or not math.isfinite(self.cost_rate_width_rad_s) or self.cost_rate_width_rad_s <= 0):
-            raise ValueError(f"cost_rate_width_rad_s must be positive and finite or None, got {self.cost_rate_width_rad_s!r}")
-        if self.cost_rate_after_rad is not None and (
-                isinstance(self.cost_rate_after_rad, bool) or not isinstance(self.cost_rate_after_rad, (int, float))
-                or not math.isfinite(self.cost_rate_after_rad) or self.cost_rate_after_rad <= 0):
-            raise ValueError(f"cost_rate_after_rad must be positive and finite or None, got {self.cost_rate_after_rad!r}")
-        if not isinstance(self.policy_linear, bool):
-            raise ValueError(f"policy_linear must be a bool, got {self.policy_linear!r}")
+        for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
+                          ("gp_iterations", 1), ("policy_iterations", 1)):
+            setattr(self, name, int_at_least(name, getattr(self, name), low))
+        try:
+            self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
+        except TypeError:
+            raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
+        for name in ("cost_rate_width_rad_s", "cost_rate_after_rad"):
+            optional_positive(name, getattr(self, name))
+        for name in ("random_bang_bang", "stop_when_balanced"):
+            boolean(name, getattr(self, name))
 
     @property
     def hold_steps(self) -> int:
         """Plant steps per control step."""
-        return int(round(self.control_dt_s / self.plant_dt_s))
+        return int(round(self.control_dt_s / self.task.dt_s))
 
     @property
     def n_horizon_steps(self) -> int:
@@ -292,14 +187,14 @@ class PilcoConfig:
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
-        data["params"] = self.params.to_dict()
+        data["task"] = self.task.to_dict()
         data["eval_seeds"] = list(self.eval_seeds)
         return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
         data = dict(data)
-        data["params"] = RodParams.from_dict(data["params"])
+        data["task"] = Task.from_dict(data["task"])
         data["eval_seeds"] = tuple(data.get("eval_seeds", ()))
         return cls(**data)
 
@@ -371,7 +266,10 @@ class PilcoResult:
         """Write ``policy.pt`` (state dict) and ``pilco.json`` (config, trial records, GP hyperparameters)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        torch.save(self.policy.state_dict(), directory / "policy.pt")
+        weights = io.BytesIO()
+        torch.save(self.policy.state_dict(), weights)
+        with atomic_write(directory / "policy.pt") as handle:
+            handle.write(weights.getvalue())
         meta = {
             "config": self.config.to_dict(),
             "records": [dataclasses.asdict(r) for r in self.records],
@@ -379,23 +277,47 @@ class PilcoResult:
             "real_seconds_to_balance": self.real_seconds_to_balance,
             "train_wall_s": self.train_wall_s,
         }
-        (directory / "pilco.json").write_text(json.dumps(meta, indent=2, default=float))
+        text = json.dumps(meta, indent=2, default=float)
+        with atomic_write(directory / "pilco.json", "w") as handle:
+            handle.write(text)
         return directory
 
     @classmethod
     def load(cls, directory: str | Path) -> "PilcoResult":
-        """Inverse of :meth:`save` (predicted and real trajectories are not stored)."""
+        """Inverse of :meth:`save` (predicted and real trajectories are not stored).
+
+        The policy weights are read with ``torch.load(..., weights_only=True)`` (tensors only, never code).
+
+        Raises
+        ------
+        FileNotFoundError
+            If ``pilco.json`` or ``policy.pt`` is missing.
+        ValueError
+            If either file is not what :meth:`save` writes (the message names the file and the reason).
+        """
         directory = Path(directory)
-        meta = json.loads((directory / "pilco.json").read_text())
-        config = PilcoConfig.from_dict(meta["config"])
-        state = torch.load(directory / "policy.pt", weights_only=True)
-        spec = state_spec(config.state)
-        policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),
-                           config.params.torque_limit_nm, linear="linear_weights" in state)
-        policy.load_state_dict(state)
-        hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
-        return cls(config=config, records=[TrialRecord(**r) for r in meta["records"]], policy=policy,
-                   gp_hyperparameters=hyper)
+        meta_path, weights_path = directory / "pilco.json", directory / "policy.pt"
+        for path in (meta_path, weights_path):
+            if not path.exists():
+                raise FileNotFoundError(f"no PILCO result file {path}")
+        try:
+            meta = json.loads(meta_path.read_text())
+            config = PilcoConfig.from_dict(meta["config"])
+            records = [TrialRecord(**r) for r in meta["records"]]
+            hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{meta_path}: not a PILCO result ({type(exc).__name__}: {exc})") from None
+        try:
+            state = torch.load(weights_path, weights_only=True, map_location="cpu")
+            spec = state_spec(config.state)
+            policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),
+                               config.task.torque_limit_nm)
+            policy.load_state_dict(state)
+        except (pickle.UnpicklingError, RuntimeError, EOFError, OSError, KeyError, TypeError, AttributeError,
+                IndexError, zipfile.BadZipFile) as exc:
+            message = " ".join(str(exc).split())[:300]
+            raise ValueError(f"{weights_path}: not a PILCO policy written by softpend ({type(exc).__name__}: {message})") from None
+        return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper)
 
 
 def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta_dot_rad_s: np.ndarray | None = None,
@@ -414,7 +336,7 @@ def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta
 def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray, rate_width: Optional[float]) -> float:
     """The cost (tip-rate factor of width ``rate_width`` or none) summed along a real trial's states (H+1, d),
     the start excluded."""
-    return float(real_cost(states[1:, spec.tip_angle_index], config.params.length_m, config.cost_width_m,
+    return float(real_cost(states[1:, spec.tip_angle_index], config.task.rod.length_m, config.cost_width_m,
                            states[1:, spec.tip_rate_index], rate_width).sum())
 
 
@@ -443,11 +365,11 @@ def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[Evaluat
     return episode, states, torques
 
 
-def _minimise(
+def _optimise_policy(
     propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
 ) -> float:
-    """L-BFGS-B on the policy parameters from the policy's current ones; keeps and returns the better of the
-    start and the result (predicted total cost)."""
+    """Policy search: L-BFGS-B on the policy parameters from the policy's current ones; the policy keeps the
+    better of the start and the result, whose predicted total cost is returned."""
 
     def objective(vector: np.ndarray) -> tuple[float, np.ndarray]:
         leaf = torch.tensor(vector, dtype=DTYPE, requires_grad=True)
@@ -474,44 +396,8 @@ def _minimise(
     return float(start_value)
 
 
-def _predicted_cost(propagator: Propagator, policy: RBFPolicy, vector: np.ndarray, m0: torch.Tensor,
-                    s0: torch.Tensor, n_steps: int) -> float:
-    """Predicted total cost of the policy with parameters ``vector`` (``inf`` when the rollout fails)."""
-    policy.set_vector(vector)
-    try:
-        with torch.no_grad():
-            value = float(propagator.rollout(m0, s0, n_steps)[3])
-    except torch.linalg.LinAlgError:
-        return math.inf
-    return value if math.isfinite(value) else math.inf
-
-
-def _optimise_policy(
-    propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int,
-    candidates: Sequence[np.ndarray] = (), restarts: int = 0,
-) -> float:
-    """Policy search from the best start, plus ``restarts`` more searches; keeps the lowest predicted cost.
-
-    The starts are the policy's current parameters and the vectors in ``candidates``, ranked by their
-    predicted cost (one rollout each); L-BFGS-B runs from the ``1 + restarts`` best of them.  The policy
-    ends with the parameters of the lowest predicted total cost, which is returned.
-    """
-    starts = [policy.get_vector()] + [np.asarray(c, dtype=float) for c in candidates]
-    if len(starts) > 1:
-        values = [_predicted_cost(propagator, policy, v, m0, s0, n_steps) for v in starts]
-        starts = [starts[i] for i in np.argsort(values, kind="stable")]
-    best_value, best_vector = math.inf, starts[0]
-    for vector in starts[: 1 + int(restarts)]:
-        policy.set_vector(vector)
-        value = _minimise(propagator, policy, m0, s0, n_steps, iterations)
-        if value < best_value:
-            best_value, best_vector = value, policy.get_vector()
-    policy.set_vector(best_vector)
-    return best_value
-
-
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "restarts")
+RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -528,6 +414,22 @@ def _random_streams(seed: int) -> dict[str, np.random.Generator]:
 def _draw_seed(rng: np.random.Generator) -> int:
     """One seed in ``[0, 2**31 - 1)`` from ``rng``."""
     return int(rng.integers(0, 2**31 - 1))
+
+
+def check_pilco_size(config: PilcoConfig) -> None:
+    """``ValueError`` (with the estimate) if a run of ``config`` would exceed
+    :data:`softpend.checks.MAX_WORK_BYTES`: the moment-matching rollout keeps, for every prediction step, a
+    matrix of ``max_gp_points**2`` entries per pair of state outputs (PILCO's predictive covariance) for the
+    policy gradient; the evaluation trajectories come on top."""
+    dim = state_spec(config.state).dim
+    rollout = 8.0 * config.n_horizon_steps * dim * dim * config.max_gp_points**2
+    policy = 8.0 * config.n_horizon_steps * config.n_basis * (config.max_gp_points + dim) * dim
+    evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
+    check_work_size(
+        "this PILCO run", rollout + policy + evaluation,
+        f"{config.n_horizon_steps} prediction steps x {dim}**2 outputs x {config.max_gp_points}**2 GP points, "
+        f"{config.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
+    )
 
 
 def run_pilco(
@@ -555,10 +457,10 @@ def run_pilco(
 
     config = config if config is not None else PilcoConfig()
     spec = state_spec(config.state)
-    params = config.params
+    check_pilco_size(config)
+    params = config.task.rod
     torque_limit = params.torque_limit_nm
-    env = SoftPendulumEnv(params=params, dt_s=config.plant_dt_s, start="hanging",
-                          start_noise_rad=config.start_noise_rad, plant=config.plant)
+    env = SoftPendulumEnv(**config.task.env_kwargs())
     streams = _random_streams(config.seed)
     start_wall = time.perf_counter()
     start_cpu = time.process_time()
@@ -605,11 +507,9 @@ def run_pilco(
     all_inputs = np.vstack(inputs)[:, :-1]
     lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
                             np.maximum(all_inputs.std(axis=0), 1e-3), 0.7)
-    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=_draw_seed(init_rng),
-                       linear=config.policy_linear)
+    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=_draw_seed(init_rng))
     result.policy = policy
     hyper: Optional[GPHyperparameters] = None
-    restart_rng = streams["restarts"]
 
     bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
     for trial in bar:
@@ -619,10 +519,6 @@ def run_pilco(
         y_all = np.vstack(targets)
         subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]),
                                seed=_draw_seed(streams["gp_subsets"]))
-        if config.gp_subset == "spread" and hyper is not None:
-            # length-scales of the last fit, averaged over the outputs (geometric mean)
-            scales = np.exp(np.mean(hyper.log_lengthscales, axis=0))
-            subset = spread_subset(x_all, config.max_gp_points, recent=len(inputs[-1]), lengthscales=scales)
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=hyper)
         gp.fit(config.gp_iterations)
         hyper = gp.hyperparameters
@@ -631,15 +527,7 @@ def run_pilco(
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
         rate_width = config.cost_rate_width_rad_s if rate_on else None
         propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width)
-        visited = np.vstack(result.real_states)
-        candidates = [
-            RBFPolicy(spec.model_inputs(visited[restart_rng.choice(len(visited), size=config.n_basis)]), lengthscales,
-                      torque_limit, seed=int(restart_rng.integers(2**31)), target_std=config.restart_target_std,
-                      linear=config.policy_linear).get_vector()
-            for _ in range(max(config.policy_candidates, config.policy_restarts))
-        ]
-        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations, candidates,
-                                     config.policy_restarts)
+        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
         with torch.no_grad():
             means, covs, _, _ = propagator.rollout(m0, s0, n_steps)
         result.predicted_means.append(means.numpy())
@@ -661,9 +549,8 @@ def run_pilco(
         # ---- test it (not counted as interaction, not used for learning)
         if config.eval_seeds:
             summary = evaluate_controller(
-                PilcoController(policy, spec, config.control_dt_s), name="pilco", seeds=config.eval_seeds,
-                duration_s=config.eval_duration_s, params=params, plant=config.plant, dt_s=config.plant_dt_s,
-                start_noise_rad=config.start_noise_rad,
+                PilcoController(policy, spec, config.control_dt_s), config.task, name="pilco", seeds=config.eval_seeds,
+                duration_s=config.eval_duration_s,
             )
             stds = [r.upright_std_rad for r in summary.results]
             record.eval_success_rate = summary.success_rate

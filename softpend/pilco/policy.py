@@ -7,20 +7,14 @@ The pre-saturation output is ``pi~(x) = sum_i beta_i exp(-|x - c_i|^2_Lambda / 2
 which never exceeds ``u_max`` and has exact Gaussian moments, so the policy can be propagated by moment
 matching (:func:`~softpend.pilco.moments.gp_moments` without model uncertainty, then
 :func:`~softpend.pilco.moments.sin_saturation_moments`).
-
-With ``linear=True`` a linear term ``w^T x`` is added before the saturation (``w`` learnable, starting at
-zero): a global feedback that acts everywhere, also where no centre has moved yet (near upright, the RBF
-output of centres placed on hanging states is about zero).  Its moments are exact as well:
-``E = m_rbf + w^T m``, ``V = V_rbf + w^T S w + 2 w^T S C_rbf`` and ``C = C_rbf + w``.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
+from softpend.checks import non_negative, positive
 from softpend.pilco.moments import gp_moments, sin_saturation_moments
 
 __all__ = ["RBFPolicy"]
@@ -46,8 +40,6 @@ class RBFPolicy:
     target_std : float
         Spread of the initial pseudo-targets (pre-saturation; 0.1 gives small torques, about 1 a policy
         that uses the whole torque range).
-    linear : bool
-        Add the linear term ``w^T x`` (weights start at zero) to the pre-saturation output.
     """
 
     def __init__(
@@ -58,7 +50,6 @@ class RBFPolicy:
         seed: int = 0,
         noise_std: float = 0.01,
         target_std: float = 0.1,
-        linear: bool = False,
     ) -> None:
         centers = np.asarray(centers, dtype=float)
         lengthscales = np.asarray(lengthscales, dtype=float)
@@ -66,18 +57,13 @@ class RBFPolicy:
             raise ValueError(f"centers must be a non-empty (n_basis, D) array, got shape {centers.shape}")
         if lengthscales.shape != (centers.shape[1],) or np.any(lengthscales <= 0):
             raise ValueError(f"lengthscales must be {centers.shape[1]} positive numbers, got {lengthscales}")
-        if not math.isfinite(torque_limit_nm) or torque_limit_nm <= 0:
-            raise ValueError(f"torque_limit_nm must be positive and finite, got {torque_limit_nm!r}")
-        if not math.isfinite(target_std) or target_std < 0:
-            raise ValueError(f"target_std must be non-negative and finite, got {target_std!r}")
-        self.torque_limit_nm = float(torque_limit_nm)
+        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
+        non_negative("target_std", target_std)
         self.noise_var = float(noise_std) ** 2
         generator = torch.Generator().manual_seed(int(seed))
         self.centers = torch.tensor(centers, dtype=DTYPE)
         self.targets = float(target_std) * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
         self.log_lengthscales = torch.log(torch.tensor(lengthscales, dtype=DTYPE))
-        self.linear = bool(linear)
-        self.linear_weights = torch.zeros(centers.shape[1] if self.linear else 0, dtype=DTYPE)
 
     @property
     def n_inputs(self) -> int:
@@ -85,10 +71,10 @@ class RBFPolicy:
 
     # ------------------------------------------------------------------ parameters as one vector
     def parameters(self) -> list[torch.Tensor]:
-        return [self.centers, self.targets, self.log_lengthscales, self.linear_weights]
+        return [self.centers, self.targets, self.log_lengthscales]
 
     def get_vector(self) -> np.ndarray:
-        """All parameters flattened (centres, targets, log length-scales, linear weights if any)."""
+        """All parameters flattened (centres, targets, log length-scales)."""
         return torch.cat([p.reshape(-1) for p in self.parameters()]).detach().numpy().copy()
 
     def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
@@ -98,11 +84,8 @@ class RBFPolicy:
         self.centers = v[: n * d].reshape(n, d)
         self.targets = v[n * d : n * d + n]
         self.log_lengthscales = v[n * d + n : n * d + n + d]
-        self.linear_weights = v[n * d + n + d :]
         if not requires_grad:
-            self.centers, self.targets, self.log_lengthscales, self.linear_weights = (
-                p.detach().clone() for p in self.parameters()
-            )
+            self.centers, self.targets, self.log_lengthscales = (p.detach().clone() for p in self.parameters())
 
     # ------------------------------------------------------------------ evaluation
     def _beta(self) -> torch.Tensor:
@@ -115,8 +98,7 @@ class RBFPolicy:
     def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
         """``pi~(x)`` for inputs ``x`` (M, D)."""
         d = (x.unsqueeze(1) - self.centers.unsqueeze(0)) / torch.exp(self.log_lengthscales)
-        z = torch.exp(-0.5 * torch.sum(d * d, dim=2)) @ self._beta()
-        return z + x @ self.linear_weights if self.linear else z
+        return torch.exp(-0.5 * torch.sum(d * d, dim=2)) @ self._beta()
 
     def torque_nm(self, x: np.ndarray) -> np.ndarray:
         """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
@@ -134,30 +116,22 @@ class RBFPolicy:
             mean, cov, self.centers, beta, self.log_lengthscales.unsqueeze(0), torch.zeros(1, dtype=DTYPE)
         )
         m_z, s_z, c_z = m_z[0], s_z[0, 0], c_z[:, 0]
-        if self.linear:
-            w = self.linear_weights
-            s_w = cov @ w
-            m_z = m_z + w @ mean
-            s_z = s_z + w @ s_w + 2.0 * s_w @ c_z
-            c_z = c_z + w
         m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, self.torque_limit_nm)
         return m_u, s_u, c_z * c_u
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, torch.Tensor]:
-        state = {"centers": self.centers.detach().clone(), "targets": self.targets.detach().clone(),
-                 "log_lengthscales": self.log_lengthscales.detach().clone()}
-        if self.linear:
-            state["linear_weights"] = self.linear_weights.detach().clone()
-        return state
+        return {"centers": self.centers.detach().clone(), "targets": self.targets.detach().clone(),
+                "log_lengthscales": self.log_lengthscales.detach().clone()}
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
-        for key in ("centers", "targets", "log_lengthscales"):
+        keys = ("centers", "targets", "log_lengthscales")
+        for key in keys:
             if key not in state:
                 raise ValueError(f"policy state dict lacks {key!r}")
+        unknown = sorted(set(state) - set(keys))
+        if unknown:
+            raise ValueError(f"policy state dict has entries this policy does not have: {unknown}")
         self.centers = state["centers"].to(DTYPE).clone()
         self.targets = state["targets"].to(DTYPE).clone()
         self.log_lengthscales = state["log_lengthscales"].to(DTYPE).clone()
-        self.linear = "linear_weights" in state
-        self.linear_weights = (state["linear_weights"].to(DTYPE).clone() if self.linear
-                               else torch.zeros(0, dtype=DTYPE))

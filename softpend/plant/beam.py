@@ -38,7 +38,8 @@ import numpy as np
 from softpend.plant.beam_adapter import BeamSection, HubBeam2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
-from softpend.plant.base import PlantBase, check_positive
+from softpend.checks import in_unit_interval, int_at_least, positive
+from softpend.plant.base import PlantBase
 
 __all__ = ["BeamPlant", "DEFAULT_N_ELEMENTS", "POISSON_RATIO", "SHEAR_CORRECTION", "beam_section_from_params"]
 
@@ -122,11 +123,8 @@ class BeamPlant(PlantBase):
         newton_relative_tolerance: float = 1e-6,
     ) -> None:
         self._init_common(params, dt_s, substeps, hub_locked_at_rad)
-        if isinstance(n_elements, bool) or int(n_elements) != n_elements or n_elements < 1:
-            raise ValueError(f"n_elements must be an integer >= 1, got {n_elements!r}")
-        if not 0.0 <= spectral_radius <= 1.0:
-            raise ValueError(f"spectral_radius must be in [0, 1], got {spectral_radius!r}")
-        self.n_elements = int(n_elements)
+        self.n_elements = int_at_least("n_elements", n_elements, 1)
+        in_unit_interval("spectral_radius", spectral_radius)
         p = self.params
         self.section = beam_section_from_params(p)
         self._beam = HubBeam2D(
@@ -141,7 +139,7 @@ class BeamPlant(PlantBase):
             substeps=self.substeps,
             hub_locked_at_rad=hub_locked_at_rad,
             spectral_radius=spectral_radius,
-            newton_relative_tolerance=check_positive("newton_relative_tolerance", newton_relative_tolerance),
+            newton_relative_tolerance=positive("newton_relative_tolerance", newton_relative_tolerance),
         )
         self._s = self._beam.node_s_m  # reference arc length of the nodes [m]
         self._hub_offset = 0 if self.hub_locked else 1

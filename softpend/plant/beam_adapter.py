@@ -36,6 +36,7 @@ from exudyn.itemInterface import (
     ObjectRigidBody2D,
 )
 
+from softpend.checks import in_unit_interval, int_at_least, positive
 from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings
 
 __all__ = ["BeamSection", "HubBeam2D"]
@@ -114,15 +115,10 @@ class HubBeam2D:
     time_s: float = field(init=False, default=0.0)
 
     def __post_init__(self) -> None:
-        if int(self.n_elements) != self.n_elements or self.n_elements < 1:
-            raise ValueError(f"n_elements must be an integer >= 1, got {self.n_elements!r}")
-        if not (math.isfinite(self.dt_s) and self.dt_s > 0):
-            raise ValueError(f"dt_s must be positive and finite, got {self.dt_s!r}")
-        if int(self.substeps) != self.substeps or self.substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
-        if not 0.0 <= self.spectral_radius <= 1.0:
-            raise ValueError(f"spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
-        self.n_elements = int(self.n_elements)
+        self.n_elements = int_at_least("n_elements", self.n_elements, 1)
+        positive("dt_s", self.dt_s)
+        int_at_least("substeps", self.substeps, 1)
+        in_unit_interval("spectral_radius", self.spectral_radius)
         self.n_nodes = self.n_elements + 1
         self.n_ode2 = 3 * self.n_nodes
         self.element_length_m = self.length_m / self.n_elements

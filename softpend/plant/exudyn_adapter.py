@@ -19,6 +19,8 @@ import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
+from softpend.checks import int_at_least, positive
+
 __all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings"]
 
 
@@ -115,10 +117,8 @@ class KinematicChain2D:
     _force: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.dt_s <= 0 or not np.isfinite(self.dt_s):
-            raise ValueError(f"dt_s must be positive and finite, got {self.dt_s!r}")
-        if int(self.substeps) != self.substeps or self.substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
+        positive("dt_s", self.dt_s)
+        int_at_least("substeps", self.substeps, 1)
         n = len(self.links)
         if n < 1:
             raise ValueError("links must not be empty")
@@ -218,7 +218,10 @@ class KinematicChain2D:
         settings.timeIntegration.startTime = self.time_s
         settings.timeIntegration.endTime = self.time_s + self.dt_s
         self._solver.InitializeSolverInitialConditions(mbs, settings)
-        ok = self._solver.SolveSteps(mbs, settings)
+        try:
+            ok = self._solver.SolveSteps(mbs, settings)
+        except exu.ExudynError as exc:
+            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}") from exc
         data = mbs.systemData
         state = data.GetSystemState()
         if not ok:
@@ -240,7 +243,10 @@ class KinematicChain2D:
 
     def solve_static(self) -> np.ndarray:
         """Static equilibrium under gravity, springs and the current joint forces; returns joint angles."""
-        ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)
+        try:
+            ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)
+        except exu.ExudynError as exc:  # SolverError (no convergence) and the solver's other errors
+            raise SolverFailure(f"Exudyn static solver failed: {' '.join(str(exc).split())}") from exc
         if not ok:
             raise SolverFailure("Exudyn static solver did not converge")
         q = np.array(self._mbs.systemData.GetODE2Coordinates())

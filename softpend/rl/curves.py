@@ -21,6 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
+from softpend.checks import in_unit_interval, positive_int
 from softpend.rl.training_log import TrainingLog
 
 __all__ = ["moving_average", "episodes_to_asymptote", "aggregate", "plant_s_at_episode"]
@@ -29,11 +30,10 @@ __all__ = ["moving_average", "episodes_to_asymptote", "aggregate", "plant_s_at_e
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
     """Trailing moving average (the first ``window - 1`` entries average what is there)."""
     values = np.asarray(values, dtype=float)
-    if isinstance(window, bool) or int(window) != window or window < 1:
-        raise ValueError(f"window must be a positive integer, got {window!r}")
+    window = positive_int("window", window)
     csum = np.cumsum(np.insert(values, 0, 0.0))
     n = np.arange(1, len(values) + 1)
-    lo = np.maximum(0, n - int(window))
+    lo = np.maximum(0, n - window)
     return (csum[n] - csum[lo]) / (n - lo)
 
 
@@ -45,10 +45,8 @@ def episodes_to_asymptote(returns: Sequence[float], window: int = 10, level: flo
     r = np.asarray(returns, dtype=float)
     if r.ndim != 1:
         raise ValueError(f"returns must be 1-D, got shape {r.shape}")
-    if not 0.0 < level <= 1.0:
-        raise ValueError(f"level must lie in (0, 1], got {level!r}")
-    if not 0.0 < final_fraction <= 1.0:
-        raise ValueError(f"final_fraction must lie in (0, 1], got {final_fraction!r}")
+    in_unit_interval("level", level, include_zero=False)
+    in_unit_interval("final_fraction", final_fraction, include_zero=False)
     if len(r) == 0:
         return math.inf
     smooth = moving_average(r, window)

@@ -13,7 +13,12 @@ Run folder layout::
     agent.zip            final agent (stable-baselines3 DQN.save)
     best_agent.zip       agent of the best periodic evaluation (see load_agent)
     log.json             TrainingLog: episode and evaluation rows
-    checkpoint/          latest checkpoint: agent.zip, replay_buffer.pkl, log.json (+ extra files of MBPO)
+    checkpoint/          latest checkpoint: agent.zip, replay_buffer.npz, log.json (+ extra files of MBPO)
+
+Agents are read back by :func:`softpend.rl.agent_files.load_agent_file`, which never unpickles (a run
+folder is something users share), and the replay buffer is stored as plain arrays.  Training stops with
+:class:`softpend.checks.NonFiniteError` as soon as a network weight is NaN or infinite, before anything
+diverged is saved.
 """
 
 from __future__ import annotations
@@ -28,13 +33,24 @@ from typing import Any, Callable, Optional
 import numpy as np
 import torch
 from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
+from softpend.checks import check_work_size, int_at_least, positive, positive_int
 from softpend.evaluation import evaluate_controller, metrics_from_trajectory
+from softpend.io.outputs import check_output_folder
 from softpend.plant import OBSERVATION_NAMES, RodParams
+from softpend.rl.agent_files import (
+    AgentFileError,
+    check_finite_weights,
+    load_agent_file,
+    load_replay_buffer,
+    save_agent_file,
+    save_replay_buffer,
+)
 from softpend.rl.config import DQNConfig, load_config, save_config
-from softpend.rl.double_dqn import DoubleDQN, TargetDQN
+from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
@@ -45,18 +61,19 @@ _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
 def agent_class(config: DQNConfig) -> type[DQN]:
-    """:class:`~softpend.rl.double_dqn.DoubleDQN` if ``config.double_q``, else
-    :class:`~softpend.rl.double_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
-    if config.double_q:
-        return DoubleDQN
+    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
     return TargetDQN if config.clip_q_targets else DQN
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
-    """A stable-baselines3 DQN (or Double DQN) with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
+    """A stable-baselines3 DQN with the config's hyperparameters (``kwargs`` go to ``DQN``).
+
+    The target network is a hard copy of the online network (``tau = 1``) every ``target_update_interval``
+    agent steps.
+    """
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
-        kwargs["q_target_bounds"] = config.q_target_bounds if config.clip_q_targets else None
+        kwargs["q_target_bounds"] = config.q_target_bounds
     return cls(
         "MlpPolicy",
         env,
@@ -68,7 +85,7 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
         train_freq=config.train_freq,
         gradient_steps=config.gradient_steps,
         target_update_interval=config.target_update_interval,
-        tau=config.tau,
+        tau=1.0,
         exploration_fraction=config.exploration_fraction,
         exploration_initial_eps=config.exploration_initial_eps,
         exploration_final_eps=config.exploration_final_eps,
@@ -82,16 +99,19 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
 
 
 def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None, duration_s: Optional[float] = None, name: str = "agent"):
-    """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent from hanging."""
-    return evaluate_controller(
-        policy_controller(model, config),
-        name=name,
-        seeds=tuple(seeds if seeds is not None else config.eval_seeds),
-        duration_s=float(duration_s if duration_s is not None else config.eval_duration_s),
-        params=RodParams(n_links=config.n_links),
-        plant=config.plant,
-        torque_limit_nm=config.torque_limit_nm,
-    )
+    """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``.
+
+    Seeds must be non-negative integers and the episodes' trajectories must fit in
+    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any episode runs).
+    """
+    seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
+    duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
+    controller = policy_controller(model, config)
+    steps = duration_s / config.dt_s + 1
+    per_step = 8 * (len(OBSERVATION_NAMES) + 2 + controller.env.plant.n_coordinates)
+    check_work_size(f"evaluating {len(seeds)} episode(s) of {duration_s:g} s", len(seeds) * steps * per_step,
+                    f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step")
+    return evaluate_controller(controller, config.task, name=name, seeds=seeds, duration_s=duration_s)
 
 
 class TrainingCallback(BaseCallback):
@@ -204,6 +224,7 @@ class TrainingCallback(BaseCallback):
         self.last_episode_torques = np.asarray(self._torques, dtype=float)
         self.log.episodes.append(row)
         self._reset_episode()
+        check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}")
         if self.on_episode_end is not None:
             self.on_episode_end(self)
         n = self.log.n_episodes
@@ -249,17 +270,19 @@ class TrainingCallback(BaseCallback):
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
             self.best_score = _score(row)
-            self.model.save(self.run_dir / "best_agent.zip")
+            check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, episode {row['episode']}")
+            save_agent_file(self.model, self.run_dir / "best_agent.zip")
         return row
 
     def checkpoint(self) -> Path:
-        """Write agent, replay buffer, log (and extra files) to ``run_dir/checkpoint`` atomically."""
+        """Write agent, replay buffer (plain arrays), log (and extra files) to ``run_dir/checkpoint`` atomically."""
+        check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, checkpoint at episode {self.log.n_episodes}")
         final = self.run_dir / "checkpoint"
         tmp = self.run_dir / "checkpoint.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         self.model.save(tmp / "agent.zip")
-        self.model.save_replay_buffer(tmp / "replay_buffer.pkl")
+        save_replay_buffer(self.model.replay_buffer, tmp / "replay_buffer.npz")
         self.log.save(tmp / "log.json")
         if self.extra_checkpoint is not None:
             self.extra_checkpoint(tmp)
@@ -277,10 +300,41 @@ def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:
     return (not evaluation["all_swung_up"], float(evaluation["max_upright_std_rad"]))
 
 
+def is_run_folder(path: Path) -> bool:
+    """Whether ``path`` is a run folder of :func:`run_training` (its ``config.json`` reads as a config)."""
+    try:
+        load_config(Path(path) / "config.json")
+    except (OSError, ValueError, TypeError, KeyError, RecursionError):
+        return False
+    return True
+
+
+def check_run_size(config: DQNConfig, observation_dim: int) -> None:
+    """``ValueError`` (with the estimate) if the arrays of a run of ``config`` -- replay buffers, networks and
+    their optimiser state, one episode's record, one evaluation's trajectories -- would exceed
+    :data:`softpend.checks.MAX_WORK_BYTES`."""
+    from softpend.rl.config import MBPOConfig
+
+    row = 2 * observation_dim * 4 + 8 + 3 * 4  # obs and next obs (float32), action (int64), reward/done/timeout
+    buffers = config.buffer_size * row
+    if isinstance(config, MBPOConfig):
+        buffers += config.buffer_size * 8 * len(OBSERVATION_NAMES) + config.model_buffer_size * row
+    widths = [observation_dim, *config.net_arch, config.n_torque_levels]
+    n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
+    networks = 4 * 4 * n_weights + 2 * 4 * config.batch_size * sum(widths)  # online, target, Adam moments; a batch
+    plant_steps = config.episode_agent_steps * config.action_repeat + 1
+    eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
+    records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
+    check_work_size(
+        "this training run", buffers + networks + records,
+        f"replay buffers {buffers / 2**20:.3g} MiB, networks {networks / 2**20:.3g} MiB, episode and evaluation "
+        f"records {records / 2**20:.3g} MiB",
+    )
+
+
 def _check_run_args(episodes: int, run_dir: Path | str) -> Path:
-    if isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    return Path(run_dir)
+    positive_int("episodes", episodes)
+    return check_output_folder(run_dir, what="run folder", owned=is_run_folder)
 
 
 def run_training(
@@ -296,20 +350,34 @@ def run_training(
     extra_checkpoint: Optional[Callable[[DQN], Callable[[Path], None]]] = None,
     restore: Optional[Callable[[DQN, Path], None]] = None,
     model_steps: Optional[Callable[[DQN], int]] = None,
+    replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`)."""
+    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`; ``replay_buffer_class`` is the
+    buffer ``make_model`` gives the agent, allocated again on resume).
+
+    Raises ``ValueError`` before any work if ``run_dir`` cannot be written or is a non-empty folder that is not
+    a run folder, and :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's
+    weights stop being finite.
+    """
     run_dir = _check_run_args(episodes, run_dir)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     checkpoint = run_dir / "checkpoint"
     env = make_training_env(config)
+    check_run_size(config, int(np.prod(env.observation_space.shape)))
     if resume and (checkpoint / "agent.zip").exists():
         saved = load_config(run_dir / "config.json")
         if saved != config:
             raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
+        if not (checkpoint / "replay_buffer.npz").exists() and (checkpoint / "replay_buffer.pkl").exists():
+            raise AgentFileError(
+                f"{checkpoint} holds a pickled replay buffer (replay_buffer.pkl), which softpend does not load "
+                "(unpickling can run arbitrary code); start a new run"
+            )
         log = TrainingLog.load(checkpoint / "log.json")
-        model = agent_class(config).load(checkpoint / "agent.zip", env=env, device="cpu")
-        model.load_replay_buffer(checkpoint / "replay_buffer.pkl")
+        model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env=env,
+                                replay_buffer_class=replay_buffer_class)
+        load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
         if restore is not None:
             restore(model, checkpoint)
     else:
@@ -330,27 +398,32 @@ def run_training(
         # exactly the remaining episodes' steps, so that SB3 stores the last transition and stops by itself
         # (the callback also stops at the episode count, which matters only if an episode diverged early);
         # the SB3 schedules (exploration) run over the whole run, resumed or not
-        model.learn(
-            total_timesteps=remaining * config.episode_agent_steps,
-            callback=callback,
-            reset_num_timesteps=log.n_episodes == 0,
-            progress_bar=False,
-        )
+        try:
+            model.learn(
+                total_timesteps=remaining * config.episode_agent_steps,
+                callback=callback,
+                reset_num_timesteps=log.n_episodes == 0,
+                progress_bar=False,
+            )
+        finally:
+            if callback.bar is not None:
+                callback.bar.close()
         callback.flush()
         callback.model = model
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:
             callback.evaluate()
         callback.checkpoint()  # so that a longer run can resume from the end of this one
-    model.save(run_dir / "agent.zip")
+    check_finite_weights(model, f"{algo} seed {seed}, final agent")
+    save_agent_file(model, run_dir / "agent.zip")
     log.save(run_dir / "log.json")
     return model, log
 
 
 def train_dqn(
-    config: DQNConfig = DQNConfig(),
-    seed: int = 0,
-    episodes: int = 150,
-    run_dir: Path | str = "runs/dqn-seed0",
+    config: DQNConfig,
+    seed: int,
+    episodes: int,
+    run_dir: Path | str,
     resume: bool = False,
     progress: bool = True,
 ) -> tuple[DQN, TrainingLog]:
@@ -405,4 +478,4 @@ def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig
     if not agent.exists():
         raise FileNotFoundError(f"no agent at {agent}")
     config = load_config(folder / "config.json")
-    return agent_class(config).load(agent, device="cpu"), config
+    return load_agent_file(agent_class(config), agent, config), config

@@ -1,4 +1,4 @@
-"""DQN-MBPO: DQN trained mostly on short rollouts of a learned dynamics ensemble branched from real states.
+"""DQN-MBPO: DQN trained on real transitions and on short rollouts of a learned dynamics ensemble.
 
 The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-lib implements it:
 
@@ -42,6 +42,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
+from softpend.checks import in_unit_interval
 from softpend.envs import step_reward
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
@@ -78,8 +79,7 @@ class MBPOReplayBuffer(ReplayBuffer):
     ) -> None:
         if n_envs != 1:
             raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
-        if not 0.0 <= real_ratio <= 1.0:
-            raise ValueError(f"real_ratio must lie in [0, 1], got {real_ratio!r}")
+        in_unit_interval("real_ratio", real_ratio)
         super().__init__(buffer_size, observation_space, action_space, device=device, n_envs=1,
                          optimize_memory_usage=False, handle_timeout_termination=handle_timeout_termination)
         self.real_ratio = float(real_ratio)
@@ -108,33 +108,10 @@ class MBPOReplayBuffer(ReplayBuffer):
             buf.full = True
         buf.pos = int((buf.pos + n) % buf.buffer_size)
 
-    def sample_real_states(
-        self, n: int, rng: np.random.Generator, upright_fraction: float = 0.0, upright_rad: float = 0.5
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``n`` real starting states: (plant observations (n, 10), env vectors (n, 11)).
-
-        Parameters
-        ----------
-        n : int
-            Number of states.
-        rng : numpy.random.Generator
-            Source of the draws.
-        upright_fraction : float
-            Share of the states (the last ones) drawn uniformly from the real states with
-            ``|theta| < upright_rad``; the rest (all of them if there is no such state) uniformly from the
-            whole real buffer.
-        upright_rad : float
-            Tip angle from upright [rad] below which a state counts as near upright.
-        """
-        if not 0.0 <= upright_fraction <= 1.0:
-            raise ValueError(f"upright_fraction must lie in [0, 1], got {upright_fraction!r}")
-        size = self.size()
-        index = rng.integers(0, size, size=n)
-        n_upright = int(round(upright_fraction * n))
-        if n_upright > 0:
-            near = np.flatnonzero(np.abs(self.plant_observations[:size, _THETA]) < upright_rad)
-            if len(near):
-                index[n - n_upright :] = near[rng.integers(0, len(near), size=n_upright)]
+    def sample_real_states(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` real starting states drawn uniformly from the real buffer with ``rng``: (plant observations
+        (n, 10), env vectors (n, 11))."""
+        index = rng.integers(0, self.size(), size=n)
         return self.plant_observations[index].copy(), self.observations[index, 0].copy()
 
     def real_observation_box(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
@@ -209,7 +186,7 @@ class MBPOTrainer:
         p = 5  # positions then velocities in OBSERVATION_NAMES order
         return save_dataset(
             self.run_dir / "real_data.npz", obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques),
-            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant=self.config.plant,
+            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant=self.config.task.plant,
             plant_params=self.env.params, seed=self.seed, protocol={"kind": "dqn-mbpo training episodes"},
             differentiation="exact (simulator velocities, as the environment observes them)",
             notes="real plant episodes of a DQN-MBPO run",
@@ -245,8 +222,8 @@ class MBPOTrainer:
             return 0
         c = self.config
         env = self.env
-        raw, vec = buffer.sample_real_states(n_rollouts, self.rng, c.upright_branch_fraction)
-        for i in range(int(round(c.start_branch_fraction * n_rollouts))):  # the first rows (upright ones come last)
+        raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
+        for i in range(int(round(c.start_branch_fraction * n_rollouts))):  # the first rows
             vec[i], info = self.start_env.reset()
             raw[i] = info["observation"]
         box = buffer.real_observation_box() if c.rollouts_within_data else None
@@ -302,8 +279,8 @@ class MBPOTrainer:
         def on_step(cb: TrainingCallback) -> None:
             if agent.num_timesteps % c.rollout_every_steps == 0 and self.dynamics is not None:
                 length = c.rollout_length(cb.log.n_episodes)
-                epsilon = max(agent.exploration_rate, c.model_rollout_epsilon)
-                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length, epsilon)
+                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length,
+                              agent.exploration_rate)
 
         callback.on_episode_end = on_episode_end
         callback.on_step_hook = on_step
@@ -324,10 +301,10 @@ class MBPOTrainer:
 
 
 def train_mbpo(
-    config: MBPOConfig = MBPOConfig(),
-    seed: int = 0,
-    episodes: int = 60,
-    run_dir: Path | str = "runs/mbpo-seed0",
+    config: MBPOConfig,
+    seed: int,
+    episodes: int,
+    run_dir: Path | str,
     resume: bool = False,
     progress: bool = True,
 ) -> tuple[DQN, TrainingLog]:
@@ -355,5 +332,6 @@ def train_mbpo(
         extra_checkpoint=lambda model: trainer.save,
         restore=lambda model, folder: trainer.restore(folder),
         model_steps=lambda model: trainer.model_steps,
+        replay_buffer_class=MBPOReplayBuffer,
     )
 

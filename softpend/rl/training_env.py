@@ -8,15 +8,15 @@ action repeat.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Optional
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import TimeLimit
 
+from softpend.checks import positive_int
 from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.evaluation import GymPolicyController
-from softpend.plant import RodParams
 from softpend.rl.config import DQNConfig
 
 __all__ = ["ActionRepeat", "HeldActionController", "make_base_env", "make_training_env", "policy_controller"]
@@ -33,9 +33,7 @@ class ActionRepeat(gym.Wrapper):
 
     def __init__(self, env: gym.Env, repeat: int) -> None:
         super().__init__(env)
-        if isinstance(repeat, bool) or int(repeat) != repeat or repeat < 1:
-            raise ValueError(f"repeat must be a positive integer, got {repeat!r}")
-        self.repeat = int(repeat)
+        self.repeat = positive_int("repeat", repeat)
 
     def step(self, action: Any):
         base = self.env.unwrapped
@@ -55,15 +53,11 @@ class ActionRepeat(gym.Wrapper):
         return obs, total, terminated, truncated, info
 
 
-def make_base_env(config: DQNConfig, start: str = "hanging") -> SoftPendulumDiscreteEnv:
-    """The discrete-torque environment with the config's plant, rod, torque limit and torque levels."""
-    return SoftPendulumDiscreteEnv(
-        n_torque_levels=config.n_torque_levels,
-        params=RodParams(n_links=config.n_links),
-        plant=config.plant,
-        torque_limit_nm=config.torque_limit_nm,
-        start=start,
-    )
+def make_base_env(config: DQNConfig, start: Optional[str] = None) -> SoftPendulumDiscreteEnv:
+    """The discrete-torque environment of ``config.task`` with the config's torque levels (``start``
+    overrides the task's start distribution)."""
+    task = config.task if start is None else config.task.replace(start=start)
+    return SoftPendulumDiscreteEnv(n_torque_levels=config.n_torque_levels, **task.env_kwargs())
 
 
 def make_training_env(config: DQNConfig) -> gym.Env:
@@ -79,9 +73,7 @@ class HeldActionController(GymPolicyController):
 
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
         super().__init__(predict, env)
-        if isinstance(repeat, bool) or int(repeat) != repeat or repeat < 1:
-            raise ValueError(f"repeat must be a positive integer, got {repeat!r}")
-        self.repeat = int(repeat)
+        self.repeat = positive_int("repeat", repeat)
         self._step = 0
         self._held_action: Any = None
         self._inner_predict = predict

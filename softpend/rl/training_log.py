@@ -19,6 +19,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from softpend.io.outputs import atomic_write
+
 __all__ = ["TrainingLog", "BALANCE_STD_RAD"]
 
 #: An evaluation "balances" when every seed swings up and holds ``upright_std_rad`` at most this [rad].
@@ -75,7 +77,9 @@ class TrainingLog:
     # ------------------------------------------------------------------ files
     def save(self, path: Path) -> None:
         data = {"algo": self.algo, "seed": self.seed, "episodes": self.episodes, "evaluations": self.evaluations}
-        Path(path).write_text(json.dumps(data, indent=1, default=_json_default))
+        text = json.dumps(data, indent=1, default=_json_default)
+        with atomic_write(path, "w") as handle:
+            handle.write(text)
 
     @classmethod
     def load(cls, path: Path) -> "TrainingLog":

@@ -10,15 +10,18 @@ Layout (relative to the project root)::
 :func:`run_notebooks` converts each notebook listed in the toc (in toc order) with jupytext, injects the
 profile's parameters with papermill, executes it with the ``python3`` kernel of the running interpreter
 (working directory: the project root) and writes ``book/_generated/NAME.ipynb``.  A notebook is skipped
-when its source, its parameters and the source of the ``softpend`` package are unchanged since the output
-was written (the execution cache).  :func:`build_html` then runs ``jupyter-book build`` with warnings as
+when its source, its parameters and the code of the ``softpend`` modules it uses (:class:`PackageCode`:
+the closure of its imports, docstrings and comments left out) are unchanged since the output was written
+(the execution cache).  :func:`build_html` then runs ``jupyter-book build`` with warnings as
 errors; the book itself never executes notebooks.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -33,11 +36,12 @@ __all__ = [
     "DEFAULT_PROFILE",
     "NotebookExecutionError",
     "NotebookRun",
+    "PackageCode",
     "build_html",
     "cache_key",
     "check_parameters",
+    "code_cells",
     "load_profiles",
-    "package_source_hash",
     "profile_parameters",
     "read_notebook",
     "run_notebooks",
@@ -49,7 +53,7 @@ DEFAULT_PROFILE = "full"
 #: Prefix of toc entries that are executed notebooks.
 GENERATED_PREFIX = "book/_generated/"
 #: Bump when the way outputs are produced changes, to invalidate every cached notebook.
-_CACHE_VERSION = "1"
+_CACHE_VERSION = "2"
 #: Kernel arguments: matplotlib figures are embedded in the notebooks (and the book) as PNG images.
 #: (The kernel's own log is limited to errors: a failing cell is reported from the notebook's outputs.)
 _KERNEL_ARGUMENTS = ["--InlineBackend.figure_formats=png", "--IPKernelApp.log_level=ERROR"]
@@ -277,24 +281,198 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
 
 
 # --------------------------------------------------------------------------- cache
-def package_source_hash(package_dir: Optional[Path] = None) -> str:
-    """SHA-256 of every file of the ``softpend`` package (paths and contents, ``__pycache__`` excluded)."""
-    if package_dir is None:
-        package_dir = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(package_dir.rglob("*")):
-        if path.is_file() and "__pycache__" not in path.parts and path.suffix not in (".pyc", ".pyo"):
-            digest.update(path.relative_to(package_dir).as_posix().encode())
-            digest.update(b"\0")
-            digest.update(path.read_bytes())
-            digest.update(b"\0")
-    return digest.hexdigest()
+#: Suffixes of non-Python files inside the package that count as data the code may read.
+DATA_SUFFIXES = (".csv", ".json", ".npy", ".npz", ".toml", ".txt", ".yaml", ".yml")
 
 
-def cache_key(source_text: str, parameters: dict[str, Any], package_hash: str) -> str:
-    """Cache key of one executed notebook: its source, its parameters and the package source hash."""
+def _drop_docstrings(tree: ast.AST) -> ast.AST:
+    """Remove every statement that is a bare string constant (the docstrings of the module, its classes and
+    functions, and attribute docstrings) from ``tree``, in place; an emptied body becomes ``pass``."""
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if not isinstance(body, list):
+            continue
+        kept = [
+            statement
+            for statement in body
+            if not (
+                isinstance(statement, ast.Expr)
+                and isinstance(statement.value, ast.Constant)
+                and isinstance(statement.value.value, str)
+            )
+        ]
+        if len(kept) != len(body):
+            node.body = kept or [ast.Pass()]
+    return tree
+
+
+def _parse_cell(source: str) -> Optional[ast.Module]:
+    """A notebook code cell as an ``ast`` tree (IPython magics translated); ``None`` when it does not parse."""
+    try:
+        return ast.parse(source)
+    except SyntaxError:
+        pass
+    try:
+        from IPython.core.inputtransformer2 import TransformerManager
+
+        return ast.parse(TransformerManager().transform_cell(source))
+    except (ImportError, SyntaxError):
+        return None
+
+
+class PackageCode:
+    """The modules of one Python package, read with ``ast``: what a piece of code imports from it, and a
+    hash of each module's code with docstrings and comments left out.
+
+    Parameters
+    ----------
+    package_root : path, optional
+        The package directory (its name is the package name); default: the installed ``softpend``.
+
+    Notes
+    -----
+    The modules a piece of code uses are the closure of its imports over the package's own imports:
+    ``import pkg.a.b`` and ``from pkg.a import b`` (``b`` counts when it is a submodule), relative imports
+    resolved, imports anywhere in a module (inside functions too) counted, and a package's ``__init__``
+    counted with each of its submodules.  A string constant in the code that names a module of the package,
+    alone (``"pkg.a.b"``) or as an entry point (``"pkg.a.b:attr"``, as the plant and environment registries
+    use), counts as an import of that module.
+    """
+
+    def __init__(self, package_root: Path | str | None = None) -> None:
+        if package_root is None:
+            package_root = Path(__file__).resolve().parents[1]
+        self.root = Path(package_root).resolve()
+        if not (self.root / "__init__.py").is_file():
+            raise ValueError(f"package_root must be a package directory with an __init__.py, got {self.root}")
+        self.name = self.root.name
+        self.modules: dict[str, Path] = {}
+        for path in sorted(self.root.rglob("*.py")):
+            if "__pycache__" in path.parts:
+                continue
+            parts = path.relative_to(self.root).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            self.modules[".".join((self.name, *parts))] = path
+        self._trees: dict[str, ast.Module] = {}
+        self._imports: dict[str, frozenset[str]] = {}
+        self._hashes: dict[str, str] = {}
+        self._entry_point = re.compile(rf"\b{re.escape(self.name)}(?:\.[A-Za-z_]\w*)*(?=:[A-Za-z_])")
+
+    # ------------------------------------------------------------------ reading
+    def tree(self, module: str) -> ast.Module:
+        """The module's ``ast`` tree without docstrings."""
+        if module not in self._trees:
+            path = self.modules[module]
+            self._trees[module] = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+        return self._trees[module]
+
+    def module_hash(self, module: str) -> str:
+        """SHA-256 of the module's code: ``ast.dump`` of its tree without docstrings (so comments, blank lines
+        and formatting do not count either)."""
+        if module not in self._hashes:
+            self._hashes[module] = hashlib.sha256(ast.dump(self.tree(module)).encode()).hexdigest()
+        return self._hashes[module]
+
+    def data_hashes(self) -> dict[str, str]:
+        """SHA-256 of every data file in the package (suffix in :data:`DATA_SUFFIXES`), by relative path."""
+        hashes = {}
+        for path in sorted(self.root.rglob("*")):
+            if path.is_file() and path.suffix in DATA_SUFFIXES and "__pycache__" not in path.parts:
+                hashes[f"{self.name}/{path.relative_to(self.root).as_posix()}"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        return hashes
+
+    # ------------------------------------------------------------------ imports
+    def _with_parents(self, module: str) -> set[str]:
+        """``module`` and the packages above it that are modules of this package (their ``__init__`` runs)."""
+        parts = module.split(".")
+        return {name for name in (".".join(parts[: i + 1]) for i in range(len(parts))) if name in self.modules}
+
+    def _tree_imports(self, tree: ast.AST, module: Optional[str] = None) -> set[str]:
+        """Modules of this package that ``tree`` imports (``module``: its own name, to resolve relative imports)."""
+        found: set[str] = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    found |= self._with_parents(alias.name)
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    if module is None:
+                        continue
+                    base = module.split(".")
+                    if self.modules[module].name != "__init__.py":
+                        base = base[:-1]
+                    base = base[: len(base) - (node.level - 1)]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                found |= self._with_parents(target)
+                for alias in node.names:
+                    if f"{target}.{alias.name}" in self.modules:
+                        found |= self._with_parents(f"{target}.{alias.name}")
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and self.name in node.value:
+                if node.value.strip() in self.modules:
+                    found |= self._with_parents(node.value.strip())
+                for match in self._entry_point.finditer(node.value):
+                    found |= self._with_parents(match.group(0))
+        found.discard(module)
+        return found
+
+    def imports(self, module: str) -> frozenset[str]:
+        """Modules of this package that ``module`` imports directly (see the class notes)."""
+        if module not in self._imports:
+            self._imports[module] = frozenset(self._tree_imports(self.tree(module), module))
+        return self._imports[module]
+
+    def closure(self, code_cells: Iterable[str]) -> set[str]:
+        """Modules of this package that the code (e.g. a notebook's code cells) uses, directly or through the
+        package's own imports; every module when a cell does not parse (its use cannot be read)."""
+        pending: set[str] = set()
+        for cell in code_cells:
+            tree = _parse_cell(cell)
+            if tree is None:
+                return set(self.modules)
+            pending |= self._tree_imports(tree)
+        used: set[str] = set()
+        while pending:
+            module = pending.pop()
+            if module not in used:
+                used.add(module)
+                pending |= self.imports(module) - used
+        return used
+
+    def code_hashes(self, code_cells: Iterable[str]) -> dict[str, str]:
+        """Hash of each module the code uses (:meth:`closure`, :meth:`module_hash`) and of each data file of
+        the package (:meth:`data_hashes`); the part of a notebook's cache key that the package contributes."""
+        hashes = {module: self.module_hash(module) for module in sorted(self.closure(code_cells))}
+        hashes.update(self.data_hashes())
+        return hashes
+
+
+def code_cells(nb) -> list[str]:
+    """The sources of an ``nbformat`` notebook's code cells."""
+    return [cell.source for cell in nb.cells if cell.cell_type == "code"]
+
+
+def _records_hashes(layout: "BookLayout") -> dict[str, str]:
+    """SHA-256 of every file under ``book/records/`` (the stored run records some notebooks read)."""
+    folder = layout.root / "book" / "records"
+    if not folder.is_dir():
+        return {}
+    return {f"book/records/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
+            for path in sorted(folder.rglob("*")) if path.is_file()}
+
+
+def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[str, str]) -> str:
+    """Cache key of one executed notebook: its source, its parameters and the hashes of the package code it
+    uses (:meth:`PackageCode.code_hashes`)."""
     payload = json.dumps(
-        {"version": _CACHE_VERSION, "source": source_text, "parameters": parameters, "package": package_hash},
+        {
+            "version": _CACHE_VERSION,
+            "source": source_text,
+            "parameters": parameters,
+            "code": sorted(code_hashes.items()),
+        },
         sort_keys=True,
         default=repr,
     )
@@ -394,7 +572,7 @@ def run_notebooks(
             raise ValueError(f"unknown notebook(s) {unknown} for --only; _toc.yml lists {names}")
         names = [name for name in names if name in set(only)]
 
-    package_hash = package_source_hash()
+    package_code = PackageCode()
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
     runs: list[NotebookRun] = []
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
@@ -413,7 +591,10 @@ def run_notebooks(
             used_overrides.update(applied)
             parameters.update(applied)
             source_text = layout.source_path(name).read_text(encoding="utf-8")
-            plan.append((name, parameters, converted, cache_key(source_text, parameters, package_hash)))
+            hashes = package_code.code_hashes(code_cells(nb))
+            if "softpend.study.records" in hashes:  # the stored run records are an input of that code
+                hashes.update(_records_hashes(layout))
+            plan.append((name, parameters, converted, cache_key(source_text, parameters, hashes)))
         unused = sorted(set(overrides) - set(used_overrides))
         if unused:
             raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({names})")

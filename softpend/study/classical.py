@@ -15,8 +15,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.evaluation import EvaluationSummary, evaluate_controller
-from softpend.plant import RodParams
-from softpend.plant import tilt_state
+from softpend.task import Task
 from softpend.control.learned import learned_model_simulator, lqr_from_learned_model
 from softpend.control.lqr import LQRController
 from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
@@ -54,27 +53,28 @@ class ClassicalComparison:
     notes: list[str] = field(default_factory=list)
 
 
-def train_learned_model(params: Optional[RodParams] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
-                        progress: bool = False, plant: str = "prb"):
-    """Babble (report protocol, ``n_trials`` x 5 s) on ``plant`` and fit the default learned model (3 x 16)."""
+def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
+                        progress: bool = False):
+    """Babble (report protocol, ``n_trials`` x 5 s) on the task's plant and fit the default learned model (3 x 16)."""
     from softpend.sysid import BabbleProtocol, babble
     from softpend.sysid.training import fit_dynamics_model
 
-    dataset = babble(BabbleProtocol(n_trials=n_trials), params=params, seed=seed, plant=plant, progress=progress)
+    task = task if task is not None else Task()
+    dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=progress)
     return fit_dynamics_model(dataset, progress=progress, max_epochs=max_epochs, seed=seed).model
 
 
-def _run(controller, params, tilts, duration_s, limit, plant) -> EvaluationSummary:
+def _run(controller, task: Task, tilts, duration_s, limit) -> EvaluationSummary:
     results = []
+    run_task = task.replace(start="upright", torque_limit_nm=limit)
     for tilt in tilts:
-        results += evaluate_controller(controller, seeds=(0,), duration_s=duration_s, start="upright", params=params,
-                                       torque_limit_nm=limit, plant=plant,
-                                       initial_state=tilt_state(params, tilt, plant)).results
+        results += evaluate_controller(controller, run_task, seeds=(0,), duration_s=duration_s,
+                                       initial_state=task.tilt_state(tilt)).results
     return EvaluationSummary(name=getattr(controller, "name", "controller"), results=results)
 
 
 def classical_comparison(
-    params: Optional[RodParams] = None,
+    task: Optional[Task] = None,
     learned_model: Any = None,
     tilts_rad: Sequence[float] = (0.2, 0.4),
     duration_s: float = 5.0,
@@ -84,14 +84,15 @@ def classical_comparison(
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
     progress: bool = False,
-    plant: str = "prb",
 ) -> ClassicalComparison:
     """Evaluate every classical controller (see the module docstring).
 
     Parameters
     ----------
-    params : RodParams, optional
-        The rod (its ``torque_limit_nm`` is "the torque limit").
+    task : Task, optional
+        The plant and rod (its ``torque_limit_nm`` is "the torque limit"); on plants other than the PRB
+        chain the controllers that read the chain's joint state (joint-state LQR, joint-energy swing-up) are
+        replaced by their observation-only versions, and ``notes`` says so.
     learned_model : DynamicsModel, optional
         Learned model for the learned-model LQR and the PID tuning; without it the PID is tuned on the
         true plant and the learned-model LQR is left out (both said in ``notes``).
@@ -108,19 +109,16 @@ def classical_comparison(
         Cost evaluations of the PID tuning.
     pid_gains : PIDGains, optional
         Skip the tuning and use these gains.
-    plant : str
-        The true plant (any name of :func:`softpend.plant.make_plant`).  On plants other than the PRB chain
-        the controllers that read the chain's joint state (joint-state LQR, joint-energy swing-up) are
-        replaced by their observation-only versions, and ``notes`` says so.
     """
-    params = params if params is not None else RodParams()
+    task = task if task is not None else Task()
+    params, plant = task.rod, task.plant
     limit = params.torque_limit_nm
     notes: list[str] = []
     near: dict[str, EvaluationSummary] = {}
     rows: list[dict[str, Any]] = []
 
     def add(label: str, controller, torque_limit: float) -> None:
-        summary = _run(controller, params, tilts_rad, duration_s, torque_limit, plant)
+        summary = _run(controller, task, tilts_rad, duration_s, torque_limit)
         summary.name = label
         near[label] = summary
         for tilt, result in zip(tilts_rad, summary.results):
@@ -144,7 +142,7 @@ def classical_comparison(
             notes.append(f"LQR on the learned model: design failed ({exc})")
     if pid_gains is None:
         simulator = (learned_model_simulator(learned_model, params) if learned_model is not None
-                     else plant_simulator(params, plant=plant))
+                     else plant_simulator(task))
         tuned_on = "learned model" if learned_model is not None else "true plant"
         if learned_model is None:
             notes.append("no learned model given: PID tuned on the true plant")
@@ -155,8 +153,8 @@ def classical_comparison(
     add("PID", PIDController(pid_gains, torque_limit_nm=limit), limit)
     add("PID, no limit", PIDController(pid_gains, torque_limit_nm=unlimited_torque_nm), unlimited_torque_nm)
     swing_controller = EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params)
-    swing = evaluate_controller(swing_controller, name="energy swing-up + LQR", seeds=swingup_seeds,
-                                duration_s=swingup_duration_s, start="hanging", params=params, plant=plant)
+    swing = evaluate_controller(swing_controller, task.replace(start="hanging"), name="energy swing-up + LQR",
+                                seeds=swingup_seeds, duration_s=swingup_duration_s)
     row = swing.row()
     row.update(start="hanging", torque_limit_nm=limit)
     rows.append(row)

@@ -13,6 +13,8 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
+from softpend.study.presets import RL_BOOK, TASK
+from softpend.task import Task
 from softpend.study.parallel import run_in_processes
 from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config
@@ -120,17 +122,18 @@ def median_real_s_to_balance(logs: Sequence[TrainingLog], std_rad: float = BALAN
     return float(np.median([log.real_s_to_balance(std_rad) for log in logs]))
 
 
-def figure_configs(torque_limit_nm: float = 0.06, episode_s: float = 5.0, rollouts_per_real_step: int = 9,
-                   mbpo_random_episodes: int = 3, plant: str = "prb") -> dict[str, DQNConfig]:
+def figure_configs(torque_limit_nm: float = TASK.torque_limit_nm, episode_s: float = RL_BOOK.episode_s,
+                   rollouts_per_real_step: int = RL_BOOK.rollouts_per_real_step,
+                   mbpo_random_episodes: int = RL_BOOK.mbpo_random_episodes, plant: str = TASK.plant) -> dict[str, DQNConfig]:
     """The configs of the book's Figures 4-6 (defaults otherwise): ``{"dqn": ..., "mbpo": ...}``.
 
     ``plant`` (``"prb"`` or ``"beam"``) is the true plant the agents train and are evaluated on.
     """
-    check_plant_name(plant)
+    task = Task(plant=plant).replace(torque_limit_nm=torque_limit_nm)
     return {
-        "dqn": DQNConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, plant=plant),
-        "mbpo": MBPOConfig(torque_limit_nm=torque_limit_nm, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
-                           initial_random_episodes=mbpo_random_episodes, plant=plant),
+        "dqn": DQNConfig(task=task, episode_s=episode_s),
+        "mbpo": MBPOConfig(task=task, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
+                           initial_random_episodes=mbpo_random_episodes),
     }
 
 

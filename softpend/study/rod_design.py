@@ -23,10 +23,11 @@ from typing import Optional
 
 import numpy as np
 
+from softpend.checks import positive
 from softpend.plant.base import PlantBase
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
-from softpend.plant.registry import make_plant
+from softpend.task import Task
 
 __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantilever", "rod_design", "rod_poses_m"]
 
@@ -34,22 +35,10 @@ __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantileve
 HORIZONTAL_HUB_ANGLE_RAD = -math.pi / 2
 
 
-def horizontal_cantilever(params: Optional[RodParams] = None, plant: str = "prb") -> PlantBase:
-    """The rod clamped horizontally (hub locked at ``-pi/2``) and resting in its deflected static equilibrium.
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        Rod parameters (default: the project's default rod).
-    plant : {"prb", "beam"}
-        Which simulator (:func:`softpend.plant.make_plant`).
-
-    Returns
-    -------
-    PlantBase
-        A hub-locked plant whose current state is the static equilibrium under gravity.
-    """
-    sim = make_plant(plant, params=params if params is not None else RodParams(), hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
+def horizontal_cantilever(task: Optional[Task] = None) -> PlantBase:
+    """The rod of ``task`` (default ``Task()``) clamped horizontally (hub locked at ``-pi/2``) and resting in
+    its deflected static equilibrium under gravity, as a hub-locked plant."""
+    sim = (task if task is not None else Task()).make_plant(hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
     sim.static_equilibrium()
     return sim
 
@@ -90,8 +79,7 @@ def clamped_upright_buckling_factor(params: Optional[RodParams] = None, step_rad
     float
         The buckling load factor (> 1: the clamped rod stands up on its own; ``inf`` without gravity).
     """
-    if not math.isfinite(step_rad) or step_rad <= 0:
-        raise ValueError(f"step_rad must be positive and finite, got {step_rad!r}")
+    positive("step_rad", step_rad)
     plant = PRBPlant(params if params is not None else RodParams(), hub_locked_at_rad=0.0)
     n = plant.n_coordinates
     zeros = np.zeros(n)
@@ -198,7 +186,7 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
     params = params if params is not None else RodParams()
     if not isinstance(params, RodParams):
         raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
-    tip = horizontal_cantilever(params).link_points_m()[-1]
+    tip = horizontal_cantilever(Task(rod=params)).link_points_m()[-1]
     return RodDesign(
         params=params,
         tip_sag_horizontal_m=float(-tip[1]),
@@ -209,16 +197,9 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
     )
 
 
-def rod_poses_m(params: Optional[RodParams] = None, plant: str = "prb") -> dict[str, np.ndarray]:
-    """Points along the rod ``(k, 2)`` [m] of three poses, from the plant's own geometry (the PRB joints,
-    or the beam nodes).
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        Rod parameters (default: the project's default rod).
-    plant : {"prb", "beam"}
-        Which simulator (:func:`softpend.plant.make_plant`).
+def rod_poses_m(task: Optional[Task] = None) -> dict[str, np.ndarray]:
+    """Points along the rod ``(k, 2)`` [m] of three poses of the plant of ``task`` (default ``Task()``), from
+    the plant's own geometry (the PRB joints, or the beam nodes).
 
     Returns
     -------
@@ -226,11 +207,11 @@ def rod_poses_m(params: Optional[RodParams] = None, plant: str = "prb") -> dict[
         ``"hanging"`` (straight, hub at ``pi``), ``"horizontal"`` (clamped horizontally, deflected by
         gravity: the static equilibrium of :func:`horizontal_cantilever`) and ``"upright"`` (straight up).
     """
-    params = params if params is not None else RodParams()
-    sim = make_plant(plant, params=params)
+    task = task if task is not None else Task()
+    sim = task.make_plant()
     hanging_q, _ = sim.hanging_state()
     return {
         "hanging": sim.link_points_m(hanging_q),
-        "horizontal": horizontal_cantilever(params, plant).link_points_m(),
+        "horizontal": horizontal_cantilever(task).link_points_m(),
         "upright": sim.link_points_m(np.zeros(sim.n_coordinates)),
     }

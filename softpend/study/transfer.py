@@ -20,6 +20,7 @@ import numpy as np
 
 from tqdm.auto import tqdm
 
+from softpend.task import Task
 from softpend.evaluation import evaluate_controller
 from softpend.plant import RodParams
 
@@ -154,10 +155,11 @@ def rl_transfer_cases(
             raise ValueError(f"algos must be among {sorted(METHOD_NAMES)}, got {algo!r}")
         for seed in seeds:
             model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
-            if config.n_links != params.n_links or abs(config.torque_limit_nm - params.torque_limit_nm) > 1e-12:
+            rod = config.task.rod
+            if rod.n_links != params.n_links or abs(rod.torque_limit_nm - params.torque_limit_nm) > 1e-12:
                 raise ValueError(
-                    f"{algo} seed {seed}: agent trained with n_links={config.n_links}, torque_limit_nm="
-                    f"{config.torque_limit_nm}, transfer study uses n_links={params.n_links}, "
+                    f"{algo} seed {seed}: agent trained with n_links={rod.n_links}, torque_limit_nm="
+                    f"{rod.torque_limit_nm}, transfer study uses n_links={params.n_links}, "
                     f"torque_limit_nm={params.torque_limit_nm}"
                 )
             cases.append(TransferCase(
@@ -237,13 +239,10 @@ def transfer_table(
     for case, plant, label in tqdm(jobs, desc="transfer", disable=not progress):
         summary = evaluate_controller(
             controllers[case.name],
+            Task(plant=plant, rod=variants[label], start=case.start, start_noise_rad=case.start_noise_rad),
             name=case.name,
             seeds=seeds,
             duration_s=max(case.duration_s * duration_scale, MIN_DURATION_S),
-            start=case.start,
-            params=variants[label],
-            plant=plant,
-            start_noise_rad=case.start_noise_rad,
         )
         row = summary.row()
         row.update(plant=plant, perturbation=label, diverged=sum(r.diverged is not None for r in summary.results))

@@ -43,8 +43,9 @@ from typing import Any, Optional
 import numpy as np
 from tqdm.auto import tqdm
 
+from softpend.checks import check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.plant import OBSERVATION_NAMES, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
-from softpend.sysid.dataset import TrajectoryDataset, write_dataset
+from softpend.sysid.dataset import DT_S_RANGE, TrajectoryDataset, write_dataset
 from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.variables import POSITION_NAMES, VELOCITY_NAMES, is_angle
 
@@ -111,29 +112,22 @@ class BabbleProtocol:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if f.name == "start":
-                if value not in _STARTS:
-                    raise ValueError(f"start must be one of {_STARTS}, got {value!r}")
-                continue
-            if f.name == "feedback_velocity":
-                if value not in ("differenced", "true"):
-                    raise ValueError(f"feedback_velocity must be 'differenced' or 'true', got {value!r}")
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
-            if value < 0:
-                raise ValueError(f"{f.name} must be non-negative, got {value!r}")
-        for name in ("n_trials", "substeps", "camera_delay_steps"):
-            if int(getattr(self, name)) != getattr(self, name):
-                raise ValueError(f"{name} must be an integer, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, int(getattr(self, name)))
-        if self.n_trials < 1 or self.substeps < 1:
-            raise ValueError(f"n_trials and substeps must be >= 1, got {self.n_trials} and {self.substeps}")
-        if self.dt_s <= 0 or self.torque_bandwidth_hz <= 0:
-            raise ValueError(f"dt_s and torque_bandwidth_hz must be positive, got {self.dt_s} and {self.torque_bandwidth_hz}")
+                one_of("start", value, _STARTS)
+            elif f.name == "feedback_velocity":
+                one_of("feedback_velocity", value, ("differenced", "true"))
+            else:
+                non_negative(f.name, value)
+        for name in ("n_trials", "substeps"):
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        object.__setattr__(self, "camera_delay_steps", int_at_least("camera_delay_steps", self.camera_delay_steps, 0))
+        for name in ("dt_s", "torque_bandwidth_hz"):
+            positive(name, getattr(self, name))
+        low, high = DT_S_RANGE
+        if not low <= self.dt_s <= high:
+            raise ValueError(f"dt_s must lie in [{low:g}, {high:g}] s (the range a dataset file accepts), got {self.dt_s!r}")
         if self.n_samples < 2:
             raise ValueError(f"trial_length_s must cover at least 2 samples of dt_s, got {self.trial_length_s}")
-        if self.feedback_trial_fraction > 1:
-            raise ValueError(f"feedback_trial_fraction must be in [0, 1], got {self.feedback_trial_fraction}")
+        in_unit_interval("feedback_trial_fraction", self.feedback_trial_fraction)
 
     @property
     def n_samples(self) -> int:
@@ -270,7 +264,8 @@ def babble(
     Raises
     ------
     ValueError
-        On invalid arguments.
+        On invalid arguments, or a dataset whose arrays would not fit in
+        :data:`softpend.checks.MAX_WORK_BYTES` (checked before the first trial).
     SimulationDiverged
         If the simulator fails in a trial (the message names the trial).
     """
@@ -281,6 +276,13 @@ def babble(
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     sim = make_plant(plant, params=params, dt_s=protocol.dt_s, substeps=protocol.substeps)
+    per_sample = 8 * (2 * len(POSITION_NAMES) + 1 + len(OBSERVATION_NAMES) + 2 * sim.n_coordinates)
+    n_samples = float(protocol.n_trials) * (protocol.n_samples + protocol.camera_delay_steps + 1)
+    check_work_size(
+        f"babbling {protocol.n_trials} trials of {protocol.n_samples} samples",
+        2 * n_samples * per_sample,
+        f"{n_samples:.3g} samples x {per_sample} bytes, held twice while the trials are stacked",
+    )
     streams = np.random.SeedSequence(int(seed)).spawn(protocol.n_trials)
     trials = []
     for i in tqdm(range(protocol.n_trials), desc="babbling", unit="trial", disable=not progress):

@@ -49,6 +49,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from softpend.io.outputs import atomic_write
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.sysid.variables import POSITION_NAMES, velocity_name
 
@@ -59,6 +60,8 @@ __all__ = [
     "TrajectoryDataset",
     "save_dataset",
     "load_dataset",
+    "is_dataset_file",
+    "DT_S_RANGE",
 ]
 
 SCHEMA_NAME = "softpend.sysid.dataset"
@@ -83,6 +86,9 @@ _REQUIRED_METADATA = (
     "protocol",
     "notes",
 )
+#: Accepted sampling steps [s]: 1 microsecond (far below any encoder or camera rate) to 10 s (far above any
+#: step at which a pendulum of this size can be identified); a ``dt_s`` outside is a corrupt or mistyped file.
+DT_S_RANGE: tuple[float, float] = (1e-6, 10.0)
 _ARRAYS_REQUIRED = ("positions", "velocities", "torques_nm")
 _ARRAYS_OPTIONAL = ("true_observations", "joint_positions_rad", "joint_velocities_rad_s")
 # fixed timestamp so that the same content gives the same bytes
@@ -207,6 +213,8 @@ def _validate(ds: TrajectoryDataset) -> None:
     dt = meta["dt_s"]
     if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
         raise ValueError(f"metadata dt_s must be a positive number, got {dt!r}")
+    if not DT_S_RANGE[0] <= dt <= DT_S_RANGE[1]:
+        raise ValueError(f"metadata dt_s must lie in [{DT_S_RANGE[0]:g}, {DT_S_RANGE[1]:g}] s, got {dt!r}")
     names = meta["position_names"]
     if not isinstance(names, (list, tuple)) or not names or any(n not in POSITION_NAMES for n in names):
         raise ValueError(f"metadata position_names must be a list drawn from {POSITION_NAMES}, got {names!r}")
@@ -377,11 +385,9 @@ def write_dataset(path: str | Path, dataset: TrajectoryDataset) -> Path:
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
-    path.parent.mkdir(parents=True, exist_ok=True)
     members = dict(dataset.arrays())
     members["metadata"] = np.array(json.dumps(dataset.metadata, sort_keys=True, allow_nan=False))
-    tmp = path.with_name(path.name + ".partial")
-    with zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_DEFLATED) as archive:
+    with atomic_write(path) as handle, zipfile.ZipFile(handle, mode="w", compression=zipfile.ZIP_DEFLATED) as archive:
         for name in sorted(members):
             info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE_TIME)
             info.compress_type = zipfile.ZIP_DEFLATED
@@ -389,8 +395,22 @@ def write_dataset(path: str | Path, dataset: TrajectoryDataset) -> Path:
             buffer = io.BytesIO()
             np.lib.format.write_array(buffer, np.require(members[name], requirements="C"), allow_pickle=False)
             archive.writestr(info, buffer.getvalue())
-    tmp.replace(path)
     return path
+
+
+def is_dataset_file(path: str | Path) -> bool:
+    """Whether ``path`` is a dataset file (a zip whose ``metadata`` member names this schema); reads only the
+    metadata (an output check of ``softpend babble``: a dataset may be replaced, any other file may not)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            if archive.getinfo("metadata.npy").file_size > 10**7:
+                return False
+            with archive.open("metadata.npy") as member:
+                raw = np.lib.format.read_array(member, allow_pickle=False)
+        metadata = json.loads(str(raw[()]))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError, RecursionError, IndexError, TypeError):
+        return False
+    return isinstance(metadata, dict) and metadata.get("schema") == SCHEMA_NAME
 
 
 def _as_float64(name: str, value: Any) -> np.ndarray:
@@ -445,8 +465,10 @@ def load_dataset(
     try:
         with np.load(path, allow_pickle=False) as archive:
             members = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, NotImplementedError) as exc:
         raise ValueError(f"{path} is not a readable dataset file: {exc}") from exc
+    except MemoryError:
+        raise ValueError(f"{path}: its arrays do not fit in memory") from None
     if "metadata" not in members:
         raise ValueError(f"{path} has no metadata member (not a softpend dataset)")
     raw_metadata = members.pop("metadata")
@@ -458,6 +480,8 @@ def load_dataset(
             raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
     except (json.JSONDecodeError, TypeError) as exc:
         raise ValueError(f"{path}: metadata is not valid JSON: {exc}") from exc
+    except RecursionError:
+        raise ValueError(f"{path}: metadata is nested too deeply to be a dataset's") from None
     unknown = set(members) - set(_ARRAYS_REQUIRED) - set(_ARRAYS_OPTIONAL)
     if unknown:
         raise ValueError(f"{path}: unexpected members {sorted(unknown)}")

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from softpend.checks import positive
+
 __all__ = ["backward_difference", "unwrap_angles"]
 
 
@@ -54,8 +56,7 @@ def backward_difference(positions: np.ndarray, dt_s: float, angle_mask: np.ndarr
         Velocity estimates [rad/s or m/s] at samples ``1 .. n_samples - 1`` (the first sample has no
         predecessor).  The error on a smooth signal is ``x''(t) dt / 2 + O(dt^2)`` (first order).
     """
-    if not np.isfinite(dt_s) or dt_s <= 0:
-        raise ValueError(f"dt_s must be positive and finite, got {dt_s!r}")
+    positive("dt_s", dt_s)
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim < 2 or positions.shape[-2] < 2:
         raise ValueError(f"positions must have shape (..., n_samples >= 2, n_variables), got {positions.shape}")

@@ -13,6 +13,7 @@ from typing import Any, Optional
 import numpy as np
 import torch
 
+from softpend.checks import finite, non_negative, positive_int
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
@@ -166,8 +167,7 @@ def rollout_errors(
         If the trials are shorter than the horizon or the arguments are invalid.
     """
     layout: StateLayout = model.layout
-    if isinstance(start_stride, bool) or not isinstance(start_stride, (int, np.integer)) or start_stride < 1:
-        raise ValueError(f"start_stride must be a positive integer, got {start_stride!r}")
+    start_stride = positive_int("start_stride", start_stride)
     steps = int(round(horizon_s / dataset.dt_s))
     if steps < 1:
         raise ValueError(f"horizon_s must be at least one step ({dataset.dt_s} s), got {horizon_s!r}")
@@ -308,12 +308,10 @@ def perturbed_simulator_errors(
 
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
-    if isinstance(start_stride, bool) or not isinstance(start_stride, (int, np.integer)) or start_stride < 1:
-        raise ValueError(f"start_stride must be a positive integer, got {start_stride!r}")
-    if not np.isfinite(hub_offset_rad) or not np.isfinite(hub_rate_offset_rad_s):
-        raise ValueError(f"hub_offset_rad and hub_rate_offset_rad_s must be finite, got {hub_offset_rad!r}, {hub_rate_offset_rad_s!r}")
-    if not (np.isfinite(torque_noise_std_nm) and torque_noise_std_nm >= 0):
-        raise ValueError(f"torque_noise_std_nm must be non-negative and finite, got {torque_noise_std_nm!r}")
+    start_stride = positive_int("start_stride", start_stride)
+    finite("hub_offset_rad", hub_offset_rad)
+    finite("hub_rate_offset_rad_s", hub_rate_offset_rad_s)
+    non_negative("torque_noise_std_nm", torque_noise_std_nm)
     steps = int(round(horizon_s / dataset.dt_s))
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     n_states = dataset.n_samples - history

@@ -34,8 +34,11 @@ row (``generator=``) for model-based RL.  Models are saved as a state dict (``.p
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import pickle
+import zipfile
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -43,6 +46,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from softpend.checks import one_of, optional_positive, positive, positive_int
+from softpend.io.outputs import atomic_write
 from softpend.sysid.layout import StateLayout
 
 __all__ = [
@@ -51,12 +56,17 @@ __all__ = [
     "DynamicsEnsemble",
     "save_model",
     "load_model",
+    "is_model_file",
+    "model_paths",
     "MODEL_SCHEMA_NAME",
     "MODEL_SCHEMA_VERSION",
 ]
 
 MODEL_SCHEMA_NAME = "softpend.sysid.model"
 MODEL_SCHEMA_VERSION = 1
+#: Largest network :func:`load_model` builds from a metadata file [weights over all members]: 10**8 (400 MB
+#: of float32), far above any model softpend fits, so that a corrupt or hostile file cannot exhaust memory.
+MAX_LOADED_WEIGHTS = 10**8
 ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "softsign": nn.Softsign, "relu": nn.ReLU, "silu": nn.SiLU, "elu": nn.ELU}
 
 
@@ -107,20 +117,14 @@ class DynamicsModel(nn.Module):
         super().__init__()
         if not isinstance(layout, StateLayout):
             raise ValueError(f"layout must be a StateLayout, got {type(layout).__name__}")
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
-        for name, value in (("dt_s", dt_s), ("torque_limit_nm", torque_limit_nm)):
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        one_of("activation", activation, ACTIVATIONS)
         self.layout = layout
-        self.dt_s = float(dt_s)
-        self.torque_limit_nm = float(torque_limit_nm)
+        self.dt_s = positive("dt_s", dt_s)
+        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
         self.hidden_widths = _check_widths(hidden_widths)
         self.activation = activation
         self.integrate_positions = bool(integrate_positions)
-        if tip_reach_m is not None and not (isinstance(tip_reach_m, (int, float)) and math.isfinite(tip_reach_m) and tip_reach_m > 0):
-            raise ValueError(f"tip_reach_m must be positive and finite or None, got {tip_reach_m!r}")
-        self.tip_reach_m = None if tip_reach_m is None else float(tip_reach_m)
+        self.tip_reach_m = optional_positive("tip_reach_m", tip_reach_m)
         p = layout.n_positions
         mask = layout.position_angle_mask
         self._p = p
@@ -364,6 +368,24 @@ def _paths(path: str | Path) -> tuple[Path, Path]:
     return path.with_name(path.name + ".pt"), path.with_name(path.name + ".json")
 
 
+def model_paths(path: str | Path) -> tuple[Path, Path]:
+    """``(<path>.pt, <path>.json)``, the two files of :func:`save_model` (``path`` may end in either suffix)."""
+    return _paths(path)
+
+
+def is_model_file(path: str | Path) -> bool:
+    """Whether ``path`` (either file of a pair, or the stem) belongs to a model written by :func:`save_model`:
+    its ``.json`` names this schema (an output check: a model may be replaced, any other file may not)."""
+    _, meta_path = _paths(path)
+    try:
+        if meta_path.stat().st_size > 10**8:
+            return False
+        meta = json.loads(meta_path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        return False
+    return isinstance(meta, dict) and meta.get("schema") == MODEL_SCHEMA_NAME
+
+
 def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None) -> tuple[Path, Path]:
     """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``).
 
@@ -389,8 +411,12 @@ def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metada
         "metadata": metadata or {},
     }
     text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)
-    torch.save(model.state_dict(), weights)
-    meta_path.write_text(text + "\n")
+    state = io.BytesIO()
+    torch.save(model.state_dict(), state)
+    with atomic_write(weights) as handle:
+        handle.write(state.getvalue())
+    with atomic_write(meta_path, "w") as handle:
+        handle.write(text + "\n")
     return weights, meta_path
 
 
@@ -418,19 +444,30 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
             raise ValueError(f"model file not found: {p}")
     try:
         meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{meta_path}: not valid JSON: {exc}") from exc
-    if meta.get("schema") != MODEL_SCHEMA_NAME or meta.get("schema_version") != MODEL_SCHEMA_VERSION:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise ValueError(f"{meta_path}: not valid JSON: {type(exc).__name__}: {exc}") from None
+    if not isinstance(meta, dict) or meta.get("schema") != MODEL_SCHEMA_NAME or meta.get("schema_version") != MODEL_SCHEMA_VERSION:
         raise ValueError(f"{meta_path}: not a {MODEL_SCHEMA_NAME} v{MODEL_SCHEMA_VERSION} file")
-    config = dict(meta["config"])
-    size = int(config.pop("ensemble_size", 1))
-    config["layout"] = StateLayout.from_dict(config["layout"])
-    members = [DynamicsModel(**config) for _ in range(size)]
-    model: DynamicsModel | DynamicsEnsemble = DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+    try:
+        config = dict(meta["config"])
+        size = positive_int("ensemble_size", config.pop("ensemble_size", 1))
+        widths = [positive_int("hidden_widths", w) for w in config.get("hidden_widths", ())]
+        edges = [64] + widths + [64]  # generous input and output widths
+        n_weights = size * sum((a + 1) * b for a, b in zip(edges[:-1], edges[1:]))
+        if n_weights > MAX_LOADED_WEIGHTS:
+            raise ValueError(f"the network would have about {n_weights:.3g} weights, above {MAX_LOADED_WEIGHTS:.0e}")
+        config["layout"] = StateLayout.from_dict(config["layout"])
+        members = [DynamicsModel(**config) for _ in range(size)]
+        model: DynamicsModel | DynamicsEnsemble = DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+    except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+        raise ValueError(f"{meta_path}: not a model of this version ({type(exc).__name__}: {exc})") from None
     try:
         state = torch.load(weights, weights_only=True, map_location="cpu")
         model.load_state_dict(state, strict=True)
-    except (RuntimeError, OSError, EOFError, KeyError) as exc:
-        raise ValueError(f"{weights}: weights do not match {meta_path}: {exc}") from exc
+    except (pickle.UnpicklingError, zipfile.BadZipFile, RuntimeError, OSError, EOFError, KeyError, TypeError,
+            AttributeError, ValueError) as exc:
+        message = " ".join(str(exc).split())[:300]
+        raise ValueError(f"{weights}: weights do not match {meta_path} or are not weights written by softpend "
+                         f"({type(exc).__name__}: {message})") from None
     model.eval()
     return model, meta["metadata"]

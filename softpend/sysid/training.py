@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from softpend.checks import NonFiniteError, boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
 from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
@@ -103,30 +104,18 @@ class TrainConfig:
             object.__setattr__(self, "integrate_positions", self.velocity_source == "observed")
         if not isinstance(self.integrate_positions, bool):
             raise ValueError(f"integrate_positions must be a bool or None, got {self.integrate_positions!r}")
-        if not isinstance(self.limit_tip_reach, bool):
-            raise ValueError(f"limit_tip_reach must be a bool, got {self.limit_tip_reach!r}")
+        boolean("limit_tip_reach", self.limit_tip_reach)
         if not self.hidden_widths or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden_widths):
             raise ValueError(f"hidden_widths must be positive integers, got {self.hidden_widths!r}")
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
-        for name in ("rollout_steps", "rollout_epochs"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+        one_of("activation", self.activation, ACTIVATIONS)
+        for name in ("rollout_steps", "rollout_epochs", "seed"):
+            object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
         for name in ("ensemble_size", "max_epochs", "batch_size", "patience"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
-            raise ValueError(f"learning_rate must be positive, got {self.learning_rate!r}")
-        if self.lr_schedule not in ("cosine", "plateau"):
-            raise ValueError(f"lr_schedule must be 'cosine' or 'plateau', got {self.lr_schedule!r}")
-        if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
-            raise ValueError(f"weight_decay must be non-negative, got {self.weight_decay!r}")
-        if not 0 < self.validation_fraction < 1:
-            raise ValueError(f"validation_fraction must be in (0, 1), got {self.validation_fraction!r}")
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        positive("learning_rate", self.learning_rate)
+        one_of("lr_schedule", self.lr_schedule, ("cosine", "plateau"))
+        non_negative("weight_decay", self.weight_decay)
+        in_unit_interval("validation_fraction", self.validation_fraction, include_zero=False, include_one=False)
 
     def layout(self) -> StateLayout:
         """The state layout these settings describe."""
@@ -273,6 +262,7 @@ def _train_member(
         net.eval()
         with torch.no_grad():
             val = float(torch.mean((net(x_val) - y_val) ** 2))
+        _check_finite_loss(desc, epoch, total / n, val, config)
         train_losses.append(total / n)
         val_losses.append(val)
         scheduler.step(val) if config.lr_schedule == "plateau" else scheduler.step()
@@ -285,6 +275,16 @@ def _train_member(
     net.load_state_dict(best[2])
     net.eval()
     return np.array(train_losses), np.array(val_losses), best[1]
+
+
+def _check_finite_loss(desc: str, epoch: int, train_loss: float, val_loss: float, config: TrainConfig) -> None:
+    """``NonFiniteError`` if an epoch's training or validation loss is NaN or infinite (the fit diverged; the
+    weights kept would be the untrained ones or garbage)."""
+    if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
+        raise NonFiniteError(
+            f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train_loss!r}, validation loss "
+            f"{val_loss!r} (lower learning_rate, now {config.learning_rate!r})"
+        )
 
 
 def _windows(layout: StateLayout, dataset: TrajectoryDataset, trials: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -343,6 +343,7 @@ def _finetune_multistep(
             total += float(loss.detach()) * batch.shape[0]
         with torch.no_grad():
             val_loss = float(_multistep_loss(model, vs, vu, scale))
+        _check_finite_loss(desc, len(train_losses) + 1, total / xs.shape[0], val_loss, config)
         train_losses.append(total / xs.shape[0])
         val_losses.append(val_loss)
         if val_loss < best[0]:
@@ -381,6 +382,8 @@ def fit_dynamics_model(
     ------
     ValueError
         On invalid settings, or a dataset that lacks the layout's variables.
+    NonFiniteError
+        If a training or validation loss becomes NaN or infinite (the fit diverged).
     """
     if not isinstance(dataset, TrajectoryDataset):
         raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")

@@ -13,13 +13,54 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
+from softpend.checks import non_negative
 from softpend.vision.tracker import GREEN_HSV, ColourRange, find_blobs
 
-__all__ = ["AffineCalibration", "calibrate_from_markers", "fit_affine", "tip_angle_rad"]
+__all__ = ["AffineCalibration", "calibrate_from_markers", "fit_affine", "points_array", "read_json_file", "tip_angle_rad"]
+
+#: Largest calibration file read [bytes] (a calibration is a few hundred bytes).
+MAX_CALIBRATION_BYTES = 1 << 20
+
+
+def points_array(name: str, value, n_min: int = 1, n_max: Optional[int] = None) -> np.ndarray:
+    """``value`` as a finite ``(n, 2)`` float array with ``n_min <= n <= n_max``, else ``ValueError`` naming
+    ``name`` (ragged lists, strings, dicts, NaN and wrong shapes are refused)."""
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be a list of (x, y) number pairs, got {_short(value)}") from None
+    n_max_text = "" if n_max is None else f" to {n_max}"
+    if array.ndim != 2 or array.shape[1] != 2 or not n_min <= len(array) <= (n_max or len(array)):
+        raise ValueError(f"{name} must be {n_min}{n_max_text} (x, y) pairs, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must hold finite numbers, got {_short(value)}")
+    return array
+
+
+def read_json_file(name: str, path: str | Path, max_bytes: int):
+    """Parse the JSON file at ``path``; a file over ``max_bytes``, malformed or too deeply nested JSON raises
+    ``ValueError`` naming ``name`` and the file (a missing file raises ``FileNotFoundError``)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{name} file not found: {path}")
+    if not path.is_file():
+        raise ValueError(f"{name} {path} is not a file")
+    size = path.stat().st_size
+    if size > max_bytes:
+        raise ValueError(f"{name} {path} has {size} bytes, more than the {max_bytes} a {name} file can have")
+    try:
+        return json.loads(path.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise ValueError(f"{name} {path} is not valid JSON: {_short(exc)}") from None
+
+
+def _short(value, limit: int = 120) -> str:
+    text = repr(value) if not isinstance(value, BaseException) else str(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def fit_affine(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -58,12 +99,16 @@ class AffineCalibration:
     residual_rms_m: float = 0.0
 
     def __post_init__(self) -> None:
-        a = np.asarray(self.pixel_to_metre, dtype=float)
+        try:
+            a = np.array(self.pixel_to_metre, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got {_short(self.pixel_to_metre)}") from None
         if a.shape != (2, 3) or not np.all(np.isfinite(a)):
-            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got {a.shape}")
+            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got shape {a.shape}")
         if abs(np.linalg.det(a[:, :2])) < 1e-15:
             raise ValueError("pixel_to_metre is singular")
         object.__setattr__(self, "pixel_to_metre", a)
+        object.__setattr__(self, "residual_rms_m", non_negative("residual_rms_m", self.residual_rms_m))
 
     @property
     def metre_to_pixel(self) -> np.ndarray:
@@ -91,15 +136,33 @@ class AffineCalibration:
 
     @classmethod
     def from_json(cls, text: str) -> "AffineCalibration":
-        data = json.loads(text)
-        return cls(np.array(data["pixel_to_metre"], dtype=float), float(data.get("residual_rms_m", 0.0)))
+        """Parse :meth:`to_json` output; anything else raises ``ValueError`` saying what is wrong."""
+        try:
+            data = json.loads(text)
+        except (ValueError, RecursionError) as exc:
+            raise ValueError(f"calibration is not valid JSON: {_short(exc)}") from None
+        return cls._from_data(data)
+
+    @classmethod
+    def _from_data(cls, data) -> "AffineCalibration":
+        if not isinstance(data, dict) or "pixel_to_metre" not in data:
+            raise ValueError(f"calibration must be a JSON object with a 'pixel_to_metre' 2x3 matrix, got {_short(data)}")
+        unknown = sorted(set(data) - {"pixel_to_metre", "residual_rms_m"})
+        if unknown:
+            raise ValueError(f"calibration has unknown keys {unknown}")
+        return cls(data["pixel_to_metre"], data.get("residual_rms_m", 0.0))
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> "AffineCalibration":
-        return cls.from_json(Path(path).read_text())
+        """Read a file written by :meth:`save` (``ValueError`` naming the file if it is not one)."""
+        data = read_json_file("calibration", path, MAX_CALIBRATION_BYTES)
+        try:
+            return cls._from_data(data)
+        except ValueError as exc:
+            raise ValueError(f"calibration file {path}: {exc}") from None
 
 
 def calibrate_from_markers(
@@ -131,9 +194,7 @@ def calibrate_from_markers(
     ValueError
         If the number of markers is out of range or fewer markers than expected are visible.
     """
-    known = np.asarray(marker_positions_m, dtype=float)
-    if known.ndim != 2 or known.shape[1] != 2 or not 3 <= len(known) <= 6:
-        raise ValueError(f"marker_positions_m must be 3 to 6 (x, y) pairs, got shape {known.shape}")
+    known = points_array("marker_positions_m", marker_positions_m, 3, 6)
     blobs = find_blobs(frame_bgr, colour, min_area_px)[: len(known)]
     if len(blobs) < len(known):
         raise ValueError(f"marker_positions_m lists {len(known)} markers but only {len(blobs)} are visible")

@@ -22,17 +22,34 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from softpend.vision.calibration import AffineCalibration
+from softpend.checks import int_at_least, non_negative, positive
+from softpend.vision.calibration import AffineCalibration, points_array, read_json_file
 
 __all__ = [
     "DEFAULT_MARKERS_M",
+    "MAX_FPS",
     "CameraEffects",
     "CameraModel",
     "RenderedClip",
     "SyntheticCamera",
     "render_video",
     "read_sidecar",
+    "check_fps",
+    "check_sidecar",
 ]
+
+#: Highest frame rate accepted [1/s] (beyond any camera; a larger value is a typo or garbage).
+MAX_FPS = 1e6
+#: Largest sidecar file read [bytes] (about two hours of 100 frames/s).
+MAX_SIDECAR_BYTES = 64 << 20
+
+
+def check_fps(name: str, value) -> float:
+    """``value`` as a frame rate in (0, :data:`MAX_FPS`] [1/s], else ``ValueError`` naming ``name``."""
+    fps = positive(name, value)
+    if fps > MAX_FPS:
+        raise ValueError(f"{name} must be at most {MAX_FPS:g} frames/s, got {value!r}")
+    return fps
 
 #: Reference-marker layout in the rod plane [m] (asymmetric, so the marker correspondence is unique).
 DEFAULT_MARKERS_M: tuple[tuple[float, float], ...] = ((-0.42, 0.31), (0.42, 0.31), (0.40, -0.30), (-0.22, -0.33))
@@ -119,13 +136,10 @@ class CameraEffects:
 
     def __post_init__(self) -> None:
         for name in ("noise_std_dn", "exposure_s", "lighting_amplitude", "gradient"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a non-negative number, got {value!r}")
+            non_negative(name, getattr(self, name))
         if self.lighting_amplitude >= 1:
             raise ValueError(f"lighting_amplitude must be < 1, got {self.lighting_amplitude!r}")
-        if int(self.blur_subframes) != self.blur_subframes or self.blur_subframes < 1:
-            raise ValueError(f"blur_subframes must be an integer >= 1, got {self.blur_subframes!r}")
+        int_at_least("blur_subframes", self.blur_subframes, 1)
 
     @classmethod
     def noisy(cls) -> "CameraEffects":
@@ -394,8 +408,7 @@ def render_video(
         Show a progress bar.
     """
     path = Path(path)
-    if not (math.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be positive, got {fps!r}")
+    check_fps("fps", fps)
     times_s = np.asarray(times_s, dtype=float)
     start = times_s[0] + camera.effects.exposure_s if start_s is None else float(start_s)
     end = times_s[-1] if duration_s is None else start + float(duration_s)
@@ -449,8 +462,41 @@ def _hide_dot(frame: np.ndarray, tip_px: np.ndarray, camera: SyntheticCamera) ->
 
 
 def read_sidecar(video_path: str | Path) -> dict:
-    """The JSON written next to a video by :func:`render_video` (raises FileNotFoundError if absent)."""
+    """The JSON written next to a video by :func:`render_video`, checked by :func:`check_sidecar`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no sidecar.
+    ValueError
+        If it is not valid JSON, too large, or a field has the wrong type or shape (the message names it).
+    """
     path = Path(str(video_path) + ".json")
     if not path.exists():
         raise FileNotFoundError(f"no camera sidecar {path} (pass --markers and --fps instead)")
-    return json.loads(path.read_text())
+    data = read_json_file("sidecar", path, MAX_SIDECAR_BYTES)
+    try:
+        return check_sidecar(data)
+    except ValueError as exc:
+        raise ValueError(f"sidecar {path}: {exc}") from None
+
+
+def check_sidecar(data) -> dict:
+    """Check the fields a tracker reads from a sidecar: ``fps`` (in (0, :data:`MAX_FPS`]),
+    ``timestamps_s`` (a list of finite numbers [s]) and ``markers_m`` (3 to 6 finite (x, y) pairs [m]),
+    each optional; returns a copy with those converted (floats, lists), ``ValueError`` naming a bad field."""
+    if not isinstance(data, dict):
+        raise ValueError(f"must be a JSON object, got {type(data).__name__}")
+    out = dict(data)
+    if out.get("fps") is not None:
+        out["fps"] = check_fps("fps", out["fps"])
+    if out.get("timestamps_s") is not None:
+        stamps = out["timestamps_s"]
+        ok = isinstance(stamps, list) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in stamps)
+        if not ok:
+            raise ValueError("timestamps_s must be a list of finite numbers [s]")
+        out["timestamps_s"] = [float(v) for v in stamps]
+    if out.get("markers_m") is not None:
+        out["markers_m"] = points_array("markers_m", out["markers_m"], 3, 6).tolist()
+    return out

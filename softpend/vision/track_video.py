@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
@@ -11,6 +13,7 @@ import numpy as np
 
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
+from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
 from softpend.vision.tracker import MAGENTA_HSV, Detection, TipTracker
 
 __all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_video"]
@@ -120,35 +123,48 @@ def track_video(
     the markers unless ``calibration`` is given.  With ``track_hub`` the magenta hub marker is tracked
     too (near the hub axis), giving the camera's view of the hub angle for clock synchronisation.
 
+    Every input is checked before ``out_csv`` is touched.  The rows go to a temporary file next to it
+    (``.<name>.*.partial``, crash-safe like any :class:`SampleLog`), which replaces ``out_csv`` only when
+    the whole video is tracked; on an error it is removed and ``out_csv`` is left as it was.
+
     Raises
     ------
     FileNotFoundError
         If the video does not exist.
     ValueError
-        If the video cannot be decoded, or neither markers nor a calibration are available.
+        If ``fps`` is not in (0, 1e6], ``out_csv`` cannot be written, the sidecar is malformed, the video
+        cannot be decoded, or neither markers nor a calibration are available.
     """
     video = Path(video)
-    Path(out_csv).unlink(missing_ok=True)  # a fresh CSV (SampleLog would append)
+    out_csv = Path(out_csv)
+    if fps is not None:
+        fps = check_fps("fps", fps)
+    _check_output_path(out_csv, video)
     if not video.exists():
         raise FileNotFoundError(f"video not found: {video}")
-    sidecar_path = Path(str(video) + ".json")
-    sidecar = None
-    if sidecar_path.exists():
-        import json
-
-        sidecar = json.loads(sidecar_path.read_text())
+    if not video.is_file():
+        raise ValueError(f"video {video} is not a file")
+    sidecar = read_sidecar(video) if Path(str(video) + ".json").exists() else None
     if marker_positions_m is None and sidecar is not None:
-        marker_positions_m = sidecar["markers_m"]
+        marker_positions_m = sidecar.get("markers_m")
     if timestamps_s is None and sidecar is not None:
-        timestamps_s = sidecar["timestamps_s"]
+        timestamps_s = sidecar.get("timestamps_s")
+    if timestamps_s is not None:
+        stamps_array = np.asarray(timestamps_s, dtype=float)
+        if stamps_array.ndim != 1 or not np.all(np.isfinite(stamps_array)):
+            raise ValueError("timestamps_s must be a 1-D sequence of finite times [s]")
     capture = cv2.VideoCapture(str(video))
     if not capture.isOpened():
         raise ValueError(f"video {video} cannot be opened by OpenCV")
     try:
         if fps is None:
-            fps = float(sidecar["fps"]) if sidecar is not None else float(capture.get(cv2.CAP_PROP_FPS) or 0)
-        if timestamps_s is None and not fps > 0:
-            raise ValueError("fps: the video has no frame rate; pass fps or timestamps")
+            if sidecar is not None and sidecar.get("fps") is not None:
+                fps = sidecar["fps"]
+            else:
+                container_fps = float(capture.get(cv2.CAP_PROP_FPS) or 0)
+                fps = container_fps if math.isfinite(container_fps) and 0 < container_fps <= MAX_FPS else None
+        if timestamps_s is None and fps is None:
+            raise ValueError("fps: the video has no usable frame rate; pass fps or timestamps")
         frames = _video_frames(capture)
         first = next(frames, None)
         if first is None:
@@ -177,9 +193,40 @@ def track_video(
 
             total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None
             iterator = tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0)
-        with SampleLog(out_csv, TRACK_COLUMNS, metadata={"video": str(video), "calibration": calibration.to_json()},
-                       fsync_every_s=1.0) as log:
-            hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
-            return track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
+        hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
+        partial = _partial_path(out_csv)
+        try:
+            with SampleLog(partial, TRACK_COLUMNS, metadata={"video": str(video), "calibration": calibration.to_json()},
+                           fsync_every_s=1.0) as log:
+                rows = track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
+            os.replace(partial, out_csv)
+        except BaseException:
+            partial.unlink(missing_ok=True)
+            raise
+        return rows
     finally:
         capture.release()
+
+
+def _check_output_path(out_csv: Path, video: Path) -> None:
+    """Refuse an ``out_csv`` that cannot be written (a folder, in a missing or read-only folder, the input)."""
+    if out_csv.is_dir():
+        raise ValueError(f"out_csv {out_csv} is a folder")
+    parent = out_csv.parent
+    if not parent.is_dir():
+        raise ValueError(f"out_csv {out_csv}: folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"out_csv {out_csv}: folder {parent} is not writable")
+    for name, path in (("video", video), ("the video's sidecar", Path(str(video) + ".json"))):
+        if path.exists() and out_csv.exists() and os.path.samefile(path, out_csv):
+            raise ValueError(f"out_csv {out_csv} is {name}; choose another output")
+
+
+def _partial_path(out_csv: Path) -> Path:
+    """A new, empty file next to ``out_csv`` to write into before the final rename."""
+    fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
+    try:
+        os.fchmod(fd, 0o644)
+    finally:
+        os.close(fd)
+    return Path(name)

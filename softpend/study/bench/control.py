@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from softpend.evaluation import evaluate_controller
-from softpend.plant import RodParams, tilt_state
+from softpend.plant import RodParams
+from softpend.task import Task
 
 #: Start seeds of the swing-up benchmark.
 SWINGUP_SEEDS = (0, 1, 2, 3, 4)
@@ -42,17 +43,17 @@ def bench_control(include_learned: bool = True) -> dict[str, float]:
     params = RodParams()
     out: dict[str, float] = {}
     lqr = LQRController.from_params(params)
-    run = evaluate_controller(lqr, seeds=(0,), duration_s=10.0, start="upright", params=params,
-                              initial_state=tilt_state(params, TILT_RAD)).results[0]
+    task = Task(rod=params)
+    upright = task.replace(start="upright")
+    tilt = task.tilt_state(TILT_RAD)
+    run = evaluate_controller(lqr, upright, seeds=(0,), duration_s=10.0, initial_state=tilt).results[0]
     out["lqr_upright_std_rad"] = run.upright_std_rad
     out["lqr_hold_std_rad"] = float(np.sqrt(np.mean(run.theta_rad[-500:] ** 2)))
     obs_lqr = LQRController.from_params(params, state="observation")
     out["lqr_observation_upright_std_rad"] = evaluate_controller(
-        obs_lqr, seeds=(0,), duration_s=10.0, start="upright", params=params,
-        initial_state=tilt_state(params, TILT_RAD)).results[0].upright_std_rad
-    out["lqr_region_of_attraction_rad"] = region_of_attraction_rad(lqr, params).largest_recovered_rad
-    swing = evaluate_controller(EnergySwingUpController(params), seeds=SWINGUP_SEEDS, duration_s=10.0,
-                                start="hanging", params=params)
+        obs_lqr, upright, seeds=(0,), duration_s=10.0, initial_state=tilt).results[0].upright_std_rad
+    out["lqr_region_of_attraction_rad"] = region_of_attraction_rad(lqr, task).largest_recovered_rad
+    swing = evaluate_controller(EnergySwingUpController(params), task, seeds=SWINGUP_SEEDS, duration_s=10.0)
     out["swingup_lqr_time_s"] = float(max(r.swing_up_time_s for r in swing.results))
     out["swingup_lqr_median_time_s"] = swing.median("swing_up_time_s")
     out["swingup_lqr_std_rad"] = float(max(r.upright_std_rad for r in swing.results))
@@ -64,6 +65,5 @@ def bench_control(include_learned: bool = True) -> dict[str, float]:
         model = fit_dynamics_model(dataset, progress=False).model
         learned = lqr_from_learned_model(model, params)
         out["learned_lqr_upright_std_rad"] = evaluate_controller(
-            learned, seeds=(0,), duration_s=10.0, start="upright", params=params,
-            initial_state=tilt_state(params, TILT_RAD)).results[0].upright_std_rad
+            learned, upright, seeds=(0,), duration_s=10.0, initial_state=tilt).results[0].upright_std_rad
     return out

@@ -40,7 +40,7 @@ def _rig_loop_jitter() -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         stats = Path(tmp) / "stats.json"
         with start_emulator_process(RigConfig(), stats_path=stats) as emulator:
-            with MotorLink(emulator.port, torque_limit_nm=0.06) as link:
+            with MotorLink(emulator.port, torque_limit_nm=RigConfig().task.torque_limit_nm) as link:
                 gains = (0.02, 0.002)  # a gentle PD on the hub about hanging: a real controller in the loop
                 result = run_control_loop(
                     link, lambda o, t: -gains[0] * (o.phi_rad - math.pi) - gains[1] * o.phi_dot_rad_s, LOOP_SECONDS

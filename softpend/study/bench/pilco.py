@@ -1,7 +1,7 @@
 """``softpend bench --only pilco``: real plant seconds PILCO needs to balance the soft rod, and its compute.
 
 The default :class:`~softpend.pilco.loop.PilcoConfig` (the project's soft rod) runs once per seed of
-:data:`SEEDS`; the issue's targets hold for *every* seed, so the headline figures are the worst seed's:
+:data:`SEEDS`; the targets below hold for *every* seed, so the headline figures are the worst seed's:
 
 * ``pilco_real_s_to_balance`` -- training plant seconds (random trial plus policy trials) up to the first
   policy whose test on the true plant (shared :func:`softpend.evaluation.evaluate_controller`, three

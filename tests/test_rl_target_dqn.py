@@ -1,33 +1,21 @@
-"""Double DQN targets on hand-made Q-values, and the gradient step that uses them."""
+"""Clipped TD targets on hand-made Q-values, and the gradient step that uses them."""
 
 import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from stable_baselines3 import DQN
 
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import agent_class, build_dqn
-from softpend.rl.double_dqn import DoubleDQN, TargetDQN, double_q_targets
+from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import make_training_env
 
 
-def test_double_q_target_values_the_online_choice_with_the_target_network():
-    rewards = torch.tensor([[1.0], [1.0]])
-    dones = torch.tensor([[0.0], [1.0]])
-    online = torch.tensor([[1.0, 5.0], [3.0, 0.0]])   # online network prefers action 1, then action 0
-    target = torch.tensor([[10.0, 2.0], [4.0, 7.0]])
-    # valued by the target network at the online choice: 1 + 0.5 * 2 (vanilla DQN would use max = 10); done -> r
-    np.testing.assert_allclose(double_q_targets(rewards, dones, 0.5, online, target).numpy(), [[2.0], [1.0]])
-    with pytest.raises(ValueError, match="same shape"):
-        double_q_targets(rewards, dones, 0.5, online, target[:, :1])
-
-
-def test_double_dqn_gradient_step_regresses_on_the_double_target(tmp_path):
-    config = DQNConfig(episode_s=0.4, double_q=True, tau=0.05, target_update_interval=1, learning_starts=0)
-    assert agent_class(config) is DoubleDQN and agent_class(DQNConfig()) is not DoubleDQN
-    env = make_training_env(config)
-    model = build_dqn(config, env, seed=0, episodes=1)
-    assert isinstance(model, DoubleDQN) and model.tau == 0.05
+def test_target_dqn_gradient_step_regresses_on_the_clipped_target(tmp_path):
+    config = DQNConfig(episode_s=0.4, clip_q_targets=True, target_update_interval=1, learning_starts=0)
+    model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
+    assert isinstance(model, TargetDQN) and model.tau == 1.0  # the target network is a hard copy
     # a buffer of one repeated transition, so that every sampled batch is the same
     obs = np.linspace(-0.5, 0.5, 11, dtype=np.float32)
     next_obs = obs[::-1].copy()
@@ -37,16 +25,17 @@ def test_double_dqn_gradient_step_regresses_on_the_double_target(tmp_path):
     from stable_baselines3.common.logger import configure
 
     model.set_logger(configure(str(tmp_path), []))
+    low, high = config.q_target_bounds
     with torch.no_grad():
         s, s2 = torch.as_tensor(obs[None]), torch.as_tensor(next_obs[None])
-        target = double_q_targets(torch.tensor([[2.0]]), torch.tensor([[0.0]]), config.gamma, model.q_net(s2), model.q_net_target(s2))
+        target = (2.0 + config.gamma * model.q_net_target(s2).max(dim=1, keepdim=True)[0]).clamp(low, high)
         expected = F.smooth_l1_loss(model.q_net(s)[:, 3:4], target).item()
         q_before = model.q_net(s)[0, 3].item()
     model.train(gradient_steps=1, batch_size=4)
     assert model.logger.name_to_value["train/loss"] == pytest.approx(expected, rel=1e-5)
     with torch.no_grad():
         q_after = model.q_net(s)[0, 3].item()
-    assert abs(q_after - target.item()) < abs(q_before - target.item())  # one step towards the double target
+    assert abs(q_after - target.item()) < abs(q_before - target.item())  # one step towards the target
 
 
 def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
@@ -54,7 +43,7 @@ def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
     low, high = config.q_target_bounds
     # an agent step's reward lies in action_repeat * [-1, 2] (shaping in [-1, 1] plus a bonus up to 1)
     assert (low, high) == pytest.approx((-4.0 / (1 - config.gamma), 8.0 / (1 - config.gamma)))
-    assert agent_class(config) is TargetDQN and agent_class(DQNConfig(double_q=True, clip_q_targets=True)) is DoubleDQN
+    assert agent_class(config) is TargetDQN and agent_class(DQNConfig()) is DQN
     model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
     assert model.q_target_bounds == pytest.approx((low, high))
     with torch.no_grad():

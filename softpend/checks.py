@@ -1,0 +1,160 @@
+"""Argument checks shared by the whole package.
+
+Each function takes the parameter's ``name`` and its ``value``, returns the value converted to its plain
+Python type (``float``, ``int``, ``bool``) when it passes, and otherwise raises ``ValueError`` with a message
+that names the parameter and shows the value, e.g. ``"dt_s must be positive and finite, got nan"``.  A
+``bool`` is never accepted where a number is expected, and NaN and infinities never pass a numeric check.
+Integer checks accept Python and NumPy integers and floats with an integral value (``4.0`` -> ``4``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Collection, Optional, TypeVar
+
+import numpy as np
+
+__all__ = [
+    "MAX_WORK_BYTES",
+    "NonFiniteError",
+    "boolean",
+    "check_work_size",
+    "finite",
+    "in_unit_interval",
+    "int_at_least",
+    "non_negative",
+    "one_of",
+    "optional_positive",
+    "positive",
+    "positive_int",
+]
+
+T = TypeVar("T")
+
+
+class NonFiniteError(ValueError):
+    """A computed quantity that must stay finite (network weights, a training loss, a metric) became NaN or
+    infinite; the message names the quantity and where it happened."""
+
+
+#: Largest array memory [bytes] that one piece of work (a dataset, a set of evaluation trajectories) may
+#: plan for: 4 GiB.  Work whose estimate is larger is refused before it starts (:func:`check_work_size`)
+#: rather than running for hours and then failing, or swapping the machine to a halt.
+MAX_WORK_BYTES = 4 * 2**30
+
+
+def check_work_size(what: str, n_bytes: float, estimate: str) -> None:
+    """``ValueError`` if ``n_bytes``, the estimated array memory of ``what``, exceeds :data:`MAX_WORK_BYTES`;
+    the message shows the estimate and ``estimate``, how it was computed (e.g. ``"6000 steps x 80 bytes"``)."""
+    if not n_bytes <= MAX_WORK_BYTES:  # also NaN
+        raise ValueError(
+            f"{what} would need about {n_bytes / 2**30:.3g} GiB of arrays ({estimate}), more than the "
+            f"{MAX_WORK_BYTES / 2**30:g} GiB that one piece of work may use"
+        )
+
+
+def _real(value: Any) -> Optional[float]:
+    """``value`` as a float if it is a finite real number (not a bool), else ``None``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return None
+    number = float(value)
+    return number if math.isfinite(number) else None
+
+
+def _integer(value: Any) -> Optional[int]:
+    """``value`` as an int if it is an integer (or a float with an integral value, not a bool), else ``None``."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        return int(value)
+    number = _real(value)
+    if number is not None and number.is_integer():
+        return int(number)
+    return None
+
+
+def finite(name: str, value: Any) -> float:
+    """``value`` as a float if it is a finite number, else ``ValueError`` naming ``name``."""
+    number = _real(value)
+    if number is None:
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return number
+
+
+def positive(name: str, value: Any) -> float:
+    """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
+    number = _real(value)
+    if number is None or number <= 0.0:
+        raise ValueError(f"{name} must be positive and finite, got {value!r}")
+    return number
+
+
+def optional_positive(name: str, value: Any) -> Optional[float]:
+    """``None`` for ``None``, else ``value`` as a float if it is a positive finite number; ``ValueError`` otherwise."""
+    if value is None:
+        return None
+    number = _real(value)
+    if number is None or number <= 0.0:
+        raise ValueError(f"{name} must be positive and finite or None, got {value!r}")
+    return number
+
+
+def non_negative(name: str, value: Any) -> float:
+    """``value`` as a float if it is a finite number >= 0, else ``ValueError`` naming ``name``."""
+    number = _real(value)
+    if number is None or number < 0.0:
+        raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
+    return number
+
+
+def positive_int(name: str, value: Any) -> int:
+    """``value`` as an int if it is an integer >= 1, else ``ValueError`` naming ``name``."""
+    number = _integer(value)
+    if number is None or number < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return number
+
+
+def int_at_least(name: str, value: Any, low: int) -> int:
+    """``value`` as an int if it is an integer >= ``low``, else ``ValueError`` naming ``name``."""
+    number = _integer(value)
+    if number is None or number < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return number
+
+
+def in_unit_interval(name: str, value: Any, *, include_zero: bool = True, include_one: bool = True) -> float:
+    """``value`` as a float if it lies in the unit interval, else ``ValueError`` naming ``name``.
+
+    Parameters
+    ----------
+    name, value : str, object
+        The parameter's name and value.
+    include_zero, include_one : bool
+        Whether the end points 0 and 1 belong to the interval (default: the closed interval ``[0, 1]``;
+        ``include_zero=False`` gives ``(0, 1]``).
+    """
+    number = _real(value)
+    above = number is not None and (number >= 0.0 if include_zero else number > 0.0)
+    below = number is not None and (number <= 1.0 if include_one else number < 1.0)
+    if not (above and below):
+        interval = f"{'[' if include_zero else '('}0, 1{']' if include_one else ')'}"
+        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
+    return float(number)  # type: ignore[arg-type]
+
+
+def one_of(name: str, value: T, choices: Collection[Any]) -> T:
+    """``value`` itself if it is one of ``choices``, else ``ValueError`` naming ``name`` and listing them."""
+    try:
+        known = value in choices
+    except TypeError:  # an unhashable value tested against a set or dict
+        known = False
+    if not known:
+        shown = list(choices) if isinstance(choices, (list, tuple)) else sorted(choices, key=repr)
+        raise ValueError(f"{name} must be one of {shown}, got {value!r}")
+    return value
+
+
+def boolean(name: str, value: Any) -> bool:
+    """``value`` if it is a ``bool`` (or a NumPy bool), else ``ValueError`` naming ``name``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be a bool, got {value!r}")
+    return bool(value)

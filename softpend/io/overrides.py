@@ -1,0 +1,140 @@
+"""``NAME=VALUE`` overrides of dataclass configs (the ``--set`` option of every command).
+
+:func:`parse_assignment` reads one ``NAME=VALUE`` item: ``VALUE`` is parsed as JSON (``3`` -> 3,
+``1e-3`` -> 0.001, ``[0, 1]`` -> [0, 1], ``null`` -> None, ``true`` -> True, ``"x"`` -> "x") and, where it
+is not JSON, kept as the plain string (``beam`` -> "beam").  :func:`apply_overrides` returns a copy of a
+dataclass instance with fields replaced by name; a dotted name reaches into a nested dataclass field
+(``task.rod.mass_kg``), lists become tuples where the field holds a tuple, and the copy is validated again by
+the dataclass's own ``__post_init__``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import typing
+from typing import Any, Iterable, Mapping, TypeVar, Union
+
+__all__ = ["apply_overrides", "parse_assignment", "parse_value"]
+
+D = TypeVar("D")
+
+Overrides = Union[Mapping[str, Any], Iterable[tuple[str, Any]]]
+
+
+def parse_value(text: str) -> Any:
+    """``text`` parsed as a JSON value, or ``text`` itself (stripped) where it is not JSON."""
+    text = text.strip()
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def parse_assignment(item: str) -> tuple[str, Any]:
+    """``"NAME=VALUE"`` -> ``(NAME, value)`` with the value read by :func:`parse_value`.
+
+    ``NAME`` is a Python identifier or a dotted path of identifiers (``task.rod.mass_kg``); the first ``=``
+    separates it from ``VALUE``, which may itself contain ``=``.
+
+    Raises
+    ------
+    ValueError
+        If ``item`` has no ``=`` or ``NAME`` is not a (dotted) identifier; the message quotes ``item``.
+    """
+    if not isinstance(item, str):
+        raise ValueError(f"--set expects NAME=VALUE as a string, got {item!r}")
+    name, sep, value = item.partition("=")
+    name = name.strip()
+    if not sep or not name or not all(part.isidentifier() for part in name.split(".")):
+        raise ValueError(f"--set expects NAME=VALUE with NAME a (dotted) Python identifier, got {item!r}")
+    return name, parse_value(value)
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    try:
+        return typing.get_type_hints(cls)
+    except Exception:  # an annotation that cannot be resolved: fall back to the current values
+        return {}
+
+
+def _holds_tuple(instance: Any, name: str, hints: Mapping[str, Any]) -> bool:
+    """Whether field ``name`` of ``instance`` is a tuple field (by its annotation or its current value)."""
+    if isinstance(getattr(instance, name, None), tuple):
+        return True
+    hint = hints.get(name)
+    candidates = typing.get_args(hint) if typing.get_origin(hint) is Union else (hint,)
+    return any(c is tuple or typing.get_origin(c) is tuple for c in candidates)
+
+
+def _as_tuple(value: Any) -> Any:
+    if isinstance(value, list):
+        return tuple(value)
+    if isinstance(value, str) and "," in value:  # the comma form "0,1" of a tuple of JSON values
+        return tuple(parse_value(part) for part in value.split(",") if part.strip())
+    if isinstance(value, (bool, int, float, str)):  # one element: 5 -> (5,)
+        return (value,)
+    return value
+
+
+def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D:
+    """A copy of the dataclass ``instance`` with the fields named in ``overrides`` replaced.
+
+    Parameters
+    ----------
+    instance : dataclass instance
+        The config to copy (frozen or not; it is not modified).
+    overrides : mapping or iterable of (name, value)
+        Field values by name (later pairs win).  A dotted name ``a.b.c`` sets field ``c`` of the dataclass
+        held in field ``b`` of the dataclass held in field ``a``; a ``dict`` given for a field that holds a
+        dataclass sets the fields it names.  A list given for a tuple field becomes a tuple, as do a string
+        with commas (``"0,1"`` -> ``(0, 1)``) and a single number or string (``5`` -> ``(5,)``).
+    prefix : str
+        Dotted path of ``instance`` inside an outer config, used in error messages.
+
+    Returns
+    -------
+    dataclass instance
+        ``dataclasses.replace(instance, ...)``: validated by the class's ``__post_init__``.
+
+    Raises
+    ------
+    ValueError
+        For a name that is not a field (the message lists the known ones), a dotted name through a field that
+        holds no dataclass, a field set both whole and through a dotted name, or a value the class rejects.
+    """
+    if not dataclasses.is_dataclass(instance) or isinstance(instance, type):
+        raise ValueError(f"apply_overrides needs a dataclass instance, got {type(instance).__name__}")
+    items = overrides.items() if isinstance(overrides, Mapping) else overrides
+    fields = {f.name: f for f in dataclasses.fields(instance) if f.init}
+    hints = _field_types(type(instance))
+    direct: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    for name, value in items:
+        head, _, rest = str(name).partition(".")
+        if head not in fields:
+            raise ValueError(
+                f"unknown {type(instance).__name__} field {prefix + head!r}; known: {sorted(fields)}"
+            )
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        elif isinstance(value, dict) and dataclasses.is_dataclass(getattr(instance, head)):
+            nested.setdefault(head, {}).update(value)
+        else:
+            direct[head] = _as_tuple(value) if _holds_tuple(instance, head, hints) else value
+    changes = dict(direct)
+    for head, sub in nested.items():
+        if head in direct:
+            raise ValueError(f"{prefix + head!r} is set both whole and through {prefix + head}.<field>")
+        inner = getattr(instance, head)
+        if not dataclasses.is_dataclass(inner) or isinstance(inner, type):
+            first = next(iter(sub))
+            raise ValueError(
+                f"cannot set {prefix + head}.{first}: {prefix + head} holds a {type(inner).__name__}, not a dataclass"
+            )
+        changes[head] = apply_overrides(inner, sub, prefix=f"{prefix}{head}.")
+    try:
+        return dataclasses.replace(instance, **changes)
+    except (TypeError, OverflowError, AttributeError) as exc:  # a value of the wrong type met the class's checks
+        shown = ", ".join(f"{prefix}{name}={value!r}" for name, value in direct.items()) or "the nested fields"
+        raise ValueError(f"{type(instance).__name__}: {shown}: value of the wrong type or size ({exc})") from None

@@ -1,0 +1,267 @@
+"""Agent and replay-buffer files read without running code from them.
+
+A stable-baselines3 agent ``.zip`` holds a ``data`` JSON in which every attribute that is not plain JSON is a
+``{":serialized:": <base64 cloudpickle>}`` entry, and ``DQN.load`` unpickles those -- so an agent file from
+somebody else could run any code.  :func:`load_agent_file` never unpickles: every pickled attribute of a
+softpend DQN agent (:data:`REBUILT_ATTRIBUTES`) is rebuilt from the run's own config (``custom_objects`` of
+``DQN.load``, which then skips the pickle) and a file with any *other* pickled entry is refused.  The
+network weights come from the ``.pth`` members, which stable-baselines3 reads with
+``torch.load(..., weights_only=True)`` (tensors only).  The rebuilt attributes are the ones ``DQN.load``
+would overwrite anyway (schedules, spaces re-seeded from the saved seed) or reset before any use (the last
+observation and episode buffers), so a loaded agent acts and trains exactly as one loaded by
+``DQN.load``.
+
+Replay buffers are written as ``.npz`` arrays (:func:`save_replay_buffer`, never a pickle) and read back
+with ``numpy.load(..., allow_pickle=False)`` into the buffer that ``DQN.load`` allocates
+(:func:`load_replay_buffer`).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import pickle
+import zipfile
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import torch
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
+
+from softpend.checks import NonFiniteError
+from softpend.io.outputs import atomic_write
+from softpend.rl.config import DQNConfig
+from softpend.rl.training_env import make_base_env
+
+__all__ = [
+    "AgentFileError",
+    "REBUILT_ATTRIBUTES",
+    "check_finite_weights",
+    "load_agent_file",
+    "load_replay_buffer",
+    "save_agent_file",
+    "save_replay_buffer",
+]
+
+#: The pickled (``":serialized:"``) attributes of a softpend DQN agent file, each rebuilt from the config.
+REBUILT_ATTRIBUTES: frozenset[str] = frozenset({
+    "policy_class", "observation_space", "action_space", "replay_buffer_class", "train_freq", "lr_schedule",
+    "exploration_schedule", "_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer",
+    "ep_success_buffer",
+})
+
+_BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+class AgentFileError(ValueError):
+    """An agent or replay-buffer file that softpend will not load (pickled content, corrupt, or not matching
+    the run's config); the message names the file and the reason."""
+
+
+def _serialized_entries(data: dict[str, Any]) -> list[str]:
+    return sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+
+
+def _read_data(path: Path, raw: bytes) -> dict[str, Any]:
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+            text = archive.read("data").decode("utf-8")
+        data = json.loads(text)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, UnicodeDecodeError, json.JSONDecodeError,
+            RecursionError, EOFError, NotImplementedError, OSError) as exc:
+        raise AgentFileError(f"{path}: not a stable-baselines3 agent file ({type(exc).__name__}: {exc})") from None
+    if not isinstance(data, dict):
+        raise AgentFileError(f"{path}: its 'data' member is not a JSON object")
+    return data
+
+
+def _rebuilt(cls: type[DQN], config: DQNConfig, replay_buffer_class: type[ReplayBuffer]) -> dict[str, Any]:
+    """``custom_objects`` for ``DQN.load``: every attribute of :data:`REBUILT_ATTRIBUTES` from ``config``."""
+    from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+    from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
+
+    spaces_env = make_base_env(config)  # its own space objects: DQN.load seeds the action space it is given
+    return {
+        "policy_class": cls.policy_aliases["MlpPolicy"],
+        "observation_space": spaces_env.observation_space,
+        "action_space": spaces_env.action_space,
+        "replay_buffer_class": replay_buffer_class,
+        "train_freq": TrainFreq(int(config.train_freq), TrainFrequencyUnit.STEP),
+        "lr_schedule": FloatSchedule(float(config.learning_rate)),
+        "exploration_schedule": LinearSchedule(
+            config.exploration_initial_eps, config.exploration_final_eps, config.exploration_fraction
+        ),
+        # reset by DQN.learn before any use (a loaded agent starts a fresh rollout), unused by predict
+        "_last_obs": None,
+        "_last_original_obs": None,
+        "_last_episode_starts": None,
+        "ep_info_buffer": None,
+        "ep_success_buffer": None,
+    }
+
+
+def _check_matches(path: Path, data: dict[str, Any], config: DQNConfig) -> None:
+    """The plain-JSON facts of the file agree with the config (a clear message instead of a shape error)."""
+    kwargs = data.get("policy_kwargs")
+    saved_arch = kwargs.get("net_arch") if isinstance(kwargs, dict) else None
+    if saved_arch != list(config.net_arch):
+        raise AgentFileError(f"{path}: its network {saved_arch!r} is not the config's net_arch {list(config.net_arch)}")
+    action = data.get("action_space")
+    if isinstance(action, dict) and "n" in action and str(action["n"]) != str(config.n_torque_levels):
+        raise AgentFileError(f"{path}: it has {action['n']} actions, the config {config.n_torque_levels} torque levels")
+
+
+def check_finite_weights(model: DQN, where: str) -> None:
+    """``NonFiniteError`` if any Q-network weight of ``model`` is NaN or infinite (``where`` says when/which)."""
+    for name, tensor in model.policy.state_dict().items():
+        if torch.is_floating_point(tensor) and not bool(torch.isfinite(tensor).all()):
+            bad = int((~torch.isfinite(tensor)).sum())
+            raise NonFiniteError(f"{where}: {bad} of {tensor.numel()} values of the network's {name} are not finite "
+                                 "(training diverged: lower learning_rate)")
+
+
+def load_agent_file(
+    cls: type[DQN],
+    path: str | Path,
+    config: DQNConfig,
+    env: Any = None,
+    replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
+) -> DQN:
+    """Load a DQN agent file written by softpend without unpickling anything (see the module docstring).
+
+    Parameters
+    ----------
+    cls : type
+        ``DQN`` or :class:`~softpend.rl.target_dqn.TargetDQN` (:func:`softpend.rl.dqn.agent_class`).
+    path : str or Path
+        The ``.zip`` file.
+    config : DQNConfig
+        The config of the run that wrote it (its ``config.json``): the source of the rebuilt attributes.
+    env : gymnasium.Env, optional
+        Environment to continue training on (``None``: for prediction only).
+    replay_buffer_class : type
+        Replay buffer the agent allocates (:class:`~softpend.rl.mbpo.MBPOReplayBuffer` to resume DQN-MBPO).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    AgentFileError
+        If the file holds a pickled entry outside :data:`REBUILT_ATTRIBUTES`, is corrupt, or does not match
+        ``config``.
+    NonFiniteError
+        If a network weight is NaN or infinite.
+    """
+    path = Path(path)
+    raw = path.read_bytes()  # read once: what is checked is what is loaded
+    data = _read_data(path, raw)
+    refused = [k for k in _serialized_entries(data) if k not in REBUILT_ATTRIBUTES]
+    if refused:
+        raise AgentFileError(
+            f"{path}: refusing to load it: its entries {refused} are pickled Python objects, and unpickling can run "
+            f"arbitrary code (softpend rebuilds only {sorted(REBUILT_ATTRIBUTES)} from the run's config)"
+        )
+    _check_matches(path, data, config)
+    custom = _rebuilt(cls, config, replay_buffer_class)
+    if replay_buffer_class is ReplayBuffer:
+        custom["replay_buffer_kwargs"] = {}
+    try:
+        model = cls.load(io.BytesIO(raw), env=env, device="cpu", custom_objects=custom)
+    except (ValueError, RuntimeError, KeyError, TypeError, AssertionError, AttributeError, IndexError, EOFError,
+            pickle.UnpicklingError, zipfile.BadZipFile, RecursionError, MemoryError) as exc:
+        message = " ".join(str(exc).split())[:300]
+        raise AgentFileError(f"{path}: cannot load the agent ({type(exc).__name__}: {message})") from exc
+    check_finite_weights(model, str(path))
+    return model
+
+
+def save_agent_file(model: DQN, path: str | Path) -> Path:
+    """``model.save`` written through :func:`softpend.io.outputs.atomic_write` (an interrupted save leaves the
+    previous file)."""
+    buffer = io.BytesIO()
+    model.save(buffer)
+    with atomic_write(path) as handle:
+        handle.write(buffer.getvalue())
+    return Path(path)
+
+
+# ---------------------------------------------------------------------------------------- replay buffers
+def _parts(buffer: ReplayBuffer) -> dict[str, ReplayBuffer]:
+    """The SB3 buffers inside ``buffer`` by key prefix (an MBPO buffer carries a model buffer)."""
+    parts = {"": buffer}
+    model_buffer = getattr(buffer, "model_buffer", None)
+    if isinstance(model_buffer, ReplayBuffer):
+        parts["model/"] = model_buffer
+    return parts
+
+
+def _filled(buffer: ReplayBuffer) -> int:
+    return buffer.buffer_size if buffer.full else buffer.pos
+
+
+def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
+    """Write the filled rows of ``buffer`` (and of an MBPO buffer's model part and real plant observations),
+    its position and fill flag as an uncompressed ``.npz`` (plain arrays, no pickle)."""
+    arrays: dict[str, np.ndarray] = {}
+    for prefix, part in _parts(buffer).items():
+        n = _filled(part)
+        for name in _BUFFER_ARRAYS:
+            arrays[prefix + name] = getattr(part, name)[:n]
+        arrays[prefix + "pos"] = np.array(part.pos, dtype=np.int64)
+        arrays[prefix + "full"] = np.array(bool(part.full))
+    plant = getattr(buffer, "plant_observations", None)
+    if isinstance(plant, np.ndarray):
+        arrays["plant_observations"] = plant[: _filled(buffer)]
+    with atomic_write(path) as handle:
+        np.savez(handle, **arrays)
+    return Path(path)
+
+
+def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
+    """Fill ``buffer`` (freshly allocated, with the run's sizes) from a file of :func:`save_replay_buffer`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    AgentFileError
+        If the file is not such a file or does not fit ``buffer`` (arrays, shapes, dtypes, position).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no replay buffer at {path}")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            saved = {name: archive[name] for name in archive.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, MemoryError) as exc:
+        raise AgentFileError(f"{path}: not a replay buffer file ({type(exc).__name__}: {exc})") from None
+    expected = set()
+    for prefix in _parts(buffer):
+        expected.update(prefix + name for name in _BUFFER_ARRAYS + ("pos", "full"))
+    if isinstance(getattr(buffer, "plant_observations", None), np.ndarray):
+        expected.add("plant_observations")
+    if set(saved) != expected:
+        raise AgentFileError(f"{path}: holds {sorted(saved)}, expected {sorted(expected)}")
+    for prefix, part in _parts(buffer).items():
+        pos, full = saved[prefix + "pos"], saved[prefix + "full"]
+        if pos.shape != () or pos.dtype.kind not in "iu" or full.shape != () or full.dtype != np.bool_:
+            raise AgentFileError(f"{path}: {prefix}pos and {prefix}full must be an integer and a bool")
+        if not 0 <= int(pos) < part.buffer_size:
+            raise AgentFileError(f"{path}: {prefix}pos {int(pos)} outside [0, {part.buffer_size})")
+        part.pos, part.full = int(pos), bool(full)
+        n = _filled(part)
+        for name in _BUFFER_ARRAYS:
+            _restore(path, prefix + name, getattr(part, name), saved[prefix + name], n)
+    if "plant_observations" in expected:
+        _restore(path, "plant_observations", buffer.plant_observations, saved["plant_observations"], _filled(buffer))
+
+
+def _restore(path: Path, name: str, target: np.ndarray, value: np.ndarray, n: int) -> None:
+    if value.dtype != target.dtype or value.shape != (n,) + target.shape[1:]:
+        raise AgentFileError(f"{path}: {name} has shape {value.shape} and dtype {value.dtype}, expected "
+                             f"{(n,) + target.shape[1:]} and {target.dtype}")
+    target[...] = 0
+    target[:n] = value
+

@@ -1,0 +1,142 @@
+"""Statistics of results over seeds and starts: intervals for success rates and aggregates of runs.
+
+* :func:`wilson_interval` -- the Wilson score interval of a success rate (``k`` of ``n`` fresh starts); unlike
+  the normal approximation it stays inside ``[0, 1]`` and is informative at ``k = 0`` or ``k = n``.
+* :func:`iqm` -- the interquartile mean (the mean of the middle 50 % of the values), the aggregate that
+  rliable (Agarwal et al., 2021) recommends over the mean (outlier-sensitive) and the median (high variance
+  over few runs).
+* :func:`aggregate_interval` -- a point estimate and a stratified bootstrap confidence interval of an
+  aggregate (median or IQM) of per-run scores, through :func:`scipy.stats.bootstrap` with the percentile
+  method: runs are resampled with replacement *within* each task (a column), so every resample keeps one
+  score per run and task, as rliable does.
+
+Every random draw takes an explicit ``seed``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+import scipy.stats
+
+__all__ = ["AggregateInterval", "aggregate_interval", "iqm", "median", "wilson_interval"]
+
+
+def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval ``(low, high)`` of a success probability from ``successes`` of ``trials``.
+
+    Raises
+    ------
+    ValueError
+        If ``trials < 1``, ``successes`` is not an integer in ``[0, trials]`` or ``confidence`` is not in
+        ``(0, 1)``.
+    """
+    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
+        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+    if isinstance(successes, bool) or int(successes) != successes or not 0 <= successes <= trials:
+        raise ValueError(f"successes must be an integer in [0, trials={trials}], got {successes!r}")
+    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    n = float(trials)
+    p = successes / n
+    z = float(scipy.stats.norm.ppf(0.5 + confidence / 2.0))
+    denominator = 1.0 + z**2 / n
+    centre = (p + z**2 / (2 * n)) / denominator
+    half = z * math.sqrt(p * (1.0 - p) / n + z**2 / (4 * n**2)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def iqm(values: np.ndarray, axis: int | None = None) -> np.ndarray | float:
+    """Interquartile mean: the mean of the values between the 25th and 75th percentile (25 % trimmed from
+    each end, :func:`scipy.stats.trim_mean`); ``inf`` values count as the largest."""
+    values = np.asarray(values, dtype=float)
+    if axis is None:
+        values, axis = values.reshape(-1), 0
+    return scipy.stats.trim_mean(values, 0.25, axis=axis)
+
+
+def median(values: np.ndarray, axis: int | None = None) -> np.ndarray | float:
+    """The median (``inf`` values count as the largest)."""
+    return np.median(np.asarray(values, dtype=float), axis=axis)
+
+
+AGGREGATES: dict[str, Callable[..., np.ndarray | float]] = {"median": median, "iqm": iqm}
+
+
+@dataclass(frozen=True)
+class AggregateInterval:
+    """An aggregate of per-run scores with its bootstrap confidence interval."""
+
+    statistic: str
+    value: float
+    low: float
+    high: float
+    n_runs: int
+    confidence: float
+
+    def as_dict(self) -> dict[str, float | str | int]:
+        return {"statistic": self.statistic, "value": self.value, "low": self.low, "high": self.high,
+                "n_runs": self.n_runs, "confidence": self.confidence}
+
+
+def aggregate_interval(
+    scores: Sequence[float] | np.ndarray,
+    statistic: str = "iqm",
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+    seed: int = 0,
+) -> AggregateInterval:
+    """Point estimate and stratified bootstrap interval of ``statistic`` over runs.
+
+    Parameters
+    ----------
+    scores : array (n_runs,) or (n_runs, n_tasks)
+        One score per run (a seed), or per run and task; the bootstrap resamples runs within each task.
+    statistic : {"iqm", "median"}
+        The aggregate, computed over all scores of a (resampled) set.
+    confidence : float
+        Confidence level of the two-sided percentile interval.
+    n_resamples : int
+        Bootstrap resamples.
+    seed : int
+        Seed of the resampling.
+
+    Raises
+    ------
+    ValueError
+        On an unknown statistic, fewer than two runs, or NaN scores (``inf`` is allowed: a run that never
+        got there).
+    """
+    if statistic not in AGGREGATES:
+        raise ValueError(f"statistic must be one of {sorted(AGGREGATES)}, got {statistic!r}")
+    data = np.asarray(scores, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] < 1:
+        raise ValueError(f"scores must have shape (n_runs >= 2,) or (n_runs >= 2, n_tasks), got {np.shape(scores)}")
+    if np.isnan(data).any():
+        raise ValueError("scores must not contain NaN")
+    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    if isinstance(n_resamples, bool) or int(n_resamples) != n_resamples or n_resamples < 100:
+        raise ValueError(f"n_resamples must be an integer >= 100, got {n_resamples!r}")
+    aggregate = AGGREGATES[statistic]
+    value = float(aggregate(data))
+
+    def stratified(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
+        return aggregate(np.concatenate(columns, axis=axis), axis=axis)
+
+    columns = [data[:, j] for j in range(data.shape[1])]
+    if np.all(data == data.flat[0]):  # every resample gives the same value; scipy would warn about it
+        low = high = value
+    else:
+        with np.errstate(invalid="ignore"):
+            result = scipy.stats.bootstrap(
+                columns, stratified, n_resamples=int(n_resamples), confidence_level=confidence,
+                method="percentile", vectorized=True, rng=np.random.default_rng(seed),
+            )
+        low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
+    return AggregateInterval(statistic, value, low, high, int(data.shape[0]), float(confidence))

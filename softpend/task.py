@@ -1,0 +1,109 @@
+"""The control task: which plant, which rod, which time step, which start distribution.
+
+One frozen :class:`Task` travels from the study's presets to every config (:class:`softpend.rl.DQNConfig`,
+:class:`softpend.pilco.PilcoConfig`), every environment factory, :func:`softpend.evaluation.evaluate_controller`
+and the rig emulator, so that no function takes loose ``(params, plant, dt_s, ...)`` arguments and no config
+carries a flattened copy of rod fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from softpend.checks import int_at_least, non_negative, one_of, positive
+from softpend.plant import RodParams, check_plant_name, make_plant, tilt_state
+from softpend.plant.protocol import Plant
+
+__all__ = ["START_KINDS", "Task"]
+
+#: Start distributions of the environments (:class:`softpend.envs.SoftPendulumEnv` ``start``).
+START_KINDS = ("hanging", "upright", "random")
+
+
+@dataclass(frozen=True)
+class Task:
+    """The plant and start distribution a controller is trained and evaluated on (SI units).
+
+    Parameters
+    ----------
+    plant : str
+        Plant name of :func:`softpend.plant.make_plant` (``"prb"``: the PRB chain, ``"beam"``: the continuum
+        beam with the same rod parameters).
+    rod : RodParams
+        Hub and rod parameters, the torque limit included.
+    dt_s : float
+        Control (plant) step [s].
+    substeps : int
+        Solver sub-steps per plant step (the implicit solver needs at least 2).
+    start : {"hanging", "upright", "random"}
+        Start distribution of episodes.
+    start_noise_rad : float
+        Half-width of the uniform start perturbation of the hub angle [rad] and rate [rad/s].
+    """
+
+    plant: str = "prb"
+    rod: RodParams = field(default_factory=RodParams)
+    dt_s: float = 0.01
+    substeps: int = 2
+    start: str = "hanging"
+    start_noise_rad: float = 0.05
+
+    def __post_init__(self) -> None:
+        check_plant_name(self.plant, "task.plant")
+        if not isinstance(self.rod, RodParams):
+            raise ValueError(f"task.rod must be a RodParams, got {type(self.rod).__name__}")
+        object.__setattr__(self, "dt_s", positive("task.dt_s", self.dt_s))
+        object.__setattr__(self, "substeps", int_at_least("task.substeps", self.substeps, 1))
+        one_of("task.start", self.start, START_KINDS)
+        object.__setattr__(self, "start_noise_rad", non_negative("task.start_noise_rad", self.start_noise_rad))
+
+    # ------------------------------------------------------------------ derived objects
+    def make_plant(self, **options: Any) -> Plant:
+        """A fresh plant of this task (``options``: plant-specific, e.g. ``hub_locked_at_rad``)."""
+        return make_plant(self.plant, params=self.rod, dt_s=self.dt_s, substeps=self.substeps, **options)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :class:`softpend.envs.SoftPendulumEnv` for this task."""
+        return {"params": self.rod, "plant": self.plant, "dt_s": self.dt_s, "substeps": self.substeps,
+                "start": self.start, "start_noise_rad": self.start_noise_rad}
+
+    def tilt_state(self, tilt_rad: float) -> tuple["np.ndarray", "np.ndarray"]:
+        """``(q, q_dot)`` of the straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright."""
+        return tilt_state(self.rod, tilt_rad, self.plant)
+
+    @property
+    def torque_limit_nm(self) -> float:
+        """The motor's torque limit [N m] (``rod.torque_limit_nm``)."""
+        return self.rod.torque_limit_nm
+
+    # ------------------------------------------------------------------ copies
+    def replace(self, **changes: Any) -> "Task":
+        """A copy with task fields changed; any :class:`~softpend.plant.RodParams` field name changes the rod
+        (``task.replace(torque_limit_nm=0.05, start="upright")``)."""
+        rod_fields = {f.name for f in dataclasses.fields(RodParams)}
+        rod_changes = {k: changes.pop(k) for k in list(changes) if k in rod_fields}
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise ValueError(f"unknown Task fields: {sorted(unknown)}")
+        if rod_changes:
+            changes["rod"] = changes.get("rod", self.rod).replace(**rod_changes)
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain ``dict`` (for JSON), the rod as a nested ``dict``."""
+        data = dataclasses.asdict(self)
+        data["rod"] = self.rod.to_dict()
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Task":
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        data = dict(data)
+        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ValueError(f"unknown Task fields: {sorted(unknown)}")
+        if "rod" in data and not isinstance(data["rod"], RodParams):
+            data["rod"] = RodParams.from_dict(data["rod"])
+        return cls(**data)

@@ -1,0 +1,27 @@
+"""The study's presets: one home of the defaults, and reported numbers measured on starts no training or
+selection step saw."""
+
+from softpend.pilco import PilcoConfig
+from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.study import presets
+from softpend.study.rl_runs import figure_configs
+
+
+def test_report_starts_are_fresh():
+    report = set(presets.REPORT_SEEDS)
+    assert len(report) == len(presets.REPORT_SEEDS) >= 20
+    selection = set(DQNConfig().eval_seeds) | set(MBPOConfig().eval_seeds) | set(PilcoConfig().eval_seeds)
+    assert selection <= set(presets.SELECTION_SEEDS)
+    assert not report & set(presets.SELECTION_SEEDS)
+    training = set(presets.RL_BOOK.seeds) | set(presets.PILCO_BOOK.seeds)
+    assert not report & training
+    for config in figure_configs().values():  # the book's configs select on the selection seeds only
+        assert set(config.eval_seeds) <= set(presets.SELECTION_SEEDS)
+
+
+def test_the_figures_use_the_presets():
+    configs = figure_configs()
+    assert configs["dqn"].task == presets.TASK and configs["mbpo"].task == presets.TASK
+    assert configs["dqn"].episode_s == presets.RL_BOOK.episode_s
+    assert configs["mbpo"].rollouts_per_real_step == presets.RL_BOOK.rollouts_per_real_step
+    assert presets.RL_EPISODES == {"dqn": presets.RL_BOOK.episodes_dqn, "mbpo": presets.RL_BOOK.episodes_mbpo}

@@ -18,6 +18,7 @@ __all__ = [
     "MAX_WORK_BYTES",
     "NonFiniteError",
     "boolean",
+    "check_notebook_parameters",
     "check_work_size",
     "finite",
     "in_unit_interval",
@@ -57,7 +58,10 @@ def _real(value: Any) -> Optional[float]:
     """``value`` as a float if it is a finite real number (not a bool), else ``None``."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return None
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond the float range
+        return None
     return number if math.isfinite(number) else None
 
 
@@ -158,3 +162,47 @@ def boolean(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be a bool, got {value!r}")
     return bool(value)
+
+
+def _assigned_names(source: str) -> set[str]:
+    """Names bound by top-level assignments in Python ``source`` (empty if it does not parse)."""
+    import ast
+
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return set()
+    names: set[str] = set()
+    for node in tree.body:
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        for target in targets:
+            names.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
+    return names
+
+
+def check_notebook_parameters() -> None:
+    """In a notebook executed by papermill: ``ValueError`` if a parameter was given that the notebook's
+    ``parameters`` cell does not define.
+
+    Papermill only logs a warning for an unknown parameter (a typo such as ``-p n_pionts 5``) and runs the
+    defaults, which silently gives the published figure.  Called at the top of the first cell after the
+    ``parameters`` cell, this reads the kernel's input history: papermill's injected cell starts with
+    ``# Parameters`` and runs right after the ``parameters`` cell, so the names it assigns must be among those
+    the cell before it assigns.  Outside IPython, or when no parameters were injected, it does nothing.
+    """
+    try:
+        from IPython import get_ipython
+    except ImportError:  # pragma: no cover - IPython is a dependency of every notebook kernel
+        return
+    shell = get_ipython()
+    history = list(shell.user_ns.get("In", [])) if shell is not None else []
+    injected = [i for i, source in enumerate(history) if isinstance(source, str) and source.lstrip().startswith("# Parameters")]
+    if not injected or injected[-1] < 1:
+        return
+    index = injected[-1]
+    declared = _assigned_names(history[index - 1])
+    unknown = sorted(_assigned_names(history[index]) - declared)
+    if unknown:
+        raise ValueError(
+            f"parameter(s) {unknown} are not defined in this notebook's parameters cell (it defines {sorted(declared)})"
+        )

@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Exception types that are the input's or the environment's fault, reported in one line.
 REPORTED_ERRORS: tuple[type[BaseException], ...] = (
-    ValueError, OSError, EOFError, RecursionError, MemoryError, zipfile.BadZipFile, pickle.UnpicklingError,
+    ValueError, OSError, EOFError, RecursionError, MemoryError, OverflowError, zipfile.BadZipFile, pickle.UnpicklingError,
 )
 
 

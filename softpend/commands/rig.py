@@ -1,7 +1,8 @@
 """``softpend rig``: serve the emulated rig (the digital twin of the motor controller) on a pseudo-terminal.
 
 Prints the pty path (one line), then serves until Ctrl-C/SIGTERM or ``--duration``.  Point any host
-program at that path, e.g. ``MotorLink(path, torque_limit_nm=0.06)``.
+program at that path, e.g. ``MotorLink(path, torque_limit_nm=0.06)``.  ``softpend rig control`` runs a
+controller on a rig or on the twin (:mod:`softpend.commands.rig_control`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed for drops, garbling and start noise")
     parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
     parser.set_defaults(func=run)
+    from softpend.commands import rig_control
+
+    actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
+    rig_control.register(actions)
+    for action in actions.choices.values():
+        action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                            help="show the traceback of an error instead of one line")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -203,16 +203,23 @@ class SoftPendulumEnv(gym.Env):
         return render_rod_rgb(self.plant.link_points_m(), self.params.length_m)
 
 
+#: Most torque levels of :class:`SoftPendulumDiscreteEnv`: 1001 (a DQN has one Q-network output per level;
+#: at the default 0.06 N m limit the levels are then 0.12 mN m apart, finer than any motor driver resolves).
+MAX_TORQUE_LEVELS = 1001
+
+
 class SoftPendulumDiscreteEnv(SoftPendulumEnv):
     """:class:`SoftPendulumEnv` with ``Discrete(n_torque_levels)`` actions for DQN.
 
     Action ``i`` applies ``torque_limit_nm * (-1 + 2 i / (n_torque_levels - 1))``: evenly spaced levels
     from ``-torque_limit_nm`` to ``+torque_limit_nm`` (zero included when the count is odd).
-    Extra argument: ``n_torque_levels`` (default 5, at least 2).
+    Extra argument: ``n_torque_levels`` (default 5, at least 2, at most :data:`MAX_TORQUE_LEVELS`).
     """
 
     def __init__(self, n_torque_levels: int = 5, **kwargs: Any) -> None:
         n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
+        if n_torque_levels > MAX_TORQUE_LEVELS:
+            raise ValueError(f"n_torque_levels must be at most {MAX_TORQUE_LEVELS}, got {n_torque_levels!r}")
         super().__init__(**kwargs)
         self.n_torque_levels = n_torque_levels
         self.torque_levels_nm = np.linspace(-1.0, 1.0, self.n_torque_levels) * self.torque_limit_nm

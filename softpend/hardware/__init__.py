@@ -1,5 +1,7 @@
-"""The hardware rig: serial motor link, rig emulator (digital twin), host control loop, crash-safe logs,
-and time synchronisation of the motor and camera streams."""
+"""The hardware rig: serial motor link, rig emulator (digital twin), host control loops (open-loop programs in
+:mod:`~softpend.hardware.loop`; any controller with the camera in the loop and the state estimator in
+:mod:`~softpend.hardware.closed_loop` and :mod:`~softpend.hardware.estimator`), crash-safe logs, and time
+synchronisation of the motor and camera streams."""
 
 from softpend.hardware.driver import (
     DeviceError,

@@ -34,7 +34,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import in_unit_interval, int_at_least, optional_positive
+from softpend.checks import finite, in_unit_interval, int_at_least, optional_positive
 from softpend.task import Task
 from softpend.hardware import protocol as proto
 from softpend.io.samplelog import SampleLog
@@ -66,6 +66,12 @@ class RigConfig:
         Seed for the drop/garble draws and the initial-state noise.
     duration_s : float or None
         Stop after this much device time [s] (None: run until killed or stopped).
+    initial_tilt_rad : float or None
+        Start with the straight rod at rest tilted by this angle from upright [rad] (plus the start noise)
+        instead of hanging (None); the encoder still reads zero at the hanging position.
+    hold_until_connected : bool
+        Hold the rod at its initial state until a host completes the handshake (a hand holding the rod
+        until the program starts), so that a start near upright is still near upright when control begins.
     """
 
     task: Task = field(default_factory=lambda: Task(start_noise_rad=0.0))
@@ -76,6 +82,8 @@ class RigConfig:
     watchdog_ms: int = 100
     seed: int = 0
     duration_s: Optional[float] = None
+    initial_tilt_rad: Optional[float] = None
+    hold_until_connected: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.task, Task):
@@ -88,6 +96,8 @@ class RigConfig:
         if int(self.watchdog_ms) != self.watchdog_ms or not 1 <= self.watchdog_ms <= 65535:
             raise ValueError(f"watchdog_ms must be an integer in [1, 65535], got {self.watchdog_ms!r}")
         optional_positive("duration_s", self.duration_s)
+        if self.initial_tilt_rad is not None:
+            finite("initial_tilt_rad", self.initial_tilt_rad)
 
     def to_dict(self) -> dict:
         data = dataclasses.asdict(self)
@@ -125,10 +135,13 @@ class RigEmulator:
         pseudo-terminal (one an earlier emulator left behind) is replaced; anything else at the path
         raises ``ValueError`` and is left as it is.  :meth:`close` removes the symlink if it still points
         to this emulator's pty.
+    scene_fd : int, optional
+        Write end of a pipe for the live pose feed (:mod:`softpend.hardware.scene`): one record per tick
+        with the host time of the sample and ``q``; written without blocking (dropped when the pipe is full).
     """
 
     def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
-                 link_path: Optional[str | os.PathLike] = None) -> None:
+                 link_path: Optional[str | os.PathLike] = None, scene_fd: Optional[int] = None) -> None:
         self.config = config if config is not None else RigConfig()
         cfg = self.config
         self.link_path = Path(link_path) if link_path else None
@@ -136,7 +149,7 @@ class RigEmulator:
             _check_link_path(self.link_path)
         self.plant = cfg.task.make_plant()
         self._rng = np.random.default_rng(cfg.seed)
-        q, qd = self.plant.hanging_state()
+        q, qd = self.plant.hanging_state() if cfg.initial_tilt_rad is None else cfg.task.tilt_state(cfg.initial_tilt_rad)
         noise = cfg.task.start_noise_rad
         q[0] += self._rng.uniform(-noise, noise)
         qd[0] += self._rng.uniform(-noise, noise)
@@ -164,6 +177,11 @@ class RigEmulator:
             self.close()
             raise
         self._running = False
+        self._scene_fd = scene_fd
+        if scene_fd is not None:
+            os.set_blocking(scene_fd, False)
+        self._start_monotonic_s = time.monotonic()
+        self.scene_records_dropped = 0
         self.ticks = 0
         self.states_sent = 0
         self.states_dropped = 0
@@ -187,6 +205,7 @@ class RigEmulator:
         dt = cfg.task.dt_s
         latency = cfg.latency_s
         start = time.monotonic()
+        self._start_monotonic_s = start
         inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
         outbound: list[tuple[float, int, bytes]] = []
         order = 0
@@ -248,12 +267,16 @@ class RigEmulator:
         cfg = self.config
         torque = self.session.torque_nm(now_us)
         observation_before = self.plant.observe()
-        if self._truth is not None:
+        if self._truth is not None or self._scene_fd is not None:
             q, qd = self.plant.joint_state()
-            self._truth.append([now_us * 1e-6, torque, *q, *qd])
+            if self._truth is not None:
+                self._truth.append([now_us * 1e-6, torque, *q, *qd])
+            if self._scene_fd is not None:
+                self._write_scene(now_us * 1e-6, q)
         counts = self.encoder_counts(self.plant.joint_state()[0][0])
         frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque) if emit else None
-        self.plant.step(torque)
+        if self.session.session_open or not cfg.hold_until_connected:
+            self.plant.step(torque)
         self.ticks += 1
         if frame is None:
             return None
@@ -268,6 +291,17 @@ class RigEmulator:
             frame = bytes(garbled)
         self.states_sent += 1
         return frame
+
+    def _write_scene(self, device_time_s: float, q: np.ndarray) -> None:
+        from softpend.hardware.scene import pack_scene_record
+
+        record = pack_scene_record(self._start_monotonic_s + device_time_s, device_time_s, q)
+        try:
+            os.write(self._scene_fd, record)  # < PIPE_BUF bytes: written whole or not at all
+        except BlockingIOError:
+            self.scene_records_dropped += 1
+        except OSError:  # the reader went away
+            self._scene_fd = None
 
     def close(self) -> None:
         for fd in (self.master_fd, self._slave_fd):
@@ -289,6 +323,7 @@ class RigEmulator:
             "states_dropped": float(self.states_dropped),
             "states_garbled": float(self.states_garbled),
             "ticks_caught_up": float(self.ticks_skipped),
+            "scene_records_dropped": float(self.scene_records_dropped),
             "tick_lateness_ms_p95": float(np.percentile(lateness, 95)) if lateness.size else float("nan"),
         }
 
@@ -316,9 +351,9 @@ def _check_link_path(path: Path) -> None:
 
 # ---------------------------------------------------------------------- process helpers
 def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path: Optional[str] = None,
-                  stats_path: Optional[str] = None, out=sys.stdout) -> int:
+                  stats_path: Optional[str] = None, out=sys.stdout, scene_fd: Optional[int] = None) -> int:
     """Create an emulator, print its pty path (one line, flushed), serve until SIGTERM/duration."""
-    emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path)
+    emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path, scene_fd=scene_fd)
 
     def _terminate(signum, frame):
         emulator.stop()
@@ -341,24 +376,40 @@ class EmulatorProcess:
     """A rig emulator running in a child process (``python -m softpend.hardware.emulator``).
 
     Use as a context manager; :attr:`port` is the pty path to open with
-    :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.
+    :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.  With
+    ``scene=True`` the emulator also writes its live pose feed to a pipe; :meth:`open_scene` gives the
+    :class:`~softpend.hardware.scene.EmulatorScene` that reads it (what the twin's camera films).
     """
 
     def __init__(self, config: RigConfig, truth_log: Optional[str | os.PathLike] = None,
-                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0) -> None:
+                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0,
+                 scene: bool = False) -> None:
         cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]
         if truth_log is not None:
             cmd += ["--truth-log", str(truth_log)]
         if stats_path is not None:
             cmd += ["--stats", str(stats_path)]
         self.stats_path = Path(stats_path) if stats_path else None
+        self.config = config
+        self.scene_fd: Optional[int] = None
+        pass_fds: tuple[int, ...] = ()
+        if scene:
+            self.scene_fd, scene_write = os.pipe()
+            cmd += ["--scene-fd", str(scene_write)]
+            pass_fds = (scene_write,)
         import tempfile
 
         self._stderr = tempfile.TemporaryFile(mode="w+")
-        self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
+        try:
+            self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True,
+                                            pass_fds=pass_fds)
+        finally:
+            for fd in pass_fds:  # the child holds its own copy of the write end
+                os.close(fd)
         ready, _, _ = select.select([self.process.stdout], [], [], start_timeout_s)
         line = self.process.stdout.readline().strip() if ready else ""
         if not line.startswith("/dev/"):
+            self._close_scene_fd()
             self.process.kill()
             self.process.wait()
             self._stderr.seek(0)
@@ -389,8 +440,24 @@ class EmulatorProcess:
     def __enter__(self) -> "EmulatorProcess":
         return self
 
+    def open_scene(self):
+        """The :class:`~softpend.hardware.scene.EmulatorScene` of the pose feed (``scene=True`` only); it
+        owns the pipe from then on."""
+        from softpend.hardware.scene import EmulatorScene
+
+        if self.scene_fd is None:
+            raise ValueError("scene: this emulator was started without a scene feed (or it was opened already)")
+        fd, self.scene_fd = self.scene_fd, None
+        return EmulatorScene(fd, self.config.task)
+
+    def _close_scene_fd(self) -> None:
+        if self.scene_fd is not None:
+            os.close(self.scene_fd)
+            self.scene_fd = None
+
     def __exit__(self, *exc) -> None:
         self.terminate()
+        self._close_scene_fd()
         if self.process.stdout:
             self.process.stdout.close()
         self._stderr.close()
@@ -407,9 +474,11 @@ def _main(argv: Optional[list[str]] = None) -> int:  # the child process entry p
     parser.add_argument("--truth-log")
     parser.add_argument("--link")
     parser.add_argument("--stats")
+    parser.add_argument("--scene-fd", type=int)
     args = parser.parse_args(argv)
     config = RigConfig.from_dict(json.loads(args.config_json))
-    return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats)
+    return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats,
+                         scene_fd=args.scene_fd)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,11 @@ sends it (clamped by the driver) and appends the sample to a crash-safe :class:`
 anything else can fail.  Whatever goes wrong -- controller exception, link error, lost tip -- the motor
 gets zero torque: a lost tip sends 0 for that tick, and any exception sends STOP and propagates (the
 sample that was being processed is still logged, with the torque actually commanded).
+
+This loop hands a controller what the rig measures at that tick (hub angle and rate, the latest tip
+position) -- enough for programs of time and hub angle such as babbling.  Controllers of the project, which
+need the joint state or the observed variables with their rates, run in
+:func:`softpend.hardware.closed_loop.run_closed_loop`, behind the state estimator.
 """
 
 from __future__ import annotations

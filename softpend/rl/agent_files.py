@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import io
 import json
-import pickle
 import zipfile
+import zlib
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import torch
@@ -52,6 +52,10 @@ REBUILT_ATTRIBUTES: frozenset[str] = frozenset({
     "ep_success_buffer",
 })
 
+#: Hyperparameters stored as plain JSON in an agent file that must equal the run's config.
+_CONFIG_ATTRIBUTES = ("learning_rate", "buffer_size", "batch_size", "gamma", "gradient_steps", "target_update_interval",
+                      "exploration_initial_eps", "exploration_final_eps", "exploration_fraction", "max_grad_norm")
+
 _BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
@@ -70,7 +74,7 @@ def _read_data(path: Path, raw: bytes) -> dict[str, Any]:
             text = archive.read("data").decode("utf-8")
         data = json.loads(text)
     except (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, UnicodeDecodeError, json.JSONDecodeError,
-            RecursionError, EOFError, NotImplementedError, OSError) as exc:
+            RecursionError, EOFError, NotImplementedError, OSError, zlib.error) as exc:
         raise AgentFileError(f"{path}: not a stable-baselines3 agent file ({type(exc).__name__}: {exc})") from None
     if not isinstance(data, dict):
         raise AgentFileError(f"{path}: its 'data' member is not a JSON object")
@@ -111,6 +115,11 @@ def _check_matches(path: Path, data: dict[str, Any], config: DQNConfig) -> None:
     action = data.get("action_space")
     if isinstance(action, dict) and "n" in action and str(action["n"]) != str(config.n_torque_levels):
         raise AgentFileError(f"{path}: it has {action['n']} actions, the config {config.n_torque_levels} torque levels")
+    for name in _CONFIG_ATTRIBUTES:
+        if name in data and data[name] != getattr(config, name):
+            raise AgentFileError(f"{path}: its {name} {data[name]!r} is not the config's {getattr(config, name)!r}")
+    if data.get("n_steps", 1) != 1 or data.get("tau", 1.0) != 1.0:
+        raise AgentFileError(f"{path}: n_steps {data.get('n_steps')!r} and tau {data.get('tau')!r} must be 1 (softpend's DQN)")
 
 
 def check_finite_weights(model: DQN, where: str) -> None:
@@ -169,8 +178,7 @@ def load_agent_file(
         custom["replay_buffer_kwargs"] = {}
     try:
         model = cls.load(io.BytesIO(raw), env=env, device="cpu", custom_objects=custom)
-    except (ValueError, RuntimeError, KeyError, TypeError, AssertionError, AttributeError, IndexError, EOFError,
-            pickle.UnpicklingError, zipfile.BadZipFile, RecursionError, MemoryError) as exc:
+    except Exception as exc:  # a corrupt or foreign file can fail inside SB3's or torch's reader in any way
         message = " ".join(str(exc).split())[:300]
         raise AgentFileError(f"{path}: cannot load the agent ({type(exc).__name__}: {message})") from exc
     check_finite_weights(model, str(path))
@@ -235,7 +243,7 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
     try:
         with np.load(path, allow_pickle=False) as archive:
             saved = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, MemoryError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, MemoryError, zlib.error, NotImplementedError) as exc:
         raise AgentFileError(f"{path}: not a replay buffer file ({type(exc).__name__}: {exc})") from None
     expected = set()
     for prefix in _parts(buffer):

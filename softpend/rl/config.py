@@ -335,7 +335,8 @@ def load_config(path: Path) -> DQNConfig:
         raise ValueError(f"{path}: not a JSON config ({type(exc).__name__}: {exc})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: not a config (expected a JSON object, got {type(data).__name__})")
-    cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(data.pop("class", "DQNConfig"))
+    name = data.pop("class", "DQNConfig")
+    cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(name) if isinstance(name, str) else None
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
     try:

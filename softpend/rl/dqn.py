@@ -301,12 +301,16 @@ def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:
 
 
 def is_run_folder(path: Path) -> bool:
-    """Whether ``path`` is a run folder of :func:`run_training` (its ``config.json`` reads as a config)."""
+    """Whether ``path`` is a run folder of :func:`run_training`, of this or an earlier version: its
+    ``config.json`` is a JSON object naming a config class, as :func:`~softpend.rl.config.save_config` writes."""
+    config = Path(path) / "config.json"
     try:
-        load_config(Path(path) / "config.json")
-    except (OSError, ValueError, TypeError, KeyError, RecursionError):
+        if config.stat().st_size > 10**7:
+            return False
+        data = json.loads(config.read_text())
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
         return False
-    return True
+    return isinstance(data, dict) and data.get("class") in ("DQNConfig", "MBPOConfig")
 
 
 def check_run_size(config: DQNConfig, observation_dim: int) -> None:

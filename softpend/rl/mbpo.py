@@ -32,6 +32,8 @@ Real plant seconds (training episodes on the true plant) and model steps are cou
 from __future__ import annotations
 
 import math
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Optional
 
@@ -292,10 +294,22 @@ class MBPOTrainer:
 
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""
-        with np.load(folder / "mbpo_state.npz", allow_pickle=False) as data:
-            self.trials_observations = list(data["observations"])
-            self.trials_torques = list(data["torques"])
-            self.n_fits, self.model_steps = (int(v) for v in data["counters"])
+        path = folder / "mbpo_state.npz"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                observations, torques, counters = data["observations"], data["torques"], data["counters"]
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            raise ValueError(f"{path}: not an MBPO checkpoint ({type(exc).__name__}: {exc})") from None
+        steps = self.config.episode_agent_steps * self.config.action_repeat
+        n = len(observations)
+        if (observations.dtype != np.float64 or torques.dtype != np.float64 or counters.shape != (2,)
+                or counters.dtype.kind not in "iu" or (n and (observations.shape != (n, steps + 1, len(OBSERVATION_NAMES))
+                                                           or torques.shape != (n, steps)))):
+            raise ValueError(f"{path}: its arrays do not match the run's episodes ({observations.shape}, {torques.shape}, "
+                             f"{counters.shape})")
+        self.trials_observations = list(observations)
+        self.trials_torques = list(torques)
+        self.n_fits, self.model_steps = (int(v) for v in counters)
         if len(self.trials_observations) >= 2:
             self.refit()
 

@@ -83,8 +83,16 @@ class TrainingLog:
 
     @classmethod
     def load(cls, path: Path) -> "TrainingLog":
-        data = json.loads(Path(path).read_text())
-        return cls(algo=data["algo"], seed=int(data["seed"]), episodes=data["episodes"], evaluations=data["evaluations"])
+        try:
+            data = json.loads(Path(path).read_text())
+            log = cls(algo=str(data["algo"]), seed=int(data["seed"]), episodes=list(data["episodes"]),
+                      evaluations=list(data["evaluations"]))
+            for row in log.episodes + log.evaluations:
+                if not isinstance(row, dict) or not isinstance(row.get("episode"), int):
+                    raise ValueError("a row is not an object with an integer episode")
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: not a training log ({type(exc).__name__}: {exc})") from None
+        return log
 
 
 def _json_default(value: Any) -> Any:

@@ -72,16 +72,10 @@ class PilcoBudget:
         One PILCO run per seed.
     runs_root : str
         Run folders (other plants: ``<runs_root>-<plant>``).
-    final_eval_seeds : tuple of int
-        Start seeds of the final evaluation of every method's last policy.
-    final_eval_duration_s : float
-        Length of those evaluation episodes [s].
     """
 
     seeds: tuple[int, ...] = (0, 1, 2)
     runs_root: str = "runs/pilco-book"
-    final_eval_seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    final_eval_duration_s: float = 10.0
 
 
 #: The published PILCO budget.

@@ -43,6 +43,7 @@ import io
 import json
 import math
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -224,7 +225,7 @@ def _validate(ds: TrajectoryDataset) -> None:
     if absent:
         raise ValueError(f"metadata position_names must include {REQUIRED_POSITION_NAMES}; missing {absent}")
     expected_velocity_names = [velocity_name(n) for n in names]
-    if list(meta["velocity_names"]) != expected_velocity_names:
+    if not isinstance(meta["velocity_names"], list) or meta["velocity_names"] != expected_velocity_names:
         raise ValueError(f"metadata velocity_names must be {expected_velocity_names}, got {meta['velocity_names']!r}")
     if meta["plant_params"] is not None:
         if not isinstance(meta["plant_params"], dict):
@@ -408,7 +409,7 @@ def is_dataset_file(path: str | Path) -> bool:
             with archive.open("metadata.npy") as member:
                 raw = np.lib.format.read_array(member, allow_pickle=False)
         metadata = json.loads(str(raw[()]))
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError, RecursionError, IndexError, TypeError):
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError, RecursionError, IndexError, TypeError, zlib.error):
         return False
     return isinstance(metadata, dict) and metadata.get("schema") == SCHEMA_NAME
 
@@ -465,8 +466,8 @@ def load_dataset(
     try:
         with np.load(path, allow_pickle=False) as archive:
             members = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, NotImplementedError) as exc:
-        raise ValueError(f"{path} is not a readable dataset file: {exc}") from exc
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, NotImplementedError, zlib.error) as exc:
+        raise ValueError(f"{path} is not a readable dataset file: {type(exc).__name__}: {exc}") from None
     except MemoryError:
         raise ValueError(f"{path}: its arrays do not fit in memory") from None
     if "metadata" not in members:

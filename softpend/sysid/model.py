@@ -37,8 +37,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import pickle
-import zipfile
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -459,13 +457,14 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
         config["layout"] = StateLayout.from_dict(config["layout"])
         members = [DynamicsModel(**config) for _ in range(size)]
         model: DynamicsModel | DynamicsEnsemble = DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+        if not isinstance(meta["metadata"], dict):
+            raise TypeError(f"metadata must be an object, got {type(meta['metadata']).__name__}")
     except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
         raise ValueError(f"{meta_path}: not a model of this version ({type(exc).__name__}: {exc})") from None
     try:
         state = torch.load(weights, weights_only=True, map_location="cpu")
         model.load_state_dict(state, strict=True)
-    except (pickle.UnpicklingError, zipfile.BadZipFile, RuntimeError, OSError, EOFError, KeyError, TypeError,
-            AttributeError, ValueError) as exc:
+    except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
         message = " ".join(str(exc).split())[:300]
         raise ValueError(f"{weights}: weights do not match {meta_path} or are not weights written by softpend "
                          f"({type(exc).__name__}: {message})") from None

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from softpend.checks import NonFiniteError, boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.checks import NonFiniteError, boolean, check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
 from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
@@ -277,6 +277,22 @@ def _train_member(
     return np.array(train_losses), np.array(val_losses), best[1]
 
 
+def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: TrainConfig) -> None:
+    """``ValueError`` before any work if the fit's arrays would exceed :data:`softpend.checks.MAX_WORK_BYTES`:
+    the transitions (states, next states and features, a few copies) and every member's weights (with Adam's
+    moments and the best-epoch copy)."""
+    dim = layout.dim
+    transitions = dataset.n_trials * max(dataset.n_samples - 1, 1)
+    data = 8.0 * 8 * transitions * (dim + 1)
+    widths = [2 * dim + 1, *config.hidden_widths, dim]
+    weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
+    networks = 8.0 * 5 * config.ensemble_size * weights + 8.0 * 4 * min(config.batch_size, transitions) * sum(widths)
+    check_work_size(
+        "this dynamics model fit", data + networks,
+        f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
+    )
+
+
 def _check_finite_loss(desc: str, epoch: int, train_loss: float, val_loss: float, config: TrainConfig) -> None:
     """``NonFiniteError`` if an epoch's training or validation loss is NaN or infinite (the fit diverged; the
     weights kept would be the untrained ones or garbage)."""
@@ -394,6 +410,7 @@ def fit_dynamics_model(
         config = config.replace(**overrides)
     started = time.perf_counter()
     layout = config.layout()
+    _check_fit_size(layout, dataset, config)
     train_trials, val_trials = split_trials(dataset.n_trials, config.validation_fraction, config.seed)
     train = layout.transitions(dataset, train_trials)
     val = layout.transitions(dataset, val_trials)

@@ -147,6 +147,12 @@ class CameraEffects:
         return cls(noise_std_dn=6.0, exposure_s=0.008, blur_subframes=5, lighting_amplitude=0.25,
                    lighting_frequency_hz=0.5, gradient=0.3, clutter=True)
 
+    @classmethod
+    def rig(cls) -> "CameraEffects":
+        """The nominal rig camera of the digital twin: mild sensor noise, 4 ms exposure blur, a slow
+        lighting drift and a gradient (the default of :func:`softpend.hardware.twin.run_twin_session`)."""
+        return cls(noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
+
 
 @dataclass
 class RenderedClip:

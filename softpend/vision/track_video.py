@@ -16,7 +16,7 @@ from softpend.vision.calibration import AffineCalibration, calibrate_from_marker
 from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
 from softpend.vision.tracker import MAGENTA_HSV, Detection, TipTracker
 
-__all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_video"]
+__all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_live", "track_video"]
 
 
 def hub_marker_tracker(calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06) -> TipTracker:
@@ -208,7 +208,7 @@ def track_video(
         capture.release()
 
 
-def _check_output_path(out_csv: Path, video: Path) -> None:
+def _check_output_path(out_csv: Path, video: Optional[Path]) -> None:
     """Refuse an ``out_csv`` that cannot be written (a folder, in a missing or read-only folder, the input)."""
     if out_csv.is_dir():
         raise ValueError(f"out_csv {out_csv} is a folder")
@@ -217,7 +217,7 @@ def _check_output_path(out_csv: Path, video: Path) -> None:
         raise ValueError(f"out_csv {out_csv}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"out_csv {out_csv}: folder {parent} is not writable")
-    for name, path in (("video", video), ("the video's sidecar", Path(str(video) + ".json"))):
+    for name, path in (() if video is None else (("video", video), ("the video's sidecar", Path(str(video) + ".json")))):
         if path.exists() and out_csv.exists() and os.path.samefile(path, out_csv):
             raise ValueError(f"out_csv {out_csv} is {name}; choose another output")
 
@@ -230,3 +230,96 @@ def _partial_path(out_csv: Path) -> Path:
     finally:
         os.close(fd)
     return Path(name)
+
+
+def track_live(
+    source,
+    out_csv: str | Path,
+    duration_s: Optional[float] = None,
+    track_hub: bool = True,
+    progress: bool = False,
+) -> np.ndarray:
+    """Track a live camera (a :class:`~softpend.vision.tip_source.ThreadedTipSource`, not yet started) into
+    ``out_csv`` until ``duration_s`` of host time has passed, the source ends, or Ctrl-C.
+
+    ``camera_time_s`` is each frame's capture time on the host clock (``time.monotonic()``).  The rows go to
+    a temporary file next to ``out_csv`` (crash-safe), which replaces ``out_csv`` when tracking ends -- also
+    on Ctrl-C, with the frames tracked so far; on an error it is removed and ``out_csv`` is left as it was.
+    With ``track_hub`` the magenta hub marker is tracked too (near the hub axis).
+
+    Raises
+    ------
+    ValueError
+        If ``duration_s`` is not positive or ``out_csv`` cannot be written; the camera's own errors.
+    """
+    import time
+
+    from softpend.vision.tip_source import ThreadedTipSource
+
+    if not isinstance(source, ThreadedTipSource):
+        raise ValueError(f"source must be a ThreadedTipSource, got {type(source).__name__}")
+    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
+    out_csv = Path(out_csv)
+    _check_output_path(out_csv, None)
+    rows: list[list[float]] = []
+    hub: list[Optional[TipTracker]] = [None]
+    frame_tracker = source.frame_tracker
+    previous_hook = source.on_frame
+
+    def on_frame(index, frame, detection, measurement) -> None:
+        hub_angle, hub_lost = math.nan, 1
+        if track_hub:
+            if hub[0] is None:
+                hub[0] = hub_marker_tracker(frame_tracker.calibration, frame.shape)
+            found = hub[0].track(frame)
+            if not found.lost:
+                hx, hy = frame_tracker.calibration.to_metres(np.array([found.x_px, found.y_px]))
+                hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0
+        theta = measurement.theta_rad
+        rows.append([index, measurement.capture_time_s, detection.x_px, detection.y_px, detection.area_px,
+                     measurement.x_m, measurement.y_m, theta, int(measurement.lost), hub_angle, hub_lost])
+        if previous_hook is not None:
+            previous_hook(index, frame, detection, measurement)
+
+    source.on_frame = on_frame
+    partial = _partial_path(out_csv)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(desc="tracking", unit="frame", mininterval=1.0)
+    written = 0
+    try:
+        with SampleLog(partial, TRACK_COLUMNS, metadata={"camera": getattr(source, "name", "camera")},
+                       fsync_every_s=1.0) as log:
+            start = time.monotonic()
+            source.start()
+            try:
+                while duration_s is None or time.monotonic() - start < duration_s:
+                    source.poll()  # raises the camera thread's error
+                    while written < len(rows):
+                        log.append(rows[written])
+                        written += 1
+                    if bar is not None:
+                        bar.update(written - bar.n)
+                    if source.finished:
+                        break
+                    time.sleep(0.01)
+            except KeyboardInterrupt:
+                pass
+            finally:
+                source.close()
+            while written < len(rows):
+                log.append(rows[written])
+                written += 1
+            if log.rows_written == 0:
+                raise ValueError("the camera delivered no frame")
+        os.replace(partial, out_csv)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))

@@ -20,6 +20,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("rl", "softpend.study.bench.rl:bench_rl"),
     ("pilco", "softpend.study.bench.pilco:bench_pilco"),
     ("hardware", "softpend.study.bench.hardware:bench_hardware"),
+    ("rig_control", "softpend.study.bench.rig_control:bench_rig_control"),
     ("sysid", "softpend.study.bench.sysid:bench_sysid"),
 ]
 

@@ -1,0 +1,193 @@
+"""``softpend rig control CONTROLLER``: run a controller on a rig (a serial port) or on the digital twin.
+
+The controller is ``lqr`` / ``lqr-obs`` (LQR on the joint state / on the observed variables), ``swingup`` /
+``swingup-obs`` (energy swing-up handing over to that LQR), ``pid`` (PID on the tip angle), or a run folder:
+a DQN or DQN-MBPO run of ``softpend train`` (``config.json`` and an agent) or a PILCO run (``pilco.json``).
+It runs in :func:`softpend.hardware.closed_loop.run_closed_loop`: encoder and camera go through the state
+estimator, the torque through the driver's clamp, STOP on every exit path, and every sample, estimate and
+command goes to the crash-safe logs in ``--out``.
+
+``--twin`` starts the emulator with the synthetic live camera; ``--port PATH`` talks to a rig and needs
+``--camera`` (a device index, stream URL or video file, through ``cv2.VideoCapture``) or ``--no-camera``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+#: The built-in controller names.
+BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "control", help="run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop",
+        description=__doc__.split("\n\n")[0])
+    parser.add_argument("controller", metavar="CONTROLLER",
+                        help=f"one of {', '.join(BUILTIN_CONTROLLERS)}, or a DQN/DQN-MBPO/PILCO run folder")
+    target = parser.add_mutually_exclusive_group(required=True)
+    target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
+    target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="folder for the logs and summary.json")
+    parser.add_argument("--duration", type=float, default=10.0, help="run length [s] (default 10)")
+    parser.add_argument("--camera", metavar="CAMERA",
+                        help="with --port: camera index, stream URL or video file (cv2.VideoCapture)")
+    parser.add_argument("--no-camera", action="store_true", help="encoder and model only (no blindness limit)")
+    parser.add_argument("--camera-fps", type=float, default=60.0, help="twin camera frame rate (default 60)")
+    parser.add_argument("--camera-latency-ms", type=float, default=20.0,
+                        help="camera latency, exposure end to host [ms] (default 20; with --camera: the "
+                             "measured latency of that camera)")
+    parser.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
+    parser.add_argument("--calibration", metavar="JSON", help="with --camera: a saved AffineCalibration")
+    parser.add_argument("--max-blind-ms", type=float, default=300.0,
+                        help="stop when the camera has not corrected the estimate for this long [ms] (300)")
+    parser.add_argument("--start", choices=("hanging", "upright"), default="hanging",
+                        help="twin: start hanging (default) or near upright (held until the host connects)")
+    parser.add_argument("--tilt", type=float, default=0.1, help="twin, --start upright: initial tilt [rad] (0.1)")
+    parser.add_argument("--start-noise", type=float, default=0.05,
+                        help="twin: uniform start noise of the hub angle [rad] and rate [rad/s] (0.05)")
+    parser.add_argument("--seed", type=int, default=0, help="twin: seed of the start noise and the camera noise")
+    parser.add_argument("--latency-ms", type=float, default=2.0, help="twin: one-way link latency [ms] (2)")
+    parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (4096)")
+    parser.add_argument("--n-links", type=int, default=None,
+                        help="PRB links of the model (default: the run folder's, else 4)")
+    parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
+    parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"),
+                        help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.set_defaults(func=run)
+
+
+def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tuple[Any, Any, str]:
+    """``(controller, task, label)`` for a controller name or run folder; ``task`` is the model task (a run
+    folder's own task unless the caller's differs only in what the caller overrode)."""
+    from softpend.control.lqr import LQRController
+    from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
+    from softpend.control.swingup import EnergySwingUpController
+
+    rod, dt = task.rod, task.dt_s
+    if spec == "lqr":
+        return LQRController.from_params(rod, dt, state="joint"), task, "LQR (joint state)"
+    if spec == "lqr-obs":
+        return LQRController.from_params(rod, dt, state="observation"), task, "LQR (observations)"
+    if spec == "swingup":
+        return EnergySwingUpController(rod, dt_s=dt), task, "energy swing-up + LQR"
+    if spec == "swingup-obs":
+        return EnergySwingUpController.for_observations(rod, dt_s=dt), task, "energy swing-up + LQR (observations)"
+    if spec == "pid":
+        if pid_gains is None:
+            gains = tune_pid(plant_simulator(task), torque_limit_nm=rod.torque_limit_nm, max_evaluations=60).gains
+        else:
+            gains = PIDGains(*pid_gains)
+        return PIDController(gains, dt_s=dt, torque_limit_nm=rod.torque_limit_nm), task, f"PID {gains}"
+    folder = Path(spec)
+    if not folder.exists():
+        raise ValueError(f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; "
+                         f"{spec!r} is neither")
+    if (folder / "pilco.json").exists():
+        from softpend.pilco.loop import PilcoResult
+
+        result = PilcoResult.load(folder)
+        return result.controller(), result.config.task, f"PILCO {folder}"
+    from softpend.rl.dqn import load_agent
+    from softpend.rl.training_env import policy_controller
+
+    model, config = load_agent(folder, which=which)
+    return policy_controller(model, config), config.task, f"{type(model).__name__} {folder}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from softpend.hardware.closed_loop import TwinCamera, run_twin_control
+    from softpend.hardware.emulator import RigConfig
+    from softpend.hardware.estimator import EstimatorConfig
+    from softpend.io.outputs import json_text
+    from softpend.study.rig import torque_chatter_nm_per_s, truth_metrics
+    from softpend.task import Task
+
+    if args.twin and args.camera:
+        raise ValueError("--camera is for --port; the twin films itself with the synthetic camera")
+    if args.port and not (args.camera or args.no_camera):
+        raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration!r}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a folder")
+    base = Task(start_noise_rad=args.start_noise)
+    if args.n_links is not None:
+        base = base.replace(n_links=args.n_links)
+    controller, task, label = build_controller(args.controller, base, args.which, args.pid_gains)
+    task = task.replace(start_noise_rad=args.start_noise)
+    if args.n_links is not None and task.rod.n_links != args.n_links:
+        task = task.replace(n_links=args.n_links)
+    estimator_config = EstimatorConfig(counts_per_rev=args.counts_per_rev, max_blind_s=args.max_blind_ms / 1000.0)
+    progress = not args.no_progress
+    if args.twin:
+        rig = RigConfig(task=task, counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0,
+                        seed=args.seed, initial_tilt_rad=args.tilt if args.start == "upright" else None,
+                        hold_until_connected=args.start == "upright")
+        camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
+                                                        seed=args.seed)
+        outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
+                                   estimator_config=estimator_config, progress=progress)
+        summary = {"controller": label, "target": "twin", **outcome.result.summary(),
+                   "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
+                   "truth": truth_metrics(outcome.truth_log, task), "emulator": outcome.emulator_stats}
+    else:
+        summary = {"controller": label, "target": args.port,
+                   **_run_on_port(args, controller, task, estimator_config, out, progress)}
+        summary["torque_chatter_nm_per_s"] = torque_chatter_nm_per_s(out / "motor_log.csv")
+    (out / "summary.json").write_text(json_text(summary, indent=2))
+    if args.json:
+        print(json_text(summary, indent=2))
+    else:
+        print(f"{label}: {summary['samples']} samples over {summary['duration_s']:.2f} s, "
+              f"{'stopped: ' + summary['stop_reason'] if summary['stop_reason'] else 'completed'}; "
+              f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; logs in {out}")
+        truth = summary.get("truth") or {}
+        if truth:
+            print(f"truth: swing-up {truth['swing_up_time_s']:.2f} s, upright std {truth['upright_std_rad']:.3f} rad, "
+                  f"peak torque {truth['peak_torque_nm']:.3f} N m, success {truth['success']}")
+    return 0 if summary["stop_reason"] is None else 1
+
+
+def _run_on_port(args, controller, task, estimator_config, out: Path, progress: bool) -> dict:
+    from softpend.hardware.closed_loop import CAMERA_LOG_COLUMNS, rig_control_columns, run_closed_loop
+    from softpend.hardware.driver import MotorLink
+    from softpend.hardware.estimator import RigStateEstimator
+    from softpend.io.samplelog import SampleLog
+    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
+    from softpend.vision.camera import DEFAULT_MARKERS_M
+    from softpend.vision.tip_source import FrameTracker, open_tip_source
+
+    out.mkdir(parents=True, exist_ok=True)
+    estimator = RigStateEstimator(task, estimator_config)
+    source = None
+    if not args.no_camera:
+        markers = DEFAULT_MARKERS_M
+        if args.markers:
+            text = args.markers
+            raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text,
+                                                                                         MAX_CALIBRATION_BYTES)
+            markers = points_array("--markers", raw, 3, 6).tolist()
+        calibration = AffineCalibration.load(args.calibration) if args.calibration else None
+        source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0,
+                                 frame_tracker=FrameTracker(calibration=calibration, markers_m=markers))
+    metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
+    try:
+        if source is not None:
+            source.start()
+        with MotorLink(args.port, torque_limit_nm=task.torque_limit_nm) as link, \
+                SampleLog(out / "motor_log.csv", rig_control_columns(estimator.n), metadata=metadata) as log, \
+                SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
+            result = run_closed_loop(link, controller, estimator, args.duration, tip_source=source, log=log,
+                                     camera_log=camera_log, progress=progress)
+    finally:
+        if source is not None:
+            source.close()
+    return result.summary()

@@ -1,0 +1,443 @@
+"""State estimation on the rig: the joint state and the report's observed variables from encoder and camera.
+
+The rig measures two things, neither of them the state a controller was designed on:
+
+* the **encoder** (every STATE frame, 100 Hz): the hub angle quantised to ``2 pi / counts_per_rev`` and the
+  device's hub rate, a few milliseconds old;
+* the **camera** (30-120 frames/s): the tip position relative to the hub, tens of milliseconds late (exposure,
+  read-out, tracking), noisy, and sometimes lost (the tracker finds no dot, a frame is dropped, the camera
+  stalls).
+
+The controllers of the project want the full joint state ``(q, q_dot)`` of the PRB chain (LQR, the energy
+swing-up on the chain's energy) or the report's observed variables *and their rates*
+(:class:`~softpend.plant.Observation`: the RL agents, PILCO, the observation LQR).  :class:`RigStateEstimator`
+provides both from one estimate.
+
+Method: an extended Kalman filter whose prediction is the plant model itself
+-------------------------------------------------------------------------------
+The state is ``x = [q, q_dot]`` of the PRB model of the rig's rod (:meth:`softpend.task.Task.make_plant`).
+
+* **Prediction** steps the nonlinear model (the Exudyn PRB chain) one control step with the torque the
+  device reports it applied; the covariance goes through the Jacobian of that step (the trapezoidal map
+  ``F = (I - A dt/2)^-1 (I + A dt/2)``, the linear part of the model's implicit integrator) with
+  ``A`` from the model linearised *at the current estimate* (Exudyn's ``ComputeLinearizedSystem``), plus
+  process noise for an uncertain torque and unmodelled accelerations of every coordinate.
+* **Encoder correction** every STATE frame: hub angle (quantisation noise ``step / sqrt(12)``) and hub rate.
+* **Camera correction** at the frame's *capture* time: the filter keeps its recent history (estimate,
+  covariance, torque, encoder sample of every step); a frame captured at ``tau`` corrects the stored step
+  nearest ``tau`` (the measured tip moved to that step's time with the estimated tip velocity), and the
+  model is run again from there to now through the stored torques and encoder samples.  This is the
+  delay compensation: a late frame is used as what it is, a view of the past, instead of being mixed into
+  the present as if it were current.
+* **Actuation lead**: a torque commanded after STATE ``k`` takes effect at the device's next tick, so the
+  controller is handed the model's prediction one step ahead (``lead_steps``) with the torque already in
+  force -- the timing the controller had in simulation.
+* **Bounded blindness**: a frame that the tracker lost, or that fails the innovation gate
+  (``gate_sigma`` standard deviations: a reflection, a wrong blob), corrects nothing; the model bridges the
+  gap.  :attr:`RigStateEstimator.blind_s` is the time since the last frame that did correct, and the loop
+  stops the motor when it exceeds ``max_blind_s``.
+
+Why this and not a fixed-gain observer or a linear Kalman filter: a filter linearised about one operating
+point (upright, say) is wrong for a swing-up that visits every angle, and a hand-tuned predictor has no
+principled way to split a tip error between the four bending angles and their rates.  Re-linearising the
+model at the estimate each step costs a few tenths of a millisecond (the Exudyn model steps in 0.05 ms),
+the covariance weights the camera against the model and the encoder by their real accuracies, and the
+same machinery that propagates the estimate also replays it after a late frame.  The price is that the
+estimate is only as good as the model: on a rod whose parameters differ from the model's, the correction
+pulls the state back at every frame, and between frames the error grows with the mismatch.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from softpend.checks import int_at_least, non_negative, positive
+from softpend.plant import Observation, SimulationDiverged
+
+__all__ = ["DeviceClock", "Estimate", "EstimatorConfig", "RigStateEstimator"]
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Noise levels and limits of :class:`RigStateEstimator` (SI units).
+
+    Parameters
+    ----------
+    counts_per_rev : int
+        Encoder resolution; the hub-angle noise is the quantisation step over ``sqrt(12)``.
+    hub_rate_std_rad_s : float or None
+        Noise of the device's hub rate [rad/s]; None ignores the reported rate.
+    tip_std_m : float
+        Noise of a camera tip position [m] (per axis).
+    torque_std_nm : float
+        Uncertainty of the applied torque (process noise) [N m].
+    accel_std_rad_s2 : float
+        Unmodelled acceleration of every coordinate, as a white-noise density [rad/s^2/sqrt(Hz)].
+    initial_bend_std_rad, initial_rate_std_rad_s : float
+        Prior uncertainty of the bending angles [rad] and of all rates [rad/s] at :meth:`reset`.
+    max_blind_s : float
+        Longest time without a camera correction the estimate is trusted [s].
+    history_s : float
+        How far back a late frame may reach [s] (older frames are discarded).
+    gate_sigma : float
+        Innovation gate: a frame further than this many standard deviations from the prediction is refused.
+    lead_steps : int
+        Steps of prediction ahead for the actuation delay (0: the estimate at the last encoder sample).
+    """
+
+    counts_per_rev: int = 4096
+    hub_rate_std_rad_s: Optional[float] = 0.02
+    tip_std_m: float = 0.002
+    torque_std_nm: float = 0.003
+    accel_std_rad_s2: float = 0.5
+    initial_bend_std_rad: float = 0.03
+    initial_rate_std_rad_s: float = 0.5
+    max_blind_s: float = 0.3
+    history_s: float = 0.3
+    gate_sigma: float = 6.0
+    lead_steps: int = 1
+
+    def __post_init__(self) -> None:
+        int_at_least("counts_per_rev", self.counts_per_rev, 4)
+        if self.hub_rate_std_rad_s is not None:
+            positive("hub_rate_std_rad_s", self.hub_rate_std_rad_s)
+        for name in ("tip_std_m", "max_blind_s", "history_s", "gate_sigma"):
+            positive(name, getattr(self, name))
+        for name in ("torque_std_nm", "accel_std_rad_s2", "initial_bend_std_rad", "initial_rate_std_rad_s"):
+            non_negative(name, getattr(self, name))
+        int_at_least("lead_steps", self.lead_steps, 0)
+
+    @property
+    def encoder_std_rad(self) -> float:
+        """Quantisation noise of the hub angle, ``2 pi / counts_per_rev / sqrt(12)`` [rad]."""
+        return 2 * math.pi / self.counts_per_rev / math.sqrt(12.0)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What the estimator hands a controller.
+
+    Attributes
+    ----------
+    time_s : float
+        Time the estimate is for [s] (the last encoder sample plus the lead).
+    q, q_dot : ndarray
+        Joint state of the PRB model (hub angle unwrapped) [rad, rad/s].
+    observation : Observation
+        The report's observed variables and their rates for that state.
+    tip_std_m : float
+        Standard deviation of the estimated tip position (root of the mean of the two variances) [m].
+    blind_s : float
+        Time since the last camera correction [s].
+    """
+
+    time_s: float
+    q: np.ndarray
+    q_dot: np.ndarray
+    observation: Observation
+    tip_std_m: float
+    blind_s: float
+
+
+@dataclass
+class _Step:
+    time_s: float
+    x: np.ndarray
+    p: np.ndarray
+    torque_nm: float  # applied from time_s on
+    phi_rad: float
+    phi_dot_rad_s: float
+    tips: list = field(default_factory=list)  # (capture_time_s, x_m, y_m) applied at this step
+
+
+class DeviceClock:
+    """Map host time (``time.monotonic()``) to device time from the STATE stream.
+
+    ``host - device`` of a STATE frame is the clock offset plus the frame's delay; the smallest value over
+    the last ``window`` frames, less the one-way link latency (half a HEARTBEAT round trip), is the offset.
+
+    Parameters
+    ----------
+    one_way_latency_s : float
+        Link latency from the device to the host [s].
+    window : int
+        Frames the minimum is taken over (bounds the effect of clock drift).
+    """
+
+    def __init__(self, one_way_latency_s: float = 0.0, window: int = 500) -> None:
+        self.one_way_latency_s = non_negative("one_way_latency_s", one_way_latency_s)
+        self._delays: collections.deque[float] = collections.deque(maxlen=int_at_least("window", window, 1))
+        self._offset: Optional[float] = None
+
+    def observe(self, host_time_s: float, device_time_s: float) -> None:
+        value = host_time_s - device_time_s
+        full = len(self._delays) == self._delays.maxlen
+        dropped = self._delays[0] if full else None
+        self._delays.append(value)
+        if self._offset is None or value < self._offset or dropped == self._offset:
+            self._offset = min(self._delays)
+
+    @property
+    def offset_s(self) -> float:
+        """Host minus device clock [s] (NaN before the first frame)."""
+        return math.nan if self._offset is None else self._offset - self.one_way_latency_s
+
+    def to_device(self, host_time_s: float) -> float:
+        return host_time_s - self.offset_s
+
+
+class RigStateEstimator:
+    """Extended Kalman filter on the PRB model with delay-compensated camera corrections (module docstring).
+
+    Parameters
+    ----------
+    task : Task
+        The rig's plant model (PRB chain of ``task.rod``, step ``task.dt_s``).
+    config : EstimatorConfig, optional
+        Noise levels and limits.
+
+    Times are device time in seconds (any origin, the same for encoder and camera; see :class:`DeviceClock`).
+    """
+
+    def __init__(self, task, config: Optional[EstimatorConfig] = None) -> None:
+        if task.plant != "prb":
+            task = task.replace(plant="prb")  # the model is the PRB chain of the same rod
+        self.task = task
+        self.config = config if config is not None else EstimatorConfig()
+        self.model = task.make_plant()
+        self.n = self.model.n_coordinates
+        self.dt_s = float(task.dt_s)
+        self._history: collections.deque[_Step] = collections.deque()
+        self._last_tip_time_s = -math.inf
+        self.tips_accepted = 0
+        self.tips_refused = 0
+        self.tips_too_old = 0
+        self.tips_deferred = 0
+        self._pending_tips: list[tuple[float, float, float]] = []
+        self.encoder_gaps = 0
+        cfg = self.config
+        h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * self.n))
+        h[0, 0] = 1.0
+        noise = [cfg.encoder_std_rad ** 2]
+        if cfg.hub_rate_std_rad_s is not None:
+            h[1, self.n] = 1.0
+            noise.append(cfg.hub_rate_std_rad_s ** 2)
+        self._h_encoder = h
+        self._r_encoder = np.diag(noise)
+        self._r_tip = np.eye(2) * cfg.tip_std_m ** 2
+        self._started = False
+
+    # ------------------------------------------------------------------ set-up
+    def reset(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float = 0.0,
+              q: Optional[np.ndarray] = None, q_dot: Optional[np.ndarray] = None) -> None:
+        """Start from the straight rod at the measured hub angle and rate (or from ``(q, q_dot)``), with the
+        prior uncertainty of the config; ``torque_nm`` is the torque applied from ``time_s`` on."""
+        cfg = self.config
+        n = self.n
+        q0 = np.zeros(n) if q is None else np.asarray(q, dtype=float).copy()
+        qd0 = np.zeros(n) if q_dot is None else np.asarray(q_dot, dtype=float).copy()
+        if q is None:
+            q0[0] = phi_rad
+        if q_dot is None:
+            qd0[0] = phi_dot_rad_s
+        variances = np.concatenate([[cfg.encoder_std_rad ** 2], np.full(n - 1, cfg.initial_bend_std_rad ** 2),
+                                    np.full(n, cfg.initial_rate_std_rad_s ** 2)])
+        self._history.clear()
+        self._pending_tips.clear()
+        self._history.append(_Step(float(time_s), np.concatenate([q0, qd0]), np.diag(variances), float(torque_nm),
+                                   float(phi_rad), float(phi_dot_rad_s)))
+        self._last_tip_time_s = float(time_s)
+        self._started = True
+
+    @property
+    def started(self) -> bool:
+        return self._started
+
+    @property
+    def time_s(self) -> float:
+        """Time of the newest encoder sample [s]."""
+        self._require_started()
+        return self._history[-1].time_s
+
+    @property
+    def blind_s(self) -> float:
+        """Time from the capture of the last frame that corrected the estimate to the newest encoder sample [s]."""
+        return self.time_s - self._last_tip_time_s
+
+    @property
+    def is_blind(self) -> bool:
+        """The camera has not corrected the estimate for more than ``max_blind_s``."""
+        return self.blind_s > self.config.max_blind_s
+
+    def _require_started(self) -> None:
+        if not self._started:
+            raise ValueError("estimator: call reset() with the first encoder sample first")
+
+    # ------------------------------------------------------------------ filter steps
+    def _predict(self, x: np.ndarray, p: np.ndarray, torque_nm: float) -> tuple[np.ndarray, np.ndarray]:
+        n, dt, cfg = self.n, self.dt_s, self.config
+        model = self.model
+        model.reset(x[:n], x[n:])
+        mass, stiffness, damping = model.linearized_matrices()
+        model.step(torque_nm)
+        q, qd = model.joint_state()
+        x_next = np.concatenate([q, qd])
+        if not np.all(np.isfinite(x_next)):
+            raise SimulationDiverged("estimator model state is not finite")
+        m_inv = np.linalg.inv(mass)
+        a = np.zeros((2 * n, 2 * n))
+        a[:n, n:] = np.eye(n)
+        a[n:, :n] = -m_inv @ stiffness
+        a[n:, n:] = -m_inv @ damping
+        # the step's Jacobian by the trapezoidal (bilinear) map, the linear part of the model's own implicit
+        # integrator: exact enough for the swing and stable for the stiff bending modes (omega dt ~ 5)
+        eye = np.eye(2 * n)
+        f = np.linalg.solve(eye - 0.5 * dt * a, eye + 0.5 * dt * a)
+        b = m_inv[:, 0]
+        sigma = cfg.accel_std_rad_s2 ** 2 * np.eye(n) + cfg.torque_std_nm ** 2 / dt * np.outer(b, b)
+        q_noise = np.block([[dt ** 3 / 3 * sigma, dt ** 2 / 2 * sigma], [dt ** 2 / 2 * sigma, dt * sigma]])
+        p_next = f @ p @ f.T + q_noise
+        return x_next, 0.5 * (p_next + p_next.T)
+
+    @staticmethod
+    def _update(x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: np.ndarray, r: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        s = h @ p @ h.T + r
+        gain = np.linalg.solve(s, h @ p).T
+        x = x + gain @ innovation
+        i_kh = np.eye(len(x)) - gain @ h
+        p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form: stays symmetric positive definite
+        return x, p
+
+    def _encoder_update(self, x: np.ndarray, p: np.ndarray, phi_rad: float, phi_dot_rad_s: float):
+        z = [phi_rad] if self.config.hub_rate_std_rad_s is None else [phi_rad, phi_dot_rad_s]
+        innovation = np.asarray(z) - self._h_encoder @ x
+        return self._update(x, p, self._h_encoder, innovation, self._r_encoder)
+
+    def _tip_model(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Tip position [m], its velocity [m/s] and the Jacobian ``d tip / d x`` ``(2, 2n)`` at ``x``."""
+        n = self.n
+        q = x[:n]
+        angles = np.cumsum(q)[1:]  # absolute angle of each link from upright
+        rates = np.cumsum(x[n:])[1:]
+        length = self.task.rod.link_length_m
+        s, c = np.sin(angles), np.cos(angles)
+        tip = np.array([-length * s.sum(), length * c.sum()])
+        velocity = np.array([-length * (c * rates).sum(), -length * (s * rates).sum()])
+        jac = np.zeros((2, 2 * n))
+        tail_c = np.cumsum(c[::-1])[::-1]  # sum over links k >= i
+        tail_s = np.cumsum(s[::-1])[::-1]
+        jac[0, 0], jac[1, 0] = -length * tail_c[0], -length * tail_s[0]
+        jac[0, 1:n] = -length * tail_c
+        jac[1, 1:n] = -length * tail_s
+        return tip, velocity, jac
+
+    def _tip_innovation(self, step: _Step, x: np.ndarray, capture_time_s: float, x_m: float, y_m: float):
+        tip, velocity, jac = self._tip_model(x)
+        measured = np.array([x_m, y_m]) + velocity * (step.time_s - capture_time_s)
+        return measured - tip, jac
+
+    def _replay(self, start: int) -> None:
+        """Recompute the steps after index ``start`` from its (corrected) estimate."""
+        history = self._history
+        for i in range(start + 1, len(history)):
+            previous, step = history[i - 1], history[i]
+            x, p = previous.x, previous.p
+            for _ in range(max(1, int(round((step.time_s - previous.time_s) / self.dt_s)))):
+                x, p = self._predict(x, p, previous.torque_nm)
+            x, p = self._encoder_update(x, p, step.phi_rad, step.phi_dot_rad_s)
+            for capture, tip_x, tip_y in step.tips:
+                innovation, jac = self._tip_innovation(step, x, capture, tip_x, tip_y)
+                x, p = self._update(x, p, jac, innovation, self._r_tip)
+            step.x, step.p = x, p
+
+    # ------------------------------------------------------------------ measurements
+    def update_encoder(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float) -> None:
+        """A STATE frame: hub angle [rad] and rate [rad/s] sampled at ``time_s``, and the torque the device
+        applies from then on [N m].  The model is advanced from the previous sample (several steps if frames
+        were lost in between, holding the last known torque)."""
+        self._require_started()
+        last = self._history[-1]
+        steps = int(round((time_s - last.time_s) / self.dt_s))
+        if steps < 1:
+            return  # a repeated or out-of-order frame
+        self.encoder_gaps += int(steps > 1)
+        x, p = last.x, last.p
+        for _ in range(steps):
+            x, p = self._predict(x, p, last.torque_nm)
+        x, p = self._encoder_update(x, p, phi_rad, phi_dot_rad_s)
+        self._history.append(_Step(float(time_s), x, p, float(torque_nm), float(phi_rad), float(phi_dot_rad_s)))
+        while len(self._history) > 2 and self._history[1].time_s < time_s - self.config.history_s:
+            self._history.popleft()
+        if self._pending_tips:
+            due = [tip for tip in self._pending_tips if tip[0] <= time_s + self.dt_s / 2]
+            self._pending_tips = [tip for tip in self._pending_tips if tip[0] > time_s + self.dt_s / 2]
+            for tip in due:
+                self._apply_tip(*tip)
+
+    def update_tip(self, capture_time_s: float, x_m: float, y_m: float) -> bool:
+        """A camera frame captured at ``capture_time_s`` (device time) showing the tip at ``(x_m, y_m)`` from
+        the hub [m]: correct the step nearest the capture and replay the model to now.  A frame captured after
+        the newest encoder sample waits until the encoder reaches its capture time.  Returns whether the frame
+        was used or queued (False: not finite, older than the history, or refused by the innovation gate)."""
+        self._require_started()
+        if not (math.isfinite(x_m) and math.isfinite(y_m) and math.isfinite(capture_time_s)):
+            return False
+        history = self._history
+        if capture_time_s < history[0].time_s - self.dt_s / 2:
+            self.tips_too_old += 1
+            return False
+        if capture_time_s > history[-1].time_s + self.dt_s / 2:
+            if capture_time_s > history[-1].time_s + self.config.history_s:
+                return False  # far in the future: a clock error, not a frame to wait for
+            self._pending_tips.append((float(capture_time_s), float(x_m), float(y_m)))
+            self.tips_deferred += 1
+            return True
+        return self._apply_tip(capture_time_s, x_m, y_m)
+
+    def _apply_tip(self, capture_time_s: float, x_m: float, y_m: float) -> bool:
+        history = self._history
+        times = np.fromiter((s.time_s for s in history), float, len(history))
+        index = int(np.argmin(np.abs(times - capture_time_s)))
+        step = history[index]
+        innovation, jac = self._tip_innovation(step, step.x, capture_time_s, x_m, y_m)
+        s = jac @ step.p @ jac.T + self._r_tip
+        distance2 = float(innovation @ np.linalg.solve(s, innovation))
+        if distance2 > self.config.gate_sigma ** 2:
+            self.tips_refused += 1
+            return False
+        step.x, step.p = self._update(step.x, step.p, jac, innovation, self._r_tip)
+        step.tips.append((float(capture_time_s), float(x_m), float(y_m)))
+        self._replay(index)
+        self.tips_accepted += 1
+        self._last_tip_time_s = max(self._last_tip_time_s, float(capture_time_s))
+        return True
+
+    # ------------------------------------------------------------------ output
+    def estimate(self, lead_steps: Optional[int] = None) -> Estimate:
+        """The estimate at the newest encoder sample, predicted ``lead_steps`` ahead (default: the config's)
+        with the torque in force."""
+        self._require_started()
+        lead = self.config.lead_steps if lead_steps is None else int_at_least("lead_steps", lead_steps, 0)
+        last = self._history[-1]
+        n = self.n
+        q, qd = last.x[:n].copy(), last.x[n:].copy()
+        if lead:
+            self.model.reset(q, qd)
+            for _ in range(lead):
+                self.model.step(last.torque_nm)
+            q, qd = self.model.joint_state()
+        _, _, jac = self._tip_model(last.x)
+        tip_cov = jac @ last.p @ jac.T
+        return Estimate(last.time_s + lead * self.dt_s, q, qd, self.model.observation_from_state(q, qd),
+                        float(math.sqrt(max(np.trace(tip_cov) / 2, 0.0))), self.blind_s)
+
+    def stats(self) -> dict[str, float]:
+        return {"tips_accepted": float(self.tips_accepted), "tips_refused": float(self.tips_refused),
+                "tips_too_old": float(self.tips_too_old), "tips_deferred": float(self.tips_deferred),
+                "encoder_gaps": float(self.encoder_gaps)}

@@ -1,0 +1,136 @@
+"""Live tip sources: the synthetic camera filming a live scene (time stamps, accuracy, faults), a video file
+replayed as a camera, ``cv2.VideoCapture`` on a file, and ``softpend track --camera``.
+
+Timing is checked loosely (the CI machine is shared): frame counts within wide bounds, latencies at least
+what was configured."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from softpend.cli import main
+from softpend.io.samplelog import read_sample_log
+from softpend.task import Task
+from softpend.vision.accuracy import babbling_trajectory
+from softpend.vision.camera import CameraEffects, CameraModel, SyntheticCamera, render_video
+from softpend.vision.tip_source import (CameraFaults, CaptureTipSource, PlantScene, SyntheticLiveCamera, TipMeasurement,
+                                        VideoFileTipSource, open_tip_source)
+
+#: A quarter-size camera: the same optics at 320x240 (cheaper to render on a loaded machine).
+SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
+
+
+def _collect(source, seconds: float) -> list[TipMeasurement]:
+    out: list[TipMeasurement] = []
+    end = time.monotonic() + seconds
+    with source:
+        while time.monotonic() < end:
+            out += source.poll()
+            time.sleep(0.005)
+        out += source.poll()
+    return out
+
+
+def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
+    task = Task()
+    scene = PlantScene(task, *task.tilt_state(2.0))  # the rod falls and swings: a fast-moving tip
+    camera = SyntheticLiveCamera(scene, fps=60, latency_s=0.02, model=SMALL, effects=CameraEffects.rig(),
+                                 faults=CameraFaults(occlusions_s=((0.4, 0.6),)))
+    measurements = _collect(camera, 1.2)
+    assert 20 <= len(measurements) <= 80  # ~70 at 60 frames/s; fewer on a loaded machine, never more
+    captures = np.array([m.capture_time_s for m in measurements])
+    assert np.all(np.diff(captures) > 0)
+    assert all(m.age_s >= 0.02 for m in measurements)  # never delivered before its latency
+    seen = [m for m in measurements if not m.lost]
+    errors = [np.hypot(*(scene.pose_at(m.capture_time_s)[0][-1] - (m.x_m, m.y_m))) for m in seen]
+    # the tip moves up to ~2 m/s: a stamp 10 ms off would show as ~2 cm; blur and noise leave ~1 mm
+    assert np.median(errors) < 0.002 and max(errors) < 0.006
+    elapsed = captures - camera.first_frame_time_s
+    lost = np.array([m.lost for m in measurements])
+    inside = (elapsed > 0.41) & (elapsed < 0.59)
+    assert inside.any() and lost[inside].all()
+    assert not lost[(elapsed < 0.39) | (elapsed > 0.61)].any()
+    assert camera.stats()["frames_occluded"] == lost.sum()
+
+
+def test_synthetic_live_camera_stall_stops_delivery_and_drops_are_counted():
+    task = Task()
+    scene = PlantScene(task)
+    camera = SyntheticLiveCamera(scene, fps=30, latency_s=0.0, model=SMALL,
+                                 faults=CameraFaults(stall_after_s=0.3, drop_probability=0.3, seed=1))
+    measurements = _collect(camera, 0.9)
+    elapsed = np.array([m.capture_time_s for m in measurements]) - camera.first_frame_time_s
+    assert len(measurements) >= 2 and np.all(elapsed < 0.3)
+    stats = camera.stats()
+    assert stats["frames_stalled"] >= 5 and stats["frames_dropped"] >= 1
+
+
+def test_camera_faults_reject_bad_values():
+    with pytest.raises(ValueError, match="drop_probability"):
+        CameraFaults(drop_probability=1.5)
+    with pytest.raises(ValueError, match="occlusions_s"):
+        CameraFaults(occlusions_s=((0.5, 0.2),))
+    with pytest.raises(ValueError, match="stall_after_s"):
+        CameraFaults(stall_after_s=-1.0)
+    with pytest.raises(ValueError, match="fps"):
+        SyntheticLiveCamera(PlantScene(Task()), fps=0.0)
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    path = tmp_path_factory.mktemp("clip") / "clip.avi"
+    times, points, hub = babbling_trajectory(100)
+    rendered = render_video(path, SyntheticCamera(), times, points, hub, fps=50.0)
+    return path, rendered
+
+
+def test_video_file_and_capture_sources_agree_with_the_offline_tracker(clip, tmp_path):
+    path, rendered = clip
+    assert main(["track", str(path), "--out", str(tmp_path / "offline.csv")]) == 0
+    offline = read_sample_log(tmp_path / "offline.csv")
+    replay = VideoFileTipSource(path, realtime=False)
+    replayed = []
+    with replay:
+        while not replay.finished:
+            replayed += replay.poll()
+            time.sleep(0.005)
+    capture = open_tip_source(str(path))
+    assert isinstance(capture, CaptureTipSource)
+    captured = []
+    with capture:
+        while not capture.finished:
+            captured += capture.poll()
+            time.sleep(0.005)
+    n = len(rendered.timestamps_s)
+    assert len(replayed) == len(captured) == len(offline) == n
+    np.testing.assert_allclose([m.x_m for m in replayed], offline["x_m"], atol=1e-12)
+    np.testing.assert_allclose([m.y_m for m in captured], offline["y_m"], atol=1e-12)
+    # replayed frames keep the spacing of the sidecar's timestamps
+    stamps = np.array([m.capture_time_s for m in replayed])
+    np.testing.assert_allclose(np.diff(stamps), np.diff(rendered.timestamps_s), atol=1e-9)
+
+
+def test_track_command_on_a_live_camera(clip, tmp_path):
+    path, rendered = clip
+    out = tmp_path / "live.csv"
+    assert main(["track", "--camera", str(path), "--out", str(out)]) == 0
+    live = read_sample_log(out)
+    assert len(live) == len(rendered.timestamps_s) and not live["lost"].any()
+    assert np.all(np.diff(live["camera_time_s"]) >= 0)
+    assert np.isfinite(live["hub_angle_rad"]).mean() > 0.9  # the hub marker is tracked too
+    assert main(["track", "--out", str(tmp_path / "x.csv")]) == 2  # neither a video nor a camera
+    assert main(["track", str(path), "--camera", "0", "--out", str(tmp_path / "x.csv")]) == 2  # both
+    assert main(["track", "--camera", str(tmp_path / "missing.avi"), "--out", str(tmp_path / "x.csv")]) == 2
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_open_tip_source_rejects_empty_names():
+    with pytest.raises(ValueError, match="camera"):
+        open_tip_source("  ")
+    with pytest.raises(ValueError, match="device"):
+        CaptureTipSource(True)
+    assert math.isnan(TipMeasurement(math.nan, math.nan, True).theta_rad)

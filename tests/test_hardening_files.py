@@ -23,6 +23,7 @@ from softpend.rl.agent_files import AgentFileError, load_agent_file, load_replay
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import agent_class, load_agent, train_dqn
 from softpend.rl.training_env import make_training_env
+from support import one_line_error
 
 TINY = dict(episode_s=0.5, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=0.5)
 CONFIG = DQNConfig(learning_starts=10, **TINY)
@@ -65,14 +66,6 @@ def rewrite_zip(path: Path, change) -> None:
     with zipfile.ZipFile(path, "w") as archive:
         for name, data in members:
             archive.writestr(name, change(name, data))
-
-
-def one_line_error(capsys, *words: str) -> str:
-    err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    for word in words:
-        assert word in err, err
-    return err
 
 
 # ------------------------------------------------------------------------------------------------ security

@@ -14,16 +14,9 @@ import numpy as np
 import pytest
 
 from softpend.cli import main
+from support import one_line_error
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def one_line_error(capsys, *words: str) -> str:
-    err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    for word in words:
-        assert word in err, err
-    return err
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,7 @@ import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 
+from softpend.io.arrays import read_npz
 from softpend.checks import NonFiniteError
 from softpend.io.outputs import atomic_write
 from softpend.rl.config import DQNConfig
@@ -238,13 +239,7 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
         If the file is not such a file or does not fit ``buffer`` (arrays, shapes, dtypes, position).
     """
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no replay buffer at {path}")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            saved = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, MemoryError, zlib.error, NotImplementedError) as exc:
-        raise AgentFileError(f"{path}: not a replay buffer file ({type(exc).__name__}: {exc})") from None
+    saved = read_npz(path, "replay buffer file", AgentFileError)
     expected = set()
     for prefix in _parts(buffer):
         expected.update(prefix + name for name in _BUFFER_ARRAYS + ("pos", "full"))

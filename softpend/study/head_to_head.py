@@ -16,7 +16,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from softpend.study.parallel import run_in_processes
+from softpend.study.sweep import run_jobs
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 
 __all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "plot_predicted_and_real_cost",
@@ -24,12 +24,12 @@ __all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head
 
 
 def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
-               progress: bool = True, workers: Optional[int] = None) -> list[PilcoResult]:
+               progress: bool = True, workers: Optional[int] = None, backend: Optional[str] = None) -> list[PilcoResult]:
     """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-seed<k>``.
 
     A folder is reused when it holds a finished run with the same config (the seed replaced); the other seeds
     run in parallel, up to ``workers`` at a time (default: one per CPU core, see
-    :func:`softpend.study.parallel.default_workers`), each with one torch thread.
+    :func:`softpend.study.sweep.default_workers`), each with one torch thread.
     """
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
@@ -40,7 +40,7 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
         if folder.name not in names and _saved_run(folder, seeded) is None:
             jobs.append((seeded, folder))
             names.append(folder.name)
-    run_in_processes(_run_and_save, jobs, names, workers, progress, desc="PILCO runs")
+    run_jobs(_run_and_save, jobs, names, workers, progress, desc="PILCO runs", backend=backend)
     return [PilcoResult.load(Path(runs_root) / f"pilco-seed{seed}") for seed in seeds]
 
 
@@ -56,7 +56,7 @@ def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
 
 
 def _run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
-    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.parallel.run_in_processes`)."""
+    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
     run_pilco(config, progress=progress).save(folder)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from softpend.study.presets import RL_BOOK, TASK
 from softpend.task import Task
-from softpend.study.parallel import run_in_processes
+from softpend.study.sweep import run_jobs
 from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
@@ -32,17 +32,18 @@ def train_seeds(
     root: Path | str = "runs/rl",
     progress: bool = True,
     workers: Optional[int] = None,
+    backend: Optional[str] = None,
 ) -> list[TrainingLog]:
     """Train (or reuse) one run per seed; returns their logs in seed order.
 
     Runs that need training are trained in parallel, up to ``workers`` at a time (default: one per CPU core,
-    see :func:`softpend.study.parallel.default_workers`).
+    see :func:`softpend.study.sweep.default_workers`).
     """
-    return _train_runs([(algo, config, seeds, episodes)], root, progress, workers)[0]
+    return _train_runs([(algo, config, seeds, episodes)], root, progress, workers, backend)[0]
 
 
 def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str, progress: bool,
-                workers: Optional[int]) -> list[list[TrainingLog]]:
+                workers: Optional[int], backend: Optional[str] = None) -> list[list[TrainingLog]]:
     """Train what ``specs`` (``(algo, config, seeds, episodes)`` each) need, in one pool; logs per spec."""
     jobs, names = [], []
     for algo, config, seeds, episodes in specs:
@@ -68,15 +69,15 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
             names.append(run_dir.name)
     # longest first: a DQN-MBPO run costs about 2.5 DQN runs of twice its episodes
     order = sorted(range(len(jobs)), key=lambda i: (jobs[i][0] != "mbpo", i))
-    run_in_processes(_train_run, [jobs[i] for i in order], [names[i] for i in order], workers, progress,
-                     desc="RL runs")
+    run_jobs(_train_run, [jobs[i] for i in order], [names[i] for i in order], workers, progress,
+             desc="RL runs", backend=backend)
     return [[TrainingLog.load(run_folder(root, algo, int(seed)) / "log.json") for seed in seeds]
             for algo, _, seeds, _ in specs]
 
 
 def _train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
                progress: bool = True) -> None:
-    """Train one run into ``run_dir`` (a job of :func:`softpend.study.parallel.run_in_processes`)."""
+    """Train one run into ``run_dir`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
     from softpend.rl.dqn import train_dqn
     from softpend.rl.mbpo import train_mbpo
 
@@ -151,6 +152,7 @@ METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
 
 def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
                 progress: bool = True, plant: str = "prb", workers: Optional[int] = None,
+                backend: Optional[str] = None,
                 **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).
 
@@ -161,7 +163,7 @@ def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], run
     root = plant_runs_root(runs_root, plant)
     dqn_logs, mbpo_logs = _train_runs(
         [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)],
-        root, progress, workers,
+        root, progress, workers, backend,
     )
     return {METHOD_NAMES["dqn"]: dqn_logs, METHOD_NAMES["mbpo"]: mbpo_logs}
 

@@ -50,6 +50,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.sysid.variables import POSITION_NAMES, velocity_name
@@ -461,15 +462,7 @@ def load_dataset(
         dtype or non-finite values, bad or mismatched metadata); the message says what is wrong.
     """
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"dataset file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            members = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, NotImplementedError, zlib.error) as exc:
-        raise ValueError(f"{path} is not a readable dataset file: {type(exc).__name__}: {exc}") from None
-    except MemoryError:
-        raise ValueError(f"{path}: its arrays do not fit in memory") from None
+    members = read_npz(path, "dataset file")
     if "metadata" not in members:
         raise ValueError(f"{path} has no metadata member (not a softpend dataset)")
     raw_metadata = members.pop("metadata")

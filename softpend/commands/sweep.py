@@ -1,0 +1,105 @@
+"""``softpend sweep``: train every method over many seeds on a parallel engine and summarise the runs.
+
+Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-seed<k>``,
+``pilco-seed<k>``), is reused when finished with the same settings and resumed when shorter, so a sweep that
+was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
+(``--backend loky|ray|dask``), where a worker that dies is retried and finished runs are kept.  The
+settings are the book's (:mod:`softpend.study.presets`).  With ``--fresh`` every run's final (and for RL
+selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+METHODS = ("dqn", "mbpo", "pilco")
+
+
+def seed_list(text: str) -> list[int]:
+    """``"0-9"``, ``"0,3,5"`` or a mix (``"0-2,7"``) as a sorted list of distinct seeds >= 0."""
+    seeds: set[int] = set()
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part:
+                low, high = (int(v) for v in part.split("-", 1))
+                if high < low:
+                    raise ValueError
+                seeds.update(range(low, high + 1))
+            else:
+                seeds.add(int(part))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}") from None
+    if not seeds or min(seeds) < 0 or len(seeds) > 10_000:
+        raise argparse.ArgumentTypeError(f"seeds must be 1 to 10000 integers >= 0, got {text!r}")
+    return sorted(seeds)
+
+
+def method_list(text: str) -> list[str]:
+    """Comma-separated method names among :data:`METHODS`."""
+    methods = [m.strip() for m in text.split(",") if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if not methods or unknown:
+        raise argparse.ArgumentTypeError(f"methods must be among {list(METHODS)}, got {text!r}")
+    return list(dict.fromkeys(methods))
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from softpend.study.sweep import BACKENDS
+
+    parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
+    parser.add_argument("--methods", type=method_list, default=list(METHODS), help="comma-separated, default all")
+    parser.add_argument("--seeds", type=seed_list, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
+    parser.add_argument("--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)")
+    parser.add_argument("--workers", type=int, default=None, help="parallel runs (default $SOFTPEND_WORKERS or the CPU count)")
+    parser.add_argument("--runs-root", type=Path, default=Path("runs/sweep"), help="run folders (default runs/sweep)")
+    parser.add_argument("--episodes-dqn", type=int, default=None, help="DQN episodes per seed (default: the book's)")
+    parser.add_argument("--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)")
+    parser.add_argument("--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)")
+    parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from softpend.io.outputs import json_text
+    from softpend.study.head_to_head import pilco_runs
+    from softpend.study.presets import PILCO, RL_BOOK
+    from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
+
+    root: Path = args.runs_root
+    for name in ("episodes_dqn", "episodes_mbpo", "pilco_trials", "workers"):
+        value = getattr(args, name)
+        if value is not None and value < (0 if name == "pilco_trials" else 1):
+            raise ValueError(f"--{name.replace('_', '-')} must be at least {0 if name == 'pilco_trials' else 1}, got {value}")
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"--runs-root {root} exists and is not a folder")
+    configs = figure_configs()
+    episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
+    out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
+    rl_logs = {}
+    for algo in (m for m in args.methods if m != "pilco"):
+        logs = train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, workers=args.workers,
+                           backend=args.backend)
+        rl_logs[algo] = logs
+        out["methods"][algo] = {"episodes": episodes[algo],
+                                "runs": summary_table({algo: logs})}
+    pilco_results = []
+    if "pilco" in args.methods:
+        config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
+        pilco_results = pilco_runs(config, args.seeds, root, workers=args.workers, backend=args.backend)
+        out["methods"]["pilco"] = {"runs": [{"seed": r.config.seed, "plant_s_to_balance": r.real_seconds_to_balance,
+                                             "plant_s": r.plant_seconds_total, "cpu_s": r.train_cpu_s}
+                                            for r in pilco_results]}
+    if args.fresh:
+        from softpend.study.fresh_starts import aggregate_fresh_start_rows, pilco_fresh_start_rows, rl_fresh_start_rows
+
+        rows = pilco_fresh_start_rows(pilco_results) if pilco_results else []
+        if rl_logs:
+            rows += rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs))
+        out["fresh_starts"] = rows
+        out["fresh_start_summary"] = aggregate_fresh_start_rows(rows)
+    print(json_text(out, indent=2))
+    return 0

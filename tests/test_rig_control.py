@@ -23,7 +23,7 @@ from softpend.vision.tip_source import CameraFaults
 
 SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
 TASK = Task(start_noise_rad=0.0)
-UPRIGHT = RigConfig(task=TASK, initial_tilt_rad=0.1, hold_until_connected=True)
+UPRIGHT = RigConfig(task=TASK, initial_tilt_rad=0.1, hold_until_commanded=True)
 
 
 def true_theta(truth_log, task: Task = TASK) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -39,7 +39,7 @@ def true_theta(truth_log, task: Task = TASK) -> tuple[np.ndarray, np.ndarray, np
 def test_lqr_holds_the_rod_through_the_pty_with_the_camera_in_the_loop(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["rig", "control", "lqr", "--twin", "--start", "upright", "--tilt", "0.1", "--duration", "3",
-                 "--out", str(out), "--no-progress", "--seed", "3"]) == 0
+                 "--start-noise", "0", "--max-blind-ms", "600", "--out", str(out), "--no-progress", "--seed", "3"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["stop_reason"] is None
     assert summary["camera"]["frames_tracked"] >= 60  # 60 frames/s for 3 s; fewer on a loaded machine
@@ -52,8 +52,9 @@ def test_lqr_holds_the_rod_through_the_pty_with_the_camera_in_the_loop(tmp_path,
     assert motor["status"][-1] == STATUS_CODES["completed"]
     assert summary["armed_at_s"] < 0.5 and motor["commanded"][motor["time_s"] < summary["armed_at_s"]].sum() == 0
     # the estimate the controller saw follows the true tip angle (device clocks agree: the emulator's)
-    true_at = np.interp(motor["est_time_s"], time_s, theta)
-    assert np.sqrt(np.nanmean((motor["est_theta_rad"] - true_at) ** 2)) < 0.02
+    true_at = np.interp(motor["device_time_s"] + motor["est_time_s"] - motor["time_s"], time_s, theta)
+    error = motor["est_theta_rad"] - true_at
+    assert np.sqrt(np.nanmean(error ** 2)) < 0.01, np.nanmax(np.abs(error))
     camera = read_sample_log(out / "camera_log.csv")
     assert camera["accepted"].sum() == summary["estimator"]["tips_accepted"]
     assert np.all(camera["delivered_host_time_s"] - camera["capture_host_time_s"] >= 0.02)
@@ -64,12 +65,12 @@ def test_lqr_holds_the_rod_through_the_pty_with_the_camera_in_the_loop(tmp_path,
 def test_camera_lost_then_stalled_is_bridged_then_a_safe_stop(tmp_path):
     controller = LQRController.from_params(TASK.rod, TASK.dt_s)
     camera = TwinCamera(fps=60, latency_s=0.02, model=SMALL,
-                        faults=CameraFaults(occlusions_s=((0.6, 0.75),), stall_after_s=1.5))
+                        faults=CameraFaults(occlusions_s=((1.0, 1.25),), stall_after_s=2.0))
     run = run_twin_control(controller, tmp_path, 5.0, rig=UPRIGHT, camera=camera,
-                           estimator_config=EstimatorConfig(max_blind_s=0.25))
+                           estimator_config=EstimatorConfig(max_blind_s=0.5))
     result = run.result
     assert result.status == "camera_blind" and "no camera correction" in result.stop_reason
-    assert result.camera["frames_lost"] >= 5  # the occlusion: lost frames, bridged without a stop
+    assert result.camera["frames_lost"] >= 2  # the occlusion: lost frames, bridged without a stop
     motor = read_sample_log(run.motor_log)
     assert len(motor) == result.samples  # every sample processed is in the log
     assert motor["status"][-1] == STATUS_CODES["camera_blind"] and motor["command_torque_nm"][-1] == 0.0
@@ -82,10 +83,11 @@ def test_camera_lost_then_stalled_is_bridged_then_a_safe_stop(tmp_path):
     assert np.all(motor["status"][motor["time_s"] < lost_at.max() + 0.1] != STATUS_CODES["camera_blind"])
     stop_s = motor["time_s"][-1]
     last_frame = camera_log["capture_device_time_s"][-1]
-    assert stop_s - last_frame >= 0.25 and stop_s < 3.5  # the stall at 1.5 s camera time, then max_blind_s
+    assert stop_s - last_frame >= 0.5 and stop_s < 4.5  # the stall at 2 s camera time, then max_blind_s
     time_s, theta, torque = true_theta(run.truth_log)
-    held = time_s - time_s[0] < stop_s
-    assert np.max(np.abs(theta[held][50:])) < 0.3  # held through the occlusion and the blind time
+    start = motor["device_time_s"][0]
+    bridged = (time_s > start + 0.5) & (time_s <= start + lost_at.max() + 0.2)
+    assert np.max(np.abs(theta[bridged])) < 0.3, result.summary()  # held through the occlusion
     after = time_s > motor["device_time_s"][-1] + 0.05
     assert after.any() and np.all(torque[after] == 0.0)  # STOP in force
     assert json.loads((tmp_path / "summary.json").read_text())["result"]["status"] == "camera_blind"

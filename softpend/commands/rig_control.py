@@ -46,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--max-blind-ms", type=float, default=300.0,
                         help="stop when the camera has not corrected the estimate for this long [ms] (300)")
     parser.add_argument("--start", choices=("hanging", "upright"), default="hanging",
-                        help="twin: start hanging (default) or near upright (held until the host connects)")
+                        help="twin: start hanging (default) or near upright (held until the first command)")
     parser.add_argument("--tilt", type=float, default=0.1, help="twin, --start upright: initial tilt [rad] (0.1)")
     parser.add_argument("--start-noise", type=float, default=0.05,
                         help="twin: uniform start noise of the hub angle [rad] and rate [rad/s] (0.05)")
@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     if args.twin:
         rig = RigConfig(task=task, counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0,
                         seed=args.seed, initial_tilt_rad=args.tilt if args.start == "upright" else None,
-                        hold_until_connected=args.start == "upright")
+                        hold_until_commanded=args.start == "upright")
         camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
                                                         seed=args.seed)
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,

@@ -412,6 +412,7 @@ def run_twin_control(
     progress: bool = False,
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 10.0,
+    link_timeout_s: float = 1.0,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin with the synthetic camera in the loop.
 
@@ -419,7 +420,9 @@ def run_twin_control(
     with a truth log and the live pose feed, films it with the synthetic camera (``camera``; None: no camera,
     encoder and model only), waits for the camera's first frame, connects, and runs :func:`run_closed_loop`.
     Writes ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir``
-    (created; existing files of these names are replaced).
+    (created; existing files of these names are replaced).  ``link_timeout_s`` is the driver's wait for a
+    STATE frame: generous by default, because the emulator shares the host's CPUs (a starved emulator
+    process is not a broken cable).
     """
     from softpend.hardware.emulator import RigConfig, start_emulator_process
     from softpend.vision.tip_source import SyntheticLiveCamera
@@ -455,7 +458,7 @@ def run_twin_control(
                 if source.frames_tracked == 0:
                     source.poll()  # raises the camera thread's error, if any
                     raise RuntimeError(f"the twin's camera delivered no frame within {camera_wait_s} s")
-            with MotorLink(emulator.port, torque_limit_nm=rig.task.torque_limit_nm) as link, \
+            with MotorLink(emulator.port, torque_limit_nm=rig.task.torque_limit_nm, timeout_s=link_timeout_s) as link, \
                     SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log, \
                     SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
                 try:

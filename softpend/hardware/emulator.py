@@ -69,9 +69,10 @@ class RigConfig:
     initial_tilt_rad : float or None
         Start with the straight rod at rest tilted by this angle from upright [rad] (plus the start noise)
         instead of hanging (None); the encoder still reads zero at the hanging position.
-    hold_until_connected : bool
-        Hold the rod at its initial state until a host completes the handshake (a hand holding the rod
-        until the program starts), so that a start near upright is still near upright when control begins.
+    hold_until_commanded : bool
+        Hold the rod at its initial state until the first TORQUE command of a session (a hand holding the
+        rod until the controller takes over), so that a start near upright is still near upright when
+        control begins.
     """
 
     task: Task = field(default_factory=lambda: Task(start_noise_rad=0.0))
@@ -83,7 +84,7 @@ class RigConfig:
     seed: int = 0
     duration_s: Optional[float] = None
     initial_tilt_rad: Optional[float] = None
-    hold_until_connected: bool = False
+    hold_until_commanded: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.task, Task):
@@ -182,6 +183,7 @@ class RigEmulator:
             os.set_blocking(scene_fd, False)
         self._start_monotonic_s = time.monotonic()
         self.scene_records_dropped = 0
+        self._released = False
         self.ticks = 0
         self.states_sent = 0
         self.states_dropped = 0
@@ -275,7 +277,8 @@ class RigEmulator:
                 self._write_scene(now_us * 1e-6, q)
         counts = self.encoder_counts(self.plant.joint_state()[0][0])
         frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque) if emit else None
-        if self.session.session_open or not cfg.hold_until_connected:
+        self._released = self._released or self.session.last_cmd_us is not None or not cfg.hold_until_commanded
+        if self._released:  # once released, never held again (a reconnect does not freeze a moving rod)
             self.plant.step(torque)
         self.ticks += 1
         if frame is None:

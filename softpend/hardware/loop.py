@@ -18,12 +18,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Optional, Protocol
+from typing import Callable, Optional, Protocol
 
 import numpy as np
 
 from softpend.checks import positive
-from softpend.plant import Observation, wrap_angle_rad
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.io.samplelog import SampleLog
 
@@ -33,7 +32,6 @@ __all__ = [
     "RigObservation",
     "TipMeasurement",
     "TipSource",
-    "project_controller",
     "run_control_loop",
 ]
 
@@ -97,28 +95,6 @@ class RigObservation:
     def theta_rad(self) -> float:
         """Tip angle from upright (NaN without a tip measurement) [rad]."""
         return math.atan2(-self.tip_x_m, self.tip_y_m) if math.isfinite(self.tip_x_m) else math.nan
-
-    def as_observation(self) -> Observation:
-        """The plant's :class:`~softpend.plant.Observation` with what the rig measures (rates of the tip
-        and the tip rotation are not measured here and are NaN)."""
-        nan = math.nan
-        return Observation(
-            float(wrap_angle_rad(self.phi_rad)), self.theta_rad, self.tip_x_m, self.tip_y_m, nan,
-            self.phi_dot_rad_s, nan, nan, nan, nan,
-        )
-
-
-def project_controller(controller: Any) -> Callable[[RigObservation, float], float]:
-    """Adapt a project :class:`softpend.evaluation.Controller` (``(observation, q, q_dot, t)``) to the rig
-    loop.  Only the hub coordinate of the joint state is measured: ``q = [phi]``, ``q_dot = [phi_dot]``."""
-    if hasattr(controller, "reset"):
-        controller.reset()
-
-    def _call(observation: RigObservation, time_s: float) -> float:
-        return float(controller(observation.as_observation(), np.array([observation.phi_rad]),
-                                np.array([observation.phi_dot_rad_s]), time_s))
-
-    return _call
 
 
 @dataclass

@@ -38,6 +38,7 @@ import numpy as np
 from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
+from softpend.hardware.loop import jitter_ms_p95
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -135,10 +136,7 @@ class ClosedLoopResult:
     @property
     def jitter_ms_p95(self) -> float:
         """95th percentile of ``|period - median period|`` between consecutive torque commands [ms]."""
-        if self.command_periods_s.size == 0:
-            return math.nan
-        nominal = float(np.median(self.command_periods_s))
-        return float(np.percentile(np.abs(self.command_periods_s - nominal), 95) * 1e3)
+        return jitter_ms_p95(self.command_periods_s)
 
     def summary(self) -> dict[str, Any]:
         """The figures as a JSON-ready dict."""

@@ -110,11 +110,17 @@ class LoopResult:
 
     @property
     def jitter_ms_p95(self) -> float:
-        """95th percentile of ``|period - nominal|`` between consecutive torque commands [ms]."""
-        if self.command_periods_s.size == 0:
-            return math.nan
-        nominal = float(np.median(self.command_periods_s))
-        return float(np.percentile(np.abs(self.command_periods_s - nominal), 95) * 1e3)
+        """95th percentile of ``|period - median period|`` between consecutive torque commands [ms]."""
+        return jitter_ms_p95(self.command_periods_s)
+
+
+def jitter_ms_p95(command_periods_s: np.ndarray) -> float:
+    """95th percentile of ``|period - median period|`` over the periods between consecutive torque commands
+    [ms] (NaN without periods)."""
+    periods = np.asarray(command_periods_s, dtype=float)
+    if periods.size == 0:
+        return math.nan
+    return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
 
 
 def run_control_loop(

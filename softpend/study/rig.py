@@ -12,23 +12,40 @@ from softpend.evaluation import metrics_from_trajectory
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
-__all__ = ["torque_chatter_nm_per_s", "truth_metrics"]
+__all__ = ["torque_chatter_nm_per_s", "torque_total_variation_per_s", "truth_metrics", "truth_trajectory"]
 
 
-def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = 0.2) -> dict[str, float]:
-    """Swing-up time, upright std, peak torque, energy and success of a twin run from the emulator's truth log
-    (the rod's true state every tick; ``task`` is the emulator's).  Empty for a log of fewer than 3 ticks."""
+def truth_trajectory(truth_log: str | Path, task: Task, start_time_s: float | None = None,
+                     end_time_s: float | None = None) -> dict[str, np.ndarray]:
+    """The true motion of a twin run from the emulator's truth log (the rod's state every tick; ``task`` is the
+    emulator's): ``time_s`` (device time), ``theta_rad`` (tip angle from upright), ``torque_nm`` (applied) and
+    ``phi_dot_rad_s`` (hub rate).  ``start_time_s`` and ``end_time_s`` (device time [s], inclusive) keep only
+    the ticks of that window."""
     log = read_sample_log(truth_log)
     time_s = log["device_time_s"]
-    if len(time_s) < 3:
-        return {}
+    keep = np.ones(len(time_s), dtype=bool)
+    if start_time_s is not None:
+        keep &= time_s >= start_time_s
+    if end_time_s is not None:
+        keep &= time_s <= end_time_s
     plant = task.make_plant()
     n = plant.n_coordinates
-    q = np.column_stack([log[f"q{i}_rad"] for i in range(n)])
-    qd = np.column_stack([log[f"q{i}_dot_rad_s"] for i in range(n)])
+    q = np.column_stack([log[f"q{i}_rad"][keep] for i in range(n)])
+    qd = np.column_stack([log[f"q{i}_dot_rad_s"][keep] for i in range(n)])
     observations = [plant.observation_from_state(a, b) for a, b in zip(q, qd)]
-    metrics = metrics_from_trajectory(time_s, np.array([o.theta_rad for o in observations]), log["applied_torque_nm"],
-                                      np.array([o.phi_dot_rad_s for o in observations]),
+    return {"time_s": time_s[keep], "theta_rad": np.array([o.theta_rad for o in observations]),
+            "torque_nm": log["applied_torque_nm"][keep], "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations])}
+
+
+def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = 0.2, start_time_s: float | None = None,
+                  end_time_s: float | None = None) -> dict[str, float]:
+    """Swing-up time, upright std, peak torque, energy and success of a twin run from the emulator's truth log
+    (:func:`truth_trajectory`; the window, when given, also sets the origin of the swing-up time).  Empty for
+    fewer than 3 ticks."""
+    truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
+    if len(truth["time_s"]) < 3:
+        return {}
+    metrics = metrics_from_trajectory(truth["time_s"], truth["theta_rad"], truth["torque_nm"], truth["phi_dot_rad_s"],
                                       success_std_rad=success_std_rad)
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
 
@@ -38,8 +55,16 @@ def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
     over the samples the controller commanded (a motor log of :func:`softpend.hardware.closed_loop.run_closed_loop`)."""
     log = read_sample_log(motor_log)
     commanded = log["commanded"] > 0
-    torque = log["command_torque_nm"][commanded]
-    time_s = log["time_s"][commanded]
+    return torque_total_variation_per_s(log["time_s"][commanded], log["command_torque_nm"][commanded])
+
+
+def torque_total_variation_per_s(time_s: np.ndarray, torque_nm: np.ndarray) -> float:
+    """Torque chatter of a sampled torque sequence, ``sum |tau[k+1] - tau[k]| / (t[-1] - t[0])`` [N m/s]
+    (NaN for fewer than 2 samples or no elapsed time)."""
+    time_s = np.asarray(time_s, dtype=float)
+    torque = np.asarray(torque_nm, dtype=float)
+    if time_s.shape != torque.shape or time_s.ndim != 1:
+        raise ValueError(f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape} and {torque.shape}")
     if len(torque) < 2 or time_s[-1] <= time_s[0]:
         return float("nan")
     return float(np.sum(np.abs(np.diff(torque))) / (time_s[-1] - time_s[0]))

@@ -5,12 +5,14 @@ from __future__ import annotations
 import matplotlib.ticker
 
 import math
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from softpend.fidelity.prb_vs_beam import ConvergenceRow
 from softpend.fidelity.validation import FreeVibration
+
+if TYPE_CHECKING:  # annotations only: importing the comparison module brings in its progress bars
+    from softpend.fidelity.prb_vs_beam import ConvergenceRow
 
 __all__ = ["plot_free_vibration", "plot_convergence", "plot_transfer_matrix", "markdown_table"]
 

@@ -6,7 +6,7 @@ from typing import Optional
 
 import numpy as np
 
-__all__ = ["draw_tracked_frame"]
+__all__ = ["draw_filmstrip", "draw_tracked_frame", "plot_twin_run"]
 
 
 def draw_tracked_frame(ax, frame_bgr: np.ndarray, detection, zoom_px: Optional[float] = 45.0,
@@ -42,3 +42,92 @@ def draw_tracked_frame(ax, frame_bgr: np.ndarray, detection, zoom_px: Optional[f
             spine.set_edgecolor("white")
         return inset
     return None
+
+
+def draw_filmstrip(frames, n_frames: int = 8, span_s: Optional[float] = None, centre_px=None,
+                   half_width_px: Optional[float] = None, frame_width_in: float = 1.9):
+    """A row of ``n_frames`` camera frames evenly spaced in time, each with the tracker's contour and centroid
+    overlaid (:func:`draw_tracked_frame`) and its time as the title.
+
+    Parameters
+    ----------
+    frames : sequence of (time_s, frame_bgr, detection)
+        Candidate frames in time order (e.g. :meth:`softpend.study.rig_runs.FrameKeeper.at_loop_times`).
+    n_frames : int
+        Frames shown (fewer if fewer are given); the one nearest each of ``n_frames`` evenly spaced times.
+    span_s : float, optional
+        Show frames up to this time [s] (default: all).
+    centre_px, half_width_px : optional
+        Crop every frame to the square of half-width ``half_width_px`` around ``centre_px`` (x, y) [px].
+    frame_width_in : float
+        Width of one frame in the figure [in].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    if n_frames < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames!r}")
+    frames = [f for f in frames if span_s is None or f[0] <= span_s]
+    if not frames:
+        raise ValueError("frames must hold at least one frame (within span_s)")
+    times = np.array([f[0] for f in frames])
+    wanted = np.linspace(times[0], times[-1], min(n_frames, len(frames)))
+    chosen = sorted({int(np.argmin(np.abs(times - t))) for t in wanted})
+    height, width = frames[0][1].shape[:2]
+    aspect = 1.0 if half_width_px is not None else height / width
+    fig, axes = plt.subplots(1, len(chosen), figsize=(frame_width_in * len(chosen), frame_width_in * aspect + 0.35),
+                             squeeze=False)
+    for ax, index in zip(axes[0], chosen):
+        time_s, frame, detection = frames[index]
+        draw_tracked_frame(ax, frame, detection, zoom_px=None)
+        if half_width_px is not None and centre_px is not None:
+            ax.set_xlim(centre_px[0] - half_width_px, centre_px[0] + half_width_px)
+            ax.set_ylim(centre_px[1] + half_width_px, centre_px[1] - half_width_px)
+        ax.set_title(f"t = {time_s:.2f} s", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[str] = None):
+    """Tip angle (its magnitude: 0 upright, pi hanging) and torque of one twin run against time since the loop's
+    first state: the rod's true tip angle (emulator truth log), the estimate the controller was handed (motor
+    log), and optionally the same controller from the same start in the ideal simulator (an
+    :class:`~softpend.evaluation.EvaluationResult`, its time shifted to the twin's first command).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    from softpend.io.samplelog import read_sample_log
+    from softpend.study.rig import truth_trajectory
+
+    motor = read_sample_log(motor_log)
+    t0_device = float(motor["device_time_s"][0])
+    truth = truth_trajectory(truth_log, task, end_time_s=float(motor["device_time_s"][-1]))
+    commanded = motor["commanded"] > 0
+    first_command_s = float(motor["time_s"][commanded][0]) if commanded.any() else 0.0
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    axes[0].plot(truth["time_s"] - t0_device, np.abs(truth["theta_rad"]), color="C0", label="twin: true tip angle")
+    axes[0].plot(motor["est_time_s"], np.abs(motor["est_theta_rad"]), color="C1", ls="--", lw=1.0,
+                 label="twin: estimate handed to the controller")
+    axes[1].step(motor["time_s"], motor["command_torque_nm"], where="post", color="C0", label="twin: commanded")
+    if simulator is not None:
+        axes[0].plot(simulator.time_s + first_command_s, np.abs(simulator.theta_rad), color="C2", lw=1.0,
+                     label="ideal simulator, same start")
+        axes[1].step(simulator.time_s + first_command_s, simulator.torque_nm, where="post", color="C2", lw=1.0,
+                     label="ideal simulator")
+    axes[0].set_ylabel(r"$|\theta|$ [rad]")
+    axes[1].set_ylabel("torque [N m]")
+    axes[1].set_xlabel("time since the loop's first state [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper right")
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    return fig

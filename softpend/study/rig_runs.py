@@ -1,0 +1,288 @@
+"""Controllers through the whole rig stack on the digital twin, beside the same controllers in the ideal simulator.
+
+A *condition* (:class:`RigCondition`) is what the rig's sensors are like: the camera's frame rate, latency and
+image imperfections, the encoder's resolution and the link latency.  :func:`twin_start` runs one controller
+from one start on the twin (:func:`softpend.hardware.closed_loop.run_twin_control`: the emulator in its own
+process on a pseudo-terminal, the synthetic live camera filming it, the Algorithm 1 tracker, the state
+estimator, the driver's clamp and STOP) and scores the rod's *true* motion from the emulator's truth log over
+the time the controller was in charge; :func:`simulator_starts` runs the same controller from the same starts
+in the ideal simulator (:func:`softpend.evaluation.evaluate_controller`: the true joint state and observation
+every step, no delay, no noise).  Both give one row per start with the same figures; a start whose run ended
+early -- a safe stop for a blind camera, a link that failed, an estimator whose model diverged -- is a failed
+row with its reason, not an exception.  :func:`summary_rows` condenses the rows per condition and controller.
+
+A start seeded ``s`` begins from the same state in both: the emulator and the simulator's environment draw the
+hanging start's hub-angle and rate noise from one generator seeded ``s`` in the same order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Optional, Sequence
+
+import numpy as np
+
+from softpend.checks import int_at_least, non_negative, positive
+from softpend.evaluation import evaluate_controller, metrics_from_trajectory
+from softpend.hardware.closed_loop import TwinCamera, run_twin_control
+from softpend.hardware.driver import LinkError
+from softpend.hardware.emulator import RigConfig
+from softpend.hardware.estimator import EstimatorConfig
+from softpend.io.samplelog import read_sample_log
+from softpend.plant import OBSERVATION_NAMES, SimulationDiverged
+from softpend.stats import wilson_interval
+from softpend.study.rig import torque_chatter_nm_per_s, torque_total_variation_per_s, truth_metrics
+from softpend.task import Task
+from softpend.vision.camera import CameraEffects
+from softpend.vision.tip_source import CameraFaults
+
+__all__ = ["CONFIDENCE", "JOINT_SWINGUP", "OBSERVATION_SWINGUP", "SIMULATOR", "FrameKeeper", "RigCondition", "rig_controllers", "simulator_starts", "summary_rows",
+           "text_figures", "twin_start"]
+
+#: Condition name of the rows of :func:`simulator_starts`.
+SIMULATOR = "ideal simulator"
+#: Confidence of the Wilson intervals of :func:`summary_rows`.
+CONFIDENCE = 0.95
+#: Labels of the controllers of :func:`rig_controllers`.
+OBSERVATION_SWINGUP = "swing-up + LQR (observations)"
+JOINT_SWINGUP = "swing-up + LQR (joint state)"
+
+
+@dataclass(frozen=True)
+class RigCondition:
+    """The rig's sensors and link for a twin run.
+
+    Parameters
+    ----------
+    name : str
+        Label of the condition in tables.
+    fps : float
+        Camera frame rate [1/s].
+    camera_latency_s : float
+        End of exposure to the frame's arrival at the tracker [s].
+    effects : CameraEffects
+        Image imperfections (default :meth:`~softpend.vision.camera.CameraEffects.rig`).
+    counts_per_rev : int
+        Encoder resolution (the estimator is told the same).
+    link_latency_s : float
+        One-way serial-link latency [s].
+    max_blind_s : float
+        The estimator's longest bridge without a camera correction before the loop stops the motor [s].
+    faults : CameraFaults, optional
+        Dropped frames, occlusions or a stall of the camera (none by default).
+    """
+
+    name: str
+    fps: float = 60.0
+    camera_latency_s: float = 0.02
+    effects: CameraEffects = field(default_factory=CameraEffects.rig)
+    counts_per_rev: int = 4096
+    link_latency_s: float = RigConfig.latency_s
+    max_blind_s: float = EstimatorConfig.max_blind_s
+    faults: Optional[CameraFaults] = None
+
+    def __post_init__(self) -> None:
+        positive("fps", self.fps)
+        non_negative("camera_latency_s", self.camera_latency_s)
+        if not isinstance(self.effects, CameraEffects):
+            raise ValueError(f"effects must be a CameraEffects, got {type(self.effects).__name__}")
+        int_at_least("counts_per_rev", self.counts_per_rev, 4)
+        non_negative("link_latency_s", self.link_latency_s)
+        positive("max_blind_s", self.max_blind_s)
+        if self.faults is not None and not isinstance(self.faults, CameraFaults):
+            raise ValueError(f"faults must be a CameraFaults or None, got {type(self.faults).__name__}")
+
+    def rig(self, task: Task, seed: int) -> RigConfig:
+        """The emulated rig of a start seeded ``seed`` (hanging, ``task.start_noise_rad`` start noise)."""
+        return RigConfig(task=task, counts_per_rev=self.counts_per_rev, latency_s=self.link_latency_s, seed=int(seed))
+
+    def camera(self, seed: int) -> TwinCamera:
+        """The twin's camera of a start seeded ``seed`` (the seed of the image noise)."""
+        return TwinCamera(fps=self.fps, latency_s=self.camera_latency_s, effects=self.effects, faults=self.faults,
+                          seed=int(seed))
+
+    def estimator(self) -> EstimatorConfig:
+        """The estimator's settings for these sensors."""
+        return EstimatorConfig(counts_per_rev=self.counts_per_rev, max_blind_s=self.max_blind_s)
+
+
+def rig_controllers(task: Task) -> dict[str, Callable[[], Any]]:
+    """The classical controllers that run on the rig, by label: factories of the energy swing-up handing over to
+    the LQR on the observed variables (:meth:`~softpend.control.swingup.EnergySwingUpController.for_observations`)
+    and, on the PRB plant (whose joint state the simulator has), the same on the PRB joint state."""
+    from softpend.control.swingup import EnergySwingUpController
+
+    rod, dt = task.rod, task.dt_s
+    controllers: dict[str, Callable[[], Any]] = {
+        OBSERVATION_SWINGUP: lambda: EnergySwingUpController.for_observations(rod, dt_s=dt)}
+    if task.plant == "prb":
+        controllers[JOINT_SWINGUP] = lambda: EnergySwingUpController(rod, dt_s=dt)
+    return controllers
+
+
+def _row(condition: str, controller: str, seed: int, metrics: Mapping[str, Any], chatter: float,
+         stop: Optional[str]) -> dict[str, Any]:
+    success = bool(metrics.get("success", False)) and stop is None
+    return {
+        "condition": condition, "controller": controller, "seed": int(seed), "success": success,
+        "swing_up_time_s": float(metrics.get("swing_up_time_s", math.inf)),
+        "upright_std_rad": float(metrics.get("upright_std_rad", math.nan)),
+        "peak_torque_nm": float(metrics.get("peak_torque_nm", math.nan)),
+        "torque_chatter_nm_per_s": float(chatter),
+        "stop": stop if stop is not None else "",
+    }
+
+
+def twin_start(controller: Any, label: str, task: Task, condition: RigCondition, seed: int, duration_s: float,
+               workdir: str | Path, success_std_rad: float = 0.1,
+               on_frame: Optional[Callable] = None) -> dict[str, Any]:
+    """One start of ``controller`` on the twin under ``condition``: a row of :func:`summary_rows`' input.
+
+    The rod's figures come from the emulator's truth log between the first state the controller commanded and
+    the last state of the run (swing-up time counted from the first command); the torque chatter from the
+    commands in the motor log.  The run's logs stay in ``workdir``.  A safe stop (the camera blind for longer
+    than ``condition.max_blind_s``, or no first frame), a :class:`~softpend.hardware.driver.LinkError` or a
+    diverged estimator model makes a failed row whose ``stop`` says why; what else the run raises propagates.
+    Besides the figures, the row holds ``jitter_ms_p95`` (command periods), ``frames_tracked``,
+    ``frames_lost`` and ``wall_s``.
+    """
+    positive("duration_s", duration_s)
+    workdir = Path(workdir)
+    started = time.perf_counter()
+    stop: Optional[str] = None
+    result = None
+    try:
+        run = run_twin_control(controller, workdir, duration_s, rig=condition.rig(task, seed),
+                               camera=condition.camera(seed), estimator_config=condition.estimator(),
+                               on_frame=on_frame)
+        result = run.result
+        if result.stop_reason is not None:
+            stop = f"{result.status.replace('_', ' ')}: {result.stop_reason}"
+    except LinkError as exc:
+        stop = f"link error: {type(exc).__name__}: {exc}"
+    except SimulationDiverged as exc:
+        stop = f"estimator model diverged: {exc}"
+    wall_s = time.perf_counter() - started
+    metrics: dict[str, Any] = {}
+    chatter = math.nan
+    motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
+    if motor_path.is_file() and truth_path.is_file():
+        motor = read_sample_log(motor_path)
+        commanded = motor["commanded"] > 0
+        if commanded.any():
+            metrics = truth_metrics(truth_path, task, success_std_rad=success_std_rad,
+                                    start_time_s=float(motor["device_time_s"][commanded][0]),
+                                    end_time_s=float(motor["device_time_s"][-1]))
+            chatter = torque_chatter_nm_per_s(motor_path)
+    if not metrics and stop is None:
+        stop = "the controller never took charge"
+    row = _row(condition.name, label, seed, metrics, chatter, stop)
+    camera = result.camera if result is not None else {}
+    row.update(jitter_ms_p95=result.jitter_ms_p95 if result is not None else math.nan,
+               frames_tracked=int(camera.get("frames_tracked", 0)), frames_lost=int(camera.get("frames_lost", 0)),
+               wall_s=wall_s)
+    return row
+
+
+def simulator_starts(controller: Any, label: str, task: Task, seeds: Sequence[int], duration_s: float,
+                     success_std_rad: float = 0.1) -> list[dict[str, Any]]:
+    """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task`` (one row each, condition
+    :data:`SIMULATOR`): :func:`~softpend.evaluation.evaluate_controller`, scored with ``success_std_rad``; a
+    diverged simulation is a failed row."""
+    summary = evaluate_controller(controller, task, name=label, seeds=list(seeds), duration_s=duration_s)
+    rows = []
+    theta_index, rate_index = OBSERVATION_NAMES.index("theta_rad"), OBSERVATION_NAMES.index("phi_dot_rad_s")
+    for result in summary.results:
+        metrics: dict[str, Any] = {}
+        if len(result.time_s) >= 2:
+            metrics = metrics_from_trajectory(result.time_s, result.observations[:, theta_index], result.torque_nm,
+                                              result.observations[:, rate_index], success_std_rad=success_std_rad)
+        stop = f"simulation diverged: {result.diverged}" if result.diverged is not None else None
+        # the torque of every step the controller commanded (the last sample has none)
+        chatter = torque_total_variation_per_s(result.time_s[:-1], result.torque_nm[:-1])
+        rows.append(_row(SIMULATOR, label, result.seed, metrics, chatter, stop))
+    return rows
+
+
+def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDENCE) -> list[dict[str, Any]]:
+    """One row per (condition, controller), in order of first appearance: ``starts``, ``successes``,
+    ``success_rate`` with its Wilson interval (``success_low``, ``success_high``), the median swing-up time and
+    the worst upright std over the starts that succeeded (NaN if none), the largest peak torque, the median
+    torque chatter, and ``stops`` (runs that ended early)."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["condition"], row["controller"]), []).append(row)
+    out = []
+    for (condition, controller), group in groups.items():
+        successes = sum(bool(r["success"]) for r in group)
+        good = [r for r in group if r["success"]]
+        low, high = wilson_interval(successes, len(group), confidence)
+        chatter = [r["torque_chatter_nm_per_s"] for r in group if math.isfinite(r["torque_chatter_nm_per_s"])]
+        peaks = [r["peak_torque_nm"] for r in group if math.isfinite(r["peak_torque_nm"])]
+        out.append({
+            "condition": condition, "controller": controller, "starts": len(group), "successes": successes,
+            "success_rate": successes / len(group), "success_low": low, "success_high": high,
+            "swing_up_time_s": float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan,
+            "upright_std_rad": float(max(r["upright_std_rad"] for r in good)) if good else math.nan,
+            "peak_torque_nm": float(max(peaks)) if peaks else math.nan,
+            "torque_chatter_nm_per_s": float(np.median(chatter)) if chatter else math.nan,
+            "stops": sum(bool(r["stop"]) for r in group),
+        })
+    return out
+
+
+class FrameKeeper:
+    """An ``on_frame`` hook of the twin's camera that keeps every ``every``-th tracked frame with its tracker
+    detection, as ``(frame_index, frame_bgr, detection)`` in :attr:`frames` (at most ``max_frames``)."""
+
+    def __init__(self, every: int = 15, max_frames: int = 200) -> None:
+        self.every = int_at_least("every", every, 1)
+        self.max_frames = int_at_least("max_frames", max_frames, 1)
+        self.frames: list[tuple[int, np.ndarray, Any]] = []
+
+    def __call__(self, index: int, frame: np.ndarray, detection: Any, measurement: Any) -> None:
+        if index % self.every == 0 and len(self.frames) < self.max_frames:
+            self.frames.append((int(index), frame.copy(), detection))
+
+    def at_loop_times(self, camera_log: str | Path) -> list[tuple[float, np.ndarray, Any]]:
+        """The kept frames that the control loop received, as ``(loop_time_s, frame_bgr, detection)``: the
+        frame's capture time on the loop's clock, from the run's camera log (frames tracked before the loop
+        started are left out)."""
+        log = read_sample_log(camera_log)
+        capture = dict(zip(log["frame"].astype(int).tolist(), log["capture_device_time_s"].tolist()))
+        return [(float(capture[i]), frame, detection) for i, frame, detection in self.frames if i in capture]
+
+
+def text_figures(summary: Sequence[Mapping[str, Any]], controllers: Mapping[str, str],
+                 conditions: Mapping[str, str]) -> dict[str, str]:
+    """The figures of :func:`summary_rows` as text for the book, keyed ``<controller key>_<condition key>_<figure>``
+    (``controllers`` and ``conditions`` map a short key to the label in the rows): ``success`` ("k of n"),
+    ``interval`` (Wilson interval, "low to high"), ``swing_up_s``, ``std_rad``, ``chatter`` and ``stops``; a
+    figure of no successful start reads "none", a combination that was not run "not run"."""
+
+    def fixed(value: float, digits: int) -> str:
+        if math.isnan(value):
+            return "none"
+        return "inf" if math.isinf(value) else f"{value:.{digits}f}"
+
+    by_key = {(r["controller"], r["condition"]): r for r in summary}
+    out: dict[str, str] = {}
+    for short, label in controllers.items():
+        for key, condition in conditions.items():
+            r = by_key.get((label, condition))
+            name = f"{short}_{key}"
+            if r is None:
+                for figure in ("success", "interval", "swing_up_s", "std_rad", "chatter", "stops"):
+                    out[f"{name}_{figure}"] = "not run"
+                continue
+            out[f"{name}_success"] = f"{r['successes']} of {r['starts']}"
+            out[f"{name}_interval"] = f"{r['success_low']:.2f} to {r['success_high']:.2f}"
+            out[f"{name}_swing_up_s"] = fixed(r["swing_up_time_s"], 2)
+            out[f"{name}_std_rad"] = fixed(r["upright_std_rad"], 3)
+            out[f"{name}_chatter"] = fixed(r["torque_chatter_nm_per_s"], 2)
+            out[f"{name}_stops"] = str(r["stops"])
+    return out

@@ -266,6 +266,13 @@ class FrameDecoder:
         self.consecutive_bad = 0
         self.last_error = None
 
+    def _bad(self, error):
+        """Count one bad frame with its reason; returns the reason."""
+        self.consecutive_bad += 1
+        self.bad_frames += 1
+        self.last_error = error
+        return error
+
     def feed(self, data):
         """Add received bytes; return ``(messages, errors)``: a list of ``(msg_type, seq, values)`` for
         each good frame completed by these bytes and a list of error strings for each bad one."""
@@ -285,35 +292,25 @@ class FrameDecoder:
             if not frame:
                 continue
             if overflow:
-                self.consecutive_bad += 1
-                self.bad_frames += 1
-                self.last_error = "frame longer than %d bytes" % MAX_FRAME_BYTES
-                errors.append(self.last_error)
+                errors.append(self._bad("frame longer than %d bytes" % MAX_FRAME_BYTES))
                 continue
             try:
                 message = decode_frame(frame)
                 problem = self._validate(message[0], message[2]) if self._validate is not None else None
-                if problem is not None:
-                    self.consecutive_bad += 1
-                    self.bad_frames += 1
-                    self.value_errors += 1
-                    self.last_error = "%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem)
-                    errors.append(self.last_error)
-                    continue
-                messages.append(message)
-                self.good_frames += 1
-                self.consecutive_bad = 0
             except ChecksumMismatch as exc:
-                self.consecutive_bad += 1
-                self.bad_frames += 1
                 self.checksum_errors += 1
-                self.last_error = str(exc)
-                errors.append(self.last_error)
+                errors.append(self._bad(str(exc)))
+                continue
             except (ProtocolError, ValueError, struct.error) as exc:
-                self.consecutive_bad += 1
-                self.bad_frames += 1
-                self.last_error = str(exc)
-                errors.append(self.last_error)
+                errors.append(self._bad(str(exc)))
+                continue
+            if problem is not None:
+                self.value_errors += 1
+                errors.append(self._bad("%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem)))
+                continue
+            messages.append(message)
+            self.good_frames += 1
+            self.consecutive_bad = 0
         return messages, errors
 
 

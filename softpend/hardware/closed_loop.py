@@ -38,7 +38,7 @@ import numpy as np
 from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
-from softpend.hardware.loop import jitter_ms_p95
+from softpend.hardware.loop import SecondsBar, jitter_ms_p95
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -226,11 +226,7 @@ def run_closed_loop(
     if hasattr(controller, "reset"):
         controller.reset()
     link.drain_states()  # states queued before the run (pings, set-up) are stale
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=round(duration_s, 1), unit="s", desc="rig control", mininterval=0.5)
+    bar = SecondsBar(duration_s, "rig control", progress)
     nominal_period = 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s
     send_times: list[float] = []
     step_times: list[float] = []
@@ -327,21 +323,17 @@ def run_closed_loop(
                 samples += 1
                 if stop_reason is not None:
                     break
-            if bar is not None:
-                shown = round(min(t, duration_s), 1)
-                if shown > bar.n:
-                    bar.update(round(shown - bar.n, 1))
-                    theta = estimate_values[2] if estimate_values is not nan_estimate else math.nan
-                    bar.set_postfix_str(f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
-                                        f"blind {estimator.blind_s * 1e3:.0f} ms", refresh=False)
+            if bar.advance(t):
+                theta = estimate_values[2] if estimate_values is not nan_estimate else math.nan
+                bar.postfix(f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
+                            f"blind {estimator.blind_s * 1e3:.0f} ms")
             if stop_reason is not None or t >= duration_s:
                 break
     except BaseException:
         link.emergency_stop()
         raise
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     link.stop()
     if stop_reason is None:
         status = "completed"

@@ -114,6 +114,37 @@ class LoopResult:
         return jitter_ms_p95(self.command_periods_s)
 
 
+class SecondsBar:
+    """A progress bar over the seconds of a loop run (``enabled=False``: does nothing); it redraws only when
+    the shown tenth of a second changes, so a 100 Hz loop does not redraw every tick."""
+
+    def __init__(self, duration_s: float, desc: str, enabled: bool = True) -> None:
+        self.duration_s = duration_s
+        self._bar = None
+        if enabled:
+            from tqdm.auto import tqdm
+
+            self._bar = tqdm(total=round(duration_s, 1), unit="s", desc=desc, mininterval=0.5)
+
+    def advance(self, time_s: float) -> bool:
+        """Show ``time_s`` [s] of run time; True when the bar moved (the moment to refresh a postfix)."""
+        if self._bar is None:
+            return False
+        shown = round(min(time_s, self.duration_s), 1)
+        if shown <= self._bar.n:
+            return False
+        self._bar.update(round(shown - self._bar.n, 1))
+        return True
+
+    def postfix(self, text: str) -> None:
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
 def jitter_ms_p95(command_periods_s: np.ndarray) -> float:
     """95th percentile of ``|period - median period|`` over the periods between consecutive torque commands
     [ms] (NaN without periods)."""
@@ -162,11 +193,7 @@ def run_control_loop(
         raise ValueError("link must be open")
     if log is not None and list(log.columns) != list(LOOP_LOG_COLUMNS):
         raise ValueError(f"log must have the columns LOOP_LOG_COLUMNS, got {log.columns}")
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=round(duration_s, 1), unit="s", desc="rig loop", mininterval=0.5)
+    bar = SecondsBar(duration_s, "rig loop", progress)
     send_times: list[float] = []
     samples = dropped = lost_count = watchdog = 0
     t0_device: Optional[float] = None
@@ -202,17 +229,13 @@ def run_control_loop(
                                 state.phi_dot_rad_s, state.applied_torque_nm, link.last_command_nm,
                                 state.flags, tip.x_m, tip.y_m, tip.lost])
             samples += 1
-            if bar is not None:
-                shown = round(min(t, duration_s), 1)
-                if shown > bar.n:
-                    bar.update(round(shown - bar.n, 1))  # respects mininterval: no redraw every tick
+            bar.advance(t)
             if t >= duration_s:
                 break
     except BaseException:
         link.emergency_stop()
         raise
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     link.send_torque(0.0)
     return LoopResult(samples, np.diff(send_times), dropped, lost_count, link.bad_frames, watchdog)

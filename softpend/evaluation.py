@@ -228,13 +228,14 @@ class EvaluationSummary:
         return float(np.mean([getattr(r, metric) for r in self.results]))
 
     def row(self) -> dict[str, Any]:
-        """One table row: medians over seeds plus the success rate."""
+        """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
+        low, high = self.success_interval()
         return {
             "controller": self.name,
             "seeds": len(self.results),
             "success_rate": self.success_rate,
-            "success_low": self.success_interval()[0],
-            "success_high": self.success_interval()[1],
+            "success_low": low,
+            "success_high": high,
             "swing_up_time_s": self.median("swing_up_time_s"),
             "upright_std_rad": self.median("upright_std_rad"),
             "upright_mean_abs_rad": self.median("upright_mean_abs_rad"),

@@ -12,6 +12,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+import numpy as np
+
 from softpend.checks import int_at_least, non_negative, one_of, positive
 from softpend.plant import RodParams, check_plant_name, make_plant, tilt_state
 from softpend.plant.protocol import Plant
@@ -69,7 +71,7 @@ class Task:
         return {"params": self.rod, "plant": self.plant, "dt_s": self.dt_s, "substeps": self.substeps,
                 "start": self.start, "start_noise_rad": self.start_noise_rad}
 
-    def tilt_state(self, tilt_rad: float) -> tuple["np.ndarray", "np.ndarray"]:
+    def tilt_state(self, tilt_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` of the straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright."""
         return tilt_state(self.rod, tilt_rad, self.plant)
 

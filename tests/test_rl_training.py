@@ -2,14 +2,12 @@
 MBPO buffer holds model transitions branched from real states."""
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
 import torch
 
 from softpend.cli import main
-from softpend.envs import step_reward
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn

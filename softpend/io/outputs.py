@@ -20,7 +20,20 @@ from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
-__all__ = ["atomic_write", "check_output_file", "check_output_folder", "finite_or_none", "json_text"]
+__all__ = ["atomic_write", "check_output_file", "check_output_folder", "finite_or_none", "json_text", "read_json_object"]
+
+
+def read_json_object(path: str | Path, max_bytes: int) -> Optional[dict]:
+    """The JSON object in the file at ``path``, or None when it is missing, larger than ``max_bytes``, not
+    JSON or not an object (for ownership checks: is this file one of ours?)."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > max_bytes:
+            return None
+        data = json.loads(path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 def _nearest_existing(path: Path) -> Path:

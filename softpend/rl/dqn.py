@@ -23,7 +23,6 @@ diverged is saved.
 
 from __future__ import annotations
 
-import json
 import math
 import shutil
 import time
@@ -39,8 +38,8 @@ from tqdm import tqdm
 
 from softpend.checks import check_work_size, int_at_least, positive, positive_int
 from softpend.evaluation import evaluate_controller, metrics_from_trajectory
-from softpend.io.outputs import check_output_folder
-from softpend.plant import OBSERVATION_NAMES, RodParams
+from softpend.io.outputs import check_output_folder, read_json_object
+from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.agent_files import (
     AgentFileError,
     check_finite_weights,
@@ -303,14 +302,8 @@ def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:
 def is_run_folder(path: Path) -> bool:
     """Whether ``path`` is a run folder of :func:`run_training`, of this or an earlier version: its
     ``config.json`` is a JSON object naming a config class, as :func:`~softpend.rl.config.save_config` writes."""
-    config = Path(path) / "config.json"
-    try:
-        if config.stat().st_size > 10**7:
-            return False
-        data = json.loads(config.read_text())
-    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
-        return False
-    return isinstance(data, dict) and data.get("class") in ("DQNConfig", "MBPOConfig")
+    data = read_json_object(Path(path) / "config.json", 10**7)
+    return data is not None and data.get("class") in ("DQNConfig", "MBPOConfig")
 
 
 def check_run_size(config: DQNConfig, observation_dim: int) -> None:

@@ -17,7 +17,6 @@ hanging start's hub-angle and rate noise from one generator seeded ``s`` in the 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field

@@ -107,7 +107,7 @@ def _engine(backend: str) -> Iterator[None]:
     except ImportError:
         raise ValueError("backend 'dask' needs dask.distributed (pip install 'dask[distributed]')") from None
     address = os.environ.get("DASK_SCHEDULER_ADDRESS")
-    with Client(address) if address else Client(processes=True) as _client, joblib.parallel_config(backend="dask"):
+    with Client(address) if address else Client(processes=True), joblib.parallel_config(backend="dask"):
         yield
 
 

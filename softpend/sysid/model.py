@@ -45,7 +45,7 @@ import torch
 from torch import Tensor, nn
 
 from softpend.checks import one_of, optional_positive, positive, positive_int
-from softpend.io.outputs import atomic_write
+from softpend.io.outputs import atomic_write, read_json_object
 from softpend.sysid.layout import StateLayout
 
 __all__ = [
@@ -374,14 +374,8 @@ def model_paths(path: str | Path) -> tuple[Path, Path]:
 def is_model_file(path: str | Path) -> bool:
     """Whether ``path`` (either file of a pair, or the stem) belongs to a model written by :func:`save_model`:
     its ``.json`` names this schema (an output check: a model may be replaced, any other file may not)."""
-    _, meta_path = _paths(path)
-    try:
-        if meta_path.stat().st_size > 10**8:
-            return False
-        meta = json.loads(meta_path.read_text())
-    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
-        return False
-    return isinstance(meta, dict) and meta.get("schema") == MODEL_SCHEMA_NAME
+    meta = read_json_object(_paths(path)[1], 10**8)
+    return meta is not None and meta.get("schema") == MODEL_SCHEMA_NAME
 
 
 def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None) -> tuple[Path, Path]:

@@ -30,6 +30,7 @@ def bench_rig_control() -> dict[str, float]:
     clock) and ``rig_control_step_cpu_ms_p95`` (the same in the loop thread's CPU time: the work without waits)."""
     from softpend.control.swingup import EnergySwingUpController
     from softpend.hardware.closed_loop import TwinCamera, run_twin_control
+    from softpend.hardware.loop import jitter_ms_p95
     from softpend.hardware.emulator import RigConfig
     from softpend.study.presets import REPORT_SEEDS
     from softpend.study.rig import torque_chatter_nm_per_s, truth_metrics
@@ -56,8 +57,7 @@ def bench_rig_control() -> dict[str, float]:
             samples += run.result.samples
             step_p95.append(run.result.step_time_ms_p95)
             cpu_p95.append(run.result.step_cpu_ms_p95)
-    pooled = np.concatenate(periods)
-    jitter = float(np.percentile(np.abs(pooled - np.median(pooled)), 95) * 1e3) if pooled.size else math.nan
+    jitter = jitter_ms_p95(np.concatenate(periods))
     return {
         "rig_success_swingup_lqr": float(np.mean(successes)),
         "rig_upright_std_rad_swingup_lqr": float(max(stds)) if stds else math.nan,

@@ -1,5 +1,6 @@
 """Fresh-start measurement of trained controllers: counts, intervals, and refusal of selection starts."""
 
+import json
 import math
 
 import numpy as np
@@ -49,3 +50,94 @@ def test_rl_rows_come_from_the_run_folders_and_refuse_selection_starts(tmp_path)
     assert all(r["balanced_starts"] == 0 for r in rows)  # one 0.4 s episode of training balances nothing
     with pytest.raises(ValueError, match="select"):
         rl_fresh_start_rows(tmp_path, [0], algos=["dqn"], report_seeds=(7, 20_000), duration_s=1.2)
+
+
+def test_rl_rows_are_kept_in_the_run_folder_and_measured_again_when_the_agent_changes(tmp_path, monkeypatch):
+    import softpend.rl.dqn as dqn
+    from softpend.study.fresh_starts import FRESH_STARTS_FILE
+
+    config = DQNConfig(episode_s=0.4, learning_starts=5, eval_seeds=(7,), eval_duration_s=0.3)
+    folder = tmp_path / "dqn-seed0"
+    train_dqn(config, seed=0, episodes=1, run_dir=folder, progress=False)
+    first = rl_fresh_start_rows(tmp_path, [0], algos=["dqn"], report_seeds=(20_000,), duration_s=1.0)
+    assert (folder / FRESH_STARTS_FILE).is_file()
+    calls = []
+    real = dqn.evaluate_agent
+    monkeypatch.setattr(dqn, "evaluate_agent", lambda *a, **k: calls.append(1) or real(*a, **k))
+    again = rl_fresh_start_rows(tmp_path, [0], algos=["dqn"], report_seeds=(20_000,), duration_s=1.0)
+    assert json.dumps(again) == json.dumps(first)  # NaN-aware equality
+    assert calls == []  # both agents read back
+    rl_fresh_start_rows(tmp_path, [0], algos=["dqn"], report_seeds=(20_001,), duration_s=1.0)
+    assert len(calls) == 2  # other starts: measured
+    train_dqn(config, seed=1, episodes=1, run_dir=tmp_path / "other", progress=False)
+    (folder / "agent.zip").write_bytes((tmp_path / "other" / "agent.zip").read_bytes())  # another final agent
+    calls.clear()  # (training evaluates too)
+    rl_fresh_start_rows(tmp_path, [0], algos=["dqn"], report_seeds=(20_001,), duration_s=1.0)
+    assert len(calls) == 1  # only the changed agent is measured again
+
+
+def _log(seed: int, plant_s: float, stopped: bool):
+    from softpend.rl.training_log import TrainingLog
+
+    log = TrainingLog("dqn", seed, episodes=[{"episode": 1, "plant_s": plant_s}],
+                      stop_reason="balanced" if stopped else None)
+    return log
+
+
+def test_headline_figures_count_final_agents_and_compare_plant_seconds_seed_by_seed():
+    from softpend.study.fresh_starts import headline_figures, seed_rows
+
+    # DQN: 300, 400, 500 s; DQN-MBPO: 90 (3.3x fewer), 150 (2.7x) and a run whose final agent fails fresh starts
+    dqn = [_log(0, 300.0, True), _log(1, 400.0, True), _log(2, 500.0, False)]
+    mbpo = [_log(0, 90.0, True), _log(1, 150.0, True), _log(2, 60.0, True)]
+    balanced = {("model-free DQN", 0): 20, ("model-free DQN", 1): 19, ("model-free DQN", 2): 18,
+                ("DQN-MBPO", 0): 20, ("DQN-MBPO", 1): 18, ("DQN-MBPO", 2): 11}
+    fresh = [{"method": m, "seed": s, "agent": "final", "balanced_starts": k, "starts": 20, "run_balances": k >= 18}
+             for (m, s), k in balanced.items()]
+    fresh += [{"method": "DQN-MBPO", "seed": 2, "agent": "selected", "balanced_starts": 20, "starts": 20,
+               "run_balances": True}]  # the selected agent does not count
+    rows = seed_rows({"dqn": dqn, "mbpo": mbpo}, fresh)
+    by = {(r["method"], r["seed"]): r for r in rows}
+    assert by[("DQN-MBPO", 2)]["plant_s_to_balance"] == math.inf and by[("model-free DQN", 2)]["plant_s_to_balance"] == 500.0
+    figures = headline_figures(rows)
+    assert figures["seeds_balanced_dqn"] == 3 and figures["seeds_balanced_mbpo"] == 2 and figures["seeds_mbpo"] == 3
+    assert figures["dqn_real_s_to_balance"] == 400.0 and figures["mbpo_real_s_to_balance"] == 150.0
+    assert figures["mbpo_over_dqn_real_s_ratio"] == pytest.approx(400 / 150)
+    assert figures["mbpo_seeds_3x_fewer_than_dqn"] == 1  # seed 0 only (seed 1: 2.7x; seed 2: never)
+    assert figures["mbpo_real_s_to_balance_low"] <= 150.0 <= figures["mbpo_real_s_to_balance_high"]
+    with pytest.raises(ValueError, match="no fresh-start row"):
+        seed_rows({"dqn": dqn}, fresh[1:])
+
+
+def test_randomised_rods_scale_each_field_within_the_spread_reproducibly():
+    from softpend.plant import RodParams
+    from softpend.plant.randomisation import RANDOMISED_FIELDS, randomised_rod
+
+    rod = RodParams()
+    rods = [randomised_rod(rod, np.random.default_rng(s), 0.15) for s in range(50)]
+    for name in RANDOMISED_FIELDS:
+        ratios = np.array([getattr(r, name) / getattr(rod, name) for r in rods])
+        assert np.all(ratios >= 0.85) and np.all(ratios <= 1.15) and ratios.std() > 0.05
+    assert rods[0] == randomised_rod(rod, np.random.default_rng(0), 0.15)
+    assert rods[0].length_m == rod.length_m and rods[0].hub_inertia_kgm2 == rod.hub_inertia_kgm2
+    assert randomised_rod(rod, np.random.default_rng(0), 0.0) == rod
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="spread"):
+            randomised_rod(rod, np.random.default_rng(0), bad)
+
+
+def test_perturbed_rod_row_runs_each_start_on_its_own_rod(monkeypatch):
+    import softpend.evaluation as evaluation
+    from softpend.control.lqr import LQRController
+    from softpend.study.fresh_starts import perturbed_rod_row
+    from softpend.task import Task
+
+    task = Task()
+    seen = []
+    real = evaluation.evaluate_controller
+    monkeypatch.setattr(evaluation, "evaluate_controller", lambda c, t, **k: seen.append(t) or real(c, t, **k))
+    controller = LQRController.from_params(task.rod, task.dt_s, state="joint")
+    row = perturbed_rod_row(controller, task, 0.15, report_seeds=(20_000, 20_001), duration_s=0.5)
+    assert row["starts"] == 2 and row["spread"] == 0.15
+    assert len({t.rod for t in seen}) == 2 and all(t.rod != task.rod for t in seen)
+    assert all(t.rod.length_m == task.rod.length_m for t in seen)

@@ -133,6 +133,7 @@ def test_rig_control_command_checks_its_arguments(tmp_path):
     assert main(["rig", "control", "nonsense", "--twin", "--out", out]) == 2
     assert main(["rig", "control", "lqr", "--twin", "--camera", "0", "--out", out]) == 2
     assert main(["rig", "control", "lqr", "--twin", "--duration", "-1", "--out", out]) == 2
+    assert main(["rig", "control", "lqr", "--twin", "--camera-effects", "foggy", "--out", out]) == 2
 
 
 def test_run_folders_become_rig_controllers(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 
 from softpend.evaluation import metrics_from_trajectory
 from softpend.rl.config import DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
-from softpend.rl.curves import aggregate, episodes_to_asymptote, moving_average
+from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 
 
@@ -97,13 +97,34 @@ def test_asymptote_of_a_saturating_curve():
     assert episodes_to_asymptote(np.arange(100.0), window=1) == 82.0
 
 
-def test_moving_average_and_aggregate():
+def test_moving_average():
     np.testing.assert_allclose(moving_average(np.array([1.0, 3.0, 5.0, 7.0]), 2), [1.0, 2.0, 4.0, 6.0])
-    logs = [_log(np.arange(10.0) + k, []) for k in range(3)]
-    agg = aggregate(logs, "return", axis="plant_s", grid=np.array([5.0, 50.0]))
-    np.testing.assert_allclose(agg["mean"], [1.0, 10.0])
-    np.testing.assert_allclose(agg["min"], [0.0, 9.0])
-    np.testing.assert_allclose(agg["max"], [2.0, 11.0])
+
+
+def _evaluation_log(seed: int, plant_s, stds) -> TrainingLog:
+    log = TrainingLog("dqn", seed)
+    log.evaluations = [{"episode": i + 1, "plant_s": float(t), "max_upright_std_rad": float(v)}
+                       for i, (t, v) in enumerate(zip(plant_s, stds))]
+    return log
+
+
+def test_interval_band_holds_a_stopped_run_at_its_last_value_and_brackets_the_iqm():
+    # eight runs of constant std k / 10 (k = 1..8); run k stops after 5 k plant seconds
+    logs = [_evaluation_log(k, np.arange(5.0, 5.0 * k + 1, 5.0), np.full(k, k / 10)) for k in range(1, 9)]
+    band = interval_band(logs, grid=np.array([2.0, 5.0, 40.0, 100.0]), n_resamples=500, seed=1)
+    np.testing.assert_allclose(band["x"], [5.0, 40.0, 100.0])  # before every run's first row: left out
+    np.testing.assert_allclose(band["per_seed"][:, -1], np.arange(1, 9) / 10)  # carried forward
+    np.testing.assert_allclose(band["value"], 0.45)  # IQM of 0.1..0.8: mean of 0.3..0.6
+    assert np.all(band["low"] < band["value"]) and np.all(band["value"] < band["high"])
+    assert np.all(band["low"] >= 0.1) and np.all(band["high"] <= 0.8)
+    again = interval_band(logs, grid=np.array([2.0, 5.0, 40.0, 100.0]), n_resamples=500, seed=1)
+    np.testing.assert_array_equal(again["low"], band["low"])  # seeded
+    # a run whose std falls: the step function takes the latest row at or before each point
+    falling = _evaluation_log(0, [5.0, 10.0, 15.0], [1.0, 0.5, 0.05])
+    band = interval_band([falling, falling], grid=np.array([5.0, 9.9, 10.0, 30.0]), n_resamples=200)
+    np.testing.assert_allclose(band["value"], [1.0, 1.0, 0.5, 0.05])
+    with pytest.raises(ValueError, match="at least two runs"):
+        interval_band([falling])
 
 
 def test_training_cpu_s_of_a_log():

@@ -72,6 +72,47 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
         train_dqn(DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False)
 
 
+def _scripted_evaluations(monkeypatch, stds):
+    """Make the training-time evaluations return these worst upright stds in turn (all swung up)."""
+    from types import SimpleNamespace
+
+    import softpend.rl.dqn as dqn
+
+    queue = list(stds)
+
+    def fake(model, config, seeds=None, duration_s=None, name="agent"):
+        std = queue.pop(0)
+        results = [SimpleNamespace(upright_std_rad=std, swing_up_time_s=2.0) for _ in config.eval_seeds]
+        return SimpleNamespace(results=results, median=lambda key: 2.0, success_rate=1.0)
+
+    monkeypatch.setattr(dqn, "evaluate_agent", fake)
+    return queue
+
+
+def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped(tmp_path, monkeypatch):
+    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_upright_std_rad=0.1,
+                       **{**TINY, "eval_every_episodes": 1})
+    # episode 1 balanced, 2 not (streak broken), 3 and 4 balanced: the run ends after episode 4 of its 8
+    queue = _scripted_evaluations(monkeypatch, [0.05, 0.3, 0.08, 0.09, 0.05, 0.05, 0.05, 0.05, 0.05])
+    model, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
+    assert log.n_episodes == 4 and [row["episode"] for row in log.evaluations] == [1, 2, 3, 4]
+    assert log.stop_reason is not None and "2 consecutive evaluations" in log.stop_reason
+    assert log.plant_s == pytest.approx(4.0)
+    assert model.num_timesteps == 4 * config.episode_agent_steps  # no plant step after the last evaluation
+    assert len(queue) == 5
+    from softpend.rl.training_log import TrainingLog
+
+    saved = TrainingLog.load(tmp_path / "log.json")
+    assert saved.stop_reason == log.stop_reason and saved.n_episodes == 4
+    # a stopped run is finished: resuming it with a larger budget trains nothing more
+    _, again = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, resume=True, progress=False)
+    assert again.n_episodes == 4 and len(queue) == 5
+    with pytest.raises(ValueError, match="stop_after_balanced_evaluations"):
+        DQNConfig(stop_after_balanced_evaluations=-1)
+    with pytest.raises(ValueError, match="stop_upright_std_rad"):
+        DQNConfig(stop_upright_std_rad=0.0)
+
+
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
     # MBPO's own branching (every rollout from a real state, none cut short); the start-state branching and the
     # data box of the defaults are tested below
@@ -168,3 +209,65 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     expected = np.array([starts.reset()[0] for _ in range(5)])
     np.testing.assert_allclose(buffer.model_buffer.observations[:5, 0], expected, atol=1e-6)
     assert (np.abs(buffer.model_buffer.observations[5:10, 0][:, None, :] - real[None]).max(axis=2) < 1e-7).any(axis=1).all()
+
+
+def test_rig_observation_is_late_and_noisy_and_the_randomised_rod_changes_every_episode():
+    from softpend.envs import SoftPendulumDiscreteEnv
+    from softpend.rl.training_env import RandomisedRod, RigObservation
+
+    plain = SoftPendulumDiscreteEnv(start="random")
+    late = RigObservation(SoftPendulumDiscreteEnv(start="random"), delay_steps=3)
+    truth = [plain.reset(seed=4)[0]] + [plain.step(4)[0] for _ in range(10)]
+    seen = [late.reset(seed=4)[0]] + [late.step(4)[0] for _ in range(10)]
+    for k in range(11):
+        np.testing.assert_array_equal(seen[k], truth[max(0, k - 3)])
+    noisy = RigObservation(SoftPendulumDiscreteEnv(start="random"), noise_rad=0.05)
+    first = noisy.reset(seed=4)[0]
+    shown = [noisy.step(4)[0] for _ in range(200)]
+    assert first.shape == truth[0].shape
+    # the noise rotates the (cos, sin) pairs: they stay on the unit circle, and differ from the truth by ~0.05 rad
+    plain.reset(seed=4)
+    true_next = [plain.step(4)[0] for _ in range(200)]
+    hub_error = np.array([np.angle(np.exp(1j * (np.arctan2(s[1], s[0]) - np.arctan2(t[1], t[0]))))
+                          for s, t in zip(shown, true_next)])
+    assert 0.03 < hub_error.std() < 0.07
+    np.testing.assert_allclose(np.hypot(np.array(shown)[:, 2], np.array(shown)[:, 3]), 1.0, atol=1e-6)
+    with pytest.raises(ValueError, match="delay_steps"):
+        RigObservation(SoftPendulumDiscreteEnv(), delay_steps=-1)
+
+    env = RandomisedRod(SoftPendulumDiscreteEnv(), 0.15)
+    nominal = env.unwrapped.params
+    env.reset(seed=1)
+    rods = [env.unwrapped.params] + [env.reset()[1] and env.unwrapped.params for _ in range(4)]
+    assert len(set(rods)) == 5 and nominal not in rods
+    assert all(0.85 <= r.mass_kg / nominal.mass_kg <= 1.15 for r in rods)
+    assert env.unwrapped.plant.params == rods[-1]
+    np.testing.assert_allclose(env.unwrapped.torque_levels_nm[-1], rods[-1].torque_limit_nm)
+    again = RandomisedRod(SoftPendulumDiscreteEnv(), 0.15)
+    again.reset(seed=1)
+    assert again.unwrapped.params == rods[0]  # the seed decides the rods
+    with pytest.raises(ValueError, match="spread"):
+        RandomisedRod(SoftPendulumDiscreteEnv(), 1.5)
+
+
+def test_training_env_applies_the_robustness_options():
+    from softpend.rl.training_env import RandomisedRod, RigObservation
+
+    config = DQNConfig(rod_randomisation=0.1, observation_delay_steps=2, observation_noise_rad=0.01)
+    env = make_training_env(config)
+    wrappers = _wrapper_types(env)
+    assert RandomisedRod in wrappers and RigObservation in wrappers
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(2)
+    assert info["plant_steps"] == config.action_repeat
+    assert not any(w in (RandomisedRod, RigObservation) for w in _wrapper_types(make_training_env(DQNConfig())))
+    with pytest.raises(ValueError, match="rod_randomisation"):
+        DQNConfig(rod_randomisation=1.0)
+
+
+def _wrapper_types(env):
+    out = []
+    while hasattr(env, "env"):
+        out.append(type(env))
+        env = env.env
+    return out

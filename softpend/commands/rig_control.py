@@ -19,6 +19,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+#: Image imperfections of the twin's camera, by ``--camera-effects`` name: the CameraEffects class method that
+#: makes them (``None``: ``CameraEffects()``, no imperfection).
+CAMERA_EFFECTS = {"clean": None, "rig": "rig", "noisy": "noisy"}
+
 #: The built-in controller names.
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
 
@@ -41,6 +45,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--camera-latency-ms", type=float, default=20.0,
                         help="camera latency, exposure end to host [ms] (default 20; with --camera: the "
                              "measured latency of that camera)")
+    parser.add_argument("--camera-effects", choices=sorted(CAMERA_EFFECTS), default="rig",
+                        help="twin camera image imperfections: 'clean' (none), 'rig' (the nominal rig camera: "
+                             "mild noise, 4 ms blur, lighting drift; default) or 'noisy' (strong noise, 8 ms blur, "
+                             "lighting changes, clutter)")
     parser.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
     parser.add_argument("--calibration", metavar="JSON", help="with --camera: a saved AffineCalibration")
     parser.add_argument("--max-blind-ms", type=float, default=300.0,
@@ -85,20 +93,12 @@ def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tu
         else:
             gains = PIDGains(*pid_gains)
         return PIDController(gains, dt_s=dt, torque_limit_nm=rod.torque_limit_nm), task, f"PID {gains}"
-    folder = Path(spec)
-    if not folder.exists():
+    if not Path(spec).exists():
         raise ValueError(f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; "
                          f"{spec!r} is neither")
-    if (folder / "pilco.json").exists():
-        from softpend.pilco.loop import PilcoResult
+    from softpend.study.rig_runs import learned_controller
 
-        result = PilcoResult.load(folder)
-        return result.controller(), result.config.task, f"PILCO {folder}"
-    from softpend.rl.dqn import load_agent
-    from softpend.rl.training_env import policy_controller
-
-    model, config = load_agent(folder, which=which)
-    return policy_controller(model, config), config.task, f"{type(model).__name__} {folder}"
+    return learned_controller(spec, which)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -108,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.io.outputs import json_text
     from softpend.study.rig import torque_chatter_nm_per_s, truth_metrics
     from softpend.task import Task
+    from softpend.vision.camera import CameraEffects
 
     if args.twin and args.camera:
         raise ValueError("--camera is for --port; the twin films itself with the synthetic camera")
@@ -131,8 +132,10 @@ def run(args: argparse.Namespace) -> int:
         rig = RigConfig(task=task, counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0,
                         seed=args.seed, initial_tilt_rad=args.tilt if args.start == "upright" else None,
                         hold_until_commanded=args.start == "upright")
+        maker = CAMERA_EFFECTS[args.camera_effects]
+        effects = getattr(CameraEffects, maker)() if maker else CameraEffects()
         camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
-                                                        seed=args.seed)
+                                                        effects=effects, seed=args.seed)
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
                                    estimator_config=estimator_config, progress=progress)
         summary = {"controller": label, "target": "twin", **outcome.result.summary(),

@@ -19,6 +19,11 @@ Choices that differ from the registered environments
 * **Action repeat** ``action_repeat = 4``: the agent picks one of ``n_torque_levels`` torques every 4 plant
   steps (25 Hz, the torque is held in between), so that the discount ``gamma = 0.99`` spans ~4 s, long
   enough to credit the pumping swing-up.  The reward of an agent step is the sum over its plant steps.
+* **Budget and early stopping**: the episode count of a run is a budget (the book's: 150 DQN, 80 DQN-MBPO
+  episodes); a run ends as soon as two consecutive evaluations on the four selection starts ``eval_seeds``
+  balance (``stop_after_balanced_evaluations``), so the final agent is one that balanced, not one trained on
+  for long after it did.  Epsilon decays over ``exploration_fraction`` of the budget: 2/15 of 150 = 20 DQN
+  episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, TypeVar
 
-from softpend.checks import boolean, in_unit_interval, int_at_least, one_of, positive, positive_int
+from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import apply_overrides, parse_value
 from softpend.task import Task
@@ -83,6 +88,29 @@ class DQNConfig:
         Evaluation episode length [s].
     checkpoint_every_episodes : int
         Save agent, replay buffer and training log every this many episodes.
+
+    Robustness (the real environment of training only; evaluation runs on ``task``)
+    --------------------------------------------------------------------------------
+    rod_randomisation : float
+        Domain randomisation: every training episode runs on a rod whose mass, stiffness, joint damping, hub
+        friction and torque limit are each scaled by a factor uniform in ``[1 - r, 1 + r]``
+        (:class:`softpend.rl.training_env.RandomisedRod`); 0: the task's rod.
+    observation_delay_steps : int
+        The agent sees the observation of this many plant steps earlier
+        (:class:`softpend.rl.training_env.RigObservation`).
+    observation_noise_rad : float
+        Standard deviation of Gaussian noise on the hub and tip angles the agent sees [rad].
+
+    Early stopping
+    --------------
+    stop_after_balanced_evaluations : int
+        End training once this many consecutive evaluations have balanced: every ``eval_seeds`` start swung up
+        and held ``upright_std_rad <= stop_upright_std_rad`` (stable-baselines3's
+        ``StopTrainingOnRewardThreshold`` with the balance criterion as the threshold).  The final agent is then
+        the agent of the last of those evaluations, and ``episodes`` is a budget, not a count.  0: train for all
+        ``episodes``.
+    stop_upright_std_rad : float
+        Upright std [rad] that counts as balanced for early stopping.
     """
 
     task: Task = field(default_factory=Task)
@@ -98,16 +126,21 @@ class DQNConfig:
     train_freq: int = 1
     gradient_steps: int = 2
     target_update_interval: int = 500
-    exploration_fraction: float = 0.2
+    exploration_fraction: float = 2 / 15
     exploration_initial_eps: float = 1.0
     exploration_final_eps: float = 0.02
     max_grad_norm: float = 10.0
     clip_q_targets: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     eval_every_episodes: int = 1
-    eval_seeds: tuple[int, ...] = (1000, 1001)
+    eval_seeds: tuple[int, ...] = (1000, 1001, 1002, 1003)
     eval_duration_s: float = 10.0
     checkpoint_every_episodes: int = 10
+    stop_after_balanced_evaluations: int = 2
+    stop_upright_std_rad: float = 0.1
+    rod_randomisation: float = 0.0
+    observation_delay_steps: int = 0
+    observation_noise_rad: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive_ints(
@@ -122,7 +155,14 @@ class DQNConfig:
         boolean("clip_q_targets", self.clip_q_targets)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
-        for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm"):
+        object.__setattr__(self, "rod_randomisation",
+                           in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
+        object.__setattr__(self, "observation_delay_steps",
+                           int_at_least("observation_delay_steps", self.observation_delay_steps, 0))
+        object.__setattr__(self, "observation_noise_rad", non_negative("observation_noise_rad", self.observation_noise_rad))
+        object.__setattr__(self, "stop_after_balanced_evaluations",
+                           int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
+        for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
         for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
             in_unit_interval(name, getattr(self, name))
@@ -225,6 +265,7 @@ class MBPOConfig(DQNConfig):
 
     DQN fields that differ from :class:`DQNConfig`
     ----------------------------------------------
+    exploration_fraction = 0.125: epsilon reaches its floor after 10 of the book's 80 real episodes.
     gradient_steps = 12, target_update_interval = 40 (agent steps, hard copy): six times model-free DQN's
     update-to-data ratio, the target network refreshed after about as many gradient steps as in DQN.
     clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values
@@ -249,6 +290,7 @@ class MBPOConfig(DQNConfig):
     rollouts_within_data: bool = True
     gradient_steps: int = 12
     target_update_interval: int = 40
+    exploration_fraction: float = 0.125
     train_freq: int = 1
     clip_q_targets: bool = True
 

@@ -10,8 +10,8 @@ episodes").  We make that reading precise (:func:`episodes_to_asymptote`):
   ``start + level * (asymptote - start)`` for the rest of the run (``start`` = the first smoothed value,
   ``level = 0.9``), i.e. it has covered 90 % of its total improvement and does not fall back.
 
-Curves of several seeds are put on a common axis (episodes, or real plant seconds by interpolation) and
-summarised by their mean and spread (min-max) in :func:`aggregate`.
+Curves of several seeds are put on a common axis (episodes, or real plant seconds) and summarised by an
+aggregate over seeds (the interquartile mean) with its stratified bootstrap interval in :func:`interval_band`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 from softpend.checks import in_unit_interval, positive_int
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["moving_average", "episodes_to_asymptote", "aggregate", "plant_s_at_episode"]
+__all__ = ["moving_average", "episodes_to_asymptote", "interval_band", "plant_s_at_episode"]
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -70,44 +70,55 @@ def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
     return float(log.episodes[int(episode) - 1]["plant_s"])
 
 
-def aggregate(logs: Sequence[TrainingLog], field: str = "return", axis: str = "episode", grid: np.ndarray | None = None,
-              window: int = 1, table: str = "episodes") -> dict[str, np.ndarray]:
-    """Mean, min and max over seeds of one logged quantity on a common axis.
+def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad", axis: str = "plant_s",
+                  grid: np.ndarray | None = None, table: str = "evaluations", statistic: str = "iqm",
+                  confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0) -> dict[str, np.ndarray]:
+    """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis.
+
+    A run that ended before the end of ``grid`` (its budget was smaller, or training stopped early because it
+    balanced) keeps its last row's value from there on: its agent no longer changes.  Points before a run's
+    first row are left out of the grid.
 
     Parameters
     ----------
     logs : sequence of TrainingLog
-        One per seed.
-    field : str
-        Column of the episode (or evaluation) rows, e.g. ``"return"``, ``"upright_std_rad"``,
-        ``"max_upright_std_rad"``.
-    axis : {"episode", "plant_s"}
-        Common x axis: training episodes, or real plant seconds (values interpolated onto ``grid``).
+        One per seed, at least two.
+    field, axis, table : str
+        As :func:`aggregate`.
     grid : array, optional
-        x values (default: the episodes/plant seconds of the shortest run).
-    window : int
-        Trailing moving average applied per seed before aggregating.
-    table : {"episodes", "evaluations"}
-        Which rows to read.
+        x values (default: 200 points from the latest first row to the furthest last row).
+    statistic : {"iqm", "median"}
+        Aggregate over seeds (:func:`softpend.stats.aggregate_interval`).
+    confidence, n_resamples, seed
+        Of the percentile bootstrap over seeds at every point.
 
     Returns
     -------
-    dict with ``x``, ``mean``, ``min``, ``max`` and ``per_seed`` (n_seeds, len(x)).
+    dict with ``x``, ``value``, ``low``, ``high`` and ``per_seed`` (n_seeds, len(x)); ``inf`` values (a run
+    that never swung up) count as the largest.
     """
-    if len(logs) == 0:
-        raise ValueError("logs must not be empty")
+    from softpend.stats import aggregate_interval
+
+    if len(logs) < 2:
+        raise ValueError(f"interval_band needs at least two runs, got {len(logs)}")
     if axis not in ("episode", "plant_s"):
         raise ValueError(f"axis must be 'episode' or 'plant_s', got {axis!r}")
-    xs, ys = [], []
-    for log in logs:
-        x = log.column(axis, table)
-        y = moving_average(log.column(field, table), window) if window > 1 else log.column(field, table)
-        xs.append(x)
-        ys.append(y)
+    xs = [log.column(axis, table) for log in logs]
+    ys = [log.column(field, table) for log in logs]
+    if any(len(x) == 0 for x in xs):
+        raise ValueError(f"every run needs at least one {table} row")
     if grid is None:
-        shortest = min(xs, key=lambda v: v[-1] if len(v) else -np.inf)
-        grid = shortest
+        grid = np.linspace(max(x[0] for x in xs), max(x[-1] for x in xs), 200)
     grid = np.asarray(grid, dtype=float)
-    per_seed = np.array([np.interp(grid, x, np.where(np.isfinite(y), y, np.nan), left=np.nan, right=np.nan) for x, y in zip(xs, ys)])
-    return {"x": grid, "mean": np.nanmean(per_seed, axis=0), "min": np.nanmin(per_seed, axis=0),
-            "max": np.nanmax(per_seed, axis=0), "per_seed": per_seed}
+    grid = grid[grid >= max(x[0] for x in xs)]
+    per_seed = np.empty((len(logs), len(grid)))
+    for i, (x, y) in enumerate(zip(xs, ys)):
+        # a step function: the value of the latest row at or before each grid point
+        index = np.searchsorted(x, grid, side="right") - 1
+        per_seed[i] = y[np.clip(index, 0, len(y) - 1)]
+    value, low, high = np.empty(len(grid)), np.empty(len(grid)), np.empty(len(grid))
+    for j in range(len(grid)):
+        interval = aggregate_interval(per_seed[:, j], statistic, confidence=confidence, n_resamples=n_resamples,
+                                      seed=seed)
+        value[j], low[j], high[j] = interval.value, interval.low, interval.high
+    return {"x": grid, "value": value, "low": low, "high": high, "per_seed": per_seed}

@@ -201,7 +201,24 @@ class TrainingCallback(BaseCallback):
             self._end_episode()
             if self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps:
                 return False
+            if self.config.stop_after_balanced_evaluations and self._pending_eval:
+                # evaluate now (the agent is the one the rollout end would evaluate) so that training can stop
+                # before another plant step is taken
+                self._pending_eval = False
+                self.evaluate()
+                if self.balanced_streak():
+                    self.log.stop_reason = (
+                        f"balanced in {self.config.stop_after_balanced_evaluations} consecutive evaluations "
+                        f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)")
+                    return False
         return True
+
+    def balanced_streak(self) -> bool:
+        """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced (early stopping)."""
+        k = self.config.stop_after_balanced_evaluations
+        rows = self.log.evaluations[-k:] if k else []
+        return len(rows) == k > 0 and all(
+            row["all_swung_up"] and row["max_upright_std_rad"] <= self.config.stop_upright_std_rad for row in rows)
 
     def _end_episode(self) -> None:
         observations = np.concatenate(self._observations)
@@ -383,7 +400,7 @@ def run_training(
         model = make_model(env, int(seed))
     # a resumed run continues with fresh start-noise draws (one seed per episode count)
     env.reset(seed=int(seed) * 100_003 + log.n_episodes)
-    remaining = int(episodes) - log.n_episodes
+    remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
     callback = TrainingCallback(
         config, log, episodes, run_dir, progress=progress,
         extra_checkpoint=extra_checkpoint(model) if extra_checkpoint else None,

@@ -35,6 +35,8 @@ class TrainingLog:
     seed: int
     episodes: list[dict[str, float]] = field(default_factory=list)
     evaluations: list[dict[str, Any]] = field(default_factory=list)
+    #: Why training ended before its episode budget (early stopping), or ``None``.
+    stop_reason: Optional[str] = None
 
     # ------------------------------------------------------------------ counters
     @property
@@ -77,6 +79,8 @@ class TrainingLog:
     # ------------------------------------------------------------------ files
     def save(self, path: Path) -> None:
         data = {"algo": self.algo, "seed": self.seed, "episodes": self.episodes, "evaluations": self.evaluations}
+        if self.stop_reason is not None:
+            data["stop_reason"] = self.stop_reason
         text = json.dumps(data, indent=1, default=_json_default)
         with atomic_write(path, "w") as handle:
             handle.write(text)
@@ -86,7 +90,9 @@ class TrainingLog:
         try:
             data = json.loads(Path(path).read_text())
             log = cls(algo=str(data["algo"]), seed=int(data["seed"]), episodes=list(data["episodes"]),
-                      evaluations=list(data["evaluations"]))
+                      evaluations=list(data["evaluations"]), stop_reason=data.get("stop_reason"))
+            if log.stop_reason is not None and not isinstance(log.stop_reason, str):
+                raise ValueError("stop_reason is not a string")
             for row in log.episodes + log.evaluations:
                 if not isinstance(row, dict) or not isinstance(row.get("episode"), int):
                     raise ValueError("a row is not an object with an integer episode")

@@ -12,6 +12,7 @@ upright standard deviation at most ``balance_std_rad`` (0.1 rad).
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any, Sequence
@@ -19,12 +20,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from softpend.evaluation import EvaluationSummary
+from softpend.io.outputs import atomic_write, read_json_object
 from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-__all__ = ["BALANCE_STD_RAD", "BALANCED_FRACTION", "aggregate_fresh_start_rows", "fresh_start_row",
-           "pilco_fresh_start_rows", "rl_fresh_start_rows"]
+__all__ = ["BALANCE_STD_RAD", "BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows", "fresh_start_row",
+           "headline_figures", "pilco_fresh_start_rows", "rl_fresh_start_rows", "seed_rows"]
 
 #: Upright standard deviation of a start that counts as balanced [rad].
 BALANCE_STD_RAD = 0.1
@@ -56,10 +58,32 @@ def fresh_start_row(summary: EvaluationSummary, balance_std_rad: float = BALANCE
     }
 
 
+#: File in an RL run folder that keeps its fresh-start rows (see :func:`rl_fresh_start_rows`).
+FRESH_STARTS_FILE = "fresh_starts.json"
+
+
+def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
+    """What a fresh-start row depends on: the agent's bytes, the starts, the duration and the code that scores."""
+    import hashlib
+    import inspect
+
+    import softpend.evaluation as evaluation
+
+    digest = hashlib.sha256(agent_path.read_bytes())
+    for source in (inspect.getsource(evaluation), inspect.getsource(fresh_start_row)):
+        digest.update(source.encode())
+    digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
+    return digest.hexdigest()
+
+
 def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
                         report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = 10.0,
                         which: Sequence[str] = ("best", "final")) -> list[dict[str, Any]]:
     """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``.
+
+    Each run folder keeps its rows in :data:`FRESH_STARTS_FILE`, keyed by the agent file's bytes, the starts, the
+    duration and the source of the evaluation code, so that the figures that report them evaluate each agent
+    once; any change of those evaluates again.
 
     Raises
     ------
@@ -71,14 +95,32 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
     rows = []
     for algo in algos:
         for seed in seeds:
+            folder = run_folder(runs_root, algo, int(seed))
+            cache_path = folder / FRESH_STARTS_FILE
+            cache = read_json_object(cache_path, 10**6) or {}
+            changed = False
             for agent_kind in which:
-                model, config = load_agent(run_folder(runs_root, algo, int(seed)), agent_kind)
+                model, config = load_agent(folder, agent_kind)
                 overlap = set(report_seeds) & set(config.eval_seeds)
                 if overlap:
                     raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
-                summary = evaluate_agent(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
+                agent_file = folder / ("best_agent.zip" if agent_kind == "best" else "agent.zip")
+                if not agent_file.exists():
+                    agent_file = folder / "agent.zip"
+                key = _evaluation_key(agent_file, report_seeds, duration_s)
+                cached = cache.get(agent_kind)
+                if isinstance(cached, dict) and cached.get("key") == key and isinstance(cached.get("row"), dict):
+                    figures = cached["row"]
+                else:
+                    summary = evaluate_agent(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
+                    figures = fresh_start_row(summary)
+                    cache[agent_kind] = {"key": key, "row": figures}
+                    changed = True
                 rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[agent_kind],
-                             **fresh_start_row(summary)})
+                             **figures})
+            if changed:
+                with atomic_write(cache_path, "w") as handle:
+                    handle.write(json.dumps(cache, indent=1))  # Infinity and NaN kept (read back by Python only)
     return rows
 
 
@@ -116,3 +158,106 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) ->
                     "runs_balanced": int(sum(g["run_balances"] for g in group)),
                     "iqm_balanced_rate": value, "iqm_low": low, "iqm_high": high})
     return out
+
+
+def seed_rows(logs_by_algo: dict[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]],
+              pilco_results: Sequence[Any] = ()) -> list[dict[str, Any]]:
+    """One row per (method, seed) of what a run cost and whether its *final* agent balances fresh starts.
+
+    ``plant_s_to_balance`` is the training plant time the run consumed [s] when its final agent (policy) balances
+    the fresh starts (:func:`fresh_start_row` ``run_balances``), ``inf`` when it does not: a run that balanced
+    during training and lost it, or never balanced, did not reach the goal within its budget.  For PILCO the
+    time is that of its first policy that balanced its own test starts (``real_seconds_to_balance``), counted
+    only when the final policy balances the fresh starts too.
+
+    Parameters
+    ----------
+    logs_by_algo : dict
+        ``{"dqn": [TrainingLog, ...], "mbpo": [...]}``.
+    fresh_rows : sequence of dict
+        :func:`rl_fresh_start_rows` (and :func:`pilco_fresh_start_rows`) rows; the ``final`` ones are used.
+    pilco_results : sequence of PilcoResult
+        PILCO runs (optional).
+    """
+    final = {(r["method"], int(r["seed"])): r for r in fresh_rows if r["agent"] == "final"}
+    rows = []
+    for algo, logs in logs_by_algo.items():
+        method = METHOD_NAMES[algo]
+        for log in logs:
+            fresh = final.get((method, int(log.seed)))
+            if fresh is None:
+                raise ValueError(f"no fresh-start row of the final agent of {method} seed {log.seed}")
+            rows.append({"method": method, "seed": int(log.seed), "episodes": log.n_episodes,
+                         "plant_s": log.plant_s, "stopped_balanced": log.stop_reason is not None,
+                         "final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"],
+                         "final_balances": fresh["run_balances"],
+                         "plant_s_to_balance": log.plant_s if fresh["run_balances"] else math.inf})
+    for result in pilco_results:
+        seed = int(result.config.seed)
+        fresh = final.get(("PILCO", seed))
+        if fresh is None:
+            raise ValueError(f"no fresh-start row of PILCO seed {seed}")
+        seconds = float(result.real_seconds_to_balance)
+        rows.append({"method": "PILCO", "seed": seed, "episodes": len(result.records),
+                     "plant_s": float(result.plant_seconds_total), "stopped_balanced": math.isfinite(seconds),
+                     "final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"],
+                     "final_balances": fresh["run_balances"],
+                     "plant_s_to_balance": seconds if fresh["run_balances"] else math.inf})
+    return rows
+
+
+def headline_figures(rows: Sequence[dict[str, Any]], within_s: float = 30.0, ratio: float = 3.0,
+                     seed: int = 0) -> dict[str, float]:
+    """The ten-seed figures of the learning methods from :func:`seed_rows` rows.
+
+    ``seeds_balanced_<m>`` (runs whose final agent balances the fresh starts) and ``seeds_<m>`` (runs) for
+    ``m`` in ``dqn``, ``mbpo``, ``pilco``; ``<m>_real_s_to_balance`` (median over seeds of
+    ``plant_s_to_balance``, ``inf`` counting as never) with its 95 % bootstrap interval (``_low``, ``_high``);
+    ``mbpo_over_dqn_real_s_ratio`` (of those medians); ``mbpo_seeds_3x_fewer_than_dqn`` (seeds whose DQN-MBPO
+    run balanced with at most ``1 / ratio`` of the DQN run's plant seconds of the same seed, a DQN run that never
+    balanced counting as infinitely slow); ``pilco_seeds_within_30s`` (PILCO runs that balanced within
+    ``within_s`` plant seconds).
+    """
+    keys = {METHOD_NAMES["dqn"]: "dqn", METHOD_NAMES["mbpo"]: "mbpo", "PILCO": "pilco"}
+    by_method: dict[str, dict[int, dict[str, Any]]] = {}
+    for row in rows:
+        by_method.setdefault(keys[row["method"]], {})[int(row["seed"])] = row
+    out: dict[str, float] = {}
+    for key, group in by_method.items():
+        seconds = np.array([r["plant_s_to_balance"] for r in group.values()], dtype=float)
+        out[f"seeds_{key}"] = float(len(group))
+        out[f"seeds_balanced_{key}"] = float(sum(bool(r["final_balances"]) for r in group.values()))
+        out[f"{key}_real_s_to_balance"] = float(np.median(seconds))
+        if len(seconds) >= 2:
+            interval = aggregate_interval(seconds, "median", seed=seed)
+            out[f"{key}_real_s_to_balance_low"], out[f"{key}_real_s_to_balance_high"] = interval.low, interval.high
+    if "dqn" in by_method and "mbpo" in by_method:
+        mf, mb = out["dqn_real_s_to_balance"], out["mbpo_real_s_to_balance"]
+        out["mbpo_over_dqn_real_s_ratio"] = mf / mb if math.isfinite(mb) and mb > 0 else math.nan
+        common = sorted(set(by_method["dqn"]) & set(by_method["mbpo"]))
+        out["mbpo_seeds_3x_fewer_than_dqn"] = float(sum(
+            math.isfinite(by_method["mbpo"][s]["plant_s_to_balance"])
+            and ratio * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
+            for s in common))
+    if "pilco" in by_method:
+        out["pilco_seeds_within_30s"] = float(sum(r["plant_s_to_balance"] <= within_s for r in by_method["pilco"].values()))
+    return out
+
+
+def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_seeds: Sequence[int] = REPORT_SEEDS,
+                      duration_s: float = 10.0) -> dict[str, Any]:
+    """One controller on rods that differ from its model: :func:`fresh_start_row` figures over ``report_seeds``,
+    where the start seeded ``s`` runs on the rod :func:`softpend.plant.randomisation.randomised_rod` draws from
+    ``numpy.random.default_rng(s)`` with ``spread`` (every field of
+    :data:`~softpend.plant.randomisation.RANDOMISED_FIELDS` scaled by its own factor in ``[1 - spread,
+    1 + spread]``), from that seed's hanging start.  The controller keeps its own model of the rod (for a
+    trained agent: the task it was trained on)."""
+    from softpend.evaluation import EvaluationSummary, evaluate_controller
+    from softpend.plant.randomisation import randomised_rod
+
+    results = []
+    for seed in report_seeds:
+        rod = randomised_rod(task.rod, np.random.default_rng(int(seed)), spread)
+        summary = evaluate_controller(controller, task.replace(rod=rod), seeds=(int(seed),), duration_s=duration_s)
+        results.extend(summary.results)
+    return {"spread": float(spread), **fresh_start_row(EvaluationSummary(name="perturbed rods", results=results))}

@@ -29,7 +29,8 @@ class RLBudget:
     Parameters
     ----------
     episodes_dqn, episodes_mbpo : int
-        Training episodes per seed (real episodes for DQN-MBPO).
+        Training episode budget per seed (real episodes for DQN-MBPO); a run stops earlier once it balances
+        (:attr:`softpend.rl.DQNConfig.stop_after_balanced_evaluations`).
     seeds : tuple of int
         Training seeds.
     episode_s : float
@@ -42,9 +43,9 @@ class RLBudget:
         Run folders (trained once, reused by every figure; other plants: ``<runs_root>-<plant>``).
     """
 
-    episodes_dqn: int = 100
-    episodes_mbpo: int = 50
-    seeds: tuple[int, ...] = (0, 1, 2)
+    episodes_dqn: int = 150
+    episodes_mbpo: int = 80
+    seeds: tuple[int, ...] = tuple(range(10))
     episode_s: float = DQNConfig.episode_s
     rollouts_per_real_step: int = MBPOConfig.rollouts_per_real_step
     mbpo_random_episodes: int = MBPOConfig.initial_random_episodes

@@ -39,7 +39,7 @@ from softpend.task import Task
 from softpend.vision.camera import CameraEffects
 from softpend.vision.tip_source import CameraFaults
 
-__all__ = ["CONFIDENCE", "JOINT_SWINGUP", "OBSERVATION_SWINGUP", "SIMULATOR", "FrameKeeper", "RigCondition", "rig_controllers", "simulator_starts", "summary_rows",
+__all__ = ["CONFIDENCE", "JOINT_SWINGUP", "OBSERVATION_SWINGUP", "SIMULATOR", "FrameKeeper", "RigCondition", "learned_controller", "rig_controllers", "simulator_starts", "summary_rows",
            "text_figures", "twin_start"]
 
 #: Condition name of the rows of :func:`simulator_starts`.
@@ -123,6 +123,25 @@ def rig_controllers(task: Task) -> dict[str, Callable[[], Any]]:
     return controllers
 
 
+def learned_controller(folder: str | Path, which: str = "final") -> tuple[Any, Task, str]:
+    """``(controller, task, label)`` of a trained run folder: a PILCO run (``pilco.json``: its final policy) or a
+    DQN / DQN-MBPO run of ``softpend train`` (the agent ``which`` of :func:`softpend.rl.dqn.load_agent`, held for
+    the config's action repeat); ``task`` is the task the run was trained on.  ``ValueError`` if ``folder`` is
+    neither."""
+    from softpend.pilco.loop import PilcoResult
+    from softpend.rl.dqn import is_run_folder, load_agent
+    from softpend.rl.training_env import policy_controller
+
+    folder = Path(folder)
+    if (folder / "pilco.json").is_file():
+        result = PilcoResult.load(folder)
+        return result.controller(), result.config.task, f"PILCO {folder}"
+    if not is_run_folder(folder):
+        raise ValueError(f"{folder} is not a run folder (no pilco.json, no config.json of a DQN or DQN-MBPO run)")
+    model, config = load_agent(folder, which=which)
+    return policy_controller(model, config), config.task, f"{type(model).__name__} {folder}"
+
+
 def _row(condition: str, controller: str, seed: int, metrics: Mapping[str, Any], chatter: float,
          stop: Optional[str]) -> dict[str, Any]:
     success = bool(metrics.get("success", False)) and stop is None
@@ -146,7 +165,8 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     commands in the motor log.  The run's logs stay in ``workdir``.  A safe stop (the camera blind for longer
     than ``condition.max_blind_s``, or no first frame), a :class:`~softpend.hardware.driver.LinkError` or a
     diverged estimator model makes a failed row whose ``stop`` says why; what else the run raises propagates.
-    Besides the figures, the row holds ``jitter_ms_p95`` (command periods), ``frames_tracked``,
+    Besides the figures, the row holds ``jitter_ms_p95`` (command periods), ``late_commands`` and ``samples``,
+    ``step_time_ms_p95`` and ``step_cpu_ms_p95`` (host processing per state, wall clock and CPU), ``frames_tracked``,
     ``frames_lost`` and ``wall_s``.
     """
     positive("duration_s", duration_s)
@@ -182,6 +202,10 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     row = _row(condition.name, label, seed, metrics, chatter, stop)
     camera = result.camera if result is not None else {}
     row.update(jitter_ms_p95=result.jitter_ms_p95 if result is not None else math.nan,
+               late_commands=int(result.late_commands) if result is not None else 0,
+               samples=int(result.samples) if result is not None else 0,
+               step_time_ms_p95=float(result.step_time_ms_p95) if result is not None else math.nan,
+               step_cpu_ms_p95=float(result.step_cpu_ms_p95) if result is not None else math.nan,
                frames_tracked=int(camera.get("frames_tracked", 0)), frames_lost=int(camera.get("frames_lost", 0)),
                wall_s=wall_s)
     return row

@@ -11,7 +11,6 @@ import math
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-import numpy as np
 
 from softpend.study.presets import RL_BOOK, TASK
 from softpend.task import Task
@@ -20,8 +19,8 @@ from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
-__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "median_real_s_to_balance", "method_medians",
-           "plant_runs_root", "run_folder", "summary_table", "train_seeds"]
+__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "run_folder", "summary_table",
+           "train_seeds"]
 
 
 def train_seeds(
@@ -59,10 +58,10 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
                 continue  # a seed listed twice is trained once (two workers must not share a folder)
             log_path = run_dir / "log.json"
             if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
-                n_done = TrainingLog.load(log_path).n_episodes
-                if n_done == episodes:
+                done = TrainingLog.load(log_path)
+                if done.n_episodes == episodes or done.stop_reason is not None:
                     continue
-                resume = n_done < episodes
+                resume = done.n_episodes < episodes
             else:
                 resume = False
             jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
@@ -118,11 +117,6 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
     return rows
 
 
-def median_real_s_to_balance(logs: Sequence[TrainingLog], std_rad: float = BALANCE_STD_RAD) -> float:
-    """Median over seeds of the plant seconds until the evaluation balances (``inf`` counts as never)."""
-    return float(np.median([log.real_s_to_balance(std_rad) for log in logs]))
-
-
 def figure_configs(torque_limit_nm: float = TASK.torque_limit_nm, episode_s: float = RL_BOOK.episode_s,
                    rollouts_per_real_step: int = RL_BOOK.rollouts_per_real_step,
                    mbpo_random_episodes: int = RL_BOOK.mbpo_random_episodes, plant: str = TASK.plant) -> dict[str, DQNConfig]:
@@ -171,15 +165,3 @@ def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], run
 def run_folder(runs_root: Path | str, algo: str, seed: int) -> Path:
     """Folder of one run made by :func:`train_seeds`."""
     return Path(runs_root) / f"{algo}-seed{seed}"
-
-
-def method_medians(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
-    """Median over seeds of every numeric column of :func:`summary_table` rows, per method."""
-    methods: dict[str, list[dict[str, Any]]] = {}
-    for row in rows:
-        methods.setdefault(row["method"], []).append(row)
-    out = {}
-    for method, group in methods.items():
-        keys = [k for k, v in group[0].items() if isinstance(v, (int, float)) and not isinstance(v, bool) and k != "seed"]
-        out[method] = {"method": method, **{k: float(np.median([g[k] for g in group])) for k in keys}}
-    return out

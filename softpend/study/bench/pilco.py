@@ -16,6 +16,16 @@ The default :class:`~softpend.pilco.loop.PilcoConfig` (the project's soft rod) r
 
 The runs are saved to ``runs/bench-pilco/seed<k>`` for inspection; they are always rerun, since their wall
 time is the measurement.
+
+Ten seeds, on fresh starts (:data:`TEN_SEEDS`, the runs of ``runs/pilco-book``: reused when present, run
+otherwise; their final policies measured on :data:`softpend.study.presets.REPORT_SEEDS`):
+
+* ``seeds_balanced_pilco`` -- runs whose final policy balances >= 90 % of the fresh starts (upright std
+  <= 0.1 rad);
+* ``pilco_seeds_within_30s`` -- runs that also balanced their own test starts within 30 plant seconds;
+* ``pilco_real_s_to_balance`` over those runs as a median with a bootstrap interval
+  (``pilco_ten_real_s_to_balance``, ``_low``, ``_high``), and the slowest run's CPU seconds
+  (``pilco_ten_max_train_cpu_s``; target: under 600 s of one core).
 """
 
 from __future__ import annotations
@@ -29,6 +39,8 @@ from softpend.pilco.loop import PilcoConfig, run_pilco
 ROOT = "runs/bench-pilco"
 #: Seeds of the benchmark runs.
 SEEDS = (0, 1, 2)
+#: Seeds of the ten-seed figures.
+TEN_SEEDS = tuple(range(10))
 
 
 def bench_pilco() -> dict[str, float]:
@@ -45,4 +57,21 @@ def bench_pilco() -> dict[str, float]:
         out[f"pilco_final_upright_std_rad_seed{seed}"] = result.records[-1].eval_upright_std_rad
     for key in ("pilco_real_s_to_balance", "pilco_train_wall_s", "pilco_train_cpu_s", "pilco_final_upright_std_rad"):
         out[key] = max(out[f"{key}_seed{seed}"] for seed in SEEDS)
+    out.update(ten_seed_figures())
+    return out
+
+
+def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
+    """The ten-seed PILCO figures of the module docstring."""
+    from softpend.study.fresh_starts import headline_figures, pilco_fresh_start_rows, seed_rows
+    from softpend.study.head_to_head import pilco_runs
+    from softpend.study.presets import PILCO, PILCO_BOOK
+
+    results = pilco_runs(PILCO, seeds, PILCO_BOOK.runs_root, progress=True)
+    figures = headline_figures(seed_rows({}, pilco_fresh_start_rows(results), results))
+    out = {key: figures[key] for key in ("seeds_pilco", "seeds_balanced_pilco", "pilco_seeds_within_30s")}
+    out["pilco_ten_real_s_to_balance"] = figures["pilco_real_s_to_balance"]
+    for end in ("low", "high"):
+        out[f"pilco_ten_real_s_to_balance_{end}"] = figures.get(f"pilco_real_s_to_balance_{end}", float("nan"))
+    out["pilco_ten_max_train_cpu_s"] = max(result.train_cpu_s for result in results)
     return out

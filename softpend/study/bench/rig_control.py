@@ -1,12 +1,17 @@
 """Closed-loop figures on the digital twin (``softpend bench --only rig_control``).
 
-The energy swing-up handing over to the LQR (:class:`softpend.control.swingup.EnergySwingUpController`, on the
-joint state the rig's estimator provides) runs through the whole rig stack -- the emulator in its own process
-on a pseudo-terminal, the synthetic live camera filming the emulator (60 frames/s, 20 ms latency, the nominal
+Each controller class runs through the whole rig stack -- the emulator in its own process on a
+pseudo-terminal, the synthetic live camera filming the emulator (60 frames/s, 20 ms latency, the nominal
 :meth:`~softpend.vision.camera.CameraEffects.rig` noise), the Algorithm 1 tracker, the state estimator, the
 4096-count encoder -- from N_STARTS fresh hanging starts (the first of
-:data:`softpend.study.presets.REPORT_SEEDS`, ``start_noise_rad`` 0.05), DURATION_S each.  A start succeeds
-when the true tip (emulator truth log) swings up and holds with upright std <= SUCCESS_STD_RAD.
+:data:`softpend.study.presets.REPORT_SEEDS`, ``start_noise_rad`` 0.05), DURATION_S each, and in the ideal
+simulator from the same starts (:func:`softpend.study.rig_runs.simulator_starts`).  A start succeeds when the
+rod's true tip (the emulator's truth log) swings up and holds with upright std <= SUCCESS_STD_RAD.
+
+The controllers (:data:`CONTROLLERS`): ``swingup_lqr``, the energy swing-up handing over to the LQR on the
+joint state the estimator provides; ``dqn``, ``mbpo`` and ``pilco``, the *final* agent or policy of the first
+training seed of the book's runs (``RL_BOOK``, ``PILCO_BOOK``: reused when present, trained otherwise).  No
+run is picked by its results: the first seed is the one measured.
 """
 
 from __future__ import annotations
@@ -14,58 +19,101 @@ from __future__ import annotations
 import math
 import tempfile
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
-N_STARTS = 5
+N_STARTS = 10
 DURATION_S = 10.0
 SUCCESS_STD_RAD = 0.1
+#: Spread of the rod-parameter changes of ``rig_perturbed_success_<c>`` (+-15 %).
+PERTURBATION = 0.15
+#: Benchmark names of the controller classes, in the order they run.
+CONTROLLERS = ("swingup_lqr", "dqn", "mbpo", "pilco")
 
 
-def bench_rig_control() -> dict[str, float]:
-    """``rig_success_swingup_lqr`` (fraction of starts), ``rig_upright_std_rad_swingup_lqr`` (worst start that
-    succeeded), ``rig_swing_up_time_s_swingup_lqr`` (median over successes), ``rig_torque_chatter_nm_per_s_swingup_lqr``
-    (median), and ``rig_control_loop_jitter_ms`` (p95 of ``|command period - median|`` over all runs' periods),
-    with ``rig_control_late_command_fraction``, ``rig_control_step_time_ms_p95`` (host processing per state, wall
-    clock) and ``rig_control_step_cpu_ms_p95`` (the same in the loop thread's CPU time: the work without waits)."""
+def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
+    """``name -> () -> (controller, task)`` for every entry of :data:`CONTROLLERS`."""
     from softpend.control.swingup import EnergySwingUpController
-    from softpend.hardware.closed_loop import TwinCamera, run_twin_control
-    from softpend.hardware.loop import jitter_ms_p95
-    from softpend.hardware.emulator import RigConfig
-    from softpend.study.presets import REPORT_SEEDS
-    from softpend.study.rig import torque_chatter_nm_per_s, truth_metrics
-    from softpend.task import Task
-    from softpend.vision.camera import CameraEffects
+    from softpend.study.head_to_head import pilco_runs
+    from softpend.study.presets import PILCO, PILCO_BOOK, RL_BOOK, TASK
+    from softpend.study.rig_runs import learned_controller
+    from softpend.study.rl_runs import figure_runs, run_folder
 
-    task = Task(start_noise_rad=0.05)
-    successes, stds, swing_up, chatter, periods, late, samples, step_p95, cpu_p95 = [], [], [], [], [], 0, 0, [], []
+    def swingup():
+        return EnergySwingUpController(TASK.rod, dt_s=TASK.dt_s), TASK
+
+    def rl(algo: str):
+        def make():
+            seed = RL_BOOK.seeds[0]
+            figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, (seed,), RL_BOOK.runs_root, progress=True)
+            controller, task, _ = learned_controller(run_folder(RL_BOOK.runs_root, algo, seed), "final")
+            return controller, task
+        return make
+
+    def pilco():
+        seed = PILCO_BOOK.seeds[0]
+        pilco_runs(PILCO, (seed,), PILCO_BOOK.runs_root, progress=True)
+        controller, task, _ = learned_controller(Path(PILCO_BOOK.runs_root) / f"pilco-seed{seed}")
+        return controller, task
+
+    return {"swingup_lqr": swingup, "dqn": rl("dqn"), "mbpo": rl("mbpo"), "pilco": pilco}
+
+
+def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int = N_STARTS) -> dict[str, float]:
+    """Per controller ``c``: ``rig_success_<c>`` (fraction of starts on the nominal twin),
+    ``rig_upright_std_rad_<c>`` (worst start that succeeded), ``rig_swing_up_time_s_<c>`` (median over
+    successes), ``rig_torque_chatter_nm_per_s_<c>`` (median), ``rig_sim_success_<c>`` (the same starts in the
+    ideal simulator), ``rig_success_drop_pp_<c>`` (simulator minus twin, percentage points) and
+    ``rig_perturbed_success_<c>`` (the same starts in the simulator, each on a rod whose mass, stiffness, damping,
+    hub friction and torque limit differ from the model by up to +-15 %,
+    :func:`softpend.study.fresh_starts.perturbed_rod_row`); over all runs
+    ``rig_control_loop_jitter_ms`` (median over runs of each run's p95 of ``|command period - median|``; the
+    worst run's in ``rig_control_loop_jitter_ms_worst_run``), ``rig_control_late_command_fraction``,
+    ``rig_control_step_time_ms_p95`` (host processing per state, wall clock) and ``rig_control_step_cpu_ms_p95``
+    (the same in the loop thread's CPU time: the work without waits)."""
+    from softpend.study.presets import REPORT_SEEDS
+    from softpend.study.fresh_starts import perturbed_rod_row
+    from softpend.study.rig_runs import RigCondition, simulator_starts, twin_start
+
+    factories = controller_factories()
+    unknown = [c for c in controllers if c not in factories]
+    if unknown:
+        raise ValueError(f"unknown rig controller(s) {unknown}; choose from {sorted(factories)}")
+    seeds = REPORT_SEEDS[:n_starts]
+    condition = RigCondition("nominal twin")
+    out: dict[str, float] = {}
+    runs: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in REPORT_SEEDS[:N_STARTS]:
-            controller = EnergySwingUpController(task.rod, dt_s=task.dt_s)
-            rig = RigConfig(task=task, counts_per_rev=4096, seed=seed)
-            camera = TwinCamera(fps=60.0, latency_s=0.020, effects=CameraEffects.rig(), seed=seed)
-            run = run_twin_control(controller, Path(tmp) / str(seed), DURATION_S, rig=rig, camera=camera)
-            metrics = truth_metrics(run.truth_log, task, success_std_rad=SUCCESS_STD_RAD)
-            ok = bool(metrics["success"]) and run.result.stop_reason is None
-            successes.append(ok)
-            if ok:
-                stds.append(metrics["upright_std_rad"])
-                swing_up.append(metrics["swing_up_time_s"])
-            chatter.append(torque_chatter_nm_per_s(run.motor_log))
-            periods.append(run.result.command_periods_s)
-            late += run.result.late_commands
-            samples += run.result.samples
-            step_p95.append(run.result.step_time_ms_p95)
-            cpu_p95.append(run.result.step_cpu_ms_p95)
-    jitter = jitter_ms_p95(np.concatenate(periods))
-    return {
-        "rig_success_swingup_lqr": float(np.mean(successes)),
-        "rig_upright_std_rad_swingup_lqr": float(max(stds)) if stds else math.nan,
-        "rig_swing_up_time_s_swingup_lqr": float(np.median(swing_up)) if swing_up else math.nan,
-        "rig_torque_chatter_nm_per_s_swingup_lqr": float(np.median(chatter)),
-        "rig_control_starts": float(len(successes)),
-        "rig_control_loop_jitter_ms": jitter,
-        "rig_control_late_command_fraction": late / max(samples, 1),
-        "rig_control_step_time_ms_p95": float(np.median(step_p95)),
-        "rig_control_step_cpu_ms_p95": float(np.median(cpu_p95)),
-    }
+        for name in controllers:
+            controller, task = factories[name]()
+            task = task.replace(start_noise_rad=0.05)
+            rows = [twin_start(controller, name, task, condition, seed, DURATION_S, Path(tmp) / f"{name}-{seed}",
+                               success_std_rad=SUCCESS_STD_RAD) for seed in seeds]
+            sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=SUCCESS_STD_RAD)
+            good = [r for r in rows if r["success"]]
+            twin_rate = len(good) / len(rows)
+            sim_rate = sum(r["success"] for r in sim) / len(sim)
+            out[f"rig_success_{name}"] = twin_rate
+            out[f"rig_upright_std_rad_{name}"] = float(max(r["upright_std_rad"] for r in good)) if good else math.nan
+            out[f"rig_swing_up_time_s_{name}"] = float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan
+            chatter = [r["torque_chatter_nm_per_s"] for r in rows if math.isfinite(r["torque_chatter_nm_per_s"])]
+            out[f"rig_torque_chatter_nm_per_s_{name}"] = float(np.median(chatter)) if chatter else math.nan
+            out[f"rig_sim_success_{name}"] = sim_rate
+            perturbed = perturbed_rod_row(controller, task, PERTURBATION, report_seeds=seeds, duration_s=DURATION_S)
+            out[f"rig_perturbed_success_{name}"] = perturbed["balanced_rate"]
+            out[f"rig_success_drop_pp_{name}"] = 100.0 * (sim_rate - twin_rate)
+            runs.extend(rows)
+
+    def median(key: str) -> float:
+        values = [r[key] for r in runs if math.isfinite(r[key])]
+        return float(np.median(values)) if values else math.nan
+
+    jitters = [r["jitter_ms_p95"] for r in runs if math.isfinite(r["jitter_ms_p95"])]
+    out["rig_control_starts"] = float(len(seeds))
+    out["rig_control_loop_jitter_ms"] = median("jitter_ms_p95")
+    out["rig_control_loop_jitter_ms_worst_run"] = float(max(jitters)) if jitters else math.nan
+    out["rig_control_late_command_fraction"] = sum(r["late_commands"] for r in runs) / max(sum(r["samples"] for r in runs), 1)
+    out["rig_control_step_time_ms_p95"] = median("step_time_ms_p95")
+    out["rig_control_step_cpu_ms_p95"] = median("step_cpu_ms_p95")
+    return out

@@ -1,18 +1,18 @@
-"""``softpend bench --only rl``: DQN training speed and plant seconds until the agents balance.
+"""``softpend bench --only rl``: DQN training speed, and the ten-seed figures of DQN and DQN-MBPO on fresh starts.
 
 * ``dqn_train_steps_per_s`` -- agent steps per wall-clock second of model-free DQN training (environment
   with action repeat, replay, gradient steps; 10 episodes after a short warm-up).
-* ``dqn_real_s_to_balance`` / ``mbpo_real_s_to_balance`` -- median over seeds (0, 1, 2) of the real plant
-  seconds of training until the periodic evaluation balances (every evaluation seed swings up and holds
-  ``upright_std_rad <= 0.2``); ``inf`` when a run never does.  The runs are those of the book's full
-  profile (:func:`softpend.study.rl_runs.figure_configs`, ``RL_EPISODES``, folder ``runs/rl-book``):
-  reused when present, trained otherwise.
-* ``mbpo_over_dqn_real_s_ratio`` -- DQN over MBPO plant seconds to balance (the target is >= 3).
-* ``full_profile_train_cpu_s`` -- CPU seconds of training all six runs (the training logs' ``cpu_s``,
-  ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time of the
-  full profile on two otherwise idle cores running two single-threaded runs at a time (as
-  :func:`~softpend.study.rl_runs.figure_runs` does), if the runs pack perfectly (a lower bound; the target
-  is <= 1200 s).
+* The runs of the book's full profile (:data:`softpend.study.presets.RL_BOOK`: every seed, the episode budgets,
+  folder ``runs/rl-book``; reused when present, trained otherwise), their final agents measured on the fresh
+  starts :data:`softpend.study.presets.REPORT_SEEDS` (:func:`softpend.study.fresh_starts.rl_fresh_start_rows`),
+  condensed by :func:`softpend.study.fresh_starts.headline_figures`: ``seeds_balanced_dqn`` and
+  ``seeds_balanced_mbpo`` (runs whose final agent balances >= 90 % of the fresh starts with upright std
+  <= 0.1 rad), ``dqn_real_s_to_balance`` and ``mbpo_real_s_to_balance`` (median over seeds of the training
+  plant seconds of a run whose final agent balances; ``inf`` for one that does not) with bootstrap intervals,
+  ``mbpo_over_dqn_real_s_ratio`` and ``mbpo_seeds_3x_fewer_than_dqn``.
+* ``full_profile_train_cpu_s`` -- CPU seconds of training all those runs (the training logs' ``cpu_s``,
+  ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time on two
+  otherwise idle cores running two single-threaded runs at a time, if the runs pack perfectly (a lower bound).
 """
 
 from __future__ import annotations
@@ -20,11 +20,7 @@ from __future__ import annotations
 import math
 import tempfile
 
-from softpend.study.presets import RL_EPISODES
 from softpend.rl.config import DQNConfig
-
-SEEDS = (0, 1, 2)
-ROOT = "runs/rl-book"
 
 
 def dqn_train_steps_per_s(episodes: int = 10) -> float:
@@ -48,19 +44,18 @@ def training_cpu_s(log) -> float:
 
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
-    from softpend.study.rl_runs import METHOD_NAMES, figure_runs, median_real_s_to_balance
+    from softpend.study.fresh_starts import headline_figures, rl_fresh_start_rows, seed_rows
+    from softpend.study.presets import RL_BOOK
+    from softpend.study.rl_runs import METHOD_NAMES, figure_runs
 
     steps_per_s = dqn_train_steps_per_s()
-    runs = figure_runs(RL_EPISODES["dqn"], RL_EPISODES["mbpo"], SEEDS, ROOT, progress=True)
-    dqn_logs, mbpo_logs = runs[METHOD_NAMES["dqn"]], runs[METHOD_NAMES["mbpo"]]
-    cpu_s = sum(training_cpu_s(log) for log in dqn_logs + mbpo_logs)
-    dqn_s = median_real_s_to_balance(dqn_logs)
-    mbpo_s = median_real_s_to_balance(mbpo_logs)
+    runs = figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, RL_BOOK.seeds, RL_BOOK.runs_root, progress=True)
+    logs = {"dqn": runs[METHOD_NAMES["dqn"]], "mbpo": runs[METHOD_NAMES["mbpo"]]}
+    fresh = rl_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds, which=("final",))
+    cpu_s = sum(training_cpu_s(log) for group in logs.values() for log in group)
     return {
         "dqn_train_steps_per_s": steps_per_s,
-        "dqn_real_s_to_balance": dqn_s,
-        "mbpo_real_s_to_balance": mbpo_s,
-        "mbpo_over_dqn_real_s_ratio": dqn_s / mbpo_s if math.isfinite(mbpo_s) and mbpo_s > 0 else math.nan,
+        **headline_figures(seed_rows(logs, fresh)),
         "full_profile_train_cpu_s": cpu_s,
         "full_profile_train_2core_s": cpu_s / 2.0,
     }

@@ -14,7 +14,7 @@ import numpy as np
 
 from softpend.evaluation import EvaluationResult
 from softpend.plotting import draw_rod
-from softpend.rl.curves import aggregate, episodes_to_asymptote, moving_average
+from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
@@ -22,32 +22,40 @@ __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upri
 COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 
-def _band(ax, agg, color, label):
-    ax.plot(agg["x"], agg["mean"], color=color, label=label)
-    ax.fill_between(agg["x"], agg["min"], agg["max"], color=color, alpha=0.2, lw=0)
-
-
-def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], window: int = 10, fig: Optional[plt.Figure] = None):
+def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], window: int = 10, fig: Optional[plt.Figure] = None,
+                         threshold_rad: float = BALANCE_STD_RAD, seed: int = 0):
     """Figure 4: return and evaluation upright std against episodes and real plant seconds.
 
-    Mean over seeds (line) and min-max spread (band); returns smoothed with a trailing ``window``-episode
-    moving average; dotted vertical lines mark each method's median episode of reaching the asymptotic
-    reward (:func:`softpend.rl.curves.episodes_to_asymptote`).
+    Top row: the return of every seed (thin lines, smoothed with a trailing ``window``-episode moving
+    average), a run's line ending where its training ended; dotted vertical lines mark each method's median
+    episode of reaching the asymptotic reward (:func:`softpend.rl.curves.episodes_to_asymptote`).  Bottom row:
+    the worst evaluation start's upright std, interquartile mean over seeds (line) with its 95 % stratified
+    bootstrap interval (band, :func:`softpend.rl.curves.interval_band`; a run that stopped keeps its last value,
+    its agent no longer changing); with a single seed, that seed's curve.  The dashed line is ``threshold_rad``.
     """
     fig = fig or plt.figure(figsize=(11, 7))
     axes = fig.subplots(2, 2, sharey="row")
     for i, (method, logs) in enumerate(logs_by_method.items()):
         color = COLORS.get(method, f"C{i}")
         for col, axis in enumerate(("episode", "plant_s")):
-            _band(axes[0, col], aggregate(logs, "return", axis=axis, window=window), color, method)
-            _band(axes[1, col], aggregate(logs, "max_upright_std_rad", axis=axis, table="evaluations"), color, method)
+            for k, log in enumerate(logs):
+                axes[0, col].plot(log.column(axis), moving_average(log.column("return"), window), color=color,
+                                  lw=0.8, alpha=0.6, label=method if k == 0 else None)
+            if len(logs) >= 2:
+                band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed)
+                axes[1, col].plot(band["x"], band["value"], color=color, label=method)
+                axes[1, col].fill_between(band["x"], band["low"], band["high"], color=color, alpha=0.2, lw=0)
+            else:
+                log = logs[0]
+                axes[1, col].plot(log.column(axis, "evaluations"), log.column("max_upright_std_rad", "evaluations"),
+                                  color=color, label=method)
         asym = float(np.median([episodes_to_asymptote(log.column("return"), window=window) for log in logs]))
         if math.isfinite(asym):
             axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
     axes[0, 0].set_ylabel(f"episode return ({window}-episode mean)")
-    axes[1, 0].set_ylabel("evaluation upright std [rad]\n(worst of the evaluation seeds)")
+    axes[1, 0].set_ylabel("evaluation upright std [rad]\n(worst evaluation start; IQM over seeds)")
     for col in range(2):
-        axes[1, col].axhline(BALANCE_STD_RAD, color="k", ls="--", lw=0.8)
+        axes[1, col].axhline(threshold_rad, color="k", ls="--", lw=0.8)
         axes[1, col].set_yscale("log")
     axes[1, 0].set_xlabel("training episodes")
     axes[1, 1].set_xlabel("real plant time [s]")
@@ -133,25 +141,33 @@ def animate_swingup(result: EvaluationResult, link_points, length_m: float, ever
 
 
 def upright_error_over_time(results: Sequence[EvaluationResult], window_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """Time-averaged upright error ``|theta|`` (trailing ``window_s`` moving average), mean over episodes."""
+    """Time-averaged upright error ``|theta|`` (trailing ``window_s`` moving average) of every episode:
+    ``(time_s, errors)`` with ``errors`` of shape ``(n_episodes, n_steps)`` (the shortest episode's steps)."""
     if len(results) == 0:
         raise ValueError("results must not be empty")
     n = min(len(r.time_s) for r in results)
     dt = float(results[0].time_s[1] - results[0].time_s[0])
     window = max(1, int(round(window_s / dt)))
     errors = np.array([moving_average(np.abs(r.theta_rad[:n]), window) for r in results])
-    return results[0].time_s[:n], errors.mean(axis=0)
+    return results[0].time_s[:n], errors
 
 
-def plot_upright_error(results_by_method: Mapping[str, Sequence[EvaluationResult]], window_s: float = 0.5, ax=None):
-    """Figure 6: the time-averaged upright error of each method's controller (mean over evaluation seeds)."""
+def plot_upright_error(results_by_method: Mapping[str, Sequence[EvaluationResult]], window_s: float = 0.5, ax=None,
+                       threshold_rad: float = BALANCE_STD_RAD):
+    """Figure 6: the time-averaged upright error of each method's controllers: the median over episodes (line)
+    and the band between the 25th and 75th percentiles (with one episode, that episode)."""
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 4))
     for i, (method, results) in enumerate(results_by_method.items()):
-        t, err = upright_error_over_time(results, window_s)
-        ax.plot(t, err, color=COLORS.get(method, f"C{i}"), label=method)
-    ax.axhline(BALANCE_STD_RAD, color="k", ls="--", lw=0.8, label=f"{BALANCE_STD_RAD} rad")
+        t, errors = upright_error_over_time(results, window_s)
+        color = COLORS.get(method, f"C{i}")
+        ax.plot(t, np.median(errors, axis=0), color=color, label=f"{method} (median of {len(results)})")
+        if len(results) > 1:
+            low, high = np.percentile(errors, [25, 75], axis=0)
+            ax.fill_between(t, low, high, color=color, alpha=0.2, lw=0)
+    ax.axhline(threshold_rad, color="k", ls="--", lw=0.8, label=f"{threshold_rad:g} rad")
     ax.set_xlabel("time [s]")
     ax.set_ylabel(rf"$|\theta|$, {window_s:g} s moving average [rad]")
+    ax.set_yscale("log")
     ax.legend()
     return ax

@@ -1,8 +1,8 @@
 """softpend: learning to control a soft robotic pendulum.
 
 Importing the package registers the Gymnasium environments ``softpend/SoftPendulum-v0`` and
-``softpend/SoftPendulumDiscrete-v0`` by ``"module:Class"`` entry points; their modules (and Exudyn) are
-imported only when an environment is made.
+``softpend/SoftPendulumDiscrete-v0`` by ``"module:Class"`` entry points (and vector entry points for
+``gymnasium.make_vec``); their modules (and Exudyn or torch) are imported only when an environment is made.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -24,8 +24,16 @@ ENVIRONMENTS = {
     "softpend/SoftPendulumDiscrete-v0": "softpend.envs.soft_pendulum:SoftPendulumDiscreteEnv",
 }
 
+#: Registered environment id -> vector entry point (``gymnasium.make_vec`` builds these by default: all rods
+#: on the batched torch chain, :mod:`softpend.envs.vector`; ``vectorization_mode="sync"`` gives Exudyn copies).
+VECTOR_ENVIRONMENTS = {
+    "softpend/SoftPendulum-v0": "softpend.envs.vector:SoftPendulumVectorEnv",
+    "softpend/SoftPendulumDiscrete-v0": "softpend.envs.vector:SoftPendulumDiscreteVectorEnv",
+}
+
 for _env_id, _entry in ENVIRONMENTS.items():
     if _env_id not in _registry:
-        _register(id=_env_id, entry_point=_entry, max_episode_steps=MAX_EPISODE_STEPS)
+        _register(id=_env_id, entry_point=_entry, vector_entry_point=VECTOR_ENVIRONMENTS.get(_env_id),
+                  max_episode_steps=MAX_EPISODE_STEPS)
 
-__all__ = ["ENVIRONMENTS", "MAX_EPISODE_STEPS", "__version__"]
+__all__ = ["ENVIRONMENTS", "MAX_EPISODE_STEPS", "VECTOR_ENVIRONMENTS", "__version__"]

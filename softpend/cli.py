@@ -29,6 +29,7 @@ COMMAND_MODULES: list[str] = [
     "softpend.commands.track",
     "softpend.commands.babble",
     "softpend.commands.fit_model",
+    "softpend.commands.identify",
     "softpend.commands.sweep",
 ]
 

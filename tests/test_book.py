@@ -1,55 +1,30 @@
-"""Build the whole book with the quick profile, in a temporary copy of the project (so neither `_build` nor
-`book/_generated` of the working tree is touched), and check the HTML it produces."""
+"""The whole book built with the quick profile (the session fixture ``quick_book`` of ``conftest.py``, in a
+temporary copy of the project), and the HTML it produces."""
 
 from __future__ import annotations
 
+import json
 import re
-import shutil
 from pathlib import Path
 
 import nbformat
-import pytest
 
 from softpend.study import book
-from softpend.study.book import build_html, load_profiles, run_notebooks, toc_notebooks
+from softpend.study.book import BookLayout, execution_order, load_profiles, notebook_after, run_notebooks, toc_notebooks
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def quick_book(tmp_path_factory):
-    """Copy the book sources, execute every toc notebook with the quick profile, build the HTML."""
-    # others edit the package while the tests run: hash each notebook's code once, so the cache check below
-    # is stable
-    hash_code = book.PackageCode.code_hashes
-    hashes: dict[tuple[str, ...], dict[str, str]] = {}
-
-    def code_hashes_once(self, cells):
-        cells = tuple(cells)
-        if cells not in hashes:
-            hashes[cells] = hash_code(self, cells)
-        return hashes[cells]
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
-        yield _build_quick_book(tmp_path_factory.mktemp("book"))
-
-
-def _build_quick_book(root: Path):
-    for name in ("_config.yml", "_toc.yml"):
-        shutil.copy2(REPO_ROOT / name, root / name)
-    shutil.copytree(REPO_ROOT / "book", root / "book", ignore=shutil.ignore_patterns("_generated"))
-    shutil.copytree(REPO_ROOT / "notebooks", root / "notebooks", ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
-    runs = run_notebooks(root, profile="quick", progress=False)
-    html_dir = build_html(root, quiet=True)
-    return root, runs, html_dir
 
 
 def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book):
     root, runs, _ = quick_book
     names = toc_notebooks(root / "_toc.yml")
     assert names, "the toc lists no notebooks"
-    assert [run.name for run in runs] == names
+    after = {name: notebook_after(book.read_notebook(root / "notebooks" / f"{name}.md"), name, names) for name in names}
+    assert [run.name for run in runs] == execution_order(names, after)
+    assert any(after.values()), "the claims ledger reads the chapters it lists in softpend.after"
+    for name, deps in after.items():  # a notebook that reads others executes after them
+        order = [run.name for run in runs]
+        assert all(order.index(dep) < order.index(name) for dep in deps), name
     assert all(run.status == "executed" for run in runs)
     quick = load_profiles(root / "book" / "profiles.yml")["quick"]
     assert sorted(quick) == sorted(names), "every notebook needs a block in the quick profile"
@@ -57,8 +32,26 @@ def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book)
         nb = nbformat.read(str(run.output_path), as_version=4)
         errors = [out for cell in nb.cells for out in cell.get("outputs", []) if out.output_type == "error"]
         assert not errors, f"{run.name}: {errors}"
-    # a second run is served by the execution cache
+    # a second run is served by the execution cache, and the execution record says so
     assert {run.status for run in run_notebooks(root, profile="quick", progress=False)} == {"cached"}
+    record = json.loads(BookLayout.at(root).record_path.read_text())
+    assert [entry["name"] for entry in record["notebooks"]] == names
+    assert all(entry["this_run"] == "cached" and entry["executed_s"] > 0 and entry["profile"] == "quick"
+               for entry in record["notebooks"])
+
+
+def test_execution_page_is_in_the_book_and_lists_every_notebook(quick_book):
+    root, runs, html_dir = quick_book
+    page = html_dir / "book" / "_generated" / "execution.html"
+    assert page.is_file()
+    text = re.sub(r"<[^>]+>", "", page.read_text(encoding="utf-8"))
+    for run in runs:  # each notebook's row links to its page
+        assert f'href="{run.name}.html"' in page.read_text(encoding="utf-8"), run.name
+    assert "--profile quick" in text and "environment.lock" in text and "CPU count" in text
+
+
+#: Notebooks whose page is a table, not a figure.
+NO_FIGURE = {"claims_ledger"}
 
 
 def test_html_pages_exist_and_embed_png_figures(quick_book):
@@ -69,6 +62,8 @@ def test_html_pages_exist_and_embed_png_figures(quick_book):
     for name in toc_notebooks(root / "_toc.yml"):
         page = html_dir / "book" / "_generated" / f"{name}.html"
         assert page.is_file(), f"no HTML page for {name}"
+        if name in NO_FIGURE:
+            continue
         sources = re.findall(r'<img[^>]*\ssrc="([^"]+)"', page.read_text(encoding="utf-8"))
         pngs = [src for src in sources if src.endswith(".png")]
         assert pngs, f"{name}: the page embeds no PNG figure"

@@ -2,7 +2,8 @@
 
 Prints the pty path (one line), then serves until Ctrl-C/SIGTERM or ``--duration``.  Point any host
 program at that path, e.g. ``MotorLink(path, torque_limit_nm=0.06)``.  ``softpend rig control`` runs a
-controller on a rig or on the twin (:mod:`softpend.commands.rig_control`).
+controller on a rig or on the twin (:mod:`softpend.commands.rig_control`); ``softpend rig design``, ``check``,
+``calibrate`` and ``babble`` take a rig from its parts to a dataset (:mod:`softpend.commands.rig_build`).
 """
 
 from __future__ import annotations
@@ -23,10 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed for drops, garbling and start noise")
     parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
     parser.set_defaults(func=run)
-    from softpend.commands import rig_control
+    from softpend.commands import rig_build, rig_control
 
     actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
     rig_control.register(actions)
+    rig_build.register(actions)
     for action in actions.choices.values():
         action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                             help="show the traceback of an error instead of one line")

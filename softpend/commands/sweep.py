@@ -5,7 +5,8 @@ Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-
 was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
 (``--backend loky|ray|dask``), where a worker that dies is retried and finished runs are kept.  The
 settings are the book's (:mod:`softpend.study.presets`).  With ``--fresh`` every run's final (and for RL
-selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`).
+selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`), with the
+per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.headline_figures`.
 """
 
 from __future__ import annotations
@@ -94,12 +95,16 @@ def run(args: argparse.Namespace) -> int:
                                              "plant_s": r.plant_seconds_total, "cpu_s": r.train_cpu_s}
                                             for r in pilco_results]}
     if args.fresh:
-        from softpend.study.fresh_starts import aggregate_fresh_start_rows, pilco_fresh_start_rows, rl_fresh_start_rows
+        from softpend.study.fresh_starts import (aggregate_fresh_start_rows, headline_figures, pilco_fresh_start_rows,
+                                                 rl_fresh_start_rows, seed_rows)
 
         rows = pilco_fresh_start_rows(pilco_results) if pilco_results else []
         if rl_logs:
             rows += rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs))
         out["fresh_starts"] = rows
         out["fresh_start_summary"] = aggregate_fresh_start_rows(rows)
+        per_seed = seed_rows(rl_logs, rows, pilco_results)
+        out["per_seed"] = per_seed
+        out["headline"] = headline_figures(per_seed)
     print(json_text(out, indent=2))
     return 0

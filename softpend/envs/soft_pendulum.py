@@ -30,6 +30,9 @@ OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
     "bonus",
 )
 
+#: Bound of the observation vector's entries (velocity entries clipped at 5, i.e. 50 rad/s).
+OBSERVATION_BOUND = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32)
+
 
 class SoftPendulumEnv(gym.Env):
     """Swing-up and balance of a soft rod driven by a torque-limited motor at its base.
@@ -101,7 +104,7 @@ class SoftPendulumEnv(gym.Env):
         self.start_noise_rad = float(start_noise_rad)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        bound = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32)
+        bound = OBSERVATION_BOUND.copy()
         self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
         self._bound = bound
         self._bonus = 0.0

@@ -171,8 +171,12 @@ class KinematicChain2D:
 
         settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
         self._settings = settings
+        # handles fetched once: every attribute access through pybind11 is a Python-C++ crossing of its own
+        self._time_integration = settings.timeIntegration
+        self._data = mbs.systemData
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(mbs, settings)
+        self._initial = exu.ConfigurationType.Initial
 
     # ------------------------------------------------------------------ state
     def set_state(self, q: np.ndarray, q_t: np.ndarray) -> None:
@@ -187,6 +191,7 @@ class KinematicChain2D:
             data.SetODE2Coordinates_t(coordinates=q_t.tolist(), configuration=configuration)
         self.time_s = 0.0
         self._q, self._q_t = q.copy(), q_t.copy()
+        self._q_list, self._q_t_list = self._q.tolist(), self._q_t.tolist()
         self._settings.timeIntegration.startTime = 0.0
         self._settings.timeIntegration.endTime = self.dt_s
         self._solver.InitializeSolver(self._mbs, self._settings)
@@ -198,6 +203,11 @@ class KinematicChain2D:
     def get_state_views(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint angles and rates without copying (read-only use; valid until the next step)."""
         return self._q, self._q_t
+
+    def get_state_lists(self) -> tuple[list[float], list[float]]:
+        """Joint angles and rates as Python lists (read-only use; valid until the next step): the form the
+        scalar observation code reads fastest."""
+        return self._q_list, self._q_t_list
 
     def set_joint_forces(self, forces: np.ndarray) -> None:
         """Generalised joint forces (torques) [N m] applied during the following steps."""
@@ -215,24 +225,28 @@ class KinematicChain2D:
         """
         settings = self._settings
         mbs = self._mbs
-        settings.timeIntegration.startTime = self.time_s
-        settings.timeIntegration.endTime = self.time_s + self.dt_s
-        self._solver.InitializeSolverInitialConditions(mbs, settings)
+        solver = self._solver
+        ti = self._time_integration
+        ti.startTime = self.time_s
+        ti.endTime = self.time_s + self.dt_s
+        solver.InitializeSolverInitialConditions(mbs, settings)
         try:
-            ok = self._solver.SolveSteps(mbs, settings)
+            ok = solver.SolveSteps(mbs, settings)
         except exu.ExudynError as exc:
             raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}") from exc
-        data = mbs.systemData
+        data = self._data
         state = data.GetSystemState()
         if not ok:
             raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
-        if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
+        q, q_t = state[0], state[1]
+        q_list, q_t_list = q.tolist(), q_t.tolist()
+        if not math.isfinite(sum(q_list) + sum(q_t_list)):  # NaN or inf anywhere makes the sum non-finite
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
-        self._q, self._q_t = state[0], state[1]
-        data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)
-        data.SetODE2Coordinates_tt(
-            coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial
-        )
+        self._q, self._q_t = q, q_t
+        self._q_list, self._q_t_list = q_list, q_t_list
+        initial = self._initial
+        data.SetSystemState(systemStateList=state, configuration=initial)
+        data.SetODE2Coordinates_tt(coordinates=data.GetODE2Coordinates_tt(), configuration=initial)
         self.time_s += self.dt_s
 
     def linearized_system(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,8 +17,10 @@ is lumped the same way (``zeta`` interior, ``2*zeta`` at the clamp).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from softpend.checks import finite, int_at_least, non_negative, positive
 
@@ -171,3 +173,35 @@ class RodParams:
         if unknown:
             raise ValueError(f"unknown RodParams fields: {sorted(unknown)}")
         return cls(**data)
+
+    @classmethod
+    def from_json(cls, path: "str | Path") -> "RodParams":
+        """Read parameters from a JSON file: an object of :meth:`to_dict` fields, or a document whose
+        ``rod_params`` member is one (what ``softpend identify --out`` writes, beside the estimates and their
+        uncertainties).
+
+        Raises
+        ------
+        ValueError
+            If the file cannot be read, is not a JSON object, or its fields are unknown or invalid (the message
+            names the file).
+        """
+        path = Path(path)
+        try:
+            if path.stat().st_size > _MAX_JSON_BYTES:
+                raise ValueError(f"{path}: larger than {_MAX_JSON_BYTES} bytes, not a parameter file")
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+            raise ValueError(f"{path}: cannot read rod parameters: {' '.join(str(exc).split())}") from None
+        if isinstance(data, dict) and isinstance(data.get("rod_params"), dict):
+            data = data["rod_params"]
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: rod parameters must be a JSON object, got {type(data).__name__}")
+        try:
+            return cls.from_dict(data)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: {' '.join(str(exc).split())}") from None
+
+
+#: Largest rod-parameter JSON file read by :meth:`RodParams.from_json` [bytes].
+_MAX_JSON_BYTES = 10**6

@@ -167,8 +167,8 @@ class PRBPlant(PlantBase):
 
     def observe(self) -> Observation:
         """The report's observed variables for the current state."""
-        q, qd = self._chain.get_state_views()
-        return self.observation_from_state(q.tolist(), qd.tolist())
+        q, qd = self._chain.get_state_lists()
+        return self.observation_from_state(q, qd)
 
     def observation_from_state(self, q, qd) -> Observation:
         """Observation for a given joint state (does not change the plant).

@@ -12,8 +12,15 @@ profile's parameters with papermill, executes it with the ``python3`` kernel of 
 (working directory: the project root) and writes ``book/_generated/NAME.ipynb``.  A notebook is skipped
 when its source, its parameters and the code of the ``softpend`` modules it uses (:class:`PackageCode`:
 the closure of its imports, docstrings and comments left out) are unchanged since the output was written
-(the execution cache).  :func:`build_html` then runs ``jupyter-book build`` with warnings as
-errors; the book itself never executes notebooks.
+(the execution cache).  A notebook whose front matter says ``softpend: {after: [NAME, ...]}`` (one that
+reads what those notebooks wrote, such as their glued values) executes after them wherever the toc lists it,
+and their cache keys are part of its own.  Every run ends by writing the execution record
+``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
+its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
+package versions of ``environment.lock``, the Python version, the CPU count and the date) and the page that
+shows it, ``book/_generated/execution.md`` (the toc entry ``book/_generated/execution``, which is a page,
+not a notebook).  :func:`build_html` then runs ``jupyter-book build`` with warnings as errors; the book
+itself never executes notebooks.
 """
 
 from __future__ import annotations
@@ -21,6 +28,8 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import os
+import platform
 import re
 import shutil
 import subprocess
@@ -34,6 +43,7 @@ from typing import Any, Iterable, Optional, Sequence
 __all__ = [
     "BookLayout",
     "DEFAULT_PROFILE",
+    "EXECUTION_PAGE",
     "NotebookExecutionError",
     "NotebookRun",
     "PackageCode",
@@ -41,22 +51,35 @@ __all__ = [
     "cache_key",
     "check_parameters",
     "code_cells",
+    "execution_order",
+    "execution_record",
     "load_profiles",
+    "notebook_after",
     "profile_parameters",
     "read_notebook",
     "run_notebooks",
     "toc_notebooks",
+    "write_execution_record",
 ]
 
 #: Profile used when none is given: the parameters that produce the published figures.
 DEFAULT_PROFILE = "full"
 #: Prefix of toc entries that are executed notebooks.
 GENERATED_PREFIX = "book/_generated/"
+#: The toc entry under :data:`GENERATED_PREFIX` that is the execution page the runner writes (not a notebook).
+EXECUTION_PAGE = "execution"
 #: Bump when the way outputs are produced changes, to invalidate every cached notebook.
 _CACHE_VERSION = "2"
 #: Kernel arguments: matplotlib figures are embedded in the notebooks (and the book) as PNG images.
 #: (The kernel's own log is limited to errors: a failing cell is reported from the notebook's outputs.)
-_KERNEL_ARGUMENTS = ["--InlineBackend.figure_formats=png", "--IPKernelApp.log_level=ERROR"]
+#: tqdm's warning that ipywidgets is missing (it then draws text bars, or none with ``disable=True``) is
+#: silenced before the first cell: it would print the machine's paths on every page; other warnings show.
+_KERNEL_ARGUMENTS = [
+    "--InlineBackend.figure_formats=png",
+    "--IPKernelApp.log_level=ERROR",
+    "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress not found', "
+    "category=__import__('tqdm').TqdmWarning)",
+]
 
 
 class NotebookExecutionError(RuntimeError):
@@ -152,6 +175,21 @@ class BookLayout:
         """The cache key of the executed notebook, next to it."""
         return self.generated_dir / f"{name}.sha256"
 
+    @property
+    def record_path(self) -> Path:
+        """The execution record of the last run, ``book/_generated/execution.json``."""
+        return self.generated_dir / f"{EXECUTION_PAGE}.json"
+
+    @property
+    def execution_page_path(self) -> Path:
+        """The execution page, ``book/_generated/execution.md``."""
+        return self.generated_dir / f"{EXECUTION_PAGE}.md"
+
+    @property
+    def lock_path(self) -> Path:
+        """The pinned package versions, ``environment.lock``."""
+        return self.root / "environment.lock"
+
 
 @dataclass(frozen=True)
 class NotebookRun:
@@ -175,7 +213,8 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
     """Names of the executed notebooks in a ``_toc.yml``, in reading order.
 
     Every ``file:`` entry (root, chapters, parts, sections) that starts with ``book/_generated/`` is a
-    notebook whose source is ``notebooks/<name>.md``.
+    notebook whose source is ``notebooks/<name>.md``, except the execution page (:data:`EXECUTION_PAGE`),
+    which the runner writes itself.
     """
     names: list[str] = []
 
@@ -184,7 +223,7 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
             for key, value in node.items():
                 if key in ("file", "root") and isinstance(value, str):
                     entry = value.removesuffix(".ipynb")
-                    if entry.startswith(GENERATED_PREFIX):
+                    if entry.startswith(GENERATED_PREFIX) and entry[len(GENERATED_PREFIX) :] != EXECUTION_PAGE:
                         names.append(entry[len(GENERATED_PREFIX) :])
                 else:
                     visit(value)
@@ -479,6 +518,62 @@ def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[st
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
+# --------------------------------------------------------------------------- order
+def notebook_after(nb, name: str, known: Sequence[str]) -> list[str]:
+    """The notebooks that notebook ``name`` executes after: its front matter's ``softpend: {after: [...]}``.
+
+    Raises
+    ------
+    ValueError
+        If ``after`` is not a list of names, names a notebook that ``known`` (the toc) does not list, or
+        names the notebook itself.
+    """
+    after = (nb.metadata.get("softpend") or {}).get("after", [])
+    if not isinstance(after, list) or not all(isinstance(entry, str) for entry in after):
+        raise ValueError(f"notebook {name!r}: softpend.after must be a list of notebook names, got {after!r}")
+    unknown = sorted(set(after) - set(known))
+    if unknown:
+        raise ValueError(f"notebook {name!r}: softpend.after names {unknown}, which _toc.yml does not list")
+    if name in after:
+        raise ValueError(f"notebook {name!r}: softpend.after names the notebook itself")
+    return list(after)
+
+
+def execution_order(names: Sequence[str], after: dict[str, Sequence[str]]) -> list[str]:
+    """``names`` in the order they execute: the given (toc) order, except that a notebook waits for the
+    notebooks its ``after`` entry lists that are among ``names``.
+
+    Raises
+    ------
+    ValueError
+        If notebooks wait for each other (a cycle).
+    """
+    selected = set(names)
+    pending, done = list(names), []
+    while pending:
+        ready = next((name for name in pending
+                      if all(dep in done or dep not in selected for dep in after.get(name, ()))), None)
+        if ready is None:
+            raise ValueError(f"notebooks {pending} wait for each other (softpend.after in their front matter)")
+        pending.remove(ready)
+        done.append(ready)
+    return done
+
+
+def _with_upstream(key: str, after: Sequence[str], layout: "BookLayout", planned: dict[str, str]) -> str:
+    """``key`` combined with the cache keys of the notebooks in ``after``: those of this run (``planned``),
+    else the key files on disk (``"absent"`` when there is none)."""
+    upstream = {}
+    for dep in after:
+        if dep in planned:
+            upstream[dep] = planned[dep]
+        else:
+            path = layout.key_path(dep)
+            upstream[dep] = path.read_text(encoding="utf-8").strip() if path.is_file() else "absent"
+    payload = json.dumps({"key": key, "after": upstream}, sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
 # --------------------------------------------------------------------------- execution
 def _execute_one(
     layout: BookLayout,
@@ -511,7 +606,24 @@ def _execute_one(
         raise NotebookExecutionError(
             name, cell_index, code_number, exc.exec_count, exc.source, f"{exc.ename}: {exc.evalue}", output_path
         ) from None
+    _fold_injected_parameters(output_path)
     key_path.write_text(key + "\n", encoding="utf-8")
+
+
+def _fold_injected_parameters(output_path: Path) -> None:
+    """Tag papermill's injected-parameters cell ``hide-input`` in an executed notebook, so that the book
+    folds it under the notebook's own parameters cell (the execution page lists the values)."""
+    import nbformat
+
+    nb = nbformat.read(str(output_path), as_version=4)
+    changed = False
+    for cell in nb.cells:
+        tags = cell.get("metadata", {}).get("tags", [])
+        if "injected-parameters" in tags and "hide-input" not in tags:
+            cell.metadata["tags"] = [*tags, "hide-input"]
+            changed = True
+    if changed:
+        nbformat.write(nb, str(output_path))
 
 
 def run_notebooks(
@@ -543,7 +655,9 @@ def run_notebooks(
     Returns
     -------
     list of NotebookRun
-        One entry per selected notebook.
+        One entry per selected notebook, in execution order (toc order, except that a notebook with
+        ``softpend.after`` in its front matter runs after those notebooks); the execution record and page
+        are written at the end (:func:`write_execution_record`).
 
     Raises
     ------
@@ -559,7 +673,7 @@ def run_notebooks(
     from tqdm.auto import tqdm
 
     layout = BookLayout.at(root)
-    names = toc_notebooks(layout.toc_path)
+    names = toc_names = toc_notebooks(layout.toc_path)
     profiles = load_profiles(layout.profiles_path)
     if profile not in profiles:
         raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
@@ -579,28 +693,39 @@ def run_notebooks(
         # validate everything first: a typo in profiles.yml should not surface after an hour of execution
         overrides = dict(overrides or {})
         used_overrides: dict[str, Any] = {}
-        plan = []
+        plan = {}
+        after: dict[str, list[str]] = {}
         for name in names:
             nb = read_notebook(layout.source_path(name))
+            after[name] = notebook_after(nb, name, toc_names)
             parameters = profile_parameters(profiles, profile, name)
-            nb.metadata["softpend"] = {"profile": profile, "source": f"notebooks/{name}.md"}
             converted = Path(scratch) / f"{name}.ipynb"
             nbformat.write(nb, str(converted))
             declared = check_parameters(converted, name, parameters)
             applied = {key: value for key, value in overrides.items() if key in declared}
+            # what the execution record reads back from the executed notebook
+            nb.metadata["softpend"] = {"profile": profile, "source": f"notebooks/{name}.md",
+                                       "parameters": dict(parameters), "overrides": applied}
+            nbformat.write(nb, str(converted))
             used_overrides.update(applied)
             parameters.update(applied)
             source_text = layout.source_path(name).read_text(encoding="utf-8")
             hashes = package_code.code_hashes(code_cells(nb))
             if "softpend.study.records" in hashes:  # the stored run records are an input of that code
                 hashes.update(_records_hashes(layout))
-            plan.append((name, parameters, converted, cache_key(source_text, parameters, hashes)))
+            plan[name] = (parameters, converted, cache_key(source_text, parameters, hashes))
         unused = sorted(set(overrides) - set(used_overrides))
         if unused:
             raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({names})")
+        order = execution_order(names, after)
 
-        bar = tqdm(plan, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
-        for name, parameters, converted, key in bar:
+        planned: dict[str, str] = {}
+        bar = tqdm(order, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
+        for name in bar:
+            parameters, converted, key = plan[name]
+            if after[name]:
+                key = _with_upstream(key, after[name], layout, planned)
+            planned[name] = key
             bar.set_postfix_str(name)
             start = time.perf_counter()
             output_path = layout.output_path(name)
@@ -618,7 +743,182 @@ def run_notebooks(
             if progress:
                 what = "up to date (cached)" if cached else f"executed in {seconds:.1f} s"
                 bar.write(f"[book] {name}: {what}", file=sys.stderr)
+    write_execution_record(layout, execution_record(layout, profile, runs, used_overrides))
     return runs
+
+
+# --------------------------------------------------------------------------- execution record
+def _title(source_path: Path) -> str:
+    """The first ``# `` heading of a notebook source (its name when there is none)."""
+    if source_path.is_file():
+        for line in source_path.read_text(encoding="utf-8").splitlines():
+            if line.startswith("# "):
+                return line[2:].strip()
+    return source_path.stem
+
+
+def _locked_packages(lock_path: Path) -> tuple[list[dict[str, Any]], Optional[str]]:
+    """The ``name==version`` lines of ``environment.lock`` with the installed version of each (``None`` when
+    not installed), and the Python version its header names."""
+    from importlib import metadata
+
+    packages, python = [], None
+    if not lock_path.is_file():
+        return packages, python
+    for line in lock_path.read_text(encoding="utf-8").splitlines():
+        line = line.strip()
+        if line.startswith("# Python "):
+            python = line[len("# Python "):].strip()
+        if not line or line.startswith("#") or "==" not in line:
+            continue
+        name, version = (part.strip() for part in line.split("==", 1))
+        try:
+            installed: Optional[str] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            installed = None
+        packages.append({"name": name, "locked": version, "installed": installed})
+    return packages, python
+
+
+def execution_record(layout: "BookLayout", profile: str, runs: Sequence[NotebookRun],
+                     overrides: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+    """What produced the executed notebooks in ``book/_generated/``, after a run of :func:`run_notebooks`.
+
+    Returns
+    -------
+    dict
+        ``date`` (UTC, ISO 8601), ``profile`` and ``overrides`` of the run; ``notebooks``: one entry per toc
+        notebook, in toc order, with ``this_run`` (``"executed"``, ``"cached"`` or ``"not run"``: not
+        selected by ``only``), ``run_s`` (this run's time for it), and from the executed notebook's metadata
+        (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
+        execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied (all None
+        when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
+        this process may use, and the ``packages`` of ``environment.lock`` with their installed versions.
+    """
+    import datetime
+
+    import nbformat
+
+    this_run = {run.name: run for run in runs}
+    notebooks = []
+    for name in toc_notebooks(layout.toc_path):
+        entry: dict[str, Any] = {"name": name, "title": _title(layout.source_path(name)),
+                                 "this_run": this_run[name].status if name in this_run else "not run",
+                                 "run_s": this_run[name].seconds if name in this_run else None,
+                                 "executed_s": None, "executed_at": None, "profile": None, "parameters": None,
+                                 "overrides": None}
+        output = layout.output_path(name)
+        if output.is_file():
+            metadata = nbformat.read(str(output), as_version=4).metadata
+            papermill = metadata.get("papermill") or {}
+            ours = metadata.get("softpend") or {}
+            entry.update(executed_s=papermill.get("duration"), executed_at=papermill.get("end_time"),
+                         profile=ours.get("profile"), parameters=ours.get("parameters"),
+                         overrides=ours.get("overrides"))
+        notebooks.append(entry)
+    packages, lock_python = _locked_packages(layout.lock_path)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "profile": profile,
+        "overrides": dict(overrides or {}),
+        "notebooks": notebooks,
+        "environment": {"python": platform.python_version(), "lock_python": lock_python,
+                        "platform": platform.platform(), "cpu_count": os.cpu_count(), "cpus_available": cpus,
+                        "packages": packages},
+    }
+
+
+def _markdown_cell(value: Any) -> str:
+    """A Markdown table cell: ``-`` for None, mappings as ``name=value`` code spans, pipes escaped."""
+    if value is None:
+        return "-"
+    if isinstance(value, dict):
+        text = ", ".join(f"`{key}={json.dumps(item)}`" for key, item in value.items()) or "none"
+    else:
+        text = str(value)
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _when(iso: Optional[str]) -> str:
+    """``2026-01-31T12:34:56.789+00:00`` as ``2026-01-31 12:34:56``; ``-`` for None."""
+    if not iso:
+        return "-"
+    return str(iso).replace("T", " ")[:19]
+
+
+def execution_page(record: dict[str, Any]) -> str:
+    """The execution page (MyST Markdown) that shows an :func:`execution_record`."""
+    env = record["environment"]
+    lines = [
+        "(execution)=",
+        "# Execution",
+        "",
+        f"The notebooks of this book were executed by `softpend book --profile {record['profile']}`; this page was "
+        f"written by that run, on {_when(record['date'])} UTC"
+        + (f", with the overrides {_markdown_cell(record['overrides'])}" if record["overrides"] else "")
+        + ". For every notebook: what this run did with it (*executed*, *cached*: taken from the execution cache "
+        "because its source, parameters and the code it uses were unchanged, or *not run*: not selected), and "
+        "the wall time, the end and the profile of its last execution.",
+        "",
+        "| notebook | this run | last execution [s] | ended (UTC) | profile |",
+        "|---|---|---|---|---|",
+    ]
+    def title(entry: dict[str, Any]) -> str:
+        return (f"{{doc}}`{_markdown_cell(entry['title'])} <{entry['name']}>`" if entry["executed_at"]
+                else _markdown_cell(entry["title"]))
+
+    for entry in record["notebooks"]:
+        seconds = entry["executed_s"]
+        lines.append("| " + " | ".join([
+            title(entry), entry["this_run"], "-" if seconds is None else f"{seconds:.1f}",
+            _when(entry["executed_at"]), _markdown_cell(entry["profile"]),
+        ]) + " |")
+    total = sum(entry["executed_s"] or 0.0 for entry in record["notebooks"])
+    lines += [
+        "",
+        f"Sum of the last execution times: {total:.0f} s.",
+        "",
+        "## Parameters",
+        "",
+        "The parameters each notebook's last execution set on top of the notebook's own `parameters` cell: "
+        "those of its profile in `book/profiles.yml`, then the overrides (`softpend book --set NAME=VALUE`).",
+        "",
+    ]
+    for entry in record["notebooks"]:
+        lines.append(f"- {title(entry)}: profile {_markdown_cell(entry['parameters'])}; "
+                     f"overrides {_markdown_cell(entry['overrides'])}")
+    lines += [
+        "",
+        "## Environment",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| Python | {env['python']} (environment.lock: {env['lock_python'] or '-'}) |",
+        f"| platform | {_markdown_cell(env['platform'])} |",
+        f"| CPU count | {env['cpu_count']} ({env['cpus_available']} available to the run) |",
+        "",
+        "Package versions pinned in `environment.lock`, and the version installed where it differs:",
+        "",
+        "| package | version | installed |",
+        "|---|---|---|",
+    ]
+    for package in env["packages"]:
+        installed = package["installed"]
+        lines.append(f"| {package['name']} | {package['locked']} | "
+                     f"{'same' if installed == package['locked'] else (installed or 'not installed')} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_execution_record(layout: "BookLayout", record: dict[str, Any]) -> None:
+    """Write ``record`` to :attr:`BookLayout.record_path` (JSON) and its page to
+    :attr:`BookLayout.execution_page_path`, each atomically."""
+    from softpend.io.outputs import atomic_write, json_text
+
+    with atomic_write(layout.record_path, "w") as handle:
+        handle.write(json_text(record, indent=2) + "\n")
+    with atomic_write(layout.execution_page_path, "w") as handle:
+        handle.write(execution_page(record))
 
 
 # --------------------------------------------------------------------------- HTML

@@ -1,10 +1,16 @@
-"""Figure 7: every classical controller through the shared evaluation, and the |theta| plot.
+"""Figure 7: every classical controller through the shared evaluation, from fresh starts, and the |theta| plot.
 
 :func:`classical_comparison` builds the controllers (LQR from the true model on joint states and on
-observations, LQR from the learned model, PID tuned on the learned model, energy swing-up plus LQR), runs
-the near-upright ones from the report's kind of start (the straight rod released at rest a little off
-upright) with and without the torque limit, the swing-up from hanging, and returns the trajectories and a
-table of :meth:`softpend.evaluation.EvaluationSummary.row` rows.
+observations, LQR from the learned model, PID tuned on the true plant and PID tuned on the learned model,
+energy swing-up plus LQR), runs the near-upright ones from the report's kind of start (the straight rod
+released at rest a little off upright) with and without the torque limit, the LQR and the swing-up from
+hanging, and returns the runs and a table of :meth:`softpend.evaluation.EvaluationSummary.row` rows.
+
+Every run is evaluated from ``starts`` fresh starts (default :data:`softpend.study.presets.REPORT_SEEDS`,
+which no training, tuning or selection step sees): a near-upright start of seed ``s`` is the straight rod
+at rest tilted by the nominal tilt plus a uniform offset of at most the task's ``start_noise_rad`` drawn
+from ``numpy.random.default_rng(s)``; a hanging start is the task's own start distribution for seed ``s``.
+Each row carries the success rate over its starts with the Wilson 95 % interval.
 """
 
 from __future__ import annotations
@@ -15,16 +21,21 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.evaluation import EvaluationSummary, evaluate_controller
+from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 from softpend.control.learned import learned_model_simulator, lqr_from_learned_model
 from softpend.control.lqr import LQRController
 from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
 from softpend.control.swingup import EnergySwingUpController
 
-__all__ = ["ClassicalComparison", "classical_comparison", "plot_abs_theta", "table_markdown", "train_learned_model"]
+__all__ = ["ClassicalComparison", "classical_comparison", "near_upright_starts", "pid_gain_sensitivity", "plot_abs_theta",
+           "table_markdown", "train_learned_model"]
 
-TABLE_COLUMNS = ("controller", "start", "torque_limit_nm", "seeds", "success_rate", "swing_up_time_s",
-                 "upright_std_rad", "peak_torque_nm", "energy_used_j")
+TABLE_COLUMNS = ("controller", "start", "torque_limit_nm", "seeds", "success_rate", "success_low", "success_high",
+                 "swing_up_time_s", "upright_std_rad", "peak_torque_nm", "energy_used_j")
+
+#: Where the PID gains were tuned, by label suffix.
+PID_TUNED_ON = ("true plant", "learned model")
 
 
 @dataclass
@@ -34,23 +45,36 @@ class ClassicalComparison:
     Attributes
     ----------
     near_upright : dict
-        ``label -> EvaluationSummary`` of the near-upright runs (one result per tilt).
-    swing_up : EvaluationSummary
-        Energy swing-up plus LQR from hanging.
+        ``label -> [EvaluationSummary per tilt]`` of the near-upright runs (one result per start).
+    from_hanging : dict
+        ``label -> EvaluationSummary`` of the runs from hanging (energy swing-up + LQR, and the LQR alone).
     rows : list of dict
-        One table row per run (controller, start, torque limit, shared-evaluation medians).
-    pid_gains : PIDGains
-        The PID gains used, and ``pid_tuned_on`` says on which model they were tuned.
+        One table row per run (controller, start, torque limit, shared-evaluation medians, success rate and
+        its Wilson 95 % interval).
+    pid_gains : dict
+        ``tuned on -> PIDGains``: ``"true plant"``, ``"learned model"`` (when a learned model was given) or
+        ``"given"``.
     notes : list of str
         Designs that failed (e.g. a learned model whose linearisation is not stabilisable).
     """
 
-    near_upright: dict[str, EvaluationSummary]
-    swing_up: EvaluationSummary
+    near_upright: dict[str, list[EvaluationSummary]]
+    from_hanging: dict[str, EvaluationSummary]
     rows: list[dict[str, Any]]
-    pid_gains: PIDGains
-    pid_tuned_on: str
+    pid_gains: dict[str, PIDGains]
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def swing_up(self) -> EvaluationSummary:
+        """The energy swing-up + LQR from hanging."""
+        return self.from_hanging["energy swing-up + LQR"]
+
+    def row(self, controller: str, start: str) -> dict[str, Any]:
+        """The table row of one run (``start``: ``"tilt 0.2 rad"`` or ``"hanging"``); ``KeyError`` if absent."""
+        for row in self.rows:
+            if row["controller"] == controller and row["start"] == start:
+                return row
+        raise KeyError(f"no run of {controller!r} from {start!r}")
 
 
 def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
@@ -64,13 +88,23 @@ def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epo
     return fit_dynamics_model(dataset, progress=progress, max_epochs=max_epochs, seed=seed).model
 
 
-def _run(controller, task: Task, tilts, duration_s, limit) -> EvaluationSummary:
-    results = []
+def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The fresh near-upright starts of one nominal tilt: per seed, the straight rod at rest tilted by
+    ``tilt_rad`` plus a uniform offset in ``[-task.start_noise_rad, task.start_noise_rad]`` drawn from
+    ``numpy.random.default_rng(seed)``."""
+    offsets = [float(np.random.default_rng(int(seed)).uniform(-1.0, 1.0)) * task.start_noise_rad for seed in starts]
+    return [task.tilt_state(float(tilt_rad) + offset) for offset in offsets]
+
+
+def _run(controller, task: Task, tilt_rad: float, starts: Sequence[int], duration_s: float, limit: float,
+         name: str) -> EvaluationSummary:
+    """The controller from each fresh start of one tilt (seed ``s`` of the episode is the start's seed)."""
     run_task = task.replace(start="upright", torque_limit_nm=limit)
-    for tilt in tilts:
-        results += evaluate_controller(controller, run_task, seeds=(0,), duration_s=duration_s,
-                                       initial_state=task.tilt_state(tilt)).results
-    return EvaluationSummary(name=getattr(controller, "name", "controller"), results=results)
+    results = []
+    for seed, state in zip(starts, near_upright_starts(task, tilt_rad, starts)):
+        results += evaluate_controller(controller, run_task, seeds=(int(seed),), duration_s=duration_s,
+                                       initial_state=state).results
+    return EvaluationSummary(name=name, results=results)
 
 
 def classical_comparison(
@@ -79,52 +113,70 @@ def classical_comparison(
     tilts_rad: Sequence[float] = (0.2, 0.4),
     duration_s: float = 5.0,
     unlimited_torque_nm: float = 1.0,
-    swingup_seeds: Sequence[int] = (0, 1, 2),
+    starts: Sequence[int] = REPORT_SEEDS,
     swingup_duration_s: float = 10.0,
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
     progress: bool = False,
 ) -> ClassicalComparison:
-    """Evaluate every classical controller (see the module docstring).
+    """Evaluate every classical controller from fresh starts (see the module docstring).
 
     Parameters
     ----------
     task : Task, optional
-        The plant and rod (its ``torque_limit_nm`` is "the torque limit"); on plants other than the PRB
-        chain the controllers that read the chain's joint state (joint-state LQR, joint-energy swing-up) are
-        replaced by their observation-only versions, and ``notes`` says so.
+        The plant and rod (its ``torque_limit_nm`` is "the torque limit", its ``start_noise_rad`` the
+        spread of the starts); on plants other than the PRB chain the controllers that read the chain's
+        joint state (joint-state LQR, joint-energy swing-up) are replaced by their observation-only
+        versions, and ``notes`` says so.
     learned_model : DynamicsModel, optional
-        Learned model for the learned-model LQR and the PID tuning; without it the PID is tuned on the
-        true plant and the learned-model LQR is left out (both said in ``notes``).
+        Learned model for the learned-model LQR and the second PID tuning; without it both are left out
+        (said in ``notes``).
     tilts_rad : sequence of float
-        Initial tilts of the near-upright runs [rad].
+        Nominal initial tilts of the near-upright runs [rad].
     duration_s : float
         Length of the near-upright runs [s].
     unlimited_torque_nm : float
         Torque limit of the "without torque limit" runs [N m] (about 9x the torque that holds the rod
         horizontal, so it never binds in these runs).
-    swingup_seeds, swingup_duration_s
-        Start seeds and length of the swing-up runs from hanging.
+    starts : sequence of int
+        Seeds of the fresh starts of every run (at least one).
+    swingup_duration_s : float
+        Length of the runs from hanging [s].
     pid_tuning_evaluations : int
-        Cost evaluations of the PID tuning.
+        Cost evaluations of each PID tuning (on the tuning starts of :func:`softpend.control.pid.tune_pid`).
     pid_gains : PIDGains, optional
-        Skip the tuning and use these gains.
+        Skip both tunings and use these gains (labelled ``"given"``).
+
+    Raises
+    ------
+    ValueError
+        If ``starts`` or ``tilts_rad`` is empty.
     """
     task = task if task is not None else Task()
+    starts = [int(seed) for seed in starts]
+    if not starts:
+        raise ValueError("starts must not be empty")
+    if len(tilts_rad) == 0:
+        raise ValueError("tilts_rad must not be empty")
     params, plant = task.rod, task.plant
     limit = params.torque_limit_nm
     notes: list[str] = []
-    near: dict[str, EvaluationSummary] = {}
+    near: dict[str, list[EvaluationSummary]] = {}
+    hanging: dict[str, EvaluationSummary] = {}
     rows: list[dict[str, Any]] = []
 
     def add(label: str, controller, torque_limit: float) -> None:
-        summary = _run(controller, task, tilts_rad, duration_s, torque_limit)
-        summary.name = label
-        near[label] = summary
-        for tilt, result in zip(tilts_rad, summary.results):
-            row = EvaluationSummary(label, [result]).row()
-            row.update(start=f"tilt {tilt:g} rad", torque_limit_nm=torque_limit)
-            rows.append(row)
+        near[label] = []
+        for tilt in tilts_rad:
+            summary = _run(controller, task, tilt, starts, duration_s, torque_limit, label)
+            near[label].append(summary)
+            rows.append({**summary.row(), "start": f"tilt {tilt:g} rad", "torque_limit_nm": torque_limit})
+
+    def add_hanging(label: str, controller) -> None:
+        summary = evaluate_controller(controller, task.replace(start="hanging"), name=label, seeds=starts,
+                                      duration_s=swingup_duration_s)
+        hanging[label] = summary
+        rows.append({**summary.row(), "start": "hanging", "torque_limit_nm": limit})
 
     joint_state = plant == "prb"
     if not joint_state:
@@ -140,36 +192,71 @@ def classical_comparison(
             add("LQR (learned model)", lqr_from_learned_model(learned_model, params), limit)
         except ValueError as exc:
             notes.append(f"LQR on the learned model: design failed ({exc})")
-    if pid_gains is None:
-        simulator = (learned_model_simulator(learned_model, params) if learned_model is not None
-                     else plant_simulator(task))
-        tuned_on = "learned model" if learned_model is not None else "true plant"
-        if learned_model is None:
-            notes.append("no learned model given: PID tuned on the true plant")
-        pid_gains = tune_pid(simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations,
-                             progress=progress).gains
     else:
-        tuned_on = "given"
-    add("PID", PIDController(pid_gains, torque_limit_nm=limit), limit)
-    add("PID, no limit", PIDController(pid_gains, torque_limit_nm=unlimited_torque_nm), unlimited_torque_nm)
-    swing_controller = EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params)
-    swing = evaluate_controller(swing_controller, task.replace(start="hanging"), name="energy swing-up + LQR",
-                                seeds=swingup_seeds, duration_s=swingup_duration_s)
-    row = swing.row()
-    row.update(start="hanging", torque_limit_nm=limit)
-    rows.append(row)
-    return ClassicalComparison(near, swing, rows, pid_gains, tuned_on, notes)
+        notes.append("no learned model given: the learned-model LQR and the PID tuned on it are left out")
+
+    if pid_gains is not None:
+        gains = {"given": pid_gains}
+    else:
+        simulators = {"true plant": plant_simulator(task)}
+        if learned_model is not None:
+            simulators["learned model"] = learned_model_simulator(learned_model, params)
+        gains = {tuned_on: tune_pid(simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations,
+                                    progress=progress).gains
+                 for tuned_on, simulator in simulators.items()}
+    for tuned_on, tuned in gains.items():
+        add(f"PID (tuned on {tuned_on})", PIDController(tuned, torque_limit_nm=limit), limit)
+        add(f"PID (tuned on {tuned_on}), no limit", PIDController(tuned, torque_limit_nm=unlimited_torque_nm),
+            unlimited_torque_nm)
+
+    add_hanging("LQR (true model)", LQRController.from_params(params, state=lqr_state))
+    add_hanging("energy swing-up + LQR",
+                EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params))
+    return ClassicalComparison(near, hanging, rows, gains, notes)
+
+
+def pid_gain_sensitivity(task: Task, gains: PIDGains, scales: Sequence[float] = (0.5, 0.8, 1.0, 1.25, 2.0),
+                         tilt_rad: float = 0.2, starts: Sequence[int] = REPORT_SEEDS, duration_s: float = 5.0,
+                         torque_limit_nm: Optional[float] = None) -> list[dict[str, Any]]:
+    """The PID with all three gains scaled by each of ``scales``, from the fresh starts of one tilt: one
+    :meth:`~softpend.evaluation.EvaluationSummary.row` per scale (``gain_scale`` added).
+
+    ``torque_limit_nm`` defaults to the task's torque limit.
+
+    Raises
+    ------
+    ValueError
+        If ``scales`` is empty or holds a scale that is not positive.
+    """
+    if len(scales) == 0 or any(not float(scale) > 0 for scale in scales):
+        raise ValueError(f"scales must be positive numbers, got {list(scales)!r}")
+    limit = task.torque_limit_nm if torque_limit_nm is None else float(torque_limit_nm)
+    rows = []
+    for scale in scales:
+        scaled = PIDGains(*(float(scale) * gains.as_array()))
+        summary = _run(PIDController(scaled, torque_limit_nm=limit), task, tilt_rad, list(starts), duration_s,
+                       limit, f"PID x {float(scale):g}")
+        rows.append({**summary.row(), "gain_scale": float(scale), "start": f"tilt {tilt_rad:g} rad",
+                     "torque_limit_nm": limit})
+    return rows
 
 
 def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None):
-    """|theta| against time for the near-upright runs from one tilt (log scale), as the report's Figure 7."""
+    """|theta| against time for the near-upright runs from one tilt (log scale), as the report's Figure 7:
+    per controller the median over the fresh starts and the band between the 10th and 90th percentiles."""
     import matplotlib.pyplot as plt
 
     ax = ax if ax is not None else plt.gca()
-    for label, summary in comparison.near_upright.items():
-        result = summary.results[tilt_index]
+    for index, (label, summaries) in enumerate(comparison.near_upright.items()):
+        results = summaries[tilt_index].results
+        length = min(len(r.time_s) for r in results)
+        time_s = results[0].time_s[:length]
+        abs_theta = np.maximum(np.abs(np.stack([r.theta_rad[:length] for r in results])), 1e-6)
+        low, median, high = np.percentile(abs_theta, [10, 50, 90], axis=0)
         style = "--" if "no limit" in label else "-"
-        ax.semilogy(result.time_s, np.maximum(np.abs(result.theta_rad), 1e-6), style, label=label)
+        colour = f"C{index % 10}"
+        ax.semilogy(time_s, median, style, color=colour, label=f"{label} ({len(results)} starts)")
+        ax.fill_between(time_s, low, high, color=colour, alpha=0.15, linewidth=0)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(r"$|\theta|$ [rad]")
     ax.set_ylim(1e-6, 3.5)

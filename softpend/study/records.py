@@ -25,7 +25,8 @@ __all__ = ["RECORDS_PATH", "current_pilco_runs", "current_rl_runs", "detail_rows
 #: The record, relative to the project root.
 RECORDS_PATH = Path("book/records/what_we_tried.yml")
 
-#: Fields of a method and of a run (``details`` and ``defaults`` and a run's ``unit`` are optional).
+#: Fields of a method and of a run (a method's ``defaults_run_by_the_book``, a run's ``details``, ``defaults`` and
+#: ``unit`` are optional).
 METHOD_FIELDS = ("title", "measure", "unit", "legend", "budget", "runs", "diagnostics")
 RUN_FIELDS = ("setting", "seeds", "outcome", "notes")
 

@@ -16,6 +16,12 @@ Yardsticks (:func:`softpend.sysid.perturbed_simulator_errors`, the simulator its
   a perfect model that makes the best model's one-step error *once*, at the start;
 * ``simulator_torque_noise_1e-4nm_*``: an unmodelled hub torque of 1e-4 N m rms (0.17 % of the
   limit), independent at every step.
+
+Grey-box identification (:func:`greybox_figures`): :func:`softpend.sysid.greybox.identify` on the training data
+with its default settings from :func:`softpend.study.greybox.perturbed_guess` (``identify_s``,
+``greybox_max_param_error_pct_sim``), and the model-quality measures of :mod:`softpend.sysid.quality` on the
+held-out trials and on held-out hanging babbling for the grey-box model and ``model_best`` (``greybox_*``,
+``nn_*``).
 """
 
 from __future__ import annotations
@@ -100,7 +106,10 @@ def bench_sysid() -> dict[str, float]:
                 out["model_wide_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
             if prefix == "model_best":
                 out["model_best_one_step_tip_rmse_m"] = metrics["one_step_tip_rmse_m"]
+                best_model = fit.model
         out.update(simulator_yardsticks(test, out["model_best_one_step_tip_rmse_m"], BEST_FULL_CONFIG.history))
+        out.update(greybox_figures(data, test, best_model))
+        out.update(greybox_twin_figures())
         return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
     finally:
         torch.set_num_threads(threads)
@@ -138,4 +147,100 @@ def simulator_yardsticks(
         for h in ("0.5", "1", "2"):
             if float(h) <= horizon_s + 1e-9:
                 out[f"{prefix}_tip_rmse_m_{h}s"] = sim.at(float(h))["tip_rmse_m"]
+    return out
+
+
+def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object = None) -> dict[str, float]:
+    """Grey-box identification of the training data from :func:`softpend.study.greybox.perturbed_guess` and
+    its model quality (:func:`softpend.study.greybox.model_quality`) on the held-out trials and on held-out
+    hanging babbling (seed ``TEST_SEED + 1``), beside ``network`` (the best learned model, keys ``nn_*``).
+
+    Keys: ``identify_s`` (wall time of :func:`softpend.sysid.greybox.identify` on ``data``, default settings),
+    ``greybox_max_param_error_pct_sim`` (largest relative error of an estimated field [%]),
+    ``greybox_max_param_std_pct`` (largest standard deviation relative to its estimate [%]),
+    ``greybox_valid_prediction_ratio`` (median valid prediction time near upright over that of the simulator
+    started 1e-4 rad off), ``greybox_valid_prediction_lyapunov``, ``simulator_1e-4rad_off_valid_prediction_s``,
+    ``greybox_hanging_tip_rmse_1s_pct_length``, ``greybox_one_step_mse``, ``lyapunov_rate_per_s``;
+    closed-loop usefulness (:func:`softpend.study.greybox.closed_loop_usefulness`, ten fresh starts):
+    ``greybox_lqr_successes``, ``greybox_swingup_successes`` and the same designed on the true parameters
+    (``true_params_*``), ``greybox_*_upright_std_ratio`` (median upright std over that of the true design); and
+    ``nn_valid_prediction_lyapunov``, ``nn_valid_prediction_ratio``, ``nn_hanging_tip_rmse_1s_pct_length``.
+    """
+    from softpend.sysid.greybox import identify
+    from softpend.study.greybox import (HANGING_PROTOCOL, YARDSTICK_OFFSET_RAD, closed_loop_usefulness, model_quality,
+                                        perturbed_guess)
+    from softpend.task import Task
+
+    truth = data.params
+    result = identify(data, initial_params=perturbed_guess(truth))
+    errors = result.relative_errors(truth)
+    hanging = babble(HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
+    networks = {"nn": network} if network is not None else {}
+    quality = model_quality(result.params, test, hanging, networks=networks)
+    rows = quality["rows"]
+    grey = rows["grey-box model"]
+    yardstick = rows[f"simulator started {YARDSTICK_OFFSET_RAD:g} rad off"]
+    out = {
+        "identify_s": result.identify_s,
+        "identify_windows": float(result.n_windows),
+        "greybox_max_param_error_pct_sim": 100 * max(errors.values()),
+        "greybox_max_param_std_pct": 100 * max(result.std[n] / abs(v) for n, v in result.estimates.items()),
+        "lyapunov_rate_per_s": quality["lyapunov_rate_per_s"],
+        "simulator_1e-4rad_off_valid_prediction_s": yardstick["valid_prediction_s"],
+        "greybox_valid_prediction_s": grey["valid_prediction_s"],
+        "greybox_valid_prediction_lyapunov": grey["valid_prediction_lyapunov"],
+        "greybox_valid_prediction_ratio": grey["valid_prediction_s"] / yardstick["valid_prediction_s"],
+        "greybox_hanging_tip_rmse_1s_pct_length": grey["hanging_tip_rmse_pct_length"],
+        "greybox_one_step_mse": grey["one_step_mse"],
+    }
+    usefulness = {(r["designed_on"], r["controller"]): r
+                  for r in closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))}
+    for key, controller in (("lqr", "LQR"), ("swingup", "energy swing-up + LQR")):
+        grey_row, true_row = usefulness[("grey-box", controller)], usefulness[("true parameters", controller)]
+        out[f"greybox_{key}_successes"] = grey_row["successes"]
+        out[f"true_params_{key}_successes"] = true_row["successes"]
+        out[f"greybox_{key}_upright_std_ratio"] = grey_row["upright_std_rad"] / true_row["upright_std_rad"]
+    if network is not None:
+        nn = rows["nn"]
+        out["nn_valid_prediction_s"] = nn["valid_prediction_s"]
+        out["nn_valid_prediction_lyapunov"] = nn["valid_prediction_lyapunov"]
+        out["nn_valid_prediction_ratio"] = nn["valid_prediction_s"] / yardstick["valid_prediction_s"]
+        out["nn_hanging_tip_rmse_1s_pct_length"] = nn["hanging_tip_rmse_pct_length"]
+    return out
+
+
+def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, float]:
+    """Grey-box identification of a dataset from the digital twin (:func:`softpend.hardware.twin.run_twin_session`:
+    the emulated serial link with latency and an encoder of finite resolution, the synthetic camera, the clock
+    synchronisation), ``duration_s`` of babbling in trials of 5 s, from
+    :func:`softpend.study.greybox.perturbed_guess` of the twin's rod; the five rod fields and the camera's delay
+    against the encoder (``camera_delay_s``: what the clock synchronisation leaves, a few milliseconds, which
+    biases the friction estimate by some 13 % when it is not estimated).
+
+    Keys: ``greybox_max_param_error_pct_twin`` (the rod fields), ``greybox_twin_error_pct_<field>`` and
+    ``greybox_twin_std_pct_<field>`` per rod field, ``greybox_twin_camera_delay_s``, ``greybox_twin_at_bounds``
+    (fields that ended on a bound of the search), ``identify_twin_s``, ``twin_session_s``.
+    """
+    import tempfile
+
+    from softpend.hardware.twin import run_twin_session
+    from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
+    from softpend.study.greybox import perturbed_guess
+
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="softpend-bench-twin-") as workdir:
+        session = run_twin_session(workdir, duration_s=duration_s, seed=seed, trial_length_s=5.0, progress=False)
+        dataset = session.dataset
+    session_s = time.perf_counter() - start
+    truth = dataset.params
+    config = GreyBoxConfig(parameters=GREYBOX_PARAMETERS + ("camera_delay_s",))
+    result = identify(dataset, config, initial_params=perturbed_guess(truth))
+    errors = result.relative_errors(truth)
+    out = {"twin_session_s": session_s, "identify_twin_s": result.identify_s,
+           "greybox_twin_camera_delay_s": result.camera_delay_s,
+           "greybox_max_param_error_pct_twin": 100 * max(errors.values()),
+           "greybox_twin_at_bounds": float(len(result.at_bounds))}
+    for name, error in errors.items():
+        out[f"greybox_twin_error_pct_{name}"] = 100 * error
+        out[f"greybox_twin_std_pct_{name}"] = 100 * result.std[name] / abs(result.estimates[name])
     return out

@@ -1,4 +1,5 @@
-"""Matplotlib drawings of Figure 3 (model rollout against the data; rollout error against the horizon)."""
+"""Matplotlib drawings of Figure 3 (model rollout against the data; rollout error against the horizon; the
+grey-box rollout beside the network's; tip error against the horizon in Lyapunov times)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 
 from softpend.sysid.metrics import RolloutErrors
 
-__all__ = ["plot_rollout", "plot_rollout_errors"]
+__all__ = ["plot_lyapunov_errors", "plot_rollout", "plot_rollout_errors", "plot_rollout_overlay"]
 
 _LABELS = {
     "phi_rad": r"base angle $\phi$ [rad]",
@@ -81,3 +82,32 @@ def plot_rollout_errors(errors: dict[str, RolloutErrors], axes: Optional[Sequenc
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     return axes
+
+
+def plot_rollout_overlay(axes: Sequence, curves: dict[str, np.ndarray], label: str, color: str = "tab:blue"):
+    """Add a second model's rollout (dotted) to the panels of :func:`plot_rollout` (same keys: ``time_s`` and
+    ``<name>_model`` for ``phi_rad, theta_rad, ex_m, ey_m``)."""
+    for ax, name in zip(axes, ("phi_rad", "theta_rad", "ex_m", "ey_m")):
+        ax.plot(curves["time_s"], curves[f"{name}_model"], color=color, lw=1.5, ls=":", label=label)
+    axes[0].legend(loc="best", fontsize=8)
+    return axes
+
+
+def plot_lyapunov_errors(curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float,
+                         length_m: float, ax=None):
+    """RMS tip error of each model against the open-loop horizon in Lyapunov times ``t * lambda``, with the
+    5 % of ``L`` line of the valid prediction time."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    x = np.asarray(horizon_s) * lyapunov_rate_per_s
+    for label, curve in curves.items():
+        ax.semilogy(x[1:], np.asarray(curve)[1:], lw=1.8, label=label)
+    ax.axhline(0.05 * length_m, color="tab:red", lw=0.8, ls="--", label="5% of rod length")
+    ax.set_ylim(top=2 * length_m)
+    ax.set_xlabel(r"open-loop horizon [Lyapunov times $1/\lambda$]")
+    ax.set_ylabel("tip-position RMSE [m]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return ax

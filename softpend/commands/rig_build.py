@@ -1,0 +1,399 @@
+"""``softpend rig design | check | calibrate | babble``: the commands that take a rig from parts to data.
+
+* ``design`` writes the rig's dimensions (``rig_design.json``), the drawing (``rig_design.png``) and the marker
+  layout (``markers.json``, for ``--markers``) for the rod's parameters (``--set NAME=VALUE`` on ``RodParams``).
+* ``check`` opens the motor link (the protocol handshake), then checks at zero torque that the device announces
+  what the host expects and that the hub rests at the hanging angle, gives one small push to check the sign of
+  the torque, and falls silent to check that the watchdog zeroes the torque.  Exit status 1 if a check fails.
+* ``calibrate`` grabs a frame, fits the affine pixel-to-metre map to the markers, saves it (for
+  ``--calibration``) and checks that the hanging rod's dot is where the design puts it.  Exit status 1 if not.
+* ``babble`` runs the babbling program over the link while the camera is tracked, and synchronises both into a
+  system-identification dataset (``rig_dataset.npz``) with a ``summary.json``.
+
+Each runs on a rig (``--port``, ``--camera``) or on the digital twin (``--twin``: the rig emulator and the
+synthetic camera).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+from softpend.commands.options import add_set_option
+
+
+def register(actions: argparse._SubParsersAction) -> None:
+    design = actions.add_parser("design", help="the rig's dimensions, drawing and marker layout for the rod's parameters")
+    design.add_argument("--out", required=True, metavar="DIR", help="folder for rig_design.json, rig_design.png, markers.json")
+    design.add_argument("--print-modulus-mpa", type=float, default=None,
+                        help="modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)")
+    _add_rod_set(design)
+    design.set_defaults(func=run_design)
+
+    check = actions.add_parser("check", help="power-on checks of the motor link: handshake, rest, direction, watchdog")
+    _add_link_target(check)
+    check.add_argument("--out", metavar="JSON", help="also write the report to this file")
+    check.add_argument("--rest-s", type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
+    check.add_argument("--push-fraction", type=float, default=0.3,
+                       help="torque of the direction push as a fraction of the torque limit (0.3)")
+    check.add_argument("--counts-per-rev", type=int, default=4096, help="twin: encoder resolution (4096)")
+    _add_rod_set(check)
+    check.set_defaults(func=run_check)
+
+    calibrate = actions.add_parser("calibrate", help="fit the camera's pixel-to-metre map to the markers and save it")
+    target = calibrate.add_mutually_exclusive_group(required=True)
+    target.add_argument("--twin", action="store_true", help="a frame of the synthetic camera")
+    target.add_argument("--camera", metavar="CAMERA", help="camera index, stream URL or image/video file")
+    calibrate.add_argument("--markers", required=True, metavar="JSON",
+                           help="marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)")
+    calibrate.add_argument("--out", required=True, metavar="JSON", help="calibration file to write (the report goes "
+                           "next to it as NAME.report.json)")
+    calibrate.add_argument("--seed", type=int, default=0, help="twin: seed of the image noise")
+    _add_rod_set(calibrate)
+    calibrate.set_defaults(func=run_calibrate)
+
+    babble = actions.add_parser("babble", help="babble over the link with the camera tracking, synchronise into a dataset")
+    _add_link_target(babble)
+    babble.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
+    babble.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
+    babble.add_argument("--calibration", metavar="JSON", help="with --camera: a saved calibration")
+    babble.add_argument("--camera-latency-ms", type=float, default=0.0, help="with --camera: its latency [ms] (0)")
+    babble.add_argument("--out", required=True, metavar="DIR", help="folder for the logs, the dataset and summary.json")
+    babble.add_argument("--duration", type=float, default=65.0, help="babbling time [s] (65)")
+    babble.add_argument("--trial-length-s", type=float, default=5.0, help="trial length of the dataset [s] (5)")
+    babble.add_argument("--seed", type=int, default=0, help="seed of the babbling torques (and of the twin)")
+    babble.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    babble.set_defaults(func=run_babble)
+
+
+def _add_link_target(parser: argparse.ArgumentParser) -> None:
+    target = parser.add_mutually_exclusive_group(required=True)
+    target.add_argument("--twin", action="store_true", help="the rig emulator")
+    target.add_argument("--port", metavar="PATH", help="serial port of the rig (the V5 brain's user port)")
+
+
+def _add_rod_set(parser: argparse.ArgumentParser) -> None:
+    add_set_option(parser, help="set a RodParams field of the rod (VALUE parsed as JSON), e.g. --set length_m=0.4; "
+                                "repeatable")
+
+
+def _rod(args: argparse.Namespace):
+    from softpend.io.overrides import apply_overrides
+    from softpend.plant import RodParams
+
+    return apply_overrides(RodParams(), args.overrides)
+
+
+def _write_json(path: Path, data) -> None:
+    from softpend.io.outputs import finite_or_none, json_text
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json_text(finite_or_none(data), indent=2) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------------- design
+def run_design(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softpend.hardware.rig_design import rig_design
+    from softpend.study.build_rig import design_figures
+    from softpend.study.figures.rig_design import draw_rig_design
+
+    params = _rod(args)
+    modulus = None if args.print_modulus_mpa is None else args.print_modulus_mpa * 1e6
+    design = rig_design(params, print_modulus_pa=modulus)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    figures = design_figures(params, design)
+    _write_json(out / "rig_design.json", figures)
+    _write_json(out / "markers.json", figures["markers_m"])
+    fig = draw_rig_design(design)
+    fig.savefig(out / "rig_design.png", dpi=120)
+    plt.close(fig)
+    print(f"beam {figures['beam_length_mm']:.1f} x {figures['beam_width_mm']:.1f} x {figures['beam_thickness_mm']:.2f} mm, "
+          f"camera {figures['camera_distance_mm']:.0f} mm from the plane ({figures['pixel_size_mm']:.2f} mm/px), "
+          f"clamped-horizontal tip sag {figures['tip_sag_horizontal_mm']:.1f} mm -> {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------- check
+def run_check(args: argparse.Namespace) -> int:
+    from softpend.hardware.emulator import RigConfig, start_emulator_process
+    from softpend.task import Task
+
+    if not (math.isfinite(args.rest_s) and args.rest_s > 0):
+        raise ValueError(f"--rest-s must be a positive number of seconds, got {args.rest_s!r}")
+    if not 0 < args.push_fraction <= 0.5:
+        raise ValueError(f"--push-fraction must lie in (0, 0.5], got {args.push_fraction!r}")
+    task = Task(rod=_rod(args), start_noise_rad=0.0)
+    if args.twin:
+        with start_emulator_process(RigConfig(task=task, counts_per_rev=args.counts_per_rev)) as emulator:
+            report = rig_check(emulator.port, task, args.rest_s, args.push_fraction)
+    else:
+        report = rig_check(args.port, task, args.rest_s, args.push_fraction)
+    if args.out:
+        _write_json(Path(args.out), report)
+    for name, check in report["checks"].items():
+        print(f"{'ok  ' if check['passed'] else 'FAIL'} {name}: {check['detail']}")
+    return 0 if report["passed"] else 1
+
+
+#: States by which the watchdog's trip may differ from its nominal time (the state period quantises it) [states].
+WATCHDOG_SLACK_STATES = 3
+
+
+def rig_check(port: str, task, rest_s: float, push_fraction: float) -> dict:
+    """The power-on checks of ``softpend rig check`` on the link at ``port`` (module docstring); the report."""
+    import numpy as np
+
+    from softpend.hardware import protocol
+    from softpend.hardware.driver import MotorLink
+
+    rod = task.rod
+    checks: dict[str, dict] = {}
+    with MotorLink(port, torque_limit_nm=rod.torque_limit_nm) as link:
+        info = link.device
+        rtt = float(np.median([link.ping() for _ in range(5)]))
+        expected_rate = 1.0 / task.dt_s
+        ok = (info.protocol_version == protocol.PROTOCOL_VERSION
+              and math.isclose(info.torque_limit_nm, rod.torque_limit_nm, rel_tol=1e-5)
+              and math.isclose(info.state_rate_hz, expected_rate, rel_tol=1e-6) and info.watchdog_s <= 0.1 + 1e-9)
+        checks["handshake"] = {"passed": bool(ok), "detail": (
+            f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit {info.torque_limit_nm:g} "
+            f"N m (rod {rod.torque_limit_nm:g}), {info.state_rate_hz:g} states/s (host {expected_rate:g}), watchdog "
+            f"{info.watchdog_s * 1e3:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms")}
+        tick = 2 * math.pi / info.counts_per_rev
+
+        link.drain_states()
+        rest = _states_for(link, rest_s)
+        phi = np.array([s.phi_rad for s in rest])
+        device_t = np.array([s.device_time_s for s in rest])
+        period = float(np.median(np.diff(device_t))) if len(rest) > 2 else math.nan
+        offset = float(np.mean(phi) - math.pi) if len(phi) else math.nan
+        spread_ticks = float((phi.max() - phi.min()) / tick) if len(phi) else math.nan
+        ok = (len(rest) > 2 and abs(period * expected_rate - 1) < 0.1 and abs(offset) <= 0.05 and spread_ticks <= 3)
+        checks["rest"] = {"passed": bool(ok), "detail": (
+            f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
+            f"spread {spread_ticks:.0f} ticks"), "offset_rad": offset, "spread_ticks": spread_ticks}
+
+        push = push_fraction * rod.torque_limit_nm
+        start_phi = phi[-1] if len(phi) else math.pi
+        moved = _hold_torque(link, push, 0.15)
+        delta = (moved[-1].phi_rad - start_phi) if moved else math.nan
+        applied = max((s.applied_torque_nm for s in moved), default=math.nan)
+        _hold_torque(link, 0.0, 1.0)  # let the swing settle, feeding the watchdog with zero torque
+        checks["direction"] = {"passed": bool(delta > tick and math.isclose(applied, push, rel_tol=1e-3)), "detail": (
+            f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
+            f"applied {applied:+.3g} N m"), "delta_rad": delta}
+
+        last_seq = link.send_torque(0.0)
+        silence = _states_for(link, 3 * info.watchdog_s + 0.2)
+        # on the device's clock: from the first state that shows the last command in force to the first trip
+        in_force = next((s.device_time_s for s in silence if s.last_cmd_seq == last_seq), math.nan)
+        tripped = [s for s in silence if s.watchdog_tripped and s.device_time_s >= in_force]
+        trip_ms = (tripped[0].device_time_s - in_force) * 1e3 if tripped else math.nan
+        zero = bool(tripped) and all(s.applied_torque_nm == 0.0 for s in tripped)
+        slack_ms = WATCHDOG_SLACK_STATES * 1e3 / info.state_rate_hz
+        ok = zero and info.watchdog_s * 1e3 - slack_ms <= trip_ms <= info.watchdog_s * 1e3 + slack_ms
+        checks["watchdog"] = {"passed": bool(ok), "detail": (
+            f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog "
+            f"{info.watchdog_s * 1e3:g} ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} "
+            f"after the trip"), "trip_ms": trip_ms}
+        link.stop()
+    return {"port": port, "device": {"protocol_version": info.protocol_version, "counts_per_rev": info.counts_per_rev,
+                                     "torque_limit_nm": info.torque_limit_nm, "watchdog_s": info.watchdog_s,
+                                     "state_rate_hz": info.state_rate_hz},
+            "round_trip_ms": rtt * 1e3, "checks": checks, "passed": all(c["passed"] for c in checks.values())}
+
+
+def _states_for(link, duration_s: float) -> list:
+    end = time.monotonic() + duration_s
+    states = []
+    while time.monotonic() < end:
+        states.append(link.read_state())
+    return states
+
+
+def _hold_torque(link, torque_nm: float, duration_s: float) -> list:
+    """Command ``torque_nm`` at every state for ``duration_s``; the states received meanwhile."""
+    end = time.monotonic() + duration_s
+    states = []
+    link.send_torque(torque_nm)
+    while time.monotonic() < end:
+        states.append(link.read_state())
+        link.send_torque(torque_nm)
+    return states
+
+
+# ---------------------------------------------------------------------------------------------------- calibrate
+def run_calibrate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from softpend.study.build_rig import CALIBRATION_MAX_RESIDUAL_PX, HANGING_TIP_TOLERANCE_M
+    from softpend.vision.calibration import (MAX_CALIBRATION_BYTES, calibrate_from_markers, points_array,
+                                             read_json_file)
+    from softpend.vision.tracker import TipTracker
+
+    text = args.markers
+    raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+    markers = points_array("--markers", raw, 3, 6)
+    params = _rod(args)
+    frame = _twin_frame(params, markers, args.seed) if args.twin else _grab_frame(args.camera)
+    calibration = calibrate_from_markers(frame, markers.tolist())
+    detection = TipTracker(search_radius_px=None).track(frame)
+    expected = np.array([0.0, -params.length_m])
+    if detection.lost:
+        tip, error = [math.nan, math.nan], math.inf
+    else:
+        tip_m = calibration.to_metres(np.array([detection.x_px, detection.y_px]))
+        tip, error = tip_m.tolist(), float(np.hypot(*(tip_m - expected)))
+    residual_px = calibration.residual_rms_m / calibration.metres_per_pixel
+    passed = residual_px <= CALIBRATION_MAX_RESIDUAL_PX and error <= HANGING_TIP_TOLERANCE_M
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    calibration.save(out)
+    report = {"calibration": str(out), "residual_px": residual_px, "residual_m": calibration.residual_rms_m,
+              "px_per_m": 1.0 / calibration.metres_per_pixel, "hub_px": calibration.to_pixels(np.zeros(2)).tolist(),
+              "tip_m": tip, "expected_tip_m": expected.tolist(), "tip_error_m": error, "passed": bool(passed)}
+    _write_json(out.with_suffix(".report.json"), report)
+    print(f"{'ok  ' if passed else 'FAIL'} markers fit to {residual_px:.3f} px RMS (at most {CALIBRATION_MAX_RESIDUAL_PX:g}), "
+          f"{report['px_per_m']:.1f} px/m; hanging tip {error * 1e3:.2f} mm from the design's (at most "
+          f"{HANGING_TIP_TOLERANCE_M * 1e3:g}) -> {out}")
+    return 0 if passed else 1
+
+
+def _twin_frame(params, markers, seed: int):
+    """One frame of the synthetic camera (the design's scene, a slight roll, the nominal rig imperfections) of the
+    rod hanging at rest."""
+    import dataclasses
+
+    import numpy as np
+
+    from softpend.hardware.rig_design import rig_design
+    from softpend.task import Task
+    from softpend.vision.camera import CameraEffects, CameraModel, SyntheticCamera
+
+    model = dataclasses.replace(rig_design(params).camera_model, roll_rad=CameraModel().roll_rad)
+    camera = SyntheticCamera(model=model, effects=CameraEffects.rig(), markers_m=markers, seed=seed)
+    plant = Task(rod=params).make_plant()
+    q, _ = plant.hanging_state()
+    points = plant.link_points_m(q)
+    times = np.array([0.0, 1.0])
+    (frame, _), = camera.frames(times, np.stack([points, points]), times[1:], np.array([q[0], q[0]]))
+    return frame
+
+
+def _grab_frame(camera: str, skip: int = 10):
+    """The ``skip``-th frame of a camera (the first ones settle exposure), or the frame of an image file."""
+    import cv2
+
+    if Path(camera).is_file() and cv2.haveImageReader(camera):
+        frame = cv2.imread(camera)
+        if frame is None:
+            raise ValueError(f"--camera {camera}: the image cannot be read")
+        return frame
+    capture = cv2.VideoCapture(int(camera) if camera.strip().isdigit() else camera)
+    try:
+        if not capture.isOpened():
+            raise ValueError(f"--camera {camera} cannot be opened")
+        frame = None
+        for _ in range(skip):
+            ok, grabbed = capture.read()
+            if not ok:
+                break
+            frame = grabbed
+    finally:
+        capture.release()
+    if frame is None:
+        raise ValueError(f"--camera {camera} delivered no frame")
+    return frame
+
+
+# ---------------------------------------------------------------------------------------------------- babble
+def run_babble(args: argparse.Namespace) -> int:
+    from softpend.hardware.emulator import RigConfig
+    from softpend.hardware.twin import run_twin_session
+    from softpend.task import Task
+
+    if args.twin and (args.camera or args.markers or args.calibration):
+        raise ValueError("--camera, --markers and --calibration are for --port; the twin films itself")
+    if args.port and not args.camera:
+        raise ValueError("--port needs --camera (index, URL or video file)")
+    if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
+        raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
+    out = Path(args.out)
+    progress = not args.no_progress
+    if args.twin:
+        rig = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed)
+        session = run_twin_session(out, duration_s=args.duration, seed=args.seed, rig=rig,
+                                   trial_length_s=args.trial_length_s, progress=progress)
+        loop, sync, dataset = session.loop, session.sync, session.dataset
+        extra = {"true_clock_offset_s": session.true_clock_offset_s}
+    else:
+        loop, sync, dataset = _babble_on_port(args, out, progress)
+        extra = {}
+    summary = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
+               "dropped_states": loop.dropped_states, "jitter_ms_p95": loop.jitter_ms_p95,
+               "clock_offset_s": sync.offset.offset_s, "peak_correlation": sync.offset.peak_correlation,
+               "gaps": len(sync.gaps), "grid_valid_fraction": sync.grid_valid_fraction, **extra}
+    _write_json(out / "summary.json", summary)
+    print(f"{summary['n_trials']} trials x {args.trial_length_s:g} s, clock offset {summary['clock_offset_s'] * 1e3:.1f} ms "
+          f"(correlation {summary['peak_correlation']:.3f}), {summary['gaps']} gaps -> {summary['dataset']}")
+    return 0
+
+
+def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool):
+    """Babble on the rig at ``args.port`` while a thread tracks ``args.camera``; synchronise the two logs."""
+    import threading
+
+    from softpend.hardware.driver import MotorLink
+    from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
+    from softpend.hardware.sync import build_rig_dataset
+    from softpend.hardware.twin import rig_babble_controller
+    from softpend.io.samplelog import SampleLog
+    from softpend.plant import RodParams
+    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
+    from softpend.vision.camera import DEFAULT_MARKERS_M
+    from softpend.vision.tip_source import FrameTracker, open_tip_source
+    from softpend.vision.track_video import track_live
+
+    out.mkdir(parents=True, exist_ok=True)
+    markers = DEFAULT_MARKERS_M
+    if args.markers:
+        text = args.markers
+        raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+        markers = points_array("--markers", raw, 3, 6).tolist()
+    calibration = AffineCalibration.load(args.calibration) if args.calibration else None
+    source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0,
+                             frame_tracker=FrameTracker(calibration=calibration, markers_m=markers))
+    camera_csv, motor_log = out / "camera.csv", out / "motor_log.csv"
+    failure: list[BaseException] = []
+
+    def film() -> None:
+        try:
+            track_live(source, camera_csv, duration_s=args.duration + 2.0)
+        except BaseException as exc:  # re-raised in the main thread below
+            failure.append(exc)
+
+    params = RodParams()
+    thread = threading.Thread(target=film, name="softpend-babble-camera", daemon=True)
+    thread.start()
+    time.sleep(1.0)  # the camera runs before the first torque, so the start-up wiggle is filmed whole
+    controller = rig_babble_controller(args.duration, params.torque_limit_nm, args.seed)
+    with MotorLink(args.port, torque_limit_nm=params.torque_limit_nm) as link, \
+            SampleLog(motor_log, LOOP_LOG_COLUMNS, metadata={"port": args.port}) as log:
+        loop = run_control_loop(link, controller, args.duration, log=log, progress=progress)
+    thread.join()
+    if failure:
+        raise failure[0]
+    dataset, sync = build_rig_dataset(motor_log, camera_csv, out / "rig_dataset.npz", params=params,
+                                      trial_length_s=args.trial_length_s, notes=f"rig babbling on {args.port}")
+    return loop, sync, dataset

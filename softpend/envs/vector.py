@@ -1,0 +1,347 @@
+"""Gymnasium vector environments of the soft pendulum task on the batched torch chain.
+
+:class:`SoftPendulumVectorEnv` runs ``num_envs`` copies of :class:`~softpend.envs.SoftPendulumEnv` at once on
+:class:`~softpend.plant.batched.BatchedPRBChain` (the PRB equations of the Exudyn plant, integrated with RK4 for
+all rods together).  Observation, reward, start states and the episode limit are those of the single
+environment: the observation vector comes from :func:`softpend.envs.observation_vector.observation_vector`, the
+reward from :func:`softpend.envs.reward.step_reward`, and sub-environment ``i`` reset with seed ``s + i`` starts
+where the single environment reset with seed ``s + i`` starts.  Autoreset follows Gymnasium's ``NEXT_STEP``
+mode: the step after an episode ends resets that sub-environment (its action is ignored, reward 0).
+
+Per-rod parameter randomisation (``randomize_fraction``) draws, at every reset of a sub-environment and from
+its own generator, a factor uniform in ``[1 - f, 1 + f]`` for each field of ``randomized_fields``.
+
+Example::
+
+    import gymnasium as gym
+    import softpend  # registers the environments and their vector entry points
+
+    envs = gym.make_vec("softpend/SoftPendulum-v0", num_envs=1024, randomize_fraction=0.15)
+    observations, infos = envs.reset(seed=0)            # rod i seeded with 0 + i
+    observations, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+
+The chain runs on torch's CPU threads; on a machine shared with other work, ``torch.set_num_threads(1)`` avoids
+threads waiting on each other.  ``info["observation"]`` holds the raw plant observations ``(num_envs, 10)``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any, Optional, Sequence
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector.utils import batch_space
+from gymnasium.vector.vector_env import AutoresetMode
+
+from softpend import MAX_EPISODE_STEPS
+from softpend.checks import in_unit_interval, int_at_least, non_negative, one_of
+from softpend.envs.observation_vector import observation_vector
+from softpend.envs.reward import RewardParams, next_bonus, step_reward
+from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND
+from softpend.plant import OBSERVATION_NAMES, RodParams
+from softpend.plant.batched import PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
+
+__all__ = ["RANDOMIZED_FIELDS", "SoftPendulumDiscreteVectorEnv", "SoftPendulumVectorEnv"]
+
+#: Fields randomised by default when ``randomize_fraction > 0``.
+RANDOMIZED_FIELDS: tuple[str, ...] = (
+    "mass_kg",
+    "youngs_modulus_pa",
+    "joint_damping_nms_per_rad",
+    "hub_friction_nms_per_rad",
+    "torque_limit_nm",
+)
+
+_THETA = OBSERVATION_NAMES.index("theta_rad")
+
+
+class SoftPendulumVectorEnv(gym.vector.VectorEnv):
+    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod).
+
+    Parameters
+    ----------
+    num_envs : int
+        Number of sub-environments (rods) ``B``.
+    params : RodParams, optional
+        The nominal rod (default :class:`~softpend.plant.RodParams`).
+    dt_s : float
+        Control step [s].
+    substeps : int, optional
+        RK4 sub-steps per control step (default and least allowed: the stability limit of the stiffest rod that
+        randomisation can draw, :func:`softpend.plant.batched.stable_substeps`; not the Exudyn plant's
+        ``substeps``).
+    torque_limit_nm : float, optional
+        Overrides ``params.torque_limit_nm``.
+    reward_params : RewardParams, optional
+        The reward (as the single environment).
+    start : {"hanging", "upright", "random"}
+        Start state, as the single environment (``options={"start": ...}`` overrides it at a reset).
+    start_noise_rad : float
+        Uniform noise on the start hub angle [rad] and hub rate [rad/s].
+    max_episode_steps : int
+        Episodes are truncated after this many steps (default :data:`softpend.MAX_EPISODE_STEPS`).
+    randomize_fraction : float
+        Half-width ``f`` of the per-rod parameter factors (0 = every rod is ``params``); in ``[0, 0.9]``.
+    randomized_fields : sequence of str
+        :class:`RodParams` fields that are randomised (default :data:`RANDOMIZED_FIELDS`).
+    plant : str
+        Only ``"prb"`` (the PRB chain); accepted so that the single environment's arguments pass through.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        params: Optional[RodParams] = None,
+        dt_s: float = 0.01,
+        substeps: Optional[int] = None,
+        torque_limit_nm: Optional[float] = None,
+        reward_params: Optional[RewardParams] = None,
+        start: str = "hanging",
+        start_noise_rad: float = 0.05,
+        max_episode_steps: int = MAX_EPISODE_STEPS,
+        randomize_fraction: float = 0.0,
+        randomized_fields: Sequence[str] = RANDOMIZED_FIELDS,
+        plant: str = "prb",
+        render_mode: Optional[str] = None,
+    ) -> None:
+        self.num_envs = int_at_least("num_envs", num_envs, 1)
+        params = params if params is not None else RodParams()
+        if not isinstance(params, RodParams):
+            raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
+        if torque_limit_nm is not None:
+            params = params.replace(torque_limit_nm=torque_limit_nm)
+        one_of("start", start, ("hanging", "upright", "random"))
+        one_of("plant", plant, ("prb",))
+        if render_mode is not None:
+            raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")
+        self.params = params
+        self.reward_params = reward_params if reward_params is not None else RewardParams()
+        self.start = start
+        self.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
+        self.max_episode_steps = int_at_least("max_episode_steps", max_episode_steps, 1)
+        fraction = in_unit_interval("randomize_fraction", randomize_fraction)
+        if fraction > 0.9:
+            raise ValueError(f"randomize_fraction must be at most 0.9, got {randomize_fraction!r}")
+        self.randomize_fraction = fraction
+        fields = tuple(randomized_fields)
+        unknown = [f for f in fields if f not in PARAMETER_FIELDS]
+        if unknown or len(set(fields)) != len(fields):
+            raise ValueError(f"randomized_fields must be distinct fields of {PARAMETER_FIELDS}, got {fields}")
+        self.randomized_fields = fields
+        self.render_mode = None
+
+        nominal = BatchedRodParams.from_params(params, batch_size=self.num_envs)
+        self._nominal = nominal
+        stable = stable_substeps(self._corner_rods(), dt_s)
+        if substeps is None:
+            substeps = stable
+        elif int_at_least("substeps", substeps, 1) < stable:
+            raise ValueError(
+                f"substeps must be at least {stable} (RK4 diverges with fewer for the stiffest rod that can be "
+                f"drawn, see softpend.plant.batched.stable_substeps), got {substeps!r}"
+            )
+        self.chain = BatchedPRBChain(nominal, dt_s=dt_s, substeps=substeps)
+        self.dt_s = self.chain.dt_s
+        self.torque_limit_nm = params.torque_limit_nm
+
+        # the single environment's spaces
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.single_observation_space = spaces.Box(-OBSERVATION_BOUND, OBSERVATION_BOUND, dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+
+        b, n = self.num_envs, self.chain.n_coordinates
+        self._q = torch.zeros(b, n, dtype=torch.float64)
+        self._qd = torch.zeros(b, n, dtype=torch.float64)
+        self._factors = np.ones((b, len(fields)))
+        self._torque_limits = np.full(b, params.torque_limit_nm)
+        self._bonus = np.zeros(b)
+        self._steps = np.zeros(b, dtype=np.int64)
+        self._autoreset = np.zeros(b, dtype=bool)
+        self._observations: Optional[np.ndarray] = None
+        self._rngs: list[Optional[np.random.Generator]] = [None] * b
+        self._seeds: list[Optional[int]] = [None] * b
+
+    # ------------------------------------------------------------------ construction helpers
+    def _corner_rods(self) -> BatchedRodParams:
+        """Every corner of the randomisation box (for the stability limit of the sub-steps)."""
+        f = self.randomize_fraction
+        if f == 0 or not self.randomized_fields:
+            return BatchedRodParams.from_params(self.params)
+        corners = np.array(list(itertools.product((1 - f, 1 + f), repeat=len(self.randomized_fields))))
+        base = BatchedRodParams.from_params(self.params, batch_size=len(corners))
+        return base.scaled(**{name: corners[:, i] for i, name in enumerate(self.randomized_fields)})
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def rod_params(self) -> BatchedRodParams:
+        """The rods now simulated (after randomisation)."""
+        return self.chain.params
+
+    @property
+    def np_random_seed(self) -> tuple[Optional[int], ...]:
+        """The seed of each sub-environment's generator (as ``SyncVectorEnv`` reports them)."""
+        return tuple(self._seeds)
+
+    def joint_state(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(q, q_dot)`` of every rod, shape ``(num_envs, n + 1)`` (copies)."""
+        return self._q.clone(), self._qd.clone()
+
+    # ------------------------------------------------------------------ actions
+    def torques_from_actions(self, actions: Any) -> np.ndarray:
+        """Hub torques [N m] for a batch of actions (``(num_envs, 1)`` or ``(num_envs,)``, clipped to [-1, 1])."""
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape == (self.num_envs, 1):
+            a = a[:, 0]
+        if a.shape != (self.num_envs,):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 1), got {np.shape(actions)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError("actions must be finite")
+        return np.clip(a, -1.0, 1.0) * self._torque_limits
+
+    # ------------------------------------------------------------------ resets
+    def _draw_starts(self, indices: np.ndarray, start: str) -> None:
+        """New start states (and parameters) of the rods ``indices``, each from its own generator, in the
+        single environment's order of draws."""
+        noise = self.start_noise_rad
+        q = np.zeros((len(indices), self.chain.n_coordinates))
+        qd = np.zeros_like(q)
+        for row, i in enumerate(indices):
+            rng = self._rngs[i]
+            hub = math.pi
+            if start == "upright":
+                hub = 0.0
+            elif start == "random":
+                hub = float(rng.uniform(-math.pi, math.pi))
+            q[row, 0] = hub + float(rng.uniform(-noise, noise))
+            qd[row, 0] = float(rng.uniform(-noise, noise))
+            if self.randomize_fraction > 0 and self.randomized_fields:
+                f = self.randomize_fraction
+                self._factors[i] = 1.0 + rng.uniform(-f, f, len(self.randomized_fields))
+        index = torch.as_tensor(indices)
+        self._q[index] = torch.as_tensor(q)
+        self._qd[index] = torch.as_tensor(qd)
+        if self.randomize_fraction > 0 and self.randomized_fields:
+            rods = self._nominal.scaled(**{name: self._factors[:, k] for k, name in enumerate(self.randomized_fields)})
+            self.chain.set_params(rods)
+            self._torque_limits = rods.torque_limit_nm.numpy().copy()
+        self._steps[indices] = 0
+        self._autoreset[indices] = False
+
+    def _observe(self) -> np.ndarray:
+        with torch.no_grad():
+            return self.chain.observations(self._q, self._qd).numpy()
+
+    def reset(self, *, seed: Optional[int | Sequence[Optional[int]]] = None, options: Optional[dict[str, Any]] = None):
+        """Reset every sub-environment (or those of ``options["reset_mask"]``).
+
+        ``seed``: ``None`` (keep each generator; a fresh random one if never seeded), an int ``s`` (seeds
+        ``s, s + 1, ...``) or one seed per sub-environment.  ``options["start"]`` overrides ``start``.
+        """
+        options = dict(options or {})
+        if seed is None:
+            seeds: list[Optional[int]] = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+            super().reset(seed=int(seed))
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed must be an int or hold {self.num_envs} seeds, got {len(seeds)}")
+        start = options.pop("start", self.start)
+        if start not in ("hanging", "upright", "random"):
+            raise ValueError(f"options['start'] must be 'hanging', 'upright' or 'random', got {start!r}")
+        mask = options.pop("reset_mask", None)
+        if mask is None:
+            mask = np.ones(self.num_envs, dtype=bool)
+        mask = np.asarray(mask)
+        if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
+            raise ValueError(f"options['reset_mask'] must be a boolean array of shape ({self.num_envs},) with a True")
+        indices = np.flatnonzero(mask)
+        for i in indices:
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
+        self._draw_starts(indices, start)
+        observations = self._observe()
+        theta = observations[:, _THETA]
+        self._bonus[indices] = next_bonus(theta[indices], np.zeros(len(indices)), self.dt_s, self.reward_params)
+        self._observations = observations
+        vectors = observation_vector(observations, self._bonus, self)
+        return vectors, {"observation": observations.copy(), "_observation": mask.copy()}
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, actions):
+        if self._observations is None:
+            raise RuntimeError("call reset() before step()")
+        torques = self.torques_from_actions(actions)
+        resetting = self._autoreset.copy()
+        q_old, qd_old = self._q, self._qd
+        with torch.no_grad():
+            q, qd = self.chain.step(q_old, qd_old, torch.from_numpy(torques))
+        finite = (torch.isfinite(q).all(1) & torch.isfinite(qd).all(1)).numpy()
+        diverged = ~finite & ~resetting
+        if diverged.any():
+            keep = torch.from_numpy(~finite)
+            q = torch.where(keep[:, None], q_old, q)
+            qd = torch.where(keep[:, None], qd_old, qd)
+        self._q, self._qd = q.contiguous(), qd.contiguous()
+        observations = self._observe()
+        reward, bonus = step_reward(observations[:, _THETA], self._bonus, self.dt_s, self.reward_params)
+        reward = np.where(diverged, 0.0, reward)
+        self._bonus = np.where(diverged, self._bonus, bonus)
+        self._steps += 1
+        truncated = (self._steps >= self.max_episode_steps) | diverged
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        # infos as SyncVectorEnv gathers them: each key beside a "_key" mask of the sub-environments that set it
+        info: dict[str, Any] = {"torque_nm": np.where(resetting, 0.0, torques), "_torque_nm": ~resetting}
+        if diverged.any():
+            info["truncation_reason"] = np.where(diverged, "simulation diverged: non-finite state", None)
+            info["_truncation_reason"] = diverged.copy()
+        if resetting.any():
+            indices = np.flatnonzero(resetting)
+            self._draw_starts(indices, self.start)
+            reset_obs = self._observe()
+            observations[indices] = reset_obs[indices]
+            self._bonus[indices] = next_bonus(reset_obs[indices, _THETA], np.zeros(len(indices)), self.dt_s,
+                                              self.reward_params)
+            reward[indices] = 0.0
+            truncated[indices] = False
+        self._autoreset = truncated | terminated
+        self._observations = observations
+        info["observation"] = observations.copy()
+        info["_observation"] = np.ones(self.num_envs, dtype=bool)
+        vectors = observation_vector(observations, self._bonus, self)
+        return vectors, np.asarray(reward, dtype=np.float64), terminated, truncated, info
+
+
+class SoftPendulumDiscreteVectorEnv(SoftPendulumVectorEnv):
+    """:class:`SoftPendulumVectorEnv` with ``Discrete(n_torque_levels)`` actions per rod, as
+    :class:`~softpend.envs.SoftPendulumDiscreteEnv`: action ``i`` applies
+    ``torque_limit_nm * (-1 + 2 i / (n_torque_levels - 1))`` with each rod's own torque limit."""
+
+    def __init__(self, num_envs: int = 1, n_torque_levels: int = 5, **kwargs: Any) -> None:
+        n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
+        if n_torque_levels > MAX_TORQUE_LEVELS:
+            raise ValueError(f"n_torque_levels must be at most {MAX_TORQUE_LEVELS}, got {n_torque_levels!r}")
+        super().__init__(num_envs=num_envs, **kwargs)
+        self.n_torque_levels = n_torque_levels
+        self._levels = np.linspace(-1.0, 1.0, n_torque_levels)
+        self.single_action_space = spaces.Discrete(n_torque_levels)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+
+    def torques_from_actions(self, actions: Any) -> np.ndarray:
+        """Hub torques [N m] for integer actions of shape ``(num_envs,)`` in ``[0, n_torque_levels)``."""
+        a = np.asarray(actions)
+        if a.shape != (self.num_envs,) or a.dtype.kind not in "iu":
+            raise ValueError(f"actions must be integers of shape ({self.num_envs},), got {a.dtype} {a.shape}")
+        if a.min() < 0 or a.max() >= self.n_torque_levels:
+            raise ValueError(f"actions must lie in [0, {self.n_torque_levels}), got {a.min()}..{a.max()}")
+        return self._levels[a] * self._torque_limits
+

@@ -1,0 +1,29 @@
+"""Figures as HTML that reads offline: matplotlib animations without the stylesheet it fetches from a CDN."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+__all__ = ["offline_jshtml"]
+
+#: The Font Awesome 4 stylesheet that matplotlib's JavaScript player links from a CDN (its button icons).
+_CDN_STYLESHEET = re.compile(r'<link rel="stylesheet"\s+href="https://[^"]*font-awesome[^"]*">\s*')
+
+
+def offline_jshtml(animation: Any, **kwargs: Any) -> str:
+    """``animation.to_jshtml(**kwargs)`` without the link to the Font Awesome stylesheet on a CDN.
+
+    The player's buttons keep their ``fa fa-*`` icon classes, which the book's theme draws with the Font
+    Awesome copy it ships; elsewhere they show as plain buttons.  Nothing is fetched from outside the page.
+
+    Raises
+    ------
+    ValueError
+        If the player no longer links the stylesheet the way this function expects (a matplotlib change).
+    """
+    html = animation.to_jshtml(**kwargs)
+    stripped, count = _CDN_STYLESHEET.subn("", html)
+    if count != 1:
+        raise ValueError(f"expected one CDN stylesheet link in the animation's HTML, found {count}")
+    return stripped

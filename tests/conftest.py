@@ -1,0 +1,43 @@
+"""Fixtures shared by several test modules."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from softpend.study import book
+from softpend.study.book import build_html, run_notebooks
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def quick_book(tmp_path_factory):
+    """The whole book built once per test session with the quick profile, in a temporary copy of the project
+    (so neither ``_build`` nor ``book/_generated`` of the working tree is touched): ``(root, runs, html_dir)``."""
+    # others edit the package while the tests run: hash each notebook's code once, so the cache check of
+    # tests/test_book.py is stable
+    hash_code = book.PackageCode.code_hashes
+    hashes: dict[tuple[str, ...], dict[str, str]] = {}
+
+    def code_hashes_once(self, cells):
+        cells = tuple(cells)
+        if cells not in hashes:
+            hashes[cells] = hash_code(self, cells)
+        return hashes[cells]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
+        yield _build_quick_book(tmp_path_factory.mktemp("book"))
+
+
+def _build_quick_book(root: Path):
+    for name in ("_config.yml", "_toc.yml", "environment.lock"):
+        shutil.copy2(REPO_ROOT / name, root / name)
+    shutil.copytree(REPO_ROOT / "book", root / "book", ignore=shutil.ignore_patterns("_generated"))
+    shutil.copytree(REPO_ROOT / "notebooks", root / "notebooks", ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+    runs = run_notebooks(root, profile="quick", progress=False)
+    html_dir = build_html(root, quiet=True)
+    return root, runs, html_dir

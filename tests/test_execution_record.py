@@ -1,0 +1,109 @@
+"""The runner's execution order (``softpend.after``) and execution record/page, on tiny synthetic books."""
+
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from softpend.study.book import BookLayout, execution_order, run_notebooks, toc_notebooks
+
+HEADER = """\
+---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+{extra}---
+"""
+
+
+def source(title: str, body: str = "print(greeting)", after: list[str] | None = None) -> str:
+    extra = f"softpend:\n  after: {json.dumps(after)}\n" if after is not None else ""
+    return (HEADER.format(extra=extra) + f"\n# {title}\n\n```{{code-cell}} ipython3\n:tags: [parameters]\n\n"
+            f"greeting = 'hello'\n```\n\n```{{code-cell}} ipython3\n{body}\n```\n")
+
+
+def make_book(root: Path, notebooks: dict[str, str], profiles: dict, lock: str = "") -> Path:
+    (root / "notebooks").mkdir(parents=True)
+    (root / "book").mkdir()
+    chapters = "\n".join(f"      - file: book/_generated/{name}" for name in notebooks)
+    (root / "_toc.yml").write_text(
+        f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n"
+        "  - caption: Appendix\n    chapters:\n      - file: book/_generated/execution\n")
+    (root / "book" / "profiles.yml").write_text(json.dumps(profiles))
+    (root / "environment.lock").write_text(lock)
+    for name, text in notebooks.items():
+        (root / "notebooks" / f"{name}.md").write_text(text)
+    return root
+
+
+def test_execution_order_waits_for_after_and_rejects_cycles():
+    assert execution_order(["a", "b", "c"], {"a": ["c"]}) == ["b", "c", "a"]
+    assert execution_order(["a", "b"], {"a": ["c"]}) == ["a", "b"]  # c not selected: nothing to wait for
+    with pytest.raises(ValueError, match="wait for each other"):
+        execution_order(["a", "b"], {"a": ["b"], "b": ["a"]})
+
+
+def test_after_runs_late_enters_the_key_and_the_record_describes_the_run(tmp_path):
+    # the ledger reads what "late" wrote: it must run after it although the toc lists it first
+    ledger = source("Ledger", "import pathlib\nprint(pathlib.Path('late.txt').read_text())", after=["late"])
+    late = source("Late", "import pathlib\npathlib.Path('late.txt').write_text(greeting)")
+    root = make_book(tmp_path, {"ledger": ledger, "late": late},
+                     {"quick": {"late": {"greeting": "hi"}}},
+                     lock="# Python 3.11.7\npytest==0.0.1\nnot-a-package-softpend==1.0\n")
+    assert toc_notebooks(root / "_toc.yml") == ["ledger", "late"]  # the execution page is not a notebook
+    runs = run_notebooks(root, profile="quick", progress=False, overrides={})
+    assert [run.name for run in runs] == ["late", "ledger"]
+    layout = BookLayout.at(root)
+    record = json.loads(layout.record_path.read_text())
+    assert record["profile"] == "quick"
+    entries = {entry["name"]: entry for entry in record["notebooks"]}
+    assert [entry["name"] for entry in record["notebooks"]] == ["ledger", "late"]  # toc order
+    assert entries["late"]["title"] == "Late" and entries["late"]["this_run"] == "executed"
+    assert entries["late"]["parameters"] == {"greeting": "hi"} and entries["late"]["overrides"] == {}
+    assert entries["ledger"]["parameters"] == {} and entries["ledger"]["profile"] == "quick"
+    assert entries["late"]["executed_s"] > 0 and entries["late"]["executed_at"].startswith(record["date"][:4])
+    env = record["environment"]
+    assert env["python"] == platform.python_version() and env["lock_python"] == "3.11.7"
+    assert env["cpu_count"] >= 1 and env["cpus_available"] >= 1
+    packages = {p["name"]: p for p in env["packages"]}
+    assert packages["pytest"]["locked"] == "0.0.1" and packages["pytest"]["installed"] not in (None, "0.0.1")
+    assert packages["not-a-package-softpend"]["installed"] is None
+    page = layout.execution_page_path.read_text()
+    assert page.startswith("(execution)=\n# Execution")
+    assert "{doc}`Late <late>`" in page and "`greeting=\"hi\"`" in page and "not installed" in page
+    nb = nbformat.read(str(layout.output_path("late")), as_version=4)
+    injected = [c for c in nb.cells if "injected-parameters" in c.metadata.get("tags", [])]
+    assert len(injected) == 1 and "hide-input" in injected[0].metadata["tags"]  # folded in the book
+
+    # cached: the record keeps the wall time of the last execution and says the run took it from the cache
+    first_s = entries["late"]["executed_s"]
+    assert {run.status for run in run_notebooks(root, profile="quick", progress=False)} == {"cached"}
+    entries = {e["name"]: e for e in json.loads(layout.record_path.read_text())["notebooks"]}
+    assert entries["late"]["this_run"] == "cached" and entries["late"]["executed_s"] == first_s
+
+    # a change upstream re-executes the notebook that runs after it (its key holds the upstream key) ...
+    (root / "notebooks" / "late.md").write_text(late.replace("write_text(greeting)", "write_text(greeting * 2)"))
+    runs = run_notebooks(root, profile="quick", progress=False, only=["late"], overrides={"greeting": "yo"})
+    assert [(run.name, run.status) for run in runs] == [("late", "executed")]
+    record = json.loads(layout.record_path.read_text())
+    entries = {e["name"]: e for e in record["notebooks"]}
+    assert entries["ledger"]["this_run"] == "not run" and entries["late"]["overrides"] == {"greeting": "yo"}
+    assert record["overrides"] == {"greeting": "yo"}
+    # ... also when it runs alone later
+    assert [run.status for run in run_notebooks(root, profile="quick", progress=False, only=["ledger"])] == ["executed"]
+
+
+def test_after_naming_an_unknown_notebook_fails_before_running(tmp_path):
+    root = make_book(tmp_path, {"a": source("A", after=["nope"])}, {"quick": {}})
+    with pytest.raises(ValueError, match="softpend.after names"):
+        run_notebooks(root, profile="quick", progress=False)
+    assert not BookLayout.at(root).output_path("a").exists()

@@ -1,0 +1,182 @@
+"""The vector environment on the batched chain against the single Exudyn environment and Gymnasium's rules."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+
+import softpend  # noqa: F401  (registers the environments)
+from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
+from softpend.envs.vector import RANDOMIZED_FIELDS, SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
+from softpend.plant import RodParams
+
+
+def _single_runs(env_class, seeds, actions, **kwargs):
+    """Observations and rewards of one single environment per seed, converged Exudyn (200 sub-steps)."""
+    observations, rewards = [], []
+    for i, seed in enumerate(seeds):
+        env = env_class(substeps=200, **kwargs)
+        obs, _ = env.reset(seed=seed)
+        run, paid = [obs], []
+        for action in actions[:, i]:
+            obs, reward, terminated, truncated, _ = env.step(action)
+            assert not (terminated or truncated)
+            run.append(obs)
+            paid.append(reward)
+        observations.append(run)
+        rewards.append(paid)
+    return np.array(observations).transpose(1, 0, 2), np.array(rewards).T
+
+
+@pytest.mark.parametrize("discrete", [False, True])
+def test_vector_env_follows_the_single_env_from_the_same_seeds(discrete: bool) -> None:
+    rng = np.random.default_rng(0)
+    n_steps, seeds = 100, [5, 6, 7]
+    kwargs = {"params": RodParams(n_links=4), "start": "random"}
+    if discrete:
+        actions = rng.integers(0, 5, (n_steps, 3))
+        vec = SoftPendulumDiscreteVectorEnv(num_envs=3, substeps=20, **kwargs)
+        single_class = SoftPendulumDiscreteEnv
+        single_actions = actions
+    else:
+        actions = rng.uniform(-1, 1, (n_steps, 3, 1)).astype(np.float32)
+        vec = SoftPendulumVectorEnv(num_envs=3, substeps=20, **kwargs)
+        single_class = SoftPendulumEnv
+        single_actions = actions
+    expected_obs, expected_rewards = _single_runs(single_class, seeds, single_actions, **kwargs)
+    obs, info = vec.reset(seed=5)
+    observations, rewards = [obs], []
+    for action in actions:
+        obs, reward, terminated, truncated, info = vec.step(action)
+        assert not terminated.any() and not truncated.any()
+        observations.append(obs)
+        rewards.append(reward)
+    np.testing.assert_allclose(observations[0], expected_obs[0], atol=1e-7)  # the same start draws
+    np.testing.assert_allclose(np.array(observations), expected_obs, atol=2e-5)
+    np.testing.assert_allclose(np.array(rewards), expected_rewards, atol=2e-4)
+    assert np.ptp(expected_obs[:, :, 0]) > 0.5  # the rods swung
+
+
+def test_autoreset_is_next_step_and_keeps_each_generator() -> None:
+    """As ``SyncVectorEnv`` over the single environments: the step after truncation returns the reset
+    observation with reward 0, drawn from the sub-environment's own generator."""
+    kwargs = {"start": "random", "max_episode_steps": 3}
+    vec = gym.make_vec("softpend/SoftPendulum-v0", num_envs=2, substeps=10, **kwargs)
+    sync = gym.make_vec("softpend/SoftPendulum-v0", num_envs=2, vectorization_mode="sync", substeps=50, **kwargs)
+    assert isinstance(vec.unwrapped, SoftPendulumVectorEnv)
+    assert vec.metadata["autoreset_mode"] == sync.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+    actions = np.full((2, 1), 0.5, dtype=np.float32)
+    v_obs, _ = vec.reset(seed=1)
+    s_obs, _ = sync.reset(seed=1)
+    np.testing.assert_allclose(v_obs, s_obs, atol=1e-7)
+    for step in range(7):
+        v_obs, v_rew, v_term, v_trunc, _ = vec.step(actions)
+        s_obs, s_rew, s_term, s_trunc, _ = sync.step(actions)
+        assert data_equivalence(v_trunc, s_trunc) and data_equivalence(v_term, s_term), step
+        np.testing.assert_allclose(v_obs, s_obs, atol=1e-3)
+        np.testing.assert_allclose(v_rew, s_rew, atol=1e-2)
+        if step == 3:  # the autoreset step: exact reset draws, reward 0
+            np.testing.assert_allclose(v_obs, s_obs, atol=1e-7)
+            assert np.all(v_rew == 0.0)
+    assert v_trunc.tolist() == [True, True]
+
+
+def test_spaces_dtypes_and_determinism() -> None:
+    def run(seed):
+        env = SoftPendulumVectorEnv(num_envs=4, start="random", randomize_fraction=0.15)
+        env.action_space.seed(seed)
+        obs, info = env.reset(seed=seed)
+        out = [obs]
+        for _ in range(20):
+            obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+            assert env.observation_space.contains(obs)
+            assert reward.shape == (4,) and reward.dtype == np.float64
+            assert terminated.dtype == truncated.dtype == np.bool_
+            assert info["observation"].shape == (4, 10)
+            out.append(obs)
+        return np.array(out), env
+
+    first, env = run(3)
+    second, _ = run(3)
+    third, _ = run(4)
+    assert env.single_observation_space == SoftPendulumEnv().observation_space
+    assert env.single_action_space == SoftPendulumEnv().action_space
+    assert data_equivalence(first, second)
+    assert not np.allclose(first, third)
+
+
+def test_per_rod_randomisation_stays_within_the_fraction_and_is_redrawn_at_resets() -> None:
+    nominal = RodParams()
+    env = SoftPendulumVectorEnv(num_envs=64, randomize_fraction=0.15, max_episode_steps=2)
+    env.reset(seed=0)
+    drawn = env.rod_params
+    for name in RANDOMIZED_FIELDS:
+        ratio = getattr(drawn, name).numpy() / getattr(nominal, name)
+        assert ratio.min() >= 0.85 and ratio.max() <= 1.15 and ratio.std() > 0.05, name
+    assert np.all(drawn.length_m.numpy() == nominal.length_m)
+    assert env.chain.substeps >= 2  # stable for the stiffest corner of the box
+    first_mass = drawn.mass_kg.clone()
+    for _ in range(3):  # two steps, then the autoreset step
+        env.step(np.zeros((64, 1), dtype=np.float32))
+    assert not np.allclose(env.rod_params.mass_kg.numpy(), first_mass.numpy())
+    # torque limit per rod: full action gives each rod's own limit
+    env.reset(seed=1)
+    _, _, _, _, info = env.step(np.ones((64, 1), dtype=np.float32))
+    np.testing.assert_allclose(info["torque_nm"], env.rod_params.torque_limit_nm.numpy())
+
+
+def test_reset_mask_resets_only_the_chosen_rods() -> None:
+    env = SoftPendulumVectorEnv(num_envs=3, start="random")
+    env.reset(seed=2)
+    for _ in range(5):
+        moved, *_ = env.step(np.ones((3, 1), dtype=np.float32))
+    fresh = SoftPendulumVectorEnv(num_envs=3, start="random")
+    start, _ = fresh.reset(seed=[12, 13, 14])
+    obs, info = env.reset(seed=[12, None, 14], options={"reset_mask": np.array([True, False, True])})
+    np.testing.assert_array_equal(obs[[0, 2]], start[[0, 2]])
+    np.testing.assert_array_equal(obs[1], moved[1])
+    assert info["_observation"].tolist() == [True, False, True]
+
+
+def test_make_vec_builds_both_action_spaces() -> None:
+    discrete = gym.make_vec("softpend/SoftPendulumDiscrete-v0", num_envs=3, n_torque_levels=7)
+    assert isinstance(discrete.unwrapped, SoftPendulumDiscreteVectorEnv)
+    assert discrete.single_action_space == gym.spaces.Discrete(7)
+    discrete.reset(seed=0)
+    _, _, _, _, info = discrete.step(np.array([0, 3, 6]))
+    np.testing.assert_allclose(info["torque_nm"], [-0.06, 0.0, 0.06], atol=1e-15)
+    assert discrete.unwrapped.max_episode_steps == softpend.MAX_EPISODE_STEPS
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"num_envs": 0}, "num_envs"),
+        ({"randomize_fraction": 1.5}, "randomize_fraction"),
+        ({"randomized_fields": ("colour",)}, "randomized_fields"),
+        ({"plant": "beam"}, "plant"),
+        ({"start": "sideways"}, "start"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"params": RodParams(n_links=10), "substeps": 2}, "substeps"),
+    ],
+)
+def test_bad_arguments_raise_value_error_naming_them(kwargs, name) -> None:
+    with pytest.raises(ValueError, match=name):
+        SoftPendulumVectorEnv(**kwargs)
+
+
+def test_bad_actions_raise_value_error() -> None:
+    env = SoftPendulumVectorEnv(num_envs=2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="actions"):
+        env.step(np.zeros((3, 1)))
+    with pytest.raises(ValueError, match="actions"):
+        env.step(np.array([[0.0], [np.nan]]))
+    discrete = SoftPendulumDiscreteVectorEnv(num_envs=2)
+    discrete.reset(seed=0)
+    with pytest.raises(ValueError, match="actions"):
+        discrete.step(np.array([0, 5]))
+    with pytest.raises(ValueError, match="actions"):
+        discrete.step(np.array([0.5, 1.0]))

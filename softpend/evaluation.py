@@ -373,6 +373,9 @@ def evaluate_controller(
 
 # ---------------------------------------------------------------------- many starts at once (module docstring)
 
+_THETA = OBSERVATION_NAMES.index("theta_rad")
+_PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
+
 #: ``policy(k, vectors, observations, q, q_dot) -> actions`` for the vector environment at plant step ``k``.
 _StepPolicy = Callable[[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray], Any]
 

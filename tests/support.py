@@ -9,3 +9,18 @@ def one_line_error(capsys, *words: str) -> str:
     for word in words:
         assert word in err, err
     return err
+
+
+#: The front matter of a jupytext MyST notebook, with ``{extra}`` for more front-matter lines.
+NOTEBOOK_HEADER = """\
+---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+{extra}---
+"""

@@ -4,7 +4,6 @@ it; and the same checks catching a page broken on purpose.  Screenshots are kept
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import pytest
 from PIL import Image

@@ -9,20 +9,10 @@ from pathlib import Path
 import nbformat
 import pytest
 
+from support import NOTEBOOK_HEADER as HEADER
+
 from softpend.study.book import BookLayout, execution_order, run_notebooks, toc_notebooks
 
-HEADER = """\
----
-jupytext:
-  text_representation:
-    extension: .md
-    format_name: myst
-kernelspec:
-  display_name: Python 3
-  language: python
-  name: python3
-{extra}---
-"""
 
 
 def source(title: str, body: str = "print(greeting)", after: list[str] | None = None) -> str:

@@ -12,19 +12,9 @@ import pytest
 from softpend.study import book
 from softpend.study.book import NotebookExecutionError, PackageCode, cache_key, code_cells, run_notebooks, toc_notebooks
 from softpend.cli import main as cli_main
+from support import NOTEBOOK_HEADER
 
-HEADER = """\
----
-jupytext:
-  text_representation:
-    extension: .md
-    format_name: myst
-kernelspec:
-  display_name: Python 3
-  language: python
-  name: python3
----
-"""
+HEADER = NOTEBOOK_HEADER.format(extra="")
 
 
 def notebook_source(*cells: str, parameters: str | None = "greeting = 'hello'\nrepeat = 1") -> str:

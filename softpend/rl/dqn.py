@@ -53,7 +53,7 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "load_agent", "train_dqn", "run_training"]
+__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "train_dqn", "run_training"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
@@ -111,6 +111,26 @@ def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...
     check_work_size(f"evaluating {len(seeds)} episode(s) of {duration_s:g} s", len(seeds) * steps * per_step,
                     f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step")
     return evaluate_controller(controller, config.task, name=name, seeds=seeds, duration_s=duration_s)
+
+
+def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None,
+                           duration_s: Optional[float] = None, name: str = "agent", **options: Any):
+    """:func:`evaluate_agent` with every episode at once on the batched chain
+    (:func:`softpend.evaluation.evaluate_batched`): the agent's greedy actions (``model.predict`` on the batch of
+    observation vectors, ``deterministic=True``) held for ``config.action_repeat`` plant steps, on the
+    ``config.n_torque_levels`` torque levels of ``config.task``.
+
+    ``options`` go to :func:`~softpend.evaluation.evaluate_batched` (``rod_spread``, ``rod_seed``, ``substeps``,
+    ``initial_state``).  Seeds must be non-negative integers; the trajectories must fit in
+    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any step).
+    """
+    from softpend.evaluation import evaluate_batched
+
+    seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
+    duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
+    return evaluate_batched(lambda vectors: model.predict(vectors, deterministic=True)[0], config.task, seeds,
+                            duration_s, action_repeat=config.action_repeat, n_torque_levels=config.n_torque_levels,
+                            name=name, **options)
 
 
 class TrainingCallback(BaseCallback):

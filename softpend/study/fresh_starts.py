@@ -25,7 +25,8 @@ from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-__all__ = ["BALANCE_STD_RAD", "BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows", "fresh_start_row",
+__all__ = ["BALANCE_STD_RAD", "BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows",
+           "converged_fresh_start_rows", "fresh_start_row",
            "headline_figures", "pilco_fresh_start_rows", "rl_fresh_start_rows", "seed_rows"]
 
 #: Upright standard deviation of a start that counts as balanced [rad].
@@ -261,3 +262,26 @@ def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_s
         summary = evaluate_controller(controller, task.replace(rod=rod), seeds=(int(seed),), duration_s=duration_s)
         results.extend(summary.results)
     return {"spread": float(spread), **fresh_start_row(EvaluationSummary(name="perturbed rods", results=results))}
+
+
+def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
+                               report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = 10.0,
+                               which: str = "final") -> list[dict[str, Any]]:
+    """:func:`rl_fresh_start_rows` of one agent per run on a *converged* simulation of the same rod: the batched
+    chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agent_batched`, whose hub angle stays far
+    closer to the Exudyn plant at 200 sub-steps than the task's Exudyn plant at 2 sub-steps does:
+    :func:`softpend.study.simulators.hub_errors_rad`), from the same starts.  A controller that holds on the task's plant but not here relies on
+    what the task's coarse time step does to the rod's bending modes, which a real rod would not do."""
+    from softpend.rl.dqn import evaluate_agent_batched, load_agent
+
+    rows = []
+    for algo in algos:
+        for seed in seeds:
+            model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
+            overlap = set(report_seeds) & set(config.eval_seeds)
+            if overlap:
+                raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
+            summary = evaluate_agent_batched(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
+            rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[which],
+                         "plant": "converged", **fresh_start_row(summary)})
+    return rows

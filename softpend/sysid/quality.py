@@ -273,12 +273,11 @@ def prb_one_step_errors(
         plant.reset(state[: plant.n_coordinates], state[plant.n_coordinates :])
         o = plant.step(dataset.torques_nm[t, s])
         predicted[row] = [getattr(o, n) for n in names]
-    now = dataset.positions[starts[:, 0], starts[:, 1]]
     nxt = dataset.positions[starts[:, 0], starts[:, 1] + 1]
     angle = np.array([n in ("phi_rad", "theta_rad", "er_rad") for n in names])
     position_error = predicted - nxt
     position_error[:, angle] = wrap_diff(position_error[:, angle], 0.0)
-    # the observed velocity of the next sample is (next - now) / dt; the predicted one (predicted - now) / dt
+    # the velocity errors follow from the position errors: (predicted - now) / dt - (next - now) / dt
     velocity_error = position_error / dataset.dt_s
     error = np.concatenate([position_error, velocity_error], axis=1)
     i_ex, i_ey = names.index("ex_m"), names.index("ey_m")

@@ -31,14 +31,18 @@ def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb"
     import softpend  # noqa: F401  (registers the environments)
 
     env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links), plant=plant)
-    actions = np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32)
+    return _timed_steps_per_s(env, np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32))
+
+
+def _timed_steps_per_s(env: gym.Env, actions: np.ndarray) -> float:
+    """Steps per wall-clock second of ``env`` (reset with seed 0) through ``actions``, reset when an episode ends."""
     env.reset(seed=0)
     start = time.perf_counter()
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             env.reset()
-    return n_steps / (time.perf_counter() - start)
+    return len(actions) / (time.perf_counter() - start)
 
 
 def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
@@ -113,13 +117,7 @@ def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int
             env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links))
             if path == "legacy":
                 make_legacy(env)
-            env.reset(seed=0)
-            start = time.perf_counter()
-            for action in actions:
-                _, _, terminated, truncated, _ = env.step(action)
-                if terminated or truncated:
-                    env.reset()
-            best[path] = max(best[path], n_steps / (time.perf_counter() - start))
+            best[path] = max(best[path], _timed_steps_per_s(env, actions))
     return best["new"], best["legacy"]
 
 

@@ -9,7 +9,9 @@
   ``seeds_balanced_mbpo`` (runs whose final agent balances >= 90 % of the fresh starts with upright std
   <= 0.1 rad), ``dqn_real_s_to_balance`` and ``mbpo_real_s_to_balance`` (median over seeds of the training
   plant seconds of a run whose final agent balances; ``inf`` for one that does not) with bootstrap intervals,
-  ``mbpo_over_dqn_real_s_ratio`` and ``mbpo_seeds_3x_fewer_than_dqn``.
+  ``mbpo_over_dqn_real_s_ratio`` and ``mbpo_seeds_3x_fewer_than_dqn``; ``seeds_balanced_<m>_converged_plant``:
+  the same final agents from the same starts on a converged simulation of the rod
+  (:func:`softpend.study.fresh_starts.converged_fresh_start_rows`, the batched chain).
 * ``full_profile_train_cpu_s`` -- CPU seconds of training all those runs (the training logs' ``cpu_s``,
   ``nan`` if a run predates that column); ``full_profile_train_2core_s`` is half of it: the wall time on two
   otherwise idle cores running two single-threaded runs at a time, if the runs pack perfectly (a lower bound).
@@ -44,7 +46,7 @@ def training_cpu_s(log) -> float:
 
 def bench_rl() -> dict[str, float]:
     """The "rl" benchmark group (see the module docstring)."""
-    from softpend.study.fresh_starts import headline_figures, rl_fresh_start_rows, seed_rows
+    from softpend.study.fresh_starts import converged_fresh_start_rows, headline_figures, rl_fresh_start_rows, seed_rows
     from softpend.study.presets import RL_BOOK
     from softpend.study.rl_runs import METHOD_NAMES, figure_runs
 
@@ -52,10 +54,14 @@ def bench_rl() -> dict[str, float]:
     runs = figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, RL_BOOK.seeds, RL_BOOK.runs_root, progress=True)
     logs = {"dqn": runs[METHOD_NAMES["dqn"]], "mbpo": runs[METHOD_NAMES["mbpo"]]}
     fresh = rl_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds, which=("final",))
+    converged = converged_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds)
     cpu_s = sum(training_cpu_s(log) for group in logs.values() for log in group)
     return {
         "dqn_train_steps_per_s": steps_per_s,
         **headline_figures(seed_rows(logs, fresh)),
+        **{f"seeds_balanced_{algo}_converged_plant": float(sum(r["run_balances"] for r in converged
+                                                              if r["method"] == METHOD_NAMES[algo]))
+           for algo in ("dqn", "mbpo")},
         "full_profile_train_cpu_s": cpu_s,
         "full_profile_train_2core_s": cpu_s / 2.0,
     }

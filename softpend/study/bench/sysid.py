@@ -21,7 +21,8 @@ Grey-box identification (:func:`greybox_figures`): :func:`softpend.sysid.greybox
 with its default settings from :func:`softpend.study.greybox.perturbed_guess` (``identify_s``,
 ``greybox_max_param_error_pct_sim``), and the model-quality measures of :mod:`softpend.sysid.quality` on the
 held-out trials and on held-out hanging babbling for the grey-box model and ``model_best`` (``greybox_*``,
-``nn_*``).
+``nn_*``); and on a dataset of the digital twin (:func:`greybox_twin_figures`: ``greybox_max_param_error_pct_twin``,
+about 80 s of real-time babbling over the emulated link, then the identification).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ from gymnasium.utils.env_checker import data_equivalence
 
 import softpend  # noqa: F401  (registers the environments)
 from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
-from softpend.envs.vector import RANDOMIZED_FIELDS, SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
+from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
+from softpend.plant.randomisation import RANDOMISED_FIELDS
 from softpend.plant import RodParams
 
 
@@ -112,7 +113,7 @@ def test_per_rod_randomisation_stays_within_the_fraction_and_is_redrawn_at_reset
     env = SoftPendulumVectorEnv(num_envs=64, randomize_fraction=0.15, max_episode_steps=2)
     env.reset(seed=0)
     drawn = env.rod_params
-    for name in RANDOMIZED_FIELDS:
+    for name in RANDOMISED_FIELDS:
         ratio = getattr(drawn, name).numpy() / getattr(nominal, name)
         assert ratio.min() >= 0.85 and ratio.max() <= 1.15 and ratio.std() > 0.05, name
     assert np.all(drawn.length_m.numpy() == nominal.length_m)

@@ -45,17 +45,9 @@ from softpend.envs.reward import RewardParams, next_bonus, step_reward
 from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
+from softpend.plant.randomisation import RANDOMISED_FIELDS
 
-__all__ = ["RANDOMIZED_FIELDS", "SoftPendulumDiscreteVectorEnv", "SoftPendulumVectorEnv"]
-
-#: Fields randomised by default when ``randomize_fraction > 0``.
-RANDOMIZED_FIELDS: tuple[str, ...] = (
-    "mass_kg",
-    "youngs_modulus_pa",
-    "joint_damping_nms_per_rad",
-    "hub_friction_nms_per_rad",
-    "torque_limit_nm",
-)
+__all__ = ["SoftPendulumDiscreteVectorEnv", "SoftPendulumVectorEnv"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
@@ -88,7 +80,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
     randomize_fraction : float
         Half-width ``f`` of the per-rod parameter factors (0 = every rod is ``params``); in ``[0, 0.9]``.
     randomized_fields : sequence of str
-        :class:`RodParams` fields that are randomised (default :data:`RANDOMIZED_FIELDS`).
+        :class:`RodParams` fields that are randomised (default :data:`softpend.plant.randomisation.RANDOMISED_FIELDS`, the fields the Exudyn training wrapper and the
+        robustness evaluation randomise).
     plant : str
         Only ``"prb"`` (the PRB chain); accepted so that the single environment's arguments pass through.
     """
@@ -107,7 +100,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         start_noise_rad: float = 0.05,
         max_episode_steps: int = MAX_EPISODE_STEPS,
         randomize_fraction: float = 0.0,
-        randomized_fields: Sequence[str] = RANDOMIZED_FIELDS,
+        randomized_fields: Sequence[str] = RANDOMISED_FIELDS,
         plant: str = "prb",
         render_mode: Optional[str] = None,
     ) -> None:

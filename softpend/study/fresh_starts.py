@@ -12,6 +12,8 @@ upright standard deviation at most ``balance_std_rad`` (0.1 rad).
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -63,18 +65,29 @@ def fresh_start_row(summary: EvaluationSummary, balance_std_rad: float = BALANCE
 FRESH_STARTS_FILE = "fresh_starts.json"
 
 
-def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
-    """What a fresh-start row depends on: the agent's bytes, the starts, the duration and the code that scores."""
-    import hashlib
+@functools.lru_cache(maxsize=1)
+def _scoring_source() -> bytes:
+    """The source of the code that scores an episode (read once per process)."""
     import inspect
 
     import softpend.evaluation as evaluation
 
+    return (inspect.getsource(evaluation) + inspect.getsource(fresh_start_row)).encode()
+
+
+def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
+    """What a fresh-start row depends on: the agent's bytes, the starts, the duration and the code that scores."""
     digest = hashlib.sha256(agent_path.read_bytes())
-    for source in (inspect.getsource(evaluation), inspect.getsource(fresh_start_row)):
-        digest.update(source.encode())
+    digest.update(_scoring_source())
     digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
     return digest.hexdigest()
+
+
+def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Sequence[int], what: str) -> None:
+    """``ValueError`` if a report start is one of the starts that selected ``what``."""
+    overlap = set(report_seeds) & set(selection_seeds)
+    if overlap:
+        raise ValueError(f"report seeds {sorted(overlap)} were used to select {what}")
 
 
 def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
@@ -102,9 +115,7 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
             changed = False
             for agent_kind in which:
                 model, config = load_agent(folder, agent_kind)
-                overlap = set(report_seeds) & set(config.eval_seeds)
-                if overlap:
-                    raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
+                _refuse_selection_starts(report_seeds, config.eval_seeds, f"the agents of {algo} seed {seed}")
                 agent_file = folder / ("best_agent.zip" if agent_kind == "best" else "agent.zip")
                 if not agent_file.exists():
                     agent_file = folder / "agent.zip"
@@ -132,9 +143,7 @@ def pilco_fresh_start_rows(results: Sequence[Any], report_seeds: Sequence[int] =
 
     rows = []
     for result in results:
-        overlap = set(report_seeds) & set(result.config.eval_seeds)
-        if overlap:
-            raise ValueError(f"report seeds {sorted(overlap)} were used by PILCO seed {result.config.seed}")
+        _refuse_selection_starts(report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {result.config.seed}")
         summary = evaluate_controller(result.controller(), result.config.task, seeds=tuple(report_seeds),
                                       duration_s=duration_s)
         rows.append({"method": "PILCO", "seed": int(result.config.seed), "agent": "final", **fresh_start_row(summary)})
@@ -278,9 +287,7 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
     for algo in algos:
         for seed in seeds:
             model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
-            overlap = set(report_seeds) & set(config.eval_seeds)
-            if overlap:
-                raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
+            _refuse_selection_starts(report_seeds, config.eval_seeds, f"the agents of {algo} seed {seed}")
             summary = evaluate_agent_batched(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
             rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[which],
                          "plant": "converged", **fresh_start_row(summary)})

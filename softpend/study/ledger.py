@@ -343,18 +343,26 @@ def _steady_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
     return LedgerRow("mf_steady", claim, "≈ 10 s", ours, "reproduced" if _median(times) <= 10.0 else "differs", "fig-swingup")
 
 
-def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> LedgerRow:
-    # reproduced: both methods hold (as in _hold_rows) and their median shares differ by at most SAME_SHARE
+def _per_method_median(fresh: Mapping[str, Sequence[Any]], figure: Callable[[Any], float]) -> Optional[dict[str, float]]:
+    """``{algo: median over a method's runs of figure(summary)}`` for both RL methods; None if one has no runs."""
     from softpend.study.rl_runs import METHOD_NAMES
 
-    claim = ("As seen in Figure 6, the final performance is near-identical to the performance of the model-free "
-             "controller.")
-    shares = {}
+    medians = {}
     for algo, method in METHOD_NAMES.items():
         summaries = list(fresh.get(method, []))
         if not summaries:
-            return LedgerRow("mb_matches_mf", claim, "near-identical", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
-        shares[algo] = _median([float(np.mean(_held(s, std_rad))) for s in summaries])
+            return None
+        medians[algo] = _median([figure(s) for s in summaries])
+    return medians
+
+
+def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> LedgerRow:
+    # reproduced: both methods hold (as in _hold_rows) and their median shares differ by at most SAME_SHARE
+    claim = ("As seen in Figure 6, the final performance is near-identical to the performance of the model-free "
+             "controller.")
+    shares = _per_method_median(fresh, lambda s: float(np.mean(_held(s, std_rad))))
+    if shares is None:
+        return LedgerRow("mb_matches_mf", claim, "near-identical", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
     ours = (f"share of fresh starts held within {std_rad:g} rad (median over seeds): DQN-MBPO {100 * shares['mbpo']:.0f} %, "
             f"DQN {100 * shares['dqn']:.0f} %")
     ok = min(shares.values()) >= HOLDS_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
@@ -363,16 +371,11 @@ def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> Ledge
 
 def _faster_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
     # reproduced: model-free DQN's median swing-up time (median over runs) below DQN-MBPO's
-    from softpend.study.rl_runs import METHOD_NAMES
-
     claim = ("Time-averaging smooths rapid changes in error, thereby masking small differences in the swingup velocity, "
              "where the model free-controller shows a slight advantage.")
-    times = {}
-    for algo, method in METHOD_NAMES.items():
-        summaries = list(fresh.get(method, []))
-        if not summaries:
-            return LedgerRow("mf_faster", claim, "model-free slightly faster", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
-        times[algo] = _median([s.median("swing_up_time_s") for s in summaries])
+    times = _per_method_median(fresh, lambda s: s.median("swing_up_time_s"))
+    if times is None:
+        return LedgerRow("mf_faster", claim, "model-free slightly faster", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
     ours = (f"median swing-up time on fresh starts: DQN {_seconds(times['dqn'])}, DQN-MBPO {_seconds(times['mbpo'])}")
     verdict = "reproduced" if times["dqn"] < times["mbpo"] else "differs"
     return LedgerRow("mf_faster", claim, "model-free slightly faster", ours, verdict, "fig-upright-error")

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from softpend.plant import PRBPlant, RodParams
-from softpend.plant.batched import BatchedPRBChain, BatchedRodParams, stable_substeps
+from softpend.plant.batched import ROSENBROCK_SUBSTEPS, BatchedPRBChain, BatchedRodParams, stable_substeps
 
 DT_S = 0.01
 
@@ -47,8 +47,8 @@ def _exudyn_reference(params, q0, qd0, torques_nm) -> np.ndarray:
     return (4 * fine - coarse) / 3
 
 
-def _batched_hub(rods, starts, torques_nm, substeps=None) -> tuple[np.ndarray, BatchedPRBChain]:
-    chain = BatchedPRBChain(BatchedRodParams.from_params(rods), dt_s=DT_S, substeps=substeps)
+def _batched_hub(rods, starts, torques_nm, substeps=None, integrator="rk4") -> tuple[np.ndarray, BatchedPRBChain]:
+    chain = BatchedPRBChain(BatchedRodParams.from_params(rods), dt_s=DT_S, substeps=substeps, integrator=integrator)
     q = torch.tensor(np.array([s[0] for s in starts]))
     qd = torch.tensor(np.array([s[1] for s in starts]))
     qs, _ = chain.rollout(q, qd, torch.tensor(torques_nm).T)
@@ -69,18 +69,75 @@ def test_hub_angle_matches_converged_exudyn_plant_over_one_second(n_links: int) 
         assert np.ptp(reference) > 0.1  # the rod really moved
 
 
-def test_default_substeps_are_more_accurate_than_the_default_exudyn_plant() -> None:
+@pytest.mark.parametrize("n_links, integrator, factor", [(4, "rk4", 10), (4, "rosenbrock", 1.5),
+                                                        (10, "rosenbrock", 1.5)])
+def test_default_substeps_are_more_accurate_than_the_default_exudyn_plant(n_links: int, integrator: str,
+                                                                          factor: float) -> None:
+    """With its default sub-steps each integrator's hub angle is closer to the converged plant than the default
+    Exudyn plant's (RK4 ten times closer at n = 4; Rosenbrock, two sub-steps, at least 1.5 times)."""
     rng = np.random.default_rng(7)
-    rod = RodParams(n_links=4)
-    start = _start(4, rng)
+    rod = RodParams(n_links=n_links)
+    start = _start(n_links, rng)
     torques = rng.uniform(-1, 1, (1, 100)) * rod.torque_limit_nm
     reference = _exudyn_reference(rod, *start, torques[0])
-    batched, chain = _batched_hub([rod], [start], torques)
-    assert chain.substeps == stable_substeps(rod, DT_S) == 2
+    batched, chain = _batched_hub([rod], [start], torques, integrator=integrator)
+    if integrator == "rk4":
+        assert chain.substeps == stable_substeps(rod, DT_S) == 2
+    else:
+        assert chain.substeps == ROSENBROCK_SUBSTEPS == 2
     exudyn_default = _exudyn_hub(rod, *start, torques[0], substeps=2)
     batched_error = np.abs(batched[0] - reference).max()
     exudyn_error = np.abs(exudyn_default - reference).max()
-    assert batched_error < exudyn_error / 10, (batched_error, exudyn_error)
+    assert batched_error < exudyn_error / factor, (batched_error, exudyn_error)
+
+
+def test_rosenbrock_converges_at_second_order_to_the_rk4_chain() -> None:
+    rng = np.random.default_rng(4)
+    rods = _rods(4)
+    starts = [_start(4, rng) for _ in rods]
+    torques = rng.uniform(-1, 1, (len(rods), 60)) * 0.06
+    reference, _ = _batched_hub(rods, starts, torques, substeps=20)  # within 1e-7 rad of the converged plant
+    errors = [np.abs(_batched_hub(rods, starts, torques, substeps=k, integrator="rosenbrock")[0] - reference).max()
+              for k in (8, 16, 32)]
+    ratios = [errors[0] / errors[1], errors[1] / errors[2]]
+    assert all(3.5 < r < 4.5 for r in ratios), (errors, ratios)
+    assert errors[-1] < 1e-4
+
+
+def test_rosenbrock_is_stable_where_rk4_diverges() -> None:
+    """One sub-step per 10 ms at n = 10: far beyond RK4's stability limit (14 sub-steps); the linearly implicit
+    method stays finite and bounded."""
+    rods = _rods(10)
+    torques = torch.tensor(np.random.default_rng(0).uniform(-0.06, 0.06, (200, len(rods))))
+    results = {}
+    for integrator in ("rk4", "rosenbrock"):
+        chain = BatchedPRBChain(BatchedRodParams.from_params(rods), substeps=1, integrator=integrator)
+        q, qd = chain.hanging_state()
+        with torch.no_grad():
+            results[integrator] = chain.rollout(q, qd, torques)
+    assert not torch.isfinite(results["rk4"][0]).all()
+    q, qd = results["rosenbrock"]
+    assert torch.isfinite(q).all() and qd.abs().max() < 100.0
+
+
+def test_compiled_chain_equals_the_eager_one_and_differentiates_eagerly() -> None:
+    rods = BatchedRodParams.from_params(_rods(4))
+    eager = BatchedPRBChain(rods, integrator="rosenbrock")
+    compiled = BatchedPRBChain(rods, integrator="rosenbrock", compiled=True)
+    q, qd = eager.hanging_state()
+    q[:, 0] -= torch.tensor([0.3, 1.2], dtype=torch.float64)
+    torques = torch.tensor([[0.06, -0.02]] * 20, dtype=torch.float64)
+    with torch.no_grad():
+        for (a, b) in zip(eager.rollout(q, qd, torques), compiled.rollout(q, qd, torques)):
+            np.testing.assert_allclose(b.numpy(), a.numpy(), rtol=1e-12, atol=1e-12)
+    assert compiled._compiled_integrate is not None
+    mass = torch.tensor([0.058, 0.066], dtype=torch.float64, requires_grad=True)
+    grads = []
+    for chain in (eager, compiled):
+        chain.set_params(rods.replace(mass_kg=mass))
+        (grad,) = torch.autograd.grad(chain.step(q, qd, torques[0])[0].sum(), mass)
+        grads.append(grad)
+    torch.testing.assert_close(grads[1], grads[0], rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize("n_links", [1, 4, 10])
@@ -100,13 +157,15 @@ def test_energy_and_observations_equal_the_exudyn_plant_on_random_states(n_links
         np.testing.assert_allclose(observations[i], plant.observation_from_state(q[i], qd[i]).as_array(), rtol=1e-12, atol=1e-13)
 
 
-@pytest.mark.parametrize("substeps, tolerance", [(20, 1e-7), (None, 2e-2)])
-def test_energy_change_equals_motor_work_minus_dissipation(substeps, tolerance: float) -> None:
-    """Energy balance over 1 s of random torque; with the default (stability-limited) sub-steps RK4 damps the
-    stiffest bending mode numerically, which shows as a residual below 1 % of the dissipated energy."""
+@pytest.mark.parametrize("integrator, substeps, tolerance", [("rk4", 20, 1e-7), ("rk4", None, 2e-2),
+                                                             ("rosenbrock", 32, 3e-4), ("rosenbrock", None, 6e-2)])
+def test_energy_change_equals_motor_work_minus_dissipation(integrator: str, substeps, tolerance: float) -> None:
+    """Energy balance over 1 s of random torque; with the default sub-steps both integrators damp the stiffest
+    bending mode numerically, which shows as a residual below 1 % (RK4) or 6 % (Rosenbrock, L-stable) of the
+    dissipated energy; with more sub-steps the residual vanishes at each method's order."""
     rng = np.random.default_rng(11)
     rods = _rods(4)
-    chain = BatchedPRBChain(BatchedRodParams.from_params(rods), substeps=substeps)
+    chain = BatchedPRBChain(BatchedRodParams.from_params(rods), substeps=substeps, integrator=integrator)
     starts = [_start(4, rng) for _ in rods]
     q = torch.tensor(np.array([s[0] for s in starts]))
     qd = torch.tensor(np.array([s[1] for s in starts]))
@@ -132,13 +191,14 @@ def test_torque_saturates_at_each_rods_limit() -> None:
     assert torch.equal(big[0], exact[0]) and torch.equal(big[1], exact[1])
 
 
-def test_gradients_match_finite_differences() -> None:
+@pytest.mark.parametrize("integrator", ["rk4", "rosenbrock"])
+def test_gradients_match_finite_differences(integrator: str) -> None:
     rod = RodParams(n_links=2)
     base = BatchedRodParams.from_params(rod, batch_size=2)
 
     def simulate(q, qd, torque, mass_kg, youngs_modulus_pa):
         params = base.replace(mass_kg=mass_kg, youngs_modulus_pa=youngs_modulus_pa)
-        chain = BatchedPRBChain(params, dt_s=0.005, substeps=2)
+        chain = BatchedPRBChain(params, dt_s=0.005, substeps=2, integrator=integrator)
         q1, qd1 = chain.step(q, qd, torque)
         q2, qd2 = chain.step(q1, qd1, -torque)
         return torch.cat([q2, qd2], dim=1)
@@ -171,6 +231,8 @@ def test_stable_substeps_grow_with_the_number_of_links() -> None:
         (lambda: BatchedRodParams.from_params(RodParams()).replace(colour=[1.0]), "colour"),
         (lambda: BatchedPRBChain(RodParams(), dt_s=0.0), "dt_s"),
         (lambda: BatchedPRBChain(RodParams(), substeps=0), "substeps"),
+        (lambda: BatchedPRBChain(RodParams(), integrator="euler"), "integrator"),
+        (lambda: BatchedPRBChain(RodParams(), compiled="yes"), "compiled"),
         (lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 4), torch.zeros(2, 5), 0.0),
          "joint_angles_rad"),
         (lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 5), torch.zeros(2, 5), [0.0, float("nan")]),

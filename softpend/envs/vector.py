@@ -1,8 +1,8 @@
 """Gymnasium vector environments of the soft pendulum task on the batched torch chain.
 
 :class:`SoftPendulumVectorEnv` runs ``num_envs`` copies of :class:`~softpend.envs.SoftPendulumEnv` at once on
-:class:`~softpend.plant.batched.BatchedPRBChain` (the PRB equations of the Exudyn plant, integrated with RK4 for
-all rods together).  Observation, reward, start states and the episode limit are those of the single
+:class:`~softpend.plant.batched.BatchedPRBChain` (the PRB equations of the Exudyn plant, integrated for all rods
+together, by RK4 unless ``integrator="rosenbrock"``).  Observation, reward, start states and the episode limit are those of the single
 environment: the observation vector comes from :func:`softpend.envs.observation_vector.observation_vector`, the
 reward from :func:`softpend.envs.reward.step_reward`, and sub-environment ``i`` reset with seed ``s + i`` starts
 where the single environment reset with seed ``s + i`` starts.  Autoreset follows Gymnasium's ``NEXT_STEP``
@@ -44,7 +44,7 @@ from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
 from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND
 from softpend.plant import OBSERVATION_NAMES, RodParams
-from softpend.plant.batched import PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
+from softpend.plant.batched import INTEGRATORS, PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
 from softpend.plant.randomisation import RANDOMISED_FIELDS
 
 __all__ = ["SoftPendulumDiscreteVectorEnv", "SoftPendulumVectorEnv"]
@@ -64,9 +64,15 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
     dt_s : float
         Control step [s].
     substeps : int, optional
-        RK4 sub-steps per control step (default and least allowed: the stability limit of the stiffest rod that
-        randomisation can draw, :func:`softpend.plant.batched.stable_substeps`; not the Exudyn plant's
-        ``substeps``).
+        Integrator sub-steps per control step (not the Exudyn plant's ``substeps``).  For ``"rk4"`` the default
+        and least allowed is the stability limit of the stiffest rod that randomisation can draw
+        (:func:`softpend.plant.batched.stable_substeps`); for ``"rosenbrock"`` the default is
+        :data:`softpend.plant.batched.ROSENBROCK_SUBSTEPS`.
+    integrator : {"rk4", "rosenbrock"}
+        The chain's integrator (:class:`~softpend.plant.batched.BatchedPRBChain`): ``"rk4"`` (default, the most
+        accurate) or ``"rosenbrock"`` (cheaper per step, stable at any step, less accurate at ``n = 4``).
+    compiled : bool
+        Step the chain through ``torch.compile`` (the first step compiles, about 20 s; later ones are faster).
     torque_limit_nm : float, optional
         Overrides ``params.torque_limit_nm``.
     reward_params : RewardParams, optional
@@ -94,6 +100,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         params: Optional[RodParams] = None,
         dt_s: float = 0.01,
         substeps: Optional[int] = None,
+        integrator: str = "rk4",
+        compiled: bool = False,
         torque_limit_nm: Optional[float] = None,
         reward_params: Optional[RewardParams] = None,
         start: str = "hanging",
@@ -132,15 +140,17 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
 
         nominal = BatchedRodParams.from_params(params, batch_size=self.num_envs)
         self._nominal = nominal
-        stable = stable_substeps(self._corner_rods(), dt_s)
-        if substeps is None:
-            substeps = stable
-        elif int_at_least("substeps", substeps, 1) < stable:
-            raise ValueError(
-                f"substeps must be at least {stable} (RK4 diverges with fewer for the stiffest rod that can be "
-                f"drawn, see softpend.plant.batched.stable_substeps), got {substeps!r}"
-            )
-        self.chain = BatchedPRBChain(nominal, dt_s=dt_s, substeps=substeps)
+        one_of("integrator", integrator, INTEGRATORS)
+        if integrator == "rk4":
+            stable = stable_substeps(self._corner_rods(), dt_s)
+            if substeps is None:
+                substeps = stable
+            elif int_at_least("substeps", substeps, 1) < stable:
+                raise ValueError(
+                    f"substeps must be at least {stable} (RK4 diverges with fewer for the stiffest rod that can be "
+                    f"drawn, see softpend.plant.batched.stable_substeps), got {substeps!r}"
+                )
+        self.chain = BatchedPRBChain(nominal, dt_s=dt_s, substeps=substeps, integrator=integrator, compiled=compiled)
         self.dt_s = self.chain.dt_s
         self.torque_limit_nm = params.torque_limit_nm
 

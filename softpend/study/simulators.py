@@ -41,7 +41,8 @@ def one_torch_thread():
 def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0) -> dict[str, float]:
     """Largest hub-angle error over ``duration_s`` of random torque (from the hanging rod, hub turned 0.3 rad
     and spinning at 0.5 rad/s) against the Exudyn plant with :data:`REFERENCE_SUBSTEPS` sub-steps: of the batched chain (default
-    sub-steps) and of the default Exudyn plant (2 sub-steps)."""
+    sub-steps, RK4 in float64; the Rosenbrock integrator in float32, the fast configuration of
+    ``softpend bench --only plant``) and of the default Exudyn plant (2 sub-steps)."""
     from softpend.plant.batched import BatchedPRBChain
 
     params = RodParams(n_links=n_links)
@@ -57,14 +58,17 @@ def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0) -> dict[str, 
         return np.array([(plant.step(t), plant.joint_state()[0][0])[1] for t in torques])
 
     reference = exudyn_hub(REFERENCE_SUBSTEPS)
+    figures = {}
     with one_torch_thread() as torch:
-        chain = BatchedPRBChain(params, batch_size=1)
-        with torch.no_grad():
-            qs, _ = chain.rollout(torch.tensor(q0)[None], torch.tensor(qd0)[None], torch.tensor(torques)[:, None])
-    batched = qs[:, 0, 0].numpy()
-    return {
-        f"batched_chain_hub_error_rad_n{n_links}": float(np.abs(batched - reference).max()),
-        f"exudyn_default_hub_error_rad_n{n_links}": float(np.abs(exudyn_hub(2) - reference).max()),
-        f"batched_chain_substeps_n{n_links}": float(chain.substeps),
-    }
+        for prefix, integrator, dtype in (("batched_chain", "rk4", torch.float64),
+                                          ("batched_rosenbrock", "rosenbrock", torch.float32)):
+            chain = BatchedPRBChain(params, batch_size=1, integrator=integrator, dtype=dtype)
+            with torch.no_grad():
+                qs, _ = chain.rollout(torch.tensor(q0, dtype=dtype)[None], torch.tensor(qd0, dtype=dtype)[None],
+                                      torch.tensor(torques, dtype=dtype)[:, None])
+            batched = qs[:, 0, 0].double().numpy()
+            figures[f"{prefix}_hub_error_rad_n{n_links}"] = float(np.abs(batched - reference).max())
+            figures[f"{prefix}_substeps_n{n_links}"] = float(chain.substeps)
+    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(np.abs(exudyn_hub(2) - reference).max())
+    return figures
 

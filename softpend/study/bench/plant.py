@@ -2,12 +2,17 @@
 
 * ``env_steps_per_s_n4``/``_n10``, ``solver_steps_per_s_n4``: the single Exudyn environment and its bare solver loop;
   ``env_steps_per_s_n4_speedup``: today's step path over the legacy one (:func:`make_legacy`), same run.
-* ``batched_rod_steps_per_s_n4``/``_n10``: the batched torch chain, 4096 rods, one torch thread, float64.
-* ``vector_env_steps_per_s_n4``: the vector environment, 1024 rods, observation and reward included.
+* ``batched_rod_steps_per_s_n4``/``_n10``: the batched torch chain, 4096 rods, one torch thread, in its fast
+  configuration: the Rosenbrock integrator (two sub-steps), compiled (``torch.compile``), float32;
+  ``..._float64``: the same in float64; ``batched_rk4_rod_steps_per_s_n*``: the chain's defaults (RK4 at its
+  stability limit, eager, float64), the configuration of the converged-plant evaluations.
+* ``vector_env_steps_per_s_n4``: the vector environment, 1024 rods, observation and reward included, with the
+  Rosenbrock integrator compiled; ``..._default``: with the environment's defaults (RK4, eager).
 * ``*_per_cpu_s_*``: the same counts per CPU second of the benchmark process (on a shared machine the
   wall-clock rates fall with the other processes' load; these much less).
-* ``batched_chain_hub_error_rad_n*`` beside ``exudyn_default_hub_error_rad_n*``: largest hub-angle error against
-  the Exudyn plant with 200 sub-steps (5 s of random torque at n = 4, 1 s at n = 10).
+* ``batched_chain_hub_error_rad_n*`` (RK4), ``batched_rosenbrock_hub_error_rad_n*`` (the fast configuration)
+  beside ``exudyn_default_hub_error_rad_n*``: largest hub-angle error against the Exudyn plant with 200
+  sub-steps (5 s of random torque at n = 4, 1 s at n = 10).
 """
 
 from __future__ import annotations
@@ -125,39 +130,46 @@ def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int
 # The batched torch chain and the vector environment
 
 
-def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int = 6,
-                            repeats: int = 3) -> tuple[float, float]:
-    """Rod-steps of 0.01 s per second of the batched chain (float64, default sub-steps, one torch thread, random
-    torques, no gradients): ``batch_size * n_steps`` over the best of ``repeats`` timed runs, per wall-clock
-    second and per CPU second of this process (the latter less sensitive to other work on the machine)."""
+def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3,
+                            integrator: str = "rk4", compiled: bool = False,
+                            dtype_name: str = "float64") -> tuple[float, float]:
+    """Rod-steps of 0.01 s per second of the batched chain (default sub-steps of ``integrator``, one torch thread,
+    random torques, no gradients): ``batch_size * n_steps`` over the best of ``repeats`` timed runs, per
+    wall-clock second and per CPU second of this process (the latter less sensitive to other work on the
+    machine).  A compiled chain is compiled by an untimed first step."""
     from softpend.plant.batched import BatchedPRBChain
 
     with _one_thread() as torch:
-        chain = BatchedPRBChain(RodParams(n_links=n_links), batch_size=batch_size)
+        dtype = getattr(torch, dtype_name)
+        chain = BatchedPRBChain(RodParams(n_links=n_links), batch_size=batch_size, integrator=integrator,
+                                compiled=compiled, dtype=dtype)
         generator = torch.Generator().manual_seed(0)
-        torques = (torch.rand(n_steps, batch_size, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06
+        torques = ((torch.rand(n_steps, batch_size, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06).to(dtype)
         best = best_cpu = math.inf
         with torch.no_grad():
             q, qd = chain.hanging_state()
-            q, qd = chain.step(q, qd, torques[0])  # warm-up
+            q, qd = chain.step(q, qd, torques[0])  # warm-up (and compilation)
             for _ in range(repeats):
                 start, start_cpu = time.perf_counter(), time.process_time()
                 for torque in torques:
                     q, qd = chain.step(q, qd, torque)
                 best = min(best, time.perf_counter() - start)
                 best_cpu = min(best_cpu, time.process_time() - start_cpu)
+            if not bool(torch.isfinite(q).all()):
+                raise RuntimeError(f"the batched chain diverged in the benchmark ({integrator}, n = {n_links})")
     return batch_size * n_steps / best, batch_size * n_steps / max(best_cpu, 1e-9)
 
 
-def vector_env_steps_per_s(n_links: int = 4, num_envs: int = 1024, n_steps: int = 40,
-                           repeats: int = 3) -> tuple[float, float]:
+def vector_env_steps_per_s(n_links: int = 4, num_envs: int = 1024, n_steps: int = 40, repeats: int = 3,
+                           integrator: str = "rk4", compiled: bool = False) -> tuple[float, float]:
     """Environment steps per second of :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (observation and
     reward included, random actions, one torch thread): ``num_envs * n_steps`` over the best timed run, per
     wall-clock second and per CPU second of this process."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
     with _one_thread():
-        env = SoftPendulumVectorEnv(num_envs=num_envs, params=RodParams(n_links=n_links))
+        env = SoftPendulumVectorEnv(num_envs=num_envs, params=RodParams(n_links=n_links), integrator=integrator,
+                                    compiled=compiled)
         actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)
         env.reset(seed=0)
         env.step(actions[0])
@@ -184,9 +196,15 @@ def bench_plant() -> dict[str, float]:
     env10 = env_steps_per_s(10)
     new4, legacy4 = env_steps_per_s_paths(4)
     dt_s = 0.01
-    batched4, batched4_cpu = batched_rod_steps_per_s(4)
-    batched10, batched10_cpu = batched_rod_steps_per_s(10, n_steps=2, repeats=2)
-    vector4, vector4_cpu = vector_env_steps_per_s(4)
+    fast = {"integrator": "rosenbrock", "compiled": True}
+    batched4, batched4_cpu = batched_rod_steps_per_s(4, dtype_name="float32", **fast)
+    batched10, batched10_cpu = batched_rod_steps_per_s(10, dtype_name="float32", **fast)
+    batched4_64, _ = batched_rod_steps_per_s(4, **fast)
+    batched10_64, _ = batched_rod_steps_per_s(10, **fast)
+    rk4_4, _ = batched_rod_steps_per_s(4)
+    rk4_10, _ = batched_rod_steps_per_s(10, n_steps=2, repeats=2)
+    vector4, vector4_cpu = vector_env_steps_per_s(4, **fast)
+    vector4_default, _ = vector_env_steps_per_s(4)
     figures = {
         "env_steps_per_s_n4": env4,
         "env_steps_per_s_n10": env10,
@@ -199,8 +217,13 @@ def bench_plant() -> dict[str, float]:
         "batched_rod_steps_per_cpu_s_n4": batched4_cpu,
         "batched_rod_steps_per_s_n10": batched10,
         "batched_rod_steps_per_cpu_s_n10": batched10_cpu,
+        "batched_rod_steps_per_s_n4_float64": batched4_64,
+        "batched_rod_steps_per_s_n10_float64": batched10_64,
+        "batched_rk4_rod_steps_per_s_n4": rk4_4,
+        "batched_rk4_rod_steps_per_s_n10": rk4_10,
         "vector_env_steps_per_s_n4": vector4,
         "vector_env_steps_per_cpu_s_n4": vector4_cpu,
+        "vector_env_steps_per_s_n4_default": vector4_default,
     }
     figures.update(hub_errors_rad(4, duration_s=5.0))
     figures.update(hub_errors_rad(10, duration_s=1.0))

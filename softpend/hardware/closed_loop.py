@@ -4,11 +4,14 @@
 
 1. feeds the encoder sample to the :class:`~softpend.hardware.estimator.RigStateEstimator` (every state, also
    the ones that queued up while the host was busy);
-2. feeds every camera measurement that arrived since the last state (:class:`~softpend.vision.tip_source.TipSource`),
-   placed at its capture time on the device clock (:class:`~softpend.hardware.estimator.DeviceClock`);
-3. hands the controller what it was designed for -- ``controller(observation, q, q_dot, time_s)`` with the
+2. hands the controller what it was designed for -- ``controller(observation, q, q_dot, time_s)`` with the
    estimate (the :class:`softpend.evaluation.Controller` protocol) -- and sends the torque, which the driver
    clamps to the torque limit;
+3. then feeds every camera measurement that arrived since the last state
+   (:class:`~softpend.vision.tip_source.TipSource`), placed at its capture time on the device clock
+   (:class:`~softpend.hardware.estimator.DeviceClock`): its correction reaches the next state's estimate, and
+   the replay of the model from the capture time stays off the path from state to command, whose duration
+   sets the loop's jitter;
 4. appends the sample, the estimate and the command to a crash-safe motor log (one line per state, written
    before anything else can fail) and each camera measurement to a camera log.
 
@@ -270,17 +273,6 @@ def run_closed_loop(
                         estimator.reset(t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
                     else:
                         estimator.update_encoder(t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
-                    if newest and tip_source is not None:
-                        polled = time.monotonic()
-                        for m in tip_source.poll():
-                            frames += 1
-                            capture = clock.to_device(m.capture_time_s) - t0
-                            accepted = (not m.lost) and estimator.update_tip(capture, m.x_m, m.y_m)
-                            if accepted and not armed:
-                                armed, armed_at, status = True, t, "running"
-                            if camera_log is not None:
-                                camera_log.append([m.frame, m.capture_time_s, m.delivered_time_s, polled, capture,
-                                                   m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
                     if newest and armed and tip_source is not None:
                         blind_max = max(blind_max, estimator.blind_s)
                         if estimator.is_blind:
@@ -298,6 +290,20 @@ def run_closed_loop(
                         expected_cmd_seq = link.send_torque(command)
                         send_times.append(time.monotonic())
                         commanded = int(armed)
+                        if tip_source is not None:
+                            # camera measurements after the command: the costly replay of a delayed frame
+                            # (see RigStateEstimator.update_tip) stays off the path from state to command, and the
+                            # corrected estimate serves the next state
+                            polled = time.monotonic()
+                            for m in tip_source.poll():
+                                frames += 1
+                                capture = clock.to_device(m.capture_time_s) - t0
+                                accepted = (not m.lost) and estimator.update_tip(capture, m.x_m, m.y_m)
+                                if accepted and not armed:
+                                    armed, armed_at, status = True, t, "running"
+                                if camera_log is not None:
+                                    camera_log.append([m.frame, m.capture_time_s, m.delivered_time_s, polled, capture,
+                                                       m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
                     row_status = status
                 except _SafeStop as stop:
                     link.stop()

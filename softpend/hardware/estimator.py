@@ -230,6 +230,12 @@ class RigStateEstimator:
         self._h_encoder = h
         self._r_encoder = np.diag(noise)
         self._r_tip = np.eye(2) * cfg.tip_std_m ** 2
+        # constants of _predict, built once (a prediction runs for every encoder sample and every replayed step)
+        n = self.n
+        self._eye_2n = np.eye(2 * n)
+        self._accel_sigma = cfg.accel_std_rad_s2 ** 2 * np.eye(n)
+        self._a = np.zeros((2 * n, 2 * n))
+        self._a[:n, n:] = np.eye(n)
         self._started = False
 
     # ------------------------------------------------------------------ set-up
@@ -290,17 +296,19 @@ class RigStateEstimator:
         if not np.all(np.isfinite(x_next)):
             raise SimulationDiverged("estimator model state is not finite")
         m_inv = np.linalg.inv(mass)
-        a = np.zeros((2 * n, 2 * n))
-        a[:n, n:] = np.eye(n)
+        a = self._a  # the top rows (0, I) are constant
         a[n:, :n] = -m_inv @ stiffness
         a[n:, n:] = -m_inv @ damping
         # the step's Jacobian by the trapezoidal (bilinear) map, the linear part of the model's own implicit
         # integrator: exact enough for the swing and stable for the stiff bending modes (omega dt ~ 5)
-        eye = np.eye(2 * n)
+        eye = self._eye_2n
         f = np.linalg.solve(eye - 0.5 * dt * a, eye + 0.5 * dt * a)
         b = m_inv[:, 0]
-        sigma = cfg.accel_std_rad_s2 ** 2 * np.eye(n) + cfg.torque_std_nm ** 2 / dt * np.outer(b, b)
-        q_noise = np.block([[dt ** 3 / 3 * sigma, dt ** 2 / 2 * sigma], [dt ** 2 / 2 * sigma, dt * sigma]])
+        sigma = self._accel_sigma + cfg.torque_std_nm ** 2 / dt * np.outer(b, b)
+        q_noise = np.empty((2 * n, 2 * n))
+        q_noise[:n, :n] = dt ** 3 / 3 * sigma
+        q_noise[:n, n:] = q_noise[n:, :n] = dt ** 2 / 2 * sigma
+        q_noise[n:, n:] = dt * sigma
         p_next = f @ p @ f.T + q_noise
         return x_next, 0.5 * (p_next + p_next.T)
 

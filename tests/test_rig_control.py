@@ -157,3 +157,38 @@ def test_run_folders_become_rig_controllers(tmp_path):
         controller.reset()
         torque = controller(observation, q, q_dot, 0.0)
         assert np.isfinite(torque) and abs(torque) <= TASK.torque_limit_nm + 1e-12
+
+
+def test_camera_process_delivers_frames_and_reports_its_end(tmp_path):
+    """The twin's camera in its own process: frames arrive stamped on the host clock; a killed camera
+    delivers nothing more and says it is no longer running; bad settings fail at start with the child's
+    error."""
+    import signal
+    import time
+
+    from softpend.hardware.camera_process import CameraProcess, camera_settings
+    from softpend.hardware.emulator import start_emulator_process
+
+    with start_emulator_process(UPRIGHT, scene=True) as emulator:
+        camera = CameraProcess(emulator.take_scene_fd(), TASK, camera_settings(60.0, 0.02, model=SMALL))
+        try:
+            deadline = time.monotonic() + 10.0
+            frames = []
+            while len(frames) < 10 and time.monotonic() < deadline:
+                frames += camera.poll()
+                time.sleep(0.01)
+            assert len(frames) >= 10 and camera.running
+            assert all(m.delivered_time_s - m.capture_time_s >= 0.02 for m in frames)
+            assert all(m.delivered_time_s <= time.monotonic() for m in frames)
+            assert [m.frame for m in frames] == sorted(m.frame for m in frames)
+            assert not any(m.lost for m in frames[1:])
+            camera.process.send_signal(signal.SIGKILL)
+            camera.process.wait(5.0)
+            camera.poll()
+            assert not camera.running and camera.poll() == []
+        finally:
+            camera.close()
+        assert camera.stats()["frames_tracked"] >= 10
+    with start_emulator_process(UPRIGHT, scene=True) as emulator:
+        with pytest.raises(RuntimeError, match="fps"):
+            CameraProcess(emulator.take_scene_fd(), TASK, camera_settings(-5.0, 0.02))

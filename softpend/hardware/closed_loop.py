@@ -42,6 +42,8 @@ from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
 from softpend.hardware.loop import SecondsBar, jitter_ms_p95
+from softpend.hardware.realtime import LOOP_PRIORITY
+from softpend.hardware.realtime import realtime_priority as _realtime_priority
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -118,6 +120,8 @@ class ClosedLoopResult:
     step_cpu_ms_p95 : float
         The same in CPU time of the loop's thread (``time.thread_time``): the work itself, without the time
         the thread waited for a CPU or for the camera thread [ms].
+    realtime : bool
+        Whether the loop ran under real-time scheduling (:func:`softpend.hardware.realtime.realtime_priority`).
     """
 
     samples: int
@@ -135,6 +139,7 @@ class ClosedLoopResult:
     estimator: dict = field(default_factory=dict)
     step_time_ms_p95: float = math.nan
     step_cpu_ms_p95: float = math.nan
+    realtime: bool = False
 
     @property
     def jitter_ms_p95(self) -> float:
@@ -149,7 +154,7 @@ class ClosedLoopResult:
             "bad_frames": self.bad_frames, "watchdog_trips": self.watchdog_trips, "blind_max_s": self.blind_max_s,
             "armed_at_s": self.armed_at_s, "jitter_ms_p95": self.jitter_ms_p95,
             "step_time_ms_p95": self.step_time_ms_p95, "step_cpu_ms_p95": self.step_cpu_ms_p95,
-            "camera": self.camera, "estimator": self.estimator,
+            "realtime": self.realtime, "camera": self.camera, "estimator": self.estimator,
         }
 
 
@@ -177,6 +182,7 @@ def run_closed_loop(
     arm_timeout_s: float = 2.0,
     progress: bool = False,
     on_sample: Optional[Callable[[dict], None]] = None,
+    realtime_priority: Optional[int] = LOOP_PRIORITY,
 ) -> ClosedLoopResult:
     """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time (module docstring).
 
@@ -205,6 +211,10 @@ def run_closed_loop(
         Show a progress bar with the estimated tip angle, the torque and the camera's blind time.
     on_sample : callable, optional
         Called with each motor-log row as a dict (after it is logged).
+    realtime_priority : int or None
+        Real-time (``SCHED_FIFO``) priority asked for the loop's thread while it runs (None: normal
+        scheduling); where the operating system refuses, the loop runs at normal priority
+        (:attr:`ClosedLoopResult.realtime` says which).
 
     Returns
     -------
@@ -245,6 +255,8 @@ def run_closed_loop(
     stop_reason: Optional[str] = None
     t = 0.0
     nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
+    priority = _realtime_priority(realtime_priority)
+    realtime = priority.__enter__()
     try:
         while True:
             states = [link.read_state()]
@@ -340,6 +352,7 @@ def run_closed_loop(
         raise
     finally:
         bar.close()
+        priority.__exit__(None, None, None)
     link.stop()
     if stop_reason is None:
         status = "completed"
@@ -347,7 +360,7 @@ def run_closed_loop(
     return ClosedLoopResult(
         samples=samples, duration_s=t, stop_reason=stop_reason, status=status, command_periods_s=periods,
         late_commands=late, dropped_states=dropped, bad_frames=link.bad_frames, watchdog_trips=watchdog,
-        blind_max_s=blind_max, armed_at_s=armed_at,
+        blind_max_s=blind_max, armed_at_s=armed_at, realtime=realtime,
         camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
         estimator=estimator.stats(),
         step_time_ms_p95=float(np.percentile(step_times, 95) * 1e3) if step_times else math.nan,
@@ -374,6 +387,10 @@ class TwinCamera:
         Injected stalls, drops, occlusions.
     seed : int
         Seed of the image noise.
+    own_process : bool
+        Render and track in a process of its own (:class:`~softpend.hardware.camera_process.CameraProcess`),
+        as a rig's camera is a device of its own (default); False: on a thread of the host's process, which
+        then shares the interpreter with the control loop.  A run with ``on_frame`` films on a thread.
     """
 
     fps: float = 60.0
@@ -382,6 +399,7 @@ class TwinCamera:
     model: Any = None
     faults: Any = None
     seed: int = 0
+    own_process: bool = True
 
 
 @dataclass
@@ -420,6 +438,7 @@ def run_twin_control(
     STATE frame: generous by default, because the emulator shares the host's CPUs (a starved emulator
     process is not a broken cable).
     """
+    from softpend.hardware.camera_process import CameraProcess, camera_settings
     from softpend.hardware.emulator import RigConfig, start_emulator_process
     from softpend.vision.tip_source import SyntheticLiveCamera
 
@@ -440,12 +459,18 @@ def run_twin_control(
     source = None
     with start_emulator_process(rig, truth_log=paths["truth_log.csv"], stats_path=stats_path,
                                 scene=camera is not None) as emulator:
-        scene = emulator.open_scene() if camera is not None else None
+        scene = None
         try:
-            if camera is not None:
+            if camera is not None and camera.own_process and on_frame is None:
+                source = CameraProcess(emulator.take_scene_fd(), rig.task,
+                                       camera_settings(camera.fps, camera.latency_s, camera.effects, camera.model,
+                                                       camera.faults, camera.seed))
+            elif camera is not None:
+                scene = emulator.open_scene()
                 source = SyntheticLiveCamera(scene, fps=camera.fps, latency_s=camera.latency_s, effects=camera.effects,
                                              model=camera.model, faults=camera.faults, seed=camera.seed,
                                              on_frame=on_frame)
+            if source is not None:
                 source.start()
                 deadline = time.monotonic() + camera_wait_s
                 while source.frames_tracked == 0 and source.running and time.monotonic() < deadline:

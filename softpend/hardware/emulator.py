@@ -37,6 +37,7 @@ import numpy as np
 from softpend.checks import finite, in_unit_interval, int_at_least, optional_positive
 from softpend.task import Task
 from softpend.hardware import protocol as proto
+from softpend.hardware.realtime import DEVICE_PRIORITY, realtime_priority
 from softpend.io.samplelog import SampleLog
 
 __all__ = ["EmulatorProcess", "RigConfig", "RigEmulator", "start_emulator_process", "truth_columns"]
@@ -453,6 +454,14 @@ class EmulatorProcess:
         fd, self.scene_fd = self.scene_fd, None
         return EmulatorScene(fd, self.config.task)
 
+    def take_scene_fd(self) -> int:
+        """The read end of the pose feed (``scene=True`` only), for another process to film; the caller owns
+        it from then on."""
+        if self.scene_fd is None:
+            raise ValueError("scene: this emulator was started without a scene feed (or it was opened already)")
+        fd, self.scene_fd = self.scene_fd, None
+        return fd
+
     def _close_scene_fd(self) -> None:
         if self.scene_fd is not None:
             os.close(self.scene_fd)
@@ -480,8 +489,11 @@ def _main(argv: Optional[list[str]] = None) -> int:  # the child process entry p
     parser.add_argument("--scene-fd", type=int)
     args = parser.parse_args(argv)
     config = RigConfig.from_dict(json.loads(args.config_json))
-    return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats,
-                         scene_fd=args.scene_fd)
+    # the emulator stands in for the rig's microcontroller, which has a processor of its own: it runs ahead of
+    # the host's work where the operating system allows
+    with realtime_priority(DEVICE_PRIORITY):
+        return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats,
+                             scene_fd=args.scene_fd)
 
 
 if __name__ == "__main__":

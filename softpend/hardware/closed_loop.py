@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -257,6 +258,12 @@ def run_closed_loop(
     nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
     priority = _realtime_priority(realtime_priority)
     realtime = priority.__enter__()
+    # a learned controller evaluates one small network per state: on one thread, so that no step waits for a
+    # worker thread of torch's pool that the machine has not scheduled (torch is not imported for this)
+    torch = sys.modules.get("torch")
+    torch_threads = torch.get_num_threads() if torch is not None else None
+    if torch is not None:
+        torch.set_num_threads(1)
     try:
         while True:
             states = [link.read_state()]
@@ -353,6 +360,8 @@ def run_closed_loop(
     finally:
         bar.close()
         priority.__exit__(None, None, None)
+        if torch is not None:
+            torch.set_num_threads(torch_threads)
     link.stop()
     if stop_reason is None:
         status = "completed"

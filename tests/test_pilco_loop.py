@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -13,7 +14,8 @@ from softpend.cli import main
 from softpend.evaluation import evaluate_controller
 from softpend.pilco import PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
 from softpend.pilco.gp import MultiOutputGP
-from softpend.pilco.loop import _came_near_upright, _optimise_policy, real_cost
+from softpend.pilco.loop import (RANDOM_STREAMS, _came_near_upright, _optimise_policy, _random_streams,
+                                 _search_with_restarts, real_cost)
 from softpend.pilco.propagation import Propagator
 from softpend.plant import RodParams
 from softpend.task import Task
@@ -33,6 +35,14 @@ TINY = dict(
 @pytest.fixture(scope="module")
 def tiny_run() -> PilcoResult:
     return run_pilco(PilcoConfig(**TINY, seed=3), progress=False)
+
+
+@pytest.fixture(scope="module")
+def tiny_run_without_restarts(tiny_run) -> PilcoResult:
+    """``tiny_run`` searching from the previous policy only."""
+    if tiny_run.config.policy_restarts == 0:
+        return tiny_run
+    return run_pilco(PilcoConfig(**TINY, seed=3, policy_restarts=0), progress=False)
 
 
 def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
@@ -122,17 +132,23 @@ def test_came_near_upright_sees_a_fast_pass_through_the_top():
     assert not _came_near_upright(spec, hanging, 0.5)
 
 
-def test_policy_search_lowers_the_predicted_cost():
+def _pendulum_gp(rng: np.random.Generator, n_points: int):
+    """A GP of rigid-pendulum-like differences over 0.1 s (theta from upright, so gravity pushes away from 0) on
+    ``n_points`` random states, a start tilted by 0.5 rad that falls over unless a policy catches it, and the
+    states."""
     spec = state_spec("tip")
-    rng = np.random.default_rng(0)
-    states = np.column_stack([rng.uniform(-8, 8, 120), rng.uniform(-np.pi, np.pi, 120)])
-    u = rng.uniform(-0.06, 0.06, 120)
-    # rigid-pendulum-like differences over 0.1 s (theta from upright, so gravity pushes away from 0)
+    states = np.column_stack([rng.uniform(-8, 8, n_points), rng.uniform(-np.pi, np.pi, n_points)])
+    u = rng.uniform(-0.06, 0.06, n_points)
     dy = np.column_stack([0.1 * (30.0 * np.sin(states[:, 1]) + 400.0 * u), 0.1 * states[:, 0]])
     gp = MultiOutputGP(np.hstack([spec.model_inputs(states), u[:, None]]), dy)
-    # start tilted by 0.5 rad: falls over unless the policy catches it
     m0 = torch.tensor([0.0, 0.5], dtype=torch.float64)
     s0 = 0.05**2 * torch.eye(2, dtype=torch.float64)
+    return spec, gp, m0, s0, states
+
+
+def test_policy_search_lowers_the_predicted_cost():
+    rng = np.random.default_rng(0)
+    spec, gp, m0, s0, _ = _pendulum_gp(rng, 120)
     policy = RBFPolicy(spec.model_inputs(rng.multivariate_normal(m0.numpy(), s0.numpy(), 10)),
                        np.array([5.0, 0.7, 0.7]), 0.06, seed=0)
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
@@ -142,9 +158,85 @@ def test_policy_search_lowers_the_predicted_cost():
     assert float(prop.rollout(m0, s0, 10)[3]) == pytest.approx(after)
 
 
+def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_without_restarts):
+    """Policy restarts (searches after the first only) leave every other draw alone: the random trial, the first
+    search and trial, the second GP subset are those of the run without restarts, and the second search, on the
+    same data, keeps a policy whose predicted cost is at most the one the previous policy alone reached."""
+    baseline = tiny_run_without_restarts
+    config = PilcoConfig(**TINY, seed=3, policy_restarts=2, restart_above_cost_fraction=0.0)
+    restarted = run_pilco(config, progress=False)
+    for mine, theirs in zip(restarted.real_states[:2], baseline.real_states[:2]):
+        np.testing.assert_array_equal(mine, theirs)
+    assert [r.policy_restarts for r in restarted.records] == [0, 0, 2]
+    assert restarted.records[1].predicted_cost == baseline.records[1].predicted_cost
+    assert restarted.records[2].n_gp_points == baseline.records[2].n_gp_points
+    assert restarted.records[2].predicted_cost <= baseline.records[2].predicted_cost
+    # a threshold that the search from the previous policy stays under makes no restart: the run without them
+    fraction = baseline.records[2].predicted_cost / config.n_horizon_steps + 1e-9
+    assert fraction < 1.0
+    unneeded = run_pilco(PilcoConfig(**TINY, seed=3, policy_restarts=2, restart_above_cost_fraction=fraction),
+                         progress=False)
+    assert [r.policy_restarts for r in unneeded.records] == [0, 0, 0]
+    assert [r.predicted_cost for r in unneeded.records[1:]] == [r.predicted_cost for r in baseline.records[1:]]
+    np.testing.assert_array_equal(unneeded.policy.get_vector(), baseline.policy.get_vector())
+
+
+def test_random_streams_keep_their_draws_when_a_stream_is_appended():
+    """Child k of ``SeedSequence(seed)`` depends on k only: the streams before the last are those of a run that
+    spawned one stream fewer."""
+    assert RANDOM_STREAMS[-1] == "policy_restarts"
+    streams = _random_streams(7)
+    older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 1)
+    for name, child in zip(RANDOM_STREAMS[:-1], older):
+        np.testing.assert_array_equal(streams[name].integers(0, 2**31 - 1, 5),
+                                      np.random.default_rng(child).integers(0, 2**31 - 1, 5))
+
+
+def test_search_with_restarts_keeps_the_best_and_reports_it():
+    rng = np.random.default_rng(1)
+    spec, gp, m0, s0, states = _pendulum_gp(rng, 80)
+    config = PilcoConfig(state="tip", horizon_s=0.8, n_basis=6, policy_iterations=5, policy_restarts=3,
+                         restart_above_cost_fraction=0.0)
+
+    def fresh_policy() -> RBFPolicy:
+        return RBFPolicy(spec.model_inputs(states[:6]), np.array([5.0, 0.7, 0.7]), 0.06, seed=0)
+
+    warm_policy = fresh_policy()
+    warm = _optimise_policy(Propagator(spec, gp, warm_policy, 0.3, 0.15), warm_policy, m0, s0, 8, iterations=5)
+    policy = fresh_policy()
+    prop = Propagator(spec, gp, policy, 0.3, 0.15)
+    best, made = _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
+                                       np.random.default_rng(0))
+    assert made == 3 and best <= warm
+    assert float(prop.rollout(m0, s0, 8)[3]) == pytest.approx(best)  # the policy holds the kept parameters
+    policy = fresh_policy()
+    prop = Propagator(spec, gp, policy, 0.3, 0.15)
+    assert _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
+                                 np.random.default_rng(0), restart=False) == (warm, 0)
+
+
+def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run_without_restarts, tmp_path):
+    """A ``pilco.json`` written before ``policy_restarts`` existed loads as a run without restarts, so the book's
+    runner reuses it only for such a config."""
+    from softpend.study.head_to_head import _saved_run
+
+    baseline = tiny_run_without_restarts
+    baseline.save(tmp_path)
+    meta = json.loads((tmp_path / "pilco.json").read_text())
+    del meta["config"]["policy_restarts"]
+    for record in meta["records"]:
+        del record["policy_restarts"]
+    (tmp_path / "pilco.json").write_text(json.dumps(meta))
+    loaded = PilcoResult.load(tmp_path)
+    assert loaded.config.policy_restarts == 0 and loaded.config == baseline.config
+    assert _saved_run(tmp_path, baseline.config) is not None
+    assert _saved_run(tmp_path, dataclasses.replace(baseline.config, policy_restarts=1)) is None
+
+
 @pytest.mark.parametrize("field, value", [
     ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
     ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
+    ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):

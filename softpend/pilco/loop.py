@@ -24,7 +24,9 @@ GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled 
 latest trial always kept, the older points drawn at random), hyperparameters by penalised marginal
 likelihood; then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
 cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
-moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy.
+moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy
+(with ``policy_restarts``, the searches after the first also start from fresh random policies when the one from
+the previous policy ends with a high predicted cost; the lowest predicted cost is kept).
 The cost is saturating in the tip's distance from upright; once a real trial has brought the tip within
 ``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by a factor in the tip rate
 (``cost_rate_width_rad_s = 3`` rad/s): a rod that spins fast over the top then earns almost nothing, one that
@@ -50,7 +52,7 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import boolean, check_work_size, int_at_least, optional_positive, positive
+from softpend.checks import boolean, check_work_size, int_at_least, non_negative, optional_positive, positive
 from softpend.evaluation import EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.plant import SimulationDiverged
@@ -110,7 +112,20 @@ class PilcoConfig:
         trial is always kept).
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search (one search per
-        trial, from the previous policy).
+        trial from the previous policy, and one per restart).
+    policy_restarts : int
+        Searches from fresh random policies that each policy search after the first (which starts from a fresh
+        random policy already) adds to the one from the previous policy: new centres drawn from all states the
+        real trials visited, new pseudo-targets of spread ``restart_target_std``, length-scales from all data
+        (otherwise the rule of the first policy), each optimised like the previous policy; the policy with the
+        lowest predicted cost is kept.  0: only the search from the previous policy, which can stay in its
+        local optimum (hanging, or spinning) once the model has learnt where it leads.
+    restart_above_cost_fraction : float
+        Restart only when the search from the previous policy ends with a predicted cost above this share of
+        the largest one (1 per prediction step); 0: in every search after the first.
+    restart_target_std : float
+        Spread of a restart's initial pseudo-targets (pre-saturation; 1 gives a policy that uses the whole
+        torque range, the first policy's 0.1 small torques).
     eval_seeds : tuple of int
         Seeds of the test episodes after each policy trial (empty: no tests).
     eval_duration_s : float
@@ -121,8 +136,9 @@ class PilcoConfig:
         End the run at the first policy that balances.
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
-        starts and torques, policy-trial starts, policy init, GP subsets; :data:`RANDOM_STREAMS`), so neither
-        ``n_policy_trials`` nor ``n_random_trials`` changes the draws of the other purposes.
+        starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;
+        :data:`RANDOM_STREAMS`), so neither ``n_policy_trials``, ``n_random_trials`` nor ``policy_restarts``
+        changes the draws of the other purposes.
     """
 
     task: Task = field(default_factory=Task)
@@ -142,6 +158,9 @@ class PilcoConfig:
     max_gp_points: int = 200
     gp_iterations: int = 100
     policy_iterations: int = 80
+    policy_restarts: int = 1
+    restart_above_cost_fraction: float = 0.5
+    restart_target_std: float = 1.0
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = 8.0
     target_std_rad: float = 0.1
@@ -153,7 +172,7 @@ class PilcoConfig:
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         state_spec(self.state)
         for name in ("control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad", "random_hold_min_s", "random_hold_max_s"):
+                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
             positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
@@ -163,8 +182,12 @@ class PilcoConfig:
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
-                          ("gp_iterations", 1), ("policy_iterations", 1)):
+                          ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
+        fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
+        if fraction >= 1.0:
+            raise ValueError(f"restart_above_cost_fraction must be in [0, 1), got {self.restart_above_cost_fraction!r}")
+        self.restart_above_cost_fraction = fraction
         try:
             self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
         except TypeError:
@@ -190,9 +213,13 @@ class PilcoConfig:
         data["eval_seeds"] = list(self.eval_seeds)
         return data
 
+    #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
+    #: setting existed (so such a run is not taken for a run of a config with other values).
+    MISSING_DEFAULTS = {"policy_restarts": 0}
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
-        data = dict(data)
+        data = {**cls.MISSING_DEFAULTS, **data}
         data["task"] = Task.from_dict(data["task"])
         data["eval_seeds"] = tuple(data.get("eval_seeds", ()))
         return cls(**data)
@@ -204,7 +231,8 @@ class TrialRecord:
 
     ``predicted_cost`` is the policy search's expected total cost for the policy that ran the trial (NaN for
     the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_rate_width_rad_s``
-    the tip-rate width of that cost (``None``: position only).
+    the tip-rate width of that cost (``None``: position only); ``policy_restarts`` the searches from fresh
+    random policies that the search made besides the one from the previous policy.
     """
 
     index: int
@@ -222,6 +250,7 @@ class TrialRecord:
     balanced: bool = False
     cpu_s_total: float = float("nan")
     cost_rate_width_rad_s: Optional[float] = None
+    policy_restarts: int = 0
 
 
 @dataclass
@@ -395,11 +424,12 @@ def _optimise_policy(
 
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets")
+RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
-    """One independent generator per purpose (:data:`RANDOM_STREAMS`), spawned from ``SeedSequence(seed)``.
+    """One independent generator per purpose (:data:`RANDOM_STREAMS`), spawned from ``SeedSequence(seed)``
+    (child ``k`` depends on ``k`` only, so a stream appended to the list leaves the others' draws alone).
 
     Each stream is drawn from in order, one draw per trial or search, so the budget (``n_policy_trials``,
     ``n_random_trials``) changes none of the draws made before it runs out: the first trials of two runs that
@@ -412,6 +442,41 @@ def _random_streams(seed: int) -> dict[str, np.random.Generator]:
 def _draw_seed(rng: np.random.Generator) -> int:
     """One seed in ``[0, 2**31 - 1)`` from ``rng``."""
     return int(rng.integers(0, 2**31 - 1))
+
+
+def _random_policy(spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray, n_basis: int,
+                   torque_limit_nm: float, rng: np.random.Generator, target_std: float = 0.1) -> RBFPolicy:
+    """A fresh policy: ``n_basis`` centres drawn from ``states`` (rows of visited states), pseudo-targets of
+    spread ``target_std`` from a seed drawn from ``rng`` (after the centres), length-scales the spread of each
+    rate in ``model_inputs`` (the state part of the GP inputs) and 0.7 for every sin/cos input (as in PILCO)."""
+    chosen = states[rng.choice(len(states), size=n_basis, replace=n_basis > len(states))]
+    lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
+                            np.maximum(model_inputs.std(axis=0), 1e-3), 0.7)
+    return RBFPolicy(spec.model_inputs(chosen), lengthscales, torque_limit_nm, seed=_draw_seed(rng),
+                     target_std=target_std)
+
+
+def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor,
+                          s0: torch.Tensor, spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray,
+                          rng: np.random.Generator, restart: bool = True) -> tuple[float, int]:
+    """One policy search: from the current policy, then (when ``restart``, ``config.policy_restarts`` and the
+    cost threshold ask for it) from that many fresh random policies (:func:`_random_policy`, draws from
+    ``rng``); ``policy`` keeps the parameters of the lowest predicted cost.  Returns that cost and the number
+    of restarts made."""
+    n_steps = config.n_horizon_steps
+    best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+    if not restart or config.policy_restarts == 0 or best <= config.restart_above_cost_fraction * n_steps:
+        return best, 0
+    best_vector = policy.get_vector()
+    for _ in range(config.policy_restarts):
+        fresh = _random_policy(spec, states, model_inputs, config.n_basis, policy.torque_limit_nm, rng,
+                               config.restart_target_std)
+        policy.set_vector(fresh.get_vector())
+        value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+        if value < best:
+            best, best_vector = value, policy.get_vector()
+    policy.set_vector(best_vector)
+    return best, config.policy_restarts
 
 
 def check_pilco_size(config: PilcoConfig) -> None:
@@ -499,13 +564,8 @@ def run_pilco(
     # distribution; spreading them over the visited states lets the first policy act away from hanging),
     # length-scales: the spread of each rate in the data, 0.7 for every sin/cos input (as in PILCO)
     m0, s0 = _initial_distribution(spec, config.initial_std)
-    states = np.vstack(random_states)
-    init_rng = streams["policy_init"]
-    init_states = states[init_rng.choice(len(states), size=config.n_basis, replace=config.n_basis > len(states))]
-    all_inputs = np.vstack(inputs)[:, :-1]
-    lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
-                            np.maximum(all_inputs.std(axis=0), 1e-3), 0.7)
-    policy = RBFPolicy(spec.model_inputs(init_states), lengthscales, torque_limit, seed=_draw_seed(init_rng))
+    policy = _random_policy(spec, np.vstack(random_states), np.vstack(inputs)[:, :-1], config.n_basis, torque_limit,
+                            streams["policy_init"])
     result.policy = policy
     hyper: Optional[GPHyperparameters] = None
 
@@ -525,7 +585,10 @@ def run_pilco(
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
         rate_width = config.cost_rate_width_rad_s if rate_on else None
         propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width)
-        predicted = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+        restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search
+        predicted, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
+                                                      np.vstack(result.real_states), x_all[:, :-1], restart_rng,
+                                                      restart=trial > 1)
         with torch.no_grad():
             means, covs, _, _ = propagator.rollout(m0, s0, n_steps)
         result.predicted_means.append(means.numpy())
@@ -543,6 +606,7 @@ def run_pilco(
             real_cost=_trial_cost(config, spec, states, rate_width),
             swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
             n_gp_points=len(subset), wall_s_total=float("nan"), cost_rate_width_rad_s=rate_width,
+            policy_restarts=n_restarts,
         )
         # ---- test it (not counted as interaction, not used for learning)
         if config.eval_seeds:

@@ -94,8 +94,10 @@ def test_no_module_imports_a_floor_at_or_above_its_own() -> None:
 
 
 def test_the_library_never_imports_the_study() -> None:
+    graph = import_graph()
     library = [m for m in _modules() if unit_of(m)[0] < unit_of("softpend.study")[0]]
-    wrong = [(m, d) for m in library for d in import_graph()[m] if d.startswith("softpend.study") or d.startswith("softpend.commands")]
+    assert library, "no library module found"
+    wrong = [(m, d) for m in library for d in graph[m] if d.startswith("softpend.study") or d.startswith("softpend.commands")]
     assert not wrong
 
 

@@ -13,11 +13,26 @@
 * ``batched_chain_hub_error_rad_n*`` (RK4), ``batched_rosenbrock_hub_error_rad_n*`` (the fast configuration)
   beside ``exudyn_default_hub_error_rad_n*``: largest hub-angle error against the Exudyn plant with 200
   sub-steps (5 s of random torque at n = 4, 1 s at n = 10).
+* ``mujoco_*`` (only where ``import mujoco`` works, ``pip install softpend[bench]``; otherwise absent, and one line
+  on stderr says so): the same chain in MuJoCo (:mod:`softpend.study.bench.mujoco_chain`), one rod stepped from
+  Python per control step: ``mujoco_rk4_5ms_steps_per_s_n4``, ``mujoco_implicitfast_2p5ms_steps_per_s_n4``; at
+  n = 10, where those steps diverge (``mujoco_rk4_5ms_diverges_n10``, ``mujoco_implicitfast_2p5ms_diverges_n10``:
+  1 if so), ``mujoco_rk4_stable_steps_per_s_n10`` (RK4 with the batched chain's sub-step count,
+  ``mujoco_rk4_stable_substeps_n10``) and ``mujoco_implicitfast_0p5ms_steps_per_s_n10``; their
+  ``*_hub_error_rad_n*`` against the same Exudyn reference, beside ``mujoco_rk4_0p25ms_hub_error_rad_n*`` (a
+  converged MuJoCo run: the check that the two models are the same chain);
+  ``mujoco_rollout_rk4_5ms_rod_steps_per_s_n4``: ``mujoco.rollout`` over 4096 rods on one thread.
+* ratios, same run: ``exudyn_env_over_mujoco_rk4_n4`` and ``exudyn_solver_over_mujoco_rk4_n4`` (the single
+  Exudyn environment's and its bare solver loop's steps/s over MuJoCo RK4's), ``batched_over_mujoco_rk4_n4``/``_n10``
+  (the batched chain's fast configuration, rod-steps/s, over MuJoCo RK4's steps/s), ``batched_rk4_over_mujoco_rk4_n*``
+  (the batched chain's RK4, the same integrator and step as MuJoCo's), ``batched_over_mujoco_rollout_n4`` and
+  ``batched_rk4_over_mujoco_rollout_n4`` (over ``mujoco.rollout``: batch against batch).
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import time
 import types
 
@@ -26,7 +41,8 @@ import numpy as np
 
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
-from softpend.study.simulators import hub_errors_rad, one_torch_thread as _one_thread
+from softpend.study.bench import mujoco_chain
+from softpend.study.simulators import hub_error_reference, hub_errors_rad, one_torch_thread as _one_thread
 
 N_STEPS = 4000
 
@@ -225,6 +241,12 @@ def bench_plant() -> dict[str, float]:
         "vector_env_steps_per_cpu_s_n4": vector4_cpu,
         "vector_env_steps_per_s_n4_default": vector4_default,
     }
-    figures.update(hub_errors_rad(4, duration_s=5.0))
-    figures.update(hub_errors_rad(10, duration_s=1.0))
+    references = {4: hub_error_reference(4, duration_s=5.0), 10: hub_error_reference(10, duration_s=1.0)}
+    figures.update(hub_errors_rad(4, duration_s=5.0, reference=references[4]))
+    figures.update(hub_errors_rad(10, duration_s=1.0, reference=references[10]))
+    if mujoco_chain.mujoco_available():
+        figures.update(mujoco_chain.bench_figures(figures, references))
+    else:
+        print("[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures",
+              file=sys.stderr, flush=True)
     return figures

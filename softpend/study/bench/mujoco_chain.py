@@ -1,0 +1,356 @@
+"""The PRB chain of :class:`softpend.plant.PRBPlant` written as a MuJoCo model (benchmark comparison only).
+
+:func:`chain_mjcf` writes the MJCF of the same chain from a :class:`~softpend.plant.RodParams`: a hub body
+(inertia ``J`` about the axis, its hinge damped by the hub friction ``b``) carrying ``n`` link bodies of
+mass ``m/n``, length ``L/n``, centre of mass and inertia about it as the Exudyn plant defines them (the tip
+mass merged into the last link), hinged about ``z`` with joint springs ``2k, k, ..., k`` and dampers
+``2 zeta, zeta, ...`` (clamp first, rest angle 0), gravity along ``-y`` (upright is ``+y``) and a motor on the
+hub joint whose control and force are limited to the torque limit.  MuJoCo's hinge coordinates are the
+Exudyn plant's: ``qpos`` is the hub angle from upright followed by the ``n`` spring angles, ``qvel`` their
+rates, so that states map one to one.  The model has no geoms (no contacts).
+
+:class:`MuJoCoChain` steps one rod by control steps of ``dt_s`` (the torque held, ``mujoco.mj_step`` with
+``nstep`` sub-steps); :func:`mujoco_hub_errors_rad` compares it with the Exudyn plant run with
+:data:`~softpend.study.simulators.REFERENCE_SUBSTEPS` sub-steps, as
+:func:`~softpend.study.simulators.hub_errors_rad` does for the other simulators.
+
+MuJoCo is an optional dependency (``pip install softpend[bench]``); this module imports it when used.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Optional
+
+import numpy as np
+
+from softpend.checks import int_at_least, one_of, positive
+from softpend.plant.params import RodParams
+
+__all__ = ["CONTROL_STEP_S", "INTEGRATORS", "MuJoCoChain", "bench_figures", "chain_mjcf", "diverges", "link_inertials",
+           "mujoco_available", "mujoco_hub_errors_rad", "rollout_rod_steps_per_s", "steps_per_s"]
+
+#: Control step of the comparisons [s] (the environments' ``dt_s``).
+CONTROL_STEP_S = 0.01
+
+#: MuJoCo integrators accepted by :func:`chain_mjcf` (the names of MJCF's ``option/@integrator``).
+INTEGRATORS = ("RK4", "implicitfast", "implicit", "Euler")
+
+
+def mujoco_available() -> bool:
+    """Whether ``import mujoco`` works."""
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masses [kg], centres of mass from the link's joint [m] and inertias about the centre of mass [kg m^2]
+    of the ``n`` links, the tip mass merged into the last link (as :class:`softpend.plant.PRBPlant` builds
+    them)."""
+    n = params.n_links
+    length = params.link_length_m
+    m_l, m_t = params.link_mass_kg, params.tip_mass_kg
+    masses = np.full(n, m_l)
+    coms = np.full(n, length / 2)
+    inertias = np.full(n, m_l * length**2 / 12)
+    if m_t > 0:
+        c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
+        masses[-1] = m_l + m_t
+        coms[-1] = c
+        inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
+    return masses, coms, inertias
+
+
+def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> str:
+    """MJCF text of the PRB chain of ``params`` (see the module docstring).
+
+    Parameters
+    ----------
+    params : RodParams, optional
+        The rod (default: the project's default rod).
+    timestep_s : float
+        MuJoCo's time step [s].
+    integrator : str
+        One of :data:`INTEGRATORS`.
+    """
+    p = params if params is not None else RodParams()
+    positive("timestep_s", timestep_s)
+    one_of("integrator", integrator, INTEGRATORS)
+    masses, coms, inertias = link_inertials(p)
+    stiffness = p.spring_stiffnesses_nm_per_rad()
+    damping = p.spring_dampings_nms_per_rad()
+    length = p.link_length_m
+    limit = p.torque_limit_nm
+    r = repr  # shortest round-trip decimal of a float: the model holds the same doubles as RodParams
+    # The hub's mass sits on the fixed axis (no gravity torque, no translation): any value is exact; MuJoCo
+    # wants a moving body to have mass, so the hub gets the rod's mass there.
+    lines = [
+        '<mujoco model="softpend_prb_chain">',
+        '  <compiler angle="radian" autolimits="true"/>',
+        f'  <option timestep="{r(float(timestep_s))}" integrator="{integrator}" gravity="0 {r(-p.gravity_mps2)} 0">',
+        '    <flag contact="disable"/>',
+        '  </option>',
+        '  <worldbody>',
+        '    <body name="hub" pos="0 0 0">',
+        f'      <joint name="hub" type="hinge" axis="0 0 1" damping="{r(p.hub_friction_nms_per_rad)}"/>',
+        f'      <inertial pos="0 0 0" mass="{r(p.mass_kg)}" diaginertia="{r(p.hub_inertia_kgm2)} '
+        f'{r(p.hub_inertia_kgm2)} {r(p.hub_inertia_kgm2)}"/>',
+    ]
+    indent = "      "
+    for i in range(p.n_links):
+        offset = 0.0 if i == 0 else length
+        inertia = r(float(inertias[i]))
+        lines += [
+            f'{indent}<body name="link{i + 1}" pos="0 {r(offset)} 0">',
+            f'{indent}  <joint name="spring{i + 1}" type="hinge" axis="0 0 1" stiffness="{r(stiffness[i])}" '
+            f'springref="0" damping="{r(damping[i])}"/>',
+            f'{indent}  <inertial pos="0 {r(float(coms[i]))} 0" mass="{r(float(masses[i]))}" '
+            f'diaginertia="{inertia} {inertia} {inertia}"/>',
+        ]
+        indent += "  "
+    for i in range(p.n_links, 0, -1):
+        indent = indent[:-2]
+        lines.append(f"{indent}</body>")
+    lines += [
+        "    </body>",
+        "  </worldbody>",
+        "  <actuator>",
+        f'    <motor name="hub_torque" joint="hub" gear="1" ctrlrange="{r(-limit)} {r(limit)}" '
+        f'forcerange="{r(-limit)} {r(limit)}"/>',
+        "  </actuator>",
+        "</mujoco>",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+class MuJoCoChain:
+    """One rod of :func:`chain_mjcf` stepped by control steps of ``dt_s`` with the torque held.
+
+    Parameters
+    ----------
+    params : RodParams, optional
+        The rod.
+    timestep_s : float
+        MuJoCo's time step [s]; ``dt_s`` must be a whole number of them.
+    integrator : str
+        One of :data:`INTEGRATORS`.
+    dt_s : float
+        Control step [s].
+    """
+
+    def __init__(self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4",
+                 dt_s: float = 0.01) -> None:
+        import mujoco
+
+        self.params = params if params is not None else RodParams()
+        positive("dt_s", dt_s)
+        positive("timestep_s", timestep_s)
+        ratio = dt_s / timestep_s
+        substeps = int(round(ratio))
+        if substeps < 1 or abs(ratio - substeps) > 1e-9 * ratio:
+            raise ValueError(f"dt_s ({dt_s!r}) must be a whole number of timestep_s ({timestep_s!r})")
+        self.substeps = int_at_least("substeps", substeps, 1)
+        self.dt_s = float(dt_s)
+        self.integrator = integrator
+        self._mujoco = mujoco
+        self.model = mujoco.MjModel.from_xml_string(chain_mjcf(self.params, timestep_s, integrator))
+        self.data = mujoco.MjData(self.model)
+        kinds = mujoco.mjtWarning
+        self._instability_warnings = [int(kinds.mjWARN_BADQPOS), int(kinds.mjWARN_BADQVEL), int(kinds.mjWARN_BADQACC)]
+
+    def set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+        """Set the Exudyn plant's joint state ``(q, q_dot)`` (hub angle from upright, then spring angles) [rad,
+        rad/s]; time and control back to zero."""
+        n = self.params.n_links + 1
+        q = np.asarray(q, dtype=float).reshape(n)
+        q_dot = np.asarray(q_dot, dtype=float).reshape(n)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(q_dot))):
+            raise ValueError("joint state must be finite")
+        self._mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = q
+        self.data.qvel[:] = q_dot
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The joint state ``(q, q_dot)`` in the Exudyn plant's coordinates (copies)."""
+        return self.data.qpos.copy(), self.data.qvel.copy()
+
+    def step(self, torque_nm: float) -> None:
+        """Hold ``torque_nm`` (clamped to the torque limit by the actuator's ranges) for one control step."""
+        self.data.ctrl[0] = torque_nm
+        self._mujoco.mj_step(self.model, self.data, self.substeps)
+
+    @property
+    def diverged(self) -> bool:
+        """Whether MuJoCo met a non-finite or huge position, velocity or acceleration since the last
+        :meth:`set_state` (MuJoCo then resets the state to the model's rest pose and carries on)."""
+        warnings = self.data.warning
+        return any(warnings[w].number > 0 for w in self._instability_warnings)
+
+    def hub_trajectory_rad(self, q0: np.ndarray, qd0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
+        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` from the step
+        at which the run diverged (:attr:`diverged`) onwards."""
+        self.set_state(q0, qd0)
+        hub = np.full(len(torques_nm), np.nan)
+        qpos = self.data.qpos
+        with _quiet_mujoco():
+            for i, torque in enumerate(torques_nm):
+                self.step(float(torque))
+                if self.diverged:
+                    break
+                hub[i] = qpos[0]
+        return hub
+
+
+class _quiet_mujoco:
+    """Context: MuJoCo's warnings (printed to stderr by default) go nowhere; the counts in ``MjData.warning``
+    still rise."""
+
+    def __enter__(self):
+        import mujoco
+
+        self._mujoco = mujoco
+        self._before = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(lambda message: None)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._mujoco.set_mju_user_warning(self._before)
+
+
+def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]]) -> dict[str, float]:
+    """Largest hub-angle error of the MuJoCo chain against the Exudyn run ``reference`` (a
+    :class:`~softpend.study.simulators.HubErrorReference`: same rod, start and random torque, control steps of
+    0.01 s), as :func:`~softpend.study.simulators.hub_errors_rad` measures the other simulators.
+
+    ``configurations`` maps a key stem to ``(integrator, substeps)`` (MuJoCo steps per control step); the keys
+    are ``{stem}_hub_error_rad_n{n_links}``, ``inf`` where the run diverged.
+    """
+    figures = {}
+    n_links = reference.params.n_links
+    for stem, (integrator, substeps) in configurations.items():
+        chain = MuJoCoChain(reference.params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+        hub = chain.hub_trajectory_rad(reference.q0, reference.qd0, reference.torques_nm)
+        error = math.inf if chain.diverged else float(np.abs(hub - reference.hub_rad).max())
+        figures[f"{stem}_hub_error_rad_n{n_links}"] = error
+    return figures
+
+
+def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
+    """Whether the MuJoCo chain with ``substeps`` steps per control step diverges along the start and random
+    torque of :func:`~softpend.study.simulators.hub_error_reference` (the reference run itself is not made)."""
+    params = RodParams(n_links=n_links)
+    torques = np.random.default_rng(seed).uniform(-1, 1, int(round(duration_s / CONTROL_STEP_S))) * params.torque_limit_nm
+    q0 = np.zeros(n_links + 1)
+    qd0 = np.zeros(n_links + 1)
+    q0[0], qd0[0] = math.pi - 0.3, 0.5
+    chain = MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+    chain.hub_trajectory_rad(q0, qd0, torques)
+    return chain.diverged
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Speed
+
+
+def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 4000, repeats: int = 2) -> float:
+    """Control steps of 0.01 s per wall-clock second of one MuJoCo rod stepped from Python (set the control,
+    ``mj_step`` with ``nstep = substeps``), random torques from a seeded generator, from the hanging rod; the
+    best of ``repeats`` runs."""
+    chain = MuJoCoChain(RodParams(n_links=n_links), timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+    torques = (np.random.default_rng(0).uniform(-1, 1, n_steps) * chain.params.torque_limit_nm).tolist()
+    q0 = np.zeros(n_links + 1)
+    q0[0] = math.pi
+    best = math.inf
+    step = chain.step
+    for _ in range(repeats):
+        chain.set_state(q0, np.zeros(n_links + 1))
+        start = time.perf_counter()
+        for torque in torques:
+            step(torque)
+        best = min(best, time.perf_counter() - start)
+        if chain.diverged:
+            raise RuntimeError(f"the MuJoCo chain diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})")
+    return n_steps / best
+
+
+def rollout_rod_steps_per_s(n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6,
+                            repeats: int = 3) -> float:
+    """Rod-steps of 0.01 s per wall-clock second of ``mujoco.rollout`` over ``batch_size`` rods from the hanging
+    rod on one thread (one ``MjData``), random torques held over each control step; the best of ``repeats``
+    runs (the state arrays are allocated once, outside the timing)."""
+    import mujoco
+    from mujoco import rollout
+
+    chain = MuJoCoChain(RodParams(n_links=n_links), timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+    q0 = np.zeros(n_links + 1)
+    q0[0] = math.pi
+    chain.set_state(q0, np.zeros(n_links + 1))
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    initial = np.empty(mujoco.mj_stateSize(chain.model, spec))
+    mujoco.mj_getState(chain.model, chain.data, initial, spec)
+    initial = np.tile(initial, (batch_size, 1))
+    torques = np.random.default_rng(0).uniform(-1, 1, (batch_size, n_steps)) * chain.params.torque_limit_nm
+    control = np.repeat(torques, substeps, axis=1)[:, :, None]
+    state = np.empty((batch_size, n_steps * substeps, initial.shape[1]))
+    sensordata = np.empty((batch_size, n_steps * substeps, 0))
+    rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)  # warm-up
+    best = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)
+        best = min(best, time.perf_counter() - start)
+    if not np.isfinite(state[:, -1]).all():
+        raise RuntimeError(f"mujoco.rollout diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})")
+    return batch_size * n_steps / best
+
+
+#: ``(key stem, integrator, MuJoCo steps per control step)`` timed and compared at ``n = 4``: RK4 with a 5 ms step
+#: (the batched chain's RK4 sub-step there) and implicitfast with 2.5 ms.
+CONFIGURATIONS_N4 = (("mujoco_rk4_5ms", "RK4", 2), ("mujoco_implicitfast_2p5ms", "implicitfast", 4))
+
+#: The same at ``n = 10``, where both steps of :data:`CONFIGURATIONS_N4` diverge: RK4 with the batched chain's RK4
+#: sub-step count (:func:`~softpend.plant.batched.stable_substeps`, filled in by :func:`bench_figures`) and
+#: implicitfast with 0.5 ms.
+CONFIGURATIONS_N10 = (("mujoco_rk4_stable", "RK4", None), ("mujoco_implicitfast_0p5ms", "implicitfast", 20))
+
+#: RK4 with a 0.25 ms step: converged far below the Exudyn reference's own error (the model check).
+CONVERGED = ("mujoco_rk4_0p25ms", "RK4", 40)
+
+
+def bench_figures(base: dict[str, float], references: dict[int, object]) -> dict[str, float]:
+    """The MuJoCo figures of ``softpend bench --only plant`` (see :mod:`softpend.study.bench.plant`) and their
+    ratios to the rates already in ``base`` (same run): ``references`` maps ``n_links`` (4 and 10) to
+    :func:`~softpend.study.simulators.hub_error_reference` runs."""
+    from softpend.plant.batched import stable_substeps
+
+    figures: dict[str, float] = {}
+    n10 = tuple((stem, integrator, substeps if substeps is not None else stable_substeps(RodParams(n_links=10)))
+                for stem, integrator, substeps in CONFIGURATIONS_N10)
+    for n_links, configurations in ((4, CONFIGURATIONS_N4), (10, n10)):
+        for stem, integrator, substeps in configurations:
+            figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(n_links, integrator, substeps,
+                                                                    n_steps=4000 if n_links == 4 else 1000)
+            figures[f"{stem}_substeps_n{n_links}"] = float(substeps)
+        compared = {stem: (integrator, substeps) for stem, integrator, substeps in configurations + (CONVERGED,)}
+        figures.update(mujoco_hub_errors_rad(references[n_links], compared))
+    for stem, integrator, substeps in CONFIGURATIONS_N4:
+        figures[f"{stem}_diverges_n10"] = float(diverges(10, integrator, substeps))
+    rollout4 = rollout_rod_steps_per_s(4, "RK4", 2)
+    figures["mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"] = rollout4
+    rk4_4 = figures["mujoco_rk4_5ms_steps_per_s_n4"]
+    rk4_10 = figures["mujoco_rk4_stable_steps_per_s_n10"]
+    figures.update({
+        "exudyn_env_over_mujoco_rk4_n4": base["env_steps_per_s_n4"] / rk4_4,
+        "exudyn_solver_over_mujoco_rk4_n4": base["solver_steps_per_s_n4"] / rk4_4,
+        "batched_over_mujoco_rk4_n4": base["batched_rod_steps_per_s_n4"] / rk4_4,
+        "batched_over_mujoco_rk4_n10": base["batched_rod_steps_per_s_n10"] / rk4_10,
+        "batched_rk4_over_mujoco_rk4_n4": base["batched_rk4_rod_steps_per_s_n4"] / rk4_4,
+        "batched_rk4_over_mujoco_rk4_n10": base["batched_rk4_rod_steps_per_s_n10"] / rk4_10,
+        "batched_over_mujoco_rollout_n4": base["batched_rod_steps_per_s_n4"] / rollout4,
+        "batched_rk4_over_mujoco_rollout_n4": base["batched_rk4_rod_steps_per_s_n4"] / rollout4,
+    })
+    return figures

@@ -2,7 +2,8 @@
 #
 #   make book [PROFILE=full|quick]   build the HTML book into _build/html (executes the notebooks first);
 #                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
-#   make test                        fast test suite (pytest -m 'not expensive', set in pyproject.toml)
+#   make test [TEST_WORKERS=auto|N]  fast test suite (pytest -m 'not expensive', set in pyproject.toml), on
+#                                    pytest-xdist workers, one per CPU core by default
 #   make test-expensive              only the long checks
 #   make bench                       measured performance figures (softpend bench --json)
 #   make lock                        regenerate environment.lock from pyproject.toml (the ONLY way to edit it)
@@ -20,6 +21,8 @@ VENV := .venv
 STAMP := $(VENV)/.softpend-installed
 PROFILE ?= full
 PYTEST_ARGS ?=
+# pytest-xdist workers for `make test` (auto: one per CPU core; 0 runs the tests in this process)
+TEST_WORKERS ?= auto
 BOOK_ARGS ?=
 
 # pip on these machines prints one "Location ... is ignored" warning per configured index; drop those lines only.
@@ -29,7 +32,7 @@ PIP_QUIET := 2>&1 | { grep -v -E 'Location .* is ignored' || true; }
 .PHONY: help venv book test test-expensive bench lock clean
 
 help:
-	@sed -n '3,10p' Makefile | sed 's/^# \{0,1\}//'
+	@sed -n '3,11p' Makefile | sed 's/^# \{0,1\}//'
 
 venv: $(STAMP)
 
@@ -46,7 +49,7 @@ book: $(STAMP)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) $(PYTEST_ARGS)
 
 test-expensive: $(STAMP)
 	$(VENV)/bin/python -m pytest -m expensive $(PYTEST_ARGS)

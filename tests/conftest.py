@@ -45,3 +45,21 @@ def _build_quick_book(root: Path):
     runs = run_notebooks(root, profile="quick", progress=False)
     html_dir = build_html(root, quiet=True)
     return root, runs, html_dir
+
+
+#: The test files that read the quick book (fixture ``quick_book``).
+QUICK_BOOK_TEST_FILES = frozenset({"tests/test_book.py", "tests/test_book_browser.py"})
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """Under pytest-xdist (``make test`` runs ``-n auto``): the tests of :data:`QUICK_BOOK_TEST_FILES` go to one
+    worker, so the quick book is built once per run rather than once per worker; every other test is scheduled
+    on its own, as ``--dist load`` does."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class QuickBookOnOneWorker(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "quick_book" if nodeid.split("::", 1)[0] in QUICK_BOOK_TEST_FILES else nodeid
+
+    return QuickBookOnOneWorker(config, log)

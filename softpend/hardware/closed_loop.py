@@ -43,7 +43,7 @@ from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
 from softpend.hardware.loop import SecondsBar, jitter_ms_p95
-from softpend.hardware.realtime import LOOP_PRIORITY
+from softpend.hardware.realtime import LOOP_PRIORITY, cpus_kept_awake
 from softpend.hardware.realtime import realtime_priority as _realtime_priority
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
@@ -123,6 +123,8 @@ class ClosedLoopResult:
         the thread waited for a CPU or for the camera thread [ms].
     realtime : bool
         Whether the loop ran under real-time scheduling (:func:`softpend.hardware.realtime.realtime_priority`).
+    cpus_kept_awake : int
+        Spinner processes that kept the processors from halting during the run (0: none).
     """
 
     samples: int
@@ -141,6 +143,7 @@ class ClosedLoopResult:
     step_time_ms_p95: float = math.nan
     step_cpu_ms_p95: float = math.nan
     realtime: bool = False
+    cpus_kept_awake: int = 0
 
     @property
     def jitter_ms_p95(self) -> float:
@@ -155,7 +158,7 @@ class ClosedLoopResult:
             "bad_frames": self.bad_frames, "watchdog_trips": self.watchdog_trips, "blind_max_s": self.blind_max_s,
             "armed_at_s": self.armed_at_s, "jitter_ms_p95": self.jitter_ms_p95,
             "step_time_ms_p95": self.step_time_ms_p95, "step_cpu_ms_p95": self.step_cpu_ms_p95,
-            "realtime": self.realtime, "camera": self.camera, "estimator": self.estimator,
+            "realtime": self.realtime, "cpus_kept_awake": self.cpus_kept_awake, "camera": self.camera, "estimator": self.estimator,
         }
 
 
@@ -184,6 +187,7 @@ def run_closed_loop(
     progress: bool = False,
     on_sample: Optional[Callable[[dict], None]] = None,
     realtime_priority: Optional[int] = LOOP_PRIORITY,
+    keep_cpus_awake: bool = True,
 ) -> ClosedLoopResult:
     """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time (module docstring).
 
@@ -216,6 +220,11 @@ def run_closed_loop(
         Real-time (``SCHED_FIFO``) priority asked for the loop's thread while it runs (None: normal
         scheduling); where the operating system refuses, the loop runs at normal priority
         (:attr:`ClosedLoopResult.realtime` says which).
+    keep_cpus_awake : bool
+        Keep the processors from halting while the loop runs (:func:`softpend.hardware.realtime.cpus_kept_awake`:
+        one lowest-priority spinning process per processor; :attr:`ClosedLoopResult.cpus_kept_awake` counts
+        them).  On a virtual machine a halted processor wakes milliseconds late, which is most of the loop's
+        jitter on an otherwise idle machine.
 
     Returns
     -------
@@ -256,6 +265,8 @@ def run_closed_loop(
     stop_reason: Optional[str] = None
     t = 0.0
     nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
+    awake = cpus_kept_awake(keep_cpus_awake)
+    spinners = awake.__enter__()
     priority = _realtime_priority(realtime_priority)
     realtime = priority.__enter__()
     # a learned controller evaluates one small network per state: on one thread, so that no step waits for a
@@ -360,6 +371,7 @@ def run_closed_loop(
     finally:
         bar.close()
         priority.__exit__(None, None, None)
+        awake.__exit__(None, None, None)
         if torch is not None:
             torch.set_num_threads(torch_threads)
     link.stop()
@@ -369,7 +381,7 @@ def run_closed_loop(
     return ClosedLoopResult(
         samples=samples, duration_s=t, stop_reason=stop_reason, status=status, command_periods_s=periods,
         late_commands=late, dropped_states=dropped, bad_frames=link.bad_frames, watchdog_trips=watchdog,
-        blind_max_s=blind_max, armed_at_s=armed_at, realtime=realtime,
+        blind_max_s=blind_max, armed_at_s=armed_at, realtime=realtime, cpus_kept_awake=spinners,
         camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
         estimator=estimator.stats(),
         step_time_ms_p95=float(np.percentile(step_times, 95) * 1e3) if step_times else math.nan,
@@ -436,6 +448,7 @@ def run_twin_control(
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 10.0,
     link_timeout_s: float = 1.0,
+    keep_cpus_awake: bool = True,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin with the synthetic camera in the loop.
 
@@ -445,7 +458,7 @@ def run_twin_control(
     Writes ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir``
     (created; existing files of these names are replaced).  ``link_timeout_s`` is the driver's wait for a
     STATE frame: generous by default, because the emulator shares the host's CPUs (a starved emulator
-    process is not a broken cable).
+    process is not a broken cable).  ``keep_cpus_awake`` is passed to :func:`run_closed_loop`.
     """
     from softpend.hardware.camera_process import CameraProcess, camera_settings
     from softpend.hardware.emulator import RigConfig, start_emulator_process
@@ -493,7 +506,8 @@ def run_twin_control(
                     SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
                 try:
                     result = run_closed_loop(link, controller, estimator, duration_s, tip_source=source, log=log,
-                                             camera_log=camera_log, arm_timeout_s=arm_timeout_s, progress=progress)
+                                             camera_log=camera_log, arm_timeout_s=arm_timeout_s, progress=progress,
+                                             keep_cpus_awake=keep_cpus_awake)
                 except Exception as exc:
                     error = f"{type(exc).__name__}: {exc}"
                     raise

@@ -1,0 +1,69 @@
+"""Real-time helpers of the rig loop: the scheduling request and the processors kept awake."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import psutil
+import pytest
+
+from softpend.hardware.realtime import cpus_kept_awake, realtime_priority
+
+
+def _spinners() -> list[psutil.Process]:
+    return [child for child in psutil.Process().children() if "SCHED_IDLE" in " ".join(child.cmdline())]
+
+
+def _wait_gone(pids: list[int], timeout_s: float = 5.0) -> list[int]:
+    deadline = time.monotonic() + timeout_s
+    alive = list(pids)
+    while alive and time.monotonic() < deadline:
+        alive = [pid for pid in alive if psutil.pid_exists(pid) and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE]
+        time.sleep(0.05)
+    return alive
+
+
+def test_priority_outside_the_range_is_refused_and_none_asks_nothing():
+    with pytest.raises(ValueError, match="priority"):
+        with realtime_priority(0):
+            pass
+    with realtime_priority(None) as granted:
+        assert granted is False
+
+
+def test_one_idle_class_spinner_per_processor_for_the_block_only():
+    assert not _spinners()
+    with cpus_kept_awake(enabled=False) as count:
+        assert count == 0 and not _spinners()
+    with cpus_kept_awake() as count:
+        spinners = _spinners()
+        assert count == len(spinners) == len(os.sched_getaffinity(0))
+        time.sleep(0.3)  # let them lower their own scheduling class
+        for spinner in spinners:
+            policy = os.sched_getscheduler(spinner.pid)
+            assert policy == os.SCHED_IDLE or spinner.nice() == 19, (spinner.pid, policy)
+        assert {tuple(s.cpu_affinity()) for s in spinners} == {(cpu,) for cpu in os.sched_getaffinity(0)}
+    assert not _wait_gone([s.pid for s in spinners]), "spinners outlived the block"
+
+
+def test_spinners_end_by_themselves_when_their_process_dies():
+    program = ("import os, sys, time\n"
+               "from softpend.hardware.realtime import cpus_kept_awake\n"
+               "with cpus_kept_awake() as n:\n"
+               "    print(n, flush=True)\n"
+               "    time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, "-c", program], stdout=subprocess.PIPE, text=True)
+    try:
+        assert int(parent.stdout.readline()) >= 1
+        pids = [child.pid for child in psutil.Process(parent.pid).children()]
+        assert pids
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        assert not _wait_gone(pids), "spinners outlived their killed process"
+    finally:
+        if parent.poll() is None:
+            parent.kill()

@@ -75,7 +75,7 @@ class PilcoBudget:
         Run folders (other plants: ``<runs_root>-<plant>``).
     """
 
-    seeds: tuple[int, ...] = (0, 1, 2)
+    seeds: tuple[int, ...] = tuple(range(10))
     runs_root: str = "runs/pilco-book"
 
 

@@ -2,8 +2,8 @@
 #
 #   make book [PROFILE=full|quick]   build the HTML book into _build/html (executes the notebooks first);
 #                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
-#   make test [TEST_WORKERS=auto|N]  fast test suite (pytest -m 'not expensive', set in pyproject.toml), on
-#                                    pytest-xdist workers, one per CPU core by default
+#   make test [TEST_WORKERS=auto|N]  fast test suite (pytest -m 'not expensive') on pytest-xdist workers, one per
+#                                    CPU core by default; the real-time tests (-m realtime) after, on their own
 #   make test-expensive              only the long checks
 #   make bench                       measured performance figures (softpend bench --json)
 #   make lock                        regenerate environment.lock from pyproject.toml (the ONLY way to edit it)
@@ -48,8 +48,11 @@ $(STAMP): environment.lock pyproject.toml
 book: $(STAMP)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
+# The real-time tests (marker `realtime`: the twin, a camera or a link in real time) run alone after the others,
+# so that no test on another worker takes the CPU their timing needs.
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) $(PYTEST_ARGS)
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive and not realtime' $(PYTEST_ARGS)
+	$(VENV)/bin/python -m pytest -m 'realtime and not expensive' $(PYTEST_ARGS)
 
 test-expensive: $(STAMP)
 	$(VENV)/bin/python -m pytest -m expensive $(PYTEST_ARGS)

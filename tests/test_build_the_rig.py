@@ -25,6 +25,9 @@ from softpend.study.build_rig import (QUICK_BUDGET, TESTED_CAMERAS, TWIN, BuildT
                                       check_step, choose_cartridge, motor_rows)
 from softpend.study.figures.rig_design import dimension_labels, draw_rig_design
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 REPO = Path(__file__).resolve().parents[1]
 
 

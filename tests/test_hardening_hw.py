@@ -24,6 +24,9 @@ from softpend.vision import SyntheticCamera, TipTracker, render_video
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers
 from softpend.vision.track_video import track_video
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 F32_MAX = struct.unpack("<f", struct.pack("<I", 0x7F7FFFFF))[0]
 
 

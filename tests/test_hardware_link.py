@@ -33,6 +33,9 @@ from softpend.hardware import (
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, TipMeasurement, run_control_loop
 from softpend.hardware import protocol as proto
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 
 class ThreadedRig:
     """A RigEmulator served from a thread (a real pty, the same code as the process)."""

@@ -9,6 +9,9 @@ from softpend.io.samplelog import read_sample_log
 from softpend.hardware.twin import compare_with_simulator_model, run_twin_session, truth_link_points
 from softpend.task import Task
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):

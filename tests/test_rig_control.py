@@ -21,6 +21,9 @@ from softpend.task import Task
 from softpend.vision.camera import CameraModel
 from softpend.vision.tip_source import CameraFaults
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
 TASK = Task(start_noise_rad=0.0)
 UPRIGHT = RigConfig(task=TASK, initial_tilt_rad=0.1, hold_until_commanded=True)

@@ -20,6 +20,9 @@ from softpend.task import Task
 from softpend.vision.camera import CameraModel
 from softpend.vision.tip_source import CameraFaults
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 TASK = Task(start_noise_rad=0.05)
 
 

@@ -20,6 +20,9 @@ from softpend.vision.camera import CameraEffects, CameraModel, SyntheticCamera, 
 from softpend.vision.tip_source import (CameraFaults, CaptureTipSource, PlantScene, SyntheticLiveCamera, TipMeasurement,
                                         VideoFileTipSource, open_tip_source)
 
+#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
+pytestmark = pytest.mark.realtime
+
 #: A quarter-size camera: the same optics at 320x240 (cheaper to render on a loaded machine).
 SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
 

@@ -19,8 +19,25 @@ from softpend.plant.exudyn_adapter import ChainLink, KinematicChain2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
 
-__all__ = ["PRBPlant", "SimulationDiverged"]
+__all__ = ["PRBPlant", "SimulationDiverged", "link_inertials"]
 
+
+
+def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masses [kg], centres of mass from the link's joint [m] and inertias about the centre of mass [kg m^2]
+    of the ``n`` rod links of ``params``, the tip mass riding on the last link."""
+    n = params.n_links
+    length = params.link_length_m
+    masses = np.full(n, params.link_mass_kg)
+    coms = np.full(n, length / 2)
+    inertias = np.full(n, params.link_mass_kg * length**2 / 12)
+    if params.tip_mass_kg > 0:
+        m_l, m_t = params.link_mass_kg, params.tip_mass_kg
+        c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
+        inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
+        masses[-1] = m_l + m_t
+        coms[-1] = c
+    return masses, coms, inertias
 
 class PRBPlant(PlantBase):
     """Soft pendulum as a PRB chain on Exudyn's ``ObjectKinematicTree`` with the implicit solver.
@@ -56,16 +73,7 @@ class PRBPlant(PlantBase):
         p = self.params
         n = p.n_links
         length = p.link_length_m
-        # masses, COMs and inertias of the n rod links (the tip mass rides on the last link)
-        masses = np.full(n, p.link_mass_kg)
-        coms = np.full(n, length / 2)
-        inertias = np.full(n, p.link_mass_kg * length**2 / 12)
-        if p.tip_mass_kg > 0:
-            m_l, m_t = p.link_mass_kg, p.tip_mass_kg
-            c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
-            inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
-            masses[-1] = m_l + m_t
-            coms[-1] = c
+        masses, coms, inertias = link_inertials(p)
         self.link_masses_kg = masses
         self.link_coms_m = coms
         self.link_inertias_kgm2 = inertias

@@ -14,7 +14,7 @@ import numpy as np
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 
-__all__ = ["REFERENCE_SUBSTEPS", "HubErrorReference", "hub_error_reference", "hub_errors_rad", "one_torch_thread"]
+__all__ = ["REFERENCE_SUBSTEPS", "HubErrorReference", "hub_error_inputs", "hub_error_reference", "hub_errors_rad", "one_torch_thread"]
 
 #: Sub-steps of the Exudyn reference run (converged to well below the errors compared).
 REFERENCE_SUBSTEPS = 200
@@ -55,16 +55,23 @@ def _exudyn_hub_rad(params: RodParams, q0: np.ndarray, qd0: np.ndarray, torques:
     return np.array([(plant.step(t), plant.joint_state()[0][0])[1] for t in torques])
 
 
-def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubErrorReference:
-    """The default rod of ``n_links`` links, ``duration_s`` of random torque from ``seed``, the start (the hanging
-    rod, hub turned 0.3 rad and spinning at 0.5 rad/s) and the Exudyn plant's hub angle with
-    :data:`REFERENCE_SUBSTEPS` sub-steps along it."""
+def hub_error_inputs(n_links: int, duration_s: float, seed: int = 0) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
+    """``(params, torques_nm, q0, qd0)`` of the comparison: the default rod of ``n_links`` links, ``duration_s``
+    of random torque from ``seed`` (one value per 0.01 s control step) and the start (the hanging rod, hub
+    turned 0.3 rad and spinning at 0.5 rad/s)."""
     params = RodParams(n_links=n_links)
     n_steps = int(round(duration_s / 0.01))
     torques = np.random.default_rng(seed).uniform(-1, 1, n_steps) * params.torque_limit_nm
     q0 = np.zeros(n_links + 1)
     qd0 = np.zeros(n_links + 1)
     q0[0], qd0[0] = math.pi - 0.3, 0.5
+    return params, torques, q0, qd0
+
+
+def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubErrorReference:
+    """The inputs of :func:`hub_error_inputs` and the Exudyn plant's hub angle with :data:`REFERENCE_SUBSTEPS`
+    sub-steps along them."""
+    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
     return HubErrorReference(params, torques, q0, qd0, _exudyn_hub_rad(params, q0, qd0, torques, REFERENCE_SUBSTEPS))
 
 
@@ -82,11 +89,7 @@ def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0,
     elif reference.params.n_links != n_links:
         raise ValueError(f"reference is of a rod of {reference.params.n_links} links, n_links is {n_links}")
     params, torques, q0, qd0 = reference.params, reference.torques_nm, reference.q0, reference.qd0
-
-    def exudyn_hub(substeps: int) -> np.ndarray:
-        return _exudyn_hub_rad(params, q0, qd0, torques, substeps)
-
-    reference = reference.hub_rad
+    reference_hub = reference.hub_rad
     figures = {}
     with one_torch_thread() as torch:
         for prefix, integrator, dtype in (("batched_chain", "rk4", torch.float64),
@@ -96,8 +99,8 @@ def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0,
                 qs, _ = chain.rollout(torch.tensor(q0, dtype=dtype)[None], torch.tensor(qd0, dtype=dtype)[None],
                                       torch.tensor(torques, dtype=dtype)[:, None])
             batched = qs[:, 0, 0].double().numpy()
-            figures[f"{prefix}_hub_error_rad_n{n_links}"] = float(np.abs(batched - reference).max())
+            figures[f"{prefix}_hub_error_rad_n{n_links}"] = float(np.abs(batched - reference_hub).max())
             figures[f"{prefix}_substeps_n{n_links}"] = float(chain.substeps)
-    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(np.abs(exudyn_hub(2) - reference).max())
+    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(np.abs(_exudyn_hub_rad(params, q0, qd0, torques, 2) - reference_hub).max())
     return figures
 

@@ -27,8 +27,10 @@ import numpy as np
 
 from softpend.checks import int_at_least, one_of, positive
 from softpend.plant.params import RodParams
+from softpend.plant.prb import link_inertials
+from softpend.study.simulators import hub_error_inputs
 
-__all__ = ["CONTROL_STEP_S", "INTEGRATORS", "MuJoCoChain", "bench_figures", "chain_mjcf", "diverges", "link_inertials",
+__all__ = ["CONTROL_STEP_S", "INTEGRATORS", "MuJoCoChain", "bench_figures", "chain_mjcf", "diverges",
            "mujoco_available", "mujoco_hub_errors_rad", "rollout_rod_steps_per_s", "steps_per_s"]
 
 #: Control step of the comparisons [s] (the environments' ``dt_s``).
@@ -45,24 +47,6 @@ def mujoco_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Masses [kg], centres of mass from the link's joint [m] and inertias about the centre of mass [kg m^2]
-    of the ``n`` links, the tip mass merged into the last link (as :class:`softpend.plant.PRBPlant` builds
-    them)."""
-    n = params.n_links
-    length = params.link_length_m
-    m_l, m_t = params.link_mass_kg, params.tip_mass_kg
-    masses = np.full(n, m_l)
-    coms = np.full(n, length / 2)
-    inertias = np.full(n, m_l * length**2 / 12)
-    if m_t > 0:
-        c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
-        masses[-1] = m_l + m_t
-        coms[-1] = c
-        inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
-    return masses, coms, inertias
 
 
 def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> str:
@@ -241,12 +225,8 @@ def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]])
 
 def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
     """Whether the MuJoCo chain with ``substeps`` steps per control step diverges along the start and random
-    torque of :func:`~softpend.study.simulators.hub_error_reference` (the reference run itself is not made)."""
-    params = RodParams(n_links=n_links)
-    torques = np.random.default_rng(seed).uniform(-1, 1, int(round(duration_s / CONTROL_STEP_S))) * params.torque_limit_nm
-    q0 = np.zeros(n_links + 1)
-    qd0 = np.zeros(n_links + 1)
-    q0[0], qd0[0] = math.pi - 0.3, 0.5
+    torque of :func:`~softpend.study.simulators.hub_error_inputs`."""
+    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
     chain = MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
     chain.hub_trajectory_rad(q0, qd0, torques)
     return chain.diverged

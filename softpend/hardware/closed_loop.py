@@ -224,9 +224,8 @@ def run_closed_loop(
         Keep the processors from halting while the loop runs (:func:`softpend.hardware.realtime.cpus_kept_awake`:
         one lowest-priority spinning process per processor; :attr:`ClosedLoopResult.cpus_kept_awake` counts
         them).  On a virtual machine a halted processor wakes milliseconds late, which is most of the loop's
-        jitter on an otherwise idle machine.  Off by default: on the twin it also changed the outcome of a
-        marginal LQR catch from near upright (the rod fell in 4 of 5 runs with it, 0 of 5 without, the
-        estimates as accurate either way), which is not yet explained.
+        jitter on an otherwise idle machine.  Off by default: with other CPU-bound work on the machine, the
+        twin's closed-loop outcome varies from run to run with the spinners on, for a reason not yet known.
 
     Returns
     -------

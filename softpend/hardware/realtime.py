@@ -12,8 +12,7 @@ learns which it got.
 :func:`cpus_kept_awake` keeps the processor from halting while a run lasts.  A processor that halts when idle
 takes time to wake when the next state arrives: microseconds on most computers, but on a virtual machine a
 halted virtual processor waits for the host to run it again, which is milliseconds, and the loop's command
-jitter is then set by the idle machine rather than by the loop (on the project's 2-core virtual machine: 2.5-3
-ms at the 95th percentile when quiet, 0.3 ms with the processors kept awake).  It asks the kernel for the
+jitter is then set by the idle machine rather than by the loop.  It asks the kernel for the
 shortest wake-up latency (``/dev/cpu_dma_latency`` 0, where permitted) and runs one spinning process per
 processor at the lowest scheduling class (``SCHED_IDLE``): the spinners take a processor only when nothing else
 wants it, so they cost the other work nothing but power.

@@ -67,3 +67,21 @@ def test_spinners_end_by_themselves_when_their_process_dies():
     finally:
         if parent.poll() is None:
             parent.kill()
+
+
+def test_the_block_ends_at_once_when_every_processor_is_busy():
+    # lowest-class spinners get no processor on a busy machine; the block must not wait for them to notice
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in os.sched_getaffinity(0)]
+    try:
+        time.sleep(0.2)
+        with cpus_kept_awake() as count:
+            spinners = _spinners()
+            time.sleep(0.5)
+            entered_exit = time.monotonic()
+        exit_s = time.monotonic() - entered_exit
+        assert count >= 1 and exit_s < 1.0, exit_s
+        assert not _wait_gone([s.pid for s in spinners], timeout_s=0.5)
+    finally:
+        for process in busy:
+            process.kill()
+            process.wait()

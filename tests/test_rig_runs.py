@@ -13,7 +13,8 @@ from softpend.hardware.emulator import RigConfig, RigEmulator, truth_columns
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.stats import wilson_interval
 from softpend.study.presets import REPORT_SEEDS
-from softpend.study.rig import torque_total_variation_per_s, truth_metrics
+from softpend.hardware.closed_loop import rig_control_columns
+from softpend.study.rig import run_truth_metrics, torque_total_variation_per_s, truth_metrics
 from softpend.study.rig_runs import (JOINT_SWINGUP, OBSERVATION_SWINGUP, SIMULATOR, FrameKeeper, RigCondition,
                                      rig_controllers, simulator_starts, summary_rows, text_figures, twin_start)
 from softpend.task import Task
@@ -56,6 +57,29 @@ def test_truth_metrics_score_only_the_window_the_controller_was_in_charge(tmp_pa
     short = truth_metrics(path, TASK, success_std_rad=0.1, start_time_s=0.5, end_time_s=1.5)
     assert math.isinf(short["swing_up_time_s"]) and not short["success"]
     assert truth_metrics(path, TASK, start_time_s=3.99) == {}
+
+
+def test_a_run_is_scored_from_its_first_command_to_its_last_sample_not_on_the_fall_after_the_stop(tmp_path):
+    n = TASK.make_plant().n_coordinates
+    truth = tmp_path / "truth.csv"
+    with SampleLog(truth, truth_columns(n)) as log:  # upright at rest until 3 s, then the unheld rod hangs
+        for k in range(501):
+            q = np.zeros(n)
+            q[0] = 0.0 if k * 0.01 <= 3.0 else math.pi
+            log.append([k * 0.01, 0.0, *q, *np.zeros(n)])
+    motor = tmp_path / "motor.csv"
+    columns = rig_control_columns(n)
+    with SampleLog(motor, columns) as log:  # armed at 0.5 s, last sample at 3 s
+        for k in range(301):
+            row = dict.fromkeys(columns, 0.0)
+            row.update(device_time_s=k * 0.01, time_s=k * 0.01, commanded=float(k >= 50))
+            log.append([row[c] for c in columns])
+    scored = run_truth_metrics(motor, truth, TASK, success_std_rad=0.1)
+    assert scored["success"] and scored["upright_std_rad"] < 1e-9
+    assert truth_metrics(truth, TASK, success_std_rad=0.1)["upright_std_rad"] > 1.0  # the whole log holds the fall
+    with SampleLog(tmp_path / "idle.csv", columns) as log:  # a controller that never commanded scores nothing
+        log.append([0.0] * len(columns))
+    assert run_truth_metrics(tmp_path / "idle.csv", truth, TASK) == {}
 
 
 def test_a_start_seeded_s_begins_from_the_same_state_on_the_twin_and_in_the_simulator():

@@ -66,9 +66,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
     parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"),
                         help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)")
-    parser.add_argument("--keep-cpus-awake", action="store_true",
-                        help="keep the processors from halting during the run (one lowest-priority spinner per "
-                             "processor): on a virtual machine a halted processor wakes milliseconds late")
+    parser.add_argument("--let-cpus-idle", action="store_true",
+                        help="let the processors halt when idle during the run (by default one lowest-priority "
+                             "spinner per processor keeps them awake: on a virtual machine a halted processor "
+                             "wakes milliseconds late)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)
@@ -109,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.estimator import EstimatorConfig
     from softpend.io.outputs import json_text
-    from softpend.study.rig import torque_chatter_nm_per_s, truth_metrics
+    from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
     from softpend.task import Task
     from softpend.vision.camera import CameraEffects
 
@@ -141,10 +142,11 @@ def run(args: argparse.Namespace) -> int:
                                                         effects=effects, seed=args.seed)
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
                                    estimator_config=estimator_config, progress=progress,
-                                   keep_cpus_awake=args.keep_cpus_awake)
+                                   keep_cpus_awake=not args.let_cpus_idle)
         summary = {"controller": label, "target": "twin", **outcome.result.summary(),
                    "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
-                   "truth": truth_metrics(outcome.truth_log, task), "emulator": outcome.emulator_stats}
+                   "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
+                   "emulator": outcome.emulator_stats}
     else:
         summary = {"controller": label, "target": args.port,
                    **_run_on_port(args, controller, task, estimator_config, out, progress)}
@@ -194,7 +196,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
                 SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
             result = run_closed_loop(link, controller, estimator, args.duration, tip_source=source, log=log,
                                      camera_log=camera_log, progress=progress,
-                                     keep_cpus_awake=args.keep_cpus_awake)
+                                     keep_cpus_awake=not args.let_cpus_idle)
     finally:
         if source is not None:
             source.close()

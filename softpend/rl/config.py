@@ -73,6 +73,9 @@ class DQNConfig:
     clip_q_targets : bool
         Clamp every TD target to :attr:`q_target_bounds`, the discounted-return range that the reward's
         bounds allow (:class:`softpend.rl.target_dqn.TargetDQN`).
+    double_q : bool
+        Double-DQN targets: the online network picks the next action and the target network values it
+        (:class:`softpend.rl.target_dqn.TargetDQN`).
     net_arch : tuple of int
         Hidden layer widths of the Q-network.
 
@@ -112,6 +115,11 @@ class DQNConfig:
         ``episodes``.
     stop_upright_std_rad : float
         Upright std [rad] that counts as balanced for early stopping.
+    stop_confirm_seeds : tuple of int
+        Start-noise seeds of a confirmation: once ``stop_after_balanced_evaluations`` consecutive evaluations
+        have balanced, the agent is also evaluated from these starts (``eval_duration_s`` from hanging) and
+        training stops only if they all balance too; otherwise it goes on.  Selection starts like
+        ``eval_seeds`` (:attr:`selection_seeds`).  Empty: no confirmation.
     """
 
     task: Task = field(default_factory=Task)
@@ -132,6 +140,7 @@ class DQNConfig:
     exploration_final_eps: float = 0.02
     max_grad_norm: float = 10.0
     clip_q_targets: bool = False
+    double_q: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
@@ -139,6 +148,7 @@ class DQNConfig:
     checkpoint_every_episodes: int = 10
     stop_after_balanced_evaluations: int = 2
     stop_upright_std_rad: float = 0.1
+    stop_confirm_seeds: tuple[int, ...] = ()
     rod_randomisation: float = 0.0
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0
@@ -154,6 +164,7 @@ class DQNConfig:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         boolean("clip_q_targets", self.clip_q_targets)
+        boolean("double_q", self.double_q)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "rod_randomisation",
@@ -174,6 +185,14 @@ class DQNConfig:
             raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
         if len(seeds) == 0:
             raise ValueError("eval_seeds must not be empty")
+        try:
+            confirm = tuple(int_at_least("stop_confirm_seeds", s, 0) for s in self.stop_confirm_seeds)
+        except TypeError:
+            raise ValueError(f"stop_confirm_seeds must be a tuple of integers >= 0, got {self.stop_confirm_seeds!r}") from None
+        if set(confirm) & set(seeds):
+            raise ValueError(f"stop_confirm_seeds {sorted(set(confirm) & set(seeds))} are also eval_seeds: a confirmation "
+                             "needs starts of its own")
+        object.__setattr__(self, "stop_confirm_seeds", confirm)
         if self.episode_s < self.agent_dt_s * (1 - 1e-9):
             raise ValueError(
                 f"episode_s ({self.episode_s!r} s) must be at least one agent step, action_repeat x task.dt_s = "
@@ -185,6 +204,11 @@ class DQNConfig:
                 "so that a run ends exactly at an episode boundary"
             )
         object.__setattr__(self, "eval_seeds", seeds)
+
+    @property
+    def selection_seeds(self) -> tuple[int, ...]:
+        """Every start seed that selects or stops training: ``eval_seeds`` and ``stop_confirm_seeds``."""
+        return self.eval_seeds + self.stop_confirm_seeds
 
     @property
     def dt_s(self) -> float:

@@ -60,8 +60,9 @@ _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
 def agent_class(config: DQNConfig) -> type[DQN]:
-    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
-    return TargetDQN if config.clip_q_targets else DQN
+    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets`` or ``config.double_q``, else
+    stable-baselines3's ``DQN``."""
+    return TargetDQN if config.clip_q_targets or config.double_q else DQN
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
@@ -72,7 +73,8 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     """
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
-        kwargs["q_target_bounds"] = config.q_target_bounds
+        kwargs["q_target_bounds"] = config.q_target_bounds if config.clip_q_targets else None
+        kwargs["double_q"] = config.double_q
     return cls(
         "MlpPolicy",
         env,
@@ -226,10 +228,13 @@ class TrainingCallback(BaseCallback):
                 # before another plant step is taken
                 self._pending_eval = False
                 self.evaluate()
-                if self.balanced_streak():
+                if self.balanced_streak() and self.confirmed():
+                    confirmation = (f" and from the {len(self.config.stop_confirm_seeds)} confirmation starts"
+                                    if self.config.stop_confirm_seeds else "")
                     self.log.stop_reason = (
                         f"balanced in {self.config.stop_after_balanced_evaluations} consecutive evaluations "
-                        f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)")
+                        f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
+                        + confirmation)
                     return False
         return True
 
@@ -239,6 +244,17 @@ class TrainingCallback(BaseCallback):
         rows = self.log.evaluations[-k:] if k else []
         return len(rows) == k > 0 and all(
             row["all_swung_up"] and row["max_upright_std_rad"] <= self.config.stop_upright_std_rad for row in rows)
+
+    def confirmed(self) -> bool:
+        """Whether the agent balances from every ``stop_confirm_seeds`` start (True without any); the outcome is
+        kept in the last evaluation row (``confirmed``)."""
+        if not self.config.stop_confirm_seeds:
+            return True
+        summary = evaluate_agent(self.model, self.config, seeds=self.config.stop_confirm_seeds)
+        ok = all(math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= self.config.stop_upright_std_rad
+                 for r in summary.results)
+        self.log.evaluations[-1]["confirmed"] = bool(ok)
+        return ok
 
     def _end_episode(self) -> None:
         observations = np.concatenate(self._observations)

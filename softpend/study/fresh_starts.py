@@ -102,7 +102,7 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
     Raises
     ------
     ValueError
-        If a report seed is also one of a run's selection seeds (``config.eval_seeds``).
+        If a report seed is also one of a run's selection seeds (``config.selection_seeds``).
     """
     from softpend.rl.dqn import evaluate_agent, load_agent
 
@@ -115,7 +115,7 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
             changed = False
             for agent_kind in which:
                 model, config = load_agent(folder, agent_kind)
-                _refuse_selection_starts(report_seeds, config.eval_seeds, f"the agents of {algo} seed {seed}")
+                _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
                 agent_file = folder / ("best_agent.zip" if agent_kind == "best" else "agent.zip")
                 if not agent_file.exists():
                     agent_file = folder / "agent.zip"
@@ -287,7 +287,7 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
     for algo in algos:
         for seed in seeds:
             model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
-            _refuse_selection_starts(report_seeds, config.eval_seeds, f"the agents of {algo} seed {seed}")
+            _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
             summary = evaluate_agent_batched(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
             rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[which],
                          "plant": "converged", **fresh_start_row(summary)})

@@ -146,7 +146,7 @@ def rl_fresh_start_summaries(runs_root: Path | str, seeds: Sequence[int], report
     Raises
     ------
     ValueError
-        If a report seed is one of a run's selection seeds (``config.eval_seeds``).
+        If a report seed is one of a run's selection seeds (``config.selection_seeds``).
     """
     from softpend.rl.dqn import evaluate_agent, load_agent
     from softpend.study.rl_runs import METHOD_NAMES, plant_runs_root, run_folder
@@ -160,7 +160,7 @@ def rl_fresh_start_summaries(runs_root: Path | str, seeds: Sequence[int], report
                 model, config = load_agent(run_folder(root, algo, int(seed)), which)
             except (FileNotFoundError, ValueError, KeyError):
                 continue
-            overlap = set(report_seeds) & set(config.eval_seeds)
+            overlap = set(report_seeds) & set(config.selection_seeds)
             if overlap:
                 raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
             summaries[method].append(evaluate_agent(model, config, seeds=tuple(int(s) for s in report_seeds),

@@ -84,8 +84,9 @@ PILCO_BOOK = PilcoBudget()
 
 
 #: Start seeds that training and model selection see: the evaluations during training that pick an RL run's
-#: best agent and decide when PILCO has balanced (the configs' ``eval_seeds``).
-SELECTION_SEEDS = tuple(sorted(set(DQNConfig().eval_seeds) | set(MBPOConfig().eval_seeds) | set(PILCO.eval_seeds)))
+#: best agent, stop its training and decide when PILCO has balanced (the configs' ``selection_seeds`` and
+#: ``eval_seeds``).
+SELECTION_SEEDS = tuple(sorted(set(DQNConfig().selection_seeds) | set(MBPOConfig().selection_seeds) | set(PILCO.eval_seeds)))
 
 #: Fresh start seeds of every reported success rate and upright error: no training or selection step
 #: evaluates on them (``tests/test_presets.py`` checks that they are disjoint from the seeds above and from

@@ -66,26 +66,3 @@ def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
     model.q_target_bounds = (low, high)
     model.save(tmp_path / "agent.zip")
     assert TargetDQN.load(tmp_path / "agent.zip", device="cpu").q_target_bounds == pytest.approx((low, high))
-
-
-def test_double_q_targets_value_the_online_networks_choice_with_the_target_network():
-    config = DQNConfig(episode_s=0.4, double_q=True, learning_starts=0)
-    assert agent_class(config) is TargetDQN
-    model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
-    assert model.double_q and model.q_target_bounds is None  # no clamping unless clip_q_targets
-    with torch.no_grad():
-        for net, best in ((model.q_net, 1), (model.q_net_target, 3)):  # the online net prefers action 1,
-            layers = [m for m in net.modules() if isinstance(m, torch.nn.Linear)]  # the target net action 3
-            for layer in layers:
-                layer.weight.zero_()
-                layer.bias.zero_()
-            layers[-1].bias.copy_(torch.arange(5, dtype=torch.float32) * 10.0)
-            layers[-1].bias[best] = 100.0
-    rewards, dones = torch.tensor([[1.0]]), torch.tensor([[0.0]])
-    next_obs = torch.zeros(1, 11)
-    # Q_target(s', argmax_a Q(s', a)) = Q_target(s', 1) = 10, not max_a Q_target(s', a) = 100
-    np.testing.assert_allclose(model.td_targets(rewards, dones, config.gamma, next_obs).numpy(), [[1.0 + config.gamma * 10.0]],
-                               rtol=1e-6)
-    model.double_q = False
-    np.testing.assert_allclose(model.td_targets(rewards, dones, config.gamma, next_obs).numpy(), [[1.0 + config.gamma * 100.0]],
-                               rtol=1e-6)

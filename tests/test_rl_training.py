@@ -95,7 +95,7 @@ def _scripted_evaluations(monkeypatch, stds):
 
 def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped(tmp_path, monkeypatch):
     config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_upright_std_rad=0.1,
-                       **{**TINY, "eval_every_episodes": 1})
+                       stop_confirm_seeds=(), **{**TINY, "eval_every_episodes": 1})
     # episode 1 balanced, 2 not (streak broken), 3 and 4 balanced: the run ends after episode 4 of its 8
     queue = _scripted_evaluations(monkeypatch, [0.05, 0.3, 0.08, 0.09, 0.05, 0.05, 0.05, 0.05, 0.05])
     model, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)

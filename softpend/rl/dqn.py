@@ -60,9 +60,8 @@ _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
 def agent_class(config: DQNConfig) -> type[DQN]:
-    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets`` or ``config.double_q``, else
-    stable-baselines3's ``DQN``."""
-    return TargetDQN if config.clip_q_targets or config.double_q else DQN
+    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
+    return TargetDQN if config.clip_q_targets else DQN
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
@@ -73,8 +72,7 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     """
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
-        kwargs["q_target_bounds"] = config.q_target_bounds if config.clip_q_targets else None
-        kwargs["double_q"] = config.double_q
+        kwargs["q_target_bounds"] = config.q_target_bounds
     return cls(
         "MlpPolicy",
         env,

@@ -32,20 +32,15 @@ class TargetDQN(DQN):
         As :class:`stable_baselines3.DQN`.
     q_target_bounds : (float, float), optional
         ``(low, high)``: every TD target is clamped to this range (``None``: no clamping).
-    double_q : bool
-        Double-DQN targets (van Hasselt et al. 2016): the online network picks the next action, the target
-        network values it, ``r + gamma * Q_target(s', argmax_a Q(s', a))``.
     """
 
-    def __init__(self, *args, q_target_bounds: Optional[tuple[float, float]] = None, double_q: bool = False,
-                 **kwargs) -> None:
+    def __init__(self, *args, q_target_bounds: Optional[tuple[float, float]] = None, **kwargs) -> None:
         if q_target_bounds is not None:
             low, high = (float(v) for v in q_target_bounds)
             if not (math.isfinite(low) and math.isfinite(high) and low < high):
                 raise ValueError(f"q_target_bounds must be finite (low, high) with low < high, got {q_target_bounds!r}")
             q_target_bounds = (low, high)
         self.q_target_bounds = q_target_bounds
-        self.double_q = bool(double_q)
         super().__init__(*args, **kwargs)
 
     def td_targets(self, rewards: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor | float,
@@ -53,12 +48,7 @@ class TargetDQN(DQN):
         """TD targets of a batch (no gradient)."""
         with torch.no_grad():
             next_q_target = self.q_net_target(next_observations)
-            if getattr(self, "double_q", False):
-                next_actions = self.q_net(next_observations).argmax(dim=1, keepdim=True)
-                next_value = torch.gather(next_q_target, dim=1, index=next_actions)
-            else:
-                next_value = next_q_target.max(dim=1, keepdim=True)[0]
-            target = rewards + (1 - dones) * discounts * next_value
+            target = rewards + (1 - dones) * discounts * next_q_target.max(dim=1, keepdim=True)[0]
             bounds = getattr(self, "q_target_bounds", None)  # an agent saved without the attribute has none
             if bounds is not None:
                 target = target.clamp(bounds[0], bounds[1])

@@ -64,10 +64,10 @@ def realtime_priority(priority: Optional[int]) -> Iterator[bool]:
             pass
 
 
-#: The spinner's program: lowest scheduling class, pinned to one processor, ends with its parent (or when its
-#: standard input closes).
+#: The spinner's program: lowest scheduling class, pinned to one processor, ends with its parent.  One thread
+#: only, so that moving its one thread back to the normal class lets it run its exit at once.
 _SPINNER = """
-import os, sys, threading
+import os, sys
 cpu, parent = int(sys.argv[1]), int(sys.argv[2])
 try:
     os.sched_setaffinity(0, {cpu})
@@ -77,9 +77,7 @@ try:
     os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
 except (OSError, AttributeError):
     os.nice(19)
-done = threading.Event()
-threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
-while not done.is_set() and os.getppid() == parent:
+while os.getppid() == parent:
     for _ in range(20000):
         pass
 """
@@ -109,21 +107,21 @@ def cpus_kept_awake(enabled: bool = True) -> Iterator[int]:
         for cpu in cpus:
             try:
                 spinners.append(subprocess.Popen([sys.executable, "-c", _SPINNER, str(cpu), str(os.getpid())],
-                                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                                  stderr=subprocess.DEVNULL, close_fds=True))
             except OSError:
                 break
         yield len(spinners)
     finally:
-        # killed, not asked to end: on a loaded machine a lowest-class process may wait seconds for a processor
-        # before it could notice a request, and the block must end when its work ends
+        # killed, not asked to end, and first moved back to the normal class: on a loaded machine a lowest-class
+        # process may wait seconds for a processor, both to notice a request and to run its own exit
         for spinner in spinners:
+            try:
+                os.sched_setscheduler(spinner.pid, os.SCHED_OTHER, os.sched_param(0))
+            except (OSError, AttributeError):
+                pass
             spinner.kill()
         for spinner in spinners:
             spinner.wait()
-            try:
-                spinner.stdin.close()
-            except OSError:
-                pass
         if latency_fd is not None:
             os.close(latency_fd)

@@ -176,16 +176,10 @@ class DQNConfig:
         for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
             in_unit_interval(name, getattr(self, name))
         object.__setattr__(self, "net_arch", _positive_ints("net_arch", self.net_arch))
-        try:
-            seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
-        except TypeError:
-            raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
+        seeds = _seed_tuple("eval_seeds", self.eval_seeds)
         if len(seeds) == 0:
             raise ValueError("eval_seeds must not be empty")
-        try:
-            confirm = tuple(int_at_least("stop_confirm_seeds", s, 0) for s in self.stop_confirm_seeds)
-        except TypeError:
-            raise ValueError(f"stop_confirm_seeds must be a tuple of integers >= 0, got {self.stop_confirm_seeds!r}") from None
+        confirm = _seed_tuple("stop_confirm_seeds", self.stop_confirm_seeds)
         if set(confirm) & set(seeds):
             raise ValueError(f"stop_confirm_seeds {sorted(set(confirm) & set(seeds))} are also eval_seeds: a confirmation "
                              "needs starts of its own")
@@ -362,6 +356,14 @@ def _positive_ints(name: str, value: Any) -> tuple[int, ...]:
     if not widths:
         raise ValueError(f"{name} must be a non-empty tuple of positive integers, got {value!r}")
     return widths
+
+
+def _seed_tuple(name: str, value: Any) -> tuple[int, ...]:
+    """``value`` as a tuple of seeds (ints >= 0), else ``ValueError`` naming ``name``."""
+    try:
+        return tuple(int_at_least(name, s, 0) for s in value)
+    except TypeError:
+        raise ValueError(f"{name} must be a tuple of integers >= 0, got {value!r}") from None
 
 
 def _check_positive_ints(config: Any, names: tuple[str, ...]) -> None:

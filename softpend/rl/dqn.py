@@ -240,17 +240,20 @@ class TrainingCallback(BaseCallback):
         """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced (early stopping)."""
         k = self.config.stop_after_balanced_evaluations
         rows = self.log.evaluations[-k:] if k else []
-        return len(rows) == k > 0 and all(
-            row["all_swung_up"] and row["max_upright_std_rad"] <= self.config.stop_upright_std_rad for row in rows)
+        return len(rows) == k > 0 and all(self._balanced(row["all_swung_up"], row["max_upright_std_rad"]) for row in rows)
+
+    def _balanced(self, all_swung_up: bool, max_upright_std_rad: float) -> bool:
+        """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
+        return bool(all_swung_up) and max_upright_std_rad <= self.config.stop_upright_std_rad
 
     def confirmed(self) -> bool:
         """Whether the agent balances from every ``stop_confirm_seeds`` start (True without any); the outcome is
         kept in the last evaluation row (``confirmed``)."""
         if not self.config.stop_confirm_seeds:
             return True
-        summary = evaluate_agent(self.model, self.config, seeds=self.config.stop_confirm_seeds)
-        ok = all(math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= self.config.stop_upright_std_rad
-                 for r in summary.results)
+        results = evaluate_agent(self.model, self.config, seeds=self.config.stop_confirm_seeds).results
+        ok = self._balanced(all(math.isfinite(r.swing_up_time_s) for r in results),
+                            float(np.max([r.upright_std_rad for r in results])))  # NaN propagates: not balanced
         self.log.evaluations[-1]["confirmed"] = bool(ok)
         return ok
 

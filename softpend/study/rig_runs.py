@@ -191,8 +191,7 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
     if motor_path.is_file() and truth_path.is_file():
         metrics = run_truth_metrics(motor_path, truth_path, task, success_std_rad=success_std_rad)
-        if metrics:
-            chatter = torque_chatter_nm_per_s(motor_path)
+        chatter = torque_chatter_nm_per_s(motor_path)  # NaN when the controller commanded fewer than 2 samples
     if not metrics and stop is None:
         stop = "the controller never took charge"
     row = _row(condition.name, label, seed, metrics, chatter, stop)

@@ -134,6 +134,21 @@ def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, 
         DQNConfig(stop_confirm_seeds=(-1,))
 
 
+def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_path, monkeypatch):
+    # DQN-MBPO's rule: every balanced evaluation is confirmed at once; a failed confirmation lets training go on
+    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(5, 6),
+                       **{**TINY, "eval_every_episodes": 1})
+    queue = _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.2, 0.05, 0.05, 0.05, 0.05])
+    _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
+    assert _scripted_evaluations.calls == [(0,), (0,), (5, 6), (0,), (5, 6)]
+    assert log.n_episodes == 3 and len(queue) == 2
+    assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
+    assert log.stop_reason.startswith("balanced in an evaluation (") and "confirmation starts" in log.stop_reason
+    mbpo = MBPOConfig()
+    assert mbpo.stop_after_balanced_evaluations == 1 and len(mbpo.stop_confirm_seeds) == 8
+    assert not set(mbpo.stop_confirm_seeds) & set(mbpo.eval_seeds)
+
+
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
     # MBPO's own branching (every rollout from a real state, none cut short); the start-state branching and the
     # data box of the defaults are tested below

@@ -229,9 +229,10 @@ class TrainingCallback(BaseCallback):
                 if self.balanced_streak() and self.confirmed():
                     confirmation = (f" and from the {len(self.config.stop_confirm_seeds)} confirmation starts"
                                     if self.config.stop_confirm_seeds else "")
+                    k = self.config.stop_after_balanced_evaluations
                     self.log.stop_reason = (
-                        f"balanced in {self.config.stop_after_balanced_evaluations} consecutive evaluations "
-                        f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
+                        ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
+                        + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
                         + confirmation)
                     return False
         return True

@@ -38,6 +38,7 @@ compares both against a converged Exudyn plant.
 
 from __future__ import annotations
 
+import collections
 import copy
 import math
 from dataclasses import dataclass, field
@@ -45,8 +46,8 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from softpend.checks import check_work_size, in_unit_interval, int_at_least, positive, positive_int
-from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged
+from softpend.checks import check_work_size, in_unit_interval, int_at_least, non_negative, positive, positive_int
+from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged, wrap_angle_rad
 from softpend.stats import wilson_interval
 from softpend.task import Task
 
@@ -56,6 +57,7 @@ __all__ = [
     "EvaluationSummary",
     "FunctionController",
     "GymPolicyController",
+    "LateNoisyController",
     "evaluate_batched",
     "evaluate_controller",
     "evaluate_controllers_batched",
@@ -85,6 +87,36 @@ class FunctionController:
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
         return float(self.function(observation, q, q_dot, time_s))
+
+
+class LateNoisyController:
+    """What a controller sees on a rig: the plant's observation ``delay_steps`` plant steps late, its hub and tip
+    angles (``phi_rad``, ``theta_rad``) each perturbed by Gaussian noise of ``noise_rad`` [rad] drawn from
+    ``rng`` (and wrapped to ``[-pi, pi)``); the joint state passed on is the current one.  The first observation
+    of an episode stands in for the older ones the rig has not shown yet."""
+
+    def __init__(self, controller: Controller, delay_steps: int = 0, noise_rad: float = 0.0,
+                 rng: Optional[np.random.Generator] = None) -> None:
+        self.controller = controller
+        self.delay_steps = int_at_least("delay_steps", delay_steps, 0)
+        self.noise_rad = non_negative("noise_rad", noise_rad)
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self._past: collections.deque = collections.deque(maxlen=self.delay_steps + 1)
+
+    def reset(self) -> None:
+        self._past.clear()
+        self.controller.reset()
+
+    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
+        if not self._past:
+            self._past.extend([observation] * self.delay_steps)
+        self._past.append(observation)
+        seen = self._past[0]
+        if self.noise_rad > 0:
+            phi, theta = self.rng.normal(0.0, self.noise_rad, size=2)
+            seen = seen._replace(phi_rad=float(wrap_angle_rad(seen.phi_rad + phi)),
+                                 theta_rad=float(wrap_angle_rad(seen.theta_rad + theta)))
+        return self.controller(seen, q, q_dot, time_s)
 
 
 class GymPolicyController:

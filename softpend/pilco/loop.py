@@ -52,10 +52,12 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import boolean, check_work_size, int_at_least, non_negative, optional_positive, positive
-from softpend.evaluation import EvaluationResult, evaluate_controller, run_episode
+from softpend.checks import (boolean, check_work_size, in_unit_interval, int_at_least, non_negative,
+                             optional_positive, positive)
+from softpend.evaluation import EvaluationResult, LateNoisyController, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.plant import SimulationDiverged
+from softpend.plant.randomisation import randomised_rod
 from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
@@ -134,6 +136,15 @@ class PilcoConfig:
         Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
     stop_when_balanced : bool
         End the run at the first policy that balances.
+    rod_randomisation : float
+        Domain randomisation of the real trials: each trial runs on a rod whose mass, stiffness, joint damping,
+        hub friction and torque limit are each scaled by a factor uniform in ``[1 - r, 1 + r]``
+        (:func:`softpend.plant.randomisation.randomised_rod`); 0: the task's rod.  Tests run on the task's rod.
+    observation_delay_steps : int
+        In the real trials the policy sees the observation of this many plant steps earlier
+        (:class:`softpend.evaluation.LateNoisyController`); the GP learns from the plant's own states.
+    observation_noise_rad : float
+        Standard deviation of Gaussian noise on the hub and tip angles the policy sees in the real trials [rad].
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
         starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;
@@ -165,6 +176,9 @@ class PilcoConfig:
     eval_duration_s: float = 8.0
     target_std_rad: float = 0.1
     stop_when_balanced: bool = True
+    rod_randomisation: float = 0.0
+    observation_delay_steps: int = 0
+    observation_noise_rad: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -196,6 +210,9 @@ class PilcoConfig:
             optional_positive(name, getattr(self, name))
         for name in ("random_bang_bang", "stop_when_balanced"):
             boolean(name, getattr(self, name))
+        self.rod_randomisation = in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False)
+        self.observation_delay_steps = int_at_least("observation_delay_steps", self.observation_delay_steps, 0)
+        self.observation_noise_rad = non_negative("observation_noise_rad", self.observation_noise_rad)
 
     @property
     def hold_steps(self) -> int:
@@ -380,8 +397,20 @@ def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, to
     return m0, (std**2) * torch.eye(spec.dim, dtype=DTYPE)
 
 
-def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
-    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,)."""
+def _run_trial(config: PilcoConfig, controller, seed: int, env,
+               streams: dict[str, np.random.Generator]) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
+    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,).
+
+    With the config's robustness options the trial runs on a rod drawn from ``streams["trial_rods"]`` and the
+    controller sees late, noisy observations (noise from ``streams["trial_views"]``)."""
+    if config.rod_randomisation > 0:
+        from softpend.envs import SoftPendulumEnv
+
+        rod = randomised_rod(config.task.rod, streams["trial_rods"], config.rod_randomisation)
+        env = SoftPendulumEnv(**config.task.replace(rod=rod).env_kwargs())
+    if config.observation_delay_steps > 0 or config.observation_noise_rad > 0:
+        controller = LateNoisyController(controller, config.observation_delay_steps, config.observation_noise_rad,
+                                         streams["trial_views"])
     episode = run_episode(controller, env, seed=seed, duration_s=config.horizon_s)
     if episode.diverged:
         raise SimulationDiverged(f"the plant diverged during a PILCO trial: {episode.diverged}")
@@ -424,7 +453,8 @@ def _optimise_policy(
 
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts")
+RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts",
+                  "trial_rods", "trial_views")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -542,7 +572,8 @@ def run_pilco(
             torque_limit, config.control_dt_s, seed=_draw_seed(streams["random_torques"]),
             hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
         )
-        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env)
+        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env,
+                                              streams)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         random_states.append(states)
@@ -595,7 +626,7 @@ def run_pilco(
         result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
         # ---- run it on the plant
         controller = PilcoController(policy, spec, config.control_dt_s)
-        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env)
+        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env, streams)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         result.real_states.append(states)

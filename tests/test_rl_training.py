@@ -301,6 +301,21 @@ def test_training_env_applies_the_robustness_options():
         DQNConfig(rod_randomisation=1.0)
 
 
+def test_mbpo_trains_on_randomised_rods_whose_motors_are_stronger_than_the_model(tmp_path):
+    # a drawn rod's torque limit can exceed the task's: its real episodes still make the model's dataset
+    from softpend.sysid import load_dataset
+
+    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
+                        model_hidden_widths=(16, 16), rollout_every_steps=10, rod_randomisation=0.15,
+                        observation_delay_steps=2, observation_noise_rad=0.01, **TINY)
+    _, log = train_mbpo(config, seed=1, episodes=4, run_dir=tmp_path, progress=False)
+    assert log.n_episodes == 4 and log.model_steps > 0
+    data = load_dataset(tmp_path / "real_data.npz")
+    limit = config.task.torque_limit_nm
+    assert np.abs(data.torques_nm).max() > limit  # a motor stronger than the model's ran
+    assert np.abs(data.torques_nm).max() <= limit * 1.15 + 1e-12 and data.params is None
+
+
 def _wrapper_types(env):
     out = []
     while hasattr(env, "env"):

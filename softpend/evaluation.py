@@ -53,6 +53,7 @@ from softpend.task import Task
 
 __all__ = [
     "Controller",
+    "DelayLine",
     "EvaluationResult",
     "EvaluationSummary",
     "FunctionController",
@@ -89,6 +90,26 @@ class FunctionController:
         return float(self.function(observation, q, q_dot, time_s))
 
 
+class DelayLine:
+    """What arrives ``delay_steps`` pushes late: :meth:`push` stores a value and returns the one pushed
+    ``delay_steps`` calls earlier; until that many have been pushed, the first value of the episode stands in for
+    the older ones (a rig shows nothing before it starts)."""
+
+    def __init__(self, delay_steps: int) -> None:
+        self.delay_steps = int_at_least("delay_steps", delay_steps, 0)
+        self._past: collections.deque = collections.deque(maxlen=self.delay_steps + 1)
+
+    def clear(self) -> None:
+        """Forget every value (a new episode)."""
+        self._past.clear()
+
+    def push(self, value: Any) -> Any:
+        if not self._past:
+            self._past.extend([value] * self.delay_steps)
+        self._past.append(value)
+        return self._past[0]
+
+
 class LateNoisyController:
     """What a controller sees on a rig: the plant's observation ``delay_steps`` plant steps late, its hub and tip
     angles (``phi_rad``, ``theta_rad``) each perturbed by Gaussian noise of ``noise_rad`` [rad] drawn from
@@ -98,20 +119,17 @@ class LateNoisyController:
     def __init__(self, controller: Controller, delay_steps: int = 0, noise_rad: float = 0.0,
                  rng: Optional[np.random.Generator] = None) -> None:
         self.controller = controller
-        self.delay_steps = int_at_least("delay_steps", delay_steps, 0)
+        self._late = DelayLine(delay_steps)
+        self.delay_steps = self._late.delay_steps
         self.noise_rad = non_negative("noise_rad", noise_rad)
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self._past: collections.deque = collections.deque(maxlen=self.delay_steps + 1)
 
     def reset(self) -> None:
-        self._past.clear()
+        self._late.clear()
         self.controller.reset()
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        if not self._past:
-            self._past.extend([observation] * self.delay_steps)
-        self._past.append(observation)
-        seen = self._past[0]
+        seen = self._late.push(observation)
         if self.noise_rad > 0:
             phi, theta = self.rng.normal(0.0, self.noise_rad, size=2)
             seen = seen._replace(phi_rad=float(wrap_angle_rad(seen.phi_rad + phi)),

@@ -297,6 +297,14 @@ def test_training_env_applies_the_robustness_options():
     _, _, _, _, info = env.step(2)
     assert info["plant_steps"] == config.action_repeat
     assert not any(w in (RandomisedRod, RigObservation) for w in _wrapper_types(make_training_env(DQNConfig())))
+    # the observation arrives two plant steps late (the first one standing in for older ones), noise-free here
+    from softpend.envs import SoftPendulumDiscreteEnv
+
+    late = RigObservation(SoftPendulumDiscreteEnv(), delay_steps=2)
+    shown = [late.reset(seed=0)[0]] + [late.step(4)[0] for _ in range(3)]
+    true = [late.env.reset(seed=0)[0]] + [late.env.step(4)[0] for _ in range(3)]
+    for got, want in zip(shown, [true[0], true[0], true[0], true[1]]):
+        np.testing.assert_array_equal(got, want)
     with pytest.raises(ValueError, match="rod_randomisation"):
         DQNConfig(rod_randomisation=1.0)
 

@@ -15,12 +15,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import TimeLimit
 
-import collections
 import math
 
-from softpend.checks import int_at_least, non_negative, positive_int
+from softpend.checks import non_negative, positive_int
 from softpend.envs import SoftPendulumDiscreteEnv
-from softpend.evaluation import GymPolicyController
+from softpend.evaluation import DelayLine, GymPolicyController
 from softpend.plant import make_plant
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
@@ -63,19 +62,16 @@ class RigObservation(gym.ObservationWrapper):
 
     def __init__(self, env: gym.Env, delay_steps: int = 0, noise_rad: float = 0.0) -> None:
         super().__init__(env)
-        self.delay_steps = int_at_least("delay_steps", delay_steps, 0)
+        self._late = DelayLine(delay_steps)
+        self.delay_steps = self._late.delay_steps
         self.noise_rad = non_negative("noise_rad", noise_rad)
-        self._past: collections.deque = collections.deque(maxlen=self.delay_steps + 1)
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
-        self._past.clear()
+        self._late.clear()
         return super().reset(seed=seed, options=options)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        if not self._past:  # the first observation of an episode: the rig has shown nothing older
-            self._past.extend([observation] * self.delay_steps)
-        self._past.append(observation)
-        seen = np.array(self._past[0], dtype=observation.dtype, copy=True)
+        seen = np.array(self._late.push(observation), dtype=observation.dtype, copy=True)
         if self.noise_rad > 0:
             rng = self.env.unwrapped.np_random
             for c in (0, 2):  # (cos phi, sin phi), (cos theta, sin theta)

@@ -330,3 +330,59 @@ def _wrapper_types(env):
         out.append(type(env))
         env = env.env
     return out
+
+
+def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tmp_path, monkeypatch):
+    import softpend.rl.dqn as dqn
+
+    config = DQNConfig(learning_starts=20, reset_every_episodes=2, **{**TINY, "eval_every_episodes": 1})
+    events = []
+    real_reset, real_checkpoint = dqn.reset_q_network, dqn.TrainingCallback.checkpoint
+
+    def reset(model, seed):
+        trained = [p.detach().clone() for p in model.q_net.parameters()]
+        real_reset(model, seed)
+        fresh = [p.detach().clone() for p in model.q_net.parameters()]
+        assert all(not torch.equal(a, b) for a, b in zip(trained, fresh))
+        assert all(torch.equal(a, b) for a, b in zip(fresh, model.q_net_target.parameters()))
+        assert len(model.policy.optimizer.state) == 0
+        events.append(("reset", seed, fresh))
+
+    def checkpoint(self):
+        events.append(("checkpoint", self.log.n_episodes, [p.detach().clone() for p in self.model.q_net.parameters()]))
+        return real_checkpoint(self)
+
+    monkeypatch.setattr(dqn, "reset_q_network", reset)
+    monkeypatch.setattr(dqn.TrainingCallback, "checkpoint", checkpoint)
+    _, log = train_dqn(config, seed=3, episodes=5, run_dir=tmp_path, progress=False)
+    assert [e[:2] for e in events] == [("reset", (3, 2)), ("checkpoint", 2), ("reset", (3, 4)), ("checkpoint", 4),
+                                       ("checkpoint", 5)]  # none after the last episode
+    # the checkpoint holds the reset network, so a run resumed from it goes on after the reset
+    assert all(torch.equal(a, b) for a, b in zip(events[0][2], events[1][2]))
+    assert [row["episode"] for row in log.evaluations] == [1, 2, 3, 4, 5]
+    with pytest.raises(ValueError, match="reset_every_episodes"):
+        DQNConfig(reset_every_episodes=-1)
+
+
+def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
+    from softpend.rl.dqn import build_dqn, reset_q_network
+
+    config = DQNConfig()
+    env = make_training_env(config)
+    model = build_dqn(config, env, seed=1, episodes=1)
+    with torch.no_grad():
+        for p in model.q_net.parameters():
+            p.mul_(5.0).add_(1.0)  # far from any initialisation
+    reset_q_network(model, (1, 20))
+    first = [p.detach().clone() for p in model.q_net.parameters()]
+    reset_q_network(model, (1, 20))
+    assert all(torch.equal(a, b) for a, b in zip(first, model.q_net.parameters()))  # same seed, same weights
+    reset_q_network(model, (1, 40))
+    assert all(not torch.equal(a, b) for a, b in zip(first, model.q_net.parameters()))
+    layers = [m for m in model.q_net.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(layers) == 3
+    for layer, weight, bias in zip(layers, first[0::2], first[1::2]):  # PyTorch's default: uniform within 1/sqrt(fan_in)
+        bound = 1 / np.sqrt(layer.in_features)
+        assert float(weight.abs().max()) <= bound and float(bias.abs().max()) <= bound
+        if weight.numel() >= 1000:
+            assert float(weight.std()) == pytest.approx(bound / np.sqrt(3), rel=0.05)

@@ -76,6 +76,10 @@ class DQNConfig:
         bounds allow (:class:`softpend.rl.target_dqn.TargetDQN`).
     net_arch : tuple of int
         Hidden layer widths of the Q-network.
+    reset_every_episodes : int
+        Re-initialise the Q-network (and its target and the optimiser's moments) after every this many training
+        episodes, keeping the replay buffer (:func:`softpend.rl.dqn.reset_q_network`); 0: never.  The reset
+        follows the evaluation of that episode, so the agent evaluated there is the one before the reset.
 
     Bookkeeping
     -----------
@@ -139,6 +143,7 @@ class DQNConfig:
     max_grad_norm: float = 10.0
     clip_q_targets: bool = False
     net_arch: tuple[int, ...] = (256, 256)
+    reset_every_episodes: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_duration_s: float = 10.0
@@ -163,6 +168,7 @@ class DQNConfig:
         boolean("clip_q_targets", self.clip_q_targets)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
+        object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
         object.__setattr__(self, "rod_randomisation",
                            in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
         object.__setattr__(self, "observation_delay_steps",

@@ -53,7 +53,8 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "train_dqn", "run_training"]
+__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "reset_q_network",
+           "train_dqn", "run_training"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
@@ -179,6 +180,7 @@ class TrainingCallback(BaseCallback):
         self.on_step_hook: Optional[Callable[["TrainingCallback"], None]] = None
         self._pending_eval = False
         self._pending_checkpoint = False
+        self._pending_reset = False
         self._started = time.perf_counter()
         self._cpu_started = time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
@@ -286,6 +288,9 @@ class TrainingCallback(BaseCallback):
             self._pending_eval = True
         if n % self.config.checkpoint_every_episodes == 0:
             self._pending_checkpoint = True
+        every = self.config.reset_every_episodes
+        if every and n % every == 0 and n < self.episodes:
+            self._pending_reset = True
         if self.bar is not None:
             last_eval = self.log.evaluations[-1]["max_upright_std_rad"] if self.log.evaluations else math.nan
             self.bar.update(1)
@@ -297,10 +302,14 @@ class TrainingCallback(BaseCallback):
         self.flush()
 
     def flush(self) -> None:
-        """Run a pending evaluation and write a pending checkpoint."""
+        """Run a pending evaluation, then a pending reset of the Q-network, then write a pending checkpoint (so
+        that the evaluation measures the agent before the reset and a resumed run starts after it)."""
         if self._pending_eval:
             self._pending_eval = False
             self.evaluate()
+        if self._pending_reset:
+            self._pending_reset = False
+            reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
         if self._pending_checkpoint:
             self._pending_checkpoint = False
             self.checkpoint()
@@ -347,6 +356,28 @@ class TrainingCallback(BaseCallback):
         tmp.rename(final)
         shutil.rmtree(old, ignore_errors=True)
         return final
+
+
+def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
+    """Re-initialise ``model``'s Q-network as a new agent's (PyTorch's default initialisation of each linear
+    layer, drawn from a generator seeded by ``seed``), copy it to the target network and clear the optimiser's
+    moments; the replay buffer, the exploration schedule and the step counters are kept.
+
+    This is the periodic reset of Nikishin et al. (2022, "The primacy bias in deep reinforcement learning"):
+    with many gradient steps per real step a network fitted to the first data keeps its early errors, and a
+    fresh network fitted to all the data gathered so far does not.
+    """
+    generator = torch.Generator().manual_seed(int(np.random.SeedSequence([int(s) for s in seed]).generate_state(1)[0]))
+    with torch.no_grad():
+        for layer in model.q_net.modules():
+            if isinstance(layer, torch.nn.Linear):
+                # torch.nn.Linear.reset_parameters, with an explicit generator
+                torch.nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5), generator=generator)
+                if layer.bias is not None:
+                    bound = 1 / math.sqrt(layer.in_features)
+                    torch.nn.init.uniform_(layer.bias, -bound, bound, generator=generator)
+        model.q_net_target.load_state_dict(model.q_net.state_dict())
+    model.policy.optimizer.state.clear()
 
 
 def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:

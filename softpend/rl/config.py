@@ -294,6 +294,10 @@ class MBPOConfig(DQNConfig):
     update-to-data ratio, the target network refreshed after about as many gradient steps as in DQN.
     clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values
     diverge far above the largest achievable return (:attr:`DQNConfig.q_target_bounds`).
+    reset_every_episodes = 20: the Q-network starts afresh after episodes 20, 40 and 60 of the budget, on all the
+    data gathered so far.  With twelve gradient steps per real step a network can settle early on values far
+    above what the hanging rod earns (it spins the rod over the top, then hangs) and never leave them; a new
+    network fitted to the richer data does not inherit them.
 
     The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
     """
@@ -320,6 +324,7 @@ class MBPOConfig(DQNConfig):
     stop_confirm_seeds: tuple[int, ...] = tuple(range(1004, 1012))
     train_freq: int = 1
     clip_q_targets: bool = True
+    reset_every_episodes: int = 20
 
     def __post_init__(self) -> None:
         super().__post_init__()

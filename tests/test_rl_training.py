@@ -386,3 +386,24 @@ def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
         assert float(weight.abs().max()) <= bound and float(bias.abs().max()) <= bound
         if weight.numel() >= 1000:
             assert float(weight.std()) == pytest.approx(bound / np.sqrt(3), rel=0.05)
+
+
+def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_path, monkeypatch):
+    import softpend.rl.dqn as dqn
+
+    config = DQNConfig(learning_starts=20, reset_every_episodes=2, stop_after_balanced_evaluations=1,
+                       stop_confirm_seeds=(), **{**TINY, "eval_every_episodes": 1})
+    evaluated = []
+    real_evaluate = dqn.TrainingCallback.evaluate
+
+    def evaluate(self):
+        evaluated.append([p.detach().clone() for p in self.model.q_net.parameters()])
+        return real_evaluate(self)
+
+    monkeypatch.setattr(dqn.TrainingCallback, "evaluate", evaluate)
+    _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.05])  # episode 2, a reset episode, balances: the run stops
+    model, log = train_dqn(config, seed=0, episodes=6, run_dir=tmp_path, progress=False)
+    assert log.n_episodes == 2 and log.stop_reason is not None
+    assert all(torch.equal(a, b) for a, b in zip(evaluated[-1], model.q_net.parameters()))
+    saved, _ = load_agent(tmp_path, which="final")
+    assert all(torch.equal(a, b) for a, b in zip(evaluated[-1], saved.q_net.parameters()))

@@ -229,6 +229,7 @@ class TrainingCallback(BaseCallback):
                 self._pending_eval = False
                 self.evaluate()
                 if self.balanced_streak() and self.confirmed():
+                    self._pending_reset = False  # the final agent is the one that balanced
                     confirmation = (f" and from the {len(self.config.stop_confirm_seeds)} confirmation starts"
                                     if self.config.stop_confirm_seeds else "")
                     k = self.config.stop_after_balanced_evaluations

@@ -275,6 +275,7 @@ def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run
     ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
     ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
+    ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):

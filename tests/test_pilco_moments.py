@@ -117,7 +117,8 @@ def test_one_step_propagation_close_to_monte_carlo():
     assert float(e) == pytest.approx(np.mean(1 - np.exp(-0.5 * d2 / 0.1**2)), abs=0.01)
 
 
-def test_rollout_gradient_matches_finite_differences():
+@pytest.mark.parametrize("exploration", [0.0, -0.3])
+def test_rollout_gradient_matches_finite_differences(exploration):
     spec = state_spec("tip")
     rng = np.random.default_rng(6)
     states = np.column_stack([rng.uniform(-6, 6, 60), rng.uniform(-np.pi, np.pi, 60)])
@@ -126,7 +127,7 @@ def test_rollout_gradient_matches_finite_differences():
     dy = np.column_stack([0.05 * (30 * np.sin(states[:, 1]) + 300 * u), 0.05 * states[:, 0]])
     gp = MultiOutputGP(x, dy)
     policy = RBFPolicy(spec.model_inputs(states[:5]), np.array([3.0, 0.7, 0.7]), 0.06, seed=1)
-    prop = Propagator(spec, gp, policy, 0.3, 0.1)
+    prop = Propagator(spec, gp, policy, 0.3, 0.1, exploration=exploration)
     m0 = torch.tensor([0.0, np.pi], dtype=F64)
     s0 = 0.01 * torch.eye(2, dtype=F64)
     vector = policy.get_vector()
@@ -170,3 +171,33 @@ def test_cost_with_a_tip_rate_width_against_monte_carlo(spec_name):
     assert float(e) > position_only + 0.05  # the rate is really in there
     with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
         Propagator(spec, None, None, 0.3, 0.15, cost_rate_width_rad_s=0.0)
+
+
+def test_exploration_adds_the_weighted_cost_spread_which_is_larger_where_the_model_has_no_data():
+    """The search objective with exploration weight b is sum E[c_t] + b sum sqrt(Var[c_t]); a policy that drives
+    the rod out of the region the GP was trained on earns a larger bonus than one that leaves it hanging."""
+    spec = state_spec("tip")
+    rng = np.random.default_rng(11)
+    states = np.column_stack([rng.uniform(-1, 1, 120), np.pi + rng.uniform(-0.3, 0.3, 120)])  # hanging only
+    u = rng.uniform(-0.06, 0.06, 120)
+    x = np.hstack([spec.model_inputs(states), u[:, None]])
+    dy = np.column_stack([0.05 * (30 * np.sin(states[:, 1]) + 300 * u), 0.05 * states[:, 0]])
+    gp = MultiOutputGP(x, dy + 1e-3 * rng.normal(size=dy.shape))
+    gp.fit(60)
+    m0 = torch.tensor([0.0, np.pi], dtype=F64)
+    s0 = 0.01**2 * torch.eye(2, dtype=F64)
+    bonus = {}
+    for name, target in (("still", 0.0), ("push", 3.0)):
+        policy = RBFPolicy(spec.model_inputs(states[:5]), np.array([3.0, 0.7, 0.7]), 0.06, seed=1)
+        policy.targets = torch.full((5,), target, dtype=F64)
+        _, _, costs, plain = Propagator(spec, gp, policy, 0.3, 0.3).rollout(m0, s0, 30)
+        means, covs, costs_b, explored = Propagator(spec, gp, policy, 0.3, 0.3, exploration=-0.5).rollout(m0, s0, 30)
+        assert float(plain) == pytest.approx(float(costs.sum()), rel=1e-12)
+        assert torch.allclose(costs, costs_b)
+        spread = sum(float(torch.sqrt(Propagator(spec, None, None, 0.3, 0.3).cost(m, s)[1]))
+                     for m, s in zip(means[1:], covs[1:]))
+        assert float(explored) == pytest.approx(float(costs.sum()) - 0.5 * spread, abs=1e-5)  # sqrt(var) >= 1e-6
+        bonus[name] = float(plain - explored)
+    assert bonus["push"] > 100 * bonus["still"]  # 0.26 against 0.0006
+    with pytest.raises(ValueError, match="exploration"):
+        Propagator(spec, gp, None, 0.3, 0.1, exploration=float("nan"))

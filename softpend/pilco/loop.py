@@ -104,6 +104,10 @@ class PilcoConfig:
         Switch the tip-rate factor on only once a real trial's tip has come within this angle of upright
         [rad] (the searches before use the position cost, which rewards getting up at any speed; ``None``:
         the factor is on from the start).
+    cost_exploration : float
+        Weight ``b`` of the predicted cost's standard deviation in the search objective, per step (PILCO's
+        ``cost.expl``; see :mod:`softpend.pilco.propagation`): 0 minimises the expected cost, a negative
+        weight prefers policies whose outcome the model is unsure of (in ``[-1, 0]``).
     initial_std : float
         Standard deviation of every state variable in ``S0`` (rad or rad/s); PILCO plans for a slightly
         wider start distribution than the plant's (robustness).
@@ -164,6 +168,7 @@ class PilcoConfig:
     cost_width_m: float = 0.15
     cost_rate_width_rad_s: Optional[float] = 3.0
     cost_rate_after_rad: Optional[float] = 0.5
+    cost_exploration: float = 0.0
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
@@ -213,6 +218,10 @@ class PilcoConfig:
         self.rod_randomisation = in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False)
         self.observation_delay_steps = int_at_least("observation_delay_steps", self.observation_delay_steps, 0)
         self.observation_noise_rad = non_negative("observation_noise_rad", self.observation_noise_rad)
+        if not (isinstance(self.cost_exploration, (int, float)) and not isinstance(self.cost_exploration, bool)
+                and -1.0 <= self.cost_exploration <= 0.0):
+            raise ValueError(f"cost_exploration must be a number in [-1, 0], got {self.cost_exploration!r}")
+        self.cost_exploration = float(self.cost_exploration)
 
     @property
     def hold_steps(self) -> int:
@@ -232,7 +241,7 @@ class PilcoConfig:
 
     #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
     #: setting existed (so such a run is not taken for a run of a config with other values).
-    MISSING_DEFAULTS = {"policy_restarts": 0}
+    MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -246,7 +255,7 @@ class PilcoConfig:
 class TrialRecord:
     """One real trial and what PILCO predicted for it.
 
-    ``predicted_cost`` is the policy search's expected total cost for the policy that ran the trial (NaN for
+    ``predicted_cost`` is the expected total cost that the model predicts for the policy that ran the trial (NaN for
     the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_rate_width_rad_s``
     the tip-rate width of that cost (``None``: position only); ``policy_restarts`` the searches from fresh
     random policies that the search made besides the one from the previous policy.
@@ -615,13 +624,16 @@ def run_pilco(
         if not rate_on and config.cost_rate_width_rad_s is not None:
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
         rate_width = config.cost_rate_width_rad_s if rate_on else None
-        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width)
+        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width,
+                                config.cost_exploration)
         restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search
-        predicted, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
+        objective, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
                                                       np.vstack(result.real_states), x_all[:, :-1], restart_rng,
                                                       restart=trial > 1)
         with torch.no_grad():
-            means, covs, _, _ = propagator.rollout(m0, s0, n_steps)
+            means, covs, costs, _ = propagator.rollout(m0, s0, n_steps)
+        # the expected total cost (the objective itself when the search does not explore)
+        predicted = objective if config.cost_exploration == 0.0 else float(costs.sum())
         result.predicted_means.append(means.numpy())
         result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
         # ---- run it on the plant

@@ -38,6 +38,13 @@ With a rate width ``w_r`` [rad/s] the cost also asks the tip to be slow:
 ``c = 1 - exp(-d^2 / (2 w^2) - theta_dot^2 / (2 w_r^2))``, so passing the top at speed (a rod that spins
 over and over) earns little and only arriving slowly -- balancing -- earns the whole reward.  Its
 expectation is taken over the moment-matched Gaussian of ``(sin theta, cos theta, theta_dot)``.
+
+Exploration
+-----------
+With an exploration weight ``b`` (PILCO's ``cost.expl``) the policy search minimises
+``sum_t E[c_t] + b sqrt(Var[c_t])`` instead of the expected cost alone: ``b < 0`` rewards predicted states
+whose cost the model is unsure of (an upper confidence bound on the reward), so a policy that takes the rod
+where the data has not been yet looks better than one that keeps it on the hanging plateau the model knows.
 """
 
 from __future__ import annotations
@@ -160,17 +167,23 @@ class Propagator:
         Cost width ``w`` [m].
     cost_rate_width_rad_s : float, optional
         Width ``w_r`` of the tip-rate factor of the cost [rad/s] (``None``: position only).
+    exploration : float
+        Weight ``b`` of each step's cost standard deviation in the search objective (0: the expected cost;
+        negative: optimism in the face of the model's uncertainty).
     """
 
     def __init__(self, spec: StateSpec, dynamics, policy, length_m: float, cost_width_m: float,
-                 cost_rate_width_rad_s: float | None = None) -> None:
+                 cost_rate_width_rad_s: float | None = None, exploration: float = 0.0) -> None:
         if not length_m > 0:
             raise ValueError(f"length_m must be positive, got {length_m!r}")
         if not cost_width_m > 0:
             raise ValueError(f"cost_width_m must be positive, got {cost_width_m!r}")
         if cost_rate_width_rad_s is not None and not cost_rate_width_rad_s > 0:
             raise ValueError(f"cost_rate_width_rad_s must be positive or None, got {cost_rate_width_rad_s!r}")
+        if not (isinstance(exploration, (int, float)) and np.isfinite(exploration)):
+            raise ValueError(f"exploration must be a finite number, got {exploration!r}")
         self.cost_rate_width_rad_s = None if cost_rate_width_rad_s is None else float(cost_rate_width_rad_s)
+        self.exploration = float(exploration)
         self.spec = spec
         self.dynamics = dynamics
         self.policy = policy
@@ -230,15 +243,22 @@ class Propagator:
     def rollout(
         self, m0: torch.Tensor, s0: torch.Tensor, n_steps: int
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Predicted state means (H+1, d), covariances (H+1, d, d), expected costs (H,) and their total."""
+        """Predicted state means (H+1, d), covariances (H+1, d, d), expected costs (H,) and the search
+        objective: their total, plus ``exploration`` times the sum of the costs' standard deviations."""
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps!r}")
-        means, covs, costs = [m0], [s0], []
+        means, covs, costs, stds = [m0], [s0], [], []
         m, s = m0, s0
         for _ in range(n_steps):
             m, s = self.step(m, s)
             means.append(m)
             covs.append(s)
-            costs.append(self.cost(m, s)[0])
+            expected, variance = self.cost(m, s)
+            costs.append(expected)
+            if self.exploration != 0.0:
+                stds.append(torch.sqrt(torch.clamp(variance, min=1e-12)))
         cost_t = torch.stack(costs)
-        return torch.stack(means), torch.stack(covs), cost_t, cost_t.sum()
+        objective = cost_t.sum()
+        if stds:
+            objective = objective + self.exploration * torch.stack(stds).sum()
+        return torch.stack(means), torch.stack(covs), cost_t, objective

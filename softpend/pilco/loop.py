@@ -27,6 +27,10 @@ cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd grad
 moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy
 (with ``policy_restarts``, the searches after the first also start from fresh random policies when the one from
 the previous policy ends with a high predicted cost; the lowest predicted cost is kept).
+Every search minimises the expected cost plus ``cost_exploration = -0.2`` times the predicted standard deviation of
+each step's cost (PILCO's exploration weight; :mod:`softpend.pilco.propagation`): the first data describe the
+hanging rod well and the states above it not at all, and the weight makes a policy that goes where the model is
+unsure look better than one that stays on the hanging plateau.
 The cost is saturating in the tip's distance from upright; once a real trial has brought the tip within
 ``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by a factor in the tip rate
 (``cost_rate_width_rad_s = 3`` rad/s): a rod that spins fast over the top then earns almost nothing, one that
@@ -127,8 +131,9 @@ class PilcoConfig:
         lowest predicted cost is kept.  0: only the search from the previous policy, which can stay in its
         local optimum (hanging, or spinning) once the model has learnt where it leads.
     restart_above_cost_fraction : float
-        Restart only when the search from the previous policy ends with a predicted cost above this share of
-        the largest one (1 per prediction step); 0: in every search after the first.
+        Restart only when the search from the previous policy ends with an objective (the predicted cost with
+        its exploration term) above this share of the largest cost (1 per prediction step); 0: in every search
+        after the first.
     restart_target_std : float
         Spread of a restart's initial pseudo-targets (pre-saturation; 1 gives a policy that uses the whole
         torque range, the first policy's 0.1 small torques).
@@ -168,7 +173,7 @@ class PilcoConfig:
     cost_width_m: float = 0.15
     cost_rate_width_rad_s: Optional[float] = 3.0
     cost_rate_after_rad: Optional[float] = 0.5
-    cost_exploration: float = 0.0
+    cost_exploration: float = -0.2
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200

@@ -63,7 +63,9 @@ def test_spinners_end_by_themselves_when_their_process_dies():
         assert pids
         parent.send_signal(signal.SIGKILL)
         parent.wait()
-        assert not _wait_gone(pids), "spinners outlived their killed process"
+        # SCHED_IDLE spinners notice their parent's death only when they get a processor, which a machine busy
+        # with other work can withhold for seconds
+        assert not _wait_gone(pids, timeout_s=30.0), "spinners outlived their killed process"
     finally:
         if parent.poll() is None:
             parent.kill()

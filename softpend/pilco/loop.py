@@ -56,7 +56,7 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import (boolean, check_work_size, in_unit_interval, int_at_least, non_negative,
+from softpend.checks import (boolean, check_work_size, finite, in_unit_interval, int_at_least, non_negative,
                              optional_positive, positive)
 from softpend.evaluation import EvaluationResult, LateNoisyController, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
@@ -223,10 +223,10 @@ class PilcoConfig:
         self.rod_randomisation = in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False)
         self.observation_delay_steps = int_at_least("observation_delay_steps", self.observation_delay_steps, 0)
         self.observation_noise_rad = non_negative("observation_noise_rad", self.observation_noise_rad)
-        if not (isinstance(self.cost_exploration, (int, float)) and not isinstance(self.cost_exploration, bool)
-                and -1.0 <= self.cost_exploration <= 0.0):
-            raise ValueError(f"cost_exploration must be a number in [-1, 0], got {self.cost_exploration!r}")
-        self.cost_exploration = float(self.cost_exploration)
+        exploration = finite("cost_exploration", self.cost_exploration)
+        if not -1.0 <= exploration <= 0.0:
+            raise ValueError(f"cost_exploration must be in [-1, 0], got {self.cost_exploration!r}")
+        self.cost_exploration = exploration
 
     @property
     def hold_steps(self) -> int:

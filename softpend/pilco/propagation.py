@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from softpend.checks import finite
 from softpend.plant import OBSERVATION_NAMES
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 
@@ -180,10 +181,8 @@ class Propagator:
             raise ValueError(f"cost_width_m must be positive, got {cost_width_m!r}")
         if cost_rate_width_rad_s is not None and not cost_rate_width_rad_s > 0:
             raise ValueError(f"cost_rate_width_rad_s must be positive or None, got {cost_rate_width_rad_s!r}")
-        if not (isinstance(exploration, (int, float)) and np.isfinite(exploration)):
-            raise ValueError(f"exploration must be a finite number, got {exploration!r}")
         self.cost_rate_width_rad_s = None if cost_rate_width_rad_s is None else float(cost_rate_width_rad_s)
-        self.exploration = float(exploration)
+        self.exploration = finite("exploration", exploration)
         self.spec = spec
         self.dynamics = dynamics
         self.policy = policy

@@ -52,6 +52,7 @@ from softpend.stats import wilson_interval
 from softpend.task import Task
 
 __all__ = [
+    "TEST_EPISODE_S",
     "Controller",
     "DelayLine",
     "EvaluationResult",
@@ -65,6 +66,12 @@ __all__ = [
     "metrics_from_trajectory",
     "run_episode",
 ]
+
+#: Length of the episodes from hanging that decide whether a controller balances [s]: the tests that select an
+#: agent or stop a learning run (``DQNConfig.eval_duration_s``, ``PilcoConfig.eval_duration_s``) and the fresh
+#: starts every reported figure is measured on.  One length for both, so that a policy which holds the rod for the
+#: selection tests and falls later is caught before it is selected.
+TEST_EPISODE_S = 10.0
 
 
 class Controller(Protocol):
@@ -382,7 +389,7 @@ def evaluate_controller(
     *,
     name: str = "controller",
     seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = 10.0,
+    duration_s: float = TEST_EPISODE_S,
     initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
     env_kwargs: Optional[dict[str, Any]] = None,
 ) -> EvaluationSummary:
@@ -589,7 +596,7 @@ def evaluate_batched(
     predict_batch: Callable[[np.ndarray], Any],
     task: Optional[Task] = None,
     seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = 10.0,
+    duration_s: float = TEST_EPISODE_S,
     *,
     action_repeat: int = 1,
     n_torque_levels: Optional[int] = None,
@@ -662,7 +669,7 @@ def evaluate_controllers_batched(
     controller: Controller | Sequence[Controller],
     task: Optional[Task] = None,
     seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = 10.0,
+    duration_s: float = TEST_EPISODE_S,
     *,
     rod_spread: float = 0.0,
     rod_seed: int = 0,

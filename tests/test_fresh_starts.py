@@ -1,15 +1,18 @@
 """Fresh-start measurement of trained controllers: counts, intervals, and refusal of selection starts."""
 
+import inspect
 import json
 import math
 
 import numpy as np
 import pytest
 
-from softpend.evaluation import EvaluationResult, EvaluationSummary
+from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, EvaluationSummary
+from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import train_dqn
 from softpend.stats import wilson_interval
+from softpend.study import fresh_starts
 from softpend.study.fresh_starts import aggregate_fresh_start_rows, fresh_start_row, rl_fresh_start_rows
 
 
@@ -30,6 +33,14 @@ def test_a_start_balances_only_when_it_swings_up_and_holds_within_the_threshold(
     assert row["success_rate"] == pytest.approx(19 / 20)  # the 0.15 rad start succeeds at 0.2 rad
     worse = fresh_start_row(EvaluationSummary("x", results[:16] + [_result(16, math.inf, 1.0)] * 4))
     assert worse["balanced_starts"] == 16 and not worse["run_balances"]  # 80 % < 90 %
+
+
+def test_the_tests_that_stop_or_select_a_run_are_as_long_as_the_reported_fresh_start_episodes():
+    # a policy that holds for a shorter selection test and falls later must not stop a run as balanced
+    assert DQNConfig().eval_duration_s == PilcoConfig().eval_duration_s == TEST_EPISODE_S
+    for function in (fresh_starts.rl_fresh_start_rows, fresh_starts.pilco_fresh_start_rows,
+                     fresh_starts.perturbed_rod_row):
+        assert inspect.signature(function).parameters["duration_s"].default == TEST_EPISODE_S, function.__name__
 
 
 def test_aggregate_counts_runs_and_bootstraps_the_iqm():

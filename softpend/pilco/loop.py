@@ -58,7 +58,7 @@ import torch
 
 from softpend.checks import (boolean, check_work_size, finite, in_unit_interval, int_at_least, non_negative,
                              optional_positive, positive)
-from softpend.evaluation import EvaluationResult, LateNoisyController, evaluate_controller, run_episode
+from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, LateNoisyController, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.plant import SimulationDiverged
 from softpend.plant.randomisation import randomised_rod
@@ -140,7 +140,9 @@ class PilcoConfig:
     eval_seeds : tuple of int
         Seeds of the test episodes after each policy trial (empty: no tests).
     eval_duration_s : float
-        Length of each test episode [s].
+        Length of each test episode [s] (:data:`softpend.evaluation.TEST_EPISODE_S`, as long as the reported
+        fresh-start episodes: a policy that holds the rod for a shorter test and falls later does not stop the
+        run).
     target_std_rad : float
         Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
     stop_when_balanced : bool
@@ -183,7 +185,7 @@ class PilcoConfig:
     restart_above_cost_fraction: float = 0.5
     restart_target_std: float = 1.0
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
-    eval_duration_s: float = 8.0
+    eval_duration_s: float = TEST_EPISODE_S
     target_std_rad: float = 0.1
     stop_when_balanced: bool = True
     rod_randomisation: float = 0.0

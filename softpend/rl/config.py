@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any, Mapping, TypeVar
 
 from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.evaluation import TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import apply_overrides, parse_value
 from softpend.task import Task
@@ -89,9 +90,10 @@ class DQNConfig:
         DQN-MBPO are read at the same granularity (an evaluation is a measurement: it changes no training
         draw, so a run is the same whatever this is).
     eval_seeds : tuple of int
-        Start-noise seeds of each evaluation (10 s from hanging).
+        Start-noise seeds of each evaluation (from hanging).
     eval_duration_s : float
-        Evaluation episode length [s].
+        Evaluation episode length [s] (:data:`softpend.evaluation.TEST_EPISODE_S`, as long as the reported
+        fresh-start episodes).
     checkpoint_every_episodes : int
         Save agent, replay buffer and training log every this many episodes.
 
@@ -146,7 +148,7 @@ class DQNConfig:
     reset_every_episodes: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
-    eval_duration_s: float = 10.0
+    eval_duration_s: float = TEST_EPISODE_S
     checkpoint_every_episodes: int = 10
     stop_after_balanced_evaluations: int = 2
     stop_upright_std_rad: float = 0.1

@@ -20,7 +20,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from softpend.evaluation import EvaluationSummary, evaluate_controller
+from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_controller
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 from softpend.control.learned import learned_model_simulator, lqr_from_learned_model
@@ -114,7 +114,7 @@ def classical_comparison(
     duration_s: float = 5.0,
     unlimited_torque_nm: float = 1.0,
     starts: Sequence[int] = REPORT_SEEDS,
-    swingup_duration_s: float = 10.0,
+    swingup_duration_s: float = TEST_EPISODE_S,
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
     progress: bool = False,

@@ -21,7 +21,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from softpend.evaluation import EvaluationSummary
+from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary
 from softpend.io.outputs import atomic_write, read_json_object
 from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
@@ -91,7 +91,7 @@ def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Seque
 
 
 def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
-                        report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = 10.0,
+                        report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
                         which: Sequence[str] = ("best", "final")) -> list[dict[str, Any]]:
     """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``.
 
@@ -137,7 +137,7 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
 
 
 def pilco_fresh_start_rows(results: Sequence[Any], report_seeds: Sequence[int] = REPORT_SEEDS,
-                           duration_s: float = 10.0) -> list[dict[str, Any]]:
+                           duration_s: float = TEST_EPISODE_S) -> list[dict[str, Any]]:
     """One row per PILCO run (its final policy, on the run's task), measured on ``report_seeds``."""
     from softpend.evaluation import evaluate_controller
 
@@ -255,7 +255,7 @@ def headline_figures(rows: Sequence[dict[str, Any]], within_s: float = 30.0, rat
 
 
 def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_seeds: Sequence[int] = REPORT_SEEDS,
-                      duration_s: float = 10.0) -> dict[str, Any]:
+                      duration_s: float = TEST_EPISODE_S) -> dict[str, Any]:
     """One controller on rods that differ from its model: :func:`fresh_start_row` figures over ``report_seeds``,
     where the start seeded ``s`` runs on the rod :func:`softpend.plant.randomisation.randomised_rod` draws from
     ``numpy.random.default_rng(s)`` with ``spread`` (every field of
@@ -274,7 +274,7 @@ def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_s
 
 
 def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
-                               report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = 10.0,
+                               report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
                                which: str = "final") -> list[dict[str, Any]]:
     """:func:`rl_fresh_start_rows` of one agent per run on a *converged* simulation of the same rod: the batched
     chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agent_batched`, whose hub angle stays far

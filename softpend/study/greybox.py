@@ -16,6 +16,7 @@ from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from softpend.evaluation import TEST_EPISODE_S
 from softpend.plant import RodParams
 from softpend.sysid.babble import BabbleProtocol
 from softpend.sysid.dataset import TrajectoryDataset
@@ -179,7 +180,7 @@ def closed_loop_usefulness(
     seeds: Optional[Sequence[int]] = None,
     tilt_rad: float = 0.2,
     duration_s: float = 5.0,
-    swingup_duration_s: float = 10.0,
+    swingup_duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
     """LQR (joint state on the PRB plant, observations on others; from the straight rod tilted by ``tilt_rad``
     plus the task's start noise) and energy swing-up + LQR (from hanging) designed on each parameter set of ``identified`` (label -> params) and on

@@ -21,7 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from softpend.task import Task
-from softpend.evaluation import evaluate_controller
+from softpend.evaluation import TEST_EPISODE_S, evaluate_controller
 from softpend.plant import RodParams
 
 #: Shortest episode :func:`transfer_table` runs [s] (swing-up needs a 1 s hold to count).
@@ -82,7 +82,7 @@ class TransferCase:
     name: str
     make_controller: Callable[[], Any]
     start: str = "hanging"
-    duration_s: float = 10.0
+    duration_s: float = TEST_EPISODE_S
     start_noise_rad: float = 0.05
 
 
@@ -117,7 +117,7 @@ def rl_transfer_cases(
     seeds: Sequence[int] = (0, 1, 2),
     which: str = "best",
     params: Optional[RodParams] = None,
-    duration_s: float = 10.0,
+    duration_s: float = TEST_EPISODE_S,
 ) -> list[TransferCase]:
     """The RL agents of :mod:`softpend.rl` (trained on the PRB plant) as transfer cases: swing-up from hanging.
 

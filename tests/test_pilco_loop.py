@@ -270,12 +270,39 @@ def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run
     assert _saved_run(tmp_path, dataclasses.replace(baseline.config, policy_restarts=1)) is None
 
 
+def test_a_longer_prediction_is_searched_and_the_trial_part_is_recorded(monkeypatch):
+    """With ``prediction_s`` twice the trial, every search rolls out twice the trial's steps; the recorded
+    prediction (cost, means) covers the trial, so that it compares with the real trial."""
+    lengths, totals = [], []
+    rollout = Propagator.rollout
+
+    def spy(self, m0, s0, n_steps):
+        out = rollout(self, m0, s0, n_steps)
+        lengths.append(n_steps)
+        costs = out[2].detach()
+        totals.append((float(costs[:10].sum()), float(costs.sum())))
+        return out
+
+    monkeypatch.setattr(Propagator, "rollout", spy)
+    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, prediction_s=2.0, seed=3)
+    assert config.n_prediction_steps == 20 and config.n_horizon_steps == 10
+    result = run_pilco(config, progress=False)
+    assert set(lengths) == {20}
+    record = result.records[1]
+    # the last rollout is the one of the kept policy, after the search
+    assert record.predicted_cost == pytest.approx(totals[-1][0], rel=1e-9)
+    assert totals[-1][1] > totals[-1][0]  # the part after the trial adds cost: it was searched over
+    assert result.predicted_means[0].shape == (11, 2)
+    assert PilcoConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "prediction_s"}).prediction_s is None
+
+
 @pytest.mark.parametrize("field, value", [
     ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
     ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
     ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
     ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
+    ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):

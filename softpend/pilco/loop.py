@@ -87,7 +87,12 @@ class PilcoConfig:
     control_dt_s : float
         Plant step and PILCO's control period (zero-order hold) [s].
     horizon_s : float
-        Prediction horizon and length of every trial [s].
+        Length of every trial [s], and the prediction horizon unless ``prediction_s`` is given.
+    prediction_s : float or None
+        Length of the predicted rollout whose cost each policy search minimises [s], at least ``horizon_s``;
+        None: ``horizon_s``.  Longer than the trials, it asks the policy to keep the rod up after a trial
+        ends (the model of the upright rod comes from the upright part of the trials).  ``predicted_cost`` is
+        summed over the trial's length only, to compare with the real trial.
     n_policy_trials : int
         Largest number of policy trials after the random ones (the random draws of the trials it allows are
         the same whatever its value: every purpose has its own stream, see ``seed``).
@@ -167,6 +172,7 @@ class PilcoConfig:
     state: str = "tip_bend"
     control_dt_s: float = 0.1
     horizon_s: float = 6.0
+    prediction_s: Optional[float] = None
     n_policy_trials: int = 6
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
@@ -207,6 +213,9 @@ class PilcoConfig:
             raise ValueError(f"control_dt_s must be a whole multiple of task.dt_s, got {self.control_dt_s!r}")
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
+        optional_positive("prediction_s", self.prediction_s)
+        if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
+            raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r}")
         for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
                           ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
@@ -237,8 +246,13 @@ class PilcoConfig:
 
     @property
     def n_horizon_steps(self) -> int:
-        """Control steps per trial / prediction horizon."""
+        """Control steps per trial."""
         return int(round(self.horizon_s / self.control_dt_s))
+
+    @property
+    def n_prediction_steps(self) -> int:
+        """Control steps of the predicted rollout of each policy search."""
+        return int(round((self.prediction_s if self.prediction_s is not None else self.horizon_s) / self.control_dt_s))
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -248,7 +262,7 @@ class PilcoConfig:
 
     #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
     #: setting existed (so such a run is not taken for a run of a config with other values).
-    MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0}
+    MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -509,7 +523,7 @@ def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: R
     cost threshold ask for it) from that many fresh random policies (:func:`_random_policy`, draws from
     ``rng``); ``policy`` keeps the parameters of the lowest predicted cost.  Returns that cost and the number
     of restarts made."""
-    n_steps = config.n_horizon_steps
+    n_steps = config.n_prediction_steps
     best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
     if not restart or config.policy_restarts == 0 or best <= config.restart_above_cost_fraction * n_steps:
         return best, 0
@@ -531,12 +545,12 @@ def check_pilco_size(config: PilcoConfig) -> None:
     matrix of ``max_gp_points**2`` entries per pair of state outputs (PILCO's predictive covariance) for the
     policy gradient; the evaluation trajectories come on top."""
     dim = state_spec(config.state).dim
-    rollout = 8.0 * config.n_horizon_steps * dim * dim * config.max_gp_points**2
-    policy = 8.0 * config.n_horizon_steps * config.n_basis * (config.max_gp_points + dim) * dim
+    rollout = 8.0 * config.n_prediction_steps * dim * dim * config.max_gp_points**2
+    policy = 8.0 * config.n_prediction_steps * config.n_basis * (config.max_gp_points + dim) * dim
     evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
     check_work_size(
         "this PILCO run", rollout + policy + evaluation,
-        f"{config.n_horizon_steps} prediction steps x {dim}**2 outputs x {config.max_gp_points}**2 GP points, "
+        f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.max_gp_points}**2 GP points, "
         f"{config.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
     )
 
@@ -638,10 +652,13 @@ def run_pilco(
                                                       np.vstack(result.real_states), x_all[:, :-1], restart_rng,
                                                       restart=trial > 1)
         with torch.no_grad():
-            means, covs, costs, _ = propagator.rollout(m0, s0, n_steps)
-        # the expected total cost (the objective itself when the search does not explore)
-        predicted = objective if config.cost_exploration == 0.0 else float(costs.sum())
-        result.predicted_means.append(means.numpy())
+            means, covs, costs, _ = propagator.rollout(m0, s0, config.n_prediction_steps)
+        # the expected total cost over the trial (the objective itself when the search neither explores nor
+        # predicts past the trial)
+        same = config.cost_exploration == 0.0 and config.n_prediction_steps == n_steps
+        predicted = objective if same else float(costs[:n_steps].sum())
+        result.predicted_means.append(means[: n_steps + 1].numpy())
+        covs = covs[: n_steps + 1]
         result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
         # ---- run it on the plant
         controller = PilcoController(policy, spec, config.control_dt_s)

@@ -27,7 +27,7 @@ torch.set_num_threads(1)
 RIGID = RodParams(n_links=1, stiffness_scale=100.0)
 
 TINY = dict(
-    state="tip", control_dt_s=0.1, horizon_s=1.0, n_policy_trials=2, n_basis=5, max_gp_points=15,
+    state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=2, n_basis=5, max_gp_points=15,
     gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0,
 )
 
@@ -232,7 +232,7 @@ def test_robust_trials_run_on_drawn_rods_and_show_the_policy_late_noisy_observat
 def test_search_with_restarts_keeps_the_best_and_reports_it():
     rng = np.random.default_rng(1)
     spec, gp, m0, s0, states = _pendulum_gp(rng, 80)
-    config = PilcoConfig(state="tip", horizon_s=0.8, n_basis=6, policy_iterations=5, policy_restarts=3,
+    config = PilcoConfig(state="tip", horizon_s=0.8, prediction_s=None, n_basis=6, policy_iterations=5, policy_restarts=3,
                          restart_above_cost_fraction=0.0)
 
     def fresh_policy() -> RBFPolicy:
@@ -243,13 +243,13 @@ def test_search_with_restarts_keeps_the_best_and_reports_it():
     policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
     best, made = _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
-                                       np.random.default_rng(0))
+                                       np.random.default_rng(0), config.n_horizon_steps)
     assert made == 3 and best <= warm
     assert float(prop.rollout(m0, s0, 8)[3]) == pytest.approx(best)  # the policy holds the kept parameters
     policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
     assert _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
-                                 np.random.default_rng(0), restart=False) == (warm, 0)
+                                 np.random.default_rng(0), config.n_horizon_steps, restart=False) == (warm, 0)
 
 
 def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run_without_restarts, tmp_path):
@@ -270,9 +270,12 @@ def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run
     assert _saved_run(tmp_path, dataclasses.replace(baseline.config, policy_restarts=1)) is None
 
 
-def test_a_longer_prediction_is_searched_and_the_trial_part_is_recorded(monkeypatch):
-    """With ``prediction_s`` twice the trial, every search rolls out twice the trial's steps; the recorded
-    prediction (cost, means) covers the trial, so that it compares with the real trial."""
+def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_trial_part_is_recorded(monkeypatch):
+    """Until a policy trial has swung the rod up, every search rolls out the trial's steps; from the search
+    after such a trial on, ``prediction_s`` (here twice the trial).  The recorded prediction (cost, means)
+    covers the trial, so that it compares with the real trial."""
+    import softpend.pilco.loop as loop
+
     lengths, totals = [], []
     rollout = Propagator.rollout
 
@@ -283,16 +286,35 @@ def test_a_longer_prediction_is_searched_and_the_trial_part_is_recorded(monkeypa
         totals.append((float(costs[:10].sum()), float(costs.sum())))
         return out
 
+    run_trial = loop._run_trial
+    trials = []
+
+    def first_policy_trial_swings_up(config, controller, seed, env, streams):
+        episode, states, torques = run_trial(config, controller, seed, env, streams)
+        trials.append(episode)
+        if len(trials) == 2:  # the random trial, then the first policy trial
+            episode = dataclasses.replace(episode, swing_up_time_s=0.5)
+        return episode, states, torques
+
     monkeypatch.setattr(Propagator, "rollout", spy)
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, prediction_s=2.0, seed=3)
+    monkeypatch.setattr(loop, "_run_trial", first_policy_trial_swings_up)
+    config = PilcoConfig(**{**TINY, "prediction_s": 2.0}, seed=3)
     assert config.n_prediction_steps == 20 and config.n_horizon_steps == 10
     result = run_pilco(config, progress=False)
-    assert set(lengths) == {20}
-    record = result.records[1]
+    assert [math.isfinite(r.swing_up_time_s) for r in result.records] == [False, True, False]
+    first = lengths.index(20)
+    assert set(lengths[:first]) == {10} and set(lengths[first:]) == {20} and first > 0
+    record = result.records[2]
     # the last rollout is the one of the kept policy, after the search
     assert record.predicted_cost == pytest.approx(totals[-1][0], rel=1e-9)
     assert totals[-1][1] > totals[-1][0]  # the part after the trial adds cost: it was searched over
-    assert result.predicted_means[0].shape == (11, 2)
+    assert [m.shape for m in result.predicted_means] == [(11, 2), (11, 2)]
+    # without a swung-up policy trial, the same config searches over the trial only (the tiny trials never swing up)
+    lengths.clear()
+    monkeypatch.setattr(loop, "_run_trial", run_trial)
+    plain = run_pilco(config, progress=False)
+    assert not any(math.isfinite(r.swing_up_time_s) for r in plain.records) and set(lengths) == {10}
+    assert plain.records[1].predicted_cost == result.records[1].predicted_cost
     assert PilcoConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "prediction_s"}).prediction_s is None
 
 
@@ -319,7 +341,7 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
     args = ["train", "--algo", "pilco", "--episodes", "1", "--out", str(out), "--no-progress", "--seed", "1"]
     for key, value in TINY.items():
         if key not in ("n_policy_trials",):
-            value = json.dumps(list(value)) if isinstance(value, tuple) else value  # eval_seeds=[1000]
+            value = json.dumps(list(value) if isinstance(value, tuple) else value) if not isinstance(value, (int, float, str)) else value  # eval_seeds=[1000], null
             args += ["--set", f"{key}={value}"]
     assert main(args + ["--set", "cost_rate_width_rad_s=2.5", "--set", "cost_rate_after_rad=null"]) == 0
     summary = json.loads(capsys.readouterr().out)
@@ -334,7 +356,7 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
 @pytest.mark.expensive
 def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
     """The classical PILCO result: swing-up and balance within 10 trials of at most 4 s (random one included)."""
-    config = PilcoConfig(task=Task(rod=RIGID), state="tip", control_dt_s=0.1, horizon_s=4.0, n_policy_trials=9,
+    config = PilcoConfig(task=Task(rod=RIGID), state="tip", control_dt_s=0.1, horizon_s=4.0, prediction_s=None, n_policy_trials=9,
                          cost_rate_width_rad_s=None, policy_iterations=40, eval_seeds=(1000, 1001, 1002),
                          eval_duration_s=6.0, seed=0)
     result = run_pilco(config, progress=False)

@@ -148,7 +148,7 @@ def test_run_folders_become_rig_controllers(tmp_path):
     train_dqn(DQNConfig(learning_starts=21, episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2,
                         eval_seeds=(0,), eval_duration_s=1.5), seed=0, episodes=1, run_dir=tmp_path / "dqn",
               progress=False)
-    run_pilco(PilcoConfig(state="tip", control_dt_s=0.1, horizon_s=1.0, n_policy_trials=0, n_basis=5,
+    run_pilco(PilcoConfig(state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=0, n_basis=5,
                           max_gp_points=15, gp_iterations=15, policy_iterations=4, eval_seeds=(1000,),
                           eval_duration_s=1.0, seed=3), progress=False).save(tmp_path / "pilco")
     plant = TASK.make_plant()

@@ -4,9 +4,13 @@ Control rate and trials
 -----------------------
 The plant (``task.make_plant()``) steps at ``task.dt_s = 0.01`` s; PILCO acts every
 ``control_dt_s = 0.1`` s (10 Hz, as in PILCO's pendulum) and the torque is held constant over the ten plant
-steps in between (:class:`~softpend.pilco.controller.PilcoController`).  Trials and the prediction horizon
-are ``horizon_s = 6`` s (60 control steps): the 0.06 N m motor needs about 2 s (two to three swings) to pump
-the rod up, so a 4 s horizon leaves only 2 s in which balancing is worth more than swinging through the top.
+steps in between (:class:`~softpend.pilco.controller.PilcoController`).  Trials are ``horizon_s = 6`` s (60
+control steps): the 0.06 N m motor needs about 2 s (two to three swings) to pump the rod up, so a 4 s trial
+leaves only 2 s of data on the upright rod.  The policy searches predict the trial's length until a policy
+trial has swung the rod up (a finite ``swing_up_time_s``: within 0.2 rad of upright for 1 s, see
+:mod:`softpend.evaluation`); from then on they predict ``prediction_s = 10`` s, as long as
+the test episodes, so that a policy which swings up and lets the rod fall once the trial would have ended
+costs more than one that holds it.
 Every trial -- the random-torque trial(s) and
 each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
 perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
@@ -23,7 +27,7 @@ Model learning and policy search
 GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled to ``max_gp_points`` (the
 latest trial always kept, the older points drawn at random), hyperparameters by penalised marginal
 likelihood; then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
-cost summed over the horizon from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
+cost summed over the predicted rollout from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
 moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy
 (with ``policy_restarts``, the searches after the first also start from fresh random policies when the one from
 the previous policy ends with a high predicted cost; the lowest predicted cost is kept).
@@ -87,11 +91,14 @@ class PilcoConfig:
     control_dt_s : float
         Plant step and PILCO's control period (zero-order hold) [s].
     horizon_s : float
-        Length of every trial [s], and the prediction horizon unless ``prediction_s`` is given.
+        Length of every trial [s].
     prediction_s : float or None
-        Length of the predicted rollout whose cost each policy search minimises [s], at least ``horizon_s``;
-        None: ``horizon_s``.  Longer than the trials, it asks the policy to keep the rod up after a trial
-        ends (the model of the upright rod comes from the upright part of the trials).  ``predicted_cost`` is
+        Length of the predicted rollout whose cost each policy search minimises [s], at least ``horizon_s``,
+        once a policy trial has swung the rod up (its ``swing_up_time_s`` is finite); the searches before
+        predict ``horizon_s``.  None: always ``horizon_s``.  The default,
+        :data:`softpend.evaluation.TEST_EPISODE_S`, is as long as the test episodes that decide whether the
+        run has balanced: a rollout that ends with the trial does not ask the policy to keep the rod up after
+        it (the model of the upright rod comes from the upright part of the trials).  ``predicted_cost`` is
         summed over the trial's length only, to compare with the real trial.
     n_policy_trials : int
         Largest number of policy trials after the random ones (the random draws of the trials it allows are
@@ -172,7 +179,7 @@ class PilcoConfig:
     state: str = "tip_bend"
     control_dt_s: float = 0.1
     horizon_s: float = 6.0
-    prediction_s: Optional[float] = None
+    prediction_s: Optional[float] = TEST_EPISODE_S
     n_policy_trials: int = 6
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
@@ -215,7 +222,8 @@ class PilcoConfig:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         optional_positive("prediction_s", self.prediction_s)
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
-            raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r}")
+            raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
+                             "(None predicts the trial's length)")
         for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
                           ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
@@ -518,12 +526,11 @@ def _random_policy(spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray
 
 def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor,
                           s0: torch.Tensor, spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray,
-                          rng: np.random.Generator, restart: bool = True) -> tuple[float, int]:
-    """One policy search: from the current policy, then (when ``restart``, ``config.policy_restarts`` and the
-    cost threshold ask for it) from that many fresh random policies (:func:`_random_policy`, draws from
+                          rng: np.random.Generator, n_steps: int, restart: bool = True) -> tuple[float, int]:
+    """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when
+    ``restart``, ``config.policy_restarts`` and the cost threshold ask for it) from that many fresh random policies (:func:`_random_policy`, draws from
     ``rng``); ``policy`` keeps the parameters of the lowest predicted cost.  Returns that cost and the number
     of restarts made."""
-    n_steps = config.n_prediction_steps
     best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
     if not restart or config.policy_restarts == 0 or best <= config.restart_above_cost_fraction * n_steps:
         return best, 0
@@ -645,17 +652,19 @@ def run_pilco(
         if not rate_on and config.cost_rate_width_rad_s is not None:
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
         rate_width = config.cost_rate_width_rad_s if rate_on else None
+        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)
+        n_search = config.n_prediction_steps if swung_up else n_steps
         propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width,
                                 config.cost_exploration)
         restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search
         objective, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
                                                       np.vstack(result.real_states), x_all[:, :-1], restart_rng,
-                                                      restart=trial > 1)
+                                                      n_search, restart=trial > 1)
         with torch.no_grad():
-            means, covs, costs, _ = propagator.rollout(m0, s0, config.n_prediction_steps)
+            means, covs, costs, _ = propagator.rollout(m0, s0, n_search)
         # the expected total cost over the trial (the objective itself when the search neither explores nor
         # predicts past the trial)
-        same = config.cost_exploration == 0.0 and config.n_prediction_steps == n_steps
+        same = config.cost_exploration == 0.0 and n_search == n_steps
         predicted = objective if same else float(costs[:n_steps].sum())
         result.predicted_means.append(means[: n_steps + 1].numpy())
         covs = covs[: n_steps + 1]

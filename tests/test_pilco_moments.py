@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from softpend.pilco.gp import MultiOutputGP
-from softpend.pilco.moments import gp_moments, saturating_cost_moments, sin_saturation_moments, trig_moments
+from softpend.pilco.moments import (_WeightedExpSum, gp_moments, pair_weights, rbf_network_moments, saturating_cost_moments,
+                                    sin_saturation_moments, trig_moments)
 from softpend.pilco.policy import RBFPolicy
 from softpend.pilco.propagation import Propagator, state_spec
 
@@ -201,3 +202,61 @@ def test_exploration_adds_the_weighted_cost_spread_which_is_larger_where_the_mod
     assert bonus["push"] > 100 * bonus["still"]  # 0.26 against 0.0006
     with pytest.raises(ValueError, match="exploration"):
         Propagator(spec, gp, None, 0.3, 0.1, exploration=float("nan"))
+
+
+def test_rbf_network_moments_equal_the_one_output_gp_moments_with_their_gradients(gaussian_input):
+    m, s, _ = gaussian_input
+    rng = np.random.default_rng(5)
+    centres = torch.tensor(rng.normal(size=(12, 3)), dtype=F64)
+    beta = torch.tensor(rng.normal(size=12), dtype=F64, requires_grad=True)
+    log_ell = torch.tensor(rng.normal(scale=0.3, size=3), dtype=F64, requires_grad=True)
+    fast = rbf_network_moments(m, s, centres, beta, log_ell)
+    general = gp_moments(m, s, centres, beta.unsqueeze(0), log_ell.unsqueeze(0), torch.zeros(1, dtype=F64))
+    general = (general[0][0], general[1][0, 0], general[2][:, 0])
+    for a, b in zip(fast, general):
+        np.testing.assert_allclose(a.detach().numpy(), b.detach().numpy(), rtol=1e-10, atol=1e-14)
+    grads = [torch.autograd.grad(sum(x.sum() for x in out), (beta, log_ell)) for out in (fast, general)]
+    for a, b in zip(*grads):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-9, atol=1e-13)
+
+
+def test_one_angle_trig_moments_equal_the_blocks_of_two_independent_angles():
+    m = torch.tensor([2.9, -0.4], dtype=F64)
+    s = torch.diag(torch.tensor([0.3, 0.05], dtype=F64))
+    mean2, cov2, c2 = trig_moments(m, s)  # the general formulas
+    for k in range(2):
+        mean1, cov1, c1 = trig_moments(m[k : k + 1], s[k : k + 1, k : k + 1])  # the one-angle formulas
+        block = slice(2 * k, 2 * k + 2)
+        np.testing.assert_allclose(mean1.numpy(), mean2[block].numpy(), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(cov1.numpy(), cov2[block, block].numpy(), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(c1.numpy(), c2[k : k + 1, block].numpy(), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(cov2[0:2, 2:4].numpy(), 0.0, atol=1e-15)  # independent angles
+
+
+def test_weighted_exp_sum_gradient_matches_finite_differences_and_weights_hold_the_pairs():
+    rng = np.random.default_rng(6)
+    x = torch.tensor(rng.normal(scale=0.4, size=(3, 7, 4)), dtype=F64, requires_grad=True)
+    y = torch.tensor(rng.normal(scale=0.4, size=(3, 5, 4)), dtype=F64, requires_grad=True)
+    w = torch.tensor(rng.normal(size=(3, 7, 5)), dtype=F64)
+    assert torch.autograd.gradcheck(lambda a, b: _WeightedExpSum.apply(a, b, w), (x, y))
+    plain = torch.sum(torch.exp(x @ y.transpose(1, 2)) * w, dim=(1, 2))
+    np.testing.assert_allclose(_WeightedExpSum.apply(x, y, w).detach().numpy(), plain.detach().numpy(), rtol=1e-13)
+    beta = torch.tensor(rng.normal(size=(2, 4)), dtype=F64)
+    inv_k = torch.tensor(rng.normal(size=(2, 4, 4)), dtype=F64)
+    weights = pair_weights(beta, inv_k)  # pairs (0, 0), (0, 1), (1, 1)
+    np.testing.assert_allclose(weights[1].numpy(), np.outer(beta[0], beta[1]))
+    np.testing.assert_allclose(weights[2].numpy(), np.outer(beta[1], beta[1]) - inv_k[1].numpy())
+
+
+def test_policy_reuses_its_beta_until_a_parameter_changes():
+    rng = np.random.default_rng(7)
+    policy = RBFPolicy(rng.normal(size=(6, 3)), np.ones(3), 0.06, seed=1)
+    first = policy._beta()
+    assert policy._beta() is first
+    policy.targets[0] += 1.0  # in place
+    changed = policy._beta()
+    assert changed is not first
+    np.testing.assert_allclose(changed.numpy(), policy._compute_beta().numpy())
+    policy.set_vector(policy.get_vector() * 1.1)
+    np.testing.assert_allclose(policy._beta().numpy(), policy._compute_beta().numpy())
+    assert not np.allclose(policy._beta().numpy(), changed.numpy())

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.pilco.moments import gp_moments
+from softpend.pilco.moments import gp_moments, pair_weights
 
 __all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset"]
 
@@ -169,7 +169,8 @@ class MultiOutputGP:
 
     # ------------------------------------------------------------------ prediction
     def _update_cache(self) -> None:
-        """Precompute ``beta = (K + sn^2 I)^{-1} y`` and ``(K + sn^2 I)^{-1}`` per output (constants for the policy search)."""
+        """Precompute ``beta = (K + sn^2 I)^{-1} y``, ``(K + sn^2 I)^{-1}`` per output and the pair weights of the
+        second moments (:func:`~softpend.pilco.moments.pair_weights`): constants for the policy search."""
         h = self.hyperparameters
         x = torch.as_tensor(self.inputs_np, dtype=DTYPE)
         y = torch.as_tensor(self.targets_np, dtype=DTYPE)
@@ -187,6 +188,7 @@ class MultiOutputGP:
             betas.append(inv_k @ y[:, a])
         self.beta = torch.stack(betas)  # (E, N)
         self.inv_kernel = torch.stack(inv_ks)  # (E, N, N)
+        self.pair_weights = pair_weights(self.beta, self.inv_kernel)  # (E (E + 1) / 2, N, N)
 
     def _kernel(self, x1: torch.Tensor, x2: torch.Tensor, a: int) -> torch.Tensor:
         ell = torch.exp(self.log_lengthscales[a])
@@ -214,5 +216,6 @@ class MultiOutputGP:
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Exact moment matching at a Gaussian input, with model uncertainty (see :func:`~softpend.pilco.moments.gp_moments`)."""
         return gp_moments(
-            mean, cov, self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel
+            mean, cov, self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel,
+            self.pair_weights,
         )

@@ -16,20 +16,69 @@ Gaussian angles), ``gSat.m`` (the sine saturation ``u_max (9 sin x + sin 3x) / 8
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
 __all__ = [
     "chain_covariance",
     "gp_moments",
+    "pair_weights",
+    "rbf_network_moments",
     "saturating_cost_moments",
     "sin_saturation_moments",
     "trig_moments",
 ]
 
 
-def _pair_indices(n_outputs: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+@functools.lru_cache(maxsize=None)
+def _pair_tables(n_outputs: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The output pairs ``i <= j`` (rows, cols, in :func:`torch.triu_indices` order), the positions of the pairs
+    ``i = j`` among them, and the (E, E) table of the pair index of every ``(i, j)``."""
     rows, cols = torch.triu_indices(n_outputs, n_outputs, device=device)
-    return rows, cols
+    diag = torch.nonzero(rows == cols).squeeze(1)
+    table = torch.empty(n_outputs, n_outputs, dtype=torch.long, device=device)
+    table[rows, cols] = torch.arange(len(rows), device=device)
+    table[cols, rows] = torch.arange(len(rows), device=device)
+    return rows, cols, diag, table
+
+
+def pair_weights(beta: torch.Tensor, inv_kernel: torch.Tensor | None = None) -> torch.Tensor:
+    """The weights ``W_ij = beta_i beta_j'`` (minus ``(K_i + sn2 I)^{-1}`` when ``i = j`` and ``inv_kernel`` is
+    given) of the second moments ``sum(W_ij * L_ij)`` in :func:`gp_moments`, for the output pairs ``i <= j``
+    in :func:`torch.triu_indices` order: (P, N, N), ``P = E (E + 1) / 2``."""
+    rows, cols, diag, _ = _pair_tables(beta.shape[0], beta.device)
+    weights = beta[rows].unsqueeze(2) * beta[cols].unsqueeze(1)
+    if inv_kernel is not None:
+        weights = weights.index_add(0, diag, -inv_kernel)
+    return weights
+
+
+class _WeightedExpSum(torch.autograd.Function):
+    """``sum_{n,m} W[p, n, m] exp(X[p, n] . Y[p, m])`` per ``p``, with its gradient in ``X`` and ``Y`` written out:
+    autograd through the (P, N, N) intermediate tensors of the expression costs several times more."""
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor, y: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        terms = torch.bmm(x, y.transpose(1, 2))
+        terms.exp_()
+        terms.mul_(weights)
+        ctx.save_for_backward(x, y, terms)
+        return terms.sum(dim=(1, 2))
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        x, y, terms = ctx.saved_tensors
+        scale = grad.reshape(-1, 1, 1)
+        grad_x = torch.bmm(terms, y) * scale if ctx.needs_input_grad[0] else None
+        grad_y = torch.bmm(terms.transpose(1, 2), x) * scale if ctx.needs_input_grad[1] else None
+        return grad_x, grad_y, None
+
+
+def _weighted_exp_sum(x: torch.Tensor, y: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    if weights.requires_grad:  # weights that depend on parameters: plain autograd
+        return torch.sum(torch.exp(x @ y.transpose(1, 2)) * weights, dim=(1, 2))
+    return _WeightedExpSum.apply(x, y, weights)
 
 
 def gp_moments(
@@ -40,6 +89,7 @@ def gp_moments(
     log_lengthscales: torch.Tensor,
     log_signal_var: torch.Tensor,
     inv_kernel: torch.Tensor | None = None,
+    weights: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Moments of GP predictions at a Gaussian input (squared-exponential ARD kernel, zero prior mean).
 
@@ -63,6 +113,9 @@ def gp_moments(
         Log signal variance ``log sf2`` per output.
     inv_kernel : tensor (E, N, N), optional
         ``(K + sn2 I)^{-1}`` per output (include to add the model uncertainty).
+    weights : tensor (P, N, N), optional
+        :func:`pair_weights` of ``beta`` and ``inv_kernel`` (computed here when not given; a caller that
+        propagates many inputs through one model computes them once).
 
     Returns
     -------
@@ -90,7 +143,7 @@ def gp_moments(
 
     # second moments for each pair (i <= j) of outputs
     log_k = log_signal_var.unsqueeze(1) - 0.5 * torch.sum(scaled * scaled, dim=2)  # (E, N)
-    rows, cols = _pair_indices(n_outputs, mean.device)
+    rows, cols, diag, table = _pair_tables(n_outputs, mean.device)
     inv_ell2 = torch.exp(-2.0 * log_lengthscales)  # (E, D)
     r_mat = cov.unsqueeze(0) * (inv_ell2[rows] + inv_ell2[cols]).unsqueeze(1) + eye  # (P, D, D)
     t_pair = 1.0 / torch.sqrt(torch.linalg.det(r_mat))  # (P,)
@@ -99,28 +152,67 @@ def gp_moments(
     ij = inp.unsqueeze(0) * inv_ell2[cols].unsqueeze(1)
     ii_q = ii @ q_mat
     ij_q = ij @ q_mat
-    quad_i = torch.sum(ii_q * ii, dim=2)  # (P, N)
-    quad_j = torch.sum(ij_q * ij, dim=2)
-    exponent = (
-        (log_k[rows] + quad_i).unsqueeze(2)
-        + (log_k[cols] + quad_j).unsqueeze(1)
-        + 2.0 * ii_q @ ij.transpose(1, 2)
-    )
-    big_l = torch.exp(exponent)  # (P, N, N)
-    second = torch.sum((big_l @ beta[cols].unsqueeze(2)).squeeze(2) * beta[rows], dim=1)  # beta_i' L beta_j
-    if inv_kernel is not None:
-        # model uncertainty, diagonal pairs only: - tr(K_i^{-1} L_ii), then + sf2_i after scaling by t
-        diag = torch.nonzero(rows == cols).squeeze(1)
-        trace_term = torch.sum(inv_kernel * big_l[diag], dim=(1, 2))
-        second = second.index_add(0, diag, -trace_term)
+    half_i = (log_k[rows] + torch.sum(ii_q * ii, dim=2)).unsqueeze(2)  # (P, N, 1)
+    half_j = (log_k[cols] + torch.sum(ij_q * ij, dim=2)).unsqueeze(2)
+    # L_ij[n, m] = exp(half_i[n] + half_j[m] + 2 ii_q[n] . ij[m]) = exp(X[n] . Y[m]) with the two halves as extra
+    # columns; second_ij = sum(W_ij * L_ij) with W_ij = beta_i beta_j' (- K_i^{-1} on the diagonal pairs)
+    ones = torch.ones_like(half_i)
+    x_aug = torch.cat([2.0 * ii_q, half_i, ones], dim=2)  # (P, N, D + 2)
+    y_aug = torch.cat([ij, ones, half_j], dim=2)
+    weights = pair_weights(beta, inv_kernel) if weights is None else weights
+    second = _weighted_exp_sum(x_aug, y_aug, weights)
     second = second * t_pair
     if inv_kernel is not None:
+        # model uncertainty on the diagonal pairs: sf2_i - tr(K_i^{-1} L_ii) (the trace is in the weights)
         second = second.index_add(0, diag, signal_var)
-    s_mat = torch.zeros(n_outputs, n_outputs, dtype=mean.dtype, device=mean.device)
-    s_mat = s_mat.index_put((rows, cols), second).index_put((cols, rows), second)
-    s_mat = s_mat - torch.outer(mean_out, mean_out)
-    s_mat = 0.5 * (s_mat + s_mat.T)
+    s_mat = second[table] - torch.outer(mean_out, mean_out)  # symmetric: both halves read the same pair
     return mean_out, s_mat, io_cov
+
+
+def rbf_network_moments(
+    mean: torch.Tensor, cov: torch.Tensor, centers: torch.Tensor, beta: torch.Tensor, log_lengthscales: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Moments of one RBF network ``f(x) = sum_n beta_n exp(-|x - c_n|^2_Lambda / 2)`` at a Gaussian input.
+
+    The same numbers as :func:`gp_moments` with one output, unit signal variance and no model uncertainty
+    (``gp2`` of the PILCO code, the policy's pre-saturation output), with the fewer operations one output
+    needs: the policy is propagated once per predicted step, and its gradient taken through all of them.
+
+    Parameters
+    ----------
+    mean : tensor (D,)
+    cov : tensor (D, D)
+    centers : tensor (N, D)
+    beta : tensor (N,)
+    log_lengthscales : tensor (D,)
+
+    Returns
+    -------
+    M, S : tensor ()
+        Mean and variance of ``f(x)``.
+    C : tensor (D,)
+        ``cov^{-1} cov(x, f(x))``.
+    """
+    dim = mean.shape[0]
+    eye = torch.eye(dim, dtype=mean.dtype, device=mean.device)
+    inp = centers - mean  # (N, D)
+    inv_ell = torch.exp(-log_lengthscales)  # (D,)
+    scaled = inp * inv_ell
+    b_mat = inv_ell.unsqueeze(1) * cov * inv_ell.unsqueeze(0) + eye
+    t = torch.linalg.solve(b_mat, scaled.T).T  # scaled @ B^-1
+    lb = torch.exp(-0.5 * torch.sum(scaled * t, dim=1)) * beta
+    c = 1.0 / torch.sqrt(torch.linalg.det(b_mat))
+    mean_out = torch.sum(lb) * c
+    io_cov = ((t * inv_ell).T @ lb) * c  # (D,)
+    inv_ell2 = torch.exp(-2.0 * log_lengthscales)
+    r_mat = cov * (2.0 * inv_ell2) + eye
+    q_mat = 0.5 * torch.linalg.solve(r_mat, cov)
+    ii = inp * inv_ell2
+    ii_q = ii @ q_mat
+    half = -0.5 * torch.sum(scaled * scaled, dim=1) + torch.sum(ii_q * ii, dim=1)  # (N,)
+    big_l = torch.exp(half.unsqueeze(1) + half.unsqueeze(0) + 2.0 * ii_q @ ii.T)
+    second = (beta @ big_l @ beta) / torch.sqrt(torch.linalg.det(r_mat))
+    return mean_out, second - mean_out * mean_out, io_cov
 
 
 def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -145,6 +237,13 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
     decay = torch.exp(-0.5 * var)
     e_sin = decay * torch.sin(mean)
     e_cos = decay * torch.cos(mean)
+    if n == 1:  # one angle (the propagation's case, twice per step): the formulas below with fewer operations
+        plus = 1.0 - decay * decay
+        minus = (decay * decay - 1.0) * decay * decay
+        sin2, cos2 = torch.sin(2.0 * mean), torch.cos(2.0 * mean)
+        ss, cc, sc = 0.5 * (plus - minus * cos2), 0.5 * (plus + minus * cos2), 0.5 * minus * sin2
+        s_out = torch.stack([torch.cat([ss, sc]), torch.cat([sc, cc])])
+        return torch.cat([e_sin, e_cos]), s_out, torch.stack([e_cos, -e_sin], dim=1)
     lq = -0.5 * (var.unsqueeze(1) + var.unsqueeze(0))
     q = torch.exp(lq)
     plus = torch.exp(lq + cov) - q

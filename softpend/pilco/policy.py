@@ -5,7 +5,7 @@ The pre-saturation output is ``pi~(x) = sum_i beta_i exp(-|x - c_i|^2_Lambda / 2
 ``sn = 0.01`` whose "training set" is the learnable pseudo-inputs ``c_i`` (centres) and pseudo-targets
 ``t_i`` (the PILCO code's ``congp``).  The torque is ``u = u_max (9 sin pi~ + sin 3 pi~) / 8`` (``gSat``),
 which never exceeds ``u_max`` and has exact Gaussian moments, so the policy can be propagated by moment
-matching (:func:`~softpend.pilco.moments.gp_moments` without model uncertainty, then
+matching (:func:`~softpend.pilco.moments.rbf_network_moments`: ``gp_moments`` without model uncertainty, then
 :func:`~softpend.pilco.moments.sin_saturation_moments`).
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from softpend.checks import non_negative, positive
-from softpend.pilco.moments import gp_moments, sin_saturation_moments
+from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
 __all__ = ["RBFPolicy"]
 
@@ -64,6 +64,7 @@ class RBFPolicy:
         self.centers = torch.tensor(centers, dtype=DTYPE)
         self.targets = float(target_std) * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
         self.log_lengthscales = torch.log(torch.tensor(lengthscales, dtype=DTYPE))
+        self._beta_cache: tuple | None = None
 
     @property
     def n_inputs(self) -> int:
@@ -89,6 +90,19 @@ class RBFPolicy:
 
     # ------------------------------------------------------------------ evaluation
     def _beta(self) -> torch.Tensor:
+        """``(K_cc + sn^2 I)^{-1} t``, computed once per set of parameters (a rollout's steps share it, and
+        with autograd on, its gradient is accumulated once per rollout rather than once per step)."""
+        params = self.parameters()
+        versions = tuple(p._version for p in params)
+        cache = self._beta_cache
+        if (cache is not None and cache[0] == torch.is_grad_enabled() and cache[2] == versions
+                and all(a is b for a, b in zip(cache[1], params))):
+            return cache[3]
+        beta = self._compute_beta()
+        self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
+        return beta
+
+    def _compute_beta(self) -> torch.Tensor:
         ell = torch.exp(self.log_lengthscales)
         d = (self.centers.unsqueeze(1) - self.centers.unsqueeze(0)) / ell
         k = torch.exp(-0.5 * torch.sum(d * d, dim=2))
@@ -111,11 +125,7 @@ class RBFPolicy:
 
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
-        beta = self._beta().unsqueeze(0)
-        m_z, s_z, c_z = gp_moments(
-            mean, cov, self.centers, beta, self.log_lengthscales.unsqueeze(0), torch.zeros(1, dtype=DTYPE)
-        )
-        m_z, s_z, c_z = m_z[0], s_z[0, 0], c_z[:, 0]
+        m_z, s_z, c_z = rbf_network_moments(mean, cov, self.centers, self._beta(), self.log_lengthscales)
         m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, self.torque_limit_nm)
         return m_u, s_u, c_z * c_u
 

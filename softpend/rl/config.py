@@ -81,6 +81,11 @@ class DQNConfig:
         Re-initialise the Q-network (and its target and the optimiser's moments) after every this many training
         episodes, keeping the replay buffer (:func:`softpend.rl.dqn.reset_q_network`); 0: never.  The reset
         follows the evaluation of that episode, so the agent evaluated there is the one before the reset.
+    reset_catch_up_gradient_steps : int
+        Gradient steps on the replay buffer right after each reset, before the next plant step (no plant time),
+        with the target network copied every ``target_update_interval * gradient_steps / train_freq`` of them,
+        as often as in training (:func:`softpend.rl.dqn.catch_up`); 0: the fresh network learns only at the
+        pace of the real steps that follow.
 
     Bookkeeping
     -----------
@@ -146,6 +151,7 @@ class DQNConfig:
     clip_q_targets: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     reset_every_episodes: int = 0
+    reset_catch_up_gradient_steps: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_duration_s: float = TEST_EPISODE_S
@@ -171,6 +177,8 @@ class DQNConfig:
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
+        object.__setattr__(self, "reset_catch_up_gradient_steps",
+                           int_at_least("reset_catch_up_gradient_steps", self.reset_catch_up_gradient_steps, 0))
         object.__setattr__(self, "rod_randomisation",
                            in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
         object.__setattr__(self, "observation_delay_steps",

@@ -395,8 +395,7 @@ def catch_up(model: DQN, gradient_steps: int, copy_every: int) -> None:
     while done < gradient_steps:
         n = min(copy_every, gradient_steps - done)
         model.train(gradient_steps=n, batch_size=model.batch_size)
-        with torch.no_grad():
-            model.q_net_target.load_state_dict(model.q_net.state_dict())
+        model.q_net_target.load_state_dict(model.q_net.state_dict())
         done += n
 
 

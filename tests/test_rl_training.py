@@ -42,6 +42,26 @@ def test_held_action_controller_queries_every_repeat_steps():
     assert len(calls) == 10  # 40 plant steps / 4
 
 
+def test_greedy_predictor_gives_the_actions_of_stable_baselines3_predict():
+    from softpend.rl.dqn import build_dqn
+    from softpend.rl.training_env import greedy_predictor
+
+    config = DQNConfig()
+    model = build_dqn(config, make_training_env(config), seed=3, episodes=1)
+    generator = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # weights that make every action greedy somewhere
+        for p in model.q_net.parameters():
+            p.copy_(torch.randn(p.shape, generator=generator) / np.sqrt(p.shape[-1]))
+    vectors = np.random.default_rng(0).normal(size=(400, model.observation_space.shape[0]))
+    predict = greedy_predictor(model)
+    expected = model.predict(vectors, deterministic=True)[0]
+    assert np.array_equal(predict(vectors), expected) and len(set(expected.tolist())) >= 3
+    singles = [predict(v) for v in vectors[:50]]
+    assert all(isinstance(a, np.integer) for a in singles)
+    assert [int(a) for a in singles] == [int(model.predict(v, deterministic=True)[0]) for v in vectors[:50]]
+    assert [make_base_env(config).unwrapped.torque_from_action(a) for a in singles[:5]]  # the env takes them
+
+
 def test_dqn_trains_checkpoints_and_resumes(tmp_path):
     config = DQNConfig(learning_starts=20, **TINY)
     model, log = train_dqn(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)

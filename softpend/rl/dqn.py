@@ -50,7 +50,7 @@ from softpend.rl.agent_files import (
 )
 from softpend.rl.config import DQNConfig, load_config, save_config
 from softpend.rl.target_dqn import TargetDQN
-from softpend.rl.training_env import make_training_env, policy_controller
+from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
 __all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "reset_q_network", "catch_up",
@@ -129,7 +129,7 @@ def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[
 
     seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
     duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
-    return evaluate_batched(lambda vectors: model.predict(vectors, deterministic=True)[0], config.task, seeds,
+    return evaluate_batched(greedy_predictor(model), config.task, seeds,
                             duration_s, action_repeat=config.action_repeat, n_torque_levels=config.n_torque_levels,
                             name=name, **options)
 

@@ -24,7 +24,7 @@ from softpend.plant import make_plant
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
 
-__all__ = ["ActionRepeat", "HeldActionController", "RandomisedRod", "RigObservation", "make_base_env",
+__all__ = ["ActionRepeat", "HeldActionController", "RandomisedRod", "RigObservation", "greedy_predictor", "make_base_env",
            "make_training_env", "policy_controller"]
 
 
@@ -155,6 +155,26 @@ class HeldActionController(GymPolicyController):
         self._held_action = None
 
 
+def greedy_predictor(model: Any) -> Callable[[np.ndarray], Any]:
+    """The greedy action of a stable-baselines3 DQN model for one observation vector (an integer) or a batch
+    of them (an integer array): ``model.predict(vectors, deterministic=True)[0]`` without its per-call
+    bookkeeping (input checks, training-mode switches, tensor round trips), which costs more than the
+    Q-network itself.  The same float32 forward pass and argmax, so the same actions.
+    """
+    import torch
+
+    q_net = model.q_net
+
+    def predict(vectors: np.ndarray) -> Any:
+        x = torch.as_tensor(np.asarray(vectors), dtype=torch.float32)
+        with torch.no_grad():
+            actions = q_net(x.reshape(1, -1) if x.ndim == 1 else x).argmax(dim=1).numpy()
+        return actions[0] if x.ndim == 1 else actions
+
+    return predict
+
+
 def policy_controller(model: Any, config: DQNConfig) -> HeldActionController:
-    """Controller for :func:`softpend.evaluation.evaluate_controller` from a stable-baselines3 model."""
-    return HeldActionController(lambda o: model.predict(o, deterministic=True)[0], make_base_env(config), config.action_repeat)
+    """Controller for :func:`softpend.evaluation.evaluate_controller` from a stable-baselines3 DQN model (its
+    greedy actions, :func:`greedy_predictor`)."""
+    return HeldActionController(greedy_predictor(model), make_base_env(config), config.action_repeat)

@@ -276,12 +276,13 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     covers the trial, so that it compares with the real trial."""
     import softpend.pilco.loop as loop
 
-    lengths, totals = [], []
+    lengths, totals, widths = [], [], []
     rollout = Propagator.rollout
 
     def spy(self, m0, s0, n_steps):
         out = rollout(self, m0, s0, n_steps)
         lengths.append(n_steps)
+        widths.append(self.cost_width_m)
         costs = out[2].detach()
         totals.append((float(costs[:10].sum()), float(costs.sum())))
         return out
@@ -298,13 +299,20 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
 
     monkeypatch.setattr(Propagator, "rollout", spy)
     monkeypatch.setattr(loop, "_run_trial", first_policy_trial_swings_up)
-    config = PilcoConfig(**{**TINY, "prediction_s": 2.0}, seed=3)
+    config = PilcoConfig(**{**TINY, "prediction_s": 2.0, "cost_width_after_swing_up_m": 0.05}, seed=3)
     assert config.n_prediction_steps == 20 and config.n_horizon_steps == 10
     result = run_pilco(config, progress=False)
     assert [math.isfinite(r.swing_up_time_s) for r in result.records] == [False, True, False]
     first = lengths.index(20)
     assert set(lengths[:first]) == {10} and set(lengths[first:]) == {20} and first > 0
+    # the narrower cost width comes with the longer prediction, in the search and in the recorded real cost
+    assert set(widths[:first]) == {config.cost_width_m} and set(widths[first:]) == {0.05}
+    assert [r.cost_width_m for r in result.records] == [None, config.cost_width_m, 0.05]
     record = result.records[2]
+    spec = state_spec(config.state)
+    assert record.real_cost == pytest.approx(
+        loop._trial_cost(config, spec, result.real_states[2], record.cost_rate_width_rad_s, 0.05), rel=1e-12)
+    assert record.real_cost > loop._trial_cost(config, spec, result.real_states[2], record.cost_rate_width_rad_s)
     # the last rollout is the one of the kept policy, after the search
     assert record.predicted_cost == pytest.approx(totals[-1][0], rel=1e-9)
     assert totals[-1][1] > totals[-1][0]  # the part after the trial adds cost: it was searched over
@@ -324,7 +332,7 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
     ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
-    ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan),
+    ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan), ("cost_width_after_swing_up_m", 0.0),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):

@@ -113,6 +113,10 @@ class PilcoConfig:
         The random trial's torques are ``+-torque_limit_nm`` (else uniform in between).
     cost_width_m : float
         Width ``w`` of the saturating cost [m].
+    cost_width_after_swing_up_m : float, optional
+        Width of the saturating cost once a policy trial has swung the rod up (as ``prediction_s``) [m]:
+        narrower than ``cost_width_m``, it makes a rod that wobbles about upright cost more than one held
+        still (``None``: ``cost_width_m`` throughout).
     cost_rate_width_rad_s : float, optional
         Width of the cost's tip-rate factor [rad/s] (``None``: the cost depends on the tip position only; see
         :mod:`softpend.pilco.propagation`).
@@ -186,6 +190,7 @@ class PilcoConfig:
     random_hold_max_s: float = 0.6
     random_bang_bang: bool = True
     cost_width_m: float = 0.15
+    cost_width_after_swing_up_m: Optional[float] = None
     cost_rate_width_rad_s: Optional[float] = 3.0
     cost_rate_after_rad: Optional[float] = 0.5
     cost_exploration: float = -0.2
@@ -235,7 +240,7 @@ class PilcoConfig:
             self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
         except TypeError:
             raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
-        for name in ("cost_rate_width_rad_s", "cost_rate_after_rad"):
+        for name in ("cost_rate_width_rad_s", "cost_rate_after_rad", "cost_width_after_swing_up_m"):
             optional_positive(name, getattr(self, name))
         for name in ("random_bang_bang", "stop_when_balanced"):
             boolean(name, getattr(self, name))
@@ -285,8 +290,9 @@ class TrialRecord:
     """One real trial and what PILCO predicted for it.
 
     ``predicted_cost`` is the expected total cost that the model predicts for the policy that ran the trial (NaN for
-    the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_rate_width_rad_s``
-    the tip-rate width of that cost (``None``: position only); ``policy_restarts`` the searches from fresh
+    the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_width_m`` the width
+    of that cost [m] (``None``: the config's ``cost_width_m``), ``cost_rate_width_rad_s`` its tip-rate width
+    (``None``: position only); ``policy_restarts`` the searches from fresh
     random policies that the search made besides the one from the previous policy.
     """
 
@@ -306,6 +312,7 @@ class TrialRecord:
     cpu_s_total: float = float("nan")
     cost_rate_width_rad_s: Optional[float] = None
     policy_restarts: int = 0
+    cost_width_m: Optional[float] = None
 
 
 @dataclass
@@ -415,10 +422,12 @@ def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta
     return 1.0 - np.exp(-exponent)
 
 
-def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray, rate_width: Optional[float]) -> float:
-    """The cost (tip-rate factor of width ``rate_width`` or none) summed along a real trial's states (H+1, d),
-    the start excluded."""
-    return float(real_cost(states[1:, spec.tip_angle_index], config.task.rod.length_m, config.cost_width_m,
+def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray, rate_width: Optional[float],
+                width_m: Optional[float] = None) -> float:
+    """The cost (width ``width_m``, default ``config.cost_width_m``; tip-rate factor of width ``rate_width`` or
+    none) summed along a real trial's states (H+1, d), the start excluded."""
+    width_m = config.cost_width_m if width_m is None else width_m
+    return float(real_cost(states[1:, spec.tip_angle_index], config.task.rod.length_m, width_m,
                            states[1:, spec.tip_rate_index], rate_width).sum())
 
 
@@ -654,7 +663,10 @@ def run_pilco(
         rate_width = config.cost_rate_width_rad_s if rate_on else None
         swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)
         n_search = config.n_prediction_steps if swung_up else n_steps
-        propagator = Propagator(spec, gp, policy, params.length_m, config.cost_width_m, rate_width,
+        width_m = config.cost_width_m
+        if swung_up and config.cost_width_after_swing_up_m is not None:
+            width_m = config.cost_width_after_swing_up_m
+        propagator = Propagator(spec, gp, policy, params.length_m, width_m, rate_width,
                                 config.cost_exploration)
         restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search
         objective, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
@@ -679,10 +691,10 @@ def run_pilco(
         record = TrialRecord(
             index=index, kind="policy", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
             predicted_cost=predicted,
-            real_cost=_trial_cost(config, spec, states, rate_width),
+            real_cost=_trial_cost(config, spec, states, rate_width, width_m),
             swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
             n_gp_points=len(subset), wall_s_total=float("nan"), cost_rate_width_rad_s=rate_width,
-            policy_restarts=n_restarts,
+            policy_restarts=n_restarts, cost_width_m=width_m,
         )
         # ---- test it (not counted as interaction, not used for learning)
         if config.eval_seeds:

@@ -324,6 +324,10 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     assert not any(math.isfinite(r.swing_up_time_s) for r in plain.records) and set(lengths) == {10}
     assert plain.records[1].predicted_cost == result.records[1].predicted_cost
     assert PilcoConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "prediction_s"}).prediction_s is None
+    # a config saved before the narrower cost existed is one without it (its runs used cost_width_m throughout)
+    saved = {k: v for k, v in PilcoConfig().to_dict().items() if k != "cost_width_after_swing_up_m"}
+    assert PilcoConfig().cost_width_after_swing_up_m == 0.075
+    assert PilcoConfig.from_dict(saved).cost_width_after_swing_up_m is None
 
 
 @pytest.mark.parametrize("field, value", [

@@ -43,6 +43,8 @@ PAGE_TIMEOUT_S = 90.0
 #: Width of the browser window and the screenshots [px]; screenshots keep at most the top MAX_SHOT_PX.
 WINDOW_WIDTH_PX = 1280
 MAX_SHOT_PX = 12_000
+#: Pages open at once (each in a browser context of its own): their load waits and settling sleeps overlap.
+PAGES_AT_ONCE = 4
 
 
 def chromium_executable(install: bool = True) -> str:
@@ -341,17 +343,23 @@ def book_pages(html_dir: Path) -> list[str]:
 
 def check_pages(html_dir: Path | str, pages: Sequence[str], screenshot_dir: Path | str,
                 executable: str | None = None) -> dict[str, list[str]]:
-    """Open each page (path relative to ``html_dir``) in headless Chromium; returns ``{page: problems}``
+    """Open each page (path relative to ``html_dir``; :data:`PAGES_AT_ONCE` at a time) in headless Chromium;
+    returns ``{page: problems}``
     (see the module docstring) and saves ``screenshot_dir/<page>.png``."""
     html_dir, screenshot_dir = Path(html_dir).resolve(), Path(screenshot_dir)
     executable = executable or chromium_executable()
 
     async def run(browser_url: str, base_url: str) -> dict[str, list[str]]:
         tools = await DevTools.connect(browser_url)
+        slots = asyncio.Semaphore(PAGES_AT_ONCE)
+
+        async def check(page: str) -> list[str]:
+            async with slots:
+                return await _check_page(tools, html_dir, base_url, page,
+                                         screenshot_dir / (page.replace("/", "__") + ".png"))
+
         try:
-            return {page: await _check_page(tools, html_dir, base_url, page,
-                                            screenshot_dir / (page.replace("/", "__") + ".png"))
-                    for page in pages}
+            return dict(zip(pages, await asyncio.gather(*(check(page) for page in pages))))
         finally:
             tools.close()
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import shutil
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
+from browser import chromium_executable
 from softpend.study import book
 from softpend.study.book import build_html, run_notebooks
 
@@ -32,9 +34,27 @@ def quick_book(tmp_path_factory):
             hashes[cells] = hash_code(self, cells)
         return hashes[cells]
 
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
-        yield _build_quick_book(tmp_path_factory.mktemp("book"))
+    # the browser checks of the book (tests/test_book_browser.py) come after the build, on this worker: find or
+    # install Chromium meanwhile (apt-get on a fresh machine waits mostly on the network and the disk)
+    with ThreadPoolExecutor(1) as pool:
+        _CHROMIUM.append(pool.submit(chromium_executable))
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
+            yield _build_quick_book(tmp_path_factory.mktemp("book"))
+
+
+#: Chromium found or being installed, started by the fixture ``quick_book`` (at most one entry).
+_CHROMIUM: list[Future] = []
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """Debian's chromium (tests/browser.py), installed with apt-get when missing; a clear failure (never a skip)
+    otherwise.  The search or install that ``quick_book`` started is awaited when there is one."""
+    try:
+        return _CHROMIUM[0].result() if _CHROMIUM else chromium_executable()
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
 
 
 def _build_quick_book(root: Path):

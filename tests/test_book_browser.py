@@ -5,20 +5,10 @@ from __future__ import annotations
 
 import shutil
 
-import pytest
 from PIL import Image
 
-from browser import book_pages, check_pages, chromium_executable
+from browser import book_pages, check_pages
 from softpend.study.book import toc_notebooks
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    """Debian's chromium, installed with apt-get when missing; a clear failure (never a skip) otherwise."""
-    try:
-        return chromium_executable()
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
 
 
 def test_every_page_of_the_quick_book_reads_clean_in_chromium(quick_book, chromium, tmp_path_factory):

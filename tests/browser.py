@@ -344,8 +344,7 @@ def book_pages(html_dir: Path) -> list[str]:
 def check_pages(html_dir: Path | str, pages: Sequence[str], screenshot_dir: Path | str,
                 executable: str | None = None) -> dict[str, list[str]]:
     """Open each page (path relative to ``html_dir``; :data:`PAGES_AT_ONCE` at a time) in headless Chromium;
-    returns ``{page: problems}``
-    (see the module docstring) and saves ``screenshot_dir/<page>.png``."""
+    returns ``{page: problems}`` (see the module docstring) and saves ``screenshot_dir/<page>.png``."""
     html_dir, screenshot_dir = Path(html_dir).resolve(), Path(screenshot_dir)
     executable = executable or chromium_executable()
 

@@ -14,6 +14,9 @@ from softpend.study.book import build_html, run_notebooks
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
+#: Chromium found or being installed, started by the fixture ``quick_book`` (at most one entry).
+_CHROMIUM: list[Future] = []
+
 
 @pytest.fixture(scope="session")
 def quick_book(tmp_path_factory):
@@ -41,10 +44,6 @@ def quick_book(tmp_path_factory):
         with pytest.MonkeyPatch.context() as patch:
             patch.setattr(book.PackageCode, "code_hashes", code_hashes_once)
             yield _build_quick_book(tmp_path_factory.mktemp("book"))
-
-
-#: Chromium found or being installed, started by the fixture ``quick_book`` (at most one entry).
-_CHROMIUM: list[Future] = []
 
 
 @pytest.fixture(scope="session")

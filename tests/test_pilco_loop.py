@@ -28,7 +28,7 @@ RIGID = RodParams(n_links=1, stiffness_scale=100.0)
 
 TINY = dict(
     state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=2, n_basis=5, max_gp_points=15,
-    gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0,
+    gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0, compiled=False,
 )
 
 
@@ -353,7 +353,7 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
     args = ["train", "--algo", "pilco", "--episodes", "1", "--out", str(out), "--no-progress", "--seed", "1"]
     for key, value in TINY.items():
         if key not in ("n_policy_trials",):
-            value = json.dumps(value) if isinstance(value, (tuple, type(None))) else value  # eval_seeds=[1000], null
+            value = json.dumps(value) if isinstance(value, (tuple, type(None), bool)) else value  # [1000], null, false
             args += ["--set", f"{key}={value}"]
     assert main(args + ["--set", "cost_rate_width_rad_s=2.5", "--set", "cost_rate_after_rad=null"]) == 0
     summary = json.loads(capsys.readouterr().out)

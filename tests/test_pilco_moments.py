@@ -260,3 +260,51 @@ def test_policy_reuses_its_beta_until_a_parameter_changes():
     policy.set_vector(policy.get_vector() * 1.1)
     np.testing.assert_allclose(policy._beta().numpy(), policy._compute_beta().numpy())
     assert not np.allclose(policy._beta().numpy(), changed.numpy())
+
+
+def test_the_compiled_rollout_equals_the_eager_one_with_its_gradient():
+    """``compiled=True`` gives the eager objective and gradient (to rounding) with the book's state, the tip-rate
+    cost and exploration, also when a later search changes the cost width and a restart brings new parameters;
+    without gradients it runs eagerly, and it refuses models it cannot compile.  Torch runs two threads here: the
+    compiled loops must stay serial (with parallel ones the backward pass corrupted the heap)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        _compare_compiled_and_eager_rollouts()
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _compare_compiled_and_eager_rollouts() -> None:
+    spec = state_spec("tip_bend")
+    rng = np.random.default_rng(12)
+    states = np.cumsum(rng.normal(0.0, 0.3, (41, 4)), axis=0) + np.array([0.0, 0.0, 0.0, np.pi])
+    u = rng.uniform(-0.06, 0.06, 40)
+    x = np.hstack([spec.model_inputs(states[:-1]), u[:, None]])
+    gp = MultiOutputGP(x, states[1:] - states[:-1])
+    gp.fit(10)
+    m0 = torch.zeros(4, dtype=F64)
+    m0[3] = np.pi
+    s0 = 0.05**2 * torch.eye(4, dtype=F64)
+    for width_m, seed in ((0.15, 0), (0.075, 1)):
+        policy = RBFPolicy(spec.model_inputs(states[:8]), np.array([1.0, 1.0, 0.7, 0.7, 0.7]), 0.06, seed=seed,
+                           target_std=1.0)
+        results = []
+        for compiled in (False, True):
+            prop = Propagator(spec, gp, policy, 0.3, width_m, cost_rate_width_rad_s=3.0, exploration=-0.2,
+                              compiled=compiled)
+            leaf = torch.tensor(policy.get_vector(), requires_grad=True)
+            policy.set_vector(leaf, requires_grad=True)
+            means, covs, costs, total = prop.rollout(m0, s0, 12)
+            (grad,) = torch.autograd.grad(total, leaf)
+            results.append((float(total), grad, means.detach(), covs.detach()))
+            policy.set_vector(leaf.detach())
+        (eager, eager_grad, eager_means, eager_covs), (fast, fast_grad, fast_means, fast_covs) = results
+        assert 5.0 < eager < 12.0 and float(eager_grad.abs().max()) > 1e-4  # a rollout with something to optimise
+        assert fast == pytest.approx(eager, rel=1e-12)
+        assert _rel(fast_grad, eager_grad) < 1e-9
+        assert _rel(fast_means, eager_means) < 1e-12 and _rel(fast_covs, eager_covs) < 1e-10
+    with torch.no_grad():  # no gradient: the eager rollout, the same numbers
+        assert float(prop.rollout(m0, s0, 12)[3]) == pytest.approx(eager, rel=1e-12)
+    with pytest.raises(ValueError, match="moment_function"):
+        Propagator(spec, gp, object(), 0.3, 0.15, compiled=True)

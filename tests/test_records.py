@@ -81,7 +81,7 @@ def test_current_runs_are_read_from_the_run_folders(tmp_path):
     assert run["seeds"] == [1] and run["details"] == {1: "2 episodes"}
     assert run["outcome"][1] == (log.real_s_to_balance() if log.first_balanced() else f"never within {log.plant_s:g} plant s")
     result = run_pilco(PilcoConfig(state="tip", horizon_s=1.0, prediction_s=None, n_policy_trials=1, n_basis=5, max_gp_points=15,
-                                   gp_iterations=5, policy_iterations=3, eval_seeds=(1000,), eval_duration_s=1.0),
+                                   gp_iterations=5, policy_iterations=3, eval_seeds=(1000,), eval_duration_s=1.0, compiled=False),
                        progress=False)
     result.save(tmp_path / "pilco" / "pilco-seed0")
     (run,) = current_pilco_runs(tmp_path / "pilco", [0, 2])

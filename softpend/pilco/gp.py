@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 import scipy.optimize
@@ -215,7 +215,11 @@ class MultiOutputGP:
 
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Exact moment matching at a Gaussian input, with model uncertainty (see :func:`~softpend.pilco.moments.gp_moments`)."""
-        return gp_moments(
-            mean, cov, self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel,
-            self.pair_weights,
-        )
+        function, parameters = self.moment_function()
+        return function(mean, cov, *parameters)
+
+    def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
+        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)`` (see
+        :meth:`softpend.pilco.policy.RBFPolicy.moment_function`)."""
+        return gp_moments, (self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel,
+                            self.pair_weights)

@@ -11,15 +11,27 @@ matching (:func:`~softpend.pilco.moments.rbf_network_moments`: ``gp_moments`` wi
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import torch
 
 from softpend.checks import non_negative, positive
 from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
-__all__ = ["RBFPolicy"]
+__all__ = ["RBFPolicy", "saturated_rbf_moments"]
 
 DTYPE = torch.float64
+
+
+def saturated_rbf_moments(mean: torch.Tensor, cov: torch.Tensor, centers: torch.Tensor, beta: torch.Tensor,
+                          log_lengthscales: torch.Tensor, torque_limit_nm: float
+                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the torque ``u`` [N m] of an RBF network with weights
+    ``beta`` squashed by the sine saturation at ``torque_limit_nm``, at a Gaussian input ``x ~ N(mean, cov)``."""
+    m_z, s_z, c_z = rbf_network_moments(mean, cov, centers, beta, log_lengthscales)
+    m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, torque_limit_nm)
+    return m_u, s_u, c_z * c_u
 
 
 class RBFPolicy:
@@ -125,9 +137,14 @@ class RBFPolicy:
 
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
-        m_z, s_z, c_z = rbf_network_moments(mean, cov, self.centers, self._beta(), self.log_lengthscales)
-        m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, self.torque_limit_nm)
-        return m_u, s_u, c_z * c_u
+        function, parameters = self.moment_function()
+        return function(mean, cov, *parameters)
+
+    def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
+        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)``: ``(f, params)`` with
+        ``f(mean, cov, *params) == moments(mean, cov)`` (for a compiled propagation, whose graph then holds no
+        reference to this object)."""
+        return saturated_rbf_moments, (self.centers, self._beta(), self.log_lengthscales, self.torque_limit_nm)
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, torch.Tensor]:

@@ -297,7 +297,7 @@ def _compare_compiled_and_eager_rollouts() -> None:
             policy.set_vector(leaf, requires_grad=True)
             means, covs, costs, total = prop.rollout(m0, s0, 12)
             (grad,) = torch.autograd.grad(total, leaf)
-            results.append((float(total), grad, means.detach(), covs.detach()))
+            results.append((float(total.detach()), grad, means.detach(), covs.detach()))
             policy.set_vector(leaf.detach())
         (eager, eager_grad, eager_means, eager_covs), (fast, fast_grad, fast_means, fast_covs) = results
         assert 5.0 < eager < 12.0 and float(eager_grad.abs().max()) > 1e-4  # a rollout with something to optimise

@@ -175,7 +175,7 @@ class Propagator:
         negative: optimism in the face of the model's uncertainty).
     compiled : bool
         Run each predicted step of a :meth:`rollout` that records gradients through ``torch.compile``: the same
-        numbers to rounding, its objective and gradient about 1.7 times faster at the book's sizes (200 GP points,
+        numbers to rounding, its objective and gradient about 1.8 times faster at the book's sizes (200 GP points,
         100 steps), after a compilation of 15-40 s for each new number of GP points (cached on disk across
         processes).  It needs a C++ compiler; without one the rollout warns once and runs eagerly.  ``dynamics``
         and ``policy`` then also need ``moment_function() -> (f, params)`` with ``f(mean, cov, *params)`` their
@@ -346,7 +346,10 @@ def _compiled_step_and_cost():
 
         def guarded(*args):
             try:
-                return compiled(*args)
+                with warnings.catch_warnings():  # the compiler's notes on tracing our cached helpers, once per process
+                    warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
+                    warnings.filterwarnings("ignore", category=FutureWarning, module="torch")
+                    return compiled(*args)
             except Exception as exc:  # noqa: BLE001 (no C++ compiler, or an unsupported platform)
                 if not _is_compiler_failure(exc):
                     raise

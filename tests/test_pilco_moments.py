@@ -308,3 +308,41 @@ def _compare_compiled_and_eager_rollouts() -> None:
         assert float(prop.rollout(m0, s0, 12)[3]) == pytest.approx(eager, rel=1e-12)
     with pytest.raises(ValueError, match="moment_function"):
         Propagator(spec, gp, object(), 0.3, 0.15, compiled=True)
+
+
+def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monkeypatch):
+    """A machine without a C++ compiler: the compiled rollout falls back to the eager one (same numbers) with one
+    warning; an error of the computation itself is not taken for a compiler failure."""
+    import softpend.pilco.propagation as propagation
+    from torch._inductor.exc import CppCompileError
+
+    calls = []
+
+    def broken_compile(function, **options):
+        def run(*args):
+            calls.append(1)
+            raise CppCompileError(["g++"], "g++: not found")
+        return run
+
+    monkeypatch.setattr(propagation, "_COMPILED", [])
+    monkeypatch.setattr(torch, "compile", broken_compile)
+    spec = state_spec("tip")
+    rng = np.random.default_rng(6)
+    states = np.column_stack([rng.uniform(-6, 6, 30), rng.uniform(-np.pi, np.pi, 30)])
+    u = rng.uniform(-0.06, 0.06, 30)
+    gp = MultiOutputGP(np.hstack([spec.model_inputs(states), u[:, None]]), np.column_stack([0.05 * states[:, 0], u]))
+    policy = RBFPolicy(spec.model_inputs(states[:5]), np.array([3.0, 0.7, 0.7]), 0.06, seed=1)
+    m0, s0 = torch.tensor([0.0, np.pi], dtype=F64), 0.01 * torch.eye(2, dtype=F64)
+    eager = float(Propagator(spec, gp, policy, 0.3, 0.1).rollout(m0, s0, 4)[3])
+    prop = Propagator(spec, gp, policy, 0.3, 0.1, compiled=True)
+    with pytest.warns(RuntimeWarning, match="torch.compile is unavailable"):
+        assert float(prop.rollout(m0, s0, 4)[3].detach()) == eager
+    assert float(prop.rollout(m0, s0, 4)[3].detach()) == eager and len(calls) == 1  # no second attempt
+
+    def failing(*args):
+        raise torch.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(propagation, "_COMPILED", [])
+    monkeypatch.setattr(torch, "compile", lambda function, **options: failing)
+    with pytest.raises(torch.linalg.LinAlgError):
+        prop.rollout(m0, s0, 4)

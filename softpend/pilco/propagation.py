@@ -343,8 +343,11 @@ def _compiled_step_and_cost():
     two)."""
     if not _COMPILED:
         compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True, options={"cpp.threads": 1})
+        usable = [True]
 
         def guarded(*args):
+            if not usable[0]:
+                return _step_and_cost(*args)
             try:
                 with warnings.catch_warnings():  # the compiler's notes on tracing our cached helpers, once per process
                     warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
@@ -355,7 +358,7 @@ def _compiled_step_and_cost():
                     raise
                 warnings.warn(f"torch.compile is unavailable ({type(exc).__name__}); PILCO's rollouts run eagerly",
                               RuntimeWarning, stacklevel=2)
-                _COMPILED[0] = _step_and_cost
+                usable[0] = False
                 return _step_and_cost(*args)
 
         _COMPILED.append(guarded)

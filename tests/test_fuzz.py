@@ -176,7 +176,8 @@ def rewrite_zip(data: bytes, change: Callable[[str, bytes], bytes]) -> bytes:
 TINY_RL = ["--set", "episode_s=0.2", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.2", "--set", "learning_starts=5",
            "--set", "buffer_size=1000", "--set", "net_arch=[16]"]
 TINY_PILCO = ["--set", "state=tip", "--set", "horizon_s=0.5", "--set", "prediction_s=null", "--set", "eval_seeds=[1000]", "--set", "eval_duration_s=0.5",
-              "--set", "n_basis=3", "--set", "max_gp_points=10", "--set", "gp_iterations=2", "--set", "policy_iterations=1"]
+              "--set", "n_basis=3", "--set", "max_gp_points=10", "--set", "gp_iterations=2", "--set", "policy_iterations=1",
+              "--set", "compiled=false"]
 
 
 @pytest.fixture(scope="module")

@@ -19,6 +19,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("beam", "softpend.study.bench.beam:bench_beam"),
     ("rl", "softpend.study.bench.rl:bench_rl"),
     ("pilco", "softpend.study.bench.pilco:bench_pilco"),
+    ("pilco_search", "softpend.study.bench.pilco:bench_pilco_search"),
     ("hardware", "softpend.study.bench.hardware:bench_hardware"),
     ("rig_control", "softpend.study.bench.rig_control:bench_rig_control"),
     ("sysid", "softpend.study.bench.sysid:bench_sysid"),

@@ -26,6 +26,18 @@ otherwise; their final policies measured on :data:`softpend.study.presets.REPORT
 * ``pilco_real_s_to_balance`` over those runs as a median with a bootstrap interval
   (``pilco_ten_real_s_to_balance``, ``_low``, ``_high``), and the slowest run's CPU seconds
   (``pilco_ten_max_train_cpu_s``; target: under 600 s of one core).
+
+``softpend bench --only pilco_search`` (:func:`bench_pilco_search`): one policy-search objective and its gradient
+at the book's sizes (200 GP points of the ``tip_bend`` state, 30 basis functions, 100 predicted steps, the
+tip-rate cost and exploration), eager and through ``torch.compile``, on one thread, alternately in one process:
+
+* ``pilco_search_objective_ms_eager``, ``pilco_search_objective_ms_compiled`` -- CPU milliseconds per objective
+  and gradient (median of the repeats);
+* ``pilco_search_compiled_speedup`` -- their ratio;
+* ``pilco_search_compile_s`` -- CPU seconds of the first compiled call (the compilation, or loading it from the
+  on-disk cache);
+* ``pilco_search_objective_rel_difference``, ``pilco_search_gradient_rel_difference`` -- how far the compiled
+  objective and gradient are from the eager ones (relative).
 """
 
 from __future__ import annotations
@@ -75,3 +87,63 @@ def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
         out[f"pilco_ten_real_s_to_balance_{end}"] = figures.get(f"pilco_real_s_to_balance_{end}", float("nan"))
     out["pilco_ten_max_train_cpu_s"] = max(result.train_cpu_s for result in results)
     return out
+
+
+def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
+    """The "pilco_search" benchmark group (see the module docstring).  The GP is fitted to a random walk of the
+    book's state: the cost of a search depends on the sizes, not on the data."""
+    import time
+
+    import numpy as np
+
+    from softpend.pilco.gp import MultiOutputGP
+    from softpend.pilco.loop import DTYPE, _initial_distribution, _random_policy
+    from softpend.pilco.propagation import Propagator, state_spec
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        config = PilcoConfig()
+        spec = state_spec(config.state)
+        rng = np.random.default_rng(0)
+        n = config.max_gp_points
+        states = np.cumsum(rng.normal(0.0, 0.3, (n + 1, spec.dim)), axis=0)
+        states[:, spec.angle_indices] += np.pi
+        torque_nm = rng.uniform(-1.0, 1.0, n) * config.task.torque_limit_nm
+        inputs = np.hstack([spec.model_inputs(states[:-1]), torque_nm[:, None]])
+        gp = MultiOutputGP(inputs, states[1:] - states[:-1])
+        gp.fit(20)
+        policy = _random_policy(spec, states, inputs[:, :-1], config.n_basis, config.task.torque_limit_nm,
+                                np.random.default_rng(1), config.restart_target_std)
+        m0, s0 = _initial_distribution(spec, config.initial_std)
+        vector = policy.get_vector()
+
+        def objective(propagator: Propagator) -> tuple[float, np.ndarray, float]:
+            start = time.process_time()
+            leaf = torch.tensor(vector, dtype=DTYPE, requires_grad=True)
+            policy.set_vector(leaf, requires_grad=True)
+            total = propagator.rollout(m0, s0, config.n_prediction_steps)[3]
+            (grad,) = torch.autograd.grad(total, leaf)
+            return float(total.detach()), grad.numpy().copy(), time.process_time() - start
+
+        propagators = {compiled: Propagator(spec, gp, policy, config.task.rod.length_m, config.cost_width_m,
+                                            config.cost_rate_width_rad_s, config.cost_exploration, compiled=compiled)
+                       for compiled in (False, True)}
+        eager_value, eager_grad, _ = objective(propagators[False])
+        compiled_value, compiled_grad, compile_s = objective(propagators[True])
+        times: dict[bool, list[float]] = {False: [], True: []}
+        for _ in range(repeats):
+            for compiled, propagator in propagators.items():
+                times[compiled].append(objective(propagator)[2])
+    finally:
+        torch.set_num_threads(threads)
+    eager_ms, compiled_ms = (1000.0 * float(np.median(times[c])) for c in (False, True))
+    return {
+        "pilco_search_objective_ms_eager": eager_ms,
+        "pilco_search_objective_ms_compiled": compiled_ms,
+        "pilco_search_compiled_speedup": eager_ms / compiled_ms,
+        "pilco_search_compile_s": compile_s,
+        "pilco_search_objective_rel_difference": abs(compiled_value - eager_value) / abs(eager_value),
+        "pilco_search_gradient_rel_difference": float(np.max(np.abs(compiled_grad - eager_grad))
+                                                      / np.max(np.abs(eager_grad))),
+    }

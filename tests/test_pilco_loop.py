@@ -385,3 +385,21 @@ def test_soft_rod_balanced_with_less_than_90_plant_seconds(seed):
     assert result.records[-1].balanced, [(r.index, r.eval_upright_std_rad) for r in result.records]
     assert result.records[-1].eval_upright_std_rad <= 0.1
     assert result.real_seconds_to_balance < 90.0
+
+
+def test_a_run_uses_one_torch_thread_and_gives_the_callers_threads_back():
+    """Two threads change the last digits of the searches, which a run follows to other policies: run_pilco
+    therefore pins one thread (the callback sees one), restores the caller's count and gives the same run."""
+    before = torch.get_num_threads()
+    seen = []
+    try:
+        torch.set_num_threads(2)
+        two = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False,
+                        callback=lambda record: seen.append(torch.get_num_threads()))
+        assert torch.get_num_threads() == 2
+        torch.set_num_threads(1)
+        one = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False)
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1, 1]
+    assert [r.predicted_cost for r in two.records[1:]] == [r.predicted_cost for r in one.records[1:]]

@@ -598,7 +598,22 @@ def run_pilco(
     Returns
     -------
     PilcoResult
+
+    The run uses one torch thread (the caller's count is restored after it): with two threads the arithmetic
+    differs in the last digits, and a PILCO run follows them to other policies, so the same seed gives the same
+    run whatever the caller's threads.
     """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _run_pilco(config, progress, callback)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run_pilco(config: Optional[PilcoConfig], progress: bool,
+               callback: Optional[Callable[[TrialRecord], None]]) -> PilcoResult:
+    """:func:`run_pilco` on the caller's torch threads."""
     from tqdm.auto import tqdm
 
     from softpend.envs import SoftPendulumEnv

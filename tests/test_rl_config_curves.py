@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import metrics_from_trajectory
-from softpend.rl.config import DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
+from softpend.rl.config import REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
 from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 
@@ -41,6 +41,27 @@ def test_config_of_another_version_is_a_clear_error(tmp_path):
     (tmp_path / "c.json").write_text('{"class": "MBPOConfig", "model_epochs": 3}')
     with pytest.raises(ValueError, match="not a config of this version"):
         load_config(tmp_path / "c.json")
+
+
+@pytest.mark.parametrize("config", [DQNConfig(reset_every_episodes=20), MBPOConfig()])
+def test_saved_configs_with_removed_fields_load_when_they_trained_as_this_version(tmp_path, config):
+    """A run folder of a version that still had a removed field is found complete if the field held the value at
+    which this version trains (the book reuses it); with any other value it is another version's run."""
+    import dataclasses
+    import json
+
+    save_config(config, tmp_path / "c.json")
+    assert REMOVED_FIELDS and not set(REMOVED_FIELDS) & {f.name for f in dataclasses.fields(config)}
+    data = json.loads((tmp_path / "c.json").read_text())
+    for field, value in REMOVED_FIELDS.items():
+        (tmp_path / "old.json").write_text(json.dumps({**data, field: value}))
+        assert load_config(tmp_path / "old.json") == config
+        other = (not value) if isinstance(value, bool) else value + 1
+        (tmp_path / "old.json").write_text(json.dumps({**data, field: other}))
+        with pytest.raises(ValueError, match=f"not a config of this version: {field}"):
+            load_config(tmp_path / "old.json")
+        with pytest.raises(ValueError, match="unknown"):
+            config_from_overrides(config, {field: json.dumps(value)})
 
 
 def test_rollout_schedule_is_linear_like_mbrl_lib():

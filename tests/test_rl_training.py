@@ -384,41 +384,6 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
         DQNConfig(reset_every_episodes=-1)
 
 
-def test_catch_up_after_a_reset_fits_the_fresh_network_to_the_buffer_and_copies_its_target(tmp_path, monkeypatch):
-    import torch.nn.functional as F
-
-    import softpend.rl.dqn as dqn
-
-    config = DQNConfig(learning_starts=20, reset_every_episodes=2, reset_catch_up_gradient_steps=300,
-                       gradient_steps=2, target_update_interval=25, **TINY)
-    calls, losses = [], []
-    real_catch_up = dqn.catch_up
-
-    def td_loss(model):
-        data = model.replay_buffer.sample(512)
-        with torch.no_grad():
-            target = data.rewards + (1 - data.dones) * model.gamma * model.q_net_target(data.next_observations).max(1, keepdim=True)[0]
-            current = torch.gather(model.q_net(data.observations), 1, data.actions.long())
-        return float(F.smooth_l1_loss(current, target))
-
-    def spy(model, gradient_steps, copy_every):
-        before = model._n_updates
-        fresh = td_loss(model)
-        real_catch_up(model, gradient_steps, copy_every)
-        calls.append((gradient_steps, copy_every, model._n_updates - before))
-        losses.append((fresh, td_loss(model)))
-        assert all(torch.equal(a, b) for a, b in zip(model.q_net.parameters(), model.q_net_target.parameters()))
-
-    monkeypatch.setattr(dqn, "catch_up", spy)
-    train_dqn(config, seed=3, episodes=3, run_dir=tmp_path, progress=False)
-    assert calls == [(300, 50, 300)]  # one reset (after episode 2), 25 agent steps x 2 gradient steps per copy
-    fresh, fitted = losses[0]
-    assert fitted < 0.5 * fresh  # the fresh network's TD error on the buffer falls
-    monkeypatch.setattr(dqn, "catch_up", real_catch_up)
-    with pytest.raises(ValueError, match="reset_catch_up_gradient_steps"):
-        DQNConfig(reset_catch_up_gradient_steps=-1)
-
-
 def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
     from softpend.rl.dqn import build_dqn, reset_q_network
 

@@ -81,11 +81,6 @@ class DQNConfig:
         Re-initialise the Q-network (and its target and the optimiser's moments) after every this many training
         episodes, keeping the replay buffer (:func:`softpend.rl.dqn.reset_q_network`); 0: never.  The reset
         follows the evaluation of that episode, so the agent evaluated there is the one before the reset.
-    reset_catch_up_gradient_steps : int
-        Gradient steps on the replay buffer right after each reset, before the next plant step (no plant time),
-        with the target network copied every ``target_update_interval * gradient_steps / train_freq`` of them,
-        as often as in training (:func:`softpend.rl.dqn.catch_up`); 0: the fresh network learns only at the
-        pace of the real steps that follow.
 
     Bookkeeping
     -----------
@@ -151,7 +146,6 @@ class DQNConfig:
     clip_q_targets: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     reset_every_episodes: int = 0
-    reset_catch_up_gradient_steps: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_duration_s: float = TEST_EPISODE_S
@@ -177,8 +171,6 @@ class DQNConfig:
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
-        object.__setattr__(self, "reset_catch_up_gradient_steps",
-                           int_at_least("reset_catch_up_gradient_steps", self.reset_catch_up_gradient_steps, 0))
         object.__setattr__(self, "rod_randomisation",
                            in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
         object.__setattr__(self, "observation_delay_steps",
@@ -290,9 +282,6 @@ class MBPOConfig(DQNConfig):
         (per component, widened by 10 % of its range on each side): the Q-network is never asked to
         bootstrap from states unlike any the plant has shown, where the model and the network both
         extrapolate.
-    model_limit_tip_reach : bool
-        Keep the model's predicted tip within the rod's reach
-        (:attr:`softpend.sysid.TrainConfig.limit_tip_reach`).  Off: the guard did not help DQN-MBPO.
 
     DQN fields that differ from :class:`DQNConfig`
     ----------------------------------------------
@@ -323,7 +312,6 @@ class MBPOConfig(DQNConfig):
     model_fit_steps: int = 1500
     model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
-    model_limit_tip_reach: bool = False
     start_branch_fraction: float = 0.75
     rollouts_within_data: bool = True
     gradient_steps: int = 12
@@ -348,8 +336,7 @@ class MBPOConfig(DQNConfig):
         )
         for name in ("real_ratio", "start_branch_fraction"):
             in_unit_interval(name, getattr(self, name))
-        for name in ("model_limit_tip_reach", "rollouts_within_data"):
-            boolean(name, getattr(self, name))
+        boolean("rollouts_within_data", self.rollouts_within_data)
         schedule = tuple(int(v) for v in self.rollout_schedule)
         if len(schedule) != 4 or schedule[0] < 0 or schedule[1] < schedule[0] or schedule[2] < 1 or schedule[3] < 1:
             raise ValueError(
@@ -411,6 +398,12 @@ def config_to_dict(config: DQNConfig) -> dict[str, Any]:
     return data
 
 
+#: Fields that configs of earlier versions hold and this version does not, each with the value at which this
+#: version trains as those did: :func:`load_config` drops such a field when it holds that value (so that the
+#: run folders of those versions are still found complete) and refuses the config otherwise.
+REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_limit_tip_reach": False}
+
+
 def save_config(config: DQNConfig, path: Path) -> None:
     """Write ``config`` as JSON (with its class name)."""
     data = {"class": type(config).__name__, **config_to_dict(config)}
@@ -431,6 +424,9 @@ def load_config(path: Path) -> DQNConfig:
     cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(name) if isinstance(name, str) else None
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
+    for field, value in REMOVED_FIELDS.items():
+        if field in data and data.pop(field) != value:
+            raise ValueError(f"{path}: not a config of this version: {field} (no longer a field) is not {value!r}")
     try:
         task = Task.from_dict(data.pop("task"))
         return cls(task=task, **{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})

@@ -53,7 +53,7 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "reset_q_network", "catch_up",
+__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "reset_q_network",
            "train_dqn", "run_training"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
@@ -311,9 +311,6 @@ class TrainingCallback(BaseCallback):
         if self._pending_reset:
             self._pending_reset = False
             reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
-            if self.config.reset_catch_up_gradient_steps:
-                catch_up(self.model, self.config.reset_catch_up_gradient_steps,
-                         self.config.target_update_interval * self.config.gradient_steps // self.config.train_freq)
         if self._pending_checkpoint:
             self._pending_checkpoint = False
             self.checkpoint()
@@ -382,21 +379,6 @@ def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
                     torch.nn.init.uniform_(layer.bias, -bound, bound, generator=generator)
         model.q_net_target.load_state_dict(model.q_net.state_dict())
     model.policy.optimizer.state.clear()
-
-
-def catch_up(model: DQN, gradient_steps: int, copy_every: int) -> None:
-    """``gradient_steps`` gradient steps of ``model`` on its replay buffer (``model.train``), the target network
-    copied from the online one after every ``copy_every`` of them and after the last: a freshly reset network
-    fitted to the data gathered so far before it acts (no plant time; the draws come from the buffer's
-    generator, as in training)."""
-    int_at_least("gradient_steps", gradient_steps, 1)
-    int_at_least("copy_every", copy_every, 1)
-    done = 0
-    while done < gradient_steps:
-        n = min(copy_every, gradient_steps - done)
-        model.train(gradient_steps=n, batch_size=model.batch_size)
-        model.q_net_target.load_state_dict(model.q_net.state_dict())
-        done += n
 
 
 def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:

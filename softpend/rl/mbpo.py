@@ -212,7 +212,7 @@ class MBPOTrainer:
         result = fit_dynamics_model(
             self.dataset(),
             TrainConfig(information="full", hidden_widths=c.model_hidden_widths, ensemble_size=c.ensemble_size,
-                        limit_tip_reach=c.model_limit_tip_reach,
+                        limit_tip_reach=False,
                         max_epochs=epochs, patience=max(3, epochs // 4), batch_size=c.model_batch_size,
                         learning_rate=3e-3, seed=self.seed * 1000 + self.n_fits),
             progress=self.progress,

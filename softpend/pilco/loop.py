@@ -71,6 +71,7 @@ from softpend.pilco.controller import PilcoController, RandomTorqueController
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
 from softpend.pilco.policy import RBFPolicy
 from softpend.pilco.propagation import Propagator, StateSpec, state_spec
+from softpend.torch_threads import one_torch_thread
 
 __all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
 
@@ -603,12 +604,8 @@ def run_pilco(
     differs in the last digits, and a PILCO run follows them to other policies, so the same seed gives the same
     run whatever the caller's threads.
     """
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with one_torch_thread():
         return _run_pilco(config, progress, callback)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _run_pilco(config: Optional[PilcoConfig], progress: bool,

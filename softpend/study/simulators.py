@@ -13,30 +13,12 @@ import numpy as np
 
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
+from softpend.torch_threads import one_torch_thread
 
-__all__ = ["REFERENCE_SUBSTEPS", "HubErrorReference", "hub_error_inputs", "hub_error_reference", "hub_errors_rad", "one_torch_thread"]
+__all__ = ["REFERENCE_SUBSTEPS", "HubErrorReference", "hub_error_inputs", "hub_error_reference", "hub_errors_rad"]
 
 #: Sub-steps of the Exudyn reference run (converged to well below the errors compared).
 REFERENCE_SUBSTEPS = 200
-
-
-def one_torch_thread():
-    """Context: torch on one thread (restored afterwards)."""
-    import contextlib
-
-    import torch
-
-    @contextlib.contextmanager
-    def scope():
-        before = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            yield torch
-        finally:
-            torch.set_num_threads(before)
-
-    return scope()
-
 
 
 class HubErrorReference(NamedTuple):

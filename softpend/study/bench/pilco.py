@@ -47,6 +47,7 @@ import dataclasses
 import torch
 
 from softpend.pilco.loop import PilcoConfig, run_pilco
+from softpend.torch_threads import one_torch_thread
 
 ROOT = "runs/bench-pilco"
 #: Seeds of the benchmark runs.
@@ -100,9 +101,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
     from softpend.pilco.loop import DTYPE, _initial_distribution, _random_policy
     from softpend.pilco.propagation import Propagator, state_spec
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with one_torch_thread():
         config = PilcoConfig()
         spec = state_spec(config.state)
         rng = np.random.default_rng(0)
@@ -135,8 +134,6 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         for _ in range(repeats):
             for compiled, propagator in propagators.items():
                 times[compiled].append(objective(propagator)[2])
-    finally:
-        torch.set_num_threads(threads)
     eager_ms, compiled_ms = (1000.0 * float(np.median(times[c])) for c in (False, True))
     return {
         "pilco_search_objective_ms_eager": eager_ms,

@@ -42,7 +42,8 @@ import numpy as np
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 from softpend.study.bench import mujoco_chain
-from softpend.study.simulators import hub_error_reference, hub_errors_rad, one_torch_thread as _one_thread
+from softpend.study.simulators import hub_error_reference, hub_errors_rad
+from softpend.torch_threads import one_torch_thread as _one_thread
 
 N_STEPS = 4000
 

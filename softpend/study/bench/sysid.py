@@ -37,6 +37,7 @@ from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
 from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
+from softpend.torch_threads import one_torch_thread
 
 #: Seed of the training data and of the held-out data.
 TRAIN_SEED = 0
@@ -66,9 +67,7 @@ def rollout_steps_per_s(model: torch.nn.Module, batch: int = ROLLOUT_BATCH, step
 
 def bench_sysid() -> dict[str, float]:
     """Babbling rate, training time, rollout rate and held-out accuracy of the default pipeline."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with one_torch_thread():
         protocol = BabbleProtocol()
         start = time.perf_counter()
         data = babble(protocol, seed=TRAIN_SEED, progress=False)
@@ -112,8 +111,6 @@ def bench_sysid() -> dict[str, float]:
         out.update(greybox_figures(data, test, best_model))
         out.update(greybox_twin_figures())
         return {k: float(v) if np.isfinite(v) else float("nan") for k, v in out.items()}
-    finally:
-        torch.set_num_threads(threads)
 
 
 def simulator_yardsticks(

@@ -103,7 +103,8 @@ class PilcoConfig:
         summed over the trial's length only, to compare with the real trial.
     n_policy_trials : int
         Largest number of policy trials after the random ones (the random draws of the trials it allows are
-        the same whatever its value: every purpose has its own stream, see ``seed``).
+        the same whatever its value: every purpose has its own stream, see ``seed``; so a run that balances
+        within a smaller budget is the same run).  8 trials of ``horizon_s`` after the random trial: 54 plant s.
     n_random_trials : int
         Random-torque trials before the first policy search (each ``horizon_s`` long, counted as
         interaction); more of them give the first GP model more of the state space.
@@ -192,7 +193,7 @@ class PilcoConfig:
     control_dt_s: float = 0.1
     horizon_s: float = 6.0
     prediction_s: Optional[float] = TEST_EPISODE_S
-    n_policy_trials: int = 6
+    n_policy_trials: int = 8
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
     random_hold_max_s: float = 0.6

@@ -43,7 +43,7 @@ from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 from softpend.study.bench import mujoco_chain
 from softpend.study.simulators import hub_error_reference, hub_errors_rad
-from softpend.torch_threads import one_torch_thread as _one_thread
+from softpend.torch_threads import one_torch_thread
 
 N_STEPS = 4000
 
@@ -156,7 +156,7 @@ def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int =
     machine).  A compiled chain is compiled by an untimed first step."""
     from softpend.plant.batched import BatchedPRBChain
 
-    with _one_thread() as torch:
+    with one_torch_thread() as torch:
         dtype = getattr(torch, dtype_name)
         chain = BatchedPRBChain(RodParams(n_links=n_links), batch_size=batch_size, integrator=integrator,
                                 compiled=compiled, dtype=dtype)
@@ -184,7 +184,7 @@ def vector_env_steps_per_s(n_links: int = 4, num_envs: int = 1024, n_steps: int 
     wall-clock second and per CPU second of this process."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
-    with _one_thread():
+    with one_torch_thread():
         env = SoftPendulumVectorEnv(num_envs=num_envs, params=RodParams(n_links=n_links), integrator=integrator,
                                     compiled=compiled)
         actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)

@@ -31,6 +31,19 @@ __all__ = [
 ]
 
 
+def _solve(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``torch.linalg.solve(a, b)`` without its check for a singular ``a``: the same factorisation and numbers,
+    and no error-raising side effect in a compiled graph (with one, torch neither reuses the compiled rollout
+    of an earlier process from its disk caches nor caches it; a process then spends 15-20 s compiling each
+    graph).  A singular ``a`` gives non-finite moments, which the policy search scores as a failed rollout."""
+    return torch.linalg.solve_ex(a, b)[0]
+
+
+def _inv(a: torch.Tensor) -> torch.Tensor:
+    """``torch.linalg.inv(a)`` without its singularity check (see :func:`_solve`)."""
+    return torch.linalg.inv_ex(a)[0]
+
+
 @functools.lru_cache(maxsize=None)
 def _pair_tables(n_outputs: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """The output pairs ``i <= j`` (rows, cols, in :func:`torch.triu_indices` order), the positions of the pairs
@@ -132,7 +145,7 @@ def gp_moments(
     inv_ell = torch.exp(-log_lengthscales)  # (E, D)
     scaled = inp.unsqueeze(0) * inv_ell.unsqueeze(1)  # (E, N, D)
     b_mat = inv_ell.unsqueeze(2) * cov.unsqueeze(0) * inv_ell.unsqueeze(1) + eye  # (E, D, D)
-    t = torch.linalg.solve(b_mat, scaled.transpose(1, 2)).transpose(1, 2)  # (E, N, D) = scaled @ B^-1
+    t = _solve(b_mat, scaled.transpose(1, 2)).transpose(1, 2)  # (E, N, D) = scaled @ B^-1
     ell_weights = torch.exp(-0.5 * torch.sum(scaled * t, dim=2))  # (E, N)
     lb = ell_weights * beta
     signal_var = torch.exp(log_signal_var)
@@ -147,7 +160,7 @@ def gp_moments(
     inv_ell2 = torch.exp(-2.0 * log_lengthscales)  # (E, D)
     r_mat = cov.unsqueeze(0) * (inv_ell2[rows] + inv_ell2[cols]).unsqueeze(1) + eye  # (P, D, D)
     t_pair = 1.0 / torch.sqrt(torch.linalg.det(r_mat))  # (P,)
-    q_mat = 0.5 * torch.linalg.solve(r_mat, cov.expand_as(r_mat))  # (P, D, D), symmetric
+    q_mat = 0.5 * _solve(r_mat, cov.expand_as(r_mat))  # (P, D, D), symmetric
     ii = inp.unsqueeze(0) * inv_ell2[rows].unsqueeze(1)  # (P, N, D)
     ij = inp.unsqueeze(0) * inv_ell2[cols].unsqueeze(1)
     ii_q = ii @ q_mat
@@ -199,14 +212,14 @@ def rbf_network_moments(
     inv_ell = torch.exp(-log_lengthscales)  # (D,)
     scaled = inp * inv_ell
     b_mat = inv_ell.unsqueeze(1) * cov * inv_ell.unsqueeze(0) + eye
-    t = torch.linalg.solve(b_mat, scaled.T).T  # scaled @ B^-1
+    t = _solve(b_mat, scaled.T).T  # scaled @ B^-1
     lb = torch.exp(-0.5 * torch.sum(scaled * t, dim=1)) * beta
     c = 1.0 / torch.sqrt(torch.linalg.det(b_mat))
     mean_out = torch.sum(lb) * c
     io_cov = ((t * inv_ell).T @ lb) * c  # (D,)
     inv_ell2 = torch.exp(-2.0 * log_lengthscales)
     r_mat = cov * (2.0 * inv_ell2) + eye
-    q_mat = 0.5 * torch.linalg.solve(r_mat, cov)
+    q_mat = 0.5 * _solve(r_mat, cov)
     ii = inp * inv_ell2
     ii_q = ii @ q_mat
     half = -0.5 * torch.sum(scaled * scaled, dim=1) + torch.sum(ii_q * ii, dim=1)  # (N,)
@@ -314,10 +327,10 @@ def saturating_cost_moments(
     w = eye / width**2
     delta = mean - target
     sw = cov @ w + eye
-    s1 = w @ torch.linalg.inv(sw)
+    s1 = w @ _inv(sw)
     e_exp = torch.exp(-0.5 * delta @ s1 @ delta) / torch.sqrt(torch.linalg.det(sw))
     s2w = 2.0 * cov @ w + eye
-    s2 = w @ torch.linalg.inv(s2w)
+    s2 = w @ _inv(s2w)
     e2 = torch.exp(-delta @ s2 @ delta) / torch.sqrt(torch.linalg.det(s2w))
     return 1.0 - e_exp, torch.clamp(e2 - e_exp * e_exp, min=0.0)
 

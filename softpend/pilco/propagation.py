@@ -340,9 +340,18 @@ def _compiled_step_and_cost():
 
     The compiled loops run on one thread (``cpp.threads``): with torch 2.13 the OpenMP-parallel backward kernels of
     this graph corrupt the heap when torch has more than one thread (``tests/test_pilco_moments.py`` runs it with
-    two)."""
+    two).
+
+    A graph compiled by an earlier process is read from torch's disk caches (FX graph and AOT autograd caches), in
+    about a quarter of the time of compiling it; the AOT autograd cache takes a graph with a custom
+    ``torch.autograd.Function`` (:func:`~softpend.pilco.moments.gp_moments` has one, free of any state but its
+    tensors) only when ``autograd_cache_allow_custom_autograd_functions`` is set, which is set here for these
+    calls alone."""
     if not _COMPILED:
         compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True, options={"cpp.threads": 1})
+        import torch._functorch.config as functorch_config
+
+        cacheable = functorch_config.patch(autograd_cache_allow_custom_autograd_functions=True)
         usable = [True]
 
         def guarded(*args):
@@ -352,7 +361,8 @@ def _compiled_step_and_cost():
                 with warnings.catch_warnings():  # the compiler's notes on tracing our cached helpers, once per process
                     warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
                     warnings.filterwarnings("ignore", category=FutureWarning, module="torch")
-                    return compiled(*args)
+                    with cacheable:
+                        return compiled(*args)
             except Exception as exc:  # noqa: BLE001 (no C++ compiler, or an unsupported platform)
                 if not _is_compiler_failure(exc):
                     raise

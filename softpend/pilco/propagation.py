@@ -177,7 +177,7 @@ class Propagator:
         Run each predicted step of a :meth:`rollout` that records gradients through ``torch.compile``: the same
         numbers to rounding, its objective and gradient about twice as fast at the book's sizes (200 GP points,
         100 steps; ``softpend bench --only pilco_search``), after a compilation of 15-40 s for each new number of
-        GP points (cached on disk across processes).  It needs a C++ compiler; without one the rollout warns once
+        GP points, which a later process reads from torch's disk caches in about 5 s.  It needs a C++ compiler; without one the rollout warns once
         and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
         ``f(mean, cov, *params)`` their moments (:class:`~softpend.pilco.gp.MultiOutputGP`, :class:`~softpend.pilco.policy.RBFPolicy`).
     """

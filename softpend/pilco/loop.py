@@ -179,8 +179,8 @@ class PilcoConfig:
         Predict the rollouts of the policy searches through ``torch.compile``
         (:class:`~softpend.pilco.propagation.Propagator` ``compiled``): the same numbers to rounding, a search about
         twice as fast at the book's sizes after a compilation of 15-40 s per number of GP points (a later process
-        reads it from torch's disk caches in about 5 s; it needs a C++ compiler, and falls back to eager rollouts with a warning without one).  Off for tiny test
-        runs, where the compilation costs more than it saves.
+        reads it from torch's disk caches in about 5 s; it needs a C++ compiler, and falls back to eager rollouts
+        with a warning without one).  Off for tiny test runs, where the compilation costs more than it saves.
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
         starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;

@@ -177,8 +177,8 @@ class Propagator:
         Run each predicted step of a :meth:`rollout` that records gradients through ``torch.compile``: the same
         numbers to rounding, its objective and gradient about twice as fast at the book's sizes (200 GP points,
         100 steps; ``softpend bench --only pilco_search``), after a compilation of 15-40 s for each new number of
-        GP points, which a later process reads from torch's disk caches in about 5 s.  It needs a C++ compiler; without one the rollout warns once
-        and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
+        GP points, which a later process reads from torch's disk caches in about 5 s.  It needs a C++ compiler;
+        without one the rollout warns once and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
         ``f(mean, cov, *params)`` their moments (:class:`~softpend.pilco.gp.MultiOutputGP`, :class:`~softpend.pilco.policy.RBFPolicy`).
     """
 
@@ -343,7 +343,7 @@ def _compiled_step_and_cost():
     two).
 
     A graph compiled by an earlier process is read from torch's disk caches (FX graph and AOT autograd caches), in
-    about a quarter of the time of compiling it; the AOT autograd cache takes a graph with a custom
+    about a third of the time of compiling it; the AOT autograd cache takes a graph with a custom
     ``torch.autograd.Function`` (:func:`~softpend.pilco.moments.gp_moments` has one, free of any state but its
     tensors) only when ``autograd_cache_allow_custom_autograd_functions`` is set, which is set here for these
     calls alone."""

@@ -13,9 +13,11 @@ the test episodes, so that a policy which swings up and lets the rod fall once t
 costs more than one that holds it.
 Every trial -- the random-torque trial(s) and
 each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
-perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
-:func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
-other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
+perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``, except the optional upright trials
+(``n_upright_trials``): random torques for ``upright_trial_s`` from the rod held upright, as a person on the rig
+would hold it up and let go, which show the model the rod falling through the states above the swing.  Every
+trial runs through the shared :func:`softpend.evaluation.run_episode`, so it is the same plant and metrics as
+every other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
 
 After each policy trial the new policy is also tested with
 :func:`softpend.evaluation.evaluate_controller` (``eval_seeds``, ``eval_duration_s``); these test episodes

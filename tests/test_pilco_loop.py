@@ -123,33 +123,6 @@ def test_several_random_trials_come_first(tmp_path):
         loaded.policy.load_state_dict({k: v for k, v in state.items() if k != "targets"})
 
 
-def test_upright_trials_start_upright_and_leave_the_other_draws_alone(tmp_path):
-    """``n_upright_trials`` random trials start from the rod held upright, after the hanging random trial; they
-    last ``upright_trial_s``, count as interaction and feed the model; every other stream draws as before."""
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, n_upright_trials=2, upright_trial_s=0.5, seed=4)
-    result = run_pilco(config, progress=False)
-    assert [r.kind for r in result.records] == ["random", "upright", "upright", "policy"]
-    assert [r.index for r in result.records] == [0, 1, 2, 3]
-    np.testing.assert_allclose([r.plant_seconds_total for r in result.records], [1.0, 1.5, 2.0, 3.0])
-    assert result.records[-1].n_gp_points == 15  # 10 + 5 + 5 random points and the 10 of the trial, subsampled
-    start_noise = config.task.start_noise_rad
-    for states in result.real_states[1:3]:
-        assert states.shape == (6, 2)
-        assert abs(states[0, 1]) <= start_noise + 1e-9  # the tip starts upright (the straight rod, hub noise only)
-        assert abs(states[-1, 1]) > 5 * start_noise  # and has fallen 0.5 s later
-    assert not np.allclose(result.real_states[1], result.real_states[2])  # each draws its own start and torques
-    # the hanging random trial and the start of the policy trial are the draws of a run without upright trials
-    plain = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=4), progress=False)
-    np.testing.assert_array_equal(plain.real_states[0], result.real_states[0])
-    assert plain.real_states[1][0, 1] == pytest.approx(result.real_states[3][0, 1])
-    result.save(tmp_path)
-    assert PilcoResult.load(tmp_path).config == config
-    with pytest.raises(ValueError, match="upright_trial_s"):
-        PilcoConfig(**TINY, n_upright_trials=1, upright_trial_s=0.1)
-    with pytest.raises(ValueError, match="n_upright_trials"):
-        PilcoConfig(**TINY, n_upright_trials=-1)
-
-
 def test_came_near_upright_sees_a_fast_pass_through_the_top():
     spec = state_spec("tip")
     spin = np.column_stack([np.full(8, -10.0), np.pi - np.arange(8) * 1.0])  # 1 rad a step, through 0 (mod 2 pi)

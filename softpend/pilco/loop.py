@@ -13,11 +13,9 @@ the test episodes, so that a policy which swings up and lets the rod fall once t
 costs more than one that holds it.
 Every trial -- the random-torque trial(s) and
 each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
-perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``, except the optional upright trials
-(``n_upright_trials``): random torques for ``upright_trial_s`` from the rod held upright, as a person on the rig
-would hold it up and let go, which show the model the rod falling through the states above the swing.  Every
-trial runs through the shared :func:`softpend.evaluation.run_episode`, so it is the same plant and metrics as
-every other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
+perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
+:func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
+other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
 
 After each policy trial the new policy is also tested with
 :func:`softpend.evaluation.evaluate_controller` (``eval_seeds``, ``eval_duration_s``); these test episodes
@@ -116,14 +114,6 @@ class PilcoConfig:
         periods; see :class:`~softpend.pilco.controller.RandomTorqueController`).
     random_bang_bang : bool
         The random trial's torques are ``+-torque_limit_nm`` (else uniform in between).
-    n_upright_trials : int
-        Random-torque trials that start from the rod held upright (the environment's ``"upright"`` start, with the
-        task's start noise), after the hanging random trial(s) and before the first policy search; each lasts
-        ``upright_trial_s`` and is counted as interaction.  The rod falls through the states above the swing that
-        the hanging trials reach only briefly, with the random torques acting on it.  On the rig a person holds
-        the rod up and lets go.
-    upright_trial_s : float
-        Length of each upright trial [s].
     cost_width_m : float
         Width ``w`` of the saturating cost [m].
     cost_width_after_swing_up_m : float, optional
@@ -209,8 +199,6 @@ class PilcoConfig:
     random_hold_min_s: float = 0.2
     random_hold_max_s: float = 0.6
     random_bang_bang: bool = True
-    n_upright_trials: int = 0
-    upright_trial_s: float = 2.0
     cost_width_m: float = 0.15
     cost_width_after_swing_up_m: Optional[float] = 0.075
     cost_rate_width_rad_s: Optional[float] = 3.0
@@ -239,8 +227,7 @@ class PilcoConfig:
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         state_spec(self.state)
         for name in ("control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std",
-                     "upright_trial_s"):
+                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
             positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
@@ -249,13 +236,11 @@ class PilcoConfig:
             raise ValueError(f"control_dt_s must be a whole multiple of task.dt_s, got {self.control_dt_s!r}")
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
-        if int(round(self.upright_trial_s / self.control_dt_s)) < 2:
-            raise ValueError(f"upright_trial_s must cover at least two control steps, got {self.upright_trial_s!r}")
         optional_positive("prediction_s", self.prediction_s)
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
             raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
                              "(None predicts the trial's length)")
-        for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_upright_trials", 0), ("n_basis", 1), ("max_gp_points", 10),
+        for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
                           ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
         fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
@@ -302,7 +287,7 @@ class PilcoConfig:
     #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
     #: setting existed (so such a run is not taken for a run of a config with other values).
     MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None,
-                        "cost_width_after_swing_up_m": None, "compiled": False, "n_upright_trials": 0}
+                        "cost_width_after_swing_up_m": None, "compiled": False}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -471,11 +456,9 @@ def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, to
     return m0, (std**2) * torch.eye(spec.dim, dtype=DTYPE)
 
 
-def _run_trial(config: PilcoConfig, controller, seed: int, env, streams: dict[str, np.random.Generator],
-               duration_s: Optional[float] = None,
-               start: Optional[str] = None) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
-    """One real trial of ``duration_s`` (default ``config.horizon_s``) from the environment's start distribution
-    (or its ``start``); returns the episode, the states at the control steps (H+1, d) and the torques (H,).
+def _run_trial(config: PilcoConfig, controller, seed: int, env,
+               streams: dict[str, np.random.Generator]) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
+    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,).
 
     With the config's robustness options the trial runs on a rod drawn from ``streams["trial_rods"]`` and the
     controller sees late, noisy observations (noise from ``streams["trial_views"]``)."""
@@ -487,8 +470,7 @@ def _run_trial(config: PilcoConfig, controller, seed: int, env, streams: dict[st
     if config.observation_delay_steps > 0 or config.observation_noise_rad > 0:
         controller = LateNoisyController(controller, config.observation_delay_steps, config.observation_noise_rad,
                                          streams["trial_views"])
-    duration_s = config.horizon_s if duration_s is None else duration_s
-    episode = run_episode(controller, env, seed=seed, duration_s=duration_s, start=start)
+    episode = run_episode(controller, env, seed=seed, duration_s=config.horizon_s)
     if episode.diverged:
         raise SimulationDiverged(f"the plant diverged during a PILCO trial: {episode.diverged}")
     k = config.hold_steps
@@ -531,7 +513,7 @@ def _optimise_policy(
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
 RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts",
-                  "trial_rods", "trial_views", "upright_starts", "upright_torques")
+                  "trial_rods", "trial_views")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -675,27 +657,6 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         ))
         if callback:
             callback(records[-1])
-    for index in range(config.n_random_trials, config.n_random_trials + config.n_upright_trials):
-        random_controller = RandomTorqueController(
-            torque_limit, config.control_dt_s, seed=_draw_seed(streams["upright_torques"]),
-            hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
-        )
-        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["upright_starts"]), env,
-                                              streams, duration_s=config.upright_trial_s, start="upright")
-        inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
-        targets.append(states[1:] - states[:-1])
-        random_states.append(states)
-        plant_seconds += config.upright_trial_s
-        records.append(TrialRecord(
-            index=index, kind="upright", duration_s=config.upright_trial_s, plant_seconds_total=plant_seconds,
-            predicted_cost=float("nan"),
-            real_cost=_trial_cost(config, spec, states, config.cost_rate_width_rad_s if rate_on else None),
-            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-            n_gp_points=0, wall_s_total=time.perf_counter() - start_wall, cpu_s_total=time.process_time() - start_cpu,
-            cost_rate_width_rad_s=config.cost_rate_width_rad_s if rate_on else None,
-        ))
-        if callback:
-            callback(records[-1])
     result = PilcoResult(config=config, records=records, policy=None, gp_hyperparameters=None,  # type: ignore[arg-type]
                          real_states=list(random_states))
 
@@ -710,7 +671,7 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
 
     bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
     for trial in bar:
-        index = trial + config.n_random_trials + config.n_upright_trials - 1
+        index = trial + config.n_random_trials - 1
         # ---- learn the dynamics
         x_all = np.vstack(inputs)
         y_all = np.vstack(targets)

@@ -187,8 +187,9 @@ class PilcoConfig:
         least ``stuck_cost_fraction`` of the largest cost (1 per control step) in the real trial, the next trial
         is a random-torque trial (the first trial's kind of torques, own random streams) instead of a policy
         trial, and the next search starts from a fresh random policy (:func:`_random_policy` on all visited
-        states).  The trial counts against ``n_policy_trials`` and its data, as the latest trial, always enter
-        the next GP subset.  0: never (a run that does not meet the condition is the same run either way).
+        states).  The trial counts against ``n_policy_trials`` (the last trial of the budget is always a policy
+        trial) and its data, as the latest trial, always enter the next GP subset.  0: never (a run that does not
+        meet the condition is the same run either way).
     stuck_cost_fraction : float
         Share of the largest trial cost above which a policy trial counts as stuck (see ``stuck_policy_trials``),
         in ``(0, 1)``.
@@ -715,7 +716,7 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         width_m = config.cost_width_m
         if swung_up and config.cost_width_after_swing_up_m is not None:
             width_m = config.cost_width_after_swing_up_m
-        if _stuck(config, records):
+        if trial < config.n_policy_trials and _stuck(config, records):
             # ---- run-level restart: a random-torque trial instead of a policy trial, then a fresh policy
             episode, states, torques = _random_trial(config, env, streams, "reset_torques", "reset_starts")
             inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))

@@ -181,47 +181,13 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     np.testing.assert_array_equal(unneeded.policy.get_vector(), baseline.policy.get_vector())
 
 
-def test_a_stuck_run_restarts_with_a_random_torque_trial_and_a_fresh_policy(tiny_run):
-    """After ``stuck_policy_trials`` policy trials that each cost at least ``stuck_cost_fraction`` of the largest
-    cost, the next trial is a random-torque trial from the run's own streams and the next search starts from a fresh
-    policy (but never as the budget's last trial); before it the run is the run without the option."""
-    h = TINY["horizon_s"] / TINY["control_dt_s"]
-    assert tiny_run.records[1].real_cost >= 0.5 * h  # the tiny run hangs: its first policy trial is "stuck"
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 3}, seed=3, stuck_policy_trials=1, stuck_cost_fraction=0.5)
-    seen = []
-    result = run_pilco(config, progress=False, callback=seen.append)
-    assert [r.kind for r in result.records] == ["random", "policy", "reset", "policy"]
-    assert seen == result.records
-    np.testing.assert_allclose([r.plant_seconds_total for r in result.records], [1.0, 2.0, 3.0, 4.0])
-    for mine, theirs in zip(result.real_states[:2], tiny_run.real_states[:2]):
-        np.testing.assert_array_equal(mine, theirs)
-    assert result.records[1].real_cost == tiny_run.records[1].real_cost
-    reset = result.records[2]
-    assert math.isnan(reset.predicted_cost) and not reset.balanced and reset.n_gp_points == 0
-    # the reset trial's real cost is the cost of its recorded trajectory, and it is not the next policy trial of
-    # the run without the option
-    theta = result.real_states[2][1:, 1]
-    assert reset.real_cost == pytest.approx(real_cost(theta, 0.3, config.cost_width_m).sum())
-    assert not np.allclose(result.real_states[2], tiny_run.real_states[2])
-    assert len(result.real_states) == 4 and len(result.predicted_means) == 2
-    # the last trial of the budget is a policy trial: with a budget of two, the same run as without the option
-    untouched = run_pilco(PilcoConfig(**TINY, seed=3, stuck_policy_trials=1, stuck_cost_fraction=0.5),
-                          progress=False)
-    assert [r.kind for r in untouched.records] == [r.kind for r in tiny_run.records]
-    assert [r.real_cost for r in untouched.records] == [r.real_cost for r in tiny_run.records]
-    # a saved config without the option is one without it
-    saved = {k: v for k, v in config.to_dict().items() if k not in ("stuck_policy_trials", "stuck_cost_fraction")}
-    assert PilcoConfig.from_dict(saved).stuck_policy_trials == 0
-
-
 def test_random_streams_keep_their_draws_when_a_stream_is_appended():
     """Child k of ``SeedSequence(seed)`` depends on k only: the streams before the appended ones are those of a
-    run that spawned fewer (the runs before policy restarts, the robustness options and the run-level restart)."""
-    assert RANDOM_STREAMS[-6:] == ("policy_restarts", "trial_rods", "trial_views", "reset_starts", "reset_torques",
-                                   "reset_policies")
+    run that spawned fewer (the runs before policy restarts, and before the robustness options)."""
+    assert RANDOM_STREAMS[-3:] == ("policy_restarts", "trial_rods", "trial_views")
     streams = _random_streams(7)
-    older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 6)
-    for name, child in zip(RANDOM_STREAMS[:-6], older):
+    older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 3)
+    for name, child in zip(RANDOM_STREAMS[:-3], older):
         np.testing.assert_array_equal(streams[name].integers(0, 2**31 - 1, 5),
                                       np.random.default_rng(child).integers(0, 2**31 - 1, 5))
 
@@ -371,7 +337,6 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
     ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
     ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan), ("cost_width_after_swing_up_m", 0.0),
-    ("stuck_policy_trials", -1), ("stuck_cost_fraction", 0.0), ("stuck_cost_fraction", 1.0),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):

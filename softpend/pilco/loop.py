@@ -182,17 +182,6 @@ class PilcoConfig:
         twice as fast at the book's sizes after a compilation of 15-40 s per number of GP points (a later process
         reads it from torch's disk caches in about 5 s; it needs a C++ compiler, and falls back to eager rollouts
         with a warning without one).  Off for tiny test runs, where the compilation costs more than it saves.
-    stuck_policy_trials : int
-        Run-level restart: when this many policy trials in a row since the last random-torque trial each cost at
-        least ``stuck_cost_fraction`` of the largest cost (1 per control step) in the real trial, the next trial
-        is a random-torque trial (the first trial's kind of torques, own random streams) instead of a policy
-        trial, and the next search starts from a fresh random policy (:func:`_random_policy` on all visited
-        states).  The trial counts against ``n_policy_trials`` (the last trial of the budget is always a policy
-        trial) and its data, as the latest trial, always enter the next GP subset.  0: never (a run that does not
-        meet the condition is the same run either way).
-    stuck_cost_fraction : float
-        Share of the largest trial cost above which a policy trial counts as stuck (see ``stuck_policy_trials``),
-        in ``(0, 1)``.
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
         starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;
@@ -231,8 +220,6 @@ class PilcoConfig:
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0
     compiled: bool = True
-    stuck_policy_trials: int = 0
-    stuck_cost_fraction: float = 0.75
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -254,17 +241,12 @@ class PilcoConfig:
             raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
                              "(None predicts the trial's length)")
         for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
-                          ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0),
-                          ("stuck_policy_trials", 0)):
+                          ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
         fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
         if fraction >= 1.0:
             raise ValueError(f"restart_above_cost_fraction must be in [0, 1), got {self.restart_above_cost_fraction!r}")
         self.restart_above_cost_fraction = fraction
-        stuck = finite("stuck_cost_fraction", self.stuck_cost_fraction)
-        if not 0.0 < stuck < 1.0:
-            raise ValueError(f"stuck_cost_fraction must be in (0, 1), got {self.stuck_cost_fraction!r}")
-        self.stuck_cost_fraction = stuck
         try:
             self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
         except TypeError:
@@ -305,7 +287,7 @@ class PilcoConfig:
     #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
     #: setting existed (so such a run is not taken for a run of a config with other values).
     MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None,
-                        "cost_width_after_swing_up_m": None, "compiled": False, "stuck_policy_trials": 0}
+                        "cost_width_after_swing_up_m": None, "compiled": False}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -319,8 +301,6 @@ class PilcoConfig:
 class TrialRecord:
     """One real trial and what PILCO predicted for it.
 
-    ``kind`` is ``"random"`` (a random-torque trial before the first search), ``"policy"`` or ``"reset"`` (a
-    random-torque trial of the run-level restart, ``PilcoConfig.stuck_policy_trials``).
     ``predicted_cost`` is the expected total cost that the model predicts for the policy that ran the trial (NaN for
     the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_width_m`` the width
     of that cost [m] (``None``: the config's ``cost_width_m``), ``cost_rate_width_rad_s`` its tip-rate width
@@ -533,7 +513,7 @@ def _optimise_policy(
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
 RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts",
-                  "trial_rods", "trial_views", "reset_starts", "reset_torques", "reset_policies")
+                  "trial_rods", "trial_views")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -551,28 +531,6 @@ def _random_streams(seed: int) -> dict[str, np.random.Generator]:
 def _draw_seed(rng: np.random.Generator) -> int:
     """One seed in ``[0, 2**31 - 1)`` from ``rng``."""
     return int(rng.integers(0, 2**31 - 1))
-
-
-def _random_trial(config: PilcoConfig, env, streams: dict[str, np.random.Generator], torque_stream: str,
-                  start_stream: str) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
-    """A trial of held random torques (``config.random_hold_*``, ``random_bang_bang``) through :func:`_run_trial`;
-    the torque seed is drawn from ``streams[torque_stream]``, then the start seed from ``streams[start_stream]``."""
-    controller = RandomTorqueController(
-        config.task.rod.torque_limit_nm, config.control_dt_s,
-        seed=_draw_seed(streams[torque_stream]), hold_s=(config.random_hold_min_s, config.random_hold_max_s),
-        bang_bang=config.random_bang_bang,
-    )
-    return _run_trial(config, controller, _draw_seed(streams[start_stream]), env, streams)
-
-
-def _stuck(config: PilcoConfig, records: list[TrialRecord]) -> bool:
-    """Whether the last ``config.stuck_policy_trials`` trials are all policy trials whose real cost is at least
-    ``config.stuck_cost_fraction`` of the largest (one per control step of the trial)."""
-    k = config.stuck_policy_trials
-    if k == 0 or len(records) < k:
-        return False
-    threshold = config.stuck_cost_fraction * config.n_horizon_steps
-    return all(r.kind == "policy" and r.real_cost >= threshold for r in records[-k:])
 
 
 def _random_policy(spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray, n_basis: int,
@@ -679,7 +637,12 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
     plant_seconds = 0.0
     rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
     for index in range(config.n_random_trials):
-        episode, states, torques = _random_trial(config, env, streams, "random_torques", "random_starts")
+        random_controller = RandomTorqueController(
+            torque_limit, config.control_dt_s, seed=_draw_seed(streams["random_torques"]),
+            hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
+        )
+        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env,
+                                              streams)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         random_states.append(states)
@@ -709,34 +672,6 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
     bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
     for trial in bar:
         index = trial + config.n_random_trials - 1
-        if not rate_on and config.cost_rate_width_rad_s is not None:
-            rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
-        rate_width = config.cost_rate_width_rad_s if rate_on else None
-        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)
-        width_m = config.cost_width_m
-        if swung_up and config.cost_width_after_swing_up_m is not None:
-            width_m = config.cost_width_after_swing_up_m
-        if trial < config.n_policy_trials and _stuck(config, records):
-            # ---- run-level restart: a random-torque trial instead of a policy trial, then a fresh policy
-            episode, states, torques = _random_trial(config, env, streams, "reset_torques", "reset_starts")
-            inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
-            targets.append(states[1:] - states[:-1])
-            result.real_states.append(states)
-            plant_seconds += config.horizon_s
-            fresh = _random_policy(spec, np.vstack(result.real_states), np.vstack(inputs)[:, :-1], config.n_basis,
-                                   torque_limit, streams["reset_policies"])
-            policy.set_vector(fresh.get_vector())
-            records.append(TrialRecord(
-                index=index, kind="reset", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
-                predicted_cost=float("nan"), real_cost=_trial_cost(config, spec, states, rate_width, width_m),
-                swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-                n_gp_points=0, wall_s_total=time.perf_counter() - start_wall,
-                cpu_s_total=time.process_time() - start_cpu, cost_rate_width_rad_s=rate_width, cost_width_m=width_m,
-            ))
-            if callback:
-                callback(records[-1])
-            bar.set_postfix(real_s=f"{plant_seconds:.0f}", reset="random trial")
-            continue
         # ---- learn the dynamics
         x_all = np.vstack(inputs)
         y_all = np.vstack(targets)
@@ -746,7 +681,14 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         gp.fit(config.gp_iterations)
         hyper = gp.hyperparameters
         # ---- learn the policy
+        if not rate_on and config.cost_rate_width_rad_s is not None:
+            rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
+        rate_width = config.cost_rate_width_rad_s if rate_on else None
+        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)
         n_search = config.n_prediction_steps if swung_up else n_steps
+        width_m = config.cost_width_m
+        if swung_up and config.cost_width_after_swing_up_m is not None:
+            width_m = config.cost_width_after_swing_up_m
         propagator = Propagator(spec, gp, policy, params.length_m, width_m, rate_width,
                                 config.cost_exploration, compiled=config.compiled)
         restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search

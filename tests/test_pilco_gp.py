@@ -60,6 +60,46 @@ def test_select_subset_keeps_the_latest_points_and_is_seeded():
         select_subset(10, 0, recent=0, seed=0)
 
 
+@pytest.mark.parametrize("noise_std", [0.05, 0.0])
+def test_fitc_on_the_training_data_is_the_exact_gp(noise_std):
+    """With the training inputs as inducing inputs and no other data, FITC's predictions and the moments at a
+    Gaussian input are the exact GP's (the noise-free case has the worst-conditioned kernel matrix)."""
+    x, _, y_noisy = _data(150, noise_std, seed=0)
+    gp = MultiOutputGP(x, y_noisy)
+    gp.fit(60)
+    x_test = x[:30] + 0.1
+    mean0, var0 = gp.predict(x_test)
+    mu = torch.tensor([0.3, -0.2, 0.1], dtype=torch.float64)
+    moments0 = [gp.moments(mu, scale * torch.eye(3, dtype=torch.float64)) for scale in (0.01, 0.3)]
+    gp.condition_on(x, y_noisy)
+    mean1, var1 = gp.predict(x_test)
+    np.testing.assert_allclose(mean1, mean0, atol=1e-4 * np.abs(mean0).max())
+    np.testing.assert_allclose(var1, var0, rtol=0.05, atol=1e-3 * var0.max())
+    for scale, (m0, s0, c0) in zip((0.01, 0.3), moments0):
+        m1, s1, c1 = gp.moments(mu, scale * torch.eye(3, dtype=torch.float64))
+        np.testing.assert_allclose(m1.numpy(), m0.numpy(), atol=1e-5)
+        np.testing.assert_allclose(s1.numpy(), s0.numpy(), atol=1e-5)
+        np.testing.assert_allclose(c1.numpy(), c0.numpy(), atol=1e-4)
+
+
+def test_fitc_on_all_data_predicts_better_than_the_subset_and_stays_calibrated():
+    x, _, y_noisy = _data(600, 0.05, seed=4)
+    subset = select_subset(600, 120, recent=60, seed=0)
+    gp = MultiOutputGP(x[subset], y_noisy[subset])
+    gp.fit(60)
+    x_test, y_true, _ = _data(400, 0.0, seed=5)
+    mean_subset, var_subset = gp.predict(x_test)
+    gp.condition_on(x, y_noisy)
+    mean_all, var_all = gp.predict(x_test)
+    rmse_subset = np.sqrt(np.mean((mean_subset - y_true) ** 2, axis=0))
+    rmse_all = np.sqrt(np.mean((mean_all - y_true) ** 2, axis=0))
+    assert np.all(rmse_all < 0.8 * rmse_subset), (rmse_all, rmse_subset)
+    assert np.all(var_all.mean(axis=0) < var_subset.mean(axis=0))  # five times the data: less model uncertainty
+    z = (mean_all - y_true) / np.sqrt(var_all)
+    assert 0.2 < np.sqrt(np.mean(z**2)) < 3.0
+    assert gp.beta.shape == (2, 120) and gp.inv_kernel.shape == (2, 120, 120)  # the cost of the subset
+
+
 def test_bad_inputs_raise_value_errors():
     with pytest.raises(ValueError, match="inputs"):
         MultiOutputGP(np.zeros((5, 2)), np.zeros((4, 1)))
@@ -70,3 +110,7 @@ def test_bad_inputs_raise_value_errors():
         gp.predict(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="max_iterations"):
         gp.fit(0)
+    with pytest.raises(ValueError, match="inputs must be"):
+        gp.condition_on(np.zeros((8, 3)), np.zeros((8, 1)))
+    with pytest.raises(ValueError, match="finite"):
+        gp.condition_on(np.full((8, 2), np.inf), np.zeros((8, 1)))

@@ -330,8 +330,29 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     assert PilcoConfig.from_dict(saved).cost_width_after_swing_up_m is None
 
 
+def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(tiny_run, monkeypatch):
+    """``gp_all_data``: the first search (10 points, under ``max_gp_points`` 15) is the defaults'; the second sees
+    all 20 points through FITC on the subset of 15; a saved config without the setting loads as one without it."""
+    calls = []
+    condition_on = MultiOutputGP.condition_on
+
+    def spy(self, inputs, targets):
+        calls.append((len(self.inputs_np), len(inputs)))
+        condition_on(self, inputs, targets)
+
+    monkeypatch.setattr(MultiOutputGP, "condition_on", spy)
+    config = PilcoConfig(**TINY, seed=3, gp_all_data=True)
+    result = run_pilco(config, progress=False)
+    assert calls == [(15, 20)]
+    assert result.records[1].predicted_cost == tiny_run.records[1].predicted_cost
+    assert result.records[1].real_cost == tiny_run.records[1].real_cost
+    assert result.records[2].predicted_cost != tiny_run.records[2].predicted_cost
+    saved = {k: v for k, v in config.to_dict().items() if k != "gp_all_data"}
+    assert PilcoConfig.from_dict(saved).gp_all_data is False
+
+
 @pytest.mark.parametrize("field, value", [
-    ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
+    ("gp_all_data", 1), ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
     ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
     ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),

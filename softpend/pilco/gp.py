@@ -11,10 +11,12 @@ Hyperparameters maximise the log marginal likelihood plus the robustness penalty
 below about 500 (noise-free simulator data would otherwise drive the noise to zero and the kernel matrix to
 singularity).  The optimiser is SciPy's L-BFGS-B with PyTorch gradients, in float64.
 
-When the data set grows beyond ``max_points`` the model keeps a subset (data subsampling instead of a sparse
-GP approximation): the points of the most recent trial are always kept (that is where the current policy
-goes) and the rest is drawn uniformly at random from the older data, with an explicit seed
-(:func:`select_subset`).
+When the data set grows beyond ``max_points`` the model keeps a subset: the points of the most recent trial are
+always kept (that is where the current policy goes) and the rest is drawn uniformly at random from the older
+data, with an explicit seed (:func:`select_subset`).  The hyperparameters are fitted on the subset;
+:meth:`MultiOutputGP.condition_on` then lets the predictor see all the data through the FITC sparse
+approximation (Snelson & Ghahramani, 2006), with the subset's inputs as the inducing inputs, so that a
+prediction costs what it costs on the subset.
 """
 
 from __future__ import annotations
@@ -111,6 +113,28 @@ class MultiOutputGP:
                 log_noise_std=np.log(target_std / 10.0),
             )
         self.hyperparameters = hyperparameters
+        self.conditioning: Optional[tuple[np.ndarray, np.ndarray]] = None
+        self._update_cache()
+
+    def condition_on(self, inputs: np.ndarray, targets: np.ndarray) -> None:
+        """Condition the predictor on ``inputs`` (N, D) and ``targets`` (N, E), usually a superset of the training
+        data, through FITC with the training inputs as the inducing inputs; the hyperparameters stay as they are.
+
+        With inducing inputs ``Z`` (M of them), ``Lambda = diag(K_nn - Q_nn) + sn2 I``, ``Q_nn = K_nm K_mm^-1 K_mn``
+        and ``A = K_mm + K_mn Lambda^-1 K_nm``, the posterior mean is ``k(x, Z) beta`` with ``beta = A^-1 K_mn
+        Lambda^-1 y`` and the latent variance ``sf2 - k(x, Z) (K_mm^-1 - A^-1) k(Z, x)``: the exact GP's formulas
+        with ``beta`` and ``K_mm^-1 - A^-1`` in place of ``(K + sn2 I)^-1 y`` and ``(K + sn2 I)^-1``, so the moment
+        matching of :func:`~softpend.pilco.moments.gp_moments` applies unchanged (as in the PILCO MATLAB code).
+        When ``inputs`` are the training inputs this is the exact GP.
+        """
+        inputs = np.asarray(inputs, dtype=float)
+        targets = np.asarray(targets, dtype=float)
+        if inputs.ndim != 2 or inputs.shape[1] != self.n_inputs or targets.shape != (len(inputs), self.n_outputs):
+            raise ValueError(f"inputs must be (N, {self.n_inputs}) and targets (N, {self.n_outputs}), "
+                             f"got {inputs.shape} and {targets.shape}")
+        if not (np.all(np.isfinite(inputs)) and np.all(np.isfinite(targets))):
+            raise ValueError("inputs and targets must be finite")
+        self.conditioning = (inputs, targets)
         self._update_cache()
 
     # ------------------------------------------------------------------ fitting
@@ -181,14 +205,42 @@ class MultiOutputGP:
         betas, inv_ks = [], []
         eye = torch.eye(n, dtype=DTYPE)
         for a in range(self.n_outputs):
-            k = self._kernel(x, x, a) + (math.exp(2 * h.log_noise_std[a]) + 1e-10) * eye
-            chol = torch.linalg.cholesky(k)
-            inv_k = torch.cholesky_inverse(chol)
-            inv_ks.append(inv_k)
-            betas.append(inv_k @ y[:, a])
+            noise_var = math.exp(2 * h.log_noise_std[a]) + 1e-10
+            if self.conditioning is None:
+                k = self._kernel(x, x, a) + noise_var * eye
+                chol = torch.linalg.cholesky(k)
+                inv_k = torch.cholesky_inverse(chol)
+                inv_ks.append(inv_k)
+                betas.append(inv_k @ y[:, a])
+            else:
+                beta, inv_k = self._fitc(a, noise_var)
+                inv_ks.append(inv_k)
+                betas.append(beta)
         self.beta = torch.stack(betas)  # (E, N)
         self.inv_kernel = torch.stack(inv_ks)  # (E, N, N)
         self.pair_weights = pair_weights(self.beta, self.inv_kernel)  # (E (E + 1) / 2, N, N)
+
+    def _fitc(self, a: int, noise_var: float) -> tuple[torch.Tensor, torch.Tensor]:
+        """``beta`` (M,) and ``K_mm^-1 - A^-1`` (M, M) of output ``a`` under FITC (see :meth:`condition_on`), through
+        ``K_mm + jitter = L L'`` and ``B = I + V Lambda^-1 V'`` with ``V = L^-1 K_mn``, in float64."""
+        z = self.inputs
+        x_all = torch.as_tensor(self.conditioning[0], dtype=DTYPE)
+        y_all = torch.as_tensor(self.conditioning[1][:, a], dtype=DTYPE)
+        m = z.shape[0]
+        eye = torch.eye(m, dtype=DTYPE)
+        signal_var = float(torch.exp(self.log_signal_var[a]))
+        chol_m = torch.linalg.cholesky(self._kernel(z, z, a) + 1e-8 * signal_var * eye)
+        v = torch.linalg.solve_triangular(chol_m, self._kernel(z, x_all, a), upper=False)  # (M, N)
+        lam = torch.clamp(signal_var - torch.sum(v * v, dim=0), min=0.0) + noise_var  # (N,)
+        v_scaled = v / torch.sqrt(lam)
+        chol_b = torch.linalg.cholesky(eye + v_scaled @ v_scaled.T)
+        # A^-1 = L^-T B^-1 L^-1, so K_mm^-1 - A^-1 = L^-T (I - B^-1) L^-1 and beta = L^-T B^-1 V Lambda^-1 y
+        inv_b = torch.cholesky_inverse(chol_b)
+        inv_chol_m = torch.linalg.solve_triangular(chol_m, eye, upper=False)
+        inv_k = inv_chol_m.T @ (eye - inv_b) @ inv_chol_m
+        inv_k = 0.5 * (inv_k + inv_k.T)
+        beta = inv_chol_m.T @ (inv_b @ (v @ (y_all / lam)))
+        return beta, inv_k
 
     def _kernel(self, x1: torch.Tensor, x2: torch.Tensor, a: int) -> torch.Tensor:
         ell = torch.exp(self.log_lengthscales[a])

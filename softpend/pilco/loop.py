@@ -140,6 +140,10 @@ class PilcoConfig:
     max_gp_points : int
         Largest GP training set (beyond it the older points are subsampled uniformly at random; the latest
         trial is always kept).
+    gp_all_data : bool
+        Once the data outgrow ``max_gp_points``, condition the GP's predictions on all the data through the FITC
+        sparse approximation with the subset as the inducing inputs (:meth:`~softpend.pilco.gp.MultiOutputGP.condition_on`;
+        the hyperparameters are still fitted on the subset and a prediction costs the same); False: the subset only.
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search (one search per
         trial from the previous policy, and one per restart).
@@ -207,6 +211,7 @@ class PilcoConfig:
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
+    gp_all_data: bool = False
     gp_iterations: int = 100
     policy_iterations: int = 80
     policy_restarts: int = 1
@@ -253,7 +258,7 @@ class PilcoConfig:
             raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
         for name in ("cost_rate_width_rad_s", "cost_rate_after_rad", "cost_width_after_swing_up_m"):
             optional_positive(name, getattr(self, name))
-        for name in ("random_bang_bang", "stop_when_balanced", "compiled"):
+        for name in ("random_bang_bang", "stop_when_balanced", "compiled", "gp_all_data"):
             boolean(name, getattr(self, name))
         self.rod_randomisation = in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False)
         self.observation_delay_steps = int_at_least("observation_delay_steps", self.observation_delay_steps, 0)
@@ -287,7 +292,8 @@ class PilcoConfig:
     #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
     #: setting existed (so such a run is not taken for a run of a config with other values).
     MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None,
-                        "cost_width_after_swing_up_m": None, "compiled": False}
+                        "cost_width_after_swing_up_m": None, "compiled": False,
+                        "gp_all_data": False}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -680,6 +686,8 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=hyper)
         gp.fit(config.gp_iterations)
         hyper = gp.hyperparameters
+        if config.gp_all_data and len(subset) < len(x_all):
+            gp.condition_on(x_all, y_all)
         # ---- learn the policy
         if not rate_on and config.cost_rate_width_rad_s is not None:
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)

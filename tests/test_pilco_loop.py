@@ -330,9 +330,10 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     assert PilcoConfig.from_dict(saved).cost_width_after_swing_up_m is None
 
 
-def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(tiny_run, monkeypatch):
-    """``gp_all_data``: the first search (10 points, under ``max_gp_points`` 15) is the defaults'; the second sees
-    all 20 points through FITC on the subset of 15; a saved config without the setting loads as one without it."""
+def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(monkeypatch):
+    """``gp_all_data`` (the default): the first search (10 points, under ``max_gp_points`` 15) is the one of the
+    subset-only model; the second sees all 20 points through FITC on the subset of 15.  A saved config without the
+    setting loads as a subset-only one (the runs saved before it existed)."""
     calls = []
     condition_on = MultiOutputGP.condition_on
 
@@ -341,12 +342,15 @@ def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_t
         condition_on(self, inputs, targets)
 
     monkeypatch.setattr(MultiOutputGP, "condition_on", spy)
-    config = PilcoConfig(**TINY, seed=3, gp_all_data=True)
+    config = PilcoConfig(**TINY, seed=3)
+    assert config.gp_all_data
     result = run_pilco(config, progress=False)
     assert calls == [(15, 20)]
-    assert result.records[1].predicted_cost == tiny_run.records[1].predicted_cost
-    assert result.records[1].real_cost == tiny_run.records[1].real_cost
-    assert result.records[2].predicted_cost != tiny_run.records[2].predicted_cost
+    subset_only = run_pilco(dataclasses.replace(config, gp_all_data=False), progress=False)
+    assert calls == [(15, 20)]
+    assert result.records[1].predicted_cost == subset_only.records[1].predicted_cost
+    assert result.records[1].real_cost == subset_only.records[1].real_cost
+    assert result.records[2].predicted_cost != subset_only.records[2].predicted_cost
     saved = {k: v for k, v in config.to_dict().items() if k != "gp_all_data"}
     assert PilcoConfig.from_dict(saved).gp_all_data is False
 

@@ -24,9 +24,10 @@ The policy *balances* when every test episode swings up and keeps ``upright_std_
 
 Model learning and policy search
 --------------------------------
-GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`) on all data, subsampled to ``max_gp_points`` (the
-latest trial always kept, the older points drawn at random), hyperparameters by penalised marginal
-likelihood; then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
+GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`): hyperparameters by penalised marginal likelihood on
+the data subsampled to ``max_gp_points`` (the latest trial always kept, the older points drawn at random), and
+predictions conditioned on all data through the FITC sparse approximation with that subset as the inducing
+inputs (``gp_all_data``; a prediction costs what it costs on the subset); then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
 cost summed over the predicted rollout from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
 moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy
 (with ``policy_restarts``, the searches after the first also start from fresh random policies when the one from
@@ -143,7 +144,8 @@ class PilcoConfig:
     gp_all_data : bool
         Once the data outgrow ``max_gp_points``, condition the GP's predictions on all the data through the FITC
         sparse approximation with the subset as the inducing inputs (:meth:`~softpend.pilco.gp.MultiOutputGP.condition_on`;
-        the hyperparameters are still fitted on the subset and a prediction costs the same); False: the subset only.
+        the hyperparameters are still fitted on the subset and a prediction costs the same); False: the subset
+        only (a model that forgets the older trials it did not draw).
     gp_iterations, policy_iterations : int
         L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search (one search per
         trial from the previous policy, and one per restart).
@@ -211,7 +213,7 @@ class PilcoConfig:
     initial_std: float = 0.05
     n_basis: int = 30
     max_gp_points: int = 200
-    gp_all_data: bool = False
+    gp_all_data: bool = True
     gp_iterations: int = 100
     policy_iterations: int = 80
     policy_restarts: int = 1

@@ -24,14 +24,15 @@ The policy *balances* when every test episode swings up and keeps ``upright_std_
 
 Model learning and policy search
 --------------------------------
-GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`): hyperparameters by penalised marginal likelihood on
-the data subsampled to ``max_gp_points`` (the latest trial always kept, the older points drawn at random), and
-predictions conditioned on all data through the FITC sparse approximation with that subset as the inducing
-inputs (``gp_all_data``; a prediction costs what it costs on the subset); then the RBF policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected
-cost summed over the predicted rollout from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole
-moment-matching rollout (:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy
-(with ``policy_restarts``, the searches after the first also start from fresh random policies when the one from
-the previous policy ends with a high predicted cost; the lowest predicted cost is kept).
+GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`): hyperparameters by penalised marginal likelihood on the
+data subsampled to ``max_gp_points`` (the latest trial always kept, the older points drawn at random), and
+predictions conditioned on all data through the FITC sparse approximation with that subset as the inducing inputs
+(``gp_all_data``; a prediction costs what it costs on the subset); then the RBF policy
+(:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost summed over the predicted rollout
+from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole moment-matching rollout
+(:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy (with ``policy_restarts``, the
+searches after the first also start from fresh random policies when the one from the previous policy ends with a
+high predicted cost; the lowest predicted cost is kept).
 Every search minimises the expected cost plus ``cost_exploration = -0.2`` times the predicted standard deviation of
 each step's cost (PILCO's exploration weight; :mod:`softpend.pilco.propagation`): the first data describe the
 hanging rod well and the states above it not at all, and the weight makes a policy that goes where the model is

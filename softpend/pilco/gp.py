@@ -207,15 +207,12 @@ class MultiOutputGP:
         for a in range(self.n_outputs):
             noise_var = math.exp(2 * h.log_noise_std[a]) + 1e-10
             if self.conditioning is None:
-                k = self._kernel(x, x, a) + noise_var * eye
-                chol = torch.linalg.cholesky(k)
-                inv_k = torch.cholesky_inverse(chol)
-                inv_ks.append(inv_k)
-                betas.append(inv_k @ y[:, a])
+                inv_k = torch.cholesky_inverse(torch.linalg.cholesky(self._kernel(x, x, a) + noise_var * eye))
+                beta = inv_k @ y[:, a]
             else:
                 beta, inv_k = self._fitc(a, noise_var)
-                inv_ks.append(inv_k)
-                betas.append(beta)
+            inv_ks.append(inv_k)
+            betas.append(beta)
         self.beta = torch.stack(betas)  # (E, N)
         self.inv_kernel = torch.stack(inv_ks)  # (E, N, N)
         self.pair_weights = pair_weights(self.beta, self.inv_kernel)  # (E (E + 1) / 2, N, N)

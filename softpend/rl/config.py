@@ -24,7 +24,7 @@ Choices that differ from the registered environments
   starts ``eval_seeds`` balance and the agent also balances from the confirmation starts ``stop_confirm_seeds``,
   so the final agent is one that balanced, not one trained on for long after it did.  DQN checks eight selection
   starts in two consecutive evaluations, then confirms on eight more; DQN-MBPO checks four in one evaluation,
-  then confirms on eight more.  The stopping rules that lost are in the book's appendix.  Epsilon decays over
+  then confirms on 32 more.  The stopping rules that lost are in the book's appendix.  Epsilon decays over
   ``exploration_fraction`` of the budget: 2/15 of 150 = 20 DQN episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
 """
 
@@ -287,8 +287,10 @@ class MBPOConfig(DQNConfig):
     ----------------------------------------------
     exploration_fraction = 0.125: epsilon reaches its floor after 10 of the book's 80 real episodes.
     eval_seeds = (1000, 1001, 1002, 1003): four selection starts.
-    stop_after_balanced_evaluations = 1, stop_confirm_seeds = (1004, ..., 1011): training stops at the first
-    evaluation that balances from the four selection starts if the agent also balances from eight more.
+    stop_after_balanced_evaluations = 1, stop_confirm_seeds = (1004, ..., 1035): training stops at the first
+    evaluation that balances from the four selection starts if the agent also balances from 32 more.  The
+    agent changes much from one episode to the next; with fewer confirmation starts, training stops on
+    agents that miss a quarter of fresh starts.
     gradient_steps = 12, target_update_interval = 40 (agent steps, hard copy): six times model-free DQN's
     update-to-data ratio, the target network refreshed after about as many gradient steps as in DQN.
     clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values
@@ -319,7 +321,7 @@ class MBPOConfig(DQNConfig):
     exploration_fraction: float = 0.125
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002, 1003)
     stop_after_balanced_evaluations: int = 1
-    stop_confirm_seeds: tuple[int, ...] = tuple(range(1004, 1012))
+    stop_confirm_seeds: tuple[int, ...] = tuple(range(1004, 1036))
     train_freq: int = 1
     clip_q_targets: bool = True
     reset_every_episodes: int = 20

@@ -165,7 +165,7 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
     assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
     assert log.stop_reason.startswith("balanced in an evaluation (") and "confirmation starts" in log.stop_reason
     mbpo = MBPOConfig()
-    assert mbpo.stop_after_balanced_evaluations == 1 and len(mbpo.stop_confirm_seeds) == 8
+    assert mbpo.stop_after_balanced_evaluations == 1 and len(mbpo.stop_confirm_seeds) == 32
     assert not set(mbpo.stop_confirm_seeds) & set(mbpo.eval_seeds)
 
 

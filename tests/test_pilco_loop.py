@@ -32,9 +32,30 @@ TINY = dict(
 )
 
 
+def _spy_on_condition_on(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
+    """Record ``(subset points, all points)`` of every :meth:`MultiOutputGP.condition_on` call from now on."""
+    calls = []
+    condition_on = MultiOutputGP.condition_on
+
+    def spy(self, inputs, targets):
+        calls.append((len(self.inputs_np), len(inputs)))
+        condition_on(self, inputs, targets)
+
+    monkeypatch.setattr(MultiOutputGP, "condition_on", spy)
+    return calls
+
+
 @pytest.fixture(scope="module")
-def tiny_run() -> PilcoResult:
-    return run_pilco(PilcoConfig(**TINY, seed=3), progress=False)
+def tiny_run_and_conditioning() -> tuple[PilcoResult, list[tuple[int, int]]]:
+    """The tiny run of the defaults, and its :func:`_spy_on_condition_on` record."""
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        calls = _spy_on_condition_on(monkeypatch)
+        return run_pilco(PilcoConfig(**TINY, seed=3), progress=False), calls
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_run_and_conditioning) -> PilcoResult:
+    return tiny_run_and_conditioning[0]
 
 
 @pytest.fixture(scope="module")
@@ -330,28 +351,21 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     assert PilcoConfig.from_dict(saved).cost_width_after_swing_up_m is None
 
 
-def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(monkeypatch):
+def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(tiny_run_and_conditioning,
+                                                                                        monkeypatch):
     """``gp_all_data`` (the default): the first search (10 points, under ``max_gp_points`` 15) is the one of the
     subset-only model; the second sees all 20 points through FITC on the subset of 15.  A saved config without the
     setting loads as a subset-only one (the runs saved before it existed)."""
-    calls = []
-    condition_on = MultiOutputGP.condition_on
-
-    def spy(self, inputs, targets):
-        calls.append((len(self.inputs_np), len(inputs)))
-        condition_on(self, inputs, targets)
-
-    monkeypatch.setattr(MultiOutputGP, "condition_on", spy)
-    config = PilcoConfig(**TINY, seed=3)
-    assert config.gp_all_data
-    result = run_pilco(config, progress=False)
+    result, calls = tiny_run_and_conditioning
+    assert result.config.gp_all_data
     assert calls == [(15, 20)]
-    subset_only = run_pilco(dataclasses.replace(config, gp_all_data=False), progress=False)
-    assert calls == [(15, 20)]
+    subset_calls = _spy_on_condition_on(monkeypatch)
+    subset_only = run_pilco(dataclasses.replace(result.config, gp_all_data=False), progress=False)
+    assert subset_calls == []
     assert result.records[1].predicted_cost == subset_only.records[1].predicted_cost
     assert result.records[1].real_cost == subset_only.records[1].real_cost
     assert result.records[2].predicted_cost != subset_only.records[2].predicted_cost
-    saved = {k: v for k, v in config.to_dict().items() if k != "gp_all_data"}
+    saved = {k: v for k, v in result.config.to_dict().items() if k != "gp_all_data"}
     assert PilcoConfig.from_dict(saved).gp_all_data is False
 
 

@@ -141,11 +141,12 @@ def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, 
     config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_confirm_seeds=(5, 6),
                        **{**TINY, "eval_every_episodes": 1})
     assert config.selection_seeds == (0, 5, 6)
-    # evaluations 1 and 2 balance but the confirmation fails; 3 balances and its confirmation holds
-    queue = _scripted_evaluations(monkeypatch, [0.05, 0.05, 0.3, 0.05, 0.05, 0.05])
+    # evaluations 1 and 2 balance but the confirmation fails at its first start (the second is not run); 3
+    # balances and its confirmation holds from both starts
+    queue = _scripted_evaluations(monkeypatch, [0.05, 0.05, 0.3, 0.05, 0.05, 0.05, 0.05])
     _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
     assert log.n_episodes == 3 and len(queue) == 1
-    assert _scripted_evaluations.calls == [(0,), (0,), (5, 6), (0,), (5, 6)]
+    assert _scripted_evaluations.calls == [(0,), (0,), (5,), (0,), (5,), (6,)]
     assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
     assert "confirmation starts" in log.stop_reason
     with pytest.raises(ValueError, match="stop_confirm_seeds"):
@@ -160,8 +161,8 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
                        **{**TINY, "eval_every_episodes": 1})
     queue = _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.2, 0.05, 0.05, 0.05, 0.05])
     _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
-    assert _scripted_evaluations.calls == [(0,), (0,), (5, 6), (0,), (5, 6)]
-    assert log.n_episodes == 3 and len(queue) == 2
+    assert _scripted_evaluations.calls == [(0,), (0,), (5,), (0,), (5,), (6,)]
+    assert log.n_episodes == 3 and len(queue) == 1
     assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
     assert log.stop_reason.startswith("balanced in an evaluation (") and "confirmation starts" in log.stop_reason
     mbpo = MBPOConfig()

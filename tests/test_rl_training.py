@@ -62,7 +62,13 @@ def test_greedy_predictor_gives_the_actions_of_stable_baselines3_predict():
     assert [make_base_env(config).unwrapped.torque_from_action(a) for a in singles[:5]]  # the env takes them
 
 
-def test_dqn_trains_checkpoints_and_resumes(tmp_path):
+def test_dqn_trains_checkpoints_and_resumes(tmp_path, monkeypatch):
+    import tempfile
+
+    system_tmp = tmp_path / "system-tmp"  # where SB3's default logger would create an SB3-<date> folder per learn()
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
+    tmp_path = tmp_path / "run"
     config = DQNConfig(learning_starts=20, **TINY)
     model, log = train_dqn(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
     assert [row["episode"] for row in log.episodes] == [1, 2, 3]
@@ -90,6 +96,7 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path):
     assert len(summary.results) == 1 and summary.results[0].time_s[-1] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="config differs"):
         train_dqn(DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False)
+    assert list(system_tmp.glob("SB3-*")) == []  # no logger folder outside the run folder
 
 
 def _scripted_evaluations(monkeypatch, stds):

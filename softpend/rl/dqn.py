@@ -34,6 +34,7 @@ import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from tqdm import tqdm
 
 from softpend.checks import check_work_size, int_at_least, positive, positive_int
@@ -485,7 +486,9 @@ def run_training(
     if remaining > 0:
         # exactly the remaining episodes' steps, so that SB3 stores the last transition and stops by itself
         # (the callback also stops at the episode count, which matters only if an episode diverged early);
-        # the SB3 schedules (exploration) run over the whole run, resumed or not
+        # the SB3 schedules (exploration) run over the whole run, resumed or not.  A logger of our own without
+        # outputs: SB3's default one creates an empty folder under the system's temp directory on every learn()
+        model.set_logger(Logger(folder=None, output_formats=[]))
         try:
             model.learn(
                 total_timesteps=remaining * config.episode_agent_steps,

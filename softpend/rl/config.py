@@ -19,13 +19,13 @@ Choices that differ from the registered environments
 * **Action repeat** ``action_repeat = 4``: the agent picks one of ``n_torque_levels`` torques every 4 plant
   steps (25 Hz, the torque is held in between), so that the discount ``gamma = 0.99`` spans ~4 s, long
   enough to credit the pumping swing-up.  The reward of an agent step is the sum over its plant steps.
-* **Budget and early stopping**: the episode count of a run is a budget (the book's: 150 DQN, 80 DQN-MBPO
+* **Budget and early stopping**: the episode count of a run is a budget (the book's: 250 DQN, 80 DQN-MBPO
   episodes); a run ends as soon as ``stop_after_balanced_evaluations`` consecutive evaluations on the selection
   starts ``eval_seeds`` balance and the agent also balances from the confirmation starts ``stop_confirm_seeds``,
   so the final agent is one that balanced, not one trained on for long after it did.  DQN checks eight selection
   starts in two consecutive evaluations, then confirms on eight more; DQN-MBPO checks four in one evaluation,
   then confirms on 32 more.  The stopping rules that lost are in the book's appendix.  Epsilon decays over
-  ``exploration_fraction`` of the budget: 2/15 of 150 = 20 DQN episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
+  ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ class DQNConfig:
     train_freq: int = 1
     gradient_steps: int = 2
     target_update_interval: int = 500
-    exploration_fraction: float = 2 / 15
+    exploration_fraction: float = 0.08
     exploration_initial_eps: float = 1.0
     exploration_final_eps: float = 0.02
     max_grad_norm: float = 10.0

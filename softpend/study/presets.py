@@ -43,7 +43,7 @@ class RLBudget:
         Run folders (trained once, reused by every figure; other plants: ``<runs_root>-<plant>``).
     """
 
-    episodes_dqn: int = 150
+    episodes_dqn: int = 250
     episodes_mbpo: int = 80
     seeds: tuple[int, ...] = tuple(range(10))
     episode_s: float = DQNConfig.episode_s

@@ -61,7 +61,11 @@ def _build_quick_book(root: Path):
         shutil.copy2(REPO_ROOT / name, root / name)
     shutil.copytree(REPO_ROOT / "book", root / "book", ignore=shutil.ignore_patterns("_generated"))
     shutil.copytree(REPO_ROOT / "notebooks", root / "notebooks", ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
-    runs = run_notebooks(root, profile="quick", progress=False)
+    # the kernels make their temporary folders in root/kernel-tmp (tests/test_book.py checks none is left)
+    (root / "kernel-tmp").mkdir()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("TMPDIR", str(root / "kernel-tmp"))
+        runs = run_notebooks(root, profile="quick", progress=False)
     html_dir = build_html(root, quiet=True)
     return root, runs, html_dir
 

@@ -32,6 +32,7 @@ def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book)
         nb = nbformat.read(str(run.output_path), as_version=4)
         errors = [out for cell in nb.cells for out in cell.get("outputs", []) if out.output_type == "error"]
         assert not errors, f"{run.name}: {errors}"
+    assert not list((root / "kernel-tmp").glob("softpend-*")), "a notebook left its temporary folder behind"
     # a second run is served by the execution cache, and the execution record says so
     assert {run.status for run in run_notebooks(root, profile="quick", progress=False)} == {"cached"}
     record = json.loads(BookLayout.at(root).record_path.read_text())

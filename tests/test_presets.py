@@ -30,11 +30,12 @@ def test_the_figures_use_the_presets():
 def test_epsilon_reaches_its_floor_after_20_dqn_and_10_mbpo_episodes_of_the_books_budgets():
     """The exploration schedule is a fraction of the whole budget: a budget changed without its fraction would
     change how long the agents explore (and every run of the defaults, not only the long ones)."""
-    from stable_baselines3.common.utils import get_linear_fn
+    from softpend.rl.dqn import build_dqn
+    from softpend.rl.training_env import make_training_env
 
     for algo, floor_episode in (("dqn", 20), ("mbpo", 10)):
         config, episodes = figure_configs()[algo], presets.RL_EPISODES[algo]
-        schedule = get_linear_fn(config.exploration_initial_eps, config.exploration_final_eps, config.exploration_fraction)
-        epsilon = [schedule(1 - episode / episodes) for episode in range(episodes + 1)]
+        schedule = build_dqn(config, make_training_env(config), seed=0, episodes=episodes).exploration_schedule
+        epsilon = [schedule(1 - episode / episodes) for episode in range(episodes + 1)]  # SB3's progress_remaining
         floor = [e for e, value in enumerate(epsilon) if abs(value - config.exploration_final_eps) < 1e-9]
         assert floor[0] == floor_episode, algo

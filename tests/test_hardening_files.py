@@ -156,6 +156,7 @@ def test_safe_loading_equals_stable_baselines3_loading(run, tmp_path):
     """The agent and buffer read without unpickling equal what SB3's pickle route gives, and keep training
     bit for bit the same (the bookkeeping of a resumed run is unchanged)."""
     from stable_baselines3 import DQN
+    from stable_baselines3.common.logger import Logger
 
     checkpoint = run / "checkpoint"
     reference_buffer = tmp_path / "buffer.pkl"  # a pickle this test wrote itself
@@ -164,6 +165,7 @@ def test_safe_loading_equals_stable_baselines3_loading(run, tmp_path):
     sb3.save_replay_buffer(reference_buffer)
 
     def continued(model) -> list[torch.Tensor]:
+        model.set_logger(Logger(folder=None, output_formats=[]))  # as training does: no SB3-<date> temp folder
         model.learn(total_timesteps=40, reset_num_timesteps=False)
         return [p.detach().clone() for p in model.q_net.parameters()]
 

@@ -288,9 +288,9 @@ class MBPOConfig(DQNConfig):
     exploration_fraction = 0.125: epsilon reaches its floor after 10 of the book's 80 real episodes.
     eval_seeds = (1000, 1001, 1002, 1003): four selection starts.
     stop_after_balanced_evaluations = 1, stop_confirm_seeds = (1004, ..., 1035): training stops at the first
-    evaluation that balances from the four selection starts if the agent also balances from 32 more.  The
-    agent changes much from one episode to the next, so that a few starts that balance say little about the
-    next: with eight confirmation starts, training stopped on agents that miss a quarter of fresh starts.
+    evaluation that balances from the four selection starts if the agent also balances from 32 more: the agent
+    changes much from one episode to the next, so that a few starts that balance say little about the others
+    (the confirmation counts that were measured are in the book's appendix).
     gradient_steps = 12, target_update_interval = 40 (agent steps, hard copy): six times model-free DQN's
     update-to-data ratio, the target network refreshed after about as many gradient steps as in DQN.
     clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values

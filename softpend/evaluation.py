@@ -46,12 +46,13 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from softpend.checks import check_work_size, in_unit_interval, int_at_least, non_negative, positive, positive_int
+from softpend.checks import boolean, check_work_size, in_unit_interval, int_at_least, non_negative, positive, positive_int
 from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged, wrap_angle_rad
 from softpend.stats import wilson_interval
 from softpend.task import Task
 
 __all__ = [
+    "SUCCESS_STD_RAD",
     "TEST_EPISODE_S",
     "Controller",
     "DelayLine",
@@ -72,6 +73,9 @@ __all__ = [
 #: starts every reported figure is measured on.  One length for both, so that a policy which holds the rod for the
 #: selection tests and falls later is caught before it is selected.
 TEST_EPISODE_S = 10.0
+
+#: Largest upright std [rad] of an episode that counts as a success (``success``, see the module docstring).
+SUCCESS_STD_RAD = 0.2
 
 
 class Controller(Protocol):
@@ -186,7 +190,7 @@ def metrics_from_trajectory(
     phi_dot_rad_s: np.ndarray,
     upright_threshold_rad: float = 0.2,
     hold_s: float = 1.0,
-    success_std_rad: float = 0.2,
+    success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
     """Evaluation metrics of one sampled trajectory (see the module docstring).
 
@@ -392,6 +396,7 @@ def evaluate_controller(
     duration_s: float = TEST_EPISODE_S,
     initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
     env_kwargs: Optional[dict[str, Any]] = None,
+    stop_at_first_failure: bool = False,
 ) -> EvaluationSummary:
     """Evaluate a controller on the true plant of ``task`` over several seeds.
 
@@ -409,11 +414,16 @@ def evaluate_controller(
         Exact initial joint state, overriding the task's start distribution (e.g. a 0.2 rad tilt for LQR).
     env_kwargs : dict, optional
         Further :class:`softpend.envs.SoftPendulumEnv` arguments (e.g. ``reward_params``).
+    stop_at_first_failure : bool
+        Run the seeds in order and stop after the first episode that does not succeed (``success`` false):
+        the summary then holds the episodes up to and including that one.  Each episode is the one a full
+        evaluation runs (the same environment, reset with the same seed), so whether *every* seed succeeds is
+        decided exactly, at the cost of the episodes up to the first failure only.
 
     Returns
     -------
     EvaluationSummary
-        Per-seed :class:`EvaluationResult` objects (metrics and trajectories).
+        Per-seed :class:`EvaluationResult` objects (metrics and trajectories), in the order of ``seeds``.
     """
     from softpend.envs import SoftPendulumEnv
 
@@ -423,8 +433,13 @@ def evaluate_controller(
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
     positive("duration_s", duration_s)
+    boolean("stop_at_first_failure", stop_at_first_failure)
     env = SoftPendulumEnv(**task.env_kwargs(), **(env_kwargs or {}))
-    results = [run_episode(controller, env, seed, duration_s, initial_state=initial_state) for seed in seeds]
+    results = []
+    for seed in seeds:
+        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
+        if stop_at_first_failure and not results[-1].success:
+            break
     return EvaluationSummary(name=name, results=results)
 
 

@@ -132,3 +132,20 @@ def test_late_noisy_controller_shows_the_observation_late_with_noisy_angles():
         LateNoisyController(Recorder(), delay_steps=-1)
     with pytest.raises(ValueError, match="noise_rad"):
         LateNoisyController(Recorder(), noise_rad=-0.1)
+
+
+def test_an_evaluation_can_stop_at_its_first_failing_start_with_the_same_episodes() -> None:
+    seeds = [3, 4, 5]
+    holding = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
+    full = evaluate_controller(holding, Task(start="upright"), seeds=seeds, duration_s=2.0)
+    early = evaluate_controller(holding, Task(start="upright"), seeds=seeds, duration_s=2.0, stop_at_first_failure=True)
+    assert full.successes == early.successes == 3  # every start succeeds: every start runs
+    for a, b in zip(full.results, early.results):
+        np.testing.assert_array_equal(a.observations, b.observations)
+    idle = FunctionController(lambda o, q, qd, t: 0.0)
+    full = evaluate_controller(idle, seeds=seeds, duration_s=1.5)
+    early = evaluate_controller(idle, seeds=seeds, duration_s=1.5, stop_at_first_failure=True)
+    assert len(full.results) == 3 and [r.seed for r in early.results] == [3]  # stops after the first failure
+    np.testing.assert_array_equal(early.results[0].observations, full.results[0].observations)
+    with pytest.raises(ValueError, match="stop_at_first_failure"):
+        evaluate_controller(idle, seeds=seeds, duration_s=1.5, stop_at_first_failure=1)

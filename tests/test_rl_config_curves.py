@@ -157,3 +157,30 @@ def test_training_cpu_s_of_a_log():
     assert training_cpu_s(log) == 7.5  # the final evaluation included
     del log.episodes[0]["cpu_s"]  # a run started before CPU time was logged
     assert math.isnan(training_cpu_s(log))
+
+
+def test_a_failed_evaluation_counts_at_the_success_level_in_the_worst_start_curve():
+    # an evaluation that stopped at its first failing start knows only a lower bound of the worst std (0.15 here,
+    # below the success level): with failed_as, every row with a failed start counts as the success level
+    from softpend.evaluation import SUCCESS_STD_RAD
+    from softpend.rl.curves import worst_start_std_rad
+
+    logs = []
+    for seed, (rates, stds) in enumerate([([0.0, 0.5, 1.0], [3.0, 0.15, 0.05]), ([0.25, 1.0, 1.0], [0.4, 0.08, 0.06])]):
+        log = _evaluation_log(seed, [5.0, 10.0, 15.0], stds)
+        for row, rate in zip(log.evaluations, rates):
+            row["success_rate"] = rate
+        logs.append(log)
+    np.testing.assert_allclose(worst_start_std_rad(logs[0]), [SUCCESS_STD_RAD, SUCCESS_STD_RAD, 0.05])
+    band = interval_band(logs, grid=np.array([5.0, 10.0, 15.0]), n_resamples=200, failed_as=SUCCESS_STD_RAD)
+    np.testing.assert_allclose(band["per_seed"], [[0.2, 0.2, 0.05], [0.2, 0.08, 0.06]])
+    raw = interval_band(logs, grid=np.array([5.0, 10.0, 15.0]), n_resamples=200)
+    np.testing.assert_allclose(raw["per_seed"][0], [3.0, 0.15, 0.05])  # without failed_as: the logged values
+
+
+def test_balancing_criterion_must_not_be_looser_than_success_when_evaluations_stop_at_a_failure():
+    with pytest.raises(ValueError, match="stop_upright_std_rad"):
+        DQNConfig(stop_upright_std_rad=0.25)
+    assert DQNConfig(stop_upright_std_rad=0.25, eval_until_first_failure=False).stop_upright_std_rad == 0.25
+    with pytest.raises(ValueError, match="eval_until_first_failure"):
+        DQNConfig(eval_until_first_failure="yes")

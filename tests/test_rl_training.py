@@ -2,6 +2,7 @@
 MBPO buffer holds model transitions branched from real states."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -109,11 +110,14 @@ def _scripted_evaluations(monkeypatch, stds):
     calls = []
     queue_calls = calls
 
-    def fake(model, config, seeds=None, duration_s=None, name="agent"):
+    def fake(model, config, seeds=None, duration_s=None, name="agent", stop_at_first_failure=False):
         std = queue.pop(0)
         calls.append(tuple(seeds if seeds is not None else config.eval_seeds))
-        results = [SimpleNamespace(upright_std_rad=std, swing_up_time_s=2.0) for _ in calls[-1]]
-        return SimpleNamespace(results=results, median=lambda key: 2.0, success_rate=1.0)
+        success = std <= 0.2
+        results = [SimpleNamespace(upright_std_rad=std, swing_up_time_s=2.0, success=success) for _ in calls[-1]]
+        if stop_at_first_failure and not success:
+            results = results[:1]
+        return SimpleNamespace(results=results, median=lambda key: 2.0, successes=sum(r.success for r in results))
 
     monkeypatch.setattr(dqn, "evaluate_agent", fake)
     _scripted_evaluations.calls = queue_calls  # the starts of each evaluation, in order
@@ -435,3 +439,16 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
     assert all(torch.equal(a, b) for a, b in zip(evaluated[-1], model.q_net.parameters()))
     saved, _ = load_agent(tmp_path, which="final")
     assert all(torch.equal(a, b) for a, b in zip(evaluated[-1], saved.q_net.parameters()))
+
+
+def test_a_training_evaluation_stops_at_its_first_failing_start(tmp_path, monkeypatch):
+    # three selection starts; an evaluation with a failing start runs only the first, one that balances all three
+    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(),
+                       **{**TINY, "eval_every_episodes": 1, "eval_seeds": (0, 1, 2)})
+    _scripted_evaluations(monkeypatch, [0.5, 0.05])
+    _, log = train_dqn(config, seed=0, episodes=4, run_dir=tmp_path, progress=False)
+    failed, balanced = log.evaluations
+    assert failed["starts_evaluated"] == 1 and failed["success_rate"] == 0.0 and not failed["all_swung_up"]
+    assert math.isnan(failed["median_upright_std_rad"]) and failed["max_upright_std_rad"] == 0.5
+    assert balanced["starts_evaluated"] == 3 and balanced["success_rate"] == 1.0 and balanced["all_swung_up"]
+    assert log.n_episodes == 2 and log.stop_reason is not None

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any, Mapping, TypeVar
 
 from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
-from softpend.evaluation import TEST_EPISODE_S
+from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import apply_overrides, parse_value
 from softpend.task import Task
@@ -91,6 +91,13 @@ class DQNConfig:
         draw, so a run is the same whatever this is).
     eval_seeds : tuple of int
         Start-noise seeds of each evaluation (from hanging).
+    eval_until_first_failure : bool
+        Evaluate the ``eval_seeds`` starts in order and stop at the first that does not succeed (swing up and
+        hold ``upright_std_rad <= 0.2``, :func:`softpend.evaluation.metrics_from_trajectory`).  A balanced
+        evaluation (``stop_upright_std_rad`` <= 0.2) is always complete, so the early stopping, the plant
+        seconds to balance and the kept best agent of a run that balances are those of full evaluations; an
+        evaluation of an agent that still fails costs its starts up to the first failure only (most of a
+        model-free run's evaluations fail at the first start).  False: every start every time.
     eval_duration_s : float
         Evaluation episode length [s] (:data:`softpend.evaluation.TEST_EPISODE_S`, as long as the reported
         fresh-start episodes).
@@ -148,6 +155,7 @@ class DQNConfig:
     reset_every_episodes: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
+    eval_until_first_failure: bool = True
     eval_duration_s: float = TEST_EPISODE_S
     checkpoint_every_episodes: int = 10
     stop_after_balanced_evaluations: int = 2
@@ -168,6 +176,7 @@ class DQNConfig:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         boolean("clip_q_targets", self.clip_q_targets)
+        boolean("eval_until_first_failure", self.eval_until_first_failure)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
@@ -180,6 +189,11 @@ class DQNConfig:
                            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
+        if self.eval_until_first_failure and self.stop_upright_std_rad > SUCCESS_STD_RAD:
+            raise ValueError(
+                f"stop_upright_std_rad ({self.stop_upright_std_rad!r}) must be at most the success level "
+                f"{SUCCESS_STD_RAD:g} rad with eval_until_first_failure (a balanced evaluation must run every start)"
+            )
         for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
             in_unit_interval(name, getattr(self, name))
         object.__setattr__(self, "net_arch", _positive_ints("net_arch", self.net_arch))

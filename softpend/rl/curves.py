@@ -22,9 +22,10 @@ from typing import Sequence
 import numpy as np
 
 from softpend.checks import in_unit_interval, positive_int
+from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["moving_average", "episodes_to_asymptote", "interval_band", "plant_s_at_episode"]
+__all__ = ["moving_average", "episodes_to_asymptote", "interval_band", "plant_s_at_episode", "worst_start_std_rad"]
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -63,6 +64,13 @@ def episodes_to_asymptote(returns: Sequence[float], window: int = 10, level: flo
     return float(last_below + 2) if last_below + 1 < len(r) else math.inf
 
 
+def worst_start_std_rad(log: TrainingLog, failed_as: float = SUCCESS_STD_RAD) -> np.ndarray:
+    """Per evaluation row: the worst start's upright std [rad], or ``failed_as`` where a start failed
+    (``success_rate`` below 1; see :func:`interval_band`)."""
+    return np.where(log.column("success_rate", "evaluations") < 1.0, float(failed_as),
+                    log.column("max_upright_std_rad", "evaluations"))
+
+
 def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
     """Real plant seconds consumed when ``episode`` (1-based) ended (``inf`` for ``inf``)."""
     if math.isinf(episode):
@@ -72,7 +80,8 @@ def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
 
 def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad", axis: str = "plant_s",
                   grid: np.ndarray | None = None, table: str = "evaluations", statistic: str = "iqm",
-                  confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0) -> dict[str, np.ndarray]:
+                  confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0,
+                  failed_as: float | None = None) -> dict[str, np.ndarray]:
     """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis.
 
     A run that ended before the end of ``grid`` (its budget was smaller, or training stopped early because it
@@ -91,6 +100,11 @@ def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad
         Aggregate over seeds (:func:`softpend.stats.aggregate_interval`).
     confidence, n_resamples, seed
         Of the percentile bootstrap over seeds at every point.
+    failed_as : float, optional
+        The value of every row whose ``success_rate`` is below 1 (some start failed).  For the worst evaluation
+        start's upright std with ``failed_as`` the success level: the curve is exact where every start
+        succeeded, and an evaluation that stopped at its first failing start
+        (:attr:`softpend.rl.DQNConfig.eval_until_first_failure`) does not need the starts it did not run.
 
     Returns
     -------
@@ -105,6 +119,8 @@ def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad
         raise ValueError(f"axis must be 'episode' or 'plant_s', got {axis!r}")
     xs = [log.column(axis, table) for log in logs]
     ys = [log.column(field, table) for log in logs]
+    if failed_as is not None:
+        ys = [np.where(log.column("success_rate", table) < 1.0, float(failed_as), y) for log, y in zip(logs, ys)]
     if any(len(x) == 0 for x in xs):
         raise ValueError(f"every run needs at least one {table} row")
     if grid is None:

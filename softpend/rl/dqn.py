@@ -99,11 +99,13 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     )
 
 
-def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None, duration_s: Optional[float] = None, name: str = "agent"):
+def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None, duration_s: Optional[float] = None, name: str = "agent",
+                   stop_at_first_failure: bool = False):
     """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``.
 
     Seeds must be non-negative integers and the episodes' trajectories must fit in
-    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any episode runs).
+    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any episode runs).  ``stop_at_first_failure``: as
+    :func:`~softpend.evaluation.evaluate_controller`'s.
     """
     seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
     duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
@@ -112,7 +114,8 @@ def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + controller.env.plant.n_coordinates)
     check_work_size(f"evaluating {len(seeds)} episode(s) of {duration_s:g} s", len(seeds) * steps * per_step,
                     f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step")
-    return evaluate_controller(controller, config.task, name=name, seeds=seeds, duration_s=duration_s)
+    return evaluate_controller(controller, config.task, name=name, seeds=seeds, duration_s=duration_s,
+                               stop_at_first_failure=stop_at_first_failure)
 
 
 def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None,
@@ -321,18 +324,27 @@ class TrainingCallback(BaseCallback):
             self.checkpoint()
 
     def evaluate(self) -> dict[str, Any]:
-        """Evaluate the greedy policy on the true plant and append an evaluation row."""
-        summary = evaluate_agent(self.model, self.config)
+        """Evaluate the greedy policy on the true plant and append an evaluation row.
+
+        With ``config.eval_until_first_failure`` the evaluation stops at the first start that does not succeed
+        (``starts_evaluated`` < ``len(config.eval_seeds)``): ``success_rate`` then counts the starts before it
+        out of all ``eval_seeds``, ``all_swung_up`` is false, ``max_upright_std_rad`` is the largest of the
+        evaluated starts (a lower bound of the full evaluation's) and the medians are NaN.
+        """
+        seeds = self.config.eval_seeds
+        summary = evaluate_agent(self.model, self.config, stop_at_first_failure=self.config.eval_until_first_failure)
+        complete = len(summary.results) == len(seeds)
         stds = [r.upright_std_rad for r in summary.results]
         row = {
             "episode": self.log.n_episodes,
             "plant_s": self.log.plant_s,
             "model_steps": int(self.model_steps()),
-            "median_upright_std_rad": float(np.median(stds)),
+            "starts_evaluated": len(summary.results),
+            "median_upright_std_rad": float(np.median(stds)) if complete else math.nan,
             "max_upright_std_rad": float(np.max(stds)),
-            "median_swing_up_time_s": summary.median("swing_up_time_s"),
-            "all_swung_up": bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
-            "success_rate": summary.success_rate,
+            "median_swing_up_time_s": summary.median("swing_up_time_s") if complete else math.nan,
+            "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
+            "success_rate": summary.successes / len(seeds),
             "wall_s": self.wall_s(),
             "cpu_s": self.cpu_s(),
         }

@@ -12,9 +12,9 @@ from typing import Mapping, Optional, Sequence
 import matplotlib.pyplot as plt
 import numpy as np
 
-from softpend.evaluation import EvaluationResult
+from softpend.evaluation import SUCCESS_STD_RAD, EvaluationResult
 from softpend.plotting import draw_rod
-from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
+from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average, worst_start_std_rad
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
@@ -31,7 +31,9 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
     episode of reaching the asymptotic reward (:func:`softpend.rl.curves.episodes_to_asymptote`).  Bottom row:
     the worst evaluation start's upright std, interquartile mean over seeds (line) with its 95 % stratified
     bootstrap interval (band, :func:`softpend.rl.curves.interval_band`; a run that stopped keeps its last value,
-    its agent no longer changing); with a single seed, that seed's curve.  The dashed line is ``threshold_rad``.
+    its agent no longer changing); with a single seed, that seed's curve.  An evaluation in which a start failed
+    counts as the success level :data:`softpend.evaluation.SUCCESS_STD_RAD` (the top of the axis: an evaluation
+    stops at its first failing start).  The dashed line is ``threshold_rad``.
     """
     fig = fig or plt.figure(figsize=(11, 7))
     axes = fig.subplots(2, 2, sharey="row")
@@ -42,18 +44,17 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
                 axes[0, col].plot(log.column(axis), moving_average(log.column("return"), window), color=color,
                                   lw=0.8, alpha=0.6, label=method if k == 0 else None)
             if len(logs) >= 2:
-                band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed)
+                band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed, failed_as=SUCCESS_STD_RAD)
                 axes[1, col].plot(band["x"], band["value"], color=color, label=method)
                 axes[1, col].fill_between(band["x"], band["low"], band["high"], color=color, alpha=0.2, lw=0)
             else:
                 log = logs[0]
-                axes[1, col].plot(log.column(axis, "evaluations"), log.column("max_upright_std_rad", "evaluations"),
-                                  color=color, label=method)
+                axes[1, col].plot(log.column(axis, "evaluations"), worst_start_std_rad(log), color=color, label=method)
         asym = float(np.median([episodes_to_asymptote(log.column("return"), window=window) for log in logs]))
         if math.isfinite(asym):
             axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
     axes[0, 0].set_ylabel(f"episode return ({window}-episode mean)")
-    axes[1, 0].set_ylabel("evaluation upright std [rad]\n(worst evaluation start; IQM over seeds)")
+    axes[1, 0].set_ylabel(f"evaluation upright std [rad]\n(worst start, {SUCCESS_STD_RAD:g} if one failed; IQM over seeds)")
     for col in range(2):
         axes[1, col].axhline(threshold_rad, color="k", ls="--", lw=0.8)
         axes[1, col].set_yscale("log")

@@ -19,12 +19,14 @@ from typing import Any, Optional
 
 import numpy as np
 
+from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.outputs import atomic_write
 
 __all__ = ["TrainingLog", "BALANCE_STD_RAD"]
 
-#: An evaluation "balances" when every seed swings up and holds ``upright_std_rad`` at most this [rad].
-BALANCE_STD_RAD = 0.2
+#: An evaluation "balances" when every seed swings up and holds ``upright_std_rad`` at most this [rad]: every
+#: episode is a success (:data:`softpend.evaluation.SUCCESS_STD_RAD`).
+BALANCE_STD_RAD = SUCCESS_STD_RAD
 
 
 @dataclass

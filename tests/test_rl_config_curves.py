@@ -163,7 +163,7 @@ def test_a_failed_evaluation_counts_at_the_success_level_in_the_worst_start_curv
     # an evaluation that stopped at its first failing start knows only a lower bound of the worst std (0.15 here,
     # below the success level): with failed_as, every row with a failed start counts as the success level
     from softpend.evaluation import SUCCESS_STD_RAD
-    from softpend.rl.curves import worst_start_std_rad
+    from softpend.rl.curves import failures_as, worst_start_std_rad
 
     logs = []
     for seed, (rates, stds) in enumerate([([0.0, 0.5, 1.0], [3.0, 0.15, 0.05]), ([0.25, 1.0, 1.0], [0.4, 0.08, 0.06])]):
@@ -172,6 +172,7 @@ def test_a_failed_evaluation_counts_at_the_success_level_in_the_worst_start_curv
             row["success_rate"] = rate
         logs.append(log)
     np.testing.assert_allclose(worst_start_std_rad(logs[0]), [SUCCESS_STD_RAD, SUCCESS_STD_RAD, 0.05])
+    np.testing.assert_allclose(failures_as([3.0, 0.15, 0.05], [0.0, 0.999, 1.0], 0.2), [0.2, 0.2, 0.05])
     band = interval_band(logs, grid=np.array([5.0, 10.0, 15.0]), n_resamples=200, failed_as=SUCCESS_STD_RAD)
     np.testing.assert_allclose(band["per_seed"], [[0.2, 0.2, 0.05], [0.2, 0.08, 0.06]])
     raw = interval_band(logs, grid=np.array([5.0, 10.0, 15.0]), n_resamples=200)

@@ -25,11 +25,6 @@ def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:
     return apply_overrides(base, overrides)
 
 
-def _finite_or_none(value: Any) -> Any:
-    """``value`` unless it is a float that is not finite (NaN, inf: not JSON)."""
-    return None if isinstance(value, float) and not math.isfinite(value) else value
-
-
 def _summary(log) -> dict[str, Any]:
     last = log.evaluations[-1] if log.evaluations else {}
     to_balance = log.real_s_to_balance()
@@ -41,7 +36,7 @@ def _summary(log) -> dict[str, Any]:
         "model_steps": log.model_steps,
         "final_eval_starts": last.get("starts_evaluated"),  # fewer than the selection starts: stopped at a failure
         "final_eval_max_upright_std_rad": last.get("max_upright_std_rad"),
-        "final_eval_median_swing_up_time_s": _finite_or_none(last.get("median_swing_up_time_s")),
+        "final_eval_median_swing_up_time_s": last.get("median_swing_up_time_s"),
         "real_s_to_balance": None if math.isinf(to_balance) else to_balance,
         "episodes_to_balance": None if math.isinf(log.episodes_to_balance()) else log.episodes_to_balance(),
     }

@@ -25,7 +25,8 @@ from softpend.checks import in_unit_interval, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["moving_average", "episodes_to_asymptote", "interval_band", "plant_s_at_episode", "worst_start_std_rad"]
+__all__ = ["moving_average", "episodes_to_asymptote", "failures_as", "interval_band", "plant_s_at_episode",
+           "worst_start_std_rad"]
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -64,11 +65,21 @@ def episodes_to_asymptote(returns: Sequence[float], window: int = 10, level: flo
     return float(last_below + 2) if last_below + 1 < len(r) else math.inf
 
 
+def failures_as(values: Sequence[float], success_rates: Sequence[float], failed_as: float) -> np.ndarray:
+    """``values`` with ``failed_as`` in place of every entry whose success rate is below 1 (some start failed).
+
+    For the worst evaluation start's upright std with ``failed_as`` the success level: exact where every start
+    succeeded, and an evaluation that stopped at its first failing start
+    (:attr:`softpend.rl.DQNConfig.eval_until_first_failure`) does not need the starts it did not run.
+    """
+    return np.where(np.asarray(success_rates, dtype=float) < 1.0, float(failed_as), np.asarray(values, dtype=float))
+
+
 def worst_start_std_rad(log: TrainingLog, failed_as: float = SUCCESS_STD_RAD) -> np.ndarray:
     """Per evaluation row: the worst start's upright std [rad], or ``failed_as`` where a start failed
-    (``success_rate`` below 1; see :func:`interval_band`)."""
-    return np.where(log.column("success_rate", "evaluations") < 1.0, float(failed_as),
-                    log.column("max_upright_std_rad", "evaluations"))
+    (:func:`failures_as`)."""
+    return failures_as(log.column("max_upright_std_rad", "evaluations"), log.column("success_rate", "evaluations"),
+                       failed_as)
 
 
 def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
@@ -101,10 +112,7 @@ def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad
     confidence, n_resamples, seed
         Of the percentile bootstrap over seeds at every point.
     failed_as : float, optional
-        The value of every row whose ``success_rate`` is below 1 (some start failed).  For the worst evaluation
-        start's upright std with ``failed_as`` the success level: the curve is exact where every start
-        succeeded, and an evaluation that stopped at its first failing start
-        (:attr:`softpend.rl.DQNConfig.eval_until_first_failure`) does not need the starts it did not run.
+        The value of every row whose ``success_rate`` is below 1 (some start failed; :func:`failures_as`).
 
     Returns
     -------
@@ -120,7 +128,7 @@ def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad
     xs = [log.column(axis, table) for log in logs]
     ys = [log.column(field, table) for log in logs]
     if failed_as is not None:
-        ys = [np.where(log.column("success_rate", table) < 1.0, float(failed_as), y) for log, y in zip(logs, ys)]
+        ys = [failures_as(y, log.column("success_rate", table), failed_as) for log, y in zip(logs, ys)]
     if any(len(x) == 0 for x in xs):
         raise ValueError(f"every run needs at least one {table} row")
     if grid is None:

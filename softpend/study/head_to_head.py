@@ -20,6 +20,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
+from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 
@@ -138,7 +139,7 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
             t = [max(r["plant_s"], 1e-3) for r in seq]
             label = method if j == 0 else None
             ax_s.plot(t, [r["success_rate"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
-            worst = [r["max_upright_std_rad"] if r["success_rate"] >= 1.0 else SUCCESS_STD_RAD for r in seq]
+            worst = failures_as([r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq], SUCCESS_STD_RAD)
             ax_e.plot(t, worst, "o-", color=colour, alpha=0.7, ms=3, label=label)
     for ax in (ax_s, ax_e):
         ax.set_xscale("log")

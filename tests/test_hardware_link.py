@@ -255,18 +255,19 @@ while True:  # keep commanding until SIGTERM
 # the handler must neither deadlock on the lock nor cut the frame in two.
 _HOST_SCRIPT_SIGNAL_MID_WRITE = """
 import os, signal, sys
+from softpend.hardware import driver
 from softpend.hardware.driver import MotorLink
 link = MotorLink(sys.argv[1], torque_limit_nm=0.06).open()
 link.read_state()
 link.send_torque(0.05)
 print("commanding", flush=True)
 sys.stdin.readline()
-write = link._serial.write
-def write_then_signal(frame):  # the next write is interrupted by SIGTERM, once
-    link._serial.write = write
+write = driver._write_frame
+def write_then_signal(ser, frame, timeout_s):  # the next write is interrupted by SIGTERM, once
+    driver._write_frame = write
     os.kill(os.getpid(), signal.SIGTERM)
-    return write(frame)
-link._serial.write = write_then_signal
+    return write(ser, frame, timeout_s)
+driver._write_frame = write_then_signal
 link.send_torque(0.05)
 print("not reached", flush=True)
 """

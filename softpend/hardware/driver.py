@@ -26,6 +26,7 @@ from __future__ import annotations
 import atexit
 import math
 import os
+import select
 import signal
 import struct
 import threading
@@ -452,7 +453,7 @@ class MotorLink:
 
         try:
             with self._write_lock:
-                ser.write(frame)
+                _write_frame(ser, frame, self.timeout_s)
         except (serial.SerialException, OSError) as exc:
             raise self._fail(LinkDisconnected(f"write to {self.port!r} failed: {exc}")) from exc
         finally:
@@ -480,7 +481,7 @@ class MotorLink:
         try:
             self._stop_pending = False
             self._seq = (self._seq + 1) & 0xFFFF
-            ser.write(proto.encode_message(proto.MSG_STOP, self._seq, ()))
+            _write_frame(ser, proto.encode_message(proto.MSG_STOP, self._seq, ()), self.timeout_s)
             ser.flush()
         except Exception:
             pass
@@ -546,6 +547,35 @@ class MotorLink:
             data = self._read_bytes(remaining)
             if data:
                 self._accept(data)
+
+
+def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
+    """Write ``frame`` whole to the open port ``ser``; time out only if the port accepts no byte for ``timeout_s``.
+
+    pyserial's own ``write`` (3.5, POSIX) also raises its write timeout when the writing thread merely was not
+    scheduled for the timeout while it wrote, with every byte already sent; on a loaded computer that turned a
+    healthy link into a "disconnected" one.  Here the clock counts only time spent waiting for room in the
+    port's buffer.  Ports without a file descriptor (other platforms) use pyserial's ``write``.
+    """
+    import serial
+
+    try:
+        fd = ser.fileno()
+    except (AttributeError, OSError, ValueError):
+        ser.write(frame)
+        return
+    view = memoryview(frame)
+    while view:
+        try:
+            view = view[os.write(fd, view):]
+        except (BlockingIOError, InterruptedError):
+            pass
+        if view:  # the port's buffer is full: wait for room
+            _, writable, _ = select.select([], [fd], [], timeout_s)
+            if not writable:
+                raise serial.SerialTimeoutException(
+                    f"write timeout: the port took no byte for {timeout_s:g} s ({len(view)} of {len(frame)} "
+                    "bytes unsent)")
 
 
 def _error_meaning(code: int) -> str:

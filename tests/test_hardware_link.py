@@ -297,3 +297,20 @@ def test_sigterm_on_the_host_sends_stop(rig, script):
             host.kill()
         host.stdout.close()
         host.stdin.close()
+
+
+def test_a_host_scheduled_after_its_deadline_still_takes_the_state_that_arrived(rig):
+    """The host asks for a state with a deadline already past (it was not scheduled in time): the states that
+    arrived meanwhile are read and returned, not reported as a silent link."""
+    r = rig()
+    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+        link.drain_states()
+        time.sleep(0.05)  # states arrive in the port, unread
+        message = link._next_message(time.monotonic() - 1.0, (proto.MSG_STATE,))
+        assert message[0] == proto.MSG_STATE
+        link.drain_states()
+        r.emulator.stop()  # now nothing arrives: the same call times out
+        r.thread.join(2.0)
+        link.drain_states()
+        with pytest.raises(LinkTimeout, match="no STATE"):
+            link._next_message(time.monotonic() - 1.0, (proto.MSG_STATE,))

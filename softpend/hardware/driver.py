@@ -530,6 +530,13 @@ class MotorLink:
             self._accept(data)
 
     def _next_message(self, deadline: float, wanted: tuple[int, ...]) -> tuple[int, int, tuple]:
+        """The oldest wanted message, waiting until ``deadline`` (monotonic clock [s]) for one.
+
+        At the deadline the port is read once more without waiting: a host that was not scheduled until past
+        its deadline still finds the message that arrived meanwhile, and only a link that sent nothing wanted
+        in time times out.
+        """
+        last_look = False
         while True:
             for i, message in enumerate(self._pending):
                 if message[0] in wanted:
@@ -540,10 +547,12 @@ class MotorLink:
                 self._pending = self._pending[-64:]
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)
-                raise self._fail(
-                    LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped")
-                )
+                if last_look:
+                    names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)
+                    raise self._fail(
+                        LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped")
+                    )
+                last_look, remaining = True, 0.0
             data = self._read_bytes(remaining)
             if data:
                 self._accept(data)

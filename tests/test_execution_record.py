@@ -97,3 +97,49 @@ def test_after_naming_an_unknown_notebook_fails_before_running(tmp_path):
     with pytest.raises(ValueError, match="softpend.after names"):
         run_notebooks(root, profile="quick", progress=False)
     assert not BookLayout.at(root).output_path("a").exists()
+
+
+def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_with_their_defaults(tmp_path,
+                                                                                                     monkeypatch):
+    """``softpend: {book_runs: [...]}``: before any notebook executes, the runner trains the run sets of the
+    notebooks that will execute with their own parameters (one call, one pool); a notebook given other
+    parameters trains its own runs, a cached one needs none; the record and page say what the pool did."""
+    from softpend.study import run_pool
+
+    calls, outputs = [], []
+
+    def fake_train_book_runs(run_sets, root=".", progress=True):
+        calls.append((list(run_sets), Path(root)))
+        outputs.append(sorted(path.name for path in BookLayout.at(root).generated_dir.glob("*.ipynb")))
+        return 3
+
+    monkeypatch.setattr(run_pool, "train_book_runs", fake_train_book_runs)
+
+    header_end = HEADER.format(extra="").rindex("---")
+
+    def with_runs(title, run_sets):
+        text = source(title)
+        return text[:header_end] + f"softpend:\n  book_runs: {json.dumps(run_sets)}\n" + text[header_end:]
+
+    notebooks = {"rl": with_runs("RL", ["rl"]), "both": with_runs("Both", ["rl", "pilco"]), "plain": source("Plain")}
+    root = make_book(tmp_path, notebooks, {"full": {}, "quick": {"rl": {"greeting": "hi"}, "both": {"greeting": "hi"}}})
+    run_notebooks(root, profile="full", progress=False)
+    assert calls == [(["pilco", "rl"], root)]
+    assert outputs == [[]]  # before any notebook executed
+    record = json.loads(BookLayout.at(root).record_path.read_text())
+    assert record["training_pool"]["trained"] == 3 and record["training_pool"]["run_sets"] == ["pilco", "rl"]
+    assert "this run trained 3 of the runs they read (pilco, rl) in one pool" in \
+        BookLayout.at(root).execution_page_path.read_text()
+
+    calls.clear()
+    run_notebooks(root, profile="full", progress=False)  # everything cached: no notebook reads runs
+    assert calls == [] and json.loads(BookLayout.at(root).record_path.read_text())["training_pool"] is None
+    run_notebooks(root, profile="full", progress=False, only=["rl"], force=True)
+    assert calls == [(["rl"], root)]
+    calls.clear()
+    run_notebooks(root, profile="quick", progress=False)  # other parameters: the notebooks train their own
+    assert calls == []
+
+    bad = make_book(tmp_path / "bad", {"x": with_runs("X", ["ppo"])}, {"full": {}})
+    with pytest.raises(ValueError, match="softpend.book_runs must be a list among"):
+        run_notebooks(bad, profile="full", progress=False)

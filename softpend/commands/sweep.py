@@ -3,7 +3,8 @@
 Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-seed<k>``,
 ``pilco-seed<k>``), is reused when finished with the same settings and resumed when shorter, so a sweep that
 was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
-(``--backend loky|ray|dask``), where a worker that dies is retried and finished runs are kept.  The
+(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.run_pool.train_in_one_pool`), where
+a worker that dies is retried and finished runs are kept.  The
 settings are the book's (:mod:`softpend.study.presets`).  With ``--fresh`` every run's final (and for RL
 selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`), with the
 per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.headline_figures`.
@@ -69,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
+    from softpend.study.run_pool import train_in_one_pool
 
     root: Path = args.runs_root
     for name in ("episodes_dqn", "episodes_mbpo", "pilco_trials", "workers"):
@@ -79,9 +81,15 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--runs-root {root} exists and is not a folder")
     configs = figure_configs()
     episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
+    rl_algos = [m for m in args.methods if m != "pilco"]
+    config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
+    # every method's runs in one pool; the per-method calls below then find them finished
+    train_in_one_pool([(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos], root,
+                      config if "pilco" in args.methods else None, args.seeds, root, workers=args.workers,
+                      backend=args.backend)
     out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
     rl_logs = {}
-    for algo in (m for m in args.methods if m != "pilco"):
+    for algo in rl_algos:
         logs = train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, workers=args.workers,
                            backend=args.backend)
         rl_logs[algo] = logs
@@ -89,7 +97,6 @@ def run(args: argparse.Namespace) -> int:
                                 "runs": summary_table({algo: logs})}
     pilco_results = []
     if "pilco" in args.methods:
-        config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
         pilco_results = pilco_runs(config, args.seeds, root, workers=args.workers, backend=args.backend)
         out["methods"]["pilco"] = {"runs": [{"seed": r.config.seed, "plant_s_to_balance": r.real_seconds_to_balance,
                                              "plant_s": r.plant_seconds_total, "cpu_s": r.train_cpu_s}

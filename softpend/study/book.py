@@ -519,6 +519,25 @@ def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[st
 
 
 # --------------------------------------------------------------------------- order
+def notebook_book_runs(nb, name: str) -> list[str]:
+    """The book's training runs that notebook ``name`` reads: its front matter's ``softpend: {book_runs: [...]}``
+    (among :data:`softpend.study.run_pool.BOOK_RUN_SETS`).  Executed with its own defaults, it finds them
+    trained: :func:`run_notebooks` trains them first, in one pool.
+
+    Raises
+    ------
+    ValueError
+        If ``book_runs`` is not a list of known run set names.
+    """
+    from softpend.study.run_pool import BOOK_RUN_SETS
+
+    run_sets = (nb.metadata.get("softpend") or {}).get("book_runs", [])
+    if not isinstance(run_sets, list) or not all(entry in BOOK_RUN_SETS for entry in run_sets):
+        raise ValueError(f"notebook {name!r}: softpend.book_runs must be a list among {list(BOOK_RUN_SETS)}, "
+                         f"got {run_sets!r}")
+    return list(run_sets)
+
+
 def notebook_after(nb, name: str, known: Sequence[str]) -> list[str]:
     """The notebooks that notebook ``name`` executes after: its front matter's ``softpend: {after: [...]}``.
 
@@ -695,9 +714,11 @@ def run_notebooks(
         used_overrides: dict[str, Any] = {}
         plan = {}
         after: dict[str, list[str]] = {}
+        book_runs: dict[str, list[str]] = {}
         for name in names:
             nb = read_notebook(layout.source_path(name))
             after[name] = notebook_after(nb, name, toc_names)
+            book_runs[name] = notebook_book_runs(nb, name)
             parameters = profile_parameters(profiles, profile, name)
             converted = Path(scratch) / f"{name}.ipynb"
             nbformat.write(nb, str(converted))
@@ -720,30 +741,45 @@ def run_notebooks(
         order = execution_order(names, after)
 
         planned: dict[str, str] = {}
-        bar = tqdm(order, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
-        for name in bar:
-            parameters, converted, key = plan[name]
+        cached: dict[str, bool] = {}
+        for name in order:  # every key is known before anything executes (upstream keys are planned ones)
+            key = plan[name][2]
             if after[name]:
                 key = _with_upstream(key, after[name], layout, planned)
             planned[name] = key
+            output_path, key_path = layout.output_path(name), layout.key_path(name)
+            cached[name] = (not force and output_path.is_file() and key_path.is_file()
+                            and key_path.read_text(encoding="utf-8").strip() == key)
+        # the book's training runs that the notebooks to execute read with their own defaults: trained first,
+        # all in one pool, so that no worker idles while one notebook's last runs finish
+        run_sets = sorted({run_set for name in order if not cached[name] and not plan[name][0]
+                           for run_set in book_runs[name]})
+        pool = None
+        if run_sets:
+            from softpend.study.run_pool import train_book_runs
+
+            if progress:
+                print(f"[book] training the book's runs ({', '.join(run_sets)}) in one pool", file=sys.stderr,
+                      flush=True)
+            start = time.perf_counter()
+            trained = train_book_runs(run_sets, root=layout.root, progress=progress)
+            pool = {"run_sets": run_sets, "trained": trained, "run_s": time.perf_counter() - start}
+
+        bar = tqdm(order, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
+        for name in bar:
+            parameters, converted, _ = plan[name]
+            key = planned[name]
             bar.set_postfix_str(name)
             start = time.perf_counter()
             output_path = layout.output_path(name)
-            key_path = layout.key_path(name)
-            cached = (
-                not force
-                and output_path.is_file()
-                and key_path.is_file()
-                and key_path.read_text(encoding="utf-8").strip() == key
-            )
-            if not cached:
+            if not cached[name]:
                 _execute_one(layout, name, parameters, key, converted)
             seconds = time.perf_counter() - start
-            runs.append(NotebookRun(name, "cached" if cached else "executed", seconds, output_path))
+            runs.append(NotebookRun(name, "cached" if cached[name] else "executed", seconds, output_path))
             if progress:
-                what = "up to date (cached)" if cached else f"executed in {seconds:.1f} s"
+                what = "up to date (cached)" if cached[name] else f"executed in {seconds:.1f} s"
                 bar.write(f"[book] {name}: {what}", file=sys.stderr)
-    write_execution_record(layout, execution_record(layout, profile, runs, used_overrides))
+    write_execution_record(layout, execution_record(layout, profile, runs, used_overrides, pool))
     return runs
 
 
@@ -781,7 +817,7 @@ def _locked_packages(lock_path: Path) -> tuple[list[dict[str, Any]], Optional[st
 
 
 def execution_record(layout: "BookLayout", profile: str, runs: Sequence[NotebookRun],
-                     overrides: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+                     overrides: Optional[dict[str, Any]] = None, pool: Optional[dict[str, Any]] = None) -> dict[str, Any]:
     """What produced the executed notebooks in ``book/_generated/``, after a run of :func:`run_notebooks`.
 
     Returns
@@ -822,6 +858,7 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "profile": profile,
         "overrides": dict(overrides or {}),
+        "training_pool": pool,
         "notebooks": notebooks,
         "environment": {"python": platform.python_version(), "lock_python": lock_python,
                         "platform": platform.platform(), "cpu_count": os.cpu_count(), "cpus_available": cpus,
@@ -875,9 +912,19 @@ def execution_page(record: dict[str, Any]) -> str:
             _when(entry["executed_at"]), _markdown_cell(entry["profile"]),
         ]) + " |")
     total = sum(entry["executed_s"] or 0.0 for entry in record["notebooks"])
+    pool = record.get("training_pool")
     lines += [
         "",
         f"Sum of the last execution times: {total:.0f} s.",
+    ]
+    if pool and pool["trained"]:
+        lines += [
+            "",
+            f"Before the notebooks, this run trained {pool['trained']} of the runs they read "
+            f"({', '.join(pool['run_sets'])}) in one pool of workers, in {pool['run_s']:.0f} s; the notebooks "
+            "then found them finished, so their times above leave that training out.",
+        ]
+    lines += [
         "",
         "## Parameters",
         "",

@@ -24,8 +24,8 @@ from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 
-__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_runs", "plot_head_to_head", "plot_predicted_and_real_cost",
-           "seconds_to_balance_table"]
+__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_jobs", "pilco_runs", "plot_head_to_head",
+           "plot_predicted_and_real_cost", "run_and_save", "seconds_to_balance_table"]
 
 
 def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
@@ -36,17 +36,24 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
     run in parallel, up to ``workers`` at a time (default: one per CPU core, see
     :func:`softpend.study.sweep.default_workers`), each with one torch thread.
     """
+    jobs = pilco_jobs(config, seeds, runs_root)
+    run_jobs(run_and_save, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
+             desc="PILCO runs", backend=backend)
+    return [PilcoResult.load(Path(runs_root) / f"pilco-seed{seed}") for seed in seeds]
+
+
+def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
+    """The PILCO runs (``config`` with each seed) still missing under ``runs_root``, as ``(name, arguments of
+    :func:`run_and_save`)``; a folder holding a finished run with the same config is left out."""
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
-    jobs, names = [], []
+    jobs: list[tuple[str, tuple[Any, ...]]] = []
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
         folder = Path(runs_root) / f"pilco-seed{seed}"
-        if folder.name not in names and _saved_run(folder, seeded) is None:
-            jobs.append((seeded, folder))
-            names.append(folder.name)
-    run_jobs(_run_and_save, jobs, names, workers, progress, desc="PILCO runs", backend=backend)
-    return [PilcoResult.load(Path(runs_root) / f"pilco-seed{seed}") for seed in seeds]
+        if folder.name not in {name for name, _ in jobs} and _saved_run(folder, seeded) is None:
+            jobs.append((folder.name, (seeded, folder)))
+    return jobs
 
 
 def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
@@ -60,7 +67,7 @@ def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
     return previous if previous.config == config else None
 
 
-def _run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
+def run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
     """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
     run_pilco(config, progress=progress).save(folder)
 

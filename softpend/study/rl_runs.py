@@ -19,8 +19,8 @@ from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
-__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "run_folder", "summary_table",
-           "train_seeds"]
+__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs", "run_folder", "summary_table",
+           "train_seeds", "train_run"]
 
 
 def train_seeds(
@@ -44,6 +44,18 @@ def train_seeds(
 def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str, progress: bool,
                 workers: Optional[int], backend: Optional[str] = None) -> list[list[TrainingLog]]:
     """Train what ``specs`` (``(algo, config, seeds, episodes)`` each) need, in one pool; logs per spec."""
+    jobs = rl_jobs(specs, root)
+    run_jobs(train_run, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
+             desc="RL runs", backend=backend)
+    return [[TrainingLog.load(run_folder(root, algo, int(seed)) / "log.json") for seed in seeds]
+            for algo, _, seeds, _ in specs]
+
+
+def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
+            root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
+    """The runs that ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root``, as
+    ``(name, arguments of the run's training job)`` in the order to start them (DQN-MBPO first: a DQN-MBPO run
+    costs about 2.5 DQN runs); a finished run with the same config is left out, a shorter one is resumed."""
     jobs, names = [], []
     for algo, config, seeds, episodes in specs:
         if algo not in ("dqn", "mbpo"):
@@ -66,15 +78,11 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
                 resume = False
             jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
             names.append(run_dir.name)
-    # longest first: a DQN-MBPO run costs about 2.5 DQN runs of twice its episodes
     order = sorted(range(len(jobs)), key=lambda i: (jobs[i][0] != "mbpo", i))
-    run_jobs(_train_run, [jobs[i] for i in order], [names[i] for i in order], workers, progress,
-             desc="RL runs", backend=backend)
-    return [[TrainingLog.load(run_folder(root, algo, int(seed)) / "log.json") for seed in seeds]
-            for algo, _, seeds, _ in specs]
+    return [(names[i], jobs[i]) for i in order]
 
 
-def _train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
+def train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
                progress: bool = True) -> None:
     """Train one run into ``run_dir`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
     from softpend.rl.dqn import train_dqn

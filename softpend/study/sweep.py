@@ -27,7 +27,7 @@ import os
 import traceback
 from typing import Any, Callable, Iterator, Optional, Sequence
 
-__all__ = ["BACKENDS", "SweepFailed", "default_backend", "default_workers", "run_jobs"]
+__all__ = ["BACKENDS", "SweepFailed", "call_job", "default_backend", "default_workers", "run_jobs"]
 
 #: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
@@ -178,6 +178,12 @@ def run_jobs(
     failures.update({name: LOST for name in pending})
     if failures:
         raise SweepFailed(desc, failures)
+
+
+def call_job(job: Callable[..., None], *args: Any, progress: bool = True) -> None:
+    """Call ``job(*args, progress=progress)``: the job function of a :func:`run_jobs` pool whose jobs call
+    different functions (each argument tuple starts with its own module-level function)."""
+    job(*args, progress=progress)
 
 
 #: The error of a job whose worker process died (after every retry).

@@ -14,10 +14,15 @@ when its source, its parameters and the code of the ``softpend`` modules it uses
 the closure of its imports, docstrings and comments left out) are unchanged since the output was written
 (the execution cache).  A notebook whose front matter says ``softpend: {after: [NAME, ...]}`` (one that
 reads what those notebooks wrote, such as their glued values) executes after them wherever the toc lists it,
-and their cache keys are part of its own.  Every run ends by writing the execution record
+and their cache keys are part of its own.  A notebook whose front matter says ``softpend: {book_runs: [...]}``
+reads the book's training runs (``"rl"``, ``"pilco"``): when such notebooks are to execute with their own
+parameters, those runs are trained first, all in one pool of workers
+(:func:`softpend.study.run_pool.train_book_runs`), so that no worker idles while one notebook's last runs
+finish; the notebooks then find them finished.  Every run ends by writing the execution record
 ``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
 its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
-package versions of ``environment.lock``, the Python version, the CPU count and the date) and the page that
+package versions of ``environment.lock``, the Python version, the CPU count and the date; what the training
+pool trained and how long it took) and the page that
 shows it, ``book/_generated/execution.md`` (the toc entry ``book/_generated/execution``, which is a page,
 not a notebook).  :func:`build_html` then runs ``jupyter-book build`` with warnings as errors; the book
 itself never executes notebooks.
@@ -829,7 +834,9 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
         execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied (all None
         when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
-        this process may use, and the ``packages`` of ``environment.lock`` with their installed versions.
+        this process may use, and the ``packages`` of ``environment.lock`` with their installed versions;
+        ``training_pool``: ``pool`` (``run_sets``, ``trained``: how many runs, ``run_s``: wall time), None
+        when this run trained none first.
     """
     import datetime
 

@@ -15,8 +15,10 @@ from softpend.study.book import BookLayout, execution_order, run_notebooks, toc_
 
 
 
-def source(title: str, body: str = "print(greeting)", after: list[str] | None = None) -> str:
-    extra = f"softpend:\n  after: {json.dumps(after)}\n" if after is not None else ""
+def source(title: str, body: str = "print(greeting)", after: list[str] | None = None,
+           book_runs: list[str] | None = None) -> str:
+    front = {key: value for key, value in (("after", after), ("book_runs", book_runs)) if value is not None}
+    extra = "softpend:\n" + "".join(f"  {key}: {json.dumps(value)}\n" for key, value in front.items()) if front else ""
     return (HEADER.format(extra=extra) + f"\n# {title}\n\n```{{code-cell}} ipython3\n:tags: [parameters]\n\n"
             f"greeting = 'hello'\n```\n\n```{{code-cell}} ipython3\n{body}\n```\n")
 
@@ -115,13 +117,8 @@ def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_
 
     monkeypatch.setattr(run_pool, "train_book_runs", fake_train_book_runs)
 
-    header_end = HEADER.format(extra="").rindex("---")
-
-    def with_runs(title, run_sets):
-        text = source(title)
-        return text[:header_end] + f"softpend:\n  book_runs: {json.dumps(run_sets)}\n" + text[header_end:]
-
-    notebooks = {"rl": with_runs("RL", ["rl"]), "both": with_runs("Both", ["rl", "pilco"]), "plain": source("Plain")}
+    notebooks = {"rl": source("RL", book_runs=["rl"]), "both": source("Both", book_runs=["rl", "pilco"]),
+                 "plain": source("Plain")}
     root = make_book(tmp_path, notebooks, {"full": {}, "quick": {"rl": {"greeting": "hi"}, "both": {"greeting": "hi"}}})
     run_notebooks(root, profile="full", progress=False)
     assert calls == [(["pilco", "rl"], root)]
@@ -140,6 +137,6 @@ def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_
     run_notebooks(root, profile="quick", progress=False)  # other parameters: the notebooks train their own
     assert calls == []
 
-    bad = make_book(tmp_path / "bad", {"x": with_runs("X", ["ppo"])}, {"full": {}})
+    bad = make_book(tmp_path / "bad", {"x": source("X", book_runs=["ppo"])}, {"full": {}})
     with pytest.raises(ValueError, match="softpend.book_runs must be a list among"):
         run_notebooks(bad, profile="full", progress=False)

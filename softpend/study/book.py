@@ -822,7 +822,8 @@ def _locked_packages(lock_path: Path) -> tuple[list[dict[str, Any]], Optional[st
 
 
 def execution_record(layout: "BookLayout", profile: str, runs: Sequence[NotebookRun],
-                     overrides: Optional[dict[str, Any]] = None, pool: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+                     overrides: Optional[dict[str, Any]] = None,
+                     pool: Optional[dict[str, Any]] = None) -> dict[str, Any]:
     """What produced the executed notebooks in ``book/_generated/``, after a run of :func:`run_notebooks`.
 
     Returns

@@ -47,13 +47,13 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
     :func:`run_and_save`)``; a folder holding a finished run with the same config is left out."""
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
-    jobs: list[tuple[str, tuple[Any, ...]]] = []
+    jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
         folder = Path(runs_root) / f"pilco-seed{seed}"
-        if folder.name not in {name for name, _ in jobs} and _saved_run(folder, seeded) is None:
-            jobs.append((folder.name, (seeded, folder)))
-    return jobs
+        if folder.name not in jobs and _saved_run(folder, seeded) is None:
+            jobs[folder.name] = (seeded, folder)
+    return list(jobs.items())
 
 
 def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
@@ -146,7 +146,8 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
             t = [max(r["plant_s"], 1e-3) for r in seq]
             label = method if j == 0 else None
             ax_s.plot(t, [r["success_rate"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
-            worst = failures_as([r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq], SUCCESS_STD_RAD)
+            worst = failures_as([r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq],
+                                SUCCESS_STD_RAD)
             ax_e.plot(t, worst, "o-", color=colour, alpha=0.7, ms=3, label=label)
     for ax in (ax_s, ax_e):
         ax.set_xscale("log")

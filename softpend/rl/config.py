@@ -309,8 +309,8 @@ class MBPOConfig(DQNConfig):
     update-to-data ratio, the target network refreshed after about as many gradient steps as in DQN.
     clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values
     diverge far above the largest achievable return (:attr:`DQNConfig.q_target_bounds`).
-    reset_every_episodes = 20: the Q-network starts afresh after episodes 20, 40 and 60 of the budget, on all the
-    data gathered so far.  With twelve gradient steps per real step a network can settle early on values far
+    reset_every_episodes = 15: the Q-network starts afresh after episodes 15, 30, 45, 60 and 75 of the budget, on all
+    the data gathered so far.  With twelve gradient steps per real step a network can settle early on values far
     above what the hanging rod earns (it spins the rod over the top, then hangs) and never leave them; a new
     network fitted to the richer data does not inherit them.
 
@@ -338,7 +338,7 @@ class MBPOConfig(DQNConfig):
     stop_confirm_seeds: tuple[int, ...] = tuple(range(1004, 1036))
     train_freq: int = 1
     clip_q_targets: bool = True
-    reset_every_episodes: int = 20
+    reset_every_episodes: int = 15
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -318,11 +318,9 @@ async def _check_page(tools: DevTools, html_dir: Path, base_url: str, page: str,
         height = max(900, min(int(probe["height"]), MAX_SHOT_PX))
         await tools.send("Emulation.setDeviceMetricsOverride", {"width": WINDOW_WIDTH_PX, "height": height,
                                                                 "deviceScaleFactor": 1, "mobile": False}, session)
-        # the window is as tall as the page up to MAX_SHOT_PX: the shot keeps that window (a longer page would be
-        # "too large" for the browser to capture whole)
-        clip = {"x": 0, "y": 0, "width": WINDOW_WIDTH_PX, "height": height, "scale": 1}
-        shot_data = await tools.send("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": False,
-                                                                "clip": clip}, session)
+        # the shot keeps the window, as tall as the page up to MAX_SHOT_PX (a longer page would be "too large"
+        # for the browser to capture whole)
+        shot_data = await tools.send("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": False}, session)
         shot.parent.mkdir(parents=True, exist_ok=True)
         shot.write_bytes(base64.b64decode(shot_data["data"]))
         await asyncio.sleep(0.2)  # late console messages

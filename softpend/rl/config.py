@@ -23,7 +23,7 @@ Choices that differ from the registered environments
   episodes); a run ends as soon as ``stop_after_balanced_evaluations`` consecutive evaluations on the selection
   starts ``eval_seeds`` balance and the agent also balances from the confirmation starts ``stop_confirm_seeds``,
   so the final agent is one that balanced, not one trained on for long after it did.  DQN checks eight selection
-  starts in two consecutive evaluations, then confirms on eight more; DQN-MBPO checks four in one evaluation,
+  starts in two consecutive evaluations, then confirms on 24 more; DQN-MBPO checks four in one evaluation,
   then confirms on 32 more.  The stopping rules that lost are in the book's appendix.  Epsilon decays over
   ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
 """
@@ -160,7 +160,7 @@ class DQNConfig:
     checkpoint_every_episodes: int = 10
     stop_after_balanced_evaluations: int = 2
     stop_upright_std_rad: float = 0.1
-    stop_confirm_seeds: tuple[int, ...] = tuple(range(1008, 1016))
+    stop_confirm_seeds: tuple[int, ...] = tuple(range(1008, 1032))
     rod_randomisation: float = 0.0
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0

@@ -398,23 +398,6 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
         DQNConfig(reset_every_episodes=-1)
 
 
-def test_a_scheduled_reset_is_skipped_after_a_recent_success(tmp_path, monkeypatch):
-    import softpend.rl.dqn as dqn
-
-    config = DQNConfig(learning_starts=20, reset_every_episodes=2, skip_reset_after_success_episodes=2,
-                       **{**TINY, "eval_every_episodes": 1})
-    resets = []
-    monkeypatch.setattr(dqn, "reset_q_network", lambda model, seed: resets.append(seed))
-    # episode 3's start succeeds (0.15 <= 0.2): the reset after episode 4 falls within two episodes of it
-    _scripted_evaluations(monkeypatch, [0.5, 0.5, 0.15, 0.5, 0.5, 0.5, 0.5])
-    _, log = train_dqn(config, seed=3, episodes=7, run_dir=tmp_path, progress=False)
-    assert [row["success_rate"] > 0 for row in log.evaluations] == [False, False, True, False, False, False, False]
-    assert resets == [(3, 2), (3, 6)]
-    assert [row["episode"] for row in log.episodes if row.get("reset_skipped")] == [4]
-    with pytest.raises(ValueError, match="skip_reset_after_success_episodes"):
-        DQNConfig(skip_reset_after_success_episodes=-1)
-
-
 def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
     from softpend.rl.dqn import build_dqn, reset_q_network
 

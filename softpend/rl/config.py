@@ -81,10 +81,6 @@ class DQNConfig:
         Re-initialise the Q-network (and its target and the optimiser's moments) after every this many training
         episodes, keeping the replay buffer (:func:`softpend.rl.dqn.reset_q_network`); 0: never.  The reset
         follows the evaluation of that episode, so the agent evaluated there is the one before the reset.
-    skip_reset_after_success_episodes : int
-        Skip a scheduled reset when a start succeeded (``success_rate`` > 0 in an evaluation row) in any
-        evaluation of the last this many episodes, the reset's own included: a network that already swings the
-        rod up and holds it is kept.  The episode row then records ``reset_skipped``; 0: no reset is skipped.
 
     Bookkeeping
     -----------
@@ -157,7 +153,6 @@ class DQNConfig:
     clip_q_targets: bool = False
     net_arch: tuple[int, ...] = (256, 256)
     reset_every_episodes: int = 0
-    skip_reset_after_success_episodes: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_until_first_failure: bool = True
@@ -185,8 +180,6 @@ class DQNConfig:
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
-        object.__setattr__(self, "skip_reset_after_success_episodes",
-                           int_at_least("skip_reset_after_success_episodes", self.skip_reset_after_success_episodes, 0))
         object.__setattr__(self, "rod_randomisation",
                            in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
         object.__setattr__(self, "observation_delay_steps",

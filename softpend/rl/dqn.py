@@ -250,14 +250,6 @@ class TrainingCallback(BaseCallback):
         rows = self.log.evaluations[-k:] if k else []
         return len(rows) == k > 0 and all(self._balanced(row["all_swung_up"], row["max_upright_std_rad"]) for row in rows)
 
-    def recent_success(self) -> bool:
-        """Whether a start succeeded in an evaluation of the last ``skip_reset_after_success_episodes`` episodes
-        (False when that is 0): the scheduled reset is then skipped."""
-        window = self.config.skip_reset_after_success_episodes
-        first = self.log.n_episodes - window + 1
-        return window > 0 and any(row["episode"] >= first and row["success_rate"] > 0
-                                  for row in reversed(self.log.evaluations[-window:]))
-
     def _balanced(self, all_swung_up: bool, max_upright_std_rad: float) -> bool:
         """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
         return bool(all_swung_up) and max_upright_std_rad <= self.config.stop_upright_std_rad
@@ -326,10 +318,7 @@ class TrainingCallback(BaseCallback):
             self.evaluate()
         if self._pending_reset:
             self._pending_reset = False
-            if self.recent_success():
-                self.log.episodes[-1]["reset_skipped"] = True
-            else:
-                reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
+            reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
         if self._pending_checkpoint:
             self._pending_checkpoint = False
             self.checkpoint()

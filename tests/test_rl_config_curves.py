@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import metrics_from_trajectory
-from softpend.rl.config import REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
+from softpend.rl.config import ADDED_FIELDS, REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
 from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 
@@ -62,6 +62,30 @@ def test_saved_configs_with_removed_fields_load_when_they_trained_as_this_versio
             load_config(tmp_path / "old.json")
         with pytest.raises(ValueError, match="unknown"):
             config_from_overrides(config, {field: json.dumps(value)})
+
+
+def test_saved_configs_without_an_added_field_load_as_the_version_that_trained_them(tmp_path):
+    """A run folder of a version before a field existed is read with the value that version trained with, not
+    this version's default: DQN-MBPO's folders from before the tolerant confirmation are not its runs."""
+    import json
+
+    assert ADDED_FIELDS["stop_confirm_max_failures"] == 0 != MBPOConfig().stop_confirm_max_failures
+    save_config(MBPOConfig(), tmp_path / "c.json")
+    data = json.loads((tmp_path / "c.json").read_text())
+    del data["stop_confirm_max_failures"]
+    (tmp_path / "old.json").write_text(json.dumps(data))
+    old = load_config(tmp_path / "old.json")
+    assert old.stop_confirm_max_failures == 0 and old != MBPOConfig()
+    assert old == MBPOConfig(stop_confirm_max_failures=0)
+
+
+def test_confirmation_failures_allowed_must_leave_a_start_that_balances():
+    assert DQNConfig().stop_confirm_max_failures == 0 and MBPOConfig().stop_confirm_max_failures == 1
+    with pytest.raises(ValueError, match="stop_confirm_max_failures"):
+        DQNConfig(stop_confirm_seeds=(5, 6), stop_confirm_max_failures=2)
+    with pytest.raises(ValueError, match="stop_confirm_max_failures"):
+        DQNConfig(stop_confirm_max_failures=-1)
+    assert DQNConfig(stop_confirm_seeds=(), stop_confirm_max_failures=3).stop_confirm_max_failures == 3
 
 
 def test_rollout_schedule_is_linear_like_mbrl_lib():

@@ -166,6 +166,19 @@ def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, 
         DQNConfig(stop_confirm_seeds=(-1,))
 
 
+def test_a_confirmation_holds_with_as_many_failing_starts_as_allowed_and_stops_at_the_next(tmp_path, monkeypatch):
+    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(5, 6, 7),
+                       stop_confirm_max_failures=1, **{**TINY, "eval_every_episodes": 1})
+    # evaluation 1 balances; its confirmation fails at starts 5 and 6 and stops there (7 is not run); evaluation 2
+    # balances and its confirmation fails at start 6 only: training stops
+    queue = _scripted_evaluations(monkeypatch, [0.05, 0.3, 0.3, 0.05, 0.05, 0.3, 0.05, 0.05])
+    _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
+    assert _scripted_evaluations.calls == [(0,), (5,), (6,), (0,), (5,), (6,), (7,)]
+    assert log.n_episodes == 2 and len(queue) == 1
+    assert [(row["confirmed"], row["confirm_failures"]) for row in log.evaluations] == [(False, 2), (True, 1)]
+    assert log.stop_reason.endswith("and from 2 of the 3 confirmation starts")
+
+
 def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_path, monkeypatch):
     # DQN-MBPO's rule: every balanced evaluation is confirmed at once; a failed confirmation lets training go on
     config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(5, 6),

@@ -234,8 +234,10 @@ class TrainingCallback(BaseCallback):
                 self.evaluate()
                 if self.balanced_streak() and self.confirmed():
                     self._pending_reset = False  # the final agent is the one that balanced
-                    confirmation = (f" and from the {len(self.config.stop_confirm_seeds)} confirmation starts"
-                                    if self.config.stop_confirm_seeds else "")
+                    n = len(self.config.stop_confirm_seeds)
+                    held = n - self.log.evaluations[-1].get("confirm_failures", 0)
+                    confirmation = ("" if not n else f" and from the {n} confirmation starts" if held == n
+                                    else f" and from {held} of the {n} confirmation starts")
                     k = self.config.stop_after_balanced_evaluations
                     self.log.stop_reason = (
                         ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
@@ -255,13 +257,20 @@ class TrainingCallback(BaseCallback):
         return bool(all_swung_up) and max_upright_std_rad <= self.config.stop_upright_std_rad
 
     def confirmed(self) -> bool:
-        """Whether the agent balances from every ``stop_confirm_seeds`` start (True without any), evaluated start
-        by start up to the first that does not balance; the outcome is kept in the last evaluation row
-        (``confirmed``)."""
+        """Whether the agent balances from all ``stop_confirm_seeds`` starts but at most
+        ``stop_confirm_max_failures`` (True without any), evaluated start by start up to the failure after those;
+        the outcome and the failures counted are kept in the last evaluation row (``confirmed``,
+        ``confirm_failures``)."""
         if not self.config.stop_confirm_seeds:
             return True
-        ok = all(self._balances_from(seed) for seed in self.config.stop_confirm_seeds)
+        failures = 0
+        for seed in self.config.stop_confirm_seeds:
+            failures += not self._balances_from(seed)
+            if failures > self.config.stop_confirm_max_failures:
+                break
+        ok = failures <= self.config.stop_confirm_max_failures
         self.log.evaluations[-1]["confirmed"] = ok
+        self.log.evaluations[-1]["confirm_failures"] = failures
         return ok
 
     def _balances_from(self, seed: int) -> bool:

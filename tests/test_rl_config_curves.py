@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import metrics_from_trajectory
-from softpend.rl.config import ADDED_FIELDS, REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config, save_config
+from softpend.rl.config import (ADDED_FIELDS, REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config,
+                                 save_config)
 from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 

@@ -24,8 +24,9 @@ Choices that differ from the registered environments
   starts ``eval_seeds`` balance and the agent also balances from the confirmation starts ``stop_confirm_seeds``,
   so the final agent is one that balanced, not one trained on for long after it did.  DQN checks eight selection
   starts in two consecutive evaluations, then confirms on 24 more; DQN-MBPO checks four in one evaluation,
-  then confirms on 32 more, of which one may fail.  The stopping rules that lost are in the book's appendix.  Epsilon decays over
-  ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10 DQN-MBPO episodes.
+  then confirms on 32 more, of which one may fail.  The stopping rules that lost are in the book's appendix.
+  Epsilon decays over ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10
+  DQN-MBPO episodes.
 """
 
 from __future__ import annotations

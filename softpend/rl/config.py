@@ -432,7 +432,8 @@ def config_to_dict(config: DQNConfig) -> dict[str, Any]:
 #: Fields that configs of earlier versions hold and this version does not, each with the value at which this
 #: version trains as those did: :func:`load_config` drops such a field when it holds that value (so that the
 #: run folders of those versions are still found complete) and refuses the config otherwise.
-REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_limit_tip_reach": False}
+REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_limit_tip_reach": False,
+                                 "skip_reset_after_success_episodes": 0}
 
 #: Fields that configs of earlier versions lack, each with the value at which those versions trained:
 #: :func:`load_config` reads a config without such a field as holding that value (not this version's default), so

@@ -101,22 +101,43 @@ def test_after_naming_an_unknown_notebook_fails_before_running(tmp_path):
     assert not BookLayout.at(root).output_path("a").exists()
 
 
-def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_with_their_defaults(tmp_path,
-                                                                                                     monkeypatch):
-    """``softpend: {book_runs: [...]}``: before any notebook executes, the runner trains the run sets of the
-    notebooks that will execute with their own parameters (one call, one pool); a notebook given other
-    parameters trains its own runs, a cached one needs none; the record and page say what the pool did."""
+def fake_pool(monkeypatch, wait_for: str = ""):
+    """Replace the book's training pool: ``calls`` gets each pool's run sets and root, ``outputs`` the executed
+    notebooks when it began; each run set is one fake run, announced finished (after the output of the
+    notebook ``wait_for`` exists, if given: the pool then outlasts that notebook)."""
+    import time
+
     from softpend.study import run_pool
 
     calls, outputs = [], []
 
-    def fake_train_book_runs(run_sets, root=".", progress=True):
+    def book_run_jobs(run_sets, root="."):
         calls.append((list(run_sets), Path(root)))
+        return [(f"{run_set}-seed0", (print, run_set)) for run_set in run_sets]
+
+    def train_jobs(jobs, progress=True, niceness=0, on_finished=None):
+        root = calls[-1][1]
         outputs.append(sorted(path.name for path in BookLayout.at(root).generated_dir.glob("*.ipynb")))
-        return 3
+        deadline = time.monotonic() + 60
+        while wait_for and not BookLayout.at(root).key_path(wait_for).exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        for name, _ in jobs:
+            on_finished(name)
+        return len(jobs)
 
-    monkeypatch.setattr(run_pool, "train_book_runs", fake_train_book_runs)
+    monkeypatch.setattr(run_pool, "book_run_jobs", book_run_jobs)
+    monkeypatch.setattr(run_pool, "train_jobs", train_jobs)
+    monkeypatch.setattr(run_pool, "book_run_names", lambda run_sets: frozenset(f"{s}-seed0" for s in run_sets))
+    return calls, outputs
 
+
+def test_with_one_worker_book_runs_are_trained_first_for_the_notebooks_that_execute_with_their_defaults(
+        tmp_path, monkeypatch):
+    """``softpend: {book_runs: [...]}``: with one worker, before any notebook executes, the runner trains the
+    run sets of the notebooks that will execute with their own parameters (one pool); a notebook given other
+    parameters trains its own runs, a cached one needs none; the record and page say what the pool did."""
+    monkeypatch.setenv("SOFTPEND_WORKERS", "1")
+    calls, outputs = fake_pool(monkeypatch)
     notebooks = {"rl": source("RL", book_runs=["rl"]), "both": source("Both", book_runs=["rl", "pilco"]),
                  "plain": source("Plain")}
     root = make_book(tmp_path, notebooks, {"full": {}, "quick": {"rl": {"greeting": "hi"}, "both": {"greeting": "hi"}}})
@@ -124,8 +145,9 @@ def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_
     assert calls == [(["pilco", "rl"], root)]
     assert outputs == [[]]  # before any notebook executed
     record = json.loads(BookLayout.at(root).record_path.read_text())
-    assert record["training_pool"]["trained"] == 3 and record["training_pool"]["run_sets"] == ["pilco", "rl"]
-    assert "this run trained 3 of the runs they read (pilco, rl) in one pool" in \
+    assert record["training_pool"]["trained"] == 2 and record["training_pool"]["run_sets"] == ["pilco", "rl"]
+    assert not record["training_pool"]["background"]
+    assert "this run trained 2 of the runs they read (pilco, rl) in one pool" in \
         BookLayout.at(root).execution_page_path.read_text()
 
     calls.clear()
@@ -137,6 +159,39 @@ def test_book_runs_are_trained_first_in_one_pool_for_the_notebooks_that_execute_
     run_notebooks(root, profile="quick", progress=False)  # other parameters: the notebooks train their own
     assert calls == []
 
+
+def test_notebooks_that_need_no_runs_execute_while_the_pool_trains_in_the_background(tmp_path, monkeypatch):
+    """With two workers the pool trains in the background: a notebook that reads no runs executes (and
+    finishes) while it trains, the readers only after their runs; the page lists when each started."""
+    monkeypatch.setenv("SOFTPEND_WORKERS", "2")
+    calls, outputs = fake_pool(monkeypatch, wait_for="plain")
+    notebooks = {"rl": source("RL", book_runs=["rl"]), "plain": source("Plain")}
+    root = make_book(tmp_path, notebooks, {"full": {}})
+    runs = run_notebooks(root, profile="full", progress=False)
+    assert calls == [(["rl"], root)] and outputs == [[]]
+    layout = BookLayout.at(root)
+    record = json.loads(layout.record_path.read_text())
+    pool, entries = record["training_pool"], {entry["name"]: entry for entry in record["notebooks"]}
+    assert pool["background"] and pool["trained"] == 1
+    # "plain" finished before the pool announced its run, and "rl" started only after that
+    assert entries["plain"]["started_s"] + entries["plain"]["run_s"] <= pool["run_s"] <= entries["rl"]["started_s"]
+    assert {run.name: run.status for run in runs} == {"rl": "executed", "plain": "executed"}
+    page = layout.execution_page_path.read_text()
+    assert "in one pool of workers at the lowest scheduling priority" in page and "| started [s] | wall [s] |" in page
+
+
+def test_a_failing_notebook_lets_the_pool_finish_and_is_raised(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOFTPEND_WORKERS", "2")
+    calls, _ = fake_pool(monkeypatch)
+    notebooks = {"rl": source("RL", book_runs=["rl"]), "bad": source("Bad", "raise RuntimeError('boom')")}
+    root = make_book(tmp_path, notebooks, {"full": {}})
+    with pytest.raises(Exception, match="boom"):
+        run_notebooks(root, profile="full", progress=False)
+    assert calls == [(["rl"], root)]
+    assert not BookLayout.at(root).key_path("bad").exists()
+
+
+def test_an_unknown_run_set_is_rejected(tmp_path):
     bad = make_book(tmp_path / "bad", {"x": source("X", book_runs=["ppo"])}, {"full": {}})
     with pytest.raises(ValueError, match="softpend.book_runs must be a list among"):
         run_notebooks(bad, profile="full", progress=False)

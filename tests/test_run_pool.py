@@ -6,12 +6,14 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import pytest
+
 from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.study import run_pool
 from softpend.study.head_to_head import pilco_runs
 from softpend.study.rl_runs import train_seeds
-from softpend.study.run_pool import train_book_runs, train_in_one_pool
+from softpend.study.run_pool import book_run_jobs, book_run_names, train_book_runs, train_in_one_pool
 
 TINY_DQN = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2,
                      eval_seeds=(0,), eval_duration_s=1.0)
@@ -63,3 +65,14 @@ def test_pilco_starts_first_then_dqn_mbpo_then_dqn(tmp_path, monkeypatch):
         assert "run_sets must be among" in str(exc)
     else:
         raise AssertionError("an unknown run set was accepted")
+
+
+def test_the_first_seed_set_starts_first_and_names_its_three_runs(tmp_path):
+    names = [name for name, _ in book_run_jobs(["rl", "pilco", "first_seed"], tmp_path)]
+    assert names[:3] == ["pilco-seed0", "mbpo-seed0", "dqn-seed0"] and len(names) == len(set(names)) == 30
+    assert names[3:12] == [f"pilco-seed{k}" for k in range(1, 10)]
+    assert [name for name, _ in book_run_jobs(["first_seed"], tmp_path)] == ["pilco-seed0", "mbpo-seed0", "dqn-seed0"]
+    assert book_run_names(["first_seed"]) == {"pilco-seed0", "mbpo-seed0", "dqn-seed0"}
+    assert book_run_names(["rl", "pilco"]) == set(names)
+    with pytest.raises(ValueError, match="run_sets must be among"):
+        book_run_names(["ppo"])

@@ -59,6 +59,32 @@ def test_a_dead_worker_is_retried_and_reported_when_it_keeps_dying(tmp_path):
     assert "worker process died" in info.value.failures["doomed"]
 
 
+def write_priority(folder: Path, value: int, progress: bool = True) -> None:
+    if value < 0:
+        raise ValueError(f"negative value {value}")
+    (folder / f"nice{value}.txt").write_text(f"{os.getpid()} {os.getpriority(os.PRIO_PROCESS, 0)}")
+
+
+def test_finished_jobs_are_announced_and_background_workers_run_at_low_priority(tmp_path):
+    finished = []
+    with pytest.raises(SweepFailed, match="'bad'"):
+        run_jobs(write_priority, [(tmp_path, 0), (tmp_path, -1), (tmp_path, 1)], ["zero", "bad", "one"], workers=2,
+                 progress=False, niceness=19, on_finished=finished.append)
+    assert sorted(finished) == ["one", "zero"]  # the job that raised is not announced
+    for k in (0, 1):
+        pid, niceness = map(int, (tmp_path / f"nice{k}.txt").read_text().split())
+        assert pid != os.getpid() and niceness == 19
+    # in this process (one worker) the jobs keep the caller's priority, and are announced too
+    own = os.getpriority(os.PRIO_PROCESS, 0)
+    run_jobs(write_priority, [(tmp_path, 2)], ["two"], workers=1, progress=False, niceness=19,
+             on_finished=finished.append)
+    assert finished[-1] == "two" and (tmp_path / "nice2.txt").read_text().split()[1] == str(own)
+    assert os.getpriority(os.PRIO_PROCESS, 0) == own
+    for bad in (-1, 20, 1.5, True):
+        with pytest.raises(ValueError, match="niceness must be an integer in 0..19"):
+            run_jobs(write_priority, [(tmp_path, 3)], ["three"], niceness=bad)
+
+
 def test_one_worker_runs_in_this_process_and_bad_arguments_are_errors(tmp_path, monkeypatch):
     run_jobs(write_pid, [(tmp_path, 5)], ["only"], workers=1, progress=True)
     assert (tmp_path / "job5.txt").read_text().split()[1:] == [str(os.getpid()), "True"]

@@ -14,8 +14,9 @@ takes time to wake when the next state arrives: microseconds on most computers, 
 halted virtual processor waits for the host to run it again, which is milliseconds, and the loop's command
 jitter is then set by the idle machine rather than by the loop.  It asks the kernel for the
 shortest wake-up latency (``/dev/cpu_dma_latency`` 0, where permitted) and runs one spinning process per
-processor at the lowest scheduling class (``SCHED_IDLE``): the spinners take a processor only when nothing else
-wants it, so they cost the other work nothing but power.
+processor at the lowest scheduling class (``SCHED_IDLE``), which hands its processor to any other runnable
+work at every turn (``sched_yield``): the spinners take a processor only when nothing else wants it, and
+give it up as soon as something does, even work at the lowest ``nice`` level.
 """
 
 from __future__ import annotations
@@ -78,8 +79,7 @@ try:
 except (OSError, AttributeError):
     os.nice(19)
 while os.getppid() == parent:
-    for _ in range(20000):
-        pass
+    os.sched_yield()
 """
 
 

@@ -15,14 +15,18 @@ the closure of its imports, docstrings and comments left out) are unchanged sinc
 (the execution cache).  A notebook whose front matter says ``softpend: {after: [NAME, ...]}`` (one that
 reads what those notebooks wrote, such as their glued values) executes after them wherever the toc lists it,
 and their cache keys are part of its own.  A notebook whose front matter says ``softpend: {book_runs: [...]}``
-reads the book's training runs (``"rl"``, ``"pilco"``): when such notebooks are to execute with their own
-parameters, those runs are trained first, all in one pool of workers
+reads the book's training runs (:data:`softpend.study.run_pool.BOOK_RUN_SETS`): when such notebooks are to
+execute with their own parameters, those runs are trained in one pool of workers
 (:func:`softpend.study.run_pool.train_book_runs`), so that no worker idles while one notebook's last runs
-finish; the notebooks then find them finished.  Every run ends by writing the execution record
+finish.  With more than one worker the pool trains in the background, at the lowest scheduling priority, while
+notebooks execute side by side, each as soon as what it waits for has finished, and a notebook whose front
+matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) alone among them
+(:mod:`softpend.study.book_schedule`); with one worker the pool trains first and the notebooks execute one at
+a time.  Every run ends by writing the execution record
 ``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
 its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
 package versions of ``environment.lock``, the Python version, the CPU count and the date; what the training
-pool trained and how long it took) and the page that
+pool trained, and when each notebook started) and the page that
 shows it, ``book/_generated/execution.md`` (the toc entry ``book/_generated/execution``, which is a page,
 not a notebook).  :func:`build_html` then runs ``jupyter-book build`` with warnings as errors; the book
 itself never executes notebooks.
@@ -44,6 +48,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
+
+from softpend.study.book_schedule import Needs, next_to_start
 
 __all__ = [
     "BookLayout",
@@ -75,6 +81,9 @@ GENERATED_PREFIX = "book/_generated/"
 EXECUTION_PAGE = "execution"
 #: Bump when the way outputs are produced changes, to invalidate every cached notebook.
 _CACHE_VERSION = "2"
+#: Scheduling niceness of the training pool's workers while notebooks execute alongside (the lowest priority:
+#: they take what the notebooks leave idle, and a real-time notebook's emulator and camera run as if alone).
+BACKGROUND_NICENESS = 19
 #: Kernel arguments: matplotlib figures are embedded in the notebooks (and the book) as PNG images.
 #: (The kernel's own log is limited to errors: a failing cell is reported from the notebook's outputs.)
 #: tqdm's warning that ipywidgets is missing (it then draws text bars, or none with ``disable=True``) is
@@ -204,6 +213,7 @@ class NotebookRun:
     status: str  # "executed" or "cached"
     seconds: float
     output_path: Path
+    started_s: Optional[float] = None  # when it started, in seconds after the runner began executing
 
 
 # --------------------------------------------------------------------------- configuration
@@ -563,6 +573,21 @@ def notebook_after(nb, name: str, known: Sequence[str]) -> list[str]:
     return list(after)
 
 
+def notebook_realtime(nb, name: str) -> bool:
+    """Whether notebook ``name`` paces a rig emulator by the wall clock: its front matter's
+    ``softpend: {realtime: true}`` (:mod:`softpend.study.book_schedule` runs it alone among the notebooks).
+
+    Raises
+    ------
+    ValueError
+        If ``realtime`` is not true or false.
+    """
+    value = (nb.metadata.get("softpend") or {}).get("realtime", False)
+    if not isinstance(value, bool):
+        raise ValueError(f"notebook {name!r}: softpend.realtime must be true or false, got {value!r}")
+    return value
+
+
 def execution_order(names: Sequence[str], after: dict[str, Sequence[str]]) -> list[str]:
     """``names`` in the order they execute: the given (toc) order, except that a notebook waits for the
     notebooks its ``after`` entry lists that are among ``names``.
@@ -680,8 +705,9 @@ def run_notebooks(
     -------
     list of NotebookRun
         One entry per selected notebook, in execution order (toc order, except that a notebook with
-        ``softpend.after`` in its front matter runs after those notebooks); the execution record and page
-        are written at the end (:func:`write_execution_record`).
+        ``softpend.after`` in its front matter runs after those notebooks); notebooks execute side by side
+        where :mod:`softpend.study.book_schedule` lets them.  The execution record and page are written at
+        the end (:func:`write_execution_record`).
 
     Raises
     ------
@@ -694,7 +720,6 @@ def run_notebooks(
         A notebook raised; its partially executed output is kept for inspection.
     """
     import nbformat
-    from tqdm.auto import tqdm
 
     layout = BookLayout.at(root)
     names = toc_names = toc_notebooks(layout.toc_path)
@@ -720,10 +745,12 @@ def run_notebooks(
         plan = {}
         after: dict[str, list[str]] = {}
         book_runs: dict[str, list[str]] = {}
+        realtime: dict[str, bool] = {}
         for name in names:
             nb = read_notebook(layout.source_path(name))
             after[name] = notebook_after(nb, name, toc_names)
             book_runs[name] = notebook_book_runs(nb, name)
+            realtime[name] = notebook_realtime(nb, name)
             parameters = profile_parameters(profiles, profile, name)
             converted = Path(scratch) / f"{name}.ipynb"
             nbformat.write(nb, str(converted))
@@ -755,37 +782,194 @@ def run_notebooks(
             output_path, key_path = layout.output_path(name), layout.key_path(name)
             cached[name] = (not force and output_path.is_file() and key_path.is_file()
                             and key_path.read_text(encoding="utf-8").strip() == key)
-        # the book's training runs that the notebooks to execute read with their own defaults: trained first,
-        # all in one pool, so that no worker idles while one notebook's last runs finish
+        # the book's training runs that the notebooks to execute read with their own defaults: trained in one
+        # pool, in the background of the notebooks that need none of them (or first, with one worker)
         run_sets = sorted({run_set for name in order if not cached[name] and not plan[name][0]
                            for run_set in book_runs[name]})
-        pool = None
-        if run_sets:
-            from softpend.study.run_pool import train_book_runs
+        needs = _notebook_needs(order, plan, after, book_runs, realtime, cached)
+        runs = _execute(layout, order, plan, planned, cached, needs, run_sets, progress, profile)
+    write_execution_record(layout, execution_record(layout, profile, runs.notebooks, used_overrides, runs.pool))
+    return runs.notebooks
 
-            if progress:
-                print(f"[book] training the book's runs ({', '.join(run_sets)}) in one pool", file=sys.stderr,
-                      flush=True)
-            start = time.perf_counter()
-            trained = train_book_runs(run_sets, root=layout.root, progress=progress)
-            pool = {"run_sets": run_sets, "trained": trained, "run_s": time.perf_counter() - start}
 
-        bar = tqdm(order, desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
-        for name in bar:
-            parameters, converted, _ = plan[name]
-            key = planned[name]
-            bar.set_postfix_str(name)
-            start = time.perf_counter()
-            output_path = layout.output_path(name)
-            if not cached[name]:
-                _execute_one(layout, name, parameters, key, converted)
-            seconds = time.perf_counter() - start
-            runs.append(NotebookRun(name, "cached" if cached[name] else "executed", seconds, output_path))
-            if progress:
-                what = "up to date (cached)" if cached[name] else f"executed in {seconds:.1f} s"
-                bar.write(f"[book] {name}: {what}", file=sys.stderr)
-    write_execution_record(layout, execution_record(layout, profile, runs, used_overrides, pool))
-    return runs
+def _notebook_needs(order: Sequence[str], plan: dict[str, tuple], after: dict[str, list[str]],
+                    book_runs: dict[str, list[str]], realtime: dict[str, bool],
+                    cached: dict[str, bool]) -> dict[str, Needs]:
+    """What each notebook of ``order`` waits for (:class:`softpend.study.book_schedule.Needs`): the selected
+    notebooks of its ``after``; with its own parameters, the book runs of its ``book_runs``; with other
+    parameters, the earlier notebooks that read book runs, which may train the same runs in their kernels."""
+    from softpend.study.run_pool import book_run_names
+
+    needs, readers = {}, []
+    for name in order:
+        waits = {dep for dep in after[name] if dep in plan}
+        runs: frozenset[str] = frozenset()
+        if book_runs[name] and not cached[name]:
+            if plan[name][0]:
+                waits |= set(readers)
+            else:
+                runs = book_run_names(book_runs[name])
+        if book_runs[name]:
+            readers.append(name)
+        needs[name] = Needs(frozenset(waits), runs, realtime[name])
+    return needs
+
+
+@dataclass
+class _Execution:
+    """What :func:`_execute` did: the notebooks' :class:`NotebookRun` entries and the training pool's record."""
+
+    notebooks: list[NotebookRun]
+    pool: Optional[dict[str, Any]]
+
+
+def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], planned: dict[str, str],
+             cached: dict[str, bool], needs: dict[str, Needs], run_sets: Sequence[str], progress: bool,
+             profile: str) -> _Execution:
+    """Train the missing runs of ``run_sets`` and execute the notebooks of ``order`` that are not ``cached``, on
+    up to :func:`~softpend.study.sweep.default_workers` kernels at once (:mod:`softpend.study.book_schedule`).
+
+    With several workers the training pool runs in a background thread, its workers at niceness
+    :data:`BACKGROUND_NICENESS`, while the notebooks that need none of its runs execute; a notebook starts as
+    soon as the runs it reads have finished.  With one worker the pool trains first and the notebooks then
+    execute one at a time.  After a notebook fails, or the pool does, nothing further starts; the running
+    notebooks and the pool finish (their results are kept) and the first error is raised.
+    """
+    import queue
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tqdm.auto import tqdm
+
+    from softpend.study.run_pool import book_run_jobs, train_jobs
+    from softpend.study.sweep import default_workers
+
+    lanes = default_workers()
+    began = time.perf_counter()
+    jobs = book_run_jobs(run_sets, root=layout.root) if run_sets else []
+    pending_runs = {name for name, _ in jobs}
+    trained: set[str] = set()
+    events: "queue.Queue[tuple[str, str, Any]]" = queue.Queue()
+    pool: Optional[dict[str, Any]] = None
+    bar = tqdm(total=len(order), desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
+
+    def say(text: str) -> None:
+        if progress:
+            bar.write(f"[book] {text}", file=sys.stderr)
+
+    def train(background: bool) -> None:
+        error: Optional[BaseException] = None
+        try:
+            train_jobs(jobs, progress=progress and not background, niceness=BACKGROUND_NICENESS if background else 0,
+                       on_finished=lambda name: events.put(("run", name, None)))
+        except BaseException as exc:  # noqa: BLE001 -- handed to the scheduling thread, which raises it
+            error = exc
+        events.put(("pool", "", error))
+
+    pool_thread = None
+    if jobs:
+        say(f"training {len(jobs)} of the book's runs ({', '.join(run_sets)}) in one pool"
+            + (", in the background of the notebooks that need none of them" if lanes > 1 else ""))
+        pool = {"run_sets": list(run_sets), "trained": len(jobs), "run_s": None, "started_s": 0.0,
+                "background": lanes > 1}
+        if lanes > 1:
+            pool_thread = threading.Thread(target=train, args=(True,), name="softpend-book-pool", daemon=True)
+            pool_thread.start()
+        else:
+            train(False)
+    pool_done = pool_thread is None
+    errors: list[BaseException] = []
+    while pool_done and not events.empty():  # the pool trained first, in this thread
+        kind, name, payload = events.get()
+        if kind == "run":
+            trained.add(name)
+        elif payload is not None:
+            errors.append(payload)
+    if pool is not None and pool_done:
+        pool["run_s"] = time.perf_counter() - began
+
+    def execute(name: str) -> None:
+        start = time.perf_counter()
+        try:
+            _execute_one(layout, name, plan[name][0], planned[name], plan[name][1])
+        except BaseException as exc:  # noqa: BLE001 -- handed to the scheduling thread, which raises it
+            events.put(("notebook", name, exc))
+            return
+        events.put(("notebook", name, (start - began, time.perf_counter() - start)))
+
+    finished = {name for name in order if cached[name]}
+    started = set(finished)
+    timings: dict[str, tuple[float, float]] = {}
+    for name in order:
+        if cached[name]:
+            say(f"{name}: up to date (cached)")
+            bar.update(1)
+    # runs the pool will not train (finished before) count as trained
+    trained_or_absent = _AllBut(pending_runs, trained)
+    with ThreadPoolExecutor(max_workers=lanes, thread_name_prefix="softpend-book-notebook") as lanes_pool:
+        while True:
+            while not errors:
+                name = next_to_start(order, needs, started, finished, trained_or_absent, lanes)
+                if name is None:
+                    break
+                started.add(name)
+                bar.set_postfix_str(name)
+                lanes_pool.submit(execute, name)
+            if not started - finished and (pool_done or errors):
+                break
+            kind, name, payload = events.get()
+            if kind == "run":
+                trained.add(name)
+                say(f"run {name} trained ({len(trained)} of {len(pending_runs)})")
+            elif kind == "pool":
+                pool_done = True
+                assert pool is not None
+                pool["run_s"] = time.perf_counter() - began
+                if payload is not None:
+                    errors.append(payload)
+                    say(f"the training pool failed: {payload}")
+            elif isinstance(payload, BaseException):
+                finished.add(name)
+                errors.append(payload)
+                say(f"{name} failed; waiting for the running notebooks"
+                    + ("" if pool_done else " and the training pool") + " to finish (their results are kept)")
+            else:
+                finished.add(name)
+                timings[name] = payload
+                bar.update(1)
+                say(f"{name}: executed in {payload[1]:.1f} s")
+    if errors:
+        while not pool_done:  # a notebook failed: the pool's runs are kept, so let it finish
+            kind, name, payload = events.get()
+            if kind == "pool":
+                pool_done = True
+                assert pool is not None
+                pool["run_s"] = time.perf_counter() - began
+            elif kind == "run":
+                trained.add(name)
+    bar.close()
+    if errors:
+        raise errors[0]
+    never = [name for name in order if name not in started]
+    if never:
+        raise RuntimeError(f"notebooks {never} could not start: what they wait for never finished")
+    notebooks = [NotebookRun(name, "cached" if cached[name] else "executed",
+                             timings[name][1] if name in timings else 0.0, layout.output_path(name),
+                             timings[name][0] if name in timings else None)
+                 for name in order]
+    return _Execution(notebooks, pool)
+
+
+class _AllBut:
+    """The runs counted as trained: every run except those of ``pending`` that are not yet in ``done``."""
+
+    def __init__(self, pending: set[str], done: set[str]) -> None:
+        self._pending, self._done = pending, done
+
+    def __contains__(self, name: object) -> bool:
+        return name not in self._pending or name in self._done
+
+
 
 
 # --------------------------------------------------------------------------- execution record
@@ -831,13 +1015,15 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
     dict
         ``date`` (UTC, ISO 8601), ``profile`` and ``overrides`` of the run; ``notebooks``: one entry per toc
         notebook, in toc order, with ``this_run`` (``"executed"``, ``"cached"`` or ``"not run"``: not
-        selected by ``only``), ``run_s`` (this run's time for it), and from the executed notebook's metadata
+        selected by ``only``), ``run_s`` (this run's time for it), ``started_s`` (when this run started it,
+        in seconds after the runner began executing; None if it did not execute), and from the executed notebook's metadata
         (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
         execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied (all None
         when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
         this process may use, and the ``packages`` of ``environment.lock`` with their installed versions;
-        ``training_pool``: ``pool`` (``run_sets``, ``trained``: how many runs, ``run_s``: wall time), None
-        when this run trained none first.
+        ``training_pool``: ``pool`` (``run_sets``, ``trained``: how many runs, ``run_s``: when the last
+        finished, in seconds after the runner began executing, ``background``: whether notebooks executed
+        alongside it), None when this run trained none.
     """
     import datetime
 
@@ -849,6 +1035,7 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         entry: dict[str, Any] = {"name": name, "title": _title(layout.source_path(name)),
                                  "this_run": this_run[name].status if name in this_run else "not run",
                                  "run_s": this_run[name].seconds if name in this_run else None,
+                                 "started_s": this_run[name].started_s if name in this_run else None,
                                  "executed_s": None, "executed_at": None, "profile": None, "parameters": None,
                                  "overrides": None}
         output = layout.output_path(name)
@@ -925,7 +1112,22 @@ def execution_page(record: dict[str, Any]) -> str:
         "",
         f"Sum of the last execution times: {total:.0f} s.",
     ]
-    if pool and pool["trained"]:
+    if pool and pool["trained"] and pool.get("background"):
+        lines += [
+            "",
+            f"This run trained {pool['trained']} of the runs the notebooks read ({', '.join(pool['run_sets'])}) "
+            f"in one pool of workers at the lowest scheduling priority, in {pool['run_s']:.0f} s. The notebooks "
+            "executed alongside, several at a time, each once the runs it reads had finished; a notebook that "
+            "runs the rig's twin in real time executed alone among them, its emulator and control loop at "
+            "real-time priority. Their times above are those of a shared machine.",
+            "",
+            "| notebook | started [s] | wall [s] |",
+            "|---|---|---|",
+        ]
+        for entry in sorted((entry for entry in record["notebooks"] if entry.get("started_s") is not None),
+                            key=lambda entry: entry["started_s"]):
+            lines.append(f"| {title(entry)} | {entry['started_s']:.0f} | {entry['run_s']:.1f} |")
+    elif pool and pool["trained"]:
         lines += [
             "",
             f"Before the notebooks, this run trained {pool['trained']} of the runs they read "

@@ -71,13 +71,18 @@ def default_backend() -> str:
 
 
 def _guarded(job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool,
-             one_thread: bool = True) -> tuple[str, Optional[str]]:
-    """Run one job (in a worker: with one torch thread); ``(name, None)`` on success, ``(name, traceback)`` if
-    it raised (an exception never crosses back as a pickled object)."""
+             one_thread: bool = True, niceness: int = 0) -> tuple[str, Optional[str]]:
+    """Run one job (in a worker: with one torch thread, at least ``niceness``); ``(name, None)`` on success,
+    ``(name, traceback)`` if it raised (an exception never crosses back as a pickled object)."""
     if one_thread:
         import torch
 
         torch.set_num_threads(1)
+    if niceness and hasattr(os, "setpriority"):
+        try:  # raised only, never lowered: a worker that is asked again keeps its priority
+            os.setpriority(os.PRIO_PROCESS, 0, max(niceness, os.getpriority(os.PRIO_PROCESS, 0)))
+        except OSError:
+            pass
     try:
         job(*args, progress=progress)
     except Exception:  # noqa: BLE001 -- reported by name to the caller, which retries or raises
@@ -120,6 +125,8 @@ def run_jobs(
     desc: str = "runs",
     backend: Optional[str] = None,
     retries: int = 1,
+    on_finished: Optional[Callable[[str], None]] = None,
+    niceness: int = 0,
 ) -> None:
     """Call ``job(*args)`` for every ``args`` in ``jobs`` on the parallel engine, retrying failures.
 
@@ -145,6 +152,13 @@ def run_jobs(
     retries : int
         How often a job whose worker died is run again before giving up (a job that raised is not retried:
         it would raise again).
+    on_finished : callable, optional
+        Called in this process with a job's name as soon as that job has finished without raising (from the
+        thread that called this function).
+    niceness : int
+        The workers' scheduling niceness while they run jobs (Unix ``nice``, 0-19; raised, never lowered, and
+        kept by a reused worker): 19 leaves the processors to every other program and takes what they leave
+        idle.  Jobs that run in this process (one worker) keep its priority.
 
     Raises
     ------
@@ -162,6 +176,8 @@ def run_jobs(
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if isinstance(retries, bool) or int(retries) != retries or retries < 0:
         raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+    if isinstance(niceness, bool) or not isinstance(niceness, int) or not 0 <= niceness <= 19:
+        raise ValueError(f"niceness must be an integer in 0..19, got {niceness!r}")
     backend = default_backend() if backend is None else backend
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
@@ -170,7 +186,7 @@ def run_jobs(
     failures: dict[str, str] = {}
     for attempt in range(int(retries) + 1):
         raised, lost = _run_round(job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""),
-                                  backend)
+                                  backend, on_finished, niceness)
         failures.update(raised)
         pending = {name: pending[name] for name in lost}
         if not pending:
@@ -191,7 +207,8 @@ LOST = "its worker process died (killed, out of memory or crashed)"
 
 
 def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str,
-               backend: str) -> tuple[dict[str, str], set[str]]:
+               backend: str, on_finished: Optional[Callable[[str], None]] = None,
+               niceness: int = 0) -> tuple[dict[str, str], set[str]]:
     """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
     died)``."""
     if workers <= 1:
@@ -200,6 +217,8 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
             _, error = _guarded(job, args, name, progress, one_thread=False)
             if error is not None:
                 raised[name] = error
+            elif on_finished is not None:
+                on_finished(name)
         return raised, set()
 
     import joblib
@@ -211,12 +230,14 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
         with _engine(backend):
             parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
                                        **({"backend": "loky"} if backend == "loky" else {}))
-            calls = (joblib.delayed(_guarded)(job, args, name, False) for name, args in pending.items())
+            calls = (joblib.delayed(_guarded)(job, args, name, False, True, niceness) for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
                     finished.add(name)
                     if error is not None:
                         raised[name] = error
+                    elif on_finished is not None:
+                        on_finished(name)
                     bar.set_postfix_str(name)
                     bar.update(1)
     except ValueError:

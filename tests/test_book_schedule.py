@@ -45,3 +45,11 @@ def test_a_real_time_notebook_runs_alone_and_is_not_passed_over():
     # one that is not ready does not hold the others back
     assert next_to_start(order, NEEDS, {"fig01"}, set(), {"dqn-seed1"}, 2) is None  # fig04 lacks dqn-seed0 too
     assert next_to_start(["rig", "fig01"], NEEDS, set(), set(), set(), 2) == "fig01"
+
+
+def test_a_real_time_notebook_waits_for_the_training_pool_without_holding_the_others():
+    trained = {"dqn-seed0"}
+    order = ["rig", "fig01"]
+    assert next_to_start(order, NEEDS, set(), set(), trained, 2, training=True) == "fig01"
+    assert next_to_start(order, NEEDS, {"fig01"}, {"fig01"}, trained, 2, training=True) is None
+    assert next_to_start(order, NEEDS, {"fig01"}, {"fig01"}, trained, 2, training=False) == "rig"

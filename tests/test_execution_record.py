@@ -16,8 +16,9 @@ from softpend.study.book import BookLayout, execution_order, run_notebooks, toc_
 
 
 def source(title: str, body: str = "print(greeting)", after: list[str] | None = None,
-           book_runs: list[str] | None = None) -> str:
-    front = {key: value for key, value in (("after", after), ("book_runs", book_runs)) if value is not None}
+           book_runs: list[str] | None = None, realtime: object = None) -> str:
+    front = {key: value for key, value in (("after", after), ("book_runs", book_runs), ("realtime", realtime))
+             if value is not None}
     extra = "softpend:\n" + "".join(f"  {key}: {json.dumps(value)}\n" for key, value in front.items()) if front else ""
     return (HEADER.format(extra=extra) + f"\n# {title}\n\n```{{code-cell}} ipython3\n:tags: [parameters]\n\n"
             f"greeting = 'hello'\n```\n\n```{{code-cell}} ipython3\n{body}\n```\n")
@@ -194,4 +195,25 @@ def test_a_failing_notebook_lets_the_pool_finish_and_is_raised(tmp_path, monkeyp
 def test_an_unknown_run_set_is_rejected(tmp_path):
     bad = make_book(tmp_path / "bad", {"x": source("X", book_runs=["ppo"])}, {"full": {}})
     with pytest.raises(ValueError, match="softpend.book_runs must be a list among"):
+        run_notebooks(bad, profile="full", progress=False)
+
+
+def test_a_real_time_notebook_executes_alone_after_the_training_pool(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOFTPEND_WORKERS", "2")
+    fake_pool(monkeypatch, wait_for="a")  # the pool trains until "a" has executed
+    nap = "import time\ntime.sleep(1.0)"
+    notebooks = {"rig": source("Rig", nap, realtime=True), "a": source("A", nap), "b": source("B", nap),
+                 "c": source("C", nap), "rl": source("RL", nap, book_runs=["rl"])}
+    root = make_book(tmp_path, notebooks, {"full": {}})
+    run_notebooks(root, profile="full", progress=False)
+    record = json.loads(BookLayout.at(root).record_path.read_text())
+    entries = {entry["name"]: entry for entry in record["notebooks"]}
+    spans = {name: (entry["started_s"], entry["started_s"] + entry["run_s"]) for name, entry in entries.items()}
+    rig = spans.pop("rig")
+    assert rig[0] >= record["training_pool"]["run_s"]  # first in the toc, but it waited for the pool
+    assert all(end <= rig[0] or start >= rig[1] for start, end in spans.values()), (rig, spans)
+    assert spans["b"][0] < spans["a"][1]  # the others share the lanes
+
+    bad = make_book(tmp_path / "bad", {"x": source("X", realtime="yes")}, {"full": {}})
+    with pytest.raises(ValueError, match="softpend.realtime must be true or false"):
         run_notebooks(bad, profile="full", progress=False)

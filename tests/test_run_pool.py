@@ -67,10 +67,10 @@ def test_pilco_starts_first_then_dqn_mbpo_then_dqn(tmp_path, monkeypatch):
         raise AssertionError("an unknown run set was accepted")
 
 
-def test_the_first_seed_set_starts_first_and_names_its_three_runs(tmp_path):
+def test_the_first_seed_set_names_its_three_runs(tmp_path):
     names = [name for name, _ in book_run_jobs(["rl", "pilco", "first_seed"], tmp_path)]
-    assert names[:3] == ["pilco-seed0", "mbpo-seed0", "dqn-seed0"] and len(names) == len(set(names)) == 30
-    assert names[3:12] == [f"pilco-seed{k}" for k in range(1, 10)]
+    assert len(names) == len(set(names)) == 30  # the first seed's runs are trained once
+    assert names[:10] == [f"pilco-seed{k}" for k in range(10)]
     assert [name for name, _ in book_run_jobs(["first_seed"], tmp_path)] == ["pilco-seed0", "mbpo-seed0", "dqn-seed0"]
     assert book_run_names(["first_seed"]) == {"pilco-seed0", "mbpo-seed0", "dqn-seed0"}
     assert book_run_names(["rl", "pilco"]) == set(names)

@@ -19,9 +19,9 @@ reads the book's training runs (:data:`softpend.study.run_pool.BOOK_RUN_SETS`): 
 execute with their own parameters, those runs are trained in one pool of workers
 (:func:`softpend.study.run_pool.train_book_runs`), so that no worker idles while one notebook's last runs
 finish.  With more than one worker the pool trains in the background, at the lowest scheduling priority, while
-notebooks execute side by side, each as soon as what it waits for has finished, and a notebook whose front
-matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) alone among them
-(:mod:`softpend.study.book_schedule`); with one worker the pool trains first and the notebooks execute one at
+notebooks execute side by side, each as soon as what it waits for has finished; a notebook whose front
+matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) executes alone, after the
+pool (:mod:`softpend.study.book_schedule`); with one worker the pool trains first and the notebooks execute one at
 a time.  Every run ends by writing the execution record
 ``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
 its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
@@ -82,7 +82,7 @@ EXECUTION_PAGE = "execution"
 #: Bump when the way outputs are produced changes, to invalidate every cached notebook.
 _CACHE_VERSION = "2"
 #: Scheduling niceness of the training pool's workers while notebooks execute alongside (the lowest priority:
-#: they take what the notebooks leave idle, and a real-time notebook's emulator and camera run as if alone).
+#: they take what the notebooks leave idle).
 BACKGROUND_NICENESS = 19
 #: Kernel arguments: matplotlib figures are embedded in the notebooks (and the book) as PNG images.
 #: (The kernel's own log is limited to errors: a failing cell is reported from the notebook's outputs.)
@@ -909,7 +909,7 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
     with ThreadPoolExecutor(max_workers=lanes, thread_name_prefix="softpend-book-notebook") as lanes_pool:
         while True:
             while not errors:
-                name = next_to_start(order, needs, started, finished, trained_or_absent, lanes)
+                name = next_to_start(order, needs, started, finished, trained_or_absent, lanes, not pool_done)
                 if name is None:
                     break
                 started.add(name)
@@ -1118,8 +1118,8 @@ def execution_page(record: dict[str, Any]) -> str:
             f"This run trained {pool['trained']} of the runs the notebooks read ({', '.join(pool['run_sets'])}) "
             f"in one pool of workers at the lowest scheduling priority, in {pool['run_s']:.0f} s. The notebooks "
             "executed alongside, several at a time, each once the runs it reads had finished; a notebook that "
-            "runs the rig's twin in real time executed alone among them, its emulator and control loop at "
-            "real-time priority. Their times above are those of a shared machine.",
+            "runs the rig's twin in real time executed alone, after the training. The times above are those of a "
+            "shared machine.",
             "",
             "| notebook | started [s] | wall [s] |",
             "|---|---|---|",

@@ -6,8 +6,9 @@ read works in the background at the lowest scheduling priority.  :func:`next_to_
 * a notebook starts once the notebooks it waits for (:attr:`Needs.after`) have finished and the training runs
   it reads (:attr:`Needs.runs`) are trained;
 * a real-time notebook (front matter ``softpend: {realtime: true}``: it paces a rig emulator by the wall
-  clock) runs alone among the notebooks: it starts when none other runs, and none starts while it runs, so
-  that only the background training, which yields to it, shares the processors with it;
+  clock) runs alone: it starts when no other notebook runs and the training pool has ended, and none starts
+  while it runs (training workers, even at the lowest priority, slow the twin's processes enough for its
+  camera to miss the filter's deadlines);
 * otherwise the first ready notebook in execution order starts; a ready real-time notebook first in line
   keeps further notebooks from starting until the running ones end, so it is never passed over for good.
 """
@@ -33,7 +34,8 @@ class Needs:
 
 
 def next_to_start(order: Sequence[str], needs: Mapping[str, Needs], started: Collection[str],
-                  finished: Collection[str], trained: Container[str], lanes: int) -> Optional[str]:
+                  finished: Collection[str], trained: Container[str], lanes: int,
+                  training: bool = False) -> Optional[str]:
     """The notebook to start now, or None.
 
     Parameters
@@ -48,6 +50,8 @@ def next_to_start(order: Sequence[str], needs: Mapping[str, Needs], started: Col
         The training runs that have finished (or need no training).
     lanes : int
         How many notebooks may execute at once (at least 1).
+    training : bool
+        Whether the training pool is still running (a real-time notebook waits for it to end).
     """
     if lanes < 1:
         raise ValueError(f"lanes must be at least 1, got {lanes}")
@@ -59,6 +63,8 @@ def next_to_start(order: Sequence[str], needs: Mapping[str, Needs], started: Col
             continue
         need = needs[name]
         if not (all(dep in finished for dep in need.after) and all(run in trained for run in need.runs)):
+            continue
+        if need.realtime and training:
             continue
         if need.realtime and running:
             return None  # it waits for a free processor set, and nothing passes it meanwhile

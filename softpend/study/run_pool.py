@@ -112,9 +112,8 @@ def book_run_jobs(run_sets: Sequence[str] = BOOK_RUN_SETS, root: Path | str = ".
                   pilco_config: PilcoConfig = PILCO, pilco_budget: PilcoBudget = PILCO_BOOK) -> list[Job]:
     """The runs of ``run_sets`` (:data:`BOOK_RUN_SETS`) still missing in their run folders under ``root``
     (the project root, where the notebooks execute), in the order to start them: PILCO's, then DQN-MBPO's,
-    then DQN's (:func:`train_in_one_pool`), except that with ``"first_seed"`` the first seed's three runs start
-    before all others.  The settings are the notebooks' defaults, so a notebook executed with them finds its
-    runs finished."""
+    then DQN's (:func:`train_in_one_pool`).  The settings are the notebooks' defaults, so a notebook executed
+    with them finds its runs finished."""
     _check_run_sets(run_sets)
     seeds = {"rl": set(), "pilco": set()}
     if "rl" in run_sets:
@@ -125,20 +124,16 @@ def book_run_jobs(run_sets: Sequence[str] = BOOK_RUN_SETS, root: Path | str = ".
     if "first_seed" in run_sets:
         seeds["rl"].add(first)
         seeds["pilco"].add(first)
-    rl_seeds = [seed for seed in (*rl_budget.seeds, first) if seed in seeds["rl"]]
-    pilco_seeds = [seed for seed in (*pilco_budget.seeds, first) if seed in seeds["pilco"]]
+    rl_seeds = sorted(seeds["rl"], key=[*rl_budget.seeds, first].index)
+    pilco_seeds = sorted(seeds["pilco"], key=[*pilco_budget.seeds, first].index)
     rl_specs = []
     if rl_seeds:
         configs = figure_configs(episode_s=rl_budget.episode_s, rollouts_per_real_step=rl_budget.rollouts_per_real_step,
                                  mbpo_random_episodes=rl_budget.mbpo_random_episodes)
         rl_specs = [("dqn", configs["dqn"], rl_seeds, rl_budget.episodes_dqn),
                     ("mbpo", configs["mbpo"], rl_seeds, rl_budget.episodes_mbpo)]
-    jobs = _pool_jobs(rl_specs, Path(root) / rl_budget.runs_root, pilco_config if pilco_seeds else None, pilco_seeds,
+    return _pool_jobs(rl_specs, Path(root) / rl_budget.runs_root, pilco_config if pilco_seeds else None, pilco_seeds,
                       Path(root) / pilco_budget.runs_root)
-    if "first_seed" in run_sets:
-        firsts = book_run_names(["first_seed"], rl_budget, pilco_budget)
-        jobs = [job for job in jobs if job[0] in firsts] + [job for job in jobs if job[0] not in firsts]
-    return jobs
 
 
 def train_book_runs(run_sets: Sequence[str] = BOOK_RUN_SETS, root: Path | str = ".", workers: Optional[int] = None,

@@ -931,8 +931,10 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
             elif isinstance(payload, BaseException):
                 finished.add(name)
                 errors.append(payload)
-                say(f"{name} failed; waiting for the running notebooks"
-                    + ("" if pool_done else " and the training pool") + " to finish (their results are kept)")
+                waiting = [what for what, busy in (("the running notebooks", started - finished),
+                                                   ("the training pool", not pool_done)) if busy]
+                if waiting:  # else the error itself is the one message
+                    say(f"{name} failed; waiting for {' and '.join(waiting)} to finish (their results are kept)")
             else:
                 finished.add(name)
                 timings[name] = payload

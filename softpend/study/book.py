@@ -1018,8 +1018,8 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         ``date`` (UTC, ISO 8601), ``profile`` and ``overrides`` of the run; ``notebooks``: one entry per toc
         notebook, in toc order, with ``this_run`` (``"executed"``, ``"cached"`` or ``"not run"``: not
         selected by ``only``), ``run_s`` (this run's time for it), ``started_s`` (when this run started it,
-        in seconds after the runner began executing; None if it did not execute), and from the executed notebook's metadata
-        (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
+        in seconds after the runner began executing; None if it did not execute), and from the executed
+        notebook's metadata (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
         execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied (all None
         when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
         this process may use, and the ``packages`` of ``environment.lock`` with their installed versions;

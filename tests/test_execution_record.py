@@ -217,3 +217,17 @@ def test_a_real_time_notebook_executes_alone_after_the_training_pool(tmp_path, m
     bad = make_book(tmp_path / "bad", {"x": source("X", realtime="yes")}, {"full": {}})
     with pytest.raises(ValueError, match="softpend.realtime must be true or false"):
         run_notebooks(bad, profile="full", progress=False)
+
+
+def test_notebooks_side_by_side_all_run_in_the_project_root(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOFTPEND_WORKERS", "2")
+    here = Path.cwd()
+    # uneven lengths: executions end while others' kernels start
+    body = "import os, pathlib, time\ntime.sleep({nap})\npathlib.Path('cwd-{name}.txt').write_text(os.getcwd())"
+    notebooks = {name: source(name.upper(), body.format(nap=0.1 + 1.3 * (k % 2), name=name))
+                 for k, name in enumerate("abcdef")}
+    root = make_book(tmp_path, notebooks, {"full": {}})
+    run_notebooks(root, profile="full", progress=False)
+    assert Path.cwd() == here
+    assert {name: (root / f"cwd-{name}.txt").read_text() for name in notebooks} == {n: str(root.resolve()) for n in notebooks}
+    assert not list(here.glob("cwd-*.txt"))

@@ -646,7 +646,7 @@ def _execute_one(
             parameters=parameters,
             kernel_name=kernel_name,
             progress_bar=False,
-            cwd=str(layout.root),
+            cwd=None,  # the kernel starts in this process's working folder, the project root (see _execute)
             extra_arguments=list(_KERNEL_ARGUMENTS),
         )
     except PapermillExecutionError as exc:
@@ -835,6 +835,24 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
     execute one at a time.  After a notebook fails, or the pool does, nothing further starts; the running
     notebooks and the pool finish (their results are kept) and the first error is raised.
     """
+    from softpend.study.sweep import default_workers
+
+    lanes = default_workers()
+    began = time.perf_counter()
+    # kernels start in the working folder of this process: papermill's own ``cwd`` changes it for the length of
+    # one execution, which two executions in threads would undo for each other
+    previous_cwd = os.getcwd()
+    os.chdir(layout.root)
+    try:
+        return _execute_in_root(layout, order, plan, planned, cached, needs, run_sets, progress, profile, lanes, began)
+    finally:
+        os.chdir(previous_cwd)
+
+
+def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], planned: dict[str, str],
+                     cached: dict[str, bool], needs: dict[str, Needs], run_sets: Sequence[str], progress: bool,
+                     profile: str, lanes: int, began: float) -> _Execution:
+    """:func:`_execute`, in the project root."""
     import queue
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -842,10 +860,7 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
     from tqdm.auto import tqdm
 
     from softpend.study.run_pool import book_run_jobs, train_jobs
-    from softpend.study.sweep import default_workers
 
-    lanes = default_workers()
-    began = time.perf_counter()
     jobs = book_run_jobs(run_sets, root=layout.root) if run_sets else []
     pending_runs = {name for name, _ in jobs}
     trained: set[str] = set()

@@ -863,7 +863,8 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
 
     jobs = book_run_jobs(run_sets, root=layout.root) if run_sets else []
     pending_runs = {name for name, _ in jobs}
-    trained: set[str] = set()
+    # a run the pool does not train (it was finished before) counts as trained from the start
+    trained = {run for need in needs.values() for run in need.runs} - pending_runs
     events: "queue.Queue[tuple[str, str, Any]]" = queue.Queue()
     pool: Optional[dict[str, Any]] = None
     bar = tqdm(total=len(order), desc=f"book [{profile}]", unit="notebook", disable=not progress, file=sys.stderr)
@@ -885,23 +886,49 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
     if jobs:
         say(f"training {len(jobs)} of the book's runs ({', '.join(run_sets)}) in one pool"
             + (", in the background of the notebooks that need none of them" if lanes > 1 else ""))
-        pool = {"run_sets": list(run_sets), "trained": len(jobs), "run_s": None, "started_s": 0.0,
-                "background": lanes > 1}
+        pool = {"run_sets": list(run_sets), "trained": len(jobs), "run_s": None, "background": lanes > 1}
         if lanes > 1:
             pool_thread = threading.Thread(target=train, args=(True,), name="softpend-book-pool", daemon=True)
             pool_thread.start()
         else:
             train(False)
-    pool_done = pool_thread is None
+    pool_done = pool is None
     errors: list[BaseException] = []
-    while pool_done and not events.empty():  # the pool trained first, in this thread
-        kind, name, payload = events.get()
+    finished = {name for name in order if cached[name]}
+    started = set(finished)
+    timings: dict[str, tuple[float, float]] = {}
+
+    def take(event: tuple[str, str, Any]) -> None:
+        """Apply one event of the pool (``"run"``, ``"pool"``) or of a notebook lane (``"notebook"``)."""
+        nonlocal pool_done
+        kind, name, payload = event
         if kind == "run":
             trained.add(name)
-        elif payload is not None:
+            if pool_thread is not None:
+                say(f"run {name} trained ({len(trained & pending_runs)} of {len(pending_runs)})")
+        elif kind == "pool":
+            pool_done = True
+            assert pool is not None
+            pool["run_s"] = time.perf_counter() - began
+            if payload is not None:
+                errors.append(payload)
+                if pool_thread is not None:
+                    say(f"the training pool failed: {payload}")
+        elif isinstance(payload, BaseException):
+            finished.add(name)
             errors.append(payload)
-    if pool is not None and pool_done:
-        pool["run_s"] = time.perf_counter() - began
+            waiting = [what for what, busy in (("the running notebooks", started - finished),
+                                               ("the training pool", not pool_done)) if busy]
+            if waiting:  # else the error itself is the one message
+                say(f"{name} failed; waiting for {' and '.join(waiting)} to finish (their results are kept)")
+        else:
+            finished.add(name)
+            timings[name] = payload
+            bar.update(1)
+            say(f"{name}: executed in {payload[1]:.1f} s")
+
+    while pool_thread is None and not events.empty():  # the pool trained first, in this thread
+        take(events.get())
 
     def execute(name: str) -> None:
         start = time.perf_counter()
@@ -912,19 +939,14 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
             return
         events.put(("notebook", name, (start - began, time.perf_counter() - start)))
 
-    finished = {name for name in order if cached[name]}
-    started = set(finished)
-    timings: dict[str, tuple[float, float]] = {}
     for name in order:
         if cached[name]:
             say(f"{name}: up to date (cached)")
             bar.update(1)
-    # runs the pool will not train (finished before) count as trained
-    trained_or_absent = _AllBut(pending_runs, trained)
     with ThreadPoolExecutor(max_workers=lanes, thread_name_prefix="softpend-book-notebook") as lanes_pool:
         while True:
             while not errors:
-                name = next_to_start(order, needs, started, finished, trained_or_absent, lanes, not pool_done)
+                name = next_to_start(order, needs, started, finished, trained, lanes, not pool_done)
                 if name is None:
                     break
                 started.add(name)
@@ -932,38 +954,9 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
                 lanes_pool.submit(execute, name)
             if not started - finished and (pool_done or errors):
                 break
-            kind, name, payload = events.get()
-            if kind == "run":
-                trained.add(name)
-                say(f"run {name} trained ({len(trained)} of {len(pending_runs)})")
-            elif kind == "pool":
-                pool_done = True
-                assert pool is not None
-                pool["run_s"] = time.perf_counter() - began
-                if payload is not None:
-                    errors.append(payload)
-                    say(f"the training pool failed: {payload}")
-            elif isinstance(payload, BaseException):
-                finished.add(name)
-                errors.append(payload)
-                waiting = [what for what, busy in (("the running notebooks", started - finished),
-                                                   ("the training pool", not pool_done)) if busy]
-                if waiting:  # else the error itself is the one message
-                    say(f"{name} failed; waiting for {' and '.join(waiting)} to finish (their results are kept)")
-            else:
-                finished.add(name)
-                timings[name] = payload
-                bar.update(1)
-                say(f"{name}: executed in {payload[1]:.1f} s")
-    if errors:
-        while not pool_done:  # a notebook failed: the pool's runs are kept, so let it finish
-            kind, name, payload = events.get()
-            if kind == "pool":
-                pool_done = True
-                assert pool is not None
-                pool["run_s"] = time.perf_counter() - began
-            elif kind == "run":
-                trained.add(name)
+            take(events.get())
+    while not pool_done:  # a notebook failed: the pool's runs are kept, so let it finish
+        take(events.get())
     bar.close()
     if errors:
         raise errors[0]
@@ -975,16 +968,6 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
                              timings[name][0] if name in timings else None)
                  for name in order]
     return _Execution(notebooks, pool)
-
-
-class _AllBut:
-    """The runs counted as trained: every run except those of ``pending`` that are not yet in ``done``."""
-
-    def __init__(self, pending: set[str], done: set[str]) -> None:
-        self._pending, self._done = pending, done
-
-    def __contains__(self, name: object) -> bool:
-        return name not in self._pending or name in self._done
 
 
 
@@ -1034,9 +1017,9 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         notebook, in toc order, with ``this_run`` (``"executed"``, ``"cached"`` or ``"not run"``: not
         selected by ``only``), ``run_s`` (this run's time for it), ``started_s`` (when this run started it,
         in seconds after the runner began executing; None if it did not execute), and from the executed
-        notebook's metadata (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and end of its last
-        execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied (all None
-        when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
+        notebook's metadata (papermill's and the runner's) ``executed_s`` and ``executed_at`` (wall time and
+        end of its last execution), its ``profile``, the profile's ``parameters`` and the ``overrides`` applied
+        (all None when there is no executed notebook); ``environment``: Python version, platform, CPU count, the CPUs
         this process may use, and the ``packages`` of ``environment.lock`` with their installed versions;
         ``training_pool``: ``pool`` (``run_sets``, ``trained``: how many runs, ``run_s``: when the last
         finished, in seconds after the runner began executing, ``background``: whether notebooks executed

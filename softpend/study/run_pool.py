@@ -115,17 +115,11 @@ def book_run_jobs(run_sets: Sequence[str] = BOOK_RUN_SETS, root: Path | str = ".
     then DQN's (:func:`train_in_one_pool`).  The settings are the notebooks' defaults, so a notebook executed
     with them finds its runs finished."""
     _check_run_sets(run_sets)
-    seeds = {"rl": set(), "pilco": set()}
-    if "rl" in run_sets:
-        seeds["rl"] |= set(rl_budget.seeds)
-    if "pilco" in run_sets:
-        seeds["pilco"] |= set(pilco_budget.seeds)
     first = rl_budget.seeds[0]
-    if "first_seed" in run_sets:
-        seeds["rl"].add(first)
-        seeds["pilco"].add(first)
-    rl_seeds = sorted(seeds["rl"], key=[*rl_budget.seeds, first].index)
-    pilco_seeds = sorted(seeds["pilco"], key=[*pilco_budget.seeds, first].index)
+    rl_seeds = list(rl_budget.seeds) if "rl" in run_sets else [first] if "first_seed" in run_sets else []
+    pilco_seeds = list(pilco_budget.seeds) if "pilco" in run_sets else []
+    if "first_seed" in run_sets and first not in pilco_seeds:
+        pilco_seeds.insert(0, first)
     rl_specs = []
     if rl_seeds:
         configs = figure_configs(episode_s=rl_budget.episode_s, rollouts_per_real_step=rl_budget.rollouts_per_real_step,

@@ -163,14 +163,18 @@ def test_run_folders_become_rig_controllers(tmp_path):
 
 
 def test_camera_process_delivers_frames_and_reports_its_end(tmp_path):
-    """The twin's camera in its own process: frames arrive stamped on the host clock; a killed camera
-    delivers nothing more and says it is no longer running; bad settings fail at start with the child's
-    error."""
+    """The twin's camera in its own process: frames arrive stamped on the host clock; its camera thread runs
+    under real-time scheduling where the OS grants it, its main thread does not; a killed camera delivers
+    nothing more and says it is no longer running; bad settings fail at start with the child's error."""
+    import os
     import signal
     import time
 
     from softpend.hardware.camera_process import CameraProcess, camera_settings
     from softpend.hardware.emulator import start_emulator_process
+    from softpend.hardware.realtime import CAMERA_PRIORITY, realtime_granted
+
+    granted = realtime_granted()
 
     with start_emulator_process(UPRIGHT, scene=True) as emulator:
         camera = CameraProcess(emulator.take_scene_fd(), TASK, camera_settings(60.0, 0.02, model=SMALL))
@@ -185,6 +189,11 @@ def test_camera_process_delivers_frames_and_reports_its_end(tmp_path):
             assert all(m.delivered_time_s <= time.monotonic() for m in frames)
             assert [m.frame for m in frames] == sorted(m.frame for m in frames)
             assert not any(m.lost for m in frames[1:])
+            pid = camera.process.pid
+            policies = {int(tid): os.sched_getscheduler(int(tid)) for tid in os.listdir(f"/proc/{pid}/task")}
+            realtime = [tid for tid, policy in policies.items() if policy == os.SCHED_FIFO]
+            assert policies[pid] == os.SCHED_OTHER and bool(realtime) == granted, policies
+            assert all(os.sched_getparam(tid).sched_priority == CAMERA_PRIORITY for tid in realtime)
             camera.process.send_signal(signal.SIGKILL)
             camera.process.wait(5.0)
             camera.poll()

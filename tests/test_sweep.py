@@ -10,7 +10,7 @@ import pytest
 
 from softpend.rl.config import DQNConfig
 from softpend.study.rl_runs import run_folder, train_seeds
-from softpend.study.sweep import SweepFailed, default_backend, default_workers, run_jobs
+from softpend.study.sweep import IDLE_CLASS, SweepFailed, default_backend, default_workers, run_jobs
 
 
 def write_pid(folder: Path, value: int, progress: bool = True) -> None:
@@ -62,27 +62,26 @@ def test_a_dead_worker_is_retried_and_reported_when_it_keeps_dying(tmp_path):
 def write_priority(folder: Path, value: int, progress: bool = True) -> None:
     if value < 0:
         raise ValueError(f"negative value {value}")
-    (folder / f"nice{value}.txt").write_text(f"{os.getpid()} {os.getpriority(os.PRIO_PROCESS, 0)}")
+    policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else -1
+    (folder / f"nice{value}.txt").write_text(f"{os.getpid()} {os.getpriority(os.PRIO_PROCESS, 0)} {policy}")
 
 
-def test_finished_jobs_are_announced_and_background_workers_run_at_low_priority(tmp_path):
+def test_finished_jobs_are_announced_and_background_workers_run_at_the_lowest_priority(tmp_path):
     finished = []
     with pytest.raises(SweepFailed, match="'bad'"):
         run_jobs(write_priority, [(tmp_path, 0), (tmp_path, -1), (tmp_path, 1)], ["zero", "bad", "one"], workers=2,
-                 progress=False, niceness=19, on_finished=finished.append)
+                 progress=False, background=True, on_finished=finished.append)
     assert sorted(finished) == ["one", "zero"]  # the job that raised is not announced
     for k in (0, 1):
-        pid, niceness = map(int, (tmp_path / f"nice{k}.txt").read_text().split())
+        pid, niceness, policy = map(int, (tmp_path / f"nice{k}.txt").read_text().split())
         assert pid != os.getpid() and niceness == 19
+        assert policy == os.SCHED_IDLE or not IDLE_CLASS
     # in this process (one worker) the jobs keep the caller's priority, and are announced too
-    own = os.getpriority(os.PRIO_PROCESS, 0)
-    run_jobs(write_priority, [(tmp_path, 2)], ["two"], workers=1, progress=False, niceness=19,
+    own = os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)
+    run_jobs(write_priority, [(tmp_path, 2)], ["two"], workers=1, progress=False, background=True,
              on_finished=finished.append)
-    assert finished[-1] == "two" and (tmp_path / "nice2.txt").read_text().split()[1] == str(own)
-    assert os.getpriority(os.PRIO_PROCESS, 0) == own
-    for bad in (-1, 20, 1.5, True):
-        with pytest.raises(ValueError, match="niceness must be an integer in 0..19"):
-            run_jobs(write_priority, [(tmp_path, 3)], ["three"], niceness=bad)
+    assert finished[-1] == "two" and (tmp_path / "nice2.txt").read_text().split()[1:] == [str(v) for v in own]
+    assert (os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)) == own
 
 
 def test_one_worker_runs_in_this_process_and_bad_arguments_are_errors(tmp_path, monkeypatch):

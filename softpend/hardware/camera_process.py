@@ -216,6 +216,7 @@ def _main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--settings-json", required=True)
     args = parser.parse_args(argv)
 
+    from softpend.hardware.realtime import CAMERA_PRIORITY, realtime_priority
     from softpend.hardware.scene import EmulatorScene
     from softpend.task import Task
 
@@ -236,7 +237,8 @@ def _main(argv: Optional[list[str]] = None) -> int:
     camera.on_frame = on_frame
     try:
         send({"ready": True})
-        camera.start()
+        with realtime_priority(CAMERA_PRIORITY):  # the camera's thread, started in the block, keeps it
+            camera.start()
         while not stopping and camera.running:
             time.sleep(0.02)
         camera.close()

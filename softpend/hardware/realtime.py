@@ -3,7 +3,9 @@
 A rig's host software asks the operating system to run its control loop ahead of other work, as robot
 controllers commonly do (a ``SCHED_FIFO`` thread on Linux): a loop that waits on the link most of the time then
 answers each state within its own processing time, whatever else the computer runs.  The emulator, which
-stands in for the rig's microcontroller with a processor of its own, asks for a higher priority still.
+stands in for the rig's microcontroller with a processor of its own, asks for a higher priority still; the
+twin's camera, which stands in for a camera with its own electronics, for one below the loop's, so that it
+delivers its frames whatever else the computer runs but never holds a command back.
 
 :func:`realtime_priority` asks for it and carries on at normal priority where the operating system refuses
 (no privilege, or no such policy): the run is then as good as the machine's load allows, and the caller
@@ -28,13 +30,17 @@ import subprocess
 import sys
 from typing import Iterator, Optional
 
-__all__ = ["DEVICE_PRIORITY", "LOOP_PRIORITY", "cpus_kept_awake", "realtime_priority"]
+__all__ = ["CAMERA_PRIORITY", "DEVICE_PRIORITY", "LOOP_PRIORITY", "cpus_kept_awake", "realtime_granted",
+           "realtime_priority"]
 
 #: ``SCHED_FIFO`` priority of the host's control loop (Linux range 1-99; below the kernel's own threads).
 LOOP_PRIORITY = 10
 
 #: ``SCHED_FIFO`` priority of the emulated device (above the host loop it serves).
 DEVICE_PRIORITY = 20
+
+#: ``SCHED_FIFO`` priority of the twin's camera thread (rendering and tracking; below the host loop).
+CAMERA_PRIORITY = 5
 
 
 @contextlib.contextmanager
@@ -63,6 +69,12 @@ def realtime_priority(priority: Optional[int]) -> Iterator[bool]:
             os.sched_setscheduler(0, policy, param)
         except OSError:
             pass
+
+
+def realtime_granted() -> bool:
+    """Whether the operating system grants this process ``SCHED_FIFO`` (asked for and given back at once)."""
+    with realtime_priority(1) as granted:
+        return granted
 
 
 #: The spinner's program: lowest scheduling class, pinned to one processor, ends with its parent.  One thread

@@ -75,16 +75,16 @@ def _pool_jobs(rl_specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], rl
 
 def train_jobs(jobs: Sequence[Job], workers: Optional[int] = None, progress: bool = True,
                backend: Optional[str] = None, on_finished: Optional[Callable[[str], None]] = None,
-               niceness: int = 0) -> int:
+               background: bool = False) -> int:
     """Run ``jobs`` (from :func:`book_run_jobs`, in their order) in one pool; returns how many.
 
     ``workers``, ``progress``, ``backend``, ``on_finished`` (called with each run's name as it finishes) and
-    ``niceness`` (the workers' scheduling niceness: 19 trains in the background of other work) are those of
+    ``background`` (the workers take only what other work leaves of the processors) are those of
     :func:`softpend.study.sweep.run_jobs`.
     """
     if jobs:
         run_jobs(call_job, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
-                 desc="training runs", backend=backend, on_finished=on_finished, niceness=niceness)
+                 desc="training runs", backend=backend, on_finished=on_finished, background=background)
     return len(jobs)
 
 

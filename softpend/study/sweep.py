@@ -24,10 +24,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import traceback
 from typing import Any, Callable, Iterator, Optional, Sequence
 
-__all__ = ["BACKENDS", "SweepFailed", "call_job", "default_backend", "default_workers", "run_jobs"]
+__all__ = ["BACKENDS", "IDLE_CLASS", "SweepFailed", "call_job", "default_backend", "default_workers", "enter_background",
+           "run_jobs"]
 
 #: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
@@ -71,23 +73,39 @@ def default_backend() -> str:
 
 
 def _guarded(job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool,
-             one_thread: bool = True, niceness: int = 0) -> tuple[str, Optional[str]]:
-    """Run one job (in a worker: with one torch thread, at least ``niceness``); ``(name, None)`` on success,
-    ``(name, traceback)`` if it raised (an exception never crosses back as a pickled object)."""
+             one_thread: bool = True, background: bool = False) -> tuple[str, Optional[str]]:
+    """Run one job (in a worker: with one torch thread, in the background if asked, see :func:`run_jobs`);
+    ``(name, None)`` on success, ``(name, traceback)`` if it raised (an exception never crosses back as a
+    pickled object)."""
     if one_thread:
         import torch
 
         torch.set_num_threads(1)
-    if niceness and hasattr(os, "setpriority"):
-        try:  # raised only, never lowered: a worker that is asked again keeps its priority
-            os.setpriority(os.PRIO_PROCESS, 0, max(niceness, os.getpriority(os.PRIO_PROCESS, 0)))
-        except OSError:
-            pass
+    if background:
+        enter_background()
     try:
         job(*args, progress=progress)
     except Exception:  # noqa: BLE001 -- reported by name to the caller, which retries or raises
         return name, traceback.format_exc()
     return name, None
+
+
+#: Whether :func:`enter_background` puts a process in Linux's idle scheduling class (else it only lowers its
+#: ``nice`` level, which still lets it delay work that wakes up).
+IDLE_CLASS = sys.platform.startswith("linux") and hasattr(os, "SCHED_IDLE")
+
+
+def enter_background() -> None:
+    """Give the calling process the lowest scheduling priority for good: ``nice`` 19 and, on Linux, the idle
+    scheduling class (``SCHED_IDLE``), in which a processor runs it only when no other program wants that
+    processor and any program that wakes up takes it over at once.  (An unprivileged process cannot leave
+    either again.)  Where the operating system refuses, the process keeps what it got."""
+    if hasattr(os, "setpriority"):
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, 0, 19)
+    if IDLE_CLASS:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
 
 
 @contextlib.contextmanager
@@ -126,7 +144,7 @@ def run_jobs(
     backend: Optional[str] = None,
     retries: int = 1,
     on_finished: Optional[Callable[[str], None]] = None,
-    niceness: int = 0,
+    background: bool = False,
 ) -> None:
     """Call ``job(*args)`` for every ``args`` in ``jobs`` on the parallel engine, retrying failures.
 
@@ -155,10 +173,10 @@ def run_jobs(
     on_finished : callable, optional
         Called in this process with a job's name as soon as that job has finished without raising (from the
         thread that called this function).
-    niceness : int
-        The workers' scheduling niceness while they run jobs (Unix ``nice``, 0-19; raised, never lowered, and
-        kept by a reused worker): 19 leaves the processors to every other program and takes what they leave
-        idle.  Jobs that run in this process (one worker) keep its priority.
+    background : bool
+        Run the workers in the background of every other program (:func:`enter_background`: they take only
+        what the processors would leave idle, and keep that priority when a later call reuses them).  Jobs
+        that run in this process (one worker) keep its priority.
 
     Raises
     ------
@@ -176,8 +194,6 @@ def run_jobs(
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if isinstance(retries, bool) or int(retries) != retries or retries < 0:
         raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
-    if isinstance(niceness, bool) or not isinstance(niceness, int) or not 0 <= niceness <= 19:
-        raise ValueError(f"niceness must be an integer in 0..19, got {niceness!r}")
     backend = default_backend() if backend is None else backend
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
@@ -186,7 +202,7 @@ def run_jobs(
     failures: dict[str, str] = {}
     for attempt in range(int(retries) + 1):
         raised, lost = _run_round(job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""),
-                                  backend, on_finished, niceness)
+                                  backend, on_finished, bool(background))
         failures.update(raised)
         pending = {name: pending[name] for name in lost}
         if not pending:
@@ -208,7 +224,7 @@ LOST = "its worker process died (killed, out of memory or crashed)"
 
 def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str,
                backend: str, on_finished: Optional[Callable[[str], None]] = None,
-               niceness: int = 0) -> tuple[dict[str, str], set[str]]:
+               background: bool = False) -> tuple[dict[str, str], set[str]]:
     """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
     died)``."""
     if workers <= 1:
@@ -230,7 +246,7 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
         with _engine(backend):
             parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
                                        **({"backend": "loky"} if backend == "loky" else {}))
-            calls = (joblib.delayed(_guarded)(job, args, name, False, True, niceness) for name, args in pending.items())
+            calls = (joblib.delayed(_guarded)(job, args, name, False, True, background) for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
                     finished.add(name)

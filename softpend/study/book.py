@@ -21,9 +21,9 @@ execute with their own parameters, those runs are trained in one pool of workers
 finish.  With more than one worker the pool trains in the background, at the lowest scheduling priority, while
 notebooks execute side by side, each as soon as what it waits for has finished; a notebook whose front
 matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) executes alone among the
-notebooks, and after the pool unless the pool's workers are in the idle scheduling class and the twin's threads
-get real-time scheduling (:mod:`softpend.study.book_schedule`); with one worker the pool trains first and the notebooks execute one at
-a time.  Every run ends by writing the execution record
+notebooks, and after the pool unless the pool's workers are in the idle scheduling class and the twin's
+threads get real-time scheduling (:mod:`softpend.study.book_schedule`); with one worker the pool trains first
+and the notebooks execute one at a time.  Every run ends by writing the execution record
 ``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
 its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
 package versions of ``environment.lock``, the Python version, the CPU count and the date; what the training
@@ -829,9 +829,10 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
 
     With several workers the training pool runs in a background thread, its workers at the lowest scheduling
     priority (:func:`~softpend.study.sweep.enter_background`), while the notebooks that need none of its runs
-    execute; a notebook starts as soon as the runs it reads have finished.  With one worker the pool trains first and the notebooks then
-    execute one at a time.  After a notebook fails, or the pool does, nothing further starts; the running
-    notebooks and the pool finish (their results are kept) and the first error is raised.
+    execute; a notebook starts as soon as the runs it reads have finished.  With one worker the pool trains
+    first and the notebooks then execute one at a time.  After a notebook fails, or the pool does, nothing
+    further starts; the running notebooks and the pool finish (their results are kept) and the first error is
+    raised.
     """
     from softpend.study.sweep import default_workers
 

@@ -28,8 +28,8 @@ import sys
 import traceback
 from typing import Any, Callable, Iterator, Optional, Sequence
 
-__all__ = ["BACKENDS", "IDLE_CLASS", "SweepFailed", "call_job", "default_backend", "default_workers", "enter_background",
-           "run_jobs"]
+__all__ = ["BACKENDS", "IDLE_CLASS", "SweepFailed", "call_job", "default_backend", "default_workers",
+           "enter_background", "run_jobs"]
 
 #: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
@@ -246,7 +246,8 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
         with _engine(backend):
             parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
                                        **({"backend": "loky"} if backend == "loky" else {}))
-            calls = (joblib.delayed(_guarded)(job, args, name, False, True, background) for name, args in pending.items())
+            calls = (joblib.delayed(_guarded)(job, args, name, False, True, background)
+                     for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
                     finished.add(name)

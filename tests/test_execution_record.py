@@ -198,16 +198,8 @@ def test_an_unknown_run_set_is_rejected(tmp_path):
         run_notebooks(bad, profile="full", progress=False)
 
 
-@pytest.mark.parametrize("beside", [False, True])
-def test_a_real_time_notebook_executes_alone_and_after_the_training_pool_unless_it_may_run_beside(
-        tmp_path, monkeypatch, beside):
-    from softpend.hardware import realtime
-    from softpend.study import sweep
-
+def test_a_real_time_notebook_executes_alone_after_the_training_pool(tmp_path, monkeypatch):
     monkeypatch.setenv("SOFTPEND_WORKERS", "2")
-    # beside the pool only where its workers are in the idle class and the twin gets real-time scheduling
-    monkeypatch.setattr(sweep, "IDLE_CLASS", True)
-    monkeypatch.setattr(realtime, "realtime_granted", lambda: beside)
     fake_pool(monkeypatch, wait_for="a")  # the pool trains until "a" has executed
     nap = "import time\ntime.sleep(1.0)"
     notebooks = {"rig": source("Rig", nap, realtime=True), "a": source("A", nap), "b": source("B", nap),
@@ -215,14 +207,10 @@ def test_a_real_time_notebook_executes_alone_and_after_the_training_pool_unless_
     root = make_book(tmp_path, notebooks, {"full": {}})
     run_notebooks(root, profile="full", progress=False)
     record = json.loads(BookLayout.at(root).record_path.read_text())
-    assert record["training_pool"]["realtime_beside"] is beside
     entries = {entry["name"]: entry for entry in record["notebooks"]}
     spans = {name: (entry["started_s"], entry["started_s"] + entry["run_s"]) for name, entry in entries.items()}
     rig = spans.pop("rig")
-    if beside:  # first in the toc, it starts at once, and the pool trains on until "a" has executed
-        assert rig[0] < spans["a"][0] and rig[1] < record["training_pool"]["run_s"]
-    else:  # first in the toc, but it waited for the pool
-        assert rig[0] >= record["training_pool"]["run_s"]
+    assert rig[0] >= record["training_pool"]["run_s"]  # first in the toc, but it waited for the pool
     assert all(end <= rig[0] or start >= rig[1] for start, end in spans.values()), (rig, spans)
     assert spans["b"][0] < spans["a"][1]  # the others share the lanes
 

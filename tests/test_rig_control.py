@@ -172,9 +172,10 @@ def test_camera_process_delivers_frames_and_reports_its_end(tmp_path):
 
     from softpend.hardware.camera_process import CameraProcess, camera_settings
     from softpend.hardware.emulator import start_emulator_process
-    from softpend.hardware.realtime import CAMERA_PRIORITY, realtime_granted
+    from softpend.hardware.realtime import CAMERA_PRIORITY, realtime_priority
 
-    granted = realtime_granted()
+    with realtime_priority(CAMERA_PRIORITY) as granted:  # whether the OS grants it to this user
+        pass
 
     with start_emulator_process(UPRIGHT, scene=True) as emulator:
         camera = CameraProcess(emulator.take_scene_fd(), TASK, camera_settings(60.0, 0.02, model=SMALL))

@@ -30,8 +30,7 @@ import subprocess
 import sys
 from typing import Iterator, Optional
 
-__all__ = ["CAMERA_PRIORITY", "DEVICE_PRIORITY", "LOOP_PRIORITY", "cpus_kept_awake", "realtime_granted",
-           "realtime_priority"]
+__all__ = ["CAMERA_PRIORITY", "DEVICE_PRIORITY", "LOOP_PRIORITY", "cpus_kept_awake", "realtime_priority"]
 
 #: ``SCHED_FIFO`` priority of the host's control loop (Linux range 1-99; below the kernel's own threads).
 LOOP_PRIORITY = 10
@@ -69,12 +68,6 @@ def realtime_priority(priority: Optional[int]) -> Iterator[bool]:
             os.sched_setscheduler(0, policy, param)
         except OSError:
             pass
-
-
-def realtime_granted() -> bool:
-    """Whether the operating system grants this process ``SCHED_FIFO`` (asked for and given back at once)."""
-    with realtime_priority(1) as granted:
-        return granted
 
 
 #: The spinner's program: lowest scheduling class, pinned to one processor, ends with its parent.  One thread

@@ -20,10 +20,9 @@ execute with their own parameters, those runs are trained in one pool of workers
 (:func:`softpend.study.run_pool.train_book_runs`), so that no worker idles while one notebook's last runs
 finish.  With more than one worker the pool trains in the background, at the lowest scheduling priority, while
 notebooks execute side by side, each as soon as what it waits for has finished; a notebook whose front
-matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) executes alone among the
-notebooks, and after the pool unless the pool's workers are in the idle scheduling class and the twin's
-threads get real-time scheduling (:mod:`softpend.study.book_schedule`); with one worker the pool trains first
-and the notebooks execute one at a time.  Every run ends by writing the execution record
+matter says ``softpend: {realtime: true}`` (it runs the rig's twin by the wall clock) executes alone, after the
+pool (:mod:`softpend.study.book_schedule`); with one worker the pool trains first and the notebooks execute one
+at a time.  Every run ends by writing the execution record
 ``book/_generated/execution.json`` (:func:`write_execution_record`: per notebook the wall time and date of
 its last execution, whether this run took it from the cache, its profile, parameters and overrides; the
 package versions of ``environment.lock``, the Python version, the CPU count and the date; what the training
@@ -858,15 +857,9 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
 
     from tqdm.auto import tqdm
 
-    from softpend.hardware.realtime import realtime_granted
     from softpend.study.run_pool import book_run_jobs, train_jobs
-    from softpend.study.sweep import IDLE_CLASS
 
     jobs = book_run_jobs(run_sets, root=layout.root) if run_sets else []
-    # a real-time notebook may execute beside the pool where the pool's workers take no processor that another
-    # program wants (the idle class) and the twin's threads run ahead of other work (real-time scheduling); at
-    # nice 19 alone the training workers delay the twin's camera and link enough to stop some of its runs
-    realtime_beside = lanes > 1 and IDLE_CLASS and realtime_granted()
     pending_runs = {name for name, _ in jobs}
     # a run the pool does not train (it was finished before) counts as trained from the start
     trained = {run for need in needs.values() for run in need.runs} - pending_runs
@@ -891,8 +884,7 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
     if jobs:
         say(f"training {len(jobs)} of the book's runs ({', '.join(run_sets)}) in one pool"
             + (", in the background of the notebooks that need none of them" if lanes > 1 else ""))
-        pool = {"run_sets": list(run_sets), "trained": len(jobs), "run_s": None, "background": lanes > 1,
-                "realtime_beside": realtime_beside}
+        pool = {"run_sets": list(run_sets), "trained": len(jobs), "run_s": None, "background": lanes > 1}
         if lanes > 1:
             pool_thread = threading.Thread(target=train, args=(True,), name="softpend-book-pool", daemon=True)
             pool_thread.start()
@@ -952,8 +944,7 @@ def _execute_in_root(layout: BookLayout, order: Sequence[str], plan: dict[str, t
     with ThreadPoolExecutor(max_workers=lanes, thread_name_prefix="softpend-book-notebook") as lanes_pool:
         while True:
             while not errors:
-                name = next_to_start(order, needs, started, finished, trained, lanes,
-                                     training=not pool_done and not realtime_beside)
+                name = next_to_start(order, needs, started, finished, trained, lanes, not pool_done)
                 if name is None:
                     break
                 started.add(name)
@@ -1030,8 +1021,7 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         this process may use, and the ``packages`` of ``environment.lock`` with their installed versions;
         ``training_pool``: ``pool`` (``run_sets``, ``trained``: how many runs, ``run_s``: when the last
         finished, in seconds after the runner began executing, ``background``: whether notebooks executed
-        alongside it, ``realtime_beside``: whether the real-time notebooks could), None when this run trained
-        none.
+        alongside it), None when this run trained none.
     """
     import datetime
 
@@ -1126,10 +1116,8 @@ def execution_page(record: dict[str, Any]) -> str:
             f"This run trained {pool['trained']} of the runs the notebooks read ({', '.join(pool['run_sets'])}) "
             f"in one pool of workers at the lowest scheduling priority, in {pool['run_s']:.0f} s. The notebooks "
             "executed alongside, several at a time, each once the runs it reads had finished; a notebook that "
-            "runs the rig's twin in real time executed alone among the notebooks, "
-            + ("beside the training (its workers in the idle scheduling class, the twin's threads under "
-               "real-time scheduling)" if pool.get("realtime_beside") else "after the training")
-            + ". The times above are those of a shared machine.",
+            "runs the rig's twin in real time executed alone, after the training. The times above are those of a "
+            "shared machine.",
             "",
             "| notebook | started [s] | wall [s] |",
             "|---|---|---|",

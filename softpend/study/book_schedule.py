@@ -6,10 +6,9 @@ read works in the background at the lowest scheduling priority.  :func:`next_to_
 * a notebook starts once the notebooks it waits for (:attr:`Needs.after`) have finished and the training runs
   it reads (:attr:`Needs.runs`) are trained;
 * a real-time notebook (front matter ``softpend: {realtime: true}``: it paces a rig emulator by the wall
-  clock) runs alone among the notebooks: it starts when no other notebook runs, and none starts while it
-  runs; where the runner says so (``training``) it also waits for the training pool to end (training workers
-  that only have the lowest ``nice`` level slow the twin's processes enough for its camera and link to miss
-  their deadlines);
+  clock) runs alone: it starts when no other notebook runs and the training pool has ended, and none starts
+  while it runs (training workers, even in the idle scheduling class, delay the twin's processes enough for
+  its camera or link to miss a deadline now and then);
 * otherwise the first ready notebook in execution order starts; a ready real-time notebook first in line
   keeps further notebooks from starting until the running ones end, so it is never passed over for good.
 """
@@ -52,7 +51,7 @@ def next_to_start(order: Sequence[str], needs: Mapping[str, Needs], started: Col
     lanes : int
         How many notebooks may execute at once (at least 1).
     training : bool
-        Whether a training pool runs that a real-time notebook must wait for.
+        Whether the training pool is still running (a real-time notebook waits for it to end).
     """
     if lanes < 1:
         raise ValueError(f"lanes must be at least 1, got {lanes}")

@@ -212,7 +212,7 @@ class PilcoConfig:
     cost_rate_after_rad: Optional[float] = 0.5
     cost_exploration: float = -0.2
     initial_std: float = 0.05
-    n_basis: int = 30
+    n_basis: int = 50
     max_gp_points: int = 200
     gp_all_data: bool = True
     gp_iterations: int = 100

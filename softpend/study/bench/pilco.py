@@ -28,7 +28,7 @@ otherwise; their final policies measured on :data:`softpend.study.presets.REPORT
   (``pilco_ten_max_train_cpu_s``; target: under 600 s of one core).
 
 ``softpend bench --only pilco_search`` (:func:`bench_pilco_search`): one policy-search objective and its gradient
-at the book's sizes (200 GP points of the ``tip_bend`` state, 30 basis functions, 100 predicted steps, the
+at the book's sizes (200 GP points of the ``tip_bend`` state, 50 basis functions, 100 predicted steps, the
 tip-rate cost and exploration), eager and through ``torch.compile``, on one thread, alternately in one process:
 
 * ``pilco_search_objective_ms_eager``, ``pilco_search_objective_ms_compiled`` -- CPU milliseconds per objective

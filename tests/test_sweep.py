@@ -3,6 +3,7 @@ retried, and runs trained through the engine equal the same runs trained in the 
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -10,7 +11,8 @@ import pytest
 
 from softpend.rl.config import DQNConfig
 from softpend.study.rl_runs import run_folder, train_seeds
-from softpend.study.sweep import IDLE_CLASS, SweepFailed, default_backend, default_workers, run_jobs
+from softpend.study.sweep import (ALLOCATOR_ENV, IDLE_CLASS, SweepFailed, allocator_env, default_backend,
+                                  default_workers, run_jobs)
 
 
 def write_pid(folder: Path, value: int, progress: bool = True) -> None:
@@ -39,6 +41,26 @@ def test_jobs_run_in_worker_processes(tmp_path):
     pids = {int(line[1]) for line in lines}
     assert os.getpid() not in pids and 1 <= len(pids) <= 2
     assert all(line[2] == "False" for line in lines)  # no per-job bars from the workers
+
+
+def write_allocator_env(folder: Path, value: int, progress: bool = True) -> None:
+    (folder / f"env{value}.json").write_text(json.dumps({name: os.environ.get(name) for name in ALLOCATOR_ENV}))
+
+
+def test_workers_start_with_the_allocator_settings_and_the_caller_does_not_keep_them(tmp_path, monkeypatch):
+    from joblib.externals.loky import get_reusable_executor
+
+    for name in ALLOCATOR_ENV:
+        monkeypatch.delenv(name, raising=False)
+    get_reusable_executor().shutdown(wait=True)  # fresh workers: glibc reads the settings when a process starts
+    run_jobs(write_allocator_env, [(tmp_path, k) for k in range(2)], ["a", "b"], workers=2, progress=False)
+    assert [json.loads((tmp_path / f"env{k}.json").read_text()) for k in range(2)] == [ALLOCATOR_ENV] * 2
+    assert not any(name in os.environ for name in ALLOCATOR_ENV)
+    monkeypatch.setenv("MALLOC_TOP_PAD_", "0")  # a setting of the user's own is kept, and kept afterwards
+    with allocator_env():
+        assert os.environ["MALLOC_TOP_PAD_"] == "0"
+        assert os.environ["MALLOC_MMAP_THRESHOLD_"] == ALLOCATOR_ENV["MALLOC_MMAP_THRESHOLD_"]
+    assert os.environ["MALLOC_TOP_PAD_"] == "0" and "MALLOC_MMAP_THRESHOLD_" not in os.environ
 
 
 def test_a_failing_job_is_named_and_the_others_keep_their_results(tmp_path):

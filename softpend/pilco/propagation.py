@@ -50,6 +50,7 @@ where the data has not been yet looks better than one that keeps it on the hangi
 from __future__ import annotations
 
 import functools
+import logging
 import warnings
 from dataclasses import dataclass
 
@@ -340,7 +341,8 @@ def _compiled_step_and_cost():
 
     The compiled loops run on one thread (``cpp.threads``): with torch 2.13 the OpenMP-parallel backward kernels of
     this graph corrupt the heap when torch has more than one thread (``tests/test_pilco_moments.py`` runs it with
-    two).
+    two).  The code that calls the kernels is compiled C++ too (``cpp_wrapper``): the same kernels, so the same
+    numbers to the bit, without the Python calls of each step's few hundred kernel launches and buffer views.
 
     A graph compiled by an earlier process is read from torch's disk caches (FX graph and AOT autograd caches), in
     about a third of the time of compiling it; the AOT autograd cache takes a graph with a custom
@@ -348,7 +350,9 @@ def _compiled_step_and_cost():
     tensors) only when ``autograd_cache_allow_custom_autograd_functions`` is set, which is set here for these
     calls alone."""
     if not _COMPILED:
-        compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True, options={"cpp.threads": 1})
+        logging.getLogger("torch._inductor.ir").addFilter(_quiet_c_shim_notes)
+        compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True,
+                                 options={"cpp.threads": 1, "cpp_wrapper": True})
         import torch._functorch.config as functorch_config
 
         cacheable = functorch_config.patch(autograd_cache_allow_custom_autograd_functions=True)
@@ -373,6 +377,12 @@ def _compiled_step_and_cost():
 
         _COMPILED.append(guarded)
     return _COMPILED[0]
+
+
+def _quiet_c_shim_notes(record: logging.LogRecord) -> bool:
+    """Drop the compiler's note that an operator (``linalg_lu_solve``) has no C shim and goes through its proxy
+    executor: a fact of ``cpp_wrapper``, logged as a warning at every compilation."""
+    return "c-shim implementation" not in record.getMessage()
 
 
 def _is_compiler_failure(exc: BaseException) -> bool:

@@ -833,7 +833,7 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
     further starts; the running notebooks and the pool finish (their results are kept) and the first error is
     raised.
     """
-    from softpend.study.sweep import default_workers
+    from softpend.study.sweep import allocator_env, default_workers
 
     lanes = default_workers()
     began = time.perf_counter()
@@ -842,7 +842,9 @@ def _execute(layout: BookLayout, order: Sequence[str], plan: dict[str, tuple], p
     previous_cwd = os.getcwd()
     os.chdir(layout.root)
     try:
-        return _execute_in_root(layout, order, plan, planned, cached, needs, run_sets, progress, profile, lanes, began)
+        with allocator_env():  # for the pool's workers and the kernels
+            return _execute_in_root(layout, order, plan, planned, cached, needs, run_sets, progress, profile, lanes,
+                                    began)
     finally:
         os.chdir(previous_cwd)
 

@@ -15,7 +15,7 @@ from softpend.control.swingup import EnergySwingUpController
 from softpend.evaluation import evaluate_batched, evaluate_controller, evaluate_controllers_batched
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
-from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agent_batched
+from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agent_batched, evaluate_agents_batched
 from softpend.rl.training_env import make_training_env
 from softpend.study.fresh_starts import fresh_start_row
 from softpend.task import Task
@@ -132,6 +132,22 @@ def test_batched_episodes_do_not_depend_on_each_other(agent) -> None:
         np.testing.assert_allclose(joint.observations, alone.observations, rtol=0, atol=1e-12)  # measured: equal
         np.testing.assert_array_equal(joint.torque_nm, alone.torque_nm)
         assert joint.metrics() == pytest.approx(alone.metrics())
+
+
+def test_agents_evaluated_in_one_batch_equal_their_own_evaluations(agent) -> None:
+    model, config = agent
+    other = build_dqn(config, make_training_env(config), seed=4, episodes=1)  # another network, other actions
+    seeds = (20_003, 20_004)
+    together = evaluate_agents_batched([model, other, model], config, seeds, 1.5)
+    assert [len(summary.results) for summary in together] == [2, 2, 2]
+    for summary, alone in zip(together, [evaluate_agent_batched(m, config, seeds, 1.5) for m in (model, other, model)]):
+        for joint, own in zip(summary.results, alone.results):
+            assert joint.seed == own.seed
+            np.testing.assert_array_equal(joint.observations, own.observations)
+            np.testing.assert_array_equal(joint.torque_nm, own.torque_nm)
+    assert not all(np.array_equal(a.torque_nm, b.torque_nm) for a, b in zip(together[0].results, together[1].results))
+    with pytest.raises(ValueError, match="models must not be empty"):
+        evaluate_agents_batched([], config, seeds, 1.0)
 
 
 def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:

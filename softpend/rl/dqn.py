@@ -27,7 +27,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import torch
@@ -54,7 +54,8 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "load_agent", "reset_q_network",
+__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "evaluate_agents_batched",
+           "load_agent", "reset_q_network",
            "train_dqn", "run_training"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
@@ -129,13 +130,34 @@ def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[
     ``initial_state``).  Seeds must be non-negative integers; the trajectories must fit in
     :data:`softpend.checks.MAX_WORK_BYTES` (checked before any step).
     """
-    from softpend.evaluation import evaluate_batched
+    return evaluate_agents_batched([model], config, seeds, duration_s, name, **options)[0]
 
+
+def evaluate_agents_batched(models: Sequence[Any], config: DQNConfig, seeds: Optional[tuple[int, ...]] = None,
+                            duration_s: Optional[float] = None, name: str = "agent", **options: Any) -> list:
+    """:func:`evaluate_agent_batched` for several agents at once, each from every start of ``seeds``: one batch of
+    ``len(models) * len(seeds)`` rods, agent ``i`` driving rods ``i * len(seeds)`` to ``(i + 1) * len(seeds) - 1``,
+    so that the chain steps once for all of them.  The agents share ``config``'s task, action repeat and torque
+    levels.  The rods of a batch do not depend on each other, so each agent's episodes are those of its own
+    :func:`evaluate_agent_batched` call.  Returns one :class:`~softpend.evaluation.EvaluationSummary` per agent,
+    in the order of ``models``."""
+    from softpend.evaluation import EvaluationSummary, evaluate_batched
+
+    models = list(models)
+    if not models:
+        raise ValueError("models must not be empty")
     seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
     duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
-    return evaluate_batched(greedy_predictor(model), config.task, seeds,
-                            duration_s, action_repeat=config.action_repeat, n_torque_levels=config.n_torque_levels,
-                            name=name, **options)
+    predictors = [greedy_predictor(model) for model in models]
+    n = len(seeds)
+
+    def predict(vectors: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.asarray(p(vectors[i * n:(i + 1) * n])) for i, p in enumerate(predictors)])
+
+    summary = evaluate_batched(predict, config.task, seeds * len(models), duration_s,
+                               action_repeat=config.action_repeat, n_torque_levels=config.n_torque_levels, name=name,
+                               **options)
+    return [EvaluationSummary(name=name, results=summary.results[i * n:(i + 1) * n]) for i in range(len(models))]
 
 
 class TrainingCallback(BaseCallback):

@@ -277,18 +277,32 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
                                report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
                                which: str = "final") -> list[dict[str, Any]]:
     """:func:`rl_fresh_start_rows` of one agent per run on a *converged* simulation of the same rod: the batched
-    chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agent_batched`, whose hub angle stays far
+    chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agents_batched`, whose hub angle stays far
     closer to the Exudyn plant at 200 sub-steps than the task's Exudyn plant at 2 sub-steps does:
     :func:`softpend.study.simulators.hub_errors_rad`), from the same starts.  A controller that holds on the task's plant but not here relies on
     what the task's coarse time step does to the rod's bending modes, which a real rod would not do."""
-    from softpend.rl.dqn import evaluate_agent_batched, load_agent
+    from softpend.rl.dqn import evaluate_agents_batched, load_agent
 
-    rows = []
-    for algo in algos:
-        for seed in seeds:
-            model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
-            _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
-            summary = evaluate_agent_batched(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
-            rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[which],
-                         "plant": "converged", **fresh_start_row(summary)})
-    return rows
+    runs = [(algo, int(seed)) for algo in algos for seed in seeds]
+    agents = {}
+    for algo, seed in runs:
+        agents[algo, seed] = load_agent(run_folder(runs_root, algo, seed), which)
+        _refuse_selection_starts(report_seeds, agents[algo, seed][1].selection_seeds,
+                                 f"the agents of {algo} seed {seed}")
+    # the agents that share what the batched episodes depend on step together (one batch each)
+    groups: list[tuple[Any, list[tuple[str, int]]]] = []
+    for run, (_, config) in agents.items():
+        key = (config.task, config.action_repeat, config.n_torque_levels)
+        match = next((members for other, members in groups if other == key), None)
+        if match is None:
+            groups.append((key, [run]))
+        else:
+            match.append(run)
+    summaries = {}
+    for _, members in groups:
+        config = agents[members[0]][1]
+        evaluated = evaluate_agents_batched([agents[run][0] for run in members], config,
+                                            seeds=tuple(report_seeds), duration_s=duration_s)
+        summaries.update(zip(members, evaluated))
+    return [{"method": METHOD_NAMES[algo], "seed": seed, "agent": AGENTS[which], "plant": "converged",
+             **fresh_start_row(summaries[algo, seed])} for algo, seed in runs]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -10,7 +12,7 @@ from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.moments import (_WeightedExpSum, gp_moments, pair_weights, rbf_network_moments, saturating_cost_moments,
                                     sin_saturation_moments, trig_moments)
 from softpend.pilco.policy import RBFPolicy
-from softpend.pilco.propagation import Propagator, state_spec
+from softpend.pilco.propagation import Propagator, compiler_notes_silenced, state_spec
 
 F64 = torch.float64
 N_MC = 200_000
@@ -373,3 +375,20 @@ def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monk
     monkeypatch.setattr(torch, "compile", lambda function, **options: failing)
     with pytest.raises(torch.linalg.LinAlgError):
         prop.rollout(m0, s0, 4)
+
+
+def test_the_compilers_notes_are_silenced_and_other_warnings_are_not():
+    """What torch's compiler prints once per compilation (a deprecation notice of its own modules, its note on a
+    cached helper) is hidden; a FutureWarning of any other module, or another torch warning, is not."""
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        with compiler_notes_silenced():
+            warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "lowering.py", 1,
+                                   module="torch._inductor.lowering")
+            warnings.warn_explicit("Dynamo detected a call to a `functools.lru_cache`-wrapped function", UserWarning,
+                                   "variables.py", 1, module="torch._dynamo.variables")
+            warnings.warn_explicit("a later default", FutureWarning, "model.py", 1, module="softpend.pilco.loop")
+            warnings.warn_explicit("a torch note", UserWarning, "lowering.py", 1, module="torch._inductor.lowering")
+        warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "lowering.py", 1,
+                               module="torch._inductor.lowering")
+    assert [str(w.message) for w in seen] == ["a later default", "a torch note", "`torch._prims_common.check` is deprecated"]

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import json
 import os
+import time
+import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from softpend.rl.config import DQNConfig
@@ -61,6 +64,32 @@ def test_workers_start_with_the_allocator_settings_and_the_caller_does_not_keep_
         assert os.environ["MALLOC_TOP_PAD_"] == "0"
         assert os.environ["MALLOC_MMAP_THRESHOLD_"] == ALLOCATOR_ENV["MALLOC_MMAP_THRESHOLD_"]
     assert os.environ["MALLOC_TOP_PAD_"] == "0" and "MALLOC_MMAP_THRESHOLD_" not in os.environ
+
+
+def hold_freed_memory(folder: Path, value: int, progress: bool = True) -> None:
+    """Allocate and free 80 MB for the first two values, 640 MB for the others, in blocks of 16 MB (under the
+    allocator's limit for the heap: the worker keeps up to 1 GiB of them)."""
+    blocks = [np.ones(2 << 20) for _ in range(5 if value < 2 else 40)]
+    del blocks
+    time.sleep(1.1)  # loky checks a worker's memory at most once a second
+    (folder / f"held{value}.txt").write_text(str(os.getpid()))
+
+
+def test_a_worker_that_keeps_freed_memory_is_replaced_without_a_warning(tmp_path, monkeypatch):
+    """The workers keep freed memory, which loky's check between jobs takes for a leak: it replaces the worker
+    (every job still runs, in order of the arguments), and the sweep does not warn of it."""
+    from joblib.externals.loky import get_reusable_executor
+
+    for name in ALLOCATOR_ENV:
+        monkeypatch.delenv(name, raising=False)
+    get_reusable_executor().shutdown(wait=True)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        run_jobs(hold_freed_memory, [(tmp_path, k) for k in range(6)], [f"j{k}" for k in range(6)], workers=2,
+                 progress=False)
+    pids = {(tmp_path / f"held{k}.txt").read_text() for k in range(6)}
+    assert len(pids) > 2  # a worker was replaced
+    assert not [w for w in seen if "worker stopped" in str(w.message)], [str(w.message) for w in seen]
 
 
 def test_a_failing_job_is_named_and_the_others_keep_their_results(tmp_path):

@@ -49,10 +49,12 @@ where the data has not been yet looks better than one that keeps it on the hangi
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import warnings
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import torch
@@ -61,7 +63,7 @@ from softpend.checks import finite
 from softpend.plant import OBSERVATION_NAMES
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 
-__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "state_spec"]
+__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "compiler_notes_silenced", "state_spec"]
 
 DTYPE = torch.float64
 
@@ -362,11 +364,8 @@ def _compiled_step_and_cost():
             if not usable[0]:
                 return _step_and_cost(*args)
             try:
-                with warnings.catch_warnings():  # the compiler's notes on tracing our cached helpers, once per process
-                    warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
-                    warnings.filterwarnings("ignore", category=FutureWarning, module="torch")
-                    with cacheable:
-                        return compiled(*args)
+                with compiler_notes_silenced(), cacheable:
+                    return compiled(*args)
             except Exception as exc:  # noqa: BLE001 (no C++ compiler, or an unsupported platform)
                 if not _is_compiler_failure(exc):
                     raise
@@ -377,6 +376,17 @@ def _compiled_step_and_cost():
 
         _COMPILED.append(guarded)
     return _COMPILED[0]
+
+
+@contextlib.contextmanager
+def compiler_notes_silenced() -> Iterator[None]:
+    """Hide the warnings that torch's compiler gives once per process while it compiles a graph: its notes on
+    tracing our cached helpers and the deprecation notices of its own modules.  The backward graph of a compiled
+    rollout is compiled at its first gradient, so the gradient's caller needs this too."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
+        warnings.filterwarnings("ignore", category=FutureWarning, module="torch")
+        yield
 
 
 def _quiet_c_shim_notes(record: logging.LogRecord) -> bool:

@@ -267,10 +267,12 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     finished: set[str] = set()
     raised: dict[str, str] = {}
     try:
-        with allocator_env(), _engine(backend), warnings.catch_warnings():
-            # a worker keeps the memory its job freed (ALLOCATOR_ENV); loky's check after a job takes growth past
-            # 300 MB for a leak and starts a fresh worker for the next job (no job is lost): no warning for that
-            warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given to the executor")
+        # a worker keeps the memory its job freed (ALLOCATOR_ENV); loky's check after a job takes growth past 300 MB
+        # for a leak and starts a fresh worker for the next job (no job is lost): no warning for that.  The filter is
+        # process-wide (the book runs this pool beside other threads, for which catch_warnings is not safe).
+        warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given to the executor",
+                                category=UserWarning, module="joblib")
+        with allocator_env(), _engine(backend):
             parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
                                        **({"backend": "loky"} if backend == "loky" else {}))
             calls = (joblib.delayed(_guarded)(job, args, name, False, True, background)

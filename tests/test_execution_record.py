@@ -11,7 +11,7 @@ import pytest
 
 from support import NOTEBOOK_HEADER as HEADER
 
-from softpend.study.book import BookLayout, execution_order, run_notebooks, toc_notebooks
+from softpend.study.book import BookLayout, _processor, execution_order, run_notebooks, toc_notebooks
 
 
 
@@ -67,11 +67,13 @@ def test_after_runs_late_enters_the_key_and_the_record_describes_the_run(tmp_pat
     env = record["environment"]
     assert env["python"] == platform.python_version() and env["lock_python"] == "3.11.7"
     assert env["cpu_count"] >= 1 and env["cpus_available"] >= 1
+    assert env["processor"] == _processor() and env["processor"] not in ("", "-")
     packages = {p["name"]: p for p in env["packages"]}
     assert packages["pytest"]["locked"] == "0.0.1" and packages["pytest"]["installed"] not in (None, "0.0.1")
     assert packages["not-a-package-softpend"]["installed"] is None
     page = layout.execution_page_path.read_text()
     assert page.startswith("(execution)=\n# Execution")
+    assert f"| processor | {env['processor']} |" in page
     assert "{doc}`Late <late>`" in page and "`greeting=\"hi\"`" in page and "not installed" in page
     nb = nbformat.read(str(layout.output_path("late")), as_version=4)
     injected = [c for c in nb.cells if "injected-parameters" in c.metadata.get("tags", [])]
@@ -232,3 +234,13 @@ def test_notebooks_side_by_side_all_run_in_the_project_root(tmp_path, monkeypatc
     assert {name: (root / f"cwd-{name}.txt").read_text() for name in notebooks} == dict.fromkeys(notebooks,
                                                                                                  str(root.resolve()))
     assert not list(here.glob("cwd-*.txt"))
+
+
+def test_the_processor_is_named_by_model_family_and_model(tmp_path):
+    """Runs repeat exactly only on the same processor model, so the record names it (the first processor's
+    fields of /proc/cpuinfo); without that file it falls back to what the platform module says."""
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\n"
+                       "model name\t: AMD EPYC\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n")
+    assert _processor(cpuinfo) == "AMD EPYC (family 26, model 2)"
+    assert _processor(tmp_path / "missing") == (platform.processor() or platform.machine() or "-")

@@ -982,6 +982,22 @@ def _title(source_path: Path) -> str:
     return source_path.stem
 
 
+def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The processor's model: on Linux its name, family and model from ``/proc/cpuinfo`` (the same seeds give the
+    same runs on the same processor model; another one's vector units round differently), elsewhere
+    :func:`platform.processor` or the machine type."""
+    fields: dict[str, str] = {}
+    try:
+        for line in cpuinfo.read_text().splitlines():
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    if fields.get("model name"):
+        return f"{fields['model name']} (family {fields.get('cpu family', '-')}, model {fields.get('model', '-')})"
+    return platform.processor() or platform.machine() or "-"
+
+
 def _locked_packages(lock_path: Path) -> tuple[list[dict[str, Any]], Optional[str]]:
     """The ``name==version`` lines of ``environment.lock`` with the installed version of each (``None`` when
     not installed), and the Python version its header names."""
@@ -1056,7 +1072,8 @@ def execution_record(layout: "BookLayout", profile: str, runs: Sequence[Notebook
         "training_pool": pool,
         "notebooks": notebooks,
         "environment": {"python": platform.python_version(), "lock_python": lock_python,
-                        "platform": platform.platform(), "cpu_count": os.cpu_count(), "cpus_available": cpus,
+                        "platform": platform.platform(), "processor": _processor(), "cpu_count": os.cpu_count(),
+                        "cpus_available": cpus,
                         "packages": packages},
     }
 
@@ -1153,6 +1170,7 @@ def execution_page(record: dict[str, Any]) -> str:
         "|---|---|",
         f"| Python | {env['python']} (environment.lock: {env['lock_python'] or '-'}) |",
         f"| platform | {_markdown_cell(env['platform'])} |",
+        f"| processor | {_markdown_cell(env.get('processor'))} |",
         f"| CPU count | {env['cpu_count']} ({env['cpus_available']} available to the run) |",
         "",
         "Package versions pinned in `environment.lock`, and the version installed where it differs:",

@@ -12,7 +12,7 @@ from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.moments import (_WeightedExpSum, gp_moments, pair_weights, rbf_network_moments, saturating_cost_moments,
                                     sin_saturation_moments, trig_moments)
 from softpend.pilco.policy import RBFPolicy
-from softpend.pilco.propagation import Propagator, compiler_notes_silenced, state_spec
+from softpend.pilco.propagation import Propagator, silence_compiler_notes, state_spec
 
 F64 = torch.float64
 N_MC = 200_000
@@ -378,17 +378,18 @@ def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monk
 
 
 def test_the_compilers_notes_are_silenced_and_other_warnings_are_not():
-    """What torch's compiler prints once per compilation (a deprecation notice of its own modules, its note on a
-    cached helper) is hidden; a FutureWarning of any other module, or another torch warning, is not."""
+    """What torch's compiler prints while it compiles the rollout (a deprecation notice of its own lowering code,
+    its note on a cached helper) is hidden; the same text from another module, a FutureWarning of any other
+    module, or another torch warning, is not."""
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
-        with compiler_notes_silenced():
-            warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "lowering.py", 1,
-                                   module="torch._inductor.lowering")
-            warnings.warn_explicit("Dynamo detected a call to a `functools.lru_cache`-wrapped function", UserWarning,
-                                   "variables.py", 1, module="torch._dynamo.variables")
-            warnings.warn_explicit("a later default", FutureWarning, "model.py", 1, module="softpend.pilco.loop")
-            warnings.warn_explicit("a torch note", UserWarning, "lowering.py", 1, module="torch._inductor.lowering")
+        silence_compiler_notes()
         warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "lowering.py", 1,
                                module="torch._inductor.lowering")
+        warnings.warn_explicit("Dynamo detected a call to a `functools.lru_cache`-wrapped function", UserWarning,
+                               "functions.py", 1, module="torch._dynamo.variables.functions")
+        warnings.warn_explicit("a later default", FutureWarning, "model.py", 1, module="softpend.pilco.loop")
+        warnings.warn_explicit("a torch note", UserWarning, "lowering.py", 1, module="torch._inductor.lowering")
+        warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "ours.py", 1,
+                               module="softpend.ours")
     assert [str(w.message) for w in seen] == ["a later default", "a torch note", "`torch._prims_common.check` is deprecated"]

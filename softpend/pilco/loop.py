@@ -73,7 +73,7 @@ from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
 from softpend.pilco.policy import RBFPolicy
-from softpend.pilco.propagation import Propagator, StateSpec, compiler_notes_silenced, state_spec
+from softpend.pilco.propagation import Propagator, StateSpec, state_spec
 from softpend.torch_threads import one_torch_thread
 
 __all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
@@ -502,8 +502,7 @@ def _optimise_policy(
             _, _, _, total = propagator.rollout(m0, s0, n_steps)
         except torch.linalg.LinAlgError:
             return 1e6, np.zeros_like(vector)
-        with compiler_notes_silenced():  # a compiled rollout's backward graph is compiled here, at its first use
-            (grad,) = torch.autograd.grad(total, leaf)
+        (grad,) = torch.autograd.grad(total, leaf)
         if not torch.all(torch.isfinite(grad)) or not math.isfinite(float(total.detach())):
             return 1e6, np.zeros_like(vector)
         return float(total.detach()), grad.numpy().copy()

@@ -49,12 +49,10 @@ where the data has not been yet looks better than one that keeps it on the hangi
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import logging
 import warnings
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 import torch
@@ -63,7 +61,7 @@ from softpend.checks import finite
 from softpend.plant import OBSERVATION_NAMES
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 
-__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "compiler_notes_silenced", "state_spec"]
+__all__ = ["COMPILER_NOTES", "STATE_SPECS", "Propagator", "StateSpec", "silence_compiler_notes", "state_spec"]
 
 DTYPE = torch.float64
 
@@ -353,6 +351,7 @@ def _compiled_step_and_cost():
     calls alone."""
     if not _COMPILED:
         logging.getLogger("torch._inductor.ir").addFilter(_quiet_c_shim_notes)
+        silence_compiler_notes()
         compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True,
                                  options={"cpp.threads": 1, "cpp_wrapper": True})
         import torch._functorch.config as functorch_config
@@ -364,7 +363,7 @@ def _compiled_step_and_cost():
             if not usable[0]:
                 return _step_and_cost(*args)
             try:
-                with compiler_notes_silenced(), cacheable:
+                with cacheable:
                     return compiled(*args)
             except Exception as exc:  # noqa: BLE001 (no C++ compiler, or an unsupported platform)
                 if not _is_compiler_failure(exc):
@@ -378,15 +377,18 @@ def _compiled_step_and_cost():
     return _COMPILED[0]
 
 
-@contextlib.contextmanager
-def compiler_notes_silenced() -> Iterator[None]:
-    """Hide the warnings that torch's compiler gives once per process while it compiles a graph: its notes on
-    tracing our cached helpers and the deprecation notices of its own modules.  The backward graph of a compiled
-    rollout is compiled at its first gradient, so the gradient's caller needs this too."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Dynamo detected a call to a `functools.lru_cache`")
-        warnings.filterwarnings("ignore", category=FutureWarning, module="torch")
-        yield
+#: What torch's compiler warns of while it compiles the rollout step (forward and backward graph), once per graph:
+#: ``(message, category)``, each from a torch module.
+COMPILER_NOTES = (("Dynamo detected a call to a `functools.lru_cache`", UserWarning),
+                  ("`torch._prims_common.check` is deprecated", FutureWarning))
+
+
+def silence_compiler_notes() -> None:
+    """Ignore :data:`COMPILER_NOTES` in this process, from the first compiled rollout on.  The filters are
+    process-wide because the backward graph is compiled at the first gradient, in the caller's code; they match
+    these messages from torch's modules only."""
+    for message, category in COMPILER_NOTES:
+        warnings.filterwarnings("ignore", message=message, category=category, module="torch")
 
 
 def _quiet_c_shim_notes(record: logging.LogRecord) -> bool:

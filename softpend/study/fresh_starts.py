@@ -290,16 +290,11 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
         _refuse_selection_starts(report_seeds, agents[algo, seed][1].selection_seeds,
                                  f"the agents of {algo} seed {seed}")
     # the agents that share what the batched episodes depend on step together (one batch each)
-    groups: list[tuple[Any, list[tuple[str, int]]]] = []
+    groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
-        key = (config.task, config.action_repeat, config.n_torque_levels)
-        match = next((members for other, members in groups if other == key), None)
-        if match is None:
-            groups.append((key, [run]))
-        else:
-            match.append(run)
+        groups.setdefault((config.task, config.action_repeat, config.n_torque_levels), []).append(run)
     summaries = {}
-    for _, members in groups:
+    for members in groups.values():
         config = agents[members[0]][1]
         evaluated = evaluate_agents_batched([agents[run][0] for run in members], config,
                                             seeds=tuple(report_seeds), duration_s=duration_s)

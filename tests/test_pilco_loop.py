@@ -13,9 +13,12 @@ import torch
 from softpend.cli import main
 from softpend.evaluation import evaluate_controller
 from softpend.pilco import PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
+from softpend.pilco.controller import PilcoController
+from softpend.pilco.policy import LinearPolicy
+from softpend.plant import OBSERVATION_NAMES, Observation
 from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.loop import (RANDOM_STREAMS, _came_near_upright, _optimise_policy, _random_streams,
-                                 _search_with_restarts, real_cost)
+                                 _search_with_restarts, _upright_distribution, real_cost)
 from softpend.pilco.propagation import Propagator
 from softpend.plant import RodParams
 from softpend.task import Task
@@ -376,6 +379,7 @@ def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_t
     ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
     ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
     ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan), ("cost_width_after_swing_up_m", 0.0),
+    ("balance_within_rad", 0.0), ("balance_within_rad", 4.0), ("balance_within_rad_s", -1.0), ("balance_prediction_s", 0.0),
 ])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):
@@ -442,3 +446,70 @@ def test_a_run_uses_one_torch_thread_and_gives_the_callers_threads_back():
         torch.set_num_threads(before)
     assert seen == [1, 1]
     assert [r.predicted_cost for r in two.records[1:]] == [r.predicted_cost for r in one.records[1:]]
+
+
+def _observation(theta_rad: float, theta_dot_rad_s: float) -> Observation:
+    values = np.zeros(len(OBSERVATION_NAMES))
+    values[OBSERVATION_NAMES.index("theta_rad")] = theta_rad
+    values[OBSERVATION_NAMES.index("phi_rad")] = theta_rad
+    values[OBSERVATION_NAMES.index("theta_dot_rad_s")] = theta_dot_rad_s
+    values[OBSERVATION_NAMES.index("phi_dot_rad_s")] = theta_dot_rad_s
+    return Observation.from_array(values)
+
+
+def test_the_balancing_policy_acts_only_in_its_band_about_upright():
+    spec = state_spec("tip_bend")
+    swing = RBFPolicy(np.zeros((3, spec.n_model_inputs)), np.ones(spec.n_model_inputs), 0.06)
+    swing.targets = torch.full((3,), 0.3, dtype=torch.float64)  # a positive torque everywhere near the centres
+    balance = LinearPolicy(spec.n_model_inputs, 0.06, weights=np.array([-0.5, 0.0, 0.0, -3.0, 0.0]))
+    controller = PilcoController(swing, spec, 0.1, balance, balance_within_rad=0.4, balance_within_rad_s=2.0)
+    inside = [(0.3, 0.0), (-0.3, 1.5), (0.3 + 2 * math.pi, -1.9)]
+    outside = [(0.5, 0.0), (0.1, 2.5), (math.pi, 0.0)]
+    for (theta, rate), expected in [(c, True) for c in inside] + [(c, False) for c in outside]:
+        controller.reset()
+        torque = controller(_observation(theta, rate), np.zeros(4), np.zeros(4), 0.0)
+        x = spec.model_inputs(spec.from_observations(_observation(theta, rate).as_array()[None, :]))
+        used = balance if expected else swing
+        assert torque == pytest.approx(float(used.torque_nm(x)[0]), abs=1e-15), (theta, rate)
+    # inside the band, the balancing policy pushes the tip back towards upright
+    controller.reset()
+    assert controller(_observation(0.3, 0.0), np.zeros(4), np.zeros(4), 0.0) < 0.0
+
+
+@pytest.fixture(scope="module")
+def tiny_balancing_run() -> PilcoResult:
+    """A tiny run whose balancing band (3 rad, 20 rad/s: all but the hanging rod) the random trial visits."""
+    config = PilcoConfig(**{**TINY, "state": "tip_bend", "horizon_s": 3.0}, seed=5, balance_within_rad=3.0,
+                         balance_within_rad_s=20.0, balance_prediction_s=0.5)
+    return run_pilco(config, progress=False)
+
+
+def test_a_run_learns_a_balancing_policy_and_saves_it(tiny_balancing_run, tmp_path):
+    result = tiny_balancing_run
+    policy_records = [r for r in result.records if r.kind == "policy"]
+    searched = [r for r in policy_records if math.isfinite(r.balance_predicted_cost)]
+    assert searched and result.balance_policy is not None
+    assert np.any(result.balance_policy.get_vector() != 0.0)
+    assert all(0.0 < r.balance_predicted_cost <= 5.0 for r in searched)  # at most one per predicted step
+    loaded = PilcoResult.load(result.save(tmp_path / "run"))
+    np.testing.assert_array_equal(loaded.balance_policy.get_vector(), result.balance_policy.get_vector())
+    assert loaded.controller().balance_policy is not None
+    a = evaluate_controller(result.controller(), result.config.task, seeds=(7,), duration_s=1.0).results[0]
+    b = evaluate_controller(loaded.controller(), loaded.config.task, seeds=(7,), duration_s=1.0).results[0]
+    np.testing.assert_array_equal(a.torque_nm, b.torque_nm)
+
+
+def test_the_balancing_search_starts_from_the_band_states_of_the_real_trials():
+    config = PilcoConfig(balance_within_rad=0.4, balance_within_rad_s=2.0, initial_std=0.05)
+    spec = state_spec(config.state)
+    rng = np.random.default_rng(0)
+    band = np.column_stack([rng.uniform(-1, 1, 40), rng.normal(0, 0.1, 40), rng.normal(0, 0.05, 40),
+                            rng.uniform(-0.3, 0.3, 40) + 2 * math.pi])  # one turn over: the angle is wrapped
+    away = np.column_stack([np.full(30, 5.0), np.zeros(30), np.zeros(30), np.full(30, 0.2)])  # too fast
+    hanging = np.column_stack([np.zeros(30), np.zeros(30), np.zeros(30), np.full(30, math.pi)])
+    mean, cov = _upright_distribution(config, spec, np.vstack([band, away, hanging]))
+    wrapped = band.copy()
+    wrapped[:, 3] -= 2 * math.pi
+    np.testing.assert_allclose(mean.numpy(), wrapped.mean(axis=0), atol=1e-12)
+    np.testing.assert_allclose(cov.numpy(), np.cov(wrapped, rowvar=False) + 0.05**2 * np.eye(4), atol=1e-12)
+    assert _upright_distribution(config, spec, np.vstack([away, hanging])) is None

@@ -11,7 +11,7 @@ import torch
 from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.moments import (_WeightedExpSum, gp_moments, pair_weights, rbf_network_moments, saturating_cost_moments,
                                     sin_saturation_moments, trig_moments)
-from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import Propagator, silence_compiler_notes, state_spec
 
 F64 = torch.float64
@@ -393,3 +393,15 @@ def test_the_compilers_notes_are_silenced_and_other_warnings_are_not():
         warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "ours.py", 1,
                                module="softpend.ours")
     assert [str(w.message) for w in seen] == ["a later default", "a torch note", "`torch._prims_common.check` is deprecated"]
+
+
+def test_linear_policy_moments_match_monte_carlo(gaussian_input):
+    m, s, xs = gaussian_input
+    policy = LinearPolicy(3, 0.06, weights=np.array([1.5, -0.8, 2.0]))
+    m_u, s_u, c_u = policy.moments(m, s)
+    u = policy.torque_nm(xs)
+    assert abs(float(m_u) - u.mean()) < 0.01 * 0.06
+    assert float(s_u) == pytest.approx(u.var(), rel=0.02)
+    np.testing.assert_allclose((s @ c_u).numpy(), np.cov(np.hstack([xs, u[:, None]]).T)[:3, 3], rtol=0.03, atol=1e-5)
+    function, params = policy.moment_function()
+    assert all(torch.equal(a, b) for a, b in zip(function(m, s, *params), (m_u, s_u, c_u)))

@@ -13,10 +13,10 @@ import numpy as np
 
 from softpend.checks import positive
 from softpend.plant import Observation
-from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import StateSpec
 
-__all__ = ["PilcoController", "RandomTorqueController"]
+__all__ = ["PilcoController", "RandomTorqueController", "in_balance_band"]
 
 
 class _HoldController:
@@ -40,6 +40,14 @@ class _HoldController:
         return self._torque_nm
 
 
+def in_balance_band(spec: StateSpec, states: np.ndarray, within_rad: float, within_rad_s: float) -> np.ndarray:
+    """Which states (rows) have the tip within ``within_rad`` of upright [rad] and its rate within ``within_rad_s``
+    of zero [rad/s]."""
+    states = np.atleast_2d(states)
+    tip = (states[:, spec.tip_angle_index] + np.pi) % (2.0 * np.pi) - np.pi
+    return (np.abs(tip) < within_rad) & (np.abs(states[:, spec.tip_rate_index]) < within_rad_s)
+
+
 class PilcoController(_HoldController):
     """Run an :class:`RBFPolicy` on the observed variables of :class:`StateSpec` ``spec``.
 
@@ -51,19 +59,36 @@ class PilcoController(_HoldController):
         wrapped angles of the observation are used as they are).
     control_dt_s : float
         Control period [s] (zero-order hold in between).
+    balance_policy : LinearPolicy, optional
+        A second policy on the same inputs that acts instead of ``policy`` while the tip is within
+        ``balance_within_rad`` of upright (PILCO's balancing policy, :func:`softpend.pilco.loop.run_pilco`).
+    balance_within_rad : float
+        ``balance_policy`` acts while the tip is within this angle of upright [rad] ...
+    balance_within_rad_s : float
+        ... and its rate within this of zero [rad/s].
     """
 
-    def __init__(self, policy: RBFPolicy, spec: StateSpec, control_dt_s: float) -> None:
-        if policy.n_inputs != spec.n_model_inputs:
-            raise ValueError(f"policy takes {policy.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
+    def __init__(self, policy: RBFPolicy, spec: StateSpec, control_dt_s: float,
+                 balance_policy: LinearPolicy | None = None, balance_within_rad: float = 0.4, balance_within_rad_s: float = 2.0) -> None:
+        for name, p in (("policy", policy), ("balance_policy", balance_policy)):
+            if p is not None and p.n_inputs != spec.n_model_inputs:
+                raise ValueError(f"{name} takes {p.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
         self.policy = policy
+        self.balance_policy = balance_policy
+        self.balance_within_rad = positive("balance_within_rad", balance_within_rad)
+        self.balance_within_rad_s = positive("balance_within_rad_s", balance_within_rad_s)
         self.spec = spec
         super().__init__(control_dt_s)
 
     def _compute(self, observation: Observation) -> float:
         values = observation.as_array()
         state = self.spec.from_observations(values[None, :])
-        return float(self.policy.torque_nm(self.spec.model_inputs(state))[0])
+        inputs = self.spec.model_inputs(state)
+        policy = self.policy
+        if self.balance_policy is not None:
+            if in_balance_band(self.spec, state, self.balance_within_rad, self.balance_within_rad_s)[0]:
+                policy = self.balance_policy
+        return float(policy.torque_nm(inputs)[0])
 
 
 class RandomTorqueController(_HoldController):

@@ -45,6 +45,17 @@ holds bang-bang torques for 0.2-0.6 s each: it swings the rod far enough for the
 hanging plateau, and on most seeds it already brings the tip within ``cost_rate_after_rad`` of upright, so that
 the tip-rate factor is on from the first policy search (the appendix gives the count).
 
+Balancing policy
+----------------
+With ``balance_within_rad`` set, a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts
+instead of the RBF policy while the tip is within ``balance_within_rad`` of upright and its rate within
+``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
+the real trials have visited that band, it is searched like the RBF policy -- the same GP, cost and L-BFGS-B
+budget -- over a predicted ``balance_prediction_s`` from the mean and covariance of the real trials' states in
+the band.  The RBF policy alone can settle into a slow swaying about upright (about 1 Hz, 0.13-0.26 rad) that the
+model predicts correctly and that its search does not leave; a linear map of the tip angle, its rate and the
+bending is the form of a balancing controller, and its few weights are found from the same model.
+
 The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
 """
 
@@ -70,15 +81,18 @@ from softpend.io.outputs import atomic_write
 from softpend.plant import SimulationDiverged
 from softpend.plant.randomisation import randomised_rod
 from softpend.task import Task
-from softpend.pilco.controller import PilcoController, RandomTorqueController
+from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
-from softpend.pilco.policy import RBFPolicy
+from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import Propagator, StateSpec, state_spec
 from softpend.torch_threads import one_torch_thread
 
 __all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
 
 DTYPE = torch.float64
+
+#: Prefix of the balancing policy's entries in ``policy.pt``.
+BALANCE_PREFIX = "balance."
 
 
 @dataclass
@@ -183,6 +197,17 @@ class PilcoConfig:
         (:class:`softpend.evaluation.LateNoisyController`); the GP learns from the plant's own states.
     observation_noise_rad : float
         Standard deviation of Gaussian noise on the hub and tip angles the policy sees in the real trials [rad].
+    balance_within_rad : float, optional
+        Learn a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) that acts instead of the RBF
+        policy while the tip is within this angle of upright [rad] and its rate within ``balance_within_rad_s``
+        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  Its search predicts
+        ``balance_prediction_s`` from the states of the real trials in that band (their mean and covariance plus
+        ``initial_std**2``), with the same GP and cost as the RBF policy's search, and runs before every trial once
+        the real trials have visited the band.
+    balance_within_rad_s : float
+        Largest tip rate of the balancing policy's band [rad/s].
+    balance_prediction_s : float
+        Length of the balancing policy's predicted rollout [s].
     compiled : bool
         Predict the rollouts of the policy searches through ``torch.compile``
         (:class:`~softpend.pilco.propagation.Propagator` ``compiled``): the same numbers to rounding, a search about
@@ -228,6 +253,9 @@ class PilcoConfig:
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0
     compiled: bool = True
+    balance_within_rad: Optional[float] = None
+    balance_within_rad_s: float = 2.0
+    balance_prediction_s: float = 3.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -245,6 +273,11 @@ class PilcoConfig:
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         optional_positive("prediction_s", self.prediction_s)
+        optional_positive("balance_within_rad", self.balance_within_rad)
+        positive("balance_prediction_s", self.balance_prediction_s)
+        positive("balance_within_rad_s", self.balance_within_rad_s)
+        if self.balance_within_rad is not None and self.balance_within_rad >= math.pi:
+            raise ValueError(f"balance_within_rad must be below pi, got {self.balance_within_rad!r}")
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
             raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
                              "(None predicts the trial's length)")
@@ -296,7 +329,7 @@ class PilcoConfig:
     #: setting existed (so such a run is not taken for a run of a config with other values).
     MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None,
                         "cost_width_after_swing_up_m": None, "compiled": False,
-                        "gp_all_data": False}
+                        "gp_all_data": False, "balance_within_rad": None}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
@@ -314,7 +347,9 @@ class TrialRecord:
     the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_width_m`` the width
     of that cost [m] (``None``: the config's ``cost_width_m``), ``cost_rate_width_rad_s`` its tip-rate width
     (``None``: position only); ``policy_restarts`` the searches from fresh
-    random policies that the search made besides the one from the previous policy.
+    random policies that the search made besides the one from the previous policy; ``balance_predicted_cost`` the
+    expected cost that the model predicts for the balancing policy over ``balance_prediction_s`` from the upright
+    band's states (NaN: no balancing policy acted in the trial).
     """
 
     index: int
@@ -334,6 +369,7 @@ class TrialRecord:
     cost_rate_width_rad_s: Optional[float] = None
     policy_restarts: int = 0
     cost_width_m: Optional[float] = None
+    balance_predicted_cost: float = float("nan")
 
 
 @dataclass
@@ -344,6 +380,7 @@ class PilcoResult:
     records: list[TrialRecord]
     policy: RBFPolicy
     gp_hyperparameters: Optional[GPHyperparameters]
+    balance_policy: Optional[LinearPolicy] = None
     predicted_means: list[np.ndarray] = field(default_factory=list, repr=False)  # per policy trial (H+1, d)
     predicted_stds: list[np.ndarray] = field(default_factory=list, repr=False)
     real_states: list[np.ndarray] = field(default_factory=list, repr=False)  # per trial (H+1, d)
@@ -370,15 +407,18 @@ class PilcoResult:
         return self.records[-1].plant_seconds_total if self.records else 0.0
 
     def controller(self) -> PilcoController:
-        """The final policy as a :class:`~softpend.evaluation.Controller`."""
-        return PilcoController(self.policy, state_spec(self.config.state), self.config.control_dt_s)
+        """The final policy (with its balancing policy, if any) as a :class:`~softpend.evaluation.Controller`."""
+        return _controller(self.config, self.policy, self.balance_policy)
 
     def save(self, directory: str | Path) -> Path:
         """Write ``policy.pt`` (state dict) and ``pilco.json`` (config, trial records, GP hyperparameters)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         weights = io.BytesIO()
-        torch.save(self.policy.state_dict(), weights)
+        state = self.policy.state_dict()
+        if self.balance_policy is not None:
+            state.update({BALANCE_PREFIX + k: v for k, v in self.balance_policy.state_dict().items()})
+        torch.save(state, weights)
         with atomic_write(directory / "policy.pt") as handle:
             handle.write(weights.getvalue())
         meta = {
@@ -421,13 +461,19 @@ class PilcoResult:
         try:
             state = torch.load(weights_path, weights_only=True, map_location="cpu")
             spec = state_spec(config.state)
+            balance_state = {k[len(BALANCE_PREFIX):]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
+            state = {k: v for k, v in state.items() if not k.startswith(BALANCE_PREFIX)}
             policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),
                                config.task.torque_limit_nm)
             policy.load_state_dict(state)
+            balance = None
+            if balance_state:
+                balance = LinearPolicy(spec.n_model_inputs, config.task.torque_limit_nm)
+                balance.load_state_dict(balance_state)
         except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
             message = " ".join(str(exc).split())[:300]
             raise ValueError(f"{weights_path}: not a PILCO policy written by softpend ({type(exc).__name__}: {message})") from None
-        return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper)
+        return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper, balance_policy=balance)
 
 
 def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta_dot_rad_s: np.ndarray | None = None,
@@ -576,6 +622,26 @@ def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: R
     return best, config.policy_restarts
 
 
+def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
+    """The RBF policy, and the balancing policy within ``config.balance_within_rad`` of upright, as a controller."""
+    within = config.balance_within_rad if config.balance_within_rad is not None else 1.0
+    return PilcoController(policy, state_spec(config.state), config.control_dt_s, balance, within,
+                           config.balance_within_rad_s)
+
+
+def _upright_distribution(config: PilcoConfig, spec: StateSpec, states: np.ndarray
+                          ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
+    """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
+    policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``(-pi, pi]``;
+    None when fewer than ``2 * dim`` states are in that band."""
+    near = states[in_balance_band(spec, states, config.balance_within_rad, config.balance_within_rad_s)].copy()
+    if len(near) < 2 * spec.dim:
+        return None
+    near[:, spec.angle_indices] = (near[:, spec.angle_indices] + np.pi) % (2 * np.pi) - np.pi
+    cov = np.cov(near, rowvar=False) + config.initial_std**2 * np.eye(spec.dim)
+    return torch.tensor(near.mean(axis=0), dtype=DTYPE), torch.tensor(0.5 * (cov + cov.T), dtype=DTYPE)
+
+
 def check_pilco_size(config: PilcoConfig) -> None:
     """``ValueError`` (with the estimate) if a run of ``config`` would exceed
     :data:`softpend.checks.MAX_WORK_BYTES`: the moment-matching rollout keeps, for every prediction step, a
@@ -715,8 +781,20 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         result.predicted_means.append(means[: n_steps + 1].numpy())
         covs = covs[: n_steps + 1]
         result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
+        # ---- the balancing policy (once the real trials have visited the upright band)
+        balance_cost = float("nan")
+        if config.balance_within_rad is not None:
+            upright = _upright_distribution(config, spec, np.vstack(result.real_states))
+            if upright is not None:
+                if result.balance_policy is None:
+                    result.balance_policy = LinearPolicy(spec.n_model_inputs, torque_limit)
+                balance_propagator = Propagator(spec, gp, result.balance_policy, params.length_m, width_m, rate_width,
+                                                compiled=False)
+                n_balance = int(round(config.balance_prediction_s / config.control_dt_s))
+                balance_cost = _optimise_policy(balance_propagator, result.balance_policy, *upright, n_balance,
+                                                config.policy_iterations)
         # ---- run it on the plant
-        controller = PilcoController(policy, spec, config.control_dt_s)
+        controller = _controller(config, policy, result.balance_policy)
         episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env, streams)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
@@ -728,12 +806,12 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
             real_cost=_trial_cost(config, spec, states, rate_width, width_m),
             swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
             n_gp_points=len(subset), wall_s_total=float("nan"), cost_rate_width_rad_s=rate_width,
-            policy_restarts=n_restarts, cost_width_m=width_m,
+            policy_restarts=n_restarts, cost_width_m=width_m, balance_predicted_cost=balance_cost,
         )
         # ---- test it (not counted as interaction, not used for learning)
         if config.eval_seeds:
             summary = evaluate_controller(
-                PilcoController(policy, spec, config.control_dt_s), config.task, name="pilco", seeds=config.eval_seeds,
+                _controller(config, policy, result.balance_policy), config.task, name="pilco", seeds=config.eval_seeds,
                 duration_s=config.eval_duration_s,
             )
             stds = [r.upright_std_rad for r in summary.results]

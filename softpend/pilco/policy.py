@@ -19,7 +19,7 @@ import torch
 from softpend.checks import non_negative, positive
 from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
-__all__ = ["RBFPolicy", "saturated_rbf_moments"]
+__all__ = ["LinearPolicy", "RBFPolicy", "saturated_linear_moments", "saturated_rbf_moments"]
 
 DTYPE = torch.float64
 
@@ -32,6 +32,79 @@ def saturated_rbf_moments(mean: torch.Tensor, cov: torch.Tensor, centers: torch.
     m_z, s_z, c_z = rbf_network_moments(mean, cov, centers, beta, log_lengthscales)
     m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, torque_limit_nm)
     return m_u, s_u, c_z * c_u
+
+
+def saturated_linear_moments(mean: torch.Tensor, cov: torch.Tensor, weights: torch.Tensor, torque_limit_nm: float
+                             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the torque ``u`` [N m] of the linear map ``weights . x``
+    squashed by the sine saturation at ``torque_limit_nm``, at a Gaussian input ``x ~ N(mean, cov)``."""
+    m_u, s_u, c_u = sin_saturation_moments(weights @ mean, weights @ cov @ weights, torque_limit_nm)
+    return m_u, s_u, weights * c_u
+
+
+class LinearPolicy:
+    """Saturated linear policy ``u = u_max (9 sin z + sin 3z) / 8`` with ``z = w . x`` on ``D`` inputs (PILCO's
+    ``conlin`` with ``gSat``).  On the model inputs ``[rates, sin/cos of angles]`` the cosine of the tip angle
+    stands in for a bias near upright.
+
+    Parameters
+    ----------
+    n_inputs : int
+        Number of inputs ``D``.
+    torque_limit_nm : float
+        Saturation level ``u_max`` [N m].
+    weights : array (D,), optional
+        Initial weights [1 per input unit]; zeros (no torque) by default.
+    """
+
+    def __init__(self, n_inputs: int, torque_limit_nm: float, weights: np.ndarray | None = None) -> None:
+        if int(n_inputs) < 1:
+            raise ValueError(f"n_inputs must be >= 1, got {n_inputs!r}")
+        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
+        w = np.zeros(int(n_inputs)) if weights is None else np.asarray(weights, dtype=float)
+        if w.shape != (int(n_inputs),) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be {int(n_inputs)} finite numbers, got {weights!r}")
+        self.weights = torch.tensor(w, dtype=DTYPE)
+
+    @property
+    def n_inputs(self) -> int:
+        return self.weights.shape[0]
+
+    def get_vector(self) -> np.ndarray:
+        return self.weights.detach().numpy().copy()
+
+    def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
+        """Inverse of :meth:`get_vector`; with ``requires_grad`` the weights stay the (autograd) tensor given."""
+        v = torch.as_tensor(vector, dtype=DTYPE)
+        self.weights = v if requires_grad else v.detach().clone()
+
+    def torque_nm(self, x: np.ndarray) -> np.ndarray:
+        """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
+        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
+        with torch.no_grad():
+            z = xt @ self.weights
+            u = self.torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
+        u = u.numpy()
+        return u if np.ndim(x) == 2 else u[:1].reshape(())
+
+    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
+        return saturated_linear_moments(mean, cov, self.weights, self.torque_limit_nm)
+
+    def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
+        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)``."""
+        return saturated_linear_moments, (self.weights, self.torque_limit_nm)
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {"weights": self.weights.detach().clone()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        if set(state) != {"weights"}:
+            raise ValueError(f"linear policy state dict must hold 'weights' only, got {sorted(state)}")
+        weights = state["weights"].to(DTYPE)
+        if weights.shape != self.weights.shape:
+            raise ValueError(f"linear policy weights must have shape {tuple(self.weights.shape)}, got {tuple(weights.shape)}")
+        self.weights = weights.clone()
 
 
 class RBFPolicy:

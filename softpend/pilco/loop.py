@@ -47,7 +47,7 @@ the tip-rate factor is on from the first policy search (the appendix gives the c
 
 Balancing policy
 ----------------
-With ``balance_within_rad`` set, a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts
+With ``balance_within_rad`` set (the default), a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts
 instead of the RBF policy while the tip is within ``balance_within_rad`` of upright and its rate within
 ``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
 the real trials have visited that band, it is searched like the RBF policy -- the same GP, cost and L-BFGS-B
@@ -200,7 +200,9 @@ class PilcoConfig:
     balance_within_rad : float, optional
         Learn a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) that acts instead of the RBF
         policy while the tip is within this angle of upright [rad] and its rate within ``balance_within_rad_s``
-        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  Its search predicts
+        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  The defaults (0.4 rad,
+        2 rad/s) take in the slow sway about upright that the RBF policy alone can settle into and leave out fast
+        passes over the top.  Its search predicts
         ``balance_prediction_s`` from the states of the real trials in that band (their mean and covariance plus
         ``initial_std**2``), with the same GP and cost as the RBF policy's search, and runs before every trial once
         the real trials have visited the band.
@@ -253,7 +255,7 @@ class PilcoConfig:
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0
     compiled: bool = True
-    balance_within_rad: Optional[float] = None
+    balance_within_rad: Optional[float] = 0.4
     balance_within_rad_s: float = 2.0
     balance_prediction_s: float = 3.0
     seed: int = 0

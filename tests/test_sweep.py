@@ -197,3 +197,19 @@ def test_the_sweep_command_trains_every_method_per_seed_and_reuses_finished_runs
     for bad in (["--seeds", "3-1"], ["--methods", "dqn,ppo"], ["--seeds", "x"]):
         assert main(["sweep", *bad, "--runs-root", str(tmp_path)]) == 2
         assert "error" in capsys.readouterr().err
+
+
+def test_the_sweep_command_sets_pilco_fields_for_every_run(tmp_path, capsys):
+    from softpend.cli import main
+    from softpend.pilco.loop import PilcoResult
+
+    argv = ["sweep", "--methods", "pilco", "--seeds", "3", "--pilco-trials", "0", "--runs-root", str(tmp_path),
+            "--workers", "1", "--pilco-set", "horizon_s=1.0", "--pilco-set", "balance_within_rad=null"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    config = PilcoResult.load(tmp_path / "pilco-seed3").config
+    assert config.horizon_s == 1.0 and config.balance_within_rad is None and config.seed == 3
+    for bad in (["--pilco-set", "no_such_field=1"], ["--pilco-set", "balance_within_rad=-1"], ["--pilco-set", "x"]):
+        assert main(["sweep", "--methods", "pilco", "--seeds", "3", *bad, "--runs-root", str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert "error" in err and "Traceback" not in err

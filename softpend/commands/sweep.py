@@ -48,6 +48,7 @@ def method_list(text: str) -> list[str]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from softpend.commands.options import assignment
     from softpend.study.sweep import BACKENDS
 
     parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
@@ -59,6 +60,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--episodes-dqn", type=int, default=None, help="DQN episodes per seed (default: the book's)")
     parser.add_argument("--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)")
     parser.add_argument("--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)")
+    parser.add_argument("--pilco-set", action="append", default=[], type=assignment, metavar="NAME=VALUE",
+                        dest="pilco_overrides",
+                        help="set a PilcoConfig field for every PILCO run, VALUE as JSON (repeatable; e.g. "
+                             "balance_within_rad=null)")
     parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 
@@ -67,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from softpend.io.outputs import json_text
+    from softpend.io.overrides import apply_overrides
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
@@ -83,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
     rl_algos = [m for m in args.methods if m != "pilco"]
     config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
+    config = apply_overrides(config, getattr(args, "pilco_overrides", None) or [])
     # every method's runs in one pool; the per-method calls below then find them finished
     train_in_one_pool([(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos], root,
                       config if "pilco" in args.methods else None, args.seeds, root, workers=args.workers,

@@ -462,7 +462,9 @@ def test_the_balancing_policy_acts_only_in_its_band_about_upright():
     swing = RBFPolicy(np.zeros((3, spec.n_model_inputs)), np.ones(spec.n_model_inputs), 0.06)
     swing.targets = torch.full((3,), 0.3, dtype=torch.float64)  # a positive torque everywhere near the centres
     balance = LinearPolicy(spec.n_model_inputs, 0.06, weights=np.array([-0.5, 0.0, 0.0, -3.0, 0.0]))
-    controller = PilcoController(swing, spec, 0.1, balance, balance_within_rad=0.4, balance_within_rad_s=2.0)
+    controller = PilcoController(swing, spec, 0.1, balance, balance_band=(0.4, 2.0))
+    with pytest.raises(ValueError, match="balance_band"):
+        PilcoController(swing, spec, 0.1, balance)
     inside = [(0.3, 0.0), (-0.3, 1.5), (0.3 + 2 * math.pi, -1.9)]
     outside = [(0.5, 0.0), (0.1, 2.5), (math.pi, 0.0)]
     for (theta, rate), expected in [(c, True) for c in inside] + [(c, False) for c in outside]:

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from softpend.checks import positive
-from softpend.plant import Observation
+from softpend.plant import Observation, wrap_angle_rad
 from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import StateSpec
 
@@ -44,7 +44,7 @@ def in_balance_band(spec: StateSpec, states: np.ndarray, within_rad: float, with
     """Which states (rows) have the tip within ``within_rad`` of upright [rad] and its rate within ``within_rad_s``
     of zero [rad/s]."""
     states = np.atleast_2d(states)
-    tip = (states[:, spec.tip_angle_index] + np.pi) % (2.0 * np.pi) - np.pi
+    tip = wrap_angle_rad(states[:, spec.tip_angle_index])
     return (np.abs(tip) < within_rad) & (np.abs(states[:, spec.tip_rate_index]) < within_rad_s)
 
 
@@ -60,23 +60,26 @@ class PilcoController(_HoldController):
     control_dt_s : float
         Control period [s] (zero-order hold in between).
     balance_policy : LinearPolicy, optional
-        A second policy on the same inputs that acts instead of ``policy`` while the tip is within
-        ``balance_within_rad`` of upright (PILCO's balancing policy, :func:`softpend.pilco.loop.run_pilco`).
-    balance_within_rad : float
-        ``balance_policy`` acts while the tip is within this angle of upright [rad] ...
-    balance_within_rad_s : float
-        ... and its rate within this of zero [rad/s].
+        A second policy on the same inputs that acts instead of ``policy`` inside the band ``balance_band``
+        (PILCO's balancing policy, :func:`softpend.pilco.loop.run_pilco`).
+    balance_band : tuple of float, optional
+        ``(within_rad, within_rad_s)``: ``balance_policy`` acts while the tip is within ``within_rad`` of upright
+        [rad] and its rate within ``within_rad_s`` of zero [rad/s] (:func:`in_balance_band`); required with
+        ``balance_policy``.
     """
 
     def __init__(self, policy: RBFPolicy, spec: StateSpec, control_dt_s: float,
-                 balance_policy: LinearPolicy | None = None, balance_within_rad: float = 0.4, balance_within_rad_s: float = 2.0) -> None:
+                 balance_policy: LinearPolicy | None = None, balance_band: tuple[float, float] | None = None) -> None:
         for name, p in (("policy", policy), ("balance_policy", balance_policy)):
             if p is not None and p.n_inputs != spec.n_model_inputs:
                 raise ValueError(f"{name} takes {p.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
+        if balance_policy is not None:
+            if balance_band is None or len(balance_band) != 2:
+                raise ValueError(f"balance_band must be (within_rad, within_rad_s) with a balance_policy, got {balance_band!r}")
+            balance_band = (positive("balance_band[0]", balance_band[0]), positive("balance_band[1]", balance_band[1]))
         self.policy = policy
         self.balance_policy = balance_policy
-        self.balance_within_rad = positive("balance_within_rad", balance_within_rad)
-        self.balance_within_rad_s = positive("balance_within_rad_s", balance_within_rad_s)
+        self.balance_band = balance_band
         self.spec = spec
         super().__init__(control_dt_s)
 
@@ -85,9 +88,8 @@ class PilcoController(_HoldController):
         state = self.spec.from_observations(values[None, :])
         inputs = self.spec.model_inputs(state)
         policy = self.policy
-        if self.balance_policy is not None:
-            if in_balance_band(self.spec, state, self.balance_within_rad, self.balance_within_rad_s)[0]:
-                policy = self.balance_policy
+        if self.balance_policy is not None and in_balance_band(self.spec, state, *self.balance_band)[0]:
+            policy = self.balance_policy
         return float(policy.torque_nm(inputs)[0])
 
 

@@ -52,9 +52,9 @@ instead of the RBF policy while the tip is within ``balance_within_rad`` of upri
 ``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
 the real trials have visited that band, it is searched like the RBF policy -- the same GP, cost and L-BFGS-B
 budget -- over a predicted ``balance_prediction_s`` from the mean and covariance of the real trials' states in
-the band.  The RBF policy alone can settle into a slow swaying about upright (about 1 Hz, 0.13-0.26 rad) that the
-model predicts correctly and that its search does not leave; a linear map of the tip angle, its rate and the
-bending is the form of a balancing controller, and its few weights are found from the same model.
+the band.  The RBF policy alone can settle into a slow sway about upright that its search does not leave; a linear
+map of the tip angle, its rate and the bending is the form of a balancing controller, and its few weights are
+found from the same model.
 
 The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
 """
@@ -78,7 +78,7 @@ from softpend.checks import (boolean, check_work_size, finite, in_unit_interval,
                              optional_positive, positive)
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, LateNoisyController, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
-from softpend.plant import SimulationDiverged
+from softpend.plant import SimulationDiverged, wrap_angle_rad
 from softpend.plant.randomisation import randomised_rod
 from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
@@ -538,7 +538,7 @@ def _run_trial(config: PilcoConfig, controller, seed: int, env,
 
 
 def _optimise_policy(
-    propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
+    propagator: Propagator, policy: RBFPolicy | LinearPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
 ) -> float:
     """Policy search: L-BFGS-B on the policy parameters from the policy's current ones; the policy keeps the
     better of the start and the result, whose predicted total cost is returned."""
@@ -626,20 +626,22 @@ def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: R
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
     """The RBF policy, and the balancing policy within ``config.balance_within_rad`` of upright, as a controller."""
-    within = config.balance_within_rad if config.balance_within_rad is not None else 1.0
-    return PilcoController(policy, state_spec(config.state), config.control_dt_s, balance, within,
-                           config.balance_within_rad_s)
+    spec = state_spec(config.state)
+    if balance is None or config.balance_within_rad is None:
+        return PilcoController(policy, spec, config.control_dt_s)
+    return PilcoController(policy, spec, config.control_dt_s, balance,
+                           (config.balance_within_rad, config.balance_within_rad_s))
 
 
 def _upright_distribution(config: PilcoConfig, spec: StateSpec, states: np.ndarray
                           ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
     """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
-    policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``(-pi, pi]``;
+    policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``[-pi, pi)``;
     None when fewer than ``2 * dim`` states are in that band."""
     near = states[in_balance_band(spec, states, config.balance_within_rad, config.balance_within_rad_s)].copy()
     if len(near) < 2 * spec.dim:
         return None
-    near[:, spec.angle_indices] = (near[:, spec.angle_indices] + np.pi) % (2 * np.pi) - np.pi
+    near[:, spec.angle_indices] = wrap_angle_rad(near[:, spec.angle_indices])
     cov = np.cov(near, rowvar=False) + config.initial_std**2 * np.eye(spec.dim)
     return torch.tensor(near.mean(axis=0), dtype=DTYPE), torch.tensor(0.5 * (cov + cov.T), dtype=DTYPE)
 

@@ -19,7 +19,7 @@ import torch
 from softpend.checks import non_negative, positive
 from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
-__all__ = ["LinearPolicy", "RBFPolicy", "saturated_linear_moments", "saturated_rbf_moments"]
+__all__ = ["LinearPolicy", "RBFPolicy", "saturated_linear_moments", "saturated_rbf_moments", "sin_saturation"]
 
 DTYPE = torch.float64
 
@@ -32,6 +32,11 @@ def saturated_rbf_moments(mean: torch.Tensor, cov: torch.Tensor, centers: torch.
     m_z, s_z, c_z = rbf_network_moments(mean, cov, centers, beta, log_lengthscales)
     m_u, s_u, c_u = sin_saturation_moments(m_z, s_z, torque_limit_nm)
     return m_u, s_u, c_z * c_u
+
+
+def sin_saturation(z: torch.Tensor, torque_limit_nm: float) -> torch.Tensor:
+    """The torque ``u_max (9 sin z + sin 3z) / 8`` [N m] of pre-saturation outputs ``z`` (PILCO's ``gSat``)."""
+    return torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
 
 
 def saturated_linear_moments(mean: torch.Tensor, cov: torch.Tensor, weights: torch.Tensor, torque_limit_nm: float
@@ -83,7 +88,7 @@ class LinearPolicy:
         xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
         with torch.no_grad():
             z = xt @ self.weights
-            u = self.torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
+            u = sin_saturation(z, self.torque_limit_nm)
         u = u.numpy()
         return u if np.ndim(x) == 2 else u[:1].reshape(())
 
@@ -204,7 +209,7 @@ class RBFPolicy:
         xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
         with torch.no_grad():
             z = self.pre_saturation(xt)
-            u = self.torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
+            u = sin_saturation(z, self.torque_limit_nm)
         u = u.numpy()
         return u if np.ndim(x) == 2 else u[:1].reshape(())
 

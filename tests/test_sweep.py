@@ -213,3 +213,20 @@ def test_the_sweep_command_sets_pilco_fields_for_every_run(tmp_path, capsys):
         assert main(["sweep", "--methods", "pilco", "--seeds", "3", *bad, "--runs-root", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "error" in err and "Traceback" not in err
+
+
+def test_the_sweep_command_sets_rl_fields_for_every_run_of_their_method(tmp_path, capsys):
+    from softpend.cli import main
+    from softpend.rl.config import load_config
+
+    argv = ["sweep", "--methods", "dqn", "--seeds", "4", "--episodes-dqn", "1", "--runs-root", str(tmp_path),
+            "--workers", "1", "--dqn-set", "gradient_steps=3", "--dqn-set", "eval_seeds=[1000]",
+            "--mbpo-set", "gradient_steps=30"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    config = load_config(run_folder(tmp_path, "dqn", 4) / "config.json")
+    assert config.gradient_steps == 3 and config.eval_seeds == (1000,)  # the MBPO setting is not DQN's
+    for bad in (["--mbpo-set", "no_such_field=1"], ["--dqn-set", "gradient_steps=0"], ["--mbpo-set", "x"]):
+        assert main(["sweep", "--methods", "dqn", "--seeds", "4", *bad, "--runs-root", str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert "error" in err and "Traceback" not in err

@@ -60,15 +60,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--episodes-dqn", type=int, default=None, help="DQN episodes per seed (default: the book's)")
     parser.add_argument("--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)")
     parser.add_argument("--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)")
-    for algo, cls in (("dqn", "DQNConfig"), ("mbpo", "MBPOConfig")):
-        parser.add_argument(f"--{algo}-set", action="append", default=[], type=assignment, metavar="NAME=VALUE",
-                            dest=f"{algo}_overrides",
-                            help=f"set a {cls} field for every {'DQN-MBPO' if algo == 'mbpo' else 'DQN'} run, VALUE as "
-                                 "JSON (repeatable; e.g. gradient_steps=24)")
-    parser.add_argument("--pilco-set", action="append", default=[], type=assignment, metavar="NAME=VALUE",
-                        dest="pilco_overrides",
-                        help="set a PilcoConfig field for every PILCO run, VALUE as JSON (repeatable; e.g. "
-                             "balance_within_rad=null)")
+    for method, (cls, name, example) in {"dqn": ("DQNConfig", "DQN", "gradient_steps=4"),
+                                          "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
+                                          "pilco": ("PilcoConfig", "PILCO", "balance_within_rad=null")}.items():
+        parser.add_argument(f"--{method}-set", action="append", default=[], type=assignment, metavar="NAME=VALUE",
+                            dest=f"{method}_overrides",
+                            help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})")
     parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 
@@ -78,7 +75,6 @@ def run(args: argparse.Namespace) -> int:
 
     from softpend.io.outputs import json_text
     from softpend.io.overrides import apply_overrides
-    from softpend.rl.config import config_from_overrides
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
@@ -91,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--{name.replace('_', '-')} must be at least {0 if name == 'pilco_trials' else 1}, got {value}")
     if root.exists() and not root.is_dir():
         raise ValueError(f"--runs-root {root} exists and is not a folder")
-    configs = {algo: config_from_overrides(config, dict(getattr(args, f"{algo}_overrides", None) or []))
+    configs = {algo: apply_overrides(config, getattr(args, f"{algo}_overrides", None) or [])
                for algo, config in figure_configs().items()}
     episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
     rl_algos = [m for m in args.methods if m != "pilco"]

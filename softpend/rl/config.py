@@ -28,8 +28,8 @@ Choices that differ from the registered environments
   Epsilon decays over ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10
   DQN-MBPO episodes.
 * **Exploration floor** ``exploration_final_eps``: 0.1 for DQN, 0.02 for DQN-MBPO.  A model-free DQN run can settle on
-  spinning the rod over the top, a local optimum of the greedy policy; one action in ten taken at random keeps
-  showing it the slower passes near upright from which catching is learnt.
+  spinning the rod over the top, a local optimum of the greedy policy; with one action in ten taken at random fewer
+  runs stay there (the measurements are in the book's appendix).
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import metrics_from_trajectory
-from softpend.rl.config import (ADDED_FIELDS, REMOVED_FIELDS, DQNConfig, MBPOConfig, config_from_overrides, load_config,
-                                 save_config)
+from softpend.io.overrides import apply_overrides, parse_assignment
+from softpend.rl.config import ADDED_FIELDS, REMOVED_FIELDS, DQNConfig, MBPOConfig, load_config, save_config
 from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 
@@ -28,11 +28,13 @@ def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="rollouts_within_data"):
         MBPOConfig(rollouts_within_data="yes")
     with pytest.raises(ValueError, match="unknown"):
-        config_from_overrides(DQNConfig(), {"no_such_field": "1"})
+        apply_overrides(DQNConfig(), [parse_assignment("no_such_field=1")])
 
 
 def test_overrides_and_json_round_trip(tmp_path):
-    config = config_from_overrides(MBPOConfig(), {"learning_rate": "1e-3", "net_arch": "[32, 32]", "rollouts_per_real_step": 9})
+    """``--set`` values as the command line reads them: JSON, lists for tuples."""
+    config = apply_overrides(MBPOConfig(), [parse_assignment(text) for text in
+                                            ("learning_rate=1e-3", "net_arch=[32, 32]", "rollouts_per_real_step=9")])
     assert config.learning_rate == 1e-3 and config.net_arch == (32, 32)
     save_config(config, tmp_path / "c.json")
     assert load_config(tmp_path / "c.json") == config
@@ -62,7 +64,7 @@ def test_saved_configs_with_removed_fields_load_when_they_trained_as_this_versio
         with pytest.raises(ValueError, match=f"not a config of this version: {field}"):
             load_config(tmp_path / "old.json")
         with pytest.raises(ValueError, match="unknown"):
-            config_from_overrides(config, {field: json.dumps(value)})
+            apply_overrides(config, [parse_assignment(f"{field}={json.dumps(value)}")])
 
 
 def test_saved_configs_without_an_added_field_load_as_the_version_that_trained_them(tmp_path):

@@ -1,4 +1,4 @@
-"""Options shared by the subcommands: the repeatable ``--set NAME=VALUE``."""
+"""Options shared by the subcommands: the repeatable ``--set NAME=VALUE`` (and its per-method forms)."""
 
 from __future__ import annotations
 
@@ -19,9 +19,7 @@ def assignment(text: str) -> tuple[str, Any]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_set_option(parser: argparse.ArgumentParser, help: str, dest: str = "overrides") -> None:
-    """Add the repeatable ``--set NAME=VALUE`` to ``parser``; ``args.<dest>`` is the list of ``(NAME, value)``
-    pairs in command-line order (VALUE parsed as JSON, else kept as a string)."""
-    parser.add_argument(
-        "--set", action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help
-    )
+def add_set_option(parser: argparse.ArgumentParser, help: str, dest: str = "overrides", flag: str = "--set") -> None:
+    """Add the repeatable ``flag NAME=VALUE`` (``--set`` by default) to ``parser``; ``args.<dest>`` is the list of
+    ``(NAME, value)`` pairs in command-line order (VALUE parsed as JSON, else kept as a string)."""
+    parser.add_argument(flag, action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help)

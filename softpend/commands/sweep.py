@@ -48,7 +48,7 @@ def method_list(text: str) -> list[str]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from softpend.commands.options import assignment
+    from softpend.commands.options import add_set_option
     from softpend.study.sweep import BACKENDS
 
     parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
@@ -63,9 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     for method, (cls, name, example) in {"dqn": ("DQNConfig", "DQN", "gradient_steps=4"),
                                           "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
                                           "pilco": ("PilcoConfig", "PILCO", "balance_within_rad=null")}.items():
-        parser.add_argument(f"--{method}-set", action="append", default=[], type=assignment, metavar="NAME=VALUE",
-                            dest=f"{method}_overrides",
-                            help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})")
+        add_set_option(parser, flag=f"--{method}-set", dest=f"{method}_overrides",
+                       help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})")
     parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 

@@ -5,7 +5,7 @@ DQN settings and the bookkeeping (evaluation and checkpoint intervals).  :class:
 model-based policy optimisation needs (model rollouts per real step, rollout-length schedule, model
 refit interval, ensemble size, real-data ratio).  Both are frozen dataclasses, saved as JSON next to every
 run (``config.json``) and overridable field by field (``softpend train --set NAME=VALUE``,
-:func:`config_from_overrides`).
+:func:`softpend.io.overrides.apply_overrides`).
 
 Choices that differ from the registered environments
 ----------------------------------------------------
@@ -39,15 +39,14 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, TypeVar
+from typing import Any
 
 from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
-from softpend.io.overrides import apply_overrides, parse_value
 from softpend.task import Task
 
-__all__ = ["DQNConfig", "MBPOConfig", "config_from_overrides", "config_to_dict", "load_config", "save_config"]
+__all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "save_config"]
 
 
 @dataclass(frozen=True)
@@ -416,17 +415,6 @@ def _seed_tuple(name: str, value: Any) -> tuple[int, ...]:
 def _check_positive_ints(config: Any, names: tuple[str, ...]) -> None:
     for name in names:
         object.__setattr__(config, name, positive_int(name, getattr(config, name)))
-
-
-C = TypeVar("C", DQNConfig, MBPOConfig)
-
-
-def config_from_overrides(base: C, overrides: Mapping[str, Any]) -> C:
-    """A copy of ``base`` with fields replaced by :func:`softpend.io.overrides.apply_overrides` (unknown
-    names raise ``ValueError``; dotted names reach into the task, ``"task.rod.mass_kg"``; tuples accept
-    lists); string values are first read by :func:`~softpend.io.overrides.parse_value` (JSON, else the
-    string: ``"1e-3"``, ``"[64, 64]"``, ``"random"``)."""
-    return apply_overrides(base, {name: parse_value(v) if isinstance(v, str) else v for name, v in overrides.items()})
 
 
 def config_to_dict(config: DQNConfig) -> dict[str, Any]:

@@ -1,5 +1,6 @@
 """RL configs, the learning-curve helpers and the "balanced" / "asymptote" definitions on hand-made data."""
 
+import json
 import math
 
 import numpy as np
@@ -23,9 +24,6 @@ def test_config_validation_names_the_field():
         MBPOConfig(real_ratio=-0.1)
     with pytest.raises(ValueError, match="start_branch_fraction"):
         MBPOConfig(start_branch_fraction=1.5)
-    for bad in (-1.0, float("nan"), "fast"):
-        with pytest.raises(ValueError, match="start_branch_rate_rad_s"):
-            MBPOConfig(start_branch_rate_rad_s=bad)
     with pytest.raises(ValueError, match="clip_q_targets"):
         DQNConfig(clip_q_targets=1)
     with pytest.raises(ValueError, match="rollouts_within_data"):
@@ -83,9 +81,18 @@ def test_saved_configs_without_an_added_field_load_as_the_version_that_trained_t
     old = load_config(tmp_path / "old.json")
     assert old.stop_confirm_max_failures == 0 and old != MBPOConfig()
     assert old == MBPOConfig(stop_confirm_max_failures=0)
-    # a field added to DQN-MBPO's config only is not forced onto a model-free DQN config
+
+
+
+def test_a_field_added_to_the_dqn_mbpo_config_only_is_not_forced_onto_a_dqn_config(tmp_path, monkeypatch):
+    monkeypatch.setitem(ADDED_FIELDS, "rollouts_within_data", False)
     save_config(DQNConfig(), tmp_path / "d.json")
-    assert "start_branch_rate_rad_s" in ADDED_FIELDS and load_config(tmp_path / "d.json") == DQNConfig()
+    assert load_config(tmp_path / "d.json") == DQNConfig()
+    save_config(MBPOConfig(), tmp_path / "m.json")
+    data = json.loads((tmp_path / "m.json").read_text())
+    del data["rollouts_within_data"]
+    (tmp_path / "old.json").write_text(json.dumps(data))
+    assert load_config(tmp_path / "old.json") == MBPOConfig(rollouts_within_data=False)
 
 
 def test_confirmation_failures_allowed_must_leave_a_start_that_balances():

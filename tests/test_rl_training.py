@@ -14,7 +14,6 @@ from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import MBPOReplayBuffer, train_mbpo
 from softpend.envs.observation_vector import observation_vector
-from softpend.envs.soft_pendulum import VELOCITY_SCALE_PER_S
 from softpend.rl.training_env import HeldActionController, make_base_env, make_training_env
 
 TINY = dict(episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=1.5)
@@ -293,24 +292,6 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     expected = np.array([starts.reset()[0] for _ in range(5)])
     np.testing.assert_allclose(buffer.model_buffer.observations[:5, 0], expected, atol=1e-6)
     assert (np.abs(buffer.model_buffer.observations[5:10, 0][:, None, :] - real[None]).max(axis=2) < 1e-7).any(axis=1).all()
-    # turning starts: the same hub angles, the straight rod turning as one body at a rate within the half-width
-    buffer.model_buffer.reset()
-    turning = MBPOTrainer(dataclasses.replace(config, start_branch_fraction=1.0, start_branch_rate_rad_s=3.0,
-                                              rollouts_within_data=False), seed=3, run_dir=tmp_path)
-    turning.dynamics = _DriftingModel()
-    assert turning.rollouts(model, buffer, n_rollouts=40, length=1, epsilon=0.0) == 40
-    shown = buffer.model_buffer.observations[:40, 0]
-    starts.reset(seed=3 * 1_000_003 + 17)
-    at_rest = np.array([starts.reset()[0] for _ in range(40)])
-    np.testing.assert_allclose(shown[:, :6], at_rest[:, :6], atol=1e-6)  # angles and tip position unchanged
-    hub_rate = shown[:, 6] * VELOCITY_SCALE_PER_S
-    tip_rate = shown[:, 7] * VELOCITY_SCALE_PER_S
-    assert np.all(np.abs(hub_rate) <= 3.0) and hub_rate.std() > 1.0  # uniform on +-3: std 1.7
-    np.testing.assert_allclose(tip_rate, hub_rate, atol=1e-5)
-    # the tip moves on its circle about the hub: speed = rate x distance, at right angles to the position
-    np.testing.assert_allclose(np.hypot(shown[:, 8], shown[:, 9]),
-                               np.abs(hub_rate) * np.hypot(shown[:, 4], shown[:, 5]) / VELOCITY_SCALE_PER_S, atol=1e-5)
-    np.testing.assert_allclose(shown[:, 4] * shown[:, 8] + shown[:, 5] * shown[:, 9], 0.0, atol=1e-5)
 
 
 def test_rig_observation_is_late_and_noisy_and_the_randomised_rod_changes_every_episode():

@@ -304,11 +304,6 @@ class MBPOConfig(DQNConfig):
         (``training_start``: the straight rod at rest at a uniformly random hub angle) instead of from the
         real buffer.  Which starts the real episodes happen to draw decides when an agent first sees the
         rod at rest near upright; in the model every episode sees them all.
-    start_branch_rate_rad_s : float
-        Half-width [rad/s] of the uniform turning rate given to the rollouts branched from start states (the
-        straight rod turning as one body, hub and tip at the drawn rate; 0: at rest).  Rest starts show the model
-        the rod held near upright, and the real episodes of a rod spun over the top show it passing upright fast;
-        turning starts fill the states between, where the rod is caught.
     rollouts_within_data : bool
         End a model rollout at the first predicted observation vector outside the box of the real ones
         (per component, widened by 10 % of its range on each side): the Q-network is never asked to
@@ -353,7 +348,6 @@ class MBPOConfig(DQNConfig):
     model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
     start_branch_fraction: float = 0.75
-    start_branch_rate_rad_s: float = 0.0
     rollouts_within_data: bool = True
     gradient_steps: int = 24
     target_update_interval: int = 20
@@ -379,7 +373,6 @@ class MBPOConfig(DQNConfig):
         )
         for name in ("real_ratio", "start_branch_fraction"):
             in_unit_interval(name, getattr(self, name))
-        object.__setattr__(self, "start_branch_rate_rad_s", non_negative("start_branch_rate_rad_s", self.start_branch_rate_rad_s))
         boolean("rollouts_within_data", self.rollouts_within_data)
         schedule = tuple(int(v) for v in self.rollout_schedule)
         if len(schedule) != 4 or schedule[0] < 0 or schedule[1] < schedule[0] or schedule[2] < 1 or schedule[3] < 1:
@@ -435,12 +428,12 @@ def config_to_dict(config: DQNConfig) -> dict[str, Any]:
 #: version trains as those did: :func:`load_config` drops such a field when it holds that value (so that the
 #: run folders of those versions are still found complete) and refuses the config otherwise.
 REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_limit_tip_reach": False,
-                                 "skip_reset_after_success_episodes": 0}
+                                 "skip_reset_after_success_episodes": 0, "start_branch_rate_rad_s": 0.0}
 
 #: Fields that configs of earlier versions lack, each with the value at which those versions trained:
 #: :func:`load_config` reads a config without such a field as holding that value (not this version's default), so
 #: that a run folder of an earlier version is never taken for a run of a config that trains otherwise.
-ADDED_FIELDS: dict[str, Any] = {"stop_confirm_max_failures": 0, "start_branch_rate_rad_s": 0.0}
+ADDED_FIELDS: dict[str, Any] = {"stop_confirm_max_failures": 0}
 
 
 def save_config(config: DQNConfig, path: Path) -> None:

@@ -13,8 +13,7 @@ The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-li
    rollouts are branched from real states drawn uniformly from the real buffer, or, for a share
    ``start_branch_fraction`` of them, from fresh draws of the training episodes' start distribution (the
    straight rod at rest at a random hub angle, which a real episode starts from: the agent need not wait for
-   the plant's episodes to happen to start near upright; with ``start_branch_rate_rad_s`` the rod of such a
-   start turns as one body at a random rate, see :class:`~softpend.rl.config.MBPOConfig`).
+   the plant's episodes to happen to start near upright, see :class:`~softpend.rl.config.MBPOConfig`).
    Each rollout step takes the current epsilon-greedy action, advances the model ``action_repeat`` plant
    steps (a random ensemble member per rollout and step, as mbrl-lib's ``random_model`` propagation), and
    computes the observation vector and the report's reward from the *predicted* plant observation with the
@@ -232,18 +231,9 @@ class MBPOTrainer:
         c = self.config
         env = self.env
         raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
-        n_start = int(round(c.start_branch_fraction * n_rollouts))
-        rates = self.rng.uniform(-1.0, 1.0, size=n_start) * c.start_branch_rate_rad_s if c.start_branch_rate_rad_s > 0 else None
-        for i in range(n_start):  # the first rows
+        for i in range(int(round(c.start_branch_fraction * n_rollouts))):  # the first rows
             vec[i], info = self.start_env.reset()
             raw[i] = info["observation"]
-            if rates is not None:  # the straight rod turning as one body: the hub angle leads the plant state
-                q, q_dot = self.start_env.plant.joint_state()
-                q_dot[:] = 0.0
-                q_dot[0] = rates[i]
-                raw[i] = self.start_env.plant.observation_from_state(q, q_dot).as_array()
-        if rates is not None:
-            vec[:n_start] = observation_vector(raw[:n_start], vec[:n_start, -1].astype(np.float64), env)
         box = buffer.real_observation_box() if c.rollouts_within_data else None
         bonus = vec[:, -1].astype(np.float64)
         levels = env.torque_levels_nm

@@ -83,8 +83,8 @@ def test_saved_configs_without_an_added_field_load_as_the_version_that_trained_t
     assert old == MBPOConfig(stop_confirm_max_failures=0)
 
 
-
 def test_a_field_added_to_the_dqn_mbpo_config_only_is_not_forced_onto_a_dqn_config(tmp_path, monkeypatch):
+    """An added field that only DQN-MBPO's config has fills in DQN-MBPO configs and leaves DQN configs alone."""
     monkeypatch.setitem(ADDED_FIELDS, "rollouts_within_data", False)
     save_config(DQNConfig(), tmp_path / "d.json")
     assert load_config(tmp_path / "d.json") == DQNConfig()

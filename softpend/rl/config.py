@@ -431,8 +431,9 @@ REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_lim
                                  "skip_reset_after_success_episodes": 0, "start_branch_rate_rad_s": 0.0}
 
 #: Fields that configs of earlier versions lack, each with the value at which those versions trained:
-#: :func:`load_config` reads a config without such a field as holding that value (not this version's default), so
-#: that a run folder of an earlier version is never taken for a run of a config that trains otherwise.
+#: :func:`load_config` reads a config of a class with such a field, saved without it, as holding that value (not this
+#: version's default), so that a run folder of an earlier version is never taken for a run of a config that trains
+#: otherwise.
 ADDED_FIELDS: dict[str, Any] = {"stop_confirm_max_failures": 0}
 
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import nbformat
+import numpy as np
 import pytest
 
 from softpend.evaluation import EvaluationSummary
@@ -104,3 +105,39 @@ def test_over_seeds_and_markdown():
     assert "a \\| b" in table and "{ref}`Figure 3 <fig03-sysid>`" in table and "**reproduced**" in table
     with pytest.raises(ValueError, match="verdict"):
         LedgerRow("k", "a", "b", "c", "maybe", "x")
+
+
+def training_log(algo: str, seed: int, returns, stop_reason: Optional[str] = None, episode_s: float = 20.0):
+    from softpend.rl.training_log import TrainingLog
+
+    episodes = [{"episode": k + 1, "return": float(r), "plant_s": episode_s * (k + 1), "model_steps": 0}
+                for k, r in enumerate(returns)]
+    return TrainingLog(algo=algo, seed=seed, episodes=episodes, stop_reason=stop_reason)
+
+
+def test_a_run_that_stopped_balanced_reaches_its_asymptote_at_the_stop():
+    from softpend.study.ledger import run_to_asymptote
+
+    # a short run cut by the stop rule as its return rises (DQN-MBPO stops after a few episodes): its curve has no
+    # tail to read an asymptote from, and the curve reading alone says it never gets there
+    rising = [-50.0, -50.0, -40.0, -50.0, -30.0, 100.0, 300.0, 400.0]
+    stopped = training_log("mbpo", 0, rising, stop_reason="balanced in an evaluation (upright std <= 0.1 rad ...)")
+    assert run_to_asymptote(stopped) == (8.0, 8 * 20.0)
+    # the same curve at the end of its budget (no stop): still rising, so its asymptote is not reached
+    assert run_to_asymptote(training_log("mbpo", 0, rising)) == (math.inf, math.inf)
+    # a run that levelled off before its budget ended: the curve reading
+    plateau = np.concatenate([np.linspace(-50.0, 400.0, 100), np.full(100, 400.0)])
+    episodes, plant_s = run_to_asymptote(training_log("dqn", 0, plateau))
+    assert 80 <= episodes <= 110 and plant_s == episodes * 20.0
+
+    # ten DQN-MBPO runs that all stopped balanced after 8 to 12 episodes: the ledger says when, not "never"
+    logs = {"DQN-MBPO": [training_log("mbpo", seed, rising + [400.0] * (seed % 5), stop_reason="balanced")
+                         for seed in range(10)],
+            "model-free DQN": [training_log("dqn", seed, plateau, episode_s=100.0) for seed in range(10)]}
+    rows = {row.key: row for row in claims_ledger({}, logs, {}, [])}
+    mb = rows["mb_asymptote"]
+    assert "never" not in mb.ours, mb.ours
+    assert mb.ours.startswith("median 10 episodes") and "10 of 10 runs stopped balanced" in mb.ours, mb.ours
+    assert mb.verdict == "differs"  # 10 episodes against the report's 100
+    fewer = rows["mb_fewer"]
+    assert fewer.verdict == "reproduced" and "never" not in fewer.ours, fewer.ours

@@ -30,7 +30,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 __all__ = ["LedgerRow", "NOT_COMPUTED", "VERDICTS", "claims_ledger", "glued_values", "ledger_markdown",
-           "over_seeds", "pilco_run_results", "rl_fresh_start_summaries", "rl_run_logs", "verdict_counts"]
+           "over_seeds", "pilco_run_results", "rl_fresh_start_summaries", "rl_run_logs", "run_to_asymptote",
+           "verdict_counts"]
 
 #: What a cell says when this build has no evidence for it.
 NOT_COMPUTED = "not computed in this build"
@@ -255,10 +256,38 @@ def _sysid_row(glued) -> LedgerRow:
                      "actual next state the network achieved an error of ≈ 3e-9.", "≈ 3e-9", ours, verdict, "fig03-sysid")
 
 
+def run_to_asymptote(log: Any) -> tuple[float, float]:
+    """``(episodes, plant seconds)`` at which one training run reaches its asymptotic reward.
+
+    A run trained to the end of its budget: the curve reading of :func:`softpend.rl.curves.episodes_to_asymptote`
+    (the smoothed return reaches 90 % of the way to the mean return of the run's last fifth and stays there;
+    ``inf`` when it gets there only in its last episode, i.e. it was still rising).
+
+    A run that its stop rule ended (``log.stop_reason`` set: its agent balanced the selection starts in the last
+    evaluations, and training stopped so that the final agent is the one that balanced) has no tail from which to
+    read an asymptote: the return curve is cut while it rises, and the curve reading would say it never gets there.
+    Its agent no longer changes after the stop, so its asymptotic performance is the balanced performance at the
+    stop, reached at the stop episode: ``(log.n_episodes, log.plant_s)``.
+    """
+    from softpend.rl.curves import episodes_to_asymptote, plant_s_at_episode
+
+    if log.stop_reason is not None and log.n_episodes > 0:
+        return float(log.n_episodes), float(log.plant_s)
+    episodes = episodes_to_asymptote(log.column("return"))
+    return episodes, plant_s_at_episode(log, episodes)
+
+
+def _to_asymptote(logs: Sequence[Any]) -> tuple[list[float], list[float], int]:
+    """Episodes and plant seconds to the asymptote of each run (:func:`run_to_asymptote`), and how many runs
+    stopped because they balanced."""
+    pairs = [run_to_asymptote(log) for log in logs]
+    return [p[0] for p in pairs], [p[1] for p in pairs], sum(log.stop_reason is not None for log in logs)
+
+
 def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
     # reproduced: the median episodes to the asymptote within FACTOR of the report's, and the same for the
-    # plant time
-    from softpend.study.rl_runs import METHOD_NAMES, summary_table
+    # plant time (run_to_asymptote: a run that stopped balanced reaches it at its stop episode)
+    from softpend.study.rl_runs import METHOD_NAMES
 
     claims = {
         "dqn": ("mf_asymptote", "The model-free controller proved to successfully balance the pole reaching the asymptotic "
@@ -270,15 +299,16 @@ def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
     }
     rows = []
     for algo, (key, claim, episodes, hours, report) in claims.items():
-        table = summary_table({METHOD_NAMES[algo]: list(logs.get(METHOD_NAMES[algo], []))})
-        if not table:
+        runs = list(logs.get(METHOD_NAMES[algo], []))
+        if not runs:
             rows.append(LedgerRow(key, claim, report, NOT_COMPUTED, NOT_COMPUTED, "fig-learning-curves"))
             continue
-        to_asymptote = [row["episodes_to_asymptote"] for row in table]
-        plant_h = [row["plant_s_to_asymptote"] / 3600.0 for row in table]
-        budget = _median([row["episodes"] for row in table])
+        to_asymptote, plant_s, stopped = _to_asymptote(runs)
+        plant_h = [value / 3600.0 for value in plant_s]
         ours = (f"{over_seeds(to_asymptote, 'episodes')}; {over_seeds(plant_h, 'h of plant time')}; "
-                f"budget {budget:.0f} episodes")
+                f"{stopped} of {len(runs)} runs stopped balanced"
+                + (" (a stopped run reaches its asymptote at the stop episode)" if stopped else "")
+                + f", median {_median([log.n_episodes for log in runs]):.0f} episodes trained")
         ok = (episodes / FACTOR <= _median(to_asymptote) <= episodes * FACTOR
               and hours / FACTOR <= _median(plant_h) <= hours * FACTOR)
         rows.append(LedgerRow(key, claim, report, ours, "reproduced" if ok else "differs", "fig-learning-curves"))
@@ -286,16 +316,17 @@ def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
 
 
 def _fewer_episodes_row(logs: Mapping[str, Sequence[Any]]) -> LedgerRow:
-    # reproduced: DQN-MBPO's median plant time to the asymptote below model-free DQN's
-    from softpend.study.rl_runs import METHOD_NAMES, summary_table
+    # reproduced: DQN-MBPO's median plant time to the asymptote (run_to_asymptote) below model-free DQN's
+    from softpend.study.rl_runs import METHOD_NAMES
 
     claim = ("The model-based approach successfully converged its performance in fewer episodes than model-free RL.")
     medians = {}
     for algo, method in METHOD_NAMES.items():
-        table = summary_table({method: list(logs.get(method, []))})
-        if not table:
+        runs = list(logs.get(method, []))
+        if not runs:
             return LedgerRow("mb_fewer", claim, "≈ 100 against ≈ 150 episodes", NOT_COMPUTED, NOT_COMPUTED, "fig-learning-curves")
-        medians[algo] = (_median([r["episodes_to_asymptote"] for r in table]), _median([r["plant_s_to_asymptote"] for r in table]))
+        episodes, plant_s, _ = _to_asymptote(runs)
+        medians[algo] = (_median(episodes), _median(plant_s))
     ours = (f"plant time to the asymptote (median over seeds): DQN-MBPO {_hours(medians['mbpo'][1])} "
             f"({_number(medians['mbpo'][0])} episodes), DQN {_hours(medians['dqn'][1])} ({_number(medians['dqn'][0])} episodes)")
     verdict = "reproduced" if medians["mbpo"][1] < medians["dqn"][1] else "differs"

@@ -126,7 +126,7 @@ def run_design(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------------------------------------------- check
 def run_check(args: argparse.Namespace) -> int:
-    from softpend.hardware.emulator import RigConfig, start_emulator_process
+    from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.task import Task
 
     if not (math.isfinite(args.rest_s) and args.rest_s > 0):
@@ -135,8 +135,9 @@ def run_check(args: argparse.Namespace) -> int:
         raise ValueError(f"--push-fraction must lie in (0, 0.5], got {args.push_fraction!r}")
     task = Task(rod=_rod(args), start_noise_rad=0.0)
     if args.twin:
-        with start_emulator_process(RigConfig(task=task, counts_per_rev=args.counts_per_rev)) as emulator:
-            report = rig_check(emulator.port, task, args.rest_s, args.push_fraction)
+        rig = SimRig(RigConfig(task=task, counts_per_rev=args.counts_per_rev))
+        report = rig_check("twin", task, args.rest_s, args.push_fraction, serial=rig.connect())
+        rig.close()
     else:
         report = rig_check(args.port, task, args.rest_s, args.push_fraction)
     if args.out:
@@ -150,8 +151,9 @@ def run_check(args: argparse.Namespace) -> int:
 WATCHDOG_SLACK_STATES = 3
 
 
-def rig_check(port: str, task, rest_s: float, push_fraction: float) -> dict:
-    """The power-on checks of ``softpend rig check`` on the link at ``port`` (module docstring); the report."""
+def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None) -> dict:
+    """The power-on checks of ``softpend rig check`` on the link at ``port`` (module docstring; ``serial``: the
+    twin's in-memory link instead of the port, in simulated time); the report."""
     import numpy as np
 
     from softpend.hardware import protocol
@@ -159,7 +161,7 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float) -> dict:
 
     rod = task.rod
     checks: dict[str, dict] = {}
-    with MotorLink(port, torque_limit_nm=rod.torque_limit_nm) as link:
+    with MotorLink(port, torque_limit_nm=rod.torque_limit_nm, serial=serial) as link:
         info = link.device
         rtt = float(np.median([link.ping() for _ in range(5)]))
         expected_rate = 1.0 / task.dt_s
@@ -215,19 +217,19 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float) -> dict:
 
 
 def _states_for(link, duration_s: float) -> list:
-    end = time.monotonic() + duration_s
+    end = link.clock.now_s() + duration_s
     states = []
-    while time.monotonic() < end:
+    while link.clock.now_s() < end:
         states.append(link.read_state())
     return states
 
 
 def _hold_torque(link, torque_nm: float, duration_s: float) -> list:
     """Command ``torque_nm`` at every state for ``duration_s``; the states received meanwhile."""
-    end = time.monotonic() + duration_s
+    end = link.clock.now_s() + duration_s
     states = []
     link.send_torque(torque_nm)
-    while time.monotonic() < end:
+    while link.clock.now_s() < end:
         states.append(link.read_state())
         link.send_torque(torque_nm)
     return states

@@ -7,7 +7,8 @@ It runs in :func:`softpend.hardware.closed_loop.run_closed_loop`: encoder and ca
 estimator, the torque through the driver's clamp, STOP on every exit path, and every sample, estimate and
 command goes to the crash-safe logs in ``--out``.
 
-``--twin`` starts the emulator with the synthetic live camera; ``--port PATH`` talks to a rig and needs
+``--twin`` runs on the digital twin in simulated time (the emulated device behind an in-memory link, the
+synthetic live camera; the same ``--seed`` gives the same logs); ``--port PATH`` talks to a rig and needs
 ``--camera`` (a device index, stream URL or video file, through ``cv2.VideoCapture``) or ``--no-camera``.
 """
 
@@ -66,10 +67,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
     parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"),
                         help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)")
-    parser.add_argument("--let-cpus-idle", action="store_true",
-                        help="let the processors halt when idle during the run (by default one lowest-priority "
-                             "spinner per processor keeps them awake: on a virtual machine a halted processor "
-                             "wakes milliseconds late)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)
@@ -141,8 +138,7 @@ def run(args: argparse.Namespace) -> int:
         camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
                                                         effects=effects, seed=args.seed)
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
-                                   estimator_config=estimator_config, progress=progress,
-                                   keep_cpus_awake=not args.let_cpus_idle)
+                                   estimator_config=estimator_config, progress=progress)
         summary = {"controller": label, "target": "twin", **outcome.result.summary(),
                    "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
                    "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
@@ -195,8 +191,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
                 SampleLog(out / "motor_log.csv", rig_control_columns(estimator.n), metadata=metadata) as log, \
                 SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
             result = run_closed_loop(link, controller, estimator, args.duration, tip_source=source, log=log,
-                                     camera_log=camera_log, progress=progress,
-                                     keep_cpus_awake=not args.let_cpus_idle)
+                                     camera_log=camera_log, progress=progress)
     finally:
         if source is not None:
             source.close()

@@ -22,8 +22,10 @@ result and the log's ``status`` column, no exception), and any exception -- cont
 Ctrl-C -- (STOP, the sample being processed logged with the torque actually in force, then the exception
 propagates).  The device watchdog stops the motor if the host itself dies.
 
-:func:`run_twin_control` runs the same loop against the emulator with the synthetic live camera filming the
-emulator's live state (:class:`~softpend.hardware.scene.EmulatorScene`).
+:func:`run_twin_control` runs the same loop on the digital twin in simulated time: the device
+(:class:`~softpend.hardware.emulator.SimRig`) behind the real protocol bytes and the real driver, the synthetic
+live camera filming it (:class:`~softpend.vision.tip_source.SyntheticLiveCamera`), all on one
+:class:`~softpend.hardware.clock.SimClock`; the same start and seeds give the same logs, bit for bit.
 """
 
 from __future__ import annotations
@@ -32,7 +34,6 @@ import dataclasses
 import json
 import math
 import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -43,8 +44,6 @@ from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
 from softpend.hardware.loop import SecondsBar, jitter_ms_p95
-from softpend.hardware.realtime import LOOP_PRIORITY, cpus_kept_awake
-from softpend.hardware.realtime import realtime_priority as _realtime_priority
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -104,7 +103,7 @@ class ClosedLoopResult:
     status : str
         Key of :data:`STATUS_CODES` of the last row.
     command_periods_s : ndarray
-        Host time between consecutive torque commands [s].
+        Time between consecutive torque commands on the link's clock [s].
     late_commands : int
         Commands that the device had not received by its next tick (the state after them still reported
         the previous command in force).
@@ -116,15 +115,6 @@ class ClosedLoopResult:
         Time control started (first camera correction) [s] (NaN if never).
     camera, estimator : dict
         The tip source's and the estimator's counters.
-    step_time_ms_p95 : float
-        95th percentile of the host's processing time per state (estimator, controller, log) [ms].
-    step_cpu_ms_p95 : float
-        The same in CPU time of the loop's thread (``time.thread_time``): the work itself, without the time
-        the thread waited for a CPU or for the camera thread [ms].
-    realtime : bool
-        Whether the loop ran under real-time scheduling (:func:`softpend.hardware.realtime.realtime_priority`).
-    cpus_kept_awake : int
-        Spinner processes that kept the processors from halting during the run (0: none).
     """
 
     samples: int
@@ -140,10 +130,6 @@ class ClosedLoopResult:
     armed_at_s: float
     camera: dict = field(default_factory=dict)
     estimator: dict = field(default_factory=dict)
-    step_time_ms_p95: float = math.nan
-    step_cpu_ms_p95: float = math.nan
-    realtime: bool = False
-    cpus_kept_awake: int = 0
 
     @property
     def jitter_ms_p95(self) -> float:
@@ -156,9 +142,8 @@ class ClosedLoopResult:
             "samples": self.samples, "duration_s": self.duration_s, "stop_reason": self.stop_reason,
             "status": self.status, "late_commands": self.late_commands, "dropped_states": self.dropped_states,
             "bad_frames": self.bad_frames, "watchdog_trips": self.watchdog_trips, "blind_max_s": self.blind_max_s,
-            "armed_at_s": self.armed_at_s, "jitter_ms_p95": self.jitter_ms_p95,
-            "step_time_ms_p95": self.step_time_ms_p95, "step_cpu_ms_p95": self.step_cpu_ms_p95,
-            "realtime": self.realtime, "cpus_kept_awake": self.cpus_kept_awake, "camera": self.camera, "estimator": self.estimator,
+            "armed_at_s": self.armed_at_s, "jitter_ms_p95": self.jitter_ms_p95, "camera": self.camera,
+            "estimator": self.estimator,
         }
 
 
@@ -186,8 +171,6 @@ def run_closed_loop(
     arm_timeout_s: float = 2.0,
     progress: bool = False,
     on_sample: Optional[Callable[[dict], None]] = None,
-    realtime_priority: Optional[int] = LOOP_PRIORITY,
-    keep_cpus_awake: bool = True,
 ) -> ClosedLoopResult:
     """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time (module docstring).
 
@@ -216,15 +199,6 @@ def run_closed_loop(
         Show a progress bar with the estimated tip angle, the torque and the camera's blind time.
     on_sample : callable, optional
         Called with each motor-log row as a dict (after it is logged).
-    realtime_priority : int or None
-        Real-time (``SCHED_FIFO``) priority asked for the loop's thread while it runs (None: normal
-        scheduling); where the operating system refuses, the loop runs at normal priority
-        (:attr:`ClosedLoopResult.realtime` says which).
-    keep_cpus_awake : bool
-        Keep the processors from halting while the loop runs (:func:`softpend.hardware.realtime.cpus_kept_awake`:
-        one lowest-priority spinning process per processor; :attr:`ClosedLoopResult.cpus_kept_awake` counts
-        them).  On a virtual machine a halted processor wakes milliseconds late, which is most of the loop's
-        jitter on an otherwise idle machine.
 
     Returns
     -------
@@ -252,8 +226,6 @@ def run_closed_loop(
     bar = SecondsBar(duration_s, "rig control", progress)
     nominal_period = 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s
     send_times: list[float] = []
-    step_times: list[float] = []
-    step_cpu: list[float] = []
     samples = dropped = watchdog = late = 0
     t0: Optional[float] = None
     last_device_time: Optional[float] = None
@@ -265,12 +237,7 @@ def run_closed_loop(
     stop_reason: Optional[str] = None
     t = 0.0
     nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
-    awake = cpus_kept_awake(keep_cpus_awake)
-    spinners = awake.__enter__()
-    priority = _realtime_priority(realtime_priority)
-    realtime = priority.__enter__()
-    # a learned controller evaluates one small network per state: on one thread, so that no step waits for a
-    # worker thread of torch's pool that the machine has not scheduled (torch is not imported for this)
+    # a learned controller evaluates one small network per state: on one thread (torch is not imported for this)
     torch = sys.modules.get("torch")
     torch_threads = torch.get_num_threads() if torch is not None else None
     if torch is not None:
@@ -281,8 +248,6 @@ def run_closed_loop(
             states += link.drain_states()
             for index, state in enumerate(states):
                 newest = index == len(states) - 1
-                started = time.perf_counter()
-                started_cpu = time.thread_time()
                 clock.observe(state.host_time_s, state.device_time_s)
                 if t0 is None:
                     t0 = state.device_time_s
@@ -318,13 +283,13 @@ def run_closed_loop(
                         command = float(controller(estimate.observation, estimate.q, estimate.q_dot,
                                                    estimate.time_s)) if armed else 0.0
                         expected_cmd_seq = link.send_torque(command)
-                        send_times.append(time.monotonic())
+                        send_times.append(link.clock.now_s())
                         commanded = int(armed)
                         if tip_source is not None:
                             # camera measurements after the command: the costly replay of a delayed frame
                             # (see RigStateEstimator.update_tip) stays off the path from state to command, and the
                             # corrected estimate serves the next state
-                            polled = time.monotonic()
+                            polled = link.clock.now_s()
                             for m in tip_source.poll():
                                 frames += 1
                                 capture = clock.to_device(m.capture_time_s) - t0
@@ -354,8 +319,6 @@ def run_closed_loop(
                         log.append(row)
                     if on_sample is not None:
                         on_sample(dict(zip(columns, row)))
-                    step_times.append(time.perf_counter() - started)
-                    step_cpu.append(time.thread_time() - started_cpu)
                 samples += 1
                 if stop_reason is not None:
                     break
@@ -370,8 +333,6 @@ def run_closed_loop(
         raise
     finally:
         bar.close()
-        priority.__exit__(None, None, None)
-        awake.__exit__(None, None, None)
         if torch is not None:
             torch.set_num_threads(torch_threads)
     link.stop()
@@ -381,11 +342,9 @@ def run_closed_loop(
     return ClosedLoopResult(
         samples=samples, duration_s=t, stop_reason=stop_reason, status=status, command_periods_s=periods,
         late_commands=late, dropped_states=dropped, bad_frames=link.bad_frames, watchdog_trips=watchdog,
-        blind_max_s=blind_max, armed_at_s=armed_at, realtime=realtime, cpus_kept_awake=spinners,
+        blind_max_s=blind_max, armed_at_s=armed_at,
         camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
         estimator=estimator.stats(),
-        step_time_ms_p95=float(np.percentile(step_times, 95) * 1e3) if step_times else math.nan,
-        step_cpu_ms_p95=float(np.percentile(step_cpu, 95) * 1e3) if step_cpu else math.nan,
     )
 
 
@@ -408,10 +367,6 @@ class TwinCamera:
         Injected stalls, drops, occlusions.
     seed : int
         Seed of the image noise.
-    own_process : bool
-        Render and track in a process of its own (:class:`~softpend.hardware.camera_process.CameraProcess`),
-        as a rig's camera is a device of its own (default); False: on a thread of the host's process, which
-        then shares the interpreter with the control loop.  A run with ``on_frame`` films on a thread.
     """
 
     fps: float = 60.0
@@ -420,7 +375,6 @@ class TwinCamera:
     model: Any = None
     faults: Any = None
     seed: int = 0
-    own_process: bool = True
 
 
 @dataclass
@@ -446,22 +400,20 @@ def run_twin_control(
     arm_timeout_s: float = 2.0,
     progress: bool = False,
     on_frame: Optional[Callable] = None,
-    camera_wait_s: float = 10.0,
-    link_timeout_s: float = 1.0,
-    keep_cpus_awake: bool = True,
+    camera_wait_s: float = 1.0,
 ) -> TwinControlRun:
-    """Run ``controller`` on the digital twin with the synthetic camera in the loop.
+    """Run ``controller`` on the digital twin, in simulated time, with the synthetic camera in the loop.
 
-    Starts the emulator (``rig``, default :class:`~softpend.hardware.emulator.RigConfig`) in its own process
-    with a truth log and the live pose feed, films it with the synthetic camera (``camera``; None: no camera,
-    encoder and model only), waits for the camera's first frame, connects, and runs :func:`run_closed_loop`.
-    Writes ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir``
-    (created; existing files of these names are replaced).  ``link_timeout_s`` is the driver's wait for a
-    STATE frame: generous by default, because the emulator shares the host's CPUs (a starved emulator
-    process is not a broken cable).  ``keep_cpus_awake`` is passed to :func:`run_closed_loop`.
+    The twin's device (:class:`~softpend.hardware.emulator.SimRig` of ``rig``, default
+    :class:`~softpend.hardware.emulator.RigConfig`) writes a truth log; the synthetic camera (``camera``; None:
+    no camera, encoder and model only) films it from the start; once it has tracked a frame (within
+    ``camera_wait_s``) the driver connects over the in-memory link and :func:`run_closed_loop` runs.  Writes
+    ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir`` (created;
+    existing files of these names are replaced).  The truth log goes on 0.1 s past the end, so that it records
+    the motor after the STOP on every exit path.
     """
-    from softpend.hardware.camera_process import CameraProcess, camera_settings
-    from softpend.hardware.emulator import RigConfig, start_emulator_process
+    from softpend.hardware.clock import SimClock
+    from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.vision.tip_source import SyntheticLiveCamera
 
     rig = rig if rig is not None else RigConfig()
@@ -470,7 +422,6 @@ def run_twin_control(
     paths = {name: workdir / name for name in ("motor_log.csv", "camera_log.csv", "truth_log.csv", "summary.json")}
     for path in paths.values():
         path.unlink(missing_ok=True)
-    stats_path = workdir / ".emulator_stats.json"
     estimator = RigStateEstimator(rig.task, estimator_config if estimator_config is not None
                                   else EstimatorConfig(counts_per_rev=rig.counts_per_rev))
     metadata = {"rig": rig.to_dict(), "estimator": dataclasses.asdict(estimator.config),
@@ -478,50 +429,34 @@ def run_twin_control(
                                                        "seed": camera.seed}}
     result: Optional[ClosedLoopResult] = None
     error: Optional[str] = None
+    clock = SimClock()
+    device = SimRig(rig, clock, truth_log=paths["truth_log.csv"])
     source = None
-    with start_emulator_process(rig, truth_log=paths["truth_log.csv"], stats_path=stats_path,
-                                scene=camera is not None) as emulator:
-        scene = None
-        try:
-            if camera is not None and camera.own_process and on_frame is None:
-                source = CameraProcess(emulator.take_scene_fd(), rig.task,
-                                       camera_settings(camera.fps, camera.latency_s, camera.effects, camera.model,
-                                                       camera.faults, camera.seed))
-            elif camera is not None:
-                scene = emulator.open_scene()
-                source = SyntheticLiveCamera(scene, fps=camera.fps, latency_s=camera.latency_s, effects=camera.effects,
-                                             model=camera.model, faults=camera.faults, seed=camera.seed,
-                                             on_frame=on_frame)
-            if source is not None:
-                source.start()
-                deadline = time.monotonic() + camera_wait_s
-                while source.frames_tracked == 0 and source.running and time.monotonic() < deadline:
-                    time.sleep(0.01)
-                source.poll()  # frames of the rod before the run (the calibration is fitted on the first)
-                if source.frames_tracked == 0:
-                    source.poll()  # raises the camera thread's error, if any
-                    raise RuntimeError(f"the twin's camera delivered no frame within {camera_wait_s} s")
-            with MotorLink(emulator.port, torque_limit_nm=rig.task.torque_limit_nm, timeout_s=link_timeout_s) as link, \
-                    SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log, \
-                    SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
-                try:
-                    result = run_closed_loop(link, controller, estimator, duration_s, tip_source=source, log=log,
-                                             camera_log=camera_log, arm_timeout_s=arm_timeout_s, progress=progress,
-                                             keep_cpus_awake=keep_cpus_awake)
-                except Exception as exc:
-                    error = f"{type(exc).__name__}: {exc}"
-                    raise
-                finally:
-                    summary = {"result": result.summary() if result is not None else None, "error": error}
-                    paths["summary.json"].write_text(json.dumps(summary, indent=2, default=float))
-        finally:
-            if source is not None:
-                source.close()
-            if scene is not None:
-                scene.close()
-            time.sleep(0.1)  # the truth log records the motor after the STOP (on every exit path)
-        emulator.terminate()
-        emulator_stats = emulator.stats()
-    stats_path.unlink(missing_ok=True)
+    try:
+        if camera is not None:
+            source = SyntheticLiveCamera(device.poses, clock, fps=camera.fps, latency_s=camera.latency_s,
+                                         effects=camera.effects, model=camera.model, faults=camera.faults,
+                                         seed=camera.seed, on_frame=on_frame)
+            source.start()
+            if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
+                raise RuntimeError(f"the twin's camera delivered no frame within {camera_wait_s} s")
+            source.poll()  # frames of the rod before the run (the calibration is fitted on the first)
+        with MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link, \
+                SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log, \
+                SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
+            try:
+                result = run_closed_loop(link, controller, estimator, duration_s, tip_source=source, log=log,
+                                         camera_log=camera_log, arm_timeout_s=arm_timeout_s, progress=progress)
+            except Exception as exc:
+                error = f"{type(exc).__name__}: {exc}"
+                raise
+            finally:
+                summary = {"result": result.summary() if result is not None else None, "error": error}
+                paths["summary.json"].write_text(json.dumps(summary, indent=2, default=float))
+    finally:
+        if source is not None:
+            source.close()
+        clock.sleep_until(clock.now_s() + 0.1)  # the truth log records the motor after the STOP
+        device.close()
     return TwinControlRun(workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result,
-                          emulator_stats, error)
+                          device.stats(), error)

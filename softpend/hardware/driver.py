@@ -30,13 +30,13 @@ import select
 import signal
 import struct
 import threading
-import time
 import weakref
 from dataclasses import dataclass
 from typing import Optional
 
 from softpend.checks import positive, positive_int
 from softpend.hardware import protocol as proto
+from softpend.hardware.clock import WALL_CLOCK
 
 __all__ = [
     "DeviceError",
@@ -126,7 +126,7 @@ class MotorState:
     Attributes
     ----------
     host_time_s : float
-        ``time.monotonic()`` when the host decoded the frame [s].
+        The link's clock when the host decoded the frame [s].
     device_time_s : float
         Device clock at the encoder sample [s].
     phi_rad : float
@@ -217,6 +217,12 @@ class MotorLink:
         This many bad frames in a row raise :class:`LinkChecksumError`; isolated ones are only counted.
     install_exit_hooks : bool
         Register the atexit and SIGTERM/SIGINT hooks that stop the motor (main thread only).
+    serial : object, optional
+        An open serial-like transport to use instead of opening ``port`` with pyserial (the twin's in-memory
+        link, :meth:`softpend.hardware.emulator.SimRig.connect`).
+    clock : object, optional
+        What times the link's waits and stamps the states: ``now_s()`` [s] (default: the wall clock; the
+        twin's :class:`~softpend.hardware.clock.SimClock` with its ``serial``).
     """
 
     def __init__(
@@ -228,6 +234,8 @@ class MotorLink:
         phi_at_zero_counts_rad: float = math.pi,
         max_consecutive_bad_frames: int = 3,
         install_exit_hooks: bool = True,
+        serial=None,
+        clock=None,
     ) -> None:
         if not isinstance(port, str) or not port:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
@@ -241,6 +249,8 @@ class MotorLink:
         self.phi_at_zero_counts_rad = float(phi_at_zero_counts_rad)
         self.max_consecutive_bad_frames = int(max_consecutive_bad_frames)
         self.install_exit_hooks = install_exit_hooks
+        self._transport = serial
+        self.clock = clock if clock is not None else (getattr(serial, "clock", None) or WALL_CLOCK)
         self.device: Optional[DeviceInfo] = None
         self._serial = None
         self._decoder = proto.FrameDecoder(validate=self._check_message)
@@ -288,7 +298,8 @@ class MotorLink:
         import serial
 
         try:
-            self._serial = serial.Serial(self.port, self.baudrate, timeout=0, write_timeout=self.timeout_s)
+            self._serial = self._transport or serial.Serial(self.port, self.baudrate, timeout=0,
+                                                            write_timeout=self.timeout_s)
         except (serial.SerialException, OSError) as exc:
             raise LinkDisconnected(f"cannot open serial port {self.port!r}: {exc}") from exc
         _OPEN_LINKS.add(self)
@@ -304,7 +315,7 @@ class MotorLink:
     def _handshake(self) -> None:
         nonce = int.from_bytes(os.urandom(4), "little")
         self._write(proto.MSG_HELLO, (proto.PROTOCOL_VERSION, nonce))
-        deadline = time.monotonic() + self.timeout_s
+        deadline = self.clock.now_s() + self.timeout_s
         while True:
             try:
                 msg_type, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK, proto.MSG_ERROR))
@@ -382,13 +393,13 @@ class MotorLink:
 
     def ping(self) -> float:
         """Round-trip time of a HEARTBEAT [s]."""
-        start = time.monotonic()
+        start = self.clock.now_s()
         seq = self._write(proto.MSG_HEARTBEAT, ())
         deadline = start + self.timeout_s
         while True:
             _, ack_seq, _ = self._next_message(deadline, (proto.MSG_HEARTBEAT_ACK,))
             if ack_seq == seq:
-                return time.monotonic() - start
+                return self.clock.now_s() - start
 
     def read_state(self, timeout_s: Optional[float] = None) -> MotorState:
         """Wait for the next STATE frame and return it.
@@ -398,7 +409,7 @@ class MotorLink:
         LinkTimeout, LinkDisconnected, LinkChecksumError, DeviceError
             See the module docstring; the motor is stopped (best effort) before any of them is raised.
         """
-        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else float(timeout_s))
+        deadline = self.clock.now_s() + (self.timeout_s if timeout_s is None else float(timeout_s))
         _, seq, values = self._next_message(deadline, (proto.MSG_STATE,))
         return self._state_from(seq, values)
 
@@ -429,7 +440,7 @@ class MotorLink:
         device_us, counts, velocity, applied, last_cmd, flags = values
         cpr = self.device.counts_per_rev if self.device else 1
         return MotorState(
-            host_time_s=time.monotonic(),
+            host_time_s=self.clock.now_s(),
             device_time_s=device_us * 1e-6,
             phi_rad=self.phi_at_zero_counts_rad + counts * (2 * math.pi / cpr),
             phi_dot_rad_s=float(velocity),
@@ -545,7 +556,7 @@ class MotorLink:
             # keep the backlog bounded: STATE frames nobody waits for are superseded by newer ones
             if len(self._pending) > 256:
                 self._pending = self._pending[-64:]
-            remaining = deadline - time.monotonic()
+            remaining = deadline - self.clock.now_s()
             if remaining <= 0:
                 if last_look:
                     names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)

@@ -1,16 +1,17 @@
-"""The rig emulator: the motor controller's protocol on a pseudo-terminal, backed by the simulated plant.
+"""The rig emulator: the motor controller's device side, backed by the simulated plant.
 
-:class:`RigEmulator` opens a pseudo-terminal (``os.openpty``), and serves the protocol of
-:mod:`softpend.hardware.protocol` on it with the *same* device-side logic as the VEX program
-(:class:`~softpend.hardware.protocol.DeviceSession`: handshake, torque clamp, watchdog).  The plant
-(:func:`softpend.plant.make_plant`) advances in real time, one control step per tick; each tick the
-emulator applies the session's torque, samples a quantised encoder and streams a STATE frame.  Link
-imperfections are configurable (:class:`RigConfig`): encoder resolution, latency in both directions,
-dropped and garbled frames.  The true joint state is recorded in a crash-safe truth log (for the
-synthetic camera and for checking).
+:class:`RigDevice` is the device: the *same* protocol logic as the VEX program
+(:class:`~softpend.hardware.protocol.DeviceSession`: handshake, torque clamp, watchdog) in front of the plant
+(:meth:`softpend.task.Task.make_plant`).  Each tick (one control period) it applies the session's torque,
+samples a quantised encoder and makes a STATE frame, which may be lost or garbled
+(:class:`RigConfig`); the true joint state goes to a crash-safe truth log (for checking and scoring).
+Two things drive it:
 
-Run it as a process with ``softpend rig`` (or :func:`start_emulator_process`), which prints the pty
-path, and point :class:`~softpend.hardware.driver.MotorLink` at that path like at a real rig.
+* :class:`SimRig`, the digital twin: ticks and link latency on a :class:`~softpend.hardware.clock.SimClock`,
+  the host talking to it through an in-memory byte channel (:meth:`SimRig.connect`), in simulated time;
+* :class:`RigEmulator`, the device on a pseudo-terminal (``os.openpty``) on the wall clock, in a process of its
+  own (``softpend rig``, :func:`start_emulator_process`): point :class:`~softpend.hardware.driver.MotorLink` at
+  its path like at a real rig.
 """
 
 from __future__ import annotations
@@ -37,10 +38,11 @@ import numpy as np
 from softpend.checks import finite, in_unit_interval, int_at_least, optional_positive
 from softpend.task import Task
 from softpend.hardware import protocol as proto
-from softpend.hardware.realtime import DEVICE_PRIORITY, realtime_priority
+from softpend.hardware.clock import SimClock, SimSerial
 from softpend.io.samplelog import SampleLog
 
-__all__ = ["EmulatorProcess", "RigConfig", "RigEmulator", "start_emulator_process", "truth_columns"]
+__all__ = ["EmulatorProcess", "RigConfig", "RigDevice", "RigEmulator", "SimRig", "start_emulator_process",
+           "truth_columns"]
 
 
 @dataclass(frozen=True)
@@ -123,8 +125,8 @@ def truth_columns(n_coordinates: int) -> list[str]:
     )
 
 
-class RigEmulator:
-    """Serve the motor protocol on a pseudo-terminal, backed by the plant in real time.
+class RigDevice:
+    """The rig's device side: protocol session, plant, encoder, lost and garbled frames (module docstring).
 
     Parameters
     ----------
@@ -132,23 +134,10 @@ class RigEmulator:
         Rig settings.
     truth_log : path, optional
         Where to record the true joint state every tick (crash-safe :class:`SampleLog`).
-    link_path : path, optional
-        Also expose the pty at this path (a symlink), like a fixed device name.  Only a symlink to a
-        pseudo-terminal (one an earlier emulator left behind) is replaced; anything else at the path
-        raises ``ValueError`` and is left as it is.  :meth:`close` removes the symlink if it still points
-        to this emulator's pty.
-    scene_fd : int, optional
-        Write end of a pipe for the live pose feed (:mod:`softpend.hardware.scene`): one record per tick
-        with the host time of the sample and ``q``; written without blocking (dropped when the pipe is full).
     """
 
-    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
-                 link_path: Optional[str | os.PathLike] = None, scene_fd: Optional[int] = None) -> None:
-        self.config = config if config is not None else RigConfig()
-        cfg = self.config
-        self.link_path = Path(link_path) if link_path else None
-        if self.link_path is not None:
-            _check_link_path(self.link_path)
+    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None) -> None:
+        self.config = cfg = config if config is not None else RigConfig()
         self.plant = cfg.task.make_plant()
         self._rng = np.random.default_rng(cfg.seed)
         q, qd = self.plant.hanging_state() if cfg.initial_tilt_rad is None else cfg.task.tilt_state(cfg.initial_tilt_rad)
@@ -158,125 +147,29 @@ class RigEmulator:
         self.plant.reset(q, qd)
         self._phi0_rad = math.pi  # the encoder reads zero with the rod hanging, as on the rig
         self.session = proto.DeviceSession(
-            cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s))
-        )
-        self.master_fd, self._slave_fd = os.openpty()
-        tty.setraw(self._slave_fd)
-        self.port = os.ttyname(self._slave_fd)
+            cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s)))
         self._truth = None
-        self._linked = False
-        try:
-            if self.link_path is not None:
-                _check_link_path(self.link_path)  # again: something may have appeared meanwhile
-                if self.link_path.is_symlink():
-                    self.link_path.unlink()  # a pty symlink an earlier emulator left behind
-                self.link_path.symlink_to(self.port)
-                self._linked = True
-            if truth_log is not None:
-                self._truth = SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
-                                        metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
-        except BaseException:
-            self.close()
-            raise
-        self._running = False
-        self._scene_fd = scene_fd
-        if scene_fd is not None:
-            os.set_blocking(scene_fd, False)
-        self._start_monotonic_s = time.monotonic()
-        self.scene_records_dropped = 0
+        if truth_log is not None:
+            self._truth = SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
+                                    metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
         self._released = False
-        self.ticks = 0
-        self.states_sent = 0
-        self.states_dropped = 0
-        self.states_garbled = 0
-        self.ticks_skipped = 0
-        self.tick_lateness_s: list[float] = []
+        self.ticks = self.states_sent = self.states_dropped = self.states_garbled = 0
 
-    # ------------------------------------------------------------------ encoder model
     def encoder_counts(self, phi_unwrapped_rad: float) -> int:
         """Quantised encoder reading for a hub angle [rad]."""
         return int(math.floor((phi_unwrapped_rad - self._phi0_rad) * self.config.counts_per_rev / (2 * math.pi) + 0.5))
 
-    # ------------------------------------------------------------------ main loop
-    def stop(self) -> None:
-        self._running = False
-
-    def serve(self) -> None:
-        """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
-        cfg = self.config
-        session = self.session
-        dt = cfg.task.dt_s
-        latency = cfg.latency_s
-        start = time.monotonic()
-        self._start_monotonic_s = start
-        inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
-        outbound: list[tuple[float, int, bytes]] = []
-        order = 0
-        next_tick = start + dt
-        self._running = True
-        forces_time_us = lambda now: int((now - start) * 1e6)  # noqa: E731  device clock [us]
-        try:
-            while self._running:
-                now = time.monotonic()
-                wake = next_tick
-                if inbound:
-                    wake = min(wake, inbound[0][0])
-                if outbound:
-                    wake = min(wake, outbound[0][0])
-                ready, _, _ = select.select([self.master_fd], [], [], max(0.0, wake - now))
-                now = time.monotonic()
-                if ready:
-                    try:
-                        data = os.read(self.master_fd, 4096)
-                    except OSError:
-                        data = b""  # no host has the pty open (EIO): nothing to read
-                        time.sleep(min(dt, max(0.0, next_tick - now)))
-                    if data:
-                        order += 1
-                        heapq.heappush(inbound, (now + latency, order, data))
-                while inbound and inbound[0][0] <= now:
-                    _, _, data = heapq.heappop(inbound)
-                    for reply in session.receive(data, forces_time_us(now)):
-                        order += 1
-                        heapq.heappush(outbound, (now + latency, order, reply))
-                if now >= next_tick:
-                    self.tick_lateness_s.append(now - next_tick)
-                    # the physics does not wait: if the emulator fell behind, the plant catches up
-                    # (steps with the torque held, truth logged) and one STATE reports the latest sample
-                    due = int((now - next_tick) / dt) + 1
-                    frame = None
-                    for k in range(due):
-                        sample_us = int(round((self.ticks + 1) * dt * 1e6))
-                        frame = self._tick(sample_us, emit=k == due - 1)
-                    self.ticks_skipped += due - 1
-                    next_tick += due * dt
-                    if frame is not None:
-                        order += 1
-                        heapq.heappush(outbound, (now + latency, order, frame))
-                    if cfg.duration_s is not None and now - start >= cfg.duration_s:
-                        self._running = False
-                while outbound and outbound[0][0] <= now:
-                    _, _, frame = heapq.heappop(outbound)
-                    try:
-                        os.write(self.master_fd, frame)
-                    except OSError:
-                        pass
-        finally:
-            self._running = False
-
-    def _tick(self, now_us: int, emit: bool = True) -> Optional[bytes]:
+    def tick(self, now_us: int, emit: bool = True) -> Optional[bytes]:
         """Sample the encoder at device time ``now_us`` (= plant time), apply the session's torque for one
-        step; return the STATE frame (or None if dropped)."""
+        step; return the STATE frame (None if not emitted or lost)."""
         cfg = self.config
         torque = self.session.torque_nm(now_us)
         observation_before = self.plant.observe()
-        if self._truth is not None or self._scene_fd is not None:
-            q, qd = self.plant.joint_state()
-            if self._truth is not None:
-                self._truth.append([now_us * 1e-6, torque, *q, *qd])
-            if self._scene_fd is not None:
-                self._write_scene(now_us * 1e-6, q)
-        counts = self.encoder_counts(self.plant.joint_state()[0][0])
+        q, qd = self.plant.joint_state()
+        if self._truth is not None:
+            self._truth.append([now_us * 1e-6, torque, *q, *qd])
+        self._sampled(now_us * 1e-6, q)
+        counts = self.encoder_counts(q[0])
         frame = self.session.state_frame(now_us, counts, observation_before.phi_dot_rad_s, torque) if emit else None
         self._released = self._released or self.session.last_cmd_us is not None or not cfg.hold_until_commanded
         if self._released:  # once released, never held again (a reconnect does not freeze a moving rod)
@@ -296,16 +189,167 @@ class RigEmulator:
         self.states_sent += 1
         return frame
 
-    def _write_scene(self, device_time_s: float, q: np.ndarray) -> None:
-        from softpend.hardware.scene import pack_scene_record
+    def _sampled(self, device_time_s: float, q: np.ndarray) -> None:
+        """Hook: the joint positions at a tick's sample (the twin's camera films them)."""
 
-        record = pack_scene_record(self._start_monotonic_s + device_time_s, device_time_s, q)
+    def close(self) -> None:
+        if self._truth is not None:
+            self._truth.close()
+            self._truth = None
+
+    def stats(self) -> dict[str, float]:
+        return {"ticks": float(self.ticks), "states_sent": float(self.states_sent),
+                "states_dropped": float(self.states_dropped), "states_garbled": float(self.states_garbled)}
+
+
+class SimRig(RigDevice):
+    """The digital twin's device on a :class:`~softpend.hardware.clock.SimClock` (module docstring).
+
+    Tick ``k`` runs at ``start + k dt`` (device time ``k dt``, ``start`` the clock's time at construction); each
+    STATE frame and each reply reaches the host ``latency_s`` after it was made, and each host write reaches
+    the device ``latency_s`` after it was written.  :attr:`poses` holds the joint positions at every tick on the
+    clock's time (what the twin's camera films).
+    """
+
+    def __init__(self, config: Optional[RigConfig] = None, clock: Optional[SimClock] = None,
+                 truth_log: Optional[str | os.PathLike] = None) -> None:
+        from softpend.vision.tip_source import PoseHistory
+
+        self.clock = clock if clock is not None else SimClock()
+        self.poses = PoseHistory(self.plant_points, keep_s=2.0)
+        super().__init__(config, truth_log)
+        self.start_s = self.clock.now_s()
+        self.host: Optional[SimSerial] = None
+        self.clock.call_at(self.start_s, self._on_tick)
+
+    def plant_points(self, q: np.ndarray) -> np.ndarray:
+        return self.plant.link_points_m(q)
+
+    def _sampled(self, device_time_s: float, q: np.ndarray) -> None:
+        self.poses.add(self.start_s + device_time_s, q.copy())
+
+    def _device_us(self) -> int:
+        return int(round((self.clock.now_s() - self.start_s) * 1e6))
+
+    def _on_tick(self) -> None:
+        dt = self.config.task.dt_s
+        frame = self.tick(int(round(self.ticks * dt * 1e6)))
+        self._to_host(frame)
+        if self.config.duration_s is None or self.ticks * dt < self.config.duration_s:
+            self.clock.call_at(self.start_s + self.ticks * dt, self._on_tick)
+
+    def _to_host(self, data: Optional[bytes]) -> None:
+        host = self.host
+        if data and host is not None:
+            self.clock.call_at(self.clock.now_s() + self.config.latency_s, lambda: host.deliver(data))
+
+    def _from_host(self, data: bytes) -> None:
+        def arrive() -> None:
+            for reply in self.session.receive(data, self._device_us()):
+                self._to_host(reply)
+        self.clock.call_at(self.clock.now_s() + self.config.latency_s, arrive)
+
+    def connect(self) -> SimSerial:
+        """A new host end of the link (the one before is cut off, like an unplugged cable)."""
+        if self.host is not None:
+            self.host.close()
+        self.host = SimSerial(self.clock, self._from_host)
+        return self.host
+
+
+class RigEmulator(RigDevice):
+    """The device on a pseudo-terminal, on the wall clock (module docstring).
+
+    Parameters
+    ----------
+    config, truth_log :
+        As :class:`RigDevice`.
+    link_path : path, optional
+        Also expose the pty at this path (a symlink), like a fixed device name.  Only a symlink to a
+        pseudo-terminal (one an earlier emulator left behind) is replaced; anything else at the path
+        raises ``ValueError`` and is left as it is.  :meth:`close` removes the symlink if it still points
+        to this emulator's pty.
+    """
+
+    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
+                 link_path: Optional[str | os.PathLike] = None) -> None:
+        self.link_path = Path(link_path) if link_path else None
+        if self.link_path is not None:
+            _check_link_path(self.link_path)
+        super().__init__(config, truth_log)
+        self.master_fd, self._slave_fd = os.openpty()
+        tty.setraw(self._slave_fd)
+        self.port = os.ttyname(self._slave_fd)
+        self._linked = False
         try:
-            os.write(self._scene_fd, record)  # < PIPE_BUF bytes: written whole or not at all
-        except BlockingIOError:
-            self.scene_records_dropped += 1
-        except OSError:  # the reader went away
-            self._scene_fd = None
+            if self.link_path is not None:
+                _check_link_path(self.link_path)  # again: something may have appeared meanwhile
+                if self.link_path.is_symlink():
+                    self.link_path.unlink()  # a pty symlink an earlier emulator left behind
+                self.link_path.symlink_to(self.port)
+                self._linked = True
+        except BaseException:
+            self.close()
+            raise
+        self._running = False
+        self.ticks_skipped = 0
+
+    def stop(self) -> None:
+        self._running = False
+
+    def serve(self) -> None:
+        """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
+        cfg = self.config
+        dt = cfg.task.dt_s
+        latency = cfg.latency_s
+        start = time.monotonic()
+        inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
+        outbound: list[tuple[float, int, bytes]] = []
+        order = 0
+        next_tick = start + dt
+        self._running = True
+        try:
+            while self._running:
+                now = time.monotonic()
+                wake = min([next_tick] + [queue[0][0] for queue in (inbound, outbound) if queue])
+                ready, _, _ = select.select([self.master_fd], [], [], max(0.0, wake - now))
+                now = time.monotonic()
+                if ready:
+                    try:
+                        data = os.read(self.master_fd, 4096)
+                    except OSError:
+                        data = b""  # no host has the pty open (EIO): nothing to read
+                        time.sleep(min(dt, max(0.0, next_tick - now)))
+                    if data:
+                        order += 1
+                        heapq.heappush(inbound, (now + latency, order, data))
+                while inbound and inbound[0][0] <= now:
+                    _, _, data = heapq.heappop(inbound)
+                    for reply in self.session.receive(data, int((now - start) * 1e6)):
+                        order += 1
+                        heapq.heappush(outbound, (now + latency, order, reply))
+                if now >= next_tick:
+                    # the physics does not wait: if the emulator fell behind, the plant catches up
+                    # (steps with the torque held, truth logged) and one STATE reports the latest sample
+                    due = int((now - next_tick) / dt) + 1
+                    frame = None
+                    for k in range(due):
+                        frame = self.tick(int(round((self.ticks + 1) * dt * 1e6)), emit=k == due - 1)
+                    self.ticks_skipped += due - 1
+                    next_tick += due * dt
+                    if frame is not None:
+                        order += 1
+                        heapq.heappush(outbound, (now + latency, order, frame))
+                    if cfg.duration_s is not None and now - start >= cfg.duration_s:
+                        self._running = False
+                while outbound and outbound[0][0] <= now:
+                    _, _, frame = heapq.heappop(outbound)
+                    try:
+                        os.write(self.master_fd, frame)
+                    except OSError:
+                        pass
+        finally:
+            self._running = False
 
     def close(self) -> None:
         for fd in (self.master_fd, self._slave_fd):
@@ -313,23 +357,13 @@ class RigEmulator:
                 os.close(fd)
             except OSError:
                 pass
-        if self._truth is not None:
-            self._truth.close()
+        super().close()
         if self._linked and self.link_path.is_symlink() and os.readlink(self.link_path) == self.port:
             self.link_path.unlink()
         self._linked = False
 
     def stats(self) -> dict[str, float]:
-        lateness = np.asarray(self.tick_lateness_s) * 1e3
-        return {
-            "ticks": float(self.ticks),
-            "states_sent": float(self.states_sent),
-            "states_dropped": float(self.states_dropped),
-            "states_garbled": float(self.states_garbled),
-            "ticks_caught_up": float(self.ticks_skipped),
-            "scene_records_dropped": float(self.scene_records_dropped),
-            "tick_lateness_ms_p95": float(np.percentile(lateness, 95)) if lateness.size else float("nan"),
-        }
+        return {**super().stats(), "ticks_caught_up": float(self.ticks_skipped)}
 
 
 def _is_pty_name(target: str) -> bool:
@@ -355,9 +389,9 @@ def _check_link_path(path: Path) -> None:
 
 # ---------------------------------------------------------------------- process helpers
 def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path: Optional[str] = None,
-                  stats_path: Optional[str] = None, out=sys.stdout, scene_fd: Optional[int] = None) -> int:
+                  stats_path: Optional[str] = None, out=sys.stdout) -> int:
     """Create an emulator, print its pty path (one line, flushed), serve until SIGTERM/duration."""
-    emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path, scene_fd=scene_fd)
+    emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path)
 
     def _terminate(signum, frame):
         emulator.stop()
@@ -380,14 +414,13 @@ class EmulatorProcess:
     """A rig emulator running in a child process (``python -m softpend.hardware.emulator``).
 
     Use as a context manager; :attr:`port` is the pty path to open with
-    :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.  With
-    ``scene=True`` the emulator also writes its live pose feed to a pipe; :meth:`open_scene` gives the
-    :class:`~softpend.hardware.scene.EmulatorScene` that reads it (what the twin's camera films).
+    :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.
     """
 
     def __init__(self, config: RigConfig, truth_log: Optional[str | os.PathLike] = None,
-                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0,
-                 scene: bool = False) -> None:
+                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0) -> None:
+        import tempfile
+
         cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]
         if truth_log is not None:
             cmd += ["--truth-log", str(truth_log)]
@@ -395,25 +428,11 @@ class EmulatorProcess:
             cmd += ["--stats", str(stats_path)]
         self.stats_path = Path(stats_path) if stats_path else None
         self.config = config
-        self.scene_fd: Optional[int] = None
-        pass_fds: tuple[int, ...] = ()
-        if scene:
-            self.scene_fd, scene_write = os.pipe()
-            cmd += ["--scene-fd", str(scene_write)]
-            pass_fds = (scene_write,)
-        import tempfile
-
         self._stderr = tempfile.TemporaryFile(mode="w+")
-        try:
-            self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True,
-                                            pass_fds=pass_fds)
-        finally:
-            for fd in pass_fds:  # the child holds its own copy of the write end
-                os.close(fd)
+        self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
         ready, _, _ = select.select([self.process.stdout], [], [], start_timeout_s)
         line = self.process.stdout.readline().strip() if ready else ""
         if not line.startswith("/dev/"):
-            self._close_scene_fd()
             self.process.kill()
             self.process.wait()
             self._stderr.seek(0)
@@ -444,32 +463,8 @@ class EmulatorProcess:
     def __enter__(self) -> "EmulatorProcess":
         return self
 
-    def open_scene(self):
-        """The :class:`~softpend.hardware.scene.EmulatorScene` of the pose feed (``scene=True`` only); it
-        owns the pipe from then on."""
-        from softpend.hardware.scene import EmulatorScene
-
-        if self.scene_fd is None:
-            raise ValueError("scene: this emulator was started without a scene feed (or it was opened already)")
-        fd, self.scene_fd = self.scene_fd, None
-        return EmulatorScene(fd, self.config.task)
-
-    def take_scene_fd(self) -> int:
-        """The read end of the pose feed (``scene=True`` only), for another process to film; the caller owns
-        it from then on."""
-        if self.scene_fd is None:
-            raise ValueError("scene: this emulator was started without a scene feed (or it was opened already)")
-        fd, self.scene_fd = self.scene_fd, None
-        return fd
-
-    def _close_scene_fd(self) -> None:
-        if self.scene_fd is not None:
-            os.close(self.scene_fd)
-            self.scene_fd = None
-
     def __exit__(self, *exc) -> None:
         self.terminate()
-        self._close_scene_fd()
         if self.process.stdout:
             self.process.stdout.close()
         self._stderr.close()
@@ -486,14 +481,9 @@ def _main(argv: Optional[list[str]] = None) -> int:  # the child process entry p
     parser.add_argument("--truth-log")
     parser.add_argument("--link")
     parser.add_argument("--stats")
-    parser.add_argument("--scene-fd", type=int)
     args = parser.parse_args(argv)
     config = RigConfig.from_dict(json.loads(args.config_json))
-    # the emulator stands in for the rig's microcontroller, which has a processor of its own: it runs ahead of
-    # the host's work where the operating system allows
-    with realtime_priority(DEVICE_PRIORITY):
-        return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats,
-                             scene_fd=args.scene_fd)
+    return serve_forever(config, truth_log=args.truth_log, link_path=args.link, stats_path=args.stats)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,6 @@ need the joint state or the observed variables with their rates, run in
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Callable, Optional, Protocol
 
@@ -223,7 +222,7 @@ def run_control_loop(
                 link.emergency_stop()  # zero torque first, so the log records what is in force
                 raise
             finally:
-                send_times.append(time.monotonic())
+                send_times.append(link.clock.now_s())
                 if log is not None:
                     log.append([state.host_time_s, state.device_time_s, state.seq, state.phi_rad,
                                 state.phi_dot_rad_s, state.applied_torque_nm, link.last_command_nm,

@@ -3,8 +3,8 @@
 :func:`run_twin_session` does what a session on the real rig does, with the emulator and the synthetic
 camera standing in for the hardware:
 
-1. start the rig emulator (:class:`~softpend.hardware.emulator.EmulatorProcess`) with a truth log;
-2. over :class:`~softpend.hardware.driver.MotorLink`, run the babbling program
+1. start the twin's device (:class:`~softpend.hardware.emulator.SimRig`, in simulated time) with a truth log;
+2. over :class:`~softpend.hardware.driver.MotorLink` on the in-memory link, run the babbling program
    (:func:`rig_babble_controller`: a start-up wiggle, then band-limited random torque, the same noise
    process as :func:`softpend.sysid.babble`) in :func:`~softpend.hardware.loop.run_control_loop`,
    logging every state to a crash-safe motor log;
@@ -25,7 +25,7 @@ import numpy as np
 
 from softpend.plant import RodParams, make_plant
 from softpend.hardware.driver import MotorLink
-from softpend.hardware.emulator import RigConfig, start_emulator_process
+from softpend.hardware.emulator import RigConfig, SimRig
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
@@ -107,8 +107,8 @@ def run_twin_session(
     trial_length_s: float = 5.0,
     progress: bool = True,
 ) -> TwinSession:
-    """Run the whole rig pipeline on the digital twin (see the module docstring); takes about
-    ``duration_s`` of real time plus rendering and tracking.
+    """Run the whole rig pipeline on the digital twin (see the module docstring), in simulated time: the same
+    seed gives the same files.
 
     Parameters
     ----------
@@ -147,15 +147,17 @@ def run_twin_session(
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:  # the workdir is ours (empty or marked): these are an earlier session's outputs
         (workdir / name).unlink(missing_ok=True)
-    stats_path = workdir / "emulator_stats.json"
     limit = rig.task.torque_limit_nm
     controller = rig_babble_controller(duration_s, limit, seed)
-    with start_emulator_process(rig, truth_log=paths["truth_log.csv"], stats_path=stats_path) as emulator:
-        with MotorLink(emulator.port, torque_limit_nm=limit) as link, \
+    device = SimRig(rig, truth_log=paths["truth_log.csv"])
+    try:
+        with MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link, \
                 SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log:
             loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
-        emulator.terminate()
-        emulator_stats = emulator.stats()
+        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
+    finally:
+        device.close()
+    emulator_stats = device.stats()
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=effects, seed=seed)
     render_video(paths["camera.avi"], camera, times, points, hub, fps=camera_fps, clock_offset_s=clock_offset_s,

@@ -2,8 +2,8 @@
 
 A *condition* (:class:`RigCondition`) is what the rig's sensors are like: the camera's frame rate, latency and
 image imperfections, the encoder's resolution and the link latency.  :func:`twin_start` runs one controller
-from one start on the twin (:func:`softpend.hardware.closed_loop.run_twin_control`: the emulator in its own
-process on a pseudo-terminal, the synthetic live camera filming it, the Algorithm 1 tracker, the state
+from one start on the twin (:func:`softpend.hardware.closed_loop.run_twin_control`, in simulated time: the
+device behind the real protocol bytes, the synthetic live camera filming it, the Algorithm 1 tracker, the state
 estimator, the driver's clamp and STOP) and scores the rod's *true* motion from the emulator's truth log over
 the time the controller was in charge; :func:`simulator_starts` runs the same controller from the same starts
 in the ideal simulator (:func:`softpend.evaluation.evaluate_controller`: the true joint state and observation
@@ -18,7 +18,6 @@ hanging start's hub-angle and rate noise from one generator seeded ``s`` in the 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Sequence
@@ -165,13 +164,10 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     commands in the motor log.  The run's logs stay in ``workdir``.  A safe stop (the camera blind for longer
     than ``condition.max_blind_s``, or no first frame), a :class:`~softpend.hardware.driver.LinkError` or a
     diverged estimator model makes a failed row whose ``stop`` says why; what else the run raises propagates.
-    Besides the figures, the row holds ``jitter_ms_p95`` (command periods), ``late_commands`` and ``samples``,
-    ``step_time_ms_p95`` and ``step_cpu_ms_p95`` (host processing per state, wall clock and CPU), ``frames_tracked``,
-    ``frames_lost`` and ``wall_s``.
+    Besides the figures, the row holds ``late_commands``, ``samples``, ``frames_tracked`` and ``frames_lost``.
     """
     positive("duration_s", duration_s)
     workdir = Path(workdir)
-    started = time.perf_counter()
     stop: Optional[str] = None
     result = None
     try:
@@ -185,7 +181,6 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
         stop = f"link error: {type(exc).__name__}: {exc}"
     except SimulationDiverged as exc:
         stop = f"estimator model diverged: {exc}"
-    wall_s = time.perf_counter() - started
     metrics: dict[str, Any] = {}
     chatter = math.nan
     motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
@@ -196,13 +191,9 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
         stop = "the controller never took charge"
     row = _row(condition.name, label, seed, metrics, chatter, stop)
     camera = result.camera if result is not None else {}
-    row.update(jitter_ms_p95=result.jitter_ms_p95 if result is not None else math.nan,
-               late_commands=int(result.late_commands) if result is not None else 0,
+    row.update(late_commands=int(result.late_commands) if result is not None else 0,
                samples=int(result.samples) if result is not None else 0,
-               step_time_ms_p95=float(result.step_time_ms_p95) if result is not None else math.nan,
-               step_cpu_ms_p95=float(result.step_cpu_ms_p95) if result is not None else math.nan,
-               frames_tracked=int(camera.get("frames_tracked", 0)), frames_lost=int(camera.get("frames_lost", 0)),
-               wall_s=wall_s)
+               frames_tracked=int(camera.get("frames_tracked", 0)), frames_lost=int(camera.get("frames_lost", 0)))
     return row
 
 

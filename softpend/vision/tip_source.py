@@ -1,20 +1,20 @@
 """Live tip measurements: a camera (real, recorded or synthetic) plus the Algorithm 1 tracker, frame by frame.
 
 A :class:`TipSource` delivers :class:`TipMeasurement` objects -- the tip position relative to the hub in
-metres, or ``lost`` -- each stamped with its *capture time* on the host clock (``time.monotonic()``, the
-middle of the exposure), so that a state estimator can place a measurement that arrives late at the
-instant it describes.  Every source grabs and tracks frames on a background thread as they arrive;
-:meth:`TipSource.poll` returns what has been tracked since the previous call, oldest first.
+metres, or ``lost`` -- each stamped with its *capture time* on the host clock (``time.monotonic()`` on a rig,
+the simulated clock on the twin; the middle of the exposure), so that a state estimator can place a
+measurement that arrives late at the instant it describes.  The real and recorded cameras grab and track frames
+on a background thread as they arrive; :meth:`TipSource.poll` returns what has been tracked since the previous
+call, oldest first.
 
 Three sources share the tracking (:class:`FrameTracker`: the tracker of :mod:`softpend.vision.tracker`
 and an affine calibration, fitted from the reference markers on the first frame unless one is given):
 
-* :class:`SyntheticLiveCamera` -- renders frames of a *live* :class:`Scene` (the rig emulator's state as it
-  evolves, :class:`softpend.hardware.scene.EmulatorScene`, or an in-process simulation,
-  :class:`PlantScene`) at a frame rate (30, 60, 120 frames/s ...) with the exposure and imperfections of
-  :class:`~softpend.vision.camera.CameraEffects`; each frame reaches the tracker ``latency_s`` after the
-  end of its exposure (sensor read-out and transfer), and :class:`CameraFaults` injects stalls, dropped
-  frames and occlusions of the dot.
+* :class:`SyntheticLiveCamera` -- the digital twin's camera, in simulated time: renders frames of a *live*
+  :class:`Scene` (the twin's poses, :attr:`softpend.hardware.emulator.SimRig.poses`) at a frame rate (30, 60,
+  120 frames/s ...) with the exposure and imperfections of :class:`~softpend.vision.camera.CameraEffects`;
+  each frame reaches the tracker ``latency_s`` after the end of its exposure (sensor read-out and transfer),
+  and :class:`CameraFaults` injects stalls, dropped frames and occlusions of the dot.
 * :class:`VideoFileTipSource` -- replays a video file (with the synthetic camera's sidecar timestamps when
   present), paced in real time or as fast as it can be tracked.
 * :class:`CaptureTipSource` -- ``cv2.VideoCapture`` on a device index (``0``) or a stream URL; the capture
@@ -47,7 +47,6 @@ __all__ = [
     "CameraFaults",
     "CaptureTipSource",
     "FrameTracker",
-    "PlantScene",
     "PoseHistory",
     "Scene",
     "SyntheticLiveCamera",
@@ -247,11 +246,12 @@ class ThreadedTipSource:
     def _release(self) -> None:
         """Free the camera (called on the thread when :meth:`_run` ends)."""
 
-    def _deliver(self, index: int, frame: np.ndarray, capture_time_s: float) -> TipMeasurement:
-        """Track ``frame`` now and queue its measurement."""
+    def _deliver(self, index: int, frame: np.ndarray, capture_time_s: float,
+                 delivered_time_s: Optional[float] = None) -> TipMeasurement:
+        """Track ``frame`` now and queue its measurement (delivered now on the host clock, unless given)."""
         x_m, y_m, detection = self.frame_tracker(frame)
-        measurement = TipMeasurement(x_m, y_m, bool(detection.lost), float(capture_time_s), int(index),
-                                     time.monotonic())
+        delivered = time.monotonic() if delivered_time_s is None else delivered_time_s
+        measurement = TipMeasurement(x_m, y_m, bool(detection.lost), float(capture_time_s), int(index), delivered)
         self.frames_tracked += 1
         self.frames_lost += int(measurement.lost)
         self._ages_s.append(measurement.age_s)
@@ -271,17 +271,10 @@ class ThreadedTipSource:
 
 # ---------------------------------------------------------------------- scenes
 class Scene(Protocol):
-    """What the synthetic live camera films: the rod's pose as a function of host time."""
-
-    def latest_time_s(self) -> Optional[float]:
-        """Host time of the newest pose known (None before the first) [s]."""
+    """What the synthetic live camera films: the rod's pose as a function of the (host's) time."""
 
     def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
-        """Link points ``(n + 1, 2)`` (hub first) [m] and the hub angle [rad] at host time ``time_s``."""
-
-    @property
-    def ended(self) -> bool:
-        """No further poses will come (the emulator stopped)."""
+        """Link points ``(n + 1, 2)`` (hub first) [m] and the hub angle [rad] at time ``time_s``."""
 
 
 class PoseHistory:
@@ -332,54 +325,6 @@ class PoseHistory:
         return self.link_points(q), float(q[0])
 
 
-class PlantScene:
-    """An in-process simulation as a :class:`Scene`: the plant of ``task`` runs in real time from
-    ``(q, q_dot)`` under ``torque(time_s)`` (default none), advanced lazily whenever a pose is asked for.
-
-    Parameters
-    ----------
-    task : Task
-        Plant and rod.
-    q, q_dot : arrays, optional
-        Initial state (default: hanging at rest).
-    torque : callable, optional
-        ``torque(t) -> N m`` with ``t`` the time since the start [s].
-    start_time_s : float, optional
-        Host time of the initial state (default: now).
-    """
-
-    def __init__(self, task, q: Optional[np.ndarray] = None, q_dot: Optional[np.ndarray] = None,
-                 torque: Optional[Callable[[float], float]] = None, start_time_s: Optional[float] = None) -> None:
-        self.plant = task.make_plant()
-        if q is None:
-            q, q_dot = self.plant.hanging_state()
-        self.plant.reset(q, q_dot if q_dot is not None else np.zeros_like(np.asarray(q, float)))
-        self.torque = torque
-        self.start_time_s = time.monotonic() if start_time_s is None else float(start_time_s)
-        self.history = PoseHistory(self.plant.link_points_m)
-        self.history.add(self.start_time_s, self.plant.joint_state()[0])
-        self._steps = 0
-        self._lock = threading.Lock()
-        self.ended = False
-
-    def _advance(self) -> None:
-        dt = self.plant.dt_s
-        with self._lock:
-            while self.start_time_s + (self._steps + 1) * dt <= time.monotonic():
-                t = self._steps * dt
-                self.plant.step(float(self.torque(t)) if self.torque is not None else 0.0)
-                self._steps += 1
-                self.history.add(self.start_time_s + self._steps * dt, self.plant.joint_state()[0])
-
-    def latest_time_s(self) -> Optional[float]:
-        self._advance()
-        return self.history.latest_time_s()
-
-    def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
-        with self._lock:
-            return self.history.pose_at(time_s)
-
-
 # ---------------------------------------------------------------------- the synthetic live camera
 @dataclass(frozen=True)
 class CameraFaults:
@@ -422,18 +367,20 @@ class CameraFaults:
 
 
 class SyntheticLiveCamera(ThreadedTipSource):
-    """Film a live :class:`Scene` with the synthetic camera and track every frame as it arrives.
+    """The twin's camera: film a live :class:`Scene` on a simulated clock and track every frame.
 
-    Frame ``k`` is exposed over ``[t_k - exposure_s, t_k]`` with ``t_k = t_first + k / fps`` (host clock);
-    it is rendered as soon as the scene has reached ``t_k``, reaches the tracker at ``t_k + latency_s``
-    (later if rendering took longer: a slow machine shows up as extra latency, never as a wrong time
-    stamp), and is stamped with its capture time ``t_k - exposure_s / 2``.  A camera that falls more than
-    two frames behind skips frames (counted in ``frames_dropped``), as a real one does.
+    Frame ``k`` is exposed over ``[t_k - exposure_s, t_k]`` with ``t_k = t_first + k / fps`` (``t_first``: the
+    clock's time at :meth:`start` plus the exposure); it is rendered and tracked when the clock reaches
+    ``t_k + latency_s``, its delivery time, and stamped with its capture time ``t_k - exposure_s / 2``.  The
+    clock (:class:`~softpend.hardware.clock.SimClock`) runs the frames as events, so rendering and tracking cost
+    computer time but no simulated time, and the same seeds give the same measurements.
 
     Parameters
     ----------
     scene : Scene
-        What is filmed.
+        What is filmed (the twin's :attr:`~softpend.hardware.emulator.SimRig.poses`).
+    clock : SimClock
+        The twin's clock.
     fps : float
         Frame rate [1/s].
     latency_s : float
@@ -448,80 +395,56 @@ class SyntheticLiveCamera(ThreadedTipSource):
         Seed of the image noise.
     frame_tracker, on_frame :
         See :class:`ThreadedTipSource`.
-    scene_timeout_s : float
-        Give up (end the thread) when the scene has not advanced for this long [s].
     """
 
     name = "synthetic-camera"
 
-    def __init__(self, scene: Scene, fps: float = 60.0, latency_s: float = 0.02,
+    def __init__(self, scene: Scene, clock, fps: float = 60.0, latency_s: float = 0.02,
                  effects: Optional[CameraEffects] = None, model: Optional[CameraModel] = None,
                  faults: Optional[CameraFaults] = None, seed: int = 0,
-                 frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None,
-                 scene_timeout_s: float = 2.0) -> None:
+                 frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
         super().__init__(frame_tracker, on_frame)
         self.scene = scene
+        self.clock = clock
         self.fps = check_fps("fps", fps)
         self.latency_s = non_negative("latency_s", latency_s)
         self.camera = SyntheticCamera(model=model, effects=effects if effects is not None else CameraEffects.rig(),
                                       seed=seed)
         self.faults = faults if faults is not None else CameraFaults()
-        self.scene_timeout_s = positive("scene_timeout_s", scene_timeout_s)
         self._rng = np.random.default_rng(self.faults.seed)
         self.frames_stalled = 0
         self.frames_occluded = 0
         self.first_frame_time_s: Optional[float] = None
+        self._closed = False
 
-    def _wait_for_scene(self, time_s: float) -> bool:
-        """Wait until the scene has a pose at ``time_s``; False on close, scene end or timeout."""
-        waited_since = time.monotonic()
-        last_seen = self.scene.latest_time_s()
-        while not self._stop.is_set():
-            latest = self.scene.latest_time_s()
-            if latest is not None and latest >= time_s:
-                return True
-            if latest != last_seen:
-                last_seen, waited_since = latest, time.monotonic()
-            if getattr(self.scene, "ended", False) or time.monotonic() - waited_since > self.scene_timeout_s:
-                return False
-            self._stop.wait(0.001)
-        return False
+    def start(self) -> None:
+        if self.first_frame_time_s is None:
+            self.first_frame_time_s = self.clock.now_s() + self.camera.effects.exposure_s
+            self._schedule(0)
 
-    def _run(self) -> None:
-        exposure = self.camera.effects.exposure_s
-        period = 1.0 / self.fps
-        if not self._wait_for_scene(-math.inf):
+    def close(self, timeout_s: float = 0.0) -> None:
+        self._closed = True
+
+    def _schedule(self, k: int) -> None:
+        self.clock.call_at(self.first_frame_time_s + k / self.fps + self.latency_s, lambda: self._frame(k))
+
+    def _frame(self, k: int) -> None:
+        if self._closed:
             return
-        first = self.scene.latest_time_s() + exposure
-        self.first_frame_time_s = first
-        k = 0
-        while not self._stop.is_set():
-            t_k = first + k * period
-            if not self._wait_for_scene(t_k):
-                return
-            behind = int((time.monotonic() - t_k - self.latency_s) / period)
-            if behind > 2:  # cannot deliver on time (a loaded machine): skip frames to catch up
-                self.frames_dropped += behind
-                k += behind
-                continue
-            elapsed = t_k - first
-            index = k
-            k += 1
-            if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:
-                self.frames_stalled += 1
-                if not self._sleep_until(t_k + period):
-                    return
-                continue
-            if self.faults.drop_probability and self._rng.random() < self.faults.drop_probability:
-                self.frames_dropped += 1
-                continue
-            frame, tip_px = self.camera.render(self.scene.pose_at, t_k)
-            if self.faults.occluded(elapsed):
-                frame = _hide_dot(frame, tip_px, self.camera)
-                self.frames_occluded += 1
-            if not self._sleep_until(t_k + self.latency_s):
-                return
-            self._deliver(index, frame, t_k - exposure / 2)
+        self._schedule(k + 1)
+        t_k = self.first_frame_time_s + k / self.fps
+        elapsed = t_k - self.first_frame_time_s
+        if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:
+            self.frames_stalled += 1
+            return
+        if self.faults.drop_probability and self._rng.random() < self.faults.drop_probability:
+            self.frames_dropped += 1
+            return
+        frame, tip_px = self.camera.render(self.scene.pose_at, t_k)
+        if self.faults.occluded(elapsed):
+            frame = _hide_dot(frame, tip_px, self.camera)
+            self.frames_occluded += 1
+        self._deliver(k, frame, t_k - self.camera.effects.exposure_s / 2, self.clock.now_s())
 
     def stats(self) -> dict[str, float]:
         out = super().stats()

@@ -1,11 +1,12 @@
 """Closed-loop figures on the digital twin (``softpend bench --only rig_control``).
 
-Each controller class runs through the whole rig stack -- the emulator in its own process on a
-pseudo-terminal, the synthetic live camera filming the emulator (60 frames/s, 20 ms latency, the nominal
+Each controller class runs through the whole rig stack on the digital twin, in simulated time -- the emulated
+device behind the real protocol bytes and driver, the synthetic live camera filming the emulator (60 frames/s, 20 ms latency, the nominal
 :meth:`~softpend.vision.camera.CameraEffects.rig` noise), the Algorithm 1 tracker, the state estimator, the
 4096-count encoder -- from N_STARTS fresh hanging starts (the first of
 :data:`softpend.study.presets.REPORT_SEEDS`, ``start_noise_rad`` 0.05), DURATION_S each, and in the ideal
-simulator from the same starts (:func:`softpend.study.rig_runs.simulator_starts`).  A start succeeds when the
+simulator from the same starts (:func:`softpend.study.rig_runs.simulator_starts`).  The loop's real-time figures
+(command jitter, late commands on a pseudo-terminal) are in ``softpend bench --only hardware``.  A start succeeds when the
 rod's true tip (the emulator's truth log) swings up and holds with upright std <= SUCCESS_STD_RAD.
 
 The controllers (:data:`CONTROLLERS`): ``swingup_lqr``, the energy swing-up handing over to the LQR on the
@@ -67,11 +68,7 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
     ideal simulator), ``rig_success_drop_pp_<c>`` (simulator minus twin, percentage points) and
     ``rig_perturbed_success_<c>`` (the same starts in the simulator, each on a rod whose mass, stiffness, damping,
     hub friction and torque limit differ from the model by up to +-15 %,
-    :func:`softpend.study.fresh_starts.perturbed_rod_row`); over all runs
-    ``rig_control_loop_jitter_ms`` (median over runs of each run's p95 of ``|command period - median|``; the
-    worst run's in ``rig_control_loop_jitter_ms_worst_run``), ``rig_control_late_command_fraction``,
-    ``rig_control_step_time_ms_p95`` (host processing per state, wall clock) and ``rig_control_step_cpu_ms_p95``
-    (the same in the loop thread's CPU time: the work without waits)."""
+    :func:`softpend.study.fresh_starts.perturbed_rod_row`)."""
     from softpend.study.presets import REPORT_SEEDS
     from softpend.study.fresh_starts import perturbed_rod_row
     from softpend.study.rig_runs import RigCondition, simulator_starts, twin_start
@@ -83,7 +80,6 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
     seeds = REPORT_SEEDS[:n_starts]
     condition = RigCondition("nominal twin")
     out: dict[str, float] = {}
-    runs: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in controllers:
             controller, task = factories[name]()
@@ -103,17 +99,4 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
             perturbed = perturbed_rod_row(controller, task, PERTURBATION, report_seeds=seeds, duration_s=DURATION_S)
             out[f"rig_perturbed_success_{name}"] = perturbed["balanced_rate"]
             out[f"rig_success_drop_pp_{name}"] = 100.0 * (sim_rate - twin_rate)
-            runs.extend(rows)
-
-    def median(key: str) -> float:
-        values = [r[key] for r in runs if math.isfinite(r[key])]
-        return float(np.median(values)) if values else math.nan
-
-    jitters = [r["jitter_ms_p95"] for r in runs if math.isfinite(r["jitter_ms_p95"])]
-    out["rig_control_starts"] = float(len(seeds))
-    out["rig_control_loop_jitter_ms"] = median("jitter_ms_p95")
-    out["rig_control_loop_jitter_ms_worst_run"] = float(max(jitters)) if jitters else math.nan
-    out["rig_control_late_command_fraction"] = sum(r["late_commands"] for r in runs) / max(sum(r["samples"] for r in runs), 1)
-    out["rig_control_step_time_ms_p95"] = median("step_time_ms_p95")
-    out["rig_control_step_cpu_ms_p95"] = median("step_cpu_ms_p95")
     return out

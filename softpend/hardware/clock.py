@@ -1,0 +1,121 @@
+"""Clocks of the rig stack: the wall clock of a real rig, and the simulated clock of the digital twin.
+
+Everything on the host that waits or stamps a time (:class:`~softpend.hardware.driver.MotorLink`, the control
+loops, the twin's camera) asks a clock: :data:`WALL_CLOCK` (``time.monotonic``) on a real rig, a
+:class:`SimClock` on the twin.  A :class:`SimClock` is an event queue: time moves only when someone waits
+(:meth:`SimClock.wait_for`, :meth:`SimClock.sleep_until`), and then jumps from event to event -- an emulated
+device's tick, a byte arriving after its link latency, a camera frame -- as fast as the computer runs them.
+Events at the same time run in the order they were scheduled, so a run depends on its inputs and seeds only:
+the same start and seed give the same numbers, bit for bit.
+
+:class:`SimSerial` is the host's end of an in-memory serial link on a :class:`SimClock`: what pyserial's
+``Serial`` offers :class:`MotorLink` (``read``, ``write``, ``in_waiting``, ``timeout``), with the bytes the
+device sends arriving when the clock reaches their delivery time.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from typing import Callable, Optional
+
+__all__ = ["SimClock", "SimSerial", "WALL_CLOCK", "WallClock"]
+
+
+class WallClock:
+    """The computer's monotonic clock (a real rig)."""
+
+    def now_s(self) -> float:
+        return time.monotonic()
+
+    def sleep_until(self, time_s: float) -> None:
+        time.sleep(max(0.0, time_s - time.monotonic()))
+
+
+#: The wall clock, shared.
+WALL_CLOCK = WallClock()
+
+
+class SimClock:
+    """Simulated time [s] from 0: a queue of events that run when the clock reaches them (module docstring)."""
+
+    def __init__(self) -> None:
+        self._now = 0.0
+        self._events: list[tuple[float, int, Callable[[], None]]] = []
+        self._order = 0
+
+    def now_s(self) -> float:
+        return self._now
+
+    def call_at(self, time_s: float, action: Callable[[], None]) -> None:
+        """Run ``action()`` when the clock reaches ``time_s`` (now, if that is past)."""
+        self._order += 1
+        heapq.heappush(self._events, (max(float(time_s), self._now), self._order, action))
+
+    def wait_for(self, ready: Callable[[], bool], deadline_s: float) -> bool:
+        """Run events in time order until ``ready()`` or the next event is after ``deadline_s`` (the clock then
+        stands at the deadline); whether ``ready()``."""
+        while not ready():
+            if not self._events or self._events[0][0] > deadline_s:
+                if math.isfinite(deadline_s):
+                    self._now = max(self._now, deadline_s)
+                return False
+            time_s, _, action = heapq.heappop(self._events)
+            self._now = max(self._now, time_s)
+            action()
+        return True
+
+    def sleep_until(self, time_s: float) -> None:
+        """Run every event up to ``time_s`` and stand there."""
+        self.wait_for(lambda: False, time_s)
+
+
+class SimSerial:
+    """The host's end of an in-memory serial link on a :class:`SimClock` (module docstring).
+
+    Parameters
+    ----------
+    clock : SimClock
+        The twin's clock.
+    send : callable
+        ``send(data)``: the device's side of the bytes the host writes (it models their latency).
+    """
+
+    def __init__(self, clock: SimClock, send: Callable[[bytes], None]) -> None:
+        self.clock = clock
+        self._send = send
+        self._rx = bytearray()
+        self.timeout: Optional[float] = 0.0
+        self.is_open = True
+
+    def deliver(self, data: bytes) -> None:
+        """Bytes from the device reach the host (called by the device at their arrival time)."""
+        if self.is_open:
+            self._rx.extend(data)
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._rx)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, waiting (in simulated time) up to :attr:`timeout` for the first."""
+        if not self.is_open:
+            raise OSError("SimSerial is closed")
+        wait = math.inf if self.timeout is None else float(self.timeout)
+        self.clock.wait_for(lambda: bool(self._rx), self.clock.now_s() + wait)
+        out = bytes(self._rx[:size])
+        del self._rx[:size]
+        return out
+
+    def write(self, data: bytes) -> int:
+        if not self.is_open:
+            raise OSError("SimSerial is closed")
+        self._send(bytes(data))
+        return len(data)
+
+    def flush(self) -> None:
+        """Nothing is buffered on the host."""
+
+    def close(self) -> None:
+        self.is_open = False

@@ -1,8 +1,5 @@
-"""Live tip sources: the synthetic camera filming a live scene (time stamps, accuracy, faults), a video file
-replayed as a camera, ``cv2.VideoCapture`` on a file, and ``softpend track --camera``.
-
-Timing is checked loosely (the CI machine is shared): frame counts within wide bounds, latencies at least
-what was configured."""
+"""Live tip sources: the twin's synthetic camera filming a live scene in simulated time (time stamps, accuracy,
+faults), a video file replayed as a camera, ``cv2.VideoCapture`` on a file, and ``softpend track --camera``."""
 
 from __future__ import annotations
 
@@ -13,46 +10,40 @@ import numpy as np
 import pytest
 
 from softpend.cli import main
+from softpend.hardware.emulator import RigConfig, SimRig
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 from softpend.vision.accuracy import babbling_trajectory
 from softpend.vision.camera import CameraEffects, CameraModel, SyntheticCamera, render_video
-from softpend.vision.tip_source import (CameraFaults, CaptureTipSource, PlantScene, SyntheticLiveCamera, TipMeasurement,
+from softpend.vision.tip_source import (CameraFaults, CaptureTipSource, SyntheticLiveCamera, TipMeasurement,
                                         VideoFileTipSource, open_tip_source)
 
-#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
-pytestmark = pytest.mark.realtime
-
-#: A quarter-size camera: the same optics at 320x240 (cheaper to render on a loaded machine).
+#: A quarter-size camera: the same optics at 320x240 (cheaper to render).
 SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
 
 
-def _collect(source, seconds: float) -> list[TipMeasurement]:
-    out: list[TipMeasurement] = []
-    end = time.monotonic() + seconds
-    with source:
-        while time.monotonic() < end:
-            out += source.poll()
-            time.sleep(0.005)
-        out += source.poll()
-    return out
+def _film(rig: SimRig, camera: SyntheticLiveCamera, seconds: float) -> list[TipMeasurement]:
+    camera.start()
+    rig.clock.sleep_until(seconds)
+    return camera.poll()
 
 
 def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
-    task = Task()
-    scene = PlantScene(task, *task.tilt_state(2.0))  # the rod falls and swings: a fast-moving tip
-    camera = SyntheticLiveCamera(scene, fps=60, latency_s=0.02, model=SMALL, effects=CameraEffects.rig(),
-                                 faults=CameraFaults(occlusions_s=((0.4, 0.6),)))
-    measurements = _collect(camera, 1.2)
-    assert 20 <= len(measurements) <= 80  # ~70 at 60 frames/s; fewer on a loaded machine, never more
+    rig = SimRig(RigConfig(task=Task(start_noise_rad=0.0), initial_tilt_rad=2.0))  # the rod falls: a fast tip
+    camera = SyntheticLiveCamera(rig.poses, rig.clock, fps=60, latency_s=0.02, model=SMALL,
+                                 effects=CameraEffects.rig(), faults=CameraFaults(occlusions_s=((0.4, 0.6),)))
+    measurements = _film(rig, camera, 1.2)
+    exposure = camera.camera.effects.exposure_s
+    # every frame whose delivery time has come, and no other: t_k + latency <= 1.2 s
+    assert len(measurements) == math.floor((1.2 - exposure - 0.02) * 60) + 1
     captures = np.array([m.capture_time_s for m in measurements])
-    assert np.all(np.diff(captures) > 0)
-    assert all(m.age_s >= 0.02 for m in measurements)  # never delivered before its latency
+    np.testing.assert_allclose(np.diff(captures), 1 / 60, rtol=1e-9)
+    np.testing.assert_allclose([m.age_s for m in measurements], 0.02 + exposure / 2, rtol=1e-9)
     seen = [m for m in measurements if not m.lost]
-    errors = [np.hypot(*(scene.pose_at(m.capture_time_s)[0][-1] - (m.x_m, m.y_m))) for m in seen]
+    errors = [np.hypot(*(rig.poses.pose_at(m.capture_time_s)[0][-1] - (m.x_m, m.y_m))) for m in seen]
     # the tip moves up to ~2 m/s: a stamp 10 ms off would show as ~2 cm; blur and noise leave ~1 mm
     assert np.median(errors) < 0.002 and max(errors) < 0.006
-    elapsed = captures - camera.first_frame_time_s
+    elapsed = captures + exposure / 2 - camera.first_frame_time_s
     lost = np.array([m.lost for m in measurements])
     inside = (elapsed > 0.41) & (elapsed < 0.59)
     assert inside.any() and lost[inside].all()
@@ -61,15 +52,18 @@ def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
 
 
 def test_synthetic_live_camera_stall_stops_delivery_and_drops_are_counted():
-    task = Task()
-    scene = PlantScene(task)
-    camera = SyntheticLiveCamera(scene, fps=30, latency_s=0.0, model=SMALL,
+    rig = SimRig(RigConfig())
+    camera = SyntheticLiveCamera(rig.poses, rig.clock, fps=30, latency_s=0.0, model=SMALL,
                                  faults=CameraFaults(stall_after_s=0.3, drop_probability=0.3, seed=1))
-    measurements = _collect(camera, 0.9)
+    measurements = _film(rig, camera, 0.9)
     elapsed = np.array([m.capture_time_s for m in measurements]) - camera.first_frame_time_s
     assert len(measurements) >= 2 and np.all(elapsed < 0.3)
     stats = camera.stats()
-    assert stats["frames_stalled"] >= 5 and stats["frames_dropped"] >= 1
+    assert stats["frames_stalled"] >= 15 and stats["frames_dropped"] >= 1
+    assert stats["frames_tracked"] + stats["frames_dropped"] == 9  # frames at 0, 1/30, ... 8/30 s; then the stall
+    camera.close()
+    rig.clock.sleep_until(1.5)
+    assert camera.poll() == []  # a closed camera films no more
 
 
 def test_camera_faults_reject_bad_values():
@@ -79,8 +73,9 @@ def test_camera_faults_reject_bad_values():
         CameraFaults(occlusions_s=((0.5, 0.2),))
     with pytest.raises(ValueError, match="stall_after_s"):
         CameraFaults(stall_after_s=-1.0)
+    rig = SimRig(RigConfig())
     with pytest.raises(ValueError, match="fps"):
-        SyntheticLiveCamera(PlantScene(Task()), fps=0.0)
+        SyntheticLiveCamera(rig.poses, rig.clock, fps=0.0)
 
 
 @pytest.fixture(scope="module")

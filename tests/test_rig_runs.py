@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from softpend.control.lqr import LQRController
-from softpend.hardware.emulator import RigConfig, RigEmulator, truth_columns
+from softpend.hardware.emulator import RigConfig, SimRig, truth_columns
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.stats import wilson_interval
 from softpend.study.presets import REPORT_SEEDS
@@ -20,9 +20,6 @@ from softpend.study.rig_runs import (JOINT_SWINGUP, OBSERVATION_SWINGUP, SIMULAT
 from softpend.task import Task
 from softpend.vision.camera import CameraModel
 from softpend.vision.tip_source import CameraFaults
-
-#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
-pytestmark = pytest.mark.realtime
 
 TASK = Task(start_noise_rad=0.05)
 
@@ -89,11 +86,7 @@ def test_a_start_seeded_s_begins_from_the_same_state_on_the_twin_and_in_the_simu
         env = SoftPendulumEnv(**TASK.env_kwargs())
         env.reset(seed=seed)
         q_sim, qd_sim = env.unwrapped.plant.joint_state()
-        emulator = RigEmulator(RigConfig(task=TASK, seed=seed))
-        try:
-            q_twin, qd_twin = emulator.plant.joint_state()
-        finally:
-            emulator.close()
+        q_twin, qd_twin = SimRig(RigConfig(task=TASK, seed=seed)).plant.joint_state()
         np.testing.assert_array_equal(q_sim, q_twin)
         np.testing.assert_array_equal(qd_sim, qd_twin)
 

@@ -19,13 +19,10 @@ import serial
 
 from softpend.hardware import DeviceError, HandshakeError, LinkChecksumError, LinkDisconnected, MotorLink
 from softpend.hardware import protocol as proto
-from softpend.hardware.emulator import RigConfig, RigEmulator
+from softpend.hardware.emulator import RigConfig, RigEmulator, SimRig
 from softpend.vision import SyntheticCamera, TipTracker, render_video
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers
 from softpend.vision.track_video import track_video
-
-#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
-pytestmark = pytest.mark.realtime
 
 F32_MAX = struct.unpack("<f", struct.pack("<I", 0x7F7FFFFF))[0]
 
@@ -120,22 +117,14 @@ def test_invalid_device_torque_limit_is_refused_and_nothing_is_commanded(fake_po
     assert device.torques_on_wire() == []  # -1 N m (the old clamp with the device's -1) never went out
 
 
-def test_device_announcing_minus_one_over_a_real_pty_is_refused():
-    emulator = RigEmulator(RigConfig())
-    emulator.session.torque_limit_nm = -1.0  # a broken device program
-    import threading
-
-    thread = threading.Thread(target=emulator.serve, daemon=True)
-    thread.start()
-    try:
-        link = MotorLink(emulator.port, 0.06, install_exit_hooks=False)
-        with pytest.raises(HandshakeError, match="torque_limit_nm must be in"):
-            link.open()
-        assert emulator.session.command_nm == 0.0 and emulator.session.last_cmd_us is None
-    finally:
-        emulator.stop()
-        thread.join(2.0)
-        emulator.close()
+def test_device_announcing_minus_one_over_the_twins_link_is_refused():
+    rig = SimRig(RigConfig())
+    rig.session.torque_limit_nm = -1.0  # a broken device program
+    link = MotorLink("twin", 0.06, install_exit_hooks=False, serial=rig.connect())
+    with pytest.raises(HandshakeError, match="torque_limit_nm must be in"):
+        link.open()
+    rig.clock.sleep_until(1.0)  # whatever the host sent on its way out has arrived
+    assert rig.session.command_nm == 0.0 and rig.session.last_cmd_us is None
 
 
 @pytest.mark.parametrize(

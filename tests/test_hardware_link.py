@@ -1,8 +1,9 @@
-"""The motor link end to end through a real pseudo-terminal: round trip, safety and every fault.
+"""The motor link end to end: round trip, safety and every fault.
 
-The emulator serves the protocol on an ``os.openpty`` pair, in a thread of the test process (or, for
-the killed-link and host-signal faults, in a separate process); the host side is the real
-:class:`MotorLink` on pyserial.
+The device is the twin's (:class:`~softpend.hardware.emulator.SimRig`: the protocol bytes over an in-memory
+link, in simulated time) and the host the real :class:`MotorLink`; the real I/O path -- a pseudo-terminal, the
+emulator in a process or thread of its own, a host process that gets SIGTERM -- is covered by a few real-time
+smoke tests (marker ``realtime``) that check behaviour, never a timing figure.
 """
 
 from __future__ import annotations
@@ -26,16 +27,13 @@ from softpend.hardware import (
     MotorLink,
     RigConfig,
     RigEmulator,
+    SimRig,
     SampleLog,
     read_sample_log,
     start_emulator_process,
 )
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, TipMeasurement, run_control_loop
 from softpend.hardware import protocol as proto
-
-#: Real-time runs (the twin's emulator, camera or link timing): `make test` runs these on their own, after the rest.
-pytestmark = pytest.mark.realtime
-
 
 class ThreadedRig:
     """A RigEmulator served from a thread (a real pty, the same code as the process)."""
@@ -55,14 +53,14 @@ class ThreadedRig:
         self.emulator.close()
 
 
-def eventually(predicate, timeout_s: float = 2.0) -> bool:
-    """Poll ``predicate`` until it holds or ``timeout_s`` passes (the emulator runs in real time)."""
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.01)
-    return True
+def link_to(r: SimRig, torque_limit_nm: float = 0.06, **kwargs) -> MotorLink:
+    """A MotorLink (not yet opened) on the twin's in-memory link to ``r``."""
+    return MotorLink("twin", torque_limit_nm=torque_limit_nm, install_exit_hooks=False, serial=r.connect(), **kwargs)
+
+
+def eventually(r: SimRig, predicate, timeout_s: float = 2.0) -> bool:
+    """Run the twin's clock until ``predicate`` holds or ``timeout_s`` of simulated time passes."""
+    return r.clock.wait_for(predicate, r.clock.now_s() + timeout_s)
 
 
 def applied_now(link: MotorLink) -> float:
@@ -73,21 +71,12 @@ def applied_now(link: MotorLink) -> float:
 
 @pytest.fixture
 def rig():
-    rigs = []
-
-    def make(**config):
-        r = ThreadedRig(**config)
-        rigs.append(r)
-        return r
-
-    yield make
-    for r in rigs:
-        r.close()
+    return lambda **config: SimRig(RigConfig(**config))
 
 
 def test_round_trip_handshake_states_and_encoder(rig):
     r = rig(counts_per_rev=512, latency_s=0.001)
-    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+    with link_to(r) as link:
         assert link.device.protocol_version == proto.PROTOCOL_VERSION
         assert link.device.counts_per_rev == 512 and link.device.watchdog_s == pytest.approx(0.1)
         assert 0 < link.ping() < 0.1
@@ -108,50 +97,50 @@ def test_round_trip_handshake_states_and_encoder(rig):
 
 def test_torque_is_clamped_on_the_host_and_nan_stops(rig):
     r = rig()
-    with MotorLink(r.port, torque_limit_nm=0.02, install_exit_hooks=False) as link:
+    with link_to(r, 0.02) as link:
         assert link.torque_limit_nm == pytest.approx(0.02)
         link.read_state()
         link.send_torque(5.0)
         assert link.last_command_nm == pytest.approx(0.02)
-        assert eventually(lambda: applied_now(link) == pytest.approx(0.02, rel=1e-6))
+        assert eventually(r, lambda: applied_now(link) == pytest.approx(0.02, rel=1e-6))
         assert not link.read_state().saturated  # the device never saw more than its limit
         with pytest.raises(ValueError, match="torque_nm"):
             link.send_torque(float("nan"))
-        assert eventually(lambda: r.emulator.session.torque_nm(0) == 0.0 and r.emulator.session.stopped)
+        assert eventually(r, lambda: r.session.torque_nm(0) == 0.0 and r.session.stopped)
 
 
 def test_stalled_host_trips_the_watchdog(rig):
     r = rig(watchdog_ms=100)
-    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+    with link_to(r) as link:
         for _ in range(10):
             link.read_state()
             link.send_torque(0.04)
         stall_start = link.read_state().device_time_s
-        time.sleep(0.35)  # the host hangs: no commands
+        r.clock.sleep_until(r.clock.now_s() + 0.35)  # the host hangs: no commands
         states = link.drain_states()
         late = [s for s in states if s.device_time_s > stall_start + 0.13]
         early = [s for s in states if s.device_time_s < stall_start + 0.08]
         assert early and all(s.applied_torque_nm == pytest.approx(0.04) for s in early)
         assert late and all(s.applied_torque_nm == 0.0 and s.watchdog_tripped for s in late)
         link.send_torque(0.01)  # commands resume: so does the torque
-        assert eventually(lambda: applied_now(link) == pytest.approx(0.01))
+        assert eventually(r, lambda: applied_now(link) == pytest.approx(0.01))
 
 
 def test_garbled_link_raises_clear_error_and_stops_motor(rig):
     r = rig(garble_probability=1.0)
-    link = MotorLink(r.port, torque_limit_nm=0.06, max_consecutive_bad_frames=3, install_exit_hooks=False)
+    link = link_to(r, max_consecutive_bad_frames=3)
     link.open()  # the handshake reply is not garbled (only STATE frames are)
     link.send_torque(0.03)
     with pytest.raises(LinkChecksumError, match="3 consecutive bad frames.*motor stopped"):
         for _ in range(10):
             link.read_state()
-    assert eventually(lambda: r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0)
+    assert eventually(r, lambda: r.session.stopped and r.session.torque_nm(0) == 0.0)
     link.close()
 
 
 def test_isolated_garbled_frames_are_counted_not_fatal(rig, tmp_path):
     r = rig(garble_probability=0.15, drop_probability=0.1, seed=3)
-    with MotorLink(r.port, torque_limit_nm=0.06, max_consecutive_bad_frames=4, install_exit_hooks=False) as link, \
+    with link_to(r, max_consecutive_bad_frames=4) as link, \
             SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         result = run_control_loop(link, lambda obs, t: 0.01, duration_s=0.6, log=log)
     assert result.bad_frames > 0 and result.dropped_states > 0
@@ -167,7 +156,7 @@ def test_lost_tip_commands_zero_torque_and_is_logged(rig, tmp_path):
         lost = 10 <= k < 15  # five frames without a dot
         return TipMeasurement(math.nan if lost else 0.01, math.nan if lost else -0.29, lost)
 
-    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
+    with link_to(r) as link, \
             SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         result = run_control_loop(link, lambda obs, t: 0.03, duration_s=0.4, log=log, tip_source=camera)
     data = read_sample_log(tmp_path / "log.csv")
@@ -188,11 +177,11 @@ def test_controller_exception_stops_motor_and_keeps_samples(rig, tmp_path):
             raise RuntimeError("controller bug")
         return 0.04
 
-    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
+    with link_to(r) as link, \
             SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         with pytest.raises(RuntimeError, match="controller bug"):
             run_control_loop(link, controller, duration_s=2.0, log=log)
-        assert eventually(lambda: r.emulator.session.stopped)  # STOP went out before the exception left the loop
+        assert eventually(r, lambda: r.session.stopped)  # STOP went out before the exception left the loop
     data = read_sample_log(tmp_path / "log.csv")
     assert len(data) == 20 and data["command_torque_nm"][-1] == 0.0
 
@@ -216,6 +205,7 @@ def test_missing_port_is_a_clear_disconnect():
         MotorLink("/dev/null", torque_limit_nm=-1.0)
 
 
+@pytest.mark.realtime
 def test_killed_emulator_is_a_clear_disconnect_and_no_sample_is_lost(tmp_path):
     calls = []
     with start_emulator_process(RigConfig(), truth_log=tmp_path / "truth.csv") as emulator:
@@ -273,9 +263,10 @@ print("not reached", flush=True)
 """
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("script", [_HOST_SCRIPT, _HOST_SCRIPT_SIGNAL_MID_WRITE], ids=["loop", "mid_write"])
-def test_sigterm_on_the_host_sends_stop(rig, script):
-    r = rig(watchdog_ms=5000)  # a long watchdog: only the host's own STOP can zero the torque quickly
+def test_sigterm_on_the_host_sends_stop(script):
+    r = ThreadedRig(watchdog_ms=5000)  # a long watchdog: only the host's own STOP can zero the torque quickly
     host = subprocess.Popen(
         [sys.executable, "-c", script, r.port], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
     )
@@ -290,27 +281,31 @@ def test_sigterm_on_the_host_sends_stop(rig, script):
             host.stdin.flush()
         assert host.wait(5) == 128 + signal.SIGTERM
         assert host.stdout.read() == ""
-        assert eventually(lambda: r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0)
+        deadline = time.monotonic() + 5.0
+        while not r.emulator.session.stopped and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
         assert r.emulator.session.decoder.bad_frames == 0  # no frame was cut in two by the STOP
     finally:
         if host.poll() is None:
             host.kill()
         host.stdout.close()
         host.stdin.close()
+        r.close()
 
 
 def test_a_host_scheduled_after_its_deadline_still_takes_the_state_that_arrived(rig):
     """The host asks for a state with a deadline already past (it was not scheduled in time): the states that
     arrived meanwhile are read and returned, not reported as a silent link."""
     r = rig()
-    with MotorLink(r.port, torque_limit_nm=0.06, install_exit_hooks=False) as link:
+    with link_to(r) as link:
         link.drain_states()
-        time.sleep(0.05)  # states arrive in the port, unread
-        message = link._next_message(time.monotonic() - 1.0, (proto.MSG_STATE,))
+        r.clock.sleep_until(r.clock.now_s() + 0.05)  # states arrive in the port, unread
+        message = link._next_message(r.clock.now_s() - 1.0, (proto.MSG_STATE,))
         assert message[0] == proto.MSG_STATE
         link.drain_states()
-        r.emulator.stop()  # now nothing arrives: the same call times out
-        r.thread.join(2.0)
+        r.host = None  # now the device sends nothing: the same call times out
+        r.clock.sleep_until(r.clock.now_s() + 0.05)
         link.drain_states()
         with pytest.raises(LinkTimeout, match="no STATE"):
-            link._next_message(time.monotonic() - 1.0, (proto.MSG_STATE,))
+            link._next_message(r.clock.now_s() - 1.0, (proto.MSG_STATE,))

@@ -47,8 +47,6 @@ def test_a_port_that_takes_no_byte_times_out(port):
     pyserial's timeout (which the link reports as a disconnect), naming how much was left unsent."""
     ser, _ = port
     frame = bytes(100)
-    start = time.monotonic()
     with pytest.raises(serial.SerialTimeoutException, match=r"took no byte for 0.05 s \(\d+ of 100 bytes unsent\)"):
         for _ in range(10_000):  # a pty buffers a few tens of kB
             driver._write_frame(ser, frame, 0.05)
-    assert time.monotonic() - start < 10

@@ -21,6 +21,7 @@ from softpend.pilco.loop import (RANDOM_STREAMS, _came_near_upright, _optimise_p
                                  _search_with_restarts, _upright_distribution, real_cost)
 from softpend.pilco.propagation import Propagator
 from softpend.plant import RodParams
+from softpend.study.presets import load_hparams
 from softpend.task import Task
 
 torch.set_num_threads(1)
@@ -29,7 +30,13 @@ torch.set_num_threads(1)
 #: not be driven by the hub at all).
 RIGID = RodParams(n_links=1, stiffness_scale=100.0)
 
+#: The fields that ``book/hparams/pilco.yml`` sets and the tiny runs below keep.
+BOOK_FIELDS = ("cost_width_after_swing_up_m", "cost_rate_width_rad_s", "cost_rate_after_rad", "cost_exploration",
+               "gp_all_data", "policy_restarts", "balance_within_rad")
+
+#: The book's settings (``book/hparams/pilco.yml``) at tiny sizes.
 TINY = dict(
+    **{k: v for k, v in dataclasses.asdict(load_hparams("pilco")).items() if k in BOOK_FIELDS},
     state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=2, n_basis=5, max_gp_points=15,
     gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0, compiled=False,
 )
@@ -50,7 +57,7 @@ def _spy_on_condition_on(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int
 
 @pytest.fixture(scope="module")
 def tiny_run_and_conditioning() -> tuple[PilcoResult, list[tuple[int, int]]]:
-    """The tiny run of the defaults, and its :func:`_spy_on_condition_on` record."""
+    """The tiny run of the book's settings, and its :func:`_spy_on_condition_on` record."""
     with pytest.MonkeyPatch.context() as monkeypatch:
         calls = _spy_on_condition_on(monkeypatch)
         return run_pilco(PilcoConfig(**TINY, seed=3), progress=False), calls
@@ -66,7 +73,7 @@ def tiny_run_without_restarts(tiny_run) -> PilcoResult:
     """``tiny_run`` searching from the previous policy only."""
     if tiny_run.config.policy_restarts == 0:
         return tiny_run
-    return run_pilco(PilcoConfig(**TINY, seed=3, policy_restarts=0), progress=False)
+    return run_pilco(PilcoConfig(**{**TINY, "policy_restarts": 0}, seed=3), progress=False)
 
 
 def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
@@ -119,8 +126,8 @@ def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
 def test_several_random_trials_come_first(tmp_path):
     """``n_random_trials`` random trials come first and count as interaction; the run is saved and loaded;
     the tip-rate factor waits for a trial that came near upright (none does in 1 s)."""
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 1}, n_random_trials=3,
-                         cost_rate_width_rad_s=3.0, cost_rate_after_rad=0.5, seed=4)
+    config = PilcoConfig(**{**TINY, "n_policy_trials": 1, "cost_rate_width_rad_s": 3.0, "cost_rate_after_rad": 0.5},
+                         n_random_trials=3, seed=4)
     result = run_pilco(config, progress=False)
     assert all(r.cost_rate_width_rad_s is None for r in result.records)
     theta = result.real_states[-1][1:, 1]
@@ -187,7 +194,7 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     search and trial, the second GP subset are those of the run without restarts, and the second search, on the
     same data, keeps a policy whose predicted cost is at most the one the previous policy alone reached."""
     baseline = tiny_run_without_restarts
-    config = PilcoConfig(**TINY, seed=3, policy_restarts=2, restart_above_cost_fraction=0.0)
+    config = PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=0.0)
     restarted = run_pilco(config, progress=False)
     for mine, theirs in zip(restarted.real_states[:2], baseline.real_states[:2]):
         np.testing.assert_array_equal(mine, theirs)
@@ -198,7 +205,7 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     # a threshold that the search from the previous policy stays under makes no restart: the run without them
     fraction = baseline.records[2].predicted_cost / config.n_horizon_steps + 1e-9
     assert fraction < 1.0
-    unneeded = run_pilco(PilcoConfig(**TINY, seed=3, policy_restarts=2, restart_above_cost_fraction=fraction),
+    unneeded = run_pilco(PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=fraction),
                          progress=False)
     assert [r.policy_restarts for r in unneeded.records] == [0, 0, 0]
     assert [r.predicted_cost for r in unneeded.records[1:]] == [r.predicted_cost for r in baseline.records[1:]]
@@ -276,22 +283,21 @@ def test_search_with_restarts_keeps_the_best_and_reports_it():
                                  np.random.default_rng(0), config.n_horizon_steps, restart=False) == (warm, 0)
 
 
-def test_a_saved_config_without_restarts_is_not_taken_for_one_with_them(tiny_run_without_restarts, tmp_path):
-    """A ``pilco.json`` written before ``policy_restarts`` existed loads as a run without restarts, so the book's
-    runner reuses it only for such a config."""
+def test_a_run_saved_with_other_config_fields_is_an_error_and_not_reused(tiny_run_without_restarts, tmp_path):
+    """A ``pilco.json`` whose config lacks a field (written by a version without it) does not load: a one-line
+    error names the file and the field, and the book's runner runs the config afresh instead of reusing it."""
     from softpend.study.head_to_head import _saved_run
 
     baseline = tiny_run_without_restarts
     baseline.save(tmp_path)
+    assert _saved_run(tmp_path, baseline.config) is not None
     meta = json.loads((tmp_path / "pilco.json").read_text())
     del meta["config"]["policy_restarts"]
-    for record in meta["records"]:
-        del record["policy_restarts"]
     (tmp_path / "pilco.json").write_text(json.dumps(meta))
-    loaded = PilcoResult.load(tmp_path)
-    assert loaded.config.policy_restarts == 0 and loaded.config == baseline.config
-    assert _saved_run(tmp_path, baseline.config) is not None
-    assert _saved_run(tmp_path, dataclasses.replace(baseline.config, policy_restarts=1)) is None
+    with pytest.raises(ValueError, match=r"pilco\.json: the PilcoConfig field 'policy_restarts' is missing") as info:
+        PilcoResult.load(tmp_path)
+    assert "\n" not in str(info.value)
+    assert _saved_run(tmp_path, baseline.config) is None
 
 
 def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_trial_part_is_recorded(monkeypatch):
@@ -347,18 +353,13 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     plain = run_pilco(config, progress=False)
     assert not any(math.isfinite(r.swing_up_time_s) for r in plain.records) and set(lengths) == {10}
     assert plain.records[1].predicted_cost == result.records[1].predicted_cost
-    assert PilcoConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "prediction_s"}).prediction_s is None
-    # a config saved before the narrower cost existed is one without it (its runs used cost_width_m throughout)
-    saved = {k: v for k, v in PilcoConfig().to_dict().items() if k != "cost_width_after_swing_up_m"}
-    assert PilcoConfig().cost_width_after_swing_up_m == 0.075
-    assert PilcoConfig.from_dict(saved).cost_width_after_swing_up_m is None
+    assert PilcoConfig.from_dict(config.to_dict()) == config
 
 
 def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(tiny_run_and_conditioning,
                                                                                         monkeypatch):
-    """``gp_all_data`` (the default): the first search (10 points, under ``max_gp_points`` 15) is the one of the
-    subset-only model; the second sees all 20 points through FITC on the subset of 15.  A saved config without the
-    setting loads as a subset-only one (the runs saved before it existed)."""
+    """``gp_all_data`` (the book's setting): the first search (10 points, under ``max_gp_points`` 15) is the one of
+    the subset-only model; the second sees all 20 points through FITC on the subset of 15."""
     result, calls = tiny_run_and_conditioning
     assert result.config.gp_all_data
     assert calls == [(15, 20)]
@@ -368,8 +369,17 @@ def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_t
     assert result.records[1].predicted_cost == subset_only.records[1].predicted_cost
     assert result.records[1].real_cost == subset_only.records[1].real_cost
     assert result.records[2].predicted_cost != subset_only.records[2].predicted_cost
-    saved = {k: v for k, v in result.config.to_dict().items() if k != "gp_all_data"}
-    assert PilcoConfig.from_dict(saved).gp_all_data is False
+
+
+
+def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
+    """No migration: a config saved by a version with other fields names the first field that differs."""
+    saved = load_hparams("pilco").to_dict()
+    with pytest.raises(ValueError, match="the PilcoConfig field 'gp_all_data' is missing"):
+        PilcoConfig.from_dict({k: v for k, v in saved.items() if k != "gp_all_data"})
+    with pytest.raises(ValueError, match=r"pilco\.json: 'policy_restarts_old' is not a PilcoConfig field") as info:
+        PilcoConfig.from_dict({**saved, "policy_restarts_old": 0}, "pilco.json")
+    assert "\n" not in str(info.value)
 
 
 @pytest.mark.parametrize("field, value", [
@@ -423,8 +433,8 @@ def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
 @pytest.mark.expensive
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_soft_rod_balanced_with_less_than_90_plant_seconds(seed):
-    """The issue's targets with the default configuration (the project's soft rod), on every seed."""
-    result = run_pilco(PilcoConfig(seed=seed), progress=False)
+    """The issue's targets with the book's settings (the project's soft rod), on every seed."""
+    result = run_pilco(load_hparams("pilco", overrides={"seed": seed}), progress=False)
     assert result.records[-1].balanced, [(r.index, r.eval_upright_std_rad) for r in result.records]
     assert result.records[-1].eval_upright_std_rad <= 0.1
     assert result.real_seconds_to_balance < 90.0
@@ -481,7 +491,7 @@ def test_the_balancing_policy_acts_only_in_its_band_about_upright():
 @pytest.fixture(scope="module")
 def tiny_balancing_run() -> PilcoResult:
     """A tiny run whose balancing band (3 rad, 20 rad/s: all but the hanging rod) the random trial visits."""
-    config = PilcoConfig(**{**TINY, "state": "tip_bend", "horizon_s": 3.0}, seed=5, balance_within_rad=3.0,
+    config = PilcoConfig(**{**TINY, "state": "tip_bend", "horizon_s": 3.0, "balance_within_rad": 3.0}, seed=5,
                          balance_within_rad_s=20.0, balance_prediction_s=0.5)
     return run_pilco(config, progress=False)
 

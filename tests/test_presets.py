@@ -1,8 +1,6 @@
 """The study's presets: one home of the defaults, and reported numbers measured on starts no training or
 selection step saw."""
 
-from softpend.pilco import PilcoConfig
-from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.study import presets
 from softpend.study.rl_runs import figure_configs
 
@@ -10,7 +8,7 @@ from softpend.study.rl_runs import figure_configs
 def test_report_starts_are_fresh():
     report = set(presets.REPORT_SEEDS)
     assert len(report) == len(presets.REPORT_SEEDS) >= 20
-    selection = set(DQNConfig().selection_seeds) | set(MBPOConfig().selection_seeds) | set(PilcoConfig().eval_seeds)
+    selection = set(presets.DQN.selection_seeds) | set(presets.MBPO.selection_seeds) | set(presets.PILCO.eval_seeds)
     assert selection <= set(presets.SELECTION_SEEDS)
     assert not report & set(presets.SELECTION_SEEDS)
     training = set(presets.RL_BOOK.seeds) | set(presets.PILCO_BOOK.seeds)

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.study.presets import load_hparams
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import train_mbpo
 from softpend.rl.training_log import BALANCE_STD_RAD
@@ -23,7 +23,7 @@ def _balances(agent, config) -> None:
 
 @pytest.mark.expensive
 def test_dqn_learns_to_swing_up_and_balance(tmp_path):
-    config = DQNConfig()
+    config = load_hparams("dqn")
     agent, log = train_dqn(config, seed=0, episodes=100, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
     _balances(agent, config)
@@ -33,7 +33,7 @@ def test_dqn_learns_to_swing_up_and_balance(tmp_path):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_mbpo_learns_to_swing_up_and_balance(tmp_path, seed):
     # the target is every seed (the book's runs: 65 / 85 / 75 plant s to balance)
-    config = MBPOConfig()
+    config = load_hparams("mbpo")
     _, log = train_mbpo(config, seed=seed, episodes=50, run_dir=tmp_path, progress=False)
     assert math.isfinite(log.real_s_to_balance())
     # the agent of the best periodic evaluation (seeds 1000, 1001), as the book's figures use it, checked on

@@ -9,6 +9,7 @@ from softpend.plant.beam import BeamPlant
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.task import Task
 from softpend.rl.dqn import load_agent, train_dqn
+from softpend.study.presets import load_hparams
 from softpend.study.rl_runs import figure_configs, figure_runs, plant_runs_root, run_folder
 from softpend.rl.training_env import make_training_env
 
@@ -31,7 +32,7 @@ def test_runs_of_different_plants_live_in_different_folders():
     configs = figure_configs(plant="beam")
     assert configs["dqn"].task.plant == "beam" and isinstance(configs["mbpo"], MBPOConfig)
     assert configs["mbpo"].task.plant == "beam"
-    assert figure_configs()["dqn"] == DQNConfig()  # the PRB default runs keep their config (and cache)
+    assert figure_configs()["dqn"] == load_hparams("dqn")  # the book's settings on the PRB plant
 
 
 def test_dqn_trains_and_evaluates_on_the_beam(tmp_path):

@@ -189,10 +189,12 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
     assert log.n_episodes == 3 and len(queue) == 1
     assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
     assert log.stop_reason.startswith("balanced in an evaluation (") and "confirmation starts" in log.stop_reason
-    mbpo = MBPOConfig()
+    from softpend.study.presets import load_hparams
+
+    mbpo = load_hparams("mbpo")
     assert mbpo.stop_after_balanced_evaluations == 1 and len(mbpo.stop_confirm_seeds) == 32
     assert not set(mbpo.stop_confirm_seeds) & set(mbpo.eval_seeds)
-    dqn = DQNConfig()  # two balanced evaluations on eight starts, then a confirmation on 24 more
+    dqn = load_hparams("dqn")  # two balanced evaluations on eight starts, then a confirmation on 24 more
     assert dqn.stop_after_balanced_evaluations == 2 and len(dqn.eval_seeds) == 8 and len(dqn.stop_confirm_seeds) == 24
 
 

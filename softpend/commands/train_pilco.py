@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from softpend.io.outputs import check_output_folder, json_text
-from softpend.io.overrides import apply_overrides
 from softpend.pilco.loop import PilcoConfig, run_pilco
+from softpend.study.presets import load_hparams
 
 __all__ = ["config_from_args", "train_pilco_from_args"]
 
@@ -33,7 +33,7 @@ def config_from_args(args: argparse.Namespace) -> PilcoConfig:
         if getattr(args, name, None) is not None:
             overrides[f"task.rod.{name}"] = getattr(args, name)
     overrides.update(getattr(args, "overrides", None) or {})
-    return apply_overrides(PilcoConfig(), overrides)
+    return load_hparams("pilco", overrides=overrides)
 
 
 def train_pilco_from_args(args: argparse.Namespace) -> int:

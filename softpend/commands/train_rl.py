@@ -8,9 +8,9 @@ from typing import Any
 
 from softpend.io.outputs import json_text
 from softpend.io.overrides import apply_overrides
-from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.config import DQNConfig
 
-from softpend.study.presets import RL_EPISODES
+from softpend.study.presets import RL_EPISODES, load_hparams
 
 __all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
 
@@ -46,7 +46,7 @@ def _train(algo: str, args: argparse.Namespace) -> int:
     from softpend.rl.dqn import train_dqn
     from softpend.rl.mbpo import train_mbpo
 
-    base = DQNConfig() if algo == "dqn" else MBPOConfig()
+    base = load_hparams(algo)
     config = config_from_args(base, args)
     episodes = args.episodes if args.episodes is not None else RL_EPISODES[algo]
     train = train_dqn if algo == "dqn" else train_mbpo

@@ -15,7 +15,7 @@ import json
 import typing
 from typing import Any, Iterable, Mapping, TypeVar, Union
 
-__all__ = ["apply_overrides", "parse_assignment", "parse_value"]
+__all__ = ["apply_overrides", "check_fields", "parse_assignment", "parse_value"]
 
 D = TypeVar("D")
 
@@ -138,3 +138,16 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
     except (TypeError, OverflowError, AttributeError) as exc:  # a value of the wrong type met the class's checks
         shown = ", ".join(f"{prefix}{name}={value!r}" for name, value in direct.items()) or "the nested fields"
         raise ValueError(f"{type(instance).__name__}: {shown}: value of the wrong type or size ({exc})") from None
+
+
+def check_fields(cls: type, data: Mapping[str, Any], source: Any) -> None:
+    """Raise a one-line ``ValueError`` naming the first field of ``data`` that ``cls`` lacks, or the first field
+    of ``cls`` that ``data`` lacks (a config saved by a version with other fields)."""
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+    unknown = [k for k in data if k not in names]
+    if unknown:
+        raise ValueError(f"{source}: {unknown[0]!r} is not a {cls.__name__} field (a config of another version)")
+    missing = [k for k in names if k not in data]
+    if missing:
+        raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
+

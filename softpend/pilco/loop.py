@@ -1,62 +1,37 @@
-"""The PILCO loop on the simulated plant: one random trial (held bang-bang torques), then alternate model learning, policy search and a trial.
+"""The PILCO loop on the simulated plant: random-torque trials, then alternate model learning, policy search and a trial.
 
-Control rate and trials
------------------------
-The plant (``task.make_plant()``) steps at ``task.dt_s = 0.01`` s; PILCO acts every
-``control_dt_s = 0.1`` s (10 Hz, as in PILCO's pendulum) and the torque is held constant over the ten plant
-steps in between (:class:`~softpend.pilco.controller.PilcoController`).  Trials are ``horizon_s = 6`` s (60
-control steps): the 0.06 N m motor needs about 2 s (two to three swings) to pump the rod up, so a 4 s trial
-leaves only 2 s of data on the upright rod.  The policy searches predict the trial's length until a policy
-trial has swung the rod up (a finite ``swing_up_time_s``: within 0.2 rad of upright for 1 s, see
-:mod:`softpend.evaluation`); from then on they predict ``prediction_s = 10`` s, as long as
-the test episodes, so that a policy which swings up and lets the rod fall once the trial would have ended
-costs more than one that holds it.
-Every trial -- the random-torque trial(s) and
-each policy trial -- starts from the environment's hanging start distribution (hub angle and rate
-perturbed by up to ``task.start_noise_rad``) and lasts ``horizon_s``; it runs through the shared
-:func:`softpend.evaluation.run_episode`, so it is the same plant, start distribution and metrics as every
-other controller.  The plant seconds of these trials are the *real interaction* that PILCO learns from.
-
-After each policy trial the new policy is also tested with
-:func:`softpend.evaluation.evaluate_controller` (``eval_seeds``, ``eval_duration_s``); these test episodes
-are not used for learning and are not counted as interaction (as in a learning curve of an RL agent).
-The policy *balances* when every test episode swings up and keeps ``upright_std_rad <= target_std_rad``.
+Trials
+------
+The plant (``task.make_plant()``) steps at ``task.dt_s``; PILCO acts every ``control_dt_s`` and holds the
+torque in between (:class:`~softpend.pilco.controller.PilcoController`).  Every trial -- the random-torque
+trials (held torques, :class:`~softpend.pilco.controller.RandomTorqueController`) and each policy trial --
+starts from the task's start distribution, lasts ``horizon_s`` and runs through
+:func:`softpend.evaluation.run_episode`.  The plant seconds of these trials are the interaction PILCO learns
+from.  After each policy trial the policy is tested with :func:`softpend.evaluation.evaluate_controller`
+(``eval_seeds``, ``eval_duration_s``); the tests are neither learnt from nor counted as interaction.  The
+policy *balances* when every test episode swings up and keeps ``upright_std_rad <= target_std_rad``.
 
 Model learning and policy search
 --------------------------------
 GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`): hyperparameters by penalised marginal likelihood on the
-data subsampled to ``max_gp_points`` (the latest trial always kept, the older points drawn at random), and
-predictions conditioned on all data through the FITC sparse approximation with that subset as the inducing inputs
-(``gp_all_data``; a prediction costs what it costs on the subset); then the RBF policy
-(:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost summed over the predicted rollout
-from ``N(mu0, S0)``, by L-BFGS-B with autograd gradients through the whole moment-matching rollout
-(:class:`~softpend.pilco.propagation.Propagator`), starting from the previous policy (with ``policy_restarts``, the
-searches after the first also start from fresh random policies when the one from the previous policy ends with a
-high predicted cost; the lowest predicted cost is kept).
-Every search minimises the expected cost plus ``cost_exploration = -0.2`` times the predicted standard deviation of
-each step's cost (PILCO's exploration weight; :mod:`softpend.pilco.propagation`): the first data describe the
-hanging rod well and the states above it not at all, and the weight makes a policy that goes where the model is
-unsure look better than one that stays on the hanging plateau.
-The cost is saturating in the tip's distance from upright; once a real trial has brought the tip within
-``cost_rate_after_rad = 0.5`` rad of upright, it is multiplied by a factor in the tip rate
-(``cost_rate_width_rad_s = 3`` rad/s): a rod that spins fast over the top then earns almost nothing, one that
-arrives slowly and stays earns all of it; until then the position cost alone is used.  The random first trial
-holds bang-bang torques for 0.2-0.6 s each: it swings the rod far enough for the first GP to see more than the
-hanging plateau, and on most seeds it already brings the tip within ``cost_rate_after_rad`` of upright, so that
-the tip-rate factor is on from the first policy search (the appendix gives the count).
+data subsampled to ``max_gp_points`` (the latest trial always kept), predictions conditioned on the subset or,
+with ``gp_all_data``, on all data through the FITC approximation with the subset as inducing inputs.  The RBF
+policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost (plus
+``cost_exploration`` times its predicted standard deviation) summed over a moment-matching rollout from
+``N(mu0, S0)`` (:class:`~softpend.pilco.propagation.Propagator`), by L-BFGS-B from the previous policy, and
+with ``policy_restarts`` also from fresh random policies; the lowest predicted cost is kept.  The rollout is
+``horizon_s`` long, or ``prediction_s`` once a policy trial has swung the rod up.  The cost saturates in the
+tip's distance from upright (width ``cost_width_m``, ``cost_width_after_swing_up_m`` after a swing-up); with
+``cost_rate_width_rad_s`` it is multiplied by a factor in the tip rate once a real trial has come within
+``cost_rate_after_rad`` of upright.
 
 Balancing policy
 ----------------
-With ``balance_within_rad`` set (the default), a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts
-instead of the RBF policy while the tip is within ``balance_within_rad`` of upright and its rate within
+With ``balance_within_rad`` set, a linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts instead of
+the RBF policy while the tip is within ``balance_within_rad`` of upright and its rate within
 ``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
-the real trials have visited that band, it is searched like the RBF policy -- the same GP, cost and L-BFGS-B
-budget -- over a predicted ``balance_prediction_s`` from the mean and covariance of the real trials' states in
-the band.  The RBF policy alone can settle into a slow sway about upright that its search does not leave; a linear
-map of the tip angle, its rate and the bending is the form of a balancing controller, and its few weights are
-found from the same model.
-
-The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
+the real trials have visited that band, it is searched like the RBF policy over a predicted
+``balance_prediction_s`` from the mean and covariance of the real trials' states in the band.
 """
 
 from __future__ import annotations
@@ -78,6 +53,7 @@ from softpend.checks import (boolean, check_work_size, finite, in_unit_interval,
                              optional_positive, positive)
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, LateNoisyController, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
+from softpend.io.overrides import check_fields
 from softpend.plant import SimulationDiverged, wrap_angle_rad
 from softpend.plant.randomisation import randomised_rod
 from softpend.task import Task
@@ -103,7 +79,7 @@ class PilcoConfig:
     ----------
     task : softpend.task.Task
         Plant, rod, plant step ``task.dt_s``, sub-steps and the start distribution of every trial and test
-        episode (default: the project's soft rod hanging, ``n_links = 4``).
+        episode.
     state : {"tip_bend", "tip", "hub_tip"}
         State representation (see :mod:`softpend.pilco.propagation`).
     control_dt_s : float
@@ -113,18 +89,15 @@ class PilcoConfig:
     prediction_s : float or None
         Length of the predicted rollout whose cost each policy search minimises [s], at least ``horizon_s``,
         once a policy trial has swung the rod up (its ``swing_up_time_s`` is finite); the searches before
-        predict ``horizon_s``.  None: always ``horizon_s``.  The default,
-        :data:`softpend.evaluation.TEST_EPISODE_S`, is as long as the test episodes that decide whether the
-        run has balanced: a rollout that ends with the trial does not ask the policy to keep the rod up after
-        it (the model of the upright rod comes from the upright part of the trials).  ``predicted_cost`` is
-        summed over the trial's length only, to compare with the real trial.
+        predict ``horizon_s``.  None: always ``horizon_s``.  ``predicted_cost`` is summed over the trial's
+        length only, to compare with the real trial.
     n_policy_trials : int
         Largest number of policy trials after the random ones (the random draws of the trials it allows are
         the same whatever its value: every purpose has its own stream, see ``seed``; so a run that balances
-        within a smaller budget is the same run).  8 trials of ``horizon_s`` after the random trial: 54 plant s.
+        within a smaller budget is the same run).
     n_random_trials : int
         Random-torque trials before the first policy search (each ``horizon_s`` long, counted as
-        interaction); more of them give the first GP model more of the state space.
+        interaction).
     random_hold_min_s, random_hold_max_s : float
         Each torque of the initial random trial is held for a random time in this range [s] (whole control
         periods; see :class:`~softpend.pilco.controller.RandomTorqueController`).
@@ -133,10 +106,8 @@ class PilcoConfig:
     cost_width_m : float
         Width ``w`` of the saturating cost [m].
     cost_width_after_swing_up_m : float, optional
-        Width of the saturating cost once a policy trial has swung the rod up (as ``prediction_s``) [m]:
-        narrower than ``cost_width_m``, it makes a rod that wobbles about upright cost more than one held
-        still (``None``: ``cost_width_m`` throughout).  0.075 m, half of ``cost_width_m``: a tip 0.1 rad off
-        upright (3 cm on the 0.3 m rod) costs 0.08 per step instead of 0.02.
+        Width of the saturating cost once a policy trial has swung the rod up (as ``prediction_s``) [m]
+        (``None``: ``cost_width_m`` throughout).
     cost_rate_width_rad_s : float, optional
         Width of the cost's tip-rate factor [rad/s] (``None``: the cost depends on the tip position only; see
         :mod:`softpend.pilco.propagation`).
@@ -149,8 +120,7 @@ class PilcoConfig:
         ``cost.expl``; see :mod:`softpend.pilco.propagation`): 0 minimises the expected cost, a negative
         weight prefers policies whose outcome the model is unsure of (in ``[-1, 0]``).
     initial_std : float
-        Standard deviation of every state variable in ``S0`` (rad or rad/s); PILCO plans for a slightly
-        wider start distribution than the plant's (robustness).
+        Standard deviation of every state variable in ``S0`` (rad or rad/s).
     n_basis : int
         RBF basis functions of the policy.
     max_gp_points : int
@@ -169,21 +139,17 @@ class PilcoConfig:
         random policy already) adds to the one from the previous policy: new centres drawn from all states the
         real trials visited, new pseudo-targets of spread ``restart_target_std``, length-scales from all data
         (otherwise the rule of the first policy), each optimised like the previous policy; the policy with the
-        lowest predicted cost is kept.  0: only the search from the previous policy, which can stay in its
-        local optimum (hanging, or spinning) once the model has learnt where it leads.
+        lowest predicted cost is kept.  0: only the search from the previous policy.
     restart_above_cost_fraction : float
         Restart only when the search from the previous policy ends with an objective (the predicted cost with
         its exploration term) above this share of the largest cost (1 per prediction step); 0: in every search
         after the first.
     restart_target_std : float
-        Spread of a restart's initial pseudo-targets (pre-saturation; 1 gives a policy that uses the whole
-        torque range, the first policy's 0.1 small torques).
+        Spread of a restart's initial pseudo-targets (before the saturation).
     eval_seeds : tuple of int
         Seeds of the test episodes after each policy trial (empty: no tests).
     eval_duration_s : float
-        Length of each test episode [s] (:data:`softpend.evaluation.TEST_EPISODE_S`, as long as the reported
-        fresh-start episodes: a policy that holds the rod for a shorter test and falls later does not stop the
-        run).
+        Length of each test episode [s].
     target_std_rad : float
         Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
     stop_when_balanced : bool
@@ -200,9 +166,7 @@ class PilcoConfig:
     balance_within_rad : float, optional
         Learn a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) that acts instead of the RBF
         policy while the tip is within this angle of upright [rad] and its rate within ``balance_within_rad_s``
-        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  The defaults (0.4 rad,
-        2 rad/s) take in the slow sway about upright that the RBF policy alone can settle into and leave out fast
-        passes over the top.  Its search predicts
+        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  Its search predicts
         ``balance_prediction_s`` from the states of the real trials in that band (their mean and covariance plus
         ``initial_std**2``), with the same GP and cost as the RBF policy's search, and runs before every trial once
         the real trials have visited the band.
@@ -212,10 +176,9 @@ class PilcoConfig:
         Length of the balancing policy's predicted rollout [s].
     compiled : bool
         Predict the rollouts of the policy searches through ``torch.compile``
-        (:class:`~softpend.pilco.propagation.Propagator` ``compiled``): the same numbers to rounding, a search about
-        twice as fast at the book's sizes after a compilation of 15-40 s per number of GP points (a later process
-        reads it from torch's disk caches in about 5 s; it needs a C++ compiler, and falls back to eager rollouts
-        with a warning without one).  Off for tiny test runs, where the compilation costs more than it saves.
+        (:class:`~softpend.pilco.propagation.Propagator` ``compiled``): the same numbers to rounding, compiled once
+        per number of GP points (it needs a C++ compiler and falls back to eager rollouts with a warning without
+        one).
     seed : int
         Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
         starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;
@@ -227,24 +190,24 @@ class PilcoConfig:
     state: str = "tip_bend"
     control_dt_s: float = 0.1
     horizon_s: float = 6.0
-    prediction_s: Optional[float] = TEST_EPISODE_S
+    prediction_s: Optional[float] = None
     n_policy_trials: int = 8
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
     random_hold_max_s: float = 0.6
     random_bang_bang: bool = True
     cost_width_m: float = 0.15
-    cost_width_after_swing_up_m: Optional[float] = 0.075
-    cost_rate_width_rad_s: Optional[float] = 3.0
-    cost_rate_after_rad: Optional[float] = 0.5
-    cost_exploration: float = -0.2
+    cost_width_after_swing_up_m: Optional[float] = None
+    cost_rate_width_rad_s: Optional[float] = None
+    cost_rate_after_rad: Optional[float] = None
+    cost_exploration: float = 0.0
     initial_std: float = 0.05
     n_basis: int = 50
     max_gp_points: int = 200
-    gp_all_data: bool = True
+    gp_all_data: bool = False
     gp_iterations: int = 100
     policy_iterations: int = 80
-    policy_restarts: int = 1
+    policy_restarts: int = 0
     restart_above_cost_fraction: float = 0.5
     restart_target_std: float = 1.0
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
@@ -254,8 +217,8 @@ class PilcoConfig:
     rod_randomisation: float = 0.0
     observation_delay_steps: int = 0
     observation_noise_rad: float = 0.0
-    compiled: bool = True
-    balance_within_rad: Optional[float] = 0.4
+    compiled: bool = False
+    balance_within_rad: Optional[float] = None
     balance_within_rad_s: float = 2.0
     balance_prediction_s: float = 3.0
     seed: int = 0
@@ -327,15 +290,14 @@ class PilcoConfig:
         data["eval_seeds"] = list(self.eval_seeds)
         return data
 
-    #: Values of the settings that a saved config may lack: the ones that reproduce runs saved before the
-    #: setting existed (so such a run is not taken for a run of a config with other values).
-    MISSING_DEFAULTS = {"policy_restarts": 0, "cost_exploration": 0.0, "prediction_s": None,
-                        "cost_width_after_swing_up_m": None, "compiled": False,
-                        "gp_all_data": False, "balance_within_rad": None}
-
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "PilcoConfig":
-        data = {**cls.MISSING_DEFAULTS, **data}
+    def from_dict(cls, data: dict[str, Any], source: Any = "PILCO config") -> "PilcoConfig":
+        """Inverse of :meth:`to_dict`; a field missing from ``data`` or unknown to this class is a one-line
+        ``ValueError`` that starts with ``source``."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{source}: not a PILCO config (expected a JSON object, got {type(data).__name__})")
+        check_fields(cls, data, source)
+        data = dict(data)
         data["task"] = Task.from_dict(data["task"])
         data["eval_seeds"] = tuple(data.get("eval_seeds", ()))
         return cls(**data)
@@ -455,7 +417,7 @@ class PilcoResult:
                 raise FileNotFoundError(f"no PILCO result file {path}")
         try:
             meta = json.loads(meta_path.read_text())
-            config = PilcoConfig.from_dict(meta["config"])
+            config = PilcoConfig.from_dict(meta["config"], meta_path)
             records = [TrialRecord(**r) for r in meta["records"]]
             hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
         except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, KeyError, TypeError, AttributeError) as exc:

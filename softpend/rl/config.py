@@ -1,35 +1,13 @@
-"""Every hyperparameter of DQN and DQN-MBPO, in one documented place.
+"""The settings of DQN and DQN-MBPO.
 
-:class:`DQNConfig` holds the task (torque levels, episode length, action repeat), the stable-baselines3
-DQN settings and the bookkeeping (evaluation and checkpoint intervals).  :class:`MBPOConfig` adds what
-model-based policy optimisation needs (model rollouts per real step, rollout-length schedule, model
-refit interval, ensemble size, real-data ratio).  Both are frozen dataclasses, saved as JSON next to every
-run (``config.json``) and overridable field by field (``softpend train --set NAME=VALUE``,
+:class:`DQNConfig` holds the task (torque levels, episode length, action repeat), the stable-baselines3 DQN
+settings and the bookkeeping (evaluation, checkpoints, early stopping).  :class:`MBPOConfig` adds what
+model-based policy optimisation needs (model rollouts per real step, rollout-length schedule, model refit
+interval, ensemble size, real-data ratio).  The defaults are those of the plain algorithms; the settings the
+book trains with are data, ``book/hparams/dqn.yml`` and ``book/hparams/mbpo.yml``, read by
+:func:`softpend.study.presets.load_hparams`.  Both classes are frozen dataclasses, saved as JSON next to
+every run (``config.json``) and overridable field by field (``softpend train --set NAME=VALUE``,
 :func:`softpend.io.overrides.apply_overrides`).
-
-Choices that differ from the registered environments
-----------------------------------------------------
-* **Episode length** ``episode_s = 5 s`` (the registered envs truncate at 10 s).  Swinging up takes about
-  2-3 s, so a 5 s episode covers the swing-up and a few seconds of balancing; evaluation always runs the
-  full 10 s from hanging.  Plant seconds are counted from the steps actually simulated.
-* **Training starts** ``training_start = "random"``: each training episode starts with the straight rod at
-  rest at a uniformly random hub angle (the environment's ``start="random"``), as an operator could place it;
-  evaluation always starts hanging.  From hanging only, DQN finds the "spin over the top" local optimum of
-  the reward first and takes much longer to discover catching and balancing.
-* **Action repeat** ``action_repeat = 4``: the agent picks one of ``n_torque_levels`` torques every 4 plant
-  steps (25 Hz, the torque is held in between), so that the discount ``gamma = 0.99`` spans ~4 s, long
-  enough to credit the pumping swing-up.  The reward of an agent step is the sum over its plant steps.
-* **Budget and early stopping**: the episode count of a run is a budget (the book's: 250 DQN, 80 DQN-MBPO
-  episodes); a run ends as soon as ``stop_after_balanced_evaluations`` consecutive evaluations on the selection
-  starts ``eval_seeds`` balance and the agent also balances from the confirmation starts ``stop_confirm_seeds``,
-  so the final agent is one that balanced, not one trained on for long after it did.  DQN checks eight selection
-  starts in two consecutive evaluations, then confirms on 24 more; DQN-MBPO checks four in one evaluation,
-  then confirms on 32 more, of which one may fail.  The stopping rules that lost are in the book's appendix.
-  Epsilon decays over ``exploration_fraction`` of the budget: 0.08 of 250 = 20 DQN episodes, 0.125 of 80 = 10
-  DQN-MBPO episodes.
-* **Exploration floor** ``exploration_final_eps``: 0.1 for DQN, 0.02 for DQN-MBPO.  A model-free DQN run can settle on
-  spinning the rod over the top, a local optimum of the greedy policy; with one action in ten taken at random fewer
-  runs stay there (the measurements are in the book's appendix).
 """
 
 from __future__ import annotations
@@ -44,6 +22,7 @@ from typing import Any
 from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
+from softpend.io.overrides import check_fields
 from softpend.task import Task
 
 __all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "save_config"]
@@ -89,21 +68,16 @@ class DQNConfig:
     -----------
     eval_every_episodes : int
         Evaluate the greedy policy on the true plant (:func:`softpend.evaluation.evaluate_controller`)
-        every this many episodes.  1 for both methods, so that the plant seconds to balance of DQN and
-        DQN-MBPO are read at the same granularity (an evaluation is a measurement: it changes no training
-        draw, so a run is the same whatever this is).
+        every this many episodes (an evaluation changes no training draw).
     eval_seeds : tuple of int
         Start-noise seeds of each evaluation (from hanging).
     eval_until_first_failure : bool
         Evaluate the ``eval_seeds`` starts in order and stop at the first that does not succeed (swing up and
-        hold ``upright_std_rad <= 0.2``, :func:`softpend.evaluation.metrics_from_trajectory`).  A balanced
-        evaluation (``stop_upright_std_rad`` <= 0.2) is always complete, so the early stopping, the plant
-        seconds to balance and the kept best agent of a run that balances are those of full evaluations; an
-        evaluation of an agent that still fails costs its starts up to the first failure only (most of a
-        model-free run's evaluations fail at the first start).  False: every start every time.
+        hold ``upright_std_rad`` at most :data:`softpend.evaluation.SUCCESS_STD_RAD`).  A balanced evaluation
+        is always complete, so early stopping and the kept best agent are decided on full evaluations.  False:
+        every start every time.
     eval_duration_s : float
-        Evaluation episode length [s] (:data:`softpend.evaluation.TEST_EPISODE_S`, as long as the reported
-        fresh-start episodes).
+        Evaluation episode length [s].
     checkpoint_every_episodes : int
         Save agent, replay buffer and training log every this many episodes.
 
@@ -124,9 +98,8 @@ class DQNConfig:
     stop_after_balanced_evaluations : int
         End training once this many consecutive evaluations have balanced: every ``eval_seeds`` start swung up
         and held ``upright_std_rad <= stop_upright_std_rad`` (stable-baselines3's
-        ``StopTrainingOnRewardThreshold`` with the balance criterion as the threshold).  The final agent is then
-        the agent of the last of those evaluations, and ``episodes`` is a budget, not a count.  0: train for all
-        ``episodes``.
+        ``StopTrainingOnRewardThreshold`` with the balance criterion as the threshold); ``episodes`` is then a
+        budget.  0: train for all ``episodes``.
     stop_upright_std_rad : float
         Upright std [rad] that counts as balanced for early stopping.
     stop_confirm_seeds : tuple of int
@@ -144,30 +117,30 @@ class DQNConfig:
     n_torque_levels: int = 5
     episode_s: float = 5.0
     action_repeat: int = 4
-    training_start: str = "random"
-    learning_rate: float = 6.3e-4
+    training_start: str = "hanging"
+    learning_rate: float = 1e-4
     buffer_size: int = 100_000
-    learning_starts: int = 500
-    batch_size: int = 128
+    learning_starts: int = 100
+    batch_size: int = 32
     gamma: float = 0.99
     train_freq: int = 1
-    gradient_steps: int = 2
-    target_update_interval: int = 500
-    exploration_fraction: float = 0.08
+    gradient_steps: int = 1
+    target_update_interval: int = 10_000
+    exploration_fraction: float = 0.1
     exploration_initial_eps: float = 1.0
-    exploration_final_eps: float = 0.1
+    exploration_final_eps: float = 0.05
     max_grad_norm: float = 10.0
     clip_q_targets: bool = False
-    net_arch: tuple[int, ...] = (256, 256)
+    net_arch: tuple[int, ...] = (64, 64)
     reset_every_episodes: int = 0
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_until_first_failure: bool = True
     eval_duration_s: float = TEST_EPISODE_S
     checkpoint_every_episodes: int = 10
-    stop_after_balanced_evaluations: int = 2
+    stop_after_balanced_evaluations: int = 0
     stop_upright_std_rad: float = 0.1
-    stop_confirm_seeds: tuple[int, ...] = tuple(range(1008, 1032))
+    stop_confirm_seeds: tuple[int, ...] = ()
     stop_confirm_max_failures: int = 0
     rod_randomisation: float = 0.0
     observation_delay_steps: int = 0
@@ -272,7 +245,7 @@ class MBPOConfig(DQNConfig):
     Model-based fields
     ------------------
     rollouts_per_real_step : int
-        Model rollouts started per real agent step (the report: 9).  Rollouts are generated in batches of
+        Model rollouts started per real agent step.  Rollouts are generated in batches of
         ``rollouts_per_real_step * rollout_every_steps`` every ``rollout_every_steps`` real steps, each
         branched from a state drawn uniformly from the real replay buffer, one random ensemble member per
         rollout.
@@ -284,8 +257,7 @@ class MBPOConfig(DQNConfig):
     model_buffer_size : int
         Capacity of the model-transition buffer (older model data are overwritten, as MBPO's retain epochs).
     real_ratio : float
-        Fraction of each DQN batch drawn from real transitions (the rest from model rollouts).  0.5:
-        mostly-model batches let the agent exploit model errors.
+        Fraction of each DQN batch drawn from real transitions (the rest from model rollouts).
     initial_random_episodes : int
         Episodes of uniformly random actions before the first model fit (motor babbling).
     model_refit_every_episodes : int
@@ -301,39 +273,10 @@ class MBPOConfig(DQNConfig):
         Hidden layers of each ensemble member (:class:`softpend.sysid.DynamicsModel`).
     start_branch_fraction : float
         Share of the rollouts branched from fresh draws of the training episodes' start distribution
-        (``training_start``: the straight rod at rest at a uniformly random hub angle) instead of from the
-        real buffer.  Which starts the real episodes happen to draw decides when an agent first sees the
-        rod at rest near upright; in the model every episode sees them all.
+        (``training_start``) instead of from states of the real buffer; 0: all from the real buffer.
     rollouts_within_data : bool
         End a model rollout at the first predicted observation vector outside the box of the real ones
-        (per component, widened by 10 % of its range on each side): the Q-network is never asked to
-        bootstrap from states unlike any the plant has shown, where the model and the network both
-        extrapolate.
-
-    DQN fields that differ from :class:`DQNConfig`
-    ----------------------------------------------
-    exploration_fraction = 0.125: epsilon reaches its floor after 10 of the book's 80 real episodes.
-    exploration_final_eps = 0.02: the floor with which every other DQN-MBPO setting was chosen (the model rollouts
-    take the agent's epsilon-greedy actions too); DQN's floor of 0.1 was measured on model-free DQN only.
-    eval_seeds = (1000, 1001, 1002, 1003): four selection starts.
-    stop_after_balanced_evaluations = 1, stop_confirm_seeds = (1004, ..., 1035): training stops at the first
-    evaluation that balances from the four selection starts if the agent also balances from 32 more: the agent
-    changes much from one episode to the next, so that a few starts that balance say little about the others
-    (the confirmation counts that were measured are in the book's appendix).
-    stop_confirm_max_failures = 1: one of the 32 confirmation starts may fail, as one in 20 of the reported fresh
-    starts may.  An agent that balances 95 % of starts passes a confirmation with probability 0.52 (0.19 if
-    none may fail), one that balances 85 % with 0.04.
-    gradient_steps = 24, target_update_interval = 20 (agent steps, hard copy): twelve times model-free DQN's
-    update-to-data ratio, and the target network copied after every 480 gradient steps (model-free DQN: 1,000), so
-    that the value of the balanced rod travels back along the swing-up in fewer real episodes.
-    clip_q_targets = True: with many gradient steps on partly model-generated data the unclamped Q-values
-    diverge far above the largest achievable return (:attr:`DQNConfig.q_target_bounds`).
-    reset_every_episodes = 15: the Q-network starts afresh after episodes 15, 30, 45, 60 and 75 of the budget, on all
-    the data gathered so far.  With this many gradient steps per real step a network can settle early on values far
-    above what the hanging rod earns (it spins the rod over the top, then hangs) and never leave them; a new
-    network fitted to the richer data does not inherit them.
-
-    The outcomes of other settings are recorded in ``book/records/what_we_tried.yml`` (the book's appendix).
+        (per component, widened by 10 % of its range on each side); False: rollouts run their full length.
     """
 
     rollouts_per_real_step: int = 9
@@ -347,19 +290,8 @@ class MBPOConfig(DQNConfig):
     model_fit_steps: int = 1500
     model_batch_size: int = 256
     model_hidden_widths: tuple[int, ...] = (64, 64)
-    start_branch_fraction: float = 0.75
-    rollouts_within_data: bool = True
-    gradient_steps: int = 24
-    target_update_interval: int = 20
-    exploration_fraction: float = 0.125
-    exploration_final_eps: float = 0.02
-    eval_seeds: tuple[int, ...] = (1000, 1001, 1002, 1003)
-    stop_after_balanced_evaluations: int = 1
-    stop_confirm_seeds: tuple[int, ...] = tuple(range(1004, 1036))
-    stop_confirm_max_failures: int = 1
-    train_freq: int = 1
-    clip_q_targets: bool = True
-    reset_every_episodes: int = 15
+    start_branch_fraction: float = 0.0
+    rollouts_within_data: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -424,19 +356,6 @@ def config_to_dict(config: DQNConfig) -> dict[str, Any]:
     return data
 
 
-#: Fields that configs of earlier versions hold and this version does not, each with the value at which this
-#: version trains as those did: :func:`load_config` drops such a field when it holds that value (so that the
-#: run folders of those versions are still found complete) and refuses the config otherwise.
-REMOVED_FIELDS: dict[str, Any] = {"reset_catch_up_gradient_steps": 0, "model_limit_tip_reach": False,
-                                 "skip_reset_after_success_episodes": 0, "start_branch_rate_rad_s": 0.0}
-
-#: Fields that configs of earlier versions lack, each with the value at which those versions trained:
-#: :func:`load_config` reads a config of a class with such a field, saved without it, as holding that value (not this
-#: version's default), so that a run folder of an earlier version is never taken for a run of a config that trains
-#: otherwise.
-ADDED_FIELDS: dict[str, Any] = {"stop_confirm_max_failures": 0}
-
-
 def save_config(config: DQNConfig, path: Path) -> None:
     """Write ``config`` as JSON (with its class name)."""
     data = {"class": type(config).__name__, **config_to_dict(config)}
@@ -457,16 +376,10 @@ def load_config(path: Path) -> DQNConfig:
     cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(name) if isinstance(name, str) else None
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
-    for field, value in REMOVED_FIELDS.items():
-        if field in data and data.pop(field) != value:
-            raise ValueError(f"{path}: not a config of this version: {field} (no longer a field) is not {value!r}")
-    names = {f.name for f in dataclasses.fields(cls)}
-    for field, value in ADDED_FIELDS.items():
-        if field in names:
-            data.setdefault(field, value)
+    check_fields(cls, data, path)
     try:
         task = Task.from_dict(data.pop("task"))
         return cls(task=task, **{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
-    except (TypeError, KeyError, AttributeError) as exc:  # another version's config (renamed or removed fields)
-        raise ValueError(f"{path}: not a config of this version: {exc}") from exc
+    except (TypeError, KeyError, AttributeError) as exc:
+        raise ValueError(f"{path}: not a {cls.__name__}: {exc}") from exc
 

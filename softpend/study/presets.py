@@ -3,23 +3,67 @@
 The book's notebooks read their shared settings from here in their ``parameters`` cells (so that the full
 profile of ``book/profiles.yml`` only lists what differs: nothing for the published figures, tiny budgets for
 the quick profile), and the commands and benchmarks read the same values.  The physical defaults themselves
-live in :class:`softpend.plant.RodParams` and :class:`softpend.task.Task`; the learning algorithms' settings
-in :class:`softpend.rl.DQNConfig`, :class:`softpend.rl.MBPOConfig` and :class:`softpend.pilco.PilcoConfig`.
+live in :class:`softpend.plant.RodParams` and :class:`softpend.task.Task`.  The learning algorithms' settings are
+data: :func:`load_hparams` reads ``book/hparams/<method>.yml`` into :class:`softpend.rl.DQNConfig`,
+:class:`softpend.rl.MBPOConfig` or :class:`softpend.pilco.PilcoConfig`, whose own defaults are the plain
+algorithms'.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Optional
 
+from softpend.io.overrides import apply_overrides
 from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.task import Task
 
-__all__ = ["PILCO", "PILCO_BOOK", "PilcoBudget", "REPORT_SEEDS", "RL_BOOK", "RL_EPISODES", "RLBudget", "SELECTION_SEEDS",
-           "TASK"]
+__all__ = ["DQN", "HPARAMS_DIR", "MBPO", "PILCO", "PILCO_BOOK", "PilcoBudget", "REPORT_SEEDS", "RL_BOOK", "RL_EPISODES",
+           "RLBudget", "SELECTION_SEEDS", "TASK", "load_hparams"]
 
 #: The task of every figure: the default rod on the PRB plant, hanging starts.
 TASK = Task()
+
+#: The folder of the tuned settings, one YAML file per method (``dqn.yml``, ``mbpo.yml``, ``pilco.yml``).
+HPARAMS_DIR = Path(__file__).resolve().parents[2] / "book" / "hparams"
+
+#: The config class of each method of :func:`load_hparams`.
+CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
+
+
+def load_hparams(method: str, task: Optional[Task] = None, overrides: Optional[Mapping[str, Any]] = None,
+                 directory: Path | str = HPARAMS_DIR) -> Any:
+    """The config the book trains ``method`` (``"dqn"``, ``"mbpo"`` or ``"pilco"``) with.
+
+    The class's defaults, then the settings of ``<directory>/<method>.yml`` (a mapping ``field: value``), then
+    ``task`` (default: :data:`TASK`), then ``overrides`` (:func:`softpend.io.overrides.apply_overrides`, dotted
+    names reach into the task).  A name in the file that is not a field of the class, or a file that is not a
+    mapping, is a one-line ``ValueError`` naming the file.
+    """
+    import yaml
+
+    if method not in CONFIG_CLASSES:
+        raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
+    cls = CONFIG_CLASSES[method]
+    path = Path(directory) / f"{method}.yml"
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"{path}: cannot read the settings ({' '.join(str(exc).split())})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of {cls.__name__} fields, got {type(data).__name__}")
+    fields = {f.name for f in dataclasses.fields(cls)}
+    for name in data:
+        if name not in fields or name == "task":
+            raise ValueError(f"{path}: {name!r} is not a {cls.__name__} setting")
+    try:
+        config = apply_overrides(cls(task=task if task is not None else TASK), data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return apply_overrides(config, overrides or {})
 
 
 @dataclass(frozen=True)
@@ -46,9 +90,9 @@ class RLBudget:
     episodes_dqn: int = 250
     episodes_mbpo: int = 80
     seeds: tuple[int, ...] = tuple(range(10))
-    episode_s: float = DQNConfig.episode_s
-    rollouts_per_real_step: int = MBPOConfig.rollouts_per_real_step
-    mbpo_random_episodes: int = MBPOConfig.initial_random_episodes
+    episode_s: float = load_hparams("dqn").episode_s
+    rollouts_per_real_step: int = load_hparams("mbpo").rollouts_per_real_step
+    mbpo_random_episodes: int = load_hparams("mbpo").initial_random_episodes
     runs_root: str = "runs/rl-book"
 
 
@@ -59,8 +103,10 @@ RL_BOOK = RLBudget()
 RL_EPISODES = {"dqn": RL_BOOK.episodes_dqn, "mbpo": RL_BOOK.episodes_mbpo}
 
 
-#: The PILCO settings of Figure 10 (the :class:`~softpend.pilco.PilcoConfig` defaults).
-PILCO = PilcoConfig()
+#: The settings of the book's runs: DQN and DQN-MBPO (Figures 4-6), PILCO (Figure 10).
+DQN = load_hparams("dqn")
+MBPO = load_hparams("mbpo")
+PILCO = load_hparams("pilco")
 
 
 @dataclass(frozen=True)
@@ -86,7 +132,7 @@ PILCO_BOOK = PilcoBudget()
 #: Start seeds that training and model selection see: the evaluations during training that pick an RL run's
 #: best agent, stop its training and decide when PILCO has balanced (the configs' ``selection_seeds`` and
 #: ``eval_seeds``).
-SELECTION_SEEDS = tuple(sorted(set(DQNConfig().selection_seeds) | set(MBPOConfig().selection_seeds) | set(PILCO.eval_seeds)))
+SELECTION_SEEDS = tuple(sorted(set(DQN.selection_seeds) | set(MBPO.selection_seeds) | set(PILCO.eval_seeds)))
 
 #: Fresh start seeds of every reported success rate and upright error: no training or selection step
 #: evaluates on them (``tests/test_presets.py`` checks that they are disjoint from the seeds above and from

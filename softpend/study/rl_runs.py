@@ -7,12 +7,13 @@ one is resumed from its checkpoint, so that Figures 4-6 and ``softpend bench --o
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 
-from softpend.study.presets import RL_BOOK, TASK
+from softpend.study.presets import TASK, load_hparams
 from softpend.task import Task
 from softpend.study.sweep import run_jobs
 from softpend.plant import check_plant_name
@@ -125,19 +126,32 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
     return rows
 
 
-def figure_configs(torque_limit_nm: float = TASK.torque_limit_nm, episode_s: float = RL_BOOK.episode_s,
-                   rollouts_per_real_step: int = RL_BOOK.rollouts_per_real_step,
-                   mbpo_random_episodes: int = RL_BOOK.mbpo_random_episodes, plant: str = TASK.plant) -> dict[str, DQNConfig]:
-    """The configs of the book's Figures 4-6 (defaults otherwise): ``{"dqn": ..., "mbpo": ...}``.
+def figure_configs(plant: str = TASK.plant, task_overrides: Optional[Mapping[str, Any]] = None,
+                   rl_overrides: Optional[Mapping[str, Any]] = None, *, torque_limit_nm: Optional[float] = None,
+                   episode_s: Optional[float] = None, rollouts_per_real_step: Optional[int] = None,
+                   mbpo_random_episodes: Optional[int] = None) -> dict[str, DQNConfig]:
+    """The configs of the book's Figures 4-6: ``{"dqn": ..., "mbpo": ...}``.
 
-    ``plant`` (``"prb"`` or ``"beam"``) is the true plant the agents train and are evaluated on.
+    Each is :func:`softpend.study.presets.load_hparams` on the task ``Task(plant=plant)`` with ``task_overrides``
+    (:class:`~softpend.task.Task` fields by dotted name, e.g. ``{"rod.torque_limit_nm": 0.08}``), then
+    ``rl_overrides`` (config fields by name, each applied to the configs that have it; a name that neither
+    :class:`DQNConfig` nor :class:`MBPOConfig` has is a ``ValueError``).  The keyword-only arguments are the same
+    settings by their :class:`~softpend.study.presets.RLBudget` names (None: not set).
     """
-    task = Task(plant=plant).replace(torque_limit_nm=torque_limit_nm)
-    return {
-        "dqn": DQNConfig(task=task, episode_s=episode_s),
-        "mbpo": MBPOConfig(task=task, episode_s=episode_s, rollouts_per_real_step=rollouts_per_real_step,
-                           initial_random_episodes=mbpo_random_episodes),
-    }
+    from softpend.io.overrides import apply_overrides
+
+    task = apply_overrides(Task(plant=plant), {**({"rod.torque_limit_nm": torque_limit_nm} if torque_limit_nm is not None
+                                                  else {}), **(task_overrides or {})})
+    legacy = {"episode_s": episode_s, "rollouts_per_real_step": rollouts_per_real_step,
+              "initial_random_episodes": mbpo_random_episodes}
+    overrides = {**{k: v for k, v in legacy.items() if v is not None}, **(rl_overrides or {})}
+    configs = {algo: load_hparams(algo, task) for algo in ("dqn", "mbpo")}
+    names = {algo: {f.name for f in dataclasses.fields(config)} for algo, config in configs.items()}
+    unknown = sorted(k for k in overrides if k.partition(".")[0] not in names["mbpo"])
+    if unknown:
+        raise ValueError(f"rl_overrides: {unknown[0]!r} is not a DQNConfig or MBPOConfig field")
+    return {algo: apply_overrides(config, {k: v for k, v in overrides.items() if k.partition(".")[0] in names[algo]})
+            for algo, config in configs.items()}
 
 
 def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
@@ -153,7 +167,7 @@ METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
 
 
 def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
-                progress: bool = True, plant: str = "prb", workers: Optional[int] = None,
+                progress: bool = True, plant: str = TASK.plant, workers: Optional[int] = None,
                 backend: Optional[str] = None,
                 **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).

@@ -1,7 +1,7 @@
 """``softpend bench --only pilco``: real plant seconds PILCO needs to balance the soft rod, and its compute.
 
-The default :class:`~softpend.pilco.loop.PilcoConfig` (the project's soft rod) runs once per seed of
-:data:`SEEDS`; the targets below hold for *every* seed, so the headline figures are the worst seed's:
+The book's :class:`~softpend.pilco.loop.PilcoConfig` (``book/hparams/pilco.yml``, the project's soft rod) runs
+once per seed of :data:`SEEDS`; the targets below hold for *every* seed, so the headline figures are the worst seed's:
 
 * ``pilco_real_s_to_balance`` -- training plant seconds (random trial plus policy trials) up to the first
   policy whose test on the true plant (shared :func:`softpend.evaluation.evaluate_controller`, three
@@ -46,7 +46,8 @@ import dataclasses
 
 import torch
 
-from softpend.pilco.loop import PilcoConfig, run_pilco
+from softpend.pilco.loop import run_pilco
+from softpend.study.presets import PILCO
 from softpend.torch_threads import one_torch_thread
 
 ROOT = "runs/bench-pilco"
@@ -61,7 +62,7 @@ def bench_pilco() -> dict[str, float]:
     torch.set_num_threads(1)
     out: dict[str, float] = {}
     for seed in SEEDS:
-        result = run_pilco(dataclasses.replace(PilcoConfig(), seed=seed), progress=True)
+        result = run_pilco(dataclasses.replace(PILCO, seed=seed), progress=True)
         result.save(f"{ROOT}/seed{seed}")
         out[f"pilco_real_s_to_balance_seed{seed}"] = result.real_seconds_to_balance
         out[f"pilco_train_wall_s_seed{seed}"] = result.train_wall_s
@@ -78,7 +79,7 @@ def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
     """The ten-seed PILCO figures of the module docstring."""
     from softpend.study.fresh_starts import headline_figures, pilco_fresh_start_rows, seed_rows
     from softpend.study.head_to_head import pilco_runs
-    from softpend.study.presets import PILCO, PILCO_BOOK
+    from softpend.study.presets import PILCO_BOOK
 
     results = pilco_runs(PILCO, seeds, PILCO_BOOK.runs_root, progress=True)
     figures = headline_figures(seed_rows({}, pilco_fresh_start_rows(results), results))
@@ -102,7 +103,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
     from softpend.pilco.propagation import Propagator, state_spec
 
     with one_torch_thread():
-        config = PilcoConfig()
+        config = PILCO
         spec = state_spec(config.state)
         rng = np.random.default_rng(0)
         n = config.max_gp_points

@@ -19,10 +19,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 
-from softpend.rl.config import DQNConfig
+from softpend.study.presets import DQN
 
 
 def dqn_train_steps_per_s(episodes: int = 10) -> float:
@@ -31,7 +32,8 @@ def dqn_train_steps_per_s(episodes: int = 10) -> float:
     evaluation and checkpoint writing are excluded."""
     from softpend.rl.dqn import train_dqn
 
-    config = DQNConfig(learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000, eval_seeds=(0,), eval_duration_s=0.1)
+    config = dataclasses.replace(DQN, learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000,
+                                 eval_seeds=(0,), eval_duration_s=0.1)
     with tempfile.TemporaryDirectory() as tmp:
         _, log = train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, progress=False)
     elapsed = log.episodes[-1]["wall_s"] - log.episodes[0]["wall_s"]

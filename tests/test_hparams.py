@@ -1,0 +1,70 @@
+"""The tuned settings as data: ``book/hparams/<method>.yml`` read into the configs by ``load_hparams``."""
+
+import dataclasses
+
+import pytest
+import yaml
+
+from softpend.pilco import PilcoConfig
+from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.study.presets import CONFIG_CLASSES, HPARAMS_DIR, load_hparams
+from softpend.task import Task
+
+
+@pytest.mark.parametrize("method", sorted(CONFIG_CLASSES))
+def test_every_setting_in_a_file_is_a_field_of_its_config_and_is_applied(method):
+    cls = CONFIG_CLASSES[method]
+    data = yaml.safe_load((HPARAMS_DIR / f"{method}.yml").read_text())
+    assert isinstance(data, dict) and data
+    fields = {f.name for f in dataclasses.fields(cls)}
+    assert set(data) <= fields - {"task"}
+    config = load_hparams(method)
+    assert type(config) is cls
+    for name, value in data.items():
+        got = getattr(config, name)
+        assert (list(got) if isinstance(got, tuple) else got) == value, name
+        assert got != getattr(cls(), name), f"{name} repeats the default of {cls.__name__}"
+    for name in fields - set(data):  # every other field keeps the class's default (the plain algorithm's)
+        assert getattr(config, name) == getattr(cls(), name), name
+
+
+def test_the_classes_and_the_files():
+    assert CONFIG_CLASSES == {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
+
+
+def test_an_unknown_setting_is_a_one_line_error_naming_it_and_the_file(tmp_path):
+    (tmp_path / "dqn.yml").write_text("learning_rate: 1.0e-3\nlerning_starts: 5\n")
+    with pytest.raises(ValueError, match=r"dqn\.yml: 'lerning_starts' is not a DQNConfig setting") as info:
+        load_hparams("dqn", directory=tmp_path)
+    assert "\n" not in str(info.value)
+    (tmp_path / "pilco.yml").write_text("task: {}\n")
+    with pytest.raises(ValueError, match="'task' is not a PilcoConfig setting"):
+        load_hparams("pilco", directory=tmp_path)
+    (tmp_path / "dqn.yml").write_text("rollouts_per_real_step: 5\n")  # a DQN-MBPO setting
+    with pytest.raises(ValueError, match="'rollouts_per_real_step' is not a DQNConfig setting"):
+        load_hparams("dqn", directory=tmp_path)
+    (tmp_path / "mbpo.yml").write_text("rollouts_per_real_step: 5\n")
+    assert load_hparams("mbpo", directory=tmp_path).rollouts_per_real_step == 5
+    with pytest.raises(ValueError, match=r"missing/dqn\.yml: cannot read the settings"):
+        load_hparams("dqn", directory=tmp_path / "missing")
+
+
+def test_a_bad_value_or_a_file_that_is_not_a_mapping_is_a_one_line_error(tmp_path):
+    (tmp_path / "dqn.yml").write_text("gamma: 1.5\n")
+    with pytest.raises(ValueError, match=r"dqn\.yml: .*gamma") as info:
+        load_hparams("dqn", directory=tmp_path)
+    assert "\n" not in str(info.value)
+    (tmp_path / "pilco.yml").write_text("- 1\n- 2\n")
+    with pytest.raises(ValueError, match=r"pilco\.yml: expected a mapping of PilcoConfig fields"):
+        load_hparams("pilco", directory=tmp_path)
+    with pytest.raises(ValueError, match="unknown method 'sac'"):
+        load_hparams("sac")
+
+
+def test_task_and_overrides_come_after_the_file():
+    task = Task(plant="beam")
+    config = load_hparams("mbpo", task, {"episode_s": 1.0, "task.rod.torque_limit_nm": 0.08})
+    assert config.task == task.replace(torque_limit_nm=0.08) and config.episode_s == 1.0
+    assert config.gradient_steps == load_hparams("mbpo").gradient_steps
+    with pytest.raises(ValueError, match="unknown PilcoConfig field 'bogus'"):
+        load_hparams("pilco", overrides={"bogus": 1})

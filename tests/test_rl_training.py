@@ -285,8 +285,8 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     # branching from the training start distribution: the first share of the rollouts starts at fresh draws of
     # the start environment (the straight rod at rest at a random hub angle), the rest at real states
     buffer.model_buffer.reset()
-    trainer = MBPOTrainer(dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False), seed=3,
-                          run_dir=tmp_path)
+    trainer = MBPOTrainer(dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False,
+                                              training_start="random"), seed=3, run_dir=tmp_path)
     trainer.dynamics = _DriftingModel()
     assert trainer.rollouts(model, buffer, n_rollouts=10, length=1, epsilon=0.0) == 10
     starts = make_base_env(config, "random")

@@ -16,14 +16,9 @@ Cost (Bryson's rule, :class:`LQRWeights`)
 -----------------------------------------
 ``J = sum_k y_k' Q_y y_k + R tau_k^2`` with ``y = [theta, phi, theta_dot, phi_dot]`` and
 ``Q_y = diag(1/theta_max^2, 1/phi_max^2, 1/theta_dot_max^2, 1/phi_dot_max^2)``, ``R = 1/tau_max^2``.
-The tip angle gets the tightest tolerance, 0.01 rad (it is what the task scores); the hub angle is weighted
-loosely, 0.5 rad (the upright equilibrium needs ``phi = 0`` anyway, and a tight hub weight fights the tip);
-the rates (2 rad/s tip, 10 rad/s hub) damp the motion without slowing the recovery; ``tau_max`` is the
-default torque limit, 0.06 N m.  With these weights a 0.2 rad tilt is recovered in about 0.2 s (the motor
-saturates for the first few steps) and the measured region of attraction under the 0.06 N m limit is
-about 0.54 rad, close to the static bound ``asin(tau_max / (g (m L/2 + m_tip L))) = 0.55 rad``; weights
-10x looser or tighter change neither figure by more than a few per cent.  The bending coordinates get no direct weight (their
-modes are stable and damped); a tiny ``regularisation`` on the whole state keeps ``Q`` positive definite.
+The tolerances are the fields of :class:`LQRWeights` (the tip angle tightest, the hub angle loosest, ``tau_max``
+the default torque limit).  The bending coordinates get no direct weight; a small ``regularisation`` on the whole
+state keeps ``Q`` positive definite.
 """
 
 from __future__ import annotations

@@ -23,11 +23,8 @@ The rod is soft, so "its energy" needs a choice (``energy_source``):
 * ``"joint"`` (default; PRB plant): the PRB chain's total mechanical energy (kinetic + gravity + elastic, from
   :meth:`softpend.plant.PRBPlant.energy_j` of a design copy of the plant) minus its value upright at rest.
 
-Defaults (measured on the default rod, 10 start seeds from hanging, 10 s episodes): joint energy with
-``k_E = 5`` and no margin swings up in at most 2.9 s and then holds the tip at 0.010 rad std or better.
-The tip-only estimate is polluted by the bending vibration in ``theta_dot`` and needs a harder push and an
-energy margin; :meth:`EnergySwingUpController.for_observations` (``k_E = 50``, 0.02 J margin, LQR on
-observations) swings up within 3.0 s and holds within 0.02 rad std, using observations only.
+:meth:`EnergySwingUpController.for_observations` builds the observation-only variant: tip energy with a larger
+gain and an energy margin (the tip rate carries the bending vibration), and the LQR on observations.
 """
 
 from __future__ import annotations

@@ -96,11 +96,9 @@ class PilcoController(_HoldController):
 class RandomTorqueController(_HoldController):
     """Random torques in ``[-torque_limit_nm, torque_limit_nm]``, each held for a random whole number of control periods.
 
-    PILCO's first trial: with a new uniform draw every control period (``hold_s = (control_dt_s,
-    control_dt_s)``, ``bang_bang=False``) the torque averages out and the 0.06 N m motor barely moves the
-    hanging rod, so the first GP model knows only the hanging region.  Holding a full +-limit torque for a
-    random 0.2-0.6 s (about half the rod's swing period) pumps energy in: the rod swings through large
-    angles and often over the top, and the first model sees the whole swing-up region.
+    PILCO's random trials.  ``hold_s = (control_dt_s, control_dt_s)`` with ``bang_bang=False`` draws a new
+    uniform torque every control period; longer holds of ``+-torque_limit_nm`` (``bang_bang=True``) pump energy
+    into the swing.
 
     Parameters
     ----------

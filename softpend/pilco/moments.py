@@ -33,9 +33,8 @@ __all__ = [
 
 def _solve(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``torch.linalg.solve(a, b)`` without its check for a singular ``a``: the same factorisation and numbers,
-    and no error-raising side effect in a compiled graph (with one, torch neither reuses the compiled rollout
-    of an earlier process from its disk caches nor caches it; a process then spends 13-20 s compiling each
-    graph).  A singular ``a`` gives non-finite moments, which the policy search scores as a failed rollout."""
+    and no error-raising side effect in a compiled graph (with one, torch neither reuses a compiled rollout from
+    its disk caches nor caches it).  A singular ``a`` gives non-finite moments, which the policy search scores as a failed rollout."""
     return torch.linalg.solve_ex(a, b)[0]
 
 

@@ -7,10 +7,8 @@ rate.  Two representations are offered (:data:`STATE_SPECS`):
 
 ``"tip"``
     ``x = [theta_dot, theta]``: the tip angle ``theta`` from upright and its rate -- a pendulum's state.
-    For a stiff one-link rod it is (nearly) the full state and PILCO learns the swing-up with it; for the
-    soft rod it is too little: the bending (about 3 Hz, excited by every torque step) is not in the state
-    and shows up as GP noise (about 0.8 rad/s on the 0.1 s change of ``theta_dot``), and in our runs the
-    policy search then never found a swing-up.
+    For a stiff one-link rod it is (nearly) the full state; for the soft rod the bending is not in it and
+    shows up as GP noise.
 ``"tip_bend"`` (default)
     ``x = [theta_dot, bend_dot, bend, theta]`` with ``bend = wrap(phi - theta)``: the tip plus the rod's
     bending seen from the observations (hub angle against the tip direction) -- the report's limited
@@ -18,8 +16,6 @@ rate.  Two representations are offered (:data:`STATE_SPECS`):
 ``"hub_tip"``
     ``x = [phi_dot, theta_dot, phi, theta]``: the same information with both angles as angles (two sin/cos
     pairs), for comparison.
-
-Four GP outputs instead of two make the policy search about three times dearer than with ``"tip"``.
 
 Angles are handled as in PILCO: the Gaussian state holds the angles themselves (unwrapped), and every
 model input uses ``(sin, cos)`` of each angle instead of the angle (moments by
@@ -176,10 +172,8 @@ class Propagator:
         negative: optimism in the face of the model's uncertainty).
     compiled : bool
         Run each predicted step of a :meth:`rollout` that records gradients through ``torch.compile``: the same
-        numbers to rounding, its objective and gradient about twice as fast at the book's sizes (200 GP points,
-        100 steps; ``softpend bench --only pilco_search``), after a compilation of 15-40 s for each new number of
-        GP points, which a later process reads from torch's disk caches in about 5 s.  It needs a C++ compiler;
-        without one the rollout warns once and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
+        numbers to rounding, compiled once for each new number of GP points (and cached on disk by torch).  It
+        needs a C++ compiler; without one the rollout warns once and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
         ``f(mean, cov, *params)`` their moments (:class:`~softpend.pilco.gp.MultiOutputGP`, :class:`~softpend.pilco.policy.RBFPolicy`).
     """
 

@@ -11,9 +11,8 @@ The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-li
    to ``<run_dir>/real_data.npz``).
 3. Every ``rollout_every_steps`` real agent steps, ``rollouts_per_real_step * rollout_every_steps`` model
    rollouts are branched from real states drawn uniformly from the real buffer, or, for a share
-   ``start_branch_fraction`` of them, from fresh draws of the training episodes' start distribution (the
-   straight rod at rest at a random hub angle, which a real episode starts from: the agent need not wait for
-   the plant's episodes to happen to start near upright, see :class:`~softpend.rl.config.MBPOConfig`).
+   ``start_branch_fraction`` of them, from fresh draws of the training episodes' start distribution
+   (``training_start``).
    Each rollout step takes the current epsilon-greedy action, advances the model ``action_repeat`` plant
    steps (a random ensemble member per rollout and step, as mbrl-lib's ``random_model`` propagation), and
    computes the observation vector and the report's reward from the *predicted* plant observation with the

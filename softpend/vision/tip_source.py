@@ -7,7 +7,7 @@ measurement that arrives late at the instant it describes.  The real and recorde
 on a background thread as they arrive; :meth:`TipSource.poll` returns what has been tracked since the previous
 call, oldest first.
 
-Three sources share the tracking (:class:`FrameTracker`: the tracker of :mod:`softpend.vision.tracker`
+Two sources share the tracking (:class:`FrameTracker`: the tracker of :mod:`softpend.vision.tracker`
 and an affine calibration, fitted from the reference markers on the first frame unless one is given):
 
 * :class:`SyntheticLiveCamera` -- the digital twin's camera, in simulated time: renders frames of a *live*
@@ -15,12 +15,10 @@ and an affine calibration, fitted from the reference markers on the first frame 
   120 frames/s ...) with the exposure and imperfections of :class:`~softpend.vision.camera.CameraEffects`;
   each frame reaches the tracker ``latency_s`` after the end of its exposure (sensor read-out and transfer),
   and :class:`CameraFaults` injects stalls, dropped frames and occlusions of the dot.
-* :class:`VideoFileTipSource` -- replays a video file (with the synthetic camera's sidecar timestamps when
-  present), paced in real time or as fast as it can be tracked.
-* :class:`CaptureTipSource` -- ``cv2.VideoCapture`` on a device index (``0``) or a stream URL; the capture
-  time is the host time at which the frame was read minus the camera's known ``latency_s``.
+* :class:`CaptureTipSource` -- ``cv2.VideoCapture`` on a device index (``0``), a stream URL or a video file; the
+  capture time is the host time at which the frame was read minus the camera's known ``latency_s``.
 
-:func:`open_tip_source` builds the last two from a ``--camera`` argument.  No physical camera was available
+:func:`open_tip_source` builds it from a ``--camera`` argument.  No physical camera was available
 when this module was written: :class:`CaptureTipSource` is exercised with video files (which
 ``cv2.VideoCapture`` opens the same way), and the loop with the synthetic live camera.
 """
@@ -33,14 +31,14 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Optional, Protocol, Sequence
+from typing import Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
 from softpend.checks import in_unit_interval, non_negative, positive
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import (DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot,
-                                    check_fps, read_sidecar)
+                                    check_fps)
 from softpend.vision.tracker import Detection, TipTracker
 
 __all__ = [
@@ -53,7 +51,6 @@ __all__ = [
     "ThreadedTipSource",
     "TipMeasurement",
     "TipSource",
-    "VideoFileTipSource",
     "open_tip_source",
 ]
 
@@ -454,82 +451,6 @@ class SyntheticLiveCamera(ThreadedTipSource):
 
 
 # ---------------------------------------------------------------------- recorded and real cameras
-def _capture_frames(capture) -> Iterator[np.ndarray]:
-    while True:
-        ok, frame = capture.read()
-        if not ok:
-            return
-        yield frame
-
-
-class VideoFileTipSource(ThreadedTipSource):
-    """Replay a video file as a camera.
-
-    Frame ``i`` was captured at ``stamp_i`` (the sidecar's ``timestamps_s``, else ``i / fps``); replayed, it
-    is stamped ``t_start + stamp_i - stamp_0`` on the host clock and, with ``realtime``, delivered no earlier
-    than that time plus ``latency_s``.
-
-    Parameters
-    ----------
-    path : path
-        Video file.
-    realtime : bool
-        Pace the frames like the camera that recorded them (else: as fast as they can be tracked).
-    latency_s : float
-        Delay of each frame after its capture when paced [s].
-    fps : float, optional
-        Frame rate when the file has no sidecar (default: the container's).
-    frame_tracker, on_frame :
-        See :class:`ThreadedTipSource` (the sidecar's marker layout is used for the calibration when the
-        tracker has none).
-    """
-
-    name = "video-file"
-
-    def __init__(self, path: str | Path, realtime: bool = True, latency_s: float = 0.0, fps: Optional[float] = None,
-                 frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
-        import cv2
-
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"video not found: {path}")
-        sidecar = read_sidecar(path) if Path(str(path) + ".json").exists() else {}
-        if frame_tracker is None:
-            frame_tracker = FrameTracker(markers_m=sidecar.get("markers_m") or DEFAULT_MARKERS_M)
-        super().__init__(frame_tracker, on_frame)
-        self.path = path
-        self.realtime = bool(realtime)
-        self.latency_s = non_negative("latency_s", latency_s)
-        self._capture = cv2.VideoCapture(str(path))
-        if not self._capture.isOpened():
-            raise ValueError(f"video {path} cannot be opened by OpenCV")
-        if fps is None:
-            fps = sidecar.get("fps") or float(self._capture.get(cv2.CAP_PROP_FPS) or 0) or None
-        if fps is None and sidecar.get("timestamps_s") is None:
-            self._capture.release()
-            raise ValueError("fps: the video has no usable frame rate; pass fps")
-        self.fps = check_fps("fps", fps) if fps is not None else None
-        self._stamps = sidecar.get("timestamps_s")
-
-    def _stamp(self, i: int) -> float:
-        if self._stamps is not None and i < len(self._stamps):
-            return float(self._stamps[i]) - float(self._stamps[0])
-        return i / self.fps if self.fps else math.nan
-
-    def _run(self) -> None:
-        start = time.monotonic()
-        for i, frame in enumerate(_capture_frames(self._capture)):
-            if self._stop.is_set():
-                return
-            capture_time = start + self._stamp(i)
-            if self.realtime and not self._sleep_until(capture_time + self.latency_s):
-                return
-            self._deliver(i, frame, capture_time)
-
-    def _release(self) -> None:
-        self._capture.release()
-
-
 class CaptureTipSource(ThreadedTipSource):
     """A live camera through ``cv2.VideoCapture``: a device index (``0``) or a stream URL.
 

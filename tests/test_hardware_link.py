@@ -32,7 +32,7 @@ from softpend.hardware import (
     read_sample_log,
     start_emulator_process,
 )
-from softpend.hardware.loop import LOOP_LOG_COLUMNS, TipMeasurement, run_control_loop
+from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
 from softpend.hardware import protocol as proto
 
 class ThreadedRig:
@@ -145,26 +145,6 @@ def test_isolated_garbled_frames_are_counted_not_fatal(rig, tmp_path):
         result = run_control_loop(link, lambda obs, t: 0.01, duration_s=0.6, log=log)
     assert result.bad_frames > 0 and result.dropped_states > 0
     assert len(read_sample_log(tmp_path / "log.csv")) == result.samples
-
-
-def test_lost_tip_commands_zero_torque_and_is_logged(rig, tmp_path):
-    r = rig()
-    ticks = iter(range(10**6))
-
-    def camera() -> TipMeasurement:
-        k = next(ticks)
-        lost = 10 <= k < 15  # five frames without a dot
-        return TipMeasurement(math.nan if lost else 0.01, math.nan if lost else -0.29, lost)
-
-    with link_to(r) as link, \
-            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
-        result = run_control_loop(link, lambda obs, t: 0.03, duration_s=0.4, log=log, tip_source=camera)
-    data = read_sample_log(tmp_path / "log.csv")
-    lost = data["tip_lost"] > 0.5
-    assert result.tip_lost == 5 and lost.sum() == 5
-    assert np.all(data["command_torque_nm"][lost] == 0.0)
-    assert np.all(data["command_torque_nm"][~lost] == pytest.approx(0.03))
-    assert np.all(np.isnan(data["tip_x_m"][lost]))
 
 
 def test_controller_exception_stops_motor_and_keeps_samples(rig, tmp_path):

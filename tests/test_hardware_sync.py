@@ -41,7 +41,7 @@ def _write_logs(tmp_path, trajectory, lost_frames=(), drop_motor=()):
     motor_idx = np.array([i for j, i in enumerate(motor_idx) if j not in set(drop_motor)])
     with SampleLog(tmp_path / "motor.csv", LOOP_LOG_COLUMNS) as log:
         for i in motor_idx:
-            log.append([t[i] + 100.0, t[i], i, phi[i], 0.0, u[i], u[i], 0, np.nan, np.nan, 0])
+            log.append([t[i] + 100.0, t[i], i, phi[i], 0.0, u[i], u[i], 0])
     cam_t = np.arange(0.05, t[-1] - 0.05, 1 / 90)  # a 90 fps camera on its own clock
     with SampleLog(tmp_path / "camera.csv", TRACK_COLUMNS) as log:
         for k, tc in enumerate(cam_t):

@@ -1,14 +1,13 @@
 """The host-side control loop: any controller against a rig (real or emulated) through :class:`MotorLink`.
 
 The loop is paced by the device's STATE stream (100 Hz): for each state it builds a
-:class:`RigObservation`, optionally adds the camera's tip measurement, asks the controller for a torque,
-sends it (clamped by the driver) and appends the sample to a crash-safe :class:`SampleLog` *before*
-anything else can fail.  Whatever goes wrong -- controller exception, link error, lost tip -- the motor
-gets zero torque: a lost tip sends 0 for that tick, and any exception sends STOP and propagates (the
-sample that was being processed is still logged, with the torque actually commanded).
+:class:`RigObservation`, asks the controller for a torque, sends it (clamped by the driver) and appends the
+sample to a crash-safe :class:`SampleLog` *before* anything else can fail.  Whatever goes wrong -- controller
+exception, link error -- the motor gets zero torque: any exception sends STOP and propagates (the sample that
+was being processed is still logged, with the torque actually commanded).
 
-This loop hands a controller what the rig measures at that tick (hub angle and rate, the latest tip
-position) -- enough for programs of time and hub angle such as babbling.  Controllers of the project, which
+This loop hands a controller what the encoder measures at that tick (hub angle and rate) -- enough for programs
+of time and hub angle such as babbling.  Controllers of the project, which
 need the joint state or the observed variables with their rates, run in
 :func:`softpend.hardware.closed_loop.run_closed_loop`, behind the state estimator.
 """
@@ -17,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Optional, Protocol
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -29,8 +28,6 @@ __all__ = [
     "LOOP_LOG_COLUMNS",
     "LoopResult",
     "RigObservation",
-    "TipMeasurement",
-    "TipSource",
     "run_control_loop",
 ]
 
@@ -44,25 +41,7 @@ LOOP_LOG_COLUMNS: tuple[str, ...] = (
     "applied_torque_nm",
     "command_torque_nm",
     "flags",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_lost",
 )
-
-
-@dataclass(frozen=True)
-class TipMeasurement:
-    """The camera's tip position relative to the hub [m] (NaN and ``lost=True`` when no blob qualified)."""
-
-    x_m: float
-    y_m: float
-    lost: bool
-
-
-class TipSource(Protocol):
-    """Anything that returns the latest tip measurement (a camera + tracker, a video file)."""
-
-    def __call__(self) -> TipMeasurement: ...
 
 
 @dataclass(frozen=True)
@@ -77,33 +56,20 @@ class RigObservation:
         Hub angle from upright, unwrapped [rad].
     phi_dot_rad_s : float
         Hub rate [rad/s].
-    tip_x_m, tip_y_m : float
-        Tip position relative to the hub from the camera [m] (NaN without a camera or when lost).
-    tip_lost : bool
-        The tracker found no tip in this frame.
     """
 
     time_s: float
     phi_rad: float
     phi_dot_rad_s: float
-    tip_x_m: float = math.nan
-    tip_y_m: float = math.nan
-    tip_lost: bool = False
-
-    @property
-    def theta_rad(self) -> float:
-        """Tip angle from upright (NaN without a tip measurement) [rad]."""
-        return math.atan2(-self.tip_x_m, self.tip_y_m) if math.isfinite(self.tip_x_m) else math.nan
 
 
 @dataclass
 class LoopResult:
-    """Summary of one loop run: samples processed, periods between commands, lost/dropped counts."""
+    """Summary of one loop run: samples processed, periods between commands, dropped/bad counts."""
 
     samples: int
     command_periods_s: np.ndarray
     dropped_states: int
-    tip_lost: int
     bad_frames: int
     watchdog_trips: int
 
@@ -158,7 +124,6 @@ def run_control_loop(
     controller: Callable[[RigObservation, float], float],
     duration_s: float,
     log: Optional[SampleLog] = None,
-    tip_source: Optional[TipSource] = None,
     progress: bool = False,
 ) -> LoopResult:
     """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time.
@@ -173,8 +138,6 @@ def run_control_loop(
         Run length in device time [s].
     log : SampleLog, optional
         Log with columns :data:`LOOP_LOG_COLUMNS`; one line per received state, written before the next.
-    tip_source : callable, optional
-        Camera: returns a :class:`TipMeasurement` each tick; a lost tip commands zero torque that tick.
     progress : bool
         Show a tqdm progress bar.
 
@@ -194,7 +157,7 @@ def run_control_loop(
         raise ValueError(f"log must have the columns LOOP_LOG_COLUMNS, got {log.columns}")
     bar = SecondsBar(duration_s, "rig loop", progress)
     send_times: list[float] = []
-    samples = dropped = lost_count = watchdog = 0
+    samples = dropped = watchdog = 0
     t0_device: Optional[float] = None
     last_state: Optional[MotorState] = None
     nominal_period = 1.0 / link.device.state_rate_hz if link.device else 0.01
@@ -209,15 +172,8 @@ def run_control_loop(
                 dropped += max(0, int(round(gap / nominal_period)) - 1)
             last_state = state
             watchdog += int(state.watchdog_tripped)
-            tip = tip_source() if tip_source is not None else TipMeasurement(math.nan, math.nan, False)
-            observation = RigObservation(t, state.phi_rad, state.phi_dot_rad_s, tip.x_m, tip.y_m, tip.lost)
             try:
-                if tip.lost:
-                    lost_count += 1
-                    link.send_torque(0.0)
-                else:
-                    command = float(controller(observation, t))
-                    link.send_torque(command)
+                link.send_torque(float(controller(RigObservation(t, state.phi_rad, state.phi_dot_rad_s), t)))
             except BaseException:
                 link.emergency_stop()  # zero torque first, so the log records what is in force
                 raise
@@ -226,7 +182,7 @@ def run_control_loop(
                 if log is not None:
                     log.append([state.host_time_s, state.device_time_s, state.seq, state.phi_rad,
                                 state.phi_dot_rad_s, state.applied_torque_nm, link.last_command_nm,
-                                state.flags, tip.x_m, tip.y_m, tip.lost])
+                                state.flags])
             samples += 1
             bar.advance(t)
             if t >= duration_s:
@@ -237,4 +193,4 @@ def run_control_loop(
     finally:
         bar.close()
     link.send_torque(0.0)
-    return LoopResult(samples, np.diff(send_times), dropped, lost_count, link.bad_frames, watchdog)
+    return LoopResult(samples, np.diff(send_times), dropped, link.bad_frames, watchdog)

@@ -20,8 +20,7 @@ def test_report_starts_are_fresh():
 def test_the_figures_use_the_presets():
     configs = figure_configs()
     assert configs["dqn"].task == presets.TASK and configs["mbpo"].task == presets.TASK
-    assert configs["dqn"].episode_s == presets.RL_BOOK.episode_s
-    assert configs["mbpo"].rollouts_per_real_step == presets.RL_BOOK.rollouts_per_real_step
+    assert configs["dqn"] == presets.DQN and configs["mbpo"] == presets.MBPO
     assert presets.RL_EPISODES == {"dqn": presets.RL_BOOK.episodes_dqn, "mbpo": presets.RL_BOOK.episodes_mbpo}
 
 
@@ -37,3 +36,15 @@ def test_epsilon_reaches_its_floor_after_20_dqn_and_10_mbpo_episodes_of_the_book
         epsilon = [schedule(1 - episode / episodes) for episode in range(episodes + 1)]  # SB3's progress_remaining
         floor = [e for e, value in enumerate(epsilon) if abs(value - config.exploration_final_eps) < 1e-9]
         assert floor[0] == floor_episode, algo
+
+
+def test_figure_configs_take_task_and_rl_overrides():
+    """An RL override reaches each config that has the field; a name neither config has is an error."""
+    import pytest
+
+    configs = figure_configs("beam", {"rod.torque_limit_nm": 0.08}, {"episode_s": 1.0, "rollouts_per_real_step": 3})
+    assert configs["dqn"] == presets.load_hparams("dqn", presets.TASK.replace(plant="beam", torque_limit_nm=0.08),
+                                                  {"episode_s": 1.0})
+    assert configs["mbpo"].rollouts_per_real_step == 3 and configs["mbpo"].episode_s == 1.0
+    with pytest.raises(ValueError, match="'rollout_per_real_step' is not a DQNConfig or MBPOConfig field"):
+        figure_configs(rl_overrides={"rollout_per_real_step": 3})

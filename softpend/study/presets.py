@@ -77,12 +77,6 @@ class RLBudget:
         (:attr:`softpend.rl.DQNConfig.stop_after_balanced_evaluations`).
     seeds : tuple of int
         Training seeds.
-    episode_s : float
-        Training episode length [s] (the configs' default).
-    rollouts_per_real_step : int
-        DQN-MBPO model rollouts per real agent step (the config's default, the report's 9).
-    mbpo_random_episodes : int
-        Random-torque episodes before DQN-MBPO's first model fit (the config's default).
     runs_root : str
         Run folders (trained once, reused by every figure; other plants: ``<runs_root>-<plant>``).
     """
@@ -90,9 +84,6 @@ class RLBudget:
     episodes_dqn: int = 250
     episodes_mbpo: int = 80
     seeds: tuple[int, ...] = tuple(range(10))
-    episode_s: float = load_hparams("dqn").episode_s
-    rollouts_per_real_step: int = load_hparams("mbpo").rollouts_per_real_step
-    mbpo_random_episodes: int = load_hparams("mbpo").initial_random_episodes
     runs_root: str = "runs/rl-book"
 
 

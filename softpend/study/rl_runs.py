@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 
+from softpend.io.overrides import apply_overrides
 from softpend.study.presets import TASK, load_hparams
 from softpend.task import Task
 from softpend.study.sweep import run_jobs
@@ -127,24 +128,16 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
 
 
 def figure_configs(plant: str = TASK.plant, task_overrides: Optional[Mapping[str, Any]] = None,
-                   rl_overrides: Optional[Mapping[str, Any]] = None, *, torque_limit_nm: Optional[float] = None,
-                   episode_s: Optional[float] = None, rollouts_per_real_step: Optional[int] = None,
-                   mbpo_random_episodes: Optional[int] = None) -> dict[str, DQNConfig]:
+                   rl_overrides: Optional[Mapping[str, Any]] = None) -> dict[str, DQNConfig]:
     """The configs of the book's Figures 4-6: ``{"dqn": ..., "mbpo": ...}``.
 
     Each is :func:`softpend.study.presets.load_hparams` on the task ``Task(plant=plant)`` with ``task_overrides``
     (:class:`~softpend.task.Task` fields by dotted name, e.g. ``{"rod.torque_limit_nm": 0.08}``), then
     ``rl_overrides`` (config fields by name, each applied to the configs that have it; a name that neither
-    :class:`DQNConfig` nor :class:`MBPOConfig` has is a ``ValueError``).  The keyword-only arguments are the same
-    settings by their :class:`~softpend.study.presets.RLBudget` names (None: not set).
+    :class:`DQNConfig` nor :class:`MBPOConfig` has is a ``ValueError``).
     """
-    from softpend.io.overrides import apply_overrides
-
-    task = apply_overrides(Task(plant=plant), {**({"rod.torque_limit_nm": torque_limit_nm} if torque_limit_nm is not None
-                                                  else {}), **(task_overrides or {})})
-    legacy = {"episode_s": episode_s, "rollouts_per_real_step": rollouts_per_real_step,
-              "initial_random_episodes": mbpo_random_episodes}
-    overrides = {**{k: v for k, v in legacy.items() if v is not None}, **(rl_overrides or {})}
+    task = apply_overrides(Task(plant=plant), task_overrides or {})
+    overrides = dict(rl_overrides or {})
     configs = {algo: load_hparams(algo, task) for algo in ("dqn", "mbpo")}
     names = {algo: {f.name for f in dataclasses.fields(config)} for algo, config in configs.items()}
     unknown = sorted(k for k in overrides if k.partition(".")[0] not in names["mbpo"])

@@ -213,51 +213,14 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
 
 
 def test_random_streams_keep_their_draws_when_a_stream_is_appended():
-    """Child k of ``SeedSequence(seed)`` depends on k only: the streams before the appended ones are those of a
-    run that spawned fewer (the runs before policy restarts, and before the robustness options)."""
-    assert RANDOM_STREAMS[-3:] == ("policy_restarts", "trial_rods", "trial_views")
+    """Child k of ``SeedSequence(seed)`` depends on k only: the streams before the last are those of a run that
+    spawned fewer."""
+    assert RANDOM_STREAMS[-1] == "policy_restarts"
     streams = _random_streams(7)
-    older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 3)
-    for name, child in zip(RANDOM_STREAMS[:-3], older):
+    older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 1)
+    for name, child in zip(RANDOM_STREAMS[:-1], older):
         np.testing.assert_array_equal(streams[name].integers(0, 2**31 - 1, 5),
                                       np.random.default_rng(child).integers(0, 2**31 - 1, 5))
-
-
-def test_robust_trials_run_on_drawn_rods_and_show_the_policy_late_noisy_observations(monkeypatch):
-    """``rod_randomisation`` draws each real trial's rod from a stream of its own (the tests stay on the task's rod);
-    ``observation_delay_steps`` and ``observation_noise_rad`` put a :class:`LateNoisyController` between the plant
-    and the policy in the real trials only."""
-    import softpend.pilco.loop as loop
-    from softpend.evaluation import LateNoisyController
-
-    single = dict(TINY, n_policy_trials=0)
-    nominal = run_pilco(PilcoConfig(**single, seed=4), progress=False)
-    drawn = run_pilco(PilcoConfig(**single, seed=4, rod_randomisation=0.15), progress=False)
-    again = run_pilco(PilcoConfig(**single, seed=4, rod_randomisation=0.15), progress=False)
-    # same start and torques, another rod: another trajectory; and the same one again from the same seed
-    assert not np.allclose(drawn.real_states[0], nominal.real_states[0])
-    np.testing.assert_array_equal(drawn.real_states[0], again.real_states[0])
-
-    trial_controllers, trial_rods = [], []
-    run_episode = loop.run_episode
-
-    def recording(controller, env, seed, duration_s):
-        trial_controllers.append(controller)
-        trial_rods.append(env.unwrapped.params)
-        return run_episode(controller, env, seed=seed, duration_s=duration_s)
-
-    monkeypatch.setattr(loop, "run_episode", recording)
-    robust = PilcoConfig(**dict(TINY, n_policy_trials=1), seed=4, rod_randomisation=0.15, observation_delay_steps=3,
-                         observation_noise_rad=0.01)
-    result = run_pilco(robust, progress=False)
-    assert len(trial_controllers) == 2 and all(isinstance(c, LateNoisyController) for c in trial_controllers)
-    assert [(c.delay_steps, c.noise_rad) for c in trial_controllers] == [(3, 0.01), (3, 0.01)]
-    assert trial_rods[0] != trial_rods[1] and RodParams() not in trial_rods  # a rod of its own for each trial
-    assert all(abs(rod.mass_kg / RodParams().mass_kg - 1) <= 0.15 for rod in trial_rods)
-    assert math.isfinite(result.records[-1].eval_upright_std_rad)  # the test episodes ran (on the task's rod)
-    trial_controllers.clear()
-    run_pilco(PilcoConfig(**dict(TINY, n_policy_trials=1), seed=4), progress=False)
-    assert not any(isinstance(c, LateNoisyController) for c in trial_controllers)
 
 
 def test_search_with_restarts_keeps_the_best_and_reports_it():
@@ -320,8 +283,8 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     run_trial = loop._run_trial
     n_trials = []
 
-    def first_policy_trial_swings_up(config, controller, seed, env, streams):
-        episode, states, torques = run_trial(config, controller, seed, env, streams)
+    def first_policy_trial_swings_up(config, controller, seed, env):
+        episode, states, torques = run_trial(config, controller, seed, env)
         n_trials.append(1)
         if len(n_trials) == 2:  # the random trial, then the first policy trial
             episode = dataclasses.replace(episode, swing_up_time_s=0.5)
@@ -386,7 +349,6 @@ def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
     ("gp_all_data", 1), ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
     ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
     ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
-    ("rod_randomisation", 1.0), ("observation_delay_steps", -1), ("observation_noise_rad", -0.1),
     ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
     ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan), ("cost_width_after_swing_up_m", 0.0),
     ("balance_within_rad", 0.0), ("balance_within_rad", 4.0), ("balance_within_rad_s", -1.0), ("balance_prediction_s", 0.0),

@@ -49,13 +49,12 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import (boolean, check_work_size, finite, in_unit_interval, int_at_least, non_negative,
+from softpend.checks import (boolean, check_work_size, finite, int_at_least, non_negative,
                              optional_positive, positive)
-from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, LateNoisyController, evaluate_controller, run_episode
+from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
 from softpend.plant import SimulationDiverged, wrap_angle_rad
-from softpend.plant.randomisation import randomised_rod
 from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
@@ -101,8 +100,6 @@ class PilcoConfig:
     random_hold_min_s, random_hold_max_s : float
         Each torque of the initial random trial is held for a random time in this range [s] (whole control
         periods; see :class:`~softpend.pilco.controller.RandomTorqueController`).
-    random_bang_bang : bool
-        The random trial's torques are ``+-torque_limit_nm`` (else uniform in between).
     cost_width_m : float
         Width ``w`` of the saturating cost [m].
     cost_width_after_swing_up_m : float, optional
@@ -152,17 +149,6 @@ class PilcoConfig:
         Length of each test episode [s].
     target_std_rad : float
         Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
-    stop_when_balanced : bool
-        End the run at the first policy that balances.
-    rod_randomisation : float
-        Domain randomisation of the real trials: each trial runs on a rod whose mass, stiffness, joint damping,
-        hub friction and torque limit are each scaled by a factor uniform in ``[1 - r, 1 + r]``
-        (:func:`softpend.plant.randomisation.randomised_rod`); 0: the task's rod.  Tests run on the task's rod.
-    observation_delay_steps : int
-        In the real trials the policy sees the observation of this many plant steps earlier
-        (:class:`softpend.evaluation.LateNoisyController`); the GP learns from the plant's own states.
-    observation_noise_rad : float
-        Standard deviation of Gaussian noise on the hub and tip angles the policy sees in the real trials [rad].
     balance_within_rad : float, optional
         Learn a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) that acts instead of the RBF
         policy while the tip is within this angle of upright [rad] and its rate within ``balance_within_rad_s``
@@ -195,7 +181,6 @@ class PilcoConfig:
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
     random_hold_max_s: float = 0.6
-    random_bang_bang: bool = True
     cost_width_m: float = 0.15
     cost_width_after_swing_up_m: Optional[float] = None
     cost_rate_width_rad_s: Optional[float] = None
@@ -213,10 +198,6 @@ class PilcoConfig:
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = TEST_EPISODE_S
     target_std_rad: float = 0.1
-    stop_when_balanced: bool = True
-    rod_randomisation: float = 0.0
-    observation_delay_steps: int = 0
-    observation_noise_rad: float = 0.0
     compiled: bool = False
     balance_within_rad: Optional[float] = None
     balance_within_rad_s: float = 2.0
@@ -259,11 +240,8 @@ class PilcoConfig:
             raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
         for name in ("cost_rate_width_rad_s", "cost_rate_after_rad", "cost_width_after_swing_up_m"):
             optional_positive(name, getattr(self, name))
-        for name in ("random_bang_bang", "stop_when_balanced", "compiled", "gp_all_data"):
+        for name in ("compiled", "gp_all_data"):
             boolean(name, getattr(self, name))
-        self.rod_randomisation = in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False)
-        self.observation_delay_steps = int_at_least("observation_delay_steps", self.observation_delay_steps, 0)
-        self.observation_noise_rad = non_negative("observation_noise_rad", self.observation_noise_rad)
         exploration = finite("cost_exploration", self.cost_exploration)
         if not -1.0 <= exploration <= 0.0:
             raise ValueError(f"cost_exploration must be in [-1, 0], got {self.cost_exploration!r}")
@@ -475,20 +453,8 @@ def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, to
     return m0, (std**2) * torch.eye(spec.dim, dtype=DTYPE)
 
 
-def _run_trial(config: PilcoConfig, controller, seed: int, env,
-               streams: dict[str, np.random.Generator]) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
-    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,).
-
-    With the config's robustness options the trial runs on a rod drawn from ``streams["trial_rods"]`` and the
-    controller sees late, noisy observations (noise from ``streams["trial_views"]``)."""
-    if config.rod_randomisation > 0:
-        from softpend.envs import SoftPendulumEnv
-
-        rod = randomised_rod(config.task.rod, streams["trial_rods"], config.rod_randomisation)
-        env = SoftPendulumEnv(**config.task.replace(rod=rod).env_kwargs())
-    if config.observation_delay_steps > 0 or config.observation_noise_rad > 0:
-        controller = LateNoisyController(controller, config.observation_delay_steps, config.observation_noise_rad,
-                                         streams["trial_views"])
+def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
+    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,)."""
     episode = run_episode(controller, env, seed=seed, duration_s=config.horizon_s)
     if episode.diverged:
         raise SimulationDiverged(f"the plant diverged during a PILCO trial: {episode.diverged}")
@@ -531,8 +497,7 @@ def _optimise_policy(
 
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts",
-                  "trial_rods", "trial_views")
+RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts")
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -680,10 +645,9 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
     for index in range(config.n_random_trials):
         random_controller = RandomTorqueController(
             torque_limit, config.control_dt_s, seed=_draw_seed(streams["random_torques"]),
-            hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=config.random_bang_bang,
+            hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=True,
         )
-        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env,
-                                              streams)
+        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         random_states.append(states)
@@ -761,7 +725,7 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
                                                 config.policy_iterations)
         # ---- run it on the plant
         controller = _controller(config, policy, result.balance_policy)
-        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env, streams)
+        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env)
         inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
         targets.append(states[1:] - states[:-1])
         result.real_states.append(states)
@@ -793,7 +757,7 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
             callback(record)
         bar.set_postfix(real_s=f"{plant_seconds:.0f}", cost=f"{record.real_cost:.1f}/{predicted:.1f}",
                         std=f"{record.eval_upright_std_rad:.2f}")
-        if record.balanced and config.stop_when_balanced:
+        if record.balanced:
             break
     bar.close()
     result.gp_hyperparameters = hyper

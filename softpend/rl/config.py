@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softpend.checks import boolean, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.checks import boolean, in_unit_interval, int_at_least, one_of, positive, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
@@ -81,18 +81,6 @@ class DQNConfig:
     checkpoint_every_episodes : int
         Save agent, replay buffer and training log every this many episodes.
 
-    Robustness (the real environment of training only; evaluation runs on ``task``)
-    --------------------------------------------------------------------------------
-    rod_randomisation : float
-        Domain randomisation: every training episode runs on a rod whose mass, stiffness, joint damping, hub
-        friction and torque limit are each scaled by a factor uniform in ``[1 - r, 1 + r]``
-        (:class:`softpend.rl.training_env.RandomisedRod`); 0: the task's rod.
-    observation_delay_steps : int
-        The agent sees the observation of this many plant steps earlier
-        (:class:`softpend.rl.training_env.RigObservation`).
-    observation_noise_rad : float
-        Standard deviation of Gaussian noise on the hub and tip angles the agent sees [rad].
-
     Early stopping
     --------------
     stop_after_balanced_evaluations : int
@@ -142,9 +130,6 @@ class DQNConfig:
     stop_upright_std_rad: float = 0.1
     stop_confirm_seeds: tuple[int, ...] = ()
     stop_confirm_max_failures: int = 0
-    rod_randomisation: float = 0.0
-    observation_delay_steps: int = 0
-    observation_noise_rad: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive_ints(
@@ -161,11 +146,6 @@ class DQNConfig:
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
         object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
-        object.__setattr__(self, "rod_randomisation",
-                           in_unit_interval("rod_randomisation", self.rod_randomisation, include_one=False))
-        object.__setattr__(self, "observation_delay_steps",
-                           int_at_least("observation_delay_steps", self.observation_delay_steps, 0))
-        object.__setattr__(self, "observation_noise_rad", non_negative("observation_noise_rad", self.observation_noise_rad))
         object.__setattr__(self, "stop_after_balanced_evaluations",
                            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):

@@ -180,23 +180,18 @@ class MBPOTrainer:
             self.trials_torques.append(np.asarray(torques_nm, dtype=np.float64))
 
     def dataset(self):
-        """All stored real episodes as a :class:`softpend.sysid.TrajectoryDataset` (written to the run folder).
-
-        With ``rod_randomisation`` the episodes ran on rods of their own (each with its own torque limit), so the
-        dataset names no single rod (``plant_params`` None)."""
+        """All stored real episodes as a :class:`softpend.sysid.TrajectoryDataset` (written to the run folder)."""
         from softpend.sysid import save_dataset
 
         obs = np.stack(self.trials_observations)
         p = 5  # positions then velocities in OBSERVATION_NAMES order
-        randomised = self.config.rod_randomisation > 0
         return save_dataset(
             self.run_dir / "real_data.npz", obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques),
             dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant=self.config.task.plant,
-            plant_params=None if randomised else self.env.params, seed=self.seed,
+            plant_params=self.env.params, seed=self.seed,
             protocol={"kind": "dqn-mbpo training episodes"},
             differentiation="exact (simulator velocities, as the environment observes them)",
-            notes="real plant episodes of a DQN-MBPO run"
-                  + (f" on rods randomised by +-{self.config.rod_randomisation:g}" if randomised else ""),
+            notes="real plant episodes of a DQN-MBPO run",
         )
 
     def refit(self) -> None:

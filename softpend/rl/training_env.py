@@ -1,9 +1,7 @@
 """The training environment of DQN and DQN-MBPO, and the matching evaluation controller.
 
 :func:`make_training_env` wraps ``SoftPendulumDiscreteEnv`` (the registered ``softpend/SoftPendulumDiscrete-v0``
-class) in :class:`ActionRepeat` and a ``TimeLimit`` of ``config.episode_s``; with the config's robustness
-options, the environment first draws a new rod every episode (:class:`RandomisedRod`) and shows the agent a
-late and noisy observation (:class:`RigObservation`), as a rig would.  :class:`HeldActionController` runs a
+class) in :class:`ActionRepeat` and a ``TimeLimit`` of ``config.episode_s``.  :class:`HeldActionController` runs a
 trained agent through the shared :func:`softpend.evaluation.evaluate_controller` with the same action repeat.
 """
 
@@ -15,69 +13,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import TimeLimit
 
-import math
-
-from softpend.checks import non_negative, positive_int
+from softpend.checks import positive_int
 from softpend.envs import SoftPendulumDiscreteEnv
-from softpend.evaluation import DelayLine, GymPolicyController
-from softpend.plant import make_plant
-from softpend.plant.randomisation import randomised_rod
+from softpend.evaluation import GymPolicyController
 from softpend.rl.config import DQNConfig
 
-__all__ = ["ActionRepeat", "HeldActionController", "RandomisedRod", "RigObservation", "greedy_predictor", "make_base_env",
-           "make_training_env", "policy_controller"]
-
-
-class RandomisedRod(gym.Wrapper):
-    """Domain randomisation: every episode runs on a new rod, :func:`softpend.plant.randomisation.randomised_rod`
-    of the environment's nominal rod with ``spread``, drawn from the environment's ``np_random`` (so that the
-    seed of ``reset`` decides the rods).  The torque levels follow the drawn torque limit: the agent's actions
-    are fractions of what the motor really delivers."""
-
-    def __init__(self, env: gym.Env, spread: float, plant: str = "prb") -> None:
-        super().__init__(env)
-        base = env.unwrapped
-        randomised_rod(base.params, np.random.default_rng(0), spread)  # ValueError on a bad spread, up front
-        self.spread = float(spread)
-        self.nominal = base.params
-        self._plant_name, self._dt_s, self._substeps = plant, base.plant.dt_s, base.plant.substeps
-
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
-        base = self.env.unwrapped
-        if seed is not None:
-            self.env.reset(seed=seed, options=options)  # seeds np_random; the episode starts below
-        rod = randomised_rod(self.nominal, base.np_random, self.spread)
-        base.params = rod
-        base.plant = make_plant(self._plant_name, params=rod, dt_s=self._dt_s, substeps=self._substeps)
-        base.torque_limit_nm = rod.torque_limit_nm
-        if hasattr(base, "torque_levels_nm"):
-            base.torque_levels_nm = np.linspace(-1.0, 1.0, base.n_torque_levels) * rod.torque_limit_nm
-        return self.env.reset(options=options)
-
-
-class RigObservation(gym.ObservationWrapper):
-    """The observation a rig delivers: ``delay_steps`` plant steps late, with the hub and tip angles perturbed by
-    Gaussian noise of ``noise_rad`` (each ``(cos, sin)`` pair of the observation vector rotated by its own draw
-    from the environment's ``np_random``).  Rewards and the plant's own records stay those of the true state."""
-
-    def __init__(self, env: gym.Env, delay_steps: int = 0, noise_rad: float = 0.0) -> None:
-        super().__init__(env)
-        self._late = DelayLine(delay_steps)
-        self.delay_steps = self._late.delay_steps
-        self.noise_rad = non_negative("noise_rad", noise_rad)
-
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
-        self._late.clear()
-        return super().reset(seed=seed, options=options)
-
-    def observation(self, observation: np.ndarray) -> np.ndarray:
-        seen = np.array(self._late.push(observation), dtype=observation.dtype, copy=True)
-        if self.noise_rad > 0:
-            rng = self.env.unwrapped.np_random
-            for c in (0, 2):  # (cos phi, sin phi), (cos theta, sin theta)
-                angle = math.atan2(float(seen[c + 1]), float(seen[c])) + float(rng.normal(0.0, self.noise_rad))
-                seen[c], seen[c + 1] = math.cos(angle), math.sin(angle)
-        return seen
+__all__ = ["ActionRepeat", "HeldActionController", "greedy_predictor", "make_base_env", "make_training_env",
+           "policy_controller"]
 
 
 class ActionRepeat(gym.Wrapper):
@@ -119,14 +61,8 @@ def make_base_env(config: DQNConfig, start: Optional[str] = None) -> SoftPendulu
 
 
 def make_training_env(config: DQNConfig) -> gym.Env:
-    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(start=config.training_start)), episode_agent_steps)``,
-    the environment inside wrapped in :class:`RandomisedRod` when ``config.rod_randomisation > 0`` and in
-    :class:`RigObservation` when ``config.observation_delay_steps`` or ``config.observation_noise_rad`` is set."""
+    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(start=config.training_start)), episode_agent_steps)``."""
     env: gym.Env = make_base_env(config, config.training_start)
-    if config.rod_randomisation > 0:
-        env = RandomisedRod(env, config.rod_randomisation, plant=config.task.plant)
-    if config.observation_delay_steps > 0 or config.observation_noise_rad > 0:
-        env = RigObservation(env, config.observation_delay_steps, config.observation_noise_rad)
     return TimeLimit(ActionRepeat(env, config.action_repeat), config.episode_agent_steps)
 
 

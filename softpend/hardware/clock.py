@@ -70,6 +70,10 @@ class SimClock:
         """Run every event up to ``time_s`` and stand there."""
         self.wait_for(lambda: False, time_s)
 
+    def next_event_s(self) -> float:
+        """Time of the next event (inf when none is scheduled) [s]."""
+        return self._events[0][0] if self._events else math.inf
+
 
 class SimSerial:
     """The host's end of an in-memory serial link on a :class:`SimClock` (module docstring).

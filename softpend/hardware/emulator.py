@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import heapq
 import json
 import math
 import os
@@ -257,8 +256,24 @@ class SimRig(RigDevice):
         return self.host
 
 
-class RigEmulator(RigDevice):
-    """The device on a pseudo-terminal, on the wall clock (module docstring).
+class _PtyHost:
+    """The host's side of the link as the pty emulator sees it: bytes written to the pty's master end."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+
+    def deliver(self, data: bytes) -> None:
+        try:
+            os.write(self.fd, data)
+        except OSError:
+            pass  # no host has the pty open
+
+
+class RigEmulator(SimRig):
+    """The twin's device on a pseudo-terminal, its clock following the wall clock (module docstring).
+
+    :meth:`serve` runs the same events as the twin (ticks, bytes arriving after the link latency) when the wall
+    clock reaches them; a tick the computer could not run on time runs late, and its STATE frame goes out late.
 
     Parameters
     ----------
@@ -276,10 +291,11 @@ class RigEmulator(RigDevice):
         self.link_path = Path(link_path) if link_path else None
         if self.link_path is not None:
             _check_link_path(self.link_path)
-        super().__init__(config, truth_log)
+        super().__init__(config, SimClock(), truth_log)
         self.master_fd, self._slave_fd = os.openpty()
         tty.setraw(self._slave_fd)
         self.port = os.ttyname(self._slave_fd)
+        self.host = _PtyHost(self.master_fd)
         self._linked = False
         try:
             if self.link_path is not None:
@@ -292,62 +308,29 @@ class RigEmulator(RigDevice):
             self.close()
             raise
         self._running = False
-        self.ticks_skipped = 0
 
     def stop(self) -> None:
         self._running = False
 
     def serve(self) -> None:
         """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
-        cfg = self.config
-        dt = cfg.task.dt_s
-        latency = cfg.latency_s
-        start = time.monotonic()
-        inbound: list[tuple[float, int, bytes]] = []  # (deliver_at, order, data): latency on commands
-        outbound: list[tuple[float, int, bytes]] = []
-        order = 0
-        next_tick = start + dt
+        duration = self.config.duration_s
+        start = time.monotonic() - self.clock.now_s()
         self._running = True
         try:
-            while self._running:
-                now = time.monotonic()
-                wake = min([next_tick] + [queue[0][0] for queue in (inbound, outbound) if queue])
-                ready, _, _ = select.select([self.master_fd], [], [], max(0.0, wake - now))
-                now = time.monotonic()
+            while self._running and (duration is None or self.clock.now_s() < duration):
+                self.clock.sleep_until(time.monotonic() - start)  # every event that is due
+                wait = self.clock.next_event_s() - (time.monotonic() - start)
+                ready, _, _ = select.select([self.master_fd], [], [], min(max(0.0, wait), 0.1))
                 if ready:
                     try:
                         data = os.read(self.master_fd, 4096)
-                    except OSError:
-                        data = b""  # no host has the pty open (EIO): nothing to read
-                        time.sleep(min(dt, max(0.0, next_tick - now)))
+                    except OSError:  # no host has the pty open (EIO): nothing to read
+                        data = b""
+                        time.sleep(min(0.01, max(0.0, wait)))
                     if data:
-                        order += 1
-                        heapq.heappush(inbound, (now + latency, order, data))
-                while inbound and inbound[0][0] <= now:
-                    _, _, data = heapq.heappop(inbound)
-                    for reply in self.session.receive(data, int((now - start) * 1e6)):
-                        order += 1
-                        heapq.heappush(outbound, (now + latency, order, reply))
-                if now >= next_tick:
-                    # the physics does not wait: if the emulator fell behind, the plant catches up
-                    # (steps with the torque held, truth logged) and one STATE reports the latest sample
-                    due = int((now - next_tick) / dt) + 1
-                    frame = None
-                    for k in range(due):
-                        frame = self.tick(int(round((self.ticks + 1) * dt * 1e6)), emit=k == due - 1)
-                    self.ticks_skipped += due - 1
-                    next_tick += due * dt
-                    if frame is not None:
-                        order += 1
-                        heapq.heappush(outbound, (now + latency, order, frame))
-                    if cfg.duration_s is not None and now - start >= cfg.duration_s:
-                        self._running = False
-                while outbound and outbound[0][0] <= now:
-                    _, _, frame = heapq.heappop(outbound)
-                    try:
-                        os.write(self.master_fd, frame)
-                    except OSError:
-                        pass
+                        self.clock.sleep_until(time.monotonic() - start)
+                        self._from_host(data)
         finally:
             self._running = False
 
@@ -361,9 +344,6 @@ class RigEmulator(RigDevice):
         if self._linked and self.link_path.is_symlink() and os.readlink(self.link_path) == self.port:
             self.link_path.unlink()
         self._linked = False
-
-    def stats(self) -> dict[str, float]:
-        return {**super().stats(), "ticks_caught_up": float(self.ticks_skipped)}
 
 
 def _is_pty_name(target: str) -> bool:

@@ -250,10 +250,17 @@ def test_sigterm_on_the_host_sends_stop(script):
     host = subprocess.Popen(
         [sys.executable, "-c", script, r.port], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
     )
+    session = r.emulator.session
+
+    def within(predicate, timeout_s: float = 5.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not predicate() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return predicate()
+
     try:
         assert host.stdout.readline().strip() == "commanding"
-        time.sleep(0.1)
-        assert r.emulator.session.torque_nm(0) == pytest.approx(0.05)
+        assert within(lambda: session.torque_nm(0) == pytest.approx(0.05))
         if script is _HOST_SCRIPT:
             host.send_signal(signal.SIGTERM)
         else:
@@ -261,11 +268,8 @@ def test_sigterm_on_the_host_sends_stop(script):
             host.stdin.flush()
         assert host.wait(5) == 128 + signal.SIGTERM
         assert host.stdout.read() == ""
-        deadline = time.monotonic() + 5.0
-        while not r.emulator.session.stopped and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert r.emulator.session.stopped and r.emulator.session.torque_nm(0) == 0.0
-        assert r.emulator.session.decoder.bad_frames == 0  # no frame was cut in two by the STOP
+        assert within(lambda: session.stopped) and session.torque_nm(0) == 0.0
+        assert session.decoder.bad_frames == 0  # no frame was cut in two by the STOP
     finally:
         if host.poll() is None:
             host.kill()

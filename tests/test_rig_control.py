@@ -199,7 +199,9 @@ def test_a_short_closed_loop_through_a_pseudo_terminal_completes_and_stops_the_m
         with MotorLink(emulator.port, torque_limit_nm=TASK.torque_limit_nm, timeout_s=2.0) as link:
             result = run_closed_loop(link, LQRController.from_params(TASK.rod, TASK.dt_s), RigStateEstimator(TASK),
                                      1.0)
-        time.sleep(0.3)  # the STOP reaches the device, which logs a few ticks after it
+        deadline = time.monotonic() + 10.0  # the STOP reaches the device, which logs the ticks after it
+        while time.monotonic() < deadline and read_sample_log(tmp_path / "truth.csv")["applied_torque_nm"][-1] != 0:
+            time.sleep(0.05)
         emulator.terminate()
     assert result.status == "completed" and result.stop_reason is None and result.samples >= 50
     log = read_sample_log(tmp_path / "truth.csv")

@@ -11,7 +11,7 @@
   system-identification dataset (``rig_dataset.npz``) with a ``summary.json``.
 
 Each runs on a rig (``--port``, ``--camera``) or on the digital twin (``--twin``: the rig emulator and the
-synthetic camera).
+synthetic camera, in simulated time: the same seed gives the same outputs).
 """
 
 from __future__ import annotations

@@ -9,9 +9,9 @@ Two things drive it:
 
 * :class:`SimRig`, the digital twin: ticks and link latency on a :class:`~softpend.hardware.clock.SimClock`,
   the host talking to it through an in-memory byte channel (:meth:`SimRig.connect`), in simulated time;
-* :class:`RigEmulator`, the device on a pseudo-terminal (``os.openpty``) on the wall clock, in a process of its
-  own (``softpend rig``, :func:`start_emulator_process`): point :class:`~softpend.hardware.driver.MotorLink` at
-  its path like at a real rig.
+* :class:`RigEmulator`, the same device on a pseudo-terminal (``os.openpty``), its events run when the wall clock
+  reaches them, in a process of its own (``softpend rig``, :func:`start_emulator_process`): point
+  :class:`~softpend.hardware.driver.MotorLink` at its path like at a real rig.
 """
 
 from __future__ import annotations

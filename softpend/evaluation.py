@@ -2,8 +2,9 @@
 
 A *controller* is any object with ``reset()`` and ``__call__(observation, q, q_dot, time_s) -> torque_nm``
 (see :class:`Controller`); it sees the report's observed variables and, for model-based designs such as
-LQR on the true model, the plant's full joint state.  :func:`evaluate_controller` runs it on the true plant
-from the environment's start distribution and reports, per seed:
+LQR on the true model, the plant's full joint state.  :func:`evaluate` runs it on the true plant from the
+environment's start distribution (or an exact start, ``reset(options={"q": ..., "q_dot": ...})``) and reports,
+per seed (:func:`metrics_from_trajectory`):
 
 * ``swing_up_time_s`` -- the first time ``t`` such that ``|theta| < 0.2 rad`` throughout ``[t, t + 1 s]``
   (``inf`` if that never happens);
@@ -12,28 +13,23 @@ from the environment's start distribution and reports, per seed:
   of the run if it never swung up, so a failure shows as a large number rather than a missing one);
 * ``peak_torque_nm`` -- the largest applied torque magnitude (after saturation);
 * ``energy_used_j`` -- the mechanical work the motor does, ``sum |tau * phi_dot| * dt``;
-* ``success`` -- swung up and ``upright_std_rad <= success_std_rad``.
+* ``success`` -- swung up and ``upright_std_rad <= SUCCESS_STD_RAD``, the plant never diverging.
 
-Many starts at once
--------------------
-:func:`evaluate_batched` runs one episode per seed, all at once, on
-:class:`~softpend.envs.vector.SoftPendulumVectorEnv` (or its discrete twin), which steps every rod together on
-:class:`~softpend.plant.batched.BatchedPRBChain`.  Episode ``i`` starts exactly where
-:class:`~softpend.envs.SoftPendulumEnv` reset with ``seeds[i]`` starts (each rod seeded with its own seed), the
-policy sees the ``(B, 11)`` batch of observation vectors (the reward's bonus state included) every
-``action_repeat`` plant steps and its actions are held in between, as
-:class:`softpend.rl.training_env.HeldActionController` holds them; no episode is reset within the duration.
-:func:`evaluate_controllers_batched` does the same for :class:`Controller` objects (LQR, PID, energy swing-up),
-one copy per rod, each called with its rod's observation and joint state.  Both fill the same
-:class:`EvaluationResult` fields as :func:`evaluate_controller` (trajectories, and the metrics of
-:func:`metrics_from_trajectory` computed from them); a rod whose state stops being finite ends its episode at
-its last finite state with ``diverged`` set and ``success`` false.
+Two engines, one loop
+---------------------
+``engine="exudyn"`` runs the episodes one after the other on :class:`~softpend.envs.SoftPendulumEnv` (the plant of
+``task``); ``engine="batched"`` runs them all at once on :class:`~softpend.envs.vector.SoftPendulumVectorEnv`,
+which steps every rod together on :class:`~softpend.plant.batched.BatchedPRBChain`, episode ``i`` starting
+exactly where the single environment reset with ``seeds[i]`` starts.  The batched engine also runs a
+:class:`BatchPolicy` (a policy of the ``(B, 11)`` batch of observation vectors, its actions held for
+``action_repeat`` plant steps).  Both step the same loop and fill the same :class:`EvaluationResult`; a rod whose
+plant diverges ends its episode at its last valid state with ``diverged`` set and ``success`` false.
 
 The batched plant is the RK4 chain, not the Exudyn plant of ``task.substeps``: at its default
 (stability-limited) sub-steps it is more accurate than the Exudyn plant at its default 2 sub-steps, so that a
 closed loop sensitive to small differences (a swing-up that catches the rod on one swing or the next) can end
-differently from :func:`evaluate_controller` on the default task.  ``tests/test_evaluation_batched.py``
-compares both against a converged Exudyn plant.
+differently on the two engines.  ``tests/test_evaluation_batched.py`` compares both against a converged Exudyn
+plant.
 """
 
 from __future__ import annotations
@@ -46,14 +42,17 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from softpend.checks import boolean, check_work_size, in_unit_interval, int_at_least, non_negative, positive, positive_int
+from softpend.checks import (boolean, check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive,
+                             positive_int)
 from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged, wrap_angle_rad
 from softpend.stats import wilson_interval
 from softpend.task import Task
 
 __all__ = [
+    "HOLD_STD_RAD",
     "SUCCESS_STD_RAD",
     "TEST_EPISODE_S",
+    "BatchPolicy",
     "Controller",
     "DelayLine",
     "EvaluationResult",
@@ -61,9 +60,9 @@ __all__ = [
     "FunctionController",
     "GymPolicyController",
     "LateNoisyController",
+    "evaluate",
     "evaluate_batched",
     "evaluate_controller",
-    "evaluate_controllers_batched",
     "metrics_from_trajectory",
     "run_episode",
 ]
@@ -74,12 +73,16 @@ __all__ = [
 #: selection tests and falls later is caught before it is selected.
 TEST_EPISODE_S = 10.0
 
-#: Largest upright std [rad] of an episode that counts as a success (``success``, see the module docstring).
+#: Largest upright std [rad] of an episode that counts as a success (``success``, see the module docstring): the
+#: success of the selection tests and of the training logs.
 SUCCESS_STD_RAD = 0.2
+#: Largest upright std [rad] of a start that *holds* the rod balanced: the stricter level the fresh-start figures
+#: (:func:`softpend.study.fresh_starts.fresh_start_row`) and the rig's closed loop count a start by.
+HOLD_STD_RAD = 0.1
 
 
 class Controller(Protocol):
-    """What :func:`evaluate_controller` drives."""
+    """What :func:`evaluate` drives."""
 
     def reset(self) -> None:
         """Clear internal state (integrators, filters, bonus trackers) before an episode."""
@@ -167,20 +170,17 @@ class GymPolicyController:
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any) -> None:
         self.predict = predict
         self.env = env.unwrapped if hasattr(env, "unwrapped") else env
+        self.bonus = 0.0
 
     def reset(self) -> None:
-        self.env._bonus = 0.0
-        self._first = True
+        self.bonus = 0.0
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        env = self.env
-        if getattr(self, "_first", True):
-            env._bonus = 1.0 if abs(observation.theta_rad) < env.reward_params.epsilon_rad else 0.0
-            self._first = False
-        else:  # advance the bonus exactly as the environment's reward does
-            env._reward(observation.theta_rad)
-        action = self.predict(env._vector(observation))
-        return env.torque_from_action(action)
+        from softpend.envs.reward import next_bonus
+
+        env = self.env  # the bonus advances exactly as the environment's reward advances it
+        self.bonus = float(next_bonus(observation.theta_rad, self.bonus, env.dt_s, env.reward_params))
+        return env.torque_from_action(self.predict(env.observation_vector(observation, self.bonus)))
 
 
 def metrics_from_trajectory(
@@ -329,127 +329,113 @@ class EvaluationSummary:
         }
 
 
-def run_episode(
-    controller: Controller,
-    env: Any,
-    seed: int,
-    duration_s: float,
-    start: Optional[str] = None,
-    initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
-) -> EvaluationResult:
-    """Run one closed-loop episode of ``controller`` on ``env``'s plant (see :func:`evaluate_controller`)."""
-    env = env.unwrapped if hasattr(env, "unwrapped") else env
-    plant = env.plant
-    options = {"start": start} if start is not None else None
-    env.reset(seed=int(seed), options=options)
-    observation = plant.reset(*initial_state) if initial_state is not None else env.report_observation
-    n_steps = int(round(duration_s / plant.dt_s))
-    if n_steps < 2:
-        raise ValueError(f"duration_s must cover at least two steps of {plant.dt_s} s, got {duration_s!r}")
-    controller.reset()
-    observations = np.empty((n_steps + 1, len(OBSERVATION_NAMES)))
-    torques = np.zeros(n_steps + 1)
-    times = np.arange(n_steps + 1) * plant.dt_s
-    q, q_dot = plant.joint_state()
-    angles = np.empty((n_steps + 1, len(q)))
-    observations[0] = observation.as_array()
-    angles[0] = q
-    diverged = None
-    last = n_steps
-    for k in range(n_steps):
-        torque = float(controller(observation, q, q_dot, k * plant.dt_s))
-        if not math.isfinite(torque):
-            raise ValueError(f"controller returned a non-finite torque at t = {k * plant.dt_s:.2f} s: {torque!r}")
-        try:
-            observation = plant.step(torque)
-        except SimulationDiverged as exc:
-            diverged = exc.reason
-            last = k
-            break
-        torques[k] = plant.last_torque_nm
-        q, q_dot = plant.joint_state()
-        observations[k + 1] = observation.as_array()
-        angles[k + 1] = q
-    observations, torques, times, angles = observations[: last + 1], torques[: last + 1], times[: last + 1], angles[: last + 1]
-    if last >= 1:
-        metrics = metrics_from_trajectory(
-            times, observations[:, OBSERVATION_NAMES.index("theta_rad")], torques,
-            observations[:, OBSERVATION_NAMES.index("phi_dot_rad_s")],
-        )
-    else:
-        metrics = {"swing_up_time_s": math.inf, "upright_std_rad": math.pi, "upright_mean_abs_rad": math.pi,
-                   "peak_torque_nm": 0.0, "energy_used_j": 0.0, "success": False}
-    if diverged is not None:
-        metrics["success"] = False
-    return EvaluationResult(
-        seed=int(seed), time_s=times, observations=observations, torque_nm=torques, joint_angles_rad=angles,
-        diverged=diverged, **metrics,
-    )
+# ---------------------------------------------------------------------- the one loop over both engines
 
-
-def evaluate_controller(
-    controller: Controller,
-    task: Optional[Task] = None,
-    *,
-    name: str = "controller",
-    seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = TEST_EPISODE_S,
-    initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
-    env_kwargs: Optional[dict[str, Any]] = None,
-    stop_at_first_failure: bool = False,
-) -> EvaluationSummary:
-    """Evaluate a controller on the true plant of ``task`` over several seeds.
-
-    Parameters
-    ----------
-    controller : Controller
-        The controller under test (its ``reset()`` is called before each episode).
-    task : Task, optional
-        Plant, rod, time step and start distribution (default: ``Task()``, the default rod hanging).
-    seeds : sequence of int
-        One episode per seed; the seed draws the start-state noise through the environment's ``reset``.
-    duration_s : float
-        Episode length [s].
-    initial_state : (q, q_dot), optional
-        Exact initial joint state, overriding the task's start distribution (e.g. a 0.2 rad tilt for LQR).
-    env_kwargs : dict, optional
-        Further :class:`softpend.envs.SoftPendulumEnv` arguments (e.g. ``reward_params``).
-    stop_at_first_failure : bool
-        Run the seeds in order and stop after the first episode that does not succeed (``success`` false):
-        the summary then holds the episodes up to and including that one.  Each episode is the one a full
-        evaluation runs (the same environment, reset with the same seed), so whether *every* seed succeeds is
-        decided exactly, at the cost of the episodes up to the first failure only.
-
-    Returns
-    -------
-    EvaluationSummary
-        Per-seed :class:`EvaluationResult` objects (metrics and trajectories), in the order of ``seeds``.
-    """
-    from softpend.envs import SoftPendulumEnv
-
-    task = task if task is not None else Task()
-    if not isinstance(task, Task):
-        raise ValueError(f"task must be a Task, got {type(task).__name__}")
-    if len(seeds) == 0:
-        raise ValueError("seeds must not be empty")
-    positive("duration_s", duration_s)
-    boolean("stop_at_first_failure", stop_at_first_failure)
-    env = SoftPendulumEnv(**task.env_kwargs(), **(env_kwargs or {}))
-    results = []
-    for seed in seeds:
-        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
-        if stop_at_first_failure and not results[-1].success:
-            break
-    return EvaluationSummary(name=name, results=results)
-
-
-# ---------------------------------------------------------------------- many starts at once (module docstring)
-
+#: Metrics of an episode that ends before its second sample (a plant that diverged on the first step).
+_NO_EPISODE = {"swing_up_time_s": math.inf, "upright_std_rad": math.pi, "upright_mean_abs_rad": math.pi,
+               "peak_torque_nm": 0.0, "energy_used_j": 0.0, "success": False}
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
-#: ``policy(k, vectors, observations, q, q_dot) -> actions`` for the vector environment at plant step ``k``.
-_StepPolicy = Callable[[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray], Any]
+
+class _OneRod:
+    """The Exudyn engine: one :class:`~softpend.envs.SoftPendulumEnv` rod; controllers' torques go to its plant."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env.unwrapped if hasattr(env, "unwrapped") else env
+        self.dt_s, self.n_coordinates = self.env.plant.dt_s, self.env.plant.n_coordinates
+
+    def reset(self, seeds: list[int], options: Optional[dict[str, Any]]) -> tuple[Any, ...]:
+        self.env.reset(seed=seeds[0], options=options)
+        q, q_dot = self.env.plant.joint_state()
+        self.last = (None, self.env.report_observation.as_array()[None], q[None], q_dot[None])
+        return self.last
+
+    def torque_actions(self, torques: np.ndarray) -> np.ndarray:
+        return torques
+
+    def step(self, torques: np.ndarray) -> tuple[Any, ...]:
+        plant = self.env.plant
+        try:
+            observation = plant.step(float(torques[0]))
+        except SimulationDiverged as exc:
+            return (*self.last, np.zeros(1), np.ones(1, dtype=bool), [exc.reason])
+        q, q_dot = plant.joint_state()
+        self.last = (None, observation.as_array()[None], q[None], q_dot[None])
+        return (*self.last, np.array([plant.last_torque_nm]), np.zeros(1, dtype=bool), [None])
+
+
+class _ManyRods:
+    """The batched engine: a :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (or its discrete twin)."""
+
+    def __init__(self, env: Any) -> None:
+        self.env, self.dt_s, self.n_coordinates = env, env.dt_s, env.chain.n_coordinates
+        self.limits = env.chain.params.torque_limit_nm.numpy()
+
+    def reset(self, seeds: list[int], options: Optional[dict[str, Any]]) -> tuple[Any, ...]:
+        vectors, info = self.env.reset(seed=seeds, options=options)
+        return (vectors, info["observation"], *(x.numpy() for x in self.env.joint_state()))
+
+    def torque_actions(self, torques: np.ndarray) -> np.ndarray:
+        return (torques / self.env.torque_limit_nm)[:, None]
+
+    def step(self, actions: Any) -> tuple[Any, ...]:
+        torques = np.clip(self.env.torques_from_actions(actions), -self.limits, self.limits)
+        vectors, _, _, _, info = self.env.step(actions)
+        failed = info.get("_truncation_reason", np.zeros(self.env.num_envs, dtype=bool))
+        reasons = [str(r) if f else None for f, r in zip(failed, info.get("truncation_reason", failed))]
+        return (vectors, info["observation"], *(x.numpy() for x in self.env.joint_state()), torques, failed, reasons)
+
+
+class _Controllers:
+    """One :class:`Controller` per rod, called with its rod's observation, joint state and time."""
+
+    def __init__(self, controllers: list[Any], to_actions: Callable[[np.ndarray], Any]) -> None:
+        for c in controllers:
+            if not callable(c) or not hasattr(c, "reset"):
+                raise ValueError(f"controller must have reset() and be callable, got {type(c).__name__}")
+        self.controllers, self.to_actions = controllers, to_actions
+
+    def reset(self) -> None:
+        for c in self.controllers:
+            c.reset()
+
+    def __call__(self, k: int, time_s: float, vectors: Any, observations: np.ndarray, q: np.ndarray,
+                 q_dot: np.ndarray) -> Any:
+        torques = np.empty(len(self.controllers))
+        for i, c in enumerate(self.controllers):
+            torques[i] = float(c(Observation.from_array(observations[i]), q[i].copy(), q_dot[i].copy(), time_s))
+            if not math.isfinite(torques[i]):
+                raise ValueError(f"controller {i} returned a non-finite torque at t = {time_s:.2f} s: {torques[i]!r}")
+        return self.to_actions(torques)
+
+
+@dataclass
+class BatchPolicy:
+    """A policy of the vector environments: ``predict_batch(vectors) -> actions`` on the ``(B, 11)`` float32 batch of
+    observation vectors, called every ``action_repeat`` plant steps, its actions held in between (as
+    :class:`softpend.rl.training_env.HeldActionController` holds them): integers of shape ``(B,)`` on the
+    ``n_torque_levels`` levels when that is set, else fractions of the torque limit of shape ``(B, 1)`` or ``(B,)``
+    (for stable-baselines3: ``lambda v: model.predict(v, deterministic=True)[0]``).  Runs on the batched engine."""
+
+    predict_batch: Callable[[np.ndarray], Any]
+    action_repeat: int = 1
+    n_torque_levels: Optional[int] = None
+
+    def __post_init__(self) -> None:
+        if not callable(self.predict_batch):
+            raise ValueError(f"predict_batch must be callable, got {type(self.predict_batch).__name__}")
+        positive_int("action_repeat", self.action_repeat)
+
+    def reset(self) -> None:
+        self._held = None
+
+    def __call__(self, k: int, time_s: float, vectors: np.ndarray, *state: Any) -> Any:
+        if k % self.action_repeat == 0:
+            self._held = np.asarray(self.predict_batch(vectors))
+            if self._held.shape == (len(vectors), 1) and self.n_torque_levels is not None:
+                self._held = self._held[:, 0]
+        return self._held
 
 
 def _check_seeds(seeds: Sequence[int]) -> list[int]:
@@ -462,78 +448,81 @@ def _check_seeds(seeds: Sequence[int]) -> list[int]:
     return [int_at_least("seeds", s, 0) for s in values]
 
 
-def _rods(task: Task, seeds: list[int], rod_spread: float, rod_seed: int) -> Any:
-    """The rod of each episode as a :class:`~softpend.plant.batched.BatchedRodParams` (``None``: every episode on
-    ``task.rod``)."""
-    from softpend.plant.batched import BatchedRodParams
-    from softpend.plant.randomisation import randomised_rod
-
-    if rod_spread == 0:
+def _start_options(initial_state: Optional[tuple[Any, Any]]) -> Optional[dict[str, Any]]:
+    """``reset``'s options for an exact start ``(q, q_dot)`` (``None``: the start distribution)."""
+    if initial_state is None:
         return None
-    rods = [randomised_rod(task.rod, np.random.default_rng(rod_seed + s), rod_spread) for s in seeds]
-    return BatchedRodParams.from_params(rods)
-
-
-def _initial_joint_state(initial_state: tuple[Any, Any], batch: int, n_coordinates: int) -> tuple[Any, Any]:
-    """``(q, q_dot)`` torch tensors of shape ``(batch, n_coordinates)`` from one state or one per rod."""
-    import torch
-
     try:
         q, q_dot = initial_state
     except (TypeError, ValueError):
         raise ValueError("initial_state must be a pair (q, q_dot)") from None
-    out = []
-    for name, value in (("initial_state q", q), ("initial_state q_dot", q_dot)):
-        array = np.asarray(value, dtype=np.float64)
-        if array.shape == (n_coordinates,):
-            array = np.broadcast_to(array, (batch, n_coordinates))
-        if array.shape != (batch, n_coordinates):
-            raise ValueError(f"{name} must have shape ({n_coordinates},) or ({batch}, {n_coordinates}), got {array.shape}")
-        if not np.all(np.isfinite(array)):
-            raise ValueError(f"{name} must be finite")
-        out.append(torch.tensor(array, dtype=torch.float64))
-    return out[0], out[1]
+    return {"q": q, "q_dot": q_dot}
 
 
-def _run(
-    policy: _StepPolicy,
-    task: Optional[Task],
-    seeds: Sequence[int],
-    duration_s: float,
-    *,
-    n_torque_levels: Optional[int],
-    rod_spread: float,
-    rod_seed: int,
-    substeps: Optional[int],
-    initial_state: Optional[tuple[Any, Any]],
-    name: str,
-    reset_policy: Callable[[int], None] = lambda batch: None,
-) -> EvaluationSummary:
-    """The batched episodes of :func:`evaluate_batched` and :func:`evaluate_controllers_batched`."""
-    from softpend.envs.observation_vector import observation_vector
-    from softpend.envs.reward import next_bonus
-    from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
-    from softpend.plant.batched import stable_substeps
-
-    task = task if task is not None else Task()
-    if not isinstance(task, Task):
-        raise ValueError(f"task must be a Task, got {type(task).__name__}")
-    if task.plant != "prb":
-        raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
-    seeds = _check_seeds(seeds)
-    duration_s = positive("duration_s", duration_s)
-    n_steps = int(round(duration_s / task.dt_s))
+def _steps(duration_s: float, dt_s: float, batch: int, n_coordinates: int) -> int:
+    """Plant steps of an episode, refusing fewer than two or trajectories that do not fit in memory."""
+    n_steps = int(round(duration_s / dt_s))
     if n_steps < 2:
-        raise ValueError(f"duration_s must cover at least two steps of {task.dt_s} s, got {duration_s!r}")
-    rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
-    rod_seed = int_at_least("rod_seed", rod_seed, 0)
-    batch = len(seeds)
-    n_coordinates = task.rod.n_links + 1
+        raise ValueError(f"duration_s must cover at least two steps of {dt_s} s, got {duration_s!r}")
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + n_coordinates)
     check_work_size(f"evaluating {batch} episode(s) of {duration_s:g} s", batch * (n_steps + 1) * per_step,
-                    f"{n_steps + 1} steps of {task.dt_s:g} s per episode, {per_step} bytes of trajectory a step")
+                    f"{n_steps + 1} steps of {dt_s:g} s per episode, {per_step} bytes of trajectory a step")
+    return n_steps
 
-    rods = _rods(task, seeds, rod_spread, rod_seed)
+
+def _roll(rods: Any, policy: Any, seeds: list[int], duration_s: float,
+          initial_state: Optional[tuple[Any, Any]]) -> list[EvaluationResult]:
+    """The one evaluation loop: ``len(seeds)`` episodes at once on ``rods`` (an engine), one per seed."""
+    n_steps, batch = _steps(duration_s, rods.dt_s, len(seeds), rods.n_coordinates), len(seeds)
+    vectors, observations, q, q_dot = rods.reset(seeds, _start_options(initial_state))
+    policy.reset()
+    recorded_obs = np.empty((n_steps + 1, batch, len(OBSERVATION_NAMES)))
+    recorded_torque = np.zeros((n_steps + 1, batch))
+    recorded_q = np.empty((n_steps + 1, batch, rods.n_coordinates))
+    recorded_obs[0], recorded_q[0] = observations, q
+    last, reasons, active = np.full(batch, n_steps), [None] * batch, np.ones(batch, dtype=bool)
+    for k in range(n_steps):
+        actions = policy(k, k * rods.dt_s, vectors, observations, q, q_dot)
+        vectors, observations, q, q_dot, torques, failed, why = rods.step(actions)
+        for i in np.flatnonzero(failed & active):
+            last[i], reasons[i] = k, why[i]
+        active &= ~failed
+        recorded_torque[k, active] = torques[active]
+        recorded_obs[k + 1], recorded_q[k + 1] = observations, q
+        if not active.any():
+            break
+    times = np.arange(n_steps + 1) * rods.dt_s
+    results = []
+    for i, seed in enumerate(seeds):
+        end = int(last[i]) + 1
+        obs, torque = recorded_obs[:end, i].copy(), recorded_torque[:end, i].copy()
+        metrics = dict(_NO_EPISODE)
+        if end >= 2:
+            metrics = metrics_from_trajectory(times[:end], obs[:, _THETA], torque, obs[:, _PHI_DOT])
+        metrics["success"] = metrics["success"] and reasons[i] is None
+        results.append(EvaluationResult(seed=seed, time_s=times[:end].copy(), observations=obs, torque_nm=torque,
+                                        joint_angles_rad=recorded_q[:end, i].copy(), diverged=reasons[i], **metrics))
+    return results
+
+
+def run_episode(controller: Controller, env: Any, seed: int, duration_s: float,
+                initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None) -> EvaluationResult:
+    """One closed-loop episode of ``controller`` on ``env``, a :class:`~softpend.envs.SoftPendulumEnv` (see
+    :func:`evaluate`)."""
+    return _roll(_OneRod(env), _Controllers([controller], lambda torques: torques), [seed], duration_s,
+                 initial_state)[0]
+
+
+def _vector_env(task: Task, policy: Any, seeds: list[int], duration_s: float, rod_spread: float, rod_seed: int,
+                substeps: Optional[int], env_kwargs: dict[str, Any]) -> Any:
+    """The vector environment of a batched evaluation, rod ``i`` the one :func:`_rod` draws for ``seeds[i]``."""
+    from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
+    from softpend.plant.batched import BatchedRodParams, stable_substeps
+
+    if task.plant != "prb":
+        raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
+    rods = None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s)
+                                                                      for s in seeds])
     if rods is not None:
         stable = stable_substeps(rods, task.dt_s)
         if substeps is None:
@@ -541,194 +530,135 @@ def _run(
         elif int_at_least("substeps", substeps, 1) < stable:
             raise ValueError(f"substeps must be at least {stable} for the rods drawn with rod_spread = {rod_spread:g} "
                              f"(softpend.plant.batched.stable_substeps), got {substeps!r}")
-    kwargs: dict[str, Any] = dict(num_envs=batch, params=task.rod, dt_s=task.dt_s, substeps=substeps, start=task.start,
-                                  start_noise_rad=task.start_noise_rad, max_episode_steps=n_steps + 1)
-    if n_torque_levels is not None:
-        env: Any = SoftPendulumDiscreteVectorEnv(n_torque_levels=n_torque_levels, **kwargs)
-    else:
-        env = SoftPendulumVectorEnv(**kwargs)
+    kwargs = dict(num_envs=len(seeds), params=task.rod, dt_s=task.dt_s, substeps=substeps, start=task.start,
+                  start_noise_rad=task.start_noise_rad, max_episode_steps=int(round(duration_s / task.dt_s)) + 1,
+                  **env_kwargs)
+    levels = getattr(policy, "n_torque_levels", None)
+    env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
     if rods is not None:
         # each rod its own parameters; actions keep mapping to torques with the task's torque limit (the agent's
         # model of the motor), which the chain then saturates at the rod's own limit
         env.chain.set_params(rods)
-    limits = env.chain.params.torque_limit_nm.numpy()
-
-    vectors, info = env.reset(seed=seeds)
-    observations = info["observation"]
-    if initial_state is not None:
-        q0, qd0 = _initial_joint_state(initial_state, batch, n_coordinates)
-        env._q, env._qd = q0.contiguous(), qd0.contiguous()
-        observations = env._observe()
-        env._observations = observations
-        env._bonus = next_bonus(observations[:, _THETA], np.zeros(batch), env.dt_s, env.reward_params)
-        vectors = observation_vector(observations, env._bonus, env)
-    q, q_dot = (x.numpy() for x in env.joint_state())
-    reset_policy(batch)
-
-    recorded_obs = np.empty((n_steps + 1, batch, len(OBSERVATION_NAMES)))
-    recorded_torque = np.zeros((n_steps + 1, batch))
-    recorded_q = np.empty((n_steps + 1, batch, n_coordinates))
-    recorded_obs[0] = observations
-    recorded_q[0] = q
-    last = np.full(batch, n_steps)
-    reasons: list[Optional[str]] = [None] * batch
-    active = np.ones(batch, dtype=bool)
-    for k in range(n_steps):
-        actions = policy(k, vectors, observations, q, q_dot)
-        torques = np.clip(env.torques_from_actions(actions), -limits, limits)
-        vectors, _, _, _, info = env.step(actions)
-        if "_truncation_reason" in info:
-            failed = info["_truncation_reason"] & active
-            for i in np.flatnonzero(failed):
-                last[i], reasons[i] = k, str(info["truncation_reason"][i])
-            active &= ~failed
-        observations = info["observation"]
-        q, q_dot = (x.numpy() for x in env.joint_state())
-        recorded_torque[k, active] = torques[active]
-        recorded_obs[k + 1] = observations
-        recorded_q[k + 1] = q
-        if not active.any():
-            break
-
-    times = np.arange(n_steps + 1) * task.dt_s
-    results = []
-    for i, seed in enumerate(seeds):
-        end = int(last[i]) + 1
-        obs_i, torque_i = recorded_obs[:end, i].copy(), recorded_torque[:end, i].copy()
-        if end >= 2:
-            metrics = metrics_from_trajectory(times[:end], obs_i[:, _THETA], torque_i, obs_i[:, _PHI_DOT])
-        else:
-            metrics = {"swing_up_time_s": math.inf, "upright_std_rad": math.pi, "upright_mean_abs_rad": math.pi,
-                       "peak_torque_nm": 0.0, "energy_used_j": 0.0, "success": False}
-        if reasons[i] is not None:
-            metrics["success"] = False
-        results.append(EvaluationResult(seed=seed, time_s=times[:end].copy(), observations=obs_i, torque_nm=torque_i,
-                                        joint_angles_rad=recorded_q[:end, i].copy(), diverged=reasons[i], **metrics))
-    return EvaluationSummary(name=name, results=results)
+    return env
 
 
-def evaluate_batched(
-    predict_batch: Callable[[np.ndarray], Any],
+def _rod(task: Task, rod_spread: float, seed: int) -> Any:
+    """:func:`softpend.plant.randomisation.randomised_rod` of ``task.rod`` from ``default_rng(seed)``."""
+    from softpend.plant.randomisation import randomised_rod
+
+    return randomised_rod(task.rod, np.random.default_rng(seed), rod_spread)
+
+
+def evaluate(
+    controller: Controller | Sequence[Controller] | BatchPolicy,
     task: Optional[Task] = None,
+    *,
+    engine: str = "exudyn",
+    name: str = "controller",
     seeds: Sequence[int] = (0, 1, 2),
     duration_s: float = TEST_EPISODE_S,
-    *,
-    action_repeat: int = 1,
-    n_torque_levels: Optional[int] = None,
+    initial_state: Optional[tuple[Any, Any]] = None,
+    env_kwargs: Optional[dict[str, Any]] = None,
+    stop_at_first_failure: bool = False,
     rod_spread: float = 0.0,
     rod_seed: int = 0,
     substeps: Optional[int] = None,
-    initial_state: Optional[tuple[Any, Any]] = None,
-    name: str = "policy",
 ) -> EvaluationSummary:
-    """Evaluate a policy of the softpend environments on ``len(seeds)`` starts at once (see the module docstring).
+    """Evaluate a controller on the true plant of ``task`` from one start per seed (see the module docstring).
 
     Parameters
     ----------
-    predict_batch : callable
-        ``predict_batch(vectors) -> actions``: the ``(B, 11)`` float32 batch of observation vectors in, one
-        action per rod out (for stable-baselines3: ``lambda v: model.predict(v, deterministic=True)[0]``):
-        integers of shape ``(B,)`` when ``n_torque_levels`` is set, else fractions of the torque limit of shape
-        ``(B, 1)`` or ``(B,)`` (clipped to ``[-1, 1]``).  Called at plant steps ``0, action_repeat, ...``.
+    controller : Controller, sequence of Controller, or BatchPolicy
+        The controller under test (its ``reset()`` is called before each episode).  On the batched engine one
+        controller is copied (``copy.deepcopy``) for every rod, or a sequence holds one per seed; a
+        :class:`BatchPolicy` runs on the batched engine only.
     task : Task, optional
-        Rod, time step and start distribution (default ``Task()``); ``task.plant`` must be ``"prb"``, and
-        ``task.substeps`` (the Exudyn plant's) is not used.
+        Plant, rod, time step and start distribution (default: ``Task()``, the default rod hanging).
+    engine : {"exudyn", "batched"}
+        ``"exudyn"``: one :class:`softpend.envs.SoftPendulumEnv` episode after the other on ``task``'s plant;
+        ``"batched"``: every episode at once on :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (the RK4
+        chain; ``task.plant`` must be ``"prb"``, ``task.substeps`` is not used).
     seeds : sequence of int
-        One episode per seed (integers >= 0); episode ``i`` starts where the single environment reset with
-        ``seeds[i]`` starts.
+        One episode per seed (integers >= 0), started where the environment reset with that seed starts.
     duration_s : float
         Episode length [s] (at least two plant steps).
-    action_repeat : int
-        Plant steps each action is held.
-    n_torque_levels : int, optional
-        Discrete actions (:class:`~softpend.envs.SoftPendulumDiscreteEnv` levels) when set.
-    rod_spread : float
-        Rods that differ from ``task.rod``: the episode seeded ``s`` runs on
-        :func:`softpend.plant.randomisation.randomised_rod` of ``task.rod`` drawn from
-        ``numpy.random.default_rng(rod_seed + s)`` with this spread (0: every episode on ``task.rod``).  Actions
-        map to torques with ``task.rod``'s torque limit; each rod saturates them at its own.
-    rod_seed : int
-        Offset of the rods' generators (0: the rods of :func:`softpend.study.fresh_starts.perturbed_rod_row`).
-    substeps : int, optional
-        RK4 sub-steps per plant step (default: the stability limit of the stiffest rod,
-        :func:`softpend.plant.batched.stable_substeps`; fewer are refused).
     initial_state : (q, q_dot), optional
-        Exact initial joint state, shapes ``(n + 1,)`` (every rod) or ``(B, n + 1)``, overriding the start
-        distribution (as for :func:`~softpend.evaluation.evaluate_controller`).
-    name : str
-        Name of the summary.
+        Exact initial joint state (``reset(options={"q": ..., "q_dot": ...})``), overriding the start
+        distribution (e.g. a 0.2 rad tilt for LQR); on the batched engine one state or one per seed.
+    env_kwargs : dict, optional
+        Further arguments of the environment (e.g. ``reward_params``).
+    stop_at_first_failure : bool
+        Keep the episodes up to and including the first that does not succeed (the Exudyn engine runs no
+        further one): whether *every* seed succeeds is decided exactly, with the episodes a full evaluation runs.
+    rod_spread, rod_seed : float, int
+        Rods that differ from ``task.rod``: the episode seeded ``s`` runs on the rod
+        :func:`softpend.plant.randomisation.randomised_rod` draws from ``numpy.random.default_rng(rod_seed + s)``
+        with this spread (0: every episode on ``task.rod``); controllers keep their own model of the rod.
+    substeps : int, optional
+        Batched engine: RK4 sub-steps per plant step (default: the stability limit of the stiffest rod,
+        :func:`softpend.plant.batched.stable_substeps`; fewer are refused).
 
     Returns
     -------
     EvaluationSummary
-        One :class:`~softpend.evaluation.EvaluationResult` per seed, in the order of ``seeds``.
-    """
-    if not callable(predict_batch):
-        raise ValueError(f"predict_batch must be callable, got {type(predict_batch).__name__}")
-    repeat = positive_int("action_repeat", action_repeat)
-    held: dict[str, Any] = {}
-
-    def policy(k: int, vectors: np.ndarray, observations: np.ndarray, q: np.ndarray, q_dot: np.ndarray) -> Any:
-        if k % repeat == 0:
-            actions = np.asarray(predict_batch(vectors))
-            if actions.shape == (len(vectors), 1) and n_torque_levels is not None:
-                actions = actions[:, 0]
-            held["actions"] = actions
-        return held["actions"]
-
-    return _run(policy, task, seeds, duration_s, n_torque_levels=n_torque_levels, rod_spread=rod_spread,
-                rod_seed=rod_seed, substeps=substeps, initial_state=initial_state, name=name)
-
-
-def evaluate_controllers_batched(
-    controller: Controller | Sequence[Controller],
-    task: Optional[Task] = None,
-    seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = TEST_EPISODE_S,
-    *,
-    rod_spread: float = 0.0,
-    rod_seed: int = 0,
-    substeps: Optional[int] = None,
-    initial_state: Optional[tuple[Any, Any]] = None,
-    name: str = "controller",
-) -> EvaluationSummary:
-    """:func:`evaluate_batched` for :class:`~softpend.evaluation.Controller` objects (torque out, full joint state in).
-
-    ``controller`` is one controller, copied (``copy.deepcopy``) for every rod, or a sequence of ``len(seeds)``
-    controllers, rod ``i`` driven by the ``i``-th; each is reset before the episode and called every plant step
-    with its rod's :class:`~softpend.plant.Observation`, joint state ``(q, q_dot)`` and time, as
-    :func:`~softpend.evaluation.evaluate_controller` calls it.  Torques are clipped to the task's torque limit
-    (the continuous environment's action range) and then to each rod's own.  The other parameters are those
-    of :func:`evaluate_batched`.
+        Per-seed :class:`EvaluationResult` objects (metrics and trajectories), in the order of ``seeds``.
     """
     task = task if task is not None else Task()
+    if not isinstance(task, Task):
+        raise ValueError(f"task must be a Task, got {type(task).__name__}")
+    one_of("engine", engine, ("exudyn", "batched"))
+    seeds, env_kwargs = _check_seeds(seeds), dict(env_kwargs or {})
+    positive("duration_s", duration_s)
+    boolean("stop_at_first_failure", stop_at_first_failure)
+    rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
+    rod_seed = int_at_least("rod_seed", rod_seed, 0)
+    if engine == "batched":
+        _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
+        policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
+        env = _vector_env(task, policy, seeds, duration_s, rod_spread, rod_seed, substeps, env_kwargs)
+        rods = _ManyRods(env)
+        if not isinstance(policy, BatchPolicy):
+            policy = _Controllers(policy, rods.torque_actions)
+        results = _roll(rods, policy, seeds, duration_s, initial_state)
+        failed = [i for i, r in enumerate(results) if not r.success]
+        if stop_at_first_failure and failed:
+            results = results[: failed[0] + 1]
+        return EvaluationSummary(name=name, results=results)
+    if isinstance(controller, BatchPolicy) or substeps is not None:
+        raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
+    from softpend.envs import SoftPendulumEnv
+
+    env = SoftPendulumEnv(**task.env_kwargs(), **env_kwargs)
+    results = []
+    for seed in seeds:
+        if rod_spread > 0:
+            env = SoftPendulumEnv(**task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs)
+        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
+        if stop_at_first_failure and not results[-1].success:
+            break
+    return EvaluationSummary(name=name, results=results)
+
+
+#: The name most call sites use.
+evaluate_controller = evaluate
+
+
+def _copies(controller: Controller | Sequence[Controller], batch: int) -> list[Controller]:
+    """One controller per rod: the ``batch`` of a sequence, or copies of one controller."""
     if isinstance(controller, (list, tuple)):
-        controllers = list(controller)
-        if len(controllers) != len(_check_seeds(seeds)):
-            raise ValueError(f"controller holds {len(controllers)} controllers for {len(list(seeds))} seeds")
-    else:
-        try:
-            controllers = [copy.deepcopy(controller) for _ in _check_seeds(seeds)]
-        except Exception as exc:  # objects holding a simulator or a file handle cannot be copied
-            raise ValueError(f"controller cannot be copied for every rod ({exc}); pass one controller per seed") from exc
-    for c in controllers:
-        if not callable(c) or not hasattr(c, "reset"):
-            raise ValueError(f"controller must have reset() and be callable, got {type(c).__name__}")
-    limit = task.rod.torque_limit_nm if isinstance(task, Task) else 1.0
+        if len(controller) != batch:
+            raise ValueError(f"controller holds {len(controller)} controllers for {batch} seeds")
+        return list(controller)
+    try:
+        return [copy.deepcopy(controller) for _ in range(batch)]
+    except Exception as exc:  # objects holding a simulator or a file handle cannot be copied
+        raise ValueError(f"controller cannot be copied for every rod ({exc}); pass one controller per seed") from exc
 
-    def reset(batch: int) -> None:
-        for c in controllers:
-            c.reset()
 
-    def policy(k: int, vectors: np.ndarray, observations: np.ndarray, q: np.ndarray, q_dot: np.ndarray) -> Any:
-        time_s = k * task.dt_s
-        torques = np.empty(len(controllers))
-        for i, c in enumerate(controllers):
-            torque = float(c(Observation.from_array(observations[i]), q[i].copy(), q_dot[i].copy(), time_s))
-            if not math.isfinite(torque):
-                raise ValueError(f"controller {i} returned a non-finite torque at t = {time_s:.2f} s: {torque!r}")
-            torques[i] = torque
-        return (torques / limit)[:, None]
-
-    return _run(policy, task, seeds, duration_s, n_torque_levels=None, rod_spread=rod_spread, rod_seed=rod_seed,
-                substeps=substeps, initial_state=initial_state, name=name, reset_policy=reset)
+def evaluate_batched(predict_batch: Callable[[np.ndarray], Any], task: Optional[Task] = None,
+                     seeds: Sequence[int] = (0, 1, 2), duration_s: float = TEST_EPISODE_S, *, action_repeat: int = 1,
+                     n_torque_levels: Optional[int] = None, name: str = "policy", **options: Any) -> EvaluationSummary:
+    """:func:`evaluate` of ``BatchPolicy(predict_batch, action_repeat, n_torque_levels)`` on the batched engine
+    (``options``: ``rod_spread``, ``rod_seed``, ``substeps``, ``initial_state``)."""
+    policy = BatchPolicy(predict_batch, action_repeat, n_torque_levels)
+    return evaluate(policy, task, engine="batched", name=name, seeds=seeds, duration_s=duration_s, **options)

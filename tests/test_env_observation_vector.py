@@ -6,17 +6,20 @@ import pytest
 from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.plant import OBSERVATION_NAMES
 from softpend.envs.observation_vector import observation_vector, observations_from_vector
+from softpend.envs.reward import next_bonus
 
 
 def _trajectory(n_steps: int = 120):
     env = SoftPendulumDiscreteEnv(start="random")
     vec, _ = env.reset(seed=3)
     rng = np.random.default_rng(0)
-    raws, bonuses, vecs = [env.report_observation.as_array()], [env._bonus], [vec]
+    first = next_bonus(env.report_observation.theta_rad, 0.0, env.dt_s, env.reward_params)  # the bonus at a reset
+    raws, bonuses, vecs = [env.report_observation.as_array()], [first], [vec]
     for _ in range(n_steps):
         vec, *_ = env.step(int(rng.integers(0, env.n_torque_levels)))
+        theta = env.report_observation.theta_rad
         raws.append(env.report_observation.as_array())
-        bonuses.append(env._bonus)
+        bonuses.append(next_bonus(theta, bonuses[-1], env.dt_s, env.reward_params))
         vecs.append(vec)
     return env, np.array(raws), np.array(bonuses), np.array(vecs)
 

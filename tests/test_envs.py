@@ -13,7 +13,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import softpend  # noqa: F401  (registers the environments)
 from softpend.envs import MAX_EPISODE_STEPS, RewardParams, SoftPendulumDiscreteEnv, SoftPendulumEnv, step_reward
 from softpend.envs.reward import shaping_reward
-from softpend.plant import RodParams
+from softpend.plant import RodParams, make_plant
 
 ENV_IDS = ["softpend/SoftPendulum-v0", "softpend/SoftPendulumDiscrete-v0"]
 
@@ -94,8 +94,8 @@ def test_bonus_is_paid_inside_epsilon_and_decays_outside() -> None:
 
 def test_env_reward_matches_reward_module() -> None:
     env = SoftPendulumEnv()
-    env.reset(seed=3, options={"start": "upright"})
-    bonus = env._bonus
+    vector, _ = env.reset(seed=3, options={"start": "upright"})
+    bonus = float(vector[-1])  # the bonus state, 0 or 1 at a reset
     for k in range(50):
         obs, reward, *_ = env.step(np.array([0.3 * math.sin(k / 5)], dtype=np.float32))
         expected, bonus = step_reward(env.report_observation.theta_rad, bonus, env.dt_s, env.reward_params)
@@ -147,10 +147,9 @@ def test_step_before_reset_raises() -> None:
 
 def test_diverging_simulation_truncates_with_reason_and_finite_observation() -> None:
     env = SoftPendulumEnv(params=RodParams(n_links=10, joint_damping_nms_per_rad=0.0, hub_friction_nms_per_rad=0.0))
-    env.reset(seed=0)
     q = np.zeros(11)
     q[0], q[1] = 2.0, 0.2
-    env._observation = env.plant.reset(q, np.zeros(11))
+    env.reset(seed=0, options={"q": q})
     for _ in range(1000):
         obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
         assert np.all(np.isfinite(obs)) and math.isfinite(reward)
@@ -165,3 +164,43 @@ def test_render_returns_an_image() -> None:
     frame = env.render()
     assert frame.shape == (400, 400, 3) and frame.dtype == np.uint8
     assert (frame < 255).any()
+
+
+def test_reset_options_start_the_plant_exactly_there_and_keep_the_draws() -> None:
+    """``options={"q", "q_dot"}`` start the rod exactly at that state (as Gymnasium's pendulum reads its options); the
+    generator advances as without them, and a closed loop from there is the plant's own from that state."""
+    env = SoftPendulumEnv(start="upright")
+    q, q_dot = np.zeros(5), np.zeros(5)
+    q[0], q_dot[0] = 0.15, -0.3
+    vector, info = env.reset(seed=4, options={"q": q, "q_dot": q_dot})
+    np.testing.assert_array_equal(env.plant.joint_state()[0], q)
+    np.testing.assert_array_equal(env.plant.joint_state()[1], q_dot)
+    assert vector[-1] == 0.0 and abs(info["observation"][1] - 0.15) < 0.01  # tip tilted 0.15 rad: no bonus
+    after_exact = env.np_random.uniform()
+    env.reset(seed=4)
+    assert env.np_random.uniform() == after_exact
+    plant = make_plant("prb", params=env.params, dt_s=env.dt_s, substeps=2)
+    plant.reset(q, q_dot)
+    env.reset(seed=9, options={"q": q, "q_dot": q_dot})
+    for k in range(30):
+        action = np.array([0.3 * math.sin(k / 4)])
+        expected = plant.step(env.torque_from_action(action))
+        env.step(action)
+        assert env.report_observation == expected
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"state": np.zeros(5)}, r"unknown reset option\(s\) \['state'\]"),
+        ({"q": np.zeros(4)}, r"options\['q'\] must have shape \(5,\), got \(4,\)"),
+        ({"q": np.zeros(5), "q_dot": np.zeros((2, 5))}, r"options\['q_dot'\] must have shape"),
+        ({"q": np.full(5, np.nan)}, r"options\['q'\] must be finite"),
+        ({"q_dot": np.zeros(5)}, r"options\['q_dot'\] needs options\['q'\]"),
+        ({"start": "sideways"}, r"options\['start'\] must be one of"),
+    ],
+)
+def test_bad_reset_options_are_refused_in_one_line(options: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match) as error:
+        SoftPendulumEnv().reset(seed=0, options=options)
+    assert "\n" not in str(error.value)

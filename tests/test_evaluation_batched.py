@@ -12,7 +12,7 @@ import torch
 
 from softpend.control.lqr import LQRController
 from softpend.control.swingup import EnergySwingUpController
-from softpend.evaluation import evaluate_batched, evaluate_controller, evaluate_controllers_batched
+from softpend.evaluation import evaluate, evaluate_batched, evaluate_controller
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agent_batched, evaluate_agents_batched
@@ -56,7 +56,7 @@ def agent():
 def test_lqr_from_seeded_upright_starts_matches_the_single_evaluation() -> None:
     lqr = LQRController.from_params(UPRIGHT.rod, dt_s=UPRIGHT.dt_s)
     seeds = (11, 3, 7)  # any list of seeds: each rod seeded with its own
-    batched = evaluate_controllers_batched(lqr, UPRIGHT, seeds, 2.0)
+    batched = evaluate(lqr, UPRIGHT, engine="batched", seeds=seeds, duration_s=2.0)
     single = evaluate_controller(lqr, UPRIGHT.replace(substeps=CONVERGED), seeds=seeds, duration_s=2.0)
     _assert_same_fields(batched, single)
     starts = [r.observations[0] for r in single.results]
@@ -74,7 +74,7 @@ def test_lqr_from_a_tilt_and_on_perturbed_rods_matches_the_single_evaluation() -
     lqr = LQRController.from_params(UPRIGHT.rod, dt_s=UPRIGHT.dt_s)
     tilt = UPRIGHT.tilt_state(0.2)
     seeds = (0, 1)
-    batched = evaluate_controllers_batched(lqr, UPRIGHT, seeds, 2.0, initial_state=tilt, rod_spread=0.15, rod_seed=0)
+    batched = evaluate(lqr, UPRIGHT, engine="batched", seeds=seeds, duration_s=2.0, initial_state=tilt, rod_spread=0.15)
     for seed, b in zip(seeds, batched.results):
         rod = randomised_rod(UPRIGHT.rod, np.random.default_rng(seed), 0.15)  # perturbed_rod_row's rod of this seed
         (s,) = evaluate_controller(lqr, UPRIGHT.replace(rod=rod, substeps=CONVERGED), seeds=(seed,), duration_s=2.0,
@@ -92,7 +92,7 @@ def test_energy_swing_up_matches_the_single_evaluation() -> None:
     task = Task()
     seeds = (5, 2)
     controllers = [EnergySwingUpController(task.rod, dt_s=task.dt_s) for _ in seeds]  # holds an Exudyn plant: one each
-    batched = evaluate_controllers_batched(controllers, task, seeds, 4.5)
+    batched = evaluate(controllers, task, engine="batched", seeds=seeds, duration_s=4.5)
     single = evaluate_controller(EnergySwingUpController(task.rod, dt_s=task.dt_s), task.replace(substeps=CONVERGED),
                                  seeds=seeds, duration_s=4.5)
     _assert_same_fields(batched, single)
@@ -103,7 +103,7 @@ def test_energy_swing_up_matches_the_single_evaluation() -> None:
         assert abs(b.upright_std_rad - s.upright_std_rad) < 0.01  # measured 0.005 rad (of 0.02-0.025: the catch)
     assert fresh_start_row(batched)["starts"] == 2
     with pytest.raises(ValueError, match="one controller per seed"):
-        evaluate_controllers_batched(controllers[0], task, seeds, 1.0)
+        evaluate(controllers[0], task, engine="batched", seeds=seeds, duration_s=1.0)
 
 
 def test_dqn_agent_matches_evaluate_agent(agent) -> None:
@@ -154,7 +154,7 @@ def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:
     lqr = LQRController.from_params(UPRIGHT.rod, dt_s=UPRIGHT.dt_s)
     q, q_dot = UPRIGHT.tilt_state(0.1)
     q_dot = np.stack([q_dot, q_dot + 1e7])  # far beyond what RK4 integrates stably at this step: rod 1 diverges
-    summary = evaluate_controllers_batched(lqr, UPRIGHT, (0, 1), 1.0, initial_state=(q, q_dot))
+    summary = evaluate(lqr, UPRIGHT, engine="batched", seeds=(0, 1), duration_s=1.0, initial_state=(q, q_dot))
     ok, bad = summary.results
     assert ok.diverged is None and ok.success and len(ok.time_s) == 101
     assert bad.diverged is not None and "diverged" in bad.diverged and not bad.success
@@ -162,7 +162,8 @@ def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:
         for values in (r.observations, r.torque_nm, r.joint_angles_rad):
             assert np.all(np.isfinite(values))
         assert all(not isinstance(v, float) or not math.isnan(v) for v in r.metrics().values())
-    (alone,) = evaluate_controllers_batched(lqr, UPRIGHT, (0,), 1.0, initial_state=(q, q_dot[0])).results
+    (alone,) = evaluate(lqr, UPRIGHT, engine="batched", seeds=(0,), duration_s=1.0,
+                        initial_state=(q, q_dot[0])).results
     np.testing.assert_allclose(ok.observations, alone.observations, rtol=0, atol=1e-12)
 
 
@@ -179,7 +180,8 @@ def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:
         ({"substeps": 1}, "substeps"),
         ({"task": Task(plant="beam")}, "task.plant"),
         ({"n_torque_levels": 1}, "n_torque_levels"),
-        ({"initial_state": (np.zeros(3), np.zeros(3))}, "initial_state"),
+        ({"initial_state": (np.zeros(3), np.zeros(3))}, r"options\['q'\] must have shape"),
+        ({"initial_state": np.zeros(5)}, "initial_state must be a pair"),
         ({"seeds": tuple(range(100_000)), "duration_s": 1e4}, "GiB"),
     ],
 )

@@ -201,3 +201,49 @@ def test_bad_actions_raise_value_error() -> None:
         discrete.step(np.array([0, 5]))
     with pytest.raises(ValueError, match="actions"):
         discrete.step(np.array([0.5, 1.0]))
+
+
+def test_exact_starts_through_reset_options_follow_the_single_env_and_keep_the_draws() -> None:
+    """``options={"q", "q_dot"}`` (one state for every rod, or one per rod) start each rod exactly there, as the
+    single environment does with the same options; the masked-out rods and each generator's draws are untouched."""
+    q = np.zeros((3, 5))
+    q[:, 0] = [0.1, -0.2, 0.3]
+    env = SoftPendulumVectorEnv(num_envs=3, substeps=20, start="upright")
+    obs, info = env.reset(seed=[4, 5, 6], options={"q": q})
+    np.testing.assert_array_equal(env.joint_state()[0].numpy(), q)
+    np.testing.assert_array_equal(env.joint_state()[1].numpy(), np.zeros((3, 5)))
+    drawn = [float(r.uniform()) for r in env._rngs]  # noqa: SLF001 (reading the generators the test checks)
+    plain = SoftPendulumVectorEnv(num_envs=3, substeps=20, start="upright")
+    plain.reset(seed=[4, 5, 6])
+    assert [float(r.uniform()) for r in plain._rngs] == drawn  # noqa: SLF001
+    actions = np.full((3, 1), 0.4)
+    for i in range(3):
+        single = SoftPendulumEnv(substeps=200, start="upright")
+        single_obs, _ = single.reset(seed=0, options={"q": q[i]})
+        np.testing.assert_allclose(obs[i], single_obs, atol=1e-7)
+        vec_obs = obs
+        for _ in range(40):
+            single_obs, *_ = single.step(actions[i])
+        if i == 0:
+            for _ in range(40):
+                vec_obs, *_ = env.step(actions)
+            stepped = vec_obs
+        np.testing.assert_allclose(stepped[i], single_obs, atol=2e-5)
+    one = env.reset(seed=[1, 2, 3], options={"q": q[1], "reset_mask": np.array([False, True, False])})[0]
+    np.testing.assert_array_equal(env.joint_state()[0].numpy()[1], q[1])
+    np.testing.assert_array_equal(one[[0, 2]], stepped[[0, 2]])
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"seed": 3}, r"unknown reset option\(s\) \['seed'\]"),
+        ({"q": np.zeros((2, 5))}, r"options\['q'\] must have shape \(5,\) or \(3, 5\), got \(2, 5\)"),
+        ({"q": np.zeros(5), "q_dot": np.full(5, np.inf)}, r"options\['q_dot'\] must be finite"),
+        ({"start": "sideways"}, r"options\['start'\] must be one of"),
+    ],
+)
+def test_bad_reset_options_are_refused_in_one_line(options: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match) as error:
+        SoftPendulumVectorEnv(num_envs=3).reset(seed=0, options=options)
+    assert "\n" not in str(error.value)

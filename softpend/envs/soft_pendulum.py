@@ -34,6 +34,39 @@ OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
 OBSERVATION_BOUND = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32)
 
 
+#: Start kinds of the environments' ``start`` argument and ``options["start"]``.
+STARTS = ("hanging", "upright", "random")
+
+
+def reset_options(options: Optional[dict[str, Any]], start: str, n_coordinates: int, num_envs: Optional[int] = None,
+                  extra: tuple[str, ...] = ()) -> tuple[str, Optional[tuple[np.ndarray, np.ndarray]]]:
+    """The start kind and exact start state that ``reset``'s ``options`` ask for, as Gymnasium's pendulum reads its
+    ``options``: ``"start"`` (one of :data:`STARTS`, default ``start``) and ``"q"``, ``"q_dot"`` (the exact joint
+    state, shape ``(n_coordinates,)``, or ``(num_envs, n_coordinates)`` for a vector environment; ``q_dot`` zero
+    when left out), returned as float64 ``(q, q_dot)`` or ``None``.  The start is drawn as without them, so that
+    the generators advance alike; the exact state replaces it.  Keys in ``extra`` are the caller's; any other key,
+    a shape or a non-finite value that does not fit is a ``ValueError``."""
+    options = options or {}
+    unknown = sorted(set(options) - {"start", "q", "q_dot", *extra})
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}: the options are {['start', 'q', 'q_dot', *extra]}")
+    start = one_of("options['start']", options.get("start", start), STARTS)
+    if "q" not in options:
+        if "q_dot" in options:
+            raise ValueError("options['q_dot'] needs options['q'] (the exact start state)")
+        return start, None
+    shapes = [(n_coordinates,)] + ([(num_envs, n_coordinates)] if num_envs is not None else [])
+    state = []
+    for key in ("q", "q_dot"):
+        value = np.asarray(options.get(key, np.zeros(n_coordinates)), dtype=np.float64)
+        if value.shape not in shapes:
+            raise ValueError(f"options['{key}'] must have shape {' or '.join(map(str, shapes))}, got {value.shape}")
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"options['{key}'] must be finite")
+        state.append(value if num_envs is None else np.broadcast_to(value, (num_envs, n_coordinates)))
+    return start, (state[0], state[1])
+
+
 class SoftPendulumEnv(gym.Env):
     """Swing-up and balance of a soft rod driven by a torque-limited motor at its base.
 
@@ -61,7 +94,8 @@ class SoftPendulumEnv(gym.Env):
     ## Starting State
     ``start="hanging"`` (default): ``phi = pi`` plus uniform noise of ``start_noise_rad`` on the hub angle
     and rate; ``"upright"``: straight up plus the same noise; ``"random"``: hub angle uniform in
-    ``[-pi, pi)``.  All draws use ``self.np_random``.
+    ``[-pi, pi)``.  All draws use ``self.np_random``.  ``reset(options={"q": q, "q_dot": q_dot})`` starts
+    exactly at that joint state (:func:`reset_options`).
 
     ## Episode End
     No terminal state: episodes are truncated after ``max_episode_steps`` (1000 steps = 10 s when made
@@ -91,7 +125,7 @@ class SoftPendulumEnv(gym.Env):
         params = params if params is not None else RodParams()
         if torque_limit_nm is not None:
             params = params.replace(torque_limit_nm=torque_limit_nm)
-        one_of("start", start, ("hanging", "upright", "random"))
+        one_of("start", start, STARTS)
         non_negative("start_noise_rad", start_noise_rad)
         if render_mode is not None:
             one_of("render_mode", render_mode, self.metadata["render_modes"])
@@ -112,9 +146,9 @@ class SoftPendulumEnv(gym.Env):
         self._observation: Optional[Observation] = None
 
     # ------------------------------------------------------------------ helpers
-    def _vector(self, o: Observation) -> np.ndarray:
-        # scalar fast path (once per step); the batched twin for model rollouts is
-        # softpend.envs.observation_vector, tested equal to this one
+    def observation_vector(self, o: Observation, bonus: float) -> np.ndarray:
+        """The observation vector of plant observation ``o`` with the reward's bonus state ``bonus`` (one step;
+        the batched twin is :func:`softpend.envs.observation_vector.observation_vector`, tested equal)."""
         inv_l = 1.0 / self.params.length_m
         inv_v = 1.0 / VELOCITY_SCALE_PER_S
         cap = 5.0
@@ -130,7 +164,7 @@ class SoftPendulumEnv(gym.Env):
                 min(max(o.theta_dot_rad_s * inv_v, -cap), cap),
                 min(max(o.ex_dot_m_s * inv_l * inv_v, -cap), cap),
                 min(max(o.ey_dot_m_s * inv_l * inv_v, -cap), cap),
-                self._bonus,
+                bonus,
             ),
             dtype=np.float32,
         )
@@ -169,21 +203,21 @@ class SoftPendulumEnv(gym.Env):
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
+        """Start an episode from the start distribution, or from the exact state of ``options`` (see
+        :func:`reset_options`: ``"start"``, ``"q"``, ``"q_dot"``)."""
+        start, exact = reset_options(options, self.start, self.plant.n_coordinates)
         super().reset(seed=seed)
-        start = (options or {}).get("start", self.start)
         q, qd = self.plant.hanging_state()
         noise = self.start_noise_rad
         if start == "upright":
             q[0] = 0.0
         elif start == "random":
             q[0] = float(self.np_random.uniform(-math.pi, math.pi))
-        elif start != "hanging":
-            raise ValueError(f"options['start'] must be 'hanging', 'upright' or 'random', got {start!r}")
         q[0] += float(self.np_random.uniform(-noise, noise))
         qd[0] += float(self.np_random.uniform(-noise, noise))
-        self._observation = self.plant.reset(q, qd)
+        self._observation = self.plant.reset(*(exact if exact is not None else (q, qd)))
         self._bonus = 1.0 if abs(self._observation.theta_rad) < self.reward_params.epsilon_rad else 0.0
-        return self._vector(self._observation), {"observation": self._observation.as_array()}
+        return self.observation_vector(self._observation, self._bonus), {"observation": self._observation.as_array()}
 
     def step(self, action):
         if self._observation is None:
@@ -194,9 +228,9 @@ class SoftPendulumEnv(gym.Env):
             self._observation = self.plant.step(torque)
         except SimulationDiverged as exc:
             info["truncation_reason"] = f"simulation diverged: {exc.reason}"
-            return self._vector(self._observation), 0.0, False, True, info
+            return self.observation_vector(self._observation, self._bonus), 0.0, False, True, info
         reward = self._reward(self._observation.theta_rad)
-        return self._vector(self._observation), reward, False, False, info
+        return self.observation_vector(self._observation, self._bonus), reward, False, False, info
 
     def render(self):
         if self.render_mode != "rgb_array":

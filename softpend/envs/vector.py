@@ -42,7 +42,7 @@ from softpend import MAX_EPISODE_STEPS
 from softpend.checks import in_unit_interval, int_at_least, non_negative, one_of
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
-from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND
+from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND, STARTS, reset_options
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import INTEGRATORS, PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
 from softpend.plant.randomisation import RANDOMISED_FIELDS
@@ -118,7 +118,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
         if torque_limit_nm is not None:
             params = params.replace(torque_limit_nm=torque_limit_nm)
-        one_of("start", start, ("hanging", "upright", "random"))
+        one_of("start", start, STARTS)
         one_of("plant", plant, ("prb",))
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")
@@ -210,9 +210,10 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         return np.clip(a, -1.0, 1.0) * self._torque_limits
 
     # ------------------------------------------------------------------ resets
-    def _draw_starts(self, indices: np.ndarray, start: str) -> None:
+    def _draw_starts(self, indices: np.ndarray, start: str,
+                     exact: Optional[tuple[np.ndarray, np.ndarray]] = None) -> None:
         """New start states (and parameters) of the rods ``indices``, each from its own generator, in the
-        single environment's order of draws."""
+        single environment's order of draws; rows ``indices`` of ``exact`` replace the drawn states."""
         noise = self.start_noise_rad
         q = np.zeros((len(indices), self.chain.n_coordinates))
         qd = np.zeros_like(q)
@@ -228,6 +229,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             if self.randomize_fraction > 0 and self.randomized_fields:
                 f = self.randomize_fraction
                 self._factors[i] = 1.0 + rng.uniform(-f, f, len(self.randomized_fields))
+        if exact is not None:
+            q, qd = exact[0][indices], exact[1][indices]
         index = torch.as_tensor(indices)
         self._q[index] = torch.as_tensor(q)
         self._qd[index] = torch.as_tensor(qd)
@@ -246,9 +249,11 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         """Reset every sub-environment (or those of ``options["reset_mask"]``).
 
         ``seed``: ``None`` (keep each generator; a fresh random one if never seeded), an int ``s`` (seeds
-        ``s, s + 1, ...``) or one seed per sub-environment.  ``options["start"]`` overrides ``start``.
+        ``s, s + 1, ...``) or one seed per sub-environment.  ``options``: ``"start"``, and ``"q"``, ``"q_dot"``
+        (exact states, one for every rod or one per rod) as :func:`softpend.envs.soft_pendulum.reset_options`
+        reads them, and ``"reset_mask"``.
         """
-        options = dict(options or {})
+        start, exact = reset_options(options, self.start, self.chain.n_coordinates, self.num_envs, ("reset_mask",))
         if seed is None:
             seeds: list[Optional[int]] = [None] * self.num_envs
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
@@ -258,10 +263,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or hold {self.num_envs} seeds, got {len(seeds)}")
-        start = options.pop("start", self.start)
-        if start not in ("hanging", "upright", "random"):
-            raise ValueError(f"options['start'] must be 'hanging', 'upright' or 'random', got {start!r}")
-        mask = options.pop("reset_mask", None)
+        mask = (options or {}).get("reset_mask")
         if mask is None:
             mask = np.ones(self.num_envs, dtype=bool)
         mask = np.asarray(mask)
@@ -271,7 +273,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         for i in indices:
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
-        self._draw_starts(indices, start)
+        self._draw_starts(indices, start, exact)
         observations = self._observe()
         theta = observations[:, _THETA]
         self._bonus[indices] = next_bonus(theta[indices], np.zeros(len(indices)), self.dt_s, self.reward_params)

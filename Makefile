@@ -1,10 +1,12 @@
 # softpend: set-up, tests and the executable book.
 #
-#   make book [PROFILE=full|quick]   build the HTML book into _build/html (executes the notebooks first);
+#   make book [PROFILE=full|quick]   train the runs the notebooks read (softpend sweep --book), then execute the
+#                                    notebooks and build the HTML book into _build/html (softpend book --html);
 #                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
 #   make test [TEST_WORKERS=auto|N]  fast test suite (pytest -m 'not expensive') on pytest-xdist workers, one per
-#                                    CPU core by default; the real-time tests (-m realtime) after, on their own
+#                                    CPU core by default
 #   make test-expensive              only the long checks
+#   make lint / make format          ruff check / ruff format of softpend and tests
 #   make bench                       measured performance figures (softpend bench --json)
 #   make lock                        regenerate environment.lock from pyproject.toml (the ONLY way to edit it)
 #   make clean                       remove .venv, _build and the generated notebooks
@@ -29,10 +31,10 @@ BOOK_ARGS ?=
 # `|| true` keeps grep's "no lines left" status from failing the recipe; with pipefail pip's own status still does.
 PIP_QUIET := 2>&1 | { grep -v -E 'Location .* is ignored' || true; }
 
-.PHONY: help venv book test test-expensive bench lock clean
+.PHONY: help venv book test test-expensive lint format bench lock clean
 
 help:
-	@sed -n '3,11p' Makefile | sed 's/^# \{0,1\}//'
+	@sed -n '3,13p' Makefile | sed 's/^# \{0,1\}//'
 
 venv: $(STAMP)
 
@@ -45,17 +47,23 @@ $(STAMP): environment.lock pyproject.toml
 	$(VENV)/bin/pip check $(PIP_QUIET) || { echo "[make] .venv does not satisfy pyproject.toml: run 'make lock'" >&2; exit 1; }
 	touch $(STAMP)
 
+# Two steps: the training runs first (one pool of workers over every run still missing), then the notebooks
+# (which find their runs finished) and the HTML.
 book: $(STAMP)
+	$(VENV)/bin/softpend sweep --book --profile $(PROFILE)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
-# The real-time tests (marker `realtime`: the twin, a camera or a link in real time) run alone after the others,
-# so that no test on another worker takes the CPU their timing needs.
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive and not realtime' $(PYTEST_ARGS)
-	$(VENV)/bin/python -m pytest -m 'realtime and not expensive' $(PYTEST_ARGS)
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive' $(PYTEST_ARGS)
 
 test-expensive: $(STAMP)
 	$(VENV)/bin/python -m pytest -m expensive $(PYTEST_ARGS)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check softpend tests
+
+format: $(STAMP)
+	$(VENV)/bin/ruff format softpend tests
 
 bench: $(STAMP)
 	$(VENV)/bin/softpend bench --json

@@ -10,7 +10,7 @@ from pathlib import Path
 import nbformat
 
 from softpend.study import book
-from softpend.study.book import BookLayout, execution_order, load_profiles, notebook_after, run_notebooks, toc_notebooks
+from softpend.study.book import BookLayout, execution_order, front_matter, load_profiles, run_notebooks, toc_notebooks
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -19,7 +19,8 @@ def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book)
     root, runs, _ = quick_book
     names = toc_notebooks(root / "_toc.yml")
     assert names, "the toc lists no notebooks"
-    after = {name: notebook_after(book.read_notebook(root / "notebooks" / f"{name}.md"), name, names) for name in names}
+    after = {name: front_matter(book.read_notebook(root / "notebooks" / f"{name}.md"), name, names)["after"]
+             for name in names}
     assert [run.name for run in runs] == execution_order(names, after)
     assert any(after.values()), "the claims ledger reads the chapters it lists in softpend.after"
     for name, deps in after.items():  # a notebook that reads others executes after them
@@ -48,7 +49,16 @@ def test_execution_page_is_in_the_book_and_lists_every_notebook(quick_book):
     text = re.sub(r"<[^>]+>", "", page.read_text(encoding="utf-8"))
     for run in runs:  # each notebook's row links to its page
         assert f'href="{run.name}.html"' in page.read_text(encoding="utf-8"), run.name
-    assert "--profile quick" in text and "environment.lock" in text and "CPU count" in text
+    assert "--profile quick" in text and "environment.lock" in text and "CPU cores" in text and "processor" in text
+
+
+def test_every_chapter_ends_with_its_generated_rerun_section(quick_book):
+    """Issue 63: the runner appends "Rerun this figure" (parameters, defaults, units, the command) to each page."""
+    root, _, html_dir = quick_book
+    for name in toc_notebooks(root / "_toc.yml"):
+        text = re.sub(r"<[^>]+>", "", (html_dir / "book" / "_generated" / f"{name}.html").read_text(encoding="utf-8"))
+        assert re.search(r"Rerun this (figure|chapter)", text), name
+        assert f"softpend book --only {name} --profile quick --set " in text, name
 
 
 #: Notebooks whose page is a table, not a figure.
@@ -98,8 +108,9 @@ def test_every_simulating_notebook_takes_a_plant_parameter(tmp_path):
     for name in toc_notebooks(REPO_ROOT / "_toc.yml"):
         if name in NO_PLANT:
             continue
+        nb = book.read_notebook(REPO_ROOT / "notebooks" / f"{name}.md")
         path = tmp_path / f"{name}.ipynb"
-        nbformat.write(book.read_notebook(REPO_ROOT / "notebooks" / f"{name}.md"), str(path))
-        declared = papermill.inspect_notebook(str(path))
-        assert "plant" in declared, f"{name} has no `plant` parameter"
-        assert declared["plant"]["default"].strip("'\"") in ("prb", "beam"), name
+        nbformat.write(nb, str(path))
+        assert "plant" in papermill.inspect_notebook(str(path)), f"{name} has no `plant` parameter"
+        defaults = {row["name"]: row["default"] for row in book.notebook_parameters(book._parameters_cell(nb))}
+        assert defaults["plant"] in ("prb", "beam"), name

@@ -161,6 +161,33 @@ def test_overrides_apply_where_defined_and_unknown_ones_fail(tmp_path, capsys):
     assert "not parameters of any selected notebook" in capsys.readouterr().err
 
 
+def test_each_executed_notebook_ends_with_its_rerun_section_and_the_command_works(tmp_path):
+    """Issue 63: the runner appends "Rerun this figure": the parameters of the notebook's ``parameters`` cell
+    with their defaults, units (a ``[unit]`` in the comment, else the name's suffix) and this build's values, and
+    the command that reruns it; that command runs."""
+    parameters = "duration_s = 2.0  # length of the run\ntilt = 0.1  # start tilt [deg]\nplant = 'prb'"
+    root = make_book(tmp_path, {"fig_a": notebook_source("print(duration_s, plant)", parameters=parameters)},
+                     {"full": {"fig_a": {"duration_s": 1.0}}})
+    run_notebooks(root, progress=False)
+    output = root / "book" / "_generated" / "fig_a.ipynb"
+    last = nbformat.read(str(output), as_version=4).cells[-1]
+    assert last.cell_type == "markdown" and last.source.startswith("## Rerun this figure")
+    assert "| `duration_s` | `2.0` | `1.0` | s | length of the run |" in last.source
+    assert "| `tilt` | `0.1` |  | deg | start tilt [deg] |" in last.source
+    assert "| `plant` | `prb` |  |  |  |" in last.source
+    assert "softpend book --only fig_a --set duration_s=2.0" in last.source
+    assert cli_main(["book", "--root", str(root), "--only", "fig_a", "--set", "duration_s=3.0"]) == 0
+    last = nbformat.read(str(output), as_version=4).cells[-1]
+    assert "| `duration_s` | `2.0` | `3.0` | s |" in last.source and "3.0 prb" in outputs_text(output)
+
+
+def test_parameters_that_do_not_evaluate_show_their_expression():
+    rows = book.notebook_parameters("limit_nm = SOMEWHERE.limit  # the limit\nwidth_mm = 3")
+    assert [(r["name"], r["default"], r["unit"], r["evaluated"]) for r in rows] == [
+        ("limit_nm", "SOMEWHERE.limit", "N m", False), ("width_mm", "3", "mm", False)]
+    assert book.notebook_parameters("sizes = [16, 16]  # hidden widths [16, 16]")[0]["unit"] == ""
+
+
 def test_cache_key_covers_source_parameters_and_code():
     key = cache_key("source", {"a": 1}, {"pkg": "h"})
     assert cache_key("source", {"a": 1}, {"pkg": "h"}) == key

@@ -1,21 +1,20 @@
 """Runs on the sweep engine (joblib loky): results land on disk, a failing job is named, a worker that dies is
-retried, and runs trained through the engine equal the same runs trained in the calling process."""
+retried, and runs trained through the engine equal the same runs trained in the calling process; every method's
+runs in one pool, and the book's runs (``softpend sweep --book``)."""
 
 from __future__ import annotations
 
 import json
 import os
-import time
-import warnings
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from softpend.rl.config import DQNConfig
 from softpend.study.rl_runs import run_folder, train_seeds
-from softpend.study.sweep import (ALLOCATOR_ENV, IDLE_CLASS, SweepFailed, allocator_env, default_backend,
-                                  default_workers, run_jobs)
+from softpend.study import sweep
+from softpend.study.sweep import (SweepFailed, book_jobs, book_run_jobs, default_backend, default_workers, run_jobs,
+                                  train_in_one_pool)
 
 
 def write_pid(folder: Path, value: int, progress: bool = True) -> None:
@@ -46,52 +45,6 @@ def test_jobs_run_in_worker_processes(tmp_path):
     assert all(line[2] == "False" for line in lines)  # no per-job bars from the workers
 
 
-def write_allocator_env(folder: Path, value: int, progress: bool = True) -> None:
-    (folder / f"env{value}.json").write_text(json.dumps({name: os.environ.get(name) for name in ALLOCATOR_ENV}))
-
-
-def test_workers_start_with_the_allocator_settings_and_the_caller_does_not_keep_them(tmp_path, monkeypatch):
-    from joblib.externals.loky import get_reusable_executor
-
-    for name in ALLOCATOR_ENV:
-        monkeypatch.delenv(name, raising=False)
-    get_reusable_executor().shutdown(wait=True)  # fresh workers: glibc reads the settings when a process starts
-    run_jobs(write_allocator_env, [(tmp_path, k) for k in range(2)], ["a", "b"], workers=2, progress=False)
-    assert [json.loads((tmp_path / f"env{k}.json").read_text()) for k in range(2)] == [ALLOCATOR_ENV] * 2
-    assert not any(name in os.environ for name in ALLOCATOR_ENV)
-    monkeypatch.setenv("MALLOC_TOP_PAD_", "0")  # a setting of the user's own is kept, and kept afterwards
-    with allocator_env():
-        assert os.environ["MALLOC_TOP_PAD_"] == "0"
-        assert os.environ["MALLOC_MMAP_THRESHOLD_"] == ALLOCATOR_ENV["MALLOC_MMAP_THRESHOLD_"]
-    assert os.environ["MALLOC_TOP_PAD_"] == "0" and "MALLOC_MMAP_THRESHOLD_" not in os.environ
-
-
-def hold_freed_memory(folder: Path, value: int, progress: bool = True) -> None:
-    """Allocate and free 80 MB for the first two values, 640 MB for the others, in blocks of 16 MB (under the
-    allocator's limit for the heap: the worker keeps up to 1 GiB of them)."""
-    blocks = [np.ones(2 << 20) for _ in range(5 if value < 2 else 40)]
-    del blocks
-    time.sleep(1.1)  # loky checks a worker's memory at most once a second
-    (folder / f"held{value}.txt").write_text(str(os.getpid()))
-
-
-def test_a_worker_that_keeps_freed_memory_is_replaced_without_a_warning(tmp_path, monkeypatch):
-    """The workers keep freed memory, which loky's check between jobs takes for a leak: it replaces the worker
-    (every job still runs, in order of the arguments), and the sweep does not warn of it."""
-    from joblib.externals.loky import get_reusable_executor
-
-    for name in ALLOCATOR_ENV:
-        monkeypatch.delenv(name, raising=False)
-    get_reusable_executor().shutdown(wait=True)
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always")
-        run_jobs(hold_freed_memory, [(tmp_path, k) for k in range(6)], [f"j{k}" for k in range(6)], workers=2,
-                 progress=False)
-    pids = {(tmp_path / f"held{k}.txt").read_text() for k in range(6)}
-    assert len(pids) > 2  # a worker was replaced
-    assert not [w for w in seen if "worker stopped" in str(w.message)], [str(w.message) for w in seen]
-
-
 def test_a_failing_job_is_named_and_the_others_keep_their_results(tmp_path):
     with pytest.raises(SweepFailed, match=r"'bad'.*negative value -1") as info:
         run_jobs(write_pid, [(tmp_path, 0), (tmp_path, -1)], ["good", "bad"], workers=2, progress=False)
@@ -108,31 +61,6 @@ def test_a_dead_worker_is_retried_and_reported_when_it_keeps_dying(tmp_path):
                  retries=1)
     assert set(info.value.failures) == {"doomed", "also doomed"}
     assert "worker process died" in info.value.failures["doomed"]
-
-
-def write_priority(folder: Path, value: int, progress: bool = True) -> None:
-    if value < 0:
-        raise ValueError(f"negative value {value}")
-    policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else -1
-    (folder / f"nice{value}.txt").write_text(f"{os.getpid()} {os.getpriority(os.PRIO_PROCESS, 0)} {policy}")
-
-
-def test_finished_jobs_are_announced_and_background_workers_run_at_the_lowest_priority(tmp_path):
-    finished = []
-    with pytest.raises(SweepFailed, match="'bad'"):
-        run_jobs(write_priority, [(tmp_path, 0), (tmp_path, -1), (tmp_path, 1)], ["zero", "bad", "one"], workers=2,
-                 progress=False, background=True, on_finished=finished.append)
-    assert sorted(finished) == ["one", "zero"]  # the job that raised is not announced
-    for k in (0, 1):
-        pid, niceness, policy = map(int, (tmp_path / f"nice{k}.txt").read_text().split())
-        assert pid != os.getpid() and niceness == 19
-        assert policy == os.SCHED_IDLE or not IDLE_CLASS
-    # in this process (one worker) the jobs keep the caller's priority, and are announced too
-    own = os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)
-    run_jobs(write_priority, [(tmp_path, 2)], ["two"], workers=1, progress=False, background=True,
-             on_finished=finished.append)
-    assert finished[-1] == "two" and (tmp_path / "nice2.txt").read_text().split()[1:] == [str(v) for v in own]
-    assert (os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)) == own
 
 
 def test_one_worker_runs_in_this_process_and_bad_arguments_are_errors(tmp_path, monkeypatch):
@@ -230,3 +158,91 @@ def test_the_sweep_command_sets_rl_fields_for_every_run_of_their_method(tmp_path
         assert main(["sweep", "--methods", "dqn", "--seeds", "4", *bad, "--runs-root", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "error" in err and "Traceback" not in err
+
+
+# --------------------------------------------------------------------------- one pool, the book's runs
+TINY_DQN = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2,
+                     eval_seeds=(0,), eval_duration_s=1.0)
+
+
+def test_one_pool_trains_the_runs_each_method_trains_on_its_own(tmp_path):
+    import dataclasses
+
+    from softpend.pilco.loop import PilcoConfig
+    from softpend.study.head_to_head import pilco_runs
+
+    tiny_pilco = PilcoConfig(n_policy_trials=0, horizon_s=1.0, prediction_s=None)
+    pool, here = tmp_path / "pool", tmp_path / "here"
+    assert train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], pool / "pilco", workers=2,
+                             progress=False) == 3
+    assert train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], pool / "pilco", workers=2,
+                             progress=False) == 0  # finished runs are kept
+    stamp = (pool / "dqn-seed0" / "log.json").stat().st_mtime_ns
+    from_pool = train_seeds("dqn", TINY_DQN, [0, 1], 2, pool, progress=False, workers=1)  # found, not trained
+    assert (pool / "dqn-seed0" / "log.json").stat().st_mtime_ns == stamp
+
+    def numbers(log):
+        return [{k: v for k, v in row.items() if k not in ("wall_s", "cpu_s")} for row in log.episodes + log.evaluations]
+
+    own = train_seeds("dqn", TINY_DQN, [0, 1], 2, here, progress=False, workers=1)
+    assert [numbers(log) for log in from_pool] == [numbers(log) for log in own] and numbers(own[0]) != numbers(own[1])
+
+    def records(result) -> str:  # without timings; JSON text, where NaN equals NaN
+        return json.dumps([{k: v for k, v in dataclasses.asdict(r).items() if k not in ("wall_s_total", "cpu_s_total")}
+                           for r in result.records])
+
+    [pilco_pool] = pilco_runs(tiny_pilco, [0], pool / "pilco", progress=False, workers=1)
+    [pilco_own] = pilco_runs(tiny_pilco, [0], here / "pilco", progress=False, workers=1)
+    assert pilco_pool.config == pilco_own.config and records(pilco_pool) == records(pilco_own)
+
+
+def test_pilco_starts_first_then_dqn_mbpo_then_dqn_and_the_first_seed_set_names_its_three_runs(tmp_path, monkeypatch):
+    from softpend.rl.config import MBPOConfig
+    from softpend.pilco.loop import PilcoConfig
+
+    started = []
+    monkeypatch.setattr(sweep, "run_jobs", lambda job, jobs, names, *args, **kwargs: started.extend(names))
+    train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2), ("mbpo", MBPOConfig(episode_s=1.0), [0], 2)], tmp_path,
+                      PilcoConfig(n_policy_trials=0, horizon_s=1.0), [3, 4])
+    assert started == ["pilco-seed3", "pilco-seed4", "mbpo-seed0", "dqn-seed0", "dqn-seed1"]
+    names = [name for name, _ in book_run_jobs(["rl", "pilco", "first_seed"], tmp_path)]
+    assert len(names) == len(set(names)) == 30  # the first seed's runs are trained once
+    assert names[:10] == [f"runs/pilco-book/pilco-seed{k}" for k in range(10)]
+    assert names[10:20] == [f"runs/rl-book/mbpo-seed{k}" for k in range(10)]
+    assert [name for name, _ in book_run_jobs(["first_seed"], tmp_path)] == [
+        "runs/pilco-book/pilco-seed0", "runs/rl-book/mbpo-seed0", "runs/rl-book/dqn-seed0"]
+    with pytest.raises(ValueError, match="run sets must be among"):
+        book_run_jobs(["ppo"], tmp_path)
+
+
+def test_the_book_runs_of_a_profile_are_those_its_notebooks_train(tmp_path):
+    """``softpend sweep --book --profile quick`` trains the quick runs with the settings Figures 4 and 10 use under
+    that profile (so that the notebooks find them finished): each folder once, the first notebook's settings."""
+    import shutil
+
+    import dataclasses
+
+    from softpend.study.book import load_profiles
+    from softpend.study.presets import load_hparams
+    from softpend.study.rl_runs import figure_configs
+
+    repo = Path(__file__).resolve().parents[1]
+    for name in ("_toc.yml", "book/profiles.yml"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(repo / name, tmp_path / name)
+    shutil.copytree(repo / "notebooks", tmp_path / "notebooks")
+    quick = load_profiles(tmp_path / "book" / "profiles.yml")["quick"]
+    jobs = dict(book_jobs(tmp_path, "quick"))
+    rl, pilco = quick["fig04_learning_curves"], quick["fig10_pilco"]
+    assert sorted(jobs) == sorted([f"{pilco['pilco_runs_root']}/pilco-seed{s}" for s in pilco["pilco_seeds"]]
+                                  + [f"{rl['runs_root']}/{m}-seed{s}" for m in ("dqn", "mbpo") for s in rl["seeds"]])
+    seed = rl["seeds"][0]
+    _, algo, config, _, episodes, folder, _ = jobs[f"{rl['runs_root']}/dqn-seed{seed}"]
+    assert config == figure_configs(rl_overrides=rl["rl_overrides"])["dqn"] and config != figure_configs()["dqn"]
+    assert (algo, episodes, folder) == ("dqn", rl["episodes_dqn"], tmp_path / rl["runs_root"] / f"dqn-seed{seed}")
+    _, config, folder = jobs[f"{pilco['pilco_runs_root']}/pilco-seed{pilco['pilco_seeds'][0]}"]
+    assert config == dataclasses.replace(load_hparams("pilco", overrides=pilco["pilco_overrides"]), seed=0)
+    assert folder == tmp_path / pilco["pilco_runs_root"] / "pilco-seed0"
+    assert len(book_jobs(tmp_path, "full")) == 30
+    with pytest.raises(ValueError, match="unknown profile 'nope'"):
+        book_jobs(tmp_path, "nope")

@@ -15,9 +15,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "book",
         help="execute the book's notebooks into book/_generated (and build the HTML with --html)",
         description=(
-            "Execute the notebooks listed in _toc.yml (toc order) with the parameters of a profile in "
-            "book/profiles.yml and write book/_generated/NAME.ipynb; up-to-date notebooks are skipped "
-            "(execution cache) unless --force."
+            "Execute the notebooks listed in _toc.yml (toc order, two at a time) with the parameters of a profile "
+            "in book/profiles.yml and write book/_generated/NAME.ipynb; up-to-date notebooks are skipped "
+            "(execution cache) unless --force. The training runs the notebooks read are trained beforehand by "
+            "`softpend sweep --book --profile PROFILE` (a notebook trains what is still missing itself)."
         ),
     )
     parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)")
@@ -39,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.study.book import NotebookExecutionError, build_html, run_notebooks, summary
+    from softpend.study.book import NotebookExecutionError, build_html, run_notebooks
 
     try:
         overrides = dict(args.set)
@@ -47,7 +48,9 @@ def run(args: argparse.Namespace) -> int:
     except NotebookExecutionError as exc:
         print(f"softpend book: error: {exc}", file=sys.stderr)
         return 1
-    print(f"[book] profile {args.profile!r}: {summary(runs)}", file=sys.stderr)
+    executed = sum(run.status == "executed" for run in runs)
+    print(f"[book] profile {args.profile!r}: {executed} notebook(s) executed, {len(runs) - executed} up to date",
+          file=sys.stderr)
     if args.html:
         try:
             html_dir = build_html(args.root, args.path_output)

@@ -3,9 +3,11 @@
 Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-seed<k>``,
 ``pilco-seed<k>``), is reused when finished with the same settings and resumed when shorter, so a sweep that
 was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
-(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.run_pool.train_in_one_pool`), where
+(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.sweep.train_in_one_pool`), where
 a worker that dies is retried and finished runs are kept.  The
-settings are the book's (:mod:`softpend.study.presets`).  With ``--fresh`` every run's final (and for RL
+settings are the book's (:mod:`softpend.study.presets`).  ``--book`` instead trains the runs the book's
+notebooks read, with the budgets of a profile of ``book/profiles.yml`` (:func:`softpend.study.sweep.train_book`):
+``make book`` runs it before ``softpend book``.  With ``--fresh`` every run's final (and for RL
 selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`), with the
 per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.headline_figures`.
 """
@@ -13,6 +15,7 @@ per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.h
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 METHODS = ("dqn", "mbpo", "pilco")
@@ -52,6 +55,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.sweep import BACKENDS
 
     parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
+    parser.add_argument("--book", action="store_true",
+                        help="train the runs the book's notebooks read (for --profile), then stop; the other "
+                        "training options are not used")
+    parser.add_argument("--profile", default="full", help="with --book: the profile of book/profiles.yml (default full)")
+    parser.add_argument("--root", type=Path, default=Path("."), help="with --book: the project root (default .)")
     parser.add_argument("--methods", type=method_list, default=list(METHODS), help="comma-separated, default all")
     parser.add_argument("--seeds", type=seed_list, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
     parser.add_argument("--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)")
@@ -77,8 +85,15 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
-    from softpend.study.run_pool import train_in_one_pool
+    from softpend.study.sweep import train_book, train_in_one_pool
 
+    if args.book:
+        if args.workers is not None and args.workers < 1:
+            raise ValueError(f"--workers must be at least 1, got {args.workers}")
+        record = train_book(args.root, args.profile, workers=args.workers, backend=args.backend)
+        print(f"[sweep] profile {args.profile!r}: trained {len(record['trained'])} of the book's runs in "
+              f"{record['seconds']:.0f} s ({record['workers']} workers)", file=sys.stderr)
+        return 0
     root: Path = args.runs_root
     for name in ("episodes_dqn", "episodes_mbpo", "pilco_trials", "workers"):
         value = getattr(args, name)

@@ -11,6 +11,10 @@ whose worker process dies is retried (``retries`` times); the runs that finished
 A job's numbers do not depend on where it runs: each run seeds everything it draws from its own seed, and a
 test checks that runs trained through the engine equal the same runs trained in the calling process.
 
+Every method's runs share one pool (:func:`train_in_one_pool`), so that no worker idles while one method's last
+runs finish.  :func:`train_book` (``softpend sweep --book``) trains the runs the book's notebooks read, for one
+profile of ``book/profiles.yml``, before ``softpend book`` executes them.
+
 Backends
 --------
 ``"loky"`` (default; joblib's robust process pool, started fresh, so a script that sweeps needs no
@@ -24,13 +28,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 import traceback
 import warnings
+from pathlib import Path
 from typing import Any, Callable, Iterator, Optional, Sequence
 
-__all__ = ["ALLOCATOR_ENV", "BACKENDS", "IDLE_CLASS", "SweepFailed", "allocator_env", "call_job", "default_backend",
-           "default_workers", "enter_background", "run_jobs"]
+__all__ = ["BACKENDS", "BOOK_RUN_SETS", "SweepFailed", "book_jobs", "book_run_jobs", "call_job", "default_backend",
+           "default_workers", "run_jobs", "train_book", "train_in_one_pool"]
 
 #: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
@@ -74,62 +78,19 @@ def default_backend() -> str:
 
 
 def _guarded(job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool,
-             one_thread: bool = True, background: bool = False) -> tuple[str, Optional[str]]:
-    """Run one job (in a worker: with one torch thread, in the background if asked, see :func:`run_jobs`);
+             one_thread: bool = True) -> tuple[str, Optional[str]]:
+    """Run one job (in a worker: with one torch thread, see :func:`run_jobs`);
     ``(name, None)`` on success, ``(name, traceback)`` if it raised (an exception never crosses back as a
     pickled object)."""
     if one_thread:
         import torch
 
         torch.set_num_threads(1)
-    if background:
-        enter_background()
     try:
         job(*args, progress=progress)
     except Exception:  # noqa: BLE001 -- reported by name to the caller, which retries or raises
         return name, traceback.format_exc()
     return name, None
-
-
-#: Whether :func:`enter_background` puts a process in Linux's idle scheduling class (else it only lowers its
-#: ``nice`` level, which still lets it delay work that wakes up).
-IDLE_CLASS = sys.platform.startswith("linux") and hasattr(os, "SCHED_IDLE")
-
-
-def enter_background() -> None:
-    """Give the calling process the lowest scheduling priority for good: ``nice`` 19 and, on Linux, the idle
-    scheduling class (``SCHED_IDLE``), in which a processor runs it only when no other program wants that
-    processor and any program that wakes up takes it over at once.  (An unprivileged process cannot leave
-    either again.)  Where the operating system refuses, the process keeps what it got."""
-    if hasattr(os, "setpriority"):
-        with contextlib.suppress(OSError):
-            os.setpriority(os.PRIO_PROCESS, 0, 19)
-    if IDLE_CLASS:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-
-
-#: glibc allocator settings for the processes started by :func:`run_jobs` and the book runner: blocks up to 32 MiB
-#: come from the heap instead of fresh ``mmap`` pages, and up to 1 GiB of freed heap (grown 256 MiB at a time) is
-#: kept for the next allocation instead of being returned to the system.  PILCO's rollouts allocate and free
-#: large tensors at every step; with glibc's defaults each such tensor costs page faults.  The numbers a process
-#: computes do not change.
-ALLOCATOR_ENV = {"MALLOC_MMAP_THRESHOLD_": str(32 << 20), "MALLOC_TRIM_THRESHOLD_": str(1 << 30),
-                 "MALLOC_TOP_PAD_": str(256 << 20)}
-
-
-@contextlib.contextmanager
-def allocator_env() -> Iterator[None]:
-    """Set :data:`ALLOCATOR_ENV` in this process's environment, for the processes it starts meanwhile (glibc reads
-    them when a process starts; this process keeps its allocator).  A variable already set is left as it is;
-    those set here are removed again on exit."""
-    added = {name: value for name, value in ALLOCATOR_ENV.items() if name not in os.environ}
-    os.environ.update(added)
-    try:
-        yield
-    finally:
-        for name in added:
-            os.environ.pop(name, None)
 
 
 @contextlib.contextmanager
@@ -167,8 +128,6 @@ def run_jobs(
     desc: str = "runs",
     backend: Optional[str] = None,
     retries: int = 1,
-    on_finished: Optional[Callable[[str], None]] = None,
-    background: bool = False,
 ) -> None:
     """Call ``job(*args)`` for every ``args`` in ``jobs`` on the parallel engine, retrying failures.
 
@@ -194,13 +153,6 @@ def run_jobs(
     retries : int
         How often a job whose worker died is run again before giving up (a job that raised is not retried:
         it would raise again).
-    on_finished : callable, optional
-        Called in this process with a job's name as soon as that job has finished without raising (from the
-        thread that called this function).
-    background : bool
-        Run the workers in the background of every other program (:func:`enter_background`: they take only
-        what the processors would leave idle, and keep that priority when a later call reuses them).  Jobs
-        that run in this process (one worker) keep its priority.
 
     Raises
     ------
@@ -226,7 +178,7 @@ def run_jobs(
     failures: dict[str, str] = {}
     for attempt in range(int(retries) + 1):
         raised, lost = _run_round(job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""),
-                                  backend, on_finished, bool(background))
+                                  backend)
         failures.update(raised)
         pending = {name: pending[name] for name in lost}
         if not pending:
@@ -247,8 +199,7 @@ LOST = "its worker process died (killed, out of memory or crashed)"
 
 
 def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str,
-               backend: str, on_finished: Optional[Callable[[str], None]] = None,
-               background: bool = False) -> tuple[dict[str, str], set[str]]:
+               backend: str) -> tuple[dict[str, str], set[str]]:
     """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
     died)``."""
     if workers <= 1:
@@ -257,8 +208,6 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
             _, error = _guarded(job, args, name, progress, one_thread=False)
             if error is not None:
                 raised[name] = error
-            elif on_finished is not None:
-                on_finished(name)
         return raised, set()
 
     import joblib
@@ -267,23 +216,20 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     finished: set[str] = set()
     raised: dict[str, str] = {}
     try:
-        # a worker keeps the memory its job freed (ALLOCATOR_ENV); loky's check after a job takes growth past 300 MB
-        # for a leak and starts a fresh worker for the next job (no job is lost): no warning for that.  The filter is
-        # process-wide (the book runs this pool beside other threads, for which catch_warnings is not safe).
+        # loky's check after a job takes a worker's growth past 300 MB (PILCO's) for a leak and starts a fresh
+        # worker for the next job (no job is lost): no warning for that
         warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given to the executor",
                                 category=UserWarning, module="joblib")
-        with allocator_env(), _engine(backend):
+        with _engine(backend):
             parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
                                        **({"backend": "loky"} if backend == "loky" else {}))
-            calls = (joblib.delayed(_guarded)(job, args, name, False, True, background)
+            calls = (joblib.delayed(_guarded)(job, args, name, False, True)
                      for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
                     finished.add(name)
                     if error is not None:
                         raised[name] = error
-                    elif on_finished is not None:
-                        on_finished(name)
                     bar.set_postfix_str(name)
                     bar.update(1)
     except ValueError:
@@ -291,3 +237,126 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     except Exception:  # noqa: BLE001 -- a worker died (loky's TerminatedWorkerError, a lost Ray/Dask task)
         pass
     return raised, {name for name in pending if name not in finished}
+
+
+# --------------------------------------------------------------------------- every method in one pool, the book's runs
+#: A job of the pool: ``(name, (function, *arguments))``.
+Job = tuple[str, tuple[Any, ...]]
+
+
+def _order(jobs: Sequence[Job]) -> list[Job]:
+    """PILCO's runs first (one that never balances spends its whole budget), then DQN-MBPO's, then DQN's, the
+    shortest, which fill the end; a name's last part is ``<method>-seed<k>``."""
+    rank = {"pilco": 0, "mbpo": 1, "dqn": 2}
+    return sorted(jobs, key=lambda job: rank.get(job[0].rsplit("/", 1)[-1].split("-")[0], 3))
+
+
+def train_in_one_pool(rl_specs: Sequence[tuple[str, Any, Sequence[int], int]], rl_root: Path | str,
+                      pilco_config: Any = None, pilco_seeds: Sequence[int] = (), pilco_root: Path | str | None = None,
+                      workers: Optional[int] = None, progress: bool = True, backend: Optional[str] = None) -> int:
+    """Train every run still missing, RL (``(algo, config, seeds, episodes)`` each, as for
+    :func:`softpend.study.rl_runs.train_seeds`, under ``rl_root``) and PILCO (``pilco_config`` with each of
+    ``pilco_seeds``, under ``pilco_root``, default ``rl_root``), in one pool; returns how many were trained.  The
+    runs and folders are those of ``train_seeds`` and :func:`softpend.study.head_to_head.pilco_runs`, which then
+    find them finished."""
+    from softpend.study.head_to_head import pilco_jobs, run_and_save
+    from softpend.study.rl_runs import rl_jobs, train_run
+
+    jobs: list[Job] = []
+    if pilco_config is not None and len(pilco_seeds):
+        root = Path(rl_root if pilco_root is None else pilco_root)
+        jobs += [(name, (run_and_save, *args)) for name, args in pilco_jobs(pilco_config, pilco_seeds, root)]
+    if rl_specs:
+        jobs += [(name, (train_run, *args)) for name, args in rl_jobs(rl_specs, rl_root)]
+    return _train(_order(jobs), workers, progress, backend)
+
+
+def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend: Optional[str]) -> int:
+    if jobs:
+        run_jobs(call_job, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
+                 desc="training runs", backend=backend)
+    return len(jobs)
+
+
+#: The run sets a book notebook may read (front matter ``softpend: {book_runs: [...]}``): ``"rl"``, DQN and
+#: DQN-MBPO over the book's seeds (Figures 4-6); ``"pilco"``, PILCO over its seeds (Figure 10); ``"first_seed"``,
+#: the three methods' runs of the first seed (the learned controllers of the rig chapter).
+BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
+
+
+def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: Optional[dict[str, Any]] = None
+                  ) -> list[Job]:
+    """The runs of ``run_sets`` still missing under ``root``, named by folder (``runs/rl-book/dqn-seed0``), with
+    the settings the notebooks that read them train with (:mod:`softpend.study.presets`, ``book/hparams``), the
+    training parameters of ``parameters`` (a notebook's profile values: ``episodes_dqn``, ``episodes_mbpo``,
+    ``seeds``, ``runs_root``, ``rl_overrides``, ``pilco_seeds``, ``pilco_runs_root``, ``pilco_overrides``,
+    ``task_overrides``) in their place.  The plant is the book's (``--set plant=...`` runs train in the notebooks)."""
+    from softpend.io.overrides import apply_overrides
+    from softpend.study.head_to_head import pilco_jobs, run_and_save
+    from softpend.study.presets import PILCO_BOOK, RL_BOOK, TASK, load_hparams
+    from softpend.study.rl_runs import figure_configs, rl_jobs, train_run
+    from softpend.task import Task
+
+    unknown = sorted(set(run_sets) - set(BOOK_RUN_SETS))
+    if unknown:
+        raise ValueError(f"run sets must be among {list(BOOK_RUN_SETS)}, got {unknown}")
+    given = dict(parameters or {})
+    seeds, task_overrides = list(given.get("seeds", RL_BOOK.seeds)), given.get("task_overrides") or {}
+    rl_seeds = seeds if "rl" in run_sets else seeds[:1] if "first_seed" in run_sets else []
+    pilco_seeds = list(given.get("pilco_seeds", PILCO_BOOK.seeds)) if "pilco" in run_sets else []
+    if "first_seed" in run_sets and seeds[0] not in pilco_seeds:
+        pilco_seeds.insert(0, seeds[0])
+    jobs: list[Job] = []
+    if pilco_seeds:
+        pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
+        config = load_hparams("pilco", apply_overrides(Task(plant=TASK.plant), task_overrides),
+                              given.get("pilco_overrides"))
+        jobs += [(f"{pilco_root}/{name}", (run_and_save, *args))
+                 for name, args in pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)]
+    if rl_seeds:
+        rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
+        configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides"))
+        specs = [(algo, configs[algo], rl_seeds, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
+                 for algo in ("dqn", "mbpo")]
+        jobs += [(f"{rl_root}/{name}", (train_run, *args)) for name, args in rl_jobs(specs, Path(root) / rl_root)]
+    return _order(jobs)
+
+
+def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
+    """The training runs still missing that the book's notebooks read under ``profile``: for every toc notebook
+    with ``softpend: {book_runs: [...]}``, :func:`book_run_jobs` with its profile parameters; a folder two
+    notebooks name is trained once, with the settings of the first in toc order."""
+    from softpend.study.book import BookLayout, front_matter, load_profiles, read_notebook, toc_notebooks
+
+    layout = BookLayout.at(root)
+    toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
+    if profile not in profiles:
+        raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
+    jobs: dict[str, tuple[Any, ...]] = {}
+    for name in toc:
+        run_sets = front_matter(read_notebook(layout.source_path(name)), name, toc)["book_runs"]
+        for job, args in book_run_jobs(run_sets, layout.root, profiles[profile].get(name)) if run_sets else []:
+            jobs.setdefault(job, args)
+    return _order(list(jobs.items()))
+
+
+def train_book(root: Path | str = ".", profile: str = "full", workers: Optional[int] = None, progress: bool = True,
+               backend: Optional[str] = None) -> dict[str, Any]:
+    """Train :func:`book_jobs` in one pool and record what was trained, in how long, in
+    ``book/_generated/training.json`` (the execution page shows it); returns that record."""
+    import datetime
+    import time
+
+    from softpend.io.outputs import atomic_write, json_text
+    from softpend.study.book import BookLayout
+
+    jobs, start = book_jobs(root, profile), time.perf_counter()
+    workers = default_workers() if workers is None else workers
+    _train(jobs, workers, progress, backend)
+    record = {"profile": profile, "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+              "trained": [name for name, _ in jobs], "seconds": time.perf_counter() - start, "workers": workers}
+    layout = BookLayout.at(root)
+    layout.generated_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_write(layout.training_path, "w") as handle:
+        handle.write(json_text(record, indent=2) + "\n")
+    return record

@@ -20,13 +20,14 @@ from softpend.checks import NonFiniteError
 from softpend.cli import main
 from softpend.io.outputs import atomic_write, check_output_file, json_text
 from softpend.rl.agent_files import AgentFileError, load_agent_file, load_replay_buffer, save_replay_buffer
-from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.config import MBPOConfig
 from softpend.rl.dqn import agent_class, load_agent, train_dqn
 from softpend.rl.training_env import make_training_env
+from softpend.study.presets import load_hparams
 from support import one_line_error
 
 TINY = dict(episode_s=0.5, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=0.5)
-CONFIG = DQNConfig(learning_starts=10, **TINY)
+CONFIG = load_hparams("dqn", overrides=dict(learning_starts=10, **TINY))  # what `softpend train` builds from TRAIN_ARGS
 TRAIN_ARGS = ["--set", "episode_s=0.5", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.5", "--set",
               "learning_starts=10", "--set", "eval_every_episodes=2", "--set", "checkpoint_every_episodes=2"]
 

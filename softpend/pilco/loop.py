@@ -599,6 +599,8 @@ def run_pilco(
     Parameters
     ----------
     config : PilcoConfig, optional
+        Default ``PilcoConfig()``, the plain algorithm's settings (the book's: ``load_hparams("pilco")``,
+        :func:`softpend.study.presets.load_hparams`).
     progress : bool
         Show a tqdm progress bar over the trials.
     callback : callable, optional

@@ -1,6 +1,6 @@
 """Reinforcement learning: model-free DQN and model-based DQN-MBPO that swing the soft rod up and balance it.
 
-* :mod:`softpend.rl.config` -- every hyperparameter (``DQNConfig``, ``MBPOConfig``);
+* :mod:`softpend.rl.config` -- the settings (``DQNConfig``, ``MBPOConfig``; the book's are ``book/hparams/*.yml``);
 * :mod:`softpend.rl.training_env` -- the training environment (action repeat, episode length) and the
   controller that runs an agent through the shared evaluation;
 * :mod:`softpend.rl.dqn` -- the training loop (progress bar, periodic evaluation, resumable checkpoints);

@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"{label}: {summary['samples']} samples over {summary['duration_s']:.2f} s, "
               f"{'stopped: ' + summary['stop_reason'] if summary['stop_reason'] else 'completed'}; "
-              f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; logs in {out}")
+              + ("" if args.twin else f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; ") + f"logs in {out}")
         truth = summary.get("truth") or {}
         if truth:
             print(f"truth: swing-up {truth['swing_up_time_s']:.2f} s, upright std {truth['upright_std_rad']:.3f} rad, "

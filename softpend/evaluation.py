@@ -513,14 +513,37 @@ def run_episode(controller: Controller, env: Any, seed: int, duration_s: float,
                  initial_state)[0]
 
 
-def _vector_env(task: Task, policy: Any, seeds: list[int], duration_s: float, rod_spread: float, rod_seed: int,
-                substeps: Optional[int], env_kwargs: dict[str, Any]) -> Any:
-    """The vector environment of a batched evaluation, rod ``i`` the one :func:`_rod` draws for ``seeds[i]``."""
+def _one_by_one(controller: Controller, task: Task, seeds: list[int], duration_s: float,
+                initial_state: Optional[tuple[Any, Any]], env_kwargs: dict[str, Any], rod_spread: float,
+                rod_seed: int, substeps: Optional[int], stop_at_first_failure: bool) -> list[EvaluationResult]:
+    """The Exudyn engine's episodes of :func:`evaluate`, one after the other (none after a failure if asked)."""
+    from softpend.envs import SoftPendulumEnv
+
+    if isinstance(controller, BatchPolicy) or substeps is not None:
+        raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
+    env = SoftPendulumEnv(**task.env_kwargs(), **env_kwargs)
+    results: list[EvaluationResult] = []
+    for seed in seeds:
+        if rod_spread > 0:
+            env = SoftPendulumEnv(**task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs)
+        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
+        if stop_at_first_failure and not results[-1].success:
+            break
+    return results
+
+
+def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float,
+             initial_state: Optional[tuple[Any, Any]], env_kwargs: dict[str, Any], rod_spread: float, rod_seed: int,
+             substeps: Optional[int], stop_at_first_failure: bool) -> list[EvaluationResult]:
+    """The batched engine's episodes of :func:`evaluate`, all at once, rod ``i`` the one :func:`_rod` draws for
+    ``seeds[i]``."""
     from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
     from softpend.plant.batched import BatchedRodParams, stable_substeps
 
     if task.plant != "prb":
         raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
+    _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
+    policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
     rods = None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s)
                                                                       for s in seeds])
     if rods is not None:
@@ -539,7 +562,10 @@ def _vector_env(task: Task, policy: Any, seeds: list[int], duration_s: float, ro
         # each rod its own parameters; actions keep mapping to torques with the task's torque limit (the agent's
         # model of the motor), which the chain then saturates at the rod's own limit
         env.chain.set_params(rods)
-    return env
+    engine = _ManyRods(env)
+    if not isinstance(policy, BatchPolicy):
+        policy = _Controllers(policy, engine.torque_actions)
+    return _roll(engine, policy, seeds, duration_s, initial_state)
 
 
 def _rod(task: Task, rod_spread: float, seed: int) -> Any:
@@ -612,30 +638,12 @@ def evaluate(
     boolean("stop_at_first_failure", stop_at_first_failure)
     rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
     rod_seed = int_at_least("rod_seed", rod_seed, 0)
-    if engine == "batched":
-        _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
-        policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
-        env = _vector_env(task, policy, seeds, duration_s, rod_spread, rod_seed, substeps, env_kwargs)
-        rods = _ManyRods(env)
-        if not isinstance(policy, BatchPolicy):
-            policy = _Controllers(policy, rods.torque_actions)
-        results = _roll(rods, policy, seeds, duration_s, initial_state)
-        failed = [i for i, r in enumerate(results) if not r.success]
-        if stop_at_first_failure and failed:
-            results = results[: failed[0] + 1]
-        return EvaluationSummary(name=name, results=results)
-    if isinstance(controller, BatchPolicy) or substeps is not None:
-        raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
-    from softpend.envs import SoftPendulumEnv
-
-    env = SoftPendulumEnv(**task.env_kwargs(), **env_kwargs)
-    results = []
-    for seed in seeds:
-        if rod_spread > 0:
-            env = SoftPendulumEnv(**task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs)
-        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
-        if stop_at_first_failure and not results[-1].success:
-            break
+    episodes = _batched if engine == "batched" else _one_by_one
+    results = episodes(controller, task, seeds, duration_s, initial_state, env_kwargs, rod_spread, rod_seed, substeps,
+                       stop_at_first_failure)
+    failed = [i for i, r in enumerate(results) if not r.success]
+    if stop_at_first_failure and failed:
+        results = results[: failed[0] + 1]
     return EvaluationSummary(name=name, results=results)
 
 

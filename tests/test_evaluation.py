@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from softpend.evaluation import FunctionController, evaluate_controller, metrics_from_trajectory
+from softpend.evaluation import (BatchPolicy, FunctionController, GymPolicyController, evaluate, evaluate_controller,
+                                 metrics_from_trajectory, run_episode)
+from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.task import Task
 
 
@@ -149,3 +151,65 @@ def test_an_evaluation_can_stop_at_its_first_failing_start_with_the_same_episode
     np.testing.assert_array_equal(early.results[0].observations, full.results[0].observations)
     with pytest.raises(ValueError, match="stop_at_first_failure"):
         evaluate_controller(idle, seeds=seeds, duration_s=1.5, stop_at_first_failure=1)
+
+
+@pytest.mark.parametrize("engine", ["exudyn", "batched"])
+def test_stop_at_first_failure_keeps_the_episodes_up_to_the_first_failure_on_either_engine(engine: str) -> None:
+    idle = FunctionController(lambda o, q, qd, t: 0.0)
+    holding = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
+    upright = Task(start="upright")
+    held = evaluate(holding, upright, engine=engine, seeds=[3, 4], duration_s=1.5, stop_at_first_failure=True)
+    assert [r.seed for r in held.results] == [3, 4] and held.successes == 2
+    early = evaluate(idle, engine=engine, seeds=[3, 4, 5], duration_s=1.5, stop_at_first_failure=True)
+    assert [r.seed for r in early.results] == [3] and early.successes == 0
+
+
+@pytest.mark.parametrize("engine", ["exudyn", "batched"])
+def test_an_exact_start_is_where_the_episode_starts_and_lqr_holds_it(engine: str) -> None:
+    from softpend.control.lqr import LQRController
+
+    task = Task(start="upright")
+    tilt = task.tilt_state(0.2)
+    lqr = LQRController.from_params(task.rod, dt_s=task.dt_s)
+    (result,) = evaluate(lqr, task, engine=engine, seeds=(0,), duration_s=3.0, initial_state=tilt).results
+    np.testing.assert_array_equal(result.joint_angles_rad[0], tilt[0])
+    assert abs(result.theta_rad[0]) > 0.15 and result.success and result.swing_up_time_s < 0.2
+    assert np.all(np.abs(result.theta_rad[-100:]) < 0.02)  # caught the 0.2 rad tilt and holds upright
+
+
+def test_a_gym_policy_sees_what_its_environment_shows_and_leaves_the_environment_alone() -> None:
+    """The vectors :class:`GymPolicyController` rebuilds (the reward's bonus included) are the ones the environment
+    returns when stepped with the same actions, and the environment it reads is not written to."""
+    task = Task(start="upright", start_noise_rad=0.1)
+    env = SoftPendulumDiscreteEnv(n_torque_levels=5, **task.env_kwargs())
+    weights = np.random.default_rng(1).normal(size=11)
+    seen: list[np.ndarray] = []
+
+    def policy(vector: np.ndarray) -> int:
+        return int(np.clip(np.round(2 + 2 * np.tanh(weights @ vector)), 0, 4))
+
+    before = env.__dict__.copy()
+    controller = GymPolicyController(lambda vector: seen.append(vector.copy()) or policy(vector), env)
+    result = evaluate(controller, task, seeds=(2,), duration_s=1.0).results[0]
+    assert env.__dict__.keys() == before.keys() and all(env.__dict__[k] is v for k, v in before.items())
+    shown = SoftPendulumDiscreteEnv(n_torque_levels=5, **task.env_kwargs())
+    vector, _ = shown.reset(seed=2)
+    assert len(seen) == 100
+    for k, expected in enumerate(seen):
+        np.testing.assert_array_equal(expected, vector)
+        vector, _, _, _, info = shown.step(policy(vector))
+        assert info["torque_nm"] == result.torque_nm[k]
+    assert len({float(v[-1]) for v in seen}) > 2  # the bonus state went in, came out and decayed
+
+
+def test_engine_arguments_are_refused_where_they_do_not_belong() -> None:
+    idle = FunctionController(lambda o, q, qd, t: 0.0)
+    with pytest.raises(ValueError, match="engine must be one of"):
+        evaluate(idle, engine="mujoco", seeds=(0,), duration_s=0.5)
+    with pytest.raises(ValueError, match="batched engine"):
+        evaluate(BatchPolicy(lambda v: np.zeros((len(v), 1))), seeds=(0,), duration_s=0.5)
+    with pytest.raises(ValueError, match="batched engine"):
+        evaluate(idle, seeds=(0,), duration_s=0.5, substeps=10)
+    env = SoftPendulumDiscreteEnv()
+    with pytest.raises(ValueError, match="initial_state must be a pair"):
+        run_episode(idle, env, seed=0, duration_s=0.5, initial_state=np.zeros(5))

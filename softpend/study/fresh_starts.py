@@ -7,7 +7,7 @@ with the success rate's Wilson interval per run and, over the runs of a method, 
 a stratified bootstrap interval (:mod:`softpend.stats`).
 
 A run *balances* when at least ``balanced_fraction`` (90 %) of its fresh starts swing up and keep the
-upright standard deviation at most ``balance_std_rad`` (0.1 rad).
+upright standard deviation at most ``hold_std_rad`` (:data:`softpend.evaluation.HOLD_STD_RAD`).
 """
 
 from __future__ import annotations
@@ -21,29 +21,28 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary
+from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, EvaluationSummary, evaluate
 from softpend.io.outputs import atomic_write, read_json_object
 from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-__all__ = ["BALANCE_STD_RAD", "BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows",
+__all__ = ["BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows",
            "converged_fresh_start_rows", "fresh_start_row",
            "headline_figures", "pilco_fresh_start_rows", "rl_fresh_start_rows", "seed_rows"]
 
-#: Upright standard deviation of a start that counts as balanced [rad].
-BALANCE_STD_RAD = 0.1
 #: Share of fresh starts that must balance for a run to count as balanced.
 BALANCED_FRACTION = 0.9
 #: Names of the agents of an RL run, by :func:`softpend.rl.dqn.load_agent` ``which``.
 AGENTS = {"best": "selected", "final": "final"}
 
 
-def fresh_start_row(summary: EvaluationSummary, balance_std_rad: float = BALANCE_STD_RAD,
+def fresh_start_row(summary: EvaluationSummary, hold_std_rad: float = HOLD_STD_RAD,
                     balanced_fraction: float = BALANCED_FRACTION) -> dict[str, Any]:
-    """Success and balance figures of one controller over its fresh-start episodes."""
+    """Success and balance figures of one controller over its fresh-start episodes (a start is *balanced* when it
+    swings up and holds the upright std at most ``hold_std_rad``)."""
     n = len(summary.results)
-    balanced = [math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= balance_std_rad
+    balanced = [math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= hold_std_rad
                 for r in summary.results]
     k = int(sum(balanced))
     low, high = wilson_interval(k, n)
@@ -139,13 +138,10 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
 def pilco_fresh_start_rows(results: Sequence[Any], report_seeds: Sequence[int] = REPORT_SEEDS,
                            duration_s: float = TEST_EPISODE_S) -> list[dict[str, Any]]:
     """One row per PILCO run (its final policy, on the run's task), measured on ``report_seeds``."""
-    from softpend.evaluation import evaluate_controller
-
     rows = []
     for result in results:
         _refuse_selection_starts(report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {result.config.seed}")
-        summary = evaluate_controller(result.controller(), result.config.task, seeds=tuple(report_seeds),
-                                      duration_s=duration_s)
+        summary = evaluate(result.controller(), result.config.task, seeds=tuple(report_seeds), duration_s=duration_s)
         rows.append({"method": "PILCO", "seed": int(result.config.seed), "agent": "final", **fresh_start_row(summary)})
     return rows
 
@@ -262,15 +258,9 @@ def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_s
     :data:`~softpend.plant.randomisation.RANDOMISED_FIELDS` scaled by its own factor in ``[1 - spread,
     1 + spread]``), from that seed's hanging start.  The controller keeps its own model of the rod (for a
     trained agent: the task it was trained on)."""
-    from softpend.evaluation import EvaluationSummary, evaluate_controller
-    from softpend.plant.randomisation import randomised_rod
-
-    results = []
-    for seed in report_seeds:
-        rod = randomised_rod(task.rod, np.random.default_rng(int(seed)), spread)
-        summary = evaluate_controller(controller, task.replace(rod=rod), seeds=(int(seed),), duration_s=duration_s)
-        results.extend(summary.results)
-    return {"spread": float(spread), **fresh_start_row(EvaluationSummary(name="perturbed rods", results=results))}
+    summary = evaluate(controller, task, name="perturbed rods", seeds=report_seeds, duration_s=duration_s,
+                                  rod_spread=spread)
+    return {"spread": float(spread), **fresh_start_row(summary)}
 
 
 def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),

@@ -7,7 +7,7 @@ device behind the real protocol bytes and driver, the synthetic live camera film
 :data:`softpend.study.presets.REPORT_SEEDS`, ``start_noise_rad`` 0.05), DURATION_S each, and in the ideal
 simulator from the same starts (:func:`softpend.study.rig_runs.simulator_starts`).  The loop's real-time figures
 (command jitter, late commands on a pseudo-terminal) are in ``softpend bench --only hardware``.  A start succeeds when the
-rod's true tip (the emulator's truth log) swings up and holds with upright std <= SUCCESS_STD_RAD.
+rod's true tip (the emulator's truth log) swings up and holds with upright std <= :data:`softpend.evaluation.HOLD_STD_RAD`.
 
 The controllers (:data:`CONTROLLERS`): ``swingup_lqr``, the energy swing-up handing over to the LQR on the
 joint state the estimator provides; ``dqn``, ``mbpo`` and ``pilco``, the *final* agent or policy of the first
@@ -24,9 +24,10 @@ from typing import Any, Callable
 
 import numpy as np
 
+from softpend.evaluation import HOLD_STD_RAD
+
 N_STARTS = 10
 DURATION_S = 10.0
-SUCCESS_STD_RAD = 0.1
 #: Spread of the rod-parameter changes of ``rig_perturbed_success_<c>`` (+-15 %).
 PERTURBATION = 0.15
 #: Benchmark names of the controller classes, in the order they run.
@@ -85,8 +86,8 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
             controller, task = factories[name]()
             task = task.replace(start_noise_rad=0.05)
             rows = [twin_start(controller, name, task, condition, seed, DURATION_S, Path(tmp) / f"{name}-{seed}",
-                               success_std_rad=SUCCESS_STD_RAD) for seed in seeds]
-            sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=SUCCESS_STD_RAD)
+                               success_std_rad=HOLD_STD_RAD) for seed in seeds]
+            sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=HOLD_STD_RAD)
             good = [r for r in rows if r["success"]]
             twin_rate = len(good) / len(rows)
             sim_rate = sum(r["success"] for r in sim) / len(sim)

@@ -25,7 +25,7 @@ from softpend.checks import in_unit_interval, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["moving_average", "episodes_to_asymptote", "failures_as", "interval_band", "plant_s_at_episode",
+__all__ = ["moving_average", "episodes_to_asymptote", "run_to_asymptote", "failures_as", "interval_band", "plant_s_at_episode",
            "worst_start_std_rad"]
 
 
@@ -63,6 +63,20 @@ def episodes_to_asymptote(returns: Sequence[float], window: int = 10, level: flo
         return 1.0
     last_below = int(below[-1])
     return float(last_below + 2) if last_below + 1 < len(r) else math.inf
+
+
+def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
+    """``(episodes, plant seconds)`` at which one training run reaches its asymptotic reward.
+
+    A run trained to the end of its budget: the curve reading of :func:`episodes_to_asymptote`.  A run that its
+    stop rule ended (``log.stop_reason`` set: its agent balanced the selection starts and training stopped) has no
+    tail from which to read an asymptote; its agent no longer changes after the stop, so it reaches its asymptotic
+    performance at the stop episode: ``(log.n_episodes, log.plant_s)``.
+    """
+    if log.stop_reason is not None and log.n_episodes > 0:
+        return float(log.n_episodes), float(log.plant_s)
+    episodes = episodes_to_asymptote(log.column("return"), window=window)
+    return episodes, plant_s_at_episode(log, episodes)
 
 
 def failures_as(values: Sequence[float], success_rates: Sequence[float], failed_as: float) -> np.ndarray:

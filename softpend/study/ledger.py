@@ -29,6 +29,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
+from softpend.rl.curves import run_to_asymptote
+
 __all__ = ["LedgerRow", "NOT_COMPUTED", "VERDICTS", "claims_ledger", "glued_values", "ledger_markdown",
            "over_seeds", "pilco_run_results", "rl_fresh_start_summaries", "rl_run_logs", "run_to_asymptote",
            "verdict_counts"]
@@ -254,27 +256,6 @@ def _sysid_row(glued) -> LedgerRow:
         verdict = "reproduced" if report_mse / FACTOR <= full <= report_mse * FACTOR else "differs"
     return LedgerRow("sysid_mse", "By minimizing the mean squared error (MSE) between the predicted next state and the "
                      "actual next state the network achieved an error of ≈ 3e-9.", "≈ 3e-9", ours, verdict, "fig03-sysid")
-
-
-def run_to_asymptote(log: Any) -> tuple[float, float]:
-    """``(episodes, plant seconds)`` at which one training run reaches its asymptotic reward.
-
-    A run trained to the end of its budget: the curve reading of :func:`softpend.rl.curves.episodes_to_asymptote`
-    (the smoothed return reaches 90 % of the way to the mean return of the run's last fifth and stays there;
-    ``inf`` when it gets there only in its last episode, i.e. it was still rising).
-
-    A run that its stop rule ended (``log.stop_reason`` set: its agent balanced the selection starts in the last
-    evaluations, and training stopped so that the final agent is the one that balanced) has no tail from which to
-    read an asymptote: the return curve is cut while it rises, and the curve reading would say it never gets there.
-    Its agent no longer changes after the stop, so its asymptotic performance is the balanced performance at the
-    stop, reached at the stop episode: ``(log.n_episodes, log.plant_s)``.
-    """
-    from softpend.rl.curves import episodes_to_asymptote, plant_s_at_episode
-
-    if log.stop_reason is not None and log.n_episodes > 0:
-        return float(log.n_episodes), float(log.plant_s)
-    episodes = episodes_to_asymptote(log.column("return"))
-    return episodes, plant_s_at_episode(log, episodes)
 
 
 def _to_asymptote(logs: Sequence[Any]) -> tuple[list[float], list[float], int]:

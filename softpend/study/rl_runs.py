@@ -104,12 +104,12 @@ def _saved_config(run_dir: Path) -> DQNConfig | None:
 
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = BALANCE_STD_RAD) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance, to the asymptote, final std."""
-    from softpend.rl.curves import episodes_to_asymptote, plant_s_at_episode
+    from softpend.rl.curves import run_to_asymptote
 
     rows = []
     for method, logs in logs_by_method.items():
         for log in logs:
-            asym = episodes_to_asymptote(log.column("return"))
+            asym, asym_plant_s = run_to_asymptote(log)
             last = log.evaluations[-1] if log.evaluations else {}
             rows.append({
                 "method": method,
@@ -117,7 +117,7 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
                 "episodes": log.n_episodes,
                 "plant_s": log.plant_s,
                 "episodes_to_asymptote": asym,
-                "plant_s_to_asymptote": plant_s_at_episode(log, asym),
+                "plant_s_to_asymptote": asym_plant_s,
                 "episodes_to_balance": log.episodes_to_balance(std_rad),
                 "plant_s_to_balance": log.real_s_to_balance(std_rad),
                 "final_max_upright_std_rad": last.get("max_upright_std_rad", math.nan),

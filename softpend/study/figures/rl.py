@@ -14,7 +14,7 @@ import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD, EvaluationResult
 from softpend.plotting import draw_rod
-from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average, worst_start_std_rad
+from softpend.rl.curves import interval_band, run_to_asymptote, moving_average, worst_start_std_rad
 from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
@@ -28,7 +28,7 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
 
     Top row: the return of every seed (thin lines, smoothed with a trailing ``window``-episode moving
     average), a run's line ending where its training ended; dotted vertical lines mark each method's median
-    episode of reaching the asymptotic reward (:func:`softpend.rl.curves.episodes_to_asymptote`).  Bottom row:
+    episode of reaching the asymptotic reward (:func:`softpend.rl.curves.run_to_asymptote`).  Bottom row:
     the worst evaluation start's upright std, interquartile mean over seeds (line) with its 95 % stratified
     bootstrap interval (band, :func:`softpend.rl.curves.interval_band`; a run that stopped keeps its last value,
     its agent no longer changing); with a single seed, that seed's curve.  An evaluation in which a start failed
@@ -50,7 +50,7 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
             else:
                 log = logs[0]
                 axes[1, col].plot(log.column(axis, "evaluations"), worst_start_std_rad(log), color=color, label=method)
-        asym = float(np.median([episodes_to_asymptote(log.column("return"), window=window) for log in logs]))
+        asym = float(np.median([run_to_asymptote(log, window=window)[0] for log in logs]))
         if math.isfinite(asym):
             axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
     axes[0, 0].set_ylabel(f"episode return ({window}-episode mean)")

@@ -11,14 +11,14 @@ import pytest
 from softpend.study.presets import load_hparams
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import train_mbpo
-from softpend.rl.training_log import BALANCE_STD_RAD
+from softpend.evaluation import SUCCESS_STD_RAD
 
 
 def _balances(agent, config) -> None:
     summary = evaluate_agent(agent, config, seeds=(10, 11, 12), duration_s=10.0)
     for result in summary.results:
         assert math.isfinite(result.swing_up_time_s), f"seed {result.seed} never swung up"
-        assert result.upright_std_rad <= BALANCE_STD_RAD, f"seed {result.seed}: std {result.upright_std_rad:.3f} rad"
+        assert result.upright_std_rad <= SUCCESS_STD_RAD, f"seed {result.seed}: std {result.upright_std_rad:.3f} rad"
 
 
 @pytest.mark.expensive

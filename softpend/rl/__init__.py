@@ -14,6 +14,6 @@
 """
 
 from softpend.rl.config import DQNConfig, MBPOConfig
-from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.rl.training_log import TrainingLog
 
-__all__ = ["BALANCE_STD_RAD", "DQNConfig", "MBPOConfig", "TrainingLog"]
+__all__ = ["DQNConfig", "MBPOConfig", "TrainingLog"]

@@ -22,11 +22,7 @@ import numpy as np
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.outputs import atomic_write
 
-__all__ = ["TrainingLog", "BALANCE_STD_RAD"]
-
-#: An evaluation "balances" when every seed swings up and holds ``upright_std_rad`` at most this [rad]: every
-#: episode is a success (:data:`softpend.evaluation.SUCCESS_STD_RAD`).
-BALANCE_STD_RAD = SUCCESS_STD_RAD
+__all__ = ["TrainingLog"]
 
 
 @dataclass
@@ -61,19 +57,19 @@ class TrainingLog:
         return np.array([row[name] for row in rows], dtype=float)
 
     # ------------------------------------------------------------------ derived figures
-    def first_balanced(self, std_rad: float = BALANCE_STD_RAD) -> Optional[dict[str, Any]]:
+    def first_balanced(self, std_rad: float = SUCCESS_STD_RAD) -> Optional[dict[str, Any]]:
         """The first evaluation in which every seed swung up and held ``upright_std_rad <= std_rad``."""
         for row in self.evaluations:
             if row["all_swung_up"] and row["max_upright_std_rad"] <= std_rad:
                 return row
         return None
 
-    def real_s_to_balance(self, std_rad: float = BALANCE_STD_RAD) -> float:
+    def real_s_to_balance(self, std_rad: float = SUCCESS_STD_RAD) -> float:
         """Training plant seconds at the first balanced evaluation (``inf`` if none)."""
         row = self.first_balanced(std_rad)
         return float(row["plant_s"]) if row is not None else math.inf
 
-    def episodes_to_balance(self, std_rad: float = BALANCE_STD_RAD) -> float:
+    def episodes_to_balance(self, std_rad: float = SUCCESS_STD_RAD) -> float:
         """Training episodes at the first balanced evaluation (``inf`` if none)."""
         row = self.first_balanced(std_rad)
         return float(row["episode"]) if row is not None else math.inf

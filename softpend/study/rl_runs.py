@@ -19,7 +19,8 @@ from softpend.task import Task
 from softpend.study.sweep import run_jobs
 from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config
-from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.evaluation import SUCCESS_STD_RAD
+from softpend.rl.training_log import TrainingLog
 
 __all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs", "run_folder", "summary_table",
            "train_seeds", "train_run"]
@@ -102,7 +103,7 @@ def _saved_config(run_dir: Path) -> DQNConfig | None:
         return None
 
 
-def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = BALANCE_STD_RAD) -> list[dict[str, Any]]:
+def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance, to the asymptote, final std."""
     from softpend.rl.curves import run_to_asymptote
 

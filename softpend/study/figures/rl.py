@@ -15,7 +15,7 @@ import numpy as np
 from softpend.evaluation import SUCCESS_STD_RAD, EvaluationResult
 from softpend.plotting import draw_rod
 from softpend.rl.curves import interval_band, run_to_asymptote, moving_average, worst_start_std_rad
-from softpend.rl.training_log import BALANCE_STD_RAD, TrainingLog
+from softpend.rl.training_log import TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
 
@@ -23,7 +23,7 @@ COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 
 def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], window: int = 10, fig: Optional[plt.Figure] = None,
-                         threshold_rad: float = BALANCE_STD_RAD, seed: int = 0):
+                         threshold_rad: float = SUCCESS_STD_RAD, seed: int = 0):
     """Figure 4: return and evaluation upright std against episodes and real plant seconds.
 
     Top row: the return of every seed (thin lines, smoothed with a trailing ``window``-episode moving
@@ -154,7 +154,7 @@ def upright_error_over_time(results: Sequence[EvaluationResult], window_s: float
 
 
 def plot_upright_error(results_by_method: Mapping[str, Sequence[EvaluationResult]], window_s: float = 0.5, ax=None,
-                       threshold_rad: float = BALANCE_STD_RAD):
+                       threshold_rad: float = SUCCESS_STD_RAD):
     """Figure 6: the time-averaged upright error of each method's controllers: the median over episodes (line)
     and the band between the 25th and 75th percentiles (with one episode, that episode)."""
     if ax is None:

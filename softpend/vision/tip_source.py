@@ -200,11 +200,6 @@ class ThreadedTipSource:
             self._thread.join(timeout_s)
 
     @property
-    def running(self) -> bool:
-        """The background thread is alive (False before :meth:`start` and once the source has ended)."""
-        return self._thread is not None and self._thread.is_alive()
-
-    @property
     def finished(self) -> bool:
         """The source has ended (end of a video, camera closed, or an error) and everything was polled."""
         return self._thread is not None and not self._thread.is_alive() and not self._queue
@@ -258,12 +253,6 @@ class ThreadedTipSource:
             self._queue.append(measurement)
         return measurement
 
-    def _sleep_until(self, deadline_s: float) -> bool:
-        """Sleep until host time ``deadline_s``; False if :meth:`close` was called meanwhile."""
-        delay = deadline_s - time.monotonic()
-        if delay > 0:
-            return not self._stop.wait(delay)
-        return not self._stop.is_set()
 
 
 # ---------------------------------------------------------------------- scenes

@@ -30,6 +30,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.rl.curves import run_to_asymptote
+from softpend.study.fresh_starts import BALANCED_FRACTION
 
 __all__ = ["LedgerRow", "NOT_COMPUTED", "VERDICTS", "claims_ledger", "glued_values", "ledger_markdown",
            "over_seeds", "pilco_run_results", "rl_fresh_start_summaries", "rl_run_logs", "run_to_asymptote",
@@ -43,8 +44,6 @@ VERDICTS = ("reproduced", "differs", "not comparable", NOT_COMPUTED)
 FACTOR = 1.5
 #: Upright standard deviation the report quotes after swing-up [rad].
 REPORT_HOLD_STD_RAD = 0.2
-#: Share of fresh starts above which a method "holds" [-] (the fresh-start balance fraction).
-HOLDS_FRACTION = 0.9
 #: Largest difference of the held shares of two methods that counts as "near-identical" [-].
 SAME_SHARE = 0.1
 
@@ -315,7 +314,7 @@ def _fewer_episodes_row(logs: Mapping[str, Sequence[Any]]) -> LedgerRow:
 
 
 def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[LedgerRow]:
-    # reproduced: the median over runs of the share of fresh starts held within std_rad is at least HOLDS_FRACTION
+    # reproduced: the median over runs of the share of fresh starts held within std_rad is at least BALANCED_FRACTION
     from softpend.study.rl_runs import METHOD_NAMES
 
     claims = {
@@ -337,7 +336,7 @@ def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[Ledge
         else:
             ours = (f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {std_rad:g} rad, "
                     + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %"))
-        verdict = "reproduced" if _median(shares) >= HOLDS_FRACTION else "differs"
+        verdict = "reproduced" if _median(shares) >= BALANCED_FRACTION else "differs"
         rows.append(LedgerRow(key, claim, "std 0.2 rad", ours, verdict, chapter))
     return rows
 
@@ -377,7 +376,7 @@ def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> Ledge
         return LedgerRow("mb_matches_mf", claim, "near-identical", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
     ours = (f"share of fresh starts held within {std_rad:g} rad (median over seeds): DQN-MBPO {100 * shares['mbpo']:.0f} %, "
             f"DQN {100 * shares['dqn']:.0f} %")
-    ok = min(shares.values()) >= HOLDS_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
+    ok = min(shares.values()) >= BALANCED_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
     return LedgerRow("mb_matches_mf", claim, "near-identical", ours, "reproduced" if ok else "differs", "fig-upright-error")
 
 
@@ -419,7 +418,7 @@ def _classical_rows(glued) -> list[LedgerRow]:
         if far is not None and far_tilt != near_tilt:
             ours += f", {far['text']} from {far_tilt:g} rad"
         ours += f" and {hanging['text']} from hanging"
-        ok = near["rate"] >= HOLDS_FRACTION and hanging["rate"] <= 1 - HOLDS_FRACTION
+        ok = near["rate"] >= BALANCED_FRACTION and hanging["rate"] <= 1 - BALANCED_FRACTION
         rows.append(LedgerRow("lqr_far", claim, "a start near upright (Figure 7)", ours, "reproduced" if ok else "differs",
                               "fig07-classical"))
 

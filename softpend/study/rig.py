@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softpend.evaluation import metrics_from_trajectory
+from softpend.evaluation import SUCCESS_STD_RAD, metrics_from_trajectory
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
@@ -38,7 +38,7 @@ def truth_trajectory(truth_log: str | Path, task: Task, start_time_s: float | No
             "torque_nm": log["applied_torque_nm"][keep], "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations])}
 
 
-def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = 0.2, start_time_s: float | None = None,
+def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = SUCCESS_STD_RAD, start_time_s: float | None = None,
                   end_time_s: float | None = None) -> dict[str, float]:
     """Swing-up time, upright std, peak torque, energy and success of a twin run from the emulator's truth log
     (:func:`truth_trajectory`; the window, when given, also sets the origin of the swing-up time).  Empty for
@@ -52,7 +52,7 @@ def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = 0.
 
 
 def run_truth_metrics(motor_log: str | Path, truth_log: str | Path, task: Task,
-                      success_std_rad: float = 0.2) -> dict[str, float]:
+                      success_std_rad: float = SUCCESS_STD_RAD) -> dict[str, float]:
     """:func:`truth_metrics` of the part of a twin run that the controller commanded: from its first command to
     the last sample of the motor log (device time).  The truth log also holds the rod before the controller took
     charge and after the STOP, when nothing holds it.  Empty when the controller never commanded."""

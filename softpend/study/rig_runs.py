@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.checks import int_at_least, non_negative, positive
-from softpend.evaluation import evaluate_controller, metrics_from_trajectory
+from softpend.evaluation import HOLD_STD_RAD, evaluate_controller, metrics_from_trajectory
 from softpend.hardware.closed_loop import TwinCamera, run_twin_control
 from softpend.hardware.driver import LinkError
 from softpend.hardware.emulator import RigConfig
@@ -155,7 +155,7 @@ def _row(condition: str, controller: str, seed: int, metrics: Mapping[str, Any],
 
 
 def twin_start(controller: Any, label: str, task: Task, condition: RigCondition, seed: int, duration_s: float,
-               workdir: str | Path, success_std_rad: float = 0.1,
+               workdir: str | Path, success_std_rad: float = HOLD_STD_RAD,
                on_frame: Optional[Callable] = None) -> dict[str, Any]:
     """One start of ``controller`` on the twin under ``condition``: a row of :func:`summary_rows`' input.
 
@@ -198,7 +198,7 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
 
 
 def simulator_starts(controller: Any, label: str, task: Task, seeds: Sequence[int], duration_s: float,
-                     success_std_rad: float = 0.1) -> list[dict[str, Any]]:
+                     success_std_rad: float = HOLD_STD_RAD) -> list[dict[str, Any]]:
     """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task`` (one row each, condition
     :data:`SIMULATOR`): :func:`~softpend.evaluation.evaluate_controller`, scored with ``success_std_rad``; a
     diverged simulation is a failed row."""

@@ -70,7 +70,6 @@ def test_verdicts_follow_the_evidence():
         "fig07_classical": fig07(lqr_near=(1.0, 0.84, 1.0), lqr_far=(0.0, 0.0, 0.16), lqr_hanging=(0.0, 0.0, 0.16),
                                  lqr_learned_near=(0.9, 0.7, 0.97), pid_true_near=(1.0, 0.84, 1.0),
                                  pid_learned_near=(0.0, 0.0, 0.16), pid_true_nolimit_far=(1.0, 0.84, 1.0)),
-        "fig09_rig": {"tracker_ms_per_frame": 2.0, "tracker_fps": 500.0, "camera_fps": 100.0},
     }
     held = [summary([2.0, 3.0, 2.5], [0.05, 0.1, 0.15])] * 2  # every start held within 0.2 rad
     slower = [summary([4.0, 5.0, 4.5], [0.05, 0.1, 0.15])] * 2
@@ -84,7 +83,8 @@ def test_verdicts_follow_the_evidence():
     assert rows["lqr_model"].verdict == "differs"  # the learned-model LQR is not clearly worse
     assert rows["pid_learned"].verdict == "differs" and rows["pid_fast"].verdict == "not comparable"
     assert rows["pid_sensitive"].verdict == "differs"
-    assert rows["tracker_real_time"].verdict == "reproduced"
+    # a machine figure, measured by `softpend bench`, never by the book (its numbers repeat on every build)
+    assert rows["tracker_real_time"].verdict == NOT_COMPUTED and "softpend bench" in rows["tracker_real_time"].ours
     assert rows["mf_asymptote"].verdict == NOT_COMPUTED  # no training logs given
 
     # a method that does not hold: the rows that need it differ

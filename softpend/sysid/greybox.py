@@ -55,7 +55,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -351,7 +351,7 @@ def simulate_windows(
 class _Problem:
     """The multiple-shooting least-squares problem (decision vector: scaled parameters, then window states)."""
 
-    def __init__(self, dataset: TrajectoryDataset, guess: RodParams, names: tuple[str, ...], diff_step: float,
+    def __init__(self, dataset: TrajectoryDataset, guess: RodParams, names: Sequence[str], diff_step: float,
                  starts: np.ndarray, steps: int, substeps: int) -> None:
         self.guess = guess
         self.names = tuple(names)

@@ -308,6 +308,7 @@ def perturbed_simulator_errors(
 
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
+    assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
     start_stride = positive_int("start_stride", start_stride)
     finite("hub_offset_rad", hub_offset_rad)
     finite("hub_rate_offset_rad_s", hub_rate_offset_rad_s)

@@ -102,6 +102,19 @@ class DynamicsModel(nn.Module):
         rate follows from the corrected position).  ``None``: no limit.
     """
 
+    # buffers (registered in __init__)
+    _angle_idx: Tensor
+    _linear_idx: Tensor
+    _core_angle_mask: Tensor
+    _lag_angle_mask: Tensor
+    _tip_idx: Tensor
+    feature_mean: Tensor
+    feature_std: Tensor
+    feature_low: Tensor
+    feature_high: Tensor
+    delta_mean: Tensor
+    delta_std: Tensor
+
     def __init__(
         self,
         layout: StateLayout,
@@ -252,6 +265,7 @@ class DynamicsModel(nn.Module):
     def _within_reach(self, state: Tensor, core: Tensor) -> Tensor:
         """Pull a tip predicted beyond ``tip_reach_m`` radially back onto the circle of that radius."""
         p, tip = self._p, self._tip_idx
+        assert self.tip_reach_m is not None  # called only with a reach
         radius = torch.hypot(core[:, tip[0]], core[:, tip[1]])
         over = radius > self.tip_reach_m
         if not bool(over.any()):  # the usual case: nothing to do (and no copy)
@@ -315,7 +329,8 @@ class DynamicsEnsemble(nn.Module):
         for m in members[1:]:
             if m.config() != first:
                 raise ValueError(f"all members must share one configuration; {m.config()} != {first}")
-        self.members = nn.ModuleList(members)
+        # nn.ModuleList is not generic in torch's stubs: at run time it holds exactly these DynamicsModels
+        self.members: Sequence[DynamicsModel] = nn.ModuleList(members)  # type: ignore[assignment]
         self.layout = members[0].layout
         self.dt_s = members[0].dt_s
         self.torque_limit_nm = members[0].torque_limit_nm

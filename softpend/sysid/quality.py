@@ -121,7 +121,7 @@ def valid_prediction(
         positive("lyapunov_rate_per_s", lyapunov_rate_per_s)
     threshold = fraction * length_m
     above = error > threshold
-    censored = ~above.any(axis=1)
+    censored: np.ndarray = ~above.any(axis=1)  # type: ignore[assignment]  # numpy's stubs allow a scalar for an unknown ndim
     first = np.where(censored, error.shape[1], np.argmax(above, axis=1))
     times = np.maximum(first - 1, 0) * dt_s
     median = float(np.median(times))
@@ -162,6 +162,7 @@ def rollout_starts(
 def _recorded_states(dataset: TrajectoryDataset, starts: np.ndarray) -> np.ndarray:
     if dataset.joint_positions_rad is None:
         raise ValueError("dataset has no recorded joint states (needs a simulated PRB dataset)")
+    assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
     q = dataset.joint_positions_rad[starts[:, 0], starts[:, 1]]
     qd = dataset.joint_velocities_rad_s[starts[:, 0], starts[:, 1]]
     return np.concatenate([q, qd], axis=1)

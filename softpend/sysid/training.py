@@ -239,6 +239,7 @@ def _train_member(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     net = model.net
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
+    scheduler: torch.optim.lr_scheduler.LRScheduler
     if config.lr_schedule == "cosine":
         scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100)
     else:
@@ -265,7 +266,7 @@ def _train_member(
         _check_finite_loss(desc, epoch, total / n, val, config)
         train_losses.append(total / n)
         val_losses.append(val)
-        scheduler.step(val) if config.lr_schedule == "plateau" else scheduler.step()
+        scheduler.step(val) if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau) else scheduler.step()
         if val < best[0] * (1 - 1e-4):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
         bar.set_postfix(train=f"{total / n:.2e}", val=f"{val:.2e}", best=best[1])
@@ -343,7 +344,8 @@ def _finetune_multistep(
     vs, vu = (torch.as_tensor(a, dtype=dtype) for a in val)
     optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate / 10)
     best = (math.inf, copy.deepcopy(model.net.state_dict()))
-    train_losses, val_losses = [], []
+    train_losses: list[float] = []
+    val_losses: list[float] = []
     with torch.no_grad():
         best = (float(_multistep_loss(model, vs, vu, scale)), best[1])
     bar = tqdm(range(1, config.rollout_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
@@ -423,6 +425,7 @@ def fit_dynamics_model(
     reach = _tip_reach_m(dataset) if config.limit_tip_reach else None
 
     def new_member(index: int) -> DynamicsModel:
+        assert config.integrate_positions is not None  # set in TrainConfig.__post_init__
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed * 1000 + index)
             return DynamicsModel(

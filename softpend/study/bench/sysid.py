@@ -35,6 +35,7 @@ import torch
 from softpend.sysid.babble import BabbleProtocol, babble
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 from softpend.torch_threads import one_torch_thread
@@ -49,10 +50,10 @@ ROLLOUT_STEPS = 100
 BEST_FULL_CONFIG = TrainConfig(history=6, hidden_widths=(64, 64, 64), max_epochs=600, patience=600)
 
 
-def rollout_steps_per_s(model: torch.nn.Module, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3) -> float:
+def rollout_steps_per_s(model: DynamicsModel | DynamicsEnsemble, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3) -> float:
     """Model steps per second of :func:`softpend.sysid.rollout` on ``batch`` rows (best of ``repeats``)."""
     generator = torch.Generator().manual_seed(0)
-    dtype = model.feature_mean.dtype if hasattr(model, "feature_mean") else torch.float32
+    dtype = model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float32
     x0 = torch.randn(batch, model.layout.dim, generator=generator, dtype=dtype) * 0.1
     torques = (torch.rand(batch, steps, generator=generator, dtype=dtype) * 2 - 1) * model.torque_limit_nm
     best = float("inf")
@@ -170,6 +171,7 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
     from softpend.task import Task
 
     truth = data.params
+    assert truth is not None  # simulated babbling records its rod
     result = identify(data, initial_params=perturbed_guess(truth))
     errors = result.relative_errors(truth)
     hanging = babble(HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
@@ -230,7 +232,9 @@ def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, f
         session = run_twin_session(workdir, duration_s=duration_s, seed=seed, trial_length_s=5.0, progress=False)
         dataset = session.dataset
     session_s = time.perf_counter() - start
+    assert isinstance(dataset, TrajectoryDataset)  # build_rig_dataset's
     truth = dataset.params
+    assert truth is not None  # the twin's rod, given to build_rig_dataset
     config = GreyBoxConfig(parameters=GREYBOX_PARAMETERS + ("camera_delay_s",))
     result = identify(dataset, config, initial_params=perturbed_guess(truth))
     errors = result.relative_errors(truth)

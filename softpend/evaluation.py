@@ -205,33 +205,23 @@ def metrics_from_trajectory(
     phi_dot_rad_s : array (T,)
         Hub angular rate [rad/s].
     """
-    t = np.asarray(time_s, dtype=float)
-    theta = np.asarray(theta_rad, dtype=float)
-    torque = np.asarray(torque_nm, dtype=float)
-    phi_dot = np.asarray(phi_dot_rad_s, dtype=float)
-    if not (t.ndim == theta.ndim == torque.ndim == phi_dot.ndim == 1):
-        raise ValueError("time_s, theta_rad, torque_nm and phi_dot_rad_s must be 1-D arrays")
-    if not (len(t) == len(theta) == len(torque) == len(phi_dot)) or len(t) < 2:
-        raise ValueError(
-            f"time_s, theta_rad, torque_nm and phi_dot_rad_s must have the same length >= 2, got "
-            f"{len(t)}, {len(theta)}, {len(torque)}, {len(phi_dot)}"
-        )
-    for name, values in (("time_s", t), ("theta_rad", theta), ("torque_nm", torque), ("phi_dot_rad_s", phi_dot)):
+    names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
+    t, theta, torque, phi_dot = arrays = [np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)]
+    if any(a.ndim != 1 for a in arrays):
+        raise ValueError(f"{', '.join(names)} must be 1-D arrays")
+    if len({len(a) for a in arrays}) > 1 or len(t) < 2:
+        raise ValueError(f"{', '.join(names)} must have the same length >= 2, got {[len(a) for a in arrays]}")
+    for name, values in zip(names, arrays):
         if not np.all(np.isfinite(values)):
             raise ValueError(f"{name} contains non-finite values")
     dt = float(np.median(np.diff(t)))
     if dt <= 0:
         raise ValueError("time_s must be increasing")
-    hold_steps = int(round(hold_s / dt))
-    inside = np.abs(theta) < upright_threshold_rad
-    start_index: Optional[int] = None
-    # first index i such that inside[i : i + hold_steps + 1] is all true
-    run = 0
-    for i in range(len(inside) - 1, -1, -1):
-        run = run + 1 if inside[i] else 0
-        if run > hold_steps:
-            start_index = i
-    # the loop above scans backwards, so start_index ends as the earliest qualifying index
+    # the first index i such that |theta| stays below the threshold over samples i .. i + hold_steps
+    window = int(round(hold_s / dt)) + 1
+    inside = (np.abs(theta) < upright_threshold_rad).astype(int)
+    held = np.flatnonzero(np.convolve(inside, np.ones(window, dtype=int), "valid") == window)
+    start_index = int(held[0]) if held.size else None
     if start_index is not None:
         after = theta[start_index:]
         swing_up_time = float(t[start_index] - t[0])
@@ -247,6 +237,10 @@ def metrics_from_trajectory(
         "energy_used_j": float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt),
         "success": bool(start_index is not None and upright_std <= success_std_rad),
     }
+
+
+#: The metrics of an episode, in the order :func:`metrics_from_trajectory` returns them.
+_METRICS = ("swing_up_time_s", "upright_std_rad", "upright_mean_abs_rad", "peak_torque_nm", "energy_used_j", "success")
 
 
 @dataclass
@@ -275,15 +269,7 @@ class EvaluationResult:
         return self.observations[:, OBSERVATION_NAMES.index("phi_rad")]
 
     def metrics(self) -> dict[str, float]:
-        return {
-            "seed": self.seed,
-            "swing_up_time_s": self.swing_up_time_s,
-            "upright_std_rad": self.upright_std_rad,
-            "upright_mean_abs_rad": self.upright_mean_abs_rad,
-            "peak_torque_nm": self.peak_torque_nm,
-            "energy_used_j": self.energy_used_j,
-            "success": self.success,
-        }
+        return {"seed": self.seed, **{name: getattr(self, name) for name in _METRICS}}
 
 
 @dataclass
@@ -315,25 +301,14 @@ class EvaluationSummary:
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
         low, high = self.success_interval()
-        return {
-            "controller": self.name,
-            "seeds": len(self.results),
-            "success_rate": self.success_rate,
-            "success_low": low,
-            "success_high": high,
-            "swing_up_time_s": self.median("swing_up_time_s"),
-            "upright_std_rad": self.median("upright_std_rad"),
-            "upright_mean_abs_rad": self.median("upright_mean_abs_rad"),
-            "peak_torque_nm": self.median("peak_torque_nm"),
-            "energy_used_j": self.median("energy_used_j"),
-        }
+        return {"controller": self.name, "seeds": len(self.results), "success_rate": self.success_rate,
+                "success_low": low, "success_high": high, **{name: self.median(name) for name in _METRICS[:-1]}}
 
 
 # ---------------------------------------------------------------------- the one loop over both engines
 
 #: Metrics of an episode that ends before its second sample (a plant that diverged on the first step).
-_NO_EPISODE = {"swing_up_time_s": math.inf, "upright_std_rad": math.pi, "upright_mean_abs_rad": math.pi,
-               "peak_torque_nm": 0.0, "energy_used_j": 0.0, "success": False}
+_NO_EPISODE = dict(zip(_METRICS, (math.inf, math.pi, math.pi, 0.0, 0.0, False)))
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 

@@ -136,7 +136,10 @@ def test_batched_episodes_do_not_depend_on_each_other(agent) -> None:
 
 def test_agents_evaluated_in_one_batch_equal_their_own_evaluations(agent) -> None:
     model, config = agent
-    other = build_dqn(config, make_training_env(config), seed=4, episodes=1)  # another network, other actions
+    other = build_dqn(config, make_training_env(config), seed=4, episodes=1)  # another network
+    with torch.no_grad():  # whose Q-values are turned upside down: its greedy actions differ wherever the Q-values do
+        for parameter in list(other.q_net.parameters())[-2:]:
+            parameter.neg_()
     seeds = (20_003, 20_004)
     together = evaluate_agents_batched([model, other, model], config, seeds, 1.5)
     assert [len(summary.results) for summary in together] == [2, 2, 2]

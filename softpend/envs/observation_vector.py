@@ -1,7 +1,7 @@
 """The environment's observation vector and reward, vectorised over a batch (for model rollouts).
 
 :class:`softpend.envs.SoftPendulumEnv` builds its observation vector one step at a time from a plant
-:class:`~softpend.plant.Observation` (``SoftPendulumEnv._vector``); a model-based learner needs the same
+:class:`~softpend.plant.Observation` (:meth:`SoftPendulumEnv.observation_vector`); a model-based learner needs the same
 vector for thousands of *predicted* observations at once.  This module computes it with the environment's
 own constants (:data:`~softpend.envs.soft_pendulum.OBSERVATION_VECTOR_NAMES`, ``VELOCITY_SCALE_PER_S``, the
 observation-space bound) (the reward comes from the shared vectorised :func:`~softpend.envs.step_reward`), so
@@ -36,7 +36,7 @@ def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: SoftPen
     Returns
     -------
     ndarray, shape (B, 11), float32
-        Rows equal to ``env._vector(observation)`` with ``env._bonus = bonus``.
+        Rows equal to ``env.observation_vector(observation, bonus)``.
     """
     observations = np.asarray(observations, dtype=np.float64)
     if observations.ndim != 2 or observations.shape[1] != len(OBSERVATION_NAMES):

@@ -61,7 +61,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Optional, Sequence, Union
+from typing import Any, Callable, Optional, Sequence, Union
 
 import numpy as np
 import torch
@@ -184,7 +184,7 @@ class BatchedRodParams:
         unknown = set(changes) - set(PARAMETER_FIELDS)
         if unknown:
             raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
-        new = {}
+        new: dict[str, Any] = {}
         for name, value in changes.items():
             base = getattr(self, name)
             tensor = torch.as_tensor(value, dtype=base.dtype)
@@ -517,7 +517,8 @@ def _integrate(integrator: str, substeps: int, h: float, d: _Derived, x: torch.T
     """``substeps`` steps of ``h`` [s] of ``integrator`` from absolute angles ``x`` and rates ``v``; with
     ``with_work`` also the motor work and the dissipated energy over them [J], integrated with the method's own
     stages (RK4) or by the trapezoidal rule on the step ends (Rosenbrock, second order as the method)."""
-    work_in = work_out = None
+    work_in: Optional[torch.Tensor] = None
+    work_out: Optional[torch.Tensor] = None
     if with_work:
         work_in = torch.zeros_like(torque)
         work_out = torch.zeros_like(torque)
@@ -526,6 +527,7 @@ def _integrate(integrator: str, substeps: int, h: float, d: _Derived, x: torch.T
         if integrator == "rosenbrock":
             x_next, v_next = _rosenbrock_step(d, x, v, torque, h)
             if with_work:
+                assert work_in is not None and work_out is not None
                 before, after = _powers(d, v, torque), _powers(d, v_next, torque)
                 work_in = work_in + (h / 2) * (before[0] + after[0])
                 work_out = work_out + (h / 2) * (before[1] + after[1])
@@ -539,6 +541,7 @@ def _integrate(integrator: str, substeps: int, h: float, d: _Derived, x: torch.T
         x4, v4 = torch.add(x, v3, alpha=h), torch.add(v, a3, alpha=h)
         a4 = acc(d, x4, v4, torque)
         if with_work:
+            assert work_in is not None and work_out is not None
             p = [_powers(d, vv, torque) for vv in (v, v2, v3, v4)]
             work_in = work_in + (h / 6) * (p[0][0] + 2 * p[1][0] + 2 * p[2][0] + p[3][0])
             work_out = work_out + (h / 6) * (p[0][1] + 2 * p[1][1] + 2 * p[2][1] + p[3][1])
@@ -599,7 +602,7 @@ class BatchedPRBChain:
         if not isinstance(compiled, bool):
             raise ValueError(f"compiled must be True or False, got {compiled!r}")
         self.compiled = compiled
-        self._compiled_integrate = None
+        self._compiled_integrate: Optional[Callable[..., Any]] = None
         if isinstance(params, BatchedRodParams):
             if batch_size is not None and int_at_least("batch_size", batch_size, 1) != params.batch_size:
                 raise ValueError(f"batch_size is {batch_size} but params holds {params.batch_size} rods")
@@ -627,9 +630,9 @@ class BatchedPRBChain:
             )
         self.params = params
         self._params_require_grad = any(getattr(params, name).requires_grad for name in PARAMETER_FIELDS)
-        self.n_links = params.n_links
+        self.n_links: int = params.n_links
         self.n_coordinates = params.n_links + 1
-        self.batch_size = params.batch_size
+        self.batch_size: int = params.batch_size
         self.dtype = params.dtype
         self._d = _derive(params)
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional
 
 import exudyn as exu
 import numpy as np
@@ -188,8 +188,8 @@ class HubBeam2D:
 
         settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
         self._settings = settings
-        self._solver = exu.MainSolverImplicitSecondOrder()
-        self._solver.InitializeSolver(mbs, settings)
+        self._solver: Any = exu.MainSolverImplicitSecondOrder()  # Any: exudyn's stubs declare its methods without self
+        self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
 
     # ------------------------------------------------------------------ state (global nodal coordinates)
     def set_coordinates(self, c: np.ndarray, c_t: np.ndarray) -> None:
@@ -227,7 +227,7 @@ class HubBeam2D:
         settings.solution.file.write = False
         settings.staticSolver.verboseMode = 0
         settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
-        solver = exu.MainSolverStatic()
+        solver: Any = exu.MainSolverStatic()  # Any: exudyn's stubs declare its methods without self
         solver.InitializeSolver(self._mbs, settings)
         solver.ComputeMassMatrix(self._mbs)
         return np.array(solver.GetSystemMassMatrix(), dtype=float)[: self.n_ode2, : self.n_ode2]

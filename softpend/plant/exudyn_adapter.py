@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Sequence
 
 import exudyn as exu
 import numpy as np
@@ -143,12 +143,12 @@ class KinematicChain2D:
         )
         c, s = np.cos(self.base_angle_rad), np.sin(self.base_angle_rad)
         base_rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        transformations = exu.Matrix3DList([base_rotation] + [np.eye(3)] * (n - 1))
-        offsets = exu.Vector3DList([[0.0, link.joint_offset_m, 0.0] for link in self.links])
-        inertias = exu.Matrix3DList(
+        transformations = exu.Matrix3DList([base_rotation] + [np.eye(3)] * (n - 1))  # type: ignore[call-arg]  # exudyn's stub has no __init__
+        offsets = exu.Vector3DList([[0.0, link.joint_offset_m, 0.0] for link in self.links])  # type: ignore[call-arg]  # exudyn's stub has no __init__
+        inertias = exu.Matrix3DList(  # type: ignore[call-arg]  # exudyn's stub has no __init__
             [np.diag([link.inertia_com_kgm2, link.inertia_com_kgm2, link.inertia_com_kgm2]) for link in self.links]
         )
-        coms = exu.Vector3DList([[0.0, link.com_m, 0.0] for link in self.links])
+        coms = exu.Vector3DList([[0.0, link.com_m, 0.0] for link in self.links])  # type: ignore[call-arg]  # exudyn's stub has no __init__
         self._tree = mbs.AddObject(
             ObjectKinematicTree(
                 nodeNumber=self._node,
@@ -173,9 +173,10 @@ class KinematicChain2D:
         self._settings = settings
         # handles fetched once: every attribute access through pybind11 is a Python-C++ crossing of its own
         self._time_integration = settings.timeIntegration
-        self._data = mbs.systemData
-        self._solver = exu.MainSolverImplicitSecondOrder()
-        self._solver.InitializeSolver(mbs, settings)
+        # Any: exudyn's stubs declare these methods without self and GetSystemState as lists (it gives arrays)
+        self._data: Any = mbs.systemData
+        self._solver: Any = exu.MainSolverImplicitSecondOrder()
+        self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
         self._initial = exu.ConfigurationType.Initial
 
     # ------------------------------------------------------------------ state

@@ -21,6 +21,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from softpend.checks import finite, int_at_least, non_negative, positive
 
@@ -157,7 +158,7 @@ class RodParams:
         p = self.tip_mass_kg * self.gravity_mps2
         return w * self.length_m**4 / (8 * ei) + p * self.length_m**3 / (3 * ei)
 
-    def replace(self, **changes: float) -> "RodParams":
+    def replace(self, **changes: Any) -> "RodParams":
         """Return a copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 

@@ -201,7 +201,7 @@ def test_pilco_starts_first_then_dqn_mbpo_then_dqn_and_the_first_seed_set_names_
     from softpend.pilco.loop import PilcoConfig
 
     started = []
-    monkeypatch.setattr(sweep, "run_jobs", lambda job, jobs, names, *args, **kwargs: started.extend(names))
+    monkeypatch.setattr(sweep, "_train", lambda jobs, *args: started.extend(name for name, _ in jobs))
     train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2), ("mbpo", MBPOConfig(episode_s=1.0), [0], 2)], tmp_path,
                       PilcoConfig(n_policy_trials=0, horizon_s=1.0), [3, 4])
     assert started == ["pilco-seed3", "pilco-seed4", "mbpo-seed0", "dqn-seed0", "dqn-seed1"]

@@ -30,22 +30,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
 
+import yaml
+
 DEFAULT_PROFILE = "full"
 GENERATED_PREFIX = "book/_generated/"
 #: The toc entry under :data:`GENERATED_PREFIX` that is the page the runner writes (not a notebook).
 EXECUTION_PAGE = "execution"
 #: Bump when the way outputs are produced changes, to invalidate every cached notebook.
 _CACHE_VERSION = "3"
-#: Front-matter keys under ``softpend:``; ``realtime`` is accepted and ignored while the notebooks drop it.
+#: The keys of a notebook's front matter under ``softpend:`` (any other is an error).
 FRONT_MATTER_KEYS = ("after", "book_runs")
-_IGNORED_KEYS = ("realtime",)
 #: PNG figures; the kernel logs errors only; tqdm's "IProgress not found" warning would print paths on every page.
-_KERNEL_ARGUMENTS = [
-    "--InlineBackend.figure_formats=png",
-    "--IPKernelApp.log_level=ERROR",
-    "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress not found', "
-    "category=__import__('tqdm').TqdmWarning)",
-]
+_KERNEL_ARGUMENTS = ["--InlineBackend.figure_formats=png", "--IPKernelApp.log_level=ERROR",
+                     "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress "
+                     "not found', category=__import__('tqdm').TqdmWarning)"]
 
 
 class NotebookExecutionError(RuntimeError):
@@ -104,61 +102,45 @@ class NotebookRun:
 
 
 # --------------------------------------------------------------------------- configuration
-def _load_yaml(path: Path) -> Any:
-    import yaml
-
+def _load_yaml(path: Path | str) -> Any:
     return yaml.safe_load(Path(path).read_text(encoding="utf-8"))
 
 
 def toc_notebooks(toc_path: Path | str) -> list[str]:
-    """Names of the executed notebooks in a ``_toc.yml`` (entries under ``book/_generated/`` except the
-    execution page), in reading order."""
-    names: list[str] = []
+    """Names of the executed notebooks in a ``_toc.yml`` (its ``file``/``root`` entries under
+    ``book/_generated/`` except the execution page), in reading order."""
+    def files(node: Any) -> Iterable[str]:
+        for key, value in node.items() if isinstance(node, dict) else enumerate(node if isinstance(node, list) else []):
+            yield from [value] if key in ("file", "root") and isinstance(value, str) else files(value)
 
-    def visit(node: Any) -> None:
-        if isinstance(node, dict):
-            for key, value in node.items():
-                if key in ("file", "root") and isinstance(value, str):
-                    entry = value.removesuffix(".ipynb")
-                    if entry.startswith(GENERATED_PREFIX) and entry[len(GENERATED_PREFIX):] != EXECUTION_PAGE:
-                        names.append(entry[len(GENERATED_PREFIX):])
-                else:
-                    visit(value)
-        elif isinstance(node, list):
-            for item in node:
-                visit(item)
-
-    visit(_load_yaml(Path(toc_path)))
-    duplicates = sorted({name for name in names if names.count(name) > 1})
-    if duplicates:
+    entries = [entry.removesuffix(".ipynb") for entry in files(_load_yaml(Path(toc_path)))]
+    names = [entry[len(GENERATED_PREFIX):] for entry in entries if entry.startswith(GENERATED_PREFIX)
+             and entry != GENERATED_PREFIX + EXECUTION_PAGE]
+    if duplicates := sorted({name for name in names if names.count(name) > 1}):
         raise ValueError(f"{toc_path}: notebook(s) listed more than once: {duplicates}")
     return names
 
 
 def load_profiles(path: Path | str) -> dict[str, dict[str, dict[str, Any]]]:
     """``profiles.yml`` as ``profile -> notebook -> {parameter: value}`` (empty: the notebook's defaults)."""
-    data = _load_yaml(Path(path)) or {}
+    data = _load_yaml(path) or {}
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a mapping profile -> notebook -> parameters, got {type(data).__name__}")
-    profiles: dict[str, dict[str, dict[str, Any]]] = {}
     for profile, notebooks in data.items():
         if not isinstance(notebooks or {}, dict):
             raise ValueError(f"{path}: profile {profile!r} must map notebook names to parameters")
-        profiles[str(profile)] = {}
         for notebook, parameters in (notebooks or {}).items():
             if not isinstance(parameters or {}, dict) or not all(isinstance(key, str) for key in parameters or {}):
                 raise ValueError(f"{path}: profile {profile!r}, notebook {notebook!r}: parameters must be a mapping")
-            profiles[str(profile)][str(notebook)] = dict(parameters or {})
-    return profiles
+    return {str(profile): {str(notebook): dict(parameters or {}) for notebook, parameters in (notebooks or {}).items()}
+            for profile, notebooks in data.items()}
 
 
 def read_notebook(source_path: Path | str):
     """A jupytext MyST notebook as an ``nbformat`` notebook (no outputs)."""
     import jupytext
 
-    if not Path(source_path).is_file():
-        raise FileNotFoundError(f"notebook source {source_path} does not exist")
-    return jupytext.read(Path(source_path), fmt="md:myst")
+    return jupytext.read(Path(source_path), fmt="md:myst")  # FileNotFoundError naming it when it is missing
 
 
 def _parameters_cell(nb) -> Optional[str]:
@@ -175,8 +157,7 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
     if _parameters_cell(nbformat.read(str(notebook_path), as_version=4)) is None:
         raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
     declared = papermill.inspect_notebook(str(notebook_path))
-    unknown = sorted(set(parameters) - set(declared))
-    if unknown:
+    if unknown := sorted(set(parameters) - set(declared)):
         raise ValueError(f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell "
                          f"(it defines {sorted(declared)})")
     return declared
@@ -188,15 +169,11 @@ def front_matter(nb, name: str, known: Sequence[str]) -> dict[str, list[str]]:
     from softpend.study.sweep import BOOK_RUN_SETS
 
     meta = nb.metadata.get("softpend") or {}
-    unknown = sorted(set(meta) - set(FRONT_MATTER_KEYS) - set(_IGNORED_KEYS))
-    if unknown:
+    if unknown := sorted(set(meta) - set(FRONT_MATTER_KEYS)):
         raise ValueError(f"notebook {name!r}: unknown front-matter key(s) softpend.{', softpend.'.join(unknown)}")
     after, runs = meta.get("after", []), meta.get("book_runs", [])
-    if not isinstance(after, list) or not all(isinstance(entry, str) for entry in after):
-        raise ValueError(f"notebook {name!r}: softpend.after must be a list of notebook names, got {after!r}")
-    if sorted(set(after) - set(known)) or name in after:
-        raise ValueError(f"notebook {name!r}: softpend.after names {sorted(set(after) - set(known)) or [name]}, "
-                         "which is not another notebook of _toc.yml")
+    if not isinstance(after, list) or not all(entry in known and entry != name for entry in after):
+        raise ValueError(f"notebook {name!r}: softpend.after must list other notebooks of _toc.yml, got {after!r}")
     if not isinstance(runs, list) or not all(entry in BOOK_RUN_SETS for entry in runs):
         raise ValueError(f"notebook {name!r}: softpend.book_runs must be a list among {list(BOOK_RUN_SETS)}, "
                          f"got {runs!r}")
@@ -235,16 +212,14 @@ def _drop_docstrings(tree: ast.AST) -> ast.AST:
 
 def _parse_cell(source: str) -> Optional[ast.Module]:
     """A code cell as an ``ast`` tree (IPython magics translated); None when it does not parse."""
-    try:
-        return ast.parse(source)
-    except SyntaxError:
-        pass
-    try:
-        from IPython.core.inputtransformer2 import TransformerManager
+    from IPython.core.inputtransformer2 import TransformerManager
 
-        return ast.parse(TransformerManager().transform_cell(source))
-    except (ImportError, SyntaxError):
-        return None
+    for text in (source, TransformerManager().transform_cell(source)):
+        try:
+            return ast.parse(text)
+        except SyntaxError:
+            continue
+    return None
 
 
 class PackageCode:
@@ -263,27 +238,17 @@ class PackageCode:
             if "__pycache__" not in path.parts:
                 parts = path.relative_to(self.root).with_suffix("").parts
                 self.modules[".".join((self.name, *parts[: -1 if parts[-1] == "__init__" else None]))] = path
-        self._trees: dict[str, ast.Module] = {}
-        self._imports: dict[str, frozenset[str]] = {}
-        self._hashes: dict[str, str] = {}
+        self._read: dict[str, tuple[str, frozenset[str]]] = {}  # module -> (hash, imports)
         self._entry_point = re.compile(rf"\b{re.escape(self.name)}(?:\.[A-Za-z_]\w*)*(?=:[A-Za-z_])")
 
-    def tree(self, module: str) -> ast.Module:
-        if module not in self._trees:
+    def _module(self, module: str) -> tuple[str, frozenset[str]]:
+        """The module's hash (``ast.dump`` without docstrings: comments and layout do not count) and imports."""
+        if module not in self._read:
             path = self.modules[module]
-            self._trees[module] = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
-        return self._trees[module]
-
-    def module_hash(self, module: str) -> str:
-        if module not in self._hashes:
-            self._hashes[module] = hashlib.sha256(ast.dump(self.tree(module)).encode()).hexdigest()
-        return self._hashes[module]
-
-    def data_hashes(self) -> dict[str, str]:
-        """SHA-256 of every data file of the package (suffix in :data:`DATA_SUFFIXES`), by relative path."""
-        return {f"{self.name}/{path.relative_to(self.root).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
-                for path in sorted(self.root.rglob("*"))
-                if path.is_file() and path.suffix in DATA_SUFFIXES and "__pycache__" not in path.parts}
+            tree = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+            self._read[module] = (hashlib.sha256(ast.dump(tree).encode()).hexdigest(),
+                                  frozenset(self._tree_imports(tree, module)))
+        return self._read[module]
 
     def _with_parents(self, module: str) -> set[str]:
         parts = module.split(".")
@@ -313,11 +278,6 @@ class PackageCode:
         found.discard(module)
         return found
 
-    def imports(self, module: str) -> frozenset[str]:
-        if module not in self._imports:
-            self._imports[module] = frozenset(self._tree_imports(self.tree(module), module))
-        return self._imports[module]
-
     def closure(self, code_cells: Iterable[str]) -> set[str]:
         """Modules the code uses, directly or through the package's imports; all of them when a cell does not
         parse."""
@@ -332,13 +292,16 @@ class PackageCode:
             module = pending.pop()
             if module not in used:
                 used.add(module)
-                pending |= self.imports(module) - used
+                pending |= self._module(module)[1] - used
         return used
 
     def code_hashes(self, code_cells: Iterable[str]) -> dict[str, str]:
-        """The package's part of a notebook's cache key: each used module's hash and each data file's."""
-        hashes = {module: self.module_hash(module) for module in sorted(self.closure(code_cells))}
-        return {**hashes, **self.data_hashes()}
+        """The package's part of a notebook's cache key: the hash of each module the code uses and of each data file
+        of the package (suffix in :data:`DATA_SUFFIXES`)."""
+        hashes = {module: self._module(module)[0] for module in sorted(self.closure(code_cells))}
+        return hashes | {f"{self.name}/{path.relative_to(self.root).as_posix()}": hashlib.sha256(path.read_bytes())
+                         .hexdigest() for path in sorted(self.root.rglob("*"))
+                         if path.is_file() and path.suffix in DATA_SUFFIXES and "__pycache__" not in path.parts}
 
 
 def code_cells(nb) -> list[str]:
@@ -361,67 +324,62 @@ def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[st
 
 # --------------------------------------------------------------------------- "Rerun this figure"
 #: Units read from a parameter name's suffix (a ``[unit]`` in the line's comment comes first).
-UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_nm", "N m"), ("_ms", "ms"), ("_mm", "mm"), ("_rad", "rad"), ("_deg", "deg"), ("_hz", "Hz"), ("_fps", "1/s"), ("_kg", "kg"), ("_dn", "DN"),
-                 ("_s", "s"), ("_m", "m"))
+UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_nm", "N m"), ("_ms", "ms"), ("_mm", "mm"), ("_rad", "rad"), ("_deg", "deg"),
+                 ("_hz", "Hz"), ("_fps", "1/s"), ("_kg", "kg"), ("_dn", "DN"), ("_s", "s"), ("_m", "m"))
+
+
+def _value(value: Any) -> str:
+    """A value as ``--set NAME=VALUE`` reads it: JSON, else its text."""
+    return value if isinstance(value, str) else json.dumps(value, separators=(",", ":"), default=repr)
 
 
 def notebook_parameters(cell: str) -> list[dict[str, Any]]:
-    """The assignments of a ``parameters`` cell: ``name``, ``default`` (the value, or the expression where the cell
-    does not evaluate), ``unit`` and the line's ``comment``."""
-    comments = {tok.start[0]: tok.string.lstrip("#").strip() for tok in
-                tokenize.generate_tokens(io.StringIO(cell).readline) if tok.type == tokenize.COMMENT}
+    """The assignments of a ``parameters`` cell: ``name``, ``default`` (its value as ``--set`` reads it, or the
+    expression where the cell does not evaluate: ``evaluated`` False), ``unit`` and the line's ``comment``."""
+    comments = {token.start[0]: token.string.lstrip("#").strip() for token in
+                tokenize.generate_tokens(io.StringIO(cell).readline) if token.type == tokenize.COMMENT}
     namespace: dict[str, Any] = {}
     try:
-        exec(compile(cell, "<parameters>", "exec"), namespace)  # imports and assignments of presets
+        exec(compile(cell, "<parameters>", "exec"), namespace)  # noqa: S102 -- assignments, imports of presets
     except Exception:  # noqa: BLE001 -- the expression is shown instead
         namespace = {}
     found = []
     for node in ast.parse(cell).body:
-        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else \
-            node.target if isinstance(node, ast.AnnAssign) and node.value is not None else None
+        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
         if isinstance(target, ast.Name):
-            comment = comments.get(node.end_lineno, "")
+            comment, name = comments.get(node.end_lineno, ""), target.id
             unit = re.search(r"\[([^\],'\"]+)\]", comment)  # "[N m]", not "[16, 16]"
-            suffix = next((label for end, label in UNIT_SUFFIXES if target.id.lower().endswith(end)), "")
-            default = namespace[target.id] if target.id in namespace else ast.get_source_segment(cell, node.value)
-            found.append({"name": target.id, "default": default, "unit": unit.group(1) if unit else suffix,
-                          "comment": comment, "evaluated": target.id in namespace})
+            found.append({"name": name, "evaluated": name in namespace, "comment": comment,
+                          "default": _value(namespace[name]) if name in namespace
+                          else ast.get_source_segment(cell, node.value),
+                          "unit": unit.group(1) if unit
+                          else next((label for end, label in UNIT_SUFFIXES if name.endswith(end)), "")})
     return found
-
-
-def _value(value: Any) -> str:
-    """A value as ``--set`` reads it: JSON, else its text."""
-    try:
-        return json.dumps(value, separators=(",", ":")) if not isinstance(value, str) else value
-    except (TypeError, ValueError):
-        return repr(value)
 
 
 def _md(value: Any, limit: int = 0) -> str:
     """A table cell: ``-`` for None, mappings as ``name=value`` code spans, cut to ``limit`` characters."""
-    if value is None:
-        return "-"
     if isinstance(value, dict):
         return ", ".join(f"`{key}={json.dumps(item)}`" for key, item in value.items()) or "none"
-    text = str(value) if not limit or len(str(value)) <= limit else str(value)[: limit - 3] + "..."
-    return text.replace("|", "\\|").replace("\n", " ")
+    text = "-" if value is None else str(value)
+    text = text if not limit or len(text) <= limit else text[: limit - 3] + "..."
+    return text.replace("|", "\\|").replace("\n", " ").replace("<", "&lt;")
 
 
 def rerun_section(name: str, cell: str, profile: str, used: dict[str, Any]) -> str:
     """The generated closing section of an executed notebook: its parameters and the command that reruns it."""
     rows = notebook_parameters(cell)
-    kind = "figure" if name.startswith("fig") else "chapter"
-    lines = [f"## Rerun this {kind}", "",
+    lines = [f"## Rerun this {'figure' if name.startswith('fig') else 'chapter'}", "",
              f"This page was executed by `softpend book --profile {profile}` with the parameters below (defaults "
              "from the notebook's `parameters` cell; *this build* where the profile or `--set` changed one).", "",
              "| parameter | default | this build | unit | meaning |", "|---|---|---|---|---|"]
     for row in rows:
-        default = f"`{_md(_value(row['default']) if row['evaluated'] else row['default'], 60)}`"
         build = f"`{_md(_value(used[row['name']]), 60)}`" if row["name"] in used else ""
-        lines.append(f"| `{row['name']}` | {default} | {build} | {_md(row['unit'])} | {_md(row['comment'], 90).replace('<', '&lt;')} |")
-    example = next((row for row in rows if row["evaluated"]), None)
-    command = ["softpend", "book", "--only", name] + (["--profile", profile] if profile != DEFAULT_PROFILE else [])
-    command += ["--set", f"{example['name']}={_value(example['default'])}" if example else "NAME=VALUE"]
+        lines.append(f"| `{row['name']}` | `{_md(row['default'], 60)}` | {build} | {row['unit']} "
+                     f"| {_md(row['comment'], 90)} |")
+    example = next((f"{row['name']}={row['default']}" for row in rows if row["evaluated"]), "NAME=VALUE")
+    command = ["softpend", "book", "--only", name, *(["--profile", profile] if profile != DEFAULT_PROFILE else []),
+               "--set", example]
     lines += ["", "To rerun it from the project root with other values (one `--set NAME=VALUE` per parameter, "
               "VALUE as JSON, else a string; add `--html` to rebuild the page):", "", "```bash",
               shlex.join(command), "```"]
@@ -452,6 +410,7 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
                                      f"{exc.ename}: {exc.evalue}", output) from None
     seconds = time.perf_counter() - start
     nb = nbformat.read(str(output), as_version=4)
+    nb.metadata["softpend"] = plan["record"]  # read back by the execution record
     for cell in nb.cells:
         tags = cell.get("metadata", {}).get("tags", [])
         if "injected-parameters" in tags and "hide-input" not in tags:
@@ -465,30 +424,22 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
 def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: Optional[Sequence[str]] = None,
                   force: bool = False, progress: bool = True, overrides: Optional[dict[str, Any]] = None,
                   workers: int = 2) -> list[NotebookRun]:
-    """Execute the book's notebooks with a profile's parameters into ``book/_generated/``; returns one entry per
-    selected notebook in execution order, and writes the execution page.
-
-    ``only`` selects notebooks by name; ``overrides`` (``--set``) apply to every selected notebook whose
-    ``parameters`` cell defines them; ``workers`` notebooks execute at once.  Every ``ValueError`` (unknown
-    profile, notebook, parameter, override or front-matter key) is raised before anything executes; a failing
-    notebook raises :class:`NotebookExecutionError` once the running ones have finished.
-    """
+    """Execute the book's notebooks with a profile's parameters into ``book/_generated/``, ``workers`` at a time;
+    returns one entry per selected notebook (``only``: names) in execution order, and writes the execution page.
+    ``overrides`` (``--set``) apply to every selected notebook whose ``parameters`` cell defines them.  Every
+    ``ValueError`` (unknown profile, notebook, parameter, override or front-matter key) comes before anything
+    executes; a failing notebook raises :class:`NotebookExecutionError` once the running ones have finished."""
     import nbformat
 
     layout = BookLayout.at(root)
-    names = toc = toc_notebooks(layout.toc_path)
+    toc = toc_notebooks(layout.toc_path)
     profiles = load_profiles(layout.profiles_path)
     if profile not in profiles:
         raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
-    stray = sorted(set(profiles[profile]) - set(toc))
-    if stray:
-        raise ValueError(f"profile {profile!r} in {layout.profiles_path} names notebook(s) {stray}, "
-                         "which _toc.yml does not list")
-    if only:
-        unknown = [name for name in only if name not in toc]
-        if unknown:
-            raise ValueError(f"unknown notebook(s) {unknown} for --only; _toc.yml lists {toc}")
-        names = [name for name in toc if name in set(only)]
+    for what, listed in ((f"profile {profile!r} names", profiles[profile]), ("--only names", only or [])):
+        if unknown := sorted(set(listed) - set(toc)):
+            raise ValueError(f"{what} unknown notebook(s) {unknown}; _toc.yml lists {toc}")
+    names = [name for name in toc if name in set(only)] if only else toc
     overrides, used_overrides = dict(overrides or {}), {}
     package_code, plans, after = PackageCode(), {}, {}
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
@@ -501,19 +452,16 @@ def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: 
             nbformat.write(nb, str(converted))
             declared = check_parameters(converted, name, parameters)
             applied = {key: value for key, value in overrides.items() if key in declared}
-            nb.metadata["softpend"] = {"profile": profile, "source": f"notebooks/{name}.md",
-                                       "parameters": dict(parameters), "overrides": applied}
-            nbformat.write(nb, str(converted))
+            record = {"profile": profile, "parameters": dict(parameters), "overrides": applied}
             used_overrides.update(applied)
             parameters.update(applied)
             hashes = package_code.code_hashes(code_cells(nb))
             if "softpend.study.records" in hashes:  # the stored run records are an input of that code
                 hashes.update(_records_hashes(layout))
-            plans[name] = {"parameters": parameters, "converted": converted, "hashes": hashes,
+            plans[name] = {"parameters": parameters, "converted": converted, "hashes": hashes, "record": record,
                            "kernel": nb.metadata.get("kernelspec", {}).get("name", "python3"),
                            "rerun": rerun_section(name, _parameters_cell(nb) or "", profile, parameters)}
-        unused = sorted(set(overrides) - set(used_overrides))
-        if unused:
+        if unused := sorted(set(overrides) - set(used_overrides)):
             raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({names})")
         order = execution_order(names, after)
         cached = {}
@@ -527,7 +475,7 @@ def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: 
         seconds = _execute(layout, order, plans, after, cached, progress, max(1, int(workers)))
     runs = [NotebookRun(name, "cached" if cached[name] else "executed", seconds.get(name, 0.0),
                         layout.output_path(name)) for name in order]
-    write_execution_record(layout, execution_record(layout, profile, runs, used_overrides))
+    write_execution_record(layout, profile, runs, used_overrides)
     return runs
 
 
@@ -535,28 +483,21 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, after: dict,
              workers: int) -> dict[str, float]:
     """Execute the notebooks of ``order`` that are not cached, ``workers`` at a time, each once the selected
     notebooks of its ``after`` have finished; after a failure nothing more starts and the first error is raised."""
-    pending = [name for name in order if not cached[name]]
-    done, seconds, errors, running = {name for name in order if cached[name]}, {}, [], {}
-
-    def say(text: str) -> None:
-        if progress:
-            print(f"[book] {text}", file=sys.stderr, flush=True)
-
-    for name in order:
-        if cached[name]:
-            say(f"{name}: up to date (cached)")
+    say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
+    pending, running, seconds, errors = [name for name in order if not cached[name]], {}, {}, []
+    done = {name for name in order if cached[name]}
+    for name in (name for name in order if name in done):
+        say(f"{name}: up to date (cached)")
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="softpend-book") as pool:
         while pending or running:
-            while len(running) < workers and not errors:
-                ready = next((n for n in pending if all(d in done or d not in order for d in after[n])), None)
-                if ready is None:
-                    break
-                pending.remove(ready)
-                say(f"{ready}: executing")
-                running[pool.submit(_execute_one, layout, ready, plans[ready])] = ready
+            ready = [name for name in pending if all(dep in done or dep not in order for dep in after[name])]
+            for name in ready[: workers - len(running)] if not errors else []:
+                pending.remove(name)
+                say(f"{name}: executing")
+                running[pool.submit(_execute_one, layout, name, plans[name])] = name
             if not running:
                 break
-            for future in wait(running, return_when=FIRST_COMPLETED)[0]:
+            for future in wait(running, return_when=FIRST_COMPLETED).done:
                 name = running.pop(future)
                 if future.exception() is not None:
                     errors.append(future.exception())
@@ -573,32 +514,29 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, after: dict,
 # --------------------------------------------------------------------------- execution page
 def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     """The processor model (name, family, model of ``/proc/cpuinfo``; else what :mod:`platform` says)."""
-    fields: dict[str, str] = {}
-    try:
-        for line in cpuinfo.read_text().splitlines():
-            key, _, value = line.partition(":")
-            fields.setdefault(key.strip(), value.strip())
-    except OSError:
-        pass
+    first = cpuinfo.read_text().split("\n\n")[0] if cpuinfo.is_file() else ""
+    fields = {key.strip(): value.strip() for key, _, value in (line.partition(":") for line in first.splitlines())}
     if fields.get("model name"):
         return f"{fields['model name']} (family {fields.get('cpu family', '-')}, model {fields.get('model', '-')})"
     return platform.processor() or platform.machine() or "-"
 
 
-def execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun],
-                     overrides: Optional[dict[str, Any]] = None) -> dict[str, Any]:
-    """What produced ``book/_generated/``: per toc notebook this run's status and time and its last execution's
-    wall time, end and profile; the training step (``training.json`` of ``softpend sweep --book``); the machine."""
+def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun],
+                           overrides: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+    """Write (atomically) and return what produced ``book/_generated/`` (``execution.json``) and its page
+    (``execution.md``): per toc notebook this run's status and its last execution's wall time, end and profile;
+    the training step (``training.json`` of ``softpend sweep --book``); the machine."""
     import datetime
 
     import nbformat
+
+    from softpend.io.outputs import atomic_write, json_text
 
     this_run, notebooks = {run.name: run for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
         lines = layout.source_path(name).read_text(encoding="utf-8").splitlines()
         entry = {"name": name, "title": next((line[2:].strip() for line in lines if line.startswith("# ")), name),
                  "this_run": this_run[name].status if name in this_run else "not run",
-                 "run_s": this_run[name].seconds if name in this_run else None,
                  "executed_s": None, "executed_at": None, "profile": None}
         if layout.output_path(name).is_file():
             meta = nbformat.read(str(layout.output_path(name)), as_version=4).metadata
@@ -608,14 +546,19 @@ def execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRu
         notebooks.append(entry)
     training = json.loads(layout.training_path.read_text()) if layout.training_path.is_file() else None
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "profile": profile,
+    record = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "profile": profile,
             "overrides": dict(overrides or {}), "training": training, "notebooks": notebooks,
             "machine": {"processor": _processor(), "cpu_count": os.cpu_count(), "cpus_available": cpus,
                         "platform": platform.platform(), "python": platform.python_version()}}
+    with atomic_write(layout.record_path, "w") as handle:
+        handle.write(json_text(record, indent=2) + "\n")
+    with atomic_write(layout.execution_page_path, "w") as handle:
+        handle.write(execution_page(record))
+    return record
 
 
 def execution_page(record: dict[str, Any]) -> str:
-    """The execution page (MyST Markdown) of an :func:`execution_record`."""
+    """The execution page (MyST Markdown) of a :func:`write_execution_record` record."""
     machine, training = record["machine"], record["training"]
     when = lambda iso: str(iso).replace("T", " ")[:19] if iso else "-"  # noqa: E731
     lines = ["(execution)=", "# Execution", "",
@@ -638,16 +581,6 @@ def execution_page(record: dict[str, Any]) -> str:
               f"| CPU cores | {machine['cpu_count']} ({machine['cpus_available']} available to the run) |",
               f"| platform | {_md(machine['platform'])}, Python {machine['python']} (packages: `environment.lock`) |"]
     return "\n".join(lines) + "\n"
-
-
-def write_execution_record(layout: BookLayout, record: dict[str, Any]) -> None:
-    """Write the record (JSON) and its page, each atomically."""
-    from softpend.io.outputs import atomic_write, json_text
-
-    with atomic_write(layout.record_path, "w") as handle:
-        handle.write(json_text(record, indent=2) + "\n")
-    with atomic_write(layout.execution_page_path, "w") as handle:
-        handle.write(execution_page(record))
 
 
 # --------------------------------------------------------------------------- HTML

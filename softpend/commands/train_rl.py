@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import Any, TypeVar
 
 from softpend.io.outputs import json_text
 from softpend.io.overrides import apply_overrides
@@ -15,7 +15,10 @@ from softpend.study.presets import RL_EPISODES, load_hparams
 __all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
 
 
-def config_from_args(base: DQNConfig, args: argparse.Namespace) -> DQNConfig:
+_Config = TypeVar("_Config", bound=DQNConfig)
+
+
+def config_from_args(base: _Config, args: argparse.Namespace) -> _Config:
     """``base`` with the ``--set`` overrides (``args.overrides``, ``NAME -> parsed value``) applied, then
     ``--n-links`` and ``--torque-limit-nm`` (as ``task.rod.n_links`` and ``task.rod.torque_limit_nm``)."""
     overrides: dict[str, Any] = dict(getattr(args, "overrides", None) or {})

@@ -224,7 +224,7 @@ def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
     if isinstance(plant, np.ndarray):
         arrays["plant_observations"] = plant[: _filled(buffer)]
     with atomic_write(path) as handle:
-        np.savez(handle, **arrays)
+        np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy's stub: no key is allow_pickle
     return Path(path)
 
 
@@ -240,10 +240,11 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
     """
     path = Path(path)
     saved = read_npz(path, "replay buffer file", AgentFileError)
-    expected = set()
+    expected: set[str] = set()
     for prefix in _parts(buffer):
         expected.update(prefix + name for name in _BUFFER_ARRAYS + ("pos", "full"))
-    if isinstance(getattr(buffer, "plant_observations", None), np.ndarray):
+    plant = getattr(buffer, "plant_observations", None)  # MBPO's buffer keeps the plant's observations
+    if isinstance(plant, np.ndarray):
         expected.add("plant_observations")
     if set(saved) != expected:
         raise AgentFileError(f"{path}: holds {sorted(saved)}, expected {sorted(expected)}")
@@ -257,8 +258,8 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
         n = _filled(part)
         for name in _BUFFER_ARRAYS:
             _restore(path, prefix + name, getattr(part, name), saved[prefix + name], n)
-    if "plant_observations" in expected:
-        _restore(path, "plant_observations", buffer.plant_observations, saved["plant_observations"], _filled(buffer))
+    if isinstance(plant, np.ndarray):
+        _restore(path, "plant_observations", plant, saved["plant_observations"], _filled(buffer))
 
 
 def _restore(path: Path, name: str, target: np.ndarray, value: np.ndarray, n: int) -> None:

@@ -359,7 +359,8 @@ def load_config(path: Path) -> DQNConfig:
     check_fields(cls, data, path)
     try:
         task = Task.from_dict(data.pop("task"))
-        return cls(task=task, **{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return cls(task=task, **fields)
     except (TypeError, KeyError, AttributeError) as exc:
         raise ValueError(f"{path}: not a {cls.__name__}: {exc}") from exc
 

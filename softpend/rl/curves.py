@@ -39,7 +39,7 @@ def moving_average(values: np.ndarray, window: int) -> np.ndarray:
     return (csum[n] - csum[lo]) / (n - lo)
 
 
-def episodes_to_asymptote(returns: Sequence[float], window: int = 10, level: float = 0.9, final_fraction: float = 0.2) -> float:
+def episodes_to_asymptote(returns: Sequence[float] | np.ndarray, window: int = 10, level: float = 0.9, final_fraction: float = 0.2) -> float:
     """Episode (1-based) at which a return curve reaches its asymptotic reward (see the module docstring).
 
     Returns ``inf`` for an empty curve; a curve that never improves reaches it at episode 1.
@@ -79,7 +79,7 @@ def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
     return episodes, plant_s_at_episode(log, episodes)
 
 
-def failures_as(values: Sequence[float], success_rates: Sequence[float], failed_as: float) -> np.ndarray:
+def failures_as(values: Sequence[float] | np.ndarray, success_rates: Sequence[float] | np.ndarray, failed_as: float) -> np.ndarray:
     """``values`` with ``failed_as`` in place of every entry whose success rate is below 1 (some start failed).
 
     For the worst evaluation start's upright std with ``failed_as`` the success level: exact where every start

@@ -183,6 +183,8 @@ class TrainingCallback(BaseCallback):
         ``() -> int`` total model steps so far (0 for model-free).
     """
 
+    model: DQN  # set by BaseCallback.init_callback: the DQN (or its subclass) being trained
+
     def __init__(
         self,
         config: DQNConfig,
@@ -394,6 +396,7 @@ class TrainingCallback(BaseCallback):
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         self.model.save(tmp / "agent.zip")
+        assert self.model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
         save_replay_buffer(self.model.replay_buffer, tmp / "replay_buffer.npz")
         self.log.save(tmp / "log.json")
         if self.extra_checkpoint is not None:
@@ -496,6 +499,7 @@ def run_training(
     run_dir.mkdir(parents=True, exist_ok=True)
     checkpoint = run_dir / "checkpoint"
     env = make_training_env(config)
+    assert env.observation_space.shape is not None  # a Box
     check_run_size(config, int(np.prod(env.observation_space.shape)))
     if resume and (checkpoint / "agent.zip").exists():
         saved = load_config(run_dir / "config.json")
@@ -509,6 +513,7 @@ def run_training(
         log = TrainingLog.load(checkpoint / "log.json")
         model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env=env,
                                 replay_buffer_class=replay_buffer_class)
+        assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
         load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
         if restore is not None:
             restore(model, checkpoint)

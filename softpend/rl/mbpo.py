@@ -34,7 +34,7 @@ import math
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 import torch
@@ -51,6 +51,9 @@ from softpend.rl.dqn import TrainingCallback, build_dqn, run_training
 from softpend.envs.observation_vector import observation_vector
 from softpend.rl.training_env import make_base_env
 from softpend.rl.training_log import TrainingLog
+
+if TYPE_CHECKING:
+    from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 
 __all__ = ["MBPOReplayBuffer", "MBPOTrainer", "train_mbpo"]
 
@@ -136,7 +139,9 @@ class MBPOReplayBuffer(ReplayBuffer):
             parts.append(self.model_buffer.sample(batch_size - n_real, env=env))
         if len(parts) == 1:
             return parts[0]
-        return ReplayBufferSamples(*[None if a is None else torch.cat([a, b]) for a, b in zip(parts[0], parts[1])])
+        # field by field: tensors, and None for an optional field both buffers leave out (discounts)
+        merged: list[Any] = [None if a is None or b is None else torch.cat([a, b]) for a, b in zip(parts[0], parts[1])]
+        return ReplayBufferSamples(*merged)
 
 
 class MBPOTrainer:
@@ -167,7 +172,7 @@ class MBPOTrainer:
         self.generator = torch.Generator().manual_seed(self.seed * 7919 + 1)
         self.trials_observations: list[np.ndarray] = []
         self.trials_torques: list[np.ndarray] = []
-        self.dynamics: Optional[torch.nn.Module] = None
+        self.dynamics: Optional[DynamicsModel | DynamicsEnsemble] = None
         self.n_fits = 0
         self.model_steps = 0
 

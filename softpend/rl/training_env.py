@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium.wrappers import TimeLimit
 
 from softpend.checks import positive_int
-from softpend.envs import SoftPendulumDiscreteEnv
+from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 from softpend.evaluation import GymPolicyController
 from softpend.rl.config import DQNConfig
 
@@ -37,6 +37,7 @@ class ActionRepeat(gym.Wrapper):
 
     def step(self, action: Any):
         base = self.env.unwrapped
+        assert isinstance(base, SoftPendulumEnv)  # make_training_env wraps a SoftPendulumDiscreteEnv
         observations = [base.report_observation.as_array()]
         total = 0.0
         for _ in range(self.repeat):

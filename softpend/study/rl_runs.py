@@ -91,8 +91,11 @@ def train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: P
     from softpend.rl.dqn import train_dqn
     from softpend.rl.mbpo import train_mbpo
 
-    train = train_dqn if algo == "dqn" else train_mbpo
-    train(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
+    if algo == "dqn":
+        train_dqn(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
+    else:
+        assert isinstance(config, MBPOConfig)  # rl_jobs checks it
+        train_mbpo(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
 def _saved_config(run_dir: Path) -> DQNConfig | None:

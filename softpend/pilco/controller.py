@@ -87,8 +87,8 @@ class PilcoController(_HoldController):
         values = observation.as_array()
         state = self.spec.from_observations(values[None, :])
         inputs = self.spec.model_inputs(state)
-        policy = self.policy
-        if self.balance_policy is not None and in_balance_band(self.spec, state, *self.balance_band)[0]:
+        policy: RBFPolicy | LinearPolicy = self.policy
+        if self.balance_policy is not None and self.balance_band is not None and in_balance_band(self.spec, state, *self.balance_band)[0]:
             policy = self.balance_policy
         return float(policy.torque_nm(inputs)[0])
 

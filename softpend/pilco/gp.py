@@ -221,6 +221,7 @@ class MultiOutputGP:
         """``beta`` (M,) and ``K_mm^-1 - A^-1`` (M, M) of output ``a`` under FITC (see :meth:`condition_on`), through
         ``K_mm + jitter = L L'`` and ``B = I + V Lambda^-1 V'`` with ``V = L^-1 K_mn``, in float64."""
         z = self.inputs
+        assert self.conditioning is not None  # called only after condition_on
         x_all = torch.as_tensor(self.conditioning[0], dtype=DTYPE)
         y_all = torch.as_tensor(self.conditioning[1][:, a], dtype=DTYPE)
         m = z.shape[0]

@@ -565,6 +565,7 @@ def _upright_distribution(config: PilcoConfig, spec: StateSpec, states: np.ndarr
     """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
     policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``[-pi, pi)``;
     None when fewer than ``2 * dim`` states are in that band."""
+    assert config.balance_within_rad is not None  # called only with a balancing policy
     near = states[in_balance_band(spec, states, config.balance_within_rad, config.balance_within_rad_s)].copy()
     if len(near) < 2 * spec.dim:
         return None
@@ -691,6 +692,7 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
             gp.condition_on(x_all, y_all)
         # ---- learn the policy
         if not rate_on and config.cost_rate_width_rad_s is not None:
+            assert config.cost_rate_after_rad is not None  # without it the rate term is on from the start
             rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
         rate_width = config.cost_rate_width_rad_s if rate_on else None
         swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)

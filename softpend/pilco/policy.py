@@ -89,8 +89,8 @@ class LinearPolicy:
         with torch.no_grad():
             z = xt @ self.weights
             u = sin_saturation(z, self.torque_limit_nm)
-        u = u.numpy()
-        return u if np.ndim(x) == 2 else u[:1].reshape(())
+        torque = u.numpy()
+        return torque if np.ndim(x) == 2 else torque[:1].reshape(())
 
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
@@ -210,8 +210,8 @@ class RBFPolicy:
         with torch.no_grad():
             z = self.pre_saturation(xt)
             u = sin_saturation(z, self.torque_limit_nm)
-        u = u.numpy()
-        return u if np.ndim(x) == 2 else u[:1].reshape(())
+        torque = u.numpy()
+        return torque if np.ndim(x) == 2 else torque[:1].reshape(())
 
     def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""

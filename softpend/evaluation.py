@@ -42,8 +42,16 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 
-from softpend.checks import (boolean, check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive,
-                             positive_int)
+from softpend.checks import (
+    boolean,
+    check_work_size,
+    in_unit_interval,
+    int_at_least,
+    non_negative,
+    one_of,
+    positive,
+    positive_int,
+)
 from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged, wrap_angle_rad
 from softpend.stats import wilson_interval
 from softpend.task import Task
@@ -396,6 +404,7 @@ class BatchPolicy:
     predict_batch: Callable[[np.ndarray], Any]
     action_repeat: int = 1
     n_torque_levels: Optional[int] = None
+    _held: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not callable(self.predict_batch):
@@ -459,8 +468,8 @@ def _roll(rods: Any, policy: Any, seeds: list[int], duration_s: float,
     for k in range(n_steps):
         actions = policy(k, k * rods.dt_s, vectors, observations, q, q_dot)
         vectors, observations, q, q_dot, torques, failed, why = rods.step(actions)
-        for i in np.flatnonzero(failed & active):
-            last[i], reasons[i] = k, why[i]
+        for j in np.flatnonzero(failed & active):
+            last[j], reasons[j] = k, why[j]
         active &= ~failed
         recorded_torque[k, active] = torques[active]
         recorded_obs[k + 1], recorded_q[k + 1] = observations, q
@@ -471,7 +480,7 @@ def _roll(rods: Any, policy: Any, seeds: list[int], duration_s: float,
     for i, seed in enumerate(seeds):
         end = int(last[i]) + 1
         obs, torque = recorded_obs[:end, i].copy(), recorded_torque[:end, i].copy()
-        metrics = dict(_NO_EPISODE)
+        metrics: dict[str, Any] = dict(_NO_EPISODE)
         if end >= 2:
             metrics = metrics_from_trajectory(times[:end], obs[:, _THETA], torque, obs[:, _PHI_DOT])
         metrics["success"] = metrics["success"] and reasons[i] is None
@@ -488,7 +497,7 @@ def run_episode(controller: Controller, env: Any, seed: int, duration_s: float,
                  initial_state)[0]
 
 
-def _one_by_one(controller: Controller, task: Task, seeds: list[int], duration_s: float,
+def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float,
                 initial_state: Optional[tuple[Any, Any]], env_kwargs: dict[str, Any], rod_spread: float,
                 rod_seed: int, substeps: Optional[int], stop_at_first_failure: bool) -> list[EvaluationResult]:
     """The Exudyn engine's episodes of :func:`evaluate`, one after the other (none after a failure if asked)."""
@@ -538,9 +547,8 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float,
         # model of the motor), which the chain then saturates at the rod's own limit
         env.chain.set_params(rods)
     engine = _ManyRods(env)
-    if not isinstance(policy, BatchPolicy):
-        policy = _Controllers(policy, engine.torque_actions)
-    return _roll(engine, policy, seeds, duration_s, initial_state)
+    batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, engine.torque_actions)
+    return _roll(engine, batch_policy, seeds, duration_s, initial_state)
 
 
 def _rod(task: Task, rod_spread: float, seed: int) -> Any:
@@ -626,7 +634,7 @@ def evaluate(
 evaluate_controller = evaluate
 
 
-def _copies(controller: Controller | Sequence[Controller], batch: int) -> list[Controller]:
+def _copies(controller: Any, batch: int) -> list[Any]:
     """One controller per rod: the ``batch`` of a sequence, or copies of one controller."""
     if isinstance(controller, (list, tuple)):
         if len(controller) != batch:

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from softpend.envs import SoftPendulumDiscreteEnv
-from softpend.plant import OBSERVATION_NAMES
 from softpend.envs.observation_vector import observation_vector, observations_from_vector
 from softpend.envs.reward import next_bonus
+from softpend.plant import OBSERVATION_NAMES
 
 
 def _trajectory(n_steps: int = 120):

@@ -7,9 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from softpend.evaluation import (BatchPolicy, FunctionController, GymPolicyController, evaluate, evaluate_controller,
-                                 metrics_from_trajectory, run_episode)
 from softpend.envs import SoftPendulumDiscreteEnv
+from softpend.evaluation import (
+    BatchPolicy,
+    FunctionController,
+    GymPolicyController,
+    evaluate,
+    evaluate_controller,
+    metrics_from_trajectory,
+    run_episode,
+)
 from softpend.task import Task
 
 

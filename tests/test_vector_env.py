@@ -10,8 +10,8 @@ from gymnasium.utils.env_checker import data_equivalence
 import softpend  # noqa: F401  (registers the environments)
 from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
-from softpend.plant.randomisation import RANDOMISED_FIELDS
 from softpend.plant import RodParams
+from softpend.plant.randomisation import RANDOMISED_FIELDS
 
 
 def _single_runs(env_class, seeds, actions, **kwargs):

@@ -11,9 +11,11 @@ equality against the environment.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from softpend.envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S, SoftPendulumEnv
+from softpend.envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S
 from softpend.plant import OBSERVATION_NAMES
 
 __all__ = ["observation_vector", "observations_from_vector"]
@@ -21,7 +23,7 @@ __all__ = ["observation_vector", "observations_from_vector"]
 _I = {name: OBSERVATION_NAMES.index(name) for name in OBSERVATION_NAMES}
 
 
-def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: SoftPendulumEnv) -> np.ndarray:
+def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: Any) -> np.ndarray:
     """Environment observation vectors for a batch of plant observations.
 
     Parameters
@@ -30,7 +32,7 @@ def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: SoftPen
         Plant observations in :data:`softpend.plant.OBSERVATION_NAMES` order [rad, m, rad/s, m/s].
     bonus : ndarray, shape (B,)
         The reward's bonus state ``r*`` after the step that produced each observation.
-    env : SoftPendulumEnv
+    env : SoftPendulumEnv or SoftPendulumVectorEnv
         Environment whose conventions (rod length, bound) the vector follows (not stepped).
 
     Returns
@@ -64,7 +66,7 @@ def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: SoftPen
     return np.clip(vec, -bound, bound)
 
 
-def observations_from_vector(vectors: np.ndarray, env: SoftPendulumEnv) -> np.ndarray:
+def observations_from_vector(vectors: np.ndarray, env: Any) -> np.ndarray:
     """Invert :func:`observation_vector` where possible: plant observations (B, 10) from env vectors (B, 11).
 
     The tip rotation ``er`` and its rate are not part of the vector; they are set to ``theta`` and

@@ -10,8 +10,8 @@ import numpy as np
 from gymnasium import spaces
 
 from softpend.checks import int_at_least, non_negative, one_of
-from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
 from softpend.envs.reward import RewardParams
+from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
 
 #: Angular rates and tip velocities are divided by this before entering the observation vector [1/s].
 VELOCITY_SCALE_PER_S = 10.0

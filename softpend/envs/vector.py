@@ -189,7 +189,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         return self.chain.params
 
     @property
-    def np_random_seed(self) -> tuple[Optional[int], ...]:
+    def np_random_seed(self) -> tuple[Optional[int], ...]:  # type: ignore[override]  # one per rod
         """The seed of each sub-environment's generator (as ``SyncVectorEnv`` reports them)."""
         return tuple(self._seeds)
 
@@ -260,7 +260,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             seeds = [int(seed) + i for i in range(self.num_envs)]
             super().reset(seed=int(seed))
         else:
-            seeds = list(seed)
+            seeds = list(seed)  # type: ignore[arg-type]  # a sequence: ints were taken above
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or hold {self.num_envs} seeds, got {len(seeds)}")
         mask = (options or {}).get("reset_mask")

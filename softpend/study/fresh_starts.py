@@ -283,7 +283,7 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
         groups.setdefault((config.task, config.action_repeat, config.n_torque_levels), []).append(run)
-    summaries = {}
+    summaries: dict[tuple[str, int], EvaluationSummary] = {}
     for members in groups.values():
         config = agents[members[0]][1]
         evaluated = evaluate_agents_batched([agents[run][0] for run in members], config,

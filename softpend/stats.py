@@ -126,7 +126,7 @@ def aggregate_interval(
     aggregate = AGGREGATES[statistic]
     value = float(aggregate(data))
 
-    def stratified(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
+    def stratified(*columns: np.ndarray, axis: int = -1) -> np.ndarray | float:
         return aggregate(np.concatenate(columns, axis=axis), axis=axis)
 
     columns = [data[:, j] for j in range(data.shape[1])]

@@ -229,6 +229,7 @@ def reduce_learned_model(model_lin: LinearModel, params: RodParams) -> tuple[Lin
     ``ey`` none), and a network's Jacobian along such directions is unconstrained by the data; the
     projection keeps the dynamics the data does constrain.
     """
+    assert model_lin.dt_s is not None  # a learned model is discrete-time
     s, p, z_names = reduction_matrices(model_lin.state_names, params, model_lin.dt_s)
     reduced = LinearModel(a=s @ model_lin.a @ p, b=s @ model_lin.b, dt_s=model_lin.dt_s, state_names=z_names)
     return reduced, s

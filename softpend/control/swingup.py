@@ -30,7 +30,7 @@ gain and an energy margin (the tip rate carries the bending vibration), and the 
 from __future__ import annotations
 
 import math
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -132,7 +132,7 @@ class EnergySwingUpController:
         """Plant-agnostic variant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin (any of
         which ``kwargs`` may override).  Uses only the report's observed variables, so it runs on any
         plant built from the same ``RodParams`` (e.g. the continuum beam)."""
-        options = dict(lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0,
+        options: dict[str, Any] = dict(lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0,
                        energy_margin_j=0.02)
         options.update(kwargs)
         return cls(params, dt_s=dt_s, **options)

@@ -24,6 +24,7 @@ import numpy as np
 
 from softpend.checks import int_at_least, one_of, positive
 from softpend.plant import RodParams, make_plant
+from softpend.plant.base import PlantBase
 
 __all__ = [
     "EULER_BERNOULLI_BETA_L",
@@ -290,6 +291,7 @@ def static_tip_sag(plant: str = "beam", params: Optional[RodParams] = None, reso
     params, resolution = _check_plant_resolution(plant, params, resolution)
     kwargs = dict(params=params, hub_locked_at_rad=math.pi / 2)
     sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
+    assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     observation = sim.static_equilibrium()
     theory = params.static_sag_euler_bernoulli_m
     sag = -observation.ey_m

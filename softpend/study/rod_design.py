@@ -27,6 +27,7 @@ from softpend.checks import positive
 from softpend.plant.base import PlantBase
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
+from softpend.plant.protocol import Plant
 from softpend.task import Task
 
 __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantilever", "rod_design", "rod_poses_m"]
@@ -35,10 +36,11 @@ __all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantileve
 HORIZONTAL_HUB_ANGLE_RAD = -math.pi / 2
 
 
-def horizontal_cantilever(task: Optional[Task] = None) -> PlantBase:
+def horizontal_cantilever(task: Optional[Task] = None) -> Plant:
     """The rod of ``task`` (default ``Task()``) clamped horizontally (hub locked at ``-pi/2``) and resting in
     its deflected static equilibrium under gravity, as a hub-locked plant."""
     sim = (task if task is not None else Task()).make_plant(hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
+    assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     sim.static_equilibrium()
     return sim
 

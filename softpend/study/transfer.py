@@ -12,6 +12,7 @@ its nominal design):
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
@@ -164,7 +165,7 @@ def rl_transfer_cases(
                 )
             cases.append(TransferCase(
                 f"{METHOD_NAMES[algo]} (seed {seed})",
-                lambda model=model, config=config: policy_controller(model, config),
+                functools.partial(policy_controller, model, config),
                 start="hanging",
                 duration_s=duration_s,
             ))

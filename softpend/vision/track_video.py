@@ -181,6 +181,7 @@ def track_video(
                     raise ValueError(f"timestamps_s has {len(stamps)} entries but the video has more frames")
                 return float(stamps[i])
         else:
+            assert fps is not None  # checked above: timestamps or a frame rate
             stamp = lambda i: i / fps  # noqa: E731
 
         def all_frames():
@@ -270,9 +271,11 @@ def track_live(
     def on_frame(index, frame, detection, measurement) -> None:
         hub_angle, hub_lost = math.nan, 1
         if track_hub:
-            if hub[0] is None:
-                hub[0] = hub_marker_tracker(frame_tracker.calibration, frame.shape)
-            found = hub[0].track(frame)
+            assert frame_tracker.calibration is not None  # set by the frame's tracking, before this hook
+            hub_tracker = hub[0]
+            if hub_tracker is None:
+                hub_tracker = hub[0] = hub_marker_tracker(frame_tracker.calibration, frame.shape)
+            found = hub_tracker.track(frame)
             if not found.lost:
                 hx, hy = frame_tracker.calibration.to_metres(np.array([found.x_px, found.y_px]))
                 hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0

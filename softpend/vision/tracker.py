@@ -214,6 +214,7 @@ class TipTracker:
             detection = self._track_image(crop, max_area)
             if detection.lost:
                 return detection
+            assert detection.contour is not None  # a found blob has its contour
             if _touches_inner_edge(detection.contour, crop.shape, (x0, y0), (h, w)):
                 # the blob runs out of the region: its centre is unknown (and it is bigger than a marker)
                 return Detection(math.nan, math.nan, detection.area_px, True, None)
@@ -239,6 +240,7 @@ class TipTracker:
             return detection
         x, y = detection.x_px + x_off, detection.y_px + y_off
         self._last = (x, y)
+        assert detection.contour is not None  # a found blob has its contour
         contour = detection.contour + np.array([[x_off, y_off]], dtype=detection.contour.dtype)
         return Detection(x, y, detection.area_px, False, contour)
 

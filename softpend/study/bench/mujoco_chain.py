@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Optional
+from typing import Mapping, Optional
 
 import numpy as np
 
@@ -301,7 +301,7 @@ CONFIGURATIONS_N10 = (("mujoco_rk4_stable", "RK4", None), ("mujoco_implicitfast_
 CONVERGED = ("mujoco_rk4_0p25ms", "RK4", 40)
 
 
-def bench_figures(base: dict[str, float], references: dict[int, object]) -> dict[str, float]:
+def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> dict[str, float]:
     """The MuJoCo figures of ``softpend bench --only plant`` (see :mod:`softpend.study.bench.plant`) and their
     ratios to the rates already in ``base`` (same run): ``references`` maps ``n_links`` (4 and 10) to
     :func:`~softpend.study.simulators.hub_error_reference` runs."""

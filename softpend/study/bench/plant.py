@@ -35,6 +35,7 @@ import math
 import sys
 import time
 import types
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -213,7 +214,7 @@ def bench_plant() -> dict[str, float]:
     env10 = env_steps_per_s(10)
     new4, legacy4 = env_steps_per_s_paths(4)
     dt_s = 0.01
-    fast = {"integrator": "rosenbrock", "compiled": True}
+    fast: dict[str, Any] = {"integrator": "rosenbrock", "compiled": True}
     batched4, batched4_cpu = batched_rod_steps_per_s(4, dtype_name="float32", **fast)
     batched10, batched10_cpu = batched_rod_steps_per_s(10, dtype_name="float32", **fast)
     batched4_64, _ = batched_rod_steps_per_s(4, **fast)

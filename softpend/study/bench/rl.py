@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tempfile
+from typing import Any, Sequence
 
 from softpend.study.presets import DQN
 
@@ -54,7 +55,7 @@ def bench_rl() -> dict[str, float]:
 
     steps_per_s = dqn_train_steps_per_s()
     runs = figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, RL_BOOK.seeds, RL_BOOK.runs_root, progress=True)
-    logs = {"dqn": runs[METHOD_NAMES["dqn"]], "mbpo": runs[METHOD_NAMES["mbpo"]]}
+    logs: dict[str, Sequence[Any]] = {"dqn": runs[METHOD_NAMES["dqn"]], "mbpo": runs[METHOD_NAMES["mbpo"]]}
     fresh = rl_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds, which=("final",))
     converged = converged_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds)
     cpu_s = sum(training_cpu_s(log) for group in logs.values() for log in group)

@@ -19,7 +19,7 @@ _LABELS = {
 }
 
 
-def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence] = None, title: str = ""):
+def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.ndarray] = None, title: str = ""):
     """Four panels (phi, theta, ex, ey): data (solid) and open-loop model rollout (dashed).
 
     Parameters

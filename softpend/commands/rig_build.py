@@ -21,6 +21,7 @@ import json
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 from softpend.commands.options import add_set_option
 
@@ -163,6 +164,7 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
     checks: dict[str, dict] = {}
     with MotorLink(port, torque_limit_nm=rod.torque_limit_nm, serial=serial) as link:
         info = link.device
+        assert info is not None  # the handshake on opening the link sets it
         rtt = float(np.median([link.ping() for _ in range(5)]))
         expected_rate = 1.0 / task.dt_s
         ok = (info.protocol_version == protocol.PROTOCOL_VERSION
@@ -323,6 +325,7 @@ def _grab_frame(camera: str, skip: int = 10):
 def run_babble(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.twin import run_twin_session
+    from softpend.sysid.dataset import TrajectoryDataset
     from softpend.task import Task
 
     if args.twin and (args.camera or args.markers or args.calibration):
@@ -342,7 +345,8 @@ def run_babble(args: argparse.Namespace) -> int:
     else:
         loop, sync, dataset = _babble_on_port(args, out, progress)
         extra = {}
-    summary = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
+    assert isinstance(dataset, TrajectoryDataset)  # build_rig_dataset's
+    summary: dict[str, Any] = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
                "dropped_states": loop.dropped_states, "jitter_ms_p95": loop.jitter_ms_p95,
                "clock_offset_s": sync.offset.offset_s, "peak_correlation": sync.offset.peak_correlation,
                "gaps": len(sync.gaps), "grid_valid_fraction": sync.grid_valid_fraction, **extra}

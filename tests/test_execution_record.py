@@ -8,11 +8,9 @@ from pathlib import Path
 
 import nbformat
 import pytest
-
 from support import NOTEBOOK_HEADER as HEADER
 
 from softpend.study.book import BookLayout, _processor, execution_order, run_notebooks, toc_notebooks
-
 
 
 def source(title: str, body: str = "print(greeting)", after: list[str] | None = None,
@@ -97,9 +95,11 @@ def test_after_naming_an_unknown_notebook_fails_before_running(tmp_path):
 
 
 def test_an_unknown_run_set_or_front_matter_key_is_rejected(tmp_path):
+    from softpend.study.run_pool import book_jobs
+
     bad = make_book(tmp_path / "bad", {"x": source("X", book_runs=["ppo"])}, {"full": {}})
-    with pytest.raises(ValueError, match="softpend.book_runs must be a list among"):
-        run_notebooks(bad, profile="full", progress=False)
+    with pytest.raises(ValueError, match=r"notebook 'x': run sets \(softpend.book_runs\) must be a list among"):
+        book_jobs(bad, "full")  # softpend sweep --book, which trains them
     # the rig chapters run the twin in simulated time: `realtime: true` is gone, like any key the runner does not know
     rig = make_book(tmp_path / "rig", {"rig": source("Rig", realtime=True)}, {"full": {}})
     with pytest.raises(ValueError, match=r"^notebook 'rig': unknown front-matter key\(s\) softpend.realtime$"):
@@ -109,15 +109,15 @@ def test_an_unknown_run_set_or_front_matter_key_is_rejected(tmp_path):
 def test_the_page_shows_the_training_step_that_sweep_book_recorded(tmp_path, monkeypatch):
     """``softpend sweep --book`` writes book/_generated/training.json; the execution page reports it."""
     from softpend.cli import main
-    from softpend.study import sweep
+    from softpend.study import run_pool
 
     root = make_book(tmp_path, {"plain": source("Plain")}, {"full": {}})
     run_notebooks(root, profile="full", progress=False)
     assert "No training step recorded" in BookLayout.at(root).execution_page_path.read_text()
     trained = []
-    monkeypatch.setattr(sweep, "book_jobs", lambda root, profile: [("runs/x/dqn-seed0", (print, "x"))])
-    # (the pool itself: sweep._train, which no module imports by name)
-    monkeypatch.setattr(sweep, "_train", lambda jobs, *args: trained.extend(name for name, _ in jobs))
+    monkeypatch.setattr(run_pool, "book_jobs", lambda root, profile: [("runs/x/dqn-seed0", (print, "x"))])
+    # (the pool itself: run_pool._train, which no module imports by name)
+    monkeypatch.setattr(run_pool, "_train", lambda jobs, *args: trained.extend(name for name, _ in jobs))
     assert main(["sweep", "--book", "--root", str(root), "--workers", "1"]) == 0
     assert trained == ["runs/x/dqn-seed0"]
     training = json.loads(BookLayout.at(root).training_path.read_text())

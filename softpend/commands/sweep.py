@@ -3,10 +3,10 @@
 Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-seed<k>``,
 ``pilco-seed<k>``), is reused when finished with the same settings and resumed when shorter, so a sweep that
 was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
-(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.sweep.train_in_one_pool`), where
+(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.run_pool.train_in_one_pool`), where
 a worker that dies is retried and finished runs are kept.  The
 settings are the book's (:mod:`softpend.study.presets`).  ``--book`` instead trains the runs the book's
-notebooks read, with the budgets of a profile of ``book/profiles.yml`` (:func:`softpend.study.sweep.train_book`):
+notebooks read, with the budgets of a profile of ``book/profiles.yml`` (:func:`softpend.study.run_pool.train_book`):
 ``make book`` runs it before ``softpend book``.  With ``--fresh`` every run's final (and for RL
 selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`), with the
 per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.headline_figures`.
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
-    from softpend.study.sweep import train_book, train_in_one_pool
+    from softpend.study.run_pool import train_book, train_in_one_pool
 
     if args.book:
         if args.workers is not None and args.workers < 1:

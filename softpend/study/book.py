@@ -78,7 +78,7 @@ class BookLayout:
     generated_dir = property(lambda self: self.root / GENERATED_PREFIX.rstrip("/"))
     record_path = property(lambda self: self.generated_dir / f"{EXECUTION_PAGE}.json")
     execution_page_path = property(lambda self: self.generated_dir / f"{EXECUTION_PAGE}.md")
-    #: What ``softpend sweep --book`` trained last (:func:`softpend.study.sweep.train_book`).
+    #: What ``softpend sweep --book`` trained last (:func:`softpend.study.run_pool.train_book`).
     training_path = property(lambda self: self.generated_dir / "training.json")
 
     def source_path(self, name: str) -> Path:
@@ -165,19 +165,14 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
 
 def front_matter(nb, name: str, known: Sequence[str]) -> dict[str, list[str]]:
     """The notebook's ``softpend:`` front matter, checked: ``after`` (toc notebooks it waits for) and
-    ``book_runs`` (among :data:`softpend.study.sweep.BOOK_RUN_SETS`); any other key is an error."""
-    from softpend.study.sweep import BOOK_RUN_SETS
-
+    ``book_runs`` (the run sets ``softpend sweep --book`` trains for it, checked there); any other key is an error."""
     meta = nb.metadata.get("softpend") or {}
     if unknown := sorted(set(meta) - set(FRONT_MATTER_KEYS)):
         raise ValueError(f"notebook {name!r}: unknown front-matter key(s) softpend.{', softpend.'.join(unknown)}")
-    after, runs = meta.get("after", []), meta.get("book_runs", [])
+    after = meta.get("after", [])
     if not isinstance(after, list) or not all(entry in known and entry != name for entry in after):
         raise ValueError(f"notebook {name!r}: softpend.after must list other notebooks of _toc.yml, got {after!r}")
-    if not isinstance(runs, list) or not all(entry in BOOK_RUN_SETS for entry in runs):
-        raise ValueError(f"notebook {name!r}: softpend.book_runs must be a list among {list(BOOK_RUN_SETS)}, "
-                         f"got {runs!r}")
-    return {"after": list(after), "book_runs": list(runs)}
+    return {"after": list(after), "book_runs": meta.get("book_runs", [])}
 
 
 def execution_order(names: Sequence[str], after: dict[str, Sequence[str]]) -> list[str]:

@@ -257,16 +257,39 @@ class SimRig(RigDevice):
 
 
 class _PtyHost:
-    """The host's side of the link as the pty emulator sees it: bytes written to the pty's master end."""
+    """The host's side of the link as the pty emulator sees it: bytes written to the pty's master end.
+
+    The master end is non-blocking: a frame the pty has no room for (no host reads it: a host that connected
+    and left, or one that stopped reading) is dropped and counted in :attr:`frames_dropped`, never waited for,
+    so the emulator keeps its clock and ends at its duration.  The tail of a frame the pty took only in part
+    is kept and written first next time (one frame at most), so that the host never sees a torn frame
+    followed by another.
+    """
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
+        self.frames_dropped = 0
+        self._tail = b""
+
+    def _write(self, data: bytes) -> bytes:
+        """Write what the pty takes of ``data`` without waiting; the rest."""
+        try:
+            return data[os.write(self.fd, data):]
+        except (BlockingIOError, InterruptedError):
+            return data
+        except OSError:
+            return b""  # no host has the pty open: nothing to deliver to
 
     def deliver(self, data: bytes) -> None:
-        try:
-            os.write(self.fd, data)
-        except OSError:
-            pass  # no host has the pty open
+        if self._tail:
+            self._tail = self._write(self._tail)
+            if self._tail:
+                self.frames_dropped += 1
+                return
+        self._tail = self._write(data)
+        if self._tail == data:
+            self._tail = b""
+            self.frames_dropped += 1
 
 
 class RigEmulator(SimRig):
@@ -294,6 +317,7 @@ class RigEmulator(SimRig):
         super().__init__(config, SimClock(), truth_log)
         self.master_fd, self._slave_fd = os.openpty()
         tty.setraw(self._slave_fd)
+        os.set_blocking(self.master_fd, False)  # every write to the host is bounded (see _PtyHost)
         self.port = os.ttyname(self._slave_fd)
         self.host = _PtyHost(self.master_fd)
         self._linked = False
@@ -312,6 +336,11 @@ class RigEmulator(SimRig):
     def stop(self) -> None:
         self._running = False
 
+    def stats(self) -> dict[str, float]:
+        """:meth:`RigDevice.stats` and ``frames_dropped_full``: frames (STATEs and replies) the pty had no room
+        for (no host read them)."""
+        return {**super().stats(), "frames_dropped_full": float(self.host.frames_dropped)}
+
     def serve(self) -> None:
         """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""
         duration = self.config.duration_s
@@ -325,6 +354,8 @@ class RigEmulator(SimRig):
                 if ready:
                     try:
                         data = os.read(self.master_fd, 4096)
+                    except BlockingIOError:
+                        data = b""
                     except OSError:  # no host has the pty open (EIO): nothing to read
                         data = b""
                         time.sleep(min(0.01, max(0.0, wait)))
@@ -385,7 +416,10 @@ def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path:
     finally:
         signal.signal(signal.SIGTERM, previous)
         if stats_path:
-            Path(stats_path).write_text(json.dumps(emulator.stats()))
+            from softpend.io.outputs import atomic_write
+
+            with atomic_write(stats_path, "w") as handle:
+                handle.write(json.dumps(emulator.stats()))
         emulator.close()
     return 0
 

@@ -16,12 +16,18 @@ import numpy as np
 
 from softpend.checks import int_at_least, non_negative, one_of, positive
 from softpend.plant import RodParams, check_plant_name, make_plant, tilt_state
+from softpend.plant.params import GRAVITY_MPS2
 from softpend.plant.protocol import Plant
 
-__all__ = ["START_KINDS", "Task"]
+__all__ = ["MAX_TORQUE_RATIO", "START_KINDS", "Task"]
 
 #: Start distributions of the environments (:class:`softpend.envs.SoftPendulumEnv` ``start``).
 START_KINDS = ("hanging", "upright", "random")
+
+#: Largest torque limit of a task, as a multiple of the torque that holds its rod horizontal against standard
+#: gravity (``(mass_kg / 2 + tip_mass_kg) * length_m * 9.81``): beyond it the plant's solver fails in the first
+#: steps, and a training run on such a task would learn from no plant seconds at all.
+MAX_TORQUE_RATIO = 100.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,12 @@ class Task:
         object.__setattr__(self, "substeps", int_at_least("task.substeps", self.substeps, 1))
         one_of("task.start", self.start, START_KINDS)
         object.__setattr__(self, "start_noise_rad", non_negative("task.start_noise_rad", self.start_noise_rad))
+        rod = self.rod
+        most = MAX_TORQUE_RATIO * (rod.mass_kg / 2 + rod.tip_mass_kg) * rod.length_m * GRAVITY_MPS2
+        if rod.torque_limit_nm > most:
+            raise ValueError(f"task.rod.torque_limit_nm must be at most {most:.4g} N m ({MAX_TORQUE_RATIO:g} times the "
+                             f"torque that holds this rod horizontal; see softpend.task.MAX_TORQUE_RATIO), got "
+                             f"{rod.torque_limit_nm!r}")
 
     # ------------------------------------------------------------------ derived objects
     def make_plant(self, **options: Any) -> Plant:

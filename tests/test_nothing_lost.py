@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from softpend.cli import main
 from softpend.hardware import protocol as proto
 
 
@@ -44,3 +45,25 @@ def test_emulator_ends_at_its_duration_after_a_host_connected_and_left(tmp_path)
             process.wait()
         process.stdout.close()
         process.stderr.close()
+
+
+# ---------------------------------------------------------------------------------------------------- silent garbage
+@pytest.mark.parametrize("option", [["--set", "task.rod.torque_limit_nm=1e308"], ["--torque-limit-nm", "1e308"]])
+@pytest.mark.parametrize("algo", ["dqn", "pilco"])
+def test_train_refuses_a_torque_limit_the_plant_cannot_take(tmp_path, capsys, algo, option):
+    """Before: the plant diverged on the first step of every episode, the run trained on 0 plant seconds and the
+    command exited 0."""
+    out = tmp_path / "run"
+    rc = main(["train", "--algo", algo, "--episodes", "1", "--out", str(out), "--no-progress", *option])
+    err = capsys.readouterr().err
+    assert rc != 0
+    assert "torque_limit_nm must be at most" in err
+    assert not out.exists()
+
+
+def test_task_bounds_the_torque_limit_by_the_rod():
+    from softpend.task import Task
+
+    assert Task().replace(torque_limit_nm=1.0).torque_limit_nm == 1.0
+    with pytest.raises(ValueError, match="torque_limit_nm must be at most"):
+        Task().replace(torque_limit_nm=1e308)

@@ -67,6 +67,17 @@ def test_pilco_starts_first_then_dqn_mbpo_then_dqn_and_the_first_seed_set_names_
         book_run_jobs(["ppo"], tmp_path)
 
 
+def test_a_folder_an_earlier_notebook_reads_is_left_to_it(tmp_path):
+    """The rig chapter reads the first seed's runs of Figures 4 and 10 under their roots and budgets: its own
+    (default) budget must not train those folders again, finished or not."""
+    claimed: set[str] = set()
+    figure = book_run_jobs(["rl"], tmp_path, {"seeds": [0], "episodes_dqn": 2, "runs_root": "runs/q"}, claimed)
+    assert sorted(name for name, _ in figure) == ["runs/q/dqn-seed0", "runs/q/mbpo-seed0"]
+    assert claimed == {"runs/q/dqn-seed0", "runs/q/mbpo-seed0"}
+    rig = book_run_jobs(["first_seed"], tmp_path, {"runs_root": "runs/q", "pilco_runs_root": "runs/p"}, claimed)
+    assert [name for name, _ in rig] == ["runs/p/pilco-seed0"]
+
+
 def test_the_book_runs_of_a_profile_are_those_its_notebooks_train(tmp_path):
     """``softpend sweep --book --profile quick`` trains the quick runs with the settings Figures 4 and 10 use under
     that profile (so that the notebooks find them finished): each folder once, the first notebook's settings."""

@@ -69,13 +69,15 @@ def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend:
 BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 
-def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: Optional[dict[str, Any]] = None
-                  ) -> list[Job]:
+def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: Optional[dict[str, Any]] = None,
+                  claimed: Optional[set[str]] = None) -> list[Job]:
     """The runs of ``run_sets`` still missing under ``root``, named by folder (``runs/rl-book/dqn-seed0``), with
     the settings the notebooks that read them train with (:mod:`softpend.study.presets`, ``book/hparams``), the
     training parameters of ``parameters`` (a notebook's profile values: ``episodes_dqn``, ``episodes_mbpo``,
     ``seeds``, ``runs_root``, ``rl_overrides``, ``pilco_seeds``, ``pilco_runs_root``, ``pilco_overrides``,
-    ``task_overrides``) in their place.  The plant is the book's (``--set plant=...`` runs train in the notebooks)."""
+    ``task_overrides``) in their place.  The plant is the book's (``--set plant=...`` runs train in the notebooks).
+    A folder in ``claimed`` (those an earlier notebook reads, finished or not) is left to it; this call's folders
+    are added to ``claimed``."""
     if not isinstance(run_sets, (list, tuple)) or not set(run_sets) <= set(BOOK_RUN_SETS):
         raise ValueError(f"run sets (softpend.book_runs) must be a list among {list(BOOK_RUN_SETS)}, "
                          f"got {run_sets!r}")
@@ -85,40 +87,47 @@ def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: O
     pilco_seeds = list(given.get("pilco_seeds", PILCO_BOOK.seeds)) if "pilco" in run_sets else []
     if "first_seed" in run_sets and seeds[0] not in pilco_seeds:
         pilco_seeds.insert(0, seeds[0])
+    claimed = set() if claimed is None else claimed
+
+    def fresh(folder: str, method: str, seeds: Sequence[int]) -> list[int]:  # and claim them
+        names = {seed: f"{folder}/{method}-seed{seed}" for seed in seeds}
+        kept = [seed for seed in dict.fromkeys(seeds) if names[seed] not in claimed]
+        claimed.update(names.values())
+        return kept
+
     jobs: list[Job] = []
-    if pilco_seeds:
-        pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
+    pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
+    if pilco_seeds := fresh(pilco_root, "pilco", pilco_seeds):
         config = load_hparams("pilco", apply_overrides(Task(plant=TASK.plant), task_overrides),
                               given.get("pilco_overrides"))
         jobs += [(f"{pilco_root}/{name}", (run_and_save, *args))
                  for name, args in pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)]
+    rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
     if rl_seeds:
-        rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
         configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides"))
-        specs = [(algo, configs[algo], rl_seeds, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
-                 for algo in ("dqn", "mbpo")]
+        specs = [(algo, configs[algo], kept, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
+                 for algo in ("dqn", "mbpo") if (kept := fresh(rl_root, algo, rl_seeds))]
         jobs += [(f"{rl_root}/{name}", (train_run, *args)) for name, args in rl_jobs(specs, Path(root) / rl_root)]
     return _order(jobs)
 
 
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
     """The training runs still missing that the book's notebooks read under ``profile``: for every toc notebook
-    with ``softpend: {book_runs: [...]}``, :func:`book_run_jobs` with its profile parameters; a folder two
-    notebooks name is trained once, with the settings of the first in toc order."""
+    with ``softpend: {book_runs: [...]}``, :func:`book_run_jobs` with its profile parameters; a folder that two
+    notebooks read is the first's in toc order (the rig chapter reads Figure 4's runs with their settings)."""
     layout = BookLayout.at(root)
     toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
     if profile not in profiles:
         raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
-    jobs: dict[str, tuple[Any, ...]] = {}
+    jobs: list[Job] = []
+    claimed: set[str] = set()
     for name in toc:
         run_sets = front_matter(read_notebook(layout.source_path(name)), name, toc)["book_runs"]
         try:
-            found = book_run_jobs(run_sets, layout.root, profiles[profile].get(name)) if run_sets else []
+            jobs += book_run_jobs(run_sets, layout.root, profiles[profile].get(name), claimed) if run_sets else []
         except ValueError as exc:
             raise ValueError(f"notebook {name!r}: {exc}") from None
-        for job, args in found:
-            jobs.setdefault(job, args)
-    return _order(list(jobs.items()))
+    return _order(jobs)
 
 
 def train_book(root: Path | str = ".", profile: str = "full", workers: Optional[int] = None, progress: bool = True,

@@ -89,10 +89,10 @@ def _rod(args: argparse.Namespace):
 
 
 def _write_json(path: Path, data) -> None:
-    from softpend.io.outputs import finite_or_none, json_text
+    from softpend.io.outputs import atomic_write, finite_or_none, json_text
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json_text(finite_or_none(data), indent=2) + "\n")
+    with atomic_write(path, "w") as handle:  # never opens what is at path (a FIFO there would block the write)
+        handle.write(json_text(finite_or_none(data), indent=2) + "\n")
 
 
 # ---------------------------------------------------------------------------------------------------- design
@@ -299,6 +299,9 @@ def _grab_frame(camera: str, skip: int = 10):
     """The ``skip``-th frame of a camera (the first ones settle exposure), or the frame of an image file."""
     import cv2
 
+    from softpend.io.reading import check_capture_path
+
+    check_capture_path("--camera", camera)  # a FIFO or folder would block the capture
     if Path(camera).is_file() and cv2.haveImageReader(camera):
         frame = cv2.imread(camera)
         if frame is None:

@@ -12,15 +12,20 @@ The header line is ``# softpend-log v1 <json metadata>`` followed by the CSV col
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
+import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
 import numpy as np
+
+from softpend.checks import MAX_WORK_BYTES
+from softpend.io.reading import check_regular_file, file_kind, read_bytes_checked
 
 __all__ = ["SampleLog", "LogContents", "read_sample_log"]
 
@@ -69,12 +74,23 @@ class SampleLog:
         self.columns = columns
         self.fsync_every_s = fsync_every_s
         self.rows_written = 0
+        if os.path.exists(self.path):
+            check_regular_file(self.path, "sample log")  # a FIFO or device would block or swallow the log
         exists = self.path.exists() and self.path.stat().st_size > 0
         if exists:
             existing = read_sample_log(self.path)
             if existing.columns != columns:
                 raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
-        self._fd: Optional[int] = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        # O_NONBLOCK: a FIFO swapped in after the check fails the open (or the fstat below) instead of blocking
+        fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0), 0o644)
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise ValueError(f"sample log {self.path} is {file_kind(os.fstat(fd).st_mode)}, not a regular file")
+            fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
+        except BaseException:
+            os.close(fd)
+            raise
+        self._fd: Optional[int] = fd
         self._last_sync = time.monotonic()
         if not exists:
             header = _MAGIC + json.dumps(metadata or {}, sort_keys=True) + "\n" + ",".join(columns) + "\n"
@@ -134,10 +150,11 @@ class LogContents:
         return self.data[column]
 
 
-def read_sample_log(path: str | os.PathLike) -> LogContents:
-    """Read a :class:`SampleLog` file (every complete line; a torn last line is counted, not parsed)."""
+def read_sample_log(path: str | os.PathLike, max_bytes: int = MAX_WORK_BYTES) -> LogContents:
+    """Read a :class:`SampleLog` file (every complete line; a torn last line is counted, not parsed): a regular
+    file of at most ``max_bytes`` (default: the 4 GiB one piece of work may use)."""
     path = Path(path)
-    text = path.read_bytes().decode(errors="replace")
+    text = read_bytes_checked(path, "sample log", max_bytes).decode(errors="replace")
     lines = text.split("\n")
     if not lines or not lines[0].startswith(_MAGIC):
         raise ValueError(f"path {path} is not a softpend sample log (missing {_MAGIC.strip()!r} header)")

@@ -17,7 +17,6 @@ is lumped the same way (``zeta`` interior, ``2*zeta`` at the clamp).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -187,12 +186,12 @@ class RodParams:
             If the file cannot be read, is not a JSON object, or its fields are unknown or invalid (the message
             names the file).
         """
+        from softpend.io.reading import read_json_checked
+
         path = Path(path)
-        try:
-            if path.stat().st_size > _MAX_JSON_BYTES:
-                raise ValueError(f"{path}: larger than {_MAX_JSON_BYTES} bytes, not a parameter file")
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        try:  # a regular file of at most _MAX_JSON_BYTES (a FIFO or device would block or never end)
+            data = read_json_checked(path, "rod parameter file", _MAX_JSON_BYTES)
+        except OSError as exc:
             raise ValueError(f"{path}: cannot read rod parameters: {' '.join(str(exc).split())}") from None
         if isinstance(data, dict) and isinstance(data.get("rod_params"), dict):
             data = data["rod_params"]

@@ -31,6 +31,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 
 from softpend.io.arrays import read_npz
+from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_member
 from softpend.checks import NonFiniteError
 from softpend.io.outputs import atomic_write
 from softpend.rl.config import DQNConfig
@@ -69,10 +70,25 @@ def _serialized_entries(data: dict[str, Any]) -> list[str]:
     return sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
 
 
-def _read_data(path: Path, raw: bytes) -> dict[str, Any]:
+#: Largest ``data`` member (the JSON of the agent's plain attributes) of an agent file [bytes].
+MAX_AGENT_DATA_BYTES = 16 * 2**20
+
+
+def agent_file_bounds(config: DQNConfig, observation_dim: int) -> tuple[int, int]:
+    """``(member, total)``: the most bytes one member of an agent file of ``config`` can unpack to, and the
+    file with all its members: the Q-network and its target (float32) and Adam's two moments, twice over, plus
+    :data:`MAX_AGENT_DATA_BYTES` for the metadata members."""
+    widths = [int(observation_dim), *(int(w) for w in config.net_arch), int(config.n_torque_levels)]
+    n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
+    member = MAX_AGENT_DATA_BYTES + 16 * n_weights
+    return member, 4 * member
+
+
+def _read_data(path: Path, raw: bytes, max_member_bytes: int = MAX_AGENT_DATA_BYTES) -> dict[str, Any]:
     try:
         with zipfile.ZipFile(io.BytesIO(raw)) as archive:
-            text = archive.read("data").decode("utf-8")
+            check_zip_members(archive, path, "agent file", max_member_bytes, error=AgentFileError)
+            text = read_zip_member(archive, "data", path, "agent file", MAX_AGENT_DATA_BYTES, AgentFileError).decode("utf-8")
         data = json.loads(text)
     except (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, UnicodeDecodeError, json.JSONDecodeError,
             RecursionError, EOFError, NotImplementedError, OSError, zlib.error) as exc:
@@ -165,8 +181,12 @@ def load_agent_file(
         If a network weight is NaN or infinite.
     """
     path = Path(path)
-    raw = path.read_bytes()  # read once: what is checked is what is loaded
-    data = _read_data(path, raw)
+    spaces_env = make_base_env(config)
+    observation_dim = int(np.prod(spaces_env.observation_space.shape or (1,)))
+    max_member, max_total = agent_file_bounds(config, observation_dim)
+    # read once (what is checked is what is loaded), a regular file of the size such an agent can have
+    raw = read_bytes_checked(path, "agent file", max_total, AgentFileError)
+    data = _read_data(path, raw, max_member)
     refused = [k for k in _serialized_entries(data) if k not in REBUILT_ATTRIBUTES]
     if refused:
         raise AgentFileError(

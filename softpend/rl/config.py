@@ -23,6 +23,7 @@ from softpend.checks import boolean, in_unit_interval, int_at_least, one_of, pos
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
+from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 from softpend.task import Task
 
 __all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "save_config"]
@@ -346,10 +347,7 @@ def save_config(config: DQNConfig, path: Path) -> None:
 
 def load_config(path: Path) -> DQNConfig:
     """Read a config written by :func:`save_config`."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
-        raise ValueError(f"{path}: not a JSON config ({type(exc).__name__}: {exc})") from None
+    data = read_json_checked(path, "config file", MAX_CONFIG_BYTES)  # a regular file, read with a bound
     if not isinstance(data, dict):
         raise ValueError(f"{path}: not a config (expected a JSON object, got {type(data).__name__})")
     name = data.pop("class", "DQNConfig")

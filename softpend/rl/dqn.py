@@ -39,7 +39,8 @@ from tqdm import tqdm
 
 from softpend.checks import check_work_size, int_at_least, positive, positive_int
 from softpend.evaluation import evaluate_controller, metrics_from_trajectory
-from softpend.io.outputs import check_output_folder, read_json_object
+from softpend.io.outputs import check_output_folder
+from softpend.io.reading import read_json_object
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.agent_files import (
     AgentFileError,

@@ -31,8 +31,6 @@ Real plant seconds (training episodes on the true plant) and model steps are cou
 from __future__ import annotations
 
 import math
-import zipfile
-import zlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional
 
@@ -45,6 +43,7 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
 from softpend.envs import step_reward
+from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
 from softpend.rl.dqn import TrainingCallback, build_dqn, run_training
@@ -300,11 +299,11 @@ class MBPOTrainer:
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""
         path = folder / "mbpo_state.npz"
+        data = read_npz(path, "MBPO checkpoint")  # a regular file of plain arrays, read with a bound
         try:
-            with np.load(path, allow_pickle=False) as data:
-                observations, torques, counters = data["observations"], data["torques"], data["counters"]
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-            raise ValueError(f"{path}: not an MBPO checkpoint ({type(exc).__name__}: {exc})") from None
+            observations, torques, counters = data["observations"], data["torques"], data["counters"]
+        except KeyError as exc:
+            raise ValueError(f"{path}: not an MBPO checkpoint (no {exc} array)") from None
         steps = self.config.episode_agent_steps * self.config.action_repeat
         n = len(observations)
         if (observations.dtype != np.float64 or torques.dtype != np.float64 or counters.shape != (2,)

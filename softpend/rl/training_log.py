@@ -21,6 +21,7 @@ import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.outputs import atomic_write
+from softpend.io.reading import MAX_JSON_BYTES, read_json_checked
 
 __all__ = ["TrainingLog"]
 
@@ -86,7 +87,7 @@ class TrainingLog:
     @classmethod
     def load(cls, path: Path) -> "TrainingLog":
         try:
-            data = json.loads(Path(path).read_text())
+            data = read_json_checked(path, "training log", MAX_JSON_BYTES)  # a regular file, read with a bound
             log = cls(algo=str(data["algo"]), seed=int(data["seed"]), episodes=list(data["episodes"]),
                       evaluations=list(data["evaluations"]), stop_reason=data.get("stop_reason"))
             if log.stop_reason is not None and not isinstance(log.stop_reason, str):

@@ -22,7 +22,6 @@ they are good.  The book's chapter prints these commands and runs them on the tw
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -416,7 +415,9 @@ def build_steps(folder: str | Path, target: BuildTarget = TWIN, budget: BuildBud
 
 
 def _read_json(path: Path) -> Any:
-    return json.loads(Path(path).read_text())
+    from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
+
+    return read_json_checked(path, "build output", MAX_CONFIG_BYTES)
 
 
 def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Mapping, Optional
 
 from softpend.io.overrides import apply_overrides
+from softpend.io.reading import read_yaml_checked
 from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.task import Task
@@ -43,15 +44,13 @@ def load_hparams(method: str, task: Optional[Task] = None, overrides: Optional[M
     names reach into the task).  A name in the file that is not a field of the class, or a file that is not a
     mapping, is a one-line ``ValueError`` naming the file.
     """
-    import yaml
-
     if method not in CONFIG_CLASSES:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
     cls = CONFIG_CLASSES[method]
     path = Path(directory) / f"{method}.yml"
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
+    try:  # a regular file, read with a bound; a syntax error names the line
+        data = read_yaml_checked(path, "settings file") or {}
+    except OSError as exc:
         raise ValueError(f"{path}: cannot read the settings ({' '.join(str(exc).split())})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a mapping of {cls.__name__} fields, got {type(data).__name__}")

@@ -42,9 +42,9 @@ def load_records(path: Path | str = RECORDS_PATH) -> dict[str, dict[str, Any]]:
         A method or run without one of its fields, seeds that are not integers, or outcomes (and details)
         whose keys are not the run's seeds (``"all"`` when a run names no seeds).
     """
-    import yaml
+    from softpend.io.reading import read_yaml_checked
 
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    data = read_yaml_checked(path, "records file")
     if not isinstance(data, dict) or not isinstance(data.get("methods"), dict) or not data["methods"]:
         raise ValueError(f"{path}: methods must be a non-empty mapping")
     for key, method in data["methods"].items():

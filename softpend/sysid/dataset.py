@@ -50,8 +50,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from softpend.io.arrays import read_npz
+from softpend.io.arrays import read_npy_member, read_npz
 from softpend.io.outputs import atomic_write
+from softpend.io.reading import open_regular_file
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.sysid.variables import POSITION_NAMES, velocity_name
 
@@ -404,11 +405,11 @@ def is_dataset_file(path: str | Path) -> bool:
     """Whether ``path`` is a dataset file (a zip whose ``metadata`` member names this schema); reads only the
     metadata (an output check of ``softpend babble``: a dataset may be replaced, any other file may not)."""
     try:
-        with zipfile.ZipFile(path) as archive:
-            if archive.getinfo("metadata.npy").file_size > 10**7:
+        with open_regular_file(path, "dataset file") as handle, zipfile.ZipFile(handle) as archive:
+            info = archive.getinfo("metadata.npy")
+            if info.file_size > 10**7:
                 return False
-            with archive.open("metadata.npy") as member:
-                raw = np.lib.format.read_array(member, allow_pickle=False)
+            raw = read_npy_member(archive, info)
         metadata = json.loads(str(raw[()]))
     except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError, RecursionError, IndexError, TypeError, zlib.error):
         return False

@@ -101,7 +101,7 @@ IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
 
 def is_identification_file(path: Any) -> bool:
     """Whether ``path`` is a JSON document written from :meth:`GreyBoxResult.to_dict` (an output check)."""
-    from softpend.io.outputs import read_json_object
+    from softpend.io.reading import read_json_object
 
     data = read_json_object(path, 10**6)
     return data is not None and data.get("schema") == IDENTIFICATION_SCHEMA

@@ -45,7 +45,8 @@ import torch
 from torch import Tensor, nn
 
 from softpend.checks import one_of, optional_positive, positive, positive_int
-from softpend.io.outputs import atomic_write, read_json_object
+from softpend.io.outputs import atomic_write
+from softpend.io.reading import MAX_CONFIG_BYTES, read_bytes_checked, read_json_checked, read_json_object
 from softpend.sysid.layout import StateLayout
 
 __all__ = [
@@ -389,7 +390,7 @@ def model_paths(path: str | Path) -> tuple[Path, Path]:
 def is_model_file(path: str | Path) -> bool:
     """Whether ``path`` (either file of a pair, or the stem) belongs to a model written by :func:`save_model`:
     its ``.json`` names this schema (an output check: a model may be replaced, any other file may not)."""
-    meta = read_json_object(_paths(path)[1], 10**8)
+    meta = read_json_object(_paths(path)[1], MAX_CONFIG_BYTES)
     return meta is not None and meta.get("schema") == MODEL_SCHEMA_NAME
 
 
@@ -449,10 +450,7 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
     for p in (weights, meta_path):
         if not p.exists():
             raise ValueError(f"model file not found: {p}")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
-        raise ValueError(f"{meta_path}: not valid JSON: {type(exc).__name__}: {exc}") from None
+    meta = read_json_checked(meta_path, "model metadata file", MAX_CONFIG_BYTES)  # a regular file, bounded
     if not isinstance(meta, dict) or meta.get("schema") != MODEL_SCHEMA_NAME or meta.get("schema_version") != MODEL_SCHEMA_VERSION:
         raise ValueError(f"{meta_path}: not a {MODEL_SCHEMA_NAME} v{MODEL_SCHEMA_VERSION} file")
     try:
@@ -471,7 +469,9 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
     except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
         raise ValueError(f"{meta_path}: not a model of this version ({type(exc).__name__}: {exc})") from None
     try:
-        state = torch.load(weights, weights_only=True, map_location="cpu")
+        # a regular file no larger than the weights the metadata allows (float32, with room for the format)
+        raw = read_bytes_checked(weights, "model weights file", MAX_CONFIG_BYTES + 8 * n_weights)
+        state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
         model.load_state_dict(state, strict=True)
     except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
         message = " ".join(str(exc).split())[:300]

@@ -44,18 +44,9 @@ def points_array(name: str, value, n_min: int = 1, n_max: Optional[int] = None) 
 def read_json_file(name: str, path: str | Path, max_bytes: int):
     """Parse the JSON file at ``path``; a file over ``max_bytes``, malformed or too deeply nested JSON raises
     ``ValueError`` naming ``name`` and the file (a missing file raises ``FileNotFoundError``)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{name} file not found: {path}")
-    if not path.is_file():
-        raise ValueError(f"{name} {path} is not a file")
-    size = path.stat().st_size
-    if size > max_bytes:
-        raise ValueError(f"{name} {path} has {size} bytes, more than the {max_bytes} a {name} file can have")
-    try:
-        return json.loads(path.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise ValueError(f"{name} {path} is not valid JSON: {_short(exc)}") from None
+    from softpend.io.reading import read_json_checked
+
+    return read_json_checked(path, f"{name} file", max_bytes)  # a regular file only, read with the bound
 
 
 def _short(value, limit: int = 120) -> str:

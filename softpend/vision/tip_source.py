@@ -508,5 +508,8 @@ def open_tip_source(camera: str, latency_s: float = 0.0, fps: Optional[float] = 
     stream URL or a file that ``cv2.VideoCapture`` opens."""
     if not isinstance(camera, str) or not camera.strip():
         raise ValueError(f"camera must be a device index or a URL, got {camera!r}")
+    from softpend.io.reading import check_capture_path
+
+    check_capture_path("camera", camera)  # a FIFO or folder would block the capture
     device: int | str = int(camera) if camera.strip().isdigit() else camera
     return CaptureTipSource(device, latency_s=latency_s, fps=fps, frame_tracker=frame_tracker, on_frame=on_frame)

@@ -28,6 +28,9 @@ from softpend.io.reading import (check_zip_members, open_regular_file, read_byte
                                  read_json_object, read_yaml_checked, read_zip_member)
 
 ALARM_S = 60.0
+TINY_PILCO = ["--set", "state=tip", "--set", "horizon_s=0.5", "--set", "prediction_s=null", "--set", "eval_seeds=[1000]",
+              "--set", "eval_duration_s=0.5", "--set", "n_basis=3", "--set", "max_gp_points=10", "--set",
+              "gp_iterations=2", "--set", "policy_iterations=1", "--set", "compiled=false"]
 TINY_RL = ["--set", "episode_s=0.2", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.2", "--set",
            "learning_starts=5", "--set", "buffer_size=1000", "--set", "net_arch=[16]"]
 
@@ -225,7 +228,9 @@ def world(tmp_path_factory) -> dict[str, Path]:
                      "--no-progress"]) == 0
         assert main(["train", "--algo", "dqn", "--episodes", "1", "--out", str(root / "run"), "--no-progress",
                      *TINY_RL]) == 0
-    return {"root": root, "data": root / "data.npz", "run": root / "run"}
+        assert main(["train", "--algo", "pilco", "--episodes", "1", "--out", str(root / "pilco"), "--no-progress",
+                     *TINY_PILCO]) == 0
+    return {"root": root, "data": root / "data.npz", "run": root / "run", "pilco": root / "pilco"}
 
 
 def _special(kind: str, path: Path) -> Path:
@@ -239,9 +244,10 @@ def _special(kind: str, path: Path) -> Path:
 
 
 def _run_with(world, tmp_path: Path, member: str) -> Path:
-    """A copy of the tiny run folder (the agent files only)."""
+    """A copy of the tiny DQN run folder (the agent files only), or of the PILCO run for its files."""
     run = tmp_path / "run"
-    shutil.copytree(world["run"], run, ignore=shutil.ignore_patterns("checkpoint"))
+    source = world["pilco"] if member in ("pilco.json", "policy.pt") else world["run"]
+    shutil.copytree(source, run, ignore=shutil.ignore_patterns("checkpoint"))
     return run
 
 
@@ -283,6 +289,12 @@ def _cases():
         ("rig control RUN (config.json)", lambda w, t, s: ["rig", "control", run_member("config.json")(w, t, s),
                                                            "--twin", "--out", str(t / "o"), "--duration", "0.1",
                                                            "--no-progress"], ["config.json"]),
+        ("rig control PILCO (policy.pt)", lambda w, t, s: ["rig", "control", run_member("policy.pt")(w, t, s),
+                                                            "--twin", "--out", str(t / "o"), "--duration", "0.1",
+                                                            "--no-progress"], ["policy.pt"]),
+        ("rig control PILCO (pilco.json)", lambda w, t, s: ["rig", "control", run_member("pilco.json")(w, t, s),
+                                                             "--twin", "--out", str(t / "o"), "--duration", "0.1",
+                                                             "--no-progress"], ["run"]),
         ("rig control --out", simple("rig", "control", "lqr", "--twin", "--out", special, "--duration", "0.1",
                                      "--no-progress"), ["x"]),
         ("track VIDEO", simple("track", special, "--out", lambda w, t, s: str(t / "o.csv")), ["x"]),

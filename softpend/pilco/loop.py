@@ -54,6 +54,7 @@ from softpend.checks import (boolean, check_work_size, finite, int_at_least, non
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
+from softpend.io.reading import MAX_JSON_BYTES, read_bytes_checked, read_json_checked
 from softpend.plant import SimulationDiverged, wrap_angle_rad
 from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
@@ -394,15 +395,18 @@ class PilcoResult:
             if not path.exists():
                 raise FileNotFoundError(f"no PILCO result file {path}")
         try:
-            meta = json.loads(meta_path.read_text())
+            meta = read_json_checked(meta_path, "PILCO result file", MAX_JSON_BYTES)  # a regular file, bounded
             config = PilcoConfig.from_dict(meta["config"], meta_path)
             records = [TrialRecord(**r) for r in meta["records"]]
             hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
         except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{meta_path}: not a PILCO result ({type(exc).__name__}: {exc})") from None
         try:
-            state = torch.load(weights_path, weights_only=True, map_location="cpu")
             spec = state_spec(config.state)
+            # a regular file no larger than the config's policies (float64 centres, weights, widths, twice over)
+            bound = 2**20 + 16 * (config.n_basis + 2) * (spec.n_model_inputs + 2)
+            raw = read_bytes_checked(weights_path, "PILCO policy file", bound)
+            state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
             balance_state = {k[len(BALANCE_PREFIX):]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
             state = {k: v for k, v in state.items() if not k.startswith(BALANCE_PREFIX)}
             policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),

@@ -103,21 +103,21 @@ def run_design(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
 
     from softpend.hardware.rig_design import rig_design
+    from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import design_figures
     from softpend.study.figures.rig_design import draw_rig_design
 
+    outputs = Outputs()  # before the work: no file of these names that an earlier design did not write
+    out = outputs.folder(args.out, ("rig_design.json", "markers.json", "rig_design.png"), what="--out")
     params = _rod(args)
     modulus = None if args.print_modulus_mpa is None else args.print_modulus_mpa * 1e6
     design = rig_design(params, print_modulus_pa=modulus)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
     figures = design_figures(params, design)
-    _write_json(out / "rig_design.json", figures)
-    _write_json(out / "markers.json", figures["markers_m"])
+    outputs.write_json(out / "rig_design.json", finite_or_none(figures))
+    outputs.write_json(out / "markers.json", finite_or_none(figures["markers_m"]))
     fig = draw_rig_design(design)
-    fig.savefig(out / "rig_design.png", dpi=120)
+    with outputs.open(out / "rig_design.png") as handle:
+        fig.savefig(handle, format="png", dpi=120)
     plt.close(fig)
     print(f"beam {figures['beam_length_mm']:.1f} x {figures['beam_width_mm']:.1f} x {figures['beam_thickness_mm']:.2f} mm, "
           f"camera {figures['camera_distance_mm']:.0f} mm from the plane ({figures['pixel_size_mm']:.2f} mm/px), "
@@ -128,8 +128,12 @@ def run_design(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------------- check
 def run_check(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig, SimRig
+    from softpend.io.outputs import Outputs, finite_or_none
     from softpend.task import Task
 
+    outputs = Outputs()
+    if args.out:  # before the work
+        outputs.file(args.out, what="--out")
     if not (math.isfinite(args.rest_s) and args.rest_s > 0):
         raise ValueError(f"--rest-s must be a positive number of seconds, got {args.rest_s!r}")
     if not 0 < args.push_fraction <= 0.5:
@@ -142,7 +146,7 @@ def run_check(args: argparse.Namespace) -> int:
     else:
         report = rig_check(args.port, task, args.rest_s, args.push_fraction)
     if args.out:
-        _write_json(Path(args.out), report)
+        outputs.write_json(args.out, finite_or_none(report))
     for name, check in report["checks"].items():
         print(f"{'ok  ' if check['passed'] else 'FAIL'} {name}: {check['detail']}")
     return 0 if report["passed"] else 1
@@ -241,10 +245,16 @@ def _hold_torque(link, torque_nm: float, duration_s: float) -> list:
 def run_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import CALIBRATION_MAX_RESIDUAL_PX, HANGING_TIP_TOLERANCE_M
     from softpend.vision.calibration import (MAX_CALIBRATION_BYTES, calibrate_from_markers, points_array,
                                              read_json_file)
     from softpend.vision.tracker import TipTracker
+
+    outputs = Outputs()  # before the work: the calibration and its report
+    out = outputs.file(args.out, what="--out")
+    report_path = outputs.file(out.with_name(out.stem + ".report.json") if out.suffix else
+                               out.with_name(out.name + ".report.json"), what="the calibration report")
 
     text = args.markers
     raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
@@ -261,13 +271,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
         tip, error = tip_m.tolist(), float(np.hypot(*(tip_m - expected)))
     residual_px = calibration.residual_rms_m / calibration.metres_per_pixel
     passed = residual_px <= CALIBRATION_MAX_RESIDUAL_PX and error <= HANGING_TIP_TOLERANCE_M
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    calibration.save(out)
+    outputs.write_text(out, calibration.to_json())
     report = {"calibration": str(out), "residual_px": residual_px, "residual_m": calibration.residual_rms_m,
               "px_per_m": 1.0 / calibration.metres_per_pixel, "hub_px": calibration.to_pixels(np.zeros(2)).tolist(),
               "tip_m": tip, "expected_tip_m": expected.tolist(), "tip_error_m": error, "passed": bool(passed)}
-    _write_json(out.with_suffix(".report.json"), report)
+    outputs.write_json(report_path, finite_or_none(report))
     print(f"{'ok  ' if passed else 'FAIL'} markers fit to {residual_px:.3f} px RMS (at most {CALIBRATION_MAX_RESIDUAL_PX:g}), "
           f"{report['px_per_m']:.1f} px/m; hanging tip {error * 1e3:.2f} mm from the design's (at most "
           f"{HANGING_TIP_TOLERANCE_M * 1e3:g}) -> {out}")

@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
     from softpend.hardware.closed_loop import TwinCamera, run_twin_control
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.estimator import EstimatorConfig
-    from softpend.io.outputs import json_text
+    from softpend.hardware.closed_loop import TWIN_CONTROL_FILES
+    from softpend.io.outputs import Outputs, json_text
     from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
     from softpend.task import Task
     from softpend.vision.camera import CameraEffects
@@ -117,9 +118,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration!r}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder")
+    # before the work: every file this run writes, none of them a file that an earlier run did not write
+    outputs = Outputs()
+    out = outputs.folder(args.out, TWIN_CONTROL_FILES if args.twin else PORT_CONTROL_FILES, what="--out")
     base = Task(start_noise_rad=args.start_noise)
     if args.n_links is not None:
         base = base.replace(n_links=args.n_links)
@@ -138,16 +139,16 @@ def run(args: argparse.Namespace) -> int:
         camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
                                                         effects=effects, seed=args.seed)
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
-                                   estimator_config=estimator_config, progress=progress)
+                                   estimator_config=estimator_config, progress=progress, outputs=outputs)
         summary = {"controller": label, "target": "twin", **outcome.result.summary(),
                    "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
                    "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
                    "emulator": outcome.emulator_stats}
     else:
         summary = {"controller": label, "target": args.port,
-                   **_run_on_port(args, controller, task, estimator_config, out, progress)}
+                   **_run_on_port(args, controller, task, estimator_config, out, progress, outputs)}
         summary["torque_chatter_nm_per_s"] = torque_chatter_nm_per_s(out / "motor_log.csv")
-    (out / "summary.json").write_text(json_text(summary, indent=2))
+    outputs.write_json(out / "summary.json", summary)
     if args.json:
         print(json_text(summary, indent=2))
     else:
@@ -161,7 +162,11 @@ def run(args: argparse.Namespace) -> int:
     return 0 if summary["stop_reason"] is None else 1
 
 
-def _run_on_port(args, controller, task, estimator_config, out: Path, progress: bool) -> dict:
+#: The files ``softpend rig control --port`` writes in ``--out``.
+PORT_CONTROL_FILES = ("motor_log.csv", "camera_log.csv", "summary.json")
+
+
+def _run_on_port(args, controller, task, estimator_config, out: Path, progress: bool, outputs) -> dict:
     from softpend.hardware.closed_loop import CAMERA_LOG_COLUMNS, rig_control_columns, run_closed_loop
     from softpend.hardware.driver import MotorLink
     from softpend.hardware.estimator import RigStateEstimator
@@ -170,7 +175,6 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
     from softpend.vision.camera import DEFAULT_MARKERS_M
     from softpend.vision.tip_source import FrameTracker, open_tip_source
 
-    out.mkdir(parents=True, exist_ok=True)
     estimator = RigStateEstimator(task, estimator_config)
     source = None
     if not args.no_camera:
@@ -184,6 +188,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
         source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0,
                                  frame_tracker=FrameTracker(calibration=calibration, markers_m=markers))
     metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
+    logs = [outputs.live(out / name) for name in PORT_CONTROL_FILES[:2]]
     try:
         if source is not None:
             source.start()
@@ -195,4 +200,6 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
     finally:
         if source is not None:
             source.close()
+        for path in logs:
+            outputs.done(path)
     return result.summary()

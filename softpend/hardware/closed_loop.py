@@ -31,7 +31,6 @@ live camera filming it (:class:`~softpend.vision.tip_source.SyntheticLiveCamera`
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import sys
 from dataclasses import dataclass, field
@@ -390,6 +389,10 @@ class TwinControlRun:
     error: Optional[str] = None
 
 
+#: The files :func:`run_twin_control` writes in its folder (the three logs first).
+TWIN_CONTROL_FILES = ("motor_log.csv", "camera_log.csv", "truth_log.csv", "summary.json")
+
+
 def run_twin_control(
     controller: Any,
     workdir: str | Path,
@@ -401,6 +404,7 @@ def run_twin_control(
     progress: bool = False,
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 1.0,
+    outputs: Optional[Any] = None,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin, in simulated time, with the synthetic camera in the loop.
 
@@ -408,20 +412,22 @@ def run_twin_control(
     :class:`~softpend.hardware.emulator.RigConfig`) writes a truth log; the synthetic camera (``camera``; None:
     no camera, encoder and model only) films it from the start; once it has tracked a frame (within
     ``camera_wait_s``) the driver connects over the in-memory link and :func:`run_closed_loop` runs.  Writes
-    ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir`` (created;
-    existing files of these names are replaced).  The truth log goes on 0.1 s past the end, so that it records
+    ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir`` (created)
+    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`; default a new one): before the run, a file of
+    these names that an earlier run did not write raises ``ValueError`` (nothing is changed).  The truth log goes on 0.1 s past the end, so that it records
     the motor after the STOP on every exit path.
     """
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
+    from softpend.io.outputs import Outputs
     from softpend.vision.tip_source import SyntheticLiveCamera
 
     rig = rig if rig is not None else RigConfig()
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    paths = {name: workdir / name for name in ("motor_log.csv", "camera_log.csv", "truth_log.csv", "summary.json")}
-    for path in paths.values():
-        path.unlink(missing_ok=True)
+    outputs = outputs if outputs is not None else Outputs()
+    workdir = outputs.folder(workdir, TWIN_CONTROL_FILES, what="workdir")
+    paths = {name: workdir / name for name in TWIN_CONTROL_FILES}
+    for name in TWIN_CONTROL_FILES[:3]:
+        outputs.live(paths[name])
     estimator = RigStateEstimator(rig.task, estimator_config if estimator_config is not None
                                   else EstimatorConfig(counts_per_rev=rig.counts_per_rev))
     metadata = {"rig": rig.to_dict(), "estimator": dataclasses.asdict(estimator.config),
@@ -452,11 +458,13 @@ def run_twin_control(
                 raise
             finally:
                 summary = {"result": result.summary() if result is not None else None, "error": error}
-                paths["summary.json"].write_text(json.dumps(summary, indent=2, default=float))
+                outputs.write_json(paths["summary.json"], summary)
     finally:
         if source is not None:
             source.close()
         clock.sleep_until(clock.now_s() + 0.1)  # the truth log records the motor after the STOP
         device.close()
+        for name in TWIN_CONTROL_FILES[:3]:
+            outputs.done(paths[name])
     return TwinControlRun(workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result,
                           device.stats(), error)

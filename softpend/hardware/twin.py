@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -106,6 +106,7 @@ def run_twin_session(
     timestamp_jitter_s: float = 0.0005,
     trial_length_s: float = 5.0,
     progress: bool = True,
+    outputs: Optional[Any] = None,
 ) -> TwinSession:
     """Run the whole rig pipeline on the digital twin (see the module docstring), in simulated time: the same
     seed gives the same files.
@@ -114,8 +115,10 @@ def run_twin_session(
     ----------
     workdir : path
         Folder for the logs, the video, the CSV and the dataset: a new or empty folder, or one an earlier
-        session wrote (it holds the marker file ``.softpend-twin``; its earlier outputs are replaced).  A
-        non-empty folder without the marker raises ``ValueError`` and nothing in it is touched.
+        session wrote (it holds the marker file ``.softpend-twin``).  A non-empty folder without the marker
+        raises ``ValueError`` and nothing in it is touched; so does a file of an output's name that the
+        session did not write (the files go through ``outputs``, a :class:`softpend.io.outputs.Outputs`,
+        default a new one: an earlier session's outputs are replaced, nothing else).
     duration_s : float
         Babbling time on the rig [s].
     seed : int
@@ -140,13 +143,17 @@ def run_twin_session(
 
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
-    workdir = _claim_workdir(Path(workdir))
+    from softpend.io.outputs import Outputs
+
+    workdir = _claim_workdir(Path(workdir))  # writes the marker only into a new or empty folder
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
     effects = camera_effects if camera_effects is not None else CameraEffects(
         noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
-    for name in _OUTPUTS:  # the workdir is ours (empty or marked): these are an earlier session's outputs
-        (workdir / name).unlink(missing_ok=True)
+    for name in _OUTPUTS:  # an earlier session's outputs (checked above) are removed
+        outputs.live(workdir / name)
     limit = rig.task.torque_limit_nm
     controller = rig_babble_controller(duration_s, limit, seed)
     device = SimRig(rig, truth_log=paths["truth_log.csv"])
@@ -166,6 +173,8 @@ def run_twin_session(
     dataset, sync = build_rig_dataset(paths["motor_log.csv"], paths["camera.csv"], paths["rig_dataset.npz"],
                                       params=rig.task.rod, trial_length_s=trial_length_s,
                                       notes="digital twin: emulated serial link + synthetic camera")
+    for name in _OUTPUTS:
+        outputs.done(workdir / name)
     return TwinSession(workdir, paths["motor_log.csv"], paths["truth_log.csv"], paths["camera.avi"],
                        paths["camera.csv"], paths["rig_dataset.npz"], loop, sync, dataset, clock_offset_s,
                        emulator_stats)

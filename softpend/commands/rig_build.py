@@ -88,13 +88,6 @@ def _rod(args: argparse.Namespace):
     return apply_overrides(RodParams(), args.overrides)
 
 
-def _write_json(path: Path, data) -> None:
-    from softpend.io.outputs import atomic_write, finite_or_none, json_text
-
-    with atomic_write(path, "w") as handle:  # never opens what is at path (a FIFO there would block the write)
-        handle.write(json_text(finite_or_none(data), indent=2) + "\n")
-
-
 # ---------------------------------------------------------------------------------------------------- design
 def run_design(args: argparse.Namespace) -> int:
     import matplotlib
@@ -335,7 +328,8 @@ def _grab_frame(camera: str, skip: int = 10):
 # ---------------------------------------------------------------------------------------------------- babble
 def run_babble(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
-    from softpend.hardware.twin import run_twin_session
+    from softpend.hardware.twin import _OUTPUTS, run_twin_session
+    from softpend.io.outputs import Outputs, finite_or_none
     from softpend.sysid.dataset import TrajectoryDataset
     from softpend.task import Task
 
@@ -345,29 +339,34 @@ def run_babble(args: argparse.Namespace) -> int:
         raise ValueError("--port needs --camera (index, URL or video file)")
     if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
         raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
-    out = Path(args.out)
+    outputs = Outputs()  # before the work: no file of these names that an earlier run did not write
+    out = outputs.folder(args.out, (*(_OUTPUTS if args.twin else PORT_BABBLE_FILES), "summary.json"), what="--out")
     progress = not args.no_progress
     if args.twin:
         rig = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed)
         session = run_twin_session(out, duration_s=args.duration, seed=args.seed, rig=rig,
-                                   trial_length_s=args.trial_length_s, progress=progress)
+                                   trial_length_s=args.trial_length_s, progress=progress, outputs=outputs)
         loop, sync, dataset = session.loop, session.sync, session.dataset
         extra = {"true_clock_offset_s": session.true_clock_offset_s}
     else:
-        loop, sync, dataset = _babble_on_port(args, out, progress)
+        loop, sync, dataset = _babble_on_port(args, out, progress, outputs)
         extra = {}
     assert isinstance(dataset, TrajectoryDataset)  # build_rig_dataset's
     summary: dict[str, Any] = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
                "dropped_states": loop.dropped_states, "jitter_ms_p95": loop.jitter_ms_p95,
                "clock_offset_s": sync.offset.offset_s, "peak_correlation": sync.offset.peak_correlation,
                "gaps": len(sync.gaps), "grid_valid_fraction": sync.grid_valid_fraction, **extra}
-    _write_json(out / "summary.json", summary)
+    outputs.write_json(out / "summary.json", finite_or_none(summary))
     print(f"{summary['n_trials']} trials x {args.trial_length_s:g} s, clock offset {summary['clock_offset_s'] * 1e3:.1f} ms "
           f"(correlation {summary['peak_correlation']:.3f}), {summary['gaps']} gaps -> {summary['dataset']}")
     return 0
 
 
-def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool):
+#: The files ``softpend rig babble --port`` writes in ``--out`` besides ``summary.json``.
+PORT_BABBLE_FILES = ("camera.csv", "motor_log.csv", "rig_dataset.npz")
+
+
+def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs):
     """Babble on the rig at ``args.port`` while a thread tracks ``args.camera``; synchronise the two logs."""
     import threading
 
@@ -382,7 +381,8 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool):
     from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live
 
-    out.mkdir(parents=True, exist_ok=True)
+    for name in PORT_BABBLE_FILES:  # an earlier run's files (checked before the work) are removed
+        outputs.live(out / name)
     markers = DEFAULT_MARKERS_M
     if args.markers:
         text = args.markers
@@ -413,4 +413,6 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool):
         raise failure[0]
     dataset, sync = build_rig_dataset(motor_log, camera_csv, out / "rig_dataset.npz", params=params,
                                       trial_length_s=args.trial_length_s, notes=f"rig babbling on {args.port}")
+    for name in PORT_BABBLE_FILES:
+        outputs.done(out / name)
     return loop, sync, dataset

@@ -103,10 +103,9 @@ def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tu
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.hardware.closed_loop import TwinCamera, run_twin_control
+    from softpend.hardware.closed_loop import TWIN_CONTROL_FILES, TwinCamera, run_twin_control
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.estimator import EstimatorConfig
-    from softpend.hardware.closed_loop import TWIN_CONTROL_FILES
     from softpend.io.outputs import Outputs, json_text
     from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
     from softpend.task import Task

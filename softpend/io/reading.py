@@ -135,7 +135,7 @@ def open_regular_file(path: PathLike, what: str, max_bytes: Optional[int] = None
         os.close(fd)
         raise
     with handle:
-        yield handle  # type: ignore[misc]
+        yield handle
 
 
 def read_bytes_checked(path: PathLike, what: str, max_bytes: int, error: type[Exception] = ValueError) -> bytes:

@@ -259,7 +259,8 @@ def test_babble_replaces_a_dataset_of_its_own(tmp_path, capsys):
     args = ["babble", str(out), "--n-trials", "2", "--trial-length-s", "0.1", "--no-progress"]
     assert main(args) == 0 and main(args + ["--seed", "1"]) == 0
     assert json.loads(capsys.readouterr().out.splitlines()[-1])["n_trials"] == 2
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["data.npz"]  # no temporary file left
+    # no temporary file left; the manifest records the dataset as this command's
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".softpend-outputs.json", "data.npz"]
 
 
 @pytest.mark.parametrize("case", ["exists, not ours", "parent is a file", "unwritable"])

@@ -38,13 +38,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.io.outputs import check_output_file, json_text
+    from softpend.io.outputs import Outputs, json_text, output_name
     from softpend.plant import RodParams
     from softpend.sysid import BabbleProtocol, babble
     from softpend.sysid.dataset import is_dataset_file
 
-    output = args.output if args.output.endswith(".npz") else args.output + ".npz"
-    check_output_file(output, what="dataset", owned=is_dataset_file)  # before the work: a dataset may be replaced
+    outputs = Outputs()  # before the work: a dataset may be replaced, no other file
+    output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset", owned=is_dataset_file))
 
     protocol = BabbleProtocol(
         n_trials=args.n_trials,
@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     params = RodParams() if args.n_links is None else RodParams(n_links=args.n_links)
     started = time.perf_counter()
     dataset = babble(protocol, params=params, seed=args.seed, path=output, progress=not args.no_progress)
+    outputs.done(output)  # written atomically by the dataset's writer
     elapsed = time.perf_counter() - started
     summary = {
         "path": output,

@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from softpend.io.outputs import check_output_file, finite_or_none, json_text
+    from softpend.io.outputs import Outputs, finite_or_none, json_text, output_name
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
     from softpend.sysid.model import is_model_file, model_paths
@@ -47,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
 
     if not 1 <= args.threads <= 1024:
         raise ValueError(f"threads must lie in [1, 1024], got {args.threads}")
-    for path in model_paths(args.output):  # before the work: a model of ours may be replaced, nothing else
-        check_output_file(path, what="model file", owned=is_model_file)
+    output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
+    outputs = Outputs()
+    model_files = [outputs.file(path, what="model file", owned=is_model_file)  # before the work: a model of ours
+                   for path in model_paths(args.output)]                       # may be replaced, nothing else
     config = TrainConfig(
         information=args.information,
         history=args.history,
@@ -73,5 +75,7 @@ def run(args: argparse.Namespace) -> int:
         metrics["test"] = evaluate_model(result.model, test)
     metadata = finite_or_none(dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data))
     weights, meta = save_model(args.output, result.model, metadata)
+    for path in model_files:  # written atomically by the model's writer
+        outputs.done(path)
     print(json_text({"weights": str(weights), "metadata": str(meta), "train_time_s": round(result.train_time_s, 2), "metrics": metrics}, indent=2))
     return 0

@@ -35,13 +35,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.io.outputs import atomic_write, check_output_file, json_text
+    from softpend.io.outputs import Outputs, json_text
     from softpend.plant import RodParams
     from softpend.sysid import load_dataset
     from softpend.sysid.greybox import GreyBoxConfig, identify, is_identification_file
 
-    if args.out is not None:
-        check_output_file(args.out, what="identification file", owned=is_identification_file)
+    outputs = Outputs()
+    if args.out is not None:  # before the work
+        outputs.file(args.out, what="identification file", owned=is_identification_file)
     names = [n.strip() for n in args.parameters.split(",") if n.strip()]
     flags = ((args.torque_gain, "torque_gain"), (args.encoder_offset, "encoder_offset_rad"), (args.torque_delay, "torque_delay_s"),
              (args.camera_delay, "camera_delay_s"))
@@ -65,7 +66,6 @@ def run(args: argparse.Namespace) -> int:
     if result.at_bounds:
         print(f"on a bound of the search (not determined by the data): {', '.join(result.at_bounds)}")
     if args.out is not None:
-        with atomic_write(args.out, "w") as handle:
-            handle.write(json_text(result.to_dict(), indent=2) + "\n")
+        outputs.write_text(args.out, json_text(result.to_dict(), indent=2) + "\n")
         print(f"wrote {args.out}")
     return 0

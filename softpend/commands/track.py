@@ -37,10 +37,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from softpend.io.outputs import Outputs
     from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
     from softpend.vision.track_video import track_video
     from softpend.vision.tracker import TipTracker
 
+    outputs = Outputs()  # before the work: a CSV this command wrote may be replaced, no other file
+    outputs.file(args.out, what="--out")
     markers = None
     if args.markers:
         if args.markers.lstrip().startswith("["):
@@ -55,10 +58,14 @@ def run(args: argparse.Namespace) -> int:
     if (args.video is None) == (args.camera is None):
         raise ValueError("give either a VIDEO file or --camera CAMERA")
     if args.camera is not None:
-        return _track_camera(args, markers, calibration)
+        try:
+            return _track_camera(args, markers, calibration)
+        finally:
+            outputs.done(args.out)  # written atomically by track_live (also on Ctrl-C)
     rows = track_video(args.video, args.out, marker_positions_m=markers, fps=args.fps,
                        tracker=TipTracker(min_area_px=args.min_area), calibration=calibration,
                        track_hub=not args.no_hub, progress=True)
+    outputs.done(args.out)  # written atomically by track_video
     lost = int(np.sum(rows[:, 8] > 0.5)) if len(rows) else 0
     print(f"tracked {len(rows)} frames ({lost} lost) -> {args.out}")
     return 0

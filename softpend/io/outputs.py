@@ -345,7 +345,8 @@ class Outputs:
         return path
 
     def done(self, path: str | Path) -> None:
-        """Record the file ``path`` prepared with :meth:`live` (now complete) in the manifest."""
+        """Record the planned file ``path``, now complete, in the manifest: one prepared with :meth:`live`, or one
+        that a format's own atomic writer wrote (a dataset, a model, an agent)."""
         path = Path(path)
         if path.is_file():
             _record(path, _sha256(path))

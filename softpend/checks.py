@@ -21,6 +21,7 @@ __all__ = [
     "check_notebook_parameters",
     "check_work_size",
     "finite",
+    "in_range",
     "in_unit_interval",
     "int_at_least",
     "non_negative",
@@ -122,6 +123,15 @@ def int_at_least(name: str, value: Any, low: int) -> int:
     number = _integer(value)
     if number is None or number < low:
         raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return number
+
+
+def in_range(name: str, value: Any, low: float, high: float) -> float:
+    """``value`` as a float if it is a finite number in ``[low, high]``, else ``ValueError`` naming ``name`` and
+    the range (for a number that reaches a loop or an allocation: refused before any work starts)."""
+    number = _real(value)
+    if number is None or not low <= number <= high:
+        raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {value!r}")
     return number
 
 

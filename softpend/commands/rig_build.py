@@ -26,6 +26,10 @@ from typing import Any
 from softpend.commands.options import add_set_option
 
 
+#: Accepted ``--print-modulus-mpa`` [MPa]: a soft silicone (0.1 MPa) to steel (about 200 GPa).
+PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
+
+
 def register(actions: argparse._SubParsersAction) -> None:
     design = actions.add_parser("design", help="the rig's dimensions, drawing and marker layout for the rod's parameters")
     design.add_argument("--out", required=True, metavar="DIR", help="folder for rig_design.json, rig_design.png, markers.json")
@@ -95,15 +99,18 @@ def run_design(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from softpend.checks import in_range
     from softpend.hardware.rig_design import rig_design
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import design_figures
     from softpend.study.figures.rig_design import draw_rig_design
 
+    modulus = None
+    if args.print_modulus_mpa is not None:  # printable materials, soft silicone to steel, before anything starts
+        modulus = in_range("--print-modulus-mpa", args.print_modulus_mpa, *PRINT_MODULUS_RANGE_MPA) * 1e6
     outputs = Outputs()  # before the work: no file of these names that an earlier design did not write
     out = outputs.folder(args.out, ("rig_design.json", "markers.json", "rig_design.png"), what="--out")
     params = _rod(args)
-    modulus = None if args.print_modulus_mpa is None else args.print_modulus_mpa * 1e6
     design = rig_design(params, print_modulus_pa=modulus)
     figures = design_figures(params, design)
     outputs.write_json(out / "rig_design.json", finite_or_none(figures))

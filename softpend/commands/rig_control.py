@@ -20,12 +20,30 @@ import math
 from pathlib import Path
 from typing import Any
 
+from softpend.commands.options import MAX_SESSION_S, check_numbers
+from softpend.plant.params import MAX_N_LINKS
+
 #: Image imperfections of the twin's camera, by ``--camera-effects`` name: the CameraEffects class method that
 #: makes them (``None``: ``CameraEffects()``, no imperfection).
 CAMERA_EFFECTS = {"clean": None, "rig": "rig", "noisy": "noisy"}
 
 #: The built-in controller names.
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
+
+#: The closed interval of each numeric option, checked before anything starts (the twin's camera, device and
+#: plant would otherwise fail inside the run, or run for ever).
+OPTION_RANGES: dict[str, tuple[float, float]] = {
+    "--duration": (1e-3, MAX_SESSION_S),
+    "--camera-fps": (1.0, 1000.0),
+    "--camera-latency-ms": (0.0, 1000.0),
+    "--max-blind-ms": (1.0, 60_000.0),
+    "--tilt": (-math.pi, math.pi),
+    "--start-noise": (0.0, math.pi),
+    "--latency-ms": (0.0, 1000.0),
+    "--counts-per-rev": (4, 2**24),
+    "--n-links": (1, MAX_N_LINKS),
+    "--pid-gains": (-1e6, 1e6),
+}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -115,8 +133,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--camera is for --port; the twin films itself with the synthetic camera")
     if args.port and not (args.camera or args.no_camera):
         raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration!r}")
+    check_numbers(args, OPTION_RANGES)  # every number, by its option's name, before anything starts
     # before the work: every file this run writes, none of them a file that an earlier run did not write
     outputs = Outputs()
     out = outputs.folder(args.out, TWIN_CONTROL_FILES if args.twin else PORT_CONTROL_FILES, what="--out")
@@ -137,8 +154,11 @@ def run(args: argparse.Namespace) -> int:
         effects = getattr(CameraEffects, maker)() if maker else CameraEffects()
         camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
                                                         effects=effects, seed=args.seed)
+        # the first frame arrives after the camera's latency and one frame period: wait for it, with room
+        wait_s = 1.0 + args.camera_latency_ms / 1000.0 + 2.0 / args.camera_fps
         outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
-                                   estimator_config=estimator_config, progress=progress, outputs=outputs)
+                                   estimator_config=estimator_config, progress=progress, outputs=outputs,
+                                   camera_wait_s=wait_s)
         summary = {"controller": label, "target": "twin", **outcome.result.summary(),
                    "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
                    "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),

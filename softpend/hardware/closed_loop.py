@@ -445,7 +445,8 @@ def run_twin_control(
                                          seed=camera.seed, on_frame=on_frame)
             source.start()
             if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
-                raise RuntimeError(f"the twin's camera delivered no frame within {camera_wait_s} s")
+                raise ValueError(f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
+                                 "time: a camera latency near that, or a dot the tracker cannot find)")
             source.poll()  # frames of the rod before the run (the calibration is fitted on the first)
         with MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link, \
                 SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log, \

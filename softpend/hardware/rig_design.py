@@ -61,6 +61,8 @@ MARKER_RADIUS_M = 0.011
 #: [Pa].  The modulus of a print also depends on infill, layer orientation and temperature: the static sag
 #: test of the assembled rod (:attr:`RigDesign.rows`) measures it.
 TPU_MODULUS_RANGE_PA = (10.0e6, 100.0e6)
+#: Thinnest beam a printer lays down (two layers of 0.05 mm) [m].
+PRINTABLE_THICKNESS_M = 1.0e-4
 
 
 @dataclass(frozen=True)
@@ -353,6 +355,10 @@ def rig_design(
         raise ValueError(f"params.length_m must exceed twice the clamp radius {hub.clamp_radius_m} m, got {params.length_m!r}")
     width = params.width_m
     thickness = (12.0 * ei / (modulus * width)) ** (1.0 / 3.0)
+    if not PRINTABLE_THICKNESS_M <= thickness <= params.length_m:  # also NaN; a drawing of it would never end
+        raise ValueError(f"print_modulus_pa {modulus:g} Pa gives a beam {thickness * 1e3:.3g} mm thick for the rod's "
+                         f"bending stiffness; a printable beam is {PRINTABLE_THICKNESS_M * 1e3:g} mm to the rod's "
+                         f"length ({params.length_m * 1e3:g} mm) thick")
     density = params.mass_kg / (params.width_m * params.depth_m * params.length_m)
     beam_length = params.length_m - hub.pocket_start_m
     dot_radius = MARKER_RADIUS_M

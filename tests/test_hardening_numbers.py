@@ -1,0 +1,99 @@
+"""Numbers that would reach a loop or a child unbounded are refused up front, by the option's name.
+
+Each case runs the command in-process under an alarm (a command that does not return fails the test instead
+of hanging it) and asserts one line ``softpend ...: error: --OPTION must lie in [...]`` -- the check happens in
+the parent, before any controller is built, any file is written or any twin starts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import signal
+
+import pytest
+
+from softpend.checks import in_range
+from softpend.cli import main
+
+
+class Hang(BaseException):
+    pass
+
+
+@contextlib.contextmanager
+def alarm(seconds: float = 60.0):
+    def ring(signum, frame):
+        raise Hang(f"no result after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def refused(argv: list[str], *words: str) -> str:
+    err = io.StringIO()
+    with alarm(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    lines = [line for line in err.getvalue().splitlines() if line.strip()]
+    assert rc == 2 and len(lines) == 1 and "Traceback" not in err.getvalue(), (argv, rc, err.getvalue())
+    for word in words:
+        assert word in lines[0], (argv, words, lines[0])
+    return lines[0]
+
+
+def test_in_range():
+    assert in_range("--x", 2, 1, 3) == 2.0
+    for value in (0.5, 3.5, float("nan"), float("inf"), "2", True, None, 10**400):
+        with pytest.raises(ValueError, match=r"--x must lie in \[1, 3\]"):
+            in_range("--x", value, 1, 3)
+
+
+@pytest.mark.parametrize("value", ["1e-300", "0", "-5", "nan", "inf", "1e9"])
+def test_rig_design_print_modulus(tmp_path, value):
+    """``--print-modulus-mpa 1e-300`` drew a beam 1e100 m thick and never returned."""
+    refused(["rig", "design", "--out", str(tmp_path / "d"), "--print-modulus-mpa", value], "--print-modulus-mpa")
+    assert not (tmp_path / "d").exists()  # refused before the outputs were planned
+
+
+def test_rig_design_refuses_an_unprintable_beam():
+    from softpend.hardware.rig_design import rig_design
+
+    with pytest.raises(ValueError, match="printable beam"):
+        rig_design(print_modulus_pa=1e-294)
+    with pytest.raises(ValueError, match="printable beam"):
+        rig_design(print_modulus_pa=1e30)
+
+
+@pytest.mark.parametrize("option, value", [
+    ("--camera-fps", "0"), ("--camera-fps", "1e9"), ("--camera-fps", "nan"),
+    ("--camera-latency-ms", "-5"), ("--camera-latency-ms", "1e9"),
+    ("--start-noise", "1e300"), ("--start-noise", "-1"),
+    ("--tilt", "1e300"), ("--max-blind-ms", "1e300"), ("--max-blind-ms", "0"),
+    ("--latency-ms", "1e9"), ("--counts-per-rev", "1000000000000"), ("--duration", "1e9"), ("--duration", "0"),
+    ("--n-links", "100000"),
+])
+def test_rig_control_twin_options(tmp_path, option, value):
+    """Each twin option is checked by its name before the controller is built or the twin starts (they
+    ended in the camera's traceback, a struct.error, a run that never ended, or silently ran)."""
+    refused(["rig", "control", "pid", "--twin", "--out", str(tmp_path / "o"), "--duration", "0.2", "--no-progress",
+             option, value], option)
+    assert not (tmp_path / "o").exists()
+
+
+def test_rig_control_pid_gains(tmp_path):
+    refused(["rig", "control", "pid", "--twin", "--out", str(tmp_path / "o"), "--pid-gains", "1", "nan", "2"],
+            "--pid-gains")
+
+
+def test_twin_camera_with_a_long_latency_runs(tmp_path):
+    """A latency of a whole second is in range: the run waits for the first frame (no 'no frame' traceback)."""
+    err = io.StringIO()
+    with alarm(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = main(["rig", "control", "lqr", "--twin", "--out", str(tmp_path / "o"), "--duration", "0.2",
+                   "--no-progress", "--camera-latency-ms", "1000", "--camera-fps", "1"])
+    assert rc in (0, 1) and "Traceback" not in err.getvalue(), err.getvalue()

@@ -97,3 +97,23 @@ def test_twin_camera_with_a_long_latency_runs(tmp_path):
         rc = main(["rig", "control", "lqr", "--twin", "--out", str(tmp_path / "o"), "--duration", "0.2",
                    "--no-progress", "--camera-latency-ms", "1000", "--camera-fps", "1"])
     assert rc in (0, 1) and "Traceback" not in err.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["rig", "--duration", "1e9"], "--duration"),
+    (["rig", "--latency-ms", "nan", "--duration", "0.1"], "--latency-ms"),
+    (["rig", "check", "--twin", "--rest-s", "1e9"], "--rest-s"),
+    (["rig", "check", "--twin", "--counts-per-rev", "10000000000"], "--counts-per-rev"),
+    (["rig", "babble", "--twin", "--out", "{tmp}/b", "--trial-length-s", "-1"], "--trial-length-s"),
+    (["rig", "babble", "--twin", "--out", "{tmp}/b", "--duration", "1e9"], "--duration"),
+    (["train", "--algo", "dqn", "--out", "{tmp}/r", "--episodes", "1000000000000"], "--episodes"),
+    (["track", "--camera", "0", "--out", "{tmp}/t.csv", "--duration", "1e9"], "--duration"),
+    (["track", "--camera", "0", "--out", "{tmp}/t.csv", "--camera-latency-ms", "1e9"], "--camera-latency-ms"),
+    (["track", "{tmp}/v.avi", "--out", "{tmp}/t.csv", "--fps", "1e9"], "--fps"),
+    (["track", "{tmp}/v.avi", "--out", "{tmp}/t.csv", "--min-area", "nan"], "--min-area"),
+])
+def test_other_commands_refuse_unbounded_numbers(tmp_path, argv, option):
+    """Numbers that ran for ever (rig --duration 1e9, a twin babble with a negative trial length, 1e12
+    training episodes, rig check --rest-s 1e9) or died in a traceback are refused by name up front."""
+    refused([a.replace("{tmp}", str(tmp_path)) for a in argv], option)
+    assert not any(tmp_path.iterdir())

@@ -35,8 +35,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from softpend.commands.options import MAX_SESSION_S, check_numbers
     from softpend.hardware.emulator import RigConfig, serve_forever
     from softpend.task import Task
+
+    # before anything starts (no --duration: until Ctrl-C or SIGTERM)
+    check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--latency-ms": (0.0, 1000.0), "--drop": (0.0, 1.0),
+                         "--garble": (0.0, 1.0), "--watchdog-ms": (1, 65535), "--counts-per-rev": (4, 2**24)})
 
     config = RigConfig(
         task=Task(start_noise_rad=0.0).replace(n_links=args.n_links),

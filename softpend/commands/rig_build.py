@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import add_set_option
+from softpend.commands.options import MAX_SESSION_S, add_set_option, check_numbers
 
 
 #: Accepted ``--print-modulus-mpa`` [MPa]: a soft silicone (0.1 MPa) to steel (about 200 GPa).
@@ -131,6 +131,7 @@ def run_check(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.task import Task
 
+    check_numbers(args, {"--rest-s": (0.1, 600.0), "--counts-per-rev": (4, 2**24)})  # before anything starts
     outputs = Outputs()
     if args.out:  # before the work
         outputs.file(args.out, what="--out")
@@ -337,13 +338,14 @@ def run_babble(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.twin import _OUTPUTS, run_twin_session
     from softpend.io.outputs import Outputs, finite_or_none
-    from softpend.sysid.dataset import TrajectoryDataset
     from softpend.task import Task
 
     if args.twin and (args.camera or args.markers or args.calibration):
         raise ValueError("--camera, --markers and --calibration are for --port; the twin films itself")
     if args.port and not args.camera:
         raise ValueError("--port needs --camera (index, URL or video file)")
+    check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--trial-length-s": (0.1, MAX_SESSION_S),
+                         "--camera-latency-ms": (0.0, 1000.0)})  # before anything starts
     if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
         raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
     outputs = Outputs()  # before the work: no file of these names that an earlier run did not write
@@ -358,7 +360,6 @@ def run_babble(args: argparse.Namespace) -> int:
     else:
         loop, sync, dataset = _babble_on_port(args, out, progress, outputs)
         extra = {}
-    assert isinstance(dataset, TrajectoryDataset)  # build_rig_dataset's
     summary: dict[str, Any] = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
                "dropped_states": loop.dropped_states, "jitter_ms_p95": loop.jitter_ms_p95,
                "clock_offset_s": sync.offset.offset_s, "peak_correlation": sync.offset.peak_correlation,

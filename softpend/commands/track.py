@@ -44,6 +44,11 @@ def run(args: argparse.Namespace) -> int:
 
     outputs = Outputs()  # before the work: a CSV this command wrote may be replaced, no other file
     outputs.file(args.out, what="--out")
+    from softpend.commands.options import MAX_SESSION_S, check_numbers
+    from softpend.vision.camera import MAX_FPS
+
+    check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--camera-latency-ms": (0.0, 1000.0),
+                         "--min-area": (0.0, 1e8), "--fps": (1e-3, MAX_FPS)})  # before anything starts
     markers = None
     if args.markers:
         if args.markers.lstrip().startswith("["):

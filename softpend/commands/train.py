@@ -47,7 +47,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+#: Most training episodes one command may ask for (a million: far beyond any budget of the book).
+MAX_EPISODES = 1_000_000
+
+
 def run(args: argparse.Namespace) -> int:
+    from softpend.commands.options import check_numbers
+
+    check_numbers(args, {"--episodes": (1, MAX_EPISODES)})  # before anything starts
     if args.out is None:
         args.out = f"runs/{args.algo}-seed{args.seed}"
     args.overrides = dict(args.overrides or [])

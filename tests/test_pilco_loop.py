@@ -85,7 +85,6 @@ def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
     for r in records[1:]:
         assert 0.0 <= r.predicted_cost <= h and 0.0 <= r.real_cost <= h
         assert 0.0 <= r.eval_success_rate <= 1.0 and math.isfinite(r.eval_upright_std_rad)
-    assert records[-1].wall_s_total >= records[1].wall_s_total > 0
     assert len(tiny_run.real_states) == 3 and tiny_run.real_states[0].shape == (11, 2)
     assert len(tiny_run.predicted_means) == 2 and tiny_run.predicted_means[0].shape == (11, 2)
     # the recorded real cost is the cost of the recorded real trajectory (tip angle only: no 1 s trial gets near

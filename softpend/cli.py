@@ -17,7 +17,7 @@ import importlib
 import pickle
 import sys
 import zipfile
-from typing import Sequence
+from typing import NoReturn, Sequence
 
 #: Modules that contribute subcommands (one line per module).
 COMMAND_MODULES: list[str] = [
@@ -37,7 +37,7 @@ COMMAND_MODULES: list[str] = [
 class CommandParser(argparse.ArgumentParser):
     """``ArgumentParser`` whose usage errors are one line on stderr (``softpend train: error: ...``), exit 2."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from softpend.hardware.emulator import RigConfig, SimRig
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
+
+if TYPE_CHECKING:
+    from softpend.sysid.dataset import TrajectoryDataset
 
 __all__ = ["TWIN_MARKER", "TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
 
@@ -67,10 +70,10 @@ def truth_link_points(
     """Times [s] (device clock), points along the rod ``(T, k, 2)`` [m] (the PRB joints or the beam nodes)
     and hub angles [rad] from an emulator truth log written by the ``plant`` simulator."""
     log = read_sample_log(truth_log)
-    plant = make_plant(plant, params=params)
-    n = plant.n_coordinates
+    model = make_plant(plant, params=params)
+    n = model.n_coordinates
     q = np.column_stack([log[f"q{i}_rad"] for i in range(n)])
-    points = np.stack([plant.link_points_m(row) for row in q])
+    points = np.stack([model.link_points_m(row) for row in q])
     return log["device_time_s"], points, q[:, 0]
 
 
@@ -86,7 +89,7 @@ class TwinSession:
     dataset_path: Path
     loop: LoopResult
     sync: SyncResult
-    dataset: object
+    dataset: TrajectoryDataset
     true_clock_offset_s: float
     emulator_stats: dict = field(default_factory=dict)
 

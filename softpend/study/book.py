@@ -25,10 +25,10 @@ import sys
 import tempfile
 import time
 import tokenize
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Optional, Sequence
+from typing import Any, Iterable, Mapping, Optional, Sequence
 
 import yaml
 
@@ -175,7 +175,7 @@ def front_matter(nb, name: str, known: Sequence[str]) -> dict[str, list[str]]:
     return {"after": list(after), "book_runs": meta.get("book_runs", [])}
 
 
-def execution_order(names: Sequence[str], after: dict[str, Sequence[str]]) -> list[str]:
+def execution_order(names: Sequence[str], after: Mapping[str, Sequence[str]]) -> list[str]:
     """``names`` in toc order, except that a notebook follows the selected notebooks of its ``after``."""
     selected, pending, done = set(names), list(names), []
     while pending:
@@ -201,7 +201,7 @@ def _drop_docstrings(tree: ast.AST) -> ast.AST:
             kept = [s for s in body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant)
                                             and isinstance(s.value.value, str))]
             if len(kept) != len(body):
-                node.body = kept or [ast.Pass()]
+                setattr(node, "body", kept or [ast.Pass()])
     return tree
 
 
@@ -342,6 +342,7 @@ def notebook_parameters(cell: str) -> list[dict[str, Any]]:
     for node in ast.parse(cell).body:
         target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
         if isinstance(target, ast.Name):
+            assert isinstance(node, ast.Assign) and node.end_lineno is not None  # a parsed assignment's lines
             comment, name = comments.get(node.end_lineno, ""), target.id
             unit = re.search(r"\[([^\],'\"]+)\]", comment)  # "[N m]", not "[16, 16]"
             found.append({"name": name, "evaluated": name in namespace, "comment": comment,
@@ -479,6 +480,8 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, after: dict,
     """Execute the notebooks of ``order`` that are not cached, ``workers`` at a time, each once the selected
     notebooks of its ``after`` have finished; after a failure nothing more starts and the first error is raised."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
+    running: dict[Future[float], str]
+    errors: list[BaseException]
     pending, running, seconds, errors = [name for name in order if not cached[name]], {}, {}, []
     done = {name for name in order if cached[name]}
     for name in (name for name in order if name in done):
@@ -494,8 +497,8 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, after: dict,
                 break
             for future in wait(running, return_when=FIRST_COMPLETED).done:
                 name = running.pop(future)
-                if future.exception() is not None:
-                    errors.append(future.exception())
+                if (error := future.exception()) is not None:
+                    errors.append(error)
                     say(f"{name} failed" + ("; waiting for the running notebooks" if running else ""))
                 else:
                     done.add(name)

@@ -142,6 +142,7 @@ def lqr_torque_per_tick_nm(task: Task, counts_per_rev: int) -> dict[str, float]:
     tick = 2.0 * math.pi / int_at_least("counts_per_rev", counts_per_rev, 4)
     out = {}
     obs = LQRController.from_params(task.rod, task.dt_s, state="observation")
+    assert obs.model is not None  # from_params keeps its design model
     names = obs.model.state_names
     out["observations"] = abs(float(obs.gain[0, names.index("phi_rad")])) * tick
     if task.plant == "prb":
@@ -186,8 +187,9 @@ def camera_rows(design: RigDesign, peak_tip_speed_m_s: float, search_radius_px: 
     } for fps in fps_values]
 
 
-def modulus_rows(params: RodParams, moduli_pa: Sequence[float] = (TPU_MODULUS_RANGE_PA[0], None,
-                                                                    TPU_MODULUS_RANGE_PA[1])) -> list[dict[str, Any]]:
+def modulus_rows(params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_MODULUS_RANGE_PA[0], None,
+                                                                              TPU_MODULUS_RANGE_PA[1])
+                 ) -> list[dict[str, Any]]:
     """Per modulus (``None``: the parameters' own): the rod's design figures when the designed section is printed
     from a material of that modulus (tip sag, torque ratio, buckling load factor), and the thickness that would
     keep the design's stiffness instead."""
@@ -253,9 +255,9 @@ def firmware_settings(path: Optional[str | Path] = None) -> dict[str, Any]:
                 values[node.targets[0].id] = ast.literal_eval(node.value)
             except ValueError:
                 continue
-    for node in ast.walk(ast.parse(text)):
-        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "GearSetting":
-            values["gear_setting"] = node.attr
+    for found in ast.walk(ast.parse(text)):
+        if isinstance(found, ast.Attribute) and isinstance(found.value, ast.Name) and found.value.id == "GearSetting":
+            values["gear_setting"] = found.attr
     return values
 
 

@@ -17,7 +17,7 @@ import hashlib
 import json
 import math
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -166,7 +166,7 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) ->
     return out
 
 
-def seed_rows(logs_by_algo: dict[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]],
+def seed_rows(logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]],
               pilco_results: Sequence[Any] = ()) -> list[dict[str, Any]]:
     """One row per (method, seed) of what a run cost and whether its *final* agent balances fresh starts.
 
@@ -178,7 +178,7 @@ def seed_rows(logs_by_algo: dict[str, Sequence[Any]], fresh_rows: Sequence[dict[
 
     Parameters
     ----------
-    logs_by_algo : dict
+    logs_by_algo : mapping
         ``{"dqn": [TrainingLog, ...], "mbpo": [...]}``.
     fresh_rows : sequence of dict
         :func:`rl_fresh_start_rows` (and :func:`pilco_fresh_start_rows`) rows; the ``final`` ones are used.

@@ -200,7 +200,7 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
     died)``."""
     if workers <= 1:
-        raised = {}
+        raised: dict[str, str] = {}
         for name, args in pending.items():
             _, error = _guarded(job, args, name, progress, one_thread=False)
             if error is not None:
@@ -211,7 +211,7 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     from tqdm.auto import tqdm
 
     finished: set[str] = set()
-    raised: dict[str, str] = {}
+    raised = {}
     try:
         # loky's check after a job takes a worker's growth past 300 MB (PILCO's) for a leak and starts a fresh
         # worker for the next job (no job is lost): no warning for that

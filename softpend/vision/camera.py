@@ -302,7 +302,7 @@ class SyntheticCamera:
         gain = 1.0 + fx.lighting_amplitude * math.sin(2 * math.pi * fx.lighting_frequency_hz * time_s)
         if len(frames) == 1 and gain == 1.0 and not fx.gradient and self._noise_field is None:
             return frames[0], tip
-        image = np.zeros(frames[0].shape, np.float32)
+        image: np.ndarray = np.zeros(frames[0].shape, np.float32)
         for frame in frames:
             cv2.accumulate(frame, image)
         scale = np.float32(gain / len(frames))
@@ -346,7 +346,7 @@ class SyntheticCamera:
             if hub_angles_rad.shape != times_s.shape:
                 raise ValueError(f"hub_angles_rad must have shape {times_s.shape}, got {hub_angles_rad.shape}")
 
-        def sample(t: float) -> np.ndarray:
+        def sample(t: float) -> tuple[np.ndarray, Optional[float]]:
             i = int(np.clip(np.searchsorted(times_s, t) - 1, 0, len(times_s) - 2))
             w = (t - times_s[i]) / (times_s[i + 1] - times_s[i])
             w = min(max(w, 0.0), 1.0)
@@ -422,12 +422,13 @@ def render_video(
     rng = np.random.default_rng(camera.seed + 104729)
     stamps = frame_times + clock_offset_s + timestamp_jitter_s * rng.standard_normal(len(frame_times))
     model = camera.model
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (model.width_px, model.height_px))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc),  # type: ignore[attr-defined]  # not in the stubs
+                             fps, (model.width_px, model.height_px))
     if not writer.isOpened():
         raise ValueError(f"fourcc {fourcc!r}: cannot open a video writer for {path}")
     hidden = set(int(i) for i in drop_dot_frames)
     tips = np.empty((len(frame_times), 2))
-    kept = [] if keep_frames else None
+    kept: Optional[list[np.ndarray]] = [] if keep_frames else None
     iterator = camera.frames(times_s, link_points_m, frame_times, hub_angles_rad)
     if progress:
         from tqdm.auto import tqdm

@@ -412,12 +412,14 @@ class SyntheticLiveCamera(ThreadedTipSource):
         self._closed = True
 
     def _schedule(self, k: int) -> None:
+        assert self.first_frame_time_s is not None  # set by start()
         self.clock.call_at(self.first_frame_time_s + k / self.fps + self.latency_s, lambda: self._frame(k))
 
     def _frame(self, k: int) -> None:
         if self._closed:
             return
         self._schedule(k + 1)
+        assert self.first_frame_time_s is not None  # set by start()
         t_k = self.first_frame_time_s + k / self.fps
         elapsed = t_k - self.first_frame_time_s
         if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:

@@ -232,7 +232,6 @@ def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, f
         session = run_twin_session(workdir, duration_s=duration_s, seed=seed, trial_length_s=5.0, progress=False)
         dataset = session.dataset
     session_s = time.perf_counter() - start
-    assert isinstance(dataset, TrajectoryDataset)  # build_rig_dataset's
     truth = dataset.params
     assert truth is not None  # the twin's rod, given to build_rig_dataset
     config = GreyBoxConfig(parameters=GREYBOX_PARAMETERS + ("camera_delay_s",))

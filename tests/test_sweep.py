@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -112,10 +113,12 @@ def test_the_sweep_command_trains_every_method_per_seed_and_reuses_finished_runs
     out = json.loads(capsys.readouterr().out)
     assert out["seeds"] == [0, 1] and [r["seed"] for r in out["methods"]["dqn"]["runs"]] == [0, 1]
     assert [r["seed"] for r in out["methods"]["pilco"]["runs"]] == [0, 1]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["dqn-seed0", "dqn-seed1", "pilco-seed0", "pilco-seed1"]
-    stamp = (tmp_path / "dqn-seed0" / "log.json").stat().st_mtime_ns
+    # run folders named <algo>-<hash of the settings>-seed<k>
+    assert sorted(re.sub(r"-[0-9a-f]{8}-", "-", p.name) for p in tmp_path.iterdir()) == [
+        "dqn-seed0", "dqn-seed1", "pilco-seed0", "pilco-seed1"]
+    stamp = (run_folder(tmp_path, "dqn", 0) / "log.json").stat().st_mtime_ns
     assert main(argv) == 0  # finished runs are reused, not trained again
-    assert (tmp_path / "dqn-seed0" / "log.json").stat().st_mtime_ns == stamp
+    assert (run_folder(tmp_path, "dqn", 0) / "log.json").stat().st_mtime_ns == stamp
     assert json.loads(capsys.readouterr().out)["methods"]["dqn"] == out["methods"]["dqn"]
     for bad in (["--seeds", "3-1"], ["--methods", "dqn,ppo"], ["--seeds", "x"]):
         assert main(["sweep", *bad, "--runs-root", str(tmp_path)]) == 2
@@ -130,7 +133,7 @@ def test_the_sweep_command_sets_pilco_fields_for_every_run(tmp_path, capsys):
             "--workers", "1", "--pilco-set", "horizon_s=1.0", "--pilco-set", "balance_within_rad=null"]
     assert main(argv) == 0
     capsys.readouterr()
-    config = PilcoResult.load(tmp_path / "pilco-seed3").config
+    config = PilcoResult.load(run_folder(tmp_path, "pilco", 3)).config
     assert config.horizon_s == 1.0 and config.balance_within_rad is None and config.seed == 3
     for bad in (["--pilco-set", "no_such_field=1"], ["--pilco-set", "balance_within_rad=-1"], ["--pilco-set", "x"]):
         assert main(["sweep", "--methods", "pilco", "--seeds", "3", *bad, "--runs-root", str(tmp_path)]) == 2

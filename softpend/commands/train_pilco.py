@@ -11,11 +11,13 @@ Common options of :mod:`softpend.commands.train` map onto :class:`~softpend.pilc
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 from typing import Any
 
-from softpend.io.outputs import check_output_folder, json_text
+from softpend.io.outputs import check_output_folder, json_text, read_json_object
+from softpend.io.runfolders import check_run_folder
 from softpend.pilco.loop import PilcoConfig, run_pilco
 from softpend.study.presets import load_hparams
 
@@ -44,8 +46,13 @@ def train_pilco_from_args(args: argparse.Namespace) -> int:
         raise ValueError("--resume is not supported for pilco (runs are short; start a new run)")
     torch.set_num_threads(1)
     config = config_from_args(args)
-    # before the work: a folder of an earlier PILCO result may be replaced, any other non-empty one may not
+    # before the work: a new or empty folder; one that holds a PILCO run (of any settings) is never trained over
     check_output_folder(args.out, what="run folder", owned=lambda folder: (folder / "pilco.json").is_file())
+    if (Path(args.out) / "pilco.json").is_file():
+        saved = read_json_object(Path(args.out) / "pilco.json", 10**8)
+        check_run_folder(args.out, saved.get("config") if saved else None,
+                         json.loads(json.dumps(config.to_dict(), default=float)), None, config.seed, resume=False,
+                         can_resume=False)
     result = run_pilco(config, progress=not getattr(args, "no_progress", False))
     out = result.save(Path(args.out))
     balance = result.real_seconds_to_balance

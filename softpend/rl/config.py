@@ -26,7 +26,7 @@ from softpend.io.overrides import check_fields
 from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 from softpend.task import Task
 
-__all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "save_config"]
+__all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "saved_config_data", "save_config"]
 
 
 @dataclass(frozen=True)
@@ -335,6 +335,11 @@ def config_to_dict(config: DQNConfig) -> dict[str, Any]:
     data = dataclasses.asdict(config)
     data["task"] = config.task.to_dict()
     return data
+
+
+def saved_config_data(config: DQNConfig) -> dict[str, Any]:
+    """``config`` as :func:`save_config` saves it (its class name and fields), read back as JSON data."""
+    return json.loads(json.dumps({"class": type(config).__name__, **config_to_dict(config)}))
 
 
 def save_config(config: DQNConfig, path: Path) -> None:

@@ -50,7 +50,7 @@ from softpend.rl.agent_files import (
     save_agent_file,
     save_replay_buffer,
 )
-from softpend.rl.config import DQNConfig, load_config, save_config
+from softpend.rl.config import DQNConfig, load_config, save_config, saved_config_data
 from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
@@ -468,9 +468,26 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     )
 
 
-def _check_run_args(episodes: int, run_dir: Path | str) -> Path:
+def saved_run_seed(run_dir: Path) -> Optional[int]:
+    """The seed recorded in a run folder's log (the final one, else the checkpoint's), or None (no log yet)."""
+    for path in (run_dir / "log.json", run_dir / "checkpoint" / "log.json"):
+        data = read_json_object(path, 10**9)
+        if data is not None and isinstance(data.get("seed"), int):
+            return int(data["seed"])
+    return None
+
+
+def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed: int, resume: bool) -> Path:
+    """The run folder, checked before any work: new, empty, or holding this run (same config and seed) to
+    resume (:func:`softpend.io.runfolders.check_run_folder`)."""
+    from softpend.io.runfolders import check_run_folder
+
     positive_int("episodes", episodes)
-    return check_output_folder(run_dir, what="run folder", owned=is_run_folder)
+    run_dir = check_output_folder(run_dir, what="run folder", owned=is_run_folder)
+    if is_run_folder(run_dir):
+        check_run_folder(run_dir, read_json_object(run_dir / "config.json", 10**7), saved_config_data(config),
+                         saved_run_seed(run_dir), seed, resume)
+    return run_dir
 
 
 def run_training(
@@ -491,11 +508,11 @@ def run_training(
     """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`; ``replay_buffer_class`` is the
     buffer ``make_model`` gives the agent, allocated again on resume).
 
-    Raises ``ValueError`` before any work if ``run_dir`` cannot be written or is a non-empty folder that is not
-    a run folder, and :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's
+    Raises ``ValueError`` before any work if ``run_dir`` cannot be written, is a non-empty folder that is not
+    a run folder, holds another run (other settings or seed), or holds this run and ``resume`` is false; and :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's
     weights stop being finite.
     """
-    run_dir = _check_run_args(episodes, run_dir)
+    run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     checkpoint = run_dir / "checkpoint"

@@ -13,6 +13,7 @@ bound, and is exact when every start succeeded, the only rows the seconds-to-bal
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -20,6 +21,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
+from softpend.io.outputs import read_json_object
 from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
@@ -30,7 +32,8 @@ __all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_jobs", "pilco_runs", "plo
 
 def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
                progress: bool = True, workers: Optional[int] = None, backend: Optional[str] = None) -> list[PilcoResult]:
-    """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-seed<k>``.
+    """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-<hash>-seed<k>``
+    (:func:`softpend.study.rl_runs.run_folder`: ``<hash>`` names the settings).
 
     A folder is reused when it holds a finished run with the same config (the seed replaced); the other seeds
     run in parallel, up to ``workers`` at a time (default: one per CPU core, see
@@ -39,19 +42,32 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(run_and_save, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
              desc="PILCO runs", backend=backend)
-    return [PilcoResult.load(Path(runs_root) / f"pilco-seed{seed}") for seed in seeds]
+    from softpend.study.rl_runs import run_folder
+
+    return [PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))
+            for seed in seeds]
 
 
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
     """The PILCO runs (``config`` with each seed) still missing under ``runs_root``, as ``(name, arguments of
-    :func:`run_and_save`)``; a folder holding a finished run with the same config is left out."""
+    :func:`run_and_save`)``; a folder holding a finished run with the same config is left out.  A folder that
+    holds a run of other settings (a hash collision, or one this version cannot read) raises ``ValueError``:
+    it is never trained over."""
+    from softpend.io.runfolders import check_run_folder
+    from softpend.study.rl_runs import adopt_run_folder
+
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
     jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
-        folder = Path(runs_root) / f"pilco-seed{seed}"
+        folder = adopt_run_folder(runs_root, "pilco", int(seed), seeded)
         if folder.name not in jobs and _saved_run(folder, seeded) is None:
+            if (folder / "pilco.json").exists():
+                saved = read_json_object(folder / "pilco.json", 10**8)
+                check_run_folder(folder, saved.get("config") if saved else None,
+                                 json.loads(json.dumps(seeded.to_dict(), default=float)), None, int(seed),
+                                 resume=False, can_resume=False)
             jobs[folder.name] = (seeded, folder)
     return list(jobs.items())
 
@@ -68,7 +84,10 @@ def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
 
 
 def run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
-    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
+    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.sweep.run_jobs`), which must not hold
+    a PILCO run yet (``ValueError``: a run folder is never trained over)."""
+    if (Path(folder) / "pilco.json").exists():
+        raise ValueError(f"run folder {folder} already holds a PILCO run; a run folder is never trained over")
     run_pilco(config, progress=progress).save(folder)
 
 

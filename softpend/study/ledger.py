@@ -171,14 +171,15 @@ def rl_fresh_start_summaries(runs_root: Path | str, seeds: Sequence[int], report
 
 
 def pilco_run_results(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[Any]:
-    """The PILCO runs of Figure 10 that exist (``<runs_root>/pilco-seed<k>``), as ``PilcoResult`` objects."""
+    """The PILCO runs of Figure 10 that exist (:func:`softpend.study.rl_runs.run_folder`), as ``PilcoResult``
+    objects."""
     from softpend.pilco.loop import PilcoResult
-    from softpend.study.rl_runs import plant_runs_root
+    from softpend.study.rl_runs import plant_runs_root, run_folder
 
     results = []
     for seed in seeds:
         try:
-            results.append(PilcoResult.load(plant_runs_root(runs_root, plant) / f"pilco-seed{seed}"))
+            results.append(PilcoResult.load(run_folder(plant_runs_root(runs_root, plant), "pilco", int(seed))))
         except (FileNotFoundError, ValueError, KeyError, TypeError):
             continue
     return results

@@ -186,11 +186,11 @@ def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str =
     (:attr:`softpend.pilco.loop.PilcoResult.real_seconds_to_balance`).
     """
     from softpend.pilco.loop import PilcoResult
-    from softpend.study.rl_runs import plant_runs_root
+    from softpend.study.rl_runs import plant_runs_root, run_folder
 
     outcome, details = {}, {}
     for seed in seeds:
-        folder = plant_runs_root(runs_root, plant) / f"pilco-seed{seed}"
+        folder = run_folder(plant_runs_root(runs_root, plant), "pilco", int(seed))
         try:
             result = PilcoResult.load(folder)
         except (FileNotFoundError, ValueError, KeyError, TypeError):

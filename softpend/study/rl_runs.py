@@ -1,29 +1,35 @@
 """Multi-seed training runs for the book's figures and the benchmarks, cached in run folders.
 
-:func:`train_seeds` trains one method over several seeds into ``<root>/<algo>-seed<k>``; a folder that
-already holds a finished run with the same config and at least as many episodes is reused, and a shorter
-one is resumed from its checkpoint, so that Figures 4-6 and ``softpend bench --only rl`` share runs.
+:func:`train_seeds` trains one method over several seeds into ``<root>/<algo>-<hash>-seed<k>``
+(:func:`run_folder`: ``<hash>`` names the settings, so runs of other settings never share a folder); a folder
+that already holds a finished run with at least as many episodes is reused, and a shorter one is resumed from
+its checkpoint, so that Figures 4-6 and ``softpend bench --only rl`` share runs.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
+import re
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 
+from softpend.io.outputs import read_json_object
 from softpend.io.overrides import apply_overrides
+from softpend.io.runfolders import run_folder_name, setting_differences
 from softpend.study.presets import TASK, load_hparams
 from softpend.task import Task
 from softpend.study.sweep import run_jobs
 from softpend.plant import check_plant_name
-from softpend.rl.config import DQNConfig, MBPOConfig, load_config
+from softpend.rl.config import DQNConfig, MBPOConfig, load_config, saved_config_data
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs", "run_folder", "summary_table",
-           "train_seeds", "train_run"]
+__all__ = ["METHOD_NAMES", "adopt_run_folder", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs",
+           "run_config_data", "run_folder", "summary_table", "train_seeds", "train_run"]
 
 
 def train_seeds(
@@ -50,8 +56,8 @@ def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root
     jobs = rl_jobs(specs, root)
     run_jobs(train_run, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
              desc="RL runs", backend=backend)
-    return [[TrainingLog.load(run_folder(root, algo, int(seed)) / "log.json") for seed in seeds]
-            for algo, _, seeds, _ in specs]
+    return [[TrainingLog.load(run_folder(root, algo, int(seed), config) / "log.json") for seed in seeds]
+            for algo, config, seeds, _ in specs]
 
 
 def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
@@ -68,7 +74,7 @@ def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
         if algo == "mbpo" and not isinstance(config, MBPOConfig):
             raise ValueError("algo 'mbpo' needs an MBPOConfig")
         for seed in seeds:
-            run_dir = run_folder(root, algo, int(seed))
+            run_dir = adopt_run_folder(root, algo, int(seed), config)
             if run_dir.name in names:
                 continue  # a seed listed twice is trained once (two workers must not share a folder)
             log_path = run_dir / "log.json"
@@ -78,7 +84,9 @@ def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
                     continue
                 resume = done.n_episodes < episodes
             else:
-                resume = False
+                # a run of these settings that stopped before its end resumes from its checkpoint; a folder of
+                # this name that holds another run is refused by the training (never trained over)
+                resume = (run_dir / "config.json").exists()
             jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
             names.append(run_dir.name)
     order = sorted(range(len(jobs)), key=lambda i: (jobs[i][0] != "mbpo", i))
@@ -181,6 +189,58 @@ def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], run
     return {METHOD_NAMES["dqn"]: dqn_logs, METHOD_NAMES["mbpo"]: mbpo_logs}
 
 
-def run_folder(runs_root: Path | str, algo: str, seed: int) -> Path:
-    """Folder of one run made by :func:`train_seeds`."""
-    return Path(runs_root) / f"{algo}-seed{seed}"
+def run_config_data(algo: str, config: Any) -> dict[str, Any]:
+    """The settings that name a run's folder, as JSON data: a DQN or DQN-MBPO config as its ``config.json`` holds
+    it, a :class:`~softpend.pilco.loop.PilcoConfig` as its ``pilco.json`` holds it with the seed set to 0 (the
+    seed is the last part of the folder's name)."""
+    if algo == "pilco":
+        return json.loads(json.dumps(dataclasses.replace(config, seed=0).to_dict(), default=float))
+    return saved_config_data(config)
+
+
+def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) -> Path:
+    """Folder of one run (``algo``: ``"dqn"``, ``"mbpo"`` or ``"pilco"``) under ``runs_root``.
+
+    With ``config`` (the run's config), ``<algo>-<hash>-seed<seed>``, ``<hash>`` the first 8 hex digits of the
+    SHA-256 of :func:`run_config_data` (:func:`softpend.io.runfolders.run_folder_name`): a changed setting is a
+    new folder, so a run is never trained over by a run of other settings.  Without ``config``, the run of
+    ``algo`` and ``seed`` under ``runs_root`` whatever its settings: the one folder of that form there, else
+    the folder of the names before the hashes (``<algo>-seed<seed>``, which may not exist).
+
+    Raises
+    ------
+    ValueError
+        Without ``config``, if ``runs_root`` holds runs of ``algo`` and ``seed`` with several settings (pass
+        the config to pick one).
+    """
+    root = Path(runs_root)
+    if config is not None:
+        return root / run_folder_name(algo, run_config_data(algo, config), seed)
+    pattern = re.compile(rf"{re.escape(algo)}-[0-9a-f]{{8}}-seed{int(seed)}")
+    found = sorted(p for p in root.glob(f"{algo}-*-seed{int(seed)}") if pattern.fullmatch(p.name) and p.is_dir())
+    if len(found) > 1:
+        raise ValueError(f"{root} holds runs of {algo} seed {seed} with {len(found)} different settings "
+                         f"({', '.join(p.name for p in found)}); pass the run's config to pick one")
+    return found[0] if found else root / f"{algo}-seed{int(seed)}"
+
+
+def adopt_run_folder(runs_root: Path | str, algo: str, seed: int, config: Any) -> Path:
+    """:func:`run_folder` ``(runs_root, algo, seed, config)``; a run of these settings and seed in a folder of
+    the names before the hashes (``<algo>-seed<seed>``) is first renamed to it, so that it is reused."""
+    folder = run_folder(runs_root, algo, seed, config)
+    legacy = Path(runs_root) / f"{algo}-seed{int(seed)}"
+    if folder.exists() or not legacy.is_dir() or legacy.is_symlink():
+        return folder
+    if algo == "pilco":
+        saved = (read_json_object(legacy / "pilco.json", 10**8) or {}).get("config")
+        wanted = json.loads(json.dumps(config.to_dict(), default=float))
+        same = saved is not None and not setting_differences(saved, wanted)
+    else:
+        from softpend.rl.dqn import saved_run_seed
+
+        saved = read_json_object(legacy / "config.json", 10**7)
+        same = (saved is not None and not setting_differences(saved, saved_config_data(config))
+                and saved_run_seed(legacy) in (None, int(seed)))
+    if same:
+        os.rename(legacy, folder)
+    return folder

@@ -17,6 +17,7 @@ run is picked by its results: the first seed is the one measured.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 from pathlib import Path
@@ -40,7 +41,7 @@ def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO, PILCO_BOOK, RL_BOOK, TASK
     from softpend.study.rig_runs import learned_controller
-    from softpend.study.rl_runs import figure_runs, run_folder
+    from softpend.study.rl_runs import figure_configs, figure_runs, run_folder
 
     def swingup():
         return EnergySwingUpController(TASK.rod, dt_s=TASK.dt_s), TASK
@@ -49,14 +50,16 @@ def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
         def make():
             seed = RL_BOOK.seeds[0]
             figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, (seed,), RL_BOOK.runs_root, progress=True)
-            controller, task, _ = learned_controller(run_folder(RL_BOOK.runs_root, algo, seed), "final")
+            config = figure_configs()[algo]
+            controller, task, _ = learned_controller(run_folder(RL_BOOK.runs_root, algo, seed, config), "final")
             return controller, task
         return make
 
     def pilco():
         seed = PILCO_BOOK.seeds[0]
         pilco_runs(PILCO, (seed,), PILCO_BOOK.runs_root, progress=True)
-        controller, task, _ = learned_controller(Path(PILCO_BOOK.runs_root) / f"pilco-seed{seed}")
+        folder = run_folder(PILCO_BOOK.runs_root, "pilco", seed, dataclasses.replace(PILCO, seed=seed))
+        controller, task, _ = learned_controller(folder)
         return controller, task
 
     return {"swingup_lqr": swingup, "dqn": rl("dqn"), "mbpo": rl("mbpo"), "pilco": pilco}

@@ -111,6 +111,10 @@ def test_twin_camera_with_a_long_latency_runs(tmp_path):
     (["track", "--camera", "0", "--out", "{tmp}/t.csv", "--camera-latency-ms", "1e9"], "--camera-latency-ms"),
     (["track", "{tmp}/v.avi", "--out", "{tmp}/t.csv", "--fps", "1e9"], "--fps"),
     (["track", "{tmp}/v.avi", "--out", "{tmp}/t.csv", "--min-area", "nan"], "--min-area"),
+    (["fit-model", "{tmp}/d.npz", "{tmp}/m", "--max-epochs", "1000000000", "--patience", "1000000000"], "--max-epochs"),
+    (["fit-model", "{tmp}/d.npz", "{tmp}/m", "--patience", "1000000000"], "--patience"),
+    (["identify", "{tmp}/d.npz", "--max-iterations", "1000000000"], "--max-iterations"),
+    (["identify", "{tmp}/d.npz", "--window-s", "inf"], "--window-s"),
 ])
 def test_other_commands_refuse_unbounded_numbers(tmp_path, argv, option):
     """Numbers that ran for ever (rig --duration 1e9, a twin babble with a negative trial length, 1e12

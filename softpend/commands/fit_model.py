@@ -45,8 +45,11 @@ def run(args: argparse.Namespace) -> int:
     from softpend.sysid.model import is_model_file, model_paths
     from softpend.sysid.training import parse_widths
 
-    if not 1 <= args.threads <= 1024:
-        raise ValueError(f"threads must lie in [1, 1024], got {args.threads}")
+    from softpend.commands.options import check_numbers
+
+    # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
+    check_numbers(args, {"--threads": (1, 1024), "--max-epochs": (1, 100_000), "--patience": (1, 100_000),
+                         "--ensemble-size": (1, 1000), "--history": (0, 1000), "--batch-size": (1, 10**8)})
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
     model_files = [outputs.file(path, what="model file", owned=is_model_file)  # before the work: a model of ours

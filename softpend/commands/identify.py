@@ -40,6 +40,10 @@ def run(args: argparse.Namespace) -> int:
     from softpend.sysid import load_dataset
     from softpend.sysid.greybox import GreyBoxConfig, identify, is_identification_file
 
+    from softpend.commands.options import check_numbers
+
+    # before anything starts: the Levenberg-Marquardt loop and the window draw are bounded
+    check_numbers(args, {"--max-iterations": (1, 100_000), "--max-windows": (1, 10**6), "--window-s": (1e-6, 3600.0)})
     outputs = Outputs()
     if args.out is not None:  # before the work
         outputs.file(args.out, what="identification file", owned=is_identification_file)

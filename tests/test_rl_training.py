@@ -95,7 +95,7 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path, monkeypatch):
         load_agent(tmp_path, which="latest")
     summary = evaluate_agent(agent, loaded_config, seeds=(0,), duration_s=0.5)
     assert len(summary.results) == 1 and summary.results[0].time_s[-1] == pytest.approx(0.5)
-    with pytest.raises(ValueError, match="config differs"):
+    with pytest.raises(ValueError, match="holds another run .it differs in learning_starts"):
         train_dqn(DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False)
     assert list(system_tmp.glob("SB3-*")) == []  # no logger folder outside the run folder
 

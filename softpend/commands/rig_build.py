@@ -316,7 +316,12 @@ def _grab_frame(camera: str, skip: int = 10):
         if frame is None:
             raise ValueError(f"--camera {camera}: the image cannot be read")
         return frame
-    capture = cv2.VideoCapture(int(camera) if camera.strip().isdigit() else camera)
+    from softpend.vision.tip_source import MAX_DEVICE_INDEX
+
+    device: int | str = int(camera) if camera.strip().isdigit() else camera
+    if isinstance(device, int) and device > MAX_DEVICE_INDEX:  # OpenCV takes a C int
+        raise ValueError(f"--camera index must lie in [0, {MAX_DEVICE_INDEX}], got {camera!r}")
+    capture = cv2.VideoCapture(device)
     try:
         if not capture.isOpened():
             raise ValueError(f"--camera {camera} cannot be opened")

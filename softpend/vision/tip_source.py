@@ -503,6 +503,10 @@ class CaptureTipSource(ThreadedTipSource):
         self._capture.release()
 
 
+#: Largest camera device index a ``--camera`` argument may name.
+MAX_DEVICE_INDEX = 10_000
+
+
 def open_tip_source(camera: str, latency_s: float = 0.0, fps: Optional[float] = None,
                     frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None
                     ) -> CaptureTipSource:
@@ -514,4 +518,6 @@ def open_tip_source(camera: str, latency_s: float = 0.0, fps: Optional[float] = 
 
     check_capture_path("camera", camera)  # a FIFO or folder would block the capture
     device: int | str = int(camera) if camera.strip().isdigit() else camera
+    if isinstance(device, int) and device > MAX_DEVICE_INDEX:  # OpenCV takes a C int (and reads it as a pattern)
+        raise ValueError(f"camera index must lie in [0, {MAX_DEVICE_INDEX}], got {camera!r}")
     return CaptureTipSource(device, latency_s=latency_s, fps=fps, frame_tracker=frame_tracker, on_frame=on_frame)

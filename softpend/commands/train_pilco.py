@@ -16,7 +16,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from softpend.io.outputs import check_output_folder, json_text, read_json_object
+from softpend.io.outputs import check_output_folder, json_text
+from softpend.io.reading import read_json_object
 from softpend.io.runfolders import check_run_folder
 from softpend.pilco.loop import PilcoConfig, run_pilco
 from softpend.study.presets import load_hparams

@@ -22,7 +22,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, EvaluationSummary, evaluate
-from softpend.io.outputs import atomic_write, read_json_object
+from softpend.io.outputs import atomic_write
+from softpend.io.reading import read_json_object
 from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder

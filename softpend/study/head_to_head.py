@@ -21,7 +21,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
-from softpend.io.outputs import read_json_object
+from softpend.io.reading import read_json_object
 from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco

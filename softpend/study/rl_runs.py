@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 
-from softpend.io.outputs import read_json_object
+from softpend.io.reading import read_json_object
 from softpend.io.overrides import apply_overrides
 from softpend.io.runfolders import run_folder_name, setting_differences
 from softpend.study.presets import TASK, load_hparams

@@ -30,6 +30,8 @@ from pathlib import Path
 from typing import Any, BinaryIO, Iterator, Mapping, Optional, Union
 
 __all__ = [
+    "LineDict",
+    "LineList",
     "MAX_CONFIG_BYTES",
     "MAX_JSON_BYTES",
     "MAX_YAML_BYTES",
@@ -44,6 +46,7 @@ __all__ = [
     "read_text_checked",
     "read_yaml_checked",
     "read_zip_member",
+    "yaml_line",
 ]
 
 #: Largest configuration-like JSON document (a run's config.json, rod parameters, a calibration, markers,
@@ -186,15 +189,74 @@ def read_json_object(path: PathLike, max_bytes: int) -> Optional[dict]:
     return data if isinstance(data, dict) else None
 
 
+class LineDict(dict):
+    """A YAML mapping read by :func:`read_yaml_checked` with ``lines=True``: ``line`` is the 1-based line where
+    it starts and ``lines[key]`` the line of each key (for messages about a document of the wrong shape)."""
+
+    line: int = 0
+    lines: dict
+
+    def line_of(self, key: Any) -> int:
+        """The line of ``key`` (the mapping's own line if it has no such key)."""
+        return getattr(self, "lines", {}).get(key, self.line)
+
+
+class LineList(list):
+    """A YAML sequence read with ``lines=True``: ``line`` is where it starts, ``lines[i]`` each item's line."""
+
+    line: int = 0
+    lines: list
+
+
+def _line_loader():
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        def construct_mapping(self, node, deep=False):
+            mapping = LineDict(super().construct_mapping(node, deep=True))
+            mapping.line = node.start_mark.line + 1
+            mapping.lines = {}
+            for key_node, _ in node.value:
+                try:
+                    mapping.lines[self.construct_object(key_node, deep=True)] = key_node.start_mark.line + 1
+                except TypeError:  # an unhashable key: reported by the base constructor already
+                    pass
+            return mapping
+
+        def construct_sequence(self, node, deep=False):
+            sequence = LineList(super().construct_sequence(node, deep=True))
+            sequence.line = node.start_mark.line + 1
+            sequence.lines = [item.start_mark.line + 1 for item in node.value]
+            return sequence
+
+    Loader.add_constructor("tag:yaml.org,2002:map", Loader.construct_mapping)
+    Loader.add_constructor("tag:yaml.org,2002:seq", Loader.construct_sequence)
+    return Loader
+
+
+def yaml_line(node: Any, key: Any = None, default: int = 1) -> int:
+    """The line of ``key`` in a mapping (or item ``key`` of a sequence) read with ``lines=True``, or of
+    ``node`` itself; ``default`` for values without lines (scalars)."""
+    if isinstance(node, LineDict):
+        return node.line_of(key) if key is not None else node.line
+    if isinstance(node, LineList):
+        if isinstance(key, int) and 0 <= key < len(node.lines):
+            return node.lines[key]
+        return node.line
+    return default
+
+
 def read_yaml_checked(path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES,
-                      error: type[Exception] = ValueError) -> Any:
+                      error: type[Exception] = ValueError, lines: bool = False) -> Any:
     """The YAML document in the regular file at ``path`` (``yaml.safe_load``: plain data, no Python
-    objects); a syntax error is refused with the file, the line and the parser's reason."""
+    objects); a syntax error is refused with the file, the line and the parser's reason.  With ``lines``,
+    mappings and sequences come back as :class:`LineDict` / :class:`LineList`, which know their lines
+    (:func:`yaml_line`), for messages about a document of the wrong shape."""
     import yaml
 
     text = read_text_checked(path, what, max_bytes, error)
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_line_loader()) if lines else yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f", line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""

@@ -315,7 +315,7 @@ def test_track_refuses_an_impossible_frame_rate(tmp_path, clip, fps, capsys):
 
     out = tmp_path / "out.csv"
     assert main(["track", str(clip), "--out", str(out), "--fps", fps]) == 2
-    assert "fps must be" in capsys.readouterr().err and not out.exists()
+    assert "--fps must lie in" in capsys.readouterr().err and not out.exists()  # refused by name before the video is opened
     with pytest.raises(ValueError, match="fps must be"):
         track_video(tmp_path / "missing.avi", out, fps=float(fps))
 

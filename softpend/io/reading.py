@@ -175,7 +175,7 @@ def read_json_checked(path: PathLike, what: str, max_bytes: int = MAX_CONFIG_BYT
         raise error(f"{_described(what, Path(path))}, line {exc.lineno} column {exc.colno}: not valid JSON "
                     f"({exc.msg})") from None
     except RecursionError:
-        raise error(f"{_described(what, Path(path))}: JSON nested too deeply") from None
+        raise error(f"{_described(what, Path(path))}: not valid JSON (nested too deeply)") from None
 
 
 def read_json_object(path: PathLike, max_bytes: int) -> Optional[dict]:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
 
-import yaml
+from softpend.io.reading import read_yaml_checked, yaml_line
 
 DEFAULT_PROFILE = "full"
 GENERATED_PREFIX = "book/_generated/"
@@ -102,8 +102,42 @@ class NotebookRun:
 
 
 # --------------------------------------------------------------------------- configuration
-def _load_yaml(path: Path | str) -> Any:
-    return yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+def _load_yaml(path: Path | str, what: str) -> Any:
+    """The YAML document at ``path`` through the checked reader (a regular file of bounded size; a syntax
+    error names the file and the line), its mappings and lists knowing their lines (:func:`yaml_line`)."""
+    return read_yaml_checked(path, what, lines=True)
+
+
+def _shape_error(path: Path | str, node: Any, key: Any, expected: str, got: Any) -> ValueError:
+    """``ValueError`` naming the file, the line of ``key`` in ``node`` and what was expected there."""
+    return ValueError(f"{path}, line {yaml_line(node, key)}: expected {expected}, got {_kind(got)}")
+
+
+def _kind(value: Any) -> str:
+    return "nothing" if value is None else f"{type(value).__name__.removeprefix('Line').lower()} {value!r}"[:80]
+
+
+def _check_toc(path: Path | str, toc: Any) -> None:
+    """``_toc.yml`` has the shape jupyter-book reads: a mapping with ``root``; ``parts``, ``chapters`` and
+    ``sections`` lists of mappings; ``file``, ``root`` and ``caption`` strings."""
+    if not isinstance(toc, dict):
+        raise _shape_error(path, toc, None, "a mapping with format, root and parts or chapters", toc)
+    if "root" not in toc:
+        raise ValueError(f"{path}, line {yaml_line(toc)}: expected a 'root' entry (the book's first page)")
+
+    def walk(node: dict) -> None:
+        for key, value in node.items():
+            if key in ("file", "root", "caption", "format", "title", "url") and not isinstance(value, str):
+                raise _shape_error(path, node, key, f"'{key}' to be a string", value)
+            if key in ("parts", "chapters", "sections") and value is not None:  # (an empty entry lists nothing)
+                if not isinstance(value, list):
+                    raise _shape_error(path, node, key, f"'{key}' to be a list of entries", value)
+                for index, entry in enumerate(value):
+                    if not isinstance(entry, dict):
+                        raise _shape_error(path, value, index, f"each of '{key}' to be a mapping (file: ...)", entry)
+                    walk(entry)
+
+    walk(toc)
 
 
 def toc_notebooks(toc_path: Path | str) -> list[str]:
@@ -113,7 +147,9 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
         for key, value in node.items() if isinstance(node, dict) else enumerate(node if isinstance(node, list) else []):
             yield from [value] if key in ("file", "root") and isinstance(value, str) else files(value)
 
-    entries = [entry.removesuffix(".ipynb") for entry in files(_load_yaml(Path(toc_path)))]
+    toc = _load_yaml(Path(toc_path), "table of contents")
+    _check_toc(toc_path, toc)
+    entries = [entry.removesuffix(".ipynb") for entry in files(toc)]
     names = [entry[len(GENERATED_PREFIX):] for entry in entries if entry.startswith(GENERATED_PREFIX)
              and entry != GENERATED_PREFIX + EXECUTION_PAGE]
     if duplicates := sorted({name for name in names if names.count(name) > 1}):
@@ -123,15 +159,17 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
 
 def load_profiles(path: Path | str) -> dict[str, dict[str, dict[str, Any]]]:
     """``profiles.yml`` as ``profile -> notebook -> {parameter: value}`` (empty: the notebook's defaults)."""
-    data = _load_yaml(path) or {}
+    data = _load_yaml(path, "profiles file") or {}
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping profile -> notebook -> parameters, got {type(data).__name__}")
+        raise _shape_error(path, data, None, "a mapping profile -> notebook -> parameters", data)
     for profile, notebooks in data.items():
         if not isinstance(notebooks or {}, dict):
-            raise ValueError(f"{path}: profile {profile!r} must map notebook names to parameters")
+            raise _shape_error(path, data, profile, f"a mapping notebook -> parameters for profile {profile!r}",
+                               notebooks)
         for notebook, parameters in (notebooks or {}).items():
             if not isinstance(parameters or {}, dict) or not all(isinstance(key, str) for key in parameters or {}):
-                raise ValueError(f"{path}: profile {profile!r}, notebook {notebook!r}: parameters must be a mapping")
+                raise _shape_error(path, notebooks, notebook, f"a mapping parameter -> value for notebook "
+                                   f"{notebook!r} of profile {profile!r}", parameters)
     return {str(profile): {str(notebook): dict(parameters or {}) for notebook, parameters in (notebooks or {}).items()}
             for profile, notebooks in data.items()}
 

@@ -1,0 +1,119 @@
+"""Malformed project files of the book: ``_toc.yml`` and ``book/profiles.yml`` that are not valid YAML, are YAML
+of the wrong shape, or are not regular files give one line naming the file, the line and what was expected --
+from ``softpend book`` and from ``softpend sweep --book`` alike -- never a parser traceback or a hang."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import signal
+
+import pytest
+
+from softpend.cli import main
+from softpend.study.book import load_profiles, toc_notebooks
+
+TOC = ("format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n"
+       "      - file: book/_generated/fig02_reward\n")
+
+
+@contextlib.contextmanager
+def alarm(seconds: float = 60.0):
+    def ring(signum, frame):
+        raise TimeoutError(f"no result after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.fixture
+def root(tmp_path):
+    (tmp_path / "book").mkdir()
+    (tmp_path / "_toc.yml").write_text(TOC)
+    (tmp_path / "book" / "profiles.yml").write_text("quick:\n  fig02_reward: {n_points: 3}\n")
+    return tmp_path
+
+
+def one_line(argv: list[str]) -> str:
+    err = io.StringIO()
+    with alarm(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    lines = [line for line in err.getvalue().splitlines() if line.strip()]
+    assert rc == 2 and len(lines) == 1 and "Traceback" not in err.getvalue(), (argv, rc, err.getvalue())
+    return lines[0]
+
+
+PROFILES = [
+    ("quick:\n  fig02_reward: {n_points: 3\n", r"line 3 column 1: not valid YAML \(expected ',' or '}'"),
+    ("quick:\n  fig02_reward:\n    n_points: 3\n   bad: [\n", r"line \d+ column \d+: not valid YAML"),
+    ("quick: [1, 2]\n", r"line 1: expected a mapping notebook -> parameters for profile 'quick', got list"),
+    ("quick:\n  other: {}\n  fig02_reward: 5\n", r"line 3: expected a mapping parameter -> value for notebook "
+                                                 r"'fig02_reward' of profile 'quick', got int 5"),
+    ("- quick\n", r"line 1: expected a mapping profile -> notebook -> parameters, got list"),
+    ("!!python/object/apply:os.system ['true']\n", r"line 1 column 1: not valid YAML"),
+]
+
+
+@pytest.mark.parametrize("text, message", PROFILES)
+@pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
+def test_malformed_profiles(root, text, message, command):
+    (root / "book" / "profiles.yml").write_text(text)
+    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    assert str(root / "book" / "profiles.yml") in line
+    assert __import__("re").search(message, line), line
+    with pytest.raises(ValueError, match=message):
+        load_profiles(root / "book" / "profiles.yml")
+
+
+TOCS = [
+    ("format: jb-book\nroot: [\n", r"line \d+ column \d+: not valid YAML"),
+    ("just a sentence\n", r"line 1: expected a mapping with format, root and parts or chapters, got str"),
+    ("format: jb-book\nparts: []\n", r"line 1: expected a 'root' entry"),
+    ("format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters: book/_generated/x\n",
+     r"line 5: expected 'chapters' to be a list of entries, got str"),
+    ("format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters:\n      - file: [1]\n",
+     r"line 6: expected 'file' to be a string, got list"),
+    ("format: jb-book\nroot: book/intro\nparts:\n  - 5\n", r"line 4: expected each of 'parts' to be a mapping"),
+]
+
+
+@pytest.mark.parametrize("text, message", TOCS)
+@pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
+def test_malformed_toc(root, text, message, command):
+    (root / "_toc.yml").write_text(text)
+    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    assert str(root / "_toc.yml") in line
+    assert __import__("re").search(message, line), line
+    with pytest.raises(ValueError, match=message):
+        toc_notebooks(root / "_toc.yml")
+
+
+@pytest.mark.timeout(120, method="thread")
+@pytest.mark.parametrize("kind", ["fifo", "folder", "dev_zero"])
+@pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
+def test_special_profiles_file(root, kind, command):
+    path = root / "book" / "profiles.yml"
+    path.unlink()
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "folder":
+        path.mkdir()
+    else:
+        path.symlink_to("/dev/zero")
+    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    assert "profiles.yml" in line
+
+
+def test_the_project_files_pass(tmp_path):
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    assert toc_notebooks(repo / "_toc.yml")
+    profiles = load_profiles(repo / "book" / "profiles.yml")
+    assert "quick" in profiles and all(type(v) is dict for v in profiles.values())

@@ -21,6 +21,10 @@ from pathlib import Path
 METHODS = ("dqn", "mbpo", "pilco")
 
 
+#: Most seeds one sweep may train.
+MAX_SEEDS = 10_000
+
+
 def seed_list(text: str) -> list[int]:
     """``"0-9"``, ``"0,3,5"`` or a mix (``"0-2,7"``) as a sorted list of distinct seeds >= 0."""
     seeds: set[int] = set()
@@ -31,13 +35,16 @@ def seed_list(text: str) -> list[int]:
                 low, high = (int(v) for v in part.split("-", 1))
                 if high < low:
                     raise ValueError
-                seeds.update(range(low, high + 1))
             else:
-                seeds.add(int(part))
+                low = high = int(part)
         except ValueError:
             raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}") from None
-    if not seeds or min(seeds) < 0 or len(seeds) > 10_000:
-        raise argparse.ArgumentTypeError(f"seeds must be 1 to 10000 integers >= 0, got {text!r}")
+        if high - low + 1 > MAX_SEEDS - len(seeds):  # refused by its size before a single seed is listed
+            raise argparse.ArgumentTypeError(f"seeds {text!r} name {high - low + 1 + len(seeds)} or more seeds, more "
+                                             f"than the {MAX_SEEDS} one sweep may train")
+        seeds.update(range(low, high + 1))
+    if not seeds or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"seeds must be 1 to {MAX_SEEDS} integers >= 0, got {text!r}")
     return sorted(seeds)
 
 
@@ -86,7 +93,9 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.presets import PILCO, RL_BOOK
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
     from softpend.study.run_pool import train_book, train_in_one_pool
+    from softpend.study.sweep import check_backend, default_backend
 
+    check_backend(args.backend or default_backend())  # before any run, whatever the number of runs to train
     if args.book:
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers must be at least 1, got {args.workers}")
@@ -95,10 +104,12 @@ def run(args: argparse.Namespace) -> int:
               f"{record['seconds']:.0f} s ({record['workers']} workers)", file=sys.stderr)
         return 0
     root: Path = args.runs_root
-    for name in ("episodes_dqn", "episodes_mbpo", "pilco_trials", "workers"):
-        value = getattr(args, name)
-        if value is not None and value < (0 if name == "pilco_trials" else 1):
-            raise ValueError(f"--{name.replace('_', '-')} must be at least {0 if name == 'pilco_trials' else 1}, got {value}")
+    from softpend.commands.options import check_numbers
+    from softpend.commands.train import MAX_EPISODES
+
+    # before anything starts: every loop bounded (os.cpu_count() workers at most a thousandfold)
+    check_numbers(args, {"--episodes-dqn": (1, MAX_EPISODES), "--episodes-mbpo": (1, MAX_EPISODES),
+                         "--pilco-trials": (0, 10_000), "--workers": (1, 1024)})
     if root.exists() and not root.is_dir():
         raise ValueError(f"--runs-root {root} exists and is not a folder")
     configs = {algo: apply_overrides(config, getattr(args, f"{algo}_overrides", None) or [])

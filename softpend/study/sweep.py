@@ -31,7 +31,7 @@ import traceback
 import warnings
 from typing import Any, Callable, Iterator, Optional, Sequence
 
-__all__ = ["BACKENDS", "SweepFailed", "call_job", "default_backend", "default_workers", "run_jobs"]
+__all__ = ["BACKENDS", "SweepFailed", "call_job", "check_backend", "default_backend", "default_workers", "run_jobs"]
 
 #: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
@@ -88,6 +88,21 @@ def _guarded(job: Callable[..., None], args: tuple[Any, ...], name: str, progres
     except Exception:  # noqa: BLE001 -- reported by name to the caller, which retries or raises
         return name, traceback.format_exc()
     return name, None
+
+
+def check_backend(backend: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS` and its package is installed; ``ValueError`` naming what is
+    missing otherwise (checked before any run, whatever the number of jobs: an engine asked for is never
+    silently replaced by running in-process)."""
+    import importlib.util
+
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    needs = {"ray": ("ray", "ray[default]"), "dask": ("distributed", "dask[distributed]")}.get(backend)
+    if needs is not None and importlib.util.find_spec(needs[0]) is None:
+        what = "the ray package" if backend == "ray" else "dask.distributed"
+        raise ValueError(f"backend {backend!r} needs {what} (pip install '{needs[1]}')")
+    return backend
 
 
 @contextlib.contextmanager
@@ -167,9 +182,7 @@ def run_jobs(
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if isinstance(retries, bool) or int(retries) != retries or retries < 0:
         raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
-    backend = default_backend() if backend is None else backend
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    backend = check_backend(default_backend() if backend is None else backend)
     workers = min(int(workers), max(1, len(jobs)))
     pending = dict(zip(names, jobs))
     failures: dict[str, str] = {}

@@ -121,3 +121,24 @@ def test_other_commands_refuse_unbounded_numbers(tmp_path, argv, option):
     training episodes, rig check --rest-s 1e9) or died in a traceback are refused by name up front."""
     refused([a.replace("{tmp}", str(tmp_path)) for a in argv], option)
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("text", ["0-999999999", "0-5,6-99999", "0-10000"])
+def test_sweep_refuses_too_many_seeds_by_size(tmp_path, text):
+    """``--seeds 0-999999999`` built the list first and died in a MemoryError traceback; now the size of each
+    range is refused before a seed is listed."""
+    import argparse
+
+    from softpend.commands.sweep import MAX_SEEDS, seed_list
+
+    with pytest.raises(argparse.ArgumentTypeError, match=f"more than the {MAX_SEEDS}"):
+        seed_list(text)
+    refused(["sweep", "--seeds", text, "--runs-root", str(tmp_path / "runs")], "--seeds", "seeds")
+    assert seed_list("0-9999") == list(range(10_000)) and seed_list("0-2,7,1") == [0, 1, 2, 7]
+
+
+@pytest.mark.parametrize("option, value", [("--episodes-dqn", "1000000000000"), ("--workers", "0"),
+                                           ("--pilco-trials", "-1"), ("--episodes-mbpo", "0")])
+def test_sweep_numbers(tmp_path, option, value):
+    refused(["sweep", "--seeds", "0", "--runs-root", str(tmp_path / "runs"), option, value], option)
+    assert not (tmp_path / "runs").exists()

@@ -113,6 +113,7 @@ MARKERS = "[[0.05, 0.0], [-0.05, 0.0], [0.0, -0.35], [0.1, -0.2]]"
 
 #: Every command that writes files: its arguments (``{d}``: a folder of the test) and the files it writes there.
 COMMANDS = {
+    "rig": (["rig", "--duration", "0.2", "--truth-log", "{d}/truth.csv"], ["truth.csv"]),
     "rig control": (["rig", "control", "lqr", "--twin", "--out", "{d}", "--duration", "0.2", "--no-progress"],
                     ["summary.json", "motor_log.csv", "camera_log.csv", "truth_log.csv"]),
     "rig design": (["rig", "design", "--out", "{d}"], ["rig_design.json", "markers.json", "rig_design.png"]),

@@ -37,11 +37,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from softpend.commands.options import MAX_SESSION_S, check_numbers
     from softpend.hardware.emulator import RigConfig, serve_forever
+    from softpend.io.outputs import Outputs
     from softpend.task import Task
 
     # before anything starts (no --duration: until Ctrl-C or SIGTERM)
     check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--latency-ms": (0.0, 1000.0), "--drop": (0.0, 1.0),
                          "--garble": (0.0, 1.0), "--watchdog-ms": (1, 65535), "--counts-per-rev": (4, 2**24)})
+    outputs = Outputs()  # a truth log of an earlier session may be replaced, no other file
+    if args.truth_log:
+        outputs.file(args.truth_log, what="--truth-log")
 
     config = RigConfig(
         task=Task(start_noise_rad=0.0).replace(n_links=args.n_links),
@@ -53,4 +57,9 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         duration_s=args.duration,
     )
-    return serve_forever(config, truth_log=args.truth_log, link_path=args.port)
+    if not args.truth_log:
+        return serve_forever(config, link_path=args.port)
+    try:
+        return serve_forever(config, truth_log=str(outputs.live(args.truth_log)), link_path=args.port)
+    finally:
+        outputs.done(args.truth_log)

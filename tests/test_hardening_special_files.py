@@ -24,8 +24,15 @@ import pytest
 
 from softpend.cli import main
 from softpend.io.arrays import read_npz
-from softpend.io.reading import (check_zip_members, open_regular_file, read_bytes_checked, read_json_checked,
-                                 read_json_object, read_yaml_checked, read_zip_member)
+from softpend.io.reading import (
+    check_zip_members,
+    open_regular_file,
+    read_bytes_checked,
+    read_json_checked,
+    read_json_object,
+    read_yaml_checked,
+    read_zip_member,
+)
 
 ALARM_S = 60.0
 TINY_PILCO = ["--set", "state=tip", "--set", "horizon_s=0.5", "--set", "prediction_s=null", "--set", "eval_seeds=[1000]",

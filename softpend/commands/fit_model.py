@@ -39,13 +39,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from softpend.commands.options import check_numbers
     from softpend.io.outputs import Outputs, finite_or_none, json_text, output_name
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
     from softpend.sysid.model import is_model_file, model_paths
     from softpend.sysid.training import parse_widths
-
-    from softpend.commands.options import check_numbers
 
     # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
     check_numbers(args, {"--threads": (1, 1024), "--max-epochs": (1, 100_000), "--patience": (1, 100_000),

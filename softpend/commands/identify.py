@@ -35,12 +35,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from softpend.commands.options import check_numbers
     from softpend.io.outputs import Outputs, json_text
     from softpend.plant import RodParams
     from softpend.sysid import load_dataset
     from softpend.sysid.greybox import GreyBoxConfig, identify, is_identification_file
-
-    from softpend.commands.options import check_numbers
 
     # before anything starts: the Levenberg-Marquardt loop and the window draw are bounded
     check_numbers(args, {"--max-iterations": (1, 100_000), "--max-windows": (1, 10**6), "--window-s": (1e-6, 3600.0)})

@@ -25,7 +25,6 @@ from typing import Any
 
 from softpend.commands.options import MAX_SESSION_S, add_set_option, check_numbers
 
-
 #: Accepted ``--print-modulus-mpa`` [MPa]: a soft silicone (0.1 MPa) to steel (about 200 GPa).
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
 
@@ -248,8 +247,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import CALIBRATION_MAX_RESIDUAL_PX, HANGING_TIP_TOLERANCE_M
-    from softpend.vision.calibration import (MAX_CALIBRATION_BYTES, calibrate_from_markers, points_array,
-                                             read_json_file)
+    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, calibrate_from_markers, points_array, read_json_file
     from softpend.vision.tracker import TipTracker
 
     outputs = Outputs()  # before the work: the calibration and its report

@@ -314,6 +314,12 @@ def _cases():
         ("rig calibrate --camera", simple("rig", "calibrate", "--camera", special, "--markers",
                                           "[[0.1, 0.1], [-0.1, 0.1], [0.1, -0.1]]", "--out",
                                           lambda w, t, s: str(t / "c.json")), ["x"]),
+        ("rig check --out", simple("rig", "check", "--twin", "--out", special, "--rest-s", "0.1"), ["x"]),
+        ("rig calibrate --out", simple("rig", "calibrate", "--twin", "--markers",
+                                       "[[0.15, 0.1], [-0.15, 0.1], [0.15, -0.25], [-0.15, -0.25]]", "--out", special),
+         ["x"]),
+        ("rig babble --out", simple("rig", "babble", "--twin", "--out", special, "--duration", "3.2",
+                                    "--trial-length-s", "0.1", "--no-progress"), ["x"]),
         ("rig design --out", lambda w, t, s: ["rig", "design", "--out", str(s(t / "x"))] if not (t / "x").exists()
          else [], ["x"]),
         ("rig --truth-log", simple("rig", "--truth-log", special, "--duration", "0.2"), ["x"]),

@@ -243,3 +243,15 @@ def test_a_sweep_over_a_root_with_runs_of_other_settings_leaves_them_alone(tmp_p
     assert len([p for p in tmp_path.iterdir() if p.name.startswith("dqn-")]) == 3
     with pytest.raises(ValueError, match="different settings"):
         run_folder(tmp_path, "dqn", 0)  # which of the two runs is meant needs the config
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_an_empty_output_path_is_a_named_error(tmp_path, monkeypatch, capsys, command):
+    """Before: ``rig check --out ''`` and ``rig --truth-log ''`` wrote nothing without a word, ``rig control --out ''``
+    wrote its logs into the current folder."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["" if "{d}" in arg and "missing" not in arg else arg.replace("{d}", ".") for arg in COMMANDS[command][0]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "error" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []

@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--latency-ms": (0.0, 1000.0), "--drop": (0.0, 1.0),
                          "--garble": (0.0, 1.0), "--watchdog-ms": (1, 65535), "--counts-per-rev": (4, 2**24)})
     outputs = Outputs()  # a truth log of an earlier session may be replaced, no other file
-    if args.truth_log:
+    if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")
 
     config = RigConfig(
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         duration_s=args.duration,
     )
-    if not args.truth_log:
+    if args.truth_log is None:
         return serve_forever(config, link_path=args.port)
     try:
         return serve_forever(config, truth_log=str(outputs.live(args.truth_log)), link_path=args.port)

@@ -132,7 +132,7 @@ def run_check(args: argparse.Namespace) -> int:
 
     check_numbers(args, {"--rest-s": (0.1, 600.0), "--counts-per-rev": (4, 2**24)})  # before anything starts
     outputs = Outputs()
-    if args.out:  # before the work
+    if args.out is not None:  # before the work (an empty --out is an error, not no report)
         outputs.file(args.out, what="--out")
     if not (math.isfinite(args.rest_s) and args.rest_s > 0):
         raise ValueError(f"--rest-s must be a positive number of seconds, got {args.rest_s!r}")
@@ -145,7 +145,7 @@ def run_check(args: argparse.Namespace) -> int:
         rig.close()
     else:
         report = rig_check(args.port, task, args.rest_s, args.push_fraction)
-    if args.out:
+    if args.out is not None:
         outputs.write_json(args.out, finite_or_none(report))
     for name, check in report["checks"].items():
         print(f"{'ok  ' if check['passed'] else 'FAIL'} {name}: {check['detail']}")

@@ -234,6 +234,12 @@ def written_by_softpend(path: str | Path) -> bool:
         return False
 
 
+def _not_empty(path: str | Path, what: str) -> None:
+    """``ValueError`` for an empty path (``Path("")`` is the current folder: never what an empty ``--out`` meant)."""
+    if not os.fspath(path).strip():
+        raise ValueError(f"{what} is empty")
+
+
 def _unfinished_log(path: Path) -> bool:
     """Whether ``path`` is a crash-safe sample log the manifest records as being written (:meth:`Outputs.live`)
     by a command that did not finish (it never reached :meth:`Outputs.done`)."""
@@ -269,6 +275,7 @@ class Outputs:
     # -------------------------------------------------------------- planning
     def file(self, path: str | Path, what: str = "output", owned: Optional[Callable[[Path], bool]] = None) -> Path:
         """Plan and check the file ``path`` (see the class docstring); returns it as a ``Path``."""
+        _not_empty(path, what)
         path = Path(path)
         self._check(path, what, owned)
         self._planned[path] = (what, owned)
@@ -278,6 +285,7 @@ class Outputs:
                owned: Optional[Callable[[Path], bool]] = None) -> Path:
         """Plan and check the folder ``path`` (created when missing) and the files ``names`` in it; the folder
         may hold other files (they are left alone), not one of ``names`` that the command did not write."""
+        _not_empty(path, what)
         path = Path(path)
         if os.path.lexists(path) and not path.is_dir():
             raise ValueError(f"{what} {path} exists and is not a folder")

@@ -255,3 +255,12 @@ def test_an_empty_output_path_is_a_named_error(tmp_path, monkeypatch, capsys, co
     err = capsys.readouterr().err
     assert "error" in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("algo", ["dqn", "pilco"])
+def test_train_refuses_an_empty_run_folder_path(tmp_path, monkeypatch, capsys, algo):
+    """Before: ``--out ''`` trained into the current folder."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["train", "--algo", algo, "--out", "", "--episodes", "1", "--no-progress"]) == 2
+    assert "the path is empty" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

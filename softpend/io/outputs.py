@@ -81,8 +81,9 @@ def check_output_file(path: str | Path, *, what: str = "output", owned: Optional
     ------
     ValueError
         If ``path`` is a folder or not a regular file, its parent cannot be created (an ancestor is a file) or
-        written, or it exists and ``owned`` does not claim it.
+        written, or it exists and ``owned`` does not claim it; or if ``path`` is empty.
     """
+    _not_empty(path, what)
     path = Path(path)
     if os.path.lexists(path):
         if path.is_dir():
@@ -101,8 +102,9 @@ def check_output_folder(path: str | Path, *, what: str = "output folder", owned:
 
     ``owned(path) -> bool`` says whether an existing non-empty folder is one the caller wrote (and may write
     into); without it only a missing or empty folder passes.  Raises ``ValueError`` otherwise, or when the
-    folder cannot be created or written.
+    folder cannot be created or written, or ``path`` is empty.
     """
+    _not_empty(path, what)
     path = Path(path)
     if os.path.lexists(path):
         if not path.is_dir():
@@ -237,7 +239,7 @@ def written_by_softpend(path: str | Path) -> bool:
 def _not_empty(path: str | Path, what: str) -> None:
     """``ValueError`` for an empty path (``Path("")`` is the current folder: never what an empty ``--out`` meant)."""
     if not os.fspath(path).strip():
-        raise ValueError(f"{what} is empty")
+        raise ValueError(f"{what}: the path is empty")
 
 
 def _unfinished_log(path: Path) -> bool:

@@ -117,3 +117,12 @@ def test_the_project_files_pass(tmp_path):
     assert toc_notebooks(repo / "_toc.yml")
     profiles = load_profiles(repo / "book" / "profiles.yml")
     assert "quick" in profiles and all(type(v) is dict for v in profiles.values())
+
+
+@pytest.mark.timeout(120, method="thread")
+def test_a_notebook_source_that_is_a_fifo(root):
+    """``notebooks/NAME.md`` a named pipe: refused by name, not read until a writer appears."""
+    (root / "notebooks").mkdir()
+    os.mkfifo(root / "notebooks" / "fig02_reward.md")
+    line = one_line(["book", "--root", str(root), "--profile", "quick"])
+    assert "fig02_reward.md" in line and "named pipe" in line

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
 
-from softpend.io.reading import read_yaml_checked, yaml_line
+from softpend.io.reading import MAX_CONFIG_BYTES, read_text_checked, read_yaml_checked, yaml_line
 
 DEFAULT_PROFILE = "full"
 GENERATED_PREFIX = "book/_generated/"
@@ -178,7 +178,12 @@ def read_notebook(source_path: Path | str):
     """A jupytext MyST notebook as an ``nbformat`` notebook (no outputs)."""
     import jupytext
 
-    return jupytext.read(Path(source_path), fmt="md:myst")  # FileNotFoundError naming it when it is missing
+    return jupytext.reads(_source_text(source_path), fmt="md:myst")  # FileNotFoundError naming it when missing
+
+
+def _source_text(source_path: Path | str) -> str:
+    """A notebook source through the checked reader (a regular file of bounded size: a FIFO never blocks)."""
+    return read_text_checked(source_path, "notebook source", MAX_CONFIG_BYTES)
 
 
 def _parameters_cell(nb) -> Optional[str]:
@@ -502,7 +507,7 @@ def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: 
         for name in order:  # upstream keys: this run's, else the key files on disk
             upstream = {dep: plans[dep]["key"] if dep in plans else (layout.key_path(dep).read_text().strip()
                         if layout.key_path(dep).is_file() else "absent") for dep in after[name]}
-            source = layout.source_path(name).read_text(encoding="utf-8")
+            source = _source_text(layout.source_path(name))
             plans[name]["key"] = key = cache_key(source, plans[name]["parameters"], plans[name]["hashes"], upstream)
             cached[name] = (not force and layout.output_path(name).is_file() and layout.key_path(name).is_file()
                             and layout.key_path(name).read_text(encoding="utf-8").strip() == key)
@@ -570,7 +575,7 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
 
     this_run, notebooks = {run.name: run for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
-        lines = layout.source_path(name).read_text(encoding="utf-8").splitlines()
+        lines = _source_text(layout.source_path(name)).splitlines()
         entry = {"name": name, "title": next((line[2:].strip() for line in lines if line.startswith("# ")), name),
                  "this_run": this_run[name].status if name in this_run else "not run",
                  "executed_s": None, "executed_at": None, "profile": None}

@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
 
         rows = pilco_fresh_start_rows(pilco_results) if pilco_results else []
         if rl_logs:
-            rows += rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs))
+            rows += rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs), configs=configs)
         out["fresh_starts"] = rows
         out["fresh_start_summary"] = aggregate_fresh_start_rows(rows)
         per_seed = seed_rows(rl_logs, rows, pilco_results)

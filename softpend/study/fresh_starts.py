@@ -17,7 +17,7 @@ import hashlib
 import json
 import math
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -92,8 +92,11 @@ def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Seque
 
 def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
                         report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
-                        which: Sequence[str] = ("best", "final")) -> list[dict[str, Any]]:
-    """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``.
+                        which: Sequence[str] = ("best", "final"),
+                        configs: Optional[Mapping[str, Any]] = None) -> list[dict[str, Any]]:
+    """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``
+    (``configs``: ``{algo: config}`` of the runs, which picks their folders where runs of several settings
+    share ``runs_root``; :func:`softpend.study.rl_runs.run_folder`).
 
     Each run folder keeps its rows in :data:`FRESH_STARTS_FILE`, keyed by the agent file's bytes, the starts, the
     duration and the source of the evaluation code, so that the figures that report them evaluate each agent
@@ -109,7 +112,7 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
     rows = []
     for algo in algos:
         for seed in seeds:
-            folder = run_folder(runs_root, algo, int(seed))
+            folder = run_folder(runs_root, algo, int(seed), (configs or {}).get(algo))
             cache_path = folder / FRESH_STARTS_FILE
             cache = read_json_object(cache_path, 10**6) or {}
             changed = False

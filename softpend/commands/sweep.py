@@ -1,8 +1,9 @@
 """``softpend sweep``: train every method over many seeds on a parallel engine and summarise the runs.
 
-Each (method, seed) run lives in its own folder under ``--runs-root`` (``<algo>-seed<k>``,
-``pilco-seed<k>``), is reused when finished with the same settings and resumed when shorter, so a sweep that
-was interrupted continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
+Each (method, settings, seed) run lives in its own folder under ``--runs-root`` (``<algo>-<hash>-seed<k>``,
+``<hash>`` naming the settings: :func:`softpend.study.rl_runs.run_folder`), so that runs of other settings are
+never trained over; it is reused when finished and resumed when shorter, so a sweep that was interrupted
+continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
 (``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.run_pool.train_in_one_pool`), where
 a worker that dies is retried and finished runs are kept.  The
 settings are the book's (:mod:`softpend.study.presets`).  ``--book`` instead trains the runs the book's

@@ -318,19 +318,44 @@ def test_fuzz_command(world, name):
     case()
 
 
+def _field_names(config: Any, prefix: str = "") -> list[str]:
+    """Every field of a (nested) dataclass config by its dotted ``--set`` name."""
+    names = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        names.append(prefix + f.name)
+        if dataclasses.is_dataclass(value):
+            names += _field_names(value, f"{prefix}{f.name}.")
+    return names
+
+
 @pytest.mark.timeout(600, method="thread")
-@fuzz_settings(12)
-@given(field=st.sampled_from(["learning_rate", "buffer_size", "batch_size", "gamma", "net_arch", "episode_s",
-                              "eval_seeds", "eval_duration_s", "action_repeat", "n_torque_levels", "training_start",
-                              "task.rod.n_links", "task.rod.mass_kg", "task.dt_s", "task.substeps", "task.plant",
-                              "train_freq", "no_such_field", "task.no_field", "exploration_fraction",
-                              "task.rod.torque_limit_nm"]),
-       value=HOSTILE_JSON)
-def test_fuzz_train_set(world, field, value):
-    """``softpend train --set FIELD=VALUE`` with hostile JSON for config fields."""
-    argv = ["train", "--algo", "dqn", "--out", fresh(world, "r"), "--episodes", "1", "--no-progress", *TINY_RL,
-            "--set", f"{field}={json.dumps(value)}"]
+@fuzz_settings(16)
+@given(algo=st.sampled_from(["dqn", "mbpo"]), data=st.data())
+def test_fuzz_train_set(world, algo, data):
+    """``softpend train --set FIELD=VALUE`` with hostile JSON for every config field (nested ones included)."""
+    from softpend.rl.config import DQNConfig, MBPOConfig
+
+    config = DQNConfig() if algo == "dqn" else MBPOConfig()
+    field = data.draw(st.sampled_from(_field_names(config) + ["no_such_field", "task.no_field"]))
+    value = data.draw(st.one_of(HOSTILE_JSON.map(json.dumps), HOSTILE_NUMBER))
+    argv = ["train", "--algo", algo, "--out", fresh(world, "r"), "--episodes", "1", "--no-progress", *TINY_RL,
+            "--set", f"{field}={value}"]
+    if algo == "mbpo":
+        argv += ["--set", "initial_random_episodes=1", "--set", "model_fit_steps=5", "--set", "ensemble_size=1"]
     run_cli(argv, world["guarded"])
+
+
+@pytest.mark.timeout(600, method="thread")
+@fuzz_settings(10)
+@given(data=st.data())
+def test_fuzz_rod_fields(world, data):
+    """``softpend rig design --set FIELD=VALUE`` with hostile JSON for every RodParams field."""
+    from softpend.plant import RodParams
+
+    field = data.draw(st.sampled_from(_field_names(RodParams()) + ["no_such_field"]))
+    value = data.draw(st.one_of(HOSTILE_JSON.map(json.dumps), HOSTILE_NUMBER))
+    run_cli(["rig", "design", "--out", fresh(world, "d"), "--set", f"{field}={value}"], world["guarded"])
 
 
 # ------------------------------------------------------------------------------------------------ loaders

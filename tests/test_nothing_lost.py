@@ -264,3 +264,22 @@ def test_train_refuses_an_empty_run_folder_path(tmp_path, monkeypatch, capsys, a
     assert main(["train", "--algo", algo, "--out", "", "--episodes", "1", "--no-progress"]) == 2
     assert "the path is empty" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_log_of_a_run_that_stopped_before_its_end_is_still_the_commands(tmp_path):
+    """A crash-safe log is written in place (:meth:`Outputs.live`); a run that died before :meth:`Outputs.done`
+    leaves it recorded as being written: the next run may replace that log, never a file put in its place."""
+    from softpend.io.outputs import Outputs
+    from softpend.io.samplelog import SampleLog
+
+    path = Outputs().file(tmp_path / "motor_log.csv")
+    first = Outputs()
+    first.file(path)
+    with SampleLog(first.live(path), ["t_s"]) as log:
+        log.append([0.0])  # ... and the process dies here: no done()
+    Outputs().file(path)  # the next run may replace it
+    path.unlink()
+    path.write_text("t_s\n0.0\n")  # the user's own CSV in its place
+    with pytest.raises(ValueError, match="motor_log.csv exists and is not a file this command wrote"):
+        Outputs().file(path)
+

@@ -283,3 +283,10 @@ def test_a_log_of_a_run_that_stopped_before_its_end_is_still_the_commands(tmp_pa
     with pytest.raises(ValueError, match="motor_log.csv exists and is not a file this command wrote"):
         Outputs().file(path)
 
+
+def test_train_resume_of_a_folder_without_a_run_is_a_named_error(tmp_path, capsys):
+    """Before: ``--resume`` with a mistyped ``--out`` started a new run there without a word."""
+    assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "typo"), "--resume", *TINY]) == 2
+    assert "holds no run to resume" in capsys.readouterr().err
+    assert not (tmp_path / "typo").exists()
+

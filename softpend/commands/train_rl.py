@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import Any, TypeVar
 
 from softpend.io.outputs import json_text
@@ -53,6 +54,8 @@ def _train(algo: str, args: argparse.Namespace) -> int:
     config = config_from_args(base, args)
     episodes = args.episodes if args.episodes is not None else RL_EPISODES[algo]
     train = train_dqn if algo == "dqn" else train_mbpo
+    if args.resume and not (Path(args.out) / "config.json").is_file():  # a mistyped --out would start a new run
+        raise ValueError(f"--resume: {args.out} holds no run to resume (no config.json); leave out --resume to start one")
     _, log = train(config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress)
     print(json_text(_summary(log), indent=2))
     print(f"saved {args.out}/agent.zip")

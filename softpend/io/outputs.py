@@ -25,16 +25,12 @@ __all__ = ["MANIFEST", "Outputs", "atomic_write", "check_output_file", "check_ou
 
 
 def read_json_object(path: str | Path, max_bytes: int) -> Optional[dict]:
-    """The JSON object in the file at ``path``, or None when it is missing, larger than ``max_bytes``, not
-    JSON or not an object (for ownership checks: is this file one of ours?)."""
-    path = Path(path)
-    try:
-        if path.stat().st_size > max_bytes:
-            return None
-        data = json.loads(path.read_text())
-    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
-        return None
-    return data if isinstance(data, dict) else None
+    """The JSON object in the file at ``path``, or None when it is missing, not a regular file, larger than
+    ``max_bytes``, not JSON or not an object (for ownership checks: is this file one of ours?); never blocks
+    (:func:`softpend.io.reading.read_json_object`)."""
+    from softpend.io.reading import read_json_object as read
+
+    return read(path, max_bytes)
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -247,6 +243,8 @@ def _unfinished_log(path: Path) -> bool:
     by a command that did not finish (it never reached :meth:`Outputs.done`)."""
     entry = (_read_manifest(path.parent) or {}).get(path.name)
     if not isinstance(entry, dict) or entry.get("sha256", "") is not None:
+        return False
+    if path.is_symlink() or not path.is_file():  # a FIFO would block the read
         return False
     try:
         with open(path, "rb") as handle:

@@ -383,3 +383,20 @@ def test_json_file_larger_than_its_format(world, tmp_path):
     params = tmp_path / "params.json"
     params.write_text(json.dumps({"pad": "x" * (2 * 10**6)}))
     assert_named_error(["identify", str(world["data"]), "--initial-params", str(params)], "params.json", "bytes")
+
+
+def test_replay_buffer_file_bounded_by_the_buffer(tmp_path):
+    """A replay-buffer file can hold no more than the buffer it fills: a member of 64 MiB of zeros (a few KiB
+    packed) for a buffer of 10 rows is refused from the zip directory, before it is unpacked."""
+    from gymnasium import spaces
+    from stable_baselines3.common.buffers import ReplayBuffer
+
+    from softpend.rl.agent_files import AgentFileError, load_replay_buffer, save_replay_buffer
+
+    buffer = ReplayBuffer(10, spaces.Box(-1, 1, (3,), dtype=np.float32), spaces.Discrete(5), device="cpu")
+    path = tmp_path / "replay_buffer.npz"
+    save_replay_buffer(buffer, path)
+    load_replay_buffer(ReplayBuffer(10, buffer.observation_space, buffer.action_space, device="cpu"), path)
+    np.savez_compressed(path, observations=np.zeros(8 * 2**20))
+    with pytest.raises(AgentFileError, match="would unpack to"):
+        load_replay_buffer(ReplayBuffer(10, buffer.observation_space, buffer.action_space, device="cpu"), path)

@@ -259,7 +259,13 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
         If the file is not such a file or does not fit ``buffer`` (arrays, shapes, dtypes, position).
     """
     path = Path(path)
-    saved = read_npz(path, "replay buffer file", AgentFileError)
+    # the file can hold no more than the buffer it fills (its arrays, and the zip's and headers' overhead)
+    arrays = [getattr(part, name) for part in _parts(buffer).values() for name in _BUFFER_ARRAYS]
+    plant_observations = getattr(buffer, "plant_observations", None)
+    if isinstance(plant_observations, np.ndarray):
+        arrays.append(plant_observations)
+    max_bytes = 2**20 + sum(int(array.nbytes) for array in arrays)
+    saved = read_npz(path, "replay buffer file", AgentFileError, max_bytes=max_bytes)
     expected: set[str] = set()
     for prefix in _parts(buffer):
         expected.update(prefix + name for name in _BUFFER_ARRAYS + ("pos", "full"))

@@ -319,7 +319,8 @@ class RigEmulator(SimRig):
         tty.setraw(self._slave_fd)
         os.set_blocking(self.master_fd, False)  # every write to the host is bounded (see _PtyHost)
         self.port = os.ttyname(self._slave_fd)
-        self.host = _PtyHost(self.master_fd)
+        self._pty_host = _PtyHost(self.master_fd)
+        self.host = self._pty_host  # type: ignore[assignment]  # the pty's master end stands in for the host
         self._linked = False
         try:
             if self.link_path is not None:
@@ -339,7 +340,7 @@ class RigEmulator(SimRig):
     def stats(self) -> dict[str, float]:
         """:meth:`RigDevice.stats` and ``frames_dropped_full``: frames (STATEs and replies) the pty had no room
         for (no host read them)."""
-        return {**super().stats(), "frames_dropped_full": float(self.host.frames_dropped)}
+        return {**super().stats(), "frames_dropped_full": float(self._pty_host.frames_dropped)}
 
     def serve(self) -> None:
         """Run until :meth:`stop`, ``duration_s`` of device time, or SIGTERM; the plant runs in real time."""

@@ -54,7 +54,7 @@ MAX_EPISODES = 1_000_000
 def run(args: argparse.Namespace) -> int:
     from softpend.commands.options import check_numbers
 
-    check_numbers(args, {"--episodes": (1, MAX_EPISODES)})  # before anything starts
+    check_numbers(args, {"--episodes": (0, MAX_EPISODES)})  # before anything starts (0: PILCO's random trials only)
     if args.out is None:
         args.out = f"runs/{args.algo}-seed{args.seed}"
     args.overrides = dict(args.overrides or [])

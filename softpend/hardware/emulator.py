@@ -373,8 +373,9 @@ class RigEmulator(SimRig):
             except OSError:
                 pass
         super().close()
-        if self._linked and self.link_path.is_symlink() and os.readlink(self.link_path) == self.port:
-            self.link_path.unlink()
+        link = self.link_path
+        if self._linked and link is not None and link.is_symlink() and os.readlink(link) == self.port:
+            link.unlink()
         self._linked = False
 
 
@@ -445,8 +446,10 @@ class EmulatorProcess:
         self.config = config
         self._stderr = tempfile.TemporaryFile(mode="w+")
         self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
-        ready, _, _ = select.select([self.process.stdout], [], [], start_timeout_s)
-        line = self.process.stdout.readline().strip() if ready else ""
+        stdout = self.process.stdout
+        assert stdout is not None  # stdout=PIPE
+        ready, _, _ = select.select([stdout], [], [], start_timeout_s)
+        line = stdout.readline().strip() if ready else ""
         if not line.startswith("/dev/"):
             self.process.kill()
             self.process.wait()

@@ -37,7 +37,10 @@ def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
     text = Path(firmware_path).read_text()
     head = text.split(BEGIN_MARKER, 1)[0]
     tail = text.split(END_MARKER, 1)[1]
-    Path(firmware_path).write_text(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
+    from softpend.io.outputs import atomic_write
+
+    with atomic_write(firmware_path, "w") as handle:  # an interrupted update leaves the firmware as it was
+        handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
 
 
 if __name__ == "__main__":  # pragma: no cover

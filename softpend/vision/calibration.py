@@ -144,7 +144,12 @@ class AffineCalibration:
         return cls(data["pixel_to_metre"], data.get("residual_rms_m", 0.0))
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(self.to_json())
+        """Write :meth:`to_json` to ``path`` atomically (``softpend rig calibrate`` writes through
+        :class:`softpend.io.outputs.Outputs`, which also refuses a file it did not write)."""
+        from softpend.io.outputs import atomic_write
+
+        with atomic_write(path, "w") as handle:
+            handle.write(self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> "AffineCalibration":

@@ -456,7 +456,10 @@ def render_video(
         "camera_model": asdict(camera.model),
         "effects": asdict(camera.effects),
     }
-    Path(str(path) + ".json").write_text(json.dumps(sidecar))
+    from softpend.io.outputs import atomic_write
+
+    with atomic_write(str(path) + ".json", "w") as handle:
+        handle.write(json.dumps(sidecar))
     return RenderedClip(stamps, tips, kept)
 
 

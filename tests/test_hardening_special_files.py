@@ -320,6 +320,9 @@ def _cases():
          ["x"]),
         ("rig babble --out", simple("rig", "babble", "--twin", "--out", special, "--duration", "3.2",
                                     "--trial-length-s", "0.1", "--no-progress"), ["x"]),
+        ("sweep --runs-root", simple("sweep", "--seeds", "0", "--runs-root", special), ["x"]),
+        ("book --root", simple("book", "--root", special, "--profile", "quick"), ["x"]),
+        ("sweep --book --root", simple("sweep", "--book", "--root", special, "--profile", "quick"), ["x"]),
         ("rig design --out", lambda w, t, s: ["rig", "design", "--out", str(s(t / "x"))] if not (t / "x").exists()
          else [], ["x"]),
         ("rig --truth-log", simple("rig", "--truth-log", special, "--duration", "0.2"), ["x"]),
@@ -333,7 +336,7 @@ CASES = _cases()
 @pytest.mark.parametrize("kind", ["fifo", "folder"])
 @pytest.mark.parametrize("name, build, words", CASES, ids=[c[0] for c in CASES])
 def test_command_on_a_special_file(world, tmp_path, kind, name, build, words):
-    if kind == "folder" and name in ("rig design --out", "rig control --out"):
+    if kind == "folder" and name in ("rig design --out", "rig control --out", "sweep --runs-root"):
         pytest.skip(f"a folder is what {name} expects")
 
     def make(path: Path) -> Path:

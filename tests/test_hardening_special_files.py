@@ -403,3 +403,14 @@ def test_replay_buffer_file_bounded_by_the_buffer(tmp_path):
     np.savez_compressed(path, observations=np.zeros(8 * 2**20))
     with pytest.raises(AgentFileError, match="would unpack to"):
         load_replay_buffer(ReplayBuffer(10, buffer.observation_space, buffer.action_space, device="cpu"), path)
+
+
+@pytest.mark.timeout(60, method="thread")
+def test_a_fifo_swapped_in_after_the_check_does_not_block(fifo, monkeypatch):
+    """The check before opening can race with a swap (a regular file replaced by a FIFO): the open is
+    non-blocking and the descriptor is checked again, so the read is refused instead of waiting for a writer."""
+    import softpend.io.reading as reading
+
+    monkeypatch.setattr(reading, "check_regular_file", lambda *args, **kwargs: None)  # the swap won the race
+    with alarm(10), pytest.raises(ValueError, match="named pipe"):
+        reading.read_bytes_checked(fifo, "config file", 100)

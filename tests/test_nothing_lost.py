@@ -151,9 +151,8 @@ def test_a_users_file_beside_every_output_is_refused_by_name_and_left_as_it_was(
     assert sorted(p.name for p in folder.iterdir()) == [name]  # nothing else written: refused before the work
 
 
-@pytest.mark.parametrize("command", ["rig design", "rig check", "rig calibrate"])
+@pytest.mark.parametrize("command", ["rig design", "rig check", "rig calibrate", "babble"])
 def test_a_command_replaces_its_own_outputs_not_the_users_edit_of_them(tmp_path, capsys, command):
-    """(A dataset, a model and an identification file are also claimed by their content, as before.)"""
     folder = tmp_path / "out"
     folder.mkdir()
     (folder / "notes.txt").write_text("the user's notes\n")
@@ -288,4 +287,18 @@ def test_train_resume_of_a_folder_without_a_run_is_a_named_error(tmp_path, capsy
     assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "typo"), "--resume", *TINY]) == 2
     assert "holds no run to resume" in capsys.readouterr().err
     assert not (tmp_path / "typo").exists()
+
+
+def test_a_dataset_the_command_did_not_write_is_the_users(tmp_path, capsys):
+    """A dataset (a model, an identification file) is the command's only when its folder's manifest records
+    it: one the user placed there, even a softpend dataset written elsewhere, is never replaced."""
+    elsewhere, here = tmp_path / "a" / "data.npz", tmp_path / "b" / "data.npz"
+    argv = ["babble", "--n-trials", "1", "--trial-length-s", "0.1", "--no-progress"]
+    assert main([*argv[:1], str(elsewhere), *argv[1:]]) == 0
+    here.parent.mkdir()
+    here.write_bytes(elsewhere.read_bytes())  # the user's copy of a dataset
+    capsys.readouterr()
+    assert main([*argv[:1], str(here), *argv[1:], "--seed", "1"]) == 2
+    assert "data.npz exists and is not a file this command wrote" in capsys.readouterr().err
+    assert here.read_bytes() == elsewhere.read_bytes()
 

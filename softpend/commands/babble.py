@@ -41,10 +41,9 @@ def run(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs, json_text, output_name
     from softpend.plant import RodParams
     from softpend.sysid import BabbleProtocol, babble
-    from softpend.sysid.dataset import is_dataset_file
 
-    outputs = Outputs()  # before the work: a dataset may be replaced, no other file
-    output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset", owned=is_dataset_file))
+    outputs = Outputs()  # before the work: a dataset this command wrote may be replaced, no other file
+    output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset"))
 
     protocol = BabbleProtocol(
         n_trials=args.n_trials,

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs, finite_or_none, json_text, output_name
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
-    from softpend.sysid.model import is_model_file, model_paths
+    from softpend.sysid.model import model_paths
     from softpend.sysid.training import parse_widths
 
     # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
@@ -51,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
                          "--ensemble-size": (1, 1000), "--history": (0, 1000), "--batch-size": (1, 10**8)})
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
-    model_files = [outputs.file(path, what="model file", owned=is_model_file)  # before the work: a model of ours
-                   for path in model_paths(args.output)]                       # may be replaced, nothing else
+    # before the work: a model this command wrote may be replaced, nothing else
+    model_files = [outputs.file(path, what="model file") for path in model_paths(args.output)]
     config = TrainConfig(
         information=args.information,
         history=args.history,

@@ -39,13 +39,13 @@ def run(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs, json_text
     from softpend.plant import RodParams
     from softpend.sysid import load_dataset
-    from softpend.sysid.greybox import GreyBoxConfig, identify, is_identification_file
+    from softpend.sysid.greybox import GreyBoxConfig, identify
 
     # before anything starts: the Levenberg-Marquardt loop and the window draw are bounded
     check_numbers(args, {"--max-iterations": (1, 100_000), "--max-windows": (1, 10**6), "--window-s": (1e-6, 3600.0)})
     outputs = Outputs()
-    if args.out is not None:  # before the work
-        outputs.file(args.out, what="identification file", owned=is_identification_file)
+    if args.out is not None:  # before the work: a file this command wrote may be replaced, no other
+        outputs.file(args.out, what="identification file")
     names = [n.strip() for n in args.parameters.split(",") if n.strip()]
     flags = ((args.torque_gain, "torque_gain"), (args.encoder_offset, "encoder_offset_rad"), (args.torque_delay, "torque_delay_s"),
              (args.camera_delay, "camera_delay_s"))

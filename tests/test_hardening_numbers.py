@@ -142,3 +142,13 @@ def test_sweep_refuses_too_many_seeds_by_size(tmp_path, text):
 def test_sweep_numbers(tmp_path, option, value):
     refused(["sweep", "--seeds", "0", "--runs-root", str(tmp_path / "runs"), option, value], option)
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("option, value", [("--tip-noise-std-m", "1e300"), ("--phi-noise-std-rad", "1e9"),
+                                           ("--feedback-kp", "1e300"), ("--torque-std-fraction", "1e300"),
+                                           ("--torque-bandwidth-hz", "1e300")])
+def test_babble_refuses_a_dataset_of_noise(tmp_path, option, value):
+    """``babble --tip-noise-std-m 1e300`` wrote a 'dataset' of tip positions of 1e300 m and exited 0."""
+    refused(["babble", str(tmp_path / "d.npz"), "--n-trials", "1", "--trial-length-s", "0.05", "--no-progress",
+             option, value], option)
+    assert not (tmp_path / "d.npz").exists()

@@ -3,7 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import math
 import time
+
+from softpend.commands.options import check_numbers
+
+#: Plausible ranges of the babbling options (a wider value gives a dataset of noise, or of saturated torques,
+#: that still passes as data): noise stds up to a half turn or a metre, gains and the random torque's std far
+#: beyond the defaults.
+BABBLE_RANGES: dict[str, tuple[float, float]] = {
+    "--phi-noise-std-rad": (0.0, math.pi), "--er-noise-std-rad": (0.0, math.pi), "--tip-noise-std-m": (0.0, 1.0),
+    "--feedback-kp": (0.0, 1e4), "--feedback-kd": (0.0, 1e3), "--torque-std-fraction": (0.0, 100.0),
+    "--torque-bandwidth-hz": (1e-3, 1e4), "--camera-delay-steps": (0, 10**6),
+}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.plant import RodParams
     from softpend.sysid import BabbleProtocol, babble
 
+    check_numbers(args, BABBLE_RANGES)  # before anything starts: a dataset of data, not of noise
     outputs = Outputs()  # before the work: a dataset this command wrote may be replaced, no other file
     output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset"))
 

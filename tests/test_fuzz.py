@@ -29,6 +29,7 @@ import shutil
 import signal
 import stat
 import traceback
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
@@ -132,10 +133,16 @@ def run_cli(argv: list[str], guarded: list[Path]) -> None:
     before = _snapshot(guarded)
     out, err = io.StringIO(), io.StringIO()
     try:
-        with alarm(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        with alarm(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+                warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
             rc = main(argv)
     except BaseException as exc:  # noqa: BLE001 - anything escaping main is the outcome under test
         raise AssertionError(f"softpend {argv}: {type(exc).__name__}: {exc}") from exc
+    # a result computed through an overflow is silent garbage, not a legitimate result
+    overflows = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)
+                 and re.search(r"overflow|invalid value", str(w.message))]
+    assert rc != 0 or not overflows, f"softpend {argv}: exit 0 after {overflows[:3]}"
     assert _snapshot(guarded) == before, f"softpend {argv}: changed a file it did not write"
     stderr, stdout = err.getvalue(), out.getvalue()
     assert "Traceback" not in stderr, f"softpend {argv}: {stderr[-600:]}"

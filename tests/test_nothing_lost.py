@@ -301,20 +301,3 @@ def test_a_dataset_the_command_did_not_write_is_the_users(tmp_path, capsys):
     assert main([*argv[:1], str(here), *argv[1:], "--seed", "1"]) == 2
     assert "data.npz exists and is not a file this command wrote" in capsys.readouterr().err
     assert here.read_bytes() == elsewhere.read_bytes()
-
-
-def test_a_run_of_the_old_folder_name_with_the_same_settings_is_renamed_and_reused(tmp_path):
-    """The book's runs trained before the hashed names are found, not trained again."""
-    from softpend.rl.config import DQNConfig
-    from softpend.rl.dqn import train_dqn
-    from softpend.study.rl_runs import run_folder, train_seeds
-
-    config = DQNConfig(learning_starts=10, episode_s=0.5, eval_seeds=(0,), eval_duration_s=0.2)
-    old = tmp_path / "dqn-seed0"
-    train_dqn(config, seed=0, episodes=1, run_dir=old, progress=False)
-    stamp = (old / "log.json").stat().st_mtime_ns
-    [log] = train_seeds("dqn", config, [0], 1, tmp_path, progress=False, workers=1)
-    folder = run_folder(tmp_path, "dqn", 0, config)
-    assert not old.exists() and (folder / "log.json").stat().st_mtime_ns == stamp and log.n_episodes == 1
-    assert run_folder(tmp_path, "dqn", 0) == folder  # found without the config too
-

@@ -54,14 +54,14 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
     holds a run of other settings (a hash collision, or one this version cannot read) raises ``ValueError``:
     it is never trained over."""
     from softpend.io.runfolders import check_run_folder
-    from softpend.study.rl_runs import adopt_run_folder
+    from softpend.study.rl_runs import run_folder
 
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
     jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))
-        folder = adopt_run_folder(runs_root, "pilco", int(seed), seeded)
+        folder = run_folder(runs_root, "pilco", int(seed), seeded)
         if folder.name not in jobs and _saved_run(folder, seeded) is None:
             if (folder / "pilco.json").exists():
                 saved = read_json_object(folder / "pilco.json", 10**8)

@@ -11,15 +11,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import re
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 
-from softpend.io.reading import read_json_object
 from softpend.io.overrides import apply_overrides
-from softpend.io.runfolders import run_folder_name, setting_differences
+from softpend.io.runfolders import run_folder_name
 from softpend.study.presets import TASK, load_hparams
 from softpend.task import Task
 from softpend.study.sweep import run_jobs
@@ -28,7 +26,7 @@ from softpend.rl.config import DQNConfig, MBPOConfig, load_config, saved_config_
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["METHOD_NAMES", "adopt_run_folder", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs",
+__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs",
            "run_config_data", "run_folder", "summary_table", "train_seeds", "train_run"]
 
 
@@ -74,7 +72,7 @@ def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
         if algo == "mbpo" and not isinstance(config, MBPOConfig):
             raise ValueError("algo 'mbpo' needs an MBPOConfig")
         for seed in seeds:
-            run_dir = adopt_run_folder(root, algo, int(seed), config)
+            run_dir = run_folder(root, algo, int(seed), config)
             if run_dir.name in names:
                 continue  # a seed listed twice is trained once (two workers must not share a folder)
             log_path = run_dir / "log.json"
@@ -205,7 +203,7 @@ def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) 
     SHA-256 of :func:`run_config_data` (:func:`softpend.io.runfolders.run_folder_name`): a changed setting is a
     new folder, so a run is never trained over by a run of other settings.  Without ``config``, the run of
     ``algo`` and ``seed`` under ``runs_root`` whatever its settings: the one folder of that form there, else
-    the folder of the names before the hashes (``<algo>-seed<seed>``, which may not exist).
+    ``<algo>-seed<seed>`` (which does not exist).
 
     Raises
     ------
@@ -222,25 +220,3 @@ def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) 
         raise ValueError(f"{root} holds runs of {algo} seed {seed} with {len(found)} different settings "
                          f"({', '.join(p.name for p in found)}); pass the run's config to pick one")
     return found[0] if found else root / f"{algo}-seed{int(seed)}"
-
-
-def adopt_run_folder(runs_root: Path | str, algo: str, seed: int, config: Any) -> Path:
-    """:func:`run_folder` ``(runs_root, algo, seed, config)``; a run of these settings and seed in a folder of
-    the names before the hashes (``<algo>-seed<seed>``) is first renamed to it, so that it is reused."""
-    folder = run_folder(runs_root, algo, seed, config)
-    legacy = Path(runs_root) / f"{algo}-seed{int(seed)}"
-    if folder.exists() or not legacy.is_dir() or legacy.is_symlink():
-        return folder
-    if algo == "pilco":
-        saved = (read_json_object(legacy / "pilco.json", 10**8) or {}).get("config")
-        wanted = json.loads(json.dumps(config.to_dict(), default=float))
-        same = saved is not None and not setting_differences(saved, wanted)
-    else:
-        from softpend.rl.dqn import saved_run_seed
-
-        saved = read_json_object(legacy / "config.json", 10**7)
-        same = (saved is not None and not setting_differences(saved, saved_config_data(config))
-                and saved_run_seed(legacy) in (None, int(seed)))
-    if same:
-        os.rename(legacy, folder)
-    return folder

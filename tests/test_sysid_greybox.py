@@ -11,7 +11,7 @@ from support import one_line_error
 from softpend.cli import main
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid import BabbleProtocol, babble
-from softpend.sysid.greybox import GreyBoxConfig, identify, is_identification_file, reconstruct_joint_states
+from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
 from softpend.sysid.quality import prb_one_step_errors, prb_rollout_tip_errors, rollout_starts, tip_rmse_at_s, valid_prediction
 
 SMALL = BabbleProtocol(n_trials=3, trial_length_s=1.0)
@@ -49,7 +49,6 @@ def test_identification_result_round_trips_through_rod_params_json(fitted, tmp_p
     path = tmp_path / "identified.json"
     path.write_text(json.dumps(fitted.to_dict()))
     assert RodParams.from_json(path) == fitted.params
-    assert is_identification_file(path)
     plain = tmp_path / "plain.json"
     plain.write_text(json.dumps(fitted.params.to_dict()))
     assert RodParams.from_json(plain) == fitted.params

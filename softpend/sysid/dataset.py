@@ -43,16 +43,14 @@ import io
 import json
 import math
 import zipfile
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 
-from softpend.io.arrays import read_npy_member, read_npz
+from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
-from softpend.io.reading import open_regular_file
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.sysid.variables import POSITION_NAMES, velocity_name
 
@@ -63,7 +61,6 @@ __all__ = [
     "TrajectoryDataset",
     "save_dataset",
     "load_dataset",
-    "is_dataset_file",
     "DT_S_RANGE",
 ]
 
@@ -399,21 +396,6 @@ def write_dataset(path: str | Path, dataset: TrajectoryDataset) -> Path:
             np.lib.format.write_array(buffer, np.require(members[name], requirements="C"), allow_pickle=False)
             archive.writestr(info, buffer.getvalue())
     return path
-
-
-def is_dataset_file(path: str | Path) -> bool:
-    """Whether ``path`` is a dataset file (a zip whose ``metadata`` member names this schema); reads only the
-    metadata (an output check of ``softpend babble``: a dataset may be replaced, any other file may not)."""
-    try:
-        with open_regular_file(path, "dataset file") as handle, zipfile.ZipFile(handle) as archive:
-            info = archive.getinfo("metadata.npy")
-            if info.file_size > 10**7:
-                return False
-            raw = read_npy_member(archive, info)
-        metadata = json.loads(str(raw[()]))
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError, RecursionError, IndexError, TypeError, zlib.error):
-        return False
-    return isinstance(metadata, dict) and metadata.get("schema") == SCHEMA_NAME
 
 
 def _as_float64(name: str, value: Any) -> np.ndarray:

@@ -70,7 +70,6 @@ __all__ = [
     "GreyBoxResult",
     "identify",
     "estimate_joint_states",
-    "is_identification_file",
     "reconstruct_joint_states",
     "simulate_windows",
 ]
@@ -97,14 +96,6 @@ _LOG_BOUND = 5.0
 IDENTIFIABILITY_TOLERANCE = 1e-9
 #: ``schema`` of the JSON document of :meth:`GreyBoxResult.to_dict`.
 IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
-
-
-def is_identification_file(path: Any) -> bool:
-    """Whether ``path`` is a JSON document written from :meth:`GreyBoxResult.to_dict` (an output check)."""
-    from softpend.io.reading import read_json_object
-
-    data = read_json_object(path, 10**6)
-    return data is not None and data.get("schema") == IDENTIFICATION_SCHEMA
 
 
 @dataclass(frozen=True)

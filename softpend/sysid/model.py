@@ -46,7 +46,7 @@ from torch import Tensor, nn
 
 from softpend.checks import one_of, optional_positive, positive, positive_int
 from softpend.io.outputs import atomic_write
-from softpend.io.reading import MAX_CONFIG_BYTES, read_bytes_checked, read_json_checked, read_json_object
+from softpend.io.reading import MAX_CONFIG_BYTES, read_bytes_checked, read_json_checked
 from softpend.sysid.layout import StateLayout
 
 __all__ = [
@@ -55,7 +55,6 @@ __all__ = [
     "DynamicsEnsemble",
     "save_model",
     "load_model",
-    "is_model_file",
     "model_paths",
     "MODEL_SCHEMA_NAME",
     "MODEL_SCHEMA_VERSION",
@@ -385,13 +384,6 @@ def _paths(path: str | Path) -> tuple[Path, Path]:
 def model_paths(path: str | Path) -> tuple[Path, Path]:
     """``(<path>.pt, <path>.json)``, the two files of :func:`save_model` (``path`` may end in either suffix)."""
     return _paths(path)
-
-
-def is_model_file(path: str | Path) -> bool:
-    """Whether ``path`` (either file of a pair, or the stem) belongs to a model written by :func:`save_model`:
-    its ``.json`` names this schema (an output check: a model may be replaced, any other file may not)."""
-    meta = read_json_object(_paths(path)[1], MAX_CONFIG_BYTES)
-    return meta is not None and meta.get("schema") == MODEL_SCHEMA_NAME
 
 
 def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None) -> tuple[Path, Path]:

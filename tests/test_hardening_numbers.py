@@ -113,6 +113,7 @@ def test_twin_camera_with_a_long_latency_runs(tmp_path):
     (["track", "{tmp}/v.avi", "--out", "{tmp}/t.csv", "--min-area", "nan"], "--min-area"),
     (["fit-model", "{tmp}/d.npz", "{tmp}/m", "--max-epochs", "1000000000", "--patience", "1000000000"], "--max-epochs"),
     (["fit-model", "{tmp}/d.npz", "{tmp}/m", "--patience", "1000000000"], "--patience"),
+    (["fit-model", "{tmp}/d.npz", "{tmp}/m", "--learning-rate", "3.4e37"], "--learning-rate"),
     (["identify", "{tmp}/d.npz", "--max-iterations", "1000000000"], "--max-iterations"),
     (["identify", "{tmp}/d.npz", "--window-s", "inf"], "--window-s"),
 ])

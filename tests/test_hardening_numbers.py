@@ -153,3 +153,10 @@ def test_babble_refuses_a_dataset_of_noise(tmp_path, option, value):
     refused(["babble", str(tmp_path / "d.npz"), "--n-trials", "1", "--trial-length-s", "0.05", "--no-progress",
              option, value], option)
     assert not (tmp_path / "d.npz").exists()
+
+
+def test_dqn_learning_rate_is_bounded(tmp_path):
+    """``train --set learning_rate=3.4e37`` trained and saved an agent (exit 0): a step of that size trains
+    garbage, so the config refuses it by name."""
+    refused(["train", "--algo", "dqn", "--out", str(tmp_path / "r"), "--episodes", "1", "--no-progress",
+             "--set", "learning_rate=3.4e37"], "learning_rate must lie in")

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softpend.checks import boolean, in_unit_interval, int_at_least, one_of, positive, positive_int
+from softpend.checks import boolean, in_range, in_unit_interval, int_at_least, one_of, positive, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
@@ -151,6 +151,7 @@ class DQNConfig:
                            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
+        in_range("learning_rate", self.learning_rate, 1e-12, 10.0)  # Adam's step: beyond 10 it trains garbage
         if self.eval_until_first_failure and self.stop_upright_std_rad > SUCCESS_STD_RAD:
             raise ValueError(
                 f"stop_upright_std_rad ({self.stop_upright_std_rad!r}) must be at most the success level "

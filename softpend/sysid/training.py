@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from softpend.checks import NonFiniteError, boolean, check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.checks import NonFiniteError, boolean, check_work_size, in_range, in_unit_interval, int_at_least, non_negative, one_of, positive_int
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
 from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
@@ -112,7 +112,7 @@ class TrainConfig:
             object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
         for name in ("ensemble_size", "max_epochs", "batch_size", "patience"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
-        positive("learning_rate", self.learning_rate)
+        in_range("learning_rate", self.learning_rate, 1e-12, 10.0)  # Adam's step: beyond 10 torch overflows
         one_of("lr_schedule", self.lr_schedule, ("cosine", "plateau"))
         non_negative("weight_decay", self.weight_decay)
         in_unit_interval("validation_fraction", self.validation_fraction, include_zero=False, include_one=False)

@@ -301,7 +301,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
 
     config = DQNConfig(learning_starts=20, reset_every_episodes=2, **{**TINY, "eval_every_episodes": 1})
     events = []
-    real_reset, real_checkpoint = dqn.reset_q_network, dqn.TrainingCallback.checkpoint
+    real_reset, real_checkpoint = dqn.reset_q_network, dqn.CheckpointCallback.checkpoint
 
     def reset(model, seed):
         trained = [p.detach().clone() for p in model.q_net.parameters()]
@@ -317,7 +317,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
         return real_checkpoint(self)
 
     monkeypatch.setattr(dqn, "reset_q_network", reset)
-    monkeypatch.setattr(dqn.TrainingCallback, "checkpoint", checkpoint)
+    monkeypatch.setattr(dqn.CheckpointCallback, "checkpoint", checkpoint)
     _, log = train_dqn(config, seed=3, episodes=5, run_dir=tmp_path, progress=False)
     assert [e[:2] for e in events] == [("reset", (3, 2)), ("checkpoint", 2), ("reset", (3, 4)), ("checkpoint", 4),
                                        ("checkpoint", 5)]  # none after the last episode
@@ -358,13 +358,13 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
     config = DQNConfig(learning_starts=20, reset_every_episodes=2, stop_after_balanced_evaluations=1,
                        stop_confirm_seeds=(), **{**TINY, "eval_every_episodes": 1})
     evaluated = []
-    real_evaluate = dqn.TrainingCallback.evaluate
+    real_evaluate = dqn.EvaluationCallback.evaluate
 
     def evaluate(self):
         evaluated.append([p.detach().clone() for p in self.model.q_net.parameters()])
         return real_evaluate(self)
 
-    monkeypatch.setattr(dqn.TrainingCallback, "evaluate", evaluate)
+    monkeypatch.setattr(dqn.EvaluationCallback, "evaluate", evaluate)
     _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.05])  # episode 2, a reset episode, balances: the run stops
     model, log = train_dqn(config, seed=0, episodes=6, run_dir=tmp_path, progress=False)
     assert log.n_episodes == 2 and log.stop_reason is not None

@@ -1,11 +1,13 @@
 """Model-free DQN (stable-baselines3) that swings the soft rod up and balances it, with plant-time bookkeeping.
 
 :func:`train_dqn` trains on :func:`softpend.rl.training_env.make_training_env` with the settings of a
-:class:`~softpend.rl.config.DQNConfig`, shows a progress bar over episodes, evaluates the greedy policy on
-the true plant every ``eval_every_episodes`` episodes (shared :func:`softpend.evaluation.evaluate_controller`),
-saves a resumable checkpoint (agent, replay buffer, training log) every ``checkpoint_every_episodes`` and the
-final agent as ``<run_dir>/agent.zip``.  :mod:`softpend.rl.mbpo` reuses the same loop with a model-based
-replay buffer.
+:class:`~softpend.rl.config.DQNConfig` and the stable-baselines3 callbacks of :func:`training_callbacks`, in
+one ``CallbackList``: :class:`EpisodeRecorder` (a log row per episode), :class:`ProgressBarCallback`,
+:class:`EvaluationCallback` (the greedy policy on the true plant every ``eval_every_episodes`` episodes, shared
+:func:`softpend.evaluation.evaluate_controller`; best agent; the stop rule :class:`StopTrainingOnBalance` with
+:class:`ConfirmBalance` after each evaluation), :class:`ResetQNetworkCallback` and :class:`CheckpointCallback`
+(a resumable checkpoint: agent, replay buffer, training log).  The final agent is ``<run_dir>/agent.zip``.
+:mod:`softpend.rl.mbpo` reuses the same loop with a model-based replay buffer and its own callbacks.
 
 Run folder layout::
 
@@ -27,13 +29,13 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 import numpy as np
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 from tqdm import tqdm
 
@@ -55,9 +57,10 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["TrainingCallback", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "evaluate_agents_batched",
+__all__ = ["CheckpointCallback", "ConfirmBalance", "EpisodeRecorder", "EvaluationCallback", "ProgressBarCallback",
+           "ResetQNetworkCallback", "StopTrainingOnBalance", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "evaluate_agents_batched",
            "load_agent", "reset_q_network",
-           "train_dqn", "run_training"]
+           "train_dqn", "run_training", "training_callbacks"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
@@ -161,62 +164,29 @@ def evaluate_agents_batched(models: Sequence[Any], config: DQNConfig, seeds: Opt
     return [EvaluationSummary(name=name, results=summary.results[i * n:(i + 1) * n]) for i in range(len(models))]
 
 
-class TrainingCallback(BaseCallback):
-    """Episode bookkeeping, periodic evaluation, checkpoints and the progress bar of a training run.
+class EpisodeRecorder(BaseCallback):
+    """Bookkeeping: one :class:`TrainingLog` row per training episode; stops training at the episode budget.
 
-    Parameters
-    ----------
-    config : DQNConfig
-        The run's config.
-    log : TrainingLog
-        Log to append to (may already hold the rows of a resumed run).
-    episodes : int
-        Stop once the log holds this many episodes.
-    run_dir : Path
-        Run folder (checkpoints go to ``run_dir / "checkpoint"``).
-    progress : bool
-        Show a tqdm bar over episodes.
-    on_episode_end : callable, optional
-        ``f(callback)`` after each episode's row is logged (MBPO refits its model there).
-    extra_checkpoint : callable, optional
-        ``f(folder)`` writes algorithm-specific files into a checkpoint folder.
-    model_steps : callable, optional
-        ``() -> int`` total model steps so far (0 for model-free).
+    The callbacks after it in a :class:`~stable_baselines3.common.callbacks.CallbackList` read
+    :attr:`episode_ended` (whether the step just taken ended an episode, whose row is then ``log.episodes[-1]``).
+    ``model_steps``: ``() -> int`` total model steps so far (0 for model-free).
     """
 
     model: DQN  # set by BaseCallback.init_callback: the DQN (or its subclass) being trained
 
-    def __init__(
-        self,
-        config: DQNConfig,
-        log: TrainingLog,
-        episodes: int,
-        run_dir: Path,
-        progress: bool = True,
-        on_episode_end: Optional[Callable[["TrainingCallback"], None]] = None,
-        extra_checkpoint: Optional[Callable[[Path], None]] = None,
-        model_steps: Optional[Callable[[], int]] = None,
-    ) -> None:
+    def __init__(self, config: DQNConfig, log: TrainingLog, episodes: int,
+                 model_steps: Optional[Callable[[], int]] = None) -> None:
         super().__init__()
         self.config = config
         self.log = log
         self.episodes = int(episodes)
-        self.run_dir = Path(run_dir)
-        self.progress = progress
-        self.on_episode_end = on_episode_end
-        self.extra_checkpoint = extra_checkpoint
         self.model_steps = model_steps or (lambda: 0)
-        self.on_step_hook: Optional[Callable[["TrainingCallback"], None]] = None
-        self._pending_eval = False
-        self._pending_checkpoint = False
-        self._pending_reset = False
+        self.episode_ended = False
         self._started = time.perf_counter()
         self._cpu_started = time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
         self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
         self._reset_episode()
-        self.bar: Optional[tqdm] = None
-        self.best_score = min((_score(row) for row in log.evaluations), default=None)
 
     def _reset_episode(self) -> None:
         self._return = 0.0
@@ -232,76 +202,17 @@ class TrainingCallback(BaseCallback):
         started before this was logged) -- the cost of a run independent of other load on the machine."""
         return self._cpu_offset + time.process_time() - self._cpu_started
 
-    def _on_training_start(self) -> None:
-        self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, desc=f"{self.log.algo} seed {self.log.seed}",
-                        unit="episode", disable=not self.progress, leave=False)
-
-    def _on_training_end(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-
     def _on_step(self) -> bool:
         info = self.locals["infos"][0]
         plant = info["plant_observations"]
         self._observations.append(plant if not self._observations else plant[1:])
         self._torques.extend([info["torque_nm"]] * int(info["plant_steps"]))
         self._return += float(self.locals["rewards"][0])
-        if self.on_step_hook is not None:
-            self.on_step_hook(self)
-        if self.locals["dones"][0]:
-            self._end_episode()
-            if self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps:
-                return False
-            if self.config.stop_after_balanced_evaluations and self._pending_eval:
-                # evaluate now (the agent is the one the rollout end would evaluate) so that training can stop
-                # before another plant step is taken
-                self._pending_eval = False
-                self.evaluate()
-                if self.balanced_streak() and self.confirmed():
-                    self._pending_reset = False  # the final agent is the one that balanced
-                    n = len(self.config.stop_confirm_seeds)
-                    held = n - self.log.evaluations[-1].get("confirm_failures", 0)
-                    confirmation = ("" if not n else f" and from the {n} confirmation starts" if held == n
-                                    else f" and from {held} of the {n} confirmation starts")
-                    k = self.config.stop_after_balanced_evaluations
-                    self.log.stop_reason = (
-                        ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
-                        + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
-                        + confirmation)
-                    return False
-        return True
-
-    def balanced_streak(self) -> bool:
-        """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced (early stopping)."""
-        k = self.config.stop_after_balanced_evaluations
-        rows = self.log.evaluations[-k:] if k else []
-        return len(rows) == k > 0 and all(self._balanced(row["all_swung_up"], row["max_upright_std_rad"]) for row in rows)
-
-    def _balanced(self, all_swung_up: bool, max_upright_std_rad: float) -> bool:
-        """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
-        return bool(all_swung_up) and max_upright_std_rad <= self.config.stop_upright_std_rad
-
-    def confirmed(self) -> bool:
-        """Whether the agent balances from all ``stop_confirm_seeds`` starts but at most
-        ``stop_confirm_max_failures`` (True without any), evaluated start by start up to the failure after those;
-        the outcome and the failures counted are kept in the last evaluation row (``confirmed``,
-        ``confirm_failures``)."""
-        if not self.config.stop_confirm_seeds:
+        self.episode_ended = bool(self.locals["dones"][0])
+        if not self.episode_ended:
             return True
-        failures = 0
-        for seed in self.config.stop_confirm_seeds:
-            failures += not self._balances_from(seed)
-            if failures > self.config.stop_confirm_max_failures:
-                break
-        ok = failures <= self.config.stop_confirm_max_failures
-        self.log.evaluations[-1]["confirmed"] = ok
-        self.log.evaluations[-1]["confirm_failures"] = failures
-        return ok
-
-    def _balances_from(self, seed: int) -> bool:
-        """Whether the agent balances from one start (a NaN upright std does not)."""
-        (result,) = evaluate_agent(self.model, self.config, seeds=(seed,)).results
-        return self._balanced(math.isfinite(result.swing_up_time_s), float(result.upright_std_rad))
+        self._end_episode()
+        return not (self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps)
 
     def _end_episode(self) -> None:
         observations = np.concatenate(self._observations)
@@ -311,7 +222,8 @@ class TrainingCallback(BaseCallback):
                                "plant_s": self.log.plant_s + plant_steps * dt}
         if plant_steps >= 2:
             torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
-            metrics = metrics_from_trajectory(np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT])
+            metrics = metrics_from_trajectory(np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques,
+                                              observations[:, _PHI_DOT])
             row["upright_std_rad"] = metrics["upright_std_rad"]
             row["swing_up_time_s"] = metrics["swing_up_time_s"]
         else:
@@ -324,38 +236,109 @@ class TrainingCallback(BaseCallback):
         self.log.episodes.append(row)
         self._reset_episode()
         check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}")
-        if self.on_episode_end is not None:
-            self.on_episode_end(self)
-        n = self.log.n_episodes
-        if n % self.config.eval_every_episodes == 0 or n >= self.episodes:
-            self._pending_eval = True
-        if n % self.config.checkpoint_every_episodes == 0:
-            self._pending_checkpoint = True
-        every = self.config.reset_every_episodes
-        if every and n % every == 0 and n < self.episodes:
-            self._pending_reset = True
-        if self.bar is not None:
-            last_eval = self.log.evaluations[-1]["max_upright_std_rad"] if self.log.evaluations else math.nan
+
+
+class ProgressBarCallback(BaseCallback):
+    """A tqdm bar over the episodes of ``recorder`` (hidden unless ``show``)."""
+
+    def __init__(self, recorder: EpisodeRecorder, show: bool = True) -> None:
+        super().__init__()
+        self.recorder = recorder
+        self.show = show
+        self.bar: Optional[tqdm] = None
+
+    def _on_training_start(self) -> None:
+        log = self.recorder.log
+        self.bar = tqdm(total=self.recorder.episodes, initial=log.n_episodes, desc=f"{log.algo} seed {log.seed}",
+                        unit="episode", disable=not self.show, leave=False)
+
+    def _on_step(self) -> bool:
+        if self.recorder.episode_ended and self.bar is not None:
+            log = self.recorder.log
+            last_eval = log.evaluations[-1]["max_upright_std_rad"] if log.evaluations else math.nan
             self.bar.update(1)
-            self.bar.set_postfix(ret=f"{row['return']:.0f}", plant_s=f"{row['plant_s']:.0f}", eval_std=f"{last_eval:.2f}")
-        if n >= self.episodes:  # the run ends inside this step: evaluate now (no further rollout end)
-            self.flush()
+            self.bar.set_postfix(ret=f"{log.episodes[-1]['return']:.0f}", plant_s=f"{log.plant_s:.0f}",
+                                 eval_std=f"{last_eval:.2f}")
+        return True
+
+    def _on_training_end(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the bar (also when training raised)."""
+        if self.bar is not None:
+            self.bar.close()
+
+
+class EpisodeEventCallback(BaseCallback):
+    """A task due after some episodes of ``recorder`` (:meth:`due`), run by :meth:`run` at the next rollout end,
+    or at once after the last episode of the budget (the run ends inside that step)."""
+
+    def __init__(self, recorder: EpisodeRecorder) -> None:
+        super().__init__()
+        self.recorder = recorder
+        self.log = recorder.log
+        self.pending = False
+
+    def due(self, n_episodes: int) -> bool:
+        """Whether the task is due after ``n_episodes`` episodes."""
+        raise NotImplementedError
+
+    def run(self) -> Any:
+        """The task."""
+        raise NotImplementedError
+
+    def _on_step(self) -> bool:
+        if self.recorder.episode_ended:
+            n = self.log.n_episodes
+            self.pending = self.pending or self.due(n)
+            if n >= self.recorder.episodes:
+                self.flush()
+        return True
 
     def _on_rollout_end(self) -> None:
         self.flush()
 
     def flush(self) -> None:
-        """Run a pending evaluation, then a pending reset of the Q-network, then write a pending checkpoint (so
-        that the evaluation measures the agent before the reset and a resumed run starts after it)."""
-        if self._pending_eval:
-            self._pending_eval = False
+        """Run the task if it is due."""
+        if self.pending:
+            self.pending = False
+            self.run()
+
+
+class EvaluationCallback(EpisodeEventCallback):
+    """Greedy evaluation on the true plant every ``eval_every_episodes`` episodes and after the last one,
+    appending an evaluation row and saving the best agent (``best_agent.zip``), as stable-baselines3's
+    ``EvalCallback``.  With ``callback_after_eval`` (the stop rule) the evaluation runs right after its
+    episode, before another plant step, and that callback's ``False`` stops training."""
+
+    def __init__(self, recorder: EpisodeRecorder, run_dir: Path,
+                 callback_after_eval: Optional[BaseCallback] = None) -> None:
+        super().__init__(recorder)
+        self.config = recorder.config
+        self.run_dir = Path(run_dir)
+        self.callback_after_eval = callback_after_eval
+        if callback_after_eval is not None:
+            callback_after_eval.parent = self
+        self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
+
+    def _init_callback(self) -> None:
+        if self.callback_after_eval is not None:
+            self.callback_after_eval.init_callback(self.model)
+
+    def due(self, n_episodes: int) -> bool:
+        return n_episodes % self.config.eval_every_episodes == 0 or n_episodes >= self.recorder.episodes
+
+    def run(self) -> dict[str, Any]:
+        return self.evaluate()
+
+    def _on_step(self) -> bool:
+        super()._on_step()
+        if self.recorder.episode_ended and self.callback_after_eval is not None and self.pending:
+            self.pending = False
             self.evaluate()
-        if self._pending_reset:
-            self._pending_reset = False
-            reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
-        if self._pending_checkpoint:
-            self._pending_checkpoint = False
-            self.checkpoint()
+            return self.callback_after_eval.on_step()
+        return True
 
     def evaluate(self) -> dict[str, Any]:
         """Evaluate the greedy policy on the true plant and append an evaluation row.
@@ -372,15 +355,15 @@ class TrainingCallback(BaseCallback):
         row = {
             "episode": self.log.n_episodes,
             "plant_s": self.log.plant_s,
-            "model_steps": int(self.model_steps()),
+            "model_steps": int(self.recorder.model_steps()),
             "starts_evaluated": len(summary.results),
             "median_upright_std_rad": float(np.median(stds)) if complete else math.nan,
             "max_upright_std_rad": float(np.max(stds)),
             "median_swing_up_time_s": summary.median("swing_up_time_s") if complete else math.nan,
             "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
             "success_rate": summary.successes / len(seeds),
-            "wall_s": self.wall_s(),
-            "cpu_s": self.cpu_s(),
+            "wall_s": self.recorder.wall_s(),
+            "cpu_s": self.recorder.cpu_s(),
         }
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
@@ -388,6 +371,99 @@ class TrainingCallback(BaseCallback):
             check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, episode {row['episode']}")
             save_agent_file(self.model, self.run_dir / "best_agent.zip")
         return row
+
+
+def _balanced(config: DQNConfig, all_swung_up: bool, max_upright_std_rad: float) -> bool:
+    """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
+    return bool(all_swung_up) and max_upright_std_rad <= config.stop_upright_std_rad
+
+
+class StopTrainingOnBalance(BaseCallback):
+    """The stop rule, called after each evaluation (``EvaluationCallback(callback_after_eval=...)``): stop once
+    the last ``stop_after_balanced_evaluations`` evaluations all balanced and ``confirmation`` (if any) agrees,
+    writing ``log.stop_reason``."""
+
+    def __init__(self, config: DQNConfig, log: TrainingLog, confirmation: Optional[BaseCallback] = None) -> None:
+        super().__init__()
+        self.config = config
+        self.log = log
+        self.confirmation = confirmation
+
+    def _init_callback(self) -> None:
+        if self.confirmation is not None:
+            self.confirmation.init_callback(self.model)
+
+    def balanced_streak(self) -> bool:
+        """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced."""
+        k = self.config.stop_after_balanced_evaluations
+        rows = self.log.evaluations[-k:] if k else []
+        return len(rows) == k > 0 and all(_balanced(self.config, row["all_swung_up"], row["max_upright_std_rad"])
+                                          for row in rows)
+
+    def _on_step(self) -> bool:
+        if not self.balanced_streak() or (self.confirmation is not None and not self.confirmation.on_step()):
+            return True
+        n = len(self.config.stop_confirm_seeds)
+        held = n - self.log.evaluations[-1].get("confirm_failures", 0)
+        confirmation = ("" if not n else f" and from the {n} confirmation starts" if held == n
+                        else f" and from {held} of the {n} confirmation starts")
+        k = self.config.stop_after_balanced_evaluations
+        self.log.stop_reason = (
+            ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
+            + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)" + confirmation)
+        return False
+
+
+class ConfirmBalance(BaseCallback):
+    """Confirmation of the stop rule: ``True`` if the agent balances from all ``stop_confirm_seeds`` starts but
+    at most ``stop_confirm_max_failures``, evaluated start by start up to the failure after those; the outcome
+    and the failures counted are kept in the last evaluation row (``confirmed``, ``confirm_failures``)."""
+
+    def __init__(self, config: DQNConfig, log: TrainingLog) -> None:
+        super().__init__()
+        self.config = config
+        self.log = log
+
+    def _on_step(self) -> bool:
+        failures = 0
+        for seed in self.config.stop_confirm_seeds:
+            (result,) = evaluate_agent(self.model, self.config, seeds=(seed,)).results
+            failures += not _balanced(self.config, math.isfinite(result.swing_up_time_s), float(result.upright_std_rad))
+            if failures > self.config.stop_confirm_max_failures:
+                break
+        ok = failures <= self.config.stop_confirm_max_failures
+        self.log.evaluations[-1]["confirmed"] = ok
+        self.log.evaluations[-1]["confirm_failures"] = failures
+        return ok
+
+
+class ResetQNetworkCallback(EpisodeEventCallback):
+    """Every ``reset_every_episodes`` episodes (not after the last), :func:`reset_q_network` at the rollout end,
+    after that episode's evaluation and before its checkpoint (a run stopped by the stop rule keeps its agent)."""
+
+    def due(self, n_episodes: int) -> bool:
+        every = self.recorder.config.reset_every_episodes
+        return bool(every) and n_episodes % every == 0 and n_episodes < self.recorder.episodes
+
+    def run(self) -> None:
+        reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
+
+
+class CheckpointCallback(EpisodeEventCallback):
+    """Every ``checkpoint_every_episodes`` episodes, a resumable checkpoint in ``run_dir/checkpoint`` (see
+    :meth:`checkpoint`); ``extra_files``: ``f(folder)`` writes algorithm-specific files into it."""
+
+    def __init__(self, recorder: EpisodeRecorder, run_dir: Path,
+                 extra_files: Optional[Callable[[Path], None]] = None) -> None:
+        super().__init__(recorder)
+        self.run_dir = Path(run_dir)
+        self.extra_files = extra_files
+
+    def due(self, n_episodes: int) -> bool:
+        return n_episodes % self.recorder.config.checkpoint_every_episodes == 0
+
+    def run(self) -> Path:
+        return self.checkpoint()
 
     def checkpoint(self) -> Path:
         """Write agent, replay buffer (plain arrays), log (and extra files) to ``run_dir/checkpoint`` atomically."""
@@ -400,8 +476,8 @@ class TrainingCallback(BaseCallback):
         assert self.model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
         save_replay_buffer(self.model.replay_buffer, tmp / "replay_buffer.npz")
         self.log.save(tmp / "log.json")
-        if self.extra_checkpoint is not None:
-            self.extra_checkpoint(tmp)
+        if self.extra_files is not None:
+            self.extra_files(tmp)
         old = self.run_dir / "checkpoint.old"
         shutil.rmtree(old, ignore_errors=True)
         if final.exists():
@@ -411,6 +487,19 @@ class TrainingCallback(BaseCallback):
         return final
 
 
+class ModelBasedPart(Protocol):
+    """What a model-based variant adds to :func:`run_training` (:class:`softpend.rl.mbpo.MBPOTrainer`)."""
+
+    model_steps: int
+
+    def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
+        """The callbacks that run before ``recorder`` in each step and those that run right after it."""
+
+    def save(self, folder: Path) -> None:
+        """Write the part's state into a checkpoint folder."""
+
+    def restore(self, folder: Path) -> None:
+        """Read the part's state back from a checkpoint folder."""
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
     """Re-initialise ``model``'s Q-network as a new agent's (PyTorch's default initialisation of each linear
     layer, drawn from a generator seeded by ``seed``), copy it to the target network and clear the optimiser's
@@ -490,6 +579,59 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
     return run_dir
 
 
+def _start_or_resume(algo: str, config: DQNConfig, seed: int, run_dir: Path, resume: bool, env: Any,
+                     make_model: Callable[[Any, int], DQN], replay_buffer_class: type[ReplayBuffer],
+                     part: Optional[ModelBasedPart]) -> tuple[DQN, TrainingLog]:
+    """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (the config must match the saved
+    one; ``part`` restores its own state from the checkpoint)."""
+    checkpoint = run_dir / "checkpoint"
+    if not (resume and (checkpoint / "agent.zip").exists()):
+        save_config(config, run_dir / "config.json")
+        return make_model(env, int(seed)), TrainingLog(algo=algo, seed=int(seed))
+    saved = load_config(run_dir / "config.json")
+    if saved != config:
+        raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
+    if not (checkpoint / "replay_buffer.npz").exists() and (checkpoint / "replay_buffer.pkl").exists():
+        raise AgentFileError(
+            f"{checkpoint} holds a pickled replay buffer (replay_buffer.pkl), which softpend does not load "
+            "(unpickling can run arbitrary code); start a new run"
+        )
+    log = TrainingLog.load(checkpoint / "log.json")
+    model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env=env,
+                            replay_buffer_class=replay_buffer_class)
+    assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
+    load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
+    if part is not None:
+        part.restore(checkpoint)
+    return model, log
+
+
+def training_callbacks(config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool,
+                       part: Optional[ModelBasedPart] = None) -> CallbackList:
+    """The callbacks of a training run, in the order they run each step: the model-based part's step callbacks,
+    the episode bookkeeping, the model-based part's episode callbacks, the progress bar, the evaluation (with
+    the stop rule and its confirmation), the Q-network reset and the checkpoint."""
+    recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
+    before, after = part.callbacks(recorder) if part is not None else ([], [])
+    stop = None
+    if config.stop_after_balanced_evaluations:
+        confirmation = ConfirmBalance(config, log) if config.stop_confirm_seeds else None
+        stop = StopTrainingOnBalance(config, log, confirmation)
+    return CallbackList([
+        *before, recorder, *after, ProgressBarCallback(recorder, show=progress),
+        EvaluationCallback(recorder, run_dir, callback_after_eval=stop), ResetQNetworkCallback(recorder),
+        CheckpointCallback(recorder, run_dir, extra_files=part.save if part is not None else None),
+    ])
+
+
+_C = TypeVar("_C", bound=BaseCallback)
+
+
+def _member(callbacks: CallbackList, cls: type[_C]) -> _C:
+    """The callback of class ``cls`` in ``callbacks``."""
+    return next(c for c in callbacks.callbacks if isinstance(c, cls))
+
+
 def run_training(
     algo: str,
     config: DQNConfig,
@@ -499,77 +641,43 @@ def run_training(
     resume: bool,
     progress: bool,
     make_model: Callable[[Any, int], DQN],
-    hooks: Optional[Callable[[DQN, TrainingCallback], None]] = None,
-    extra_checkpoint: Optional[Callable[[DQN], Callable[[Path], None]]] = None,
-    restore: Optional[Callable[[DQN, Path], None]] = None,
-    model_steps: Optional[Callable[[DQN], int]] = None,
     replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
+    part: Optional[ModelBasedPart] = None,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`; ``replay_buffer_class`` is the
-    buffer ``make_model`` gives the agent, allocated again on resume).
+    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`): the agent of ``make_model`` (with
+    the buffer ``replay_buffer_class``, allocated again on resume) learns with the :func:`training_callbacks`
+    (``part``: DQN-MBPO's model refits and rollouts).
 
     Raises ``ValueError`` before any work if ``run_dir`` cannot be written, is a non-empty folder that is not
-    a run folder, holds another run (other settings or seed), or holds this run and ``resume`` is false; and :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's
-    weights stop being finite.
+    a run folder, holds another run (other settings or seed), or holds this run and ``resume`` is false; and
+    :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's weights stop being finite.
     """
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
-    checkpoint = run_dir / "checkpoint"
     env = make_training_env(config)
     assert env.observation_space.shape is not None  # a Box
     check_run_size(config, int(np.prod(env.observation_space.shape)))
-    if resume and (checkpoint / "agent.zip").exists():
-        saved = load_config(run_dir / "config.json")
-        if saved != config:
-            raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
-        if not (checkpoint / "replay_buffer.npz").exists() and (checkpoint / "replay_buffer.pkl").exists():
-            raise AgentFileError(
-                f"{checkpoint} holds a pickled replay buffer (replay_buffer.pkl), which softpend does not load "
-                "(unpickling can run arbitrary code); start a new run"
-            )
-        log = TrainingLog.load(checkpoint / "log.json")
-        model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env=env,
-                                replay_buffer_class=replay_buffer_class)
-        assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
-        load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
-        if restore is not None:
-            restore(model, checkpoint)
-    else:
-        save_config(config, run_dir / "config.json")
-        log = TrainingLog(algo=algo, seed=int(seed))
-        model = make_model(env, int(seed))
+    model, log = _start_or_resume(algo, config, seed, run_dir, resume, env, make_model, replay_buffer_class, part)
     # a resumed run continues with fresh start-noise draws (one seed per episode count)
     env.reset(seed=int(seed) * 100_003 + log.n_episodes)
     remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
-    callback = TrainingCallback(
-        config, log, episodes, run_dir, progress=progress,
-        extra_checkpoint=extra_checkpoint(model) if extra_checkpoint else None,
-        model_steps=(lambda: model_steps(model)) if model_steps else None,
-    )
-    if hooks is not None:
-        hooks(model, callback)
     if remaining > 0:
+        callbacks = training_callbacks(config, log, episodes, run_dir, progress, part)
+        evaluation, checkpoints = _member(callbacks, EvaluationCallback), _member(callbacks, CheckpointCallback)
         # exactly the remaining episodes' steps, so that SB3 stores the last transition and stops by itself
-        # (the callback also stops at the episode count, which matters only if an episode diverged early);
+        # (the recorder also stops at the episode count, which matters only if an episode diverged early);
         # the SB3 schedules (exploration) run over the whole run, resumed or not.  A logger of our own without
         # outputs: SB3's default one creates an empty folder under the system's temp directory on every learn()
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
-            model.learn(
-                total_timesteps=remaining * config.episode_agent_steps,
-                callback=callback,
-                reset_num_timesteps=log.n_episodes == 0,
-                progress_bar=False,
-            )
+            model.learn(total_timesteps=remaining * config.episode_agent_steps, callback=callbacks,
+                        reset_num_timesteps=log.n_episodes == 0, progress_bar=False)
         finally:
-            if callback.bar is not None:
-                callback.bar.close()
-        callback.flush()
-        callback.model = model
+            _member(callbacks, ProgressBarCallback).close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:
-            callback.evaluate()
-        callback.checkpoint()  # so that a longer run can resume from the end of this one
+            evaluation.evaluate()
+        checkpoints.checkpoint()  # so that a longer run can resume from the end of this one
     check_finite_weights(model, f"{algo} seed {seed}, final agent")
     save_agent_file(model, run_dir / "agent.zip")
     log.save(run_dir / "log.json")

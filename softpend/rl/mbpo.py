@@ -39,6 +39,7 @@ import torch
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
@@ -46,7 +47,7 @@ from softpend.envs import step_reward
 from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
-from softpend.rl.dqn import TrainingCallback, build_dqn, run_training
+from softpend.rl.dqn import EpisodeRecorder, build_dqn, run_training
 from softpend.envs.observation_vector import observation_vector
 from softpend.rl.training_env import make_base_env
 from softpend.rl.training_log import TrainingLog
@@ -54,7 +55,7 @@ from softpend.rl.training_log import TrainingLog
 if TYPE_CHECKING:
     from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 
-__all__ = ["MBPOReplayBuffer", "MBPOTrainer", "train_mbpo"]
+__all__ = ["MBPOReplayBuffer", "MBPOTrainer", "ModelRefitCallback", "ModelRolloutCallback", "train_mbpo"]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
@@ -268,28 +269,11 @@ class MBPOTrainer:
         self.model_steps += added
         return added
 
-    # ------------------------------------------------------------------ hooks into the training loop
-    def attach(self, agent: DQN, callback: TrainingCallback) -> None:
-        """Hook the refits and rollouts into a :class:`~softpend.rl.dqn.TrainingCallback`."""
-        c = self.config
-        buffer = agent.replay_buffer
-        if not isinstance(buffer, MBPOReplayBuffer):
-            raise ValueError("the agent's replay buffer must be an MBPOReplayBuffer")
-
-        def on_episode_end(cb: TrainingCallback) -> None:
-            self.add_episode(cb.last_episode_observations, cb.last_episode_torques)
-            n = cb.log.n_episodes
-            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model_refit_every_episodes == 0:
-                self.refit()
-
-        def on_step(cb: TrainingCallback) -> None:
-            if agent.num_timesteps % c.rollout_every_steps == 0 and self.dynamics is not None:
-                length = c.rollout_length(cb.log.n_episodes)
-                self.rollouts(agent, buffer, c.rollouts_per_real_step * c.rollout_every_steps, length,
-                              agent.exploration_rate)
-
-        callback.on_episode_end = on_episode_end
-        callback.on_step_hook = on_step
+    # ------------------------------------------------------------------ the training loop's callbacks
+    def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
+        """The :class:`ModelRolloutCallback` (before the episode bookkeeping of
+        :func:`softpend.rl.dqn.training_callbacks`) and the :class:`ModelRefitCallback` (after it)."""
+        return [ModelRolloutCallback(self, recorder.log)], [ModelRefitCallback(self, recorder)]
 
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
@@ -316,6 +300,50 @@ class MBPOTrainer:
         self.n_fits, self.model_steps = (int(v) for v in counters)
         if len(self.trials_observations) >= 2:
             self.refit()
+
+
+class ModelRolloutCallback(BaseCallback):
+    """Every ``rollout_every_steps`` real agent steps, once the model is fitted, branch
+    ``rollouts_per_real_step * rollout_every_steps`` model rollouts of the scheduled length into the agent's
+    :class:`MBPOReplayBuffer`, acting epsilon-greedily with the agent's current exploration rate."""
+
+    model: DQN
+
+    def __init__(self, trainer: MBPOTrainer, log: TrainingLog) -> None:
+        super().__init__()
+        self.trainer = trainer
+        self.log = log
+
+    def _init_callback(self) -> None:
+        if not isinstance(self.model.replay_buffer, MBPOReplayBuffer):
+            raise ValueError("the agent's replay buffer must be an MBPOReplayBuffer")
+
+    def _on_step(self) -> bool:
+        c = self.trainer.config
+        if self.model.num_timesteps % c.rollout_every_steps == 0 and self.trainer.dynamics is not None:
+            assert isinstance(self.model.replay_buffer, MBPOReplayBuffer)
+            self.trainer.rollouts(self.model, self.model.replay_buffer, c.rollouts_per_real_step * c.rollout_every_steps,
+                                  c.rollout_length(self.log.n_episodes), self.model.exploration_rate)
+        return True
+
+
+class ModelRefitCallback(BaseCallback):
+    """After each real episode (logged by ``recorder``), store it and refit the dynamics ensemble after
+    ``initial_random_episodes`` episodes and every ``model_refit_every_episodes`` after those."""
+
+    def __init__(self, trainer: MBPOTrainer, recorder: EpisodeRecorder) -> None:
+        super().__init__()
+        self.trainer = trainer
+        self.recorder = recorder
+
+    def _on_step(self) -> bool:
+        if self.recorder.episode_ended:
+            c = self.trainer.config
+            self.trainer.add_episode(self.recorder.last_episode_observations, self.recorder.last_episode_torques)
+            n = self.recorder.log.n_episodes
+            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model_refit_every_episodes == 0:
+                self.trainer.refit()
+        return True
 
 
 def train_mbpo(
@@ -345,11 +373,6 @@ def train_mbpo(
 
     return run_training(
         "mbpo", config, seed, episodes, run_dir, resume, progress,
-        make_model=make_model,
-        hooks=trainer.attach,
-        extra_checkpoint=lambda model: trainer.save,
-        restore=lambda model, folder: trainer.restore(folder),
-        model_steps=lambda model: trainer.model_steps,
-        replay_buffer_class=MBPOReplayBuffer,
+        make_model=make_model, replay_buffer_class=MBPOReplayBuffer, part=trainer,
     )
 

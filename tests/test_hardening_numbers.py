@@ -155,8 +155,16 @@ def test_babble_refuses_a_dataset_of_noise(tmp_path, option, value):
     assert not (tmp_path / "d.npz").exists()
 
 
-def test_dqn_learning_rate_is_bounded(tmp_path):
-    """``train --set learning_rate=3.4e37`` trained and saved an agent (exit 0): a step of that size trains
-    garbage, so the config refuses it by name."""
+def test_learning_rates_beyond_a_float32_step_are_refused(tmp_path):
+    """Adam's step ``lr / (1 - beta1)`` must stay a float32: ``fit-model --learning-rate 3.4e37`` ended in torch's
+    overflow traceback.  Up to 1e30 a huge step is still taken, and diverges into the NonFiniteError of the
+    training loops (tests/test_hardening_files.py)."""
+    from softpend.rl.config import DQNConfig
+    from softpend.sysid import TrainConfig
+
     refused(["train", "--algo", "dqn", "--out", str(tmp_path / "r"), "--episodes", "1", "--no-progress",
              "--set", "learning_rate=3.4e37"], "learning_rate must lie in")
+    for make in (DQNConfig, TrainConfig):
+        with pytest.raises(ValueError, match="learning_rate must lie in"):
+            make(learning_rate=3.4e37)
+        assert make(learning_rate=1e30).learning_rate == 1e30

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
     check_numbers(args, {"--threads": (1, 1024), "--max-epochs": (1, 100_000), "--patience": (1, 100_000),
                          "--ensemble-size": (1, 1000), "--history": (0, 1000), "--batch-size": (1, 10**8),
-                         "--learning-rate": (1e-12, 10.0)})
+                         "--learning-rate": (1e-12, 1e30)})  # Adam's step stays a float32
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
     # before the work: a model this command wrote may be replaced, nothing else

@@ -151,7 +151,7 @@ class DQNConfig:
                            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
-        in_range("learning_rate", self.learning_rate, 1e-12, 10.0)  # Adam's step: beyond 10 it trains garbage
+        in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step, lr / (1 - beta1), stays a float32
         if self.eval_until_first_failure and self.stop_upright_std_rad > SUCCESS_STD_RAD:
             raise ValueError(
                 f"stop_upright_std_rad ({self.stop_upright_std_rad!r}) must be at most the success level "

@@ -112,7 +112,7 @@ class TrainConfig:
             object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
         for name in ("ensemble_size", "max_epochs", "batch_size", "patience"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
-        in_range("learning_rate", self.learning_rate, 1e-12, 10.0)  # Adam's step: beyond 10 torch overflows
+        in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step, lr / (1 - beta1), stays a float32
         one_of("lr_schedule", self.lr_schedule, ("cosine", "plateau"))
         non_negative("weight_decay", self.weight_decay)
         in_unit_interval("validation_fraction", self.validation_fraction, include_zero=False, include_one=False)

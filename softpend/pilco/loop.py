@@ -63,7 +63,7 @@ from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import Propagator, StateSpec, state_spec
 from softpend.torch_threads import one_torch_thread
 
-__all__ = ["PilcoConfig", "PilcoResult", "TrialRecord", "run_pilco", "real_cost"]
+__all__ = ["Pilco", "PilcoConfig", "PilcoResult", "PolicySearch", "TrialRecord", "run_pilco", "real_cost"]
 
 DTYPE = torch.float64
 
@@ -625,148 +625,227 @@ def run_pilco(
 
 def _run_pilco(config: Optional[PilcoConfig], progress: bool,
                callback: Optional[Callable[[TrialRecord], None]]) -> PilcoResult:
-    """:func:`run_pilco` on the caller's torch threads."""
+    """:func:`run_pilco` on the caller's torch threads: the random trials, then model, policy and a policy trial
+    until a policy balances or ``n_policy_trials`` have run."""
     from tqdm.auto import tqdm
 
-    from softpend.envs import SoftPendulumEnv
+    pilco = Pilco(config if config is not None else PilcoConfig())
+    for _ in range(pilco.config.n_random_trials):
+        record = pilco.random_trial()
+        if callback:
+            callback(record)
+    pilco.start_policy()
+    bar = tqdm(range(pilco.config.n_policy_trials), desc="PILCO trials", disable=not progress)
+    for _ in bar:
+        pilco.optimize_models()
+        search = pilco.optimize_policy()
+        record = pilco.policy_trial(search)
+        if callback:
+            callback(record)
+        bar.set_postfix(real_s=f"{record.plant_seconds_total:.0f}", cost=f"{record.real_cost:.1f}/"
+                        f"{search.predicted_cost:.1f}", std=f"{record.eval_upright_std_rad:.2f}")
+        if record.balanced:
+            break
+    bar.close()
+    return pilco.result()
 
-    config = config if config is not None else PilcoConfig()
-    spec = state_spec(config.state)
-    check_pilco_size(config)
-    params = config.task.rod
-    torque_limit = params.torque_limit_nm
-    env = SoftPendulumEnv(**config.task.env_kwargs())
-    streams = _random_streams(config.seed)
-    start_wall = time.perf_counter()
-    start_cpu = time.process_time()
-    n_steps = config.n_horizon_steps
 
-    # ---- random-torque trials (start and torques each from their own stream: trial k is the same whatever
-    # the number of trials)
-    inputs: list[np.ndarray] = []
-    targets: list[np.ndarray] = []
-    records: list[TrialRecord] = []
-    random_states: list[np.ndarray] = []
-    plant_seconds = 0.0
-    rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
-    for index in range(config.n_random_trials):
-        random_controller = RandomTorqueController(
-            torque_limit, config.control_dt_s, seed=_draw_seed(streams["random_torques"]),
+@dataclass
+class PolicySearch:
+    """What :meth:`Pilco.optimize_policy` searched with and predicted.
+
+    ``predicted_cost`` is the expected total cost over a trial's ``horizon_s`` of the policy found;
+    ``cost_width_m`` and ``cost_rate_width_rad_s`` the cost it minimised (``None``: no tip-rate factor);
+    ``n_restarts`` the searches from fresh random policies; ``balance_predicted_cost`` the balancing policy's
+    expected cost over ``balance_prediction_s`` from the upright band (NaN: no balancing policy searched).
+    """
+
+    predicted_cost: float
+    cost_width_m: float
+    cost_rate_width_rad_s: Optional[float]
+    n_restarts: int
+    balance_predicted_cost: float = float("nan")
+
+
+class Pilco:
+    """PILCO on the plant as an object: real trials feed the data, :meth:`optimize_models` fits the GP dynamics,
+    :meth:`optimize_policy` searches the policies on the model, :meth:`controller` gives them as a controller.
+
+    A run is :meth:`random_trial` ``n_random_trials`` times and :meth:`start_policy`, then :meth:`optimize_models`,
+    :meth:`optimize_policy` and :meth:`policy_trial` per policy trial (:func:`run_pilco`); :meth:`result`
+    collects the outcome.  Every random draw comes from the run's streams (:func:`_random_streams`).
+    """
+
+    def __init__(self, config: PilcoConfig) -> None:
+        from softpend.envs import SoftPendulumEnv
+
+        check_pilco_size(config)
+        self.config = config
+        self.spec = state_spec(config.state)
+        self.env = SoftPendulumEnv(**config.task.env_kwargs())
+        self.streams = _random_streams(config.seed)
+        self.m0, self.s0 = _initial_distribution(self.spec, config.initial_std)
+        self.inputs: list[np.ndarray] = []  # per trial: GP inputs (states' model inputs and torque)
+        self.targets: list[np.ndarray] = []  # per trial: state differences
+        self.records: list[TrialRecord] = []
+        self.real_states: list[np.ndarray] = []  # per trial (H+1, d)
+        self.predicted_means: list[np.ndarray] = []  # per policy trial (H+1, d)
+        self.predicted_stds: list[np.ndarray] = []
+        self.policy: Optional[RBFPolicy] = None
+        self.balance_policy: Optional[LinearPolicy] = None
+        self.gp: Optional[MultiOutputGP] = None
+        self.gp_hyperparameters: Optional[GPHyperparameters] = None
+        self.n_gp_points = 0
+        self.n_searches = 0
+        self.plant_seconds = 0.0
+        self.rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
+        self._start_wall = time.perf_counter()
+        self._start_cpu = time.process_time()
+
+    def random_trial(self) -> TrialRecord:
+        """One trial of held random torques (start and torques each from their own stream: trial ``k`` is the
+        same whatever the number of trials)."""
+        config = self.config
+        controller = RandomTorqueController(
+            config.task.rod.torque_limit_nm, config.control_dt_s, seed=_draw_seed(self.streams["random_torques"]),
             hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=True,
         )
-        episode, states, torques = _run_trial(config, random_controller, _draw_seed(streams["random_starts"]), env)
-        inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
-        targets.append(states[1:] - states[:-1])
-        random_states.append(states)
-        plant_seconds += config.horizon_s
-        records.append(TrialRecord(
-            index=index, kind="random", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
-            predicted_cost=float("nan"),
-            real_cost=_trial_cost(config, spec, states, config.cost_rate_width_rad_s if rate_on else None),
-            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-            n_gp_points=0, wall_s_total=time.perf_counter() - start_wall, cpu_s_total=time.process_time() - start_cpu,
-            cost_rate_width_rad_s=config.cost_rate_width_rad_s if rate_on else None,
-        ))
-        if callback:
-            callback(records[-1])
-    result = PilcoResult(config=config, records=records, policy=None, gp_hyperparameters=None,  # type: ignore[arg-type]
-                         real_states=list(random_states))
+        episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
+        rate_width = config.cost_rate_width_rad_s if self.rate_on else None
+        return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0),  # type: ignore[arg-type]
+                            n_gp_points=0)
 
-    # ---- the policy: centres on states of the random trial (PILCO draws them from the initial state
-    # distribution; spreading them over the visited states lets the first policy act away from hanging),
-    # length-scales: the spread of each rate in the data, 0.7 for every sin/cos input (as in PILCO)
-    m0, s0 = _initial_distribution(spec, config.initial_std)
-    policy = _random_policy(spec, np.vstack(random_states), np.vstack(inputs)[:, :-1], config.n_basis, torque_limit,
-                            streams["policy_init"])
-    result.policy = policy
-    hyper: Optional[GPHyperparameters] = None
+    def start_policy(self) -> RBFPolicy:
+        """The first policy, random, its centres on the states of the trials so far (PILCO draws them from the
+        initial state distribution; spreading them over the visited states lets the first policy act away from
+        hanging), its length-scales the spread of each rate in the data and 0.7 for every sin/cos input."""
+        self.policy = _random_policy(self.spec, np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1],
+                                     self.config.n_basis, self.config.task.rod.torque_limit_nm,
+                                     self.streams["policy_init"])
+        return self.policy
 
-    bar = tqdm(range(1, config.n_policy_trials + 1), desc="PILCO trials", disable=not progress)
-    for trial in bar:
-        index = trial + config.n_random_trials - 1
-        # ---- learn the dynamics
-        x_all = np.vstack(inputs)
-        y_all = np.vstack(targets)
-        subset = select_subset(len(x_all), config.max_gp_points, recent=len(inputs[-1]),
-                               seed=_draw_seed(streams["gp_subsets"]))
-        gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=hyper)
-        gp.fit(config.gp_iterations)
-        hyper = gp.hyperparameters
-        if config.gp_all_data and len(subset) < len(x_all):
+    def optimize_models(self) -> MultiOutputGP:
+        """Fit the GP dynamics on the data subsampled to ``max_gp_points`` (the latest trial kept), from the last
+        fit's hyperparameters; with ``gp_all_data`` condition it on all the data."""
+        x_all, y_all = np.vstack(self.inputs), np.vstack(self.targets)
+        subset = select_subset(len(x_all), self.config.max_gp_points, recent=len(self.inputs[-1]),
+                               seed=_draw_seed(self.streams["gp_subsets"]))
+        gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=self.gp_hyperparameters)
+        gp.fit(self.config.gp_iterations)
+        self.gp_hyperparameters = gp.hyperparameters
+        if self.config.gp_all_data and len(subset) < len(x_all):
             gp.condition_on(x_all, y_all)
-        # ---- learn the policy
-        if not rate_on and config.cost_rate_width_rad_s is not None:
+        self.gp, self.n_gp_points = gp, len(subset)
+        return gp
+
+    def optimize_policy(self) -> PolicySearch:
+        """Search the RBF policy on the model from the current one (and, after the first search, with restarts),
+        predict its trial, and search the balancing policy when it is on."""
+        config, spec = self.config, self.spec
+        assert self.policy is not None and self.gp is not None, "start_policy and optimize_models come first"
+        rate_width, width_m, n_search = self._cost()
+        propagator = Propagator(spec, self.gp, self.policy, config.task.rod.length_m, width_m, rate_width,
+                                config.cost_exploration, compiled=config.compiled)
+        restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
+        objective, n_restarts = _search_with_restarts(config, propagator, self.policy, self.m0, self.s0, spec,
+                                                      np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1],
+                                                      restart_rng, n_search, restart=self.n_searches > 0)
+        self.n_searches += 1
+        predicted = self._predict(propagator, n_search, objective)
+        return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
+
+    def _cost(self) -> tuple[Optional[float], float, int]:
+        """The tip-rate width (``None``: off), the cost width [m] and the predicted steps of the next search."""
+        config = self.config
+        if not self.rate_on and config.cost_rate_width_rad_s is not None:
             assert config.cost_rate_after_rad is not None  # without it the rate term is on from the start
-            rate_on = any(_came_near_upright(spec, st, config.cost_rate_after_rad) for st in result.real_states)
-        rate_width = config.cost_rate_width_rad_s if rate_on else None
-        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in records)
-        n_search = config.n_prediction_steps if swung_up else n_steps
+            self.rate_on = any(_came_near_upright(self.spec, st, config.cost_rate_after_rad) for st in self.real_states)
+        rate_width = config.cost_rate_width_rad_s if self.rate_on else None
+        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in self.records)
         width_m = config.cost_width_m
         if swung_up and config.cost_width_after_swing_up_m is not None:
             width_m = config.cost_width_after_swing_up_m
-        propagator = Propagator(spec, gp, policy, params.length_m, width_m, rate_width,
-                                config.cost_exploration, compiled=config.compiled)
-        restart_rng = np.random.default_rng(_draw_seed(streams["policy_restarts"]))  # one draw per search
-        objective, n_restarts = _search_with_restarts(config, propagator, policy, m0, s0, spec,
-                                                      np.vstack(result.real_states), x_all[:, :-1], restart_rng,
-                                                      n_search, restart=trial > 1)
+        return rate_width, width_m, config.n_prediction_steps if swung_up else config.n_horizon_steps
+
+    def _predict(self, propagator: Propagator, n_search: int, objective: float) -> float:
+        """Keep the predicted trajectory of the searched policy over a trial and return its expected total cost
+        (the search's objective itself when the search neither explores nor predicts past the trial)."""
+        n_steps = self.config.n_horizon_steps
         with torch.no_grad():
-            means, covs, costs, _ = propagator.rollout(m0, s0, n_search)
-        # the expected total cost over the trial (the objective itself when the search neither explores nor
-        # predicts past the trial)
-        same = config.cost_exploration == 0.0 and n_search == n_steps
-        predicted = objective if same else float(costs[:n_steps].sum())
-        result.predicted_means.append(means[: n_steps + 1].numpy())
+            means, covs, costs, _ = propagator.rollout(self.m0, self.s0, n_search)
+        self.predicted_means.append(means[: n_steps + 1].numpy())
         covs = covs[: n_steps + 1]
-        result.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
-        # ---- the balancing policy (once the real trials have visited the upright band)
-        balance_cost = float("nan")
-        if config.balance_within_rad is not None:
-            upright = _upright_distribution(config, spec, np.vstack(result.real_states))
-            if upright is not None:
-                if result.balance_policy is None:
-                    result.balance_policy = LinearPolicy(spec.n_model_inputs, torque_limit)
-                balance_propagator = Propagator(spec, gp, result.balance_policy, params.length_m, width_m, rate_width,
-                                                compiled=False)
-                n_balance = int(round(config.balance_prediction_s / config.control_dt_s))
-                balance_cost = _optimise_policy(balance_propagator, result.balance_policy, *upright, n_balance,
-                                                config.policy_iterations)
-        # ---- run it on the plant
-        controller = _controller(config, policy, result.balance_policy)
-        episode, states, torques = _run_trial(config, controller, _draw_seed(streams["policy_starts"]), env)
-        inputs.append(np.hstack([spec.model_inputs(states[:-1]), torques[:, None]]))
-        targets.append(states[1:] - states[:-1])
-        result.real_states.append(states)
-        plant_seconds += config.horizon_s
-        record = TrialRecord(
-            index=index, kind="policy", duration_s=config.horizon_s, plant_seconds_total=plant_seconds,
-            predicted_cost=predicted,
-            real_cost=_trial_cost(config, spec, states, rate_width, width_m),
-            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad,
-            n_gp_points=len(subset), wall_s_total=float("nan"), cost_rate_width_rad_s=rate_width,
-            policy_restarts=n_restarts, cost_width_m=width_m, balance_predicted_cost=balance_cost,
-        )
-        # ---- test it (not counted as interaction, not used for learning)
+        self.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
+        same = self.config.cost_exploration == 0.0 and n_search == n_steps
+        return objective if same else float(costs[:n_steps].sum())
+
+    def _optimize_balance(self, width_m: float, rate_width: Optional[float]) -> float:
+        """Search the balancing policy from the real trials' upright band (once they have visited it); its
+        predicted cost, NaN when none was searched."""
+        config, spec = self.config, self.spec
+        if config.balance_within_rad is None:
+            return float("nan")
+        upright = _upright_distribution(config, spec, np.vstack(self.real_states))
+        if upright is None:
+            return float("nan")
+        if self.balance_policy is None:
+            self.balance_policy = LinearPolicy(spec.n_model_inputs, config.task.rod.torque_limit_nm)
+        propagator = Propagator(spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width,
+                                compiled=False)
+        n_balance = int(round(config.balance_prediction_s / config.control_dt_s))
+        return _optimise_policy(propagator, self.balance_policy, *upright, n_balance, config.policy_iterations)
+
+    def controller(self) -> PilcoController:
+        """The current policy (with its balancing policy, if any) as a controller."""
+        assert self.policy is not None, "no policy before the first optimize_policy"
+        return _controller(self.config, self.policy, self.balance_policy)
+
+    def policy_trial(self, search: PolicySearch) -> TrialRecord:
+        """Run the current policy on the plant (learnt from), then test it (``eval_seeds``: neither learnt from nor
+        counted as interaction); ``search`` is what :meth:`optimize_policy` returned for it."""
+        config = self.config
+        episode, states = self._trial(self.controller(), _draw_seed(self.streams["policy_starts"]))
+        record = self._record("policy", episode, states, search, self.n_gp_points)
         if config.eval_seeds:
-            summary = evaluate_controller(
-                _controller(config, policy, result.balance_policy), config.task, name="pilco", seeds=config.eval_seeds,
-                duration_s=config.eval_duration_s,
-            )
+            summary = evaluate_controller(self.controller(), config.task, name="pilco", seeds=config.eval_seeds,
+                                          duration_s=config.eval_duration_s)
             stds = [r.upright_std_rad for r in summary.results]
             record.eval_success_rate = summary.success_rate
             record.eval_upright_std_rad = float(np.max(stds))
             record.balanced = bool(
                 all(math.isfinite(r.swing_up_time_s) for r in summary.results) and max(stds) <= config.target_std_rad
             )
-        record.wall_s_total = time.perf_counter() - start_wall
-        record.cpu_s_total = time.process_time() - start_cpu
-        records.append(record)
-        if callback:
-            callback(record)
-        bar.set_postfix(real_s=f"{plant_seconds:.0f}", cost=f"{record.real_cost:.1f}/{predicted:.1f}",
-                        std=f"{record.eval_upright_std_rad:.2f}")
-        if record.balanced:
-            break
-    bar.close()
-    result.gp_hyperparameters = hyper
-    return result
+        record.wall_s_total = time.perf_counter() - self._start_wall
+        record.cpu_s_total = time.process_time() - self._start_cpu
+        return record
+
+    def _trial(self, controller, seed: int) -> tuple[EvaluationResult, np.ndarray]:
+        """One real trial from start seed ``seed``, added to the data; the episode and its control-step states."""
+        episode, states, torques = _run_trial(self.config, controller, seed, self.env)
+        self.inputs.append(np.hstack([self.spec.model_inputs(states[:-1]), torques[:, None]]))
+        self.targets.append(states[1:] - states[:-1])
+        self.real_states.append(states)
+        self.plant_seconds += self.config.horizon_s
+        return episode, states
+
+    def _record(self, kind: str, episode: EvaluationResult, states: np.ndarray, search: PolicySearch,
+                n_gp_points: int) -> TrialRecord:
+        """The :class:`TrialRecord` of the trial just run, added to the records (test results to come)."""
+        record = TrialRecord(
+            index=len(self.records), kind=kind, duration_s=self.config.horizon_s,
+            plant_seconds_total=self.plant_seconds, predicted_cost=search.predicted_cost,
+            real_cost=_trial_cost(self.config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m),
+            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad, n_gp_points=n_gp_points,
+            wall_s_total=time.perf_counter() - self._start_wall, cpu_s_total=time.process_time() - self._start_cpu,
+            cost_rate_width_rad_s=search.cost_rate_width_rad_s, policy_restarts=search.n_restarts,
+            cost_width_m=search.cost_width_m, balance_predicted_cost=search.balance_predicted_cost,
+        )
+        self.records.append(record)
+        return record
+
+    def result(self) -> PilcoResult:
+        """The run so far as a :class:`PilcoResult`."""
+        return PilcoResult(config=self.config, records=self.records, policy=self.policy,  # type: ignore[arg-type]
+                           gp_hyperparameters=self.gp_hyperparameters, balance_policy=self.balance_policy,
+                           predicted_means=self.predicted_means, predicted_stds=self.predicted_stds,
+                           real_states=self.real_states)

@@ -9,11 +9,11 @@ import pytest
 import torch
 
 from softpend.cli import main
+from softpend.envs.observation_vector import observation_vector
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import MBPOReplayBuffer, train_mbpo
-from softpend.envs.observation_vector import observation_vector
 from softpend.rl.training_env import HeldActionController, make_base_env, make_training_env
 
 TINY = dict(episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=1.5)
@@ -384,3 +384,21 @@ def test_a_training_evaluation_stops_at_its_first_failing_start(tmp_path, monkey
     assert math.isnan(failed["median_upright_std_rad"]) and failed["max_upright_std_rad"] == 0.5
     assert balanced["starts_evaluated"] == 3 and balanced["success_rate"] == 1.0 and balanced["all_swung_up"]
     assert log.n_episodes == 2 and log.stop_reason is not None
+
+
+def test_training_is_a_list_of_callbacks_in_order(tmp_path):
+    from softpend.rl import dqn
+    from softpend.rl.mbpo import MBPOTrainer, ModelRefitCallback, ModelRolloutCallback
+    from softpend.rl.training_log import TrainingLog
+
+    config = MBPOConfig(stop_after_balanced_evaluations=1, stop_confirm_seeds=(5,), **TINY)
+    log = TrainingLog(algo="mbpo", seed=0)
+    callbacks = dqn.training_callbacks(config, log, 4, tmp_path, progress=False,
+                                       part=MBPOTrainer(config, 0, tmp_path))
+    assert [type(c) for c in callbacks.callbacks] == [
+        ModelRolloutCallback, dqn.EpisodeRecorder, ModelRefitCallback, dqn.ProgressBarCallback,
+        dqn.EvaluationCallback, dqn.ResetQNetworkCallback, dqn.CheckpointCallback]
+    stop = callbacks.callbacks[4].callback_after_eval
+    assert isinstance(stop, dqn.StopTrainingOnBalance) and isinstance(stop.confirmation, dqn.ConfirmBalance)
+    plain = dqn.training_callbacks(DQNConfig(**TINY), TrainingLog(algo="dqn", seed=0), 4, tmp_path, progress=False)
+    assert len(plain.callbacks) == 5 and plain.callbacks[2].callback_after_eval is None

@@ -274,6 +274,8 @@ class EpisodeEventCallback(BaseCallback):
     """A task due after some episodes of ``recorder`` (:meth:`due`), run by :meth:`run` at the next rollout end,
     or at once after the last episode of the budget (the run ends inside that step)."""
 
+    model: DQN
+
     def __init__(self, recorder: EpisodeRecorder) -> None:
         super().__init__()
         self.recorder = recorder

@@ -44,11 +44,11 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
 from softpend.envs import step_reward
+from softpend.envs.observation_vector import observation_vector
 from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
 from softpend.rl.dqn import EpisodeRecorder, build_dqn, run_training
-from softpend.envs.observation_vector import observation_vector
 from softpend.rl.training_env import make_base_env
 from softpend.rl.training_log import TrainingLog
 

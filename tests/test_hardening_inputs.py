@@ -5,7 +5,6 @@ from __future__ import annotations
 import io
 import json
 import shutil
-import time
 import zipfile
 from pathlib import Path
 
@@ -111,12 +110,11 @@ def figure_book(tmp_path_factory) -> Path:
     ("fig02_reward", "dt_s=-0.01", "dt_s must be positive"),
     ("fig01_prb_rod", "n_links=100000", "n_links must be at most 64"),
 ])
+@pytest.mark.timeout(600)  # a guard against a hang, not a timing figure
 def test_figure_notebooks_refuse_impossible_parameters(figure_book, capsys, notebook, assignment, message):
-    started = time.perf_counter()
     args = ["book", "--root", str(figure_book), "--profile", "quick", "--only", notebook, "--set", assignment, "--force"]
     assert main(args) == 1
     assert message in capsys.readouterr().err
-    assert time.perf_counter() - started < 120  # refused at once, not after growing a kernel
 
 
 # ------------------------------------------------------------------------------------------------ bounds
@@ -126,10 +124,9 @@ def test_figure_notebooks_refuse_impossible_parameters(figure_book, capsys, note
     ("--trial-length-s", "1e9", ("GiB", "samples")),
 ])
 def test_babble_refuses_work_that_cannot_fit_before_starting(tmp_path, capsys, option, value, words):
-    started = time.perf_counter()
     assert main(["babble", str(tmp_path / "d.npz"), option, value, "--no-progress"]) == 2
     one_line_error(capsys, *words)
-    assert time.perf_counter() - started < 10 and not (tmp_path / "d.npz").exists()
+    assert not (tmp_path / "d.npz").exists()
 
 
 # ------------------------------------------------------------------------------------------------ one-line errors
@@ -147,10 +144,9 @@ def test_a_diverging_babble_is_one_line(tmp_path, capsys, args):
     "task.rod.n_links=1e30", "task.substeps=1e9", "buffer_size=1e12", "net_arch=[100000000]", "batch_size=1000000000",
 ])
 def test_wrong_train_set_values_are_one_line(tmp_path, capsys, assignment):
-    started = time.perf_counter()
     assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "r"), "--no-progress", "--set", assignment]) == 2
     one_line_error(capsys)
-    assert time.perf_counter() - started < 20
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]  # refused before any work: nothing written
 
 
 @pytest.fixture(scope="module")

@@ -138,7 +138,7 @@ def gp_moments(
     C : tensor (D, E)
         ``cov^{-1} cov(x, f(x))``.
     """
-    n_outputs, dim = log_lengthscales.shape
+    dim = log_lengthscales.shape[1]
     eye = torch.eye(dim, dtype=mean.dtype, device=mean.device)
     inp = inputs - mean  # (N, D)
     inv_ell = torch.exp(-log_lengthscales)  # (E, D)
@@ -153,9 +153,20 @@ def gp_moments(
     t_scaled = t * inv_ell.unsqueeze(1)  # (E, N, D)
     io_cov = torch.einsum("end,en->de", t_scaled, lb) * c  # (D, E)
 
-    # second moments for each pair (i <= j) of outputs
+    second = _second_moments(cov, inp, scaled, log_lengthscales, log_signal_var, signal_var, beta, inv_kernel, weights,
+                             eye)
+    s_mat = second - torch.outer(mean_out, mean_out)
+    return mean_out, s_mat, io_cov
+
+
+def _second_moments(cov: torch.Tensor, inp: torch.Tensor, scaled: torch.Tensor, log_lengthscales: torch.Tensor,
+                    log_signal_var: torch.Tensor, signal_var: torch.Tensor, beta: torch.Tensor,
+                    inv_kernel: torch.Tensor | None, weights: torch.Tensor | None, eye: torch.Tensor) -> torch.Tensor:
+    """The (E, E) second moments ``E[f_i f_j]`` of :func:`gp_moments` (``inp``: the inputs less the input mean,
+    ``scaled``: those over each output's length-scales), computed once per pair ``i <= j``."""
+    n_outputs = log_lengthscales.shape[0]
     log_k = log_signal_var.unsqueeze(1) - 0.5 * torch.sum(scaled * scaled, dim=2)  # (E, N)
-    rows, cols, diag, table = _pair_tables(n_outputs, mean.device)
+    rows, cols, diag, table = _pair_tables(n_outputs, inp.device)
     inv_ell2 = torch.exp(-2.0 * log_lengthscales)  # (E, D)
     r_mat = cov.unsqueeze(0) * (inv_ell2[rows] + inv_ell2[cols]).unsqueeze(1) + eye  # (P, D, D)
     t_pair = 1.0 / torch.sqrt(torch.linalg.det(r_mat))  # (P,)
@@ -177,8 +188,7 @@ def gp_moments(
     if inv_kernel is not None:
         # model uncertainty on the diagonal pairs: sf2_i - tr(K_i^{-1} L_ii) (the trace is in the weights)
         second = second.index_add(0, diag, signal_var)
-    s_mat = second[table] - torch.outer(mean_out, mean_out)  # symmetric: both halves read the same pair
-    return mean_out, s_mat, io_cov
+    return second[table]  # symmetric: both halves read the same pair
 
 
 def rbf_network_moments(

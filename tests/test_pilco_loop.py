@@ -12,7 +12,7 @@ import torch
 
 from softpend.cli import main
 from softpend.evaluation import evaluate_controller
-from softpend.pilco import PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
+from softpend.pilco import Pilco, PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
 from softpend.pilco.controller import PilcoController
 from softpend.pilco.policy import LinearPolicy
 from softpend.plant import OBSERVATION_NAMES, Observation
@@ -106,6 +106,27 @@ def test_budget_leaves_the_first_trials_alone(tiny_run):
     # and the seed does change them
     other = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
     assert not np.allclose(other.real_states[0], tiny_run.real_states[0])
+
+
+def test_pilco_object_steps_are_the_loop(tiny_run):
+    """Driving :class:`Pilco` by hand (random trial, first policy, models, policy, trial) makes the loop's trials."""
+    def same(mine, theirs) -> bool:  # all but the clocks, NaN equal to NaN
+        fields = [{k: v for k, v in dataclasses.asdict(r).items() if k not in ("wall_s_total", "cpu_s_total")}
+                  for r in (mine, theirs)]
+        return json.dumps(fields[0], sort_keys=True) == json.dumps(fields[1], sort_keys=True)
+
+    pilco = Pilco(PilcoConfig(**TINY, seed=3))
+    assert same(pilco.random_trial(), tiny_run.records[0])
+    pilco.start_policy()
+    gp = pilco.optimize_models()
+    assert pilco.gp is gp and pilco.n_gp_points == tiny_run.records[1].n_gp_points
+    search = pilco.optimize_policy()
+    assert search.predicted_cost == tiny_run.records[1].predicted_cost and search.n_restarts == 0
+    assert same(pilco.policy_trial(search), tiny_run.records[1])
+    np.testing.assert_array_equal(pilco.real_states[1], tiny_run.real_states[1])
+    assert isinstance(pilco.controller(), PilcoController)
+    result = pilco.result()
+    assert result.records == pilco.records and result.policy is pilco.policy
 
 
 def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):

@@ -32,6 +32,11 @@ the RBF policy while the tip is within ``balance_within_rad`` of upright and its
 ``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
 the real trials have visited that band, it is searched like the RBF policy over a predicted
 ``balance_prediction_s`` from the mean and covariance of the real trials' states in the band.
+
+The object and the loop
+-----------------------
+:class:`Pilco` holds a run's data, GP model and policies (``random_trial``, ``start_policy``, ``optimize_models``,
+``optimize_policy``, ``policy_trial``, ``controller``, ``result``); :func:`run_pilco` is its loop.
 """
 
 from __future__ import annotations

@@ -660,13 +660,14 @@ class PolicySearch:
     """What :meth:`Pilco.optimize_policy` searched with and predicted.
 
     ``predicted_cost`` is the expected total cost over a trial's ``horizon_s`` of the policy found;
-    ``cost_width_m`` and ``cost_rate_width_rad_s`` the cost it minimised (``None``: no tip-rate factor);
+    ``cost_width_m`` and ``cost_rate_width_rad_s`` the cost it minimised (``None``: the config's ``cost_width_m``,
+    no tip-rate factor), by which its trial is scored;
     ``n_restarts`` the searches from fresh random policies; ``balance_predicted_cost`` the balancing policy's
     expected cost over ``balance_prediction_s`` from the upright band (NaN: no balancing policy searched).
     """
 
     predicted_cost: float
-    cost_width_m: float
+    cost_width_m: Optional[float]
     cost_rate_width_rad_s: Optional[float]
     n_restarts: int
     balance_predicted_cost: float = float("nan")
@@ -717,8 +718,7 @@ class Pilco:
         )
         episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
         rate_width = config.cost_rate_width_rad_s if self.rate_on else None
-        return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0),  # type: ignore[arg-type]
-                            n_gp_points=0)
+        return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)
 
     def start_policy(self) -> RBFPolicy:
         """The first policy, random, its centres on the states of the trials so far (PILCO draws them from the

@@ -3,10 +3,11 @@
 #   make book [PROFILE=full|quick]   train the runs the notebooks read (softpend sweep --book), then execute the
 #                                    notebooks and build the HTML book into _build/html (softpend book --html);
 #                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
-#   make test [TEST_WORKERS=auto|N]  fast test suite (pytest -m 'not expensive') on pytest-xdist workers, one per
-#                                    CPU core by default
+#   make test [TEST_WORKERS=auto|N]  the static checks (make lint), then the fast test suite (pytest -m 'not
+#                                    expensive') on pytest-xdist workers, one per CPU core by default
 #   make test-expensive              only the long checks
-#   make lint / make format          ruff check / ruff format of softpend and tests
+#   make lint                        ruff check, ruff format --check (softpend, tests) and mypy (softpend)
+#   make format                      ruff format and the safe ruff fixes of softpend and tests
 #   make bench                       measured performance figures (softpend bench --json)
 #   make lock                        regenerate environment.lock from pyproject.toml (the ONLY way to edit it)
 #   make clean                       remove .venv, _build and the generated notebooks
@@ -53,7 +54,7 @@ book: $(STAMP)
 	$(VENV)/bin/softpend sweep --book --profile $(PROFILE)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
-test: $(STAMP)
+test: lint
 	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive' $(PYTEST_ARGS)
 
 test-expensive: $(STAMP)
@@ -61,8 +62,11 @@ test-expensive: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check softpend tests
+	$(VENV)/bin/ruff format --check softpend tests
+	$(VENV)/bin/mypy
 
 format: $(STAMP)
+	$(VENV)/bin/ruff check --fix softpend tests
 	$(VENV)/bin/ruff format softpend tests
 
 bench: $(STAMP)

@@ -33,7 +33,11 @@ VECTOR_ENVIRONMENTS = {
 
 for _env_id, _entry in ENVIRONMENTS.items():
     if _env_id not in _registry:
-        _register(id=_env_id, entry_point=_entry, vector_entry_point=VECTOR_ENVIRONMENTS.get(_env_id),
-                  max_episode_steps=MAX_EPISODE_STEPS)
+        _register(
+            id=_env_id,
+            entry_point=_entry,
+            vector_entry_point=VECTOR_ENVIRONMENTS.get(_env_id),
+            max_episode_steps=MAX_EPISODE_STEPS,
+        )
 
 __all__ = ["ENVIRONMENTS", "MAX_EPISODE_STEPS", "VECTOR_ENVIRONMENTS", "__version__"]

@@ -184,7 +184,9 @@ def _assigned_names(source: str) -> set[str]:
         return set()
     names: set[str] = set()
     for node in tree.body:
-        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        targets = (
+            node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        )
         for target in targets:
             names.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
     return names
@@ -206,7 +208,9 @@ def check_notebook_parameters() -> None:
         return
     shell = get_ipython()
     history = list(shell.user_ns.get("In", [])) if shell is not None else []
-    injected = [i for i, source in enumerate(history) if isinstance(source, str) and source.lstrip().startswith("# Parameters")]
+    injected = [
+        i for i, source in enumerate(history) if isinstance(source, str) and source.lstrip().startswith("# Parameters")
+    ]
     if not injected or injected[-1] < 1:
         return
     index = injected[-1]

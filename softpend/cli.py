@@ -51,14 +51,25 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
     for subparser in subparsers.choices.values():
-        subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                               help="show the traceback of an error instead of one line")
+        subparser.add_argument(
+            "--debug",
+            action="store_true",
+            default=argparse.SUPPRESS,
+            help="show the traceback of an error instead of one line",
+        )
     return parser
 
 
 #: Exception types that are the input's or the environment's fault, reported in one line.
 REPORTED_ERRORS: tuple[type[BaseException], ...] = (
-    ValueError, OSError, EOFError, RecursionError, MemoryError, OverflowError, zipfile.BadZipFile, pickle.UnpicklingError,
+    ValueError,
+    OSError,
+    EOFError,
+    RecursionError,
+    MemoryError,
+    OverflowError,
+    zipfile.BadZipFile,
+    pickle.UnpicklingError,
 )
 
 

@@ -138,8 +138,13 @@ class LateNoisyController:
     ``rng`` (and wrapped to ``[-pi, pi)``); the joint state passed on is the current one.  The first observation
     of an episode stands in for the older ones the rig has not shown yet."""
 
-    def __init__(self, controller: Controller, delay_steps: int = 0, noise_rad: float = 0.0,
-                 rng: Optional[np.random.Generator] = None) -> None:
+    def __init__(
+        self,
+        controller: Controller,
+        delay_steps: int = 0,
+        noise_rad: float = 0.0,
+        rng: Optional[np.random.Generator] = None,
+    ) -> None:
         self.controller = controller
         self._late = DelayLine(delay_steps)
         self.delay_steps = self._late.delay_steps
@@ -154,8 +159,10 @@ class LateNoisyController:
         seen = self._late.push(observation)
         if self.noise_rad > 0:
             phi, theta = self.rng.normal(0.0, self.noise_rad, size=2)
-            seen = seen._replace(phi_rad=float(wrap_angle_rad(seen.phi_rad + phi)),
-                                 theta_rad=float(wrap_angle_rad(seen.theta_rad + theta)))
+            seen = seen._replace(
+                phi_rad=float(wrap_angle_rad(seen.phi_rad + phi)),
+                theta_rad=float(wrap_angle_rad(seen.theta_rad + theta)),
+            )
         return self.controller(seen, q, q_dot, time_s)
 
 
@@ -214,7 +221,9 @@ def metrics_from_trajectory(
         Hub angular rate [rad/s].
     """
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
-    t, theta, torque, phi_dot = arrays = [np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)]
+    t, theta, torque, phi_dot = arrays = [
+        np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)
+    ]
     if any(a.ndim != 1 for a in arrays):
         raise ValueError(f"{', '.join(names)} must be 1-D arrays")
     if len({len(a) for a in arrays}) > 1 or len(t) < 2:
@@ -309,8 +318,14 @@ class EvaluationSummary:
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
         low, high = self.success_interval()
-        return {"controller": self.name, "seeds": len(self.results), "success_rate": self.success_rate,
-                "success_low": low, "success_high": high, **{name: self.median(name) for name in _METRICS[:-1]}}
+        return {
+            "controller": self.name,
+            "seeds": len(self.results),
+            "success_rate": self.success_rate,
+            "success_low": low,
+            "success_high": high,
+            **{name: self.median(name) for name in _METRICS[:-1]},
+        }
 
 
 # ---------------------------------------------------------------------- the one loop over both engines
@@ -383,8 +398,9 @@ class _Controllers:
         for c in self.controllers:
             c.reset()
 
-    def __call__(self, k: int, time_s: float, vectors: Any, observations: np.ndarray, q: np.ndarray,
-                 q_dot: np.ndarray) -> Any:
+    def __call__(
+        self, k: int, time_s: float, vectors: Any, observations: np.ndarray, q: np.ndarray, q_dot: np.ndarray
+    ) -> Any:
         torques = np.empty(len(self.controllers))
         for i, c in enumerate(self.controllers):
             torques[i] = float(c(Observation.from_array(observations[i]), q[i].copy(), q_dot[i].copy(), time_s))
@@ -449,13 +465,17 @@ def _steps(duration_s: float, dt_s: float, batch: int, n_coordinates: int) -> in
     if n_steps < 2:
         raise ValueError(f"duration_s must cover at least two steps of {dt_s} s, got {duration_s!r}")
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + n_coordinates)
-    check_work_size(f"evaluating {batch} episode(s) of {duration_s:g} s", batch * (n_steps + 1) * per_step,
-                    f"{n_steps + 1} steps of {dt_s:g} s per episode, {per_step} bytes of trajectory a step")
+    check_work_size(
+        f"evaluating {batch} episode(s) of {duration_s:g} s",
+        batch * (n_steps + 1) * per_step,
+        f"{n_steps + 1} steps of {dt_s:g} s per episode, {per_step} bytes of trajectory a step",
+    )
     return n_steps
 
 
-def _roll(rods: Any, policy: Any, seeds: list[int], duration_s: float,
-          initial_state: Optional[tuple[Any, Any]]) -> list[EvaluationResult]:
+def _roll(
+    rods: Any, policy: Any, seeds: list[int], duration_s: float, initial_state: Optional[tuple[Any, Any]]
+) -> list[EvaluationResult]:
     """The one evaluation loop: ``len(seeds)`` episodes at once on ``rods`` (an engine), one per seed."""
     n_steps, batch = _steps(duration_s, rods.dt_s, len(seeds), rods.n_coordinates), len(seeds)
     vectors, observations, q, q_dot = rods.reset(seeds, _start_options(initial_state))
@@ -484,22 +504,46 @@ def _roll(rods: Any, policy: Any, seeds: list[int], duration_s: float,
         if end >= 2:
             metrics = metrics_from_trajectory(times[:end], obs[:, _THETA], torque, obs[:, _PHI_DOT])
         metrics["success"] = metrics["success"] and reasons[i] is None
-        results.append(EvaluationResult(seed=seed, time_s=times[:end].copy(), observations=obs, torque_nm=torque,
-                                        joint_angles_rad=recorded_q[:end, i].copy(), diverged=reasons[i], **metrics))
+        results.append(
+            EvaluationResult(
+                seed=seed,
+                time_s=times[:end].copy(),
+                observations=obs,
+                torque_nm=torque,
+                joint_angles_rad=recorded_q[:end, i].copy(),
+                diverged=reasons[i],
+                **metrics,
+            )
+        )
     return results
 
 
-def run_episode(controller: Controller, env: Any, seed: int, duration_s: float,
-                initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None) -> EvaluationResult:
+def run_episode(
+    controller: Controller,
+    env: Any,
+    seed: int,
+    duration_s: float,
+    initial_state: Optional[tuple[np.ndarray, np.ndarray]] = None,
+) -> EvaluationResult:
     """One closed-loop episode of ``controller`` on ``env``, a :class:`~softpend.envs.SoftPendulumEnv` (see
     :func:`evaluate`)."""
-    return _roll(_OneRod(env), _Controllers([controller], lambda torques: torques), [seed], duration_s,
-                 initial_state)[0]
+    return _roll(_OneRod(env), _Controllers([controller], lambda torques: torques), [seed], duration_s, initial_state)[
+        0
+    ]
 
 
-def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float,
-                initial_state: Optional[tuple[Any, Any]], env_kwargs: dict[str, Any], rod_spread: float,
-                rod_seed: int, substeps: Optional[int], stop_at_first_failure: bool) -> list[EvaluationResult]:
+def _one_by_one(
+    controller: Any,
+    task: Task,
+    seeds: list[int],
+    duration_s: float,
+    initial_state: Optional[tuple[Any, Any]],
+    env_kwargs: dict[str, Any],
+    rod_spread: float,
+    rod_seed: int,
+    substeps: Optional[int],
+    stop_at_first_failure: bool,
+) -> list[EvaluationResult]:
     """The Exudyn engine's episodes of :func:`evaluate`, one after the other (none after a failure if asked)."""
     from softpend.envs import SoftPendulumEnv
 
@@ -509,16 +553,27 @@ def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float
     results: list[EvaluationResult] = []
     for seed in seeds:
         if rod_spread > 0:
-            env = SoftPendulumEnv(**task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs)
+            env = SoftPendulumEnv(
+                **task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs
+            )
         results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
         if stop_at_first_failure and not results[-1].success:
             break
     return results
 
 
-def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float,
-             initial_state: Optional[tuple[Any, Any]], env_kwargs: dict[str, Any], rod_spread: float, rod_seed: int,
-             substeps: Optional[int], stop_at_first_failure: bool) -> list[EvaluationResult]:
+def _batched(
+    controller: Any,
+    task: Task,
+    seeds: list[int],
+    duration_s: float,
+    initial_state: Optional[tuple[Any, Any]],
+    env_kwargs: dict[str, Any],
+    rod_spread: float,
+    rod_seed: int,
+    substeps: Optional[int],
+    stop_at_first_failure: bool,
+) -> list[EvaluationResult]:
     """The batched engine's episodes of :func:`evaluate`, all at once, rod ``i`` the one :func:`_rod` draws for
     ``seeds[i]``."""
     from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
@@ -528,18 +583,28 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float,
         raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
     _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
     policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
-    rods = None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s)
-                                                                      for s in seeds])
+    rods = (
+        None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s) for s in seeds])
+    )
     if rods is not None:
         stable = stable_substeps(rods, task.dt_s)
         if substeps is None:
             substeps = max(stable, stable_substeps(task.rod, task.dt_s))
         elif int_at_least("substeps", substeps, 1) < stable:
-            raise ValueError(f"substeps must be at least {stable} for the rods drawn with rod_spread = {rod_spread:g} "
-                             f"(softpend.plant.batched.stable_substeps), got {substeps!r}")
-    kwargs = dict(num_envs=len(seeds), params=task.rod, dt_s=task.dt_s, substeps=substeps, start=task.start,
-                  start_noise_rad=task.start_noise_rad, max_episode_steps=int(round(duration_s / task.dt_s)) + 1,
-                  **env_kwargs)
+            raise ValueError(
+                f"substeps must be at least {stable} for the rods drawn with rod_spread = {rod_spread:g} "
+                f"(softpend.plant.batched.stable_substeps), got {substeps!r}"
+            )
+    kwargs = dict(
+        num_envs=len(seeds),
+        params=task.rod,
+        dt_s=task.dt_s,
+        substeps=substeps,
+        start=task.start,
+        start_noise_rad=task.start_noise_rad,
+        max_episode_steps=int(round(duration_s / task.dt_s)) + 1,
+        **env_kwargs,
+    )
     levels = getattr(policy, "n_torque_levels", None)
     env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
     if rods is not None:
@@ -622,8 +687,18 @@ def evaluate(
     rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
     rod_seed = int_at_least("rod_seed", rod_seed, 0)
     episodes = _batched if engine == "batched" else _one_by_one
-    results = episodes(controller, task, seeds, duration_s, initial_state, env_kwargs, rod_spread, rod_seed, substeps,
-                       stop_at_first_failure)
+    results = episodes(
+        controller,
+        task,
+        seeds,
+        duration_s,
+        initial_state,
+        env_kwargs,
+        rod_spread,
+        rod_seed,
+        substeps,
+        stop_at_first_failure,
+    )
     failed = [i for i, r in enumerate(results) if not r.success]
     if stop_at_first_failure and failed:
         results = results[: failed[0] + 1]
@@ -646,9 +721,17 @@ def _copies(controller: Any, batch: int) -> list[Any]:
         raise ValueError(f"controller cannot be copied for every rod ({exc}); pass one controller per seed") from exc
 
 
-def evaluate_batched(predict_batch: Callable[[np.ndarray], Any], task: Optional[Task] = None,
-                     seeds: Sequence[int] = (0, 1, 2), duration_s: float = TEST_EPISODE_S, *, action_repeat: int = 1,
-                     n_torque_levels: Optional[int] = None, name: str = "policy", **options: Any) -> EvaluationSummary:
+def evaluate_batched(
+    predict_batch: Callable[[np.ndarray], Any],
+    task: Optional[Task] = None,
+    seeds: Sequence[int] = (0, 1, 2),
+    duration_s: float = TEST_EPISODE_S,
+    *,
+    action_repeat: int = 1,
+    n_torque_levels: Optional[int] = None,
+    name: str = "policy",
+    **options: Any,
+) -> EvaluationSummary:
     """:func:`evaluate` of ``BatchPolicy(predict_batch, action_repeat, n_torque_levels)`` on the batched engine
     (``options``: ``rod_spread``, ``rod_seed``, ``substeps``, ``initial_state``)."""
     policy = BatchPolicy(predict_batch, action_repeat, n_torque_levels)

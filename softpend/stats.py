@@ -78,8 +78,14 @@ class AggregateInterval:
     confidence: float
 
     def as_dict(self) -> dict[str, float | str | int]:
-        return {"statistic": self.statistic, "value": self.value, "low": self.low, "high": self.high,
-                "n_runs": self.n_runs, "confidence": self.confidence}
+        return {
+            "statistic": self.statistic,
+            "value": self.value,
+            "low": self.low,
+            "high": self.high,
+            "n_runs": self.n_runs,
+            "confidence": self.confidence,
+        }
 
 
 def aggregate_interval(
@@ -135,8 +141,13 @@ def aggregate_interval(
     else:
         with np.errstate(invalid="ignore"):
             result = scipy.stats.bootstrap(
-                columns, stratified, n_resamples=int(n_resamples), confidence_level=confidence,
-                method="percentile", vectorized=True, rng=np.random.default_rng(seed),
+                columns,
+                stratified,
+                n_resamples=int(n_resamples),
+                confidence_level=confidence,
+                method="percentile",
+                vectorized=True,
+                rng=np.random.default_rng(seed),
             )
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
     return AggregateInterval(statistic, value, low, high, int(data.shape[0]), float(confidence))

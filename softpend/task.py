@@ -69,9 +69,11 @@ class Task:
         rod = self.rod
         most = MAX_TORQUE_RATIO * (rod.mass_kg / 2 + rod.tip_mass_kg) * rod.length_m * GRAVITY_MPS2
         if rod.torque_limit_nm > most:
-            raise ValueError(f"task.rod.torque_limit_nm must be at most {most:.4g} N m ({MAX_TORQUE_RATIO:g} times the "
-                             f"torque that holds this rod horizontal; see softpend.task.MAX_TORQUE_RATIO), got "
-                             f"{rod.torque_limit_nm!r}")
+            raise ValueError(
+                f"task.rod.torque_limit_nm must be at most {most:.4g} N m ({MAX_TORQUE_RATIO:g} times the "
+                f"torque that holds this rod horizontal; see softpend.task.MAX_TORQUE_RATIO), got "
+                f"{rod.torque_limit_nm!r}"
+            )
 
     # ------------------------------------------------------------------ derived objects
     def make_plant(self, **options: Any) -> Plant:
@@ -80,8 +82,14 @@ class Task:
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :class:`softpend.envs.SoftPendulumEnv` for this task."""
-        return {"params": self.rod, "plant": self.plant, "dt_s": self.dt_s, "substeps": self.substeps,
-                "start": self.start, "start_noise_rad": self.start_noise_rad}
+        return {
+            "params": self.rod,
+            "plant": self.plant,
+            "dt_s": self.dt_s,
+            "substeps": self.substeps,
+            "start": self.start,
+            "start_noise_rad": self.start_noise_rad,
+        }
 
     def tilt_state(self, tilt_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` of the straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright."""

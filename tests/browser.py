@@ -63,10 +63,15 @@ def chromium_executable(install: bool = True) -> str:
     if not install or apt is None or os.geteuid() != 0:
         raise RuntimeError(
             "headless Chromium is needed to check the book in a browser: `chromium` is not on PATH and cannot "
-            f"be installed here (needs apt-get as root); install Debian's `{CHROMIUM_PACKAGE}` package")
+            f"be installed here (needs apt-get as root); install Debian's `{CHROMIUM_PACKAGE}` package"
+        )
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     log = []
-    for command in ([apt, "install", "-y", CHROMIUM_PACKAGE], [apt, "update"], [apt, "install", "-y", CHROMIUM_PACKAGE]):
+    for command in (
+        [apt, "install", "-y", CHROMIUM_PACKAGE],
+        [apt, "update"],
+        [apt, "install", "-y", CHROMIUM_PACKAGE],
+    ):
         result = subprocess.run(command, env=env, capture_output=True, text=True, timeout=1200)
         log.append(f"$ {' '.join(command)} -> exit {result.returncode}\n{result.stderr[-2000:]}")
         found = shutil.which("chromium")
@@ -79,6 +84,7 @@ def chromium_executable(install: bool = True) -> str:
 @contextlib.contextmanager
 def serve(folder: Path) -> Iterator[str]:
     """Serve ``folder`` over HTTP on 127.0.0.1 (a free port) in a thread; yields the base URL."""
+
     class Quiet(http.server.SimpleHTTPRequestHandler):
         def log_message(self, *args: Any) -> None:
             pass
@@ -99,11 +105,26 @@ def launch_chromium(executable: str) -> Iterator[str]:
     """Start headless Chromium with the DevTools protocol on a free port; yields the browser's websocket URL."""
     profile = tempfile.mkdtemp(prefix="softpend-chromium-")
     process = subprocess.Popen(
-        [executable, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-         "--no-first-run", "--no-default-browser-check", "--disable-extensions", "--disable-background-networking",
-         "--disable-component-update", "--remote-debugging-port=0", "--remote-debugging-address=127.0.0.1",
-         f"--user-data-dir={profile}", f"--window-size={WINDOW_WIDTH_PX},900", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        [
+            executable,
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--disable-extensions",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--remote-debugging-port=0",
+            "--remote-debugging-address=127.0.0.1",
+            f"--user-data-dir={profile}",
+            f"--window-size={WINDOW_WIDTH_PX},900",
+            "about:blank",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         url, seen = None, []
@@ -157,8 +178,9 @@ class DevTools:
             elif "method" in data:
                 self.events.append(data)
 
-    async def send(self, method: str, params: dict | None = None, session: str | None = None,
-                   timeout_s: float = PAGE_TIMEOUT_S) -> dict[str, Any]:
+    async def send(
+        self, method: str, params: dict | None = None, session: str | None = None, timeout_s: float = PAGE_TIMEOUT_S
+    ) -> dict[str, Any]:
         self.next_id += 1
         message: dict[str, Any] = {"id": self.next_id, "method": method, "params": params or {}}
         if session is not None:
@@ -181,8 +203,9 @@ class DevTools:
             await asyncio.sleep(0.05)
 
     async def evaluate(self, expression: str, session: str) -> Any:
-        result = await self.send("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
-                                                      "returnByValue": True}, session)
+        result = await self.send(
+            "Runtime.evaluate", {"expression": expression, "awaitPromise": True, "returnByValue": True}, session
+        )
         if "exceptionDetails" in result:
             raise RuntimeError(f"evaluating the page checks failed: {result['exceptionDetails']}")
         return result["result"].get("value")
@@ -249,7 +272,10 @@ def _ids_in_file(path: Path) -> frozenset[str]:
     from bs4 import BeautifulSoup
 
     soup = BeautifulSoup(path.read_text(encoding="utf-8", errors="replace"), "html.parser")
-    return frozenset([tag["id"] for tag in soup.find_all(id=True)] + [tag["name"] for tag in soup.find_all("a", attrs={"name": True})])
+    return frozenset(
+        [tag["id"] for tag in soup.find_all(id=True)]
+        + [tag["name"] for tag in soup.find_all("a", attrs={"name": True})]
+    )
 
 
 def _link_problems(html_dir: Path, base_url: str, page_path: str, probe: dict[str, Any]) -> list[str]:
@@ -297,12 +323,17 @@ async def _check_page(tools: DevTools, html_dir: Path, base_url: str, page: str,
     # a browser context of its own per page: a fresh reader (no storage shared with the other pages)
     context = (await tools.send("Target.createBrowserContext"))["browserContextId"]
     target = await tools.send("Target.createTarget", {"url": "about:blank", "browserContextId": context})
-    session = (await tools.send("Target.attachToTarget", {"targetId": target["targetId"], "flatten": True}))["sessionId"]
+    session = (await tools.send("Target.attachToTarget", {"targetId": target["targetId"], "flatten": True}))[
+        "sessionId"
+    ]
     try:
         for domain in ("Page", "Runtime", "Log"):
             await tools.send(f"{domain}.enable", session=session)
-        await tools.send("Emulation.setDeviceMetricsOverride", {"width": WINDOW_WIDTH_PX, "height": 900,
-                                                                "deviceScaleFactor": 1, "mobile": False}, session)
+        await tools.send(
+            "Emulation.setDeviceMetricsOverride",
+            {"width": WINDOW_WIDTH_PX, "height": 900, "deviceScaleFactor": 1, "mobile": False},
+            session,
+        )
         start = len(tools.events)
         url = base_url + page
         navigation = await tools.send("Page.navigate", {"url": url}, session)
@@ -311,16 +342,22 @@ async def _check_page(tools: DevTools, html_dir: Path, base_url: str, page: str,
         await tools.wait_for("Page.loadEventFired", session, start)
         loaded = len(tools.events)
         await asyncio.sleep(0.5)
-        if any(e["method"] == "Page.frameStartedLoading" and e.get("sessionId") == session
-               for e in tools.events[loaded:]):  # a redirect (the book's index.html): wait for the target page
+        if any(
+            e["method"] == "Page.frameStartedLoading" and e.get("sessionId") == session for e in tools.events[loaded:]
+        ):  # a redirect (the book's index.html): wait for the target page
             await tools.wait_for("Page.loadEventFired", session, loaded)
         probe = await tools.evaluate(PAGE_PROBE, session)
         height = max(900, min(int(probe["height"]), MAX_SHOT_PX))
-        await tools.send("Emulation.setDeviceMetricsOverride", {"width": WINDOW_WIDTH_PX, "height": height,
-                                                                "deviceScaleFactor": 1, "mobile": False}, session)
+        await tools.send(
+            "Emulation.setDeviceMetricsOverride",
+            {"width": WINDOW_WIDTH_PX, "height": height, "deviceScaleFactor": 1, "mobile": False},
+            session,
+        )
         # the shot keeps the window, as tall as the page up to MAX_SHOT_PX (a longer page would be "too large"
         # for the browser to capture whole)
-        shot_data = await tools.send("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": False}, session)
+        shot_data = await tools.send(
+            "Page.captureScreenshot", {"format": "png", "captureBeyondViewport": False}, session
+        )
         shot.parent.mkdir(parents=True, exist_ok=True)
         shot.write_bytes(base64.b64decode(shot_data["data"]))
         await asyncio.sleep(0.2)  # late console messages
@@ -339,12 +376,16 @@ async def _check_page(tools: DevTools, html_dir: Path, base_url: str, page: str,
 
 def book_pages(html_dir: Path) -> list[str]:
     """Every HTML page of a built book, relative to ``html_dir`` (theme and source folders left out)."""
-    return sorted(path.relative_to(html_dir).as_posix() for path in html_dir.rglob("*.html")
-                  if not {"_static", "_sources", "_images"} & set(path.relative_to(html_dir).parts))
+    return sorted(
+        path.relative_to(html_dir).as_posix()
+        for path in html_dir.rglob("*.html")
+        if not {"_static", "_sources", "_images"} & set(path.relative_to(html_dir).parts)
+    )
 
 
-def check_pages(html_dir: Path | str, pages: Sequence[str], screenshot_dir: Path | str,
-                executable: str | None = None) -> dict[str, list[str]]:
+def check_pages(
+    html_dir: Path | str, pages: Sequence[str], screenshot_dir: Path | str, executable: str | None = None
+) -> dict[str, list[str]]:
     """Open each page (path relative to ``html_dir``; :data:`PAGES_AT_ONCE` at a time) in headless Chromium;
     returns ``{page: problems}`` (see the module docstring) and saves ``screenshot_dir/<page>.png``."""
     html_dir, screenshot_dir = Path(html_dir).resolve(), Path(screenshot_dir)
@@ -356,8 +397,9 @@ def check_pages(html_dir: Path | str, pages: Sequence[str], screenshot_dir: Path
 
         async def check(page: str) -> list[str]:
             async with slots:
-                return await _check_page(tools, html_dir, base_url, page,
-                                         screenshot_dir / (page.replace("/", "__") + ".png"))
+                return await _check_page(
+                    tools, html_dir, base_url, page, screenshot_dir / (page.replace("/", "__") + ".png")
+                )
 
         try:
             return dict(zip(pages, await asyncio.gather(*(check(page) for page in pages))))

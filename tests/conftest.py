@@ -7,8 +7,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
-
 from browser import chromium_executable
+
 from softpend.study import book
 from softpend.study.book import build_html, run_notebooks
 

@@ -69,10 +69,12 @@ def test_hub_angle_matches_converged_exudyn_plant_over_one_second(n_links: int) 
         assert np.ptp(reference) > 0.1  # the rod really moved
 
 
-@pytest.mark.parametrize("n_links, integrator, factor", [(4, "rk4", 10), (4, "rosenbrock", 1.5),
-                                                        (10, "rosenbrock", 1.5)])
-def test_default_substeps_are_more_accurate_than_the_default_exudyn_plant(n_links: int, integrator: str,
-                                                                          factor: float) -> None:
+@pytest.mark.parametrize(
+    "n_links, integrator, factor", [(4, "rk4", 10), (4, "rosenbrock", 1.5), (10, "rosenbrock", 1.5)]
+)
+def test_default_substeps_are_more_accurate_than_the_default_exudyn_plant(
+    n_links: int, integrator: str, factor: float
+) -> None:
     """With its default sub-steps each integrator's hub angle is closer to the converged plant than the default
     Exudyn plant's (RK4 ten times closer at n = 4; Rosenbrock, two sub-steps, at least 1.5 times)."""
     rng = np.random.default_rng(7)
@@ -97,8 +99,10 @@ def test_rosenbrock_converges_at_second_order_to_the_rk4_chain() -> None:
     starts = [_start(4, rng) for _ in rods]
     torques = rng.uniform(-1, 1, (len(rods), 60)) * 0.06
     reference, _ = _batched_hub(rods, starts, torques, substeps=20)  # within 1e-7 rad of the converged plant
-    errors = [np.abs(_batched_hub(rods, starts, torques, substeps=k, integrator="rosenbrock")[0] - reference).max()
-              for k in (8, 16, 32)]
+    errors = [
+        np.abs(_batched_hub(rods, starts, torques, substeps=k, integrator="rosenbrock")[0] - reference).max()
+        for k in (8, 16, 32)
+    ]
     ratios = [errors[0] / errors[1], errors[1] / errors[2]]
     assert all(3.5 < r < 4.5 for r in ratios), (errors, ratios)
     assert errors[-1] < 1e-4
@@ -129,7 +133,7 @@ def test_compiled_chain_equals_the_eager_one_and_differentiates_eagerly() -> Non
     q[:, 0] -= torch.tensor([0.3, 1.2], dtype=torch.float64)
     torques = torch.tensor([[0.06, -0.02]] * 20, dtype=torch.float64)
     with torch.no_grad():
-        for (a, b) in zip(eager.rollout(q, qd, torques), compiled.rollout(q, qd, torques)):
+        for a, b in zip(eager.rollout(q, qd, torques), compiled.rollout(q, qd, torques)):
             np.testing.assert_allclose(b.numpy(), a.numpy(), rtol=1e-12, atol=1e-12)
     assert compiled._compiled_integrate is not None
     mass = torch.tensor([0.058, 0.066], dtype=torch.float64, requires_grad=True)
@@ -155,11 +159,15 @@ def test_energy_and_observations_equal_the_exudyn_plant_on_random_states(n_links
         expected = plant.energy_j(q[i], qd[i])
         for key, value in expected.items():
             assert float(energies[key][i]) == pytest.approx(value, rel=1e-12, abs=1e-14), key
-        np.testing.assert_allclose(observations[i], plant.observation_from_state(q[i], qd[i]).as_array(), rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose(
+            observations[i], plant.observation_from_state(q[i], qd[i]).as_array(), rtol=1e-12, atol=1e-13
+        )
 
 
-@pytest.mark.parametrize("integrator, substeps, tolerance", [("rk4", 20, 1e-7), ("rk4", None, 2e-2),
-                                                             ("rosenbrock", 32, 3e-4), ("rosenbrock", None, 6e-2)])
+@pytest.mark.parametrize(
+    "integrator, substeps, tolerance",
+    [("rk4", 20, 1e-7), ("rk4", None, 2e-2), ("rosenbrock", 32, 3e-4), ("rosenbrock", None, 6e-2)],
+)
 def test_energy_change_equals_motor_work_minus_dissipation(integrator: str, substeps, tolerance: float) -> None:
     """Energy balance over 1 s of random torque; with the default sub-steps both integrators damp the stiffest
     bending mode numerically, which shows as a residual below 1 % (RK4) or 6 % (Rosenbrock, L-stable) of the
@@ -225,8 +233,10 @@ def test_stable_substeps_grow_with_the_number_of_links() -> None:
     [
         (lambda: BatchedRodParams.from_params(RodParams()).replace(mass_kg=[-1.0]), "mass_kg"),
         (lambda: BatchedRodParams.from_params(RodParams()).replace(hub_inertia_kgm2=[0.0]), "hub_inertia_kgm2"),
-        (lambda: BatchedRodParams.from_params(RodParams()).replace(joint_damping_nms_per_rad=[float("nan")]),
-         "joint_damping_nms_per_rad"),
+        (
+            lambda: BatchedRodParams.from_params(RodParams()).replace(joint_damping_nms_per_rad=[float("nan")]),
+            "joint_damping_nms_per_rad",
+        ),
         (lambda: BatchedRodParams.from_params(RodParams(), batch_size=0), "batch_size"),
         (lambda: BatchedRodParams.from_params([RodParams(n_links=3), RodParams(n_links=4)]), "n_links"),
         (lambda: BatchedRodParams.from_params(RodParams()).replace(colour=[1.0]), "colour"),
@@ -234,12 +244,22 @@ def test_stable_substeps_grow_with_the_number_of_links() -> None:
         (lambda: BatchedPRBChain(RodParams(), substeps=0), "substeps"),
         (lambda: BatchedPRBChain(RodParams(), integrator="euler"), "integrator"),
         (lambda: BatchedPRBChain(RodParams(), compiled="yes"), "compiled"),
-        (lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 4), torch.zeros(2, 5), 0.0),
-         "joint_angles_rad"),
-        (lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 5), torch.zeros(2, 5), [0.0, float("nan")]),
-         "torque_nm"),
-        (lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 5), torch.zeros(2, 5), [0.0, 0.0, 0.0]),
-         "torque_nm"),
+        (
+            lambda: BatchedPRBChain(RodParams(), batch_size=2).step(torch.zeros(2, 4), torch.zeros(2, 5), 0.0),
+            "joint_angles_rad",
+        ),
+        (
+            lambda: BatchedPRBChain(RodParams(), batch_size=2).step(
+                torch.zeros(2, 5), torch.zeros(2, 5), [0.0, float("nan")]
+            ),
+            "torque_nm",
+        ),
+        (
+            lambda: BatchedPRBChain(RodParams(), batch_size=2).step(
+                torch.zeros(2, 5), torch.zeros(2, 5), [0.0, 0.0, 0.0]
+            ),
+            "torque_nm",
+        ),
     ],
 )
 def test_bad_input_raises_value_error_naming_the_parameter(build, name: str) -> None:

@@ -47,7 +47,12 @@ def test_state_round_trip_and_rigid_rotation():
     q, qd = plant.hanging_state()
     qd[0] = 2.0
     observation = plant.reset(q, qd)
-    inertia = p.hub_inertia_kgm2 + p.mass_kg * p.length_m**2 / 3 + p.mass_kg * p.depth_m**2 / 12 + p.tip_mass_kg * p.length_m**2
+    inertia = (
+        p.hub_inertia_kgm2
+        + p.mass_kg * p.length_m**2 / 3
+        + p.mass_kg * p.depth_m**2 / 12
+        + p.tip_mass_kg * p.length_m**2
+    )
     assert plant.energy_j()["kinetic_j"] == pytest.approx(0.5 * inertia * 4.0, rel=1e-9)
     assert math.hypot(observation.ex_dot_m_s, observation.ey_dot_m_s) == pytest.approx(2.0 * p.length_m)
     assert observation.theta_dot_rad_s == pytest.approx(2.0)
@@ -55,7 +60,9 @@ def test_state_round_trip_and_rigid_rotation():
 
 def test_energy_conserved_without_damping():
     params = RodParams(joint_damping_nms_per_rad=0.0, hub_friction_nms_per_rad=0.0)
-    plant = BeamPlant(params, dt_s=0.002, substeps=1, n_elements=6, spectral_radius=1.0, newton_relative_tolerance=1e-10)
+    plant = BeamPlant(
+        params, dt_s=0.002, substeps=1, n_elements=6, spectral_radius=1.0, newton_relative_tolerance=1e-10
+    )
     q, qd = plant.hanging_state()
     q[0] = math.pi - 1.2
     plant.reset(q, qd)

@@ -2,8 +2,8 @@
 
 import pytest
 
-from softpend.study.transfer import TransferCase, perturbations, transfer_table
 from softpend.plant import RodParams
+from softpend.study.transfer import TransferCase, perturbations, transfer_table
 
 
 def test_perturbations_change_one_thing_each():
@@ -22,7 +22,11 @@ def test_lqr_from_prb_balances_the_beam_small_budget():
 
     params = RodParams()
     case = TransferCase(
-        "LQR", lambda: LQRController.from_params(params, state="observation"), start="upright", duration_s=2.5, start_noise_rad=0.15
+        "LQR",
+        lambda: LQRController.from_params(params, state="observation"),
+        start="upright",
+        duration_s=2.5,
+        start_noise_rad=0.15,
     )
     rows = transfer_table([case], params, plants=("beam",), seeds=(0,), fraction=0.2, progress=False)
     assert len(rows) == 7
@@ -48,10 +52,10 @@ class _Idle:
 
 def test_rl_agents_run_in_the_transfer_study(tmp_path):
     """A (tiny) DQN run becomes a transfer case, evaluated on the beam; a mismatched rod is refused."""
-    from softpend.study.transfer import rl_transfer_cases, transfer_matrix
     from softpend.rl.config import DQNConfig
     from softpend.rl.dqn import train_dqn
     from softpend.study.rl_runs import run_folder
+    from softpend.study.transfer import rl_transfer_cases, transfer_matrix
 
     config = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=100, checkpoint_every_episodes=100)
     train_dqn(config, seed=0, episodes=2, run_dir=run_folder(tmp_path, "dqn", 0), progress=False)

@@ -19,8 +19,10 @@ def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book)
     root, runs, _ = quick_book
     names = toc_notebooks(root / "_toc.yml")
     assert names, "the toc lists no notebooks"
-    after = {name: front_matter(book.read_notebook(root / "notebooks" / f"{name}.md"), name, names)["after"]
-             for name in names}
+    after = {
+        name: front_matter(book.read_notebook(root / "notebooks" / f"{name}.md"), name, names)["after"]
+        for name in names
+    }
     assert [run.name for run in runs] == execution_order(names, after)
     assert any(after.values()), "the claims ledger reads the chapters it lists in softpend.after"
     for name, deps in after.items():  # a notebook that reads others executes after them
@@ -38,8 +40,10 @@ def test_every_toc_notebook_has_a_quick_profile_and_executes_cleanly(quick_book)
     assert {run.status for run in run_notebooks(root, profile="quick", progress=False)} == {"cached"}
     record = json.loads(BookLayout.at(root).record_path.read_text())
     assert [entry["name"] for entry in record["notebooks"]] == names
-    assert all(entry["this_run"] == "cached" and entry["executed_s"] > 0 and entry["profile"] == "quick"
-               for entry in record["notebooks"])
+    assert all(
+        entry["this_run"] == "cached" and entry["executed_s"] > 0 and entry["profile"] == "quick"
+        for entry in record["notebooks"]
+    )
 
 
 def test_execution_page_is_in_the_book_and_lists_every_notebook(quick_book):

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import shutil
 
+from browser import book_pages, check_pages
 from PIL import Image
 
-from browser import book_pages, check_pages
 from softpend.study.book import toc_notebooks
 
 
@@ -26,7 +26,8 @@ def test_every_page_of_the_quick_book_reads_clean_in_chromium(quick_book, chromi
     broken = {page: found for page, found in problems.items() if found}
     assert not broken, f"screenshots in {shots}:\n" + "\n".join(
         f"{page}:\n  " + "\n  ".join(found[:20]) + (f"\n  ... {len(found) - 20} more" if len(found) > 20 else "")
-        for page, found in broken.items())
+        for page, found in broken.items()
+    )
 
 
 #: Injected into a real page of the book: one of each kind of problem the checks must find.
@@ -56,8 +57,9 @@ def test_the_checks_find_every_problem_of_a_deliberately_broken_page(quick_book,
     text = page.read_text(encoding="utf-8")
     assert "</main>" in text
     page.write_text(text.replace("</main>", BROKEN + "</main>", 1), encoding="utf-8")
-    problems = check_pages(copy, ["book/_generated/fig02_reward.html"], tmp_path / "shots",
-                           executable=chromium)["book/_generated/fig02_reward.html"]
+    problems = check_pages(copy, ["book/_generated/fig02_reward.html"], tmp_path / "shots", executable=chromium)[
+        "book/_generated/fig02_reward.html"
+    ]
     report = "\n".join(problems)
 
     def found(kind: str, *words: str) -> bool:

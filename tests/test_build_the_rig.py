@@ -21,8 +21,17 @@ import pytest
 from softpend.hardware.rig_design import V5_CARTRIDGES, rig_design
 from softpend.io.overrides import apply_overrides, parse_assignment
 from softpend.plant import RodParams
-from softpend.study.build_rig import (QUICK_BUDGET, TESTED_CAMERAS, TWIN, BuildTarget, QuantisedHub, build_steps,
-                                      check_step, choose_cartridge, motor_rows)
+from softpend.study.build_rig import (
+    QUICK_BUDGET,
+    TESTED_CAMERAS,
+    TWIN,
+    BuildTarget,
+    QuantisedHub,
+    build_steps,
+    check_step,
+    choose_cartridge,
+    motor_rows,
+)
 from softpend.study.figures.rig_design import dimension_labels, draw_rig_design
 
 REPO = Path(__file__).resolve().parents[1]
@@ -121,7 +130,9 @@ def test_the_rig_target_names_port_and_camera():
     assert "--port" in steps["check"].argv and "--camera" not in steps["check"].argv
     assert "--camera" in steps["calibrate"].argv and "--port" not in steps["calibrate"].argv
     assert "--calibration" in steps["control"].argv and "--twin" not in steps["control"].argv
-    assert all("--twin" in s.argv for s in build_steps("build", TWIN) if s.key in ("check", "calibrate", "babble", "control"))
+    assert all(
+        "--twin" in s.argv for s in build_steps("build", TWIN) if s.key in ("check", "calibrate", "babble", "control")
+    )
 
 
 def _run(argv: tuple[str, ...], cwd: Path) -> int:
@@ -182,8 +193,9 @@ def test_the_power_on_check_fails_a_device_with_a_slow_watchdog():
     from softpend.task import Task
 
     task = Task(start_noise_rad=0.0)
-    report = rig_check("twin", task, rest_s=0.3, push_fraction=0.2,
-                       serial=SimRig(RigConfig(task=task, watchdog_ms=300)).connect())
+    report = rig_check(
+        "twin", task, rest_s=0.3, push_fraction=0.2, serial=SimRig(RigConfig(task=task, watchdog_ms=300)).connect()
+    )
     assert not report["passed"]
     assert not report["checks"]["handshake"]["passed"]
     assert report["checks"]["rest"]["passed"] and report["checks"]["direction"]["passed"]

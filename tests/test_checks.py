@@ -13,7 +13,9 @@ NOT_NUMBERS = [True, False, np.bool_(True), "1", None, [1.0], (1,)]
 NOT_FINITE = [math.nan, math.inf, -math.inf, np.float64("nan")]
 
 
-@pytest.mark.parametrize("value, expected", [(1, 1.0), (0.25, 0.25), (np.float32(2.0), 2.0), (np.int64(3), 3.0), (1e-300, 1e-300)])
+@pytest.mark.parametrize(
+    "value, expected", [(1, 1.0), (0.25, 0.25), (np.float32(2.0), 2.0), (np.int64(3), 3.0), (1e-300, 1e-300)]
+)
 def test_positive_accepts_positive_finite_numbers_as_float(value, expected):
     result = checks.positive("dt_s", value)
     assert result == expected and type(result) is float

@@ -28,12 +28,17 @@ def test_near_upright_starts_are_seeded_tilts_within_the_start_noise():
 
 
 def test_every_run_is_evaluated_from_every_start_with_an_interval():
-    comparison = classical_comparison(Task(), tilts_rad=(0.2,), duration_s=2.0, starts=STARTS,
-                                      swingup_duration_s=3.0, pid_gains=GAINS)
+    comparison = classical_comparison(
+        Task(), tilts_rad=(0.2,), duration_s=2.0, starts=STARTS, swingup_duration_s=3.0, pid_gains=GAINS
+    )
     assert comparison.pid_gains == {"given": GAINS}
     labels = {row["controller"] for row in comparison.rows}
-    assert {"LQR (true model)", "PID (tuned on given)", "PID (tuned on given), no limit",
-            "energy swing-up + LQR"} <= labels
+    assert {
+        "LQR (true model)",
+        "PID (tuned on given)",
+        "PID (tuned on given), no limit",
+        "energy swing-up + LQR",
+    } <= labels
     for row in comparison.rows:
         assert row["seeds"] == len(STARTS)
         assert 0.0 <= row["success_low"] <= row["success_rate"] <= row["success_high"] + 1e-12 <= 1.0 + 1e-12
@@ -53,4 +58,3 @@ def test_pid_gain_sensitivity_scales_every_gain():
     assert rows[0]["success_rate"] < rows[1]["success_rate"]  # a hundredth of the gains cannot hold the rod
     with pytest.raises(ValueError, match="scales"):
         pid_gain_sensitivity(Task(), GAINS, scales=(0.0,), starts=STARTS)
-

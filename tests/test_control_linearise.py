@@ -99,7 +99,9 @@ def test_learned_linearisation_is_the_jacobian_of_the_model():
 
     def f(x, u):
         with torch.no_grad():
-            return model.predict_next(torch.as_tensor(x).reshape(1, -1), torch.tensor([u], dtype=torch.float64)).numpy()[0]
+            return model.predict_next(
+                torch.as_tensor(x).reshape(1, -1), torch.tensor([u], dtype=torch.float64)
+            ).numpy()[0]
 
     h = 1e-6
     for i in (0, 1, 6):
@@ -158,6 +160,8 @@ def test_lqr_from_learned_model_stabilises_true_plant(trained_model):
     assert controller.design_model.is_stable_closed_loop(controller.design_gain)
     q = np.zeros(params.n_links + 1)
     q[0] = 0.2
-    result = evaluate_controller(controller, Task(start="upright"), seeds=(0,), duration_s=6.0, initial_state=(q, 0 * q)).results[0]
+    result = evaluate_controller(
+        controller, Task(start="upright"), seeds=(0,), duration_s=6.0, initial_state=(q, 0 * q)
+    ).results[0]
     assert result.diverged is None and result.upright_std_rad < 0.02
     assert np.all(np.abs(result.theta_rad[-100:]) < 0.01)

@@ -64,7 +64,9 @@ def test_saturation(joint_lqr):
 @pytest.mark.parametrize("which", ["joint", "observation"])
 def test_recovers_from_tilt_and_stays_upright(which, joint_lqr, observation_lqr):
     controller = joint_lqr if which == "joint" else observation_lqr
-    result = evaluate_controller(controller, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=_tilt(0.2)).results[0]
+    result = evaluate_controller(
+        controller, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=_tilt(0.2)
+    ).results[0]
     assert result.diverged is None
     assert result.swing_up_time_s < 0.5
     assert result.upright_std_rad < 0.02

@@ -44,15 +44,18 @@ def test_pid_holds_the_true_plant_upright():
     pid = PIDController(PIDGains(0.19, 0.0005, 0.014))
     q = np.zeros(params.n_links + 1)
     q[0] = 0.2
-    result = evaluate_controller(pid, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=(q, 0 * q)).results[0]
+    result = evaluate_controller(
+        pid, Task(start="upright"), seeds=(0,), duration_s=4.0, initial_state=(q, 0 * q)
+    ).results[0]
     assert result.diverged is None
     assert result.swing_up_time_s < 1.0
     assert np.all(np.abs(result.theta_rad[-100:]) < 0.02)
 
 
 def test_tuning_lowers_the_cost_on_a_tiny_budget():
-    result = tune_pid(plant_simulator(), initial_gains=PIDGains(0.3, 0.1, 0.005), tilts_rad=(0.1,), duration_s=1.0,
-                      max_evaluations=6)
+    result = tune_pid(
+        plant_simulator(), initial_gains=PIDGains(0.3, 0.1, 0.005), tilts_rad=(0.1,), duration_s=1.0, max_evaluations=6
+    )
     assert result.cost < result.initial_cost
     assert result.n_evaluations <= 8
 

@@ -77,8 +77,9 @@ def test_lqr_from_a_tilt_and_on_perturbed_rods_matches_the_single_evaluation() -
     batched = evaluate(lqr, UPRIGHT, engine="batched", seeds=seeds, duration_s=2.0, initial_state=tilt, rod_spread=0.15)
     for seed, b in zip(seeds, batched.results):
         rod = randomised_rod(UPRIGHT.rod, np.random.default_rng(seed), 0.15)  # perturbed_rod_row's rod of this seed
-        (s,) = evaluate_controller(lqr, UPRIGHT.replace(rod=rod, substeps=CONVERGED), seeds=(seed,), duration_s=2.0,
-                                   initial_state=tilt).results
+        (s,) = evaluate_controller(
+            lqr, UPRIGHT.replace(rod=rod, substeps=CONVERGED), seeds=(seed,), duration_s=2.0, initial_state=tilt
+        ).results
         np.testing.assert_allclose(b.joint_angles_rad[0], tilt[0])
         assert b.success == s.success
         assert np.max(np.abs(b.theta_rad - s.theta_rad)) < 1e-4
@@ -93,8 +94,9 @@ def test_energy_swing_up_matches_the_single_evaluation() -> None:
     seeds = (5, 2)
     controllers = [EnergySwingUpController(task.rod, dt_s=task.dt_s) for _ in seeds]  # holds an Exudyn plant: one each
     batched = evaluate(controllers, task, engine="batched", seeds=seeds, duration_s=4.5)
-    single = evaluate_controller(EnergySwingUpController(task.rod, dt_s=task.dt_s), task.replace(substeps=CONVERGED),
-                                 seeds=seeds, duration_s=4.5)
+    single = evaluate_controller(
+        EnergySwingUpController(task.rod, dt_s=task.dt_s), task.replace(substeps=CONVERGED), seeds=seeds, duration_s=4.5
+    )
     _assert_same_fields(batched, single)
     for b, s in zip(batched.results, single.results):
         assert b.success and s.success
@@ -119,8 +121,11 @@ def test_dqn_agent_matches_evaluate_agent(agent) -> None:
         assert np.max(np.abs(b.theta_rad - s.theta_rad)) < 5e-5  # measured 1.1e-5 rad
     assert any(np.ptp(r.torque_nm) > 0 for r in batched.results)  # the agent switched torques
     row, expected = fresh_start_row(batched), fresh_start_row(single)
-    assert (row["starts"], row["balanced_starts"], row["success_rate"]) == (3, expected["balanced_starts"],
-                                                                            expected["success_rate"])
+    assert (row["starts"], row["balanced_starts"], row["success_rate"]) == (
+        3,
+        expected["balanced_starts"],
+        expected["success_rate"],
+    )
 
 
 def test_batched_episodes_do_not_depend_on_each_other(agent) -> None:
@@ -165,8 +170,7 @@ def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:
         for values in (r.observations, r.torque_nm, r.joint_angles_rad):
             assert np.all(np.isfinite(values))
         assert all(not isinstance(v, float) or not math.isnan(v) for v in r.metrics().values())
-    (alone,) = evaluate(lqr, UPRIGHT, engine="batched", seeds=(0,), duration_s=1.0,
-                        initial_state=(q, q_dot[0])).results
+    (alone,) = evaluate(lqr, UPRIGHT, engine="batched", seeds=(0,), duration_s=1.0, initial_state=(q, q_dot[0])).results
     np.testing.assert_allclose(ok.observations, alone.observations, rtol=0, atol=1e-12)
 
 

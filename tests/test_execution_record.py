@@ -13,13 +13,23 @@ from support import NOTEBOOK_HEADER as HEADER
 from softpend.study.book import BookLayout, _processor, execution_order, run_notebooks, toc_notebooks
 
 
-def source(title: str, body: str = "print(greeting)", after: list[str] | None = None,
-           book_runs: list[str] | None = None, realtime: object = None) -> str:
-    front = {key: value for key, value in (("after", after), ("book_runs", book_runs), ("realtime", realtime))
-             if value is not None}
+def source(
+    title: str,
+    body: str = "print(greeting)",
+    after: list[str] | None = None,
+    book_runs: list[str] | None = None,
+    realtime: object = None,
+) -> str:
+    front = {
+        key: value
+        for key, value in (("after", after), ("book_runs", book_runs), ("realtime", realtime))
+        if value is not None
+    }
     extra = "softpend:\n" + "".join(f"  {key}: {json.dumps(value)}\n" for key, value in front.items()) if front else ""
-    return (HEADER.format(extra=extra) + f"\n# {title}\n\n```{{code-cell}} ipython3\n:tags: [parameters]\n\n"
-            f"greeting = 'hello'\n```\n\n```{{code-cell}} ipython3\n{body}\n```\n")
+    return (
+        HEADER.format(extra=extra) + f"\n# {title}\n\n```{{code-cell}} ipython3\n:tags: [parameters]\n\n"
+        f"greeting = 'hello'\n```\n\n```{{code-cell}} ipython3\n{body}\n```\n"
+    )
 
 
 def make_book(root: Path, notebooks: dict[str, str], profiles: dict) -> Path:
@@ -28,7 +38,8 @@ def make_book(root: Path, notebooks: dict[str, str], profiles: dict) -> Path:
     chapters = "\n".join(f"      - file: book/_generated/{name}" for name in notebooks)
     (root / "_toc.yml").write_text(
         f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n"
-        "  - caption: Appendix\n    chapters:\n      - file: book/_generated/execution\n")
+        "  - caption: Appendix\n    chapters:\n      - file: book/_generated/execution\n"
+    )
     (root / "book" / "profiles.yml").write_text(json.dumps(profiles))
     for name, text in notebooks.items():
         (root / "notebooks" / f"{name}.md").write_text(text)
@@ -46,8 +57,7 @@ def test_after_runs_late_enters_the_key_and_the_record_describes_the_run(tmp_pat
     # the ledger reads what "late" wrote: it must run after it although the toc lists it first
     ledger = source("Ledger", "import pathlib\nprint(pathlib.Path('late.txt').read_text())", after=["late"])
     late = source("Late", "import pathlib\npathlib.Path('late.txt').write_text(greeting)")
-    root = make_book(tmp_path, {"ledger": ledger, "late": late},
-                     {"quick": {"late": {"greeting": "hi"}}})
+    root = make_book(tmp_path, {"ledger": ledger, "late": late}, {"quick": {"late": {"greeting": "hi"}}})
     assert toc_notebooks(root / "_toc.yml") == ["ledger", "late"]  # the execution page is not a notebook
     runs = run_notebooks(root, profile="quick", progress=False, overrides={})
     assert [run.name for run in runs] == ["late", "ledger"]
@@ -132,13 +142,15 @@ def test_notebooks_side_by_side_all_run_in_the_project_root(tmp_path, monkeypatc
     here = Path.cwd()
     # uneven lengths: executions end while others' kernels start
     body = "import os, pathlib, time\ntime.sleep({nap})\npathlib.Path('cwd-{name}.txt').write_text(os.getcwd())"
-    notebooks = {name: source(name.upper(), body.format(nap=0.1 + 1.3 * (k % 2), name=name))
-                 for k, name in enumerate("abcdef")}
+    notebooks = {
+        name: source(name.upper(), body.format(nap=0.1 + 1.3 * (k % 2), name=name)) for k, name in enumerate("abcdef")
+    }
     root = make_book(tmp_path, notebooks, {"full": {}})
     run_notebooks(root, profile="full", progress=False)
     assert Path.cwd() == here
-    assert {name: (root / f"cwd-{name}.txt").read_text() for name in notebooks} == dict.fromkeys(notebooks,
-                                                                                                 str(root.resolve()))
+    assert {name: (root / f"cwd-{name}.txt").read_text() for name in notebooks} == dict.fromkeys(
+        notebooks, str(root.resolve())
+    )
     assert not list(here.glob("cwd-*.txt"))
 
 
@@ -146,7 +158,9 @@ def test_the_processor_is_named_by_model_family_and_model(tmp_path):
     """Runs repeat exactly only on the same processor model, so the record names it (the first processor's
     fields of /proc/cpuinfo); without that file it falls back to what the platform module says."""
     cpuinfo = tmp_path / "cpuinfo"
-    cpuinfo.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\n"
-                       "model name\t: AMD EPYC\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n")
+    cpuinfo.write_text(
+        "processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\n"
+        "model name\t: AMD EPYC\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n"
+    )
     assert _processor(cpuinfo) == "AMD EPYC (family 26, model 2)"
     assert _processor(tmp_path / "missing") == (platform.processor() or platform.machine() or "-")

@@ -18,14 +18,27 @@ from softpend.study.fresh_starts import aggregate_fresh_start_rows, fresh_start_
 
 def _result(seed, swing_up_s, std):
     empty = np.zeros((2, 10))
-    return EvaluationResult(seed=seed, swing_up_time_s=swing_up_s, upright_std_rad=std, upright_mean_abs_rad=std,
-                            peak_torque_nm=0.06, energy_used_j=0.1, success=math.isfinite(swing_up_s) and std <= 0.2,
-                            time_s=np.zeros(2), observations=empty, torque_nm=np.zeros(2), joint_angles_rad=empty)
+    return EvaluationResult(
+        seed=seed,
+        swing_up_time_s=swing_up_s,
+        upright_std_rad=std,
+        upright_mean_abs_rad=std,
+        peak_torque_nm=0.06,
+        energy_used_j=0.1,
+        success=math.isfinite(swing_up_s) and std <= 0.2,
+        time_s=np.zeros(2),
+        observations=empty,
+        torque_nm=np.zeros(2),
+        joint_angles_rad=empty,
+    )
 
 
 def test_a_start_balances_only_when_it_swings_up_and_holds_within_the_threshold():
-    results = [_result(i, 2.0, 0.05) for i in range(17)] + [_result(17, 2.0, 0.15), _result(18, math.inf, 0.05),
-                                                             _result(19, 3.0, 0.09)]
+    results = [_result(i, 2.0, 0.05) for i in range(17)] + [
+        _result(17, 2.0, 0.15),
+        _result(18, math.inf, 0.05),
+        _result(19, 3.0, 0.09),
+    ]
     row = fresh_start_row(EvaluationSummary("x", results))
     assert row["starts"] == 20 and row["balanced_starts"] == 18
     assert (row["balanced_low"], row["balanced_high"]) == pytest.approx(wilson_interval(18, 20))
@@ -38,14 +51,19 @@ def test_a_start_balances_only_when_it_swings_up_and_holds_within_the_threshold(
 def test_the_tests_that_stop_or_select_a_run_are_as_long_as_the_reported_fresh_start_episodes():
     # a policy that holds for a shorter selection test and falls later must not stop a run as balanced
     assert DQNConfig().eval_duration_s == PilcoConfig().eval_duration_s == TEST_EPISODE_S
-    for function in (fresh_starts.rl_fresh_start_rows, fresh_starts.pilco_fresh_start_rows,
-                     fresh_starts.perturbed_rod_row):
+    for function in (
+        fresh_starts.rl_fresh_start_rows,
+        fresh_starts.pilco_fresh_start_rows,
+        fresh_starts.perturbed_rod_row,
+    ):
         assert inspect.signature(function).parameters["duration_s"].default == TEST_EPISODE_S, function.__name__
 
 
 def test_aggregate_counts_runs_and_bootstraps_the_iqm():
-    rows = [{"method": "m", "agent": "final", "balanced_rate": r, "run_balances": r >= 0.9}
-            for r in (1.0, 0.95, 0.9, 0.5, 0.0)]
+    rows = [
+        {"method": "m", "agent": "final", "balanced_rate": r, "run_balances": r >= 0.9}
+        for r in (1.0, 0.95, 0.9, 0.5, 0.0)
+    ]
     (agg,) = aggregate_fresh_start_rows(rows)
     assert agg["runs"] == 5 and agg["runs_balanced"] == 3
     assert agg["iqm_low"] <= agg["iqm_balanced_rate"] <= agg["iqm_high"]
@@ -90,8 +108,9 @@ def test_rl_rows_are_kept_in_the_run_folder_and_measured_again_when_the_agent_ch
 def _log(seed: int, plant_s: float, stopped: bool):
     from softpend.rl.training_log import TrainingLog
 
-    log = TrainingLog("dqn", seed, episodes=[{"episode": 1, "plant_s": plant_s}],
-                      stop_reason="balanced" if stopped else None)
+    log = TrainingLog(
+        "dqn", seed, episodes=[{"episode": 1, "plant_s": plant_s}], stop_reason="balanced" if stopped else None
+    )
     return log
 
 
@@ -101,15 +120,34 @@ def test_headline_figures_count_final_agents_and_compare_plant_seconds_seed_by_s
     # DQN: 300, 400, 500 s; DQN-MBPO: 90 (3.3x fewer), 150 (2.7x) and a run whose final agent fails fresh starts
     dqn = [_log(0, 300.0, True), _log(1, 400.0, True), _log(2, 500.0, False)]
     mbpo = [_log(0, 90.0, True), _log(1, 150.0, True), _log(2, 60.0, True)]
-    balanced = {("model-free DQN", 0): 20, ("model-free DQN", 1): 19, ("model-free DQN", 2): 18,
-                ("DQN-MBPO", 0): 20, ("DQN-MBPO", 1): 18, ("DQN-MBPO", 2): 11}
-    fresh = [{"method": m, "seed": s, "agent": "final", "balanced_starts": k, "starts": 20, "run_balances": k >= 18}
-             for (m, s), k in balanced.items()]
-    fresh += [{"method": "DQN-MBPO", "seed": 2, "agent": "selected", "balanced_starts": 20, "starts": 20,
-               "run_balances": True}]  # the selected agent does not count
+    balanced = {
+        ("model-free DQN", 0): 20,
+        ("model-free DQN", 1): 19,
+        ("model-free DQN", 2): 18,
+        ("DQN-MBPO", 0): 20,
+        ("DQN-MBPO", 1): 18,
+        ("DQN-MBPO", 2): 11,
+    }
+    fresh = [
+        {"method": m, "seed": s, "agent": "final", "balanced_starts": k, "starts": 20, "run_balances": k >= 18}
+        for (m, s), k in balanced.items()
+    ]
+    fresh += [
+        {
+            "method": "DQN-MBPO",
+            "seed": 2,
+            "agent": "selected",
+            "balanced_starts": 20,
+            "starts": 20,
+            "run_balances": True,
+        }
+    ]  # the selected agent does not count
     rows = seed_rows({"dqn": dqn, "mbpo": mbpo}, fresh)
     by = {(r["method"], r["seed"]): r for r in rows}
-    assert by[("DQN-MBPO", 2)]["plant_s_to_balance"] == math.inf and by[("model-free DQN", 2)]["plant_s_to_balance"] == 500.0
+    assert (
+        by[("DQN-MBPO", 2)]["plant_s_to_balance"] == math.inf
+        and by[("model-free DQN", 2)]["plant_s_to_balance"] == 500.0
+    )
     figures = headline_figures(rows)
     assert figures["seeds_balanced_dqn"] == 3 and figures["seeds_balanced_mbpo"] == 2 and figures["seeds_mbpo"] == 3
     assert figures["dqn_real_s_to_balance"] == 400.0 and figures["mbpo_real_s_to_balance"] == 150.0
@@ -147,12 +185,21 @@ def test_perturbed_rod_row_runs_each_start_on_its_own_rod():
     from softpend.task import Task
 
     task, seeds = Task(), (20_000, 20_001)
-    row = perturbed_rod_row(EnergySwingUpController(task.rod, dt_s=task.dt_s), task, 0.15, report_seeds=seeds,
-                            duration_s=4.0)
-    by_hand = [evaluate(EnergySwingUpController(task.rod, dt_s=task.dt_s), task.replace(rod=randomised_rod(
-        task.rod, np.random.default_rng(seed), 0.15)), seeds=(seed,), duration_s=4.0).results[0] for seed in seeds]
+    row = perturbed_rod_row(
+        EnergySwingUpController(task.rod, dt_s=task.dt_s), task, 0.15, report_seeds=seeds, duration_s=4.0
+    )
+    by_hand = [
+        evaluate(
+            EnergySwingUpController(task.rod, dt_s=task.dt_s),
+            task.replace(rod=randomised_rod(task.rod, np.random.default_rng(seed), 0.15)),
+            seeds=(seed,),
+            duration_s=4.0,
+        ).results[0]
+        for seed in seeds
+    ]
     assert row == {"spread": 0.15, **fresh_start_row(EvaluationSummary("by hand", by_hand))}
     assert row["balanced_starts"] == 2  # the swing-up holds both rods: the times below are real catches
-    nominal = fresh_start_row(evaluate(EnergySwingUpController(task.rod, dt_s=task.dt_s), task, seeds=seeds,
-                                       duration_s=4.0))
+    nominal = fresh_start_row(
+        evaluate(EnergySwingUpController(task.rod, dt_s=task.dt_s), task, seeds=seeds, duration_s=4.0)
+    )
     assert nominal["median_swing_up_time_s"] != row["median_swing_up_time_s"]

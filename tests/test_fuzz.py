@@ -47,10 +47,19 @@ CASE_LIMIT_S = 30.0
 
 def fuzz_settings(max_examples: int) -> settings:
     """Reproducible (derandomised), bounded settings; no example database, no deadline (the alarm guards)."""
-    return settings(max_examples=max_examples * (10 if EXPLORE else 1), derandomize=not EXPLORE, database=None,
-                    deadline=None, print_blob=False,
-                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
-                                           HealthCheck.data_too_large, HealthCheck.filter_too_much])
+    return settings(
+        max_examples=max_examples * (10 if EXPLORE else 1),
+        derandomize=not EXPLORE,
+        database=None,
+        deadline=None,
+        print_blob=False,
+        suppress_health_check=[
+            HealthCheck.function_scoped_fixture,
+            HealthCheck.too_slow,
+            HealthCheck.data_too_large,
+            HealthCheck.filter_too_much,
+        ],
+    )
 
 
 class Hang(BaseException):
@@ -74,10 +83,12 @@ def alarm(seconds: float = CASE_LIMIT_S):
 # ------------------------------------------------------------------------------------------------ strategies
 #: Numbers as a command line spells them: non-finite, huge, negative, tiny, zero.
 NON_FINITE = st.sampled_from(["nan", "inf", "-inf", "NaN", "1e400", "-1e400"])
-HUGE = st.one_of(st.floats(min_value=1e9, max_value=1e308).map(repr),
-                 st.integers(min_value=10**9, max_value=10**40).map(str))
-NEGATIVE = st.one_of(st.floats(min_value=-1e308, max_value=-1e-300).map(repr),
-                     st.integers(min_value=-10**30, max_value=-1).map(str))
+HUGE = st.one_of(
+    st.floats(min_value=1e9, max_value=1e308).map(repr), st.integers(min_value=10**9, max_value=10**40).map(str)
+)
+NEGATIVE = st.one_of(
+    st.floats(min_value=-1e308, max_value=-1e-300).map(repr), st.integers(min_value=-(10**30), max_value=-1).map(str)
+)
 TINY = st.floats(min_value=1e-300, max_value=1e-9).map(repr)
 ZERO = st.sampled_from(["0", "-0.0", "0.0", "0e5"])
 #: Values of the wrong type, empty values and unicode.
@@ -87,20 +98,38 @@ UNICODE = st.text(alphabet=st.characters(blacklist_categories=("Cs", "Cc")), min
 #: Any hostile value of a numeric option.
 HOSTILE_NUMBER = st.one_of(NON_FINITE, HUGE, NEGATIVE, TINY, ZERO, WRONG_TYPE, EMPTY, UNICODE)
 #: Any hostile value of a text option (a list of names, an activation, ...).
-HOSTILE_TEXT = st.one_of(EMPTY, UNICODE, WRONG_TYPE, st.sampled_from(["0", "-4", "a,b", "8,,8", "1e3", "nope"]),
-                         HUGE)
+HOSTILE_TEXT = st.one_of(EMPTY, UNICODE, WRONG_TYPE, st.sampled_from(["0", "-4", "a,b", "8,,8", "1e3", "nope"]), HUGE)
 
 #: JSON values: scalars of every type, non-finite spellings, and nested containers.
-JSON_SCALAR = st.one_of(st.none(), st.booleans(), st.integers(min_value=-10**40, max_value=10**40),
-                        st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=8),
-                        st.sampled_from(["nan", "1e400", "prb", "beam", "random", ""]))
-HOSTILE_JSON = st.recursive(JSON_SCALAR, lambda inner: st.one_of(st.lists(inner, max_size=3),
-                                                                  st.dictionaries(st.text(max_size=6), inner, max_size=3)),
-                            max_leaves=8)
+JSON_SCALAR = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(10**40), max_value=10**40),
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.text(max_size=8),
+    st.sampled_from(["nan", "1e400", "prb", "beam", "random", ""]),
+)
+HOSTILE_JSON = st.recursive(
+    JSON_SCALAR,
+    lambda inner: st.one_of(st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
+    max_leaves=8,
+)
 
 #: Special files, each built once by the ``special`` fixture.
-SPECIAL_KINDS = ("fifo", "folder", "dev_zero", "dev_null", "dangling_link", "link_to_fifo", "missing", "unicode_missing",
-                 "empty", "garbage", "below_a_file", "precious")
+SPECIAL_KINDS = (
+    "fifo",
+    "folder",
+    "dev_zero",
+    "dev_null",
+    "dangling_link",
+    "link_to_fifo",
+    "missing",
+    "unicode_missing",
+    "empty",
+    "garbage",
+    "below_a_file",
+    "precious",
+)
 SPECIAL = st.sampled_from(SPECIAL_KINDS)
 
 
@@ -133,15 +162,22 @@ def run_cli(argv: list[str], guarded: list[Path]) -> None:
     before = _snapshot(guarded)
     out, err = io.StringIO(), io.StringIO()
     try:
-        with alarm(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
-                warnings.catch_warnings(record=True) as caught:
+        with (
+            alarm(),
+            contextlib.redirect_stdout(out),
+            contextlib.redirect_stderr(err),
+            warnings.catch_warnings(record=True) as caught,
+        ):
             warnings.simplefilter("always", RuntimeWarning)
             rc = main(argv)
     except BaseException as exc:  # noqa: BLE001 - anything escaping main is the outcome under test
         raise AssertionError(f"softpend {argv}: {type(exc).__name__}: {exc}") from exc
     # a result computed through an overflow is silent garbage, not a legitimate result
-    overflows = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)
-                 and re.search(r"overflow|invalid value", str(w.message))]
+    overflows = [
+        str(w.message)
+        for w in caught
+        if issubclass(w.category, RuntimeWarning) and re.search(r"overflow|invalid value", str(w.message))
+    ]
     assert rc != 0 or not overflows, f"softpend {argv}: exit 0 after {overflows[:3]}"
     assert _snapshot(guarded) == before, f"softpend {argv}: changed a file it did not write"
     stderr, stdout = err.getvalue(), out.getvalue()
@@ -173,8 +209,20 @@ def run_call(call: Callable[[], Any], check: Callable[[Any], None] | None = None
 
 
 # ------------------------------------------------------------------------------------------------ fixtures
-TINY_RL = ["--set", "episode_s=0.2", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.2", "--set",
-           "learning_starts=5", "--set", "buffer_size=1000", "--set", "net_arch=[16]"]
+TINY_RL = [
+    "--set",
+    "episode_s=0.2",
+    "--set",
+    "eval_seeds=[0]",
+    "--set",
+    "eval_duration_s=0.2",
+    "--set",
+    "learning_starts=5",
+    "--set",
+    "buffer_size=1000",
+    "--set",
+    "net_arch=[16]",
+]
 MARKERS = [[0.15, 0.1], [-0.15, 0.1], [0.15, -0.25], [-0.15, -0.25]]
 _COUNTER = itertools.count()
 
@@ -183,12 +231,19 @@ _COUNTER = itertools.count()
 def world(tmp_path_factory) -> dict[str, Path]:
     """Files the fuzz reads: a tiny dataset, a tiny DQN run, a tiny model, a markers file, special files."""
     root = tmp_path_factory.mktemp("fuzz")
-    paths = {"root": root, "data": root / "data.npz", "run": root / "run", "model": root / "model",
-             "markers": root / "markers.json"}
+    paths = {
+        "root": root,
+        "data": root / "data.npz",
+        "run": root / "run",
+        "model": root / "model",
+        "markers": root / "markers.json",
+    }
     with contextlib.redirect_stdout(io.StringIO()):
         assert main(["babble", str(paths["data"]), "--n-trials", "3", "--trial-length-s", "0.1", "--no-progress"]) == 0
-        assert main(["train", "--algo", "dqn", "--episodes", "1", "--out", str(paths["run"]), "--no-progress",
-                     *TINY_RL]) == 0
+        assert (
+            main(["train", "--algo", "dqn", "--episodes", "1", "--out", str(paths["run"]), "--no-progress", *TINY_RL])
+            == 0
+        )
         assert main(["fit-model", str(paths["data"]), str(paths["model"]), "--max-epochs", "2", "--no-progress"]) == 0
     paths["markers"].write_text(json.dumps(MARKERS))
     special = root / "special"
@@ -209,7 +264,10 @@ def world(tmp_path_factory) -> dict[str, Path]:
     paths["below_a_file"] = special / "a_file" / "x"
     # (an empty file is not guarded: a crash-safe log may start in it, as in a file it created)
     paths["guarded"] = [paths[k] for k in ("fifo", "folder", "garbage", "precious", "data", "markers")] + [
-        paths["run"] / "config.json", paths["run"] / "agent.zip", special / "a_file"]
+        paths["run"] / "config.json",
+        paths["run"] / "agent.zip",
+        special / "a_file",
+    ]
     return paths
 
 
@@ -225,49 +283,121 @@ def fresh(world, name: str) -> str:
 COMMANDS: dict[str, dict[str, Any]] = {
     "babble": {
         "argv": ["babble", "{out}.npz", "--n-trials", "1", "--trial-length-s", "0.05", "--no-progress"],
-        "numbers": ["--n-trials", "--trial-length-s", "--dt-s", "--torque-std-fraction", "--torque-bandwidth-hz",
-                    "--feedback-trial-fraction", "--feedback-kp", "--feedback-kd", "--phi-noise-std-rad",
-                    "--tip-noise-std-m", "--er-noise-std-rad", "--camera-delay-steps", "--n-links", "--seed"],
-        "texts": ["--start"], "paths": [1]},
+        "numbers": [
+            "--n-trials",
+            "--trial-length-s",
+            "--dt-s",
+            "--torque-std-fraction",
+            "--torque-bandwidth-hz",
+            "--feedback-trial-fraction",
+            "--feedback-kp",
+            "--feedback-kd",
+            "--phi-noise-std-rad",
+            "--tip-noise-std-m",
+            "--er-noise-std-rad",
+            "--camera-delay-steps",
+            "--n-links",
+            "--seed",
+        ],
+        "texts": ["--start"],
+        "paths": [1],
+    },
     "fit-model": {
         "argv": ["fit-model", "{data}", "{out}", "--max-epochs", "2", "--no-progress"],
-        "numbers": ["--history", "--ensemble-size", "--max-epochs", "--batch-size", "--learning-rate", "--patience",
-                    "--validation-fraction", "--seed", "--threads"],
-        "texts": ["--hidden-widths", "--activation", "--information", "--velocity-source"], "paths": [1, 2, "--test-data"]},
+        "numbers": [
+            "--history",
+            "--ensemble-size",
+            "--max-epochs",
+            "--batch-size",
+            "--learning-rate",
+            "--patience",
+            "--validation-fraction",
+            "--seed",
+            "--threads",
+        ],
+        "texts": ["--hidden-widths", "--activation", "--information", "--velocity-source"],
+        "paths": [1, 2, "--test-data"],
+    },
     "identify": {
         "argv": ["identify", "{data}", "--max-iterations", "1", "--max-windows", "2", "--window-s", "0.05"],
         "numbers": ["--window-s", "--max-windows", "--max-iterations", "--seed"],
-        "texts": ["--parameters"], "paths": [1, "--initial-params", "--out"]},
+        "texts": ["--parameters"],
+        "paths": [1, "--initial-params", "--out"],
+    },
     "evaluate": {
         "argv": ["evaluate", "{run}", "--seeds", "0", "--duration-s", "0.2"],
-        "numbers": ["--duration-s", "--seeds"], "texts": ["--which"], "paths": [1]},
+        "numbers": ["--duration-s", "--seeds"],
+        "texts": ["--which"],
+        "paths": [1],
+    },
     "train": {
         "argv": ["train", "--algo", "dqn", "--out", "{out}", "--episodes", "1", "--no-progress", *TINY_RL],
-        "numbers": ["--seed", "--episodes", "--torque-limit-nm", "--n-links"], "texts": ["--algo"], "paths": ["--out"]},
+        "numbers": ["--seed", "--episodes", "--torque-limit-nm", "--n-links"],
+        "texts": ["--algo"],
+        "paths": ["--out"],
+    },
     "rig control": {
         "argv": ["rig", "control", "lqr", "--twin", "--out", "{out}", "--duration", "0.2", "--no-progress"],
-        "numbers": ["--duration", "--camera-fps", "--camera-latency-ms", "--max-blind-ms", "--tilt", "--start-noise",
-                    "--seed", "--latency-ms", "--counts-per-rev", "--n-links"],
-        "texts": ["--camera-effects", "--start", "--which"], "paths": [2, "--out"]},
+        "numbers": [
+            "--duration",
+            "--camera-fps",
+            "--camera-latency-ms",
+            "--max-blind-ms",
+            "--tilt",
+            "--start-noise",
+            "--seed",
+            "--latency-ms",
+            "--counts-per-rev",
+            "--n-links",
+        ],
+        "texts": ["--camera-effects", "--start", "--which"],
+        "paths": [2, "--out"],
+    },
     "rig design": {
-        "argv": ["rig", "design", "--out", "{out}"], "numbers": ["--print-modulus-mpa"], "texts": [], "paths": ["--out"]},
+        "argv": ["rig", "design", "--out", "{out}"],
+        "numbers": ["--print-modulus-mpa"],
+        "texts": [],
+        "paths": ["--out"],
+    },
     "rig check": {
         "argv": ["rig", "check", "--twin", "--rest-s", "0.1"],
-        "numbers": ["--rest-s", "--push-fraction", "--counts-per-rev"], "texts": [], "paths": ["--out"]},
+        "numbers": ["--rest-s", "--push-fraction", "--counts-per-rev"],
+        "texts": [],
+        "paths": ["--out"],
+    },
     "rig calibrate": {
         "argv": ["rig", "calibrate", "--twin", "--markers", "{markers}", "--out", "{out}.json"],
-        "numbers": ["--seed"], "texts": ["--markers"], "paths": ["--markers", "--out"]},
+        "numbers": ["--seed"],
+        "texts": ["--markers"],
+        "paths": ["--markers", "--out"],
+    },
     "rig": {
         "argv": ["rig", "--duration", "0.2"],
-        "numbers": ["--duration", "--latency-ms", "--drop", "--garble", "--watchdog-ms", "--counts-per-rev",
-                    "--n-links", "--seed"], "texts": [], "paths": ["--truth-log"]},
+        "numbers": [
+            "--duration",
+            "--latency-ms",
+            "--drop",
+            "--garble",
+            "--watchdog-ms",
+            "--counts-per-rev",
+            "--n-links",
+            "--seed",
+        ],
+        "texts": [],
+        "paths": ["--truth-log"],
+    },
     "track": {
         "argv": ["track", "{out}.avi", "--out", "{out}.csv"],
-        "numbers": ["--fps", "--min-area"], "texts": ["--markers"], "paths": [1, "--out", "--markers", "--calibration"]},
+        "numbers": ["--fps", "--min-area"],
+        "texts": ["--markers"],
+        "paths": [1, "--out", "--markers", "--calibration"],
+    },
     "track --camera": {
         "argv": ["track", "--camera", "{out}.avi", "--out", "{out}.csv", "--duration", "0.2"],
-        "numbers": ["--duration", "--camera-latency-ms", "--min-area"], "texts": ["--camera"],
-        "paths": ["--camera", "--out"]},
+        "numbers": ["--duration", "--camera-latency-ms", "--min-area"],
+        "texts": ["--camera"],
+        "paths": ["--camera", "--out"],
+    },
 }
 
 
@@ -346,8 +476,19 @@ def test_fuzz_train_set(world, algo, data):
     config = DQNConfig() if algo == "dqn" else MBPOConfig()
     field = data.draw(st.sampled_from(_field_names(config) + ["no_such_field", "task.no_field"]))
     value = data.draw(st.one_of(HOSTILE_JSON.map(json.dumps), HOSTILE_NUMBER))
-    argv = ["train", "--algo", algo, "--out", fresh(world, "r"), "--episodes", "1", "--no-progress", *TINY_RL,
-            "--set", f"{field}={value}"]
+    argv = [
+        "train",
+        "--algo",
+        algo,
+        "--out",
+        fresh(world, "r"),
+        "--episodes",
+        "1",
+        "--no-progress",
+        *TINY_RL,
+        "--set",
+        f"{field}={value}",
+    ]
     if algo == "mbpo":
         argv += ["--set", "initial_random_episodes=1", "--set", "model_fit_steps=5", "--set", "ensemble_size=1"]
     run_cli(argv, world["guarded"])
@@ -414,13 +555,22 @@ def mutated_json(draw, value: Any, depth: int = 0) -> Any:
         return out
     if isinstance(value, list) and value and draw(st.booleans()):
         i = draw(st.integers(min_value=0, max_value=len(value) - 1))
-        return value[:i] + [draw(mutated_json(value[i], depth + 1))] + value[i + 1:]
+        return value[:i] + [draw(mutated_json(value[i], depth + 1))] + value[i + 1 :]
     return draw(HOSTILE_JSON)
 
 
-HOSTILE_ARRAYS = st.sampled_from([np.zeros((3, 10, 5)), np.full((3, 9), np.nan), np.zeros((2,), dtype=np.int8),
-                                  np.array(["x"]), np.zeros((3, 10, 5), dtype=np.float32), np.zeros(0), np.array(np.inf),
-                                  np.array([{"a": 1}], dtype=object)])
+HOSTILE_ARRAYS = st.sampled_from(
+    [
+        np.zeros((3, 10, 5)),
+        np.full((3, 9), np.nan),
+        np.zeros((2,), dtype=np.int8),
+        np.array(["x"]),
+        np.zeros((3, 10, 5), dtype=np.float32),
+        np.zeros(0),
+        np.array(np.inf),
+        np.array([{"a": 1}], dtype=object),
+    ]
+)
 
 
 def _finite_dataset(dataset) -> None:
@@ -445,8 +595,11 @@ def test_fuzz_load_dataset(world, data):
     elif kind in ("member", "extra"):
         target = data.draw(st.sampled_from(["positions.npy", "velocities.npy", "torques_nm.npy", "metadata.npy"]))
         array = data.draw(HOSTILE_ARRAYS)
-        blob = _rewrite_zip(original, lambda name, member: _npy(array) if name == target and kind == "member" else member,
-                            {"extra.npy": _npy(array)} if kind == "extra" else None)
+        blob = _rewrite_zip(
+            original,
+            lambda name, member: _npy(array) if name == target and kind == "member" else member,
+            {"extra.npy": _npy(array)} if kind == "extra" else None,
+        )
     else:
         target = data.draw(st.sampled_from(["positions.npy", "metadata.npy"]))
         payload = data.draw(st.binary(max_size=64))
@@ -481,8 +634,13 @@ def test_fuzz_load_agent(world, data):
     elif kind == "weights":
         import torch
 
-        state = {"q_net.q_net.0.weight": data.draw(st.sampled_from([torch.zeros(3), torch.full((16, 11), math.nan),
-                                                                     torch.zeros((16, 11), dtype=torch.int64)]))}
+        state = {
+            "q_net.q_net.0.weight": data.draw(
+                st.sampled_from(
+                    [torch.zeros(3), torch.full((16, 11), math.nan), torch.zeros((16, 11), dtype=torch.int64)]
+                )
+            )
+        }
         buffer = io.BytesIO()
         torch.save(state, buffer)
         blob = _rewrite_zip(original, lambda name, member: buffer.getvalue() if name == "policy.pth" else member)
@@ -545,10 +703,16 @@ def _readers() -> dict[str, Callable[[Path], Any]]:
     from softpend.sysid import load_dataset, load_model
     from softpend.vision.calibration import AffineCalibration, read_json_file
 
-    return {"load_dataset": load_dataset, "load_config": load_config, "TrainingLog.load": TrainingLog.load,
-            "RodParams.from_json": RodParams.from_json, "AffineCalibration.load": AffineCalibration.load,
-            "read_json_file": lambda p: read_json_file("--markers", p, 10**6), "read_sample_log": read_sample_log,
-            "load_model": load_model}
+    return {
+        "load_dataset": load_dataset,
+        "load_config": load_config,
+        "TrainingLog.load": TrainingLog.load,
+        "RodParams.from_json": RodParams.from_json,
+        "AffineCalibration.load": AffineCalibration.load,
+        "read_json_file": lambda p: read_json_file("--markers", p, 10**6),
+        "read_sample_log": read_sample_log,
+        "load_model": load_model,
+    }
 
 
 @pytest.mark.timeout(600, method="thread")
@@ -561,20 +725,43 @@ def test_fuzz_readers_on_special_files(world, reader, kind):
 
 
 # ------------------------------------------------------------------------------------------------ environments
-ENV_SANE = {"dt_s": [0.01, 0.02], "substeps": [1, 2], "torque_limit_nm": [0.06, 0.03],
-            "start": ["hanging", "upright", "random"], "start_noise_rad": [0.05, 0.0], "plant": ["prb"]}
-ENV_HOSTILE = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(min_value=-10**12, max_value=10**12),
-                        st.none(), st.booleans(), st.text(max_size=6), st.sampled_from(["sideways", "nope"]))
-ACTIONS = st.one_of(st.integers(min_value=-3, max_value=8), st.floats(allow_nan=True, allow_infinity=True), st.none(),
-                    st.text(max_size=3), st.booleans(), st.lists(st.floats(min_value=-2, max_value=2), max_size=2),
-                    st.sampled_from([np.int64(2), np.array([1]), np.array([0.3], dtype=np.float32), np.array([1.0])]))
+ENV_SANE = {
+    "dt_s": [0.01, 0.02],
+    "substeps": [1, 2],
+    "torque_limit_nm": [0.06, 0.03],
+    "start": ["hanging", "upright", "random"],
+    "start_noise_rad": [0.05, 0.0],
+    "plant": ["prb"],
+}
+ENV_HOSTILE = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(min_value=-(10**12), max_value=10**12),
+    st.none(),
+    st.booleans(),
+    st.text(max_size=6),
+    st.sampled_from(["sideways", "nope"]),
+)
+ACTIONS = st.one_of(
+    st.integers(min_value=-3, max_value=8),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.none(),
+    st.text(max_size=3),
+    st.booleans(),
+    st.lists(st.floats(min_value=-2, max_value=2), max_size=2),
+    st.sampled_from([np.int64(2), np.array([1]), np.array([0.3], dtype=np.float32), np.array([1.0])]),
+)
 
 
 @pytest.mark.timeout(600, method="thread")
 @fuzz_settings(25)
-@given(discrete=st.booleans(), sane=st.fixed_dictionaries({}, optional={k: st.sampled_from(v) for k, v in ENV_SANE.items()}),
-       hostile_field=st.sampled_from(sorted(ENV_SANE) + ["n_torque_levels", None]), hostile=ENV_HOSTILE,
-       actions=st.lists(ACTIONS, min_size=1, max_size=5), seed=st.integers(min_value=0, max_value=1000))
+@given(
+    discrete=st.booleans(),
+    sane=st.fixed_dictionaries({}, optional={k: st.sampled_from(v) for k, v in ENV_SANE.items()}),
+    hostile_field=st.sampled_from(sorted(ENV_SANE) + ["n_torque_levels", None]),
+    hostile=ENV_HOSTILE,
+    actions=st.lists(ACTIONS, min_size=1, max_size=5),
+    seed=st.integers(min_value=0, max_value=1000),
+)
 def test_fuzz_environments(discrete, sane, hostile_field, hostile, actions, seed):
     from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 
@@ -594,6 +781,7 @@ def test_fuzz_environments(discrete, sane, hostile_field, hostile, actions, seed
     if env is None:
         return
     for action in actions:
+
         def step(action=action):
             obs, reward, terminated, truncated, info = env.step(action)
             assert np.all(np.isfinite(obs)) and math.isfinite(reward), (obs, reward)
@@ -602,8 +790,9 @@ def test_fuzz_environments(discrete, sane, hostile_field, hostile, actions, seed
 
 
 # ------------------------------------------------------------------------------------------------ --set parsing
-SET_TEXT = st.text(alphabet=st.sampled_from(list("abcdefghijklmnopqrstuvwxyz_.=0123456789 []{}\",-+e\u00e9\u2603")),
-                   max_size=30)
+SET_TEXT = st.text(
+    alphabet=st.sampled_from(list('abcdefghijklmnopqrstuvwxyz_.=0123456789 []{}",-+e\u00e9\u2603')), max_size=30
+)
 
 
 @pytest.mark.timeout(600, method="thread")

@@ -14,8 +14,10 @@ import pytest
 from softpend.cli import main
 from softpend.study.book import load_profiles, toc_notebooks
 
-TOC = ("format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n"
-       "      - file: book/_generated/fig02_reward\n")
+TOC = (
+    "format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n"
+    "      - file: book/_generated/fig02_reward\n"
+)
 
 
 @contextlib.contextmanager
@@ -53,8 +55,11 @@ PROFILES = [
     ("quick:\n  fig02_reward: {n_points: 3\n", r"line 3 column 1: not valid YAML \(expected ',' or '}'"),
     ("quick:\n  fig02_reward:\n    n_points: 3\n   bad: [\n", r"line \d+ column \d+: not valid YAML"),
     ("quick: [1, 2]\n", r"line 1: expected a mapping notebook -> parameters for profile 'quick', got list"),
-    ("quick:\n  other: {}\n  fig02_reward: 5\n", r"line 3: expected a mapping parameter -> value for notebook "
-                                                 r"'fig02_reward' of profile 'quick', got int 5"),
+    (
+        "quick:\n  other: {}\n  fig02_reward: 5\n",
+        r"line 3: expected a mapping parameter -> value for notebook "
+        r"'fig02_reward' of profile 'quick', got int 5",
+    ),
     ("- quick\n", r"line 1: expected a mapping profile -> notebook -> parameters, got list"),
     ("!!python/object/apply:os.system ['true']\n", r"line 1 column 1: not valid YAML"),
 ]
@@ -75,10 +80,14 @@ TOCS = [
     ("format: jb-book\nroot: [\n", r"line \d+ column \d+: not valid YAML"),
     ("just a sentence\n", r"line 1: expected a mapping with format, root and parts or chapters, got str"),
     ("format: jb-book\nparts: []\n", r"line 1: expected a 'root' entry"),
-    ("format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters: book/_generated/x\n",
-     r"line 5: expected 'chapters' to be a list of entries, got str"),
-    ("format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters:\n      - file: [1]\n",
-     r"line 6: expected 'file' to be a string, got list"),
+    (
+        "format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters: book/_generated/x\n",
+        r"line 5: expected 'chapters' to be a list of entries, got str",
+    ),
+    (
+        "format: jb-book\nroot: book/intro\nparts:\n  - caption: F\n    chapters:\n      - file: [1]\n",
+        r"line 6: expected 'file' to be a string, got list",
+    ),
     ("format: jb-book\nroot: book/intro\nparts:\n  - 5\n", r"line 4: expected each of 'parts' to be a mapping"),
 ]
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from support import one_line_error
 
 from softpend.checks import NonFiniteError
 from softpend.cli import main
@@ -24,12 +25,23 @@ from softpend.rl.config import MBPOConfig
 from softpend.rl.dqn import agent_class, load_agent, train_dqn
 from softpend.rl.training_env import make_training_env
 from softpend.study.presets import load_hparams
-from support import one_line_error
 
 TINY = dict(episode_s=0.5, eval_every_episodes=2, checkpoint_every_episodes=2, eval_seeds=(0,), eval_duration_s=0.5)
 CONFIG = load_hparams("dqn", overrides=dict(learning_starts=10, **TINY))  # what `softpend train` builds from TRAIN_ARGS
-TRAIN_ARGS = ["--set", "episode_s=0.5", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.5", "--set",
-              "learning_starts=10", "--set", "eval_every_episodes=2", "--set", "checkpoint_every_episodes=2"]
+TRAIN_ARGS = [
+    "--set",
+    "episode_s=0.5",
+    "--set",
+    "eval_seeds=[0]",
+    "--set",
+    "eval_duration_s=0.5",
+    "--set",
+    "learning_starts=10",
+    "--set",
+    "eval_every_episodes=2",
+    "--set",
+    "checkpoint_every_episodes=2",
+]
 
 
 class Payload:
@@ -78,7 +90,10 @@ def test_agent_with_an_unknown_pickled_entry_is_refused_and_runs_nothing(run, tm
         if name != "data":
             return data
         content = json.loads(data)
-        content["evil"] = {":type:": "<class 'object'>", ":serialized:": base64.b64encode(payload_bytes(marker)).decode()}
+        content["evil"] = {
+            ":type:": "<class 'object'>",
+            ":serialized:": base64.b64encode(payload_bytes(marker)).decode(),
+        }
         return json.dumps(content).encode()
 
     for agent in ("agent.zip", "best_agent.zip"):
@@ -110,8 +125,9 @@ def test_a_payload_in_a_rebuilt_entry_is_never_unpickled(run, tmp_path):
     genuine, _ = load_agent(run, which="final")
     assert not marker.exists()
     observations = np.random.default_rng(0).uniform(-1, 1, size=(20, 11)).astype(np.float32)
-    np.testing.assert_array_equal(agent.predict(observations, deterministic=True)[0],
-                                  genuine.predict(observations, deterministic=True)[0])
+    np.testing.assert_array_equal(
+        agent.predict(observations, deterministic=True)[0], genuine.predict(observations, deterministic=True)[0]
+    )
 
 
 def test_agent_weights_that_are_a_pickle_payload_are_refused(run, tmp_path, capsys):
@@ -192,9 +208,17 @@ def test_mbpo_replay_buffer_round_trip_is_exact(tmp_path):
     rng = np.random.default_rng(1)
     for _ in range(70):  # wraps around: full
         obs = rng.normal(size=(1, 11)).astype(np.float32)
-        buffer.add(obs, obs + 1, np.array([[rng.integers(5)]]), np.array([rng.normal()]), np.array([0.0]),
-                   [{"plant_observations": rng.normal(size=(2, 10))}])
-    buffer.add_model_transitions(rng.normal(size=(7, 11)), rng.normal(size=(7, 11)), rng.integers(0, 5, 7), rng.normal(size=7))
+        buffer.add(
+            obs,
+            obs + 1,
+            np.array([[rng.integers(5)]]),
+            np.array([rng.normal()]),
+            np.array([0.0]),
+            [{"plant_observations": rng.normal(size=(2, 10))}],
+        )
+    buffer.add_model_transitions(
+        rng.normal(size=(7, 11)), rng.normal(size=(7, 11)), rng.integers(0, 5, 7), rng.normal(size=7)
+    )
     save_replay_buffer(buffer, tmp_path / "b.npz")
     restored = MBPOReplayBuffer(50, env.observation_space, env.action_space, model_buffer_size=30, real_ratio=0.5)
     load_replay_buffer(restored, tmp_path / "b.npz")
@@ -211,8 +235,8 @@ def test_mbpo_replay_buffer_round_trip_is_exact(tmp_path):
 def test_torch_load_refusals_are_named_errors(tmp_path):
     from softpend.pilco.loop import PilcoConfig, PilcoResult
     from softpend.sysid import load_model
-    from softpend.sysid.model import DynamicsModel, save_model
     from softpend.sysid.layout import StateLayout
+    from softpend.sysid.model import DynamicsModel, save_model
 
     marker = tmp_path / "pwned"
     evil = io.BytesIO()
@@ -224,7 +248,9 @@ def test_torch_load_refusals_are_named_errors(tmp_path):
         load_model(tmp_path / "m")
     pilco = tmp_path / "pilco"
     pilco.mkdir()
-    (pilco / "pilco.json").write_text(json.dumps({"config": PilcoConfig().to_dict(), "records": [], "gp_hyperparameters": None}))
+    (pilco / "pilco.json").write_text(
+        json.dumps({"config": PilcoConfig().to_dict(), "records": [], "gp_hyperparameters": None})
+    )
     (pilco / "policy.pt").write_bytes(evil.getvalue())
     with pytest.raises(ValueError, match="not a PILCO policy.*UnpicklingError"):
         PilcoResult.load(pilco)
@@ -237,7 +263,11 @@ def _bad_outputs(tmp_path: Path) -> dict[str, Path]:
     precious.write_bytes(b"someone else's data")
     a_file = tmp_path / "a_file"
     a_file.write_text("x")
-    return {"exists, not ours": precious, "parent is a file": a_file / "out.npz", "unwritable": Path("/proc/softpend-test/out.npz")}
+    return {
+        "exists, not ours": precious,
+        "parent is a file": a_file / "out.npz",
+        "unwritable": Path("/proc/softpend-test/out.npz"),
+    }
 
 
 @pytest.mark.parametrize("case", ["exists, not ours", "parent is a file", "unwritable"])
@@ -286,7 +316,9 @@ def test_train_checks_its_run_folder_before_training(tmp_path, monkeypatch, caps
     import softpend.rl.dqn
 
     monkeypatch.setattr(softpend.rl.dqn, "make_training_env", lambda *a: pytest.fail("trained before checking"))
-    monkeypatch.setattr(softpend.commands.train_pilco, "run_pilco", lambda *a, **k: pytest.fail("trained before checking"))
+    monkeypatch.setattr(
+        softpend.commands.train_pilco, "run_pilco", lambda *a, **k: pytest.fail("trained before checking")
+    )
     foreign = tmp_path / "photos"
     foreign.mkdir()
     (foreign / "holiday.jpg").write_bytes(b"jpeg")
@@ -295,7 +327,9 @@ def test_train_checks_its_run_folder_before_training(tmp_path, monkeypatch, caps
     for out in (foreign, a_file, a_file / "run", Path("/proc/softpend-test/run")):
         assert main(["train", "--algo", algo, "--out", str(out), "--no-progress"]) == 2
         one_line_error(capsys, "run folder")
-    assert (foreign / "holiday.jpg").read_bytes() == b"jpeg" and sorted(p.name for p in foreign.iterdir()) == ["holiday.jpg"]
+    assert (foreign / "holiday.jpg").read_bytes() == b"jpeg" and sorted(p.name for p in foreign.iterdir()) == [
+        "holiday.jpg"
+    ]
 
 
 def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path):
@@ -313,8 +347,19 @@ def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path):
 # ------------------------------------------------------------------------------------------------ non-finite
 def test_dqn_with_a_huge_learning_rate_stops_before_saving_nan_weights(tmp_path, capsys):
     out = tmp_path / "run"
-    args = ["train", "--algo", "dqn", "--episodes", "3", "--out", str(out), "--no-progress", *TRAIN_ARGS,
-            "--set", "learning_rate=1e30"]
+    args = [
+        "train",
+        "--algo",
+        "dqn",
+        "--episodes",
+        "3",
+        "--out",
+        str(out),
+        "--no-progress",
+        *TRAIN_ARGS,
+        "--set",
+        "learning_rate=1e30",
+    ]
     assert main(args) == 2
     one_line_error(capsys, "NonFiniteError", "learning_rate")
     assert not (out / "agent.zip").exists() and not (out / "checkpoint").exists()
@@ -343,8 +388,21 @@ def test_a_diverging_dynamics_fit_is_a_named_error(tmp_path, capsys):
     data = tmp_path / "data.npz"
     assert main(["babble", str(data), "--n-trials", "3", "--trial-length-s", "0.2", "--no-progress"]) == 0
     capsys.readouterr()
-    assert main(["fit-model", str(data), str(tmp_path / "m"), "--learning-rate", "1e30", "--max-epochs", "5",
-                 "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "fit-model",
+                str(data),
+                str(tmp_path / "m"),
+                "--learning-rate",
+                "1e30",
+                "--max-epochs",
+                "5",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     one_line_error(capsys, "NonFiniteError", "learning_rate")
     assert not (tmp_path / "m.pt").exists()
 
@@ -357,8 +415,24 @@ def _strict_json(text: str):
 
 
 def test_pilco_without_policy_trials_prints_valid_json(tmp_path, capsys):
-    args = ["train", "--algo", "pilco", "--episodes", "0", "--out", str(tmp_path / "p"), "--no-progress",
-            "--set", "state=tip", "--set", "horizon_s=1.0", "--set", "eval_seeds=[1000]", "--set", "eval_duration_s=1.0"]
+    args = [
+        "train",
+        "--algo",
+        "pilco",
+        "--episodes",
+        "0",
+        "--out",
+        str(tmp_path / "p"),
+        "--no-progress",
+        "--set",
+        "state=tip",
+        "--set",
+        "horizon_s=1.0",
+        "--set",
+        "eval_seeds=[1000]",
+        "--set",
+        "eval_duration_s=1.0",
+    ]
     assert main(args) == 0
     summary = _strict_json(capsys.readouterr().out)
     assert summary["trials"] == 1 and summary["final_eval_upright_std_rad"] is None

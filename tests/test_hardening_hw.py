@@ -129,8 +129,18 @@ def test_device_announcing_minus_one_over_the_twins_link_is_refused():
 
 @pytest.mark.parametrize(
     "host_limit, device_limit, command",
-    [(0.06, 0.04, 0.05), (0.06, 0.04, -0.05), (0.02, 0.06, 5.0), (0.06, 0.06, 5.0), (0.06, 0.06, -5.0),
-     (0.06, 0.06, 0.06), (0.1, 0.06, 1e300), (0.05, 0.06, 1.0), (0.05, 0.06, -1.0), (0.07, 0.05, 0.2)],
+    [
+        (0.06, 0.04, 0.05),
+        (0.06, 0.04, -0.05),
+        (0.02, 0.06, 5.0),
+        (0.06, 0.06, 5.0),
+        (0.06, 0.06, -5.0),
+        (0.06, 0.06, 0.06),
+        (0.1, 0.06, 1e300),
+        (0.05, 0.06, 1.0),
+        (0.05, 0.06, -1.0),
+        (0.07, 0.05, 0.2),
+    ],
 )
 def test_torque_on_the_wire_never_exceeds_the_smaller_limit(fake_port, host_limit, device_limit, command):
     device = FakeDevice(torque_limit_nm=device_limit)
@@ -147,9 +157,13 @@ def test_torque_on_the_wire_never_exceeds_the_smaller_limit(fake_port, host_limi
 # ---------------------------------------------------------------------- handshake values
 @pytest.mark.parametrize(
     "ack, field",
-    [(_ack(cpr=0), "counts_per_rev"), (_ack(cpr=2**32 - 1), "counts_per_rev"),
-     (_ack(rate_hz=0), "state_rate_hz"), (_ack(rate_hz=65535), "state_rate_hz"),
-     (_ack(watchdog_ms=0), "watchdog_s")],
+    [
+        (_ack(cpr=0), "counts_per_rev"),
+        (_ack(cpr=2**32 - 1), "counts_per_rev"),
+        (_ack(rate_hz=0), "state_rate_hz"),
+        (_ack(rate_hz=65535), "state_rate_hz"),
+        (_ack(watchdog_ms=0), "watchdog_s"),
+    ],
 )
 def test_impossible_hello_ack_is_a_named_handshake_error(fake_port, ack, field):
     link = fake_port(FakeDevice(hello_ack=ack))
@@ -189,10 +203,24 @@ def test_device_error_after_the_handshake_is_explained(fake_port):
 # ---------------------------------------------------------------------- decoded STATE values
 @pytest.mark.parametrize(
     "bad",
-    [dict(velocity=math.nan), dict(velocity=math.inf), dict(velocity=-1e6), dict(applied=math.nan),
-     dict(applied=-math.inf), dict(applied=0.5), dict(flags=0x80)],
-    ids=["nan_velocity", "inf_velocity", "huge_velocity", "nan_torque", "inf_torque", "torque_over_limit",
-         "undefined_flag"],
+    [
+        dict(velocity=math.nan),
+        dict(velocity=math.inf),
+        dict(velocity=-1e6),
+        dict(applied=math.nan),
+        dict(applied=-math.inf),
+        dict(applied=0.5),
+        dict(flags=0x80),
+    ],
+    ids=[
+        "nan_velocity",
+        "inf_velocity",
+        "huge_velocity",
+        "nan_torque",
+        "inf_torque",
+        "torque_over_limit",
+        "undefined_flag",
+    ],
 )
 def test_state_with_impossible_values_is_rejected_and_counted(fake_port, bad):
     device = FakeDevice()
@@ -315,18 +343,29 @@ def test_track_refuses_an_impossible_frame_rate(tmp_path, clip, fps, capsys):
 
     out = tmp_path / "out.csv"
     assert main(["track", str(clip), "--out", str(out), "--fps", fps]) == 2
-    assert "--fps must lie in" in capsys.readouterr().err and not out.exists()  # refused by name before the video is opened
+    assert (
+        "--fps must lie in" in capsys.readouterr().err and not out.exists()
+    )  # refused by name before the video is opened
     with pytest.raises(ValueError, match="fps must be"):
         track_video(tmp_path / "missing.avi", out, fps=float(fps))
 
 
 @pytest.mark.parametrize(
     "sidecar, field",
-    [([1, 2, 3], "JSON object"), ({"fps": "fast"}, "fps"), ({"fps": math.inf}, "fps"), ({"fps": 0}, "fps"),
-     ({"timestamps_s": [0.0, None]}, "timestamps_s"), ({"timestamps_s": "0.0"}, "timestamps_s"),
-     ({"markers_m": "abc"}, "markers_m"), ({"markers_m": [[0, 1], [2]]}, "markers_m"),
-     ({"markers_m": [[0, 1], [2, 3]]}, "markers_m"), ({"markers_m": [[0, 1], [2, 3], [math.nan, 1]]}, "markers_m"),
-     ("[" * 100000, "not valid JSON"), ("{bad json", "not valid JSON")],
+    [
+        ([1, 2, 3], "JSON object"),
+        ({"fps": "fast"}, "fps"),
+        ({"fps": math.inf}, "fps"),
+        ({"fps": 0}, "fps"),
+        ({"timestamps_s": [0.0, None]}, "timestamps_s"),
+        ({"timestamps_s": "0.0"}, "timestamps_s"),
+        ({"markers_m": "abc"}, "markers_m"),
+        ({"markers_m": [[0, 1], [2]]}, "markers_m"),
+        ({"markers_m": [[0, 1], [2, 3]]}, "markers_m"),
+        ({"markers_m": [[0, 1], [2, 3], [math.nan, 1]]}, "markers_m"),
+        ("[" * 100000, "not valid JSON"),
+        ("{bad json", "not valid JSON"),
+    ],
 )
 def test_malformed_sidecar_is_a_named_error(tmp_path, clip, sidecar, field):
     video = tmp_path / "clip.avi"
@@ -346,13 +385,19 @@ def test_malformed_sidecar_is_a_named_error(tmp_path, clip, sidecar, field):
 
 @pytest.mark.parametrize(
     "content, field",
-    [("[]", "JSON object"), ('{"pixel_to_metre": [[1, 2], [3]]}', "pixel_to_metre"),
-     ('{"pixel_to_metre": "abc"}', "pixel_to_metre"), ('{"pixel_to_metre": [[1, 0, 0], [0, 1]]}', "pixel_to_metre"),
-     ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}', "pixel_to_metre"),
-     ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "residual_rms_m": "x"}', "residual_rms_m"),
-     ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "residual_rms_m": -1}', "residual_rms_m"),
-     ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "extra": 1}', "unknown keys"),
-     ("{}", "pixel_to_metre"), ("not json", "not valid JSON"), ("[" * 100000, "not valid JSON")],
+    [
+        ("[]", "JSON object"),
+        ('{"pixel_to_metre": [[1, 2], [3]]}', "pixel_to_metre"),
+        ('{"pixel_to_metre": "abc"}', "pixel_to_metre"),
+        ('{"pixel_to_metre": [[1, 0, 0], [0, 1]]}', "pixel_to_metre"),
+        ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}', "pixel_to_metre"),
+        ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "residual_rms_m": "x"}', "residual_rms_m"),
+        ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "residual_rms_m": -1}', "residual_rms_m"),
+        ('{"pixel_to_metre": [[1, 0, 0], [0, 1, 0]], "extra": 1}', "unknown keys"),
+        ("{}", "pixel_to_metre"),
+        ("not json", "not valid JSON"),
+        ("[" * 100000, "not valid JSON"),
+    ],
 )
 def test_malformed_calibration_file_is_a_named_error(tmp_path, content, field, capsys):
     from softpend.cli import main
@@ -403,12 +448,21 @@ def test_a_frame_full_of_blue_is_no_tip():
 
 @pytest.mark.parametrize(
     "frame",
-    [np.zeros((0, 0, 3), np.uint8), np.zeros((0, 5, 3), np.uint8), np.zeros((4, 4, 3), np.uint8),
-     np.zeros((1, 640, 3), np.uint8), np.zeros((20, 20, 3), np.float32), np.zeros((20, 20, 3), bool),
-     np.zeros((20, 20, 3), np.uint16), np.zeros((20, 20), np.uint8), np.zeros((20, 20, 4), np.uint8),
-     np.zeros((2, 20, 20, 3), np.uint8), [[[0, 0, 0]] * 20] * 20, None],
-    ids=["empty", "zero_rows", "4x4", "one_row", "float32", "bool", "uint16", "gray", "bgra", "4d", "list",
-         "none"],
+    [
+        np.zeros((0, 0, 3), np.uint8),
+        np.zeros((0, 5, 3), np.uint8),
+        np.zeros((4, 4, 3), np.uint8),
+        np.zeros((1, 640, 3), np.uint8),
+        np.zeros((20, 20, 3), np.float32),
+        np.zeros((20, 20, 3), bool),
+        np.zeros((20, 20, 3), np.uint16),
+        np.zeros((20, 20), np.uint8),
+        np.zeros((20, 20, 4), np.uint8),
+        np.zeros((2, 20, 20, 3), np.uint8),
+        [[[0, 0, 0]] * 20] * 20,
+        None,
+    ],
+    ids=["empty", "zero_rows", "4x4", "one_row", "float32", "bool", "uint16", "gray", "bgra", "4d", "list", "none"],
 )
 def test_bad_frames_are_a_named_value_error(frame):
     with pytest.raises(ValueError, match="frame_bgr"):
@@ -420,10 +474,16 @@ def test_bad_frames_are_a_named_value_error(frame):
 
 
 def test_bad_tracker_settings_are_named():
-    for kwargs, name in [(dict(search_radius_px=math.inf), "search_radius_px"), (dict(min_area_px="5"), "min_area_px"),
-                         (dict(min_area_px=math.nan), "min_area_px"), (dict(region_px=(1, 2, 3)), "region_px"),
-                         (dict(region_px=(0, 0, math.nan, 5)), "region_px"), (dict(max_area_fraction=0), "max_area_fraction"),
-                         (dict(max_area_fraction=2), "max_area_fraction"), (dict(colour="blue"), "colour")]:
+    for kwargs, name in [
+        (dict(search_radius_px=math.inf), "search_radius_px"),
+        (dict(min_area_px="5"), "min_area_px"),
+        (dict(min_area_px=math.nan), "min_area_px"),
+        (dict(region_px=(1, 2, 3)), "region_px"),
+        (dict(region_px=(0, 0, math.nan, 5)), "region_px"),
+        (dict(max_area_fraction=0), "max_area_fraction"),
+        (dict(max_area_fraction=2), "max_area_fraction"),
+        (dict(colour="blue"), "colour"),
+    ]:
         with pytest.raises(ValueError, match=name):
             TipTracker(**kwargs)
     with pytest.raises(ValueError, match="region_px .* outside"):
@@ -443,9 +503,13 @@ def _random_chunk(rng: np.random.Generator, device: FakeDevice) -> bytes:
     if kind == 0:  # random bytes, zeros included
         return bytes(rng.integers(0, 256, size=int(rng.integers(1, 120)), dtype=np.uint8))
     if kind == 1:  # a valid-CRC STATE with random values
-        return device.state(velocity=_random_value(rng), applied=_random_value(rng),
-                            flags=int(rng.integers(0, 256)), counts=int(rng.integers(-2**31, 2**31)),
-                            seq=int(rng.integers(0, 65536)))
+        return device.state(
+            velocity=_random_value(rng),
+            applied=_random_value(rng),
+            flags=int(rng.integers(0, 256)),
+            counts=int(rng.integers(-(2**31), 2**31)),
+            seq=int(rng.integers(0, 65536)),
+        )
     if kind == 2:  # a good STATE, one bit flipped
         frame = bytearray(device.state(velocity=float(rng.normal()), applied=0.01))
         i = int(rng.integers(0, len(frame)))
@@ -462,9 +526,13 @@ def _random_chunk(rng: np.random.Generator, device: FakeDevice) -> bytes:
 
 
 def _limits_ok(link: MotorLink, state) -> bool:
-    return (math.isfinite(state.phi_rad) and math.isfinite(state.phi_dot_rad_s) and math.isfinite(state.device_time_s)
-            and abs(state.applied_torque_nm) <= link.device.torque_limit_nm * (1 + 1e-6)
-            and not state.flags & ~proto.FLAG_MASK)
+    return (
+        math.isfinite(state.phi_rad)
+        and math.isfinite(state.phi_dot_rad_s)
+        and math.isfinite(state.device_time_s)
+        and abs(state.applied_torque_nm) <= link.device.torque_limit_nm * (1 + 1e-6)
+        and not state.flags & ~proto.FLAG_MASK
+    )
 
 
 def test_fuzz_decoder_never_passes_on_an_impossible_state(fake_port):
@@ -488,8 +556,10 @@ def test_fuzz_decoder_never_passes_on_an_impossible_state(fake_port):
             assert _limits_ok(link, state), state
         outcomes["states" if states else "nothing"] += 1
     link.close()
-    print(f"decoder fuzz: {n_chunks} chunks, {dict(outcomes)}, rejected values {link.rejected_states}, "
-          f"bad frames {link.bad_frames}")
+    print(
+        f"decoder fuzz: {n_chunks} chunks, {dict(outcomes)}, rejected values {link.rejected_states}, "
+        f"bad frames {link.bad_frames}"
+    )
     assert sum(outcomes.values()) == n_chunks
     assert outcomes["states"] > 100 and link.rejected_states > 100 and outcomes["LinkChecksumError"] > 0
 
@@ -545,8 +615,12 @@ def _random_frame(rng: np.random.Generator):
 def test_fuzz_tracker_outcome_classes():
     rng = np.random.default_rng(11)
     outcomes = collections.Counter()
-    trackers = [TipTracker(), TipTracker(min_area_px=0.0), TipTracker(search_radius_px=None),
-                TipTracker(region_px=(10, 10, 60, 50), min_area_px=4.0)]
+    trackers = [
+        TipTracker(),
+        TipTracker(min_area_px=0.0),
+        TipTracker(search_radius_px=None),
+        TipTracker(region_px=(10, 10, 60, 50), min_area_px=4.0),
+    ]
     n_frames = 5000
     for k in range(n_frames):
         frame = _random_frame(rng)
@@ -589,7 +663,9 @@ def _random_json(rng: np.random.Generator, depth: int = 0):
         rows, cols = int(rng.integers(0, 8)), int(rng.integers(1, 4))
         return rng.normal(size=(rows, cols)).tolist()
     keys = ["pixel_to_metre", "residual_rms_m", "fps", "timestamps_s", "markers_m", "other"]
-    return {keys[int(i)]: _random_json(rng, depth + 1) for i in rng.integers(0, len(keys), size=int(rng.integers(0, 4)))}
+    return {
+        keys[int(i)]: _random_json(rng, depth + 1) for i in rng.integers(0, len(keys), size=int(rng.integers(0, 4)))
+    }
 
 
 def test_fuzz_calibration_and_sidecar_contents():
@@ -601,8 +677,10 @@ def test_fuzz_calibration_and_sidecar_contents():
     for k in range(n_cases):
         data = _random_json(rng)
         if k % 3 == 0:  # often a nearly right calibration
-            data = {"pixel_to_metre": rng.normal(size=(2, int(rng.integers(2, 5)))).tolist(),
-                    "residual_rms_m": _random_json(rng, 4) if rng.random() < 0.5 else 0.001}
+            data = {
+                "pixel_to_metre": rng.normal(size=(2, int(rng.integers(2, 5)))).tolist(),
+                "residual_rms_m": _random_json(rng, 4) if rng.random() < 0.5 else 0.001,
+            }
         elif k % 3 == 1 and isinstance(data, dict):  # ... or a nearly right sidecar
             data["markers_m"] = rng.normal(size=(int(rng.integers(2, 8)), 2)).tolist()
         text = json.dumps(data, allow_nan=True)

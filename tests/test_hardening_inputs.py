@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import one_line_error
 
 from softpend.cli import main
-from support import one_line_error
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -23,15 +23,28 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
     out = {}
     for name, dt in (("train", "0.01"), ("other_dt", "0.02")):
         out[name] = folder / f"{name}.npz"
-        assert main(["babble", str(out[name]), "--n-trials", "3", "--trial-length-s", "0.2", "--dt-s", dt, "--no-progress"]) == 0
+        assert (
+            main(
+                ["babble", str(out[name]), "--n-trials", "3", "--trial-length-s", "0.2", "--dt-s", dt, "--no-progress"]
+            )
+            == 0
+        )
     return out
 
 
 # ------------------------------------------------------------------------------------------------ silent garbage
 def test_fit_model_refuses_test_data_at_another_time_step(datasets, tmp_path, capsys):
     capsys.readouterr()
-    args = ["fit-model", str(datasets["train"]), str(tmp_path / "m"), "--test-data", str(datasets["other_dt"]),
-            "--max-epochs", "2", "--no-progress"]
+    args = [
+        "fit-model",
+        str(datasets["train"]),
+        str(tmp_path / "m"),
+        "--test-data",
+        str(datasets["other_dt"]),
+        "--max-epochs",
+        "2",
+        "--no-progress",
+    ]
     assert main(args) == 2
     one_line_error(capsys, "dt_s is 0.02, expected 0.01")
     assert not (tmp_path / "m.pt").exists()
@@ -98,31 +111,50 @@ def figure_book(tmp_path_factory) -> Path:
     (root / "book").mkdir()
     names = ["fig01_prb_rod", "fig02_reward"]
     chapters = "\n".join(f"      - file: book/_generated/{name}" for name in names)
-    (root / "_toc.yml").write_text(f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n")
+    (root / "_toc.yml").write_text(
+        f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n"
+    )
     (root / "book" / "profiles.yml").write_text(json.dumps({"quick": {}}))
     for name in names:
         shutil.copy(ROOT / "notebooks" / f"{name}.md", root / "notebooks" / f"{name}.md")
     return root
 
 
-@pytest.mark.parametrize("notebook, assignment, message", [
-    ("fig02_reward", "n_points=0", "n_points must be an integer >= 2"),
-    ("fig02_reward", "dt_s=-0.01", "dt_s must be positive"),
-    ("fig01_prb_rod", "n_links=100000", "n_links must be at most 64"),
-])
+@pytest.mark.parametrize(
+    "notebook, assignment, message",
+    [
+        ("fig02_reward", "n_points=0", "n_points must be an integer >= 2"),
+        ("fig02_reward", "dt_s=-0.01", "dt_s must be positive"),
+        ("fig01_prb_rod", "n_links=100000", "n_links must be at most 64"),
+    ],
+)
 @pytest.mark.timeout(600)  # a guard against a hang, not a timing figure
 def test_figure_notebooks_refuse_impossible_parameters(figure_book, capsys, notebook, assignment, message):
-    args = ["book", "--root", str(figure_book), "--profile", "quick", "--only", notebook, "--set", assignment, "--force"]
+    args = [
+        "book",
+        "--root",
+        str(figure_book),
+        "--profile",
+        "quick",
+        "--only",
+        notebook,
+        "--set",
+        assignment,
+        "--force",
+    ]
     assert main(args) == 1
     assert message in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------------------------------ bounds
-@pytest.mark.parametrize("option, value, words", [
-    ("--dt-s", "1e-9", ("dt_s must lie in",)),
-    ("--n-trials", "10000000000", ("GiB", "samples")),
-    ("--trial-length-s", "1e9", ("GiB", "samples")),
-])
+@pytest.mark.parametrize(
+    "option, value, words",
+    [
+        ("--dt-s", "1e-9", ("dt_s must lie in",)),
+        ("--n-trials", "10000000000", ("GiB", "samples")),
+        ("--trial-length-s", "1e9", ("GiB", "samples")),
+    ],
+)
 def test_babble_refuses_work_that_cannot_fit_before_starting(tmp_path, capsys, option, value, words):
     assert main(["babble", str(tmp_path / "d.npz"), option, value, "--no-progress"]) == 2
     one_line_error(capsys, *words)
@@ -130,19 +162,33 @@ def test_babble_refuses_work_that_cannot_fit_before_starting(tmp_path, capsys, o
 
 
 # ------------------------------------------------------------------------------------------------ one-line errors
-@pytest.mark.parametrize("args", [
-    ["--dt-s", "0.2", "--n-trials", "2", "--trial-length-s", "2"],
-    ["--n-links", "40", "--n-trials", "2", "--trial-length-s", "1"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--dt-s", "0.2", "--n-trials", "2", "--trial-length-s", "2"],
+        ["--n-links", "40", "--n-trials", "2", "--trial-length-s", "1"],
+    ],
+)
 def test_a_diverging_babble_is_one_line(tmp_path, capsys, args):
     assert main(["babble", str(tmp_path / "d.npz"), "--no-progress", *args]) == 2
     one_line_error(capsys, "SimulationDiverged", "trial 0")
 
 
-@pytest.mark.parametrize("assignment", [
-    "eval_seeds=[null]", "eval_seeds=[[1]]", "net_arch=[1e400]", "net_arch={\"a\": 1}", "eval_seeds=[-1]",
-    "task.rod.n_links=1e30", "task.substeps=1e9", "buffer_size=1e12", "net_arch=[100000000]", "batch_size=1000000000",
-])
+@pytest.mark.parametrize(
+    "assignment",
+    [
+        "eval_seeds=[null]",
+        "eval_seeds=[[1]]",
+        "net_arch=[1e400]",
+        'net_arch={"a": 1}',
+        "eval_seeds=[-1]",
+        "task.rod.n_links=1e30",
+        "task.substeps=1e9",
+        "buffer_size=1e12",
+        "net_arch=[100000000]",
+        "batch_size=1000000000",
+    ],
+)
 def test_wrong_train_set_values_are_one_line(tmp_path, capsys, assignment):
     assert main(["train", "--algo", "dqn", "--out", str(tmp_path / "r"), "--no-progress", "--set", assignment]) == 2
     one_line_error(capsys)
@@ -155,16 +201,24 @@ def agent_run(tmp_path_factory) -> Path:
     from softpend.rl.dqn import train_dqn
 
     folder = tmp_path_factory.mktemp("agent") / "run"
-    train_dqn(DQNConfig(learning_starts=10, episode_s=0.5, eval_seeds=(0,), eval_duration_s=0.5), seed=0, episodes=1,
-              run_dir=folder, progress=False)
+    train_dqn(
+        DQNConfig(learning_starts=10, episode_s=0.5, eval_seeds=(0,), eval_duration_s=0.5),
+        seed=0,
+        episodes=1,
+        run_dir=folder,
+        progress=False,
+    )
     return folder
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--seeds", "-1"], ("seeds must be an integer >= 0",)),
-    (["--duration-s", "1e12"], ("GiB", "steps")),
-    (["--duration-s", "nan"], ("duration_s",)),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--seeds", "-1"], ("seeds must be an integer >= 0",)),
+        (["--duration-s", "1e12"], ("GiB", "steps")),
+        (["--duration-s", "nan"], ("duration_s",)),
+    ],
+)
 def test_evaluate_refuses_bad_seeds_and_durations(agent_run, capsys, args, words):
     assert main(["evaluate", str(agent_run), *args]) == 2
     one_line_error(capsys, *words)

@@ -35,11 +35,42 @@ from softpend.io.reading import (
 )
 
 ALARM_S = 60.0
-TINY_PILCO = ["--set", "state=tip", "--set", "horizon_s=0.5", "--set", "prediction_s=null", "--set", "eval_seeds=[1000]",
-              "--set", "eval_duration_s=0.5", "--set", "n_basis=3", "--set", "max_gp_points=10", "--set",
-              "gp_iterations=2", "--set", "policy_iterations=1", "--set", "compiled=false"]
-TINY_RL = ["--set", "episode_s=0.2", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.2", "--set",
-           "learning_starts=5", "--set", "buffer_size=1000", "--set", "net_arch=[16]"]
+TINY_PILCO = [
+    "--set",
+    "state=tip",
+    "--set",
+    "horizon_s=0.5",
+    "--set",
+    "prediction_s=null",
+    "--set",
+    "eval_seeds=[1000]",
+    "--set",
+    "eval_duration_s=0.5",
+    "--set",
+    "n_basis=3",
+    "--set",
+    "max_gp_points=10",
+    "--set",
+    "gp_iterations=2",
+    "--set",
+    "policy_iterations=1",
+    "--set",
+    "compiled=false",
+]
+TINY_RL = [
+    "--set",
+    "episode_s=0.2",
+    "--set",
+    "eval_seeds=[0]",
+    "--set",
+    "eval_duration_s=0.2",
+    "--set",
+    "learning_starts=5",
+    "--set",
+    "buffer_size=1000",
+    "--set",
+    "net_arch=[16]",
+]
 
 
 class Hang(BaseException):
@@ -88,8 +119,12 @@ def fifo(tmp_path) -> Path:
 @pytest.mark.timeout(120, method="thread")
 def test_reader_refuses_fifo_folder_and_devices(tmp_path, fifo):
     with alarm(10):
-        for path, kind in ((fifo, "named pipe"), (tmp_path, "folder"), (Path("/dev/zero"), "character device"),
-                           (Path("/dev/null"), "character device")):
+        for path, kind in (
+            (fifo, "named pipe"),
+            (tmp_path, "folder"),
+            (Path("/dev/zero"), "character device"),
+            (Path("/dev/null"), "character device"),
+        ):
             with pytest.raises(ValueError, match=kind) as info:
                 read_bytes_checked(path, "config file", 100)
             assert str(path) in str(info.value) and "config file" in str(info.value)
@@ -182,9 +217,14 @@ def _npy(array: np.ndarray) -> bytes:
 
 
 def test_read_npz_round_trip(tmp_path):
-    arrays = {"c": np.arange(12.0).reshape(3, 4), "f": np.asfortranarray(np.arange(12).reshape(3, 4)),
-              "s": np.array("h\u00e9llo"), "b": np.array(True), "e": np.zeros((0, 3)),
-              "r": np.zeros(2, dtype=[("x", "<f4"), ("y", "<i8")])}
+    arrays = {
+        "c": np.arange(12.0).reshape(3, 4),
+        "f": np.asfortranarray(np.arange(12).reshape(3, 4)),
+        "s": np.array("h\u00e9llo"),
+        "b": np.array(True),
+        "e": np.zeros((0, 3)),
+        "r": np.zeros(2, dtype=[("x", "<f4"), ("y", "<i8")]),
+    }
     np.savez(tmp_path / "t.npz", **arrays)
     read = read_npz(tmp_path / "t.npz", "test file")
     assert sorted(read) == sorted(arrays)
@@ -194,11 +234,14 @@ def test_read_npz_round_trip(tmp_path):
         assert read[name].flags.writeable
 
 
-@pytest.mark.parametrize("member, reason", [
-    (pickle.dumps({"x": 1}), "not a .npy array"),
-    (_npy(np.array([{"x": 1}], dtype=object)), "holds Python objects"),
-    (_npy(np.zeros(4))[:-8], "declares shape"),
-])
+@pytest.mark.parametrize(
+    "member, reason",
+    [
+        (pickle.dumps({"x": 1}), "not a .npy array"),
+        (_npy(np.array([{"x": 1}], dtype=object)), "holds Python objects"),
+        (_npy(np.zeros(4))[:-8], "declares shape"),
+    ],
+)
 def test_read_npz_refuses_pickles_and_lying_headers(tmp_path, member, reason):
     path = tmp_path / "bad.npz"
     path.write_bytes(_zip({"positions.npy": _npy(np.zeros(3)), "metadata.npy": member}))
@@ -231,12 +274,29 @@ def world(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("special")
     quiet = contextlib.redirect_stdout(io.StringIO())
     with quiet:
-        assert main(["babble", str(root / "data.npz"), "--n-trials", "2", "--trial-length-s", "0.1",
-                     "--no-progress"]) == 0
-        assert main(["train", "--algo", "dqn", "--episodes", "1", "--out", str(root / "run"), "--no-progress",
-                     *TINY_RL]) == 0
-        assert main(["train", "--algo", "pilco", "--episodes", "1", "--out", str(root / "pilco"), "--no-progress",
-                     *TINY_PILCO]) == 0
+        assert (
+            main(["babble", str(root / "data.npz"), "--n-trials", "2", "--trial-length-s", "0.1", "--no-progress"]) == 0
+        )
+        assert (
+            main(["train", "--algo", "dqn", "--episodes", "1", "--out", str(root / "run"), "--no-progress", *TINY_RL])
+            == 0
+        )
+        assert (
+            main(
+                [
+                    "train",
+                    "--algo",
+                    "pilco",
+                    "--episodes",
+                    "1",
+                    "--out",
+                    str(root / "pilco"),
+                    "--no-progress",
+                    *TINY_PILCO,
+                ]
+            )
+            == 0
+        )
     return {"root": root, "data": root / "data.npz", "run": root / "run", "pilco": root / "pilco"}
 
 
@@ -271,63 +331,236 @@ def _cases():
             run = _run_with(w, t, member)
             s(run / member)
             return str(run)
+
         return build
 
     return [
         ("fit-model DATASET", simple("fit-model", special, lambda w, t, s: str(t / "m"), "--no-progress"), ["x"]),
-        ("fit-model --test-data", simple("fit-model", data, lambda w, t, s: str(t / "m"), "--test-data", special,
-                                         "--max-epochs", "1", "--no-progress"), ["x"]),
+        (
+            "fit-model --test-data",
+            simple(
+                "fit-model",
+                data,
+                lambda w, t, s: str(t / "m"),
+                "--test-data",
+                special,
+                "--max-epochs",
+                "1",
+                "--no-progress",
+            ),
+            ["x"],
+        ),
         ("identify DATASET", simple("identify", special), ["x"]),
-        ("identify --initial-params", simple("identify", data, "--initial-params", special, "--max-iterations", "1"),
-         ["x"]),
+        (
+            "identify --initial-params",
+            simple("identify", data, "--initial-params", special, "--max-iterations", "1"),
+            ["x"],
+        ),
         ("identify --out", simple("identify", data, "--out", special, "--max-iterations", "1"), ["x"]),
-        ("babble OUTPUT", lambda w, t, s: ["babble", str(s(t / "x.npz")), "--n-trials", "1", "--trial-length-s",
-                                           "0.05", "--no-progress"], ["x.npz"]),
+        (
+            "babble OUTPUT",
+            lambda w, t, s: [
+                "babble",
+                str(s(t / "x.npz")),
+                "--n-trials",
+                "1",
+                "--trial-length-s",
+                "0.05",
+                "--no-progress",
+            ],
+            ["x.npz"],
+        ),
         ("evaluate AGENT", simple("evaluate", special, "--seeds", "0", "--duration-s", "0.1"), ["x"]),
-        ("evaluate config.json", lambda w, t, s: ["evaluate", run_member("config.json")(w, t, s), "--seeds", "0",
-                                                  "--duration-s", "0.1"], ["config.json"]),
-        ("evaluate agent.zip", lambda w, t, s: ["evaluate", run_member("agent.zip")(w, t, s), "--which", "final",
-                                                "--seeds", "0", "--duration-s", "0.1"], ["agent.zip"]),
-        ("evaluate best_agent.zip", lambda w, t, s: ["evaluate", run_member("best_agent.zip")(w, t, s), "--seeds", "0",
-                                                     "--duration-s", "0.1"], ["best_agent.zip"]),
-        ("train --resume config.json", lambda w, t, s: ["train", "--algo", "dqn", "--resume", "--episodes", "2",
-                                                        "--out", run_member("config.json")(w, t, s), "--no-progress",
-                                                        *TINY_RL], ["run"]),
-        ("rig control RUN (config.json)", lambda w, t, s: ["rig", "control", run_member("config.json")(w, t, s),
-                                                           "--twin", "--out", str(t / "o"), "--duration", "0.1",
-                                                           "--no-progress"], ["config.json"]),
-        ("rig control PILCO (policy.pt)", lambda w, t, s: ["rig", "control", run_member("policy.pt")(w, t, s),
-                                                            "--twin", "--out", str(t / "o"), "--duration", "0.1",
-                                                            "--no-progress"], ["policy.pt"]),
-        ("rig control PILCO (pilco.json)", lambda w, t, s: ["rig", "control", run_member("pilco.json")(w, t, s),
-                                                             "--twin", "--out", str(t / "o"), "--duration", "0.1",
-                                                             "--no-progress"], ["run"]),
-        ("rig control --out", simple("rig", "control", "lqr", "--twin", "--out", special, "--duration", "0.1",
-                                     "--no-progress"), ["x"]),
+        (
+            "evaluate config.json",
+            lambda w, t, s: ["evaluate", run_member("config.json")(w, t, s), "--seeds", "0", "--duration-s", "0.1"],
+            ["config.json"],
+        ),
+        (
+            "evaluate agent.zip",
+            lambda w, t, s: [
+                "evaluate",
+                run_member("agent.zip")(w, t, s),
+                "--which",
+                "final",
+                "--seeds",
+                "0",
+                "--duration-s",
+                "0.1",
+            ],
+            ["agent.zip"],
+        ),
+        (
+            "evaluate best_agent.zip",
+            lambda w, t, s: ["evaluate", run_member("best_agent.zip")(w, t, s), "--seeds", "0", "--duration-s", "0.1"],
+            ["best_agent.zip"],
+        ),
+        (
+            "train --resume config.json",
+            lambda w, t, s: [
+                "train",
+                "--algo",
+                "dqn",
+                "--resume",
+                "--episodes",
+                "2",
+                "--out",
+                run_member("config.json")(w, t, s),
+                "--no-progress",
+                *TINY_RL,
+            ],
+            ["run"],
+        ),
+        (
+            "rig control RUN (config.json)",
+            lambda w, t, s: [
+                "rig",
+                "control",
+                run_member("config.json")(w, t, s),
+                "--twin",
+                "--out",
+                str(t / "o"),
+                "--duration",
+                "0.1",
+                "--no-progress",
+            ],
+            ["config.json"],
+        ),
+        (
+            "rig control PILCO (policy.pt)",
+            lambda w, t, s: [
+                "rig",
+                "control",
+                run_member("policy.pt")(w, t, s),
+                "--twin",
+                "--out",
+                str(t / "o"),
+                "--duration",
+                "0.1",
+                "--no-progress",
+            ],
+            ["policy.pt"],
+        ),
+        (
+            "rig control PILCO (pilco.json)",
+            lambda w, t, s: [
+                "rig",
+                "control",
+                run_member("pilco.json")(w, t, s),
+                "--twin",
+                "--out",
+                str(t / "o"),
+                "--duration",
+                "0.1",
+                "--no-progress",
+            ],
+            ["run"],
+        ),
+        (
+            "rig control --out",
+            simple("rig", "control", "lqr", "--twin", "--out", special, "--duration", "0.1", "--no-progress"),
+            ["x"],
+        ),
         ("track VIDEO", simple("track", special, "--out", lambda w, t, s: str(t / "o.csv")), ["x"]),
-        ("track --markers", simple("track", lambda w, t, s: str(t / "v.avi"), "--markers", special, "--out",
-                                   lambda w, t, s: str(t / "o.csv")), ["x"]),
-        ("track --calibration", simple("track", lambda w, t, s: str(t / "v.avi"), "--calibration", special, "--out",
-                                       lambda w, t, s: str(t / "o.csv")), ["x"]),
-        ("rig calibrate --markers", simple("rig", "calibrate", "--twin", "--markers", special, "--out",
-                                           lambda w, t, s: str(t / "c.json")), ["x"]),
-        ("rig calibrate --camera", simple("rig", "calibrate", "--camera", special, "--markers",
-                                          "[[0.1, 0.1], [-0.1, 0.1], [0.1, -0.1]]", "--out",
-                                          lambda w, t, s: str(t / "c.json")), ["x"]),
+        (
+            "track --markers",
+            simple(
+                "track",
+                lambda w, t, s: str(t / "v.avi"),
+                "--markers",
+                special,
+                "--out",
+                lambda w, t, s: str(t / "o.csv"),
+            ),
+            ["x"],
+        ),
+        (
+            "track --calibration",
+            simple(
+                "track",
+                lambda w, t, s: str(t / "v.avi"),
+                "--calibration",
+                special,
+                "--out",
+                lambda w, t, s: str(t / "o.csv"),
+            ),
+            ["x"],
+        ),
+        (
+            "rig calibrate --markers",
+            simple("rig", "calibrate", "--twin", "--markers", special, "--out", lambda w, t, s: str(t / "c.json")),
+            ["x"],
+        ),
+        (
+            "rig calibrate --camera",
+            simple(
+                "rig",
+                "calibrate",
+                "--camera",
+                special,
+                "--markers",
+                "[[0.1, 0.1], [-0.1, 0.1], [0.1, -0.1]]",
+                "--out",
+                lambda w, t, s: str(t / "c.json"),
+            ),
+            ["x"],
+        ),
         ("rig check --out", simple("rig", "check", "--twin", "--out", special, "--rest-s", "0.1"), ["x"]),
-        ("rig calibrate --out", simple("rig", "calibrate", "--twin", "--markers",
-                                       "[[0.15, 0.1], [-0.15, 0.1], [0.15, -0.25], [-0.15, -0.25]]", "--out", special),
-         ["x"]),
-        ("rig babble --out", simple("rig", "babble", "--twin", "--out", special, "--duration", "3.2",
-                                    "--trial-length-s", "0.1", "--no-progress"), ["x"]),
-        ("rig control --port", simple("rig", "control", "lqr", "--port", special, "--no-camera", "--out",
-                                      lambda w, t, s: str(t / "o"), "--duration", "0.2", "--no-progress"), ["x"]),
+        (
+            "rig calibrate --out",
+            simple(
+                "rig",
+                "calibrate",
+                "--twin",
+                "--markers",
+                "[[0.15, 0.1], [-0.15, 0.1], [0.15, -0.25], [-0.15, -0.25]]",
+                "--out",
+                special,
+            ),
+            ["x"],
+        ),
+        (
+            "rig babble --out",
+            simple(
+                "rig",
+                "babble",
+                "--twin",
+                "--out",
+                special,
+                "--duration",
+                "3.2",
+                "--trial-length-s",
+                "0.1",
+                "--no-progress",
+            ),
+            ["x"],
+        ),
+        (
+            "rig control --port",
+            simple(
+                "rig",
+                "control",
+                "lqr",
+                "--port",
+                special,
+                "--no-camera",
+                "--out",
+                lambda w, t, s: str(t / "o"),
+                "--duration",
+                "0.2",
+                "--no-progress",
+            ),
+            ["x"],
+        ),
         ("rig check --port", simple("rig", "check", "--port", special), ["x"]),
         ("sweep --runs-root", simple("sweep", "--seeds", "0", "--runs-root", special), ["x"]),
         ("book --root", simple("book", "--root", special, "--profile", "quick"), ["x"]),
         ("sweep --book --root", simple("sweep", "--book", "--root", special, "--profile", "quick"), ["x"]),
-        ("rig design --out", lambda w, t, s: ["rig", "design", "--out", str(s(t / "x"))] if not (t / "x").exists()
-         else [], ["x"]),
+        (
+            "rig design --out",
+            lambda w, t, s: ["rig", "design", "--out", str(s(t / "x"))] if not (t / "x").exists() else [],
+            ["x"],
+        ),
         ("rig --truth-log", simple("rig", "--truth-log", special, "--duration", "0.2"), ["x"]),
     ]
 
@@ -358,8 +591,12 @@ def test_agent_file_with_a_huge_member_is_refused_unread(world, tmp_path):
         members = {info.filename: archive.read(info) for info in archive.infolist()}
     members["policy.pth"] = bytes(256 * 2**20)
     (run / "agent.zip").write_bytes(_zip(members))
-    line = assert_named_error(["evaluate", str(run), "--which", "final", "--seeds", "0", "--duration-s", "0.1"],
-                              "agent.zip", "policy.pth", "would unpack to")
+    line = assert_named_error(
+        ["evaluate", str(run), "--which", "final", "--seeds", "0", "--duration-s", "0.1"],
+        "agent.zip",
+        "policy.pth",
+        "would unpack to",
+    )
     assert "268435456" in line
 
 

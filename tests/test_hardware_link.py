@@ -27,13 +27,14 @@ from softpend.hardware import (
     MotorLink,
     RigConfig,
     RigEmulator,
-    SimRig,
     SampleLog,
+    SimRig,
     read_sample_log,
     start_emulator_process,
 )
-from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
 from softpend.hardware import protocol as proto
+from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
+
 
 class ThreadedRig:
     """A RigEmulator served from a thread (a real pty, the same code as the process)."""
@@ -140,8 +141,7 @@ def test_garbled_link_raises_clear_error_and_stops_motor(rig):
 
 def test_isolated_garbled_frames_are_counted_not_fatal(rig, tmp_path):
     r = rig(garble_probability=0.15, drop_probability=0.1, seed=3)
-    with link_to(r, max_consecutive_bad_frames=4) as link, \
-            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+    with link_to(r, max_consecutive_bad_frames=4) as link, SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         result = run_control_loop(link, lambda obs, t: 0.01, duration_s=0.6, log=log)
     assert result.bad_frames > 0 and result.dropped_states > 0
     assert len(read_sample_log(tmp_path / "log.csv")) == result.samples
@@ -157,8 +157,7 @@ def test_controller_exception_stops_motor_and_keeps_samples(rig, tmp_path):
             raise RuntimeError("controller bug")
         return 0.04
 
-    with link_to(r) as link, \
-            SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+    with link_to(r) as link, SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         with pytest.raises(RuntimeError, match="controller bug"):
             run_control_loop(link, controller, duration_s=2.0, log=log)
         assert eventually(r, lambda: r.session.stopped)  # STOP went out before the exception left the loop
@@ -189,8 +188,10 @@ def test_missing_port_is_a_clear_disconnect():
 def test_killed_emulator_is_a_clear_disconnect_and_no_sample_is_lost(tmp_path):
     calls = []
     with start_emulator_process(RigConfig(), truth_log=tmp_path / "truth.csv") as emulator:
-        with MotorLink(emulator.port, torque_limit_nm=0.06, install_exit_hooks=False) as link, \
-                SampleLog(tmp_path / "motor.csv", LOOP_LOG_COLUMNS) as log:
+        with (
+            MotorLink(emulator.port, torque_limit_nm=0.06, install_exit_hooks=False) as link,
+            SampleLog(tmp_path / "motor.csv", LOOP_LOG_COLUMNS) as log,
+        ):
             killer = threading.Timer(0.5, emulator.kill)
             killer.start()
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from softpend.hardware.loop import LOOP_LOG_COLUMNS
-from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import build_rig_dataset, estimate_clock_offset, startup_wiggle_torque, synchronise
+from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.plant import RodParams, make_plant
 from softpend.vision.track_video import TRACK_COLUMNS
 
@@ -50,16 +50,30 @@ def _write_logs(tmp_path, trajectory, lost_frames=(), drop_motor=()):
             hub = np.interp(tc, t, phi)
             lost = k in set(lost_frames)
             nan = np.nan
-            log.append([k, tc + TRUE_OFFSET_S, nan, nan, 50.0, nan if lost else x, nan if lost else y,
-                        nan if lost else np.arctan2(-x, y), int(lost), (hub + np.pi) % (2 * np.pi) - np.pi, 0])
+            log.append(
+                [
+                    k,
+                    tc + TRUE_OFFSET_S,
+                    nan,
+                    nan,
+                    50.0,
+                    nan if lost else x,
+                    nan if lost else y,
+                    nan if lost else np.arctan2(-x, y),
+                    int(lost),
+                    (hub + np.pi) % (2 * np.pi) - np.pi,
+                    0,
+                ]
+            )
     return tmp_path / "motor.csv", tmp_path / "camera.csv"
 
 
 def test_offset_recovered_from_the_wiggle_with_hub_marker(tmp_path, trajectory):
     motor, camera = _write_logs(tmp_path, trajectory)
     m, c = read_sample_log(motor), read_sample_log(camera)
-    estimate = estimate_clock_offset(m["device_time_s"], m["phi_rad"], c["camera_time_s"], c["hub_angle_rad"],
-                                     window_s=(0.0, 4.0), max_offset_s=1.0)
+    estimate = estimate_clock_offset(
+        m["device_time_s"], m["phi_rad"], c["camera_time_s"], c["hub_angle_rad"], window_s=(0.0, 4.0), max_offset_s=1.0
+    )
     assert estimate.offset_s == pytest.approx(TRUE_OFFSET_S, abs=0.001)
     assert estimate.peak_correlation > 0.95
 
@@ -68,8 +82,9 @@ def test_tip_angle_alone_gives_a_biased_offset(tmp_path, trajectory):
     """Why the rig has a hub marker: the tip lags the hub, so correlating with it shifts the estimate."""
     motor, camera = _write_logs(tmp_path, trajectory)
     m, c = read_sample_log(motor), read_sample_log(camera)
-    estimate = estimate_clock_offset(m["device_time_s"], m["phi_rad"], c["camera_time_s"], c["theta_rad"],
-                                     window_s=(0.0, 4.0), max_offset_s=1.0)
+    estimate = estimate_clock_offset(
+        m["device_time_s"], m["phi_rad"], c["camera_time_s"], c["theta_rad"], window_s=(0.0, 4.0), max_offset_s=1.0
+    )
     assert abs(estimate.offset_s - TRUE_OFFSET_S) > 0.01
 
 
@@ -93,8 +108,9 @@ def test_synchronise_resamples_reports_gaps_and_writes_a_dataset(tmp_path, traje
     t, phi, ex, ey, u = data.T
     grid = result.trial_start_s[1] + np.arange(100) * 0.01
     np.testing.assert_allclose(result.positions[1, :, 2], np.interp(grid, t, ex), atol=2e-3)
-    np.testing.assert_allclose(result.positions[1, :, 0], (np.interp(grid, t, phi) + np.pi) % (2 * np.pi) - np.pi,
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        result.positions[1, :, 0], (np.interp(grid, t, phi) + np.pi) % (2 * np.pi) - np.pi, atol=1e-6
+    )
     # torque is the zero-order hold of the applied torque
     np.testing.assert_allclose(result.torques_nm[1], np.interp(grid[:-1], t, u), atol=0.031)
     # velocities are backward differences of the positions

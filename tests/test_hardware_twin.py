@@ -6,15 +6,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from softpend.io.samplelog import read_sample_log
 from softpend.hardware.twin import compare_with_simulator_model, run_twin_session, truth_link_points
+from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
-    return run_twin_session(tmp_path_factory.mktemp("twin"), duration_s=7.0, seed=3, trial_length_s=2.0,
-                            clock_offset_s=0.311, progress=False)
+    return run_twin_session(
+        tmp_path_factory.mktemp("twin"),
+        duration_s=7.0,
+        seed=3,
+        trial_length_s=2.0,
+        clock_offset_s=0.311,
+        progress=False,
+    )
 
 
 def test_twin_session_produces_a_synchronised_rig_dataset(session):

@@ -98,7 +98,9 @@ def test_the_library_never_imports_the_study() -> None:
     graph = import_graph()
     library = [m for m in _modules() if unit_of(m)[0] < unit_of("softpend.study")[0]]
     assert library, "no library module found"
-    wrong = [(m, d) for m in library for d in graph[m] if d.startswith("softpend.study") or d.startswith("softpend.commands")]
+    wrong = [
+        (m, d) for m in library for d in graph[m] if d.startswith("softpend.study") or d.startswith("softpend.commands")
+    ]
     assert not wrong
 
 
@@ -115,7 +117,7 @@ def test_no_import_cycle() -> None:
             if _is_parent_package(dep, node):
                 continue  # importing a submodule runs its parent package first: not an edge of the design
             if state.get(dep) == 1:
-                cycle = stack[stack.index(dep):] + [dep]
+                cycle = stack[stack.index(dep) :] + [dep]
                 pytest.fail("import cycle: " + " -> ".join(cycle))
             if dep not in state:
                 visit(dep)

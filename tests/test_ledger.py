@@ -12,26 +12,47 @@ import numpy as np
 import pytest
 
 from softpend.evaluation import EvaluationSummary
-from softpend.study.ledger import (NOT_COMPUTED, VERDICTS, LedgerRow, claims_ledger, glued_values, ledger_markdown,
-                                   over_seeds, verdict_counts)
+from softpend.study.ledger import (
+    NOT_COMPUTED,
+    VERDICTS,
+    LedgerRow,
+    claims_ledger,
+    glued_values,
+    ledger_markdown,
+    over_seeds,
+    verdict_counts,
+)
 
 
 def glue_output(name: str, text: str) -> dict:
-    return nbformat.v4.new_output("display_data", data={"application/papermill.record/text/plain": text},
-                                  metadata={"scrapbook": {"name": name, "mime_prefix": "application/papermill.record/"}})
+    return nbformat.v4.new_output(
+        "display_data",
+        data={"application/papermill.record/text/plain": text},
+        metadata={"scrapbook": {"name": name, "mime_prefix": "application/papermill.record/"}},
+    )
 
 
 def test_glued_values_reads_numbers_strings_and_numpy_scalars_back(tmp_path):
     nb = nbformat.v4.new_notebook()
     cell = nbformat.v4.new_code_cell("glue(...)")
-    cell.outputs = [glue_output("mse", "3.1e-09"), glue_output("text", "'100% of 10 starts'"),
-                    glue_output("flag", "True"), glue_output("numpy", "np.float64(0.25)"), glue_output("never", "inf"),
-                    nbformat.v4.new_output("stream", text="not glued")]
+    cell.outputs = [
+        glue_output("mse", "3.1e-09"),
+        glue_output("text", "'100% of 10 starts'"),
+        glue_output("flag", "True"),
+        glue_output("numpy", "np.float64(0.25)"),
+        glue_output("never", "inf"),
+        nbformat.v4.new_output("stream", text="not glued"),
+    ]
     nb.cells = [cell]
     path = tmp_path / "x.ipynb"
     nbformat.write(nb, str(path))
-    assert glued_values(path) == {"mse": 3.1e-9, "text": "100% of 10 starts", "flag": True, "numpy": 0.25,
-                                  "never": math.inf}
+    assert glued_values(path) == {
+        "mse": 3.1e-9,
+        "text": "100% of 10 starts",
+        "flag": True,
+        "numpy": 0.25,
+        "never": math.inf,
+    }
     assert glued_values(tmp_path / "missing.ipynb") == {}
 
 
@@ -56,20 +77,39 @@ def summary(times, stds) -> EvaluationSummary:
 
 def fig07(**runs) -> dict:
     """Glued values of Figure 7: key -> (rate, low, high)."""
-    values = {"near_tilt_rad": 0.2, "far_tilt_rad": 0.8, "pid_scales_failing": "0.5", "pid_scales_tried": "0.5, 1, 2",
-              "pid_sensitive_near_one": False}
+    values = {
+        "near_tilt_rad": 0.2,
+        "far_tilt_rad": 0.8,
+        "pid_scales_failing": "0.5",
+        "pid_scales_tried": "0.5, 1, 2",
+        "pid_sensitive_near_one": False,
+    }
     for key, (rate, low, high) in runs.items():
-        values.update({f"{key}_rate": rate, f"{key}_low": low, f"{key}_high": high, f"{key}_starts": 20,
-                       f"{key}_time_s": 0.1, f"{key}_text": f"{rate:.0%} of 20 starts"})
+        values.update(
+            {
+                f"{key}_rate": rate,
+                f"{key}_low": low,
+                f"{key}_high": high,
+                f"{key}_starts": 20,
+                f"{key}_time_s": 0.1,
+                f"{key}_text": f"{rate:.0%} of 20 starts",
+            }
+        )
     return values
 
 
 def test_verdicts_follow_the_evidence():
     glued = {
         "fig03_sysid": {"one_step_mse_full": 3.5e-9, "one_step_mse_limited": 1e-8, "n_test_trials": 12},
-        "fig07_classical": fig07(lqr_near=(1.0, 0.84, 1.0), lqr_far=(0.0, 0.0, 0.16), lqr_hanging=(0.0, 0.0, 0.16),
-                                 lqr_learned_near=(0.9, 0.7, 0.97), pid_true_near=(1.0, 0.84, 1.0),
-                                 pid_learned_near=(0.0, 0.0, 0.16), pid_true_nolimit_far=(1.0, 0.84, 1.0)),
+        "fig07_classical": fig07(
+            lqr_near=(1.0, 0.84, 1.0),
+            lqr_far=(0.0, 0.0, 0.16),
+            lqr_hanging=(0.0, 0.0, 0.16),
+            lqr_learned_near=(0.9, 0.7, 0.97),
+            pid_true_near=(1.0, 0.84, 1.0),
+            pid_learned_near=(0.0, 0.0, 0.16),
+            pid_true_nolimit_far=(1.0, 0.84, 1.0),
+        ),
     }
     held = [summary([2.0, 3.0, 2.5], [0.05, 0.1, 0.15])] * 2  # every start held within 0.2 rad
     slower = [summary([4.0, 5.0, 4.5], [0.05, 0.1, 0.15])] * 2
@@ -110,8 +150,10 @@ def test_over_seeds_and_markdown():
 def training_log(algo: str, seed: int, returns, stop_reason: Optional[str] = None, episode_s: float = 20.0):
     from softpend.rl.training_log import TrainingLog
 
-    episodes = [{"episode": k + 1, "return": float(r), "plant_s": episode_s * (k + 1), "model_steps": 0}
-                for k, r in enumerate(returns)]
+    episodes = [
+        {"episode": k + 1, "return": float(r), "plant_s": episode_s * (k + 1), "model_steps": 0}
+        for k, r in enumerate(returns)
+    ]
     return TrainingLog(algo=algo, seed=seed, episodes=episodes, stop_reason=stop_reason)
 
 
@@ -131,9 +173,12 @@ def test_a_run_that_stopped_balanced_reaches_its_asymptote_at_the_stop():
     assert 80 <= episodes <= 110 and plant_s == episodes * 20.0
 
     # ten DQN-MBPO runs that all stopped balanced after 8 to 12 episodes: the ledger says when, not "never"
-    logs = {"DQN-MBPO": [training_log("mbpo", seed, rising + [400.0] * (seed % 5), stop_reason="balanced")
-                         for seed in range(10)],
-            "model-free DQN": [training_log("dqn", seed, plateau, episode_s=100.0) for seed in range(10)]}
+    logs = {
+        "DQN-MBPO": [
+            training_log("mbpo", seed, rising + [400.0] * (seed % 5), stop_reason="balanced") for seed in range(10)
+        ],
+        "model-free DQN": [training_log("dqn", seed, plateau, episode_s=100.0) for seed in range(10)],
+    }
     rows = {row.key: row for row in claims_ledger({}, logs, {}, [])}
     mb = rows["mb_asymptote"]
     assert "never" not in mb.ours, mb.ours

@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("mujoco", reason="MuJoCo is an optional benchmark dependency (pip install softpend[bench]); "
-                                      "these checks run where it is installed")
+pytest.importorskip(
+    "mujoco",
+    reason="MuJoCo is an optional benchmark dependency (pip install softpend[bench]); "
+    "these checks run where it is installed",
+)
 
 from softpend.plant import RodParams  # noqa: E402
 from softpend.plant.prb import PRBPlant  # noqa: E402
@@ -58,16 +61,23 @@ def _wrong_clamp_stiffness(monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
 
 
 def _no_tip_mass(monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
-    monkeypatch.setattr(mujoco_chain, "link_inertials",
-                        lambda p: (np.full(p.n_links, p.link_mass_kg), np.full(p.n_links, p.link_length_m / 2),
-                                   np.full(p.n_links, p.link_mass_kg * p.link_length_m**2 / 12)))
+    monkeypatch.setattr(
+        mujoco_chain,
+        "link_inertials",
+        lambda p: (
+            np.full(p.n_links, p.link_mass_kg),
+            np.full(p.n_links, p.link_length_m / 2),
+            np.full(p.n_links, p.link_mass_kg * p.link_length_m**2 / 12),
+        ),
+    )
     return Q0
 
 
 def _no_hub_friction(monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
     real = mujoco_chain.chain_mjcf
-    monkeypatch.setattr(mujoco_chain, "chain_mjcf",
-                        lambda params, *a, **k: real(params.replace(hub_friction_nms_per_rad=0.0), *a, **k))
+    monkeypatch.setattr(
+        mujoco_chain, "chain_mjcf", lambda params, *a, **k: real(params.replace(hub_friction_nms_per_rad=0.0), *a, **k)
+    )
     return Q0
 
 
@@ -76,8 +86,9 @@ def _absolute_angles(monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
 
 
 @pytest.mark.parametrize("wrong", [_wrong_clamp_stiffness, _no_tip_mass, _no_hub_friction, _absolute_angles])
-def test_a_wrong_model_or_state_map_fails_the_check(exudyn_angles: np.ndarray, monkeypatch: pytest.MonkeyPatch,
-                                                    wrong) -> None:
+def test_a_wrong_model_or_state_map_fails_the_check(
+    exudyn_angles: np.ndarray, monkeypatch: pytest.MonkeyPatch, wrong
+) -> None:
     q0 = wrong(monkeypatch)
     error = np.abs(_mujoco_angles(q0) - exudyn_angles).max()
     assert error > 10 * TOLERANCE_RAD, error
@@ -116,23 +127,43 @@ def test_bench_figures_returns_every_key(monkeypatch: pytest.MonkeyPatch) -> Non
 
     real_steps, real_rollout = mujoco_chain.steps_per_s, mujoco_chain.rollout_rod_steps_per_s
     monkeypatch.setattr(mujoco_chain, "steps_per_s", lambda *a, n_steps=0: real_steps(*a, n_steps=20, repeats=1))
-    monkeypatch.setattr(mujoco_chain, "rollout_rod_steps_per_s",
-                        lambda *a: real_rollout(*a, batch_size=8, n_steps=2, repeats=1))
+    monkeypatch.setattr(
+        mujoco_chain, "rollout_rod_steps_per_s", lambda *a: real_rollout(*a, batch_size=8, n_steps=2, repeats=1)
+    )
     references = {4: hub_error_reference(4, duration_s=0.2), 10: hub_error_reference(10, duration_s=0.05)}
-    base = {key: 1000.0 for key in ("env_steps_per_s_n4", "solver_steps_per_s_n4", "batched_rod_steps_per_s_n4",
-                                    "batched_rod_steps_per_s_n10", "batched_rk4_rod_steps_per_s_n4",
-                                    "batched_rk4_rod_steps_per_s_n10")}
+    base = {
+        key: 1000.0
+        for key in (
+            "env_steps_per_s_n4",
+            "solver_steps_per_s_n4",
+            "batched_rod_steps_per_s_n4",
+            "batched_rod_steps_per_s_n10",
+            "batched_rk4_rod_steps_per_s_n4",
+            "batched_rk4_rod_steps_per_s_n10",
+        )
+    }
     figures = mujoco_chain.bench_figures(base, references)
     expected = {
-        "mujoco_rk4_5ms_steps_per_s_n4", "mujoco_implicitfast_2p5ms_steps_per_s_n4",
-        "mujoco_rk4_stable_steps_per_s_n10", "mujoco_implicitfast_0p5ms_steps_per_s_n10",
-        "mujoco_rk4_5ms_hub_error_rad_n4", "mujoco_implicitfast_2p5ms_hub_error_rad_n4",
-        "mujoco_rk4_0p25ms_hub_error_rad_n4", "mujoco_rk4_stable_hub_error_rad_n10",
-        "mujoco_implicitfast_0p5ms_hub_error_rad_n10", "mujoco_rk4_0p25ms_hub_error_rad_n10",
-        "mujoco_rk4_5ms_diverges_n10", "mujoco_implicitfast_2p5ms_diverges_n10",
-        "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4", "exudyn_env_over_mujoco_rk4_n4",
-        "exudyn_solver_over_mujoco_rk4_n4", "batched_over_mujoco_rk4_n4", "batched_over_mujoco_rk4_n10",
-        "batched_rk4_over_mujoco_rk4_n4", "batched_rk4_over_mujoco_rk4_n10", "batched_over_mujoco_rollout_n4",
+        "mujoco_rk4_5ms_steps_per_s_n4",
+        "mujoco_implicitfast_2p5ms_steps_per_s_n4",
+        "mujoco_rk4_stable_steps_per_s_n10",
+        "mujoco_implicitfast_0p5ms_steps_per_s_n10",
+        "mujoco_rk4_5ms_hub_error_rad_n4",
+        "mujoco_implicitfast_2p5ms_hub_error_rad_n4",
+        "mujoco_rk4_0p25ms_hub_error_rad_n4",
+        "mujoco_rk4_stable_hub_error_rad_n10",
+        "mujoco_implicitfast_0p5ms_hub_error_rad_n10",
+        "mujoco_rk4_0p25ms_hub_error_rad_n10",
+        "mujoco_rk4_5ms_diverges_n10",
+        "mujoco_implicitfast_2p5ms_diverges_n10",
+        "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4",
+        "exudyn_env_over_mujoco_rk4_n4",
+        "exudyn_solver_over_mujoco_rk4_n4",
+        "batched_over_mujoco_rk4_n4",
+        "batched_over_mujoco_rk4_n10",
+        "batched_rk4_over_mujoco_rk4_n4",
+        "batched_rk4_over_mujoco_rk4_n10",
+        "batched_over_mujoco_rollout_n4",
         "batched_rk4_over_mujoco_rollout_n4",
     }
     assert expected <= set(figures)

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import nbformat
 import pytest
+from support import NOTEBOOK_HEADER
 
+from softpend.cli import main as cli_main
 from softpend.study import book
 from softpend.study.book import NotebookExecutionError, PackageCode, cache_key, code_cells, run_notebooks, toc_notebooks
-from softpend.cli import main as cli_main
-from support import NOTEBOOK_HEADER
 
 HEADER = NOTEBOOK_HEADER.format(extra="")
 
@@ -35,7 +35,9 @@ def make_book(root: Path, notebooks: dict[str, str], profiles: dict) -> Path:
     (root / "notebooks").mkdir(parents=True)
     (root / "book").mkdir()
     chapters = "\n".join(f"      - file: book/_generated/{name}" for name in notebooks)
-    (root / "_toc.yml").write_text(f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n")
+    (root / "_toc.yml").write_text(
+        f"format: jb-book\nroot: book/intro\nparts:\n  - caption: Figures\n    chapters:\n{chapters}\n"
+    )
     (root / "book" / "profiles.yml").write_text(json.dumps(profiles))  # JSON is YAML
     for name, source in notebooks.items():
         (root / "notebooks" / f"{name}.md").write_text(source)
@@ -44,7 +46,9 @@ def make_book(root: Path, notebooks: dict[str, str], profiles: dict) -> Path:
 
 def outputs_text(path: Path) -> str:
     nb = nbformat.read(str(path), as_version=4)
-    return "".join(out.get("text", "") for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", []))
+    return "".join(
+        out.get("text", "") for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", [])
+    )
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -57,7 +61,9 @@ def test_toc_notebooks_keeps_reading_order_and_skips_plain_chapters(tmp_path):
         "  - caption: B\n    chapters:\n      - file: book/_generated/fig03\n"
     )
     assert toc_notebooks(toc) == ["fig02", "fig01", "fig03"]
-    toc.write_text("format: jb-book\nroot: book/intro\nchapters:\n  - file: book/_generated/a\n  - file: book/_generated/a\n")
+    toc.write_text(
+        "format: jb-book\nroot: book/intro\nchapters:\n  - file: book/_generated/a\n  - file: book/_generated/a\n"
+    )
     with pytest.raises(ValueError, match="more than once"):
         toc_notebooks(toc)
 
@@ -80,7 +86,9 @@ def test_bad_profiles_raise_before_anything_runs(tmp_path, profiles, match):
 
 
 def test_notebook_without_parameters_cell_is_rejected(tmp_path):
-    root = make_book(tmp_path, {"good": notebook_source(OK_CELL), "bare": notebook_source(OK_CELL, parameters=None)}, {"full": {}})
+    root = make_book(
+        tmp_path, {"good": notebook_source(OK_CELL), "bare": notebook_source(OK_CELL, parameters=None)}, {"full": {}}
+    )
     with pytest.raises(ValueError, match="'bare' has no code cell tagged 'parameters'"):
         run_notebooks(root, progress=False)
     # validation happens before execution: the valid notebook listed first was not run either
@@ -166,8 +174,11 @@ def test_each_executed_notebook_ends_with_its_rerun_section_and_the_command_work
     with their defaults, units (a ``[unit]`` in the comment, else the name's suffix) and this build's values, and
     the command that reruns it; that command runs."""
     parameters = "duration_s = 2.0  # length of the run\ntilt = 0.1  # start tilt [deg]\nplant = 'prb'"
-    root = make_book(tmp_path, {"fig_a": notebook_source("print(duration_s, plant)", parameters=parameters)},
-                     {"full": {"fig_a": {"duration_s": 1.0}}})
+    root = make_book(
+        tmp_path,
+        {"fig_a": notebook_source("print(duration_s, plant)", parameters=parameters)},
+        {"full": {"fig_a": {"duration_s": 1.0}}},
+    )
     run_notebooks(root, progress=False)
     output = root / "book" / "_generated" / "fig_a.ipynb"
     last = nbformat.read(str(output), as_version=4).cells[-1]
@@ -184,7 +195,9 @@ def test_each_executed_notebook_ends_with_its_rerun_section_and_the_command_work
 def test_parameters_that_do_not_evaluate_show_their_expression():
     rows = book.notebook_parameters("limit_nm = SOMEWHERE.limit  # the limit\nwidth_mm = 3")
     assert [(r["name"], r["default"], r["unit"], r["evaluated"]) for r in rows] == [
-        ("limit_nm", "SOMEWHERE.limit", "N m", False), ("width_mm", "3", "mm", False)]
+        ("limit_nm", "SOMEWHERE.limit", "N m", False),
+        ("width_mm", "3", "mm", False),
+    ]
     assert book.notebook_parameters("sizes = [16, 16]  # hidden widths [16, 16]")[0]["unit"] == ""
 
 
@@ -317,7 +330,13 @@ def test_real_notebook_closure_reaches_the_plant_and_not_pilco():
     code = PackageCode()
     assert code.name == "softpend"
     used = code.closure(code_cells(book.read_notebook(root / "notebooks" / "fig01_prb_rod.md")))
-    assert {"softpend", "softpend.plant", "softpend.plant.registry", "softpend.plant.prb", "softpend.study.rod_design"} <= used
+    assert {
+        "softpend",
+        "softpend.plant",
+        "softpend.plant.registry",
+        "softpend.plant.prb",
+        "softpend.study.rod_design",
+    } <= used
     assert "softpend.plant.beam" in used  # named only by the registry's entry point
     assert "softpend.pilco.loop" not in used and "softpend.rl.dqn" not in used
     assert all(len(value) == 64 for value in code.code_hashes(["import softpend.plant"]).values())
@@ -333,7 +352,9 @@ def test_code_change_invalidates_the_cache(tmp_path, monkeypatch):
 
 
 def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_path):
-    source = notebook_source(OK_CELL, "print('before the failure')", "raise RuntimeError('deliberate failure')", "print('never')")
+    source = notebook_source(
+        OK_CELL, "print('before the failure')", "raise RuntimeError('deliberate failure')", "print('never')"
+    )
     root = make_book(tmp_path, {"broken": source}, {"full": {}})
     with pytest.raises(NotebookExecutionError) as info:
         run_notebooks(root, progress=False)

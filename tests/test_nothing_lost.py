@@ -20,8 +20,12 @@ def test_emulator_ends_at_its_duration_after_a_host_connected_and_left(tmp_path)
     """A host opens the pty, reads a little and closes it without reading further: the STATE frames pile up in
     the pty until it is full.  The emulator drops what does not fit and exits at its duration (before the fix
     it blocked in the write to the full pty and only a signal ended it)."""
-    process = subprocess.Popen([sys.executable, "-c", "from softpend.cli import main; main()", "rig", "--duration", "25"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from softpend.cli import main; main()", "rig", "--duration", "25"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         port = process.stdout.readline().split()[0]
         assert port.startswith("/dev/"), port
@@ -100,8 +104,21 @@ def test_sweep_refuses_a_backend_that_is_not_installed_whatever_the_job_count(tm
     for jobs in ([], [(1,)], [(1,), (2,)]):
         with pytest.raises(ValueError, match="backend 'ray' needs the ray package"):
             run_jobs(print, jobs, [f"job{i}" for i in range(len(jobs))], workers=1, progress=False, backend="ray")
-    argv = ["sweep", "--methods", "pilco", "--seeds", "0", "--pilco-trials", "0", "--runs-root", str(tmp_path),
-            "--workers", "1", "--backend", "ray"]
+    argv = [
+        "sweep",
+        "--methods",
+        "pilco",
+        "--seeds",
+        "0",
+        "--pilco-trials",
+        "0",
+        "--runs-root",
+        str(tmp_path),
+        "--workers",
+        "1",
+        "--backend",
+        "ray",
+    ]
     assert main(argv) == 2
     assert "backend 'ray' needs the ray package" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # refused before any run
@@ -113,17 +130,21 @@ MARKERS = "[[0.05, 0.0], [-0.05, 0.0], [0.0, -0.35], [0.1, -0.2]]"
 #: Every command that writes files: its arguments (``{d}``: a folder of the test) and the files it writes there.
 COMMANDS = {
     "rig": (["rig", "--duration", "0.2", "--truth-log", "{d}/truth.csv"], ["truth.csv"]),
-    "rig control": (["rig", "control", "lqr", "--twin", "--out", "{d}", "--duration", "0.2", "--no-progress"],
-                    ["summary.json", "motor_log.csv", "camera_log.csv", "truth_log.csv"]),
+    "rig control": (
+        ["rig", "control", "lqr", "--twin", "--out", "{d}", "--duration", "0.2", "--no-progress"],
+        ["summary.json", "motor_log.csv", "camera_log.csv", "truth_log.csv"],
+    ),
     "rig design": (["rig", "design", "--out", "{d}"], ["rig_design.json", "markers.json", "rig_design.png"]),
     "rig check": (["rig", "check", "--twin", "--out", "{d}/check.json", "--rest-s", "0.2"], ["check.json"]),
-    "rig calibrate": (["rig", "calibrate", "--twin", "--markers", MARKERS, "--out", "{d}/cal.json"],
-                      ["cal.json", "cal.report.json"]),
-    "rig babble": (["rig", "babble", "--twin", "--out", "{d}", "--duration", "6", "--trial-length-s", "2",
-                    "--no-progress"],
-                   ["summary.json", "rig_dataset.npz", "motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv"]),
-    "babble": (["babble", "{d}/data.npz", "--n-trials", "1", "--trial-length-s", "0.1", "--no-progress"],
-               ["data.npz"]),
+    "rig calibrate": (
+        ["rig", "calibrate", "--twin", "--markers", MARKERS, "--out", "{d}/cal.json"],
+        ["cal.json", "cal.report.json"],
+    ),
+    "rig babble": (
+        ["rig", "babble", "--twin", "--out", "{d}", "--duration", "6", "--trial-length-s", "2", "--no-progress"],
+        ["summary.json", "rig_dataset.npz", "motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv"],
+    ),
+    "babble": (["babble", "{d}/data.npz", "--n-trials", "1", "--trial-length-s", "0.1", "--no-progress"], ["data.npz"]),
     "fit-model": (["fit-model", "{d}/missing.npz", "{d}/model"], ["model.pt", "model.json"]),
     "identify": (["identify", "{d}/missing.npz", "--out", "{d}/identified.json"], ["identified.json"]),
     "track": (["track", "{d}/missing.avi", "--out", "{d}/track.csv"], ["track.csv"]),
@@ -180,8 +201,19 @@ def test_the_writer_refuses_a_file_planned_after_the_work_and_one_that_appeared_
 
 
 # ---------------------------------------------------------------------------------------------------- run folders
-TINY = ["--episodes", "1", "--no-progress", "--set", "episode_s=0.5", "--set", "eval_seeds=[0]",
-        "--set", "eval_duration_s=0.2", "--set", "learning_starts=10"]
+TINY = [
+    "--episodes",
+    "1",
+    "--no-progress",
+    "--set",
+    "episode_s=0.5",
+    "--set",
+    "eval_seeds=[0]",
+    "--set",
+    "eval_duration_s=0.2",
+    "--set",
+    "learning_starts=10",
+]
 
 
 def test_train_refuses_another_runs_folder_and_never_trains_over_a_run(tmp_path, capsys):
@@ -191,9 +223,11 @@ def test_train_refuses_another_runs_folder_and_never_trains_over_a_run(tmp_path,
     assert main(["train", "--algo", "dqn", "--out", str(folder), *TINY]) == 0
     saved = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
     capsys.readouterr()
-    for extra, message in ((["--seed", "1"], "holds another run (it differs in seed"),
-                           (["--set", "gamma=0.9"], "holds another run (it differs in gamma"),
-                           ([], "already holds this run")):
+    for extra, message in (
+        (["--seed", "1"], "holds another run (it differs in seed"),
+        (["--set", "gamma=0.9"], "holds another run (it differs in gamma"),
+        ([], "already holds this run"),
+    ):
         assert main(["train", "--algo", "dqn", "--out", str(folder), *TINY, *extra]) == 2
         err = capsys.readouterr().err
         assert str(folder) in err and message in err
@@ -224,9 +258,27 @@ def test_a_sweep_over_a_root_with_runs_of_other_settings_leaves_them_alone(tmp_p
     ``dqn-seed0`` whatever the settings) retrained into it.  Run folders are now named by their settings' hash."""
     from softpend.study.rl_runs import run_folder
 
-    argv = ["sweep", "--methods", "dqn", "--seeds", "0", "--episodes-dqn", "1", "--runs-root", str(tmp_path),
-            "--workers", "1", "--dqn-set", "episode_s=0.5", "--dqn-set", "eval_seeds=[0]",
-            "--dqn-set", "eval_duration_s=0.2", "--dqn-set", "learning_starts=10"]
+    argv = [
+        "sweep",
+        "--methods",
+        "dqn",
+        "--seeds",
+        "0",
+        "--episodes-dqn",
+        "1",
+        "--runs-root",
+        str(tmp_path),
+        "--workers",
+        "1",
+        "--dqn-set",
+        "episode_s=0.5",
+        "--dqn-set",
+        "eval_seeds=[0]",
+        "--dqn-set",
+        "eval_duration_s=0.2",
+        "--dqn-set",
+        "learning_starts=10",
+    ]
     assert main(argv) == 0
     [first] = list(tmp_path.iterdir())
     saved = {p.name: p.read_bytes() for p in first.iterdir() if p.is_file()}

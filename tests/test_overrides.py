@@ -38,10 +38,23 @@ class Outer:
     flag: bool = False
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("3", 3), ("1e-3", 1e-3), ("-0.5", -0.5), ("[0, 1]", [0, 1]), ("null", None), ("true", True),
-    ('"3"', "3"), ("beam", "beam"), (" beam ", "beam"), ("0,1", "0,1"), ("", ""), ('{"a": 1}', {"a": 1}),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("3", 3),
+        ("1e-3", 1e-3),
+        ("-0.5", -0.5),
+        ("[0, 1]", [0, 1]),
+        ("null", None),
+        ("true", True),
+        ('"3"', "3"),
+        ("beam", "beam"),
+        (" beam ", "beam"),
+        ("0,1", "0,1"),
+        ("", ""),
+        ('{"a": 1}', {"a": 1}),
+    ],
+)
 def test_parse_value_reads_json_and_falls_back_to_the_string(text, expected):
     assert parse_value(text) == expected
     assert type(parse_value(text)) is type(expected)
@@ -88,12 +101,15 @@ def test_apply_overrides_validates_the_copy():
         apply_overrides(Outer(), {"task.rod.mass_kg": -1.0})
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"nmae": "x"}, r"unknown Outer field 'nmae'; known: \['flag', 'name', 'rate', 'seeds', 'task', 'widths'\]"),
-    ({"task.rod.masss_kg": 1.0}, r"unknown Inner field 'task.rod.masss_kg'; known: \['mass_kg', 'n_links'\]"),
-    ({"name.length": 1}, r"cannot set name.length: name holds a str"),
-    ({"task": Middle(), "task.dt_s": 0.1}, r"'task' is set both whole and through task.<field>"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"nmae": "x"}, r"unknown Outer field 'nmae'; known: \['flag', 'name', 'rate', 'seeds', 'task', 'widths'\]"),
+        ({"task.rod.masss_kg": 1.0}, r"unknown Inner field 'task.rod.masss_kg'; known: \['mass_kg', 'n_links'\]"),
+        ({"name.length": 1}, r"cannot set name.length: name holds a str"),
+        ({"task": Middle(), "task.dt_s": 0.1}, r"'task' is set both whole and through task.<field>"),
+    ],
+)
 def test_apply_overrides_rejects_unknown_or_impossible_names(overrides, message):
     with pytest.raises(ValueError, match=message):
         apply_overrides(Outer(), overrides)
@@ -110,22 +126,35 @@ def test_rl_and_pilco_configs_take_the_same_overrides():
     from softpend.pilco.loop import PilcoConfig
     from softpend.rl.config import MBPOConfig
 
-    rl = apply_overrides(MBPOConfig(), dict([parse_assignment("net_arch=[32,32]"), parse_assignment("learning_rate=1e-3")]))
+    rl = apply_overrides(
+        MBPOConfig(), dict([parse_assignment("net_arch=[32,32]"), parse_assignment("learning_rate=1e-3")])
+    )
     assert rl.net_arch == (32, 32) and rl.learning_rate == 1e-3
-    pilco = apply_overrides(PilcoConfig(), dict(map(parse_assignment, [
-        "eval_seeds=[0,1]", "cost_rate_width_rad_s=null", "state=tip", "task.rod.mass_kg=0.07"])))
+    pilco = apply_overrides(
+        PilcoConfig(),
+        dict(
+            map(
+                parse_assignment,
+                ["eval_seeds=[0,1]", "cost_rate_width_rad_s=null", "state=tip", "task.rod.mass_kg=0.07"],
+            )
+        ),
+    )
     assert pilco.eval_seeds == (0, 1) and pilco.cost_rate_width_rad_s is None and pilco.state == "tip"
     assert pilco.task.rod.mass_kg == 0.07
     assert dataclasses.replace(pilco, task=PilcoConfig().task) == apply_overrides(
-        PilcoConfig(), {"eval_seeds": "0,1", "cost_rate_width_rad_s": None, "state": "tip"})
+        PilcoConfig(), {"eval_seeds": "0,1", "cost_rate_width_rad_s": None, "state": "tip"}
+    )
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["train", "--algo", "dqn", "--set", "learning_rate"], "--set expects NAME=VALUE"),
-    (["train", "--algo", "pilco", "--set", "no_such_field=1"], "unknown PilcoConfig field 'no_such_field'"),
-    (["train", "--algo", "dqn", "--set", "gamma=2"], "gamma must lie in [0, 1]"),
-    (["book", "--set", "3d=1"], "--set expects NAME=VALUE"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["train", "--algo", "dqn", "--set", "learning_rate"], "--set expects NAME=VALUE"),
+        (["train", "--algo", "pilco", "--set", "no_such_field=1"], "unknown PilcoConfig field 'no_such_field'"),
+        (["train", "--algo", "dqn", "--set", "gamma=2"], "gamma must lie in [0, 1]"),
+        (["book", "--set", "3d=1"], "--set expects NAME=VALUE"),
+    ],
+)
 def test_a_bad_set_is_one_line_on_stderr_and_exit_status_2(argv, message, capsys):
     assert main(argv) == 2
     captured = capsys.readouterr()

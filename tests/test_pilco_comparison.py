@@ -12,14 +12,25 @@ matplotlib.use("Agg")
 import numpy as np
 import pytest
 
-from softpend.study.head_to_head import curve_rows_pilco, plot_predicted_and_real_cost, seconds_to_balance_table
 from softpend.pilco.loop import TrialRecord
+from softpend.study.head_to_head import curve_rows_pilco, plot_predicted_and_real_cost, seconds_to_balance_table
 
 
 def record(index, kind, plant_s, predicted, real, success=math.nan, std=math.nan):
-    return TrialRecord(index=index, kind=kind, duration_s=6.0, plant_seconds_total=plant_s, predicted_cost=predicted,
-                       real_cost=real, swing_up_time_s=math.nan, upright_std_rad=math.nan, n_gp_points=10,
-                       wall_s_total=1.0, eval_success_rate=success, eval_upright_std_rad=std)
+    return TrialRecord(
+        index=index,
+        kind=kind,
+        duration_s=6.0,
+        plant_seconds_total=plant_s,
+        predicted_cost=predicted,
+        real_cost=real,
+        swing_up_time_s=math.nan,
+        upright_std_rad=math.nan,
+        n_gp_points=10,
+        wall_s_total=1.0,
+        eval_success_rate=success,
+        eval_upright_std_rad=std,
+    )
 
 
 def fake_result(seed, records):
@@ -27,8 +38,14 @@ def fake_result(seed, records):
 
 
 RESULTS = [
-    fake_result(0, [record(0, "random", 6, math.nan, 60), record(1, "policy", 12, 50, 40, 0.0, 1.5),
-                    record(2, "policy", 18, 20, 15, 1.0, 0.05)]),
+    fake_result(
+        0,
+        [
+            record(0, "random", 6, math.nan, 60),
+            record(1, "policy", 12, 50, 40, 0.0, 1.5),
+            record(2, "policy", 18, 20, 15, 1.0, 0.05),
+        ],
+    ),
     fake_result(1, [record(0, "random", 6, math.nan, 59), record(1, "policy", 12, 30, 12, 1.0, 0.15)]),
 ]
 

@@ -14,13 +14,19 @@ from softpend.cli import main
 from softpend.evaluation import evaluate_controller
 from softpend.pilco import Pilco, PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
 from softpend.pilco.controller import PilcoController
-from softpend.pilco.policy import LinearPolicy
-from softpend.plant import OBSERVATION_NAMES, Observation
 from softpend.pilco.gp import MultiOutputGP
-from softpend.pilco.loop import (RANDOM_STREAMS, _came_near_upright, _optimise_policy, _random_streams,
-                                 _search_with_restarts, _upright_distribution, real_cost)
+from softpend.pilco.loop import (
+    RANDOM_STREAMS,
+    _came_near_upright,
+    _optimise_policy,
+    _random_streams,
+    _search_with_restarts,
+    _upright_distribution,
+    real_cost,
+)
+from softpend.pilco.policy import LinearPolicy
 from softpend.pilco.propagation import Propagator
-from softpend.plant import RodParams
+from softpend.plant import OBSERVATION_NAMES, Observation, RodParams
 from softpend.study.presets import load_hparams
 from softpend.task import Task
 
@@ -31,14 +37,31 @@ torch.set_num_threads(1)
 RIGID = RodParams(n_links=1, stiffness_scale=100.0)
 
 #: The fields that ``book/hparams/pilco.yml`` sets and the tiny runs below keep.
-BOOK_FIELDS = ("cost_width_after_swing_up_m", "cost_rate_width_rad_s", "cost_rate_after_rad", "cost_exploration",
-               "gp_all_data", "policy_restarts", "balance_within_rad")
+BOOK_FIELDS = (
+    "cost_width_after_swing_up_m",
+    "cost_rate_width_rad_s",
+    "cost_rate_after_rad",
+    "cost_exploration",
+    "gp_all_data",
+    "policy_restarts",
+    "balance_within_rad",
+)
 
 #: The book's settings (``book/hparams/pilco.yml``) at tiny sizes.
 TINY = dict(
     **{k: v for k, v in dataclasses.asdict(load_hparams("pilco")).items() if k in BOOK_FIELDS},
-    state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=2, n_basis=5, max_gp_points=15,
-    gp_iterations=15, policy_iterations=4, eval_seeds=(1000,), eval_duration_s=1.0, compiled=False,
+    state="tip",
+    control_dt_s=0.1,
+    horizon_s=1.0,
+    prediction_s=None,
+    n_policy_trials=2,
+    n_basis=5,
+    max_gp_points=15,
+    gp_iterations=15,
+    policy_iterations=4,
+    eval_seeds=(1000,),
+    eval_duration_s=1.0,
+    compiled=False,
 )
 
 
@@ -110,9 +133,12 @@ def test_budget_leaves_the_first_trials_alone(tiny_run):
 
 def test_pilco_object_steps_are_the_loop(tiny_run):
     """Driving :class:`Pilco` by hand (random trial, first policy, models, policy, trial) makes the loop's trials."""
+
     def same(mine, theirs) -> bool:  # all but the clocks, NaN equal to NaN
-        fields = [{k: v for k, v in dataclasses.asdict(r).items() if k not in ("wall_s_total", "cpu_s_total")}
-                  for r in (mine, theirs)]
+        fields = [
+            {k: v for k, v in dataclasses.asdict(r).items() if k not in ("wall_s_total", "cpu_s_total")}
+            for r in (mine, theirs)
+        ]
         return json.dumps(fields[0], sort_keys=True) == json.dumps(fields[1], sort_keys=True)
 
     pilco = Pilco(PilcoConfig(**TINY, seed=3))
@@ -146,8 +172,11 @@ def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
 def test_several_random_trials_come_first(tmp_path):
     """``n_random_trials`` random trials come first and count as interaction; the run is saved and loaded;
     the tip-rate factor waits for a trial that came near upright (none does in 1 s)."""
-    config = PilcoConfig(**{**TINY, "n_policy_trials": 1, "cost_rate_width_rad_s": 3.0, "cost_rate_after_rad": 0.5},
-                         n_random_trials=3, seed=4)
+    config = PilcoConfig(
+        **{**TINY, "n_policy_trials": 1, "cost_rate_width_rad_s": 3.0, "cost_rate_after_rad": 0.5},
+        n_random_trials=3,
+        seed=4,
+    )
     result = run_pilco(config, progress=False)
     assert all(r.cost_rate_width_rad_s is None for r in result.records)
     theta = result.real_states[-1][1:, 1]
@@ -200,8 +229,9 @@ def _pendulum_gp(rng: np.random.Generator, n_points: int):
 def test_policy_search_lowers_the_predicted_cost():
     rng = np.random.default_rng(0)
     spec, gp, m0, s0, _ = _pendulum_gp(rng, 120)
-    policy = RBFPolicy(spec.model_inputs(rng.multivariate_normal(m0.numpy(), s0.numpy(), 10)),
-                       np.array([5.0, 0.7, 0.7]), 0.06, seed=0)
+    policy = RBFPolicy(
+        spec.model_inputs(rng.multivariate_normal(m0.numpy(), s0.numpy(), 10)), np.array([5.0, 0.7, 0.7]), 0.06, seed=0
+    )
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
     before = float(prop.rollout(m0, s0, 10)[3])
     after = _optimise_policy(prop, policy, m0, s0, 10, iterations=10)
@@ -225,8 +255,9 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     # a threshold that the search from the previous policy stays under makes no restart: the run without them
     fraction = baseline.records[2].predicted_cost / config.n_horizon_steps + 1e-9
     assert fraction < 1.0
-    unneeded = run_pilco(PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=fraction),
-                         progress=False)
+    unneeded = run_pilco(
+        PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=fraction), progress=False
+    )
     assert [r.policy_restarts for r in unneeded.records] == [0, 0, 0]
     assert [r.predicted_cost for r in unneeded.records[1:]] == [r.predicted_cost for r in baseline.records[1:]]
     np.testing.assert_array_equal(unneeded.policy.get_vector(), baseline.policy.get_vector())
@@ -239,15 +270,23 @@ def test_random_streams_keep_their_draws_when_a_stream_is_appended():
     streams = _random_streams(7)
     older = np.random.SeedSequence(7).spawn(len(RANDOM_STREAMS) - 1)
     for name, child in zip(RANDOM_STREAMS[:-1], older):
-        np.testing.assert_array_equal(streams[name].integers(0, 2**31 - 1, 5),
-                                      np.random.default_rng(child).integers(0, 2**31 - 1, 5))
+        np.testing.assert_array_equal(
+            streams[name].integers(0, 2**31 - 1, 5), np.random.default_rng(child).integers(0, 2**31 - 1, 5)
+        )
 
 
 def test_search_with_restarts_keeps_the_best_and_reports_it():
     rng = np.random.default_rng(1)
     spec, gp, m0, s0, states = _pendulum_gp(rng, 80)
-    config = PilcoConfig(state="tip", horizon_s=0.8, prediction_s=None, n_basis=6, policy_iterations=5, policy_restarts=3,
-                         restart_above_cost_fraction=0.0)
+    config = PilcoConfig(
+        state="tip",
+        horizon_s=0.8,
+        prediction_s=None,
+        n_basis=6,
+        policy_iterations=5,
+        policy_restarts=3,
+        restart_above_cost_fraction=0.0,
+    )
 
     def fresh_policy() -> RBFPolicy:
         return RBFPolicy(spec.model_inputs(states[:6]), np.array([5.0, 0.7, 0.7]), 0.06, seed=0)
@@ -256,14 +295,35 @@ def test_search_with_restarts_keeps_the_best_and_reports_it():
     warm = _optimise_policy(Propagator(spec, gp, warm_policy, 0.3, 0.15), warm_policy, m0, s0, 8, iterations=5)
     policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
-    best, made = _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
-                                       np.random.default_rng(0), config.n_horizon_steps)
+    best, made = _search_with_restarts(
+        config,
+        prop,
+        policy,
+        m0,
+        s0,
+        spec,
+        states,
+        spec.model_inputs(states),
+        np.random.default_rng(0),
+        config.n_horizon_steps,
+    )
     assert made == 3 and best <= warm
     assert float(prop.rollout(m0, s0, 8)[3]) == pytest.approx(best)  # the policy holds the kept parameters
     policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
-    assert _search_with_restarts(config, prop, policy, m0, s0, spec, states, spec.model_inputs(states),
-                                 np.random.default_rng(0), config.n_horizon_steps, restart=False) == (warm, 0)
+    assert _search_with_restarts(
+        config,
+        prop,
+        policy,
+        m0,
+        s0,
+        spec,
+        states,
+        spec.model_inputs(states),
+        np.random.default_rng(0),
+        config.n_horizon_steps,
+        restart=False,
+    ) == (warm, 0)
 
 
 def test_a_run_saved_with_other_config_fields_is_an_error_and_not_reused(tiny_run_without_restarts, tmp_path):
@@ -324,7 +384,8 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     record = result.records[2]
     spec = state_spec(config.state)
     assert record.real_cost == pytest.approx(
-        loop._trial_cost(config, spec, result.real_states[2], record.cost_rate_width_rad_s, 0.05), rel=1e-12)
+        loop._trial_cost(config, spec, result.real_states[2], record.cost_rate_width_rad_s, 0.05), rel=1e-12
+    )
     assert record.real_cost > loop._trial_cost(config, spec, result.real_states[2], record.cost_rate_width_rad_s)
     # the last rollout is the one of the kept policy, after the search
     assert record.predicted_cost == pytest.approx(totals[-1][0], rel=1e-9)
@@ -339,8 +400,9 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
     assert PilcoConfig.from_dict(config.to_dict()) == config
 
 
-def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(tiny_run_and_conditioning,
-                                                                                        monkeypatch):
+def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(
+    tiny_run_and_conditioning, monkeypatch
+):
     """``gp_all_data`` (the book's setting): the first search (10 points, under ``max_gp_points`` 15) is the one of
     the subset-only model; the second sees all 20 points through FITC on the subset of 15."""
     result, calls = tiny_run_and_conditioning
@@ -354,7 +416,6 @@ def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_t
     assert result.records[2].predicted_cost != subset_only.records[2].predicted_cost
 
 
-
 def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
     """No migration: a config saved by a version with other fields names the first field that differs."""
     saved = load_hparams("pilco").to_dict()
@@ -365,14 +426,34 @@ def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
     assert "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("field, value", [
-    ("gp_all_data", 1), ("state", "joint"), ("control_dt_s", 0.055), ("horizon_s", 0.05), ("n_basis", 0), ("cost_width_m", -1.0),
-    ("cost_rate_width_rad_s", 0.0), ("n_random_trials", 0), ("cost_rate_after_rad", -0.5),
-    ("policy_restarts", -1), ("restart_above_cost_fraction", 1.0), ("restart_target_std", 0.0),
-    ("cost_exploration", 0.2), ("cost_exploration", -1.5), ("cost_exploration", "-0.2"),
-    ("prediction_s", 3.0), ("prediction_s", 0.0), ("prediction_s", math.nan), ("cost_width_after_swing_up_m", 0.0),
-    ("balance_within_rad", 0.0), ("balance_within_rad", 4.0), ("balance_within_rad_s", -1.0), ("balance_prediction_s", 0.0),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("gp_all_data", 1),
+        ("state", "joint"),
+        ("control_dt_s", 0.055),
+        ("horizon_s", 0.05),
+        ("n_basis", 0),
+        ("cost_width_m", -1.0),
+        ("cost_rate_width_rad_s", 0.0),
+        ("n_random_trials", 0),
+        ("cost_rate_after_rad", -0.5),
+        ("policy_restarts", -1),
+        ("restart_above_cost_fraction", 1.0),
+        ("restart_target_std", 0.0),
+        ("cost_exploration", 0.2),
+        ("cost_exploration", -1.5),
+        ("cost_exploration", "-0.2"),
+        ("prediction_s", 3.0),
+        ("prediction_s", 0.0),
+        ("prediction_s", math.nan),
+        ("cost_width_after_swing_up_m", 0.0),
+        ("balance_within_rad", 0.0),
+        ("balance_within_rad", 4.0),
+        ("balance_within_rad_s", -1.0),
+        ("balance_prediction_s", 0.0),
+    ],
+)
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):
         PilcoConfig(**{field: value})
@@ -403,9 +484,19 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
 @pytest.mark.expensive
 def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
     """The classical PILCO result: swing-up and balance within 10 trials of at most 4 s (random one included)."""
-    config = PilcoConfig(task=Task(rod=RIGID), state="tip", control_dt_s=0.1, horizon_s=4.0, prediction_s=None, n_policy_trials=9,
-                         cost_rate_width_rad_s=None, policy_iterations=40, eval_seeds=(1000, 1001, 1002),
-                         eval_duration_s=6.0, seed=0)
+    config = PilcoConfig(
+        task=Task(rod=RIGID),
+        state="tip",
+        control_dt_s=0.1,
+        horizon_s=4.0,
+        prediction_s=None,
+        n_policy_trials=9,
+        cost_rate_width_rad_s=None,
+        policy_iterations=40,
+        eval_seeds=(1000, 1001, 1002),
+        eval_duration_s=6.0,
+        seed=0,
+    )
     result = run_pilco(config, progress=False)
     assert len(result.records) <= 10
     assert result.records[-1].balanced, [(r.index, r.eval_upright_std_rad) for r in result.records]
@@ -429,8 +520,11 @@ def test_a_run_uses_one_torch_thread_and_gives_the_callers_threads_back():
     seen = []
     try:
         torch.set_num_threads(2)
-        two = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False,
-                        callback=lambda record: seen.append(torch.get_num_threads()))
+        two = run_pilco(
+            PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3),
+            progress=False,
+            callback=lambda record: seen.append(torch.get_num_threads()),
+        )
         assert torch.get_num_threads() == 2
         torch.set_num_threads(1)
         one = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False)
@@ -473,8 +567,12 @@ def test_the_balancing_policy_acts_only_in_its_band_about_upright():
 @pytest.fixture(scope="module")
 def tiny_balancing_run() -> PilcoResult:
     """A tiny run whose balancing band (3 rad, 20 rad/s: all but the hanging rod) the random trial visits."""
-    config = PilcoConfig(**{**TINY, "state": "tip_bend", "horizon_s": 3.0, "balance_within_rad": 3.0}, seed=5,
-                         balance_within_rad_s=20.0, balance_prediction_s=0.5)
+    config = PilcoConfig(
+        **{**TINY, "state": "tip_bend", "horizon_s": 3.0, "balance_within_rad": 3.0},
+        seed=5,
+        balance_within_rad_s=20.0,
+        balance_prediction_s=0.5,
+    )
     return run_pilco(config, progress=False)
 
 
@@ -497,8 +595,14 @@ def test_the_balancing_search_starts_from_the_band_states_of_the_real_trials():
     config = PilcoConfig(balance_within_rad=0.4, balance_within_rad_s=2.0, initial_std=0.05)
     spec = state_spec(config.state)
     rng = np.random.default_rng(0)
-    band = np.column_stack([rng.uniform(-1, 1, 40), rng.normal(0, 0.1, 40), rng.normal(0, 0.05, 40),
-                            rng.uniform(-0.3, 0.3, 40) + 2 * math.pi])  # one turn over: the angle is wrapped
+    band = np.column_stack(
+        [
+            rng.uniform(-1, 1, 40),
+            rng.normal(0, 0.1, 40),
+            rng.normal(0, 0.05, 40),
+            rng.uniform(-0.3, 0.3, 40) + 2 * math.pi,
+        ]
+    )  # one turn over: the angle is wrapped
     away = np.column_stack([np.full(30, 5.0), np.zeros(30), np.zeros(30), np.full(30, 0.2)])  # too fast
     hanging = np.column_stack([np.zeros(30), np.zeros(30), np.zeros(30), np.full(30, math.pi)])
     mean, cov = _upright_distribution(config, spec, np.vstack([band, away, hanging]))

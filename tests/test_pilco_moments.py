@@ -9,8 +9,15 @@ import pytest
 import torch
 
 from softpend.pilco.gp import MultiOutputGP
-from softpend.pilco.moments import (_WeightedExpSum, gp_moments, pair_weights, rbf_network_moments, saturating_cost_moments,
-                                    sin_saturation_moments, trig_moments)
+from softpend.pilco.moments import (
+    _WeightedExpSum,
+    gp_moments,
+    pair_weights,
+    rbf_network_moments,
+    saturating_cost_moments,
+    sin_saturation_moments,
+    trig_moments,
+)
 from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import Propagator, silence_compiler_notes, state_spec
 
@@ -197,8 +204,9 @@ def test_exploration_adds_the_weighted_cost_spread_which_is_larger_where_the_mod
         means, covs, costs_b, explored = Propagator(spec, gp, policy, 0.3, 0.3, exploration=-0.5).rollout(m0, s0, 30)
         assert float(plain) == pytest.approx(float(costs.sum()), rel=1e-12)
         assert torch.allclose(costs, costs_b)
-        spread = sum(float(torch.sqrt(Propagator(spec, None, None, 0.3, 0.3).cost(m, s)[1]))
-                     for m, s in zip(means[1:], covs[1:]))
+        spread = sum(
+            float(torch.sqrt(Propagator(spec, None, None, 0.3, 0.3).cost(m, s)[1])) for m, s in zip(means[1:], covs[1:])
+        )
         assert float(explored) == pytest.approx(float(costs.sum()) - 0.5 * spread, abs=1e-5)  # sqrt(var) >= 1e-6
         bonus[name] = float(plain - explored)
     assert bonus["push"] > 100 * bonus["still"]  # 0.26 against 0.0006
@@ -289,12 +297,14 @@ def _compare_compiled_and_eager_rollouts() -> None:
     m0[3] = np.pi
     s0 = 0.05**2 * torch.eye(4, dtype=F64)
     for width_m, seed in ((0.15, 0), (0.075, 1)):
-        policy = RBFPolicy(spec.model_inputs(states[:8]), np.array([1.0, 1.0, 0.7, 0.7, 0.7]), 0.06, seed=seed,
-                           target_std=1.0)
+        policy = RBFPolicy(
+            spec.model_inputs(states[:8]), np.array([1.0, 1.0, 0.7, 0.7, 0.7]), 0.06, seed=seed, target_std=1.0
+        )
         results = []
         for compiled in (False, True):
-            prop = Propagator(spec, gp, policy, 0.3, width_m, cost_rate_width_rad_s=3.0, exploration=-0.2,
-                              compiled=compiled)
+            prop = Propagator(
+                spec, gp, policy, 0.3, width_m, cost_rate_width_rad_s=3.0, exploration=-0.2, compiled=compiled
+            )
             leaf = torch.tensor(policy.get_vector(), requires_grad=True)
             policy.set_vector(leaf, requires_grad=True)
             means, covs, costs, total = prop.rollout(m0, s0, 12)
@@ -327,8 +337,12 @@ def test_the_compiled_rollout_goes_through_torchs_disk_caches():
     policy = RBFPolicy(spec.model_inputs(states[:6]), np.ones(5), 0.06, seed=2, target_std=1.0)
     m0 = torch.zeros(4, dtype=F64)
     m0[3] = np.pi
-    keys = (("aot_autograd", "autograd_cache_bypass"), ("inductor", "fxgraph_cache_bypass"),
-            ("aot_autograd", "autograd_cache_saved"), ("aot_autograd", "autograd_cache_hit"))
+    keys = (
+        ("aot_autograd", "autograd_cache_bypass"),
+        ("inductor", "fxgraph_cache_bypass"),
+        ("aot_autograd", "autograd_cache_saved"),
+        ("aot_autograd", "autograd_cache_hit"),
+    )
     before = {key: counters[key[0]][key[1]] for key in keys}
     prop = Propagator(spec, gp, policy, 0.3, 0.15, cost_rate_width_rad_s=3.0, exploration=-0.2, compiled=True)
     leaf = torch.tensor(policy.get_vector(), requires_grad=True)
@@ -342,8 +356,9 @@ def test_the_compiled_rollout_goes_through_torchs_disk_caches():
 def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monkeypatch):
     """A machine without a C++ compiler: the compiled rollout falls back to the eager one (same numbers) with one
     warning; an error of the computation itself is not taken for a compiler failure."""
-    import softpend.pilco.propagation as propagation
     from torch._inductor.exc import CppCompileError
+
+    import softpend.pilco.propagation as propagation
 
     calls = []
 
@@ -351,6 +366,7 @@ def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monk
         def run(*args):
             calls.append(1)
             raise CppCompileError(["g++"], "g++: not found")
+
         return run
 
     monkeypatch.setattr(propagation, "_COMPILED", [])
@@ -384,15 +400,30 @@ def test_the_compilers_notes_are_silenced_and_other_warnings_are_not():
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         silence_compiler_notes()
-        warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "lowering.py", 1,
-                               module="torch._inductor.lowering")
-        warnings.warn_explicit("Dynamo detected a call to a `functools.lru_cache`-wrapped function", UserWarning,
-                               "functions.py", 1, module="torch._dynamo.variables.functions")
+        warnings.warn_explicit(
+            "`torch._prims_common.check` is deprecated",
+            FutureWarning,
+            "lowering.py",
+            1,
+            module="torch._inductor.lowering",
+        )
+        warnings.warn_explicit(
+            "Dynamo detected a call to a `functools.lru_cache`-wrapped function",
+            UserWarning,
+            "functions.py",
+            1,
+            module="torch._dynamo.variables.functions",
+        )
         warnings.warn_explicit("a later default", FutureWarning, "model.py", 1, module="softpend.pilco.loop")
         warnings.warn_explicit("a torch note", UserWarning, "lowering.py", 1, module="torch._inductor.lowering")
-        warnings.warn_explicit("`torch._prims_common.check` is deprecated", FutureWarning, "ours.py", 1,
-                               module="softpend.ours")
-    assert [str(w.message) for w in seen] == ["a later default", "a torch note", "`torch._prims_common.check` is deprecated"]
+        warnings.warn_explicit(
+            "`torch._prims_common.check` is deprecated", FutureWarning, "ours.py", 1, module="softpend.ours"
+        )
+    assert [str(w.message) for w in seen] == [
+        "a later default",
+        "a torch note",
+        "`torch._prims_common.check` is deprecated",
+    ]
 
 
 def test_linear_policy_moments_match_monte_carlo(gaussian_input):

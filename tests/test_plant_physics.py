@@ -20,7 +20,10 @@ def _zero_crossing_times(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 def test_single_link_small_oscillation_period_matches_compound_pendulum(tip_mass_kg: float) -> None:
     # n = 1 and no spring: the link swings freely about the hub axis, a compound pendulum
     p = RodParams(
-        n_links=1, stiffness_scale=0.0, tip_mass_kg=tip_mass_kg, joint_damping_nms_per_rad=0.0,
+        n_links=1,
+        stiffness_scale=0.0,
+        tip_mass_kg=tip_mass_kg,
+        joint_damping_nms_per_rad=0.0,
         hub_friction_nms_per_rad=0.0,
     )
     plant = PRBPlant(p)
@@ -178,7 +181,9 @@ def test_bad_parameters_raise_value_error_naming_them(field: str, value: float) 
         RodParams(**{field: value})
 
 
-@pytest.mark.parametrize("kwargs, name", [({"dt_s": 0.0}, "dt_s"), ({"dt_s": float("nan")}, "dt_s"), ({"substeps": 0}, "substeps")])
+@pytest.mark.parametrize(
+    "kwargs, name", [({"dt_s": 0.0}, "dt_s"), ({"dt_s": float("nan")}, "dt_s"), ({"substeps": 0}, "substeps")]
+)
 def test_bad_plant_arguments_raise(kwargs: dict, name: str) -> None:
     with pytest.raises(ValueError, match=name):
         PRBPlant(RodParams(), **kwargs)

@@ -43,8 +43,9 @@ def test_figure_configs_take_task_and_rl_overrides():
     import pytest
 
     configs = figure_configs("beam", {"rod.torque_limit_nm": 0.08}, {"episode_s": 1.0, "rollouts_per_real_step": 3})
-    assert configs["dqn"] == presets.load_hparams("dqn", presets.TASK.replace(plant="beam", torque_limit_nm=0.08),
-                                                  {"episode_s": 1.0})
+    assert configs["dqn"] == presets.load_hparams(
+        "dqn", presets.TASK.replace(plant="beam", torque_limit_nm=0.08), {"episode_s": 1.0}
+    )
     assert configs["mbpo"].rollouts_per_real_step == 3 and configs["mbpo"].episode_s == 1.0
     with pytest.raises(ValueError, match="'rollout_per_real_step' is not a DQNConfig or MBPOConfig field"):
         figure_configs(rl_overrides={"rollout_per_real_step": 3})

@@ -39,8 +39,32 @@ def true_theta(truth_log, task: Task = TASK) -> tuple[np.ndarray, np.ndarray, np
 
 def test_lqr_holds_the_rod_on_the_twin_with_the_camera_in_the_loop(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["rig", "control", "lqr", "--twin", "--start", "upright", "--tilt", "0.1", "--duration", "3",
-                 "--start-noise", "0", "--max-blind-ms", "600", "--out", str(out), "--no-progress", "--seed", "3"]) == 0
+    assert (
+        main(
+            [
+                "rig",
+                "control",
+                "lqr",
+                "--twin",
+                "--start",
+                "upright",
+                "--tilt",
+                "0.1",
+                "--duration",
+                "3",
+                "--start-noise",
+                "0",
+                "--max-blind-ms",
+                "600",
+                "--out",
+                str(out),
+                "--no-progress",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["stop_reason"] is None
     assert summary["camera"]["frames_tracked"] >= 175  # 60 frames/s for 3 s, in simulated time: none skipped
@@ -55,7 +79,7 @@ def test_lqr_holds_the_rod_on_the_twin_with_the_camera_in_the_loop(tmp_path, cap
     # the estimate the controller saw follows the true tip angle (device clocks agree: the emulator's)
     true_at = np.interp(motor["device_time_s"] + motor["est_time_s"] - motor["time_s"], time_s, theta)
     error = motor["est_theta_rad"] - true_at
-    assert np.sqrt(np.nanmean(error ** 2)) < 0.01, np.nanmax(np.abs(error))
+    assert np.sqrt(np.nanmean(error**2)) < 0.01, np.nanmax(np.abs(error))
     camera = read_sample_log(out / "camera_log.csv")
     assert camera["accepted"].sum() == summary["estimator"]["tips_accepted"]
     assert np.all(camera["delivered_host_time_s"] - camera["capture_host_time_s"] >= 0.02)
@@ -65,10 +89,12 @@ def test_lqr_holds_the_rod_on_the_twin_with_the_camera_in_the_loop(tmp_path, cap
 
 def test_camera_lost_then_stalled_is_bridged_then_a_safe_stop(tmp_path):
     controller = LQRController.from_params(TASK.rod, TASK.dt_s)
-    camera = TwinCamera(fps=60, latency_s=0.02, model=SMALL,
-                        faults=CameraFaults(occlusions_s=((1.0, 1.25),), stall_after_s=2.0))
-    run = run_twin_control(controller, tmp_path, 5.0, rig=UPRIGHT, camera=camera,
-                           estimator_config=EstimatorConfig(max_blind_s=0.5))
+    camera = TwinCamera(
+        fps=60, latency_s=0.02, model=SMALL, faults=CameraFaults(occlusions_s=((1.0, 1.25),), stall_after_s=2.0)
+    )
+    run = run_twin_control(
+        controller, tmp_path, 5.0, rig=UPRIGHT, camera=camera, estimator_config=EstimatorConfig(max_blind_s=0.5)
+    )
     result = run.result
     assert result.status == "camera_blind" and "no camera correction" in result.stop_reason
     assert result.camera["frames_lost"] >= 2  # the occlusion: lost frames, bridged without a stop
@@ -143,12 +169,37 @@ def test_run_folders_become_rig_controllers(tmp_path):
     from softpend.rl.config import DQNConfig
     from softpend.rl.dqn import train_dqn
 
-    train_dqn(DQNConfig(learning_starts=21, episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2,
-                        eval_seeds=(0,), eval_duration_s=1.5), seed=0, episodes=1, run_dir=tmp_path / "dqn",
-              progress=False)
-    run_pilco(PilcoConfig(state="tip", control_dt_s=0.1, horizon_s=1.0, prediction_s=None, n_policy_trials=0, n_basis=5,
-                          max_gp_points=15, gp_iterations=15, policy_iterations=4, eval_seeds=(1000,),
-                          eval_duration_s=1.0, seed=3), progress=False).save(tmp_path / "pilco")
+    train_dqn(
+        DQNConfig(
+            learning_starts=21,
+            episode_s=1.0,
+            eval_every_episodes=2,
+            checkpoint_every_episodes=2,
+            eval_seeds=(0,),
+            eval_duration_s=1.5,
+        ),
+        seed=0,
+        episodes=1,
+        run_dir=tmp_path / "dqn",
+        progress=False,
+    )
+    run_pilco(
+        PilcoConfig(
+            state="tip",
+            control_dt_s=0.1,
+            horizon_s=1.0,
+            prediction_s=None,
+            n_policy_trials=0,
+            n_basis=5,
+            max_gp_points=15,
+            gp_iterations=15,
+            policy_iterations=4,
+            eval_seeds=(1000,),
+            eval_duration_s=1.0,
+            seed=3,
+        ),
+        progress=False,
+    ).save(tmp_path / "pilco")
     plant = TASK.make_plant()
     q, q_dot = plant.hanging_state()
     observation = plant.observation_from_state(q, q_dot)
@@ -167,15 +218,27 @@ def test_two_twin_runs_of_the_same_start_and_seed_give_identical_logs_and_swing_
     from softpend.study.rig import run_truth_metrics
 
     task = Task(start_noise_rad=0.05)
-    runs = [run_twin_control(EnergySwingUpController(task.rod, dt_s=task.dt_s), tmp_path / f"run{i}", 6.0,
-                             rig=RigConfig(task=task, seed=7), camera=TwinCamera(seed=7, model=SMALL))
-            for i in range(2)]
+    runs = [
+        run_twin_control(
+            EnergySwingUpController(task.rod, dt_s=task.dt_s),
+            tmp_path / f"run{i}",
+            6.0,
+            rig=RigConfig(task=task, seed=7),
+            camera=TwinCamera(seed=7, model=SMALL),
+        )
+        for i in range(2)
+    ]
     for name in ("motor_log", "camera_log", "truth_log"):
         first, second = (getattr(run, name).read_bytes() for run in runs)
         assert first == second and len(first) > 10_000, name
     assert runs[0].result.summary() == runs[1].result.summary()
-    other = run_twin_control(EnergySwingUpController(task.rod, dt_s=task.dt_s), tmp_path / "other", 1.0,
-                             rig=RigConfig(task=task, seed=8), camera=TwinCamera(seed=8, model=SMALL))
+    other = run_twin_control(
+        EnergySwingUpController(task.rod, dt_s=task.dt_s),
+        tmp_path / "other",
+        1.0,
+        rig=RigConfig(task=task, seed=8),
+        camera=TwinCamera(seed=8, model=SMALL),
+    )
     assert other.truth_log.read_bytes()[:20_000] != runs[0].truth_log.read_bytes()[:20_000]  # the seed matters
     metrics = run_truth_metrics(runs[0].motor_log, runs[0].truth_log, task)
     assert metrics["success"] and metrics["swing_up_time_s"] < 4.0 and metrics["upright_std_rad"] < 0.05, metrics
@@ -197,8 +260,7 @@ def test_a_short_closed_loop_through_a_pseudo_terminal_completes_and_stops_the_m
 
     with start_emulator_process(UPRIGHT, truth_log=tmp_path / "truth.csv") as emulator:
         with MotorLink(emulator.port, torque_limit_nm=TASK.torque_limit_nm, timeout_s=2.0) as link:
-            result = run_closed_loop(link, LQRController.from_params(TASK.rod, TASK.dt_s), RigStateEstimator(TASK),
-                                     1.0)
+            result = run_closed_loop(link, LQRController.from_params(TASK.rod, TASK.dt_s), RigStateEstimator(TASK), 1.0)
         deadline = time.monotonic() + 10.0  # the STOP reaches the device, which logs the ticks after it
         while time.monotonic() < deadline and read_sample_log(tmp_path / "truth.csv")["applied_torque_nm"][-1] != 0:
             time.sleep(0.05)

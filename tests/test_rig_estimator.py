@@ -62,8 +62,9 @@ def simulate(task: Task, true_task: Task, n_steps: int = 400, seed: int = 0) -> 
     return Run(task, time_s, qs, np.array(qds), np.array(theta), np.array(theta_dot), torque, frames)
 
 
-def run_estimator(run: Run, compensate: bool = True, config: EstimatorConfig | None = None,
-                  blind_from_s: float = math.inf):
+def run_estimator(
+    run: Run, compensate: bool = True, config: EstimatorConfig | None = None, blind_from_s: float = math.inf
+):
     """Feed the run as the loop does (frames when they are delivered); returns per-step errors
     ``(theta, theta_dot, max |q|)`` from 0.5 s on, and the estimator."""
     estimator = RigStateEstimator(run.task, config or EstimatorConfig(lead_steps=0))
@@ -80,8 +81,13 @@ def run_estimator(run: Run, compensate: bool = True, config: EstimatorConfig | N
                 estimator.update_tip(capture if compensate else t, x, y)
             frame = next(frames, None)
         estimate = estimator.estimate()
-        errors.append((wrap_angle_rad(estimate.observation.theta_rad - run.theta[k]),
-                       estimate.observation.theta_dot_rad_s - run.theta_dot[k], np.max(np.abs(estimate.q - run.q[k]))))
+        errors.append(
+            (
+                wrap_angle_rad(estimate.observation.theta_rad - run.theta[k]),
+                estimate.observation.theta_dot_rad_s - run.theta_dot[k],
+                np.max(np.abs(estimate.q - run.q[k])),
+            )
+        )
     return np.array(errors)[49:], estimator
 
 
@@ -91,13 +97,13 @@ def nominal() -> Run:
 
 
 def _rms(values: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(values ** 2)))
+    return float(np.sqrt(np.mean(values**2)))
 
 
 def test_estimate_tracks_the_true_state_and_delay_compensation_pays(nominal):
     errors, estimator = run_estimator(nominal)
     assert _rms(errors[:, 0]) < 0.006  # tip angle [rad]; one frame alone is good to ~0.003 rad
-    assert _rms(errors[:, 1]) < 0.08   # tip angle rate [rad/s] (the swing reaches ~5 rad/s)
+    assert _rms(errors[:, 1]) < 0.08  # tip angle rate [rad/s] (the swing reaches ~5 rad/s)
     assert np.max(errors[:, 2]) < 0.02  # every joint coordinate [rad]
     assert estimator.stats()["tips_refused"] == 0
     late, _ = run_estimator(nominal, compensate=False)  # the same frames taken as if they were current
@@ -106,7 +112,9 @@ def test_estimate_tracks_the_true_state_and_delay_compensation_pays(nominal):
 
 
 def test_estimate_survives_a_rod_that_differs_from_the_model():
-    heavier_softer = Task().replace(mass_kg=1.15 * 0.058, youngs_modulus_pa=0.85 * 50e6, hub_friction_nms_per_rad=2.6e-3)
+    heavier_softer = Task().replace(
+        mass_kg=1.15 * 0.058, youngs_modulus_pa=0.85 * 50e6, hub_friction_nms_per_rad=2.6e-3
+    )
     errors, estimator = run_estimator(simulate(Task(), heavier_softer, seed=1))
     assert _rms(errors[:, 0]) < 0.04 and _rms(errors[:, 1]) < 1.5
     assert estimator.stats()["tips_refused"] <= 2
@@ -136,8 +144,13 @@ def test_outliers_are_refused_and_lead_predicts_ahead(nominal):
     assert not estimator.update_tip(capture, x + 0.05, y)  # 5 cm off: a reflection, not the dot
     assert not estimator.update_tip(-1.0, x, y)  # older than the history
     assert not estimator.update_tip(capture, math.nan, y)
-    assert estimator.stats() == {"tips_accepted": float(accepted), "tips_refused": 1.0, "tips_too_old": 1.0,
-                                 "tips_deferred": 0.0, "encoder_gaps": 0.0}
+    assert estimator.stats() == {
+        "tips_accepted": float(accepted),
+        "tips_refused": 1.0,
+        "tips_too_old": 1.0,
+        "tips_deferred": 0.0,
+        "encoder_gaps": 0.0,
+    }
     ahead = estimator.estimate()
     assert ahead.time_s == pytest.approx(nominal.time_s[60] + 0.01)
     now = estimator.estimate(lead_steps=0)

@@ -9,14 +9,24 @@ import numpy as np
 import pytest
 
 from softpend.control.lqr import LQRController
+from softpend.hardware.closed_loop import rig_control_columns
 from softpend.hardware.emulator import RigConfig, SimRig, truth_columns
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.stats import wilson_interval
 from softpend.study.presets import REPORT_SEEDS
-from softpend.hardware.closed_loop import rig_control_columns
 from softpend.study.rig import run_truth_metrics, torque_total_variation_per_s, truth_metrics
-from softpend.study.rig_runs import (JOINT_SWINGUP, OBSERVATION_SWINGUP, SIMULATOR, FrameKeeper, RigCondition,
-                                     rig_controllers, simulator_starts, summary_rows, text_figures, twin_start)
+from softpend.study.rig_runs import (
+    JOINT_SWINGUP,
+    OBSERVATION_SWINGUP,
+    SIMULATOR,
+    FrameKeeper,
+    RigCondition,
+    rig_controllers,
+    simulator_starts,
+    summary_rows,
+    text_figures,
+    twin_start,
+)
 from softpend.task import Task
 from softpend.vision.camera import CameraModel
 from softpend.vision.tip_source import CameraFaults
@@ -115,18 +125,33 @@ def test_simulator_rows_score_the_swing_up_and_a_motor_left_off():
 
 
 def _row(condition, controller, success, swing_up_s=2.0, std=0.05, peak=0.06, chatter=1.0, stop=""):
-    return {"condition": condition, "controller": controller, "seed": 0, "success": success,
-            "swing_up_time_s": swing_up_s, "upright_std_rad": std, "peak_torque_nm": peak,
-            "torque_chatter_nm_per_s": chatter, "stop": stop}
+    return {
+        "condition": condition,
+        "controller": controller,
+        "seed": 0,
+        "success": success,
+        "swing_up_time_s": swing_up_s,
+        "upright_std_rad": std,
+        "peak_torque_nm": peak,
+        "torque_chatter_nm_per_s": chatter,
+        "stop": stop,
+    }
 
 
 def test_summary_rows_count_successes_with_wilson_intervals_in_order_of_appearance():
-    rows = [_row("nominal twin", "a", True, 2.0, 0.03), _row("nominal twin", "a", True, 3.0, 0.08),
-            _row("nominal twin", "a", False, math.inf, 1.5, chatter=math.nan, stop="camera blind: ..."),
-            _row(SIMULATOR, "a", True, 1.0, 0.01, peak=0.05), _row(SIMULATOR, "b", False, math.inf, 2.0)]
+    rows = [
+        _row("nominal twin", "a", True, 2.0, 0.03),
+        _row("nominal twin", "a", True, 3.0, 0.08),
+        _row("nominal twin", "a", False, math.inf, 1.5, chatter=math.nan, stop="camera blind: ..."),
+        _row(SIMULATOR, "a", True, 1.0, 0.01, peak=0.05),
+        _row(SIMULATOR, "b", False, math.inf, 2.0),
+    ]
     summary = summary_rows(rows)
-    assert [(r["condition"], r["controller"]) for r in summary] == [("nominal twin", "a"), (SIMULATOR, "a"),
-                                                                    (SIMULATOR, "b")]
+    assert [(r["condition"], r["controller"]) for r in summary] == [
+        ("nominal twin", "a"),
+        (SIMULATOR, "a"),
+        (SIMULATOR, "b"),
+    ]
     twin = summary[0]
     assert (twin["starts"], twin["successes"], twin["stops"]) == (3, 2, 1)
     assert (twin["success_low"], twin["success_high"]) == pytest.approx(wilson_interval(2, 3))

@@ -8,10 +8,10 @@ import math
 
 import pytest
 
-from softpend.study.presets import load_hparams
+from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import train_mbpo
-from softpend.evaluation import SUCCESS_STD_RAD
+from softpend.study.presets import load_hparams
 
 
 def _balances(agent, config) -> None:

@@ -34,8 +34,10 @@ def test_config_validation_names_the_field():
 
 def test_overrides_and_json_round_trip(tmp_path):
     """``--set`` values as the command line reads them: JSON, lists for tuples."""
-    config = apply_overrides(MBPOConfig(), [parse_assignment(text) for text in
-                                            ("learning_rate=1e-3", "net_arch=[32, 32]", "rollouts_per_real_step=9")])
+    config = apply_overrides(
+        MBPOConfig(),
+        [parse_assignment(text) for text in ("learning_rate=1e-3", "net_arch=[32, 32]", "rollouts_per_real_step=9")],
+    )
     assert config.learning_rate == 1e-3 and config.net_arch == (32, 32)
     save_config(config, tmp_path / "c.json")
     assert load_config(tmp_path / "c.json") == config
@@ -99,7 +101,9 @@ def test_metrics_on_hand_made_swing_up():
 def _log(returns, evals):
     log = TrainingLog("dqn", 0)
     for i, r in enumerate(returns):
-        log.episodes.append({"episode": i + 1, "return": r, "plant_s": 5.0 * (i + 1), "upright_std_rad": 1.0, "model_steps": 0})
+        log.episodes.append(
+            {"episode": i + 1, "return": r, "plant_s": 5.0 * (i + 1), "upright_std_rad": 1.0, "model_steps": 0}
+        )
     log.evaluations = evals
     return log
 
@@ -132,8 +136,10 @@ def test_moving_average():
 
 def _evaluation_log(seed: int, plant_s, stds) -> TrainingLog:
     log = TrainingLog("dqn", seed)
-    log.evaluations = [{"episode": i + 1, "plant_s": float(t), "max_upright_std_rad": float(v)}
-                       for i, (t, v) in enumerate(zip(plant_s, stds))]
+    log.evaluations = [
+        {"episode": i + 1, "plant_s": float(t), "max_upright_std_rad": float(v)}
+        for i, (t, v) in enumerate(zip(plant_s, stds))
+    ]
     return log
 
 

@@ -7,11 +7,11 @@ import pytest
 
 from softpend.plant.beam import BeamPlant
 from softpend.rl.config import DQNConfig, MBPOConfig
-from softpend.task import Task
 from softpend.rl.dqn import load_agent, train_dqn
+from softpend.rl.training_env import make_training_env
 from softpend.study.presets import load_hparams
 from softpend.study.rl_runs import figure_configs, figure_runs, plant_runs_root, run_folder
-from softpend.rl.training_env import make_training_env
+from softpend.task import Task
 
 
 def test_plant_is_validated_with_a_clear_error(tmp_path):
@@ -36,8 +36,15 @@ def test_runs_of_different_plants_live_in_different_folders():
 
 
 def test_dqn_trains_and_evaluates_on_the_beam(tmp_path):
-    config = DQNConfig(task=Task(plant="beam"), episode_s=0.4, learning_starts=5, eval_every_episodes=1, checkpoint_every_episodes=1,
-                       eval_seeds=(0,), eval_duration_s=0.3)
+    config = DQNConfig(
+        task=Task(plant="beam"),
+        episode_s=0.4,
+        learning_starts=5,
+        eval_every_episodes=1,
+        checkpoint_every_episodes=1,
+        eval_seeds=(0,),
+        eval_duration_s=0.3,
+    )
     assert isinstance(make_training_env(config).unwrapped.plant, BeamPlant)
     _, log = train_dqn(config, seed=0, episodes=1, run_dir=tmp_path, progress=False)
     assert log.plant_s == pytest.approx(0.4) and len(log.evaluations) == 1

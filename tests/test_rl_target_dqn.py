@@ -20,8 +20,14 @@ def test_target_dqn_gradient_step_regresses_on_the_clipped_target(tmp_path):
     obs = np.linspace(-0.5, 0.5, 11, dtype=np.float32)
     next_obs = obs[::-1].copy()
     for _ in range(8):
-        model.replay_buffer.add(obs[None], next_obs[None], np.array([[3]]), np.array([2.0]), np.array([False]),
-                                [{"plant_observations": None}])
+        model.replay_buffer.add(
+            obs[None],
+            next_obs[None],
+            np.array([[3]]),
+            np.array([2.0]),
+            np.array([False]),
+            [{"plant_observations": None}],
+        )
     from stable_baselines3.common.logger import configure
 
     model.set_logger(configure(str(tmp_path), []))
@@ -58,8 +64,11 @@ def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
     np.testing.assert_allclose(targets.numpy(), [[high], [low], [2.0]], rtol=1e-6)
     # without bounds the target is stable-baselines3's r + gamma * max_a Q_target(s', a)
     model.q_target_bounds = None
-    np.testing.assert_allclose(model.td_targets(rewards, dones, config.gamma, next_obs).numpy(),
-                               [[1.0 + config.gamma * 1e4], [-1e5], [2.0]], rtol=1e-6)
+    np.testing.assert_allclose(
+        model.td_targets(rewards, dones, config.gamma, next_obs).numpy(),
+        [[1.0 + config.gamma * 1e4], [-1e5], [2.0]],
+        rtol=1e-6,
+    )
     with pytest.raises(ValueError, match="q_target_bounds"):
         TargetDQN("MlpPolicy", make_training_env(config), q_target_bounds=(1.0, -1.0))
     # the bounds survive saving and loading

@@ -96,7 +96,9 @@ def test_dqn_trains_checkpoints_and_resumes(tmp_path, monkeypatch):
     summary = evaluate_agent(agent, loaded_config, seeds=(0,), duration_s=0.5)
     assert len(summary.results) == 1 and summary.results[0].time_s[-1] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="holds another run .it differs in learning_starts"):
-        train_dqn(DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False)
+        train_dqn(
+            DQNConfig(learning_starts=21, **TINY), seed=0, episodes=6, run_dir=tmp_path, resume=True, progress=False
+        )
     assert list(system_tmp.glob("SB3-*")) == []  # no logger folder outside the run folder
 
 
@@ -125,8 +127,13 @@ def _scripted_evaluations(monkeypatch, stds):
 
 
 def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped(tmp_path, monkeypatch):
-    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_upright_std_rad=0.1,
-                       stop_confirm_seeds=(), **{**TINY, "eval_every_episodes": 1})
+    config = DQNConfig(
+        learning_starts=20,
+        stop_after_balanced_evaluations=2,
+        stop_upright_std_rad=0.1,
+        stop_confirm_seeds=(),
+        **{**TINY, "eval_every_episodes": 1},
+    )
     # episode 1 balanced, 2 not (streak broken), 3 and 4 balanced: the run ends after episode 4 of its 8
     queue = _scripted_evaluations(monkeypatch, [0.05, 0.3, 0.08, 0.09, 0.05, 0.05, 0.05, 0.05, 0.05])
     model, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
@@ -149,8 +156,12 @@ def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped
 
 
 def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, monkeypatch):
-    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=2, stop_confirm_seeds=(5, 6),
-                       **{**TINY, "eval_every_episodes": 1})
+    config = DQNConfig(
+        learning_starts=20,
+        stop_after_balanced_evaluations=2,
+        stop_confirm_seeds=(5, 6),
+        **{**TINY, "eval_every_episodes": 1},
+    )
     assert config.selection_seeds == (0, 5, 6)
     # evaluations 1 and 2 balance but the confirmation fails at its first start (the second is not run); 3
     # balances and its confirmation holds from both starts
@@ -167,8 +178,13 @@ def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, 
 
 
 def test_a_confirmation_holds_with_as_many_failing_starts_as_allowed_and_stops_at_the_next(tmp_path, monkeypatch):
-    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(5, 6, 7),
-                       stop_confirm_max_failures=1, **{**TINY, "eval_every_episodes": 1})
+    config = DQNConfig(
+        learning_starts=20,
+        stop_after_balanced_evaluations=1,
+        stop_confirm_seeds=(5, 6, 7),
+        stop_confirm_max_failures=1,
+        **{**TINY, "eval_every_episodes": 1},
+    )
     # evaluation 1 balances; its confirmation fails at starts 5 and 6 and stops there (7 is not run); evaluation 2
     # balances and its confirmation fails at start 6 only: training stops
     queue = _scripted_evaluations(monkeypatch, [0.05, 0.3, 0.3, 0.05, 0.05, 0.3, 0.05, 0.05])
@@ -181,8 +197,12 @@ def test_a_confirmation_holds_with_as_many_failing_starts_as_allowed_and_stops_a
 
 def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_path, monkeypatch):
     # DQN-MBPO's rule: every balanced evaluation is confirmed at once; a failed confirmation lets training go on
-    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(5, 6),
-                       **{**TINY, "eval_every_episodes": 1})
+    config = DQNConfig(
+        learning_starts=20,
+        stop_after_balanced_evaluations=1,
+        stop_confirm_seeds=(5, 6),
+        **{**TINY, "eval_every_episodes": 1},
+    )
     queue = _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.2, 0.05, 0.05, 0.05, 0.05])
     _, log = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, progress=False)
     assert _scripted_evaluations.calls == [(0,), (0,), (5,), (0,), (5,), (6,)]
@@ -201,9 +221,19 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
     # MBPO's own branching (every rollout from a real state, none cut short); the start-state branching and the
     # data box of the defaults are tested below
-    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
-                        model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
-                        rollout_schedule=(0, 1, 1, 1), start_branch_fraction=0.0, rollouts_within_data=False, **TINY)
+    config = MBPOConfig(
+        initial_random_episodes=2,
+        model_refit_every_episodes=1,
+        model_fit_steps=20,
+        ensemble_size=2,
+        model_hidden_widths=(16, 16),
+        rollout_every_steps=10,
+        rollouts_per_real_step=9,
+        rollout_schedule=(0, 1, 1, 1),
+        start_branch_fraction=0.0,
+        rollouts_within_data=False,
+        **TINY,
+    )
     model, log = train_mbpo(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
     buffer = model.replay_buffer
     assert isinstance(buffer, MBPOReplayBuffer)
@@ -243,8 +273,24 @@ def test_mbpo_rejects_a_dqn_config(tmp_path):
 
 def test_command_line_train_and_evaluate(tmp_path, capsys):
     out = tmp_path / "run"
-    args = ["train", "--algo", "dqn", "--episodes", "2", "--out", str(out), "--no-progress",
-            "--set", "episode_s=0.5", "--set", "eval_seeds=[0]", "--set", "eval_duration_s=0.5", "--set", "learning_starts=10"]
+    args = [
+        "train",
+        "--algo",
+        "dqn",
+        "--episodes",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--set",
+        "episode_s=0.5",
+        "--set",
+        "eval_seeds=[0]",
+        "--set",
+        "eval_duration_s=0.5",
+        "--set",
+        "learning_starts=10",
+    ]
     assert main(args) == 0
     assert (out / "agent.zip").exists()
     assert main(["evaluate", str(out), "--seeds", "0", "--duration-s", "0.5", "--json"]) == 0
@@ -264,9 +310,17 @@ class _DriftingModel:
 def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tmp_path):
     from softpend.rl.mbpo import MBPOTrainer
 
-    config = MBPOConfig(initial_random_episodes=2, model_refit_every_episodes=1, model_fit_steps=20, ensemble_size=2,
-                        model_hidden_widths=(16, 16), rollout_every_steps=10, rollouts_per_real_step=9,
-                        rollout_schedule=(0, 1, 1, 1), **TINY)
+    config = MBPOConfig(
+        initial_random_episodes=2,
+        model_refit_every_episodes=1,
+        model_fit_steps=20,
+        ensemble_size=2,
+        model_hidden_widths=(16, 16),
+        rollout_every_steps=10,
+        rollouts_per_real_step=9,
+        rollout_schedule=(0, 1, 1, 1),
+        **TINY,
+    )
     model, _ = train_mbpo(config, seed=0, episodes=2, run_dir=tmp_path, progress=False)
     buffer = model.replay_buffer
     low, high = buffer.real_observation_box()
@@ -285,15 +339,22 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     # branching from the training start distribution: the first share of the rollouts starts at fresh draws of
     # the start environment (the straight rod at rest at a random hub angle), the rest at real states
     buffer.model_buffer.reset()
-    trainer = MBPOTrainer(dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False,
-                                              training_start="random"), seed=3, run_dir=tmp_path)
+    trainer = MBPOTrainer(
+        dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False, training_start="random"),
+        seed=3,
+        run_dir=tmp_path,
+    )
     trainer.dynamics = _DriftingModel()
     assert trainer.rollouts(model, buffer, n_rollouts=10, length=1, epsilon=0.0) == 10
     starts = make_base_env(config, "random")
     starts.reset(seed=3 * 1_000_003 + 17)
     expected = np.array([starts.reset()[0] for _ in range(5)])
     np.testing.assert_allclose(buffer.model_buffer.observations[:5, 0], expected, atol=1e-6)
-    assert (np.abs(buffer.model_buffer.observations[5:10, 0][:, None, :] - real[None]).max(axis=2) < 1e-7).any(axis=1).all()
+    assert (
+        (np.abs(buffer.model_buffer.observations[5:10, 0][:, None, :] - real[None]).max(axis=2) < 1e-7)
+        .any(axis=1)
+        .all()
+    )
 
 
 def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tmp_path, monkeypatch):
@@ -319,8 +380,13 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
     monkeypatch.setattr(dqn, "reset_q_network", reset)
     monkeypatch.setattr(dqn.CheckpointCallback, "checkpoint", checkpoint)
     _, log = train_dqn(config, seed=3, episodes=5, run_dir=tmp_path, progress=False)
-    assert [e[:2] for e in events] == [("reset", (3, 2)), ("checkpoint", 2), ("reset", (3, 4)), ("checkpoint", 4),
-                                       ("checkpoint", 5)]  # none after the last episode
+    assert [e[:2] for e in events] == [
+        ("reset", (3, 2)),
+        ("checkpoint", 2),
+        ("reset", (3, 4)),
+        ("checkpoint", 4),
+        ("checkpoint", 5),
+    ]  # none after the last episode
     # the checkpoint holds the reset network, so a run resumed from it goes on after the reset
     assert all(torch.equal(a, b) for a, b in zip(events[0][2], events[1][2]))
     assert [row["episode"] for row in log.evaluations] == [1, 2, 3, 4, 5]
@@ -345,7 +411,9 @@ def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
     assert all(not torch.equal(a, b) for a, b in zip(first, model.q_net.parameters()))
     layers = [m for m in model.q_net.modules() if isinstance(m, torch.nn.Linear)]
     assert len(layers) == 3
-    for layer, weight, bias in zip(layers, first[0::2], first[1::2]):  # PyTorch's default: uniform within 1/sqrt(fan_in)
+    for layer, weight, bias in zip(
+        layers, first[0::2], first[1::2]
+    ):  # PyTorch's default: uniform within 1/sqrt(fan_in)
         bound = 1 / np.sqrt(layer.in_features)
         assert float(weight.abs().max()) <= bound and float(bias.abs().max()) <= bound
         if weight.numel() >= 1000:
@@ -355,8 +423,13 @@ def test_reset_q_network_draws_a_new_agents_initialisation_from_its_seed():
 def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_path, monkeypatch):
     import softpend.rl.dqn as dqn
 
-    config = DQNConfig(learning_starts=20, reset_every_episodes=2, stop_after_balanced_evaluations=1,
-                       stop_confirm_seeds=(), **{**TINY, "eval_every_episodes": 1})
+    config = DQNConfig(
+        learning_starts=20,
+        reset_every_episodes=2,
+        stop_after_balanced_evaluations=1,
+        stop_confirm_seeds=(),
+        **{**TINY, "eval_every_episodes": 1},
+    )
     evaluated = []
     real_evaluate = dqn.EvaluationCallback.evaluate
 
@@ -375,8 +448,12 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
 
 def test_a_training_evaluation_stops_at_its_first_failing_start(tmp_path, monkeypatch):
     # three selection starts; an evaluation with a failing start runs only the first, one that balances all three
-    config = DQNConfig(learning_starts=20, stop_after_balanced_evaluations=1, stop_confirm_seeds=(),
-                       **{**TINY, "eval_every_episodes": 1, "eval_seeds": (0, 1, 2)})
+    config = DQNConfig(
+        learning_starts=20,
+        stop_after_balanced_evaluations=1,
+        stop_confirm_seeds=(),
+        **{**TINY, "eval_every_episodes": 1, "eval_seeds": (0, 1, 2)},
+    )
     _scripted_evaluations(monkeypatch, [0.5, 0.05])
     _, log = train_dqn(config, seed=0, episodes=4, run_dir=tmp_path, progress=False)
     failed, balanced = log.evaluations
@@ -393,11 +470,16 @@ def test_training_is_a_list_of_callbacks_in_order(tmp_path):
 
     config = MBPOConfig(stop_after_balanced_evaluations=1, stop_confirm_seeds=(5,), **TINY)
     log = TrainingLog(algo="mbpo", seed=0)
-    callbacks = dqn.training_callbacks(config, log, 4, tmp_path, progress=False,
-                                       part=MBPOTrainer(config, 0, tmp_path))
+    callbacks = dqn.training_callbacks(config, log, 4, tmp_path, progress=False, part=MBPOTrainer(config, 0, tmp_path))
     assert [type(c) for c in callbacks.callbacks] == [
-        ModelRolloutCallback, dqn.EpisodeRecorder, ModelRefitCallback, dqn.ProgressBarCallback,
-        dqn.EvaluationCallback, dqn.ResetQNetworkCallback, dqn.CheckpointCallback]
+        ModelRolloutCallback,
+        dqn.EpisodeRecorder,
+        ModelRefitCallback,
+        dqn.ProgressBarCallback,
+        dqn.EvaluationCallback,
+        dqn.ResetQNetworkCallback,
+        dqn.CheckpointCallback,
+    ]
     stop = callbacks.callbacks[4].callback_after_eval
     assert isinstance(stop, dqn.StopTrainingOnBalance) and isinstance(stop.confirmation, dqn.ConfirmBalance)
     plain = dqn.training_callbacks(DQNConfig(**TINY), TrainingLog(algo="dqn", seed=0), 4, tmp_path, progress=False)

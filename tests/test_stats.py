@@ -11,7 +11,7 @@ from softpend.stats import aggregate_interval, iqm, wilson_interval
 @pytest.mark.parametrize(
     "k, n, low, high",
     [
-        (8, 10, 0.4902, 0.9433),   # Wilson (1927) score interval, z = 1.95996
+        (8, 10, 0.4902, 0.9433),  # Wilson (1927) score interval, z = 1.95996
         (0, 10, 0.0, 0.2775),
         (10, 10, 0.7225, 1.0),
         (20, 20, 0.8389, 1.0),

@@ -55,8 +55,9 @@ def test_a_dead_worker_is_retried_and_reported_when_it_keeps_dying(tmp_path):
     run_jobs(die_once, [(tmp_path, 1), (tmp_path, 2)], ["one", "two"], workers=2, progress=False, retries=2)
     assert (tmp_path / "job1.txt").exists() and (tmp_path / "job2.txt").exists()
     with pytest.raises(SweepFailed, match="'doomed'") as info:
-        run_jobs(always_die, [(tmp_path, 3), (tmp_path, 4)], ["doomed", "also doomed"], workers=2, progress=False,
-                 retries=1)
+        run_jobs(
+            always_die, [(tmp_path, 3), (tmp_path, 4)], ["doomed", "also doomed"], workers=2, progress=False, retries=1
+        )
     assert set(info.value.failures) == {"doomed", "also doomed"}
     assert "worker process died" in info.value.failures["doomed"]
 
@@ -88,8 +89,14 @@ def test_runs_trained_on_the_engine_equal_runs_trained_here(tmp_path, backend):
         pytest.importorskip("ray", reason="backend 'ray' is tested where Ray is installed")
     if backend == "dask":
         pytest.importorskip("dask.distributed", reason="backend 'dask' is tested where Dask is installed")
-    config = DQNConfig(learning_starts=20, episode_s=1.0, eval_every_episodes=2, checkpoint_every_episodes=2,
-                       eval_seeds=(0,), eval_duration_s=1.0)
+    config = DQNConfig(
+        learning_starts=20,
+        episode_s=1.0,
+        eval_every_episodes=2,
+        checkpoint_every_episodes=2,
+        eval_seeds=(0,),
+        eval_duration_s=1.0,
+    )
     here = train_seeds("dqn", config, [0, 1], 2, tmp_path / "here", progress=False, workers=1)
     there = train_seeds("dqn", config, [0, 1, 1], 2, tmp_path / "there", progress=False, workers=2, backend=backend)
     assert [log.seed for log in there] == [0, 1, 1]  # a repeated seed is trained once and reported twice
@@ -107,15 +114,32 @@ def test_runs_trained_on_the_engine_equal_runs_trained_here(tmp_path, backend):
 def test_the_sweep_command_trains_every_method_per_seed_and_reuses_finished_runs(tmp_path, capsys):
     from softpend.cli import main
 
-    argv = ["sweep", "--methods", "dqn,pilco", "--seeds", "0-1", "--episodes-dqn", "1", "--pilco-trials", "0",
-            "--runs-root", str(tmp_path), "--workers", "1"]
+    argv = [
+        "sweep",
+        "--methods",
+        "dqn,pilco",
+        "--seeds",
+        "0-1",
+        "--episodes-dqn",
+        "1",
+        "--pilco-trials",
+        "0",
+        "--runs-root",
+        str(tmp_path),
+        "--workers",
+        "1",
+    ]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["seeds"] == [0, 1] and [r["seed"] for r in out["methods"]["dqn"]["runs"]] == [0, 1]
     assert [r["seed"] for r in out["methods"]["pilco"]["runs"]] == [0, 1]
     # run folders named <algo>-<hash of the settings>-seed<k>
     assert sorted(re.sub(r"-[0-9a-f]{8}-", "-", p.name) for p in tmp_path.iterdir()) == [
-        "dqn-seed0", "dqn-seed1", "pilco-seed0", "pilco-seed1"]
+        "dqn-seed0",
+        "dqn-seed1",
+        "pilco-seed0",
+        "pilco-seed1",
+    ]
     stamp = (run_folder(tmp_path, "dqn", 0) / "log.json").stat().st_mtime_ns
     assert main(argv) == 0  # finished runs are reused, not trained again
     assert (run_folder(tmp_path, "dqn", 0) / "log.json").stat().st_mtime_ns == stamp
@@ -129,8 +153,23 @@ def test_the_sweep_command_sets_pilco_fields_for_every_run(tmp_path, capsys):
     from softpend.cli import main
     from softpend.pilco.loop import PilcoResult
 
-    argv = ["sweep", "--methods", "pilco", "--seeds", "3", "--pilco-trials", "0", "--runs-root", str(tmp_path),
-            "--workers", "1", "--pilco-set", "horizon_s=1.0", "--pilco-set", "balance_within_rad=null"]
+    argv = [
+        "sweep",
+        "--methods",
+        "pilco",
+        "--seeds",
+        "3",
+        "--pilco-trials",
+        "0",
+        "--runs-root",
+        str(tmp_path),
+        "--workers",
+        "1",
+        "--pilco-set",
+        "horizon_s=1.0",
+        "--pilco-set",
+        "balance_within_rad=null",
+    ]
     assert main(argv) == 0
     capsys.readouterr()
     config = PilcoResult.load(run_folder(tmp_path, "pilco", 3)).config
@@ -145,9 +184,25 @@ def test_the_sweep_command_sets_rl_fields_for_every_run_of_their_method(tmp_path
     from softpend.cli import main
     from softpend.rl.config import load_config
 
-    argv = ["sweep", "--methods", "dqn", "--seeds", "4", "--episodes-dqn", "1", "--runs-root", str(tmp_path),
-            "--workers", "1", "--dqn-set", "gradient_steps=3", "--dqn-set", "eval_seeds=[1000]",
-            "--mbpo-set", "gradient_steps=30"]
+    argv = [
+        "sweep",
+        "--methods",
+        "dqn",
+        "--seeds",
+        "4",
+        "--episodes-dqn",
+        "1",
+        "--runs-root",
+        str(tmp_path),
+        "--workers",
+        "1",
+        "--dqn-set",
+        "gradient_steps=3",
+        "--dqn-set",
+        "eval_seeds=[1000]",
+        "--mbpo-set",
+        "gradient_steps=30",
+    ]
     assert main(argv) == 0
     capsys.readouterr()
     config = load_config(run_folder(tmp_path, "dqn", 4) / "config.json")
@@ -156,4 +211,3 @@ def test_the_sweep_command_sets_rl_fields_for_every_run_of_their_method(tmp_path
         assert main(["sweep", "--methods", "dqn", "--seeds", "4", *bad, "--runs-root", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "error" in err and "Traceback" not in err
-

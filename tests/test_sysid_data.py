@@ -78,7 +78,9 @@ def test_babble_shapes_limits_and_upright_region(tiny):
     v_obs, v_true = tiny.velocities[..., 2:4], tiny.true_observations[..., 7:9]  # ex_dot, ey_dot
     assert np.sqrt(np.mean((v_obs - v_true) ** 2)) < 0.3 * np.sqrt(np.mean(v_true**2))
     # the stored velocity is exactly the backward difference of the stored positions
-    np.testing.assert_allclose(tiny.velocities[:, 1:, 2], np.diff(tiny.positions[..., 2], axis=1) / TINY.dt_s, atol=1e-9)
+    np.testing.assert_allclose(
+        tiny.velocities[:, 1:, 2], np.diff(tiny.positions[..., 2], axis=1) / TINY.dt_s, atol=1e-9
+    )
 
 
 def test_babble_is_reproducible_to_the_byte(tmp_path):
@@ -119,7 +121,11 @@ def test_babble_protocol_rejects_bad_input():
 def _rig_arrays(n_trials=2, n_samples=6):
     rng = np.random.default_rng(0)
     positions = np.stack(
-        [rng.uniform(-0.5, 0.5, (n_trials, n_samples)), rng.uniform(-0.1, 0.1, (n_trials, n_samples)), 0.3 + rng.uniform(-0.01, 0.01, (n_trials, n_samples))],
+        [
+            rng.uniform(-0.5, 0.5, (n_trials, n_samples)),
+            rng.uniform(-0.1, 0.1, (n_trials, n_samples)),
+            0.3 + rng.uniform(-0.01, 0.01, (n_trials, n_samples)),
+        ],
         axis=-1,
     )
     velocities = rng.normal(size=positions.shape)
@@ -139,7 +145,9 @@ def test_dataset_round_trip(tmp_path, tiny):
     assert back.metadata["seed"] == 3 and back.metadata["plant_params"] == RodParams().to_dict()
     # a rig file: only the limited variables, no simulator arrays
     positions, velocities, torques = _rig_arrays()
-    rig = save_dataset(tmp_path / "rig.npz", positions, velocities, torques, dt_s=0.02, position_names=("phi_rad", "ex_m", "ey_m"))
+    rig = save_dataset(
+        tmp_path / "rig.npz", positions, velocities, torques, dt_s=0.02, position_names=("phi_rad", "ex_m", "ey_m")
+    )
     back = load_dataset(tmp_path / "rig.npz")
     np.testing.assert_array_equal(back.positions, positions)
     assert back.true_observations is None and back.velocity_names == ("phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s")
@@ -158,13 +166,25 @@ def test_save_dataset_rejects_bad_arrays(tmp_path):
     with pytest.raises(ValueError, match="positions has non-finite"):
         save_dataset(tmp_path / "x", bad, velocities, torques, dt_s=0.01, position_names=names)
     with pytest.raises(ValueError, match="position_names must include"):
-        save_dataset(tmp_path / "x", positions, velocities, torques, dt_s=0.01, position_names=("phi_rad", "theta_rad", "ey_m"))
+        save_dataset(
+            tmp_path / "x", positions, velocities, torques, dt_s=0.01, position_names=("phi_rad", "theta_rad", "ey_m")
+        )
     with pytest.raises(ValueError, match="dt_s"):
         save_dataset(tmp_path / "x", positions, velocities, torques, dt_s=0.0, position_names=names)
     with pytest.raises(ValueError, match="wrapped"):
-        save_dataset(tmp_path / "x", positions + np.array([4.0, 0, 0]), velocities, torques, dt_s=0.01, position_names=names)
+        save_dataset(
+            tmp_path / "x", positions + np.array([4.0, 0, 0]), velocities, torques, dt_s=0.01, position_names=names
+        )
     with pytest.raises(ValueError, match="torque limit"):
-        save_dataset(tmp_path / "x", positions, velocities, torques * 10, dt_s=0.01, position_names=names, plant_params=RodParams())
+        save_dataset(
+            tmp_path / "x",
+            positions,
+            velocities,
+            torques * 10,
+            dt_s=0.01,
+            position_names=names,
+            plant_params=RodParams(),
+        )
     assert not list(tmp_path.iterdir())  # nothing written on error
 
 

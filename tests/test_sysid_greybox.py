@@ -12,11 +12,23 @@ from softpend.cli import main
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid import BabbleProtocol, babble
 from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
-from softpend.sysid.quality import prb_one_step_errors, prb_rollout_tip_errors, rollout_starts, tip_rmse_at_s, valid_prediction
+from softpend.sysid.quality import (
+    prb_one_step_errors,
+    prb_rollout_tip_errors,
+    rollout_starts,
+    tip_rmse_at_s,
+    valid_prediction,
+)
 
 SMALL = BabbleProtocol(n_trials=3, trial_length_s=1.0)
 #: A guess 20-60 % off the truth in every estimated field.
-OFF = dict(hub_inertia_kgm2=1.4, hub_friction_nms_per_rad=0.6, youngs_modulus_pa=1.3, joint_damping_nms_per_rad=1.5, tip_mass_kg=0.8)
+OFF = dict(
+    hub_inertia_kgm2=1.4,
+    hub_friction_nms_per_rad=0.6,
+    youngs_modulus_pa=1.3,
+    joint_damping_nms_per_rad=1.5,
+    tip_mass_kg=0.8,
+)
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +42,9 @@ def _guess(truth: RodParams) -> RodParams:
 
 @pytest.fixture(scope="module")
 def fitted(small):
-    return identify(small, GreyBoxConfig(window_s=0.2, max_windows=8, max_iterations=15), initial_params=_guess(small.params))
+    return identify(
+        small, GreyBoxConfig(window_s=0.2, max_windows=8, max_iterations=15), initial_params=_guess(small.params)
+    )
 
 
 def test_identification_recovers_the_parameters_of_simulated_data(small, fitted):
@@ -70,16 +84,28 @@ def test_a_dataset_without_torque_cannot_identify_the_torque_gain():
 
 def test_a_dataset_where_nothing_moves_is_rejected_naming_a_parameter():
     # the straight rod hanging at rest with no torque: no observation depends on any parameter
-    at_rest = babble(SMALL.replace(start="hanging", start_angle_std_rad=0.0, start_bend_std_rad=0.0, start_rate_std_rad_s=0.0,
-                                   torque_std_fraction=0.0, feedback_trial_fraction=0.0), seed=1, progress=False)
+    at_rest = babble(
+        SMALL.replace(
+            start="hanging",
+            start_angle_std_rad=0.0,
+            start_bend_std_rad=0.0,
+            start_rate_std_rad_s=0.0,
+            torque_std_fraction=0.0,
+            feedback_trial_fraction=0.0,
+        ),
+        seed=1,
+        progress=False,
+    )
     with pytest.raises(ValueError, match="cannot identify hub_inertia_kgm2"):
         identify(at_rest, GreyBoxConfig(window_s=0.2, max_windows=4))
 
 
 def test_collinear_stiffness_parameters_are_rejected():
     with pytest.raises(ValueError, match="stiffness_scale"):
-        identify(babble(SMALL.replace(n_trials=1), seed=0, progress=False),
-                 GreyBoxConfig(parameters=("youngs_modulus_pa", "stiffness_scale")))
+        identify(
+            babble(SMALL.replace(n_trials=1), seed=0, progress=False),
+            GreyBoxConfig(parameters=("youngs_modulus_pa", "stiffness_scale")),
+        )
 
 
 def test_joint_state_reconstruction_puts_the_tip_where_it_was_observed():
@@ -87,7 +113,9 @@ def test_joint_state_reconstruction_puts_the_tip_where_it_was_observed():
     plant = PRBPlant(params)
     q = np.array([0.3, 0.05, -0.02, 0.04, 0.01])
     o = plant.reset(q, np.zeros(5))
-    r = reconstruct_joint_states(np.array([o.phi_rad]), np.array([o.ex_m]), np.array([o.ey_m]), np.array([o.er_rad]), params)[0]
+    r = reconstruct_joint_states(
+        np.array([o.phi_rad]), np.array([o.ex_m]), np.array([o.ey_m]), np.array([o.er_rad]), params
+    )[0]
     back = plant.reset(r, np.zeros(5))
     assert r[0] == pytest.approx(q[0], abs=1e-12)
     assert abs(back.ex_m - o.ex_m) < 1e-5 and abs(back.ey_m - o.ey_m) < 1e-5 and abs(back.er_rad - o.er_rad) < 1e-4
@@ -97,11 +125,13 @@ def test_valid_prediction_time_on_a_hand_made_trajectory():
     dt, length = 0.01, 0.3
     t = np.arange(101) * dt
     threshold = 0.05 * length  # 15 mm
-    errors = np.stack([
-        0.01 * t,  # 1 cm/s: never reaches 15 mm within 1 s (censored)
-        0.1 * t,  # 10 cm/s: above 15 mm from t = 0.16 s on, valid up to 0.15 s
-        threshold * np.exp(6.0 * (t - 0.5)),  # exponential growth through the threshold at 0.5 s
-    ])
+    errors = np.stack(
+        [
+            0.01 * t,  # 1 cm/s: never reaches 15 mm within 1 s (censored)
+            0.1 * t,  # 10 cm/s: above 15 mm from t = 0.16 s on, valid up to 0.15 s
+            threshold * np.exp(6.0 * (t - 0.5)),  # exponential growth through the threshold at 0.5 s
+        ]
+    )
     result = valid_prediction(errors, dt, length, lyapunov_rate_per_s=6.0)
     np.testing.assert_allclose(result.times_s, [1.0, 0.15, 0.5], atol=1e-12)
     assert result.censored.tolist() == [True, False, False]
@@ -133,8 +163,24 @@ def test_identify_command_writes_json_that_rod_params_loads(small, tmp_path, cap
     guess = tmp_path / "guess.json"
     guess.write_text(json.dumps(_guess(small.params).to_dict()))
     out = tmp_path / "id.json"
-    code = main(["identify", str(data), "--initial-params", str(guess), "--out", str(out), "--window-s", "0.2",
-                 "--max-windows", "4", "--max-iterations", "3", "--parameters", "hub_inertia_kgm2,tip_mass_kg"])
+    code = main(
+        [
+            "identify",
+            str(data),
+            "--initial-params",
+            str(guess),
+            "--out",
+            str(out),
+            "--window-s",
+            "0.2",
+            "--max-windows",
+            "4",
+            "--max-iterations",
+            "3",
+            "--parameters",
+            "hub_inertia_kgm2,tip_mass_kg",
+        ]
+    )
     assert code == 0
     printed = capsys.readouterr().out
     assert "hub_inertia_kgm2" in printed and "tip_mass_kg" in printed
@@ -156,10 +202,18 @@ def test_torque_gain_and_encoder_offset_are_recovered(small):
     phi = small.position_names.index("phi_rad")
     positions = small.positions.copy()
     positions[..., phi] = (positions[..., phi] + 0.02 + np.pi) % (2 * np.pi) - np.pi
-    rig = TrajectoryDataset(positions=positions, velocities=small.velocities, torques_nm=small.torques_nm / 1.1,
-                            metadata=dict(small.metadata, plant_params=None))
-    config = GreyBoxConfig(parameters=("hub_inertia_kgm2", "tip_mass_kg", "torque_gain", "encoder_offset_rad", "torque_delay_s"),
-                           window_s=0.2, max_windows=8, max_iterations=15)
+    rig = TrajectoryDataset(
+        positions=positions,
+        velocities=small.velocities,
+        torques_nm=small.torques_nm / 1.1,
+        metadata=dict(small.metadata, plant_params=None),
+    )
+    config = GreyBoxConfig(
+        parameters=("hub_inertia_kgm2", "tip_mass_kg", "torque_gain", "encoder_offset_rad", "torque_delay_s"),
+        window_s=0.2,
+        max_windows=8,
+        max_iterations=15,
+    )
     result = identify(rig, config, initial_params=small.params.replace(hub_inertia_kgm2=3e-4, tip_mass_kg=0.008))
     assert result.torque_gain == pytest.approx(1.1, rel=1e-3)
     assert result.encoder_offset_rad == pytest.approx(0.02, abs=1e-4)
@@ -173,9 +227,16 @@ def test_joint_states_estimated_from_the_past_match_the_recorded_ones(small):
 
     samples = np.array([[0, 40], [1, 75], [2, 99]])
     estimated = estimate_joint_states(small.params, small, samples, lookback_s=0.1)
-    recorded = np.concatenate([small.joint_positions_rad[samples[:, 0], samples[:, 1]],
-                               small.joint_velocities_rad_s[samples[:, 0], samples[:, 1]]], axis=1)
-    estimated[:, 0] = recorded[:, 0] + (estimated[:, 0] - recorded[:, 0] + np.pi) % (2 * np.pi) - np.pi  # hub angle mod 2 pi
+    recorded = np.concatenate(
+        [
+            small.joint_positions_rad[samples[:, 0], samples[:, 1]],
+            small.joint_velocities_rad_s[samples[:, 0], samples[:, 1]],
+        ],
+        axis=1,
+    )
+    estimated[:, 0] = (
+        recorded[:, 0] + (estimated[:, 0] - recorded[:, 0] + np.pi) % (2 * np.pi) - np.pi
+    )  # hub angle mod 2 pi
     np.testing.assert_allclose(estimated, recorded, atol=1e-6)
     with pytest.raises(ValueError, match="look 0.1 s back"):
         estimate_joint_states(small.params, small, np.array([[0, 5]]), lookback_s=0.1)
@@ -189,9 +250,15 @@ def test_a_camera_delay_is_recovered(small):
     for name in ("ex_m", "ey_m", "er_rad"):
         i = small.position_names.index(name)
         positions[:, 1:, i] = 0.5 * (small.positions[:, 1:, i] + small.positions[:, :-1, i])
-    rig = TrajectoryDataset(positions=positions, velocities=small.velocities, torques_nm=small.torques_nm,
-                            metadata=dict(small.metadata, plant_params=None))
-    config = GreyBoxConfig(parameters=("hub_inertia_kgm2", "camera_delay_s"), window_s=0.2, max_windows=8, max_iterations=15)
+    rig = TrajectoryDataset(
+        positions=positions,
+        velocities=small.velocities,
+        torques_nm=small.torques_nm,
+        metadata=dict(small.metadata, plant_params=None),
+    )
+    config = GreyBoxConfig(
+        parameters=("hub_inertia_kgm2", "camera_delay_s"), window_s=0.2, max_windows=8, max_iterations=15
+    )
     result = identify(rig, config, initial_params=small.params.replace(hub_inertia_kgm2=3e-4))
     assert result.camera_delay_s == pytest.approx(0.5 * small.dt_s, abs=2e-4)
     assert result.estimates["hub_inertia_kgm2"] == pytest.approx(small.params.hub_inertia_kgm2, rel=1e-2)

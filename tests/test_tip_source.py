@@ -15,8 +15,13 @@ from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 from softpend.vision.accuracy import babbling_trajectory
 from softpend.vision.camera import CameraEffects, CameraModel, SyntheticCamera, render_video
-from softpend.vision.tip_source import (CameraFaults, CaptureTipSource, SyntheticLiveCamera, TipMeasurement,
-                                        open_tip_source)
+from softpend.vision.tip_source import (
+    CameraFaults,
+    CaptureTipSource,
+    SyntheticLiveCamera,
+    TipMeasurement,
+    open_tip_source,
+)
 
 #: A quarter-size camera: the same optics at 320x240 (cheaper to render).
 SMALL = CameraModel(width_px=320, height_px=240, px_per_m=320.0, centre_px=(160.0, 119.0))
@@ -30,8 +35,15 @@ def _film(rig: SimRig, camera: SyntheticLiveCamera, seconds: float) -> list[TipM
 
 def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
     rig = SimRig(RigConfig(task=Task(start_noise_rad=0.0), initial_tilt_rad=2.0))  # the rod falls: a fast tip
-    camera = SyntheticLiveCamera(rig.poses, rig.clock, fps=60, latency_s=0.02, model=SMALL,
-                                 effects=CameraEffects.rig(), faults=CameraFaults(occlusions_s=((0.4, 0.6),)))
+    camera = SyntheticLiveCamera(
+        rig.poses,
+        rig.clock,
+        fps=60,
+        latency_s=0.02,
+        model=SMALL,
+        effects=CameraEffects.rig(),
+        faults=CameraFaults(occlusions_s=((0.4, 0.6),)),
+    )
     measurements = _film(rig, camera, 1.2)
     exposure = camera.camera.effects.exposure_s
     # every frame whose delivery time has come, and no other: t_k + latency <= 1.2 s
@@ -53,8 +65,14 @@ def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
 
 def test_synthetic_live_camera_stall_stops_delivery_and_drops_are_counted():
     rig = SimRig(RigConfig())
-    camera = SyntheticLiveCamera(rig.poses, rig.clock, fps=30, latency_s=0.0, model=SMALL,
-                                 faults=CameraFaults(stall_after_s=0.3, drop_probability=0.3, seed=1))
+    camera = SyntheticLiveCamera(
+        rig.poses,
+        rig.clock,
+        fps=30,
+        latency_s=0.0,
+        model=SMALL,
+        faults=CameraFaults(stall_after_s=0.3, drop_probability=0.3, seed=1),
+    )
     measurements = _film(rig, camera, 0.9)
     elapsed = np.array([m.capture_time_s for m in measurements]) - camera.first_frame_time_s
     assert len(measurements) >= 2 and np.all(elapsed < 0.3)

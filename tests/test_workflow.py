@@ -18,8 +18,13 @@ CHECK_JSONSCHEMA = Path(sys.executable).with_name("check-jsonschema")
 def check(path: Path) -> subprocess.CompletedProcess:
     # any attempt to reach the network goes to a closed port: the schema must come from the package itself
     env = {**os.environ, "HTTP_PROXY": "http://127.0.0.1:9", "HTTPS_PROXY": "http://127.0.0.1:9", "NO_PROXY": ""}
-    return subprocess.run([str(CHECK_JSONSCHEMA), "--builtin-schema", "vendor.github-workflows", str(path)],
-                          capture_output=True, text=True, env=env, timeout=120)
+    return subprocess.run(
+        [str(CHECK_JSONSCHEMA), "--builtin-schema", "vendor.github-workflows", str(path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
 
 
 def test_the_workflow_is_valid_and_a_broken_copy_is_not(tmp_path):
@@ -28,7 +33,9 @@ def test_the_workflow_is_valid_and_a_broken_copy_is_not(tmp_path):
 
     text = WORKFLOW.read_text()
     broken = tmp_path / "book.yml"
-    broken.write_text(text.replace("    runs-on: ubuntu-latest\n", "    runs-on: ubuntu-latest\n    timeout-minutes: soon\n", 1))
+    broken.write_text(
+        text.replace("    runs-on: ubuntu-latest\n", "    runs-on: ubuntu-latest\n    timeout-minutes: soon\n", 1)
+    )
     result = check(broken)
     assert result.returncode != 0 and "timeout-minutes" in result.stdout + result.stderr, result.stdout
     no_steps = tmp_path / "no_steps.yml"
@@ -39,8 +46,13 @@ def test_the_workflow_is_valid_and_a_broken_copy_is_not(tmp_path):
 def test_the_workflow_tests_builds_from_the_cache_and_deploys_to_pages():
     workflow = yaml.safe_load(WORKFLOW.read_text())
     jobs = workflow["jobs"]
-    runs = lambda job: [step.get("run", "") for step in jobs[job]["steps"]]  # noqa: E731
-    uses = lambda job: {step["uses"].split("@")[0]: step.get("with", {}) for step in jobs[job]["steps"] if "uses" in step}  # noqa: E731
+
+    def runs(job):
+        return [step.get("run", "") for step in jobs[job]["steps"]]
+
+    def uses(job):
+        return {step["uses"].split("@")[0]: step.get("with", {}) for step in jobs[job]["steps"] if "uses" in step}
+
     assert "make test" in runs("test")
     assert jobs["book"]["needs"] == "test" and "make book" in runs("book")
     cache = uses("book")["actions/cache"]

@@ -12,9 +12,14 @@ from softpend.commands.options import check_numbers
 #: that still passes as data): noise stds up to a half turn or a metre, gains and the random torque's std far
 #: beyond the defaults.
 BABBLE_RANGES: dict[str, tuple[float, float]] = {
-    "--phi-noise-std-rad": (0.0, math.pi), "--er-noise-std-rad": (0.0, math.pi), "--tip-noise-std-m": (0.0, 1.0),
-    "--feedback-kp": (0.0, 1e4), "--feedback-kd": (0.0, 1e3), "--torque-std-fraction": (0.0, 100.0),
-    "--torque-bandwidth-hz": (1e-3, 1e4), "--camera-delay-steps": (0, 10**6),
+    "--phi-noise-std-rad": (0.0, math.pi),
+    "--er-noise-std-rad": (0.0, math.pi),
+    "--tip-noise-std-m": (0.0, 1.0),
+    "--feedback-kp": (0.0, 1e4),
+    "--feedback-kd": (0.0, 1e3),
+    "--torque-std-fraction": (0.0, 100.0),
+    "--torque-bandwidth-hz": (1e-3, 1e4),
+    "--camera-delay-steps": (0, 10**6),
 }
 
 
@@ -32,14 +37,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("output", help="dataset file to write (.npz)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
     parser.add_argument("--n-trials", type=int, default=d.n_trials, help=f"number of trials ({d.n_trials})")
-    parser.add_argument("--trial-length-s", type=float, default=d.trial_length_s, help=f"trial length [s] ({d.trial_length_s})")
+    parser.add_argument(
+        "--trial-length-s", type=float, default=d.trial_length_s, help=f"trial length [s] ({d.trial_length_s})"
+    )
     parser.add_argument("--dt-s", type=float, default=d.dt_s, help=f"sampling step [s] ({d.dt_s})")
-    parser.add_argument("--start", choices=("upright", "hanging", "random"), default=d.start, help=f"start region ({d.start})")
-    parser.add_argument("--torque-std-fraction", type=float, default=d.torque_std_fraction, help="random torque std / torque limit")
-    parser.add_argument("--torque-bandwidth-hz", type=float, default=d.torque_bandwidth_hz, help="low-pass cut-off of the random torque [Hz]")
-    parser.add_argument("--feedback-trial-fraction", type=float, default=d.feedback_trial_fraction, help="fraction of trials with the stabilising PD")
-    parser.add_argument("--feedback-kp", type=float, default=d.feedback_kp_nm_per_rad, help="PD gain on the hub angle [N m/rad]")
-    parser.add_argument("--feedback-kd", type=float, default=d.feedback_kd_nms_per_rad, help="PD gain on the hub rate [N m s/rad]")
+    parser.add_argument(
+        "--start", choices=("upright", "hanging", "random"), default=d.start, help=f"start region ({d.start})"
+    )
+    parser.add_argument(
+        "--torque-std-fraction", type=float, default=d.torque_std_fraction, help="random torque std / torque limit"
+    )
+    parser.add_argument(
+        "--torque-bandwidth-hz",
+        type=float,
+        default=d.torque_bandwidth_hz,
+        help="low-pass cut-off of the random torque [Hz]",
+    )
+    parser.add_argument(
+        "--feedback-trial-fraction",
+        type=float,
+        default=d.feedback_trial_fraction,
+        help="fraction of trials with the stabilising PD",
+    )
+    parser.add_argument(
+        "--feedback-kp", type=float, default=d.feedback_kp_nm_per_rad, help="PD gain on the hub angle [N m/rad]"
+    )
+    parser.add_argument(
+        "--feedback-kd", type=float, default=d.feedback_kd_nms_per_rad, help="PD gain on the hub rate [N m s/rad]"
+    )
     parser.add_argument("--phi-noise-std-rad", type=float, default=0.0, help="encoder noise std [rad]")
     parser.add_argument("--tip-noise-std-m", type=float, default=0.0, help="camera tip-position noise std [m]")
     parser.add_argument("--er-noise-std-rad", type=float, default=0.0, help="tip-rotation noise std [rad]")

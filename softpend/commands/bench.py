@@ -11,7 +11,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("bench", help="measure performance figures (see softpend.study.bench)")
     parser.add_argument("--json", action="store_true", help="print one JSON object (default: a table)")
     parser.add_argument(
-        "--only", action="append", metavar="GROUP", help=f"run only this group (repeatable): {[n for n, _ in BENCHMARKS]}"
+        "--only",
+        action="append",
+        metavar="GROUP",
+        help=f"run only this group (repeatable): {[n for n, _ in BENCHMARKS]}",
     )
     parser.set_defaults(func=run)
 

@@ -21,8 +21,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "`softpend sweep --book --profile PROFILE` (a notebook trains what is still missing itself)."
         ),
     )
-    parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)")
-    parser.add_argument("--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod")
+    parser.add_argument(
+        "--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)"
+    )
+    parser.add_argument(
+        "--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod"
+    )
     add_set_option(
         parser,
         dest="set",
@@ -31,10 +35,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "continuum beam",
     )
     parser.add_argument("--force", action="store_true", help="execute even if the cached output is up to date")
-    parser.add_argument("--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)")
+    parser.add_argument(
+        "--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)"
+    )
     parser.add_argument("--root", default=".", help="project root holding _toc.yml (default: current directory)")
     parser.add_argument(
-        "--path-output", default=None, help="with --html: write the HTML to PATH/_build/html (default: ROOT/_build/html)"
+        "--path-output",
+        default=None,
+        help="with --html: write the HTML to PATH/_build/html (default: ROOT/_build/html)",
     )
     parser.set_defaults(func=run)
 
@@ -49,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"softpend book: error: {exc}", file=sys.stderr)
         return 1
     executed = sum(run.status == "executed" for run in runs)
-    print(f"[book] profile {args.profile!r}: {executed} notebook(s) executed, {len(runs) - executed} up to date",
-          file=sys.stderr)
+    print(
+        f"[book] profile {args.profile!r}: {executed} notebook(s) executed, {len(runs) - executed} up to date",
+        file=sys.stderr,
+    )
     if args.html:
         try:
             html_dir = build_html(args.root, args.path_output)

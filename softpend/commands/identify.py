@@ -19,17 +19,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("dataset", help="dataset (.npz)")
     parser.add_argument("--out", default=None, help="JSON file to write (rod_params, estimates, std, fit)")
-    parser.add_argument("--parameters", default=",".join(GREYBOX_PARAMETERS),
-                        help=f"comma-separated parameters to estimate, from {', '.join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)}")
+    parser.add_argument(
+        "--parameters",
+        default=",".join(GREYBOX_PARAMETERS),
+        help=f"comma-separated parameters to estimate, from {', '.join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)}",
+    )
     parser.add_argument("--torque-gain", action="store_true", help="also estimate a gain on the recorded torque")
     parser.add_argument("--encoder-offset", action="store_true", help="also estimate an offset of the hub encoder")
-    parser.add_argument("--torque-delay", action="store_true", help="also estimate a delay of the torque (within one sample either way)")
-    parser.add_argument("--camera-delay", action="store_true", help="also estimate a delay of the camera against the encoder (within one sample either way; "
-                        "advised for rig data, whose clock synchronisation leaves a few milliseconds)")
-    parser.add_argument("--initial-params", default=None, help="JSON file of the initial guess (default: the dataset's plant_params)")
+    parser.add_argument(
+        "--torque-delay", action="store_true", help="also estimate a delay of the torque (within one sample either way)"
+    )
+    parser.add_argument(
+        "--camera-delay",
+        action="store_true",
+        help="also estimate a delay of the camera against the encoder (within one sample either way; "
+        "advised for rig data, whose clock synchronisation leaves a few milliseconds)",
+    )
+    parser.add_argument(
+        "--initial-params", default=None, help="JSON file of the initial guess (default: the dataset's plant_params)"
+    )
     parser.add_argument("--window-s", type=float, default=d.window_s, help=f"shooting window [s] ({d.window_s})")
     parser.add_argument("--max-windows", type=int, default=d.max_windows, help=f"most windows used ({d.max_windows})")
-    parser.add_argument("--max-iterations", type=int, default=d.max_iterations, help=f"most Levenberg-Marquardt steps ({d.max_iterations})")
+    parser.add_argument(
+        "--max-iterations",
+        type=int,
+        default=d.max_iterations,
+        help=f"most Levenberg-Marquardt steps ({d.max_iterations})",
+    )
     parser.add_argument("--seed", type=int, default=d.seed, help=f"seed of the window draw ({d.seed})")
     parser.set_defaults(func=run)
 
@@ -47,25 +63,41 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:  # before the work: a file this command wrote may be replaced, no other
         outputs.file(args.out, what="identification file")
     names = [n.strip() for n in args.parameters.split(",") if n.strip()]
-    flags = ((args.torque_gain, "torque_gain"), (args.encoder_offset, "encoder_offset_rad"), (args.torque_delay, "torque_delay_s"),
-             (args.camera_delay, "camera_delay_s"))
+    flags = (
+        (args.torque_gain, "torque_gain"),
+        (args.encoder_offset, "encoder_offset_rad"),
+        (args.torque_delay, "torque_delay_s"),
+        (args.camera_delay, "camera_delay_s"),
+    )
     names += [n for flag, n in flags if flag and n not in names]
-    config = GreyBoxConfig(parameters=tuple(names), window_s=args.window_s, max_windows=args.max_windows,
-                           max_iterations=args.max_iterations, seed=args.seed)
+    config = GreyBoxConfig(
+        parameters=tuple(names),
+        window_s=args.window_s,
+        max_windows=args.max_windows,
+        max_iterations=args.max_iterations,
+        seed=args.seed,
+    )
     dataset = load_dataset(args.dataset)
     guess = RodParams.from_json(args.initial_params) if args.initial_params else None
     result = identify(dataset, config, initial_params=guess)
     truth = dataset.params if dataset.metadata["source"] == "simulation" else None
     print(f"{'parameter':28s} {'estimate':>14s} {'std':>12s} {'initial':>12s}" + (f" {'truth':>12s}" if truth else ""))
-    calibration = {"torque_gain": 1.0, "encoder_offset_rad": 0.0, "torque_delay_s": 0.0, "camera_delay_s": 0.0}  # initial guess = truth of a simulation
+    calibration = {
+        "torque_gain": 1.0,
+        "encoder_offset_rad": 0.0,
+        "torque_delay_s": 0.0,
+        "camera_delay_s": 0.0,
+    }  # initial guess = truth of a simulation
     for name, value in result.estimates.items():
         initial = calibration[name] if name in calibration else getattr(result.initial_params, name)
         line = f"{name:28s} {value:14.6g} {result.std[name]:12.3g} {initial:12.6g}"
         if truth:
             line += f" {calibration[name] if name in calibration else getattr(truth, name):12.6g}"
         print(line)
-    print(f"{result.n_windows} windows of {result.window_steps} samples, residual RMS {result.residual_rms_rad:.3g} rad, "
-          f"{result.njev} Jacobians, {result.identify_s:.1f} s: {result.message}")
+    print(
+        f"{result.n_windows} windows of {result.window_steps} samples, residual RMS {result.residual_rms_rad:.3g} rad, "
+        f"{result.njev} Jacobians, {result.identify_s:.1f} s: {result.message}"
+    )
     if result.at_bounds:
         print(f"on a bound of the search (not determined by the data): {', '.join(result.at_bounds)}")
     if args.out is not None:

@@ -14,7 +14,9 @@ import argparse
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
     parser.add_argument("--port", metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run until killed)")
+    parser.add_argument(
+        "--duration", type=float, default=None, help="stop after this many seconds (default: run until killed)"
+    )
     parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (default 4096)")
     parser.add_argument("--latency-ms", type=float, default=2.0, help="one-way link latency [ms] (default 2)")
     parser.add_argument("--drop", type=float, default=0.0, help="probability that a STATE frame is dropped")
@@ -30,8 +32,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rig_control.register(actions)
     rig_build.register(actions)
     for action in actions.choices.values():
-        action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                            help="show the traceback of an error instead of one line")
+        action.add_argument(
+            "--debug",
+            action="store_true",
+            default=argparse.SUPPRESS,
+            help="show the traceback of an error instead of one line",
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,8 +47,17 @@ def run(args: argparse.Namespace) -> int:
     from softpend.task import Task
 
     # before anything starts (no --duration: until Ctrl-C or SIGTERM)
-    check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--latency-ms": (0.0, 1000.0), "--drop": (0.0, 1.0),
-                         "--garble": (0.0, 1.0), "--watchdog-ms": (1, 65535), "--counts-per-rev": (4, 2**24)})
+    check_numbers(
+        args,
+        {
+            "--duration": (1e-3, MAX_SESSION_S),
+            "--latency-ms": (0.0, 1000.0),
+            "--drop": (0.0, 1.0),
+            "--garble": (0.0, 1.0),
+            "--watchdog-ms": (1, 65535),
+            "--counts-per-rev": (4, 2**24),
+        },
+    )
     outputs = Outputs()  # a truth log of an earlier session may be replaced, no other file
     if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")

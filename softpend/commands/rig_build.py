@@ -30,10 +30,18 @@ PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
 
 
 def register(actions: argparse._SubParsersAction) -> None:
-    design = actions.add_parser("design", help="the rig's dimensions, drawing and marker layout for the rod's parameters")
-    design.add_argument("--out", required=True, metavar="DIR", help="folder for rig_design.json, rig_design.png, markers.json")
-    design.add_argument("--print-modulus-mpa", type=float, default=None,
-                        help="modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)")
+    design = actions.add_parser(
+        "design", help="the rig's dimensions, drawing and marker layout for the rod's parameters"
+    )
+    design.add_argument(
+        "--out", required=True, metavar="DIR", help="folder for rig_design.json, rig_design.png, markers.json"
+    )
+    design.add_argument(
+        "--print-modulus-mpa",
+        type=float,
+        default=None,
+        help="modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)",
+    )
     _add_rod_set(design)
     design.set_defaults(func=run_design)
 
@@ -41,8 +49,12 @@ def register(actions: argparse._SubParsersAction) -> None:
     _add_link_target(check)
     check.add_argument("--out", metavar="JSON", help="also write the report to this file")
     check.add_argument("--rest-s", type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
-    check.add_argument("--push-fraction", type=float, default=0.3,
-                       help="torque of the direction push as a fraction of the torque limit (0.3)")
+    check.add_argument(
+        "--push-fraction",
+        type=float,
+        default=0.3,
+        help="torque of the direction push as a fraction of the torque limit (0.3)",
+    )
     check.add_argument("--counts-per-rev", type=int, default=4096, help="twin: encoder resolution (4096)")
     _add_rod_set(check)
     check.set_defaults(func=run_check)
@@ -51,15 +63,25 @@ def register(actions: argparse._SubParsersAction) -> None:
     target = calibrate.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="a frame of the synthetic camera")
     target.add_argument("--camera", metavar="CAMERA", help="camera index, stream URL or image/video file")
-    calibrate.add_argument("--markers", required=True, metavar="JSON",
-                           help="marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)")
-    calibrate.add_argument("--out", required=True, metavar="JSON", help="calibration file to write (the report goes "
-                           "next to it as NAME.report.json)")
+    calibrate.add_argument(
+        "--markers",
+        required=True,
+        metavar="JSON",
+        help="marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)",
+    )
+    calibrate.add_argument(
+        "--out",
+        required=True,
+        metavar="JSON",
+        help="calibration file to write (the report goes next to it as NAME.report.json)",
+    )
     calibrate.add_argument("--seed", type=int, default=0, help="twin: seed of the image noise")
     _add_rod_set(calibrate)
     calibrate.set_defaults(func=run_calibrate)
 
-    babble = actions.add_parser("babble", help="babble over the link with the camera tracking, synchronise into a dataset")
+    babble = actions.add_parser(
+        "babble", help="babble over the link with the camera tracking, synchronise into a dataset"
+    )
     _add_link_target(babble)
     babble.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
     babble.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
@@ -80,8 +102,9 @@ def _add_link_target(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_rod_set(parser: argparse.ArgumentParser) -> None:
-    add_set_option(parser, help="set a RodParams field of the rod (VALUE parsed as JSON), e.g. --set length_m=0.4; "
-                                "repeatable")
+    add_set_option(
+        parser, help="set a RodParams field of the rod (VALUE parsed as JSON), e.g. --set length_m=0.4; repeatable"
+    )
 
 
 def _rod(args: argparse.Namespace):
@@ -118,9 +141,11 @@ def run_design(args: argparse.Namespace) -> int:
     with outputs.open(out / "rig_design.png") as handle:
         fig.savefig(handle, format="png", dpi=120)
     plt.close(fig)
-    print(f"beam {figures['beam_length_mm']:.1f} x {figures['beam_width_mm']:.1f} x {figures['beam_thickness_mm']:.2f} mm, "
-          f"camera {figures['camera_distance_mm']:.0f} mm from the plane ({figures['pixel_size_mm']:.2f} mm/px), "
-          f"clamped-horizontal tip sag {figures['tip_sag_horizontal_mm']:.1f} mm -> {out}")
+    print(
+        f"beam {figures['beam_length_mm']:.1f} x {figures['beam_width_mm']:.1f} x {figures['beam_thickness_mm']:.2f} mm, "
+        f"camera {figures['camera_distance_mm']:.0f} mm from the plane ({figures['pixel_size_mm']:.2f} mm/px), "
+        f"clamped-horizontal tip sag {figures['tip_sag_horizontal_mm']:.1f} mm -> {out}"
+    )
     return 0
 
 
@@ -171,13 +196,20 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         assert info is not None  # the handshake on opening the link sets it
         rtt = float(np.median([link.ping() for _ in range(5)]))
         expected_rate = 1.0 / task.dt_s
-        ok = (info.protocol_version == protocol.PROTOCOL_VERSION
-              and math.isclose(info.torque_limit_nm, rod.torque_limit_nm, rel_tol=1e-5)
-              and math.isclose(info.state_rate_hz, expected_rate, rel_tol=1e-6) and info.watchdog_s <= 0.1 + 1e-9)
-        checks["handshake"] = {"passed": bool(ok), "detail": (
-            f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit {info.torque_limit_nm:g} "
-            f"N m (rod {rod.torque_limit_nm:g}), {info.state_rate_hz:g} states/s (host {expected_rate:g}), watchdog "
-            f"{info.watchdog_s * 1e3:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms")}
+        ok = (
+            info.protocol_version == protocol.PROTOCOL_VERSION
+            and math.isclose(info.torque_limit_nm, rod.torque_limit_nm, rel_tol=1e-5)
+            and math.isclose(info.state_rate_hz, expected_rate, rel_tol=1e-6)
+            and info.watchdog_s <= 0.1 + 1e-9
+        )
+        checks["handshake"] = {
+            "passed": bool(ok),
+            "detail": (
+                f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit {info.torque_limit_nm:g} "
+                f"N m (rod {rod.torque_limit_nm:g}), {info.state_rate_hz:g} states/s (host {expected_rate:g}), watchdog "
+                f"{info.watchdog_s * 1e3:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms"
+            ),
+        }
         tick = 2 * math.pi / info.counts_per_rev
 
         link.drain_states()
@@ -187,10 +219,16 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         period = float(np.median(np.diff(device_t))) if len(rest) > 2 else math.nan
         offset = float(np.mean(phi) - math.pi) if len(phi) else math.nan
         spread_ticks = float((phi.max() - phi.min()) / tick) if len(phi) else math.nan
-        ok = (len(rest) > 2 and abs(period * expected_rate - 1) < 0.1 and abs(offset) <= 0.05 and spread_ticks <= 3)
-        checks["rest"] = {"passed": bool(ok), "detail": (
-            f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
-            f"spread {spread_ticks:.0f} ticks"), "offset_rad": offset, "spread_ticks": spread_ticks}
+        ok = len(rest) > 2 and abs(period * expected_rate - 1) < 0.1 and abs(offset) <= 0.05 and spread_ticks <= 3
+        checks["rest"] = {
+            "passed": bool(ok),
+            "detail": (
+                f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
+                f"spread {spread_ticks:.0f} ticks"
+            ),
+            "offset_rad": offset,
+            "spread_ticks": spread_ticks,
+        }
 
         push = push_fraction * rod.torque_limit_nm
         start_phi = phi[-1] if len(phi) else math.pi
@@ -198,9 +236,14 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         delta = (moved[-1].phi_rad - start_phi) if moved else math.nan
         applied = max((s.applied_torque_nm for s in moved), default=math.nan)
         _hold_torque(link, 0.0, 1.0)  # let the swing settle, feeding the watchdog with zero torque
-        checks["direction"] = {"passed": bool(delta > tick and math.isclose(applied, push, rel_tol=1e-3)), "detail": (
-            f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
-            f"applied {applied:+.3g} N m"), "delta_rad": delta}
+        checks["direction"] = {
+            "passed": bool(delta > tick and math.isclose(applied, push, rel_tol=1e-3)),
+            "detail": (
+                f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
+                f"applied {applied:+.3g} N m"
+            ),
+            "delta_rad": delta,
+        }
 
         last_seq = link.send_torque(0.0)
         silence = _states_for(link, 3 * info.watchdog_s + 0.2)
@@ -211,15 +254,29 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         zero = bool(tripped) and all(s.applied_torque_nm == 0.0 for s in tripped)
         slack_ms = WATCHDOG_SLACK_STATES * 1e3 / info.state_rate_hz
         ok = zero and info.watchdog_s * 1e3 - slack_ms <= trip_ms <= info.watchdog_s * 1e3 + slack_ms
-        checks["watchdog"] = {"passed": bool(ok), "detail": (
-            f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog "
-            f"{info.watchdog_s * 1e3:g} ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} "
-            f"after the trip"), "trip_ms": trip_ms}
+        checks["watchdog"] = {
+            "passed": bool(ok),
+            "detail": (
+                f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog "
+                f"{info.watchdog_s * 1e3:g} ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} "
+                f"after the trip"
+            ),
+            "trip_ms": trip_ms,
+        }
         link.stop()
-    return {"port": port, "device": {"protocol_version": info.protocol_version, "counts_per_rev": info.counts_per_rev,
-                                     "torque_limit_nm": info.torque_limit_nm, "watchdog_s": info.watchdog_s,
-                                     "state_rate_hz": info.state_rate_hz},
-            "round_trip_ms": rtt * 1e3, "checks": checks, "passed": all(c["passed"] for c in checks.values())}
+    return {
+        "port": port,
+        "device": {
+            "protocol_version": info.protocol_version,
+            "counts_per_rev": info.counts_per_rev,
+            "torque_limit_nm": info.torque_limit_nm,
+            "watchdog_s": info.watchdog_s,
+            "state_rate_hz": info.state_rate_hz,
+        },
+        "round_trip_ms": rtt * 1e3,
+        "checks": checks,
+        "passed": all(c["passed"] for c in checks.values()),
+    }
 
 
 def _states_for(link, duration_s: float) -> list:
@@ -252,11 +309,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     outputs = Outputs()  # before the work: the calibration and its report
     out = outputs.file(args.out, what="--out")
-    report_path = outputs.file(out.with_name(out.stem + ".report.json") if out.suffix else
-                               out.with_name(out.name + ".report.json"), what="the calibration report")
+    report_path = outputs.file(
+        out.with_name(out.stem + ".report.json") if out.suffix else out.with_name(out.name + ".report.json"),
+        what="the calibration report",
+    )
 
     text = args.markers
-    raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+    raw = (
+        json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+    )
     markers = points_array("--markers", raw, 3, 6)
     params = _rod(args)
     frame = _twin_frame(params, markers, args.seed) if args.twin else _grab_frame(args.camera)
@@ -271,13 +332,23 @@ def run_calibrate(args: argparse.Namespace) -> int:
     residual_px = calibration.residual_rms_m / calibration.metres_per_pixel
     passed = residual_px <= CALIBRATION_MAX_RESIDUAL_PX and error <= HANGING_TIP_TOLERANCE_M
     outputs.write_text(out, calibration.to_json())
-    report = {"calibration": str(out), "residual_px": residual_px, "residual_m": calibration.residual_rms_m,
-              "px_per_m": 1.0 / calibration.metres_per_pixel, "hub_px": calibration.to_pixels(np.zeros(2)).tolist(),
-              "tip_m": tip, "expected_tip_m": expected.tolist(), "tip_error_m": error, "passed": bool(passed)}
+    report = {
+        "calibration": str(out),
+        "residual_px": residual_px,
+        "residual_m": calibration.residual_rms_m,
+        "px_per_m": 1.0 / calibration.metres_per_pixel,
+        "hub_px": calibration.to_pixels(np.zeros(2)).tolist(),
+        "tip_m": tip,
+        "expected_tip_m": expected.tolist(),
+        "tip_error_m": error,
+        "passed": bool(passed),
+    }
     outputs.write_json(report_path, finite_or_none(report))
-    print(f"{'ok  ' if passed else 'FAIL'} markers fit to {residual_px:.3f} px RMS (at most {CALIBRATION_MAX_RESIDUAL_PX:g}), "
-          f"{report['px_per_m']:.1f} px/m; hanging tip {error * 1e3:.2f} mm from the design's (at most "
-          f"{HANGING_TIP_TOLERANCE_M * 1e3:g}) -> {out}")
+    print(
+        f"{'ok  ' if passed else 'FAIL'} markers fit to {residual_px:.3f} px RMS (at most {CALIBRATION_MAX_RESIDUAL_PX:g}), "
+        f"{report['px_per_m']:.1f} px/m; hanging tip {error * 1e3:.2f} mm from the design's (at most "
+        f"{HANGING_TIP_TOLERANCE_M * 1e3:g}) -> {out}"
+    )
     return 0 if passed else 1
 
 
@@ -298,7 +369,7 @@ def _twin_frame(params, markers, seed: int):
     q, _ = plant.hanging_state()
     points = plant.link_points_m(q)
     times = np.array([0.0, 1.0])
-    (frame, _), = camera.frames(times, np.stack([points, points]), times[1:], np.array([q[0], q[0]]))
+    ((frame, _),) = camera.frames(times, np.stack([points, points]), times[1:], np.array([q[0], q[0]]))
     return frame
 
 
@@ -347,8 +418,14 @@ def run_babble(args: argparse.Namespace) -> int:
         raise ValueError("--camera, --markers and --calibration are for --port; the twin films itself")
     if args.port and not args.camera:
         raise ValueError("--port needs --camera (index, URL or video file)")
-    check_numbers(args, {"--duration": (1e-3, MAX_SESSION_S), "--trial-length-s": (0.1, MAX_SESSION_S),
-                         "--camera-latency-ms": (0.0, 1000.0)})  # before anything starts
+    check_numbers(
+        args,
+        {
+            "--duration": (1e-3, MAX_SESSION_S),
+            "--trial-length-s": (0.1, MAX_SESSION_S),
+            "--camera-latency-ms": (0.0, 1000.0),
+        },
+    )  # before anything starts
     if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
         raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
     outputs = Outputs()  # before the work: no file of these names that an earlier run did not write
@@ -356,20 +433,37 @@ def run_babble(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     if args.twin:
         rig = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed)
-        session = run_twin_session(out, duration_s=args.duration, seed=args.seed, rig=rig,
-                                   trial_length_s=args.trial_length_s, progress=progress, outputs=outputs)
+        session = run_twin_session(
+            out,
+            duration_s=args.duration,
+            seed=args.seed,
+            rig=rig,
+            trial_length_s=args.trial_length_s,
+            progress=progress,
+            outputs=outputs,
+        )
         loop, sync, dataset = session.loop, session.sync, session.dataset
         extra = {"true_clock_offset_s": session.true_clock_offset_s}
     else:
         loop, sync, dataset = _babble_on_port(args, out, progress, outputs)
         extra = {}
-    summary: dict[str, Any] = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials, "samples": loop.samples,
-               "dropped_states": loop.dropped_states, "jitter_ms_p95": loop.jitter_ms_p95,
-               "clock_offset_s": sync.offset.offset_s, "peak_correlation": sync.offset.peak_correlation,
-               "gaps": len(sync.gaps), "grid_valid_fraction": sync.grid_valid_fraction, **extra}
+    summary: dict[str, Any] = {
+        "dataset": str(out / "rig_dataset.npz"),
+        "n_trials": dataset.n_trials,
+        "samples": loop.samples,
+        "dropped_states": loop.dropped_states,
+        "jitter_ms_p95": loop.jitter_ms_p95,
+        "clock_offset_s": sync.offset.offset_s,
+        "peak_correlation": sync.offset.peak_correlation,
+        "gaps": len(sync.gaps),
+        "grid_valid_fraction": sync.grid_valid_fraction,
+        **extra,
+    }
     outputs.write_json(out / "summary.json", finite_or_none(summary))
-    print(f"{summary['n_trials']} trials x {args.trial_length_s:g} s, clock offset {summary['clock_offset_s'] * 1e3:.1f} ms "
-          f"(correlation {summary['peak_correlation']:.3f}), {summary['gaps']} gaps -> {summary['dataset']}")
+    print(
+        f"{summary['n_trials']} trials x {args.trial_length_s:g} s, clock offset {summary['clock_offset_s'] * 1e3:.1f} ms "
+        f"(correlation {summary['peak_correlation']:.3f}), {summary['gaps']} gaps -> {summary['dataset']}"
+    )
     return 0
 
 
@@ -397,11 +491,18 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     markers = DEFAULT_MARKERS_M
     if args.markers:
         text = args.markers
-        raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+        raw = (
+            json.loads(text)
+            if text.lstrip().startswith("[")
+            else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+        )
         markers = points_array("--markers", raw, 3, 6).tolist()
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
-    source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0,
-                             frame_tracker=FrameTracker(calibration=calibration, markers_m=markers))
+    source = open_tip_source(
+        args.camera,
+        latency_s=args.camera_latency_ms / 1000.0,
+        frame_tracker=FrameTracker(calibration=calibration, markers_m=markers),
+    )
     camera_csv, motor_log = out / "camera.csv", out / "motor_log.csv"
     failure: list[BaseException] = []
 
@@ -416,14 +517,22 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     thread.start()
     time.sleep(1.0)  # the camera runs before the first torque, so the start-up wiggle is filmed whole
     controller = rig_babble_controller(args.duration, params.torque_limit_nm, args.seed)
-    with MotorLink(args.port, torque_limit_nm=params.torque_limit_nm) as link, \
-            SampleLog(motor_log, LOOP_LOG_COLUMNS, metadata={"port": args.port}) as log:
+    with (
+        MotorLink(args.port, torque_limit_nm=params.torque_limit_nm) as link,
+        SampleLog(motor_log, LOOP_LOG_COLUMNS, metadata={"port": args.port}) as log,
+    ):
         loop = run_control_loop(link, controller, args.duration, log=log, progress=progress)
     thread.join()
     if failure:
         raise failure[0]
-    dataset, sync = build_rig_dataset(motor_log, camera_csv, out / "rig_dataset.npz", params=params,
-                                      trial_length_s=args.trial_length_s, notes=f"rig babbling on {args.port}")
+    dataset, sync = build_rig_dataset(
+        motor_log,
+        camera_csv,
+        out / "rig_dataset.npz",
+        params=params,
+        trial_length_s=args.trial_length_s,
+        notes=f"rig babbling on {args.port}",
+    )
     for name in PORT_BABBLE_FILES:
         outputs.done(out / name)
     return loop, sync, dataset

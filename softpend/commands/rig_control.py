@@ -48,43 +48,75 @@ OPTION_RANGES: dict[str, tuple[float, float]] = {
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        "control", help="run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop",
-        description=__doc__.split("\n\n")[0])
-    parser.add_argument("controller", metavar="CONTROLLER",
-                        help=f"one of {', '.join(BUILTIN_CONTROLLERS)}, or a DQN/DQN-MBPO/PILCO run folder")
+        "control",
+        help="run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop",
+        description=__doc__.split("\n\n")[0],
+    )
+    parser.add_argument(
+        "controller",
+        metavar="CONTROLLER",
+        help=f"one of {', '.join(BUILTIN_CONTROLLERS)}, or a DQN/DQN-MBPO/PILCO run folder",
+    )
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
     target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for the logs and summary.json")
     parser.add_argument("--duration", type=float, default=10.0, help="run length [s] (default 10)")
-    parser.add_argument("--camera", metavar="CAMERA",
-                        help="with --port: camera index, stream URL or video file (cv2.VideoCapture)")
+    parser.add_argument(
+        "--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file (cv2.VideoCapture)"
+    )
     parser.add_argument("--no-camera", action="store_true", help="encoder and model only (no blindness limit)")
     parser.add_argument("--camera-fps", type=float, default=60.0, help="twin camera frame rate (default 60)")
-    parser.add_argument("--camera-latency-ms", type=float, default=20.0,
-                        help="camera latency, exposure end to host [ms] (default 20; with --camera: the "
-                             "measured latency of that camera)")
-    parser.add_argument("--camera-effects", choices=sorted(CAMERA_EFFECTS), default="rig",
-                        help="twin camera image imperfections: 'clean' (none), 'rig' (the nominal rig camera: "
-                             "mild noise, 4 ms blur, lighting drift; default) or 'noisy' (strong noise, 8 ms blur, "
-                             "lighting changes, clutter)")
+    parser.add_argument(
+        "--camera-latency-ms",
+        type=float,
+        default=20.0,
+        help="camera latency, exposure end to host [ms] (default 20; with --camera: the "
+        "measured latency of that camera)",
+    )
+    parser.add_argument(
+        "--camera-effects",
+        choices=sorted(CAMERA_EFFECTS),
+        default="rig",
+        help="twin camera image imperfections: 'clean' (none), 'rig' (the nominal rig camera: "
+        "mild noise, 4 ms blur, lighting drift; default) or 'noisy' (strong noise, 8 ms blur, "
+        "lighting changes, clutter)",
+    )
     parser.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
     parser.add_argument("--calibration", metavar="JSON", help="with --camera: a saved AffineCalibration")
-    parser.add_argument("--max-blind-ms", type=float, default=300.0,
-                        help="stop when the camera has not corrected the estimate for this long [ms] (300)")
-    parser.add_argument("--start", choices=("hanging", "upright"), default="hanging",
-                        help="twin: start hanging (default) or near upright (held until the first command)")
+    parser.add_argument(
+        "--max-blind-ms",
+        type=float,
+        default=300.0,
+        help="stop when the camera has not corrected the estimate for this long [ms] (300)",
+    )
+    parser.add_argument(
+        "--start",
+        choices=("hanging", "upright"),
+        default="hanging",
+        help="twin: start hanging (default) or near upright (held until the first command)",
+    )
     parser.add_argument("--tilt", type=float, default=0.1, help="twin, --start upright: initial tilt [rad] (0.1)")
-    parser.add_argument("--start-noise", type=float, default=0.05,
-                        help="twin: uniform start noise of the hub angle [rad] and rate [rad/s] (0.05)")
+    parser.add_argument(
+        "--start-noise",
+        type=float,
+        default=0.05,
+        help="twin: uniform start noise of the hub angle [rad] and rate [rad/s] (0.05)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="twin: seed of the start noise and the camera noise")
     parser.add_argument("--latency-ms", type=float, default=2.0, help="twin: one-way link latency [ms] (2)")
     parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (4096)")
-    parser.add_argument("--n-links", type=int, default=None,
-                        help="PRB links of the model (default: the run folder's, else 4)")
+    parser.add_argument(
+        "--n-links", type=int, default=None, help="PRB links of the model (default: the run folder's, else 4)"
+    )
     parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
-    parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"),
-                        help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)")
+    parser.add_argument(
+        "--pid-gains",
+        type=float,
+        nargs=3,
+        metavar=("KP", "KI", "KD"),
+        help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)
@@ -113,8 +145,9 @@ def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tu
             gains = PIDGains(*pid_gains)
         return PIDController(gains, dt_s=dt, torque_limit_nm=rod.torque_limit_nm), task, f"PID {gains}"
     if not Path(spec).exists():
-        raise ValueError(f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; "
-                         f"{spec!r} is neither")
+        raise ValueError(
+            f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; {spec!r} is neither"
+        )
     from softpend.study.rig_runs import learned_controller
 
     return learned_controller(spec, which)
@@ -147,37 +180,67 @@ def run(args: argparse.Namespace) -> int:
     estimator_config = EstimatorConfig(counts_per_rev=args.counts_per_rev, max_blind_s=args.max_blind_ms / 1000.0)
     progress = not args.no_progress
     if args.twin:
-        rig = RigConfig(task=task, counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0,
-                        seed=args.seed, initial_tilt_rad=args.tilt if args.start == "upright" else None,
-                        hold_until_commanded=args.start == "upright")
+        rig = RigConfig(
+            task=task,
+            counts_per_rev=args.counts_per_rev,
+            latency_s=args.latency_ms / 1000.0,
+            seed=args.seed,
+            initial_tilt_rad=args.tilt if args.start == "upright" else None,
+            hold_until_commanded=args.start == "upright",
+        )
         maker = CAMERA_EFFECTS[args.camera_effects]
         effects = getattr(CameraEffects, maker)() if maker else CameraEffects()
-        camera = None if args.no_camera else TwinCamera(fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0,
-                                                        effects=effects, seed=args.seed)
+        camera = (
+            None
+            if args.no_camera
+            else TwinCamera(
+                fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0, effects=effects, seed=args.seed
+            )
+        )
         # the first frame arrives after the camera's latency and one frame period: wait for it, with room
         wait_s = 1.0 + args.camera_latency_ms / 1000.0 + 2.0 / args.camera_fps
-        outcome = run_twin_control(controller, out, args.duration, rig=rig, camera=camera,
-                                   estimator_config=estimator_config, progress=progress, outputs=outputs,
-                                   camera_wait_s=wait_s)
-        summary = {"controller": label, "target": "twin", **outcome.result.summary(),
-                   "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
-                   "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
-                   "emulator": outcome.emulator_stats}
+        outcome = run_twin_control(
+            controller,
+            out,
+            args.duration,
+            rig=rig,
+            camera=camera,
+            estimator_config=estimator_config,
+            progress=progress,
+            outputs=outputs,
+            camera_wait_s=wait_s,
+        )
+        summary = {
+            "controller": label,
+            "target": "twin",
+            **outcome.result.summary(),
+            "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
+            "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
+            "emulator": outcome.emulator_stats,
+        }
     else:
-        summary = {"controller": label, "target": args.port,
-                   **_run_on_port(args, controller, task, estimator_config, out, progress, outputs)}
+        summary = {
+            "controller": label,
+            "target": args.port,
+            **_run_on_port(args, controller, task, estimator_config, out, progress, outputs),
+        }
         summary["torque_chatter_nm_per_s"] = torque_chatter_nm_per_s(out / "motor_log.csv")
     outputs.write_json(out / "summary.json", summary)
     if args.json:
         print(json_text(summary, indent=2))
     else:
-        print(f"{label}: {summary['samples']} samples over {summary['duration_s']:.2f} s, "
-              f"{'stopped: ' + summary['stop_reason'] if summary['stop_reason'] else 'completed'}; "
-              + ("" if args.twin else f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; ") + f"logs in {out}")
+        print(
+            f"{label}: {summary['samples']} samples over {summary['duration_s']:.2f} s, "
+            f"{'stopped: ' + summary['stop_reason'] if summary['stop_reason'] else 'completed'}; "
+            + ("" if args.twin else f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; ")
+            + f"logs in {out}"
+        )
         truth = summary.get("truth") or {}
         if truth:
-            print(f"truth: swing-up {truth['swing_up_time_s']:.2f} s, upright std {truth['upright_std_rad']:.3f} rad, "
-                  f"peak torque {truth['peak_torque_nm']:.3f} N m, success {truth['success']}")
+            print(
+                f"truth: swing-up {truth['swing_up_time_s']:.2f} s, upright std {truth['upright_std_rad']:.3f} rad, "
+                f"peak torque {truth['peak_torque_nm']:.3f} N m, success {truth['success']}"
+            )
     return 0 if summary["stop_reason"] is None else 1
 
 
@@ -200,22 +263,38 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
         markers = DEFAULT_MARKERS_M
         if args.markers:
             text = args.markers
-            raw = json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text,
-                                                                                         MAX_CALIBRATION_BYTES)
+            raw = (
+                json.loads(text)
+                if text.lstrip().startswith("[")
+                else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+            )
             markers = points_array("--markers", raw, 3, 6).tolist()
         calibration = AffineCalibration.load(args.calibration) if args.calibration else None
-        source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0,
-                                 frame_tracker=FrameTracker(calibration=calibration, markers_m=markers))
+        source = open_tip_source(
+            args.camera,
+            latency_s=args.camera_latency_ms / 1000.0,
+            frame_tracker=FrameTracker(calibration=calibration, markers_m=markers),
+        )
     metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
     logs = [outputs.live(out / name) for name in PORT_CONTROL_FILES[:2]]
     try:
         if source is not None:
             source.start()
-        with MotorLink(args.port, torque_limit_nm=task.torque_limit_nm) as link, \
-                SampleLog(out / "motor_log.csv", rig_control_columns(estimator.n), metadata=metadata) as log, \
-                SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
-            result = run_closed_loop(link, controller, estimator, args.duration, tip_source=source, log=log,
-                                     camera_log=camera_log, progress=progress)
+        with (
+            MotorLink(args.port, torque_limit_nm=task.torque_limit_nm) as link,
+            SampleLog(out / "motor_log.csv", rig_control_columns(estimator.n), metadata=metadata) as log,
+            SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
+        ):
+            result = run_closed_loop(
+                link,
+                controller,
+                estimator,
+                args.duration,
+                tip_source=source,
+                log=log,
+                camera_log=camera_log,
+                progress=progress,
+            )
     finally:
         if source is not None:
             source.close()

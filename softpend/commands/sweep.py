@@ -41,8 +41,10 @@ def seed_list(text: str) -> list[int]:
         except ValueError:
             raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}") from None
         if high - low + 1 > MAX_SEEDS - len(seeds):  # refused by its size before a single seed is listed
-            raise argparse.ArgumentTypeError(f"seeds {text!r} name {high - low + 1 + len(seeds)} or more seeds, more "
-                                             f"than the {MAX_SEEDS} one sweep may train")
+            raise argparse.ArgumentTypeError(
+                f"seeds {text!r} name {high - low + 1 + len(seeds)} or more seeds, more "
+                f"than the {MAX_SEEDS} one sweep may train"
+            )
         seeds.update(range(low, high + 1))
     if not seeds or min(seeds) < 0:
         raise argparse.ArgumentTypeError(f"seeds must be 1 to {MAX_SEEDS} integers >= 0, got {text!r}")
@@ -63,24 +65,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.sweep import BACKENDS
 
     parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
-    parser.add_argument("--book", action="store_true",
-                        help="train the runs the book's notebooks read (for --profile), then stop; the other "
-                        "training options are not used")
-    parser.add_argument("--profile", default="full", help="with --book: the profile of book/profiles.yml (default full)")
+    parser.add_argument(
+        "--book",
+        action="store_true",
+        help="train the runs the book's notebooks read (for --profile), then stop; the other "
+        "training options are not used",
+    )
+    parser.add_argument(
+        "--profile", default="full", help="with --book: the profile of book/profiles.yml (default full)"
+    )
     parser.add_argument("--root", type=Path, default=Path("."), help="with --book: the project root (default .)")
     parser.add_argument("--methods", type=method_list, default=list(METHODS), help="comma-separated, default all")
     parser.add_argument("--seeds", type=seed_list, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
-    parser.add_argument("--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)")
-    parser.add_argument("--workers", type=int, default=None, help="parallel runs (default $SOFTPEND_WORKERS or the CPU count)")
+    parser.add_argument(
+        "--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=None, help="parallel runs (default $SOFTPEND_WORKERS or the CPU count)"
+    )
     parser.add_argument("--runs-root", type=Path, default=Path("runs/sweep"), help="run folders (default runs/sweep)")
     parser.add_argument("--episodes-dqn", type=int, default=None, help="DQN episodes per seed (default: the book's)")
-    parser.add_argument("--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)")
-    parser.add_argument("--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)")
-    for method, (cls, name, example) in {"dqn": ("DQNConfig", "DQN", "gradient_steps=4"),
-                                          "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
-                                          "pilco": ("PilcoConfig", "PILCO", "balance_within_rad=null")}.items():
-        add_set_option(parser, flag=f"--{method}-set", dest=f"{method}_overrides",
-                       help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})")
+    parser.add_argument(
+        "--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)"
+    )
+    parser.add_argument(
+        "--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)"
+    )
+    for method, (cls, name, example) in {
+        "dqn": ("DQNConfig", "DQN", "gradient_steps=4"),
+        "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
+        "pilco": ("PilcoConfig", "PILCO", "balance_within_rad=null"),
+    }.items():
+        add_set_option(
+            parser,
+            flag=f"--{method}-set",
+            dest=f"{method}_overrides",
+            help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})",
+        )
     parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 
@@ -101,45 +122,76 @@ def run(args: argparse.Namespace) -> int:
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers must be at least 1, got {args.workers}")
         record = train_book(args.root, args.profile, workers=args.workers, backend=args.backend)
-        print(f"[sweep] profile {args.profile!r}: trained {len(record['trained'])} of the book's runs in "
-              f"{record['seconds']:.0f} s ({record['workers']} workers)", file=sys.stderr)
+        print(
+            f"[sweep] profile {args.profile!r}: trained {len(record['trained'])} of the book's runs in "
+            f"{record['seconds']:.0f} s ({record['workers']} workers)",
+            file=sys.stderr,
+        )
         return 0
     root: Path = args.runs_root
     from softpend.commands.options import check_numbers
     from softpend.commands.train import MAX_EPISODES
 
     # before anything starts: every loop bounded (os.cpu_count() workers at most a thousandfold)
-    check_numbers(args, {"--episodes-dqn": (1, MAX_EPISODES), "--episodes-mbpo": (1, MAX_EPISODES),
-                         "--pilco-trials": (0, 10_000), "--workers": (1, 1024)})
+    check_numbers(
+        args,
+        {
+            "--episodes-dqn": (1, MAX_EPISODES),
+            "--episodes-mbpo": (1, MAX_EPISODES),
+            "--pilco-trials": (0, 10_000),
+            "--workers": (1, 1024),
+        },
+    )
     if root.exists() and not root.is_dir():
         raise ValueError(f"--runs-root {root} exists and is not a folder")
-    configs = {algo: apply_overrides(config, getattr(args, f"{algo}_overrides", None) or [])
-               for algo, config in figure_configs().items()}
+    configs = {
+        algo: apply_overrides(config, getattr(args, f"{algo}_overrides", None) or [])
+        for algo, config in figure_configs().items()
+    }
     episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
     rl_algos = [m for m in args.methods if m != "pilco"]
     config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
     config = apply_overrides(config, getattr(args, "pilco_overrides", None) or [])
     # every method's runs in one pool; the per-method calls below then find them finished
-    train_in_one_pool([(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos], root,
-                      config if "pilco" in args.methods else None, args.seeds, root, workers=args.workers,
-                      backend=args.backend)
+    train_in_one_pool(
+        [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos],
+        root,
+        config if "pilco" in args.methods else None,
+        args.seeds,
+        root,
+        workers=args.workers,
+        backend=args.backend,
+    )
     out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
     rl_logs = {}
     for algo in rl_algos:
-        logs = train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, workers=args.workers,
-                           backend=args.backend)
+        logs = train_seeds(
+            algo, configs[algo], args.seeds, episodes[algo], root, workers=args.workers, backend=args.backend
+        )
         rl_logs[algo] = logs
-        out["methods"][algo] = {"episodes": episodes[algo],
-                                "runs": summary_table({algo: logs})}
+        out["methods"][algo] = {"episodes": episodes[algo], "runs": summary_table({algo: logs})}
     pilco_results = []
     if "pilco" in args.methods:
         pilco_results = pilco_runs(config, args.seeds, root, workers=args.workers, backend=args.backend)
-        out["methods"]["pilco"] = {"runs": [{"seed": r.config.seed, "plant_s_to_balance": r.real_seconds_to_balance,
-                                             "plant_s": r.plant_seconds_total, "cpu_s": r.train_cpu_s}
-                                            for r in pilco_results]}
+        out["methods"]["pilco"] = {
+            "runs": [
+                {
+                    "seed": r.config.seed,
+                    "plant_s_to_balance": r.real_seconds_to_balance,
+                    "plant_s": r.plant_seconds_total,
+                    "cpu_s": r.train_cpu_s,
+                }
+                for r in pilco_results
+            ]
+        }
     if args.fresh:
-        from softpend.study.fresh_starts import (aggregate_fresh_start_rows, headline_figures, pilco_fresh_start_rows,
-                                                 rl_fresh_start_rows, seed_rows)
+        from softpend.study.fresh_starts import (
+            aggregate_fresh_start_rows,
+            headline_figures,
+            pilco_fresh_start_rows,
+            rl_fresh_start_rows,
+            seed_rows,
+        )
 
         rows = pilco_fresh_start_rows(pilco_results) if pilco_results else []
         if rl_logs:

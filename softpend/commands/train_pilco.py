@@ -51,9 +51,15 @@ def train_pilco_from_args(args: argparse.Namespace) -> int:
     check_output_folder(args.out, what="run folder", owned=lambda folder: (folder / "pilco.json").is_file())
     if (Path(args.out) / "pilco.json").is_file():
         saved = read_json_object(Path(args.out) / "pilco.json", 10**8)
-        check_run_folder(args.out, saved.get("config") if saved else None,
-                         json.loads(json.dumps(config.to_dict(), default=float)), None, config.seed, resume=False,
-                         can_resume=False)
+        check_run_folder(
+            args.out,
+            saved.get("config") if saved else None,
+            json.loads(json.dumps(config.to_dict(), default=float)),
+            None,
+            config.seed,
+            resume=False,
+            can_resume=False,
+        )
     result = run_pilco(config, progress=not getattr(args, "no_progress", False))
     out = result.save(Path(args.out))
     balance = result.real_seconds_to_balance

@@ -10,7 +10,6 @@ from typing import Any, TypeVar
 from softpend.io.outputs import json_text
 from softpend.io.overrides import apply_overrides
 from softpend.rl.config import DQNConfig
-
 from softpend.study.presets import RL_EPISODES, load_hparams
 
 __all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
@@ -55,8 +54,12 @@ def _train(algo: str, args: argparse.Namespace) -> int:
     episodes = args.episodes if args.episodes is not None else RL_EPISODES[algo]
     train = train_dqn if algo == "dqn" else train_mbpo
     if args.resume and not (Path(args.out) / "config.json").is_file():  # a mistyped --out would start a new run
-        raise ValueError(f"--resume: {args.out} holds no run to resume (no config.json); leave out --resume to start one")
-    _, log = train(config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress)
+        raise ValueError(
+            f"--resume: {args.out} holds no run to resume (no config.json); leave out --resume to start one"
+        )
+    _, log = train(
+        config, seed=args.seed, episodes=episodes, run_dir=args.out, resume=args.resume, progress=not args.no_progress
+    )
     print(json_text(_summary(log), indent=2))
     print(f"saved {args.out}/agent.zip")
     return 0

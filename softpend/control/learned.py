@@ -23,9 +23,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
 from softpend.control.linearise import LinearModel
 from softpend.control.lqr import LQRController, LQRWeights, design_lqr, output_weight_matrix
+from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
 
 __all__ = [
     "LearnedStateTracker",
@@ -54,8 +54,9 @@ def upright_state_vector(model: Any, params: RodParams) -> np.ndarray:
         raise ValueError(f"model state entry {exc} is not an observed variable") from exc
 
 
-def linearise_learned_model(model: Any, params: Optional[RodParams] = None, state: Optional[np.ndarray] = None,
-                            torque_nm: float = 0.0) -> LinearModel:
+def linearise_learned_model(
+    model: Any, params: Optional[RodParams] = None, state: Optional[np.ndarray] = None, torque_nm: float = 0.0
+) -> LinearModel:
     """Jacobians ``A = d f / d x``, ``B = d f / d tau`` of the learned one-step map at upright (autograd).
 
     Parameters
@@ -85,8 +86,12 @@ def linearise_learned_model(model: Any, params: Optional[RodParams] = None, stat
     x = torch.as_tensor(x0, dtype=torch.float64)
     u = torch.tensor([float(torque_nm)], dtype=torch.float64)
     a, b = torch.autograd.functional.jacobian(step, (x, u))
-    return LinearModel(a=a.detach().numpy(), b=b.detach().numpy().reshape(-1, 1), dt_s=float(model.dt_s),
-                       state_names=tuple(model.layout.names))
+    return LinearModel(
+        a=a.detach().numpy(),
+        b=b.detach().numpy().reshape(-1, 1),
+        dt_s=float(model.dt_s),
+        state_names=tuple(model.layout.names),
+    )
 
 
 def _output_map(names: tuple[str, ...], params: RodParams) -> np.ndarray:
@@ -152,9 +157,18 @@ class LearnedStateTracker:
 class _TrackedLQR(LQRController):
     """LQR whose state tracker must be reset with the controller."""
 
-    def __init__(self, gain: np.ndarray, torque_limit_nm: float, *, tracker: LearnedStateTracker,
-                 upright: np.ndarray, model: LinearModel, name: str, design_model: LinearModel,
-                 design_gain: np.ndarray) -> None:
+    def __init__(
+        self,
+        gain: np.ndarray,
+        torque_limit_nm: float,
+        *,
+        tracker: LearnedStateTracker,
+        upright: np.ndarray,
+        model: LinearModel,
+        name: str,
+        design_model: LinearModel,
+        design_gain: np.ndarray,
+    ) -> None:
         self.tracker = tracker
         self.upright = upright
         #: the (possibly reduced) model the Riccati equation was solved on, and the gain on its state
@@ -175,7 +189,9 @@ def reduced_coordinate_names(names: tuple[str, ...]) -> tuple[str, ...]:
     return ("phi_rad", "theta_rad", "er_rad") if "er_rad" in names else ("phi_rad", "theta_rad")
 
 
-def reduction_matrices(names: tuple[str, ...], params: RodParams, dt_s: float) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+def reduction_matrices(
+    names: tuple[str, ...], params: RodParams, dt_s: float
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Maps between the learned model's state ``x`` and ``z = [angles, rates]`` about upright.
 
     The angles are :func:`reduced_coordinate_names`.  ``P`` embeds ``z`` to first order: ``ex = -L theta``,
@@ -272,9 +288,16 @@ def lqr_from_learned_model(
         output_map = _output_map(model_lin.state_names, params)
     q = output_weight_matrix(output_map, weights)
     design_gain = design_lqr(design, q, weights.r)
-    return _TrackedLQR(design_gain @ select, limit, model=model_lin, name="LQR (learned model)",
-                       tracker=LearnedStateTracker(model), upright=upright_state_vector(model, params),
-                       design_model=design, design_gain=design_gain)
+    return _TrackedLQR(
+        design_gain @ select,
+        limit,
+        model=model_lin,
+        name="LQR (learned model)",
+        tracker=LearnedStateTracker(model),
+        upright=upright_state_vector(model, params),
+        design_model=design,
+        design_gain=design_gain,
+    )
 
 
 def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
@@ -301,7 +324,11 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
         for angle in ("theta_rad", "er_rad"):
             rate = angle.replace("_rad", "_dot_rad_s")
             if rate not in v:
-                v[rate] = 0.0 if previous is None else ((v[angle] - previous[angle] + math.pi) % (2 * math.pi) - math.pi) / dt_s
+                v[rate] = (
+                    0.0
+                    if previous is None
+                    else ((v[angle] - previous[angle] + math.pi) % (2 * math.pi) - math.pi) / dt_s
+                )
         observation = Observation(*[v[name] for name in OBSERVATION_NAMES])
         return observation, v
 
@@ -321,8 +348,15 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
             for k in range(n_steps):
                 torque = min(max(float(controller(observation, None, None, k * dt_s)), -limit), limit)
                 torques[k] = torque
-                x = net.predict_next(torch.as_tensor(x, dtype=torch.float32).reshape(1, -1),
-                                     torch.tensor([torque], dtype=torch.float32)).reshape(-1).double().numpy()
+                x = (
+                    net.predict_next(
+                        torch.as_tensor(x, dtype=torch.float32).reshape(1, -1),
+                        torch.tensor([torque], dtype=torch.float32),
+                    )
+                    .reshape(-1)
+                    .double()
+                    .numpy()
+                )
                 if not np.all(np.isfinite(x)):
                     thetas[k + 1 :] = np.nan
                     break

@@ -254,7 +254,9 @@ def linearise_step_map(
     return LinearModel(a=a, b=b.reshape(-1, 1), dt_s=float(dt_s), state_names=names)
 
 
-def observation_coordinates_matrix(params: RodParams, names: Sequence[str] = OBSERVATION_COORDINATE_NAMES) -> np.ndarray:
+def observation_coordinates_matrix(
+    params: RodParams, names: Sequence[str] = OBSERVATION_COORDINATE_NAMES
+) -> np.ndarray:
     """Linear map ``y = C q`` from joint angles to observed angles about upright.
 
     At upright the link angles ``a_i = phi + q_1 + ... + q_i`` are small, the tip angle is the mean link

@@ -29,7 +29,6 @@ from typing import Callable, Optional
 import numpy as np
 
 from softpend.checks import non_negative, positive
-from softpend.plant import Observation, RodParams, wrap_angle_rad
 from softpend.control.linearise import (
     LinearModel,
     discretise,
@@ -38,6 +37,7 @@ from softpend.control.linearise import (
     observation_coordinates_matrix,
     reduce_to_observation_coordinates,
 )
+from softpend.plant import Observation, RodParams, wrap_angle_rad
 
 __all__ = ["LQRController", "LQRWeights", "design_lqr", "output_weight_matrix"]
 
@@ -76,9 +76,10 @@ class LQRWeights:
 
     def output_weights(self) -> np.ndarray:
         """``diag(Q_y)`` for ``y = [theta, phi, theta_dot, phi_dot]``."""
-        return 1.0 / np.array(
-            [self.theta_max_rad, self.phi_max_rad, self.theta_dot_max_rad_s, self.phi_dot_max_rad_s]
-        ) ** 2
+        return (
+            1.0
+            / np.array([self.theta_max_rad, self.phi_max_rad, self.theta_dot_max_rad_s, self.phi_dot_max_rad_s]) ** 2
+        )
 
     @property
     def r(self) -> float:

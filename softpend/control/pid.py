@@ -204,20 +204,33 @@ def tune_pid(
 
     def cost(log_gains: np.ndarray) -> float:
         gains = PIDGains(*np.exp(np.clip(log_gains, -12, 6)))
-        controller = PIDController(gains, dt_s=dt_s, torque_limit_nm=torque_limit_nm,
-                                   derivative_filter_s=derivative_filter_s)
+        controller = PIDController(
+            gains, dt_s=dt_s, torque_limit_nm=torque_limit_nm, derivative_filter_s=derivative_filter_s
+        )
         bar.update(1)
         return pid_rollout_cost(controller, simulate, tilts_rad, duration_s, torque_weight)
 
     x0 = np.log(initial_gains.as_array())
     initial_cost = cost(x0)
     result = scipy.optimize.minimize(
-        cost, x0, method="Nelder-Mead",
-        options={"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + np.vstack([np.zeros(3), np.eye(3)])},
+        cost,
+        x0,
+        method="Nelder-Mead",
+        options={
+            "maxfev": int(max_evaluations),
+            "xatol": 1e-3,
+            "fatol": 1e-7,
+            "initial_simplex": x0 + np.vstack([np.zeros(3), np.eye(3)]),
+        },
     )
     bar.close()
     best = result.x if result.fun <= initial_cost else x0
-    return PIDTuningResult(PIDGains(*np.exp(np.clip(best, -12, 6))), float(min(result.fun, initial_cost)), initial_cost, int(result.nfev) + 1)
+    return PIDTuningResult(
+        PIDGains(*np.exp(np.clip(best, -12, 6))),
+        float(min(result.fun, initial_cost)),
+        initial_cost,
+        int(result.nfev) + 1,
+    )
 
 
 def plant_simulator(task: Optional[Task] = None) -> Simulator:
@@ -231,7 +244,11 @@ def plant_simulator(task: Optional[Task] = None) -> Simulator:
     def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
         run_task = base.replace(torque_limit_nm=controller.torque_limit_nm)
         result = evaluate_controller(
-            controller, run_task, seeds=(0,), duration_s=duration_s, initial_state=run_task.tilt_state(tilt_rad),
+            controller,
+            run_task,
+            seeds=(0,),
+            duration_s=duration_s,
+            initial_state=run_task.tilt_state(tilt_rad),
         ).results[0]
         theta = result.theta_rad if result.diverged is None else np.append(result.theta_rad, np.nan)
         return theta, result.torque_nm

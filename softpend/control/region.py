@@ -49,7 +49,11 @@ def recovers_from(
     ``duration_s``."""
     task = (task if task is not None else Task()).replace(start="upright")
     summary = evaluate_controller(
-        controller, task, seeds=(0,), duration_s=duration_s, initial_state=task.tilt_state(float(tilt_rad)),
+        controller,
+        task,
+        seeds=(0,),
+        duration_s=duration_s,
+        initial_state=task.tilt_state(float(tilt_rad)),
     )
     result = summary.results[0]
     if result.diverged is not None:

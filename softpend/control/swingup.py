@@ -35,8 +35,8 @@ from typing import Any, Optional
 import numpy as np
 
 from softpend.checks import finite, one_of, positive
-from softpend.plant import Observation, PRBPlant, RodParams
 from softpend.control.lqr import LQRController, LQRWeights
+from softpend.plant import Observation, PRBPlant, RodParams
 
 __all__ = ["EnergySwingUpController", "pendulum_energy_j"]
 
@@ -47,7 +47,9 @@ def pendulum_energy_j(params: RodParams, theta_rad: float, theta_dot_rad_s: floa
     ``E = I_O theta_dot^2 / 2 + g (m L/2 + m_tip L) (cos(theta) - 1)`` with
     ``I_O = J_hub + m L^2/3 + m_tip L^2``.
     """
-    inertia = params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
+    inertia = (
+        params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
+    )
     return 0.5 * inertia * theta_dot_rad_s**2 + params.gravity_torque_horizontal_nm * (math.cos(theta_rad) - 1.0)
 
 
@@ -110,8 +112,9 @@ class EnergySwingUpController:
         self.balance = (
             balance
             if balance is not None
-            else LQRController.from_params(self.params, dt_s=dt_s, state=lqr_state, weights=lqr_weights,
-                                           torque_limit_nm=self.torque_limit_nm)
+            else LQRController.from_params(
+                self.params, dt_s=dt_s, state=lqr_state, weights=lqr_weights, torque_limit_nm=self.torque_limit_nm
+            )
         )
         self.energy_source = energy_source
         self.energy_gain = float(energy_gain_per_j_rad_s)
@@ -128,12 +131,15 @@ class EnergySwingUpController:
         self.reset()
 
     @classmethod
-    def for_observations(cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs) -> "EnergySwingUpController":
+    def for_observations(
+        cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs
+    ) -> "EnergySwingUpController":
         """Plant-agnostic variant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin (any of
         which ``kwargs`` may override).  Uses only the report's observed variables, so it runs on any
         plant built from the same ``RodParams`` (e.g. the continuum beam)."""
-        options: dict[str, Any] = dict(lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0,
-                       energy_margin_j=0.02)
+        options: dict[str, Any] = dict(
+            lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0, energy_margin_j=0.02
+        )
         options.update(kwargs)
         return cls(params, dt_s=dt_s, **options)
 
@@ -147,7 +153,10 @@ class EnergySwingUpController:
     def energy_j(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
         """Energy relative to upright at rest [J] from the chosen source."""
         if self._design_plant is not None:
-            return self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"] - self._upright_energy_j
+            return (
+                self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"]
+                - self._upright_energy_j
+            )
         return pendulum_energy_j(self.params, observation.theta_rad, observation.theta_dot_rad_s)
 
     def pumping_torque_nm(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:

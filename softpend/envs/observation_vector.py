@@ -91,4 +91,3 @@ def observations_from_vector(vectors: np.ndarray, env: Any) -> np.ndarray:
     out[:, _I["ey_dot_m_s"]] = col["ey_dot_over_10L"] * length * v
     out[:, _I["er_dot_rad_s"]] = out[:, _I["theta_dot_rad_s"]]
     return out
-

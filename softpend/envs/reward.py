@@ -59,7 +59,9 @@ def shaping_reward(theta_rad: np.ndarray | float, clip_value: float = 50.0) -> n
     return float(value) if np.ndim(theta_rad) == 0 else value
 
 
-def next_bonus(theta_rad: np.ndarray | float, previous_bonus: np.ndarray | float, dt_s: float, params: RewardParams) -> np.ndarray | float:
+def next_bonus(
+    theta_rad: np.ndarray | float, previous_bonus: np.ndarray | float, dt_s: float, params: RewardParams
+) -> np.ndarray | float:
     """Bonus ``r*_t`` from the tip angle and the previous bonus (vectorised)."""
     inside = np.abs(theta_rad) < params.epsilon_rad
     value = np.where(inside, 1.0, np.asarray(previous_bonus, dtype=float) * math.exp(-params.bonus_decay_per_s * dt_s))

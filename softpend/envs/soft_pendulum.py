@@ -38,8 +38,13 @@ OBSERVATION_BOUND = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32
 STARTS = ("hanging", "upright", "random")
 
 
-def reset_options(options: Optional[dict[str, Any]], start: str, n_coordinates: int, num_envs: Optional[int] = None,
-                  extra: tuple[str, ...] = ()) -> tuple[str, Optional[tuple[np.ndarray, np.ndarray]]]:
+def reset_options(
+    options: Optional[dict[str, Any]],
+    start: str,
+    n_coordinates: int,
+    num_envs: Optional[int] = None,
+    extra: tuple[str, ...] = (),
+) -> tuple[str, Optional[tuple[np.ndarray, np.ndarray]]]:
     """The start kind and exact start state that ``reset``'s ``options`` ask for, as Gymnasium's pendulum reads its
     ``options``: ``"start"`` (one of :data:`STARTS`, default ``start``) and ``"q"``, ``"q_dot"`` (the exact joint
     state, shape ``(n_coordinates,)``, or ``(num_envs, n_coordinates)`` for a vector environment; ``q_dot`` zero

@@ -210,8 +210,9 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         return np.clip(a, -1.0, 1.0) * self._torque_limits
 
     # ------------------------------------------------------------------ resets
-    def _draw_starts(self, indices: np.ndarray, start: str,
-                     exact: Optional[tuple[np.ndarray, np.ndarray]] = None) -> None:
+    def _draw_starts(
+        self, indices: np.ndarray, start: str, exact: Optional[tuple[np.ndarray, np.ndarray]] = None
+    ) -> None:
         """New start states (and parameters) of the rods ``indices``, each from its own generator, in the
         single environment's order of draws; rows ``indices`` of ``exact`` replace the drawn states."""
         noise = self.start_noise_rad
@@ -314,8 +315,9 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             self._draw_starts(indices, self.start)
             reset_obs = self._observe()
             observations[indices] = reset_obs[indices]
-            self._bonus[indices] = next_bonus(reset_obs[indices, _THETA], np.zeros(len(indices)), self.dt_s,
-                                              self.reward_params)
+            self._bonus[indices] = next_bonus(
+                reset_obs[indices, _THETA], np.zeros(len(indices)), self.dt_s, self.reward_params
+            )
             reward[indices] = 0.0
             truncated[indices] = False
         self._autoreset = truncated | terminated
@@ -349,4 +351,3 @@ class SoftPendulumDiscreteVectorEnv(SoftPendulumVectorEnv):
         if a.min() < 0 or a.max() >= self.n_torque_levels:
             raise ValueError(f"actions must lie in [0, {self.n_torque_levels}), got {a.min()}..{a.max()}")
         return self._levels[a] * self._torque_limits
-

@@ -22,8 +22,8 @@ from typing import Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from softpend.plant import RodParams, make_plant
 from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
+from softpend.plant import RodParams, make_plant
 
 __all__ = [
     "SMALL_DEFLECTION_STIFFNESS_SCALE",
@@ -134,7 +134,9 @@ def convergence_table(
         tip = tip_trajectory_m(plant, params, torques, resolution=n)
         distance = np.linalg.norm(tip - beam_tip, axis=1) / params.length_m
         rows.append(
-            ConvergenceRow(plant, n, f1, f2, sag_small, sag_large, float(np.sqrt(np.mean(distance**2))), float(distance.max()))
+            ConvergenceRow(
+                plant, n, f1, f2, sag_small, sag_large, float(np.sqrt(np.mean(distance**2))), float(distance.max())
+            )
         )
     return rows
 

@@ -278,7 +278,9 @@ def measured_bending_frequencies(
     }
 
 
-def static_tip_sag(plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None) -> dict[str, float]:
+def static_tip_sag(
+    plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None
+) -> dict[str, float]:
     """Tip drop of the horizontally clamped rod under gravity from the plant's static solver.
 
     Returns

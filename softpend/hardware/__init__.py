@@ -4,6 +4,7 @@ clock; :mod:`~softpend.hardware.clock`), host control loops (open-loop programs 
 :mod:`~softpend.hardware.closed_loop` and :mod:`~softpend.hardware.estimator`), crash-safe logs, and time
 synchronisation of the motor and camera streams."""
 
+from softpend.hardware.clock import SimClock
 from softpend.hardware.driver import (
     DeviceError,
     DeviceInfo,
@@ -15,7 +16,6 @@ from softpend.hardware.driver import (
     MotorLink,
     MotorState,
 )
-from softpend.hardware.clock import SimClock
 from softpend.hardware.emulator import EmulatorProcess, RigConfig, RigEmulator, SimRig, start_emulator_process
 from softpend.io.samplelog import SampleLog, read_sample_log
 

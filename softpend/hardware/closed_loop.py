@@ -60,26 +60,48 @@ __all__ = [
 
 #: ``status`` column of the motor log: what the loop was doing when it wrote the row.
 STATUS_CODES: dict[str, int] = {
-    "arming": 0,        # waiting for the first camera correction (zero torque)
+    "arming": 0,  # waiting for the first camera correction (zero torque)
     "running": 1,
-    "completed": 2,     # the last sample of a run that lasted its duration
+    "completed": 2,  # the last sample of a run that lasted its duration
     "camera_blind": 3,  # safe stop: no camera correction for max_blind_s
-    "arm_timeout": 4,   # safe stop: the camera never corrected the estimate
-    "error": 5,         # an exception (controller, estimator, link, interrupt): STOP, then it propagates
+    "arm_timeout": 4,  # safe stop: the camera never corrected the estimate
+    "error": 5,  # an exception (controller, estimator, link, interrupt): STOP, then it propagates
 }
 
 #: Columns of the camera log.
 CAMERA_LOG_COLUMNS: tuple[str, ...] = (
-    "frame", "capture_host_time_s", "delivered_host_time_s", "polled_host_time_s", "capture_device_time_s",
-    "x_m", "y_m", "theta_rad", "lost", "accepted",
+    "frame",
+    "capture_host_time_s",
+    "delivered_host_time_s",
+    "polled_host_time_s",
+    "capture_device_time_s",
+    "x_m",
+    "y_m",
+    "theta_rad",
+    "lost",
+    "accepted",
 )
 
 
 def rig_control_columns(n_coordinates: int) -> list[str]:
     """Columns of the motor log of :func:`run_closed_loop` for a model with ``n_coordinates`` coordinates."""
     return (
-        ["host_time_s", "device_time_s", "time_s", "state_seq", "phi_rad", "phi_dot_rad_s", "applied_torque_nm",
-         "flags", "command_torque_nm", "commanded", "late_command", "camera_frames", "blind_s", "est_time_s"]
+        [
+            "host_time_s",
+            "device_time_s",
+            "time_s",
+            "state_seq",
+            "phi_rad",
+            "phi_dot_rad_s",
+            "applied_torque_nm",
+            "flags",
+            "command_torque_nm",
+            "commanded",
+            "late_command",
+            "camera_frames",
+            "blind_s",
+            "est_time_s",
+        ]
         + [f"est_{name}" for name in OBSERVATION_NAMES]
         + [f"est_q{i}_rad" for i in range(n_coordinates)]
         + [f"est_q{i}_dot_rad_s" for i in range(n_coordinates)]
@@ -138,10 +160,18 @@ class ClosedLoopResult:
     def summary(self) -> dict[str, Any]:
         """The figures as a JSON-ready dict."""
         return {
-            "samples": self.samples, "duration_s": self.duration_s, "stop_reason": self.stop_reason,
-            "status": self.status, "late_commands": self.late_commands, "dropped_states": self.dropped_states,
-            "bad_frames": self.bad_frames, "watchdog_trips": self.watchdog_trips, "blind_max_s": self.blind_max_s,
-            "armed_at_s": self.armed_at_s, "jitter_ms_p95": self.jitter_ms_p95, "camera": self.camera,
+            "samples": self.samples,
+            "duration_s": self.duration_s,
+            "stop_reason": self.stop_reason,
+            "status": self.status,
+            "late_commands": self.late_commands,
+            "dropped_states": self.dropped_states,
+            "bad_frames": self.bad_frames,
+            "watchdog_trips": self.watchdog_trips,
+            "blind_max_s": self.blind_max_s,
+            "armed_at_s": self.armed_at_s,
+            "jitter_ms_p95": self.jitter_ms_p95,
+            "camera": self.camera,
             "estimator": self.estimator,
         }
 
@@ -270,17 +300,30 @@ def run_closed_loop(
                     if newest and armed and tip_source is not None:
                         blind_max = max(blind_max, estimator.blind_s)
                         if estimator.is_blind:
-                            raise _SafeStop("camera_blind", f"no camera correction for {estimator.blind_s:.3f} s "
-                                            f"(max_blind_s {estimator.config.max_blind_s} s) at t = {t:.2f} s")
+                            raise _SafeStop(
+                                "camera_blind",
+                                f"no camera correction for {estimator.blind_s:.3f} s "
+                                f"(max_blind_s {estimator.config.max_blind_s} s) at t = {t:.2f} s",
+                            )
                     if newest and not armed and t > arm_timeout_s:
-                        raise _SafeStop("arm_timeout", f"the camera did not correct the estimate within "
-                                        f"arm_timeout_s = {arm_timeout_s} s")
+                        raise _SafeStop(
+                            "arm_timeout",
+                            f"the camera did not correct the estimate within arm_timeout_s = {arm_timeout_s} s",
+                        )
                     if newest:
                         estimate = estimator.estimate()
-                        estimate_values = ([estimate.time_s] + list(estimate.observation) + list(estimate.q)
-                                           + list(estimate.q_dot) + [estimate.tip_std_m])
-                        command = float(controller(estimate.observation, estimate.q, estimate.q_dot,
-                                                   estimate.time_s)) if armed else 0.0
+                        estimate_values = (
+                            [estimate.time_s]
+                            + list(estimate.observation)
+                            + list(estimate.q)
+                            + list(estimate.q_dot)
+                            + [estimate.tip_std_m]
+                        )
+                        command = (
+                            float(controller(estimate.observation, estimate.q, estimate.q_dot, estimate.time_s))
+                            if armed
+                            else 0.0
+                        )
                         expected_cmd_seq = link.send_torque(command)
                         send_times.append(link.clock.now_s())
                         commanded = int(armed)
@@ -296,8 +339,20 @@ def run_closed_loop(
                                 if accepted and not armed:
                                     armed, armed_at, status = True, t, "running"
                                 if camera_log is not None:
-                                    camera_log.append([m.frame, m.capture_time_s, m.delivered_time_s, polled, capture,
-                                                       m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
+                                    camera_log.append(
+                                        [
+                                            m.frame,
+                                            m.capture_time_s,
+                                            m.delivered_time_s,
+                                            polled,
+                                            capture,
+                                            m.x_m,
+                                            m.y_m,
+                                            m.theta_rad,
+                                            m.lost,
+                                            accepted,
+                                        ]
+                                    )
                     row_status = status
                 except _SafeStop as stop:
                     link.stop()
@@ -310,10 +365,23 @@ def run_closed_loop(
                 finally:
                     if newest and stop_reason is None and row_status != "error" and t >= duration_s:
                         row_status = "completed"
-                    row = [state.host_time_s, state.device_time_s, t, state.seq, state.phi_rad, state.phi_dot_rad_s,
-                           state.applied_torque_nm, state.flags, link.last_command_nm, commanded, late_flag, frames,
-                           estimator.blind_s if estimator.started else math.nan, *estimate_values,
-                           STATUS_CODES[row_status]]
+                    row = [
+                        state.host_time_s,
+                        state.device_time_s,
+                        t,
+                        state.seq,
+                        state.phi_rad,
+                        state.phi_dot_rad_s,
+                        state.applied_torque_nm,
+                        state.flags,
+                        link.last_command_nm,
+                        commanded,
+                        late_flag,
+                        frames,
+                        estimator.blind_s if estimator.started else math.nan,
+                        *estimate_values,
+                        STATUS_CODES[row_status],
+                    ]
                     if log is not None:
                         log.append(row)
                     if on_sample is not None:
@@ -323,8 +391,10 @@ def run_closed_loop(
                     break
             if bar.advance(t):
                 theta = estimate_values[2] if estimate_values is not nan_estimate else math.nan
-                bar.postfix(f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
-                            f"blind {estimator.blind_s * 1e3:.0f} ms")
+                bar.postfix(
+                    f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
+                    f"blind {estimator.blind_s * 1e3:.0f} ms"
+                )
             if stop_reason is not None or t >= duration_s:
                 break
     except BaseException:
@@ -339,9 +409,17 @@ def run_closed_loop(
         status = "completed"
     periods = np.diff(send_times)
     return ClosedLoopResult(
-        samples=samples, duration_s=t, stop_reason=stop_reason, status=status, command_periods_s=periods,
-        late_commands=late, dropped_states=dropped, bad_frames=link.bad_frames, watchdog_trips=watchdog,
-        blind_max_s=blind_max, armed_at_s=armed_at,
+        samples=samples,
+        duration_s=t,
+        stop_reason=stop_reason,
+        status=status,
+        command_periods_s=periods,
+        late_commands=late,
+        dropped_states=dropped,
+        bad_frames=link.bad_frames,
+        watchdog_trips=watchdog,
+        blind_max_s=blind_max,
+        armed_at_s=armed_at,
         camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
         estimator=estimator.stats(),
     )
@@ -428,11 +506,15 @@ def run_twin_control(
     paths = {name: workdir / name for name in TWIN_CONTROL_FILES}
     for name in TWIN_CONTROL_FILES[:3]:
         outputs.live(paths[name])
-    estimator = RigStateEstimator(rig.task, estimator_config if estimator_config is not None
-                                  else EstimatorConfig(counts_per_rev=rig.counts_per_rev))
-    metadata = {"rig": rig.to_dict(), "estimator": dataclasses.asdict(estimator.config),
-                "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s,
-                                                       "seed": camera.seed}}
+    estimator = RigStateEstimator(
+        rig.task,
+        estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev),
+    )
+    metadata = {
+        "rig": rig.to_dict(),
+        "estimator": dataclasses.asdict(estimator.config),
+        "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
+    }
     result: Optional[ClosedLoopResult] = None
     error: Optional[str] = None
     clock = SimClock()
@@ -440,20 +522,41 @@ def run_twin_control(
     source = None
     try:
         if camera is not None:
-            source = SyntheticLiveCamera(device.poses, clock, fps=camera.fps, latency_s=camera.latency_s,
-                                         effects=camera.effects, model=camera.model, faults=camera.faults,
-                                         seed=camera.seed, on_frame=on_frame)
+            source = SyntheticLiveCamera(
+                device.poses,
+                clock,
+                fps=camera.fps,
+                latency_s=camera.latency_s,
+                effects=camera.effects,
+                model=camera.model,
+                faults=camera.faults,
+                seed=camera.seed,
+                on_frame=on_frame,
+            )
             source.start()
             if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
-                raise ValueError(f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
-                                 "time: a camera latency near that, or a dot the tracker cannot find)")
+                raise ValueError(
+                    f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
+                    "time: a camera latency near that, or a dot the tracker cannot find)"
+                )
             source.poll()  # frames of the rod before the run (the calibration is fitted on the first)
-        with MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link, \
-                SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log, \
-                SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log:
+        with (
+            MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
+            SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log,
+            SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
+        ):
             try:
-                result = run_closed_loop(link, controller, estimator, duration_s, tip_source=source, log=log,
-                                         camera_log=camera_log, arm_timeout_s=arm_timeout_s, progress=progress)
+                result = run_closed_loop(
+                    link,
+                    controller,
+                    estimator,
+                    duration_s,
+                    tip_source=source,
+                    log=log,
+                    camera_log=camera_log,
+                    arm_timeout_s=arm_timeout_s,
+                    progress=progress,
+                )
             except Exception as exc:
                 error = f"{type(exc).__name__}: {exc}"
                 raise
@@ -467,5 +570,6 @@ def run_twin_control(
         device.close()
         for name in TWIN_CONTROL_FILES[:3]:
             outputs.done(paths[name])
-    return TwinControlRun(workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result,
-                          device.stats(), error)
+    return TwinControlRun(
+        workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result, device.stats(), error
+    )

@@ -298,8 +298,9 @@ class MotorLink:
         import serial
 
         try:
-            self._serial = self._transport or serial.Serial(self.port, self.baudrate, timeout=0,
-                                                            write_timeout=self.timeout_s)
+            self._serial = self._transport or serial.Serial(
+                self.port, self.baudrate, timeout=0, write_timeout=self.timeout_s
+            )
         except (serial.SerialException, OSError) as exc:
             raise LinkDisconnected(f"cannot open serial port {self.port!r}: {exc}") from exc
         _OPEN_LINKS.add(self)
@@ -485,7 +486,9 @@ class MotorLink:
         ser = self._serial
         if ser is None:
             return
-        acquired = self._write_lock.acquire(timeout=self.timeout_s) if wait else self._write_lock.acquire(blocking=False)
+        acquired = (
+            self._write_lock.acquire(timeout=self.timeout_s) if wait else self._write_lock.acquire(blocking=False)
+        )
         if not acquired:
             self._stop_pending = True
             return
@@ -528,12 +531,12 @@ class MotorLink:
                 raise self._fail(DeviceError(f"device {self.port!r} reported an error: {meaning}"))
         self._pending.extend(messages)
         if errors and self._decoder.consecutive_bad >= self.max_consecutive_bad_frames:
-                raise self._fail(
-                    LinkChecksumError(
-                        f"{self._decoder.consecutive_bad} consecutive bad frames from {self.port!r} "
-                        f"(last: {self._decoder.last_error}); motor stopped"
-                    )
+            raise self._fail(
+                LinkChecksumError(
+                    f"{self._decoder.consecutive_bad} consecutive bad frames from {self.port!r} "
+                    f"(last: {self._decoder.last_error}); motor stopped"
                 )
+            )
 
     def _pump_nonblocking(self) -> None:
         data = self._read_bytes(0.0)
@@ -560,9 +563,7 @@ class MotorLink:
             if remaining <= 0:
                 if last_look:
                     names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)
-                    raise self._fail(
-                        LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped")
-                    )
+                    raise self._fail(LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped"))
                 last_look, remaining = True, 0.0
             data = self._read_bytes(remaining)
             if data:
@@ -587,7 +588,7 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
     view = memoryview(frame)
     while view:
         try:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         except (BlockingIOError, InterruptedError):
             pass
         if view:  # the port's buffer is full: wait for room
@@ -595,7 +596,8 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
             if not writable:
                 raise serial.SerialTimeoutException(
                     f"write timeout: the port took no byte for {timeout_s:g} s ({len(view)} of {len(frame)} "
-                    "bytes unsent)")
+                    "bytes unsent)"
+                )
 
 
 def _error_meaning(code: int) -> str:
@@ -604,8 +606,10 @@ def _error_meaning(code: int) -> str:
     if meaning is None:
         return f"unknown error code {code} (not defined by protocol version {proto.PROTOCOL_VERSION})"
     if code == proto.ERR_VERSION:
-        meaning += (f"; the host speaks version {proto.PROTOCOL_VERSION}: flash firmware/vex_v5_motor.py from "
-                    "this package, or use the package version that matches the device")
+        meaning += (
+            f"; the host speaks version {proto.PROTOCOL_VERSION}: flash firmware/vex_v5_motor.py from "
+            "this package, or use the package version that matches the device"
+        )
     return meaning
 
 

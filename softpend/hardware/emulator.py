@@ -35,13 +35,20 @@ from typing import Optional
 import numpy as np
 
 from softpend.checks import finite, in_unit_interval, int_at_least, optional_positive
-from softpend.task import Task
 from softpend.hardware import protocol as proto
 from softpend.hardware.clock import SimClock, SimSerial
 from softpend.io.samplelog import SampleLog
+from softpend.task import Task
 
-__all__ = ["EmulatorProcess", "RigConfig", "RigDevice", "RigEmulator", "SimRig", "start_emulator_process",
-           "truth_columns"]
+__all__ = [
+    "EmulatorProcess",
+    "RigConfig",
+    "RigDevice",
+    "RigEmulator",
+    "SimRig",
+    "start_emulator_process",
+    "truth_columns",
+]
 
 
 @dataclass(frozen=True)
@@ -139,18 +146,22 @@ class RigDevice:
         self.config = cfg = config if config is not None else RigConfig()
         self.plant = cfg.task.make_plant()
         self._rng = np.random.default_rng(cfg.seed)
-        q, qd = self.plant.hanging_state() if cfg.initial_tilt_rad is None else cfg.task.tilt_state(cfg.initial_tilt_rad)
+        q, qd = (
+            self.plant.hanging_state() if cfg.initial_tilt_rad is None else cfg.task.tilt_state(cfg.initial_tilt_rad)
+        )
         noise = cfg.task.start_noise_rad
         q[0] += self._rng.uniform(-noise, noise)
         qd[0] += self._rng.uniform(-noise, noise)
         self.plant.reset(q, qd)
         self._phi0_rad = math.pi  # the encoder reads zero with the rod hanging, as on the rig
         self.session = proto.DeviceSession(
-            cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s)))
+            cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s))
+        )
         self._truth = None
         if truth_log is not None:
-            self._truth = SampleLog(truth_log, truth_columns(self.plant.n_coordinates),
-                                    metadata={"rig": cfg.to_dict()}, fsync_every_s=None)
+            self._truth = SampleLog(
+                truth_log, truth_columns(self.plant.n_coordinates), metadata={"rig": cfg.to_dict()}, fsync_every_s=None
+            )
         self._released = False
         self.ticks = self.states_sent = self.states_dropped = self.states_garbled = 0
 
@@ -197,8 +208,12 @@ class RigDevice:
             self._truth = None
 
     def stats(self) -> dict[str, float]:
-        return {"ticks": float(self.ticks), "states_sent": float(self.states_sent),
-                "states_dropped": float(self.states_dropped), "states_garbled": float(self.states_garbled)}
+        return {
+            "ticks": float(self.ticks),
+            "states_sent": float(self.states_sent),
+            "states_dropped": float(self.states_dropped),
+            "states_garbled": float(self.states_garbled),
+        }
 
 
 class SimRig(RigDevice):
@@ -210,8 +225,12 @@ class SimRig(RigDevice):
     clock's time (what the twin's camera films).
     """
 
-    def __init__(self, config: Optional[RigConfig] = None, clock: Optional[SimClock] = None,
-                 truth_log: Optional[str | os.PathLike] = None) -> None:
+    def __init__(
+        self,
+        config: Optional[RigConfig] = None,
+        clock: Optional[SimClock] = None,
+        truth_log: Optional[str | os.PathLike] = None,
+    ) -> None:
         from softpend.vision.tip_source import PoseHistory
 
         self.clock = clock if clock is not None else SimClock()
@@ -246,6 +265,7 @@ class SimRig(RigDevice):
         def arrive() -> None:
             for reply in self.session.receive(data, self._device_us()):
                 self._to_host(reply)
+
         self.clock.call_at(self.clock.now_s() + self.config.latency_s, arrive)
 
     def connect(self) -> SimSerial:
@@ -274,7 +294,7 @@ class _PtyHost:
     def _write(self, data: bytes) -> bytes:
         """Write what the pty takes of ``data`` without waiting; the rest."""
         try:
-            return data[os.write(self.fd, data):]
+            return data[os.write(self.fd, data) :]
         except (BlockingIOError, InterruptedError):
             return data
         except OSError:
@@ -309,8 +329,12 @@ class RigEmulator(SimRig):
         to this emulator's pty.
     """
 
-    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None,
-                 link_path: Optional[str | os.PathLike] = None) -> None:
+    def __init__(
+        self,
+        config: Optional[RigConfig] = None,
+        truth_log: Optional[str | os.PathLike] = None,
+        link_path: Optional[str | os.PathLike] = None,
+    ) -> None:
         self.link_path = Path(link_path) if link_path else None
         if self.link_path is not None:
             _check_link_path(self.link_path)
@@ -390,19 +414,28 @@ def _check_link_path(path: Path) -> None:
         target = os.readlink(path)
         if _is_pty_name(target):
             return
-        raise ValueError(f"link_path (--port) {path} is a symlink to {target!r}, not to a pseudo-terminal; "
-                         "refusing to replace it (remove it or choose another path)")
+        raise ValueError(
+            f"link_path (--port) {path} is a symlink to {target!r}, not to a pseudo-terminal; "
+            "refusing to replace it (remove it or choose another path)"
+        )
     if path.exists():
         kind = "folder" if path.is_dir() else "file"
-        raise ValueError(f"link_path (--port) {path} is an existing {kind}; refusing to replace it "
-                         "(remove it or choose another path)")
+        raise ValueError(
+            f"link_path (--port) {path} is an existing {kind}; refusing to replace it "
+            "(remove it or choose another path)"
+        )
     if not path.parent.is_dir():
         raise ValueError(f"link_path (--port) {path}: folder {path.parent} does not exist")
 
 
 # ---------------------------------------------------------------------- process helpers
-def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path: Optional[str] = None,
-                  stats_path: Optional[str] = None, out=sys.stdout) -> int:
+def serve_forever(
+    config: RigConfig,
+    truth_log: Optional[str] = None,
+    link_path: Optional[str] = None,
+    stats_path: Optional[str] = None,
+    out=sys.stdout,
+) -> int:
     """Create an emulator, print its pty path (one line, flushed), serve until SIGTERM/duration."""
     emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path)
 
@@ -433,8 +466,13 @@ class EmulatorProcess:
     :class:`~softpend.hardware.driver.MotorLink`.  :meth:`kill` is the "pulled cable" fault.
     """
 
-    def __init__(self, config: RigConfig, truth_log: Optional[str | os.PathLike] = None,
-                 stats_path: Optional[str | os.PathLike] = None, start_timeout_s: float = 20.0) -> None:
+    def __init__(
+        self,
+        config: RigConfig,
+        truth_log: Optional[str | os.PathLike] = None,
+        stats_path: Optional[str | os.PathLike] = None,
+        start_timeout_s: float = 20.0,
+    ) -> None:
         import tempfile
 
         cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]

@@ -223,24 +223,31 @@ class RigStateEstimator:
         cfg = self.config
         h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * self.n))
         h[0, 0] = 1.0
-        noise = [cfg.encoder_std_rad ** 2]
+        noise = [cfg.encoder_std_rad**2]
         if cfg.hub_rate_std_rad_s is not None:
             h[1, self.n] = 1.0
-            noise.append(cfg.hub_rate_std_rad_s ** 2)
+            noise.append(cfg.hub_rate_std_rad_s**2)
         self._h_encoder = h
         self._r_encoder = np.diag(noise)
-        self._r_tip = np.eye(2) * cfg.tip_std_m ** 2
+        self._r_tip = np.eye(2) * cfg.tip_std_m**2
         # constants of _predict, built once (a prediction runs for every encoder sample and every replayed step)
         n = self.n
         self._eye_2n = np.eye(2 * n)
-        self._accel_sigma = cfg.accel_std_rad_s2 ** 2 * np.eye(n)
+        self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)
         self._a = np.zeros((2 * n, 2 * n))
         self._a[:n, n:] = np.eye(n)
         self._started = False
 
     # ------------------------------------------------------------------ set-up
-    def reset(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float = 0.0,
-              q: Optional[np.ndarray] = None, q_dot: Optional[np.ndarray] = None) -> None:
+    def reset(
+        self,
+        time_s: float,
+        phi_rad: float,
+        phi_dot_rad_s: float,
+        torque_nm: float = 0.0,
+        q: Optional[np.ndarray] = None,
+        q_dot: Optional[np.ndarray] = None,
+    ) -> None:
         """Start from the straight rod at the measured hub angle and rate (or from ``(q, q_dot)``), with the
         prior uncertainty of the config; ``torque_nm`` is the torque applied from ``time_s`` on."""
         cfg = self.config
@@ -251,12 +258,25 @@ class RigStateEstimator:
             q0[0] = phi_rad
         if q_dot is None:
             qd0[0] = phi_dot_rad_s
-        variances = np.concatenate([[cfg.encoder_std_rad ** 2], np.full(n - 1, cfg.initial_bend_std_rad ** 2),
-                                    np.full(n, cfg.initial_rate_std_rad_s ** 2)])
+        variances = np.concatenate(
+            [
+                [cfg.encoder_std_rad**2],
+                np.full(n - 1, cfg.initial_bend_std_rad**2),
+                np.full(n, cfg.initial_rate_std_rad_s**2),
+            ]
+        )
         self._history.clear()
         self._pending_tips.clear()
-        self._history.append(_Step(float(time_s), np.concatenate([q0, qd0]), np.diag(variances), float(torque_nm),
-                                   float(phi_rad), float(phi_dot_rad_s)))
+        self._history.append(
+            _Step(
+                float(time_s),
+                np.concatenate([q0, qd0]),
+                np.diag(variances),
+                float(torque_nm),
+                float(phi_rad),
+                float(phi_dot_rad_s),
+            )
+        )
         self._last_tip_time_s = float(time_s)
         self._started = True
 
@@ -304,17 +324,18 @@ class RigStateEstimator:
         eye = self._eye_2n
         f = np.linalg.solve(eye - 0.5 * dt * a, eye + 0.5 * dt * a)
         b = m_inv[:, 0]
-        sigma = self._accel_sigma + cfg.torque_std_nm ** 2 / dt * np.outer(b, b)
+        sigma = self._accel_sigma + cfg.torque_std_nm**2 / dt * np.outer(b, b)
         q_noise = np.empty((2 * n, 2 * n))
-        q_noise[:n, :n] = dt ** 3 / 3 * sigma
-        q_noise[:n, n:] = q_noise[n:, :n] = dt ** 2 / 2 * sigma
+        q_noise[:n, :n] = dt**3 / 3 * sigma
+        q_noise[:n, n:] = q_noise[n:, :n] = dt**2 / 2 * sigma
         q_noise[n:, n:] = dt * sigma
         p_next = f @ p @ f.T + q_noise
         return x_next, 0.5 * (p_next + p_next.T)
 
     @staticmethod
-    def _update(x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: np.ndarray, r: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def _update(
+        x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: np.ndarray, r: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         s = h @ p @ h.T + r
         gain = np.linalg.solve(s, h @ p).T
         x = x + gain @ innovation
@@ -416,7 +437,7 @@ class RigStateEstimator:
         innovation, jac = self._tip_innovation(step, step.x, capture_time_s, x_m, y_m)
         s = jac @ step.p @ jac.T + self._r_tip
         distance2 = float(innovation @ np.linalg.solve(s, innovation))
-        if distance2 > self.config.gate_sigma ** 2:
+        if distance2 > self.config.gate_sigma**2:
             self.tips_refused += 1
             return False
         step.x, step.p = self._update(step.x, step.p, jac, innovation, self._r_tip)
@@ -442,10 +463,20 @@ class RigStateEstimator:
             q, qd = self.model.joint_state()
         _, _, jac = self._tip_model(last.x)
         tip_cov = jac @ last.p @ jac.T
-        return Estimate(last.time_s + lead * self.dt_s, q, qd, self.model.observation_from_state(q, qd),
-                        float(math.sqrt(max(np.trace(tip_cov) / 2, 0.0))), self.blind_s)
+        return Estimate(
+            last.time_s + lead * self.dt_s,
+            q,
+            qd,
+            self.model.observation_from_state(q, qd),
+            float(math.sqrt(max(np.trace(tip_cov) / 2, 0.0))),
+            self.blind_s,
+        )
 
     def stats(self) -> dict[str, float]:
-        return {"tips_accepted": float(self.tips_accepted), "tips_refused": float(self.tips_refused),
-                "tips_too_old": float(self.tips_too_old), "tips_deferred": float(self.tips_deferred),
-                "encoder_gaps": float(self.encoder_gaps)}
+        return {
+            "tips_accepted": float(self.tips_accepted),
+            "tips_refused": float(self.tips_refused),
+            "tips_too_old": float(self.tips_too_old),
+            "tips_deferred": float(self.tips_deferred),
+            "encoder_gaps": float(self.encoder_gaps),
+        }

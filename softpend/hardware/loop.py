@@ -180,9 +180,18 @@ def run_control_loop(
             finally:
                 send_times.append(link.clock.now_s())
                 if log is not None:
-                    log.append([state.host_time_s, state.device_time_s, state.seq, state.phi_rad,
-                                state.phi_dot_rad_s, state.applied_torque_nm, link.last_command_nm,
-                                state.flags])
+                    log.append(
+                        [
+                            state.host_time_s,
+                            state.device_time_s,
+                            state.seq,
+                            state.phi_rad,
+                            state.phi_dot_rad_s,
+                            state.applied_torque_nm,
+                            link.last_command_nm,
+                            state.flags,
+                        ]
+                    )
             samples += 1
             bar.advance(t)
             if t >= duration_s:

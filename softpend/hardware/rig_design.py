@@ -176,14 +176,25 @@ class HubSpec:
     keep_out_margin_m: float = 0.10
 
     def __post_init__(self) -> None:
-        for name in ("shaft_side_m", "clamp_radius_m", "pocket_start_m", "mount_thickness_m", "hub_marker_radius_m",
-                     "hub_marker_dot_radius_m", "flag_gap_m", "marker_clearance_m", "keep_out_margin_m"):
+        for name in (
+            "shaft_side_m",
+            "clamp_radius_m",
+            "pocket_start_m",
+            "mount_thickness_m",
+            "hub_marker_radius_m",
+            "hub_marker_dot_radius_m",
+            "flag_gap_m",
+            "marker_clearance_m",
+            "keep_out_margin_m",
+        ):
             positive(name, getattr(self, name))
         if not self.pocket_start_m < self.clamp_radius_m:
             raise ValueError(f"pocket_start_m must be below clamp_radius_m, got {self.pocket_start_m!r}")
         if self.pocket_start_m < self.shaft_side_m * math.sqrt(0.5):
-            raise ValueError(f"pocket_start_m must clear the shaft's bore (half-diagonal "
-                             f"{self.shaft_side_m * math.sqrt(0.5):.4g} m), got {self.pocket_start_m!r}")
+            raise ValueError(
+                f"pocket_start_m must clear the shaft's bore (half-diagonal "
+                f"{self.shaft_side_m * math.sqrt(0.5):.4g} m), got {self.pocket_start_m!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -273,15 +284,22 @@ class RigDesign:
         """Whether every marker lies wholly inside the image."""
         px = self.camera_model.to_pixels(self.markers_m)
         r = MARKER_RADIUS_M * self.camera_model.px_per_m
-        return bool(np.all(px - r >= 0) and np.all(px[:, 0] + r <= self.camera.width_px)
-                    and np.all(px[:, 1] + r <= self.camera.height_px))
+        return bool(
+            np.all(px - r >= 0)
+            and np.all(px[:, 0] + r <= self.camera.width_px)
+            and np.all(px[:, 1] + r <= self.camera.height_px)
+        )
 
     def swing_in_view(self) -> bool:
         """Whether the whole swing circle lies inside the image."""
         centre = self.camera_model.to_pixels(np.zeros(2))
         r = self.swing_radius_m * self.camera_model.px_per_m
-        return bool(centre[0] - r >= 0 and centre[1] - r >= 0 and centre[0] + r <= self.camera.width_px
-                    and centre[1] + r <= self.camera.height_px)
+        return bool(
+            centre[0] - r >= 0
+            and centre[1] - r >= 0
+            and centre[0] + r <= self.camera.width_px
+            and centre[1] + r <= self.camera.height_px
+        )
 
     def to_dict(self) -> dict:
         """The design's figures as plain numbers (JSON), lengths in millimetres where the key says ``_mm``."""
@@ -352,13 +370,17 @@ def rig_design(
     if not ei > 0:
         raise ValueError("params: the rod has no bending stiffness (youngs_modulus_pa or stiffness_scale is 0)")
     if params.length_m <= 2 * hub.clamp_radius_m:
-        raise ValueError(f"params.length_m must exceed twice the clamp radius {hub.clamp_radius_m} m, got {params.length_m!r}")
+        raise ValueError(
+            f"params.length_m must exceed twice the clamp radius {hub.clamp_radius_m} m, got {params.length_m!r}"
+        )
     width = params.width_m
     thickness = (12.0 * ei / (modulus * width)) ** (1.0 / 3.0)
     if not PRINTABLE_THICKNESS_M <= thickness <= params.length_m:  # also NaN; a drawing of it would never end
-        raise ValueError(f"print_modulus_pa {modulus:g} Pa gives a beam {thickness * 1e3:.3g} mm thick for the rod's "
-                         f"bending stiffness; a printable beam is {PRINTABLE_THICKNESS_M * 1e3:g} mm to the rod's "
-                         f"length ({params.length_m * 1e3:g} mm) thick")
+        raise ValueError(
+            f"print_modulus_pa {modulus:g} Pa gives a beam {thickness * 1e3:.3g} mm thick for the rod's "
+            f"bending stiffness; a printable beam is {PRINTABLE_THICKNESS_M * 1e3:g} mm to the rod's "
+            f"length ({params.length_m * 1e3:g} mm) thick"
+        )
     density = params.mass_kg / (params.width_m * params.depth_m * params.length_m)
     beam_length = params.length_m - hub.pocket_start_m
     dot_radius = MARKER_RADIUS_M
@@ -368,9 +390,16 @@ def rig_design(
     needed = swing + hub.marker_clearance_m + MARKER_RADIUS_M
     scale = max(1.0, needed / float(np.min(np.hypot(*default_markers.T))))
     base = CameraModel()
-    model = CameraModel(width_px=camera.width_px, height_px=camera.height_px, px_per_m=base.px_per_m / scale,
-                        centre_px=(base.centre_px[0] * camera.width_px / base.width_px,
-                                   base.centre_px[1] * camera.height_px / base.height_px), roll_rad=0.0)
+    model = CameraModel(
+        width_px=camera.width_px,
+        height_px=camera.height_px,
+        px_per_m=base.px_per_m / scale,
+        centre_px=(
+            base.centre_px[0] * camera.width_px / base.width_px,
+            base.centre_px[1] * camera.height_px / base.height_px,
+        ),
+        roll_rad=0.0,
+    )
     fov_width = camera.width_px / model.px_per_m
     distance = fov_width / (2.0 * math.tan(math.radians(camera.horizontal_fov_deg) / 2.0))
     flag_length = hub.hub_marker_radius_m + hub.hub_marker_dot_radius_m + 0.003

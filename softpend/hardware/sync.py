@@ -26,8 +26,8 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.plant import RodParams, wrap_angle_rad
 from softpend.io.samplelog import LogContents, read_sample_log
+from softpend.plant import RodParams, wrap_angle_rad
 
 __all__ = [
     "ClockOffset",
@@ -43,8 +43,14 @@ __all__ = [
 RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
 
 
-def startup_wiggle_torque(duration_s: float, torque_nm: float, seed: int, dt_s: float = 0.01,
-                          min_hold_s: float = 0.08, max_hold_s: float = 0.3) -> np.ndarray:
+def startup_wiggle_torque(
+    duration_s: float,
+    torque_nm: float,
+    seed: int,
+    dt_s: float = 0.01,
+    min_hold_s: float = 0.08,
+    max_hold_s: float = 0.3,
+) -> np.ndarray:
     """A pseudo-random +-``torque_nm`` sequence (random hold times): the deliberate start-up wiggle whose
     non-periodic pattern gives a single, sharp cross-correlation peak.
 
@@ -171,7 +177,9 @@ def estimate_clock_offset(
     seg_n = count[m:] - count[:-m]
     seg_var = np.maximum(seg_sq - seg_sum**2 / m, 0.0)
     denominator = np.sqrt(seg_var * float(motor_rate @ motor_rate))
-    scores = np.where((seg_n >= 0.9 * m) & (denominator > 0), dot / np.where(denominator > 0, denominator, 1.0), -np.inf)
+    scores = np.where(
+        (seg_n >= 0.9 * m) & (denominator > 0), dot / np.where(denominator > 0, denominator, 1.0), -np.inf
+    )
     best = int(np.argmax(scores))
     if not np.isfinite(scores[best]):
         raise ValueError("the camera and motor records do not overlap for any offset within max_offset_s")
@@ -234,8 +242,10 @@ def synchronise(
     ValueError
         If the logs lack columns, do not overlap, or contain no gap-free stretch of one trial.
     """
-    for name, log, needed in (("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
-                              ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost"))):
+    for name, log, needed in (
+        ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
+        ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost")),
+    ):
         missing = [c for c in needed if c not in log.columns]
         if missing:
             raise ValueError(f"{name} log is missing columns {missing}")
@@ -329,8 +339,9 @@ def build_rig_dataset(
     """
     from softpend.sysid.dataset import save_dataset
 
-    result = synchronise(read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s,
-                         trial_length_s=trial_length_s, **sync_kwargs)
+    result = synchronise(
+        read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s, trial_length_s=trial_length_s, **sync_kwargs
+    )
     protocol = {
         "kind": "rig babbling, motor log + tracked camera (softpend.hardware.sync)",
         "clock_offset_s": result.offset.offset_s,
@@ -342,7 +353,15 @@ def build_rig_dataset(
         "camera_csv": str(camera_csv),
     }
     dataset = save_dataset(
-        out_path, result.positions, result.velocities, result.torques_nm, dt_s=dt_s,
-        position_names=RIG_POSITION_NAMES, source="rig", plant_params=params, protocol=protocol, notes=notes,
+        out_path,
+        result.positions,
+        result.velocities,
+        result.torques_nm,
+        dt_s=dt_s,
+        position_names=RIG_POSITION_NAMES,
+        source="rig",
+        plant_params=params,
+        protocol=protocol,
+        notes=notes,
     )
     return dataset, result

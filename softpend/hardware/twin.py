@@ -23,12 +23,12 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
 
-from softpend.plant import RodParams, make_plant
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.emulator import RigConfig, SimRig
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
-from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
+from softpend.io.samplelog import SampleLog, read_sample_log
+from softpend.plant import RodParams, make_plant
 
 if TYPE_CHECKING:
     from softpend.sysid.dataset import TrajectoryDataset
@@ -152,8 +152,11 @@ def run_twin_session(
     outputs = outputs if outputs is not None else Outputs()
     outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
-    effects = camera_effects if camera_effects is not None else CameraEffects(
-        noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
+    effects = (
+        camera_effects
+        if camera_effects is not None
+        else CameraEffects(noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
+    )
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:  # an earlier session's outputs (checked above) are removed
         outputs.live(workdir / name)
@@ -161,8 +164,10 @@ def run_twin_session(
     controller = rig_babble_controller(duration_s, limit, seed)
     device = SimRig(rig, truth_log=paths["truth_log.csv"])
     try:
-        with MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link, \
-                SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log:
+        with (
+            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
+            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
+        ):
             loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
         device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
     finally:
@@ -170,24 +175,55 @@ def run_twin_session(
     emulator_stats = device.stats()
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=effects, seed=seed)
-    render_video(paths["camera.avi"], camera, times, points, hub, fps=camera_fps, clock_offset_s=clock_offset_s,
-                 timestamp_jitter_s=timestamp_jitter_s, progress=progress)
+    render_video(
+        paths["camera.avi"],
+        camera,
+        times,
+        points,
+        hub,
+        fps=camera_fps,
+        clock_offset_s=clock_offset_s,
+        timestamp_jitter_s=timestamp_jitter_s,
+        progress=progress,
+    )
     track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
-    dataset, sync = build_rig_dataset(paths["motor_log.csv"], paths["camera.csv"], paths["rig_dataset.npz"],
-                                      params=rig.task.rod, trial_length_s=trial_length_s,
-                                      notes="digital twin: emulated serial link + synthetic camera")
+    dataset, sync = build_rig_dataset(
+        paths["motor_log.csv"],
+        paths["camera.csv"],
+        paths["rig_dataset.npz"],
+        params=rig.task.rod,
+        trial_length_s=trial_length_s,
+        notes="digital twin: emulated serial link + synthetic camera",
+    )
     for name in _OUTPUTS:
         outputs.done(workdir / name)
-    return TwinSession(workdir, paths["motor_log.csv"], paths["truth_log.csv"], paths["camera.avi"],
-                       paths["camera.csv"], paths["rig_dataset.npz"], loop, sync, dataset, clock_offset_s,
-                       emulator_stats)
+    return TwinSession(
+        workdir,
+        paths["motor_log.csv"],
+        paths["truth_log.csv"],
+        paths["camera.avi"],
+        paths["camera.csv"],
+        paths["rig_dataset.npz"],
+        loop,
+        sync,
+        dataset,
+        clock_offset_s,
+        emulator_stats,
+    )
 
 
 #: Marker file of a folder written by :func:`run_twin_session`.
 TWIN_MARKER = ".softpend-twin"
 #: Every file :func:`run_twin_session` writes in its folder (besides the marker).
-_OUTPUTS = ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz", "camera.avi.json",
-            "emulator_stats.json")
+_OUTPUTS = (
+    "motor_log.csv",
+    "truth_log.csv",
+    "camera.avi",
+    "camera.csv",
+    "rig_dataset.npz",
+    "camera.avi.json",
+    "emulator_stats.json",
+)
 
 
 def _claim_workdir(workdir: Path) -> Path:
@@ -197,8 +233,10 @@ def _claim_workdir(workdir: Path) -> Path:
         if not workdir.is_dir():
             raise ValueError(f"workdir {workdir} exists and is not a folder")
         if not marker.is_file() and any(workdir.iterdir()):
-            raise ValueError(f"workdir {workdir} is not empty and was not written by run_twin_session "
-                             f"(no {TWIN_MARKER} marker); pass a new or empty folder (nothing was changed)")
+            raise ValueError(
+                f"workdir {workdir} is not empty and was not written by run_twin_session "
+                f"(no {TWIN_MARKER} marker); pass a new or empty folder (nothing was changed)"
+            )
     else:
         workdir.mkdir(parents=True)
     if not marker.is_file():
@@ -236,17 +274,35 @@ def compare_with_simulator_model(
     params = params if params is not None else (rig_dataset.params or RodParams())
     trial_length_s = rig_dataset.n_samples * rig_dataset.dt_s
     protocol = BabbleProtocol(
-        n_trials=rig_dataset.n_trials, trial_length_s=trial_length_s, dt_s=rig_dataset.dt_s, start="hanging",
-        start_angle_std_rad=0.3, start_rate_std_rad_s=1.0, feedback_trial_fraction=0.0,
-        torque_std_fraction=0.5, torque_bandwidth_hz=2.0,
+        n_trials=rig_dataset.n_trials,
+        trial_length_s=trial_length_s,
+        dt_s=rig_dataset.dt_s,
+        start="hanging",
+        start_angle_std_rad=0.3,
+        start_rate_std_rad_s=1.0,
+        feedback_trial_fraction=0.0,
+        torque_std_fraction=0.5,
+        torque_bandwidth_hz=2.0,
     )
     sim_train = babble(protocol, params=params, seed=seed + 1000, progress=progress, plant=plant)
-    sim_test = babble(protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0)),
-                      params=params, seed=seed + 2000, progress=progress, plant=plant)
+    sim_test = babble(
+        protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0)),
+        params=params,
+        seed=seed + 2000,
+        progress=progress,
+        plant=plant,
+    )
     fits = {}
     for name, data in (("twin", rig_dataset), ("sim", sim_train)):
-        fits[name] = fit_dynamics_model(data, information="limited", history=history, max_epochs=max_epochs,
-                                        patience=20, seed=seed, progress=progress)
+        fits[name] = fit_dynamics_model(
+            data,
+            information="limited",
+            history=history,
+            max_epochs=max_epochs,
+            patience=20,
+            seed=seed,
+            progress=progress,
+        )
     errors = {name: rollout_errors(fit.model, sim_test, horizon_s=horizon_s) for name, fit in fits.items()}
     twin = errors["twin"].at(horizon_s)
     sim = errors["sim"].at(horizon_s)

@@ -22,8 +22,19 @@ from softpend.io.reading import check_zip_members, open_regular_file
 __all__ = ["read_npz", "read_npy_member"]
 
 #: What reading a corrupt, truncated or hostile archive can raise.
-_READ_ERRORS = (OSError, ValueError, zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, KeyError, MemoryError,
-                NotImplementedError, zlib.error, SyntaxError, TypeError)
+_READ_ERRORS = (
+    OSError,
+    ValueError,
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    EOFError,
+    KeyError,
+    MemoryError,
+    NotImplementedError,
+    zlib.error,
+    SyntaxError,
+    TypeError,
+)
 
 
 def read_npy_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
@@ -49,8 +60,10 @@ def read_npy_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarr
         n_bytes = count * dtype.itemsize
         held = info.file_size - member.tell()  # the bytes after the header, from the zip directory
         if n_bytes > held:
-            raise ValueError(f"its header declares shape {shape} of {dtype} ({n_bytes} bytes), more than the "
-                             f"{held} bytes of data it holds")
+            raise ValueError(
+                f"its header declares shape {shape} of {dtype} ({n_bytes} bytes), more than the "
+                f"{held} bytes of data it holds"
+            )
         data = member.read(n_bytes)
     if len(data) != n_bytes:
         raise ValueError(f"truncated: {len(data)} of {n_bytes} bytes of data")
@@ -58,8 +71,9 @@ def read_npy_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarr
     return array.reshape(shape[::-1]).transpose() if fortran else array.reshape(shape)
 
 
-def read_npz(path: str | Path, what: str, error: type[Exception] = ValueError,
-             max_bytes: int = MAX_WORK_BYTES) -> dict[str, np.ndarray]:
+def read_npz(
+    path: str | Path, what: str, error: type[Exception] = ValueError, max_bytes: int = MAX_WORK_BYTES
+) -> dict[str, np.ndarray]:
     """Every member of the ``.npz`` archive at ``path`` as an array (see the module docstring).
 
     Parameters

@@ -20,8 +20,18 @@ from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
-__all__ = ["MANIFEST", "Outputs", "atomic_write", "check_output_file", "check_output_folder", "finite_or_none", "json_text",
-           "output_name", "read_json_object", "written_by_softpend"]
+__all__ = [
+    "MANIFEST",
+    "Outputs",
+    "atomic_write",
+    "check_output_file",
+    "check_output_folder",
+    "finite_or_none",
+    "json_text",
+    "output_name",
+    "read_json_object",
+    "written_by_softpend",
+]
 
 
 def read_json_object(path: str | Path, max_bytes: int) -> Optional[dict]:
@@ -55,7 +65,9 @@ def _check_parent(path: Path, what: str) -> None:
         raise ValueError(f"{what} {path}: cannot write in {ancestor}: {exc.strerror or exc}") from None
 
 
-def check_output_file(path: str | Path, *, what: str = "output", owned: Optional[Callable[[Path], bool]] = None) -> Path:
+def check_output_file(
+    path: str | Path, *, what: str = "output", owned: Optional[Callable[[Path], bool]] = None
+) -> Path:
     """Check, before any work, that ``path`` can be written as a new file or replace a file of ours.
 
     Parameters
@@ -87,13 +99,17 @@ def check_output_file(path: str | Path, *, what: str = "output", owned: Optional
         if path.is_symlink() or not path.is_file():
             raise ValueError(f"{what} {path} exists and is not a regular file; refusing to replace it")
         if owned is None or not _claims(owned, path):
-            raise ValueError(f"{what} {path} exists and is not a file this command wrote; refusing to overwrite it "
-                             "(remove it or choose another path)")
+            raise ValueError(
+                f"{what} {path} exists and is not a file this command wrote; refusing to overwrite it "
+                "(remove it or choose another path)"
+            )
     _check_parent(path, what)
     return path
 
 
-def check_output_folder(path: str | Path, *, what: str = "output folder", owned: Optional[Callable[[Path], bool]] = None) -> Path:
+def check_output_folder(
+    path: str | Path, *, what: str = "output folder", owned: Optional[Callable[[Path], bool]] = None
+) -> Path:
     """Check, before any work, that ``path`` can be created as a folder or is an empty folder or one of ours.
 
     ``owned(path) -> bool`` says whether an existing non-empty folder is one the caller wrote (and may write
@@ -106,8 +122,10 @@ def check_output_folder(path: str | Path, *, what: str = "output folder", owned:
         if not path.is_dir():
             raise ValueError(f"{what} {path} exists and is not a folder")
         if any(path.iterdir()) and (owned is None or not _claims(owned, path)):
-            raise ValueError(f"{what} {path} is not empty and is not a folder this command wrote; refusing to "
-                             "write into it (choose another path)")
+            raise ValueError(
+                f"{what} {path} is not empty and is not a folder this command wrote; refusing to "
+                "write into it (choose another path)"
+            )
         try:
             with tempfile.NamedTemporaryFile(dir=path, prefix=".softpend-probe-"):
                 pass
@@ -281,8 +299,13 @@ class Outputs:
         self._planned[path] = (what, owned)
         return path
 
-    def folder(self, path: str | Path, names: tuple[str, ...] | list[str], what: str = "output folder",
-               owned: Optional[Callable[[Path], bool]] = None) -> Path:
+    def folder(
+        self,
+        path: str | Path,
+        names: tuple[str, ...] | list[str],
+        what: str = "output folder",
+        owned: Optional[Callable[[Path], bool]] = None,
+    ) -> Path:
         """Plan and check the folder ``path`` (created when missing) and the files ``names`` in it; the folder
         may hold other files (they are left alone), not one of ``names`` that the command did not write."""
         _not_empty(path, what)
@@ -290,8 +313,10 @@ class Outputs:
         if os.path.lexists(path) and not path.is_dir():
             raise ValueError(f"{what} {path} exists and is not a folder")
         if path.is_dir() and _read_manifest(path) is None:
-            raise ValueError(f"{what} {path}: {path / MANIFEST} is not a softpend manifest; refusing to write "
-                             "into this folder (choose another path)")
+            raise ValueError(
+                f"{what} {path}: {path / MANIFEST} is not a softpend manifest; refusing to write "
+                "into this folder (choose another path)"
+            )
         for name in names:
             self.file(path / name, f"{what} {path}: file", owned)
         return path
@@ -302,10 +327,15 @@ class Outputs:
         if os.path.lexists(path) and path.is_dir() and not path.is_symlink():
             raise ValueError(f"{what} {path} is a folder")
         if path.parent.is_dir() and _read_manifest(path.parent) is None:
-            raise ValueError(f"{what} {path}: {path.parent / MANIFEST} is not a softpend manifest; refusing to "
-                             "write into this folder (choose another path)")
-        check_output_file(path, what=what, owned=lambda p: written_by_softpend(p) or _unfinished_log(p)
-                          or (owned is not None and owned(p)))
+            raise ValueError(
+                f"{what} {path}: {path.parent / MANIFEST} is not a softpend manifest; refusing to "
+                "write into this folder (choose another path)"
+            )
+        check_output_file(
+            path,
+            what=what,
+            owned=lambda p: written_by_softpend(p) or _unfinished_log(p) or (owned is not None and owned(p)),
+        )
 
     def _planned_entry(self, path: Path) -> tuple[str, Optional[Callable[[Path], bool]]]:
         path = Path(path)

@@ -113,9 +113,7 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
     for name, value in items:
         head, _, rest = str(name).partition(".")
         if head not in fields:
-            raise ValueError(
-                f"unknown {type(instance).__name__} field {prefix + head!r}; known: {sorted(fields)}"
-            )
+            raise ValueError(f"unknown {type(instance).__name__} field {prefix + head!r}; known: {sorted(fields)}")
         if rest:
             nested.setdefault(head, {})[rest] = value
         elif isinstance(value, dict) and dataclasses.is_dataclass(getattr(instance, head)):
@@ -150,4 +148,3 @@ def check_fields(cls: type, data: Mapping[str, Any], source: Any) -> None:
     missing = [k for k in names if k not in data]
     if missing:
         raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
-

@@ -81,8 +81,9 @@ def _described(what: str, path: Path) -> str:
     return f"{what} {path}" if what else str(path)
 
 
-def check_regular_file(path: PathLike, what: str, max_bytes: Optional[int] = None,
-                       error: type[Exception] = ValueError) -> os.stat_result:
+def check_regular_file(
+    path: PathLike, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
+) -> os.stat_result:
     """``os.stat(path)`` if ``path`` is a regular file (symbolic links followed) of at most ``max_bytes``.
 
     Raises
@@ -103,14 +104,16 @@ def check_regular_file(path: PathLike, what: str, max_bytes: Optional[int] = Non
     if not stat.S_ISREG(info.st_mode):
         raise error(f"{_described(what, path)} is {file_kind(info.st_mode)}, not a regular file")
     if max_bytes is not None and info.st_size > max_bytes:
-        raise error(f"{_described(what, path)} has {info.st_size} bytes, more than the {max_bytes} a "
-                    f"{what or 'file'} can have")
+        raise error(
+            f"{_described(what, path)} has {info.st_size} bytes, more than the {max_bytes} a {what or 'file'} can have"
+        )
     return info
 
 
 @contextlib.contextmanager
-def open_regular_file(path: PathLike, what: str, max_bytes: Optional[int] = None,
-                      error: type[Exception] = ValueError) -> Iterator[BinaryIO]:
+def open_regular_file(
+    path: PathLike, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
+) -> Iterator[BinaryIO]:
     """The regular file at ``path`` opened for binary reading (a context manager).
 
     Checked with :func:`check_regular_file` before opening, opened with ``O_NONBLOCK`` (so a FIFO swapped in
@@ -130,8 +133,10 @@ def open_regular_file(path: PathLike, what: str, max_bytes: Optional[int] = None
         if not stat.S_ISREG(info.st_mode):
             raise error(f"{_described(what, path)} is {file_kind(info.st_mode)}, not a regular file")
         if max_bytes is not None and info.st_size > max_bytes:
-            raise error(f"{_described(what, path)} has {info.st_size} bytes, more than the {max_bytes} a "
-                        f"{what or 'file'} can have")
+            raise error(
+                f"{_described(what, path)} has {info.st_size} bytes, more than the {max_bytes} a "
+                f"{what or 'file'} can have"
+            )
         fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
         handle = os.fdopen(fd, "rb")
     except BaseException:
@@ -164,16 +169,18 @@ def read_text_checked(path: PathLike, what: str, max_bytes: int, error: type[Exc
         raise error(f"{_described(what, Path(path))}: not UTF-8 text (byte {exc.start})") from None
 
 
-def read_json_checked(path: PathLike, what: str, max_bytes: int = MAX_CONFIG_BYTES,
-                      error: type[Exception] = ValueError) -> Any:
+def read_json_checked(
+    path: PathLike, what: str, max_bytes: int = MAX_CONFIG_BYTES, error: type[Exception] = ValueError
+) -> Any:
     """The JSON document in the regular file at ``path``; malformed or too deeply nested JSON is refused
     with the file, the line and the reason."""
     text = read_text_checked(path, what, max_bytes, error)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise error(f"{_described(what, Path(path))}, line {exc.lineno} column {exc.colno}: not valid JSON "
-                    f"({exc.msg})") from None
+        raise error(
+            f"{_described(what, Path(path))}, line {exc.lineno} column {exc.colno}: not valid JSON ({exc.msg})"
+        ) from None
     except RecursionError:
         raise error(f"{_described(what, Path(path))}: not valid JSON (nested too deeply)") from None
 
@@ -246,8 +253,9 @@ def yaml_line(node: Any, key: Any = None, default: int = 1) -> int:
     return default
 
 
-def read_yaml_checked(path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES,
-                      error: type[Exception] = ValueError, lines: bool = False) -> Any:
+def read_yaml_checked(
+    path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES, error: type[Exception] = ValueError, lines: bool = False
+) -> Any:
     """The YAML document in the regular file at ``path`` (``yaml.safe_load``: plain data, no Python
     objects); a syntax error is refused with the file, the line and the parser's reason.  With ``lines``,
     mappings and sequences come back as :class:`LineDict` / :class:`LineList`, which know their lines
@@ -263,7 +271,9 @@ def read_yaml_checked(path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES
         reason = " ".join(str(exc.problem or exc.context or "invalid syntax").split())
         raise error(f"{_described(what, Path(path))}{where}: not valid YAML ({reason})") from None
     except (yaml.YAMLError, RecursionError) as exc:
-        raise error(f"{_described(what, Path(path))}: not valid YAML ({' '.join(str(exc).split()) or type(exc).__name__})") from None
+        raise error(
+            f"{_described(what, Path(path))}: not valid YAML ({' '.join(str(exc).split()) or type(exc).__name__})"
+        ) from None
 
 
 def check_capture_path(name: str, source: str) -> None:
@@ -279,9 +289,14 @@ def check_capture_path(name: str, source: str) -> None:
 
 
 # ---------------------------------------------------------------------------------------- zip archives
-def check_zip_members(archive: zipfile.ZipFile, path: PathLike, what: str,
-                      max_member_bytes: Union[int, Mapping[str, int]], max_total_bytes: Optional[int] = None,
-                      error: type[Exception] = ValueError) -> None:
+def check_zip_members(
+    archive: zipfile.ZipFile,
+    path: PathLike,
+    what: str,
+    max_member_bytes: Union[int, Mapping[str, int]],
+    max_total_bytes: Optional[int] = None,
+    error: type[Exception] = ValueError,
+) -> None:
     """Refuse ``archive`` (opened from ``path``) if a member would unpack to more than its bound, or all
     members together to more than ``max_total_bytes`` -- from the central directory, before any member is
     decompressed (``zipfile`` never unpacks a member beyond the size its directory entry states).
@@ -297,22 +312,29 @@ def check_zip_members(archive: zipfile.ZipFile, path: PathLike, what: str,
         else:
             bound = max_member_bytes
         if info.file_size > bound:
-            raise error(f"{_described(what, Path(path))}: member {info.filename!r} would unpack to {info.file_size} "
-                        f"bytes, more than the {bound} it can have")
+            raise error(
+                f"{_described(what, Path(path))}: member {info.filename!r} would unpack to {info.file_size} "
+                f"bytes, more than the {bound} it can have"
+            )
         total += info.file_size
     if max_total_bytes is not None and total > max_total_bytes:
-        raise error(f"{_described(what, Path(path))}: its members would unpack to {total} bytes, more than the "
-                    f"{max_total_bytes} a {what or 'file'} can have")
+        raise error(
+            f"{_described(what, Path(path))}: its members would unpack to {total} bytes, more than the "
+            f"{max_total_bytes} a {what or 'file'} can have"
+        )
 
 
-def read_zip_member(archive: zipfile.ZipFile, name: str, path: PathLike, what: str, max_bytes: int,
-                    error: type[Exception] = ValueError) -> bytes:
+def read_zip_member(
+    archive: zipfile.ZipFile, name: str, path: PathLike, what: str, max_bytes: int, error: type[Exception] = ValueError
+) -> bytes:
     """The bytes of member ``name`` of ``archive`` (opened from ``path``), refused beyond ``max_bytes`` by its
     directory entry and read with that bound.  ``KeyError`` if there is no such member."""
     info = archive.getinfo(name)
     if info.file_size > max_bytes:
-        raise error(f"{_described(what, Path(path))}: member {name!r} would unpack to {info.file_size} bytes, more "
-                    f"than the {max_bytes} it can have")
+        raise error(
+            f"{_described(what, Path(path))}: member {name!r} would unpack to {info.file_size} bytes, more "
+            f"than the {max_bytes} it can have"
+        )
     with archive.open(info) as member:
         data = member.read(max_bytes + 1)
     if len(data) > max_bytes:  # pragma: no cover - zipfile stops at the directory's size

@@ -57,8 +57,15 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def check_run_folder(folder: str | Path, saved: Optional[Mapping[str, Any]], wanted: Mapping[str, Any],
-                     saved_seed: Optional[int], seed: int, resume: bool, can_resume: bool = True) -> None:
+def check_run_folder(
+    folder: str | Path,
+    saved: Optional[Mapping[str, Any]],
+    wanted: Mapping[str, Any],
+    saved_seed: Optional[int],
+    seed: int,
+    resume: bool,
+    can_resume: bool = True,
+) -> None:
     """Refuse, before any work, to train run ``(wanted, seed)`` into ``folder`` that holds a run already.
 
     ``saved`` is the config saved in ``folder`` (None: unreadable), ``saved_seed`` the seed its log records
@@ -68,18 +75,26 @@ def check_run_folder(folder: str | Path, saved: Optional[Mapping[str, Any]], wan
     method has no resuming, and the message says so).
     """
     if saved is None:
-        raise ValueError(f"run folder {folder} holds a run whose config this version cannot read; refusing to train "
-                         "into it (choose another folder)")
+        raise ValueError(
+            f"run folder {folder} holds a run whose config this version cannot read; refusing to train "
+            "into it (choose another folder)"
+        )
     differences = setting_differences(saved, wanted)
     if saved_seed is not None and int(saved_seed) != int(seed):
         differences.insert(0, f"seed ({saved_seed}, not {seed})")
     if differences:
         shown = ", ".join(differences[:5]) + (f" and {len(differences) - 5} more" if len(differences) > 5 else "")
-        raise ValueError(f"run folder {folder} holds another run (it differs in {shown}); a run folder is reused "
-                         "only for the same settings and seed: choose another folder")
+        raise ValueError(
+            f"run folder {folder} holds another run (it differs in {shown}); a run folder is reused "
+            "only for the same settings and seed: choose another folder"
+        )
     if not resume and not can_resume:
-        raise ValueError(f"run folder {folder} already holds this run (same settings, seed {seed}); a run folder is "
-                         "never trained over: choose another folder")
+        raise ValueError(
+            f"run folder {folder} already holds this run (same settings, seed {seed}); a run folder is "
+            "never trained over: choose another folder"
+        )
     if not resume:
-        raise ValueError(f"run folder {folder} already holds this run (same settings, seed {seed}); resume it "
-                         "(softpend train --resume) or choose another folder: a run folder is never trained over")
+        raise ValueError(
+            f"run folder {folder} already holds this run (same settings, seed {seed}); resume it "
+            "(softpend train --resume) or choose another folder: a run folder is never trained over"
+        )

@@ -82,7 +82,9 @@ class SampleLog:
             if existing.columns != columns:
                 raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
         # O_NONBLOCK: a FIFO swapped in after the check fails the open (or the fstat below) instead of blocking
-        fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0), 0o644)
+        fd = os.open(
+            self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0), 0o644
+        )
         try:
             if not stat.S_ISREG(os.fstat(fd).st_mode):
                 raise ValueError(f"sample log {self.path} is {file_kind(os.fstat(fd).st_mode)}, not a regular file")
@@ -158,7 +160,7 @@ def read_sample_log(path: str | os.PathLike, max_bytes: int = MAX_WORK_BYTES) ->
     lines = text.split("\n")
     if not lines or not lines[0].startswith(_MAGIC):
         raise ValueError(f"path {path} is not a softpend sample log (missing {_MAGIC.strip()!r} header)")
-    metadata = json.loads(lines[0][len(_MAGIC):])
+    metadata = json.loads(lines[0][len(_MAGIC) :])
     if len(lines) < 2 or not lines[1]:
         raise ValueError(f"path {path} has no column line")
     columns = lines[1].split(",")

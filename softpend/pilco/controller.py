@@ -12,9 +12,9 @@ import math
 import numpy as np
 
 from softpend.checks import positive
-from softpend.plant import Observation, wrap_angle_rad
 from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import StateSpec
+from softpend.plant import Observation, wrap_angle_rad
 
 __all__ = ["PilcoController", "RandomTorqueController", "in_balance_band"]
 
@@ -68,14 +68,24 @@ class PilcoController(_HoldController):
         ``balance_policy``.
     """
 
-    def __init__(self, policy: RBFPolicy, spec: StateSpec, control_dt_s: float,
-                 balance_policy: LinearPolicy | None = None, balance_band: tuple[float, float] | None = None) -> None:
+    def __init__(
+        self,
+        policy: RBFPolicy,
+        spec: StateSpec,
+        control_dt_s: float,
+        balance_policy: LinearPolicy | None = None,
+        balance_band: tuple[float, float] | None = None,
+    ) -> None:
         for name, p in (("policy", policy), ("balance_policy", balance_policy)):
             if p is not None and p.n_inputs != spec.n_model_inputs:
-                raise ValueError(f"{name} takes {p.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
+                raise ValueError(
+                    f"{name} takes {p.n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}"
+                )
         if balance_policy is not None:
             if balance_band is None or len(balance_band) != 2:
-                raise ValueError(f"balance_band must be (within_rad, within_rad_s) with a balance_policy, got {balance_band!r}")
+                raise ValueError(
+                    f"balance_band must be (within_rad, within_rad_s) with a balance_policy, got {balance_band!r}"
+                )
             balance_band = (positive("balance_band[0]", balance_band[0]), positive("balance_band[1]", balance_band[1]))
         self.policy = policy
         self.balance_policy = balance_policy
@@ -88,7 +98,11 @@ class PilcoController(_HoldController):
         state = self.spec.from_observations(values[None, :])
         inputs = self.spec.model_inputs(state)
         policy: RBFPolicy | LinearPolicy = self.policy
-        if self.balance_policy is not None and self.balance_band is not None and in_balance_band(self.spec, state, *self.balance_band)[0]:
+        if (
+            self.balance_policy is not None
+            and self.balance_band is not None
+            and in_balance_band(self.spec, state, *self.balance_band)[0]
+        ):
             policy = self.balance_policy
         return float(policy.torque_nm(inputs)[0])
 
@@ -112,8 +126,14 @@ class RandomTorqueController(_HoldController):
         Draw the sign only (torque ``+-torque_limit_nm``) instead of a uniform torque.
     """
 
-    def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int,
-                 hold_s: tuple[float, float] | None = None, bang_bang: bool = False) -> None:
+    def __init__(
+        self,
+        torque_limit_nm: float,
+        control_dt_s: float,
+        seed: int,
+        hold_s: tuple[float, float] | None = None,
+        bang_bang: bool = False,
+    ) -> None:
         positive("torque_limit_nm", torque_limit_nm)
         positive("control_dt_s", control_dt_s)
         hold = (control_dt_s, control_dt_s) if hold_s is None else tuple(float(h) for h in hold_s)

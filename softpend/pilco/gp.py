@@ -130,8 +130,10 @@ class MultiOutputGP:
         inputs = np.asarray(inputs, dtype=float)
         targets = np.asarray(targets, dtype=float)
         if inputs.ndim != 2 or inputs.shape[1] != self.n_inputs or targets.shape != (len(inputs), self.n_outputs):
-            raise ValueError(f"inputs must be (N, {self.n_inputs}) and targets (N, {self.n_outputs}), "
-                             f"got {inputs.shape} and {targets.shape}")
+            raise ValueError(
+                f"inputs must be (N, {self.n_inputs}) and targets (N, {self.n_outputs}), "
+                f"got {inputs.shape} and {targets.shape}"
+            )
         if not (np.all(np.isfinite(inputs)) and np.all(np.isfinite(targets))):
             raise ValueError("inputs and targets must be finite")
         self.conditioning = (inputs, targets)
@@ -140,8 +142,12 @@ class MultiOutputGP:
     # ------------------------------------------------------------------ fitting
     @staticmethod
     def _neg_log_likelihood(
-        params: torch.Tensor, x: torch.Tensor, y: torch.Tensor, log_input_std: torch.Tensor,
-        lengthscale_curb: float, snr_curb: float,
+        params: torch.Tensor,
+        x: torch.Tensor,
+        y: torch.Tensor,
+        log_input_std: torch.Tensor,
+        lengthscale_curb: float,
+        snr_curb: float,
     ) -> torch.Tensor:
         d = x.shape[1]
         log_ell, log_sf, log_sn = params[:d], params[d], params[d + 1]
@@ -271,5 +277,11 @@ class MultiOutputGP:
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
         """:meth:`moments` as a pure function and its arguments after ``(mean, cov)`` (see
         :meth:`softpend.pilco.policy.RBFPolicy.moment_function`)."""
-        return gp_moments, (self.inputs, self.beta, self.log_lengthscales, self.log_signal_var, self.inv_kernel,
-                            self.pair_weights)
+        return gp_moments, (
+            self.inputs,
+            self.beta,
+            self.log_lengthscales,
+            self.log_signal_var,
+            self.inv_kernel,
+            self.pair_weights,
+        )

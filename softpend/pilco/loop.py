@@ -54,18 +54,17 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import (boolean, check_work_size, finite, int_at_least, non_negative,
-                             optional_positive, positive)
+from softpend.checks import boolean, check_work_size, finite, int_at_least, non_negative, optional_positive, positive
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import check_fields
 from softpend.io.reading import MAX_JSON_BYTES, read_bytes_checked, read_json_checked
-from softpend.plant import SimulationDiverged, wrap_angle_rad
-from softpend.task import Task
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
 from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import Propagator, StateSpec, state_spec
+from softpend.plant import SimulationDiverged, wrap_angle_rad
+from softpend.task import Task
 from softpend.torch_threads import one_torch_thread
 
 __all__ = ["Pilco", "PilcoConfig", "PilcoResult", "PolicySearch", "TrialRecord", "run_pilco", "real_cost"]
@@ -214,8 +213,17 @@ class PilcoConfig:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         state_spec(self.state)
-        for name in ("control_dt_s", "horizon_s", "cost_width_m", "initial_std", "eval_duration_s",
-                     "target_std_rad", "random_hold_min_s", "random_hold_max_s", "restart_target_std"):
+        for name in (
+            "control_dt_s",
+            "horizon_s",
+            "cost_width_m",
+            "initial_std",
+            "eval_duration_s",
+            "target_std_rad",
+            "random_hold_min_s",
+            "random_hold_max_s",
+            "restart_target_std",
+        ):
             positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
@@ -231,10 +239,19 @@ class PilcoConfig:
         if self.balance_within_rad is not None and self.balance_within_rad >= math.pi:
             raise ValueError(f"balance_within_rad must be below pi, got {self.balance_within_rad!r}")
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
-            raise ValueError(f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
-                             "(None predicts the trial's length)")
-        for name, low in (("n_policy_trials", 0), ("n_random_trials", 1), ("n_basis", 1), ("max_gp_points", 10),
-                          ("gp_iterations", 1), ("policy_iterations", 1), ("policy_restarts", 0)):
+            raise ValueError(
+                f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
+                "(None predicts the trial's length)"
+            )
+        for name, low in (
+            ("n_policy_trials", 0),
+            ("n_random_trials", 1),
+            ("n_basis", 1),
+            ("max_gp_points", 10),
+            ("gp_iterations", 1),
+            ("policy_iterations", 1),
+            ("policy_restarts", 0),
+        ):
             setattr(self, name, int_at_least(name, getattr(self, name), low))
         fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
         if fraction >= 1.0:
@@ -412,10 +429,13 @@ class PilcoResult:
             bound = 2**20 + 16 * (config.n_basis + 2) * (spec.n_model_inputs + 2)
             raw = read_bytes_checked(weights_path, "PILCO policy file", bound)
             state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
-            balance_state = {k[len(BALANCE_PREFIX):]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
+            balance_state = {k[len(BALANCE_PREFIX) :]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
             state = {k: v for k, v in state.items() if not k.startswith(BALANCE_PREFIX)}
-            policy = RBFPolicy(np.zeros((state["centers"].shape[0], spec.n_model_inputs)), np.ones(spec.n_model_inputs),
-                               config.task.torque_limit_nm)
+            policy = RBFPolicy(
+                np.zeros((state["centers"].shape[0], spec.n_model_inputs)),
+                np.ones(spec.n_model_inputs),
+                config.task.torque_limit_nm,
+            )
             policy.load_state_dict(state)
             balance = None
             if balance_state:
@@ -423,12 +443,19 @@ class PilcoResult:
                 balance.load_state_dict(balance_state)
         except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
             message = " ".join(str(exc).split())[:300]
-            raise ValueError(f"{weights_path}: not a PILCO policy written by softpend ({type(exc).__name__}: {message})") from None
+            raise ValueError(
+                f"{weights_path}: not a PILCO policy written by softpend ({type(exc).__name__}: {message})"
+            ) from None
         return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper, balance_policy=balance)
 
 
-def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta_dot_rad_s: np.ndarray | None = None,
-              cost_rate_width_rad_s: float | None = None) -> np.ndarray:
+def real_cost(
+    theta_rad: np.ndarray,
+    length_m: float,
+    cost_width_m: float,
+    theta_dot_rad_s: np.ndarray | None = None,
+    cost_rate_width_rad_s: float | None = None,
+) -> np.ndarray:
     """The saturating cost of :class:`~softpend.pilco.propagation.Propagator` at deterministic tip angles [rad]
     (and, with ``cost_rate_width_rad_s``, tip rates ``theta_dot_rad_s`` [rad/s])."""
     d2 = 2.0 * length_m**2 * (1.0 - np.cos(np.asarray(theta_rad, dtype=float)))
@@ -440,13 +467,25 @@ def real_cost(theta_rad: np.ndarray, length_m: float, cost_width_m: float, theta
     return 1.0 - np.exp(-exponent)
 
 
-def _trial_cost(config: PilcoConfig, spec: StateSpec, states: np.ndarray, rate_width: Optional[float],
-                width_m: Optional[float] = None) -> float:
+def _trial_cost(
+    config: PilcoConfig,
+    spec: StateSpec,
+    states: np.ndarray,
+    rate_width: Optional[float],
+    width_m: Optional[float] = None,
+) -> float:
     """The cost (width ``width_m``, default ``config.cost_width_m``; tip-rate factor of width ``rate_width`` or
     none) summed along a real trial's states (H+1, d), the start excluded."""
     width_m = config.cost_width_m if width_m is None else width_m
-    return float(real_cost(states[1:, spec.tip_angle_index], config.task.rod.length_m, width_m,
-                           states[1:, spec.tip_rate_index], rate_width).sum())
+    return float(
+        real_cost(
+            states[1:, spec.tip_angle_index],
+            config.task.rod.length_m,
+            width_m,
+            states[1:, spec.tip_rate_index],
+            rate_width,
+        ).sum()
+    )
 
 
 def _came_near_upright(spec: StateSpec, states: np.ndarray, within_rad: float) -> bool:
@@ -475,7 +514,12 @@ def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[Evaluat
 
 
 def _optimise_policy(
-    propagator: Propagator, policy: RBFPolicy | LinearPolicy, m0: torch.Tensor, s0: torch.Tensor, n_steps: int, iterations: int
+    propagator: Propagator,
+    policy: RBFPolicy | LinearPolicy,
+    m0: torch.Tensor,
+    s0: torch.Tensor,
+    n_steps: int,
+    iterations: int,
 ) -> float:
     """Policy search: L-BFGS-B on the policy parameters from the policy's current ones; the policy keeps the
     better of the start and the result, whose predicted total cost is returned."""
@@ -495,7 +539,10 @@ def _optimise_policy(
     start = policy.get_vector()
     start_value = objective(start)[0]
     result = scipy.optimize.minimize(
-        objective, start, jac=True, method="L-BFGS-B",
+        objective,
+        start,
+        jac=True,
+        method="L-BFGS-B",
         options={"maxiter": int(iterations), "maxfun": int(2 * iterations)},
     )
     if result.fun <= start_value:
@@ -526,21 +573,40 @@ def _draw_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**31 - 1))
 
 
-def _random_policy(spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray, n_basis: int,
-                   torque_limit_nm: float, rng: np.random.Generator, target_std: float = 0.1) -> RBFPolicy:
+def _random_policy(
+    spec: StateSpec,
+    states: np.ndarray,
+    model_inputs: np.ndarray,
+    n_basis: int,
+    torque_limit_nm: float,
+    rng: np.random.Generator,
+    target_std: float = 0.1,
+) -> RBFPolicy:
     """A fresh policy: ``n_basis`` centres drawn from ``states`` (rows of visited states), pseudo-targets of
     spread ``target_std`` from a seed drawn from ``rng`` (after the centres), length-scales the spread of each
     rate in ``model_inputs`` (the state part of the GP inputs) and 0.7 for every sin/cos input (as in PILCO)."""
     chosen = states[rng.choice(len(states), size=n_basis, replace=n_basis > len(states))]
-    lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles,
-                            np.maximum(model_inputs.std(axis=0), 1e-3), 0.7)
-    return RBFPolicy(spec.model_inputs(chosen), lengthscales, torque_limit_nm, seed=_draw_seed(rng),
-                     target_std=target_std)
+    lengthscales = np.where(
+        np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles, np.maximum(model_inputs.std(axis=0), 1e-3), 0.7
+    )
+    return RBFPolicy(
+        spec.model_inputs(chosen), lengthscales, torque_limit_nm, seed=_draw_seed(rng), target_std=target_std
+    )
 
 
-def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: RBFPolicy, m0: torch.Tensor,
-                          s0: torch.Tensor, spec: StateSpec, states: np.ndarray, model_inputs: np.ndarray,
-                          rng: np.random.Generator, n_steps: int, restart: bool = True) -> tuple[float, int]:
+def _search_with_restarts(
+    config: PilcoConfig,
+    propagator: Propagator,
+    policy: RBFPolicy,
+    m0: torch.Tensor,
+    s0: torch.Tensor,
+    spec: StateSpec,
+    states: np.ndarray,
+    model_inputs: np.ndarray,
+    rng: np.random.Generator,
+    n_steps: int,
+    restart: bool = True,
+) -> tuple[float, int]:
     """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when
     ``restart``, ``config.policy_restarts`` and the cost threshold ask for it) from that many fresh random
     policies (:func:`_random_policy`, draws from ``rng``); ``policy`` keeps the parameters of the lowest
@@ -550,8 +616,9 @@ def _search_with_restarts(config: PilcoConfig, propagator: Propagator, policy: R
         return best, 0
     best_vector = policy.get_vector()
     for _ in range(config.policy_restarts):
-        fresh = _random_policy(spec, states, model_inputs, config.n_basis, policy.torque_limit_nm, rng,
-                               config.restart_target_std)
+        fresh = _random_policy(
+            spec, states, model_inputs, config.n_basis, policy.torque_limit_nm, rng, config.restart_target_std
+        )
         policy.set_vector(fresh.get_vector())
         value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
         if value < best:
@@ -565,12 +632,14 @@ def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[Linear
     spec = state_spec(config.state)
     if balance is None or config.balance_within_rad is None:
         return PilcoController(policy, spec, config.control_dt_s)
-    return PilcoController(policy, spec, config.control_dt_s, balance,
-                           (config.balance_within_rad, config.balance_within_rad_s))
+    return PilcoController(
+        policy, spec, config.control_dt_s, balance, (config.balance_within_rad, config.balance_within_rad_s)
+    )
 
 
-def _upright_distribution(config: PilcoConfig, spec: StateSpec, states: np.ndarray
-                          ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
+def _upright_distribution(
+    config: PilcoConfig, spec: StateSpec, states: np.ndarray
+) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
     """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
     policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``[-pi, pi)``;
     None when fewer than ``2 * dim`` states are in that band."""
@@ -593,7 +662,8 @@ def check_pilco_size(config: PilcoConfig) -> None:
     policy = 8.0 * config.n_prediction_steps * config.n_basis * (config.max_gp_points + dim) * dim
     evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
     check_work_size(
-        "this PILCO run", rollout + policy + evaluation,
+        "this PILCO run",
+        rollout + policy + evaluation,
         f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.max_gp_points}**2 GP points, "
         f"{config.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
     )
@@ -628,8 +698,9 @@ def run_pilco(
         return _run_pilco(config, progress, callback)
 
 
-def _run_pilco(config: Optional[PilcoConfig], progress: bool,
-               callback: Optional[Callable[[TrialRecord], None]]) -> PilcoResult:
+def _run_pilco(
+    config: Optional[PilcoConfig], progress: bool, callback: Optional[Callable[[TrialRecord], None]]
+) -> PilcoResult:
     """:func:`run_pilco` on the caller's torch threads: the random trials, then model, policy and a policy trial
     until a policy balances or ``n_policy_trials`` have run."""
     from tqdm.auto import tqdm
@@ -647,8 +718,11 @@ def _run_pilco(config: Optional[PilcoConfig], progress: bool,
         record = pilco.policy_trial(search)
         if callback:
             callback(record)
-        bar.set_postfix(real_s=f"{record.plant_seconds_total:.0f}", cost=f"{record.real_cost:.1f}/"
-                        f"{search.predicted_cost:.1f}", std=f"{record.eval_upright_std_rad:.2f}")
+        bar.set_postfix(
+            real_s=f"{record.plant_seconds_total:.0f}",
+            cost=f"{record.real_cost:.1f}/{search.predicted_cost:.1f}",
+            std=f"{record.eval_upright_std_rad:.2f}",
+        )
         if record.balanced:
             break
     bar.close()
@@ -713,8 +787,11 @@ class Pilco:
         same whatever the number of trials)."""
         config = self.config
         controller = RandomTorqueController(
-            config.task.rod.torque_limit_nm, config.control_dt_s, seed=_draw_seed(self.streams["random_torques"]),
-            hold_s=(config.random_hold_min_s, config.random_hold_max_s), bang_bang=True,
+            config.task.rod.torque_limit_nm,
+            config.control_dt_s,
+            seed=_draw_seed(self.streams["random_torques"]),
+            hold_s=(config.random_hold_min_s, config.random_hold_max_s),
+            bang_bang=True,
         )
         episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
         rate_width = config.cost_rate_width_rad_s if self.rate_on else None
@@ -724,17 +801,26 @@ class Pilco:
         """The first policy, random, its centres on the states of the trials so far (PILCO draws them from the
         initial state distribution; spreading them over the visited states lets the first policy act away from
         hanging), its length-scales the spread of each rate in the data and 0.7 for every sin/cos input."""
-        self.policy = _random_policy(self.spec, np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1],
-                                     self.config.n_basis, self.config.task.rod.torque_limit_nm,
-                                     self.streams["policy_init"])
+        self.policy = _random_policy(
+            self.spec,
+            np.vstack(self.real_states),
+            np.vstack(self.inputs)[:, :-1],
+            self.config.n_basis,
+            self.config.task.rod.torque_limit_nm,
+            self.streams["policy_init"],
+        )
         return self.policy
 
     def optimize_models(self) -> MultiOutputGP:
         """Fit the GP dynamics on the data subsampled to ``max_gp_points`` (the latest trial kept), from the last
         fit's hyperparameters; with ``gp_all_data`` condition it on all the data."""
         x_all, y_all = np.vstack(self.inputs), np.vstack(self.targets)
-        subset = select_subset(len(x_all), self.config.max_gp_points, recent=len(self.inputs[-1]),
-                               seed=_draw_seed(self.streams["gp_subsets"]))
+        subset = select_subset(
+            len(x_all),
+            self.config.max_gp_points,
+            recent=len(self.inputs[-1]),
+            seed=_draw_seed(self.streams["gp_subsets"]),
+        )
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=self.gp_hyperparameters)
         gp.fit(self.config.gp_iterations)
         self.gp_hyperparameters = gp.hyperparameters
@@ -749,12 +835,30 @@ class Pilco:
         config, spec = self.config, self.spec
         assert self.policy is not None and self.gp is not None, "start_policy and optimize_models come first"
         rate_width, width_m, n_search = self._cost()
-        propagator = Propagator(spec, self.gp, self.policy, config.task.rod.length_m, width_m, rate_width,
-                                config.cost_exploration, compiled=config.compiled)
+        propagator = Propagator(
+            spec,
+            self.gp,
+            self.policy,
+            config.task.rod.length_m,
+            width_m,
+            rate_width,
+            config.cost_exploration,
+            compiled=config.compiled,
+        )
         restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
-        objective, n_restarts = _search_with_restarts(config, propagator, self.policy, self.m0, self.s0, spec,
-                                                      np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1],
-                                                      restart_rng, n_search, restart=self.n_searches > 0)
+        objective, n_restarts = _search_with_restarts(
+            config,
+            propagator,
+            self.policy,
+            self.m0,
+            self.s0,
+            spec,
+            np.vstack(self.real_states),
+            np.vstack(self.inputs)[:, :-1],
+            restart_rng,
+            n_search,
+            restart=self.n_searches > 0,
+        )
         self.n_searches += 1
         predicted = self._predict(propagator, n_search, objective)
         return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
@@ -795,8 +899,9 @@ class Pilco:
             return float("nan")
         if self.balance_policy is None:
             self.balance_policy = LinearPolicy(spec.n_model_inputs, config.task.rod.torque_limit_nm)
-        propagator = Propagator(spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width,
-                                compiled=False)
+        propagator = Propagator(
+            spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width, compiled=False
+        )
         n_balance = int(round(config.balance_prediction_s / config.control_dt_s))
         return _optimise_policy(propagator, self.balance_policy, *upright, n_balance, config.policy_iterations)
 
@@ -812,8 +917,9 @@ class Pilco:
         episode, states = self._trial(self.controller(), _draw_seed(self.streams["policy_starts"]))
         record = self._record("policy", episode, states, search, self.n_gp_points)
         if config.eval_seeds:
-            summary = evaluate_controller(self.controller(), config.task, name="pilco", seeds=config.eval_seeds,
-                                          duration_s=config.eval_duration_s)
+            summary = evaluate_controller(
+                self.controller(), config.task, name="pilco", seeds=config.eval_seeds, duration_s=config.eval_duration_s
+            )
             stds = [r.upright_std_rad for r in summary.results]
             record.eval_success_rate = summary.success_rate
             record.eval_upright_std_rad = float(np.max(stds))
@@ -833,24 +939,39 @@ class Pilco:
         self.plant_seconds += self.config.horizon_s
         return episode, states
 
-    def _record(self, kind: str, episode: EvaluationResult, states: np.ndarray, search: PolicySearch,
-                n_gp_points: int) -> TrialRecord:
+    def _record(
+        self, kind: str, episode: EvaluationResult, states: np.ndarray, search: PolicySearch, n_gp_points: int
+    ) -> TrialRecord:
         """The :class:`TrialRecord` of the trial just run, added to the records (test results to come)."""
         record = TrialRecord(
-            index=len(self.records), kind=kind, duration_s=self.config.horizon_s,
-            plant_seconds_total=self.plant_seconds, predicted_cost=search.predicted_cost,
+            index=len(self.records),
+            kind=kind,
+            duration_s=self.config.horizon_s,
+            plant_seconds_total=self.plant_seconds,
+            predicted_cost=search.predicted_cost,
             real_cost=_trial_cost(self.config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m),
-            swing_up_time_s=episode.swing_up_time_s, upright_std_rad=episode.upright_std_rad, n_gp_points=n_gp_points,
-            wall_s_total=time.perf_counter() - self._start_wall, cpu_s_total=time.process_time() - self._start_cpu,
-            cost_rate_width_rad_s=search.cost_rate_width_rad_s, policy_restarts=search.n_restarts,
-            cost_width_m=search.cost_width_m, balance_predicted_cost=search.balance_predicted_cost,
+            swing_up_time_s=episode.swing_up_time_s,
+            upright_std_rad=episode.upright_std_rad,
+            n_gp_points=n_gp_points,
+            wall_s_total=time.perf_counter() - self._start_wall,
+            cpu_s_total=time.process_time() - self._start_cpu,
+            cost_rate_width_rad_s=search.cost_rate_width_rad_s,
+            policy_restarts=search.n_restarts,
+            cost_width_m=search.cost_width_m,
+            balance_predicted_cost=search.balance_predicted_cost,
         )
         self.records.append(record)
         return record
 
     def result(self) -> PilcoResult:
         """The run so far as a :class:`PilcoResult`."""
-        return PilcoResult(config=self.config, records=self.records, policy=self.policy,  # type: ignore[arg-type]
-                           gp_hyperparameters=self.gp_hyperparameters, balance_policy=self.balance_policy,
-                           predicted_means=self.predicted_means, predicted_stds=self.predicted_stds,
-                           real_states=self.real_states)
+        return PilcoResult(
+            config=self.config,
+            records=self.records,
+            policy=self.policy,  # type: ignore[arg-type]
+            gp_hyperparameters=self.gp_hyperparameters,
+            balance_policy=self.balance_policy,
+            predicted_means=self.predicted_means,
+            predicted_stds=self.predicted_stds,
+            real_states=self.real_states,
+        )

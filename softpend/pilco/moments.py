@@ -153,15 +153,25 @@ def gp_moments(
     t_scaled = t * inv_ell.unsqueeze(1)  # (E, N, D)
     io_cov = torch.einsum("end,en->de", t_scaled, lb) * c  # (D, E)
 
-    second = _second_moments(cov, inp, scaled, log_lengthscales, log_signal_var, signal_var, beta, inv_kernel, weights,
-                             eye)
+    second = _second_moments(
+        cov, inp, scaled, log_lengthscales, log_signal_var, signal_var, beta, inv_kernel, weights, eye
+    )
     s_mat = second - torch.outer(mean_out, mean_out)
     return mean_out, s_mat, io_cov
 
 
-def _second_moments(cov: torch.Tensor, inp: torch.Tensor, scaled: torch.Tensor, log_lengthscales: torch.Tensor,
-                    log_signal_var: torch.Tensor, signal_var: torch.Tensor, beta: torch.Tensor,
-                    inv_kernel: torch.Tensor | None, weights: torch.Tensor | None, eye: torch.Tensor) -> torch.Tensor:
+def _second_moments(
+    cov: torch.Tensor,
+    inp: torch.Tensor,
+    scaled: torch.Tensor,
+    log_lengthscales: torch.Tensor,
+    log_signal_var: torch.Tensor,
+    signal_var: torch.Tensor,
+    beta: torch.Tensor,
+    inv_kernel: torch.Tensor | None,
+    weights: torch.Tensor | None,
+    eye: torch.Tensor,
+) -> torch.Tensor:
     """The (E, E) second moments ``E[f_i f_j]`` of :func:`gp_moments` (``inp``: the inputs less the input mean,
     ``scaled``: those over each output's length-scales), computed once per pair ``i <= j``."""
     n_outputs = log_lengthscales.shape[0]

@@ -24,9 +24,14 @@ __all__ = ["LinearPolicy", "RBFPolicy", "saturated_linear_moments", "saturated_r
 DTYPE = torch.float64
 
 
-def saturated_rbf_moments(mean: torch.Tensor, cov: torch.Tensor, centers: torch.Tensor, beta: torch.Tensor,
-                          log_lengthscales: torch.Tensor, torque_limit_nm: float
-                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def saturated_rbf_moments(
+    mean: torch.Tensor,
+    cov: torch.Tensor,
+    centers: torch.Tensor,
+    beta: torch.Tensor,
+    log_lengthscales: torch.Tensor,
+    torque_limit_nm: float,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the torque ``u`` [N m] of an RBF network with weights
     ``beta`` squashed by the sine saturation at ``torque_limit_nm``, at a Gaussian input ``x ~ N(mean, cov)``."""
     m_z, s_z, c_z = rbf_network_moments(mean, cov, centers, beta, log_lengthscales)
@@ -39,8 +44,9 @@ def sin_saturation(z: torch.Tensor, torque_limit_nm: float) -> torch.Tensor:
     return torque_limit_nm * (9.0 * torch.sin(z) + torch.sin(3.0 * z)) / 8.0
 
 
-def saturated_linear_moments(mean: torch.Tensor, cov: torch.Tensor, weights: torch.Tensor, torque_limit_nm: float
-                             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def saturated_linear_moments(
+    mean: torch.Tensor, cov: torch.Tensor, weights: torch.Tensor, torque_limit_nm: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the torque ``u`` [N m] of the linear map ``weights . x``
     squashed by the sine saturation at ``torque_limit_nm``, at a Gaussian input ``x ~ N(mean, cov)``."""
     m_u, s_u, c_u = sin_saturation_moments(weights @ mean, weights @ cov @ weights, torque_limit_nm)
@@ -108,7 +114,9 @@ class LinearPolicy:
             raise ValueError(f"linear policy state dict must hold 'weights' only, got {sorted(state)}")
         weights = state["weights"].to(DTYPE)
         if weights.shape != self.weights.shape:
-            raise ValueError(f"linear policy weights must have shape {tuple(self.weights.shape)}, got {tuple(weights.shape)}")
+            raise ValueError(
+                f"linear policy weights must have shape {tuple(self.weights.shape)}, got {tuple(weights.shape)}"
+            )
         self.weights = weights.clone()
 
 
@@ -185,8 +193,12 @@ class RBFPolicy:
         params = self.parameters()
         versions = tuple(p._version for p in params)
         cache = self._beta_cache
-        if (cache is not None and cache[0] == torch.is_grad_enabled() and cache[2] == versions
-                and all(a is b for a, b in zip(cache[1], params))):
+        if (
+            cache is not None
+            and cache[0] == torch.is_grad_enabled()
+            and cache[2] == versions
+            and all(a is b for a, b in zip(cache[1], params))
+        ):
             return cache[3]
         beta = self._compute_beta()
         self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
@@ -226,8 +238,11 @@ class RBFPolicy:
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"centers": self.centers.detach().clone(), "targets": self.targets.detach().clone(),
-                "log_lengthscales": self.log_lengthscales.detach().clone()}
+        return {
+            "centers": self.centers.detach().clone(),
+            "targets": self.targets.detach().clone(),
+            "log_lengthscales": self.log_lengthscales.detach().clone(),
+        }
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         keys = ("centers", "targets", "log_lengthscales")

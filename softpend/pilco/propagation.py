@@ -54,8 +54,8 @@ import numpy as np
 import torch
 
 from softpend.checks import finite
-from softpend.plant import OBSERVATION_NAMES
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
+from softpend.plant import OBSERVATION_NAMES
 
 __all__ = ["COMPILER_NOTES", "STATE_SPECS", "Propagator", "StateSpec", "silence_compiler_notes", "state_spec"]
 
@@ -177,8 +177,17 @@ class Propagator:
         ``f(mean, cov, *params)`` their moments (:class:`~softpend.pilco.gp.MultiOutputGP`, :class:`~softpend.pilco.policy.RBFPolicy`).
     """
 
-    def __init__(self, spec: StateSpec, dynamics, policy, length_m: float, cost_width_m: float,
-                 cost_rate_width_rad_s: float | None = None, exploration: float = 0.0, compiled: bool = False) -> None:
+    def __init__(
+        self,
+        spec: StateSpec,
+        dynamics,
+        policy,
+        length_m: float,
+        cost_width_m: float,
+        cost_rate_width_rad_s: float | None = None,
+        exploration: float = 0.0,
+        compiled: bool = False,
+    ) -> None:
         if not length_m > 0:
             raise ValueError(f"length_m must be positive, got {length_m!r}")
         if not cost_width_m > 0:
@@ -201,10 +210,14 @@ class Propagator:
         k = d - spec.n_angles
         # positions in the augmented vector [state (d), trig (2A), u]
         model_inputs = tuple(range(k)) + tuple(range(d, d + 2 * spec.n_angles))
-        self._layout = _Layout(dim=d, angles=tuple(spec.angle_indices), model_inputs=model_inputs,
-                               dynamics_inputs=model_inputs + (d + 2 * spec.n_angles,),
-                               tip_angle=spec.tip_angle_index,
-                               tip_rate=spec.tip_rate_index if self.cost_rate_width_rad_s is not None else None)
+        self._layout = _Layout(
+            dim=d,
+            angles=tuple(spec.angle_indices),
+            model_inputs=model_inputs,
+            dynamics_inputs=model_inputs + (d + 2 * spec.n_angles,),
+            tip_angle=spec.tip_angle_index,
+            tip_rate=spec.tip_rate_index if self.cost_rate_width_rad_s is not None else None,
+        )
         # (ex, ey) = A @ (sin theta, cos theta) for the point at distance L in the tip's direction; the tip rate
         # is scaled by w / w_r, so that one width w applies to all three coordinates
         self._cost_terms = (
@@ -283,8 +296,9 @@ def _augment(m: torch.Tensor, s: torch.Tensor, m_new: torch.Tensor, s_new: torch
     return m_out, s_out
 
 
-def _step(layout: _Layout, policy: tuple, dynamics: tuple, m: torch.Tensor, s: torch.Tensor
-          ) -> tuple[torch.Tensor, torch.Tensor]:
+def _step(
+    layout: _Layout, policy: tuple, dynamics: tuple, m: torch.Tensor, s: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """One predicted step; ``policy`` and ``dynamics`` are ``(moment function, its parameters)``."""
     ang = _index(layout.angles)
     m_t, s_t, c_t = trig_moments(m[ang], s[ang][:, ang])
@@ -313,13 +327,16 @@ def _cost(layout: _Layout, cost_terms: tuple, m: torch.Tensor, s: torch.Tensor) 
     j = layout.tip_rate
     cross = k * (a @ (s[j, i] * c_t[0]))  # cov(position, k theta_dot) = cov(theta_dot, theta) C_trig, projected
     m_z = torch.cat([m_z, k * m[j : j + 1]])
-    s_z = torch.cat([torch.cat([s_z, cross.unsqueeze(1)], dim=1),
-                     torch.cat([cross, (k * k) * s[j, j].reshape(1)]).unsqueeze(0)], dim=0)
+    s_z = torch.cat(
+        [torch.cat([s_z, cross.unsqueeze(1)], dim=1), torch.cat([cross, (k * k) * s[j, j].reshape(1)]).unsqueeze(0)],
+        dim=0,
+    )
     return saturating_cost_moments(m_z, s_z, torch.cat([target, torch.zeros(1, dtype=DTYPE)]), width)
 
 
-def _step_and_cost(layout: _Layout, policy: tuple, dynamics: tuple, cost_terms: tuple, m: torch.Tensor,
-                   s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def _step_and_cost(
+    layout: _Layout, policy: tuple, dynamics: tuple, cost_terms: tuple, m: torch.Tensor, s: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """:func:`_step`, then :func:`_cost` of the new state: ``(m, s, expected cost, its variance)``."""
     m, s = _step(layout, policy, dynamics, m, s)
     expected, variance = _cost(layout, cost_terms, m, s)
@@ -346,8 +363,9 @@ def _compiled_step_and_cost():
     if not _COMPILED:
         logging.getLogger("torch._inductor.ir").addFilter(_quiet_c_shim_notes)
         silence_compiler_notes()
-        compiled = torch.compile(_step_and_cost, dynamic=False, fullgraph=True,
-                                 options={"cpp.threads": 1, "cpp_wrapper": True})
+        compiled = torch.compile(
+            _step_and_cost, dynamic=False, fullgraph=True, options={"cpp.threads": 1, "cpp_wrapper": True}
+        )
         import torch._functorch.config as functorch_config
 
         cacheable = functorch_config.patch(autograd_cache_allow_custom_autograd_functions=True)
@@ -362,8 +380,11 @@ def _compiled_step_and_cost():
             except Exception as exc:  # noqa: BLE001 (no C++ compiler, or an unsupported platform)
                 if not _is_compiler_failure(exc):
                     raise
-                warnings.warn(f"torch.compile is unavailable ({type(exc).__name__}); PILCO's rollouts run eagerly",
-                              RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"torch.compile is unavailable ({type(exc).__name__}); PILCO's rollouts run eagerly",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
                 usable[0] = False
                 return _step_and_cost(*args)
 
@@ -373,8 +394,10 @@ def _compiled_step_and_cost():
 
 #: What torch's compiler warns of while it compiles the rollout step (forward and backward graph), once per graph:
 #: ``(message, category)``, each from a torch module.
-COMPILER_NOTES = (("Dynamo detected a call to a `functools.lru_cache`", UserWarning),
-                  ("`torch._prims_common.check` is deprecated", FutureWarning))
+COMPILER_NOTES = (
+    ("Dynamo detected a call to a `functools.lru_cache`", UserWarning),
+    ("`torch._prims_common.check` is deprecated", FutureWarning),
+)
 
 
 def silence_compiler_notes() -> None:

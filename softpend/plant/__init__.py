@@ -1,8 +1,8 @@
 """Plants: the simulated soft pendulum and its parameters."""
 
+from softpend.plant.base import Plant, SimulationDiverged, tilt_state
 from softpend.plant.observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
 from softpend.plant.params import GRAVITY_MPS2, RodParams
-from softpend.plant.base import Plant, SimulationDiverged, tilt_state
 from softpend.plant.prb import PRBPlant
 from softpend.plant.registry import check_plant_name, make_plant, plant_names, register_plant
 

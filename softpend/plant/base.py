@@ -110,9 +110,16 @@ class PlantBase:
         ValueError
             If a state has the wrong shape or is not finite.
         """
-        q = np.zeros(self.n_coordinates) if joint_angles_rad is None else self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = (np.zeros(self.n_coordinates) if joint_velocities_rad_s is None
-              else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s"))
+        q = (
+            np.zeros(self.n_coordinates)
+            if joint_angles_rad is None
+            else self._check_state(joint_angles_rad, "joint_angles_rad")
+        )
+        qd = (
+            np.zeros(self.n_coordinates)
+            if joint_velocities_rad_s is None
+            else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
+        )
         self._set_state(q, qd)
         self.last_torque_nm = 0.0
         return self.observe()

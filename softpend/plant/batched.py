@@ -196,8 +196,12 @@ class BatchedRodParams:
         unknown = set(factors) - set(PARAMETER_FIELDS)
         if unknown:
             raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
-        return self.replace(**{name: getattr(self, name) * torch.as_tensor(f, dtype=getattr(self, name).dtype)
-                               for name, f in factors.items()})
+        return self.replace(
+            **{
+                name: getattr(self, name) * torch.as_tensor(f, dtype=getattr(self, name).dtype)
+                for name, f in factors.items()
+            }
+        )
 
     def rod(self, index: int) -> RodParams:
         """Rod ``index`` as a :class:`RodParams` (values detached)."""
@@ -277,7 +281,9 @@ def _derive(p: BatchedRodParams) -> _Derived:
 UNROLLED_SOLVE_MAX_LINKS = 12
 
 
-def _cholesky_factor(diagonal: torch.Tensor, below: list[torch.Tensor]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+def _cholesky_factor(
+    diagonal: torch.Tensor, below: list[torch.Tensor]
+) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
     """Cholesky factor ``L`` of a symmetric positive definite ``M`` given by its diagonal ``(n, B)`` and the parts
     of its columns below the diagonal (``below[j]``: rows ``j + 1..n - 1`` of column ``j``): the reciprocals of
     ``L``'s diagonal and the parts of its columns below the diagonal; every operation acts on rows of ``B``
@@ -292,7 +298,7 @@ def _cholesky_factor(diagonal: torch.Tensor, below: list[torch.Tensor]) -> tuple
             ljk = lk[j - k - 1]
             d = torch.addcmul(d, ljk, ljk, value=-1.0)
             if j < n - 1:
-                column = torch.addcmul(column, lk[j - k:], ljk, value=-1.0)
+                column = torch.addcmul(column, lk[j - k :], ljk, value=-1.0)
         r = torch.rsqrt(d)
         inverse_diagonal.append(r)
         lower.append(column * r)
@@ -331,8 +337,9 @@ def _gram_times(d: _Derived, w: torch.Tensor) -> torch.Tensor:
     from the structure ``G_ij = L h_max(i, j)`` off the diagonal."""
     hw = d.first_moment_kgm * w
     tail = hw.sum(-2, keepdim=True) - torch.cumsum(hw, -2)  # sum over j > i of h_j w_j
-    return torch.addcmul(torch.addcmul(d.gram_diagonal_minus_lh * w, d.length_times_h, torch.cumsum(w, -2)),
-                         d.link_length_m, tail)
+    return torch.addcmul(
+        torch.addcmul(d.gram_diagonal_minus_lh * w, d.length_times_h, torch.cumsum(w, -2)), d.link_length_m, tail
+    )
 
 
 def _forces(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor):
@@ -354,7 +361,7 @@ def _mass_below(d: _Derived, c: torch.Tensor, s: torch.Tensor) -> list[torch.Ten
     """The links' mass matrix below its diagonal, column by column (``M_ij = G_ij cos(a_i - a_j)``,
     ``G_ij = L h_i`` for ``i > j``); its diagonal is ``G_jj``."""
     n = c.shape[0]
-    return [d.length_times_h[j + 1:] * torch.addcmul(c[j + 1:] * c[j], s[j + 1:], s[j]) for j in range(n)]
+    return [d.length_times_h[j + 1 :] * torch.addcmul(c[j + 1 :] * c[j], s[j + 1 :], s[j]) for j in range(n)]
 
 
 def _dense_mass(d: _Derived, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
@@ -428,8 +435,10 @@ class _RosenbrockMatrix:
             self.factor = torch.linalg.cholesky(matrix)
         else:
             below = _mass_below(d, c, s)
-            below = [torch.cat([(column[0] - e[j + 1])[None], column[1:]]) if j < n - 1 else column
-                     for j, column in enumerate(below)]
+            below = [
+                torch.cat([(column[0] - e[j + 1])[None], column[1:]]) if j < n - 1 else column
+                for j, column in enumerate(below)
+            ]
             self.factor = _cholesky_factor(diagonal, below)
 
     def solve(self, hub_rhs: torch.Tensor, link_rhs: torch.Tensor) -> torch.Tensor:
@@ -444,8 +453,9 @@ class _RosenbrockMatrix:
         return torch.cat([hub[None], links])
 
 
-def _rosenbrock_step(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor,
-                     h: float) -> tuple[torch.Tensor, torch.Tensor]:
+def _rosenbrock_step(
+    d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor, h: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """One step of ``h`` [s] of the two-stage Rosenbrock-W method ROS2 (Verwer et al. 1999) on
     ``y = (x, v)``, ``y' = (v, x_dd)``, with ``W = I - gamma h J`` for the stiff linear part of the Jacobian
     ``J = [[0, I], [-M^-1 K, -M^-1 D]]`` (mass matrix frozen at the step's start; gravity and the velocity terms
@@ -465,15 +475,20 @@ def _rosenbrock_step(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torc
     rv2 = torch.add(_accelerations(d, x2, v2, torque), kv1, alpha=-2.0)
     rx2 = torch.add(v2, kx1, alpha=-2.0)
     spring_x = _spring_times(k, rx2)
-    kv2 = matrix.solve(torch.addcmul(-gamma_h * spring_x[0], d.hub_inertia_kgm2, rv2[0]),
-                       torch.add(_mass_times(d, c, s, rv2[1:]), spring_x[1:], alpha=-gamma_h))
+    kv2 = matrix.solve(
+        torch.addcmul(-gamma_h * spring_x[0], d.hub_inertia_kgm2, rv2[0]),
+        torch.add(_mass_times(d, c, s, rv2[1:]), spring_x[1:], alpha=-gamma_h),
+    )
     kx2 = torch.add(rx2, kv2, alpha=gamma_h)
-    return (torch.add(x, torch.add(kx2, kx1, alpha=3.0), alpha=h / 2),
-            torch.add(v, torch.add(kv2, kv1, alpha=3.0), alpha=h / 2))
+    return (
+        torch.add(x, torch.add(kx2, kx1, alpha=3.0), alpha=h / 2),
+        torch.add(v, torch.add(kv2, kv1, alpha=3.0), alpha=h / 2),
+    )
 
 
-def stable_substeps(params: Union[RodParams, BatchedRodParams], dt_s: float = 0.01,
-                    bound: float = RK4_STABILITY_BOUND) -> int:
+def stable_substeps(
+    params: Union[RodParams, BatchedRodParams], dt_s: float = 0.01, bound: float = RK4_STABILITY_BOUND
+) -> int:
     """RK4 sub-steps per ``dt_s`` that keep ``|lambda| h <= bound`` for every rod of ``params``.
 
     ``|lambda|`` is the largest eigenvalue magnitude of the chain linearised about the straight rod hanging at
@@ -482,7 +497,9 @@ def stable_substeps(params: Union[RodParams, BatchedRodParams], dt_s: float = 0.
     positive("dt_s", dt_s)
     positive("bound", bound)
     p = params if isinstance(params, BatchedRodParams) else BatchedRodParams.from_params(params)
-    d = _derive(BatchedRodParams(n_links=p.n_links, **{f: getattr(p, f).detach().to(torch.float64) for f in PARAMETER_FIELDS}))
+    d = _derive(
+        BatchedRodParams(n_links=p.n_links, **{f: getattr(p, f).detach().to(torch.float64) for f in PARAMETER_FIELDS})
+    )
     n = p.n_links
     size = p.batch_size
     # hanging straight: a_i = pi, so cos(a_i - a_j) = 1 and the gravity torque g h_i sin(a_i) linearises to -g h_i
@@ -512,8 +529,16 @@ def _powers(d: _Derived, v: torch.Tensor, torque: torch.Tensor) -> tuple[torch.T
     return torque * v[0], dissipated
 
 
-def _integrate(integrator: str, substeps: int, h: float, d: _Derived, x: torch.Tensor, v: torch.Tensor,
-               torque: torch.Tensor, with_work: bool):
+def _integrate(
+    integrator: str,
+    substeps: int,
+    h: float,
+    d: _Derived,
+    x: torch.Tensor,
+    v: torch.Tensor,
+    torque: torch.Tensor,
+    with_work: bool,
+):
     """``substeps`` steps of ``h`` [s] of ``integrator`` from absolute angles ``x`` and rates ``v``; with
     ``with_work`` also the motor work and the dissipated energy over them [J], integrated with the method's own
     stages (RK4) or by the trapezoidal rule on the step ends (Rosenbrock, second order as the method)."""
@@ -607,7 +632,9 @@ class BatchedPRBChain:
             if batch_size is not None and int_at_least("batch_size", batch_size, 1) != params.batch_size:
                 raise ValueError(f"batch_size is {batch_size} but params holds {params.batch_size} rods")
         elif params is None or isinstance(params, RodParams):
-            params = BatchedRodParams.from_params(params, batch_size=1 if batch_size is None else batch_size, dtype=dtype)
+            params = BatchedRodParams.from_params(
+                params, batch_size=1 if batch_size is None else batch_size, dtype=dtype
+            )
         else:
             raise ValueError(f"params must be a BatchedRodParams or a RodParams, got {type(params).__name__}")
         self.dt_s = positive("dt_s", dt_s)
@@ -646,7 +673,9 @@ class BatchedPRBChain:
     def _check_state(self, value: TensorLike, name: str) -> torch.Tensor:
         tensor = torch.as_tensor(value, dtype=self.dtype)
         if tuple(tensor.shape) != (self.batch_size, self.n_coordinates):
-            raise ValueError(f"{name} must have shape ({self.batch_size}, {self.n_coordinates}), got {tuple(tensor.shape)}")
+            raise ValueError(
+                f"{name} must have shape ({self.batch_size}, {self.n_coordinates}), got {tuple(tensor.shape)}"
+            )
         return tensor
 
     def _check_torque(self, torque_nm: TensorLike) -> torch.Tensor:
@@ -654,7 +683,9 @@ class BatchedPRBChain:
         if torque.ndim == 0:
             torque = torque.expand(self.batch_size)
         if tuple(torque.shape) != (self.batch_size,):
-            raise ValueError(f"torque_nm must be a number or have shape ({self.batch_size},), got {tuple(torque.shape)}")
+            raise ValueError(
+                f"torque_nm must be a number or have shape ({self.batch_size},), got {tuple(torque.shape)}"
+            )
         if not bool(torch.isfinite(torque.detach()).all()):
             raise ValueError("torque_nm must be finite")
         return torch.minimum(torch.maximum(torque, -self._d.torque_limit_nm), self._d.torque_limit_nm)
@@ -668,8 +699,9 @@ class BatchedPRBChain:
         return torch.cat([x[:1], x[1:] - x[:-1]]).T
 
     # ------------------------------------------------------------------ stepping
-    def step(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike,
-             torque_nm: TensorLike) -> tuple[torch.Tensor, torch.Tensor]:
+    def step(
+        self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torque_nm: TensorLike
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Hold ``torque_nm`` (per rod, saturated) for one control step ``dt_s``.
 
         Parameters
@@ -690,11 +722,11 @@ class BatchedPRBChain:
         x, v = self._integrate(self._absolute(q), self._absolute(qd), torque)
         return self._relative(x), self._relative(v)
 
-    def _integrate(self, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor,
-                   with_work: bool = False):
+    def _integrate(self, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor, with_work: bool = False):
         h = self.dt_s / self.substeps
         needs_grad = torch.is_grad_enabled() and (
-            self._params_require_grad or x.requires_grad or v.requires_grad or torque.requires_grad)
+            self._params_require_grad or x.requires_grad or v.requires_grad or torque.requires_grad
+        )
         if self.compiled and not with_work and not needs_grad:
             if self._compiled_integrate is None:
                 self._compiled_integrate = torch.compile(_integrate, dynamic=False)
@@ -711,8 +743,9 @@ class BatchedPRBChain:
         x, v, w_in, w_out = self._integrate(self._absolute(q), self._absolute(qd), torque, with_work=True)
         return self._relative(x), self._relative(v), w_in, w_out
 
-    def rollout(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike,
-                torques_nm: TensorLike) -> tuple[torch.Tensor, torch.Tensor]:
+    def rollout(
+        self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torques_nm: TensorLike
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """States after each of ``T`` control steps, for torques of shape ``(T, B)``: tensors ``(T, B, n + 1)``."""
         q = self._check_state(joint_angles_rad, "joint_angles_rad")
         qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
@@ -743,15 +776,17 @@ class BatchedPRBChain:
         ey_dot = -(length * s * ad).sum(0)
         r2 = ex * ex + ey * ey
         theta = torch.atan2(-ex, ey)
-        theta_dot = torch.where(r2 > 0, (ex * ey_dot - ey * ex_dot) / torch.where(r2 > 0, r2, torch.ones_like(r2)),
-                                torch.zeros_like(r2))
+        theta_dot = torch.where(
+            r2 > 0, (ex * ey_dot - ey * ex_dot) / torch.where(r2 > 0, r2, torch.ones_like(r2)), torch.zeros_like(r2)
+        )
         two_pi = 2 * math.pi
 
         def wrap(angle: torch.Tensor) -> torch.Tensor:
             return torch.remainder(angle + math.pi, two_pi) - math.pi
 
-        return torch.stack([wrap(x[0]), wrap(theta), ex, ey, wrap(a[-1]), v[0], theta_dot, ex_dot, ey_dot, ad[-1]],
-                           dim=1)
+        return torch.stack(
+            [wrap(x[0]), wrap(theta), ex, ey, wrap(a[-1]), v[0], theta_dot, ex_dot, ey_dot, ad[-1]], dim=1
+        )
 
     def energy_j(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> dict[str, torch.Tensor]:
         """Kinetic, gravitational and elastic energy of each rod [J] (tensors ``(B,)``), as
@@ -765,4 +800,9 @@ class BatchedPRBChain:
         kinetic = 0.5 * d.hub_inertia_kgm2 * v[0] ** 2 + 0.5 * (ad * _mass_times(d, c, s, ad)).sum(0)
         gravity = (d.gravity_moment_nm * c).sum(0)
         elastic = 0.5 * (d.stiffness_nm_per_rad * (a - x[:-1]) ** 2).sum(0)
-        return {"kinetic_j": kinetic, "gravity_j": gravity, "elastic_j": elastic, "total_j": kinetic + gravity + elastic}
+        return {
+            "kinetic_j": kinetic,
+            "gravity_j": gravity,
+            "elastic_j": elastic,
+            "total_j": kinetic + gravity + elastic,
+        }

@@ -35,11 +35,11 @@ from typing import Optional
 
 import numpy as np
 
+from softpend.checks import in_unit_interval, int_at_least, positive
+from softpend.plant.base import PlantBase
 from softpend.plant.beam_adapter import BeamSection, HubBeam2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
-from softpend.checks import in_unit_interval, int_at_least, positive
-from softpend.plant.base import PlantBase
 
 __all__ = ["BeamPlant", "DEFAULT_N_ELEMENTS", "POISSON_RATIO", "SHEAR_CORRECTION", "beam_section_from_params"]
 
@@ -287,15 +287,25 @@ class BeamPlant(PlantBase):
         sec = self.section
         h = self._beam.element_length_m
         g = p.gravity_mps2
-        gravity = g * sec.mass_per_length_kg_m * h * float(np.sum(0.5 * (y[:-1] + y[1:]))) + g * p.tip_mass_kg * float(y[-1])
+        gravity = g * sec.mass_per_length_kg_m * h * float(np.sum(0.5 * (y[:-1] + y[1:]))) + g * p.tip_mass_kg * float(
+            y[-1]
+        )
         dx = np.diff(x) / h
         dy = np.diff(y) / h
         mid = 0.5 * (rot[:-1] + rot[1:])
         tangent = -np.sin(mid) * dx + np.cos(mid) * dy  # r' . t, with t = (-sin, cos) (upright at rotation 0)
         normal = np.cos(mid) * dx + np.sin(mid) * dy
         curvature = np.diff(rot) / h
-        elastic = 0.5 * h * float(
-            np.sum(sec.axial_stiffness_n * (tangent - 1.0) ** 2 + sec.shear_stiffness_n * normal**2 + sec.bending_stiffness_nm2 * curvature**2)
+        elastic = (
+            0.5
+            * h
+            * float(
+                np.sum(
+                    sec.axial_stiffness_n * (tangent - 1.0) ** 2
+                    + sec.shear_stiffness_n * normal**2
+                    + sec.bending_stiffness_nm2 * curvature**2
+                )
+            )
         )
         return {
             "kinetic_j": kinetic,
@@ -303,4 +313,3 @@ class BeamPlant(PlantBase):
             "elastic_j": elastic,
             "total_j": kinetic + gravity + elastic,
         }
-

@@ -171,7 +171,9 @@ class HubBeam2D:
         if self.hub_locked_at_rad is not None:
             # constraint: q_hub - q_ground = offset
             mbs.AddObject(
-                ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=float(self.hub_locked_at_rad))
+                ObjectConnectorCoordinate(
+                    markerNumbers=[ground_marker, hub_rotation], offset=float(self.hub_locked_at_rad)
+                )
             )
         else:
             if self.hub_inertia_kgm2 > 0:
@@ -179,14 +181,18 @@ class HubBeam2D:
             if self.hub_friction_nms_per_rad > 0:
                 mbs.AddObject(
                     ObjectConnectorCoordinateSpringDamper(
-                        markerNumbers=[ground_marker, hub_rotation], stiffness=0.0, damping=self.hub_friction_nms_per_rad
+                        markerNumbers=[ground_marker, hub_rotation],
+                        stiffness=0.0,
+                        damping=self.hub_friction_nms_per_rad,
                     )
                 )
             self._torque_load = mbs.AddLoad(LoadCoordinate(markerNumber=hub_rotation, load=0.0))
         mbs.Assemble()
         self._mass_matrix = self._compute_mass_matrix()
 
-        settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
+        settings = implicit_solver_settings(
+            self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance
+        )
         self._settings = settings
         self._solver: Any = exu.MainSolverImplicitSecondOrder()  # Any: exudyn's stubs declare its methods without self
         self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
@@ -276,7 +282,9 @@ class HubBeam2D:
         if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
         data.SetSystemState(systemStateList=state, configuration=exu.ConfigurationType.Initial)
-        data.SetODE2Coordinates_tt(coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial)
+        data.SetODE2Coordinates_tt(
+            coordinates=data.GetODE2Coordinates_tt(), configuration=exu.ConfigurationType.Initial
+        )
         self.time_s += self.dt_s
 
     def solve_static(self) -> np.ndarray:

@@ -169,7 +169,9 @@ class KinematicChain2D:
         )
         mbs.Assemble()
 
-        settings = implicit_solver_settings(self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance)
+        settings = implicit_solver_settings(
+            self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance
+        )
         self._settings = settings
         # handles fetched once: every attribute access through pybind11 is a Python-C++ crossing of its own
         self._time_integration = settings.timeIntegration
@@ -234,7 +236,9 @@ class KinematicChain2D:
         try:
             ok = solver.SolveSteps(mbs, settings)
         except exu.ExudynError as exc:
-            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}") from exc
+            raise SolverFailure(
+                f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}"
+            ) from exc
         data = self._data
         state = data.GetSystemState()
         if not ok:

@@ -25,7 +25,9 @@ OBSERVATION_NAMES: tuple[str, ...] = (
 
 def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
     """Wrap an angle to ``[-pi, pi)``."""
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi if np.ndim(angle) else (angle + np.pi) % (2 * np.pi) - np.pi
+    return (
+        (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi if np.ndim(angle) else (angle + np.pi) % (2 * np.pi) - np.pi
+    )
 
 
 class Observation(NamedTuple):

@@ -85,7 +85,9 @@ class RodParams:
             finite(field.name, getattr(self, field.name))
         n_links = int_at_least("n_links", self.n_links, 1)
         if n_links > MAX_N_LINKS:
-            raise ValueError(f"n_links must be at most {MAX_N_LINKS} (see softpend.plant.params.MAX_N_LINKS), got {self.n_links!r}")
+            raise ValueError(
+                f"n_links must be at most {MAX_N_LINKS} (see softpend.plant.params.MAX_N_LINKS), got {self.n_links!r}"
+            )
         for name in ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm"):
             positive(name, getattr(self, name))
         for name in (

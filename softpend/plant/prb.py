@@ -22,7 +22,6 @@ from softpend.plant.params import RodParams
 __all__ = ["PRBPlant", "SimulationDiverged", "link_inertials"]
 
 
-
 def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Masses [kg], centres of mass from the link's joint [m] and inertias about the centre of mass [kg m^2]
     of the ``n`` rod links of ``params``, the tip mass riding on the last link."""
@@ -38,6 +37,7 @@ def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarra
         masses[-1] = m_l + m_t
         coms[-1] = c
     return masses, coms, inertias
+
 
 class PRBPlant(PlantBase):
     """Soft pendulum as a PRB chain on Exudyn's ``ObjectKinematicTree`` with the implicit solver.

@@ -30,8 +30,9 @@ class Plant(Protocol):
     def time_s(self) -> float:
         """Simulated time since the last reset [s]."""
 
-    def reset(self, joint_angles_rad: Optional[np.ndarray] = None,
-              joint_velocities_rad_s: Optional[np.ndarray] = None) -> Observation:
+    def reset(
+        self, joint_angles_rad: Optional[np.ndarray] = None, joint_velocities_rad_s: Optional[np.ndarray] = None
+    ) -> Observation:
         """Restart from ``(q, q_dot)`` (default: the straight rod upright at rest)."""
 
     def step(self, torque_nm: float) -> Observation:

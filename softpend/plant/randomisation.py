@@ -16,8 +16,13 @@ from softpend.plant.params import RodParams
 __all__ = ["RANDOMISED_FIELDS", "randomised_rod"]
 
 #: The fields scaled by :func:`randomised_rod`.
-RANDOMISED_FIELDS = ("mass_kg", "youngs_modulus_pa", "joint_damping_nms_per_rad", "hub_friction_nms_per_rad",
-                     "torque_limit_nm")
+RANDOMISED_FIELDS = (
+    "mass_kg",
+    "youngs_modulus_pa",
+    "joint_damping_nms_per_rad",
+    "hub_friction_nms_per_rad",
+    "torque_limit_nm",
+)
 
 
 def randomised_rod(rod: RodParams, rng: np.random.Generator, spread: float) -> RodParams:

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def draw_rod(ax, points_m: np.ndarray, color: str = "C0", alpha: float = 1.0, label: str | None = None, joints: bool = True):
+def draw_rod(
+    ax, points_m: np.ndarray, color: str = "C0", alpha: float = 1.0, label: str | None = None, joints: bool = True
+):
     """Draw a rod given its ``(n + 1, 2)`` joint positions [m] (hub first) on a matplotlib axis."""
     points_m = np.asarray(points_m, dtype=float)
     if points_m.ndim != 2 or points_m.shape[1] != 2 or points_m.shape[0] < 2:

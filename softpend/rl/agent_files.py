@@ -30,10 +30,10 @@ import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 
-from softpend.io.arrays import read_npz
-from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_member
 from softpend.checks import NonFiniteError
+from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
+from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_member
 from softpend.rl.config import DQNConfig
 from softpend.rl.training_env import make_base_env
 
@@ -48,15 +48,36 @@ __all__ = [
 ]
 
 #: The pickled (``":serialized:"``) attributes of a softpend DQN agent file, each rebuilt from the config.
-REBUILT_ATTRIBUTES: frozenset[str] = frozenset({
-    "policy_class", "observation_space", "action_space", "replay_buffer_class", "train_freq", "lr_schedule",
-    "exploration_schedule", "_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer",
-    "ep_success_buffer",
-})
+REBUILT_ATTRIBUTES: frozenset[str] = frozenset(
+    {
+        "policy_class",
+        "observation_space",
+        "action_space",
+        "replay_buffer_class",
+        "train_freq",
+        "lr_schedule",
+        "exploration_schedule",
+        "_last_obs",
+        "_last_original_obs",
+        "_last_episode_starts",
+        "ep_info_buffer",
+        "ep_success_buffer",
+    }
+)
 
 #: Hyperparameters stored as plain JSON in an agent file that must equal the run's config.
-_CONFIG_ATTRIBUTES = ("learning_rate", "buffer_size", "batch_size", "gamma", "gradient_steps", "target_update_interval",
-                      "exploration_initial_eps", "exploration_final_eps", "exploration_fraction", "max_grad_norm")
+_CONFIG_ATTRIBUTES = (
+    "learning_rate",
+    "buffer_size",
+    "batch_size",
+    "gamma",
+    "gradient_steps",
+    "target_update_interval",
+    "exploration_initial_eps",
+    "exploration_final_eps",
+    "exploration_fraction",
+    "max_grad_norm",
+)
 
 _BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -88,10 +109,22 @@ def _read_data(path: Path, raw: bytes, max_member_bytes: int = MAX_AGENT_DATA_BY
     try:
         with zipfile.ZipFile(io.BytesIO(raw)) as archive:
             check_zip_members(archive, path, "agent file", max_member_bytes, error=AgentFileError)
-            text = read_zip_member(archive, "data", path, "agent file", MAX_AGENT_DATA_BYTES, AgentFileError).decode("utf-8")
+            text = read_zip_member(archive, "data", path, "agent file", MAX_AGENT_DATA_BYTES, AgentFileError).decode(
+                "utf-8"
+            )
         data = json.loads(text)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, UnicodeDecodeError, json.JSONDecodeError,
-            RecursionError, EOFError, NotImplementedError, OSError, zlib.error) as exc:
+    except (
+        zipfile.BadZipFile,
+        zipfile.LargeZipFile,
+        KeyError,
+        UnicodeDecodeError,
+        json.JSONDecodeError,
+        RecursionError,
+        EOFError,
+        NotImplementedError,
+        OSError,
+        zlib.error,
+    ) as exc:
         raise AgentFileError(f"{path}: not a stable-baselines3 agent file ({type(exc).__name__}: {exc})") from None
     if not isinstance(data, dict):
         raise AgentFileError(f"{path}: its 'data' member is not a JSON object")
@@ -136,7 +169,9 @@ def _check_matches(path: Path, data: dict[str, Any], config: DQNConfig) -> None:
         if name in data and data[name] != getattr(config, name):
             raise AgentFileError(f"{path}: its {name} {data[name]!r} is not the config's {getattr(config, name)!r}")
     if data.get("n_steps", 1) != 1 or data.get("tau", 1.0) != 1.0:
-        raise AgentFileError(f"{path}: n_steps {data.get('n_steps')!r} and tau {data.get('tau')!r} must be 1 (softpend's DQN)")
+        raise AgentFileError(
+            f"{path}: n_steps {data.get('n_steps')!r} and tau {data.get('tau')!r} must be 1 (softpend's DQN)"
+        )
 
 
 def check_finite_weights(model: DQN, where: str) -> None:
@@ -144,8 +179,10 @@ def check_finite_weights(model: DQN, where: str) -> None:
     for name, tensor in model.policy.state_dict().items():
         if torch.is_floating_point(tensor) and not bool(torch.isfinite(tensor).all()):
             bad = int((~torch.isfinite(tensor)).sum())
-            raise NonFiniteError(f"{where}: {bad} of {tensor.numel()} values of the network's {name} are not finite "
-                                 "(training diverged: lower learning_rate)")
+            raise NonFiniteError(
+                f"{where}: {bad} of {tensor.numel()} values of the network's {name} are not finite "
+                "(training diverged: lower learning_rate)"
+            )
 
 
 def load_agent_file(
@@ -290,8 +327,9 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
 
 def _restore(path: Path, name: str, target: np.ndarray, value: np.ndarray, n: int) -> None:
     if value.dtype != target.dtype or value.shape != (n,) + target.shape[1:]:
-        raise AgentFileError(f"{path}: {name} has shape {value.shape} and dtype {value.dtype}, expected "
-                             f"{(n,) + target.shape[1:]} and {target.dtype}")
+        raise AgentFileError(
+            f"{path}: {name} has shape {value.shape} and dtype {value.dtype}, expected "
+            f"{(n,) + target.shape[1:]} and {target.dtype}"
+        )
     target[...] = 0
     target[:n] = value
-

@@ -135,9 +135,17 @@ class DQNConfig:
     def __post_init__(self) -> None:
         _check_positive_ints(
             self,
-            ("n_torque_levels", "action_repeat", "buffer_size", "batch_size", "train_freq",
-             "gradient_steps", "target_update_interval", "eval_every_episodes",
-             "checkpoint_every_episodes"),
+            (
+                "n_torque_levels",
+                "action_repeat",
+                "buffer_size",
+                "batch_size",
+                "train_freq",
+                "gradient_steps",
+                "target_update_interval",
+                "eval_every_episodes",
+                "checkpoint_every_episodes",
+            ),
         )
         one_of("training_start", self.training_start, ("random", "hanging", "upright"))
         if not isinstance(self.task, Task):
@@ -146,9 +154,14 @@ class DQNConfig:
         boolean("eval_until_first_failure", self.eval_until_first_failure)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
-        object.__setattr__(self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0))
-        object.__setattr__(self, "stop_after_balanced_evaluations",
-                           int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0))
+        object.__setattr__(
+            self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0)
+        )
+        object.__setattr__(
+            self,
+            "stop_after_balanced_evaluations",
+            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0),
+        )
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
         in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step, lr / (1 - beta1), stays a float32
@@ -165,13 +178,17 @@ class DQNConfig:
             raise ValueError("eval_seeds must not be empty")
         confirm = _seed_tuple("stop_confirm_seeds", self.stop_confirm_seeds)
         if set(confirm) & set(seeds):
-            raise ValueError(f"stop_confirm_seeds {sorted(set(confirm) & set(seeds))} are also eval_seeds: a confirmation "
-                             "needs starts of its own")
+            raise ValueError(
+                f"stop_confirm_seeds {sorted(set(confirm) & set(seeds))} are also eval_seeds: a confirmation "
+                "needs starts of its own"
+            )
         object.__setattr__(self, "stop_confirm_seeds", confirm)
         failures = int_at_least("stop_confirm_max_failures", self.stop_confirm_max_failures, 0)
         if confirm and failures >= len(confirm):
-            raise ValueError(f"stop_confirm_max_failures ({failures}) must be less than the {len(confirm)} "
-                             "stop_confirm_seeds: a confirmation needs a start that balances")
+            raise ValueError(
+                f"stop_confirm_max_failures ({failures}) must be less than the {len(confirm)} "
+                "stop_confirm_seeds: a confirmation needs a start that balances"
+            )
         object.__setattr__(self, "stop_confirm_max_failures", failures)
         if self.episode_s < self.agent_dt_s * (1 - 1e-9):
             raise ValueError(
@@ -279,8 +296,15 @@ class MBPOConfig(DQNConfig):
         super().__post_init__()
         _check_positive_ints(
             self,
-            ("rollouts_per_real_step", "rollout_every_steps", "model_buffer_size", "model_refit_every_episodes",
-             "ensemble_size", "model_fit_steps", "model_batch_size"),
+            (
+                "rollouts_per_real_step",
+                "rollout_every_steps",
+                "model_buffer_size",
+                "model_refit_every_episodes",
+                "ensemble_size",
+                "model_fit_steps",
+                "model_batch_size",
+            ),
         )
         object.__setattr__(
             self, "initial_random_episodes", int_at_least("initial_random_episodes", self.initial_random_episodes, 1)
@@ -367,4 +391,3 @@ def load_config(path: Path) -> DQNConfig:
         return cls(task=task, **fields)
     except (TypeError, KeyError, AttributeError) as exc:
         raise ValueError(f"{path}: not a {cls.__name__}: {exc}") from exc
-

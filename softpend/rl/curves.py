@@ -25,8 +25,15 @@ from softpend.checks import in_unit_interval, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["moving_average", "episodes_to_asymptote", "run_to_asymptote", "failures_as", "interval_band", "plant_s_at_episode",
-           "worst_start_std_rad"]
+__all__ = [
+    "moving_average",
+    "episodes_to_asymptote",
+    "run_to_asymptote",
+    "failures_as",
+    "interval_band",
+    "plant_s_at_episode",
+    "worst_start_std_rad",
+]
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -39,7 +46,9 @@ def moving_average(values: np.ndarray, window: int) -> np.ndarray:
     return (csum[n] - csum[lo]) / (n - lo)
 
 
-def episodes_to_asymptote(returns: Sequence[float] | np.ndarray, window: int = 10, level: float = 0.9, final_fraction: float = 0.2) -> float:
+def episodes_to_asymptote(
+    returns: Sequence[float] | np.ndarray, window: int = 10, level: float = 0.9, final_fraction: float = 0.2
+) -> float:
     """Episode (1-based) at which a return curve reaches its asymptotic reward (see the module docstring).
 
     Returns ``inf`` for an empty curve; a curve that never improves reaches it at episode 1.
@@ -79,7 +88,9 @@ def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
     return episodes, plant_s_at_episode(log, episodes)
 
 
-def failures_as(values: Sequence[float] | np.ndarray, success_rates: Sequence[float] | np.ndarray, failed_as: float) -> np.ndarray:
+def failures_as(
+    values: Sequence[float] | np.ndarray, success_rates: Sequence[float] | np.ndarray, failed_as: float
+) -> np.ndarray:
     """``values`` with ``failed_as`` in place of every entry whose success rate is below 1 (some start failed).
 
     For the worst evaluation start's upright std with ``failed_as`` the success level: exact where every start
@@ -92,8 +103,9 @@ def failures_as(values: Sequence[float] | np.ndarray, success_rates: Sequence[fl
 def worst_start_std_rad(log: TrainingLog, failed_as: float = SUCCESS_STD_RAD) -> np.ndarray:
     """Per evaluation row: the worst start's upright std [rad], or ``failed_as`` where a start failed
     (:func:`failures_as`)."""
-    return failures_as(log.column("max_upright_std_rad", "evaluations"), log.column("success_rate", "evaluations"),
-                       failed_as)
+    return failures_as(
+        log.column("max_upright_std_rad", "evaluations"), log.column("success_rate", "evaluations"), failed_as
+    )
 
 
 def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
@@ -103,10 +115,18 @@ def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
     return float(log.episodes[int(episode) - 1]["plant_s"])
 
 
-def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad", axis: str = "plant_s",
-                  grid: np.ndarray | None = None, table: str = "evaluations", statistic: str = "iqm",
-                  confidence: float = 0.95, n_resamples: int = 1000, seed: int = 0,
-                  failed_as: float | None = None) -> dict[str, np.ndarray]:
+def interval_band(
+    logs: Sequence[TrainingLog],
+    field: str = "max_upright_std_rad",
+    axis: str = "plant_s",
+    grid: np.ndarray | None = None,
+    table: str = "evaluations",
+    statistic: str = "iqm",
+    confidence: float = 0.95,
+    n_resamples: int = 1000,
+    seed: int = 0,
+    failed_as: float | None = None,
+) -> dict[str, np.ndarray]:
     """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis.
 
     A run that ended before the end of ``grid`` (its budget was smaller, or training stopped early because it
@@ -156,7 +176,8 @@ def interval_band(logs: Sequence[TrainingLog], field: str = "max_upright_std_rad
         per_seed[i] = y[np.clip(index, 0, len(y) - 1)]
     value, low, high = np.empty(len(grid)), np.empty(len(grid)), np.empty(len(grid))
     for j in range(len(grid)):
-        interval = aggregate_interval(per_seed[:, j], statistic, confidence=confidence, n_resamples=n_resamples,
-                                      seed=seed)
+        interval = aggregate_interval(
+            per_seed[:, j], statistic, confidence=confidence, n_resamples=n_resamples, seed=seed
+        )
         value[j], low[j], high[j] = interval.value, interval.low, interval.high
     return {"x": grid, "value": value, "low": low, "high": high, "per_seed": per_seed}

@@ -57,10 +57,25 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["CheckpointCallback", "ConfirmBalance", "EpisodeRecorder", "EvaluationCallback", "ProgressBarCallback",
-           "ResetQNetworkCallback", "StopTrainingOnBalance", "agent_class", "build_dqn", "evaluate_agent", "evaluate_agent_batched", "evaluate_agents_batched",
-           "load_agent", "reset_q_network",
-           "train_dqn", "run_training", "training_callbacks"]
+__all__ = [
+    "CheckpointCallback",
+    "ConfirmBalance",
+    "EpisodeRecorder",
+    "EvaluationCallback",
+    "ProgressBarCallback",
+    "ResetQNetworkCallback",
+    "StopTrainingOnBalance",
+    "agent_class",
+    "build_dqn",
+    "evaluate_agent",
+    "evaluate_agent_batched",
+    "evaluate_agents_batched",
+    "load_agent",
+    "reset_q_network",
+    "train_dqn",
+    "run_training",
+    "training_callbacks",
+]
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
@@ -104,8 +119,14 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     )
 
 
-def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None, duration_s: Optional[float] = None, name: str = "agent",
-                   stop_at_first_failure: bool = False):
+def evaluate_agent(
+    model: Any,
+    config: DQNConfig,
+    seeds: Optional[tuple[int, ...]] = None,
+    duration_s: Optional[float] = None,
+    name: str = "agent",
+    stop_at_first_failure: bool = False,
+):
     """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``.
 
     Seeds must be non-negative integers and the episodes' trajectories must fit in
@@ -117,14 +138,29 @@ def evaluate_agent(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...
     controller = policy_controller(model, config)
     steps = duration_s / config.dt_s + 1
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + controller.env.plant.n_coordinates)
-    check_work_size(f"evaluating {len(seeds)} episode(s) of {duration_s:g} s", len(seeds) * steps * per_step,
-                    f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step")
-    return evaluate_controller(controller, config.task, name=name, seeds=seeds, duration_s=duration_s,
-                               stop_at_first_failure=stop_at_first_failure)
+    check_work_size(
+        f"evaluating {len(seeds)} episode(s) of {duration_s:g} s",
+        len(seeds) * steps * per_step,
+        f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step",
+    )
+    return evaluate_controller(
+        controller,
+        config.task,
+        name=name,
+        seeds=seeds,
+        duration_s=duration_s,
+        stop_at_first_failure=stop_at_first_failure,
+    )
 
 
-def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[int, ...]] = None,
-                           duration_s: Optional[float] = None, name: str = "agent", **options: Any):
+def evaluate_agent_batched(
+    model: Any,
+    config: DQNConfig,
+    seeds: Optional[tuple[int, ...]] = None,
+    duration_s: Optional[float] = None,
+    name: str = "agent",
+    **options: Any,
+):
     """:func:`evaluate_agent` with every episode at once on the batched chain
     (:func:`softpend.evaluation.evaluate_batched`): the agent's greedy actions (``model.predict`` on the batch of
     observation vectors, ``deterministic=True``) held for ``config.action_repeat`` plant steps, on the
@@ -137,8 +173,14 @@ def evaluate_agent_batched(model: Any, config: DQNConfig, seeds: Optional[tuple[
     return evaluate_agents_batched([model], config, seeds, duration_s, name, **options)[0]
 
 
-def evaluate_agents_batched(models: Sequence[Any], config: DQNConfig, seeds: Optional[tuple[int, ...]] = None,
-                            duration_s: Optional[float] = None, name: str = "agent", **options: Any) -> list:
+def evaluate_agents_batched(
+    models: Sequence[Any],
+    config: DQNConfig,
+    seeds: Optional[tuple[int, ...]] = None,
+    duration_s: Optional[float] = None,
+    name: str = "agent",
+    **options: Any,
+) -> list:
     """:func:`evaluate_agent_batched` for several agents at once, each from every start of ``seeds``: one batch of
     ``len(models) * len(seeds)`` rods, agent ``i`` driving rods ``i * len(seeds)`` to ``(i + 1) * len(seeds) - 1``,
     so that the chain steps once for all of them.  The agents share ``config``'s task, action repeat and torque
@@ -156,12 +198,19 @@ def evaluate_agents_batched(models: Sequence[Any], config: DQNConfig, seeds: Opt
     n = len(seeds)
 
     def predict(vectors: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.asarray(p(vectors[i * n:(i + 1) * n])) for i, p in enumerate(predictors)])
+        return np.concatenate([np.asarray(p(vectors[i * n : (i + 1) * n])) for i, p in enumerate(predictors)])
 
-    summary = evaluate_batched(predict, config.task, seeds * len(models), duration_s,
-                               action_repeat=config.action_repeat, n_torque_levels=config.n_torque_levels, name=name,
-                               **options)
-    return [EvaluationSummary(name=name, results=summary.results[i * n:(i + 1) * n]) for i in range(len(models))]
+    summary = evaluate_batched(
+        predict,
+        config.task,
+        seeds * len(models),
+        duration_s,
+        action_repeat=config.action_repeat,
+        n_torque_levels=config.n_torque_levels,
+        name=name,
+        **options,
+    )
+    return [EvaluationSummary(name=name, results=summary.results[i * n : (i + 1) * n]) for i in range(len(models))]
 
 
 class EpisodeRecorder(BaseCallback):
@@ -174,8 +223,9 @@ class EpisodeRecorder(BaseCallback):
 
     model: DQN  # set by BaseCallback.init_callback: the DQN (or its subclass) being trained
 
-    def __init__(self, config: DQNConfig, log: TrainingLog, episodes: int,
-                 model_steps: Optional[Callable[[], int]] = None) -> None:
+    def __init__(
+        self, config: DQNConfig, log: TrainingLog, episodes: int, model_steps: Optional[Callable[[], int]] = None
+    ) -> None:
         super().__init__()
         self.config = config
         self.log = log
@@ -218,12 +268,16 @@ class EpisodeRecorder(BaseCallback):
         observations = np.concatenate(self._observations)
         plant_steps = len(observations) - 1
         dt = self.config.dt_s
-        row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return,
-                               "plant_s": self.log.plant_s + plant_steps * dt}
+        row: dict[str, Any] = {
+            "episode": self.log.n_episodes + 1,
+            "return": self._return,
+            "plant_s": self.log.plant_s + plant_steps * dt,
+        }
         if plant_steps >= 2:
             torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
-            metrics = metrics_from_trajectory(np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques,
-                                              observations[:, _PHI_DOT])
+            metrics = metrics_from_trajectory(
+                np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT]
+            )
             row["upright_std_rad"] = metrics["upright_std_rad"]
             row["swing_up_time_s"] = metrics["swing_up_time_s"]
         else:
@@ -235,7 +289,9 @@ class EpisodeRecorder(BaseCallback):
         self.last_episode_torques = np.asarray(self._torques, dtype=float)
         self.log.episodes.append(row)
         self._reset_episode()
-        check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}")
+        check_finite_weights(
+            self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}"
+        )
 
 
 class ProgressBarCallback(BaseCallback):
@@ -249,16 +305,23 @@ class ProgressBarCallback(BaseCallback):
 
     def _on_training_start(self) -> None:
         log = self.recorder.log
-        self.bar = tqdm(total=self.recorder.episodes, initial=log.n_episodes, desc=f"{log.algo} seed {log.seed}",
-                        unit="episode", disable=not self.show, leave=False)
+        self.bar = tqdm(
+            total=self.recorder.episodes,
+            initial=log.n_episodes,
+            desc=f"{log.algo} seed {log.seed}",
+            unit="episode",
+            disable=not self.show,
+            leave=False,
+        )
 
     def _on_step(self) -> bool:
         if self.recorder.episode_ended and self.bar is not None:
             log = self.recorder.log
             last_eval = log.evaluations[-1]["max_upright_std_rad"] if log.evaluations else math.nan
             self.bar.update(1)
-            self.bar.set_postfix(ret=f"{log.episodes[-1]['return']:.0f}", plant_s=f"{log.plant_s:.0f}",
-                                 eval_std=f"{last_eval:.2f}")
+            self.bar.set_postfix(
+                ret=f"{log.episodes[-1]['return']:.0f}", plant_s=f"{log.plant_s:.0f}", eval_std=f"{last_eval:.2f}"
+            )
         return True
 
     def _on_training_end(self) -> None:
@@ -314,8 +377,9 @@ class EvaluationCallback(EpisodeEventCallback):
     ``EvalCallback``.  With ``callback_after_eval`` (the stop rule) the evaluation runs right after its
     episode, before another plant step, and that callback's ``False`` stops training."""
 
-    def __init__(self, recorder: EpisodeRecorder, run_dir: Path,
-                 callback_after_eval: Optional[BaseCallback] = None) -> None:
+    def __init__(
+        self, recorder: EpisodeRecorder, run_dir: Path, callback_after_eval: Optional[BaseCallback] = None
+    ) -> None:
         super().__init__(recorder)
         self.config = recorder.config
         self.run_dir = Path(run_dir)
@@ -399,20 +463,28 @@ class StopTrainingOnBalance(BaseCallback):
         """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced."""
         k = self.config.stop_after_balanced_evaluations
         rows = self.log.evaluations[-k:] if k else []
-        return len(rows) == k > 0 and all(_balanced(self.config, row["all_swung_up"], row["max_upright_std_rad"])
-                                          for row in rows)
+        return len(rows) == k > 0 and all(
+            _balanced(self.config, row["all_swung_up"], row["max_upright_std_rad"]) for row in rows
+        )
 
     def _on_step(self) -> bool:
         if not self.balanced_streak() or (self.confirmation is not None and not self.confirmation.on_step()):
             return True
         n = len(self.config.stop_confirm_seeds)
         held = n - self.log.evaluations[-1].get("confirm_failures", 0)
-        confirmation = ("" if not n else f" and from the {n} confirmation starts" if held == n
-                        else f" and from {held} of the {n} confirmation starts")
+        confirmation = (
+            ""
+            if not n
+            else f" and from the {n} confirmation starts"
+            if held == n
+            else f" and from {held} of the {n} confirmation starts"
+        )
         k = self.config.stop_after_balanced_evaluations
         self.log.stop_reason = (
             ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
-            + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)" + confirmation)
+            + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
+            + confirmation
+        )
         return False
 
 
@@ -455,8 +527,9 @@ class CheckpointCallback(EpisodeEventCallback):
     """Every ``checkpoint_every_episodes`` episodes, a resumable checkpoint in ``run_dir/checkpoint`` (see
     :meth:`checkpoint`); ``extra_files``: ``f(folder)`` writes algorithm-specific files into it."""
 
-    def __init__(self, recorder: EpisodeRecorder, run_dir: Path,
-                 extra_files: Optional[Callable[[Path], None]] = None) -> None:
+    def __init__(
+        self, recorder: EpisodeRecorder, run_dir: Path, extra_files: Optional[Callable[[Path], None]] = None
+    ) -> None:
         super().__init__(recorder)
         self.run_dir = Path(run_dir)
         self.extra_files = extra_files
@@ -469,7 +542,9 @@ class CheckpointCallback(EpisodeEventCallback):
 
     def checkpoint(self) -> Path:
         """Write agent, replay buffer (plain arrays), log (and extra files) to ``run_dir/checkpoint`` atomically."""
-        check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, checkpoint at episode {self.log.n_episodes}")
+        check_finite_weights(
+            self.model, f"{self.log.algo} seed {self.log.seed}, checkpoint at episode {self.log.n_episodes}"
+        )
         final = self.run_dir / "checkpoint"
         tmp = self.run_dir / "checkpoint.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
@@ -502,6 +577,8 @@ class ModelBasedPart(Protocol):
 
     def restore(self, folder: Path) -> None:
         """Read the part's state back from a checkpoint folder."""
+
+
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
     """Re-initialise ``model``'s Q-network as a new agent's (PyTorch's default initialisation of each linear
     layer, drawn from a generator seeded by ``seed``), copy it to the target network and clear the optimiser's
@@ -553,7 +630,8 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
     records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
     check_work_size(
-        "this training run", buffers + networks + records,
+        "this training run",
+        buffers + networks + records,
         f"replay buffers {buffers / 2**20:.3g} MiB, networks {networks / 2**20:.3g} MiB, episode and evaluation "
         f"records {records / 2**20:.3g} MiB",
     )
@@ -576,14 +654,28 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
     positive_int("episodes", episodes)
     run_dir = check_output_folder(run_dir, what="run folder", owned=is_run_folder)
     if is_run_folder(run_dir):
-        check_run_folder(run_dir, read_json_object(run_dir / "config.json", 10**7), saved_config_data(config),
-                         saved_run_seed(run_dir), seed, resume)
+        check_run_folder(
+            run_dir,
+            read_json_object(run_dir / "config.json", 10**7),
+            saved_config_data(config),
+            saved_run_seed(run_dir),
+            seed,
+            resume,
+        )
     return run_dir
 
 
-def _start_or_resume(algo: str, config: DQNConfig, seed: int, run_dir: Path, resume: bool, env: Any,
-                     make_model: Callable[[Any, int], DQN], replay_buffer_class: type[ReplayBuffer],
-                     part: Optional[ModelBasedPart]) -> tuple[DQN, TrainingLog]:
+def _start_or_resume(
+    algo: str,
+    config: DQNConfig,
+    seed: int,
+    run_dir: Path,
+    resume: bool,
+    env: Any,
+    make_model: Callable[[Any, int], DQN],
+    replay_buffer_class: type[ReplayBuffer],
+    part: Optional[ModelBasedPart],
+) -> tuple[DQN, TrainingLog]:
     """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (the config must match the saved
     one; ``part`` restores its own state from the checkpoint)."""
     checkpoint = run_dir / "checkpoint"
@@ -599,8 +691,9 @@ def _start_or_resume(algo: str, config: DQNConfig, seed: int, run_dir: Path, res
             "(unpickling can run arbitrary code); start a new run"
         )
     log = TrainingLog.load(checkpoint / "log.json")
-    model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env=env,
-                            replay_buffer_class=replay_buffer_class)
+    model = load_agent_file(
+        agent_class(config), checkpoint / "agent.zip", config, env=env, replay_buffer_class=replay_buffer_class
+    )
     assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
     load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
     if part is not None:
@@ -608,8 +701,14 @@ def _start_or_resume(algo: str, config: DQNConfig, seed: int, run_dir: Path, res
     return model, log
 
 
-def training_callbacks(config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool,
-                       part: Optional[ModelBasedPart] = None) -> CallbackList:
+def training_callbacks(
+    config: DQNConfig,
+    log: TrainingLog,
+    episodes: int,
+    run_dir: Path,
+    progress: bool,
+    part: Optional[ModelBasedPart] = None,
+) -> CallbackList:
     """The callbacks of a training run, in the order they run each step: the model-based part's step callbacks,
     the episode bookkeeping, the model-based part's episode callbacks, the progress bar, the evaluation (with
     the stop rule and its confirmation), the Q-network reset and the checkpoint."""
@@ -619,11 +718,17 @@ def training_callbacks(config: DQNConfig, log: TrainingLog, episodes: int, run_d
     if config.stop_after_balanced_evaluations:
         confirmation = ConfirmBalance(config, log) if config.stop_confirm_seeds else None
         stop = StopTrainingOnBalance(config, log, confirmation)
-    return CallbackList([
-        *before, recorder, *after, ProgressBarCallback(recorder, show=progress),
-        EvaluationCallback(recorder, run_dir, callback_after_eval=stop), ResetQNetworkCallback(recorder),
-        CheckpointCallback(recorder, run_dir, extra_files=part.save if part is not None else None),
-    ])
+    return CallbackList(
+        [
+            *before,
+            recorder,
+            *after,
+            ProgressBarCallback(recorder, show=progress),
+            EvaluationCallback(recorder, run_dir, callback_after_eval=stop),
+            ResetQNetworkCallback(recorder),
+            CheckpointCallback(recorder, run_dir, extra_files=part.save if part is not None else None),
+        ]
+    )
 
 
 _C = TypeVar("_C", bound=BaseCallback)
@@ -673,8 +778,12 @@ def run_training(
         # outputs: SB3's default one creates an empty folder under the system's temp directory on every learn()
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
-            model.learn(total_timesteps=remaining * config.episode_agent_steps, callback=callbacks,
-                        reset_num_timesteps=log.n_episodes == 0, progress_bar=False)
+            model.learn(
+                total_timesteps=remaining * config.episode_agent_steps,
+                callback=callbacks,
+                reset_num_timesteps=log.n_episodes == 0,
+                progress_bar=False,
+            )
         finally:
             _member(callbacks, ProgressBarCallback).close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:
@@ -717,7 +826,13 @@ def train_dqn(
         The trained agent and its log (also saved in ``run_dir``).
     """
     return run_training(
-        "dqn", config, seed, episodes, run_dir, resume, progress,
+        "dqn",
+        config,
+        seed,
+        episodes,
+        run_dir,
+        resume,
+        progress,
         make_model=lambda env, s: build_dqn(config, env, s, episodes),
     )
 

@@ -84,23 +84,43 @@ class MBPOReplayBuffer(ReplayBuffer):
         if n_envs != 1:
             raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
         in_unit_interval("real_ratio", real_ratio)
-        super().__init__(buffer_size, observation_space, action_space, device=device, n_envs=1,
-                         optimize_memory_usage=False, handle_timeout_termination=handle_timeout_termination)
+        super().__init__(
+            buffer_size,
+            observation_space,
+            action_space,
+            device=device,
+            n_envs=1,
+            optimize_memory_usage=False,
+            handle_timeout_termination=handle_timeout_termination,
+        )
         self.real_ratio = float(real_ratio)
         self.plant_observations = np.zeros((self.buffer_size, len(OBSERVATION_NAMES)), dtype=np.float64)
-        self.model_buffer = ReplayBuffer(model_buffer_size, observation_space, action_space, device=device, n_envs=1,
-                                         handle_timeout_termination=False)
+        self.model_buffer = ReplayBuffer(
+            model_buffer_size,
+            observation_space,
+            action_space,
+            device=device,
+            n_envs=1,
+            handle_timeout_termination=False,
+        )
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D102 (SB3 API)
         self.plant_observations[self.pos] = infos[0]["plant_observations"][0]
         super().add(obs, next_obs, action, reward, done, infos)
 
-    def add_model_transitions(self, obs: np.ndarray, next_obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray) -> None:
+    def add_model_transitions(
+        self, obs: np.ndarray, next_obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray
+    ) -> None:
         """Append a batch of model transitions (no terminal states) to the model part (FIFO)."""
         buf = self.model_buffer
         n = len(obs)
         if n > buf.buffer_size:  # keep the newest
-            obs, next_obs, actions, rewards = obs[-buf.buffer_size :], next_obs[-buf.buffer_size :], actions[-buf.buffer_size :], rewards[-buf.buffer_size :]
+            obs, next_obs, actions, rewards = (
+                obs[-buf.buffer_size :],
+                next_obs[-buf.buffer_size :],
+                actions[-buf.buffer_size :],
+                rewards[-buf.buffer_size :],
+            )
             n = buf.buffer_size
         index = (buf.pos + np.arange(n)) % buf.buffer_size
         buf.observations[index, 0] = obs
@@ -191,9 +211,16 @@ class MBPOTrainer:
         obs = np.stack(self.trials_observations)
         p = 5  # positions then velocities in OBSERVATION_NAMES order
         return save_dataset(
-            self.run_dir / "real_data.npz", obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques),
-            dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation", plant=self.config.task.plant,
-            plant_params=self.env.params, seed=self.seed,
+            self.run_dir / "real_data.npz",
+            obs[:, :, :p],
+            obs[:, :, p:],
+            np.stack(self.trials_torques),
+            dt_s=self.config.dt_s,
+            position_names=OBSERVATION_NAMES[:p],
+            source="simulation",
+            plant=self.config.task.plant,
+            plant_params=self.env.params,
+            seed=self.seed,
             protocol={"kind": "dqn-mbpo training episodes"},
             differentiation="exact (simulator velocities, as the environment observes them)",
             notes="real plant episodes of a DQN-MBPO run",
@@ -210,15 +237,24 @@ class MBPOTrainer:
         epochs = max(3, math.ceil(c.model_fit_steps * c.model_batch_size / n_transitions))
         result = fit_dynamics_model(
             self.dataset(),
-            TrainConfig(information="full", hidden_widths=c.model_hidden_widths, ensemble_size=c.ensemble_size,
-                        limit_tip_reach=False,
-                        max_epochs=epochs, patience=max(3, epochs // 4), batch_size=c.model_batch_size,
-                        learning_rate=3e-3, seed=self.seed * 1000 + self.n_fits),
+            TrainConfig(
+                information="full",
+                hidden_widths=c.model_hidden_widths,
+                ensemble_size=c.ensemble_size,
+                limit_tip_reach=False,
+                max_epochs=epochs,
+                patience=max(3, epochs // 4),
+                batch_size=c.model_batch_size,
+                learning_rate=3e-3,
+                seed=self.seed * 1000 + self.n_fits,
+            ),
             progress=self.progress,
         )
         self.dynamics = result.model.eval()
         self.n_fits += 1
-        save_model(self.run_dir / "dynamics", self.dynamics, {"fits": self.n_fits, "episodes": len(self.trials_observations)})
+        save_model(
+            self.run_dir / "dynamics", self.dynamics, {"fits": self.n_fits, "episodes": len(self.trials_observations)}
+        )
 
     # ------------------------------------------------------------------ rollouts
     @torch.no_grad()
@@ -277,8 +313,12 @@ class MBPOTrainer:
 
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
-        np.savez(folder / "mbpo_state.npz", observations=np.array(self.trials_observations), torques=np.array(self.trials_torques),
-                 counters=np.array([self.n_fits, self.model_steps]))
+        np.savez(
+            folder / "mbpo_state.npz",
+            observations=np.array(self.trials_observations),
+            torques=np.array(self.trials_torques),
+            counters=np.array([self.n_fits, self.model_steps]),
+        )
 
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""
@@ -290,11 +330,17 @@ class MBPOTrainer:
             raise ValueError(f"{path}: not an MBPO checkpoint (no {exc} array)") from None
         steps = self.config.episode_agent_steps * self.config.action_repeat
         n = len(observations)
-        if (observations.dtype != np.float64 or torques.dtype != np.float64 or counters.shape != (2,)
-                or counters.dtype.kind not in "iu" or (n and (observations.shape != (n, steps + 1, len(OBSERVATION_NAMES))
-                                                           or torques.shape != (n, steps)))):
-            raise ValueError(f"{path}: its arrays do not match the run's episodes ({observations.shape}, {torques.shape}, "
-                             f"{counters.shape})")
+        if (
+            observations.dtype != np.float64
+            or torques.dtype != np.float64
+            or counters.shape != (2,)
+            or counters.dtype.kind not in "iu"
+            or (n and (observations.shape != (n, steps + 1, len(OBSERVATION_NAMES)) or torques.shape != (n, steps)))
+        ):
+            raise ValueError(
+                f"{path}: its arrays do not match the run's episodes ({observations.shape}, {torques.shape}, "
+                f"{counters.shape})"
+            )
         self.trials_observations = list(observations)
         self.trials_torques = list(torques)
         self.n_fits, self.model_steps = (int(v) for v in counters)
@@ -322,8 +368,13 @@ class ModelRolloutCallback(BaseCallback):
         c = self.trainer.config
         if self.model.num_timesteps % c.rollout_every_steps == 0 and self.trainer.dynamics is not None:
             assert isinstance(self.model.replay_buffer, MBPOReplayBuffer)
-            self.trainer.rollouts(self.model, self.model.replay_buffer, c.rollouts_per_real_step * c.rollout_every_steps,
-                                  c.rollout_length(self.log.n_episodes), self.model.exploration_rate)
+            self.trainer.rollouts(
+                self.model,
+                self.model.replay_buffer,
+                c.rollouts_per_real_step * c.rollout_every_steps,
+                c.rollout_length(self.log.n_episodes),
+                self.model.exploration_rate,
+            )
         return True
 
 
@@ -364,7 +415,10 @@ def train_mbpo(
 
     def make_model(env: Any, s: int) -> DQN:
         dqn = build_dqn(
-            config, env, s, episodes,
+            config,
+            env,
+            s,
+            episodes,
             replay_buffer_class=MBPOReplayBuffer,
             replay_buffer_kwargs={"model_buffer_size": config.model_buffer_size, "real_ratio": config.real_ratio},
         )
@@ -372,7 +426,14 @@ def train_mbpo(
         return dqn
 
     return run_training(
-        "mbpo", config, seed, episodes, run_dir, resume, progress,
-        make_model=make_model, replay_buffer_class=MBPOReplayBuffer, part=trainer,
+        "mbpo",
+        config,
+        seed,
+        episodes,
+        run_dir,
+        resume,
+        progress,
+        make_model=make_model,
+        replay_buffer_class=MBPOReplayBuffer,
+        part=trainer,
     )
-

@@ -43,8 +43,13 @@ class TargetDQN(DQN):
         self.q_target_bounds = q_target_bounds
         super().__init__(*args, **kwargs)
 
-    def td_targets(self, rewards: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor | float,
-                   next_observations: torch.Tensor) -> torch.Tensor:
+    def td_targets(
+        self,
+        rewards: torch.Tensor,
+        dones: torch.Tensor,
+        discounts: torch.Tensor | float,
+        next_observations: torch.Tensor,
+    ) -> torch.Tensor:
         """TD targets of a batch (no gradient)."""
         with torch.no_grad():
             next_q_target = self.q_net_target(next_observations)
@@ -72,4 +77,3 @@ class TargetDQN(DQN):
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", float(np.mean(losses)) if losses else float("nan"))
-

@@ -41,21 +41,34 @@ _CACHE_VERSION = "3"
 #: The keys of a notebook's front matter under ``softpend:`` (any other is an error).
 FRONT_MATTER_KEYS = ("after", "book_runs")
 #: PNG figures; the kernel logs errors only; tqdm's "IProgress not found" warning would print paths on every page.
-_KERNEL_ARGUMENTS = ["--InlineBackend.figure_formats=png", "--IPKernelApp.log_level=ERROR",
-                     "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress "
-                     "not found', category=__import__('tqdm').TqdmWarning)"]
+_KERNEL_ARGUMENTS = [
+    "--InlineBackend.figure_formats=png",
+    "--IPKernelApp.log_level=ERROR",
+    "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress "
+    "not found', category=__import__('tqdm').TqdmWarning)",
+]
 
 
 class NotebookExecutionError(RuntimeError):
     """A notebook raised while executing; the partially executed output is kept at ``output_path``.
     ``cell_index`` counts every cell of the source, ``code_cell_number`` its code cells from 1."""
 
-    def __init__(self, notebook: str, cell_index: int, code_cell_number: int, execution_count: Optional[int],
-                 source: str, error: str, output_path: Path) -> None:
+    def __init__(
+        self,
+        notebook: str,
+        cell_index: int,
+        code_cell_number: int,
+        execution_count: Optional[int],
+        source: str,
+        error: str,
+        output_path: Path,
+    ) -> None:
         first_line = next((line for line in source.splitlines() if line.strip()), "")
-        super().__init__(f"notebook {notebook!r} failed in code cell {code_cell_number} of notebooks/{notebook}.md "
-                         f"(In [{execution_count}], starting {first_line!r}): {error}; "
-                         f"the partially executed notebook is kept in {output_path}")
+        super().__init__(
+            f"notebook {notebook!r} failed in code cell {code_cell_number} of notebooks/{notebook}.md "
+            f"(In [{execution_count}], starting {first_line!r}): {error}; "
+            f"the partially executed notebook is kept in {output_path}"
+        )
         self.notebook, self.cell_index, self.code_cell_number = notebook, cell_index, code_cell_number
         self.execution_count, self.output_path = execution_count, output_path
 
@@ -143,6 +156,7 @@ def _check_toc(path: Path | str, toc: Any) -> None:
 def toc_notebooks(toc_path: Path | str) -> list[str]:
     """Names of the executed notebooks in a ``_toc.yml`` (its ``file``/``root`` entries under
     ``book/_generated/`` except the execution page), in reading order."""
+
     def files(node: Any) -> Iterable[str]:
         for key, value in node.items() if isinstance(node, dict) else enumerate(node if isinstance(node, list) else []):
             yield from [value] if key in ("file", "root") and isinstance(value, str) else files(value)
@@ -150,8 +164,11 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
     toc = _load_yaml(Path(toc_path), "table of contents")
     _check_toc(toc_path, toc)
     entries = [entry.removesuffix(".ipynb") for entry in files(toc)]
-    names = [entry[len(GENERATED_PREFIX):] for entry in entries if entry.startswith(GENERATED_PREFIX)
-             and entry != GENERATED_PREFIX + EXECUTION_PAGE]
+    names = [
+        entry[len(GENERATED_PREFIX) :]
+        for entry in entries
+        if entry.startswith(GENERATED_PREFIX) and entry != GENERATED_PREFIX + EXECUTION_PAGE
+    ]
     if duplicates := sorted({name for name in names if names.count(name) > 1}):
         raise ValueError(f"{toc_path}: notebook(s) listed more than once: {duplicates}")
     return names
@@ -164,14 +181,22 @@ def load_profiles(path: Path | str) -> dict[str, dict[str, dict[str, Any]]]:
         raise _shape_error(path, data, None, "a mapping profile -> notebook -> parameters", data)
     for profile, notebooks in data.items():
         if not isinstance(notebooks or {}, dict):
-            raise _shape_error(path, data, profile, f"a mapping notebook -> parameters for profile {profile!r}",
-                               notebooks)
+            raise _shape_error(
+                path, data, profile, f"a mapping notebook -> parameters for profile {profile!r}", notebooks
+            )
         for notebook, parameters in (notebooks or {}).items():
             if not isinstance(parameters or {}, dict) or not all(isinstance(key, str) for key in parameters or {}):
-                raise _shape_error(path, notebooks, notebook, f"a mapping parameter -> value for notebook "
-                                   f"{notebook!r} of profile {profile!r}", parameters)
-    return {str(profile): {str(notebook): dict(parameters or {}) for notebook, parameters in (notebooks or {}).items()}
-            for profile, notebooks in data.items()}
+                raise _shape_error(
+                    path,
+                    notebooks,
+                    notebook,
+                    f"a mapping parameter -> value for notebook {notebook!r} of profile {profile!r}",
+                    parameters,
+                )
+    return {
+        str(profile): {str(notebook): dict(parameters or {}) for notebook, parameters in (notebooks or {}).items()}
+        for profile, notebooks in data.items()
+    }
 
 
 def read_notebook(source_path: Path | str):
@@ -187,8 +212,14 @@ def _source_text(source_path: Path | str) -> str:
 
 
 def _parameters_cell(nb) -> Optional[str]:
-    return next((cell.source for cell in nb.cells if cell.cell_type == "code"
-                 and "parameters" in cell.get("metadata", {}).get("tags", [])), None)
+    return next(
+        (
+            cell.source
+            for cell in nb.cells
+            if cell.cell_type == "code" and "parameters" in cell.get("metadata", {}).get("tags", [])
+        ),
+        None,
+    )
 
 
 def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str, Any]) -> dict[str, Any]:
@@ -201,8 +232,10 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
         raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
     declared = papermill.inspect_notebook(str(notebook_path))
     if unknown := sorted(set(parameters) - set(declared)):
-        raise ValueError(f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell "
-                         f"(it defines {sorted(declared)})")
+        raise ValueError(
+            f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell "
+            f"(it defines {sorted(declared)})"
+        )
     return declared
 
 
@@ -222,8 +255,9 @@ def execution_order(names: Sequence[str], after: Mapping[str, Sequence[str]]) ->
     """``names`` in toc order, except that a notebook follows the selected notebooks of its ``after``."""
     selected, pending, done = set(names), list(names), []
     while pending:
-        ready = next((name for name in pending
-                      if all(dep in done or dep not in selected for dep in after.get(name, ()))), None)
+        ready = next(
+            (name for name in pending if all(dep in done or dep not in selected for dep in after.get(name, ()))), None
+        )
         if ready is None:
             raise ValueError(f"notebooks {pending} wait for each other (softpend.after in their front matter)")
         pending.remove(ready)
@@ -241,8 +275,13 @@ def _drop_docstrings(tree: ast.AST) -> ast.AST:
     for node in ast.walk(tree):
         body = getattr(node, "body", None)
         if isinstance(body, list):
-            kept = [s for s in body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant)
-                                            and isinstance(s.value.value, str))]
+            kept = [
+                s
+                for s in body
+                if not (
+                    isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant) and isinstance(s.value.value, str)
+                )
+            ]
             if len(kept) != len(body):
                 setattr(node, "body", kept or [ast.Pass()])
     return tree
@@ -284,8 +323,10 @@ class PackageCode:
         if module not in self._read:
             path = self.modules[module]
             tree = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
-            self._read[module] = (hashlib.sha256(ast.dump(tree).encode()).hexdigest(),
-                                  frozenset(self._tree_imports(tree, module)))
+            self._read[module] = (
+                hashlib.sha256(ast.dump(tree).encode()).hexdigest(),
+                frozenset(self._tree_imports(tree, module)),
+            )
         return self._read[module]
 
     def _with_parents(self, module: str) -> set[str]:
@@ -337,9 +378,11 @@ class PackageCode:
         """The package's part of a notebook's cache key: the hash of each module the code uses and of each data file
         of the package (suffix in :data:`DATA_SUFFIXES`)."""
         hashes = {module: self._module(module)[0] for module in sorted(self.closure(code_cells))}
-        return hashes | {f"{self.name}/{path.relative_to(self.root).as_posix()}": hashlib.sha256(path.read_bytes())
-                         .hexdigest() for path in sorted(self.root.rglob("*"))
-                         if path.is_file() and path.suffix in DATA_SUFFIXES and "__pycache__" not in path.parts}
+        return hashes | {
+            f"{self.name}/{path.relative_to(self.root).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
+            for path in sorted(self.root.rglob("*"))
+            if path.is_file() and path.suffix in DATA_SUFFIXES and "__pycache__" not in path.parts
+        }
 
 
 def code_cells(nb) -> list[str]:
@@ -349,21 +392,45 @@ def code_cells(nb) -> list[str]:
 def _records_hashes(layout: BookLayout) -> dict[str, str]:
     """SHA-256 of every file under ``book/records/`` (the stored run records some notebooks read)."""
     folder = layout.root / "book" / "records"
-    return {f"book/records/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
-            for path in sorted(folder.rglob("*")) if path.is_file()} if folder.is_dir() else {}
+    return (
+        {
+            f"book/records/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
+            for path in sorted(folder.rglob("*"))
+            if path.is_file()
+        }
+        if folder.is_dir()
+        else {}
+    )
 
 
 def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[str, str], after: Any = None) -> str:
     """Cache key of one executed notebook: source, parameters, package code and the keys of its ``after``."""
-    payload = {"version": _CACHE_VERSION, "source": source_text, "parameters": parameters,
-               "code": sorted(code_hashes.items()), **({"after": after} if after else {})}
+    payload = {
+        "version": _CACHE_VERSION,
+        "source": source_text,
+        "parameters": parameters,
+        "code": sorted(code_hashes.items()),
+        **({"after": after} if after else {}),
+    }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
 
 
 # --------------------------------------------------------------------------- "Rerun this figure"
 #: Units read from a parameter name's suffix (a ``[unit]`` in the line's comment comes first).
-UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_nm", "N m"), ("_ms", "ms"), ("_mm", "mm"), ("_rad", "rad"), ("_deg", "deg"),
-                 ("_hz", "Hz"), ("_fps", "1/s"), ("_kg", "kg"), ("_dn", "DN"), ("_s", "s"), ("_m", "m"))
+UNIT_SUFFIXES = (
+    ("_rad_s", "rad/s"),
+    ("_nm", "N m"),
+    ("_ms", "ms"),
+    ("_mm", "mm"),
+    ("_rad", "rad"),
+    ("_deg", "deg"),
+    ("_hz", "Hz"),
+    ("_fps", "1/s"),
+    ("_kg", "kg"),
+    ("_dn", "DN"),
+    ("_s", "s"),
+    ("_m", "m"),
+)
 
 
 def _value(value: Any) -> str:
@@ -374,8 +441,11 @@ def _value(value: Any) -> str:
 def notebook_parameters(cell: str) -> list[dict[str, Any]]:
     """The assignments of a ``parameters`` cell: ``name``, ``default`` (its value as ``--set`` reads it, or the
     expression where the cell does not evaluate: ``evaluated`` False), ``unit`` and the line's ``comment``."""
-    comments = {token.start[0]: token.string.lstrip("#").strip() for token in
-                tokenize.generate_tokens(io.StringIO(cell).readline) if token.type == tokenize.COMMENT}
+    comments = {
+        token.start[0]: token.string.lstrip("#").strip()
+        for token in tokenize.generate_tokens(io.StringIO(cell).readline)
+        if token.type == tokenize.COMMENT
+    }
     namespace: dict[str, Any] = {}
     try:
         exec(compile(cell, "<parameters>", "exec"), namespace)  # noqa: S102 -- assignments, imports of presets
@@ -388,11 +458,19 @@ def notebook_parameters(cell: str) -> list[dict[str, Any]]:
             assert isinstance(node, ast.Assign) and node.end_lineno is not None  # a parsed assignment's lines
             comment, name = comments.get(node.end_lineno, ""), target.id
             unit = re.search(r"\[([^\],'\"]+)\]", comment)  # "[N m]", not "[16, 16]"
-            found.append({"name": name, "evaluated": name in namespace, "comment": comment,
-                          "default": _value(namespace[name]) if name in namespace
-                          else ast.get_source_segment(cell, node.value),
-                          "unit": unit.group(1) if unit
-                          else next((label for end, label in UNIT_SUFFIXES if name.endswith(end)), "")})
+            found.append(
+                {
+                    "name": name,
+                    "evaluated": name in namespace,
+                    "comment": comment,
+                    "default": _value(namespace[name])
+                    if name in namespace
+                    else ast.get_source_segment(cell, node.value),
+                    "unit": unit.group(1)
+                    if unit
+                    else next((label for end, label in UNIT_SUFFIXES if name.endswith(end)), ""),
+                }
+            )
     return found
 
 
@@ -408,20 +486,39 @@ def _md(value: Any, limit: int = 0) -> str:
 def rerun_section(name: str, cell: str, profile: str, used: dict[str, Any]) -> str:
     """The generated closing section of an executed notebook: its parameters and the command that reruns it."""
     rows = notebook_parameters(cell)
-    lines = [f"## Rerun this {'figure' if name.startswith('fig') else 'chapter'}", "",
-             f"This page was executed by `softpend book --profile {profile}` with the parameters below (defaults "
-             "from the notebook's `parameters` cell; *this build* where the profile or `--set` changed one).", "",
-             "| parameter | default | this build | unit | meaning |", "|---|---|---|---|---|"]
+    lines = [
+        f"## Rerun this {'figure' if name.startswith('fig') else 'chapter'}",
+        "",
+        f"This page was executed by `softpend book --profile {profile}` with the parameters below (defaults "
+        "from the notebook's `parameters` cell; *this build* where the profile or `--set` changed one).",
+        "",
+        "| parameter | default | this build | unit | meaning |",
+        "|---|---|---|---|---|",
+    ]
     for row in rows:
         build = f"`{_md(_value(used[row['name']]), 60)}`" if row["name"] in used else ""
-        lines.append(f"| `{row['name']}` | `{_md(row['default'], 60)}` | {build} | {row['unit']} "
-                     f"| {_md(row['comment'], 90)} |")
+        lines.append(
+            f"| `{row['name']}` | `{_md(row['default'], 60)}` | {build} | {row['unit']} | {_md(row['comment'], 90)} |"
+        )
     example = next((f"{row['name']}={row['default']}" for row in rows if row["evaluated"]), "NAME=VALUE")
-    command = ["softpend", "book", "--only", name, *(["--profile", profile] if profile != DEFAULT_PROFILE else []),
-               "--set", example]
-    lines += ["", "To rerun it from the project root with other values (one `--set NAME=VALUE` per parameter, "
-              "VALUE as JSON, else a string; add `--html` to rebuild the page):", "", "```bash",
-              shlex.join(command), "```"]
+    command = [
+        "softpend",
+        "book",
+        "--only",
+        name,
+        *(["--profile", profile] if profile != DEFAULT_PROFILE else []),
+        "--set",
+        example,
+    ]
+    lines += [
+        "",
+        "To rerun it from the project root with other values (one `--set NAME=VALUE` per parameter, "
+        "VALUE as JSON, else a string; add `--html` to rebuild the page):",
+        "",
+        "```bash",
+        shlex.join(command),
+        "```",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -437,16 +534,23 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
     key_path.unlink(missing_ok=True)  # an interrupted or failed run must not look cached
     start = time.perf_counter()
     try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
-        papermill.execute_notebook(str(plan["converted"]), str(output), parameters=plan["parameters"],
-                                   kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGUMENTS,
-                                   resources={"metadata": {"path": str(layout.root)}})
+        papermill.execute_notebook(
+            str(plan["converted"]),
+            str(output),
+            parameters=plan["parameters"],
+            kernel_name=plan["kernel"],
+            progress_bar=False,
+            extra_arguments=_KERNEL_ARGUMENTS,
+            resources={"metadata": {"path": str(layout.root)}},
+        )
     except PapermillExecutionError as exc:
         source_nb, at = nbformat.read(str(plan["converted"]), as_version=4), exc.cell_index
         matches = [i for i, c in enumerate(source_nb.cells) if c.cell_type == "code" and c.source == exc.source]
         index = min(matches, key=lambda i: abs(i - at)) if matches else -1
         number = sum(c.cell_type == "code" for c in source_nb.cells[: index + 1]) if matches else 0
-        raise NotebookExecutionError(name, index, number, exc.exec_count, exc.source,
-                                     f"{exc.ename}: {exc.evalue}", output) from None
+        raise NotebookExecutionError(
+            name, index, number, exc.exec_count, exc.source, f"{exc.ename}: {exc.evalue}", output
+        ) from None
     seconds = time.perf_counter() - start
     nb = nbformat.read(str(output), as_version=4)
     nb.metadata["softpend"] = plan["record"]  # read back by the execution record
@@ -460,9 +564,15 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
     return seconds
 
 
-def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: Optional[Sequence[str]] = None,
-                  force: bool = False, progress: bool = True, overrides: Optional[dict[str, Any]] = None,
-                  workers: int = 2) -> list[NotebookRun]:
+def run_notebooks(
+    root: Path | str = ".",
+    profile: str = DEFAULT_PROFILE,
+    only: Optional[Sequence[str]] = None,
+    force: bool = False,
+    progress: bool = True,
+    overrides: Optional[dict[str, Any]] = None,
+    workers: int = 2,
+) -> list[NotebookRun]:
     """Execute the book's notebooks with a profile's parameters into ``book/_generated/``, ``workers`` at a time;
     returns one entry per selected notebook (``only``: names) in execution order, and writes the execution page.
     ``overrides`` (``--set``) apply to every selected notebook whose ``parameters`` cell defines them.  Every
@@ -497,29 +607,45 @@ def run_notebooks(root: Path | str = ".", profile: str = DEFAULT_PROFILE, only: 
             hashes = package_code.code_hashes(code_cells(nb))
             if "softpend.study.records" in hashes:  # the stored run records are an input of that code
                 hashes.update(_records_hashes(layout))
-            plans[name] = {"parameters": parameters, "converted": converted, "hashes": hashes, "record": record,
-                           "kernel": nb.metadata.get("kernelspec", {}).get("name", "python3"),
-                           "rerun": rerun_section(name, _parameters_cell(nb) or "", profile, parameters)}
+            plans[name] = {
+                "parameters": parameters,
+                "converted": converted,
+                "hashes": hashes,
+                "record": record,
+                "kernel": nb.metadata.get("kernelspec", {}).get("name", "python3"),
+                "rerun": rerun_section(name, _parameters_cell(nb) or "", profile, parameters),
+            }
         if unused := sorted(set(overrides) - set(used_overrides)):
             raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({names})")
         order = execution_order(names, after)
         cached = {}
         for name in order:  # upstream keys: this run's, else the key files on disk
-            upstream = {dep: plans[dep]["key"] if dep in plans else (layout.key_path(dep).read_text().strip()
-                        if layout.key_path(dep).is_file() else "absent") for dep in after[name]}
+            upstream = {
+                dep: plans[dep]["key"]
+                if dep in plans
+                else (layout.key_path(dep).read_text().strip() if layout.key_path(dep).is_file() else "absent")
+                for dep in after[name]
+            }
             source = _source_text(layout.source_path(name))
             plans[name]["key"] = key = cache_key(source, plans[name]["parameters"], plans[name]["hashes"], upstream)
-            cached[name] = (not force and layout.output_path(name).is_file() and layout.key_path(name).is_file()
-                            and layout.key_path(name).read_text(encoding="utf-8").strip() == key)
+            cached[name] = (
+                not force
+                and layout.output_path(name).is_file()
+                and layout.key_path(name).is_file()
+                and layout.key_path(name).read_text(encoding="utf-8").strip() == key
+            )
         seconds = _execute(layout, order, plans, after, cached, progress, max(1, int(workers)))
-    runs = [NotebookRun(name, "cached" if cached[name] else "executed", seconds.get(name, 0.0),
-                        layout.output_path(name)) for name in order]
+    runs = [
+        NotebookRun(name, "cached" if cached[name] else "executed", seconds.get(name, 0.0), layout.output_path(name))
+        for name in order
+    ]
     write_execution_record(layout, profile, runs, used_overrides)
     return runs
 
 
-def _execute(layout: BookLayout, order: Sequence[str], plans: dict, after: dict, cached: dict, progress: bool,
-             workers: int) -> dict[str, float]:
+def _execute(
+    layout: BookLayout, order: Sequence[str], plans: dict, after: dict, cached: dict, progress: bool, workers: int
+) -> dict[str, float]:
     """Execute the notebooks of ``order`` that are not cached, ``workers`` at a time, each once the selected
     notebooks of its ``after`` have finished; after a failure nothing more starts and the first error is raised."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
@@ -562,8 +688,9 @@ def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     return platform.processor() or platform.machine() or "-"
 
 
-def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun],
-                           overrides: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+def write_execution_record(
+    layout: BookLayout, profile: str, runs: Sequence[NotebookRun], overrides: Optional[dict[str, Any]] = None
+) -> dict[str, Any]:
     """Write (atomically) and return what produced ``book/_generated/`` (``execution.json``) and its page
     (``execution.md``): per toc notebook this run's status and its last execution's wall time, end and profile;
     the training step (``training.json`` of ``softpend sweep --book``); the machine."""
@@ -576,21 +703,38 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
     this_run, notebooks = {run.name: run for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
         lines = _source_text(layout.source_path(name)).splitlines()
-        entry = {"name": name, "title": next((line[2:].strip() for line in lines if line.startswith("# ")), name),
-                 "this_run": this_run[name].status if name in this_run else "not run",
-                 "executed_s": None, "executed_at": None, "profile": None}
+        entry = {
+            "name": name,
+            "title": next((line[2:].strip() for line in lines if line.startswith("# ")), name),
+            "this_run": this_run[name].status if name in this_run else "not run",
+            "executed_s": None,
+            "executed_at": None,
+            "profile": None,
+        }
         if layout.output_path(name).is_file():
             meta = nbformat.read(str(layout.output_path(name)), as_version=4).metadata
-            entry.update(executed_s=meta.get("papermill", {}).get("duration"),
-                         executed_at=meta.get("papermill", {}).get("end_time"),
-                         profile=meta.get("softpend", {}).get("profile"))
+            entry.update(
+                executed_s=meta.get("papermill", {}).get("duration"),
+                executed_at=meta.get("papermill", {}).get("end_time"),
+                profile=meta.get("softpend", {}).get("profile"),
+            )
         notebooks.append(entry)
     training = json.loads(layout.training_path.read_text()) if layout.training_path.is_file() else None
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    record = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "profile": profile,
-            "overrides": dict(overrides or {}), "training": training, "notebooks": notebooks,
-            "machine": {"processor": _processor(), "cpu_count": os.cpu_count(), "cpus_available": cpus,
-                        "platform": platform.platform(), "python": platform.python_version()}}
+    record = {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "profile": profile,
+        "overrides": dict(overrides or {}),
+        "training": training,
+        "notebooks": notebooks,
+        "machine": {
+            "processor": _processor(),
+            "cpu_count": os.cpu_count(),
+            "cpus_available": cpus,
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+        },
+    }
     with atomic_write(layout.record_path, "w") as handle:
         handle.write(json_text(record, indent=2) + "\n")
     with atomic_write(layout.execution_page_path, "w") as handle:
@@ -602,25 +746,44 @@ def execution_page(record: dict[str, Any]) -> str:
     """The execution page (MyST Markdown) of a :func:`write_execution_record` record."""
     machine, training = record["machine"], record["training"]
     when = lambda iso: str(iso).replace("T", " ")[:19] if iso else "-"  # noqa: E731
-    lines = ["(execution)=", "# Execution", "",
-             f"Written by `softpend book --profile {record['profile']}` on {when(record['date'])} UTC"
-             + (f" with {_md(record['overrides'])}" if record["overrides"] else "") + ". Per notebook: what this run "
-             "did (*executed*; *cached*: its source, parameters and the code it uses were unchanged; *not run*: not "
-             "selected) and its last execution. Each chapter ends with its parameters and the command that reruns it.",
-             "", "| notebook | this run | last execution [s] | ended (UTC) | profile |", "|---|---|---|---|---|"]
+    lines = [
+        "(execution)=",
+        "# Execution",
+        "",
+        f"Written by `softpend book --profile {record['profile']}` on {when(record['date'])} UTC"
+        + (f" with {_md(record['overrides'])}" if record["overrides"] else "")
+        + ". Per notebook: what this run "
+        "did (*executed*; *cached*: its source, parameters and the code it uses were unchanged; *not run*: not "
+        "selected) and its last execution. Each chapter ends with its parameters and the command that reruns it.",
+        "",
+        "| notebook | this run | last execution [s] | ended (UTC) | profile |",
+        "|---|---|---|---|---|",
+    ]
     for e in record["notebooks"]:
         title = f"{{doc}}`{_md(e['title'])} <{e['name']}>`" if e["executed_at"] else _md(e["title"])
         seconds = "-" if e["executed_s"] is None else f"{e['executed_s']:.1f}"
         lines.append(f"| {title} | {e['this_run']} | {seconds} | {when(e['executed_at'])} | {_md(e['profile'])} |")
     total = sum(e["executed_s"] or 0.0 for e in record["notebooks"])
-    lines += ["", f"Sum of the last execution times: {total:.0f} s.", "", "## Training step", "",
-              f"`softpend sweep --book --profile {training['profile']}` on {when(training['date'])} UTC trained "
-              f"{len(training['trained'])} run(s) the notebooks read (the others were there already) in "
-              f"{training['seconds']:.0f} s, with {training['workers']} worker(s)." if training else
-              "No training step recorded (`softpend sweep --book`): the notebooks trained the runs they read.",
-              "", "## Machine", "", "| | |", "|---|---|", f"| processor | {_md(machine['processor'])} |",
-              f"| CPU cores | {machine['cpu_count']} ({machine['cpus_available']} available to the run) |",
-              f"| platform | {_md(machine['platform'])}, Python {machine['python']} (packages: `environment.lock`) |"]
+    lines += [
+        "",
+        f"Sum of the last execution times: {total:.0f} s.",
+        "",
+        "## Training step",
+        "",
+        f"`softpend sweep --book --profile {training['profile']}` on {when(training['date'])} UTC trained "
+        f"{len(training['trained'])} run(s) the notebooks read (the others were there already) in "
+        f"{training['seconds']:.0f} s, with {training['workers']} worker(s)."
+        if training
+        else "No training step recorded (`softpend sweep --book`): the notebooks trained the runs they read.",
+        "",
+        "## Machine",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| processor | {_md(machine['processor'])} |",
+        f"| CPU cores | {machine['cpu_count']} ({machine['cpus_available']} available to the run) |",
+        f"| platform | {_md(machine['platform'])}, Python {machine['python']} (packages: `environment.lock`) |",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -631,8 +794,16 @@ def build_html(root: Path | str = ".", path_output: Optional[Path | str] = None,
     layout = BookLayout.at(root)
     script = Path(sys.executable).parent / "jupyter-book"
     output = Path(path_output if path_output is not None else layout.root).resolve()
-    command = [str(script) if script.exists() else (shutil.which("jupyter-book") or "jupyter-book"), "build",
-               str(layout.root), "--path-output", str(output), "-W", "-n", "--keep-going"] + (["-q"] if quiet else [])
+    command = [
+        str(script) if script.exists() else (shutil.which("jupyter-book") or "jupyter-book"),
+        "build",
+        str(layout.root),
+        "--path-output",
+        str(output),
+        "-W",
+        "-n",
+        "--keep-going",
+    ] + (["-q"] if quiet else [])
     print("[book] " + " ".join(command), file=sys.stderr, flush=True)
     if subprocess.run(command, cwd=layout.root).returncode != 0:
         raise RuntimeError("jupyter-book build failed (warnings count as errors)")

@@ -31,8 +31,7 @@ import numpy as np
 
 from softpend.checks import int_at_least, positive
 from softpend.evaluation import evaluate_controller
-from softpend.hardware.rig_design import (TPU_MODULUS_RANGE_PA, V5_CARTRIDGES, MotorCartridge, RigDesign,
-                                          rig_design)
+from softpend.hardware.rig_design import TPU_MODULUS_RANGE_PA, V5_CARTRIDGES, MotorCartridge, RigDesign, rig_design
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.observation import wrap_angle_rad
 from softpend.study.rig_runs import rig_controllers
@@ -40,11 +39,29 @@ from softpend.study.rod_design import rod_design
 from softpend.task import Task
 
 __all__ = [
-    "BuildBudget", "BuildStep", "BuildTarget", "CALIBRATION_MAX_RESIDUAL_PX", "HANGING_TIP_TOLERANCE_M",
+    "BuildBudget",
+    "BuildStep",
+    "BuildTarget",
+    "CALIBRATION_MAX_RESIDUAL_PX",
+    "HANGING_TIP_TOLERANCE_M",
     "IDENTIFY_HORIZON_S",
-    "MIN_TORQUE_MARGIN", "QUICK_BUDGET", "TESTED_CAMERAS", "TWIN", "QuantisedHub", "build_steps", "camera_rows",
-    "check_step", "choose_cartridge", "design_figures", "firmware_settings", "encoder_rows", "lqr_torque_per_tick_nm", "modulus_rows", "motor_rows",
-    "parts_list", "swing_up_needs",
+    "MIN_TORQUE_MARGIN",
+    "QUICK_BUDGET",
+    "TESTED_CAMERAS",
+    "TWIN",
+    "QuantisedHub",
+    "build_steps",
+    "camera_rows",
+    "check_step",
+    "choose_cartridge",
+    "design_figures",
+    "firmware_settings",
+    "encoder_rows",
+    "lqr_torque_per_tick_nm",
+    "modulus_rows",
+    "motor_rows",
+    "parts_list",
+    "swing_up_needs",
 ]
 
 #: Least ratio of the torque a cartridge gives at the peak hub rate to the torque limit the controllers use.
@@ -73,18 +90,24 @@ def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[
         summary = evaluate_controller(make(), task, name=label, seeds=list(seeds), duration_s=duration_s)
         for result in summary.results:
             obs = result.observations
-            rows.append({
-                "controller": label, "seed": result.seed, "success": bool(result.success),
-                "swing_up_time_s": float(result.swing_up_time_s), "upright_std_rad": float(result.upright_std_rad),
-                "peak_torque_nm": float(np.max(np.abs(result.torque_nm))),
-                "peak_hub_rate_rad_s": float(np.max(np.abs(obs[:, phi_dot]))),
-                "peak_tip_speed_m_s": float(np.max(np.hypot(obs[:, ex_dot], obs[:, ey_dot]))),
-            })
+            rows.append(
+                {
+                    "controller": label,
+                    "seed": result.seed,
+                    "success": bool(result.success),
+                    "swing_up_time_s": float(result.swing_up_time_s),
+                    "upright_std_rad": float(result.upright_std_rad),
+                    "peak_torque_nm": float(np.max(np.abs(result.torque_nm))),
+                    "peak_hub_rate_rad_s": float(np.max(np.abs(obs[:, phi_dot]))),
+                    "peak_tip_speed_m_s": float(np.max(np.hypot(obs[:, ex_dot], obs[:, ey_dot]))),
+                }
+            )
     return rows
 
 
-def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float,
-               cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES) -> list[dict[str, Any]]:
+def motor_rows(
+    peak_hub_rate_rad_s: float, torque_nm: float, cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
+) -> list[dict[str, Any]]:
     """Each cartridge against the swing-up: free speed over the peak hub rate, torque available at the peak hub
     rate over ``torque_nm``, encoder ticks, and whether it qualifies (free speed above the peak rate and a torque
     margin of at least :data:`MIN_TORQUE_MARGIN`)."""
@@ -93,17 +116,24 @@ def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float,
     for c in cartridges:
         available = c.available_torque_nm(peak_hub_rate_rad_s)
         speed_margin = c.free_speed_rad_s / peak_hub_rate_rad_s if peak_hub_rate_rad_s > 0 else math.inf
-        rows.append({
-            "cartridge": c.name, "free_speed_rad_s": c.free_speed_rad_s, "stall_torque_nm": c.stall_torque_nm,
-            "speed_margin": speed_margin, "torque_at_peak_rate_nm": available,
-            "torque_margin": available / torque_nm, "encoder_ticks_per_rev": c.encoder_ticks_per_rev,
-            "qualifies": bool(speed_margin > 1.0 and available / torque_nm >= MIN_TORQUE_MARGIN),
-        })
+        rows.append(
+            {
+                "cartridge": c.name,
+                "free_speed_rad_s": c.free_speed_rad_s,
+                "stall_torque_nm": c.stall_torque_nm,
+                "speed_margin": speed_margin,
+                "torque_at_peak_rate_nm": available,
+                "torque_margin": available / torque_nm,
+                "encoder_ticks_per_rev": c.encoder_ticks_per_rev,
+                "qualifies": bool(speed_margin > 1.0 and available / torque_nm >= MIN_TORQUE_MARGIN),
+            }
+        )
     return rows
 
 
-def choose_cartridge(rows: Sequence[dict[str, Any]],
-                     cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES) -> MotorCartridge:
+def choose_cartridge(
+    rows: Sequence[dict[str, Any]], cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
+) -> MotorCartridge:
     """The qualifying cartridge of :func:`motor_rows` with the finest encoder (``ValueError`` if none qualifies)."""
     good = [c for c, r in zip(cartridges, rows) if r["qualifies"]]
     if not good:
@@ -159,20 +189,31 @@ def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], durati
     for n in counts:
         per_tick = lqr_torque_per_tick_nm(task, n)
         for label, make in rig_controllers(task).items():
-            summary = evaluate_controller(QuantisedHub(make(), n), task, name=label, seeds=list(seeds),
-                                          duration_s=duration_s)
+            summary = evaluate_controller(
+                QuantisedHub(make(), n), task, name=label, seeds=list(seeds), duration_s=duration_s
+            )
             key = "joint state" if "joint" in label else "observations"
             stds = [r.upright_std_rad for r in summary.results if r.success]
-            rows.append({
-                "counts_per_rev": int(n), "controller": label, "starts": len(summary.results),
-                "successes": summary.successes, "worst_upright_std_rad": max(stds) if stds else math.nan,
-                "torque_per_tick_fraction": per_tick[key] / task.torque_limit_nm,
-            })
+            rows.append(
+                {
+                    "counts_per_rev": int(n),
+                    "controller": label,
+                    "starts": len(summary.results),
+                    "successes": summary.successes,
+                    "worst_upright_std_rad": max(stds) if stds else math.nan,
+                    "torque_per_tick_fraction": per_tick[key] / task.torque_limit_nm,
+                }
+            )
     return rows
 
 
-def camera_rows(design: RigDesign, peak_tip_speed_m_s: float, search_radius_px: float,
-                exposure_s: float, fps_values: Sequence[float]) -> list[dict[str, Any]]:
+def camera_rows(
+    design: RigDesign,
+    peak_tip_speed_m_s: float,
+    search_radius_px: float,
+    exposure_s: float,
+    fps_values: Sequence[float],
+) -> list[dict[str, Any]]:
     """Per frame rate: the tip's largest step between frames [px] against the tracker's search radius (a step
     beyond it makes the tracker search the whole frame: slower, not lost), and the motion blur of an
     ``exposure_s`` exposure [px] against the dot's diameter [px]; ``max_exposure_ms`` is the exposure whose blur
@@ -180,16 +221,23 @@ def camera_rows(design: RigDesign, peak_tip_speed_m_s: float, search_radius_px: 
     positive("search_radius_px", search_radius_px)
     speed_px = peak_tip_speed_m_s * design.camera_model.px_per_m
     dot_px = 2.0 * design.dot_radius_m * design.camera_model.px_per_m
-    return [{
-        "fps": float(fps), "step_px": speed_px / fps, "search_radius_px": float(search_radius_px),
-        "within_window": bool(speed_px / fps < search_radius_px), "blur_px": speed_px * exposure_s,
-        "dot_diameter_px": dot_px, "max_exposure_ms": 1e3 * dot_px / speed_px if speed_px > 0 else math.inf,
-    } for fps in fps_values]
+    return [
+        {
+            "fps": float(fps),
+            "step_px": speed_px / fps,
+            "search_radius_px": float(search_radius_px),
+            "within_window": bool(speed_px / fps < search_radius_px),
+            "blur_px": speed_px * exposure_s,
+            "dot_diameter_px": dot_px,
+            "max_exposure_ms": 1e3 * dot_px / speed_px if speed_px > 0 else math.inf,
+        }
+        for fps in fps_values
+    ]
 
 
-def modulus_rows(params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_MODULUS_RANGE_PA[0], None,
-                                                                              TPU_MODULUS_RANGE_PA[1])
-                 ) -> list[dict[str, Any]]:
+def modulus_rows(
+    params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_MODULUS_RANGE_PA[0], None, TPU_MODULUS_RANGE_PA[1])
+) -> list[dict[str, Any]]:
     """Per modulus (``None``: the parameters' own): the rod's design figures when the designed section is printed
     from a material of that modulus (tip sag, torque ratio, buckling load factor), and the thickness that would
     keep the design's stiffness instead."""
@@ -197,11 +245,15 @@ def modulus_rows(params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_
     for modulus in moduli_pa:
         e = params.youngs_modulus_pa if modulus is None else float(modulus)
         figures = rod_design(params.replace(youngs_modulus_pa=e))
-        rows.append({
-            "modulus_mpa": e / 1e6, "tip_sag_fraction": figures.tip_sag_fraction,
-            "torque_ratio": figures.torque_ratio, "buckling_load_factor": figures.buckling_load_factor,
-            "thickness_for_design_mm": 1e3 * rig_design(params, print_modulus_pa=e).beam_thickness_m,
-        })
+        rows.append(
+            {
+                "modulus_mpa": e / 1e6,
+                "tip_sag_fraction": figures.tip_sag_fraction,
+                "torque_ratio": figures.torque_ratio,
+                "buckling_load_factor": figures.buckling_load_factor,
+                "thickness_for_design_mm": 1e3 * rig_design(params, print_modulus_pa=e).beam_thickness_m,
+            }
+        )
     return rows
 
 
@@ -210,32 +262,57 @@ def parts_list(design: RigDesign, cartridge: MotorCartridge, camera_fps: float) 
     d = design.to_dict()
     p = design.params
     return [
-        {"part": "TPU beam (printed)", "quantity": "1",
-         "spec": f"{d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm "
-                 f"(length x width out of plane x thickness in plane), E = {d['print_modulus_mpa']:.3g} MPa, "
-                 f"solid infill, about {d['beam_mass_g']:.0f} g"},
-        {"part": "hub mount (printed, rigid: PLA or PETG)", "quantity": "1",
-         "spec": f"boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the "
-                 f"shaft, beam pocket from {1e3 * design.hub.pocket_start_m:.0f} mm, marker flag "
-                 f"{d['flag_length_mm']:.0f} mm long {1e3 * design.hub.flag_gap_m:.0f} mm in front of the beam"},
-        {"part": "tip mass (steel disc)", "quantity": "1",
-         "spec": f"diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, "
-                 f"{d['tip_mass_g']:.3g} g, matte blue dot of the same diameter on its front"},
-        {"part": "calibration markers (matte green discs)", "quantity": str(len(design.markers_m)),
-         "spec": f"diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at "
-                 + ", ".join(f"({x * 1e3:.0f}, {y * 1e3:.0f})" for x, y in design.markers_m) + " mm from the hub axis"},
-        {"part": "hub marker (matte magenta disc)", "quantity": "1",
-         "spec": f"diameter {2e3 * design.hub.hub_marker_dot_radius_m:.0f} mm on the flag, "
-                 f"{d['hub_marker_radius_mm']:.0f} mm from the hub axis"},
-        {"part": "VEX V5 Smart Motor", "quantity": "1",
-         "spec": f"{cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), "
-                 f"torque limit {p.torque_limit_nm:g} N m set in the device program"},
-        {"part": "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat", "quantity": "1 each",
-         "spec": "the device program runs on the brain; USB to the host computer"},
-        {"part": "camera", "quantity": "1",
-         "spec": f"{design.camera.width_px} x {design.camera.height_px} px at >= {camera_fps:g} frames/s, horizontal "
-                 f"field of view {design.camera.horizontal_fov_deg:g} deg, {d['camera_distance_mm']:.0f} mm from the "
-                 f"rod plane, square on, optical axis through the hub axis"},
+        {
+            "part": "TPU beam (printed)",
+            "quantity": "1",
+            "spec": f"{d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm "
+            f"(length x width out of plane x thickness in plane), E = {d['print_modulus_mpa']:.3g} MPa, "
+            f"solid infill, about {d['beam_mass_g']:.0f} g",
+        },
+        {
+            "part": "hub mount (printed, rigid: PLA or PETG)",
+            "quantity": "1",
+            "spec": f"boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the "
+            f"shaft, beam pocket from {1e3 * design.hub.pocket_start_m:.0f} mm, marker flag "
+            f"{d['flag_length_mm']:.0f} mm long {1e3 * design.hub.flag_gap_m:.0f} mm in front of the beam",
+        },
+        {
+            "part": "tip mass (steel disc)",
+            "quantity": "1",
+            "spec": f"diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, "
+            f"{d['tip_mass_g']:.3g} g, matte blue dot of the same diameter on its front",
+        },
+        {
+            "part": "calibration markers (matte green discs)",
+            "quantity": str(len(design.markers_m)),
+            "spec": f"diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at "
+            + ", ".join(f"({x * 1e3:.0f}, {y * 1e3:.0f})" for x, y in design.markers_m)
+            + " mm from the hub axis",
+        },
+        {
+            "part": "hub marker (matte magenta disc)",
+            "quantity": "1",
+            "spec": f"diameter {2e3 * design.hub.hub_marker_dot_radius_m:.0f} mm on the flag, "
+            f"{d['hub_marker_radius_mm']:.0f} mm from the hub axis",
+        },
+        {
+            "part": "VEX V5 Smart Motor",
+            "quantity": "1",
+            "spec": f"{cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), "
+            f"torque limit {p.torque_limit_nm:g} N m set in the device program",
+        },
+        {
+            "part": "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat",
+            "quantity": "1 each",
+            "spec": "the device program runs on the brain; USB to the host computer",
+        },
+        {
+            "part": "camera",
+            "quantity": "1",
+            "spec": f"{design.camera.width_px} x {design.camera.height_px} px at >= {camera_fps:g} frames/s, horizontal "
+            f"field of view {design.camera.horizontal_fov_deg:g} deg, {d['camera_distance_mm']:.0f} mm from the "
+            f"rod plane, square on, optical axis through the hub axis",
+        },
     ]
 
 
@@ -360,8 +437,9 @@ class BuildStep:
         return " ".join(a if a and all(ch not in a for ch in " []{}\"',") else f"'{a}'" for a in self.argv)
 
 
-def build_steps(folder: str | Path, target: BuildTarget = TWIN, budget: BuildBudget = BuildBudget(),
-                overrides: Sequence[str] = ()) -> list[BuildStep]:
+def build_steps(
+    folder: str | Path, target: BuildTarget = TWIN, budget: BuildBudget = BuildBudget(), overrides: Sequence[str] = ()
+) -> list[BuildStep]:
     """The procedure from the design to the first closed-loop run, every output under ``folder``.
 
     Parameters
@@ -380,39 +458,108 @@ def build_steps(folder: str | Path, target: BuildTarget = TWIN, budget: BuildBud
     counts = ["--counts-per-rev", str(firmware_settings()["COUNTS_PER_REV"])]
     tol_mm = HANGING_TIP_TOLERANCE_M * 1e3
     return [
-        BuildStep("design", "Compute the rig's dimensions and drawing from the rod's parameters",
-                  ("softpend", "rig", "design", "--out", str(f / "design"), *sets),
-                  "every marker and the whole swing circle inside the image, every marker clear of the swing "
-                  "circle, and a dot larger than the tracker's smallest blob"),
-        BuildStep("firmware", "Check that the device program carries the host's protocol",
-                  ("python", "-m", "softpend.hardware.firmware"),
-                  "'firmware protocol copy is up to date' and exit status 0"),
-        BuildStep("check", "Power on: handshake, encoder at rest, direction, watchdog",
-                  ("softpend", "rig", "check", *target.link(), *(counts if target.twin else []),
-                   "--out", str(f / "check.json")),
-                  "the protocol version, torque limit and state rate the host expects; the hub at rest at the "
-                  "hanging angle; a positive torque turns the hub the positive way; the watchdog zeroes the torque "
-                  "after a silent host"),
-        BuildStep("calibrate", "Fit the camera's affine map to the markers",
-                  ("softpend", "rig", "calibrate", *target.camera_args(), "--markers", str(f / "design" / "markers.json"),
-                   "--out", str(f / "calibration.json"), *sets),
-                  f"marker residual at most {CALIBRATION_MAX_RESIDUAL_PX:g} px and the hanging tip within "
-                  f"{tol_mm:g} mm of where the design puts it"),
-        BuildStep("babble", "Babble: random torque, encoder and camera logged and synchronised",
-                  ("softpend", "rig", "babble", *target.rig(),
-                   *([] if target.twin else ["--calibration", str(f / "calibration.json")]), "--out", str(f / "babble"), "--duration", f"{budget.babble_s:g}",
-                   "--trial-length-s", f"{budget.trial_length_s:g}", "--seed", str(budget.seed), "--no-progress"),
-                  "a clock offset found with a clear correlation peak, no gaps, and whole trials in the dataset"),
-        BuildStep("identify", "Identify the rod: fit the dynamics model to the babbling",
-                  ("softpend", "fit-model", str(f / "babble" / "rig_dataset.npz"), str(f / "model"),
-                   "--information", "limited", "--max-epochs", str(budget.max_epochs), "--no-progress"),
-                  f"open-loop tip error {IDENTIFY_HORIZON_S:g} s into a rollout below the yardstick of a rod that "
-                  "stays put"),
-        BuildStep("control", "First closed-loop run: energy swing-up and LQR on the observations",
-                  ("softpend", "rig", "control", "swingup-obs", *target.rig(),
-                   *([] if target.twin else ["--calibration", str(f / "calibration.json")]), *counts,
-                   "--out", str(f / "control"), "--duration", f"{budget.control_s:g}", "--no-progress"),
-                  "no early stop; on the twin, the rod's true tip swung up and held upright"),
+        BuildStep(
+            "design",
+            "Compute the rig's dimensions and drawing from the rod's parameters",
+            ("softpend", "rig", "design", "--out", str(f / "design"), *sets),
+            "every marker and the whole swing circle inside the image, every marker clear of the swing "
+            "circle, and a dot larger than the tracker's smallest blob",
+        ),
+        BuildStep(
+            "firmware",
+            "Check that the device program carries the host's protocol",
+            ("python", "-m", "softpend.hardware.firmware"),
+            "'firmware protocol copy is up to date' and exit status 0",
+        ),
+        BuildStep(
+            "check",
+            "Power on: handshake, encoder at rest, direction, watchdog",
+            (
+                "softpend",
+                "rig",
+                "check",
+                *target.link(),
+                *(counts if target.twin else []),
+                "--out",
+                str(f / "check.json"),
+            ),
+            "the protocol version, torque limit and state rate the host expects; the hub at rest at the "
+            "hanging angle; a positive torque turns the hub the positive way; the watchdog zeroes the torque "
+            "after a silent host",
+        ),
+        BuildStep(
+            "calibrate",
+            "Fit the camera's affine map to the markers",
+            (
+                "softpend",
+                "rig",
+                "calibrate",
+                *target.camera_args(),
+                "--markers",
+                str(f / "design" / "markers.json"),
+                "--out",
+                str(f / "calibration.json"),
+                *sets,
+            ),
+            f"marker residual at most {CALIBRATION_MAX_RESIDUAL_PX:g} px and the hanging tip within "
+            f"{tol_mm:g} mm of where the design puts it",
+        ),
+        BuildStep(
+            "babble",
+            "Babble: random torque, encoder and camera logged and synchronised",
+            (
+                "softpend",
+                "rig",
+                "babble",
+                *target.rig(),
+                *([] if target.twin else ["--calibration", str(f / "calibration.json")]),
+                "--out",
+                str(f / "babble"),
+                "--duration",
+                f"{budget.babble_s:g}",
+                "--trial-length-s",
+                f"{budget.trial_length_s:g}",
+                "--seed",
+                str(budget.seed),
+                "--no-progress",
+            ),
+            "a clock offset found with a clear correlation peak, no gaps, and whole trials in the dataset",
+        ),
+        BuildStep(
+            "identify",
+            "Identify the rod: fit the dynamics model to the babbling",
+            (
+                "softpend",
+                "fit-model",
+                str(f / "babble" / "rig_dataset.npz"),
+                str(f / "model"),
+                "--information",
+                "limited",
+                "--max-epochs",
+                str(budget.max_epochs),
+                "--no-progress",
+            ),
+            f"open-loop tip error {IDENTIFY_HORIZON_S:g} s into a rollout below the yardstick of a rod that stays put",
+        ),
+        BuildStep(
+            "control",
+            "First closed-loop run: energy swing-up and LQR on the observations",
+            (
+                "softpend",
+                "rig",
+                "control",
+                "swingup-obs",
+                *target.rig(),
+                *([] if target.twin else ["--calibration", str(f / "calibration.json")]),
+                *counts,
+                "--out",
+                str(f / "control"),
+                "--duration",
+                f"{budget.control_s:g}",
+                "--no-progress",
+            ),
+            "no early stop; on the twin, the rod's true tip swung up and held upright",
+        ),
     ]
 
 
@@ -443,30 +590,58 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
 def _check_design(f: Path) -> dict[str, Any]:
     d = _read_json(f / "design" / "rig_design.json")
     markers = _read_json(f / "design" / "markers.json")
-    good = (d["markers_in_view"] and d["swing_in_view"] and d["min_marker_gap_mm"] > 0
-            and d["dot_area_px"] > d["tracker_min_area_px"] and (f / "design" / "rig_design.png").stat().st_size > 0
-            and len(markers) == len(d["markers_m"]))
-    return {"good": bool(good), "beam_thickness_mm": d["beam_thickness_mm"], "camera_distance_mm": d["camera_distance_mm"],
-            "pixel_size_mm": d["pixel_size_mm"], "tip_sag_mm": d["tip_sag_horizontal_mm"]}
+    good = (
+        d["markers_in_view"]
+        and d["swing_in_view"]
+        and d["min_marker_gap_mm"] > 0
+        and d["dot_area_px"] > d["tracker_min_area_px"]
+        and (f / "design" / "rig_design.png").stat().st_size > 0
+        and len(markers) == len(d["markers_m"])
+    )
+    return {
+        "good": bool(good),
+        "beam_thickness_mm": d["beam_thickness_mm"],
+        "camera_distance_mm": d["camera_distance_mm"],
+        "pixel_size_mm": d["pixel_size_mm"],
+        "tip_sag_mm": d["tip_sag_horizontal_mm"],
+    }
 
 
 def _check_rig_check(f: Path) -> dict[str, Any]:
     d = _read_json(f / "check.json")
-    return {"good": bool(d["passed"]), **{name: c["passed"] for name, c in d["checks"].items()},
-            "watchdog_trip_ms": d["checks"]["watchdog"]["trip_ms"], "round_trip_ms": d["round_trip_ms"]}
+    return {
+        "good": bool(d["passed"]),
+        **{name: c["passed"] for name, c in d["checks"].items()},
+        "watchdog_trip_ms": d["checks"]["watchdog"]["trip_ms"],
+        "round_trip_ms": d["round_trip_ms"],
+    }
 
 
 def _check_calibration(f: Path) -> dict[str, Any]:
     d = _read_json(f / "calibration.report.json")
-    return {"good": bool(d["passed"]), "residual_px": d["residual_px"], "tip_error_mm": 1e3 * d["tip_error_m"],
-            "px_per_m": d["px_per_m"]}
+    return {
+        "good": bool(d["passed"]),
+        "residual_px": d["residual_px"],
+        "tip_error_mm": 1e3 * d["tip_error_m"],
+        "px_per_m": d["px_per_m"],
+    }
 
 
 def _check_babble(f: Path) -> dict[str, Any]:
     d = _read_json(f / "babble" / "summary.json")
-    good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5 and (f / "babble" / "rig_dataset.npz").is_file()
-    return {"good": bool(good), "n_trials": d["n_trials"], "clock_offset_ms": 1e3 * d["clock_offset_s"],
-            "peak_correlation": d["peak_correlation"], "valid_fraction": d["grid_valid_fraction"]}
+    good = (
+        d["n_trials"] >= 1
+        and d["gaps"] == 0
+        and d["peak_correlation"] > 0.5
+        and (f / "babble" / "rig_dataset.npz").is_file()
+    )
+    return {
+        "good": bool(good),
+        "n_trials": d["n_trials"],
+        "clock_offset_ms": 1e3 * d["clock_offset_s"],
+        "peak_correlation": d["peak_correlation"],
+        "valid_fraction": d["grid_valid_fraction"],
+    }
 
 
 def _check_model(f: Path) -> dict[str, Any]:
@@ -474,18 +649,26 @@ def _check_model(f: Path) -> dict[str, Any]:
     v = meta["metadata"]["metrics"]["validation"]
     tip, hold = v.get(f"tip_rmse_m@{IDENTIFY_HORIZON_S:g}s"), v.get(f"hold_tip_rmse_m@{IDENTIFY_HORIZON_S:g}s")
     good = tip is not None and hold is not None and math.isfinite(tip) and tip < hold
-    return {"good": bool(good), "tip_rmse_mm": 1e3 * tip if tip is not None else math.nan,
-            "hold_tip_rmse_mm": 1e3 * hold if hold is not None else math.nan}
+    return {
+        "good": bool(good),
+        "tip_rmse_mm": 1e3 * tip if tip is not None else math.nan,
+        "hold_tip_rmse_mm": 1e3 * hold if hold is not None else math.nan,
+    }
 
 
 def _check_control(f: Path) -> dict[str, Any]:
     d = _read_json(f / "control" / "summary.json")
     truth = d.get("truth") or {}
     good = d["stop_reason"] is None and (bool(truth.get("success")) if truth else True)
-    return {"good": bool(good), "stop_reason": d["stop_reason"], "samples": d["samples"],
-            "late_commands": d.get("late_commands", 0), "success": bool(truth.get("success", False)),
-            "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
-            "upright_std_rad": truth.get("upright_std_rad", math.nan)}
+    return {
+        "good": bool(good),
+        "stop_reason": d["stop_reason"],
+        "samples": d["samples"],
+        "late_commands": d.get("late_commands", 0),
+        "success": bool(truth.get("success", False)),
+        "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
+        "upright_std_rad": truth.get("upright_std_rad", math.nan),
+    }
 
 
 def design_figures(params: RodParams, design: Optional[RigDesign] = None) -> dict[str, Any]:

@@ -20,19 +20,37 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_controller
-from softpend.study.presets import REPORT_SEEDS
-from softpend.task import Task
 from softpend.control.learned import learned_model_simulator, lqr_from_learned_model
 from softpend.control.lqr import LQRController
 from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
 from softpend.control.swingup import EnergySwingUpController
+from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_controller
+from softpend.study.presets import REPORT_SEEDS
+from softpend.task import Task
 
-__all__ = ["ClassicalComparison", "classical_comparison", "near_upright_starts", "pid_gain_sensitivity", "plot_abs_theta",
-           "table_markdown", "train_learned_model"]
+__all__ = [
+    "ClassicalComparison",
+    "classical_comparison",
+    "near_upright_starts",
+    "pid_gain_sensitivity",
+    "plot_abs_theta",
+    "table_markdown",
+    "train_learned_model",
+]
 
-TABLE_COLUMNS = ("controller", "start", "torque_limit_nm", "seeds", "success_rate", "success_low", "success_high",
-                 "swing_up_time_s", "upright_std_rad", "peak_torque_nm", "energy_used_j")
+TABLE_COLUMNS = (
+    "controller",
+    "start",
+    "torque_limit_nm",
+    "seeds",
+    "success_rate",
+    "success_low",
+    "success_high",
+    "swing_up_time_s",
+    "upright_std_rad",
+    "peak_torque_nm",
+    "energy_used_j",
+)
 
 #: Where the PID gains were tuned, by label suffix.
 PID_TUNED_ON = ("true plant", "learned model")
@@ -77,8 +95,9 @@ class ClassicalComparison:
         raise KeyError(f"no run of {controller!r} from {start!r}")
 
 
-def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0,
-                        progress: bool = False):
+def train_learned_model(
+    task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0, progress: bool = False
+):
     """Babble (report protocol, ``n_trials`` x 5 s) on the task's plant and fit the default learned model (3 x 16)."""
     from softpend.sysid import BabbleProtocol, babble
     from softpend.sysid.training import fit_dynamics_model
@@ -96,14 +115,16 @@ def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> l
     return [task.tilt_state(float(tilt_rad) + offset) for offset in offsets]
 
 
-def _run(controller, task: Task, tilt_rad: float, starts: Sequence[int], duration_s: float, limit: float,
-         name: str) -> EvaluationSummary:
+def _run(
+    controller, task: Task, tilt_rad: float, starts: Sequence[int], duration_s: float, limit: float, name: str
+) -> EvaluationSummary:
     """The controller from each fresh start of one tilt (seed ``s`` of the episode is the start's seed)."""
     run_task = task.replace(start="upright", torque_limit_nm=limit)
     results = []
     for seed, state in zip(starts, near_upright_starts(task, tilt_rad, starts)):
-        results += evaluate_controller(controller, run_task, seeds=(int(seed),), duration_s=duration_s,
-                                       initial_state=state).results
+        results += evaluate_controller(
+            controller, run_task, seeds=(int(seed),), duration_s=duration_s, initial_state=state
+        ).results
     return EvaluationSummary(name=name, results=results)
 
 
@@ -173,18 +194,24 @@ def classical_comparison(
             rows.append({**summary.row(), "start": f"tilt {tilt:g} rad", "torque_limit_nm": torque_limit})
 
     def add_hanging(label: str, controller) -> None:
-        summary = evaluate_controller(controller, task.replace(start="hanging"), name=label, seeds=starts,
-                                      duration_s=swingup_duration_s)
+        summary = evaluate_controller(
+            controller, task.replace(start="hanging"), name=label, seeds=starts, duration_s=swingup_duration_s
+        )
         hanging[label] = summary
         rows.append({**summary.row(), "start": "hanging", "torque_limit_nm": limit})
 
     joint_state = plant == "prb"
     if not joint_state:
-        notes.append(f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only versions")
+        notes.append(
+            f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only versions"
+        )
     lqr_state = "joint" if joint_state else "observation"
     add("LQR (true model)", LQRController.from_params(params, state=lqr_state), limit)
-    add("LQR (true model), no limit",
-        LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm), unlimited_torque_nm)
+    add(
+        "LQR (true model), no limit",
+        LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm),
+        unlimited_torque_nm,
+    )
     if joint_state:
         add("LQR (observations)", LQRController.from_params(params, state="observation"), limit)
     if learned_model is not None:
@@ -201,23 +228,37 @@ def classical_comparison(
         simulators = {"true plant": plant_simulator(task)}
         if learned_model is not None:
             simulators["learned model"] = learned_model_simulator(learned_model, params)
-        gains = {tuned_on: tune_pid(simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations,
-                                    progress=progress).gains
-                 for tuned_on, simulator in simulators.items()}
+        gains = {
+            tuned_on: tune_pid(
+                simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations, progress=progress
+            ).gains
+            for tuned_on, simulator in simulators.items()
+        }
     for tuned_on, tuned in gains.items():
         add(f"PID (tuned on {tuned_on})", PIDController(tuned, torque_limit_nm=limit), limit)
-        add(f"PID (tuned on {tuned_on}), no limit", PIDController(tuned, torque_limit_nm=unlimited_torque_nm),
-            unlimited_torque_nm)
+        add(
+            f"PID (tuned on {tuned_on}), no limit",
+            PIDController(tuned, torque_limit_nm=unlimited_torque_nm),
+            unlimited_torque_nm,
+        )
 
     add_hanging("LQR (true model)", LQRController.from_params(params, state=lqr_state))
-    add_hanging("energy swing-up + LQR",
-                EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params))
+    add_hanging(
+        "energy swing-up + LQR",
+        EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params),
+    )
     return ClassicalComparison(near, hanging, rows, gains, notes)
 
 
-def pid_gain_sensitivity(task: Task, gains: PIDGains, scales: Sequence[float] = (0.5, 0.8, 1.0, 1.25, 2.0),
-                         tilt_rad: float = 0.2, starts: Sequence[int] = REPORT_SEEDS, duration_s: float = 5.0,
-                         torque_limit_nm: Optional[float] = None) -> list[dict[str, Any]]:
+def pid_gain_sensitivity(
+    task: Task,
+    gains: PIDGains,
+    scales: Sequence[float] = (0.5, 0.8, 1.0, 1.25, 2.0),
+    tilt_rad: float = 0.2,
+    starts: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = 5.0,
+    torque_limit_nm: Optional[float] = None,
+) -> list[dict[str, Any]]:
     """The PID with all three gains scaled by each of ``scales``, from the fresh starts of one tilt: one
     :meth:`~softpend.evaluation.EvaluationSummary.row` per scale (``gain_scale`` added).
 
@@ -234,10 +275,18 @@ def pid_gain_sensitivity(task: Task, gains: PIDGains, scales: Sequence[float] = 
     rows = []
     for scale in scales:
         scaled = PIDGains(*(float(scale) * gains.as_array()))
-        summary = _run(PIDController(scaled, torque_limit_nm=limit), task, tilt_rad, list(starts), duration_s,
-                       limit, f"PID x {float(scale):g}")
-        rows.append({**summary.row(), "gain_scale": float(scale), "start": f"tilt {tilt_rad:g} rad",
-                     "torque_limit_nm": limit})
+        summary = _run(
+            PIDController(scaled, torque_limit_nm=limit),
+            task,
+            tilt_rad,
+            list(starts),
+            duration_s,
+            limit,
+            f"PID x {float(scale):g}",
+        )
+        rows.append(
+            {**summary.row(), "gain_scale": float(scale), "start": f"tilt {tilt_rad:g} rad", "torque_limit_nm": limit}
+        )
     return rows
 
 
@@ -266,6 +315,7 @@ def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None
 
 def table_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] = TABLE_COLUMNS) -> str:
     """A Markdown table of comparison rows (numbers to 4 significant digits)."""
+
     def cell(value: Any) -> str:
         return f"{value:.4g}" if isinstance(value, float) else str(value)
 

@@ -28,9 +28,17 @@ from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-__all__ = ["BALANCED_FRACTION", "FRESH_STARTS_FILE", "aggregate_fresh_start_rows",
-           "converged_fresh_start_rows", "fresh_start_row",
-           "headline_figures", "pilco_fresh_start_rows", "rl_fresh_start_rows", "seed_rows"]
+__all__ = [
+    "BALANCED_FRACTION",
+    "FRESH_STARTS_FILE",
+    "aggregate_fresh_start_rows",
+    "converged_fresh_start_rows",
+    "fresh_start_row",
+    "headline_figures",
+    "pilco_fresh_start_rows",
+    "rl_fresh_start_rows",
+    "seed_rows",
+]
 
 #: Share of fresh starts that must balance for a run to count as balanced.
 BALANCED_FRACTION = 0.9
@@ -38,13 +46,16 @@ BALANCED_FRACTION = 0.9
 AGENTS = {"best": "selected", "final": "final"}
 
 
-def fresh_start_row(summary: EvaluationSummary, hold_std_rad: float = HOLD_STD_RAD,
-                    balanced_fraction: float = BALANCED_FRACTION) -> dict[str, Any]:
+def fresh_start_row(
+    summary: EvaluationSummary, hold_std_rad: float = HOLD_STD_RAD, balanced_fraction: float = BALANCED_FRACTION
+) -> dict[str, Any]:
     """Success and balance figures of one controller over its fresh-start episodes (a start is *balanced* when it
     swings up and holds the upright std at most ``hold_std_rad``)."""
     n = len(summary.results)
-    balanced = [math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= hold_std_rad
-                for r in summary.results]
+    balanced = [
+        math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= hold_std_rad
+        for r in summary.results
+    ]
     k = int(sum(balanced))
     low, high = wilson_interval(k, n)
     stds = [r.upright_std_rad for r, ok in zip(summary.results, balanced) if ok]
@@ -90,10 +101,15 @@ def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Seque
         raise ValueError(f"report seeds {sorted(overlap)} were used to select {what}")
 
 
-def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
-                        report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
-                        which: Sequence[str] = ("best", "final"),
-                        configs: Optional[Mapping[str, Any]] = None) -> list[dict[str, Any]]:
+def rl_fresh_start_rows(
+    runs_root: Path | str,
+    seeds: Sequence[int],
+    algos: Sequence[str] = ("dqn", "mbpo"),
+    report_seeds: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = TEST_EPISODE_S,
+    which: Sequence[str] = ("best", "final"),
+    configs: Optional[Mapping[str, Any]] = None,
+) -> list[dict[str, Any]]:
     """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``
     (``configs``: ``{algo: config}`` of the runs, which picks their folders where runs of several settings
     share ``runs_root``; :func:`softpend.study.rl_runs.run_folder`).
@@ -131,20 +147,22 @@ def rl_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequ
                     figures = fresh_start_row(summary)
                     cache[agent_kind] = {"key": key, "row": figures}
                     changed = True
-                rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[agent_kind],
-                             **figures})
+                rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[agent_kind], **figures})
             if changed:
                 with atomic_write(cache_path, "w") as handle:
                     handle.write(json.dumps(cache, indent=1))  # Infinity and NaN kept (read back by Python only)
     return rows
 
 
-def pilco_fresh_start_rows(results: Sequence[Any], report_seeds: Sequence[int] = REPORT_SEEDS,
-                           duration_s: float = TEST_EPISODE_S) -> list[dict[str, Any]]:
+def pilco_fresh_start_rows(
+    results: Sequence[Any], report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S
+) -> list[dict[str, Any]]:
     """One row per PILCO run (its final policy, on the run's task), measured on ``report_seeds``."""
     rows = []
     for result in results:
-        _refuse_selection_starts(report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {result.config.seed}")
+        _refuse_selection_starts(
+            report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {result.config.seed}"
+        )
         summary = evaluate(result.controller(), result.config.task, seeds=tuple(report_seeds), duration_s=duration_s)
         rows.append({"method": "PILCO", "seed": int(result.config.seed), "agent": "final", **fresh_start_row(summary)})
     return rows
@@ -164,14 +182,23 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) ->
             value, low, high = interval.value, interval.low, interval.high
         else:
             value, low, high = float(rates[0]), math.nan, math.nan
-        out.append({"method": method, "agent": agent, "runs": len(group),
-                    "runs_balanced": int(sum(g["run_balances"] for g in group)),
-                    "iqm_balanced_rate": value, "iqm_low": low, "iqm_high": high})
+        out.append(
+            {
+                "method": method,
+                "agent": agent,
+                "runs": len(group),
+                "runs_balanced": int(sum(g["run_balances"] for g in group)),
+                "iqm_balanced_rate": value,
+                "iqm_low": low,
+                "iqm_high": high,
+            }
+        )
     return out
 
 
-def seed_rows(logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]],
-              pilco_results: Sequence[Any] = ()) -> list[dict[str, Any]]:
+def seed_rows(
+    logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]], pilco_results: Sequence[Any] = ()
+) -> list[dict[str, Any]]:
     """One row per (method, seed) of what a run cost and whether its *final* agent balances fresh starts.
 
     ``plant_s_to_balance`` is the training plant time the run consumed [s] when its final agent (policy) balances
@@ -197,27 +224,44 @@ def seed_rows(logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[di
             fresh = final.get((method, int(log.seed)))
             if fresh is None:
                 raise ValueError(f"no fresh-start row of the final agent of {method} seed {log.seed}")
-            rows.append({"method": method, "seed": int(log.seed), "episodes": log.n_episodes,
-                         "plant_s": log.plant_s, "stopped_balanced": log.stop_reason is not None,
-                         "final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"],
-                         "final_balances": fresh["run_balances"],
-                         "plant_s_to_balance": log.plant_s if fresh["run_balances"] else math.inf})
+            rows.append(
+                {
+                    "method": method,
+                    "seed": int(log.seed),
+                    "episodes": log.n_episodes,
+                    "plant_s": log.plant_s,
+                    "stopped_balanced": log.stop_reason is not None,
+                    "final_balanced_starts": fresh["balanced_starts"],
+                    "starts": fresh["starts"],
+                    "final_balances": fresh["run_balances"],
+                    "plant_s_to_balance": log.plant_s if fresh["run_balances"] else math.inf,
+                }
+            )
     for result in pilco_results:
         seed = int(result.config.seed)
         fresh = final.get(("PILCO", seed))
         if fresh is None:
             raise ValueError(f"no fresh-start row of PILCO seed {seed}")
         seconds = float(result.real_seconds_to_balance)
-        rows.append({"method": "PILCO", "seed": seed, "episodes": len(result.records),
-                     "plant_s": float(result.plant_seconds_total), "stopped_balanced": math.isfinite(seconds),
-                     "final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"],
-                     "final_balances": fresh["run_balances"],
-                     "plant_s_to_balance": seconds if fresh["run_balances"] else math.inf})
+        rows.append(
+            {
+                "method": "PILCO",
+                "seed": seed,
+                "episodes": len(result.records),
+                "plant_s": float(result.plant_seconds_total),
+                "stopped_balanced": math.isfinite(seconds),
+                "final_balanced_starts": fresh["balanced_starts"],
+                "starts": fresh["starts"],
+                "final_balances": fresh["run_balances"],
+                "plant_s_to_balance": seconds if fresh["run_balances"] else math.inf,
+            }
+        )
     return rows
 
 
-def headline_figures(rows: Sequence[dict[str, Any]], within_s: float = 30.0, ratio: float = 3.0,
-                     seed: int = 0) -> dict[str, float]:
+def headline_figures(
+    rows: Sequence[dict[str, Any]], within_s: float = 30.0, ratio: float = 3.0, seed: int = 0
+) -> dict[str, float]:
     """The ten-seed figures of the learning methods from :func:`seed_rows` rows.
 
     ``seeds_balanced_<m>`` (runs whose final agent balances the fresh starts) and ``seeds_<m>`` (runs) for
@@ -245,31 +289,47 @@ def headline_figures(rows: Sequence[dict[str, Any]], within_s: float = 30.0, rat
         mf, mb = out["dqn_real_s_to_balance"], out["mbpo_real_s_to_balance"]
         out["mbpo_over_dqn_real_s_ratio"] = mf / mb if math.isfinite(mb) and mb > 0 else math.nan
         common = sorted(set(by_method["dqn"]) & set(by_method["mbpo"]))
-        out["mbpo_seeds_3x_fewer_than_dqn"] = float(sum(
-            math.isfinite(by_method["mbpo"][s]["plant_s_to_balance"])
-            and ratio * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
-            for s in common))
+        out["mbpo_seeds_3x_fewer_than_dqn"] = float(
+            sum(
+                math.isfinite(by_method["mbpo"][s]["plant_s_to_balance"])
+                and ratio * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
+                for s in common
+            )
+        )
     if "pilco" in by_method:
-        out["pilco_seeds_within_30s"] = float(sum(r["plant_s_to_balance"] <= within_s for r in by_method["pilco"].values()))
+        out["pilco_seeds_within_30s"] = float(
+            sum(r["plant_s_to_balance"] <= within_s for r in by_method["pilco"].values())
+        )
     return out
 
 
-def perturbed_rod_row(controller: Any, task: Any, spread: float = 0.15, report_seeds: Sequence[int] = REPORT_SEEDS,
-                      duration_s: float = TEST_EPISODE_S) -> dict[str, Any]:
+def perturbed_rod_row(
+    controller: Any,
+    task: Any,
+    spread: float = 0.15,
+    report_seeds: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = TEST_EPISODE_S,
+) -> dict[str, Any]:
     """One controller on rods that differ from its model: :func:`fresh_start_row` figures over ``report_seeds``,
     where the start seeded ``s`` runs on the rod :func:`softpend.plant.randomisation.randomised_rod` draws from
     ``numpy.random.default_rng(s)`` with ``spread`` (every field of
     :data:`~softpend.plant.randomisation.RANDOMISED_FIELDS` scaled by its own factor in ``[1 - spread,
     1 + spread]``), from that seed's hanging start.  The controller keeps its own model of the rod (for a
     trained agent: the task it was trained on)."""
-    summary = evaluate(controller, task, name="perturbed rods", seeds=report_seeds, duration_s=duration_s,
-                                  rod_spread=spread)
+    summary = evaluate(
+        controller, task, name="perturbed rods", seeds=report_seeds, duration_s=duration_s, rod_spread=spread
+    )
     return {"spread": float(spread), **fresh_start_row(summary)}
 
 
-def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algos: Sequence[str] = ("dqn", "mbpo"),
-                               report_seeds: Sequence[int] = REPORT_SEEDS, duration_s: float = TEST_EPISODE_S,
-                               which: str = "final") -> list[dict[str, Any]]:
+def converged_fresh_start_rows(
+    runs_root: Path | str,
+    seeds: Sequence[int],
+    algos: Sequence[str] = ("dqn", "mbpo"),
+    report_seeds: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = TEST_EPISODE_S,
+    which: str = "final",
+) -> list[dict[str, Any]]:
     """:func:`rl_fresh_start_rows` of one agent per run on a *converged* simulation of the same rod: the batched
     chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agents_batched`, whose hub angle stays far
     closer to the Exudyn plant at 200 sub-steps than the task's Exudyn plant at 2 sub-steps does:
@@ -281,8 +341,9 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
     agents = {}
     for algo, seed in runs:
         agents[algo, seed] = load_agent(run_folder(runs_root, algo, seed), which)
-        _refuse_selection_starts(report_seeds, agents[algo, seed][1].selection_seeds,
-                                 f"the agents of {algo} seed {seed}")
+        _refuse_selection_starts(
+            report_seeds, agents[algo, seed][1].selection_seeds, f"the agents of {algo} seed {seed}"
+        )
     # the agents that share what the batched episodes depend on step together (one batch each)
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
@@ -290,8 +351,17 @@ def converged_fresh_start_rows(runs_root: Path | str, seeds: Sequence[int], algo
     summaries: dict[tuple[str, int], EvaluationSummary] = {}
     for members in groups.values():
         config = agents[members[0]][1]
-        evaluated = evaluate_agents_batched([agents[run][0] for run in members], config,
-                                            seeds=tuple(report_seeds), duration_s=duration_s)
+        evaluated = evaluate_agents_batched(
+            [agents[run][0] for run in members], config, seeds=tuple(report_seeds), duration_s=duration_s
+        )
         summaries.update(zip(members, evaluated))
-    return [{"method": METHOD_NAMES[algo], "seed": seed, "agent": AGENTS[which], "plant": "converged",
-             **fresh_start_row(summaries[algo, seed])} for algo, seed in runs]
+    return [
+        {
+            "method": METHOD_NAMES[algo],
+            "seed": seed,
+            "agent": AGENTS[which],
+            "plant": "converged",
+            **fresh_start_row(summaries[algo, seed]),
+        }
+        for algo, seed in runs
+    ]

@@ -49,8 +49,14 @@ GUESS_FACTORS: dict[str, float] = {
     "tip_mass_kg": 0.7,
 }
 #: Held-out babbling around the hanging equilibrium (the stable regime): no feedback, random torque.
-HANGING_PROTOCOL = BabbleProtocol(n_trials=6, trial_length_s=3.0, start="hanging", start_angle_std_rad=0.3,
-                                  start_rate_std_rad_s=1.0, feedback_trial_fraction=0.0)
+HANGING_PROTOCOL = BabbleProtocol(
+    n_trials=6,
+    trial_length_s=3.0,
+    start="hanging",
+    start_angle_std_rad=0.3,
+    start_rate_std_rad_s=1.0,
+    feedback_trial_fraction=0.0,
+)
 #: Yardstick: the simulator restarted with the hub angle this far off [rad].
 YARDSTICK_OFFSET_RAD = 1e-4
 #: Its row label in :func:`model_quality`.
@@ -118,8 +124,10 @@ def model_quality(
     if start_state not in ("recorded", "estimated"):
         raise ValueError(f"start_state must be 'recorded' or 'estimated', got {start_state!r}")
     networks = dict(networks or {})
-    recorded_prb = all(d is None or (d.metadata.get("plant") == "prb" and d.joint_positions_rad is not None)
-                       for d in (upright, hanging))
+    recorded_prb = all(
+        d is None or (d.metadata.get("plant") == "prb" and d.joint_positions_rad is not None)
+        for d in (upright, hanging)
+    )
     if start_state == "recorded" and not recorded_prb:
         raise ValueError("start_state='recorded' needs simulated PRB data; use start_state='estimated'")
     lookback = int(round(lookback_s / upright.dt_s)) + 1 if start_state == "estimated" else 0
@@ -133,7 +141,9 @@ def model_quality(
     def yardstick(data: TrajectoryDataset, starts: np.ndarray, n_steps: int) -> dict[str, np.ndarray]:
         if not recorded_prb:
             return {}
-        return {YARDSTICK_LABEL: prb_rollout_tip_errors(truth, data, starts, n_steps, hub_offset_rad=YARDSTICK_OFFSET_RAD)}
+        return {
+            YARDSTICK_LABEL: prb_rollout_tip_errors(truth, data, starts, n_steps, hub_offset_rad=YARDSTICK_OFFSET_RAD)
+        }
 
     lam = upright_growth_rate_per_s(truth)
     length = truth.length_m
@@ -141,14 +151,20 @@ def model_quality(
     steps = int(round(horizon_s / dt))
     first = max([lookback] + [m.layout.history for m in networks.values()])
     starts = rollout_starts(upright, steps, stride=stride, first=first, max_tilt_rad=max_tilt_rad)
-    errors: dict[str, np.ndarray] = {"grey-box model": grey_errors(upright, starts, steps), **yardstick(upright, starts, steps)}
+    errors: dict[str, np.ndarray] = {
+        "grey-box model": grey_errors(upright, starts, steps),
+        **yardstick(upright, starts, steps),
+    }
     for label, model in networks.items():
         errors[label] = network_rollout_tip_errors(model, upright, starts, steps)
     rows: dict[str, dict[str, float]] = {}
     for label, error in errors.items():
         vp = valid_prediction(error, dt, length, lyapunov_rate_per_s=lam)
-        rows[label] = {"valid_prediction_s": vp.median_s, "valid_prediction_lyapunov": vp.median_lyapunov,
-                       "censored_fraction": float(np.mean(vp.censored))}
+        rows[label] = {
+            "valid_prediction_s": vp.median_s,
+            "valid_prediction_lyapunov": vp.median_lyapunov,
+            "censored_fraction": float(np.mean(vp.censored)),
+        }
     if hanging is not None:
         h_steps = int(round(hanging_horizon_s / hanging.dt_s))
         h_first = max([lookback] + [m.layout.history for m in networks.values()])
@@ -157,7 +173,9 @@ def model_quality(
         for label, model in networks.items():
             h_errors[label] = network_rollout_tip_errors(model, hanging, h_starts, h_steps)
         for label, error in h_errors.items():
-            rows[label]["hanging_tip_rmse_pct_length"] = 100 * tip_rmse_at_s(error, hanging.dt_s, hanging_horizon_s) / length
+            rows[label]["hanging_tip_rmse_pct_length"] = (
+                100 * tip_rmse_at_s(error, hanging.dt_s, hanging_horizon_s) / length
+            )
     if recorded_prb:
         one = prb_one_step_errors(identified, upright)
         rows["grey-box model"]["one_step_mse"] = one["mse"]
@@ -170,8 +188,14 @@ def model_quality(
             rows[label]["one_step_mse"] = net["mse"]
             rows[label]["one_step_tip_rmse_m"] = net.get("one_step_tip_rmse_m", float("nan"))
     curves = {label: np.sqrt(np.mean(error**2, axis=0)) for label, error in errors.items()}
-    return {"lyapunov_rate_per_s": lam, "length_m": length, "rows": rows, "curves": curves,
-            "horizon_s": np.arange(steps + 1) * dt, "n_rollouts": int(starts.shape[0])}
+    return {
+        "lyapunov_rate_per_s": lam,
+        "length_m": length,
+        "rows": rows,
+        "curves": curves,
+        "horizon_s": np.arange(steps + 1) * dt,
+        "n_rollouts": int(starts.shape[0]),
+    }
 
 
 def closed_loop_usefulness(
@@ -210,14 +234,34 @@ def closed_loop_usefulness(
         for seed in seeds:
             offset = float(np.random.default_rng(seed).uniform(-1.0, 1.0)) * task.start_noise_rad
             lqr_controller = LQRController.from_params(params, state="joint" if joint else "observation")
-            results += evaluate_controller(lqr_controller, upright_task, seeds=(seed,),
-                                           duration_s=duration_s, initial_state=task.tilt_state(tilt_rad + offset)).results
+            results += evaluate_controller(
+                lqr_controller,
+                upright_task,
+                seeds=(seed,),
+                duration_s=duration_s,
+                initial_state=task.tilt_state(tilt_rad + offset),
+            ).results
         lqr = EvaluationSummary(name="LQR", results=results)
-        swing_controller = EnergySwingUpController(params) if joint else EnergySwingUpController.for_observations(params)
-        swing = evaluate_controller(swing_controller, task.replace(start="hanging"), seeds=seeds,
-                                    duration_s=swingup_duration_s, name="energy swing-up + LQR")
+        swing_controller = (
+            EnergySwingUpController(params) if joint else EnergySwingUpController.for_observations(params)
+        )
+        swing = evaluate_controller(
+            swing_controller,
+            task.replace(start="hanging"),
+            seeds=seeds,
+            duration_s=swingup_duration_s,
+            name="energy swing-up + LQR",
+        )
         for summary, start in ((lqr, f"tilt {tilt_rad:g} rad"), (swing, "hanging")):
-            rows.append({"designed_on": label, "controller": summary.name, "start": start,
-                         "success_rate": summary.success_rate, "successes": summary.successes,
-                         "episodes": len(summary.results), "upright_std_rad": summary.median("upright_std_rad")})
+            rows.append(
+                {
+                    "designed_on": label,
+                    "controller": summary.name,
+                    "start": start,
+                    "success_rate": summary.success_rate,
+                    "successes": summary.successes,
+                    "episodes": len(summary.results),
+                    "upright_std_rad": summary.median("upright_std_rad"),
+                }
+            )
     return rows

@@ -22,16 +22,30 @@ import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.reading import read_json_object
+from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
-from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 
-__all__ = ["curve_rows_pilco", "curve_rows_rl", "pilco_jobs", "pilco_runs", "plot_head_to_head",
-           "plot_predicted_and_real_cost", "run_and_save", "seconds_to_balance_table"]
+__all__ = [
+    "curve_rows_pilco",
+    "curve_rows_rl",
+    "pilco_jobs",
+    "pilco_runs",
+    "plot_head_to_head",
+    "plot_predicted_and_real_cost",
+    "run_and_save",
+    "seconds_to_balance_table",
+]
 
 
-def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str = "runs/pilco-book",
-               progress: bool = True, workers: Optional[int] = None, backend: Optional[str] = None) -> list[PilcoResult]:
+def pilco_runs(
+    config: PilcoConfig,
+    seeds: Sequence[int],
+    runs_root: Path | str = "runs/pilco-book",
+    progress: bool = True,
+    workers: Optional[int] = None,
+    backend: Optional[str] = None,
+) -> list[PilcoResult]:
     """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-<hash>-seed<k>``
     (:func:`softpend.study.rl_runs.run_folder`: ``<hash>`` names the settings).
 
@@ -40,12 +54,21 @@ def pilco_runs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str 
     :func:`softpend.study.sweep.default_workers`), each with one torch thread.
     """
     jobs = pilco_jobs(config, seeds, runs_root)
-    run_jobs(run_and_save, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
-             desc="PILCO runs", backend=backend)
+    run_jobs(
+        run_and_save,
+        [args for _, args in jobs],
+        [name for name, _ in jobs],
+        workers,
+        progress,
+        desc="PILCO runs",
+        backend=backend,
+    )
     from softpend.study.rl_runs import run_folder
 
-    return [PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))
-            for seed in seeds]
+    return [
+        PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))
+        for seed in seeds
+    ]
 
 
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
@@ -65,9 +88,15 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
         if folder.name not in jobs and _saved_run(folder, seeded) is None:
             if (folder / "pilco.json").exists():
                 saved = read_json_object(folder / "pilco.json", 10**8)
-                check_run_folder(folder, saved.get("config") if saved else None,
-                                 json.loads(json.dumps(seeded.to_dict(), default=float)), None, int(seed),
-                                 resume=False, can_resume=False)
+                check_run_folder(
+                    folder,
+                    saved.get("config") if saved else None,
+                    json.loads(json.dumps(seeded.to_dict(), default=float)),
+                    None,
+                    int(seed),
+                    resume=False,
+                    can_resume=False,
+                )
             jobs[folder.name] = (seeded, folder)
     return list(jobs.items())
 
@@ -98,9 +127,15 @@ def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> l
         for record in result.records:
             if record.kind != "policy" or math.isnan(record.eval_success_rate):
                 continue
-            rows.append({"method": method, "seed": result.config.seed, "plant_s": record.plant_seconds_total,
-                         "success_rate": record.eval_success_rate,
-                         "max_upright_std_rad": record.eval_upright_std_rad})
+            rows.append(
+                {
+                    "method": method,
+                    "seed": result.config.seed,
+                    "plant_s": record.plant_seconds_total,
+                    "success_rate": record.eval_success_rate,
+                    "max_upright_std_rad": record.eval_upright_std_rad,
+                }
+            )
     return rows
 
 
@@ -110,9 +145,15 @@ def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, An
     for method, logs in logs_by_method.items():
         for log in logs:
             for row in log.evaluations:
-                rows.append({"method": method, "seed": log.seed, "plant_s": float(row["plant_s"]),
-                             "success_rate": float(row["success_rate"]),
-                             "max_upright_std_rad": float(row["max_upright_std_rad"])})
+                rows.append(
+                    {
+                        "method": method,
+                        "seed": log.seed,
+                        "plant_s": float(row["plant_s"]),
+                        "success_rate": float(row["success_rate"]),
+                        "max_upright_std_rad": float(row["max_upright_std_rad"]),
+                    }
+                )
     return rows
 
 
@@ -123,7 +164,9 @@ def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
     return math.inf
 
 
-def seconds_to_balance_table(rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)) -> list[dict[str, Any]]:
+def seconds_to_balance_table(
+    rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)
+) -> list[dict[str, Any]]:
     """Per method: median over seeds of the training plant seconds until an evaluation on which every seed
     succeeds with ``max_upright_std_rad`` at most each level (``inf`` when a seed never does), plus the
     final evaluation's success rate and upright error (medians over seeds)."""
@@ -165,8 +208,9 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
             t = [max(r["plant_s"], 1e-3) for r in seq]
             label = method if j == 0 else None
             ax_s.plot(t, [r["success_rate"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
-            worst = failures_as([r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq],
-                                SUCCESS_STD_RAD)
+            worst = failures_as(
+                [r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq], SUCCESS_STD_RAD
+            )
             ax_e.plot(t, worst, "o-", color=colour, alpha=0.7, ms=3, label=label)
     for ax in (ax_s, ax_e):
         ax.set_xscale("log")
@@ -196,9 +240,15 @@ def plot_predicted_and_real_cost(results: Sequence[PilcoResult]):
     for result in results:
         records = [r for r in result.records if r.kind == "policy"]
         trials = [r.index for r in records]
-        line, = ax.plot(trials, [r.predicted_cost for r in records], "x--", alpha=0.8)
-        ax.plot(trials, [r.real_cost for r in records], "o-", color=line.get_color(), alpha=0.8,
-                label=f"seed {result.config.seed}")
+        (line,) = ax.plot(trials, [r.predicted_cost for r in records], "x--", alpha=0.8)
+        ax.plot(
+            trials,
+            [r.real_cost for r in records],
+            "o-",
+            color=line.get_color(),
+            alpha=0.8,
+            label=f"seed {result.config.seed}",
+        )
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("trial")
     ax.set_ylabel("summed cost over the trial")

@@ -32,9 +32,20 @@ import numpy as np
 from softpend.rl.curves import run_to_asymptote
 from softpend.study.fresh_starts import BALANCED_FRACTION
 
-__all__ = ["LedgerRow", "NOT_COMPUTED", "VERDICTS", "claims_ledger", "glued_values", "ledger_markdown",
-           "over_seeds", "pilco_run_results", "rl_fresh_start_summaries", "rl_run_logs", "run_to_asymptote",
-           "verdict_counts"]
+__all__ = [
+    "LedgerRow",
+    "NOT_COMPUTED",
+    "VERDICTS",
+    "claims_ledger",
+    "glued_values",
+    "ledger_markdown",
+    "over_seeds",
+    "pilco_run_results",
+    "rl_fresh_start_summaries",
+    "rl_run_logs",
+    "run_to_asymptote",
+    "verdict_counts",
+]
 
 #: What a cell says when this build has no evidence for it.
 NOT_COMPUTED = "not computed in this build"
@@ -140,8 +151,14 @@ def rl_run_logs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb")
     return logs
 
 
-def rl_fresh_start_summaries(runs_root: Path | str, seeds: Sequence[int], report_seeds: Sequence[int],
-                             duration_s: float = 10.0, plant: str = "prb", which: str = "best") -> dict[str, list[Any]]:
+def rl_fresh_start_summaries(
+    runs_root: Path | str,
+    seeds: Sequence[int],
+    report_seeds: Sequence[int],
+    duration_s: float = 10.0,
+    plant: str = "prb",
+    which: str = "best",
+) -> dict[str, list[Any]]:
     """``{method name: [EvaluationSummary per seed]}``: each run's agent (``which``: ``"best"``, the selected
     one, or ``"final"``) on the fresh hanging starts ``report_seeds`` (runs without an agent are skipped).
 
@@ -165,8 +182,15 @@ def rl_fresh_start_summaries(runs_root: Path | str, seeds: Sequence[int], report
             overlap = set(report_seeds) & set(config.selection_seeds)
             if overlap:
                 raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
-            summaries[method].append(evaluate_agent(model, config, seeds=tuple(int(s) for s in report_seeds),
-                                                    duration_s=duration_s, name=f"{method} seed {seed}"))
+            summaries[method].append(
+                evaluate_agent(
+                    model,
+                    config,
+                    seeds=tuple(int(s) for s in report_seeds),
+                    duration_s=duration_s,
+                    name=f"{method} seed {seed}",
+                )
+            )
     return summaries
 
 
@@ -189,7 +213,7 @@ def pilco_run_results(runs_root: Path | str, seeds: Sequence[int], plant: str = 
 def _number(value: float, digits: int = 2) -> str:
     if math.isinf(value):
         return "never" if value > 0 else "-inf"
-    return f"{value:.{digits}g}" if abs(value) < 10 ** digits else f"{value:.0f}"
+    return f"{value:.{digits}g}" if abs(value) < 10**digits else f"{value:.0f}"
 
 
 def _seconds(value: float) -> str:
@@ -215,8 +239,10 @@ def over_seeds(values: Sequence[float], unit: str = "", fmt: Callable[[float], s
     if len(values) == 1:
         return f"{text(values[0])} (1 seed)"
     interval = aggregate_interval(values, "median")
-    return (f"median {text(interval.value)} (95 % interval {fmt(interval.low)}-{text(interval.high)} "
-            f"over {len(values)} seeds)")
+    return (
+        f"median {text(interval.value)} (95 % interval {fmt(interval.low)}-{text(interval.high)} "
+        f"over {len(values)} seeds)"
+    )
 
 
 def _share_text(k: int, n: int) -> str:
@@ -228,8 +254,10 @@ def _share_text(k: int, n: int) -> str:
 
 def _held(summary: Any, std_rad: float) -> list[bool]:
     """Per start: swung up, did not diverge and kept the upright standard deviation at most ``std_rad``."""
-    return [math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= std_rad
-            for r in summary.results]
+    return [
+        math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= std_rad
+        for r in summary.results
+    ]
 
 
 def _median(values: Sequence[float]) -> float:
@@ -251,11 +279,20 @@ def _sysid_row(glued) -> LedgerRow:
     if not isinstance(full, (int, float)):
         ours, verdict = NOT_COMPUTED, NOT_COMPUTED
     else:
-        ours = f"{full:.2g} (full information), " + (f"{limited:.2g} (limited)" if isinstance(limited, (int, float)) else "")
+        ours = f"{full:.2g} (full information), " + (
+            f"{limited:.2g} (limited)" if isinstance(limited, (int, float)) else ""
+        )
         ours += f"; 1 seed, {trials} held-out trials" if trials is not None else "; 1 seed"
         verdict = "reproduced" if report_mse / FACTOR <= full <= report_mse * FACTOR else "differs"
-    return LedgerRow("sysid_mse", "By minimizing the mean squared error (MSE) between the predicted next state and the "
-                     "actual next state the network achieved an error of ≈ 3e-9.", "≈ 3e-9", ours, verdict, "fig03-sysid")
+    return LedgerRow(
+        "sysid_mse",
+        "By minimizing the mean squared error (MSE) between the predicted next state and the "
+        "actual next state the network achieved an error of ≈ 3e-9.",
+        "≈ 3e-9",
+        ours,
+        verdict,
+        "fig03-sysid",
+    )
 
 
 def _to_asymptote(logs: Sequence[Any]) -> tuple[list[float], list[float], int]:
@@ -271,12 +308,22 @@ def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
     from softpend.study.rl_runs import METHOD_NAMES
 
     claims = {
-        "dqn": ("mf_asymptote", "The model-free controller proved to successfully balance the pole reaching the asymptotic "
-                "reward in approximately 150 episodes of training, equivalent to around 4 hours of simulated time.",
-                150, 4.0, "≈ 150 episodes, ≈ 4 h"),
-        "mbpo": ("mb_asymptote", "The agent reached asymptotic performance in approximately 100 episodes of training as "
-                 "seen by the orange line in Figure 4 (2 hours 45 minutes of simulated time).",
-                 100, 2.75, "≈ 100 episodes, 2 h 45 min"),
+        "dqn": (
+            "mf_asymptote",
+            "The model-free controller proved to successfully balance the pole reaching the asymptotic "
+            "reward in approximately 150 episodes of training, equivalent to around 4 hours of simulated time.",
+            150,
+            4.0,
+            "≈ 150 episodes, ≈ 4 h",
+        ),
+        "mbpo": (
+            "mb_asymptote",
+            "The agent reached asymptotic performance in approximately 100 episodes of training as "
+            "seen by the orange line in Figure 4 (2 hours 45 minutes of simulated time).",
+            100,
+            2.75,
+            "≈ 100 episodes, 2 h 45 min",
+        ),
     }
     rows = []
     for algo, (key, claim, episodes, hours, report) in claims.items():
@@ -286,12 +333,16 @@ def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
             continue
         to_asymptote, plant_s, stopped = _to_asymptote(runs)
         plant_h = [value / 3600.0 for value in plant_s]
-        ours = (f"{over_seeds(to_asymptote, 'episodes')}; {over_seeds(plant_h, 'h of plant time')}; "
-                f"{stopped} of {len(runs)} runs stopped balanced"
-                + (" (a stopped run reaches its asymptote at the stop episode)" if stopped else "")
-                + f", median {_median([log.n_episodes for log in runs]):.0f} episodes trained")
-        ok = (episodes / FACTOR <= _median(to_asymptote) <= episodes * FACTOR
-              and hours / FACTOR <= _median(plant_h) <= hours * FACTOR)
+        ours = (
+            f"{over_seeds(to_asymptote, 'episodes')}; {over_seeds(plant_h, 'h of plant time')}; "
+            f"{stopped} of {len(runs)} runs stopped balanced"
+            + (" (a stopped run reaches its asymptote at the stop episode)" if stopped else "")
+            + f", median {_median([log.n_episodes for log in runs]):.0f} episodes trained"
+        )
+        ok = (
+            episodes / FACTOR <= _median(to_asymptote) <= episodes * FACTOR
+            and hours / FACTOR <= _median(plant_h) <= hours * FACTOR
+        )
         rows.append(LedgerRow(key, claim, report, ours, "reproduced" if ok else "differs", "fig-learning-curves"))
     return rows
 
@@ -300,16 +351,20 @@ def _fewer_episodes_row(logs: Mapping[str, Sequence[Any]]) -> LedgerRow:
     # reproduced: DQN-MBPO's median plant time to the asymptote (run_to_asymptote) below model-free DQN's
     from softpend.study.rl_runs import METHOD_NAMES
 
-    claim = ("The model-based approach successfully converged its performance in fewer episodes than model-free RL.")
+    claim = "The model-based approach successfully converged its performance in fewer episodes than model-free RL."
     medians = {}
     for algo, method in METHOD_NAMES.items():
         runs = list(logs.get(method, []))
         if not runs:
-            return LedgerRow("mb_fewer", claim, "≈ 100 against ≈ 150 episodes", NOT_COMPUTED, NOT_COMPUTED, "fig-learning-curves")
+            return LedgerRow(
+                "mb_fewer", claim, "≈ 100 against ≈ 150 episodes", NOT_COMPUTED, NOT_COMPUTED, "fig-learning-curves"
+            )
         episodes, plant_s, _ = _to_asymptote(runs)
         medians[algo] = (_median(episodes), _median(plant_s))
-    ours = (f"plant time to the asymptote (median over seeds): DQN-MBPO {_hours(medians['mbpo'][1])} "
-            f"({_number(medians['mbpo'][0])} episodes), DQN {_hours(medians['dqn'][1])} ({_number(medians['dqn'][0])} episodes)")
+    ours = (
+        f"plant time to the asymptote (median over seeds): DQN-MBPO {_hours(medians['mbpo'][1])} "
+        f"({_number(medians['mbpo'][0])} episodes), DQN {_hours(medians['dqn'][1])} ({_number(medians['dqn'][0])} episodes)"
+    )
     verdict = "reproduced" if medians["mbpo"][1] < medians["dqn"][1] else "differs"
     return LedgerRow("mb_fewer", claim, "≈ 100 against ≈ 150 episodes", ours, verdict, "fig-learning-curves")
 
@@ -319,10 +374,18 @@ def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[Ledge
     from softpend.study.rl_runs import METHOD_NAMES
 
     claims = {
-        "dqn": ("mf_holds", "After swinging up the rod remained within a standard deviation of 0.2 radians from the "
-                "upright position for an arbitrary time.", "fig-upright-error"),
-        "mbpo": ("mb_holds", "The final performance is near-identical to the performance of the model-free controller, "
-                 "reaching a standard deviation of 0.2 radians from the upright position.", "fig-upright-error"),
+        "dqn": (
+            "mf_holds",
+            "After swinging up the rod remained within a standard deviation of 0.2 radians from the "
+            "upright position for an arbitrary time.",
+            "fig-upright-error",
+        ),
+        "mbpo": (
+            "mb_holds",
+            "The final performance is near-identical to the performance of the model-free controller, "
+            "reaching a standard deviation of 0.2 radians from the upright position.",
+            "fig-upright-error",
+        ),
     }
     rows = []
     for algo, (key, claim, chapter) in claims.items():
@@ -335,8 +398,10 @@ def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[Ledge
         if len(held) == 1:
             ours = f"{METHOD_NAMES[algo]}: held {_share_text(int(sum(held[0])), len(held[0]))} within {std_rad:g} rad (1 seed)"
         else:
-            ours = (f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {std_rad:g} rad, "
-                    + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %"))
+            ours = (
+                f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {std_rad:g} rad, "
+                + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %")
+            )
         verdict = "reproduced" if _median(shares) >= BALANCED_FRACTION else "differs"
         rows.append(LedgerRow(key, claim, "std 0.2 rad", ours, verdict, chapter))
     return rows
@@ -352,10 +417,14 @@ def _steady_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
         return LedgerRow("mf_steady", claim, "≈ 10 s", NOT_COMPUTED, NOT_COMPUTED, "fig-swingup")
     times = [s.median("swing_up_time_s") for s in summaries]
     ours = f"model-free DQN, swing-up time on fresh starts: {over_seeds(times, 's')}"
-    return LedgerRow("mf_steady", claim, "≈ 10 s", ours, "reproduced" if _median(times) <= 10.0 else "differs", "fig-swingup")
+    return LedgerRow(
+        "mf_steady", claim, "≈ 10 s", ours, "reproduced" if _median(times) <= 10.0 else "differs", "fig-swingup"
+    )
 
 
-def _per_method_median(fresh: Mapping[str, Sequence[Any]], figure: Callable[[Any], float]) -> Optional[dict[str, float]]:
+def _per_method_median(
+    fresh: Mapping[str, Sequence[Any]], figure: Callable[[Any], float]
+) -> Optional[dict[str, float]]:
     """``{algo: median over a method's runs of figure(summary)}`` for both RL methods; None if one has no runs."""
     from softpend.study.rl_runs import METHOD_NAMES
 
@@ -370,25 +439,34 @@ def _per_method_median(fresh: Mapping[str, Sequence[Any]], figure: Callable[[Any
 
 def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> LedgerRow:
     # reproduced: both methods hold (as in _hold_rows) and their median shares differ by at most SAME_SHARE
-    claim = ("As seen in Figure 6, the final performance is near-identical to the performance of the model-free "
-             "controller.")
+    claim = (
+        "As seen in Figure 6, the final performance is near-identical to the performance of the model-free controller."
+    )
     shares = _per_method_median(fresh, lambda s: float(np.mean(_held(s, std_rad))))
     if shares is None:
         return LedgerRow("mb_matches_mf", claim, "near-identical", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
-    ours = (f"share of fresh starts held within {std_rad:g} rad (median over seeds): DQN-MBPO {100 * shares['mbpo']:.0f} %, "
-            f"DQN {100 * shares['dqn']:.0f} %")
+    ours = (
+        f"share of fresh starts held within {std_rad:g} rad (median over seeds): DQN-MBPO {100 * shares['mbpo']:.0f} %, "
+        f"DQN {100 * shares['dqn']:.0f} %"
+    )
     ok = min(shares.values()) >= BALANCED_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
-    return LedgerRow("mb_matches_mf", claim, "near-identical", ours, "reproduced" if ok else "differs", "fig-upright-error")
+    return LedgerRow(
+        "mb_matches_mf", claim, "near-identical", ours, "reproduced" if ok else "differs", "fig-upright-error"
+    )
 
 
 def _faster_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
     # reproduced: model-free DQN's median swing-up time (median over runs) below DQN-MBPO's
-    claim = ("Time-averaging smooths rapid changes in error, thereby masking small differences in the swingup velocity, "
-             "where the model free-controller shows a slight advantage.")
+    claim = (
+        "Time-averaging smooths rapid changes in error, thereby masking small differences in the swingup velocity, "
+        "where the model free-controller shows a slight advantage."
+    )
     times = _per_method_median(fresh, lambda s: s.median("swing_up_time_s"))
     if times is None:
-        return LedgerRow("mf_faster", claim, "model-free slightly faster", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error")
-    ours = (f"median swing-up time on fresh starts: DQN {_seconds(times['dqn'])}, DQN-MBPO {_seconds(times['mbpo'])}")
+        return LedgerRow(
+            "mf_faster", claim, "model-free slightly faster", NOT_COMPUTED, NOT_COMPUTED, "fig-upright-error"
+        )
+    ours = f"median swing-up time on fresh starts: DQN {_seconds(times['dqn'])}, DQN-MBPO {_seconds(times['mbpo'])}"
     verdict = "reproduced" if times["dqn"] < times["mbpo"] else "differs"
     return LedgerRow("mf_faster", claim, "model-free slightly faster", ours, verdict, "fig-upright-error")
 
@@ -409,29 +487,53 @@ def _classical_rows(glued) -> list[LedgerRow]:
     rows = []
 
     # LQR far from upright -- reproduced: >= 90 % of near-upright starts balance, <= 10 % from hanging
-    claim = ("For this method, the pendulum starts closer to the final position as convergance becomes more difficult as "
-             "the distance from the target increases for a nonlinear system.")
+    claim = (
+        "For this method, the pendulum starts closer to the final position as convergance becomes more difficult as "
+        "the distance from the target increases for a nonlinear system."
+    )
     near, far, hanging = (_fig07(glued, k) for k in ("lqr_near", "lqr_far", "lqr_hanging"))
     if near is None or hanging is None:
-        rows.append(LedgerRow("lqr_far", claim, "a start near upright (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical"))
+        rows.append(
+            LedgerRow(
+                "lqr_far", claim, "a start near upright (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical"
+            )
+        )
     else:
         ours = f"LQR (true model) balances {near['text']} from {near_tilt:g} rad"
         if far is not None and far_tilt != near_tilt:
             ours += f", {far['text']} from {far_tilt:g} rad"
         ours += f" and {hanging['text']} from hanging"
         ok = near["rate"] >= BALANCED_FRACTION and hanging["rate"] <= 1 - BALANCED_FRACTION
-        rows.append(LedgerRow("lqr_far", claim, "a start near upright (Figure 7)", ours, "reproduced" if ok else "differs",
-                              "fig07-classical"))
+        rows.append(
+            LedgerRow(
+                "lqr_far",
+                claim,
+                "a start near upright (Figure 7)",
+                ours,
+                "reproduced" if ok else "differs",
+                "fig07-classical",
+            )
+        )
 
     # LQR needs the full model -- reproduced: the learned-model LQR balances fewer near-upright starts (the
     # Wilson intervals of the two success rates do not overlap)
-    claim = ("It requires a full state-space model of the system (matrices A, B, C, D) so it will not perform simply "
-             "with observed data of motor babbling with a physical system.")
+    claim = (
+        "It requires a full state-space model of the system (matrices A, B, C, D) so it will not perform simply "
+        "with observed data of motor babbling with a physical system."
+    )
     learned = _fig07(glued, "lqr_learned_near")
     if near is None or learned is None:
         text = _glued(glued, "fig07_classical", "lqr_learned_near_text")
-        rows.append(LedgerRow("lqr_model", claim, "no figure", NOT_COMPUTED if text is None else f"LQR on the learned model: {text}",
-                              NOT_COMPUTED, "fig07-classical"))
+        rows.append(
+            LedgerRow(
+                "lqr_model",
+                claim,
+                "no figure",
+                NOT_COMPUTED if text is None else f"LQR on the learned model: {text}",
+                NOT_COMPUTED,
+                "fig07-classical",
+            )
+        )
     else:
         ours = f"from {near_tilt:g} rad: LQR on the true model {near['text']}, on the learned model {learned['text']}"
         verdict = "reproduced" if learned["high"] < near["low"] else "differs"
@@ -439,54 +541,87 @@ def _classical_rows(glued) -> list[LedgerRow]:
 
     # PID works with some success, tuned on the learned model -- reproduced: it balances >= 50 % of the
     # near-upright starts with the torque limit
-    claim = ("PID parameters could be optimized for the model obtained from system identification and then applied to "
-             "the real system. This enabled testing on the actual system to be avoided, whilst still yielding reasonable "
-             "results, albeit to a limited degree.")
+    claim = (
+        "PID parameters could be optimized for the model obtained from system identification and then applied to "
+        "the real system. This enabled testing on the actual system to be avoided, whilst still yielding reasonable "
+        "results, albeit to a limited degree."
+    )
     learned_pid, true_pid = _fig07(glued, "pid_learned_near"), _fig07(glued, "pid_true_near")
     if learned_pid is None or true_pid is None:
-        rows.append(LedgerRow("pid_learned", claim, "some success (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical"))
+        rows.append(
+            LedgerRow("pid_learned", claim, "some success (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical")
+        )
     else:
-        ours = (f"from {near_tilt:g} rad with the torque limit: tuned on the learned model {learned_pid['text']}, "
-                f"tuned on the true plant {true_pid['text']}")
-        rows.append(LedgerRow("pid_learned", claim, "some success (Figure 7)", ours,
-                              "reproduced" if learned_pid["rate"] >= 0.5 else "differs", "fig07-classical"))
+        ours = (
+            f"from {near_tilt:g} rad with the torque limit: tuned on the learned model {learned_pid['text']}, "
+            f"tuned on the true plant {true_pid['text']}"
+        )
+        rows.append(
+            LedgerRow(
+                "pid_learned",
+                claim,
+                "some success (Figure 7)",
+                ours,
+                "reproduced" if learned_pid["rate"] >= 0.5 else "differs",
+                "fig07-classical",
+            )
+        )
 
     # PID with a very high torque limit is quicker than RL: the starts differ (near upright against hanging)
-    claim = ("A very high torque limit was given to the controller meaning it naturally moved the pendulum upright much "
-             "quicker than the reinforcement-based methods.")
+    claim = (
+        "A very high torque limit was given to the controller meaning it naturally moved the pendulum upright much "
+        "quicker than the reinforcement-based methods."
+    )
     fast = _fig07(glued, "pid_true_nolimit_far")
     if fast is None:
-        rows.append(LedgerRow("pid_fast", claim, "quicker than RL (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical"))
+        rows.append(
+            LedgerRow("pid_fast", claim, "quicker than RL (Figure 7)", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical")
+        )
     else:
-        ours = (f"PID (true-plant gains) without a torque limit from {far_tilt:g} rad: {fast['text']}, median time to "
-                f"upright {_seconds(fast['time_s'])}; the RL agents start from hanging")
-        rows.append(LedgerRow("pid_fast", claim, "quicker than RL (Figure 7)", ours, "not comparable", "fig07-classical"))
+        ours = (
+            f"PID (true-plant gains) without a torque limit from {far_tilt:g} rad: {fast['text']}, median time to "
+            f"upright {_seconds(fast['time_s'])}; the RL agents start from hanging"
+        )
+        rows.append(
+            LedgerRow("pid_fast", claim, "quicker than RL (Figure 7)", ours, "not comparable", "fig07-classical")
+        )
 
     # PID hypersensitive to its parameters -- reproduced: scaling the gains by a factor within 0.8-1.25
     # leaves the success interval below one half
-    claim = ("Adding more links to the system increases the overall complexity making PID control hypersensitive to "
-             "its parameters.")
+    claim = (
+        "Adding more links to the system increases the overall complexity making PID control hypersensitive to "
+        "its parameters."
+    )
     failing, tried = (_glued(glued, "fig07_classical", k) for k in ("pid_scales_failing", "pid_scales_tried"))
     sensitive = _glued(glued, "fig07_classical", "pid_sensitive_near_one")
     if failing is None or tried is None or not isinstance(sensitive, bool):
         rows.append(LedgerRow("pid_sensitive", claim, "no figure", NOT_COMPUTED, NOT_COMPUTED, "fig07-classical"))
     else:
         ours = f"gains scaled by {tried}: fails (success interval below one half) at the factors {failing}"
-        rows.append(LedgerRow("pid_sensitive", claim, "no figure", ours, "reproduced" if sensitive else "differs",
-                              "fig07-classical"))
+        rows.append(
+            LedgerRow(
+                "pid_sensitive", claim, "no figure", ours, "reproduced" if sensitive else "differs", "fig07-classical"
+            )
+        )
     return rows
 
 
 def _pilco_row(pilco: Sequence[Any]) -> LedgerRow:
     # not comparable: the report quotes PILCO on the cart double pendulum, not on its rod
-    claim = ("PILCO took less than 90 seconds of real experience to learn to stabilize the double pendulum cart model, "
-             "with computation time between trials.")
+    claim = (
+        "PILCO took less than 90 seconds of real experience to learn to stabilize the double pendulum cart model, "
+        "with computation time between trials."
+    )
     if not pilco:
-        return LedgerRow("pilco_90s", claim, "< 90 s (literature, cart double pendulum)", NOT_COMPUTED, NOT_COMPUTED, "fig-pilco")
+        return LedgerRow(
+            "pilco_90s", claim, "< 90 s (literature, cart double pendulum)", NOT_COMPUTED, NOT_COMPUTED, "fig-pilco"
+        )
     seconds = [r.real_seconds_to_balance for r in pilco]
     balanced = sum(math.isfinite(s) for s in seconds)
     ours = f"PILCO on our rod, plant seconds to balance: {over_seeds(seconds, 's')}; {balanced} of {len(seconds)} runs balanced"
-    return LedgerRow("pilco_90s", claim, "< 90 s (literature, cart double pendulum)", ours, "not comparable", "fig-pilco")
+    return LedgerRow(
+        "pilco_90s", claim, "< 90 s (literature, cart double pendulum)", ours, "not comparable", "fig-pilco"
+    )
 
 
 def _tracker_row(glued) -> LedgerRow:
@@ -496,9 +631,13 @@ def _tracker_row(glued) -> LedgerRow:
     return LedgerRow("tracker_real_time", claim, "real time (no figure)", ours, NOT_COMPUTED, "fig09-rig")
 
 
-def claims_ledger(glued: Mapping[str, Mapping[str, Any]], rl_logs: Mapping[str, Sequence[Any]],
-                  rl_fresh: Mapping[str, Sequence[Any]], pilco: Sequence[Any],
-                  hold_std_rad: float = REPORT_HOLD_STD_RAD) -> list[LedgerRow]:
+def claims_ledger(
+    glued: Mapping[str, Mapping[str, Any]],
+    rl_logs: Mapping[str, Sequence[Any]],
+    rl_fresh: Mapping[str, Sequence[Any]],
+    pilco: Sequence[Any],
+    hold_std_rad: float = REPORT_HOLD_STD_RAD,
+) -> list[LedgerRow]:
     """One row per claim of the report, in the report's order.
 
     Parameters

@@ -22,8 +22,21 @@ from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.task import Task
 
-__all__ = ["DQN", "HPARAMS_DIR", "MBPO", "PILCO", "PILCO_BOOK", "PilcoBudget", "REPORT_SEEDS", "RL_BOOK", "RL_EPISODES",
-           "RLBudget", "SELECTION_SEEDS", "TASK", "load_hparams"]
+__all__ = [
+    "DQN",
+    "HPARAMS_DIR",
+    "MBPO",
+    "PILCO",
+    "PILCO_BOOK",
+    "PilcoBudget",
+    "REPORT_SEEDS",
+    "RL_BOOK",
+    "RL_EPISODES",
+    "RLBudget",
+    "SELECTION_SEEDS",
+    "TASK",
+    "load_hparams",
+]
 
 #: The task of every figure: the default rod on the PRB plant, hanging starts.
 TASK = Task()
@@ -35,8 +48,12 @@ HPARAMS_DIR = Path(__file__).resolve().parents[2] / "book" / "hparams"
 CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
 
 
-def load_hparams(method: str, task: Optional[Task] = None, overrides: Optional[Mapping[str, Any]] = None,
-                 directory: Path | str = HPARAMS_DIR) -> Any:
+def load_hparams(
+    method: str,
+    task: Optional[Task] = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    directory: Path | str = HPARAMS_DIR,
+) -> Any:
     """The config the book trains ``method`` (``"dqn"``, ``"mbpo"`` or ``"pilco"``) with.
 
     The class's defaults, then the settings of ``<directory>/<method>.yml`` (a mapping ``field: value``), then

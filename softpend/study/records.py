@@ -19,8 +19,16 @@ from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["RECORDS_PATH", "current_pilco_runs", "current_rl_runs", "detail_rows", "load_records", "plot_records",
-           "run_rows", "summary_rows"]
+__all__ = [
+    "RECORDS_PATH",
+    "current_pilco_runs",
+    "current_rl_runs",
+    "detail_rows",
+    "load_records",
+    "plot_records",
+    "run_rows",
+    "summary_rows",
+]
 
 #: The record, relative to the project root.
 RECORDS_PATH = Path("book/records/what_we_tried.yml")
@@ -70,7 +78,9 @@ def _check_run(run: Any, where: str) -> None:
         raise ValueError(f"{where}: seeds must be a list of integers, got {seeds!r}")
     keys = set(seeds) if seeds else {"all"}
     if not isinstance(run["outcome"], dict) or set(run["outcome"]) != keys:
-        raise ValueError(f"{where}: outcome must have one entry per seed ({sorted(keys, key=str)}), got {run['outcome']!r}")
+        raise ValueError(
+            f"{where}: outcome must have one entry per seed ({sorted(keys, key=str)}), got {run['outcome']!r}"
+        )
     details = run.get("details", {})
     if not isinstance(details, dict) or not set(details) <= keys:
         raise ValueError(f"{where}: details must be keyed by the run's seeds, got {details!r}")
@@ -101,7 +111,9 @@ def _format(value: float) -> str:
     return "never" if math.isinf(value) else ("" if math.isnan(value) else f"{value:g}")
 
 
-def run_rows(method: Mapping[str, Any], table: str = "runs", current: Sequence[Mapping[str, Any]] = ()) -> tuple[list[dict[str, Any]], list[str]]:
+def run_rows(
+    method: Mapping[str, Any], table: str = "runs", current: Sequence[Mapping[str, Any]] = ()
+) -> tuple[list[dict[str, Any]], list[str]]:
     """Rows and columns of one table of a method: one row per run, one column per seed, then (for ``runs``)
     the seeds that balanced and the median over seeds, the unit and the notes; ``current`` rows (see
     :func:`current_rl_runs`) come last."""
@@ -111,7 +123,10 @@ def run_rows(method: Mapping[str, Any], table: str = "runs", current: Sequence[M
     summarise = table == "runs" and bool(method["unit"])
     rows = []
     for number, run in enumerate(runs, start=1):
-        row: dict[str, Any] = {"row": number, "setting": run["setting"] + (" **(defaults)**" if run.get("defaults") else "")}
+        row: dict[str, Any] = {
+            "row": number,
+            "setting": run["setting"] + (" **(defaults)**" if run.get("defaults") else ""),
+        }
         row.update({column: "" for column in seed_columns})
         for key, outcome in run["outcome"].items():
             row["all seeds" if key == "all" else f"seed {key}"] = outcome
@@ -129,11 +144,16 @@ def run_rows(method: Mapping[str, Any], table: str = "runs", current: Sequence[M
 
 def detail_rows(method: Mapping[str, Any], table: str = "runs") -> list[dict[str, Any]]:
     """One row per run and seed with details: ``{row, seed, details}`` (``row`` as in :func:`run_rows`)."""
-    return [{"row": number, "seed": seed, "details": _cell(text)}
-            for number, run in enumerate(method[table], start=1) for seed, text in run.get("details", {}).items()]
+    return [
+        {"row": number, "seed": seed, "details": _cell(text)}
+        for number, run in enumerate(method[table], start=1)
+        for seed, text in run.get("details", {}).items()
+    ]
 
 
-def summary_rows(records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}) -> list[dict[str, Any]]:
+def summary_rows(
+    records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}
+) -> list[dict[str, Any]]:
     """Per method, the runs of the defaults over every recorded seed (all ``defaults`` runs together), and the
     current runs: seeds that balanced and the median over seeds (``key``: the method's key in ``records``,
     ``current``: whether the row is of the current runs)."""
@@ -141,16 +161,28 @@ def summary_rows(records: Mapping[str, Mapping[str, Any]], current: Mapping[str,
     for key, method in records.items():
         if not method["unit"]:
             continue
-        groups = [("recorded runs of the defaults", [r for r in method["runs"] if r.get("defaults")]),
-                  ("the book's current runs", list(current.get(key, ())))]
+        groups = [
+            ("recorded runs of the defaults", [r for r in method["runs"] if r.get("defaults")]),
+            ("the book's current runs", list(current.get(key, ()))),
+        ]
         for what, runs in groups:
             outcomes = [o for run in runs if run["seeds"] for o in run["outcome"].values()]
             if not outcomes:
                 continue
             seeds = sorted(s for run in runs for s in run["seeds"])
             balanced, median = _summary(outcomes)
-            rows.append({"key": key, "current": what != groups[0][0], "method": method["title"], "runs": what, "seeds": ", ".join(map(str, seeds)),
-                         "balanced": balanced, "median": _format(median), "unit": method["unit"]})
+            rows.append(
+                {
+                    "key": key,
+                    "current": what != groups[0][0],
+                    "method": method["title"],
+                    "runs": what,
+                    "seeds": ", ".join(map(str, seeds)),
+                    "balanced": balanced,
+                    "median": _format(median),
+                    "unit": method["unit"],
+                }
+            )
     return rows
 
 
@@ -199,16 +231,24 @@ def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str =
         outcome[int(seed)] = float(value) if math.isfinite(value) else f"not within {result.plant_seconds_total:g} s"
         policy_trials = sum(r.kind == "policy" for r in result.records)
         worst = result.records[-1].eval_upright_std_rad if result.records else math.nan
-        details[int(seed)] = (f"{policy_trials} policy trials, worst test std {worst:.2g} rad, "
-                              f"{result.train_cpu_s:.0f} CPU s")
+        details[int(seed)] = (
+            f"{policy_trials} policy trials, worst test std {worst:.2g} rad, {result.train_cpu_s:.0f} CPU s"
+        )
     return _current_run(outcome, details, f"{runs_root} (plant {plant})")
 
 
 def _current_run(outcome: dict, details: dict, where: str) -> list[dict[str, Any]]:
     if not outcome:
         return []
-    return [{"setting": f"the current defaults: the book's runs in {where}", "seeds": sorted(outcome),
-             "outcome": outcome, "details": details, "notes": "computed from the run folders"}]
+    return [
+        {
+            "setting": f"the current defaults: the book's runs in {where}",
+            "seeds": sorted(outcome),
+            "outcome": outcome,
+            "details": details,
+            "notes": "computed from the run folders",
+        }
+    ]
 
 
 def plot_records(records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}):
@@ -218,13 +258,18 @@ def plot_records(records: Mapping[str, Mapping[str, Any]], current: Mapping[str,
 
     keys = [k for k, m in records.items() if m["unit"]]
     heights = [len(records[k]["runs"]) + len(current.get(k, ())) for k in keys]
-    fig, axes = plt.subplots(len(keys), 1, figsize=(8, 1.2 + 0.28 * sum(heights)), squeeze=False,
-                             gridspec_kw={"height_ratios": heights})
+    fig, axes = plt.subplots(
+        len(keys), 1, figsize=(8, 1.2 + 0.28 * sum(heights)), squeeze=False, gridspec_kw={"height_ratios": heights}
+    )
     for ax, key in zip(axes[:, 0], keys):
         method = records[key]
         runs = list(method["runs"]) + list(current.get(key, ()))
-        finite = [v for run in runs for v in map(_value, run["outcome"].values())
-                  if v is not None and math.isfinite(v) and run.get("unit", method["unit"]) == method["unit"]]
+        finite = [
+            v
+            for run in runs
+            for v in map(_value, run["outcome"].values())
+            if v is not None and math.isfinite(v) and run.get("unit", method["unit"]) == method["unit"]
+        ]
         edge = 1.15 * max(finite) if finite else 1.0
         for number, run in enumerate(runs, start=1):
             if not run["seeds"]:  # no per-seed outcome to draw

@@ -12,12 +12,18 @@ from softpend.evaluation import SUCCESS_STD_RAD, metrics_from_trajectory
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
-__all__ = ["run_truth_metrics", "torque_chatter_nm_per_s", "torque_total_variation_per_s", "truth_metrics",
-           "truth_trajectory"]
+__all__ = [
+    "run_truth_metrics",
+    "torque_chatter_nm_per_s",
+    "torque_total_variation_per_s",
+    "truth_metrics",
+    "truth_trajectory",
+]
 
 
-def truth_trajectory(truth_log: str | Path, task: Task, start_time_s: float | None = None,
-                     end_time_s: float | None = None) -> dict[str, np.ndarray]:
+def truth_trajectory(
+    truth_log: str | Path, task: Task, start_time_s: float | None = None, end_time_s: float | None = None
+) -> dict[str, np.ndarray]:
     """The true motion of a twin run from the emulator's truth log (the rod's state every tick; ``task`` is the
     emulator's): ``time_s`` (device time), ``theta_rad`` (tip angle from upright), ``torque_nm`` (applied) and
     ``phi_dot_rad_s`` (hub rate).  ``start_time_s`` and ``end_time_s`` (device time [s], inclusive) keep only
@@ -34,25 +40,36 @@ def truth_trajectory(truth_log: str | Path, task: Task, start_time_s: float | No
     q = np.column_stack([log[f"q{i}_rad"][keep] for i in range(n)])
     qd = np.column_stack([log[f"q{i}_dot_rad_s"][keep] for i in range(n)])
     observations = [plant.observation_from_state(a, b) for a, b in zip(q, qd)]
-    return {"time_s": time_s[keep], "theta_rad": np.array([o.theta_rad for o in observations]),
-            "torque_nm": log["applied_torque_nm"][keep], "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations])}
+    return {
+        "time_s": time_s[keep],
+        "theta_rad": np.array([o.theta_rad for o in observations]),
+        "torque_nm": log["applied_torque_nm"][keep],
+        "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations]),
+    }
 
 
-def truth_metrics(truth_log: str | Path, task: Task, success_std_rad: float = SUCCESS_STD_RAD, start_time_s: float | None = None,
-                  end_time_s: float | None = None) -> dict[str, float]:
+def truth_metrics(
+    truth_log: str | Path,
+    task: Task,
+    success_std_rad: float = SUCCESS_STD_RAD,
+    start_time_s: float | None = None,
+    end_time_s: float | None = None,
+) -> dict[str, float]:
     """Swing-up time, upright std, peak torque, energy and success of a twin run from the emulator's truth log
     (:func:`truth_trajectory`; the window, when given, also sets the origin of the swing-up time).  Empty for
     fewer than 3 ticks."""
     truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
     if len(truth["time_s"]) < 3:
         return {}
-    metrics = metrics_from_trajectory(truth["time_s"], truth["theta_rad"], truth["torque_nm"], truth["phi_dot_rad_s"],
-                                      success_std_rad=success_std_rad)
+    metrics = metrics_from_trajectory(
+        truth["time_s"], truth["theta_rad"], truth["torque_nm"], truth["phi_dot_rad_s"], success_std_rad=success_std_rad
+    )
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
 
 
-def run_truth_metrics(motor_log: str | Path, truth_log: str | Path, task: Task,
-                      success_std_rad: float = SUCCESS_STD_RAD) -> dict[str, float]:
+def run_truth_metrics(
+    motor_log: str | Path, truth_log: str | Path, task: Task, success_std_rad: float = SUCCESS_STD_RAD
+) -> dict[str, float]:
     """:func:`truth_metrics` of the part of a twin run that the controller commanded: from its first command to
     the last sample of the motor log (device time).  The truth log also holds the rod before the controller took
     charge and after the STOP, when nothing holds it.  Empty when the controller never commanded."""
@@ -60,9 +77,13 @@ def run_truth_metrics(motor_log: str | Path, truth_log: str | Path, task: Task,
     commanded = motor["commanded"] > 0
     if not commanded.any():
         return {}
-    return truth_metrics(truth_log, task, success_std_rad=success_std_rad,
-                         start_time_s=float(motor["device_time_s"][commanded][0]),
-                         end_time_s=float(motor["device_time_s"][-1]))
+    return truth_metrics(
+        truth_log,
+        task,
+        success_std_rad=success_std_rad,
+        start_time_s=float(motor["device_time_s"][commanded][0]),
+        end_time_s=float(motor["device_time_s"][-1]),
+    )
 
 
 def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
@@ -79,7 +100,9 @@ def torque_total_variation_per_s(time_s: np.ndarray, torque_nm: np.ndarray) -> f
     time_s = np.asarray(time_s, dtype=float)
     torque = np.asarray(torque_nm, dtype=float)
     if time_s.shape != torque.shape or time_s.ndim != 1:
-        raise ValueError(f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape} and {torque.shape}")
+        raise ValueError(
+            f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape} and {torque.shape}"
+        )
     if len(torque) < 2 or time_s[-1] <= time_s[0]:
         return float("nan")
     return float(np.sum(np.abs(np.diff(torque))) / (time_s[-1] - time_s[0]))

@@ -38,8 +38,20 @@ from softpend.task import Task
 from softpend.vision.camera import CameraEffects
 from softpend.vision.tip_source import CameraFaults
 
-__all__ = ["CONFIDENCE", "JOINT_SWINGUP", "OBSERVATION_SWINGUP", "SIMULATOR", "FrameKeeper", "RigCondition", "learned_controller", "rig_controllers", "simulator_starts", "summary_rows",
-           "text_figures", "twin_start"]
+__all__ = [
+    "CONFIDENCE",
+    "JOINT_SWINGUP",
+    "OBSERVATION_SWINGUP",
+    "SIMULATOR",
+    "FrameKeeper",
+    "RigCondition",
+    "learned_controller",
+    "rig_controllers",
+    "simulator_starts",
+    "summary_rows",
+    "text_figures",
+    "twin_start",
+]
 
 #: Condition name of the rows of :func:`simulator_starts`.
 SIMULATOR = "ideal simulator"
@@ -100,8 +112,9 @@ class RigCondition:
 
     def camera(self, seed: int) -> TwinCamera:
         """The twin's camera of a start seeded ``seed`` (the seed of the image noise)."""
-        return TwinCamera(fps=self.fps, latency_s=self.camera_latency_s, effects=self.effects, faults=self.faults,
-                          seed=int(seed))
+        return TwinCamera(
+            fps=self.fps, latency_s=self.camera_latency_s, effects=self.effects, faults=self.faults, seed=int(seed)
+        )
 
     def estimator(self) -> EstimatorConfig:
         """The estimator's settings for these sensors."""
@@ -116,7 +129,8 @@ def rig_controllers(task: Task) -> dict[str, Callable[[], Any]]:
 
     rod, dt = task.rod, task.dt_s
     controllers: dict[str, Callable[[], Any]] = {
-        OBSERVATION_SWINGUP: lambda: EnergySwingUpController.for_observations(rod, dt_s=dt)}
+        OBSERVATION_SWINGUP: lambda: EnergySwingUpController.for_observations(rod, dt_s=dt)
+    }
     if task.plant == "prb":
         controllers[JOINT_SWINGUP] = lambda: EnergySwingUpController(rod, dt_s=dt)
     return controllers
@@ -141,11 +155,15 @@ def learned_controller(folder: str | Path, which: str = "final") -> tuple[Any, T
     return policy_controller(model, config), config.task, f"{type(model).__name__} {folder}"
 
 
-def _row(condition: str, controller: str, seed: int, metrics: Mapping[str, Any], chatter: float,
-         stop: Optional[str]) -> dict[str, Any]:
+def _row(
+    condition: str, controller: str, seed: int, metrics: Mapping[str, Any], chatter: float, stop: Optional[str]
+) -> dict[str, Any]:
     success = bool(metrics.get("success", False)) and stop is None
     return {
-        "condition": condition, "controller": controller, "seed": int(seed), "success": success,
+        "condition": condition,
+        "controller": controller,
+        "seed": int(seed),
+        "success": success,
         "swing_up_time_s": float(metrics.get("swing_up_time_s", math.inf)),
         "upright_std_rad": float(metrics.get("upright_std_rad", math.nan)),
         "peak_torque_nm": float(metrics.get("peak_torque_nm", math.nan)),
@@ -154,9 +172,17 @@ def _row(condition: str, controller: str, seed: int, metrics: Mapping[str, Any],
     }
 
 
-def twin_start(controller: Any, label: str, task: Task, condition: RigCondition, seed: int, duration_s: float,
-               workdir: str | Path, success_std_rad: float = HOLD_STD_RAD,
-               on_frame: Optional[Callable] = None) -> dict[str, Any]:
+def twin_start(
+    controller: Any,
+    label: str,
+    task: Task,
+    condition: RigCondition,
+    seed: int,
+    duration_s: float,
+    workdir: str | Path,
+    success_std_rad: float = HOLD_STD_RAD,
+    on_frame: Optional[Callable] = None,
+) -> dict[str, Any]:
     """One start of ``controller`` on the twin under ``condition``: a row of :func:`summary_rows`' input.
 
     The rod's figures come from the emulator's truth log between the first state the controller commanded and
@@ -171,9 +197,15 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
     stop: Optional[str] = None
     result = None
     try:
-        run = run_twin_control(controller, workdir, duration_s, rig=condition.rig(task, seed),
-                               camera=condition.camera(seed), estimator_config=condition.estimator(),
-                               on_frame=on_frame)
+        run = run_twin_control(
+            controller,
+            workdir,
+            duration_s,
+            rig=condition.rig(task, seed),
+            camera=condition.camera(seed),
+            estimator_config=condition.estimator(),
+            on_frame=on_frame,
+        )
         result = run.result
         if result.stop_reason is not None:
             stop = f"{result.status.replace('_', ' ')}: {result.stop_reason}"
@@ -191,14 +223,23 @@ def twin_start(controller: Any, label: str, task: Task, condition: RigCondition,
         stop = "the controller never took charge"
     row = _row(condition.name, label, seed, metrics, chatter, stop)
     camera = result.camera if result is not None else {}
-    row.update(late_commands=int(result.late_commands) if result is not None else 0,
-               samples=int(result.samples) if result is not None else 0,
-               frames_tracked=int(camera.get("frames_tracked", 0)), frames_lost=int(camera.get("frames_lost", 0)))
+    row.update(
+        late_commands=int(result.late_commands) if result is not None else 0,
+        samples=int(result.samples) if result is not None else 0,
+        frames_tracked=int(camera.get("frames_tracked", 0)),
+        frames_lost=int(camera.get("frames_lost", 0)),
+    )
     return row
 
 
-def simulator_starts(controller: Any, label: str, task: Task, seeds: Sequence[int], duration_s: float,
-                     success_std_rad: float = HOLD_STD_RAD) -> list[dict[str, Any]]:
+def simulator_starts(
+    controller: Any,
+    label: str,
+    task: Task,
+    seeds: Sequence[int],
+    duration_s: float,
+    success_std_rad: float = HOLD_STD_RAD,
+) -> list[dict[str, Any]]:
     """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task`` (one row each, condition
     :data:`SIMULATOR`): :func:`~softpend.evaluation.evaluate_controller`, scored with ``success_std_rad``; a
     diverged simulation is a failed row."""
@@ -208,8 +249,13 @@ def simulator_starts(controller: Any, label: str, task: Task, seeds: Sequence[in
     for result in summary.results:
         metrics: dict[str, Any] = {}
         if len(result.time_s) >= 2:
-            metrics = metrics_from_trajectory(result.time_s, result.observations[:, theta_index], result.torque_nm,
-                                              result.observations[:, rate_index], success_std_rad=success_std_rad)
+            metrics = metrics_from_trajectory(
+                result.time_s,
+                result.observations[:, theta_index],
+                result.torque_nm,
+                result.observations[:, rate_index],
+                success_std_rad=success_std_rad,
+            )
         stop = f"simulation diverged: {result.diverged}" if result.diverged is not None else None
         # the torque of every step the controller commanded (the last sample has none)
         chatter = torque_total_variation_per_s(result.time_s[:-1], result.torque_nm[:-1])
@@ -232,15 +278,22 @@ def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDEN
         low, high = wilson_interval(successes, len(group), confidence)
         chatter = [r["torque_chatter_nm_per_s"] for r in group if math.isfinite(r["torque_chatter_nm_per_s"])]
         peaks = [r["peak_torque_nm"] for r in group if math.isfinite(r["peak_torque_nm"])]
-        out.append({
-            "condition": condition, "controller": controller, "starts": len(group), "successes": successes,
-            "success_rate": successes / len(group), "success_low": low, "success_high": high,
-            "swing_up_time_s": float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan,
-            "upright_std_rad": float(max(r["upright_std_rad"] for r in good)) if good else math.nan,
-            "peak_torque_nm": float(max(peaks)) if peaks else math.nan,
-            "torque_chatter_nm_per_s": float(np.median(chatter)) if chatter else math.nan,
-            "stops": sum(bool(r["stop"]) for r in group),
-        })
+        out.append(
+            {
+                "condition": condition,
+                "controller": controller,
+                "starts": len(group),
+                "successes": successes,
+                "success_rate": successes / len(group),
+                "success_low": low,
+                "success_high": high,
+                "swing_up_time_s": float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan,
+                "upright_std_rad": float(max(r["upright_std_rad"] for r in good)) if good else math.nan,
+                "peak_torque_nm": float(max(peaks)) if peaks else math.nan,
+                "torque_chatter_nm_per_s": float(np.median(chatter)) if chatter else math.nan,
+                "stops": sum(bool(r["stop"]) for r in group),
+            }
+        )
     return out
 
 
@@ -266,8 +319,9 @@ class FrameKeeper:
         return [(float(capture[i]), frame, detection) for i, frame, detection in self.frames if i in capture]
 
 
-def text_figures(summary: Sequence[Mapping[str, Any]], controllers: Mapping[str, str],
-                 conditions: Mapping[str, str]) -> dict[str, str]:
+def text_figures(
+    summary: Sequence[Mapping[str, Any]], controllers: Mapping[str, str], conditions: Mapping[str, str]
+) -> dict[str, str]:
     """The figures of :func:`summary_rows` as text for the book, keyed ``<controller key>_<condition key>_<figure>``
     (``controllers`` and ``conditions`` map a short key to the label in the rows): ``success`` ("k of n"),
     ``interval`` (Wilson interval, "low to high"), ``swing_up_s``, ``std_rad``, ``chatter`` and ``stops``; a

@@ -15,19 +15,28 @@ import re
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
-
+from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.overrides import apply_overrides
 from softpend.io.runfolders import run_folder_name
-from softpend.study.presets import TASK, load_hparams
-from softpend.task import Task
-from softpend.study.sweep import run_jobs
 from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config, saved_config_data
-from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
+from softpend.study.presets import TASK, load_hparams
+from softpend.study.sweep import run_jobs
+from softpend.task import Task
 
-__all__ = ["METHOD_NAMES", "figure_configs", "figure_runs", "plant_runs_root", "rl_jobs",
-           "run_config_data", "run_folder", "summary_table", "train_seeds", "train_run"]
+__all__ = [
+    "METHOD_NAMES",
+    "figure_configs",
+    "figure_runs",
+    "plant_runs_root",
+    "rl_jobs",
+    "run_config_data",
+    "run_folder",
+    "summary_table",
+    "train_seeds",
+    "train_run",
+]
 
 
 def train_seeds(
@@ -48,18 +57,33 @@ def train_seeds(
     return _train_runs([(algo, config, seeds, episodes)], root, progress, workers, backend)[0]
 
 
-def _train_runs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str, progress: bool,
-                workers: Optional[int], backend: Optional[str] = None) -> list[list[TrainingLog]]:
+def _train_runs(
+    specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
+    root: Path | str,
+    progress: bool,
+    workers: Optional[int],
+    backend: Optional[str] = None,
+) -> list[list[TrainingLog]]:
     """Train what ``specs`` (``(algo, config, seeds, episodes)`` each) need, in one pool; logs per spec."""
     jobs = rl_jobs(specs, root)
-    run_jobs(train_run, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
-             desc="RL runs", backend=backend)
-    return [[TrainingLog.load(run_folder(root, algo, int(seed), config) / "log.json") for seed in seeds]
-            for algo, config, seeds, _ in specs]
+    run_jobs(
+        train_run,
+        [args for _, args in jobs],
+        [name for name, _ in jobs],
+        workers,
+        progress,
+        desc="RL runs",
+        backend=backend,
+    )
+    return [
+        [TrainingLog.load(run_folder(root, algo, int(seed), config) / "log.json") for seed in seeds]
+        for algo, config, seeds, _ in specs
+    ]
 
 
-def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
-            root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
+def rl_jobs(
+    specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str
+) -> list[tuple[str, tuple[Any, ...]]]:
     """The runs that ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root``, as
     ``(name, arguments of the run's training job)`` in the order to start them (DQN-MBPO first: a DQN-MBPO run
     costs about 2.5 DQN runs); a finished run with the same config is left out, a shorter one is resumed."""
@@ -91,8 +115,9 @@ def rl_jobs(specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]],
     return [(names[i], jobs[i]) for i in order]
 
 
-def train_run(algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool,
-               progress: bool = True) -> None:
+def train_run(
+    algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool, progress: bool = True
+) -> None:
     """Train one run into ``run_dir`` (a job of :func:`softpend.study.sweep.run_jobs`)."""
     from softpend.rl.dqn import train_dqn
     from softpend.rl.mbpo import train_mbpo
@@ -112,7 +137,9 @@ def _saved_config(run_dir: Path) -> DQNConfig | None:
         return None
 
 
-def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD) -> list[dict[str, Any]]:
+def summary_table(
+    logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD
+) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance, to the asymptote, final std."""
     from softpend.rl.curves import run_to_asymptote
 
@@ -121,24 +148,29 @@ def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: flo
         for log in logs:
             asym, asym_plant_s = run_to_asymptote(log)
             last = log.evaluations[-1] if log.evaluations else {}
-            rows.append({
-                "method": method,
-                "seed": log.seed,
-                "episodes": log.n_episodes,
-                "plant_s": log.plant_s,
-                "episodes_to_asymptote": asym,
-                "plant_s_to_asymptote": asym_plant_s,
-                "episodes_to_balance": log.episodes_to_balance(std_rad),
-                "plant_s_to_balance": log.real_s_to_balance(std_rad),
-                "final_max_upright_std_rad": last.get("max_upright_std_rad", math.nan),
-                "final_swing_up_time_s": last.get("median_swing_up_time_s", math.nan),
-                "model_steps": log.model_steps,
-            })
+            rows.append(
+                {
+                    "method": method,
+                    "seed": log.seed,
+                    "episodes": log.n_episodes,
+                    "plant_s": log.plant_s,
+                    "episodes_to_asymptote": asym,
+                    "plant_s_to_asymptote": asym_plant_s,
+                    "episodes_to_balance": log.episodes_to_balance(std_rad),
+                    "plant_s_to_balance": log.real_s_to_balance(std_rad),
+                    "final_max_upright_std_rad": last.get("max_upright_std_rad", math.nan),
+                    "final_swing_up_time_s": last.get("median_swing_up_time_s", math.nan),
+                    "model_steps": log.model_steps,
+                }
+            )
     return rows
 
 
-def figure_configs(plant: str = TASK.plant, task_overrides: Optional[Mapping[str, Any]] = None,
-                   rl_overrides: Optional[Mapping[str, Any]] = None) -> dict[str, DQNConfig]:
+def figure_configs(
+    plant: str = TASK.plant,
+    task_overrides: Optional[Mapping[str, Any]] = None,
+    rl_overrides: Optional[Mapping[str, Any]] = None,
+) -> dict[str, DQNConfig]:
     """The configs of the book's Figures 4-6: ``{"dqn": ..., "mbpo": ...}``.
 
     Each is :func:`softpend.study.presets.load_hparams` on the task ``Task(plant=plant)`` with ``task_overrides``
@@ -153,8 +185,10 @@ def figure_configs(plant: str = TASK.plant, task_overrides: Optional[Mapping[str
     unknown = sorted(k for k in overrides if k.partition(".")[0] not in names["mbpo"])
     if unknown:
         raise ValueError(f"rl_overrides: {unknown[0]!r} is not a DQNConfig or MBPOConfig field")
-    return {algo: apply_overrides(config, {k: v for k, v in overrides.items() if k.partition(".")[0] in names[algo]})
-            for algo, config in configs.items()}
+    return {
+        algo: apply_overrides(config, {k: v for k, v in overrides.items() if k.partition(".")[0] in names[algo]})
+        for algo, config in configs.items()
+    }
 
 
 def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
@@ -169,10 +203,17 @@ def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
 METHOD_NAMES = {"dqn": "model-free DQN", "mbpo": "DQN-MBPO"}
 
 
-def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], runs_root: Path | str = "runs/rl-book",
-                progress: bool = True, plant: str = TASK.plant, workers: Optional[int] = None,
-                backend: Optional[str] = None,
-                **config_kwargs: Any) -> dict[str, list[TrainingLog]]:
+def figure_runs(
+    episodes_dqn: int,
+    episodes_mbpo: int,
+    seeds: Sequence[int],
+    runs_root: Path | str = "runs/rl-book",
+    progress: bool = True,
+    plant: str = TASK.plant,
+    workers: Optional[int] = None,
+    backend: Optional[str] = None,
+    **config_kwargs: Any,
+) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).
 
     The runs of ``plant`` live under :func:`plant_runs_root` ``(runs_root, plant)``.  The runs to train (both
@@ -182,7 +223,10 @@ def figure_runs(episodes_dqn: int, episodes_mbpo: int, seeds: Sequence[int], run
     root = plant_runs_root(runs_root, plant)
     dqn_logs, mbpo_logs = _train_runs(
         [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)],
-        root, progress, workers, backend,
+        root,
+        progress,
+        workers,
+        backend,
     )
     return {METHOD_NAMES["dqn"]: dqn_logs, METHOD_NAMES["mbpo"]: mbpo_logs}
 
@@ -217,6 +261,8 @@ def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) 
     pattern = re.compile(rf"{re.escape(algo)}-[0-9a-f]{{8}}-seed{int(seed)}")
     found = sorted(p for p in root.glob(f"{algo}-*-seed{int(seed)}") if pattern.fullmatch(p.name) and p.is_dir())
     if len(found) > 1:
-        raise ValueError(f"{root} holds runs of {algo} seed {seed} with {len(found)} different settings "
-                         f"({', '.join(p.name for p in found)}); pass the run's config to pick one")
+        raise ValueError(
+            f"{root} holds runs of {algo} seed {seed} with {len(found)} different settings "
+            f"({', '.join(p.name for p in found)}); pass the run's config to pick one"
+        )
     return found[0] if found else root / f"{algo}-seed{int(seed)}"

@@ -141,8 +141,16 @@ class RodDesign:
         p = self.params
         return [
             ("rod length L, links n", f"{p.length_m:.3g} m, n = {p.n_links}", "PRB chain of n rigid links"),
-            ("rod mass m, tip mass", f"{p.mass_kg * 1e3:.3g} g, {p.tip_mass_kg * 1e3:.3g} g", "uniform rod plus end mass"),
-            ("bending stiffness EI", f"{p.bending_stiffness_nm2:.3g} N m²", f"joint springs k = EI/(L/n) = {p.joint_stiffness_nm_per_rad:.3g} N m/rad"),
+            (
+                "rod mass m, tip mass",
+                f"{p.mass_kg * 1e3:.3g} g, {p.tip_mass_kg * 1e3:.3g} g",
+                "uniform rod plus end mass",
+            ),
+            (
+                "bending stiffness EI",
+                f"{p.bending_stiffness_nm2:.3g} N m²",
+                f"joint springs k = EI/(L/n) = {p.joint_stiffness_nm_per_rad:.3g} N m/rad",
+            ),
             (
                 "tip sag, clamped horizontal (PRB statics)",
                 f"{self.tip_sag_horizontal_m * 1e3:.1f} mm = {100 * self.tip_sag_fraction:.0f} % of L",

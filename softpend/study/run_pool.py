@@ -39,9 +39,16 @@ def _order(jobs: Sequence[Job]) -> list[Job]:
     return sorted(jobs, key=lambda job: rank.get(job[0].rsplit("/", 1)[-1].split("-")[0], 3))
 
 
-def train_in_one_pool(rl_specs: Sequence[tuple[str, Any, Sequence[int], int]], rl_root: Path | str,
-                      pilco_config: Any = None, pilco_seeds: Sequence[int] = (), pilco_root: Path | str | None = None,
-                      workers: Optional[int] = None, progress: bool = True, backend: Optional[str] = None) -> int:
+def train_in_one_pool(
+    rl_specs: Sequence[tuple[str, Any, Sequence[int], int]],
+    rl_root: Path | str,
+    pilco_config: Any = None,
+    pilco_seeds: Sequence[int] = (),
+    pilco_root: Path | str | None = None,
+    workers: Optional[int] = None,
+    progress: bool = True,
+    backend: Optional[str] = None,
+) -> int:
     """Train every run still missing, RL (``(algo, config, seeds, episodes)`` each, as for
     :func:`softpend.study.rl_runs.train_seeds`, under ``rl_root``) and PILCO (``pilco_config`` with each of
     ``pilco_seeds``, under ``pilco_root``, default ``rl_root``), in one pool; returns how many were trained.  The
@@ -58,8 +65,15 @@ def train_in_one_pool(rl_specs: Sequence[tuple[str, Any, Sequence[int], int]], r
 
 def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend: Optional[str]) -> int:
     if jobs:
-        run_jobs(call_job, [args for _, args in jobs], [name for name, _ in jobs], workers, progress,
-                 desc="training runs", backend=backend)
+        run_jobs(
+            call_job,
+            [args for _, args in jobs],
+            [name for name, _ in jobs],
+            workers,
+            progress,
+            desc="training runs",
+            backend=backend,
+        )
     return len(jobs)
 
 
@@ -69,8 +83,12 @@ def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend:
 BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 
-def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: Optional[dict[str, Any]] = None,
-                  claimed: Optional[set[str]] = None) -> list[Job]:
+def book_run_jobs(
+    run_sets: Sequence[str],
+    root: Path | str = ".",
+    parameters: Optional[dict[str, Any]] = None,
+    claimed: Optional[set[str]] = None,
+) -> list[Job]:
     """The runs of ``run_sets`` still missing under ``root``, named by folder (``runs/rl-book/dqn-seed0``), with
     the settings the notebooks that read them train with (:mod:`softpend.study.presets`, ``book/hparams``), the
     training parameters of ``parameters`` (a notebook's profile values: ``episodes_dqn``, ``episodes_mbpo``,
@@ -79,8 +97,7 @@ def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: O
     A folder in ``claimed`` (those an earlier notebook reads, finished or not) is left to it; this call's folders
     are added to ``claimed``."""
     if not isinstance(run_sets, (list, tuple)) or not set(run_sets) <= set(BOOK_RUN_SETS):
-        raise ValueError(f"run sets (softpend.book_runs) must be a list among {list(BOOK_RUN_SETS)}, "
-                         f"got {run_sets!r}")
+        raise ValueError(f"run sets (softpend.book_runs) must be a list among {list(BOOK_RUN_SETS)}, got {run_sets!r}")
     given = dict(parameters or {})
     seeds, task_overrides = list(given.get("seeds", RL_BOOK.seeds)), given.get("task_overrides") or {}
     rl_seeds = seeds if "rl" in run_sets else seeds[:1] if "first_seed" in run_sets else []
@@ -98,15 +115,21 @@ def book_run_jobs(run_sets: Sequence[str], root: Path | str = ".", parameters: O
     jobs: list[Job] = []
     pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
     if pilco_seeds := fresh(pilco_root, "pilco", pilco_seeds):
-        config = load_hparams("pilco", apply_overrides(Task(plant=TASK.plant), task_overrides),
-                              given.get("pilco_overrides"))
-        jobs += [(f"{pilco_root}/{name}", (run_and_save, *args))
-                 for name, args in pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)]
+        config = load_hparams(
+            "pilco", apply_overrides(Task(plant=TASK.plant), task_overrides), given.get("pilco_overrides")
+        )
+        jobs += [
+            (f"{pilco_root}/{name}", (run_and_save, *args))
+            for name, args in pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)
+        ]
     rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
     if rl_seeds:
         configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides"))
-        specs = [(algo, configs[algo], kept, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
-                 for algo in ("dqn", "mbpo") if (kept := fresh(rl_root, algo, rl_seeds))]
+        specs = [
+            (algo, configs[algo], kept, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
+            for algo in ("dqn", "mbpo")
+            if (kept := fresh(rl_root, algo, rl_seeds))
+        ]
         jobs += [(f"{rl_root}/{name}", (train_run, *args)) for name, args in rl_jobs(specs, Path(root) / rl_root)]
     return _order(jobs)
 
@@ -130,15 +153,25 @@ def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
     return _order(jobs)
 
 
-def train_book(root: Path | str = ".", profile: str = "full", workers: Optional[int] = None, progress: bool = True,
-               backend: Optional[str] = None) -> dict[str, Any]:
+def train_book(
+    root: Path | str = ".",
+    profile: str = "full",
+    workers: Optional[int] = None,
+    progress: bool = True,
+    backend: Optional[str] = None,
+) -> dict[str, Any]:
     """Train :func:`book_jobs` in one pool and record what was trained, in how long, in
     ``book/_generated/training.json`` (the execution page shows it); returns that record."""
     jobs, start = book_jobs(root, profile), time.perf_counter()
     workers = default_workers() if workers is None else workers
     _train(jobs, workers, progress, backend)
-    record = {"profile": profile, "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-              "trained": [name for name, _ in jobs], "seconds": time.perf_counter() - start, "workers": workers}
+    record = {
+        "profile": profile,
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "trained": [name for name, _ in jobs],
+        "seconds": time.perf_counter() - start,
+        "workers": workers,
+    }
     layout = BookLayout.at(root)
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
     with atomic_write(layout.training_path, "w") as handle:

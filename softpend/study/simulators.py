@@ -31,13 +31,17 @@ class HubErrorReference(NamedTuple):
     hub_rad: np.ndarray  # hub angle of the Exudyn plant with REFERENCE_SUBSTEPS sub-steps after each step [rad]
 
 
-def _exudyn_hub_rad(params: RodParams, q0: np.ndarray, qd0: np.ndarray, torques: np.ndarray, substeps: int) -> np.ndarray:
+def _exudyn_hub_rad(
+    params: RodParams, q0: np.ndarray, qd0: np.ndarray, torques: np.ndarray, substeps: int
+) -> np.ndarray:
     plant = PRBPlant(params, substeps=substeps)
     plant.reset(q0, qd0)
     return np.array([(plant.step(t), plant.joint_state()[0][0])[1] for t in torques])
 
 
-def hub_error_inputs(n_links: int, duration_s: float, seed: int = 0) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
+def hub_error_inputs(
+    n_links: int, duration_s: float, seed: int = 0
+) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
     """``(params, torques_nm, q0, qd0)`` of the comparison: the default rod of ``n_links`` links, ``duration_s``
     of random torque from ``seed`` (one value per 0.01 s control step) and the start (the hanging rod, hub
     turned 0.3 rad and spinning at 0.5 rad/s)."""
@@ -57,8 +61,9 @@ def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubEr
     return HubErrorReference(params, torques, q0, qd0, _exudyn_hub_rad(params, q0, qd0, torques, REFERENCE_SUBSTEPS))
 
 
-def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0,
-                   reference: Optional[HubErrorReference] = None) -> dict[str, float]:
+def hub_errors_rad(
+    n_links: int, duration_s: float, seed: int = 0, reference: Optional[HubErrorReference] = None
+) -> dict[str, float]:
     """Largest hub-angle error over ``duration_s`` of random torque (from the hanging rod, hub turned 0.3 rad
     and spinning at 0.5 rad/s) against the Exudyn plant with :data:`REFERENCE_SUBSTEPS` sub-steps: of the batched chain (default
     sub-steps, RK4 in float64; the Rosenbrock integrator in float32, the fast configuration of
@@ -74,15 +79,21 @@ def hub_errors_rad(n_links: int, duration_s: float, seed: int = 0,
     reference_hub = reference.hub_rad
     figures = {}
     with one_torch_thread() as torch:
-        for prefix, integrator, dtype in (("batched_chain", "rk4", torch.float64),
-                                          ("batched_rosenbrock", "rosenbrock", torch.float32)):
+        for prefix, integrator, dtype in (
+            ("batched_chain", "rk4", torch.float64),
+            ("batched_rosenbrock", "rosenbrock", torch.float32),
+        ):
             chain = BatchedPRBChain(params, batch_size=1, integrator=integrator, dtype=dtype)
             with torch.no_grad():
-                qs, _ = chain.rollout(torch.tensor(q0, dtype=dtype)[None], torch.tensor(qd0, dtype=dtype)[None],
-                                      torch.tensor(torques, dtype=dtype)[:, None])
+                qs, _ = chain.rollout(
+                    torch.tensor(q0, dtype=dtype)[None],
+                    torch.tensor(qd0, dtype=dtype)[None],
+                    torch.tensor(torques, dtype=dtype)[:, None],
+                )
             batched = qs[:, 0, 0].double().numpy()
             figures[f"{prefix}_hub_error_rad_n{n_links}"] = float(np.abs(batched - reference_hub).max())
             figures[f"{prefix}_substeps_n{n_links}"] = float(chain.substeps)
-    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(np.abs(_exudyn_hub_rad(params, q0, qd0, torques, 2) - reference_hub).max())
+    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(
+        np.abs(_exudyn_hub_rad(params, q0, qd0, torques, 2) - reference_hub).max()
+    )
     return figures
-

@@ -74,8 +74,9 @@ def default_backend() -> str:
     return backend
 
 
-def _guarded(job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool,
-             one_thread: bool = True) -> tuple[str, Optional[str]]:
+def _guarded(
+    job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool, one_thread: bool = True
+) -> tuple[str, Optional[str]]:
     """Run one job (in a worker: with one torch thread, see :func:`run_jobs`);
     ``(name, None)`` on success, ``(name, traceback)`` if it raised (an exception never crosses back as a
     pickled object)."""
@@ -187,8 +188,9 @@ def run_jobs(
     pending = dict(zip(names, jobs))
     failures: dict[str, str] = {}
     for attempt in range(int(retries) + 1):
-        raised, lost = _run_round(job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""),
-                                  backend)
+        raised, lost = _run_round(
+            job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""), backend
+        )
         failures.update(raised)
         pending = {name: pending[name] for name in lost}
         if not pending:
@@ -208,8 +210,9 @@ def call_job(job: Callable[..., None], *args: Any, progress: bool = True) -> Non
 LOST = "its worker process died (killed, out of memory or crashed)"
 
 
-def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str,
-               backend: str) -> tuple[dict[str, str], set[str]]:
+def _run_round(
+    job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str, backend: str
+) -> tuple[dict[str, str], set[str]]:
     """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
     died)``."""
     if workers <= 1:
@@ -228,13 +231,19 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     try:
         # loky's check after a job takes a worker's growth past 300 MB (PILCO's) for a leak and starts a fresh
         # worker for the next job (no job is lost): no warning for that
-        warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given to the executor",
-                                category=UserWarning, module="joblib")
+        warnings.filterwarnings(
+            "ignore",
+            message="A worker stopped while some jobs were given to the executor",
+            category=UserWarning,
+            module="joblib",
+        )
         with _engine(backend):
-            parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered",
-                                       **({"backend": "loky"} if backend == "loky" else {}))
-            calls = (joblib.delayed(_guarded)(job, args, name, False, True)
-                     for name, args in pending.items())
+            parallel = joblib.Parallel(
+                n_jobs=min(workers, len(pending)),
+                return_as="generator_unordered",
+                **({"backend": "loky"} if backend == "loky" else {}),
+            )
+            calls = (joblib.delayed(_guarded)(job, args, name, False, True) for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
                     finished.add(name)
@@ -247,4 +256,3 @@ def _run_round(job: Callable[..., None], pending: dict[str, tuple[Any, ...]], wo
     except Exception:  # noqa: BLE001 -- a worker died (loky's TerminatedWorkerError, a lost Ray/Dask task)
         pass
     return raised, {name for name in pending if name not in finished}
-

@@ -18,12 +18,11 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
-
 from tqdm.auto import tqdm
 
-from softpend.task import Task
 from softpend.evaluation import TEST_EPISODE_S, evaluate_controller
 from softpend.plant import RodParams
+from softpend.task import Task
 
 #: Shortest episode :func:`transfer_table` runs [s] (swing-up needs a 1 s hold to count).
 MIN_DURATION_S = 2.0
@@ -146,8 +145,8 @@ def rl_transfer_cases(
         If an algorithm is unknown or an agent was trained on a different rod.
     """
     from softpend.rl.dqn import load_agent
-    from softpend.study.rl_runs import METHOD_NAMES, run_folder
     from softpend.rl.training_env import policy_controller
+    from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
     params = params or RodParams()
     cases = []
@@ -163,12 +162,14 @@ def rl_transfer_cases(
                     f"{rod.torque_limit_nm}, transfer study uses n_links={params.n_links}, "
                     f"torque_limit_nm={params.torque_limit_nm}"
                 )
-            cases.append(TransferCase(
-                f"{METHOD_NAMES[algo]} (seed {seed})",
-                functools.partial(policy_controller, model, config),
-                start="hanging",
-                duration_s=duration_s,
-            ))
+            cases.append(
+                TransferCase(
+                    f"{METHOD_NAMES[algo]} (seed {seed})",
+                    functools.partial(policy_controller, model, config),
+                    start="hanging",
+                    duration_s=duration_s,
+                )
+            )
     return cases
 
 

@@ -18,7 +18,16 @@ __all__ = [
 ]
 
 from softpend.sysid.layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
-from softpend.sysid.metrics import RolloutErrors, evaluate_model, hub_rate_offset_for_tip_error, one_step_errors, perturbed_simulator_errors, rollout_errors, rollout_trial, tip_angle_rad  # noqa: E402
+from softpend.sysid.metrics import (  # noqa: E402
+    RolloutErrors,
+    evaluate_model,
+    hub_rate_offset_for_tip_error,
+    one_step_errors,
+    perturbed_simulator_errors,
+    rollout_errors,
+    rollout_trial,
+    tip_angle_rad,
+)
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
 from softpend.sysid.rollout import rollout  # noqa: E402
 from softpend.sysid.training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402

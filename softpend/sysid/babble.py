@@ -43,7 +43,15 @@ from typing import Any, Optional
 import numpy as np
 from tqdm.auto import tqdm
 
-from softpend.checks import check_work_size, in_unit_interval, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.checks import (
+    check_work_size,
+    in_unit_interval,
+    int_at_least,
+    non_negative,
+    one_of,
+    positive,
+    positive_int,
+)
 from softpend.plant import OBSERVATION_NAMES, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
 from softpend.sysid.dataset import DT_S_RANGE, TrajectoryDataset, write_dataset
 from softpend.sysid.differentiation import backward_difference
@@ -124,7 +132,9 @@ class BabbleProtocol:
             positive(name, getattr(self, name))
         low, high = DT_S_RANGE
         if not low <= self.dt_s <= high:
-            raise ValueError(f"dt_s must lie in [{low:g}, {high:g}] s (the range a dataset file accepts), got {self.dt_s!r}")
+            raise ValueError(
+                f"dt_s must lie in [{low:g}, {high:g}] s (the range a dataset file accepts), got {self.dt_s!r}"
+            )
         if self.n_samples < 2:
             raise ValueError(f"trial_length_s must cover at least 2 samples of dt_s, got {self.trial_length_s}")
         in_unit_interval("feedback_trial_fraction", self.feedback_trial_fraction)
@@ -143,7 +153,9 @@ class BabbleProtocol:
         return dataclasses.replace(self, **changes)
 
 
-def band_limited_noise(rng: np.random.Generator, n_steps: int, std: float, bandwidth_hz: float, dt_s: float) -> np.ndarray:
+def band_limited_noise(
+    rng: np.random.Generator, n_steps: int, std: float, bandwidth_hz: float, dt_s: float
+) -> np.ndarray:
     """Gaussian noise through a first-order low-pass filter (stationary Ornstein-Uhlenbeck samples).
 
     ``u[0] ~ N(0, std^2)`` and ``u[k+1] = a u[k] + sqrt(1 - a^2) std w[k]`` with ``a = exp(-2 pi f_c dt)``
@@ -167,7 +179,11 @@ def _start_state(
     q = np.zeros(n_coordinates)
     qd = np.zeros(n_coordinates)
     centre = {"upright": 0.0, "hanging": math.pi}.get(protocol.start)
-    q[0] = rng.uniform(-math.pi, math.pi) if centre is None else centre + protocol.start_angle_std_rad * rng.standard_normal()
+    q[0] = (
+        rng.uniform(-math.pi, math.pi)
+        if centre is None
+        else centre + protocol.start_angle_std_rad * rng.standard_normal()
+    )
     bends = protocol.start_bend_std_rad * rng.standard_normal(n_coordinates - 1)
     if bend_joints:
         q[1:] = bends
@@ -185,7 +201,9 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
 
     q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, bend_joints=isinstance(plant, PRBPlant))
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
-    babble = band_limited_noise(rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s)
+    babble = band_limited_noise(
+        rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s
+    )
     kp = protocol.feedback_kp_nm_per_rad if use_feedback else 0.0
     kd = protocol.feedback_kd_nms_per_rad if use_feedback else 0.0
 

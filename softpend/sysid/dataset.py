@@ -207,7 +207,9 @@ def _validate(ds: TrajectoryDataset) -> None:
     if meta["schema"] != SCHEMA_NAME:
         raise ValueError(f"metadata schema must be {SCHEMA_NAME!r}, got {meta['schema']!r}")
     if meta["schema_version"] != SCHEMA_VERSION:
-        raise ValueError(f"metadata schema_version {meta['schema_version']!r} is not supported (expected {SCHEMA_VERSION})")
+        raise ValueError(
+            f"metadata schema_version {meta['schema_version']!r} is not supported (expected {SCHEMA_VERSION})"
+        )
     if meta["source"] not in _SOURCES:
         raise ValueError(f"metadata source must be one of {_SOURCES}, got {meta['source']!r}")
     dt = meta["dt_s"]
@@ -267,7 +269,9 @@ def _validate(ds: TrajectoryDataset) -> None:
             if value.ndim != 3 or value.shape[:2] != (n_trials, n_samples) or value.shape[2] < 1:
                 raise ValueError(f"{name} must have shape ({n_trials}, {n_samples}, J), got {value.shape}")
             if joint_shape is not None and value.shape != joint_shape:
-                raise ValueError(f"joint_positions_rad and joint_velocities_rad_s shapes differ: {joint_shape} vs {value.shape}")
+                raise ValueError(
+                    f"joint_positions_rad and joint_velocities_rad_s shapes differ: {joint_shape} vs {value.shape}"
+                )
             joint_shape = value.shape
         elif value.shape != expected:
             raise ValueError(f"{name} must have shape {expected} (from metadata), got {value.shape}")
@@ -371,7 +375,9 @@ def save_dataset(
         torques_nm=_as_float64("torques_nm", torques_nm),
         metadata=metadata,
         true_observations=None if true_observations is None else _as_float64("true_observations", true_observations),
-        joint_positions_rad=None if joint_positions_rad is None else _as_float64("joint_positions_rad", joint_positions_rad),
+        joint_positions_rad=None
+        if joint_positions_rad is None
+        else _as_float64("joint_positions_rad", joint_positions_rad),
         joint_velocities_rad_s=None
         if joint_velocities_rad_s is None
         else _as_float64("joint_velocities_rad_s", joint_velocities_rad_s),
@@ -450,7 +456,9 @@ def load_dataset(
         raise ValueError(f"{path} has no metadata member (not a softpend dataset)")
     raw_metadata = members.pop("metadata")
     if raw_metadata.ndim != 0 or raw_metadata.dtype.kind != "U":
-        raise ValueError(f"{path}: metadata must be a 0-d unicode array, got dtype {raw_metadata.dtype} shape {raw_metadata.shape}")
+        raise ValueError(
+            f"{path}: metadata must be a 0-d unicode array, got dtype {raw_metadata.dtype} shape {raw_metadata.shape}"
+        )
     try:
         metadata = json.loads(str(raw_metadata[()]))
         if not isinstance(metadata, dict):
@@ -472,5 +480,7 @@ def load_dataset(
     if expected_dt_s is not None and not math.isclose(dataset.dt_s, expected_dt_s, rel_tol=1e-12):
         raise ValueError(f"{path}: dt_s is {dataset.dt_s}, expected {expected_dt_s}")
     if expected_params is not None and dataset.metadata["plant_params"] != expected_params.to_dict():
-        raise ValueError(f"{path}: plant_params {dataset.metadata['plant_params']} do not match the expected {expected_params.to_dict()}")
+        raise ValueError(
+            f"{path}: plant_params {dataset.metadata['plant_params']} do not match the expected {expected_params.to_dict()}"
+        )
     return dataset

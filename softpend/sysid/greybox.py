@@ -229,8 +229,12 @@ class GreyBoxResult:
             "rod_params": self.params.to_dict(),
             "estimates": dict(self.estimates),
             "std": dict(self.std),
-            "calibration": {"torque_gain": self.torque_gain, "encoder_offset_rad": self.encoder_offset_rad,
-                            "torque_delay_s": self.torque_delay_s, "camera_delay_s": self.camera_delay_s},
+            "calibration": {
+                "torque_gain": self.torque_gain,
+                "encoder_offset_rad": self.encoder_offset_rad,
+                "torque_delay_s": self.torque_delay_s,
+                "camera_delay_s": self.camera_delay_s,
+            },
             "fit": {
                 "method": "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)",
                 "residual_rms_rad": self.residual_rms_rad,
@@ -257,8 +261,13 @@ def _observed(dataset: TrajectoryDataset) -> tuple[list[str], np.ndarray]:
 
 
 def reconstruct_joint_states(
-    phi_rad: np.ndarray, ex_m: np.ndarray, ey_m: np.ndarray, er_rad: Optional[np.ndarray], params: RodParams,
-    ridge: float = 1e-4, iterations: int = 20,
+    phi_rad: np.ndarray,
+    ex_m: np.ndarray,
+    ey_m: np.ndarray,
+    er_rad: Optional[np.ndarray],
+    params: RodParams,
+    ridge: float = 1e-4,
+    iterations: int = 20,
 ) -> np.ndarray:
     """Joint angles ``q = [phi, q_1 .. q_n]`` of a PRB rod that put its tip at the observed position (and tip
     angle ``er`` when given), the spring angles as small as possible (a ridge of weight ``ridge`` on them);
@@ -307,8 +316,14 @@ def _substeps(dataset: TrajectoryDataset, substeps: Optional[int]) -> int:
 
 
 def simulate_windows(
-    params: RodParams, dt_s: float, substeps: int, states: np.ndarray, torques_nm: np.ndarray,
-    torque_gain: float = 1.0, has_er: bool = True, plant: Optional[PRBPlant] = None,
+    params: RodParams,
+    dt_s: float,
+    substeps: int,
+    states: np.ndarray,
+    torques_nm: np.ndarray,
+    torque_gain: float = 1.0,
+    has_er: bool = True,
+    plant: Optional[PRBPlant] = None,
 ) -> np.ndarray:
     """Open-loop PRB simulations from joint states ``(B, 2 (n + 1))`` (``q`` then ``q_dot``) under torques
     ``(B, W)`` times ``torque_gain``; returns the simulated ``phi, ex, ey`` (and ``er`` if ``has_er``) at every
@@ -342,8 +357,16 @@ def simulate_windows(
 class _Problem:
     """The multiple-shooting least-squares problem (decision vector: scaled parameters, then window states)."""
 
-    def __init__(self, dataset: TrajectoryDataset, guess: RodParams, names: Sequence[str], diff_step: float,
-                 starts: np.ndarray, steps: int, substeps: int) -> None:
+    def __init__(
+        self,
+        dataset: TrajectoryDataset,
+        guess: RodParams,
+        names: Sequence[str],
+        diff_step: float,
+        starts: np.ndarray,
+        steps: int,
+        substeps: int,
+    ) -> None:
         self.guess = guess
         self.names = tuple(names)
         self.dt_s = dataset.dt_s
@@ -400,9 +423,13 @@ class _Problem:
         plant, gain, offset, delay = self.plant(theta)
         torques = self.torques
         if delay > 0.0:
-            torques = (1.0 - delay) * torques + delay * np.concatenate([self.previous_torques[:, None], torques[:, :-1]], axis=1)
+            torques = (1.0 - delay) * torques + delay * np.concatenate(
+                [self.previous_torques[:, None], torques[:, :-1]], axis=1
+            )
         elif delay < 0.0:
-            torques = (1.0 + delay) * torques - delay * np.concatenate([torques[:, 1:], self.next_torques[:, None]], axis=1)
+            torques = (1.0 + delay) * torques - delay * np.concatenate(
+                [torques[:, 1:], self.next_torques[:, None]], axis=1
+            )
         sim = simulate_windows(plant.params, self.dt_s, self.substeps, states, torques, gain, self.has_er, plant)
         sim[..., 0] += offset
         if "camera_delay_s" in self.names:  # the camera sees the tip of (k - b) dt at sample k
@@ -466,7 +493,12 @@ class _Problem:
 
 
 def _levenberg_marquardt(
-    problem: _Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray, max_iterations: int, tolerance: float,
+    problem: _Problem,
+    z0: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    max_iterations: int,
+    tolerance: float,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Levenberg-Marquardt on the multiple-shooting problem, each step solved exactly by eliminating the
     window states (block-diagonal normal equations, Schur complement on the parameters); Marquardt's
@@ -532,16 +564,20 @@ def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, wh
     scale = float(diag.max(initial=0.0))
     for name, value in zip(names, diag):
         if not value > IDENTIFIABILITY_TOLERANCE * max(scale, 1e-300) or scale == 0.0:
-            raise ValueError(f"the dataset cannot identify {name} ({where}: the observations do not depend on it; "
-                             "e.g. the torque does not excite it, or nothing moves)")
+            raise ValueError(
+                f"the dataset cannot identify {name} ({where}: the observations do not depend on it; "
+                "e.g. the torque does not excite it, or nothing moves)"
+            )
     norm = 1.0 / np.sqrt(diag)
     sn = s * norm[:, None] * norm[None, :]
     values, vectors = np.linalg.eigh(sn)
     if values[0] < IDENTIFIABILITY_TOLERANCE:
         worst = names[int(np.argmax(np.abs(vectors[:, 0])))]
         partners = [n for n, v in zip(names, vectors[:, 0]) if abs(v) > 0.2 and n != worst]
-        raise ValueError(f"the dataset cannot identify {worst} ({where}: its effect on the observations is that of "
-                         f"{', '.join(partners) or 'the window initial states'}; rank-deficient Jacobian)")
+        raise ValueError(
+            f"the dataset cannot identify {worst} ({where}: its effect on the observations is that of "
+            f"{', '.join(partners) or 'the window initial states'}; rank-deficient Jacobian)"
+        )
 
 
 def _window_starts(dataset: TrajectoryDataset, steps: int, max_windows: int, seed: int) -> np.ndarray:
@@ -611,7 +647,9 @@ def identify(
         raise ValueError(f"initial_params must be a RodParams, got {type(guess).__name__}")
     for name in config.parameters:
         if name in ESTIMABLE_ROD_FIELDS and not getattr(guess, name) > 0:
-            raise ValueError(f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}")
+            raise ValueError(
+                f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
+            )
     if "youngs_modulus_pa" in config.parameters and "stiffness_scale" in config.parameters:
         raise ValueError("parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one")
     for name in ("torque_gain", "torque_delay_s"):
@@ -673,17 +711,24 @@ def identify(
         njev=int(fit["njev"]),
         status=int(fit["status"]),
         message=str(fit["message"]),
-        at_bounds=tuple(name for j, name in enumerate(config.parameters)
-                        if (name in _DELAYS and abs(z[j]) >= 1.0)
-                        or (name not in ("encoder_offset_rad",) + _DELAYS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))),
+        at_bounds=tuple(
+            name
+            for j, name in enumerate(config.parameters)
+            if (name in _DELAYS and abs(z[j]) >= 1.0)
+            or (name not in ("encoder_offset_rad",) + _DELAYS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))
+        ),
         window_starts=starts,
         window_states=z[problem.n_p :].reshape(problem.n_windows, -1),
     )
 
 
 def estimate_joint_states(
-    params: RodParams, dataset: TrajectoryDataset, samples: np.ndarray, lookback_s: float = 0.1,
-    substeps: Optional[int] = None, max_iterations: int = 15,
+    params: RodParams,
+    dataset: TrajectoryDataset,
+    samples: np.ndarray,
+    lookback_s: float = 0.1,
+    substeps: Optional[int] = None,
+    max_iterations: int = 15,
 ) -> np.ndarray:
     """Causal estimates of the PRB joint state ``(q, q_dot)`` at given samples from the observations before them.
 
@@ -715,7 +760,9 @@ def estimate_joint_states(
     problem = _Problem(dataset, params, (), 1e-6, starts, steps, substeps)
     x0 = _initial_states(dataset, starts, params).reshape(-1)
     unbounded = np.full(x0.size, np.inf)
-    z, _ = _levenberg_marquardt(problem, x0, -unbounded, unbounded, positive_int("max_iterations", max_iterations), 1e-8)
+    z, _ = _levenberg_marquardt(
+        problem, x0, -unbounded, unbounded, positive_int("max_iterations", max_iterations), 1e-8
+    )
     fitted = z.reshape(problem.n_windows, -1)
     plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=substeps)
     n_q = plant.n_coordinates

@@ -146,7 +146,9 @@ class StateLayout:
                 + ("; use information='limited'" if self.information == "full" else "")
             )
         if dataset.n_samples < self.history + 2:
-            raise ValueError(f"dataset has {dataset.n_samples} samples a trial; history={self.history} needs at least {self.history + 2}")
+            raise ValueError(
+                f"dataset has {dataset.n_samples} samples a trial; history={self.history} needs at least {self.history + 2}"
+            )
         positions = np.stack([dataset.column(n) for n in self.position_names], axis=-1)
         if self.velocity_source == "true":
             velocities = np.stack([dataset.true_column(velocity_name(n)) for n in self.position_names], axis=-1)

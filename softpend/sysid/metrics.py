@@ -19,7 +19,16 @@ from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.rollout import rollout
 
-__all__ = ["evaluate_model", "hub_rate_offset_for_tip_error", "one_step_errors", "perturbed_simulator_errors", "RolloutErrors", "rollout_errors", "rollout_trial", "tip_angle_rad"]
+__all__ = [
+    "evaluate_model",
+    "hub_rate_offset_for_tip_error",
+    "one_step_errors",
+    "perturbed_simulator_errors",
+    "RolloutErrors",
+    "rollout_errors",
+    "rollout_trial",
+    "tip_angle_rad",
+]
 
 
 class _MeanOf:
@@ -90,7 +99,11 @@ def one_step_errors(
     first.to(dtype)
     names = layout.names[:core]
     by_variable = {n: float(v) for n, v in zip(names, np.mean(error**2, axis=0))}
-    tip = {"one_step_tip_rmse_m": float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))} if "ex_m" in by_variable else {}
+    tip = (
+        {"one_step_tip_rmse_m": float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))}
+        if "ex_m" in by_variable
+        else {}
+    )
     return {
         "mse": float(np.mean(error**2)),
         "mse_trivial": float(np.mean(change**2)),
@@ -182,9 +195,15 @@ def rollout_errors(
     actions = np.stack([torques[:, s : s + steps] for s in starts], axis=1).reshape(-1, steps)
     dtype = _dtype(model)
     with torch.inference_mode():
-        predicted = rollout(
-            _deterministic(model), torch.as_tensor(windows[:, 0], dtype=dtype), torch.as_tensor(actions, dtype=dtype)
-        ).double().numpy()
+        predicted = (
+            rollout(
+                _deterministic(model),
+                torch.as_tensor(windows[:, 0], dtype=dtype),
+                torch.as_tensor(actions, dtype=dtype),
+            )
+            .double()
+            .numpy()
+        )
     i_phi, i_ex, i_ey = (layout.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
 
     def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -233,14 +252,20 @@ def rollout_trial(
     first = int(round(start_s / dataset.dt_s))
     steps = int(round(duration_s / dataset.dt_s))
     if first < 0 or steps < 1 or first + steps >= states.shape[0]:
-        raise ValueError(f"start_s={start_s}, duration_s={duration_s} do not fit in a trial of {states.shape[0]} states")
+        raise ValueError(
+            f"start_s={start_s}, duration_s={duration_s} do not fit in a trial of {states.shape[0]} states"
+        )
     dtype = _dtype(model)
     with torch.inference_mode():
-        predicted = rollout(
-            _deterministic(model),
-            torch.as_tensor(states[first : first + 1], dtype=dtype),
-            torch.as_tensor(torques[None, first : first + steps], dtype=dtype),
-        )[0].double().numpy()
+        predicted = (
+            rollout(
+                _deterministic(model),
+                torch.as_tensor(states[first : first + 1], dtype=dtype),
+                torch.as_tensor(torques[None, first : first + steps], dtype=dtype),
+            )[0]
+            .double()
+            .numpy()
+        )
     truth = states[first : first + steps + 1]
     out = {"time_s": (np.arange(steps + 1) + first + layout.history) * dataset.dt_s}
     for name in ("phi_rad", "theta_rad", "ex_m", "ey_m"):
@@ -322,7 +347,12 @@ def perturbed_simulator_errors(
     params = dataset.params
     if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
         params = dataclasses.replace(params, torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
-    plant = make_plant(dataset.metadata.get("plant") or "prb", params=params, dt_s=dataset.dt_s, substeps=int(protocol.get("substeps", 2)))
+    plant = make_plant(
+        dataset.metadata.get("plant") or "prb",
+        params=params,
+        dt_s=dataset.dt_s,
+        substeps=int(protocol.get("substeps", 2)),
+    )
     rng = np.random.default_rng(seed)
     names = dataset.position_names
     i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
@@ -379,6 +409,11 @@ def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float
         raise ValueError(f"tip_error_m must be positive, got {tip_error_m!r}")
     reference_rad_s = 1e-2
     first_step = perturbed_simulator_errors(
-        dataset, hub_offset_rad=0.0, hub_rate_offset_rad_s=reference_rad_s, horizon_s=dataset.dt_s, start_stride=1, history=history
+        dataset,
+        hub_offset_rad=0.0,
+        hub_rate_offset_rad_s=reference_rad_s,
+        horizon_s=dataset.dt_s,
+        start_stride=1,
+        history=history,
     )
     return reference_rad_s * tip_error_m / float(first_step.tip_rmse_m[1])

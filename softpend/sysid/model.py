@@ -65,7 +65,13 @@ MODEL_SCHEMA_VERSION = 1
 #: Largest network :func:`load_model` builds from a metadata file [weights over all members]: 10**8 (400 MB
 #: of float32), far above any model softpend fits, so that a corrupt or hostile file cannot exhaust memory.
 MAX_LOADED_WEIGHTS = 10**8
-ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "softsign": nn.Softsign, "relu": nn.ReLU, "silu": nn.SiLU, "elu": nn.ELU}
+ACTIVATIONS: dict[str, type[nn.Module]] = {
+    "tanh": nn.Tanh,
+    "softsign": nn.Softsign,
+    "relu": nn.ReLU,
+    "silu": nn.SiLU,
+    "elu": nn.ELU,
+}
 
 
 def _wrap(x: Tensor) -> Tensor:
@@ -144,8 +150,12 @@ class DynamicsModel(nn.Module):
         self.n_outputs = p if self.integrate_positions else self._core
         self.register_buffer("_angle_idx", torch.as_tensor(np.flatnonzero(mask), dtype=torch.long), persistent=False)
         self.register_buffer("_linear_idx", torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long), persistent=False)
-        self.register_buffer("_core_angle_mask", torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])), persistent=False)
-        self.register_buffer("_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False)
+        self.register_buffer(
+            "_core_angle_mask", torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])), persistent=False
+        )
+        self.register_buffer(
+            "_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False
+        )
         # theta is a function of the tip position (theta = atan2(-ex, ey) in the data): derive it, and its
         # rate, from the predicted tip instead of letting a redundant prediction drift away from it
         names = layout.names
@@ -214,9 +224,16 @@ class DynamicsModel(nn.Module):
         self.feature_low.copy_(low - margin * span)
         self.feature_high.copy_(high + margin * span)
 
-    def set_normalisation(self, feature_mean: Tensor, feature_std: Tensor, delta_mean: Tensor, delta_std: Tensor) -> None:
+    def set_normalisation(
+        self, feature_mean: Tensor, feature_std: Tensor, delta_mean: Tensor, delta_std: Tensor
+    ) -> None:
         """Store the training-set statistics (standard deviations below 1e-12 are replaced by 1)."""
-        for name, value in (("feature_mean", feature_mean), ("feature_std", feature_std), ("delta_mean", delta_mean), ("delta_std", delta_std)):
+        for name, value in (
+            ("feature_mean", feature_mean),
+            ("feature_std", feature_std),
+            ("delta_mean", delta_mean),
+            ("delta_std", delta_std),
+        ):
             buffer = getattr(self, name)
             value = torch.as_tensor(value, dtype=buffer.dtype)
             if value.shape != buffer.shape or not torch.all(torch.isfinite(value)):
@@ -287,7 +304,9 @@ class DynamicsModel(nn.Module):
         else:  # true velocities: d/dt atan2(-ex, ey)
             ex_dot, ey_dot = core[:, p + self._i_ex], core[:, p + self._i_ey]
             rate = (ex * ey_dot - ey * ex_dot) / (ex * ex + ey * ey).clamp_min(1e-12)
-        return torch.cat([core[:, :i], theta[:, None], core[:, i + 1 : p + i], rate[:, None], core[:, p + i + 1 :]], dim=1)
+        return torch.cat(
+            [core[:, :i], theta[:, None], core[:, i + 1 : p + i], rate[:, None], core[:, p + i + 1 :]], dim=1
+        )
 
     def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
         """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m] (clipped to the limit).
@@ -386,7 +405,9 @@ def model_paths(path: str | Path) -> tuple[Path, Path]:
     return _paths(path)
 
 
-def save_model(path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None) -> tuple[Path, Path]:
+def save_model(
+    path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None
+) -> tuple[Path, Path]:
     """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``).
 
     Returns
@@ -443,7 +464,11 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
         if not p.exists():
             raise ValueError(f"model file not found: {p}")
     meta = read_json_checked(meta_path, "model metadata file", MAX_CONFIG_BYTES)  # a regular file, bounded
-    if not isinstance(meta, dict) or meta.get("schema") != MODEL_SCHEMA_NAME or meta.get("schema_version") != MODEL_SCHEMA_VERSION:
+    if (
+        not isinstance(meta, dict)
+        or meta.get("schema") != MODEL_SCHEMA_NAME
+        or meta.get("schema_version") != MODEL_SCHEMA_VERSION
+    ):
         raise ValueError(f"{meta_path}: not a {MODEL_SCHEMA_NAME} v{MODEL_SCHEMA_VERSION} file")
     try:
         config = dict(meta["config"])
@@ -455,7 +480,9 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
             raise ValueError(f"the network would have about {n_weights:.3g} weights, above {MAX_LOADED_WEIGHTS:.0e}")
         config["layout"] = StateLayout.from_dict(config["layout"])
         members = [DynamicsModel(**config) for _ in range(size)]
-        model: DynamicsModel | DynamicsEnsemble = DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+        model: DynamicsModel | DynamicsEnsemble = (
+            DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]
+        )
         if not isinstance(meta["metadata"], dict):
             raise TypeError(f"metadata must be an object, got {type(meta['metadata']).__name__}")
     except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
@@ -467,7 +494,9 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
         model.load_state_dict(state, strict=True)
     except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
         message = " ".join(str(exc).split())[:300]
-        raise ValueError(f"{weights}: weights do not match {meta_path} or are not weights written by softpend "
-                         f"({type(exc).__name__}: {message})") from None
+        raise ValueError(
+            f"{weights}: weights do not match {meta_path} or are not weights written by softpend "
+            f"({type(exc).__name__}: {message})"
+        ) from None
     model.eval()
     return model, meta["metadata"]

@@ -73,12 +73,20 @@ class ValidPrediction:
 
     def to_dict(self) -> dict[str, Any]:
         """Summary (JSON-ready)."""
-        return {"median_s": self.median_s, "median_lyapunov": self.median_lyapunov, "threshold_m": self.threshold_m,
-                "n_rollouts": int(self.times_s.size), "censored_fraction": float(np.mean(self.censored))}
+        return {
+            "median_s": self.median_s,
+            "median_lyapunov": self.median_lyapunov,
+            "threshold_m": self.threshold_m,
+            "n_rollouts": int(self.times_s.size),
+            "censored_fraction": float(np.mean(self.censored)),
+        }
 
 
 def valid_prediction(
-    tip_error_m: np.ndarray, dt_s: float, length_m: float, fraction: float = VALID_TIP_FRACTION,
+    tip_error_m: np.ndarray,
+    dt_s: float,
+    length_m: float,
+    fraction: float = VALID_TIP_FRACTION,
     lyapunov_rate_per_s: Optional[float] = None,
 ) -> ValidPrediction:
     """Valid prediction time of rollouts from their tip errors.
@@ -139,8 +147,12 @@ def tip_rmse_at_s(tip_error_m: np.ndarray, dt_s: float, horizon_s: float) -> flo
 
 
 def rollout_starts(
-    dataset: TrajectoryDataset, steps: int, stride: int = 10, first: int = 0,
-    max_tilt_rad: Optional[float] = None, trials: Optional[np.ndarray] = None,
+    dataset: TrajectoryDataset,
+    steps: int,
+    stride: int = 10,
+    first: int = 0,
+    max_tilt_rad: Optional[float] = None,
+    trials: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Start samples ``(B, 2)`` rows ``(trial, sample)`` of open-loop rollouts of ``steps`` steps: every
     ``stride``-th sample from ``first`` that leaves ``steps`` samples after it, optionally only those whose
@@ -154,8 +166,10 @@ def rollout_starts(
         theta = np.arctan2(-dataset.column("ex_m"), dataset.column("ey_m"))
         grid = grid[np.abs(theta[grid[:, 0], grid[:, 1]]) <= positive("max_tilt_rad", max_tilt_rad)]
     if grid.shape[0] == 0:
-        raise ValueError(f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples"
-                         + ("" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start"))
+        raise ValueError(
+            f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples"
+            + ("" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start")
+        )
     return grid
 
 
@@ -169,8 +183,13 @@ def _recorded_states(dataset: TrajectoryDataset, starts: np.ndarray) -> np.ndarr
 
 
 def prb_rollout_tip_errors(
-    params: RodParams, dataset: TrajectoryDataset, starts: np.ndarray, steps: int,
-    hub_offset_rad: float = 0.0, substeps: Optional[int] = None, initial_states: Optional[np.ndarray] = None,
+    params: RodParams,
+    dataset: TrajectoryDataset,
+    starts: np.ndarray,
+    steps: int,
+    hub_offset_rad: float = 0.0,
+    substeps: Optional[int] = None,
+    initial_states: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Tip errors ``(B, steps + 1)`` [m] of open-loop PRB rollouts with ``params`` from the recorded joint state
     at each start, or from ``initial_states`` ``(B, 2 (n + 1))`` when given (e.g.
@@ -187,8 +206,10 @@ def prb_rollout_tip_errors(
     """
     states = _recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
     if states.shape != (starts.shape[0], 2 * (params.n_links + 1)):
-        raise ValueError(f"the dataset's joint states have {states.shape[1] // 2} coordinates; a PRB rod of "
-                         f"{params.n_links} links has {params.n_links + 1} (another plant?)")
+        raise ValueError(
+            f"the dataset's joint states have {states.shape[1] // 2} coordinates; a PRB rod of "
+            f"{params.n_links} links has {params.n_links + 1} (another plant?)"
+        )
     states[:, 0] += hub_offset_rad
     steps = positive_int("steps", steps)
     index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
@@ -202,8 +223,13 @@ def prb_rollout_tip_errors(
 
 
 def prb_rollout_trial(
-    params: RodParams, dataset: TrajectoryDataset, trial: int, start_sample: int, steps: int,
-    substeps: Optional[int] = None, initial_state: Optional[np.ndarray] = None,
+    params: RodParams,
+    dataset: TrajectoryDataset,
+    trial: int,
+    start_sample: int,
+    steps: int,
+    substeps: Optional[int] = None,
+    initial_state: Optional[np.ndarray] = None,
 ) -> dict[str, np.ndarray]:
     """One open-loop PRB rollout with ``params`` from the recorded joint state at ``start_sample`` of ``trial``
     (or from ``initial_state``, ``q`` then ``q_dot``, when given), in the format of :func:`softpend.sysid.rollout_trial` (``time_s``; ``phi_rad, theta_rad, ex_m, ey_m`` of the
@@ -211,15 +237,27 @@ def prb_rollout_trial(
     starts = np.array([[int(trial), int(start_sample)]], dtype=np.int64)
     if not 0 <= trial < dataset.n_trials or not 0 <= start_sample < dataset.n_samples - steps:
         raise ValueError(f"trial {trial}, start_sample {start_sample} and {steps} steps do not fit the dataset")
-    state = _recorded_states(dataset, starts) if initial_state is None else np.asarray(initial_state, float).reshape(1, -1)
+    state = (
+        _recorded_states(dataset, starts) if initial_state is None else np.asarray(initial_state, float).reshape(1, -1)
+    )
     index = start_sample + np.arange(steps + 1)
     if substeps is None:
         substeps = int(dataset.metadata.get("protocol", {}).get("substeps", 2))
-    sim = simulate_windows(params, dataset.dt_s, substeps, state, dataset.torques_nm[trial, index[:-1]][None], has_er=False)[0]
+    sim = simulate_windows(
+        params, dataset.dt_s, substeps, state, dataset.torques_nm[trial, index[:-1]][None], has_er=False
+    )[0]
     ex, ey = dataset.column("ex_m")[trial, index], dataset.column("ey_m")[trial, index]
-    out = {"time_s": index * dataset.dt_s, "phi_rad": dataset.column("phi_rad")[trial, index], "phi_rad_model": sim[:, 0],
-           "ex_m": ex, "ex_m_model": sim[:, 1], "ey_m": ey, "ey_m_model": sim[:, 2],
-           "theta_rad": np.arctan2(-ex, ey), "theta_rad_model": np.arctan2(-sim[:, 1], sim[:, 2])}
+    out = {
+        "time_s": index * dataset.dt_s,
+        "phi_rad": dataset.column("phi_rad")[trial, index],
+        "phi_rad_model": sim[:, 0],
+        "ex_m": ex,
+        "ex_m_model": sim[:, 1],
+        "ey_m": ey,
+        "ey_m_model": sim[:, 2],
+        "theta_rad": np.arctan2(-ex, ey),
+        "theta_rad_model": np.arctan2(-sim[:, 1], sim[:, 2]),
+    }
     return out
 
 
@@ -249,14 +287,22 @@ def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: n
     actions = torques[starts[:, :1], i[:, :-1]]
     dtype = _dtype(model)
     with torch.inference_mode():
-        predicted = rollout(_deterministic(model), torch.as_tensor(truth[:, 0], dtype=dtype),
-                            torch.as_tensor(actions, dtype=dtype)).double().numpy()
+        predicted = (
+            rollout(
+                _deterministic(model), torch.as_tensor(truth[:, 0], dtype=dtype), torch.as_tensor(actions, dtype=dtype)
+            )
+            .double()
+            .numpy()
+        )
     i_ex, i_ey = layout.index("ex_m"), layout.index("ey_m")
     return np.hypot(predicted[..., i_ex] - truth[..., i_ex], predicted[..., i_ey] - truth[..., i_ey])
 
 
 def prb_one_step_errors(
-    params: RodParams, dataset: TrajectoryDataset, trials: Optional[np.ndarray] = None, substeps: Optional[int] = None,
+    params: RodParams,
+    dataset: TrajectoryDataset,
+    trials: Optional[np.ndarray] = None,
+    substeps: Optional[int] = None,
 ) -> dict[str, float]:
     """One-step error of a PRB model with ``params`` from the recorded joint state at every sample of the
     given trials: ``mse`` over the observed positions and their backward-difference velocities (the next

@@ -19,7 +19,17 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from softpend.checks import NonFiniteError, boolean, check_work_size, in_range, in_unit_interval, int_at_least, non_negative, one_of, positive_int
+from softpend.checks import (
+    NonFiniteError,
+    boolean,
+    check_work_size,
+    in_range,
+    in_unit_interval,
+    int_at_least,
+    non_negative,
+    one_of,
+    positive_int,
+)
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
 from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
@@ -105,7 +115,9 @@ class TrainConfig:
         if not isinstance(self.integrate_positions, bool):
             raise ValueError(f"integrate_positions must be a bool or None, got {self.integrate_positions!r}")
         boolean("limit_tip_reach", self.limit_tip_reach)
-        if not self.hidden_widths or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden_widths):
+        if not self.hidden_widths or any(
+            isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden_widths
+        ):
             raise ValueError(f"hidden_widths must be positive integers, got {self.hidden_widths!r}")
         one_of("activation", self.activation, ACTIVATIONS)
         for name in ("rollout_steps", "rollout_epochs", "seed"):
@@ -241,9 +253,13 @@ def _train_member(
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
     scheduler: torch.optim.lr_scheduler.LRScheduler
     if config.lr_schedule == "cosine":
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100)
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
+            optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100
+        )
     else:
-        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimiser, factor=0.5, patience=max(1, config.patience // 3))
+        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+            optimiser, factor=0.5, patience=max(1, config.patience // 3)
+        )
     n = x_train.shape[0]
     best = (math.inf, 0, copy.deepcopy(net.state_dict()))
     train_losses: list[float] = []
@@ -289,7 +305,8 @@ def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: Tra
     weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
     networks = 8.0 * 5 * config.ensemble_size * weights + 8.0 * 4 * min(config.batch_size, transitions) * sum(widths)
     check_work_size(
-        "this dynamics model fit", data + networks,
+        "this dynamics model fit",
+        data + networks,
         f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
     )
 
@@ -304,7 +321,9 @@ def _check_finite_loss(desc: str, epoch: int, train_loss: float, val_loss: float
         )
 
 
-def _windows(layout: StateLayout, dataset: TrajectoryDataset, trials: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+def _windows(
+    layout: StateLayout, dataset: TrajectoryDataset, trials: np.ndarray, steps: int
+) -> tuple[np.ndarray, np.ndarray]:
     """All windows of ``steps + 1`` consecutive states (and their ``steps`` torques) of the trials."""
     states = layout.states(dataset)[trials]
     torques = layout.torques(dataset)[trials]
@@ -315,7 +334,9 @@ def _windows(layout: StateLayout, dataset: TrajectoryDataset, trials: np.ndarray
     return states[:, idx].reshape(-1, steps + 1, layout.dim), torques[:, idx[:, :-1]].reshape(-1, steps)
 
 
-def _multistep_loss(model: DynamicsModel, states: torch.Tensor, torques: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+def _multistep_loss(
+    model: DynamicsModel, states: torch.Tensor, torques: torch.Tensor, scale: torch.Tensor
+) -> torch.Tensor:
     """Mean squared scaled core-state error of the model's open-loop predictions over a window."""
     x = states[:, 0]
     core = model.layout.core_dim
@@ -420,7 +441,9 @@ def fit_dynamics_model(
     # without plant parameters (a rig file), the largest recorded torque stands in for the limit
     limit = params.torque_limit_nm if params is not None else float(np.abs(dataset.torques_nm).max())
     if limit <= 0:
-        raise ValueError("dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from")
+        raise ValueError(
+            "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
+        )
 
     reach = _tip_reach_m(dataset) if config.limit_tip_reach else None
 
@@ -429,7 +452,13 @@ def fit_dynamics_model(
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed * 1000 + index)
             return DynamicsModel(
-                layout, dataset.dt_s, limit, config.hidden_widths, config.activation, config.integrate_positions, tip_reach_m=reach
+                layout,
+                dataset.dt_s,
+                limit,
+                config.hidden_widths,
+                config.activation,
+                config.integrate_positions,
+                tip_reach_m=reach,
             )
 
     members = [new_member(k) for k in range(config.ensemble_size)]

@@ -2,7 +2,14 @@
 video files into time-stamped CSV logs."""
 
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, fit_affine, tip_angle_rad
-from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, read_sidecar, render_video
+from softpend.vision.camera import (
+    DEFAULT_MARKERS_M,
+    CameraEffects,
+    CameraModel,
+    SyntheticCamera,
+    read_sidecar,
+    render_video,
+)
 from softpend.vision.tracker import BLUE_HSV, GREEN_HSV, ColourRange, Detection, TipTracker, find_blobs
 
 __all__ = [

@@ -26,7 +26,9 @@ def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.
     q[0] = start_angle_rad
     plant.reset(q, qd)
     limit = plant.params.torque_limit_nm
-    torque = np.clip(band_limited_noise(np.random.default_rng(seed), n_steps, 0.7 * limit, 2.0, plant.dt_s), -limit, limit)
+    torque = np.clip(
+        band_limited_noise(np.random.default_rng(seed), n_steps, 0.7 * limit, 2.0, plant.dt_s), -limit, limit
+    )
     times, points, hub = [], [], []
     for k in range(n_steps):
         times.append(k * plant.dt_s)

@@ -20,7 +20,14 @@ import numpy as np
 from softpend.checks import non_negative
 from softpend.vision.tracker import GREEN_HSV, ColourRange, find_blobs
 
-__all__ = ["AffineCalibration", "calibrate_from_markers", "fit_affine", "points_array", "read_json_file", "tip_angle_rad"]
+__all__ = [
+    "AffineCalibration",
+    "calibrate_from_markers",
+    "fit_affine",
+    "points_array",
+    "read_json_file",
+    "tip_angle_rad",
+]
 
 #: Largest calibration file read [bytes] (a calibration is a few hundred bytes).
 MAX_CALIBRATION_BYTES = 1 << 20
@@ -93,7 +100,9 @@ class AffineCalibration:
         try:
             a = np.array(self.pixel_to_metre, dtype=float)
         except (TypeError, ValueError, OverflowError):
-            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got {_short(self.pixel_to_metre)}") from None
+            raise ValueError(
+                f"pixel_to_metre must be a finite (2, 3) matrix, got {_short(self.pixel_to_metre)}"
+            ) from None
         if a.shape != (2, 3) or not np.all(np.isfinite(a)):
             raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got shape {a.shape}")
         if abs(np.linalg.det(a[:, :2])) < 1e-15:
@@ -137,7 +146,9 @@ class AffineCalibration:
     @classmethod
     def _from_data(cls, data) -> "AffineCalibration":
         if not isinstance(data, dict) or "pixel_to_metre" not in data:
-            raise ValueError(f"calibration must be a JSON object with a 'pixel_to_metre' 2x3 matrix, got {_short(data)}")
+            raise ValueError(
+                f"calibration must be a JSON object with a 'pixel_to_metre' 2x3 matrix, got {_short(data)}"
+            )
         unknown = sorted(set(data) - {"pixel_to_metre", "residual_rms_m"})
         if unknown:
             raise ValueError(f"calibration has unknown keys {unknown}")

@@ -51,11 +51,12 @@ def check_fps(name: str, value) -> float:
         raise ValueError(f"{name} must be at most {MAX_FPS:g} frames/s, got {value!r}")
     return fps
 
+
 #: Reference-marker layout in the rod plane [m] (asymmetric, so the marker correspondence is unique).
 DEFAULT_MARKERS_M: tuple[tuple[float, float], ...] = ((-0.42, 0.31), (0.42, 0.31), (0.40, -0.30), (-0.22, -0.33))
 
-_TIP_BGR = (200, 70, 20)        # the blue dot
-_MARKER_BGR = (40, 170, 30)     # green markers
+_TIP_BGR = (200, 70, 20)  # the blue dot
+_MARKER_BGR = (40, 170, 30)  # green markers
 _ROD_BGR = (70, 70, 70)
 _HUB_MARKER_BGR = (180, 0, 220)  # magenta
 _HUB_BGR = (20, 20, 20)
@@ -144,8 +145,15 @@ class CameraEffects:
     @classmethod
     def noisy(cls) -> "CameraEffects":
         """The "noisy" condition of the benchmark: noise, blur, lighting changes and clutter."""
-        return cls(noise_std_dn=6.0, exposure_s=0.008, blur_subframes=5, lighting_amplitude=0.25,
-                   lighting_frequency_hz=0.5, gradient=0.3, clutter=True)
+        return cls(
+            noise_std_dn=6.0,
+            exposure_s=0.008,
+            blur_subframes=5,
+            lighting_amplitude=0.25,
+            lighting_frequency_hz=0.5,
+            gradient=0.3,
+            clutter=True,
+        )
 
     @classmethod
     def rig(cls) -> "CameraEffects":
@@ -213,9 +221,12 @@ class SyntheticCamera:
         # sensor noise: per frame a random crop of one larger noise field (fast, and distinct per frame)
         self._noise_margin = 97
         self._noise_field = (
-            self._rng.standard_normal((m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3), dtype=np.float32)
+            self._rng.standard_normal(
+                (m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3), dtype=np.float32
+            )
             * np.float32(self.effects.noise_std_dn)
-            if self.effects.noise_std_dn > 0 else None
+            if self.effects.noise_std_dn > 0
+            else None
         )
 
     # ------------------------------------------------------------------ scene
@@ -224,19 +235,34 @@ class SyntheticCamera:
         image = np.full((m.height_px, m.width_px, 3), (205, 210, 215), dtype=np.uint8)
         if self.effects.clutter:
             rng = np.random.default_rng(self.seed + 7919)
-            palette = [(60, 60, 200), (40, 140, 220), (30, 200, 230), (150, 150, 150), (100, 90, 120), (180, 200, 230),
-                       (80, 110, 140)]  # reds, oranges, yellows, greys, browns: no blue, green or magenta
+            palette = [
+                (60, 60, 200),
+                (40, 140, 220),
+                (30, 200, 230),
+                (150, 150, 150),
+                (100, 90, 120),
+                (180, 200, 230),
+                (80, 110, 140),
+            ]  # reds, oranges, yellows, greys, browns: no blue, green or magenta
             for _ in range(25):
                 colour = palette[rng.integers(len(palette))]
                 kind = rng.integers(3)
                 x, y = int(rng.integers(0, m.width_px)), int(rng.integers(0, m.height_px))
                 if kind == 0:
-                    cv2.rectangle(image, (x, y), (x + int(rng.integers(10, 90)), y + int(rng.integers(10, 60))), colour, -1)
+                    cv2.rectangle(
+                        image, (x, y), (x + int(rng.integers(10, 90)), y + int(rng.integers(10, 60))), colour, -1
+                    )
                 elif kind == 1:
                     cv2.circle(image, (x, y), int(rng.integers(5, 30)), colour, -1, cv2.LINE_AA)
                 else:
-                    cv2.line(image, (x, y), (int(rng.integers(0, m.width_px)), int(rng.integers(0, m.height_px))),
-                             colour, int(rng.integers(1, 4)), cv2.LINE_AA)
+                    cv2.line(
+                        image,
+                        (x, y),
+                        (int(rng.integers(0, m.width_px)), int(rng.integers(0, m.height_px))),
+                        colour,
+                        int(rng.integers(1, 4)),
+                        cv2.LINE_AA,
+                    )
             for _ in range(6):  # tiny blue specks (below any sensible min_area_px)
                 x, y = int(rng.integers(0, m.width_px)), int(rng.integers(0, m.height_px))
                 cv2.circle(image, (x, y), 1, _TIP_BGR, -1)
@@ -259,7 +285,9 @@ class SyntheticCamera:
         cv2.polylines(image, [fixed], False, _ROD_BGR, width, cv2.LINE_AA, shift)
         hub = pixels[0]
         half = 0.6 * width + 3
-        cv2.rectangle(image, (int(hub[0] - half), int(hub[1] - half)), (int(hub[0] + half), int(hub[1] + half)), _HUB_BGR, -1)
+        cv2.rectangle(
+            image, (int(hub[0] - half), int(hub[1] - half)), (int(hub[0] + half), int(hub[1] + half)), _HUB_BGR, -1
+        )
         if self.hub_marker_radius_m:
             if hub_angle_rad is None:
                 d = points[1] - points[0]
@@ -319,8 +347,13 @@ class SyntheticCamera:
         np.clip(image, 0, 255, out=image)
         return image.astype(np.uint8), tip
 
-    def frames(self, times_s: np.ndarray, link_points_m: np.ndarray, frame_times_s: np.ndarray,
-               hub_angles_rad: Optional[np.ndarray] = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    def frames(
+        self,
+        times_s: np.ndarray,
+        link_points_m: np.ndarray,
+        frame_times_s: np.ndarray,
+        hub_angles_rad: Optional[np.ndarray] = None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """Frames for a sampled trajectory.
 
         Parameters
@@ -360,8 +393,15 @@ class SyntheticCamera:
 def _circle(image: np.ndarray, centre_px: np.ndarray, radius_px: float, colour: tuple[int, int, int]) -> None:
     shift = 4
     scale = 1 << shift
-    cv2.circle(image, (int(round(centre_px[0] * scale)), int(round(centre_px[1] * scale))),
-               int(round(radius_px * scale)), colour, -1, cv2.LINE_AA, shift)
+    cv2.circle(
+        image,
+        (int(round(centre_px[0] * scale)), int(round(centre_px[1] * scale))),
+        int(round(radius_px * scale)),
+        colour,
+        -1,
+        cv2.LINE_AA,
+        shift,
+    )
 
 
 def render_video(
@@ -422,8 +462,12 @@ def render_video(
     rng = np.random.default_rng(camera.seed + 104729)
     stamps = frame_times + clock_offset_s + timestamp_jitter_s * rng.standard_normal(len(frame_times))
     model = camera.model
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc),  # type: ignore[attr-defined]  # not in the stubs
-                             fps, (model.width_px, model.height_px))
+    writer = cv2.VideoWriter(
+        str(path),
+        cv2.VideoWriter_fourcc(*fourcc),  # type: ignore[attr-defined]  # not in the stubs
+        fps,
+        (model.width_px, model.height_px),
+    )
     if not writer.isOpened():
         raise ValueError(f"fourcc {fourcc!r}: cannot open a video writer for {path}")
     hidden = set(int(i) for i in drop_dot_frames)
@@ -503,7 +547,8 @@ def check_sidecar(data) -> dict:
     if out.get("timestamps_s") is not None:
         stamps = out["timestamps_s"]
         ok = isinstance(stamps, list) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in stamps)
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in stamps
+        )
         if not ok:
             raise ValueError("timestamps_s must be a list of finite numbers [s]")
         out["timestamps_s"] = [float(v) for v in stamps]

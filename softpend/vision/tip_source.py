@@ -37,8 +37,7 @@ import numpy as np
 
 from softpend.checks import in_unit_interval, non_negative, positive
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
-from softpend.vision.camera import (DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot,
-                                    check_fps)
+from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot, check_fps
 from softpend.vision.tracker import Detection, TipTracker
 
 __all__ = [
@@ -123,8 +122,12 @@ class FrameTracker:
         Reference-marker layout in the rod plane [m] (used only without ``calibration``).
     """
 
-    def __init__(self, tracker: Optional[TipTracker] = None, calibration: Optional[AffineCalibration] = None,
-                 markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M) -> None:
+    def __init__(
+        self,
+        tracker: Optional[TipTracker] = None,
+        calibration: Optional[AffineCalibration] = None,
+        markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M,
+    ) -> None:
         if tracker is not None and not isinstance(tracker, TipTracker):
             raise ValueError(f"tracker must be a TipTracker, got {type(tracker).__name__}")
         if calibration is not None and not isinstance(calibration, AffineCalibration):
@@ -165,8 +168,9 @@ class ThreadedTipSource:
 
     name = "camera"
 
-    def __init__(self, frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None,
-                 max_queue: int = 10000) -> None:
+    def __init__(
+        self, frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None, max_queue: int = 10000
+    ) -> None:
         self.frame_tracker = frame_tracker if frame_tracker is not None else FrameTracker()
         self.on_frame = on_frame
         self._queue: collections.deque[TipMeasurement] = collections.deque(maxlen=int(max_queue))
@@ -238,8 +242,9 @@ class ThreadedTipSource:
     def _release(self) -> None:
         """Free the camera (called on the thread when :meth:`_run` ends)."""
 
-    def _deliver(self, index: int, frame: np.ndarray, capture_time_s: float,
-                 delivered_time_s: Optional[float] = None) -> TipMeasurement:
+    def _deliver(
+        self, index: int, frame: np.ndarray, capture_time_s: float, delivered_time_s: Optional[float] = None
+    ) -> TipMeasurement:
         """Track ``frame`` now and queue its measurement (delivered now on the host clock, unless given)."""
         x_m, y_m, detection = self.frame_tracker(frame)
         delivered = time.monotonic() if delivered_time_s is None else delivered_time_s
@@ -252,7 +257,6 @@ class ThreadedTipSource:
         with self._lock:
             self._queue.append(measurement)
         return measurement
-
 
 
 # ---------------------------------------------------------------------- scenes
@@ -385,17 +389,27 @@ class SyntheticLiveCamera(ThreadedTipSource):
 
     name = "synthetic-camera"
 
-    def __init__(self, scene: Scene, clock, fps: float = 60.0, latency_s: float = 0.02,
-                 effects: Optional[CameraEffects] = None, model: Optional[CameraModel] = None,
-                 faults: Optional[CameraFaults] = None, seed: int = 0,
-                 frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        clock,
+        fps: float = 60.0,
+        latency_s: float = 0.02,
+        effects: Optional[CameraEffects] = None,
+        model: Optional[CameraModel] = None,
+        faults: Optional[CameraFaults] = None,
+        seed: int = 0,
+        frame_tracker: Optional[FrameTracker] = None,
+        on_frame: Optional[FrameHook] = None,
+    ) -> None:
         super().__init__(frame_tracker, on_frame)
         self.scene = scene
         self.clock = clock
         self.fps = check_fps("fps", fps)
         self.latency_s = non_negative("latency_s", latency_s)
-        self.camera = SyntheticCamera(model=model, effects=effects if effects is not None else CameraEffects.rig(),
-                                      seed=seed)
+        self.camera = SyntheticCamera(
+            model=model, effects=effects if effects is not None else CameraEffects.rig(), seed=seed
+        )
         self.faults = faults if faults is not None else CameraFaults()
         self._rng = np.random.default_rng(self.faults.seed)
         self.frames_stalled = 0
@@ -466,8 +480,15 @@ class CaptureTipSource(ThreadedTipSource):
 
     name = "capture"
 
-    def __init__(self, device: int | str, latency_s: float = 0.0, fps: Optional[float] = None, timeout_s: float = 2.0,
-                 frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
+    def __init__(
+        self,
+        device: int | str,
+        latency_s: float = 0.0,
+        fps: Optional[float] = None,
+        timeout_s: float = 2.0,
+        frame_tracker: Optional[FrameTracker] = None,
+        on_frame: Optional[FrameHook] = None,
+    ) -> None:
         import cv2
 
         if isinstance(device, bool) or not isinstance(device, (int, str)) or device == "":
@@ -507,9 +528,13 @@ class CaptureTipSource(ThreadedTipSource):
 MAX_DEVICE_INDEX = 10_000
 
 
-def open_tip_source(camera: str, latency_s: float = 0.0, fps: Optional[float] = None,
-                    frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None
-                    ) -> CaptureTipSource:
+def open_tip_source(
+    camera: str,
+    latency_s: float = 0.0,
+    fps: Optional[float] = None,
+    frame_tracker: Optional[FrameTracker] = None,
+    on_frame: Optional[FrameHook] = None,
+) -> CaptureTipSource:
     """The :class:`CaptureTipSource` of a ``--camera`` argument: digits are a device index, anything else a
     stream URL or a file that ``cv2.VideoCapture`` opens."""
     if not isinstance(camera, str) or not camera.strip():

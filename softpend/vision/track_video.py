@@ -19,14 +19,21 @@ from softpend.vision.tracker import MAGENTA_HSV, Detection, TipTracker
 __all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_live", "track_video"]
 
 
-def hub_marker_tracker(calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06) -> TipTracker:
+def hub_marker_tracker(
+    calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06
+) -> TipTracker:
     """A tracker for the magenta hub marker that searches only within ``radius_m`` of the hub axis."""
     centre = calibration.to_pixels(np.zeros(2))
     r = radius_m / calibration.metres_per_pixel
     h, w = frame_shape[:2]
-    region = (max(int(centre[0] - r), 0), max(int(centre[1] - r), 0), min(int(centre[0] + r) + 1, w),
-              min(int(centre[1] + r) + 1, h))
+    region = (
+        max(int(centre[0] - r), 0),
+        max(int(centre[1] - r), 0),
+        min(int(centre[0] + r) + 1, w),
+        min(int(centre[1] + r) + 1, h),
+    )
     return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=region)
+
 
 #: Columns of the tracking CSV.
 TRACK_COLUMNS: tuple[str, ...] = (
@@ -87,8 +94,19 @@ def track_frames(
             if not hub.lost:
                 hx, hy = calibration.to_metres(np.array([hub.x_px, hub.y_px]))
                 hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0
-        row = [i, stamp(i), detection.x_px, detection.y_px, detection.area_px, float(x_m), float(y_m), theta,
-               int(detection.lost), hub_angle, hub_lost]
+        row = [
+            i,
+            stamp(i),
+            detection.x_px,
+            detection.y_px,
+            detection.area_px,
+            float(x_m),
+            float(y_m),
+            theta,
+            int(detection.lost),
+            hub_angle,
+            hub_lost,
+        ]
         if log is not None:
             log.append(row)
         if on_detection is not None:
@@ -197,8 +215,12 @@ def track_video(
         hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
         partial = _partial_path(out_csv)
         try:
-            with SampleLog(partial, TRACK_COLUMNS, metadata={"video": str(video), "calibration": calibration.to_json()},
-                           fsync_every_s=1.0) as log:
+            with SampleLog(
+                partial,
+                TRACK_COLUMNS,
+                metadata={"video": str(video), "calibration": calibration.to_json()},
+                fsync_every_s=1.0,
+            ) as log:
                 rows = track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
             os.replace(partial, out_csv)
         except BaseException:
@@ -218,7 +240,7 @@ def _check_output_path(out_csv: Path, video: Optional[Path]) -> None:
         raise ValueError(f"out_csv {out_csv}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"out_csv {out_csv}: folder {parent} is not writable")
-    for name, path in (() if video is None else (("video", video), ("the video's sidecar", Path(str(video) + ".json")))):
+    for name, path in () if video is None else (("video", video), ("the video's sidecar", Path(str(video) + ".json"))):
         if path.exists() and out_csv.exists() and os.path.samefile(path, out_csv):
             raise ValueError(f"out_csv {out_csv} is {name}; choose another output")
 
@@ -280,8 +302,21 @@ def track_live(
                 hx, hy = frame_tracker.calibration.to_metres(np.array([found.x_px, found.y_px]))
                 hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0
         theta = measurement.theta_rad
-        rows.append([index, measurement.capture_time_s, detection.x_px, detection.y_px, detection.area_px,
-                     measurement.x_m, measurement.y_m, theta, int(measurement.lost), hub_angle, hub_lost])
+        rows.append(
+            [
+                index,
+                measurement.capture_time_s,
+                detection.x_px,
+                detection.y_px,
+                detection.area_px,
+                measurement.x_m,
+                measurement.y_m,
+                theta,
+                int(measurement.lost),
+                hub_angle,
+                hub_lost,
+            ]
+        )
         if previous_hook is not None:
             previous_hook(index, frame, detection, measurement)
 
@@ -294,8 +329,9 @@ def track_live(
         bar = tqdm(desc="tracking", unit="frame", mininterval=1.0)
     written = 0
     try:
-        with SampleLog(partial, TRACK_COLUMNS, metadata={"camera": getattr(source, "name", "camera")},
-                       fsync_every_s=1.0) as log:
+        with SampleLog(
+            partial, TRACK_COLUMNS, metadata={"camera": getattr(source, "name", "camera")}, fsync_every_s=1.0
+        ) as log:
             start = time.monotonic()
             source.start()
             try:

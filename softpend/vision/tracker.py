@@ -45,8 +45,11 @@ class ColourRange:
     def __post_init__(self) -> None:
         for name in ("lower_hsv", "upper_hsv"):
             value = getattr(self, name)
-            ok = isinstance(value, (tuple, list)) and len(value) == 3 and all(
-                isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)
+            ok = (
+                isinstance(value, (tuple, list))
+                and len(value) == 3
+                and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)
+            )
             if not ok:
                 raise ValueError(f"{name} must be three integers in [0, 255], got {value!r}")
         if any(lo > hi for lo, hi in zip(self.lower_hsv, self.upper_hsv)):
@@ -78,13 +81,20 @@ class Detection:
 
 
 def _validate_frame(frame_bgr: np.ndarray) -> None:
-    if not isinstance(frame_bgr, np.ndarray) or frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
+    if (
+        not isinstance(frame_bgr, np.ndarray)
+        or frame_bgr.ndim != 3
+        or frame_bgr.shape[2] != 3
+        or frame_bgr.dtype != np.uint8
+    ):
         shape = getattr(frame_bgr, "shape", None)
         dtype = getattr(frame_bgr, "dtype", type(frame_bgr).__name__)
         raise ValueError(f"frame_bgr must be an (H, W, 3) uint8 BGR image, got shape {shape} of {dtype}")
     if min(frame_bgr.shape[:2]) < MIN_FRAME_SIDE_PX:
-        raise ValueError(f"frame_bgr must be at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX} pixels, "
-                         f"got {frame_bgr.shape[1]}x{frame_bgr.shape[0]}")
+        raise ValueError(
+            f"frame_bgr must be at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX} pixels, "
+            f"got {frame_bgr.shape[1]}x{frame_bgr.shape[0]}"
+        )
 
 
 def _blobs(blurred: np.ndarray, min_area_px: float) -> list[tuple[float, np.ndarray]]:
@@ -218,8 +228,13 @@ class TipTracker:
             if _touches_inner_edge(detection.contour, crop.shape, (x0, y0), (h, w)):
                 # the blob runs out of the region: its centre is unknown (and it is bigger than a marker)
                 return Detection(math.nan, math.nan, detection.area_px, True, None)
-            return Detection(detection.x_px + x0, detection.y_px + y0, detection.area_px, False,
-                             detection.contour + np.array([[x0, y0]], dtype=detection.contour.dtype))
+            return Detection(
+                detection.x_px + x0,
+                detection.y_px + y0,
+                detection.area_px,
+                False,
+                detection.contour + np.array([[x0, y0]], dtype=detection.contour.dtype),
+            )
         x_off = y_off = 0
         image = frame_bgr
         if self.search_radius_px is not None and self._last is not None:
@@ -230,8 +245,9 @@ class TipTracker:
             if image.size == 0:  # the last position lies outside this (smaller) frame
                 image, x_off, y_off = frame_bgr, 0, 0
         detection = self._track_image(image, max_area)
-        if image is not frame_bgr and (detection.lost or _touches_inner_edge(detection.contour, image.shape,
-                                                                             (x_off, y_off), (h, w))):
+        if image is not frame_bgr and (
+            detection.lost or _touches_inner_edge(detection.contour, image.shape, (x_off, y_off), (h, w))
+        ):
             # nothing in the window, or a blob cut by the window's edge (it extends beyond: search it whole)
             detection = self._track_image(frame_bgr, max_area)
             x_off = y_off = 0
@@ -245,15 +261,15 @@ class TipTracker:
         return Detection(x, y, detection.area_px, False, contour)
 
     def _track_image(self, image: np.ndarray, max_area_px: float) -> Detection:
-        mask = self.colour.mask(image)                  # 1-2: colour range -> binary image
-        blurred = cv2.GaussianBlur(mask, (3, 3), 0)     # 3: 3x3 Gaussian blur
-        blobs = _blobs(blurred, self.min_area_px)       # 4-5: contours, sorted by area
+        mask = self.colour.mask(image)  # 1-2: colour range -> binary image
+        blurred = cv2.GaussianBlur(mask, (3, 3), 0)  # 3: 3x3 Gaussian blur
+        blobs = _blobs(blurred, self.min_area_px)  # 4-5: contours, sorted by area
         if not blobs:
             return Detection(math.nan, math.nan, 0.0, True, None)
         area, contour = blobs[0]
-        if area > max_area_px:                           # too big to be the dot: no guess
+        if area > max_area_px:  # too big to be the dot: no guess
             return Detection(math.nan, math.nan, area, True, contour)
-        x, y = _centroid(blurred, contour)              # 6: centre of the region
+        x, y = _centroid(blurred, contour)  # 6: centre of the region
         return Detection(x, y, area, False, contour)
 
 
@@ -267,8 +283,9 @@ def _pixel_index(value) -> int:
     return int(number)
 
 
-def _touches_inner_edge(contour: Optional[np.ndarray], window_shape: tuple[int, ...], offset: tuple[int, int],
-                        frame_shape: tuple[int, int]) -> bool:
+def _touches_inner_edge(
+    contour: Optional[np.ndarray], window_shape: tuple[int, ...], offset: tuple[int, int], frame_shape: tuple[int, int]
+) -> bool:
     """True if ``contour`` (window coordinates) reaches an edge of the search window that is not an edge of
     the frame (the blob may continue outside the window)."""
     if contour is None:
@@ -277,5 +294,9 @@ def _touches_inner_edge(contour: Optional[np.ndarray], window_shape: tuple[int, 
     win_h, win_w = window_shape[:2]
     x_off, y_off = offset
     frame_h, frame_w = frame_shape
-    return ((x <= 0 and x_off > 0) or (y <= 0 and y_off > 0) or (x + w >= win_w and x_off + win_w < frame_w)
-            or (y + h >= win_h and y_off + win_h < frame_h))
+    return (
+        (x <= 0 and x_off > 0)
+        or (y <= 0 and y_off > 0)
+        or (x + w >= win_w and x_off + win_w < frame_w)
+        or (y + h >= win_h and y_off + win_h < frame_h)
+    )

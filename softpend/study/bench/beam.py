@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
 from softpend.plant import RodParams
 from softpend.study.bench.plant import env_steps_per_s
-from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
 
 N_STEPS = 2000
 

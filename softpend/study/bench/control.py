@@ -50,8 +50,11 @@ def bench_control(include_learned: bool = True) -> dict[str, float]:
     out["lqr_upright_std_rad"] = run.upright_std_rad
     out["lqr_hold_std_rad"] = float(np.sqrt(np.mean(run.theta_rad[-500:] ** 2)))
     obs_lqr = LQRController.from_params(params, state="observation")
-    out["lqr_observation_upright_std_rad"] = evaluate_controller(
-        obs_lqr, upright, seeds=(0,), duration_s=10.0, initial_state=tilt).results[0].upright_std_rad
+    out["lqr_observation_upright_std_rad"] = (
+        evaluate_controller(obs_lqr, upright, seeds=(0,), duration_s=10.0, initial_state=tilt)
+        .results[0]
+        .upright_std_rad
+    )
     out["lqr_region_of_attraction_rad"] = region_of_attraction_rad(lqr, task).largest_recovered_rad
     swing = evaluate_controller(EnergySwingUpController(params), task, seeds=SWINGUP_SEEDS, duration_s=10.0)
     out["swingup_lqr_time_s"] = float(max(r.swing_up_time_s for r in swing.results))
@@ -64,6 +67,9 @@ def bench_control(include_learned: bool = True) -> dict[str, float]:
         dataset = babble(params=params, seed=0, progress=False)
         model = fit_dynamics_model(dataset, progress=False).model
         learned = lqr_from_learned_model(model, params)
-        out["learned_lqr_upright_std_rad"] = evaluate_controller(
-            learned, upright, seeds=(0,), duration_s=10.0, initial_state=tilt).results[0].upright_std_rad
+        out["learned_lqr_upright_std_rad"] = (
+            evaluate_controller(learned, upright, seeds=(0,), duration_s=10.0, initial_state=tilt)
+            .results[0]
+            .upright_std_rad
+        )
     return out

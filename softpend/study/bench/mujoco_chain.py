@@ -30,8 +30,18 @@ from softpend.plant.params import RodParams
 from softpend.plant.prb import link_inertials
 from softpend.study.simulators import hub_error_inputs
 
-__all__ = ["CONTROL_STEP_S", "INTEGRATORS", "MuJoCoChain", "bench_figures", "chain_mjcf", "diverges",
-           "mujoco_available", "mujoco_hub_errors_rad", "rollout_rod_steps_per_s", "steps_per_s"]
+__all__ = [
+    "CONTROL_STEP_S",
+    "INTEGRATORS",
+    "MuJoCoChain",
+    "bench_figures",
+    "chain_mjcf",
+    "diverges",
+    "mujoco_available",
+    "mujoco_hub_errors_rad",
+    "rollout_rod_steps_per_s",
+    "steps_per_s",
+]
 
 #: Control step of the comparisons [s] (the environments' ``dt_s``).
 CONTROL_STEP_S = 0.01
@@ -77,8 +87,8 @@ def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, in
         '  <compiler angle="radian" autolimits="true"/>',
         f'  <option timestep="{r(float(timestep_s))}" integrator="{integrator}" gravity="0 {r(-p.gravity_mps2)} 0">',
         '    <flag contact="disable"/>',
-        '  </option>',
-        '  <worldbody>',
+        "  </option>",
+        "  <worldbody>",
         '    <body name="hub" pos="0 0 0">',
         f'      <joint name="hub" type="hinge" axis="0 0 1" damping="{r(p.hub_friction_nms_per_rad)}"/>',
         f'      <inertial pos="0 0 0" mass="{r(p.mass_kg)}" diaginertia="{r(p.hub_inertia_kgm2)} '
@@ -126,8 +136,9 @@ class MuJoCoChain:
         Control step [s].
     """
 
-    def __init__(self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4",
-                 dt_s: float = 0.01) -> None:
+    def __init__(
+        self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4", dt_s: float = 0.01
+    ) -> None:
         import mujoco
 
         self.params = params if params is not None else RodParams()
@@ -253,12 +264,15 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
             step(torque)
         best = min(best, time.perf_counter() - start)
         if chain.diverged:
-            raise RuntimeError(f"the MuJoCo chain diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})")
+            raise RuntimeError(
+                f"the MuJoCo chain diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})"
+            )
     return n_steps / best
 
 
-def rollout_rod_steps_per_s(n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6,
-                            repeats: int = 3) -> float:
+def rollout_rod_steps_per_s(
+    n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3
+) -> float:
     """Rod-steps of 0.01 s per wall-clock second of ``mujoco.rollout`` over ``batch_size`` rods from the hanging
     rod on one thread (one ``MjData``), random torques held over each control step; the best of ``repeats``
     runs (the state arrays are allocated once, outside the timing)."""
@@ -284,7 +298,9 @@ def rollout_rod_steps_per_s(n_links: int, integrator: str, substeps: int, batch_
         rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)
         best = min(best, time.perf_counter() - start)
     if not np.isfinite(state[:, -1]).all():
-        raise RuntimeError(f"mujoco.rollout diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})")
+        raise RuntimeError(
+            f"mujoco.rollout diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})"
+        )
     return batch_size * n_steps / best
 
 
@@ -308,12 +324,15 @@ def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> d
     from softpend.plant.batched import stable_substeps
 
     figures: dict[str, float] = {}
-    n10 = tuple((stem, integrator, substeps if substeps is not None else stable_substeps(RodParams(n_links=10)))
-                for stem, integrator, substeps in CONFIGURATIONS_N10)
+    n10 = tuple(
+        (stem, integrator, substeps if substeps is not None else stable_substeps(RodParams(n_links=10)))
+        for stem, integrator, substeps in CONFIGURATIONS_N10
+    )
     for n_links, configurations in ((4, CONFIGURATIONS_N4), (10, n10)):
         for stem, integrator, substeps in configurations:
-            figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(n_links, integrator, substeps,
-                                                                    n_steps=4000 if n_links == 4 else 1000)
+            figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(
+                n_links, integrator, substeps, n_steps=4000 if n_links == 4 else 1000
+            )
             figures[f"{stem}_substeps_n{n_links}"] = float(substeps)
         compared = {stem: (integrator, substeps) for stem, integrator, substeps in configurations + (CONVERGED,)}
         figures.update(mujoco_hub_errors_rad(references[n_links], compared))
@@ -323,14 +342,16 @@ def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> d
     figures["mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"] = rollout4
     rk4_4 = figures["mujoco_rk4_5ms_steps_per_s_n4"]
     rk4_10 = figures["mujoco_rk4_stable_steps_per_s_n10"]
-    figures.update({
-        "exudyn_env_over_mujoco_rk4_n4": base["env_steps_per_s_n4"] / rk4_4,
-        "exudyn_solver_over_mujoco_rk4_n4": base["solver_steps_per_s_n4"] / rk4_4,
-        "batched_over_mujoco_rk4_n4": base["batched_rod_steps_per_s_n4"] / rk4_4,
-        "batched_over_mujoco_rk4_n10": base["batched_rod_steps_per_s_n10"] / rk4_10,
-        "batched_rk4_over_mujoco_rk4_n4": base["batched_rk4_rod_steps_per_s_n4"] / rk4_4,
-        "batched_rk4_over_mujoco_rk4_n10": base["batched_rk4_rod_steps_per_s_n10"] / rk4_10,
-        "batched_over_mujoco_rollout_n4": base["batched_rod_steps_per_s_n4"] / rollout4,
-        "batched_rk4_over_mujoco_rollout_n4": base["batched_rk4_rod_steps_per_s_n4"] / rollout4,
-    })
+    figures.update(
+        {
+            "exudyn_env_over_mujoco_rk4_n4": base["env_steps_per_s_n4"] / rk4_4,
+            "exudyn_solver_over_mujoco_rk4_n4": base["solver_steps_per_s_n4"] / rk4_4,
+            "batched_over_mujoco_rk4_n4": base["batched_rod_steps_per_s_n4"] / rk4_4,
+            "batched_over_mujoco_rk4_n10": base["batched_rod_steps_per_s_n10"] / rk4_10,
+            "batched_rk4_over_mujoco_rk4_n4": base["batched_rk4_rod_steps_per_s_n4"] / rk4_4,
+            "batched_rk4_over_mujoco_rk4_n10": base["batched_rk4_rod_steps_per_s_n10"] / rk4_10,
+            "batched_over_mujoco_rollout_n4": base["batched_rod_steps_per_s_n4"] / rollout4,
+            "batched_rk4_over_mujoco_rollout_n4": base["batched_rk4_rod_steps_per_s_n4"] / rollout4,
+        }
+    )
     return figures

@@ -113,8 +113,15 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         inputs = np.hstack([spec.model_inputs(states[:-1]), torque_nm[:, None]])
         gp = MultiOutputGP(inputs, states[1:] - states[:-1])
         gp.fit(20)
-        policy = _random_policy(spec, states, inputs[:, :-1], config.n_basis, config.task.torque_limit_nm,
-                                np.random.default_rng(1), config.restart_target_std)
+        policy = _random_policy(
+            spec,
+            states,
+            inputs[:, :-1],
+            config.n_basis,
+            config.task.torque_limit_nm,
+            np.random.default_rng(1),
+            config.restart_target_std,
+        )
         m0, s0 = _initial_distribution(spec, config.initial_std)
         vector = policy.get_vector()
 
@@ -126,9 +133,19 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
             (grad,) = torch.autograd.grad(total, leaf)
             return float(total.detach()), grad.numpy().copy(), time.process_time() - start
 
-        propagators = {compiled: Propagator(spec, gp, policy, config.task.rod.length_m, config.cost_width_m,
-                                            config.cost_rate_width_rad_s, config.cost_exploration, compiled=compiled)
-                       for compiled in (False, True)}
+        propagators = {
+            compiled: Propagator(
+                spec,
+                gp,
+                policy,
+                config.task.rod.length_m,
+                config.cost_width_m,
+                config.cost_rate_width_rad_s,
+                config.cost_exploration,
+                compiled=compiled,
+            )
+            for compiled in (False, True)
+        }
         eager_value, eager_grad, _ = objective(propagators[False])
         compiled_value, compiled_grad, compile_s = objective(propagators[True])
         times: dict[bool, list[float]] = {False: [], True: []}
@@ -142,6 +159,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         "pilco_search_compiled_speedup": eager_ms / compiled_ms,
         "pilco_search_compile_s": compile_s,
         "pilco_search_objective_rel_difference": abs(compiled_value - eager_value) / abs(eager_value),
-        "pilco_search_gradient_rel_difference": float(np.max(np.abs(compiled_grad - eager_grad))
-                                                      / np.max(np.abs(eager_grad))),
+        "pilco_search_gradient_rel_difference": float(
+            np.max(np.abs(compiled_grad - eager_grad)) / np.max(np.abs(eager_grad))
+        ),
     }

@@ -102,7 +102,9 @@ def _legacy_advance(self) -> None:
     try:
         ok = self._solver.SolveSteps(mbs, settings)
     except exu.ExudynError as exc:
-        raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}") from exc
+        raise SolverFailure(
+            f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}"
+        ) from exc
     data = mbs.systemData
     state = data.GetSystemState()
     if not ok:
@@ -148,9 +150,15 @@ def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int
 # The batched torch chain and the vector environment
 
 
-def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3,
-                            integrator: str = "rk4", compiled: bool = False,
-                            dtype_name: str = "float64") -> tuple[float, float]:
+def batched_rod_steps_per_s(
+    n_links: int,
+    batch_size: int = 4096,
+    n_steps: int = 6,
+    repeats: int = 3,
+    integrator: str = "rk4",
+    compiled: bool = False,
+    dtype_name: str = "float64",
+) -> tuple[float, float]:
     """Rod-steps of 0.01 s per second of the batched chain (default sub-steps of ``integrator``, one torch thread,
     random torques, no gradients): ``batch_size * n_steps`` over the best of ``repeats`` timed runs, per
     wall-clock second and per CPU second of this process (the latter less sensitive to other work on the
@@ -159,8 +167,9 @@ def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int =
 
     with one_torch_thread() as torch:
         dtype = getattr(torch, dtype_name)
-        chain = BatchedPRBChain(RodParams(n_links=n_links), batch_size=batch_size, integrator=integrator,
-                                compiled=compiled, dtype=dtype)
+        chain = BatchedPRBChain(
+            RodParams(n_links=n_links), batch_size=batch_size, integrator=integrator, compiled=compiled, dtype=dtype
+        )
         generator = torch.Generator().manual_seed(0)
         torques = ((torch.rand(n_steps, batch_size, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06).to(dtype)
         best = best_cpu = math.inf
@@ -178,16 +187,23 @@ def batched_rod_steps_per_s(n_links: int, batch_size: int = 4096, n_steps: int =
     return batch_size * n_steps / best, batch_size * n_steps / max(best_cpu, 1e-9)
 
 
-def vector_env_steps_per_s(n_links: int = 4, num_envs: int = 1024, n_steps: int = 40, repeats: int = 3,
-                           integrator: str = "rk4", compiled: bool = False) -> tuple[float, float]:
+def vector_env_steps_per_s(
+    n_links: int = 4,
+    num_envs: int = 1024,
+    n_steps: int = 40,
+    repeats: int = 3,
+    integrator: str = "rk4",
+    compiled: bool = False,
+) -> tuple[float, float]:
     """Environment steps per second of :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (observation and
     reward included, random actions, one torch thread): ``num_envs * n_steps`` over the best timed run, per
     wall-clock second and per CPU second of this process."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
     with one_torch_thread():
-        env = SoftPendulumVectorEnv(num_envs=num_envs, params=RodParams(n_links=n_links), integrator=integrator,
-                                    compiled=compiled)
+        env = SoftPendulumVectorEnv(
+            num_envs=num_envs, params=RodParams(n_links=n_links), integrator=integrator, compiled=compiled
+        )
         actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)
         env.reset(seed=0)
         env.step(actions[0])
@@ -249,6 +265,9 @@ def bench_plant() -> dict[str, float]:
     if mujoco_chain.mujoco_available():
         figures.update(mujoco_chain.bench_figures(figures, references))
     else:
-        print("[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures",
-              file=sys.stderr, flush=True)
+        print(
+            "[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures",
+            file=sys.stderr,
+            flush=True,
+        )
     return figures

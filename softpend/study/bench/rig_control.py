@@ -53,6 +53,7 @@ def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
             config = figure_configs()[algo]
             controller, task, _ = learned_controller(run_folder(RL_BOOK.runs_root, algo, seed, config), "final")
             return controller, task
+
         return make
 
     def pilco():
@@ -73,8 +74,8 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
     ``rig_perturbed_success_<c>`` (the same starts in the simulator, each on a rod whose mass, stiffness, damping,
     hub friction and torque limit differ from the model by up to +-15 %,
     :func:`softpend.study.fresh_starts.perturbed_rod_row`)."""
-    from softpend.study.presets import REPORT_SEEDS
     from softpend.study.fresh_starts import perturbed_rod_row
+    from softpend.study.presets import REPORT_SEEDS
     from softpend.study.rig_runs import RigCondition, simulator_starts, twin_start
 
     factories = controller_factories()
@@ -88,15 +89,28 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
         for name in controllers:
             controller, task = factories[name]()
             task = task.replace(start_noise_rad=0.05)
-            rows = [twin_start(controller, name, task, condition, seed, DURATION_S, Path(tmp) / f"{name}-{seed}",
-                               success_std_rad=HOLD_STD_RAD) for seed in seeds]
+            rows = [
+                twin_start(
+                    controller,
+                    name,
+                    task,
+                    condition,
+                    seed,
+                    DURATION_S,
+                    Path(tmp) / f"{name}-{seed}",
+                    success_std_rad=HOLD_STD_RAD,
+                )
+                for seed in seeds
+            ]
             sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=HOLD_STD_RAD)
             good = [r for r in rows if r["success"]]
             twin_rate = len(good) / len(rows)
             sim_rate = sum(r["success"] for r in sim) / len(sim)
             out[f"rig_success_{name}"] = twin_rate
             out[f"rig_upright_std_rad_{name}"] = float(max(r["upright_std_rad"] for r in good)) if good else math.nan
-            out[f"rig_swing_up_time_s_{name}"] = float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan
+            out[f"rig_swing_up_time_s_{name}"] = (
+                float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan
+            )
             chatter = [r["torque_chatter_nm_per_s"] for r in rows if math.isfinite(r["torque_chatter_nm_per_s"])]
             out[f"rig_torque_chatter_nm_per_s_{name}"] = float(np.median(chatter)) if chatter else math.nan
             out[f"rig_sim_success_{name}"] = sim_rate

@@ -33,8 +33,14 @@ def dqn_train_steps_per_s(episodes: int = 10) -> float:
     evaluation and checkpoint writing are excluded."""
     from softpend.rl.dqn import train_dqn
 
-    config = dataclasses.replace(DQN, learning_starts=0, eval_every_episodes=10_000, checkpoint_every_episodes=10_000,
-                                 eval_seeds=(0,), eval_duration_s=0.1)
+    config = dataclasses.replace(
+        DQN,
+        learning_starts=0,
+        eval_every_episodes=10_000,
+        checkpoint_every_episodes=10_000,
+        eval_seeds=(0,),
+        eval_duration_s=0.1,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         _, log = train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, progress=False)
     elapsed = log.episodes[-1]["wall_s"] - log.episodes[0]["wall_s"]
@@ -62,9 +68,12 @@ def bench_rl() -> dict[str, float]:
     return {
         "dqn_train_steps_per_s": steps_per_s,
         **headline_figures(seed_rows(logs, fresh)),
-        **{f"seeds_balanced_{algo}_converged_plant": float(sum(r["run_balances"] for r in converged
-                                                              if r["method"] == METHOD_NAMES[algo]))
-           for algo in ("dqn", "mbpo")},
+        **{
+            f"seeds_balanced_{algo}_converged_plant": float(
+                sum(r["run_balances"] for r in converged if r["method"] == METHOD_NAMES[algo])
+            )
+            for algo in ("dqn", "mbpo")
+        },
         "full_profile_train_cpu_s": cpu_s,
         "full_profile_train_2core_s": cpu_s / 2.0,
     }

@@ -50,7 +50,9 @@ ROLLOUT_STEPS = 100
 BEST_FULL_CONFIG = TrainConfig(history=6, hidden_widths=(64, 64, 64), max_epochs=600, patience=600)
 
 
-def rollout_steps_per_s(model: DynamicsModel | DynamicsEnsemble, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3) -> float:
+def rollout_steps_per_s(
+    model: DynamicsModel | DynamicsEnsemble, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3
+) -> float:
     """Model steps per second of :func:`softpend.sysid.rollout` on ``batch`` rows (best of ``repeats``)."""
     generator = torch.Generator().manual_seed(0)
     dtype = model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float32
@@ -165,9 +167,14 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
     (``true_params_*``), ``greybox_*_upright_std_ratio`` (median upright std over that of the true design); and
     ``nn_valid_prediction_lyapunov``, ``nn_valid_prediction_ratio``, ``nn_hanging_tip_rmse_1s_pct_length``.
     """
+    from softpend.study.greybox import (
+        HANGING_PROTOCOL,
+        YARDSTICK_OFFSET_RAD,
+        closed_loop_usefulness,
+        model_quality,
+        perturbed_guess,
+    )
     from softpend.sysid.greybox import identify
-    from softpend.study.greybox import (HANGING_PROTOCOL, YARDSTICK_OFFSET_RAD, closed_loop_usefulness, model_quality,
-                                        perturbed_guess)
     from softpend.task import Task
 
     truth = data.params
@@ -193,8 +200,10 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
         "greybox_hanging_tip_rmse_1s_pct_length": grey["hanging_tip_rmse_pct_length"],
         "greybox_one_step_mse": grey["one_step_mse"],
     }
-    usefulness = {(r["designed_on"], r["controller"]): r
-                  for r in closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))}
+    usefulness = {
+        (r["designed_on"], r["controller"]): r
+        for r in closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))
+    }
     for key, controller in (("lqr", "LQR"), ("swingup", "energy swing-up + LQR")):
         grey_row, true_row = usefulness[("grey-box", controller)], usefulness[("true parameters", controller)]
         out[f"greybox_{key}_successes"] = grey_row["successes"]
@@ -224,8 +233,8 @@ def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, f
     import tempfile
 
     from softpend.hardware.twin import run_twin_session
-    from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
     from softpend.study.greybox import perturbed_guess
+    from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="softpend-bench-twin-") as workdir:
@@ -237,10 +246,13 @@ def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, f
     config = GreyBoxConfig(parameters=GREYBOX_PARAMETERS + ("camera_delay_s",))
     result = identify(dataset, config, initial_params=perturbed_guess(truth))
     errors = result.relative_errors(truth)
-    out = {"twin_session_s": session_s, "identify_twin_s": result.identify_s,
-           "greybox_twin_camera_delay_s": result.camera_delay_s,
-           "greybox_max_param_error_pct_twin": 100 * max(errors.values()),
-           "greybox_twin_at_bounds": float(len(result.at_bounds))}
+    out = {
+        "twin_session_s": session_s,
+        "identify_twin_s": result.identify_s,
+        "greybox_twin_camera_delay_s": result.camera_delay_s,
+        "greybox_max_param_error_pct_twin": 100 * max(errors.values()),
+        "greybox_twin_at_bounds": float(len(result.at_bounds)),
+    }
     for name, error in errors.items():
         out[f"greybox_twin_error_pct_{name}"] = 100 * error
         out[f"greybox_twin_std_pct_{name}"] = 100 * result.std[name] / abs(result.estimates[name])

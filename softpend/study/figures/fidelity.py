@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import matplotlib.ticker
-
 import math
 from typing import TYPE_CHECKING, Any, Sequence
 
+import matplotlib.ticker
 import numpy as np
 
 from softpend.fidelity.validation import FreeVibration
@@ -69,8 +68,9 @@ def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recomm
     axes[0].legend(fontsize=8)
 
 
-def plot_transfer_matrix(ax, rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate",
-                         vmax: float | None = None) -> Any:
+def plot_transfer_matrix(
+    ax, rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate", vmax: float | None = None
+) -> Any:
     """Heat map of one transfer metric (controllers x parameter perturbations) on one plant, the values
     written in the cells; returns the image for a colour bar."""
     from softpend.study.transfer import transfer_matrix
@@ -78,13 +78,24 @@ def plot_transfer_matrix(ax, rows: Sequence[dict[str, Any]], plant: str, metric:
     controllers, labels, values = transfer_matrix(rows, plant, metric)
     shown = np.where(np.isfinite(values), values, np.nan)
     cmap = "RdYlGn" if metric == "success_rate" else "RdYlGn_r"
-    image = ax.imshow(shown, cmap=cmap, vmin=0.0, vmax=vmax if vmax is not None else np.nanmax(shown[np.isfinite(shown)], initial=1.0),
-                      aspect="auto")
+    image = ax.imshow(
+        shown,
+        cmap=cmap,
+        vmin=0.0,
+        vmax=vmax if vmax is not None else np.nanmax(shown[np.isfinite(shown)], initial=1.0),
+        aspect="auto",
+    )
     for i in range(values.shape[0]):
         for j in range(values.shape[1]):
             v = values[i, j]
-            ax.text(j, i, "inf" if math.isinf(v) else ("-" if math.isnan(v) else f"{v:.2g}"), ha="center",
-                    va="center", fontsize=7)
+            ax.text(
+                j,
+                i,
+                "inf" if math.isinf(v) else ("-" if math.isnan(v) else f"{v:.2g}"),
+                ha="center",
+                va="center",
+                fontsize=7,
+            )
     ax.set_xticks(range(len(labels)), labels, rotation=40, ha="right", fontsize=8)
     ax.set_yticks(range(len(controllers)), controllers, fontsize=8)
     ax.set_title(f"{metric} on the {plant} plant", fontsize=9)

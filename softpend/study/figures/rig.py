@@ -9,8 +9,14 @@ import numpy as np
 __all__ = ["draw_filmstrip", "draw_tracked_frame", "plot_twin_run"]
 
 
-def draw_tracked_frame(ax, frame_bgr: np.ndarray, detection, zoom_px: Optional[float] = 45.0,
-                       markers_px: Optional[np.ndarray] = None, truth_px: Optional[np.ndarray] = None):
+def draw_tracked_frame(
+    ax,
+    frame_bgr: np.ndarray,
+    detection,
+    zoom_px: Optional[float] = 45.0,
+    markers_px: Optional[np.ndarray] = None,
+    truth_px: Optional[np.ndarray] = None,
+):
     """Show a BGR camera frame on ``ax`` with the tracker's contour (green line) and centroid (red cross),
     optional calibration-marker centres (white circles) and the true tip position (yellow plus); with
     ``zoom_px`` an inset magnifies the dot.  Returns the inset axis (or None)."""
@@ -44,8 +50,14 @@ def draw_tracked_frame(ax, frame_bgr: np.ndarray, detection, zoom_px: Optional[f
     return None
 
 
-def draw_filmstrip(frames, n_frames: int = 8, span_s: Optional[float] = None, centre_px=None,
-                   half_width_px: Optional[float] = None, frame_width_in: float = 1.9):
+def draw_filmstrip(
+    frames,
+    n_frames: int = 8,
+    span_s: Optional[float] = None,
+    centre_px=None,
+    half_width_px: Optional[float] = None,
+    frame_width_in: float = 1.9,
+):
     """A row of ``n_frames`` camera frames evenly spaced in time, each with the tracker's contour and centroid
     overlaid (:func:`draw_tracked_frame`) and its time as the title.
 
@@ -78,8 +90,9 @@ def draw_filmstrip(frames, n_frames: int = 8, span_s: Optional[float] = None, ce
     chosen = sorted({int(np.argmin(np.abs(times - t))) for t in wanted})
     height, width = frames[0][1].shape[:2]
     aspect = 1.0 if half_width_px is not None else height / width
-    fig, axes = plt.subplots(1, len(chosen), figsize=(frame_width_in * len(chosen), frame_width_in * aspect + 0.35),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(chosen), figsize=(frame_width_in * len(chosen), frame_width_in * aspect + 0.35), squeeze=False
+    )
     for ax, index in zip(axes[0], chosen):
         time_s, frame, detection = frames[index]
         draw_tracked_frame(ax, frame, detection, zoom_px=None)
@@ -113,14 +126,31 @@ def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[st
     first_command_s = float(motor["time_s"][commanded][0]) if commanded.any() else 0.0
     fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     axes[0].plot(truth["time_s"] - t0_device, np.abs(truth["theta_rad"]), color="C0", label="twin: true tip angle")
-    axes[0].plot(motor["est_time_s"], np.abs(motor["est_theta_rad"]), color="C1", ls="--", lw=1.0,
-                 label="twin: estimate handed to the controller")
+    axes[0].plot(
+        motor["est_time_s"],
+        np.abs(motor["est_theta_rad"]),
+        color="C1",
+        ls="--",
+        lw=1.0,
+        label="twin: estimate handed to the controller",
+    )
     axes[1].step(motor["time_s"], motor["command_torque_nm"], where="post", color="C0", label="twin: commanded")
     if simulator is not None:
-        axes[0].plot(simulator.time_s + first_command_s, np.abs(simulator.theta_rad), color="C2", lw=1.0,
-                     label="ideal simulator, same start")
-        axes[1].step(simulator.time_s + first_command_s, simulator.torque_nm, where="post", color="C2", lw=1.0,
-                     label="ideal simulator")
+        axes[0].plot(
+            simulator.time_s + first_command_s,
+            np.abs(simulator.theta_rad),
+            color="C2",
+            lw=1.0,
+            label="ideal simulator, same start",
+        )
+        axes[1].step(
+            simulator.time_s + first_command_s,
+            simulator.torque_nm,
+            where="post",
+            color="C2",
+            lw=1.0,
+            label="ideal simulator",
+        )
     axes[0].set_ylabel(r"$|\theta|$ [rad]")
     axes[1].set_ylabel("torque [N m]")
     axes[1].set_xlabel("time since the loop's first state [s]")

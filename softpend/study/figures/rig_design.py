@@ -33,8 +33,17 @@ def _dimension(ax, p0, p1, text: str, offset, fontsize: float = 8.0, **text_kw) 
         ax.plot([p[0], q[0]], [p[1], q[1]], color="0.45", lw=0.5)
     ax.annotate("", xy=b, xytext=a, arrowprops=dict(arrowstyle="<->", lw=0.7, color="0.2", shrinkA=0, shrinkB=0))
     mid = (a + b) / 2
-    ax.text(mid[0], mid[1], text, fontsize=fontsize, ha="center", va="center", gid="dimension",
-            bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.9), **text_kw)
+    ax.text(
+        mid[0],
+        mid[1],
+        text,
+        fontsize=fontsize,
+        ha="center",
+        va="center",
+        gid="dimension",
+        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.9),
+        **text_kw,
+    )
 
 
 def _front(ax, d: RigDesign) -> None:
@@ -46,13 +55,38 @@ def _front(ax, d: RigDesign) -> None:
     x0 = -centre_px[0] * d.pixel_size_m
     y0 = -(d.camera.height_px - centre_px[1]) * d.pixel_size_m
     ax.add_patch(Rectangle((x0, y0), fov_w, fov_h, fill=False, ls="--", lw=0.8, ec="0.3"))
-    ax.text(x0 + fov_w / 2, y0 + fov_h - 0.01, f"camera field {fov_w * 1e3:.0f} x {fov_h * 1e3:.0f} mm, "
-            f"{d.camera.width_px} x {d.camera.height_px} px: pixel {d.pixel_size_m * 1e3:.2f} mm",
-            fontsize=8, va="top", ha="center", gid="dimension")
-    ax.add_patch(Circle((0, 0), d.swing_radius_m, fill=False, ls=":", lw=0.8, ec=_BLUE,
-                        label=f"swing circle of the dot, radius {d.swing_radius_m * 1e3:.0f} mm"))
-    ax.add_patch(Circle((0, 0), d.keep_out_radius_m, fill=False, ls="-.", lw=0.8, ec="#d62728",
-                        label=f"keep clear while powered, radius {d.keep_out_radius_m * 1e3:.0f} mm"))
+    ax.text(
+        x0 + fov_w / 2,
+        y0 + fov_h - 0.01,
+        f"camera field {fov_w * 1e3:.0f} x {fov_h * 1e3:.0f} mm, "
+        f"{d.camera.width_px} x {d.camera.height_px} px: pixel {d.pixel_size_m * 1e3:.2f} mm",
+        fontsize=8,
+        va="top",
+        ha="center",
+        gid="dimension",
+    )
+    ax.add_patch(
+        Circle(
+            (0, 0),
+            d.swing_radius_m,
+            fill=False,
+            ls=":",
+            lw=0.8,
+            ec=_BLUE,
+            label=f"swing circle of the dot, radius {d.swing_radius_m * 1e3:.0f} mm",
+        )
+    )
+    ax.add_patch(
+        Circle(
+            (0, 0),
+            d.keep_out_radius_m,
+            fill=False,
+            ls="-.",
+            lw=0.8,
+            ec="#d62728",
+            label=f"keep clear while powered, radius {d.keep_out_radius_m * 1e3:.0f} mm",
+        )
+    )
     # beam hanging along -y, from the pocket to the tip
     ax.add_patch(Rectangle((-D / 2, -L), D, d.beam_length_m, fc=_TPU, ec="k", lw=0.6))
     # mount boss, square bore, marker flag
@@ -60,22 +94,45 @@ def _front(ax, d: RigDesign) -> None:
     s = hub.shaft_side_m / 2
     ax.add_patch(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.5))
     flag_w = 2 * (hub.hub_marker_dot_radius_m + 0.002)
-    ax.add_patch(Rectangle((-flag_w / 2, -d.flag_length_m), flag_w, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6,
-                           alpha=0.85))
+    ax.add_patch(
+        Rectangle((-flag_w / 2, -d.flag_length_m), flag_w, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6, alpha=0.85)
+    )
     ax.add_patch(Circle((0, -hub.hub_marker_radius_m), hub.hub_marker_dot_radius_m, fc=_MAGENTA, ec="k", lw=0.4))
     # tip disc and dot
     ax.add_patch(Circle((0, -L), d.dot_radius_m, fc=_BLUE, ec="k", lw=0.6))
     for i, (x, y) in enumerate(d.markers_m):
         ax.add_patch(Circle((x, y), MARKER_RADIUS_M, fc=_GREEN, ec="k", lw=0.5))
-        ax.text(x, y + 1.8 * MARKER_RADIUS_M, f"M{i + 1} ({x * 1e3:.0f}, {y * 1e3:.0f})", fontsize=7, ha="center",
-                gid="dimension")
+        ax.text(
+            x,
+            y + 1.8 * MARKER_RADIUS_M,
+            f"M{i + 1} ({x * 1e3:.0f}, {y * 1e3:.0f})",
+            fontsize=7,
+            ha="center",
+            gid="dimension",
+        )
     _dimension(ax, (0, 0), (0, -L), f"L = {L * 1e3:.0f} mm", (-0.09, 0.0))
-    ax.annotate(f"D = {D * 1e3:.2f} mm (in plane)", xy=(D / 2, -0.6 * L), xytext=(0.06, -0.6 * L), fontsize=8,
-                arrowprops=dict(arrowstyle="->", lw=0.6), gid="dimension")
-    ax.annotate(f"hub marker at {hub.hub_marker_radius_m * 1e3:.0f} mm", xy=(0, -hub.hub_marker_radius_m),
-                xytext=(0.06, -0.09), fontsize=7, arrowprops=dict(arrowstyle="->", lw=0.6))
-    ax.annotate(f"tip mass {p.tip_mass_kg * 1e3:.3g} g, dot diameter {2e3 * d.dot_radius_m:.0f} mm",
-                xy=(0, -L), xytext=(0.05, -L - 0.01), fontsize=7, arrowprops=dict(arrowstyle="->", lw=0.6))
+    ax.annotate(
+        f"D = {D * 1e3:.2f} mm (in plane)",
+        xy=(D / 2, -0.6 * L),
+        xytext=(0.06, -0.6 * L),
+        fontsize=8,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+        gid="dimension",
+    )
+    ax.annotate(
+        f"hub marker at {hub.hub_marker_radius_m * 1e3:.0f} mm",
+        xy=(0, -hub.hub_marker_radius_m),
+        xytext=(0.06, -0.09),
+        fontsize=7,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+    )
+    ax.annotate(
+        f"tip mass {p.tip_mass_kg * 1e3:.3g} g, dot diameter {2e3 * d.dot_radius_m:.0f} mm",
+        xy=(0, -L),
+        xytext=(0.05, -L - 0.01),
+        fontsize=7,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+    )
     ax.legend(loc="upper center", fontsize=7, framealpha=0.9, bbox_to_anchor=(0.5, -0.11), ncol=2)
     margin = 0.03
     ax.set_xlim(x0 - margin, x0 + fov_w + margin)
@@ -91,26 +148,58 @@ def _hub_detail(ax, d: RigDesign) -> None:
     hub = d.hub
     mm = 1e3
     r, s, D = hub.clamp_radius_m * mm, hub.shaft_side_m * mm / 2, d.beam_thickness_m * mm
-    ax.add_patch(Rectangle((-D / 2, -d.flag_length_m * mm - 8), D, d.flag_length_m * mm + 8 - hub.pocket_start_m * mm,
-                           fc=_TPU, ec="k", lw=0.6))
+    ax.add_patch(
+        Rectangle(
+            (-D / 2, -d.flag_length_m * mm - 8),
+            D,
+            d.flag_length_m * mm + 8 - hub.pocket_start_m * mm,
+            fc=_TPU,
+            ec="k",
+            lw=0.6,
+        )
+    )
     ax.add_patch(Circle((0, 0), r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.9))
     ax.add_patch(Rectangle((-D / 2, -r), D, r - hub.pocket_start_m * mm, fc=_TPU, ec="k", lw=0.5, ls="--"))
     ax.add_patch(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.6))
     flag_w = 2 * (hub.hub_marker_dot_radius_m + 0.002) * mm
-    ax.add_patch(Rectangle((-flag_w / 2, -d.flag_length_m * mm), flag_w, d.flag_length_m * mm - r, fc=_MOUNT, ec="k",
-                           lw=0.6, alpha=0.6))
-    ax.add_patch(Circle((0, -hub.hub_marker_radius_m * mm), hub.hub_marker_dot_radius_m * mm, fc=_MAGENTA, ec="k",
-                        lw=0.4))
+    ax.add_patch(
+        Rectangle(
+            (-flag_w / 2, -d.flag_length_m * mm), flag_w, d.flag_length_m * mm - r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.6
+        )
+    )
+    ax.add_patch(
+        Circle((0, -hub.hub_marker_radius_m * mm), hub.hub_marker_dot_radius_m * mm, fc=_MAGENTA, ec="k", lw=0.4)
+    )
     _dimension(ax, (0, 0), (r, 0), f"R {r:.0f}", (0, r + 4), fontsize=7)
-    ax.annotate(f"bore {2 * s:.3f} square", xy=(s, s), xytext=(r + 3, r + 1), fontsize=7,
-                arrowprops=dict(arrowstyle="->", lw=0.6), gid="dimension")
-    _dimension(ax, (0, -hub.pocket_start_m * mm), (0, -r), f"pocket {r - hub.pocket_start_m * mm:.0f}", (-r - 6, 0),
-               fontsize=7)
+    ax.annotate(
+        f"bore {2 * s:.3f} square",
+        xy=(s, s),
+        xytext=(r + 3, r + 1),
+        fontsize=7,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+        gid="dimension",
+    )
+    _dimension(
+        ax, (0, -hub.pocket_start_m * mm), (0, -r), f"pocket {r - hub.pocket_start_m * mm:.0f}", (-r - 6, 0), fontsize=7
+    )
     _dimension(ax, (0, 0), (0, -d.flag_length_m * mm), f"flag {d.flag_length_m * mm:.0f}", (r + 8, 0), fontsize=7)
-    _dimension(ax, (0, 0), (0, -hub.hub_marker_radius_m * mm), f"{hub.hub_marker_radius_m * mm:.0f}", (-flag_w / 2 - 5, 0),
-               fontsize=7)
-    ax.text(0, -d.flag_length_m * mm - 12, f"flag {hub.flag_gap_m * mm:.0f} mm in front of the beam,\n"
-            f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)", fontsize=7, ha="center", va="top")
+    _dimension(
+        ax,
+        (0, 0),
+        (0, -hub.hub_marker_radius_m * mm),
+        f"{hub.hub_marker_radius_m * mm:.0f}",
+        (-flag_w / 2 - 5, 0),
+        fontsize=7,
+    )
+    ax.text(
+        0,
+        -d.flag_length_m * mm - 12,
+        f"flag {hub.flag_gap_m * mm:.0f} mm in front of the beam,\n"
+        f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)",
+        fontsize=7,
+        ha="center",
+        va="top",
+    )
     ax.set_aspect("equal")
     ax.set_xlim(-r - 14, r + 20)
     ax.set_ylim(-d.flag_length_m * mm - 24, r + 10)
@@ -130,24 +219,54 @@ def _side(ax, d: RigDesign) -> None:
     ax.add_patch(Rectangle((z_beam, -L), W, L - hub.pocket_start_m, fc=_TPU, ec="k", lw=0.6))
     z_flag = z_beam + W + hub.flag_gap_m
     ax.add_patch(Rectangle((z_flag, -d.flag_length_m), 0.003, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6))
-    ax.add_patch(Rectangle((z_beam + W, -L - d.dot_radius_m), d.tip_disc_thickness_m, 2 * d.dot_radius_m,
-                           fc=_STEEL, ec="k", lw=0.6))
-    ax.annotate(f"W = {W * 1e3:.0f} mm (out of plane)", xy=(z_beam + W, -0.75 * L), xytext=(0.05, -0.75 * L),
-                fontsize=8, arrowprops=dict(arrowstyle="->", lw=0.6), gid="dimension")
-    ax.annotate(f"tip disc {d.tip_disc_thickness_m * 1e3:.1f} mm", xy=(z_beam + W + d.tip_disc_thickness_m, -L),
-                xytext=(0.05, -L + 0.03), fontsize=7, arrowprops=dict(arrowstyle="->", lw=0.6), gid="dimension")
+    ax.add_patch(
+        Rectangle(
+            (z_beam + W, -L - d.dot_radius_m), d.tip_disc_thickness_m, 2 * d.dot_radius_m, fc=_STEEL, ec="k", lw=0.6
+        )
+    )
+    ax.annotate(
+        f"W = {W * 1e3:.0f} mm (out of plane)",
+        xy=(z_beam + W, -0.75 * L),
+        xytext=(0.05, -0.75 * L),
+        fontsize=8,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+        gid="dimension",
+    )
+    ax.annotate(
+        f"tip disc {d.tip_disc_thickness_m * 1e3:.1f} mm",
+        xy=(z_beam + W + d.tip_disc_thickness_m, -L),
+        xytext=(0.05, -L + 0.03),
+        fontsize=7,
+        arrowprops=dict(arrowstyle="->", lw=0.6),
+        gid="dimension",
+    )
     # the camera on the optical axis through the hub axis, looking back at the plane
     zc = z_beam + W + d.camera_distance_m
     half = math.radians(d.camera.horizontal_fov_deg) / 2
     reach = d.camera_distance_m * math.tan(half)
-    ax.add_patch(Polygon([(zc, 0), (zc - d.camera_distance_m, reach), (zc - d.camera_distance_m, -reach)],
-                         closed=True, fc=_BLUE, alpha=0.06, ec=_BLUE, lw=0.6, ls="--"))
+    ax.add_patch(
+        Polygon(
+            [(zc, 0), (zc - d.camera_distance_m, reach), (zc - d.camera_distance_m, -reach)],
+            closed=True,
+            fc=_BLUE,
+            alpha=0.06,
+            ec=_BLUE,
+            lw=0.6,
+            ls="--",
+        )
+    )
     ax.add_patch(Rectangle((zc, -0.02), 0.04, 0.04, fc="0.2", ec="k"))
     ax.text(zc + 0.02, 0.03, "camera", fontsize=7, ha="center")
-    _dimension(ax, (z_beam + W, 0.0), (zc, 0.0), f"{d.camera_distance_m * 1e3:.0f} mm to the rod plane",
-               (0.0, reach + 0.05))
-    ax.text(zc - 0.02, -reach + 0.02, f"horizontal field of view {d.camera.horizontal_fov_deg:g} deg", fontsize=7,
-            ha="right")
+    _dimension(
+        ax, (z_beam + W, 0.0), (zc, 0.0), f"{d.camera_distance_m * 1e3:.0f} mm to the rod plane", (0.0, reach + 0.05)
+    )
+    ax.text(
+        zc - 0.02,
+        -reach + 0.02,
+        f"horizontal field of view {d.camera.horizontal_fov_deg:g} deg",
+        fontsize=7,
+        ha="right",
+    )
     ax.set_aspect("equal")
     ax.set_xlim(-0.08, zc + 0.08)
     ax.set_ylim(-max(L, reach) - 0.06, reach + 0.1)
@@ -163,8 +282,11 @@ def draw_rig_design(design: RigDesign, figsize=(15.0, 5.8)):
     _front(front, design)
     _hub_detail(detail, design)
     _side(side, design)
-    fig.suptitle(f"rig for a {design.params.length_m * 1e3:.0f} mm rod, EI = {design.params.bending_stiffness_nm2:.3g} "
-                 f"N m², printed at E = {design.print_modulus_pa / 1e6:.3g} MPa", fontsize=10)
+    fig.suptitle(
+        f"rig for a {design.params.length_m * 1e3:.0f} mm rod, EI = {design.params.bending_stiffness_nm2:.3g} "
+        f"N m², printed at E = {design.print_modulus_pa / 1e6:.3g} MPa",
+        fontsize=10,
+    )
     fig.tight_layout()
     return fig
 

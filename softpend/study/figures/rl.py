@@ -14,7 +14,7 @@ import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD, EvaluationResult
 from softpend.plotting import draw_rod
-from softpend.rl.curves import interval_band, run_to_asymptote, moving_average, worst_start_std_rad
+from softpend.rl.curves import interval_band, moving_average, run_to_asymptote, worst_start_std_rad
 from softpend.rl.training_log import TrainingLog
 
 __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
@@ -22,8 +22,13 @@ __all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upri
 COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 
-def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], window: int = 10, fig: Optional[plt.Figure] = None,
-                         threshold_rad: float = SUCCESS_STD_RAD, seed: int = 0):
+def plot_learning_curves(
+    logs_by_method: Mapping[str, Sequence[TrainingLog]],
+    window: int = 10,
+    fig: Optional[plt.Figure] = None,
+    threshold_rad: float = SUCCESS_STD_RAD,
+    seed: int = 0,
+):
     """Figure 4: return and evaluation upright std against episodes and real plant seconds.
 
     Top row: the return of every seed (thin lines, smoothed with a trailing ``window``-episode moving
@@ -41,8 +46,14 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
         color = COLORS.get(method, f"C{i}")
         for col, axis in enumerate(("episode", "plant_s")):
             for k, log in enumerate(logs):
-                axes[0, col].plot(log.column(axis), moving_average(log.column("return"), window), color=color,
-                                  lw=0.8, alpha=0.6, label=method if k == 0 else None)
+                axes[0, col].plot(
+                    log.column(axis),
+                    moving_average(log.column("return"), window),
+                    color=color,
+                    lw=0.8,
+                    alpha=0.6,
+                    label=method if k == 0 else None,
+                )
             if len(logs) >= 2:
                 band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed, failed_as=SUCCESS_STD_RAD)
                 axes[1, col].plot(band["x"], band["value"], color=color, label=method)
@@ -54,7 +65,9 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], wi
         if math.isfinite(asym):
             axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
     axes[0, 0].set_ylabel(f"episode return ({window}-episode mean)")
-    axes[1, 0].set_ylabel(f"evaluation upright std [rad]\n(worst start, {SUCCESS_STD_RAD:g} if one failed; IQM over seeds)")
+    axes[1, 0].set_ylabel(
+        f"evaluation upright std [rad]\n(worst start, {SUCCESS_STD_RAD:g} if one failed; IQM over seeds)"
+    )
     for col in range(2):
         axes[1, col].axhline(threshold_rad, color="k", ls="--", lw=0.8)
         axes[1, col].set_yscale("log")
@@ -136,12 +149,16 @@ def animate_swingup(result: EvaluationResult, link_points, length_m: float, ever
         text.set_text(f"t = {result.time_s[i]:.2f} s")
         return line, text
 
-    anim = animation.FuncAnimation(fig, update, frames=frames, interval=1000 * every * float(result.time_s[1] - result.time_s[0]), blit=True)
+    anim = animation.FuncAnimation(
+        fig, update, frames=frames, interval=1000 * every * float(result.time_s[1] - result.time_s[0]), blit=True
+    )
     plt.close(fig)
     return anim
 
 
-def upright_error_over_time(results: Sequence[EvaluationResult], window_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def upright_error_over_time(
+    results: Sequence[EvaluationResult], window_s: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """Time-averaged upright error ``|theta|`` (trailing ``window_s`` moving average) of every episode:
     ``(time_s, errors)`` with ``errors`` of shape ``(n_episodes, n_steps)`` (the shortest episode's steps)."""
     if len(results) == 0:
@@ -153,8 +170,12 @@ def upright_error_over_time(results: Sequence[EvaluationResult], window_s: float
     return results[0].time_s[:n], errors
 
 
-def plot_upright_error(results_by_method: Mapping[str, Sequence[EvaluationResult]], window_s: float = 0.5, ax=None,
-                       threshold_rad: float = SUCCESS_STD_RAD):
+def plot_upright_error(
+    results_by_method: Mapping[str, Sequence[EvaluationResult]],
+    window_s: float = 0.5,
+    ax=None,
+    threshold_rad: float = SUCCESS_STD_RAD,
+):
     """Figure 6: the time-averaged upright error of each method's controllers: the median over episodes (line)
     and the band between the 25th and 75th percentiles (with one episode, that episode)."""
     if ax is None:

@@ -48,7 +48,9 @@ def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.nda
     return axes
 
 
-def plot_rollout_errors(errors: dict[str, RolloutErrors], axes: Optional[Sequence] = None, length_m: Optional[float] = None):
+def plot_rollout_errors(
+    errors: dict[str, RolloutErrors], axes: Optional[Sequence] = None, length_m: Optional[float] = None
+):
     """Tip-position and base-angle RMSE against the horizon, one line per model, with the "hold" yardstick.
 
     Parameters
@@ -93,8 +95,9 @@ def plot_rollout_overlay(axes: Sequence, curves: dict[str, np.ndarray], label: s
     return axes
 
 
-def plot_lyapunov_errors(curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float,
-                         length_m: float, ax=None):
+def plot_lyapunov_errors(
+    curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float, length_m: float, ax=None
+):
     """RMS tip error of each model against the open-loop horizon in Lyapunov times ``t * lambda``, with the
     5 % of ``L`` line of the valid prediction time."""
     import matplotlib.pyplot as plt

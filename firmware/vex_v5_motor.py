@@ -85,7 +85,7 @@ ERR_BAD_MESSAGE = 3
 ERROR_MEANINGS = {
     ERR_VERSION: "protocol version mismatch (ERR_VERSION): the device does not speak this protocol version",
     ERR_NO_SESSION: "no session open (ERR_NO_SESSION): a command arrived before the HELLO handshake"
-                    " (did the device restart?)",
+    " (did the device restart?)",
     ERR_BAD_MESSAGE: "message type not accepted by the device (ERR_BAD_MESSAGE)",
 }
 
@@ -370,8 +370,14 @@ class DeviceSession:
                     encode_message(
                         MSG_HELLO_ACK,
                         seq,
-                        (PROTOCOL_VERSION, values[1], self.counts_per_rev, self.torque_limit_nm,
-                         self.watchdog_ms, self.state_rate_hz),
+                        (
+                            PROTOCOL_VERSION,
+                            values[1],
+                            self.counts_per_rev,
+                            self.torque_limit_nm,
+                            self.watchdog_ms,
+                            self.state_rate_hz,
+                        ),
                     )
                 )
             elif not self.session_open:

@@ -135,3 +135,13 @@ def test_a_notebook_source_that_is_a_fifo(root):
     os.mkfifo(root / "notebooks" / "fig02_reward.md")
     line = one_line(["book", "--root", str(root), "--profile", "quick"])
     assert "fig02_reward.md" in line and "named pipe" in line
+
+
+@pytest.mark.timeout(120, method="thread")
+@pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
+def test_a_toc_that_is_a_fifo_is_named_as_such(root, command):
+    """Before: ``_toc.yml`` a named pipe was reported as a missing ``_toc.yml``."""
+    (root / "_toc.yml").unlink()
+    os.mkfifo(root / "_toc.yml")
+    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    assert "_toc.yml is not a regular file" in line

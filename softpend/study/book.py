@@ -82,6 +82,8 @@ class BookLayout:
     @classmethod
     def at(cls, root: Path | str = ".") -> "BookLayout":
         layout = cls(Path(root).resolve())
+        if (layout.root / "_toc.yml").exists() and not (layout.root / "_toc.yml").is_file():
+            raise ValueError(f"{layout.root / '_toc.yml'} is not a regular file")
         if not (layout.root / "_toc.yml").is_file():
             raise FileNotFoundError(f"no _toc.yml in {layout.root} (run from the project root or pass --root)")
         return layout

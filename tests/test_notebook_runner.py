@@ -371,15 +371,17 @@ def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_p
     assert cli_main(["book", "--root", str(root)]) == 1  # and the CLI exits non-zero
 
 
-def test_records_files_enter_the_key_of_the_notebooks_that_read_them(tmp_path):
-    """Notebooks using softpend.study.records read book/records/: editing a record changes their key."""
-    from softpend.study.book import BookLayout, _records_hashes
+@pytest.mark.parametrize("folder, name", [("records", "what_we_tried.yml"), ("hparams", "dqn.yml")])
+def test_data_files_enter_the_key_of_the_notebooks_whose_code_reads_them(tmp_path, folder, name):
+    """softpend.study.records reads book/records/, softpend.study.presets book/hparams/: editing one changes the
+    hashes that go into the key of every notebook using that code."""
+    from softpend.study.book import BookLayout, _data_hashes
 
-    (tmp_path / "book" / "records").mkdir(parents=True)
+    (tmp_path / "book" / folder).mkdir(parents=True)
     layout = BookLayout(tmp_path)
-    assert _records_hashes(layout) == {}
-    record = tmp_path / "book" / "records" / "what_we_tried.yml"
-    record.write_text("dqn: []\n")
-    first = _records_hashes(layout)
-    record.write_text("dqn: [1]\n")
-    assert set(first) == {"book/records/what_we_tried.yml"} and _records_hashes(layout) != first
+    assert _data_hashes(layout, folder) == {}
+    data = tmp_path / "book" / folder / name
+    data.write_text("a: []\n")
+    first = _data_hashes(layout, folder)
+    data.write_text("a: [1]\n")
+    assert set(first) == {f"book/{folder}/{name}"} and _data_hashes(layout, folder) != first

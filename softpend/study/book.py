@@ -391,12 +391,13 @@ def code_cells(nb) -> list[str]:
     return [cell.source for cell in nb.cells if cell.cell_type == "code"]
 
 
-def _records_hashes(layout: BookLayout) -> dict[str, str]:
-    """SHA-256 of every file under ``book/records/`` (the stored run records some notebooks read)."""
-    folder = layout.root / "book" / "records"
+def _data_hashes(layout: BookLayout, folder_name: str) -> dict[str, str]:
+    """SHA-256 of every file under ``book/<folder_name>/`` (data that package code reads: stored run records,
+    the methods' tuned settings)."""
+    folder = layout.root / "book" / folder_name
     return (
         {
-            f"book/records/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
+            f"book/{folder_name}/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
             for path in sorted(folder.rglob("*"))
             if path.is_file()
         }
@@ -607,8 +608,10 @@ def run_notebooks(
             used_overrides.update(applied)
             parameters.update(applied)
             hashes = package_code.code_hashes(code_cells(nb))
-            if "softpend.study.records" in hashes:  # the stored run records are an input of that code
-                hashes.update(_records_hashes(layout))
+            # data files that package code reads are inputs of that code
+            for module, folder_name in (("softpend.study.records", "records"), ("softpend.study.presets", "hparams")):
+                if module in hashes:
+                    hashes.update(_data_hashes(layout, folder_name))
             plans[name] = {
                 "parameters": parameters,
                 "converted": converted,

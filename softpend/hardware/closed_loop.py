@@ -30,12 +30,13 @@ live camera filming it (:class:`~softpend.vision.tip_source.SyntheticLiveCamera`
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
@@ -238,191 +239,278 @@ def run_closed_loop(
     LinkError, ValueError, SimulationDiverged, KeyboardInterrupt, or what the controller raises
         After STOP; the samples up to and including the failing one are in ``log``.
     """
-    positive("duration_s", duration_s)
-    non_negative("arm_timeout_s", arm_timeout_s)
-    if not link.is_open:
-        raise ValueError("link must be open")
-    columns = rig_control_columns(estimator.n)
-    if log is not None and list(log.columns) != columns:
-        raise ValueError(f"log must have the columns rig_control_columns({estimator.n}), got {log.columns}")
-    if camera_log is not None and list(camera_log.columns) != list(CAMERA_LOG_COLUMNS):
-        raise ValueError(f"camera_log must have the columns CAMERA_LOG_COLUMNS, got {camera_log.columns}")
+    _check_loop_arguments(link, estimator, duration_s, arm_timeout_s, log, camera_log)
     if clock is None:
         clock = DeviceClock(measure_one_way_latency_s(link))
     if hasattr(controller, "reset"):
         controller.reset()
     link.drain_states()  # states queued before the run (pings, set-up) are stale
     bar = SecondsBar(duration_s, "rig control", progress)
-    nominal_period = 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s
-    send_times: list[float] = []
-    samples = dropped = watchdog = late = 0
-    t0: Optional[float] = None
-    last_device_time: Optional[float] = None
-    expected_cmd_seq: Optional[int] = None
-    armed = tip_source is None
-    armed_at = 0.0 if armed else math.nan
-    blind_max = 0.0
-    status = "arming" if not armed else "running"
-    stop_reason: Optional[str] = None
-    t = 0.0
-    nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
-    # a learned controller evaluates one small network per state: on one thread (torch is not imported for this)
+    loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s)
+    loop.log, loop.camera_log, loop.on_sample = log, camera_log, on_sample
+    loop.run(bar)
+    link.stop()
+    return loop.result()
+
+
+def _check_loop_arguments(
+    link: MotorLink,
+    estimator: RigStateEstimator,
+    duration_s: float,
+    arm_timeout_s: float,
+    log: Optional[SampleLog],
+    camera_log: Optional[SampleLog],
+) -> None:
+    """Raise ``ValueError`` for arguments :func:`run_closed_loop` cannot run with."""
+    positive("duration_s", duration_s)
+    non_negative("arm_timeout_s", arm_timeout_s)
+    if not link.is_open:
+        raise ValueError("link must be open")
+    if log is not None and list(log.columns) != rig_control_columns(estimator.n):
+        raise ValueError(f"log must have the columns rig_control_columns({estimator.n}), got {log.columns}")
+    if camera_log is not None and list(camera_log.columns) != list(CAMERA_LOG_COLUMNS):
+        raise ValueError(f"camera_log must have the columns CAMERA_LOG_COLUMNS, got {camera_log.columns}")
+
+
+@contextlib.contextmanager
+def _one_torch_thread() -> Iterator[None]:
+    """A learned controller evaluates one small network per state: torch on one thread while the loop runs
+    (torch is not imported for this)."""
     torch = sys.modules.get("torch")
     torch_threads = torch.get_num_threads() if torch is not None else None
     if torch is not None:
         torch.set_num_threads(1)
     try:
-        while True:
-            states = [link.read_state()]
-            states += link.drain_states()
-            for index, state in enumerate(states):
-                newest = index == len(states) - 1
-                clock.observe(state.host_time_s, state.device_time_s)
-                if t0 is None:
-                    t0 = state.device_time_s
-                t = state.device_time_s - t0
-                if last_device_time is not None:
-                    dropped += max(0, int(round((state.device_time_s - last_device_time) / nominal_period)) - 1)
-                last_device_time = state.device_time_s
-                watchdog += int(state.watchdog_tripped)
-                late_flag = int(expected_cmd_seq is not None and state.last_cmd_seq != expected_cmd_seq)
-                late += late_flag
-                expected_cmd_seq = None
-                frames = 0
-                commanded = 0
-                estimate_values = nan_estimate
-                row_status = status
-                try:
-                    if not estimator.started:
-                        estimator.reset(t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
-                    else:
-                        estimator.update_encoder(t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
-                    if newest and armed and tip_source is not None:
-                        blind_max = max(blind_max, estimator.blind_s)
-                        if estimator.is_blind:
-                            raise _SafeStop(
-                                "camera_blind",
-                                f"no camera correction for {estimator.blind_s:.3f} s "
-                                f"(max_blind_s {estimator.config.max_blind_s} s) at t = {t:.2f} s",
-                            )
-                    if newest and not armed and t > arm_timeout_s:
-                        raise _SafeStop(
-                            "arm_timeout",
-                            f"the camera did not correct the estimate within arm_timeout_s = {arm_timeout_s} s",
-                        )
-                    if newest:
-                        estimate = estimator.estimate()
-                        estimate_values = (
-                            [estimate.time_s]
-                            + list(estimate.observation)
-                            + list(estimate.q)
-                            + list(estimate.q_dot)
-                            + [estimate.tip_std_m]
-                        )
-                        command = (
-                            float(controller(estimate.observation, estimate.q, estimate.q_dot, estimate.time_s))
-                            if armed
-                            else 0.0
-                        )
-                        expected_cmd_seq = link.send_torque(command)
-                        send_times.append(link.clock.now_s())
-                        commanded = int(armed)
-                        if tip_source is not None:
-                            # camera measurements after the command: the costly replay of a delayed frame
-                            # (see RigStateEstimator.update_tip) stays off the path from state to command, and the
-                            # corrected estimate serves the next state
-                            polled = link.clock.now_s()
-                            for m in tip_source.poll():
-                                frames += 1
-                                capture = clock.to_device(m.capture_time_s) - t0
-                                accepted = (not m.lost) and estimator.update_tip(capture, m.x_m, m.y_m)
-                                if accepted and not armed:
-                                    armed, armed_at, status = True, t, "running"
-                                if camera_log is not None:
-                                    camera_log.append(
-                                        [
-                                            m.frame,
-                                            m.capture_time_s,
-                                            m.delivered_time_s,
-                                            polled,
-                                            capture,
-                                            m.x_m,
-                                            m.y_m,
-                                            m.theta_rad,
-                                            m.lost,
-                                            accepted,
-                                        ]
-                                    )
-                    row_status = status
-                except _SafeStop as stop:
-                    link.stop()
-                    status = row_status = stop.status
-                    stop_reason = stop.reason
-                except BaseException:
-                    link.emergency_stop()  # zero torque first, so the log records what is in force
-                    row_status = "error"
-                    raise
-                finally:
-                    if newest and stop_reason is None and row_status != "error" and t >= duration_s:
-                        row_status = "completed"
-                    row = [
-                        state.host_time_s,
-                        state.device_time_s,
-                        t,
-                        state.seq,
-                        state.phi_rad,
-                        state.phi_dot_rad_s,
-                        state.applied_torque_nm,
-                        state.flags,
-                        link.last_command_nm,
-                        commanded,
-                        late_flag,
-                        frames,
-                        estimator.blind_s if estimator.started else math.nan,
-                        *estimate_values,
-                        STATUS_CODES[row_status],
-                    ]
-                    if log is not None:
-                        log.append(row)
-                    if on_sample is not None:
-                        on_sample(dict(zip(columns, row)))
-                samples += 1
-                if stop_reason is not None:
-                    break
-            if bar.advance(t):
-                theta = estimate_values[2] if estimate_values is not nan_estimate else math.nan
-                bar.postfix(
-                    f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
-                    f"blind {estimator.blind_s * 1e3:.0f} ms"
-                )
-            if stop_reason is not None or t >= duration_s:
-                break
-    except BaseException:
-        link.emergency_stop()
-        raise
+        yield
     finally:
-        bar.close()
         if torch is not None:
             torch.set_num_threads(torch_threads)
-    link.stop()
-    if stop_reason is None:
-        status = "completed"
-    periods = np.diff(send_times)
-    return ClosedLoopResult(
-        samples=samples,
-        duration_s=t,
-        stop_reason=stop_reason,
-        status=status,
-        command_periods_s=periods,
-        late_commands=late,
-        dropped_states=dropped,
-        bad_frames=link.bad_frames,
-        watchdog_trips=watchdog,
-        blind_max_s=blind_max,
-        armed_at_s=armed_at,
-        camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
-        estimator=estimator.stats(),
-    )
+
+
+@dataclass
+class _Tick:
+    """What one state's row records, filled in as the state is processed (an exception leaves it partial)."""
+
+    late_flag: int
+    row_status: str
+    estimate_values: list[float]
+    frames: int = 0
+    commanded: int = 0
+
+
+class _ClosedLoop:
+    """The counters and the per-state step of one :func:`run_closed_loop` run."""
+
+    log: Optional[SampleLog] = None
+    camera_log: Optional[SampleLog] = None
+    on_sample: Optional[Callable[[dict], None]] = None
+
+    def __init__(
+        self,
+        link: MotorLink,
+        controller: Any,
+        estimator: RigStateEstimator,
+        duration_s: float,
+        tip_source: Any,
+        clock: DeviceClock,
+        arm_timeout_s: float,
+    ) -> None:
+        self.link, self.controller, self.estimator, self.tip_source = link, controller, estimator, tip_source
+        self.duration_s, self.clock, self.arm_timeout_s = duration_s, clock, arm_timeout_s
+        self.columns = rig_control_columns(estimator.n)
+        self.nominal_period = 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s
+        self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
+        self.send_times: list[float] = []
+        self.samples = self.dropped = self.watchdog = self.late = 0
+        self.t0: Optional[float] = None
+        self.last_device_time: Optional[float] = None
+        self.expected_cmd_seq: Optional[int] = None
+        self.armed = tip_source is None
+        self.armed_at = 0.0 if self.armed else math.nan
+        self.blind_max = 0.0
+        self.status = "arming" if not self.armed else "running"
+        self.stop_reason: Optional[str] = None
+        self.t = 0.0
+
+    def run(self, bar: SecondsBar) -> None:
+        """Process the states until the run's end or a safe stop; any exception: emergency STOP, then it propagates."""
+        link = self.link
+        with _one_torch_thread():
+            try:
+                while True:
+                    states = [link.read_state()]
+                    states += link.drain_states()
+                    for index, state in enumerate(states):
+                        estimate_values = self.step(state, newest=index == len(states) - 1)
+                        if self.stop_reason is not None:
+                            break
+                    if bar.advance(self.t):
+                        theta = estimate_values[2] if estimate_values is not self.nan_estimate else math.nan
+                        bar.postfix(
+                            f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
+                            f"blind {self.estimator.blind_s * 1e3:.0f} ms"
+                        )
+                    if self.stop_reason is not None or self.t >= self.duration_s:
+                        break
+            except BaseException:
+                link.emergency_stop()
+                raise
+            finally:
+                bar.close()
+
+    def step(self, state: Any, newest: bool) -> list[float]:
+        """Process one state (the command and the camera only for the ``newest`` of a batch), log its row;
+        return the estimate's values (NaN unless a command was computed)."""
+        tick = _Tick(self._count(state), self.status, self.nan_estimate)
+        try:
+            estimator = self.estimator
+            if not estimator.started:
+                estimator.reset(self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
+            else:
+                estimator.update_encoder(self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
+            if newest:
+                self._check_safety()
+                self._command(tick)
+                if self.tip_source is not None:
+                    self._poll_camera(tick)
+            tick.row_status = self.status
+        except _SafeStop as stop:
+            self.link.stop()
+            self.status = tick.row_status = stop.status
+            self.stop_reason = stop.reason
+        except BaseException:
+            self.link.emergency_stop()  # zero torque first, so the log records what is in force
+            tick.row_status = "error"
+            raise
+        finally:
+            if newest and self.stop_reason is None and tick.row_status != "error" and self.t >= self.duration_s:
+                tick.row_status = "completed"
+            self._log_row(state, tick)
+        self.samples += 1
+        return tick.estimate_values
+
+    def _count(self, state: Any) -> int:
+        """Clock, time and link counters of one state; return its late-command flag."""
+        self.clock.observe(state.host_time_s, state.device_time_s)
+        if self.t0 is None:
+            self.t0 = state.device_time_s
+        self.t = state.device_time_s - self.t0
+        if self.last_device_time is not None:
+            self.dropped += max(0, int(round((state.device_time_s - self.last_device_time) / self.nominal_period)) - 1)
+        self.last_device_time = state.device_time_s
+        self.watchdog += int(state.watchdog_tripped)
+        late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
+        self.late += late_flag
+        self.expected_cmd_seq = None
+        return late_flag
+
+    def _check_safety(self) -> None:
+        """Raise :class:`_SafeStop` for a camera blind for too long or one that never corrected the estimate."""
+        estimator = self.estimator
+        if self.armed and self.tip_source is not None:
+            self.blind_max = max(self.blind_max, estimator.blind_s)
+            if estimator.is_blind:
+                raise _SafeStop(
+                    "camera_blind",
+                    f"no camera correction for {estimator.blind_s:.3f} s "
+                    f"(max_blind_s {estimator.config.max_blind_s} s) at t = {self.t:.2f} s",
+                )
+        if not self.armed and self.t > self.arm_timeout_s:
+            raise _SafeStop(
+                "arm_timeout",
+                f"the camera did not correct the estimate within arm_timeout_s = {self.arm_timeout_s} s",
+            )
+
+    def _command(self, tick: _Tick) -> None:
+        """Estimate, ask the controller (zero torque until armed), send the torque."""
+        estimate = self.estimator.estimate()
+        tick.estimate_values = (
+            [estimate.time_s]
+            + list(estimate.observation)
+            + list(estimate.q)
+            + list(estimate.q_dot)
+            + [estimate.tip_std_m]
+        )
+        command = (
+            float(self.controller(estimate.observation, estimate.q, estimate.q_dot, estimate.time_s))
+            if self.armed
+            else 0.0
+        )
+        self.expected_cmd_seq = self.link.send_torque(command)
+        self.send_times.append(self.link.clock.now_s())
+        tick.commanded = int(self.armed)
+
+    def _poll_camera(self, tick: _Tick) -> None:
+        """Feed the camera measurements that arrived to the estimator (the first accepted one arms the loop).
+
+        They come after the command: the costly replay of a delayed frame (see RigStateEstimator.update_tip)
+        stays off the path from state to command, and the corrected estimate serves the next state."""
+        assert self.t0 is not None
+        polled = self.link.clock.now_s()
+        for m in self.tip_source.poll():
+            tick.frames += 1
+            capture = self.clock.to_device(m.capture_time_s) - self.t0
+            accepted = (not m.lost) and self.estimator.update_tip(capture, m.x_m, m.y_m)
+            if accepted and not self.armed:
+                self.armed, self.armed_at, self.status = True, self.t, "running"
+            if self.camera_log is not None:
+                self.camera_log.append(
+                    [
+                        m.frame,
+                        m.capture_time_s,
+                        m.delivered_time_s,
+                        polled,
+                        capture,
+                        m.x_m,
+                        m.y_m,
+                        m.theta_rad,
+                        m.lost,
+                        accepted,
+                    ]
+                )
+
+    def _log_row(self, state: Any, tick: _Tick) -> None:
+        """Append the state's row to the motor log and hand it to ``on_sample``."""
+        row = [
+            state.host_time_s,
+            state.device_time_s,
+            self.t,
+            state.seq,
+            state.phi_rad,
+            state.phi_dot_rad_s,
+            state.applied_torque_nm,
+            state.flags,
+            self.link.last_command_nm,
+            tick.commanded,
+            tick.late_flag,
+            tick.frames,
+            self.estimator.blind_s if self.estimator.started else math.nan,
+            *tick.estimate_values,
+            STATUS_CODES[tick.row_status],
+        ]
+        if self.log is not None:
+            self.log.append(row)
+        if self.on_sample is not None:
+            self.on_sample(dict(zip(self.columns, row)))
+
+    def result(self) -> ClosedLoopResult:
+        """The run's :class:`ClosedLoopResult` (after the STOP)."""
+        tip_source = self.tip_source
+        return ClosedLoopResult(
+            samples=self.samples,
+            duration_s=self.t,
+            stop_reason=self.stop_reason,
+            status=self.status if self.stop_reason is not None else "completed",
+            command_periods_s=np.diff(self.send_times),
+            late_commands=self.late,
+            dropped_states=self.dropped,
+            bad_frames=self.link.bad_frames,
+            watchdog_trips=self.watchdog,
+            blind_max_s=self.blind_max,
+            armed_at_s=self.armed_at,
+            camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
+            estimator=self.estimator.stats(),
+        )
 
 
 # ---------------------------------------------------------------------- the digital twin
@@ -498,7 +586,6 @@ def run_twin_control(
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
-    from softpend.vision.tip_source import SyntheticLiveCamera
 
     rig = rig if rig is not None else RigConfig()
     outputs = outputs if outputs is not None else Outputs()
@@ -515,38 +602,20 @@ def run_twin_control(
         "estimator": dataclasses.asdict(estimator.config),
         "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
     }
-    result: Optional[ClosedLoopResult] = None
-    error: Optional[str] = None
     clock = SimClock()
     device = SimRig(rig, clock, truth_log=paths["truth_log.csv"])
     source = None
     try:
         if camera is not None:
-            source = SyntheticLiveCamera(
-                device.poses,
-                clock,
-                fps=camera.fps,
-                latency_s=camera.latency_s,
-                effects=camera.effects,
-                model=camera.model,
-                faults=camera.faults,
-                seed=camera.seed,
-                on_frame=on_frame,
-            )
-            source.start()
-            if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
-                raise ValueError(
-                    f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
-                    "time: a camera latency near that, or a dot the tracker cannot find)"
-                )
-            source.poll()  # frames of the rod before the run (the calibration is fitted on the first)
+            source = _twin_tip_source(camera, device, clock, on_frame)
+            _wait_for_first_frame(source, clock, camera_wait_s)
         with (
             MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
             SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log,
             SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
         ):
-            try:
-                result = run_closed_loop(
+            result = _run_and_summarise(
+                lambda: run_closed_loop(
                     link,
                     controller,
                     estimator,
@@ -556,13 +625,10 @@ def run_twin_control(
                     camera_log=camera_log,
                     arm_timeout_s=arm_timeout_s,
                     progress=progress,
-                )
-            except Exception as exc:
-                error = f"{type(exc).__name__}: {exc}"
-                raise
-            finally:
-                summary = {"result": result.summary() if result is not None else None, "error": error}
-                outputs.write_json(paths["summary.json"], summary)
+                ),
+                outputs,
+                paths["summary.json"],
+            )
     finally:
         if source is not None:
             source.close()
@@ -571,5 +637,50 @@ def run_twin_control(
         for name in TWIN_CONTROL_FILES[:3]:
             outputs.done(paths[name])
     return TwinControlRun(
-        workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result, device.stats(), error
+        workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result, device.stats(), None
     )
+
+
+def _twin_tip_source(camera: TwinCamera, device: Any, clock: Any, on_frame: Optional[Callable]) -> Any:
+    """The twin's synthetic live camera filming ``device`` (not started)."""
+    from softpend.vision.tip_source import SyntheticLiveCamera
+
+    return SyntheticLiveCamera(
+        device.poses,
+        clock,
+        fps=camera.fps,
+        latency_s=camera.latency_s,
+        effects=camera.effects,
+        model=camera.model,
+        faults=camera.faults,
+        seed=camera.seed,
+        on_frame=on_frame,
+    )
+
+
+def _wait_for_first_frame(source: Any, clock: Any, camera_wait_s: float) -> None:
+    """Start the twin's camera and wait (in simulated time) until it has tracked a frame; drop the frames of the
+    rod before the run (the calibration is fitted on the first)."""
+    source.start()
+    if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
+        raise ValueError(
+            f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
+            "time: a camera latency near that, or a dot the tracker cannot find)"
+        )
+    source.poll()
+
+
+def _run_and_summarise(run: Callable[[], ClosedLoopResult], outputs: Any, path: Path) -> ClosedLoopResult:
+    """Run the loop; write its summary (or its error) to ``path``, also when it raises."""
+    result: Optional[ClosedLoopResult] = None
+    error: Optional[str] = None
+    try:
+        result = run()
+    except Exception as exc:
+        error = f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        summary = {"result": result.summary() if result is not None else None, "error": error}
+        outputs.write_json(path, summary)
+    assert result is not None
+    return result

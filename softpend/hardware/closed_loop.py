@@ -1,6 +1,7 @@
 """Any controller of the project on a rig (real or the digital twin): encoder and camera in, torque out.
 
-:func:`run_closed_loop` is paced by the device's STATE stream (100 Hz).  For each state it
+:func:`run_closed_loop` runs the rig loop (:class:`~softpend.hardware.loop.RigLoop`), paced by the device's
+STATE stream (100 Hz).  For each state it
 
 1. feeds the encoder sample to the :class:`~softpend.hardware.estimator.RigStateEstimator` (every state, also
    the ones that queued up while the host was busy);
@@ -43,7 +44,7 @@ import numpy as np
 from softpend.checks import non_negative, positive
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
-from softpend.hardware.loop import SecondsBar, jitter_ms_p95
+from softpend.hardware.loop import RigLoop, SecondsBar, jitter_ms_p95
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -298,9 +299,10 @@ class _Tick:
     commanded: int = 0
 
 
-class _ClosedLoop:
+class _ClosedLoop(RigLoop):
     """The counters and the per-state step of one :func:`run_closed_loop` run."""
 
+    drains = True
     log: Optional[SampleLog] = None
     camera_log: Optional[SampleLog] = None
     on_sample: Optional[Callable[[dict], None]] = None
@@ -315,52 +317,34 @@ class _ClosedLoop:
         clock: DeviceClock,
         arm_timeout_s: float,
     ) -> None:
-        self.link, self.controller, self.estimator, self.tip_source = link, controller, estimator, tip_source
-        self.duration_s, self.clock, self.arm_timeout_s = duration_s, clock, arm_timeout_s
+        super().__init__(link, duration_s, 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s)
+        self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
+        self.clock, self.arm_timeout_s = clock, arm_timeout_s
         self.columns = rig_control_columns(estimator.n)
-        self.nominal_period = 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
-        self.send_times: list[float] = []
-        self.samples = self.dropped = self.watchdog = self.late = 0
-        self.t0: Optional[float] = None
-        self.last_device_time: Optional[float] = None
+        self.estimate_values = self.nan_estimate
+        self.late = 0
         self.expected_cmd_seq: Optional[int] = None
         self.armed = tip_source is None
         self.armed_at = 0.0 if self.armed else math.nan
         self.blind_max = 0.0
         self.status = "arming" if not self.armed else "running"
-        self.stop_reason: Optional[str] = None
-        self.t = 0.0
 
     def run(self, bar: SecondsBar) -> None:
-        """Process the states until the run's end or a safe stop; any exception: emergency STOP, then it propagates."""
-        link = self.link
         with _one_torch_thread():
-            try:
-                while True:
-                    states = [link.read_state()]
-                    states += link.drain_states()
-                    for index, state in enumerate(states):
-                        estimate_values = self.step(state, newest=index == len(states) - 1)
-                        if self.stop_reason is not None:
-                            break
-                    if bar.advance(self.t):
-                        theta = estimate_values[2] if estimate_values is not self.nan_estimate else math.nan
-                        bar.postfix(
-                            f"theta {theta:+.2f} rad, torque {link.last_command_nm:+.3f} N m, "
-                            f"blind {self.estimator.blind_s * 1e3:.0f} ms"
-                        )
-                    if self.stop_reason is not None or self.t >= self.duration_s:
-                        break
-            except BaseException:
-                link.emergency_stop()
-                raise
-            finally:
-                bar.close()
+            super().run(bar)
 
-    def step(self, state: Any, newest: bool) -> list[float]:
-        """Process one state (the command and the camera only for the ``newest`` of a batch), log its row;
-        return the estimate's values (NaN unless a command was computed)."""
+    def show(self, bar: SecondsBar) -> None:
+        if bar.advance(self.t):
+            values = self.estimate_values
+            theta = values[2] if values is not self.nan_estimate else math.nan
+            bar.postfix(
+                f"theta {theta:+.2f} rad, torque {self.link.last_command_nm:+.3f} N m, "
+                f"blind {self.estimator.blind_s * 1e3:.0f} ms"
+            )
+
+    def step(self, state: Any, newest: bool) -> None:
+        """Process one state (the command and the camera only for the ``newest`` of a batch), log its row."""
         tick = _Tick(self._count(state), self.status, self.nan_estimate)
         try:
             estimator = self.estimator
@@ -387,18 +371,12 @@ class _ClosedLoop:
                 tick.row_status = "completed"
             self._log_row(state, tick)
         self.samples += 1
-        return tick.estimate_values
+        self.estimate_values = tick.estimate_values
 
     def _count(self, state: Any) -> int:
         """Clock, time and link counters of one state; return its late-command flag."""
         self.clock.observe(state.host_time_s, state.device_time_s)
-        if self.t0 is None:
-            self.t0 = state.device_time_s
-        self.t = state.device_time_s - self.t0
-        if self.last_device_time is not None:
-            self.dropped += max(0, int(round((state.device_time_s - self.last_device_time) / self.nominal_period)) - 1)
-        self.last_device_time = state.device_time_s
-        self.watchdog += int(state.watchdog_tripped)
+        self.count(state)
         late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
         self.late += late_flag
         self.expected_cmd_seq = None

@@ -1,15 +1,16 @@
-"""The host-side control loop: any controller against a rig (real or emulated) through :class:`MotorLink`.
+"""The host-side rig loop: a controller against a rig (real or emulated) through :class:`MotorLink`.
 
-The loop is paced by the device's STATE stream (100 Hz): for each state it builds a
-:class:`RigObservation`, asks the controller for a torque, sends it (clamped by the driver) and appends the
-sample to a crash-safe :class:`SampleLog` *before* anything else can fail.  Whatever goes wrong -- controller
-exception, link error -- the motor gets zero torque: any exception sends STOP and propagates (the sample that
-was being processed is still logged, with the torque actually commanded).
+:class:`RigLoop` is the one loop of both programs on the rig.  It is paced by the device's STATE stream
+(100 Hz) and hands each state to a step; whatever goes wrong -- controller exception, link error -- the motor
+gets zero torque: any exception sends STOP and propagates.
 
-This loop hands a controller what the encoder measures at that tick (hub angle and rate) -- enough for programs
-of time and hub angle such as babbling.  Controllers of the project, which
-need the joint state or the observed variables with their rates, run in
-:func:`softpend.hardware.closed_loop.run_closed_loop`, behind the state estimator.
+:func:`run_control_loop` (the babbling of :func:`softpend.hardware.twin.run_twin_session` and ``softpend rig
+babble``) steps with what the encoder measures at that tick: it builds a :class:`RigObservation` (hub angle
+and rate), asks the controller -- a program of time and hub angle such as babbling -- for a torque, sends it
+(clamped by the driver) and appends the sample to a crash-safe :class:`SampleLog` *before* anything else can
+fail (the sample that was being processed is still logged, with the torque actually commanded).  Controllers
+of the project, which need the joint state or the observed variables with their rates, step behind the state
+estimator in :func:`softpend.hardware.closed_loop.run_closed_loop`.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from softpend.io.samplelog import SampleLog
 __all__ = [
     "LOOP_LOG_COLUMNS",
     "LoopResult",
+    "RigLoop",
     "RigObservation",
     "run_control_loop",
 ]
@@ -119,6 +121,108 @@ def jitter_ms_p95(command_periods_s: np.ndarray) -> float:
     return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
 
 
+class RigLoop:
+    """One run of the rig loop, paced by the device's STATE stream: read a state (with :attr:`drains`, also
+    the ones that queued up while the host was busy), hand each to :meth:`step`, until ``duration_s`` of
+    device time or a safe stop (:attr:`stop_reason`); any exception sends STOP and propagates.  Subclasses
+    say what a state does (:meth:`step`): the babbling loop here, the closed loop behind the state estimator
+    in :mod:`softpend.hardware.closed_loop`."""
+
+    #: Process the states that queued up since the last one too (only the newest gets a command).
+    drains = False
+
+    def __init__(self, link: MotorLink, duration_s: float, nominal_period_s: float) -> None:
+        self.link = link
+        self.duration_s = duration_s
+        self.nominal_period = nominal_period_s
+        self.send_times: list[float] = []
+        self.samples = self.dropped = self.watchdog = 0
+        self.t0: Optional[float] = None
+        self.last_device_time: Optional[float] = None
+        self.t = 0.0
+        self.stop_reason: Optional[str] = None
+
+    def count(self, state: MotorState) -> None:
+        """The loop time of ``state`` and the link counters (dropped states, watchdog trips)."""
+        if self.t0 is None:
+            self.t0 = state.device_time_s
+        self.t = state.device_time_s - self.t0
+        if self.last_device_time is not None:
+            self.dropped += max(0, int(round((state.device_time_s - self.last_device_time) / self.nominal_period)) - 1)
+        self.last_device_time = state.device_time_s
+        self.watchdog += int(state.watchdog_tripped)
+
+    def step(self, state: MotorState, newest: bool) -> None:
+        """Process one state (``newest``: the last of those read together)."""
+        raise NotImplementedError
+
+    def show(self, bar: SecondsBar) -> None:
+        """Advance the progress bar after a batch of states."""
+        bar.advance(self.t)
+
+    def run(self, bar: SecondsBar) -> None:
+        """Process the states until the run's end or a safe stop; any exception: emergency STOP, then it
+        propagates.  Closes ``bar``."""
+        link = self.link
+        try:
+            while True:
+                states = [link.read_state()]
+                if self.drains:
+                    states += link.drain_states()
+                for index, state in enumerate(states):
+                    self.step(state, newest=index == len(states) - 1)
+                    if self.stop_reason is not None:
+                        break
+                self.show(bar)
+                if self.stop_reason is not None or self.t >= self.duration_s:
+                    break
+        except BaseException:
+            link.emergency_stop()
+            raise
+        finally:
+            bar.close()
+
+
+class _BabbleLoop(RigLoop):
+    """:func:`run_control_loop`: a command for every state from what the encoder measures."""
+
+    def __init__(
+        self,
+        link: MotorLink,
+        controller: Callable[[RigObservation, float], float],
+        duration_s: float,
+        log: Optional[SampleLog],
+    ) -> None:
+        super().__init__(link, duration_s, 1.0 / link.device.state_rate_hz if link.device else 0.01)
+        self.controller = controller
+        self.log = log
+
+    def step(self, state: MotorState, newest: bool) -> None:
+        self.count(state)
+        link, t = self.link, self.t
+        try:
+            link.send_torque(float(self.controller(RigObservation(t, state.phi_rad, state.phi_dot_rad_s), t)))
+        except BaseException:
+            link.emergency_stop()  # zero torque first, so the log records what is in force
+            raise
+        finally:
+            self.send_times.append(link.clock.now_s())
+            if self.log is not None:
+                self.log.append(
+                    [
+                        state.host_time_s,
+                        state.device_time_s,
+                        state.seq,
+                        state.phi_rad,
+                        state.phi_dot_rad_s,
+                        state.applied_torque_nm,
+                        link.last_command_nm,
+                        state.flags,
+                    ]
+                )
+        self.samples += 1
+
+
 def run_control_loop(
     link: MotorLink,
     controller: Callable[[RigObservation, float], float],
@@ -156,50 +260,7 @@ def run_control_loop(
     if log is not None and list(log.columns) != list(LOOP_LOG_COLUMNS):
         raise ValueError(f"log must have the columns LOOP_LOG_COLUMNS, got {log.columns}")
     bar = SecondsBar(duration_s, "rig loop", progress)
-    send_times: list[float] = []
-    samples = dropped = watchdog = 0
-    t0_device: Optional[float] = None
-    last_state: Optional[MotorState] = None
-    nominal_period = 1.0 / link.device.state_rate_hz if link.device else 0.01
-    try:
-        while True:
-            state = link.read_state()
-            if t0_device is None:
-                t0_device = state.device_time_s
-            t = state.device_time_s - t0_device
-            if last_state is not None:
-                gap = state.device_time_s - last_state.device_time_s
-                dropped += max(0, int(round(gap / nominal_period)) - 1)
-            last_state = state
-            watchdog += int(state.watchdog_tripped)
-            try:
-                link.send_torque(float(controller(RigObservation(t, state.phi_rad, state.phi_dot_rad_s), t)))
-            except BaseException:
-                link.emergency_stop()  # zero torque first, so the log records what is in force
-                raise
-            finally:
-                send_times.append(link.clock.now_s())
-                if log is not None:
-                    log.append(
-                        [
-                            state.host_time_s,
-                            state.device_time_s,
-                            state.seq,
-                            state.phi_rad,
-                            state.phi_dot_rad_s,
-                            state.applied_torque_nm,
-                            link.last_command_nm,
-                            state.flags,
-                        ]
-                    )
-            samples += 1
-            bar.advance(t)
-            if t >= duration_s:
-                break
-    except BaseException:
-        link.emergency_stop()
-        raise
-    finally:
-        bar.close()
+    loop = _BabbleLoop(link, controller, duration_s, log)
+    loop.run(bar)
     link.send_torque(0.0)
-    return LoopResult(samples, np.diff(send_times), dropped, link.bad_frames, watchdog)
+    return LoopResult(loop.samples, np.diff(loop.send_times), loop.dropped, link.bad_frames, loop.watchdog)

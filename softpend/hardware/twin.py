@@ -141,8 +141,7 @@ def run_twin_session(
     progress : bool
         Progress bars.
     """
-    from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
-    from softpend.vision.track_video import track_video
+    from softpend.vision.camera import CameraEffects
 
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
@@ -160,40 +159,9 @@ def run_twin_session(
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:  # an earlier session's outputs (checked above) are removed
         outputs.live(workdir / name)
-    limit = rig.task.torque_limit_nm
-    controller = rig_babble_controller(duration_s, limit, seed)
-    device = SimRig(rig, truth_log=paths["truth_log.csv"])
-    try:
-        with (
-            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
-            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
-        ):
-            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
-        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
-    finally:
-        device.close()
-    emulator_stats = device.stats()
-    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
-    camera = SyntheticCamera(effects=effects, seed=seed)
-    render_video(
-        paths["camera.avi"],
-        camera,
-        times,
-        points,
-        hub,
-        fps=camera_fps,
-        clock_offset_s=clock_offset_s,
-        timestamp_jitter_s=timestamp_jitter_s,
-        progress=progress,
-    )
-    track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
-    dataset, sync = build_rig_dataset(
-        paths["motor_log.csv"],
-        paths["camera.csv"],
-        paths["rig_dataset.npz"],
-        params=rig.task.rod,
-        trial_length_s=trial_length_s,
-        notes="digital twin: emulated serial link + synthetic camera",
+    loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress)
+    dataset, sync = _film_track_and_sync(
+        rig, effects, seed, paths, camera_fps, clock_offset_s, timestamp_jitter_s, trial_length_s, progress
     )
     for name in _OUTPUTS:
         outputs.done(workdir / name)
@@ -209,6 +177,65 @@ def run_twin_session(
         dataset,
         clock_offset_s,
         emulator_stats,
+    )
+
+
+def _babble_on_twin(
+    rig: RigConfig, duration_s: float, seed: int, paths: dict[str, Path], progress: bool
+) -> tuple[LoopResult, dict]:
+    """Babble on the twin's device over the in-memory link, logging the motor and the truth; the loop's result
+    and the device's counters."""
+    limit = rig.task.torque_limit_nm
+    controller = rig_babble_controller(duration_s, limit, seed)
+    device = SimRig(rig, truth_log=paths["truth_log.csv"])
+    try:
+        with (
+            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
+            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
+        ):
+            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
+        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
+    finally:
+        device.close()
+    return loop, device.stats()
+
+
+def _film_track_and_sync(
+    rig: RigConfig,
+    effects: Any,
+    seed: int,
+    paths: dict[str, Path],
+    camera_fps: float,
+    clock_offset_s: float,
+    timestamp_jitter_s: float,
+    trial_length_s: float,
+    progress: bool,
+) -> tuple[TrajectoryDataset, SyncResult]:
+    """Render the truth log with the synthetic camera, track the video, synchronise it with the motor log."""
+    from softpend.vision.camera import SyntheticCamera, render_video
+    from softpend.vision.track_video import track_video
+
+    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
+    camera = SyntheticCamera(effects=effects, seed=seed)
+    render_video(
+        paths["camera.avi"],
+        camera,
+        times,
+        points,
+        hub,
+        fps=camera_fps,
+        clock_offset_s=clock_offset_s,
+        timestamp_jitter_s=timestamp_jitter_s,
+        progress=progress,
+    )
+    track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
+    return build_rig_dataset(
+        paths["motor_log.csv"],
+        paths["camera.csv"],
+        paths["rig_dataset.npz"],
+        params=rig.task.rod,
+        trial_length_s=trial_length_s,
+        notes="digital twin: emulated serial link + synthetic camera",
     )
 
 

@@ -253,7 +253,7 @@ def test_sigterm_on_the_host_sends_stop(script):
     )
     session = r.emulator.session
 
-    def within(predicate, timeout_s: float = 5.0) -> bool:
+    def within(predicate, timeout_s: float = 60.0) -> bool:  # a guard against a hang on a loaded machine
         deadline = time.monotonic() + timeout_s
         while not predicate() and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -267,7 +267,7 @@ def test_sigterm_on_the_host_sends_stop(script):
         else:
             host.stdin.write("go\n")
             host.stdin.flush()
-        assert host.wait(5) == 128 + signal.SIGTERM
+        assert host.wait(60) == 128 + signal.SIGTERM
         assert host.stdout.read() == ""
         assert within(lambda: session.stopped) and session.torque_nm(0) == 0.0
         assert session.decoder.bad_frames == 0  # no frame was cut in two by the STOP

@@ -26,7 +26,6 @@ import math
 import os
 import re
 import shutil
-import signal
 import stat
 import traceback
 import warnings
@@ -38,6 +37,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support import alarm
 
 from softpend.cli import main
 
@@ -60,24 +60,6 @@ def fuzz_settings(max_examples: int) -> settings:
             HealthCheck.filter_too_much,
         ],
     )
-
-
-class Hang(BaseException):
-    """Raised by the alarm when a case runs past :data:`CASE_LIMIT_S` (a BaseException: nothing catches it)."""
-
-
-@contextlib.contextmanager
-def alarm(seconds: float = CASE_LIMIT_S):
-    def ring(signum, frame):
-        raise Hang(f"no result after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 # ------------------------------------------------------------------------------------------------ strategies
@@ -163,7 +145,7 @@ def run_cli(argv: list[str], guarded: list[Path]) -> None:
     out, err = io.StringIO(), io.StringIO()
     try:
         with (
-            alarm(),
+            alarm(CASE_LIMIT_S),
             contextlib.redirect_stdout(out),
             contextlib.redirect_stderr(err),
             warnings.catch_warnings(record=True) as caught,
@@ -197,7 +179,7 @@ def run_cli(argv: list[str], guarded: list[Path]) -> None:
 def run_call(call: Callable[[], Any], check: Callable[[Any], None] | None = None, label: str = "") -> None:
     """Run a Python entry point: a named error (``ValueError``/``OSError``) or a result that passes ``check``."""
     try:
-        with alarm():
+        with alarm(CASE_LIMIT_S):
             result = call()
     except (ValueError, OSError):
         return

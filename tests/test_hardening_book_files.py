@@ -4,14 +4,11 @@ from ``softpend book`` and from ``softpend sweep --book`` alike -- never a parse
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
-import signal
 
 import pytest
+from support import refused
 
-from softpend.cli import main
 from softpend.study.book import load_profiles, toc_notebooks
 
 TOC = (
@@ -20,35 +17,12 @@ TOC = (
 )
 
 
-@contextlib.contextmanager
-def alarm(seconds: float = 60.0):
-    def ring(signum, frame):
-        raise TimeoutError(f"no result after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
 @pytest.fixture
 def root(tmp_path):
     (tmp_path / "book").mkdir()
     (tmp_path / "_toc.yml").write_text(TOC)
     (tmp_path / "book" / "profiles.yml").write_text("quick:\n  fig02_reward: {n_points: 3}\n")
     return tmp_path
-
-
-def one_line(argv: list[str]) -> str:
-    err = io.StringIO()
-    with alarm(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        rc = main(argv)
-    lines = [line for line in err.getvalue().splitlines() if line.strip()]
-    assert rc == 2 and len(lines) == 1 and "Traceback" not in err.getvalue(), (argv, rc, err.getvalue())
-    return lines[0]
 
 
 PROFILES = [
@@ -69,7 +43,7 @@ PROFILES = [
 @pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
 def test_malformed_profiles(root, text, message, command):
     (root / "book" / "profiles.yml").write_text(text)
-    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    line = refused([*command, "--root", str(root), "--profile", "quick"])
     assert str(root / "book" / "profiles.yml") in line
     assert __import__("re").search(message, line), line
     with pytest.raises(ValueError, match=message):
@@ -96,7 +70,7 @@ TOCS = [
 @pytest.mark.parametrize("command", [["book"], ["sweep", "--book"]])
 def test_malformed_toc(root, text, message, command):
     (root / "_toc.yml").write_text(text)
-    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    line = refused([*command, "--root", str(root), "--profile", "quick"])
     assert str(root / "_toc.yml") in line
     assert __import__("re").search(message, line), line
     with pytest.raises(ValueError, match=message):
@@ -115,7 +89,7 @@ def test_special_profiles_file(root, kind, command):
         path.mkdir()
     else:
         path.symlink_to("/dev/zero")
-    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    line = refused([*command, "--root", str(root), "--profile", "quick"])
     assert "profiles.yml" in line
 
 
@@ -133,7 +107,7 @@ def test_a_notebook_source_that_is_a_fifo(root):
     """``notebooks/NAME.md`` a named pipe: refused by name, not read until a writer appears."""
     (root / "notebooks").mkdir()
     os.mkfifo(root / "notebooks" / "fig02_reward.md")
-    line = one_line(["book", "--root", str(root), "--profile", "quick"])
+    line = refused(["book", "--root", str(root), "--profile", "quick"])
     assert "fig02_reward.md" in line and "named pipe" in line
 
 
@@ -143,5 +117,5 @@ def test_a_toc_that_is_a_fifo_is_named_as_such(root, command):
     """Before: ``_toc.yml`` a named pipe was reported as a missing ``_toc.yml``."""
     (root / "_toc.yml").unlink()
     os.mkfifo(root / "_toc.yml")
-    line = one_line([*command, "--root", str(root), "--profile", "quick"])
+    line = refused([*command, "--root", str(root), "--profile", "quick"])
     assert "_toc.yml is not a regular file" in line

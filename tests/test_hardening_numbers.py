@@ -9,41 +9,12 @@ from __future__ import annotations
 
 import contextlib
 import io
-import signal
 
 import pytest
+from support import alarm, refused
 
 from softpend.checks import in_range
 from softpend.cli import main
-
-
-class Hang(BaseException):
-    pass
-
-
-@contextlib.contextmanager
-def alarm(seconds: float = 60.0):
-    def ring(signum, frame):
-        raise Hang(f"no result after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-def refused(argv: list[str], *words: str) -> str:
-    err = io.StringIO()
-    with alarm(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        rc = main(argv)
-    lines = [line for line in err.getvalue().splitlines() if line.strip()]
-    assert rc == 2 and len(lines) == 1 and "Traceback" not in err.getvalue(), (argv, rc, err.getvalue())
-    for word in words:
-        assert word in lines[0], (argv, words, lines[0])
-    return lines[0]
 
 
 def test_in_range():

@@ -293,9 +293,6 @@ class PoseHistory:
             self._times.popleft()
             self._q.popleft()
 
-    def latest_time_s(self) -> Optional[float]:
-        return self._times[-1] if self._times else None
-
     def q_at(self, time_s: float) -> np.ndarray:
         """Joint positions at ``time_s``, linear between the stored samples (clamped at both ends)."""
         if not self._times:

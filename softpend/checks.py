@@ -1,11 +1,4 @@
-"""Argument checks shared by the whole package.
-
-Each function takes the parameter's ``name`` and its ``value``, returns the value converted to its plain
-Python type (``float``, ``int``, ``bool``) when it passes, and otherwise raises ``ValueError`` with a message
-that names the parameter and shows the value, e.g. ``"dt_s must be positive and finite, got nan"``.  A
-``bool`` is never accepted where a number is expected, and NaN and infinities never pass a numeric check.
-Integer checks accept Python and NumPy integers and floats with an integral value (``4.0`` -> ``4``).
-"""
+"""Argument checks shared by the whole package."""
 
 from __future__ import annotations
 
@@ -136,16 +129,7 @@ def in_range(name: str, value: Any, low: float, high: float) -> float:
 
 
 def in_unit_interval(name: str, value: Any, *, include_zero: bool = True, include_one: bool = True) -> float:
-    """``value`` as a float if it lies in the unit interval, else ``ValueError`` naming ``name``.
-
-    Parameters
-    ----------
-    name, value : str, object
-        The parameter's name and value.
-    include_zero, include_one : bool
-        Whether the end points 0 and 1 belong to the interval (default: the closed interval ``[0, 1]``;
-        ``include_zero=False`` gives ``(0, 1]``).
-    """
+    """``value`` as a float if it lies in the unit interval, else ``ValueError`` naming ``name``."""
     number = _real(value)
     above = number is not None and (number >= 0.0 if include_zero else number > 0.0)
     below = number is not None and (number <= 1.0 if include_one else number < 1.0)
@@ -194,14 +178,7 @@ def _assigned_names(source: str) -> set[str]:
 
 def check_notebook_parameters() -> None:
     """In a notebook executed by papermill: ``ValueError`` if a parameter was given that the notebook's
-    ``parameters`` cell does not define.
-
-    Papermill only logs a warning for an unknown parameter (a typo such as ``-p n_pionts 5``) and runs the
-    defaults, which silently gives the published figure.  Called at the top of the first cell after the
-    ``parameters`` cell, this reads the kernel's input history: papermill's injected cell starts with
-    ``# Parameters`` and runs right after the ``parameters`` cell, so the names it assigns must be among those
-    the cell before it assigns.  Outside IPython, or when no parameters were injected, it does nothing.
-    """
+    ``parameters`` cell does not define."""
     try:
         from IPython import get_ipython
     except ImportError:  # pragma: no cover - IPython is a dependency of every notebook kernel

@@ -1,36 +1,4 @@
-"""The one evaluation used by every controller in the project (RL, LQR, PID, PILCO, on any plant).
-
-A *controller* is any object with ``reset()`` and ``__call__(observation, q, q_dot, time_s) -> torque_nm``
-(see :class:`Controller`); it sees the report's observed variables and, for model-based designs such as
-LQR on the true model, the plant's full joint state.  :func:`evaluate` runs it on the true plant from the
-environment's start distribution (or an exact start, ``reset(options={"q": ..., "q_dot": ...})``) and reports,
-per seed (:func:`metrics_from_trajectory`):
-
-* ``swing_up_time_s`` -- the first time ``t`` such that ``|theta| < 0.2 rad`` throughout ``[t, t + 1 s]``
-  (``inf`` if that never happens);
-* ``upright_std_rad`` -- the standard deviation of ``theta`` about upright (``sqrt(mean(theta**2))``) after
-  swing-up; ``upright_mean_abs_rad`` -- the mean of ``|theta|`` after swing-up (both over the final 50 %
-  of the run if it never swung up, so a failure shows as a large number rather than a missing one);
-* ``peak_torque_nm`` -- the largest applied torque magnitude (after saturation);
-* ``energy_used_j`` -- the mechanical work the motor does, ``sum |tau * phi_dot| * dt``;
-* ``success`` -- swung up and ``upright_std_rad <= SUCCESS_STD_RAD``, the plant never diverging.
-
-Two engines, one loop
----------------------
-``engine="exudyn"`` runs the episodes one after the other on :class:`~softpend.envs.SoftPendulumEnv` (the plant of
-``task``); ``engine="batched"`` runs them all at once on :class:`~softpend.envs.vector.SoftPendulumVectorEnv`,
-which steps every rod together on :class:`~softpend.plant.batched.BatchedPRBChain`, episode ``i`` starting
-exactly where the single environment reset with ``seeds[i]`` starts.  The batched engine also runs a
-:class:`BatchPolicy` (a policy of the ``(B, 11)`` batch of observation vectors, its actions held for
-``action_repeat`` plant steps).  Both step the same loop and fill the same :class:`EvaluationResult`; a rod whose
-plant diverges ends its episode at its last valid state with ``diverged`` set and ``success`` false.
-
-The batched plant is the RK4 chain, not the Exudyn plant of ``task.substeps``: at its default
-(stability-limited) sub-steps it is more accurate than the Exudyn plant at its default 2 sub-steps, so that a
-closed loop sensitive to small differences (a swing-up that catches the rod on one swing or the next) can end
-differently on the two engines.  ``tests/test_evaluation_batched.py`` compares both against a converged Exudyn
-plant.
-"""
+"""The one evaluation used by every controller in the project (RL, LQR, PID, PILCO, on any plant)."""
 
 from __future__ import annotations
 
@@ -167,20 +135,7 @@ class LateNoisyController:
 
 
 class GymPolicyController:
-    """Run a policy trained on a softpend Gymnasium environment (e.g. a stable-baselines3 model).
-
-    The environment's observation vector (including the reward's bonus state) is rebuilt from the
-    plant's observation exactly as the environment builds it, and the policy's action is mapped to a
-    torque with the environment's own ``torque_from_action``.
-
-    Parameters
-    ----------
-    predict : callable
-        ``predict(obs_vector) -> action`` (for SB3: ``lambda o: model.predict(o, deterministic=True)[0]``).
-    env : SoftPendulumEnv
-        An environment instance with the same settings the policy was trained on (only its observation
-        and action conventions are used; it is not stepped).
-    """
+    """Run a policy trained on a softpend Gymnasium environment (e.g. a stable-baselines3 model)."""
 
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any) -> None:
         self.predict = predict
@@ -207,19 +162,7 @@ def metrics_from_trajectory(
     hold_s: float = 1.0,
     success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
-    """Evaluation metrics of one sampled trajectory (see the module docstring).
-
-    Parameters
-    ----------
-    time_s : array (T,)
-        Sample times, uniformly spaced [s].
-    theta_rad : array (T,)
-        Tip angle from upright at those times [rad].
-    torque_nm : array (T,)
-        Applied torque held from each sample to the next [N m] (the last value is unused for energy).
-    phi_dot_rad_s : array (T,)
-        Hub angular rate [rad/s].
-    """
+    """Evaluation metrics of one sampled trajectory (see the module docstring)."""
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
     t, theta, torque, phi_dot = arrays = [
         np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)
@@ -638,45 +581,7 @@ def evaluate(
     rod_seed: int = 0,
     substeps: Optional[int] = None,
 ) -> EvaluationSummary:
-    """Evaluate a controller on the true plant of ``task`` from one start per seed (see the module docstring).
-
-    Parameters
-    ----------
-    controller : Controller, sequence of Controller, or BatchPolicy
-        The controller under test (its ``reset()`` is called before each episode).  On the batched engine one
-        controller is copied (``copy.deepcopy``) for every rod, or a sequence holds one per seed; a
-        :class:`BatchPolicy` runs on the batched engine only.
-    task : Task, optional
-        Plant, rod, time step and start distribution (default: ``Task()``, the default rod hanging).
-    engine : {"exudyn", "batched"}
-        ``"exudyn"``: one :class:`softpend.envs.SoftPendulumEnv` episode after the other on ``task``'s plant;
-        ``"batched"``: every episode at once on :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (the RK4
-        chain; ``task.plant`` must be ``"prb"``, ``task.substeps`` is not used).
-    seeds : sequence of int
-        One episode per seed (integers >= 0), started where the environment reset with that seed starts.
-    duration_s : float
-        Episode length [s] (at least two plant steps).
-    initial_state : (q, q_dot), optional
-        Exact initial joint state (``reset(options={"q": ..., "q_dot": ...})``), overriding the start
-        distribution (e.g. a 0.2 rad tilt for LQR); on the batched engine one state or one per seed.
-    env_kwargs : dict, optional
-        Further arguments of the environment (e.g. ``reward_params``).
-    stop_at_first_failure : bool
-        Keep the episodes up to and including the first that does not succeed (the Exudyn engine runs no
-        further one): whether *every* seed succeeds is decided exactly, with the episodes a full evaluation runs.
-    rod_spread, rod_seed : float, int
-        Rods that differ from ``task.rod``: the episode seeded ``s`` runs on the rod
-        :func:`softpend.plant.randomisation.randomised_rod` draws from ``numpy.random.default_rng(rod_seed + s)``
-        with this spread (0: every episode on ``task.rod``); controllers keep their own model of the rod.
-    substeps : int, optional
-        Batched engine: RK4 sub-steps per plant step (default: the stability limit of the stiffest rod,
-        :func:`softpend.plant.batched.stable_substeps`; fewer are refused).
-
-    Returns
-    -------
-    EvaluationSummary
-        Per-seed :class:`EvaluationResult` objects (metrics and trajectories), in the order of ``seeds``.
-    """
+    """Evaluate a controller on the true plant of ``task`` from one start per seed (see the module docstring)."""
     task = task if task is not None else Task()
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")

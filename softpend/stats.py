@@ -1,17 +1,4 @@
-"""Statistics of results over seeds and starts: intervals for success rates and aggregates of runs.
-
-* :func:`wilson_interval` -- the Wilson score interval of a success rate (``k`` of ``n`` fresh starts); unlike
-  the normal approximation it stays inside ``[0, 1]`` and is informative at ``k = 0`` or ``k = n``.
-* :func:`iqm` -- the interquartile mean (the mean of the middle 50 % of the values), the aggregate that
-  rliable (Agarwal et al., 2021) recommends over the mean (outlier-sensitive) and the median (high variance
-  over few runs).
-* :func:`aggregate_interval` -- a point estimate and a stratified bootstrap confidence interval of an
-  aggregate (median or IQM) of per-run scores, through :func:`scipy.stats.bootstrap` with the percentile
-  method: runs are resampled with replacement *within* each task (a column), so every resample keeps one
-  score per run and task, as rliable does.
-
-Every random draw takes an explicit ``seed``.
-"""
+"""Statistics of results over seeds and starts: intervals for success rates and aggregates of runs."""
 
 from __future__ import annotations
 
@@ -26,14 +13,7 @@ __all__ = ["AggregateInterval", "aggregate_interval", "iqm", "median", "wilson_i
 
 
 def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval ``(low, high)`` of a success probability from ``successes`` of ``trials``.
-
-    Raises
-    ------
-    ValueError
-        If ``trials < 1``, ``successes`` is not an integer in ``[0, trials]`` or ``confidence`` is not in
-        ``(0, 1)``.
-    """
+    """Wilson score interval ``(low, high)`` of a success probability from ``successes`` of ``trials``."""
     if isinstance(trials, bool) or int(trials) != trials or trials < 1:
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     if isinstance(successes, bool) or int(successes) != successes or not 0 <= successes <= trials:
@@ -95,27 +75,7 @@ def aggregate_interval(
     n_resamples: int = 2000,
     seed: int = 0,
 ) -> AggregateInterval:
-    """Point estimate and stratified bootstrap interval of ``statistic`` over runs.
-
-    Parameters
-    ----------
-    scores : array (n_runs,) or (n_runs, n_tasks)
-        One score per run (a seed), or per run and task; the bootstrap resamples runs within each task.
-    statistic : {"iqm", "median"}
-        The aggregate, computed over all scores of a (resampled) set.
-    confidence : float
-        Confidence level of the two-sided percentile interval.
-    n_resamples : int
-        Bootstrap resamples.
-    seed : int
-        Seed of the resampling.
-
-    Raises
-    ------
-    ValueError
-        On an unknown statistic, fewer than two runs, or NaN scores (``inf`` is allowed: a run that never
-        got there).
-    """
+    """Point estimate and stratified bootstrap interval of ``statistic`` over runs."""
     if statistic not in AGGREGATES:
         raise ValueError(f"statistic must be one of {sorted(AGGREGATES)}, got {statistic!r}")
     data = np.asarray(scores, dtype=float)

@@ -1,10 +1,4 @@
-"""The control task: which plant, which rod, which time step, which start distribution.
-
-One frozen :class:`Task` travels from the study's presets to every config (:class:`softpend.rl.DQNConfig`,
-:class:`softpend.pilco.PilcoConfig`), every environment factory, :func:`softpend.evaluation.evaluate_controller`
-and the rig emulator, so that no function takes loose ``(params, plant, dt_s, ...)`` arguments and no config
-carries a flattened copy of rod fields.
-"""
+"""The control task: which plant, which rod, which time step, which start distribution."""
 
 from __future__ import annotations
 
@@ -32,24 +26,7 @@ MAX_TORQUE_RATIO = 100.0
 
 @dataclass(frozen=True)
 class Task:
-    """The plant and start distribution a controller is trained and evaluated on (SI units).
-
-    Parameters
-    ----------
-    plant : str
-        Plant name of :func:`softpend.plant.make_plant` (``"prb"``: the PRB chain, ``"beam"``: the continuum
-        beam with the same rod parameters).
-    rod : RodParams
-        Hub and rod parameters, the torque limit included.
-    dt_s : float
-        Control (plant) step [s].
-    substeps : int
-        Solver sub-steps per plant step (the implicit solver needs at least 2).
-    start : {"hanging", "upright", "random"}
-        Start distribution of episodes.
-    start_noise_rad : float
-        Half-width of the uniform start perturbation of the hub angle [rad] and rate [rad/s].
-    """
+    """The plant and start distribution a controller is trained and evaluated on (SI units)."""
 
     plant: str = "prb"
     rod: RodParams = field(default_factory=RodParams)

@@ -1,9 +1,4 @@
-"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder.
-
-The algorithms are looked up in :data:`ALGORITHMS` (``name -> "module:function"``); each function takes the
-parsed :class:`argparse.Namespace` and returns an exit code.  Common options are defined here; anything
-algorithm-specific goes through repeatable ``--set NAME=VALUE`` overrides of that algorithm's config.
-"""
+"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder."""
 
 from __future__ import annotations
 

@@ -1,12 +1,4 @@
-"""``softpend train --algo pilco``: run the PILCO loop and save the result to ``--out``.
-
-Common options of :mod:`softpend.commands.train` map onto :class:`~softpend.pilco.loop.PilcoConfig`:
-``--seed`` -> ``seed``, ``--episodes`` -> ``n_policy_trials``, ``--torque-limit-nm`` and ``--n-links`` ->
-``task.rod``; every other field is set with ``--set NAME=VALUE``, VALUE parsed as JSON (e.g.
-``--set horizon_s=3.0``, ``--set state=tip``, ``--set eval_seeds=[1000,1001]``,
-``--set cost_rate_width_rad_s=null``, ``--set task.rod.mass_kg=0.07``; see :mod:`softpend.io.overrides`).
-``--resume`` is not supported (a run is short).
-"""
+"""``softpend train --algo pilco``: run the PILCO loop and save the result to ``--out``."""
 
 from __future__ import annotations
 

@@ -1,13 +1,4 @@
-"""PILCO (Deisenroth & Rasmussen, 2011) on the soft pendulum, in PyTorch.
-
-* :mod:`~softpend.pilco.moments` -- exact moment matching (GP prediction at a Gaussian input, sin/cos of
-  Gaussian angles, the sine saturation, the saturating cost);
-* :mod:`~softpend.pilco.gp` -- GP dynamics model (SE-ARD, one GP per output, penalised marginal likelihood);
-* :mod:`~softpend.pilco.policy` -- the saturated RBF-network policy;
-* :mod:`~softpend.pilco.propagation` -- state representation and the moment-matching rollout with its cost;
-* :mod:`~softpend.pilco.controller` -- a policy as a :class:`softpend.evaluation.Controller` (zero-order hold);
-* :mod:`~softpend.pilco.loop` -- PILCO on the plant as an object (:class:`Pilco`) and its loop (:func:`run_pilco`).
-"""
+"""PILCO (Deisenroth & Rasmussen, 2011) on the soft pendulum, in PyTorch."""
 
 from softpend.pilco.controller import PilcoController, RandomTorqueController
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP

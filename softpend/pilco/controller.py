@@ -1,9 +1,4 @@
-"""A PILCO policy (or random torques) as a :class:`softpend.evaluation.Controller` with a zero-order hold.
-
-The plant steps at ``dt_s`` (0.01 s by default) while PILCO acts at its control period ``control_dt_s``
-(default 0.1 s): the controller recomputes the torque when ``time_s`` reaches the next multiple of
-``control_dt_s`` and holds it in between.
-"""
+"""A PILCO policy (or random torques) as a :class:`softpend.evaluation.Controller` with a zero-order hold."""
 
 from __future__ import annotations
 
@@ -49,24 +44,7 @@ def in_balance_band(spec: StateSpec, states: np.ndarray, within_rad: float, with
 
 
 class PilcoController(_HoldController):
-    """Run an :class:`RBFPolicy` on the observed variables of :class:`StateSpec` ``spec``.
-
-    Parameters
-    ----------
-    policy : RBFPolicy
-    spec : StateSpec
-        Which observed variables the policy sees (only rates and sin/cos of angles enter it, so the
-        wrapped angles of the observation are used as they are).
-    control_dt_s : float
-        Control period [s] (zero-order hold in between).
-    balance_policy : LinearPolicy, optional
-        A second policy on the same inputs that acts instead of ``policy`` inside the band ``balance_band``
-        (PILCO's balancing policy, :func:`softpend.pilco.loop.run_pilco`).
-    balance_band : tuple of float, optional
-        ``(within_rad, within_rad_s)``: ``balance_policy`` acts while the tip is within ``within_rad`` of upright
-        [rad] and its rate within ``within_rad_s`` of zero [rad/s] (:func:`in_balance_band`); required with
-        ``balance_policy``.
-    """
+    """Run an :class:`RBFPolicy` on the observed variables of :class:`StateSpec` ``spec``."""
 
     def __init__(
         self,
@@ -108,23 +86,7 @@ class PilcoController(_HoldController):
 
 
 class RandomTorqueController(_HoldController):
-    """Random torques in ``[-torque_limit_nm, torque_limit_nm]``, each held for a random whole number of control periods.
-
-    PILCO's random trials.  ``hold_s = (control_dt_s, control_dt_s)`` with ``bang_bang=False`` draws a new
-    uniform torque every control period; longer holds of ``+-torque_limit_nm`` (``bang_bang=True``) pump energy
-    into the swing.
-
-    Parameters
-    ----------
-    torque_limit_nm : float
-    control_dt_s : float
-    seed : int
-        Seed of the draws (re-seeded on every :meth:`reset`, so an episode is reproducible).
-    hold_s : tuple of float
-        Shortest and longest hold ``(min, max)`` [s]; rounded to whole control periods (at least one).
-    bang_bang : bool
-        Draw the sign only (torque ``+-torque_limit_nm``) instead of a uniform torque.
-    """
+    """Random torques in ``[-torque_limit_nm, torque_limit_nm]``, each held for a random whole number of control periods."""
 
     def __init__(
         self,

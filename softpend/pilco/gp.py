@@ -1,23 +1,4 @@
-"""Gaussian-process regression for PILCO's dynamics model: one GP per output, squared-exponential ARD kernel.
-
-Each output ``a`` has its own hyperparameters: log length-scales ``log l_a`` (one per input), the log signal
-standard deviation ``log sf_a`` and the log noise standard deviation ``log sn_a``; the kernel is
-``k(x, x') = sf^2 exp(-sum_d (x_d - x'_d)^2 / (2 l_d^2))`` and the prior mean is zero (the targets are state
-differences, so zero mean means "the state stays where it is").
-
-Hyperparameters maximise the log marginal likelihood plus the robustness penalty of the PILCO MATLAB code
-(``hypCurb.m``): ``((log l_d - log std(x_d)) / log 100)^30`` keeps every length-scale within a factor of about
-100 of the spread of its input, and ``((log sf - log sn) / log 500)^30`` keeps the signal-to-noise ratio
-below about 500 (noise-free simulator data would otherwise drive the noise to zero and the kernel matrix to
-singularity).  The optimiser is SciPy's L-BFGS-B with PyTorch gradients, in float64.
-
-When the data set grows beyond ``max_points`` the model keeps a subset: the points of the most recent trial are
-always kept (that is where the current policy goes) and the rest is drawn uniformly at random from the older
-data, with an explicit seed (:func:`select_subset`).  The hyperparameters are fitted on the subset;
-:meth:`MultiOutputGP.condition_on` then lets the predictor see all the data through the FITC sparse
-approximation (Snelson & Ghahramani, 2006), with the subset's inputs as the inducing inputs, so that a
-prediction costs what it costs on the subset.
-"""
+"""Gaussian-process regression for PILCO's dynamics model: one GP per output, squared-exponential ARD kernel."""
 
 from __future__ import annotations
 
@@ -53,19 +34,7 @@ class GPHyperparameters:
 
 
 def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.ndarray:
-    """Indices of at most ``max_points`` of ``n_points`` data points: the last ``recent`` always, the rest at random.
-
-    Parameters
-    ----------
-    n_points : int
-        Size of the data set (points are in chronological order).
-    max_points : int
-        Largest subset size.
-    recent : int
-        Number of most recent points that are always kept (capped at ``max_points``).
-    seed : int
-        Seed of the random draw.
-    """
+    """Indices of at most ``max_points`` of ``n_points`` data points: the last ``recent`` always, the rest at random."""
     if max_points < 1:
         raise ValueError(f"max_points must be >= 1, got {max_points!r}")
     if n_points <= max_points:
@@ -77,17 +46,7 @@ def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.
 
 
 class MultiOutputGP:
-    """``E`` independent GP regressors sharing the training inputs (SE-ARD kernel, zero prior mean).
-
-    Parameters
-    ----------
-    inputs : array (N, D)
-        Training inputs.
-    targets : array (N, E)
-        Training targets.
-    hyperparameters : GPHyperparameters, optional
-        Start values (default: length-scales = input standard deviations, ``sf = std(y)``, ``sn = sf / 10``).
-    """
+    """``E`` independent GP regressors sharing the training inputs (SE-ARD kernel, zero prior mean)."""
 
     def __init__(self, inputs: np.ndarray, targets: np.ndarray, hyperparameters: Optional[GPHyperparameters] = None):
         inputs = np.asarray(inputs, dtype=float)
@@ -118,15 +77,7 @@ class MultiOutputGP:
 
     def condition_on(self, inputs: np.ndarray, targets: np.ndarray) -> None:
         """Condition the predictor on ``inputs`` (N, D) and ``targets`` (N, E), usually a superset of the training
-        data, through FITC with the training inputs as the inducing inputs; the hyperparameters stay as they are.
-
-        With inducing inputs ``Z`` (M of them), ``Lambda = diag(K_nn - Q_nn) + sn2 I``, ``Q_nn = K_nm K_mm^-1 K_mn``
-        and ``A = K_mm + K_mn Lambda^-1 K_nm``, the posterior mean is ``k(x, Z) beta`` with ``beta = A^-1 K_mn
-        Lambda^-1 y`` and the latent variance ``sf2 - k(x, Z) (K_mm^-1 - A^-1) k(Z, x)``: the exact GP's formulas
-        with ``beta`` and ``K_mm^-1 - A^-1`` in place of ``(K + sn2 I)^-1 y`` and ``(K + sn2 I)^-1``, so the moment
-        matching of :func:`~softpend.pilco.moments.gp_moments` applies unchanged (as in the PILCO MATLAB code).
-        When ``inputs`` are the training inputs this is the exact GP.
-        """
+        data, through FITC with the training inputs as the inducing inputs; the hyperparameters stay as they are."""
         inputs = np.asarray(inputs, dtype=float)
         targets = np.asarray(targets, dtype=float)
         if inputs.ndim != 2 or inputs.shape[1] != self.n_inputs or targets.shape != (len(inputs), self.n_outputs):
@@ -252,12 +203,7 @@ class MultiOutputGP:
         return torch.exp(self.log_signal_var[a] - 0.5 * torch.sum(d * d, dim=2))
 
     def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Posterior mean and variance of the latent function at deterministic inputs ``x`` (M, D).
-
-        Returns
-        -------
-        mean, var : arrays (M, E)
-        """
+        """Posterior mean and variance of the latent function at deterministic inputs ``x`` (M, D)."""
         xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
         if xt.shape[1] != self.n_inputs:
             raise ValueError(f"x must have {self.n_inputs} columns, got {xt.shape[1]}")

@@ -1,43 +1,4 @@
-"""The PILCO loop on the simulated plant: random-torque trials, then alternate model learning, policy search and a trial.
-
-Trials
-------
-The plant (``task.make_plant()``) steps at ``task.dt_s``; PILCO acts every ``control_dt_s`` and holds the
-torque in between (:class:`~softpend.pilco.controller.PilcoController`).  Every trial -- the random-torque
-trials (held torques, :class:`~softpend.pilco.controller.RandomTorqueController`) and each policy trial --
-starts from the task's start distribution, lasts ``horizon_s`` and runs through
-:func:`softpend.evaluation.run_episode`.  The plant seconds of these trials are the interaction PILCO learns
-from.  After each policy trial the policy is tested with :func:`softpend.evaluation.evaluate_controller`
-(``eval_seeds``, ``eval_duration_s``); the tests are neither learnt from nor counted as interaction.  The
-policy *balances* when every test episode swings up and keeps ``upright_std_rad <= target_std_rad``.
-
-Model learning and policy search
---------------------------------
-GP dynamics (:class:`~softpend.pilco.gp.MultiOutputGP`): hyperparameters by penalised marginal likelihood on the
-data subsampled to ``max_gp_points`` (the latest trial always kept), predictions conditioned on the subset or,
-with ``gp_all_data``, on all data through the FITC approximation with the subset as inducing inputs.  The RBF
-policy (:class:`~softpend.pilco.policy.RBFPolicy`) minimises the predicted expected cost (plus
-``cost_exploration`` times its predicted standard deviation) summed over a moment-matching rollout from
-``N(mu0, S0)`` (:class:`~softpend.pilco.propagation.Propagator`), by L-BFGS-B from the previous policy, and
-with ``policy_restarts`` also from fresh random policies; the lowest predicted cost is kept.  The rollout is
-``horizon_s`` long, or ``prediction_s`` once a policy trial has swung the rod up.  The cost saturates in the
-tip's distance from upright (width ``cost_width_m``, ``cost_width_after_swing_up_m`` after a swing-up); with
-``cost_rate_width_rad_s`` it is multiplied by a factor in the tip rate once a real trial has come within
-``cost_rate_after_rad`` of upright.
-
-Balancing policy
-----------------
-With ``balance_within_rad`` set, a linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) acts instead of
-the RBF policy while the tip is within ``balance_within_rad`` of upright and its rate within
-``balance_within_rad_s`` (:class:`~softpend.pilco.controller.PilcoController`).  Before every policy trial, once
-the real trials have visited that band, it is searched like the RBF policy over a predicted
-``balance_prediction_s`` from the mean and covariance of the real trials' states in the band.
-
-The object and the loop
------------------------
-:class:`Pilco` holds a run's data, GP model and policies (``random_trial``, ``start_policy``, ``optimize_models``,
-``optimize_policy``, ``policy_trial``, ``controller``, ``result``); :func:`run_pilco` is its loop.
-"""
+"""The PILCO loop on the simulated plant: random-torque trials, then alternate model learning, policy search and a trial."""
 
 from __future__ import annotations
 
@@ -77,105 +38,7 @@ BALANCE_PREFIX = "balance."
 
 @dataclass
 class PilcoConfig:
-    """Settings of a PILCO run (SI units).
-
-    Parameters
-    ----------
-    task : softpend.task.Task
-        Plant, rod, plant step ``task.dt_s``, sub-steps and the start distribution of every trial and test
-        episode.
-    state : {"tip_bend", "tip", "hub_tip"}
-        State representation (see :mod:`softpend.pilco.propagation`).
-    control_dt_s : float
-        Plant step and PILCO's control period (zero-order hold) [s].
-    horizon_s : float
-        Length of every trial [s].
-    prediction_s : float or None
-        Length of the predicted rollout whose cost each policy search minimises [s], at least ``horizon_s``,
-        once a policy trial has swung the rod up (its ``swing_up_time_s`` is finite); the searches before
-        predict ``horizon_s``.  None: always ``horizon_s``.  ``predicted_cost`` is summed over the trial's
-        length only, to compare with the real trial.
-    n_policy_trials : int
-        Largest number of policy trials after the random ones (the random draws of the trials it allows are
-        the same whatever its value: every purpose has its own stream, see ``seed``; so a run that balances
-        within a smaller budget is the same run).
-    n_random_trials : int
-        Random-torque trials before the first policy search (each ``horizon_s`` long, counted as
-        interaction).
-    random_hold_min_s, random_hold_max_s : float
-        Each torque of the initial random trial is held for a random time in this range [s] (whole control
-        periods; see :class:`~softpend.pilco.controller.RandomTorqueController`).
-    cost_width_m : float
-        Width ``w`` of the saturating cost [m].
-    cost_width_after_swing_up_m : float, optional
-        Width of the saturating cost once a policy trial has swung the rod up (as ``prediction_s``) [m]
-        (``None``: ``cost_width_m`` throughout).
-    cost_rate_width_rad_s : float, optional
-        Width of the cost's tip-rate factor [rad/s] (``None``: the cost depends on the tip position only; see
-        :mod:`softpend.pilco.propagation`).
-    cost_rate_after_rad : float, optional
-        Switch the tip-rate factor on only once a real trial's tip has come within this angle of upright
-        [rad] (the searches before use the position cost, which rewards getting up at any speed; ``None``:
-        the factor is on from the start).
-    cost_exploration : float
-        Weight ``b`` of the predicted cost's standard deviation in the search objective, per step (PILCO's
-        ``cost.expl``; see :mod:`softpend.pilco.propagation`): 0 minimises the expected cost, a negative
-        weight prefers policies whose outcome the model is unsure of (in ``[-1, 0]``).
-    initial_std : float
-        Standard deviation of every state variable in ``S0`` (rad or rad/s).
-    n_basis : int
-        RBF basis functions of the policy.
-    max_gp_points : int
-        Largest GP training set (beyond it the older points are subsampled uniformly at random; the latest
-        trial is always kept).
-    gp_all_data : bool
-        Once the data outgrow ``max_gp_points``, condition the GP's predictions on all the data through the FITC
-        sparse approximation with the subset as the inducing inputs (:meth:`~softpend.pilco.gp.MultiOutputGP.condition_on`;
-        the hyperparameters are still fitted on the subset and a prediction costs the same); False: the subset
-        only (a model that forgets the older trials it did not draw).
-    gp_iterations, policy_iterations : int
-        L-BFGS-B iteration budgets of the hyperparameter fit and of each policy search (one search per
-        trial from the previous policy, and one per restart).
-    policy_restarts : int
-        Searches from fresh random policies that each policy search after the first (which starts from a fresh
-        random policy already) adds to the one from the previous policy: new centres drawn from all states the
-        real trials visited, new pseudo-targets of spread ``restart_target_std``, length-scales from all data
-        (otherwise the rule of the first policy), each optimised like the previous policy; the policy with the
-        lowest predicted cost is kept.  0: only the search from the previous policy.
-    restart_above_cost_fraction : float
-        Restart only when the search from the previous policy ends with an objective (the predicted cost with
-        its exploration term) above this share of the largest cost (1 per prediction step); 0: in every search
-        after the first.
-    restart_target_std : float
-        Spread of a restart's initial pseudo-targets (before the saturation).
-    eval_seeds : tuple of int
-        Seeds of the test episodes after each policy trial (empty: no tests).
-    eval_duration_s : float
-        Length of each test episode [s].
-    target_std_rad : float
-        Balance criterion: ``upright_std_rad`` after swing-up at most this [rad].
-    balance_within_rad : float, optional
-        Learn a second, linear policy (:class:`~softpend.pilco.policy.LinearPolicy`) that acts instead of the RBF
-        policy while the tip is within this angle of upright [rad] and its rate within ``balance_within_rad_s``
-        (:class:`~softpend.pilco.controller.PilcoController`); ``None``: the RBF policy alone.  Its search predicts
-        ``balance_prediction_s`` from the states of the real trials in that band (their mean and covariance plus
-        ``initial_std**2``), with the same GP and cost as the RBF policy's search, and runs before every trial once
-        the real trials have visited the band.
-    balance_within_rad_s : float
-        Largest tip rate of the balancing policy's band [rad/s].
-    balance_prediction_s : float
-        Length of the balancing policy's predicted rollout [s].
-    compiled : bool
-        Predict the rollouts of the policy searches through ``torch.compile``
-        (:class:`~softpend.pilco.propagation.Propagator` ``compiled``): the same numbers to rounding, compiled once
-        per number of GP points (it needs a C++ compiler and falls back to eager rollouts with a warning without
-        one).
-    seed : int
-        Seed of every random draw of the run: ``SeedSequence(seed)`` spawns one stream per purpose (random-trial
-        starts and torques, policy-trial starts, policy init, GP subsets, policy restarts;
-        :data:`RANDOM_STREAMS`), so neither ``n_policy_trials``, ``n_random_trials`` nor ``policy_restarts``
-        changes the draws of the other purposes.
-    """
+    """Settings of a PILCO run (SI units)."""
 
     task: Task = field(default_factory=Task)
     state: str = "tip_bend"
@@ -306,16 +169,7 @@ class PilcoConfig:
 
 @dataclass
 class TrialRecord:
-    """One real trial and what PILCO predicted for it.
-
-    ``predicted_cost`` is the expected total cost that the model predicts for the policy that ran the trial (NaN for
-    the random trial); ``real_cost`` the same cost summed along the real trajectory; ``cost_width_m`` the width
-    of that cost [m] (``None``: the config's ``cost_width_m``), ``cost_rate_width_rad_s`` its tip-rate width
-    (``None``: position only); ``policy_restarts`` the searches from fresh
-    random policies that the search made besides the one from the previous policy; ``balance_predicted_cost`` the
-    expected cost that the model predicts for the balancing policy over ``balance_prediction_s`` from the upright
-    band's states (NaN: no balancing policy acted in the trial).
-    """
+    """One real trial and what PILCO predicted for it."""
 
     index: int
     kind: str
@@ -400,17 +254,7 @@ class PilcoResult:
 
     @classmethod
     def load(cls, directory: str | Path) -> "PilcoResult":
-        """Inverse of :meth:`save` (predicted and real trajectories are not stored).
-
-        The policy weights are read with ``torch.load(..., weights_only=True)`` (tensors only, never code).
-
-        Raises
-        ------
-        FileNotFoundError
-            If ``pilco.json`` or ``policy.pt`` is missing.
-        ValueError
-            If either file is not what :meth:`save` writes (the message names the file and the reason).
-        """
+        """Inverse of :meth:`save` (predicted and real trajectories are not stored)."""
         directory = Path(directory)
         meta_path, weights_path = directory / "pilco.json", directory / "policy.pt"
         for path in (meta_path, weights_path):
@@ -558,12 +402,7 @@ RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_in
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
     """One independent generator per purpose (:data:`RANDOM_STREAMS`), spawned from ``SeedSequence(seed)``
-    (child ``k`` depends on ``k`` only, so a stream appended to the list leaves the others' draws alone).
-
-    Each stream is drawn from in order, one draw per trial or search, so the budget (``n_policy_trials``,
-    ``n_random_trials``) changes none of the draws made before it runs out: the first trials of two runs that
-    differ only in the budget are the same.
-    """
+    (child ``k`` depends on ``k`` only, so a stream appended to the list leaves the others' draws alone)."""
     children = np.random.SeedSequence(int(seed)).spawn(len(RANDOM_STREAMS))
     return {name: np.random.default_rng(child) for name, child in zip(RANDOM_STREAMS, children)}
 
@@ -674,26 +513,7 @@ def run_pilco(
     progress: bool = True,
     callback: Optional[Callable[[TrialRecord], None]] = None,
 ) -> PilcoResult:
-    """Run PILCO on the plant (see the module docstring).
-
-    Parameters
-    ----------
-    config : PilcoConfig, optional
-        Default ``PilcoConfig()``, the plain algorithm's settings (the book's: ``load_hparams("pilco")``,
-        :func:`softpend.study.presets.load_hparams`).
-    progress : bool
-        Show a tqdm progress bar over the trials.
-    callback : callable, optional
-        Called with each :class:`TrialRecord` as it is completed.
-
-    Returns
-    -------
-    PilcoResult
-
-    The run uses one torch thread (the caller's count is restored after it): with two threads the arithmetic
-    differs in the last digits, and a PILCO run follows them to other policies, so the same seed gives the same
-    run whatever the caller's threads.
-    """
+    """Run PILCO on the plant (see the module docstring)."""
     with one_torch_thread():
         return _run_pilco(config, progress, callback)
 
@@ -731,14 +551,7 @@ def _run_pilco(
 
 @dataclass
 class PolicySearch:
-    """What :meth:`Pilco.optimize_policy` searched with and predicted.
-
-    ``predicted_cost`` is the expected total cost over a trial's ``horizon_s`` of the policy found;
-    ``cost_width_m`` and ``cost_rate_width_rad_s`` the cost it minimised (``None``: the config's ``cost_width_m``,
-    no tip-rate factor), by which its trial is scored;
-    ``n_restarts`` the searches from fresh random policies; ``balance_predicted_cost`` the balancing policy's
-    expected cost over ``balance_prediction_s`` from the upright band (NaN: no balancing policy searched).
-    """
+    """What :meth:`Pilco.optimize_policy` searched with and predicted."""
 
     predicted_cost: float
     cost_width_m: Optional[float]
@@ -749,12 +562,7 @@ class PolicySearch:
 
 class Pilco:
     """PILCO on the plant as an object: real trials feed the data, :meth:`optimize_models` fits the GP dynamics,
-    :meth:`optimize_policy` searches the policies on the model, :meth:`controller` gives them as a controller.
-
-    A run is :meth:`random_trial` ``n_random_trials`` times and :meth:`start_policy`, then :meth:`optimize_models`,
-    :meth:`optimize_policy` and :meth:`policy_trial` per policy trial (:func:`run_pilco`); :meth:`result`
-    collects the outcome.  Every random draw comes from the run's streams (:func:`_random_streams`).
-    """
+    :meth:`optimize_policy` searches the policies on the model, :meth:`controller` gives them as a controller."""
 
     def __init__(self, config: PilcoConfig) -> None:
         from softpend.envs import SoftPendulumEnv

@@ -1,18 +1,4 @@
-"""Exact moment matching of Gaussian inputs through the pieces of PILCO (Deisenroth & Rasmussen, 2011).
-
-Every function maps a Gaussian ``x ~ N(m, s)`` to the mean ``M`` and covariance ``S`` of an output
-``y = f(x)`` and to ``C = s^{-1} cov(x, y)`` (the "input-output covariance times the inverse input
-covariance" of the PILCO MATLAB code), so that covariances with any other variable ``z`` that is jointly
-Gaussian with ``x`` follow as ``cov(z, y) = cov(z, x) @ C`` (see :func:`chain_covariance`).  That is how a
-whole rollout ``state -> (sin, cos) -> policy -> saturation -> GP dynamics -> next state`` is propagated
-while keeping the state-control-successor correlations.
-
-The functions are written in PyTorch and differentiable, so the expected long-term cost can be optimised
-with gradients through the whole prediction by autograd.  They mirror ``gp0.m`` / ``gp2.m`` (GP
-prediction at an uncertain input, with and without model uncertainty), ``gTrig.m`` (sine and cosine of
-Gaussian angles), ``gSat.m`` (the sine saturation ``u_max (9 sin x + sin 3x) / 8``) and ``lossSat.m``
-(the saturating cost ``1 - exp(-|z - z*|^2_W / 2)``) of the PILCO MATLAB code.
-"""
+"""Exact moment matching of Gaussian inputs through the pieces of PILCO (Deisenroth & Rasmussen, 2011)."""
 
 from __future__ import annotations
 
@@ -103,41 +89,7 @@ def gp_moments(
     inv_kernel: torch.Tensor | None = None,
     weights: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Moments of GP predictions at a Gaussian input (squared-exponential ARD kernel, zero prior mean).
-
-    With ``inv_kernel`` given this is ``gp0`` of the PILCO code: the output is the GP's latent function
-    and its variance includes the model uncertainty (``sf2 - tr(K^{-1} L)`` terms).  Without it this is
-    ``gp2``: the posterior mean function only, as used for the RBF policy.
-
-    Parameters
-    ----------
-    mean : tensor (D,)
-        Input mean.
-    cov : tensor (D, D)
-        Input covariance (may be singular).
-    inputs : tensor (N, D)
-        Training (or basis-function) inputs.
-    beta : tensor (E, N)
-        ``(K + sn2 I)^{-1} y`` for each of the ``E`` outputs.
-    log_lengthscales : tensor (E, D)
-        Log length-scales per output and input dimension.
-    log_signal_var : tensor (E,)
-        Log signal variance ``log sf2`` per output.
-    inv_kernel : tensor (E, N, N), optional
-        ``(K + sn2 I)^{-1}`` per output (include to add the model uncertainty).
-    weights : tensor (P, N, N), optional
-        :func:`pair_weights` of ``beta`` and ``inv_kernel`` (computed here when not given; a caller that
-        propagates many inputs through one model computes them once).
-
-    Returns
-    -------
-    M : tensor (E,)
-        Predictive mean.
-    S : tensor (E, E)
-        Predictive covariance.
-    C : tensor (D, E)
-        ``cov^{-1} cov(x, f(x))``.
-    """
+    """Moments of GP predictions at a Gaussian input (squared-exponential ARD kernel, zero prior mean)."""
     dim = log_lengthscales.shape[1]
     eye = torch.eye(dim, dtype=mean.dtype, device=mean.device)
     inp = inputs - mean  # (N, D)
@@ -204,27 +156,7 @@ def _second_moments(
 def rbf_network_moments(
     mean: torch.Tensor, cov: torch.Tensor, centers: torch.Tensor, beta: torch.Tensor, log_lengthscales: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Moments of one RBF network ``f(x) = sum_n beta_n exp(-|x - c_n|^2_Lambda / 2)`` at a Gaussian input.
-
-    The same numbers as :func:`gp_moments` with one output, unit signal variance and no model uncertainty
-    (``gp2`` of the PILCO code, the policy's pre-saturation output), with the fewer operations one output
-    needs: the policy is propagated once per predicted step, and its gradient taken through all of them.
-
-    Parameters
-    ----------
-    mean : tensor (D,)
-    cov : tensor (D, D)
-    centers : tensor (N, D)
-    beta : tensor (N,)
-    log_lengthscales : tensor (D,)
-
-    Returns
-    -------
-    M, S : tensor ()
-        Mean and variance of ``f(x)``.
-    C : tensor (D,)
-        ``cov^{-1} cov(x, f(x))``.
-    """
+    """Moments of one RBF network ``f(x) = sum_n beta_n exp(-|x - c_n|^2_Lambda / 2)`` at a Gaussian input."""
     dim = mean.shape[0]
     eye = torch.eye(dim, dtype=mean.dtype, device=mean.device)
     inp = centers - mean  # (N, D)
@@ -248,22 +180,7 @@ def rbf_network_moments(
 
 
 def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Moments of ``(sin a_1, cos a_1, sin a_2, cos a_2, ...)`` for Gaussian angles ``a ~ N(mean, cov)``.
-
-    Parameters
-    ----------
-    mean : tensor (A,)
-        Angle means [rad].
-    cov : tensor (A, A)
-        Angle covariance [rad^2].
-
-    Returns
-    -------
-    M : tensor (2A,)
-    S : tensor (2A, 2A)
-    C : tensor (A, 2A)
-        ``cov^{-1} cov(a, trig(a))`` (``C[i, 2i] = E cos a_i``, ``C[i, 2i+1] = -E sin a_i``).
-    """
+    """Moments of ``(sin a_1, cos a_1, sin a_2, cos a_2, ...)`` for Gaussian angles ``a ~ N(mean, cov)``."""
     n = mean.shape[0]
     var = torch.diagonal(cov)
     decay = torch.exp(-0.5 * var)
@@ -300,17 +217,7 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
 def sin_saturation_moments(
     mean: torch.Tensor, var: torch.Tensor, limit: float
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Moments of the smooth saturation ``u = limit (9 sin x + sin 3x) / 8`` of a scalar ``x ~ N(mean, var)``.
-
-    The map is odd, monotone on ``[-pi/2, pi/2]`` and flat at ``+-limit`` there (``gSat.m``).
-
-    Returns
-    -------
-    M, S : tensor ()
-        Mean and variance of ``u``.
-    C : tensor ()
-        ``var^{-1} cov(x, u)`` (by Stein's lemma ``E[u'(x)]``).
-    """
+    """Moments of the smooth saturation ``u = limit (9 sin x + sin 3x) / 8`` of a scalar ``x ~ N(mean, var)``."""
     e = lambda k: torch.exp(-0.5 * k * k * var)  # noqa: E731  (E[cos kx] = e(k) cos(k m))
     a = limit / 8.0
     m_u = a * (9.0 * e(1.0) * torch.sin(mean) + e(3.0) * torch.sin(3.0 * mean))
@@ -326,21 +233,7 @@ def sin_saturation_moments(
 def saturating_cost_moments(
     mean: torch.Tensor, cov: torch.Tensor, target: torch.Tensor, width: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Mean and variance of the saturating cost ``1 - exp(-|z - target|^2 / (2 width^2))``, ``z ~ N(mean, cov)``.
-
-    Parameters
-    ----------
-    mean : tensor (K,)
-    cov : tensor (K, K)
-    target : tensor (K,)
-    width : float
-        Cost width (same units as ``z``).
-
-    Returns
-    -------
-    E, V : tensor ()
-        Expected cost (in ``[0, 1]``) and its variance.
-    """
+    """Mean and variance of the saturating cost ``1 - exp(-|z - target|^2 / (2 width^2))``, ``z ~ N(mean, cov)``."""
     k = mean.shape[0]
     eye = torch.eye(k, dtype=mean.dtype, device=mean.device)
     w = eye / width**2

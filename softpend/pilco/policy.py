@@ -1,13 +1,4 @@
-"""PILCO's controller: a radial-basis-function network squashed by a sine saturation.
-
-The pre-saturation output is ``pi~(x) = sum_i beta_i exp(-|x - c_i|^2_Lambda / 2)`` with
-``beta = (K_cc + sn^2 I)^{-1} t``: the posterior mean of a GP with unit signal variance and noise
-``sn = 0.01`` whose "training set" is the learnable pseudo-inputs ``c_i`` (centres) and pseudo-targets
-``t_i`` (the PILCO code's ``congp``).  The torque is ``u = u_max (9 sin pi~ + sin 3 pi~) / 8`` (``gSat``),
-which never exceeds ``u_max`` and has exact Gaussian moments, so the policy can be propagated by moment
-matching (:func:`~softpend.pilco.moments.rbf_network_moments`: ``gp_moments`` without model uncertainty, then
-:func:`~softpend.pilco.moments.sin_saturation_moments`).
-"""
+"""PILCO's controller: a radial-basis-function network squashed by a sine saturation."""
 
 from __future__ import annotations
 
@@ -56,17 +47,7 @@ def saturated_linear_moments(
 class LinearPolicy:
     """Saturated linear policy ``u = u_max (9 sin z + sin 3z) / 8`` with ``z = w . x`` on ``D`` inputs (PILCO's
     ``conlin`` with ``gSat``).  On the model inputs ``[rates, sin/cos of angles]`` the cosine of the tip angle
-    stands in for a bias near upright.
-
-    Parameters
-    ----------
-    n_inputs : int
-        Number of inputs ``D``.
-    torque_limit_nm : float
-        Saturation level ``u_max`` [N m].
-    weights : array (D,), optional
-        Initial weights [1 per input unit]; zeros (no torque) by default.
-    """
+    stands in for a bias near upright."""
 
     def __init__(self, n_inputs: int, torque_limit_nm: float, weights: np.ndarray | None = None) -> None:
         if int(n_inputs) < 1:
@@ -121,24 +102,7 @@ class LinearPolicy:
 
 
 class RBFPolicy:
-    """Saturated RBF-network policy on ``D`` inputs with one scalar output (the base torque).
-
-    Parameters
-    ----------
-    centers : array (n_basis, D)
-        Initial basis-function centres (pseudo-inputs).
-    lengthscales : array (D,)
-        Initial length-scales (same units as the inputs).
-    torque_limit_nm : float
-        Saturation level ``u_max`` [N m].
-    seed : int
-        Seed of the initial pseudo-targets ``t ~ target_std N(0, 1)``.
-    noise_std : float
-        Pseudo-noise of the underlying GP (regularises ``beta``).
-    target_std : float
-        Spread of the initial pseudo-targets (pre-saturation; 0.1 gives small torques, about 1 a policy
-        that uses the whole torque range).
-    """
+    """Saturated RBF-network policy on ``D`` inputs with one scalar output (the base torque)."""
 
     def __init__(
         self,

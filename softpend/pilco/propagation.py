@@ -1,47 +1,4 @@
-"""State representation, one-step moment-matching propagation and the expected long-term cost.
-
-State representation
---------------------
-PILCO models the plant in the report's *observed* variables (limited information), sampled at the control
-rate.  Two representations are offered (:data:`STATE_SPECS`):
-
-``"tip"``
-    ``x = [theta_dot, theta]``: the tip angle ``theta`` from upright and its rate -- a pendulum's state.
-    For a stiff one-link rod it is (nearly) the full state; for the soft rod the bending is not in it and
-    shows up as GP noise.
-``"tip_bend"`` (default)
-    ``x = [theta_dot, bend_dot, bend, theta]`` with ``bend = wrap(phi - theta)``: the tip plus the rod's
-    bending seen from the observations (hub angle against the tip direction) -- the report's limited
-    information with the bending mode in the state.  Only ``theta`` is an angle; ``bend`` stays small.
-``"hub_tip"``
-    ``x = [phi_dot, theta_dot, phi, theta]``: the same information with both angles as angles (two sin/cos
-    pairs), for comparison.
-
-Angles are handled as in PILCO: the Gaussian state holds the angles themselves (unwrapped), and every
-model input uses ``(sin, cos)`` of each angle instead of the angle (moments by
-:func:`~softpend.pilco.moments.trig_moments`).  The GP inputs are ``[rates, sin/cos of angles, u]`` and
-its targets the state differences over one control step.
-
-Cost
-----
-The saturating cost of the tip's distance from upright, ``c = 1 - exp(-d^2 / (2 w^2))`` with
-``d^2 = |L (-sin theta, cos theta) - (0, L)|^2 = 2 L^2 (1 - cos theta)`` (``L`` the rod length, ``w`` the
-cost width in metres): the point at distance ``L`` from the hub in the tip's direction against the
-upright tip position.  Its expectation under the predicted Gaussian is exact
-(:func:`~softpend.pilco.moments.saturating_cost_moments`).
-
-With a rate width ``w_r`` [rad/s] the cost also asks the tip to be slow:
-``c = 1 - exp(-d^2 / (2 w^2) - theta_dot^2 / (2 w_r^2))``, so passing the top at speed (a rod that spins
-over and over) earns little and only arriving slowly -- balancing -- earns the whole reward.  Its
-expectation is taken over the moment-matched Gaussian of ``(sin theta, cos theta, theta_dot)``.
-
-Exploration
------------
-With an exploration weight ``b`` (PILCO's ``cost.expl``) the policy search minimises
-``sum_t E[c_t] + b sqrt(Var[c_t])`` instead of the expected cost alone: ``b < 0`` rewards predicted states
-whose cost the model is unsure of (an upper confidence bound on the reward), so a policy that takes the rod
-where the data has not been yet looks better than one that keeps it on the hanging plateau the model knows.
-"""
+"""State representation, one-step moment-matching propagation and the expected long-term cost."""
 
 from __future__ import annotations
 
@@ -75,18 +32,7 @@ DERIVED_VARIABLES = {
 
 @dataclass(frozen=True)
 class StateSpec:
-    """Which observed variables form PILCO's state; non-angle variables first, then the angles.
-
-    Attributes
-    ----------
-    name : str
-    variables : tuple of str
-        Names from :data:`softpend.plant.OBSERVATION_NAMES`.
-    n_angles : int
-        The last ``n_angles`` variables are angles [rad].
-    tip_angle_index : int
-        Index (in ``variables``) of the tip angle ``theta`` used by the cost.
-    """
+    """Which observed variables form PILCO's state; non-angle variables first, then the angles."""
 
     name: str
     variables: tuple[str, ...]
@@ -112,11 +58,7 @@ class StateSpec:
         return self.dim - self.n_angles + 2 * self.n_angles
 
     def from_observations(self, observations: np.ndarray) -> np.ndarray:
-        """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time.
-
-        Besides the observed variables, ``bend_rad = wrap(phi - theta)`` and
-        ``bend_dot_rad_s = phi_dot - theta_dot`` (hub against tip direction: the rod's bending) are available.
-        """
+        """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time."""
         obs = np.atleast_2d(np.asarray(observations, dtype=float))
         columns = []
         for name in self.variables:
@@ -152,30 +94,7 @@ def state_spec(name: str) -> StateSpec:
 
 
 class Propagator:
-    """Moment-matching rollout of a Gaussian state through policy and GP dynamics, with the expected cost.
-
-    Parameters
-    ----------
-    spec : StateSpec
-    dynamics : object with ``moments(mean, cov) -> (M, S, C)``
-        The GP model of the state differences (inputs ``[model inputs, u]``).
-    policy : object with ``moments(mean, cov) -> (m_u, s_u, c_u)``
-        The controller on the model inputs.
-    length_m : float
-        Rod length ``L`` used by the cost [m].
-    cost_width_m : float
-        Cost width ``w`` [m].
-    cost_rate_width_rad_s : float, optional
-        Width ``w_r`` of the tip-rate factor of the cost [rad/s] (``None``: position only).
-    exploration : float
-        Weight ``b`` of each step's cost standard deviation in the search objective (0: the expected cost;
-        negative: optimism in the face of the model's uncertainty).
-    compiled : bool
-        Run each predicted step of a :meth:`rollout` that records gradients through ``torch.compile``: the same
-        numbers to rounding, compiled once for each new number of GP points (and cached on disk by torch).  It
-        needs a C++ compiler; without one the rollout warns once and runs eagerly.  ``dynamics`` and ``policy`` then also need ``moment_function() -> (f, params)`` with
-        ``f(mean, cov, *params)`` their moments (:class:`~softpend.pilco.gp.MultiOutputGP`, :class:`~softpend.pilco.policy.RBFPolicy`).
-    """
+    """Moment-matching rollout of a Gaussian state through policy and GP dynamics, with the expected cost."""
 
     def __init__(
         self,
@@ -348,18 +267,7 @@ _COMPILED: list = []
 
 def _compiled_step_and_cost():
     """:func:`_step_and_cost` through ``torch.compile`` (static shapes: one graph per number of GP points), or the
-    eager function, with a warning, where the compiler cannot be used.
-
-    The compiled loops run on one thread (``cpp.threads``): with torch 2.13 the OpenMP-parallel backward kernels of
-    this graph corrupt the heap when torch has more than one thread (``tests/test_pilco_moments.py`` runs it with
-    two).  The code that calls the kernels is compiled C++ too (``cpp_wrapper``): the same kernels, so the same
-    numbers to the bit, without the Python calls of each step's few hundred kernel launches and buffer views.
-
-    A graph compiled by an earlier process is read from torch's disk caches (FX graph and AOT autograd caches), in
-    about a third of the time of compiling it; the AOT autograd cache takes a graph with a custom
-    ``torch.autograd.Function`` (:func:`~softpend.pilco.moments.gp_moments` has one, free of any state but its
-    tensors) only when ``autograd_cache_allow_custom_autograd_functions`` is set, which is set here for these
-    calls alone."""
+    eager function, with a warning, where the compiler cannot be used."""
     if not _COMPILED:
         logging.getLogger("torch._inductor.ir").addFilter(_quiet_c_shim_notes)
         silence_compiler_notes()

@@ -1,20 +1,4 @@
-"""Agent and replay-buffer files read without running code from them.
-
-A stable-baselines3 agent ``.zip`` holds a ``data`` JSON in which every attribute that is not plain JSON is a
-``{":serialized:": <base64 cloudpickle>}`` entry, and ``DQN.load`` unpickles those -- so an agent file from
-somebody else could run any code.  :func:`load_agent_file` never unpickles: every pickled attribute of a
-softpend DQN agent (:data:`REBUILT_ATTRIBUTES`) is rebuilt from the run's own config (``custom_objects`` of
-``DQN.load``, which then skips the pickle) and a file with any *other* pickled entry is refused.  The
-network weights come from the ``.pth`` members, which stable-baselines3 reads with
-``torch.load(..., weights_only=True)`` (tensors only).  The rebuilt attributes are the ones ``DQN.load``
-would overwrite anyway (schedules, spaces re-seeded from the saved seed) or reset before any use (the last
-observation and episode buffers), so a loaded agent acts and trains exactly as one loaded by
-``DQN.load``.
-
-Replay buffers are written as ``.npz`` arrays (:func:`save_replay_buffer`, never a pickle) and read back
-with ``numpy.load(..., allow_pickle=False)`` into the buffer that ``DQN.load`` allocates
-(:func:`load_replay_buffer`).
-"""
+"""Agent and replay-buffer files read without running code from them."""
 
 from __future__ import annotations
 
@@ -192,31 +176,7 @@ def load_agent_file(
     env: Any = None,
     replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
 ) -> DQN:
-    """Load a DQN agent file written by softpend without unpickling anything (see the module docstring).
-
-    Parameters
-    ----------
-    cls : type
-        ``DQN`` or :class:`~softpend.rl.target_dqn.TargetDQN` (:func:`softpend.rl.dqn.agent_class`).
-    path : str or Path
-        The ``.zip`` file.
-    config : DQNConfig
-        The config of the run that wrote it (its ``config.json``): the source of the rebuilt attributes.
-    env : gymnasium.Env, optional
-        Environment to continue training on (``None``: for prediction only).
-    replay_buffer_class : type
-        Replay buffer the agent allocates (:class:`~softpend.rl.mbpo.MBPOReplayBuffer` to resume DQN-MBPO).
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    AgentFileError
-        If the file holds a pickled entry outside :data:`REBUILT_ATTRIBUTES`, is corrupt, or does not match
-        ``config``.
-    NonFiniteError
-        If a network weight is NaN or infinite.
-    """
+    """Load a DQN agent file written by softpend without unpickling anything (see the module docstring)."""
     path = Path(path)
     spaces_env = make_base_env(config)
     observation_dim = int(np.prod(spaces_env.observation_space.shape or (1,)))
@@ -286,15 +246,7 @@ def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
 
 
 def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
-    """Fill ``buffer`` (freshly allocated, with the run's sizes) from a file of :func:`save_replay_buffer`.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    AgentFileError
-        If the file is not such a file or does not fit ``buffer`` (arrays, shapes, dtypes, position).
-    """
+    """Fill ``buffer`` (freshly allocated, with the run's sizes) from a file of :func:`save_replay_buffer`."""
     path = Path(path)
     # the file can hold no more than the buffer it fills (its arrays, and the zip's and headers' overhead)
     arrays = [getattr(part, name) for part in _parts(buffer).values() for name in _BUFFER_ARRAYS]

@@ -1,14 +1,4 @@
-"""The settings of DQN and DQN-MBPO.
-
-:class:`DQNConfig` holds the task (torque levels, episode length, action repeat), the stable-baselines3 DQN
-settings and the bookkeeping (evaluation, checkpoints, early stopping).  :class:`MBPOConfig` adds what
-model-based policy optimisation needs (model rollouts per real step, rollout-length schedule, model refit
-interval, ensemble size, real-data ratio).  The defaults are those of the plain algorithms; the settings the
-book trains with are data, ``book/hparams/dqn.yml`` and ``book/hparams/mbpo.yml``, read by
-:func:`softpend.study.presets.load_hparams`.  Both classes are frozen dataclasses, saved as JSON next to
-every run (``config.json``) and overridable field by field (``softpend train --set NAME=VALUE``,
-:func:`softpend.io.overrides.apply_overrides`).
-"""
+"""The settings of DQN and DQN-MBPO."""
 
 from __future__ import annotations
 
@@ -31,76 +21,7 @@ __all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "saved_co
 
 @dataclass(frozen=True)
 class DQNConfig:
-    """Model-free DQN on ``SoftPendulumDiscreteEnv``.
-
-    Task
-    ----
-    task : softpend.task.Task
-        The plant, rod (torque limit included), time step and evaluation start distribution the agent is
-        trained on and evaluated on.
-    n_torque_levels : int
-        Discrete actions, evenly spaced in ``[-torque_limit_nm, torque_limit_nm]``.
-    episode_s : float
-        Training episode length [s] (truncation; there is no terminal state).
-    action_repeat : int
-        Plant steps (``task.dt_s`` each) per agent decision.
-    training_start : {"random", "hanging", "upright"}
-        Start distribution of *training* episodes (:class:`softpend.envs.SoftPendulumEnv` ``start``);
-        evaluation starts from ``task.start``.
-
-    DQN (stable-baselines3 names; counted in agent steps)
-    ------------------------------------------------------
-    learning_rate, buffer_size, learning_starts, batch_size, gamma, train_freq, gradient_steps,
-    target_update_interval, exploration_fraction, exploration_initial_eps, exploration_final_eps,
-    max_grad_norm : as in :class:`stable_baselines3.DQN` (``exploration_fraction`` is the fraction of the
-    whole run over which epsilon decays linearly; the target network is a hard copy of the online network
-    made every ``target_update_interval`` agent steps).
-    clip_q_targets : bool
-        Clamp every TD target to :attr:`q_target_bounds`, the discounted-return range that the reward's
-        bounds allow (:class:`softpend.rl.target_dqn.TargetDQN`).
-    net_arch : tuple of int
-        Hidden layer widths of the Q-network.
-    reset_every_episodes : int
-        Re-initialise the Q-network (and its target and the optimiser's moments) after every this many training
-        episodes, keeping the replay buffer (:func:`softpend.rl.dqn.reset_q_network`); 0: never.  The reset
-        follows the evaluation of that episode, so the agent evaluated there is the one before the reset.
-
-    Bookkeeping
-    -----------
-    eval_every_episodes : int
-        Evaluate the greedy policy on the true plant (:func:`softpend.evaluation.evaluate_controller`)
-        every this many episodes (an evaluation changes no training draw).
-    eval_seeds : tuple of int
-        Start-noise seeds of each evaluation (from hanging).
-    eval_until_first_failure : bool
-        Evaluate the ``eval_seeds`` starts in order and stop at the first that does not succeed (swing up and
-        hold ``upright_std_rad`` at most :data:`softpend.evaluation.SUCCESS_STD_RAD`).  A balanced evaluation
-        is always complete, so early stopping and the kept best agent are decided on full evaluations.  False:
-        every start every time.
-    eval_duration_s : float
-        Evaluation episode length [s].
-    checkpoint_every_episodes : int
-        Save agent, replay buffer and training log every this many episodes.
-
-    Early stopping
-    --------------
-    stop_after_balanced_evaluations : int
-        End training once this many consecutive evaluations have balanced: every ``eval_seeds`` start swung up
-        and held ``upright_std_rad <= stop_upright_std_rad`` (stable-baselines3's
-        ``StopTrainingOnRewardThreshold`` with the balance criterion as the threshold); ``episodes`` is then a
-        budget.  0: train for all ``episodes``.
-    stop_upright_std_rad : float
-        Upright std [rad] that counts as balanced for early stopping.
-    stop_confirm_seeds : tuple of int
-        Start-noise seeds of a confirmation: once ``stop_after_balanced_evaluations`` consecutive evaluations
-        have balanced, the agent is also evaluated from these starts (``eval_duration_s`` from hanging) and
-        training stops only if they all balance too; otherwise it goes on.  Selection starts like
-        ``eval_seeds`` (:attr:`selection_seeds`).  Empty: no confirmation.
-    stop_confirm_max_failures : int
-        Confirmation starts that may fail: the confirmation holds when at most this many of ``stop_confirm_seeds``
-        do not balance (evaluated start by start up to the failure after these).  Less than the number of
-        confirmation starts.
-    """
+    """Model-free DQN on ``SoftPendulumDiscreteEnv``."""
 
     task: Task = field(default_factory=Task)
     n_torque_levels: int = 5
@@ -219,12 +140,7 @@ class DQNConfig:
 
     @property
     def q_target_bounds(self) -> tuple[float, float]:
-        """``(low, high)``: the range of discounted returns [reward units] that the report's reward allows.
-
-        A plant step's reward lies in ``[-1, 1 + bonus_weight]`` (:mod:`softpend.envs.reward`), an agent
-        step's in ``action_repeat`` times that, and a discounted sum of those in that range over
-        ``1 - gamma`` (truncated episodes bootstrap, so the horizon is infinite).
-        """
+        """``(low, high)``: the range of discounted returns [reward units] that the report's reward allows."""
         from softpend.envs.reward import RewardParams
 
         low, high = -1.0, 1.0 + RewardParams().bonus_weight
@@ -239,44 +155,7 @@ class DQNConfig:
 
 @dataclass(frozen=True)
 class MBPOConfig(DQNConfig):
-    """DQN-MBPO: DQN trained on short rollouts of a learned dynamics ensemble branched from real states.
-
-    Model-based fields
-    ------------------
-    rollouts_per_real_step : int
-        Model rollouts started per real agent step.  Rollouts are generated in batches of
-        ``rollouts_per_real_step * rollout_every_steps`` every ``rollout_every_steps`` real steps, each
-        branched from a state drawn uniformly from the real replay buffer, one random ensemble member per
-        rollout.
-    rollout_every_steps : int
-        Real agent steps between rollout batches.
-    rollout_schedule : (first_episode, last_episode, min_length, max_length)
-        mbrl-lib's ``rollout_schedule``: the rollout length (agent steps) grows linearly from
-        ``min_length`` at ``first_episode`` to ``max_length`` at ``last_episode``.
-    model_buffer_size : int
-        Capacity of the model-transition buffer (older model data are overwritten, as MBPO's retain epochs).
-    real_ratio : float
-        Fraction of each DQN batch drawn from real transitions (the rest from model rollouts).
-    initial_random_episodes : int
-        Episodes of uniformly random actions before the first model fit (motor babbling).
-    model_refit_every_episodes : int
-        Refit the dynamics ensemble on all real data every this many episodes.
-    ensemble_size : int
-        Members of the dynamics ensemble.
-    model_fit_steps : int
-        Minibatch gradient steps per ensemble member and refit (the epochs are set so that a refit costs
-        about this many steps whatever the data size; early stopping on held-out episodes still applies).
-    model_batch_size : int
-        Minibatch size of the model fits.
-    model_hidden_widths : tuple of int
-        Hidden layers of each ensemble member (:class:`softpend.sysid.DynamicsModel`).
-    start_branch_fraction : float
-        Share of the rollouts branched from fresh draws of the training episodes' start distribution
-        (``training_start``) instead of from states of the real buffer; 0: all from the real buffer.
-    rollouts_within_data : bool
-        End a model rollout at the first predicted observation vector outside the box of the real ones
-        (per component, widened by 10 % of its range on each side); False: rollouts run their full length.
-    """
+    """DQN-MBPO: DQN trained on short rollouts of a learned dynamics ensemble branched from real states."""
 
     rollouts_per_real_step: int = 9
     rollout_every_steps: int = 125

@@ -1,18 +1,4 @@
-"""Learning curves in plant time, and when a run "reaches its asymptotic reward".
-
-The report's Figure 4 plots the episode return against training episodes for both methods and reads off
-the episode after which the curve stops rising ("reaching the asymptotic reward in approximately 150
-episodes").  We make that reading precise (:func:`episodes_to_asymptote`):
-
-* smooth the per-episode return with a trailing moving average of ``window`` episodes;
-* the *asymptotic reward* is the mean return over the last ``final_fraction`` of the run;
-* the run *reaches* it at the first episode after which the smoothed return stays at or above
-  ``start + level * (asymptote - start)`` for the rest of the run (``start`` = the first smoothed value,
-  ``level = 0.9``), i.e. it has covered 90 % of its total improvement and does not fall back.
-
-Curves of several seeds are put on a common axis (episodes, or real plant seconds) and summarised by an
-aggregate over seeds (the interquartile mean) with its stratified bootstrap interval in :func:`interval_band`.
-"""
+"""Learning curves in plant time, and when a run "reaches its asymptotic reward"."""
 
 from __future__ import annotations
 
@@ -49,10 +35,7 @@ def moving_average(values: np.ndarray, window: int) -> np.ndarray:
 def episodes_to_asymptote(
     returns: Sequence[float] | np.ndarray, window: int = 10, level: float = 0.9, final_fraction: float = 0.2
 ) -> float:
-    """Episode (1-based) at which a return curve reaches its asymptotic reward (see the module docstring).
-
-    Returns ``inf`` for an empty curve; a curve that never improves reaches it at episode 1.
-    """
+    """Episode (1-based) at which a return curve reaches its asymptotic reward (see the module docstring)."""
     r = np.asarray(returns, dtype=float)
     if r.ndim != 1:
         raise ValueError(f"returns must be 1-D, got shape {r.shape}")
@@ -75,13 +58,7 @@ def episodes_to_asymptote(
 
 
 def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
-    """``(episodes, plant seconds)`` at which one training run reaches its asymptotic reward.
-
-    A run trained to the end of its budget: the curve reading of :func:`episodes_to_asymptote`.  A run that its
-    stop rule ended (``log.stop_reason`` set: its agent balanced the selection starts and training stopped) has no
-    tail from which to read an asymptote; its agent no longer changes after the stop, so it reaches its asymptotic
-    performance at the stop episode: ``(log.n_episodes, log.plant_s)``.
-    """
+    """``(episodes, plant seconds)`` at which one training run reaches its asymptotic reward."""
     if log.stop_reason is not None and log.n_episodes > 0:
         return float(log.n_episodes), float(log.plant_s)
     episodes = episodes_to_asymptote(log.column("return"), window=window)
@@ -91,12 +68,7 @@ def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
 def failures_as(
     values: Sequence[float] | np.ndarray, success_rates: Sequence[float] | np.ndarray, failed_as: float
 ) -> np.ndarray:
-    """``values`` with ``failed_as`` in place of every entry whose success rate is below 1 (some start failed).
-
-    For the worst evaluation start's upright std with ``failed_as`` the success level: exact where every start
-    succeeded, and an evaluation that stopped at its first failing start
-    (:attr:`softpend.rl.DQNConfig.eval_until_first_failure`) does not need the starts it did not run.
-    """
+    """``values`` with ``failed_as`` in place of every entry whose success rate is below 1 (some start failed)."""
     return np.where(np.asarray(success_rates, dtype=float) < 1.0, float(failed_as), np.asarray(values, dtype=float))
 
 
@@ -127,32 +99,7 @@ def interval_band(
     seed: int = 0,
     failed_as: float | None = None,
 ) -> dict[str, np.ndarray]:
-    """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis.
-
-    A run that ended before the end of ``grid`` (its budget was smaller, or training stopped early because it
-    balanced) keeps its last row's value from there on: its agent no longer changes.  Points before a run's
-    first row are left out of the grid.
-
-    Parameters
-    ----------
-    logs : sequence of TrainingLog
-        One per seed, at least two.
-    field, axis, table : str
-        As :func:`aggregate`.
-    grid : array, optional
-        x values (default: 200 points from the latest first row to the furthest last row).
-    statistic : {"iqm", "median"}
-        Aggregate over seeds (:func:`softpend.stats.aggregate_interval`).
-    confidence, n_resamples, seed
-        Of the percentile bootstrap over seeds at every point.
-    failed_as : float, optional
-        The value of every row whose ``success_rate`` is below 1 (some start failed; :func:`failures_as`).
-
-    Returns
-    -------
-    dict with ``x``, ``value``, ``low``, ``high`` and ``per_seed`` (n_seeds, len(x)); ``inf`` values (a run
-    that never swung up) count as the largest.
-    """
+    """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis."""
     from softpend.stats import aggregate_interval
 
     if len(logs) < 2:

@@ -1,27 +1,4 @@
-"""Model-free DQN (stable-baselines3) that swings the soft rod up and balances it, with plant-time bookkeeping.
-
-:func:`train_dqn` trains on :func:`softpend.rl.training_env.make_training_env` with the settings of a
-:class:`~softpend.rl.config.DQNConfig` and the stable-baselines3 callbacks of :func:`training_callbacks`, in
-one ``CallbackList``: :class:`EpisodeRecorder` (a log row per episode), :class:`ProgressBarCallback`,
-:class:`EvaluationCallback` (the greedy policy on the true plant every ``eval_every_episodes`` episodes, shared
-:func:`softpend.evaluation.evaluate_controller`; best agent; the stop rule :class:`StopTrainingOnBalance` with
-:class:`ConfirmBalance` after each evaluation), :class:`ResetQNetworkCallback` and :class:`CheckpointCallback`
-(a resumable checkpoint: agent, replay buffer, training log).  The final agent is ``<run_dir>/agent.zip``.
-:mod:`softpend.rl.mbpo` reuses the same loop with a model-based replay buffer and its own callbacks.
-
-Run folder layout::
-
-    config.json          the config (softpend.rl.config.save_config)
-    agent.zip            final agent (stable-baselines3 DQN.save)
-    best_agent.zip       agent of the best periodic evaluation (see load_agent)
-    log.json             TrainingLog: episode and evaluation rows
-    checkpoint/          latest checkpoint: agent.zip, replay_buffer.npz, log.json (+ extra files of MBPO)
-
-Agents are read back by :func:`softpend.rl.agent_files.load_agent_file`, which never unpickles (a run
-folder is something users share), and the replay buffer is stored as plain arrays.  Training stops with
-:class:`softpend.checks.NonFiniteError` as soon as a network weight is NaN or infinite, before anything
-diverged is saved.
-"""
+"""Model-free DQN (stable-baselines3) that swings the soft rod up and balances it, with plant-time bookkeeping."""
 
 from __future__ import annotations
 
@@ -87,11 +64,7 @@ def agent_class(config: DQNConfig) -> type[DQN]:
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
-    """A stable-baselines3 DQN with the config's hyperparameters (``kwargs`` go to ``DQN``).
-
-    The target network is a hard copy of the online network (``tau = 1``) every ``target_update_interval``
-    agent steps.
-    """
+    """A stable-baselines3 DQN with the config's hyperparameters (``kwargs`` go to ``DQN``)."""
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
         kwargs["q_target_bounds"] = config.q_target_bounds
@@ -127,12 +100,7 @@ def evaluate_agent(
     name: str = "agent",
     stop_at_first_failure: bool = False,
 ):
-    """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``.
-
-    Seeds must be non-negative integers and the episodes' trajectories must fit in
-    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any episode runs).  ``stop_at_first_failure``: as
-    :func:`~softpend.evaluation.evaluate_controller`'s.
-    """
+    """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``."""
     seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
     duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
     controller = policy_controller(model, config)
@@ -164,12 +132,7 @@ def evaluate_agent_batched(
     """:func:`evaluate_agent` with every episode at once on the batched chain
     (:func:`softpend.evaluation.evaluate_batched`): the agent's greedy actions (``model.predict`` on the batch of
     observation vectors, ``deterministic=True``) held for ``config.action_repeat`` plant steps, on the
-    ``config.n_torque_levels`` torque levels of ``config.task``.
-
-    ``options`` go to :func:`~softpend.evaluation.evaluate_batched` (``rod_spread``, ``rod_seed``, ``substeps``,
-    ``initial_state``).  Seeds must be non-negative integers; the trajectories must fit in
-    :data:`softpend.checks.MAX_WORK_BYTES` (checked before any step).
-    """
+    ``config.n_torque_levels`` torque levels of ``config.task``."""
     return evaluate_agents_batched([model], config, seeds, duration_s, name, **options)[0]
 
 
@@ -214,12 +177,7 @@ def evaluate_agents_batched(
 
 
 class EpisodeRecorder(BaseCallback):
-    """Bookkeeping: one :class:`TrainingLog` row per training episode; stops training at the episode budget.
-
-    The callbacks after it in a :class:`~stable_baselines3.common.callbacks.CallbackList` read
-    :attr:`episode_ended` (whether the step just taken ended an episode, whose row is then ``log.episodes[-1]``).
-    ``model_steps``: ``() -> int`` total model steps so far (0 for model-free).
-    """
+    """Bookkeeping: one :class:`TrainingLog` row per training episode; stops training at the episode budget."""
 
     model: DQN  # set by BaseCallback.init_callback: the DQN (or its subclass) being trained
 
@@ -407,13 +365,7 @@ class EvaluationCallback(EpisodeEventCallback):
         return True
 
     def evaluate(self) -> dict[str, Any]:
-        """Evaluate the greedy policy on the true plant and append an evaluation row.
-
-        With ``config.eval_until_first_failure`` the evaluation stops at the first start that does not succeed
-        (``starts_evaluated`` < ``len(config.eval_seeds)``): ``success_rate`` then counts the starts before it
-        out of all ``eval_seeds``, ``all_swung_up`` is false, ``max_upright_std_rad`` is the largest of the
-        evaluated starts (a lower bound of the full evaluation's) and the medians are NaN.
-        """
+        """Evaluate the greedy policy on the true plant and append an evaluation row."""
         seeds = self.config.eval_seeds
         summary = evaluate_agent(self.model, self.config, stop_at_first_failure=self.config.eval_until_first_failure)
         complete = len(summary.results) == len(seeds)
@@ -582,12 +534,7 @@ class ModelBasedPart(Protocol):
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
     """Re-initialise ``model``'s Q-network as a new agent's (PyTorch's default initialisation of each linear
     layer, drawn from a generator seeded by ``seed``), copy it to the target network and clear the optimiser's
-    moments; the replay buffer, the exploration schedule and the step counters are kept.
-
-    This is the periodic reset of Nikishin et al. (2022, "The primacy bias in deep reinforcement learning"):
-    with many gradient steps per real step a network fitted to the first data keeps its early errors, and a
-    fresh network fitted to all the data gathered so far does not.
-    """
+    moments; the replay buffer, the exploration schedule and the step counters are kept."""
     generator = torch.Generator().manual_seed(int(np.random.SeedSequence([int(s) for s in seed]).generate_state(1)[0]))
     with torch.no_grad():
         for layer in model.q_net.modules():
@@ -753,12 +700,7 @@ def run_training(
 ) -> tuple[DQN, TrainingLog]:
     """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`): the agent of ``make_model`` (with
     the buffer ``replay_buffer_class``, allocated again on resume) learns with the :func:`training_callbacks`
-    (``part``: DQN-MBPO's model refits and rollouts).
-
-    Raises ``ValueError`` before any work if ``run_dir`` cannot be written, is a non-empty folder that is not
-    a run folder, holds another run (other settings or seed), or holds this run and ``resume`` is false; and
-    :class:`~softpend.checks.NonFiniteError` (nothing diverged saved) if the network's weights stop being finite.
-    """
+    (``part``: DQN-MBPO's model refits and rollouts)."""
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -803,28 +745,7 @@ def train_dqn(
     resume: bool = False,
     progress: bool = True,
 ) -> tuple[DQN, TrainingLog]:
-    """Train model-free DQN for ``episodes`` training episodes (see the module docstring).
-
-    Parameters
-    ----------
-    config : DQNConfig
-        Hyperparameters and task settings.
-    seed : int
-        Seed of the network initialisation, exploration and start-noise draws.
-    episodes : int
-        Training episodes (each ``config.episode_s`` of plant time).
-    run_dir : path
-        Run folder (created).
-    resume : bool
-        Continue from ``run_dir/checkpoint`` if it exists (the config must match the saved one).
-    progress : bool
-        Show a progress bar.
-
-    Returns
-    -------
-    (DQN, TrainingLog)
-        The trained agent and its log (also saved in ``run_dir``).
-    """
+    """Train model-free DQN for ``episodes`` training episodes (see the module docstring)."""
     return run_training(
         "dqn",
         config,
@@ -838,18 +759,7 @@ def train_dqn(
 
 
 def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:
-    """An agent of a run folder and its config.
-
-    Parameters
-    ----------
-    run_dir : path
-        Run folder, or the path of an agent ``.zip`` inside it.
-    which : {"best", "final"}
-        ``"best"``: the agent of the best periodic evaluation (``best_agent.zip``: every evaluation seed
-        swung up, then the smallest worst-seed upright std; later wins ties) -- model selection on the
-        evaluation seeds, as stable-baselines3's ``EvalCallback``; ``"final"``: the agent at the end of
-        training (``agent.zip``, also used when a run has no ``best_agent.zip``).
-    """
+    """An agent of a run folder and its config."""
     if which not in ("best", "final"):
         raise ValueError(f"which must be 'best' or 'final', got {which!r}")
     path = Path(run_dir)

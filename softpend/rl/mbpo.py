@@ -1,32 +1,4 @@
-"""DQN-MBPO: DQN trained on real transitions and on short rollouts of a learned dynamics ensemble.
-
-The report's model-based variant, following MBPO (Janner et al. 2019) as mbrl-lib implements it:
-
-1. The agent acts on the real plant (:func:`softpend.rl.training_env.make_training_env`); real transitions go
-   to the real part of :class:`MBPOReplayBuffer` together with the plant observation they start from.
-   The first ``initial_random_episodes`` episodes use uniformly random torques (motor babbling).
-2. Every ``model_refit_every_episodes`` episodes the dynamics ensemble of the system-identification
-   package (:func:`softpend.sysid.fit_dynamics_model`, full-information state, one step of ``dt_s``) is
-   refitted from scratch on *all* real episodes so far (written as a :class:`softpend.sysid.TrajectoryDataset`
-   to ``<run_dir>/real_data.npz``).
-3. Every ``rollout_every_steps`` real agent steps, ``rollouts_per_real_step * rollout_every_steps`` model
-   rollouts are branched from real states drawn uniformly from the real buffer, or, for a share
-   ``start_branch_fraction`` of them, from fresh draws of the training episodes' start distribution
-   (``training_start``).
-   Each rollout step takes the current epsilon-greedy action, advances the model ``action_repeat`` plant
-   steps (a random ensemble member per rollout and step, as mbrl-lib's ``random_model`` propagation), and
-   computes the observation vector and the report's reward from the *predicted* plant observation with the
-   environment's own conventions
-   (:func:`softpend.envs.observation_vector.observation_vector`, :func:`softpend.envs.step_reward`).  The
-   rollout length follows the ``rollout_schedule`` (linear in episodes, as mbrl-lib).  With
-   ``rollouts_within_data`` a rollout ends at its first predicted observation outside the box of the real
-   ones, where neither the model nor the Q-network has data.
-4. Each DQN gradient step samples ``real_ratio`` of its batch from real transitions and the rest from the
-   model buffer (FIFO, ``model_buffer_size``).
-
-Real plant seconds (training episodes on the true plant) and model steps are counted separately in the
-:class:`~softpend.rl.training_log.TrainingLog`.
-"""
+"""DQN-MBPO: DQN trained on real transitions and on short rollouts of a learned dynamics ensemble."""
 
 from __future__ import annotations
 
@@ -61,13 +33,7 @@ _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 
 class MBPOReplayBuffer(ReplayBuffer):
-    """Replay buffer with a real part (this buffer, as stable-baselines3 fills it) and a model part.
-
-    The real part also stores, per transition, the plant observation the transition starts from
-    (``plant_observations``; from ``info["plant_observations"][0]`` of :class:`~softpend.rl.training_env.ActionRepeat`),
-    so that model rollouts can branch from real states.  :meth:`sample` draws ``real_ratio`` of a batch
-    from the real part and the rest from :attr:`model_buffer` (all real while the model part is empty).
-    """
+    """Replay buffer with a real part (this buffer, as stable-baselines3 fills it) and a model part."""
 
     def __init__(
         self,
@@ -165,19 +131,7 @@ class MBPOReplayBuffer(ReplayBuffer):
 
 
 class MBPOTrainer:
-    """The model-based part of DQN-MBPO: real-episode store, model refits and model rollouts.
-
-    Parameters
-    ----------
-    config : MBPOConfig
-        Settings.
-    seed : int
-        Seeds the branching-state draws, the ensemble members and the rollout member choice.
-    run_dir : Path
-        Where ``real_data.npz`` and the fitted model are written.
-    progress : bool
-        Progress bars of the model fits.
-    """
+    """The model-based part of DQN-MBPO: real-episode store, model refits and model rollouts."""
 
     def __init__(self, config: MBPOConfig, seed: int, run_dir: Path, progress: bool = False) -> None:
         self.config = config

@@ -1,14 +1,4 @@
-"""DQN whose TD targets are clipped to the bounds of the discounted return.
-
-Vanilla DQN regresses on ``r + gamma * max_a Q_target(s', a)``, which overestimates the value wherever the
-target network's errors are positive -- and with many gradient steps per real step on partly model-generated
-data (DQN-MBPO) those errors are large.  :class:`TargetDQN` clamps every TD target to
-``[r_min, r_max] / (1 - gamma)``, the range of discounted returns that rewards bounded by ``[r_min, r_max]``
-per agent step allow (``q_target_bounds``).  A Q-value outside it is an error by construction; clamping stops
-such errors from feeding back through bootstrapping.
-
-Everything else (Huber loss, gradient clipping, n-step discounts, target updates) is stable-baselines3's.
-"""
+"""DQN whose TD targets are clipped to the bounds of the discounted return."""
 
 from __future__ import annotations
 
@@ -24,15 +14,7 @@ __all__ = ["TargetDQN"]
 
 
 class TargetDQN(DQN):
-    """:class:`stable_baselines3.DQN` whose gradient steps clamp the TD targets to ``q_target_bounds``.
-
-    Parameters
-    ----------
-    *args, **kwargs
-        As :class:`stable_baselines3.DQN`.
-    q_target_bounds : (float, float), optional
-        ``(low, high)``: every TD target is clamped to this range (``None``: no clamping).
-    """
+    """:class:`stable_baselines3.DQN` whose gradient steps clamp the TD targets to ``q_target_bounds``."""
 
     def __init__(self, *args, q_target_bounds: Optional[tuple[float, float]] = None, **kwargs) -> None:
         if q_target_bounds is not None:

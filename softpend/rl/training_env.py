@@ -1,9 +1,4 @@
-"""The training environment of DQN and DQN-MBPO, and the matching evaluation controller.
-
-:func:`make_training_env` wraps ``SoftPendulumDiscreteEnv`` (the registered ``softpend/SoftPendulumDiscrete-v0``
-class) in :class:`ActionRepeat` and a ``TimeLimit`` of ``config.episode_s``.  :class:`HeldActionController` runs a
-trained agent through the shared :func:`softpend.evaluation.evaluate_controller` with the same action repeat.
-"""
+"""The training environment of DQN and DQN-MBPO, and the matching evaluation controller."""
 
 from __future__ import annotations
 
@@ -29,13 +24,7 @@ __all__ = [
 
 
 class ActionRepeat(gym.Wrapper):
-    """Hold each action for ``repeat`` plant steps; the reward is the sum over those steps.
-
-    ``info["plant_observations"]`` is the ``(k + 1, 10)`` array of plant observations from before the
-    action to after it (:data:`softpend.plant.OBSERVATION_NAMES` order), ``info["torque_nm"]`` the torque
-    applied, ``info["plant_steps"] = k`` the plant steps simulated (``k < repeat`` only if the simulation
-    diverged).  Model-based learning and the learning curves read these.
-    """
+    """Hold each action for ``repeat`` plant steps; the reward is the sum over those steps."""
 
     def __init__(self, env: gym.Env, repeat: int) -> None:
         super().__init__(env)

@@ -1,13 +1,4 @@
-"""What a training run records: one row per training episode and per evaluation, in plant time.
-
-Each training episode row holds its return, the upright error of the episode's tip angle (the shared
-:func:`softpend.evaluation.metrics_from_trajectory`), and the *cumulative* real plant seconds and model
-steps consumed so far, and the wall-clock and CPU seconds of training so far (``wall_s``, ``cpu_s``; CPU
-seconds measure a run's cost independently of other load on the machine).  Each evaluation row holds the shared :func:`softpend.evaluation.evaluate_controller`
-metrics of the greedy policy on the true plant (10 s from hanging, a few start-noise seeds).  Evaluation
-episodes are a measurement: the agent never learns from them, and they are not counted as training plant
-time.
-"""
+"""What a training run records: one row per training episode and per evaluation, in plant time."""
 
 from __future__ import annotations
 

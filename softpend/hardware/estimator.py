@@ -1,51 +1,6 @@
-"""State estimation on the rig: the joint state and the report's observed variables from encoder and camera.
-
-The rig measures two things, neither of them the state a controller was designed on:
-
-* the **encoder** (every STATE frame, 100 Hz): the hub angle quantised to ``2 pi / counts_per_rev`` and the
-  device's hub rate, a few milliseconds old;
-* the **camera** (30-120 frames/s): the tip position relative to the hub, tens of milliseconds late (exposure,
-  read-out, tracking), noisy, and sometimes lost (the tracker finds no dot, a frame is dropped, the camera
-  stalls).
-
-The controllers of the project want the full joint state ``(q, q_dot)`` of the PRB chain (LQR, the energy
-swing-up on the chain's energy) or the report's observed variables *and their rates*
-(:class:`~softpend.plant.Observation`: the RL agents, PILCO, the observation LQR).  :class:`RigStateEstimator`
-provides both from one estimate.
-
-Method: an extended Kalman filter whose prediction is the plant model itself
--------------------------------------------------------------------------------
-The state is ``x = [q, q_dot]`` of the PRB model of the rig's rod (:meth:`softpend.task.Task.make_plant`).
-
-* **Prediction** steps the nonlinear model (the Exudyn PRB chain) one control step with the torque the
-  device reports it applied; the covariance goes through the Jacobian of that step (the trapezoidal map
-  ``F = (I - A dt/2)^-1 (I + A dt/2)``, the linear part of the model's implicit integrator) with
-  ``A`` from the model linearised *at the current estimate* (Exudyn's ``ComputeLinearizedSystem``), plus
-  process noise for an uncertain torque and unmodelled accelerations of every coordinate.
-* **Encoder correction** every STATE frame: hub angle (quantisation noise ``step / sqrt(12)``) and hub rate.
-* **Camera correction** at the frame's *capture* time: the filter keeps its recent history (estimate,
-  covariance, torque, encoder sample of every step); a frame captured at ``tau`` corrects the stored step
-  nearest ``tau`` (the measured tip moved to that step's time with the estimated tip velocity), and the
-  model is run again from there to now through the stored torques and encoder samples.  This is the
-  delay compensation: a late frame is used as what it is, a view of the past, instead of being mixed into
-  the present as if it were current.
-* **Actuation lead**: a torque commanded after STATE ``k`` takes effect at the device's next tick, so the
-  controller is handed the model's prediction one step ahead (``lead_steps``) with the torque already in
-  force -- the timing the controller had in simulation.
-* **Bounded blindness**: a frame that the tracker lost, or that fails the innovation gate
-  (``gate_sigma`` standard deviations: a reflection, a wrong blob), corrects nothing; the model bridges the
-  gap.  :attr:`RigStateEstimator.blind_s` is the time since the last frame that did correct, and the loop
-  stops the motor when it exceeds ``max_blind_s``.
-
-Why this and not a fixed-gain observer or a linear Kalman filter: a filter linearised about one operating
-point (upright, say) is wrong for a swing-up that visits every angle, and a hand-tuned predictor has no
-principled way to split a tip error between the four bending angles and their rates.  Re-linearising the
-model at the estimate each step costs a few tenths of a millisecond (the Exudyn model steps in 0.05 ms),
-the covariance weights the camera against the model and the encoder by their real accuracies, and the
-same machinery that propagates the estimate also replays it after a late frame.  The price is that the
-estimate is only as good as the model: on a rod whose parameters differ from the model's, the correction
-pulls the state back at every frame, and between frames the error grows with the mismatch.
-"""
+"""Rig state estimation: an extended Kalman filter on the PRB model, fed by the encoder every STATE frame and by
+late camera frames at their capture time (the filter's history is corrected there and replayed to now); the
+controller gets the joint state and the observed variables, predicted ``lead_steps`` ahead."""
 
 from __future__ import annotations
 
@@ -66,28 +21,10 @@ __all__ = ["DeviceClock", "Estimate", "EstimatorConfig", "RigStateEstimator"]
 class EstimatorConfig:
     """Noise levels and limits of :class:`RigStateEstimator` (SI units).
 
-    Parameters
-    ----------
-    counts_per_rev : int
-        Encoder resolution; the hub-angle noise is the quantisation step over ``sqrt(12)``.
-    hub_rate_std_rad_s : float or None
-        Noise of the device's hub rate [rad/s]; None ignores the reported rate.
-    tip_std_m : float
-        Noise of a camera tip position [m] (per axis).
-    torque_std_nm : float
-        Uncertainty of the applied torque (process noise) [N m].
-    accel_std_rad_s2 : float
-        Unmodelled acceleration of every coordinate, as a white-noise density [rad/s^2/sqrt(Hz)].
-    initial_bend_std_rad, initial_rate_std_rad_s : float
-        Prior uncertainty of the bending angles [rad] and of all rates [rad/s] at :meth:`reset`.
-    max_blind_s : float
-        Longest time without a camera correction the estimate is trusted [s].
-    history_s : float
-        How far back a late frame may reach [s] (older frames are discarded).
-    gate_sigma : float
-        Innovation gate: a frame further than this many standard deviations from the prediction is refused.
-    lead_steps : int
-        Steps of prediction ahead for the actuation delay (0: the estimate at the last encoder sample).
+    ``hub_rate_std_rad_s`` None ignores the device's hub rate; ``accel_std_rad_s2`` is the unmodelled
+    acceleration of every coordinate [rad/s^2/sqrt(Hz)]; ``max_blind_s`` the longest time without a camera
+    correction; ``history_s`` how far back a late frame may reach; ``gate_sigma`` the innovation gate;
+    ``lead_steps`` the steps of prediction ahead for the actuation delay.
     """
 
     counts_per_rev: int = 4096
@@ -114,27 +51,14 @@ class EstimatorConfig:
 
     @property
     def encoder_std_rad(self) -> float:
-        """Quantisation noise of the hub angle, ``2 pi / counts_per_rev / sqrt(12)`` [rad]."""
+        """Quantisation noise of the hub angle [rad]."""
         return 2 * math.pi / self.counts_per_rev / math.sqrt(12.0)
 
 
 @dataclass(frozen=True)
 class Estimate:
-    """What the estimator hands a controller.
-
-    Attributes
-    ----------
-    time_s : float
-        Time the estimate is for [s] (the last encoder sample plus the lead).
-    q, q_dot : ndarray
-        Joint state of the PRB model (hub angle unwrapped) [rad, rad/s].
-    observation : Observation
-        The report's observed variables and their rates for that state.
-    tip_std_m : float
-        Standard deviation of the estimated tip position (root of the mean of the two variances) [m].
-    blind_s : float
-        Time since the last camera correction [s].
-    """
+    """What the estimator hands a controller: the state at ``time_s`` (last encoder sample plus the lead), the
+    observed variables for it, and the standard deviation of the estimated tip position [m]."""
 
     time_s: float
     q: np.ndarray
@@ -156,18 +80,8 @@ class _Step:
 
 
 class DeviceClock:
-    """Map host time (``time.monotonic()``) to device time from the STATE stream.
-
-    ``host - device`` of a STATE frame is the clock offset plus the frame's delay; the smallest value over
-    the last ``window`` frames, less the one-way link latency (half a HEARTBEAT round trip), is the offset.
-
-    Parameters
-    ----------
-    one_way_latency_s : float
-        Link latency from the device to the host [s].
-    window : int
-        Frames the minimum is taken over (bounds the effect of clock drift).
-    """
+    """Map host time to device time: the offset is the smallest ``host - device`` of the last ``window`` STATE
+    frames, less the one-way link latency."""
 
     def __init__(self, one_way_latency_s: float = 0.0, window: int = 500) -> None:
         self.one_way_latency_s = non_negative("one_way_latency_s", one_way_latency_s)
@@ -192,72 +106,42 @@ class DeviceClock:
 
 
 class RigStateEstimator:
-    """Extended Kalman filter on the PRB model with delay-compensated camera corrections (module docstring).
-
-    Parameters
-    ----------
-    task : Task
-        The rig's plant model (PRB chain of ``task.rod``, step ``task.dt_s``).
-    config : EstimatorConfig, optional
-        Noise levels and limits.
-
-    Times are device time in seconds (any origin, the same for encoder and camera; see :class:`DeviceClock`).
-    """
+    """Extended Kalman filter on the PRB chain of ``task.rod`` with delay-compensated camera corrections; times
+    are device time [s]."""
 
     def __init__(self, task, config: Optional[EstimatorConfig] = None) -> None:
         if task.plant != "prb":
-            task = task.replace(plant="prb")  # the model is the PRB chain of the same rod
+            task = task.replace(plant="prb")
         self.task = task
-        self.config = config if config is not None else EstimatorConfig()
+        self.config = cfg = config if config is not None else EstimatorConfig()
         self.model = task.make_plant()
-        self.n = self.model.n_coordinates
+        self.n = n = self.model.n_coordinates
         self.dt_s = float(task.dt_s)
         self._history: collections.deque[_Step] = collections.deque()
         self._last_tip_time_s = -math.inf
-        self.tips_accepted = 0
-        self.tips_refused = 0
-        self.tips_too_old = 0
-        self.tips_deferred = 0
+        self.tips_accepted = self.tips_refused = self.tips_too_old = self.tips_deferred = self.encoder_gaps = 0
         self._pending_tips: list[tuple[float, float, float]] = []
-        self.encoder_gaps = 0
-        cfg = self.config
-        h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * self.n))
+        h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * n))
         h[0, 0] = 1.0
         noise = [cfg.encoder_std_rad**2]
         if cfg.hub_rate_std_rad_s is not None:
-            h[1, self.n] = 1.0
+            h[1, n] = 1.0
             noise.append(cfg.hub_rate_std_rad_s**2)
         self._h_encoder = h
         self._r_encoder = np.diag(noise)
         self._r_tip = np.eye(2) * cfg.tip_std_m**2
-        # constants of _predict, built once (a prediction runs for every encoder sample and every replayed step)
-        n = self.n
         self._eye_2n = np.eye(2 * n)
         self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)
         self._a = np.zeros((2 * n, 2 * n))
         self._a[:n, n:] = np.eye(n)
-        self._started = False
+        self.started = False
 
-    # ------------------------------------------------------------------ set-up
-    def reset(
-        self,
-        time_s: float,
-        phi_rad: float,
-        phi_dot_rad_s: float,
-        torque_nm: float = 0.0,
-        q: Optional[np.ndarray] = None,
-        q_dot: Optional[np.ndarray] = None,
-    ) -> None:
-        """Start from the straight rod at the measured hub angle and rate (or from ``(q, q_dot)``), with the
-        prior uncertainty of the config; ``torque_nm`` is the torque applied from ``time_s`` on."""
-        cfg = self.config
-        n = self.n
-        q0 = np.zeros(n) if q is None else np.asarray(q, dtype=float).copy()
-        qd0 = np.zeros(n) if q_dot is None else np.asarray(q_dot, dtype=float).copy()
-        if q is None:
-            q0[0] = phi_rad
-        if q_dot is None:
-            qd0[0] = phi_dot_rad_s
+    def reset(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float = 0.0) -> None:
+        """Start from the straight rod at the measured hub angle and rate, with the config's prior uncertainty;
+        ``torque_nm`` is applied from ``time_s`` on."""
+        cfg, n = self.config, self.n
+        q0, qd0 = np.zeros(n), np.zeros(n)
+        q0[0], qd0[0] = phi_rad, phi_dot_rad_s
         variances = np.concatenate(
             [
                 [cfg.encoder_std_rad**2],
@@ -267,22 +151,12 @@ class RigStateEstimator:
         )
         self._history.clear()
         self._pending_tips.clear()
+        x = np.concatenate([q0, qd0])
         self._history.append(
-            _Step(
-                float(time_s),
-                np.concatenate([q0, qd0]),
-                np.diag(variances),
-                float(torque_nm),
-                float(phi_rad),
-                float(phi_dot_rad_s),
-            )
+            _Step(float(time_s), x, np.diag(variances), float(torque_nm), float(phi_rad), float(phi_dot_rad_s))
         )
         self._last_tip_time_s = float(time_s)
-        self._started = True
-
-    @property
-    def started(self) -> bool:
-        return self._started
+        self.started = True
 
     @property
     def time_s(self) -> float:
@@ -292,19 +166,17 @@ class RigStateEstimator:
 
     @property
     def blind_s(self) -> float:
-        """Time from the capture of the last frame that corrected the estimate to the newest encoder sample [s]."""
+        """Time from the capture of the last correcting frame to the newest encoder sample [s]."""
         return self.time_s - self._last_tip_time_s
 
     @property
     def is_blind(self) -> bool:
-        """The camera has not corrected the estimate for more than ``max_blind_s``."""
         return self.blind_s > self.config.max_blind_s
 
     def _require_started(self) -> None:
-        if not self._started:
+        if not self.started:
             raise ValueError("estimator: call reset() with the first encoder sample first")
 
-    # ------------------------------------------------------------------ filter steps
     def _predict(self, x: np.ndarray, p: np.ndarray, torque_nm: float) -> tuple[np.ndarray, np.ndarray]:
         n, dt, cfg = self.n, self.dt_s, self.config
         model = self.model
@@ -316,11 +188,9 @@ class RigStateEstimator:
         if not np.all(np.isfinite(x_next)):
             raise SimulationDiverged("estimator model state is not finite")
         m_inv = np.linalg.inv(mass)
-        a = self._a  # the top rows (0, I) are constant
+        a = self._a
         a[n:, :n] = -m_inv @ stiffness
         a[n:, n:] = -m_inv @ damping
-        # the step's Jacobian by the trapezoidal (bilinear) map, the linear part of the model's own implicit
-        # integrator: exact enough for the swing and stable for the stiff bending modes (omega dt ~ 5)
         eye = self._eye_2n
         f = np.linalg.solve(eye - 0.5 * dt * a, eye + 0.5 * dt * a)
         b = m_inv[:, 0]
@@ -340,10 +210,15 @@ class RigStateEstimator:
         gain = np.linalg.solve(s, h @ p).T
         x = x + gain @ innovation
         i_kh = np.eye(len(x)) - gain @ h
-        p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form: stays symmetric positive definite
+        p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form
         return x, p
 
-    def _encoder_update(self, x: np.ndarray, p: np.ndarray, phi_rad: float, phi_dot_rad_s: float):
+    def _advance(
+        self, x: np.ndarray, p: np.ndarray, torque_nm: float, steps: int, phi_rad: float, phi_dot_rad_s: float
+    ):
+        """Predict ``steps`` steps with ``torque_nm``, then correct with an encoder sample."""
+        for _ in range(steps):
+            x, p = self._predict(x, p, torque_nm)
         z = [phi_rad] if self.config.hub_rate_std_rad_s is None else [phi_rad, phi_dot_rad_s]
         innovation = np.asarray(z) - self._h_encoder @ x
         return self._update(x, p, self._h_encoder, innovation, self._r_encoder)
@@ -376,30 +251,22 @@ class RigStateEstimator:
         history = self._history
         for i in range(start + 1, len(history)):
             previous, step = history[i - 1], history[i]
-            x, p = previous.x, previous.p
-            for _ in range(max(1, int(round((step.time_s - previous.time_s) / self.dt_s)))):
-                x, p = self._predict(x, p, previous.torque_nm)
-            x, p = self._encoder_update(x, p, step.phi_rad, step.phi_dot_rad_s)
+            steps = max(1, int(round((step.time_s - previous.time_s) / self.dt_s)))
+            x, p = self._advance(previous.x, previous.p, previous.torque_nm, steps, step.phi_rad, step.phi_dot_rad_s)
             for capture, tip_x, tip_y in step.tips:
                 innovation, jac = self._tip_innovation(step, x, capture, tip_x, tip_y)
                 x, p = self._update(x, p, jac, innovation, self._r_tip)
             step.x, step.p = x, p
 
-    # ------------------------------------------------------------------ measurements
     def update_encoder(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float) -> None:
-        """A STATE frame: hub angle [rad] and rate [rad/s] sampled at ``time_s``, and the torque the device
-        applies from then on [N m].  The model is advanced from the previous sample (several steps if frames
-        were lost in between, holding the last known torque)."""
+        """A STATE frame sampled at ``time_s``, and the torque the device applies from then on."""
         self._require_started()
         last = self._history[-1]
         steps = int(round((time_s - last.time_s) / self.dt_s))
         if steps < 1:
             return  # a repeated or out-of-order frame
         self.encoder_gaps += int(steps > 1)
-        x, p = last.x, last.p
-        for _ in range(steps):
-            x, p = self._predict(x, p, last.torque_nm)
-        x, p = self._encoder_update(x, p, phi_rad, phi_dot_rad_s)
+        x, p = self._advance(last.x, last.p, last.torque_nm, steps, phi_rad, phi_dot_rad_s)
         self._history.append(_Step(float(time_s), x, p, float(torque_nm), float(phi_rad), float(phi_dot_rad_s)))
         while len(self._history) > 2 and self._history[1].time_s < time_s - self.config.history_s:
             self._history.popleft()
@@ -410,10 +277,9 @@ class RigStateEstimator:
                 self._apply_tip(*tip)
 
     def update_tip(self, capture_time_s: float, x_m: float, y_m: float) -> bool:
-        """A camera frame captured at ``capture_time_s`` (device time) showing the tip at ``(x_m, y_m)`` from
-        the hub [m]: correct the step nearest the capture and replay the model to now.  A frame captured after
-        the newest encoder sample waits until the encoder reaches its capture time.  Returns whether the frame
-        was used or queued (False: not finite, older than the history, or refused by the innovation gate)."""
+        """A camera frame of the tip at ``(x_m, y_m)`` from the hub, captured at ``capture_time_s``: correct the
+        step nearest the capture and replay to now (a frame ahead of the encoder waits); whether it was used or
+        queued."""
         self._require_started()
         if not (math.isfinite(x_m) and math.isfinite(y_m) and math.isfinite(capture_time_s)):
             return False
@@ -423,7 +289,7 @@ class RigStateEstimator:
             return False
         if capture_time_s > history[-1].time_s + self.dt_s / 2:
             if capture_time_s > history[-1].time_s + self.config.history_s:
-                return False  # far in the future: a clock error, not a frame to wait for
+                return False  # a clock error
             self._pending_tips.append((float(capture_time_s), float(x_m), float(y_m)))
             self.tips_deferred += 1
             return True
@@ -447,10 +313,8 @@ class RigStateEstimator:
         self._last_tip_time_s = max(self._last_tip_time_s, float(capture_time_s))
         return True
 
-    # ------------------------------------------------------------------ output
     def estimate(self, lead_steps: Optional[int] = None) -> Estimate:
-        """The estimate at the newest encoder sample, predicted ``lead_steps`` ahead (default: the config's)
-        with the torque in force."""
+        """The estimate at the newest encoder sample, predicted ``lead_steps`` ahead (default: the config's)."""
         self._require_started()
         lead = self.config.lead_steps if lead_steps is None else int_at_least("lead_steps", lead_steps, 0)
         last = self._history[-1]
@@ -473,10 +337,5 @@ class RigStateEstimator:
         )
 
     def stats(self) -> dict[str, float]:
-        return {
-            "tips_accepted": float(self.tips_accepted),
-            "tips_refused": float(self.tips_refused),
-            "tips_too_old": float(self.tips_too_old),
-            "tips_deferred": float(self.tips_deferred),
-            "encoder_gaps": float(self.encoder_gaps),
-        }
+        names = ("tips_accepted", "tips_refused", "tips_too_old", "tips_deferred", "encoder_gaps")
+        return {name: float(getattr(self, name)) for name in names}

@@ -1,18 +1,5 @@
-"""``softpend rig design | check | calibrate | babble``: the commands that take a rig from parts to data.
-
-* ``design`` writes the rig's dimensions (``rig_design.json``), the drawing (``rig_design.png``) and the marker
-  layout (``markers.json``, for ``--markers``) for the rod's parameters (``--set NAME=VALUE`` on ``RodParams``).
-* ``check`` opens the motor link (the protocol handshake), then checks at zero torque that the device announces
-  what the host expects and that the hub rests at the hanging angle, gives one small push to check the sign of
-  the torque, and falls silent to check that the watchdog zeroes the torque.  Exit status 1 if a check fails.
-* ``calibrate`` grabs a frame, fits the affine pixel-to-metre map to the markers, saves it (for
-  ``--calibration``) and checks that the hanging rod's dot is where the design puts it.  Exit status 1 if not.
-* ``babble`` runs the babbling program over the link while the camera is tracked, and synchronises both into a
-  system-identification dataset (``rig_dataset.npz``) with a ``summary.json``.
-
-Each runs on a rig (``--port``, ``--camera``) or on the digital twin (``--twin``: the rig emulator and the
-synthetic camera, in simulated time: the same seed gives the same outputs).
-"""
+"""``softpend rig design | check | calibrate | babble``: the commands that take a rig (``--port``, ``--camera``) or
+the digital twin (``--twin``, simulated time) from parts to data."""
 
 from __future__ import annotations
 
@@ -25,7 +12,7 @@ from typing import Any
 
 from softpend.commands.options import MAX_SESSION_S, add_set_option, check_numbers
 
-#: Accepted ``--print-modulus-mpa`` [MPa]: a soft silicone (0.1 MPa) to steel (about 200 GPa).
+#: Accepted ``--print-modulus-mpa`` [MPa]: soft silicone to steel.
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
 
 
@@ -114,7 +101,6 @@ def _rod(args: argparse.Namespace):
     return apply_overrides(RodParams(), args.overrides)
 
 
-# ---------------------------------------------------------------------------------------------------- design
 def run_design(args: argparse.Namespace) -> int:
     import matplotlib
 
@@ -128,9 +114,9 @@ def run_design(args: argparse.Namespace) -> int:
     from softpend.study.figures.rig_design import draw_rig_design
 
     modulus = None
-    if args.print_modulus_mpa is not None:  # printable materials, soft silicone to steel, before anything starts
+    if args.print_modulus_mpa is not None:
         modulus = in_range("--print-modulus-mpa", args.print_modulus_mpa, *PRINT_MODULUS_RANGE_MPA) * 1e6
-    outputs = Outputs()  # before the work: no file of these names that an earlier design did not write
+    outputs = Outputs()
     out = outputs.folder(args.out, ("rig_design.json", "markers.json", "rig_design.png"), what="--out")
     params = _rod(args)
     design = rig_design(params, print_modulus_pa=modulus)
@@ -149,18 +135,15 @@ def run_design(args: argparse.Namespace) -> int:
     return 0
 
 
-# ---------------------------------------------------------------------------------------------------- check
 def run_check(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.task import Task
 
-    check_numbers(args, {"--rest-s": (0.1, 600.0), "--counts-per-rev": (4, 2**24)})  # before anything starts
+    check_numbers(args, {"--rest-s": (0.1, 600.0), "--counts-per-rev": (4, 2**24)})
     outputs = Outputs()
-    if args.out is not None:  # before the work (an empty --out is an error, not no report)
+    if args.out is not None:  # an empty --out is an error, not no report
         outputs.file(args.out, what="--out")
-    if not (math.isfinite(args.rest_s) and args.rest_s > 0):
-        raise ValueError(f"--rest-s must be a positive number of seconds, got {args.rest_s!r}")
     if not 0 < args.push_fraction <= 0.5:
         raise ValueError(f"--push-fraction must lie in (0, 0.5], got {args.push_fraction!r}")
     task = Task(rod=_rod(args), start_noise_rad=0.0)
@@ -177,13 +160,13 @@ def run_check(args: argparse.Namespace) -> int:
     return 0 if report["passed"] else 1
 
 
-#: States by which the watchdog's trip may differ from its nominal time (the state period quantises it) [states].
+#: States by which the watchdog's trip may differ from its nominal time.
 WATCHDOG_SLACK_STATES = 3
 
 
 def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None) -> dict:
-    """The power-on checks of ``softpend rig check`` on the link at ``port`` (module docstring; ``serial``: the
-    twin's in-memory link instead of the port, in simulated time); the report."""
+    """The report of the power-on checks (handshake, rest, direction, watchdog) on the link at ``port`` (or the twin's
+    in-memory ``serial``)."""
     import numpy as np
 
     from softpend.hardware import protocol
@@ -232,10 +215,10 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
 
         push = push_fraction * rod.torque_limit_nm
         start_phi = phi[-1] if len(phi) else math.pi
-        moved = _hold_torque(link, push, 0.15)
+        moved = _states_for(link, 0.15, push)
         delta = (moved[-1].phi_rad - start_phi) if moved else math.nan
         applied = max((s.applied_torque_nm for s in moved), default=math.nan)
-        _hold_torque(link, 0.0, 1.0)  # let the swing settle, feeding the watchdog with zero torque
+        _states_for(link, 1.0, 0.0)  # let the swing settle, feeding the watchdog with zero torque
         checks["direction"] = {
             "passed": bool(delta > tick and math.isclose(applied, push, rel_tol=1e-3)),
             "detail": (
@@ -267,11 +250,8 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
     return {
         "port": port,
         "device": {
-            "protocol_version": info.protocol_version,
-            "counts_per_rev": info.counts_per_rev,
-            "torque_limit_nm": info.torque_limit_nm,
-            "watchdog_s": info.watchdog_s,
-            "state_rate_hz": info.state_rate_hz,
+            k: getattr(info, k)
+            for k in ("protocol_version", "counts_per_rev", "torque_limit_nm", "watchdog_s", "state_rate_hz")
         },
         "round_trip_ms": rtt * 1e3,
         "checks": checks,
@@ -279,46 +259,34 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
     }
 
 
-def _states_for(link, duration_s: float) -> list:
+def _states_for(link, duration_s: float, torque_nm: float | None = None) -> list:
+    """The states received in ``duration_s``, commanding ``torque_nm`` (if given) at every state."""
     end = link.clock.now_s() + duration_s
     states = []
-    while link.clock.now_s() < end:
-        states.append(link.read_state())
-    return states
-
-
-def _hold_torque(link, torque_nm: float, duration_s: float) -> list:
-    """Command ``torque_nm`` at every state for ``duration_s``; the states received meanwhile."""
-    end = link.clock.now_s() + duration_s
-    states = []
-    link.send_torque(torque_nm)
-    while link.clock.now_s() < end:
-        states.append(link.read_state())
+    if torque_nm is not None:
         link.send_torque(torque_nm)
+    while link.clock.now_s() < end:
+        states.append(link.read_state())
+        if torque_nm is not None:
+            link.send_torque(torque_nm)
     return states
 
 
-# ---------------------------------------------------------------------------------------------------- calibrate
 def run_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import CALIBRATION_MAX_RESIDUAL_PX, HANGING_TIP_TOLERANCE_M
-    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, calibrate_from_markers, points_array, read_json_file
+    from softpend.vision.calibration import calibrate_from_markers
     from softpend.vision.tracker import TipTracker
 
-    outputs = Outputs()  # before the work: the calibration and its report
+    outputs = Outputs()
     out = outputs.file(args.out, what="--out")
     report_path = outputs.file(
         out.with_name(out.stem + ".report.json") if out.suffix else out.with_name(out.name + ".report.json"),
         what="the calibration report",
     )
-
-    text = args.markers
-    raw = (
-        json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
-    )
-    markers = points_array("--markers", raw, 3, 6)
+    markers = _markers(args.markers)
     params = _rod(args)
     frame = _twin_frame(params, markers, args.seed) if args.twin else _grab_frame(args.camera)
     calibration = calibrate_from_markers(frame, markers.tolist())
@@ -352,9 +320,18 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return 0 if passed else 1
 
 
+def _markers(text: str):
+    """``--markers``: a JSON list of 3 to 6 points [m] or a file holding one."""
+    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, points_array, read_json_file
+
+    raw = (
+        json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
+    )
+    return points_array("--markers", raw, 3, 6)
+
+
 def _twin_frame(params, markers, seed: int):
-    """One frame of the synthetic camera (the design's scene, a slight roll, the nominal rig imperfections) of the
-    rod hanging at rest."""
+    """A synthetic-camera frame (the design's scene, a slight roll) of the rod hanging at rest."""
     import dataclasses
 
     import numpy as np
@@ -374,12 +351,12 @@ def _twin_frame(params, markers, seed: int):
 
 
 def _grab_frame(camera: str, skip: int = 10):
-    """The ``skip``-th frame of a camera (the first ones settle exposure), or the frame of an image file."""
+    """The ``skip``-th frame of a camera (the first ones settle exposure), or an image file."""
     import cv2
 
     from softpend.io.reading import check_capture_path
 
-    check_capture_path("--camera", camera)  # a FIFO or folder would block the capture
+    check_capture_path("--camera", camera)
     if Path(camera).is_file() and cv2.haveImageReader(camera):
         frame = cv2.imread(camera)
         if frame is None:
@@ -407,7 +384,6 @@ def _grab_frame(camera: str, skip: int = 10):
     return frame
 
 
-# ---------------------------------------------------------------------------------------------------- babble
 def run_babble(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.twin import _OUTPUTS, run_twin_session
@@ -418,17 +394,11 @@ def run_babble(args: argparse.Namespace) -> int:
         raise ValueError("--camera, --markers and --calibration are for --port; the twin films itself")
     if args.port and not args.camera:
         raise ValueError("--port needs --camera (index, URL or video file)")
-    check_numbers(
-        args,
-        {
-            "--duration": (1e-3, MAX_SESSION_S),
-            "--trial-length-s": (0.1, MAX_SESSION_S),
-            "--camera-latency-ms": (0.0, 1000.0),
-        },
-    )  # before anything starts
+    limits = {"--duration": (1e-3, MAX_SESSION_S), "--trial-length-s": (0.1, MAX_SESSION_S)}
+    check_numbers(args, {**limits, "--camera-latency-ms": (0.0, 1000.0)})
     if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
         raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
-    outputs = Outputs()  # before the work: no file of these names that an earlier run did not write
+    outputs = Outputs()
     out = outputs.folder(args.out, (*(_OUTPUTS if args.twin else PORT_BABBLE_FILES), "summary.json"), what="--out")
     progress = not args.no_progress
     if args.twin:
@@ -472,7 +442,7 @@ PORT_BABBLE_FILES = ("camera.csv", "motor_log.csv", "rig_dataset.npz")
 
 
 def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs):
-    """Babble on the rig at ``args.port`` while a thread tracks ``args.camera``; synchronise the two logs."""
+    """Babble on the rig at ``args.port`` while a thread tracks ``args.camera``; synchronise the logs."""
     import threading
 
     from softpend.hardware.driver import MotorLink
@@ -481,22 +451,14 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     from softpend.hardware.twin import rig_babble_controller
     from softpend.io.samplelog import SampleLog
     from softpend.plant import RodParams
-    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
+    from softpend.vision.calibration import AffineCalibration
     from softpend.vision.camera import DEFAULT_MARKERS_M
     from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live
 
-    for name in PORT_BABBLE_FILES:  # an earlier run's files (checked before the work) are removed
+    for name in PORT_BABBLE_FILES:
         outputs.live(out / name)
-    markers = DEFAULT_MARKERS_M
-    if args.markers:
-        text = args.markers
-        raw = (
-            json.loads(text)
-            if text.lstrip().startswith("[")
-            else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
-        )
-        markers = points_array("--markers", raw, 3, 6).tolist()
+    markers = _markers(args.markers).tolist() if args.markers else DEFAULT_MARKERS_M
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
     source = open_tip_source(
         args.camera,

@@ -1,31 +1,12 @@
-"""Building the rig: the numbers that choose its parts, and the procedure from a box of parts to a balancing rod.
-
-The rig's geometry comes from :func:`softpend.hardware.rig_design.rig_design`.  This module measures what the
-controllers ask of the parts and compares it with what the parts give:
-
-* :func:`swing_up_needs` runs the energy swing-up handing over to the LQR (both variants of
-  :func:`softpend.study.rig_runs.rig_controllers`) in the simulator from seeded hanging starts and records the
-  peak torque, the peak hub rate and the peak tip speed;
-* :func:`motor_rows` sets them against the three V5 cartridges (torque available at the peak hub rate on the
-  DC motor line, free speed, encoder ticks) and :func:`choose_cartridge` picks one;
-* :func:`encoder_rows` runs the same controllers with the hub angle quantised to an encoder's ticks, beside the
-  LQR's torque step for one tick (:func:`lqr_torque_per_tick_nm`);
-* :func:`camera_rows` turns the peak tip speed into the least frame rate at which the tracker's search window
-  still finds the dot, and the exposure's motion blur;
-* :func:`modulus_rows` shows what the TPU's modulus range does to the rod's design figures
-  (:func:`softpend.study.rod_design.rod_design`) and to the section that keeps the design's stiffness.
-
-:func:`build_steps` is the procedure itself: every step's command line, for a rig (serial port and camera) or
-the digital twin, with what a good result looks like; :func:`check_step` reads a step's outputs and says whether
-they are good.  The book's chapter prints these commands and runs them on the twin; a test runs them too.
-"""
+"""Building the rig: the numbers that choose its parts (motor, encoder, camera, material) and the procedure from
+a box of parts to a balancing rod (:func:`build_steps`, :func:`check_step`)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -38,66 +19,35 @@ from softpend.study.rig_runs import rig_controllers
 from softpend.study.rod_design import rod_design
 from softpend.task import Task
 
-__all__ = [
-    "BuildBudget",
-    "BuildStep",
-    "BuildTarget",
-    "CALIBRATION_MAX_RESIDUAL_PX",
-    "HANGING_TIP_TOLERANCE_M",
-    "IDENTIFY_HORIZON_S",
-    "MIN_TORQUE_MARGIN",
-    "QUICK_BUDGET",
-    "TESTED_CAMERAS",
-    "TWIN",
-    "QuantisedHub",
-    "build_steps",
-    "camera_rows",
-    "check_step",
-    "choose_cartridge",
-    "design_figures",
-    "firmware_settings",
-    "encoder_rows",
-    "lqr_torque_per_tick_nm",
-    "modulus_rows",
-    "motor_rows",
-    "parts_list",
-    "swing_up_needs",
-]
-
-#: Least ratio of the torque a cartridge gives at the peak hub rate to the torque limit the controllers use.
+#: Least ratio of the torque a cartridge gives at the peak hub rate to the controllers' torque limit.
 MIN_TORQUE_MARGIN = 1.5
-#: Largest RMS residual of the marker fit that counts as a good calibration [px].
+#: Largest RMS residual of the marker fit of a good calibration [px].
 CALIBRATION_MAX_RESIDUAL_PX = 0.5
-#: Largest distance of the tracked tip of the rod hanging at rest from where the design puts it [m].
+#: Largest distance of the tracked hanging tip from where the design puts it [m].
 HANGING_TIP_TOLERANCE_M = 0.005
 #: Horizon of the open-loop rollout error that judges the identified model [s].
 IDENTIFY_HORIZON_S = 0.5
-#: Cameras under which the rig's closed loop has run on the twin (the closed-loop chapter's nominal and harsh
-#: conditions): name -> (frame rate [1/s], latency from exposure to tracker [s]).
+#: Cameras the closed loop has run under on the twin: name -> (frame rate [1/s], latency [s]).
 TESTED_CAMERAS: dict[str, tuple[float, float]] = {"nominal": (60.0, 0.020), "harsh": (30.0, 0.040)}
 
 
-# ---------------------------------------------------------------------------------------------- what the rod needs
 def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
-    """One row per controller of :func:`~softpend.study.rig_runs.rig_controllers` and start seed: the peak torque
-    [N m], peak hub rate [rad/s] and peak tip speed [m/s] of the swing-up and balance in the simulator, with
-    ``success``, ``swing_up_time_s`` and ``upright_std_rad`` (:func:`softpend.evaluation.evaluate_controller`)."""
+    """Per rig controller and seed: success, swing-up time, upright std and the peak torque, hub rate and tip speed
+    of the swing-up and balance in the simulator."""
     positive("duration_s", duration_s)
+    phi_dot, ex_dot, ey_dot = (OBSERVATION_NAMES.index(n) for n in ("phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"))
     rows = []
-    phi_dot = OBSERVATION_NAMES.index("phi_dot_rad_s")
-    ex_dot, ey_dot = OBSERVATION_NAMES.index("ex_dot_m_s"), OBSERVATION_NAMES.index("ey_dot_m_s")
     for label, make in rig_controllers(task).items():
-        summary = evaluate_controller(make(), task, name=label, seeds=list(seeds), duration_s=duration_s)
-        for result in summary.results:
-            obs = result.observations
+        for r in evaluate_controller(make(), task, name=label, seeds=list(seeds), duration_s=duration_s).results:
+            obs = r.observations
             rows.append(
                 {
                     "controller": label,
-                    "seed": result.seed,
-                    "success": bool(result.success),
-                    "swing_up_time_s": float(result.swing_up_time_s),
-                    "upright_std_rad": float(result.upright_std_rad),
-                    "peak_torque_nm": float(np.max(np.abs(result.torque_nm))),
+                    "seed": r.seed,
+                    "success": bool(r.success),
+                    "swing_up_time_s": float(r.swing_up_time_s),
+                    "upright_std_rad": float(r.upright_std_rad),
+                    "peak_torque_nm": float(np.max(np.abs(r.torque_nm))),
                     "peak_hub_rate_rad_s": float(np.max(np.abs(obs[:, phi_dot]))),
                     "peak_tip_speed_m_s": float(np.max(np.hypot(obs[:, ex_dot], obs[:, ey_dot]))),
                 }
@@ -108,9 +58,8 @@ def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[
 def motor_rows(
     peak_hub_rate_rad_s: float, torque_nm: float, cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
 ) -> list[dict[str, Any]]:
-    """Each cartridge against the swing-up: free speed over the peak hub rate, torque available at the peak hub
-    rate over ``torque_nm``, encoder ticks, and whether it qualifies (free speed above the peak rate and a torque
-    margin of at least :data:`MIN_TORQUE_MARGIN`)."""
+    """Each cartridge against the swing-up's peak hub rate and ``torque_nm``; it qualifies when faster than the
+    peak rate with a torque margin of at least :data:`MIN_TORQUE_MARGIN` there."""
     positive("torque_nm", torque_nm)
     rows = []
     for c in cartridges:
@@ -134,7 +83,7 @@ def motor_rows(
 def choose_cartridge(
     rows: Sequence[dict[str, Any]], cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
 ) -> MotorCartridge:
-    """The qualifying cartridge of :func:`motor_rows` with the finest encoder (``ValueError`` if none qualifies)."""
+    """The qualifying cartridge of :func:`motor_rows` with the finest encoder."""
     good = [c for c, r in zip(cartridges, rows) if r["qualifies"]]
     if not good:
         raise ValueError("rows: no cartridge gives the swing-up's torque at its peak hub rate")
@@ -142,8 +91,7 @@ def choose_cartridge(
 
 
 class QuantisedHub:
-    """A controller that sees the hub angle only to ``counts_per_rev`` ticks (zero at hanging), as the encoder
-    reports it; the rates and the rest of the state are passed on unchanged."""
+    """A controller that sees the hub angle only to ``counts_per_rev`` encoder ticks (zero at hanging)."""
 
     def __init__(self, controller: Any, counts_per_rev: int) -> None:
         self.controller = controller
@@ -164,17 +112,14 @@ class QuantisedHub:
 
 
 def lqr_torque_per_tick_nm(task: Task, counts_per_rev: int) -> dict[str, float]:
-    """Torque step of the rig's LQRs for one encoder tick of the hub angle [N m]: the gain on the hub angle
-    times ``2 pi / counts_per_rev``, for the LQR on the observations (``"observations"``) and, on the PRB plant,
-    on the joint state (``"joint state"``)."""
+    """Torque step of the rig's LQRs for one encoder tick of the hub angle [N m], by ``"observations"`` and (PRB
+    plant) ``"joint state"``."""
     from softpend.control.lqr import LQRController
 
     tick = 2.0 * math.pi / int_at_least("counts_per_rev", counts_per_rev, 4)
-    out = {}
     obs = LQRController.from_params(task.rod, task.dt_s, state="observation")
     assert obs.model is not None  # from_params keeps its design model
-    names = obs.model.state_names
-    out["observations"] = abs(float(obs.gain[0, names.index("phi_rad")])) * tick
+    out = {"observations": abs(float(obs.gain[0, obs.model.state_names.index("phi_rad")])) * tick}
     if task.plant == "prb":
         joint = LQRController.from_params(task.rod, task.dt_s, state="joint")
         out["joint state"] = abs(float(joint.gain[0, 0])) * tick
@@ -182,9 +127,8 @@ def lqr_torque_per_tick_nm(task: Task, counts_per_rev: int) -> dict[str, float]:
 
 
 def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
-    """Per encoder resolution and controller: successes over ``seeds`` and the worst upright standard deviation
-    of the swing-up + LQR in the simulator with the hub angle quantised (:class:`QuantisedHub`), and the LQR's
-    torque step per tick as a fraction of the torque limit."""
+    """Per encoder resolution and rig controller: successes and worst upright std with the hub angle quantised
+    (:class:`QuantisedHub`), and the LQR's torque step per tick over the torque limit."""
     rows = []
     for n in counts:
         per_tick = lqr_torque_per_tick_nm(task, n)
@@ -192,7 +136,6 @@ def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], durati
             summary = evaluate_controller(
                 QuantisedHub(make(), n), task, name=label, seeds=list(seeds), duration_s=duration_s
             )
-            key = "joint state" if "joint" in label else "observations"
             stds = [r.upright_std_rad for r in summary.results if r.success]
             rows.append(
                 {
@@ -201,7 +144,8 @@ def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], durati
                     "starts": len(summary.results),
                     "successes": summary.successes,
                     "worst_upright_std_rad": max(stds) if stds else math.nan,
-                    "torque_per_tick_fraction": per_tick[key] / task.torque_limit_nm,
+                    "torque_per_tick_fraction": per_tick["joint state" if "joint" in label else "observations"]
+                    / task.torque_limit_nm,
                 }
             )
     return rows
@@ -214,10 +158,8 @@ def camera_rows(
     exposure_s: float,
     fps_values: Sequence[float],
 ) -> list[dict[str, Any]]:
-    """Per frame rate: the tip's largest step between frames [px] against the tracker's search radius (a step
-    beyond it makes the tracker search the whole frame: slower, not lost), and the motion blur of an
-    ``exposure_s`` exposure [px] against the dot's diameter [px]; ``max_exposure_ms`` is the exposure whose blur
-    at the peak tip speed equals the dot's diameter."""
+    """Per frame rate: the tip's largest step between frames against the tracker's search radius, and the motion
+    blur of an ``exposure_s`` exposure against the dot's diameter [px]."""
     positive("search_radius_px", search_radius_px)
     speed_px = peak_tip_speed_m_s * design.camera_model.px_per_m
     dot_px = 2.0 * design.dot_radius_m * design.camera_model.px_per_m
@@ -238,9 +180,8 @@ def camera_rows(
 def modulus_rows(
     params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_MODULUS_RANGE_PA[0], None, TPU_MODULUS_RANGE_PA[1])
 ) -> list[dict[str, Any]]:
-    """Per modulus (``None``: the parameters' own): the rod's design figures when the designed section is printed
-    from a material of that modulus (tip sag, torque ratio, buckling load factor), and the thickness that would
-    keep the design's stiffness instead."""
+    """Per modulus (``None``: the rod's own): the rod's design figures with the designed section printed in that
+    material, and the thickness that would keep the design's stiffness."""
     rows = []
     for modulus in moduli_pa:
         e = params.youngs_modulus_pa if modulus is None else float(modulus)
@@ -316,57 +257,43 @@ def parts_list(design: RigDesign, cartridge: MotorCartridge, camera_fps: float) 
     ]
 
 
-def firmware_settings(path: Optional[str | Path] = None) -> dict[str, Any]:
-    """The literal settings of the device program (``COUNTS_PER_REV``, ``TORQUE_LIMIT_NM``, ``WATCHDOG_MS``,
-    ``STATE_RATE_HZ``, ``STALL_TORQUE_NM``, ``PORT`` ...), read from its source without running it, with
-    ``gear_setting`` (the ``GearSetting`` the motor is created with)."""
+def firmware_settings() -> dict[str, Any]:
+    """The literal settings of the device program (``COUNTS_PER_REV``, ``TORQUE_LIMIT_NM``, ...), read from its
+    source without running it, with ``gear_setting`` (the motor's ``GearSetting``)."""
     import ast
 
     from softpend.hardware.firmware import FIRMWARE_PATH
 
-    text = Path(path if path is not None else FIRMWARE_PATH).read_text()
+    tree = ast.parse(Path(FIRMWARE_PATH).read_text())
     values: dict[str, Any] = {}
-    for node in ast.parse(text).body:
+    for node in tree.body:
         if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
             try:
                 values[node.targets[0].id] = ast.literal_eval(node.value)
             except ValueError:
                 continue
-    for found in ast.walk(ast.parse(text)):
+    for found in ast.walk(tree):
         if isinstance(found, ast.Attribute) and isinstance(found.value, ast.Name) and found.value.id == "GearSetting":
             values["gear_setting"] = found.attr
     return values
 
 
-# ---------------------------------------------------------------------------------------------- the procedure
 @dataclass(frozen=True)
 class BuildTarget:
-    """Where the procedure runs: the digital twin, or a rig on a serial port with a camera.
-
-    Parameters
-    ----------
-    twin : bool
-        Run on the digital twin (emulator and synthetic camera).
-    port : str
-        Serial port of the V5 brain's user channel (a rig only).
-    camera : str
-        Camera index or stream URL (a rig only).
-    """
+    """Where the procedure runs: the digital twin, or a rig (serial ``port`` of the V5 brain, ``camera`` index or
+    URL)."""
 
     twin: bool = True
     port: str = "/dev/ttyACM1"
     camera: str = "0"
 
     def link(self) -> list[str]:
-        """Arguments that name the motor link."""
         return ["--twin"] if self.twin else ["--port", self.port]
 
     def camera_args(self) -> list[str]:
-        """Arguments that name the camera."""
         return ["--twin"] if self.twin else ["--camera", self.camera]
 
     def rig(self) -> list[str]:
-        """Arguments that name the motor link and the camera."""
         return ["--twin"] if self.twin else ["--port", self.port, "--camera", self.camera]
 
 
@@ -376,21 +303,7 @@ TWIN = BuildTarget()
 
 @dataclass(frozen=True)
 class BuildBudget:
-    """How long the procedure's runs are.
-
-    Parameters
-    ----------
-    babble_s : float
-        Babbling time [s] (at least ``trial_length_s + 3``).
-    trial_length_s : float
-        Trial length of the identification dataset [s].
-    max_epochs : int
-        Training epochs of the identified model.
-    control_s : float
-        Length of the first closed-loop run [s].
-    seed : int
-        Seed of the babbling torques and of the twin.
-    """
+    """Run lengths of the procedure [s], training epochs of the identified model, and the seed."""
 
     babble_s: float = 65.0
     trial_length_s: float = 5.0
@@ -412,19 +325,7 @@ QUICK_BUDGET = BuildBudget(babble_s=8.0, trial_length_s=2.0, max_epochs=5, contr
 
 @dataclass(frozen=True)
 class BuildStep:
-    """One step of the procedure.
-
-    Attributes
-    ----------
-    key : str
-        Short name (``design``, ``firmware``, ``check``, ``calibrate``, ``babble``, ``identify``, ``control``).
-    title : str
-        What the step does.
-    argv : tuple of str
-        The command line (``softpend ...`` or ``python -m ...``); empty for a step without a command.
-    good : str
-        What a good result looks like.
-    """
+    """One step of the procedure: short name, what it does, its command line and what a good result looks like."""
 
     key: str
     title: str
@@ -433,35 +334,25 @@ class BuildStep:
 
     @property
     def command(self) -> str:
-        """The command line as one shell line (arguments with spaces or brackets quoted)."""
+        """The command line as one shell line."""
         return " ".join(a if a and all(ch not in a for ch in " []{}\"',") else f"'{a}'" for a in self.argv)
 
 
 def build_steps(
     folder: str | Path, target: BuildTarget = TWIN, budget: BuildBudget = BuildBudget(), overrides: Sequence[str] = ()
 ) -> list[BuildStep]:
-    """The procedure from the design to the first closed-loop run, every output under ``folder``.
-
-    Parameters
-    ----------
-    folder : path
-        Folder of every step's outputs (relative paths stay relative in the command lines).
-    target : BuildTarget
-        The twin or a rig.
-    budget : BuildBudget
-        Run lengths.
-    overrides : sequence of str
-        ``NAME=VALUE`` rod parameters (``RodParams`` fields) passed to the design as ``--set``.
-    """
+    """The procedure from the design to the first closed-loop run, every output under ``folder``; ``overrides``:
+    ``NAME=VALUE`` rod parameters passed as ``--set``."""
     f = Path(folder)
     sets = [a for item in overrides for a in ("--set", item)]
     counts = ["--counts-per-rev", str(firmware_settings()["COUNTS_PER_REV"])]
-    tol_mm = HANGING_TIP_TOLERANCE_M * 1e3
+    calibration = [] if target.twin else ["--calibration", str(f / "calibration.json")]
+    rig = ("softpend", "rig")
     return [
         BuildStep(
             "design",
             "Compute the rig's dimensions and drawing from the rod's parameters",
-            ("softpend", "rig", "design", "--out", str(f / "design"), *sets),
+            (*rig, "design", "--out", str(f / "design"), *sets),
             "every marker and the whole swing circle inside the image, every marker clear of the swing "
             "circle, and a dot larger than the tracker's smallest blob",
         ),
@@ -474,15 +365,7 @@ def build_steps(
         BuildStep(
             "check",
             "Power on: handshake, encoder at rest, direction, watchdog",
-            (
-                "softpend",
-                "rig",
-                "check",
-                *target.link(),
-                *(counts if target.twin else []),
-                "--out",
-                str(f / "check.json"),
-            ),
+            (*rig, "check", *target.link(), *(counts if target.twin else []), "--out", str(f / "check.json")),
             "the protocol version, torque limit and state rate the host expects; the hub at rest at the "
             "hanging angle; a positive torque turns the hub the positive way; the watchdog zeroes the torque "
             "after a silent host",
@@ -490,74 +373,31 @@ def build_steps(
         BuildStep(
             "calibrate",
             "Fit the camera's affine map to the markers",
-            (
-                "softpend",
-                "rig",
-                "calibrate",
-                *target.camera_args(),
-                "--markers",
-                str(f / "design" / "markers.json"),
-                "--out",
-                str(f / "calibration.json"),
-                *sets,
-            ),
+            (*rig, "calibrate", *target.camera_args(), "--markers", str(f / "design" / "markers.json"))
+            + ("--out", str(f / "calibration.json"), *sets),
             f"marker residual at most {CALIBRATION_MAX_RESIDUAL_PX:g} px and the hanging tip within "
-            f"{tol_mm:g} mm of where the design puts it",
+            f"{HANGING_TIP_TOLERANCE_M * 1e3:g} mm of where the design puts it",
         ),
         BuildStep(
             "babble",
             "Babble: random torque, encoder and camera logged and synchronised",
-            (
-                "softpend",
-                "rig",
-                "babble",
-                *target.rig(),
-                *([] if target.twin else ["--calibration", str(f / "calibration.json")]),
-                "--out",
-                str(f / "babble"),
-                "--duration",
-                f"{budget.babble_s:g}",
-                "--trial-length-s",
-                f"{budget.trial_length_s:g}",
-                "--seed",
-                str(budget.seed),
-                "--no-progress",
-            ),
+            (*rig, "babble", *target.rig(), *calibration, "--out", str(f / "babble"))
+            + ("--duration", f"{budget.babble_s:g}", "--trial-length-s", f"{budget.trial_length_s:g}")
+            + ("--seed", str(budget.seed), "--no-progress"),
             "a clock offset found with a clear correlation peak, no gaps, and whole trials in the dataset",
         ),
         BuildStep(
             "identify",
             "Identify the rod: fit the dynamics model to the babbling",
-            (
-                "softpend",
-                "fit-model",
-                str(f / "babble" / "rig_dataset.npz"),
-                str(f / "model"),
-                "--information",
-                "limited",
-                "--max-epochs",
-                str(budget.max_epochs),
-                "--no-progress",
-            ),
+            ("softpend", "fit-model", str(f / "babble" / "rig_dataset.npz"), str(f / "model"))
+            + ("--information", "limited", "--max-epochs", str(budget.max_epochs), "--no-progress"),
             f"open-loop tip error {IDENTIFY_HORIZON_S:g} s into a rollout below the yardstick of a rod that stays put",
         ),
         BuildStep(
             "control",
             "First closed-loop run: energy swing-up and LQR on the observations",
-            (
-                "softpend",
-                "rig",
-                "control",
-                "swingup-obs",
-                *target.rig(),
-                *([] if target.twin else ["--calibration", str(f / "calibration.json")]),
-                *counts,
-                "--out",
-                str(f / "control"),
-                "--duration",
-                f"{budget.control_s:g}",
-                "--no-progress",
-            ),
+            (*rig, "control", "swingup-obs", *target.rig(), *calibration, *counts, "--out", str(f / "control"))
+            + ("--duration", f"{budget.control_s:g}", "--no-progress"),
             "no early stop; on the twin, the rod's true tip swung up and held upright",
         ),
     ]
@@ -570,21 +410,19 @@ def _read_json(path: Path) -> Any:
 
 
 def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
-    """Read the outputs of ``step`` (run with :func:`build_steps` into ``folder``) and return its figures with
-    ``good`` (whether they look as :attr:`BuildStep.good` says)."""
-    f = Path(folder)
-    checks: dict[str, Callable[[], dict[str, Any]]] = {
-        "design": lambda: _check_design(f),
-        "firmware": lambda: {"good": True},
-        "check": lambda: _check_rig_check(f),
-        "calibrate": lambda: _check_calibration(f),
-        "babble": lambda: _check_babble(f),
-        "identify": lambda: _check_model(f),
-        "control": lambda: _check_control(f),
+    """The figures of the outputs of ``step`` (run with :func:`build_steps` into ``folder``), with ``good``."""
+    checks = {
+        "design": _check_design,
+        "firmware": lambda f: {"good": True},
+        "check": _check_rig_check,
+        "calibrate": _check_calibration,
+        "babble": _check_babble,
+        "identify": _check_model,
+        "control": _check_control,
     }
     if step.key not in checks:
         raise ValueError(f"step.key must be one of {sorted(checks)}, got {step.key!r}")
-    return checks[step.key]()
+    return checks[step.key](Path(folder))
 
 
 def _check_design(f: Path) -> dict[str, Any]:
@@ -629,14 +467,9 @@ def _check_calibration(f: Path) -> dict[str, Any]:
 
 def _check_babble(f: Path) -> dict[str, Any]:
     d = _read_json(f / "babble" / "summary.json")
-    good = (
-        d["n_trials"] >= 1
-        and d["gaps"] == 0
-        and d["peak_correlation"] > 0.5
-        and (f / "babble" / "rig_dataset.npz").is_file()
-    )
+    good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5
     return {
-        "good": bool(good),
+        "good": bool(good and (f / "babble" / "rig_dataset.npz").is_file()),
         "n_trials": d["n_trials"],
         "clock_offset_ms": 1e3 * d["clock_offset_s"],
         "peak_correlation": d["peak_correlation"],
@@ -645,8 +478,7 @@ def _check_babble(f: Path) -> dict[str, Any]:
 
 
 def _check_model(f: Path) -> dict[str, Any]:
-    meta = _read_json(f / "model.json")
-    v = meta["metadata"]["metrics"]["validation"]
+    v = _read_json(f / "model.json")["metadata"]["metrics"]["validation"]
     tip, hold = v.get(f"tip_rmse_m@{IDENTIFY_HORIZON_S:g}s"), v.get(f"hold_tip_rmse_m@{IDENTIFY_HORIZON_S:g}s")
     good = tip is not None and hold is not None and math.isfinite(tip) and tip < hold
     return {
@@ -672,13 +504,11 @@ def _check_control(f: Path) -> dict[str, Any]:
 
 
 def design_figures(params: RodParams, design: Optional[RigDesign] = None) -> dict[str, Any]:
-    """:meth:`RigDesign.to_dict` of ``params`` with the static sag test's figure: the tip sag of the rod
-    clamped horizontal (PRB statics, :func:`softpend.study.rod_design.rod_design`) in ``tip_sag_horizontal_mm``,
-    and the tracker's smallest blob in ``tracker_min_area_px``."""
+    """:meth:`RigDesign.to_dict` with the clamped-horizontal tip sag (``tip_sag_horizontal_mm``, PRB statics) and
+    the tracker's smallest blob (``tracker_min_area_px``)."""
     from softpend.vision.tracker import TipTracker
 
-    design = design if design is not None else rig_design(params)
-    figures = design.to_dict()
+    figures = (design if design is not None else rig_design(params)).to_dict()
     figures["tip_sag_horizontal_mm"] = 1e3 * rod_design(params).tip_sag_horizontal_m
     figures["tracker_min_area_px"] = TipTracker().min_area_px
     return figures

@@ -1,6 +1,5 @@
-"""Figures of a closed-loop run on the digital twin, from its logs: what the rod truly did (the emulator's
-truth log, scored by :func:`softpend.evaluation.metrics_from_trajectory`) and how hard the motor was driven
-(torque chatter, from the motor log)."""
+"""Figures of a closed-loop twin run from its logs: the rod's true motion (emulator truth log) and the torque
+chatter (motor log)."""
 
 from __future__ import annotations
 
@@ -12,22 +11,12 @@ from softpend.evaluation import SUCCESS_STD_RAD, metrics_from_trajectory
 from softpend.io.samplelog import read_sample_log
 from softpend.task import Task
 
-__all__ = [
-    "run_truth_metrics",
-    "torque_chatter_nm_per_s",
-    "torque_total_variation_per_s",
-    "truth_metrics",
-    "truth_trajectory",
-]
-
 
 def truth_trajectory(
     truth_log: str | Path, task: Task, start_time_s: float | None = None, end_time_s: float | None = None
 ) -> dict[str, np.ndarray]:
-    """The true motion of a twin run from the emulator's truth log (the rod's state every tick; ``task`` is the
-    emulator's): ``time_s`` (device time), ``theta_rad`` (tip angle from upright), ``torque_nm`` (applied) and
-    ``phi_dot_rad_s`` (hub rate).  ``start_time_s`` and ``end_time_s`` (device time [s], inclusive) keep only
-    the ticks of that window."""
+    """``time_s`` (device time), ``theta_rad``, ``torque_nm`` (applied) and ``phi_dot_rad_s`` of a twin run from the
+    emulator's truth log, within the device-time window ``[start_time_s, end_time_s]`` when given."""
     log = read_sample_log(truth_log)
     time_s = log["device_time_s"]
     keep = np.ones(len(time_s), dtype=bool)
@@ -55,9 +44,8 @@ def truth_metrics(
     start_time_s: float | None = None,
     end_time_s: float | None = None,
 ) -> dict[str, float]:
-    """Swing-up time, upright std, peak torque, energy and success of a twin run from the emulator's truth log
-    (:func:`truth_trajectory`; the window, when given, also sets the origin of the swing-up time).  Empty for
-    fewer than 3 ticks."""
+    """The evaluation's metrics of the true motion in the window (:func:`truth_trajectory`); empty for fewer than
+    3 ticks."""
     truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
     if len(truth["time_s"]) < 3:
         return {}
@@ -70,9 +58,8 @@ def truth_metrics(
 def run_truth_metrics(
     motor_log: str | Path, truth_log: str | Path, task: Task, success_std_rad: float = SUCCESS_STD_RAD
 ) -> dict[str, float]:
-    """:func:`truth_metrics` of the part of a twin run that the controller commanded: from its first command to
-    the last sample of the motor log (device time).  The truth log also holds the rod before the controller took
-    charge and after the STOP, when nothing holds it.  Empty when the controller never commanded."""
+    """:func:`truth_metrics` from the controller's first command to the motor log's last sample; empty when it never
+    commanded."""
     motor = read_sample_log(motor_log)
     commanded = motor["commanded"] > 0
     if not commanded.any():
@@ -87,16 +74,14 @@ def run_truth_metrics(
 
 
 def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
-    """Total variation of the commanded torque per second of the run, ``sum |tau[k+1] - tau[k]| / T`` [N m/s],
-    over the samples the controller commanded (a motor log of :func:`softpend.hardware.closed_loop.run_closed_loop`)."""
+    """:func:`torque_total_variation_per_s` of the commanded samples of a motor log."""
     log = read_sample_log(motor_log)
     commanded = log["commanded"] > 0
     return torque_total_variation_per_s(log["time_s"][commanded], log["command_torque_nm"][commanded])
 
 
 def torque_total_variation_per_s(time_s: np.ndarray, torque_nm: np.ndarray) -> float:
-    """Torque chatter of a sampled torque sequence, ``sum |tau[k+1] - tau[k]| / (t[-1] - t[0])`` [N m/s]
-    (NaN for fewer than 2 samples or no elapsed time)."""
+    """``sum |tau[k+1] - tau[k]| / (t[-1] - t[0])`` [N m/s]; NaN for fewer than 2 samples or no elapsed time."""
     time_s = np.asarray(time_s, dtype=float)
     torque = np.asarray(torque_nm, dtype=float)
     if time_s.shape != torque.shape or time_s.ndim != 1:

@@ -1,19 +1,5 @@
-"""Controllers through the whole rig stack on the digital twin, beside the same controllers in the ideal simulator.
-
-A *condition* (:class:`RigCondition`) is what the rig's sensors are like: the camera's frame rate, latency and
-image imperfections, the encoder's resolution and the link latency.  :func:`twin_start` runs one controller
-from one start on the twin (:func:`softpend.hardware.closed_loop.run_twin_control`, in simulated time: the
-device behind the real protocol bytes, the synthetic live camera filming it, the Algorithm 1 tracker, the state
-estimator, the driver's clamp and STOP) and scores the rod's *true* motion from the emulator's truth log over
-the time the controller was in charge; :func:`simulator_starts` runs the same controller from the same starts
-in the ideal simulator (:func:`softpend.evaluation.evaluate_controller`: the true joint state and observation
-every step, no delay, no noise).  Both give one row per start with the same figures; a start whose run ended
-early -- a safe stop for a blind camera, a link that failed, an estimator whose model diverged -- is a failed
-row with its reason, not an exception.  :func:`summary_rows` condenses the rows per condition and controller.
-
-A start seeded ``s`` begins from the same state in both: the emulator and the simulator's environment draw the
-hanging start's hub-angle and rate noise from one generator seeded ``s`` in the same order.
-"""
+"""Controllers through the whole rig stack on the digital twin (:func:`twin_start`) beside the same controllers in
+the ideal simulator (:func:`simulator_starts`), from the same seeded starts, one row per start."""
 
 from __future__ import annotations
 
@@ -38,21 +24,6 @@ from softpend.task import Task
 from softpend.vision.camera import CameraEffects
 from softpend.vision.tip_source import CameraFaults
 
-__all__ = [
-    "CONFIDENCE",
-    "JOINT_SWINGUP",
-    "OBSERVATION_SWINGUP",
-    "SIMULATOR",
-    "FrameKeeper",
-    "RigCondition",
-    "learned_controller",
-    "rig_controllers",
-    "simulator_starts",
-    "summary_rows",
-    "text_figures",
-    "twin_start",
-]
-
 #: Condition name of the rows of :func:`simulator_starts`.
 SIMULATOR = "ideal simulator"
 #: Confidence of the Wilson intervals of :func:`summary_rows`.
@@ -64,27 +35,8 @@ JOINT_SWINGUP = "swing-up + LQR (joint state)"
 
 @dataclass(frozen=True)
 class RigCondition:
-    """The rig's sensors and link for a twin run.
-
-    Parameters
-    ----------
-    name : str
-        Label of the condition in tables.
-    fps : float
-        Camera frame rate [1/s].
-    camera_latency_s : float
-        End of exposure to the frame's arrival at the tracker [s].
-    effects : CameraEffects
-        Image imperfections (default :meth:`~softpend.vision.camera.CameraEffects.rig`).
-    counts_per_rev : int
-        Encoder resolution (the estimator is told the same).
-    link_latency_s : float
-        One-way serial-link latency [s].
-    max_blind_s : float
-        The estimator's longest bridge without a camera correction before the loop stops the motor [s].
-    faults : CameraFaults, optional
-        Dropped frames, occlusions or a stall of the camera (none by default).
-    """
+    """The rig's sensors and link for a twin run: camera frame rate, latency, image effects and faults, encoder
+    resolution, one-way link latency, and the estimator's longest blind bridge before the motor stops."""
 
     name: str
     fps: float = 60.0
@@ -107,11 +59,11 @@ class RigCondition:
             raise ValueError(f"faults must be a CameraFaults or None, got {type(self.faults).__name__}")
 
     def rig(self, task: Task, seed: int) -> RigConfig:
-        """The emulated rig of a start seeded ``seed`` (hanging, ``task.start_noise_rad`` start noise)."""
+        """The emulated rig of a start seeded ``seed``."""
         return RigConfig(task=task, counts_per_rev=self.counts_per_rev, latency_s=self.link_latency_s, seed=int(seed))
 
     def camera(self, seed: int) -> TwinCamera:
-        """The twin's camera of a start seeded ``seed`` (the seed of the image noise)."""
+        """The twin's camera of a start seeded ``seed``."""
         return TwinCamera(
             fps=self.fps, latency_s=self.camera_latency_s, effects=self.effects, faults=self.faults, seed=int(seed)
         )
@@ -122,9 +74,8 @@ class RigCondition:
 
 
 def rig_controllers(task: Task) -> dict[str, Callable[[], Any]]:
-    """The classical controllers that run on the rig, by label: factories of the energy swing-up handing over to
-    the LQR on the observed variables (:meth:`~softpend.control.swingup.EnergySwingUpController.for_observations`)
-    and, on the PRB plant (whose joint state the simulator has), the same on the PRB joint state."""
+    """Factories of the rig's classical controllers by label: energy swing-up + LQR on the observations and, on the
+    PRB plant, on the joint state."""
     from softpend.control.swingup import EnergySwingUpController
 
     rod, dt = task.rod, task.dt_s
@@ -137,10 +88,8 @@ def rig_controllers(task: Task) -> dict[str, Callable[[], Any]]:
 
 
 def learned_controller(folder: str | Path, which: str = "final") -> tuple[Any, Task, str]:
-    """``(controller, task, label)`` of a trained run folder: a PILCO run (``pilco.json``: its final policy) or a
-    DQN / DQN-MBPO run of ``softpend train`` (the agent ``which`` of :func:`softpend.rl.dqn.load_agent`, held for
-    the config's action repeat); ``task`` is the task the run was trained on.  ``ValueError`` if ``folder`` is
-    neither."""
+    """``(controller, task, label)`` of a PILCO run folder (final policy) or a DQN / DQN-MBPO run folder (agent
+    ``which``); ``task`` is the one the run trained on."""
     from softpend.pilco.loop import PilcoResult
     from softpend.rl.dqn import is_run_folder, load_agent
     from softpend.rl.training_env import policy_controller
@@ -183,15 +132,9 @@ def twin_start(
     success_std_rad: float = HOLD_STD_RAD,
     on_frame: Optional[Callable] = None,
 ) -> dict[str, Any]:
-    """One start of ``controller`` on the twin under ``condition``: a row of :func:`summary_rows`' input.
-
-    The rod's figures come from the emulator's truth log between the first state the controller commanded and
-    the last state of the run (swing-up time counted from the first command); the torque chatter from the
-    commands in the motor log.  The run's logs stay in ``workdir``.  A safe stop (the camera blind for longer
-    than ``condition.max_blind_s``, or no first frame), a :class:`~softpend.hardware.driver.LinkError` or a
-    diverged estimator model makes a failed row whose ``stop`` says why; what else the run raises propagates.
-    Besides the figures, the row holds ``late_commands``, ``samples``, ``frames_tracked`` and ``frames_lost``.
-    """
+    """One start of ``controller`` on the twin under ``condition`` (logs in ``workdir``): the row of the rod's true
+    motion while the controller was in charge; a safe stop, link error or diverged estimator is a failed row whose
+    ``stop`` says why."""
     positive("duration_s", duration_s)
     workdir = Path(workdir)
     stop: Optional[str] = None
@@ -218,7 +161,7 @@ def twin_start(
     motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
     if motor_path.is_file() and truth_path.is_file():
         metrics = run_truth_metrics(motor_path, truth_path, task, success_std_rad=success_std_rad)
-        chatter = torque_chatter_nm_per_s(motor_path)  # NaN when the controller commanded fewer than 2 samples
+        chatter = torque_chatter_nm_per_s(motor_path)
     if not metrics and stop is None:
         stop = "the controller never took charge"
     row = _row(condition.name, label, seed, metrics, chatter, stop)
@@ -240,9 +183,8 @@ def simulator_starts(
     duration_s: float,
     success_std_rad: float = HOLD_STD_RAD,
 ) -> list[dict[str, Any]]:
-    """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task`` (one row each, condition
-    :data:`SIMULATOR`): :func:`~softpend.evaluation.evaluate_controller`, scored with ``success_std_rad``; a
-    diverged simulation is a failed row."""
+    """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task``, one row each (a diverged
+    simulation is a failed row)."""
     summary = evaluate_controller(controller, task, name=label, seeds=list(seeds), duration_s=duration_s)
     rows = []
     theta_index, rate_index = OBSERVATION_NAMES.index("theta_rad"), OBSERVATION_NAMES.index("phi_dot_rad_s")
@@ -264,10 +206,8 @@ def simulator_starts(
 
 
 def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDENCE) -> list[dict[str, Any]]:
-    """One row per (condition, controller), in order of first appearance: ``starts``, ``successes``,
-    ``success_rate`` with its Wilson interval (``success_low``, ``success_high``), the median swing-up time and
-    the worst upright std over the starts that succeeded (NaN if none), the largest peak torque, the median
-    torque chatter, and ``stops`` (runs that ended early)."""
+    """One row per (condition, controller): success rate with its Wilson interval, median swing-up time and worst
+    upright std of the successes, largest peak torque, median torque chatter, and runs that ended early."""
     groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["condition"], row["controller"]), []).append(row)
@@ -298,8 +238,8 @@ def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDEN
 
 
 class FrameKeeper:
-    """An ``on_frame`` hook of the twin's camera that keeps every ``every``-th tracked frame with its tracker
-    detection, as ``(frame_index, frame_bgr, detection)`` in :attr:`frames` (at most ``max_frames``)."""
+    """An ``on_frame`` hook that keeps every ``every``-th frame as ``(index, frame_bgr, detection)`` in
+    :attr:`frames` (at most ``max_frames``)."""
 
     def __init__(self, every: int = 15, max_frames: int = 200) -> None:
         self.every = int_at_least("every", every, 1)
@@ -311,9 +251,7 @@ class FrameKeeper:
             self.frames.append((int(index), frame.copy(), detection))
 
     def at_loop_times(self, camera_log: str | Path) -> list[tuple[float, np.ndarray, Any]]:
-        """The kept frames that the control loop received, as ``(loop_time_s, frame_bgr, detection)``: the
-        frame's capture time on the loop's clock, from the run's camera log (frames tracked before the loop
-        started are left out)."""
+        """The kept frames the control loop received, as ``(capture time on the loop's clock, frame, detection)``."""
         log = read_sample_log(camera_log)
         capture = dict(zip(log["frame"].astype(int).tolist(), log["capture_device_time_s"].tolist()))
         return [(float(capture[i]), frame, detection) for i, frame, detection in self.frames if i in capture]
@@ -322,10 +260,8 @@ class FrameKeeper:
 def text_figures(
     summary: Sequence[Mapping[str, Any]], controllers: Mapping[str, str], conditions: Mapping[str, str]
 ) -> dict[str, str]:
-    """The figures of :func:`summary_rows` as text for the book, keyed ``<controller key>_<condition key>_<figure>``
-    (``controllers`` and ``conditions`` map a short key to the label in the rows): ``success`` ("k of n"),
-    ``interval`` (Wilson interval, "low to high"), ``swing_up_s``, ``std_rad``, ``chatter`` and ``stops``; a
-    figure of no successful start reads "none", a combination that was not run "not run"."""
+    """The figures of :func:`summary_rows` as text, keyed ``<controller key>_<condition key>_<figure>``
+    (``controllers`` and ``conditions``: short key -> label)."""
 
     def fixed(value: float, digits: int) -> str:
         if math.isnan(value):

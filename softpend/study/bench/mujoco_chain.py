@@ -1,20 +1,6 @@
-"""The PRB chain of :class:`softpend.plant.PRBPlant` written as a MuJoCo model (benchmark comparison only).
+"""The PRB chain of :class:`softpend.plant.PRBPlant` as a MuJoCo model, for the ``plant`` benchmark's comparison.
 
-:func:`chain_mjcf` writes the MJCF of the same chain from a :class:`~softpend.plant.RodParams`: a hub body
-(inertia ``J`` about the axis, its hinge damped by the hub friction ``b``) carrying ``n`` link bodies of
-mass ``m/n``, length ``L/n``, centre of mass and inertia about it as the Exudyn plant defines them (the tip
-mass merged into the last link), hinged about ``z`` with joint springs ``2k, k, ..., k`` and dampers
-``2 zeta, zeta, ...`` (clamp first, rest angle 0), gravity along ``-y`` (upright is ``+y``) and a motor on the
-hub joint whose control and force are limited to the torque limit.  MuJoCo's hinge coordinates are the
-Exudyn plant's: ``qpos`` is the hub angle from upright followed by the ``n`` spring angles, ``qvel`` their
-rates, so that states map one to one.  The model has no geoms (no contacts).
-
-:class:`MuJoCoChain` steps one rod by control steps of ``dt_s`` (the torque held, ``mujoco.mj_step`` with
-``nstep`` sub-steps); :func:`mujoco_hub_errors_rad` compares it with the Exudyn plant run with
-:data:`~softpend.study.simulators.REFERENCE_SUBSTEPS` sub-steps, as
-:func:`~softpend.study.simulators.hub_errors_rad` does for the other simulators.
-
-MuJoCo is an optional dependency (``pip install softpend[bench]``); this module imports it when used.
+MuJoCo's ``qpos``/``qvel`` are the Exudyn plant's joint state; MuJoCo is optional (``pip install softpend[bench]``).
 """
 
 from __future__ import annotations
@@ -25,28 +11,15 @@ from typing import Mapping, Optional
 
 import numpy as np
 
-from softpend.checks import int_at_least, one_of, positive
+from softpend.checks import one_of, positive
 from softpend.plant.params import RodParams
 from softpend.plant.prb import link_inertials
 from softpend.study.simulators import hub_error_inputs
 
-__all__ = [
-    "CONTROL_STEP_S",
-    "INTEGRATORS",
-    "MuJoCoChain",
-    "bench_figures",
-    "chain_mjcf",
-    "diverges",
-    "mujoco_available",
-    "mujoco_hub_errors_rad",
-    "rollout_rod_steps_per_s",
-    "steps_per_s",
-]
-
-#: Control step of the comparisons [s] (the environments' ``dt_s``).
+#: Control step of the comparisons [s].
 CONTROL_STEP_S = 0.01
 
-#: MuJoCo integrators accepted by :func:`chain_mjcf` (the names of MJCF's ``option/@integrator``).
+#: MuJoCo integrators accepted by :func:`chain_mjcf`.
 INTEGRATORS = ("RK4", "implicitfast", "implicit", "Euler")
 
 
@@ -60,17 +33,8 @@ def mujoco_available() -> bool:
 
 
 def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> str:
-    """MJCF text of the PRB chain of ``params`` (see the module docstring).
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        The rod (default: the project's default rod).
-    timestep_s : float
-        MuJoCo's time step [s].
-    integrator : str
-        One of :data:`INTEGRATORS`.
-    """
+    """MJCF text of the PRB chain of ``params``: hub and ``n`` links with the Exudyn plant's inertias, joint springs
+    and dampers, gravity along ``-y``, a torque-limited hub motor, no contacts."""
     p = params if params is not None else RodParams()
     positive("timestep_s", timestep_s)
     one_of("integrator", integrator, INTEGRATORS)
@@ -79,9 +43,8 @@ def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, in
     damping = p.spring_dampings_nms_per_rad()
     length = p.link_length_m
     limit = p.torque_limit_nm
-    r = repr  # shortest round-trip decimal of a float: the model holds the same doubles as RodParams
-    # The hub's mass sits on the fixed axis (no gravity torque, no translation): any value is exact; MuJoCo
-    # wants a moving body to have mass, so the hub gets the rod's mass there.
+    r = repr  # shortest round-trip decimal: the model holds the same doubles as RodParams
+    # the hub's mass sits on the fixed axis, so any value is exact; MuJoCo wants one
     lines = [
         '<mujoco model="softpend_prb_chain">',
         '  <compiler angle="radian" autolimits="true"/>',
@@ -122,19 +85,8 @@ def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, in
 
 
 class MuJoCoChain:
-    """One rod of :func:`chain_mjcf` stepped by control steps of ``dt_s`` with the torque held.
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        The rod.
-    timestep_s : float
-        MuJoCo's time step [s]; ``dt_s`` must be a whole number of them.
-    integrator : str
-        One of :data:`INTEGRATORS`.
-    dt_s : float
-        Control step [s].
-    """
+    """One rod of :func:`chain_mjcf` stepped by control steps of ``dt_s`` (a whole number of ``timestep_s``) with
+    the torque held."""
 
     def __init__(
         self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4", dt_s: float = 0.01
@@ -148,9 +100,8 @@ class MuJoCoChain:
         substeps = int(round(ratio))
         if substeps < 1 or abs(ratio - substeps) > 1e-9 * ratio:
             raise ValueError(f"dt_s ({dt_s!r}) must be a whole number of timestep_s ({timestep_s!r})")
-        self.substeps = int_at_least("substeps", substeps, 1)
+        self.substeps = substeps
         self.dt_s = float(dt_s)
-        self.integrator = integrator
         self._mujoco = mujoco
         self.model = mujoco.MjModel.from_xml_string(chain_mjcf(self.params, timestep_s, integrator))
         self.data = mujoco.MjData(self.model)
@@ -158,8 +109,7 @@ class MuJoCoChain:
         self._instability_warnings = [int(kinds.mjWARN_BADQPOS), int(kinds.mjWARN_BADQVEL), int(kinds.mjWARN_BADQACC)]
 
     def set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
-        """Set the Exudyn plant's joint state ``(q, q_dot)`` (hub angle from upright, then spring angles) [rad,
-        rad/s]; time and control back to zero."""
+        """Set the joint state ``(q, q_dot)``; time and control back to zero."""
         n = self.params.n_links + 1
         q = np.asarray(q, dtype=float).reshape(n)
         q_dot = np.asarray(q_dot, dtype=float).reshape(n)
@@ -170,24 +120,22 @@ class MuJoCoChain:
         self.data.qvel[:] = q_dot
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """The joint state ``(q, q_dot)`` in the Exudyn plant's coordinates (copies)."""
+        """The joint state ``(q, q_dot)`` (copies)."""
         return self.data.qpos.copy(), self.data.qvel.copy()
 
     def step(self, torque_nm: float) -> None:
-        """Hold ``torque_nm`` (clamped to the torque limit by the actuator's ranges) for one control step."""
+        """Hold ``torque_nm`` (clamped by the actuator) for one control step."""
         self.data.ctrl[0] = torque_nm
         self._mujoco.mj_step(self.model, self.data, self.substeps)
 
     @property
     def diverged(self) -> bool:
-        """Whether MuJoCo met a non-finite or huge position, velocity or acceleration since the last
-        :meth:`set_state` (MuJoCo then resets the state to the model's rest pose and carries on)."""
+        """Whether MuJoCo met a bad position, velocity or acceleration since the last :meth:`set_state`."""
         warnings = self.data.warning
         return any(warnings[w].number > 0 for w in self._instability_warnings)
 
     def hub_trajectory_rad(self, q0: np.ndarray, qd0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
-        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` from the step
-        at which the run diverged (:attr:`diverged`) onwards."""
+        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` once diverged."""
         self.set_state(q0, qd0)
         hub = np.full(len(torques_nm), np.nan)
         qpos = self.data.qpos
@@ -201,8 +149,7 @@ class MuJoCoChain:
 
 
 class _quiet_mujoco:
-    """Context: MuJoCo's warnings (printed to stderr by default) go nowhere; the counts in ``MjData.warning``
-    still rise."""
+    """Context in which MuJoCo's warnings are not printed (``MjData.warning`` still counts them)."""
 
     def __enter__(self):
         import mujoco
@@ -217,13 +164,8 @@ class _quiet_mujoco:
 
 
 def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]]) -> dict[str, float]:
-    """Largest hub-angle error of the MuJoCo chain against the Exudyn run ``reference`` (a
-    :class:`~softpend.study.simulators.HubErrorReference`: same rod, start and random torque, control steps of
-    0.01 s), as :func:`~softpend.study.simulators.hub_errors_rad` measures the other simulators.
-
-    ``configurations`` maps a key stem to ``(integrator, substeps)`` (MuJoCo steps per control step); the keys
-    are ``{stem}_hub_error_rad_n{n_links}``, ``inf`` where the run diverged.
-    """
+    """``{stem}_hub_error_rad_n{n_links}``: largest hub-angle error of the MuJoCo chain against the Exudyn run
+    ``reference`` (``inf`` if diverged), per ``stem -> (integrator, MuJoCo steps per control step)``."""
     figures = {}
     n_links = reference.params.n_links
     for stem, (integrator, substeps) in configurations.items():
@@ -235,22 +177,16 @@ def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]])
 
 
 def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
-    """Whether the MuJoCo chain with ``substeps`` steps per control step diverges along the start and random
-    torque of :func:`~softpend.study.simulators.hub_error_inputs`."""
+    """Whether the MuJoCo chain diverges along the inputs of :func:`~softpend.study.simulators.hub_error_inputs`."""
     params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
     chain = MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
     chain.hub_trajectory_rad(q0, qd0, torques)
     return chain.diverged
 
 
-# ---------------------------------------------------------------------------------------------------------
-# Speed
-
-
 def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 4000, repeats: int = 2) -> float:
-    """Control steps of 0.01 s per wall-clock second of one MuJoCo rod stepped from Python (set the control,
-    ``mj_step`` with ``nstep = substeps``), random torques from a seeded generator, from the hanging rod; the
-    best of ``repeats`` runs."""
+    """Control steps per second of one MuJoCo rod stepped from Python from hanging under seeded random torques
+    (best of ``repeats``)."""
     chain = MuJoCoChain(RodParams(n_links=n_links), timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
     torques = (np.random.default_rng(0).uniform(-1, 1, n_steps) * chain.params.torque_limit_nm).tolist()
     q0 = np.zeros(n_links + 1)
@@ -273,9 +209,8 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
 def rollout_rod_steps_per_s(
     n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3
 ) -> float:
-    """Rod-steps of 0.01 s per wall-clock second of ``mujoco.rollout`` over ``batch_size`` rods from the hanging
-    rod on one thread (one ``MjData``), random torques held over each control step; the best of ``repeats``
-    runs (the state arrays are allocated once, outside the timing)."""
+    """Rod-steps per second of ``mujoco.rollout`` over ``batch_size`` hanging rods on one thread under seeded random
+    torques (best of ``repeats``)."""
     import mujoco
     from mujoco import rollout
 
@@ -304,23 +239,19 @@ def rollout_rod_steps_per_s(
     return batch_size * n_steps / best
 
 
-#: ``(key stem, integrator, MuJoCo steps per control step)`` timed and compared at ``n = 4``: RK4 with a 5 ms step
-#: (the batched chain's RK4 sub-step there) and implicitfast with 2.5 ms.
+#: ``(key stem, integrator, MuJoCo steps per control step)`` timed and compared at ``n = 4``.
 CONFIGURATIONS_N4 = (("mujoco_rk4_5ms", "RK4", 2), ("mujoco_implicitfast_2p5ms", "implicitfast", 4))
 
-#: The same at ``n = 10``, where both steps of :data:`CONFIGURATIONS_N4` diverge: RK4 with the batched chain's RK4
-#: sub-step count (:func:`~softpend.plant.batched.stable_substeps`, filled in by :func:`bench_figures`) and
-#: implicitfast with 0.5 ms.
+#: The same at ``n = 10`` (``None``: the batched chain's :func:`~softpend.plant.batched.stable_substeps`).
 CONFIGURATIONS_N10 = (("mujoco_rk4_stable", "RK4", None), ("mujoco_implicitfast_0p5ms", "implicitfast", 20))
 
-#: RK4 with a 0.25 ms step: converged far below the Exudyn reference's own error (the model check).
+#: A converged RK4 run: the check that both models are the same chain.
 CONVERGED = ("mujoco_rk4_0p25ms", "RK4", 40)
 
 
 def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> dict[str, float]:
-    """The MuJoCo figures of ``softpend bench --only plant`` (see :mod:`softpend.study.bench.plant`) and their
-    ratios to the rates already in ``base`` (same run): ``references`` maps ``n_links`` (4 and 10) to
-    :func:`~softpend.study.simulators.hub_error_reference` runs."""
+    """The ``mujoco_*`` figures of the ``plant`` benchmark and their ratios to the rates in ``base``;
+    ``references``: ``n_links`` (4, 10) -> :func:`~softpend.study.simulators.hub_error_reference`."""
     from softpend.plant.batched import stable_substeps
 
     figures: dict[str, float] = {}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import collections
 import copy
 import math
 from dataclasses import dataclass, field
@@ -15,12 +14,11 @@ from softpend.checks import (
     check_work_size,
     in_unit_interval,
     int_at_least,
-    non_negative,
     one_of,
     positive,
     positive_int,
 )
-from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged, wrap_angle_rad
+from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged
 from softpend.stats import wilson_interval
 from softpend.task import Task
 
@@ -30,12 +28,10 @@ __all__ = [
     "TEST_EPISODE_S",
     "BatchPolicy",
     "Controller",
-    "DelayLine",
     "EvaluationResult",
     "EvaluationSummary",
     "FunctionController",
     "GymPolicyController",
-    "LateNoisyController",
     "evaluate",
     "evaluate_batched",
     "evaluate_controller",
@@ -78,60 +74,6 @@ class FunctionController:
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
         return float(self.function(observation, q, q_dot, time_s))
-
-
-class DelayLine:
-    """What arrives ``delay_steps`` pushes late: :meth:`push` stores a value and returns the one pushed
-    ``delay_steps`` calls earlier; until that many have been pushed, the first value of the episode stands in for
-    the older ones (a rig shows nothing before it starts)."""
-
-    def __init__(self, delay_steps: int) -> None:
-        self.delay_steps = int_at_least("delay_steps", delay_steps, 0)
-        self._past: collections.deque = collections.deque(maxlen=self.delay_steps + 1)
-
-    def clear(self) -> None:
-        """Forget every value (a new episode)."""
-        self._past.clear()
-
-    def push(self, value: Any) -> Any:
-        if not self._past:
-            self._past.extend([value] * self.delay_steps)
-        self._past.append(value)
-        return self._past[0]
-
-
-class LateNoisyController:
-    """What a controller sees on a rig: the plant's observation ``delay_steps`` plant steps late, its hub and tip
-    angles (``phi_rad``, ``theta_rad``) each perturbed by Gaussian noise of ``noise_rad`` [rad] drawn from
-    ``rng`` (and wrapped to ``[-pi, pi)``); the joint state passed on is the current one.  The first observation
-    of an episode stands in for the older ones the rig has not shown yet."""
-
-    def __init__(
-        self,
-        controller: Controller,
-        delay_steps: int = 0,
-        noise_rad: float = 0.0,
-        rng: Optional[np.random.Generator] = None,
-    ) -> None:
-        self.controller = controller
-        self._late = DelayLine(delay_steps)
-        self.delay_steps = self._late.delay_steps
-        self.noise_rad = non_negative("noise_rad", noise_rad)
-        self.rng = rng if rng is not None else np.random.default_rng(0)
-
-    def reset(self) -> None:
-        self._late.clear()
-        self.controller.reset()
-
-    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        seen = self._late.push(observation)
-        if self.noise_rad > 0:
-            phi, theta = self.rng.normal(0.0, self.noise_rad, size=2)
-            seen = seen._replace(
-                phi_rad=float(wrap_angle_rad(seen.phi_rad + phi)),
-                theta_rad=float(wrap_angle_rad(seen.theta_rad + theta)),
-            )
-        return self.controller(seen, q, q_dot, time_s)
 
 
 class GymPolicyController:
@@ -475,48 +417,25 @@ def run_episode(
     ]
 
 
-def _one_by_one(
-    controller: Any,
-    task: Task,
-    seeds: list[int],
-    duration_s: float,
-    initial_state: Optional[tuple[Any, Any]],
-    env_kwargs: dict[str, Any],
-    rod_spread: float,
-    rod_seed: int,
-    substeps: Optional[int],
-    stop_at_first_failure: bool,
-) -> list[EvaluationResult]:
+def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float, o: dict) -> list[EvaluationResult]:
     """The Exudyn engine's episodes of :func:`evaluate`, one after the other (none after a failure if asked)."""
     from softpend.envs import SoftPendulumEnv
 
-    if isinstance(controller, BatchPolicy) or substeps is not None:
+    if isinstance(controller, BatchPolicy) or o["substeps"] is not None:
         raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
-    env = SoftPendulumEnv(**task.env_kwargs(), **env_kwargs)
+    env = SoftPendulumEnv(**task.env_kwargs(), **o["env_kwargs"])
     results: list[EvaluationResult] = []
     for seed in seeds:
-        if rod_spread > 0:
-            env = SoftPendulumEnv(
-                **task.replace(rod=_rod(task, rod_spread, rod_seed + seed)).env_kwargs(), **env_kwargs
-            )
-        results.append(run_episode(controller, env, seed, duration_s, initial_state=initial_state))
-        if stop_at_first_failure and not results[-1].success:
+        if o["rod_spread"] > 0:
+            rod = _rod(task, o["rod_spread"], o["rod_seed"] + seed)
+            env = SoftPendulumEnv(**task.replace(rod=rod).env_kwargs(), **o["env_kwargs"])
+        results.append(run_episode(controller, env, seed, duration_s, initial_state=o["initial_state"]))
+        if o["stop_at_first_failure"] and not results[-1].success:
             break
     return results
 
 
-def _batched(
-    controller: Any,
-    task: Task,
-    seeds: list[int],
-    duration_s: float,
-    initial_state: Optional[tuple[Any, Any]],
-    env_kwargs: dict[str, Any],
-    rod_spread: float,
-    rod_seed: int,
-    substeps: Optional[int],
-    stop_at_first_failure: bool,
-) -> list[EvaluationResult]:
+def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o: dict) -> list[EvaluationResult]:
     """The batched engine's episodes of :func:`evaluate`, all at once, rod ``i`` the one :func:`_rod` draws for
     ``seeds[i]``."""
     from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
@@ -525,6 +444,7 @@ def _batched(
     if task.plant != "prb":
         raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
     _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
+    rod_spread, rod_seed, substeps = o["rod_spread"], o["rod_seed"], o["substeps"]
     policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
     rods = (
         None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s) for s in seeds])
@@ -546,7 +466,7 @@ def _batched(
         start=task.start,
         start_noise_rad=task.start_noise_rad,
         max_episode_steps=int(round(duration_s / task.dt_s)) + 1,
-        **env_kwargs,
+        **o["env_kwargs"],
     )
     levels = getattr(policy, "n_torque_levels", None)
     env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
@@ -556,7 +476,7 @@ def _batched(
         env.chain.set_params(rods)
     engine = _ManyRods(env)
     batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, engine.torque_actions)
-    return _roll(engine, batch_policy, seeds, duration_s, initial_state)
+    return _roll(engine, batch_policy, seeds, duration_s, o["initial_state"])
 
 
 def _rod(task: Task, rod_spread: float, seed: int) -> Any:
@@ -586,24 +506,17 @@ def evaluate(
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")
     one_of("engine", engine, ("exudyn", "batched"))
-    seeds, env_kwargs = _check_seeds(seeds), dict(env_kwargs or {})
+    seeds = _check_seeds(seeds)
     positive("duration_s", duration_s)
-    boolean("stop_at_first_failure", stop_at_first_failure)
-    rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
-    rod_seed = int_at_least("rod_seed", rod_seed, 0)
-    episodes = _batched if engine == "batched" else _one_by_one
-    results = episodes(
-        controller,
-        task,
-        seeds,
-        duration_s,
-        initial_state,
-        env_kwargs,
-        rod_spread,
-        rod_seed,
-        substeps,
-        stop_at_first_failure,
+    options = dict(
+        initial_state=initial_state,
+        env_kwargs=dict(env_kwargs or {}),
+        stop_at_first_failure=boolean("stop_at_first_failure", stop_at_first_failure),
+        rod_spread=in_unit_interval("rod_spread", rod_spread, include_one=False),
+        rod_seed=int_at_least("rod_seed", rod_seed, 0),
+        substeps=substeps,
     )
+    results = (_batched if engine == "batched" else _one_by_one)(controller, task, seeds, duration_s, options)
     failed = [i for i, r in enumerate(results) if not r.success]
     if stop_at_first_failure and failed:
         results = results[: failed[0] + 1]

@@ -94,55 +94,6 @@ def test_non_finite_controller_output_is_an_error() -> None:
         evaluate_controller(FunctionController(lambda o, q, qd, t: float("nan")), seeds=[0], duration_s=0.5)
 
 
-def test_late_noisy_controller_shows_the_observation_late_with_noisy_angles():
-    from softpend.evaluation import LateNoisyController
-    from softpend.plant import Observation
-
-    seen = []
-    resets = []
-
-    class Recorder:
-        def reset(self):
-            resets.append(True)
-
-        def __call__(self, observation, q, q_dot, time_s):
-            seen.append(observation)
-            return 0.0
-
-    observations = [Observation(*([0.01 * k] * 10)) for k in range(6)]
-    late = LateNoisyController(Recorder(), delay_steps=2)
-    late.reset()
-    for obs in observations:
-        late(obs, np.zeros(1), np.zeros(1), 0.0)
-    # two steps late; before the rig has shown older observations the first one stands in for them
-    assert [o.phi_rad for o in seen] == pytest.approx([0.0, 0.0, 0.0, 0.01, 0.02, 0.03])
-    late.reset()
-    seen.clear()
-    late(observations[5], np.zeros(1), np.zeros(1), 0.0)
-    assert resets == [True, True] and seen == [observations[5]]  # reset forgets the past and resets the controller
-
-    def noisy_run(seed: int) -> np.ndarray:
-        seen.clear()
-        noisy = LateNoisyController(Recorder(), noise_rad=0.05, rng=np.random.default_rng(seed))
-        truth = Observation(3.1, -3.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
-        for _ in range(4000):
-            noisy(truth, np.zeros(1), np.zeros(1), 0.0)
-        values = np.array([o.as_array() for o in seen])
-        np.testing.assert_array_equal(values[:, 2:], np.tile(truth.as_array()[2:], (4000, 1)))  # only the angles
-        assert np.all(values[:, :2] >= -math.pi) and np.all(values[:, :2] < math.pi)  # wrapped
-        errors = np.angle(np.exp(1j * (values[:, :2] - truth.as_array()[:2])))
-        np.testing.assert_allclose(errors.std(axis=0), 0.05, rtol=0.06)
-        np.testing.assert_allclose(errors.mean(axis=0), 0.0, atol=0.005)
-        return values
-
-    np.testing.assert_array_equal(noisy_run(1), noisy_run(1))  # the noise is the generator's
-    assert not np.array_equal(noisy_run(1), noisy_run(2))
-    with pytest.raises(ValueError, match="delay_steps"):
-        LateNoisyController(Recorder(), delay_steps=-1)
-    with pytest.raises(ValueError, match="noise_rad"):
-        LateNoisyController(Recorder(), noise_rad=-0.1)
-
-
 def test_an_evaluation_can_stop_at_its_first_failing_start_with_the_same_episodes() -> None:
     seeds = [3, 4, 5]
     holding = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])

@@ -446,10 +446,9 @@ def _search_with_restarts(
     n_steps: int,
     restart: bool = True,
 ) -> tuple[float, int]:
-    """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when
-    ``restart``, ``config.policy_restarts`` and the cost threshold ask for it) from that many fresh random
-    policies (:func:`_random_policy`, draws from ``rng``); ``policy`` keeps the parameters of the lowest
-    predicted cost.  Returns that cost and the number of restarts made."""
+    """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when ``restart``,
+    ``config.policy_restarts`` and the cost threshold ask for it) from that many fresh random policies
+    (:func:`_random_policy`, draws from ``rng``); ``policy`` keeps the parameters of the lowest predicted cost."""
     best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
     if not restart or config.policy_restarts == 0 or best <= config.restart_above_cost_fraction * n_steps:
         return best, 0

@@ -46,8 +46,7 @@ def saturated_linear_moments(
 
 class LinearPolicy:
     """Saturated linear policy ``u = u_max (9 sin z + sin 3z) / 8`` with ``z = w . x`` on ``D`` inputs (PILCO's
-    ``conlin`` with ``gSat``).  On the model inputs ``[rates, sin/cos of angles]`` the cosine of the tip angle
-    stands in for a bias near upright."""
+    ``conlin`` with ``gSat``)."""
 
     def __init__(self, n_inputs: int, torque_limit_nm: float, weights: np.ndarray | None = None) -> None:
         if int(n_inputs) < 1:

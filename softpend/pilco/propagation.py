@@ -309,9 +309,7 @@ COMPILER_NOTES = (
 
 
 def silence_compiler_notes() -> None:
-    """Ignore :data:`COMPILER_NOTES` in this process, from the first compiled rollout on.  The filters are
-    process-wide because the backward graph is compiled at the first gradient, in the caller's code; they match
-    these messages from torch's modules only."""
+    """Ignore :data:`COMPILER_NOTES` in this process, from the first compiled rollout on."""
     for message, category in COMPILER_NOTES:
         warnings.filterwarnings("ignore", message=message, category=category, module="torch")
 

@@ -18,7 +18,7 @@ from softpend.checks import NonFiniteError
 from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
 from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_member
-from softpend.rl.config import DQNConfig
+from softpend.rl.config import SB3_FIELDS, DQNConfig
 from softpend.rl.training_env import make_base_env
 
 __all__ = [
@@ -50,18 +50,7 @@ REBUILT_ATTRIBUTES: frozenset[str] = frozenset(
 )
 
 #: Hyperparameters stored as plain JSON in an agent file that must equal the run's config.
-_CONFIG_ATTRIBUTES = (
-    "learning_rate",
-    "buffer_size",
-    "batch_size",
-    "gamma",
-    "gradient_steps",
-    "target_update_interval",
-    "exploration_initial_eps",
-    "exploration_final_eps",
-    "exploration_fraction",
-    "max_grad_norm",
-)
+_CONFIG_ATTRIBUTES = [name for name in SB3_FIELDS if name not in ("learning_starts", "train_freq")]
 
 _BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 

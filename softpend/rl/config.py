@@ -16,7 +16,13 @@ from softpend.io.overrides import check_fields
 from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 from softpend.task import Task
 
-__all__ = ["DQNConfig", "MBPOConfig", "config_to_dict", "load_config", "saved_config_data", "save_config"]
+__all__ = ["DQNConfig", "MBPOConfig", "SB3_FIELDS", "config_to_dict", "load_config", "saved_config_data", "save_config"]
+
+#: The stable-baselines3 ``DQN`` arguments that are :class:`DQNConfig` fields of the same name.
+SB3_FIELDS = (
+    "learning_rate buffer_size learning_starts batch_size gamma train_freq gradient_steps target_update_interval "
+    "exploration_fraction exploration_initial_eps exploration_final_eps max_grad_norm"
+).split()
 
 
 @dataclass(frozen=True)
@@ -54,38 +60,18 @@ class DQNConfig:
     stop_confirm_max_failures: int = 0
 
     def __post_init__(self) -> None:
-        _check_positive_ints(
-            self,
-            (
-                "n_torque_levels",
-                "action_repeat",
-                "buffer_size",
-                "batch_size",
-                "train_freq",
-                "gradient_steps",
-                "target_update_interval",
-                "eval_every_episodes",
-                "checkpoint_every_episodes",
-            ),
-        )
+        _set_ints(self, "n_torque_levels action_repeat buffer_size batch_size train_freq gradient_steps", 1)
+        _set_ints(self, "target_update_interval eval_every_episodes checkpoint_every_episodes", 1)
         one_of("training_start", self.training_start, ("random", "hanging", "upright"))
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         boolean("clip_q_targets", self.clip_q_targets)
         boolean("eval_until_first_failure", self.eval_until_first_failure)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
-        object.__setattr__(self, "learning_starts", int_at_least("learning_starts", self.learning_starts, 0))
-        object.__setattr__(
-            self, "reset_every_episodes", int_at_least("reset_every_episodes", self.reset_every_episodes, 0)
-        )
-        object.__setattr__(
-            self,
-            "stop_after_balanced_evaluations",
-            int_at_least("stop_after_balanced_evaluations", self.stop_after_balanced_evaluations, 0),
-        )
+        _set_ints(self, "learning_starts reset_every_episodes stop_after_balanced_evaluations", 0)
         for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
             positive(name, getattr(self, name))
-        in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step, lr / (1 - beta1), stays a float32
+        in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step stays a float32
         if self.eval_until_first_failure and self.stop_upright_std_rad > SUCCESS_STD_RAD:
             raise ValueError(
                 f"stop_upright_std_rad ({self.stop_upright_std_rad!r}) must be at most the success level "
@@ -125,12 +111,12 @@ class DQNConfig:
 
     @property
     def selection_seeds(self) -> tuple[int, ...]:
-        """Every start seed that selects or stops training: ``eval_seeds`` and ``stop_confirm_seeds``."""
+        """``eval_seeds`` and ``stop_confirm_seeds``."""
         return self.eval_seeds + self.stop_confirm_seeds
 
     @property
     def dt_s(self) -> float:
-        """Plant step [s] (``task.dt_s``)."""
+        """Plant step [s]."""
         return self.task.dt_s
 
     @property
@@ -173,21 +159,9 @@ class MBPOConfig(DQNConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _check_positive_ints(
-            self,
-            (
-                "rollouts_per_real_step",
-                "rollout_every_steps",
-                "model_buffer_size",
-                "model_refit_every_episodes",
-                "ensemble_size",
-                "model_fit_steps",
-                "model_batch_size",
-            ),
-        )
-        object.__setattr__(
-            self, "initial_random_episodes", int_at_least("initial_random_episodes", self.initial_random_episodes, 1)
-        )
+        _set_ints(self, "rollouts_per_real_step rollout_every_steps model_buffer_size model_refit_every_episodes", 1)
+        _set_ints(self, "ensemble_size model_fit_steps model_batch_size", 1)
+        _set_ints(self, "initial_random_episodes", 1, at_least=True)
         for name in ("real_ratio", "start_branch_fraction"):
             in_unit_interval(name, getattr(self, name))
         boolean("rollouts_within_data", self.rollouts_within_data)
@@ -229,27 +203,29 @@ def _seed_tuple(name: str, value: Any) -> tuple[int, ...]:
         raise ValueError(f"{name} must be a tuple of integers >= 0, got {value!r}") from None
 
 
-def _check_positive_ints(config: Any, names: tuple[str, ...]) -> None:
-    for name in names:
-        object.__setattr__(config, name, positive_int(name, getattr(config, name)))
+def _set_ints(config: Any, names: str, low: int, at_least: bool = False) -> None:
+    """Check and convert the int fields ``names`` (space-separated): ``>= low``, or positive when ``low`` is 1."""
+    for name in names.split():
+        value = getattr(config, name)
+        checked = positive_int(name, value) if low == 1 and not at_least else int_at_least(name, value, low)
+        object.__setattr__(config, name, checked)
 
 
 def config_to_dict(config: DQNConfig) -> dict[str, Any]:
-    """The fields of ``config`` as plain JSON data (the task as a nested ``dict``)."""
+    """The fields of ``config`` as plain JSON data, with its class name."""
     data = dataclasses.asdict(config)
     data["task"] = config.task.to_dict()
-    return data
+    return {"class": type(config).__name__, **data}
 
 
 def saved_config_data(config: DQNConfig) -> dict[str, Any]:
-    """``config`` as :func:`save_config` saves it (its class name and fields), read back as JSON data."""
-    return json.loads(json.dumps({"class": type(config).__name__, **config_to_dict(config)}))
+    """``config`` as :func:`save_config` saves it, read back as JSON data."""
+    return json.loads(json.dumps(config_to_dict(config)))
 
 
 def save_config(config: DQNConfig, path: Path) -> None:
     """Write ``config`` as JSON (with its class name)."""
-    data = {"class": type(config).__name__, **config_to_dict(config)}
-    text = json.dumps(data, indent=2)
+    text = json.dumps(config_to_dict(config), indent=2)
     with atomic_write(path, "w") as handle:
         handle.write(text)
 

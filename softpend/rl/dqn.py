@@ -29,7 +29,7 @@ from softpend.rl.agent_files import (
     save_agent_file,
     save_replay_buffer,
 )
-from softpend.rl.config import DQNConfig, load_config, save_config, saved_config_data
+from softpend.rl.config import SB3_FIELDS, DQNConfig, load_config, save_config, saved_config_data
 from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
@@ -68,28 +68,9 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
         kwargs["q_target_bounds"] = config.q_target_bounds
-    return cls(
-        "MlpPolicy",
-        env,
-        learning_rate=config.learning_rate,
-        buffer_size=config.buffer_size,
-        learning_starts=config.learning_starts,
-        batch_size=config.batch_size,
-        gamma=config.gamma,
-        train_freq=config.train_freq,
-        gradient_steps=config.gradient_steps,
-        target_update_interval=config.target_update_interval,
-        tau=1.0,
-        exploration_fraction=config.exploration_fraction,
-        exploration_initial_eps=config.exploration_initial_eps,
-        exploration_final_eps=config.exploration_final_eps,
-        max_grad_norm=config.max_grad_norm,
-        policy_kwargs={"net_arch": list(config.net_arch)},
-        seed=int(seed),
-        device="cpu",
-        verbose=0,
-        **kwargs,
-    )
+    hyper = {name: getattr(config, name) for name in SB3_FIELDS}
+    net = {"net_arch": list(config.net_arch)}
+    return cls("MlpPolicy", env, tau=1.0, policy_kwargs=net, seed=int(seed), device="cpu", verbose=0, **hyper, **kwargs)
 
 
 def evaluate_agent(
@@ -101,8 +82,7 @@ def evaluate_agent(
     stop_at_first_failure: bool = False,
 ):
     """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``."""
-    seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
-    duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
+    seeds, duration_s = _seeds_and_duration(config, seeds, duration_s)
     controller = policy_controller(model, config)
     steps = duration_s / config.dt_s + 1
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + controller.env.plant.n_coordinates)
@@ -121,6 +101,11 @@ def evaluate_agent(
     )
 
 
+def _seeds_and_duration(config: DQNConfig, seeds: Any, duration_s: Any) -> tuple[tuple[int, ...], float]:
+    seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
+    return seeds, positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
+
+
 def evaluate_agent_batched(
     model: Any,
     config: DQNConfig,
@@ -129,10 +114,7 @@ def evaluate_agent_batched(
     name: str = "agent",
     **options: Any,
 ):
-    """:func:`evaluate_agent` with every episode at once on the batched chain
-    (:func:`softpend.evaluation.evaluate_batched`): the agent's greedy actions (``model.predict`` on the batch of
-    observation vectors, ``deterministic=True``) held for ``config.action_repeat`` plant steps, on the
-    ``config.n_torque_levels`` torque levels of ``config.task``."""
+    """:func:`evaluate_agent` with every episode at once on the batched chain."""
     return evaluate_agents_batched([model], config, seeds, duration_s, name, **options)[0]
 
 
@@ -144,32 +126,27 @@ def evaluate_agents_batched(
     name: str = "agent",
     **options: Any,
 ) -> list:
-    """:func:`evaluate_agent_batched` for several agents at once, each from every start of ``seeds``: one batch of
-    ``len(models) * len(seeds)`` rods, agent ``i`` driving rods ``i * len(seeds)`` to ``(i + 1) * len(seeds) - 1``,
-    so that the chain steps once for all of them.  The agents share ``config``'s task, action repeat and torque
-    levels.  The rods of a batch do not depend on each other, so each agent's episodes are those of its own
-    :func:`evaluate_agent_batched` call.  Returns one :class:`~softpend.evaluation.EvaluationSummary` per agent,
-    in the order of ``models``."""
+    """:func:`evaluate_agent_batched` for several agents in one batch (agent ``i`` drives the ``i``-th block of rods)."""
     from softpend.evaluation import EvaluationSummary, evaluate_batched
 
     models = list(models)
     if not models:
         raise ValueError("models must not be empty")
-    seeds = tuple(int_at_least("seeds", s, 0) for s in (seeds if seeds is not None else config.eval_seeds))
-    duration_s = positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
+    seeds, duration_s = _seeds_and_duration(config, seeds, duration_s)
     predictors = [greedy_predictor(model) for model in models]
     n = len(seeds)
 
     def predict(vectors: np.ndarray) -> np.ndarray:
         return np.concatenate([np.asarray(p(vectors[i * n : (i + 1) * n])) for i, p in enumerate(predictors)])
 
+    levels, repeat = config.n_torque_levels, config.action_repeat
     summary = evaluate_batched(
         predict,
         config.task,
         seeds * len(models),
         duration_s,
-        action_repeat=config.action_repeat,
-        n_torque_levels=config.n_torque_levels,
+        action_repeat=repeat,
+        n_torque_levels=levels,
         name=name,
         **options,
     )
@@ -179,7 +156,7 @@ def evaluate_agents_batched(
 class EpisodeRecorder(BaseCallback):
     """Bookkeeping: one :class:`TrainingLog` row per training episode; stops training at the episode budget."""
 
-    model: DQN  # set by BaseCallback.init_callback: the DQN (or its subclass) being trained
+    model: DQN
 
     def __init__(
         self, config: DQNConfig, log: TrainingLog, episodes: int, model_steps: Optional[Callable[[], int]] = None
@@ -206,8 +183,7 @@ class EpisodeRecorder(BaseCallback):
         return self._wall_offset + time.perf_counter() - self._started
 
     def cpu_s(self) -> float:
-        """CPU seconds of this process spent training so far (over resumed sessions; ``nan`` if a resumed run
-        started before this was logged) -- the cost of a run independent of other load on the machine."""
+        """CPU seconds of training so far (over resumed sessions)."""
         return self._cpu_offset + time.process_time() - self._cpu_started
 
     def _on_step(self) -> bool:
@@ -226,23 +202,17 @@ class EpisodeRecorder(BaseCallback):
         observations = np.concatenate(self._observations)
         plant_steps = len(observations) - 1
         dt = self.config.dt_s
-        row: dict[str, Any] = {
-            "episode": self.log.n_episodes + 1,
-            "return": self._return,
-            "plant_s": self.log.plant_s + plant_steps * dt,
-        }
+        row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return}
+        row["plant_s"] = self.log.plant_s + plant_steps * dt
+        std, swing_up = math.pi, math.inf
         if plant_steps >= 2:
             torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
             metrics = metrics_from_trajectory(
                 np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT]
             )
-            row["upright_std_rad"] = metrics["upright_std_rad"]
-            row["swing_up_time_s"] = metrics["swing_up_time_s"]
-        else:
-            row["upright_std_rad"], row["swing_up_time_s"] = math.pi, math.inf
-        row["model_steps"] = int(self.model_steps())
-        row["wall_s"] = self.wall_s()
-        row["cpu_s"] = self.cpu_s()
+            std, swing_up = metrics["upright_std_rad"], metrics["swing_up_time_s"]
+        row.update(upright_std_rad=std, swing_up_time_s=swing_up, model_steps=int(self.model_steps()))
+        row.update(wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.last_episode_observations = observations
         self.last_episode_torques = np.asarray(self._torques, dtype=float)
         self.log.episodes.append(row)
@@ -263,13 +233,9 @@ class ProgressBarCallback(BaseCallback):
 
     def _on_training_start(self) -> None:
         log = self.recorder.log
+        desc, off = f"{log.algo} seed {log.seed}", not self.show
         self.bar = tqdm(
-            total=self.recorder.episodes,
-            initial=log.n_episodes,
-            desc=f"{log.algo} seed {log.seed}",
-            unit="episode",
-            disable=not self.show,
-            leave=False,
+            total=self.recorder.episodes, initial=log.n_episodes, desc=desc, unit="episode", disable=off, leave=False
         )
 
     def _on_step(self) -> bool:
@@ -304,11 +270,9 @@ class EpisodeEventCallback(BaseCallback):
         self.pending = False
 
     def due(self, n_episodes: int) -> bool:
-        """Whether the task is due after ``n_episodes`` episodes."""
         raise NotImplementedError
 
     def run(self) -> Any:
-        """The task."""
         raise NotImplementedError
 
     def _on_step(self) -> bool:
@@ -330,10 +294,8 @@ class EpisodeEventCallback(BaseCallback):
 
 
 class EvaluationCallback(EpisodeEventCallback):
-    """Greedy evaluation on the true plant every ``eval_every_episodes`` episodes and after the last one,
-    appending an evaluation row and saving the best agent (``best_agent.zip``), as stable-baselines3's
-    ``EvalCallback``.  With ``callback_after_eval`` (the stop rule) the evaluation runs right after its
-    episode, before another plant step, and that callback's ``False`` stops training."""
+    """Greedy evaluation on the true plant every ``eval_every_episodes`` episodes and after the last one, appending an
+    evaluation row and saving the best agent (``best_agent.zip``), as stable-baselines3's ``EvalCallback``."""
 
     def __init__(
         self, recorder: EpisodeRecorder, run_dir: Path, callback_after_eval: Optional[BaseCallback] = None
@@ -368,17 +330,18 @@ class EvaluationCallback(EpisodeEventCallback):
         """Evaluate the greedy policy on the true plant and append an evaluation row."""
         seeds = self.config.eval_seeds
         summary = evaluate_agent(self.model, self.config, stop_at_first_failure=self.config.eval_until_first_failure)
-        complete = len(summary.results) == len(seeds)
-        stds = [r.upright_std_rad for r in summary.results]
+        results = summary.results
+        complete = len(results) == len(seeds)
+        stds = [r.upright_std_rad for r in results]
         row = {
             "episode": self.log.n_episodes,
             "plant_s": self.log.plant_s,
             "model_steps": int(self.recorder.model_steps()),
-            "starts_evaluated": len(summary.results),
+            "starts_evaluated": len(results),
             "median_upright_std_rad": float(np.median(stds)) if complete else math.nan,
             "max_upright_std_rad": float(np.max(stds)),
             "median_swing_up_time_s": summary.median("swing_up_time_s") if complete else math.nan,
-            "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in summary.results)),
+            "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in results)),
             "success_rate": summary.successes / len(seeds),
             "wall_s": self.recorder.wall_s(),
             "cpu_s": self.recorder.cpu_s(),
@@ -424,19 +387,11 @@ class StopTrainingOnBalance(BaseCallback):
             return True
         n = len(self.config.stop_confirm_seeds)
         held = n - self.log.evaluations[-1].get("confirm_failures", 0)
-        confirmation = (
-            ""
-            if not n
-            else f" and from the {n} confirmation starts"
-            if held == n
-            else f" and from {held} of the {n} confirmation starts"
-        )
+        confirmation = "" if not n else f" and from {'the' if held == n else f'{held} of the'} {n} confirmation starts"
         k = self.config.stop_after_balanced_evaluations
         self.log.stop_reason = (
-            ("balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations ")
-            + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start)"
-            + confirmation
-        )
+            "balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations "
+        ) + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start){confirmation}"
         return False
 
 
@@ -584,7 +539,7 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     )
 
 
-def saved_run_seed(run_dir: Path) -> Optional[int]:
+def _saved_run_seed(run_dir: Path) -> Optional[int]:
     """The seed recorded in a run folder's log (the final one, else the checkpoint's), or None (no log yet)."""
     for path in (run_dir / "log.json", run_dir / "checkpoint" / "log.json"):
         data = read_json_object(path, 10**9)
@@ -605,7 +560,7 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
             run_dir,
             read_json_object(run_dir / "config.json", 10**7),
             saved_config_data(config),
-            saved_run_seed(run_dir),
+            _saved_run_seed(run_dir),
             seed,
             resume,
         )
@@ -746,16 +701,8 @@ def train_dqn(
     progress: bool = True,
 ) -> tuple[DQN, TrainingLog]:
     """Train model-free DQN for ``episodes`` training episodes (see the module docstring)."""
-    return run_training(
-        "dqn",
-        config,
-        seed,
-        episodes,
-        run_dir,
-        resume,
-        progress,
-        make_model=lambda env, s: build_dqn(config, env, s, episodes),
-    )
+    make_model = lambda env, s: build_dqn(config, env, s, episodes)  # noqa: E731
+    return run_training("dqn", config, seed, episodes, run_dir, resume, progress, make_model=make_model)
 
 
 def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:

@@ -88,11 +88,9 @@ class HeldActionController(GymPolicyController):
 
 
 def greedy_predictor(model: Any) -> Callable[[np.ndarray], Any]:
-    """The greedy action of a stable-baselines3 DQN model for one observation vector (an integer) or a batch
-    of them (an integer array): ``model.predict(vectors, deterministic=True)[0]`` without its per-call
-    bookkeeping (input checks, training-mode switches, tensor round trips), which costs more than the
-    Q-network itself.  The same float32 forward pass and argmax, so the same actions.
-    """
+    """The greedy action of a stable-baselines3 DQN model for one observation vector (an integer) or a batch of them
+    (an integer array): ``model.predict(vectors, deterministic=True)[0]`` without its per-call bookkeeping (input
+    checks, training-mode switches, tensor round trips), which costs more than the Q-network itself."""
     import torch
 
     q_net = model.q_net

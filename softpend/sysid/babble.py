@@ -1,36 +1,5 @@
-"""Motor babbling: drive the simulated rod with random torques and record what a rig would see.
-
-Protocol (the report's, made explicit; every number is a field of :class:`BabbleProtocol`)
------------------------------------------------------------------------------------------
-* ``n_trials`` trials (60) of ``trial_length_s`` (5 s) at ``dt_s`` (0.01 s): 500 stored samples and
-  499 transitions a trial.  The plant is reset between trials.
-* **Start state** near the upright equilibrium (``start="upright"``): hub angle ``~ N(0, 0.1 rad)``,
-  each spring angle ``~ N(0, 0.02 rad)``, hub rate ``~ N(0, 0.2 rad/s)``.  ``"hanging"`` and
-  ``"random"`` (hub angle uniform) are available for data that covers the swing-up region.
-* **Torque** = clip(feedback + babble, +-torque limit).  The babble term is band-limited Gaussian noise:
-  white noise through a first-order low-pass filter (an Ornstein-Uhlenbeck process) with cut-off
-  ``torque_bandwidth_hz`` (2 Hz) and stationary standard deviation ``torque_std_fraction`` (0.5) times
-  the torque limit, started from its stationary normal distribution.  The feedback term is a weak
-  stabilising PD on the hub encoder, ``-kp * phi - kd * phi_dot`` (0.8 N m/rad, 0.015 N m s/rad), with
-  ``phi_dot`` the backward difference of the sampled hub angle as a rig's controller computes it,
-  active in a fraction ``feedback_trial_fraction`` (0.8) of the trials, so that those trials keep the
-  rod wobbling in the upright region where the controllers work (|theta| mostly below 0.3 rad; an
-  occasional trial still falls) while the noise excites it; in the other trials the rod falls from
-  upright and swings under the random torque, so the data also covers falling and the hanging region.
-  A hub encoder and a PD loop on it are what a rig has, so the protocol runs on hardware as is.  (A PD
-  on the simulator's true hub rate makes the torque chatter with the rod's fast bending modes, which
-  the sampled observations cannot resolve; the differenced rate keeps the data far more predictable.)
-* **Observations**: the positions ``phi, theta, ex, ey, er`` are sampled, optionally with Gaussian
-  sensor noise (``phi_noise_std_rad``, ``tip_noise_std_m`` on ``ex, ey`` before ``theta`` is computed
-  from them, ``er_noise_std_rad``) and a camera delay of ``camera_delay_steps`` samples on the camera
-  quantities ``theta, ex, ey, er`` (the encoder angle and the torque are not delayed).  Velocities are
-  backward differences of the unwrapped sampled positions
-  (:func:`softpend.sysid.backward_difference`); the simulator's true observation (true velocities) and
-  joint state are kept alongside.
-
-Each trial draws from its own stream ``SeedSequence(seed).spawn(n_trials)[i]``, so the same seed gives
-the same dataset (and the same file bytes) on any machine.
-"""
+"""Motor babbling: drive the simulated rod with band-limited random torques (plus a weak PD on the hub encoder in
+most trials) and record what a rig would see.  Trial ``i`` draws from ``SeedSequence(seed).spawn(n_trials)[i]``."""
 
 from __future__ import annotations
 
@@ -52,10 +21,10 @@ from softpend.checks import (
     positive,
     positive_int,
 )
-from softpend.plant import OBSERVATION_NAMES, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
-from softpend.sysid.dataset import DT_S_RANGE, TrajectoryDataset, write_dataset
+from softpend.plant import OBSERVATION_NAMES, PRBPlant, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
+from softpend.sysid.dataset import DT_S_RANGE, TrajectoryDataset, dataset_metadata, write_dataset
 from softpend.sysid.differentiation import backward_difference
-from softpend.sysid.variables import POSITION_NAMES, VELOCITY_NAMES, is_angle
+from softpend.sysid.variables import POSITION_NAMES, is_angle
 
 __all__ = ["BabbleProtocol", "babble", "band_limited_noise"]
 
@@ -64,38 +33,9 @@ _STARTS = ("upright", "hanging", "random")
 
 @dataclass(frozen=True)
 class BabbleProtocol:
-    """How to babble (see the module docstring for the meaning and defaults).
-
-    Parameters
-    ----------
-    n_trials : int
-        Number of trials.
-    trial_length_s : float
-        Length of a trial [s]; ``round(trial_length_s / dt_s)`` samples are stored.
-    dt_s : float
-        Sampling and control step [s].
-    substeps : int
-        Implicit solver steps per control step.
-    start : {"upright", "hanging", "random"}
-        Start region.
-    start_angle_std_rad, start_bend_std_rad, start_rate_std_rad_s : float
-        Standard deviations of the start hub angle [rad], spring angles [rad] and hub rate [rad/s].
-    torque_std_fraction : float
-        Stationary standard deviation of the random torque, as a fraction of the torque limit.
-    torque_bandwidth_hz : float
-        Cut-off frequency of the first-order low-pass filter on the white noise [Hz].
-    feedback_kp_nm_per_rad, feedback_kd_nms_per_rad : float
-        Stabilising PD gains on the hub angle [N m/rad] and rate [N m s/rad].
-    feedback_trial_fraction : float
-        Probability that a trial uses the PD feedback (0 = pure random torque).
-    feedback_velocity : {"differenced", "true"}
-        Hub rate used by the PD: the backward difference of the sampled hub angle (as the rig's
-        controller computes it; default) or the simulator's true rate.
-    phi_noise_std_rad, tip_noise_std_m, er_noise_std_rad : float
-        Sensor noise standard deviations [rad, m, rad].
-    camera_delay_steps : int
-        Delay of the camera quantities ``theta, ex, ey, er`` [samples].
-    """
+    """How to babble: trials, start region and spread, the random torque (std as a fraction of the torque limit,
+    low-pass cut-off), the PD on the hub (gains, fraction of trials, differenced or true rate), sensor noise and the
+    camera delay [samples] of ``theta, ex, ey, er``."""
 
     n_trials: int = 60
     trial_length_s: float = 5.0
@@ -117,14 +57,11 @@ class BabbleProtocol:
     camera_delay_steps: int = 0
 
     def __post_init__(self) -> None:
+        one_of("start", self.start, _STARTS)
+        one_of("feedback_velocity", self.feedback_velocity, ("differenced", "true"))
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if f.name == "start":
-                one_of("start", value, _STARTS)
-            elif f.name == "feedback_velocity":
-                one_of("feedback_velocity", value, ("differenced", "true"))
-            else:
-                non_negative(f.name, value)
+            if f.name not in ("start", "feedback_velocity"):
+                non_negative(f.name, getattr(self, f.name))
         for name in ("n_trials", "substeps"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
         object.__setattr__(self, "camera_delay_steps", int_at_least("camera_delay_steps", self.camera_delay_steps, 0))
@@ -141,11 +78,10 @@ class BabbleProtocol:
 
     @property
     def n_samples(self) -> int:
-        """Stored samples per trial (``n_samples - 1`` transitions)."""
+        """Stored samples per trial."""
         return int(round(self.trial_length_s / self.dt_s))
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict (for JSON metadata)."""
         return dataclasses.asdict(self)
 
     def replace(self, **changes: Any) -> "BabbleProtocol":
@@ -156,11 +92,8 @@ class BabbleProtocol:
 def band_limited_noise(
     rng: np.random.Generator, n_steps: int, std: float, bandwidth_hz: float, dt_s: float
 ) -> np.ndarray:
-    """Gaussian noise through a first-order low-pass filter (stationary Ornstein-Uhlenbeck samples).
-
-    ``u[0] ~ N(0, std^2)`` and ``u[k+1] = a u[k] + sqrt(1 - a^2) std w[k]`` with ``a = exp(-2 pi f_c dt)``
-    and ``w ~ N(0, 1)``: every sample is ``N(0, std^2)`` and the spectrum falls off above ``f_c``.
-    """
+    """Stationary first-order low-pass Gaussian noise: ``u[k+1] = a u[k] + sqrt(1 - a^2) std w[k]``,
+    ``a = exp(-2 pi f_c dt)``, ``u[0] ~ N(0, std^2)``."""
     a = math.exp(-2 * math.pi * bandwidth_hz * dt_s)
     w = rng.standard_normal(n_steps)
     u = np.empty(n_steps)
@@ -172,10 +105,9 @@ def band_limited_noise(
 
 
 def _start_state(
-    rng: np.random.Generator, protocol: BabbleProtocol, n_coordinates: int, bend_joints: bool = True
+    rng: np.random.Generator, protocol: BabbleProtocol, n_coordinates: int, bend_joints: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Random start state; ``bend_joints`` perturbs the spring angles too (PRB chains only: other plants,
-    such as the continuum beam, have coordinates that are not joint angles and start straight)."""
+    """Random start state; ``bend_joints`` bends the springs too (PRB chains only; the beam starts straight)."""
     q = np.zeros(n_coordinates)
     qd = np.zeros(n_coordinates)
     centre = {"upright": 0.0, "hanging": math.pi}.get(protocol.start)
@@ -192,21 +124,18 @@ def _start_state(
 
 
 def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Simulate one trial; returns the stored arrays for it."""
+    """Simulate one trial; returns its stored arrays."""
     n = protocol.n_samples
     delay = protocol.camera_delay_steps
-    n_steps = n + delay  # raw samples 0 .. n + delay (one extra sample for the first backward difference)
+    n_steps = n + delay  # one extra sample for the first backward difference
     limit = plant.params.torque_limit_nm
-    from softpend.plant import PRBPlant
-
-    q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, bend_joints=isinstance(plant, PRBPlant))
+    q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, isinstance(plant, PRBPlant))
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
     babble = band_limited_noise(
         rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s
     )
     kp = protocol.feedback_kp_nm_per_rad if use_feedback else 0.0
     kd = protocol.feedback_kd_nms_per_rad if use_feedback else 0.0
-
     obs = np.empty((n_steps + 1, len(OBSERVATION_NAMES)))
     joint_q = np.empty((n_steps + 1, plant.n_coordinates))
     joint_qd = np.empty_like(joint_q)
@@ -218,7 +147,7 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
         joint_q[k], joint_qd[k] = plant.joint_state()
         if k == n_steps:
             break
-        if protocol.feedback_velocity == "differenced":  # as the rig's controller: encoder difference
+        if protocol.feedback_velocity == "differenced":
             phi_rate = float(wrap_angle_rad(o.phi_rad - phi_previous)) / protocol.dt_s
         else:
             phi_rate = o.phi_dot_rad_s
@@ -230,22 +159,19 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     # sensor model: noise on the sampled positions, camera quantities delayed by `delay` samples
     true_positions = obs[:, :5]
     raw = np.empty((n + 1, 5))
-    clock = np.arange(delay, delay + n + 1)  # encoder/torque clock
-    camera = np.arange(0, n + 1)
-    names = POSITION_NAMES
-    i_phi, i_theta, i_ex, i_ey, i_er = (names.index(x) for x in ("phi_rad", "theta_rad", "ex_m", "ey_m", "er_rad"))
+    clock = np.arange(delay, delay + n + 1)  # encoder and torque clock
+    i_phi, i_theta, i_ex, i_ey, i_er = range(5)
     raw[:, i_phi] = true_positions[clock, i_phi] + protocol.phi_noise_std_rad * rng.standard_normal(n + 1)
-    raw[:, i_ex] = true_positions[camera, i_ex] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
-    raw[:, i_ey] = true_positions[camera, i_ey] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
+    raw[:, i_ex] = true_positions[: n + 1, i_ex] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
+    raw[:, i_ey] = true_positions[: n + 1, i_ey] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
     raw[:, i_theta] = np.arctan2(-raw[:, i_ex], raw[:, i_ey])
-    raw[:, i_er] = true_positions[camera, i_er] + protocol.er_noise_std_rad * rng.standard_normal(n + 1)
-    angle_mask = np.array([is_angle(x) for x in names])
+    raw[:, i_er] = true_positions[: n + 1, i_er] + protocol.er_noise_std_rad * rng.standard_normal(n + 1)
+    angle_mask = np.array([is_angle(x) for x in POSITION_NAMES])
     raw[:, angle_mask] = wrap_angle_rad(raw[:, angle_mask])
-    velocities = backward_difference(raw, protocol.dt_s, angle_mask)
-    stored = clock[1:]  # simulator sample index of each stored sample (encoder clock)
+    stored = clock[1:]
     return {
         "positions": raw[1:],
-        "velocities": velocities,
+        "velocities": backward_difference(raw, protocol.dt_s, angle_mask),
         "torques_nm": torques[stored[:-1]],
         "true_observations": obs[stored],
         "joint_positions_rad": joint_q[stored],
@@ -262,30 +188,11 @@ def babble(
     path: Optional[str | Path] = None,
     progress: bool = True,
 ) -> TrajectoryDataset:
-    """Run the motor-babbling protocol on a simulated plant and return (and optionally save) the dataset.
+    """Run the babbling protocol on a simulated plant (:func:`softpend.plant.make_plant` name) and return the
+    dataset, also written to ``path`` if given.
 
-    Parameters
-    ----------
-    protocol : BabbleProtocol, optional
-        The protocol (default: the report's 60 x 5 s at dt = 0.01 s, see the module docstring).
-    params : RodParams, optional
-        Plant parameters (default: ``RodParams()``).
-    seed : int
-        Seed of every random draw (start states, torques, feedback on/off, sensor noise).
-    plant : str
-        Plant name for :func:`softpend.plant.make_plant`.
-    path : str or Path, optional
-        If given, the dataset is also written there (:func:`softpend.sysid.save_dataset` format).
-    progress : bool
-        Show a progress bar over trials.
-
-    Raises
-    ------
-    ValueError
-        On invalid arguments, or a dataset whose arrays would not fit in
-        :data:`softpend.checks.MAX_WORK_BYTES` (checked before the first trial).
-    SimulationDiverged
-        If the simulator fails in a trial (the message names the trial).
+    Raises ``ValueError`` on bad arguments or a dataset too large for :data:`softpend.checks.MAX_WORK_BYTES`
+    (before the first trial), ``SimulationDiverged`` naming the trial if the simulator fails.
     """
     protocol = protocol if protocol is not None else BabbleProtocol()
     if not isinstance(protocol, BabbleProtocol):
@@ -308,39 +215,19 @@ def babble(
             trials.append(_run_trial(sim, protocol, np.random.default_rng(streams[i])))
         except SimulationDiverged as exc:
             raise SimulationDiverged(f"trial {i}: {exc.reason}") from exc
-    stack = lambda key: np.ascontiguousarray(np.stack([t[key] for t in trials]))  # noqa: E731
-    metadata = {
-        "schema": "softpend.sysid.dataset",
-        "schema_version": 1,
-        "softpend_version": _version(),
-        "source": "simulation",
-        "dt_s": float(protocol.dt_s),
-        "n_trials": protocol.n_trials,
-        "n_samples": protocol.n_samples,
-        "position_names": list(POSITION_NAMES),
-        "velocity_names": list(VELOCITY_NAMES),
-        "differentiation": "backward",
-        "plant": plant,
-        "plant_params": params.to_dict(),
-        "seed": int(seed),
-        "protocol": dict(protocol.to_dict(), feedback_trials=[int(t["feedback"]) for t in trials]),
-        "notes": "motor babbling (softpend.sysid.babble)",
-    }
-    dataset = TrajectoryDataset(
-        positions=stack("positions"),
-        velocities=stack("velocities"),
-        torques_nm=stack("torques_nm"),
-        metadata=metadata,
-        true_observations=stack("true_observations"),
-        joint_positions_rad=stack("joint_positions_rad"),
-        joint_velocities_rad_s=stack("joint_velocities_rad_s"),
+    arrays = {key: np.ascontiguousarray(np.stack([t[key] for t in trials])) for key in trials[0] if key != "feedback"}
+    metadata = dataset_metadata(
+        arrays["positions"],
+        dt_s=float(protocol.dt_s),
+        position_names=POSITION_NAMES,
+        source="simulation",
+        plant=plant,
+        plant_params=params,
+        seed=int(seed),
+        protocol=dict(protocol.to_dict(), feedback_trials=[int(t["feedback"]) for t in trials]),
+        notes="motor babbling (softpend.sysid.babble)",
     )
+    dataset = TrajectoryDataset(metadata=metadata, **arrays)
     if path is not None:
         write_dataset(path, dataset)
     return dataset
-
-
-def _version() -> str:
-    from softpend import __version__
-
-    return __version__

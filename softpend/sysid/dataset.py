@@ -1,41 +1,6 @@
-"""System-identification datasets: one ``.npz`` file of trials plus JSON metadata.
-
-File format (schema ``softpend.sysid.dataset``, version 1)
-----------------------------------------------------------
-A zip archive readable with ``numpy.load(path, allow_pickle=False)``, written byte-for-byte
-deterministically (fixed zip timestamps, no pickles), holding these ``.npy`` members.  ``T`` is the
-number of trials, ``N`` the number of samples per trial (every trial has the same length and sampling
-step ``dt_s``), ``P`` the number of position variables named in ``metadata["position_names"]``, ``J`` the
-number of joint coordinates of a simulated plant.
-
-``positions``  float64 ``(T, N, P)``
-    Observed positions at the sample times, in the order of ``position_names`` (a subset of
-    ``phi_rad, theta_rad, ex_m, ey_m, er_rad`` that must include ``phi_rad, ex_m, ey_m``).  Angles
-    [rad] from upright, counter-clockwise positive, wrapped to ``[-pi, pi)``; tip coordinates [m]
-    relative to the hub axis, y up.  These are what the sensors reported (with noise and camera delay
-    if any).
-``velocities``  float64 ``(T, N, P)``
-    Their first derivatives [rad/s, m/s] as the rig computes them: backward differences of the
-    unwrapped positions (``metadata["differentiation"]`` says which scheme).  Sample ``i`` uses samples
-    ``i`` and ``i - 1``; a writer records one extra sample before the first stored one for this.
-``torques_nm``  float64 ``(T, N - 1)``
-    Base torque [N m] held constant (zero-order hold) from sample ``i`` to sample ``i + 1``, after
-    clipping to the torque limit: the torque that actually acted.
-``true_observations``  float64 ``(T, N, 10)``, optional (simulated data only)
-    The simulator's noise-free, undelayed observation at each sample, in
-    :data:`softpend.plant.OBSERVATION_NAMES` order, with the true (not differenced) velocities.
-``joint_positions_rad``, ``joint_velocities_rad_s``  float64 ``(T, N, J)``, optional (simulated only)
-    The plant's full joint state ``(q, q_dot)`` (hub angle unwrapped, then the spring angles).
-``metadata``  0-d unicode array
-    UTF-8 JSON object with: ``schema`` (``"softpend.sysid.dataset"``), ``schema_version`` (1),
-    ``softpend_version``, ``source`` (``"simulation"`` or ``"rig"``), ``dt_s``, ``n_trials``,
-    ``n_samples``, ``position_names``, ``velocity_names``, ``differentiation``, ``plant`` (plant
-    name or null), ``plant_params`` (:meth:`softpend.plant.RodParams.to_dict` or null), ``seed``
-    (int or null), ``protocol`` (object: how the torques were generated), ``notes`` (free text).
-
-A rig writes the same format with :func:`save_dataset` (``source="rig"``, no ``true_observations`` or
-joint arrays; ``er_rad`` may be absent when the camera tracks only the tip dot).
-"""
+"""System-identification datasets: trials of positions ``(T, N, P)``, backward-difference velocities ``(T, N, P)``
+and held torques ``(T, N - 1)`` (optionally the simulator's true observations and joint states) in one
+deterministic ``.npz`` file with JSON metadata (schema ``softpend.sysid.dataset`` v1); never unpickled."""
 
 from __future__ import annotations
 
@@ -52,13 +17,14 @@ import numpy as np
 from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
 from softpend.plant import OBSERVATION_NAMES, RodParams
-from softpend.sysid.variables import POSITION_NAMES, velocity_name
+from softpend.sysid.variables import ANGLE_NAMES, POSITION_NAMES, velocity_name
 
 __all__ = [
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
     "REQUIRED_POSITION_NAMES",
     "TrajectoryDataset",
+    "dataset_metadata",
     "save_dataset",
     "load_dataset",
     "DT_S_RANGE",
@@ -86,20 +52,16 @@ _REQUIRED_METADATA = (
     "protocol",
     "notes",
 )
-#: Accepted sampling steps [s]: 1 microsecond (far below any encoder or camera rate) to 10 s (far above any
-#: step at which a pendulum of this size can be identified); a ``dt_s`` outside is a corrupt or mistyped file.
+#: Accepted sampling steps [s]; a ``dt_s`` outside is a corrupt or mistyped file.
 DT_S_RANGE: tuple[float, float] = (1e-6, 10.0)
 _ARRAYS_REQUIRED = ("positions", "velocities", "torques_nm")
 _ARRAYS_OPTIONAL = ("true_observations", "joint_positions_rad", "joint_velocities_rad_s")
-# fixed timestamp so that the same content gives the same bytes
 _ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
 
 
 @dataclass(frozen=True, eq=False)
 class TrajectoryDataset:
-    """Trials of sampled observations and the torques that produced them (see the module docstring for
-    the arrays, their shapes and units).  Build with :func:`save_dataset`/:func:`load_dataset` or
-    :func:`softpend.sysid.babble`; the constructor validates everything."""
+    """Trials of sampled observations and the torques that produced them; the constructor validates everything."""
 
     positions: np.ndarray
     velocities: np.ndarray
@@ -112,35 +74,29 @@ class TrajectoryDataset:
     def __post_init__(self) -> None:
         _validate(self)
 
-    # -------------------------------------------------------------- convenience
     @property
     def n_trials(self) -> int:
-        """Number of trials ``T``."""
         return int(self.positions.shape[0])
 
     @property
     def n_samples(self) -> int:
-        """Samples per trial ``N`` (``N - 1`` transitions)."""
+        """Samples per trial (``n_samples - 1`` transitions)."""
         return int(self.positions.shape[1])
 
     @property
     def n_transitions(self) -> int:
-        """Total number of transitions ``T * (N - 1)``."""
         return self.n_trials * (self.n_samples - 1)
 
     @property
     def dt_s(self) -> float:
-        """Sampling step [s]."""
         return float(self.metadata["dt_s"])
 
     @property
     def position_names(self) -> tuple[str, ...]:
-        """Names of the columns of :attr:`positions`."""
         return tuple(self.metadata["position_names"])
 
     @property
     def velocity_names(self) -> tuple[str, ...]:
-        """Names of the columns of :attr:`velocities`."""
         return tuple(self.metadata["velocity_names"])
 
     @property
@@ -171,34 +127,20 @@ class TrajectoryDataset:
         return self.true_observations[..., OBSERVATION_NAMES.index(name)]
 
     def select_trials(self, trials: np.ndarray | list[int]) -> "TrajectoryDataset":
-        """A dataset with only the given trials (metadata ``n_trials`` updated)."""
+        """A dataset with only the given trials."""
         index = np.asarray(trials, dtype=np.int64).reshape(-1)
         if index.size == 0 or index.min() < 0 or index.max() >= self.n_trials:
             raise ValueError(f"trials must be non-empty indices in [0, {self.n_trials}), got {trials!r}")
-        metadata = dict(self.metadata, n_trials=int(index.size))
-        take = lambda a: None if a is None else a[index]  # noqa: E731
-        return TrajectoryDataset(
-            positions=self.positions[index],
-            velocities=self.velocities[index],
-            torques_nm=self.torques_nm[index],
-            metadata=metadata,
-            true_observations=take(self.true_observations),
-            joint_positions_rad=take(self.joint_positions_rad),
-            joint_velocities_rad_s=take(self.joint_velocities_rad_s),
-        )
+        arrays = {name: value[index] for name, value in self.arrays().items()}
+        return TrajectoryDataset(metadata=dict(self.metadata, n_trials=int(index.size)), **arrays)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays present, by file member name."""
-        out = {name: getattr(self, name) for name in _ARRAYS_REQUIRED}
-        for name in _ARRAYS_OPTIONAL:
-            if getattr(self, name) is not None:
-                out[name] = getattr(self, name)
-        return out
+        names = _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL
+        return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
 
 
-# ---------------------------------------------------------------------------------------- validation
-def _validate(ds: TrajectoryDataset) -> None:
-    meta = ds.metadata
+def _validate_metadata(meta: Any) -> None:
     if not isinstance(meta, dict):
         raise ValueError(f"metadata must be a dict, got {type(meta).__name__}")
     missing = [key for key in _REQUIRED_METADATA if key not in meta]
@@ -231,7 +173,7 @@ def _validate(ds: TrajectoryDataset) -> None:
     if meta["plant_params"] is not None:
         if not isinstance(meta["plant_params"], dict):
             raise ValueError(f"metadata plant_params must be an object or null, got {meta['plant_params']!r}")
-        RodParams.from_dict(meta["plant_params"])  # raises ValueError on unknown or invalid fields
+        RodParams.from_dict(meta["plant_params"])
     if meta["seed"] is not None and (isinstance(meta["seed"], bool) or not isinstance(meta["seed"], int)):
         raise ValueError(f"metadata seed must be an integer or null, got {meta['seed']!r}")
     if not isinstance(meta["protocol"], dict):
@@ -239,21 +181,25 @@ def _validate(ds: TrajectoryDataset) -> None:
     for key in ("n_trials", "n_samples"):
         if isinstance(meta[key], bool) or not isinstance(meta[key], int):
             raise ValueError(f"metadata {key} must be an integer, got {meta[key]!r}")
-    n_trials, n_samples, n_pos = meta["n_trials"], meta["n_samples"], len(names)
-    if n_trials < 1 or n_samples < 2:
-        raise ValueError(f"need n_trials >= 1 and n_samples >= 2, got {n_trials} and {n_samples}")
+    if meta["n_trials"] < 1 or meta["n_samples"] < 2:
+        raise ValueError(f"need n_trials >= 1 and n_samples >= 2, got {meta['n_trials']} and {meta['n_samples']}")
     try:
         json.dumps(meta, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"metadata must be JSON-serialisable without NaN: {exc}") from exc
 
+
+def _validate(ds: TrajectoryDataset) -> None:
+    meta = ds.metadata
+    _validate_metadata(meta)
+    names = meta["position_names"]
+    n_trials, n_samples = meta["n_trials"], meta["n_samples"]
     shapes = {
-        "positions": (n_trials, n_samples, n_pos),
-        "velocities": (n_trials, n_samples, n_pos),
+        "positions": (n_trials, n_samples, len(names)),
+        "velocities": (n_trials, n_samples, len(names)),
         "torques_nm": (n_trials, n_samples - 1),
         "true_observations": (n_trials, n_samples, len(OBSERVATION_NAMES)),
     }
-    joint_shape = None
     for name in _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL:
         value = getattr(ds, name)
         if value is None:
@@ -265,38 +211,29 @@ def _validate(ds: TrajectoryDataset) -> None:
         if value.dtype != np.float64:
             raise ValueError(f"{name} must have dtype float64, got {value.dtype}")
         expected = shapes.get(name)
-        if expected is None:  # joint arrays: (T, N, J) with the same J for both
+        if expected is None:  # joint arrays: (T, N, J)
             if value.ndim != 3 or value.shape[:2] != (n_trials, n_samples) or value.shape[2] < 1:
                 raise ValueError(f"{name} must have shape ({n_trials}, {n_samples}, J), got {value.shape}")
-            if joint_shape is not None and value.shape != joint_shape:
-                raise ValueError(
-                    f"joint_positions_rad and joint_velocities_rad_s shapes differ: {joint_shape} vs {value.shape}"
-                )
-            joint_shape = value.shape
         elif value.shape != expected:
             raise ValueError(f"{name} must have shape {expected} (from metadata), got {value.shape}")
         if not np.all(np.isfinite(value)):
             bad = np.argwhere(~np.isfinite(value))[0]
             raise ValueError(f"{name} has non-finite values (first at index {tuple(int(i) for i in bad)})")
-    if (ds.joint_positions_rad is None) != (ds.joint_velocities_rad_s is None):
+    jp, jv = ds.joint_positions_rad, ds.joint_velocities_rad_s
+    if (jp is None) != (jv is None):
         raise ValueError("joint_positions_rad and joint_velocities_rad_s must be given together")
-    angle_columns = [i for i, n in enumerate(names) if n in ("phi_rad", "theta_rad", "er_rad")]
-    wrapped = ds.positions[..., angle_columns]
+    if jp is not None and jv is not None and jp.shape != jv.shape:
+        raise ValueError(f"joint_positions_rad and joint_velocities_rad_s shapes differ: {jp.shape} vs {jv.shape}")
+    wrapped = ds.positions[..., [i for i, n in enumerate(names) if n in ANGLE_NAMES]]
     if wrapped.size and (wrapped.min() < -np.pi - 1e-9 or wrapped.max() > np.pi + 1e-9):
         raise ValueError("angle columns of positions must be wrapped to [-pi, pi)")
     params = ds.params
-    if params is not None:
-        limit = params.torque_limit_nm
-        if np.abs(ds.torques_nm).max(initial=0.0) > limit * (1 + 1e-9):
-            raise ValueError(f"torques_nm exceed the torque limit {limit} N m of plant_params")
+    if params is not None and np.abs(ds.torques_nm).max(initial=0.0) > params.torque_limit_nm * (1 + 1e-9):
+        raise ValueError(f"torques_nm exceed the torque limit {params.torque_limit_nm} N m of plant_params")
 
 
-# ---------------------------------------------------------------------------------------- writing
-def save_dataset(
-    path: str | Path,
-    positions: np.ndarray,
-    velocities: np.ndarray,
-    torques_nm: np.ndarray,
+def dataset_metadata(
+    positions: Any,
     *,
     dt_s: float,
     position_names: tuple[str, ...] | list[str] = POSITION_NAMES,
@@ -307,57 +244,22 @@ def save_dataset(
     protocol: Optional[dict[str, Any]] = None,
     differentiation: str = "backward",
     notes: str = "",
-    true_observations: Optional[np.ndarray] = None,
-    joint_positions_rad: Optional[np.ndarray] = None,
-    joint_velocities_rad_s: Optional[np.ndarray] = None,
-) -> TrajectoryDataset:
-    """Validate arrays plus metadata and write them as a dataset file (see the module docstring).
-
-    Parameters
-    ----------
-    path : str or Path
-        Output file (``.npz`` is appended if missing); parent folders are created.
-    positions, velocities : ndarray, shape (T, N, P)
-        Observed positions [rad, m] (angles wrapped to ``[-pi, pi)``) and their derivatives [rad/s, m/s];
-        use :func:`softpend.sysid.backward_difference` on ``N + 1`` samples to get the latter as a rig.
-    torques_nm : ndarray, shape (T, N - 1)
-        Torque applied between consecutive samples [N m].
-    dt_s : float
-        Sampling step [s].
-    position_names : sequence of str
-        Column names of ``positions`` (subset of ``phi_rad, theta_rad, ex_m, ey_m, er_rad`` containing
-        ``phi_rad, ex_m, ey_m``).
-    source : {"rig", "simulation"}
-        Where the data came from.
-    plant, plant_params, seed, protocol, differentiation, notes
-        Metadata (plant name, :class:`RodParams` or its dict, random seed, how the torques were made,
-        velocity scheme, free text).
-    true_observations, joint_positions_rad, joint_velocities_rad_s : ndarray, optional
-        Simulator ground truth (see the module docstring).
-
-    Returns
-    -------
-    TrajectoryDataset
-        The dataset as written (so ``load_dataset(path)`` returns an equal one).
-
-    Raises
-    ------
-    ValueError
-        If any array or metadata entry is invalid (the message names it).
-    """
+) -> dict[str, Any]:
+    """The metadata of a dataset with these positions ``(T, N, P)``."""
     from softpend import __version__
 
     if isinstance(plant_params, RodParams):
         plant_params = plant_params.to_dict()
     names = [str(n) for n in position_names]
-    metadata = {
+    shape = np.shape(positions) if np.ndim(positions) == 3 else (-1, -1)
+    return {
         "schema": SCHEMA_NAME,
         "schema_version": SCHEMA_VERSION,
         "softpend_version": __version__,
         "source": source,
         "dt_s": float(dt_s) if isinstance(dt_s, (int, float, np.floating)) and not isinstance(dt_s, bool) else dt_s,
-        "n_trials": int(np.shape(positions)[0]) if np.ndim(positions) == 3 else -1,
-        "n_samples": int(np.shape(positions)[1]) if np.ndim(positions) == 3 else -1,
+        "n_trials": int(shape[0]),
+        "n_samples": int(shape[1]),
         "position_names": names,
         "velocity_names": [velocity_name(n) if n in POSITION_NAMES else n for n in names],
         "differentiation": str(differentiation),
@@ -367,21 +269,34 @@ def save_dataset(
         "protocol": {} if protocol is None else _jsonable(protocol),
         "notes": str(notes),
     }
+
+
+def save_dataset(
+    path: str | Path,
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    torques_nm: np.ndarray,
+    *,
+    true_observations: Optional[np.ndarray] = None,
+    joint_positions_rad: Optional[np.ndarray] = None,
+    joint_velocities_rad_s: Optional[np.ndarray] = None,
+    **metadata: Any,
+) -> TrajectoryDataset:
+    """Validate arrays plus metadata (the keywords of :func:`dataset_metadata`) and write them as a dataset file
+    (``.npz`` appended if missing); returns the dataset as written.  ``ValueError`` names what is invalid."""
+    meta = dataset_metadata(positions, **metadata)
     if np.ndim(positions) != 3:
         raise ValueError(f"positions must have shape (T, N, P), got {np.shape(positions)}")
-    dataset = TrajectoryDataset(
-        positions=_as_float64("positions", positions),
-        velocities=_as_float64("velocities", velocities),
-        torques_nm=_as_float64("torques_nm", torques_nm),
-        metadata=metadata,
-        true_observations=None if true_observations is None else _as_float64("true_observations", true_observations),
-        joint_positions_rad=None
-        if joint_positions_rad is None
-        else _as_float64("joint_positions_rad", joint_positions_rad),
-        joint_velocities_rad_s=None
-        if joint_velocities_rad_s is None
-        else _as_float64("joint_velocities_rad_s", joint_velocities_rad_s),
+    given = dict(
+        positions=positions,
+        velocities=velocities,
+        torques_nm=torques_nm,
+        true_observations=true_observations,
+        joint_positions_rad=joint_positions_rad,
+        joint_velocities_rad_s=joint_velocities_rad_s,
     )
+    arrays = {name: _as_float64(name, value) for name, value in given.items() if value is not None}
+    dataset = TrajectoryDataset(metadata=meta, **arrays)
     write_dataset(path, dataset)
     return dataset
 
@@ -424,31 +339,12 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-# ---------------------------------------------------------------------------------------- reading
 def load_dataset(
-    path: str | Path,
-    *,
-    expected_params: Optional[RodParams] = None,
-    expected_dt_s: Optional[float] = None,
+    path: str | Path, *, expected_params: Optional[RodParams] = None, expected_dt_s: Optional[float] = None
 ) -> TrajectoryDataset:
-    """Read and validate a dataset file written by :func:`save_dataset` (never unpickles).
+    """Read and validate a dataset file (never unpickles), optionally checking its ``plant_params`` and ``dt_s``.
 
-    Parameters
-    ----------
-    path : str or Path
-        The ``.npz`` file.
-    expected_params : RodParams, optional
-        If given, the file's ``plant_params`` must equal these.
-    expected_dt_s : float, optional
-        If given, the file's ``dt_s`` must equal this.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    ValueError
-        If the file is not a valid dataset (corrupt archive, missing or extra member, wrong shape,
-        dtype or non-finite values, bad or mismatched metadata); the message says what is wrong.
+    Raises ``FileNotFoundError`` if ``path`` does not exist, ``ValueError`` saying what is wrong otherwise.
     """
     path = Path(path)
     members = read_npz(path, "dataset file")

@@ -1,60 +1,14 @@
-"""Grey-box identification: the PRB rod's physical parameters from a babbling dataset.
+"""Grey-box identification: the PRB rod's physical parameters (and rig calibrations) from a babbling dataset.
 
-The model is the simulator itself (:class:`softpend.plant.PRBPlant` on Exudyn, at the dataset's ``dt_s`` and
-solver sub-steps); what is estimated are some of its :class:`~softpend.plant.RodParams` fields (by default hub
-inertia, hub friction, Young's modulus, joint damping and tip mass) and, optionally, two calibrations of the
-rig: a gain on the recorded torque (``torque_gain``: the motor's torque constant is off), an offset of the
-encoder (``encoder_offset_rad``: the measured hub angle is the true one plus this) and a delay of the torque
-(``torque_delay_s``, within one sample either way: the recorded torque acts this much later, or earlier when
-negative, as a link's latency or a log that stamps a torque with the state after it; over each sample the model
-applies the mean of the shifted held torque, ``(1 - a) tau[k] + a tau[k - 1]`` with ``a = delay / dt``, and
-``tau[k + 1]`` in place of ``tau[k - 1]`` for a negative delay), and a delay of the camera against the encoder
-(``camera_delay_s``, within one sample either way: what is left of the clock synchronisation's error; the
-simulated tip is interpolated linearly between samples).
-
-Method: multiple shooting (simulation-error minimisation over short windows)
------------------------------------------------------------------------------
-Near upright the rod is unstable (an eigenvalue of about +6 /s), so a simulation-error fit over whole 5 s
-trials is hopeless: any parameter or state error grows e-fold every 0.16 s and the cost is a jagged function
-of the parameters.  A one-step prediction-error fit needs the full joint state at every sample, which a rig
-does not measure (the five observed angles and positions do not determine the four spring angles *and* their
-rates) and whose numerical reconstruction from differenced samples biases the estimates.  Multiple shooting
-sits between the two: the data are cut into short windows (``window_s``, 0.3 s by default: the unstable mode
-grows about sixfold over one), each window's initial joint state ``(q, q_dot)`` is a free decision variable
-(started from a geometric reconstruction of the bent rod from the observed hub angle, tip position and tip
-angle), and the parameters are shared by all windows.  The residuals are the observed positions ``phi, ex, ey``
-(and ``er`` where recorded) minus the simulated ones at every sample of every window, the tip coordinates
-divided by the rod length so that all residuals are in radians.  Within a window the simulation stays close
-to the data, so the cost is smooth, and each window's state enters only its own residuals, so the Jacobian is
-block-sparse: it is computed by forward differences with every window's state perturbed at once (one
-simulation per parameter plus one per state component).  Levenberg-Marquardt minimises the sum of squares,
-each step solved exactly by eliminating the window states from the normal equations (their blocks are
-10 x 10 and independent; the Schur complement leaves a system in the parameters alone).  SciPy's
-``least_squares`` on the same problem (sparse Jacobian, LSMR sub-problem solver) needs many times more
-iterations: its inexact steps crawl along the ill-conditioned valley between states and parameters.
-
-Uncertainty: the covariance of the parameters is ``s^2 (J^T J)^-1`` at the optimum, restricted to the
-parameter block after the window states are eliminated (the Schur complement), with ``s^2`` the residual sum
-of squares over the residuals minus the decision variables; it is reported as one standard deviation per
-parameter.  A parameter that leaves the residuals unchanged, or whose effect is a combination of the others'
-(a rank-deficient Jacobian), is reported by :class:`ValueError` naming it, checked before the fit and at the
-optimum.
-
-Cost: one residual evaluation simulates ``max_windows x window_s`` of data (default 120 x 0.3 s = 36 s of the
-default dataset's 300 s, windows drawn at random from the non-overlapping ones by ``seed``); one Jacobian costs
-``n_parameters + 2 (n_links + 1)`` evaluations (15 for the default five parameters and four links), and the
-default dataset converges in about eight Levenberg-Marquardt steps from a guess tens of percent off, some
-0.6 million simulated steps (``softpend bench --only sysid`` times it: ``identify_s``).
-
-:func:`estimate_joint_states` uses the same fit with the parameters held to estimate the joint state before an
-open-loop prediction from the observations that precede it.
+Multiple shooting over short windows on the Exudyn plant: each window's initial joint state is a free variable,
+the parameters are shared, and Levenberg-Marquardt eliminates the window states (Schur complement) at every step.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Optional, Sequence
 
 import numpy as np
@@ -88,39 +42,22 @@ ESTIMABLE_ROD_FIELDS: tuple[str, ...] = GREYBOX_PARAMETERS + ("stiffness_scale",
 CALIBRATION_PARAMETERS: tuple[str, ...] = ("torque_gain", "encoder_offset_rad", "torque_delay_s", "camera_delay_s")
 #: Calibrations that are delays within one sample either way (decision variable: the fraction of ``dt``).
 _DELAYS = ("torque_delay_s", "camera_delay_s")
+#: Calibrations whose truth is zero (no relative error, not log-scaled).
+_ZERO_CALIBRATIONS = ("encoder_offset_rad",) + _DELAYS
 #: Scale of the encoder-offset decision variable [rad].
 _OFFSET_SCALE_RAD = 0.01
-#: Bounds of the log-scaled parameters (a factor e^5, about 150, either side of the initial guess).
+#: Bounds of the log-scaled parameters (a factor e^5 either side of the initial guess).
 _LOG_BOUND = 5.0
 #: Numerical rank tolerance of the normalised parameter information matrix.
 IDENTIFIABILITY_TOLERANCE = 1e-9
-#: ``schema`` of the JSON document of :meth:`GreyBoxResult.to_dict`.
 IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
 
 
 @dataclass(frozen=True)
 class GreyBoxConfig:
-    """Settings of :func:`identify`.
-
-    Parameters
-    ----------
-    parameters : tuple of str
-        What to estimate: fields of :data:`ESTIMABLE_ROD_FIELDS` and/or :data:`CALIBRATION_PARAMETERS`.
-    window_s : float
-        Length of a shooting window [s].
-    max_windows : int
-        Most windows used (drawn without replacement from the non-overlapping windows of all trials).
-    seed : int
-        Seed of the window draw.
-    max_iterations : int
-        Most accepted Levenberg-Marquardt steps (each costs one Jacobian).
-    diff_step : float
-        Forward-difference step of the Jacobian, relative (log-scaled parameters and states).
-    tolerance : float
-        Convergence: a relative parameter step below this (or a relative cost reduction below its square).
-    substeps : int, optional
-        Solver sub-steps per sample (default: the dataset's protocol's, else 2).
-    """
+    """Settings of :func:`identify`: what to estimate (:data:`ESTIMABLE_ROD_FIELDS`, :data:`CALIBRATION_PARAMETERS`),
+    the window length and count, the seed of the window draw, the iteration limit, the relative forward-difference
+    step, the convergence tolerance and the solver sub-steps (default: the dataset's protocol's, else 2)."""
 
     parameters: tuple[str, ...] = GREYBOX_PARAMETERS
     window_s: float = 0.3
@@ -143,46 +80,18 @@ class GreyBoxConfig:
             raise ValueError(f"parameters has duplicates: {names}")
         object.__setattr__(self, "parameters", names)
         positive("window_s", self.window_s)
-        object.__setattr__(self, "max_windows", positive_int("max_windows", self.max_windows))
-        object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
-        object.__setattr__(self, "max_iterations", positive_int("max_iterations", self.max_iterations))
         positive("diff_step", self.diff_step)
         positive("tolerance", self.tolerance)
-        if self.substeps is not None:
-            object.__setattr__(self, "substeps", positive_int("substeps", self.substeps))
+        object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
+        for name in ("max_windows", "max_iterations") + (() if self.substeps is None else ("substeps",)):
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
 
 
 @dataclass
 class GreyBoxResult:
-    """What :func:`identify` found.
-
-    Attributes
-    ----------
-    params : RodParams
-        The initial guess with the estimated rod fields replaced.
-    initial_params : RodParams
-        The initial guess.
-    estimates, std : dict
-        Every estimated parameter (rod fields and calibrations) and its standard deviation, in its own unit.
-    torque_gain, encoder_offset_rad, torque_delay_s, camera_delay_s : float
-        The calibrations (1, 0, 0 and 0 when not estimated).
-    correlation : ndarray, shape (P, P)
-        Correlation matrix of the estimates (order of ``estimates``).
-    residual_rms_rad : float
-        Root-mean-square residual at the optimum [rad; tip coordinates as a fraction of ``L``].
-    n_windows, window_steps, n_residuals, n_variables : int
-        Windows, samples per window (after its start), residuals and decision variables.
-    identify_s : float
-        Wall time of the identification [s].
-    nfev, njev : int
-        Residual evaluations and Jacobians.
-    at_bounds : tuple of str
-        Estimated parameters that ended on a bound of the search (a factor e^5 from the initial guess): the data
-        do not pull them back, so their estimate means little (their ``std`` says so too, as a rule).
-    status : int
-        How the iteration stopped (0: iteration limit, 1: tolerance, 2: no step lowers the cost);
-        ``message`` says it in words.
-    """
+    """What :func:`identify` found: the rod with the estimated fields replaced, every estimate and its standard
+    deviation in its own unit, the calibrations (1, 0, 0, 0 when not estimated), how the fit went, and the
+    estimates that ended on a bound of the search (not determined by the data)."""
 
     params: RodParams
     initial_params: RodParams
@@ -190,7 +99,6 @@ class GreyBoxResult:
     std: dict[str, float]
     torque_gain: float
     encoder_offset_rad: float
-    correlation: np.ndarray
     residual_rms_rad: float
     n_windows: int
     window_steps: int
@@ -204,56 +112,36 @@ class GreyBoxResult:
     at_bounds: tuple[str, ...] = ()
     torque_delay_s: float = 0.0
     camera_delay_s: float = 0.0
-    window_starts: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), np.int64))
-    window_states: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0)))
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
-        """``|estimate / truth - 1|`` of every estimated rod field, and of the torque gain against 1 (the offset
-        and the delay, whose truth is zero, have no relative error and are left out)."""
+        """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""
         out = {}
         for name, value in self.estimates.items():
             if name == "torque_gain":
                 out[name] = abs(value - 1.0)
-            elif name in ("encoder_offset_rad",) + _DELAYS:
-                continue
-            else:
+            elif name not in _ZERO_CALIBRATIONS:
                 reference = getattr(truth, name)
                 out[name] = abs(value / reference - 1.0) if reference != 0 else abs(value)
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict: ``rod_params`` (what :meth:`RodParams.from_json` reads), ``estimates``, ``std``,
-        ``calibration`` and ``fit`` (how the fit went)."""
+        """JSON-ready dict; its ``rod_params`` is what :meth:`RodParams.from_json` reads."""
+        fit_keys = ("residual_rms_rad", "n_windows", "window_steps", "n_residuals", "n_variables", "identify_s")
         return {
             "schema": IDENTIFICATION_SCHEMA,
             "rod_params": self.params.to_dict(),
             "estimates": dict(self.estimates),
             "std": dict(self.std),
-            "calibration": {
-                "torque_gain": self.torque_gain,
-                "encoder_offset_rad": self.encoder_offset_rad,
-                "torque_delay_s": self.torque_delay_s,
-                "camera_delay_s": self.camera_delay_s,
-            },
+            "calibration": {name: getattr(self, name) for name in CALIBRATION_PARAMETERS},
             "fit": {
                 "method": "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)",
-                "residual_rms_rad": self.residual_rms_rad,
-                "n_windows": self.n_windows,
-                "window_steps": self.window_steps,
-                "n_residuals": self.n_residuals,
-                "n_variables": self.n_variables,
-                "identify_s": self.identify_s,
-                "nfev": self.nfev,
-                "njev": self.njev,
-                "status": self.status,
-                "message": self.message,
+                **{key: getattr(self, key) for key in fit_keys + ("nfev", "njev", "status", "message")},
                 "at_bounds": list(self.at_bounds),
                 "initial_params": self.initial_params.to_dict(),
             },
         }
 
 
-# ------------------------------------------------------------------------------------ reconstruction
 def _observed(dataset: TrajectoryDataset) -> tuple[list[str], np.ndarray]:
     """The residual variables (``phi, ex, ey`` and ``er`` if recorded) and their columns ``(T, N, k)``."""
     names = ["phi_rad", "ex_m", "ey_m"] + (["er_rad"] if "er_rad" in dataset.position_names else [])
@@ -269,9 +157,8 @@ def reconstruct_joint_states(
     ridge: float = 1e-4,
     iterations: int = 20,
 ) -> np.ndarray:
-    """Joint angles ``q = [phi, q_1 .. q_n]`` of a PRB rod that put its tip at the observed position (and tip
-    angle ``er`` when given), the spring angles as small as possible (a ridge of weight ``ridge`` on them);
-    Gauss-Newton, vectorised over any leading shape of the inputs.  Returns shape ``(..., n + 1)``."""
+    """Joint angles ``(..., n + 1)`` of a PRB rod that put its tip at the observed position (and tip angle ``er``
+    when given), the spring angles as small as possible (a ridge on them); vectorised Gauss-Newton."""
     phi = np.asarray(phi_rad, float)
     n = params.n_links
     length = params.link_length_m
@@ -286,7 +173,6 @@ def reconstruct_joint_states(
         a = phi[..., None] + np.cumsum(b, axis=-1)
         sin, cos = np.sin(a), np.cos(a)
         model = [-length * sin.sum(-1) / scale, length * cos.sum(-1) / scale]
-        # d tip / d b_i: the links from i on turn
         tail_cos = np.cumsum(cos[..., ::-1], axis=-1)[..., ::-1]
         tail_sin = np.cumsum(sin[..., ::-1], axis=-1)[..., ::-1]
         rows = [-length * tail_cos / scale, -length * tail_sin / scale]
@@ -296,7 +182,7 @@ def reconstruct_joint_states(
         r = np.stack(model, axis=-1) - target
         if er_rad is not None:
             r[..., 2] = wrap_diff(a[..., -1], target[..., 2])
-        jac = np.stack(rows, axis=-2)  # (..., k, n)
+        jac = np.stack(rows, axis=-2)
         jtj = np.einsum("...ki,...kj->...ij", jac, jac) + ridge * eye
         rhs = np.einsum("...ki,...k->...i", jac, r) + ridge * b
         b = b - np.linalg.solve(jtj, rhs[..., None])[..., 0]
@@ -308,11 +194,16 @@ def wrap_diff(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
     return (np.asarray(a) - b + np.pi) % (2 * np.pi) - np.pi
 
 
-# ------------------------------------------------------------------------------------ simulation
-def _substeps(dataset: TrajectoryDataset, substeps: Optional[int]) -> int:
+def dataset_substeps(dataset: TrajectoryDataset, substeps: Optional[int] = None) -> int:
+    """``substeps`` if given, else the dataset's protocol's, else 2."""
     if substeps is not None:
         return int(substeps)
     return int(dataset.metadata.get("protocol", {}).get("substeps", 2))
+
+
+def _free_plant(params: RodParams, dt_s: float, substeps: int) -> PRBPlant:
+    """A PRB plant whose torque is not clipped (the recorded one already was)."""
+    return PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dt_s, substeps=substeps)
 
 
 def simulate_windows(
@@ -325,12 +216,10 @@ def simulate_windows(
     has_er: bool = True,
     plant: Optional[PRBPlant] = None,
 ) -> np.ndarray:
-    """Open-loop PRB simulations from joint states ``(B, 2 (n + 1))`` (``q`` then ``q_dot``) under torques
-    ``(B, W)`` times ``torque_gain``; returns the simulated ``phi, ex, ey`` (and ``er`` if ``has_er``) at every
-    sample, shape ``(B, W + 1, 3 or 4)``.  The torque is not clipped (the recorded one already was).  A
-    simulation that diverges keeps its last state to the end of its window."""
-    if plant is None:
-        plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dt_s, substeps=substeps)
+    """Open-loop PRB simulations from joint states ``(B, 2 (n + 1))`` under torques ``(B, W)`` times
+    ``torque_gain``: ``phi, ex, ey`` (and ``er``) at every sample, ``(B, W + 1, 3 or 4)``.  A diverging
+    simulation keeps its last state to the end of its window."""
+    plant = plant if plant is not None else _free_plant(params, dt_s, substeps)
     n_q = plant.n_coordinates
     states = np.asarray(states, float)
     torques = np.asarray(torques_nm, float) * torque_gain
@@ -339,19 +228,23 @@ def simulate_windows(
     for w in range(states.shape[0]):
         o = plant.reset(states[w, :n_q], states[w, n_q:])
         row = out[w]
-        row[0, :3] = o.phi_rad, o.ex_m, o.ey_m
-        if has_er:
-            row[0, 3] = o.er_rad
+        row[0] = (o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[:k]
         for i, tau in enumerate(torques[w]):
             try:
                 o = plant.step(tau)
             except SimulationDiverged:
                 row[i + 1 :] = row[i]
                 break
-            row[i + 1, :3] = o.phi_rad, o.ex_m, o.ey_m
-            if has_er:
-                row[i + 1, 3] = o.er_rad
+            row[i + 1] = (o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[:k]
     return out
+
+
+def _normal_blocks(dense: np.ndarray, block: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``J_p^T J_p``, the windows' ``J_s^T J_s`` and ``J_p^T J_s``."""
+    a = np.einsum("wrp,wrq->pq", dense, dense)
+    d = np.einsum("wri,wrj->wij", block, block)
+    b = np.einsum("wrp,wri->wpi", dense, block)
+    return a, d, b
 
 
 class _Problem:
@@ -371,27 +264,23 @@ class _Problem:
         self.names = tuple(names)
         self.dt_s = dataset.dt_s
         self.substeps = substeps
-        self.steps = steps
         self.diff_step = diff_step
-        names, columns = _observed(dataset)
-        self.has_er = "er_rad" in names
-        self.k = len(names)
+        observed, columns = _observed(dataset)
+        self.has_er = "er_rad" in observed
         index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
-        self.measured = columns[starts[:, :1], index]  # (B, W + 1, k)
+        self.measured = columns[starts[:, :1], index]
         self.torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
         self.previous_torques = dataset.torques_nm[starts[:, 0], np.maximum(starts[:, 1] - 1, 0)]
         self.next_torques = dataset.torques_nm[starts[:, 0], np.minimum(starts[:, 1] + steps, dataset.n_samples - 2)]
         self.n_windows = int(starts.shape[0])
         self.n_q = guess.n_links + 1
         self.n_p = len(self.names)
-        self.weights = np.array([1.0, 1.0 / guess.length_m, 1.0 / guess.length_m, 1.0][: self.k])
+        self.weights = np.array([1.0, 1.0 / guess.length_m, 1.0 / guess.length_m, 1.0][: len(observed)])
         self._plants: dict[bytes, PRBPlant] = {}
         self._cache: tuple[bytes, np.ndarray] | None = None
 
-    # -------------------------------------------------------------- parameters
     def unpack(self, theta: np.ndarray) -> tuple[RodParams, float, float, float]:
-        """``(rod, torque gain, encoder offset [rad], torque delay [fraction of dt])`` of scaled parameters
-        (the camera delay is read by :meth:`simulate` directly)."""
+        """``(rod, torque gain, encoder offset [rad], torque delay [fraction of dt])`` of scaled parameters."""
         changes: dict[str, float] = {}
         gain, offset, delay = 1.0, 0.0, 0.0
         for name, value in zip(self.names, theta):
@@ -401,26 +290,20 @@ class _Problem:
                 offset = value * _OFFSET_SCALE_RAD
             elif name == "torque_delay_s":
                 delay = float(value)
-            elif name == "camera_delay_s":
-                continue
-            else:
+            elif name != "camera_delay_s":
                 changes[name] = getattr(self.guess, name) * math.exp(value)
         return self.guess.replace(**changes), gain, offset, delay
 
-    def plant(self, theta: np.ndarray) -> tuple[PRBPlant, float, float, float]:
+    def simulate(self, z: np.ndarray) -> np.ndarray:
+        theta = z[: self.n_p]
+        states = z[self.n_p :].reshape(self.n_windows, 2 * self.n_q)
         key = np.asarray(theta, float).tobytes()
         rod, gain, offset, delay = self.unpack(theta)
         if key not in self._plants:
             if len(self._plants) > 4:
                 self._plants.clear()
-            self._plants[key] = PRBPlant(rod.replace(torque_limit_nm=1e6), dt_s=self.dt_s, substeps=self.substeps)
-        return self._plants[key], gain, offset, delay
-
-    # -------------------------------------------------------------- residuals
-    def simulate(self, z: np.ndarray) -> np.ndarray:
-        theta = z[: self.n_p]
-        states = z[self.n_p :].reshape(self.n_windows, 2 * self.n_q)
-        plant, gain, offset, delay = self.plant(theta)
+            self._plants[key] = _free_plant(rod, self.dt_s, self.substeps)
+        plant = self._plants[key]
         torques = self.torques
         if delay > 0.0:
             torques = (1.0 - delay) * torques + delay * np.concatenate(
@@ -443,7 +326,7 @@ class _Problem:
         return sim
 
     def residual_blocks(self, z: np.ndarray) -> np.ndarray:
-        """Residuals ``(B, W + 1, k)``."""
+        """Residuals ``(B, W + 1, k)``, angles wrapped, tip coordinates over the rod length."""
         r = self.simulate(z) - self.measured
         r[..., 0] = wrap_diff(r[..., 0], 0.0)
         if self.has_er:
@@ -452,59 +335,44 @@ class _Problem:
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         key = z.tobytes()
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[1]
-        r = self.residual_blocks(z).reshape(-1)
-        self._cache = (key, r)
-        return r
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, self.residual_blocks(z).reshape(-1))
+        return self._cache[1]
 
     def jacobian(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Forward differences, every window's state component perturbed at once: ``(J_p, J_s)`` of shapes
-        ``(B, R, P)`` (parameters, dense) and ``(B, R, S)`` (each window's own state; the rest is zero)."""
+        """Forward differences, every window's state component moved at once: ``(J_p, J_s)`` of shapes
+        ``(B, R, P)`` and ``(B, R, S)`` (each window's own state; the rest is zero)."""
         z = np.asarray(z, float)
         base = self.residuals(z).reshape(self.n_windows, -1)
-        rows_per = base.shape[1]
-        dense = np.empty((self.n_windows, rows_per, self.n_p))
+        moved_residuals = lambda zm: self.residual_blocks(zm).reshape(self.n_windows, -1) - base  # noqa: E731
+        dense = np.empty((self.n_windows, base.shape[1], self.n_p))
         for j in range(self.n_p):
             h = self.diff_step * max(1.0, abs(z[j]))
             zj = z.copy()
             zj[j] += h
-            dense[:, :, j] = (self.residual_blocks(zj).reshape(self.n_windows, -1) - base) / h
+            dense[:, :, j] = moved_residuals(zj) / h
         n_s = 2 * self.n_q
-        block = np.empty((self.n_windows, rows_per, n_s))
+        block = np.empty((self.n_windows, base.shape[1], n_s))
         states = z[self.n_p :].reshape(self.n_windows, n_s)
         for c in range(n_s):
             h = self.diff_step * np.maximum(1.0, np.abs(states[:, c]))
             moved = states.copy()
             moved[:, c] += h
-            zc = np.concatenate([z[: self.n_p], moved.reshape(-1)])
-            block[:, :, c] = (self.residual_blocks(zc).reshape(self.n_windows, -1) - base) / h[:, None]
+            block[:, :, c] = moved_residuals(np.concatenate([z[: self.n_p], moved.reshape(-1)])) / h[:, None]
         return dense, block
 
-    # -------------------------------------------------------------- information
-    @staticmethod
-    def parameter_information(dense: np.ndarray, block: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, S)``: ``J_p^T J_p`` and its Schur complement after eliminating the window states."""
-        a = np.einsum("wrp,wrq->pq", dense, dense)
-        d = np.einsum("wri,wrj->wij", block, block)
-        b = np.einsum("wrp,wri->wpi", dense, block)
+    def parameter_information(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, S)`` at ``z``: ``J_p^T J_p`` and its Schur complement after eliminating the window states."""
+        a, d, b = _normal_blocks(*self.jacobian(z))
         s = a - np.einsum("wpi,wij,wqj->pq", b, np.linalg.pinv(d, rcond=1e-12, hermitian=True), b)
         return a, 0.5 * (s + s.T)
 
 
 def _levenberg_marquardt(
-    problem: _Problem,
-    z0: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    max_iterations: int,
-    tolerance: float,
+    problem: _Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray, max_iterations: int, tolerance: float
 ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Levenberg-Marquardt on the multiple-shooting problem, each step solved exactly by eliminating the
-    window states (block-diagonal normal equations, Schur complement on the parameters); Marquardt's
-    diagonal scaling; parameters kept within ``[lower, upper]``.  Stops when the parameter step (scaled: the
-    relative change of a rod field) is below ``tolerance``, the cost falls by less than ``tolerance**2``
-    relatively, or after ``max_iterations`` accepted steps."""
+    """Levenberg-Marquardt with Marquardt's scaling, each step solved exactly with the window states eliminated,
+    the parameters kept within ``[lower, upper]``; stops on a small step or cost reduction, or the limit."""
     n_p = problem.n_p
     z = z0.copy()
     r = problem.residuals(z)
@@ -517,24 +385,20 @@ def _levenberg_marquardt(
         rb = r.reshape(problem.n_windows, -1)
         g_p = np.einsum("wrp,wr->p", dense, rb)
         g_s = np.einsum("wri,wr->wi", block, rb)
-        a = np.einsum("wrp,wrq->pq", dense, dense)
-        d = np.einsum("wri,wrj->wij", block, block)
-        b = np.einsum("wrp,wri->wpi", dense, block)
+        a, d, b = _normal_blocks(dense, block)
         diag_a = np.maximum(np.diag(a), 1e-30)
         diag_d = np.maximum(np.diagonal(d, axis1=1, axis2=2), 1e-30)
         accepted = False
         while mu < 1e12:
             d_mu = d + mu * (np.eye(d.shape[1])[None] * diag_d[:, None, :])
             a_mu = a + mu * np.diag(diag_a)
-            # D^-1 [B^T, g_s] for every window at once
             solved = np.linalg.solve(d_mu, np.concatenate([np.transpose(b, (0, 2, 1)), g_s[:, :, None]], axis=2))
             inv_bt, inv_g = solved[:, :, :n_p], solved[:, :, n_p]
             schur = a_mu - np.einsum("wpi,wiq->pq", b, inv_bt)
             rhs = -g_p + np.einsum("wpi,wi->p", b, inv_g)
             dp = np.linalg.solve(schur, rhs) if n_p else np.zeros(0)
             ds = -inv_g - np.einsum("wip,p->wi", inv_bt, dp)
-            trial = z + np.concatenate([dp, ds.reshape(-1)])
-            trial = np.clip(trial, lower, upper)
+            trial = np.clip(z + np.concatenate([dp, ds.reshape(-1)]), lower, upper)
             r_new = problem.residuals(trial)
             nfev += 1
             cost_new = 0.5 * float(r_new @ r_new)
@@ -547,7 +411,7 @@ def _levenberg_marquardt(
             break
         if n_p:
             step = float(np.max(np.abs(trial[:n_p] - z[:n_p])))
-        else:  # states only: their relative step
+        else:
             step = float(np.max(np.abs(trial - z) / np.maximum(1.0, np.abs(z)), initial=0.0))
         reduction = (cost - cost_new) / max(cost, 1e-300)
         z, r, cost = trial, r_new, cost_new
@@ -559,7 +423,7 @@ def _levenberg_marquardt(
 
 
 def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, where: str) -> None:
-    """``ValueError`` naming a parameter that the data do not determine (see the module docstring)."""
+    """``ValueError`` naming a parameter that the data do not determine (no effect, or a combination of others)."""
     diag = np.diag(a)
     scale = float(diag.max(initial=0.0))
     for name, value in zip(names, diag):
@@ -569,8 +433,7 @@ def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, wh
                 "e.g. the torque does not excite it, or nothing moves)"
             )
     norm = 1.0 / np.sqrt(diag)
-    sn = s * norm[:, None] * norm[None, :]
-    values, vectors = np.linalg.eigh(sn)
+    values, vectors = np.linalg.eigh(s * norm[:, None] * norm[None, :])
     if values[0] < IDENTIFIABILITY_TOLERANCE:
         worst = names[int(np.argmax(np.abs(vectors[:, 0])))]
         partners = [n for n, v in zip(names, vectors[:, 0]) if abs(v) > 0.2 and n != worst]
@@ -581,8 +444,8 @@ def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, wh
 
 
 def _window_starts(dataset: TrajectoryDataset, steps: int, max_windows: int, seed: int) -> np.ndarray:
-    """``(B, 2)`` rows ``(trial, first sample)``: non-overlapping windows of ``steps`` samples after their start,
-    from sample 1 (sample 0 has no predecessor for the rate reconstruction), at most ``max_windows`` drawn."""
+    """``(B, 2)`` rows ``(trial, first sample)`` of non-overlapping windows from sample 1, at most ``max_windows``
+    drawn."""
     n = dataset.n_samples
     firsts = np.arange(1, n - steps, steps)
     firsts = firsts[firsts + steps <= n - 1]
@@ -596,53 +459,22 @@ def _window_starts(dataset: TrajectoryDataset, steps: int, max_windows: int, see
 
 
 def _initial_states(dataset: TrajectoryDataset, starts: np.ndarray, guess: RodParams) -> np.ndarray:
-    """Window start states from the observations: the bent rod of :func:`reconstruct_joint_states` at the start
-    sample, rates by central differences of the reconstructions one sample either side."""
+    """Window start states: the reconstructed bent rod, rates by central differences of the reconstructions."""
     names, columns = _observed(dataset)
-    has_er = "er_rad" in names
     trial, first = starts[:, 0], starts[:, 1]
     q = []
     for shift in (-1, 0, 1):
         c = columns[trial, first + shift]
-        q.append(reconstruct_joint_states(c[:, 0], c[:, 1], c[:, 2], c[:, 3] if has_er else None, guess))
+        q.append(reconstruct_joint_states(c[:, 0], c[:, 1], c[:, 2], c[:, 3] if "er_rad" in names else None, guess))
     rate = (wrap_diff(q[2], q[0])) / (2 * dataset.dt_s)
     return np.concatenate([q[1], rate], axis=1)
 
 
-def identify(
-    dataset: TrajectoryDataset,
-    config: Optional[GreyBoxConfig] = None,
-    initial_params: Optional[RodParams] = None,
-) -> GreyBoxResult:
-    """Estimate PRB rod parameters (and rig calibrations) from a dataset by multiple shooting.
-
-    Parameters
-    ----------
-    dataset : TrajectoryDataset
-        Babbling data (simulated, the twin's or a rig's, any plant): needs ``phi_rad, ex_m, ey_m``.
-    config : GreyBoxConfig, optional
-        What to estimate and how (default: :class:`GreyBoxConfig`).
-    initial_params : RodParams, optional
-        Initial guess, and the values of the fields not estimated (default: the dataset's ``plant_params``,
-        else ``RodParams()``); every estimated rod field must be positive in it.
-
-    Returns
-    -------
-    GreyBoxResult
-
-    Raises
-    ------
-    ValueError
-        On bad arguments, a dataset too short for one window, or a parameter the dataset cannot identify
-        (the message names it).
-    """
-    started = time.perf_counter()
-    config = config if config is not None else GreyBoxConfig()
+def _check_inputs(dataset: TrajectoryDataset, config: GreyBoxConfig, guess: RodParams) -> None:
     if not isinstance(config, GreyBoxConfig):
         raise ValueError(f"config must be a GreyBoxConfig, got {type(config).__name__}")
     if not isinstance(dataset, TrajectoryDataset):
         raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
-    guess = initial_params if initial_params is not None else (dataset.params or RodParams())
     if not isinstance(guess, RodParams):
         raise ValueError(f"initial_params must be a RodParams, got {type(guess).__name__}")
     for name in config.parameters:
@@ -650,20 +482,34 @@ def identify(
             raise ValueError(
                 f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
             )
+        if name in ("torque_gain", "torque_delay_s") and not np.any(dataset.torques_nm != 0):
+            raise ValueError(f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)")
     if "youngs_modulus_pa" in config.parameters and "stiffness_scale" in config.parameters:
         raise ValueError("parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one")
-    for name in ("torque_gain", "torque_delay_s"):
-        if name in config.parameters and not np.any(dataset.torques_nm != 0):
-            raise ValueError(f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)")
+
+
+def identify(
+    dataset: TrajectoryDataset, config: Optional[GreyBoxConfig] = None, initial_params: Optional[RodParams] = None
+) -> GreyBoxResult:
+    """Estimate PRB rod parameters (and rig calibrations) from a dataset by multiple shooting.
+
+    ``initial_params`` is the initial guess and holds the fields not estimated (default: the dataset's
+    ``plant_params``, else ``RodParams()``).  Raises ``ValueError`` on bad arguments, a dataset too short for one
+    window, or a parameter the dataset cannot identify (named).
+    """
+    started = time.perf_counter()
+    config = config if config is not None else GreyBoxConfig()
+    guess = initial_params if initial_params is not None else (getattr(dataset, "params", None) or RodParams())
+    _check_inputs(dataset, config, guess)
     steps = int(round(config.window_s / dataset.dt_s))
     if steps < 2:
         raise ValueError(f"window_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {config.window_s!r}")
-    substeps = _substeps(dataset, config.substeps)
     starts = _window_starts(dataset, steps, config.max_windows, config.seed)
-    problem = _Problem(dataset, guess, config.parameters, config.diff_step, starts, steps, substeps)
+    problem = _Problem(
+        dataset, guess, config.parameters, config.diff_step, starts, steps, dataset_substeps(dataset, config.substeps)
+    )
     x0 = np.concatenate([np.zeros(problem.n_p), _initial_states(dataset, starts, guess).reshape(-1)])
-    a, s = problem.parameter_information(*problem.jacobian(x0))
-    _check_identifiable(config.parameters, a, s, "at the initial guess")
+    _check_identifiable(config.parameters, *problem.parameter_information(x0), "at the initial guess")
     lower = np.full(x0.size, -np.inf)
     upper = np.full(x0.size, np.inf)
     for j, name in enumerate(config.parameters):
@@ -672,13 +518,11 @@ def identify(
         elif name != "encoder_offset_rad":
             lower[j], upper[j] = -_LOG_BOUND, _LOG_BOUND
     z, fit = _levenberg_marquardt(problem, x0, lower, upper, config.max_iterations, config.tolerance)
-    a, s = problem.parameter_information(*problem.jacobian(z))
+    a, s = problem.parameter_information(z)
     _check_identifiable(config.parameters, a, s, "at the optimum")
     r = problem.residuals(z)
-    dof = max(r.size - z.size, 1)
-    sigma2 = float(r @ r) / dof
-    cov = sigma2 * np.linalg.inv(s)
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sigma2 = float(r @ r) / max(r.size - z.size, 1)
+    sd = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(s)), 0.0, None))
     rod, gain, offset, delay = problem.unpack(z[: problem.n_p])
     estimates: dict[str, float] = {}
     std: dict[str, float] = {}
@@ -690,7 +534,6 @@ def identify(
         else:
             value = gain if name == "torque_gain" else float(getattr(rod, name))
             estimates[name], std[name] = value, float(value * sd[j])  # delta method on the log scale
-    correlation = cov / np.outer(np.maximum(sd, 1e-300), np.maximum(sd, 1e-300))
     return GreyBoxResult(
         params=rod,
         initial_params=guess,
@@ -700,7 +543,6 @@ def identify(
         encoder_offset_rad=offset,
         torque_delay_s=delay * dataset.dt_s,
         camera_delay_s=estimates.get("camera_delay_s", 0.0),
-        correlation=correlation,
         residual_rms_rad=float(np.sqrt(np.mean(r**2))),
         n_windows=problem.n_windows,
         window_steps=steps,
@@ -715,10 +557,8 @@ def identify(
             name
             for j, name in enumerate(config.parameters)
             if (name in _DELAYS and abs(z[j]) >= 1.0)
-            or (name not in ("encoder_offset_rad",) + _DELAYS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))
+            or (name not in _ZERO_CALIBRATIONS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))
         ),
-        window_starts=starts,
-        window_states=z[problem.n_p :].reshape(problem.n_windows, -1),
     )
 
 
@@ -730,24 +570,8 @@ def estimate_joint_states(
     substeps: Optional[int] = None,
     max_iterations: int = 15,
 ) -> np.ndarray:
-    """Causal estimates of the PRB joint state ``(q, q_dot)`` at given samples from the observations before them.
-
-    For each row ``(trial, sample)`` of ``samples`` the state at ``sample - round(lookback_s / dt)`` is fitted to
-    the observations from there up to ``sample`` (the multiple-shooting fit of :func:`identify` with the
-    parameters held at ``params``, every window at once), and the model is run forward from it to ``sample``
-    under the recorded torques.  This is what a rig can do before an open-loop prediction: the observed
-    variables do not determine the rod's bending, a short stretch of their history does.
-
-    Returns
-    -------
-    ndarray, shape (B, 2 (n_links + 1))
-        ``q`` then ``q_dot`` at each sample.
-
-    Raises
-    ------
-    ValueError
-        If a sample has less than ``lookback_s`` (plus one sample) of data before it.
-    """
+    """Causal PRB joint states ``(B, 2 (n + 1))`` at rows ``(trial, sample)``: the state ``lookback_s`` earlier is
+    fitted to the observations up to ``sample`` (parameters held), then run forward under the recorded torques."""
     samples = np.asarray(samples, dtype=np.int64).reshape(-1, 2)
     steps = int(round(positive("lookback_s", lookback_s) / dataset.dt_s))
     if steps < 2:
@@ -756,7 +580,7 @@ def estimate_joint_states(
     starts[:, 1] -= steps
     if samples.size == 0 or starts[:, 1].min() < 1 or samples[:, 1].max() >= dataset.n_samples:
         raise ValueError(f"samples must lie in [{steps + 1}, {dataset.n_samples}) to look {lookback_s} s back")
-    substeps = _substeps(dataset, substeps)
+    substeps = dataset_substeps(dataset, substeps)
     problem = _Problem(dataset, params, (), 1e-6, starts, steps, substeps)
     x0 = _initial_states(dataset, starts, params).reshape(-1)
     unbounded = np.full(x0.size, np.inf)
@@ -764,7 +588,7 @@ def estimate_joint_states(
         problem, x0, -unbounded, unbounded, positive_int("max_iterations", max_iterations), 1e-8
     )
     fitted = z.reshape(problem.n_windows, -1)
-    plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=substeps)
+    plant = _free_plant(params, dataset.dt_s, substeps)
     n_q = plant.n_coordinates
     out = np.empty_like(fitted)
     for w in range(problem.n_windows):
@@ -774,6 +598,5 @@ def estimate_joint_states(
                 plant.step(tau)
         except SimulationDiverged:
             pass
-        q, qd = plant.joint_state()
-        out[w] = np.concatenate([q, qd])
+        out[w] = np.concatenate(plant.joint_state())
     return out

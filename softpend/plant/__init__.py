@@ -4,7 +4,7 @@ from softpend.plant.base import Plant, SimulationDiverged, tilt_state
 from softpend.plant.observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
 from softpend.plant.params import GRAVITY_MPS2, RodParams
 from softpend.plant.prb import PRBPlant
-from softpend.plant.registry import check_plant_name, make_plant, plant_names, register_plant
+from softpend.plant.registry import check_plant_name, make_plant, plant_names
 
 __all__ = [
     "GRAVITY_MPS2",
@@ -18,6 +18,5 @@ __all__ = [
     "check_plant_name",
     "make_plant",
     "plant_names",
-    "register_plant",
     "tilt_state",
 ]

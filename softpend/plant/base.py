@@ -1,10 +1,4 @@
-"""What every plant shares: argument checks, torque saturation, divergence reporting.
-
-:class:`PlantBase` holds the plumbing common to the PRB chain (:class:`~softpend.plant.PRBPlant`) and the
-continuum beam (:class:`~softpend.plant.beam.BeamPlant`); a plant supplies ``reset``,
-``observation_from_state``/``observe``, ``joint_state`` and the solver hooks ``_advance(torque_nm)`` and
-``_solve_static()``.
-"""
+"""What every plant shares: argument checks, torque saturation, divergence reporting."""
 
 from __future__ import annotations
 
@@ -21,9 +15,7 @@ from softpend.plant.protocol import Plant
 
 __all__ = ["Plant", "PlantBase", "SimulationDiverged", "tilt_state"]
 
-
-#: Most implicit-solver steps per control step: 1000.  The plants are stable at 2; a thousand times finer is
-#: far past any accuracy gain, and a larger count would only make each step arbitrarily slow.
+#: Most implicit-solver steps per control step.
 MAX_SUBSTEPS = 1000
 
 
@@ -36,11 +28,8 @@ class SimulationDiverged(RuntimeError):
 
 
 class PlantBase:
-    """Shared part of the plants (see the module docstring).
-
-    Attributes set by :meth:`_init_common`: ``params``, ``dt_s``, ``substeps``, ``hub_locked``,
-    ``last_torque_nm``; the subclass sets ``n_coordinates``.
-    """
+    """Shared part of the plants; a subclass sets ``n_coordinates`` and supplies ``_set_state``, ``observe``,
+    ``_advance(torque_nm)`` and ``_solve_static()``."""
 
     params: RodParams
     dt_s: float
@@ -65,23 +54,18 @@ class PlantBase:
         self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
         self.last_torque_nm = 0.0
 
-    # ------------------------------------------------------------------ hooks of the subclasses
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
-        """Make the checked state ``(q, q_dot)`` the solver's current state with zero hub torque."""
         raise NotImplementedError
 
     def observe(self) -> Observation:
         raise NotImplementedError
 
     def _advance(self, torque_nm: float) -> None:
-        """Hold ``torque_nm`` (already saturated) on the hub for one step ``dt_s``."""
         raise NotImplementedError
 
     def _solve_static(self) -> None:
-        """Static equilibrium with zero torque from the current state, made the current state."""
         raise NotImplementedError
 
-    # ------------------------------------------------------------------ shared behaviour
     def _check_state(self, values: np.ndarray, name: str) -> np.ndarray:
         values = np.asarray(values, dtype=float)
         if values.shape != (self.n_coordinates,):
@@ -91,42 +75,19 @@ class PlantBase:
         return values.copy()
 
     def reset(
-        self,
-        joint_angles_rad: Optional[np.ndarray] = None,
-        joint_velocities_rad_s: Optional[np.ndarray] = None,
+        self, joint_angles_rad: Optional[np.ndarray] = None, joint_velocities_rad_s: Optional[np.ndarray] = None
     ) -> Observation:
-        """Restart from a state (default: all zero, the straight rod pointing up at rest).
-
-        Parameters
-        ----------
-        joint_angles_rad : array of shape (n_coordinates,)
-            The plant's coordinates ``q``, hub angle first unless the hub is locked [rad; m for the beam's
-            transverse coordinates].
-        joint_velocities_rad_s : array of shape (n_coordinates,)
-            Their rates ``q_dot`` [rad/s; m/s].
-
-        Raises
-        ------
-        ValueError
-            If a state has the wrong shape or is not finite.
-        """
-        q = (
-            np.zeros(self.n_coordinates)
-            if joint_angles_rad is None
-            else self._check_state(joint_angles_rad, "joint_angles_rad")
-        )
-        qd = (
-            np.zeros(self.n_coordinates)
-            if joint_velocities_rad_s is None
-            else self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
+        """Restart from ``(q, q_dot)`` (default: the straight rod upright at rest)."""
+        q, qd = (
+            np.zeros(self.n_coordinates) if value is None else self._check_state(value, name)
+            for value, name in (
+                (joint_angles_rad, "joint_angles_rad"),
+                (joint_velocities_rad_s, "joint_velocities_rad_s"),
+            )
         )
         self._set_state(q, qd)
         self.last_torque_nm = 0.0
         return self.observe()
-
-    def set_joint_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
-        """Alias of :meth:`reset`; used to branch from a stored state."""
-        return self.reset(q, q_dot)
 
     def hanging_state(self) -> tuple[np.ndarray, np.ndarray]:
         """State of the straight rod hanging down at rest (``phi = pi``)."""
@@ -136,46 +97,37 @@ class PlantBase:
         return q, np.zeros(self.n_coordinates)
 
     def step(self, torque_nm: float) -> Observation:
-        """Apply a base torque (clipped to ``params.torque_limit_nm``) for one step ``dt_s``.
+        """Hold a base torque (clipped to ``params.torque_limit_nm``) for one step ``dt_s``.
 
-        Raises
-        ------
-        ValueError
-            If ``torque_nm`` is not finite.
-        SimulationDiverged
-            If the solver fails or the state stops being finite.
+        Raises ``ValueError`` for a non-finite torque, :class:`SimulationDiverged` if the solver fails.
         """
         torque = float(torque_nm)
         if not math.isfinite(torque):
             raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")
         limit = self.params.torque_limit_nm
-        torque = min(max(torque, -limit), limit)
-        self.last_torque_nm = torque
-        try:
-            self._advance(torque)
-        except SolverFailure as exc:
-            raise SimulationDiverged(str(exc)) from exc
-        return self.observe()
+        self.last_torque_nm = torque = min(max(torque, -limit), limit)
+        return self._solve(self._advance, torque)
 
     def static_equilibrium(self) -> Observation:
-        """Solve for static equilibrium under gravity and elasticity (zero torque) with Exudyn's static
-        solver, starting from the current state, and make it the current (resting) state.
-
-        Most useful with ``hub_locked_at_rad`` set (a cantilever); with a free hub the result is whichever
-        equilibrium the Newton iteration reaches from the current state.
-        """
+        """Solve for static equilibrium at zero torque from the current state and make it the current state."""
         self.last_torque_nm = 0.0
+        return self._solve(self._solve_static)
+
+    def _solve(self, solver, *args) -> Observation:
         try:
-            self._solve_static()
+            solver(*args)
         except SolverFailure as exc:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()
+
+
+def energies(kinetic, gravity, elastic) -> dict:
+    """The energy dict of :meth:`Plant.energy_j`."""
+    return {"kinetic_j": kinetic, "gravity_j": gravity, "elastic_j": elastic, "total_j": kinetic + gravity + elastic}
 
 
 def tilt_state(params: RodParams, tilt_rad: float, plant: str = "prb") -> tuple[np.ndarray, np.ndarray]:
-    """Straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright, as ``(q, q_dot)`` of the
-    plant named ``plant`` (any registered plant: its state is the hub angle followed by coordinates that are
-    zero for the straight rod)."""
+    """``(q, q_dot)`` of the straight rod at rest tilted by ``tilt_rad`` from upright, for plant ``plant``."""
     from softpend.plant.registry import make_plant
 
     n = params.n_links + 1 if plant == "prb" else make_plant(plant, params=params).n_coordinates

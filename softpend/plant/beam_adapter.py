@@ -1,18 +1,6 @@
-"""A snake_case adapter over Exudyn for the continuum-beam rod (the beam counterpart of
-:mod:`softpend.plant.exudyn_adapter`).
-
-:class:`HubBeam2D` builds a planar rod of ``n`` ``ObjectBeamGeometricallyExact2D`` elements (Simo-Reissner
-beam: axial, shear and bending deformation, linear interpolation, ``NodeRigidBody2D`` nodes with
-coordinates ``(x, y, rotation)``) pointing up (+y) in the reference configuration.  Node 0 is the motor hub:
-its position is held at the origin by two coordinate constraints and its rotation is the hub angle, which
-carries the rotor inertia (an ``ObjectRigidBody2D`` sharing the node), the viscous bearing friction (a
-coordinate spring-damper to ground with zero stiffness) and the base torque (a ``LoadCoordinate``).  With
-``hub_locked_at_rad`` the hub rotation is constrained instead (a clamped cantilever).  A tip mass is an
-``ObjectMassPoint2D`` on the last node; gravity acts on every body through ``LoadMassProportional``.
-
-The adapter works in Exudyn's *global* nodal coordinates (displacements from the reference configuration);
-the plant (:mod:`softpend.plant.beam`) maps them to and from its hub-frame state.
-"""
+"""A snake_case adapter over Exudyn for the continuum-beam rod: ``ObjectBeamGeometricallyExact2D`` elements on a
+driven hub node (held at the origin; rotor inertia, viscous friction and torque on its rotation), in Exudyn's
+global nodal coordinates."""
 
 from __future__ import annotations
 
@@ -37,30 +25,14 @@ from exudyn.itemInterface import (
 )
 
 from softpend.checks import in_unit_interval, int_at_least, positive
-from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings
+from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings, static_solver_settings
 
 __all__ = ["BeamSection", "HubBeam2D"]
 
 
 @dataclass(frozen=True)
 class BeamSection:
-    """Cross-section properties of a uniform beam (per unit length, SI units).
-
-    Parameters
-    ----------
-    mass_per_length_kg_m : float
-        ``rho*A`` [kg/m].
-    rotary_inertia_kg_m : float
-        Cross-section mass moment of inertia per length ``rho*I`` [kg m].
-    bending_stiffness_nm2 : float
-        ``E*I`` [N m^2].
-    axial_stiffness_n : float
-        ``E*A`` [N].
-    shear_stiffness_n : float
-        ``kappa*G*A`` [N].
-    bending_damping_nm2s, axial_damping_ns, shear_damping_ns : float
-        Kelvin-Voigt damping of curvature, axial strain and shear strain rates [N m^2 s, N s, N s].
-    """
+    """Cross-section properties of a uniform beam per unit length (SI units; Kelvin-Voigt dampings)."""
 
     mass_per_length_kg_m: float
     rotary_inertia_kg_m: float
@@ -74,31 +46,8 @@ class BeamSection:
 
 @dataclass
 class HubBeam2D:
-    """A planar beam clamped to a driven hub, stepped with Exudyn's implicit (generalized-alpha) solver.
-
-    Parameters
-    ----------
-    section : BeamSection
-        Beam properties.
-    length_m : float
-        Beam length [m].
-    n_elements : int
-        Number of beam elements (``n_elements + 1`` nodes, node 0 = hub).
-    tip_mass_kg : float
-        Point mass on the last node [kg].
-    hub_inertia_kgm2, hub_friction_nms_per_rad : float
-        Rotor inertia [kg m^2] and viscous friction [N m s/rad] of the hub (unused when locked).
-    gravity_mps2 : float
-        Gravity along -y [m/s^2].
-    dt_s : float
-        Control step [s].
-    substeps : int
-        Solver steps per control step.
-    hub_locked_at_rad : float, optional
-        Constrain the hub rotation to this angle (cantilever).
-    spectral_radius : float
-        Generalized-alpha spectral radius at infinity (1 = no numerical damping).
-    """
+    """A planar beam (node 0 the hub) pointing up on a driven hub, stepped with the implicit solver;
+    ``hub_locked_at_rad`` constrains the hub rotation (a cantilever)."""
 
     section: BeamSection
     length_m: float
@@ -122,11 +71,9 @@ class HubBeam2D:
         self.n_nodes = self.n_elements + 1
         self.n_ode2 = 3 * self.n_nodes
         self.element_length_m = self.length_m / self.n_elements
-        #: reference arc-length position of each node [m]
         self.node_s_m = np.linspace(0.0, self.length_m, self.n_nodes)
         self._build()
 
-    # ------------------------------------------------------------------ construction
     def _build(self) -> None:
         sec = self.section
         self._sc = exu.SystemContainer()
@@ -163,13 +110,12 @@ class HubBeam2D:
                 mbs.AddLoad(LoadMassProportional(markerNumber=marker, loadVector=gravity))
         ground_marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground, coordinate=0))
         hub = self._nodes[0]
-        for coordinate in (0, 1):  # the hub axis stays at the origin
+        for coordinate in (0, 1):
             marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=coordinate))
             mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, marker]))
         hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
         self._torque_load = None
         if self.hub_locked_at_rad is not None:
-            # constraint: q_hub - q_ground = offset
             mbs.AddObject(
                 ObjectConnectorCoordinate(
                     markerNumbers=[ground_marker, hub_rotation], offset=float(self.hub_locked_at_rad)
@@ -197,10 +143,8 @@ class HubBeam2D:
         self._solver: Any = exu.MainSolverImplicitSecondOrder()  # Any: exudyn's stubs declare its methods without self
         self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
 
-    # ------------------------------------------------------------------ state (global nodal coordinates)
     def set_coordinates(self, c: np.ndarray, c_t: np.ndarray) -> None:
-        """Set the nodal coordinates (displacements ``x, y`` [m] and rotation [rad] per node, node 0 first,
-        relative to the upright straight reference) and their rates, and restart the integrator."""
+        """Set the nodal coordinates ``(x, y, rotation)`` per node and their rates; restart the integrator."""
         c = np.asarray(c, dtype=float).reshape(self.n_ode2)
         c_t = np.asarray(c_t, dtype=float).reshape(self.n_ode2)
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(c_t))):
@@ -219,42 +163,28 @@ class HubBeam2D:
         self._solver.InitializeSolver(self._mbs, self._settings)
 
     def get_coordinates(self) -> tuple[np.ndarray, np.ndarray]:
-        """Nodal coordinates and their rates (copies, see :meth:`set_coordinates`)."""
+        """Nodal coordinates and their rates (copies)."""
         data = self._mbs.systemData
         return np.array(data.GetODE2Coordinates()), np.array(data.GetODE2Coordinates_t())
 
     def set_hub_torque(self, torque_nm: float) -> None:
-        """Base torque on the hub [N m] for the following steps (ignored when the hub is locked)."""
+        """Hub torque [N m] for the following steps (ignored when the hub is locked)."""
         if self._torque_load is not None:
             self._mbs.SetLoadParameter(self._torque_load, "load", float(torque_nm))
 
     def _compute_mass_matrix(self) -> np.ndarray:
-        settings = exu.SimulationSettings()
-        settings.solution.file.write = False
-        settings.staticSolver.verboseMode = 0
-        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
         solver: Any = exu.MainSolverStatic()  # Any: exudyn's stubs declare its methods without self
-        solver.InitializeSolver(self._mbs, settings)
+        solver.InitializeSolver(self._mbs, static_solver_settings(1, 1e-8))
         solver.ComputeMassMatrix(self._mbs)
         return np.array(solver.GetSystemMassMatrix(), dtype=float)[: self.n_ode2, : self.n_ode2]
 
     def mass_matrix(self) -> np.ndarray:
-        """The mass matrix of the nodal coordinates, from Exudyn (constant for these elements; computed
-        once at construction)."""
+        """The (constant) mass matrix of the nodal coordinates."""
         return self._mass_matrix
 
-    # ------------------------------------------------------------------ stepping
     def advance(self) -> None:
-        """Advance by one control step ``dt_s`` (``substeps`` solver steps).
-
-        If Newton fails (fast hub motion can outrun the default step), the control step is retried from
-        its start with 4x and then 16x as many solver steps before giving up.
-
-        Raises
-        ------
-        SolverFailure
-            If Newton fails at every refinement or the new state is not finite.
-        """
+        """Advance by one control step, retried with 4x and 16x the solver steps if Newton fails;
+        ``SolverFailure`` if every try fails or the state is not finite."""
         settings = self._settings
         mbs = self._mbs
         data = mbs.systemData
@@ -262,7 +192,7 @@ class HubBeam2D:
         ti = settings.timeIntegration
         ok = False
         for refinement in (1, 4, 16):
-            if refinement > 1:  # back to the start of the control step
+            if refinement > 1:
                 for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
                     data.SetSystemState(systemStateList=start_state, configuration=configuration)
             ti.numberOfSteps = int(self.substeps) * refinement
@@ -271,7 +201,7 @@ class HubBeam2D:
             self._solver.InitializeSolverInitialConditions(mbs, settings)
             try:
                 ok = bool(self._solver.SolveSteps(mbs, settings))
-            except Exception:  # Exudyn raises on e.g. singular Jacobians; treat like a failed step
+            except Exception:  # Exudyn raises on e.g. singular Jacobians
                 ok = False
             if ok:
                 break
@@ -288,21 +218,12 @@ class HubBeam2D:
         self.time_s += self.dt_s
 
     def solve_static(self) -> np.ndarray:
-        """Static equilibrium under gravity, elasticity and the current hub torque; returns the nodal
-        coordinates and makes them the current (resting) state."""
+        """Static equilibrium under the current hub torque (one load step, else 20), made the resting state."""
         start, _ = self.get_coordinates()
-        # one full load step converges for the cantilever cases we need; load stepping is the fallback
         for load_steps in (1, 20):
-            settings = exu.SimulationSettings()
-            settings.staticSolver.numberOfLoadSteps = load_steps
-            settings.staticSolver.verboseMode = 0
-            settings.staticSolver.newton.relativeTolerance = 1e-8
-            settings.solution.file.write = False
-            settings.show.computationTime = False
-            settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
             try:
-                ok = exu.SolveStatic(self._mbs, settings, updateInitialValues=True)
-            except Exception:  # Exudyn raises when Newton fails; retry, then report
+                ok = exu.SolveStatic(self._mbs, static_solver_settings(load_steps, 1e-8), updateInitialValues=True)
+            except Exception:
                 ok = False
             if ok:
                 break

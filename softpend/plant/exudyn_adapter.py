@@ -1,13 +1,5 @@
-"""A small snake_case adapter over Exudyn's CamelCase API.
-
-Everything in softpend that touches Exudyn for the pseudo-rigid-body chain goes through
-:class:`KinematicChain2D`: it builds a planar ``ObjectKinematicTree`` (minimal coordinates, one
-``RevoluteZ`` joint per link), owns the implicit (generalized-alpha) solver, and advances it by one
-control step of ``dt_s`` split into ``substeps`` solver steps.  Joint springs and dampers use the tree's
-built-in P/D joint control (``tau_i = -k_i*q_i - d_i*q_t_i``), the actuation torque uses
-``jointForceVector``, and gravity uses the tree's ``gravity`` vector, so no Python user function runs in
-the solver loop.
-"""
+"""A snake_case adapter over Exudyn for the PRB chain: a planar ``ObjectKinematicTree`` (one ``RevoluteZ``
+joint per link; springs and dampers as its P/D joint control) stepped by the implicit solver."""
 
 from __future__ import annotations
 
@@ -21,7 +13,7 @@ from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
 from softpend.checks import int_at_least, positive
 
-__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings"]
+__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings", "static_solver_settings"]
 
 
 class SolverFailure(RuntimeError):
@@ -31,11 +23,7 @@ class SolverFailure(RuntimeError):
 def implicit_solver_settings(
     dt_s: float, substeps: int, spectral_radius: float, newton_relative_tolerance: float
 ) -> exu.SimulationSettings:
-    """Settings of the generalized-alpha solver stepped once per control step by softpend's plants.
-
-    ``substeps`` fixed steps per ``dt_s`` (no adaptive step), modified Newton (the Jacobian is updated only
-    when convergence slows), no solution files, quiet output, dense linear algebra (small systems).
-    """
+    """Generalized-alpha settings: ``substeps`` fixed steps per ``dt_s``, modified Newton, quiet, dense."""
     settings = exu.SimulationSettings()
     ti = settings.timeIntegration
     ti.numberOfSteps = int(substeps)
@@ -56,25 +44,22 @@ def implicit_solver_settings(
     return settings
 
 
+def static_solver_settings(load_steps: int, relative_tolerance: float) -> exu.SimulationSettings:
+    """Settings of Exudyn's static solver: ``load_steps`` load steps, quiet, dense."""
+    settings = exu.SimulationSettings()
+    settings.staticSolver.numberOfLoadSteps = load_steps
+    settings.staticSolver.verboseMode = 0
+    settings.staticSolver.newton.relativeTolerance = relative_tolerance
+    settings.solution.file.write = False
+    settings.show.computationTime = False
+    settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
+    return settings
+
+
 @dataclass(frozen=True)
 class ChainLink:
-    """One link of a planar serial chain, hinged at its parent's joint frame.
-
-    Parameters
-    ----------
-    joint_offset_m : float
-        Distance from the parent joint to this joint along the parent link's axis (+y) [m].
-    mass_kg : float
-        Link mass [kg].
-    com_m : float
-        Centre of mass along the link's own axis, from its joint [m].
-    inertia_com_kgm2 : float
-        Moment of inertia about the centre of mass, about z [kg m^2].
-    stiffness_nm_per_rad : float
-        Torsional spring at this joint [N m/rad] (rest angle 0).
-    damping_nms_per_rad : float
-        Viscous damper at this joint [N m s/rad].
-    """
+    """One link of a planar chain: its joint's offset from the parent joint along the parent's axis, its mass,
+    centre of mass from its joint, inertia about the centre of mass, and the joint's spring and damper."""
 
     joint_offset_m: float
     mass_kg: float
@@ -86,26 +71,8 @@ class ChainLink:
 
 @dataclass
 class KinematicChain2D:
-    """A planar serial chain on Exudyn, stepped with the implicit solver.
-
-    Link ``i`` rotates about joint ``i`` (``RevoluteZ``); with all joint angles zero the chain points
-    up (+y) and gravity acts along -y.  Joint 0 sits at the origin, rotated by ``base_angle_rad``.
-
-    Parameters
-    ----------
-    links : sequence of ChainLink
-        The links, base first.
-    gravity_mps2 : float
-        Gravitational acceleration along -y [m/s^2].
-    dt_s : float
-        Control step [s].
-    substeps : int
-        Implicit solver steps per control step (>= 2 keeps stiff chains stable).
-    base_angle_rad : float
-        Fixed rotation of joint 0's frame (used to clamp a rod at a given angle).
-    spectral_radius : float
-        Generalized-alpha spectral radius at infinity (1 = no numerical damping).
-    """
+    """A planar serial chain (links base first) pointing up (+y) at zero angles, gravity along -y, joint 0 at
+    the origin rotated by ``base_angle_rad``; stepped by ``substeps`` implicit solver steps per ``dt_s``."""
 
     links: Sequence[ChainLink]
     gravity_mps2: float
@@ -127,7 +94,6 @@ class KinematicChain2D:
         self.time_s = 0.0
         self._build()
 
-    # ------------------------------------------------------------------ construction
     def _build(self) -> None:
         n = self.n
         self._sc = exu.SystemContainer()
@@ -173,7 +139,6 @@ class KinematicChain2D:
             self.dt_s, self.substeps, self.spectral_radius, self.newton_relative_tolerance
         )
         self._settings = settings
-        # handles fetched once: every attribute access through pybind11 is a Python-C++ crossing of its own
         self._time_integration = settings.timeIntegration
         # Any: exudyn's stubs declare these methods without self and GetSystemState as lists (it gives arrays)
         self._data: Any = mbs.systemData
@@ -181,7 +146,6 @@ class KinematicChain2D:
         self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
         self._initial = exu.ConfigurationType.Initial
 
-    # ------------------------------------------------------------------ state
     def set_state(self, q: np.ndarray, q_t: np.ndarray) -> None:
         """Set joint angles [rad] and joint rates [rad/s] and restart the integrator from them."""
         q = np.asarray(q, dtype=float).reshape(self.n)
@@ -204,12 +168,11 @@ class KinematicChain2D:
         return np.array(self._q, dtype=float), np.array(self._q_t, dtype=float)
 
     def get_state_views(self) -> tuple[np.ndarray, np.ndarray]:
-        """Joint angles and rates without copying (read-only use; valid until the next step)."""
+        """Joint angles and rates without copying (valid until the next step)."""
         return self._q, self._q_t
 
     def get_state_lists(self) -> tuple[list[float], list[float]]:
-        """Joint angles and rates as Python lists (read-only use; valid until the next step): the form the
-        scalar observation code reads fastest."""
+        """Joint angles and rates as Python lists (valid until the next step)."""
         return self._q_list, self._q_t_list
 
     def set_joint_forces(self, forces: np.ndarray) -> None:
@@ -217,15 +180,8 @@ class KinematicChain2D:
         self._force[:] = forces
         self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._force)
 
-    # ------------------------------------------------------------------ stepping
     def advance(self) -> None:
-        """Advance by one control step ``dt_s`` (``substeps`` implicit solver steps).
-
-        Raises
-        ------
-        SolverFailure
-            If Newton fails or the new state is not finite.
-        """
+        """Advance by one control step; ``SolverFailure`` if Newton fails or the state is not finite."""
         settings = self._settings
         mbs = self._mbs
         solver = self._solver
@@ -245,7 +201,7 @@ class KinematicChain2D:
             raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
         q, q_t = state[0], state[1]
         q_list, q_t_list = q.tolist(), q_t.tolist()
-        if not math.isfinite(sum(q_list) + sum(q_t_list)):  # NaN or inf anywhere makes the sum non-finite
+        if not math.isfinite(sum(q_list) + sum(q_t_list)):
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
         self._q, self._q_t = q, q_t
         self._q_list, self._q_t_list = q_list, q_t_list
@@ -255,29 +211,18 @@ class KinematicChain2D:
         self.time_s += self.dt_s
 
     def linearized_system(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Mass, stiffness and damping matrices ``(M, K, D)`` of the chain linearised at the current
-        state (Exudyn's ``ComputeLinearizedSystem``): ``M dq_dd + D dq_d + K dq = forces``."""
+        """``(M, K, D)`` of ``M dq_dd + D dq_d + K dq = forces`` linearised at the current state."""
         mass, stiffness, damping = self._mbs.ComputeLinearizedSystem()
         return np.asarray(mass), np.asarray(stiffness), np.asarray(damping)
 
     def solve_static(self) -> np.ndarray:
         """Static equilibrium under gravity, springs and the current joint forces; returns joint angles."""
         try:
-            ok = exu.SolveStatic(self._mbs, self._static_settings(), updateInitialValues=True)
-        except exu.ExudynError as exc:  # SolverError (no convergence) and the solver's other errors
+            ok = exu.SolveStatic(self._mbs, static_solver_settings(20, 1e-12), updateInitialValues=True)
+        except exu.ExudynError as exc:
             raise SolverFailure(f"Exudyn static solver failed: {' '.join(str(exc).split())}") from exc
         if not ok:
             raise SolverFailure("Exudyn static solver did not converge")
         q = np.array(self._mbs.systemData.GetODE2Coordinates())
         self.set_state(q, np.zeros(self.n))
         return q
-
-    def _static_settings(self) -> exu.SimulationSettings:
-        settings = exu.SimulationSettings()
-        settings.staticSolver.numberOfLoadSteps = 20
-        settings.staticSolver.verboseMode = 0
-        settings.staticSolver.newton.relativeTolerance = 1e-12
-        settings.solution.file.write = False
-        settings.show.computationTime = False
-        settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
-        return settings

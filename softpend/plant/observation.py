@@ -7,8 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: Order of :meth:`Observation.as_array` (the report's ``q = [phi, theta, e_x, e_y]`` plus the tip rotation
-#: ``e_r``, followed by the time derivatives).
+#: Order of :meth:`Observation.as_array`.
 OBSERVATION_NAMES: tuple[str, ...] = (
     "phi_rad",
     "theta_rad",
@@ -31,23 +30,9 @@ def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
 
 
 class Observation(NamedTuple):
-    """One sample of the observed variables (angles from upright, counter-clockwise positive).
-
-    An immutable named tuple (cheap to build once per simulation step).
-
-    Attributes
-    ----------
-    phi_rad : float
-        Base (motor hub) angle, wrapped to ``[-pi, pi)``; 0 = rod clamped pointing up, pi = hanging.
-    theta_rad : float
-        Tip angle: angle of the tip position vector (seen from the hub axis) from upright, ``[-pi, pi)``.
-    ex_m, ey_m : float
-        Tip position relative to the hub axis [m] (y up).
-    er_rad : float
-        Tip rotation: absolute angle of the last link from upright, ``[-pi, pi)``.
-    *_dot : float
-        Time derivatives of the above [rad/s, m/s].
-    """
+    """One sample of the observed variables: hub angle ``phi``, tip angle ``theta`` (of the tip position seen
+    from the hub axis), tip position ``(ex, ey)`` from the hub axis, tip rotation ``er`` (the last link's
+    angle), and their rates; angles from upright, wrapped to ``[-pi, pi)``."""
 
     phi_rad: float
     theta_rad: float
@@ -87,9 +72,7 @@ def observation_from_tip(
     er_rad: float,
     er_dot_rad_s: float,
 ) -> Observation:
-    """Build an :class:`Observation` from the hub angle, the tip position and the tip rotation (all with
-    rates): derives the tip angle ``theta = atan2(-ex, ey)`` and its rate, and wraps the angles to
-    ``[-pi, pi)``.  Scalar ``math`` on purpose: it runs once per simulation step."""
+    """The :class:`Observation` of a hub angle, tip position and tip rotation (with rates); ``theta = atan2(-ex, ey)``."""
     r2 = ex_m * ex_m + ey_m * ey_m
     theta = math.atan2(-ex_m, ey_m)
     theta_dot = (ex_m * ey_dot_m_s - ey_m * ex_dot_m_s) / r2 if r2 > 0 else 0.0

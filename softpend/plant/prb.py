@@ -1,11 +1,5 @@
-"""The pseudo-rigid-body (PRB) soft pendulum on Exudyn.
-
-A motor hub (rotor inertia ``J``, viscous friction ``b``, base torque ``tau``) carries a rod of ``n`` equal
-rigid links joined by torsional springs and dampers (see :mod:`softpend.plant.params` for the mapping
-from ``E, W, D`` to the spring constants).  Generalised coordinates are the hub angle ``phi`` measured
-from upright and the ``n`` spring angles (the first between hub and link 1), all counter-clockwise
-positive, so the chain has ``n + 1`` degrees of freedom.
-"""
+"""The pseudo-rigid-body (PRB) soft pendulum on Exudyn: a motor hub carrying ``n`` rigid links joined by
+torsional springs and dampers; coordinates are the hub angle from upright and the ``n`` spring angles."""
 
 from __future__ import annotations
 
@@ -14,7 +8,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.plant.base import PlantBase, SimulationDiverged
+from softpend.plant.base import PlantBase, SimulationDiverged, energies
 from softpend.plant.exudyn_adapter import ChainLink, KinematicChain2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
@@ -23,8 +17,8 @@ __all__ = ["PRBPlant", "SimulationDiverged", "link_inertials"]
 
 
 def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Masses [kg], centres of mass from the link's joint [m] and inertias about the centre of mass [kg m^2]
-    of the ``n`` rod links of ``params``, the tip mass riding on the last link."""
+    """Masses [kg], centres of mass from the joint [m] and inertias about them [kg m^2] of the rod's links,
+    the tip mass on the last."""
     n = params.n_links
     length = params.link_length_m
     masses = np.full(n, params.link_mass_kg)
@@ -42,23 +36,8 @@ def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarra
 class PRBPlant(PlantBase):
     """Soft pendulum as a PRB chain on Exudyn's ``ObjectKinematicTree`` with the implicit solver.
 
-    Parameters
-    ----------
-    params : RodParams, optional
-        Physical parameters (defaults: the project's default rod, see the book's introduction).
-    dt_s : float
-        Control step [s]; the torque is held constant (zero-order hold) over each step.
-    substeps : int
-        Implicit solver steps per control step (at least 2).
-    hub_locked_at_rad : float, optional
-        If given, the hub is clamped at this angle (no hub degree of freedom): a cantilever test rig.
-    spectral_radius : float
-        Generalized-alpha spectral radius (1 = energy-conserving trapezoidal rule for linear systems).
-
-    Notes
-    -----
-    :meth:`step` clips the torque to ``params.torque_limit_nm`` (the motor saturates) and raises
-    :class:`SimulationDiverged` instead of ever returning a non-finite state.
+    ``hub_locked_at_rad`` clamps the hub at that angle (a cantilever; no hub coordinate);
+    ``spectral_radius`` is the generalized-alpha spectral radius (1: no numerical damping).
     """
 
     def __init__(
@@ -71,7 +50,6 @@ class PRBPlant(PlantBase):
     ) -> None:
         self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         p = self.params
-        n = p.n_links
         length = p.link_length_m
         masses, coms, inertias = link_inertials(p)
         self.link_masses_kg = masses
@@ -79,46 +57,32 @@ class PRBPlant(PlantBase):
         self.link_inertias_kgm2 = inertias
         stiffness = p.spring_stiffnesses_nm_per_rad()
         damping = p.spring_dampings_nms_per_rad()
-        rod_links = [
+        links = [
             ChainLink(
-                joint_offset_m=0.0 if i == 0 else length,
-                mass_kg=float(masses[i]),
-                com_m=float(coms[i]),
-                inertia_com_kgm2=float(inertias[i]),
-                stiffness_nm_per_rad=stiffness[i],
-                damping_nms_per_rad=damping[i],
+                0.0 if i == 0 else length,
+                float(masses[i]),
+                float(coms[i]),
+                float(inertias[i]),
+                stiffness[i],
+                damping[i],
             )
-            for i in range(n)
+            for i in range(p.n_links)
         ]
-        if self.hub_locked:
-            links = rod_links
-            base_angle = self._hub_angle_locked
-        else:
-            hub = ChainLink(
-                joint_offset_m=0.0,
-                mass_kg=0.0,
-                com_m=0.0,
-                inertia_com_kgm2=p.hub_inertia_kgm2,
-                stiffness_nm_per_rad=0.0,
-                damping_nms_per_rad=p.hub_friction_nms_per_rad,
-            )
-            links = [hub] + rod_links
-            base_angle = 0.0
+        if not self.hub_locked:
+            links.insert(0, ChainLink(0.0, 0.0, 0.0, p.hub_inertia_kgm2, 0.0, p.hub_friction_nms_per_rad))
         self._hub_offset = 0 if self.hub_locked else 1
         self._chain = KinematicChain2D(
             links=links,
             gravity_mps2=p.gravity_mps2,
             dt_s=self.dt_s,
             substeps=self.substeps,
-            base_angle_rad=base_angle,
+            base_angle_rad=self._hub_angle_locked if self.hub_locked else 0.0,
             spectral_radius=spectral_radius,
         )
         self.n_coordinates = self._chain.n
-        self.last_torque_nm = 0.0
         self._forces = np.zeros(self.n_coordinates)
         self.reset()
 
-    # ------------------------------------------------------------------ state
     @property
     def time_s(self) -> float:
         """Simulated time since the last reset [s]."""
@@ -130,10 +94,9 @@ class PRBPlant(PlantBase):
         self._chain.set_joint_forces(self._forces)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Full joint state ``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
+        """``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
         return self._chain.get_state()
 
-    # ------------------------------------------------------------------ stepping
     def _advance(self, torque_nm: float) -> None:
         if not self.hub_locked:
             self._forces[0] = torque_nm
@@ -147,25 +110,17 @@ class PRBPlant(PlantBase):
         self._chain.solve_static()
 
     def linearized_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(M, K, D)`` of the joint-space dynamics linearised at the current state by Exudyn.
-
-        ``M dq_dd + D dq_d + K dq = B tau`` with ``B = e_0`` (the torque acts on the hub coordinate).
-        """
+        """``(M, K, D)`` of ``M dq_dd + D dq_d + K dq = e_0 tau`` linearised at the current state by Exudyn."""
         return self._chain.linearized_system()
 
-    # ------------------------------------------------------------------ kinematics
     def _absolute_angles(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Absolute angle (from upright) and rate of each rod link."""
         if self.hub_locked:
-            a = self._hub_angle_locked + np.cumsum(q)
-            ad = np.cumsum(qd)
-        else:
-            a = np.cumsum(q)[1:]
-            ad = np.cumsum(qd)[1:]
-        return a, ad
+            return self._hub_angle_locked + np.cumsum(q), np.cumsum(qd)
+        return np.cumsum(q)[1:], np.cumsum(qd)[1:]
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
-        """Positions ``(n + 1, 2)`` of the hub axis, every joint and the tip [m] (for drawing)."""
+        """Positions ``(n + 1, 2)`` of the hub axis, every joint and the tip [m]."""
         if q is None:
             q, _ = self.joint_state()
         a, _ = self._absolute_angles(np.asarray(q, float), np.zeros_like(q, dtype=float))
@@ -174,29 +129,23 @@ class PRBPlant(PlantBase):
         return np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
 
     def observe(self) -> Observation:
-        """The report's observed variables for the current state."""
         q, qd = self._chain.get_state_lists()
         return self.observation_from_state(q, qd)
 
     def observation_from_state(self, q, qd) -> Observation:
-        """Observation for a given joint state (does not change the plant).
-
-        Written with scalar ``math`` on purpose: for chains of a few links it is several times faster
-        than NumPy, and it runs once per environment step.
-        """
+        """Observation of a joint state (scalar ``math``: faster than NumPy for a few links)."""
         length = self.params.link_length_m
-        if self.hub_locked:
-            angle, rate = self._hub_angle_locked, 0.0
-            phi, phi_dot = self._hub_angle_locked, 0.0
-            start = 0
+        locked = self.hub_locked
+        if locked:
+            angle = phi = self._hub_angle_locked
+            rate = phi_dot = 0.0
         else:
-            angle, rate = float(q[0]), float(qd[0])
-            phi, phi_dot = angle, rate
-            start = 1
+            angle = phi = float(q[0])
+            rate = phi_dot = float(qd[0])
         ex = ey = ex_dot = ey_dot = 0.0
         sin, cos = math.sin, math.cos
-        for i in range(start, len(q)):
-            if self.hub_locked and i == 0:
+        for i in range(0 if locked else 1, len(q)):
+            if locked and i == 0:
                 angle = self._hub_angle_locked + float(q[0])
                 rate = float(qd[0])
             else:
@@ -209,36 +158,24 @@ class PRBPlant(PlantBase):
             ey_dot -= length * s_a * rate
         return observation_from_tip(phi, phi_dot, ex, ey, ex_dot, ey_dot, angle, rate)
 
-    # ------------------------------------------------------------------ energy
     def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:
-        """Kinetic, gravitational and elastic energy [J], computed from the geometry (not by Exudyn)."""
+        """Kinetic, gravitational and elastic energy [J], from the geometry."""
         if q is None or qd is None:
             q, qd = self.joint_state()
         a, ad = self._absolute_angles(q, qd)
         length = self.params.link_length_m
-        g = self.params.gravity_mps2
-        # joint heights and velocities (start of each link)
         uy = np.cos(a)
         joint_y = np.concatenate([[0.0], np.cumsum(length * uy)[:-1]])
-        vx_step = -length * np.cos(a) * ad
-        vy_step = -length * np.sin(a) * ad
-        joint_vx = np.concatenate([[0.0], np.cumsum(vx_step)[:-1]])
-        joint_vy = np.concatenate([[0.0], np.cumsum(vy_step)[:-1]])
+        joint_vx = np.concatenate([[0.0], np.cumsum(-length * np.cos(a) * ad)[:-1]])
+        joint_vy = np.concatenate([[0.0], np.cumsum(-length * np.sin(a) * ad)[:-1]])
         c = self.link_coms_m
-        com_y = joint_y + c * uy
         com_vx = joint_vx - c * np.cos(a) * ad
         com_vy = joint_vy - c * np.sin(a) * ad
         m = self.link_masses_kg
         kinetic = float(np.sum(0.5 * m * (com_vx**2 + com_vy**2) + 0.5 * self.link_inertias_kgm2 * ad**2))
         if not self.hub_locked:
             kinetic += 0.5 * self.params.hub_inertia_kgm2 * float(qd[0]) ** 2
-        gravity = float(np.sum(m * g * com_y))
+        gravity = float(np.sum(m * self.params.gravity_mps2 * (joint_y + c * uy)))
         springs = np.asarray(self.params.spring_stiffnesses_nm_per_rad())
-        bend = q[self._hub_offset :]
-        elastic = float(0.5 * np.sum(springs * bend**2))
-        return {
-            "kinetic_j": kinetic,
-            "gravity_j": gravity,
-            "elastic_j": elastic,
-            "total_j": kinetic + gravity + elastic,
-        }
+        elastic = float(0.5 * np.sum(springs * q[self._hub_offset :] ** 2))
+        return energies(kinetic, gravity, elastic)

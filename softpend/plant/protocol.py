@@ -1,4 +1,4 @@
-"""The interface every plant implements (:class:`Plant`), as a protocol type checkers see."""
+"""The interface every plant implements, as a protocol type checkers see."""
 
 from __future__ import annotations
 
@@ -14,11 +14,8 @@ __all__ = ["Plant"]
 
 @runtime_checkable
 class Plant(Protocol):
-    """What every plant offers (:class:`~softpend.plant.PRBPlant`, :class:`~softpend.plant.beam.BeamPlant`):
-    the interface environments, controllers, the evaluation and the rig emulator rely on.
-
-    ``q`` is the plant's coordinate vector, hub angle first (unwrapped) unless the hub is locked.
-    """
+    """What environments, controllers, the evaluation and the rig emulator use of a plant; ``q`` is the
+    coordinate vector, hub angle first (unwrapped) unless the hub is locked."""
 
     params: RodParams
     dt_s: float
@@ -36,10 +33,10 @@ class Plant(Protocol):
         """Restart from ``(q, q_dot)`` (default: the straight rod upright at rest)."""
 
     def step(self, torque_nm: float) -> Observation:
-        """Hold ``torque_nm`` (saturated at ``params.torque_limit_nm``) for one step ``dt_s``."""
+        """Hold ``torque_nm`` (saturated) for one step ``dt_s``."""
 
     def observe(self) -> Observation:
-        """The report's observed variables now."""
+        """The observed variables now."""
 
     def observation_from_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
         """The observation of a given state (the plant is not changed)."""
@@ -51,7 +48,7 @@ class Plant(Protocol):
         """The straight rod hanging down at rest."""
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
-        """Points along the rod, hub first [m] (for drawing)."""
+        """Points along the rod, hub first [m]."""
 
     def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:
         """Kinetic, gravitational, elastic and total energy [J]."""

@@ -1,10 +1,4 @@
-"""Rods that differ from the model: random scalings of a :class:`~softpend.plant.RodParams` within a spread.
-
-Domain randomisation for training and the robustness evaluation draw rods the same way: every field of
-:data:`RANDOMISED_FIELDS` is multiplied by its own factor drawn uniformly from ``[1 - spread, 1 + spread]``.
-The fields are those a built rig gets wrong: the rod's mass, stiffness (Young's modulus) and joint damping,
-the hub's friction, and the torque the motor really delivers.
-"""
+"""Rods that differ from the model: random scalings of a :class:`~softpend.plant.RodParams` within a spread."""
 
 from __future__ import annotations
 
@@ -15,7 +9,7 @@ from softpend.plant.params import RodParams
 
 __all__ = ["RANDOMISED_FIELDS", "randomised_rod"]
 
-#: The fields scaled by :func:`randomised_rod`.
+#: The fields scaled by :func:`randomised_rod`: what a built rig gets wrong.
 RANDOMISED_FIELDS = (
     "mass_kg",
     "youngs_modulus_pa",
@@ -26,9 +20,8 @@ RANDOMISED_FIELDS = (
 
 
 def randomised_rod(rod: RodParams, rng: np.random.Generator, spread: float) -> RodParams:
-    """A copy of ``rod`` with each of :data:`RANDOMISED_FIELDS` scaled by a factor uniform in
-    ``[1 - spread, 1 + spread]`` (``spread`` a fraction in ``[0, 1)``, e.g. 0.15 for +-15 %), drawn from ``rng``
-    in the order of :data:`RANDOMISED_FIELDS`."""
+    """``rod`` with each of :data:`RANDOMISED_FIELDS` scaled by a factor uniform in ``[1 - spread, 1 + spread]``
+    drawn from ``rng`` in that order (``spread`` in ``[0, 1)``)."""
     spread = in_unit_interval("spread", spread, include_one=False)
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")

@@ -10,12 +10,9 @@ import numpy as np
 from softpend.vision.camera import CameraEffects, SyntheticCamera
 from softpend.vision.tracker import TipTracker
 
-__all__ = ["TrackingErrors", "babbling_trajectory", "tracking_errors"]
-
 
 def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.2):
-    """A simulated babbling trajectory of the default rod (band-limited random torque, as
-    :func:`softpend.sysid.babble`): times [s], link points ``(T, n + 1, 2)`` [m], hub angles [rad]."""
+    """A babbling trajectory of the default rod: times [s], link points ``(T, n + 1, 2)`` [m], hub angles [rad]."""
     from softpend.plant import RodParams, make_plant
     from softpend.sysid.babble import band_limited_noise
 
@@ -40,7 +37,7 @@ def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.
 
 @dataclass
 class TrackingErrors:
-    """Per-frame tracking error: ``error_px`` (F, 2) tracked minus true pixel position (NaN when lost)."""
+    """Per-frame tracked minus true pixel position ``error_px`` (F, 2) (NaN when lost)."""
 
     time_s: np.ndarray
     error_px: np.ndarray
@@ -60,8 +57,7 @@ def tracking_errors(
     tracker: Optional[TipTracker] = None,
     keep_frames: bool = False,
 ):
-    """Render ``n_frames`` frames of ``trajectory`` (from :func:`babbling_trajectory`) at its sample
-    times and track them; returns :class:`TrackingErrors` (and the frames if ``keep_frames``)."""
+    """:class:`TrackingErrors` (and the frames if ``keep_frames``) of ``n_frames`` frames of ``trajectory``."""
     times, points, hub = trajectory
     if not 1 <= n_frames < len(times):
         raise ValueError(f"n_frames must be in [1, {len(times) - 1}], got {n_frames!r}")

@@ -1,10 +1,5 @@
-"""Affine pixel-to-metre calibration from reference markers.
-
-The rod moves in one plane, so the camera maps that plane to the image by an affine map (the report's
-affine projection).  Reference markers at known positions in the rod's plane (metres, hub axis at the
-origin, y up) are detected in a frame (:func:`softpend.vision.tracker.find_blobs`), matched to the known
-positions, and the 2x3 affine map pixel -> metre is fitted by least squares.
-"""
+"""Affine pixel-to-metre calibration, fitted by least squares to reference markers at known positions in the
+rod's plane (metres, hub axis at the origin, y up)."""
 
 from __future__ import annotations
 
@@ -20,22 +15,13 @@ import numpy as np
 from softpend.checks import non_negative
 from softpend.vision.tracker import GREEN_HSV, ColourRange, find_blobs
 
-__all__ = [
-    "AffineCalibration",
-    "calibrate_from_markers",
-    "fit_affine",
-    "points_array",
-    "read_json_file",
-    "tip_angle_rad",
-]
-
-#: Largest calibration file read [bytes] (a calibration is a few hundred bytes).
+#: Largest calibration or marker file read [bytes].
 MAX_CALIBRATION_BYTES = 1 << 20
 
 
 def points_array(name: str, value, n_min: int = 1, n_max: Optional[int] = None) -> np.ndarray:
     """``value`` as a finite ``(n, 2)`` float array with ``n_min <= n <= n_max``, else ``ValueError`` naming
-    ``name`` (ragged lists, strings, dicts, NaN and wrong shapes are refused)."""
+    ``name``."""
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -49,11 +35,25 @@ def points_array(name: str, value, n_min: int = 1, n_max: Optional[int] = None) 
 
 
 def read_json_file(name: str, path: str | Path, max_bytes: int):
-    """Parse the JSON file at ``path``; a file over ``max_bytes``, malformed or too deeply nested JSON raises
-    ``ValueError`` naming ``name`` and the file (a missing file raises ``FileNotFoundError``)."""
+    """The JSON document in the regular file at ``path`` (``ValueError`` naming ``name`` and the file)."""
     from softpend.io.reading import read_json_checked
 
-    return read_json_checked(path, f"{name} file", max_bytes)  # a regular file only, read with the bound
+    return read_json_checked(path, f"{name} file", max_bytes)
+
+
+def read_markers(name: str, text: Optional[str]) -> Optional[list]:
+    """A ``--markers`` argument, a JSON list ``[[x, y], ...]`` or a file holding one, as 3 to 6 marker
+    positions [m] (None for None or an empty argument)."""
+    if not text:
+        return None
+    if text.lstrip().startswith("["):
+        try:
+            markers = json.loads(text)
+        except (ValueError, RecursionError) as exc:
+            raise ValueError(f"{name} is not a valid JSON list: {exc}") from None
+    else:
+        markers = read_json_file(name, text, MAX_CALIBRATION_BYTES)
+    return points_array(name, markers, 3, 6).tolist()
 
 
 def _short(value, limit: int = 120) -> str:
@@ -83,15 +83,8 @@ def tip_angle_rad(x_m: np.ndarray | float, y_m: np.ndarray | float) -> np.ndarra
 
 @dataclass(frozen=True)
 class AffineCalibration:
-    """Pixel <-> metre affine map.
-
-    Attributes
-    ----------
-    pixel_to_metre : ndarray, shape (2, 3)
-        ``[x_m, y_m] = A @ [x_px, y_px, 1]``.
-    residual_rms_m : float
-        RMS residual of the markers after the fit [m] (0 for an exact map).
-    """
+    """The pixel -> metre map ``[x_m, y_m] = pixel_to_metre @ [x_px, y_px, 1]`` and the RMS residual of the
+    markers after the fit [m]."""
 
     pixel_to_metre: np.ndarray
     residual_rms_m: float = 0.0
@@ -100,21 +93,13 @@ class AffineCalibration:
         try:
             a = np.array(self.pixel_to_metre, dtype=float)
         except (TypeError, ValueError, OverflowError):
-            raise ValueError(
-                f"pixel_to_metre must be a finite (2, 3) matrix, got {_short(self.pixel_to_metre)}"
-            ) from None
+            a = np.full(0, math.nan)
         if a.shape != (2, 3) or not np.all(np.isfinite(a)):
-            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got shape {a.shape}")
+            raise ValueError(f"pixel_to_metre must be a finite (2, 3) matrix, got {_short(self.pixel_to_metre)}")
         if abs(np.linalg.det(a[:, :2])) < 1e-15:
             raise ValueError("pixel_to_metre is singular")
         object.__setattr__(self, "pixel_to_metre", a)
         object.__setattr__(self, "residual_rms_m", non_negative("residual_rms_m", self.residual_rms_m))
-
-    @property
-    def metre_to_pixel(self) -> np.ndarray:
-        """The inverse map as a 2x3 matrix."""
-        linear = np.linalg.inv(self.pixel_to_metre[:, :2])
-        return np.column_stack([linear, -linear @ self.pixel_to_metre[:, 2]])
 
     def to_metres(self, points_px: np.ndarray) -> np.ndarray:
         """Map ``(..., 2)`` pixel coordinates to metres (NaN stays NaN)."""
@@ -123,7 +108,8 @@ class AffineCalibration:
 
     def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
         """Map ``(..., 2)`` metre coordinates to pixels."""
-        inverse = self.metre_to_pixel
+        linear = np.linalg.inv(self.pixel_to_metre[:, :2])
+        inverse = np.column_stack([linear, -linear @ self.pixel_to_metre[:, 2]])
         return np.asarray(points_m, dtype=float) @ inverse[:, :2].T + inverse[:, 2]
 
     @property
@@ -154,17 +140,9 @@ class AffineCalibration:
             raise ValueError(f"calibration has unknown keys {unknown}")
         return cls(data["pixel_to_metre"], data.get("residual_rms_m", 0.0))
 
-    def save(self, path: str | Path) -> None:
-        """Write :meth:`to_json` to ``path`` atomically (``softpend rig calibrate`` writes through
-        :class:`softpend.io.outputs.Outputs`, which also refuses a file it did not write)."""
-        from softpend.io.outputs import atomic_write
-
-        with atomic_write(path, "w") as handle:
-            handle.write(self.to_json())
-
     @classmethod
     def load(cls, path: str | Path) -> "AffineCalibration":
-        """Read a file written by :meth:`save` (``ValueError`` naming the file if it is not one)."""
+        """Read a file holding :meth:`to_json` output (``ValueError`` naming the file if it is not one)."""
         data = read_json_file("calibration", path, MAX_CALIBRATION_BYTES)
         try:
             return cls._from_data(data)
@@ -178,29 +156,8 @@ def calibrate_from_markers(
     colour: ColourRange = GREEN_HSV,
     min_area_px: float = 10.0,
 ) -> AffineCalibration:
-    """Detect the reference markers in ``frame_bgr`` and fit the pixel -> metre map.
-
-    Parameters
-    ----------
-    frame_bgr : ndarray
-        A BGR frame showing all markers.
-    marker_positions_m : sequence of (x, y)
-        Known marker positions in the rod plane [m] (hub axis at the origin, y up); 3 to 6 markers.
-    colour : ColourRange
-        Marker colour.
-    min_area_px : float
-        Smallest marker blob [px^2].
-
-    Returns
-    -------
-    AffineCalibration
-        The fit with the marker correspondence (tried over all orderings) of smallest residual.
-
-    Raises
-    ------
-    ValueError
-        If the number of markers is out of range or fewer markers than expected are visible.
-    """
+    """Detect the 3 to 6 reference markers at ``marker_positions_m`` [m] in ``frame_bgr`` and fit the
+    pixel -> metre map: the handedness-preserving marker correspondence of smallest residual."""
     known = points_array("marker_positions_m", marker_positions_m, 3, 6)
     blobs = find_blobs(frame_bgr, colour, min_area_px)[: len(known)]
     if len(blobs) < len(known):
@@ -215,9 +172,7 @@ def calibrate_from_markers(
             continue
         residual = target - (pixels @ a[:, :2].T + a[:, 2])
         rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-        # a mirror image fits as well as the truth; keep maps that preserve handedness
-        # (image y points down, metre y up, so det(A) < 0)
-        if np.linalg.det(a[:, :2]) >= 0:
+        if np.linalg.det(a[:, :2]) >= 0:  # a mirror image (image y points down, metre y up: det(A) < 0)
             continue
         if best is None or rms < best[0]:
             best = (rms, a)

@@ -1,27 +1,5 @@
-"""Live tip measurements: a camera (real, recorded or synthetic) plus the Algorithm 1 tracker, frame by frame.
-
-A :class:`TipSource` delivers :class:`TipMeasurement` objects -- the tip position relative to the hub in
-metres, or ``lost`` -- each stamped with its *capture time* on the host clock (``time.monotonic()`` on a rig,
-the simulated clock on the twin; the middle of the exposure), so that a state estimator can place a
-measurement that arrives late at the instant it describes.  The real and recorded cameras grab and track frames
-on a background thread as they arrive; :meth:`TipSource.poll` returns what has been tracked since the previous
-call, oldest first.
-
-Two sources share the tracking (:class:`FrameTracker`: the tracker of :mod:`softpend.vision.tracker`
-and an affine calibration, fitted from the reference markers on the first frame unless one is given):
-
-* :class:`SyntheticLiveCamera` -- the digital twin's camera, in simulated time: renders frames of a *live*
-  :class:`Scene` (the twin's poses, :attr:`softpend.hardware.emulator.SimRig.poses`) at a frame rate (30, 60,
-  120 frames/s ...) with the exposure and imperfections of :class:`~softpend.vision.camera.CameraEffects`;
-  each frame reaches the tracker ``latency_s`` after the end of its exposure (sensor read-out and transfer),
-  and :class:`CameraFaults` injects stalls, dropped frames and occlusions of the dot.
-* :class:`CaptureTipSource` -- ``cv2.VideoCapture`` on a device index (``0``), a stream URL or a video file; the
-  capture time is the host time at which the frame was read minus the camera's known ``latency_s``.
-
-:func:`open_tip_source` builds it from a ``--camera`` argument.  No physical camera was available
-when this module was written: :class:`CaptureTipSource` is exercised with video files (which
-``cv2.VideoCapture`` opens the same way), and the loop with the synthetic live camera.
-"""
+"""Live tip measurements: a camera (real, recorded or the twin's synthetic one) plus the tracker, frame by frame,
+each measurement stamped with its capture time on the host clock (:func:`open_tip_source` for ``--camera``)."""
 
 from __future__ import annotations
 
@@ -40,38 +18,11 @@ from softpend.vision.calibration import AffineCalibration, calibrate_from_marker
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot, check_fps
 from softpend.vision.tracker import Detection, TipTracker
 
-__all__ = [
-    "CameraFaults",
-    "CaptureTipSource",
-    "FrameTracker",
-    "PoseHistory",
-    "Scene",
-    "SyntheticLiveCamera",
-    "ThreadedTipSource",
-    "TipMeasurement",
-    "TipSource",
-    "open_tip_source",
-]
-
 
 @dataclass(frozen=True)
 class TipMeasurement:
-    """One tracked frame: the tip position relative to the hub [m] (NaN and ``lost=True`` when no blob
-    qualified).
-
-    Attributes
-    ----------
-    x_m, y_m : float
-        Tip position in the rod plane, hub axis at the origin, y up [m].
-    lost : bool
-        The tracker found no dot in this frame.
-    capture_time_s : float
-        Host clock (``time.monotonic()``) at the middle of the frame's exposure [s] (NaN if unknown).
-    frame : int
-        Index of the frame in its source (-1 if unknown).
-    delivered_time_s : float
-        Host clock when the tracker's answer was ready [s] (NaN if unknown).
-    """
+    """One tracked frame: the tip relative to the hub [m] (NaN when ``lost``), the host time at the middle of
+    the exposure and when the answer was ready [s], and the frame's index in its source."""
 
     x_m: float
     y_m: float
@@ -87,40 +38,25 @@ class TipMeasurement:
 
     @property
     def age_s(self) -> float:
-        """Delivery minus capture time [s]: the latency the measurement reached its user with."""
+        """Delivery minus capture time [s]."""
         return self.delivered_time_s - self.capture_time_s
 
 
 class TipSource(Protocol):
-    """A camera with a tracker behind it (see the module docstring)."""
+    """A camera with a tracker behind it: ``poll`` returns the measurements since the last call, oldest first."""
 
-    def start(self) -> None:
-        """Begin grabbing and tracking frames (on a background thread)."""
+    def start(self) -> None: ...
 
-    def poll(self) -> list[TipMeasurement]:
-        """The measurements tracked since the previous call, oldest first (re-raises an error of the
-        background thread)."""
+    def poll(self) -> list[TipMeasurement]: ...
 
-    def close(self) -> None:
-        """Stop grabbing and release the camera."""
+    def close(self) -> None: ...
 
-    def stats(self) -> dict[str, float]:
-        """Counters: frames tracked, lost, dropped, and the delivery latency."""
+    def stats(self) -> dict[str, float]: ...
 
 
-# ---------------------------------------------------------------------- tracking
 class FrameTracker:
-    """Algorithm 1 on a frame, mapped to metres: a :class:`TipTracker` plus an affine calibration.
-
-    Parameters
-    ----------
-    tracker : TipTracker, optional
-        The tracker (default ``TipTracker()``).
-    calibration : AffineCalibration, optional
-        Pixel -> metre map; without it, it is fitted on the first frame from ``markers_m``.
-    markers_m : sequence of (x, y)
-        Reference-marker layout in the rod plane [m] (used only without ``calibration``).
-    """
+    """A :class:`TipTracker` plus a pixel -> metre calibration (fitted on the first frame from ``markers_m``
+    unless given)."""
 
     def __init__(
         self,
@@ -128,10 +64,6 @@ class FrameTracker:
         calibration: Optional[AffineCalibration] = None,
         markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M,
     ) -> None:
-        if tracker is not None and not isinstance(tracker, TipTracker):
-            raise ValueError(f"tracker must be a TipTracker, got {type(tracker).__name__}")
-        if calibration is not None and not isinstance(calibration, AffineCalibration):
-            raise ValueError(f"calibration must be an AffineCalibration, got {type(calibration).__name__}")
         self.tracker = tracker if tracker is not None else TipTracker()
         self.calibration = calibration
         self.markers_m = markers_m
@@ -151,29 +83,16 @@ FrameHook = Callable[[int, np.ndarray, Detection, "TipMeasurement"], None]
 
 
 class ThreadedTipSource:
-    """Shared machinery of the sources: a daemon thread runs :meth:`_run`, which calls :meth:`_deliver` for
-    each tracked frame; :meth:`poll` drains the queue.  An exception on the thread ends it and is raised by
-    the next :meth:`poll`.  Use as a context manager (``start`` on enter, ``close`` on exit).
-
-    Parameters
-    ----------
-    frame_tracker : FrameTracker, optional
-        Tracking and calibration (default ``FrameTracker()``).
-    on_frame : callable, optional
-        ``on_frame(index, frame, detection, measurement)`` after each tracked frame (on the thread), e.g.
-        to keep frames for a figure.
-    max_queue : int
-        Measurements kept when nobody polls (the oldest are dropped first).
-    """
+    """A daemon thread runs :meth:`_run`, which calls :meth:`_deliver` per frame; :meth:`poll` drains the
+    queue and re-raises an error of the thread.  ``on_frame(index, frame, detection, measurement)`` runs after
+    each tracked frame.  A context manager (``start`` on enter, ``close`` on exit)."""
 
     name = "camera"
 
-    def __init__(
-        self, frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None, max_queue: int = 10000
-    ) -> None:
+    def __init__(self, frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
         self.frame_tracker = frame_tracker if frame_tracker is not None else FrameTracker()
         self.on_frame = on_frame
-        self._queue: collections.deque[TipMeasurement] = collections.deque(maxlen=int(max_queue))
+        self._queue: collections.deque[TipMeasurement] = collections.deque(maxlen=10000)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -183,12 +102,10 @@ class ThreadedTipSource:
         self.frames_dropped = 0
         self._ages_s: list[float] = []
 
-    # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
-        if self._thread is not None:
-            return
-        self._thread = threading.Thread(target=self._guarded_run, name=f"softpend-{self.name}", daemon=True)
-        self._thread.start()
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._guarded_run, name=f"softpend-{self.name}", daemon=True)
+            self._thread.start()
 
     def _guarded_run(self) -> None:
         try:
@@ -205,7 +122,7 @@ class ThreadedTipSource:
 
     @property
     def finished(self) -> bool:
-        """The source has ended (end of a video, camera closed, or an error) and everything was polled."""
+        """The source has ended and everything was polled."""
         return self._thread is not None and not self._thread.is_alive() and not self._queue
 
     def __enter__(self):
@@ -215,7 +132,6 @@ class ThreadedTipSource:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    # ------------------------------------------------------------------ consumer side
     def poll(self) -> list[TipMeasurement]:
         with self._lock:
             out = list(self._queue)
@@ -235,17 +151,16 @@ class ThreadedTipSource:
             "delivery_latency_ms_p95": float(np.percentile(ages, 95)) if ages.size else math.nan,
         }
 
-    # ------------------------------------------------------------------ producer side
     def _run(self) -> None:
         raise NotImplementedError
 
     def _release(self) -> None:
-        """Free the camera (called on the thread when :meth:`_run` ends)."""
+        """Free the camera (on the thread, when :meth:`_run` ends)."""
 
     def _deliver(
         self, index: int, frame: np.ndarray, capture_time_s: float, delivered_time_s: Optional[float] = None
     ) -> TipMeasurement:
-        """Track ``frame`` now and queue its measurement (delivered now on the host clock, unless given)."""
+        """Track ``frame`` and queue its measurement (delivered now on the host clock, unless given)."""
         x_m, y_m, detection = self.frame_tracker(frame)
         delivered = time.monotonic() if delivered_time_s is None else delivered_time_s
         measurement = TipMeasurement(x_m, y_m, bool(detection.lost), float(capture_time_s), int(index), delivered)
@@ -259,24 +174,8 @@ class ThreadedTipSource:
         return measurement
 
 
-# ---------------------------------------------------------------------- scenes
-class Scene(Protocol):
-    """What the synthetic live camera films: the rod's pose as a function of the (host's) time."""
-
-    def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
-        """Link points ``(n + 1, 2)`` (hub first) [m] and the hub angle [rad] at time ``time_s``."""
-
-
 class PoseHistory:
-    """Recent joint positions of a PRB rod on the host clock, interpolated to any time in between.
-
-    Parameters
-    ----------
-    link_points : callable
-        ``link_points(q) -> (n + 1, 2)`` points along the rod [m] (e.g. ``plant.link_points_m``).
-    keep_s : float
-        How much history is kept [s].
-    """
+    """Recent joint positions of a PRB rod on the host clock; ``link_points(q)`` gives the rod's points [m]."""
 
     def __init__(self, link_points: Callable[[np.ndarray], np.ndarray], keep_s: float = 2.0) -> None:
         self.link_points = link_points
@@ -308,26 +207,15 @@ class PoseHistory:
         return (1.0 - w) * self._q[i] + w * self._q[i + 1]
 
     def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
+        """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``."""
         q = self.q_at(time_s)
         return self.link_points(q), float(q[0])
 
 
-# ---------------------------------------------------------------------- the synthetic live camera
 @dataclass(frozen=True)
 class CameraFaults:
-    """Faults of the synthetic live camera (none by default).
-
-    Parameters
-    ----------
-    drop_probability : float
-        Probability that a frame never reaches the host.
-    occlusions_s : sequence of (start, end)
-        Windows of time since the first frame [s] in which the dot is hidden (the tracker reports lost).
-    stall_after_s : float, optional
-        The camera delivers nothing after this much time since its first frame [s] (a frozen driver).
-    seed : int
-        Seed of the drop draws.
-    """
+    """Faults of the synthetic live camera: the probability that a frame never arrives (drawn with ``seed``),
+    windows ``(start, end)`` [s since the first frame] with the dot hidden, and a stall after a time [s]."""
 
     drop_probability: float = 0.0
     occlusions_s: tuple[tuple[float, float], ...] = ()
@@ -354,41 +242,15 @@ class CameraFaults:
 
 
 class SyntheticLiveCamera(ThreadedTipSource):
-    """The twin's camera: film a live :class:`Scene` on a simulated clock and track every frame.
-
-    Frame ``k`` is exposed over ``[t_k - exposure_s, t_k]`` with ``t_k = t_first + k / fps`` (``t_first``: the
-    clock's time at :meth:`start` plus the exposure); it is rendered and tracked when the clock reaches
-    ``t_k + latency_s``, its delivery time, and stamped with its capture time ``t_k - exposure_s / 2``.  The
-    clock (:class:`~softpend.hardware.clock.SimClock`) runs the frames as events, so rendering and tracking cost
-    computer time but no simulated time, and the same seeds give the same measurements.
-
-    Parameters
-    ----------
-    scene : Scene
-        What is filmed (the twin's :attr:`~softpend.hardware.emulator.SimRig.poses`).
-    clock : SimClock
-        The twin's clock.
-    fps : float
-        Frame rate [1/s].
-    latency_s : float
-        End of exposure to the frame's arrival at the tracker [s].
-    effects : CameraEffects, optional
-        Exposure blur, noise and lighting (default :meth:`CameraEffects.rig`).
-    model : CameraModel, optional
-        Camera geometry (default :class:`CameraModel`, 640x480).
-    faults : CameraFaults, optional
-        Injected stalls, drops and occlusions.
-    seed : int
-        Seed of the image noise.
-    frame_tracker, on_frame :
-        See :class:`ThreadedTipSource`.
-    """
+    """The twin's camera on its simulated ``clock``: frame ``k`` is exposed until ``t_k = t_first + k / fps``,
+    rendered from ``scene.pose_at`` and tracked at ``t_k + latency_s``, and stamped with its capture time
+    ``t_k - exposure_s / 2``.  ``effects`` default to :meth:`CameraEffects.rig`; ``seed`` draws image noise."""
 
     name = "synthetic-camera"
 
     def __init__(
         self,
-        scene: Scene,
+        scene: PoseHistory,
         clock,
         fps: float = 60.0,
         latency_s: float = 0.02,
@@ -404,9 +266,8 @@ class SyntheticLiveCamera(ThreadedTipSource):
         self.clock = clock
         self.fps = check_fps("fps", fps)
         self.latency_s = non_negative("latency_s", latency_s)
-        self.camera = SyntheticCamera(
-            model=model, effects=effects if effects is not None else CameraEffects.rig(), seed=seed
-        )
+        effects = effects if effects is not None else CameraEffects.rig()
+        self.camera = SyntheticCamera(model=model, effects=effects, seed=seed)
         self.faults = faults if faults is not None else CameraFaults()
         self._rng = np.random.default_rng(self.faults.seed)
         self.frames_stalled = 0
@@ -446,34 +307,13 @@ class SyntheticLiveCamera(ThreadedTipSource):
         self._deliver(k, frame, t_k - self.camera.effects.exposure_s / 2, self.clock.now_s())
 
     def stats(self) -> dict[str, float]:
-        out = super().stats()
-        out["frames_stalled"] = float(self.frames_stalled)
-        out["frames_occluded"] = float(self.frames_occluded)
-        return out
+        stalled, occluded = float(self.frames_stalled), float(self.frames_occluded)
+        return {**super().stats(), "frames_stalled": stalled, "frames_occluded": occluded}
 
 
-# ---------------------------------------------------------------------- recorded and real cameras
 class CaptureTipSource(ThreadedTipSource):
-    """A live camera through ``cv2.VideoCapture``: a device index (``0``) or a stream URL.
-
-    Each frame is tracked as soon as it is read; its capture time is the host time of the read minus
-    ``latency_s``, the camera's exposure-to-host latency, which must be measured for the camera at hand
-    (e.g. by filming the host's own clock).  A device that delivers no frame for ``timeout_s`` ends the
-    source (the consumer sees no more measurements and decides what that means).
-
-    Parameters
-    ----------
-    device : int or str
-        Device index or URL (any source ``cv2.VideoCapture`` opens, video files included).
-    latency_s : float
-        Exposure-to-host latency subtracted from the read time [s].
-    fps : float, optional
-        Frame rate to request from the device.
-    timeout_s : float
-        Longest wait for a frame [s].
-    frame_tracker, on_frame :
-        See :class:`ThreadedTipSource`.
-    """
+    """``cv2.VideoCapture`` on a device index, stream URL or video file.  A frame's capture time is the host
+    time of its read minus the camera's ``latency_s``; no frame for ``timeout_s`` ends the source."""
 
     name = "capture"
 
@@ -481,24 +321,20 @@ class CaptureTipSource(ThreadedTipSource):
         self,
         device: int | str,
         latency_s: float = 0.0,
-        fps: Optional[float] = None,
         timeout_s: float = 2.0,
         frame_tracker: Optional[FrameTracker] = None,
-        on_frame: Optional[FrameHook] = None,
     ) -> None:
         import cv2
 
         if isinstance(device, bool) or not isinstance(device, (int, str)) or device == "":
             raise ValueError(f"device must be a camera index or a URL, got {device!r}")
-        super().__init__(frame_tracker, on_frame)
+        super().__init__(frame_tracker)
         self.device = device
         self.latency_s = non_negative("latency_s", latency_s)
         self.timeout_s = positive("timeout_s", timeout_s)
         self._capture = cv2.VideoCapture(device)
         if not self._capture.isOpened():
             raise ValueError(f"camera {device!r} cannot be opened by OpenCV (no such device or stream)")
-        if fps is not None:
-            self._capture.set(cv2.CAP_PROP_FPS, check_fps("fps", fps))
 
     def _run(self) -> None:
         index = 0
@@ -511,7 +347,7 @@ class CaptureTipSource(ThreadedTipSource):
                     return
                 self._stop.wait(0.005)
                 if isinstance(self.device, str) and Path(self.device).is_file():
-                    return  # the end of a file: no more frames will come
+                    return  # the end of a file
                 continue
             last_frame = now
             self._deliver(index, frame, now - self.latency_s)
@@ -521,25 +357,21 @@ class CaptureTipSource(ThreadedTipSource):
         self._capture.release()
 
 
-#: Largest camera device index a ``--camera`` argument may name.
+#: Largest camera device index a ``--camera`` argument may name (OpenCV takes a C int).
 MAX_DEVICE_INDEX = 10_000
 
 
 def open_tip_source(
-    camera: str,
-    latency_s: float = 0.0,
-    fps: Optional[float] = None,
-    frame_tracker: Optional[FrameTracker] = None,
-    on_frame: Optional[FrameHook] = None,
+    camera: str, latency_s: float = 0.0, frame_tracker: Optional[FrameTracker] = None
 ) -> CaptureTipSource:
     """The :class:`CaptureTipSource` of a ``--camera`` argument: digits are a device index, anything else a
-    stream URL or a file that ``cv2.VideoCapture`` opens."""
+    stream URL or a file."""
     if not isinstance(camera, str) or not camera.strip():
         raise ValueError(f"camera must be a device index or a URL, got {camera!r}")
     from softpend.io.reading import check_capture_path
 
     check_capture_path("camera", camera)  # a FIFO or folder would block the capture
     device: int | str = int(camera) if camera.strip().isdigit() else camera
-    if isinstance(device, int) and device > MAX_DEVICE_INDEX:  # OpenCV takes a C int (and reads it as a pattern)
+    if isinstance(device, int) and device > MAX_DEVICE_INDEX:
         raise ValueError(f"camera index must lie in [0, {MAX_DEVICE_INDEX}], got {camera!r}")
-    return CaptureTipSource(device, latency_s=latency_s, fps=fps, frame_tracker=frame_tracker, on_frame=on_frame)
+    return CaptureTipSource(device, latency_s=latency_s, frame_tracker=frame_tracker)

@@ -1,39 +1,22 @@
-"""Track a video file (or camera) into a time-stamped, crash-safe CSV (``softpend track``)."""
+"""Track a video file or a live camera into a time-stamped, crash-safe CSV (``softpend track``)."""
 
 from __future__ import annotations
 
 import math
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 import cv2
 import numpy as np
 
+from softpend.checks import optional_positive
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
-from softpend.vision.tracker import MAGENTA_HSV, Detection, TipTracker
-
-__all__ = ["TRACK_COLUMNS", "hub_marker_tracker", "track_frames", "track_live", "track_video"]
-
-
-def hub_marker_tracker(
-    calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06
-) -> TipTracker:
-    """A tracker for the magenta hub marker that searches only within ``radius_m`` of the hub axis."""
-    centre = calibration.to_pixels(np.zeros(2))
-    r = radius_m / calibration.metres_per_pixel
-    h, w = frame_shape[:2]
-    region = (
-        max(int(centre[0] - r), 0),
-        max(int(centre[1] - r), 0),
-        min(int(centre[0] + r) + 1, w),
-        min(int(centre[1] + r) + 1, h),
-    )
-    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=region)
-
+from softpend.vision.tracker import MAGENTA_HSV, TipTracker
 
 #: Columns of the tracking CSV.
 TRACK_COLUMNS: tuple[str, ...] = (
@@ -51,68 +34,61 @@ TRACK_COLUMNS: tuple[str, ...] = (
 )
 
 
+def hub_marker_tracker(
+    calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06
+) -> TipTracker:
+    """A tracker of the magenta hub marker that searches only within ``radius_m`` of the hub axis."""
+    centre = calibration.to_pixels(np.zeros(2))
+    r = radius_m / calibration.metres_per_pixel
+    h, w = frame_shape[:2]
+    region = (
+        max(int(centre[0] - r), 0),
+        max(int(centre[1] - r), 0),
+        min(int(centre[0] + r) + 1, w),
+        min(int(centre[1] + r) + 1, h),
+    )
+    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=region)
+
+
+def _hub_angle(
+    hub_tracker: Optional[TipTracker], calibration: AffineCalibration, frame: np.ndarray
+) -> tuple[float, int]:
+    """``(hub_angle_rad, hub_lost)`` of a frame (NaN and 1 without a tracker or a marker)."""
+    if hub_tracker is not None:
+        hub = hub_tracker.track(frame)
+        if not hub.lost:
+            hx, hy = calibration.to_metres(np.array([hub.x_px, hub.y_px]))
+            return float(tip_angle_rad(hx, hy)), 0
+    return math.nan, 1
+
+
+def _rows_array(rows: list) -> np.ndarray:
+    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
+
+
 def track_frames(
     frames,
-    timestamps_s: Sequence[float] | Callable[[int], float],
+    stamp: Callable[[int], float],
     tracker: TipTracker,
     calibration: AffineCalibration,
-    log: Optional[SampleLog] = None,
-    on_detection: Optional[Callable[[int, np.ndarray, Detection], None]] = None,
+    log: SampleLog,
     hub_tracker: Optional[TipTracker] = None,
 ) -> np.ndarray:
-    """Track an iterable of BGR frames; returns an ``(F, len(TRACK_COLUMNS))`` array (NaN where lost).
-
-    Parameters
-    ----------
-    frames : iterable of ndarray
-        BGR frames.
-    timestamps_s : sequence or callable
-        Camera-clock time of each frame [s] (or ``index -> time``).
-    tracker : TipTracker
-        The tracker.
-    calibration : AffineCalibration
-        Pixel -> metre map (hub axis at the origin).
-    log : SampleLog, optional
-        Also append each row to this log (columns :data:`TRACK_COLUMNS`) as it is produced.
-    on_detection : callable, optional
-        Called with ``(index, frame, detection)`` (e.g. to keep a frame for a figure).
-    hub_tracker : TipTracker, optional
-        Tracker of the hub marker (:func:`hub_marker_tracker`); gives ``hub_angle_rad`` (else NaN).
-    """
-    stamp = timestamps_s if callable(timestamps_s) else (lambda i: float(timestamps_s[i]))
+    """Track BGR frames (``stamp(i)``: the camera time of frame ``i`` [s]) into ``log`` and an
+    ``(F, len(TRACK_COLUMNS))`` array (NaN where lost)."""
     rows = []
     for i, frame in enumerate(frames):
-        detection = tracker.track(frame)
-        if detection.lost:
+        d = tracker.track(frame)
+        if d.lost:
             x_m = y_m = theta = math.nan
         else:
-            x_m, y_m = calibration.to_metres(np.array([detection.x_px, detection.y_px]))
+            x_m, y_m = calibration.to_metres(np.array([d.x_px, d.y_px]))
             theta = float(tip_angle_rad(x_m, y_m))
-        hub_angle, hub_lost = math.nan, 1
-        if hub_tracker is not None:
-            hub = hub_tracker.track(frame)
-            if not hub.lost:
-                hx, hy = calibration.to_metres(np.array([hub.x_px, hub.y_px]))
-                hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0
-        row = [
-            i,
-            stamp(i),
-            detection.x_px,
-            detection.y_px,
-            detection.area_px,
-            float(x_m),
-            float(y_m),
-            theta,
-            int(detection.lost),
-            hub_angle,
-            hub_lost,
-        ]
-        if log is not None:
-            log.append(row)
-        if on_detection is not None:
-            on_detection(i, frame, detection)
+        row = [i, stamp(i), d.x_px, d.y_px, d.area_px, float(x_m), float(y_m), theta, int(d.lost)]
+        row += _hub_angle(hub_tracker, calibration, frame)
+        log.append(row)
         rows.append(row)
-    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
+    return _rows_array(rows)
 
 
 def _video_frames(capture: cv2.VideoCapture):
@@ -121,6 +97,12 @@ def _video_frames(capture: cv2.VideoCapture):
         if not ok:
             return
         yield frame
+
+
+def _progress(iterator, total: Optional[int] = None):
+    from tqdm.auto import tqdm
+
+    return tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0)
 
 
 def track_video(
@@ -134,24 +116,13 @@ def track_video(
     track_hub: bool = True,
     progress: bool = False,
 ) -> np.ndarray:
-    """Track every frame of a video file into ``out_csv`` (crash-safe :class:`SampleLog`).
+    """Track every frame of a video file into ``out_csv`` (a :class:`SampleLog`), with the magenta hub marker
+    if ``track_hub``.
 
-    Missing settings come from the synthetic camera's sidecar ``<video>.json`` when present: the frame
-    timestamps (camera clock) and the marker layout.  The calibration is fitted on the first frame from
-    the markers unless ``calibration`` is given.  With ``track_hub`` the magenta hub marker is tracked
-    too (near the hub axis), giving the camera's view of the hub angle for clock synchronisation.
-
-    Every input is checked before ``out_csv`` is touched.  The rows go to a temporary file next to it
-    (``.<name>.*.partial``, crash-safe like any :class:`SampleLog`), which replaces ``out_csv`` only when
-    the whole video is tracked; on an error it is removed and ``out_csv`` is left as it was.
-
-    Raises
-    ------
-    FileNotFoundError
-        If the video does not exist.
-    ValueError
-        If ``fps`` is not in (0, 1e6], ``out_csv`` cannot be written, the sidecar is malformed, the video
-        cannot be decoded, or neither markers nor a calibration are available.
+    Missing timestamps, frame rate and markers come from the video's sidecar ``<video>.json`` when there is one;
+    the calibration is fitted on the first frame from the markers unless given.  Every input is checked before
+    ``out_csv`` is touched, and the rows go to a temporary file that replaces ``out_csv`` only once the whole
+    video is tracked.
     """
     video = Path(video)
     out_csv = Path(out_csv)
@@ -162,10 +133,10 @@ def track_video(
         raise FileNotFoundError(f"video not found: {video}")
     if not video.is_file():
         raise ValueError(f"video {video} is not a file")
-    sidecar = read_sidecar(video) if Path(str(video) + ".json").exists() else None
-    if marker_positions_m is None and sidecar is not None:
+    sidecar = read_sidecar(video) if Path(str(video) + ".json").exists() else {}
+    if marker_positions_m is None:
         marker_positions_m = sidecar.get("markers_m")
-    if timestamps_s is None and sidecar is not None:
+    if timestamps_s is None:
         timestamps_s = sidecar.get("timestamps_s")
     if timestamps_s is not None:
         stamps_array = np.asarray(timestamps_s, dtype=float)
@@ -176,11 +147,10 @@ def track_video(
         raise ValueError(f"video {video} cannot be opened by OpenCV")
     try:
         if fps is None:
-            if sidecar is not None and sidecar.get("fps") is not None:
-                fps = sidecar["fps"]
-            else:
-                container_fps = float(capture.get(cv2.CAP_PROP_FPS) or 0)
-                fps = container_fps if math.isfinite(container_fps) and 0 < container_fps <= MAX_FPS else None
+            fps = sidecar.get("fps")
+        if fps is None:
+            container_fps = float(capture.get(cv2.CAP_PROP_FPS) or 0)
+            fps = container_fps if math.isfinite(container_fps) and 0 < container_fps <= MAX_FPS else None
         if timestamps_s is None and fps is None:
             raise ValueError("fps: the video has no usable frame rate; pass fps or timestamps")
         frames = _video_frames(capture)
@@ -208,25 +178,11 @@ def track_video(
 
         iterator = all_frames()
         if progress:
-            from tqdm.auto import tqdm
-
-            total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None
-            iterator = tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0)
+            iterator = _progress(iterator, int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None)
         hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
-        partial = _partial_path(out_csv)
-        try:
-            with SampleLog(
-                partial,
-                TRACK_COLUMNS,
-                metadata={"video": str(video), "calibration": calibration.to_json()},
-                fsync_every_s=1.0,
-            ) as log:
-                rows = track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
-            os.replace(partial, out_csv)
-        except BaseException:
-            partial.unlink(missing_ok=True)
-            raise
-        return rows
+        metadata = {"video": str(video), "calibration": calibration.to_json()}
+        with _replacing(out_csv, metadata) as log:
+            return track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
     finally:
         capture.release()
 
@@ -245,44 +201,52 @@ def _check_output_path(out_csv: Path, video: Optional[Path]) -> None:
             raise ValueError(f"out_csv {out_csv} is {name}; choose another output")
 
 
-def _partial_path(out_csv: Path) -> Path:
-    """A new, empty file next to ``out_csv`` to write into before the final rename."""
-    fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
-    try:
-        os.fchmod(fd, 0o644)
-    finally:
-        os.close(fd)
-    return Path(name)
+class _replacing:
+    """A :class:`SampleLog` in a new temporary file next to ``out_csv`` that replaces ``out_csv`` on a clean
+    exit and is removed on an error."""
+
+    def __init__(self, out_csv: Path, metadata: dict) -> None:
+        fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
+        try:
+            os.fchmod(fd, 0o644)
+        finally:
+            os.close(fd)
+        self.out_csv, self.partial = out_csv, Path(name)
+        try:
+            self.log = SampleLog(self.partial, TRACK_COLUMNS, metadata=metadata, fsync_every_s=1.0)
+        except BaseException:
+            self.partial.unlink(missing_ok=True)
+            raise
+
+    def __enter__(self) -> SampleLog:
+        return self.log
+
+    def __exit__(self, kind, *exc) -> None:
+        replaced = False
+        try:
+            self.log.close()
+            if kind is None:
+                os.replace(self.partial, self.out_csv)
+                replaced = True
+        finally:
+            if not replaced:
+                self.partial.unlink(missing_ok=True)
 
 
 def track_live(
-    source,
-    out_csv: str | Path,
-    duration_s: Optional[float] = None,
-    track_hub: bool = True,
-    progress: bool = False,
+    source, out_csv: str | Path, duration_s: Optional[float] = None, track_hub: bool = True, progress: bool = False
 ) -> np.ndarray:
     """Track a live camera (a :class:`~softpend.vision.tip_source.ThreadedTipSource`, not yet started) into
     ``out_csv`` until ``duration_s`` of host time has passed, the source ends, or Ctrl-C.
 
-    ``camera_time_s`` is each frame's capture time on the host clock (``time.monotonic()``).  The rows go to
-    a temporary file next to ``out_csv`` (crash-safe), which replaces ``out_csv`` when tracking ends -- also
-    on Ctrl-C, with the frames tracked so far; on an error it is removed and ``out_csv`` is left as it was.
-    With ``track_hub`` the magenta hub marker is tracked too (near the hub axis).
-
-    Raises
-    ------
-    ValueError
-        If ``duration_s`` is not positive or ``out_csv`` cannot be written; the camera's own errors.
+    ``camera_time_s`` is each frame's capture time on the host clock.  The rows go to a temporary file that
+    replaces ``out_csv`` when tracking ends (also on Ctrl-C); on an error ``out_csv`` is left as it was.
     """
-    import time
-
     from softpend.vision.tip_source import ThreadedTipSource
 
     if not isinstance(source, ThreadedTipSource):
         raise ValueError(f"source must be a ThreadedTipSource, got {type(source).__name__}")
-    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
+    optional_positive("duration_s", duration_s)
     out_csv = Path(out_csv)
     _check_output_path(out_csv, None)
     rows: list[list[float]] = []
@@ -291,17 +255,10 @@ def track_live(
     previous_hook = source.on_frame
 
     def on_frame(index, frame, detection, measurement) -> None:
-        hub_angle, hub_lost = math.nan, 1
-        if track_hub:
-            assert frame_tracker.calibration is not None  # set by the frame's tracking, before this hook
-            hub_tracker = hub[0]
-            if hub_tracker is None:
-                hub_tracker = hub[0] = hub_marker_tracker(frame_tracker.calibration, frame.shape)
-            found = hub_tracker.track(frame)
-            if not found.lost:
-                hx, hy = frame_tracker.calibration.to_metres(np.array([found.x_px, found.y_px]))
-                hub_angle, hub_lost = float(tip_angle_rad(hx, hy)), 0
-        theta = measurement.theta_rad
+        calibration = frame_tracker.calibration
+        assert calibration is not None  # set by the frame's tracking, before this hook
+        if track_hub and hub[0] is None:
+            hub[0] = hub_marker_tracker(calibration, frame.shape)
         rows.append(
             [
                 index,
@@ -311,35 +268,32 @@ def track_live(
                 detection.area_px,
                 measurement.x_m,
                 measurement.y_m,
-                theta,
+                measurement.theta_rad,
                 int(measurement.lost),
-                hub_angle,
-                hub_lost,
+                *_hub_angle(hub[0], calibration, frame),
             ]
         )
         if previous_hook is not None:
             previous_hook(index, frame, detection, measurement)
 
     source.on_frame = on_frame
-    partial = _partial_path(out_csv)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(desc="tracking", unit="frame", mininterval=1.0)
+    bar = _progress(None) if progress else None
     written = 0
     try:
-        with SampleLog(
-            partial, TRACK_COLUMNS, metadata={"camera": getattr(source, "name", "camera")}, fsync_every_s=1.0
-        ) as log:
+        with _replacing(out_csv, {"camera": getattr(source, "name", "camera")}) as log:
+
+            def flush() -> None:
+                nonlocal written
+                while written < len(rows):
+                    log.append(rows[written])
+                    written += 1
+
             start = time.monotonic()
             source.start()
             try:
                 while duration_s is None or time.monotonic() - start < duration_s:
                     source.poll()  # raises the camera thread's error
-                    while written < len(rows):
-                        log.append(rows[written])
-                        written += 1
+                    flush()
                     if bar is not None:
                         bar.update(written - bar.n)
                     if source.finished:
@@ -349,16 +303,10 @@ def track_live(
                 pass
             finally:
                 source.close()
-            while written < len(rows):
-                log.append(rows[written])
-                written += 1
+            flush()
             if log.rows_written == 0:
                 raise ValueError("the camera delivered no frame")
-        os.replace(partial, out_csv)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
     finally:
         if bar is not None:
             bar.close()
-    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
+    return _rows_array(rows)

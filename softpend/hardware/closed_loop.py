@@ -1,33 +1,8 @@
-"""Any controller of the project on a rig (real or the digital twin): encoder and camera in, torque out.
+"""Any controller of the project on a rig (real, or the digital twin in simulated time): encoder and camera through
+the state estimator, the torque through the driver's clamp, zero torque on every exit path, crash-safe logs.
 
-:func:`run_closed_loop` runs the rig loop (:class:`~softpend.hardware.loop.RigLoop`), paced by the device's
-STATE stream (100 Hz).  For each state it
-
-1. feeds the encoder sample to the :class:`~softpend.hardware.estimator.RigStateEstimator` (every state, also
-   the ones that queued up while the host was busy);
-2. hands the controller what it was designed for -- ``controller(observation, q, q_dot, time_s)`` with the
-   estimate (the :class:`softpend.evaluation.Controller` protocol) -- and sends the torque, which the driver
-   clamps to the torque limit;
-3. then feeds every camera measurement that arrived since the last state
-   (:class:`~softpend.vision.tip_source.TipSource`), placed at its capture time on the device clock
-   (:class:`~softpend.hardware.estimator.DeviceClock`): its correction reaches the next state's estimate, and
-   the replay of the model from the capture time stays off the path from state to command, whose duration
-   sets the loop's jitter;
-4. appends the sample, the estimate and the command to a crash-safe motor log (one line per state, written
-   before anything else can fail) and each camera measurement to a camera log.
-
-Control starts ("arms") with the first camera frame that corrects the estimate (zero torque until then,
-at most ``arm_timeout_s``).  The motor gets zero torque on every exit path: the run completing (STOP), a
-camera that has not corrected the estimate for ``max_blind_s`` (a *safe stop*: STOP, reason in the
-result and the log's ``status`` column, no exception), and any exception -- controller, estimator, link,
-Ctrl-C -- (STOP, the sample being processed logged with the torque actually in force, then the exception
-propagates).  The device watchdog stops the motor if the host itself dies.
-
-:func:`run_twin_control` runs the same loop on the digital twin in simulated time: the device
-(:class:`~softpend.hardware.emulator.SimRig`) behind the real protocol bytes and the real driver, the synthetic
-live camera filming it (:class:`~softpend.vision.tip_source.SyntheticLiveCamera`), all on one
-:class:`~softpend.hardware.clock.SimClock`; the same start and seeds give the same logs, bit for bit.
-"""
+Control arms with the first camera frame that corrects the estimate; a camera blind for ``max_blind_s`` (or one
+that never arms) is a safe stop (STOP, reason in the result); any exception sends STOP and propagates."""
 
 from __future__ import annotations
 
@@ -41,10 +16,10 @@ from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
-from softpend.checks import non_negative, positive
+from softpend.checks import non_negative
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
-from softpend.hardware.loop import RigLoop, SecondsBar, jitter_ms_p95
+from softpend.hardware.loop import LoopResult, RigLoop, SecondsBar, check_run
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
@@ -54,20 +29,19 @@ __all__ = [
     "ClosedLoopResult",
     "TwinCamera",
     "TwinControlRun",
-    "measure_one_way_latency_s",
     "rig_control_columns",
     "run_closed_loop",
     "run_twin_control",
 ]
 
-#: ``status`` column of the motor log: what the loop was doing when it wrote the row.
+#: ``status`` column of the motor log.
 STATUS_CODES: dict[str, int] = {
-    "arming": 0,  # waiting for the first camera correction (zero torque)
+    "arming": 0,  # zero torque until the first camera correction
     "running": 1,
-    "completed": 2,  # the last sample of a run that lasted its duration
-    "camera_blind": 3,  # safe stop: no camera correction for max_blind_s
-    "arm_timeout": 4,  # safe stop: the camera never corrected the estimate
-    "error": 5,  # an exception (controller, estimator, link, interrupt): STOP, then it propagates
+    "completed": 2,
+    "camera_blind": 3,  # safe stop
+    "arm_timeout": 4,  # safe stop
+    "error": 5,  # an exception: STOP, then it propagates
 }
 
 #: Columns of the camera log.
@@ -84,26 +58,16 @@ CAMERA_LOG_COLUMNS: tuple[str, ...] = (
     "accepted",
 )
 
+_STATE_COLUMNS = ["host_time_s", "device_time_s", "time_s", "state_seq", "phi_rad", "phi_dot_rad_s"]
+_COMMAND_COLUMNS = ["applied_torque_nm", "flags", "command_torque_nm", "commanded", "late_command"]
+
 
 def rig_control_columns(n_coordinates: int) -> list[str]:
-    """Columns of the motor log of :func:`run_closed_loop` for a model with ``n_coordinates`` coordinates."""
+    """Columns of the motor log of :func:`run_closed_loop` for a model of ``n_coordinates`` coordinates."""
     return (
-        [
-            "host_time_s",
-            "device_time_s",
-            "time_s",
-            "state_seq",
-            "phi_rad",
-            "phi_dot_rad_s",
-            "applied_torque_nm",
-            "flags",
-            "command_torque_nm",
-            "commanded",
-            "late_command",
-            "camera_frames",
-            "blind_s",
-            "est_time_s",
-        ]
+        _STATE_COLUMNS
+        + _COMMAND_COLUMNS
+        + ["camera_frames", "blind_s", "est_time_s"]
         + [f"est_{name}" for name in OBSERVATION_NAMES]
         + [f"est_q{i}_rad" for i in range(n_coordinates)]
         + [f"est_q{i}_dot_rad_s" for i in range(n_coordinates)]
@@ -112,70 +76,24 @@ def rig_control_columns(n_coordinates: int) -> list[str]:
 
 
 @dataclass
-class ClosedLoopResult:
-    """Summary of one :func:`run_closed_loop` run.
+class ClosedLoopResult(LoopResult):
+    """Summary of one :func:`run_closed_loop` run: ``stop_reason`` None when it ran its course, ``status`` a key
+    of :data:`STATUS_CODES`, ``late_commands`` those the device had not received by its next tick,
+    ``armed_at_s`` the time control started (NaN if never)."""
 
-    Attributes
-    ----------
-    samples : int
-        States processed (rows of the motor log).
-    duration_s : float
-        Device time from the first to the last state [s].
-    stop_reason : str or None
-        Why the loop stopped before ``duration_s`` (a safe stop), None when it ran its course.
-    status : str
-        Key of :data:`STATUS_CODES` of the last row.
-    command_periods_s : ndarray
-        Time between consecutive torque commands on the link's clock [s].
-    late_commands : int
-        Commands that the device had not received by its next tick (the state after them still reported
-        the previous command in force).
-    dropped_states, bad_frames, watchdog_trips : int
-        Link figures.
-    blind_max_s : float
-        Longest time without a camera correction while armed [s].
-    armed_at_s : float
-        Time control started (first camera correction) [s] (NaN if never).
-    camera, estimator : dict
-        The tip source's and the estimator's counters.
-    """
-
-    samples: int
     duration_s: float
     stop_reason: Optional[str]
     status: str
-    command_periods_s: np.ndarray
     late_commands: int
-    dropped_states: int
-    bad_frames: int
-    watchdog_trips: int
     blind_max_s: float
     armed_at_s: float
     camera: dict = field(default_factory=dict)
     estimator: dict = field(default_factory=dict)
 
-    @property
-    def jitter_ms_p95(self) -> float:
-        """95th percentile of ``|period - median period|`` between consecutive torque commands [ms]."""
-        return jitter_ms_p95(self.command_periods_s)
-
     def summary(self) -> dict[str, Any]:
         """The figures as a JSON-ready dict."""
-        return {
-            "samples": self.samples,
-            "duration_s": self.duration_s,
-            "stop_reason": self.stop_reason,
-            "status": self.status,
-            "late_commands": self.late_commands,
-            "dropped_states": self.dropped_states,
-            "bad_frames": self.bad_frames,
-            "watchdog_trips": self.watchdog_trips,
-            "blind_max_s": self.blind_max_s,
-            "armed_at_s": self.armed_at_s,
-            "jitter_ms_p95": self.jitter_ms_p95,
-            "camera": self.camera,
-            "estimator": self.estimator,
-        }
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "command_periods_s"}
+        return {**out, "jitter_ms_p95": self.jitter_ms_p95}
 
 
 class _SafeStop(Exception):
@@ -183,11 +101,6 @@ class _SafeStop(Exception):
         super().__init__(reason)
         self.status = status
         self.reason = reason
-
-
-def measure_one_way_latency_s(link: MotorLink, pings: int = 5) -> float:
-    """Half the shortest HEARTBEAT round trip of ``pings`` [s]."""
-    return min(link.ping() for _ in range(max(1, int(pings)))) / 2
 
 
 def run_closed_loop(
@@ -201,96 +114,55 @@ def run_closed_loop(
     clock: Optional[DeviceClock] = None,
     arm_timeout_s: float = 2.0,
     progress: bool = False,
-    on_sample: Optional[Callable[[dict], None]] = None,
 ) -> ClosedLoopResult:
-    """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time (module docstring).
+    """Run ``controller(observation, q, q_dot, time_s)`` on the rig behind the open ``link`` for ``duration_s`` of
+    device time.
 
-    Parameters
-    ----------
-    link : MotorLink
-        An open link.
-    controller : Controller
-        ``reset()`` (optional) and ``controller(observation, q, q_dot, time_s) -> torque_nm``.
-    estimator : RigStateEstimator
-        The state estimator (reset by this function at the first state).
-    duration_s : float
-        Run length from the first state [s].
-    tip_source : TipSource, optional
-        The camera (started by the caller).  Without one, control starts at once and the estimate rests
-        on the encoder and the model alone (no blindness limit).
-    log : SampleLog, optional
-        Motor log with columns :func:`rig_control_columns` of the estimator's model.
-    camera_log : SampleLog, optional
-        Camera log with columns :data:`CAMERA_LOG_COLUMNS`.
-    clock : DeviceClock, optional
-        Host-to-device clock map (default: one with half a measured HEARTBEAT round trip as latency).
-    arm_timeout_s : float
-        Longest wait for the first camera correction [s].
-    progress : bool
-        Show a progress bar with the estimated tip angle, the torque and the camera's blind time.
-    on_sample : callable, optional
-        Called with each motor-log row as a dict (after it is logged).
-
-    Returns
-    -------
-    ClosedLoopResult
-
-    Raises
-    ------
-    LinkError, ValueError, SimulationDiverged, KeyboardInterrupt, or what the controller raises
-        After STOP; the samples up to and including the failing one are in ``log``.
+    Args: ``tip_source`` the started camera (None: control starts at once, no blindness limit); ``log`` and
+    ``camera_log`` with the columns :func:`rig_control_columns` and :data:`CAMERA_LOG_COLUMNS`; ``clock`` the
+    host-to-device clock map (default: half the shortest of 5 HEARTBEAT round trips as latency).
     """
-    _check_loop_arguments(link, estimator, duration_s, arm_timeout_s, log, camera_log)
+    check_run(
+        link,
+        duration_s,
+        [
+            ("log", log, rig_control_columns(estimator.n), f"rig_control_columns({estimator.n})"),
+            ("camera_log", camera_log, CAMERA_LOG_COLUMNS, "CAMERA_LOG_COLUMNS"),
+        ],
+    )
+    non_negative("arm_timeout_s", arm_timeout_s)
     if clock is None:
-        clock = DeviceClock(measure_one_way_latency_s(link))
+        clock = DeviceClock(min(link.ping() for _ in range(5)) / 2)
     if hasattr(controller, "reset"):
         controller.reset()
-    link.drain_states()  # states queued before the run (pings, set-up) are stale
+    link.drain_states()  # states queued before the run are stale
     bar = SecondsBar(duration_s, "rig control", progress)
     loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s)
-    loop.log, loop.camera_log, loop.on_sample = log, camera_log, on_sample
-    loop.run(bar)
+    loop.log, loop.camera_log = log, camera_log
+    with _one_torch_thread():
+        loop.run(bar)
     link.stop()
     return loop.result()
 
 
-def _check_loop_arguments(
-    link: MotorLink,
-    estimator: RigStateEstimator,
-    duration_s: float,
-    arm_timeout_s: float,
-    log: Optional[SampleLog],
-    camera_log: Optional[SampleLog],
-) -> None:
-    """Raise ``ValueError`` for arguments :func:`run_closed_loop` cannot run with."""
-    positive("duration_s", duration_s)
-    non_negative("arm_timeout_s", arm_timeout_s)
-    if not link.is_open:
-        raise ValueError("link must be open")
-    if log is not None and list(log.columns) != rig_control_columns(estimator.n):
-        raise ValueError(f"log must have the columns rig_control_columns({estimator.n}), got {log.columns}")
-    if camera_log is not None and list(camera_log.columns) != list(CAMERA_LOG_COLUMNS):
-        raise ValueError(f"camera_log must have the columns CAMERA_LOG_COLUMNS, got {camera_log.columns}")
-
-
 @contextlib.contextmanager
 def _one_torch_thread() -> Iterator[None]:
-    """A learned controller evaluates one small network per state: torch on one thread while the loop runs
-    (torch is not imported for this)."""
+    """Torch on one thread while the loop runs (if torch is imported)."""
     torch = sys.modules.get("torch")
-    torch_threads = torch.get_num_threads() if torch is not None else None
-    if torch is not None:
-        torch.set_num_threads(1)
+    if torch is None:
+        yield
+        return
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     try:
         yield
     finally:
-        if torch is not None:
-            torch.set_num_threads(torch_threads)
+        torch.set_num_threads(threads)
 
 
 @dataclass
 class _Tick:
-    """What one state's row records, filled in as the state is processed (an exception leaves it partial)."""
+    """What one state's row records, filled in as the state is processed."""
 
     late_flag: int
     row_status: str
@@ -300,12 +172,9 @@ class _Tick:
 
 
 class _ClosedLoop(RigLoop):
-    """The counters and the per-state step of one :func:`run_closed_loop` run."""
-
     drains = True
     log: Optional[SampleLog] = None
     camera_log: Optional[SampleLog] = None
-    on_sample: Optional[Callable[[dict], None]] = None
 
     def __init__(
         self,
@@ -320,7 +189,6 @@ class _ClosedLoop(RigLoop):
         super().__init__(link, duration_s, 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s)
         self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
         self.clock, self.arm_timeout_s = clock, arm_timeout_s
-        self.columns = rig_control_columns(estimator.n)
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
         self.estimate_values = self.nan_estimate
         self.late = 0
@@ -330,28 +198,28 @@ class _ClosedLoop(RigLoop):
         self.blind_max = 0.0
         self.status = "arming" if not self.armed else "running"
 
-    def run(self, bar: SecondsBar) -> None:
-        with _one_torch_thread():
-            super().run(bar)
-
     def show(self, bar: SecondsBar) -> None:
         if bar.advance(self.t):
-            values = self.estimate_values
-            theta = values[2] if values is not self.nan_estimate else math.nan
+            theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan
             bar.postfix(
                 f"theta {theta:+.2f} rad, torque {self.link.last_command_nm:+.3f} N m, "
                 f"blind {self.estimator.blind_s * 1e3:.0f} ms"
             )
 
     def step(self, state: Any, newest: bool) -> None:
-        """Process one state (the command and the camera only for the ``newest`` of a batch), log its row."""
-        tick = _Tick(self._count(state), self.status, self.nan_estimate)
+        """Process one state (command and camera only for the ``newest`` of a batch) and log its row."""
+        self.clock.observe(state.host_time_s, state.device_time_s)
+        self.count(state)
+        late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
+        self.late += late_flag
+        self.expected_cmd_seq = None
+        tick = _Tick(late_flag, self.status, self.nan_estimate)
         try:
-            estimator = self.estimator
-            if not estimator.started:
-                estimator.reset(self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
+            measured = (self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
+            if not self.estimator.started:
+                self.estimator.reset(*measured)
             else:
-                estimator.update_encoder(self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
+                self.estimator.update_encoder(*measured)
             if newest:
                 self._check_safety()
                 self._command(tick)
@@ -373,17 +241,7 @@ class _ClosedLoop(RigLoop):
         self.samples += 1
         self.estimate_values = tick.estimate_values
 
-    def _count(self, state: Any) -> int:
-        """Clock, time and link counters of one state; return its late-command flag."""
-        self.clock.observe(state.host_time_s, state.device_time_s)
-        self.count(state)
-        late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
-        self.late += late_flag
-        self.expected_cmd_seq = None
-        return late_flag
-
     def _check_safety(self) -> None:
-        """Raise :class:`_SafeStop` for a camera blind for too long or one that never corrected the estimate."""
         estimator = self.estimator
         if self.armed and self.tip_source is not None:
             self.blind_max = max(self.blind_max, estimator.blind_s)
@@ -400,29 +258,16 @@ class _ClosedLoop(RigLoop):
             )
 
     def _command(self, tick: _Tick) -> None:
-        """Estimate, ask the controller (zero torque until armed), send the torque."""
-        estimate = self.estimator.estimate()
-        tick.estimate_values = (
-            [estimate.time_s]
-            + list(estimate.observation)
-            + list(estimate.q)
-            + list(estimate.q_dot)
-            + [estimate.tip_std_m]
-        )
-        command = (
-            float(self.controller(estimate.observation, estimate.q, estimate.q_dot, estimate.time_s))
-            if self.armed
-            else 0.0
-        )
+        e = self.estimator.estimate()
+        tick.estimate_values = [e.time_s, *e.observation, *e.q, *e.q_dot, e.tip_std_m]
+        command = float(self.controller(e.observation, e.q, e.q_dot, e.time_s)) if self.armed else 0.0
         self.expected_cmd_seq = self.link.send_torque(command)
         self.send_times.append(self.link.clock.now_s())
         tick.commanded = int(self.armed)
 
     def _poll_camera(self, tick: _Tick) -> None:
-        """Feed the camera measurements that arrived to the estimator (the first accepted one arms the loop).
-
-        They come after the command: the costly replay of a delayed frame (see RigStateEstimator.update_tip)
-        stays off the path from state to command, and the corrected estimate serves the next state."""
+        """Feed the camera measurements that arrived to the estimator, after the command (the replay of a late
+        frame stays off the path from state to command); the first accepted one arms the loop."""
         assert self.t0 is not None
         polled = self.link.clock.now_s()
         for m in self.tip_source.poll():
@@ -432,58 +277,29 @@ class _ClosedLoop(RigLoop):
             if accepted and not self.armed:
                 self.armed, self.armed_at, self.status = True, self.t, "running"
             if self.camera_log is not None:
-                self.camera_log.append(
-                    [
-                        m.frame,
-                        m.capture_time_s,
-                        m.delivered_time_s,
-                        polled,
-                        capture,
-                        m.x_m,
-                        m.y_m,
-                        m.theta_rad,
-                        m.lost,
-                        accepted,
-                    ]
-                )
+                times = [m.capture_time_s, m.delivered_time_s, polled, capture]
+                self.camera_log.append([m.frame, *times, m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
 
     def _log_row(self, state: Any, tick: _Tick) -> None:
-        """Append the state's row to the motor log and hand it to ``on_sample``."""
-        row = [
-            state.host_time_s,
-            state.device_time_s,
-            self.t,
-            state.seq,
-            state.phi_rad,
-            state.phi_dot_rad_s,
-            state.applied_torque_nm,
-            state.flags,
-            self.link.last_command_nm,
-            tick.commanded,
-            tick.late_flag,
-            tick.frames,
-            self.estimator.blind_s if self.estimator.started else math.nan,
-            *tick.estimate_values,
-            STATUS_CODES[tick.row_status],
-        ]
-        if self.log is not None:
-            self.log.append(row)
-        if self.on_sample is not None:
-            self.on_sample(dict(zip(self.columns, row)))
+        if self.log is None:
+            return
+        row = [state.host_time_s, state.device_time_s, self.t, state.seq, state.phi_rad, state.phi_dot_rad_s]
+        row += [state.applied_torque_nm, state.flags, self.link.last_command_nm, tick.commanded, tick.late_flag]
+        blind = self.estimator.blind_s if self.estimator.started else math.nan
+        self.log.append([*row, tick.frames, blind, *tick.estimate_values, STATUS_CODES[tick.row_status]])
 
     def result(self) -> ClosedLoopResult:
-        """The run's :class:`ClosedLoopResult` (after the STOP)."""
         tip_source = self.tip_source
         return ClosedLoopResult(
             samples=self.samples,
-            duration_s=self.t,
-            stop_reason=self.stop_reason,
-            status=self.status if self.stop_reason is not None else "completed",
             command_periods_s=np.diff(self.send_times),
-            late_commands=self.late,
             dropped_states=self.dropped,
             bad_frames=self.link.bad_frames,
             watchdog_trips=self.watchdog,
+            duration_s=self.t,
+            stop_reason=self.stop_reason,
+            status=self.status if self.stop_reason is not None else "completed",
+            late_commands=self.late,
             blind_max_s=self.blind_max,
             armed_at_s=self.armed_at,
             camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
@@ -491,26 +307,10 @@ class _ClosedLoop(RigLoop):
         )
 
 
-# ---------------------------------------------------------------------- the digital twin
 @dataclass(frozen=True)
 class TwinCamera:
-    """The synthetic live camera of the twin (:class:`softpend.vision.tip_source.SyntheticLiveCamera`).
-
-    Parameters
-    ----------
-    fps : float
-        Frame rate [1/s].
-    latency_s : float
-        End of exposure to arrival at the tracker [s].
-    effects : CameraEffects, optional
-        Default :meth:`~softpend.vision.camera.CameraEffects.rig`.
-    model : CameraModel, optional
-        Default 640x480.
-    faults : CameraFaults, optional
-        Injected stalls, drops, occlusions.
-    seed : int
-        Seed of the image noise.
-    """
+    """The twin's synthetic live camera (:class:`softpend.vision.tip_source.SyntheticLiveCamera`): frame rate,
+    latency from the end of exposure to the tracker [s], image effects, camera model, injected faults, seed."""
 
     fps: float = 60.0
     latency_s: float = 0.02
@@ -530,7 +330,6 @@ class TwinControlRun:
     truth_log: Path
     result: ClosedLoopResult
     emulator_stats: dict
-    error: Optional[str] = None
 
 
 #: The files :func:`run_twin_control` writes in its folder (the three logs first).
@@ -550,115 +349,66 @@ def run_twin_control(
     camera_wait_s: float = 1.0,
     outputs: Optional[Any] = None,
 ) -> TwinControlRun:
-    """Run ``controller`` on the digital twin, in simulated time, with the synthetic camera in the loop.
-
-    The twin's device (:class:`~softpend.hardware.emulator.SimRig` of ``rig``, default
-    :class:`~softpend.hardware.emulator.RigConfig`) writes a truth log; the synthetic camera (``camera``; None:
-    no camera, encoder and model only) films it from the start; once it has tracked a frame (within
-    ``camera_wait_s``) the driver connects over the in-memory link and :func:`run_closed_loop` runs.  Writes
-    ``motor_log.csv``, ``camera_log.csv``, ``truth_log.csv`` and ``summary.json`` to ``workdir`` (created)
-    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`; default a new one): before the run, a file of
-    these names that an earlier run did not write raises ``ValueError`` (nothing is changed).  The truth log goes on 0.1 s past the end, so that it records
-    the motor after the STOP on every exit path.
-    """
+    """Run ``controller`` on the digital twin (``rig``, default :class:`~softpend.hardware.emulator.RigConfig`)
+    in simulated time, filmed by ``camera`` (None: encoder and model only) from the start; the loop starts once
+    the camera tracked a frame (within ``camera_wait_s``).  Writes :data:`TWIN_CONTROL_FILES` to ``workdir``
+    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`), the summary also when the run raises."""
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
+    from softpend.vision.tip_source import SyntheticLiveCamera
 
     rig = rig if rig is not None else RigConfig()
     outputs = outputs if outputs is not None else Outputs()
     workdir = outputs.folder(workdir, TWIN_CONTROL_FILES, what="workdir")
-    paths = {name: workdir / name for name in TWIN_CONTROL_FILES}
-    for name in TWIN_CONTROL_FILES[:3]:
-        outputs.live(paths[name])
-    estimator = RigStateEstimator(
-        rig.task,
-        estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev),
-    )
+    motor_path, camera_path, truth_path, summary_path = (workdir / name for name in TWIN_CONTROL_FILES)
+    logs = (motor_path, camera_path, truth_path)
+    for path in logs:
+        outputs.live(path)
+    config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
+    estimator = RigStateEstimator(rig.task, config)
     metadata = {
         "rig": rig.to_dict(),
         "estimator": dataclasses.asdict(estimator.config),
         "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
     }
     clock = SimClock()
-    device = SimRig(rig, clock, truth_log=paths["truth_log.csv"])
+    device = SimRig(rig, clock, truth_log=truth_path)
     source = None
+    result: Optional[ClosedLoopResult] = None
+    error: Optional[str] = None
     try:
         if camera is not None:
-            source = _twin_tip_source(camera, device, clock, on_frame)
-            _wait_for_first_frame(source, clock, camera_wait_s)
+            settings = {f.name: getattr(camera, f.name) for f in dataclasses.fields(camera)}
+            source = SyntheticLiveCamera(device.poses, clock, **settings, on_frame=on_frame)
+            source.start()
+            if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
+                raise ValueError(
+                    f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
+                    "time: a camera latency near that, or a dot the tracker cannot find)"
+                )
+            source.poll()  # the frames of the rod before the run
         with (
             MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
-            SampleLog(paths["motor_log.csv"], rig_control_columns(estimator.n), metadata=metadata) as log,
-            SampleLog(paths["camera_log.csv"], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
+            SampleLog(motor_path, rig_control_columns(estimator.n), metadata=metadata) as log,
+            SampleLog(camera_path, CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
         ):
-            result = _run_and_summarise(
-                lambda: run_closed_loop(
-                    link,
-                    controller,
-                    estimator,
-                    duration_s,
-                    tip_source=source,
-                    log=log,
-                    camera_log=camera_log,
-                    arm_timeout_s=arm_timeout_s,
-                    progress=progress,
-                ),
-                outputs,
-                paths["summary.json"],
-            )
+            try:
+                result = run_closed_loop(
+                    link, controller, estimator, duration_s, source, log, camera_log, None, arm_timeout_s, progress
+                )
+            except Exception as exc:
+                error = f"{type(exc).__name__}: {exc}"
+                raise
+            finally:
+                summary = {"result": result.summary() if result is not None else None, "error": error}
+                outputs.write_json(summary_path, summary)
     finally:
         if source is not None:
             source.close()
         clock.sleep_until(clock.now_s() + 0.1)  # the truth log records the motor after the STOP
         device.close()
-        for name in TWIN_CONTROL_FILES[:3]:
-            outputs.done(paths[name])
-    return TwinControlRun(
-        workdir, paths["motor_log.csv"], paths["camera_log.csv"], paths["truth_log.csv"], result, device.stats(), None
-    )
-
-
-def _twin_tip_source(camera: TwinCamera, device: Any, clock: Any, on_frame: Optional[Callable]) -> Any:
-    """The twin's synthetic live camera filming ``device`` (not started)."""
-    from softpend.vision.tip_source import SyntheticLiveCamera
-
-    return SyntheticLiveCamera(
-        device.poses,
-        clock,
-        fps=camera.fps,
-        latency_s=camera.latency_s,
-        effects=camera.effects,
-        model=camera.model,
-        faults=camera.faults,
-        seed=camera.seed,
-        on_frame=on_frame,
-    )
-
-
-def _wait_for_first_frame(source: Any, clock: Any, camera_wait_s: float) -> None:
-    """Start the twin's camera and wait (in simulated time) until it has tracked a frame; drop the frames of the
-    rod before the run (the calibration is fitted on the first)."""
-    source.start()
-    if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
-        raise ValueError(
-            f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
-            "time: a camera latency near that, or a dot the tracker cannot find)"
-        )
-    source.poll()
-
-
-def _run_and_summarise(run: Callable[[], ClosedLoopResult], outputs: Any, path: Path) -> ClosedLoopResult:
-    """Run the loop; write its summary (or its error) to ``path``, also when it raises."""
-    result: Optional[ClosedLoopResult] = None
-    error: Optional[str] = None
-    try:
-        result = run()
-    except Exception as exc:
-        error = f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        summary = {"result": result.summary() if result is not None else None, "error": error}
-        outputs.write_json(path, summary)
+        for path in logs:
+            outputs.done(path)
     assert result is not None
-    return result
+    return TwinControlRun(workdir, motor_path, camera_path, truth_path, result, device.stats())

@@ -1,23 +1,11 @@
-"""The host-side rig loop: a controller against a rig (real or emulated) through :class:`MotorLink`.
-
-:class:`RigLoop` is the one loop of both programs on the rig.  It is paced by the device's STATE stream
-(100 Hz) and hands each state to a step; whatever goes wrong -- controller exception, link error -- the motor
-gets zero torque: any exception sends STOP and propagates.
-
-:func:`run_control_loop` (the babbling of :func:`softpend.hardware.twin.run_twin_session` and ``softpend rig
-babble``) steps with what the encoder measures at that tick: it builds a :class:`RigObservation` (hub angle
-and rate), asks the controller -- a program of time and hub angle such as babbling -- for a torque, sends it
-(clamped by the driver) and appends the sample to a crash-safe :class:`SampleLog` *before* anything else can
-fail (the sample that was being processed is still logged, with the torque actually commanded).  Controllers
-of the project, which need the joint state or the observed variables with their rates, step behind the state
-estimator in :func:`softpend.hardware.closed_loop.run_closed_loop`.
-"""
+"""The host's rig loop, paced by the device's STATE stream (STOP on any exception), and :func:`run_control_loop`:
+a program of time and hub angle (babbling) on a rig, every state logged before anything else can fail."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -25,13 +13,7 @@ from softpend.checks import positive
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.io.samplelog import SampleLog
 
-__all__ = [
-    "LOOP_LOG_COLUMNS",
-    "LoopResult",
-    "RigLoop",
-    "RigObservation",
-    "run_control_loop",
-]
+__all__ = ["LOOP_LOG_COLUMNS", "LoopResult", "RigLoop", "RigObservation", "run_control_loop"]
 
 #: Columns of the motor log written by :func:`run_control_loop`.
 LOOP_LOG_COLUMNS: tuple[str, ...] = (
@@ -48,17 +30,7 @@ LOOP_LOG_COLUMNS: tuple[str, ...] = (
 
 @dataclass(frozen=True)
 class RigObservation:
-    """What a controller sees on the rig.
-
-    Attributes
-    ----------
-    time_s : float
-        Device time since the start of the loop [s].
-    phi_rad : float
-        Hub angle from upright, unwrapped [rad].
-    phi_dot_rad_s : float
-        Hub rate [rad/s].
-    """
+    """What a program sees on the rig: device time since the loop's start [s], hub angle (unwrapped) and rate."""
 
     time_s: float
     phi_rad: float
@@ -67,7 +39,7 @@ class RigObservation:
 
 @dataclass
 class LoopResult:
-    """Summary of one loop run: samples processed, periods between commands, dropped/bad counts."""
+    """Summary of one loop run."""
 
     samples: int
     command_periods_s: np.ndarray
@@ -78,12 +50,15 @@ class LoopResult:
     @property
     def jitter_ms_p95(self) -> float:
         """95th percentile of ``|period - median period|`` between consecutive torque commands [ms]."""
-        return jitter_ms_p95(self.command_periods_s)
+        periods = np.asarray(self.command_periods_s, dtype=float)
+        if periods.size == 0:
+            return math.nan
+        return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
 
 
 class SecondsBar:
-    """A progress bar over the seconds of a loop run (``enabled=False``: does nothing); it redraws only when
-    the shown tenth of a second changes, so a 100 Hz loop does not redraw every tick."""
+    """A progress bar over the seconds of a run, redrawn when the shown tenth of a second changes (``enabled``
+    False: does nothing)."""
 
     def __init__(self, duration_s: float, desc: str, enabled: bool = True) -> None:
         self.duration_s = duration_s
@@ -94,7 +69,7 @@ class SecondsBar:
             self._bar = tqdm(total=round(duration_s, 1), unit="s", desc=desc, mininterval=0.5)
 
     def advance(self, time_s: float) -> bool:
-        """Show ``time_s`` [s] of run time; True when the bar moved (the moment to refresh a postfix)."""
+        """Show ``time_s``; whether the bar moved."""
         if self._bar is None:
             return False
         shown = round(min(time_s, self.duration_s), 1)
@@ -112,21 +87,19 @@ class SecondsBar:
             self._bar.close()
 
 
-def jitter_ms_p95(command_periods_s: np.ndarray) -> float:
-    """95th percentile of ``|period - median period|`` over the periods between consecutive torque commands
-    [ms] (NaN without periods)."""
-    periods = np.asarray(command_periods_s, dtype=float)
-    if periods.size == 0:
-        return math.nan
-    return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
+def check_run(link: MotorLink, duration_s: float, logs: Sequence[tuple[str, Optional[Any], Sequence[str], str]]):
+    """Raise ``ValueError`` for a loop that cannot run: ``logs`` are ``(name, log, columns, columns' name)``."""
+    positive("duration_s", duration_s)
+    if not link.is_open:
+        raise ValueError("link must be open")
+    for name, log, columns, what in logs:
+        if log is not None and list(log.columns) != list(columns):
+            raise ValueError(f"{name} must have the columns {what}, got {log.columns}")
 
 
 class RigLoop:
-    """One run of the rig loop, paced by the device's STATE stream: read a state (with :attr:`drains`, also
-    the ones that queued up while the host was busy), hand each to :meth:`step`, until ``duration_s`` of
-    device time or a safe stop (:attr:`stop_reason`); any exception sends STOP and propagates.  Subclasses
-    say what a state does (:meth:`step`): the babbling loop here, the closed loop behind the state estimator
-    in :mod:`softpend.hardware.closed_loop`."""
+    """One run paced by the STATE stream: each state read (with :attr:`drains`, also those that queued up) goes
+    to :meth:`step` until ``duration_s`` of device time or a safe stop (:attr:`stop_reason`)."""
 
     #: Process the states that queued up since the last one too (only the newest gets a command).
     drains = False
@@ -143,7 +116,7 @@ class RigLoop:
         self.stop_reason: Optional[str] = None
 
     def count(self, state: MotorState) -> None:
-        """The loop time of ``state`` and the link counters (dropped states, watchdog trips)."""
+        """The loop time of ``state`` and the link counters."""
         if self.t0 is None:
             self.t0 = state.device_time_s
         self.t = state.device_time_s - self.t0
@@ -153,16 +126,13 @@ class RigLoop:
         self.watchdog += int(state.watchdog_tripped)
 
     def step(self, state: MotorState, newest: bool) -> None:
-        """Process one state (``newest``: the last of those read together)."""
         raise NotImplementedError
 
     def show(self, bar: SecondsBar) -> None:
-        """Advance the progress bar after a batch of states."""
         bar.advance(self.t)
 
     def run(self, bar: SecondsBar) -> None:
-        """Process the states until the run's end or a safe stop; any exception: emergency STOP, then it
-        propagates.  Closes ``bar``."""
+        """Process the states until the end or a safe stop; any exception sends STOP and propagates."""
         link = self.link
         try:
             while True:
@@ -184,15 +154,7 @@ class RigLoop:
 
 
 class _BabbleLoop(RigLoop):
-    """:func:`run_control_loop`: a command for every state from what the encoder measures."""
-
-    def __init__(
-        self,
-        link: MotorLink,
-        controller: Callable[[RigObservation, float], float],
-        duration_s: float,
-        log: Optional[SampleLog],
-    ) -> None:
+    def __init__(self, link: MotorLink, controller: Callable, duration_s: float, log: Optional[SampleLog]) -> None:
         super().__init__(link, duration_s, 1.0 / link.device.state_rate_hz if link.device else 0.01)
         self.controller = controller
         self.log = log
@@ -230,37 +192,10 @@ def run_control_loop(
     log: Optional[SampleLog] = None,
     progress: bool = False,
 ) -> LoopResult:
-    """Run ``controller`` on the rig behind ``link`` for ``duration_s`` of device time.
-
-    Parameters
-    ----------
-    link : MotorLink
-        An open link.
-    controller : callable
-        ``controller(observation: RigObservation, time_s) -> torque_nm``.
-    duration_s : float
-        Run length in device time [s].
-    log : SampleLog, optional
-        Log with columns :data:`LOOP_LOG_COLUMNS`; one line per received state, written before the next.
-    progress : bool
-        Show a tqdm progress bar.
-
-    Returns
-    -------
-    LoopResult
-
-    Raises
-    ------
-    LinkError
-        From the driver (the motor has been stopped); the samples up to the failure are in ``log``.
-    """
-    positive("duration_s", duration_s)
-    if not link.is_open:
-        raise ValueError("link must be open")
-    if log is not None and list(log.columns) != list(LOOP_LOG_COLUMNS):
-        raise ValueError(f"log must have the columns LOOP_LOG_COLUMNS, got {log.columns}")
-    bar = SecondsBar(duration_s, "rig loop", progress)
+    """Run ``controller(observation, time_s) -> torque_nm`` on the open ``link`` for ``duration_s`` of device time,
+    one row of :data:`LOOP_LOG_COLUMNS` in ``log`` per state; a link error stops the motor and propagates."""
+    check_run(link, duration_s, [("log", log, LOOP_LOG_COLUMNS, "LOOP_LOG_COLUMNS")])
     loop = _BabbleLoop(link, controller, duration_s, log)
-    loop.run(bar)
+    loop.run(SecondsBar(duration_s, "rig loop", progress))
     link.send_torque(0.0)
     return LoopResult(loop.samples, np.diff(loop.send_times), loop.dropped, link.bad_frames, loop.watchdog)

@@ -1,17 +1,5 @@
-"""Figure 7: every classical controller through the shared evaluation, from fresh starts, and the |theta| plot.
-
-:func:`classical_comparison` builds the controllers (LQR from the true model on joint states and on
-observations, LQR from the learned model, PID tuned on the true plant and PID tuned on the learned model,
-energy swing-up plus LQR), runs the near-upright ones from the report's kind of start (the straight rod
-released at rest a little off upright) with and without the torque limit, the LQR and the swing-up from
-hanging, and returns the runs and a table of :meth:`softpend.evaluation.EvaluationSummary.row` rows.
-
-Every run is evaluated from ``starts`` fresh starts (default :data:`softpend.study.presets.REPORT_SEEDS`,
-which no training, tuning or selection step sees): a near-upright start of seed ``s`` is the straight rod
-at rest tilted by the nominal tilt plus a uniform offset of at most the task's ``start_noise_rad`` drawn
-from ``numpy.random.default_rng(s)``; a hanging start is the task's own start distribution for seed ``s``.
-Each row carries the success rate over its starts with the Wilson 95 % interval.
-"""
+"""Figure 7: every classical controller through the shared evaluation from fresh starts (near upright and from
+hanging, with and without the torque limit), and the |theta| plot."""
 
 from __future__ import annotations
 
@@ -28,16 +16,6 @@ from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_cont
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
-__all__ = [
-    "ClassicalComparison",
-    "classical_comparison",
-    "near_upright_starts",
-    "pid_gain_sensitivity",
-    "plot_abs_theta",
-    "table_markdown",
-    "train_learned_model",
-]
-
 TABLE_COLUMNS = (
     "controller",
     "start",
@@ -52,29 +30,11 @@ TABLE_COLUMNS = (
     "energy_used_j",
 )
 
-#: Where the PID gains were tuned, by label suffix.
-PID_TUNED_ON = ("true plant", "learned model")
-
 
 @dataclass
 class ClassicalComparison:
-    """Runs behind Figure 7.
-
-    Attributes
-    ----------
-    near_upright : dict
-        ``label -> [EvaluationSummary per tilt]`` of the near-upright runs (one result per start).
-    from_hanging : dict
-        ``label -> EvaluationSummary`` of the runs from hanging (energy swing-up + LQR, and the LQR alone).
-    rows : list of dict
-        One table row per run (controller, start, torque limit, shared-evaluation medians, success rate and
-        its Wilson 95 % interval).
-    pid_gains : dict
-        ``tuned on -> PIDGains``: ``"true plant"``, ``"learned model"`` (when a learned model was given) or
-        ``"given"``.
-    notes : list of str
-        Designs that failed (e.g. a learned model whose linearisation is not stabilisable).
-    """
+    """Runs behind Figure 7: ``label -> [summary per tilt]`` near upright, ``label -> summary`` from hanging, one
+    table row per run, the PID gains by where they were tuned, and notes on designs left out."""
 
     near_upright: dict[str, list[EvaluationSummary]]
     from_hanging: dict[str, EvaluationSummary]
@@ -82,13 +42,8 @@ class ClassicalComparison:
     pid_gains: dict[str, PIDGains]
     notes: list[str] = field(default_factory=list)
 
-    @property
-    def swing_up(self) -> EvaluationSummary:
-        """The energy swing-up + LQR from hanging."""
-        return self.from_hanging["energy swing-up + LQR"]
-
     def row(self, controller: str, start: str) -> dict[str, Any]:
-        """The table row of one run (``start``: ``"tilt 0.2 rad"`` or ``"hanging"``); ``KeyError`` if absent."""
+        """The table row of one run (``start``: ``"tilt 0.2 rad"`` or ``"hanging"``)."""
         for row in self.rows:
             if row["controller"] == controller and row["start"] == start:
                 return row
@@ -98,7 +53,7 @@ class ClassicalComparison:
 def train_learned_model(
     task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0, progress: bool = False
 ):
-    """Babble (report protocol, ``n_trials`` x 5 s) on the task's plant and fit the default learned model (3 x 16)."""
+    """Babble ``n_trials`` x 5 s on the task's plant and fit the default learned model."""
     from softpend.sysid import BabbleProtocol, babble
     from softpend.sysid.training import fit_dynamics_model
 
@@ -108,17 +63,15 @@ def train_learned_model(
 
 
 def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The fresh near-upright starts of one nominal tilt: per seed, the straight rod at rest tilted by
-    ``tilt_rad`` plus a uniform offset in ``[-task.start_noise_rad, task.start_noise_rad]`` drawn from
-    ``numpy.random.default_rng(seed)``."""
+    """Per seed, the straight rod at rest tilted by ``tilt_rad`` plus a uniform offset of at most
+    ``task.start_noise_rad`` from ``default_rng(seed)``."""
     offsets = [float(np.random.default_rng(int(seed)).uniform(-1.0, 1.0)) * task.start_noise_rad for seed in starts]
     return [task.tilt_state(float(tilt_rad) + offset) for offset in offsets]
 
 
-def _run(
+def run_from_tilt(
     controller, task: Task, tilt_rad: float, starts: Sequence[int], duration_s: float, limit: float, name: str
 ) -> EvaluationSummary:
-    """The controller from each fresh start of one tilt (seed ``s`` of the episode is the start's seed)."""
     run_task = task.replace(start="upright", torque_limit_nm=limit)
     results = []
     for seed, state in zip(starts, near_upright_starts(task, tilt_rad, starts)):
@@ -140,38 +93,10 @@ def classical_comparison(
     pid_gains: Optional[PIDGains] = None,
     progress: bool = False,
 ) -> ClassicalComparison:
-    """Evaluate every classical controller from fresh starts (see the module docstring).
+    """Evaluate every classical controller from the fresh starts ``starts``.
 
-    Parameters
-    ----------
-    task : Task, optional
-        The plant and rod (its ``torque_limit_nm`` is "the torque limit", its ``start_noise_rad`` the
-        spread of the starts); on plants other than the PRB chain the controllers that read the chain's
-        joint state (joint-state LQR, joint-energy swing-up) are replaced by their observation-only
-        versions, and ``notes`` says so.
-    learned_model : DynamicsModel, optional
-        Learned model for the learned-model LQR and the second PID tuning; without it both are left out
-        (said in ``notes``).
-    tilts_rad : sequence of float
-        Nominal initial tilts of the near-upright runs [rad].
-    duration_s : float
-        Length of the near-upright runs [s].
-    unlimited_torque_nm : float
-        Torque limit of the "without torque limit" runs [N m] (about 9x the torque that holds the rod
-        horizontal, so it never binds in these runs).
-    starts : sequence of int
-        Seeds of the fresh starts of every run (at least one).
-    swingup_duration_s : float
-        Length of the runs from hanging [s].
-    pid_tuning_evaluations : int
-        Cost evaluations of each PID tuning (on the tuning starts of :func:`softpend.control.pid.tune_pid`).
-    pid_gains : PIDGains, optional
-        Skip both tunings and use these gains (labelled ``"given"``).
-
-    Raises
-    ------
-    ValueError
-        If ``starts`` or ``tilts_rad`` is empty.
+    Off the PRB plant the joint-state designs become observation-only ones; without ``learned_model`` the
+    learned-model LQR and PID are left out; ``pid_gains`` skips the PID tunings.
     """
     task = task if task is not None else Task()
     starts = [int(seed) for seed in starts]
@@ -189,7 +114,7 @@ def classical_comparison(
     def add(label: str, controller, torque_limit: float) -> None:
         near[label] = []
         for tilt in tilts_rad:
-            summary = _run(controller, task, tilt, starts, duration_s, torque_limit, label)
+            summary = run_from_tilt(controller, task, tilt, starts, duration_s, torque_limit, label)
             near[label].append(summary)
             rows.append({**summary.row(), "start": f"tilt {tilt:g} rad", "torque_limit_nm": torque_limit})
 
@@ -259,23 +184,14 @@ def pid_gain_sensitivity(
     duration_s: float = 5.0,
     torque_limit_nm: Optional[float] = None,
 ) -> list[dict[str, Any]]:
-    """The PID with all three gains scaled by each of ``scales``, from the fresh starts of one tilt: one
-    :meth:`~softpend.evaluation.EvaluationSummary.row` per scale (``gain_scale`` added).
-
-    ``torque_limit_nm`` defaults to the task's torque limit.
-
-    Raises
-    ------
-    ValueError
-        If ``scales`` is empty or holds a scale that is not positive.
-    """
+    """The PID with its gains scaled by each of ``scales`` from the fresh starts of one tilt, one row per scale."""
     if len(scales) == 0 or any(not float(scale) > 0 for scale in scales):
         raise ValueError(f"scales must be positive numbers, got {list(scales)!r}")
     limit = task.torque_limit_nm if torque_limit_nm is None else float(torque_limit_nm)
     rows = []
     for scale in scales:
         scaled = PIDGains(*(float(scale) * gains.as_array()))
-        summary = _run(
+        summary = run_from_tilt(
             PIDController(scaled, torque_limit_nm=limit),
             task,
             tilt_rad,
@@ -291,8 +207,7 @@ def pid_gain_sensitivity(
 
 
 def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None):
-    """|theta| against time for the near-upright runs from one tilt (log scale), as the report's Figure 7:
-    per controller the median over the fresh starts and the band between the 10th and 90th percentiles."""
+    """|theta| against time of the near-upright runs from one tilt (log scale): median and 10-90 % band."""
     import matplotlib.pyplot as plt
 
     ax = ax if ax is not None else plt.gca()

@@ -1,14 +1,5 @@
-"""PILCO against DQN and DQN-MBPO in real plant seconds (Figure 10).
-
-All three methods are measured the same way: after each training trial/episode block the current policy is
-run by the shared :func:`softpend.evaluation.evaluate_controller` on the true plant from hanging (these test
-episodes are not learned from and are not counted), and the curve is plotted against the *training* plant
-seconds consumed so far.  PILCO's points come from :class:`~softpend.pilco.loop.TrialRecord` (one per policy
-trial), DQN's and DQN-MBPO's from the evaluation rows of :class:`softpend.rl.training_log.TrainingLog`.
-DQN's and DQN-MBPO's evaluations stop at their first failing start
-(:attr:`softpend.rl.DQNConfig.eval_until_first_failure`): their success rate counts the starts before it, a lower
-bound, and is exact when every start succeeded, the only rows the seconds-to-balance table counts.
-"""
+"""PILCO against DQN and DQN-MBPO in training plant seconds (Figure 10): PILCO's run cache, the curves of each
+method's policy tests on the true plant, the seconds-to-balance table and the plots."""
 
 from __future__ import annotations
 
@@ -26,17 +17,6 @@ from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 from softpend.rl.curves import failures_as
 from softpend.study.sweep import run_jobs
 
-__all__ = [
-    "curve_rows_pilco",
-    "curve_rows_rl",
-    "pilco_jobs",
-    "pilco_runs",
-    "plot_head_to_head",
-    "plot_predicted_and_real_cost",
-    "run_and_save",
-    "seconds_to_balance_table",
-]
-
 
 def pilco_runs(
     config: PilcoConfig,
@@ -46,13 +26,8 @@ def pilco_runs(
     workers: Optional[int] = None,
     backend: Optional[str] = None,
 ) -> list[PilcoResult]:
-    """Run (or reuse) PILCO once per seed into ``<runs_root>/pilco-<hash>-seed<k>``
-    (:func:`softpend.study.rl_runs.run_folder`: ``<hash>`` names the settings).
-
-    A folder is reused when it holds a finished run with the same config (the seed replaced); the other seeds
-    run in parallel, up to ``workers`` at a time (default: one per CPU core, see
-    :func:`softpend.study.sweep.default_workers`), each with one torch thread.
-    """
+    """Run (or reuse) PILCO once per seed under ``runs_root`` (:func:`softpend.study.rl_runs.run_folder`), the
+    missing seeds in parallel, and load the results."""
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(
         run_and_save,
@@ -72,10 +47,8 @@ def pilco_runs(
 
 
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
-    """The PILCO runs (``config`` with each seed) still missing under ``runs_root``, as ``(name, arguments of
-    :func:`run_and_save`)``; a folder holding a finished run with the same config is left out.  A folder that
-    holds a run of other settings (a hash collision, or one this version cannot read) raises ``ValueError``:
-    it is never trained over."""
+    """The PILCO runs still missing under ``runs_root`` as ``(name, arguments of run_and_save)``; a folder holding
+    a run of other settings raises ``ValueError``."""
     from softpend.io.runfolders import check_run_folder
     from softpend.study.rl_runs import run_folder
 
@@ -113,15 +86,14 @@ def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:
 
 
 def run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> None:
-    """One PILCO run saved to ``folder`` (a job of :func:`softpend.study.sweep.run_jobs`), which must not hold
-    a PILCO run yet (``ValueError``: a run folder is never trained over)."""
+    """One PILCO run saved to ``folder``, which must not hold one yet."""
     if (Path(folder) / "pilco.json").exists():
         raise ValueError(f"run folder {folder} already holds a PILCO run; a run folder is never trained over")
     run_pilco(config, progress=progress).save(folder)
 
 
 def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> list[dict[str, Any]]:
-    """One row per evaluated PILCO policy: ``method, seed, plant_s, success_rate, max_upright_std_rad``."""
+    """One curve row per evaluated PILCO policy."""
     rows = []
     for result in results:
         for record in result.records:
@@ -140,7 +112,7 @@ def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> l
 
 
 def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
-    """The same rows from the evaluation tables of :class:`softpend.rl.training_log.TrainingLog` objects."""
+    """The curve rows of the evaluations of training logs, by method."""
     rows = []
     for method, logs in logs_by_method.items():
         for log in logs:
@@ -167,9 +139,8 @@ def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
 def seconds_to_balance_table(
     rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)
 ) -> list[dict[str, Any]]:
-    """Per method: median over seeds of the training plant seconds until an evaluation on which every seed
-    succeeds with ``max_upright_std_rad`` at most each level (``inf`` when a seed never does), plus the
-    final evaluation's success rate and upright error (medians over seeds)."""
+    """Per method, medians over seeds: training plant seconds to the first evaluation that succeeds on every start
+    within each std level (``inf`` if never), and the final evaluation's figures."""
     table = []
     for method in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == method]
@@ -187,15 +158,7 @@ def seconds_to_balance_table(
 
 
 def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.1):
-    """Success rate and upright error against training plant seconds, one colour per method, a line per seed.
-
-    The upright error is the worst start's, drawn at the success level :data:`softpend.evaluation.SUCCESS_STD_RAD`
-    for an evaluation in which a start failed.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """Success rate and worst-start upright error against training plant seconds, a line per method and seed."""
     import matplotlib.pyplot as plt
 
     fig, (ax_s, ax_e) = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
@@ -227,12 +190,7 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
 
 
 def plot_predicted_and_real_cost(results: Sequence[PilcoResult]):
-    """PILCO's predicted (dashed, crosses) and real (solid, dots) summed cost of each policy trial, per seed.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """PILCO's predicted (dashed) and real (solid) summed cost of each policy trial, per seed."""
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 

@@ -1,19 +1,5 @@
-"""Why the project's default rod looks the way it does: design figures computed from the plant itself.
-
-The default :class:`~softpend.plant.params.RodParams` are chosen so that the control problem has the
-three features the report is about:
-
-* the rod is *soft*: held horizontal by a locked hub it sags visibly (10-30 % of its length) under its
-  own weight and the tip mass, computed with the PRB plant's static solver;
-* the motor is *weak*: the torque limit is below the torque needed to hold the straight rod horizontal,
-  so the rod cannot be lifted straight up and a swing-up has to pump energy;
-* the rod is *stiff enough to stand*: clamped pointing up it does not buckle under its own weight (the
-  gravity load factor at which the clamped PRB chain buckles is well above 1), so upright is a shape the
-  hub can balance by feedback (the classical-control chapter's LQR does it).
-
-:func:`rod_design` computes these figures; :meth:`RodDesign.to_markdown` renders the design table shown in
-the book's Figure 1 notebook, and :func:`rod_poses_m` gives the joint positions drawn there.
-"""
+"""Why the default rod looks the way it does: it sags visibly, the motor cannot lift it straight, and clamped
+upright it does not buckle; figures computed from the plant itself."""
 
 from __future__ import annotations
 
@@ -30,15 +16,12 @@ from softpend.plant.prb import PRBPlant
 from softpend.plant.protocol import Plant
 from softpend.task import Task
 
-__all__ = ["RodDesign", "clamped_upright_buckling_factor", "horizontal_cantilever", "rod_design", "rod_poses_m"]
-
 #: Hub angle that points the clamped rod horizontally (to +x) [rad].
 HORIZONTAL_HUB_ANGLE_RAD = -math.pi / 2
 
 
 def horizontal_cantilever(task: Optional[Task] = None) -> Plant:
-    """The rod of ``task`` (default ``Task()``) clamped horizontally (hub locked at ``-pi/2``) and resting in
-    its deflected static equilibrium under gravity, as a hub-locked plant."""
+    """The rod of ``task`` clamped horizontally, resting in its static equilibrium under gravity."""
     sim = (task if task is not None else Task()).make_plant(hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
     assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     sim.static_equilibrium()
@@ -62,25 +45,8 @@ def _hessian(function, n: int, step: float) -> np.ndarray:
 
 
 def clamped_upright_buckling_factor(params: Optional[RodParams] = None, step_rad: float = 1e-3) -> float:
-    """Factor by which gravity would have to grow for the rod, clamped pointing straight up, to buckle.
-
-    The clamped (hub-locked) PRB chain is stable upright when the Hessian of its potential energy
-    ``K_elastic - G_gravity`` at the straight configuration is positive definite; the critical load factor
-    is the smallest generalised eigenvalue ``lambda`` of ``K v = lambda G v``.  Both Hessians are taken by
-    finite differences of :meth:`PRBPlant.energy_j`, i.e. from the plant's own geometry.
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        Rod parameters (default: the project's default rod).
-    step_rad : float
-        Finite-difference step [rad].
-
-    Returns
-    -------
-    float
-        The buckling load factor (> 1: the clamped rod stands up on its own; ``inf`` without gravity).
-    """
+    """Factor by which gravity would have to grow for the rod clamped upright to buckle: the smallest ``lambda`` of
+    ``K v = lambda G v``, the Hessians of the elastic and gravity energy by finite differences."""
     positive("step_rad", step_rad)
     plant = PRBPlant(params if params is not None else RodParams(), hub_locked_at_rad=0.0)
     n = plant.n_coordinates
@@ -100,24 +66,8 @@ def clamped_upright_buckling_factor(params: Optional[RodParams] = None, step_rad
 
 @dataclass(frozen=True)
 class RodDesign:
-    """Design figures of a rod (see :func:`rod_design`).
-
-    Attributes
-    ----------
-    params : RodParams
-        The rod they describe.
-    tip_sag_horizontal_m : float
-        Vertical drop of the tip below the hub axis when the rod is clamped horizontally, from the PRB
-        plant's static equilibrium [m].
-    tip_sag_euler_bernoulli_m : float
-        The same from small-deflection Euler-Bernoulli beam theory [m] (over-estimates large sag).
-    gravity_torque_horizontal_nm : float
-        Torque needed to hold the straight rod horizontal [N m].
-    torque_limit_nm : float
-        Motor torque limit [N m].
-    buckling_load_factor : float
-        See :func:`clamped_upright_buckling_factor` (dimensionless).
-    """
+    """Design figures of a rod: tip sag clamped horizontal (PRB statics, Euler-Bernoulli), the torque to hold the
+    straight rod horizontal, the torque limit, and the buckling load factor clamped upright."""
 
     params: RodParams
     tip_sag_horizontal_m: float
@@ -128,12 +78,12 @@ class RodDesign:
 
     @property
     def tip_sag_fraction(self) -> float:
-        """Horizontal tip sag as a fraction of the rod length (dimensionless)."""
+        """Horizontal tip sag over the rod length."""
         return self.tip_sag_horizontal_m / self.params.length_m
 
     @property
     def torque_ratio(self) -> float:
-        """Torque limit over the torque needed to hold the rod horizontal (< 1: swing-up must pump)."""
+        """Torque limit over the torque to hold the rod horizontal."""
         return self.torque_limit_nm / self.gravity_torque_horizontal_nm
 
     def rows(self) -> list[tuple[str, str, str]]:
@@ -181,18 +131,7 @@ class RodDesign:
 
 
 def rod_design(params: Optional[RodParams] = None) -> RodDesign:
-    """Compute the design figures of a rod with the PRB plant.
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        Rod parameters (default: the project's default rod).
-
-    Returns
-    -------
-    RodDesign
-        Horizontal tip sag (PRB statics and beam theory), torque ratio and buckling load factor.
-    """
+    """The design figures of a rod, from the PRB plant."""
     params = params if params is not None else RodParams()
     if not isinstance(params, RodParams):
         raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
@@ -208,15 +147,8 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
 
 
 def rod_poses_m(task: Optional[Task] = None) -> dict[str, np.ndarray]:
-    """Points along the rod ``(k, 2)`` [m] of three poses of the plant of ``task`` (default ``Task()``), from
-    the plant's own geometry (the PRB joints, or the beam nodes).
-
-    Returns
-    -------
-    dict
-        ``"hanging"`` (straight, hub at ``pi``), ``"horizontal"`` (clamped horizontally, deflected by
-        gravity: the static equilibrium of :func:`horizontal_cantilever`) and ``"upright"`` (straight up).
-    """
+    """Points along the rod ``(k, 2)`` [m] of the plant of ``task`` hanging, clamped horizontal (deflected) and
+    upright."""
     task = task if task is not None else Task()
     sim = task.make_plant()
     hanging_q, _ = sim.hanging_state()

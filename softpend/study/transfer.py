@@ -1,14 +1,5 @@
-"""Sim-to-"real" transfer: controllers designed on the PRB plant, evaluated on the continuum beam.
-
-The beam plant plays the real rod.  Every controller goes through the project's one evaluation,
-:func:`softpend.evaluation.evaluate_controller`, on the PRB plant it was designed for and on the beam, at
-the nominal parameters and with the *plant's* parameters perturbed by ``+-fraction`` (the controller keeps
-its nominal design):
-
-* ``stiffness``: ``stiffness_scale * (1 +- f)`` (``E I``, and the beam's ``E A``, ``G A``);
-* ``mass``: rod mass and tip mass ``* (1 +- f)``;
-* ``damping``: material/joint damping and hub friction ``* (1 +- f)``.
-"""
+"""Sim-to-"real" transfer: controllers designed on the PRB plant, evaluated on the PRB plant and the continuum beam
+at the nominal parameters and with the plant's stiffness, mass or damping perturbed."""
 
 from __future__ import annotations
 
@@ -24,28 +15,13 @@ from softpend.evaluation import TEST_EPISODE_S, evaluate_controller
 from softpend.plant import RodParams
 from softpend.task import Task
 
-#: Shortest episode :func:`transfer_table` runs [s] (swing-up needs a 1 s hold to count).
+#: Shortest episode :func:`transfer_table` runs [s] (a swing-up needs a 1 s hold to count).
 MIN_DURATION_S = 2.0
-
-__all__ = [
-    "MIN_DURATION_S",
-    "TransferCase",
-    "default_transfer_cases",
-    "perturbations",
-    "rl_transfer_cases",
-    "transfer_matrix",
-    "transfer_table",
-]
 
 
 def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodParams]:
-    """The nominal parameters and the six one-at-a-time perturbations (see the module docstring).
-
-    Raises
-    ------
-    ValueError
-        If ``fraction`` is not in ``[0, 1)``.
-    """
+    """The nominal parameters and the six one-at-a-time perturbations by ``+-fraction``: stiffness scale, rod and
+    tip mass, joint damping and hub friction."""
     if not 0.0 <= fraction < 1.0:
         raise ValueError(f"fraction must be in [0, 1), got {fraction!r}")
     out = {"nominal": params}
@@ -63,21 +39,8 @@ def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodPara
 
 @dataclass
 class TransferCase:
-    """A controller and the task it is evaluated on.
-
-    Attributes
-    ----------
-    name : str
-        Label in the table.
-    make_controller : callable
-        ``() -> Controller``, designed on the nominal PRB plant (called once per case).
-    start : {"hanging", "upright", "random"}
-        Start distribution of the evaluation.
-    duration_s : float
-        Episode length [s].
-    start_noise_rad : float
-        Start noise on the hub angle and rate.
-    """
+    """A controller factory (designed on the nominal PRB plant) and the start, episode length and start noise it is
+    evaluated with."""
 
     name: str
     make_controller: Callable[[], Any]
@@ -87,9 +50,8 @@ class TransferCase:
 
 
 def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.01) -> list[TransferCase]:
-    """The classical controllers of :mod:`softpend.control` that run on observations only (so they can
-    run on any plant): the observation-feedback LQR from a tilted start (``+-0.2 rad`` hub noise) and the
-    energy swing-up with that LQR from hanging."""
+    """The observation-only classical controllers: the LQR from near upright and the energy swing-up + LQR from
+    hanging."""
     from softpend.control.lqr import LQRController
     from softpend.control.swingup import EnergySwingUpController
 
@@ -119,31 +81,8 @@ def rl_transfer_cases(
     params: Optional[RodParams] = None,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[TransferCase]:
-    """The RL agents of :mod:`softpend.rl` (trained on the PRB plant) as transfer cases: swing-up from hanging.
-
-    Parameters
-    ----------
-    runs_root : path
-        Folder of the runs made by :func:`softpend.study.rl_runs.train_seeds` (``<root>/<algo>-seed<k>``).
-    algos : sequence of {"dqn", "mbpo"}
-        Methods to include.
-    seeds : sequence of int
-        Training seeds: one case per (method, seed), each the agent of that run.
-    which : {"best", "final"}
-        Which agent of a run (see :func:`softpend.rl.dqn.load_agent`).
-    params : RodParams, optional
-        Nominal parameters of the transfer study; the agents must have been trained on a rod with the same
-        number of links and torque limit.
-    duration_s : float
-        Episode length [s].
-
-    Raises
-    ------
-    FileNotFoundError
-        If a run folder has no agent.
-    ValueError
-        If an algorithm is unknown or an agent was trained on a different rod.
-    """
+    """The agents ``which`` of the RL runs under ``runs_root`` (one per method and seed) as swing-up cases; they must
+    have been trained on a rod with the links and torque limit of ``params``."""
     from softpend.rl.dqn import load_agent
     from softpend.rl.training_env import policy_controller
     from softpend.study.rl_runs import METHOD_NAMES, run_folder
@@ -176,15 +115,8 @@ def rl_transfer_cases(
 def transfer_matrix(
     rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate"
 ) -> tuple[list[str], list[str], np.ndarray]:
-    """One metric of :func:`transfer_table` rows on one plant as a (controller x perturbation) matrix.
-
-    Returns
-    -------
-    controllers, perturbations : list of str
-        Row and column labels, in the order they first appear.
-    values : ndarray, shape (len(controllers), len(perturbations))
-        The metric (NaN where a combination is missing).
-    """
+    """One metric of :func:`transfer_table` rows on one plant as ``(controllers, perturbations, matrix)`` (NaN
+    where missing)."""
     sel = [r for r in rows if r["plant"] == plant]
     if not sel:
         raise ValueError(f"no rows for plant {plant!r}")
@@ -207,30 +139,9 @@ def transfer_table(
     duration_scale: float = 1.0,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Evaluate every case on every plant and parameter perturbation.
-
-    Parameters
-    ----------
-    cases : sequence of TransferCase
-        Controllers and tasks (see :func:`default_transfer_cases`).
-    params : RodParams, optional
-        Nominal parameters (the controllers' design point).
-    plants : sequence of str
-        Plant names (``make_plant``).
-    fraction : float
-        Perturbation size (0.2 = +-20 %).
-    seeds : sequence of int
-        Evaluation seeds.
-    duration_scale : float
-        Multiplies every case's duration (shorter runs for quick profiles); never below
-        ``MIN_DURATION_S`` so that the evaluation's 1 s hold criterion can still be met.
-
-    Returns
-    -------
-    list of dict
-        One row per (case, plant, perturbation): :meth:`EvaluationSummary.row` plus ``plant``,
-        ``perturbation`` and ``diverged`` (episodes that ended in a solver failure).
-    """
+    """Evaluate every case on every plant and perturbation: one :meth:`EvaluationSummary.row` each, with
+    ``plant``, ``perturbation`` and ``diverged``; ``duration_scale`` shortens every episode, down to
+    :data:`MIN_DURATION_S`."""
     params = params or RodParams()
     if duration_scale <= 0:
         raise ValueError(f"duration_scale must be positive, got {duration_scale!r}")

@@ -1,33 +1,6 @@
-"""Plant and environment speed (``softpend bench --only plant``).
-
-* ``env_steps_per_s_n4``/``_n10``, ``solver_steps_per_s_n4``: the single Exudyn environment and its bare solver loop;
-  ``env_steps_per_s_n4_speedup``: today's step path over the legacy one (:func:`make_legacy`), same run.
-* ``batched_rod_steps_per_s_n4``/``_n10``: the batched torch chain, 4096 rods, one torch thread, in its fast
-  configuration: the Rosenbrock integrator (two sub-steps), compiled (``torch.compile``), float32;
-  ``..._float64``: the same in float64; ``batched_rk4_rod_steps_per_s_n*``: the chain's defaults (RK4 at its
-  stability limit, eager, float64), the configuration of the converged-plant evaluations.
-* ``vector_env_steps_per_s_n4``: the vector environment, 1024 rods, observation and reward included, with the
-  Rosenbrock integrator compiled; ``..._default``: with the environment's defaults (RK4, eager).
-* ``*_per_cpu_s_*``: the same counts per CPU second of the benchmark process (on a shared machine the
-  wall-clock rates fall with the other processes' load; these much less).
-* ``batched_chain_hub_error_rad_n*`` (RK4), ``batched_rosenbrock_hub_error_rad_n*`` (the fast configuration)
-  beside ``exudyn_default_hub_error_rad_n*``: largest hub-angle error against the Exudyn plant with 200
-  sub-steps (5 s of random torque at n = 4, 1 s at n = 10).
-* ``mujoco_*`` (only where ``import mujoco`` works, ``pip install softpend[bench]``; otherwise absent, and one line
-  on stderr says so): the same chain in MuJoCo (:mod:`softpend.study.bench.mujoco_chain`), one rod stepped from
-  Python per control step: ``mujoco_rk4_5ms_steps_per_s_n4``, ``mujoco_implicitfast_2p5ms_steps_per_s_n4``; at
-  n = 10, where those steps diverge (``mujoco_rk4_5ms_diverges_n10``, ``mujoco_implicitfast_2p5ms_diverges_n10``:
-  1 if so), ``mujoco_rk4_stable_steps_per_s_n10`` (RK4 with the batched chain's sub-step count,
-  ``mujoco_rk4_stable_substeps_n10``) and ``mujoco_implicitfast_0p5ms_steps_per_s_n10``; their
-  ``*_hub_error_rad_n*`` against the same Exudyn reference, beside ``mujoco_rk4_0p25ms_hub_error_rad_n*`` (a
-  converged MuJoCo run: the check that the two models are the same chain);
-  ``mujoco_rollout_rk4_5ms_rod_steps_per_s_n4``: ``mujoco.rollout`` over 4096 rods on one thread.
-* ratios, same run: ``exudyn_env_over_mujoco_rk4_n4`` and ``exudyn_solver_over_mujoco_rk4_n4`` (the single
-  Exudyn environment's and its bare solver loop's steps/s over MuJoCo RK4's), ``batched_over_mujoco_rk4_n4``/``_n10``
-  (the batched chain's fast configuration, rod-steps/s, over MuJoCo RK4's steps/s), ``batched_rk4_over_mujoco_rk4_n*``
-  (the batched chain's RK4, the same integrator and step as MuJoCo's), ``batched_over_mujoco_rollout_n4`` and
-  ``batched_rk4_over_mujoco_rollout_n4`` (over ``mujoco.rollout``: batch against batch).
-"""
+"""Plant and environment speed and accuracy (``softpend bench --only plant``): the Exudyn environment and solver,
+its step path against the legacy one, the batched torch chain, the vector environment, hub-angle errors against a
+converged Exudyn run, and, where ``import mujoco`` works, the same chain in MuJoCo."""
 
 from __future__ import annotations
 
@@ -35,7 +8,7 @@ import math
 import sys
 import time
 import types
-from typing import Any
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -50,7 +23,7 @@ N_STEPS = 4000
 
 
 def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb") -> float:
-    """Steps per second through the Gymnasium API (``gym.make``, random actions from a seeded generator)."""
+    """Steps per second through the Gymnasium API under seeded random actions."""
     import softpend  # noqa: F401  (registers the environments)
 
     env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links), plant=plant)
@@ -58,7 +31,7 @@ def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb"
 
 
 def _timed_steps_per_s(env: gym.Env, actions: np.ndarray) -> float:
-    """Steps per wall-clock second of ``env`` (reset with seed 0) through ``actions``, reset when an episode ends."""
+    """Steps per second of ``env`` through ``actions``."""
     env.reset(seed=0)
     start = time.perf_counter()
     for action in actions:
@@ -69,7 +42,7 @@ def _timed_steps_per_s(env: gym.Env, actions: np.ndarray) -> float:
 
 
 def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
-    """The bare Exudyn loop: set the joint torque, advance one control step, nothing else."""
+    """Steps per second of the bare Exudyn loop: set the joint torque, advance."""
     plant = PRBPlant(RodParams(n_links=n_links))
     plant.reset(*plant.hanging_state())
     chain = plant._chain
@@ -83,10 +56,7 @@ def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
     return n_steps / (time.perf_counter() - start)
 
 
-# ---------------------------------------------------------------------------------------------------------
-# The baseline of ``env_steps_per_s_n4_speedup``: the single environment's step path with more Python-C++
-# crossings (settings and system data fetched through pybind11 at every step, the finiteness check through
-# np.sum, the observation converting the state arrays with ``tolist`` once more).  Same numbers.
+# The baseline of ``env_steps_per_s_n4_speedup``: the step path with more Python-C++ crossings, same numbers.
 
 
 def _legacy_advance(self) -> None:
@@ -123,16 +93,15 @@ def _legacy_observe(self):
 
 
 def make_legacy(env) -> None:
-    """Give ``env`` (a ``gym.make`` environment on the PRB plant) the baseline step path above
-    (``tests/test_bench_plant.py`` holds both paths to identical numbers)."""
+    """Give ``env`` (on the PRB plant) the baseline step path above."""
     plant = env.unwrapped.plant
     plant._chain.advance = types.MethodType(_legacy_advance, plant._chain)
     plant.observe = types.MethodType(_legacy_observe, plant)
 
 
 def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int = 3) -> tuple[float, float]:
-    """Steps per second of the single environment through today's step path and the legacy one, interleaved
-    ``repeats`` times (best of each kept), so that both see the same machine load."""
+    """Steps per second of the environment through today's step path and the legacy one, interleaved (best of
+    ``repeats``)."""
     import softpend  # noqa: F401  (registers the environments)
 
     actions = np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32)
@@ -146,8 +115,15 @@ def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int
     return best["new"], best["legacy"]
 
 
-# ---------------------------------------------------------------------------------------------------------
-# The batched torch chain and the vector environment
+def _best_times(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
+    """Shortest wall-clock and CPU seconds of ``repeats`` calls of ``run``."""
+    best = best_cpu = math.inf
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        run()
+        best = min(best, time.perf_counter() - start)
+        best_cpu = min(best_cpu, time.process_time() - start_cpu)
+    return best, best_cpu
 
 
 def batched_rod_steps_per_s(
@@ -159,10 +135,8 @@ def batched_rod_steps_per_s(
     compiled: bool = False,
     dtype_name: str = "float64",
 ) -> tuple[float, float]:
-    """Rod-steps of 0.01 s per second of the batched chain (default sub-steps of ``integrator``, one torch thread,
-    random torques, no gradients): ``batch_size * n_steps`` over the best of ``repeats`` timed runs, per
-    wall-clock second and per CPU second of this process (the latter less sensitive to other work on the
-    machine).  A compiled chain is compiled by an untimed first step."""
+    """Rod-steps per wall-clock and per CPU second of the batched chain on one torch thread under random torques
+    (best of ``repeats``, after an untimed first step)."""
     from softpend.plant.batched import BatchedPRBChain
 
     with one_torch_thread() as torch:
@@ -172,16 +146,16 @@ def batched_rod_steps_per_s(
         )
         generator = torch.Generator().manual_seed(0)
         torques = ((torch.rand(n_steps, batch_size, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06).to(dtype)
-        best = best_cpu = math.inf
         with torch.no_grad():
             q, qd = chain.hanging_state()
             q, qd = chain.step(q, qd, torques[0])  # warm-up (and compilation)
-            for _ in range(repeats):
-                start, start_cpu = time.perf_counter(), time.process_time()
+
+            def run() -> None:
+                nonlocal q, qd
                 for torque in torques:
                     q, qd = chain.step(q, qd, torque)
-                best = min(best, time.perf_counter() - start)
-                best_cpu = min(best_cpu, time.process_time() - start_cpu)
+
+            best, best_cpu = _best_times(run, repeats)
             if not bool(torch.isfinite(q).all()):
                 raise RuntimeError(f"the batched chain diverged in the benchmark ({integrator}, n = {n_links})")
     return batch_size * n_steps / best, batch_size * n_steps / max(best_cpu, 1e-9)
@@ -195,9 +169,8 @@ def vector_env_steps_per_s(
     integrator: str = "rk4",
     compiled: bool = False,
 ) -> tuple[float, float]:
-    """Environment steps per second of :class:`~softpend.envs.vector.SoftPendulumVectorEnv` (observation and
-    reward included, random actions, one torch thread): ``num_envs * n_steps`` over the best timed run, per
-    wall-clock second and per CPU second of this process."""
+    """Steps per wall-clock and per CPU second of the vector environment on one torch thread under random actions
+    (best of ``repeats``)."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
     with one_torch_thread():
@@ -207,24 +180,12 @@ def vector_env_steps_per_s(
         actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)
         env.reset(seed=0)
         env.step(actions[0])
-        best = best_cpu = math.inf
-        for _ in range(repeats):
-            start, start_cpu = time.perf_counter(), time.process_time()
-            for action in actions:
-                env.step(action)
-            best = min(best, time.perf_counter() - start)
-            best_cpu = min(best_cpu, time.process_time() - start_cpu)
+        best, best_cpu = _best_times(lambda: [env.step(action) for action in actions], repeats)
     return num_envs * n_steps / best, num_envs * n_steps / max(best_cpu, 1e-9)
 
 
 def bench_plant() -> dict[str, float]:
-    """Env and bare-solver step rates at n = 4 and n = 10 (random actions, dt = 0.01 s, 2 sub-steps); the
-    speed-up of the single environment's step over its legacy path; the batched chain's and the vector
-    environment's rates and the batched chain's accuracy beside the default Exudyn plant's.
-
-    The env and solver loops for n = 4 are interleaved twice and the best of each kept, so that the
-    wrapper-cost ratio compares like with like on a noisy machine.
-    """
+    """The ``plant`` benchmark group (see the module docstring)."""
     env4 = max(env_steps_per_s(4) for _ in range(2))
     solver4 = max(_solver_steps_per_s(4) for _ in range(2))
     env10 = env_steps_per_s(10)
@@ -259,9 +220,9 @@ def bench_plant() -> dict[str, float]:
         "vector_env_steps_per_cpu_s_n4": vector4_cpu,
         "vector_env_steps_per_s_n4_default": vector4_default,
     }
-    references = {4: hub_error_reference(4, duration_s=5.0), 10: hub_error_reference(10, duration_s=1.0)}
-    figures.update(hub_errors_rad(4, duration_s=5.0, reference=references[4]))
-    figures.update(hub_errors_rad(10, duration_s=1.0, reference=references[10]))
+    references = {n: hub_error_reference(n, duration_s=d) for n, d in ((4, 5.0), (10, 1.0))}
+    for n, d in ((4, 5.0), (10, 1.0)):
+        figures.update(hub_errors_rad(n, duration_s=d, reference=references[n]))
     if mujoco_chain.mujoco_available():
         figures.update(mujoco_chain.bench_figures(figures, references))
     else:

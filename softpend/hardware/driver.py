@@ -1,25 +1,6 @@
-"""Host-side driver for the motor link (pyserial).
-
-:class:`MotorLink` opens the serial port, performs the version handshake and then exchanges the
-messages of :mod:`softpend.hardware.protocol`: it sends torque commands (clamped to the torque limit
-*before* they leave the host) and reads the device's time-stamped encoder states.  Safety is part of the
-driver:
-
-* every torque is clamped to ``min(host limit, device limit)`` (as the float32 that goes on the wire:
-  never a hair above); a non-finite torque stops the motor and raises ``ValueError``;
-* what the device announces and reports is checked before it is used: a HELLO_ACK with an impossible
-  value (a torque limit of -1, NaN or 1e30, zero counts per revolution, no watchdog, a state rate of 0)
-  is refused with :class:`HandshakeError` naming the field; a STATE frame whose values are not finite or
-  out of range (a NaN velocity, an applied torque beyond the device's limit, undefined flag bits) is a bad
-  frame like a corrupt one (counted, never passed on);
-* zero torque on every exit path: ``close()`` (and so the context manager) sends STOP, an ``atexit`` hook
-  and SIGTERM/SIGINT handlers send STOP for links still open, and any link error sends STOP before it is
-  raised (best effort: a dead link cannot carry it, which is what the device-side watchdog is for);
-* clear errors: :class:`LinkTimeout` (no state within the timeout), :class:`LinkDisconnected` (the port
-  went away), :class:`LinkChecksumError` (too many consecutive frames failed their CRC),
-  :class:`HandshakeError` (wrong protocol version, impossible announced values or no answer),
-  :class:`DeviceError` (the device reported an error; the message says what the code means).
-"""
+"""Host-side driver of the motor link: version handshake, torque commands clamped on the host (never above the
+smaller of the host's and the device's limit, as the float32 on the wire), checked STATE frames, STOP on every
+exit path (close, atexit, SIGTERM/SIGINT, any link error), and one clear exception per failure."""
 
 from __future__ import annotations
 
@@ -46,22 +27,14 @@ __all__ = [
     "LinkDisconnected",
     "LinkError",
     "LinkTimeout",
-    "MAX_COUNTS_PER_REV",
-    "MAX_DEVICE_TORQUE_LIMIT_NM",
-    "MAX_HUB_SPEED_RAD_S",
-    "MAX_STATE_RATE_HZ",
     "MotorLink",
     "MotorState",
 ]
 
-#: Largest torque limit a device may announce [N m] (the V5 Smart Motor stalls at 2.1 N m); beyond it the
-#: HELLO_ACK is refused as garbage.
+#: Largest values a device may announce or report (beyond them a value is garbage).
 MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
-#: Largest encoder resolution a device may announce [counts per revolution].
 MAX_COUNTS_PER_REV = 1 << 24
-#: Largest STATE rate a device may announce [Hz] (a serial link carries a few thousand frames/s at most).
 MAX_STATE_RATE_HZ = 10000
-#: Largest hub rate a STATE frame may report [rad/s] (about 9500 rpm); faster is a corrupt value.
 MAX_HUB_SPEED_RAD_S = 1000.0
 
 
@@ -74,7 +47,7 @@ class LinkTimeout(LinkError):
 
 
 class LinkDisconnected(LinkError):
-    """The serial port went away (device unplugged, emulator killed)."""
+    """The serial port went away."""
 
 
 class LinkChecksumError(LinkError):
@@ -82,7 +55,7 @@ class LinkChecksumError(LinkError):
 
 
 class HandshakeError(LinkError):
-    """The version handshake failed."""
+    """The version handshake failed (version, impossible announced values, no answer)."""
 
 
 class DeviceError(LinkError):
@@ -91,12 +64,7 @@ class DeviceError(LinkError):
 
 @dataclass(frozen=True)
 class DeviceInfo:
-    """What the device announced in its HELLO_ACK.
-
-    Raises ``ValueError`` naming the field when a value is impossible: ``counts_per_rev`` outside
-    [1, :data:`MAX_COUNTS_PER_REV`], ``torque_limit_nm`` not in (0, :data:`MAX_DEVICE_TORQUE_LIMIT_NM`],
-    ``watchdog_s`` not in (0, 65.535] s, ``state_rate_hz`` not in [1, :data:`MAX_STATE_RATE_HZ`].
-    """
+    """What the device announced in its HELLO_ACK (``ValueError`` naming an impossible field)."""
 
     protocol_version: int
     counts_per_rev: int
@@ -121,36 +89,14 @@ class DeviceInfo:
 
 @dataclass(frozen=True)
 class MotorState:
-    """One STATE message, converted to SI units.
-
-    Attributes
-    ----------
-    host_time_s : float
-        The link's clock when the host decoded the frame [s].
-    device_time_s : float
-        Device clock at the encoder sample [s].
-    phi_rad : float
-        Hub angle from upright, unwrapped [rad] (``phi_at_zero_counts_rad`` + counts).
-    phi_dot_rad_s : float
-        Hub rate reported by the device [rad/s].
-    applied_torque_nm : float
-        Torque the device is applying [N m] (0 after the watchdog or STOP).
-    encoder_counts : int
-        Raw encoder counts since the device started.
-    last_cmd_seq : int
-        Sequence number of the torque command in force.
-    flags : int
-        ``protocol.FLAG_*`` bits.
-    seq : int
-        Sequence number of this STATE frame.
-    """
+    """One STATE message in SI units: the host's clock at decoding, the device clock at the encoder sample, the
+    hub angle from upright (unwrapped), the seq of the command in force, ``protocol.FLAG_*`` bits."""
 
     host_time_s: float
     device_time_s: float
     phi_rad: float
     phi_dot_rad_s: float
     applied_torque_nm: float
-    encoder_counts: int
     last_cmd_seq: int
     flags: int
     seq: int
@@ -175,9 +121,7 @@ def _stop_all_open_links(wait: bool = True) -> None:
 
 
 def _signal_handler(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess test
-    # The handler runs in the main thread, possibly in the middle of that thread's own frame write
-    # (holding the write lock): it must not wait for the lock, or the process deadlocks.  A link that is
-    # mid-write gets its STOP as soon as the write ends (or from the atexit hook while unwinding).
+    # the main thread may hold a write lock here: never wait for it (the write in progress sends STOP)
     _stop_all_open_links(wait=False)
     previous = _PREVIOUS_HANDLERS.get(signum)
     if callable(previous):
@@ -199,30 +143,13 @@ def _install_exit_hooks() -> None:
 
 
 class MotorLink:
-    """A session with the motor controller over a serial port.
+    """A session with the motor controller over the serial port ``port`` (or the open transport ``serial``, such
+    as the twin's in-memory link, timed by its ``clock``).
 
-    Parameters
-    ----------
-    port : str
-        Serial device (``/dev/ttyACM0`` for the V5 brain, or the pty path printed by ``softpend rig``).
-    torque_limit_nm : float
-        Host-side torque limit [N m]; the effective limit is the smaller of this and the device's.
-    baudrate : int
-        Serial baud rate (ignored by pseudo-terminals).
-    timeout_s : float
-        How long :meth:`read_state` and the handshake wait before raising :class:`LinkTimeout` [s].
-    phi_at_zero_counts_rad : float
-        Hub angle when the encoder reads zero [rad] (pi: the rod hangs down when the device starts).
-    max_consecutive_bad_frames : int
-        This many bad frames in a row raise :class:`LinkChecksumError`; isolated ones are only counted.
-    install_exit_hooks : bool
-        Register the atexit and SIGTERM/SIGINT hooks that stop the motor (main thread only).
-    serial : object, optional
-        An open serial-like transport to use instead of opening ``port`` with pyserial (the twin's in-memory
-        link, :meth:`softpend.hardware.emulator.SimRig.connect`).
-    clock : object, optional
-        What times the link's waits and stamps the states: ``now_s()`` [s] (default: the wall clock; the
-        twin's :class:`~softpend.hardware.clock.SimClock` with its ``serial``).
+    Args: ``torque_limit_nm`` the host's limit (the effective one is the smaller of it and the device's);
+    ``timeout_s`` how long a read or the handshake waits; ``phi_at_zero_counts_rad`` the hub angle at zero
+    counts; ``max_consecutive_bad_frames`` bad frames in a row that raise :class:`LinkChecksumError`;
+    ``install_exit_hooks`` the atexit and signal hooks that stop the motor.
     """
 
     def __init__(
@@ -235,7 +162,6 @@ class MotorLink:
         max_consecutive_bad_frames: int = 3,
         install_exit_hooks: bool = True,
         serial=None,
-        clock=None,
     ) -> None:
         if not isinstance(port, str) or not port:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
@@ -250,51 +176,38 @@ class MotorLink:
         self.max_consecutive_bad_frames = int(max_consecutive_bad_frames)
         self.install_exit_hooks = install_exit_hooks
         self._transport = serial
-        self.clock = clock if clock is not None else (getattr(serial, "clock", None) or WALL_CLOCK)
+        self.clock = getattr(serial, "clock", None) or WALL_CLOCK
         self.device: Optional[DeviceInfo] = None
         self._serial = None
         self._decoder = proto.FrameDecoder(validate=self._check_message)
         self._seq = 0
         self._pending: list[tuple[int, int, tuple]] = []
         self.last_command_nm = 0.0
-        self.commands_sent = 0
         self._write_lock = threading.Lock()
         self._stop_pending = False
 
-    # ------------------------------------------------------------------ properties
     @property
     def is_open(self) -> bool:
         return self._serial is not None
 
     @property
     def torque_limit_nm(self) -> float:
-        """Effective limit: the smaller of the host's and the (validated) device's [N m]."""
+        """The smaller of the host's and the device's limit [N m]."""
         if self.device is None:
             return self.host_torque_limit_nm
         return min(self.host_torque_limit_nm, self.device.torque_limit_nm)
 
     @property
     def rejected_states(self) -> int:
-        """Frames received so far with a valid CRC but impossible values (counted in :attr:`bad_frames`)."""
+        """Frames with a valid CRC but impossible values (counted in :attr:`bad_frames` too)."""
         return self._decoder.value_errors
 
     @property
     def bad_frames(self) -> int:
-        """Frames received so far that failed CRC or framing."""
         return self._decoder.bad_frames
 
-    # ------------------------------------------------------------------ open / close
     def open(self) -> "MotorLink":
-        """Open the port and perform the version handshake.
-
-        Raises
-        ------
-        LinkDisconnected
-            If the port cannot be opened.
-        HandshakeError
-            On a version mismatch, a HELLO_ACK with impossible values (the message names the field), or
-            if the device does not answer within ``timeout_s``.
-        """
+        """Open the port and perform the version handshake (:class:`LinkDisconnected`, :class:`HandshakeError`)."""
         import serial
 
         try:
@@ -319,11 +232,9 @@ class MotorLink:
         deadline = self.clock.now_s() + self.timeout_s
         while True:
             try:
-                msg_type, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK, proto.MSG_ERROR))
+                _, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK,))
             except LinkTimeout as exc:
                 raise HandshakeError(f"no HELLO_ACK from {self.port!r} within {self.timeout_s:.3f} s") from exc
-            if msg_type == proto.MSG_ERROR:  # only reached if _accept queued it (it raises during a handshake)
-                raise HandshakeError(f"device {self.port!r} refused the handshake: {_error_meaning(values[0])}")
             version, echoed, cpr, limit, watchdog_ms, rate_hz = values
             if echoed != nonce:
                 continue  # a stale answer to an earlier session
@@ -361,15 +272,8 @@ class MotorLink:
         except Exception:
             pass
 
-    # ------------------------------------------------------------------ commands
     def send_torque(self, torque_nm: float) -> int:
-        """Command a base torque, clamped to :attr:`torque_limit_nm` here on the host; returns its seq.
-
-        Raises
-        ------
-        ValueError
-            If ``torque_nm`` is not a finite number (the motor is stopped first).
-        """
+        """Command a torque, clamped to :attr:`torque_limit_nm`; its seq (``ValueError``, motor stopped, if not finite)."""
         try:
             torque = math.nan if isinstance(torque_nm, (str, bytes, bool)) else float(torque_nm)
         except (TypeError, ValueError):
@@ -378,13 +282,12 @@ class MotorLink:
             self.emergency_stop()
             raise ValueError(f"torque_nm must be a finite number, got {torque_nm!r} (motor stopped)")
         limit = self.torque_limit_nm
-        if not (math.isfinite(limit) and limit > 0):  # unreachable with a validated device; never send then
+        if not (math.isfinite(limit) and limit > 0):
             self.emergency_stop()
             raise LinkError(f"effective torque limit {limit!r} N m is not a positive number (motor stopped)")
         torque = _float32_within(min(max(torque, -limit), limit), limit)
         seq = self._write(proto.MSG_TORQUE, (torque,))
         self.last_command_nm = torque
-        self.commands_sent += 1
         return seq
 
     def stop(self) -> None:
@@ -403,28 +306,22 @@ class MotorLink:
                 return self.clock.now_s() - start
 
     def read_state(self, timeout_s: Optional[float] = None) -> MotorState:
-        """Wait for the next STATE frame and return it.
-
-        Raises
-        ------
-        LinkTimeout, LinkDisconnected, LinkChecksumError, DeviceError
-            See the module docstring; the motor is stopped (best effort) before any of them is raised.
-        """
+        """Wait for the next STATE frame (a link error stops the motor before it is raised)."""
         deadline = self.clock.now_s() + (self.timeout_s if timeout_s is None else float(timeout_s))
         _, seq, values = self._next_message(deadline, (proto.MSG_STATE,))
         return self._state_from(seq, values)
 
     def drain_states(self) -> list[MotorState]:
         """Every STATE frame already received (without waiting), oldest first."""
-        self._pump_nonblocking()
+        data = self._read_bytes(0.0)
+        if data:
+            self._accept(data)
         states = [self._state_from(s, v) for t, s, v in self._pending if t == proto.MSG_STATE]
         self._pending = [m for m in self._pending if m[0] != proto.MSG_STATE]
         return states
 
-    # ------------------------------------------------------------------ internals
     def _check_message(self, msg_type: int, values: tuple) -> Optional[str]:
-        """What is impossible about a decoded message's values (None when nothing): the decoder's
-        ``validate`` hook, so a refused frame counts as a bad frame."""
+        """What is impossible about a decoded message's values (None: nothing); the decoder's ``validate`` hook."""
         if msg_type != proto.MSG_STATE:
             return None
         _, _, velocity, applied, _, flags = values
@@ -446,7 +343,6 @@ class MotorLink:
             phi_rad=self.phi_at_zero_counts_rad + counts * (2 * math.pi / cpr),
             phi_dot_rad_s=float(velocity),
             applied_torque_nm=float(applied),
-            encoder_counts=int(counts),
             last_cmd_seq=int(last_cmd),
             flags=int(flags),
             seq=int(seq),
@@ -474,15 +370,8 @@ class MotorLink:
         return self._seq
 
     def emergency_stop(self, wait: bool = True) -> None:
-        """Send STOP if the port is open, swallowing any error (for exit and failure paths).
-
-        Parameters
-        ----------
-        wait : bool
-            Wait (up to ``timeout_s``) for a frame another thread is writing.  With ``False`` (signal
-            handlers) a link whose write lock is held is only marked: the write in progress sends STOP
-            when it ends, so a frame is never cut in two and the handler never deadlocks.
-        """
+        """Send STOP if the port is open, swallowing any error.  With ``wait`` False (signal handlers) a link whose
+        write lock is held is only marked, and the write in progress sends STOP when it ends."""
         ser = self._serial
         if ser is None:
             return
@@ -538,25 +427,14 @@ class MotorLink:
                 )
             )
 
-    def _pump_nonblocking(self) -> None:
-        data = self._read_bytes(0.0)
-        if data:
-            self._accept(data)
-
     def _next_message(self, deadline: float, wanted: tuple[int, ...]) -> tuple[int, int, tuple]:
-        """The oldest wanted message, waiting until ``deadline`` (monotonic clock [s]) for one.
-
-        At the deadline the port is read once more without waiting: a host that was not scheduled until past
-        its deadline still finds the message that arrived meanwhile, and only a link that sent nothing wanted
-        in time times out.
-        """
+        """The oldest wanted message, waiting until ``deadline`` for one (the port is read once more at it)."""
         last_look = False
         while True:
             for i, message in enumerate(self._pending):
                 if message[0] in wanted:
                     del self._pending[i]
                     return message
-            # keep the backlog bounded: STATE frames nobody waits for are superseded by newer ones
             if len(self._pending) > 256:
                 self._pending = self._pending[-64:]
             remaining = deadline - self.clock.now_s()
@@ -571,13 +449,8 @@ class MotorLink:
 
 
 def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
-    """Write ``frame`` whole to the open port ``ser``; time out only if the port accepts no byte for ``timeout_s``.
-
-    pyserial's own ``write`` (3.5, POSIX) also raises its write timeout when the writing thread merely was not
-    scheduled for the timeout while it wrote, with every byte already sent; on a loaded computer that turned a
-    healthy link into a "disconnected" one.  Here the clock counts only time spent waiting for room in the
-    port's buffer.  Ports without a file descriptor (other platforms) use pyserial's ``write``.
-    """
+    """Write ``frame`` whole to ``ser``; time out only if the port takes no byte for ``timeout_s`` (a writer that
+    was not scheduled is not a dead link).  Ports without a file descriptor use pyserial's ``write``."""
     import serial
 
     try:
@@ -591,7 +464,7 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
             view = view[os.write(fd, view) :]
         except (BlockingIOError, InterruptedError):
             pass
-        if view:  # the port's buffer is full: wait for room
+        if view:
             _, writable, _ = select.select([], [fd], [], timeout_s)
             if not writable:
                 raise serial.SerialTimeoutException(
@@ -614,9 +487,8 @@ def _error_meaning(code: int) -> str:
 
 
 def _float32_within(value: float, limit: float) -> float:
-    """``value`` rounded to float32 (as it goes on the wire), moved one float32 step towards zero when the
-    rounding took it beyond ``limit`` (0.05 rounds up to 0.0500000007 in float32)."""
+    """``value`` as the float32 on the wire, one float32 step towards zero if rounding took it beyond ``limit``."""
     (bits,) = struct.unpack("<I", struct.pack("<f", value))
     if abs(struct.unpack("<f", struct.pack("<I", bits))[0]) > limit:
-        bits -= 1  # the magnitude bits of an IEEE float: one step towards zero
+        bits -= 1
     return struct.unpack("<f", struct.pack("<I", bits))[0]

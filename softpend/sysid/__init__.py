@@ -2,7 +2,20 @@
 
 from softpend.sysid.babble import BabbleProtocol, babble, band_limited_noise
 from softpend.sysid.dataset import SCHEMA_VERSION, TrajectoryDataset, load_dataset, save_dataset, write_dataset
-from softpend.sysid.differentiation import backward_difference, unwrap_angles
+from softpend.sysid.differentiation import backward_difference
+from softpend.sysid.layout import INFORMATION_LEVELS, StateLayout, TransitionData
+from softpend.sysid.metrics import (
+    RolloutErrors,
+    evaluate_model,
+    hub_rate_offset_for_tip_error,
+    one_step_errors,
+    perturbed_simulator_errors,
+    rollout_errors,
+    rollout_trial,
+)
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model
+from softpend.sysid.rollout import rollout
+from softpend.sysid.training import FitResult, TrainConfig, fit_dynamics_model, split_trials
 
 __all__ = [
     "BabbleProtocol",
@@ -13,26 +26,7 @@ __all__ = [
     "band_limited_noise",
     "load_dataset",
     "save_dataset",
-    "unwrap_angles",
     "write_dataset",
-]
-
-from softpend.sysid.layout import INFORMATION_LEVELS, StateLayout, TransitionData  # noqa: E402
-from softpend.sysid.metrics import (  # noqa: E402
-    RolloutErrors,
-    evaluate_model,
-    hub_rate_offset_for_tip_error,
-    one_step_errors,
-    perturbed_simulator_errors,
-    rollout_errors,
-    rollout_trial,
-    tip_angle_rad,
-)
-from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model  # noqa: E402
-from softpend.sysid.rollout import rollout  # noqa: E402
-from softpend.sysid.training import FitResult, TrainConfig, fit_dynamics_model, split_trials  # noqa: E402
-
-__all__ += [
     "INFORMATION_LEVELS",
     "StateLayout",
     "TransitionData",
@@ -43,7 +37,6 @@ __all__ += [
     "perturbed_simulator_errors",
     "rollout_errors",
     "rollout_trial",
-    "tip_angle_rad",
     "DynamicsEnsemble",
     "DynamicsModel",
     "load_model",

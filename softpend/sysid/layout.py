@@ -1,24 +1,6 @@
-"""State vectors of the learned dynamics models at the two information levels.
-
-Full information (``StateLayout.full()``, ``d = 10``): every observed variable, in
-:data:`softpend.plant.OBSERVATION_NAMES` order::
-
-    [phi_rad, theta_rad, ex_m, ey_m, er_rad, phi_dot_rad_s, theta_dot_rad_s, ex_dot_m_s, ey_dot_m_s, er_dot_rad_s]
-
-optionally followed by ``history`` past frames of the five positions (``StateLayout.full(history)``).
-
-Limited information (``StateLayout.limited(history)``, ``d = 6 + 3 * history``): only the base angle and
-the tip position, their backward-difference velocities, then ``history`` past frames of the positions
-(lag 1 first)::
-
-    [phi_rad, ex_m, ey_m, phi_dot_rad_s, ex_dot_m_s, ey_dot_m_s,
-     phi_rad_lag1, ex_m_lag1, ey_m_lag1, ..., phi_rad_lag<h>, ex_m_lag<h>, ey_m_lag<h>]
-
-Units are the report's: angles [rad] from upright, counter-clockwise positive, wrapped to ``[-pi, pi)``;
-tip coordinates [m] relative to the hub axis, y up; rates [rad/s, m/s].  The first ``2 P`` entries
-(positions then velocities, ``P`` position variables) are the *core* that the network predicts; lagged
-frames are shifted in by :meth:`softpend.sysid.DynamicsModel.predict_next`.
-"""
+"""State vectors of the learned dynamics models: full information (the ten observed variables) or limited (hub
+angle, tip position and their differenced rates), each optionally followed by ``history`` past position frames
+(lag 1 first).  The first ``2 P`` entries (positions, then velocities) are the core that the network predicts."""
 
 from __future__ import annotations
 
@@ -38,18 +20,8 @@ _LIMITED_POSITIONS: tuple[str, ...] = ("phi_rad", "ex_m", "ey_m")
 
 @dataclass(frozen=True)
 class StateLayout:
-    """Which observed variables make up the model state, and how many past frames.
-
-    Parameters
-    ----------
-    information : {"full", "limited"}
-        Information level (see the module docstring).
-    history : int
-        Number of past position frames in the state (default 0).
-    velocity_source : {"observed", "true"}
-        Velocities from the dataset's ``velocities`` (backward differences, as a rig) or, for simulated
-        data at full information, the simulator's true velocities.
-    """
+    """Which observed variables make up the model state, how many past frames, and whether the velocities are the
+    dataset's differenced ones or (simulated data, full information) the simulator's true ones."""
 
     information: str = "full"
     history: int = 0
@@ -74,7 +46,6 @@ class StateLayout:
         """Base angle and tip position, differenced velocities, ``history`` past frames."""
         return cls("limited", history, "observed")
 
-    # ------------------------------------------------------------------ names and masks
     @property
     def position_names(self) -> tuple[str, ...]:
         """Position variables of the core state."""
@@ -82,7 +53,6 @@ class StateLayout:
 
     @property
     def n_positions(self) -> int:
-        """Number of position variables ``P``."""
         return len(self.position_names)
 
     @property
@@ -99,7 +69,6 @@ class StateLayout:
 
     @property
     def dim(self) -> int:
-        """State dimension ``d``."""
         return self.core_dim + self.history * self.n_positions
 
     @property
@@ -120,25 +89,14 @@ class StateLayout:
         return self.names.index(name)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict (for JSON metadata)."""
         return {"information": self.information, "history": self.history, "velocity_source": self.velocity_source}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "StateLayout":
-        """Inverse of :meth:`to_dict`."""
         return cls(**data)
 
-    # ------------------------------------------------------------------ from data
     def states(self, dataset: TrajectoryDataset) -> np.ndarray:
-        """State vectors of every trial, shape ``(T, N - history, d)`` (sample ``i`` of the result is
-        sample ``i + history`` of the dataset: the first ``history`` samples only feed the lags).
-
-        Raises
-        ------
-        ValueError
-            If the dataset lacks a variable of this layout, or (``velocity_source="true"``) has no true
-            observations, or is shorter than ``history + 2`` samples.
-        """
+        """State vectors of every trial, ``(T, N - history, d)``: sample ``i`` is the dataset's ``i + history``."""
         missing = [n for n in self.position_names if n not in dataset.position_names]
         if missing:
             raise ValueError(
@@ -150,10 +108,8 @@ class StateLayout:
                 f"dataset has {dataset.n_samples} samples a trial; history={self.history} needs at least {self.history + 2}"
             )
         positions = np.stack([dataset.column(n) for n in self.position_names], axis=-1)
-        if self.velocity_source == "true":
-            velocities = np.stack([dataset.true_column(velocity_name(n)) for n in self.position_names], axis=-1)
-        else:
-            velocities = np.stack([dataset.column(velocity_name(n)) for n in self.position_names], axis=-1)
+        column = dataset.true_column if self.velocity_source == "true" else dataset.column
+        velocities = np.stack([column(velocity_name(n)) for n in self.position_names], axis=-1)
         h = self.history
         n = dataset.n_samples
         parts = [positions[:, h:], velocities[:, h:]]
@@ -161,8 +117,7 @@ class StateLayout:
         return np.ascontiguousarray(np.concatenate(parts, axis=-1))
 
     def torques(self, dataset: TrajectoryDataset) -> np.ndarray:
-        """Torques aligned with :meth:`states`: ``(T, N - history - 1)`` [N m], entry ``i`` acts from
-        state ``i`` to state ``i + 1``."""
+        """Torques ``(T, N - history - 1)`` [N m] aligned with :meth:`states` (entry ``i`` acts from state ``i``)."""
         return np.ascontiguousarray(dataset.torques_nm[:, self.history :])
 
     def transitions(self, dataset: TrajectoryDataset, trials: np.ndarray | None = None) -> "TransitionData":

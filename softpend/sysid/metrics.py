@@ -1,12 +1,8 @@
-"""Accuracy of a learned dynamics model on held-out trials: one-step error and open-loop rollout error.
-
-Ground truth is the dataset's observed state (what the model is trained to predict; noise-free unless
-the dataset was recorded with sensor noise).  Ensembles are evaluated through their mean prediction.
-"""
+"""Accuracy of a learned dynamics model on held-out trials against the observed states: one-step error and
+open-loop rollout error (ensembles through their mean prediction)."""
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -14,7 +10,9 @@ import numpy as np
 import torch
 
 from softpend.checks import finite, non_negative, positive_int
+from softpend.plant import make_plant, wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.greybox import dataset_substeps
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.rollout import rollout
@@ -27,7 +25,6 @@ __all__ = [
     "RolloutErrors",
     "rollout_errors",
     "rollout_trial",
-    "tip_angle_rad",
 ]
 
 
@@ -51,8 +48,13 @@ def _dtype(model: Any) -> torch.dtype:
     return first.feature_mean.dtype if isinstance(first, DynamicsModel) else torch.float64
 
 
-def _wrap(x: np.ndarray) -> np.ndarray:
-    return (x + np.pi) % (2 * np.pi) - np.pi
+def open_loop(model: Any, x0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
+    """Open-loop predictions ``(B, T + 1, d)`` (float64) of a model (ensembles: their mean) from states ``(B, d)``
+    under torques ``(B, T)``."""
+    dtype = _dtype(model)
+    with torch.inference_mode():
+        x = rollout(_deterministic(model), torch.as_tensor(x0, dtype=dtype), torch.as_tensor(torques_nm, dtype=dtype))
+    return x.double().numpy()
 
 
 def one_step_errors(
@@ -60,20 +62,9 @@ def one_step_errors(
     dataset: TrajectoryDataset,
     trials: Optional[np.ndarray] = None,
 ) -> dict[str, Any]:
-    """One-step prediction error over all transitions of the given trials.
-
-    Returns
-    -------
-    dict
-        ``mse``: mean squared error of the predicted next core state (positions and velocities, angle
-        errors wrapped) in the report's units [rad^2, m^2, (rad/s)^2, (m/s)^2 averaged], the number to
-        set beside the report's ~3e-9; ``mse_trivial``: the same for the "next = current" predictor;
-        ``mse_normalised`` / ``mse_normalised_trivial``: both in the network's standardised target
-        space (each predicted change divided by its training-set standard deviation: the training
-        loss; the trivial predictor scores about 1);
-        ``mse_by_variable``: per core variable [report units]; ``one_step_tip_rmse_m``: root-mean-square
-        Euclidean tip-position error after one step [m] (when the layout has the tip); ``n_transitions``.
-    """
+    """One-step prediction error over all transitions of the given trials: the mean squared error of the next
+    core state (angle errors wrapped) in the report's units and in the network's standardised target space, each
+    beside the "next = current" predictor's, per variable, and the tip RMSE [m] when the layout has the tip."""
     layout: StateLayout = model.layout
     data = layout.transitions(dataset, trials)
     dtype = _dtype(model)
@@ -84,10 +75,9 @@ def one_step_errors(
     core = layout.core_dim
     mask = layout.angle_mask[:core]
     error = predicted[:, :core] - data.next_states[:, :core]
-    error[:, mask] = _wrap(error[:, mask])
+    error[:, mask] = wrap_angle_rad(error[:, mask])
     change = data.next_states[:, :core] - data.states[:, :core]
-    change[:, mask] = _wrap(change[:, mask])
-    # standardised errors in the space the network is trained in (its loss)
+    change[:, mask] = wrap_angle_rad(change[:, mask])
     first = (model.members[0] if isinstance(model, DynamicsEnsemble) else model).double()
     with torch.inference_mode():
         s0 = torch.as_tensor(data.states, dtype=torch.float64)
@@ -117,21 +107,8 @@ def one_step_errors(
 
 @dataclass
 class RolloutErrors:
-    """Open-loop rollout error against the data, as a function of the horizon.
-
-    Attributes
-    ----------
-    horizon_s : ndarray, shape (H + 1,)
-        Time since the rollout start [s] (``0, dt, ..., H dt``).
-    tip_rmse_m : ndarray, shape (H + 1,)
-        Root-mean-square Euclidean tip-position error ``sqrt(mean((ex - ex*)^2 + (ey - ey*)^2))`` [m].
-    phi_rmse_rad : ndarray, shape (H + 1,)
-        Root-mean-square wrapped base-angle error [rad].
-    hold_tip_rmse_m, hold_phi_rmse_rad : ndarray, shape (H + 1,)
-        The same for the trivial prediction "the rod stays where it was at the start" (a yardstick).
-    n_rollouts : int
-        Number of rollouts averaged (start points over all trials).
-    """
+    """Open-loop RMS tip-position [m] and hub-angle [rad] errors against the data at horizons ``0, dt, ..., H dt``,
+    and the same for "the rod stays where it was" (``hold_``), over ``n_rollouts`` start points."""
 
     horizon_s: np.ndarray
     tip_rmse_m: np.ndarray
@@ -169,16 +146,8 @@ def rollout_errors(
     horizon_s: float = 2.0,
     start_stride: int = 10,
 ) -> RolloutErrors:
-    """Open-loop rollouts from many start points of the given trials under the recorded torques.
-
-    Rollouts start at every ``start_stride``-th state of each trial that leaves ``horizon_s`` of data
-    after it; all run in one batched call of :func:`softpend.sysid.rollout`.
-
-    Raises
-    ------
-    ValueError
-        If the trials are shorter than the horizon or the arguments are invalid.
-    """
+    """Open-loop rollouts from every ``start_stride``-th state of the trials that leaves ``horizon_s`` after it,
+    under the recorded torques, in one batch."""
     layout: StateLayout = model.layout
     start_stride = positive_int("start_stride", start_stride)
     steps = int(round(horizon_s / dataset.dt_s))
@@ -193,22 +162,12 @@ def rollout_errors(
     starts = np.arange(0, n_states - steps, start_stride)
     windows = np.stack([states[:, s : s + steps + 1] for s in starts], axis=1).reshape(-1, steps + 1, layout.dim)
     actions = np.stack([torques[:, s : s + steps] for s in starts], axis=1).reshape(-1, steps)
-    dtype = _dtype(model)
-    with torch.inference_mode():
-        predicted = (
-            rollout(
-                _deterministic(model),
-                torch.as_tensor(windows[:, 0], dtype=dtype),
-                torch.as_tensor(actions, dtype=dtype),
-            )
-            .double()
-            .numpy()
-        )
+    predicted = open_loop(model, windows[:, 0], actions)
     i_phi, i_ex, i_ey = (layout.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
 
     def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tip = (pred[..., i_ex] - windows[..., i_ex]) ** 2 + (pred[..., i_ey] - windows[..., i_ey]) ** 2
-        phi = _wrap(pred[..., i_phi] - windows[..., i_phi]) ** 2
+        phi = wrap_angle_rad(pred[..., i_phi] - windows[..., i_phi]) ** 2
         return np.sqrt(tip.mean(0)), np.sqrt(phi.mean(0))
 
     tip, phi = errors(predicted)
@@ -223,11 +182,6 @@ def rollout_errors(
     )
 
 
-def tip_angle_rad(ex_m: np.ndarray, ey_m: np.ndarray) -> np.ndarray:
-    """Tip angle ``theta`` from upright, counter-clockwise positive, from the tip position [rad]."""
-    return np.arctan2(-np.asarray(ex_m), np.asarray(ey_m))
-
-
 def rollout_trial(
     model: DynamicsModel | DynamicsEnsemble,
     dataset: TrajectoryDataset,
@@ -235,15 +189,8 @@ def rollout_trial(
     start_s: float = 0.0,
     duration_s: float = 2.0,
 ) -> dict[str, np.ndarray]:
-    """One open-loop model rollout on one trial, next to the data, for plotting.
-
-    Returns
-    -------
-    dict
-        ``time_s`` (from the trial start) and, for each of ``phi_rad, theta_rad, ex_m, ey_m``, the data
-        (``"<name>"``) and the model (``"<name>_model"``); ``theta`` is computed from the tip position
-        when the layout does not contain it.
-    """
+    """One open-loop model rollout on one trial next to the data, for plotting: ``time_s`` and, for each of
+    ``phi_rad, theta_rad, ex_m, ey_m``, the data (``name``) and the model (``name_model``)."""
     layout: StateLayout = model.layout
     if not 0 <= trial < dataset.n_trials:
         raise ValueError(f"trial must be in [0, {dataset.n_trials}), got {trial!r}")
@@ -255,17 +202,7 @@ def rollout_trial(
         raise ValueError(
             f"start_s={start_s}, duration_s={duration_s} do not fit in a trial of {states.shape[0]} states"
         )
-    dtype = _dtype(model)
-    with torch.inference_mode():
-        predicted = (
-            rollout(
-                _deterministic(model),
-                torch.as_tensor(states[first : first + 1], dtype=dtype),
-                torch.as_tensor(torques[None, first : first + steps], dtype=dtype),
-            )[0]
-            .double()
-            .numpy()
-        )
+    predicted = open_loop(model, states[first : first + 1], torques[None, first : first + steps])[0]
     truth = states[first : first + steps + 1]
     out = {"time_s": (np.arange(steps + 1) + first + layout.history) * dataset.dt_s}
     for name in ("phi_rad", "theta_rad", "ex_m", "ey_m"):
@@ -273,8 +210,8 @@ def rollout_trial(
             out[name], out[f"{name}_model"] = truth[:, layout.index(name)], predicted[:, layout.index(name)]
         else:  # theta at limited information: from the tip position
             ex, ey = layout.index("ex_m"), layout.index("ey_m")
-            out[name] = tip_angle_rad(truth[:, ex], truth[:, ey])
-            out[f"{name}_model"] = tip_angle_rad(predicted[:, ex], predicted[:, ey])
+            out[name] = np.arctan2(-truth[:, ex], truth[:, ey])
+            out[f"{name}_model"] = np.arctan2(-predicted[:, ex], predicted[:, ey])
     return out
 
 
@@ -285,9 +222,8 @@ def evaluate_model(
     horizons_s: tuple[float, ...] = (0.5, 1.0, 2.0),
     start_stride: int = 10,
 ) -> dict[str, float]:
-    """The headline figures on the given trials, as one flat JSON-ready dict: one-step MSE (report units
-    and standardised, with the trivial predictor's), open-loop tip-position and base-angle RMSE at
-    ``horizons_s`` (model and "hold"), and the tip RMSE as a fraction of the rod length when known."""
+    """The headline figures on the given trials as one flat JSON-ready dict: one-step errors, open-loop errors at
+    ``horizons_s``, and the tip RMSE as a fraction of the rod length when known."""
     one = one_step_errors(model, dataset, trials)
     out: dict[str, float] = {k: v for k, v in one.items() if k != "mse_by_variable"}
     longest = min(max(horizons_s), (dataset.n_samples - 1 - model.layout.history) * dataset.dt_s)
@@ -314,23 +250,9 @@ def perturbed_simulator_errors(
     torque_noise_std_nm: float = 0.0,
     seed: int = 0,
 ) -> RolloutErrors:
-    """Yardstick for open-loop errors: the simulator itself, restarted from the recorded joint state with
-    the hub angle off by ``hub_offset_rad`` and driven by the recorded torques, against the data.
-
-    Near upright the rod is unstable, so even this "perfect model with a tiny state error" drifts away;
-    a learned model cannot be expected to do much better over the same horizon.  Start points are the
-    same as :func:`rollout_errors` with ``history`` (use the model's ``layout.history``).  Needs a
-    simulated dataset (joint arrays and ``plant_params``).
-
-    ``hub_rate_offset_rad_s`` also starts the hub rate off (with the springs' rates unchanged the whole
-    rod turns that much faster: the error a model makes in one step of the tip angle's rate).
-    ``torque_noise_std_nm`` adds an independent Gaussian torque error [N m] (seeded by ``seed``) to the
-    hub at every step, not clipped by the motor limit: the simulator as a "model" whose only fault is a
-    small unmodelled generalised force, i.e. a one-step error that keeps being made, as a learned
-    model's is.
-    """
-    from softpend.plant import make_plant
-
+    """Yardstick: the simulator itself restarted from the recorded joint state with the hub angle (and rate) off,
+    optionally with Gaussian torque noise (seeded, not clipped) at every step, at the start points of
+    :func:`rollout_errors` with ``history``; needs a simulated dataset."""
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
     assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
@@ -343,16 +265,11 @@ def perturbed_simulator_errors(
     n_states = dataset.n_samples - history
     if steps < 1 or n_states < steps + 1:
         raise ValueError(f"horizon_s={horizon_s} does not fit in trials of {n_states} states")
-    protocol = dataset.metadata.get("protocol", {})
     params = dataset.params
     if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
-        params = dataclasses.replace(params, torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
-    plant = make_plant(
-        dataset.metadata.get("plant") or "prb",
-        params=params,
-        dt_s=dataset.dt_s,
-        substeps=int(protocol.get("substeps", 2)),
-    )
+        params = params.replace(torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
+    plant_name = dataset.metadata.get("plant") or "prb"
+    plant = make_plant(plant_name, params=params, dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
     rng = np.random.default_rng(seed)
     names = dataset.position_names
     i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
@@ -377,9 +294,9 @@ def perturbed_simulator_errors(
             ey = np.array([o.ey_m for o in path])
             phi = np.array([o.phi_rad for o in path])
             tip_sq += (ex - truth[:, i_ex]) ** 2 + (ey - truth[:, i_ey]) ** 2
-            phi_sq += _wrap(phi - truth[:, i_phi]) ** 2
+            phi_sq += wrap_angle_rad(phi - truth[:, i_phi]) ** 2
             hold_tip_sq += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
-            hold_phi_sq += _wrap(truth[0, i_phi] - truth[:, i_phi]) ** 2
+            hold_phi_sq += wrap_angle_rad(truth[0, i_phi] - truth[:, i_phi]) ** 2
             count += 1
     return RolloutErrors(
         horizon_s=np.arange(steps + 1) * dataset.dt_s,
@@ -393,18 +310,7 @@ def perturbed_simulator_errors(
 
 def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float, history: int = 0) -> float:
     """The hub-rate offset [rad/s] that makes :func:`perturbed_simulator_errors` miss the recorded tip by
-    ``tip_error_m`` (RMS over every start point of the trials) after its first step.
-
-    Started with the hub rate off and the springs' rates unchanged, the rod turns rigidly a little faster,
-    so the first-step tip error is proportional to the offset (about ``dt * L`` per rad/s); it is
-    measured once with a 1e-2 rad/s offset and scaled.  With a model's one-step tip RMSE this gives a
-    perfect simulator that makes the model's one-step error once, at the start of each rollout.
-
-    Raises
-    ------
-    ValueError
-        If ``tip_error_m`` is not positive, or the dataset is not simulated.
-    """
+    ``tip_error_m`` (RMS) after its first step (the error is proportional to the offset)."""
     if not (np.isfinite(tip_error_m) and tip_error_m > 0):
         raise ValueError(f"tip_error_m must be positive, got {tip_error_m!r}")
     reference_rad_s = 1e-2

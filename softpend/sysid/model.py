@@ -1,36 +1,6 @@
-"""Learned dynamics ``x[t+1] = f(x[t], tau[t])`` in PyTorch: one network, or an ensemble of them.
-
-Network
--------
-The report's multilayer perceptron (default 3 hidden layers of 16; SiLU, smooth for linearisation and
-cheap on a CPU) maps *features* of the state and torque to the normalised *change* of the core state
-(positions and velocities):
-
-* features: ``sin`` and ``cos`` of each absolute angle (``phi, theta, er``; no seam at ``+-pi``), the
-  other positions and every velocity as they are, for each past frame the position change since
-  then (angle differences wrapped), and the torque [N m]; each feature is standardised with the
-  training set's mean and standard deviation (stored buffers) and clamped to the box seen in training
-  plus a 10 % margin (so a rollout that drifts off the data cannot make the network extrapolate
-  without bound);
-* output: the standardised change of the core state over one step (angle increments wrapped to
-  ``[-pi, pi)``), de-standardised and added to the state; angles are wrapped again and the lagged
-  frames are shifted in.  With differenced velocities (``integrate_positions``, the default) the network
-  predicts only the velocity change and positions follow from ``x[t+1] = x[t] + dt v[t+1]``, which is
-  exact for backward differences.  ``theta`` (and its rate) is not predicted but derived from the
-  predicted tip position, ``theta = atan2(-ex, ey)``, as in the data.  A predicted tip beyond
-  ``tip_reach_m`` (the rod length plus 1 % when trained by :func:`softpend.sysid.fit_dynamics_model`)
-  is pulled back radially onto that circle, so a rollout that has lost the rod stays on its scale.
-
-Both classes offer the same batched API in the report's units (state layout: :mod:`softpend.sysid.layout`)::
-
-    next_state = model.predict_next(state, torque_nm)        # (B, d), (B,) -> (B, d)
-
-It is differentiable (``torch.func.jacrev`` or ``torch.autograd.functional.jacobian`` give the
-linearisation at upright).  :class:`DynamicsEnsemble` adds ``member=`` and random-member selection per
-row (``generator=``) for model-based RL.  Models are saved as a state dict (``.pt``) plus JSON metadata
-(``.json``) by :func:`save_model` and read back with ``torch.load(..., weights_only=True)`` by
-:func:`load_model`.
-"""
+"""Learned one-step dynamics ``x[t+1] = f(x[t], tau[t])`` in PyTorch: an MLP on standardised features of the
+state (sin/cos of angles, lag differences, torque) predicting the standardised change of the core state, or an
+ensemble of them; saved as a state dict plus JSON metadata and read back with ``weights_only=True``."""
 
 from __future__ import annotations
 
@@ -62,8 +32,7 @@ __all__ = [
 
 MODEL_SCHEMA_NAME = "softpend.sysid.model"
 MODEL_SCHEMA_VERSION = 1
-#: Largest network :func:`load_model` builds from a metadata file [weights over all members]: 10**8 (400 MB
-#: of float32), far above any model softpend fits, so that a corrupt or hostile file cannot exhaust memory.
+#: Largest network :func:`load_model` builds from a metadata file [weights over all members].
 MAX_LOADED_WEIGHTS = 10**8
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "tanh": nn.Tanh,
@@ -74,7 +43,8 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
 }
 
 
-def _wrap(x: Tensor) -> Tensor:
+def wrap_tensor(x: Tensor) -> Tensor:
+    """Angles wrapped to ``[-pi, pi)``."""
     return torch.remainder(x + math.pi, 2 * math.pi) - math.pi
 
 
@@ -86,26 +56,11 @@ def _check_widths(hidden_widths: Sequence[int]) -> tuple[int, ...]:
 
 
 class DynamicsModel(nn.Module):
-    """One learned one-step dynamics model (see the module docstring).
+    """One learned one-step dynamics model for states of ``layout`` at step ``dt_s``.
 
-    Parameters
-    ----------
-    layout : StateLayout
-        State vector layout (information level, history).
-    dt_s : float
-        Time step the model was trained for [s].
-    torque_limit_nm : float
-        Torque limit of the plant [N m]; :meth:`predict_next` clips torques to it like the motor.
-    hidden_widths : sequence of int
-        Hidden layer widths (default: the report's ``(16, 16, 16)``).
-    activation : str
-        One of :data:`ACTIVATIONS`.
-    integrate_positions : bool
-        Predict only the velocity change and integrate positions (for backward-difference velocities).
-    tip_reach_m : float, optional
-        Largest distance of the tip from the hub axis [m] (the rod length): a predicted tip position
-        beyond it is pulled back radially onto that circle (and, with differenced velocities, the tip
-        rate follows from the corrected position).  ``None``: no limit.
+    Torques are clipped to ``torque_limit_nm``.  ``integrate_positions``: predict only the velocity change and
+    integrate positions (exact for backward-difference velocities).  ``tip_reach_m``: a predicted tip beyond it is
+    pulled back radially onto that circle (``None``: no limit).
     """
 
     # buffers (registered in __init__)
@@ -156,8 +111,7 @@ class DynamicsModel(nn.Module):
         self.register_buffer(
             "_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False
         )
-        # theta is a function of the tip position (theta = atan2(-ex, ey) in the data): derive it, and its
-        # rate, from the predicted tip instead of letting a redundant prediction drift away from it
+        # theta = atan2(-ex, ey) in the data: derived from the predicted tip, not predicted
         names = layout.names
         self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
         self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
@@ -169,8 +123,6 @@ class DynamicsModel(nn.Module):
         self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
         self.register_buffer("feature_mean", torch.zeros(self.n_features, dtype=torch.float32))
         self.register_buffer("feature_std", torch.ones(self.n_features, dtype=torch.float32))
-        # the box of standardised features seen in training (plus a margin); inputs are clamped to it so
-        # that a rollout drifting off the data cannot make the network extrapolate without bound
         self.register_buffer("feature_low", torch.full((self.n_features,), -math.inf, dtype=torch.float32))
         self.register_buffer("feature_high", torch.full((self.n_features,), math.inf, dtype=torch.float32))
         self.register_buffer("delta_mean", torch.zeros(self.n_outputs, dtype=torch.float32))
@@ -183,7 +135,6 @@ class DynamicsModel(nn.Module):
         layers.append(nn.Linear(width_in, self.n_outputs, dtype=torch.float32))
         self.net = nn.Sequential(*layers)
 
-    # ------------------------------------------------------------------ pieces
     def features(self, state: Tensor, torque_nm: Tensor) -> Tensor:
         """Raw (not standardised) network input features, shape ``(B, n_features)``."""
         p, h = self._p, self._h
@@ -193,18 +144,17 @@ class DynamicsModel(nn.Module):
         if h:
             lags = state[:, 2 * p :]
             rel = pos.repeat(1, h) - lags
-            parts.append(torch.where(self._lag_angle_mask, _wrap(rel), rel))
+            parts.append(torch.where(self._lag_angle_mask, wrap_tensor(rel), rel))
         parts.append(torque_nm.reshape(-1, 1))
         return torch.cat(parts, dim=1)
 
     def target_delta(self, state: Tensor, next_state: Tensor) -> Tensor:
-        """What the network learns to predict (before standardisation): the velocity change ``(B, P)``
-        with ``integrate_positions``, else the core-state change ``(B, 2P)`` (angle increments wrapped)."""
+        """What the network learns (before standardisation): the velocity change, or the core-state change."""
         if self.integrate_positions:
             p = self._p
             return next_state[:, p : 2 * p] - state[:, p : 2 * p]
         delta = next_state[:, : self._core] - state[:, : self._core]
-        return torch.where(self._core_angle_mask, _wrap(delta), delta)
+        return torch.where(self._core_angle_mask, wrap_tensor(delta), delta)
 
     def forward(self, features_normalised: Tensor) -> Tensor:
         """Network on standardised features -> standardised core-state change."""
@@ -228,12 +178,8 @@ class DynamicsModel(nn.Module):
         self, feature_mean: Tensor, feature_std: Tensor, delta_mean: Tensor, delta_std: Tensor
     ) -> None:
         """Store the training-set statistics (standard deviations below 1e-12 are replaced by 1)."""
-        for name, value in (
-            ("feature_mean", feature_mean),
-            ("feature_std", feature_std),
-            ("delta_mean", delta_mean),
-            ("delta_std", delta_std),
-        ):
+        values = (feature_mean, feature_std, delta_mean, delta_std)
+        for name, value in zip(("feature_mean", "feature_std", "delta_mean", "delta_std"), values):
             buffer = getattr(self, name)
             value = torch.as_tensor(value, dtype=buffer.dtype)
             if value.shape != buffer.shape or not torch.all(torch.isfinite(value)):
@@ -242,7 +188,6 @@ class DynamicsModel(nn.Module):
                 value = torch.where(value > 1e-12, value, torch.ones_like(value))
             buffer.copy_(value)
 
-    # ------------------------------------------------------------------ public API
     def _check(self, state: Tensor, torque_nm: Tensor) -> tuple[Tensor, Tensor]:
         if state.ndim != 2 or state.shape[1] != self.layout.dim:
             raise ValueError(f"state must have shape (B, {self.layout.dim}), got {tuple(state.shape)}")
@@ -261,13 +206,12 @@ class DynamicsModel(nn.Module):
         if not self.integrate_positions:
             return out
         p = self._p
-        # backward-difference velocities: x[t+1] = x[t] + dt * v[t+1] holds exactly in the data
         return torch.cat([self.dt_s * (state[:, p : 2 * p] + out), out], dim=1)
 
     def next_from_delta(self, state: Tensor, delta: Tensor) -> Tensor:
         """Apply a core-state change: add, wrap angles, shift the lagged frames."""
         core = state[:, : self._core] + delta
-        core = torch.where(self._core_angle_mask, _wrap(core), core)
+        core = torch.where(self._core_angle_mask, wrap_tensor(core), core)
         if self.tip_reach_m is not None and self._has_tip:
             core = self._within_reach(state, core)
         if self._derive_theta:
@@ -276,7 +220,7 @@ class DynamicsModel(nn.Module):
             return core
         p = self._p
         previous = state[:, :p]
-        previous = torch.where(self._core_angle_mask[:p], _wrap(previous), previous)
+        previous = torch.where(self._core_angle_mask[:p], wrap_tensor(previous), previous)
         return torch.cat([core, previous, state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
 
     def _within_reach(self, state: Tensor, core: Tensor) -> Tensor:
@@ -300,7 +244,7 @@ class DynamicsModel(nn.Module):
         ex, ey = core[:, self._i_ex], core[:, self._i_ey]
         theta = torch.atan2(-ex, ey)
         if self.integrate_positions:  # differenced velocities: the rate is the wrapped increment over dt
-            rate = _wrap(theta - state[:, i]) / self.dt_s
+            rate = wrap_tensor(theta - state[:, i]) / self.dt_s
         else:  # true velocities: d/dt atan2(-ex, ey)
             ex_dot, ey_dot = core[:, p + self._i_ex], core[:, p + self._i_ey]
             rate = (ex * ey_dot - ey * ex_dot) / (ex * ex + ey * ey).clamp_min(1e-12)
@@ -309,11 +253,7 @@ class DynamicsModel(nn.Module):
         )
 
     def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
-        """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m] (clipped to the limit).
-
-        ``generator`` is accepted (and ignored) so that a single model and an ensemble can be used
-        interchangeably.
-        """
+        """Next state ``(B, d)`` from states ``(B, d)`` and torques ``(B,)`` [N m]; ``generator`` is ignored."""
         state, torque_nm = self._check(state, torque_nm)
         return self.next_from_delta(state, self.predict_delta(state, torque_nm))
 
@@ -331,13 +271,8 @@ class DynamicsModel(nn.Module):
 
 
 class DynamicsEnsemble(nn.Module):
-    """Several :class:`DynamicsModel` members with the same layout (trained from different seeds and
-    bootstrap resamples).
-
-    :meth:`predict_next` picks, for every row independently, one member uniformly at random (drawn
-    from ``generator``), as in MBPO-style model rollouts; ``member=k`` uses member ``k`` for all rows
-    and ``member="mean"`` averages the members' predicted changes.
-    """
+    """:class:`DynamicsModel` members of one configuration.  :meth:`predict_next` picks a random member per row
+    (from ``generator``), member ``k``, or the mean of the members' predicted changes (``"mean"``)."""
 
     def __init__(self, members: Sequence[DynamicsModel]) -> None:
         super().__init__()
@@ -357,10 +292,6 @@ class DynamicsEnsemble(nn.Module):
     def __len__(self) -> int:
         return len(self.members)
 
-    def predict_next_all(self, state: Tensor, torque_nm: Tensor) -> Tensor:
-        """Every member's next state, shape ``(K, B, d)``."""
-        return torch.stack([m.predict_next(state, torque_nm) for m in self.members])
-
     def predict_next(
         self,
         state: Tensor,
@@ -368,7 +299,6 @@ class DynamicsEnsemble(nn.Module):
         generator: Optional[torch.Generator] = None,
         member: int | str | None = None,
     ) -> Tensor:
-        """Next state ``(B, d)``: a random member per row (default), member ``k``, or ``"mean"``."""
         if isinstance(member, int) and not isinstance(member, bool):
             if not 0 <= member < len(self.members):
                 raise ValueError(f"member must be in [0, {len(self.members)}), got {member}")
@@ -392,34 +322,23 @@ class DynamicsEnsemble(nn.Module):
         return dict(self.members[0].config(), ensemble_size=len(self.members))
 
 
-# ---------------------------------------------------------------------------------------- files
-def _paths(path: str | Path) -> tuple[Path, Path]:
+def model_paths(path: str | Path) -> tuple[Path, Path]:
+    """``(<path>.pt, <path>.json)``, the two files of :func:`save_model` (``path`` may end in either suffix)."""
     path = Path(path)
     if path.suffix in (".pt", ".json"):
         path = path.with_suffix("")
     return path.with_name(path.name + ".pt"), path.with_name(path.name + ".json")
 
 
-def model_paths(path: str | Path) -> tuple[Path, Path]:
-    """``(<path>.pt, <path>.json)``, the two files of :func:`save_model` (``path`` may end in either suffix)."""
-    return _paths(path)
-
-
 def save_model(
     path: str | Path, model: DynamicsModel | DynamicsEnsemble, metadata: Optional[dict[str, Any]] = None
 ) -> tuple[Path, Path]:
-    """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``).
-
-    Returns
-    -------
-    (Path, Path)
-        The two files written.
-    """
+    """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``); returns both paths."""
     from softpend import __version__
 
     if not isinstance(model, (DynamicsModel, DynamicsEnsemble)):
         raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")
-    weights, meta_path = _paths(path)
+    weights, meta_path = model_paths(path)
     weights.parent.mkdir(parents=True, exist_ok=True)
     kind = "ensemble" if isinstance(model, DynamicsEnsemble) else "single"
     config = model.config()
@@ -442,24 +361,9 @@ def save_model(
 
 
 def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict[str, Any]]:
-    """Read a model written by :func:`save_model` (``torch.load(..., weights_only=True)``).
-
-    Parameters
-    ----------
-    path : str or Path
-        ``<path>``, ``<path>.pt`` or ``<path>.json``.
-
-    Returns
-    -------
-    (model, metadata)
-        The model in eval mode, and the ``metadata`` dict given to :func:`save_model`.
-
-    Raises
-    ------
-    ValueError
-        If the files are missing, of another schema, or do not match each other.
-    """
-    weights, meta_path = _paths(path)
+    """``(model in eval mode, metadata)`` of :func:`save_model`'s files; ``ValueError`` if they are missing, of
+    another schema, or do not match each other."""
+    weights, meta_path = model_paths(path)
     for p in (weights, meta_path):
         if not p.exists():
             raise ValueError(f"model file not found: {p}")

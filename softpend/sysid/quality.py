@@ -1,23 +1,5 @@
-"""Model quality measured the way an unstable plant allows.
-
-Near upright the rod is unstable (the linearisation has a real eigenvalue ``lambda`` of about +6 /s), so any
-model, the simulator itself restarted a hair off, leaves the data open loop within a fraction of a second, and
-a tip error at a fixed 1 s mostly measures the instability.  The measures here:
-
-* **valid prediction time** (:func:`valid_prediction`): per open-loop rollout, the longest horizon over which
-  the tip error stays within a fraction (5 %) of the rod length ``L`` at every sample; its median over start
-  points near upright, in seconds and in Lyapunov times ``1 / lambda`` (``lambda`` is passed in: the
-  linearisation lives in :mod:`softpend.control`);
-* **hanging-regime tip error**: the RMS tip error at a fixed horizon (1 s) of rollouts in the stable regime
-  around the hanging equilibrium, where a fixed horizon is meaningful;
-* **one-step error** of the grey-box model (:func:`prb_one_step_errors`), in the units of
-  :func:`softpend.sysid.one_step_errors`.
-
-Per-rollout tip errors come from :func:`prb_rollout_tip_errors` (a PRB model with given parameters, started
-from the recorded joint state: the grey-box model or the simulator itself as a yardstick) and
-:func:`network_rollout_tip_errors` (a learned network from the observed state), at the same start samples
-(:func:`rollout_starts`).
-"""
+"""Model quality as an unstable plant allows: valid prediction time (median horizon within 5 % of the rod length,
+in seconds and Lyapunov times), the tip error at a fixed horizon, and the grey-box model's one-step error."""
 
 from __future__ import annotations
 
@@ -29,7 +11,8 @@ import numpy as np
 from softpend.checks import in_unit_interval, non_negative, positive, positive_int
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid.dataset import TrajectoryDataset
-from softpend.sysid.greybox import simulate_windows, wrap_diff
+from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
+from softpend.sysid.metrics import open_loop
 
 __all__ = [
     "ValidPrediction",
@@ -48,21 +31,8 @@ VALID_TIP_FRACTION = 0.05
 
 @dataclass(frozen=True)
 class ValidPrediction:
-    """Valid prediction times of a set of rollouts.
-
-    Attributes
-    ----------
-    times_s : ndarray, shape (B,)
-        Per rollout: the longest horizon [s] over which the tip error stays within ``threshold_m``.
-    censored : ndarray of bool, shape (B,)
-        Rollouts that never left the threshold (their time is the whole horizon: a lower bound).
-    threshold_m : float
-        The tip-error threshold [m].
-    median_s : float
-        Median of ``times_s`` [s].
-    lyapunov_rate_per_s : float or None
-        ``lambda`` [1/s], if given; ``median_lyapunov`` is then ``median_s * lambda`` (else NaN).
-    """
+    """Valid prediction times [s] of rollouts, which never left the threshold (``censored``: a lower bound), and
+    their median in seconds and, given ``lambda``, in Lyapunov times (else NaN)."""
 
     times_s: np.ndarray
     censored: np.ndarray
@@ -89,34 +59,9 @@ def valid_prediction(
     fraction: float = VALID_TIP_FRACTION,
     lyapunov_rate_per_s: Optional[float] = None,
 ) -> ValidPrediction:
-    """Valid prediction time of rollouts from their tip errors.
-
-    Parameters
-    ----------
-    tip_error_m : ndarray, shape (B, H + 1)
-        Euclidean tip error of each rollout at horizons ``0, dt, ..., H dt`` [m].
-    dt_s : float
-        Sample step [s].
-    length_m : float
-        Rod length ``L`` [m].
-    fraction : float
-        Threshold as a fraction of ``L`` (default 5 %).
-    lyapunov_rate_per_s : float, optional
-        Largest growth rate ``lambda`` of the linearisation at upright [1/s] (to express the median in
-        Lyapunov times ``1 / lambda``).
-
-    Returns
-    -------
-    ValidPrediction
-        A rollout whose first sample above the threshold is ``k`` has the valid time ``(k - 1) dt``; one that
-        never exceeds it has ``H dt`` and is flagged ``censored``.
-
-    Raises
-    ------
-    ValueError
-        If the errors are not a finite non-negative ``(B, H + 1)`` array with ``B >= 1`` and ``H >= 1``, or a
-        scalar argument is invalid.
-    """
+    """Valid prediction time of rollouts from their tip errors ``(B, H + 1)`` [m]: a rollout first above
+    ``fraction * length_m`` at sample ``k`` is valid for ``(k - 1) dt``, one never above for ``H dt`` (censored).
+    ``lyapunov_rate_per_s`` is the growth rate of the linearisation at upright."""
     error = np.asarray(tip_error_m, dtype=float)
     if error.ndim != 2 or error.shape[0] < 1 or error.shape[1] < 2:
         raise ValueError(f"tip_error_m must have shape (B >= 1, H + 1 >= 2), got {error.shape}")
@@ -154,9 +99,8 @@ def rollout_starts(
     max_tilt_rad: Optional[float] = None,
     trials: Optional[np.ndarray] = None,
 ) -> np.ndarray:
-    """Start samples ``(B, 2)`` rows ``(trial, sample)`` of open-loop rollouts of ``steps`` steps: every
-    ``stride``-th sample from ``first`` that leaves ``steps`` samples after it, optionally only those whose
-    observed tip angle is within ``max_tilt_rad`` of upright (``|theta| <= max_tilt_rad``)."""
+    """Rows ``(trial, sample)`` of every ``stride``-th sample from ``first`` that leaves ``steps`` samples after it,
+    optionally only those with ``|theta| <= max_tilt_rad``."""
     steps = positive_int("steps", steps)
     stride = positive_int("stride", stride)
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
@@ -191,19 +135,8 @@ def prb_rollout_tip_errors(
     substeps: Optional[int] = None,
     initial_states: Optional[np.ndarray] = None,
 ) -> np.ndarray:
-    """Tip errors ``(B, steps + 1)`` [m] of open-loop PRB rollouts with ``params`` from the recorded joint state
-    at each start, or from ``initial_states`` ``(B, 2 (n + 1))`` when given (e.g.
-    :func:`softpend.sysid.greybox.estimate_joint_states`), the hub angle moved by ``hub_offset_rad``, under the
-    recorded torques, against the observed tip.
-
-    With the dataset's own parameters and an offset this is the "simulator started off" yardstick; with
-    identified parameters and no offset it measures the parameter error alone.
-
-    Raises
-    ------
-    ValueError
-        If the dataset has no joint states, or its joint states do not fit ``params`` (another plant).
-    """
+    """Tip errors ``(B, steps + 1)`` [m] of open-loop PRB rollouts with ``params`` from the recorded joint state (or
+    ``initial_states``), the hub angle moved by ``hub_offset_rad``, under the recorded torques."""
     states = _recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
     if states.shape != (starts.shape[0], 2 * (params.n_links + 1)):
         raise ValueError(
@@ -214,9 +147,7 @@ def prb_rollout_tip_errors(
     steps = positive_int("steps", steps)
     index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
     torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-    if substeps is None:
-        substeps = int(dataset.metadata.get("protocol", {}).get("substeps", 2))
-    sim = simulate_windows(params, dataset.dt_s, substeps, states, torques, has_er=False)
+    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset, substeps), states, torques, has_er=False)
     ex = dataset.column("ex_m")[starts[:, :1], index]
     ey = dataset.column("ey_m")[starts[:, :1], index]
     return np.hypot(sim[..., 1] - ex, sim[..., 2] - ey)
@@ -231,9 +162,8 @@ def prb_rollout_trial(
     substeps: Optional[int] = None,
     initial_state: Optional[np.ndarray] = None,
 ) -> dict[str, np.ndarray]:
-    """One open-loop PRB rollout with ``params`` from the recorded joint state at ``start_sample`` of ``trial``
-    (or from ``initial_state``, ``q`` then ``q_dot``, when given), in the format of :func:`softpend.sysid.rollout_trial` (``time_s``; ``phi_rad, theta_rad, ex_m, ey_m`` of the
-    data and ``<name>_model``)."""
+    """One open-loop PRB rollout from the recorded joint state (or ``initial_state``) in the format of
+    :func:`softpend.sysid.rollout_trial`."""
     starts = np.array([[int(trial), int(start_sample)]], dtype=np.int64)
     if not 0 <= trial < dataset.n_trials or not 0 <= start_sample < dataset.n_samples - steps:
         raise ValueError(f"trial {trial}, start_sample {start_sample} and {steps} steps do not fit the dataset")
@@ -241,40 +171,19 @@ def prb_rollout_trial(
         _recorded_states(dataset, starts) if initial_state is None else np.asarray(initial_state, float).reshape(1, -1)
     )
     index = start_sample + np.arange(steps + 1)
-    if substeps is None:
-        substeps = int(dataset.metadata.get("protocol", {}).get("substeps", 2))
-    sim = simulate_windows(
-        params, dataset.dt_s, substeps, state, dataset.torques_nm[trial, index[:-1]][None], has_er=False
-    )[0]
-    ex, ey = dataset.column("ex_m")[trial, index], dataset.column("ey_m")[trial, index]
-    out = {
-        "time_s": index * dataset.dt_s,
-        "phi_rad": dataset.column("phi_rad")[trial, index],
-        "phi_rad_model": sim[:, 0],
-        "ex_m": ex,
-        "ex_m_model": sim[:, 1],
-        "ey_m": ey,
-        "ey_m_model": sim[:, 2],
-        "theta_rad": np.arctan2(-ex, ey),
-        "theta_rad_model": np.arctan2(-sim[:, 1], sim[:, 2]),
-    }
+    torques = dataset.torques_nm[trial, index[:-1]][None]
+    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset, substeps), state, torques, has_er=False)[0]
+    out = {"time_s": index * dataset.dt_s}
+    for k, name in enumerate(("phi_rad", "ex_m", "ey_m")):
+        out[name], out[f"{name}_model"] = dataset.column(name)[trial, index], sim[:, k]
+    out["theta_rad"] = np.arctan2(-out["ex_m"], out["ey_m"])
+    out["theta_rad_model"] = np.arctan2(-sim[:, 1], sim[:, 2])
     return out
 
 
 def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: np.ndarray, steps: int) -> np.ndarray:
-    """Tip errors ``(B, steps + 1)`` [m] of open-loop rollouts of a learned dynamics model (ensembles through
-    their mean) from the observed state at each start sample under the recorded torques.
-
-    Raises
-    ------
-    ValueError
-        If a start is earlier than the model's history allows.
-    """
-    import torch
-
-    from softpend.sysid.metrics import _deterministic, _dtype
-    from softpend.sysid.rollout import rollout
-
+    """Tip errors ``(B, steps + 1)`` [m] of open-loop rollouts of a learned model (ensembles: their mean) from the
+    observed state at each start under the recorded torques."""
     layout = model.layout
     h = layout.history
     if np.any(starts[:, 1] < h):
@@ -285,15 +194,7 @@ def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: n
     i = starts[:, 1:2] - h + np.arange(steps + 1)[None, :]
     truth = states[starts[:, :1], i]
     actions = torques[starts[:, :1], i[:, :-1]]
-    dtype = _dtype(model)
-    with torch.inference_mode():
-        predicted = (
-            rollout(
-                _deterministic(model), torch.as_tensor(truth[:, 0], dtype=dtype), torch.as_tensor(actions, dtype=dtype)
-            )
-            .double()
-            .numpy()
-        )
+    predicted = open_loop(model, truth[:, 0], actions)
     i_ex, i_ey = layout.index("ex_m"), layout.index("ey_m")
     return np.hypot(predicted[..., i_ex] - truth[..., i_ex], predicted[..., i_ey] - truth[..., i_ey])
 
@@ -304,16 +205,14 @@ def prb_one_step_errors(
     trials: Optional[np.ndarray] = None,
     substeps: Optional[int] = None,
 ) -> dict[str, float]:
-    """One-step error of a PRB model with ``params`` from the recorded joint state at every sample of the
-    given trials: ``mse`` over the observed positions and their backward-difference velocities (the next
-    sample's velocity predicted as ``(predicted position - current position) / dt``), in the units and the
-    variable set of :func:`softpend.sysid.one_step_errors` at full information; ``one_step_tip_rmse_m``."""
+    """One-step error of a PRB model from the recorded joint state at every sample of the trials, in the units of
+    :func:`softpend.sysid.one_step_errors` at full information (velocities as backward differences)."""
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     starts = np.array([(t, s) for t in trials for s in range(dataset.n_samples - 1)], dtype=np.int64)
     states = _recorded_states(dataset, starts)
-    if substeps is None:
-        substeps = int(dataset.metadata.get("protocol", {}).get("substeps", 2))
-    plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=substeps)
+    plant = PRBPlant(
+        params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset, substeps)
+    )
     names = dataset.position_names
     predicted = np.empty((starts.shape[0], len(names)))
     for row, ((t, s), state) in enumerate(zip(starts, states)):
@@ -324,7 +223,6 @@ def prb_one_step_errors(
     angle = np.array([n in ("phi_rad", "theta_rad", "er_rad") for n in names])
     position_error = predicted - nxt
     position_error[:, angle] = wrap_diff(position_error[:, angle], 0.0)
-    # the velocity errors follow from the position errors: (predicted - now) / dt - (next - now) / dt
     velocity_error = position_error / dataset.dt_s
     error = np.concatenate([position_error, velocity_error], axis=1)
     i_ex, i_ey = names.index("ex_m"), names.index("ey_m")

@@ -1,10 +1,5 @@
-"""Fit a learned dynamics model (or an ensemble) to a babbling dataset.
-
-One-step regression of the standardised core-state change (see :mod:`softpend.sysid.model`) with Adam
-on minibatches, a validation split *by trial* (whole trials are held out, so validation transitions
-are not neighbours of training ones), learning-rate halving on a validation plateau, early stopping
-with the best validation weights restored, and a progress bar.
-"""
+"""Fit a learned dynamics model (or an ensemble) to a babbling dataset: one-step regression with Adam, a
+validation split by trial, early stopping on the best validation weights, optional multi-step fine-tuning."""
 
 from __future__ import annotations
 
@@ -30,62 +25,21 @@ from softpend.checks import (
     one_of,
     positive_int,
 )
+from softpend.plant import wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
-from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel
+from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, wrap_tensor
 
 __all__ = ["TrainConfig", "FitResult", "fit_dynamics_model", "split_trials"]
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Hyper-parameters of :func:`fit_dynamics_model`.
-
-    Parameters
-    ----------
-    information : {"full", "limited"}
-        Information level (:class:`softpend.sysid.StateLayout`).
-    history : int
-        Past position frames in the state (limited information only).
-    velocity_source : {"observed", "true"}
-        Differenced (rig-like, default) or the simulator's true velocities (full information only).
-    hidden_widths : tuple of int
-        Hidden layer widths (the report's ``(16, 16, 16)``).
-    activation : str
-        Hidden activation (``silu`` default: smooth, so linearisations are well defined, and cheap).
-    integrate_positions : bool, optional
-        Predict only the velocity change and integrate positions with ``x[t+1] = x[t] + dt v[t+1]``
-        (exact for backward-difference velocities); ``None`` = yes for observed velocities, no for true.
-    limit_tip_reach : bool
-        Keep predicted tip positions within the rod's reach (the dataset's ``length_m``, or for a rig file
-        without plant parameters the largest tip distance recorded, plus 1 % slack): see ``tip_reach_m``
-        of :class:`softpend.sysid.DynamicsModel`.
-    ensemble_size : int
-        Number of members (1 = a single :class:`DynamicsModel`).
-    bootstrap : bool
-        Train each ensemble member on a bootstrap resample of the training transitions.
-    max_epochs : int
-        Upper limit on passes over the training set (one-step loss).
-    rollout_steps, rollout_epochs : int
-        After the one-step fit, fine-tune for ``rollout_epochs`` epochs on the multi-step loss: the
-        model's own ``rollout_steps``-step open-loop predictions from every training state, compared
-        with the data (0 = no fine-tuning, the report's plain one-step fit).
-    batch_size : int
-        Minibatch size.
-    learning_rate : float
-        Initial Adam step size.
-    lr_schedule : {"cosine", "plateau"}
-        Cosine annealing of the step size to 1 % over ``max_epochs``, or halving after ``patience // 3``
-        epochs without a validation improvement.
-    weight_decay : float
-        Adam weight decay.
-    patience : int
-        Early stopping: epochs without a validation improvement before stopping.
-    validation_fraction : float
-        Fraction of trials held out for validation (at least one trial).
-    seed : int
-        Seed of the split, the initial weights, the bootstrap and the minibatch order.
-    """
+    """Settings of :func:`fit_dynamics_model`: the state layout, the network, the ensemble, the optimiser and the
+    split.  ``integrate_positions=None`` means yes for observed velocities; ``limit_tip_reach`` keeps predicted
+    tips within the rod's reach plus :data:`TIP_REACH_SLACK`; ``rollout_steps``/``rollout_epochs`` fine-tune on
+    the model's own multi-step predictions (0: none); ``lr_schedule`` is cosine annealing to 1 % or halving on a
+    validation plateau."""
 
     information: str = "full"
     history: int = 0
@@ -146,25 +100,8 @@ class TrainConfig:
 
 @dataclass
 class FitResult:
-    """What :func:`fit_dynamics_model` returns.
-
-    Attributes
-    ----------
-    model : DynamicsModel or DynamicsEnsemble
-        The trained model (eval mode), best validation weights.
-    config : TrainConfig
-        Settings used.
-    train_trials, val_trials : ndarray of int
-        Trial indices of the dataset used for training and for validation.
-    train_loss, val_loss : list of ndarray
-        Per member, the loss (mean squared standardised change) after each epoch.
-    best_epochs : list of int
-        Per member, the epoch whose weights were kept (1-based).
-    multistep_train_loss, multistep_val_loss : list of ndarray
-        Per member, the multi-step loss after each fine-tuning epoch (empty without fine-tuning).
-    train_time_s : float
-        Wall time of the fit [s].
-    """
+    """What :func:`fit_dynamics_model` returns: the model (best validation weights), settings, split, and per
+    member the losses after each epoch and the epoch kept (1-based)."""
 
     model: DynamicsModel | DynamicsEnsemble
     config: TrainConfig
@@ -198,15 +135,12 @@ def split_trials(n_trials: int, validation_fraction: float, seed: int) -> tuple[
     return np.sort(order[n_val:]), np.sort(order[:n_val])
 
 
-#: Slack of the tip-reach limit, as a fraction of the reach: a wall exactly at the rod length also clips
-#: the small prediction errors of a nearly straight rod (measured: 1 % slack gives 12.0 mm at 0.5 s where
-#: the exact length gives 14.3 mm and no limit 12.5 mm; every limit keeps 2 s rollouts on the rod's scale).
+#: Slack of the tip-reach limit, as a fraction of the reach.
 TIP_REACH_SLACK = 0.01
 
 
 def _tip_reach_m(dataset: TrajectoryDataset) -> Optional[float]:
-    """The rod length [m] of a simulated dataset, else the largest recorded tip distance, plus
-    :data:`TIP_REACH_SLACK` (``None`` without a tip position)."""
+    """The rod length of a simulated dataset, else the largest recorded tip distance, plus the slack."""
     if dataset.params is not None:
         return float(dataset.params.length_m) * (1 + TIP_REACH_SLACK)
     if not all(n in dataset.position_names for n in ("ex_m", "ey_m")):
@@ -215,27 +149,38 @@ def _tip_reach_m(dataset: TrajectoryDataset) -> Optional[float]:
     return radius * (1 + TIP_REACH_SLACK) if radius > 0 else None
 
 
-def _statistics(model: DynamicsModel, data: TransitionData) -> tuple[torch.Tensor, ...]:
-    """Feature and target standardisation statistics, computed in float64."""
-    s = torch.as_tensor(data.states, dtype=torch.float64)
-    s1 = torch.as_tensor(data.next_states, dtype=torch.float64)
-    u = torch.as_tensor(data.torques_nm, dtype=torch.float64)
+def _features_and_targets(
+    model: DynamicsModel, data: TransitionData
+) -> tuple[DynamicsModel, torch.Tensor, torch.Tensor]:
+    """A float64 copy of the model, and the raw features and target changes of the transitions in float64."""
     probe = copy.deepcopy(model).double()
-    feats = probe.features(s, u)
-    deltas = probe.target_delta(s, s1)
-    return feats.mean(0), feats.std(0), deltas.mean(0), deltas.std(0)
+    s, s1, u = (torch.as_tensor(a, dtype=torch.float64) for a in (data.states, data.next_states, data.torques_nm))
+    return probe, probe.features(s, u), probe.target_delta(s, s1)
 
 
 def _tensors(model: DynamicsModel, data: TransitionData) -> tuple[torch.Tensor, torch.Tensor]:
     """Standardised (features, target changes) in the model's dtype."""
-    probe = copy.deepcopy(model).double()
-    s = torch.as_tensor(data.states, dtype=torch.float64)
-    s1 = torch.as_tensor(data.next_states, dtype=torch.float64)
-    u = torch.as_tensor(data.torques_nm, dtype=torch.float64)
-    x = probe.normalise_features(probe.features(s, u))
-    y = (probe.target_delta(s, s1) - probe.delta_mean) / probe.delta_std
+    probe, features, targets = _features_and_targets(model, data)
+    x = probe.normalise_features(features)
+    y = (targets - probe.delta_mean) / probe.delta_std
     dtype = model.feature_mean.dtype
     return x.to(dtype).contiguous(), y.to(dtype).contiguous()
+
+
+def _epoch(
+    optimiser: torch.optim.Optimizer, n: int, batch_size: int, generator: torch.Generator, loss_of: Any
+) -> float:
+    """One pass over ``n`` samples in random minibatches; the mean of ``loss_of(batch)``."""
+    order = torch.randperm(n, generator=generator)
+    total = 0.0
+    for start in range(0, n, batch_size):
+        batch = order[start : start + batch_size]
+        loss = loss_of(batch)
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+        total += float(loss.detach()) * batch.shape[0]
+    return total / n
 
 
 def _train_member(
@@ -260,32 +205,29 @@ def _train_member(
         scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
             optimiser, factor=0.5, patience=max(1, config.patience // 3)
         )
-    n = x_train.shape[0]
     best = (math.inf, 0, copy.deepcopy(net.state_dict()))
     train_losses: list[float] = []
     val_losses: list[float] = []
     bar = tqdm(range(1, config.max_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
     for epoch in bar:
         net.train()
-        order = torch.randperm(n, generator=generator)
-        total = 0.0
-        for start in range(0, n, config.batch_size):
-            batch = order[start : start + config.batch_size]
-            loss = torch.mean((net(x_train[batch]) - y_train[batch]) ** 2)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-            total += float(loss.detach()) * batch.shape[0]
+        train = _epoch(
+            optimiser,
+            x_train.shape[0],
+            config.batch_size,
+            generator,
+            lambda batch: torch.mean((net(x_train[batch]) - y_train[batch]) ** 2),
+        )
         net.eval()
         with torch.no_grad():
             val = float(torch.mean((net(x_val) - y_val) ** 2))
-        _check_finite_loss(desc, epoch, total / n, val, config)
-        train_losses.append(total / n)
+        _check_finite_loss(desc, epoch, train, val, config)
+        train_losses.append(train)
         val_losses.append(val)
         scheduler.step(val) if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau) else scheduler.step()
         if val < best[0] * (1 - 1e-4):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
-        bar.set_postfix(train=f"{total / n:.2e}", val=f"{val:.2e}", best=best[1])
+        bar.set_postfix(train=f"{train:.2e}", val=f"{val:.2e}", best=best[1])
         if epoch - best[1] >= config.patience:
             break
     bar.close()
@@ -295,9 +237,7 @@ def _train_member(
 
 
 def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: TrainConfig) -> None:
-    """``ValueError`` before any work if the fit's arrays would exceed :data:`softpend.checks.MAX_WORK_BYTES`:
-    the transitions (states, next states and features, a few copies) and every member's weights (with Adam's
-    moments and the best-epoch copy)."""
+    """``ValueError`` before any work if the fit's arrays would exceed :data:`softpend.checks.MAX_WORK_BYTES`."""
     dim = layout.dim
     transitions = dataset.n_trials * max(dataset.n_samples - 1, 1)
     data = 8.0 * 8 * transitions * (dim + 1)
@@ -312,8 +252,7 @@ def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: Tra
 
 
 def _check_finite_loss(desc: str, epoch: int, train_loss: float, val_loss: float, config: TrainConfig) -> None:
-    """``NonFiniteError`` if an epoch's training or validation loss is NaN or infinite (the fit diverged; the
-    weights kept would be the untrained ones or garbage)."""
+    """``NonFiniteError`` if an epoch's training or validation loss is NaN or infinite (the fit diverged)."""
     if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
         raise NonFiniteError(
             f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train_loss!r}, validation loss "
@@ -345,7 +284,7 @@ def _multistep_loss(
     for j in range(torques.shape[1]):
         x = model.predict_next(x, torques[:, j])
         err = x[:, :core] - states[:, j + 1, :core]
-        err = torch.where(mask, torch.remainder(err + math.pi, 2 * math.pi) - math.pi, err)
+        err = torch.where(mask, wrap_tensor(err), err)
         total = total + torch.mean((err / scale) ** 2)
     return total / torques.shape[1]
 
@@ -364,65 +303,39 @@ def _finetune_multistep(
     xs, us = (torch.as_tensor(a, dtype=dtype) for a in train)
     vs, vu = (torch.as_tensor(a, dtype=dtype) for a in val)
     optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate / 10)
-    best = (math.inf, copy.deepcopy(model.net.state_dict()))
+    with torch.no_grad():
+        best = (float(_multistep_loss(model, vs, vu, scale)), copy.deepcopy(model.net.state_dict()))
     train_losses: list[float] = []
     val_losses: list[float] = []
-    with torch.no_grad():
-        best = (float(_multistep_loss(model, vs, vu, scale)), best[1])
     bar = tqdm(range(1, config.rollout_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
-    for _ in bar:
-        order = torch.randperm(xs.shape[0], generator=generator)
-        total = 0.0
-        for start in range(0, xs.shape[0], config.batch_size):
-            batch = order[start : start + config.batch_size]
-            loss = _multistep_loss(model, xs[batch], us[batch], scale)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-            total += float(loss.detach()) * batch.shape[0]
+    for epoch in bar:
+        train = _epoch(
+            optimiser,
+            xs.shape[0],
+            config.batch_size,
+            generator,
+            lambda batch: _multistep_loss(model, xs[batch], us[batch], scale),
+        )
         with torch.no_grad():
             val_loss = float(_multistep_loss(model, vs, vu, scale))
-        _check_finite_loss(desc, len(train_losses) + 1, total / xs.shape[0], val_loss, config)
-        train_losses.append(total / xs.shape[0])
+        _check_finite_loss(desc, epoch, train, val_loss, config)
+        train_losses.append(train)
         val_losses.append(val_loss)
         if val_loss < best[0]:
             best = (val_loss, copy.deepcopy(model.net.state_dict()))
-        bar.set_postfix(train=f"{total / xs.shape[0]:.2e}", val=f"{val_loss:.2e}")
+        bar.set_postfix(train=f"{train:.2e}", val=f"{val_loss:.2e}")
     bar.close()
     model.net.load_state_dict(best[1])
     return np.array(train_losses), np.array(val_losses)
 
 
 def fit_dynamics_model(
-    dataset: TrajectoryDataset,
-    config: Optional[TrainConfig] = None,
-    progress: bool = True,
-    **overrides: Any,
+    dataset: TrajectoryDataset, config: Optional[TrainConfig] = None, progress: bool = True, **overrides: Any
 ) -> FitResult:
-    """Train a dynamics model on a dataset.
+    """Train a dynamics model (``config`` with ``overrides`` of its fields) on a dataset of at least 2 trials.
 
-    Parameters
-    ----------
-    dataset : TrajectoryDataset
-        Babbling (or rig) data, at least 2 trials.
-    config : TrainConfig, optional
-        Settings (default ``TrainConfig()``: full information, 3 x 16, one model).
-    progress : bool
-        Show progress bars (one per member, over epochs).
-    **overrides
-        Fields of :class:`TrainConfig` to change, e.g. ``hidden_widths=(64, 64)``, ``ensemble_size=5``.
-
-    Returns
-    -------
-    FitResult
-        The model and the training record.
-
-    Raises
-    ------
-    ValueError
-        On invalid settings, or a dataset that lacks the layout's variables.
-    NonFiniteError
-        If a training or validation loss becomes NaN or infinite (the fit diverged).
+    Raises ``ValueError`` on invalid settings or a dataset that lacks the layout's variables, ``NonFiniteError``
+    if a loss becomes NaN or infinite.
     """
     if not isinstance(dataset, TrajectoryDataset):
         raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
@@ -444,25 +357,25 @@ def fit_dynamics_model(
         raise ValueError(
             "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
         )
-
     reach = _tip_reach_m(dataset) if config.limit_tip_reach else None
-
-    def new_member(index: int) -> DynamicsModel:
-        assert config.integrate_positions is not None  # set in TrainConfig.__post_init__
+    assert config.integrate_positions is not None  # set in TrainConfig.__post_init__
+    members = []
+    for index in range(config.ensemble_size):
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed * 1000 + index)
-            return DynamicsModel(
-                layout,
-                dataset.dt_s,
-                limit,
-                config.hidden_widths,
-                config.activation,
-                config.integrate_positions,
-                tip_reach_m=reach,
+            members.append(
+                DynamicsModel(
+                    layout,
+                    dataset.dt_s,
+                    limit,
+                    config.hidden_widths,
+                    config.activation,
+                    config.integrate_positions,
+                    tip_reach_m=reach,
+                )
             )
-
-    members = [new_member(k) for k in range(config.ensemble_size)]
-    stats = _statistics(members[0], train)
+    _, features, targets = _features_and_targets(members[0], train)
+    stats = features.mean(0), features.std(0), targets.mean(0), targets.std(0)
     for m in members:
         m.set_normalisation(*stats)
     x_train, y_train = _tensors(members[0], train)
@@ -470,12 +383,13 @@ def fit_dynamics_model(
     for m in members:
         m.set_feature_box(x_train.min(0).values, x_train.max(0).values)
     result = FitResult(model=members[0], config=config, train_trials=train_trials, val_trials=val_trials)
-    if config.rollout_steps and config.rollout_epochs:
+    multistep = bool(config.rollout_steps and config.rollout_epochs)
+    if multistep:
         windows_train = _windows(layout, dataset, train_trials, config.rollout_steps)
         windows_val = _windows(layout, dataset, val_trials, config.rollout_steps)
         change = train.next_states[:, : layout.core_dim] - train.states[:, : layout.core_dim]
         mask = layout.angle_mask[: layout.core_dim]
-        change[:, mask] = (change[:, mask] + np.pi) % (2 * np.pi) - np.pi
+        change[:, mask] = wrap_angle_rad(change[:, mask])
         core_scale = torch.as_tensor(np.maximum(change.std(0), 1e-12), dtype=members[0].feature_mean.dtype)
     for k, member in enumerate(members):
         generator = torch.Generator().manual_seed(config.seed * 1000 + k)
@@ -489,7 +403,7 @@ def fit_dynamics_model(
         result.train_loss.append(tl)
         result.val_loss.append(vl)
         result.best_epochs.append(best)
-        if config.rollout_steps and config.rollout_epochs:
+        if multistep:
             mtl, mvl = _finetune_multistep(
                 member, windows_train, windows_val, core_scale, config, generator, progress, desc + " (multi-step)"
             )

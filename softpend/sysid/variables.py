@@ -6,14 +6,11 @@ from softpend.plant import OBSERVATION_NAMES
 
 __all__ = ["POSITION_NAMES", "VELOCITY_NAMES", "ANGLE_NAMES", "velocity_name", "is_angle"]
 
-#: The report's sampled quantities ``q = [phi, theta, e_x, e_y]`` plus the tip rotation ``e_r``.
+#: The sampled positions ``phi, theta, e_x, e_y, e_r`` and their time derivatives, same order.
 POSITION_NAMES: tuple[str, ...] = OBSERVATION_NAMES[:5]
-#: Their first time derivatives, same order.
 VELOCITY_NAMES: tuple[str, ...] = OBSERVATION_NAMES[5:]
-#: Position variables that are angles (wrapped to ``[-pi, pi)``; unwrapped before differencing).
+#: Position variables that are angles (wrapped to ``[-pi, pi)``).
 ANGLE_NAMES: frozenset[str] = frozenset({"phi_rad", "theta_rad", "er_rad"})
-
-assert len(POSITION_NAMES) == len(VELOCITY_NAMES) == 5
 
 
 def velocity_name(position_name: str) -> str:
@@ -24,5 +21,4 @@ def velocity_name(position_name: str) -> str:
 
 
 def is_angle(name: str) -> bool:
-    """Whether a position variable is an angle [rad] (else a length [m])."""
     return name in ANGLE_NAMES

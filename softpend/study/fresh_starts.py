@@ -1,14 +1,5 @@
-"""Trained controllers measured on fresh starts: the starts that no training or selection step saw.
-
-An RL run picks its *selected* (best) agent on the evaluation seeds of its config and ends with its *final*
-agent; PILCO decides that it has balanced on its own test seeds.  Every number this module reports is
-measured afterwards, on :data:`softpend.study.presets.REPORT_SEEDS` (hanging starts of the task, 10 s each),
-with the success rate's Wilson interval per run and, over the runs of a method, the interquartile mean with
-a stratified bootstrap interval (:mod:`softpend.stats`).
-
-A run *balances* when at least ``balanced_fraction`` (90 %) of its fresh starts swing up and keep the
-upright standard deviation at most ``hold_std_rad`` (:data:`softpend.evaluation.HOLD_STD_RAD`).
-"""
+"""Trained controllers measured on fresh starts (:data:`softpend.study.presets.REPORT_SEEDS`, which no training
+or selection step sees): per-run rows, their aggregates over runs and the headline figures."""
 
 from __future__ import annotations
 
@@ -44,18 +35,23 @@ __all__ = [
 BALANCED_FRACTION = 0.9
 #: Names of the agents of an RL run, by :func:`softpend.rl.dqn.load_agent` ``which``.
 AGENTS = {"best": "selected", "final": "final"}
+#: File in an RL run folder that keeps its fresh-start rows.
+FRESH_STARTS_FILE = "fresh_starts.json"
+
+
+def held_starts(summary: EvaluationSummary, hold_std_rad: float) -> list[bool]:
+    """Per start: swung up, did not diverge and kept the upright std at most ``hold_std_rad``."""
+    return [
+        math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= hold_std_rad
+        for r in summary.results
+    ]
 
 
 def fresh_start_row(
     summary: EvaluationSummary, hold_std_rad: float = HOLD_STD_RAD, balanced_fraction: float = BALANCED_FRACTION
 ) -> dict[str, Any]:
-    """Success and balance figures of one controller over its fresh-start episodes (a start is *balanced* when it
-    swings up and holds the upright std at most ``hold_std_rad``)."""
-    n = len(summary.results)
-    balanced = [
-        math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= hold_std_rad
-        for r in summary.results
-    ]
+    """Success and balance figures of one controller over its fresh-start episodes."""
+    n, balanced = len(summary.results), held_starts(summary, hold_std_rad)
     k = int(sum(balanced))
     low, high = wilson_interval(k, n)
     stds = [r.upright_std_rad for r, ok in zip(summary.results, balanced) if ok]
@@ -72,22 +68,18 @@ def fresh_start_row(
     }
 
 
-#: File in an RL run folder that keeps its fresh-start rows (see :func:`rl_fresh_start_rows`).
-FRESH_STARTS_FILE = "fresh_starts.json"
-
-
 @functools.lru_cache(maxsize=1)
 def _scoring_source() -> bytes:
-    """The source of the code that scores an episode (read once per process)."""
+    """The source of the code that scores an episode."""
     import inspect
 
     import softpend.evaluation as evaluation
 
-    return (inspect.getsource(evaluation) + inspect.getsource(fresh_start_row)).encode()
+    return "".join(inspect.getsource(code) for code in (evaluation, held_starts, fresh_start_row)).encode()
 
 
 def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
-    """What a fresh-start row depends on: the agent's bytes, the starts, the duration and the code that scores."""
+    """Key of a fresh-start row: the agent's bytes, the starts, the duration and the scoring code."""
     digest = hashlib.sha256(agent_path.read_bytes())
     digest.update(_scoring_source())
     digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
@@ -95,9 +87,7 @@ def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: f
 
 
 def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Sequence[int], what: str) -> None:
-    """``ValueError`` if a report start is one of the starts that selected ``what``."""
-    overlap = set(report_seeds) & set(selection_seeds)
-    if overlap:
+    if overlap := set(report_seeds) & set(selection_seeds):
         raise ValueError(f"report seeds {sorted(overlap)} were used to select {what}")
 
 
@@ -110,19 +100,9 @@ def rl_fresh_start_rows(
     which: Sequence[str] = ("best", "final"),
     configs: Optional[Mapping[str, Any]] = None,
 ) -> list[dict[str, Any]]:
-    """One row per (method, seed, agent) of the RL runs under ``runs_root``, measured on ``report_seeds``
-    (``configs``: ``{algo: config}`` of the runs, which picks their folders where runs of several settings
-    share ``runs_root``; :func:`softpend.study.rl_runs.run_folder`).
-
-    Each run folder keeps its rows in :data:`FRESH_STARTS_FILE`, keyed by the agent file's bytes, the starts, the
-    duration and the source of the evaluation code, so that the figures that report them evaluate each agent
-    once; any change of those evaluates again.
-
-    Raises
-    ------
-    ValueError
-        If a report seed is also one of a run's selection seeds (``config.selection_seeds``).
-    """
+    """One row per (method, seed, agent) of the RL runs under ``runs_root`` on ``report_seeds`` (``configs``:
+    ``{algo: config}`` picks the run folders), cached in each folder's :data:`FRESH_STARTS_FILE` by
+    :func:`_evaluation_key`; ``ValueError`` if a report seed selected a run's agents."""
     from softpend.rl.dqn import evaluate_agent, load_agent
 
     rows = []
@@ -199,79 +179,50 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) ->
 def seed_rows(
     logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]], pilco_results: Sequence[Any] = ()
 ) -> list[dict[str, Any]]:
-    """One row per (method, seed) of what a run cost and whether its *final* agent balances fresh starts.
-
-    ``plant_s_to_balance`` is the training plant time the run consumed [s] when its final agent (policy) balances
-    the fresh starts (:func:`fresh_start_row` ``run_balances``), ``inf`` when it does not: a run that balanced
-    during training and lost it, or never balanced, did not reach the goal within its budget.  For PILCO the
-    time is that of its first policy that balanced its own test starts (``real_seconds_to_balance``), counted
-    only when the final policy balances the fresh starts too.
-
-    Parameters
-    ----------
-    logs_by_algo : mapping
-        ``{"dqn": [TrainingLog, ...], "mbpo": [...]}``.
-    fresh_rows : sequence of dict
-        :func:`rl_fresh_start_rows` (and :func:`pilco_fresh_start_rows`) rows; the ``final`` ones are used.
-    pilco_results : sequence of PilcoResult
-        PILCO runs (optional).
-    """
+    """One row per (method, seed): what the run cost and whether its final agent balances the fresh starts
+    (``plant_s_to_balance``: the run's plant seconds if so, else ``inf``; PILCO: its seconds to its first
+    balancing policy).  ``logs_by_algo``: ``{"dqn": [TrainingLog, ...], "mbpo": [...]}``; ``fresh_rows``: rows of
+    :func:`rl_fresh_start_rows` and :func:`pilco_fresh_start_rows`."""
     final = {(r["method"], int(r["seed"])): r for r in fresh_rows if r["agent"] == "final"}
     rows = []
-    for algo, logs in logs_by_algo.items():
-        method = METHOD_NAMES[algo]
-        for log in logs:
-            fresh = final.get((method, int(log.seed)))
-            if fresh is None:
-                raise ValueError(f"no fresh-start row of the final agent of {method} seed {log.seed}")
-            rows.append(
-                {
-                    "method": method,
-                    "seed": int(log.seed),
-                    "episodes": log.n_episodes,
-                    "plant_s": log.plant_s,
-                    "stopped_balanced": log.stop_reason is not None,
-                    "final_balanced_starts": fresh["balanced_starts"],
-                    "starts": fresh["starts"],
-                    "final_balances": fresh["run_balances"],
-                    "plant_s_to_balance": log.plant_s if fresh["run_balances"] else math.inf,
-                }
-            )
-    for result in pilco_results:
-        seed = int(result.config.seed)
-        fresh = final.get(("PILCO", seed))
-        if fresh is None:
-            raise ValueError(f"no fresh-start row of PILCO seed {seed}")
-        seconds = float(result.real_seconds_to_balance)
+
+    def add(method: str, seed: int, episodes: int, plant_s: float, stopped: bool, to_balance: float) -> None:
+        if (fresh := final.get((method, seed))) is None:
+            what = f"the final agent of {method} seed {seed}" if method != "PILCO" else f"PILCO seed {seed}"
+            raise ValueError(f"no fresh-start row of {what}")
         rows.append(
             {
-                "method": "PILCO",
+                "method": method,
                 "seed": seed,
-                "episodes": len(result.records),
-                "plant_s": float(result.plant_seconds_total),
-                "stopped_balanced": math.isfinite(seconds),
+                "episodes": episodes,
+                "plant_s": plant_s,
+                "stopped_balanced": stopped,
                 "final_balanced_starts": fresh["balanced_starts"],
                 "starts": fresh["starts"],
                 "final_balances": fresh["run_balances"],
-                "plant_s_to_balance": seconds if fresh["run_balances"] else math.inf,
+                "plant_s_to_balance": to_balance if fresh["run_balances"] else math.inf,
             }
         )
+
+    for algo, logs in logs_by_algo.items():
+        for log in logs:
+            add(
+                METHOD_NAMES[algo], int(log.seed), log.n_episodes, log.plant_s, log.stop_reason is not None, log.plant_s
+            )
+    for result in pilco_results:
+        seconds = float(result.real_seconds_to_balance)
+        plant_s = float(result.plant_seconds_total)
+        add("PILCO", int(result.config.seed), len(result.records), plant_s, math.isfinite(seconds), seconds)
     return rows
 
 
 def headline_figures(
     rows: Sequence[dict[str, Any]], within_s: float = 30.0, ratio: float = 3.0, seed: int = 0
 ) -> dict[str, float]:
-    """The ten-seed figures of the learning methods from :func:`seed_rows` rows.
-
-    ``seeds_balanced_<m>`` (runs whose final agent balances the fresh starts) and ``seeds_<m>`` (runs) for
-    ``m`` in ``dqn``, ``mbpo``, ``pilco``; ``<m>_real_s_to_balance`` (median over seeds of
-    ``plant_s_to_balance``, ``inf`` counting as never) with its 95 % bootstrap interval (``_low``, ``_high``);
-    ``mbpo_over_dqn_real_s_ratio`` (of those medians); ``mbpo_seeds_3x_fewer_than_dqn`` (seeds whose DQN-MBPO
-    run balanced with at most ``1 / ratio`` of the DQN run's plant seconds of the same seed, a DQN run that never
-    balanced counting as infinitely slow); ``pilco_seeds_within_30s`` (PILCO runs that balanced within
-    ``within_s`` plant seconds).
-    """
+    """The learning methods' figures over seeds from :func:`seed_rows` rows, per method ``m``: ``seeds_<m>``,
+    ``seeds_balanced_<m>``, ``<m>_real_s_to_balance`` (median, with ``_low``/``_high`` bootstrap bounds);
+    ``mbpo_over_dqn_real_s_ratio``, ``mbpo_seeds_3x_fewer_than_dqn`` (seeds where DQN-MBPO needed at most
+    ``1 / ratio`` of DQN's plant seconds) and ``pilco_seeds_within_30s`` (within ``within_s``)."""
     keys = {METHOD_NAMES["dqn"]: "dqn", METHOD_NAMES["mbpo"]: "mbpo", "PILCO": "pilco"}
     by_method: dict[str, dict[int, dict[str, Any]]] = {}
     for row in rows:
@@ -310,12 +261,8 @@ def perturbed_rod_row(
     report_seeds: Sequence[int] = REPORT_SEEDS,
     duration_s: float = TEST_EPISODE_S,
 ) -> dict[str, Any]:
-    """One controller on rods that differ from its model: :func:`fresh_start_row` figures over ``report_seeds``,
-    where the start seeded ``s`` runs on the rod :func:`softpend.plant.randomisation.randomised_rod` draws from
-    ``numpy.random.default_rng(s)`` with ``spread`` (every field of
-    :data:`~softpend.plant.randomisation.RANDOMISED_FIELDS` scaled by its own factor in ``[1 - spread,
-    1 + spread]``), from that seed's hanging start.  The controller keeps its own model of the rod (for a
-    trained agent: the task it was trained on)."""
+    """:func:`fresh_start_row` of a controller over ``report_seeds``, the start seeded ``s`` on the rod
+    :func:`softpend.plant.randomisation.randomised_rod` draws from ``default_rng(s)`` with ``spread``."""
     summary = evaluate(
         controller, task, name="perturbed rods", seeds=report_seeds, duration_s=duration_s, rod_spread=spread
     )
@@ -330,11 +277,8 @@ def converged_fresh_start_rows(
     duration_s: float = TEST_EPISODE_S,
     which: str = "final",
 ) -> list[dict[str, Any]]:
-    """:func:`rl_fresh_start_rows` of one agent per run on a *converged* simulation of the same rod: the batched
-    chain at its default sub-steps (:func:`softpend.rl.dqn.evaluate_agents_batched`, whose hub angle stays far
-    closer to the Exudyn plant at 200 sub-steps than the task's Exudyn plant at 2 sub-steps does:
-    :func:`softpend.study.simulators.hub_errors_rad`), from the same starts.  A controller that holds on the task's plant but not here relies on
-    what the task's coarse time step does to the rod's bending modes, which a real rod would not do."""
+    """:func:`rl_fresh_start_rows` of one agent per run on the batched chain at its default (converged) sub-steps
+    (:func:`softpend.rl.dqn.evaluate_agents_batched`), from the same starts."""
     from softpend.rl.dqn import evaluate_agents_batched, load_agent
 
     runs = [(algo, int(seed)) for algo in algos for seed in seeds]
@@ -344,7 +288,7 @@ def converged_fresh_start_rows(
         _refuse_selection_starts(
             report_seeds, agents[algo, seed][1].selection_seeds, f"the agents of {algo} seed {seed}"
         )
-    # the agents that share what the batched episodes depend on step together (one batch each)
+    # agents that share what the batched episodes depend on step together
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
         groups.setdefault((config.task, config.action_repeat, config.n_torque_levels), []).append(run)

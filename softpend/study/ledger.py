@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.rl.curves import run_to_asymptote
-from softpend.study.fresh_starts import BALANCED_FRACTION
+from softpend.study.fresh_starts import BALANCED_FRACTION, held_starts
 from softpend.study.rl_runs import METHOD_NAMES, plant_runs_root, run_folder
 
 __all__ = [
@@ -197,14 +197,6 @@ def over_seeds(values: Sequence[float], unit: str = "", fmt: Callable[[float], s
     )
 
 
-def _held(summary: Any, std_rad: float) -> list[bool]:
-    """Per start: swung up, did not diverge and kept the upright standard deviation at most ``std_rad``."""
-    return [
-        math.isfinite(r.swing_up_time_s) and r.diverged is None and r.upright_std_rad <= std_rad
-        for r in summary.results
-    ]
-
-
 def _median(values: Sequence[float]) -> float:
     return float(np.median(values)) if len(values) else math.nan
 
@@ -326,7 +318,7 @@ def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[Ledge
         if not summaries:
             rows.append(_row(key, claim, "std 0.2 rad", "fig-upright-error"))
             continue
-        held = [_held(s, std_rad) for s in summaries]
+        held = [held_starts(s, std_rad) for s in summaries]
         shares = [float(np.mean(h)) for h in held]
         if len(held) == 1:
             k, n = int(sum(held[0])), len(held[0])
@@ -359,7 +351,7 @@ def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> Ledge
         "As seen in Figure 6, the final performance is near-identical to the performance of the model-free controller."
     )
     args = ("mb_matches_mf", claim, "near-identical", "fig-upright-error")
-    shares = _per_method_median(fresh, lambda s: float(np.mean(_held(s, std_rad))))
+    shares = _per_method_median(fresh, lambda s: float(np.mean(held_starts(s, std_rad))))
     if shares is None:
         return _row(*args)
     ours = (

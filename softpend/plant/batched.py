@@ -1,59 +1,8 @@
-"""A batched, differentiable pseudo-rigid-body (PRB) chain in PyTorch: many rods stepped at once.
+"""A batched, differentiable PRB chain in PyTorch: the equations of :class:`softpend.plant.PRBPlant` for many rods.
 
-The equations are those of :class:`softpend.plant.PRBPlant` (the Exudyn plant): a motor hub of inertia
-``J`` with viscous friction ``b`` driven by a saturated torque, carrying ``n`` equal rigid links joined by
-torsional springs and dampers (``2k, k, ..., k`` and ``2 zeta, zeta, ...``, clamp first), the tip mass riding
-on the last link, gravity along ``-y``.  The state is the Exudyn plant's ``(q, q_dot)``: the hub angle from
-upright followed by the ``n`` spring angles [rad], and their rates [rad/s].
-
-Formulation
------------
-Internally the chain uses the absolute angles ``x = (phi, a_1, ..., a_n)`` (``a_i`` the angle of link ``i``
-from upright, ``x = cumsum(q)``).  In these coordinates the kinetic energy splits into the hub's
-``J phi_dot**2 / 2`` and the links' ``a_dot' M(a) a_dot / 2`` with ``M_ij = G_ij cos(a_i - a_j)``, where the
-constant matrix ``G`` holds the links' second moments (``G_ii``: link ``i`` about its joint plus
-``L**2`` times the mass beyond it; ``G_ij = L h_max(i,j)`` off the diagonal) and ``h_i`` is the first
-moment of everything from link ``i`` outwards about joint ``i``.  Lagrange's equations are
-
-    J phi_dd = tau - b phi_dot - tau_0
-    sum_j G_ij [cos(a_i - a_j) a_dd_j + sin(a_i - a_j) a_dot_j**2] = g h_i sin(a_i) + tau_{i-1} - tau_i
-
-with the spring torques ``tau_i = -k_i (x_{i+1} - x_i) - d_i (x_dot_{i+1} - x_dot_i)`` (``tau_n = 0``).  The
-``n x n`` system for ``a_dd`` is solved by a Cholesky factorisation written out over the batch (batched
-LAPACK for long chains); the products with ``G`` use its structure and cost O(n) operations.
-
-Integrators
------------
-The torque is held over the control step ``dt_s`` (zero-order hold), split into ``substeps`` equal steps.
-
-``"rk4"`` (the default): classical fourth-order Runge-Kutta.  By default the sub-step count is chosen for
-stability from the largest eigenvalue magnitude ``|lambda|`` of the chain linearised about the straight rod
-(:func:`stable_substeps`: ``|lambda| h <= 2.5``, inside RK4's stability region, whose imaginary-axis limit is
-``2.83``).  That gives 2 sub-steps of 5 ms at ``n = 4`` and 14 at ``n = 10`` for the default rod (with fewer,
-RK4 diverges).  Fourth order on the slow swing modes makes it far more accurate than the Exudyn plant's default
-(two generalised-alpha steps per 10 ms, second order): ``softpend bench --only plant`` reports the largest
-hub-angle error against the Exudyn plant with 200 sub-steps over 5 s of random torque at ``n = 4`` and 1 s at
-``n = 10`` beside the default Exudyn plant's.  At the stability limit RK4 damps the stiffest bending mode
-numerically (the energy balance is off by below 1 % of the dissipated energy over 1 s at ``n = 4``); more
-sub-steps converge at fourth order: ``tests/test_batched_chain.py`` holds the hub angle within 1e-6 rad of a
-converged Exudyn run over 1 s of random torque with 20 sub-steps, at ``n = 4`` and ``n = 10``.
-
-``"rosenbrock"``: the two-stage Rosenbrock-W method ROS2 (Verwer, Spee, Blom and Hundsdorfer 1999, with
-``gamma = 1 - 1/sqrt(2)``), linearly implicit in the stiff linear part of the equations (springs, dampers, hub
-friction; the mass matrix frozen at each step's start).  It is second order whatever that approximation, and
-L-stable, so that the sub-steps need not resolve the bending modes: its default :data:`ROSENBROCK_SUBSTEPS` (two)
-serve every chain length.  A sub-step factorises two ``(n + 1)``-square systems (the iteration matrix and the mass
-matrix at the second stage) against RK4's four, and RK4 needs seven times as many sub-steps at ``n = 10``.  Its
-error with two sub-steps lies between RK4's and the default Exudyn plant's (``tests/test_batched_chain.py``
-holds it at least 1.5 times below the latter at ``n = 4`` and ``n = 10``); L-stability damps the stiffest
-modes, so that the energy balance is off by a few per cent of the dissipated energy with two sub-steps and
-converges at second order with more.
-
-``compiled=True`` runs either through ``torch.compile`` (same results to rounding, two to three times faster
-for thousands of rods); gradients always come from the eager operations.
-
-Every function is built from differentiable torch operations: gradients flow to the states, the torques and
-the per-rod parameters (:class:`BatchedRodParams` with ``requires_grad`` tensors).
+Internally the state is the absolute angles ``x = cumsum(q)``; the links' mass matrix is ``M_ij = G_ij cos(a_i - a_j)``
+with constant ``G``, solved by a Cholesky factorisation written out over the batch.  Integrators: ``"rk4"``
+(sub-steps from :func:`stable_substeps`) and ``"rosenbrock"`` (ROS2, linearly implicit in the springs and dampers).
 """
 
 from __future__ import annotations
@@ -82,13 +31,13 @@ PARAMETER_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Rod
 
 _POSITIVE = ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm", "hub_inertia_kgm2")
 
-#: ``|lambda| h`` allowed by :func:`stable_substeps` (RK4 is stable up to 2.83 on the imaginary axis).
+#: ``|lambda| h`` allowed by :func:`stable_substeps` (inside RK4's stability region).
 RK4_STABILITY_BOUND = 2.5
 
 #: The integrators of :class:`BatchedPRBChain`.
 INTEGRATORS = ("rk4", "rosenbrock")
 
-#: Most RK4 sub-steps per control step (as for the Exudyn plant's ``MAX_SUBSTEPS``).
+#: Most sub-steps per control step.
 MAX_SUBSTEPS = 1000
 
 TensorLike = Union[torch.Tensor, np.ndarray, Sequence[float], float]
@@ -96,14 +45,8 @@ TensorLike = Union[torch.Tensor, np.ndarray, Sequence[float], float]
 
 @dataclass(frozen=True)
 class BatchedRodParams:
-    """Parameters of ``B`` rods of one topology (``n_links``), one value per rod for every float field of
-    :class:`~softpend.plant.RodParams` (same names and units), each a tensor of shape ``(B,)``.
-
-    Build it with :meth:`from_params` (one rod repeated, or a list of rods) and vary it with :meth:`scaled`
-    or :meth:`replace`.  Tensors may require gradients (identification); the values are checked as
-    :class:`RodParams` checks them, except that ``hub_inertia_kgm2`` must be positive (the hub equation
-    divides by it).
-    """
+    """``B`` rods of one ``n_links``: every float field of :class:`~softpend.plant.RodParams` as a tensor ``(B,)``
+    (may require gradients); checked as :class:`RodParams`, with ``hub_inertia_kgm2`` positive."""
 
     n_links: int
     length_m: torch.Tensor
@@ -148,7 +91,6 @@ class BatchedRodParams:
 
     @property
     def batch_size(self) -> int:
-        """Number of rods ``B``."""
         return int(self.length_m.shape[0])
 
     @classmethod
@@ -158,8 +100,7 @@ class BatchedRodParams:
         batch_size: Optional[int] = None,
         dtype: torch.dtype = torch.float64,
     ) -> "BatchedRodParams":
-        """Rods from :class:`RodParams`: one rod repeated ``batch_size`` times, or a list of rods of the same
-        ``n_links`` (then ``batch_size`` must be ``None`` or the list's length)."""
+        """One rod repeated ``batch_size`` times, or a list of rods of one ``n_links``."""
         if params is None or isinstance(params, RodParams):
             rods = [params if params is not None else RodParams()]
             size = 1 if batch_size is None else int_at_least("batch_size", batch_size, 1)
@@ -180,10 +121,8 @@ class BatchedRodParams:
         return cls(n_links=rods[0].n_links, **fields)
 
     def replace(self, **changes: TensorLike) -> "BatchedRodParams":
-        """A copy with some fields replaced (tensors, arrays or numbers broadcast to ``(B,)``; checked again)."""
-        unknown = set(changes) - set(PARAMETER_FIELDS)
-        if unknown:
-            raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
+        """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
+        _check_fields(changes)
         new: dict[str, Any] = {}
         for name, value in changes.items():
             base = getattr(self, name)
@@ -192,10 +131,8 @@ class BatchedRodParams:
         return dataclasses.replace(self, **new)
 
     def scaled(self, **factors: TensorLike) -> "BatchedRodParams":
-        """A copy with some fields multiplied by per-rod factors (e.g. ``mass_kg=1 + 0.1 * noise``)."""
-        unknown = set(factors) - set(PARAMETER_FIELDS)
-        if unknown:
-            raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
+        """A copy with some fields multiplied by per-rod factors."""
+        _check_fields(factors)
         return self.replace(
             **{
                 name: getattr(self, name) * torch.as_tensor(f, dtype=getattr(self, name).dtype)
@@ -203,19 +140,20 @@ class BatchedRodParams:
             }
         )
 
-    def rod(self, index: int) -> RodParams:
-        """Rod ``index`` as a :class:`RodParams` (values detached)."""
-        return RodParams(n_links=self.n_links, **{name: float(getattr(self, name)[index]) for name in PARAMETER_FIELDS})
-
     @property
     def dtype(self) -> torch.dtype:
         return self.length_m.dtype
 
 
+def _check_fields(changes: dict) -> None:
+    unknown = set(changes) - set(PARAMETER_FIELDS)
+    if unknown:
+        raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
+
+
 @dataclass(frozen=True)
 class _Derived:
-    """Per-rod constants of the equations, batch last (``(n, B)`` and ``(n, n, B)``: elementwise products and
-    sums along the links then run over contiguous rows of ``B`` values)."""
+    """Per-rod constants of the equations, batch last."""
 
     link_length_m: torch.Tensor  # (B,)
     gram: torch.Tensor  # G, (n, n, B)
@@ -240,7 +178,6 @@ def _derive(p: BatchedRodParams) -> _Derived:
     m_link = p.mass_kg / n
     last = torch.zeros(n, 1, dtype=p.dtype)
     last[-1] = 1.0
-    # mass, first moment about the joint and second moment about the joint of each link (tip mass on the last)
     masses = m_link + last * p.tip_mass_kg
     first = m_link * length / 2 + last * (p.tip_mass_kg * length)
     second = m_link * length**2 / 3 + last * (p.tip_mass_kg * length**2)
@@ -273,24 +210,18 @@ def _derive(p: BatchedRodParams) -> _Derived:
     )
 
 
-#: Chains of at most this many links solve for the link accelerations with the Cholesky factorisation written
-#: out over the batch (:func:`_cholesky_solve`, about ``n**3 / 3`` elementwise operations on rows of ``B``
-#: values); longer ones call batched LAPACK (``torch.linalg.solve``).  The written-out factorisation is as fast
-#: as LAPACK at ``n = 4`` and twice as fast at ``n = 10`` for 4096 rods on one thread, and it never waits on
-#: LAPACK's thread pool, which on a busy machine slowed small batches a hundredfold.
+#: Longest chain solved with the written-out Cholesky factorisation; longer ones use batched LAPACK.
 UNROLLED_SOLVE_MAX_LINKS = 12
 
 
 def _cholesky_factor(
     diagonal: torch.Tensor, below: list[torch.Tensor]
 ) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
-    """Cholesky factor ``L`` of a symmetric positive definite ``M`` given by its diagonal ``(n, B)`` and the parts
-    of its columns below the diagonal (``below[j]``: rows ``j + 1..n - 1`` of column ``j``): the reciprocals of
-    ``L``'s diagonal and the parts of its columns below the diagonal; every operation acts on rows of ``B``
-    values."""
+    """Cholesky factor of ``M`` given by its diagonal ``(n, B)`` and its columns below it (``below[j]``: rows
+    ``j + 1..`` of column ``j``), as the reciprocals of the factor's diagonal and its columns below it."""
     n = diagonal.shape[0]
-    inverse_diagonal: list[torch.Tensor] = []  # 1 / L_jj
-    lower: list[torch.Tensor] = []  # rows j + 1..n - 1 of column j of the Cholesky factor L
+    inverse_diagonal: list[torch.Tensor] = []
+    lower: list[torch.Tensor] = []
     for j in range(n):
         d, column = diagonal[j], below[j]
         for k in range(j):
@@ -309,7 +240,6 @@ def _cholesky_substitute(factor: tuple[list[torch.Tensor], list[torch.Tensor]], 
     """Solve ``L L' x = rhs`` (``rhs`` of shape ``(n, B)``) with a factor from :func:`_cholesky_factor`."""
     inverse_diagonal, lower = factor
     n = rhs.shape[0]
-    # L y = rhs, a column at a time
     y: list[torch.Tensor] = []
     rest = rhs
     for j in range(n):
@@ -317,7 +247,6 @@ def _cholesky_substitute(factor: tuple[list[torch.Tensor], list[torch.Tensor]], 
         y.append(yj)
         if j < n - 1:
             rest = torch.addcmul(rest[1:], lower[j], yj, value=-1.0)
-    # L' x = y, from the last row up, a column of L' (a row of L) at a time
     x: list[Optional[torch.Tensor]] = [None] * n
     for i in range(n - 1, -1, -1):
         xi = y[i] * inverse_diagonal[i]
@@ -327,25 +256,17 @@ def _cholesky_substitute(factor: tuple[list[torch.Tensor], list[torch.Tensor]], 
     return torch.stack(x)  # type: ignore[arg-type]
 
 
-def _cholesky_solve(diagonal: torch.Tensor, below: list[torch.Tensor], rhs: torch.Tensor) -> torch.Tensor:
-    """Solve ``M x = rhs`` for symmetric positive definite ``M`` given as for :func:`_cholesky_factor`."""
-    return _cholesky_substitute(_cholesky_factor(diagonal, below), rhs)
-
-
 def _gram_times(d: _Derived, w: torch.Tensor) -> torch.Tensor:
-    """``sum_j G_ij w_j`` along dimension ``-2`` of ``w`` (``(n, B)`` or ``(2, n, B)``) in O(n) operations,
-    from the structure ``G_ij = L h_max(i, j)`` off the diagonal."""
+    """``G w`` along dimension ``-2`` of ``w`` in O(n), from ``G_ij = L h_max(i, j)`` off the diagonal."""
     hw = d.first_moment_kgm * w
-    tail = hw.sum(-2, keepdim=True) - torch.cumsum(hw, -2)  # sum over j > i of h_j w_j
+    tail = hw.sum(-2, keepdim=True) - torch.cumsum(hw, -2)
     return torch.addcmul(
         torch.addcmul(d.gram_diagonal_minus_lh * w, d.length_times_h, torch.cumsum(w, -2)), d.link_length_m, tail
     )
 
 
 def _forces(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor):
-    """The right-hand sides of the equations of motion for absolute angles ``x`` and rates ``v`` (``(n + 1, B)``)
-    and the (saturated) hub torque: the hub's ``J phi_dd`` (``(B,)``) and the links' ``M(a) a_dd`` (``(n, B)``),
-    with the sines and cosines of the link angles and the spring torques."""
+    """Right-hand sides ``J phi_dd`` and ``M(a) a_dd``, and the links' cosines and sines."""
     a, ad = x[1:], v[1:]
     s, c = torch.sin(a), torch.cos(a)
     tau = torch.addcmul(d.negative_stiffness * (a - x[:-1]), d.negative_damping, ad - v[:-1])
@@ -358,8 +279,7 @@ def _forces(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor)
 
 
 def _mass_below(d: _Derived, c: torch.Tensor, s: torch.Tensor) -> list[torch.Tensor]:
-    """The links' mass matrix below its diagonal, column by column (``M_ij = G_ij cos(a_i - a_j)``,
-    ``G_ij = L h_i`` for ``i > j``); its diagonal is ``G_jj``."""
+    """The links' mass matrix below its diagonal, column by column."""
     n = c.shape[0]
     return [d.length_times_h[j + 1 :] * torch.addcmul(c[j + 1 :] * c[j], s[j + 1 :], s[j]) for j in range(n)]
 
@@ -370,56 +290,46 @@ def _dense_mass(d: _Derived, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
 
 
 def _accelerations(d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor) -> torch.Tensor:
-    """``x_dd`` (``(n + 1, B)``) for absolute angles ``x`` and rates ``v`` and the (saturated) hub torque."""
+    """``x_dd`` for absolute angles ``x``, rates ``v`` and the hub torque."""
     hub, rhs, c, s = _forces(d, x, v, torque)
     n = c.shape[0]
     if n <= UNROLLED_SOLVE_MAX_LINKS:
-        a_dd = _cholesky_solve(d.gram_diagonal, _mass_below(d, c, s), rhs)
+        a_dd = _cholesky_substitute(_cholesky_factor(d.gram_diagonal, _mass_below(d, c, s)), rhs)
     else:
         a_dd = torch.linalg.solve(_dense_mass(d, c, s), rhs.T).T
     return torch.cat([(hub * d.inverse_hub_inertia)[None], a_dd])
 
 
 def _mass_times(d: _Derived, c: torch.Tensor, s: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-    """``M(a) w`` for the links' mass matrix at link angles with cosines ``c`` and sines ``s``, ``w`` of shape
-    ``(n, B)``, in O(n) operations (``M_ij = G_ij (c_i c_j + s_i s_j)``)."""
+    """``M(a) w`` in O(n) (``M_ij = G_ij (c_i c_j + s_i s_j)``)."""
     g = _gram_times(d, torch.stack([c * w, s * w]))
     return torch.addcmul(c * g[0], s, g[1])
 
 
 def _spring_times(k: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-    """The spring chain's stiffness (or damping) matrix times ``w`` (``(n + 1, B)``, hub first) for per-spring
-    coefficients ``k`` (``(n, B)``, clamp first): ``sum_i k_i (w_{i+1} - w_i)`` differenced back."""
+    """The spring chain's stiffness (or damping) matrix, coefficients ``k`` clamp first, times ``w``."""
     e = k * (w[1:] - w[:-1])
     if e.shape[0] == 1:
         return torch.cat([-e, e])
     return torch.cat([-e[:1], e[:-1] - e[1:], e[-1:]])
 
 
-#: The diagonal coefficient of the Rosenbrock-W method ROS2 (:func:`_rosenbrock_step`): ``1 - 1/sqrt(2)``.
+#: The diagonal coefficient of ROS2.
 ROS2_GAMMA = 1.0 - 1.0 / math.sqrt(2.0)
 
-#: Sub-steps per control step of the Rosenbrock integrator by default (see the module docstring).
+#: Default sub-steps per control step of the Rosenbrock integrator.
 ROSENBROCK_SUBSTEPS = 2
 
 
 class _RosenbrockMatrix:
-    """The factorised iteration matrix ``S = M + gamma h D + (gamma h)**2 K`` of :func:`_rosenbrock_step` at one
-    state: ``M`` the mass matrix (hub and links), ``D`` the hub friction and joint dampers, ``K`` the springs.
-
-    ``S`` couples the hub only to the first link (through the clamp spring and damper), so the hub is eliminated
-    first (a Schur complement on the first link) and the links' ``n x n`` system factorised as in
-    :func:`_accelerations`.
-    """
+    """The factorised ``S = M + gamma h D + (gamma h)**2 K``, the hub eliminated onto the first link first."""
 
     def __init__(self, d: _Derived, c: torch.Tensor, s: torch.Tensor, gamma_h: float) -> None:
-        # per spring: gamma h d_i + (gamma h)^2 k_i, (n, B)
         e = torch.add(gamma_h * d.damping_nms_per_rad, d.stiffness_nm_per_rad, alpha=gamma_h * gamma_h)
         self.clamp = e[0]
         self.hub = torch.add(d.hub_inertia_kgm2 + self.clamp, d.hub_friction_nms_per_rad, alpha=gamma_h)
         self.inverse_hub = 1.0 / self.hub
         n = c.shape[0]
-        # links: M + the springs' tridiagonal part, the hub's Schur complement on the first link
         diagonal = d.gram_diagonal + e
         if n > 1:
             diagonal = torch.cat([diagonal[:-1] + e[1:], diagonal[-1:]])
@@ -456,14 +366,8 @@ class _RosenbrockMatrix:
 def _rosenbrock_step(
     d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor, h: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """One step of ``h`` [s] of the two-stage Rosenbrock-W method ROS2 (Verwer et al. 1999) on
-    ``y = (x, v)``, ``y' = (v, x_dd)``, with ``W = I - gamma h J`` for the stiff linear part of the Jacobian
-    ``J = [[0, I], [-M^-1 K, -M^-1 D]]`` (mass matrix frozen at the step's start; gravity and the velocity terms
-    explicit).  The stages solve ``S k_v = M r_v - gamma h K r_x``, ``k_x = r_x + gamma h k_v`` with
-    :class:`_RosenbrockMatrix` ``S``:
-
-        k1 = W^-1 f(y),   k2 = W^-1 (f(y + h k1) - 2 k1),   y+ = y + h (3/2 k1 + 1/2 k2).
-    """
+    """One step of ``h`` of ROS2 (Verwer et al. 1999), ``W = I - gamma h J`` for the springs and dampers:
+    ``k1 = W^-1 f(y)``, ``k2 = W^-1 (f(y + h k1) - 2 k1)``, ``y+ = y + h (3/2 k1 + 1/2 k2)``."""
     gamma_h = ROS2_GAMMA * h
     hub, rhs, c, s = _forces(d, x, v, torque)
     matrix = _RosenbrockMatrix(d, c, s, gamma_h)
@@ -489,11 +393,8 @@ def _rosenbrock_step(
 def stable_substeps(
     params: Union[RodParams, BatchedRodParams], dt_s: float = 0.01, bound: float = RK4_STABILITY_BOUND
 ) -> int:
-    """RK4 sub-steps per ``dt_s`` that keep ``|lambda| h <= bound`` for every rod of ``params``.
-
-    ``|lambda|`` is the largest eigenvalue magnitude of the chain linearised about the straight rod hanging at
-    rest (springs, dampers, gravity, hub friction); the stiff modes that set it barely depend on the pose.
-    """
+    """RK4 sub-steps per ``dt_s`` keeping ``|lambda| h <= bound`` for every rod, ``lambda`` the eigenvalues of
+    the chain linearised about the straight rod hanging at rest."""
     positive("dt_s", dt_s)
     positive("bound", bound)
     p = params if isinstance(params, BatchedRodParams) else BatchedRodParams.from_params(params)
@@ -502,7 +403,6 @@ def stable_substeps(
     )
     n = p.n_links
     size = p.batch_size
-    # hanging straight: a_i = pi, so cos(a_i - a_j) = 1 and the gravity torque g h_i sin(a_i) linearises to -g h_i
     mass = torch.zeros(size, n + 1, n + 1, dtype=torch.float64)
     mass[:, 0, 0] = d.hub_inertia_kgm2
     mass[:, 1:, 1:] = d.gram.permute(2, 0, 1)
@@ -539,9 +439,8 @@ def _integrate(
     torque: torch.Tensor,
     with_work: bool,
 ):
-    """``substeps`` steps of ``h`` [s] of ``integrator`` from absolute angles ``x`` and rates ``v``; with
-    ``with_work`` also the motor work and the dissipated energy over them [J], integrated with the method's own
-    stages (RK4) or by the trapezoidal rule on the step ends (Rosenbrock, second order as the method)."""
+    """``substeps`` steps of ``h``; with ``with_work`` also the motor work and the dissipated energy [J]
+    (RK4's stages, or the trapezoidal rule for Rosenbrock)."""
     work_in: Optional[torch.Tensor] = None
     work_out: Optional[torch.Tensor] = None
     if with_work:
@@ -578,39 +477,11 @@ def _integrate(
 
 
 class BatchedPRBChain:
-    """``B`` PRB rods of one topology stepped together (see the module docstring for the equations).
+    """``B`` PRB rods of one ``n_links`` stepped together, statelessly (a step maps a state to the next).
 
-    Parameters
-    ----------
-    params : BatchedRodParams or RodParams, optional
-        The rods (default: the project's default rod); a :class:`RodParams` is repeated ``batch_size`` times.
-    batch_size : int, optional
-        Number of rods when ``params`` is a single :class:`RodParams` (default 1).
-    dt_s : float
-        Control step [s]; the torque is held constant over it.
-    substeps : int, optional
-        Integrator steps per control step (default: for ``"rk4"`` :func:`stable_substeps` for ``params``, fewer
-        diverge; for ``"rosenbrock"`` :data:`ROSENBROCK_SUBSTEPS`).
-    dtype : torch.dtype
-        Floating-point type of states and parameters built here (``torch.float64`` default).
-    integrator : {"rk4", "rosenbrock"}
-        ``"rk4"`` (default): classical Runge-Kutta, fourth order, explicit, so its sub-steps must resolve the
-        stiffest bending mode.  ``"rosenbrock"``: the linearly implicit two-stage ROS2 method, second order and
-        stable at any step; at ``n = 4`` its default two sub-steps cost about three quarters of RK4's two and are
-        less accurate, for longer chains it is far cheaper (see the module docstring).
-    compiled : bool
-        Run :meth:`step` and :meth:`rollout` through ``torch.compile`` (PyTorch's compiler fuses the elementwise
-        operations into loops of C++; it needs a C++ compiler).  The first step compiles (about 20 s); later ones
-        are two to three times faster for batches of a few thousand rods, with the eager results to rounding.
-        Steps that need gradients (grad mode on and a state, torque or parameter requiring them) always run
-        eagerly (with torch 2.13 the compiled backward pass of the Rosenbrock step disagrees with finite
-        differences).
-
-    Notes
-    -----
-    The chain is stateless: :meth:`step` maps a state to the next one, so that it can be differentiated and
-    branched freely.  Torques are saturated at each rod's ``torque_limit_nm``.  A rod whose state becomes
-    non-finite stays non-finite; :meth:`step` does not raise for it (check with :func:`torch.isfinite`).
+    ``substeps`` defaults to :func:`stable_substeps` (RK4) or :data:`ROSENBROCK_SUBSTEPS`; ``compiled`` runs the
+    steps that need no gradient through ``torch.compile``.  Torques are saturated per rod; a rod whose state
+    becomes non-finite stays so, without an exception.
     """
 
     def __init__(
@@ -645,7 +516,6 @@ class BatchedPRBChain:
             raise ValueError(f"substeps must be at most {MAX_SUBSTEPS}, got {substeps!r}")
         self.set_params(params)
 
-    # ------------------------------------------------------------------ parameters
     def set_params(self, params: BatchedRodParams) -> None:
         """Use new per-rod parameters (same ``n_links`` and batch size; the sub-step count is kept)."""
         if not isinstance(params, BatchedRodParams):
@@ -663,9 +533,8 @@ class BatchedPRBChain:
         self.dtype = params.dtype
         self._d = _derive(params)
 
-    # ------------------------------------------------------------------ states
     def hanging_state(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """The straight rods hanging down at rest (``phi = pi``), as ``(q, q_dot)`` of shape ``(B, n + 1)``."""
+        """The straight rods hanging down at rest, as ``(q, q_dot)`` of shape ``(B, n + 1)``."""
         q = torch.zeros(self.batch_size, self.n_coordinates, dtype=self.dtype)
         q[:, 0] = math.pi
         return q, torch.zeros_like(q)
@@ -694,32 +563,23 @@ class BatchedPRBChain:
     def _absolute(q: torch.Tensor) -> torch.Tensor:
         return torch.cumsum(q, dim=1).T.contiguous()
 
+    def _absolute_state(self, q: TensorLike, qd: TensorLike) -> tuple[torch.Tensor, torch.Tensor]:
+        """Checked ``(q, q_dot)`` as absolute angles and rates ``(n + 1, B)``."""
+        return (
+            self._absolute(self._check_state(q, "joint_angles_rad")),
+            self._absolute(self._check_state(qd, "joint_velocities_rad_s")),
+        )
+
     @staticmethod
     def _relative(x: torch.Tensor) -> torch.Tensor:
         return torch.cat([x[:1], x[1:] - x[:-1]]).T
 
-    # ------------------------------------------------------------------ stepping
     def step(
         self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torque_nm: TensorLike
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Hold ``torque_nm`` (per rod, saturated) for one control step ``dt_s``.
-
-        Parameters
-        ----------
-        joint_angles_rad, joint_velocities_rad_s : tensor of shape (B, n + 1)
-            ``q`` and ``q_dot`` as the Exudyn plant has them (hub angle first, then the spring angles).
-        torque_nm : tensor of shape (B,) or a number
-            Hub torque [N m], clipped to each rod's ``torque_limit_nm``.
-
-        Returns
-        -------
-        (q, q_dot) : tensors of shape (B, n + 1)
-            The state after ``dt_s``.
-        """
-        q = self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        torque = self._check_torque(torque_nm)
-        x, v = self._integrate(self._absolute(q), self._absolute(qd), torque)
+        """``(q, q_dot)`` of shape ``(B, n + 1)`` after holding ``torque_nm`` (per rod or one number) for ``dt_s``."""
+        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
+        x, v = self._integrate(x, v, self._check_torque(torque_nm))
         return self._relative(x), self._relative(v)
 
     def _integrate(self, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor, with_work: bool = False):
@@ -734,25 +594,19 @@ class BatchedPRBChain:
         return _integrate(self.integrator, self.substeps, h, self._d, x, v, torque, with_work)
 
     def step_with_work(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torque_nm: TensorLike):
-        """:meth:`step` that also returns the work done over the step [J], integrated with the same RK4 stages:
-        ``(q, q_dot, motor_work_j, dissipated_j)`` (hub torque times hub rate; hub friction plus joint
-        damping).  Energy balance: ``energy after - energy before = motor_work_j - dissipated_j``."""
-        q = self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        torque = self._check_torque(torque_nm)
-        x, v, w_in, w_out = self._integrate(self._absolute(q), self._absolute(qd), torque, with_work=True)
+        """:meth:`step` and the work over it: ``(q, q_dot, motor_work_j, dissipated_j)``."""
+        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
+        x, v, w_in, w_out = self._integrate(x, v, self._check_torque(torque_nm), with_work=True)
         return self._relative(x), self._relative(v), w_in, w_out
 
     def rollout(
         self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torques_nm: TensorLike
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """States after each of ``T`` control steps, for torques of shape ``(T, B)``: tensors ``(T, B, n + 1)``."""
-        q = self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
+        """States ``(T, B, n + 1)`` after each of ``T`` control steps, for torques ``(T, B)``."""
+        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
         torques = torch.as_tensor(torques_nm, dtype=self.dtype)
         if torques.ndim != 2 or torques.shape[1] != self.batch_size:
             raise ValueError(f"torques_nm must have shape (T, {self.batch_size}), got {tuple(torques.shape)}")
-        x, v = self._absolute(q), self._absolute(qd)
         qs, qds = [], []
         for torque in torques:
             x, v = self._integrate(x, v, self._check_torque(torque))
@@ -760,13 +614,9 @@ class BatchedPRBChain:
             qds.append(self._relative(v))
         return torch.stack(qs), torch.stack(qds)
 
-    # ------------------------------------------------------------------ what the plant reports
     def observations(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> torch.Tensor:
-        """The plant observations, shape ``(B, 10)`` in :data:`softpend.plant.OBSERVATION_NAMES` order: the
-        batched counterpart of :meth:`softpend.plant.PRBPlant.observation_from_state`."""
-        q = self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        x, v = self._absolute(q), self._absolute(qd)
+        """Plant observations ``(B, 10)`` in :data:`softpend.plant.OBSERVATION_NAMES` order."""
+        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
         length = self._d.link_length_m
         a, ad = x[1:], v[1:]
         s, c = torch.sin(a), torch.cos(a)
@@ -789,11 +639,8 @@ class BatchedPRBChain:
         )
 
     def energy_j(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> dict[str, torch.Tensor]:
-        """Kinetic, gravitational and elastic energy of each rod [J] (tensors ``(B,)``), as
-        :meth:`softpend.plant.PRBPlant.energy_j` defines them (gravity energy zero at the hub's height)."""
-        q = self._check_state(joint_angles_rad, "joint_angles_rad")
-        qd = self._check_state(joint_velocities_rad_s, "joint_velocities_rad_s")
-        x, v = self._absolute(q), self._absolute(qd)
+        """Energies of each rod [J] (tensors ``(B,)``), as :meth:`softpend.plant.PRBPlant.energy_j`."""
+        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
         d = self._d
         a, ad = x[1:], v[1:]
         s, c = torch.sin(a), torch.cos(a)

@@ -4,6 +4,19 @@ from __future__ import annotations
 
 import argparse
 
+#: ``(flag, TrainConfig field, type, help, allowed range)`` of the training options.
+_OPTIONS = (
+    ("--history", "history", int, "past position frames in the state", (0, 1000)),
+    ("--activation", "activation", str, "hidden activation", None),
+    ("--ensemble-size", "ensemble_size", int, "ensemble members", (1, 1000)),
+    ("--max-epochs", "max_epochs", int, "epoch limit", (1, 100_000)),
+    ("--batch-size", "batch_size", int, "minibatch size", (1, 10**8)),
+    ("--learning-rate", "learning_rate", float, "Adam step size", (1e-12, 1e30)),  # Adam's step stays a float32
+    ("--patience", "patience", int, "early-stopping patience [epochs]", (1, 100_000)),
+    ("--validation-fraction", "validation_fraction", float, "fraction of trials for validation", None),
+    ("--seed", "seed", int, "seed", None),
+)
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid import TrainConfig
@@ -22,33 +35,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--information", choices=("full", "limited"), default=d.information, help=f"information level ({d.information})"
     )
     parser.add_argument(
-        "--history", type=int, default=d.history, help=f"past position frames in the state ({d.history})"
-    )
-    parser.add_argument(
-        "--velocity-source",
-        choices=("observed", "true"),
-        default=d.velocity_source,
-        help=f"velocities ({d.velocity_source})",
+        "--velocity-source", choices=("observed", "true"), default=d.velocity_source, help="velocities (observed)"
     )
     parser.add_argument(
         "--hidden-widths", default=",".join(map(str, d.hidden_widths)), help="comma-separated hidden widths (16,16,16)"
     )
-    parser.add_argument("--activation", default=d.activation, help=f"hidden activation ({d.activation})")
-    parser.add_argument(
-        "--ensemble-size", type=int, default=d.ensemble_size, help=f"ensemble members ({d.ensemble_size})"
-    )
-    parser.add_argument("--max-epochs", type=int, default=d.max_epochs, help=f"epoch limit ({d.max_epochs})")
-    parser.add_argument("--batch-size", type=int, default=d.batch_size, help=f"minibatch size ({d.batch_size})")
-    parser.add_argument(
-        "--learning-rate", type=float, default=d.learning_rate, help=f"Adam step size ({d.learning_rate})"
-    )
-    parser.add_argument(
-        "--patience", type=int, default=d.patience, help=f"early-stopping patience [epochs] ({d.patience})"
-    )
-    parser.add_argument(
-        "--validation-fraction", type=float, default=d.validation_fraction, help="fraction of trials for validation"
-    )
-    parser.add_argument("--seed", type=int, default=d.seed, help=f"seed ({d.seed})")
+    for flag, field, kind, text, _ in _OPTIONS:
+        parser.add_argument(flag, type=kind, default=getattr(d, field), help=f"{text} ({getattr(d, field)})")
     parser.add_argument("--test-data", default=None, help="held-out dataset (.npz) to evaluate on as well")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
@@ -66,35 +59,17 @@ def run(args: argparse.Namespace) -> int:
     from softpend.sysid.training import parse_widths
 
     # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
-    check_numbers(
-        args,
-        {
-            "--threads": (1, 1024),
-            "--max-epochs": (1, 100_000),
-            "--patience": (1, 100_000),
-            "--ensemble-size": (1, 1000),
-            "--history": (0, 1000),
-            "--batch-size": (1, 10**8),
-            "--learning-rate": (1e-12, 1e30),
-        },
-    )  # Adam's step stays a float32
+    limits = {flag: bounds for flag, _, _, _, bounds in _OPTIONS if bounds is not None}
+    check_numbers(args, {"--threads": (1, 1024), **limits})
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
     # before the work: a model this command wrote may be replaced, nothing else
     model_files = [outputs.file(path, what="model file") for path in model_paths(args.output)]
     config = TrainConfig(
         information=args.information,
-        history=args.history,
         velocity_source=args.velocity_source,
         hidden_widths=parse_widths(args.hidden_widths),
-        activation=args.activation,
-        ensemble_size=args.ensemble_size,
-        max_epochs=args.max_epochs,
-        batch_size=args.batch_size,
-        learning_rate=args.learning_rate,
-        patience=args.patience,
-        validation_fraction=args.validation_fraction,
-        seed=args.seed,
+        **{field: getattr(args, field) for _, field, _, _, _ in _OPTIONS},
     )
     dataset = load_dataset(args.dataset)
     # a model predicts one step of the training data's dt_s: held-out data at another step is not a test of it
@@ -110,15 +85,6 @@ def run(args: argparse.Namespace) -> int:
     weights, meta = save_model(args.output, result.model, metadata)
     for path in model_files:  # written atomically by the model's writer
         outputs.done(path)
-    print(
-        json_text(
-            {
-                "weights": str(weights),
-                "metadata": str(meta),
-                "train_time_s": round(result.train_time_s, 2),
-                "metrics": metrics,
-            },
-            indent=2,
-        )
-    )
+    summary = {"weights": str(weights), "metadata": str(meta), "train_time_s": round(result.train_time_s, 2)}
+    print(json_text(dict(summary, metrics=metrics), indent=2))
     return 0

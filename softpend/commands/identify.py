@@ -4,6 +4,17 @@ from __future__ import annotations
 
 import argparse
 
+#: Calibration parameter -> (flag that adds it, what it is).
+_CALIBRATION_FLAGS = {
+    "torque_gain": ("--torque-gain", "a gain on the recorded torque"),
+    "encoder_offset_rad": ("--encoder-offset", "an offset of the hub encoder"),
+    "torque_delay_s": ("--torque-delay", "a delay of the torque (within one sample either way)"),
+    "camera_delay_s": (
+        "--camera-delay",
+        "a delay of the camera against the encoder (within one sample either way; advised for rig data)",
+    ),
+}
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid.greybox import CALIBRATION_PARAMETERS, ESTIMABLE_ROD_FIELDS, GREYBOX_PARAMETERS, GreyBoxConfig
@@ -24,28 +35,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=",".join(GREYBOX_PARAMETERS),
         help=f"comma-separated parameters to estimate, from {', '.join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)}",
     )
-    parser.add_argument("--torque-gain", action="store_true", help="also estimate a gain on the recorded torque")
-    parser.add_argument("--encoder-offset", action="store_true", help="also estimate an offset of the hub encoder")
-    parser.add_argument(
-        "--torque-delay", action="store_true", help="also estimate a delay of the torque (within one sample either way)"
-    )
-    parser.add_argument(
-        "--camera-delay",
-        action="store_true",
-        help="also estimate a delay of the camera against the encoder (within one sample either way; "
-        "advised for rig data, whose clock synchronisation leaves a few milliseconds)",
-    )
+    for flag, text in _CALIBRATION_FLAGS.values():
+        parser.add_argument(flag, action="store_true", help=f"also estimate {text}")
     parser.add_argument(
         "--initial-params", default=None, help="JSON file of the initial guess (default: the dataset's plant_params)"
     )
     parser.add_argument("--window-s", type=float, default=d.window_s, help=f"shooting window [s] ({d.window_s})")
     parser.add_argument("--max-windows", type=int, default=d.max_windows, help=f"most windows used ({d.max_windows})")
-    parser.add_argument(
-        "--max-iterations",
-        type=int,
-        default=d.max_iterations,
-        help=f"most Levenberg-Marquardt steps ({d.max_iterations})",
-    )
+    parser.add_argument("--max-iterations", type=int, default=d.max_iterations, help="most Levenberg-Marquardt steps")
     parser.add_argument("--seed", type=int, default=d.seed, help=f"seed of the window draw ({d.seed})")
     parser.set_defaults(func=run)
 
@@ -63,13 +60,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:  # before the work: a file this command wrote may be replaced, no other
         outputs.file(args.out, what="identification file")
     names = [n.strip() for n in args.parameters.split(",") if n.strip()]
-    flags = (
-        (args.torque_gain, "torque_gain"),
-        (args.encoder_offset, "encoder_offset_rad"),
-        (args.torque_delay, "torque_delay_s"),
-        (args.camera_delay, "camera_delay_s"),
-    )
-    names += [n for flag, n in flags if flag and n not in names]
+    names += [
+        n for n, (flag, _) in _CALIBRATION_FLAGS.items() if getattr(args, flag[2:].replace("-", "_")) and n not in names
+    ]
     config = GreyBoxConfig(
         parameters=tuple(names),
         window_s=args.window_s,
@@ -82,12 +75,7 @@ def run(args: argparse.Namespace) -> int:
     result = identify(dataset, config, initial_params=guess)
     truth = dataset.params if dataset.metadata["source"] == "simulation" else None
     print(f"{'parameter':28s} {'estimate':>14s} {'std':>12s} {'initial':>12s}" + (f" {'truth':>12s}" if truth else ""))
-    calibration = {
-        "torque_gain": 1.0,
-        "encoder_offset_rad": 0.0,
-        "torque_delay_s": 0.0,
-        "camera_delay_s": 0.0,
-    }  # initial guess = truth of a simulation
+    calibration = {name: 0.0 for name in _CALIBRATION_FLAGS} | {"torque_gain": 1.0}  # a simulation's truth
     for name, value in result.estimates.items():
         initial = calibration[name] if name in calibration else getattr(result.initial_params, name)
         line = f"{name:28s} {value:14.6g} {result.std[name]:12.3g} {initial:12.6g}"

@@ -1,17 +1,5 @@
-"""How the pseudo-rigid-body chain approaches the continuum beam as the number of links grows.
-
-For each ``n_links`` the PRB plant (``k = E I/(L/n)``, ``2k`` at the clamp, see :mod:`softpend.plant.params`)
-is compared with the beam plant (the reference, at its default element count) on
-
-* the first two cantilever frequencies, measured from free-vibration runs of both plants
-  (:func:`~softpend.fidelity.validation.cantilever_free_vibration`), against Euler-Bernoulli;
-* the static tip sag of the horizontally clamped rod: a stiff rod (small deflection, against
-  ``w L^4/(8 E I) + P L^3/(3 E I)``) and the default soft rod (large deflection, against the beam);
-* the tip trajectory ``(e_x, e_y)`` under the same open-loop torque from hanging (RMS distance to the
-  beam's tip over the run, relative to ``L``).
-
-:func:`recommend_n_links` picks the smallest ``n`` that meets given tolerances on all of these.
-"""
+"""How the pseudo-rigid-body chain approaches the continuum beam as ``n_links`` grows: cantilever frequencies,
+static sag (small and large deflection) and the tip trajectory under one open-loop torque, against the beam."""
 
 from __future__ import annotations
 
@@ -22,7 +10,7 @@ from typing import Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
+from softpend.fidelity.validation import cantilever_free_vibration, measured_bending_frequencies, static_tip_sag
 from softpend.plant import RodParams, make_plant
 
 __all__ = [
@@ -33,13 +21,12 @@ __all__ = [
     "tip_trajectory_m",
 ]
 
-#: ``stiffness_scale`` of the small-deflection sag case (tip drop ~0.2 % of ``L`` for the default rod).
+#: ``stiffness_scale`` of the small-deflection sag case.
 SMALL_DEFLECTION_STIFFNESS_SCALE = 100.0
 
 
 def open_loop_torque_nm(params: RodParams, duration_s: float, dt_s: float = 0.01) -> np.ndarray:
-    """A deterministic test input: ``tau_max * clip(sin(2 pi 1.0 t) + 0.4 sin(2 pi 3.1 t), -1, 1)``,
-    which pumps the pendulum swing (about 1 Hz) and excites the first bending mode (about 3 Hz)."""
+    """A deterministic test input that pumps the swing (1 Hz) and excites the first bending mode (3.1 Hz)."""
     t = np.arange(int(round(duration_s / dt_s))) * dt_s
     u = np.sin(2 * math.pi * 1.0 * t) + 0.4 * np.sin(2 * math.pi * 3.1 * t)
     return params.torque_limit_nm * np.clip(u, -1.0, 1.0)
@@ -48,10 +35,7 @@ def open_loop_torque_nm(params: RodParams, duration_s: float, dt_s: float = 0.01
 def tip_trajectory_m(
     plant: str, params: RodParams, torques_nm: np.ndarray, dt_s: float = 0.01, resolution: Optional[int] = None
 ) -> np.ndarray:
-    """Tip positions ``(T + 1, 2)`` [m] of a plant started hanging at rest and driven by ``torques_nm``.
-
-    ``resolution`` is the beam's ``n_elements`` or the PRB chain's ``n_links``.
-    """
+    """Tip positions ``(T + 1, 2)`` [m] of a plant (``resolution``: elements or links) started hanging at rest."""
     kwargs = {}
     if plant == "prb" and resolution is not None:
         params = params.replace(n_links=int(resolution))
@@ -92,24 +76,8 @@ def convergence_table(
     reference_elements: Optional[int] = None,
     progress: bool = True,
 ) -> list[ConvergenceRow]:
-    """PRB chains of ``n_links`` and beams of ``beam_elements`` against theory and the reference beam.
-
-    Parameters
-    ----------
-    n_links, beam_elements : sequences of int
-        PRB and beam resolutions to test.
-    params : RodParams, optional
-        The rod (default: the project's default rod).
-    trajectory_s : float
-        Length of the open-loop tip-trajectory comparison [s].
-    reference_elements : int, optional
-        Element count of the reference beam (default: the beam plant's default).
-
-    Returns
-    -------
-    list of ConvergenceRow
-        Beam rows first, then PRB rows; a PRB chain of one link has no second mode (``nan``).
-    """
+    """PRB chains of ``n_links`` and beams of ``beam_elements`` against theory and the reference beam (default:
+    the beam plant's default elements); beam rows first, a one-link chain has no second mode (``nan``)."""
     from softpend.plant.beam import DEFAULT_N_ELEMENTS
 
     params = params or RodParams()
@@ -122,8 +90,6 @@ def convergence_table(
     rows = []
     for plant, n in tqdm(jobs, desc="PRB vs beam", disable=not progress):
         if plant == "prb" and n == 1:
-            from softpend.fidelity.validation import cantilever_free_vibration
-
             f1 = float(cantilever_free_vibration("prb", params, 1, modes=(1,)).error_pct[0])
             f2 = math.nan
         else:
@@ -144,9 +110,8 @@ def convergence_table(
 def recommend_n_links(
     rows: Sequence[ConvergenceRow], tolerance_pct: float = 2.0, tip_rms_tolerance: float = 0.05
 ) -> Optional[int]:
-    """Smallest PRB ``n_links`` whose first-frequency error, both sag errors (within ``tolerance_pct``)
-    and tip-trajectory RMS distance to the beam (within ``tip_rms_tolerance * L``) all pass, and which
-    also passes at every larger ``n`` tested; ``None`` if none does."""
+    """Smallest PRB ``n_links`` whose first-frequency and sag errors (``tolerance_pct``) and tip RMS distance to the
+    beam (``tip_rms_tolerance * L``) pass there and at every larger ``n`` tested; ``None`` if none does."""
     prb = sorted((r for r in rows if r.plant == "prb"), key=lambda r: r.resolution)
     ok = [
         abs(r.f1_error_pct) <= tolerance_pct

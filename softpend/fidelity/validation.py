@@ -1,18 +1,5 @@
-"""Cantilever experiments on either plant (hub locked): free-vibration bending frequencies and static sag.
-
-Both experiments run the plant itself -- a free-vibration simulation or Exudyn's static solver -- and
-compare with Euler-Bernoulli theory; nothing here computes the plant's frequencies from a formula.
-
-* Frequencies: the hub is locked upright, gravity and damping are switched off, the rod starts at rest
-  bent into the sum of the first two Euler-Bernoulli cantilever mode shapes (small amplitude, so the
-  response is linear), and the tip's lateral displacement ``e_x(t)`` is recorded.  The frequencies are
-  then fitted to that signal: a Hann-windowed, zero-padded FFT gives a starting value for each mode (the
-  largest peak in a band around the theoretical value, which is only used to pick the band), and a
-  nonlinear least-squares fit of ``sum_k a_k cos(2 pi f_k t) + b_k sin(2 pi f_k t) + c`` refines them.
-* Sag: the hub is locked horizontal (``phi = pi/2``) and the static solver finds the equilibrium under
-  gravity; the tip's vertical drop is compared with ``w L^4/(8 E I) + P L^3/(3 E I)``
-  (:attr:`RodParams.static_sag_euler_bernoulli_m`), valid for small deflections.
-"""
+"""Cantilever experiments on either plant (hub locked) against Euler-Bernoulli theory: bending frequencies fitted
+to a free-vibration run (FFT start, least-squares refinement) and the static tip sag from Exudyn's static solver."""
 
 from __future__ import annotations
 
@@ -43,8 +30,7 @@ EULER_BERNOULLI_BETA_L: tuple[float, ...] = (1.875104068711961, 4.69409113297417
 
 
 def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.ndarray:
-    """Bending frequencies ``f_k = (beta_k L)^2/(2 pi L^2) sqrt(E I/(rho A))`` of the clamped-free rod
-    without tip mass [Hz]."""
+    """Bending frequencies [Hz] of the clamped-free rod without tip mass."""
     if not 1 <= n_modes <= len(EULER_BERNOULLI_BETA_L):
         raise ValueError(f"n_modes must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {n_modes!r}")
     mu = params.mass_kg / params.length_m
@@ -53,15 +39,7 @@ def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.nd
 
 
 def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cantilever mode shape ``w_k(s)`` (tip value 2 in magnitude) and its slope ``L dw_k/ds``.
-
-    Parameters
-    ----------
-    mode : int
-        Mode number (1-based).
-    s_over_l : array
-        Arc length from the clamp over the rod length.
-    """
+    """Cantilever mode shape ``w_k(s / L)`` (1-based ``mode``, tip value 2 in magnitude) and its slope ``L dw_k/ds``."""
     if not 1 <= mode <= len(EULER_BERNOULLI_BETA_L):
         raise ValueError(f"mode must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {mode!r}")
     b = EULER_BERNOULLI_BETA_L[mode - 1]
@@ -73,18 +51,8 @@ def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndar
 
 
 def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarray]:
-    """State of a hub-locked plant whose rod follows a lateral deflection ``u(s)`` (across the rod, in
-    the hub frame), at rest.
-
-    Parameters
-    ----------
-    plant : BeamPlant or PRBPlant
-        A plant with ``hub_locked`` set.
-    lateral_m : callable
-        ``u(s)`` [m] for arc length ``s`` [m].
-    slope : callable
-        ``du/ds(s)`` (used for the beam's cross-section rotations).
-    """
+    """State at rest of a hub-locked plant whose rod follows a lateral deflection ``lateral_m(s)`` [m] with slope
+    ``slope(s)`` (arc length ``s`` [m], in the hub frame)."""
     if not getattr(plant, "hub_locked", False):
         raise ValueError("plant must have its hub locked (hub_locked_at_rad set)")
     p = plant.params
@@ -105,7 +73,7 @@ def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarra
 
 @dataclass
 class FreeVibration:
-    """A free-vibration run of a cantilever: tip signal and the frequencies fitted to it."""
+    """A free-vibration run of a cantilever: tip signal, the frequencies fitted to it, and theory's."""
 
     plant: str
     resolution: int
@@ -116,7 +84,7 @@ class FreeVibration:
 
     @property
     def error_pct(self) -> np.ndarray:
-        """Relative error of the measured frequencies against Euler-Bernoulli [%]."""
+        """Error of the measured frequencies against Euler-Bernoulli [%]."""
         return 100.0 * (self.frequencies_hz / self.theory_hz - 1.0)
 
 
@@ -145,29 +113,9 @@ def cantilever_free_vibration(
     amplitude_m: Optional[float] = None,
     modes: Sequence[int] = (1, 2),
 ) -> FreeVibration:
-    """Release the hub-locked, gravity-free, undamped rod from a bent shape and fit its frequencies.
-
-    Parameters
-    ----------
-    plant : {"beam", "prb"}
-        Which plant.
-    params : RodParams, optional
-        Rod parameters (gravity, damping and the tip mass are set to zero here).
-    resolution : int, optional
-        ``n_elements`` of the beam or ``n_links`` of the PRB chain (default: the plant's default).
-    duration_s : float, optional
-        Simulated time (default: six periods of the first Euler-Bernoulli mode).
-    dt_s : float
-        Solver step [s] (small, so the integrator's period error ``~(omega dt)^2/12`` stays below 0.05 %).
-    amplitude_m : float, optional
-        Tip amplitude of each mode in the initial shape (default ``L/500``: linear regime).
-    modes : sequence of int
-        Mode shapes superposed in the initial condition; one frequency is fitted per mode.
-
-    Returns
-    -------
-    FreeVibration
-    """
+    """Release the hub-locked, gravity-free, undamped rod from the sum of the ``modes``' shapes (tip amplitude
+    ``L/500`` each by default) and fit one frequency per mode.  ``resolution`` is the beam's ``n_elements`` or the
+    chain's ``n_links``; ``duration_s`` defaults to six periods of the first mode."""
     params = (params or RodParams()).replace(gravity_mps2=0.0, joint_damping_nms_per_rad=0.0, tip_mass_kg=0.0)
     params, resolution = _check_plant_resolution(plant, params, resolution)
     modes = [int(m) for m in modes]
@@ -200,8 +148,7 @@ def cantilever_free_vibration(
 
 
 def _fft_peak_hz(time_s: np.ndarray, signal: np.ndarray, band_hz: tuple[float, float]) -> float:
-    """Largest peak of the Hann-windowed, 16x zero-padded spectrum inside ``band_hz`` (parabolic
-    interpolation on the log magnitude)."""
+    """Largest peak of the Hann-windowed, zero-padded spectrum inside ``band_hz`` (parabolic interpolation)."""
     dt = float(time_s[1] - time_s[0])
     x = (signal - np.mean(signal)) * np.hanning(len(signal))
     n_fft = 16 * int(2 ** math.ceil(math.log2(len(x))))
@@ -220,21 +167,8 @@ def _fft_peak_hz(time_s: np.ndarray, signal: np.ndarray, band_hz: tuple[float, f
 
 
 def fit_modal_frequencies_hz(time_s: np.ndarray, signal: np.ndarray, centres_hz: Sequence[float]) -> np.ndarray:
-    """Frequencies of the sinusoids that make up a free-vibration signal [Hz].
-
-    Parameters
-    ----------
-    time_s, signal : arrays (T,)
-        Uniformly sampled signal.
-    centres_hz : sequence of float
-        Rough location of each mode: the starting value of mode ``k`` is the largest FFT peak within
-        ``[centre_k / 2, 2 centre_k]`` (bands are cut half-way between neighbouring centres).
-
-    Returns
-    -------
-    array
-        The least-squares frequencies, one per centre.
-    """
+    """Least-squares frequencies [Hz] of the sinusoids in a uniformly sampled signal, one per rough centre (started
+    from the largest FFT peak within bands cut half-way between neighbouring centres)."""
     from scipy.optimize import least_squares
 
     t = np.asarray(time_s, dtype=float)
@@ -268,31 +202,21 @@ def measured_bending_frequencies(
 ) -> dict[str, float]:
     """First two cantilever frequencies from a free-vibration run and their error against theory."""
     run = cantilever_free_vibration(plant, params, resolution, **kwargs)
-    return {
-        "f1_hz": float(run.frequencies_hz[0]),
-        "f2_hz": float(run.frequencies_hz[1]),
-        "f1_theory_hz": float(run.theory_hz[0]),
-        "f2_theory_hz": float(run.theory_hz[1]),
-        "f1_error_pct": float(run.error_pct[0]),
-        "f2_error_pct": float(run.error_pct[1]),
-    }
+    out = {}
+    for k in (0, 1):
+        out[f"f{k + 1}_hz"] = float(run.frequencies_hz[k])
+        out[f"f{k + 1}_theory_hz"] = float(run.theory_hz[k])
+        out[f"f{k + 1}_error_pct"] = float(run.error_pct[k])
+    return out
 
 
 def static_tip_sag(
     plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None
 ) -> dict[str, float]:
-    """Tip drop of the horizontally clamped rod under gravity from the plant's static solver.
-
-    Returns
-    -------
-    dict
-        ``sag_m`` (vertical tip drop), ``tip_x_m``/``tip_y_m`` (tip position relative to the hub),
-        ``theory_m`` (small-deflection Euler-Bernoulli) and ``error_pct``.
-    """
-    params = params or RodParams()
-    params, resolution = _check_plant_resolution(plant, params, resolution)
-    kwargs = dict(params=params, hub_locked_at_rad=math.pi / 2)
-    sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
+    """Tip drop of the horizontally clamped rod under gravity from the plant's static solver, beside the
+    small-deflection theory's."""
+    params, resolution = _check_plant_resolution(plant, params or RodParams(), resolution)
+    sim = make_plant(plant, params=params, hub_locked_at_rad=math.pi / 2, **_plant_kwargs(plant, resolution))
     assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     observation = sim.static_equilibrium()
     theory = params.static_sag_euler_bernoulli_m

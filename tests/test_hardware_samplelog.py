@@ -54,7 +54,7 @@ def test_torn_last_line_is_reported_not_parsed(tmp_path):
     path = tmp_path / "log.csv"
     with SampleLog(path, ["a_m", "b_s"]) as log:
         log.append([1.0, 2.0])
-        log.append({"a_m": 3.0, "b_s": float("nan")})
+        log.append([3.0, float("nan")])
     with open(path, "a") as f:
         f.write("4.0,")  # a power cut in the middle of a line
     data = read_sample_log(path)

@@ -1,12 +1,5 @@
-"""``NAME=VALUE`` overrides of dataclass configs (the ``--set`` option of every command).
-
-:func:`parse_assignment` reads one ``NAME=VALUE`` item: ``VALUE`` is parsed as JSON (``3`` -> 3,
-``1e-3`` -> 0.001, ``[0, 1]`` -> [0, 1], ``null`` -> None, ``true`` -> True, ``"x"`` -> "x") and, where it
-is not JSON, kept as the plain string (``beam`` -> "beam").  :func:`apply_overrides` returns a copy of a
-dataclass instance with fields replaced by name; a dotted name reaches into a nested dataclass field
-(``task.rod.mass_kg``), lists become tuples where the field holds a tuple, and the copy is validated again by
-the dataclass's own ``__post_init__``.
-"""
+"""``NAME=VALUE`` overrides of dataclass configs (the ``--set`` option of every command): values parsed as
+JSON where they are JSON, dotted names into nested dataclasses, the copy validated by its class."""
 
 from __future__ import annotations
 
@@ -14,8 +7,6 @@ import dataclasses
 import json
 import typing
 from typing import Any, Iterable, Mapping, TypeVar, Union
-
-__all__ = ["apply_overrides", "check_fields", "parse_assignment", "parse_value"]
 
 D = TypeVar("D")
 
@@ -32,16 +23,8 @@ def parse_value(text: str) -> Any:
 
 
 def parse_assignment(item: str) -> tuple[str, Any]:
-    """``"NAME=VALUE"`` -> ``(NAME, value)`` with the value read by :func:`parse_value`.
-
-    ``NAME`` is a Python identifier or a dotted path of identifiers (``task.rod.mass_kg``); the first ``=``
-    separates it from ``VALUE``, which may itself contain ``=``.
-
-    Raises
-    ------
-    ValueError
-        If ``item`` has no ``=`` or ``NAME`` is not a (dotted) identifier; the message quotes ``item``.
-    """
+    """``"NAME=VALUE"`` -> ``(NAME, parse_value(VALUE))``, split at the first ``=``; ``NAME`` is a dotted
+    identifier (``task.rod.mass_kg``), else ``ValueError`` quoting ``item``."""
     if not isinstance(item, str):
         raise ValueError(f"--set expects NAME=VALUE as a string, got {item!r}")
     name, sep, value = item.partition("=")
@@ -78,30 +61,13 @@ def _as_tuple(value: Any) -> Any:
 
 
 def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D:
-    """A copy of the dataclass ``instance`` with the fields named in ``overrides`` replaced.
+    """A validated copy (``dataclasses.replace``) of the dataclass ``instance`` with the fields named in
+    ``overrides`` (a mapping or ``(name, value)`` pairs, later pairs win) replaced.
 
-    Parameters
-    ----------
-    instance : dataclass instance
-        The config to copy (frozen or not; it is not modified).
-    overrides : mapping or iterable of (name, value)
-        Field values by name (later pairs win).  A dotted name ``a.b.c`` sets field ``c`` of the dataclass
-        held in field ``b`` of the dataclass held in field ``a``; a ``dict`` given for a field that holds a
-        dataclass sets the fields it names.  A list given for a tuple field becomes a tuple, as do a string
-        with commas (``"0,1"`` -> ``(0, 1)``) and a single number or string (``5`` -> ``(5,)``).
-    prefix : str
-        Dotted path of ``instance`` inside an outer config, used in error messages.
-
-    Returns
-    -------
-    dataclass instance
-        ``dataclasses.replace(instance, ...)``: validated by the class's ``__post_init__``.
-
-    Raises
-    ------
-    ValueError
-        For a name that is not a field (the message lists the known ones), a dotted name through a field that
-        holds no dataclass, a field set both whole and through a dotted name, or a value the class rejects.
+    ``a.b`` (or a dict given for ``a``) sets field ``b`` of the dataclass in field ``a``; a list, a comma string
+    (``"0,1"``) or a single value given for a tuple field becomes a tuple.  ``prefix`` is the dotted path of
+    ``instance`` in an outer config, for messages.  ``ValueError`` for an unknown name (listing the known ones),
+    a field set both whole and by a dotted name, or a value the class rejects.
     """
     if not dataclasses.is_dataclass(instance) or isinstance(instance, type):
         raise ValueError(f"apply_overrides needs a dataclass instance, got {type(instance).__name__}")

@@ -1,14 +1,5 @@
-"""Crash-safe sample logs: append-only CSV, one ``write(2)`` per sample.
-
-A :class:`SampleLog` opens its file with ``O_APPEND`` and writes every sample as one complete CSV line in a
-single system call, so the moment :meth:`SampleLog.append` returns the line is in the kernel: a crash or
-``SIGKILL`` of the logging process leaves every appended sample readable.  ``fsync_every_s`` sets how
-often the data is also forced to the disk (protection against power loss, which costs a disk flush):
-``0`` fsyncs every sample, ``None`` never.  :func:`read_sample_log` reads a log back and ignores (and
-reports) a torn last line, which only a power loss can produce.
-
-The header line is ``# softpend-log v1 <json metadata>`` followed by the CSV column names.
-"""
+"""Crash-safe sample logs: an append-only CSV (header ``# softpend-log v1 <json metadata>``, then the column
+names) written one complete line per ``write(2)``, so a killed writer leaves every appended sample readable."""
 
 from __future__ import annotations
 
@@ -27,8 +18,6 @@ import numpy as np
 from softpend.checks import MAX_WORK_BYTES
 from softpend.io.reading import check_regular_file, file_kind, read_bytes_checked
 
-__all__ = ["SampleLog", "LogContents", "read_sample_log"]
-
 _MAGIC = "# softpend-log v1 "
 
 
@@ -38,25 +27,12 @@ def _format(value: Any) -> str:
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     value = float(value)
-    if math.isnan(value):
-        return "nan"
-    return repr(value)
+    return "nan" if math.isnan(value) else repr(value)
 
 
 class SampleLog:
-    """Append-only, per-sample-flushed CSV log.
-
-    Parameters
-    ----------
-    path : str or Path
-        File to create (or append to, if it exists with the same columns).
-    columns : sequence of str
-        Column names (with units, e.g. ``phi_rad``).
-    metadata : dict, optional
-        JSON-serialisable metadata stored in the first line.
-    fsync_every_s : float or None
-        Force data to disk at most this often [s] (0: every sample; None: never).
-    """
+    """Append-only CSV log of ``columns`` at ``path`` (appended to if it holds a log of the same columns); the
+    data is forced to disk at most every ``fsync_every_s`` (0: every sample, None: only on close)."""
 
     def __init__(
         self,
@@ -99,21 +75,14 @@ class SampleLog:
             os.write(self._fd, header.encode())
             os.fsync(self._fd)
 
-    def append(self, row: Sequence[Any] | dict) -> None:
-        """Write one sample (a sequence in column order or a dict by column name)."""
+    def append(self, row: Sequence[Any]) -> None:
+        """Write one sample (values in column order)."""
         if self._fd is None:
             raise ValueError("append to a closed SampleLog")
-        if isinstance(row, dict):
-            missing = [c for c in self.columns if c not in row]
-            if missing:
-                raise ValueError(f"row is missing columns {missing}")
-            values = [row[c] for c in self.columns]
-        else:
-            values = list(row)
-            if len(values) != len(self.columns):
-                raise ValueError(f"row has {len(values)} values, the log has {len(self.columns)} columns")
-        line = (",".join(_format(v) for v in values) + "\n").encode()
-        os.write(self._fd, line)  # one syscall: the whole line reaches the kernel or nothing does
+        values = list(row)
+        if len(values) != len(self.columns):
+            raise ValueError(f"row has {len(values)} values, the log has {len(self.columns)} columns")
+        os.write(self._fd, (",".join(_format(v) for v in values) + "\n").encode())  # one syscall per line
         self.rows_written += 1
         if self.fsync_every_s is not None:
             now = time.monotonic()
@@ -138,7 +107,7 @@ class SampleLog:
 
 @dataclass
 class LogContents:
-    """A log read back: ``data[column]`` arrays, the metadata, and whether a torn last line was dropped."""
+    """A log read back: ``data[column]`` arrays, the metadata, and the number of torn last lines dropped."""
 
     columns: list[str]
     data: dict[str, np.ndarray]
@@ -153,8 +122,7 @@ class LogContents:
 
 
 def read_sample_log(path: str | os.PathLike, max_bytes: int = MAX_WORK_BYTES) -> LogContents:
-    """Read a :class:`SampleLog` file (every complete line; a torn last line is counted, not parsed): a regular
-    file of at most ``max_bytes`` (default: the 4 GiB one piece of work may use)."""
+    """Read a :class:`SampleLog` file of at most ``max_bytes``; a torn last line is counted, not parsed."""
     path = Path(path)
     text = read_bytes_checked(path, "sample log", max_bytes).decode(errors="replace")
     lines = text.split("\n")
@@ -165,9 +133,7 @@ def read_sample_log(path: str | os.PathLike, max_bytes: int = MAX_WORK_BYTES) ->
         raise ValueError(f"path {path} has no column line")
     columns = lines[1].split(",")
     body = lines[2:]
-    torn = 0
-    if body and body[-1] != "":
-        torn = 1  # the file does not end with a newline: the last line is incomplete
+    torn = int(bool(body) and body[-1] != "")  # the file does not end with a newline
     rows = [line for line in body[:-1] if line]
     values = np.array([[float(v) for v in line.split(",")] for line in rows], dtype=float).reshape(-1, len(columns))
     return LogContents(columns, {c: values[:, i] for i, c in enumerate(columns)}, metadata, torn)

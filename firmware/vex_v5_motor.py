@@ -18,48 +18,14 @@
 # stall torque 2.1 N m at 12 V with 18:1, free speed 200 rpm).
 
 # ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----
-# softpend motor-link protocol, version 1.
+# softpend motor-link protocol, version 1: shared verbatim by the host driver, the rig emulator and the VEX V5
+# program (firmware/vex_v5_motor.py embeds a copy), so it uses only what MicroPython offers (``struct``).
 #
-# This module is shared VERBATIM by three programs: the host driver (softpend.hardware.driver), the rig
-# emulator (softpend.hardware.emulator) and the device program for the VEX V5 brain
-# (firmware/vex_v5_motor.py, which embeds a copy between marker lines; tests/test_hardware_protocol.py
-# checks that the copy is identical).  It therefore uses only what MicroPython on the V5 brain offers:
-# the ``struct`` module, plain classes, bytes/bytearray.  No numpy, typing, dataclasses or f-string tricks.
-#
-# Wire format
-# -----------
-# Every message is one frame::
-#
-#     COBS( payload || CRC16(payload) ) || 0x00
-#
-# * ``payload`` = ``type:u8, seq:u16`` followed by the message body (little-endian, see MESSAGE_FORMATS).
-# * ``CRC16`` is CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), appended big-endian.
-# * COBS (consistent overhead byte stuffing) removes every 0x00 from the frame, so 0x00 is an unambiguous
-#   delimiter: a receiver that joins mid-stream or sees a garbled byte resynchronises at the next 0x00.
-#
-# Messages (host -> device: 0x0_, device -> host: 0x8_)
-# -----------------------------------------------------
-# HELLO      0x01  version:u16, nonce:u32                      host opens the session
-# TORQUE     0x02  torque_nm:f32                                torque command (feeds the watchdog)
-# HEARTBEAT  0x03  (empty)                                      liveness probe; device echoes the seq
-# STOP       0x04  (empty)                                      zero torque now (every host exit path)
-# HELLO_ACK  0x81  version:u16, nonce:u32, counts_per_rev:u32,  device answers HELLO; a version mismatch is
-#                  torque_limit_nm:f32, watchdog_ms:u16,         answered with ERROR(ERR_VERSION) instead
-#                  state_rate_hz:u16
-# STATE      0x82  device_time_us:u64, encoder_counts:i32,      streamed at state_rate_hz once a session is
-#                  velocity_rad_s:f32, applied_torque_nm:f32,    open; ``last_cmd_seq`` is the seq of the
-#                  last_cmd_seq:u16, flags:u8                    torque command in force
-# HEARTBEAT_ACK 0x83 (empty, echoes the seq)
-# ERROR      0x84  code:u8                                      device-side error report
-#
-# STATE flags: bit 0 = watchdog tripped (no TORQUE for watchdog_ms, torque forced to 0),
-#              bit 1 = torque command saturated at the device limit, bit 2 = stopped by STOP;
-#              the other bits are always 0.
-# ERROR codes: 1 = ERR_VERSION (HELLO carried a protocol version the device does not speak),
-#              2 = ERR_NO_SESSION (a command arrived before a HELLO opened the session, e.g. after a
-#              device restart), 3 = ERR_BAD_MESSAGE (a message type the device does not accept).
-# The watchdog is fed only by TORQUE messages (never by HEARTBEAT): a host that stops commanding stops
-# the motor.
+# Frame: COBS(payload || CRC-16/CCITT-FALSE(payload), big-endian) || 0x00, payload = type:u8, seq:u16, body
+# (little-endian, MESSAGE_FORMATS).  Host -> device: HELLO (version, nonce), TORQUE (N m, feeds the watchdog),
+# HEARTBEAT, STOP.  Device -> host: HELLO_ACK (version, nonce, counts_per_rev, torque_limit_nm, watchdog_ms,
+# state_rate_hz), STATE (device_time_us, encoder_counts, velocity_rad_s, applied_torque_nm, last_cmd_seq, flags),
+# HEARTBEAT_ACK (echoes the seq), ERROR (code).
 
 import struct
 
@@ -115,7 +81,7 @@ MAX_FRAME_BYTES = 64
 
 
 class ProtocolError(Exception):
-    """A frame that cannot be decoded (bad COBS, bad CRC, unknown type, wrong length)."""
+    """A frame that cannot be decoded."""
 
 
 class ChecksumMismatch(ProtocolError):
@@ -123,20 +89,7 @@ class ChecksumMismatch(ProtocolError):
 
 
 def crc16_ccitt(data, crc=0xFFFF):
-    """CRC-16/CCITT-FALSE of ``data`` (poly 0x1021, init 0xFFFF, no reflection, no final xor).
-
-    Parameters
-    ----------
-    data : bytes
-        The bytes to check.
-    crc : int
-        Initial value (0xFFFF; pass a previous result to continue a running CRC).
-
-    Returns
-    -------
-    int
-        The 16-bit CRC.
-    """
+    """CRC-16/CCITT-FALSE of ``data`` (poly 0x1021, init 0xFFFF)."""
     for byte in data:
         crc ^= byte << 8
         for _ in range(8):
@@ -148,7 +101,7 @@ def crc16_ccitt(data, crc=0xFFFF):
 
 
 def cobs_encode(data):
-    """COBS-encode ``data`` (the result contains no 0x00 byte; the delimiter is not added)."""
+    """COBS-encode ``data`` (no 0x00 byte in the result; no delimiter added)."""
     out = bytearray()
     block = bytearray()
     for byte in data:
@@ -187,22 +140,7 @@ def cobs_decode(data):
 
 
 def encode_message(msg_type, seq, values=()):
-    """Build one complete wire frame (COBS, CRC and the trailing 0x00 delimiter).
-
-    Parameters
-    ----------
-    msg_type : int
-        One of the ``MSG_*`` constants.
-    seq : int
-        Sequence number, taken modulo 65536.
-    values : tuple
-        The body fields in the order of ``MESSAGE_FORMATS[msg_type]`` (SI units: N m, rad, rad/s, us).
-
-    Returns
-    -------
-    bytes
-        The frame, ready to write to the serial port.
-    """
+    """One complete wire frame of the body ``values`` (``MESSAGE_FORMATS[msg_type]``), delimiter included."""
     if msg_type not in MESSAGE_FORMATS:
         raise ValueError("msg_type: unknown message type %r" % (msg_type,))
     payload = struct.pack(HEADER_FORMAT, msg_type, seq & 0xFFFF) + struct.pack(MESSAGE_FORMATS[msg_type], *values)
@@ -211,15 +149,7 @@ def encode_message(msg_type, seq, values=()):
 
 
 def decode_frame(frame):
-    """Decode one frame (without its 0x00 delimiter) into ``(msg_type, seq, values)``.
-
-    Raises
-    ------
-    ChecksumMismatch
-        If the CRC does not match.
-    ProtocolError
-        If the frame is malformed, of unknown type or of the wrong length.
-    """
+    """Decode one frame (without its delimiter) into ``(msg_type, seq, values)`` (:class:`ProtocolError`)."""
     raw = cobs_decode(frame)
     if len(raw) < HEADER_SIZE + 2:
         raise ProtocolError("frame too short (%d bytes)" % len(raw))
@@ -240,20 +170,8 @@ def decode_frame(frame):
 
 
 class FrameDecoder:
-    """Incremental receiver: feed it bytes as they arrive, get decoded messages back.
-
-    Bytes are buffered until a 0x00 delimiter; each complete frame is decoded.  Frames that fail are
-    counted (``bad_frames``, ``checksum_errors``) and reported through ``errors`` instead of raising, so
-    one garbled frame never desynchronises the stream; the caller decides what a bad frame means
-    (``consecutive_bad`` counts bad frames since the last good one).
-
-    Parameters
-    ----------
-    validate : callable, optional
-        ``validate(msg_type, values)`` returns None for an acceptable message or a string saying what is
-        wrong with its values (a NaN velocity, a torque beyond the limit); a frame it refuses is a bad
-        frame like a corrupt one (counted in ``bad_frames`` and ``value_errors``, never returned).
-    """
+    """Incremental receiver: bytes in, decoded messages out; bad frames are counted and reported, never raised.
+    ``validate(msg_type, values)`` returns None or what is wrong with the values (then a bad frame too)."""
 
     def __init__(self, validate=None):
         self._frame = bytearray()
@@ -262,20 +180,17 @@ class FrameDecoder:
         self.bad_frames = 0
         self.checksum_errors = 0
         self.value_errors = 0
-        self.good_frames = 0
         self.consecutive_bad = 0
         self.last_error = None
 
     def _bad(self, error):
-        """Count one bad frame with its reason; returns the reason."""
         self.consecutive_bad += 1
         self.bad_frames += 1
         self.last_error = error
         return error
 
     def feed(self, data):
-        """Add received bytes; return ``(messages, errors)``: a list of ``(msg_type, seq, values)`` for
-        each good frame completed by these bytes and a list of error strings for each bad one."""
+        """Add received bytes; ``(messages, errors)`` of the frames they complete."""
         messages = []
         errors = []
         for byte in data:
@@ -309,30 +224,14 @@ class FrameDecoder:
                 errors.append(self._bad("%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem)))
                 continue
             messages.append(message)
-            self.good_frames += 1
             self.consecutive_bad = 0
         return messages, errors
 
 
 class DeviceSession:
-    """The device side of the protocol: session state, torque clamp and watchdog.
-
-    Shared by the VEX V5 program and the rig emulator, so the two cannot behave differently.  The
-    caller owns the clock (microseconds), the motor and the encoder: it feeds received bytes to
-    :meth:`receive` (and writes back the frames it returns), asks :meth:`torque_nm` for the torque to
-    apply at each motor update, and sends :meth:`state_frame` at ``state_rate_hz``.
-
-    Parameters
-    ----------
-    counts_per_rev : int
-        Encoder counts per revolution of the hub.
-    torque_limit_nm : float
-        Device-side torque limit [N m]; commands beyond it are clamped and flagged.
-    watchdog_ms : int
-        Torque is forced to zero when no TORQUE message arrived for this long [ms].
-    state_rate_hz : int
-        Rate at which the caller streams STATE frames [Hz] (announced in HELLO_ACK).
-    """
+    """The device side: session, torque clamp (commands beyond ``torque_limit_nm`` are clamped and flagged) and
+    watchdog (zero torque when no TORQUE arrived for ``watchdog_ms``).  The caller owns the clock [us], the motor
+    and the encoder: it feeds bytes to :meth:`receive`, applies :meth:`torque_nm`, sends :meth:`state_frame`."""
 
     def __init__(self, counts_per_rev, torque_limit_nm, watchdog_ms=100, state_rate_hz=100):
         self.counts_per_rev = int(counts_per_rev)
@@ -354,7 +253,7 @@ class DeviceSession:
         return self.tx_seq
 
     def receive(self, data, now_us):
-        """Process received bytes at device time ``now_us``; return the reply frames to send (list)."""
+        """Process received bytes at device time ``now_us``; the reply frames to send."""
         replies = []
         messages, _errors = self.decoder.feed(data)
         for msg_type, seq, values in messages:
@@ -402,7 +301,7 @@ class DeviceSession:
         return replies
 
     def watchdog_tripped(self, now_us):
-        """True when commands were received but none for ``watchdog_ms`` (torque is then zero)."""
+        """Commands were received, but none for ``watchdog_ms``."""
         return self.last_cmd_us is not None and now_us - self.last_cmd_us > self.watchdog_us
 
     def torque_nm(self, now_us):
@@ -412,7 +311,6 @@ class DeviceSession:
         return self.command_nm
 
     def flags(self, now_us):
-        """STATE flag bits at ``now_us``."""
         bits = 0
         if self.watchdog_tripped(now_us):
             bits |= FLAG_WATCHDOG
@@ -423,7 +321,7 @@ class DeviceSession:
         return bits
 
     def state_frame(self, now_us, encoder_counts, velocity_rad_s, applied_torque_nm):
-        """A STATE frame for an encoder sample taken at ``now_us`` (or None before the handshake)."""
+        """A STATE frame for an encoder sample taken at ``now_us`` (None before the handshake)."""
         if not self.session_open:
             return None
         return encode_message(

@@ -1,10 +1,5 @@
-"""The device program for the VEX V5 brain, and the tool that keeps its protocol copy in sync.
-
-The V5 runs one Python file, so ``firmware/vex_v5_motor.py`` embeds :mod:`softpend.hardware.protocol`
-verbatim between two marker lines.  :func:`embedded_protocol` extracts that copy,
-:func:`check_firmware` says whether it is identical to the package's module, and :func:`update_firmware`
-rewrites it (``python -m softpend.hardware.firmware --update``).  A test fails if the copy drifts.
-"""
+"""The VEX V5 device program embeds :mod:`softpend.hardware.protocol` verbatim between two marker lines: check
+that copy, or rewrite it (``python -m softpend.hardware.firmware --update``)."""
 
 from __future__ import annotations
 
@@ -39,7 +34,7 @@ def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
     tail = text.split(END_MARKER, 1)[1]
     from softpend.io.outputs import atomic_write
 
-    with atomic_write(firmware_path, "w") as handle:  # an interrupted update leaves the firmware as it was
+    with atomic_write(firmware_path, "w") as handle:
         handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
 
 

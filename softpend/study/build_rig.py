@@ -202,59 +202,60 @@ def parts_list(design: RigDesign, cartridge: MotorCartridge, camera_fps: float) 
     """What to print and buy, with the dimensions of ``design`` (rows of ``part``, ``quantity``, ``spec``)."""
     d = design.to_dict()
     p = design.params
-    return [
-        {
-            "part": "TPU beam (printed)",
-            "quantity": "1",
-            "spec": f"{d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm "
+    rows = [
+        (
+            "TPU beam (printed)",
+            "1",
+            f"{d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm "
             f"(length x width out of plane x thickness in plane), E = {d['print_modulus_mpa']:.3g} MPa, "
             f"solid infill, about {d['beam_mass_g']:.0f} g",
-        },
-        {
-            "part": "hub mount (printed, rigid: PLA or PETG)",
-            "quantity": "1",
-            "spec": f"boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the "
+        ),
+        (
+            "hub mount (printed, rigid: PLA or PETG)",
+            "1",
+            f"boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the "
             f"shaft, beam pocket from {1e3 * design.hub.pocket_start_m:.0f} mm, marker flag "
             f"{d['flag_length_mm']:.0f} mm long {1e3 * design.hub.flag_gap_m:.0f} mm in front of the beam",
-        },
-        {
-            "part": "tip mass (steel disc)",
-            "quantity": "1",
-            "spec": f"diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, "
+        ),
+        (
+            "tip mass (steel disc)",
+            "1",
+            f"diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, "
             f"{d['tip_mass_g']:.3g} g, matte blue dot of the same diameter on its front",
-        },
-        {
-            "part": "calibration markers (matte green discs)",
-            "quantity": str(len(design.markers_m)),
-            "spec": f"diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at "
+        ),
+        (
+            "calibration markers (matte green discs)",
+            str(len(design.markers_m)),
+            f"diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at "
             + ", ".join(f"({x * 1e3:.0f}, {y * 1e3:.0f})" for x, y in design.markers_m)
             + " mm from the hub axis",
-        },
-        {
-            "part": "hub marker (matte magenta disc)",
-            "quantity": "1",
-            "spec": f"diameter {2e3 * design.hub.hub_marker_dot_radius_m:.0f} mm on the flag, "
+        ),
+        (
+            "hub marker (matte magenta disc)",
+            "1",
+            f"diameter {2e3 * design.hub.hub_marker_dot_radius_m:.0f} mm on the flag, "
             f"{d['hub_marker_radius_mm']:.0f} mm from the hub axis",
-        },
-        {
-            "part": "VEX V5 Smart Motor",
-            "quantity": "1",
-            "spec": f"{cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), "
+        ),
+        (
+            "VEX V5 Smart Motor",
+            "1",
+            f"{cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), "
             f"torque limit {p.torque_limit_nm:g} N m set in the device program",
-        },
-        {
-            "part": "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat",
-            "quantity": "1 each",
-            "spec": "the device program runs on the brain; USB to the host computer",
-        },
-        {
-            "part": "camera",
-            "quantity": "1",
-            "spec": f"{design.camera.width_px} x {design.camera.height_px} px at >= {camera_fps:g} frames/s, horizontal "
+        ),
+        (
+            "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat",
+            "1 each",
+            "the device program runs on the brain; USB to the host computer",
+        ),
+        (
+            "camera",
+            "1",
+            f"{design.camera.width_px} x {design.camera.height_px} px at >= {camera_fps:g} frames/s, horizontal "
             f"field of view {design.camera.horizontal_fov_deg:g} deg, {d['camera_distance_mm']:.0f} mm from the "
             f"rod plane, square on, optical axis through the hub axis",
-        },
+        ),
     ]
+    return [{"part": part, "quantity": quantity, "spec": spec} for part, quantity, spec in rows]
 
 
 def firmware_settings() -> dict[str, Any]:

@@ -1,8 +1,4 @@
-"""The batched torch chain beside the Exudyn plant: how closely the two simulators agree.
-
-:func:`hub_errors_rad` runs both from the same state under the same random torque against the Exudyn plant with
-:data:`REFERENCE_SUBSTEPS` sub-steps (Figure 1's agreement section and ``softpend bench --only plant``).
-"""
+"""How closely the batched torch chain and the default Exudyn plant agree with a converged Exudyn run."""
 
 from __future__ import annotations
 
@@ -15,20 +11,18 @@ from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 from softpend.torch_threads import one_torch_thread
 
-__all__ = ["REFERENCE_SUBSTEPS", "HubErrorReference", "hub_error_inputs", "hub_error_reference", "hub_errors_rad"]
-
-#: Sub-steps of the Exudyn reference run (converged to well below the errors compared).
+#: Sub-steps of the Exudyn reference run.
 REFERENCE_SUBSTEPS = 200
 
 
 class HubErrorReference(NamedTuple):
-    """The run that :func:`hub_errors_rad` compares simulators against (control steps of 0.01 s)."""
+    """The converged Exudyn run that :func:`hub_errors_rad` compares simulators against."""
 
     params: RodParams
-    torques_nm: np.ndarray  # (n_steps,), held over each control step
-    q0: np.ndarray  # initial joint angles (hub angle from upright, then the spring angles) [rad]
-    qd0: np.ndarray  # initial joint rates [rad/s]
-    hub_rad: np.ndarray  # hub angle of the Exudyn plant with REFERENCE_SUBSTEPS sub-steps after each step [rad]
+    torques_nm: np.ndarray
+    q0: np.ndarray
+    qd0: np.ndarray
+    hub_rad: np.ndarray  # after each control step
 
 
 def _exudyn_hub_rad(
@@ -42,9 +36,8 @@ def _exudyn_hub_rad(
 def hub_error_inputs(
     n_links: int, duration_s: float, seed: int = 0
 ) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
-    """``(params, torques_nm, q0, qd0)`` of the comparison: the default rod of ``n_links`` links, ``duration_s``
-    of random torque from ``seed`` (one value per 0.01 s control step) and the start (the hanging rod, hub
-    turned 0.3 rad and spinning at 0.5 rad/s)."""
+    """``(params, torques_nm, q0, qd0)``: ``duration_s`` of seeded random torque from the hanging rod, hub turned
+    0.3 rad and spinning at 0.5 rad/s."""
     params = RodParams(n_links=n_links)
     n_steps = int(round(duration_s / 0.01))
     torques = np.random.default_rng(seed).uniform(-1, 1, n_steps) * params.torque_limit_nm
@@ -55,8 +48,7 @@ def hub_error_inputs(
 
 
 def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubErrorReference:
-    """The inputs of :func:`hub_error_inputs` and the Exudyn plant's hub angle with :data:`REFERENCE_SUBSTEPS`
-    sub-steps along them."""
+    """The inputs of :func:`hub_error_inputs` and the converged Exudyn plant's hub angle along them."""
     params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
     return HubErrorReference(params, torques, q0, qd0, _exudyn_hub_rad(params, q0, qd0, torques, REFERENCE_SUBSTEPS))
 
@@ -64,11 +56,8 @@ def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubEr
 def hub_errors_rad(
     n_links: int, duration_s: float, seed: int = 0, reference: Optional[HubErrorReference] = None
 ) -> dict[str, float]:
-    """Largest hub-angle error over ``duration_s`` of random torque (from the hanging rod, hub turned 0.3 rad
-    and spinning at 0.5 rad/s) against the Exudyn plant with :data:`REFERENCE_SUBSTEPS` sub-steps: of the batched chain (default
-    sub-steps, RK4 in float64; the Rosenbrock integrator in float32, the fast configuration of
-    ``softpend bench --only plant``) and of the default Exudyn plant (2 sub-steps).  ``reference``: what
-    :func:`hub_error_reference` returns for the same arguments (computed when not given)."""
+    """Largest hub-angle error against the converged Exudyn run (``reference``, computed when not given) of the
+    batched chain (RK4 in float64, Rosenbrock in float32) and of the default Exudyn plant."""
     from softpend.plant.batched import BatchedPRBChain
 
     if reference is None:

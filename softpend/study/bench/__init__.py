@@ -1,10 +1,5 @@
-"""Benchmarks: measured performance figures, printed by ``softpend bench --json``.
-
-Each benchmark is a function ``() -> dict[str, float]`` listed in :data:`BENCHMARKS` as
-``"module:function"``; ``softpend bench`` runs them in order (or only those named with ``--only``) and
-merges their figures into one JSON object.  Ratios are measured inside one function so that both sides
-see the same machine load.
-"""
+"""Benchmarks: ``softpend bench`` runs the groups of :data:`BENCHMARKS` (``"module:function"``, each returning
+``dict[str, float]``) and merges their figures."""
 
 from __future__ import annotations
 
@@ -12,7 +7,6 @@ import importlib
 import time
 from typing import Callable, Iterable
 
-#: ``(name, "module:function")`` pairs; one line per benchmark group.
 BENCHMARKS: list[tuple[str, str]] = [
     ("plant", "softpend.study.bench.plant:bench_plant"),
     ("control", "softpend.study.bench.control:bench_control"),

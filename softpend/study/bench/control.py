@@ -1,21 +1,4 @@
-"""Classical-control figures (``softpend bench --only control``).
-
-Every figure goes through :func:`softpend.evaluation.evaluate_controller` on the default rod (n = 4,
-dt = 0.01 s, torque limit 0.06 N m):
-
-* ``lqr_upright_std_rad`` -- LQR from the true model (joint state), straight rod released at rest from a
-  0.2 rad tilt, 10 s: the evaluation's ``upright_std_rad`` (RMS tip angle after it first stays within
-  0.2 rad for 1 s; the recovery transient is included);
-* ``lqr_hold_std_rad`` -- the same run, RMS tip angle over the last 5 s (holding only);
-* ``lqr_observation_upright_std_rad`` -- the same with the LQR on observations only;
-* ``lqr_region_of_attraction_rad`` -- largest initial tilt the true-model LQR recovers from;
-* ``swingup_lqr_time_s`` / ``swingup_lqr_std_rad`` -- energy swing-up plus LQR from hanging, worst case
-  over start seeds 0-4 (the evaluation's start noise): the largest swing-up time and upright std;
-* ``swingup_lqr_median_time_s`` -- median swing-up time over those seeds;
-* ``learned_lqr_upright_std_rad`` -- LQR designed on a learned model (report-protocol babbling, 60 x 5 s,
-  seed 0; default 3 x 16 network) applied to the true plant from the 0.2 rad tilt; ``inf``-free: a fall
-  shows as a large std.
-"""
+"""Classical-control figures on the default rod (``softpend bench --only control``)."""
 
 from __future__ import annotations
 
@@ -25,13 +8,13 @@ from softpend.evaluation import evaluate_controller
 from softpend.plant import RodParams
 from softpend.task import Task
 
-#: Start seeds of the swing-up benchmark.
 SWINGUP_SEEDS = (0, 1, 2, 3, 4)
 TILT_RAD = 0.2
 
 
 def bench_control(include_learned: bool = True) -> dict[str, float]:
-    """Measure the classical baselines (see the module docstring)."""
+    """LQR from a 0.2 rad tilt (joint state, observations, learned model): upright and hold std; its region of
+    attraction; energy swing-up + LQR from hanging: worst and median swing-up time, worst upright std."""
     import torch
 
     from softpend.control.learned import lqr_from_learned_model

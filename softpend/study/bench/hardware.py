@@ -12,8 +12,7 @@ LOOP_SECONDS = 5.0
 
 
 def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, float, float]:
-    """(RMS error [px], frames/s with the default search window, frames/s searching every frame whole,
-    lost frames) over N_FRAMES rendered frames."""
+    """(RMS error [px], frames/s with the search window, frames/s searching whole frames, lost frames)."""
     from softpend.vision.accuracy import tracking_errors
     from softpend.vision.tracker import TipTracker
 
@@ -21,7 +20,7 @@ def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, floa
     fps = {}
     for name, radius in (("window", TipTracker().search_radius_px), ("full", None)):
         best = math.inf
-        for _ in range(3):  # best of three passes: the machine is shared
+        for _ in range(3):
             tracker = TipTracker(search_radius_px=radius)
             start = time.perf_counter()
             for frame in frames:
@@ -32,8 +31,7 @@ def _tracker_figures(effects, seed: int, trajectory) -> tuple[float, float, floa
 
 
 def _rig_loop_jitter() -> dict[str, float]:
-    """The real-time figures of the rig's host loop: the closed loop (energy swing-up and LQR behind the state
-    estimator, no camera) against the emulator in its own process on a pseudo-terminal, by the wall clock."""
+    """Command-period figures of the closed loop against the emulator in its own process on a pseudo-terminal."""
     from softpend.control.swingup import EnergySwingUpController
     from softpend.hardware.closed_loop import run_closed_loop
     from softpend.hardware.driver import MotorLink
@@ -58,11 +56,7 @@ def _rig_loop_jitter() -> dict[str, float]:
 
 
 def bench_hardware() -> dict[str, float]:
-    """Tracker figures on N_FRAMES rendered 640x480 frames (clean, and with noise + motion blur +
-    lighting changes + clutter), tracking on one OpenCV thread, with the default tracker (48 px search
-    window after the first frame) and, as ``*_full_frame``, searching every frame whole; the 100 Hz closed loop against
-    the emulator (separate process, real pty, wall clock) for LOOP_SECONDS: p95 of ``|command period - median
-    period|`` and late commands (the next state still reported the command before)."""
+    """Tracker speed and accuracy on clean and noisy rendered frames, and the rig loop's jitter."""
     import cv2
 
     from softpend.vision.accuracy import babbling_trajectory

@@ -1,44 +1,5 @@
-"""``softpend bench --only pilco``: real plant seconds PILCO needs to balance the soft rod, and its compute.
-
-The book's :class:`~softpend.pilco.loop.PilcoConfig` (``book/hparams/pilco.yml``, the project's soft rod) runs
-once per seed of :data:`SEEDS`; the targets below hold for *every* seed, so the headline figures are the worst seed's:
-
-* ``pilco_real_s_to_balance`` -- training plant seconds (random trial plus policy trials) up to the first
-  policy whose test on the true plant (shared :func:`softpend.evaluation.evaluate_controller`, three
-  start-noise seeds, ``eval_duration_s`` = 10 s from hanging) swings up on every test seed with
-  ``upright_std_rad <= 0.1``; ``inf`` if no policy within the trial budget does.  Worst seed.  Target: < 90 s.
-* ``pilco_train_wall_s`` -- wall-clock seconds of a whole run (model fits, policy searches, trials and the
-  test episodes), single-threaded torch.  Worst seed.  Target: < 900 s on the project's 2-core machine.
-* ``pilco_train_cpu_s`` -- CPU seconds of a whole run, worst seed (the wall time also counts waiting for a
-  machine that other jobs keep busy).
-* ``pilco_final_upright_std_rad`` -- the last policy's worst test-seed error, worst run.
-* ``..._seed<k>`` -- the same per seed, and ``pilco_trials_seed<k>`` (trials run, the random one included).
-
-The runs are saved to ``runs/bench-pilco/seed<k>`` for inspection; they are always rerun, since their wall
-time is the measurement.
-
-Ten seeds, on fresh starts (:data:`TEN_SEEDS`, the runs of ``runs/pilco-book``: reused when present, run
-otherwise; their final policies measured on :data:`softpend.study.presets.REPORT_SEEDS`):
-
-* ``seeds_balanced_pilco`` -- runs whose final policy balances >= 90 % of the fresh starts (upright std
-  <= 0.1 rad);
-* ``pilco_seeds_within_30s`` -- runs that also balanced their own test starts within 30 plant seconds;
-* ``pilco_real_s_to_balance`` over those runs as a median with a bootstrap interval
-  (``pilco_ten_real_s_to_balance``, ``_low``, ``_high``), and the slowest run's CPU seconds
-  (``pilco_ten_max_train_cpu_s``; target: under 600 s of one core).
-
-``softpend bench --only pilco_search`` (:func:`bench_pilco_search`): one policy-search objective and its gradient
-at the book's sizes (200 GP points of the ``tip_bend`` state, 50 basis functions, 100 predicted steps, the
-tip-rate cost and exploration), eager and through ``torch.compile``, on one thread, alternately in one process:
-
-* ``pilco_search_objective_ms_eager``, ``pilco_search_objective_ms_compiled`` -- CPU milliseconds per objective
-  and gradient (median of the repeats);
-* ``pilco_search_compiled_speedup`` -- their ratio;
-* ``pilco_search_compile_s`` -- CPU seconds of the first compiled call (the compilation, or loading it from the
-  on-disk cache);
-* ``pilco_search_objective_rel_difference``, ``pilco_search_gradient_rel_difference`` -- how far the compiled
-  objective and gradient are from the eager ones (relative).
-"""
+"""PILCO benchmarks: plant seconds to balance and compute of the book's runs (worst of :data:`SEEDS`, and the
+ten-seed figures on fresh starts), and the policy-search objective eager against ``torch.compile``."""
 
 from __future__ import annotations
 
@@ -51,14 +12,13 @@ from softpend.study.presets import PILCO
 from softpend.torch_threads import one_torch_thread
 
 ROOT = "runs/bench-pilco"
-#: Seeds of the benchmark runs.
 SEEDS = (0, 1, 2)
-#: Seeds of the ten-seed figures.
 TEN_SEEDS = tuple(range(10))
 
 
 def bench_pilco() -> dict[str, float]:
-    """The "pilco" benchmark group (see the module docstring)."""
+    """The ``pilco`` benchmark group: runs saved to ``runs/bench-pilco/seed<k>``, always rerun (their time is the
+    measurement)."""
     torch.set_num_threads(1)
     out: dict[str, float] = {}
     for seed in SEEDS:
@@ -76,7 +36,7 @@ def bench_pilco() -> dict[str, float]:
 
 
 def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
-    """The ten-seed PILCO figures of the module docstring."""
+    """Balanced seeds and plant seconds to balance of the book's ten PILCO runs on fresh starts."""
     from softpend.study.fresh_starts import headline_figures, pilco_fresh_start_rows, seed_rows
     from softpend.study.head_to_head import pilco_runs
     from softpend.study.presets import PILCO_BOOK
@@ -92,8 +52,8 @@ def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
 
 
 def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
-    """The "pilco_search" benchmark group (see the module docstring).  The GP is fitted to a random walk of the
-    book's state: the cost of a search depends on the sizes, not on the data."""
+    """CPU milliseconds of one policy-search objective and gradient at the book's sizes, eager and compiled, and how
+    far apart their results are; the GP is fitted to a random walk."""
     import time
 
     import numpy as np

@@ -1,29 +1,5 @@
-"""System-identification speed and accuracy (``softpend bench --only sysid``).
-
-Runs the default protocol end to end on one torch thread: babble 60 x 5 s (seed 0), train the default
-full-information model and the limited-information model, babble 12 held-out trials (seed 12345) and
-measure one-step and open-loop rollout errors on them (all held-out trials, and the near-upright ones
-that had the stabilising feedback), then time batched rollouts.  Five models: the report's (full
-information, state without history, 3 x 16), full information with 3 past frames (3 x 16 and 3 x 64),
-limited information with 3 past frames, and :data:`BEST_FULL_CONFIG` (``model_best``, the published
-Figure 3 setting).
-
-Yardsticks (:func:`softpend.sysid.perturbed_simulator_errors`, the simulator itself as the "model"):
-
-* ``simulator_1e-4rad_off_*``: restarted 1e-4 rad off in hub angle;
-* ``simulator_one_best_model_step_*``: restarted with the hub rate off by as much as makes its first
-  step miss the tip by the best model's one-step tip RMSE (``model_best_one_step_tip_rmse_m``), i.e.
-  a perfect model that makes the best model's one-step error *once*, at the start;
-* ``simulator_torque_noise_1e-4nm_*``: an unmodelled hub torque of 1e-4 N m rms (0.17 % of the
-  limit), independent at every step.
-
-Grey-box identification (:func:`greybox_figures`): :func:`softpend.sysid.greybox.identify` on the training data
-with its default settings from :func:`softpend.study.greybox.perturbed_guess` (``identify_s``,
-``greybox_max_param_error_pct_sim``), and the model-quality measures of :mod:`softpend.sysid.quality` on the
-held-out trials and on held-out hanging babbling for the grey-box model and ``model_best`` (``greybox_*``,
-``nn_*``); and on a dataset of the digital twin (:func:`greybox_twin_figures`: ``greybox_max_param_error_pct_twin``,
-about 80 s of real-time babbling over the emulated link, then the identification).
-"""
+"""System-identification speed and accuracy (``softpend bench --only sysid``): babbling, five learned models on
+held-out trials, the simulator-as-model yardsticks, and grey-box identification on simulated and twin data."""
 
 from __future__ import annotations
 
@@ -40,20 +16,18 @@ from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 from softpend.torch_threads import one_torch_thread
 
-#: Seed of the training data and of the held-out data.
 TRAIN_SEED = 0
 TEST_SEED = 12345
 ROLLOUT_BATCH = 4096
 ROLLOUT_STEPS = 100
-#: The most accurate full-information setting measured (the fig03 notebook's full profile): 6 past
-#: frames, 3 x 64, 600 epochs of the cosine schedule run to the end (the best validation weights kept).
+#: The fig03 notebook's full-information setting (``model_best``).
 BEST_FULL_CONFIG = TrainConfig(history=6, hidden_widths=(64, 64, 64), max_epochs=600, patience=600)
 
 
 def rollout_steps_per_s(
     model: DynamicsModel | DynamicsEnsemble, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3
 ) -> float:
-    """Model steps per second of :func:`softpend.sysid.rollout` on ``batch`` rows (best of ``repeats``)."""
+    """Model steps per second of batched rollouts (best of ``repeats``)."""
     generator = torch.Generator().manual_seed(0)
     dtype = model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float32
     x0 = torch.randn(batch, model.layout.dim, generator=generator, dtype=dtype) * 0.1
@@ -69,7 +43,7 @@ def rollout_steps_per_s(
 
 
 def bench_sysid() -> dict[str, float]:
-    """Babbling rate, training time, rollout rate and held-out accuracy of the default pipeline."""
+    """The ``sysid`` benchmark group (see the module docstring)."""
     with one_torch_thread():
         protocol = BabbleProtocol()
         start = time.perf_counter()
@@ -87,7 +61,6 @@ def bench_sysid() -> dict[str, float]:
             ("model_limited", TrainConfig(information="limited", history=3)),
             ("model_best", BEST_FULL_CONFIG),
         )
-        # held-out trials with the stabilising feedback: the rod stays near upright
         upright = np.flatnonzero(np.array(test.metadata["protocol"]["feedback_trials"], dtype=bool))
         for prefix, config in configs:
             fit = fit_dynamics_model(data, config, progress=False)
@@ -119,21 +92,8 @@ def bench_sysid() -> dict[str, float]:
 def simulator_yardsticks(
     test: TrajectoryDataset, model_one_step_tip_m: float, history: int = 0, horizon_s: float = 2.0
 ) -> dict[str, float]:
-    """The simulator-as-model yardsticks of the module docstring on held-out trials (tip RMSE [m] after
-    one step and at 0.5, 1 and 2 s, those within ``horizon_s``).
-
-    Parameters
-    ----------
-    test : TrajectoryDataset
-        Simulated held-out trials.
-    model_one_step_tip_m : float
-        One-step tip RMSE of the model to compare with [m]; sets the hub-rate offset of the
-        ``simulator_one_best_model_step`` run.
-    history : int
-        The model's past frames (the rollouts start where the model's do).
-    horizon_s : float
-        Longest rollout [s].
-    """
+    """Tip RMSE [m] of the perturbed-simulator yardsticks on held-out trials after one step and at 0.5, 1 and 2 s
+    (within ``horizon_s``); ``model_one_step_tip_m`` sets the hub-rate offset of ``simulator_one_best_model_step``."""
     if not (np.isfinite(model_one_step_tip_m) and model_one_step_tip_m > 0):
         raise ValueError(f"model_one_step_tip_m must be positive, got {model_one_step_tip_m!r}")
     out: dict[str, float] = {}
@@ -152,21 +112,8 @@ def simulator_yardsticks(
 
 
 def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object = None) -> dict[str, float]:
-    """Grey-box identification of the training data from :func:`softpend.study.greybox.perturbed_guess` and
-    its model quality (:func:`softpend.study.greybox.model_quality`) on the held-out trials and on held-out
-    hanging babbling (seed ``TEST_SEED + 1``), beside ``network`` (the best learned model, keys ``nn_*``).
-
-    Keys: ``identify_s`` (wall time of :func:`softpend.sysid.greybox.identify` on ``data``, default settings),
-    ``greybox_max_param_error_pct_sim`` (largest relative error of an estimated field [%]),
-    ``greybox_max_param_std_pct`` (largest standard deviation relative to its estimate [%]),
-    ``greybox_valid_prediction_ratio`` (median valid prediction time near upright over that of the simulator
-    started 1e-4 rad off), ``greybox_valid_prediction_lyapunov``, ``simulator_1e-4rad_off_valid_prediction_s``,
-    ``greybox_hanging_tip_rmse_1s_pct_length``, ``greybox_one_step_mse``, ``lyapunov_rate_per_s``;
-    closed-loop usefulness (:func:`softpend.study.greybox.closed_loop_usefulness`, ten fresh starts):
-    ``greybox_lqr_successes``, ``greybox_swingup_successes`` and the same designed on the true parameters
-    (``true_params_*``), ``greybox_*_upright_std_ratio`` (median upright std over that of the true design); and
-    ``nn_valid_prediction_lyapunov``, ``nn_valid_prediction_ratio``, ``nn_hanging_tip_rmse_1s_pct_length``.
-    """
+    """Grey-box identification of ``data`` from the perturbed guess, its parameter errors, model quality on held-out
+    data and closed-loop usefulness, beside ``network`` (keys ``nn_*``)."""
     from softpend.study.greybox import (
         HANGING_PROTOCOL,
         YARDSTICK_OFFSET_RAD,
@@ -219,17 +166,7 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
 
 
 def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, float]:
-    """Grey-box identification of a dataset from the digital twin (:func:`softpend.hardware.twin.run_twin_session`:
-    the emulated serial link with latency and an encoder of finite resolution, the synthetic camera, the clock
-    synchronisation), ``duration_s`` of babbling in trials of 5 s, from
-    :func:`softpend.study.greybox.perturbed_guess` of the twin's rod; the five rod fields and the camera's delay
-    against the encoder (``camera_delay_s``: what the clock synchronisation leaves, a few milliseconds, which
-    biases the friction estimate by some 13 % when it is not estimated).
-
-    Keys: ``greybox_max_param_error_pct_twin`` (the rod fields), ``greybox_twin_error_pct_<field>`` and
-    ``greybox_twin_std_pct_<field>`` per rod field, ``greybox_twin_camera_delay_s``, ``greybox_twin_at_bounds``
-    (fields that ended on a bound of the search), ``identify_twin_s``, ``twin_session_s``.
-    """
+    """Grey-box identification (rod fields and camera delay) of ``duration_s`` of babbling on the digital twin."""
     import tempfile
 
     from softpend.hardware.twin import run_twin_session

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from softpend.envs import SoftPendulumDiscreteEnv
-from softpend.envs.observation_vector import observation_vector, observations_from_vector
+from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import next_bonus
 from softpend.plant import OBSERVATION_NAMES
 
@@ -37,16 +37,7 @@ def test_clipped_like_environment():
     assert vec[0, 6] == pytest.approx(env.observation_space.high[6])
 
 
-def test_inverse_recovers_observed_variables():
-    env, raws, bonuses, vecs = _trajectory(60)
-    back = observations_from_vector(vecs, env)
-    keep = [OBSERVATION_NAMES.index(n) for n in OBSERVATION_NAMES if not n.startswith("er")]
-    np.testing.assert_allclose(back[:, keep], raws[:, keep], atol=2e-5)
-
-
 def test_bad_shape_raises():
     env = SoftPendulumDiscreteEnv()
     with pytest.raises(ValueError, match="observations"):
         observation_vector(np.zeros((3, 4)), np.zeros(3), env)
-    with pytest.raises(ValueError, match="vectors"):
-        observations_from_vector(np.zeros((3, 4)), env)

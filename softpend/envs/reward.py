@@ -1,14 +1,5 @@
-"""The report's reward (eqs. 4-5): a clipped cot|theta| shaping term plus a decaying bonus near upright.
-
-    r_t  = clip(cos(theta)/|sin(theta)|, -c, c) / c  +  w * r*_t
-    r*_t = 1                           if |theta_t| < epsilon
-         = r*_{t-1} * exp(-k * dt)      otherwise
-
-``theta`` is the tip angle from upright.  The shaping term is divided by its clip value ``c`` (the report
-only states proportionality) so that it lies in ``[-1, 1]``: -1 hanging, about 0 horizontal, and it climbs
-steeply near upright (``cot|theta| = c`` at ``|theta| = atan(1/c)``, 0.02 rad for ``c = 50``).  The bonus
-``r*`` pays ``w`` per step while the tip is within ``epsilon`` of upright and then decays at rate ``k``
-[1/s], which rewards staying up rather than swinging through.
+"""The report's reward (eqs. 4-5): ``r_t = clip(cot|theta|, -c, c) / c + w r*_t``, the bonus ``r*_t`` 1 while
+``|theta| < epsilon`` and decaying at ``k`` [1/s] after.
 """
 
 from __future__ import annotations
@@ -23,19 +14,7 @@ from softpend.checks import non_negative, positive
 
 @dataclass(frozen=True)
 class RewardParams:
-    """Parameters of the report's reward.
-
-    Parameters
-    ----------
-    clip_value : float
-        ``c``: the shaping term ``cos/|sin|`` is clipped to ``[-c, c]`` (the report: 50).
-    epsilon_rad : float
-        Half-width of the bonus region around upright [rad].
-    bonus_weight : float
-        ``w``: reward per step while inside the bonus region.
-    bonus_decay_per_s : float
-        ``k``: decay rate of the bonus after leaving the region [1/s].
-    """
+    """``c``, ``epsilon``, ``w`` and ``k`` of the reward."""
 
     clip_value: float = 50.0
     epsilon_rad: float = 0.1
@@ -69,13 +48,7 @@ def next_bonus(
 
 
 def step_reward(theta_rad, previous_bonus, dt_s: float, params: RewardParams = RewardParams()):
-    """One step of the report's reward.
-
-    Returns
-    -------
-    reward, bonus : float or array
-        The reward ``r_t`` and the new bonus state ``r*_t`` (feed it back as ``previous_bonus``).
-    """
+    """One step of the reward (vectorised): ``(r_t, r*_t)``."""
     bonus = next_bonus(theta_rad, previous_bonus, dt_s, params)
     reward = shaping_reward(theta_rad, params.clip_value) + params.bonus_weight * np.asarray(bonus)
     return (float(reward) if np.ndim(reward) == 0 else reward), bonus

@@ -13,7 +13,7 @@ from softpend.checks import int_at_least, non_negative, one_of
 from softpend.envs.reward import RewardParams
 from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
 
-#: Angular rates and tip velocities are divided by this before entering the observation vector [1/s].
+#: Rates are divided by this in the observation vector [1/s].
 VELOCITY_SCALE_PER_S = 10.0
 
 OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
@@ -34,7 +34,10 @@ OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
 OBSERVATION_BOUND = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32)
 
 
-#: Start kinds of the environments' ``start`` argument and ``options["start"]``.
+#: Most torque levels of the discrete environments.
+MAX_TORQUE_LEVELS = 1001
+
+#: Start kinds of ``start`` and ``options["start"]``.
 STARTS = ("hanging", "upright", "random")
 
 
@@ -45,12 +48,9 @@ def reset_options(
     num_envs: Optional[int] = None,
     extra: tuple[str, ...] = (),
 ) -> tuple[str, Optional[tuple[np.ndarray, np.ndarray]]]:
-    """The start kind and exact start state that ``reset``'s ``options`` ask for, as Gymnasium's pendulum reads its
-    ``options``: ``"start"`` (one of :data:`STARTS`, default ``start``) and ``"q"``, ``"q_dot"`` (the exact joint
-    state, shape ``(n_coordinates,)``, or ``(num_envs, n_coordinates)`` for a vector environment; ``q_dot`` zero
-    when left out), returned as float64 ``(q, q_dot)`` or ``None``.  The start is drawn as without them, so that
-    the generators advance alike; the exact state replaces it.  Keys in ``extra`` are the caller's; any other key,
-    a shape or a non-finite value that does not fit is a ``ValueError``."""
+    """The start kind (``options["start"]``, default ``start``) and the exact start state ``(q, q_dot)`` of
+    ``options["q"]``, ``options["q_dot"]`` (one, or one per rod of a vector environment) or ``None``; keys in
+    ``extra`` are the caller's."""
     options = options or {}
     unknown = sorted(set(options) - {"start", "q", "q_dot", *extra})
     if unknown:
@@ -72,45 +72,32 @@ def reset_options(
     return start, (state[0], state[1])
 
 
+def draw_start(rng: np.random.Generator, start: str, noise_rad: float) -> tuple[float, float]:
+    """Hub angle and rate of a start of kind ``start``, drawn from ``rng``."""
+    hub = math.pi
+    if start == "upright":
+        hub = 0.0
+    elif start == "random":
+        hub = float(rng.uniform(-math.pi, math.pi))
+    return hub + float(rng.uniform(-noise_rad, noise_rad)), float(rng.uniform(-noise_rad, noise_rad))
+
+
+def check_torque_levels(n_torque_levels: int) -> int:
+    n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
+    if n_torque_levels > MAX_TORQUE_LEVELS:
+        raise ValueError(f"n_torque_levels must be at most {MAX_TORQUE_LEVELS}, got {n_torque_levels!r}")
+    return n_torque_levels
+
+
 class SoftPendulumEnv(gym.Env):
     """Swing-up and balance of a soft rod driven by a torque-limited motor at its base.
 
-    ## Description
-    A motor hub drives the base of a soft rod (a pseudo-rigid-body chain simulated with Exudyn, see
-    :class:`softpend.plant.PRBPlant`).  The rod starts hanging down; the goal is to bring the *tip* above
-    the hub and keep it there.  The torque limit is smaller than the torque needed to hold the rod
-    horizontal, so the controller has to pump energy over several swings.
-
-    ## Action Space
-    ``Box(-1, 1, (1,), float32)``: the base torque as a fraction of ``torque_limit_nm``.
-
-    ## Observation Space
-    ``Box(-bound, bound, (11,), float32)`` with, in order, ``cos(phi), sin(phi), cos(theta), sin(theta),
-    ex/L, ey/L, phi_dot/10, theta_dot/10, ex_dot/(10 L), ey_dot/(10 L), bonus``: base angle ``phi`` and tip
-    angle ``theta`` from upright, tip position ``(ex, ey)`` relative to the hub [m], their rates, and the
-    reward's bonus state ``r*`` (so that the reward is a function of the observation).  Velocity entries
-    are clipped to ``[-5, 5]`` (50 rad/s).  ``info["observation"]`` holds the report's raw variables
-    (:data:`softpend.plant.OBSERVATION_NAMES`).
-
-    ## Rewards
-    The report's eqs. 4-5 (:mod:`softpend.envs.reward`): ``clip(cot|theta|, -50, 50)/50`` plus a bonus of
-    1 per step inside ``|theta| < epsilon`` that decays at ``bonus_decay_per_s`` after leaving it.
-
-    ## Starting State
-    ``start="hanging"`` (default): ``phi = pi`` plus uniform noise of ``start_noise_rad`` on the hub angle
-    and rate; ``"upright"``: straight up plus the same noise; ``"random"``: hub angle uniform in
-    ``[-pi, pi)``.  All draws use ``self.np_random``.  ``reset(options={"q": q, "q_dot": q_dot})`` starts
-    exactly at that joint state (:func:`reset_options`).
-
-    ## Episode End
-    No terminal state: episodes are truncated after ``max_episode_steps`` (1000 steps = 10 s when made
-    with ``gymnasium.make``).  If the simulation diverges the step returns ``truncated=True`` with
-    ``info["truncation_reason"]`` and the last valid observation.
-
-    ## Arguments
-    ``params`` (RodParams), ``dt_s`` (0.01), ``substeps`` (2), ``torque_limit_nm`` (overrides
-    ``params.torque_limit_nm``), ``reward_params`` (RewardParams), ``start``, ``start_noise_rad``
-    (0.05), ``plant`` (``"prb"``; any name of :func:`softpend.plant.make_plant`).
+    Actions: ``Box(-1, 1, (1,))``, the torque as a fraction of ``torque_limit_nm``.  Observations:
+    :data:`OBSERVATION_VECTOR_NAMES` (rates clipped at 50 rad/s); ``info["observation"]`` holds the plant's.
+    Reward: :mod:`softpend.envs.reward`.  Starts: ``"hanging"``, ``"upright"`` (plus uniform noise of
+    ``start_noise_rad`` on hub angle and rate) or ``"random"``; ``reset(options={"q": ..., "q_dot": ...})``
+    starts at an exact state.  No terminal state; a diverged simulation truncates the episode with
+    ``info["truncation_reason"]``.  ``plant``: any name of :func:`softpend.plant.make_plant`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
@@ -145,15 +132,12 @@ class SoftPendulumEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         bound = OBSERVATION_BOUND.copy()
         self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
-        self._bound = bound
         self._bonus = 0.0
         self._bonus_decay = math.exp(-self.reward_params.bonus_decay_per_s * self.dt_s)
         self._observation: Optional[Observation] = None
 
-    # ------------------------------------------------------------------ helpers
     def observation_vector(self, o: Observation, bonus: float) -> np.ndarray:
-        """The observation vector of plant observation ``o`` with the reward's bonus state ``bonus`` (one step;
-        the batched twin is :func:`softpend.envs.observation_vector.observation_vector`, tested equal)."""
+        """The observation vector of plant observation ``o`` and the reward's bonus state ``bonus``."""
         inv_l = 1.0 / self.params.length_m
         inv_v = 1.0 / VELOCITY_SCALE_PER_S
         cap = 5.0
@@ -206,20 +190,12 @@ class SoftPendulumEnv(gym.Env):
             raise RuntimeError("call reset() first")
         return self._observation
 
-    # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None):
-        """Start an episode from the start distribution, or from the exact state of ``options`` (see
-        :func:`reset_options`: ``"start"``, ``"q"``, ``"q_dot"``)."""
+        """Start an episode; ``options`` as :func:`reset_options` reads them."""
         start, exact = reset_options(options, self.start, self.plant.n_coordinates)
         super().reset(seed=seed)
         q, qd = self.plant.hanging_state()
-        noise = self.start_noise_rad
-        if start == "upright":
-            q[0] = 0.0
-        elif start == "random":
-            q[0] = float(self.np_random.uniform(-math.pi, math.pi))
-        q[0] += float(self.np_random.uniform(-noise, noise))
-        qd[0] += float(self.np_random.uniform(-noise, noise))
+        q[0], qd[0] = draw_start(self.np_random, start, self.start_noise_rad)
         self._observation = self.plant.reset(*(exact if exact is not None else (q, qd)))
         self._bonus = 1.0 if abs(self._observation.theta_rad) < self.reward_params.epsilon_rad else 0.0
         return self.observation_vector(self._observation, self._bonus), {"observation": self._observation.as_array()}
@@ -245,32 +221,19 @@ class SoftPendulumEnv(gym.Env):
         return render_rod_rgb(self.plant.link_points_m(), self.params.length_m)
 
 
-#: Most torque levels of :class:`SoftPendulumDiscreteEnv`: 1001 (a DQN has one Q-network output per level;
-#: at the default 0.06 N m limit the levels are then 0.12 mN m apart, finer than any motor driver resolves).
-MAX_TORQUE_LEVELS = 1001
-
-
 class SoftPendulumDiscreteEnv(SoftPendulumEnv):
-    """:class:`SoftPendulumEnv` with ``Discrete(n_torque_levels)`` actions for DQN.
-
-    Action ``i`` applies ``torque_limit_nm * (-1 + 2 i / (n_torque_levels - 1))``: evenly spaced levels
-    from ``-torque_limit_nm`` to ``+torque_limit_nm`` (zero included when the count is odd).
-    Extra argument: ``n_torque_levels`` (default 5, at least 2, at most :data:`MAX_TORQUE_LEVELS`).
-    """
+    """:class:`SoftPendulumEnv` with ``Discrete(n_torque_levels)`` actions: evenly spaced torques from
+    ``-torque_limit_nm`` to ``+torque_limit_nm``."""
 
     def __init__(self, n_torque_levels: int = 5, **kwargs: Any) -> None:
-        n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
-        if n_torque_levels > MAX_TORQUE_LEVELS:
-            raise ValueError(f"n_torque_levels must be at most {MAX_TORQUE_LEVELS}, got {n_torque_levels!r}")
+        n_torque_levels = check_torque_levels(n_torque_levels)
         super().__init__(**kwargs)
         self.n_torque_levels = n_torque_levels
         self.torque_levels_nm = np.linspace(-1.0, 1.0, self.n_torque_levels) * self.torque_limit_nm
         self.action_space = spaces.Discrete(self.n_torque_levels)
 
     def torque_from_action(self, action) -> float:
-        """Torque [N m] of action ``action``: an integer in ``[0, n_torque_levels)`` (a Python or NumPy integer,
-        or an integer array holding one element, as policies return it); anything else -- a float such as
-        2.7, several elements, a bool -- is refused with ``ValueError``."""
+        """Torque [N m] of an integer action (or a one-element integer array) in ``[0, n_torque_levels)``."""
         value = action
         if isinstance(value, (list, tuple)):
             value = np.asarray(value) if all(isinstance(v, (int, np.integer)) for v in value) else None

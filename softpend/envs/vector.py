@@ -1,33 +1,11 @@
-"""Gymnasium vector environments of the soft pendulum task on the batched torch chain.
-
-:class:`SoftPendulumVectorEnv` runs ``num_envs`` copies of :class:`~softpend.envs.SoftPendulumEnv` at once on
-:class:`~softpend.plant.batched.BatchedPRBChain` (the PRB equations of the Exudyn plant, integrated for all rods
-together, by RK4 unless ``integrator="rosenbrock"``).  Observation, reward, start states and the episode limit are those of the single
-environment: the observation vector comes from :func:`softpend.envs.observation_vector.observation_vector`, the
-reward from :func:`softpend.envs.reward.step_reward`, and sub-environment ``i`` reset with seed ``s + i`` starts
-where the single environment reset with seed ``s + i`` starts.  Autoreset follows Gymnasium's ``NEXT_STEP``
-mode: the step after an episode ends resets that sub-environment (its action is ignored, reward 0).
-
-Per-rod parameter randomisation (``randomize_fraction``) draws, at every reset of a sub-environment and from
-its own generator, a factor uniform in ``[1 - f, 1 + f]`` for each field of ``randomized_fields``.
-
-Example::
-
-    import gymnasium as gym
-    import softpend  # registers the environments and their vector entry points
-
-    envs = gym.make_vec("softpend/SoftPendulum-v0", num_envs=1024, randomize_fraction=0.15)
-    observations, infos = envs.reset(seed=0)            # rod i seeded with 0 + i
-    observations, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
-
-The chain runs on torch's CPU threads; on a machine shared with other work, ``torch.set_num_threads(1)`` avoids
-threads waiting on each other.  ``info["observation"]`` holds the raw plant observations ``(num_envs, 10)``.
+"""Gymnasium vector environments of the soft pendulum task on the batched torch chain: ``num_envs`` copies of
+:class:`~softpend.envs.SoftPendulumEnv` (same observations, rewards, seeded starts), autoreset ``NEXT_STEP``,
+optional per-rod parameter randomisation drawn at each reset from the rod's own generator.
 """
 
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Any, Optional, Sequence
 
 import gymnasium as gym
@@ -42,7 +20,7 @@ from softpend import MAX_EPISODE_STEPS
 from softpend.checks import in_unit_interval, int_at_least, non_negative, one_of
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
-from softpend.envs.soft_pendulum import MAX_TORQUE_LEVELS, OBSERVATION_BOUND, STARTS, reset_options
+from softpend.envs.soft_pendulum import OBSERVATION_BOUND, STARTS, check_torque_levels, draw_start, reset_options
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import INTEGRATORS, PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
 from softpend.plant.randomisation import RANDOMISED_FIELDS
@@ -55,41 +33,10 @@ _THETA = OBSERVATION_NAMES.index("theta_rad")
 class SoftPendulumVectorEnv(gym.vector.VectorEnv):
     """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod).
 
-    Parameters
-    ----------
-    num_envs : int
-        Number of sub-environments (rods) ``B``.
-    params : RodParams, optional
-        The nominal rod (default :class:`~softpend.plant.RodParams`).
-    dt_s : float
-        Control step [s].
-    substeps : int, optional
-        Integrator sub-steps per control step (not the Exudyn plant's ``substeps``).  For ``"rk4"`` the default
-        and least allowed is the stability limit of the stiffest rod that randomisation can draw
-        (:func:`softpend.plant.batched.stable_substeps`); for ``"rosenbrock"`` the default is
-        :data:`softpend.plant.batched.ROSENBROCK_SUBSTEPS`.
-    integrator : {"rk4", "rosenbrock"}
-        The chain's integrator (:class:`~softpend.plant.batched.BatchedPRBChain`): ``"rk4"`` (default, the most
-        accurate) or ``"rosenbrock"`` (cheaper per step, stable at any step, less accurate at ``n = 4``).
-    compiled : bool
-        Step the chain through ``torch.compile`` (the first step compiles, about 20 s; later ones are faster).
-    torque_limit_nm : float, optional
-        Overrides ``params.torque_limit_nm``.
-    reward_params : RewardParams, optional
-        The reward (as the single environment).
-    start : {"hanging", "upright", "random"}
-        Start state, as the single environment (``options={"start": ...}`` overrides it at a reset).
-    start_noise_rad : float
-        Uniform noise on the start hub angle [rad] and hub rate [rad/s].
-    max_episode_steps : int
-        Episodes are truncated after this many steps (default :data:`softpend.MAX_EPISODE_STEPS`).
-    randomize_fraction : float
-        Half-width ``f`` of the per-rod parameter factors (0 = every rod is ``params``); in ``[0, 0.9]``.
-    randomized_fields : sequence of str
-        :class:`RodParams` fields that are randomised (default :data:`softpend.plant.randomisation.RANDOMISED_FIELDS`, the fields the Exudyn training wrapper and the
-        robustness evaluation randomise).
-    plant : str
-        Only ``"prb"`` (the PRB chain); accepted so that the single environment's arguments pass through.
+    ``substeps``: integrator sub-steps (RK4: at least the stability limit of the stiffest rod randomisation can
+    draw); ``randomize_fraction``: half-width ``f`` in ``[0, 0.9]`` of the factors on ``randomized_fields``;
+    ``plant``: only ``"prb"``.  The other arguments are those of :class:`~softpend.envs.SoftPendulumEnv` and
+    :class:`~softpend.plant.batched.BatchedPRBChain`.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -154,7 +101,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self.dt_s = self.chain.dt_s
         self.torque_limit_nm = params.torque_limit_nm
 
-        # the single environment's spaces
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.single_observation_space = spaces.Box(-OBSERVATION_BOUND, OBSERVATION_BOUND, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -172,9 +118,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self._rngs: list[Optional[np.random.Generator]] = [None] * b
         self._seeds: list[Optional[int]] = [None] * b
 
-    # ------------------------------------------------------------------ construction helpers
     def _corner_rods(self) -> BatchedRodParams:
-        """Every corner of the randomisation box (for the stability limit of the sub-steps)."""
+        """Every corner of the randomisation box."""
         f = self.randomize_fraction
         if f == 0 or not self.randomized_fields:
             return BatchedRodParams.from_params(self.params)
@@ -182,7 +127,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         base = BatchedRodParams.from_params(self.params, batch_size=len(corners))
         return base.scaled(**{name: corners[:, i] for i, name in enumerate(self.randomized_fields)})
 
-    # ------------------------------------------------------------------ properties
     @property
     def rod_params(self) -> BatchedRodParams:
         """The rods now simulated (after randomisation)."""
@@ -190,16 +134,15 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
 
     @property
     def np_random_seed(self) -> tuple[Optional[int], ...]:  # type: ignore[override]  # one per rod
-        """The seed of each sub-environment's generator (as ``SyncVectorEnv`` reports them)."""
+        """The seed of each sub-environment's generator."""
         return tuple(self._seeds)
 
     def joint_state(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(q, q_dot)`` of every rod, shape ``(num_envs, n + 1)`` (copies)."""
         return self._q.clone(), self._qd.clone()
 
-    # ------------------------------------------------------------------ actions
     def torques_from_actions(self, actions: Any) -> np.ndarray:
-        """Hub torques [N m] for a batch of actions (``(num_envs, 1)`` or ``(num_envs,)``, clipped to [-1, 1])."""
+        """Hub torques [N m] for actions ``(num_envs, 1)`` or ``(num_envs,)``."""
         a = np.asarray(actions, dtype=np.float64)
         if a.shape == (self.num_envs, 1):
             a = a[:, 0]
@@ -209,24 +152,16 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             raise ValueError("actions must be finite")
         return np.clip(a, -1.0, 1.0) * self._torque_limits
 
-    # ------------------------------------------------------------------ resets
     def _draw_starts(
         self, indices: np.ndarray, start: str, exact: Optional[tuple[np.ndarray, np.ndarray]] = None
     ) -> None:
-        """New start states (and parameters) of the rods ``indices``, each from its own generator, in the
-        single environment's order of draws; rows ``indices`` of ``exact`` replace the drawn states."""
-        noise = self.start_noise_rad
+        """New start states (and parameters) of the rods ``indices``, each from its own generator; rows
+        ``indices`` of ``exact`` replace the drawn states."""
         q = np.zeros((len(indices), self.chain.n_coordinates))
         qd = np.zeros_like(q)
         for row, i in enumerate(indices):
             rng = self._rngs[i]
-            hub = math.pi
-            if start == "upright":
-                hub = 0.0
-            elif start == "random":
-                hub = float(rng.uniform(-math.pi, math.pi))
-            q[row, 0] = hub + float(rng.uniform(-noise, noise))
-            qd[row, 0] = float(rng.uniform(-noise, noise))
+            q[row, 0], qd[row, 0] = draw_start(rng, start, self.start_noise_rad)
             if self.randomize_fraction > 0 and self.randomized_fields:
                 f = self.randomize_fraction
                 self._factors[i] = 1.0 + rng.uniform(-f, f, len(self.randomized_fields))
@@ -247,13 +182,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             return self.chain.observations(self._q, self._qd).numpy()
 
     def reset(self, *, seed: Optional[int | Sequence[Optional[int]]] = None, options: Optional[dict[str, Any]] = None):
-        """Reset every sub-environment (or those of ``options["reset_mask"]``).
-
-        ``seed``: ``None`` (keep each generator; a fresh random one if never seeded), an int ``s`` (seeds
-        ``s, s + 1, ...``) or one seed per sub-environment.  ``options``: ``"start"``, and ``"q"``, ``"q_dot"``
-        (exact states, one for every rod or one per rod) as :func:`softpend.envs.soft_pendulum.reset_options`
-        reads them, and ``"reset_mask"``.
-        """
+        """Reset every sub-environment, or those of ``options["reset_mask"]``; ``seed``: ``None`` (keep the
+        generators), ``s`` (seeds ``s, s + 1, ...``) or one per sub-environment."""
         start, exact = reset_options(options, self.start, self.chain.n_coordinates, self.num_envs, ("reset_mask",))
         if seed is None:
             seeds: list[Optional[int]] = [None] * self.num_envs
@@ -282,7 +212,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         vectors = observation_vector(observations, self._bonus, self)
         return vectors, {"observation": observations.copy(), "_observation": mask.copy()}
 
-    # ------------------------------------------------------------------ stepping
     def step(self, actions):
         if self._observations is None:
             raise RuntimeError("call reset() before step()")
@@ -305,7 +234,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self._steps += 1
         truncated = (self._steps >= self.max_episode_steps) | diverged
         terminated = np.zeros(self.num_envs, dtype=bool)
-        # infos as SyncVectorEnv gathers them: each key beside a "_key" mask of the sub-environments that set it
         info: dict[str, Any] = {"torque_nm": np.where(resetting, 0.0, torques), "_torque_nm": ~resetting}
         if diverged.any():
             info["truncation_reason"] = np.where(diverged, "simulation diverged: non-finite state", None)
@@ -329,14 +257,10 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
 
 
 class SoftPendulumDiscreteVectorEnv(SoftPendulumVectorEnv):
-    """:class:`SoftPendulumVectorEnv` with ``Discrete(n_torque_levels)`` actions per rod, as
-    :class:`~softpend.envs.SoftPendulumDiscreteEnv`: action ``i`` applies
-    ``torque_limit_nm * (-1 + 2 i / (n_torque_levels - 1))`` with each rod's own torque limit."""
+    """:class:`SoftPendulumVectorEnv` with the actions of :class:`~softpend.envs.SoftPendulumDiscreteEnv`."""
 
     def __init__(self, num_envs: int = 1, n_torque_levels: int = 5, **kwargs: Any) -> None:
-        n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
-        if n_torque_levels > MAX_TORQUE_LEVELS:
-            raise ValueError(f"n_torque_levels must be at most {MAX_TORQUE_LEVELS}, got {n_torque_levels!r}")
+        n_torque_levels = check_torque_levels(n_torque_levels)
         super().__init__(num_envs=num_envs, **kwargs)
         self.n_torque_levels = n_torque_levels
         self._levels = np.linspace(-1.0, 1.0, n_torque_levels)

@@ -57,16 +57,6 @@ class AggregateInterval:
     n_runs: int
     confidence: float
 
-    def as_dict(self) -> dict[str, float | str | int]:
-        return {
-            "statistic": self.statistic,
-            "value": self.value,
-            "low": self.low,
-            "high": self.high,
-            "n_runs": self.n_runs,
-            "confidence": self.confidence,
-        }
-
 
 def aggregate_interval(
     scores: Sequence[float] | np.ndarray,

@@ -76,17 +76,8 @@ class PilcoConfig:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         state_spec(self.state)
-        for name in (
-            "control_dt_s",
-            "horizon_s",
-            "cost_width_m",
-            "initial_std",
-            "eval_duration_s",
-            "target_std_rad",
-            "random_hold_min_s",
-            "random_hold_max_s",
-            "restart_target_std",
-        ):
+        positives = "control_dt_s horizon_s cost_width_m initial_std eval_duration_s target_std_rad random_hold_min_s"
+        for name in f"{positives} random_hold_max_s restart_target_std".split():
             positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
@@ -106,15 +97,8 @@ class PilcoConfig:
                 f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
                 "(None predicts the trial's length)"
             )
-        for name, low in (
-            ("n_policy_trials", 0),
-            ("n_random_trials", 1),
-            ("n_basis", 1),
-            ("max_gp_points", 10),
-            ("gp_iterations", 1),
-            ("policy_iterations", 1),
-            ("policy_restarts", 0),
-        ):
+        lows = {"n_policy_trials": 0, "n_random_trials": 1, "n_basis": 1, "max_gp_points": 10, "gp_iterations": 1}
+        for name, low in {**lows, "policy_iterations": 1, "policy_restarts": 0}.items():
             setattr(self, name, int_at_least(name, getattr(self, name), low))
         fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
         if fraction >= 1.0:
@@ -513,39 +497,28 @@ def run_pilco(
     callback: Optional[Callable[[TrialRecord], None]] = None,
 ) -> PilcoResult:
     """Run PILCO on the plant (see the module docstring)."""
-    with one_torch_thread():
-        return _run_pilco(config, progress, callback)
-
-
-def _run_pilco(
-    config: Optional[PilcoConfig], progress: bool, callback: Optional[Callable[[TrialRecord], None]]
-) -> PilcoResult:
-    """:func:`run_pilco` on the caller's torch threads: the random trials, then model, policy and a policy trial
-    until a policy balances or ``n_policy_trials`` have run."""
     from tqdm.auto import tqdm
 
-    pilco = Pilco(config if config is not None else PilcoConfig())
-    for _ in range(pilco.config.n_random_trials):
-        record = pilco.random_trial()
-        if callback:
+    callback = callback or (lambda record: None)
+    with one_torch_thread():
+        pilco = Pilco(config if config is not None else PilcoConfig())
+        for _ in range(pilco.config.n_random_trials):
+            callback(pilco.random_trial())
+        pilco.start_policy()
+        bar = tqdm(range(pilco.config.n_policy_trials), desc="PILCO trials", disable=not progress)
+        for _ in bar:
+            pilco.optimize_models()
+            search = pilco.optimize_policy()
+            record = pilco.policy_trial(search)
             callback(record)
-    pilco.start_policy()
-    bar = tqdm(range(pilco.config.n_policy_trials), desc="PILCO trials", disable=not progress)
-    for _ in bar:
-        pilco.optimize_models()
-        search = pilco.optimize_policy()
-        record = pilco.policy_trial(search)
-        if callback:
-            callback(record)
-        bar.set_postfix(
-            real_s=f"{record.plant_seconds_total:.0f}",
-            cost=f"{record.real_cost:.1f}/{search.predicted_cost:.1f}",
-            std=f"{record.eval_upright_std_rad:.2f}",
-        )
-        if record.balanced:
-            break
-    bar.close()
-    return pilco.result()
+            cost = f"{record.real_cost:.1f}/{search.predicted_cost:.1f}"
+            bar.set_postfix(
+                real_s=f"{record.plant_seconds_total:.0f}", cost=cost, std=f"{record.eval_upright_std_rad:.2f}"
+            )
+            if record.balanced:
+                break
+        bar.close()
+        return pilco.result()
 
 
 @dataclass
@@ -642,17 +615,12 @@ class Pilco:
         config, spec = self.config, self.spec
         assert self.policy is not None and self.gp is not None, "start_policy and optimize_models come first"
         rate_width, width_m, n_search = self._cost()
+        length_m, exploration = config.task.rod.length_m, config.cost_exploration
         propagator = Propagator(
-            spec,
-            self.gp,
-            self.policy,
-            config.task.rod.length_m,
-            width_m,
-            rate_width,
-            config.cost_exploration,
-            compiled=config.compiled,
+            spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, compiled=config.compiled
         )
         restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
+        visited = (np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1])
         objective, n_restarts = _search_with_restarts(
             config,
             propagator,
@@ -660,11 +628,10 @@ class Pilco:
             self.m0,
             self.s0,
             spec,
-            np.vstack(self.real_states),
-            np.vstack(self.inputs)[:, :-1],
+            *visited,
             restart_rng,
             n_search,
-            restart=self.n_searches > 0,
+            self.n_searches > 0,
         )
         self.n_searches += 1
         predicted = self._predict(propagator, n_search, objective)

@@ -7,7 +7,6 @@ import functools
 import torch
 
 __all__ = [
-    "chain_covariance",
     "gp_moments",
     "pair_weights",
     "rbf_network_moments",
@@ -245,8 +244,3 @@ def saturating_cost_moments(
     s2 = w @ _inv(s2w)
     e2 = torch.exp(-delta @ s2 @ delta) / torch.sqrt(torch.linalg.det(s2w))
     return 1.0 - e_exp, torch.clamp(e2 - e_exp * e_exp, min=0.0)
-
-
-def chain_covariance(cov_with_input: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
-    """``cov(z, y) = cov(z, x) @ C`` for ``y = f(x)`` with ``C = cov(x)^{-1} cov(x, y)`` (jointly Gaussian ``z, x``)."""
-    return cov_with_input @ c

@@ -10,11 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from softpend.checks import finite
+from softpend.checks import boolean, finite, optional_positive, positive
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 from softpend.plant import OBSERVATION_NAMES
 
-__all__ = ["COMPILER_NOTES", "STATE_SPECS", "Propagator", "StateSpec", "silence_compiler_notes", "state_spec"]
+__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "silence_compiler_notes", "state_spec"]
 
 DTYPE = torch.float64
 
@@ -107,14 +107,10 @@ class Propagator:
         exploration: float = 0.0,
         compiled: bool = False,
     ) -> None:
-        if not length_m > 0:
-            raise ValueError(f"length_m must be positive, got {length_m!r}")
-        if not cost_width_m > 0:
-            raise ValueError(f"cost_width_m must be positive, got {cost_width_m!r}")
-        if cost_rate_width_rad_s is not None and not cost_rate_width_rad_s > 0:
-            raise ValueError(f"cost_rate_width_rad_s must be positive or None, got {cost_rate_width_rad_s!r}")
-        if not isinstance(compiled, bool):
-            raise ValueError(f"compiled must be True or False, got {compiled!r}")
+        positive("length_m", length_m)
+        positive("cost_width_m", cost_width_m)
+        optional_positive("cost_rate_width_rad_s", cost_rate_width_rad_s)
+        boolean("compiled", compiled)
         if compiled and not all(hasattr(m, "moment_function") for m in (dynamics, policy)):
             raise ValueError("a compiled propagation needs dynamics and a policy with moment_function()")
         self.cost_rate_width_rad_s = None if cost_rate_width_rad_s is None else float(cost_rate_width_rad_s)
@@ -300,18 +296,10 @@ def _compiled_step_and_cost():
     return _COMPILED[0]
 
 
-#: What torch's compiler warns of while it compiles the rollout step (forward and backward graph), once per graph:
-#: ``(message, category)``, each from a torch module.
-COMPILER_NOTES = (
-    ("Dynamo detected a call to a `functools.lru_cache`", UserWarning),
-    ("`torch._prims_common.check` is deprecated", FutureWarning),
-)
-
-
 def silence_compiler_notes() -> None:
-    """Ignore :data:`COMPILER_NOTES` in this process, from the first compiled rollout on."""
-    for message, category in COMPILER_NOTES:
-        warnings.filterwarnings("ignore", message=message, category=category, module="torch")
+    """Ignore the notes torch's compiler warns of while it compiles the rollout step."""
+    warnings.filterwarnings("ignore", "Dynamo detected a call to a `functools.lru_cache`", UserWarning, "torch")
+    warnings.filterwarnings("ignore", "`torch._prims_common.check` is deprecated", FutureWarning, "torch")
 
 
 def _quiet_c_shim_notes(record: logging.LogRecord) -> bool:

@@ -1,14 +1,5 @@
-"""The training runs of several methods in one pool of workers, and the runs the book's notebooks read.
-
-Training one method after another leaves workers idle while each method's last runs finish; one pool over all
-the runs (:func:`softpend.study.sweep.run_jobs`) keeps every worker busy until the last few.
-:func:`train_in_one_pool` starts PILCO's runs first (a run that never balances spends its whole budget), then
-DQN-MBPO's, then DQN's, the shortest, which fill the end.  The runs, their folders and their reuse are those of
-:func:`softpend.study.rl_runs.train_seeds` and :func:`softpend.study.head_to_head.pilco_runs`, which then find
-them finished: the pool changes when a run trains, never what it computes.  :func:`train_book` (``softpend sweep
---book``, the first step of ``make book``) trains the runs that the book's notebooks read under a profile, so
-that ``softpend book`` only executes notebooks.
-"""
+"""The training runs of several methods in one pool of workers (PILCO's first, DQN's last), and the runs the
+book's notebooks read (``softpend sweep --book``); the pool changes when a run trains, never what it computes."""
 
 from __future__ import annotations
 
@@ -33,8 +24,7 @@ Job = tuple[str, tuple[Any, ...]]
 
 
 def _order(jobs: Sequence[Job]) -> list[Job]:
-    """PILCO's runs first (one that never balances spends its whole budget), then DQN-MBPO's, then DQN's, the
-    shortest, which fill the end; a name's last part is ``<method>-seed<k>``."""
+    """PILCO's runs first (the longest), then DQN-MBPO's, then DQN's; a name ends with ``<method>-seed<k>``."""
     rank = {"pilco": 0, "mbpo": 1, "dqn": 2}
     return sorted(jobs, key=lambda job: rank.get(job[0].rsplit("/", 1)[-1].split("-")[0], 3))
 
@@ -49,11 +39,9 @@ def train_in_one_pool(
     progress: bool = True,
     backend: Optional[str] = None,
 ) -> int:
-    """Train every run still missing, RL (``(algo, config, seeds, episodes)`` each, as for
-    :func:`softpend.study.rl_runs.train_seeds`, under ``rl_root``) and PILCO (``pilco_config`` with each of
-    ``pilco_seeds``, under ``pilco_root``, default ``rl_root``), in one pool; returns how many were trained.  The
-    runs and folders are those of ``train_seeds`` and :func:`softpend.study.head_to_head.pilco_runs`, which then
-    find them finished."""
+    """Train the missing runs of ``rl_specs`` (``(algo, config, seeds, episodes)`` each, under ``rl_root``) and of
+    ``pilco_config`` over ``pilco_seeds`` (under ``pilco_root``, default ``rl_root``) in one pool; returns how
+    many were trained."""
     jobs: list[Job] = []
     if pilco_config is not None and len(pilco_seeds):
         root = Path(rl_root if pilco_root is None else pilco_root)
@@ -65,21 +53,12 @@ def train_in_one_pool(
 
 def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend: Optional[str]) -> int:
     if jobs:
-        run_jobs(
-            call_job,
-            [args for _, args in jobs],
-            [name for name, _ in jobs],
-            workers,
-            progress,
-            desc="training runs",
-            backend=backend,
-        )
+        run_jobs(call_job, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "training runs", backend)
     return len(jobs)
 
 
-#: The run sets a book notebook may read (front matter ``softpend: {book_runs: [...]}``): ``"rl"``, DQN and
-#: DQN-MBPO over the book's seeds (Figures 4-6); ``"pilco"``, PILCO over its seeds (Figure 10); ``"first_seed"``,
-#: the three methods' runs of the first seed (the learned controllers of the rig chapter).
+#: The run sets a notebook may read (front matter ``softpend: {book_runs: [...]}``): DQN and DQN-MBPO over the
+#: book's seeds, PILCO over its seeds, the three methods' runs of the first seed.
 BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 
@@ -89,13 +68,10 @@ def book_run_jobs(
     parameters: Optional[dict[str, Any]] = None,
     claimed: Optional[set[str]] = None,
 ) -> list[Job]:
-    """The runs of ``run_sets`` still missing under ``root``, named by folder (``runs/rl-book/dqn-seed0``), with
-    the settings the notebooks that read them train with (:mod:`softpend.study.presets`, ``book/hparams``), the
-    training parameters of ``parameters`` (a notebook's profile values: ``episodes_dqn``, ``episodes_mbpo``,
-    ``seeds``, ``runs_root``, ``rl_overrides``, ``pilco_seeds``, ``pilco_runs_root``, ``pilco_overrides``,
-    ``task_overrides``) in their place.  The plant is the book's (``--set plant=...`` runs train in the notebooks).
-    A folder in ``claimed`` (those an earlier notebook reads, finished or not) is left to it; this call's folders
-    are added to ``claimed``."""
+    """The missing runs of ``run_sets`` under ``root``, named by folder, with the settings the notebooks train
+    with and a notebook's profile ``parameters`` (``episodes_dqn``, ``seeds``, ``runs_root``, ``rl_overrides``,
+    ``pilco_seeds``, ...) in their place; a folder in ``claimed`` (an earlier notebook's) is left out, and this
+    call's folders are added to it."""
     if not isinstance(run_sets, (list, tuple)) or not set(run_sets) <= set(BOOK_RUN_SETS):
         raise ValueError(f"run sets (softpend.book_runs) must be a list among {list(BOOK_RUN_SETS)}, got {run_sets!r}")
     given = dict(parameters or {})
@@ -135,9 +111,8 @@ def book_run_jobs(
 
 
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
-    """The training runs still missing that the book's notebooks read under ``profile``: for every toc notebook
-    with ``softpend: {book_runs: [...]}``, :func:`book_run_jobs` with its profile parameters; a folder that two
-    notebooks read is the first's in toc order (the rig chapter reads Figure 4's runs with their settings)."""
+    """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook; a
+    folder two notebooks read is the first's)."""
     layout = BookLayout.at(root)
     toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
     if profile not in profiles:
@@ -160,8 +135,7 @@ def train_book(
     progress: bool = True,
     backend: Optional[str] = None,
 ) -> dict[str, Any]:
-    """Train :func:`book_jobs` in one pool and record what was trained, in how long, in
-    ``book/_generated/training.json`` (the execution page shows it); returns that record."""
+    """Train :func:`book_jobs` in one pool and write (and return) the record the execution page shows."""
     jobs, start = book_jobs(root, profile), time.perf_counter()
     workers = default_workers() if workers is None else workers
     _train(jobs, workers, progress, backend)

@@ -1,27 +1,6 @@
-"""Independent runs (methods x seeds) on a parallel engine: joblib's ``loky`` process pool by default, Ray or
-Dask when installed and asked for.
-
-The book's figures and ``softpend sweep`` rest on runs that each use one core (torch is held to one thread in
-every worker) and write their results to their own folder.  :func:`run_jobs` hands such jobs to
-:class:`joblib.Parallel`; the workers return nothing but a status, and the caller reads the results back from
-disk, so no result crosses a process boundary as a pickle and a finished run is kept whatever happens to the
-others.  A job that raises is reported by name (its run is deterministic, so it is not run again); a job
-whose worker process dies is retried (``retries`` times); the runs that finished are never run again.
-
-A job's numbers do not depend on where it runs: each run seeds everything it draws from its own seed, and a
-test checks that runs trained through the engine equal the same runs trained in the calling process.
-
-Every method's runs share one pool (:mod:`softpend.study.run_pool`), which also trains the runs the book's
-notebooks read (``softpend sweep --book``).
-
-Backends
---------
-``"loky"`` (default; joblib's robust process pool, started fresh, so a script that sweeps needs no
-``if __name__ == "__main__":`` guard for the workers' sake), ``"ray"`` (``ray.util.joblib``; connects to
-a running cluster through ``RAY_ADDRESS`` or starts a local one), ``"dask"`` (``dask.distributed``: the
-client of ``DASK_SCHEDULER_ADDRESS`` or a local cluster).  ``$SOFTPEND_BACKEND`` picks the default and
-``$SOFTPEND_WORKERS`` caps the number of workers (``1`` runs every job in the calling process).
-"""
+"""Independent jobs (methods x seeds) that write their results to disk, on joblib's ``loky`` process pool or on
+Ray or Dask: a job that raises is reported by name, one whose worker dies is retried, finished jobs are kept.
+``$SOFTPEND_BACKEND`` picks the default backend, ``$SOFTPEND_WORKERS`` caps the workers (1: run in-process)."""
 
 from __future__ import annotations
 
@@ -31,19 +10,19 @@ import traceback
 import warnings
 from typing import Any, Callable, Iterator, Optional, Sequence
 
+from softpend.checks import int_at_least, one_of
+
 __all__ = ["BACKENDS", "SweepFailed", "call_job", "check_backend", "default_backend", "default_workers", "run_jobs"]
 
-#: Environment variable that caps the number of workers (``1`` runs every job in the caller).
 WORKERS_ENV = "SOFTPEND_WORKERS"
-#: Environment variable that picks the default backend.
 BACKEND_ENV = "SOFTPEND_BACKEND"
-#: Backends :func:`run_jobs` accepts.
 BACKENDS = ("loky", "ray", "dask")
+#: The error of a job whose worker process died (after every retry).
+LOST = "its worker process died (killed, out of memory or crashed)"
 
 
 class SweepFailed(RuntimeError):
-    """Some jobs failed after every retry; ``failures`` maps each job's name to its last error (the other
-    jobs finished and their results are on disk)."""
+    """Jobs that failed after every retry; ``failures``: job name -> last error."""
 
     def __init__(self, desc: str, failures: dict[str, str]) -> None:
         names = ", ".join(repr(n) for n in failures)
@@ -53,33 +32,28 @@ class SweepFailed(RuntimeError):
 
 
 def default_workers() -> int:
-    """Workers to use: ``$SOFTPEND_WORKERS`` if set, else the CPU cores this process may use."""
+    """``$SOFTPEND_WORKERS`` if set, else the CPU cores this process may use."""
     value = os.environ.get(WORKERS_ENV)
-    if value is not None:
-        try:
-            workers = int(value)
-        except ValueError:
-            raise ValueError(f"{WORKERS_ENV} must be a positive integer, got {value!r}") from None
-        if workers < 1:
-            raise ValueError(f"{WORKERS_ENV} must be a positive integer, got {value!r}")
-        return workers
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+    if value is None:
+        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+    try:
+        workers = int(value)
+    except ValueError:
+        workers = 0
+    if workers < 1:
+        raise ValueError(f"{WORKERS_ENV} must be a positive integer, got {value!r}")
+    return workers
 
 
 def default_backend() -> str:
-    """``$SOFTPEND_BACKEND`` if set (checked), else ``"loky"``."""
-    backend = os.environ.get(BACKEND_ENV, "loky")
-    if backend not in BACKENDS:
-        raise ValueError(f"{BACKEND_ENV} must be one of {list(BACKENDS)}, got {backend!r}")
-    return backend
+    """``$SOFTPEND_BACKEND`` if set, else ``"loky"``."""
+    return one_of(BACKEND_ENV, os.environ.get(BACKEND_ENV, "loky"), BACKENDS)
 
 
 def _guarded(
     job: Callable[..., None], args: tuple[Any, ...], name: str, progress: bool, one_thread: bool = True
 ) -> tuple[str, Optional[str]]:
-    """Run one job (in a worker: with one torch thread, see :func:`run_jobs`);
-    ``(name, None)`` on success, ``(name, traceback)`` if it raised (an exception never crosses back as a
-    pickled object)."""
+    """Run one job: ``(name, None)`` on success, ``(name, traceback)`` if it raised."""
     if one_thread:
         import torch
 
@@ -92,13 +66,10 @@ def _guarded(
 
 
 def check_backend(backend: str) -> str:
-    """``backend`` if it is one of :data:`BACKENDS` and its package is installed; ``ValueError`` naming what is
-    missing otherwise (checked before any run, whatever the number of jobs: an engine asked for is never
-    silently replaced by running in-process)."""
+    """``backend`` if it is known and its package is installed, else ``ValueError`` (checked before any run)."""
     import importlib.util
 
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    one_of("backend", backend, BACKENDS)
     needs = {"ray": ("ray", "ray[default]"), "dask": ("distributed", "dask[distributed]")}.get(backend)
     if needs is not None and importlib.util.find_spec(needs[0]) is None:
         what = "the ray package" if backend == "ray" else "dask.distributed"
@@ -111,24 +82,19 @@ def _engine(backend: str) -> Iterator[None]:
     """Make ``backend`` joblib's active backend (registering Ray's or Dask's first)."""
     import joblib
 
-    if backend == "loky":
-        yield
-        return
     if backend == "ray":
-        try:
-            from ray.util.joblib import register_ray
-        except ImportError:
-            raise ValueError("backend 'ray' needs the ray package (pip install 'ray[default]')") from None
+        from ray.util.joblib import register_ray
+
         register_ray()
         with joblib.parallel_config(backend="ray"):
             yield
-        return
-    try:
+    elif backend == "dask":
         from dask.distributed import Client
-    except ImportError:
-        raise ValueError("backend 'dask' needs dask.distributed (pip install 'dask[distributed]')") from None
-    address = os.environ.get("DASK_SCHEDULER_ADDRESS")
-    with Client(address) if address else Client(processes=True), joblib.parallel_config(backend="dask"):
+
+        address = os.environ.get("DASK_SCHEDULER_ADDRESS")
+        with Client(address) if address else Client(processes=True), joblib.parallel_config(backend="dask"):
+            yield
+    else:
         yield
 
 
@@ -142,52 +108,21 @@ def run_jobs(
     backend: Optional[str] = None,
     retries: int = 1,
 ) -> None:
-    """Call ``job(*args)`` for every ``args`` in ``jobs`` on the parallel engine, retrying failures.
-
-    Parameters
-    ----------
-    job : callable
-        A module-level function (workers import it by name) that writes its results to disk.  It is called
-        as ``job(*args, progress=...)``: with this function's ``progress`` in this process, ``False`` in a
-        worker.
-    jobs : sequence of tuples
-        The arguments of each call, in the order to start them (put the longest first).
-    names : sequence of str
-        One distinct name per job, used in the progress bar and in errors.
-    workers : int, optional
-        Workers to use; default :func:`default_workers`.  With 1 (or a single job) the calls run one after
-        another in this process.
-    progress : bool
-        Show a bar over finished jobs (only when jobs run in workers).
-    desc : str
-        Label of the progress bar and of errors.
-    backend : {"loky", "ray", "dask"}, optional
-        The engine (default :func:`default_backend`).
-    retries : int
-        How often a job whose worker died is run again before giving up (a job that raised is not retried:
-        it would raise again).
-
-    Raises
-    ------
-    SweepFailed
-        Naming every job that still failed after ``retries`` retries; all other jobs have finished.
-    ValueError
-        On inconsistent arguments or an unavailable backend.
-    """
+    """Call ``job(*args, progress=...)`` (a module-level function that writes its results to disk; ``progress``
+    False in a worker) for every ``args`` of ``jobs`` (named by ``names``, started in order), ``workers`` at a
+    time (1: one after another in this process), retrying ``retries`` times a job whose worker died;
+    :class:`SweepFailed` names the jobs that still failed once every other job has finished."""
     if len(jobs) != len(names):
         raise ValueError(f"got {len(jobs)} jobs but {len(names)} names")
     if len(set(names)) != len(names):
         raise ValueError(f"job names must be distinct, got {list(names)}")
-    workers = default_workers() if workers is None else workers
-    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
-    if isinstance(retries, bool) or int(retries) != retries or retries < 0:
-        raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+    workers = int_at_least("workers", default_workers() if workers is None else workers, 1)
+    retries = int_at_least("retries", retries, 0)
     backend = check_backend(default_backend() if backend is None else backend)
-    workers = min(int(workers), max(1, len(jobs)))
+    workers = min(workers, max(1, len(jobs)))
     pending = dict(zip(names, jobs))
     failures: dict[str, str] = {}
-    for attempt in range(int(retries) + 1):
+    for attempt in range(retries + 1):
         raised, lost = _run_round(
             job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""), backend
         )
@@ -201,20 +136,14 @@ def run_jobs(
 
 
 def call_job(job: Callable[..., None], *args: Any, progress: bool = True) -> None:
-    """Call ``job(*args, progress=progress)``: the job function of a :func:`run_jobs` pool whose jobs call
-    different functions (each argument tuple starts with its own module-level function)."""
+    """The job function of a pool whose jobs call different functions (each ``args`` starts with its own)."""
     job(*args, progress=progress)
-
-
-#: The error of a job whose worker process died (after every retry).
-LOST = "its worker process died (killed, out of memory or crashed)"
 
 
 def _run_round(
     job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str, backend: str
 ) -> tuple[dict[str, str], set[str]]:
-    """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker
-    died)``."""
+    """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker died)``."""
     if workers <= 1:
         raised: dict[str, str] = {}
         for name, args in pending.items():
@@ -229,8 +158,7 @@ def _run_round(
     finished: set[str] = set()
     raised = {}
     try:
-        # loky's check after a job takes a worker's growth past 300 MB (PILCO's) for a leak and starts a fresh
-        # worker for the next job (no job is lost): no warning for that
+        # loky replaces a worker that grew past its memory check; no job is lost
         warnings.filterwarnings(
             "ignore",
             message="A worker stopped while some jobs were given to the executor",

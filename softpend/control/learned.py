@@ -1,19 +1,5 @@
-"""Classical designs on the learned dynamics model (the report's suggestion): linearisation, LQR, PID tuning.
-
-The learned model (:class:`softpend.sysid.DynamicsModel` or an ensemble; anything with ``layout``,
-``dt_s`` and ``predict_next(state (B, d), torque_nm (B,)) -> (B, d)``) predicts the next *observed* state
-in the layout :mod:`softpend.sysid.layout` describes (full information: the report's observed variables;
-limited: hub angle and tip position with lagged frames).  Here:
-
-* :func:`upright_state_vector` builds the model's state of the straight rod at rest upright;
-* :func:`linearise_learned_model` gives ``x+ = A x + B tau`` at that state by autograd
-  (``torch.autograd.functional.jacobian`` in float64);
-* :func:`lqr_from_learned_model` designs a discrete LQR on it with the same Bryson weights as the
-  true-model design, and returns an :class:`~softpend.control.lqr.LQRController` whose state is built
-  from observations exactly as the model's state is (backward-difference velocities when the model was
-  trained on them, lagged frames);
-* :func:`learned_model_simulator` rolls a controller out on the model, for :func:`softpend.control.pid.tune_pid`.
-"""
+"""Classical designs on a learned dynamics model (anything with ``layout``, ``dt_s`` and ``predict_next``):
+its autograd linearisation at upright, an LQR on it, and closed-loop rollouts on the model for PID tuning."""
 
 from __future__ import annotations
 
@@ -26,6 +12,7 @@ import numpy as np
 from softpend.control.linearise import LinearModel
 from softpend.control.lqr import LQRController, LQRWeights, design_lqr, output_weight_matrix
 from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
+from softpend.sysid.variables import velocity_name
 
 __all__ = [
     "LearnedStateTracker",
@@ -39,37 +26,24 @@ __all__ = [
 ]
 
 
-def _base_name(name: str) -> str:
-    return name.split("_lag")[0]
+def _state_vector(names: tuple[str, ...], observation: Observation) -> np.ndarray:
+    """The model state of an observation with every lagged frame equal to it."""
+    values = dict(zip(OBSERVATION_NAMES, observation.as_array()))
+    try:
+        return np.array([values[name.split("_lag")[0]] for name in names])
+    except KeyError as exc:
+        raise ValueError(f"model state entry {exc} is not an observed variable") from exc
 
 
 def upright_state_vector(model: Any, params: RodParams) -> np.ndarray:
-    """The model's state vector for the straight rod at rest upright (lags equal to the current frame)."""
-    plant = PRBPlant(params)
-    observation = plant.reset()
-    values = dict(zip(OBSERVATION_NAMES, observation.as_array()))
-    try:
-        return np.array([values[_base_name(name)] for name in model.layout.names])
-    except KeyError as exc:
-        raise ValueError(f"model state entry {exc} is not an observed variable") from exc
+    """The model's state of the straight rod at rest upright."""
+    return _state_vector(tuple(model.layout.names), PRBPlant(params).reset())
 
 
 def linearise_learned_model(
     model: Any, params: Optional[RodParams] = None, state: Optional[np.ndarray] = None, torque_nm: float = 0.0
 ) -> LinearModel:
-    """Jacobians ``A = d f / d x``, ``B = d f / d tau`` of the learned one-step map at upright (autograd).
-
-    Parameters
-    ----------
-    model : DynamicsModel or DynamicsEnsemble (or any module with ``layout``, ``dt_s``, ``predict_next``)
-        An ensemble is linearised through its mean prediction.
-    params : RodParams, optional
-        Rod geometry used to build the upright state (default rod).
-    state : array (d,), optional
-        Linearisation point instead of upright.
-    torque_nm : float
-        Torque at the linearisation point [N m].
-    """
+    """Jacobians ``A``, ``B`` of the model's one-step map (an ensemble's mean) at ``state`` (default upright)."""
     import torch
 
     params = params if params is not None else RodParams()
@@ -94,36 +68,9 @@ def linearise_learned_model(
     )
 
 
-def _output_map(names: tuple[str, ...], params: RodParams) -> np.ndarray:
-    """Rows ``[theta, phi, theta_dot, phi_dot]`` as linear functions of the model state at upright
-    (``theta ~ -ex / L`` when the model has the tip position but not ``theta``)."""
-    c = np.zeros((4, len(names)))
-    for row, angle in ((0, "theta"), (1, "phi")):
-        for offset, suffix in ((0, "_rad"), (2, "_dot_rad_s")):
-            name = angle + suffix
-            if name in names:
-                c[row + offset, names.index(name)] = 1.0
-            elif angle == "theta":
-                ex = "ex_m" if offset == 0 else "ex_dot_m_s"
-                if ex not in names:
-                    raise ValueError(f"the model state has neither {name} nor {ex}")
-                c[row + offset, names.index(ex)] = -1.0 / params.length_m
-            else:
-                raise ValueError(f"the model state has no {name}")
-    return c
-
-
-def velocity_name(position_name: str) -> str:
-    """Observed rate belonging to a position variable (``phi_rad -> phi_dot_rad_s``, ``ex_m -> ex_dot_m_s``)."""
-    from softpend.sysid.variables import velocity_name as name
-
-    return name(position_name)
-
-
 class LearnedStateTracker:
-    """Builds the learned model's state vector from successive observations, as the training data did:
-    positions as observed, velocities as backward differences of the unwrapped positions (or the
-    observation's rates for a model trained on true velocities), lagged frames from a short history."""
+    """The model's state from successive observations as in its training data: positions, their rates
+    (backward differences of the unwrapped positions, or the observed rates) and lagged frames."""
 
     def __init__(self, model: Any) -> None:
         layout = model.layout
@@ -155,7 +102,8 @@ class LearnedStateTracker:
 
 
 class _TrackedLQR(LQRController):
-    """LQR whose state tracker must be reset with the controller."""
+    """LQR on the tracked model state minus its upright value; ``design_model``, ``design_gain``: the reduced
+    model the Riccati equation was solved on and the gain on its state."""
 
     def __init__(
         self,
@@ -171,7 +119,6 @@ class _TrackedLQR(LQRController):
     ) -> None:
         self.tracker = tracker
         self.upright = upright
-        #: the (possibly reduced) model the Riccati equation was solved on, and the gain on its state
         self.design_model = design_model
         self.design_gain = np.asarray(design_gain, dtype=float).reshape(1, -1)
         super().__init__(gain, self._state, torque_limit_nm, model=model, name=name)
@@ -184,27 +131,15 @@ class _TrackedLQR(LQRController):
 
 
 def reduced_coordinate_names(names: tuple[str, ...]) -> tuple[str, ...]:
-    """Angles of the reduced learned model: hub angle, tip angle and, when the model observes it, tip
-    rotation (full information); the state is these angles followed by their rates."""
+    """Angles of the reduced model: hub and tip angle, and the tip rotation when the model observes it."""
     return ("phi_rad", "theta_rad", "er_rad") if "er_rad" in names else ("phi_rad", "theta_rad")
 
 
 def reduction_matrices(
     names: tuple[str, ...], params: RodParams, dt_s: float
 ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """Maps between the learned model's state ``x`` and ``z = [angles, rates]`` about upright.
-
-    The angles are :func:`reduced_coordinate_names`.  ``P`` embeds ``z`` to first order: ``ex = -L theta``,
-    ``ey`` unchanged, ``e_r = theta`` when the model has no ``e_r`` coordinate of its own, rates alike, and a
-    frame lagged by ``k`` steps at ``position - k dt rate``.  ``S`` reads ``z`` back from ``x``
-    (``theta = -ex/L`` for a model without ``theta``).  ``S P = I``.
-
-    Returns
-    -------
-    S : (2k, d) array
-    P : (d, 2k) array
-    z_names : tuple of str
-    """
+    """``(S, P, z_names)``: ``x ~ P z`` to first order about upright for ``z`` the reduced angles and their rates
+    (``ex = -L theta``, a frame lagged ``k`` steps at ``position - k dt rate``), ``z = S x``, ``S P = I``."""
     angles = reduced_coordinate_names(names)
     k = len(angles)
     length = params.length_m
@@ -212,11 +147,11 @@ def reduction_matrices(
     embed.setdefault("er_rad", embed["theta_rad"])
     embed["ex_m"] = -length * embed["theta_rad"]
     embed["ey_m"] = np.zeros(k)
+    rate_of = {velocity_name(position): position for position in embed}
     p = np.zeros((len(names), 2 * k))
     for i, name in enumerate(names):
         base, _, lag = name.partition("_lag")
         lag_steps = int(lag) if lag else 0
-        rate_of = {velocity_name(position): position for position in embed}
         if base in rate_of:
             p[i, k:] = embed[rate_of[base]]
         elif base in embed:
@@ -232,19 +167,12 @@ def reduction_matrices(
                 s[offset + j, names.index(name)] = 1.0
             else:  # theta from the tip position
                 s[offset + j, names.index(to_name("ex_m"))] = -1.0 / length
-    z_names = angles + tuple(velocity_name(a) for a in angles)
-    return s, p, z_names
+    return s, p, angles + tuple(velocity_name(a) for a in angles)
 
 
 def reduce_learned_model(model_lin: LinearModel, params: RodParams) -> tuple[LinearModel, np.ndarray]:
-    """Project the learned linearisation onto ``z`` (:func:`reduction_matrices`): ``A_z = S A P``, ``B_z = S B``.
-
-    Returns the reduced model and ``S``.
-
-    The observed variables are redundant (``ex`` and ``theta`` carry the same first-order information,
-    ``ey`` none), and a network's Jacobian along such directions is unconstrained by the data; the
-    projection keeps the dynamics the data does constrain.
-    """
+    """The linearisation projected onto ``z`` (``A_z = S A P``, ``B_z = S B``) and ``S``: the directions the
+    data constrain."""
     assert model_lin.dt_s is not None  # a learned model is discrete-time
     s, p, z_names = reduction_matrices(model_lin.state_names, params, model_lin.dt_s)
     reduced = LinearModel(a=s @ model_lin.a @ p, b=s @ model_lin.b, dt_s=model_lin.dt_s, state_names=z_names)
@@ -256,41 +184,21 @@ def lqr_from_learned_model(
     params: Optional[RodParams] = None,
     weights: Optional[LQRWeights] = None,
     torque_limit_nm: Optional[float] = None,
-    reduced: bool = True,
 ) -> LQRController:
-    """Discrete LQR designed on the autograd linearisation of the learned model.
-
-    ``Q`` penalises ``[theta, phi, theta_dot, phi_dot]`` (same :class:`~softpend.control.lqr.LQRWeights` as
-    the true-model design).  With ``reduced=True`` (default) the design model is the linearisation
-    projected onto ``z = [phi, theta, (e_r,) rates]`` (:func:`reduce_learned_model`) and the feedback is
-    ``z`` read from the model's state; with ``reduced=False`` the design uses the model's full state
-    (redundant directions included, which a network leaves unconstrained, so the Riccati solve may fail or
-    give large gains).  The model's state is built from observations as in training
-    (:class:`LearnedStateTracker`), minus its upright value.
-
-    Raises
-    ------
-    ValueError
-        If the learned linearisation is not stabilisable with these weights.
-    """
+    """Discrete LQR designed on the reduced autograd linearisation of the learned model (the true-model
+    design's weights), fed back from the model's state built as in training; ``ValueError`` if the
+    linearisation is not stabilisable."""
     params = params if params is not None else RodParams()
     weights = weights if weights is not None else LQRWeights()
     model_lin = linearise_learned_model(model, params)
-    limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
-    if reduced:
-        design, select = reduce_learned_model(model_lin, params)
-        z = design.state_names
-        output_map = np.zeros((4, len(z)))  # y = [theta, phi, theta_dot, phi_dot] from z
-        for row, name in enumerate(("theta_rad", "phi_rad", "theta_dot_rad_s", "phi_dot_rad_s")):
-            output_map[row, z.index(name)] = 1.0
-    else:
-        design, select = model_lin, np.eye(model_lin.n_states)
-        output_map = _output_map(model_lin.state_names, params)
-    q = output_weight_matrix(output_map, weights)
-    design_gain = design_lqr(design, q, weights.r)
+    design, select = reduce_learned_model(model_lin, params)
+    output_map = np.zeros((4, len(design.state_names)))  # y = [theta, phi, theta_dot, phi_dot] from z
+    for row, name in enumerate(("theta_rad", "phi_rad", "theta_dot_rad_s", "phi_dot_rad_s")):
+        output_map[row, design.state_names.index(name)] = 1.0
+    design_gain = design_lqr(design, output_weight_matrix(output_map, weights), weights.r)
     return _TrackedLQR(
         design_gain @ select,
-        limit,
+        params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm,
         model=model_lin,
         name="LQR (learned model)",
         tracker=LearnedStateTracker(model),
@@ -301,13 +209,9 @@ def lqr_from_learned_model(
 
 
 def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
-    """``simulate(controller, tilt_rad, duration_s) -> (theta_rad, torque_nm)`` on the learned model.
-
-    The start is the straight rod at rest tilted by ``tilt_rad`` (as on the true plant), converted to the
-    model's state; each step the controller sees an :class:`Observation` rebuilt from the predicted state
-    (tip angle from the tip position, ``theta = atan2(-ex, ey)``; missing rates are backward differences)
-    and the torque, saturated at the controller's limit, is fed to ``predict_next``.
-    """
+    """``simulate(controller, tilt_rad, duration_s) -> (theta_rad, torque_nm)`` on the learned model, from the
+    straight rod at rest tilted by ``tilt_rad``; the controller sees observations rebuilt from the predicted
+    states (``theta = atan2(-ex, ey)`` and backward-difference rates where the model lacks them)."""
     import torch
 
     params = params if params is not None else RodParams()
@@ -317,8 +221,7 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
 
     def to_observation(x: np.ndarray, previous: Optional[dict[str, float]]) -> tuple[Observation, dict[str, float]]:
         v = {name: float(value) for name, value in zip(names, x) if "_lag" not in name}
-        ex, ey = v["ex_m"], v["ey_m"]
-        theta = math.atan2(-ex, ey)
+        theta = math.atan2(-v["ex_m"], v["ey_m"])
         v.setdefault("theta_rad", theta)
         v.setdefault("er_rad", theta)
         for angle in ("theta_rad", "er_rad"):
@@ -329,16 +232,13 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
                     if previous is None
                     else ((v[angle] - previous[angle] + math.pi) % (2 * math.pi) - math.pi) / dt_s
                 )
-        observation = Observation(*[v[name] for name in OBSERVATION_NAMES])
-        return observation, v
+        return Observation(*[v[name] for name in OBSERVATION_NAMES]), v
 
     def simulate(controller: Any, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
         plant = PRBPlant(params, dt_s=dt_s)
         q = np.zeros(plant.n_coordinates)
         q[0] = tilt_rad
-        start = plant.reset(q, np.zeros_like(q))
-        values = dict(zip(OBSERVATION_NAMES, start.as_array()))
-        x = np.array([values[_base_name(name)] for name in names])
+        x = _state_vector(names, plant.reset(q, np.zeros_like(q)))
         n_steps = int(round(duration_s / dt_s))
         thetas, torques = np.empty(n_steps + 1), np.zeros(n_steps + 1)
         observation, previous = to_observation(x, None)

@@ -1,24 +1,7 @@
-"""Linear-quadratic regulators about upright, designed with python-control, applied with saturation.
+"""Linear-quadratic regulators about upright (python-control), applied with saturation.
 
-Two feedback paths, both designed on the PRB model built from :class:`~softpend.plant.RodParams`:
-
-* **joint state** (:meth:`LQRController.from_params` with ``state="joint"``): ``x = [q, q_dot]`` with the
-  hub angle wrapped to ``[-pi, pi)``.  Needs the plant's joint state (the PRB plant; ideal sensing).
-* **observations** (``state="observation"``): ``z = [phi, theta, e_r, phi_dot, theta_dot, e_r_dot]`` read
-  from the report's observed variables only, so it runs on any plant (e.g. the continuum beam).  The design
-  model is the joint-space model condensed onto these coordinates
-  (:func:`~softpend.control.linearise.reduce_to_observation_coordinates`).
-
-The gain of the learned dynamics model is built in :mod:`softpend.control.learned`, also as an
-:class:`LQRController`.
-
-Cost (Bryson's rule, :class:`LQRWeights`)
------------------------------------------
-``J = sum_k y_k' Q_y y_k + R tau_k^2`` with ``y = [theta, phi, theta_dot, phi_dot]`` and
-``Q_y = diag(1/theta_max^2, 1/phi_max^2, 1/theta_dot_max^2, 1/phi_dot_max^2)``, ``R = 1/tau_max^2``.
-The tolerances are the fields of :class:`LQRWeights` (the tip angle tightest, the hub angle loosest, ``tau_max``
-the default torque limit).  The bending coordinates get no direct weight; a small ``regularisation`` on the whole
-state keeps ``Q`` positive definite.
+Feedback on the joint state ``[q, q_dot]`` (PRB plant) or on the observed angles and rates (any plant, designed on
+the condensed model); cost ``y' Q_y y + R tau^2`` by Bryson's rule on ``y = [theta, phi, theta_dot, phi_dot]``.
 """
 
 from __future__ import annotations
@@ -28,7 +11,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from softpend.checks import non_negative, positive
+from softpend.checks import non_negative, one_of, positive
 from softpend.control.linearise import (
     LinearModel,
     discretise,
@@ -46,21 +29,8 @@ StateFunction = Callable[[Observation, np.ndarray, np.ndarray], np.ndarray]
 
 @dataclass(frozen=True)
 class LQRWeights:
-    """Bryson's-rule tolerances that define ``Q`` and ``R`` (see the module docstring).
-
-    Attributes
-    ----------
-    theta_max_rad : float
-        Acceptable tip-angle excursion [rad].
-    phi_max_rad : float
-        Acceptable hub-angle excursion [rad].
-    theta_dot_max_rad_s, phi_dot_max_rad_s : float
-        Acceptable rates [rad/s].
-    torque_max_nm : float
-        Acceptable torque [N m] (``R = 1/torque_max_nm**2``).
-    regularisation : float
-        Added to every diagonal entry of ``Q`` (relative to the largest entry).
-    """
+    """Bryson's-rule tolerances of ``y`` and the torque; ``regularisation`` (relative to ``Q``'s largest
+    diagonal entry) is added to ``Q``'s diagonal."""
 
     theta_max_rad: float = 0.01
     phi_max_rad: float = 0.5
@@ -74,47 +44,33 @@ class LQRWeights:
             positive(name, getattr(self, name))
         non_negative("regularisation", self.regularisation)
 
-    def output_weights(self) -> np.ndarray:
-        """``diag(Q_y)`` for ``y = [theta, phi, theta_dot, phi_dot]``."""
-        return (
-            1.0
-            / np.array([self.theta_max_rad, self.phi_max_rad, self.theta_dot_max_rad_s, self.phi_dot_max_rad_s]) ** 2
-        )
-
     @property
     def r(self) -> float:
         return 1.0 / self.torque_max_nm**2
 
 
 def output_weight_matrix(output_map: np.ndarray, weights: LQRWeights) -> np.ndarray:
-    """``Q = C_y' Q_y C_y + eps I`` for a state whose outputs ``y = [theta, phi, theta_dot, phi_dot]`` are
-    ``y = C_y x`` (``output_map`` is ``C_y``, shape ``(4, nx)``)."""
+    """``Q = C_y' Q_y C_y + eps I`` for outputs ``y = C_y x`` (``output_map`` is ``C_y``, shape ``(4, nx)``)."""
     c = np.asarray(output_map, dtype=float)
     if c.ndim != 2 or c.shape[0] != 4:
         raise ValueError(f"output_map must have shape (4, n_states), got {c.shape}")
-    q = c.T @ np.diag(weights.output_weights()) @ c
+    w = weights
+    tolerances = np.array([w.theta_max_rad, w.phi_max_rad, w.theta_dot_max_rad_s, w.phi_dot_max_rad_s])
+    q = c.T @ np.diag(1.0 / tolerances**2) @ c
     return q + weights.regularisation * float(np.max(np.diag(q))) * np.eye(c.shape[1])
 
 
 def design_lqr(model: LinearModel, q: np.ndarray, r: float) -> np.ndarray:
-    """Optimal gain ``K`` (``u = -K x``) from ``control.dlqr`` (discrete model) or ``control.lqr``.
-
-    Raises
-    ------
-    ValueError
-        If the weights have the wrong shape or the Riccati equation has no stabilising solution.
-    """
+    """Optimal gain ``K`` (``u = -K x``); ``ValueError`` if the Riccati equation has no stabilising solution."""
     import control
 
     q = np.asarray(q, dtype=float)
     if q.shape != (model.n_states, model.n_states):
         raise ValueError(f"q must have shape {(model.n_states, model.n_states)}, got {q.shape}")
     positive("r", r)
+    solve = control.dlqr if model.is_discrete else control.lqr
     try:
-        if model.is_discrete:
-            gain, _, _ = control.dlqr(model.a, model.b, q, np.array([[r]]))
-        else:
-            gain, _, _ = control.lqr(model.a, model.b, q, np.array([[r]]))
+        gain, _, _ = solve(model.a, model.b, q, np.array([[r]]))
     except Exception as exc:  # python-control raises several types for a failed Riccati solve
         raise ValueError(f"LQR design failed: {exc}") from exc
     return np.asarray(gain, dtype=float).reshape(1, -1)
@@ -127,8 +83,7 @@ def _joint_state(observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> 
 
 
 def observation_state_function(names: tuple[str, ...]) -> StateFunction:
-    """State ``[angles..., rates...]`` read from an :class:`Observation` (names from
-    :data:`~softpend.control.linearise.OBSERVATION_COORDINATE_NAMES`); angles are already wrapped."""
+    """State ``[angles..., rates...]`` read from an :class:`Observation`."""
     rate_names = tuple(name.replace("_rad", "_dot_rad_s") for name in names)
 
     def state(observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
@@ -138,22 +93,8 @@ def observation_state_function(names: tuple[str, ...]) -> StateFunction:
 
 
 class LQRController:
-    """State feedback ``tau = sat(-K x)`` with ``x`` built from the observation and/or joint state.
-
-    Parameters
-    ----------
-    gain : (1, nx) array
-        LQR gain ``K``.
-    state_function : callable
-        ``state_function(observation, q, q_dot) -> x`` (deviation from upright).
-    torque_limit_nm : float
-        Saturation applied to the commanded torque [N m] (the plant saturates too; this keeps the
-        commanded and applied torques equal).
-    model : LinearModel, optional
-        The design model (kept for analysis: closed-loop eigenvalues).
-    name : str
-        Label for tables.
-    """
+    """State feedback ``tau = sat(-K x)``, ``x = state_function(observation, q, q_dot)`` (deviation from upright);
+    ``model`` is the design model."""
 
     def __init__(
         self,
@@ -175,7 +116,6 @@ class LQRController:
         self.model = model
         self.name = name
 
-    # ------------------------------------------------------------------ constructors
     @classmethod
     def from_params(
         cls,
@@ -187,66 +127,40 @@ class LQRController:
         linearisation: str = "exudyn",
         substeps: int = 2,
     ) -> "LQRController":
-        """LQR designed on the PRB model of ``params`` (the "true model").
+        """Discrete LQR designed on the PRB model of ``params``.
 
-        Parameters
-        ----------
-        params : RodParams, optional
-            Rod and hub (default rod).  For a beam plant pass the beam's ``RodParams``: the design uses
-            the PRB chain with ``params.n_links`` links.
-        dt_s : float
-            Control step [s]; the design is discrete (zero-order hold).
-        state : {"joint", "observation"}
-            Feedback path (see the module docstring).
-        weights : LQRWeights, optional
-            Cost tolerances (defaults documented on :class:`LQRWeights`).
-        torque_limit_nm : float, optional
-            Saturation [N m] (default ``params.torque_limit_nm``).
-        linearisation : {"exudyn", "step_map"}
-            Joint-state design model: Exudyn's linearised matrices discretised with ZOH, or finite
-            differences of the simulator's step map (only for ``state="joint"``).
-        substeps : int
-            Solver sub-steps of the step-map linearisation.
+        ``state``: ``"joint"`` or ``"observation"`` feedback; ``linearisation``: the joint-state design model,
+        Exudyn's matrices discretised (``"exudyn"``) or the simulator's step map (``"step_map"``, ``substeps``).
         """
         params = params if params is not None else RodParams()
         weights = weights if weights is not None else LQRWeights()
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
-        if state not in ("joint", "observation"):
-            raise ValueError(f"state must be 'joint' or 'observation', got {state!r}")
-        if linearisation not in ("exudyn", "step_map"):
-            raise ValueError(f"linearisation must be 'exudyn' or 'step_map', got {linearisation!r}")
-        mechanics = linearise_exudyn(params)
+        one_of("state", state, ("joint", "observation"))
+        one_of("linearisation", linearisation, ("exudyn", "step_map"))
         if state == "joint":
             if linearisation == "exudyn":
-                model = discretise(mechanics.state_space(), dt_s)
+                model = discretise(linearise_exudyn(params).state_space(), dt_s)
             else:
                 model = linearise_step_map(params, dt_s=dt_s, substeps=substeps)
-            n = params.n_links + 1
             angles = observation_coordinates_matrix(params, ("theta_rad", "phi_rad"))
-            zero = np.zeros_like(angles)
-            output_map = np.block([[angles, zero], [zero, angles]])
-            q = output_weight_matrix(output_map, weights)
-            gain = design_lqr(model, q, weights.r)
-            assert gain.shape == (1, 2 * n)
-            return cls(gain, _joint_state, limit, model=model, name="LQR (joint state)")
-        if linearisation != "exudyn":
-            raise ValueError("state='observation' uses the condensed Exudyn model; use linearisation='exudyn'")
-        reduced, _, names = reduce_to_observation_coordinates(mechanics, params)
-        model = discretise(reduced.state_space(), dt_s)
-        model = LinearModel(model.a, model.b, model.dt_s, names + tuple(n.replace("_rad", "_dot_rad_s") for n in names))
-        k = len(names)
-        select = np.zeros((2, k))
-        select[0, names.index("theta_rad")] = 1.0
-        select[1, names.index("phi_rad")] = 1.0
-        zero = np.zeros_like(select)
-        output_map = np.block([[select, zero], [zero, select]])
-        q = output_weight_matrix(output_map, weights)
-        gain = design_lqr(model, q, weights.r)
-        return cls(gain, observation_state_function(names), limit, model=model, name="LQR (observations)")
+            state_function, name = _joint_state, "LQR (joint state)"
+        else:
+            if linearisation != "exudyn":
+                raise ValueError("state='observation' uses the condensed Exudyn model; use linearisation='exudyn'")
+            reduced, _, names = reduce_to_observation_coordinates(linearise_exudyn(params), params)
+            model = discretise(reduced.state_space(), dt_s)
+            rates = tuple(n.replace("_rad", "_dot_rad_s") for n in names)
+            model = LinearModel(model.a, model.b, model.dt_s, names + rates)
+            angles = np.zeros((2, len(names)))
+            angles[0, names.index("theta_rad")] = 1.0
+            angles[1, names.index("phi_rad")] = 1.0
+            state_function, name = observation_state_function(names), "LQR (observations)"
+        zero = np.zeros_like(angles)
+        q = output_weight_matrix(np.block([[angles, zero], [zero, angles]]), weights)
+        return cls(design_lqr(model, q, weights.r), state_function, limit, model=model, name=name)
 
-    # ------------------------------------------------------------------ Controller protocol
     def reset(self) -> None:
-        """Stateless: nothing to clear."""
+        pass
 
     def state(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
         """The feedback state ``x`` for the current step."""
@@ -255,10 +169,3 @@ class LQRController:
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
         torque = -float(self.gain[0] @ self.state(observation, q, q_dot))
         return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)
-
-    def closed_loop_eigenvalues(self, model: Optional[LinearModel] = None) -> np.ndarray:
-        """Eigenvalues of ``A - B K`` on ``model`` (default: the design model)."""
-        model = model if model is not None else self.model
-        if model is None:
-            raise ValueError("no model given and the controller has no design model")
-        return np.linalg.eigvals(model.closed_loop(self.gain))

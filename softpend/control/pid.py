@@ -1,22 +1,5 @@
-"""PID on the tip angle with a filtered derivative and back-calculation anti-windup, and its tuning.
-
-Control law (setpoint ``theta = 0``, error ``e = theta``, sampled every ``dt_s``)::
-
-    D[k] = (T_f D[k-1] + (e[k] - e[k-1])) / (T_f + dt)        # derivative through 1/(T_f s + 1)
-    u[k] = K_p e[k] + I[k] + K_d D[k]
-    tau[k] = -sat(u[k], tau_max)
-    I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) - u[k]) / T_t)   # back-calculation anti-windup
-
-The derivative acts on the measured tip angle (differences of wrapped angles, unwrapped step by step),
-not on a velocity sensor, because a rig only measures positions.  While the motor saturates, the
-back-calculation term bleeds the integrator towards the value that makes ``u`` equal to the limit, with
-tracking time constant ``T_t`` (default ``sqrt(T_i T_d)``, Astrom and Hagglund), so the integrator does
-not wind up.
-
-:func:`tune_pid` chooses ``K_p, K_i, K_d`` by minimising a quadratic cost of closed-loop rollouts on any
-one-step model (the learned dynamics model, per the report's suggestion, or the true plant), with
-Nelder-Mead on the logarithms of the gains.
-"""
+"""PID on the tip angle (filtered derivative of the measured angle, back-calculation anti-windup) and its tuning
+by Nelder-Mead on closed-loop rollouts of any one-step model."""
 
 from __future__ import annotations
 
@@ -36,14 +19,7 @@ __all__ = ["PIDController", "PIDGains", "PIDTuningResult", "pid_rollout_cost", "
 
 @dataclass(frozen=True)
 class PIDGains:
-    """PID gains on the tip angle.
-
-    Attributes
-    ----------
-    kp_nm_per_rad : float
-    ki_nm_per_rad_s : float
-    kd_nms_per_rad : float
-    """
+    """PID gains on the tip angle."""
 
     kp_nm_per_rad: float
     ki_nm_per_rad_s: float
@@ -58,24 +34,14 @@ class PIDGains:
 
 
 class PIDController:
-    """Discrete PID on the tip angle ``theta`` (see the module docstring).
+    """Discrete PID on the tip angle, setpoint upright::
 
-    Parameters
-    ----------
-    gains : PIDGains
-    dt_s : float
-        Control step [s].
-    torque_limit_nm : float
-        Saturation of the command [N m]; the anti-windup tracks it.
-    derivative_filter_s : float
-        Derivative filter time constant ``T_f`` [s] (0 = unfiltered difference).
-    tracking_time_s : float, optional
-        Anti-windup tracking time constant ``T_t`` [s] (default ``sqrt(T_i T_d)`` with ``T_i = K_p/K_i``,
-        ``T_d = K_d/K_p``, or ``10 dt`` when that is undefined).
-    anti_windup : bool
-        Switch the back-calculation off (for comparison: plain integration).
-    name : str
-        Label for tables.
+        D[k] = (T_f D[k-1] + (e[k] - e[k-1])) / (T_f + dt)
+        u[k] = K_p e[k] + I[k] + K_d D[k],   tau[k] = -sat(u[k])
+        I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) - u[k]) / T_t)
+
+    ``T_f = derivative_filter_s``; ``T_t = tracking_time_s`` (default ``sqrt(T_i T_d)``, or ``10 dt`` when a gain is
+    zero); ``anti_windup=False`` drops the back-calculation.
     """
 
     def __init__(
@@ -112,11 +78,11 @@ class PIDController:
         self._last_error_rad: Optional[float] = None
 
     def update(self, theta_rad: float) -> float:
-        """Advance the controller by one step with the measured tip angle; returns the torque [N m]."""
+        """One step with the measured tip angle; the torque [N m]."""
         if not math.isfinite(theta_rad):
             raise ValueError(f"theta_rad must be finite, got {theta_rad!r}")
         kp, ki, kd = self.gains.as_array()
-        error = float(wrap_angle_rad(theta_rad))  # the target is upright whichever way round the rod went
+        error = float(wrap_angle_rad(theta_rad))
         increment = 0.0 if self._last_error_rad is None else float(wrap_angle_rad(error - self._last_error_rad))
         self._last_error_rad = error
         tf, dt = self.derivative_filter_s, self.dt_s
@@ -153,8 +119,8 @@ def pid_rollout_cost(
     torque_weight: float = 0.1,
     fall_angle_rad: float = 1.0,
 ) -> float:
-    """Mean over starts of ``mean(theta^2) + torque_weight * mean((tau / tau_max)^2)``; a rollout whose tip
-    leaves ``fall_angle_rad`` (or that returns non-finite values) costs ``10`` (a fallen rod)."""
+    """Mean over starts of ``mean(theta^2) + torque_weight * mean((tau / tau_max)^2)``, 10 for a rollout that
+    leaves ``fall_angle_rad`` or is not finite."""
     total = 0.0
     for tilt in tilts_rad:
         controller.reset()
@@ -180,20 +146,8 @@ def tune_pid(
     max_evaluations: int = 120,
     progress: bool = False,
 ) -> PIDTuningResult:
-    """Tune ``K_p, K_i, K_d`` by Nelder-Mead on ``log(gains)`` minimising :func:`pid_rollout_cost`.
-
-    Parameters
-    ----------
-    simulate : callable
-        Closed-loop simulator on the tuning model (see :func:`softpend.control.learned.learned_model_simulator`
-        and :func:`plant_simulator`).
-    initial_gains : PIDGains
-        Starting point (all gains must be positive).
-    max_evaluations : int
-        Budget of cost evaluations.
-    progress : bool
-        Show a tqdm bar over the evaluations.
-    """
+    """Gains minimising :func:`pid_rollout_cost` on ``simulate`` by Nelder-Mead on their logarithms, from
+    ``initial_gains`` (positive), in at most ``max_evaluations`` costs."""
     import scipy.optimize
 
     if np.any(initial_gains.as_array() <= 0):
@@ -234,9 +188,7 @@ def tune_pid(
 
 
 def plant_simulator(task: Optional[Task] = None) -> Simulator:
-    """Closed-loop simulator on the true plant of ``task`` (straight rod released at rest at the given tilt,
-    the controller's own torque limit), for tuning on the true model and for tests; built on
-    :func:`softpend.evaluation.evaluate_controller`."""
+    """Closed-loop simulator on the plant of ``task``, from the straight rod at rest at the given tilt."""
     from softpend.evaluation import evaluate_controller
 
     base = (task if task is not None else Task()).replace(start="upright")

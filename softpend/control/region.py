@@ -18,18 +18,8 @@ __all__ = ["RegionOfAttraction", "recovers_from", "region_of_attraction_rad"]
 
 @dataclass(frozen=True)
 class RegionOfAttraction:
-    """Result of :func:`region_of_attraction_rad`.
-
-    Attributes
-    ----------
-    largest_recovered_rad : float
-        Largest initial tilt of the straight rod (tip angle) from which the controller recovers, with every
-        smaller tilt on the scan recovered as well [rad].
-    smallest_failed_rad : float
-        The first tilt that failed (``inf`` if none up to ``max_angle_rad``) [rad].
-    tested_rad, recovered : arrays
-        All tilts simulated and whether each recovered.
-    """
+    """Largest tilt recovered from (every smaller one on the scan too), the first that failed (``inf`` if none),
+    and every tilt tried with its outcome."""
 
     largest_recovered_rad: float
     smallest_failed_rad: float
@@ -44,9 +34,8 @@ def recovers_from(
     duration_s: float = 4.0,
     tolerance_rad: float = 0.02,
 ) -> bool:
-    """Whether ``controller`` brings the rod of ``task`` released at rest, straight and tilted by ``tilt_rad``
-    (hub and tip at that angle), back to ``|theta| < tolerance_rad`` for the whole last second of
-    ``duration_s``."""
+    """Whether ``controller`` brings the straight rod released at rest at ``tilt_rad`` back within
+    ``tolerance_rad`` of upright for the last second of ``duration_s``."""
     task = (task if task is not None else Task()).replace(start="upright")
     summary = evaluate_controller(
         controller,
@@ -71,23 +60,8 @@ def region_of_attraction_rad(
     duration_s: float = 4.0,
     progress: bool = False,
 ) -> RegionOfAttraction:
-    """Largest initial tip angle the controller recovers from (scan up in ``step_rad``, then bisect).
-
-    Tilts are positive (the design is symmetric).  The scan stops at the first failure; bisection between
-    the last success and that failure refines the boundary to ``resolution_rad``.
-
-    Parameters
-    ----------
-    controller : Controller
-    task : Task, optional
-        Plant and rod (its ``torque_limit_nm`` is the saturation); default ``Task()``.
-    step_rad, resolution_rad, max_angle_rad : float
-        Coarse step, final resolution and upper end of the scan [rad].
-    duration_s : float
-        Length of each recovery trial [s].
-    progress : bool
-        Show a tqdm progress bar over the coarse scan.
-    """
+    """Largest positive tilt the controller recovers from: a scan up in ``step_rad`` to the first failure, then
+    bisection to ``resolution_rad``."""
     for name, value in (("step_rad", step_rad), ("resolution_rad", resolution_rad), ("max_angle_rad", max_angle_rad)):
         positive(name, value)
     tested: list[float] = []

@@ -1,30 +1,9 @@
-"""Energy-based swing-up (pumping) that hands over to an LQR near upright.
+"""Energy-based swing-up that hands over to an LQR near upright.
 
-The torque limit is about half the torque needed to hold the rod horizontal, so the motor cannot lift
-the rod directly: it has to pump energy over several swings.  At the swing frequency (about 1 Hz, well
-below the first bending mode) the rod moves as one body, so the motor's power into the swing is
-``tau * theta_dot``; pushing with the tip rate while the rod's energy ``E`` is below the upright energy
-``E_up`` raises ``E`` as fast as the torque limit allows::
-
-    tau = sat(k_E * (E_up + E_margin - E) * theta_dot, tau_max)
-
-(bang-bang for large ``k_E``, smooth near ``theta_dot = 0`` so the torque does not chatter).  The tip
-rate, not the hub rate, sets the sign: the light hub on the compliant clamp vibrates against the rod, and
-feedback on ``phi_dot`` pumps that vibration (a self-excited hub oscillation at the clamp mode) instead
-of the swing.  Once the tip
-is within ``capture_angle_rad`` of upright the LQR takes over; if the tip falls beyond
-``release_angle_rad`` pumping resumes (hysteresis).
-
-The rod is soft, so "its energy" needs a choice (``energy_source``):
-
-* ``"observation"`` (any plant): the rod seen as a rigid pendulum through its tip:
-  ``E = I_O theta_dot^2 / 2 + m g l (cos(theta) - 1)`` with ``I_O`` the inertia of hub, rod and tip mass
-  about the hub axis and ``m g l = g (m L/2 + m_tip L)``; ``E_up = 0``.  Needs only ``theta`` and its rate.
-* ``"joint"`` (default; PRB plant): the PRB chain's total mechanical energy (kinetic + gravity + elastic, from
-  :meth:`softpend.plant.PRBPlant.energy_j` of a design copy of the plant) minus its value upright at rest.
-
-:meth:`EnergySwingUpController.for_observations` builds the observation-only variant: tip energy with a larger
-gain and an energy margin (the tip rate carries the bending vibration), and the LQR on observations.
+Pumping torque ``sat(k_E (E_up + E_margin - E) theta_dot)`` (the tip rate: feedback on the hub rate pumps the
+clamp mode), with ``E`` the rigid-pendulum energy seen through the tip (``"observation"``) or the PRB chain's
+mechanical energy (``"joint"``); the LQR takes over inside ``capture_angle_rad`` and lets go beyond
+``release_angle_rad``.
 """
 
 from __future__ import annotations
@@ -42,11 +21,7 @@ __all__ = ["EnergySwingUpController", "pendulum_energy_j"]
 
 
 def pendulum_energy_j(params: RodParams, theta_rad: float, theta_dot_rad_s: float) -> float:
-    """Rigid-pendulum energy of the rod seen through its tip, zero upright at rest [J].
-
-    ``E = I_O theta_dot^2 / 2 + g (m L/2 + m_tip L) (cos(theta) - 1)`` with
-    ``I_O = J_hub + m L^2/3 + m_tip L^2``.
-    """
+    """Rigid-pendulum energy of the rod seen through its tip, zero upright at rest [J]."""
     inertia = (
         params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
     )
@@ -56,27 +31,8 @@ def pendulum_energy_j(params: RodParams, theta_rad: float, theta_dot_rad_s: floa
 class EnergySwingUpController:
     """Energy pumping from hanging plus LQR balance near upright (see the module docstring).
 
-    Parameters
-    ----------
-    params : RodParams, optional
-        Rod and hub used for the design (default rod).  For another plant (e.g. the continuum beam) pass
-        its ``RodParams`` and use ``energy_source="observation"`` with an observation-feedback LQR.
-    balance : Controller-like, optional
-        The balancing controller; default ``LQRController.from_params(params, dt_s, state=lqr_state)``.
-    dt_s : float
-        Control step of the default LQR [s].
-    lqr_state : {"joint", "observation"}
-        Feedback path of the default LQR.
-    energy_source : {"observation", "joint"}
-        Energy used for pumping.
-    energy_gain_per_j_rad_s : float
-        ``k_E`` [N m / (J rad/s)]; large values give bang-bang pumping.
-    energy_margin_j : float
-        Target energy above upright [J], to make up for friction on the last swing.
-    capture_angle_rad, release_angle_rad : float
-        Hand over to the LQR inside ``capture_angle_rad``; resume pumping beyond ``release_angle_rad``.
-    torque_limit_nm : float, optional
-        Largest pumping torque [N m] (default ``params.torque_limit_nm``).
+    ``balance`` defaults to ``LQRController.from_params(params, dt_s, state=lqr_state)``; ``energy_margin_j``
+    is the target energy above upright; ``torque_limit_nm`` bounds the pumping torque.
     """
 
     def __init__(
@@ -134,9 +90,7 @@ class EnergySwingUpController:
     def for_observations(
         cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs
     ) -> "EnergySwingUpController":
-        """Plant-agnostic variant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin (any of
-        which ``kwargs`` may override).  Uses only the report's observed variables, so it runs on any
-        plant built from the same ``RodParams`` (e.g. the continuum beam)."""
+        """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin."""
         options: dict[str, Any] = dict(
             lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0, energy_margin_j=0.02
         )
@@ -151,7 +105,7 @@ class EnergySwingUpController:
             self.balance.reset()
 
     def energy_j(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
-        """Energy relative to upright at rest [J] from the chosen source."""
+        """Energy relative to upright at rest [J]."""
         if self._design_plant is not None:
             return (
                 self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"]
@@ -163,7 +117,7 @@ class EnergySwingUpController:
         """The energy-pumping torque [N m] (saturated)."""
         error = self.energy_margin_j - self.energy_j(observation, q, q_dot)
         torque = self.energy_gain * error * observation.theta_dot_rad_s
-        if observation.theta_dot_rad_s == 0.0 and error > 0:  # at rest: kick to start the first swing
+        if observation.theta_dot_rad_s == 0.0 and error > 0:  # at rest: a kick starts the first swing
             torque = self.torque_limit_nm
         return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)
 

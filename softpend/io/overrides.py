@@ -34,18 +34,14 @@ def parse_assignment(item: str) -> tuple[str, Any]:
     return name, parse_value(value)
 
 
-def _field_types(cls: type) -> dict[str, Any]:
-    try:
-        return typing.get_type_hints(cls)
-    except Exception:  # an annotation that cannot be resolved: fall back to the current values
-        return {}
-
-
-def _holds_tuple(instance: Any, name: str, hints: Mapping[str, Any]) -> bool:
-    """Whether field ``name`` of ``instance`` is a tuple field (by its annotation or its current value)."""
+def _holds_tuple(instance: Any, name: str) -> bool:
+    """Whether field ``name`` of ``instance`` is a tuple field (by its current value or its annotation)."""
     if isinstance(getattr(instance, name, None), tuple):
         return True
-    hint = hints.get(name)
+    try:
+        hint = typing.get_type_hints(type(instance)).get(name)
+    except Exception:  # an annotation that cannot be resolved
+        return False
     candidates = typing.get_args(hint) if typing.get_origin(hint) is Union else (hint,)
     return any(c is tuple or typing.get_origin(c) is tuple for c in candidates)
 
@@ -72,8 +68,7 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
     if not dataclasses.is_dataclass(instance) or isinstance(instance, type):
         raise ValueError(f"apply_overrides needs a dataclass instance, got {type(instance).__name__}")
     items = overrides.items() if isinstance(overrides, Mapping) else overrides
-    fields = {f.name: f for f in dataclasses.fields(instance) if f.init}
-    hints = _field_types(type(instance))
+    fields = [f.name for f in dataclasses.fields(instance) if f.init]
     direct: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {}
     for name, value in items:
@@ -85,7 +80,7 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
         elif isinstance(value, dict) and dataclasses.is_dataclass(getattr(instance, head)):
             nested.setdefault(head, {}).update(value)
         else:
-            direct[head] = _as_tuple(value) if _holds_tuple(instance, head, hints) else value
+            direct[head] = _as_tuple(value) if _holds_tuple(instance, head) else value
     changes = dict(direct)
     for head, sub in nested.items():
         if head in direct:

@@ -68,17 +68,14 @@ def check_regular_file(
     return info
 
 
-@contextlib.contextmanager
-def open_regular_file(
-    path: PathLike, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
-) -> Iterator[BinaryIO]:
-    """The regular file at ``path`` opened for binary reading, checked before opening and again on the
-    descriptor (opened with ``O_NONBLOCK``); the caller bounds its reads by ``max_bytes``."""
-    path = Path(path)
-    check_regular_file(path, what, max_bytes, error)
-    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+def open_checked_fd(
+    path: PathLike, flags: int, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
+) -> int:
+    """``os.open(path, flags)`` made non-blocking for the open, so a FIFO cannot block it, and refused (closed)
+    unless the descriptor is a regular file of at most ``max_bytes``."""
+    flags |= os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
     try:
-        fd = os.open(path, flags)
+        fd = os.open(path, flags, 0o644)
     except FileNotFoundError:
         raise FileNotFoundError(f"{_described(what, path)}: no such file") from None
     except OSError as exc:
@@ -86,11 +83,20 @@ def open_regular_file(
     try:
         _check_stat(os.fstat(fd), path, what, max_bytes, error)
         fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
-        handle = os.fdopen(fd, "rb")
     except BaseException:
         os.close(fd)
         raise
-    with handle:
+    return fd
+
+
+@contextlib.contextmanager
+def open_regular_file(
+    path: PathLike, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
+) -> Iterator[BinaryIO]:
+    """The regular file at ``path`` opened for binary reading, checked before opening and again on the
+    descriptor; the caller bounds its reads by ``max_bytes``."""
+    check_regular_file(path, what, max_bytes, error)
+    with os.fdopen(open_checked_fd(path, os.O_RDONLY, what, max_bytes, error), "rb") as handle:
         yield handle
 
 

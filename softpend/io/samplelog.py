@@ -3,11 +3,9 @@ names) written one complete line per ``write(2)``, so a killed writer leaves eve
 
 from __future__ import annotations
 
-import fcntl
 import json
 import math
 import os
-import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +14,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from softpend.checks import MAX_WORK_BYTES
-from softpend.io.reading import check_regular_file, file_kind, read_bytes_checked
+from softpend.io.reading import check_regular_file, open_checked_fd, read_bytes_checked
 
 _MAGIC = "# softpend-log v1 "
 
@@ -57,17 +55,7 @@ class SampleLog:
             existing = read_sample_log(self.path)
             if existing.columns != columns:
                 raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
-        # O_NONBLOCK: a FIFO swapped in after the check fails the open (or the fstat below) instead of blocking
-        fd = os.open(
-            self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0), 0o644
-        )
-        try:
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                raise ValueError(f"sample log {self.path} is {file_kind(os.fstat(fd).st_mode)}, not a regular file")
-            fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
-        except BaseException:
-            os.close(fd)
-            raise
+        fd = open_checked_fd(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, "sample log")
         self._fd: Optional[int] = fd
         self._last_sync = time.monotonic()
         if not exists:

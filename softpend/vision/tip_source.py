@@ -192,23 +192,20 @@ class PoseHistory:
             self._times.popleft()
             self._q.popleft()
 
-    def q_at(self, time_s: float) -> np.ndarray:
-        """Joint positions at ``time_s``, linear between the stored samples (clamped at both ends)."""
+    def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
+        """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``, linear between the stored samples
+        (clamped at both ends)."""
         if not self._times:
             raise ValueError("PoseHistory is empty")
         times = self._times
         if time_s <= times[0]:
-            return self._q[0]
-        if time_s >= times[-1]:
-            return self._q[-1]
-        i = int(np.searchsorted(np.fromiter(times, float, len(times)), time_s)) - 1
-        t0, t1 = times[i], times[i + 1]
-        w = (time_s - t0) / (t1 - t0)
-        return (1.0 - w) * self._q[i] + w * self._q[i + 1]
-
-    def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
-        """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``."""
-        q = self.q_at(time_s)
+            q = self._q[0]
+        elif time_s >= times[-1]:
+            q = self._q[-1]
+        else:
+            i = int(np.searchsorted(np.fromiter(times, float, len(times)), time_s)) - 1
+            w = (time_s - times[i]) / (times[i + 1] - times[i])
+            q = (1.0 - w) * self._q[i] + w * self._q[i + 1]
         return self.link_points(q), float(q[0])
 
 
@@ -224,15 +221,14 @@ class CameraFaults:
 
     def __post_init__(self) -> None:
         in_unit_interval("drop_probability", self.drop_probability)
-        windows = []
-        for window in self.occlusions_s:
-            try:
-                start, end = (float(v) for v in window)
-            except (TypeError, ValueError):
-                raise ValueError(f"occlusions_s must be (start, end) pairs [s], got {self.occlusions_s!r}") from None
-            if not (math.isfinite(start) and math.isfinite(end) and 0 <= start < end):
-                raise ValueError(f"occlusions_s must be (start, end) pairs with 0 <= start < end, got {window!r}")
-            windows.append((start, end))
+        try:
+            windows = [(float(start), float(end)) for start, end in self.occlusions_s]
+        except (TypeError, ValueError):
+            raise ValueError(f"occlusions_s must be (start, end) pairs [s], got {self.occlusions_s!r}") from None
+        if not all(math.isfinite(start) and math.isfinite(end) and 0 <= start < end for start, end in windows):
+            raise ValueError(
+                f"occlusions_s must be (start, end) pairs with 0 <= start < end, got {self.occlusions_s!r}"
+            )
         object.__setattr__(self, "occlusions_s", tuple(windows))
         if self.stall_after_s is not None:
             non_negative("stall_after_s", self.stall_after_s)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import itertools
 import math
 import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Iterator, Optional, Sequence
 
 import cv2
 import numpy as np
@@ -16,21 +18,12 @@ from softpend.checks import optional_positive
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
+from softpend.vision.tip_source import FrameTracker, ThreadedTipSource
 from softpend.vision.tracker import MAGENTA_HSV, TipTracker
 
 #: Columns of the tracking CSV.
-TRACK_COLUMNS: tuple[str, ...] = (
-    "frame",
-    "camera_time_s",
-    "x_px",
-    "y_px",
-    "area_px",
-    "x_m",
-    "y_m",
-    "theta_rad",
-    "lost",
-    "hub_angle_rad",
-    "hub_lost",
+TRACK_COLUMNS: tuple[str, ...] = tuple(
+    "frame camera_time_s x_px y_px area_px x_m y_m theta_rad lost hub_angle_rad hub_lost".split()
 )
 
 
@@ -40,14 +33,9 @@ def hub_marker_tracker(
     """A tracker of the magenta hub marker that searches only within ``radius_m`` of the hub axis."""
     centre = calibration.to_pixels(np.zeros(2))
     r = radius_m / calibration.metres_per_pixel
-    h, w = frame_shape[:2]
-    region = (
-        max(int(centre[0] - r), 0),
-        max(int(centre[1] - r), 0),
-        min(int(centre[0] + r) + 1, w),
-        min(int(centre[1] + r) + 1, h),
-    )
-    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=region)
+    low = [max(int(c - r), 0) for c in centre]
+    high = [min(int(c + r) + 1, n) for c, n in zip(centre, (frame_shape[1], frame_shape[0]))]
+    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=(*low, *high))
 
 
 def _hub_angle(
@@ -62,33 +50,15 @@ def _hub_angle(
     return math.nan, 1
 
 
+def _row(index, time_s, x_m, y_m, detection, hub_tracker, calibration, frame) -> list:
+    """One row of :data:`TRACK_COLUMNS`."""
+    theta = math.nan if detection.lost else float(tip_angle_rad(x_m, y_m))
+    row = [index, time_s, detection.x_px, detection.y_px, detection.area_px, x_m, y_m, theta, int(detection.lost)]
+    return row + [*_hub_angle(hub_tracker, calibration, frame)]
+
+
 def _rows_array(rows: list) -> np.ndarray:
     return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
-
-
-def track_frames(
-    frames,
-    stamp: Callable[[int], float],
-    tracker: TipTracker,
-    calibration: AffineCalibration,
-    log: SampleLog,
-    hub_tracker: Optional[TipTracker] = None,
-) -> np.ndarray:
-    """Track BGR frames (``stamp(i)``: the camera time of frame ``i`` [s]) into ``log`` and an
-    ``(F, len(TRACK_COLUMNS))`` array (NaN where lost)."""
-    rows = []
-    for i, frame in enumerate(frames):
-        d = tracker.track(frame)
-        if d.lost:
-            x_m = y_m = theta = math.nan
-        else:
-            x_m, y_m = calibration.to_metres(np.array([d.x_px, d.y_px]))
-            theta = float(tip_angle_rad(x_m, y_m))
-        row = [i, stamp(i), d.x_px, d.y_px, d.area_px, float(x_m), float(y_m), theta, int(d.lost)]
-        row += _hub_angle(hub_tracker, calibration, frame)
-        log.append(row)
-        rows.append(row)
-    return _rows_array(rows)
 
 
 def _video_frames(capture: cv2.VideoCapture):
@@ -161,28 +131,28 @@ def track_video(
             if marker_positions_m is None:
                 raise ValueError("marker_positions_m: needed to calibrate (no calibration and no sidecar)")
             calibration = calibrate_from_markers(first, marker_positions_m)
-        if timestamps_s is not None:
-            stamps = list(timestamps_s)
+        stamps = None if timestamps_s is None else list(timestamps_s)
 
-            def stamp(i: int) -> float:
-                if i >= len(stamps):
-                    raise ValueError(f"timestamps_s has {len(stamps)} entries but the video has more frames")
-                return float(stamps[i])
-        else:
-            assert fps is not None  # checked above: timestamps or a frame rate
-            stamp = lambda i: i / fps  # noqa: E731
+        def stamp(i: int) -> float:
+            if stamps is None:
+                return i / fps  # type: ignore[operator]  # checked above: timestamps or a frame rate
+            if i >= len(stamps):
+                raise ValueError(f"timestamps_s has {len(stamps)} entries but the video has more frames")
+            return float(stamps[i])
 
-        def all_frames():
-            yield first
-            yield from frames
-
-        iterator = all_frames()
+        iterator = itertools.chain([first], frames)
         if progress:
             iterator = _progress(iterator, int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None)
         hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
         metadata = {"video": str(video), "calibration": calibration.to_json()}
+        frame_tracker = FrameTracker(tracker, calibration)
+        rows = []
         with _replacing(out_csv, metadata) as log:
-            return track_frames(iterator, stamp, tracker or TipTracker(), calibration, log, hub_tracker=hub)
+            for i, frame in enumerate(iterator):
+                x_m, y_m, detection = frame_tracker(frame)
+                rows.append(_row(i, stamp(i), x_m, y_m, detection, hub, calibration, frame))
+                log.append(rows[-1])
+        return _rows_array(rows)
     finally:
         capture.release()
 
@@ -201,36 +171,21 @@ def _check_output_path(out_csv: Path, video: Optional[Path]) -> None:
             raise ValueError(f"out_csv {out_csv} is {name}; choose another output")
 
 
-class _replacing:
+@contextlib.contextmanager
+def _replacing(out_csv: Path, metadata: dict) -> Iterator[SampleLog]:
     """A :class:`SampleLog` in a new temporary file next to ``out_csv`` that replaces ``out_csv`` on a clean
     exit and is removed on an error."""
-
-    def __init__(self, out_csv: Path, metadata: dict) -> None:
-        fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
-        try:
-            os.fchmod(fd, 0o644)
-        finally:
-            os.close(fd)
-        self.out_csv, self.partial = out_csv, Path(name)
-        try:
-            self.log = SampleLog(self.partial, TRACK_COLUMNS, metadata=metadata, fsync_every_s=1.0)
-        except BaseException:
-            self.partial.unlink(missing_ok=True)
-            raise
-
-    def __enter__(self) -> SampleLog:
-        return self.log
-
-    def __exit__(self, kind, *exc) -> None:
-        replaced = False
-        try:
-            self.log.close()
-            if kind is None:
-                os.replace(self.partial, self.out_csv)
-                replaced = True
-        finally:
-            if not replaced:
-                self.partial.unlink(missing_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
+    os.close(fd)
+    partial = Path(name)
+    try:
+        os.chmod(partial, 0o644)
+        with SampleLog(partial, TRACK_COLUMNS, metadata=metadata, fsync_every_s=1.0) as log:
+            yield log
+        os.replace(partial, out_csv)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
 
 
 def track_live(
@@ -242,8 +197,6 @@ def track_live(
     ``camera_time_s`` is each frame's capture time on the host clock.  The rows go to a temporary file that
     replaces ``out_csv`` when tracking ends (also on Ctrl-C); on an error ``out_csv`` is left as it was.
     """
-    from softpend.vision.tip_source import ThreadedTipSource
-
     if not isinstance(source, ThreadedTipSource):
         raise ValueError(f"source must be a ThreadedTipSource, got {type(source).__name__}")
     optional_positive("duration_s", duration_s)
@@ -259,20 +212,8 @@ def track_live(
         assert calibration is not None  # set by the frame's tracking, before this hook
         if track_hub and hub[0] is None:
             hub[0] = hub_marker_tracker(calibration, frame.shape)
-        rows.append(
-            [
-                index,
-                measurement.capture_time_s,
-                detection.x_px,
-                detection.y_px,
-                detection.area_px,
-                measurement.x_m,
-                measurement.y_m,
-                measurement.theta_rad,
-                int(measurement.lost),
-                *_hub_angle(hub[0], calibration, frame),
-            ]
-        )
+        x_m, y_m = measurement.x_m, measurement.y_m
+        rows.append(_row(index, measurement.capture_time_s, x_m, y_m, detection, hub[0], calibration, frame))
         if previous_hook is not None:
             previous_hook(index, frame, detection, measurement)
 

@@ -167,7 +167,7 @@ def rollout_errors(
 
     def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tip = (pred[..., i_ex] - windows[..., i_ex]) ** 2 + (pred[..., i_ey] - windows[..., i_ey]) ** 2
-        phi = wrap_angle_rad(pred[..., i_phi] - windows[..., i_phi]) ** 2
+        phi = np.asarray(wrap_angle_rad(pred[..., i_phi] - windows[..., i_phi])) ** 2
         return np.sqrt(tip.mean(0)), np.sqrt(phi.mean(0))
 
     tip, phi = errors(predicted)

@@ -309,7 +309,7 @@ def _finetune_multistep(
     val_losses: list[float] = []
     bar = tqdm(range(1, config.rollout_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
     for epoch in bar:
-        train = _epoch(
+        loss = _epoch(
             optimiser,
             xs.shape[0],
             config.batch_size,
@@ -318,12 +318,12 @@ def _finetune_multistep(
         )
         with torch.no_grad():
             val_loss = float(_multistep_loss(model, vs, vu, scale))
-        _check_finite_loss(desc, epoch, train, val_loss, config)
-        train_losses.append(train)
+        _check_finite_loss(desc, epoch, loss, val_loss, config)
+        train_losses.append(loss)
         val_losses.append(val_loss)
         if val_loss < best[0]:
             best = (val_loss, copy.deepcopy(model.net.state_dict()))
-        bar.set_postfix(train=f"{train:.2e}", val=f"{val_loss:.2e}")
+        bar.set_postfix(train=f"{loss:.2e}", val=f"{val_loss:.2e}")
     bar.close()
     model.net.load_state_dict(best[1])
     return np.array(train_losses), np.array(val_losses)

@@ -1,17 +1,6 @@
-"""``softpend sweep``: train every method over many seeds on a parallel engine and summarise the runs.
-
-Each (method, settings, seed) run lives in its own folder under ``--runs-root`` (``<algo>-<hash>-seed<k>``,
-``<hash>`` naming the settings: :func:`softpend.study.rl_runs.run_folder`), so that runs of other settings are
-never trained over; it is reused when finished and resumed when shorter, so a sweep that was interrupted
-continues where it stopped; the runs go through :func:`softpend.study.sweep.run_jobs`
-(``--backend loky|ray|dask``), all methods in one pool (:func:`softpend.study.run_pool.train_in_one_pool`), where
-a worker that dies is retried and finished runs are kept.  The
-settings are the book's (:mod:`softpend.study.presets`).  ``--book`` instead trains the runs the book's
-notebooks read, with the budgets of a profile of ``book/profiles.yml`` (:func:`softpend.study.run_pool.train_book`):
-``make book`` runs it before ``softpend book``.  With ``--fresh`` every run's final (and for RL
-selected) agent is also measured on the fresh report starts (:mod:`softpend.study.fresh_starts`), with the
-per-seed table and the headline figures of :func:`~softpend.study.fresh_starts.headline_figures`.
-"""
+"""``softpend sweep``: train every method over many seeds on a parallel engine (run folders reused, resumed,
+retried) and summarise the runs; ``--book`` trains the runs the book's notebooks read; ``--fresh`` measures the
+agents on the fresh report starts."""
 
 from __future__ import annotations
 
@@ -20,8 +9,6 @@ import sys
 from pathlib import Path
 
 METHODS = ("dqn", "mbpo", "pilco")
-
-
 #: Most seeds one sweep may train.
 MAX_SEEDS = 10_000
 
@@ -132,7 +119,6 @@ def run(args: argparse.Namespace) -> int:
     from softpend.commands.options import check_numbers
     from softpend.commands.train import MAX_EPISODES
 
-    # before anything starts: every loop bounded (os.cpu_count() workers at most a thousandfold)
     check_numbers(
         args,
         {

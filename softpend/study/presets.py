@@ -1,13 +1,5 @@
-"""The one home of the study's defaults and budgets.
-
-The book's notebooks read their shared settings from here in their ``parameters`` cells (so that the full
-profile of ``book/profiles.yml`` only lists what differs: nothing for the published figures, tiny budgets for
-the quick profile), and the commands and benchmarks read the same values.  The physical defaults themselves
-live in :class:`softpend.plant.RodParams` and :class:`softpend.task.Task`.  The learning algorithms' settings are
-data: :func:`load_hparams` reads ``book/hparams/<method>.yml`` into :class:`softpend.rl.DQNConfig`,
-:class:`softpend.rl.MBPOConfig` or :class:`softpend.pilco.PilcoConfig`, whose own defaults are the plain
-algorithms'.
-"""
+"""The study's defaults and budgets, read by the notebooks, commands and benchmarks; the methods' tuned settings
+are data (``book/hparams/<method>.yml``, :func:`load_hparams`)."""
 
 from __future__ import annotations
 
@@ -54,13 +46,9 @@ def load_hparams(
     overrides: Optional[Mapping[str, Any]] = None,
     directory: Path | str = HPARAMS_DIR,
 ) -> Any:
-    """The config the book trains ``method`` (``"dqn"``, ``"mbpo"`` or ``"pilco"``) with.
-
-    The class's defaults, then the settings of ``<directory>/<method>.yml`` (a mapping ``field: value``), then
-    ``task`` (default: :data:`TASK`), then ``overrides`` (:func:`softpend.io.overrides.apply_overrides`, dotted
-    names reach into the task).  A name in the file that is not a field of the class, or a file that is not a
-    mapping, is a one-line ``ValueError`` naming the file.
-    """
+    """The config the book trains ``method`` (``"dqn"``, ``"mbpo"``, ``"pilco"``) with: the class's defaults, the
+    fields of ``<directory>/<method>.yml``, ``task`` (default :data:`TASK`), then ``overrides`` (dotted names reach
+    into the task); ``ValueError`` naming the file for an unknown field or a file that is not a mapping."""
     if method not in CONFIG_CLASSES:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
     cls = CONFIG_CLASSES[method]
@@ -84,18 +72,8 @@ def load_hparams(
 
 @dataclass(frozen=True)
 class RLBudget:
-    """The RL runs behind Figures 4-6 and 10 (and the RL rows of the beam chapter's transfer table).
-
-    Parameters
-    ----------
-    episodes_dqn, episodes_mbpo : int
-        Training episode budget per seed (real episodes for DQN-MBPO); a run stops earlier once it balances
-        (:attr:`softpend.rl.DQNConfig.stop_after_balanced_evaluations`).
-    seeds : tuple of int
-        Training seeds.
-    runs_root : str
-        Run folders (trained once, reused by every figure; other plants: ``<runs_root>-<plant>``).
-    """
+    """The RL runs of Figures 4-6 and 10: episodes per seed (a run stops earlier once it balances), seeds, and
+    the run folders (other plants: ``<runs_root>-<plant>``)."""
 
     episodes_dqn: int = 250
     episodes_mbpo: int = 80
@@ -118,15 +96,7 @@ PILCO = load_hparams("pilco")
 
 @dataclass(frozen=True)
 class PilcoBudget:
-    """The PILCO runs of Figure 10.
-
-    Parameters
-    ----------
-    seeds : tuple of int
-        One PILCO run per seed.
-    runs_root : str
-        Run folders (other plants: ``<runs_root>-<plant>``).
-    """
+    """The PILCO runs of Figure 10: one per seed, in ``runs_root`` (other plants: ``<runs_root>-<plant>``)."""
 
     seeds: tuple[int, ...] = tuple(range(10))
     runs_root: str = "runs/pilco-book"
@@ -136,12 +106,8 @@ class PilcoBudget:
 PILCO_BOOK = PilcoBudget()
 
 
-#: Start seeds that training and model selection see: the evaluations during training that pick an RL run's
-#: best agent, stop its training and decide when PILCO has balanced (the configs' ``selection_seeds`` and
-#: ``eval_seeds``).
+#: Start seeds that training and model selection see (the configs' ``selection_seeds`` and ``eval_seeds``).
 SELECTION_SEEDS = tuple(sorted(set(DQN.selection_seeds) | set(MBPO.selection_seeds) | set(PILCO.eval_seeds)))
 
-#: Fresh start seeds of every reported success rate and upright error: no training or selection step
-#: evaluates on them (``tests/test_presets.py`` checks that they are disjoint from the seeds above and from
-#: the training seeds).
+#: Fresh start seeds of every reported success rate and upright error (disjoint from the seeds above).
 REPORT_SEEDS = tuple(range(20_000, 20_020))

@@ -1,15 +1,6 @@
-"""The record of settings tried for each method (``book/records/what_we_tried.yml``), for the book's appendix.
-
-The YAML file holds, per method, a list of runs -- ``{setting, seeds, outcome, details, notes}``, the outcome
-per seed -- made with earlier versions of the code.  :func:`load_records` reads and checks it;
-:func:`run_rows` and :func:`summary_rows` turn it into table rows (the summaries -- seeds that balanced, the
-median over seeds -- are computed here, not stored); :func:`current_rl_runs` and :func:`current_pilco_runs`
-read the same figures from the run folders that the book's figures made with the current code, where they
-exist; :func:`plot_records` draws every run's outcome per seed.
-
-An outcome in a run is a number (the measure at which the run first balanced, in the run's unit), a string
-(a run that did not balance; its text says how far it got) or ``"-"`` (a seed not run).
-"""
+"""The record of settings tried for each method (``book/records/what_we_tried.yml``) as the appendix's tables
+and plot, beside the same figures read from the current run folders.  An outcome is a number (the measure at
+which the run first balanced), a string (did not balance) or ``"-"`` (a seed not run)."""
 
 from __future__ import annotations
 
@@ -33,8 +24,7 @@ __all__ = [
 #: The record, relative to the project root.
 RECORDS_PATH = Path("book/records/what_we_tried.yml")
 
-#: Fields of a method and of a run (a method's ``defaults_run_by_the_book``, a run's ``details``, ``defaults`` and
-#: ``unit`` are optional).
+#: Required fields of a method and of a run.
 METHOD_FIELDS = ("title", "measure", "unit", "legend", "budget", "runs", "diagnostics")
 RUN_FIELDS = ("setting", "seeds", "outcome", "notes")
 
@@ -42,14 +32,8 @@ NOT_RUN = "-"
 
 
 def load_records(path: Path | str = RECORDS_PATH) -> dict[str, dict[str, Any]]:
-    """The methods of the record, by key, each with its runs and diagnostics checked.
-
-    Raises
-    ------
-    ValueError
-        A method or run without one of its fields, seeds that are not integers, or outcomes (and details)
-        whose keys are not the run's seeds (``"all"`` when a run names no seeds).
-    """
+    """The methods of the record, by key, checked (``ValueError`` for a missing field, seeds that are not integers,
+    outcomes or details not keyed by the run's seeds, or ``"all"`` for a run without seeds)."""
     from softpend.io.reading import read_yaml_checked
 
     data = read_yaml_checked(path, "records file")
@@ -87,7 +71,7 @@ def _check_run(run: Any, where: str) -> None:
 
 
 def _value(outcome: Any) -> Optional[float]:
-    """The measure of one seed's outcome: the number, ``inf`` for a run that did not balance, ``None`` if not run."""
+    """The measure of one outcome: the number, ``inf`` (did not balance), ``None`` (not run)."""
     if isinstance(outcome, bool):
         raise ValueError(f"an outcome must be a number or a string, got {outcome!r}")
     if isinstance(outcome, (int, float)):
@@ -96,14 +80,13 @@ def _value(outcome: Any) -> Optional[float]:
 
 
 def _summary(outcomes: Sequence[Any]) -> tuple[str, float]:
-    """``("k of n", median)`` over the seeds that were run (a seed that did not balance counts as ``inf``)."""
+    """``("k of n", median)`` over the seeds that were run."""
     values = [v for v in (_value(o) for o in outcomes) if v is not None]
     balanced = sum(math.isfinite(v) for v in values)
     return f"{balanced} of {len(values)}", float(np.median(values)) if values else math.nan
 
 
 def _cell(value: Any) -> Any:
-    """A table cell: strings with their pipes escaped (Markdown tables), other values as they are."""
     return value.replace("|", "\\|") if isinstance(value, str) else value
 
 
@@ -114,9 +97,8 @@ def _format(value: float) -> str:
 def run_rows(
     method: Mapping[str, Any], table: str = "runs", current: Sequence[Mapping[str, Any]] = ()
 ) -> tuple[list[dict[str, Any]], list[str]]:
-    """Rows and columns of one table of a method: one row per run, one column per seed, then (for ``runs``)
-    the seeds that balanced and the median over seeds, the unit and the notes; ``current`` rows (see
-    :func:`current_rl_runs`) come last."""
+    """Rows and columns of one table of a method: a row per run (``current`` rows last), a column per seed, then
+    for ``runs`` the seeds that balanced, the median, the unit; and the notes."""
     runs = list(method[table]) + list(current)
     seeds = sorted({s for run in runs for s in run["seeds"]})
     seed_columns = [f"seed {s}" for s in seeds] + (["all seeds"] if any(not run["seeds"] for run in runs) else [])
@@ -154,9 +136,7 @@ def detail_rows(method: Mapping[str, Any], table: str = "runs") -> list[dict[str
 def summary_rows(
     records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}
 ) -> list[dict[str, Any]]:
-    """Per method, the runs of the defaults over every recorded seed (all ``defaults`` runs together), and the
-    current runs: seeds that balanced and the median over seeds (``key``: the method's key in ``records``,
-    ``current``: whether the row is of the current runs)."""
+    """Per method, the recorded runs of the defaults and the current runs: seeds that balanced and the median."""
     rows = []
     for key, method in records.items():
         if not method["unit"]:
@@ -187,12 +167,7 @@ def summary_rows(
 
 
 def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current runs of one RL method as a record run (empty when no run folder holds a log).
-
-    Reads ``log.json`` of each seed's folder (:func:`softpend.study.rl_runs.run_folder`) that exists and whose
-    ``config.json`` this version of the code reads; the outcome is the training plant seconds at the first
-    balanced evaluation (:meth:`softpend.rl.training_log.TrainingLog.real_s_to_balance`).
-    """
+    """The book's current runs of one RL method as a record run: plant seconds at the first balanced evaluation."""
     from softpend.rl.config import load_config
     from softpend.rl.training_log import TrainingLog
     from softpend.study.rl_runs import plant_runs_root, run_folder
@@ -212,11 +187,7 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
 
 
 def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current PILCO runs as a record run (empty when no run folder holds a readable run).
-
-    The outcome is the plant seconds of interaction up to the first policy that balances
-    (:attr:`softpend.pilco.loop.PilcoResult.real_seconds_to_balance`).
-    """
+    """The book's current PILCO runs as a record run: plant seconds up to the first policy that balances."""
     from softpend.pilco.loop import PilcoResult
     from softpend.study.rl_runs import plant_runs_root, run_folder
 
@@ -252,8 +223,7 @@ def _current_run(outcome: dict, details: dict, where: str) -> list[dict[str, Any
 
 
 def plot_records(records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}):
-    """One panel per method with a unit: each run's outcome per seed (dots: balanced at that value; crosses
-    at the right edge: did not balance), rows numbered as in :func:`run_rows`."""
+    """One panel per method with a unit: each run's outcome per seed (crosses at the right edge: did not balance)."""
     import matplotlib.pyplot as plt
 
     keys = [k for k, m in records.items() if m["unit"]]

@@ -1,10 +1,5 @@
-"""Multi-seed training runs for the book's figures and the benchmarks, cached in run folders.
-
-:func:`train_seeds` trains one method over several seeds into ``<root>/<algo>-<hash>-seed<k>``
-(:func:`run_folder`: ``<hash>`` names the settings, so runs of other settings never share a folder); a folder
-that already holds a finished run with at least as many episodes is reused, and a shorter one is resumed from
-its checkpoint, so that Figures 4-6 and ``softpend bench --only rl`` share runs.
-"""
+"""The book's multi-seed RL runs, cached in run folders ``<root>/<algo>-<hash>-seed<k>`` (``<hash>`` names the
+settings): a finished run is reused, a shorter one resumed."""
 
 from __future__ import annotations
 
@@ -49,11 +44,7 @@ def train_seeds(
     workers: Optional[int] = None,
     backend: Optional[str] = None,
 ) -> list[TrainingLog]:
-    """Train (or reuse) one run per seed; returns their logs in seed order.
-
-    Runs that need training are trained in parallel, up to ``workers`` at a time (default: one per CPU core,
-    see :func:`softpend.study.sweep.default_workers`).
-    """
+    """Train (or reuse) one run per seed, ``workers`` at a time; returns their logs in seed order."""
     return _train_runs([(algo, config, seeds, episodes)], root, progress, workers, backend)[0]
 
 
@@ -64,17 +55,9 @@ def _train_runs(
     workers: Optional[int],
     backend: Optional[str] = None,
 ) -> list[list[TrainingLog]]:
-    """Train what ``specs`` (``(algo, config, seeds, episodes)`` each) need, in one pool; logs per spec."""
+    """Train what ``specs`` need in one pool; logs per spec."""
     jobs = rl_jobs(specs, root)
-    run_jobs(
-        train_run,
-        [args for _, args in jobs],
-        [name for name, _ in jobs],
-        workers,
-        progress,
-        desc="RL runs",
-        backend=backend,
-    )
+    run_jobs(train_run, [args for _, args in jobs], [name for name, _ in jobs], workers, progress, "RL runs", backend)
     return [
         [TrainingLog.load(run_folder(root, algo, int(seed), config) / "log.json") for seed in seeds]
         for algo, config, seeds, _ in specs
@@ -84,9 +67,8 @@ def _train_runs(
 def rl_jobs(
     specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str
 ) -> list[tuple[str, tuple[Any, ...]]]:
-    """The runs that ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root``, as
-    ``(name, arguments of the run's training job)`` in the order to start them (DQN-MBPO first: a DQN-MBPO run
-    costs about 2.5 DQN runs); a finished run with the same config is left out, a shorter one is resumed."""
+    """The runs ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root``: ``(name, arguments
+    of train_run)``, DQN-MBPO's first; a finished run is left out, a shorter one resumed."""
     jobs, names = [], []
     for algo, config, seeds, episodes in specs:
         if algo not in ("dqn", "mbpo"):
@@ -105,9 +87,7 @@ def rl_jobs(
                 if done.n_episodes == episodes or done.stop_reason is not None:
                     continue
                 resume = done.n_episodes < episodes
-            else:
-                # a run of these settings that stopped before its end resumes from its checkpoint; a folder of
-                # this name that holds another run is refused by the training (never trained over)
+            else:  # an unfinished run resumes; a folder holding another run is refused by the training
                 resume = (run_dir / "config.json").exists()
             jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
             names.append(run_dir.name)
@@ -130,7 +110,7 @@ def train_run(
 
 
 def _saved_config(run_dir: Path) -> DQNConfig | None:
-    """The config saved in a run folder, or None if it was written by an incompatible version."""
+    """The config saved in a run folder, or None if this version cannot read it."""
     try:
         return load_config(run_dir / "config.json")
     except ValueError:
@@ -140,7 +120,7 @@ def _saved_config(run_dir: Path) -> DQNConfig | None:
 def summary_table(
     logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD
 ) -> list[dict[str, Any]]:
-    """One row per method and seed: episodes and plant seconds to balance, to the asymptote, final std."""
+    """One row per method and seed: episodes and plant seconds to balance and to the asymptote, final std."""
     from softpend.rl.curves import run_to_asymptote
 
     rows = []
@@ -171,13 +151,8 @@ def figure_configs(
     task_overrides: Optional[Mapping[str, Any]] = None,
     rl_overrides: Optional[Mapping[str, Any]] = None,
 ) -> dict[str, DQNConfig]:
-    """The configs of the book's Figures 4-6: ``{"dqn": ..., "mbpo": ...}``.
-
-    Each is :func:`softpend.study.presets.load_hparams` on the task ``Task(plant=plant)`` with ``task_overrides``
-    (:class:`~softpend.task.Task` fields by dotted name, e.g. ``{"rod.torque_limit_nm": 0.08}``), then
-    ``rl_overrides`` (config fields by name, each applied to the configs that have it; a name that neither
-    :class:`DQNConfig` nor :class:`MBPOConfig` has is a ``ValueError``).
-    """
+    """The configs of Figures 4-6, ``{"dqn": ..., "mbpo": ...}``: the tuned settings on ``Task(plant=plant)`` with
+    ``task_overrides`` (dotted names), then ``rl_overrides`` (each applied to the configs that have the field)."""
     task = apply_overrides(Task(plant=plant), task_overrides or {})
     overrides = dict(rl_overrides or {})
     configs = {algo: load_hparams(algo, task) for algo in ("dqn", "mbpo")}
@@ -192,8 +167,7 @@ def figure_configs(
 
 
 def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
-    """The run folder root of one plant: ``runs_root`` itself for the PRB rod (the book's default runs), a
-    sibling ``<runs_root>-<plant>`` for any other plant, so that runs on different plants never share a cache."""
+    """``runs_root`` for the PRB rod, ``<runs_root>-<plant>`` for any other plant."""
     check_plant_name(plant)
     root = Path(runs_root)
     return root if plant == "prb" else root.with_name(f"{root.name}-{plant}")
@@ -214,11 +188,7 @@ def figure_runs(
     backend: Optional[str] = None,
     **config_kwargs: Any,
 ) -> dict[str, list[TrainingLog]]:
-    """Train (or reuse) the runs behind Figures 4-6; returns ``{method name: logs}`` (see :func:`figure_configs`).
-
-    The runs of ``plant`` live under :func:`plant_runs_root` ``(runs_root, plant)``.  The runs to train (both
-    methods, every seed) share one pool of ``workers`` processes (see :func:`train_seeds`).
-    """
+    """Train (or reuse) the runs of Figures 4-6 (both methods in one pool); returns ``{method name: logs}``."""
     configs = figure_configs(plant=plant, **config_kwargs)
     root = plant_runs_root(runs_root, plant)
     dqn_logs, mbpo_logs = _train_runs(
@@ -232,29 +202,16 @@ def figure_runs(
 
 
 def run_config_data(algo: str, config: Any) -> dict[str, Any]:
-    """The settings that name a run's folder, as JSON data: a DQN or DQN-MBPO config as its ``config.json`` holds
-    it, a :class:`~softpend.pilco.loop.PilcoConfig` as its ``pilco.json`` holds it with the seed set to 0 (the
-    seed is the last part of the folder's name)."""
+    """The settings that name a run's folder, as JSON data (PILCO's with the seed set to 0)."""
     if algo == "pilco":
         return json.loads(json.dumps(dataclasses.replace(config, seed=0).to_dict(), default=float))
     return saved_config_data(config)
 
 
 def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) -> Path:
-    """Folder of one run (``algo``: ``"dqn"``, ``"mbpo"`` or ``"pilco"``) under ``runs_root``.
-
-    With ``config`` (the run's config), ``<algo>-<hash>-seed<seed>``, ``<hash>`` the first 8 hex digits of the
-    SHA-256 of :func:`run_config_data` (:func:`softpend.io.runfolders.run_folder_name`): a changed setting is a
-    new folder, so a run is never trained over by a run of other settings.  Without ``config``, the run of
-    ``algo`` and ``seed`` under ``runs_root`` whatever its settings: the one folder of that form there, else
-    ``<algo>-seed<seed>`` (which does not exist).
-
-    Raises
-    ------
-    ValueError
-        Without ``config``, if ``runs_root`` holds runs of ``algo`` and ``seed`` with several settings (pass
-        the config to pick one).
-    """
+    """Folder of one run: with ``config``, ``<algo>-<hash>-seed<seed>`` (``<hash>`` from :func:`run_config_data`);
+    without, the one folder of ``algo`` and ``seed`` under ``runs_root`` (``ValueError`` if runs of several
+    settings are there), else ``<algo>-seed<seed>``."""
     root = Path(runs_root)
     if config is not None:
         return root / run_folder_name(algo, run_config_data(algo, config), seed)

@@ -143,7 +143,7 @@ def call_job(job: Callable[..., None], *args: Any, progress: bool = True) -> Non
 def _run_round(
     job: Callable[..., None], pending: dict[str, tuple[Any, ...]], workers: int, progress: bool, desc: str, backend: str
 ) -> tuple[dict[str, str], set[str]]:
-    """One pass over ``pending``: ``(name -> traceback of the jobs that raised, names of the jobs whose worker died)``."""
+    """One pass over ``pending``: ``({name: traceback} of the jobs that raised, names of the lost jobs)``."""
     if workers <= 1:
         raised: dict[str, str] = {}
         for name, args in pending.items():

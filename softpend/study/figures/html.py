@@ -12,16 +12,8 @@ _CDN_STYLESHEET = re.compile(r'<link rel="stylesheet"\s+href="https://[^"]*font-
 
 
 def offline_jshtml(animation: Any, **kwargs: Any) -> str:
-    """``animation.to_jshtml(**kwargs)`` without the link to the Font Awesome stylesheet on a CDN.
-
-    The player's buttons keep their ``fa fa-*`` icon classes, which the book's theme draws with the Font
-    Awesome copy it ships; elsewhere they show as plain buttons.  Nothing is fetched from outside the page.
-
-    Raises
-    ------
-    ValueError
-        If the player no longer links the stylesheet the way this function expects (a matplotlib change).
-    """
+    """``animation.to_jshtml(**kwargs)`` without its link to the Font Awesome stylesheet on a CDN;
+    ``ValueError`` if the player does not link it once."""
     html = animation.to_jshtml(**kwargs)
     stripped, count = _CDN_STYLESHEET.subn("", html)
     if count != 1:

@@ -58,26 +58,9 @@ def draw_filmstrip(
     half_width_px: Optional[float] = None,
     frame_width_in: float = 1.9,
 ):
-    """A row of ``n_frames`` camera frames evenly spaced in time, each with the tracker's contour and centroid
-    overlaid (:func:`draw_tracked_frame`) and its time as the title.
-
-    Parameters
-    ----------
-    frames : sequence of (time_s, frame_bgr, detection)
-        Candidate frames in time order (e.g. :meth:`softpend.study.rig_runs.FrameKeeper.at_loop_times`).
-    n_frames : int
-        Frames shown (fewer if fewer are given); the one nearest each of ``n_frames`` evenly spaced times.
-    span_s : float, optional
-        Show frames up to this time [s] (default: all).
-    centre_px, half_width_px : optional
-        Crop every frame to the square of half-width ``half_width_px`` around ``centre_px`` (x, y) [px].
-    frame_width_in : float
-        Width of one frame in the figure [in].
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """A figure of ``n_frames`` of ``frames`` (``(time_s, frame_bgr, detection)``, in time order) evenly spaced up
+    to ``span_s``, each with the tracker's overlay (:func:`draw_tracked_frame`), cropped to ``half_width_px``
+    around ``centre_px`` if given."""
     import matplotlib.pyplot as plt
 
     if n_frames < 1:
@@ -105,15 +88,8 @@ def draw_filmstrip(
 
 
 def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[str] = None):
-    """Tip angle (its magnitude: 0 upright, pi hanging) and torque of one twin run against time since the loop's
-    first state: the rod's true tip angle (emulator truth log), the estimate the controller was handed (motor
-    log), and optionally the same controller from the same start in the ideal simulator (an
-    :class:`~softpend.evaluation.EvaluationResult`, its time shifted to the twin's first command).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """A figure of ``|theta|`` and torque of one twin run against time: the true tip angle, the controller's
+    estimate and the commands, and optionally the ideal simulator's run from the same start (``simulator``)."""
     import matplotlib.pyplot as plt
 
     from softpend.io.samplelog import read_sample_log

@@ -1,9 +1,5 @@
-"""The rig's dimensioned drawing (:func:`draw_rig_design`): a front view in the camera's plane, the hub mount
-enlarged, and a side view.
-
-Both views are drawn to scale from a :class:`~softpend.hardware.rig_design.RigDesign`; every dimension label is
-formatted from the design, so the drawing changes with the rod's parameters.
-"""
+"""The rig's dimensioned drawing (:func:`draw_rig_design`), to scale and labelled from a
+:class:`~softpend.hardware.rig_design.RigDesign`."""
 
 from __future__ import annotations
 

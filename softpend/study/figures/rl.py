@@ -1,8 +1,4 @@
-"""Figures 4-6 of the report: learning curves, the swing-up time course, and the upright error over time.
-
-Thin matplotlib helpers for the notebooks; the numbers come from :mod:`softpend.rl.curves` and the shared
-evaluation results (:class:`softpend.evaluation.EvaluationResult`).
-"""
+"""Figures 4-6: learning curves, the swing-up time course and the upright error over time."""
 
 from __future__ import annotations
 
@@ -29,17 +25,9 @@ def plot_learning_curves(
     threshold_rad: float = SUCCESS_STD_RAD,
     seed: int = 0,
 ):
-    """Figure 4: return and evaluation upright std against episodes and real plant seconds.
-
-    Top row: the return of every seed (thin lines, smoothed with a trailing ``window``-episode moving
-    average), a run's line ending where its training ended; dotted vertical lines mark each method's median
-    episode of reaching the asymptotic reward (:func:`softpend.rl.curves.run_to_asymptote`).  Bottom row:
-    the worst evaluation start's upright std, interquartile mean over seeds (line) with its 95 % stratified
-    bootstrap interval (band, :func:`softpend.rl.curves.interval_band`; a run that stopped keeps its last value,
-    its agent no longer changing); with a single seed, that seed's curve.  An evaluation in which a start failed
-    counts as the success level :data:`softpend.evaluation.SUCCESS_STD_RAD` (the top of the axis: an evaluation
-    stops at its first failing start).  The dashed line is ``threshold_rad``.
-    """
+    """Figure 4: each seed's smoothed return (``window`` episodes) with each method's median episode of reaching
+    the asymptote (dotted), and the worst start's evaluation upright std (IQM over seeds with its 95 % band; a
+    failed start counts as :data:`~softpend.evaluation.SUCCESS_STD_RAD`), against episodes and plant seconds."""
     fig = fig or plt.figure(figsize=(11, 7))
     axes = fig.subplots(2, 2, sharey="row")
     for i, (method, logs) in enumerate(logs_by_method.items()):
@@ -79,17 +67,8 @@ def plot_learning_curves(
 
 
 def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: Optional[plt.Figure] = None):
-    """Figure 5: tip angle, hub angle and torque against time, and a filmstrip of rod shapes.
-
-    Parameters
-    ----------
-    result : EvaluationResult
-        One evaluation episode (from the shared evaluation).
-    link_points : callable
-        ``q -> (n + 1, 2)`` joint positions [m] (``plant.link_points_m``).
-    n_frames : int
-        Rod shapes in the filmstrip, evenly spaced over the swing-up (and one second after it).
-    """
+    """Figure 5: tip angle, hub angle and torque of one episode against time, and ``n_frames`` rod shapes
+    (``link_points``: ``q -> (n + 1, 2)`` joint positions) up to a second after the swing-up."""
     fig = fig or plt.figure(figsize=(11, 8))
     grid = fig.add_gridspec(4, 1, height_ratios=[1, 1, 1, 1.3])
     t = result.time_s

@@ -20,15 +20,8 @@ _LABELS = {
 
 
 def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.ndarray] = None, title: str = ""):
-    """Four panels (phi, theta, ex, ey): data (solid) and open-loop model rollout (dashed).
-
-    Parameters
-    ----------
-    curves : dict
-        Output of :func:`softpend.sysid.rollout_trial`.
-    axes : sequence of 4 matplotlib Axes, optional
-        Where to draw (default: a new 2 x 2 figure).
-    """
+    """Four panels (phi, theta, ex, ey) of :func:`softpend.sysid.rollout_trial` ``curves``: data (solid) and the
+    open-loop model rollout (dashed), on ``axes`` or a new 2 x 2 figure."""
     import matplotlib.pyplot as plt
 
     if axes is None:
@@ -51,17 +44,8 @@ def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.nda
 def plot_rollout_errors(
     errors: dict[str, RolloutErrors], axes: Optional[Sequence] = None, length_m: Optional[float] = None
 ):
-    """Tip-position and base-angle RMSE against the horizon, one line per model, with the "hold" yardstick.
-
-    Parameters
-    ----------
-    errors : dict
-        Label -> :class:`softpend.sysid.RolloutErrors`.
-    axes : sequence of 2 Axes, optional
-        Where to draw (default: a new 1 x 2 figure).
-    length_m : float, optional
-        Rod length; draws the 5 % target line on the tip panel.
-    """
+    """Tip-position and base-angle RMSE against the horizon, one line per model (``errors``: label ->
+    :class:`softpend.sysid.RolloutErrors`), the "hold" yardstick, and the 5 % line with ``length_m``."""
     import matplotlib.pyplot as plt
 
     if axes is None:

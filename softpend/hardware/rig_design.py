@@ -1,35 +1,10 @@
-"""The rig's geometry and parts, computed from the rod's parameters.
-
-:func:`rig_design` turns a :class:`~softpend.plant.params.RodParams` into the dimensions of what is printed,
-bought and placed: the TPU beam, the hub mount on the motor shaft, the tip mass with its blue dot, the green
-calibration markers and the camera.  Every figure follows from the parameters and a few stated parts
-(:class:`MotorCartridge`, :class:`CameraSpec`, :class:`HubSpec`), so a change of the rod changes the rig.
-
-The beam section
-----------------
-The PRB model needs only the beam's flexural rigidity ``EI = E W D**3 / 12 * stiffness_scale``
-(:attr:`RodParams.bending_stiffness_nm2`); the joint springs are ``k = EI/(L/n)``.  A beam printed from a
-material of modulus ``E_print`` and width ``W`` (out of the camera plane) has that rigidity when its
-thickness in the bending direction (in the camera plane) is::
-
-    D_print = (12 EI / (E_print W)) ** (1/3)
-
-With ``E_print`` equal to the parameters' modulus this is the parameters' own depth ``D``.  The beam bends
-in the camera plane because the out-of-plane rigidity ``E D W**3 / 12`` is ``(W/D)**2`` times larger.  The
-print's mass is ``rho W D_print L`` with the density ``rho = m / (W D L)`` the parameters imply.
-
-The camera
-----------
-The camera looks square-on at the rod's plane, its optical axis through the hub axis, so the plane maps to
-the image by an affine map (:mod:`softpend.vision.calibration`).  The scene of the synthetic camera
-(:class:`~softpend.vision.camera.CameraModel`, :data:`~softpend.vision.camera.DEFAULT_MARKERS_M`) is the
-design for the default rod; a longer rod scales the marker layout and the field of view by the same factor,
-so that every marker stays outside the swing circle by :attr:`HubSpec.marker_clearance_m`.  A lens of
-horizontal field of view ``alpha`` covers the field width ``F`` from the distance ``F / (2 tan(alpha/2))``.
-"""
+"""The rig's geometry and parts from the rod's parameters: a printed beam of the rod's flexural rigidity
+(``D_print = (12 EI / (E_print W)) ** (1/3)``), the hub mount, the steel tip disc, the calibration markers (scaled
+to clear the swing circle) and the camera square-on to the rod's plane."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Optional
@@ -52,34 +27,18 @@ __all__ = [
     "rig_design",
 ]
 
-#: Density of the steel tip mass [kg/m^3].
 STEEL_DENSITY_KG_M3 = 7850.0
-#: Radius of the printed green calibration markers and of the blue tip dot's disc [m] (the synthetic camera's
-#: 11 mm dot; its markers are drawn 7 px wide at 640 px/m, the same size).
+#: Radius of the calibration markers and of the tip dot's disc [m].
 MARKER_RADIUS_M = 0.011
-#: Young's modulus of printed TPU filaments, Shore 85A to 98A, from the range of manufacturers' data sheets
-#: [Pa].  The modulus of a print also depends on infill, layer orientation and temperature: the static sag
-#: test of the assembled rod (:attr:`RigDesign.rows`) measures it.
+#: Young's modulus of printed TPU filaments, Shore 85A to 98A [Pa].
 TPU_MODULUS_RANGE_PA = (10.0e6, 100.0e6)
-#: Thinnest beam a printer lays down (two layers of 0.05 mm) [m].
+#: Thinnest beam a printer lays down [m].
 PRINTABLE_THICKNESS_M = 1.0e-4
 
 
 @dataclass(frozen=True)
 class MotorCartridge:
-    """A gear cartridge of the VEX V5 Smart Motor (published figures at 12 V).
-
-    Parameters
-    ----------
-    name : str
-        Label (colour and ratio).
-    free_speed_rad_s : float
-        Output speed without load [rad/s].
-    stall_torque_nm : float
-        Output torque at stall [N m].
-    encoder_ticks_per_rev : int
-        Encoder ticks per output revolution.
-    """
+    """A gear cartridge of the VEX V5 Smart Motor (published figures at 12 V, at the output)."""
 
     name: str
     free_speed_rad_s: float
@@ -92,18 +51,12 @@ class MotorCartridge:
         int_at_least("encoder_ticks_per_rev", self.encoder_ticks_per_rev, 4)
 
     def available_torque_nm(self, speed_rad_s: float) -> float:
-        """Torque the motor can give at ``speed_rad_s`` on the full supply, ``stall (1 - |w|/w_free)`` (the DC motor
-        line of the device program's model), 0 beyond the free speed [N m]."""
+        """Torque at ``speed_rad_s`` on the full supply (the DC motor line), 0 beyond the free speed [N m]."""
         return self.stall_torque_nm * max(0.0, 1.0 - abs(float(speed_rad_s)) / self.free_speed_rad_s)
-
-    @property
-    def encoder_resolution_rad(self) -> float:
-        """Hub angle of one encoder tick [rad]."""
-        return 2.0 * math.pi / self.encoder_ticks_per_rev
 
 
 _RPM = 2.0 * math.pi / 60.0
-#: The three V5 Smart Motor cartridges (red, green, blue), coarse to fine speed.
+#: The three V5 Smart Motor cartridges, coarse to fine speed.
 V5_CARTRIDGES: tuple[MotorCartridge, ...] = (
     MotorCartridge("red 36:1", 100.0 * _RPM, 4.2, 1800),
     MotorCartridge("green 18:1", 200.0 * _RPM, 2.1, 900),
@@ -113,16 +66,7 @@ V5_CARTRIDGES: tuple[MotorCartridge, ...] = (
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """The camera filming the rod's plane.
-
-    Parameters
-    ----------
-    width_px, height_px : int
-        Image size of the video mode used.
-    horizontal_fov_deg : float
-        Horizontal field of view of the lens in that mode [deg] (62.2 for the Raspberry Pi Camera Module 2 at
-        its full field).
-    """
+    """The camera filming the rod's plane: image size and horizontal field of view [deg] of the video mode."""
 
     width_px: int = 640
     height_px: int = 480
@@ -138,32 +82,9 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class HubSpec:
-    """The printed hub mount and the clearances around the rod.
-
-    Parameters
-    ----------
-    shaft_side_m : float
-        Side of the motor's square drive shaft (the V5 1/8 inch shaft) [m]; the mount's bore.
-    clamp_radius_m : float
-        Radius of the mount's round boss around the shaft: the beam leaves the mount at this distance from the
-        hub axis [m].
-    pocket_start_m : float
-        Distance from the hub axis to the inner end of the beam's pocket in the mount [m].
-    mount_thickness_m : float
-        Thickness of the mount along the shaft [m].
-    hub_marker_radius_m : float
-        Distance of the magenta hub marker from the axis along the rod [m] (the synthetic camera's 35 mm).  The
-        marker sits on a rigid flag of the mount that runs along the rod ``flag_gap_m`` in front of the beam
-        (towards the camera), so that it turns with the hub while the beam bends freely behind it.
-    hub_marker_dot_radius_m : float
-        Radius of the hub marker dot [m].
-    flag_gap_m : float
-        Gap between the marker flag and the beam's front face [m].
-    marker_clearance_m : float
-        Least gap between a calibration marker's edge and the swing circle [m].
-    keep_out_margin_m : float
-        Margin beyond the swing circle that must stay clear of hands and objects while the motor is on [m].
-    """
+    """The printed hub mount and the clearances around the rod [m]: the beam leaves the mount's boss at
+    ``clamp_radius_m``; the magenta hub marker sits ``hub_marker_radius_m`` from the axis on a rigid flag
+    ``flag_gap_m`` in front of the beam; ``keep_out_margin_m`` beyond the swing circle stays clear."""
 
     shaft_side_m: float = 0.125 * 0.0254
     clamp_radius_m: float = 0.012
@@ -176,18 +97,8 @@ class HubSpec:
     keep_out_margin_m: float = 0.10
 
     def __post_init__(self) -> None:
-        for name in (
-            "shaft_side_m",
-            "clamp_radius_m",
-            "pocket_start_m",
-            "mount_thickness_m",
-            "hub_marker_radius_m",
-            "hub_marker_dot_radius_m",
-            "flag_gap_m",
-            "marker_clearance_m",
-            "keep_out_margin_m",
-        ):
-            positive(name, getattr(self, name))
+        for f in dataclasses.fields(self):
+            positive(f.name, getattr(self, f.name))
         if not self.pocket_start_m < self.clamp_radius_m:
             raise ValueError(f"pocket_start_m must be below clamp_radius_m, got {self.pocket_start_m!r}")
         if self.pocket_start_m < self.shaft_side_m * math.sqrt(0.5):
@@ -199,41 +110,9 @@ class HubSpec:
 
 @dataclass(frozen=True)
 class RigDesign:
-    """Dimensions of the rig for one rod (see :func:`rig_design`; SI units).
-
-    Attributes
-    ----------
-    params : RodParams
-        The rod.
-    print_modulus_pa : float
-        Modulus of the material the beam is printed from [Pa].
-    beam_length_m, beam_width_m, beam_thickness_m : float
-        The printed beam: from the pocket's inner end to the tip, out of plane, in plane (bending) [m].
-    beam_mass_kg : float
-        Mass of the printed beam at the density the parameters imply [kg].
-    out_of_plane_stiffness_ratio : float
-        Out-of-plane over in-plane flexural rigidity, ``(W / D_print)**2``.
-    tip_disc_thickness_m : float
-        Thickness of a steel disc of the dot's diameter that has the tip mass [m].
-    dot_radius_m : float
-        Radius of the blue dot on the tip disc [m].
-    swing_radius_m : float
-        Radius of the circle the straight rod's dot sweeps, ``L`` plus the dot radius [m].
-    keep_out_radius_m : float
-        Radius that must stay clear while the motor is on [m].
-    flag_length_m : float
-        Length of the mount's marker flag from the hub axis (it carries the hub marker) [m].
-    markers_m : ndarray, shape (4, 2)
-        Calibration marker centres in the rod's plane [m] (hub axis at the origin, y up).
-    marker_scale : float
-        Factor applied to :data:`DEFAULT_MARKERS_M` (1 for the default rod).
-    camera_model : CameraModel
-        The affine camera of the design (no roll, hub at the image centre used by the synthetic camera).
-    camera_distance_m : float
-        Lens to rod plane [m].
-    hub : HubSpec, camera : CameraSpec
-        The parts assumed.
-    """
+    """Dimensions of the rig for one rod (:func:`rig_design`; SI units): the printed beam (length from the
+    pocket's inner end, width out of plane, thickness in plane), the tip disc, the swing and keep-out radii, the
+    marker flag, the calibration markers (hub at the origin, y up), the affine camera and its distance."""
 
     params: RodParams
     print_modulus_pa: float
@@ -254,7 +133,6 @@ class RigDesign:
     hub: HubSpec
     camera: CameraSpec
 
-    # ------------------------------------------------------------------ camera figures
     @property
     def pixel_size_m(self) -> float:
         """Side of one pixel in the rod's plane [m]."""
@@ -267,13 +145,8 @@ class RigDesign:
 
     @property
     def dot_area_px(self) -> float:
-        """Area of the blue dot in the image [px^2] (the tracker needs at least its ``min_area_px``)."""
+        """Area of the blue dot in the image [px^2]."""
         return math.pi * (self.dot_radius_m / self.pixel_size_m) ** 2
-
-    def depth_error_m(self, offset_m: float = 0.001) -> float:
-        """Tip position error of the affine map when the dot lies ``offset_m`` in front of the markers' plane:
-        the scale error ``offset / distance`` times the swing radius [m]."""
-        return abs(offset_m) / self.camera_distance_m * self.swing_radius_m
 
     @property
     def min_marker_gap_m(self) -> float:
@@ -302,7 +175,7 @@ class RigDesign:
         )
 
     def to_dict(self) -> dict:
-        """The design's figures as plain numbers (JSON), lengths in millimetres where the key says ``_mm``."""
+        """The design's figures as JSON numbers (millimetres where the key says ``_mm``)."""
         fov_w, fov_h = self.field_of_view_m
         return {
             "rod_length_mm": 1e3 * self.params.length_m,
@@ -341,25 +214,9 @@ def rig_design(
     camera: Optional[CameraSpec] = None,
     hub: Optional[HubSpec] = None,
 ) -> RigDesign:
-    """The rig's dimensions for the rod ``params`` (module docstring for the formulas).
-
-    Parameters
-    ----------
-    params : RodParams, optional
-        The rod (default: the project's default rod).
-    print_modulus_pa : float, optional
-        Modulus of the beam's material [Pa] (default ``params.youngs_modulus_pa``: the parameters' own section).
-    camera : CameraSpec, optional
-        The camera (default :class:`CameraSpec`).
-    hub : HubSpec, optional
-        Mount and clearances (default :class:`HubSpec`).
-
-    Raises
-    ------
-    ValueError
-        If ``params`` is not a RodParams, the rod has no bending stiffness (a hinged chain cannot be printed as
-        a beam), or the rod is shorter than the mount's clamp.
-    """
+    """The rig's dimensions for the rod ``params`` (default rod), its beam printed from a material of modulus
+    ``print_modulus_pa`` (default the rod's own); ``ValueError`` for a rod without bending stiffness, shorter
+    than the mount's clamp, or a beam that cannot be printed."""
     params = params if params is not None else RodParams()
     if not isinstance(params, RodParams):
         raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
@@ -375,7 +232,7 @@ def rig_design(
         )
     width = params.width_m
     thickness = (12.0 * ei / (modulus * width)) ** (1.0 / 3.0)
-    if not PRINTABLE_THICKNESS_M <= thickness <= params.length_m:  # also NaN; a drawing of it would never end
+    if not PRINTABLE_THICKNESS_M <= thickness <= params.length_m:  # also NaN
         raise ValueError(
             f"print_modulus_pa {modulus:g} Pa gives a beam {thickness * 1e3:.3g} mm thick for the rod's "
             f"bending stiffness; a printable beam is {PRINTABLE_THICKNESS_M * 1e3:g} mm to the rod's "

@@ -121,14 +121,11 @@ def linearise_step_map(
     params: Optional[RodParams] = None,
     dt_s: float = 0.01,
     substeps: int = 2,
-    state_step: float = 1e-6,
-    torque_step_nm: float = 1e-5,
 ) -> LinearModel:
-    """Discrete model from central differences (steps ``state_step``, ``torque_step_nm``) of one control step of
-    :class:`~softpend.plant.PRBPlant` about the straight rod upright at rest."""
+    """Discrete model from central differences of one control step of :class:`~softpend.plant.PRBPlant` about
+    the straight rod upright at rest."""
     params = params if params is not None else RodParams()
-    if state_step <= 0 or torque_step_nm <= 0:
-        raise ValueError("state_step and torque_step_nm must be positive")
+    state_step, torque_step_nm = 1e-6, 1e-5
     plant = PRBPlant(params, dt_s=dt_s, substeps=substeps)
     n = plant.n_coordinates
 

@@ -117,17 +117,16 @@ def pid_rollout_cost(
     tilts_rad: Sequence[float] = (0.1, -0.2),
     duration_s: float = 3.0,
     torque_weight: float = 0.1,
-    fall_angle_rad: float = 1.0,
 ) -> float:
     """Mean over starts of ``mean(theta^2) + torque_weight * mean((tau / tau_max)^2)``, 10 for a rollout that
-    leaves ``fall_angle_rad`` or is not finite."""
+    leaves 1 rad or is not finite."""
     total = 0.0
     for tilt in tilts_rad:
         controller.reset()
         theta, torque = simulate(controller, float(tilt), duration_s)
         theta = np.asarray(theta, float)
         torque = np.asarray(torque, float)
-        if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > fall_angle_rad):
+        if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > 1.0):
             total += 10.0
             continue
         total += float(np.mean(theta**2) + torque_weight * np.mean((torque / controller.torque_limit_nm) ** 2))
@@ -196,11 +195,7 @@ def plant_simulator(task: Optional[Task] = None) -> Simulator:
     def simulate(controller: PIDController, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
         run_task = base.replace(torque_limit_nm=controller.torque_limit_nm)
         result = evaluate_controller(
-            controller,
-            run_task,
-            seeds=(0,),
-            duration_s=duration_s,
-            initial_state=run_task.tilt_state(tilt_rad),
+            controller, run_task, seeds=(0,), duration_s=duration_s, initial_state=run_task.tilt_state(tilt_rad)
         ).results[0]
         theta = result.theta_rad if result.diverged is None else np.append(result.theta_rad, np.nan)
         return theta, result.torque_nm

@@ -14,7 +14,7 @@ from typing import Any, Optional
 import numpy as np
 
 from softpend.checks import finite, one_of, positive
-from softpend.control.lqr import LQRController, LQRWeights
+from softpend.control.lqr import LQRController
 from softpend.plant import Observation, PRBPlant, RodParams
 
 __all__ = ["EnergySwingUpController", "pendulum_energy_j"]
@@ -47,7 +47,6 @@ class EnergySwingUpController:
         capture_angle_rad: float = 0.4,
         release_angle_rad: float = 0.8,
         torque_limit_nm: Optional[float] = None,
-        lqr_weights: Optional[LQRWeights] = None,
     ) -> None:
         self.params = params if params is not None else RodParams()
         one_of("energy_source", energy_source, ("observation", "joint"))
@@ -69,7 +68,7 @@ class EnergySwingUpController:
             balance
             if balance is not None
             else LQRController.from_params(
-                self.params, dt_s=dt_s, state=lqr_state, weights=lqr_weights, torque_limit_nm=self.torque_limit_nm
+                self.params, dt_s=dt_s, state=lqr_state, torque_limit_nm=self.torque_limit_nm
             )
         )
         self.energy_source = energy_source

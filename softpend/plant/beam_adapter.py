@@ -24,7 +24,6 @@ from exudyn.itemInterface import (
     ObjectRigidBody2D,
 )
 
-from softpend.checks import in_unit_interval, int_at_least, positive
 from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings, static_solver_settings
 
 __all__ = ["BeamSection", "HubBeam2D"]
@@ -64,17 +63,10 @@ class HubBeam2D:
     time_s: float = field(init=False, default=0.0)
 
     def __post_init__(self) -> None:
-        self.n_elements = int_at_least("n_elements", self.n_elements, 1)
-        positive("dt_s", self.dt_s)
-        int_at_least("substeps", self.substeps, 1)
-        in_unit_interval("spectral_radius", self.spectral_radius)
         self.n_nodes = self.n_elements + 1
         self.n_ode2 = 3 * self.n_nodes
         self.element_length_m = self.length_m / self.n_elements
         self.node_s_m = np.linspace(0.0, self.length_m, self.n_nodes)
-        self._build()
-
-    def _build(self) -> None:
         sec = self.section
         self._sc = exu.SystemContainer()
         mbs = self._sc.AddSystem()

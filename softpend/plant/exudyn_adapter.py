@@ -11,8 +11,6 @@ import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
-from softpend.checks import int_at_least, positive
-
 __all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings", "static_solver_settings"]
 
 
@@ -84,18 +82,12 @@ class KinematicChain2D:
     _force: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        positive("dt_s", self.dt_s)
-        int_at_least("substeps", self.substeps, 1)
         n = len(self.links)
         if n < 1:
             raise ValueError("links must not be empty")
         self.n = n
         self._force = np.zeros(n)
         self.time_s = 0.0
-        self._build()
-
-    def _build(self) -> None:
-        n = self.n
         self._sc = exu.SystemContainer()
         mbs = self._sc.AddSystem()
         self._mbs = mbs

@@ -10,10 +10,7 @@ if TYPE_CHECKING:
 
 __all__ = ["check_plant_name", "make_plant", "plant_names"]
 
-_PLANTS: dict[str, str] = {
-    "prb": "softpend.plant.prb:PRBPlant",
-    "beam": "softpend.plant.beam:BeamPlant",
-}
+_PLANTS: dict[str, str] = {"prb": "softpend.plant.prb:PRBPlant", "beam": "softpend.plant.beam:BeamPlant"}
 
 
 def plant_names() -> list[str]:

@@ -1,21 +1,6 @@
-"""Time synchronisation: merge the motor log and the camera CSV into a system-identification dataset.
-
-The motor controller and the camera have separate clocks.  :func:`estimate_clock_offset` finds
-``offset_s = camera clock - motor clock`` from the data: over a window that contains the deliberate
-start-up wiggle (a pseudo-random torque burst, see :func:`startup_wiggle_torque`), the hub rate from the
-encoder and the hub rate seen by the camera (a magenta marker on the rod clamp) are cross-correlated
-over candidate offsets (1 ms grid, refined by a parabola through the peak).  Both measure the same
-rigid body, so the peak sits at the clock offset.  Without a hub marker the tip angle is used instead;
-that is biased by the rod's own lag between hub and tip (about 60 ms for the default rod, measured in
-the tests), so the hub marker is the recommended set-up.
-
-:func:`synchronise` then maps camera times onto the motor clock, resamples both streams onto a grid of
-``dt_s`` (0.01 s) aligned with the motor samples (linear interpolation of positions, zero-order hold of
-the applied torque), marks grid points that fall in a gap (dropped motor states, lost or missing camera
-frames), cuts the valid stretches into trials of ``trial_length_s`` and computes backward-difference
-velocities as :mod:`softpend.sysid` does.  :func:`build_rig_dataset` writes the result with
-:func:`softpend.sysid.save_dataset` (``source="rig"``).
-"""
+"""Merge the motor log and the camera CSV into a system-identification dataset: the camera's clock offset from
+cross-correlating the hub rates of the start-up wiggle, both streams resampled onto the motor's grid, gaps marked,
+the valid stretches cut into trials with backward-difference velocities."""
 
 from __future__ import annotations
 
@@ -39,7 +24,7 @@ __all__ = [
     "synchronise",
 ]
 
-#: Position columns of a rig dataset (the camera tracks only the tip dot, so no ``er_rad``).
+#: Position columns of a rig dataset.
 RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
 
 
@@ -51,11 +36,7 @@ def startup_wiggle_torque(
     min_hold_s: float = 0.08,
     max_hold_s: float = 0.3,
 ) -> np.ndarray:
-    """A pseudo-random +-``torque_nm`` sequence (random hold times): the deliberate start-up wiggle whose
-    non-periodic pattern gives a single, sharp cross-correlation peak.
-
-    Returns the torque per control step [N m], ``round(duration_s / dt_s)`` values.
-    """
+    """The start-up wiggle: +-``torque_nm`` with random hold times, one torque per control step."""
     if not (duration_s > 0 and torque_nm > 0 and dt_s > 0 and 0 < min_hold_s <= max_hold_s):
         raise ValueError("duration_s, torque_nm, dt_s must be positive and min_hold_s <= max_hold_s")
     rng = np.random.default_rng(seed)
@@ -86,10 +67,6 @@ class Gap:
     end_s: float
     reason: str
 
-    @property
-    def duration_s(self) -> float:
-        return self.end_s - self.start_s
-
 
 @dataclass
 class SyncResult:
@@ -104,17 +81,6 @@ class SyncResult:
     grid_valid_fraction: float = 1.0
     trial_start_s: list[float] = field(default_factory=list)
 
-    @property
-    def n_trials(self) -> int:
-        return int(self.positions.shape[0])
-
-
-def _fill_nan(t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    good = np.isfinite(x)
-    if good.sum() < 2:
-        raise ValueError("camera log has fewer than 2 tracked frames")
-    return np.interp(t, t[good], x[good])
-
 
 def estimate_clock_offset(
     motor_time_s: np.ndarray,
@@ -125,21 +91,9 @@ def estimate_clock_offset(
     max_offset_s: float = 1.0,
     resolution_s: float = 0.001,
 ) -> ClockOffset:
-    """Estimate ``camera clock - motor clock`` by cross-correlating hub and tip-angle rates.
-
-    Parameters
-    ----------
-    motor_time_s, motor_phi_rad : ndarray
-        Encoder samples on the motor clock [s, rad] (unwrapped or wrapped).
-    camera_time_s, camera_theta_rad : ndarray
-        Tip angle from the camera on the camera clock [s, rad]; NaN where the tip was lost.
-    window_s : (start, end), optional
-        Motor-clock window to correlate (the start-up wiggle); default the whole motor record.
-    max_offset_s : float
-        Largest offset searched [s].
-    resolution_s : float
-        Grid step of the search and of the resampled signals [s].
-    """
+    """Estimate ``camera clock - motor clock`` by cross-correlating the rates of the encoder's hub angle and the
+    camera's angle (NaN where lost) over the motor-clock ``window_s`` (default: all), on a ``resolution_s`` grid of
+    offsets up to ``max_offset_s``, refined by a parabola through the peak."""
     tm = np.asarray(motor_time_s, float)
     tc = np.asarray(camera_time_s, float)
     if tm.size < 10 or tc.size < 10:
@@ -151,7 +105,9 @@ def estimate_clock_offset(
     good = np.isfinite(theta_raw)
     theta = np.full_like(theta_raw, np.nan)
     theta[good] = np.unwrap(theta_raw[good])
-    theta = _fill_nan(tc, theta)
+    if good.sum() < 2:
+        raise ValueError("camera log has fewer than 2 tracked frames")
+    theta = np.interp(tc, tc[good], theta[good])
     start, end = (tm[0], tm[-1]) if window_s is None else (float(window_s[0]), float(window_s[1]))
     if end - start < 20 * resolution_s:
         raise ValueError(f"window_s {window_s} is too short")
@@ -160,11 +116,9 @@ def estimate_clock_offset(
     motor_rate -= motor_rate.mean()
     n_lag = int(round(max_offset_s / resolution_s))
     offsets = np.arange(-n_lag, n_lag + 1) * resolution_s
-    # camera rate on the window extended by the search range; outside the camera record it is undefined
     extended = np.arange(-n_lag, grid.size + n_lag) * resolution_s + start
     inside = (extended >= tc[0]) & (extended <= tc[-1])
     cam_rate = np.where(inside, np.gradient(np.interp(extended, tc, theta), resolution_s), 0.0)
-    # for every lag: correlation of the motor window with the camera segment it overlaps (FFT, all lags at once)
     from scipy.signal import correlate
 
     m = grid.size
@@ -192,10 +146,8 @@ def estimate_clock_offset(
     return ClockOffset(float(refined), float(scores[best]))
 
 
-def _gaps_from_times(t: np.ndarray, nominal_s: float, factor: float, reason: str) -> list[Gap]:
-    steps = np.diff(t)
-    idx = np.nonzero(steps > factor * nominal_s)[0]
-    return [Gap(float(t[i]), float(t[i + 1]), reason) for i in idx]
+def _gaps_from_times(t: np.ndarray, max_step_s: float, reason: str) -> list[Gap]:
+    return [Gap(float(t[i]), float(t[i + 1]), reason) for i in np.nonzero(np.diff(t) > max_step_s)[0]]
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -217,30 +169,12 @@ def synchronise(
     min_gap_s: float = 0.03,
 ) -> SyncResult:
     """Merge a motor log (:data:`softpend.hardware.loop.LOOP_LOG_COLUMNS`) and a camera CSV
-    (:data:`softpend.vision.track_video.TRACK_COLUMNS`) into resampled trials.
+    (:data:`softpend.vision.track_video.TRACK_COLUMNS`) into trials of ``trial_length_s`` sampled every ``dt_s``.
 
-    Parameters
-    ----------
-    motor, camera : LogContents
-        The two logs (:func:`softpend.hardware.read_sample_log`).
-    dt_s : float
-        Output sampling step [s].
-    trial_length_s : float
-        Length of each output trial [s] (``N = round(trial_length_s / dt_s)`` samples).
-    offset : ClockOffset, optional
-        Known clock offset; estimated from the data when omitted.
-    wiggle_window_s : float, optional
-        Correlate only the first this many seconds of the motor record (the start-up wiggle); None for all.
-    max_offset_s : float
-        Largest clock offset searched [s].
-    gap_factor, min_gap_s : float
-        A spacing larger than ``gap_factor`` times the median sample period and than ``min_gap_s`` [s]
-        is a gap (one missed sample is interpolated over; longer holes are not).
-
-    Raises
-    ------
-    ValueError
-        If the logs lack columns, do not overlap, or contain no gap-free stretch of one trial.
+    The clock ``offset`` is estimated from the first ``wiggle_window_s`` of the motor record when not given
+    (the hub marker's angle if tracked, else the tip angle).  A spacing above ``gap_factor`` times the median
+    period and ``min_gap_s`` is a gap.  ``ValueError`` when the logs lack columns, do not overlap, or hold no
+    gap-free trial.
     """
     for name, log, needed in (
         ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
@@ -261,15 +195,15 @@ def synchronise(
         window = None if wiggle_window_s is None else (tm[0], tm[0] + wiggle_window_s)
         if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
             reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
-        else:  # no hub marker: the tip angle (biased by the rod's lag, see the module docstring)
+        else:  # no hub marker: the tip angle (biased by the rod's lag)
             reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
         offset = estimate_clock_offset(tm, phi, tc_cam, reference, window, max_offset_s)
     tc = tc_cam - offset.offset_s  # camera frames on the motor clock
 
     motor_period = float(np.median(np.diff(tm)))
     camera_period = float(np.median(np.diff(tc)))
-    gaps = _gaps_from_times(tm, max(gap_factor * motor_period, min_gap_s), 1.0, "motor states missing")
-    gaps += _gaps_from_times(tc, max(gap_factor * camera_period, min_gap_s), 1.0, "camera frames missing")
+    gaps = _gaps_from_times(tm, max(gap_factor * motor_period, min_gap_s), "motor states missing")
+    gaps += _gaps_from_times(tc, max(gap_factor * camera_period, min_gap_s), "camera frames missing")
     for a, b in _runs(lost):
         start = tc[a - 1] if a > 0 else tc[a]
         end = tc[b] if b < len(tc) else tc[b - 1]
@@ -333,10 +267,8 @@ def build_rig_dataset(
     notes: str = "",
     **sync_kwargs,
 ):
-    """Synchronise a motor log and a camera CSV and save them as a ``source="rig"`` dataset.
-
-    Returns ``(dataset, sync_result)``; the offset and gaps are recorded in the dataset's ``protocol``.
-    """
+    """Synchronise a motor log and a camera CSV and save them as a ``source="rig"`` dataset;
+    ``(dataset, sync_result)``."""
     from softpend.sysid.dataset import save_dataset
 
     result = synchronise(

@@ -1,18 +1,6 @@
-"""End to end on the digital twin: babble over the emulated serial link, film it, track, synchronise.
-
-:func:`run_twin_session` does what a session on the real rig does, with the emulator and the synthetic
-camera standing in for the hardware:
-
-1. start the twin's device (:class:`~softpend.hardware.emulator.SimRig`, in simulated time) with a truth log;
-2. over :class:`~softpend.hardware.driver.MotorLink` on the in-memory link, run the babbling program
-   (:func:`rig_babble_controller`: a start-up wiggle, then band-limited random torque, the same noise
-   process as :func:`softpend.sysid.babble`) in :func:`~softpend.hardware.loop.run_control_loop`,
-   logging every state to a crash-safe motor log;
-3. render the true motion (from the truth log) with the synthetic camera, on a camera clock offset from
-   the motor clock, to a video file;
-4. track the video (Algorithm 1) into the camera CSV;
-5. synchronise the two logs into a ``source="rig"`` dataset (:func:`~softpend.hardware.sync.build_rig_dataset`).
-"""
+"""A rig session end to end on the digital twin, in simulated time: babble over the emulated serial link (truth
+logged), film the true motion with the synthetic camera on an offset clock, track the video, synchronise the two
+logs into a ``source="rig"`` dataset."""
 
 from __future__ import annotations
 
@@ -46,9 +34,8 @@ def rig_babble_controller(
     torque_bandwidth_hz: float = 2.0,
     dt_s: float = 0.01,
 ) -> Callable[[RigObservation, float], float]:
-    """The rig's babbling program: a pseudo-random start-up wiggle of ``wiggle_fraction`` times the limit
-    for ``wiggle_s``, then band-limited Gaussian torque (:func:`softpend.sysid.band_limited_noise`,
-    standard deviation ``torque_std_fraction`` times the limit) -- a function of time only."""
+    """The rig's babbling program, a function of time: the start-up wiggle for ``wiggle_s``, then band-limited
+    Gaussian torque (:func:`softpend.sysid.band_limited_noise`); amplitudes are fractions of the limit."""
     from softpend.sysid.babble import band_limited_noise
 
     rng = np.random.default_rng(seed)
@@ -67,8 +54,7 @@ def rig_babble_controller(
 def truth_link_points(
     truth_log: str | Path, params: RodParams, plant: str = "prb"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Times [s] (device clock), points along the rod ``(T, k, 2)`` [m] (the PRB joints or the beam nodes)
-    and hub angles [rad] from an emulator truth log written by the ``plant`` simulator."""
+    """Device times, points along the rod ``(T, k, 2)`` and hub angles from an emulator truth log of ``plant``."""
     log = read_sample_log(truth_log)
     model = make_plant(plant, params=params)
     n = model.n_coordinates
@@ -111,43 +97,20 @@ def run_twin_session(
     progress: bool = True,
     outputs: Optional[Any] = None,
 ) -> TwinSession:
-    """Run the whole rig pipeline on the digital twin (see the module docstring), in simulated time: the same
-    seed gives the same files.
+    """Run the rig pipeline on the twin (module docstring); the same seed gives the same files.
 
-    Parameters
-    ----------
-    workdir : path
-        Folder for the logs, the video, the CSV and the dataset: a new or empty folder, or one an earlier
-        session wrote (it holds the marker file ``.softpend-twin``).  A non-empty folder without the marker
-        raises ``ValueError`` and nothing in it is touched; so does a file of an output's name that the
-        session did not write (the files go through ``outputs``, a :class:`softpend.io.outputs.Outputs`,
-        default a new one: an earlier session's outputs are replaced, nothing else).
-    duration_s : float
-        Babbling time on the rig [s].
-    seed : int
-        Seed of the babbling torques, the emulator and the camera noise.
-    rig : RigConfig, optional
-        Emulator settings (default: 4096-count encoder, 2 ms latency, no drops).
-    camera_effects : CameraEffects, optional
-        Synthetic camera imperfections (default: mild noise, 4 ms exposure blur, lighting drift).
-    camera_fps : float
-        Camera frame rate [1/s].
-    clock_offset_s : float
-        Camera clock minus motor clock [s] (the synchronisation must recover it).
-    timestamp_jitter_s : float
-        Camera timestamp noise [s].
-    trial_length_s : float
-        Trial length of the output dataset [s].
-    progress : bool
-        Progress bars.
+    ``workdir`` must be new, empty or an earlier session's (marked ``.softpend-twin``; otherwise ``ValueError``,
+    nothing touched); ``seed`` seeds the torques, the emulator and the camera; ``clock_offset_s`` is the camera
+    clock minus the motor clock the synchronisation must recover.
     """
-    from softpend.vision.camera import CameraEffects
+    from softpend.io.outputs import Outputs
+    from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
+    from softpend.vision.track_video import track_video
 
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
-    from softpend.io.outputs import Outputs
 
-    workdir = _claim_workdir(Path(workdir))  # writes the marker only into a new or empty folder
+    workdir = _claim_workdir(Path(workdir))
     outputs = outputs if outputs is not None else Outputs()
     outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
@@ -157,34 +120,42 @@ def run_twin_session(
         else CameraEffects(noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
     )
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
-    for name in _OUTPUTS:  # an earlier session's outputs (checked above) are removed
+    for name in _OUTPUTS:
         outputs.live(workdir / name)
     loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress)
-    dataset, sync = _film_track_and_sync(
-        rig, effects, seed, paths, camera_fps, clock_offset_s, timestamp_jitter_s, trial_length_s, progress
+    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
+    camera = SyntheticCamera(effects=effects, seed=seed)
+    video, camera_csv = paths["camera.avi"], paths["camera.csv"]
+    render_video(
+        video,
+        camera,
+        times,
+        points,
+        hub,
+        fps=camera_fps,
+        clock_offset_s=clock_offset_s,
+        timestamp_jitter_s=timestamp_jitter_s,
+        progress=progress,
+    )
+    track_video(video, camera_csv, progress=progress)
+    dataset, sync = build_rig_dataset(
+        paths["motor_log.csv"],
+        camera_csv,
+        paths["rig_dataset.npz"],
+        params=rig.task.rod,
+        trial_length_s=trial_length_s,
+        notes="digital twin: emulated serial link + synthetic camera",
     )
     for name in _OUTPUTS:
         outputs.done(workdir / name)
-    return TwinSession(
-        workdir,
-        paths["motor_log.csv"],
-        paths["truth_log.csv"],
-        paths["camera.avi"],
-        paths["camera.csv"],
-        paths["rig_dataset.npz"],
-        loop,
-        sync,
-        dataset,
-        clock_offset_s,
-        emulator_stats,
-    )
+    files = [paths[name] for name in ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz")]
+    return TwinSession(workdir, *files, loop, sync, dataset, clock_offset_s, emulator_stats)
 
 
 def _babble_on_twin(
     rig: RigConfig, duration_s: float, seed: int, paths: dict[str, Path], progress: bool
 ) -> tuple[LoopResult, dict]:
-    """Babble on the twin's device over the in-memory link, logging the motor and the truth; the loop's result
-    and the device's counters."""
+    """Babble on the twin over the in-memory link; the loop's result and the device's counters."""
     limit = rig.task.torque_limit_nm
     controller = rig_babble_controller(duration_s, limit, seed)
     device = SimRig(rig, truth_log=paths["truth_log.csv"])
@@ -198,45 +169,6 @@ def _babble_on_twin(
     finally:
         device.close()
     return loop, device.stats()
-
-
-def _film_track_and_sync(
-    rig: RigConfig,
-    effects: Any,
-    seed: int,
-    paths: dict[str, Path],
-    camera_fps: float,
-    clock_offset_s: float,
-    timestamp_jitter_s: float,
-    trial_length_s: float,
-    progress: bool,
-) -> tuple[TrajectoryDataset, SyncResult]:
-    """Render the truth log with the synthetic camera, track the video, synchronise it with the motor log."""
-    from softpend.vision.camera import SyntheticCamera, render_video
-    from softpend.vision.track_video import track_video
-
-    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
-    camera = SyntheticCamera(effects=effects, seed=seed)
-    render_video(
-        paths["camera.avi"],
-        camera,
-        times,
-        points,
-        hub,
-        fps=camera_fps,
-        clock_offset_s=clock_offset_s,
-        timestamp_jitter_s=timestamp_jitter_s,
-        progress=progress,
-    )
-    track_video(paths["camera.avi"], paths["camera.csv"], progress=progress)
-    return build_rig_dataset(
-        paths["motor_log.csv"],
-        paths["camera.csv"],
-        paths["rig_dataset.npz"],
-        params=rig.task.rod,
-        trial_length_s=trial_length_s,
-        notes="digital twin: emulated serial link + synthetic camera",
-    )
 
 
 #: Marker file of a folder written by :func:`run_twin_session`.
@@ -282,15 +214,9 @@ def compare_with_simulator_model(
     progress: bool = False,
     plant: str = "prb",
 ) -> dict[str, object]:
-    """Train the same limited-information dynamics model (:func:`softpend.sysid.fit_dynamics_model`) on
-    the twin's rig dataset and on clean simulator babbling of the same size and torque process (hanging
-    start, no feedback, no sensor noise), and compare their open-loop rollout errors at ``horizon_s`` on
-    held-out clean simulator trials.
-
-    Returns a dict with ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, ``ratio`` (twin / sim),
-    ``hold_tip_rmse_m`` (the "rod stays put" yardstick), the two :class:`RolloutErrors`, and the models.
-    ``plant`` names the simulator of the clean babbling (the one the twin ran, for a like-for-like test).
-    """
+    """Fit the same limited-information dynamics model on the twin's rig dataset and on clean simulator babbling of
+    the same size and torque process (of ``plant``), and compare their rollout errors at ``horizon_s`` on held-out
+    simulator trials: ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, ``ratio``, ``hold_tip_rmse_m``, errors, models."""
     import torch
 
     from softpend.sysid import BabbleProtocol, babble

@@ -20,6 +20,7 @@ BABBLE_RANGES: dict[str, tuple[float, float]] = {
     "--torque-std-fraction": (0.0, 100.0),
     "--torque-bandwidth-hz": (1e-3, 1e4),
     "--camera-delay-steps": (0, 10**6),
+    "--multisine-peak-fraction": (0.0, 1.0),
 }
 
 
@@ -45,13 +46,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--start", choices=("upright", "hanging", "random"), default=d.start, help=f"start region ({d.start})"
     )
     parser.add_argument(
+        "--program",
+        choices=("noise", "multisine"),
+        default=d.program,
+        help="torque program: band-limited random torque, or a designed multisine from 0.2 Hz to "
+        f"--torque-bandwidth-hz ({d.program})",
+    )
+    parser.add_argument(
+        "--multisine-peak-fraction",
+        type=float,
+        default=d.multisine_peak_fraction,
+        help=f"peak of the multisine / torque limit ({d.multisine_peak_fraction})",
+    )
+    parser.add_argument(
         "--torque-std-fraction", type=float, default=d.torque_std_fraction, help="random torque std / torque limit"
     )
     parser.add_argument(
         "--torque-bandwidth-hz",
         type=float,
         default=d.torque_bandwidth_hz,
-        help="low-pass cut-off of the random torque [Hz]",
+        help="low-pass cut-off of the random torque, upper band edge of the multisine [Hz]",
     )
     parser.add_argument(
         "--feedback-trial-fraction",
@@ -88,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
         trial_length_s=args.trial_length_s,
         dt_s=args.dt_s,
         start=args.start,
+        program=args.program,
+        multisine_peak_fraction=args.multisine_peak_fraction,
         torque_std_fraction=args.torque_std_fraction,
         torque_bandwidth_hz=args.torque_bandwidth_hz,
         feedback_trial_fraction=args.feedback_trial_fraction,

@@ -24,17 +24,21 @@ from softpend.checks import (
 from softpend.plant import OBSERVATION_NAMES, PRBPlant, RodParams, SimulationDiverged, make_plant, wrap_angle_rad
 from softpend.sysid.dataset import DT_S_RANGE, TrajectoryDataset, dataset_metadata, write_dataset
 from softpend.sysid.differentiation import backward_difference
+from softpend.sysid.excitation import multisine
 from softpend.sysid.variables import POSITION_NAMES, is_angle
 
-__all__ = ["BabbleProtocol", "babble", "band_limited_noise"]
+__all__ = ["PROGRAMS", "BabbleProtocol", "babble", "band_limited_noise"]
 
 _STARTS = ("upright", "hanging", "random")
+#: Torque programs of :class:`BabbleProtocol`.
+PROGRAMS = ("noise", "multisine")
 
 
 @dataclass(frozen=True)
 class BabbleProtocol:
-    """How to babble: trials, start region and spread, the random torque (std as a fraction of the torque limit,
-    low-pass cut-off), the PD on the hub (gains, fraction of trials, differenced or true rate), sensor noise and the
+    """How to babble: trials, start region and spread, the torque program (``"noise"``: random torque, std as a
+    fraction of the torque limit, low-pass cut-off; ``"multisine"``: :func:`softpend.sysid.excitation.multisine`
+    from 0.2 Hz to ``torque_bandwidth_hz`` with peak ``multisine_peak_fraction`` of the limit), the PD on the hub (gains, fraction of trials, differenced or true rate), sensor noise and the
     camera delay [samples] of ``theta, ex, ey, er``."""
 
     n_trials: int = 60
@@ -55,12 +59,15 @@ class BabbleProtocol:
     tip_noise_std_m: float = 0.0
     er_noise_std_rad: float = 0.0
     camera_delay_steps: int = 0
+    program: str = "noise"
+    multisine_peak_fraction: float = 0.8
 
     def __post_init__(self) -> None:
         one_of("start", self.start, _STARTS)
+        one_of("program", self.program, PROGRAMS)
         one_of("feedback_velocity", self.feedback_velocity, ("differenced", "true"))
         for f in dataclasses.fields(self):
-            if f.name not in ("start", "feedback_velocity"):
+            if f.name not in ("start", "feedback_velocity", "program"):
                 non_negative(f.name, getattr(self, f.name))
         for name in ("n_trials", "substeps"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
@@ -75,6 +82,7 @@ class BabbleProtocol:
         if self.n_samples < 2:
             raise ValueError(f"trial_length_s must cover at least 2 samples of dt_s, got {self.trial_length_s}")
         in_unit_interval("feedback_trial_fraction", self.feedback_trial_fraction)
+        in_unit_interval("multisine_peak_fraction", self.multisine_peak_fraction)
 
     @property
     def n_samples(self) -> int:
@@ -131,9 +139,14 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     limit = plant.params.torque_limit_nm
     q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, isinstance(plant, PRBPlant))
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
-    babble = band_limited_noise(
-        rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s
-    )
+    if protocol.program == "multisine":
+        babble = multisine(
+            n_steps, protocol.dt_s, protocol.multisine_peak_fraction * limit, (0.2, protocol.torque_bandwidth_hz)
+        )
+    else:
+        babble = band_limited_noise(
+            rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s
+        )
     kp = protocol.feedback_kp_nm_per_rad if use_feedback else 0.0
     kd = protocol.feedback_kd_nms_per_rad if use_feedback else 0.0
     obs = np.empty((n_steps + 1, len(OBSERVATION_NAMES)))

@@ -333,7 +333,7 @@ def _data_hashes(layout: BookLayout, folder_name: str) -> dict[str, str]:
 
 def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[str, str], after: Any = None) -> str:
     """Cache key of one executed notebook: source, parameters, package code and the keys of its ``after``."""
-    payload = {"version": _CACHE_VERSION, "source": source_text, "parameters": parameters}
+    payload: dict[str, Any] = {"version": _CACHE_VERSION, "source": source_text, "parameters": parameters}
     payload |= {"code": sorted(code_hashes.items()), **({"after": after} if after else {})}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
 

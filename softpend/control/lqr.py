@@ -137,6 +137,7 @@ class LQRController:
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         one_of("state", state, ("joint", "observation"))
         one_of("linearisation", linearisation, ("exudyn", "step_map"))
+        state_function: StateFunction
         if state == "joint":
             if linearisation == "exudyn":
                 model = discretise(linearise_exudyn(params).state_space(), dt_s)

@@ -1,8 +1,5 @@
-"""The hardware rig: serial motor link, rig emulator (the digital twin in simulated time, or a pty on the wall
-clock; :mod:`~softpend.hardware.clock`), host control loops (open-loop programs in
-:mod:`~softpend.hardware.loop`; any controller with the camera in the loop and the state estimator in
-:mod:`~softpend.hardware.closed_loop` and :mod:`~softpend.hardware.estimator`), crash-safe logs, and time
-synchronisation of the motor and camera streams."""
+"""The hardware rig: serial motor link, rig emulator and digital twin, host control loops, state estimator, crash-safe
+logs, time synchronisation of the motor and camera streams."""
 
 from softpend.hardware.clock import SimClock
 from softpend.hardware.driver import (

@@ -1,17 +1,6 @@
-"""Clocks of the rig stack: the wall clock of a real rig, and the simulated clock of the digital twin.
-
-Everything on the host that waits or stamps a time (:class:`~softpend.hardware.driver.MotorLink`, the control
-loops, the twin's camera) asks a clock: :data:`WALL_CLOCK` (``time.monotonic``) on a real rig, a
-:class:`SimClock` on the twin.  A :class:`SimClock` is an event queue: time moves only when someone waits
-(:meth:`SimClock.wait_for`, :meth:`SimClock.sleep_until`), and then jumps from event to event -- an emulated
-device's tick, a byte arriving after its link latency, a camera frame -- as fast as the computer runs them.
-Events at the same time run in the order they were scheduled, so a run depends on its inputs and seeds only:
-the same start and seed give the same numbers, bit for bit.
-
-:class:`SimSerial` is the host's end of an in-memory serial link on a :class:`SimClock`: what pyserial's
-``Serial`` offers :class:`MotorLink` (``read``, ``write``, ``in_waiting``, ``timeout``), with the bytes the
-device sends arriving when the clock reaches their delivery time.
-"""
+"""Clocks of the rig stack: the wall clock of a real rig, and the twin's :class:`SimClock`, an event queue whose
+time jumps from event to event when someone waits (events at the same time run in the order scheduled, so a run
+depends on its inputs and seeds only); :class:`SimSerial` is the host's end of an in-memory link on it."""
 
 from __future__ import annotations
 
@@ -29,16 +18,13 @@ class WallClock:
     def now_s(self) -> float:
         return time.monotonic()
 
-    def sleep_until(self, time_s: float) -> None:
-        time.sleep(max(0.0, time_s - time.monotonic()))
-
 
 #: The wall clock, shared.
 WALL_CLOCK = WallClock()
 
 
 class SimClock:
-    """Simulated time [s] from 0: a queue of events that run when the clock reaches them (module docstring)."""
+    """Simulated time [s] from 0: a queue of events that run when the clock reaches them."""
 
     def __init__(self) -> None:
         self._now = 0.0
@@ -55,7 +41,7 @@ class SimClock:
 
     def wait_for(self, ready: Callable[[], bool], deadline_s: float) -> bool:
         """Run events in time order until ``ready()`` or the next event is after ``deadline_s`` (the clock then
-        stands at the deadline); whether ``ready()``."""
+        stands there); whether ``ready()``."""
         while not ready():
             if not self._events or self._events[0][0] > deadline_s:
                 if math.isfinite(deadline_s):
@@ -76,15 +62,8 @@ class SimClock:
 
 
 class SimSerial:
-    """The host's end of an in-memory serial link on a :class:`SimClock` (module docstring).
-
-    Parameters
-    ----------
-    clock : SimClock
-        The twin's clock.
-    send : callable
-        ``send(data)``: the device's side of the bytes the host writes (it models their latency).
-    """
+    """What pyserial's ``Serial`` offers :class:`~softpend.hardware.driver.MotorLink`, on a :class:`SimClock`:
+    ``send(data)`` takes the bytes the host writes, :meth:`deliver` brings the device's."""
 
     def __init__(self, clock: SimClock, send: Callable[[bytes], None]) -> None:
         self.clock = clock
@@ -94,7 +73,7 @@ class SimSerial:
         self.is_open = True
 
     def deliver(self, data: bytes) -> None:
-        """Bytes from the device reach the host (called by the device at their arrival time)."""
+        """Bytes from the device reach the host."""
         if self.is_open:
             self._rx.extend(data)
 
@@ -119,7 +98,7 @@ class SimSerial:
         return len(data)
 
     def flush(self) -> None:
-        """Nothing is buffered on the host."""
+        pass
 
     def close(self) -> None:
         self.is_open = False

@@ -69,7 +69,7 @@ def test_no_dot_or_too_small_dot_is_lost_not_guessed(swing):
     assert d.lost and math.isnan(d.x_px) and math.isnan(d.y_px)
     assert not TipTracker().track(frame).lost
     assert TipTracker(min_area_px=10_000).track(frame).lost  # the dot is below this minimum area
-    assert TipTracker(max_area_px=50.0).track(frame).lost  # ... and above this maximum
+    assert TipTracker(max_area_fraction=50.0 / (640 * 480)).track(frame).lost  # ... and above this maximum
     with pytest.raises(ValueError, match="frame_bgr"):
         TipTracker().track(np.zeros((10, 10), np.uint8))
     with pytest.raises(ValueError, match="min_area_px"):

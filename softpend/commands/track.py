@@ -8,32 +8,14 @@ import argparse
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("track", help="track the tip dot in a video file into a time-stamped CSV")
-    parser.add_argument(
-        "video", nargs="?", help="video file (the synthetic camera's sidecar VIDEO.json is used if present)"
-    )
-    parser.add_argument(
-        "--camera",
-        metavar="CAMERA",
-        help="track live instead: a camera index (0), a stream URL, or a video file read as a stream",
-    )
+    parser.add_argument("video", nargs="?", help="video file (its sidecar VIDEO.json is used if present)")
+    parser.add_argument("--camera", help="track live instead: a camera index (0), a stream URL or a video file")
     parser.add_argument("--duration", type=float, help="with --camera: stop after this many seconds")
     parser.add_argument(
-        "--camera-latency-ms",
-        type=float,
-        default=0.0,
-        help="with --camera: exposure-to-host latency of the camera, subtracted from the read time [ms] (default 0)",
+        "--camera-latency-ms", type=float, default=0.0, help="with --camera: exposure-to-host latency [ms] (default 0)"
     )
-    parser.add_argument(
-        "--out",
-        required=True,
-        metavar="CSV",
-        help="output CSV (crash-safe sample log; replaced only once the whole video is tracked)",
-    )
-    parser.add_argument(
-        "--markers",
-        metavar="JSON",
-        help="marker positions in the rod plane [m], JSON list [[x, y], ...] or file (hub axis at 0, y up)",
-    )
+    parser.add_argument("--out", required=True, metavar="CSV", help="output CSV, replaced once the video is tracked")
+    parser.add_argument("--markers", metavar="JSON", help="marker positions [m]: a JSON list [[x, y], ...] or file")
     parser.add_argument("--calibration", metavar="JSON", help="a saved AffineCalibration instead of markers")
     parser.add_argument("--fps", type=float, help="frame rate for timestamps when the video has no sidecar")
     parser.add_argument("--min-area", type=float, default=20.0, help="smallest dot area [px^2] (default 20)")

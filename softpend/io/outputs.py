@@ -17,13 +17,6 @@ import numpy as np
 from softpend.io.reading import read_json_object
 
 
-def _nearest_existing(path: Path) -> Path:
-    """``path`` or its nearest ancestor that exists."""
-    while not os.path.lexists(path) and path.parent != path:
-        path = path.parent
-    return path
-
-
 def _check_writable(folder: Path, what: str, path: Path, where: str) -> None:
     try:  # the only reliable writability test (permissions, read-only mounts, pseudo file systems, root)
         with tempfile.NamedTemporaryFile(dir=folder, prefix=".softpend-probe-"):
@@ -34,7 +27,9 @@ def _check_writable(folder: Path, what: str, path: Path, where: str) -> None:
 
 def _check_parent(path: Path, what: str) -> None:
     """The folder that will hold ``path`` exists or can be created, and a file can be created in it."""
-    ancestor = _nearest_existing(path.parent)
+    ancestor = path.parent
+    while not os.path.lexists(ancestor) and ancestor.parent != ancestor:
+        ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise ValueError(f"{what} {path}: {ancestor} is not a folder, so {path.parent} cannot be created")
     _check_writable(ancestor, what, path, str(ancestor))

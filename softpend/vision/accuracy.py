@@ -11,7 +11,7 @@ from softpend.vision.camera import CameraEffects, SyntheticCamera
 from softpend.vision.tracker import TipTracker
 
 
-def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.2):
+def babbling_trajectory(n_steps: int, seed: int = 0):
     """A babbling trajectory of the default rod: times [s], link points ``(T, n + 1, 2)`` [m], hub angles [rad]."""
     from softpend.plant import RodParams, make_plant
     from softpend.sysid.babble import band_limited_noise
@@ -20,7 +20,7 @@ def babbling_trajectory(n_steps: int, seed: int = 0, start_angle_rad: float = 2.
         raise ValueError(f"n_steps must be >= 2, got {n_steps!r}")
     plant = make_plant("prb", params=RodParams())
     q, qd = plant.hanging_state()
-    q[0] = start_angle_rad
+    q[0] = 2.2
     plant.reset(q, qd)
     limit = plant.params.torque_limit_nm
     torque = np.clip(
@@ -50,19 +50,14 @@ class TrackingErrors:
 
 
 def tracking_errors(
-    trajectory,
-    effects: Optional[CameraEffects] = None,
-    n_frames: int = 300,
-    seed: int = 0,
-    tracker: Optional[TipTracker] = None,
-    keep_frames: bool = False,
+    trajectory, effects: Optional[CameraEffects] = None, n_frames: int = 300, seed: int = 0, keep_frames: bool = False
 ):
     """:class:`TrackingErrors` (and the frames if ``keep_frames``) of ``n_frames`` frames of ``trajectory``."""
     times, points, hub = trajectory
     if not 1 <= n_frames < len(times):
         raise ValueError(f"n_frames must be in [1, {len(times) - 1}], got {n_frames!r}")
     camera = SyntheticCamera(effects=effects, seed=seed)
-    tracker = tracker if tracker is not None else TipTracker()
+    tracker = TipTracker()
     frame_times = times[1 : n_frames + 1]
     errors, lost, frames = [], [], []
     for frame, truth in camera.frames(times, points, frame_times, hub):

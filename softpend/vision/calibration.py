@@ -13,7 +13,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from softpend.checks import non_negative
-from softpend.vision.tracker import GREEN_HSV, ColourRange, find_blobs
+from softpend.vision.tracker import GREEN_HSV, find_blobs
 
 #: Largest calibration or marker file read [bytes].
 MAX_CALIBRATION_BYTES = 1 << 20
@@ -150,16 +150,11 @@ class AffineCalibration:
             raise ValueError(f"calibration file {path}: {exc}") from None
 
 
-def calibrate_from_markers(
-    frame_bgr: np.ndarray,
-    marker_positions_m: Sequence[Sequence[float]],
-    colour: ColourRange = GREEN_HSV,
-    min_area_px: float = 10.0,
-) -> AffineCalibration:
-    """Detect the 3 to 6 reference markers at ``marker_positions_m`` [m] in ``frame_bgr`` and fit the
-    pixel -> metre map: the handedness-preserving marker correspondence of smallest residual."""
+def calibrate_from_markers(frame_bgr: np.ndarray, marker_positions_m: Sequence[Sequence[float]]) -> AffineCalibration:
+    """Find the 3 to 6 green markers at ``marker_positions_m`` [m] in ``frame_bgr`` and fit the pixel -> metre
+    map: the handedness-preserving marker correspondence of smallest residual."""
     known = points_array("marker_positions_m", marker_positions_m, 3, 6)
-    blobs = find_blobs(frame_bgr, colour, min_area_px)[: len(known)]
+    blobs = find_blobs(frame_bgr, GREEN_HSV, 10.0)[: len(known)]
     if len(blobs) < len(known):
         raise ValueError(f"marker_positions_m lists {len(known)} markers but only {len(blobs)} are visible")
     pixels = np.array([[b.x_px, b.y_px] for b in blobs])

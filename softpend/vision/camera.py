@@ -54,10 +54,8 @@ class CameraModel:
     def __post_init__(self) -> None:
         if self.width_px < 16 or self.height_px < 16:
             raise ValueError(f"width_px and height_px must be >= 16, got {self.width_px}x{self.height_px}")
-        for name in ("px_per_m", "aspect"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be positive, got {value!r}")
+        positive("px_per_m", self.px_per_m)
+        positive("aspect", self.aspect)
 
     def metre_to_pixel(self) -> np.ndarray:
         """The 2x3 matrix ``pixel = M @ [x_m, y_m, 1]``."""
@@ -145,14 +143,11 @@ class SyntheticCamera:
         self._gradient3 = cv2.merge([gradient, gradient, gradient])
         # sensor noise: per frame a random crop of one larger noise field
         self._noise_margin = 97
-        self._noise_field = (
-            self._rng.standard_normal(
-                (m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3), dtype=np.float32
-            )
-            * np.float32(self.effects.noise_std_dn)
-            if self.effects.noise_std_dn > 0
-            else None
-        )
+        self._noise_field: Optional[np.ndarray] = None
+        if self.effects.noise_std_dn > 0:
+            shape = (m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3)
+            noise = self._rng.standard_normal(shape, dtype=np.float32)
+            self._noise_field = noise * np.float32(self.effects.noise_std_dn)
 
     def _make_background(self) -> np.ndarray:
         m = self.model

@@ -309,17 +309,12 @@ class SyntheticLiveCamera(ThreadedTipSource):
 
 class CaptureTipSource(ThreadedTipSource):
     """``cv2.VideoCapture`` on a device index, stream URL or video file.  A frame's capture time is the host
-    time of its read minus the camera's ``latency_s``; no frame for ``timeout_s`` ends the source."""
+    time of its read minus the camera's ``latency_s``; no frame for :attr:`timeout_s` [s] ends the source."""
 
     name = "capture"
+    timeout_s = 2.0
 
-    def __init__(
-        self,
-        device: int | str,
-        latency_s: float = 0.0,
-        timeout_s: float = 2.0,
-        frame_tracker: Optional[FrameTracker] = None,
-    ) -> None:
+    def __init__(self, device: int | str, latency_s: float = 0.0, frame_tracker: Optional[FrameTracker] = None) -> None:
         import cv2
 
         if isinstance(device, bool) or not isinstance(device, (int, str)) or device == "":
@@ -327,7 +322,6 @@ class CaptureTipSource(ThreadedTipSource):
         super().__init__(frame_tracker)
         self.device = device
         self.latency_s = non_negative("latency_s", latency_s)
-        self.timeout_s = positive("timeout_s", timeout_s)
         self._capture = cv2.VideoCapture(device)
         if not self._capture.isOpened():
             raise ValueError(f"camera {device!r} cannot be opened by OpenCV (no such device or stream)")

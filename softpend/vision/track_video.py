@@ -27,12 +27,10 @@ TRACK_COLUMNS: tuple[str, ...] = tuple(
 )
 
 
-def hub_marker_tracker(
-    calibration: AffineCalibration, frame_shape: tuple[int, ...], radius_m: float = 0.06
-) -> TipTracker:
-    """A tracker of the magenta hub marker that searches only within ``radius_m`` of the hub axis."""
+def hub_marker_tracker(calibration: AffineCalibration, frame_shape: tuple[int, ...]) -> TipTracker:
+    """A tracker of the magenta hub marker that searches only within 6 cm of the hub axis."""
     centre = calibration.to_pixels(np.zeros(2))
-    r = radius_m / calibration.metres_per_pixel
+    r = 0.06 / calibration.metres_per_pixel
     low = [max(int(c - r), 0) for c in centre]
     high = [min(int(c + r) + 1, n) for c, n in zip(centre, (frame_shape[1], frame_shape[0]))]
     return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=(*low, *high))

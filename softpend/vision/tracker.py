@@ -120,8 +120,8 @@ def _shifted(detection: Detection, x_off: int, y_off: int) -> Detection:
 class TipTracker:
     """Track the blue tip dot in camera frames (Algorithm 1).
 
-    A blob is the dot if its area lies in ``[min_area_px, max_area_px]`` [px^2] and covers at most
-    ``max_area_fraction`` of the frame.  After a found dot the next frame is searched first within
+    A blob is the dot if its area is at least ``min_area_px`` [px^2] and at most ``max_area_fraction`` of the
+    frame.  After a found dot the next frame is searched first within
     ``search_radius_px`` of it (None: always the whole frame); ``region_px`` ``(x0, y0, x1, y1)`` restricts
     every search to a rectangle.
     """
@@ -130,7 +130,6 @@ class TipTracker:
         self,
         colour: ColourRange = BLUE_HSV,
         min_area_px: float = 20.0,
-        max_area_px: Optional[float] = None,
         search_radius_px: Optional[float] = 48.0,
         region_px: Optional[tuple[int, int, int, int]] = None,
         max_area_fraction: float = 0.05,
@@ -139,9 +138,6 @@ class TipTracker:
             raise ValueError(f"colour must be a ColourRange, got {type(colour).__name__}")
         self.colour = colour
         self.min_area_px = non_negative("min_area_px", min_area_px)
-        self.max_area_px = optional_positive("max_area_px", max_area_px)
-        if self.max_area_px is not None and not self.max_area_px > self.min_area_px:
-            raise ValueError(f"max_area_px must exceed min_area_px, got {max_area_px!r}")
         self.search_radius_px = optional_positive("search_radius_px", search_radius_px)
         self.max_area_fraction = in_unit_interval("max_area_fraction", max_area_fraction, include_zero=False)
         if region_px is not None:
@@ -160,8 +156,6 @@ class TipTracker:
         _validate_frame(frame_bgr)
         h, w = frame_bgr.shape[:2]
         max_area = self.max_area_fraction * h * w
-        if self.max_area_px is not None:
-            max_area = min(max_area, self.max_area_px)
         if self.region_px is not None:
             x0, y0, x1, y1 = self.region_px
             if x0 >= w or y0 >= h:

@@ -3,7 +3,8 @@
 Pumping torque ``sat(k_E (E_up + E_margin - E) theta_dot)`` (the tip rate: feedback on the hub rate pumps the
 clamp mode), with ``E`` the rigid-pendulum energy seen through the tip (``"observation"``) or the PRB chain's
 mechanical energy (``"joint"``); the LQR takes over inside ``capture_angle_rad`` and lets go beyond
-``release_angle_rad``.
+``release_angle_rad``. With ``rate_filter_s > 0`` the pumping uses the tip rate through a first-order low-pass of
+that time constant, so bending vibration (the continuum beam, a camera's noise) does not make the pumping chatter.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from softpend.checks import finite, one_of, positive
+from softpend.checks import finite, non_negative, one_of, positive
 from softpend.control.lqr import LQRController
 from softpend.plant import Observation, PRBPlant, RodParams
 
@@ -32,7 +33,8 @@ class EnergySwingUpController:
     """Energy pumping from hanging plus LQR balance near upright (see the module docstring).
 
     ``balance`` defaults to ``LQRController.from_params(params, dt_s, state=lqr_state)``; ``energy_margin_j``
-    is the target energy above upright; ``torque_limit_nm`` bounds the pumping torque.
+    is the target energy above upright; ``torque_limit_nm`` bounds the pumping torque; ``rate_filter_s`` is the
+    time constant of the low-pass on the tip rate that the pumping uses (0: none).
     """
 
     def __init__(
@@ -47,6 +49,7 @@ class EnergySwingUpController:
         capture_angle_rad: float = 0.4,
         release_angle_rad: float = 0.8,
         torque_limit_nm: Optional[float] = None,
+        rate_filter_s: float = 0.0,
     ) -> None:
         self.params = params if params is not None else RodParams()
         one_of("energy_source", energy_source, ("observation", "joint"))
@@ -61,6 +64,7 @@ class EnergySwingUpController:
                 f"release_angle_rad ({release_angle_rad}) must not be smaller than capture_angle_rad ({capture_angle_rad})"
             )
         finite("energy_margin_j", energy_margin_j)
+        self._rate_gain = float(dt_s) / (non_negative("rate_filter_s", rate_filter_s) + float(dt_s))
         self.torque_limit_nm = positive(
             "torque_limit_nm", self.params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         )
@@ -89,9 +93,13 @@ class EnergySwingUpController:
     def for_observations(
         cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs
     ) -> "EnergySwingUpController":
-        """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin."""
+        """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin, 50 ms rate filter."""
         options: dict[str, Any] = dict(
-            lqr_state="observation", energy_source="observation", energy_gain_per_j_rad_s=50.0, energy_margin_j=0.02
+            lqr_state="observation",
+            energy_source="observation",
+            energy_gain_per_j_rad_s=50.0,
+            energy_margin_j=0.02,
+            rate_filter_s=0.05,
         )
         options.update(kwargs)
         return cls(params, dt_s=dt_s, **options)
@@ -100,6 +108,7 @@ class EnergySwingUpController:
         """Start in pumping mode."""
         self.balancing = False
         self.handover_time_s: Optional[float] = None
+        self._rate_rad_s: Optional[float] = None
         if hasattr(self.balance, "reset"):
             self.balance.reset()
 
@@ -110,17 +119,26 @@ class EnergySwingUpController:
                 self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"]
                 - self._upright_energy_j
             )
-        return pendulum_energy_j(self.params, observation.theta_rad, observation.theta_dot_rad_s)
+        return pendulum_energy_j(self.params, observation.theta_rad, self._tip_rate(observation))
+
+    def _tip_rate(self, observation: Observation) -> float:
+        """The tip rate the pumping uses (low-passed when ``rate_filter_s > 0``)."""
+        return observation.theta_dot_rad_s if self._rate_rad_s is None else self._rate_rad_s
 
     def pumping_torque_nm(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
         """The energy-pumping torque [N m] (saturated)."""
         error = self.energy_margin_j - self.energy_j(observation, q, q_dot)
-        torque = self.energy_gain * error * observation.theta_dot_rad_s
-        if observation.theta_dot_rad_s == 0.0 and error > 0:  # at rest: a kick starts the first swing
+        rate = self._tip_rate(observation)
+        torque = self.energy_gain * error * rate
+        if rate == 0.0 and error > 0:  # at rest: a kick starts the first swing
             torque = self.torque_limit_nm
         return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
+        if self._rate_gain < 1.0:
+            rate = observation.theta_dot_rad_s
+            last = rate if self._rate_rad_s is None else self._rate_rad_s
+            self._rate_rad_s = last + self._rate_gain * (rate - last)
         angle = abs(observation.theta_rad)
         if self.balancing and angle > self.release_angle_rad:
             self.balancing = False

@@ -1,0 +1,834 @@
+"""Model-predictive swing-up on learned dynamics with few plant seconds.
+
+An ensemble of probabilistic (Gaussian-output) networks models the rod: either black-box on the observed
+variables (:class:`GaussianDynamicsModel`, a :class:`softpend.sysid.DynamicsModel` with a variance head, rolled
+out by :func:`softpend.sysid.rollout`) or as a residual on the identified PRB chain's batched step
+(:class:`ResidualPRBEnsemble`).  :class:`MPPI` plans held torques over sampled rollouts (each row draws its
+member at every step); an LQR on the identified rod takes over near upright.  :func:`run_planner` drives the
+plant: a multisine excitation, then planner trials from the selection starts, refitting between trials, until
+``stop_after_balanced`` trials in a row balance.  Every plant second driven is counted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from softpend.checks import in_range, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.control.learned import LearnedStateTracker
+from softpend.control.lqr import LQRController
+from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
+from softpend.plant import Observation, RodParams
+from softpend.plant.batched import BatchedPRBChain
+from softpend.sysid.babble import BabbleProtocol, babble
+from softpend.sysid.differentiation import backward_difference
+from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
+from softpend.sysid.layout import StateLayout
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
+from softpend.sysid.rollout import rollout
+from softpend.sysid.variables import POSITION_NAMES, is_angle
+from softpend.task import Task
+
+__all__ = [
+    "MODELS",
+    "MPPI",
+    "GaussianDynamicsModel",
+    "PlannerConfig",
+    "PlannerController",
+    "PlannerResult",
+    "ResidualPRBEnsemble",
+    "TrialRecord",
+    "fresh_start_evaluation",
+    "run_planner",
+]
+
+#: The dynamics models of :class:`PlannerConfig` (``model``).
+MODELS = ("ensemble", "residual")
+#: Weight of the squared energy error (in units of the hanging energy gap) beside ``1 - cos(theta)``.
+ENERGY_WEIGHT = 1.0
+#: The LQR hands back to the planner beyond this multiple of the capture angle.
+RELEASE_FACTOR = 2.0
+#: The grey-box identification starts from the task's rod with its estimated fields scaled by these factors (the
+#: task's rod is the simulated truth, so starting from it would tell the fit the answer).
+IDENTIFY_GUESS_FACTORS = {
+    "hub_inertia_kgm2": 1.5,
+    "hub_friction_nms_per_rad": 0.5,
+    "youngs_modulus_pa": 0.7,
+    "joint_damping_nms_per_rad": 2.0,
+    "tip_mass_kg": 0.7,
+}
+#: Upright threshold of a held rod [rad] (as :func:`softpend.evaluation.metrics_from_trajectory`).
+UPRIGHT_RAD = 0.2
+#: The joint state the controllers are handed in place of the plant's (they read observations only).
+_NO_STATE = np.empty(0)
+_ANGLE_MASK = np.array([is_angle(n) for n in POSITION_NAMES])
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Settings of :func:`run_planner` (SI units; names carry them).
+
+    ``model``: :data:`MODELS`.  ``excitation_s``: multisine seconds from hanging before the first trial.
+    ``trial_s``: longest planner trial; a trial ends once the rod has been held (``|theta| < 0.2`` rad,
+    RMS at most ``target_std_rad``) for ``hold_s``.  ``stop_after_balanced``: balanced trials in a row that end
+    the run.  ``identify_windows``: windows of the grey-box identification of the rod (0: the task's nominal
+    rod) that the LQR, the energy cost and the residual model use.  ``horizon_s``, ``control_dt_s``,
+    ``n_samples``, ``temperature``, ``noise_fraction``: MPPI's horizon, torque hold, rollouts, temperature (cost
+    units) and sampling std (fraction of the torque limit).  ``selection_seeds``: the trials' start seeds.
+    """
+
+    task: Task = field(default_factory=Task)
+    model: str = "ensemble"
+    excitation_s: float = 5.0
+    trial_s: float = TEST_EPISODE_S
+    hold_s: float = 3.0
+    max_trials: int = 8
+    stop_after_balanced: int = 1
+    ensemble_size: int = 5
+    hidden_width: int = 64
+    train_steps: int = 600
+    identify_windows: int = 40
+    horizon_s: float = 1.2
+    control_dt_s: float = 0.05
+    n_samples: int = 200
+    temperature: float = 0.3
+    noise_fraction: float = 0.6
+    capture_rad: float = 0.4
+    target_std_rad: float = HOLD_STD_RAD
+    selection_seeds: tuple[int, ...] = (1000, 1001, 1002)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.task, Task):
+            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        one_of("model", self.model, MODELS)
+        for name in ("excitation_s", "trial_s", "hold_s", "horizon_s", "control_dt_s", "temperature"):
+            positive(name, getattr(self, name))
+        for name in ("max_trials", "stop_after_balanced", "ensemble_size", "hidden_width", "train_steps"):
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        for name in ("identify_windows", "seed"):
+            object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
+        object.__setattr__(self, "n_samples", int_at_least("n_samples", self.n_samples, 2))
+        if self.n_samples % self.ensemble_size:
+            raise ValueError(
+                f"n_samples must be a multiple of ensemble_size ({self.ensemble_size}), got {self.n_samples!r}"
+            )
+        in_range("noise_fraction", self.noise_fraction, 1e-6, 10.0)
+        in_range("capture_rad", self.capture_rad, 1e-6, math.pi / RELEASE_FACTOR)
+        positive("target_std_rad", self.target_std_rad)
+        if self.hold_s > self.trial_s:
+            raise ValueError(f"hold_s must be at most trial_s ({self.trial_s!r} s), got {self.hold_s!r}")
+        if self.excitation_s < 2 * self.task.dt_s:
+            raise ValueError(f"excitation_s must cover at least two steps of task.dt_s, got {self.excitation_s!r}")
+        for name, seconds in (("control_dt_s", self.control_dt_s), ("horizon_s", self.horizon_s)):
+            ratio = seconds / self.task.dt_s
+            if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9:
+                raise ValueError(f"{name} must be a whole multiple of task.dt_s, got {seconds!r}")
+        if self.n_knots < 1:
+            raise ValueError(f"horizon_s must hold at least one control_dt_s, got {self.horizon_s!r}")
+        try:
+            seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
+        except TypeError:
+            raise ValueError(f"selection_seeds must be integers >= 0, got {self.selection_seeds!r}") from None
+        if not seeds or len(set(seeds)) != len(seeds):
+            raise ValueError(f"selection_seeds must be distinct and non-empty, got {self.selection_seeds!r}")
+        object.__setattr__(self, "selection_seeds", seeds)
+
+    @property
+    def hold_steps(self) -> int:
+        """Plant steps per planned torque."""
+        return int(round(self.control_dt_s / self.task.dt_s))
+
+    @property
+    def n_knots(self) -> int:
+        """Planned torques over the horizon."""
+        return int(round(self.horizon_s / self.control_dt_s))
+
+    def replace(self, **changes: Any) -> "PlannerConfig":
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path, task: Optional[Task] = None) -> "PlannerConfig":
+        """The defaults, then the ``field: value`` mapping of a YAML file (e.g. ``book/hparams/planner.yml``)."""
+        from softpend.io.overrides import apply_overrides
+        from softpend.io.reading import read_yaml_checked
+
+        data = read_yaml_checked(path, "settings file") or {}
+        if not isinstance(data, dict) or "task" in data:
+            raise ValueError(f"{path}: expected a mapping of PlannerConfig fields other than task")
+        try:
+            return apply_overrides(cls(task=task if task is not None else Task()), data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+
+# ---------------------------------------------------------------------- probabilistic networks
+
+
+class _GaussianHead(nn.Module):
+    """Mean and bounded log-variance from a network's ``2 m`` raw outputs (soft bounds learnt, as in PETS)."""
+
+    def __init__(self, n_outputs: int) -> None:
+        super().__init__()
+        self.max_log_var = nn.Parameter(torch.full((n_outputs,), 0.5))
+        self.min_log_var = nn.Parameter(torch.full((n_outputs,), -10.0))
+
+    def forward(self, raw: Tensor) -> tuple[Tensor, Tensor]:
+        mean, log_var = raw.chunk(2, dim=-1)
+        log_var = self.max_log_var - nn.functional.softplus(self.max_log_var - log_var)
+        return mean, self.min_log_var + nn.functional.softplus(log_var - self.min_log_var)
+
+
+def _mlp(n_in: int, n_out: int, width: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(n_in, width), nn.SiLU(), nn.Linear(width, width), nn.SiLU(), nn.Linear(width, n_out))
+
+
+def _sample(mean: Tensor, log_var: Tensor, generator: Optional[torch.Generator]) -> Tensor:
+    """``mean`` plus Gaussian noise of ``exp(log_var)`` drawn from ``generator`` (``None``: the mean)."""
+    if generator is None:
+        return mean
+    noise = torch.randn(mean.shape, generator=generator, dtype=mean.dtype)
+    return mean + torch.exp(0.5 * log_var) * noise
+
+
+class GaussianDynamicsModel(DynamicsModel):
+    """A :class:`~softpend.sysid.DynamicsModel` whose network also outputs a log-variance of the standardised
+    change; :meth:`predict_delta` adds a draw from ``self.noise_generator`` (``None``: the mean)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        width = self.hidden_widths[-1]
+        self.net[-1] = nn.Linear(width, 2 * self.n_outputs)
+        self.head = _GaussianHead(self.n_outputs)
+        self.noise_generator: Optional[torch.Generator] = None
+
+    def predict_delta(self, state: Tensor, torque_nm: Tensor) -> Tensor:
+        state, torque_nm = self._check(state, torque_nm)
+        torque_nm = torque_nm.clamp(-self.torque_limit_nm, self.torque_limit_nm)
+        mean, log_var = self.head(self.net(self.normalise_features(self.features(state, torque_nm))))
+        out = _sample(mean, log_var, self.noise_generator) * self.delta_std + self.delta_mean
+        if not self.integrate_positions:
+            return out
+        p = self._p
+        return torch.cat([self.dt_s * (state[:, p : 2 * p] + out), out], dim=1)
+
+
+def _fit_gaussian(
+    nets: Sequence[nn.Module], heads: Sequence[_GaussianHead], x: Tensor, y: Tensor, steps: int, seed: int
+) -> list[float]:
+    """Fit each ``(net, head)`` pair to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam;
+    returns each member's last minibatch loss."""
+    generator = torch.Generator().manual_seed(seed)
+    losses = []
+    n = x.shape[0]
+    for net, head in zip(nets, heads):
+        rows = torch.randint(n, (n,), generator=generator)
+        params = list(net.parameters()) + list(head.parameters())
+        optimiser = torch.optim.Adam(params, lr=3e-3, weight_decay=1e-5)
+        loss = torch.zeros(())
+        for _ in range(steps):
+            batch = rows[torch.randint(n, (min(256, n),), generator=generator)]
+            mean, log_var = head(net(x[batch]))
+            loss = (((mean - y[batch]) ** 2) * torch.exp(-log_var) + log_var).mean()
+            loss = loss + 0.01 * (head.max_log_var.sum() - head.min_log_var.sum())
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+        losses.append(float(loss.detach()))
+    return losses
+
+
+class StackedEnsemble:
+    """Fast rollouts of a fitted black-box :class:`~softpend.sysid.DynamicsEnsemble` of
+    :class:`GaussianDynamicsModel` members sharing their standardisation (as :func:`fit_ensemble` makes them):
+    row ``i`` of a batch is predicted by member ``i % E`` throughout (trajectory sampling), the members' layers
+    applied as one batched matrix product; ``predict_next`` as the ensemble's, for :func:`softpend.sysid.rollout`."""
+
+    def __init__(self, ensemble: DynamicsEnsemble) -> None:
+        self.members: list[Any] = list(ensemble.members)
+        self.first = self.members[0]
+        self.layout, self.dt_s = ensemble.layout, ensemble.dt_s
+        layers = [[m.net[i] for m in self.members] for i in range(0, len(self.first.net), 2)]
+        self.weights = [torch.stack([layer.weight.detach().T for layer in group]) for group in layers]
+        self.biases = [torch.stack([layer.bias.detach()[None] for layer in group]) for group in layers]
+        self.max_log_var = torch.stack([m.head.max_log_var.detach()[None] for m in self.members])
+        self.min_log_var = torch.stack([m.head.min_log_var.detach()[None] for m in self.members])
+        self.noise_generator: Optional[torch.Generator] = None
+
+    def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
+        first, n_members = self.first, len(self.members)
+        state, torque_nm = first._check(state, torque_nm)
+        batch = state.shape[0]
+        if batch % n_members:
+            raise ValueError(f"the batch ({batch}) must be a multiple of the ensemble size ({n_members})")
+        torque_nm = torque_nm.clamp(-first.torque_limit_nm, first.torque_limit_nm)
+        z = first.normalise_features(first.features(state, torque_nm))
+        h = z.reshape(batch // n_members, n_members, -1).transpose(0, 1)
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = torch.baddbmm(b, h, w)
+            if i < len(self.weights) - 1:
+                h = nn.functional.silu(h)
+        mean, log_var = h.chunk(2, dim=-1)
+        log_var = self.max_log_var - nn.functional.softplus(self.max_log_var - log_var)
+        log_var = self.min_log_var + nn.functional.softplus(log_var - self.min_log_var)
+        out = _sample(mean, log_var, self.noise_generator).transpose(0, 1).reshape(batch, -1)
+        out = out * first.delta_std + first.delta_mean
+        p = first._p
+        delta = torch.cat([first.dt_s * (state[:, p : 2 * p] + out), out], dim=1)
+        return first.next_from_delta(state, delta)
+
+
+def _standardise(values: Tensor) -> tuple[Tensor, Tensor]:
+    mean, std = values.mean(0), values.std(0)
+    return mean, torch.where(std > 1e-12, std, torch.ones_like(std))
+
+
+def fit_ensemble(
+    states: np.ndarray, torques_nm: np.ndarray, next_states: np.ndarray, task: Task, config: PlannerConfig
+) -> DynamicsEnsemble:
+    """The black-box ensemble: :class:`GaussianDynamicsModel` members on the full observed layout (differenced
+    velocities), fitted to the transitions ``states (M, 10) -> next_states`` under ``torques_nm (M,)``."""
+    layout = StateLayout.full()
+    members = [
+        GaussianDynamicsModel(
+            layout, task.dt_s, task.torque_limit_nm, (config.hidden_width,) * 2, tip_reach_m=1.01 * task.rod.length_m
+        )
+        for _ in range(config.ensemble_size)
+    ]
+    first = members[0]
+    s, u, s1 = (torch.as_tensor(a, dtype=torch.float32) for a in (states, torques_nm, next_states))
+    features, targets = first.features(s, u), first.target_delta(s, s1)
+    f_mean, f_std = _standardise(features)
+    d_mean, d_std = _standardise(targets)
+    z = (features - f_mean) / f_std
+    for m in members:
+        m.set_normalisation(f_mean, f_std, d_mean, d_std)
+        m.set_feature_box(z.min(0).values, z.max(0).values, margin=0.5)
+    x = first.normalise_features(features)
+    torch.manual_seed(config.seed)  # the networks' initial weights
+    for m in members:
+        m.net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
+    _fit_gaussian(
+        [m.net for m in members],
+        [m.head for m in members],
+        x,
+        (targets - d_mean) / d_std,
+        config.train_steps,
+        config.seed,
+    )
+    return DynamicsEnsemble(members).eval()
+
+
+# ---------------------------------------------------------------------- physics-structured residual model
+
+
+def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
+    """Tip angle ``theta`` and rate of joint states ``(..., n + 1)`` (as the plant observes them)."""
+    a, ad = torch.cumsum(q, -1)[..., 1:], torch.cumsum(qd, -1)[..., 1:]
+    s, c = torch.sin(a), torch.cos(a)
+    ex, ey = -link_length_m * s.sum(-1), link_length_m * c.sum(-1)
+    ex_dot, ey_dot = -link_length_m * (c * ad).sum(-1), -link_length_m * (s * ad).sum(-1)
+    return torch.atan2(-ex, ey), (ex * ey_dot - ey * ex_dot) / (ex * ex + ey * ey).clamp_min(1e-12)
+
+
+class ResidualPRBEnsemble(nn.Module):
+    """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` (``(B, 2 (n + 1))``): the identified
+    rod's batched RK4 step plus a Gaussian residual network of member ``k`` (drawn per row and step)."""
+
+    def __init__(self, params: RodParams, dt_s: float, n_members: int, width: int) -> None:
+        super().__init__()
+        self.params, self.dt_s, self.torque_limit_nm = params, float(dt_s), params.torque_limit_nm
+        self.n_q = params.n_links + 1
+        n_features = 2 * params.n_links + (params.n_links) + self.n_q + 1
+        self.nets = nn.ModuleList([_mlp(n_features, 4 * self.n_q, width) for _ in range(n_members)])
+        self.heads = nn.ModuleList([_GaussianHead(2 * self.n_q) for _ in range(n_members)])
+        for name, size in (
+            ("f_mean", n_features),
+            ("f_std", n_features),
+            ("r_mean", 2 * self.n_q),
+            ("r_std", 2 * self.n_q),
+        ):
+            self.register_buffer(name, torch.zeros(size) if name.endswith("mean") else torch.ones(size))
+        self._chains: dict[int, BatchedPRBChain] = {}
+        self.noise_generator: Optional[torch.Generator] = None
+
+    def physics(self, x: Tensor, torque_nm: Tensor) -> Tensor:
+        """The identified PRB chain's step of joint states ``x (B, 2 (n + 1))``."""
+        batch = x.shape[0]
+        if batch not in self._chains:
+            self._chains[batch] = BatchedPRBChain(self.params, batch_size=batch, dt_s=self.dt_s)
+        q, qd = self._chains[batch].step(x[:, : self.n_q].double(), x[:, self.n_q :].double(), torque_nm.double())
+        return torch.cat([q, qd], dim=1).to(x.dtype)
+
+    def features(self, x: Tensor, torque_nm: Tensor) -> Tensor:
+        q, qd = x[:, : self.n_q], x[:, self.n_q :]
+        a = torch.cumsum(q, 1)[:, 1:]
+        return torch.cat([torch.sin(a), torch.cos(a), q[:, 1:], qd, torque_nm.reshape(-1, 1) / self.torque_limit_nm], 1)
+
+    def predict_next(self, x: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
+        x = x.float()
+        torque_nm = torque_nm.reshape(-1).float().clamp(-self.torque_limit_nm, self.torque_limit_nm)
+        z = (self.features(x, torque_nm) - self.f_mean) / self.f_std
+        outs = [head(net(z)) for net, head in zip(self.nets, self.heads)]
+        mean, log_var = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
+        pick = torch.randint(len(self.nets), (x.shape[0],), generator=generator)
+        rows = torch.arange(x.shape[0])
+        residual = _sample(mean[pick, rows], log_var[pick, rows], self.noise_generator) * self.r_std + self.r_mean
+        return self.physics(x, torque_nm) + residual
+
+    def fit(self, x: np.ndarray, torques_nm: np.ndarray, x_next: np.ndarray, steps: int, seed: int) -> list[float]:
+        """Fit the residual networks to joint-state transitions (members on bootstraps)."""
+        x_t, u, x1 = (torch.as_tensor(a, dtype=torch.float32) for a in (x, torques_nm, x_next))
+        with torch.no_grad():
+            residual = x1 - self.physics(x_t, u)
+            features = self.features(x_t, u)
+        self.f_mean, self.f_std = _standardise(features)
+        self.r_mean, self.r_std = _standardise(residual)
+        torch.manual_seed(seed)
+        for net in self.nets:
+            net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
+        z, y = (features - self.f_mean) / self.f_std, (residual - self.r_mean) / self.r_std
+        return _fit_gaussian(list(self.nets), list(self.heads), z, y, steps, seed)  # type: ignore[arg-type]
+
+
+def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.ndarray:
+    """Joint states ``(N - 1, 2 (n + 1))`` of observed positions ``(N, 5)`` (phi, theta, ex, ey, er): angles
+    reconstructed (:func:`softpend.sysid.greybox.reconstruct_joint_states`), rates backward differences (hub
+    unwrapped), from the second sample on."""
+    q = reconstruct_joint_states(positions[:, 0], positions[:, 2], positions[:, 3], positions[:, 4], params)
+    q[:, 0] = np.unwrap(q[:, 0])
+    return np.concatenate([q[1:], np.diff(q, axis=0) / dt_s], axis=1)
+
+
+class JointStateTracker:
+    """The residual model's states ``(B, 2 (n + 1))`` from successive observations ``(B, 10)``, as
+    :func:`joint_states` builds them from data (before the first sample: one step back along the observed rates)."""
+
+    def __init__(self, params: RodParams, dt_s: float) -> None:
+        self.params, self.dt_s = params, float(dt_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self._previous: Optional[np.ndarray] = None
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        now = observations[:, :5]
+        previous = now - self.dt_s * observations[:, 5:] if self._previous is None else self._previous
+        self._previous = now
+        return np.stack([joint_states(np.stack([p, n]), self.params, self.dt_s)[0] for p, n in zip(previous, now)])
+
+
+class ObservedStateTracker:
+    """The black-box model's states ``(B, d)`` from successive observations ``(B, 10)``: one
+    :class:`softpend.control.learned.LearnedStateTracker` per rod."""
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+        self.reset()
+
+    def reset(self) -> None:
+        self._trackers: list[LearnedStateTracker] = []
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        if len(self._trackers) != len(observations):
+            self._trackers = [LearnedStateTracker(self.model) for _ in observations]
+        return np.stack(
+            [t(Observation.from_array(o), _NO_STATE, _NO_STATE) for t, o in zip(self._trackers, observations)]
+        )
+
+
+# ---------------------------------------------------------------------- MPPI
+
+
+class MPPI:
+    """Model-predictive path integral control of one torque held for ``hold_steps`` model steps per knot.
+
+    ``rollout_fn(x0 (R, d), torques (R, T)) -> states (R, T + 1, d)``; ``cost_fn(states (R, T, d), torques
+    (R, T)) -> (R, T)``.  :meth:`optimise` refines the mean torque sequences of ``B`` starts ``iterations`` times
+    from ``n_samples`` perturbed copies each (the first unperturbed), weighted by ``exp(-cost / temperature)``;
+    :meth:`plan` does so for one start, returns the first torque and shifts its sequence by one knot.
+    """
+
+    def __init__(
+        self,
+        rollout_fn: Callable[[Tensor, Tensor], Tensor],
+        cost_fn: Callable[[Tensor, Tensor], Tensor],
+        torque_limit_nm: float,
+        n_knots: int,
+        hold_steps: int,
+        n_samples: int,
+        noise_std_nm: float,
+        temperature: float,
+        seed: int = 0,
+        iterations: int = 1,
+    ) -> None:
+        self.rollout_fn, self.cost_fn = rollout_fn, cost_fn
+        self.limit = positive("torque_limit_nm", torque_limit_nm)
+        self.n_knots, self.hold_steps = positive_int("n_knots", n_knots), positive_int("hold_steps", hold_steps)
+        self.n_samples = int_at_least("n_samples", n_samples, 2)
+        self.noise_std = positive("noise_std_nm", noise_std_nm)
+        self.temperature = positive("temperature", temperature)
+        self.iterations = positive_int("iterations", iterations)
+        self.generator = torch.Generator().manual_seed(int(non_negative("seed", seed)))
+        self.reset()
+
+    def reset(self) -> None:
+        self.mean = torch.zeros(1, self.n_knots, dtype=torch.float64)
+
+    @torch.no_grad()
+    def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:
+        """Refined mean sequences ``(B, n_knots)`` of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
+        x = torch.as_tensor(states, dtype=torch.float32)
+        batch, k = x.shape[0], self.n_samples
+        x0 = x.repeat_interleave(k, dim=0)
+        for _ in range(self.iterations):
+            noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
+            noise[:, 0] = 0.0
+            knots = (mean[:, None] + noise).clamp(-self.limit, self.limit)
+            torques = knots.reshape(batch * k, -1).repeat_interleave(self.hold_steps, dim=1)
+            states_ = self.rollout_fn(x0, torques.float())
+            cost = self.cost_fn(states_[:, 1:], torques).double().sum(1).reshape(batch, k)
+            cost = torch.where(torch.isfinite(cost), cost, torch.full_like(cost, math.inf))
+            weights = torch.softmax(-(cost - cost.min(1, keepdim=True).values) / self.temperature, 1)
+            mean = (weights[..., None] * knots).sum(1)
+        return mean
+
+    def plan(self, state: np.ndarray | Tensor) -> float:
+        """The first torque [N m] for one start ``state (d,)``; keeps and shifts the mean sequence."""
+        self.mean = self.optimise(torch.as_tensor(state).reshape(1, -1), self.mean)
+        first = float(self.mean[0, 0])
+        self.mean = torch.cat([self.mean[:, 1:], self.mean[:, -1:]], dim=1)
+        return first
+
+
+def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor) -> Tensor:
+    """``1 - cos(theta)`` plus :data:`ENERGY_WEIGHT` times the squared rigid-pendulum energy error
+    (:func:`softpend.control.swingup.pendulum_energy_j`, zero upright) over the hanging energy gap."""
+    inertia = (
+        params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
+    )
+    moment = params.gravity_torque_horizontal_nm
+    energy = 0.5 * inertia * theta_dot_rad_s**2 + moment * (torch.cos(theta_rad) - 1.0)
+    return 1.0 - torch.cos(theta_rad) + ENERGY_WEIGHT * (energy / (2 * moment)) ** 2
+
+
+# ---------------------------------------------------------------------- the controller on the plant
+
+
+class PlannerController:
+    """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
+    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`); it reads
+    observations only."""
+
+    def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float) -> None:
+        self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
+        self.capture_rad, self.hold_steps = float(capture_rad), mppi.hold_steps
+        self.torque_limit_nm = lqr.torque_limit_nm
+        self.reset()
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self._mean: Optional[Tensor] = None
+
+    def torques(self, observations: np.ndarray, time_s: float) -> np.ndarray:
+        """Torques ``(B,)`` [N m] for observations ``(B, 10)`` of ``B`` rods (the same ``B`` since :meth:`reset`)."""
+        batch = len(observations)
+        if self._mean is None or len(self._mean) != batch:
+            self._mean = torch.zeros(batch, self.mppi.n_knots, dtype=torch.float64)
+            self.balancing, self._k, self._held = np.zeros(batch, bool), np.zeros(batch, int), np.zeros(batch)
+        states = self.tracker(observations)
+        angle = np.abs(observations[:, 1])
+        release = self.balancing & (angle > RELEASE_FACTOR * self.capture_rad)
+        self._mean[torch.as_tensor(release)] = 0.0
+        self._k[release] = 0
+        self.balancing = (self.balancing & ~release) | (angle < self.capture_rad)
+        out = np.empty(batch)
+        for i in np.flatnonzero(self.balancing):
+            out[i] = self.lqr(Observation.from_array(observations[i]), _NO_STATE, _NO_STATE, time_s)
+        plan = np.flatnonzero(~self.balancing & (self._k % self.hold_steps == 0))
+        if plan.size:
+            rows = torch.as_tensor(plan)
+            mean = self.mppi.optimise(states[plan], self._mean[rows])
+            self._held[plan] = mean[:, 0].numpy()
+            self._mean[rows] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+        planning = ~self.balancing
+        out[planning] = self._held[planning]
+        self._k[planning] += 1
+        return np.clip(out, -self.torque_limit_nm, self.torque_limit_nm)
+
+    def __call__(self, observation: Observation, q: Any, q_dot: Any, time_s: float) -> float:
+        return float(self.torques(observation.as_array()[None], time_s)[0])
+
+    def batch_policy(self) -> BatchPolicy:
+        """This controller as a policy of the batched engine (:func:`softpend.evaluation.evaluate`)."""
+        return _BatchPlanner(self)
+
+
+class _BatchPlanner(BatchPolicy):
+    """:class:`PlannerController` on the batched engine: the rods' raw observations in, torque fractions out."""
+
+    def __init__(self, controller: PlannerController) -> None:
+        super().__init__(predict_batch=lambda vectors: None)
+        self.controller = controller
+
+    def reset(self) -> None:
+        self.controller.reset()
+
+    def __call__(self, k: int, time_s: float, vectors: np.ndarray, *state: Any) -> Any:
+        return (self.controller.torques(np.asarray(state[0]), time_s) / self.controller.torque_limit_nm)[:, None]
+
+
+# ---------------------------------------------------------------------- the trial loop
+
+
+@dataclass
+class TrialRecord:
+    """One stretch of plant time: the excitation or a planner trial."""
+
+    kind: str
+    start_seed: Optional[int]
+    plant_s: float
+    plant_s_total: float
+    balanced: bool
+    upright_std_rad: float
+    fit_wall_s: float
+    wall_s_total: float
+
+
+@dataclass
+class PlannerResult:
+    """Outcome of :func:`run_planner`: the records, the final controller and model, the identified rod."""
+
+    config: PlannerConfig
+    records: list[TrialRecord]
+    controller: PlannerController
+    rod: RodParams
+    model: Any
+
+    @property
+    def plant_seconds(self) -> float:
+        """Every plant second driven (excitation and trials)."""
+        return self.records[-1].plant_s_total
+
+    @property
+    def balanced(self) -> bool:
+        """Whether the stopping rule fired (``stop_after_balanced`` balanced trials in a row)."""
+        n = self.config.stop_after_balanced
+        trials = [r for r in self.records if r.kind == "trial"]
+        return len(trials) >= n and all(r.balanced for r in trials[-n:])
+
+    @property
+    def plant_seconds_to_balance(self) -> float:
+        return self.plant_seconds if self.balanced else math.inf
+
+
+def _transitions(positions: np.ndarray, torques_nm: np.ndarray, dt_s: float) -> tuple[np.ndarray, ...]:
+    """Black-box transitions of one trajectory (positions ``(N, 5)``, torques ``(N - 1,)``): states ``[x, v]`` with
+    ``v`` the backward difference, from the second sample on."""
+    states = np.concatenate([positions[1:], backward_difference(positions, dt_s, _ANGLE_MASK)], axis=1)
+    return states[:-1], torques_nm[1:], states[1:]
+
+
+def _run_trial(env: Any, controller: PlannerController, seed: int, config: PlannerConfig) -> dict[str, Any]:
+    """One planner trial on the plant: until held for ``hold_s``, ``trial_s`` or a diverged simulation."""
+    env.reset(seed=seed)
+    controller.reset()
+    dt, limit = env.dt_s, env.torque_limit_nm
+    window = int(round(config.hold_s / dt))
+    observations, torques = [env.report_observation.as_array()], []
+    balanced = False
+    for k in range(int(round(config.trial_s / dt))):
+        observation = env.report_observation
+        torque = min(max(controller(observation, None, None, k * dt), -limit), limit)
+        *_, truncated, _info = env.step(np.array([torque / limit]))
+        torques.append(torque)
+        observations.append(env.report_observation.as_array())
+        if truncated:
+            break
+        theta = np.array(observations[-window:])[:, 1]
+        if len(theta) == window and np.all(np.abs(theta) < UPRIGHT_RAD):
+            if math.sqrt(float(np.mean(theta**2))) <= config.target_std_rad:
+                balanced = True
+                break
+    obs = np.array(observations)
+    tail = obs[-window:, 1]
+    return {
+        "positions": obs[:, :5],
+        "torques": np.array(torques),
+        "plant_s": len(torques) * dt,
+        "balanced": balanced,
+        "upright_std_rad": float(np.sqrt(np.mean(tail**2))),
+    }
+
+
+class _Planner:
+    """Data, models and controller of one run."""
+
+    def __init__(self, config: PlannerConfig, rod: RodParams) -> None:
+        self.config, self.rod = config, rod
+        task = config.task
+        self.lqr = LQRController.from_params(
+            rod, dt_s=task.dt_s, state="observation", torque_limit_nm=task.torque_limit_nm
+        )
+        self.trajectories: list[tuple[np.ndarray, np.ndarray]] = []
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.model: Any = None
+
+    def add(self, positions: np.ndarray, torques_nm: np.ndarray) -> None:
+        if len(torques_nm) >= 3:
+            self.trajectories.append((positions, torques_nm))
+
+    def fit(self, refit: int) -> None:
+        config, task = self.config, self.config.task
+        seed = config.seed * 1000 + refit
+        if config.model == "ensemble":
+            parts = [_transitions(p, u, task.dt_s) for p, u in self.trajectories]
+            s, u, s1 = (np.concatenate([part[i] for part in parts]) for i in range(3))
+            self.model = fit_ensemble(s, u, s1, task, config.replace(seed=seed))
+        else:
+            xs, us, x1s = [], [], []
+            for positions, torques in self.trajectories:
+                x = joint_states(positions, self.rod, task.dt_s)
+                xs.append(x[:-1])
+                us.append(torques[1:])
+                x1s.append(x[1:])
+            self.model = ResidualPRBEnsemble(self.rod, task.dt_s, config.ensemble_size, config.hidden_width)
+            self.model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
+
+    def controller(self) -> PlannerController:
+        config, task, rod = self.config, self.config.task, self.rod
+        model, generator = self.model, self.generator
+        model.noise_generator = generator
+        for member in getattr(model, "members", ()):
+            member.noise_generator = generator
+        if config.model == "ensemble":
+            tracker: Any = ObservedStateTracker(model)
+            i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
+
+            def cost(states: Tensor, torques: Tensor) -> Tensor:
+                return swing_up_cost(rod, states[..., i_theta], states[..., i_rate])
+
+        else:
+            tracker = JointStateTracker(rod, task.dt_s)
+            n_q, link = rod.n_links + 1, rod.link_length_m
+
+            def cost(states: Tensor, torques: Tensor) -> Tensor:
+                return swing_up_cost(rod, *_tip(states[..., :n_q], states[..., n_q:], link))
+
+        fast = StackedEnsemble(model) if config.model == "ensemble" else model
+        fast.noise_generator = generator
+        mppi = MPPI(
+            lambda x0, torques: rollout(fast, x0, torques, generator),
+            cost,
+            task.torque_limit_nm,
+            config.n_knots,
+            config.hold_steps,
+            config.n_samples,
+            config.noise_fraction * task.torque_limit_nm,
+            config.temperature,
+            seed=config.seed,
+        )
+        return PlannerController(mppi, tracker, self.lqr, config.capture_rad)
+
+
+def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) -> PlannerResult:
+    """Excitation, identification, then planner trials from the selection starts until the stopping rule fires
+    (or ``max_trials``); every plant second driven counts, failed trials included."""
+    from softpend.envs import SoftPendulumEnv
+    from softpend.torch_threads import one_torch_thread
+
+    config = config if config is not None else PlannerConfig()
+    task = config.task
+    started = time.perf_counter()
+    records: list[TrialRecord] = []
+    with one_torch_thread():
+        protocol = BabbleProtocol(
+            program="multisine",
+            start="hanging",
+            feedback_trial_fraction=0.0,
+            n_trials=1,
+            trial_length_s=config.excitation_s,
+            dt_s=task.dt_s,
+            substeps=task.substeps,
+        )
+        data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
+        excitation_s = protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
+        fit_started = time.perf_counter()
+        rod = task.rod
+        if config.identify_windows:
+            guess = task.rod.replace(**{k: f * getattr(task.rod, k) for k, f in IDENTIFY_GUESS_FACTORS.items()})
+            rod = identify(data, GreyBoxConfig(max_windows=config.identify_windows, seed=config.seed), guess).params
+        planner = _Planner(config, rod)
+        for i in range(data.n_trials):
+            planner.add(data.positions[i], data.torques_nm[i])
+        planner.fit(0)
+        records.append(
+            TrialRecord(
+                "excitation",
+                None,
+                excitation_s,
+                excitation_s,
+                False,
+                math.nan,
+                time.perf_counter() - fit_started,
+                time.perf_counter() - started,
+            )
+        )
+        env = SoftPendulumEnv(**task.env_kwargs())
+        in_a_row = 0
+        for index in range(config.max_trials):
+            seed = config.selection_seeds[index % len(config.selection_seeds)]
+            trial = _run_trial(env, planner.controller(), seed, config)
+            planner.add(trial["positions"], trial["torques"])
+            in_a_row = in_a_row + 1 if trial["balanced"] else 0
+            fit_started = time.perf_counter()
+            if in_a_row < config.stop_after_balanced:
+                planner.fit(index + 1)
+            total = records[-1].plant_s_total + trial["plant_s"]
+            records.append(
+                TrialRecord(
+                    "trial",
+                    seed,
+                    trial["plant_s"],
+                    total,
+                    trial["balanced"],
+                    trial["upright_std_rad"],
+                    time.perf_counter() - fit_started,
+                    time.perf_counter() - started,
+                )
+            )
+            if progress:
+                r = records[-1]
+                print(
+                    f"trial {index}: seed {seed} {r.plant_s:.2f} s (total {r.plant_s_total:.2f} s) balanced "
+                    f"{r.balanced} std {r.upright_std_rad:.3f} wall {r.wall_s_total:.0f} s",
+                    flush=True,
+                )
+            if in_a_row >= config.stop_after_balanced:
+                break
+    return PlannerResult(config, records, planner.controller(), rod, planner.model)
+
+
+def fresh_start_evaluation(
+    result: PlannerResult, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S, engine: str = "batched"
+) -> EvaluationSummary:
+    """The final controller from fresh starts (:func:`softpend.evaluation.evaluate`; the batched engine runs
+    every start at once); seeds shared with the run's selection starts raise ``ValueError``."""
+    from softpend.torch_threads import one_torch_thread
+
+    shared = sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds))
+    if shared:
+        raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
+    one_of("engine", engine, ("exudyn", "batched"))
+    controller = result.controller.batch_policy() if engine == "batched" else result.controller
+    with torch.no_grad(), one_torch_thread():
+        task = result.config.task
+        return evaluate(controller, task, engine=engine, name="planner", seeds=seeds, duration_s=duration_s)

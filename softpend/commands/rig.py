@@ -1,10 +1,5 @@
-"""``softpend rig``: serve the emulated rig (the digital twin of the motor controller) on a pseudo-terminal.
-
-Prints the pty path (one line), then serves until Ctrl-C/SIGTERM or ``--duration``.  Point any host
-program at that path, e.g. ``MotorLink(path, torque_limit_nm=0.06)``.  ``softpend rig control`` runs a
-controller on a rig or on the twin (:mod:`softpend.commands.rig_control`); ``softpend rig design``, ``check``,
-``calibrate`` and ``babble`` take a rig from its parts to a dataset (:mod:`softpend.commands.rig_build`).
-"""
+"""``softpend rig``: serve the emulated rig on a pseudo-terminal (its path printed on one line) until Ctrl-C, SIGTERM
+or ``--duration``; ``softpend rig control`` and the build actions are its sub-commands."""
 
 from __future__ import annotations
 
@@ -46,7 +41,6 @@ def run(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs
     from softpend.task import Task
 
-    # before anything starts (no --duration: until Ctrl-C or SIGTERM)
     check_numbers(
         args,
         {
@@ -58,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
             "--counts-per-rev": (4, 2**24),
         },
     )
-    outputs = Outputs()  # a truth log of an earlier session may be replaced, no other file
+    outputs = Outputs()
     if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")
 

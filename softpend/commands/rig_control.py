@@ -1,16 +1,7 @@
 """``softpend rig control CONTROLLER``: run a controller on a rig (a serial port) or on the digital twin.
 
-The controller is ``lqr`` / ``lqr-obs`` (LQR on the joint state / on the observed variables), ``swingup`` /
-``swingup-obs`` (energy swing-up handing over to that LQR), ``pid`` (PID on the tip angle), or a run folder:
-a DQN or DQN-MBPO run of ``softpend train`` (``config.json`` and an agent) or a PILCO run (``pilco.json``).
-It runs in :func:`softpend.hardware.closed_loop.run_closed_loop`: encoder and camera go through the state
-estimator, the torque through the driver's clamp, STOP on every exit path, and every sample, estimate and
-command goes to the crash-safe logs in ``--out``.
-
-``--twin`` runs on the digital twin in simulated time (the emulated device behind an in-memory link, the
-synthetic live camera; the same ``--seed`` gives the same logs); ``--port PATH`` talks to a rig and needs
-``--camera`` (a device index, stream URL or video file, through ``cv2.VideoCapture``) or ``--no-camera``.
-"""
+CONTROLLER is ``lqr``, ``lqr-obs``, ``swingup``, ``swingup-obs``, ``pid`` or a DQN, DQN-MBPO or PILCO run folder;
+it runs behind the state estimator (:func:`softpend.hardware.closed_loop.run_closed_loop`), logs in ``--out``."""
 
 from __future__ import annotations
 
@@ -23,15 +14,12 @@ from typing import Any
 from softpend.commands.options import MAX_SESSION_S, check_numbers
 from softpend.plant.params import MAX_N_LINKS
 
-#: Image imperfections of the twin's camera, by ``--camera-effects`` name: the CameraEffects class method that
-#: makes them (``None``: ``CameraEffects()``, no imperfection).
+#: ``--camera-effects`` names: the CameraEffects class method that makes them (None: no imperfection).
 CAMERA_EFFECTS = {"clean": None, "rig": "rig", "noisy": "noisy"}
 
-#: The built-in controller names.
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
 
-#: The closed interval of each numeric option, checked before anything starts (the twin's camera, device and
-#: plant would otherwise fail inside the run, or run for ever).
+#: The closed interval of each numeric option, checked before anything starts.
 OPTION_RANGES: dict[str, tuple[float, float]] = {
     "--duration": (1e-3, MAX_SESSION_S),
     "--camera-fps": (1.0, 1000.0),
@@ -123,8 +111,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tuple[Any, Any, str]:
-    """``(controller, task, label)`` for a controller name or run folder; ``task`` is the model task (a run
-    folder's own task unless the caller's differs only in what the caller overrode)."""
+    """``(controller, task, label)`` for a controller name or run folder (whose own task it returns)."""
     from softpend.control.lqr import LQRController
     from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
     from softpend.control.swingup import EnergySwingUpController
@@ -166,8 +153,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--camera is for --port; the twin films itself with the synthetic camera")
     if args.port and not (args.camera or args.no_camera):
         raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
-    check_numbers(args, OPTION_RANGES)  # every number, by its option's name, before anything starts
-    # before the work: every file this run writes, none of them a file that an earlier run did not write
+    check_numbers(args, OPTION_RANGES)
     outputs = Outputs()
     out = outputs.folder(args.out, TWIN_CONTROL_FILES if args.twin else PORT_CONTROL_FILES, what="--out")
     base = Task(start_noise_rad=args.start_noise)
@@ -197,7 +183,6 @@ def run(args: argparse.Namespace) -> int:
                 fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0, effects=effects, seed=args.seed
             )
         )
-        # the first frame arrives after the camera's latency and one frame period: wait for it, with room
         wait_s = 1.0 + args.camera_latency_ms / 1000.0 + 2.0 / args.camera_fps
         outcome = run_twin_control(
             controller,
@@ -210,21 +195,14 @@ def run(args: argparse.Namespace) -> int:
             outputs=outputs,
             camera_wait_s=wait_s,
         )
-        summary = {
-            "controller": label,
-            "target": "twin",
-            **outcome.result.summary(),
-            "torque_chatter_nm_per_s": torque_chatter_nm_per_s(outcome.motor_log),
-            "truth": run_truth_metrics(outcome.motor_log, outcome.truth_log, task),
-            "emulator": outcome.emulator_stats,
-        }
+        target, figures = "twin", outcome.result.summary()
+        truth = run_truth_metrics(outcome.motor_log, outcome.truth_log, task)
+        extra = {"truth": truth, "emulator": outcome.emulator_stats}
     else:
-        summary = {
-            "controller": label,
-            "target": args.port,
-            **_run_on_port(args, controller, task, estimator_config, out, progress, outputs),
-        }
-        summary["torque_chatter_nm_per_s"] = torque_chatter_nm_per_s(out / "motor_log.csv")
+        target, extra = args.port, {}
+        figures = _run_on_port(args, controller, task, estimator_config, out, progress, outputs)
+    chatter = torque_chatter_nm_per_s(out / "motor_log.csv")
+    summary = {"controller": label, "target": target, **figures, "torque_chatter_nm_per_s": chatter, **extra}
     outputs.write_json(out / "summary.json", summary)
     if args.json:
         print(json_text(summary, indent=2))
@@ -286,14 +264,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
             SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
         ):
             result = run_closed_loop(
-                link,
-                controller,
-                estimator,
-                args.duration,
-                tip_source=source,
-                log=log,
-                camera_log=camera_log,
-                progress=progress,
+                link, controller, estimator, args.duration, source, log, camera_log, progress=progress
             )
     finally:
         if source is not None:

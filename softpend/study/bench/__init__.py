@@ -17,6 +17,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("hardware", "softpend.study.bench.hardware:bench_hardware"),
     ("rig_control", "softpend.study.bench.rig_control:bench_rig_control"),
     ("sysid", "softpend.study.bench.sysid:bench_sysid"),
+    ("data_efficiency", "softpend.study.bench.data_efficiency:bench_data_efficiency"),
 ]
 
 

@@ -23,51 +23,23 @@ from softpend.hardware.loop import LoopResult, RigLoop, SecondsBar, check_run
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
 
-__all__ = [
-    "CAMERA_LOG_COLUMNS",
-    "STATUS_CODES",
-    "ClosedLoopResult",
-    "TwinCamera",
-    "TwinControlRun",
-    "rig_control_columns",
-    "run_closed_loop",
-    "run_twin_control",
-]
-
-#: ``status`` column of the motor log.
+#: ``status`` column of the motor log (``camera_blind`` and ``arm_timeout`` are safe stops).
 STATUS_CODES: dict[str, int] = {
-    "arming": 0,  # zero torque until the first camera correction
-    "running": 1,
-    "completed": 2,
-    "camera_blind": 3,  # safe stop
-    "arm_timeout": 4,  # safe stop
-    "error": 5,  # an exception: STOP, then it propagates
+    name: code for code, name in enumerate(("arming", "running", "completed", "camera_blind", "arm_timeout", "error"))
 }
 
 #: Columns of the camera log.
-CAMERA_LOG_COLUMNS: tuple[str, ...] = (
-    "frame",
-    "capture_host_time_s",
-    "delivered_host_time_s",
-    "polled_host_time_s",
-    "capture_device_time_s",
-    "x_m",
-    "y_m",
-    "theta_rad",
-    "lost",
-    "accepted",
+CAMERA_LOG_COLUMNS: tuple[str, ...] = tuple(
+    "frame capture_host_time_s delivered_host_time_s polled_host_time_s capture_device_time_s x_m y_m theta_rad "
+    "lost accepted".split()
 )
-
-_STATE_COLUMNS = ["host_time_s", "device_time_s", "time_s", "state_seq", "phi_rad", "phi_dot_rad_s"]
-_COMMAND_COLUMNS = ["applied_torque_nm", "flags", "command_torque_nm", "commanded", "late_command"]
 
 
 def rig_control_columns(n_coordinates: int) -> list[str]:
     """Columns of the motor log of :func:`run_closed_loop` for a model of ``n_coordinates`` coordinates."""
     return (
-        _STATE_COLUMNS
-        + _COMMAND_COLUMNS
-        + ["camera_frames", "blind_s", "est_time_s"]
+        "host_time_s device_time_s time_s state_seq phi_rad phi_dot_rad_s applied_torque_nm flags command_torque_nm "
+        "commanded late_command camera_frames blind_s est_time_s".split()
         + [f"est_{name}" for name in OBSERVATION_NAMES]
         + [f"est_q{i}_rad" for i in range(n_coordinates)]
         + [f"est_q{i}_dot_rad_s" for i in range(n_coordinates)]
@@ -348,11 +320,13 @@ def run_twin_control(
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 1.0,
     outputs: Optional[Any] = None,
+    estimator_task: Optional[Any] = None,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin (``rig``, default :class:`~softpend.hardware.emulator.RigConfig`)
     in simulated time, filmed by ``camera`` (None: encoder and model only) from the start; the loop starts once
     the camera tracked a frame (within ``camera_wait_s``).  Writes :data:`TWIN_CONTROL_FILES` to ``workdir``
-    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`), the summary also when the run raises."""
+    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`), the summary also when the run raises; the estimator's
+    model is ``estimator_task`` (default: ``rig.task``, the twin's own rod)."""
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
@@ -366,7 +340,7 @@ def run_twin_control(
     for path in logs:
         outputs.live(path)
     config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
-    estimator = RigStateEstimator(rig.task, config)
+    estimator = RigStateEstimator(estimator_task if estimator_task is not None else rig.task, config)
     metadata = {
         "rig": rig.to_dict(),
         "estimator": dataclasses.asdict(estimator.config),

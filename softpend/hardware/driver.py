@@ -19,18 +19,6 @@ from softpend.checks import positive, positive_int
 from softpend.hardware import protocol as proto
 from softpend.hardware.clock import WALL_CLOCK
 
-__all__ = [
-    "DeviceError",
-    "DeviceInfo",
-    "HandshakeError",
-    "LinkChecksumError",
-    "LinkDisconnected",
-    "LinkError",
-    "LinkTimeout",
-    "MotorLink",
-    "MotorState",
-]
-
 #: Largest values a device may announce or report (beyond them a value is garbage).
 MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
 MAX_COUNTS_PER_REV = 1 << 24
@@ -282,9 +270,6 @@ class MotorLink:
             self.emergency_stop()
             raise ValueError(f"torque_nm must be a finite number, got {torque_nm!r} (motor stopped)")
         limit = self.torque_limit_nm
-        if not (math.isfinite(limit) and limit > 0):
-            self.emergency_stop()
-            raise LinkError(f"effective torque limit {limit!r} N m is not a positive number (motor stopped)")
         torque = _float32_within(min(max(torque, -limit), limit), limit)
         seq = self._write(proto.MSG_TORQUE, (torque,))
         self.last_command_nm = torque

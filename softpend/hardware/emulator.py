@@ -28,15 +28,6 @@ from softpend.hardware.clock import SimClock, SimSerial
 from softpend.io.samplelog import SampleLog
 from softpend.task import Task
 
-__all__ = [
-    "EmulatorProcess",
-    "RigConfig",
-    "RigEmulator",
-    "SimRig",
-    "start_emulator_process",
-    "truth_columns",
-]
-
 
 @dataclass(frozen=True)
 class RigConfig:

@@ -16,15 +16,8 @@ from softpend.io.samplelog import SampleLog
 __all__ = ["LOOP_LOG_COLUMNS", "LoopResult", "RigLoop", "RigObservation", "run_control_loop"]
 
 #: Columns of the motor log written by :func:`run_control_loop`.
-LOOP_LOG_COLUMNS: tuple[str, ...] = (
-    "host_time_s",
-    "device_time_s",
-    "state_seq",
-    "phi_rad",
-    "phi_dot_rad_s",
-    "applied_torque_nm",
-    "command_torque_nm",
-    "flags",
+LOOP_LOG_COLUMNS: tuple[str, ...] = tuple(
+    "host_time_s device_time_s state_seq phi_rad phi_dot_rad_s applied_torque_nm command_torque_nm flags".split()
 )
 
 

@@ -15,18 +15,6 @@ from softpend.checks import int_at_least, positive
 from softpend.plant.params import RodParams
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraModel
 
-__all__ = [
-    "MARKER_RADIUS_M",
-    "STEEL_DENSITY_KG_M3",
-    "TPU_MODULUS_RANGE_PA",
-    "V5_CARTRIDGES",
-    "CameraSpec",
-    "HubSpec",
-    "MotorCartridge",
-    "RigDesign",
-    "rig_design",
-]
-
 STEEL_DENSITY_KG_M3 = 7850.0
 #: Radius of the calibration markers and of the tip dot's disc [m].
 MARKER_RADIUS_M = 0.011

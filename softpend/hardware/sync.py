@@ -14,16 +14,6 @@ import numpy as np
 from softpend.io.samplelog import LogContents, read_sample_log
 from softpend.plant import RodParams, wrap_angle_rad
 
-__all__ = [
-    "ClockOffset",
-    "Gap",
-    "SyncResult",
-    "build_rig_dataset",
-    "estimate_clock_offset",
-    "startup_wiggle_torque",
-    "synchronise",
-]
-
 #: Position columns of a rig dataset.
 RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
 

@@ -33,15 +33,20 @@ def rig_babble_controller(
     torque_std_fraction: float = 0.5,
     torque_bandwidth_hz: float = 2.0,
     dt_s: float = 0.01,
+    program: Optional[np.ndarray] = None,
 ) -> Callable[[RigObservation, float], float]:
     """The rig's babbling program, a function of time: the start-up wiggle for ``wiggle_s``, then band-limited
-    Gaussian torque (:func:`softpend.sysid.band_limited_noise`); amplitudes are fractions of the limit."""
+    Gaussian torque (:func:`softpend.sysid.band_limited_noise`), or the torques ``program`` [N m, one per
+    ``dt_s``, then zero] when given; amplitudes are fractions of the limit."""
     from softpend.sysid.babble import band_limited_noise
 
     rng = np.random.default_rng(seed)
     n = int(math.ceil((duration_s + 1.0) / dt_s))
     wiggle = startup_wiggle_torque(wiggle_s, wiggle_fraction * torque_limit_nm, seed=seed + 1, dt_s=dt_s)
-    noise = band_limited_noise(rng, n, torque_std_fraction * torque_limit_nm, torque_bandwidth_hz, dt_s)
+    if program is None:
+        noise = band_limited_noise(rng, n, torque_std_fraction * torque_limit_nm, torque_bandwidth_hz, dt_s)
+    else:
+        noise = np.append(np.asarray(program, dtype=float), 0.0)
     sequence = np.concatenate([wiggle, noise])
 
     def controller(observation: RigObservation, time_s: float) -> float:
@@ -96,12 +101,14 @@ def run_twin_session(
     trial_length_s: float = 5.0,
     progress: bool = True,
     outputs: Optional[Any] = None,
+    program: Optional[np.ndarray] = None,
 ) -> TwinSession:
     """Run the rig pipeline on the twin (module docstring); the same seed gives the same files.
 
     ``workdir`` must be new, empty or an earlier session's (marked ``.softpend-twin``; otherwise ``ValueError``,
     nothing touched); ``seed`` seeds the torques, the emulator and the camera; ``clock_offset_s`` is the camera
-    clock minus the motor clock the synchronisation must recover.
+    clock minus the motor clock the synchronisation must recover; ``program`` replaces the babbling torque after
+    the start-up wiggle (:func:`rig_babble_controller`).
     """
     from softpend.io.outputs import Outputs
     from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
@@ -122,7 +129,7 @@ def run_twin_session(
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:
         outputs.live(workdir / name)
-    loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress)
+    loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress, program)
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=effects, seed=seed)
     video, camera_csv = paths["camera.avi"], paths["camera.csv"]
@@ -153,11 +160,11 @@ def run_twin_session(
 
 
 def _babble_on_twin(
-    rig: RigConfig, duration_s: float, seed: int, paths: dict[str, Path], progress: bool
+    rig: RigConfig, duration_s: float, seed: int, paths: dict[str, Path], progress: bool, program=None
 ) -> tuple[LoopResult, dict]:
     """Babble on the twin over the in-memory link; the loop's result and the device's counters."""
     limit = rig.task.torque_limit_nm
-    controller = rig_babble_controller(duration_s, limit, seed)
+    controller = rig_babble_controller(duration_s, limit, seed, program=program)
     device = SimRig(rig, truth_log=paths["truth_log.csv"])
     try:
         with (

@@ -201,9 +201,9 @@ TINY_RL = [
     "--set",
     "learning_starts=5",
     "--set",
-    "buffer_size=1000",
+    "learner.buffer_size=1000",
     "--set",
-    "net_arch=[16]",
+    "learner.net_arch=[16]",
 ]
 MARKERS = [[0.15, 0.1], [-0.15, 0.1], [0.15, -0.25], [-0.15, -0.25]]
 _COUNTER = itertools.count()
@@ -472,7 +472,7 @@ def test_fuzz_train_set(world, algo, data):
         f"{field}={value}",
     ]
     if algo == "mbpo":
-        argv += ["--set", "initial_random_episodes=1", "--set", "model_fit_steps=5", "--set", "ensemble_size=1"]
+        argv += ["--set", "initial_random_episodes=1", "--set", "model.fit_steps=5", "--set", "model.ensemble_size=1"]
     run_cli(argv, world["guarded"])
 
 

@@ -358,7 +358,7 @@ def test_dqn_with_a_huge_learning_rate_stops_before_saving_nan_weights(tmp_path,
         "--no-progress",
         *TRAIN_ARGS,
         "--set",
-        "learning_rate=1e30",
+        "learner.learning_rate=1e30",
     ]
     assert main(args) == 2
     one_line_error(capsys, "NonFiniteError", "learning_rate")

@@ -179,14 +179,14 @@ def test_a_diverging_babble_is_one_line(tmp_path, capsys, args):
     [
         "eval_seeds=[null]",
         "eval_seeds=[[1]]",
-        "net_arch=[1e400]",
-        'net_arch={"a": 1}',
+        "learner.net_arch=[1e400]",
+        'learner.net_arch={"a": 1}',
         "eval_seeds=[-1]",
         "task.rod.n_links=1e30",
         "task.substeps=1e9",
-        "buffer_size=1e12",
-        "net_arch=[100000000]",
-        "batch_size=1000000000",
+        "learner.buffer_size=1e12",
+        "learner.net_arch=[100000000]",
+        "learner.batch_size=1000000000",
     ],
 )
 def test_wrong_train_set_values_are_one_line(tmp_path, capsys, assignment):

@@ -199,7 +199,7 @@ def test_learning_rates_beyond_a_float32_step_are_refused(tmp_path):
     """Adam's step ``lr / (1 - beta1)`` must stay a float32: ``fit-model --learning-rate 3.4e37`` ended in torch's
     overflow traceback.  Up to 1e30 a huge step is still taken, and diverges into the NonFiniteError of the
     training loops (tests/test_hardening_files.py)."""
-    from softpend.rl.config import DQNConfig
+    from softpend.rl.config import DQNLearner
     from softpend.sysid import TrainConfig
 
     refused(
@@ -213,11 +213,11 @@ def test_learning_rates_beyond_a_float32_step_are_refused(tmp_path):
             "1",
             "--no-progress",
             "--set",
-            "learning_rate=3.4e37",
+            "learner.learning_rate=3.4e37",
         ],
         "learning_rate must lie in",
     )
-    for make in (DQNConfig, TrainConfig):
+    for make in (DQNLearner, TrainConfig):
         with pytest.raises(ValueError, match="learning_rate must lie in"):
             make(learning_rate=3.4e37)
         assert make(learning_rate=1e30).learning_rate == 1e30

@@ -47,13 +47,13 @@ TINY_PILCO = [
     "--set",
     "eval_duration_s=0.5",
     "--set",
-    "n_basis=3",
+    "policy.n_basis=3",
     "--set",
-    "max_gp_points=10",
+    "gp.max_points=10",
     "--set",
-    "gp_iterations=2",
+    "gp.iterations=2",
     "--set",
-    "policy_iterations=1",
+    "optimiser.iterations=1",
     "--set",
     "compiled=false",
 ]
@@ -67,9 +67,9 @@ TINY_RL = [
     "--set",
     "learning_starts=5",
     "--set",
-    "buffer_size=1000",
+    "learner.buffer_size=1000",
     "--set",
-    "net_arch=[16]",
+    "learner.net_arch=[16]",
 ]
 
 

@@ -20,12 +20,23 @@ def test_every_setting_in_a_file_is_a_field_of_its_config_and_is_applied(method)
     assert set(data) <= fields - {"task"}
     config = load_hparams(method)
     assert type(config) is cls
+    _assert_applied(config, cls(), data)
+
+
+def _assert_applied(config, default, data, prefix=""):
+    """Every setting of ``data`` (nested groups as mappings) is applied and differs from the default; every other
+    field keeps the class's default (the plain algorithm's)."""
     for name, value in data.items():
-        got = getattr(config, name)
-        assert (list(got) if isinstance(got, tuple) else got) == value, name
-        assert got != getattr(cls(), name), f"{name} repeats the default of {cls.__name__}"
-    for name in fields - set(data):  # every other field keeps the class's default (the plain algorithm's)
-        assert getattr(config, name) == getattr(cls(), name), name
+        got, plain = getattr(config, name), getattr(default, name)
+        if dataclasses.is_dataclass(got):
+            assert isinstance(value, dict), prefix + name
+            _assert_applied(got, plain, value, f"{prefix}{name}.")
+            continue
+        assert (list(got) if isinstance(got, tuple) else got) == value, prefix + name
+        assert got != plain, f"{prefix}{name} repeats the default of {type(default).__name__}"
+    for f in dataclasses.fields(config):
+        if f.name not in data:
+            assert getattr(config, f.name) == getattr(default, f.name), prefix + f.name
 
 
 def test_the_classes_and_the_files():
@@ -33,24 +44,24 @@ def test_the_classes_and_the_files():
 
 
 def test_an_unknown_setting_is_a_one_line_error_naming_it_and_the_file(tmp_path):
-    (tmp_path / "dqn.yml").write_text("learning_rate: 1.0e-3\nlerning_starts: 5\n")
+    (tmp_path / "dqn.yml").write_text("learner: {learning_rate: 1.0e-3}\nlerning_starts: 5\n")
     with pytest.raises(ValueError, match=r"dqn\.yml: 'lerning_starts' is not a DQNConfig setting") as info:
         load_hparams("dqn", directory=tmp_path)
     assert "\n" not in str(info.value)
     (tmp_path / "pilco.yml").write_text("task: {}\n")
     with pytest.raises(ValueError, match="'task' is not a PilcoConfig setting"):
         load_hparams("pilco", directory=tmp_path)
-    (tmp_path / "dqn.yml").write_text("rollouts_per_real_step: 5\n")  # a DQN-MBPO setting
-    with pytest.raises(ValueError, match="'rollouts_per_real_step' is not a DQNConfig setting"):
+    (tmp_path / "dqn.yml").write_text("rollout: {per_real_step: 5}\n")  # a DQN-MBPO setting
+    with pytest.raises(ValueError, match="'rollout' is not a DQNConfig setting"):
         load_hparams("dqn", directory=tmp_path)
-    (tmp_path / "mbpo.yml").write_text("rollouts_per_real_step: 5\n")
-    assert load_hparams("mbpo", directory=tmp_path).rollouts_per_real_step == 5
+    (tmp_path / "mbpo.yml").write_text("rollout: {per_real_step: 5}\n")
+    assert load_hparams("mbpo", directory=tmp_path).rollout.per_real_step == 5
     with pytest.raises(ValueError, match=r"missing/dqn\.yml: cannot read the settings"):
         load_hparams("dqn", directory=tmp_path / "missing")
 
 
 def test_a_bad_value_or_a_file_that_is_not_a_mapping_is_a_one_line_error(tmp_path):
-    (tmp_path / "dqn.yml").write_text("gamma: 1.5\n")
+    (tmp_path / "dqn.yml").write_text("learner: {gamma: 1.5}\n")
     with pytest.raises(ValueError, match=r"dqn\.yml: .*gamma") as info:
         load_hparams("dqn", directory=tmp_path)
     assert "\n" not in str(info.value)
@@ -65,6 +76,6 @@ def test_task_and_overrides_come_after_the_file():
     task = Task(plant="beam")
     config = load_hparams("mbpo", task, {"episode_s": 1.0, "task.rod.torque_limit_nm": 0.08})
     assert config.task == task.replace(torque_limit_nm=0.08) and config.episode_s == 1.0
-    assert config.gradient_steps == load_hparams("mbpo").gradient_steps
+    assert config.learner.gradient_steps == load_hparams("mbpo").learner.gradient_steps
     with pytest.raises(ValueError, match="unknown PilcoConfig field 'bogus'"):
         load_hparams("pilco", overrides={"bogus": 1})

@@ -221,7 +221,7 @@ def test_train_refuses_another_runs_folder_and_never_trains_over_a_run(tmp_path,
     capsys.readouterr()
     for extra, message in (
         (["--seed", "1"], "holds another run (it differs in seed"),
-        (["--set", "gamma=0.9"], "holds another run (it differs in gamma"),
+        (["--set", "learner.gamma=0.9"], "holds another run (it differs in learner.gamma"),
         ([], "already holds this run"),
     ):
         assert main(["train", "--algo", "dqn", "--out", str(folder), *TINY, *extra]) == 2
@@ -282,7 +282,7 @@ def test_a_sweep_over_a_root_with_runs_of_other_settings_leaves_them_alone(tmp_p
     legacy.mkdir()
     (legacy / "config.json").write_text('{"class": "DQNConfig", "gamma": 0.5}')
     (legacy / "agent.zip").write_bytes(b"an old agent")
-    assert main([*argv, "--dqn-set", "gamma=0.9"]) == 0
+    assert main([*argv, "--dqn-set", "learner.gamma=0.9"]) == 0
     capsys.readouterr()
     assert {p.name: p.read_bytes() for p in first.iterdir() if p.is_file()} == saved
     assert (legacy / "agent.zip").read_bytes() == b"an old agent"

@@ -127,22 +127,23 @@ def test_rl_and_pilco_configs_take_the_same_overrides():
     from softpend.rl.config import MBPOConfig
 
     rl = apply_overrides(
-        MBPOConfig(), dict([parse_assignment("net_arch=[32,32]"), parse_assignment("learning_rate=1e-3")])
+        MBPOConfig(),
+        dict([parse_assignment("learner.net_arch=[32,32]"), parse_assignment("learner.learning_rate=1e-3")]),
     )
-    assert rl.net_arch == (32, 32) and rl.learning_rate == 1e-3
+    assert rl.learner.net_arch == (32, 32) and rl.learner.learning_rate == 1e-3
     pilco = apply_overrides(
         PilcoConfig(),
         dict(
             map(
                 parse_assignment,
-                ["eval_seeds=[0,1]", "cost_rate_width_rad_s=null", "state=tip", "task.rod.mass_kg=0.07"],
+                ["eval_seeds=[0,1]", "cost.rate_width_rad_s=null", "state=tip", "task.rod.mass_kg=0.07"],
             )
         ),
     )
-    assert pilco.eval_seeds == (0, 1) and pilco.cost_rate_width_rad_s is None and pilco.state == "tip"
+    assert pilco.eval_seeds == (0, 1) and pilco.cost.rate_width_rad_s is None and pilco.state == "tip"
     assert pilco.task.rod.mass_kg == 0.07
     assert dataclasses.replace(pilco, task=PilcoConfig().task) == apply_overrides(
-        PilcoConfig(), {"eval_seeds": "0,1", "cost_rate_width_rad_s": None, "state": "tip"}
+        PilcoConfig(), {"eval_seeds": "0,1", "cost": {"rate_width_rad_s": None}, "state": "tip"}
     )
 
 
@@ -151,7 +152,7 @@ def test_rl_and_pilco_configs_take_the_same_overrides():
     [
         (["train", "--algo", "dqn", "--set", "learning_rate"], "--set expects NAME=VALUE"),
         (["train", "--algo", "pilco", "--set", "no_such_field=1"], "unknown PilcoConfig field 'no_such_field'"),
-        (["train", "--algo", "dqn", "--set", "gamma=2"], "gamma must lie in [0, 1]"),
+        (["train", "--algo", "dqn", "--set", "learner.gamma=2"], "learner.gamma must lie in [0, 1]"),
         (["book", "--set", "3d=1"], "--set expects NAME=VALUE"),
     ],
 )

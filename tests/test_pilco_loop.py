@@ -12,7 +12,18 @@ import torch
 
 from softpend.cli import main
 from softpend.evaluation import evaluate_controller
-from softpend.pilco import Pilco, PilcoConfig, PilcoResult, RBFPolicy, run_pilco, state_spec
+from softpend.io.overrides import apply_overrides
+from softpend.pilco import (
+    CostSettings,
+    OptimiserSettings,
+    Pilco,
+    PilcoConfig,
+    PilcoResult,
+    PolicySettings,
+    RBFPolicy,
+    run_pilco,
+    state_spec,
+)
 from softpend.pilco.controller import PilcoController
 from softpend.pilco.gp import MultiOutputGP
 from softpend.pilco.loop import (
@@ -36,33 +47,26 @@ torch.set_num_threads(1)
 #: not be driven by the hub at all).
 RIGID = RodParams(n_links=1, stiffness_scale=100.0)
 
-#: The fields that ``book/hparams/pilco.yml`` sets and the tiny runs below keep.
-BOOK_FIELDS = (
-    "cost_width_after_swing_up_m",
-    "cost_rate_width_rad_s",
-    "cost_rate_after_rad",
-    "cost_exploration",
-    "gp_all_data",
-    "policy_restarts",
-    "balance_within_rad",
-)
+#: The tiny sizes (dotted ``--set`` names) over the book's settings (``book/hparams/pilco.yml``).
+TINY = {
+    "state": "tip",
+    "control_dt_s": 0.1,
+    "horizon_s": 1.0,
+    "prediction_s": None,
+    "n_policy_trials": 2,
+    "policy.n_basis": 5,
+    "gp.max_points": 15,
+    "gp.iterations": 15,
+    "optimiser.iterations": 4,
+    "eval_seeds": (1000,),
+    "eval_duration_s": 1.0,
+    "compiled": False,
+}
 
-#: The book's settings (``book/hparams/pilco.yml``) at tiny sizes.
-TINY = dict(
-    **{k: v for k, v in dataclasses.asdict(load_hparams("pilco")).items() if k in BOOK_FIELDS},
-    state="tip",
-    control_dt_s=0.1,
-    horizon_s=1.0,
-    prediction_s=None,
-    n_policy_trials=2,
-    n_basis=5,
-    max_gp_points=15,
-    gp_iterations=15,
-    policy_iterations=4,
-    eval_seeds=(1000,),
-    eval_duration_s=1.0,
-    compiled=False,
-)
+
+def tiny(changes: dict | None = None, **fields) -> PilcoConfig:
+    """The book's settings at the tiny sizes, with ``changes`` (dotted names) and ``fields``."""
+    return apply_overrides(load_hparams("pilco"), {**TINY, **(changes or {}), **fields})
 
 
 def _spy_on_condition_on(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
@@ -83,7 +87,7 @@ def tiny_run_and_conditioning() -> tuple[PilcoResult, list[tuple[int, int]]]:
     """The tiny run of the book's settings, and its :func:`_spy_on_condition_on` record."""
     with pytest.MonkeyPatch.context() as monkeypatch:
         calls = _spy_on_condition_on(monkeypatch)
-        return run_pilco(PilcoConfig(**TINY, seed=3), progress=False), calls
+        return run_pilco(tiny(seed=3), progress=False), calls
 
 
 @pytest.fixture(scope="module")
@@ -94,9 +98,9 @@ def tiny_run(tiny_run_and_conditioning) -> PilcoResult:
 @pytest.fixture(scope="module")
 def tiny_run_without_restarts(tiny_run) -> PilcoResult:
     """``tiny_run`` searching from the previous policy only."""
-    if tiny_run.config.policy_restarts == 0:
+    if tiny_run.config.optimiser.restarts == 0:
         return tiny_run
-    return run_pilco(PilcoConfig(**{**TINY, "policy_restarts": 0}, seed=3), progress=False)
+    return run_pilco(tiny({"optimiser.restarts": 0}, seed=3), progress=False)
 
 
 def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
@@ -113,21 +117,21 @@ def test_loop_runs_trials_and_accounts_plant_seconds(tiny_run):
     # the recorded real cost is the cost of the recorded real trajectory (tip angle only: no 1 s trial gets near
     # upright, so the default tip-rate factor stays off)
     theta = tiny_run.real_states[1][1:, 1]
-    assert records[1].real_cost == pytest.approx(real_cost(theta, 0.3, tiny_run.config.cost_width_m).sum())
+    assert records[1].real_cost == pytest.approx(real_cost(theta, 0.3, tiny_run.config.cost.width_m).sum())
     assert all(r.cost_rate_width_rad_s is None for r in records)
 
 
 def test_budget_leaves_the_first_trials_alone(tiny_run):
     """Every purpose draws from its own stream: a run with a smaller ``n_policy_trials`` makes exactly the first
     trials of the larger one (random trial, GP subset, policy search, policy trial start)."""
-    shorter = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False)
+    shorter = run_pilco(tiny(n_policy_trials=1, seed=3), progress=False)
     assert len(shorter.records) == 2
     for mine, theirs in zip(shorter.real_states, tiny_run.real_states[:2]):
         np.testing.assert_array_equal(mine, theirs)
     assert shorter.records[1].predicted_cost == tiny_run.records[1].predicted_cost
     assert shorter.records[1].real_cost == tiny_run.records[1].real_cost
     # and the seed does change them
-    other = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
+    other = run_pilco(tiny(n_policy_trials=0, seed=4), progress=False)
     assert not np.allclose(other.real_states[0], tiny_run.real_states[0])
 
 
@@ -141,7 +145,7 @@ def test_pilco_object_steps_are_the_loop(tiny_run):
         ]
         return json.dumps(fields[0], sort_keys=True) == json.dumps(fields[1], sort_keys=True)
 
-    pilco = Pilco(PilcoConfig(**TINY, seed=3))
+    pilco = Pilco(tiny(seed=3))
     assert same(pilco.random_trial(), tiny_run.records[0])
     pilco.start_policy()
     gp = pilco.optimize_models()
@@ -172,15 +176,13 @@ def test_result_round_trip_and_shared_evaluation(tiny_run, tmp_path):
 def test_several_random_trials_come_first(tmp_path):
     """``n_random_trials`` random trials come first and count as interaction; the run is saved and loaded;
     the tip-rate factor waits for a trial that came near upright (none does in 1 s)."""
-    config = PilcoConfig(
-        **{**TINY, "n_policy_trials": 1, "cost_rate_width_rad_s": 3.0, "cost_rate_after_rad": 0.5},
-        n_random_trials=3,
-        seed=4,
+    config = tiny(
+        {"cost.rate_width_rad_s": 3.0, "cost.rate_after_rad": 0.5}, n_policy_trials=1, n_random_trials=3, seed=4
     )
     result = run_pilco(config, progress=False)
     assert all(r.cost_rate_width_rad_s is None for r in result.records)
     theta = result.real_states[-1][1:, 1]
-    assert result.records[-1].real_cost == pytest.approx(real_cost(theta, 0.3, config.cost_width_m).sum())
+    assert result.records[-1].real_cost == pytest.approx(real_cost(theta, 0.3, config.cost.width_m).sum())
     assert [r.kind for r in result.records] == ["random", "random", "random", "policy"]
     assert [r.index for r in result.records] == [0, 1, 2, 3]
     np.testing.assert_allclose([r.plant_seconds_total for r in result.records], [1.0, 2.0, 3.0, 4.0])
@@ -188,7 +190,7 @@ def test_several_random_trials_come_first(tmp_path):
     randoms = result.real_states[:3]
     assert not np.allclose(randoms[1], randoms[2])  # each random trial draws its own torques and start
     # the first random trial is the one a single-random-trial run makes (same seed stream)
-    single = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 0}, seed=4), progress=False)
+    single = run_pilco(tiny(n_policy_trials=0, seed=4), progress=False)
     np.testing.assert_array_equal(single.real_states[0], randoms[0])
     result.save(tmp_path)
     loaded = PilcoResult.load(tmp_path)
@@ -244,7 +246,7 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     search and trial, the second GP subset are those of the run without restarts, and the second search, on the
     same data, keeps a policy whose predicted cost is at most the one the previous policy alone reached."""
     baseline = tiny_run_without_restarts
-    config = PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=0.0)
+    config = tiny({"optimiser.restarts": 2, "optimiser.restart_above_cost_fraction": 0.0}, seed=3)
     restarted = run_pilco(config, progress=False)
     for mine, theirs in zip(restarted.real_states[:2], baseline.real_states[:2]):
         np.testing.assert_array_equal(mine, theirs)
@@ -256,7 +258,7 @@ def test_restarts_draw_from_their_own_stream_and_keep_the_lowest_cost(tiny_run_w
     fraction = baseline.records[2].predicted_cost / config.n_horizon_steps + 1e-9
     assert fraction < 1.0
     unneeded = run_pilco(
-        PilcoConfig(**{**TINY, "policy_restarts": 2}, seed=3, restart_above_cost_fraction=fraction), progress=False
+        tiny({"optimiser.restarts": 2, "optimiser.restart_above_cost_fraction": fraction}, seed=3), progress=False
     )
     assert [r.policy_restarts for r in unneeded.records] == [0, 0, 0]
     assert [r.predicted_cost for r in unneeded.records[1:]] == [r.predicted_cost for r in baseline.records[1:]]
@@ -282,10 +284,8 @@ def test_search_with_restarts_keeps_the_best_and_reports_it():
         state="tip",
         horizon_s=0.8,
         prediction_s=None,
-        n_basis=6,
-        policy_iterations=5,
-        policy_restarts=3,
-        restart_above_cost_fraction=0.0,
+        policy=PolicySettings(n_basis=6),
+        optimiser=OptimiserSettings(iterations=5, restarts=3, restart_above_cost_fraction=0.0),
     )
 
     def fresh_policy() -> RBFPolicy:
@@ -335,9 +335,9 @@ def test_a_run_saved_with_other_config_fields_is_an_error_and_not_reused(tiny_ru
     baseline.save(tmp_path)
     assert _saved_run(tmp_path, baseline.config) is not None
     meta = json.loads((tmp_path / "pilco.json").read_text())
-    del meta["config"]["policy_restarts"]
+    del meta["config"]["optimiser"]["restarts"]
     (tmp_path / "pilco.json").write_text(json.dumps(meta))
-    with pytest.raises(ValueError, match=r"pilco\.json: the PilcoConfig field 'policy_restarts' is missing") as info:
+    with pytest.raises(ValueError, match=r"pilco\.json: the OptimiserSettings field 'restarts' is missing") as info:
         PilcoResult.load(tmp_path)
     assert "\n" not in str(info.value)
     assert _saved_run(tmp_path, baseline.config) is None
@@ -372,15 +372,15 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
 
     monkeypatch.setattr(Propagator, "rollout", spy)
     monkeypatch.setattr(loop, "_run_trial", first_policy_trial_swings_up)
-    config = PilcoConfig(**{**TINY, "prediction_s": 2.0, "cost_width_after_swing_up_m": 0.05}, seed=3)
+    config = tiny({"prediction_s": 2.0, "cost.width_after_swing_up_m": 0.05}, seed=3)
     assert config.n_prediction_steps == 20 and config.n_horizon_steps == 10
     result = run_pilco(config, progress=False)
     assert [math.isfinite(r.swing_up_time_s) for r in result.records] == [False, True, False]
     first = lengths.index(20)
     assert set(lengths[:first]) == {10} and set(lengths[first:]) == {20} and first > 0
     # the narrower cost width comes with the longer prediction, in the search and in the recorded real cost
-    assert set(widths[:first]) == {config.cost_width_m} and set(widths[first:]) == {0.05}
-    assert [r.cost_width_m for r in result.records] == [None, config.cost_width_m, 0.05]
+    assert set(widths[:first]) == {config.cost.width_m} and set(widths[first:]) == {0.05}
+    assert [r.cost_width_m for r in result.records] == [None, config.cost.width_m, 0.05]
     record = result.records[2]
     spec = state_spec(config.state)
     assert record.real_cost == pytest.approx(
@@ -403,13 +403,13 @@ def test_a_longer_prediction_is_searched_once_a_policy_trial_swung_up_and_the_tr
 def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_the_subset(
     tiny_run_and_conditioning, monkeypatch
 ):
-    """``gp_all_data`` (the book's setting): the first search (10 points, under ``max_gp_points`` 15) is the one of
+    """``gp.all_data`` (the book's setting): the first search (10 points, under ``gp.max_points`` 15) is the one of
     the subset-only model; the second sees all 20 points through FITC on the subset of 15."""
     result, calls = tiny_run_and_conditioning
-    assert result.config.gp_all_data
+    assert result.config.gp.all_data
     assert calls == [(15, 20)]
     subset_calls = _spy_on_condition_on(monkeypatch)
-    subset_only = run_pilco(dataclasses.replace(result.config, gp_all_data=False), progress=False)
+    subset_only = run_pilco(apply_overrides(result.config, {"gp.all_data": False}), progress=False)
     assert subset_calls == []
     assert result.records[1].predicted_cost == subset_only.records[1].predicted_cost
     assert result.records[1].real_cost == subset_only.records[1].real_cost
@@ -419,8 +419,10 @@ def test_gp_all_data_conditions_the_model_on_every_point_once_the_data_outgrow_t
 def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
     """No migration: a config saved by a version with other fields names the first field that differs."""
     saved = load_hparams("pilco").to_dict()
-    with pytest.raises(ValueError, match="the PilcoConfig field 'gp_all_data' is missing"):
-        PilcoConfig.from_dict({k: v for k, v in saved.items() if k != "gp_all_data"})
+    with pytest.raises(ValueError, match="the PilcoConfig field 'gp' is missing"):
+        PilcoConfig.from_dict({k: v for k, v in saved.items() if k != "gp"})
+    with pytest.raises(ValueError, match="the GPSettings field 'all_data' is missing"):
+        PilcoConfig.from_dict({**saved, "gp": {"max_points": 200, "iterations": 100}})
     with pytest.raises(ValueError, match=r"pilco\.json: 'policy_restarts_old' is not a PilcoConfig field") as info:
         PilcoConfig.from_dict({**saved, "policy_restarts_old": 0}, "pilco.json")
     assert "\n" not in str(info.value)
@@ -429,34 +431,35 @@ def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error():
 @pytest.mark.parametrize(
     "field, value",
     [
-        ("gp_all_data", 1),
+        ("gp.all_data", 1),
         ("state", "joint"),
         ("control_dt_s", 0.055),
         ("horizon_s", 0.05),
-        ("n_basis", 0),
-        ("cost_width_m", -1.0),
-        ("cost_rate_width_rad_s", 0.0),
+        ("policy.n_basis", 0),
+        ("cost.width_m", -1.0),
+        ("cost.rate_width_rad_s", 0.0),
         ("n_random_trials", 0),
-        ("cost_rate_after_rad", -0.5),
-        ("policy_restarts", -1),
-        ("restart_above_cost_fraction", 1.0),
-        ("restart_target_std", 0.0),
-        ("cost_exploration", 0.2),
-        ("cost_exploration", -1.5),
-        ("cost_exploration", "-0.2"),
+        ("cost.rate_after_rad", -0.5),
+        ("optimiser.restarts", -1),
+        ("optimiser.restart_above_cost_fraction", 1.0),
+        ("optimiser.restart_target_std", 0.0),
+        ("cost.exploration", 0.2),
+        ("cost.exploration", -1.5),
+        ("cost.exploration", "-0.2"),
         ("prediction_s", 3.0),
         ("prediction_s", 0.0),
         ("prediction_s", math.nan),
-        ("cost_width_after_swing_up_m", 0.0),
-        ("balance_within_rad", 0.0),
-        ("balance_within_rad", 4.0),
-        ("balance_within_rad_s", -1.0),
-        ("balance_prediction_s", 0.0),
+        ("cost.width_after_swing_up_m", 0.0),
+        ("policy.balance_within_rad", 0.0),
+        ("policy.balance_within_rad", 4.0),
+        ("policy.balance_within_rad_s", -1.0),
+        ("policy.balance_prediction_s", 0.0),
+        ("gp", 5),
     ],
 )
 def test_config_rejects_bad_values(field, value):
-    with pytest.raises(ValueError, match=field):
-        PilcoConfig(**{field: value})
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        apply_overrides(PilcoConfig(), {field: value})
 
 
 def test_real_cost_rejects_a_state_without_the_tip_rate():
@@ -471,13 +474,13 @@ def test_softpend_train_algo_pilco(tmp_path, capsys):
         if key not in ("n_policy_trials",):
             value = json.dumps(value) if isinstance(value, (tuple, type(None), bool)) else value  # [1000], null, false
             args += ["--set", f"{key}={value}"]
-    assert main(args + ["--set", "cost_rate_width_rad_s=2.5", "--set", "cost_rate_after_rad=null"]) == 0
+    assert main(args + ["--set", "cost.rate_width_rad_s=2.5", "--set", "cost.rate_after_rad=null"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["trials"] == 2 and summary["plant_seconds_total"] == pytest.approx(2.0)
     assert (out / "policy.pt").exists() and (out / "pilco.json").exists()
     loaded = PilcoResult.load(out)
-    assert loaded.config.cost_rate_width_rad_s == 2.5
-    assert all(r.cost_rate_width_rad_s == 2.5 for r in loaded.records)  # on from the start without cost_rate_after_rad
+    assert loaded.config.cost.rate_width_rad_s == 2.5
+    assert all(r.cost_rate_width_rad_s == 2.5 for r in loaded.records)  # on from the start without cost.rate_after_rad
     assert main(["train", "--algo", "pilco", "--out", str(out), "--set", "no_such_field=1"]) == 2
 
 
@@ -491,8 +494,8 @@ def test_rigid_pendulum_swing_up_within_ten_trials_of_four_seconds():
         horizon_s=4.0,
         prediction_s=None,
         n_policy_trials=9,
-        cost_rate_width_rad_s=None,
-        policy_iterations=40,
+        cost=CostSettings(rate_width_rad_s=None),
+        optimiser=OptimiserSettings(iterations=40),
         eval_seeds=(1000, 1001, 1002),
         eval_duration_s=6.0,
         seed=0,
@@ -521,13 +524,13 @@ def test_a_run_uses_one_torch_thread_and_gives_the_callers_threads_back():
     try:
         torch.set_num_threads(2)
         two = run_pilco(
-            PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3),
+            tiny(n_policy_trials=1, seed=3),
             progress=False,
             callback=lambda record: seen.append(torch.get_num_threads()),
         )
         assert torch.get_num_threads() == 2
         torch.set_num_threads(1)
-        one = run_pilco(PilcoConfig(**{**TINY, "n_policy_trials": 1}, seed=3), progress=False)
+        one = run_pilco(tiny(n_policy_trials=1, seed=3), progress=False)
     finally:
         torch.set_num_threads(before)
     assert seen == [1, 1]
@@ -567,11 +570,11 @@ def test_the_balancing_policy_acts_only_in_its_band_about_upright():
 @pytest.fixture(scope="module")
 def tiny_balancing_run() -> PilcoResult:
     """A tiny run whose balancing band (3 rad, 20 rad/s: all but the hanging rod) the random trial visits."""
-    config = PilcoConfig(
-        **{**TINY, "state": "tip_bend", "horizon_s": 3.0, "balance_within_rad": 3.0},
+    config = tiny(
+        {"policy.balance_within_rad": 3.0, "policy.balance_within_rad_s": 20.0, "policy.balance_prediction_s": 0.5},
+        state="tip_bend",
+        horizon_s=3.0,
         seed=5,
-        balance_within_rad_s=20.0,
-        balance_prediction_s=0.5,
     )
     return run_pilco(config, progress=False)
 
@@ -592,7 +595,7 @@ def test_a_run_learns_a_balancing_policy_and_saves_it(tiny_balancing_run, tmp_pa
 
 
 def test_the_balancing_search_starts_from_the_band_states_of_the_real_trials():
-    config = PilcoConfig(balance_within_rad=0.4, balance_within_rad_s=2.0, initial_std=0.05)
+    config = PilcoConfig(policy=PolicySettings(balance_within_rad=0.4, balance_within_rad_s=2.0), initial_std=0.05)
     spec = state_spec(config.state)
     rng = np.random.default_rng(0)
     band = np.column_stack(

@@ -34,7 +34,7 @@ def test_epsilon_reaches_its_floor_after_20_dqn_and_10_mbpo_episodes_of_the_book
         config, episodes = figure_configs()[algo], presets.RL_EPISODES[algo]
         schedule = build_dqn(config, make_training_env(config), seed=0, episodes=episodes).exploration_schedule
         epsilon = [schedule(1 - episode / episodes) for episode in range(episodes + 1)]  # SB3's progress_remaining
-        floor = [e for e, value in enumerate(epsilon) if abs(value - config.exploration_final_eps) < 1e-9]
+        floor = [e for e, value in enumerate(epsilon) if abs(value - config.learner.exploration_final_eps) < 1e-9]
         assert floor[0] == floor_episode, algo
 
 
@@ -42,10 +42,10 @@ def test_figure_configs_take_task_and_rl_overrides():
     """An RL override reaches each config that has the field; a name neither config has is an error."""
     import pytest
 
-    configs = figure_configs("beam", {"rod.torque_limit_nm": 0.08}, {"episode_s": 1.0, "rollouts_per_real_step": 3})
+    configs = figure_configs("beam", {"rod.torque_limit_nm": 0.08}, {"episode_s": 1.0, "rollout.per_real_step": 3})
     assert configs["dqn"] == presets.load_hparams(
         "dqn", presets.TASK.replace(plant="beam", torque_limit_nm=0.08), {"episode_s": 1.0}
     )
-    assert configs["mbpo"].rollouts_per_real_step == 3 and configs["mbpo"].episode_s == 1.0
+    assert configs["mbpo"].rollout.per_real_step == 3 and configs["mbpo"].episode_s == 1.0
     with pytest.raises(ValueError, match="'rollout_per_real_step' is not a DQNConfig or MBPOConfig field"):
         figure_configs(rl_overrides={"rollout_per_real_step": 3})

@@ -93,7 +93,7 @@ def test_current_runs_are_empty_without_run_folders(tmp_path):
 
 
 def test_current_runs_are_read_from_the_run_folders(tmp_path):
-    from softpend.pilco import PilcoConfig, run_pilco
+    from softpend.pilco import GPSettings, OptimiserSettings, PilcoConfig, PolicySettings, run_pilco
     from softpend.rl.config import DQNConfig
     from softpend.rl.dqn import train_dqn
 
@@ -115,10 +115,9 @@ def test_current_runs_are_read_from_the_run_folders(tmp_path):
             horizon_s=1.0,
             prediction_s=None,
             n_policy_trials=1,
-            n_basis=5,
-            max_gp_points=15,
-            gp_iterations=5,
-            policy_iterations=3,
+            policy=PolicySettings(n_basis=5),
+            gp=GPSettings(max_points=15, iterations=5),
+            optimiser=OptimiserSettings(iterations=3),
             eval_seeds=(1000,),
             eval_duration_s=1.0,
             compiled=False,

@@ -165,7 +165,7 @@ def test_rig_control_command_checks_its_arguments(tmp_path):
 
 def test_run_folders_become_rig_controllers(tmp_path):
     from softpend.commands.rig_control import build_controller
-    from softpend.pilco import PilcoConfig, run_pilco
+    from softpend.pilco import GPSettings, OptimiserSettings, PilcoConfig, PolicySettings, run_pilco
     from softpend.rl.config import DQNConfig
     from softpend.rl.dqn import train_dqn
 
@@ -190,10 +190,9 @@ def test_run_folders_become_rig_controllers(tmp_path):
             horizon_s=1.0,
             prediction_s=None,
             n_policy_trials=0,
-            n_basis=5,
-            max_gp_points=15,
-            gp_iterations=15,
-            policy_iterations=4,
+            policy=PolicySettings(n_basis=5),
+            gp=GPSettings(max_points=15, iterations=15),
+            optimiser=OptimiserSettings(iterations=4),
             eval_seeds=(1000,),
             eval_duration_s=1.0,
             seed=3,

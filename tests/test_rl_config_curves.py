@@ -8,7 +8,15 @@ import pytest
 
 from softpend.evaluation import metrics_from_trajectory
 from softpend.io.overrides import apply_overrides, parse_assignment
-from softpend.rl.config import DQNConfig, MBPOConfig, load_config, save_config
+from softpend.rl.config import (
+    DQNConfig,
+    DQNLearner,
+    MBPOConfig,
+    RolloutSettings,
+    StopRule,
+    load_config,
+    save_config,
+)
 from softpend.rl.curves import episodes_to_asymptote, interval_band, moving_average
 from softpend.rl.training_log import TrainingLog
 
@@ -16,18 +24,20 @@ from softpend.rl.training_log import TrainingLog
 def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="n_torque_levels"):
         DQNConfig(n_torque_levels=1)
-    with pytest.raises(ValueError, match="gamma"):
-        DQNConfig(gamma=1.5)
-    with pytest.raises(ValueError, match="rollout_schedule"):
-        MBPOConfig(rollout_schedule=(5, 2, 1, 3))
-    with pytest.raises(ValueError, match="real_ratio"):
-        MBPOConfig(real_ratio=-0.1)
-    with pytest.raises(ValueError, match="start_branch_fraction"):
-        MBPOConfig(start_branch_fraction=1.5)
-    with pytest.raises(ValueError, match="clip_q_targets"):
-        DQNConfig(clip_q_targets=1)
-    with pytest.raises(ValueError, match="rollouts_within_data"):
-        MBPOConfig(rollouts_within_data="yes")
+    with pytest.raises(ValueError, match="learner.gamma"):
+        DQNLearner(gamma=1.5)
+    with pytest.raises(ValueError, match="rollout.schedule"):
+        RolloutSettings(schedule=(5, 2, 1, 3))
+    with pytest.raises(ValueError, match="rollout.real_ratio"):
+        RolloutSettings(real_ratio=-0.1)
+    with pytest.raises(ValueError, match="rollout.start_branch_fraction"):
+        RolloutSettings(start_branch_fraction=1.5)
+    with pytest.raises(ValueError, match="learner.clip_q_targets"):
+        DQNLearner(clip_q_targets=1)
+    with pytest.raises(ValueError, match="rollout.within_data"):
+        apply_overrides(MBPOConfig(), [parse_assignment("rollout.within_data=yes")])
+    with pytest.raises(ValueError, match="learner must be a DQNLearner"):
+        DQNConfig(learner={"gamma": 0.5})
     with pytest.raises(ValueError, match="unknown"):
         apply_overrides(DQNConfig(), [parse_assignment("no_such_field=1")])
 
@@ -36,9 +46,13 @@ def test_overrides_and_json_round_trip(tmp_path):
     """``--set`` values as the command line reads them: JSON, lists for tuples."""
     config = apply_overrides(
         MBPOConfig(),
-        [parse_assignment(text) for text in ("learning_rate=1e-3", "net_arch=[32, 32]", "rollouts_per_real_step=9")],
+        [
+            parse_assignment(t)
+            for t in ("learner.learning_rate=1e-3", "learner.net_arch=[32, 32]", "rollout.per_real_step=8")
+        ],
     )
-    assert config.learning_rate == 1e-3 and config.net_arch == (32, 32)
+    assert config.learner.learning_rate == 1e-3 and config.learner.net_arch == (32, 32)
+    assert config.rollout.per_real_step == 8
     save_config(config, tmp_path / "c.json")
     assert load_config(tmp_path / "c.json") == config
 
@@ -58,25 +72,25 @@ def test_a_saved_config_with_a_field_too_many_or_too_few_is_a_one_line_error(tmp
     with pytest.raises(ValueError, match="'reset_catch_up_gradient_steps' is not a") as info:
         load_config(tmp_path / "old.json")
     assert "\n" not in str(info.value)
-    del data["stop_confirm_max_failures"]
+    del data["stop"]["confirm_max_failures"]
     (tmp_path / "old.json").write_text(json.dumps(data))
-    with pytest.raises(ValueError, match="field 'stop_confirm_max_failures' is missing") as info:
+    with pytest.raises(ValueError, match="StopRule field 'confirm_max_failures' is missing") as info:
         load_config(tmp_path / "old.json")
     assert "\n" not in str(info.value)
 
 
 def test_confirmation_failures_allowed_must_leave_a_start_that_balances():
-    assert DQNConfig().stop_confirm_max_failures == 0
-    with pytest.raises(ValueError, match="stop_confirm_max_failures"):
-        DQNConfig(stop_confirm_seeds=(5, 6), stop_confirm_max_failures=2)
-    with pytest.raises(ValueError, match="stop_confirm_max_failures"):
-        DQNConfig(stop_confirm_max_failures=-1)
-    assert DQNConfig(stop_confirm_seeds=(), stop_confirm_max_failures=3).stop_confirm_max_failures == 3
+    assert DQNConfig().stop.confirm_max_failures == 0
+    with pytest.raises(ValueError, match="stop.confirm_max_failures"):
+        StopRule(confirm_seeds=(5, 6), confirm_max_failures=2)
+    with pytest.raises(ValueError, match="stop.confirm_max_failures"):
+        StopRule(confirm_max_failures=-1)
+    assert StopRule(confirm_seeds=(), confirm_max_failures=3).confirm_max_failures == 3
 
 
 def test_rollout_schedule_is_linear_like_mbrl_lib():
-    config = MBPOConfig(rollout_schedule=(10, 20, 1, 11))
-    assert [config.rollout_length(e) for e in (0, 10, 15, 20, 50)] == [1, 1, 6, 11, 11]
+    rollout = RolloutSettings(schedule=(10, 20, 1, 11))
+    assert [rollout.length(e) for e in (0, 10, 15, 20, 50)] == [1, 1, 6, 11, 11]
 
 
 def test_episode_steps_follow_action_repeat():
@@ -194,8 +208,9 @@ def test_a_failed_evaluation_counts_at_the_success_level_in_the_worst_start_curv
 
 
 def test_balancing_criterion_must_not_be_looser_than_success_when_evaluations_stop_at_a_failure():
-    with pytest.raises(ValueError, match="stop_upright_std_rad"):
-        DQNConfig(stop_upright_std_rad=0.25)
-    assert DQNConfig(stop_upright_std_rad=0.25, eval_until_first_failure=False).stop_upright_std_rad == 0.25
+    with pytest.raises(ValueError, match="stop.upright_std_rad"):
+        DQNConfig(stop=StopRule(upright_std_rad=0.25))
+    loose = StopRule(upright_std_rad=0.25)
+    assert DQNConfig(stop=loose, eval_until_first_failure=False).stop.upright_std_rad == 0.25
     with pytest.raises(ValueError, match="eval_until_first_failure"):
         DQNConfig(eval_until_first_failure="yes")

@@ -6,14 +6,16 @@ import torch
 import torch.nn.functional as F
 from stable_baselines3 import DQN
 
-from softpend.rl.config import DQNConfig
+from softpend.rl.config import DQNConfig, DQNLearner
 from softpend.rl.dqn import agent_class, build_dqn
 from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import make_training_env
 
 
 def test_target_dqn_gradient_step_regresses_on_the_clipped_target(tmp_path):
-    config = DQNConfig(episode_s=0.4, clip_q_targets=True, target_update_interval=1, learning_starts=0)
+    config = DQNConfig(
+        episode_s=0.4, learning_starts=0, learner=DQNLearner(clip_q_targets=True, target_update_interval=1)
+    )
     model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
     assert isinstance(model, TargetDQN) and model.tau == 1.0  # the target network is a hard copy
     # a buffer of one repeated transition, so that every sampled batch is the same
@@ -34,7 +36,7 @@ def test_target_dqn_gradient_step_regresses_on_the_clipped_target(tmp_path):
     low, high = config.q_target_bounds
     with torch.no_grad():
         s, s2 = torch.as_tensor(obs[None]), torch.as_tensor(next_obs[None])
-        target = (2.0 + config.gamma * model.q_net_target(s2).max(dim=1, keepdim=True)[0]).clamp(low, high)
+        target = (2.0 + config.learner.gamma * model.q_net_target(s2).max(dim=1, keepdim=True)[0]).clamp(low, high)
         expected = F.smooth_l1_loss(model.q_net(s)[:, 3:4], target).item()
         q_before = model.q_net(s)[0, 3].item()
     model.train(gradient_steps=1, batch_size=4)
@@ -45,10 +47,10 @@ def test_target_dqn_gradient_step_regresses_on_the_clipped_target(tmp_path):
 
 
 def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
-    config = DQNConfig(episode_s=0.4, clip_q_targets=True, learning_starts=0)
+    config = DQNConfig(episode_s=0.4, learning_starts=0, learner=DQNLearner(clip_q_targets=True))
     low, high = config.q_target_bounds
     # an agent step's reward lies in action_repeat * [-1, 2] (shaping in [-1, 1] plus a bonus up to 1)
-    assert (low, high) == pytest.approx((-4.0 / (1 - config.gamma), 8.0 / (1 - config.gamma)))
+    assert (low, high) == pytest.approx((-4.0 / (1 - config.learner.gamma), 8.0 / (1 - config.learner.gamma)))
     assert agent_class(config) is TargetDQN and agent_class(DQNConfig()) is DQN
     model = build_dqn(config, make_training_env(config), seed=0, episodes=1)
     assert model.q_target_bounds == pytest.approx((low, high))
@@ -60,13 +62,13 @@ def test_clipped_targets_stay_within_the_return_bounds(tmp_path):
     next_obs = torch.zeros(3, 11)
     rewards = torch.tensor([[1.0], [-1e5], [2.0]])
     dones = torch.tensor([[0.0], [1.0], [1.0]])
-    targets = model.td_targets(rewards, dones, config.gamma, next_obs)
+    targets = model.td_targets(rewards, dones, config.learner.gamma, next_obs)
     np.testing.assert_allclose(targets.numpy(), [[high], [low], [2.0]], rtol=1e-6)
     # without bounds the target is stable-baselines3's r + gamma * max_a Q_target(s', a)
     model.q_target_bounds = None
     np.testing.assert_allclose(
-        model.td_targets(rewards, dones, config.gamma, next_obs).numpy(),
-        [[1.0 + config.gamma * 1e4], [-1e5], [2.0]],
+        model.td_targets(rewards, dones, config.learner.gamma, next_obs).numpy(),
+        [[1.0 + config.learner.gamma * 1e4], [-1e5], [2.0]],
         rtol=1e-6,
     )
     with pytest.raises(ValueError, match="q_target_bounds"):

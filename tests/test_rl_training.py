@@ -11,7 +11,7 @@ import torch
 from softpend.cli import main
 from softpend.envs.observation_vector import observation_vector
 from softpend.plant import OBSERVATION_NAMES
-from softpend.rl.config import DQNConfig, MBPOConfig
+from softpend.rl.config import DQNConfig, MBPOConfig, ModelSettings, RolloutSettings, StopRule
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn
 from softpend.rl.mbpo import MBPOReplayBuffer, train_mbpo
 from softpend.rl.training_env import HeldActionController, make_base_env, make_training_env
@@ -129,9 +129,7 @@ def _scripted_evaluations(monkeypatch, stds):
 def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped(tmp_path, monkeypatch):
     config = DQNConfig(
         learning_starts=20,
-        stop_after_balanced_evaluations=2,
-        stop_upright_std_rad=0.1,
-        stop_confirm_seeds=(),
+        stop=StopRule(after_balanced_evaluations=2, upright_std_rad=0.1, confirm_seeds=()),
         **{**TINY, "eval_every_episodes": 1},
     )
     # episode 1 balanced, 2 not (streak broken), 3 and 4 balanced: the run ends after episode 4 of its 8
@@ -149,17 +147,16 @@ def test_training_stops_after_consecutive_balanced_evaluations_and_stays_stopped
     # a stopped run is finished: resuming it with a larger budget trains nothing more
     _, again = train_dqn(config, seed=0, episodes=8, run_dir=tmp_path, resume=True, progress=False)
     assert again.n_episodes == 4 and len(queue) == 5
-    with pytest.raises(ValueError, match="stop_after_balanced_evaluations"):
-        DQNConfig(stop_after_balanced_evaluations=-1)
-    with pytest.raises(ValueError, match="stop_upright_std_rad"):
-        DQNConfig(stop_upright_std_rad=0.0)
+    with pytest.raises(ValueError, match="stop.after_balanced_evaluations"):
+        StopRule(after_balanced_evaluations=-1)
+    with pytest.raises(ValueError, match="stop.upright_std_rad"):
+        StopRule(upright_std_rad=0.0)
 
 
 def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, monkeypatch):
     config = DQNConfig(
         learning_starts=20,
-        stop_after_balanced_evaluations=2,
-        stop_confirm_seeds=(5, 6),
+        stop=StopRule(after_balanced_evaluations=2, confirm_seeds=(5, 6)),
         **{**TINY, "eval_every_episodes": 1},
     )
     assert config.selection_seeds == (0, 5, 6)
@@ -171,18 +168,16 @@ def test_training_stops_only_once_the_confirmation_starts_balance_too(tmp_path, 
     assert _scripted_evaluations.calls == [(0,), (0,), (5,), (0,), (5,), (6,)]
     assert [row.get("confirmed") for row in log.evaluations] == [None, False, True]
     assert "confirmation starts" in log.stop_reason
-    with pytest.raises(ValueError, match="stop_confirm_seeds"):
-        DQNConfig(eval_seeds=(1, 2), stop_confirm_seeds=(2, 3))
-    with pytest.raises(ValueError, match="stop_confirm_seeds"):
-        DQNConfig(stop_confirm_seeds=(-1,))
+    with pytest.raises(ValueError, match="stop.confirm_seeds"):
+        DQNConfig(eval_seeds=(1, 2), stop=StopRule(confirm_seeds=(2, 3)))
+    with pytest.raises(ValueError, match="stop.confirm_seeds"):
+        StopRule(confirm_seeds=(-1,))
 
 
 def test_a_confirmation_holds_with_as_many_failing_starts_as_allowed_and_stops_at_the_next(tmp_path, monkeypatch):
     config = DQNConfig(
         learning_starts=20,
-        stop_after_balanced_evaluations=1,
-        stop_confirm_seeds=(5, 6, 7),
-        stop_confirm_max_failures=1,
+        stop=StopRule(after_balanced_evaluations=1, confirm_seeds=(5, 6, 7), confirm_max_failures=1),
         **{**TINY, "eval_every_episodes": 1},
     )
     # evaluation 1 balances; its confirmation fails at starts 5 and 6 and stops there (7 is not run); evaluation 2
@@ -199,8 +194,7 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
     # DQN-MBPO's rule: every balanced evaluation is confirmed at once; a failed confirmation lets training go on
     config = DQNConfig(
         learning_starts=20,
-        stop_after_balanced_evaluations=1,
-        stop_confirm_seeds=(5, 6),
+        stop=StopRule(after_balanced_evaluations=1, confirm_seeds=(5, 6)),
         **{**TINY, "eval_every_episodes": 1},
     )
     queue = _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.2, 0.05, 0.05, 0.05, 0.05])
@@ -212,10 +206,10 @@ def test_one_balanced_evaluation_stops_training_once_its_confirmation_holds(tmp_
     from softpend.study.presets import load_hparams
 
     mbpo = load_hparams("mbpo")
-    assert mbpo.stop_after_balanced_evaluations == 1 and len(mbpo.stop_confirm_seeds) == 32
-    assert not set(mbpo.stop_confirm_seeds) & set(mbpo.eval_seeds)
+    assert mbpo.stop.after_balanced_evaluations == 1 and len(mbpo.stop.confirm_seeds) == 32
+    assert not set(mbpo.stop.confirm_seeds) & set(mbpo.eval_seeds)
     dqn = load_hparams("dqn")  # two balanced evaluations on eight starts, then a confirmation on 24 more
-    assert dqn.stop_after_balanced_evaluations == 2 and len(dqn.eval_seeds) == 8 and len(dqn.stop_confirm_seeds) == 24
+    assert dqn.stop.after_balanced_evaluations == 2 and len(dqn.eval_seeds) == 8 and len(dqn.stop.confirm_seeds) == 24
 
 
 def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path):
@@ -223,15 +217,10 @@ def test_mbpo_buffer_holds_model_transitions_branched_from_real_states(tmp_path)
     # data box of the defaults are tested below
     config = MBPOConfig(
         initial_random_episodes=2,
-        model_refit_every_episodes=1,
-        model_fit_steps=20,
-        ensemble_size=2,
-        model_hidden_widths=(16, 16),
-        rollout_every_steps=10,
-        rollouts_per_real_step=9,
-        rollout_schedule=(0, 1, 1, 1),
-        start_branch_fraction=0.0,
-        rollouts_within_data=False,
+        model=ModelSettings(refit_every_episodes=1, fit_steps=20, ensemble_size=2, hidden_widths=(16, 16)),
+        rollout=RolloutSettings(
+            every_steps=10, per_real_step=9, schedule=(0, 1, 1, 1), start_branch_fraction=0.0, within_data=False
+        ),
         **TINY,
     )
     model, log = train_mbpo(config, seed=0, episodes=3, run_dir=tmp_path, progress=False)
@@ -312,13 +301,8 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
 
     config = MBPOConfig(
         initial_random_episodes=2,
-        model_refit_every_episodes=1,
-        model_fit_steps=20,
-        ensemble_size=2,
-        model_hidden_widths=(16, 16),
-        rollout_every_steps=10,
-        rollouts_per_real_step=9,
-        rollout_schedule=(0, 1, 1, 1),
+        model=ModelSettings(refit_every_episodes=1, fit_steps=20, ensemble_size=2, hidden_widths=(16, 16)),
+        rollout=RolloutSettings(every_steps=10, per_real_step=9, schedule=(0, 1, 1, 1)),
         **TINY,
     )
     model, _ = train_mbpo(config, seed=0, episodes=2, run_dir=tmp_path, progress=False)
@@ -329,7 +313,11 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     added = {}
     for within in (False, True):
         buffer.model_buffer.reset()
-        trainer = MBPOTrainer(dataclasses.replace(config, rollouts_within_data=within), seed=0, run_dir=tmp_path)
+        trainer = MBPOTrainer(
+            dataclasses.replace(config, rollout=dataclasses.replace(config.rollout, within_data=within)),
+            seed=0,
+            run_dir=tmp_path,
+        )
         trainer.dynamics = _DriftingModel()
         added[within] = trainer.rollouts(model, buffer, n_rollouts=50, length=6, epsilon=0.0)
         next_obs = buffer.model_buffer.next_observations[: added[within], 0]
@@ -340,7 +328,11 @@ def test_mbpo_rollouts_stay_within_the_real_data_and_branch_from_start_states(tm
     # the start environment (the straight rod at rest at a random hub angle), the rest at real states
     buffer.model_buffer.reset()
     trainer = MBPOTrainer(
-        dataclasses.replace(config, start_branch_fraction=0.5, rollouts_within_data=False, training_start="random"),
+        dataclasses.replace(
+            config,
+            rollout=dataclasses.replace(config.rollout, start_branch_fraction=0.5, within_data=False),
+            training_start="random",
+        ),
         seed=3,
         run_dir=tmp_path,
     )
@@ -426,8 +418,7 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
     config = DQNConfig(
         learning_starts=20,
         reset_every_episodes=2,
-        stop_after_balanced_evaluations=1,
-        stop_confirm_seeds=(),
+        stop=StopRule(after_balanced_evaluations=1, confirm_seeds=()),
         **{**TINY, "eval_every_episodes": 1},
     )
     evaluated = []
@@ -450,8 +441,7 @@ def test_a_training_evaluation_stops_at_its_first_failing_start(tmp_path, monkey
     # three selection starts; an evaluation with a failing start runs only the first, one that balances all three
     config = DQNConfig(
         learning_starts=20,
-        stop_after_balanced_evaluations=1,
-        stop_confirm_seeds=(),
+        stop=StopRule(after_balanced_evaluations=1, confirm_seeds=()),
         **{**TINY, "eval_every_episodes": 1, "eval_seeds": (0, 1, 2)},
     )
     _scripted_evaluations(monkeypatch, [0.5, 0.05])
@@ -468,7 +458,7 @@ def test_training_is_a_list_of_callbacks_in_order(tmp_path):
     from softpend.rl.mbpo import MBPOTrainer, ModelRefitCallback, ModelRolloutCallback
     from softpend.rl.training_log import TrainingLog
 
-    config = MBPOConfig(stop_after_balanced_evaluations=1, stop_confirm_seeds=(5,), **TINY)
+    config = MBPOConfig(stop=StopRule(after_balanced_evaluations=1, confirm_seeds=(5,)), **TINY)
     log = TrainingLog(algo="mbpo", seed=0)
     callbacks = dqn.training_callbacks(config, log, 4, tmp_path, progress=False, part=MBPOTrainer(config, 0, tmp_path))
     assert [type(c) for c in callbacks.callbacks] == [

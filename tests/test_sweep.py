@@ -168,13 +168,17 @@ def test_the_sweep_command_sets_pilco_fields_for_every_run(tmp_path, capsys):
         "--pilco-set",
         "horizon_s=1.0",
         "--pilco-set",
-        "balance_within_rad=null",
+        "policy.balance_within_rad=null",
     ]
     assert main(argv) == 0
     capsys.readouterr()
     config = PilcoResult.load(run_folder(tmp_path, "pilco", 3)).config
-    assert config.horizon_s == 1.0 and config.balance_within_rad is None and config.seed == 3
-    for bad in (["--pilco-set", "no_such_field=1"], ["--pilco-set", "balance_within_rad=-1"], ["--pilco-set", "x"]):
+    assert config.horizon_s == 1.0 and config.policy.balance_within_rad is None and config.seed == 3
+    for bad in (
+        ["--pilco-set", "no_such_field=1"],
+        ["--pilco-set", "policy.balance_within_rad=-1"],
+        ["--pilco-set", "x"],
+    ):
         assert main(["sweep", "--methods", "pilco", "--seeds", "3", *bad, "--runs-root", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "error" in err and "Traceback" not in err
@@ -197,17 +201,17 @@ def test_the_sweep_command_sets_rl_fields_for_every_run_of_their_method(tmp_path
         "--workers",
         "1",
         "--dqn-set",
-        "gradient_steps=3",
+        "learner.gradient_steps=3",
         "--dqn-set",
         "eval_seeds=[1000]",
         "--mbpo-set",
-        "gradient_steps=30",
+        "learner.gradient_steps=30",
     ]
     assert main(argv) == 0
     capsys.readouterr()
     config = load_config(run_folder(tmp_path, "dqn", 4) / "config.json")
-    assert config.gradient_steps == 3 and config.eval_seeds == (1000,)  # the MBPO setting is not DQN's
-    for bad in (["--mbpo-set", "no_such_field=1"], ["--dqn-set", "gradient_steps=0"], ["--mbpo-set", "x"]):
+    assert config.learner.gradient_steps == 3 and config.eval_seeds == (1000,)  # the MBPO setting is not DQN's
+    for bad in (["--mbpo-set", "no_such_field=1"], ["--dqn-set", "learner.gradient_steps=0"], ["--mbpo-set", "x"]):
         assert main(["sweep", "--methods", "dqn", "--seeds", "4", *bad, "--runs-root", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "error" in err and "Traceback" not in err

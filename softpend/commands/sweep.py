@@ -79,9 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)"
     )
     for method, (cls, name, example) in {
-        "dqn": ("DQNConfig", "DQN", "gradient_steps=4"),
+        "dqn": ("DQNConfig", "DQN", "learner.gradient_steps=4"),
         "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
-        "pilco": ("PilcoConfig", "PILCO", "balance_within_rad=null"),
+        "pilco": ("PilcoConfig", "PILCO", "policy.balance_within_rad=null"),
     }.items():
         add_set_option(
             parser,

@@ -57,14 +57,9 @@ def _as_tuple(value: Any) -> Any:
 
 
 def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D:
-    """A validated copy (``dataclasses.replace``) of the dataclass ``instance`` with the fields named in
-    ``overrides`` (a mapping or ``(name, value)`` pairs, later pairs win) replaced.
-
-    ``a.b`` (or a dict given for ``a``) sets field ``b`` of the dataclass in field ``a``; a list, a comma string
-    (``"0,1"``) or a single value given for a tuple field becomes a tuple.  ``prefix`` is the dotted path of
-    ``instance`` in an outer config, for messages.  ``ValueError`` for an unknown name (listing the known ones),
-    a field set both whole and by a dotted name, or a value the class rejects.
-    """
+    """A validated copy of the dataclass ``instance`` with the fields named in ``overrides`` (a mapping or pairs)
+    replaced: ``a.b`` (or a dict for ``a``) reaches into a nested dataclass, a list, ``"0,1"`` or a single value for
+    a tuple field becomes a tuple; ``prefix`` is ``instance``'s dotted path in messages."""
     if not dataclasses.is_dataclass(instance) or isinstance(instance, type):
         raise ValueError(f"apply_overrides needs a dataclass instance, got {type(instance).__name__}")
     items = overrides.items() if isinstance(overrides, Mapping) else overrides
@@ -109,3 +104,25 @@ def check_fields(cls: type, data: Mapping[str, Any], source: Any) -> None:
     missing = [k for k in names if k not in data]
     if missing:
         raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
+
+
+def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) -> D:
+    """The dataclass ``cls`` from JSON data as ``dataclasses.asdict`` gives it: every field present
+    (:func:`check_fields`), lists as tuples, a mapping for a field whose default is a dataclass built the same
+    way; ``convert``: field name -> function building that field from its data."""
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{source}: expected a JSON object for a {cls.__name__}, got {type(data).__name__}")
+    check_fields(cls, data, source)
+    values: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if not f.init:
+            continue
+        value = data[f.name]
+        if f.name in convert:
+            value = convert[f.name](value)
+        elif dataclasses.is_dataclass(f.default_factory):
+            value = dataclass_from_data(f.default_factory, value, source)  # type: ignore[arg-type]
+        elif isinstance(value, list):
+            value = tuple(value)
+        values[f.name] = value
+    return cls(**values)

@@ -18,7 +18,7 @@ import torch
 from softpend.checks import boolean, check_work_size, finite, int_at_least, non_negative, optional_positive, positive
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
-from softpend.io.overrides import check_fields
+from softpend.io.overrides import dataclass_from_data
 from softpend.io.reading import MAX_JSON_BYTES, read_bytes_checked, read_json_checked
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
@@ -28,12 +28,107 @@ from softpend.plant import SimulationDiverged, wrap_angle_rad
 from softpend.task import Task
 from softpend.torch_threads import one_torch_thread
 
-__all__ = ["Pilco", "PilcoConfig", "PilcoResult", "PolicySearch", "TrialRecord", "run_pilco", "real_cost"]
+__all__ = [
+    "CostSettings",
+    "GPSettings",
+    "OptimiserSettings",
+    "Pilco",
+    "PilcoConfig",
+    "PolicySettings",
+    "PilcoResult",
+    "PolicySearch",
+    "TrialRecord",
+    "run_pilco",
+    "real_cost",
+]
 
 DTYPE = torch.float64
 
 #: Prefix of the balancing policy's entries in ``policy.pt``.
 BALANCE_PREFIX = "balance."
+
+
+@dataclass(frozen=True)
+class CostSettings:
+    """The saturating cost: its width [m] of tip distance (``width_after_swing_up_m`` once a policy trial swung
+    up), a tip-rate factor of width ``rate_width_rad_s`` (None: none) once a trial came within ``rate_after_rad``
+    of upright (None: from the start), and the exploration weight in [-1, 0] of the cost's spread."""
+
+    width_m: float = 0.15
+    width_after_swing_up_m: Optional[float] = None
+    rate_width_rad_s: Optional[float] = None
+    rate_after_rad: Optional[float] = None
+    exploration: float = 0.0
+
+    def __post_init__(self) -> None:
+        positive("cost.width_m", self.width_m)
+        for name in ("rate_width_rad_s", "rate_after_rad", "width_after_swing_up_m"):
+            optional_positive(f"cost.{name}", getattr(self, name))
+        exploration = finite("cost.exploration", self.exploration)
+        if not -1.0 <= exploration <= 0.0:
+            raise ValueError(f"cost.exploration must be in [-1, 0], got {self.exploration!r}")
+        object.__setattr__(self, "exploration", exploration)
+
+
+@dataclass(frozen=True)
+class GPSettings:
+    """The GP dynamics: fitted on at most ``max_points`` points (``all_data``: then conditioned on all), with
+    ``iterations`` optimiser steps."""
+
+    max_points: int = 200
+    all_data: bool = False
+    iterations: int = 100
+
+    def __post_init__(self) -> None:
+        _set_ints(self, {"max_points": 10, "iterations": 1}, "gp.")
+        boolean("gp.all_data", self.all_data)
+
+
+@dataclass(frozen=True)
+class PolicySettings:
+    """The RBF policy's ``n_basis`` functions; a linear balancing policy (None: none) acting within
+    ``balance_within_rad`` and ``balance_within_rad_s`` of upright, searched over ``balance_prediction_s``."""
+
+    n_basis: int = 50
+    balance_within_rad: Optional[float] = None
+    balance_within_rad_s: float = 2.0
+    balance_prediction_s: float = 3.0
+
+    def __post_init__(self) -> None:
+        _set_ints(self, {"n_basis": 1}, "policy.")
+        optional_positive("policy.balance_within_rad", self.balance_within_rad)
+        positive("policy.balance_prediction_s", self.balance_prediction_s)
+        positive("policy.balance_within_rad_s", self.balance_within_rad_s)
+        if self.balance_within_rad is not None and self.balance_within_rad >= math.pi:
+            raise ValueError(f"policy.balance_within_rad must be below pi, got {self.balance_within_rad!r}")
+
+
+@dataclass(frozen=True)
+class OptimiserSettings:
+    """L-BFGS-B policy search: ``iterations`` per search, then ``restarts`` searches from fresh policies (pseudo-
+    target spread ``restart_target_std``) when the predicted cost is above ``restart_above_cost_fraction`` of
+    the steps."""
+
+    iterations: int = 80
+    restarts: int = 0
+    restart_above_cost_fraction: float = 0.5
+    restart_target_std: float = 1.0
+
+    def __post_init__(self) -> None:
+        _set_ints(self, {"iterations": 1, "restarts": 0}, "optimiser.")
+        positive("optimiser.restart_target_std", self.restart_target_std)
+        fraction = non_negative("optimiser.restart_above_cost_fraction", self.restart_above_cost_fraction)
+        if fraction >= 1.0:
+            raise ValueError(
+                f"optimiser.restart_above_cost_fraction must be in [0, 1), got {self.restart_above_cost_fraction!r}"
+            )
+        object.__setattr__(self, "restart_above_cost_fraction", fraction)
+
+
+def _set_ints(settings: Any, lows: dict[str, int], prefix: str = "") -> None:
+    """Check and convert the int fields named in ``lows`` (name -> lowest value)."""
+    for name, low in lows.items():
+        object.__setattr__(settings, name, int_at_least(prefix + name, getattr(settings, name), low))
 
 
 @dataclass
@@ -49,35 +144,25 @@ class PilcoConfig:
     n_random_trials: int = 1
     random_hold_min_s: float = 0.2
     random_hold_max_s: float = 0.6
-    cost_width_m: float = 0.15
-    cost_width_after_swing_up_m: Optional[float] = None
-    cost_rate_width_rad_s: Optional[float] = None
-    cost_rate_after_rad: Optional[float] = None
-    cost_exploration: float = 0.0
     initial_std: float = 0.05
-    n_basis: int = 50
-    max_gp_points: int = 200
-    gp_all_data: bool = False
-    gp_iterations: int = 100
-    policy_iterations: int = 80
-    policy_restarts: int = 0
-    restart_above_cost_fraction: float = 0.5
-    restart_target_std: float = 1.0
     eval_seeds: tuple[int, ...] = (1000, 1001, 1002)
     eval_duration_s: float = TEST_EPISODE_S
     target_std_rad: float = 0.1
     compiled: bool = False
-    balance_within_rad: Optional[float] = None
-    balance_within_rad_s: float = 2.0
-    balance_prediction_s: float = 3.0
     seed: int = 0
+    cost: CostSettings = field(default_factory=CostSettings)
+    gp: GPSettings = field(default_factory=GPSettings)
+    policy: PolicySettings = field(default_factory=PolicySettings)
+    optimiser: OptimiserSettings = field(default_factory=OptimiserSettings)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.task, Task):
-            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        groups = {"task": Task, "cost": CostSettings, "gp": GPSettings, "policy": PolicySettings}
+        for name, cls in {**groups, "optimiser": OptimiserSettings}.items():
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
         state_spec(self.state)
-        positives = "control_dt_s horizon_s cost_width_m initial_std eval_duration_s target_std_rad random_hold_min_s"
-        for name in f"{positives} random_hold_max_s restart_target_std".split():
+        positives = "control_dt_s horizon_s initial_std eval_duration_s target_std_rad random_hold_min_s"
+        for name in f"{positives} random_hold_max_s".split():
             positive(name, getattr(self, name))
         if self.random_hold_max_s < self.random_hold_min_s:
             raise ValueError(f"random_hold_max_s must be >= random_hold_min_s, got {self.random_hold_max_s!r}")
@@ -87,35 +172,17 @@ class PilcoConfig:
         if self.n_horizon_steps < 2:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         optional_positive("prediction_s", self.prediction_s)
-        optional_positive("balance_within_rad", self.balance_within_rad)
-        positive("balance_prediction_s", self.balance_prediction_s)
-        positive("balance_within_rad_s", self.balance_within_rad_s)
-        if self.balance_within_rad is not None and self.balance_within_rad >= math.pi:
-            raise ValueError(f"balance_within_rad must be below pi, got {self.balance_within_rad!r}")
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
             raise ValueError(
                 f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
                 "(None predicts the trial's length)"
             )
-        lows = {"n_policy_trials": 0, "n_random_trials": 1, "n_basis": 1, "max_gp_points": 10, "gp_iterations": 1}
-        for name, low in {**lows, "policy_iterations": 1, "policy_restarts": 0}.items():
-            setattr(self, name, int_at_least(name, getattr(self, name), low))
-        fraction = non_negative("restart_above_cost_fraction", self.restart_above_cost_fraction)
-        if fraction >= 1.0:
-            raise ValueError(f"restart_above_cost_fraction must be in [0, 1), got {self.restart_above_cost_fraction!r}")
-        self.restart_above_cost_fraction = fraction
+        _set_ints(self, {"n_policy_trials": 0, "n_random_trials": 1})
         try:
             self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
         except TypeError:
             raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
-        for name in ("cost_rate_width_rad_s", "cost_rate_after_rad", "cost_width_after_swing_up_m"):
-            optional_positive(name, getattr(self, name))
-        for name in ("compiled", "gp_all_data"):
-            boolean(name, getattr(self, name))
-        exploration = finite("cost_exploration", self.cost_exploration)
-        if not -1.0 <= exploration <= 0.0:
-            raise ValueError(f"cost_exploration must be in [-1, 0], got {self.cost_exploration!r}")
-        self.cost_exploration = exploration
+        boolean("compiled", self.compiled)
 
     @property
     def hold_steps(self) -> int:
@@ -144,11 +211,7 @@ class PilcoConfig:
         ``ValueError`` that starts with ``source``."""
         if not isinstance(data, dict):
             raise ValueError(f"{source}: not a PILCO config (expected a JSON object, got {type(data).__name__})")
-        check_fields(cls, data, source)
-        data = dict(data)
-        data["task"] = Task.from_dict(data["task"])
-        data["eval_seeds"] = tuple(data.get("eval_seeds", ()))
-        return cls(**data)
+        return dataclass_from_data(cls, data, source, task=Task.from_dict)
 
 
 @dataclass
@@ -254,7 +317,7 @@ class PilcoResult:
         try:
             spec = state_spec(config.state)
             # a regular file no larger than the config's policies (float64 centres, weights, widths, twice over)
-            bound = 2**20 + 16 * (config.n_basis + 2) * (spec.n_model_inputs + 2)
+            bound = 2**20 + 16 * (config.policy.n_basis + 2) * (spec.n_model_inputs + 2)
             raw = read_bytes_checked(weights_path, "PILCO policy file", bound)
             state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
             balance_state = {k[len(BALANCE_PREFIX) :]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
@@ -302,9 +365,9 @@ def _trial_cost(
     rate_width: Optional[float],
     width_m: Optional[float] = None,
 ) -> float:
-    """The cost (width ``width_m``, default ``config.cost_width_m``; tip-rate factor of width ``rate_width`` or
+    """The cost (width ``width_m``, default ``config.cost.width_m``; tip-rate factor of width ``rate_width`` or
     none) summed along a real trial's states (H+1, d), the start excluded."""
-    width_m = config.cost_width_m if width_m is None else width_m
+    width_m = config.cost.width_m if width_m is None else width_m
     return float(
         real_cost(
             states[1:, spec.tip_angle_index],
@@ -431,31 +494,41 @@ def _search_with_restarts(
     restart: bool = True,
 ) -> tuple[float, int]:
     """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when ``restart``,
-    ``config.policy_restarts`` and the cost threshold ask for it) from that many fresh random policies
+    ``config.optimiser.restarts`` and the cost threshold ask for it) from that many fresh random policies
     (:func:`_random_policy`, draws from ``rng``); ``policy`` keeps the parameters of the lowest predicted cost."""
-    best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
-    if not restart or config.policy_restarts == 0 or best <= config.restart_above_cost_fraction * n_steps:
+    best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
+    if not restart or config.optimiser.restarts == 0 or best <= config.optimiser.restart_above_cost_fraction * n_steps:
         return best, 0
     best_vector = policy.get_vector()
-    for _ in range(config.policy_restarts):
+    for _ in range(config.optimiser.restarts):
         fresh = _random_policy(
-            spec, states, model_inputs, config.n_basis, policy.torque_limit_nm, rng, config.restart_target_std
+            spec,
+            states,
+            model_inputs,
+            config.policy.n_basis,
+            policy.torque_limit_nm,
+            rng,
+            config.optimiser.restart_target_std,
         )
         policy.set_vector(fresh.get_vector())
-        value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.policy_iterations)
+        value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
         if value < best:
             best, best_vector = value, policy.get_vector()
     policy.set_vector(best_vector)
-    return best, config.policy_restarts
+    return best, config.optimiser.restarts
 
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
-    """The RBF policy, and the balancing policy within ``config.balance_within_rad`` of upright, as a controller."""
+    """The RBF policy, and the balancing policy within ``config.policy.balance_within_rad`` of upright, as a controller."""
     spec = state_spec(config.state)
-    if balance is None or config.balance_within_rad is None:
+    if balance is None or config.policy.balance_within_rad is None:
         return PilcoController(policy, spec, config.control_dt_s)
     return PilcoController(
-        policy, spec, config.control_dt_s, balance, (config.balance_within_rad, config.balance_within_rad_s)
+        policy,
+        spec,
+        config.control_dt_s,
+        balance,
+        (config.policy.balance_within_rad, config.policy.balance_within_rad_s),
     )
 
 
@@ -465,8 +538,10 @@ def _upright_distribution(
     """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
     policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``[-pi, pi)``;
     None when fewer than ``2 * dim`` states are in that band."""
-    assert config.balance_within_rad is not None  # called only with a balancing policy
-    near = states[in_balance_band(spec, states, config.balance_within_rad, config.balance_within_rad_s)].copy()
+    assert config.policy.balance_within_rad is not None  # called only with a balancing policy
+    near = states[
+        in_balance_band(spec, states, config.policy.balance_within_rad, config.policy.balance_within_rad_s)
+    ].copy()
     if len(near) < 2 * spec.dim:
         return None
     near[:, spec.angle_indices] = wrap_angle_rad(near[:, spec.angle_indices])
@@ -477,17 +552,17 @@ def _upright_distribution(
 def check_pilco_size(config: PilcoConfig) -> None:
     """``ValueError`` (with the estimate) if a run of ``config`` would exceed
     :data:`softpend.checks.MAX_WORK_BYTES`: the moment-matching rollout keeps, for every prediction step, a
-    matrix of ``max_gp_points**2`` entries per pair of state outputs (PILCO's predictive covariance) for the
+    matrix of ``gp.max_points**2`` entries per pair of state outputs (PILCO's predictive covariance) for the
     policy gradient; the evaluation trajectories come on top."""
     dim = state_spec(config.state).dim
-    rollout = 8.0 * config.n_prediction_steps * dim * dim * config.max_gp_points**2
-    policy = 8.0 * config.n_prediction_steps * config.n_basis * (config.max_gp_points + dim) * dim
+    rollout = 8.0 * config.n_prediction_steps * dim * dim * config.gp.max_points**2
+    policy = 8.0 * config.n_prediction_steps * config.policy.n_basis * (config.gp.max_points + dim) * dim
     evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
     check_work_size(
         "this PILCO run",
         rollout + policy + evaluation,
-        f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.max_gp_points}**2 GP points, "
-        f"{config.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
+        f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.gp.max_points}**2 GP points, "
+        f"{config.policy.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
     )
 
 
@@ -558,7 +633,7 @@ class Pilco:
         self.n_gp_points = 0
         self.n_searches = 0
         self.plant_seconds = 0.0
-        self.rate_on = config.cost_rate_width_rad_s is not None and config.cost_rate_after_rad is None
+        self.rate_on = config.cost.rate_width_rad_s is not None and config.cost.rate_after_rad is None
         self._start_wall = time.perf_counter()
         self._start_cpu = time.process_time()
 
@@ -574,7 +649,7 @@ class Pilco:
             bang_bang=True,
         )
         episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
-        rate_width = config.cost_rate_width_rad_s if self.rate_on else None
+        rate_width = config.cost.rate_width_rad_s if self.rate_on else None
         return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)
 
     def start_policy(self) -> RBFPolicy:
@@ -585,26 +660,26 @@ class Pilco:
             self.spec,
             np.vstack(self.real_states),
             np.vstack(self.inputs)[:, :-1],
-            self.config.n_basis,
+            self.config.policy.n_basis,
             self.config.task.rod.torque_limit_nm,
             self.streams["policy_init"],
         )
         return self.policy
 
     def optimize_models(self) -> MultiOutputGP:
-        """Fit the GP dynamics on the data subsampled to ``max_gp_points`` (the latest trial kept), from the last
-        fit's hyperparameters; with ``gp_all_data`` condition it on all the data."""
+        """Fit the GP dynamics on the data subsampled to ``gp.max_points`` (the latest trial kept), from the last
+        fit's hyperparameters; with ``gp.all_data`` condition it on all the data."""
         x_all, y_all = np.vstack(self.inputs), np.vstack(self.targets)
         subset = select_subset(
             len(x_all),
-            self.config.max_gp_points,
+            self.config.gp.max_points,
             recent=len(self.inputs[-1]),
             seed=_draw_seed(self.streams["gp_subsets"]),
         )
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=self.gp_hyperparameters)
-        gp.fit(self.config.gp_iterations)
+        gp.fit(self.config.gp.iterations)
         self.gp_hyperparameters = gp.hyperparameters
-        if self.config.gp_all_data and len(subset) < len(x_all):
+        if self.config.gp.all_data and len(subset) < len(x_all):
             gp.condition_on(x_all, y_all)
         self.gp, self.n_gp_points = gp, len(subset)
         return gp
@@ -615,7 +690,7 @@ class Pilco:
         config, spec = self.config, self.spec
         assert self.policy is not None and self.gp is not None, "start_policy and optimize_models come first"
         rate_width, width_m, n_search = self._cost()
-        length_m, exploration = config.task.rod.length_m, config.cost_exploration
+        length_m, exploration = config.task.rod.length_m, config.cost.exploration
         propagator = Propagator(
             spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, compiled=config.compiled
         )
@@ -640,14 +715,14 @@ class Pilco:
     def _cost(self) -> tuple[Optional[float], float, int]:
         """The tip-rate width (``None``: off), the cost width [m] and the predicted steps of the next search."""
         config = self.config
-        if not self.rate_on and config.cost_rate_width_rad_s is not None:
-            assert config.cost_rate_after_rad is not None  # without it the rate term is on from the start
-            self.rate_on = any(_came_near_upright(self.spec, st, config.cost_rate_after_rad) for st in self.real_states)
-        rate_width = config.cost_rate_width_rad_s if self.rate_on else None
+        if not self.rate_on and config.cost.rate_width_rad_s is not None:
+            assert config.cost.rate_after_rad is not None  # without it the rate term is on from the start
+            self.rate_on = any(_came_near_upright(self.spec, st, config.cost.rate_after_rad) for st in self.real_states)
+        rate_width = config.cost.rate_width_rad_s if self.rate_on else None
         swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in self.records)
-        width_m = config.cost_width_m
-        if swung_up and config.cost_width_after_swing_up_m is not None:
-            width_m = config.cost_width_after_swing_up_m
+        width_m = config.cost.width_m
+        if swung_up and config.cost.width_after_swing_up_m is not None:
+            width_m = config.cost.width_after_swing_up_m
         return rate_width, width_m, config.n_prediction_steps if swung_up else config.n_horizon_steps
 
     def _predict(self, propagator: Propagator, n_search: int, objective: float) -> float:
@@ -659,14 +734,14 @@ class Pilco:
         self.predicted_means.append(means[: n_steps + 1].numpy())
         covs = covs[: n_steps + 1]
         self.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
-        same = self.config.cost_exploration == 0.0 and n_search == n_steps
+        same = self.config.cost.exploration == 0.0 and n_search == n_steps
         return objective if same else float(costs[:n_steps].sum())
 
     def _optimize_balance(self, width_m: float, rate_width: Optional[float]) -> float:
         """Search the balancing policy from the real trials' upright band (once they have visited it); its
         predicted cost, NaN when none was searched."""
         config, spec = self.config, self.spec
-        if config.balance_within_rad is None:
+        if config.policy.balance_within_rad is None:
             return float("nan")
         upright = _upright_distribution(config, spec, np.vstack(self.real_states))
         if upright is None:
@@ -676,8 +751,8 @@ class Pilco:
         propagator = Propagator(
             spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width, compiled=False
         )
-        n_balance = int(round(config.balance_prediction_s / config.control_dt_s))
-        return _optimise_policy(propagator, self.balance_policy, *upright, n_balance, config.policy_iterations)
+        n_balance = int(round(config.policy.balance_prediction_s / config.control_dt_s))
+        return _optimise_policy(propagator, self.balance_policy, *upright, n_balance, config.optimiser.iterations)
 
     def controller(self) -> PilcoController:
         """The current policy (with its balancing policy, if any) as a controller."""

@@ -50,7 +50,7 @@ REBUILT_ATTRIBUTES: frozenset[str] = frozenset(
 )
 
 #: Hyperparameters stored as plain JSON in an agent file that must equal the run's config.
-_CONFIG_ATTRIBUTES = [name for name in SB3_FIELDS if name not in ("learning_starts", "train_freq")]
+_CONFIG_ATTRIBUTES = [name for name in SB3_FIELDS if name != "train_freq"]
 
 _BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -72,7 +72,7 @@ def agent_file_bounds(config: DQNConfig, observation_dim: int) -> tuple[int, int
     """``(member, total)``: the most bytes one member of an agent file of ``config`` can unpack to, and the
     file with all its members: the Q-network and its target (float32) and Adam's two moments, twice over, plus
     :data:`MAX_AGENT_DATA_BYTES` for the metadata members."""
-    widths = [int(observation_dim), *(int(w) for w in config.net_arch), int(config.n_torque_levels)]
+    widths = [int(observation_dim), *(int(w) for w in config.learner.net_arch), int(config.n_torque_levels)]
     n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
     member = MAX_AGENT_DATA_BYTES + 16 * n_weights
     return member, 4 * member
@@ -115,10 +115,12 @@ def _rebuilt(cls: type[DQN], config: DQNConfig, replay_buffer_class: type[Replay
         "observation_space": spaces_env.observation_space,
         "action_space": spaces_env.action_space,
         "replay_buffer_class": replay_buffer_class,
-        "train_freq": TrainFreq(int(config.train_freq), TrainFrequencyUnit.STEP),
-        "lr_schedule": FloatSchedule(float(config.learning_rate)),
+        "train_freq": TrainFreq(int(config.learner.train_freq), TrainFrequencyUnit.STEP),
+        "lr_schedule": FloatSchedule(float(config.learner.learning_rate)),
         "exploration_schedule": LinearSchedule(
-            config.exploration_initial_eps, config.exploration_final_eps, config.exploration_fraction
+            config.learner.exploration_initial_eps,
+            config.learner.exploration_final_eps,
+            config.learner.exploration_fraction,
         ),
         # reset by DQN.learn before any use (a loaded agent starts a fresh rollout), unused by predict
         "_last_obs": None,
@@ -133,14 +135,18 @@ def _check_matches(path: Path, data: dict[str, Any], config: DQNConfig) -> None:
     """The plain-JSON facts of the file agree with the config (a clear message instead of a shape error)."""
     kwargs = data.get("policy_kwargs")
     saved_arch = kwargs.get("net_arch") if isinstance(kwargs, dict) else None
-    if saved_arch != list(config.net_arch):
-        raise AgentFileError(f"{path}: its network {saved_arch!r} is not the config's net_arch {list(config.net_arch)}")
+    if saved_arch != list(config.learner.net_arch):
+        raise AgentFileError(
+            f"{path}: its network {saved_arch!r} is not the config's learner.net_arch {list(config.learner.net_arch)}"
+        )
     action = data.get("action_space")
     if isinstance(action, dict) and "n" in action and str(action["n"]) != str(config.n_torque_levels):
         raise AgentFileError(f"{path}: it has {action['n']} actions, the config {config.n_torque_levels} torque levels")
     for name in _CONFIG_ATTRIBUTES:
-        if name in data and data[name] != getattr(config, name):
-            raise AgentFileError(f"{path}: its {name} {data[name]!r} is not the config's {getattr(config, name)!r}")
+        if name in data and data[name] != getattr(config.learner, name):
+            raise AgentFileError(
+                f"{path}: its {name} {data[name]!r} is not the config's learner.{name} {getattr(config.learner, name)!r}"
+            )
     if data.get("n_steps", 1) != 1 or data.get("tau", 1.0) != 1.0:
         raise AgentFileError(
             f"{path}: n_steps {data.get('n_steps')!r} and tau {data.get('tau')!r} must be 1 (softpend's DQN)"

@@ -12,17 +12,80 @@ from typing import Any
 from softpend.checks import boolean, in_range, in_unit_interval, int_at_least, one_of, positive, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
-from softpend.io.overrides import check_fields
+from softpend.io.overrides import dataclass_from_data
 from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 from softpend.task import Task
 
-__all__ = ["DQNConfig", "MBPOConfig", "SB3_FIELDS", "config_to_dict", "load_config", "saved_config_data", "save_config"]
+__all__ = [
+    "DQNConfig",
+    "DQNLearner",
+    "MBPOConfig",
+    "ModelSettings",
+    "RolloutSettings",
+    "SB3_FIELDS",
+    "StopRule",
+    "config_to_dict",
+    "load_config",
+    "saved_config_data",
+    "save_config",
+]
 
-#: The stable-baselines3 ``DQN`` arguments that are :class:`DQNConfig` fields of the same name.
+#: The stable-baselines3 ``DQN`` arguments that are :class:`DQNLearner` fields of the same name.
 SB3_FIELDS = (
-    "learning_rate buffer_size learning_starts batch_size gamma train_freq gradient_steps target_update_interval "
+    "learning_rate buffer_size batch_size gamma train_freq gradient_steps target_update_interval "
     "exploration_fraction exploration_initial_eps exploration_final_eps max_grad_norm"
 ).split()
+
+
+@dataclass(frozen=True)
+class DQNLearner:
+    """The Q-learner: stable-baselines3 ``DQN`` arguments, the network's hidden layer widths, target clipping."""
+
+    learning_rate: float = 1e-4
+    buffer_size: int = 100_000
+    batch_size: int = 32
+    gamma: float = 0.99
+    train_freq: int = 1
+    gradient_steps: int = 1
+    target_update_interval: int = 10_000
+    exploration_fraction: float = 0.1
+    exploration_initial_eps: float = 1.0
+    exploration_final_eps: float = 0.05
+    max_grad_norm: float = 10.0
+    net_arch: tuple[int, ...] = (64, 64)
+    clip_q_targets: bool = False
+
+    def __post_init__(self) -> None:
+        _set_ints(self, "buffer_size batch_size train_freq gradient_steps target_update_interval", 1, "learner.")
+        for name in ("learning_rate", "max_grad_norm"):
+            positive(f"learner.{name}", getattr(self, name))
+        in_range("learner.learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step stays a float32
+        for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
+            in_unit_interval(f"learner.{name}", getattr(self, name))
+        boolean("learner.clip_q_targets", self.clip_q_targets)
+        object.__setattr__(self, "net_arch", _positive_ints("learner.net_arch", self.net_arch))
+
+
+@dataclass(frozen=True)
+class StopRule:
+    """Stop training after ``after_balanced_evaluations`` balanced evaluations in a row (0: never), each start
+    within ``upright_std_rad``, confirmed on ``confirm_seeds`` with at most ``confirm_max_failures`` failures."""
+
+    after_balanced_evaluations: int = 0
+    upright_std_rad: float = 0.1
+    confirm_seeds: tuple[int, ...] = ()
+    confirm_max_failures: int = 0
+
+    def __post_init__(self) -> None:
+        _set_ints(self, "after_balanced_evaluations confirm_max_failures", 0, "stop.")
+        positive("stop.upright_std_rad", self.upright_std_rad)
+        confirm = _seed_tuple("stop.confirm_seeds", self.confirm_seeds)
+        if confirm and self.confirm_max_failures >= len(confirm):
+            raise ValueError(
+                f"stop.confirm_max_failures ({self.confirm_max_failures}) must be less than the {len(confirm)} "
+                "stop.confirm_seeds: a confirmation needs a start that balances"
+            )
+        object.__setattr__(self, "confirm_seeds", confirm)
 
 
 @dataclass(frozen=True)
@@ -34,85 +97,57 @@ class DQNConfig:
     episode_s: float = 5.0
     action_repeat: int = 4
     training_start: str = "hanging"
-    learning_rate: float = 1e-4
-    buffer_size: int = 100_000
     learning_starts: int = 100
-    batch_size: int = 32
-    gamma: float = 0.99
-    train_freq: int = 1
-    gradient_steps: int = 1
-    target_update_interval: int = 10_000
-    exploration_fraction: float = 0.1
-    exploration_initial_eps: float = 1.0
-    exploration_final_eps: float = 0.05
-    max_grad_norm: float = 10.0
-    clip_q_targets: bool = False
-    net_arch: tuple[int, ...] = (64, 64)
     reset_every_episodes: int = 0
+    checkpoint_every_episodes: int = 10
     eval_every_episodes: int = 1
     eval_seeds: tuple[int, ...] = tuple(range(1000, 1008))
     eval_until_first_failure: bool = True
     eval_duration_s: float = TEST_EPISODE_S
-    checkpoint_every_episodes: int = 10
-    stop_after_balanced_evaluations: int = 0
-    stop_upright_std_rad: float = 0.1
-    stop_confirm_seeds: tuple[int, ...] = ()
-    stop_confirm_max_failures: int = 0
+    learner: DQNLearner = field(default_factory=DQNLearner)
+    stop: StopRule = field(default_factory=StopRule)
 
     def __post_init__(self) -> None:
-        _set_ints(self, "n_torque_levels action_repeat buffer_size batch_size train_freq gradient_steps", 1)
-        _set_ints(self, "target_update_interval eval_every_episodes checkpoint_every_episodes", 1)
-        one_of("training_start", self.training_start, ("random", "hanging", "upright"))
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
-        boolean("clip_q_targets", self.clip_q_targets)
-        boolean("eval_until_first_failure", self.eval_until_first_failure)
+        for name, cls in (("learner", DQNLearner), ("stop", StopRule)):
+            _check_group(self, name, cls)
+        _set_ints(self, "n_torque_levels action_repeat eval_every_episodes checkpoint_every_episodes", 1)
+        _set_ints(self, "learning_starts reset_every_episodes", 0)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
-        _set_ints(self, "learning_starts reset_every_episodes stop_after_balanced_evaluations", 0)
-        for name in ("episode_s", "learning_rate", "eval_duration_s", "max_grad_norm", "stop_upright_std_rad"):
+        one_of("training_start", self.training_start, ("random", "hanging", "upright"))
+        boolean("eval_until_first_failure", self.eval_until_first_failure)
+        for name in ("episode_s", "eval_duration_s"):
             positive(name, getattr(self, name))
-        in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step stays a float32
-        if self.eval_until_first_failure and self.stop_upright_std_rad > SUCCESS_STD_RAD:
+        if self.eval_until_first_failure and self.stop.upright_std_rad > SUCCESS_STD_RAD:
             raise ValueError(
-                f"stop_upright_std_rad ({self.stop_upright_std_rad!r}) must be at most the success level "
+                f"stop.upright_std_rad ({self.stop.upright_std_rad!r}) must be at most the success level "
                 f"{SUCCESS_STD_RAD:g} rad with eval_until_first_failure (a balanced evaluation must run every start)"
             )
-        for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
-            in_unit_interval(name, getattr(self, name))
-        object.__setattr__(self, "net_arch", _positive_ints("net_arch", self.net_arch))
         seeds = _seed_tuple("eval_seeds", self.eval_seeds)
         if len(seeds) == 0:
             raise ValueError("eval_seeds must not be empty")
-        confirm = _seed_tuple("stop_confirm_seeds", self.stop_confirm_seeds)
-        if set(confirm) & set(seeds):
+        shared = set(self.stop.confirm_seeds) & set(seeds)
+        if shared:
             raise ValueError(
-                f"stop_confirm_seeds {sorted(set(confirm) & set(seeds))} are also eval_seeds: a confirmation "
-                "needs starts of its own"
+                f"stop.confirm_seeds {sorted(shared)} are also eval_seeds: a confirmation needs starts of its own"
             )
-        object.__setattr__(self, "stop_confirm_seeds", confirm)
-        failures = int_at_least("stop_confirm_max_failures", self.stop_confirm_max_failures, 0)
-        if confirm and failures >= len(confirm):
-            raise ValueError(
-                f"stop_confirm_max_failures ({failures}) must be less than the {len(confirm)} "
-                "stop_confirm_seeds: a confirmation needs a start that balances"
-            )
-        object.__setattr__(self, "stop_confirm_max_failures", failures)
         if self.episode_s < self.agent_dt_s * (1 - 1e-9):
             raise ValueError(
                 f"episode_s ({self.episode_s!r} s) must be at least one agent step, action_repeat x task.dt_s = "
                 f"{self.agent_dt_s:g} s"
             )
-        if self.episode_agent_steps % self.train_freq:
+        if self.episode_agent_steps % self.learner.train_freq:
             raise ValueError(
-                f"train_freq ({self.train_freq}) must divide the agent steps of an episode ({self.episode_agent_steps}), "
-                "so that a run ends exactly at an episode boundary"
+                f"learner.train_freq ({self.learner.train_freq}) must divide the agent steps of an episode "
+                f"({self.episode_agent_steps}), so that a run ends exactly at an episode boundary"
             )
         object.__setattr__(self, "eval_seeds", seeds)
 
     @property
     def selection_seeds(self) -> tuple[int, ...]:
-        """``eval_seeds`` and ``stop_confirm_seeds``."""
-        return self.eval_seeds + self.stop_confirm_seeds
+        """``eval_seeds`` and ``stop.confirm_seeds``."""
+        return self.eval_seeds + self.stop.confirm_seeds
 
     @property
     def dt_s(self) -> float:
@@ -129,8 +164,9 @@ class DQNConfig:
         """``(low, high)``: the range of discounted returns [reward units] that the report's reward allows."""
         from softpend.envs.reward import RewardParams
 
+        gamma = self.learner.gamma
         low, high = -1.0, 1.0 + RewardParams().bonus_weight
-        scale = self.action_repeat / (1.0 - self.gamma) if self.gamma < 1.0 else math.inf
+        scale = self.action_repeat / (1.0 - gamma) if gamma < 1.0 else math.inf
         return (low * scale, high * scale)
 
     @property
@@ -140,48 +176,77 @@ class DQNConfig:
 
 
 @dataclass(frozen=True)
-class MBPOConfig(DQNConfig):
-    """DQN-MBPO: DQN trained on short rollouts of a learned dynamics ensemble branched from real states."""
+class ModelSettings:
+    """DQN-MBPO's dynamics ensemble: its size and hidden widths, the fit's steps and batch, the refit period."""
 
-    rollouts_per_real_step: int = 9
-    rollout_every_steps: int = 125
-    rollout_schedule: tuple[int, int, int, int] = (3, 20, 1, 5)
-    model_buffer_size: int = 60_000
-    real_ratio: float = 0.5
-    initial_random_episodes: int = 3
-    model_refit_every_episodes: int = 2
     ensemble_size: int = 3
-    model_fit_steps: int = 1500
-    model_batch_size: int = 256
-    model_hidden_widths: tuple[int, ...] = (64, 64)
-    start_branch_fraction: float = 0.0
-    rollouts_within_data: bool = False
+    hidden_widths: tuple[int, ...] = (64, 64)
+    fit_steps: int = 1500
+    batch_size: int = 256
+    refit_every_episodes: int = 2
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        _set_ints(self, "rollouts_per_real_step rollout_every_steps model_buffer_size model_refit_every_episodes", 1)
-        _set_ints(self, "ensemble_size model_fit_steps model_batch_size", 1)
-        _set_ints(self, "initial_random_episodes", 1, at_least=True)
+        _set_ints(self, "ensemble_size fit_steps batch_size refit_every_episodes", 1, "model.")
+        object.__setattr__(self, "hidden_widths", _positive_ints("model.hidden_widths", self.hidden_widths))
+
+
+@dataclass(frozen=True)
+class RolloutSettings:
+    """DQN-MBPO's model rollouts: ``per_real_step * every_steps`` rollouts every ``every_steps`` real agent steps,
+    of the length of ``schedule`` (first_episode, last_episode, min_length, max_length), into a model buffer of
+    ``buffer_size``; ``real_ratio`` of each batch real, ``start_branch_fraction`` of the rollouts from training
+    starts, ``within_data``: rollouts stop at states outside the real data's box."""
+
+    per_real_step: int = 9
+    every_steps: int = 125
+    schedule: tuple[int, int, int, int] = (3, 20, 1, 5)
+    buffer_size: int = 60_000
+    real_ratio: float = 0.5
+    start_branch_fraction: float = 0.0
+    within_data: bool = False
+
+    def __post_init__(self) -> None:
+        _set_ints(self, "per_real_step every_steps buffer_size", 1, "rollout.")
         for name in ("real_ratio", "start_branch_fraction"):
-            in_unit_interval(name, getattr(self, name))
-        boolean("rollouts_within_data", self.rollouts_within_data)
-        schedule = tuple(int(v) for v in self.rollout_schedule)
+            in_unit_interval(f"rollout.{name}", getattr(self, name))
+        boolean("rollout.within_data", self.within_data)
+        schedule = tuple(int(v) for v in self.schedule)
         if len(schedule) != 4 or schedule[0] < 0 or schedule[1] < schedule[0] or schedule[2] < 1 or schedule[3] < 1:
             raise ValueError(
-                "rollout_schedule must be (first_episode >= 0, last_episode >= first_episode, min_length >= 1, "
-                f"max_length >= 1), got {self.rollout_schedule!r}"
+                "rollout.schedule must be (first_episode >= 0, last_episode >= first_episode, min_length >= 1, "
+                f"max_length >= 1), got {self.schedule!r}"
             )
-        object.__setattr__(self, "rollout_schedule", schedule)
-        object.__setattr__(self, "model_hidden_widths", _positive_ints("model_hidden_widths", self.model_hidden_widths))
+        object.__setattr__(self, "schedule", schedule)
 
-    def rollout_length(self, episode: int) -> int:
+    def length(self, episode: int) -> int:
         """Rollout length (agent steps) at a training episode (mbrl-lib's linear schedule)."""
-        first, last, low, high = self.rollout_schedule
+        first, last, low, high = self.schedule
         if episode <= first or last == first:
             return low if episode <= first else high
         if episode >= last:
             return high
         return int(round(low + (episode - first) / (last - first) * (high - low)))
+
+
+@dataclass(frozen=True)
+class MBPOConfig(DQNConfig):
+    """DQN-MBPO: DQN trained on short rollouts of a learned dynamics ensemble branched from real states."""
+
+    initial_random_episodes: int = 3
+    model: ModelSettings = field(default_factory=ModelSettings)
+    rollout: RolloutSettings = field(default_factory=RolloutSettings)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name, cls in (("model", ModelSettings), ("rollout", RolloutSettings)):
+            _check_group(self, name, cls)
+        _set_ints(self, "initial_random_episodes", 1)
+
+
+def _check_group(config: Any, name: str, cls: type) -> None:
+    """``ValueError`` unless field ``name`` of ``config`` holds a ``cls``."""
+    if not isinstance(getattr(config, name), cls):
+        raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(config, name)).__name__}")
 
 
 def _positive_ints(name: str, value: Any) -> tuple[int, ...]:
@@ -203,11 +268,11 @@ def _seed_tuple(name: str, value: Any) -> tuple[int, ...]:
         raise ValueError(f"{name} must be a tuple of integers >= 0, got {value!r}") from None
 
 
-def _set_ints(config: Any, names: str, low: int, at_least: bool = False) -> None:
-    """Check and convert the int fields ``names`` (space-separated): ``>= low``, or positive when ``low`` is 1."""
+def _set_ints(config: Any, names: str, low: int, prefix: str = "") -> None:
+    """Check and convert the int fields ``names`` (space-separated): positive when ``low`` is 1, else ``>= low``."""
     for name in names.split():
-        value = getattr(config, name)
-        checked = positive_int(name, value) if low == 1 and not at_least else int_at_least(name, value, low)
+        value, shown = getattr(config, name), prefix + name
+        checked = positive_int(shown, value) if low == 1 else int_at_least(shown, value, low)
         object.__setattr__(config, name, checked)
 
 
@@ -232,17 +297,14 @@ def save_config(config: DQNConfig, path: Path) -> None:
 
 def load_config(path: Path) -> DQNConfig:
     """Read a config written by :func:`save_config`."""
-    data = read_json_checked(path, "config file", MAX_CONFIG_BYTES)  # a regular file, read with a bound
+    data = read_json_checked(path, "config file", MAX_CONFIG_BYTES)
     if not isinstance(data, dict):
         raise ValueError(f"{path}: not a config (expected a JSON object, got {type(data).__name__})")
     name = data.pop("class", "DQNConfig")
     cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(name) if isinstance(name, str) else None
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
-    check_fields(cls, data, path)
     try:
-        task = Task.from_dict(data.pop("task"))
-        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-        return cls(task=task, **fields)
+        return dataclass_from_data(cls, data, path, task=Task.from_dict)
     except (TypeError, KeyError, AttributeError) as exc:
         raise ValueError(f"{path}: not a {cls.__name__}: {exc}") from exc

@@ -59,8 +59,8 @@ _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 
 
 def agent_class(config: DQNConfig) -> type[DQN]:
-    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.clip_q_targets``, else stable-baselines3's ``DQN``."""
-    return TargetDQN if config.clip_q_targets else DQN
+    """:class:`~softpend.rl.target_dqn.TargetDQN` if ``config.learner.clip_q_targets``, else stable-baselines3's ``DQN``."""
+    return TargetDQN if config.learner.clip_q_targets else DQN
 
 
 def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: Any) -> DQN:
@@ -68,8 +68,9 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
         kwargs["q_target_bounds"] = config.q_target_bounds
-    hyper = {name: getattr(config, name) for name in SB3_FIELDS}
-    net = {"net_arch": list(config.net_arch)}
+    hyper = {name: getattr(config.learner, name) for name in SB3_FIELDS}
+    hyper["learning_starts"] = config.learning_starts
+    net = {"net_arch": list(config.learner.net_arch)}
     return cls("MlpPolicy", env, tau=1.0, policy_kwargs=net, seed=int(seed), device="cpu", verbose=0, **hyper, **kwargs)
 
 
@@ -356,12 +357,12 @@ class EvaluationCallback(EpisodeEventCallback):
 
 def _balanced(config: DQNConfig, all_swung_up: bool, max_upright_std_rad: float) -> bool:
     """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
-    return bool(all_swung_up) and max_upright_std_rad <= config.stop_upright_std_rad
+    return bool(all_swung_up) and max_upright_std_rad <= config.stop.upright_std_rad
 
 
 class StopTrainingOnBalance(BaseCallback):
     """The stop rule, called after each evaluation (``EvaluationCallback(callback_after_eval=...)``): stop once
-    the last ``stop_after_balanced_evaluations`` evaluations all balanced and ``confirmation`` (if any) agrees,
+    the last ``stop.after_balanced_evaluations`` evaluations all balanced and ``confirmation`` (if any) agrees,
     writing ``log.stop_reason``."""
 
     def __init__(self, config: DQNConfig, log: TrainingLog, confirmation: Optional[BaseCallback] = None) -> None:
@@ -375,8 +376,8 @@ class StopTrainingOnBalance(BaseCallback):
             self.confirmation.init_callback(self.model)
 
     def balanced_streak(self) -> bool:
-        """Whether the last ``stop_after_balanced_evaluations`` evaluations all balanced."""
-        k = self.config.stop_after_balanced_evaluations
+        """Whether the last ``stop.after_balanced_evaluations`` evaluations all balanced."""
+        k = self.config.stop.after_balanced_evaluations
         rows = self.log.evaluations[-k:] if k else []
         return len(rows) == k > 0 and all(
             _balanced(self.config, row["all_swung_up"], row["max_upright_std_rad"]) for row in rows
@@ -385,19 +386,19 @@ class StopTrainingOnBalance(BaseCallback):
     def _on_step(self) -> bool:
         if not self.balanced_streak() or (self.confirmation is not None and not self.confirmation.on_step()):
             return True
-        n = len(self.config.stop_confirm_seeds)
+        n = len(self.config.stop.confirm_seeds)
         held = n - self.log.evaluations[-1].get("confirm_failures", 0)
         confirmation = "" if not n else f" and from {'the' if held == n else f'{held} of the'} {n} confirmation starts"
-        k = self.config.stop_after_balanced_evaluations
+        k = self.config.stop.after_balanced_evaluations
         self.log.stop_reason = (
             "balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations "
-        ) + f"(upright std <= {self.config.stop_upright_std_rad:g} rad from every evaluation start){confirmation}"
+        ) + f"(upright std <= {self.config.stop.upright_std_rad:g} rad from every evaluation start){confirmation}"
         return False
 
 
 class ConfirmBalance(BaseCallback):
-    """Confirmation of the stop rule: ``True`` if the agent balances from all ``stop_confirm_seeds`` starts but
-    at most ``stop_confirm_max_failures``, evaluated start by start up to the failure after those; the outcome
+    """Confirmation of the stop rule: ``True`` if the agent balances from all ``stop.confirm_seeds`` starts but
+    at most ``stop.confirm_max_failures``, evaluated start by start up to the failure after those; the outcome
     and the failures counted are kept in the last evaluation row (``confirmed``, ``confirm_failures``)."""
 
     def __init__(self, config: DQNConfig, log: TrainingLog) -> None:
@@ -407,12 +408,12 @@ class ConfirmBalance(BaseCallback):
 
     def _on_step(self) -> bool:
         failures = 0
-        for seed in self.config.stop_confirm_seeds:
+        for seed in self.config.stop.confirm_seeds:
             (result,) = evaluate_agent(self.model, self.config, seeds=(seed,)).results
             failures += not _balanced(self.config, math.isfinite(result.swing_up_time_s), float(result.upright_std_rad))
-            if failures > self.config.stop_confirm_max_failures:
+            if failures > self.config.stop.confirm_max_failures:
                 break
-        ok = failures <= self.config.stop_confirm_max_failures
+        ok = failures <= self.config.stop.confirm_max_failures
         self.log.evaluations[-1]["confirmed"] = ok
         self.log.evaluations[-1]["confirm_failures"] = failures
         return ok
@@ -522,12 +523,14 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     from softpend.rl.config import MBPOConfig
 
     row = 2 * observation_dim * 4 + 8 + 3 * 4  # obs and next obs (float32), action (int64), reward/done/timeout
-    buffers = config.buffer_size * row
+    buffers = config.learner.buffer_size * row
     if isinstance(config, MBPOConfig):
-        buffers += config.buffer_size * 8 * len(OBSERVATION_NAMES) + config.model_buffer_size * row
-    widths = [observation_dim, *config.net_arch, config.n_torque_levels]
+        buffers += config.learner.buffer_size * 8 * len(OBSERVATION_NAMES) + config.rollout.buffer_size * row
+    widths = [observation_dim, *config.learner.net_arch, config.n_torque_levels]
     n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
-    networks = 4 * 4 * n_weights + 2 * 4 * config.batch_size * sum(widths)  # online, target, Adam moments; a batch
+    networks = 4 * 4 * n_weights + 2 * 4 * config.learner.batch_size * sum(
+        widths
+    )  # online, target, Adam moments; a batch
     plant_steps = config.episode_agent_steps * config.action_repeat + 1
     eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
     records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
@@ -617,8 +620,8 @@ def training_callbacks(
     recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
     before, after = part.callbacks(recorder) if part is not None else ([], [])
     stop = None
-    if config.stop_after_balanced_evaluations:
-        confirmation = ConfirmBalance(config, log) if config.stop_confirm_seeds else None
+    if config.stop.after_balanced_evaluations:
+        confirmation = ConfirmBalance(config, log) if config.stop.confirm_seeds else None
         stop = StopTrainingOnBalance(config, log, confirmation)
     return CallbackList(
         [

@@ -188,17 +188,17 @@ class MBPOTrainer:
             raise ValueError("need at least 2 complete real episodes to fit the dynamics model")
         c = self.config
         n_transitions = sum(len(t) for t in self.trials_torques)
-        epochs = max(3, math.ceil(c.model_fit_steps * c.model_batch_size / n_transitions))
+        epochs = max(3, math.ceil(c.model.fit_steps * c.model.batch_size / n_transitions))
         result = fit_dynamics_model(
             self.dataset(),
             TrainConfig(
                 information="full",
-                hidden_widths=c.model_hidden_widths,
-                ensemble_size=c.ensemble_size,
+                hidden_widths=c.model.hidden_widths,
+                ensemble_size=c.model.ensemble_size,
                 limit_tip_reach=False,
                 max_epochs=epochs,
                 patience=max(3, epochs // 4),
-                batch_size=c.model_batch_size,
+                batch_size=c.model.batch_size,
                 learning_rate=3e-3,
                 seed=self.seed * 1000 + self.n_fits,
             ),
@@ -220,10 +220,10 @@ class MBPOTrainer:
         c = self.config
         env = self.env
         raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
-        for i in range(int(round(c.start_branch_fraction * n_rollouts))):  # the first rows
+        for i in range(int(round(c.rollout.start_branch_fraction * n_rollouts))):  # the first rows
             vec[i], info = self.start_env.reset()
             raw[i] = info["observation"]
-        box = buffer.real_observation_box() if c.rollouts_within_data else None
+        box = buffer.real_observation_box() if c.rollout.within_data else None
         bonus = vec[:, -1].astype(np.float64)
         levels = env.torque_levels_nm
         state = torch.as_tensor(raw, dtype=torch.float32)
@@ -303,8 +303,8 @@ class MBPOTrainer:
 
 
 class ModelRolloutCallback(BaseCallback):
-    """Every ``rollout_every_steps`` real agent steps, once the model is fitted, branch
-    ``rollouts_per_real_step * rollout_every_steps`` model rollouts of the scheduled length into the agent's
+    """Every ``rollout.every_steps`` real agent steps, once the model is fitted, branch
+    ``rollout.per_real_step * rollout.every_steps`` model rollouts of the scheduled length into the agent's
     :class:`MBPOReplayBuffer`, acting epsilon-greedily with the agent's current exploration rate."""
 
     model: DQN
@@ -320,13 +320,13 @@ class ModelRolloutCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         c = self.trainer.config
-        if self.model.num_timesteps % c.rollout_every_steps == 0 and self.trainer.dynamics is not None:
+        if self.model.num_timesteps % c.rollout.every_steps == 0 and self.trainer.dynamics is not None:
             assert isinstance(self.model.replay_buffer, MBPOReplayBuffer)
             self.trainer.rollouts(
                 self.model,
                 self.model.replay_buffer,
-                c.rollouts_per_real_step * c.rollout_every_steps,
-                c.rollout_length(self.log.n_episodes),
+                c.rollout.per_real_step * c.rollout.every_steps,
+                c.rollout.length(self.log.n_episodes),
                 self.model.exploration_rate,
             )
         return True
@@ -334,7 +334,7 @@ class ModelRolloutCallback(BaseCallback):
 
 class ModelRefitCallback(BaseCallback):
     """After each real episode (logged by ``recorder``), store it and refit the dynamics ensemble after
-    ``initial_random_episodes`` episodes and every ``model_refit_every_episodes`` after those."""
+    ``initial_random_episodes`` episodes and every ``model.refit_every_episodes`` after those."""
 
     def __init__(self, trainer: MBPOTrainer, recorder: EpisodeRecorder) -> None:
         super().__init__()
@@ -346,7 +346,7 @@ class ModelRefitCallback(BaseCallback):
             c = self.trainer.config
             self.trainer.add_episode(self.recorder.last_episode_observations, self.recorder.last_episode_torques)
             n = self.recorder.log.n_episodes
-            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model_refit_every_episodes == 0:
+            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model.refit_every_episodes == 0:
                 self.trainer.refit()
         return True
 
@@ -374,7 +374,10 @@ def train_mbpo(
             s,
             episodes,
             replay_buffer_class=MBPOReplayBuffer,
-            replay_buffer_kwargs={"model_buffer_size": config.model_buffer_size, "real_ratio": config.real_ratio},
+            replay_buffer_kwargs={
+                "model_buffer_size": config.rollout.buffer_size,
+                "real_ratio": config.rollout.real_ratio,
+            },
         )
         dqn.learning_starts = learning_starts
         return dqn

@@ -66,7 +66,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         config = PILCO
         spec = state_spec(config.state)
         rng = np.random.default_rng(0)
-        n = config.max_gp_points
+        n = config.gp.max_points
         states = np.cumsum(rng.normal(0.0, 0.3, (n + 1, spec.dim)), axis=0)
         states[:, spec.angle_indices] += np.pi
         torque_nm = rng.uniform(-1.0, 1.0, n) * config.task.torque_limit_nm
@@ -77,10 +77,10 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
             spec,
             states,
             inputs[:, :-1],
-            config.n_basis,
+            config.policy.n_basis,
             config.task.torque_limit_nm,
             np.random.default_rng(1),
-            config.restart_target_std,
+            config.optimiser.restart_target_std,
         )
         m0, s0 = _initial_distribution(spec, config.initial_std)
         vector = policy.get_vector()
@@ -99,9 +99,9 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
                 gp,
                 policy,
                 config.task.rod.length_m,
-                config.cost_width_m,
-                config.cost_rate_width_rad_s,
-                config.cost_exploration,
+                config.cost.width_m,
+                config.cost.rate_width_rad_s,
+                config.cost.exploration,
                 compiled=compiled,
             )
             for compiled in (False, True)

@@ -40,57 +40,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop",
         description=__doc__.split("\n\n")[0],
     )
-    parser.add_argument(
-        "controller",
-        metavar="CONTROLLER",
-        help=f"one of {', '.join(BUILTIN_CONTROLLERS)}, or a DQN/DQN-MBPO/PILCO run folder",
-    )
+    parser.add_argument("controller", metavar="CONTROLLER", help=f"{', '.join(BUILTIN_CONTROLLERS)} or a run folder")
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
     target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for the logs and summary.json")
     parser.add_argument("--duration", type=float, default=10.0, help="run length [s] (default 10)")
-    parser.add_argument(
-        "--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file (cv2.VideoCapture)"
-    )
+    parser.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
     parser.add_argument("--no-camera", action="store_true", help="encoder and model only (no blindness limit)")
     parser.add_argument("--camera-fps", type=float, default=60.0, help="twin camera frame rate (default 60)")
+    parser.add_argument("--camera-latency-ms", type=float, default=20.0, help="exposure end to host [ms] (20)")
     parser.add_argument(
-        "--camera-latency-ms",
-        type=float,
-        default=20.0,
-        help="camera latency, exposure end to host [ms] (default 20; with --camera: the "
-        "measured latency of that camera)",
-    )
-    parser.add_argument(
-        "--camera-effects",
-        choices=sorted(CAMERA_EFFECTS),
-        default="rig",
-        help="twin camera image imperfections: 'clean' (none), 'rig' (the nominal rig camera: "
-        "mild noise, 4 ms blur, lighting drift; default) or 'noisy' (strong noise, 8 ms blur, "
-        "lighting changes, clutter)",
+        "--camera-effects", choices=sorted(CAMERA_EFFECTS), default="rig", help="twin camera imperfections (rig)"
     )
     parser.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
     parser.add_argument("--calibration", metavar="JSON", help="with --camera: a saved AffineCalibration")
-    parser.add_argument(
-        "--max-blind-ms",
-        type=float,
-        default=300.0,
-        help="stop when the camera has not corrected the estimate for this long [ms] (300)",
-    )
-    parser.add_argument(
-        "--start",
-        choices=("hanging", "upright"),
-        default="hanging",
-        help="twin: start hanging (default) or near upright (held until the first command)",
-    )
+    parser.add_argument("--max-blind-ms", type=float, default=300.0, help="longest time without a camera fix [ms]")
+    parser.add_argument("--start", choices=("hanging", "upright"), default="hanging", help="twin: start (hanging)")
     parser.add_argument("--tilt", type=float, default=0.1, help="twin, --start upright: initial tilt [rad] (0.1)")
-    parser.add_argument(
-        "--start-noise",
-        type=float,
-        default=0.05,
-        help="twin: uniform start noise of the hub angle [rad] and rate [rad/s] (0.05)",
-    )
+    parser.add_argument("--start-noise", type=float, default=0.05, help="twin: uniform start noise [rad, rad/s]")
     parser.add_argument("--seed", type=int, default=0, help="twin: seed of the start noise and the camera noise")
     parser.add_argument("--latency-ms", type=float, default=2.0, help="twin: one-way link latency [ms] (2)")
     parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (4096)")
@@ -98,13 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--n-links", type=int, default=None, help="PRB links of the model (default: the run folder's, else 4)"
     )
     parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
-    parser.add_argument(
-        "--pid-gains",
-        type=float,
-        nargs=3,
-        metavar=("KP", "KI", "KD"),
-        help="pid: gains [N m/rad, N m/(rad s), N m s/rad] (default: tuned on the model)",
-    )
+    parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"), help="pid: gains (tuned)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)

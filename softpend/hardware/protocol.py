@@ -245,20 +245,8 @@ class DeviceSession:
                 self.command_nm = 0.0
                 self.last_cmd_us = None
                 self.stopped = False
-                replies.append(
-                    encode_message(
-                        MSG_HELLO_ACK,
-                        seq,
-                        (
-                            PROTOCOL_VERSION,
-                            values[1],
-                            self.counts_per_rev,
-                            self.torque_limit_nm,
-                            self.watchdog_ms,
-                            self.state_rate_hz,
-                        ),
-                    )
-                )
+                ack = (PROTOCOL_VERSION, values[1], self.counts_per_rev, self.torque_limit_nm, self.watchdog_ms)
+                replies.append(encode_message(MSG_HELLO_ACK, seq, ack + (self.state_rate_hz,)))
             elif not self.session_open:
                 replies.append(encode_message(MSG_ERROR, seq, (ERR_NO_SESSION,)))
             elif msg_type == MSG_TORQUE:

@@ -155,7 +155,7 @@ def run_twin_session(
     )
     for name in _OUTPUTS:
         outputs.done(workdir / name)
-    files = [paths[name] for name in ("motor_log.csv", "truth_log.csv", "camera.avi", "camera.csv", "rig_dataset.npz")]
+    files = (paths["motor_log.csv"], paths["truth_log.csv"], video, camera_csv, paths["rig_dataset.npz"])
     return TwinSession(workdir, *files, loop, sync, dataset, clock_offset_s, emulator_stats)
 
 
@@ -252,17 +252,13 @@ def compare_with_simulator_model(
         progress=progress,
         plant=plant,
     )
-    fits = {}
-    for name, data in (("twin", rig_dataset), ("sim", sim_train)):
-        fits[name] = fit_dynamics_model(
-            data,
-            information="limited",
-            history=history,
-            max_epochs=max_epochs,
-            patience=20,
-            seed=seed,
-            progress=progress,
-        )
+    settings: dict[str, Any] = dict(
+        information="limited", history=history, max_epochs=max_epochs, patience=20, seed=seed
+    )
+    fits = {
+        name: fit_dynamics_model(data, **settings, progress=progress)
+        for name, data in (("twin", rig_dataset), ("sim", sim_train))
+    }
     errors = {name: rollout_errors(fit.model, sim_test, horizon_s=horizon_s) for name, fit in fits.items()}
     twin = errors["twin"].at(horizon_s)
     sim = errors["sim"].at(horizon_s)

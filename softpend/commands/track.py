@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.commands.options import MAX_SESSION_S, check_numbers
     from softpend.io.outputs import Outputs
     from softpend.vision.calibration import AffineCalibration, read_markers
-    from softpend.vision.camera import DEFAULT_MARKERS_M, MAX_FPS
+    from softpend.vision.camera import MAX_FPS
     from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live, track_video
     from softpend.vision.tracker import TipTracker
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if args.fps is not None:
             raise ValueError("--fps is for video files; a live camera stamps each frame when it arrives")
-        frame_tracker = FrameTracker(tracker, calibration, markers if markers is not None else DEFAULT_MARKERS_M)
+        frame_tracker = FrameTracker(tracker, calibration, markers)
         source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0, frame_tracker=frame_tracker)
         try:
             rows = track_live(source, args.out, duration_s=args.duration, track_hub=not args.no_hub, progress=True)

@@ -121,7 +121,7 @@ def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) ->
         if f.name in convert:
             value = convert[f.name](value)
         elif dataclasses.is_dataclass(f.default_factory):
-            value = dataclass_from_data(f.default_factory, value, source)  # type: ignore[arg-type]
+            value = dataclass_from_data(f.default_factory, value, source)
         elif isinstance(value, list):
             value = tuple(value)
         values[f.name] = value

@@ -19,16 +19,15 @@ from softpend.vision.tracker import GREEN_HSV, find_blobs
 MAX_CALIBRATION_BYTES = 1 << 20
 
 
-def points_array(name: str, value, n_min: int = 1, n_max: Optional[int] = None) -> np.ndarray:
+def points_array(name: str, value, n_min: int = 3, n_max: int = 6) -> np.ndarray:
     """``value`` as a finite ``(n, 2)`` float array with ``n_min <= n <= n_max``, else ``ValueError`` naming
     ``name``."""
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be a list of (x, y) number pairs, got {_short(value)}") from None
-    n_max_text = "" if n_max is None else f" to {n_max}"
-    if array.ndim != 2 or array.shape[1] != 2 or not n_min <= len(array) <= (n_max or len(array)):
-        raise ValueError(f"{name} must be {n_min}{n_max_text} (x, y) pairs, got shape {array.shape}")
+    if array.ndim != 2 or array.shape[1] != 2 or not n_min <= len(array) <= n_max:
+        raise ValueError(f"{name} must be {n_min} to {n_max} (x, y) pairs, got shape {array.shape}")
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} must hold finite numbers, got {_short(value)}")
     return array
@@ -53,7 +52,7 @@ def read_markers(name: str, text: Optional[str]) -> Optional[list]:
             raise ValueError(f"{name} is not a valid JSON list: {exc}") from None
     else:
         markers = read_json_file(name, text, MAX_CALIBRATION_BYTES)
-    return points_array(name, markers, 3, 6).tolist()
+    return points_array(name, markers).tolist()
 
 
 def _short(value, limit: int = 120) -> str:
@@ -153,7 +152,7 @@ class AffineCalibration:
 def calibrate_from_markers(frame_bgr: np.ndarray, marker_positions_m: Sequence[Sequence[float]]) -> AffineCalibration:
     """Find the 3 to 6 green markers at ``marker_positions_m`` [m] in ``frame_bgr`` and fit the pixel -> metre
     map: the handedness-preserving marker correspondence of smallest residual."""
-    known = points_array("marker_positions_m", marker_positions_m, 3, 6)
+    known = points_array("marker_positions_m", marker_positions_m)
     blobs = find_blobs(frame_bgr, GREEN_HSV, 10.0)[: len(known)]
     if len(blobs) < len(known):
         raise ValueError(f"marker_positions_m lists {len(known)} markers but only {len(blobs)} are visible")

@@ -12,8 +12,8 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from softpend.checks import int_at_least, non_negative, positive
-from softpend.vision.calibration import AffineCalibration, points_array, read_json_file
+from softpend.checks import finite, int_at_least, non_negative, positive
+from softpend.vision.calibration import points_array, read_json_file
 
 #: Highest frame rate accepted [1/s].
 MAX_FPS = 1e6
@@ -69,18 +69,11 @@ class CameraModel:
         m = self.metre_to_pixel()
         return np.asarray(points_m, dtype=float) @ m[:, :2].T + m[:, 2]
 
-    def calibration(self) -> AffineCalibration:
-        """The exact pixel -> metre map of this camera."""
-        m = self.metre_to_pixel()
-        linear = np.linalg.inv(m[:, :2])
-        return AffineCalibration(np.column_stack([linear, -linear @ m[:, 2]]))
-
 
 @dataclass(frozen=True)
 class CameraEffects:
-    """Imperfections of the synthetic camera (all off by default): sensor noise [8-bit DN], exposure [s]
-    averaged over ``blur_subframes`` renders, a global gain ``1 + a sin(2 pi f t)``, a brightness gradient
-    across the image, and background clutter (with blue specks below the tracker's minimum area)."""
+    """Imperfections of the synthetic camera (all off by default): sensor noise [DN], exposure blur [s], a gain
+    ``1 + a sin(2 pi f t)``, a brightness gradient, and background clutter."""
 
     noise_std_dn: float = 0.0
     exposure_s: float = 0.0
@@ -281,11 +274,8 @@ def render_video(
     drop_dot_frames: Sequence[int] = (),
     progress: bool = False,
 ) -> RenderedClip:
-    """Render a trajectory (see :meth:`SyntheticCamera.frames`) to an MJPG video and a sidecar ``<path>.json``.
-
-    A frame exposed until scene time ``t`` is stamped ``t + clock_offset_s`` plus Gaussian jitter of
-    ``timestamp_jitter_s``; ``drop_dot_frames`` are frames with the dot hidden (an occlusion).
-    """
+    """Render a trajectory (:meth:`SyntheticCamera.frames`) to an MJPG video and a sidecar ``<path>.json``; a frame
+    exposed until ``t`` is stamped ``t + clock_offset_s`` (+ jitter), ``drop_dot_frames`` have the dot hidden."""
     path = Path(path)
     check_fps("fps", fps)
     times_s = np.asarray(times_s, dtype=float)
@@ -341,10 +331,10 @@ def _hide_dot(frame: np.ndarray, tip_px: np.ndarray, camera: SyntheticCamera) ->
 
 
 def read_sidecar(video_path: str | Path) -> dict:
-    """The sidecar JSON of a video, checked by :func:`check_sidecar` (``FileNotFoundError`` without one)."""
+    """The sidecar JSON of a video checked by :func:`check_sidecar` (``{}`` without one)."""
     path = Path(str(video_path) + ".json")
     if not path.exists():
-        raise FileNotFoundError(f"no camera sidecar {path} (pass --markers and --fps instead)")
+        return {}
     data = read_json_file("sidecar", path, MAX_SIDECAR_BYTES)
     try:
         return check_sidecar(data)
@@ -361,13 +351,9 @@ def check_sidecar(data) -> dict:
     if out.get("fps") is not None:
         out["fps"] = check_fps("fps", out["fps"])
     if out.get("timestamps_s") is not None:
-        stamps = out["timestamps_s"]
-        ok = isinstance(stamps, list) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in stamps
-        )
-        if not ok:
+        if not isinstance(out["timestamps_s"], list):
             raise ValueError("timestamps_s must be a list of finite numbers [s]")
-        out["timestamps_s"] = [float(v) for v in stamps]
+        out["timestamps_s"] = [finite("timestamps_s", v) for v in out["timestamps_s"]]
     if out.get("markers_m") is not None:
-        out["markers_m"] = points_array("markers_m", out["markers_m"], 3, 6).tolist()
+        out["markers_m"] = points_array("markers_m", out["markers_m"]).tolist()
     return out

@@ -62,11 +62,11 @@ class FrameTracker:
         self,
         tracker: Optional[TipTracker] = None,
         calibration: Optional[AffineCalibration] = None,
-        markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M,
+        markers_m: Optional[Sequence[Sequence[float]]] = None,
     ) -> None:
         self.tracker = tracker if tracker is not None else TipTracker()
         self.calibration = calibration
-        self.markers_m = markers_m
+        self.markers_m = markers_m if markers_m is not None else DEFAULT_MARKERS_M
 
     def __call__(self, frame_bgr: np.ndarray) -> tuple[float, float, Detection]:
         """``(x_m, y_m, detection)`` of one BGR frame (NaN positions when lost)."""

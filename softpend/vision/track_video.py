@@ -31,9 +31,9 @@ def hub_marker_tracker(calibration: AffineCalibration, frame_shape: tuple[int, .
     """A tracker of the magenta hub marker that searches only within 6 cm of the hub axis."""
     centre = calibration.to_pixels(np.zeros(2))
     r = 0.06 / calibration.metres_per_pixel
-    low = [max(int(c - r), 0) for c in centre]
-    high = [min(int(c + r) + 1, n) for c, n in zip(centre, (frame_shape[1], frame_shape[0]))]
-    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=(*low, *high))
+    x0, y0 = (max(int(c - r), 0) for c in centre)
+    x1, y1 = (min(int(c + r) + 1, n) for c, n in zip(centre, (frame_shape[1], frame_shape[0])))
+    return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=(x0, y0, x1, y1))
 
 
 def _hub_angle(
@@ -84,14 +84,8 @@ def track_video(
     track_hub: bool = True,
     progress: bool = False,
 ) -> np.ndarray:
-    """Track every frame of a video file into ``out_csv`` (a :class:`SampleLog`), with the magenta hub marker
-    if ``track_hub``.
-
-    Missing timestamps, frame rate and markers come from the video's sidecar ``<video>.json`` when there is one;
-    the calibration is fitted on the first frame from the markers unless given.  Every input is checked before
-    ``out_csv`` is touched, and the rows go to a temporary file that replaces ``out_csv`` only once the whole
-    video is tracked.
-    """
+    """Track every frame of a video file (and the hub marker if ``track_hub``) into ``out_csv``, replaced only
+    once the whole video is tracked; missing timestamps, frame rate and markers come from its sidecar."""
     video = Path(video)
     out_csv = Path(out_csv)
     if fps is not None:
@@ -101,7 +95,7 @@ def track_video(
         raise FileNotFoundError(f"video not found: {video}")
     if not video.is_file():
         raise ValueError(f"video {video} is not a file")
-    sidecar = read_sidecar(video) if Path(str(video) + ".json").exists() else {}
+    sidecar = read_sidecar(video)
     if marker_positions_m is None:
         marker_positions_m = sidecar.get("markers_m")
     if timestamps_s is None:
@@ -189,12 +183,8 @@ def _replacing(out_csv: Path, metadata: dict) -> Iterator[SampleLog]:
 def track_live(
     source, out_csv: str | Path, duration_s: Optional[float] = None, track_hub: bool = True, progress: bool = False
 ) -> np.ndarray:
-    """Track a live camera (a :class:`~softpend.vision.tip_source.ThreadedTipSource`, not yet started) into
-    ``out_csv`` until ``duration_s`` of host time has passed, the source ends, or Ctrl-C.
-
-    ``camera_time_s`` is each frame's capture time on the host clock.  The rows go to a temporary file that
-    replaces ``out_csv`` when tracking ends (also on Ctrl-C); on an error ``out_csv`` is left as it was.
-    """
+    """Track a live camera (not yet started) into ``out_csv`` (host capture times), replaced when ``duration_s``
+    has passed, the source ends or on Ctrl-C; on an error ``out_csv`` is left as it was."""
     if not isinstance(source, ThreadedTipSource):
         raise ValueError(f"source must be a ThreadedTipSource, got {type(source).__name__}")
     optional_positive("duration_s", duration_s)
@@ -217,15 +207,12 @@ def track_live(
 
     source.on_frame = on_frame
     bar = _progress(None) if progress else None
-    written = 0
     try:
         with _replacing(out_csv, {"camera": getattr(source, "name", "camera")}) as log:
 
             def flush() -> None:
-                nonlocal written
-                while written < len(rows):
-                    log.append(rows[written])
-                    written += 1
+                for row in rows[log.rows_written :]:  # a snapshot: the camera thread appends meanwhile
+                    log.append(row)
 
             start = time.monotonic()
             source.start()
@@ -234,7 +221,7 @@ def track_live(
                     source.poll()  # raises the camera thread's error
                     flush()
                     if bar is not None:
-                        bar.update(written - bar.n)
+                        bar.update(log.rows_written - bar.n)
                     if source.finished:
                         break
                     time.sleep(0.01)

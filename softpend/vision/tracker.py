@@ -118,13 +118,8 @@ def _shifted(detection: Detection, x_off: int, y_off: int) -> Detection:
 
 
 class TipTracker:
-    """Track the blue tip dot in camera frames (Algorithm 1).
-
-    A blob is the dot if its area is at least ``min_area_px`` [px^2] and at most ``max_area_fraction`` of the
-    frame.  After a found dot the next frame is searched first within
-    ``search_radius_px`` of it (None: always the whole frame); ``region_px`` ``(x0, y0, x1, y1)`` restricts
-    every search to a rectangle.
-    """
+    """Track the blue tip dot (Algorithm 1): a blob of ``min_area_px`` [px^2] to ``max_area_fraction`` of the frame,
+    searched first within ``search_radius_px`` of the last dot, only ever inside ``region_px`` if given."""
 
     def __init__(
         self,

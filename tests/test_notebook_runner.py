@@ -375,13 +375,14 @@ def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_p
 def test_data_files_enter_the_key_of_the_notebooks_whose_code_reads_them(tmp_path, folder, name):
     """softpend.study.records reads book/records/, softpend.study.presets book/hparams/: editing one changes the
     hashes that go into the key of every notebook using that code."""
-    from softpend.study.book import BookLayout, _data_hashes
+    from softpend.study.book import _file_hashes
 
-    (tmp_path / "book" / folder).mkdir(parents=True)
-    layout = BookLayout(tmp_path)
-    assert _data_hashes(layout, folder) == {}
-    data = tmp_path / "book" / folder / name
+    path = tmp_path / "book" / folder
+    assert _file_hashes(path, f"book/{folder}") == {}  # absent
+    path.mkdir(parents=True)
+    assert _file_hashes(path, f"book/{folder}") == {}
+    data = path / name
     data.write_text("a: []\n")
-    first = _data_hashes(layout, folder)
+    first = _file_hashes(path, f"book/{folder}")
     data.write_text("a: [1]\n")
-    assert set(first) == {f"book/{folder}/{name}"} and _data_hashes(layout, folder) != first
+    assert set(first) == {f"book/{folder}/{name}"} and _file_hashes(path, f"book/{folder}") != first

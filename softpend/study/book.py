@@ -1,6 +1,5 @@
-"""``softpend book``: execute the notebooks of ``_toc.yml`` with papermill under a profile of
-``book/profiles.yml`` into ``book/_generated/``, cached by source, parameters and the ``softpend`` code they use;
-write the execution page; build the HTML with Jupyter Book."""
+"""``softpend book``: execute the notebooks of ``_toc.yml`` with papermill under a profile of ``book/profiles.yml``,
+cached by source, parameters and the ``softpend`` code they use; write the execution page; build the HTML."""
 
 from __future__ import annotations
 
@@ -18,21 +17,20 @@ import sys
 import tempfile
 import time
 import tokenize
+from collections import namedtuple
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
 
-from softpend.io.reading import MAX_CONFIG_BYTES, read_text_checked, read_yaml_checked, yaml_line
+from softpend.io.reading import MAX_CONFIG_BYTES, read_json_object, read_text_checked, read_yaml_checked, yaml_line
 
 DEFAULT_PROFILE = "full"
 GENERATED_PREFIX = "book/_generated/"
-#: The toc entry under :data:`GENERATED_PREFIX` that the runner writes (not a notebook).
-EXECUTION_PAGE = "execution"
-#: Bump to invalidate every cached notebook.
-_CACHE_VERSION = "3"
-#: The keys of a notebook's front matter under ``softpend:``.
-FRONT_MATTER_KEYS = ("after", "book_runs")
+EXECUTION_PAGE = "execution"  # the toc entry under GENERATED_PREFIX that the runner writes (not a notebook)
+_CACHE_VERSION = "3"  # bump to invalidate every cached notebook
+FRONT_MATTER_KEYS = ("after", "book_runs")  # a notebook's front matter under ``softpend:``
+DATA_SUFFIXES = (".csv", ".json", ".npy", ".npz", ".toml", ".txt", ".yaml", ".yml")  # the package's data files
 _KERNEL_ARGUMENTS = [
     "--InlineBackend.figure_formats=png",
     "--IPKernelApp.log_level=ERROR",
@@ -58,9 +56,9 @@ class BookLayout:
     @classmethod
     def at(cls, root: Path | str = ".") -> "BookLayout":
         layout = cls(Path(root).resolve())
-        if (layout.root / "_toc.yml").exists() and not (layout.root / "_toc.yml").is_file():
-            raise ValueError(f"{layout.root / '_toc.yml'} is not a regular file")
-        if not (layout.root / "_toc.yml").is_file():
+        if layout.toc_path.exists() and not layout.toc_path.is_file():
+            raise ValueError(f"{layout.toc_path} is not a regular file")
+        if not layout.toc_path.is_file():
             raise FileNotFoundError(f"no _toc.yml in {layout.root} (run from the project root or pass --root)")
         return layout
 
@@ -81,54 +79,39 @@ class BookLayout:
         return self.generated_dir / f"{name}.sha256"
 
 
-@dataclass(frozen=True)
-class NotebookRun:
-    """One notebook of :func:`run_notebooks`: ``status`` is ``"executed"`` or ``"cached"``."""
-
-    name: str
-    status: str
-    seconds: float
-    output_path: Path
+#: One notebook of :func:`run_notebooks`: ``status`` is ``"executed"`` or ``"cached"``.
+NotebookRun = namedtuple("NotebookRun", "name status seconds output_path")
 
 
-# --------------------------------------------------------------------------- configuration
 def _shape_error(path: Path | str, node: Any, key: Any, expected: str, got: Any) -> ValueError:
     kind = "nothing" if got is None else f"{type(got).__name__.removeprefix('Line').lower()} {got!r}"[:80]
     return ValueError(f"{path}, line {yaml_line(node, key)}: expected {expected}, got {kind}")
 
 
-def _check_toc(path: Path | str, toc: Any) -> None:
-    """``_toc.yml`` has the shape jupyter-book reads (a mapping with ``root``, lists of mappings, strings)."""
+def toc_notebooks(toc_path: Path | str) -> list[str]:
+    """Names of the executed notebooks of a ``_toc.yml`` (entries under ``book/_generated/``), in reading order;
+    ``ValueError`` unless it has the shape jupyter-book reads (a mapping with ``root``, lists of mappings)."""
+    toc, entries = read_yaml_checked(Path(toc_path), "table of contents", lines=True), list[str]()
     if not isinstance(toc, dict):
-        raise _shape_error(path, toc, None, "a mapping with format, root and parts or chapters", toc)
+        raise _shape_error(toc_path, toc, None, "a mapping with format, root and parts or chapters", toc)
     if "root" not in toc:
-        raise ValueError(f"{path}, line {yaml_line(toc)}: expected a 'root' entry (the book's first page)")
+        raise ValueError(f"{toc_path}, line {yaml_line(toc)}: expected a 'root' entry (the book's first page)")
 
     def walk(node: dict) -> None:
         for key, value in node.items():
             if key in ("file", "root", "caption", "format", "title", "url") and not isinstance(value, str):
-                raise _shape_error(path, node, key, f"'{key}' to be a string", value)
+                raise _shape_error(toc_path, node, key, f"'{key}' to be a string", value)
+            entries.extend([value.removesuffix(".ipynb")] if key in ("file", "root") else [])
             if key in ("parts", "chapters", "sections") and value is not None:
                 if not isinstance(value, list):
-                    raise _shape_error(path, node, key, f"'{key}' to be a list of entries", value)
+                    raise _shape_error(toc_path, node, key, f"'{key}' to be a list of entries", value)
                 for index, entry in enumerate(value):
                     if not isinstance(entry, dict):
-                        raise _shape_error(path, value, index, f"each of '{key}' to be a mapping (file: ...)", entry)
+                        expected = f"each of '{key}' to be a mapping (file: ...)"
+                        raise _shape_error(toc_path, value, index, expected, entry)
                     walk(entry)
 
     walk(toc)
-
-
-def toc_notebooks(toc_path: Path | str) -> list[str]:
-    """Names of the executed notebooks of a ``_toc.yml`` (entries under ``book/_generated/``), in reading order."""
-
-    def files(node: Any) -> Iterable[str]:
-        for key, value in node.items() if isinstance(node, dict) else enumerate(node if isinstance(node, list) else []):
-            yield from [value] if key in ("file", "root") and isinstance(value, str) else files(value)
-
-    toc = read_yaml_checked(Path(toc_path), "table of contents", lines=True)
-    _check_toc(toc_path, toc)
-    entries = [entry.removesuffix(".ipynb") for entry in files(toc)]
     names = [e[len(GENERATED_PREFIX) :] for e in entries if e.startswith(GENERATED_PREFIX)]
     names = [name for name in names if name != EXECUTION_PAGE]
     if duplicates := sorted({name for name in names if names.count(name) > 1}):
@@ -176,8 +159,7 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
 
     if _parameters_cell(nbformat.read(str(notebook_path), as_version=4)) is None:
         raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
-    declared = papermill.inspect_notebook(str(notebook_path))
-    if unknown := sorted(set(parameters) - set(declared)):
+    if unknown := sorted(set(parameters) - set(declared := papermill.inspect_notebook(str(notebook_path)))):
         raise ValueError(
             f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell "
             f"(it defines {sorted(declared)})"
@@ -208,21 +190,12 @@ def execution_order(names: Sequence[str], after: Mapping[str, Sequence[str]]) ->
     return done
 
 
-# --------------------------------------------------------------------------- cache
-#: Suffixes of the package's data files (inputs of its code).
-DATA_SUFFIXES = (".csv", ".json", ".npy", ".npz", ".toml", ".txt", ".yaml", ".yml")
-
-
 def _drop_docstrings(tree: ast.AST) -> ast.AST:
     """Remove every bare string statement from ``tree``; an emptied body becomes ``pass``."""
+    is_text = lambda s: isinstance(s, ast.Expr) and isinstance(getattr(s.value, "value", None), str)  # noqa: E731
     for node in ast.walk(tree):
-        body = getattr(node, "body", None)
-        if isinstance(body, list):
-            kept = [
-                s for s in body if not (isinstance(s, ast.Expr) and isinstance(getattr(s.value, "value", None), str))
-            ]
-            if len(kept) != len(body):
-                setattr(node, "body", kept or [ast.Pass()])
+        if isinstance(body := getattr(node, "body", None), list) and any(map(is_text, body)):
+            setattr(node, "body", [s for s in body if not is_text(s)] or [ast.Pass()])
     return tree
 
 
@@ -239,9 +212,9 @@ def _parse_cell(source: str) -> Optional[ast.Module]:
 
 
 class PackageCode:
-    """The modules of a package (default ``softpend``) read with ``ast``: the closure of a piece of code's imports
-    (anywhere, relative ones resolved, parent packages included, string constants naming a module or an entry
-    point ``"pkg.a:Name"``) and a hash of each module's code without docstrings and comments."""
+    """The modules of a package (default ``softpend``) read with ``ast``: the closure of some code's imports
+    (relative ones resolved, parent packages included, strings naming a module or an entry point ``"pkg.a:Name"``)
+    and a hash of each module's code without docstrings and comments."""
 
     def __init__(self, package_root: Path | str | None = None) -> None:
         self.root = Path(package_root or Path(__file__).resolve().parents[1]).resolve()
@@ -309,26 +282,20 @@ class PackageCode:
     def code_hashes(self, code_cells: Iterable[str]) -> dict[str, str]:
         """The hash of each module the code uses and of each data file of the package."""
         hashes = {module: self._module(module)[0] for module in sorted(self.closure(code_cells))}
-        data = [p for p in sorted(self.root.rglob("*")) if p.suffix in DATA_SUFFIXES and "__pycache__" not in p.parts]
-        return hashes | _file_hashes(self.root, self.name, data)
+        return hashes | _file_hashes(self.root, self.name, DATA_SUFFIXES)
 
 
-def _file_hashes(folder: Path, prefix: str, paths: Iterable[Path]) -> dict[str, str]:
+def _file_hashes(folder: Path, prefix: str, suffixes: Sequence[str] = ()) -> dict[str, str]:
+    """SHA-256 of each file under ``folder`` (ending in one of ``suffixes`` if given) as ``prefix/relative path``."""
     return {
         f"{prefix}/{path.relative_to(folder).as_posix()}": hashlib.sha256(path.read_bytes()).hexdigest()
-        for path in paths
-        if path.is_file()
+        for path in (sorted(folder.rglob("*")) if folder.is_dir() else [])
+        if path.is_file() and "__pycache__" not in path.parts and (not suffixes or path.suffix in suffixes)
     }
 
 
 def code_cells(nb) -> list[str]:
     return [cell.source for cell in nb.cells if cell.cell_type == "code"]
-
-
-def _data_hashes(layout: BookLayout, folder_name: str) -> dict[str, str]:
-    """SHA-256 of every file under ``book/<folder_name>/``."""
-    folder = layout.root / "book" / folder_name
-    return _file_hashes(folder, f"book/{folder_name}", sorted(folder.rglob("*"))) if folder.is_dir() else {}
 
 
 def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[str, str], after: Any = None) -> str:
@@ -338,14 +305,8 @@ def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[st
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
 
 
-# --------------------------------------------------------------------------- "Rerun this figure"
-#: Units read from a parameter name's suffix (a ``[unit]`` in the line's comment comes first).
-UNIT_SUFFIXES = tuple(
-    tuple(pair.split("="))
-    for pair in "_rad_s=rad/s,_nm=N m,_ms=ms,_mm=mm,_rad=rad,_deg=deg,_hz=Hz,_fps=1/s,_kg=kg,_dn=DN,_s=s,_m=m".split(
-        ","
-    )
-)
+_UNITS = "_rad_s=rad/s,_nm=N m,_ms=ms,_mm=mm,_rad=rad,_deg=deg,_hz=Hz,_fps=1/s,_kg=kg,_dn=DN,_s=s,_m=m"
+UNIT_SUFFIXES = [pair.partition("=")[::2] for pair in _UNITS.split(",")]  # name suffix -> unit, first match counts
 
 
 def _value(value: Any) -> str:
@@ -355,7 +316,8 @@ def _value(value: Any) -> str:
 
 def notebook_parameters(cell: str) -> list[dict[str, Any]]:
     """The assignments of a ``parameters`` cell: ``name``, ``default`` (as ``--set`` reads it, or the expression
-    where the cell does not evaluate: ``evaluated`` False), ``unit`` and the line's ``comment``."""
+    where the cell does not evaluate: ``evaluated`` False), ``unit`` (``[unit]`` in the comment, else the name's
+    suffix) and the line's ``comment``."""
     tokens = tokenize.generate_tokens(io.StringIO(cell).readline)
     comments = {t.start[0]: t.string.lstrip("#").strip() for t in tokens if t.type == tokenize.COMMENT}
     namespace: dict[str, Any] = {}
@@ -365,19 +327,12 @@ def notebook_parameters(cell: str) -> list[dict[str, Any]]:
         namespace = {}
     found = []
     for node in ast.parse(cell).body:
-        if not (isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name)):
-            continue
-        name, comment = node.targets[0].id, comments.get(node.end_lineno or 0, "")
-        unit = re.search(r"\[([^\],'\"]+)\]", comment)  # "[N m]", not "[16, 16]"
-        found.append(
-            {
-                "name": name,
-                "evaluated": name in namespace,
-                "comment": comment,
-                "default": _value(namespace[name]) if name in namespace else ast.get_source_segment(cell, node.value),
-                "unit": unit.group(1) if unit else next((u for end, u in UNIT_SUFFIXES if name.endswith(end)), ""),
-            }
-        )
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            name, comment = node.targets[0].id, comments.get(node.end_lineno or 0, "")
+            bracket = re.search(r"\[([^\],'\"]+)\]", comment)  # "[N m]", not "[16, 16]"
+            unit = bracket.group(1) if bracket else next((u for end, u in UNIT_SUFFIXES if name.endswith(end)), "")
+            default = _value(namespace[name]) if name in namespace else ast.get_source_segment(cell, node.value)
+            found.append(dict(name=name, evaluated=name in namespace, comment=comment, default=default, unit=unit))
     return found
 
 
@@ -418,46 +373,6 @@ a string; add `--html` to rebuild the page):
 """
 
 
-# --------------------------------------------------------------------------- execution
-def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
-    """Execute one notebook (kernel in the project root) with its rerun section appended; returns its wall time."""
-    import nbformat
-    import papermill
-    from papermill.exceptions import PapermillExecutionError
-
-    output, key_path = layout.output_path(name), layout.key_path(name)
-    key_path.unlink(missing_ok=True)  # an interrupted or failed run must not look cached
-    start = time.perf_counter()
-    try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
-        options = dict(kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGUMENTS)
-        resources = {"metadata": {"path": str(layout.root)}}
-        papermill.execute_notebook(
-            str(plan["converted"]), str(output), plan["parameters"], resources=resources, **options
-        )
-    except PapermillExecutionError as exc:
-        cells, at = nbformat.read(str(plan["converted"]), as_version=4).cells, exc.cell_index
-        matches = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.source == exc.source]
-        index = min(matches, key=lambda i: abs(i - at)) if matches else -1
-        number = sum(c.cell_type == "code" for c in cells[: index + 1]) if matches else 0
-        first_line = next((line for line in exc.source.splitlines() if line.strip()), "")
-        message = (
-            f"notebook {name!r} failed in code cell {number} of notebooks/{name}.md (In [{exc.exec_count}], "
-            f"starting {first_line!r}): {exc.ename}: {exc.evalue}; the partially executed notebook is kept in {output}"
-        )
-        raise NotebookExecutionError(message, index, number, output) from None
-    seconds = time.perf_counter() - start
-    nb = nbformat.read(str(output), as_version=4)
-    nb.metadata["softpend"] = plan["record"]  # read back by the execution record
-    for cell in nb.cells:
-        tags = cell.get("metadata", {}).get("tags", [])
-        if "injected-parameters" in tags and "hide-input" not in tags:
-            cell.metadata["tags"] = [*tags, "hide-input"]
-    nb.cells.append(nbformat.v4.new_markdown_cell(plan["rerun"]))
-    nbformat.write(nb, str(output))
-    key_path.write_text(plan["key"] + "\n", encoding="utf-8")
-    return seconds
-
-
 def run_notebooks(
     root: Path | str = ".",
     profile: str = DEFAULT_PROFILE,
@@ -465,15 +380,12 @@ def run_notebooks(
     force: bool = False,
     progress: bool = True,
     overrides: Optional[dict[str, Any]] = None,
-    workers: int = 2,
 ) -> list[NotebookRun]:
-    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``,
-    for every notebook that defines them), ``workers`` at a time, and write the execution page.  Every
-    ``ValueError`` comes before anything executes; a failing notebook raises :class:`NotebookExecutionError`
-    once the running ones have finished."""
+    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``, in
+    every notebook that defines them), two at a time, and write the execution page.  Every ``ValueError`` comes
+    before anything executes; a failing notebook raises :class:`NotebookExecutionError` once the running ones end."""
     layout = BookLayout.at(root)
-    toc = toc_notebooks(layout.toc_path)
-    profiles = load_profiles(layout.profiles_path)
+    toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
     if profile not in profiles:
         raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
     for what, listed in ((f"profile {profile!r} names", profiles[profile]), ("--only names", only or [])):
@@ -484,17 +396,16 @@ def run_notebooks(
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
         plans, used = _plan(layout, names, toc, profile, profiles[profile], dict(overrides or {}), Path(scratch))
         order = execution_order(names, {name: plan["after"] for name, plan in plans.items()})
-        cached = {}
         for name in order:  # upstream keys: this run's, else the key files on disk
-            after = plans[name]["after"]
-            upstream = {dep: plans[dep]["key"] if dep in plans else _key_on_disk(layout, dep) for dep in after}
+            plan = plans[name]
+            upstream = {dep: plans[dep]["key"] if dep in plans else _key_on_disk(layout, dep) for dep in plan["after"]}
             source = _source_text(layout.source_path(name))
-            plans[name]["key"] = key = cache_key(source, plans[name]["parameters"], plans[name]["hashes"], upstream)
-            cached[name] = not force and layout.output_path(name).is_file() and _key_on_disk(layout, name) == key
-        seconds = _execute(layout, order, plans, cached, progress, max(1, int(workers)))
+            plan["key"] = key = cache_key(source, plan["parameters"], plan["hashes"], upstream)
+            cached = not force and layout.output_path(name).is_file() and _key_on_disk(layout, name) == key
+            plan["status"] = "cached" if cached else "executed"
+        seconds = _execute(layout, order, plans, progress)
     runs = [
-        NotebookRun(name, "cached" if cached[name] else "executed", seconds.get(name, 0.0), layout.output_path(name))
-        for name in order
+        NotebookRun(name, plans[name]["status"], seconds.get(name, 0.0), layout.output_path(name)) for name in order
     ]
     write_execution_record(layout, profile, runs, used)
     return runs
@@ -506,7 +417,7 @@ def _key_on_disk(layout: BookLayout, name: str) -> str:
 
 
 def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict, overrides: dict, scratch: Path):
-    """Check every notebook and build its plan (parameters, converted notebook, code hashes, rerun section);
+    """Check every notebook and plan its run (parameters, converted notebook, code hashes, rerun section);
     returns the plans and the overrides used."""
     import nbformat
 
@@ -515,17 +426,16 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
         nb = read_notebook(layout.source_path(name))
         after = front_matter(nb, name, toc)["after"]
         parameters = dict(given.get(name, {}))
-        converted = scratch / f"{name}.ipynb"
-        nbformat.write(nb, str(converted))
+        nbformat.write(nb, str(converted := scratch / f"{name}.ipynb"))
         declared = check_parameters(converted, name, parameters)
         applied = {key: value for key, value in overrides.items() if key in declared}
         record = {"profile": profile, "parameters": dict(parameters), "overrides": applied}
-        used.update(applied)
-        parameters.update(applied)
+        used |= applied
+        parameters |= applied
         hashes = package_code.code_hashes(code_cells(nb))
-        for module, folder_name in (("softpend.study.records", "records"), ("softpend.study.presets", "hparams")):
+        for module, folder in (("softpend.study.records", "records"), ("softpend.study.presets", "hparams")):
             if module in hashes:  # the book's data files that this code reads
-                hashes.update(_data_hashes(layout, folder_name))
+                hashes |= _file_hashes(layout.root / "book" / folder, f"book/{folder}")
         kernel = nb.metadata.get("kernelspec", {}).get("name", "python3")
         rerun = rerun_section(name, _parameters_cell(nb) or "", profile, parameters)
         plans[name] = dict(after=after, parameters=parameters, converted=converted, hashes=hashes, record=record)
@@ -536,15 +446,14 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
 
 
 def _execute(
-    layout: BookLayout, order: Sequence[str], plans: dict, cached: dict, progress: bool, workers: int
+    layout: BookLayout, order: Sequence[str], plans: dict, progress: bool, workers: int = 2
 ) -> dict[str, float]:
-    """Execute the notebooks of ``order`` that are not cached, ``workers`` at a time, each once the selected
-    notebooks of its ``after`` have finished; after a failure nothing more starts and the first error is raised."""
+    """Execute the uncached notebooks of ``order``, ``workers`` at a time, each once the selected notebooks of its
+    ``after`` have finished; after a failure nothing more starts and the first error is raised."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
+    done = {name for name in order if plans[name]["status"] == "cached"}
+    pending, seconds, errors = [name for name in order if name not in done], dict[str, float](), list[BaseException]()
     running: dict[Future[float], str] = {}
-    errors: list[BaseException] = []
-    pending, seconds = [name for name in order if not cached[name]], {}
-    done = {name for name in order if cached[name]}
     for name in (name for name in order if name in done):
         say(f"{name}: up to date (cached)")
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="softpend-book") as pool:
@@ -570,7 +479,45 @@ def _execute(
     return seconds
 
 
-# --------------------------------------------------------------------------- execution page
+def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
+    """Execute one notebook (kernel in the project root) and append its rerun section; returns its wall time."""
+    import nbformat
+    import papermill
+    from papermill.exceptions import PapermillExecutionError
+
+    output, key_path = layout.output_path(name), layout.key_path(name)
+    key_path.unlink(missing_ok=True)  # an interrupted or failed run must not look cached
+    start = time.perf_counter()
+    try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
+        options = dict(kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGUMENTS)
+        resources = {"metadata": {"path": str(layout.root)}}
+        papermill.execute_notebook(
+            str(plan["converted"]), str(output), plan["parameters"], resources=resources, **options
+        )
+    except PapermillExecutionError as exc:
+        cells, at = nbformat.read(str(plan["converted"]), as_version=4).cells, exc.cell_index
+        matches = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.source == exc.source]
+        index = min(matches, key=lambda i: abs(i - at), default=-1)
+        number = sum(c.cell_type == "code" for c in cells[: index + 1])
+        first_line = next((line for line in exc.source.splitlines() if line.strip()), "")
+        message = (
+            f"notebook {name!r} failed in code cell {number} of notebooks/{name}.md (In [{exc.exec_count}], "
+            f"starting {first_line!r}): {exc.ename}: {exc.evalue}; the partially executed notebook is kept in {output}"
+        )
+        raise NotebookExecutionError(message, index, number, output) from None
+    seconds = time.perf_counter() - start
+    nb = nbformat.read(str(output), as_version=4)
+    nb.metadata["softpend"] = plan["record"]  # read back by the execution record
+    for cell in nb.cells:
+        tags = cell.get("metadata", {}).get("tags", [])
+        if "injected-parameters" in tags and "hide-input" not in tags:
+            cell.metadata["tags"] = [*tags, "hide-input"]
+    nb.cells.append(nbformat.v4.new_markdown_cell(plan["rerun"]))
+    nbformat.write(nb, str(output))
+    key_path.write_text(plan["key"] + "\n", encoding="utf-8")
+    return seconds
+
+
 def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     """The processor model (``/proc/cpuinfo``, else :mod:`platform`)."""
     first = cpuinfo.read_text().split("\n\n")[0] if cpuinfo.is_file() else ""
@@ -580,38 +527,40 @@ def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     return platform.processor() or platform.machine() or "-"
 
 
-def write_execution_record(
-    layout: BookLayout, profile: str, runs: Sequence[NotebookRun], overrides: dict[str, Any]
-) -> dict[str, Any]:
-    """Write and return the record of what produced ``book/_generated/`` (``execution.json``) and its page."""
+def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun], overrides: dict) -> None:
+    """Write the record of what produced ``book/_generated/`` (``execution.json``) and the execution page."""
     import datetime
 
     import nbformat
 
     from softpend.io.outputs import atomic_write, json_text
 
-    this_run, notebooks = {run.name: run for run in runs}, []
+    this_run, notebooks = {run.name: run.status for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
         lines = _source_text(layout.source_path(name)).splitlines()
         output = layout.output_path(name)
         meta = nbformat.read(str(output), as_version=4).metadata if output.is_file() else {}
-        papermill = meta.get("papermill", {})
-        title = next((line[2:].strip() for line in lines if line.startswith("# ")), name)
-        entry = {"name": name, "title": title, "this_run": this_run[name].status if name in this_run else "not run"}
+        papermill, title = (
+            meta.get("papermill", {}),
+            next((ln[2:].strip() for ln in lines if ln.startswith("# ")), name),
+        )
+        entry = {"name": name, "title": title, "this_run": this_run.get(name, "not run")}
         entry |= {"executed_s": papermill.get("duration"), "executed_at": papermill.get("end_time")}
         notebooks.append(entry | {"profile": meta.get("softpend", {}).get("profile")})
-    training = json.loads(layout.training_path.read_text()) if layout.training_path.is_file() else None
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     machine = {"processor": _processor(), "cpu_count": os.cpu_count(), "cpus_available": cpus}
     machine |= {"platform": platform.platform(), "python": platform.python_version()}
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    record = {"date": date, "profile": profile, "overrides": dict(overrides), "training": training}
-    record |= {"notebooks": notebooks, "machine": machine}
+    record = {"date": date, "profile": profile, "overrides": dict(overrides)}
+    record |= {
+        "training": read_json_object(layout.training_path, MAX_CONFIG_BYTES),
+        "notebooks": notebooks,
+        "machine": machine,
+    }
     with atomic_write(layout.record_path, "w") as handle:
         handle.write(json_text(record, indent=2) + "\n")
     with atomic_write(layout.execution_page_path, "w") as handle:
         handle.write(execution_page(record))
-    return record
 
 
 def execution_page(record: dict[str, Any]) -> str:
@@ -657,7 +606,6 @@ Sum of the last execution times: {sum(e["executed_s"] or 0.0 for e in record["no
 """
 
 
-# --------------------------------------------------------------------------- HTML
 def build_html(root: Path | str = ".", path_output: Optional[Path | str] = None, quiet: bool = False) -> Path:
     """``jupyter-book build`` (warnings as errors) of the executed notebooks; returns the HTML folder
     ``<path_output or root>/_build/html`` (``RuntimeError`` on failure)."""

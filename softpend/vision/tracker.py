@@ -65,28 +65,20 @@ _LOST = Detection(math.nan, math.nan, 0.0, True, None)
 
 
 def _validate_frame(frame_bgr: np.ndarray) -> None:
-    if (
-        not isinstance(frame_bgr, np.ndarray)
-        or frame_bgr.ndim != 3
-        or frame_bgr.shape[2] != 3
-        or frame_bgr.dtype != np.uint8
-    ):
-        shape = getattr(frame_bgr, "shape", None)
+    shape = getattr(frame_bgr, "shape", None)
+    if not isinstance(frame_bgr, np.ndarray) or frame_bgr.ndim != 3 or shape[2] != 3 or frame_bgr.dtype != np.uint8:
         dtype = getattr(frame_bgr, "dtype", type(frame_bgr).__name__)
         raise ValueError(f"frame_bgr must be an (H, W, 3) uint8 BGR image, got shape {shape} of {dtype}")
-    if min(frame_bgr.shape[:2]) < MIN_FRAME_SIDE_PX:
-        raise ValueError(
-            f"frame_bgr must be at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX} pixels, "
-            f"got {frame_bgr.shape[1]}x{frame_bgr.shape[0]}"
-        )
+    if min(shape[:2]) < MIN_FRAME_SIDE_PX:
+        side = MIN_FRAME_SIDE_PX
+        raise ValueError(f"frame_bgr must be at least {side}x{side} pixels, got {shape[1]}x{shape[0]}")
 
 
 def _blobs(blurred: np.ndarray, min_area_px: float) -> list[tuple[float, np.ndarray]]:
     _, binary = cv2.threshold(blurred, 127, 255, cv2.THRESH_BINARY)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    out = [(area, contour) for contour in contours if (area := cv2.contourArea(contour)) >= min_area_px]
-    out.sort(key=lambda item: -item[0])
-    return out
+    found = [(area, contour) for contour in contours if (area := cv2.contourArea(contour)) >= min_area_px]
+    return sorted(found, key=lambda item: -item[0])
 
 
 def _centroid(blurred: np.ndarray, contour: np.ndarray) -> tuple[float, float]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Optional
 
 import cv2
 import numpy as np
@@ -65,7 +65,7 @@ _LOST = Detection(math.nan, math.nan, 0.0, True, None)
 
 
 def _validate_frame(frame_bgr: np.ndarray) -> None:
-    shape = getattr(frame_bgr, "shape", None)
+    shape: Any = getattr(frame_bgr, "shape", None)
     if not isinstance(frame_bgr, np.ndarray) or frame_bgr.ndim != 3 or shape[2] != 3 or frame_bgr.dtype != np.uint8:
         dtype = getattr(frame_bgr, "dtype", type(frame_bgr).__name__)
         raise ValueError(f"frame_bgr must be an (H, W, 3) uint8 BGR image, got shape {shape} of {dtype}")

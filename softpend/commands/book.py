@@ -14,58 +14,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "book",
         help="execute the book's notebooks into book/_generated (and build the HTML with --html)",
-        description=(
-            "Execute the notebooks listed in _toc.yml (toc order, two at a time) with the parameters of a profile "
-            "in book/profiles.yml and write book/_generated/NAME.ipynb; up-to-date notebooks are skipped "
-            "(execution cache) unless --force. The training runs the notebooks read are trained beforehand by "
-            "`softpend sweep --book --profile PROFILE` (a notebook trains what is still missing itself)."
-        ),
+        description="Execute the notebooks of _toc.yml (toc order, two at a time) with the parameters of a profile "
+        "in book/profiles.yml into book/_generated/NAME.ipynb, skipping up-to-date ones unless --force. The runs "
+        "they read are trained beforehand by `softpend sweep --book --profile PROFILE` (else by the notebook).",
     )
-    parser.add_argument(
-        "--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)"
-    )
-    parser.add_argument(
-        "--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod"
-    )
+    add = parser.add_argument
+    add("--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)")
+    add("--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod")
     add_set_option(
         parser,
         dest="set",
-        help="set a parameter (VALUE parsed as JSON, else kept as a string) in every notebook that defines it, "
-        "on top of the profile; repeatable. Example: --set plant=beam regenerates the figure set on the "
-        "continuum beam",
+        help="set a parameter (VALUE as JSON, else a string) in every notebook that defines it, on top of the "
+        "profile; repeatable. Example: --set plant=beam regenerates the figure set on the continuum beam",
     )
-    parser.add_argument("--force", action="store_true", help="execute even if the cached output is up to date")
-    parser.add_argument(
-        "--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)"
-    )
-    parser.add_argument("--root", default=".", help="project root holding _toc.yml (default: current directory)")
-    parser.add_argument(
-        "--path-output",
-        default=None,
-        help="with --html: write the HTML to PATH/_build/html (default: ROOT/_build/html)",
-    )
+    add("--force", action="store_true", help="execute even if the cached output is up to date")
+    add("--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)")
+    add("--root", default=".", help="project root holding _toc.yml (default: current directory)")
+    add("--path-output", help="with --html: write the HTML to PATH/_build/html (default: ROOT/_build/html)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.study.book import NotebookExecutionError, build_html, run_notebooks
+    from softpend.study.book import build_html, run_notebooks
 
-    try:
-        overrides = dict(args.set)
-        runs = run_notebooks(args.root, profile=args.profile, only=args.only, force=args.force, overrides=overrides)
-    except NotebookExecutionError as exc:
+    try:  # a failing notebook (NotebookExecutionError) or jupyter-book build: one line, exit status 1
+        runs = run_notebooks(args.root, args.profile, args.only, args.force, overrides=dict(args.set))
+        executed = sum(run.status == "executed" for run in runs)
+        summary = f"{executed} notebook(s) executed, {len(runs) - executed} up to date"
+        print(f"[book] profile {args.profile!r}: {summary}", file=sys.stderr)
+        if args.html:
+            print(f"[book] HTML: {build_html(args.root, args.path_output) / 'index.html'}", file=sys.stderr)
+    except RuntimeError as exc:
         print(f"softpend book: error: {exc}", file=sys.stderr)
         return 1
-    executed = sum(run.status == "executed" for run in runs)
-    print(
-        f"[book] profile {args.profile!r}: {executed} notebook(s) executed, {len(runs) - executed} up to date",
-        file=sys.stderr,
-    )
-    if args.html:
-        try:
-            html_dir = build_html(args.root, args.path_output)
-        except RuntimeError as exc:
-            print(f"softpend book: error: {exc}", file=sys.stderr)
-            return 1
-        print(f"[book] HTML: {html_dir / 'index.html'}", file=sys.stderr)
     return 0

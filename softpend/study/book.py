@@ -4,6 +4,7 @@ cached by source, parameters and the ``softpend`` code they use; write the execu
 from __future__ import annotations
 
 import ast
+import contextlib
 import hashlib
 import io
 import json
@@ -28,10 +29,11 @@ from softpend.io.reading import MAX_CONFIG_BYTES, read_json_object, read_text_ch
 DEFAULT_PROFILE = "full"
 GENERATED_PREFIX = "book/_generated/"
 EXECUTION_PAGE = "execution"  # the toc entry under GENERATED_PREFIX that the runner writes (not a notebook)
+WORKERS = 2  # notebooks executing at once
 _CACHE_VERSION = "3"  # bump to invalidate every cached notebook
 FRONT_MATTER_KEYS = ("after", "book_runs")  # a notebook's front matter under ``softpend:``
 DATA_SUFFIXES = (".csv", ".json", ".npy", ".npz", ".toml", ".txt", ".yaml", ".yml")  # the package's data files
-_KERNEL_ARGUMENTS = [
+_KERNEL_ARGS = [
     "--InlineBackend.figure_formats=png",
     "--IPKernelApp.log_level=ERROR",
     "--IPKernelApp.exec_lines=__import__('warnings').filterwarnings('ignore', message='IProgress "
@@ -160,10 +162,8 @@ def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str,
     if _parameters_cell(nbformat.read(str(notebook_path), as_version=4)) is None:
         raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
     if unknown := sorted(set(parameters) - set(declared := papermill.inspect_notebook(str(notebook_path)))):
-        raise ValueError(
-            f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell "
-            f"(it defines {sorted(declared)})"
-        )
+        defined = f"(it defines {sorted(declared)})"
+        raise ValueError(f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell {defined}")
     return declared
 
 
@@ -204,10 +204,8 @@ def _parse_cell(source: str) -> Optional[ast.Module]:
     from IPython.core.inputtransformer2 import TransformerManager
 
     for text in (source, TransformerManager().transform_cell(source)):
-        try:
+        with contextlib.suppress(SyntaxError):
             return ast.parse(text)
-        except SyntaxError:
-            continue
     return None
 
 
@@ -245,23 +243,19 @@ class PackageCode:
         found: set[str] = set()
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
-                for alias in node.names:
-                    found |= self._with_parents(alias.name)
-            elif isinstance(node, ast.ImportFrom):
-                if node.level:
-                    if module is None:
-                        continue
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and (module or not node.level):
+                target = node.module or ""
+                if node.level and module:  # relative to the module's package
                     base = module.split(".")[: None if self.modules[module].name == "__init__.py" else -1]
-                    target = ".".join(base[: len(base) - (node.level - 1)] + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
-                found |= self._with_parents(target)
-                for alias in node.names:
-                    found |= self._with_parents(f"{target}.{alias.name}")
+                    target = ".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
+                targets = [target, *(f"{target}.{alias.name}" for alias in node.names)]
             elif isinstance(node, ast.Constant) and isinstance(node.value, str) and self.name in node.value:
-                found |= self._with_parents(node.value.strip()) if node.value.strip() in self.modules else set()
-                for match in self._entry_point.finditer(node.value):
-                    found |= self._with_parents(match.group(0))
+                targets = [match.group(0) for match in self._entry_point.finditer(node.value)]
+                targets += [node.value.strip()] if node.value.strip() in self.modules else []
+            else:
+                continue
+            found = found.union(*map(self._with_parents, targets))
         found.discard(module)
         return found
 
@@ -381,9 +375,9 @@ def run_notebooks(
     progress: bool = True,
     overrides: Optional[dict[str, Any]] = None,
 ) -> list[NotebookRun]:
-    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``, in
-    every notebook that defines them), two at a time, and write the execution page.  Every ``ValueError`` comes
-    before anything executes; a failing notebook raises :class:`NotebookExecutionError` once the running ones end."""
+    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``) and
+    write the execution page.  Every ``ValueError`` comes before anything executes; a failing notebook raises
+    :class:`NotebookExecutionError` once the running ones end."""
     layout = BookLayout.at(root)
     toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
     if profile not in profiles:
@@ -417,8 +411,7 @@ def _key_on_disk(layout: BookLayout, name: str) -> str:
 
 
 def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict, overrides: dict, scratch: Path):
-    """Check every notebook and plan its run (parameters, converted notebook, code hashes, rerun section);
-    returns the plans and the overrides used."""
+    """Check every notebook and plan its run; returns the plans and the overrides used."""
     import nbformat
 
     package_code, plans, used = PackageCode(), dict[str, dict[str, Any]](), dict[str, Any]()
@@ -445,10 +438,8 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
     return plans, used
 
 
-def _execute(
-    layout: BookLayout, order: Sequence[str], plans: dict, progress: bool, workers: int = 2
-) -> dict[str, float]:
-    """Execute the uncached notebooks of ``order``, ``workers`` at a time, each once the selected notebooks of its
+def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> dict[str, float]:
+    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each once the selected notebooks of its
     ``after`` have finished; after a failure nothing more starts and the first error is raised."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
     done = {name for name in order if plans[name]["status"] == "cached"}
@@ -456,10 +447,10 @@ def _execute(
     running: dict[Future[float], str] = {}
     for name in (name for name in order if name in done):
         say(f"{name}: up to date (cached)")
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="softpend-book") as pool:
+    with ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="softpend-book") as pool:
         while pending or running:
             ready = [n for n in pending if all(dep in done or dep not in order for dep in plans[n]["after"])]
-            for name in ready[: workers - len(running)] if not errors else []:
+            for name in ready[: WORKERS - len(running)] if not errors else []:
                 pending.remove(name)
                 say(f"{name}: executing")
                 running[pool.submit(_execute_one, layout, name, plans[name])] = name
@@ -489,11 +480,9 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
     key_path.unlink(missing_ok=True)  # an interrupted or failed run must not look cached
     start = time.perf_counter()
     try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
-        options = dict(kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGUMENTS)
-        resources = {"metadata": {"path": str(layout.root)}}
-        papermill.execute_notebook(
-            str(plan["converted"]), str(output), plan["parameters"], resources=resources, **options
-        )
+        where = {"metadata": {"path": str(layout.root)}}
+        options = dict(kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGS, resources=where)
+        papermill.execute_notebook(str(plan["converted"]), str(output), plan["parameters"], **options)
     except PapermillExecutionError as exc:
         cells, at = nbformat.read(str(plan["converted"]), as_version=4).cells, exc.cell_index
         matches = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.source == exc.source]
@@ -528,7 +517,7 @@ def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
 
 
 def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun], overrides: dict) -> None:
-    """Write the record of what produced ``book/_generated/`` (``execution.json``) and the execution page."""
+    """Write the record of what produced ``book/_generated/`` (``execution.json``) and the execution page (MyST)."""
     import datetime
 
     import nbformat
@@ -540,10 +529,8 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
         lines = _source_text(layout.source_path(name)).splitlines()
         output = layout.output_path(name)
         meta = nbformat.read(str(output), as_version=4).metadata if output.is_file() else {}
-        papermill, title = (
-            meta.get("papermill", {}),
-            next((ln[2:].strip() for ln in lines if ln.startswith("# ")), name),
-        )
+        papermill = meta.get("papermill", {})
+        title = next((line[2:].strip() for line in lines if line.startswith("# ")), name)
         entry = {"name": name, "title": title, "this_run": this_run.get(name, "not run")}
         entry |= {"executed_s": papermill.get("duration"), "executed_at": papermill.get("end_time")}
         notebooks.append(entry | {"profile": meta.get("softpend", {}).get("profile")})
@@ -551,24 +538,14 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
     machine = {"processor": _processor(), "cpu_count": os.cpu_count(), "cpus_available": cpus}
     machine |= {"platform": platform.platform(), "python": platform.python_version()}
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    record = {"date": date, "profile": profile, "overrides": dict(overrides)}
-    record |= {
-        "training": read_json_object(layout.training_path, MAX_CONFIG_BYTES),
-        "notebooks": notebooks,
-        "machine": machine,
-    }
+    training = read_json_object(layout.training_path, MAX_CONFIG_BYTES)
+    record = {"date": date, "profile": profile, "overrides": dict(overrides), "training": training}
+    record |= {"notebooks": notebooks, "machine": machine}
     with atomic_write(layout.record_path, "w") as handle:
         handle.write(json_text(record, indent=2) + "\n")
-    with atomic_write(layout.execution_page_path, "w") as handle:
-        handle.write(execution_page(record))
-
-
-def execution_page(record: dict[str, Any]) -> str:
-    """The execution page (MyST Markdown) of a :func:`write_execution_record` record."""
-    machine, training = record["machine"], record["training"]
     when = lambda iso: str(iso).replace("T", " ")[:19] if iso else "-"  # noqa: E731
     rows = ""
-    for e in record["notebooks"]:
+    for e in notebooks:
         title = f"{{doc}}`{_md(e['title'])} <{e['name']}>`" if e["executed_at"] else _md(e["title"])
         seconds = "-" if e["executed_s"] is None else f"{e['executed_s']:.1f}"
         rows += f"| {title} | {e['this_run']} | {seconds} | {when(e['executed_at'])} | {_md(e['profile'])} |\n"
@@ -579,18 +556,19 @@ def execution_page(record: dict[str, Any]) -> str:
         if training
         else "No training step recorded (`softpend sweep --book`): the notebooks trained the runs they read."
     )
-    overrides = f" with {_md(record['overrides'])}" if record["overrides"] else ""
-    return f"""(execution)=
+    with_overrides = f" with {_md(overrides)}" if overrides else ""
+    with atomic_write(layout.execution_page_path, "w") as handle:
+        handle.write(f"""(execution)=
 # Execution
 
-Written by `softpend book --profile {record["profile"]}` on {when(record["date"])} UTC{overrides}. Per notebook: \
-what this run did (*executed*; *cached*: its source, parameters and the code it uses were unchanged; *not run*: \
-not selected) and its last execution. Each chapter ends with its parameters and the command that reruns it.
+Written by `softpend book --profile {profile}` on {when(date)} UTC{with_overrides}. Per notebook: what this run did \
+(*executed*; *cached*: its source, parameters and the code it uses were unchanged; *not run*: not \
+selected) and its last execution. Each chapter ends with its parameters and the command that reruns it.
 
 | notebook | this run | last execution [s] | ended (UTC) | profile |
 |---|---|---|---|---|
 {rows}
-Sum of the last execution times: {sum(e["executed_s"] or 0.0 for e in record["notebooks"]):.0f} s.
+Sum of the last execution times: {sum(e["executed_s"] or 0.0 for e in notebooks):.0f} s.
 
 ## Training step
 
@@ -603,7 +581,7 @@ Sum of the last execution times: {sum(e["executed_s"] or 0.0 for e in record["no
 | processor | {_md(machine["processor"])} |
 | CPU cores | {machine["cpu_count"]} ({machine["cpus_available"]} available to the run) |
 | platform | {_md(machine["platform"])}, Python {machine["python"]} (packages: `environment.lock`) |
-"""
+""")
 
 
 def build_html(root: Path | str = ".", path_output: Optional[Path | str] = None, quiet: bool = False) -> Path:

@@ -7,8 +7,6 @@ from typing import Any
 
 from softpend.io.overrides import parse_assignment
 
-__all__ = ["MAX_SESSION_S", "add_set_option", "assignment", "check_numbers"]
-
 
 def assignment(text: str) -> tuple[str, Any]:
     """``argparse`` type of ``--set``: :func:`softpend.io.overrides.parse_assignment`, its ``ValueError``

@@ -14,8 +14,6 @@ from softpend.io.runfolders import check_run_folder
 from softpend.pilco.loop import PilcoConfig, run_pilco
 from softpend.study.presets import load_hparams
 
-__all__ = ["config_from_args", "train_pilco_from_args"]
-
 
 def config_from_args(args: argparse.Namespace) -> PilcoConfig:
     """A :class:`PilcoConfig` from the parsed ``softpend train`` options: ``--seed``, ``--episodes``,

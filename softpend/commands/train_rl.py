@@ -12,9 +12,6 @@ from softpend.io.overrides import apply_overrides
 from softpend.rl.config import DQNConfig
 from softpend.study.presets import RL_EPISODES, load_hparams
 
-__all__ = ["config_from_args", "train_dqn_from_args", "train_mbpo_from_args"]
-
-
 _Config = TypeVar("_Config", bound=DQNConfig)
 
 

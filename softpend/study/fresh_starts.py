@@ -19,18 +19,6 @@ from softpend.stats import aggregate_interval, wilson_interval
 from softpend.study.presets import REPORT_SEEDS
 from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-__all__ = [
-    "BALANCED_FRACTION",
-    "FRESH_STARTS_FILE",
-    "aggregate_fresh_start_rows",
-    "converged_fresh_start_rows",
-    "fresh_start_row",
-    "headline_figures",
-    "pilco_fresh_start_rows",
-    "rl_fresh_start_rows",
-    "seed_rows",
-]
-
 #: Share of fresh starts that must balance for a run to count as balanced.
 BALANCED_FRACTION = 0.9
 #: Names of the agents of an RL run, by :func:`softpend.rl.dqn.load_agent` ``which``.

@@ -16,21 +16,6 @@ from softpend.rl.curves import run_to_asymptote
 from softpend.study.fresh_starts import BALANCED_FRACTION, held_starts
 from softpend.study.rl_runs import METHOD_NAMES, plant_runs_root, run_folder
 
-__all__ = [
-    "LedgerRow",
-    "NOT_COMPUTED",
-    "VERDICTS",
-    "claims_ledger",
-    "glued_values",
-    "ledger_markdown",
-    "over_seeds",
-    "pilco_run_results",
-    "rl_fresh_start_summaries",
-    "rl_run_logs",
-    "run_to_asymptote",
-    "verdict_counts",
-]
-
 NOT_COMPUTED = "not computed in this build"
 VERDICTS = ("reproduced", "differs", "not comparable", NOT_COMPUTED)
 #: A number of the report counts as reproduced within this factor (either way) [-].

@@ -14,22 +14,6 @@ from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
 from softpend.task import Task
 
-__all__ = [
-    "DQN",
-    "HPARAMS_DIR",
-    "MBPO",
-    "PILCO",
-    "PILCO_BOOK",
-    "PilcoBudget",
-    "REPORT_SEEDS",
-    "RL_BOOK",
-    "RL_EPISODES",
-    "RLBudget",
-    "SELECTION_SEEDS",
-    "TASK",
-    "load_hparams",
-]
-
 #: The task of every figure: the default rod on the PRB plant, hanging starts.
 TASK = Task()
 

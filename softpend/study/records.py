@@ -10,17 +10,6 @@ from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = [
-    "RECORDS_PATH",
-    "current_pilco_runs",
-    "current_rl_runs",
-    "detail_rows",
-    "load_records",
-    "plot_records",
-    "run_rows",
-    "summary_rows",
-]
-
 #: The record, relative to the project root.
 RECORDS_PATH = Path("book/records/what_we_tried.yml")
 

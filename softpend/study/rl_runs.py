@@ -20,19 +20,6 @@ from softpend.study.presets import TASK, load_hparams
 from softpend.study.sweep import run_jobs
 from softpend.task import Task
 
-__all__ = [
-    "METHOD_NAMES",
-    "figure_configs",
-    "figure_runs",
-    "plant_runs_root",
-    "rl_jobs",
-    "run_config_data",
-    "run_folder",
-    "summary_table",
-    "train_seeds",
-    "train_run",
-]
-
 
 def train_seeds(
     algo: str,

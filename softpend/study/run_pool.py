@@ -17,8 +17,6 @@ from softpend.study.rl_runs import figure_configs, rl_jobs, train_run
 from softpend.study.sweep import call_job, default_workers, run_jobs
 from softpend.task import Task
 
-__all__ = ["BOOK_RUN_SETS", "book_jobs", "book_run_jobs", "train_book", "train_in_one_pool"]
-
 #: A job of the pool: ``(name, (function, *arguments))``.
 Job = tuple[str, tuple[Any, ...]]
 

@@ -12,8 +12,6 @@ from typing import Any, Callable, Iterator, Optional, Sequence
 
 from softpend.checks import int_at_least, one_of
 
-__all__ = ["BACKENDS", "SweepFailed", "call_job", "check_backend", "default_backend", "default_workers", "run_jobs"]
-
 WORKERS_ENV = "SOFTPEND_WORKERS"
 BACKEND_ENV = "SOFTPEND_BACKEND"
 BACKENDS = ("loky", "ray", "dask")

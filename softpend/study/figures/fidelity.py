@@ -13,8 +13,6 @@ from softpend.fidelity.validation import FreeVibration
 if TYPE_CHECKING:  # annotations only: importing the comparison module brings in its progress bars
     from softpend.fidelity.prb_vs_beam import ConvergenceRow
 
-__all__ = ["plot_free_vibration", "plot_convergence", "plot_transfer_matrix", "markdown_table"]
-
 
 def plot_free_vibration(ax_time, ax_spectrum, run: FreeVibration) -> None:
     """Tip signal of a free-vibration run and its spectrum, with the fitted and theoretical frequencies."""

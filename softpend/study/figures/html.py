@@ -5,8 +5,6 @@ from __future__ import annotations
 import re
 from typing import Any
 
-__all__ = ["offline_jshtml"]
-
 #: The Font Awesome 4 stylesheet that matplotlib's JavaScript player links from a CDN (its button icons).
 _CDN_STYLESHEET = re.compile(r'<link rel="stylesheet"\s+href="https://[^"]*font-awesome[^"]*">\s*')
 

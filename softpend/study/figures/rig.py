@@ -6,8 +6,6 @@ from typing import Optional
 
 import numpy as np
 
-__all__ = ["draw_filmstrip", "draw_tracked_frame", "plot_twin_run"]
-
 
 def draw_tracked_frame(
     ax,

@@ -11,8 +11,6 @@ from matplotlib.patches import Circle, Polygon, Rectangle
 
 from softpend.hardware.rig_design import MARKER_RADIUS_M, RigDesign
 
-__all__ = ["dimension_labels", "draw_rig_design"]
-
 _TPU = "#e3a33b"
 _MOUNT = "#8c8c8c"
 _STEEL = "#5b6770"

@@ -13,8 +13,6 @@ from softpend.plotting import draw_rod
 from softpend.rl.curves import interval_band, moving_average, run_to_asymptote, worst_start_std_rad
 from softpend.rl.training_log import TrainingLog
 
-__all__ = ["plot_learning_curves", "plot_swingup", "animate_swingup", "plot_upright_error", "upright_error_over_time"]
-
 COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 

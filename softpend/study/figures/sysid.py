@@ -9,8 +9,6 @@ import numpy as np
 
 from softpend.sysid.metrics import RolloutErrors
 
-__all__ = ["plot_lyapunov_errors", "plot_rollout", "plot_rollout_errors", "plot_rollout_overlay"]
-
 _LABELS = {
     "phi_rad": r"base angle $\phi$ [rad]",
     "theta_rad": r"tip angle $\theta$ [rad]",

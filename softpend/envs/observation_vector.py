@@ -9,8 +9,6 @@ import numpy as np
 from softpend.envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S
 from softpend.plant import OBSERVATION_NAMES
 
-__all__ = ["observation_vector"]
-
 
 def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: Any) -> np.ndarray:
     """Rows ``env.observation_vector(observation, bonus)`` (float32, ``(B, 11)``) for plant observations

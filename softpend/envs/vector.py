@@ -25,8 +25,6 @@ from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import INTEGRATORS, PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
 from softpend.plant.randomisation import RANDOMISED_FIELDS
 
-__all__ = ["SoftPendulumDiscreteVectorEnv", "SoftPendulumVectorEnv"]
-
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 

@@ -13,14 +13,6 @@ from tqdm.auto import tqdm
 from softpend.fidelity.validation import cantilever_free_vibration, measured_bending_frequencies, static_tip_sag
 from softpend.plant import RodParams, make_plant
 
-__all__ = [
-    "SMALL_DEFLECTION_STIFFNESS_SCALE",
-    "convergence_table",
-    "open_loop_torque_nm",
-    "recommend_n_links",
-    "tip_trajectory_m",
-]
-
 #: ``stiffness_scale`` of the small-deflection sag case.
 SMALL_DEFLECTION_STIFFNESS_SCALE = 100.0
 

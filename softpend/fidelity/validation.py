@@ -13,18 +13,6 @@ from softpend.checks import int_at_least, one_of, positive
 from softpend.plant import RodParams, make_plant
 from softpend.plant.base import PlantBase
 
-__all__ = [
-    "EULER_BERNOULLI_BETA_L",
-    "FreeVibration",
-    "cantilever_free_vibration",
-    "euler_bernoulli_frequencies_hz",
-    "euler_bernoulli_mode_shape",
-    "fit_modal_frequencies_hz",
-    "measured_bending_frequencies",
-    "static_tip_sag",
-    "deflected_state",
-]
-
 #: Roots ``beta_k L`` of ``1 + cos(beta L) cosh(beta L) = 0`` (clamped-free beam), first three modes.
 EULER_BERNOULLI_BETA_L: tuple[float, ...] = (1.875104068711961, 4.694091132974175, 7.854757438237613)
 

@@ -1,16 +1,14 @@
 """Plants: the simulated soft pendulum and its parameters."""
 
-from softpend.plant.base import Plant, SimulationDiverged, tilt_state
+from softpend.plant.base import SimulationDiverged, tilt_state
 from softpend.plant.observation import OBSERVATION_NAMES, Observation, wrap_angle_rad
-from softpend.plant.params import GRAVITY_MPS2, RodParams
+from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 from softpend.plant.registry import check_plant_name, make_plant, plant_names
 
 __all__ = [
-    "GRAVITY_MPS2",
     "OBSERVATION_NAMES",
     "Observation",
-    "Plant",
     "PRBPlant",
     "RodParams",
     "SimulationDiverged",

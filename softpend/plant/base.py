@@ -11,9 +11,6 @@ from softpend.checks import int_at_least, positive
 from softpend.plant.exudyn_adapter import SolverFailure
 from softpend.plant.observation import Observation
 from softpend.plant.params import RodParams
-from softpend.plant.protocol import Plant
-
-__all__ = ["Plant", "PlantBase", "SimulationDiverged", "tilt_state"]
 
 #: Most implicit-solver steps per control step.
 MAX_SUBSTEPS = 1000

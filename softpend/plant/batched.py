@@ -18,8 +18,6 @@ import torch
 from softpend.checks import int_at_least, one_of, positive
 from softpend.plant.params import MAX_N_LINKS, RodParams
 
-__all__ = ["PARAMETER_FIELDS", "BatchedPRBChain", "BatchedRodParams", "INTEGRATORS", "stable_substeps"]
-
 #: The per-rod parameters of :class:`BatchedRodParams`: every float field of :class:`RodParams`.
 PARAMETER_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RodParams) if f.name != "n_links")
 

@@ -17,8 +17,6 @@ from softpend.plant.beam_adapter import BeamSection, HubBeam2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
 
-__all__ = ["BeamPlant", "DEFAULT_N_ELEMENTS", "POISSON_RATIO", "SHEAR_CORRECTION", "beam_section_from_params"]
-
 DEFAULT_N_ELEMENTS = 12
 #: Poisson ratio of the rod material, for the shear stiffness only.
 POISSON_RATIO = 0.45

@@ -26,8 +26,6 @@ from exudyn.itemInterface import (
 
 from softpend.plant.exudyn_adapter import SolverFailure, implicit_solver_settings, static_solver_settings
 
-__all__ = ["BeamSection", "HubBeam2D"]
-
 
 @dataclass(frozen=True)
 class BeamSection:

@@ -11,8 +11,6 @@ import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
-__all__ = ["ChainLink", "KinematicChain2D", "SolverFailure", "implicit_solver_settings", "static_solver_settings"]
-
 
 class SolverFailure(RuntimeError):
     """The Exudyn solver failed (Newton did not converge or the state became non-finite)."""

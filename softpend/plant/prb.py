@@ -8,12 +8,10 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.plant.base import PlantBase, SimulationDiverged, energies
+from softpend.plant.base import PlantBase, energies
 from softpend.plant.exudyn_adapter import ChainLink, KinematicChain2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
-
-__all__ = ["PRBPlant", "SimulationDiverged", "link_inertials"]
 
 
 def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -9,8 +9,6 @@ import numpy as np
 from softpend.plant.observation import Observation
 from softpend.plant.params import RodParams
 
-__all__ = ["Plant"]
-
 
 @runtime_checkable
 class Plant(Protocol):

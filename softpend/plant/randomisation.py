@@ -7,8 +7,6 @@ import numpy as np
 from softpend.checks import in_unit_interval
 from softpend.plant.params import RodParams
 
-__all__ = ["RANDOMISED_FIELDS", "randomised_rod"]
-
 #: The fields scaled by :func:`randomised_rod`: what a built rig gets wrong.
 RANDOMISED_FIELDS = (
     "mass_kg",

@@ -8,8 +8,6 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from softpend.plant.protocol import Plant
 
-__all__ = ["check_plant_name", "make_plant", "plant_names"]
-
 _PLANTS: dict[str, str] = {"prb": "softpend.plant.prb:PRBPlant", "beam": "softpend.plant.beam:BeamPlant"}
 
 

@@ -27,8 +27,6 @@ from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.excitation import multisine
 from softpend.sysid.variables import POSITION_NAMES, is_angle
 
-__all__ = ["PROGRAMS", "BabbleProtocol", "babble", "band_limited_noise"]
-
 _STARTS = ("upright", "hanging", "random")
 #: Torque programs of :class:`BabbleProtocol`.
 PROGRAMS = ("noise", "multisine")

@@ -19,17 +19,6 @@ from softpend.io.outputs import atomic_write
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.sysid.variables import ANGLE_NAMES, POSITION_NAMES, velocity_name
 
-__all__ = [
-    "SCHEMA_NAME",
-    "SCHEMA_VERSION",
-    "REQUIRED_POSITION_NAMES",
-    "TrajectoryDataset",
-    "dataset_metadata",
-    "save_dataset",
-    "load_dataset",
-    "DT_S_RANGE",
-]
-
 SCHEMA_NAME = "softpend.sysid.dataset"
 SCHEMA_VERSION = 1
 #: Every dataset has at least the limited-information variables: base angle and tip position.

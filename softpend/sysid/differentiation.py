@@ -6,8 +6,6 @@ import numpy as np
 
 from softpend.checks import positive
 
-__all__ = ["backward_difference"]
-
 
 def backward_difference(positions: np.ndarray, dt_s: float, angle_mask: np.ndarray) -> np.ndarray:
     """``v[t] = (x[t] - x[t-1]) / dt`` of positions ``(..., N, P)`` at samples ``1 .. N - 1``, the columns in

@@ -17,17 +17,6 @@ from softpend.checks import int_at_least, positive, positive_int
 from softpend.plant import PRBPlant, RodParams, SimulationDiverged
 from softpend.sysid.dataset import TrajectoryDataset
 
-__all__ = [
-    "CALIBRATION_PARAMETERS",
-    "GREYBOX_PARAMETERS",
-    "GreyBoxConfig",
-    "GreyBoxResult",
-    "identify",
-    "estimate_joint_states",
-    "reconstruct_joint_states",
-    "simulate_windows",
-]
-
 #: Rod parameters estimated by default.
 GREYBOX_PARAMETERS: tuple[str, ...] = (
     "hub_inertia_kgm2",

@@ -12,8 +12,6 @@ import numpy as np
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.variables import POSITION_NAMES, is_angle, velocity_name
 
-__all__ = ["INFORMATION_LEVELS", "StateLayout", "TransitionData"]
-
 INFORMATION_LEVELS: tuple[str, ...] = ("full", "limited")
 _LIMITED_POSITIONS: tuple[str, ...] = ("phi_rad", "ex_m", "ey_m")
 

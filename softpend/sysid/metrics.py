@@ -17,16 +17,6 @@ from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.rollout import rollout
 
-__all__ = [
-    "evaluate_model",
-    "hub_rate_offset_for_tip_error",
-    "one_step_errors",
-    "perturbed_simulator_errors",
-    "RolloutErrors",
-    "rollout_errors",
-    "rollout_trial",
-]
-
 
 class _MeanOf:
     """Adapter: an ensemble's mean prediction with the single-model signature."""

@@ -19,17 +19,6 @@ from softpend.io.outputs import atomic_write
 from softpend.io.reading import MAX_CONFIG_BYTES, read_bytes_checked, read_json_checked
 from softpend.sysid.layout import StateLayout
 
-__all__ = [
-    "ACTIVATIONS",
-    "DynamicsModel",
-    "DynamicsEnsemble",
-    "save_model",
-    "load_model",
-    "model_paths",
-    "MODEL_SCHEMA_NAME",
-    "MODEL_SCHEMA_VERSION",
-]
-
 MODEL_SCHEMA_NAME = "softpend.sysid.model"
 MODEL_SCHEMA_VERSION = 1
 #: Largest network :func:`load_model` builds from a metadata file [weights over all members].

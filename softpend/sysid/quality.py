@@ -14,17 +14,6 @@ from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
 from softpend.sysid.metrics import open_loop
 
-__all__ = [
-    "ValidPrediction",
-    "network_rollout_tip_errors",
-    "prb_one_step_errors",
-    "prb_rollout_tip_errors",
-    "prb_rollout_trial",
-    "rollout_starts",
-    "tip_rmse_at_s",
-    "valid_prediction",
-]
-
 #: Tip-error threshold of the valid prediction time, as a fraction of the rod length.
 VALID_TIP_FRACTION = 0.05
 

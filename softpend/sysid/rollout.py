@@ -7,8 +7,6 @@ from typing import Any, Optional
 import torch
 from torch import Tensor
 
-__all__ = ["rollout"]
-
 
 def rollout(model: Any, x0: Tensor, torques_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
     """``x0 (B, d)`` followed by the ``T`` states a model (anything with ``predict_next``; an ensemble draws its

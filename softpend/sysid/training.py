@@ -30,8 +30,6 @@ from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
 from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, wrap_tensor
 
-__all__ = ["TrainConfig", "FitResult", "fit_dynamics_model", "split_trials"]
-
 
 @dataclass(frozen=True)
 class TrainConfig:

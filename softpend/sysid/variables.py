@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from softpend.plant import OBSERVATION_NAMES
 
-__all__ = ["POSITION_NAMES", "VELOCITY_NAMES", "ANGLE_NAMES", "velocity_name", "is_angle"]
-
 #: The sampled positions ``phi, theta, e_x, e_y, e_r`` and their time derivatives, same order.
 POSITION_NAMES: tuple[str, ...] = OBSERVATION_NAMES[:5]
 VELOCITY_NAMES: tuple[str, ...] = OBSERVATION_NAMES[5:]

@@ -19,7 +19,7 @@ _GREEN = "#2ca02c"
 _MAGENTA = "#c218c8"
 
 
-def _dimension(ax, p0, p1, text: str, offset, fontsize: float = 8.0, **text_kw) -> None:
+def _dimension(ax, p0, p1, text: str, offset, fontsize: float = 8.0) -> None:
     """A dimension line from ``p0`` to ``p1`` shifted by ``offset`` [m], with extension lines and ``text``."""
     p0, p1, off = np.asarray(p0, float), np.asarray(p1, float), np.asarray(offset, float)
     a, b = p0 + off, p1 + off
@@ -27,106 +27,53 @@ def _dimension(ax, p0, p1, text: str, offset, fontsize: float = 8.0, **text_kw) 
         ax.plot([p[0], q[0]], [p[1], q[1]], color="0.45", lw=0.5)
     ax.annotate("", xy=b, xytext=a, arrowprops=dict(arrowstyle="<->", lw=0.7, color="0.2", shrinkA=0, shrinkB=0))
     mid = (a + b) / 2
-    ax.text(
-        mid[0],
-        mid[1],
-        text,
-        fontsize=fontsize,
-        ha="center",
-        va="center",
-        gid="dimension",
-        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.9),
-        **text_kw,
-    )
+    box = dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.9)
+    ax.text(mid[0], mid[1], text, fontsize=fontsize, ha="center", va="center", gid="dimension", bbox=box)
+
+
+def _arrow(ax, text: str, xy, xytext, fontsize: float = 7, **kw) -> None:
+    """A label with an arrow to ``xy``."""
+    ax.annotate(text, xy=xy, xytext=xytext, fontsize=fontsize, arrowprops=dict(arrowstyle="->", lw=0.6), **kw)
 
 
 def _front(ax, d: RigDesign) -> None:
     """Front view: the rod hanging in the camera's plane (hub axis at the origin, y up), metres."""
-    p, hub = d.params, d.hub
+    p, hub, add = d.params, d.hub, ax.add_patch
     L, D = p.length_m, d.beam_thickness_m
     fov_w, fov_h = d.field_of_view_m
     centre_px = np.array(d.camera_model.centre_px)
     x0 = -centre_px[0] * d.pixel_size_m
     y0 = -(d.camera.height_px - centre_px[1]) * d.pixel_size_m
-    ax.add_patch(Rectangle((x0, y0), fov_w, fov_h, fill=False, ls="--", lw=0.8, ec="0.3"))
-    ax.text(
-        x0 + fov_w / 2,
-        y0 + fov_h - 0.01,
+    add(Rectangle((x0, y0), fov_w, fov_h, fill=False, ls="--", lw=0.8, ec="0.3"))
+    field = (
         f"camera field {fov_w * 1e3:.0f} x {fov_h * 1e3:.0f} mm, "
-        f"{d.camera.width_px} x {d.camera.height_px} px: pixel {d.pixel_size_m * 1e3:.2f} mm",
-        fontsize=8,
-        va="top",
-        ha="center",
-        gid="dimension",
+        f"{d.camera.width_px} x {d.camera.height_px} px: pixel {d.pixel_size_m * 1e3:.2f} mm"
     )
-    ax.add_patch(
-        Circle(
-            (0, 0),
-            d.swing_radius_m,
-            fill=False,
-            ls=":",
-            lw=0.8,
-            ec=_BLUE,
-            label=f"swing circle of the dot, radius {d.swing_radius_m * 1e3:.0f} mm",
-        )
-    )
-    ax.add_patch(
-        Circle(
-            (0, 0),
-            d.keep_out_radius_m,
-            fill=False,
-            ls="-.",
-            lw=0.8,
-            ec="#d62728",
-            label=f"keep clear while powered, radius {d.keep_out_radius_m * 1e3:.0f} mm",
-        )
-    )
+    ax.text(x0 + fov_w / 2, y0 + fov_h - 0.01, field, fontsize=8, va="top", ha="center", gid="dimension")
+    swing = f"swing circle of the dot, radius {d.swing_radius_m * 1e3:.0f} mm"
+    add(Circle((0, 0), d.swing_radius_m, fill=False, ls=":", lw=0.8, ec=_BLUE, label=swing))
+    keep_out = f"keep clear while powered, radius {d.keep_out_radius_m * 1e3:.0f} mm"
+    add(Circle((0, 0), d.keep_out_radius_m, fill=False, ls="-.", lw=0.8, ec="#d62728", label=keep_out))
     # beam hanging along -y, from the pocket to the tip
-    ax.add_patch(Rectangle((-D / 2, -L), D, d.beam_length_m, fc=_TPU, ec="k", lw=0.6))
+    add(Rectangle((-D / 2, -L), D, d.beam_length_m, fc=_TPU, ec="k", lw=0.6))
     # mount boss, square bore, marker flag
-    ax.add_patch(Circle((0, 0), hub.clamp_radius_m, fc=_MOUNT, ec="k", lw=0.6))
+    add(Circle((0, 0), hub.clamp_radius_m, fc=_MOUNT, ec="k", lw=0.6))
     s = hub.shaft_side_m / 2
-    ax.add_patch(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.5))
+    add(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.5))
     flag_w = 2 * (hub.hub_marker_dot_radius_m + 0.002)
-    ax.add_patch(
-        Rectangle((-flag_w / 2, -d.flag_length_m), flag_w, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6, alpha=0.85)
-    )
-    ax.add_patch(Circle((0, -hub.hub_marker_radius_m), hub.hub_marker_dot_radius_m, fc=_MAGENTA, ec="k", lw=0.4))
+    add(Rectangle((-flag_w / 2, -d.flag_length_m), flag_w, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6, alpha=0.85))
+    add(Circle((0, -hub.hub_marker_radius_m), hub.hub_marker_dot_radius_m, fc=_MAGENTA, ec="k", lw=0.4))
     # tip disc and dot
-    ax.add_patch(Circle((0, -L), d.dot_radius_m, fc=_BLUE, ec="k", lw=0.6))
+    add(Circle((0, -L), d.dot_radius_m, fc=_BLUE, ec="k", lw=0.6))
     for i, (x, y) in enumerate(d.markers_m):
-        ax.add_patch(Circle((x, y), MARKER_RADIUS_M, fc=_GREEN, ec="k", lw=0.5))
-        ax.text(
-            x,
-            y + 1.8 * MARKER_RADIUS_M,
-            f"M{i + 1} ({x * 1e3:.0f}, {y * 1e3:.0f})",
-            fontsize=7,
-            ha="center",
-            gid="dimension",
-        )
+        add(Circle((x, y), MARKER_RADIUS_M, fc=_GREEN, ec="k", lw=0.5))
+        label = f"M{i + 1} ({x * 1e3:.0f}, {y * 1e3:.0f})"
+        ax.text(x, y + 1.8 * MARKER_RADIUS_M, label, fontsize=7, ha="center", gid="dimension")
     _dimension(ax, (0, 0), (0, -L), f"L = {L * 1e3:.0f} mm", (-0.09, 0.0))
-    ax.annotate(
-        f"D = {D * 1e3:.2f} mm (in plane)",
-        xy=(D / 2, -0.6 * L),
-        xytext=(0.06, -0.6 * L),
-        fontsize=8,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-        gid="dimension",
-    )
-    ax.annotate(
-        f"hub marker at {hub.hub_marker_radius_m * 1e3:.0f} mm",
-        xy=(0, -hub.hub_marker_radius_m),
-        xytext=(0.06, -0.09),
-        fontsize=7,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-    )
-    ax.annotate(
-        f"tip mass {p.tip_mass_kg * 1e3:.3g} g, dot diameter {2e3 * d.dot_radius_m:.0f} mm",
-        xy=(0, -L),
-        xytext=(0.05, -L - 0.01),
-        fontsize=7,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-    )
+    _arrow(ax, f"D = {D * 1e3:.2f} mm (in plane)", (D / 2, -0.6 * L), (0.06, -0.6 * L), 8, gid="dimension")
+    _arrow(ax, f"hub marker at {hub.hub_marker_radius_m * 1e3:.0f} mm", (0, -hub.hub_marker_radius_m), (0.06, -0.09))
+    tip = f"tip mass {p.tip_mass_kg * 1e3:.3g} g, dot diameter {2e3 * d.dot_radius_m:.0f} mm"
+    _arrow(ax, tip, (0, -L), (0.05, -L - 0.01))
     ax.legend(loc="upper center", fontsize=7, framealpha=0.9, bbox_to_anchor=(0.5, -0.11), ncol=2)
     margin = 0.03
     ax.set_xlim(x0 - margin, x0 + fov_w + margin)
@@ -139,128 +86,62 @@ def _front(ax, d: RigDesign) -> None:
 
 def _hub_detail(ax, d: RigDesign) -> None:
     """The hub mount enlarged, front view: boss, square bore, beam pocket and marker flag (millimetres)."""
-    hub = d.hub
+    hub, add = d.hub, ax.add_patch
     mm = 1e3
     r, s, D = hub.clamp_radius_m * mm, hub.shaft_side_m * mm / 2, d.beam_thickness_m * mm
-    ax.add_patch(
-        Rectangle(
-            (-D / 2, -d.flag_length_m * mm - 8),
-            D,
-            d.flag_length_m * mm + 8 - hub.pocket_start_m * mm,
-            fc=_TPU,
-            ec="k",
-            lw=0.6,
-        )
-    )
-    ax.add_patch(Circle((0, 0), r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.9))
-    ax.add_patch(Rectangle((-D / 2, -r), D, r - hub.pocket_start_m * mm, fc=_TPU, ec="k", lw=0.5, ls="--"))
-    ax.add_patch(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.6))
+    flag, pocket, marker = d.flag_length_m * mm, hub.pocket_start_m * mm, hub.hub_marker_radius_m * mm
+    add(Rectangle((-D / 2, -flag - 8), D, flag + 8 - pocket, fc=_TPU, ec="k", lw=0.6))
+    add(Circle((0, 0), r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.9))
+    add(Rectangle((-D / 2, -r), D, r - pocket, fc=_TPU, ec="k", lw=0.5, ls="--"))
+    add(Polygon([(-s, -s), (s, -s), (s, s), (-s, s)], closed=True, fc="white", ec="k", lw=0.6))
     flag_w = 2 * (hub.hub_marker_dot_radius_m + 0.002) * mm
-    ax.add_patch(
-        Rectangle(
-            (-flag_w / 2, -d.flag_length_m * mm), flag_w, d.flag_length_m * mm - r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.6
-        )
-    )
-    ax.add_patch(
-        Circle((0, -hub.hub_marker_radius_m * mm), hub.hub_marker_dot_radius_m * mm, fc=_MAGENTA, ec="k", lw=0.4)
-    )
+    add(Rectangle((-flag_w / 2, -flag), flag_w, flag - r, fc=_MOUNT, ec="k", lw=0.6, alpha=0.6))
+    add(Circle((0, -marker), hub.hub_marker_dot_radius_m * mm, fc=_MAGENTA, ec="k", lw=0.4))
     _dimension(ax, (0, 0), (r, 0), f"R {r:.0f}", (0, r + 4), fontsize=7)
-    ax.annotate(
-        f"bore {2 * s:.3f} square",
-        xy=(s, s),
-        xytext=(r + 3, r + 1),
-        fontsize=7,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-        gid="dimension",
-    )
-    _dimension(
-        ax, (0, -hub.pocket_start_m * mm), (0, -r), f"pocket {r - hub.pocket_start_m * mm:.0f}", (-r - 6, 0), fontsize=7
-    )
-    _dimension(ax, (0, 0), (0, -d.flag_length_m * mm), f"flag {d.flag_length_m * mm:.0f}", (r + 8, 0), fontsize=7)
-    _dimension(
-        ax,
-        (0, 0),
-        (0, -hub.hub_marker_radius_m * mm),
-        f"{hub.hub_marker_radius_m * mm:.0f}",
-        (-flag_w / 2 - 5, 0),
-        fontsize=7,
-    )
-    ax.text(
-        0,
-        -d.flag_length_m * mm - 12,
+    _arrow(ax, f"bore {2 * s:.3f} square", (s, s), (r + 3, r + 1), gid="dimension")
+    _dimension(ax, (0, -pocket), (0, -r), f"pocket {r - pocket:.0f}", (-r - 6, 0), fontsize=7)
+    _dimension(ax, (0, 0), (0, -flag), f"flag {flag:.0f}", (r + 8, 0), fontsize=7)
+    _dimension(ax, (0, 0), (0, -marker), f"{marker:.0f}", (-flag_w / 2 - 5, 0), fontsize=7)
+    note = (
         f"flag {hub.flag_gap_m * mm:.0f} mm in front of the beam,\n"
-        f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)",
-        fontsize=7,
-        ha="center",
-        va="top",
+        f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)"
     )
+    ax.text(0, -flag - 12, note, fontsize=7, ha="center", va="top")
     ax.set_aspect("equal")
     ax.set_xlim(-r - 14, r + 20)
-    ax.set_ylim(-d.flag_length_m * mm - 24, r + 10)
+    ax.set_ylim(-flag - 24, r + 10)
     ax.set_title("hub mount [mm]")
 
 
 def _side(ax, d: RigDesign) -> None:
     """Side view: the motor, the mount, the beam's width and the camera at its distance (z towards the camera)."""
-    p, hub = d.params, d.hub
+    p, hub, add = d.params, d.hub, ax.add_patch
     L, W = p.length_m, d.beam_width_m
     t = hub.mount_thickness_m
     # motor body behind the mount (not to scale in depth), the mount boss and the flag in front of the beam
-    ax.add_patch(Rectangle((-0.06, -0.035), 0.05, 0.07, fc="0.25", ec="k", lw=0.6))
+    add(Rectangle((-0.06, -0.035), 0.05, 0.07, fc="0.25", ec="k", lw=0.6))
     ax.text(-0.035, 0.045, "V5 motor", fontsize=7, ha="center")
-    ax.add_patch(Rectangle((-0.01, -hub.clamp_radius_m), t, 2 * hub.clamp_radius_m, fc=_MOUNT, ec="k", lw=0.6))
+    add(Rectangle((-0.01, -hub.clamp_radius_m), t, 2 * hub.clamp_radius_m, fc=_MOUNT, ec="k", lw=0.6))
     z_beam = -0.01 + (t - W) / 2
-    ax.add_patch(Rectangle((z_beam, -L), W, L - hub.pocket_start_m, fc=_TPU, ec="k", lw=0.6))
+    add(Rectangle((z_beam, -L), W, L - hub.pocket_start_m, fc=_TPU, ec="k", lw=0.6))
     z_flag = z_beam + W + hub.flag_gap_m
-    ax.add_patch(Rectangle((z_flag, -d.flag_length_m), 0.003, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6))
-    ax.add_patch(
-        Rectangle(
-            (z_beam + W, -L - d.dot_radius_m), d.tip_disc_thickness_m, 2 * d.dot_radius_m, fc=_STEEL, ec="k", lw=0.6
-        )
-    )
-    ax.annotate(
-        f"W = {W * 1e3:.0f} mm (out of plane)",
-        xy=(z_beam + W, -0.75 * L),
-        xytext=(0.05, -0.75 * L),
-        fontsize=8,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-        gid="dimension",
-    )
-    ax.annotate(
-        f"tip disc {d.tip_disc_thickness_m * 1e3:.1f} mm",
-        xy=(z_beam + W + d.tip_disc_thickness_m, -L),
-        xytext=(0.05, -L + 0.03),
-        fontsize=7,
-        arrowprops=dict(arrowstyle="->", lw=0.6),
-        gid="dimension",
-    )
+    add(Rectangle((z_flag, -d.flag_length_m), 0.003, d.flag_length_m, fc=_MOUNT, ec="k", lw=0.6))
+    disc = d.tip_disc_thickness_m
+    add(Rectangle((z_beam + W, -L - d.dot_radius_m), disc, 2 * d.dot_radius_m, fc=_STEEL, ec="k", lw=0.6))
+    _arrow(ax, f"W = {W * 1e3:.0f} mm (out of plane)", (z_beam + W, -0.75 * L), (0.05, -0.75 * L), 8, gid="dimension")
+    _arrow(ax, f"tip disc {disc * 1e3:.1f} mm", (z_beam + W + disc, -L), (0.05, -L + 0.03), gid="dimension")
     # the camera on the optical axis through the hub axis, looking back at the plane
     zc = z_beam + W + d.camera_distance_m
     half = math.radians(d.camera.horizontal_fov_deg) / 2
     reach = d.camera_distance_m * math.tan(half)
-    ax.add_patch(
-        Polygon(
-            [(zc, 0), (zc - d.camera_distance_m, reach), (zc - d.camera_distance_m, -reach)],
-            closed=True,
-            fc=_BLUE,
-            alpha=0.06,
-            ec=_BLUE,
-            lw=0.6,
-            ls="--",
-        )
-    )
-    ax.add_patch(Rectangle((zc, -0.02), 0.04, 0.04, fc="0.2", ec="k"))
+    cone = [(zc, 0), (zc - d.camera_distance_m, reach), (zc - d.camera_distance_m, -reach)]
+    add(Polygon(cone, closed=True, fc=_BLUE, alpha=0.06, ec=_BLUE, lw=0.6, ls="--"))
+    add(Rectangle((zc, -0.02), 0.04, 0.04, fc="0.2", ec="k"))
     ax.text(zc + 0.02, 0.03, "camera", fontsize=7, ha="center")
-    _dimension(
-        ax, (z_beam + W, 0.0), (zc, 0.0), f"{d.camera_distance_m * 1e3:.0f} mm to the rod plane", (0.0, reach + 0.05)
-    )
-    ax.text(
-        zc - 0.02,
-        -reach + 0.02,
-        f"horizontal field of view {d.camera.horizontal_fov_deg:g} deg",
-        fontsize=7,
-        ha="right",
-    )
+    distance = f"{d.camera_distance_m * 1e3:.0f} mm to the rod plane"
+    _dimension(ax, (z_beam + W, 0.0), (zc, 0.0), distance, (0.0, reach + 0.05))
+    fov = f"horizontal field of view {d.camera.horizontal_fov_deg:g} deg"
+    ax.text(zc - 0.02, -reach + 0.02, fov, fontsize=7, ha="right")
     ax.set_aspect("equal")
     ax.set_xlim(-0.08, zc + 0.08)
     ax.set_ylim(-max(L, reach) - 0.06, reach + 0.1)

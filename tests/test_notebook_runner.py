@@ -12,7 +12,7 @@ from support import NOTEBOOK_HEADER
 
 from softpend.cli import main as cli_main
 from softpend.study import book
-from softpend.study.book import NotebookExecutionError, PackageCode, cache_key, code_cells, run_notebooks, toc_notebooks
+from softpend.study.book import NotebookExecutionError, PackageCode, cache_key, run_notebooks, toc_notebooks
 
 HEADER = NOTEBOOK_HEADER.format(extra="")
 
@@ -329,7 +329,8 @@ def test_real_notebook_closure_reaches_the_plant_and_not_pilco():
     root = Path(__file__).resolve().parents[1]
     code = PackageCode()
     assert code.name == "softpend"
-    used = code.closure(code_cells(book.read_notebook(root / "notebooks" / "fig01_prb_rod.md")))
+    nb = book.read_notebook(root / "notebooks" / "fig01_prb_rod.md")
+    used = code.closure(cell.source for cell in nb.cells if cell.cell_type == "code")
     assert {
         "softpend",
         "softpend.plant",

@@ -210,9 +210,8 @@ def _parse_cell(source: str) -> Optional[ast.Module]:
 
 
 class PackageCode:
-    """The modules of a package (default ``softpend``) read with ``ast``: the closure of some code's imports
-    (relative ones resolved, parent packages included, strings naming a module or an entry point ``"pkg.a:Name"``)
-    and a hash of each module's code without docstrings and comments."""
+    """A package's modules (default ``softpend``) read with ``ast``: the closure of some code's imports (strings
+    naming a module or an entry point ``"pkg.a:Name"`` included) and each module's hash without docstrings."""
 
     def __init__(self, package_root: Path | str | None = None) -> None:
         self.root = Path(package_root or Path(__file__).resolve().parents[1]).resolve()
@@ -288,10 +287,6 @@ def _file_hashes(folder: Path, prefix: str, suffixes: Sequence[str] = ()) -> dic
     }
 
 
-def code_cells(nb) -> list[str]:
-    return [cell.source for cell in nb.cells if cell.cell_type == "code"]
-
-
 def cache_key(source_text: str, parameters: dict[str, Any], code_hashes: dict[str, str], after: Any = None) -> str:
     """Cache key of one executed notebook: source, parameters, package code and the keys of its ``after``."""
     payload: dict[str, Any] = {"version": _CACHE_VERSION, "source": source_text, "parameters": parameters}
@@ -309,9 +304,8 @@ def _value(value: Any) -> str:
 
 
 def notebook_parameters(cell: str) -> list[dict[str, Any]]:
-    """The assignments of a ``parameters`` cell: ``name``, ``default`` (as ``--set`` reads it, or the expression
-    where the cell does not evaluate: ``evaluated`` False), ``unit`` (``[unit]`` in the comment, else the name's
-    suffix) and the line's ``comment``."""
+    """The assignments of a ``parameters`` cell: ``name``, ``default`` (as ``--set`` reads it; the expression where
+    the cell does not evaluate: ``evaluated`` False), ``unit`` and the line's ``comment``."""
     tokens = tokenize.generate_tokens(io.StringIO(cell).readline)
     comments = {t.start[0]: t.string.lstrip("#").strip() for t in tokens if t.type == tokenize.COMMENT}
     namespace: dict[str, Any] = {}
@@ -425,14 +419,13 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
         record = {"profile": profile, "parameters": dict(parameters), "overrides": applied}
         used |= applied
         parameters |= applied
-        hashes = package_code.code_hashes(code_cells(nb))
+        hashes = package_code.code_hashes(cell.source for cell in nb.cells if cell.cell_type == "code")
         for module, folder in (("softpend.study.records", "records"), ("softpend.study.presets", "hparams")):
             if module in hashes:  # the book's data files that this code reads
                 hashes |= _file_hashes(layout.root / "book" / folder, f"book/{folder}")
-        kernel = nb.metadata.get("kernelspec", {}).get("name", "python3")
-        rerun = rerun_section(name, _parameters_cell(nb) or "", profile, parameters)
         plans[name] = dict(after=after, parameters=parameters, converted=converted, hashes=hashes, record=record)
-        plans[name] |= {"kernel": kernel, "rerun": rerun}
+        plans[name]["kernel"] = nb.metadata.get("kernelspec", {}).get("name", "python3")
+        plans[name]["rerun"] = rerun_section(name, _parameters_cell(nb) or "", profile, parameters)
     if unused := sorted(set(overrides) - set(used)):
         raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({list(names)})")
     return plans, used

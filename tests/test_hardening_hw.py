@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 import serial
 
-from softpend.hardware import DeviceError, HandshakeError, LinkChecksumError, LinkDisconnected, MotorLink
 from softpend.hardware import protocol as proto
+from softpend.hardware.driver import DeviceError, HandshakeError, LinkChecksumError, LinkDisconnected, MotorLink
 from softpend.hardware.emulator import RigConfig, RigEmulator, SimRig
-from softpend.vision import SyntheticCamera, TipTracker, render_video
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers
+from softpend.vision.camera import SyntheticCamera, render_video
 from softpend.vision.track_video import track_video
+from softpend.vision.tracker import TipTracker
 
 F32_MAX = struct.unpack("<f", struct.pack("<I", 0x7F7FFFFF))[0]
 
@@ -228,7 +229,7 @@ def test_state_with_impossible_values_is_rejected_and_counted(fake_port, bad):
         device.inject(device.state(seq=1, **bad) + device.state(seq=2, velocity=0.25, applied=0.01))
         state = link.read_state()
         assert state.seq == 2 and state.phi_dot_rad_s == 0.25  # the bad one was never passed on
-        assert link.rejected_states == 1 and link.bad_frames == 1
+        assert link._decoder.value_errors == 1 and link.bad_frames == 1
         device.inject(device.state(seq=3, **bad) * 3)
         with pytest.raises(LinkChecksumError, match="refused"):
             link.read_state()
@@ -557,11 +558,11 @@ def test_fuzz_decoder_never_passes_on_an_impossible_state(fake_port):
         outcomes["states" if states else "nothing"] += 1
     link.close()
     print(
-        f"decoder fuzz: {n_chunks} chunks, {dict(outcomes)}, rejected values {link.rejected_states}, "
+        f"decoder fuzz: {n_chunks} chunks, {dict(outcomes)}, rejected values {link._decoder.value_errors}, "
         f"bad frames {link.bad_frames}"
     )
     assert sum(outcomes.values()) == n_chunks
-    assert outcomes["states"] > 100 and link.rejected_states > 100 and outcomes["LinkChecksumError"] > 0
+    assert outcomes["states"] > 100 and link._decoder.value_errors > 100 and outcomes["LinkChecksumError"] > 0
 
 
 def test_fuzz_handshake_values_and_torque_on_the_wire(fake_port):

@@ -19,21 +19,11 @@ import time
 import numpy as np
 import pytest
 
-from softpend.hardware import (
-    HandshakeError,
-    LinkChecksumError,
-    LinkDisconnected,
-    LinkTimeout,
-    MotorLink,
-    RigConfig,
-    RigEmulator,
-    SampleLog,
-    SimRig,
-    read_sample_log,
-    start_emulator_process,
-)
 from softpend.hardware import protocol as proto
+from softpend.hardware.driver import HandshakeError, LinkChecksumError, LinkDisconnected, LinkTimeout, MotorLink
+from softpend.hardware.emulator import RigConfig, RigEmulator, SimRig, start_emulator_process
 from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
+from softpend.io.samplelog import SampleLog, read_sample_log
 
 
 class ThreadedRig:

@@ -9,17 +9,10 @@ import numpy as np
 import pytest
 
 from softpend.plant import RodParams, make_plant
-from softpend.vision import (
-    DEFAULT_MARKERS_M,
-    CameraEffects,
-    CameraModel,
-    SyntheticCamera,
-    TipTracker,
-    calibrate_from_markers,
-    fit_affine,
-    render_video,
-)
+from softpend.vision.calibration import calibrate_from_markers, fit_affine
+from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, render_video
 from softpend.vision.track_video import TRACK_COLUMNS
+from softpend.vision.tracker import TipTracker
 
 
 @pytest.fixture(scope="module")

@@ -5,20 +5,26 @@ from __future__ import annotations
 
 import argparse
 
+from softpend.commands.options import MAX_SESSION_S
+
+#: The numeric options: (flag, type, default, closed interval checked before anything starts, help).
+NUMBERS = (
+    ("--duration", float, None, (1e-3, MAX_SESSION_S), "stop after this many seconds (default: run until killed)"),
+    ("--counts-per-rev", int, 4096, (4, 2**24), "encoder resolution (default 4096)"),
+    ("--latency-ms", float, 2.0, (0.0, 1000.0), "one-way link latency [ms] (default 2)"),
+    ("--drop", float, 0.0, (0.0, 1.0), "probability that a STATE frame is dropped"),
+    ("--garble", float, 0.0, (0.0, 1.0), "probability that a STATE frame is corrupted"),
+    ("--watchdog-ms", int, 100, (1, 65535), "device watchdog [ms] (default 100)"),
+    ("--n-links", int, 4, None, "PRB links of the simulated rod"),
+    ("--seed", int, 0, None, "seed for drops, garbling and start noise"),
+)
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
     parser.add_argument("--port", metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")
-    parser.add_argument(
-        "--duration", type=float, default=None, help="stop after this many seconds (default: run until killed)"
-    )
-    parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (default 4096)")
-    parser.add_argument("--latency-ms", type=float, default=2.0, help="one-way link latency [ms] (default 2)")
-    parser.add_argument("--drop", type=float, default=0.0, help="probability that a STATE frame is dropped")
-    parser.add_argument("--garble", type=float, default=0.0, help="probability that a STATE frame is corrupted")
-    parser.add_argument("--watchdog-ms", type=int, default=100, help="device watchdog [ms] (default 100)")
-    parser.add_argument("--n-links", type=int, default=4, help="PRB links of the simulated rod")
-    parser.add_argument("--seed", type=int, default=0, help="seed for drops, garbling and start noise")
+    for flag, kind, default, _, text in NUMBERS:
+        parser.add_argument(flag, type=kind, default=default, help=text)
     parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
     parser.set_defaults(func=run)
     from softpend.commands import rig_build, rig_control
@@ -26,36 +32,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
     rig_control.register(actions)
     rig_build.register(actions)
+    debug = dict(
+        action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error instead of one line"
+    )
     for action in actions.choices.values():
-        action.add_argument(
-            "--debug",
-            action="store_true",
-            default=argparse.SUPPRESS,
-            help="show the traceback of an error instead of one line",
-        )
+        action.add_argument("--debug", **debug)
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.commands.options import MAX_SESSION_S, check_numbers
+    from softpend.commands.options import check_numbers
     from softpend.hardware.emulator import RigConfig, serve_forever
     from softpend.io.outputs import Outputs
     from softpend.task import Task
 
-    check_numbers(
-        args,
-        {
-            "--duration": (1e-3, MAX_SESSION_S),
-            "--latency-ms": (0.0, 1000.0),
-            "--drop": (0.0, 1.0),
-            "--garble": (0.0, 1.0),
-            "--watchdog-ms": (1, 65535),
-            "--counts-per-rev": (4, 2**24),
-        },
-    )
+    check_numbers(args, {flag: limits for flag, _, _, limits, _ in NUMBERS if limits is not None})
     outputs = Outputs()
     if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")
-
     config = RigConfig(
         task=Task(start_noise_rad=0.0).replace(n_links=args.n_links),
         counts_per_rev=args.counts_per_rev,

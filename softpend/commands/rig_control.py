@@ -6,32 +6,43 @@ it runs behind the state estimator (:func:`softpend.hardware.closed_loop.run_clo
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 from softpend.commands.options import MAX_SESSION_S, check_numbers
 from softpend.plant.params import MAX_N_LINKS
 
-#: ``--camera-effects`` names: the CameraEffects class method that makes them (None: no imperfection).
-CAMERA_EFFECTS = {"clean": None, "rig": "rig", "noisy": "noisy"}
+#: ``--camera-effects`` names: no imperfection, or the CameraEffects class method of that name.
+CAMERA_EFFECTS = ("clean", "rig", "noisy")
 
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
 
-#: The closed interval of each numeric option, checked before anything starts.
-OPTION_RANGES: dict[str, tuple[float, float]] = {
-    "--duration": (1e-3, MAX_SESSION_S),
-    "--camera-fps": (1.0, 1000.0),
-    "--camera-latency-ms": (0.0, 1000.0),
-    "--max-blind-ms": (1.0, 60_000.0),
-    "--tilt": (-math.pi, math.pi),
-    "--start-noise": (0.0, math.pi),
-    "--latency-ms": (0.0, 1000.0),
-    "--counts-per-rev": (4, 2**24),
-    "--n-links": (1, MAX_N_LINKS),
-    "--pid-gains": (-1e6, 1e6),
-}
+#: The options after CONTROLLER: (flag, closed interval checked before anything starts, add_argument keywords).
+OPTIONS: tuple[tuple[str, Optional[tuple[float, float]], dict[str, Any]], ...] = (
+    ("--out", None, dict(required=True, metavar="DIR", help="folder for the logs and summary.json")),
+    ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, default=10.0, help="run length [s] (default 10)")),
+    ("--camera", None, dict(metavar="CAMERA", help="with --port: camera index, stream URL or video file")),
+    ("--no-camera", None, dict(action="store_true", help="encoder and model only (no blindness limit)")),
+    ("--camera-fps", (1.0, 1000.0), dict(type=float, default=60.0, help="twin camera frame rate (default 60)")),
+    ("--camera-latency-ms", (0.0, 1000.0), dict(type=float, default=20.0, help="exposure end to host [ms] (20)")),
+    ("--camera-effects", None, dict(choices=sorted(CAMERA_EFFECTS), default="rig", help="twin camera defects (rig)")),
+    ("--markers", None, dict(metavar="JSON", help="with --camera: marker positions [m] (default layout)")),
+    ("--calibration", None, dict(metavar="JSON", help="with --camera: a saved AffineCalibration")),
+    ("--max-blind-ms", (1.0, 60_000.0), dict(type=float, default=300.0, help="longest time without a camera fix [ms]")),
+    ("--start", None, dict(choices=("hanging", "upright"), default="hanging", help="twin: start (hanging)")),
+    ("--tilt", (-math.pi, math.pi), dict(type=float, default=0.1, help="twin, --start upright: tilt [rad] (0.1)")),
+    ("--start-noise", (0.0, math.pi), dict(type=float, default=0.05, help="twin: uniform start noise [rad, rad/s]")),
+    ("--seed", None, dict(type=int, default=0, help="twin: seed of the start noise and the camera noise")),
+    ("--latency-ms", (0.0, 1000.0), dict(type=float, default=2.0, help="twin: one-way link latency [ms] (2)")),
+    ("--counts-per-rev", (4, 2**24), dict(type=int, default=4096, help="encoder resolution (4096)")),
+    ("--n-links", (1, MAX_N_LINKS), dict(type=int, help="PRB links of the model (default: the run folder's, else 4)")),
+    ("--which", None, dict(choices=("best", "final"), default="best", help="DQN run: which agent")),
+    ("--pid-gains", (-1e6, 1e6), dict(type=float, nargs=3, metavar=("KP", "KI", "KD"), help="pid: gains (tuned)")),
+    ("--no-progress", None, dict(action="store_true", help="hide the progress bar")),
+    ("--json", None, dict(action="store_true", help="print the summary as JSON")),
+)
+OPTION_RANGES = {flag: limits for flag, limits, _ in OPTIONS if limits is not None}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -44,31 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
     target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder for the logs and summary.json")
-    parser.add_argument("--duration", type=float, default=10.0, help="run length [s] (default 10)")
-    parser.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
-    parser.add_argument("--no-camera", action="store_true", help="encoder and model only (no blindness limit)")
-    parser.add_argument("--camera-fps", type=float, default=60.0, help="twin camera frame rate (default 60)")
-    parser.add_argument("--camera-latency-ms", type=float, default=20.0, help="exposure end to host [ms] (20)")
-    parser.add_argument(
-        "--camera-effects", choices=sorted(CAMERA_EFFECTS), default="rig", help="twin camera imperfections (rig)"
-    )
-    parser.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
-    parser.add_argument("--calibration", metavar="JSON", help="with --camera: a saved AffineCalibration")
-    parser.add_argument("--max-blind-ms", type=float, default=300.0, help="longest time without a camera fix [ms]")
-    parser.add_argument("--start", choices=("hanging", "upright"), default="hanging", help="twin: start (hanging)")
-    parser.add_argument("--tilt", type=float, default=0.1, help="twin, --start upright: initial tilt [rad] (0.1)")
-    parser.add_argument("--start-noise", type=float, default=0.05, help="twin: uniform start noise [rad, rad/s]")
-    parser.add_argument("--seed", type=int, default=0, help="twin: seed of the start noise and the camera noise")
-    parser.add_argument("--latency-ms", type=float, default=2.0, help="twin: one-way link latency [ms] (2)")
-    parser.add_argument("--counts-per-rev", type=int, default=4096, help="encoder resolution (4096)")
-    parser.add_argument(
-        "--n-links", type=int, default=None, help="PRB links of the model (default: the run folder's, else 4)"
-    )
-    parser.add_argument("--which", choices=("best", "final"), default="best", help="DQN run: which agent")
-    parser.add_argument("--pid-gains", type=float, nargs=3, metavar=("KP", "KI", "KD"), help="pid: gains (tuned)")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    for flag, _, keywords in OPTIONS:
+        parser.add_argument(flag, **keywords)
     parser.set_defaults(func=run)
 
 
@@ -136,26 +124,20 @@ def run(args: argparse.Namespace) -> int:
             initial_tilt_rad=args.tilt if args.start == "upright" else None,
             hold_until_commanded=args.start == "upright",
         )
-        maker = CAMERA_EFFECTS[args.camera_effects]
-        effects = getattr(CameraEffects, maker)() if maker else CameraEffects()
-        camera = (
-            None
-            if args.no_camera
-            else TwinCamera(
-                fps=args.camera_fps, latency_s=args.camera_latency_ms / 1000.0, effects=effects, seed=args.seed
-            )
-        )
-        wait_s = 1.0 + args.camera_latency_ms / 1000.0 + 2.0 / args.camera_fps
+        name = args.camera_effects
+        effects = CameraEffects() if name == "clean" else getattr(CameraEffects, name)()
+        latency_s = args.camera_latency_ms / 1000.0
+        camera = TwinCamera(args.camera_fps, latency_s, effects, seed=args.seed) if not args.no_camera else None
         outcome = run_twin_control(
             controller,
             out,
             args.duration,
-            rig=rig,
-            camera=camera,
-            estimator_config=estimator_config,
+            rig,
+            camera,
+            estimator_config,
             progress=progress,
             outputs=outputs,
-            camera_wait_s=wait_s,
+            camera_wait_s=1.0 + latency_s + 2.0 / args.camera_fps,
         )
         target, figures = "twin", outcome.result.summary()
         truth = run_truth_metrics(outcome.motor_log, outcome.truth_log, task)
@@ -193,28 +175,15 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
     from softpend.hardware.driver import MotorLink
     from softpend.hardware.estimator import RigStateEstimator
     from softpend.io.samplelog import SampleLog
-    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, AffineCalibration, points_array, read_json_file
-    from softpend.vision.camera import DEFAULT_MARKERS_M
+    from softpend.vision.calibration import AffineCalibration, read_markers
     from softpend.vision.tip_source import FrameTracker, open_tip_source
 
     estimator = RigStateEstimator(task, estimator_config)
     source = None
     if not args.no_camera:
-        markers = DEFAULT_MARKERS_M
-        if args.markers:
-            text = args.markers
-            raw = (
-                json.loads(text)
-                if text.lstrip().startswith("[")
-                else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
-            )
-            markers = points_array("--markers", raw, 3, 6).tolist()
         calibration = AffineCalibration.load(args.calibration) if args.calibration else None
-        source = open_tip_source(
-            args.camera,
-            latency_s=args.camera_latency_ms / 1000.0,
-            frame_tracker=FrameTracker(calibration=calibration, markers_m=markers),
-        )
+        tracker = FrameTracker(calibration=calibration, markers_m=read_markers("--markers", args.markers))
+        source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0, frame_tracker=tracker)
     metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
     logs = [outputs.live(out / name) for name in PORT_CONTROL_FILES[:2]]
     try:

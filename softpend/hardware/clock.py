@@ -9,8 +9,6 @@ import math
 import time
 from typing import Callable, Optional
 
-__all__ = ["SimClock", "SimSerial", "WALL_CLOCK", "WallClock"]
-
 
 class WallClock:
     """The computer's monotonic clock (a real rig)."""

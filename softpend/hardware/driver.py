@@ -1,6 +1,5 @@
-"""Host-side driver of the motor link: version handshake, torque commands clamped on the host (never above the
-smaller of the host's and the device's limit, as the float32 on the wire), checked STATE frames, STOP on every
-exit path (close, atexit, SIGTERM/SIGINT, any link error), and one clear exception per failure."""
+"""Host-side driver of the motor link: version handshake, torque clamped to the smaller of the host's and the
+device's limit (as the float32 on the wire), checked STATE frames, STOP on every exit path."""
 
 from __future__ import annotations
 
@@ -21,8 +20,6 @@ from softpend.hardware.clock import WALL_CLOCK
 
 #: Largest values a device may announce or report (beyond them a value is garbage).
 MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
-MAX_COUNTS_PER_REV = 1 << 24
-MAX_STATE_RATE_HZ = 10000
 MAX_HUB_SPEED_RAD_S = 1000.0
 
 
@@ -30,24 +27,20 @@ class LinkError(RuntimeError):
     """Base class of every motor-link failure."""
 
 
-class LinkTimeout(LinkError):
-    """The device did not answer within the timeout."""
+class LinkTimeout(LinkError): ...
 
 
-class LinkDisconnected(LinkError):
-    """The serial port went away."""
+class LinkDisconnected(LinkError): ...
 
 
 class LinkChecksumError(LinkError):
     """Too many consecutive frames failed their CRC, framing or value checks."""
 
 
-class HandshakeError(LinkError):
-    """The version handshake failed (version, impossible announced values, no answer)."""
+class HandshakeError(LinkError): ...
 
 
-class DeviceError(LinkError):
-    """The device reported an error."""
+class DeviceError(LinkError): ...
 
 
 @dataclass(frozen=True)
@@ -62,10 +55,10 @@ class DeviceInfo:
 
     def __post_init__(self) -> None:
         checks = (
-            ("counts_per_rev", self.counts_per_rev, 1, MAX_COUNTS_PER_REV, True),
+            ("counts_per_rev", self.counts_per_rev, 1, 1 << 24, True),
             ("torque_limit_nm", self.torque_limit_nm, 0.0, MAX_DEVICE_TORQUE_LIMIT_NM, False),
             ("watchdog_s", self.watchdog_s, 0.0, 65.535, False),
-            ("state_rate_hz", self.state_rate_hz, 1, MAX_STATE_RATE_HZ, True),
+            ("state_rate_hz", self.state_rate_hz, 1, 10000, True),
         )
         for name, value, low, high, closed_low in checks:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
@@ -77,8 +70,7 @@ class DeviceInfo:
 
 @dataclass(frozen=True)
 class MotorState:
-    """One STATE message in SI units: the host's clock at decoding, the device clock at the encoder sample, the
-    hub angle from upright (unwrapped), the seq of the command in force, ``protocol.FLAG_*`` bits."""
+    """One STATE message in SI units (hub angle from upright, unwrapped; ``flags``: ``protocol.FLAG_*`` bits)."""
 
     host_time_s: float
     device_time_s: float
@@ -92,10 +84,6 @@ class MotorState:
     @property
     def watchdog_tripped(self) -> bool:
         return bool(self.flags & proto.FLAG_WATCHDOG)
-
-    @property
-    def saturated(self) -> bool:
-        return bool(self.flags & proto.FLAG_SATURATED)
 
 
 _OPEN_LINKS: "weakref.WeakSet[MotorLink]" = weakref.WeakSet()
@@ -131,14 +119,8 @@ def _install_exit_hooks() -> None:
 
 
 class MotorLink:
-    """A session with the motor controller over the serial port ``port`` (or the open transport ``serial``, such
-    as the twin's in-memory link, timed by its ``clock``).
-
-    Args: ``torque_limit_nm`` the host's limit (the effective one is the smaller of it and the device's);
-    ``timeout_s`` how long a read or the handshake waits; ``phi_at_zero_counts_rad`` the hub angle at zero
-    counts; ``max_consecutive_bad_frames`` bad frames in a row that raise :class:`LinkChecksumError`;
-    ``install_exit_hooks`` the atexit and signal hooks that stop the motor.
-    """
+    """A session with the motor controller on the serial port ``port`` (or the open transport ``serial``, timed
+    by its ``clock``); ``max_consecutive_bad_frames`` bad frames in a row raise :class:`LinkChecksumError`."""
 
     def __init__(
         self,
@@ -153,15 +135,12 @@ class MotorLink:
     ) -> None:
         if not isinstance(port, str) or not port:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
-        positive("torque_limit_nm", torque_limit_nm)
-        positive("timeout_s", timeout_s)
-        positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
         self.port = port
-        self.host_torque_limit_nm = float(torque_limit_nm)
+        self.host_torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
         self.baudrate = int(baudrate)
-        self.timeout_s = float(timeout_s)
+        self.timeout_s = positive("timeout_s", timeout_s)
         self.phi_at_zero_counts_rad = float(phi_at_zero_counts_rad)
-        self.max_consecutive_bad_frames = int(max_consecutive_bad_frames)
+        self.max_consecutive_bad_frames = positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
         self.install_exit_hooks = install_exit_hooks
         self._transport = serial
         self.clock = getattr(serial, "clock", None) or WALL_CLOCK
@@ -184,11 +163,6 @@ class MotorLink:
         if self.device is None:
             return self.host_torque_limit_nm
         return min(self.host_torque_limit_nm, self.device.torque_limit_nm)
-
-    @property
-    def rejected_states(self) -> int:
-        """Frames with a valid CRC but impossible values (counted in :attr:`bad_frames` too)."""
-        return self._decoder.value_errors
 
     @property
     def bad_frames(self) -> int:
@@ -229,11 +203,10 @@ class MotorLink:
             if version != proto.PROTOCOL_VERSION:
                 raise HandshakeError(f"device speaks protocol version {version}, host {proto.PROTOCOL_VERSION}")
             try:
-                device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
+                self.device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
+                return
             except ValueError as exc:
                 raise HandshakeError(f"device {self.port!r} announced an impossible HELLO_ACK: {exc}") from exc
-            self.device = device
-            return
 
     def close(self) -> None:
         """Send STOP (zero torque) and close the port.  Safe to call more than once."""
@@ -306,7 +279,7 @@ class MotorLink:
         return states
 
     def _check_message(self, msg_type: int, values: tuple) -> Optional[str]:
-        """What is impossible about a decoded message's values (None: nothing); the decoder's ``validate`` hook."""
+        """What is impossible about a decoded message's values (None: nothing)."""
         if msg_type != proto.MSG_STATE:
             return None
         _, _, velocity, applied, _, flags = values
@@ -355,8 +328,7 @@ class MotorLink:
         return self._seq
 
     def emergency_stop(self, wait: bool = True) -> None:
-        """Send STOP if the port is open, swallowing any error.  With ``wait`` False (signal handlers) a link whose
-        write lock is held is only marked, and the write in progress sends STOP when it ends."""
+        """Send STOP if the port is open, swallowing any error; without ``wait`` a held write lock defers it."""
         ser = self._serial
         if ser is None:
             return
@@ -434,8 +406,7 @@ class MotorLink:
 
 
 def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
-    """Write ``frame`` whole to ``ser``; time out only if the port takes no byte for ``timeout_s`` (a writer that
-    was not scheduled is not a dead link).  Ports without a file descriptor use pyserial's ``write``."""
+    """Write ``frame`` whole to ``ser``, timing out only when the port takes no byte for ``timeout_s``."""
     import serial
 
     try:

@@ -14,8 +14,6 @@ import numpy as np
 from softpend.checks import int_at_least, non_negative, positive
 from softpend.plant import Observation, SimulationDiverged
 
-__all__ = ["DeviceClock", "Estimate", "EstimatorConfig", "RigStateEstimator"]
-
 
 @dataclass(frozen=True)
 class EstimatorConfig:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-__all__ = ["BEGIN_MARKER", "END_MARKER", "FIRMWARE_PATH", "check_firmware", "embedded_protocol", "update_firmware"]
 
 BEGIN_MARKER = "# ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----\n"
 END_MARKER = "# ---- END softpend/hardware/protocol.py ----\n"

@@ -13,7 +13,6 @@ from softpend.checks import positive
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.io.samplelog import SampleLog
 
-__all__ = ["LOOP_LOG_COLUMNS", "LoopResult", "RigLoop", "RigObservation", "run_control_loop"]
 
 #: Columns of the motor log written by :func:`run_control_loop`.
 LOOP_LOG_COLUMNS: tuple[str, ...] = tuple(

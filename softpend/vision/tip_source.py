@@ -9,7 +9,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional, Protocol, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -40,18 +40,6 @@ class TipMeasurement:
     def age_s(self) -> float:
         """Delivery minus capture time [s]."""
         return self.delivered_time_s - self.capture_time_s
-
-
-class TipSource(Protocol):
-    """A camera with a tracker behind it: ``poll`` returns the measurements since the last call, oldest first."""
-
-    def start(self) -> None: ...
-
-    def poll(self) -> list[TipMeasurement]: ...
-
-    def close(self) -> None: ...
-
-    def stats(self) -> dict[str, float]: ...
 
 
 class FrameTracker:

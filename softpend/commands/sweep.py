@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 METHODS = ("dqn", "mbpo", "pilco")
 #: Most seeds one sweep may train.
@@ -47,6 +48,29 @@ def method_list(text: str) -> list[str]:
     return list(dict.fromkeys(methods))
 
 
+#: ``(flag, type, default, help)`` of the options besides ``--book``, ``--backend``, the ``--<method>-set`` and
+#: ``--fresh``.
+OPTIONS: tuple[tuple[str, Any, Any, str], ...] = (
+    ("--profile", None, "full", "with --book: the profile of book/profiles.yml (default full)"),
+    ("--root", Path, Path("."), "with --book: the project root (default .)"),
+    ("--methods", method_list, list(METHODS), "comma-separated, default all"),
+    ("--seeds", seed_list, list(range(10)), "e.g. 0-9 (default) or 0,3,5"),
+)
+RUN_OPTIONS: tuple[tuple[str, Any, Any, str], ...] = (
+    ("--workers", int, None, "parallel runs (default $SOFTPEND_WORKERS or the CPU count)"),
+    ("--runs-root", Path, Path("runs/sweep"), "run folders (default runs/sweep)"),
+    ("--episodes-dqn", int, None, "DQN episodes per seed (default: the book's)"),
+    ("--episodes-mbpo", int, None, "DQN-MBPO episodes per seed (default: the book's)"),
+    ("--pilco-trials", int, None, "PILCO policy trials per seed (default: the book's)"),
+)
+#: ``method -> (config class, method name, example of --<method>-set)``.
+SET_EXAMPLES = {
+    "dqn": ("DQNConfig", "DQN", "learner.gradient_steps=4"),
+    "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
+    "pilco": ("PilcoConfig", "PILCO", "policy.balance_within_rad=null"),
+}
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.commands.options import add_set_option
     from softpend.study.sweep import BACKENDS
@@ -58,37 +82,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="train the runs the book's notebooks read (for --profile), then stop; the other "
         "training options are not used",
     )
-    parser.add_argument(
-        "--profile", default="full", help="with --book: the profile of book/profiles.yml (default full)"
-    )
-    parser.add_argument("--root", type=Path, default=Path("."), help="with --book: the project root (default .)")
-    parser.add_argument("--methods", type=method_list, default=list(METHODS), help="comma-separated, default all")
-    parser.add_argument("--seeds", type=seed_list, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
+    for flag, kind, default, text in OPTIONS:
+        parser.add_argument(flag, type=kind, default=default, help=text)
     parser.add_argument(
         "--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)"
     )
-    parser.add_argument(
-        "--workers", type=int, default=None, help="parallel runs (default $SOFTPEND_WORKERS or the CPU count)"
-    )
-    parser.add_argument("--runs-root", type=Path, default=Path("runs/sweep"), help="run folders (default runs/sweep)")
-    parser.add_argument("--episodes-dqn", type=int, default=None, help="DQN episodes per seed (default: the book's)")
-    parser.add_argument(
-        "--episodes-mbpo", type=int, default=None, help="DQN-MBPO episodes per seed (default: the book's)"
-    )
-    parser.add_argument(
-        "--pilco-trials", type=int, default=None, help="PILCO policy trials per seed (default: the book's)"
-    )
-    for method, (cls, name, example) in {
-        "dqn": ("DQNConfig", "DQN", "learner.gradient_steps=4"),
-        "mbpo": ("MBPOConfig", "DQN-MBPO", "reset_every_episodes=20"),
-        "pilco": ("PilcoConfig", "PILCO", "policy.balance_within_rad=null"),
-    }.items():
-        add_set_option(
-            parser,
-            flag=f"--{method}-set",
-            dest=f"{method}_overrides",
-            help=f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})",
-        )
+    for flag, kind, default, text in RUN_OPTIONS:
+        parser.add_argument(flag, type=kind, default=default, help=text)
+    for method, (cls, name, example) in SET_EXAMPLES.items():
+        text = f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})"
+        add_set_option(parser, flag=f"--{method}-set", dest=f"{method}_overrides", help=text)
     parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 
@@ -96,10 +99,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
+    from softpend.commands.options import check_numbers
+    from softpend.commands.train import MAX_EPISODES
     from softpend.io.outputs import json_text
     from softpend.io.overrides import apply_overrides
     from softpend.study.head_to_head import pilco_runs
-    from softpend.study.presets import PILCO, RL_BOOK
+    from softpend.study.presets import PILCO, RL_EPISODES
     from softpend.study.rl_runs import figure_configs, summary_table, train_seeds
     from softpend.study.run_pool import train_book, train_in_one_pool
     from softpend.study.sweep import check_backend, default_backend
@@ -116,76 +121,40 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     root: Path = args.runs_root
-    from softpend.commands.options import check_numbers
-    from softpend.commands.train import MAX_EPISODES
-
-    check_numbers(
-        args,
-        {
-            "--episodes-dqn": (1, MAX_EPISODES),
-            "--episodes-mbpo": (1, MAX_EPISODES),
-            "--pilco-trials": (0, 10_000),
-            "--workers": (1, 1024),
-        },
-    )
+    limits = {"--episodes-dqn": (1, MAX_EPISODES), "--episodes-mbpo": (1, MAX_EPISODES)}
+    check_numbers(args, {**limits, "--pilco-trials": (0, 10_000), "--workers": (1, 1024)})
     if root.exists() and not root.is_dir():
         raise ValueError(f"--runs-root {root} exists and is not a folder")
-    configs = {
-        algo: apply_overrides(config, getattr(args, f"{algo}_overrides", None) or [])
-        for algo, config in figure_configs().items()
-    }
-    episodes = {"dqn": args.episodes_dqn or RL_BOOK.episodes_dqn, "mbpo": args.episodes_mbpo or RL_BOOK.episodes_mbpo}
+    configs = {algo: apply_overrides(c, getattr(args, f"{algo}_overrides")) for algo, c in figure_configs().items()}
+    episodes = {algo: getattr(args, f"episodes_{algo}") or RL_EPISODES[algo] for algo in configs}
     rl_algos = [m for m in args.methods if m != "pilco"]
     config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
-    config = apply_overrides(config, getattr(args, "pilco_overrides", None) or [])
+    config = apply_overrides(config, args.pilco_overrides)
+    pool = dict(workers=args.workers, backend=args.backend)
     # every method's runs in one pool; the per-method calls below then find them finished
-    train_in_one_pool(
-        [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos],
-        root,
-        config if "pilco" in args.methods else None,
-        args.seeds,
-        root,
-        workers=args.workers,
-        backend=args.backend,
-    )
+    rl_specs = [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos]
+    train_in_one_pool(rl_specs, root, config if "pilco" in args.methods else None, args.seeds, root, **pool)
     out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
-    rl_logs = {}
-    for algo in rl_algos:
-        logs = train_seeds(
-            algo, configs[algo], args.seeds, episodes[algo], root, workers=args.workers, backend=args.backend
-        )
-        rl_logs[algo] = logs
+    rl_logs = {algo: train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, **pool) for algo in rl_algos}
+    for algo, logs in rl_logs.items():
         out["methods"][algo] = {"episodes": episodes[algo], "runs": summary_table({algo: logs})}
-    pilco_results = []
-    if "pilco" in args.methods:
-        pilco_results = pilco_runs(config, args.seeds, root, workers=args.workers, backend=args.backend)
-        out["methods"]["pilco"] = {
-            "runs": [
-                {
-                    "seed": r.config.seed,
-                    "plant_s_to_balance": r.real_seconds_to_balance,
-                    "plant_s": r.plant_seconds_total,
-                    "cpu_s": r.train_cpu_s,
-                }
-                for r in pilco_results
-            ]
-        }
+    pilco_results = pilco_runs(config, args.seeds, root, **pool) if "pilco" in args.methods else []
+    if pilco_results:
+        keys = ("seed", "plant_s_to_balance", "plant_s", "cpu_s")
+        values = [
+            (r.config.seed, r.real_seconds_to_balance, r.plant_seconds_total, r.train_cpu_s) for r in pilco_results
+        ]
+        out["methods"]["pilco"] = {"runs": [dict(zip(keys, v)) for v in values]}
     if args.fresh:
-        from softpend.study.fresh_starts import (
-            aggregate_fresh_start_rows,
-            headline_figures,
-            pilco_fresh_start_rows,
-            rl_fresh_start_rows,
-            seed_rows,
-        )
+        from softpend.study import fresh_starts as fs
 
-        rows = pilco_fresh_start_rows(pilco_results) if pilco_results else []
+        rows = fs.pilco_fresh_start_rows(pilco_results) if pilco_results else []
         if rl_logs:
-            rows += rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs), configs=configs)
-        out["fresh_starts"] = rows
-        out["fresh_start_summary"] = aggregate_fresh_start_rows(rows)
-        per_seed = seed_rows(rl_logs, rows, pilco_results)
-        out["per_seed"] = per_seed
-        out["headline"] = headline_figures(per_seed)
+            rows += fs.rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs), configs=configs)
+        per_seed = fs.seed_rows(rl_logs, rows, pilco_results)
+        summary = fs.aggregate_fresh_start_rows(rows)
+        out.update(
+            fresh_starts=rows, fresh_start_summary=summary, per_seed=per_seed, headline=fs.headline_figures(per_seed)
+        )
     print(json_text(out, indent=2))
     return 0

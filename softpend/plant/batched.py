@@ -59,27 +59,20 @@ class BatchedRodParams:
         if n_links > MAX_N_LINKS:
             raise ValueError(f"n_links must be at most {MAX_N_LINKS}, got {self.n_links!r}")
         object.__setattr__(self, "n_links", n_links)
-        shape = None
+        shape = getattr(self.length_m, "shape", None)
         for name in PARAMETER_FIELDS:
             value = getattr(self, name)
-            if not isinstance(value, torch.Tensor):
-                raise ValueError(f"{name} must be a torch tensor of shape (B,), got {type(value).__name__}")
-            if value.ndim != 1 or value.shape[0] < 1:
-                raise ValueError(f"{name} must have shape (B,) with B >= 1, got {tuple(value.shape)}")
-            if shape is None:
-                shape = value.shape
-            elif value.shape != shape:
-                raise ValueError(f"{name} has shape {tuple(value.shape)}, the other parameters {tuple(shape)}")
-            if not value.is_floating_point():
-                raise ValueError(f"{name} must be a floating-point tensor, got {value.dtype}")
+            if not (isinstance(value, torch.Tensor) and value.is_floating_point() and value.ndim == 1):
+                raise ValueError(
+                    f"{name} must be a floating-point torch tensor of shape (B,), got {type(value).__name__}"
+                )
+            if value.shape != shape or not value.shape[0]:
+                raise ValueError(f"{name} has shape {tuple(value.shape)}, the other parameters {tuple(shape or ())}")
             detached = value.detach()
-            if not bool(torch.isfinite(detached).all()):
-                raise ValueError(f"{name} must be finite, got {detached.tolist()[:8]}")
             low = float(detached.min())
-            if name in _POSITIVE and not low > 0:
-                raise ValueError(f"{name} must be positive for every rod, got minimum {low!r}")
-            if name not in _POSITIVE and low < 0:
-                raise ValueError(f"{name} must be non-negative for every rod, got minimum {low!r}")
+            if not bool(torch.isfinite(detached).all()) or (low <= 0 if name in _POSITIVE else low < 0):
+                sign = "positive" if name in _POSITIVE else "non-negative"
+                raise ValueError(f"{name} must be finite and {sign} for every rod, got {detached.tolist()[:8]}")
 
     @property
     def batch_size(self) -> int:
@@ -114,7 +107,9 @@ class BatchedRodParams:
 
     def replace(self, **changes: TensorLike) -> "BatchedRodParams":
         """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
-        _check_fields(changes)
+        unknown = set(changes) - set(PARAMETER_FIELDS)
+        if unknown:
+            raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
         new: dict[str, Any] = {}
         for name, value in changes.items():
             base = getattr(self, name)
@@ -124,23 +119,13 @@ class BatchedRodParams:
 
     def scaled(self, **factors: TensorLike) -> "BatchedRodParams":
         """A copy with some fields multiplied by per-rod factors."""
-        _check_fields(factors)
         return self.replace(
-            **{
-                name: getattr(self, name) * torch.as_tensor(f, dtype=getattr(self, name).dtype)
-                for name, f in factors.items()
-            }
+            **{n: getattr(self, n, 1.0) * torch.as_tensor(f, dtype=self.dtype) for n, f in factors.items()}
         )
 
     @property
     def dtype(self) -> torch.dtype:
         return self.length_m.dtype
-
-
-def _check_fields(changes: dict) -> None:
-    unknown = set(changes) - set(PARAMETER_FIELDS)
-    if unknown:
-        raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
 
 
 @dataclass(frozen=True)
@@ -414,40 +399,14 @@ def stable_substeps(
     return max(1, math.ceil(largest * dt_s / bound))
 
 
-def _powers(d: _Derived, v: torch.Tensor, torque: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Motor power (hub torque times hub rate) and dissipated power (hub friction, joint dampers) [W]."""
-    rel = v[1:] - v[:-1]
-    dissipated = d.hub_friction_nms_per_rad * v[0] ** 2 + (d.damping_nms_per_rad * rel**2).sum(0)
-    return torque * v[0], dissipated
-
-
 def _integrate(
-    integrator: str,
-    substeps: int,
-    h: float,
-    d: _Derived,
-    x: torch.Tensor,
-    v: torch.Tensor,
-    torque: torch.Tensor,
-    with_work: bool,
-):
-    """``substeps`` steps of ``h``; with ``with_work`` also the motor work and the dissipated energy [J]
-    (RK4's stages, or the trapezoidal rule for Rosenbrock)."""
-    work_in: Optional[torch.Tensor] = None
-    work_out: Optional[torch.Tensor] = None
-    if with_work:
-        work_in = torch.zeros_like(torque)
-        work_out = torch.zeros_like(torque)
+    integrator: str, substeps: int, h: float, d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``substeps`` steps of ``h``."""
     acc = _accelerations
     for _ in range(substeps):
         if integrator == "rosenbrock":
-            x_next, v_next = _rosenbrock_step(d, x, v, torque, h)
-            if with_work:
-                assert work_in is not None and work_out is not None
-                before, after = _powers(d, v, torque), _powers(d, v_next, torque)
-                work_in = work_in + (h / 2) * (before[0] + after[0])
-                work_out = work_out + (h / 2) * (before[1] + after[1])
-            x, v = x_next, v_next
+            x, v = _rosenbrock_step(d, x, v, torque, h)
             continue
         a1 = acc(d, x, v, torque)
         x2, v2 = torch.add(x, v, alpha=h / 2), torch.add(v, a1, alpha=h / 2)
@@ -456,15 +415,8 @@ def _integrate(
         a3 = acc(d, x3, v3, torque)
         x4, v4 = torch.add(x, v3, alpha=h), torch.add(v, a3, alpha=h)
         a4 = acc(d, x4, v4, torque)
-        if with_work:
-            assert work_in is not None and work_out is not None
-            p = [_powers(d, vv, torque) for vv in (v, v2, v3, v4)]
-            work_in = work_in + (h / 6) * (p[0][0] + 2 * p[1][0] + 2 * p[2][0] + p[3][0])
-            work_out = work_out + (h / 6) * (p[0][1] + 2 * p[1][1] + 2 * p[2][1] + p[3][1])
         x = torch.add(x, torch.add(torch.add(v + v4, v2, alpha=2.0), v3, alpha=2.0), alpha=h / 6)
         v = torch.add(v, torch.add(torch.add(a1 + a4, a2, alpha=2.0), a3, alpha=2.0), alpha=h / 6)
-    if with_work:
-        return x, v, work_in, work_out
     return x, v
 
 
@@ -574,22 +526,16 @@ class BatchedPRBChain:
         x, v = self._integrate(x, v, self._check_torque(torque_nm))
         return self._relative(x), self._relative(v)
 
-    def _integrate(self, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor, with_work: bool = False):
+    def _integrate(self, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h = self.dt_s / self.substeps
         needs_grad = torch.is_grad_enabled() and (
             self._params_require_grad or x.requires_grad or v.requires_grad or torque.requires_grad
         )
-        if self.compiled and not with_work and not needs_grad:
+        if self.compiled and not needs_grad:
             if self._compiled_integrate is None:
                 self._compiled_integrate = torch.compile(_integrate, dynamic=False)
-            return self._compiled_integrate(self.integrator, self.substeps, h, self._d, x, v, torque, False)
-        return _integrate(self.integrator, self.substeps, h, self._d, x, v, torque, with_work)
-
-    def step_with_work(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torque_nm: TensorLike):
-        """:meth:`step` and the work over it: ``(q, q_dot, motor_work_j, dissipated_j)``."""
-        x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
-        x, v, w_in, w_out = self._integrate(x, v, self._check_torque(torque_nm), with_work=True)
-        return self._relative(x), self._relative(v), w_in, w_out
+            return self._compiled_integrate(self.integrator, self.substeps, h, self._d, x, v, torque)
+        return _integrate(self.integrator, self.substeps, h, self._d, x, v, torque)
 
     def rollout(
         self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike, torques_nm: TensorLike

@@ -19,7 +19,7 @@ from support import one_line_error
 
 from softpend.checks import NonFiniteError
 from softpend.cli import main
-from softpend.io.outputs import atomic_write, check_output_file, json_text
+from softpend.io.outputs import Outputs, atomic_write, json_text
 from softpend.rl.agent_files import AgentFileError, load_agent_file, load_replay_buffer, save_replay_buffer
 from softpend.rl.config import MBPOConfig
 from softpend.rl.dqn import agent_class, load_agent, train_dqn
@@ -341,7 +341,7 @@ def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path):
             raise RuntimeError("disk full")
     assert path.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["out.bin"]
     with pytest.raises(ValueError, match="is a folder"):
-        check_output_file(tmp_path)
+        Outputs().file(tmp_path)
 
 
 # ------------------------------------------------------------------------------------------------ non-finite

@@ -1,18 +1,14 @@
-"""Any controller of the project on a rig (real, or the digital twin in simulated time): encoder and camera through
-the state estimator, the torque through the driver's clamp, zero torque on every exit path, crash-safe logs.
-
-Control arms with the first camera frame that corrects the estimate; a camera blind for ``max_blind_s`` (or one
-that never arms) is a safe stop (STOP, reason in the result); any exception sends STOP and propagates."""
+"""Any controller on a rig (real, or the digital twin in simulated time) behind the state estimator: control arms
+with the first camera correction, a blind camera is a safe stop, any exception sends STOP and propagates."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -36,7 +32,6 @@ CAMERA_LOG_COLUMNS: tuple[str, ...] = tuple(
 
 
 def rig_control_columns(n_coordinates: int) -> list[str]:
-    """Columns of the motor log of :func:`run_closed_loop` for a model of ``n_coordinates`` coordinates."""
     return (
         "host_time_s device_time_s time_s state_seq phi_rad phi_dot_rad_s applied_torque_nm flags command_torque_nm "
         "commanded late_command camera_frames blind_s est_time_s".split()
@@ -49,9 +44,7 @@ def rig_control_columns(n_coordinates: int) -> list[str]:
 
 @dataclass
 class ClosedLoopResult(LoopResult):
-    """Summary of one :func:`run_closed_loop` run: ``stop_reason`` None when it ran its course, ``status`` a key
-    of :data:`STATUS_CODES`, ``late_commands`` those the device had not received by its next tick,
-    ``armed_at_s`` the time control started (NaN if never)."""
+    """Summary of one :func:`run_closed_loop` run (``status`` a key of :data:`STATUS_CODES`)."""
 
     duration_s: float
     stop_reason: Optional[str]
@@ -63,16 +56,12 @@ class ClosedLoopResult(LoopResult):
     estimator: dict = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
-        """The figures as a JSON-ready dict."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "command_periods_s"}
         return {**out, "jitter_ms_p95": self.jitter_ms_p95}
 
 
 class _SafeStop(Exception):
-    def __init__(self, status: str, reason: str) -> None:
-        super().__init__(reason)
-        self.status = status
-        self.reason = reason
+    """``(status, reason)``."""
 
 
 def run_closed_loop(
@@ -88,12 +77,7 @@ def run_closed_loop(
     progress: bool = False,
 ) -> ClosedLoopResult:
     """Run ``controller(observation, q, q_dot, time_s)`` on the rig behind the open ``link`` for ``duration_s`` of
-    device time.
-
-    Args: ``tip_source`` the started camera (None: control starts at once, no blindness limit); ``log`` and
-    ``camera_log`` with the columns :func:`rig_control_columns` and :data:`CAMERA_LOG_COLUMNS`; ``clock`` the
-    host-to-device clock map (default: half the shortest of 5 HEARTBEAT round trips as latency).
-    """
+    device time; ``tip_source`` None starts control at once; ``clock`` defaults to half the shortest of 5 pings."""
     check_run(
         link,
         duration_s,
@@ -111,31 +95,21 @@ def run_closed_loop(
     bar = SecondsBar(duration_s, "rig control", progress)
     loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s)
     loop.log, loop.camera_log = log, camera_log
-    with _one_torch_thread():
+    torch = sys.modules.get("torch")  # on one thread while the loop runs
+    threads = torch.get_num_threads() if torch is not None else 0
+    try:
+        if torch is not None:
+            torch.set_num_threads(1)
         loop.run(bar)
+    finally:
+        if torch is not None:
+            torch.set_num_threads(threads)
     link.stop()
     return loop.result()
 
 
-@contextlib.contextmanager
-def _one_torch_thread() -> Iterator[None]:
-    """Torch on one thread while the loop runs (if torch is imported)."""
-    torch = sys.modules.get("torch")
-    if torch is None:
-        yield
-        return
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
-
-
 @dataclass
 class _Tick:
-    """What one state's row records, filled in as the state is processed."""
-
     late_flag: int
     row_status: str
     estimate_values: list[float]
@@ -179,7 +153,6 @@ class _ClosedLoop(RigLoop):
             )
 
     def step(self, state: Any, newest: bool) -> None:
-        """Process one state (command and camera only for the ``newest`` of a batch) and log its row."""
         self.clock.observe(state.host_time_s, state.device_time_s)
         self.count(state)
         late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
@@ -200,8 +173,8 @@ class _ClosedLoop(RigLoop):
             tick.row_status = self.status
         except _SafeStop as stop:
             self.link.stop()
-            self.status = tick.row_status = stop.status
-            self.stop_reason = stop.reason
+            self.status = tick.row_status = stop.args[0]
+            self.stop_reason = stop.args[1]
         except BaseException:
             self.link.emergency_stop()  # zero torque first, so the log records what is in force
             tick.row_status = "error"
@@ -225,8 +198,7 @@ class _ClosedLoop(RigLoop):
                 )
         if not self.armed and self.t > self.arm_timeout_s:
             raise _SafeStop(
-                "arm_timeout",
-                f"the camera did not correct the estimate within arm_timeout_s = {self.arm_timeout_s} s",
+                "arm_timeout", f"the camera did not correct the estimate within arm_timeout_s = {self.arm_timeout_s} s"
             )
 
     def _command(self, tick: _Tick) -> None:
@@ -238,8 +210,7 @@ class _ClosedLoop(RigLoop):
         tick.commanded = int(self.armed)
 
     def _poll_camera(self, tick: _Tick) -> None:
-        """Feed the camera measurements that arrived to the estimator, after the command (the replay of a late
-        frame stays off the path from state to command); the first accepted one arms the loop."""
+        """Feed the camera's new measurements to the estimator (after the command); the first accepted one arms."""
         assert self.t0 is not None
         polled = self.link.clock.now_s()
         for m in self.tip_source.poll():
@@ -281,8 +252,7 @@ class _ClosedLoop(RigLoop):
 
 @dataclass(frozen=True)
 class TwinCamera:
-    """The twin's synthetic live camera (:class:`softpend.vision.tip_source.SyntheticLiveCamera`): frame rate,
-    latency from the end of exposure to the tracker [s], image effects, camera model, injected faults, seed."""
+    """Settings of the twin's :class:`softpend.vision.tip_source.SyntheticLiveCamera`."""
 
     fps: float = 60.0
     latency_s: float = 0.02
@@ -294,9 +264,6 @@ class TwinCamera:
 
 @dataclass
 class TwinControlRun:
-    """Files and figures of one :func:`run_twin_control` run."""
-
-    workdir: Path
     motor_log: Path
     camera_log: Path
     truth_log: Path
@@ -315,18 +282,13 @@ def run_twin_control(
     rig: Optional[Any] = None,
     camera: Optional[TwinCamera] = TwinCamera(),
     estimator_config: Optional[EstimatorConfig] = None,
-    arm_timeout_s: float = 2.0,
     progress: bool = False,
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 1.0,
     outputs: Optional[Any] = None,
-    estimator_task: Optional[Any] = None,
 ) -> TwinControlRun:
-    """Run ``controller`` on the digital twin (``rig``, default :class:`~softpend.hardware.emulator.RigConfig`)
-    in simulated time, filmed by ``camera`` (None: encoder and model only) from the start; the loop starts once
-    the camera tracked a frame (within ``camera_wait_s``).  Writes :data:`TWIN_CONTROL_FILES` to ``workdir``
-    through ``outputs`` (a :class:`softpend.io.outputs.Outputs`), the summary also when the run raises; the estimator's
-    model is ``estimator_task`` (default: ``rig.task``, the twin's own rod)."""
+    """Run ``controller`` on the digital twin ``rig`` in simulated time, filmed by ``camera`` (None: none), once the
+    camera tracked a frame; writes :data:`TWIN_CONTROL_FILES` to ``workdir`` (the summary also when it raises)."""
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
@@ -340,7 +302,7 @@ def run_twin_control(
     for path in logs:
         outputs.live(path)
     config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
-    estimator = RigStateEstimator(estimator_task if estimator_task is not None else rig.task, config)
+    estimator = RigStateEstimator(rig.task, config)
     metadata = {
         "rig": rig.to_dict(),
         "estimator": dataclasses.asdict(estimator.config),
@@ -369,7 +331,7 @@ def run_twin_control(
         ):
             try:
                 result = run_closed_loop(
-                    link, controller, estimator, duration_s, source, log, camera_log, None, arm_timeout_s, progress
+                    link, controller, estimator, duration_s, source, log, camera_log, progress=progress
                 )
             except Exception as exc:
                 error = f"{type(exc).__name__}: {exc}"
@@ -385,4 +347,4 @@ def run_twin_control(
         for path in logs:
             outputs.done(path)
     assert result is not None
-    return TwinControlRun(workdir, motor_path, camera_path, truth_path, result, device.stats())
+    return TwinControlRun(motor_path, camera_path, truth_path, result, device.stats())

@@ -1,6 +1,5 @@
-"""The rig emulator: the device's protocol session (:class:`~softpend.hardware.protocol.DeviceSession`) in front
-of the simulated plant, with a quantised encoder, lost and garbled STATE frames and a truth log; on a
-:class:`~softpend.hardware.clock.SimClock` (:class:`SimRig`, the twin) or on a pseudo-terminal (:class:`RigEmulator`)."""
+"""The rig emulator: the device's protocol session in front of the simulated plant (quantised encoder, lost and
+garbled STATE frames, truth log), on a :class:`SimClock` (:class:`SimRig`) or a pseudo-terminal (:class:`RigEmulator`)."""
 
 from __future__ import annotations
 
@@ -22,7 +21,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import finite, in_unit_interval, int_at_least, optional_positive
+from softpend.checks import finite, in_range, in_unit_interval, int_at_least, optional_positive
 from softpend.hardware import protocol as proto
 from softpend.hardware.clock import SimClock, SimSerial
 from softpend.io.samplelog import SampleLog
@@ -31,13 +30,8 @@ from softpend.task import Task
 
 @dataclass(frozen=True)
 class RigConfig:
-    """Settings of the emulated rig.
-
-    ``task.dt_s`` is the STATE period (in [0.001, 0.1] s) and ``task.start_noise_rad`` the uniform noise on the
-    initial hub angle and rate; ``latency_s`` the one-way link latency; ``seed`` seeds the drops, garbling and
-    start noise; ``duration_s`` None runs until stopped; ``initial_tilt_rad`` starts the straight rod at rest
-    tilted from upright instead of hanging; ``hold_until_commanded`` holds the rod until the first TORQUE.
-    """
+    """Settings of the emulated rig: ``task.dt_s`` is the STATE period; ``initial_tilt_rad`` starts the straight rod
+    at rest tilted from upright instead of hanging; ``hold_until_commanded`` holds it until the first TORQUE."""
 
     task: Task = field(default_factory=lambda: Task(start_noise_rad=0.0))
     counts_per_rev: int = 4096
@@ -53,8 +47,7 @@ class RigConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
-        if not 0.001 <= self.task.dt_s <= 0.1:
-            raise ValueError(f"task.dt_s must be in [0.001, 0.1] s, got {self.task.dt_s!r}")
+        in_range("task.dt_s", self.task.dt_s, 0.001, 0.1)
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
         for name in ("latency_s", "drop_probability", "garble_probability"):
             in_unit_interval(name, getattr(self, name))
@@ -78,7 +71,6 @@ class RigConfig:
 
 
 def truth_columns(n_coordinates: int) -> list[str]:
-    """Columns of the emulator's truth log."""
     return (
         ["device_time_s", "applied_torque_nm"]
         + [f"q{i}_rad" for i in range(n_coordinates)]
@@ -87,9 +79,8 @@ def truth_columns(n_coordinates: int) -> list[str]:
 
 
 class SimRig:
-    """The twin's device (module docstring) on a :class:`~softpend.hardware.clock.SimClock`: tick ``k`` at
-    ``start + k dt``, bytes either way arrive ``latency_s`` late; :attr:`poses` holds the joint positions of every
-    tick (what the camera films); ``truth_log`` records the true joint state every tick."""
+    """The device on a :class:`SimClock`: tick ``k`` at ``start + k dt``, bytes either way ``latency_s`` late;
+    :attr:`poses` holds the joint positions of every tick (what the camera films)."""
 
     def __init__(
         self,
@@ -126,8 +117,7 @@ class SimRig:
         self.clock.call_at(self.start_s, self._on_tick)
 
     def tick(self, now_us: int) -> Optional[bytes]:
-        """Sample the encoder at device time ``now_us``, apply the session's torque for one step; the STATE frame
-        (None if lost)."""
+        """Sample the encoder at device time ``now_us`` and step the plant; the STATE frame (None if lost)."""
         cfg = self.config
         torque = self.session.torque_nm(now_us)
         observation_before = self.plant.observe()
@@ -193,15 +183,13 @@ class SimRig:
 
 
 class _PtyHost:
-    """The pty's master end: a frame the pty has no room for is dropped, never waited for; the tail of a frame
-    the pty took in part is written first next time."""
+    """The pty's master end: a frame the pty has no room for is dropped; the tail of one taken in part goes first."""
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
         self._tail = b""
 
     def _write(self, data: bytes) -> bytes:
-        """Write what the pty takes of ``data``; the rest."""
         try:
             return data[os.write(self.fd, data) :]
         except (BlockingIOError, InterruptedError):
@@ -220,9 +208,8 @@ class _PtyHost:
 
 
 class RigEmulator(SimRig):
-    """The twin's device on a pseudo-terminal, its events run when the wall clock reaches them.  ``link_path``
-    also exposes the pty there as a symlink: only a pty symlink an earlier emulator left is replaced (anything
-    else raises ``ValueError``), and :meth:`close` removes it if it still points to this pty."""
+    """The device on a pseudo-terminal in real time, also exposed as the symlink ``link_path`` (replacing only a
+    pty symlink an earlier emulator left)."""
 
     def __init__(
         self,
@@ -293,7 +280,6 @@ class RigEmulator(SimRig):
 
 
 def _check_link_path(path: Path) -> None:
-    """Refuse a ``link_path`` that holds anything but a symlink to a pseudo-terminal."""
     if path.is_symlink():
         target = os.readlink(path)
         if re.fullmatch(r"/dev/pts/\d+|/dev/ttys\d+", target):
@@ -332,8 +318,7 @@ def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path:
 
 
 class EmulatorProcess:
-    """A rig emulator in a child process (``python -m softpend.hardware.emulator``), a context manager;
-    :attr:`port` is its pty path."""
+    """A rig emulator in a child process, a context manager; :attr:`port` is its pty path."""
 
     def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None) -> None:
         import tempfile

@@ -13,7 +13,6 @@ from softpend.checks import positive
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.io.samplelog import SampleLog
 
-
 #: Columns of the motor log written by :func:`run_control_loop`.
 LOOP_LOG_COLUMNS: tuple[str, ...] = tuple(
     "host_time_s device_time_s state_seq phi_rad phi_dot_rad_s applied_torque_nm command_torque_nm flags".split()
@@ -49,8 +48,7 @@ class LoopResult:
 
 
 class SecondsBar:
-    """A progress bar over the seconds of a run, redrawn when the shown tenth of a second changes (``enabled``
-    False: does nothing)."""
+    """A progress bar over the seconds of a run, redrawn when the shown tenth of a second changes."""
 
     def __init__(self, duration_s: float, desc: str, enabled: bool = True) -> None:
         self.duration_s = duration_s
@@ -90,8 +88,8 @@ def check_run(link: MotorLink, duration_s: float, logs: Sequence[tuple[str, Opti
 
 
 class RigLoop:
-    """One run paced by the STATE stream: each state read (with :attr:`drains`, also those that queued up) goes
-    to :meth:`step` until ``duration_s`` of device time or a safe stop (:attr:`stop_reason`)."""
+    """One run paced by the STATE stream: each state read goes to :meth:`step` until ``duration_s`` of device time
+    or a safe stop (:attr:`stop_reason`)."""
 
     #: Process the states that queued up since the last one too (only the newest gets a command).
     drains = False
@@ -108,7 +106,6 @@ class RigLoop:
         self.stop_reason: Optional[str] = None
 
     def count(self, state: MotorState) -> None:
-        """The loop time of ``state`` and the link counters."""
         if self.t0 is None:
             self.t0 = state.device_time_s
         self.t = state.device_time_s - self.t0
@@ -124,7 +121,6 @@ class RigLoop:
         bar.advance(self.t)
 
     def run(self, bar: SecondsBar) -> None:
-        """Process the states until the end or a safe stop; any exception sends STOP and propagates."""
         link = self.link
         try:
             while True:
@@ -162,18 +158,8 @@ class _BabbleLoop(RigLoop):
         finally:
             self.send_times.append(link.clock.now_s())
             if self.log is not None:
-                self.log.append(
-                    [
-                        state.host_time_s,
-                        state.device_time_s,
-                        state.seq,
-                        state.phi_rad,
-                        state.phi_dot_rad_s,
-                        state.applied_torque_nm,
-                        link.last_command_nm,
-                        state.flags,
-                    ]
-                )
+                names = ("host_time_s", "device_time_s", "seq", "phi_rad", "phi_dot_rad_s", "applied_torque_nm")
+                self.log.append([*(getattr(state, name) for name in names), link.last_command_nm, state.flags])
         self.samples += 1
 
 

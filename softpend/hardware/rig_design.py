@@ -141,26 +141,17 @@ class RigDesign:
         """Least gap between a marker's edge and the swing circle [m]."""
         return float(np.min(np.hypot(*self.markers_m.T))) - MARKER_RADIUS_M - self.swing_radius_m
 
+    def _in_view(self, centres_m: np.ndarray, radius_m: float) -> bool:
+        """Whether the circles of ``radius_m`` around ``centres_m`` lie wholly inside the image."""
+        px = self.camera_model.to_pixels(centres_m).reshape(-1, 2)
+        r = radius_m * self.camera_model.px_per_m
+        return bool(np.all(px - r >= 0) and np.all(px + r <= (self.camera.width_px, self.camera.height_px)))
+
     def markers_in_view(self) -> bool:
-        """Whether every marker lies wholly inside the image."""
-        px = self.camera_model.to_pixels(self.markers_m)
-        r = MARKER_RADIUS_M * self.camera_model.px_per_m
-        return bool(
-            np.all(px - r >= 0)
-            and np.all(px[:, 0] + r <= self.camera.width_px)
-            and np.all(px[:, 1] + r <= self.camera.height_px)
-        )
+        return self._in_view(self.markers_m, MARKER_RADIUS_M)
 
     def swing_in_view(self) -> bool:
-        """Whether the whole swing circle lies inside the image."""
-        centre = self.camera_model.to_pixels(np.zeros(2))
-        r = self.swing_radius_m * self.camera_model.px_per_m
-        return bool(
-            centre[0] - r >= 0
-            and centre[1] - r >= 0
-            and centre[0] + r <= self.camera.width_px
-            and centre[1] + r <= self.camera.height_px
-        )
+        return self._in_view(np.zeros(2), self.swing_radius_m)
 
     def to_dict(self) -> dict:
         """The design's figures as JSON numbers (millimetres where the key says ``_mm``)."""

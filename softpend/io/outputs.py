@@ -49,26 +49,6 @@ def _claims(owned: Optional[Callable[[Path], bool]], path: Path) -> bool:
         return False
 
 
-def check_output_file(
-    path: str | Path, *, what: str = "output", owned: Optional[Callable[[Path], bool]] = None
-) -> Path:
-    """Check, before any work, that ``path`` can be written as a new file or replace a file that
-    ``owned(path)`` claims (missing parent folders will be created); ``ValueError`` otherwise."""
-    path = _not_empty(path, what)
-    if os.path.lexists(path):
-        if path.is_dir():
-            raise ValueError(f"{what} {path} is a folder")
-        if path.is_symlink() or not path.is_file():
-            raise ValueError(f"{what} {path} exists and is not a regular file; refusing to replace it")
-        if not _claims(owned, path):
-            raise ValueError(
-                f"{what} {path} exists and is not a file this command wrote; refusing to overwrite it "
-                "(remove it or choose another path)"
-            )
-    _check_parent(path, what)
-    return path
-
-
 def check_output_folder(
     path: str | Path, *, what: str = "output folder", owned: Optional[Callable[[Path], bool]] = None
 ) -> Path:
@@ -233,12 +213,21 @@ class Outputs:
             )
 
     def _check(self, path: Path, what: str) -> None:
+        """``path`` can be written as a new file or replace one of ours (missing folders will be created)."""
         if path.name == MANIFEST:
             raise ValueError(f"{what} {path}: {MANIFEST} is the name of softpend's manifest; choose another name")
-        if os.path.lexists(path) and path.is_dir() and not path.is_symlink():
+        exists = os.path.lexists(path)
+        if exists and path.is_dir():
             raise ValueError(f"{what} {path} is a folder")
+        if exists and (path.is_symlink() or not path.is_file()):
+            raise ValueError(f"{what} {path} exists and is not a regular file; refusing to replace it")
         self._check_manifest(path.parent, what, path)
-        check_output_file(path, what=what, owned=_ours)
+        if exists and not _claims(_ours, path):
+            raise ValueError(
+                f"{what} {path} exists and is not a file this command wrote; refusing to overwrite it "
+                "(remove it or choose another path)"
+            )
+        _check_parent(path, what)
 
     def _checked_again(self, path: str | Path) -> Path:
         """The planned ``path``, checked again (a file that appeared there during the work is not replaced)."""

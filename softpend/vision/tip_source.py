@@ -71,9 +71,8 @@ FrameHook = Callable[[int, np.ndarray, Detection, "TipMeasurement"], None]
 
 
 class ThreadedTipSource:
-    """A daemon thread runs :meth:`_run`, which calls :meth:`_deliver` per frame; :meth:`poll` drains the
-    queue and re-raises an error of the thread.  ``on_frame(index, frame, detection, measurement)`` runs after
-    each tracked frame.  A context manager (``start`` on enter, ``close`` on exit)."""
+    """A daemon thread runs :meth:`_run`, which calls :meth:`_deliver` per frame; :meth:`poll` drains the queue and
+    re-raises an error of the thread; ``on_frame(index, frame, detection, measurement)`` runs after each frame."""
 
     name = "camera"
 
@@ -113,13 +112,6 @@ class ThreadedTipSource:
         """The source has ended and everything was polled."""
         return self._thread is not None and not self._thread.is_alive() and not self._queue
 
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     def poll(self) -> list[TipMeasurement]:
         with self._lock:
             out = list(self._queue)
@@ -131,13 +123,10 @@ class ThreadedTipSource:
 
     def stats(self) -> dict[str, float]:
         ages = np.asarray(self._ages_s) * 1e3
-        return {
-            "frames_tracked": float(self.frames_tracked),
-            "frames_lost": float(self.frames_lost),
-            "frames_dropped": float(self.frames_dropped),
-            "delivery_latency_ms_median": float(np.median(ages)) if ages.size else math.nan,
-            "delivery_latency_ms_p95": float(np.percentile(ages, 95)) if ages.size else math.nan,
-        }
+        out = {name: float(getattr(self, name)) for name in ("frames_tracked", "frames_lost", "frames_dropped")}
+        out["delivery_latency_ms_median"] = float(np.median(ages)) if ages.size else math.nan
+        out["delivery_latency_ms_p95"] = float(np.percentile(ages, 95)) if ages.size else math.nan
+        return out
 
     def _run(self) -> None:
         raise NotImplementedError
@@ -181,8 +170,7 @@ class PoseHistory:
             self._q.popleft()
 
     def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
-        """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``, linear between the stored samples
-        (clamped at both ends)."""
+        """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``, linear between samples, clamped."""
         if not self._times:
             raise ValueError("PoseHistory is empty")
         times = self._times
@@ -214,9 +202,7 @@ class CameraFaults:
         except (TypeError, ValueError):
             raise ValueError(f"occlusions_s must be (start, end) pairs [s], got {self.occlusions_s!r}") from None
         if not all(math.isfinite(start) and math.isfinite(end) and 0 <= start < end for start, end in windows):
-            raise ValueError(
-                f"occlusions_s must be (start, end) pairs with 0 <= start < end, got {self.occlusions_s!r}"
-            )
+            raise ValueError(f"occlusions_s must be pairs with 0 <= start < end, got {self.occlusions_s!r}")
         object.__setattr__(self, "occlusions_s", tuple(windows))
         if self.stall_after_s is not None:
             non_negative("stall_after_s", self.stall_after_s)
@@ -226,9 +212,8 @@ class CameraFaults:
 
 
 class SyntheticLiveCamera(ThreadedTipSource):
-    """The twin's camera on its simulated ``clock``: frame ``k`` is exposed until ``t_k = t_first + k / fps``,
-    rendered from ``scene.pose_at`` and tracked at ``t_k + latency_s``, and stamped with its capture time
-    ``t_k - exposure_s / 2``.  ``effects`` default to :meth:`CameraEffects.rig`; ``seed`` draws image noise."""
+    """The twin's camera on its simulated ``clock``: frame ``k``, exposed until ``t_k = t_first + k / fps``, is
+    tracked at ``t_k + latency_s`` and stamped ``t_k - exposure_s / 2``; ``effects`` default to the rig's."""
 
     name = "synthetic-camera"
 
@@ -242,10 +227,9 @@ class SyntheticLiveCamera(ThreadedTipSource):
         model: Optional[CameraModel] = None,
         faults: Optional[CameraFaults] = None,
         seed: int = 0,
-        frame_tracker: Optional[FrameTracker] = None,
         on_frame: Optional[FrameHook] = None,
     ) -> None:
-        super().__init__(frame_tracker, on_frame)
+        super().__init__(None, on_frame)
         self.scene = scene
         self.clock = clock
         self.fps = check_fps("fps", fps)

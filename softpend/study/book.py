@@ -86,7 +86,7 @@ NotebookRun = namedtuple("NotebookRun", "name status seconds output_path")
 
 
 def _shape_error(path: Path | str, node: Any, key: Any, expected: str, got: Any) -> ValueError:
-    kind = "nothing" if got is None else f"{type(got).__name__.removeprefix('Line').lower()} {got!r}"[:80]
+    kind = "nothing" if got is None else f"{type(got).__name__.removeprefix('_Line').lower()} {got!r}"[:80]
     return ValueError(f"{path}, line {yaml_line(node, key)}: expected {expected}, got {kind}")
 
 
@@ -154,13 +154,9 @@ def _parameters_cell(nb) -> Optional[str]:
 
 
 def check_parameters(notebook_path: Path | str, name: str, parameters: dict[str, Any]) -> dict[str, Any]:
-    """The parameters a notebook (``.ipynb``) declares; ``ValueError`` if it has no ``parameters`` cell or
-    ``parameters`` names one it does not define."""
-    import nbformat
+    """The parameters a notebook (``.ipynb``) declares; ``ValueError`` if ``parameters`` names another one."""
     import papermill
 
-    if _parameters_cell(nbformat.read(str(notebook_path), as_version=4)) is None:
-        raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
     if unknown := sorted(set(parameters) - set(declared := papermill.inspect_notebook(str(notebook_path)))):
         defined = f"(it defines {sorted(declared)})"
         raise ValueError(f"notebook {name!r}: parameter(s) {unknown} are not defined in its parameters cell {defined}")
@@ -391,10 +387,8 @@ def run_notebooks(
             plan["key"] = key = cache_key(source, plan["parameters"], plan["hashes"], upstream)
             cached = not force and layout.output_path(name).is_file() and _key_on_disk(layout, name) == key
             plan["status"] = "cached" if cached else "executed"
-        seconds = _execute(layout, order, plans, progress)
-    runs = [
-        NotebookRun(name, plans[name]["status"], seconds.get(name, 0.0), layout.output_path(name)) for name in order
-    ]
+        _execute(layout, order, plans, progress)
+    runs = [NotebookRun(n, plans[n]["status"], plans[n].get("seconds", 0.0), layout.output_path(n)) for n in order]
     write_execution_record(layout, profile, runs, used)
     return runs
 
@@ -412,6 +406,8 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
     for name in names:
         nb = read_notebook(layout.source_path(name))
         after = front_matter(nb, name, toc)["after"]
+        if (cell := _parameters_cell(nb)) is None:
+            raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
         parameters = dict(given.get(name, {}))
         nbformat.write(nb, str(converted := scratch / f"{name}.ipynb"))
         declared = check_parameters(converted, name, parameters)
@@ -425,18 +421,19 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
                 hashes |= _file_hashes(layout.root / "book" / folder, f"book/{folder}")
         plans[name] = dict(after=after, parameters=parameters, converted=converted, hashes=hashes, record=record)
         plans[name]["kernel"] = nb.metadata.get("kernelspec", {}).get("name", "python3")
-        plans[name]["rerun"] = rerun_section(name, _parameters_cell(nb) or "", profile, parameters)
+        plans[name]["rerun"] = rerun_section(name, cell, profile, parameters)
     if unused := sorted(set(overrides) - set(used)):
         raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({list(names)})")
     return plans, used
 
 
-def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> dict[str, float]:
-    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each once the selected notebooks of its
-    ``after`` have finished; after a failure nothing more starts and the first error is raised."""
+def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> None:
+    """Execute the uncached notebooks of ``order`` (their ``seconds`` into ``plans``), :data:`WORKERS` at a time, each
+    once the selected notebooks of its ``after`` have finished; after a failure nothing more starts and the first
+    error is raised."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
     done = {name for name in order if plans[name]["status"] == "cached"}
-    pending, seconds, errors = [name for name in order if name not in done], dict[str, float](), list[BaseException]()
+    pending, errors = [name for name in order if name not in done], list[BaseException]()
     running: dict[Future[float], str] = {}
     for name in (name for name in order if name in done):
         say(f"{name}: up to date (cached)")
@@ -456,11 +453,10 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bo
                     say(f"{name} failed" + ("; waiting for the running notebooks" if running else ""))
                 else:
                     done.add(name)
-                    seconds[name] = future.result()
-                    say(f"{name}: executed in {seconds[name]:.1f} s")
+                    plans[name]["seconds"] = future.result()
+                    say(f"{name}: executed in {plans[name]['seconds']:.1f} s")
     if errors:
         raise errors[0]
-    return seconds
 
 
 def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
@@ -520,10 +516,10 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
     this_run, notebooks = {run.name: run.status for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
         lines = _source_text(layout.source_path(name)).splitlines()
+        title = next((line[2:].strip() for line in lines if line.startswith("# ")), name)
         output = layout.output_path(name)
         meta = nbformat.read(str(output), as_version=4).metadata if output.is_file() else {}
         papermill = meta.get("papermill", {})
-        title = next((line[2:].strip() for line in lines if line.startswith("# ")), name)
         entry = {"name": name, "title": title, "this_run": this_run.get(name, "not run")}
         entry |= {"executed_s": papermill.get("duration"), "executed_at": papermill.get("end_time")}
         notebooks.append(entry | {"profile": meta.get("softpend", {}).get("profile")})

@@ -288,14 +288,9 @@ class BuildTarget:
     port: str = "/dev/ttyACM1"
     camera: str = "0"
 
-    def link(self) -> list[str]:
-        return ["--twin"] if self.twin else ["--port", self.port]
-
-    def camera_args(self) -> list[str]:
-        return ["--twin"] if self.twin else ["--camera", self.camera]
-
-    def rig(self) -> list[str]:
-        return ["--twin"] if self.twin else ["--port", self.port, "--camera", self.camera]
+    def args(self, *names: str) -> list[str]:
+        """``--twin``, or each of ``names`` (``port``, ``camera``) as ``--NAME VALUE``."""
+        return ["--twin"] if self.twin else [a for name in names for a in (f"--{name}", getattr(self, name))]
 
 
 #: The twin target of the dry run.
@@ -349,6 +344,7 @@ def build_steps(
     counts = ["--counts-per-rev", str(firmware_settings()["COUNTS_PER_REV"])]
     calibration = [] if target.twin else ["--calibration", str(f / "calibration.json")]
     rig = ("softpend", "rig")
+    link, on_rig = target.args("port"), target.args("port", "camera")
     return [
         BuildStep(
             "design",
@@ -366,7 +362,7 @@ def build_steps(
         BuildStep(
             "check",
             "Power on: handshake, encoder at rest, direction, watchdog",
-            (*rig, "check", *target.link(), *(counts if target.twin else []), "--out", str(f / "check.json")),
+            (*rig, "check", *link, *(counts if target.twin else []), "--out", str(f / "check.json")),
             "the protocol version, torque limit and state rate the host expects; the hub at rest at the "
             "hanging angle; a positive torque turns the hub the positive way; the watchdog zeroes the torque "
             "after a silent host",
@@ -374,7 +370,7 @@ def build_steps(
         BuildStep(
             "calibrate",
             "Fit the camera's affine map to the markers",
-            (*rig, "calibrate", *target.camera_args(), "--markers", str(f / "design" / "markers.json"))
+            (*rig, "calibrate", *target.args("camera"), "--markers", str(f / "design" / "markers.json"))
             + ("--out", str(f / "calibration.json"), *sets),
             f"marker residual at most {CALIBRATION_MAX_RESIDUAL_PX:g} px and the hanging tip within "
             f"{HANGING_TIP_TOLERANCE_M * 1e3:g} mm of where the design puts it",
@@ -382,7 +378,7 @@ def build_steps(
         BuildStep(
             "babble",
             "Babble: random torque, encoder and camera logged and synchronised",
-            (*rig, "babble", *target.rig(), *calibration, "--out", str(f / "babble"))
+            (*rig, "babble", *on_rig, *calibration, "--out", str(f / "babble"))
             + ("--duration", f"{budget.babble_s:g}", "--trial-length-s", f"{budget.trial_length_s:g}")
             + ("--seed", str(budget.seed), "--no-progress"),
             "a clock offset found with a clear correlation peak, no gaps, and whole trials in the dataset",
@@ -397,111 +393,75 @@ def build_steps(
         BuildStep(
             "control",
             "First closed-loop run: energy swing-up and LQR on the observations",
-            (*rig, "control", "swingup-obs", *target.rig(), *calibration, *counts, "--out", str(f / "control"))
+            (*rig, "control", "swingup-obs", *on_rig, *calibration, *counts, "--out", str(f / "control"))
             + ("--duration", f"{budget.control_s:g}", "--no-progress"),
             "no early stop; on the twin, the rod's true tip swung up and held upright",
         ),
     ]
 
 
-def _read_json(path: Path) -> Any:
-    from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
-
-    return read_json_checked(path, "build output", MAX_CONFIG_BYTES)
-
-
 def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
     """The figures of the outputs of ``step`` (run with :func:`build_steps` into ``folder``), with ``good``."""
-    checks = {
-        "design": _check_design,
-        "firmware": lambda f: {"good": True},
-        "check": _check_rig_check,
-        "calibrate": _check_calibration,
-        "babble": _check_babble,
-        "identify": _check_model,
-        "control": _check_control,
-    }
-    if step.key not in checks:
-        raise ValueError(f"step.key must be one of {sorted(checks)}, got {step.key!r}")
-    return checks[step.key](Path(folder))
+    from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 
+    f = Path(folder)
 
-def _check_design(f: Path) -> dict[str, Any]:
-    d = _read_json(f / "design" / "rig_design.json")
-    markers = _read_json(f / "design" / "markers.json")
-    good = (
-        d["markers_in_view"]
-        and d["swing_in_view"]
-        and d["min_marker_gap_mm"] > 0
-        and d["dot_area_px"] > d["tracker_min_area_px"]
-        and (f / "design" / "rig_design.png").stat().st_size > 0
-        and len(markers) == len(d["markers_m"])
-    )
-    return {
-        "good": bool(good),
-        "beam_thickness_mm": d["beam_thickness_mm"],
-        "camera_distance_mm": d["camera_distance_mm"],
-        "pixel_size_mm": d["pixel_size_mm"],
-        "tip_sag_mm": d["tip_sag_horizontal_mm"],
-    }
+    def read(*parts: str) -> Any:
+        return read_json_checked(f.joinpath(*parts), "build output", MAX_CONFIG_BYTES)
 
-
-def _check_rig_check(f: Path) -> dict[str, Any]:
-    d = _read_json(f / "check.json")
-    return {
-        "good": bool(d["passed"]),
-        **{name: c["passed"] for name, c in d["checks"].items()},
-        "watchdog_trip_ms": d["checks"]["watchdog"]["trip_ms"],
-        "round_trip_ms": d["round_trip_ms"],
-    }
-
-
-def _check_calibration(f: Path) -> dict[str, Any]:
-    d = _read_json(f / "calibration.report.json")
-    return {
-        "good": bool(d["passed"]),
-        "residual_px": d["residual_px"],
-        "tip_error_mm": 1e3 * d["tip_error_m"],
-        "px_per_m": d["px_per_m"],
-    }
-
-
-def _check_babble(f: Path) -> dict[str, Any]:
-    d = _read_json(f / "babble" / "summary.json")
-    good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5
-    return {
-        "good": bool(good and (f / "babble" / "rig_dataset.npz").is_file()),
-        "n_trials": d["n_trials"],
-        "clock_offset_ms": 1e3 * d["clock_offset_s"],
-        "peak_correlation": d["peak_correlation"],
-        "valid_fraction": d["grid_valid_fraction"],
-    }
-
-
-def _check_model(f: Path) -> dict[str, Any]:
-    v = _read_json(f / "model.json")["metadata"]["metrics"]["validation"]
-    tip, hold = v.get(f"tip_rmse_m@{IDENTIFY_HORIZON_S:g}s"), v.get(f"hold_tip_rmse_m@{IDENTIFY_HORIZON_S:g}s")
-    good = tip is not None and hold is not None and math.isfinite(tip) and tip < hold
-    return {
-        "good": bool(good),
-        "tip_rmse_mm": 1e3 * tip if tip is not None else math.nan,
-        "hold_tip_rmse_mm": 1e3 * hold if hold is not None else math.nan,
-    }
-
-
-def _check_control(f: Path) -> dict[str, Any]:
-    d = _read_json(f / "control" / "summary.json")
-    truth = d.get("truth") or {}
-    good = d["stop_reason"] is None and (bool(truth.get("success")) if truth else True)
-    return {
-        "good": bool(good),
-        "stop_reason": d["stop_reason"],
-        "samples": d["samples"],
-        "late_commands": d.get("late_commands", 0),
-        "success": bool(truth.get("success", False)),
-        "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
-        "upright_std_rad": truth.get("upright_std_rad", math.nan),
-    }
+    if step.key == "firmware":
+        return {"good": True}
+    if step.key == "design":
+        d, markers = read("design", "rig_design.json"), read("design", "markers.json")
+        good = d["markers_in_view"] and d["swing_in_view"] and d["min_marker_gap_mm"] > 0
+        good = good and d["dot_area_px"] > d["tracker_min_area_px"]
+        good = good and (f / "design" / "rig_design.png").stat().st_size > 0 and len(markers) == len(d["markers_m"])
+        figures = {k: d[k] for k in ("beam_thickness_mm", "camera_distance_mm", "pixel_size_mm")}
+        return {"good": bool(good), **figures, "tip_sag_mm": d["tip_sag_horizontal_mm"]}
+    if step.key == "check":
+        d = read("check.json")
+        passed = {name: c["passed"] for name, c in d["checks"].items()}
+        trip_ms = d["checks"]["watchdog"]["trip_ms"]
+        return {"good": bool(d["passed"]), **passed, "watchdog_trip_ms": trip_ms, "round_trip_ms": d["round_trip_ms"]}
+    if step.key == "calibrate":
+        d = read("calibration.report.json")
+        return {
+            "good": bool(d["passed"]),
+            "residual_px": d["residual_px"],
+            "tip_error_mm": 1e3 * d["tip_error_m"],
+            "px_per_m": d["px_per_m"],
+        }
+    if step.key == "babble":
+        d = read("babble", "summary.json")
+        good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5
+        return {
+            "good": bool(good and (f / "babble" / "rig_dataset.npz").is_file()),
+            "n_trials": d["n_trials"],
+            "clock_offset_ms": 1e3 * d["clock_offset_s"],
+            "peak_correlation": d["peak_correlation"],
+            "valid_fraction": d["grid_valid_fraction"],
+        }
+    if step.key == "identify":
+        v = read("model.json")["metadata"]["metrics"]["validation"]
+        tip, hold = v.get(f"tip_rmse_m@{IDENTIFY_HORIZON_S:g}s"), v.get(f"hold_tip_rmse_m@{IDENTIFY_HORIZON_S:g}s")
+        good = tip is not None and hold is not None and math.isfinite(tip) and tip < hold
+        mm = {k: 1e3 * x if x is not None else math.nan for k, x in (("tip_rmse_mm", tip), ("hold_tip_rmse_mm", hold))}
+        return {"good": bool(good), **mm}
+    if step.key == "control":
+        d = read("control", "summary.json")
+        truth = d.get("truth") or {}
+        good = d["stop_reason"] is None and (bool(truth.get("success")) if truth else True)
+        return {
+            "good": bool(good),
+            "stop_reason": d["stop_reason"],
+            "samples": d["samples"],
+            "late_commands": d.get("late_commands", 0),
+            "success": bool(truth.get("success", False)),
+            "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
+            "upright_std_rad": truth.get("upright_std_rad", math.nan),
+        }
+    keys = ["babble", "calibrate", "check", "control", "design", "firmware", "identify"]
+    raise ValueError(f"step.key must be one of {keys}, got {step.key!r}")
 
 
 def design_figures(params: RodParams, design: Optional[RigDesign] = None) -> dict[str, Any]:

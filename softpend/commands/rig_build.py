@@ -17,18 +17,12 @@ PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
 
 
 def register(actions: argparse._SubParsersAction) -> None:
-    design = actions.add_parser(
-        "design", help="the rig's dimensions, drawing and marker layout for the rod's parameters"
-    )
-    design.add_argument(
-        "--out", required=True, metavar="DIR", help="folder for rig_design.json, rig_design.png, markers.json"
-    )
-    design.add_argument(
-        "--print-modulus-mpa",
-        type=float,
-        default=None,
-        help="modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)",
-    )
+    text = "the rig's dimensions, drawing and marker layout for the rod's parameters"
+    design = actions.add_parser("design", help=text)
+    text = "folder for rig_design.json, rig_design.png, markers.json"
+    design.add_argument("--out", required=True, metavar="DIR", help=text)
+    text = "modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)"
+    design.add_argument("--print-modulus-mpa", type=float, default=None, help=text)
     _add_rod_set(design)
     design.set_defaults(func=run_design)
 
@@ -36,12 +30,8 @@ def register(actions: argparse._SubParsersAction) -> None:
     _add_link_target(check)
     check.add_argument("--out", metavar="JSON", help="also write the report to this file")
     check.add_argument("--rest-s", type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
-    check.add_argument(
-        "--push-fraction",
-        type=float,
-        default=0.3,
-        help="torque of the direction push as a fraction of the torque limit (0.3)",
-    )
+    text = "torque of the direction push as a fraction of the torque limit (0.3)"
+    check.add_argument("--push-fraction", type=float, default=0.3, help=text)
     check.add_argument("--counts-per-rev", type=int, default=4096, help="twin: encoder resolution (4096)")
     _add_rod_set(check)
     check.set_defaults(func=run_check)
@@ -50,25 +40,16 @@ def register(actions: argparse._SubParsersAction) -> None:
     target = calibrate.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="a frame of the synthetic camera")
     target.add_argument("--camera", metavar="CAMERA", help="camera index, stream URL or image/video file")
-    calibrate.add_argument(
-        "--markers",
-        required=True,
-        metavar="JSON",
-        help="marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)",
-    )
-    calibrate.add_argument(
-        "--out",
-        required=True,
-        metavar="JSON",
-        help="calibration file to write (the report goes next to it as NAME.report.json)",
-    )
+    text = "marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)"
+    calibrate.add_argument("--markers", required=True, metavar="JSON", help=text)
+    text = "calibration file to write (the report goes next to it as NAME.report.json)"
+    calibrate.add_argument("--out", required=True, metavar="JSON", help=text)
     calibrate.add_argument("--seed", type=int, default=0, help="twin: seed of the image noise")
     _add_rod_set(calibrate)
     calibrate.set_defaults(func=run_calibrate)
 
-    babble = actions.add_parser(
-        "babble", help="babble over the link with the camera tracking, synchronise into a dataset"
-    )
+    text = "babble over the link with the camera tracking, synchronise into a dataset"
+    babble = actions.add_parser("babble", help=text)
     _add_link_target(babble)
     babble.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
     babble.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
@@ -283,8 +264,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     outputs = Outputs()
     out = outputs.file(args.out, what="--out")
     report_path = outputs.file(
-        out.with_name(out.stem + ".report.json") if out.suffix else out.with_name(out.name + ".report.json"),
-        what="the calibration report",
+        out.with_name((out.stem if out.suffix else out.name) + ".report.json"), what="the calibration report"
     )
     markers = _markers(args.markers)
     params = _rod(args)
@@ -403,14 +383,9 @@ def run_babble(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     if args.twin:
         rig = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed)
+        length = args.trial_length_s
         session = run_twin_session(
-            out,
-            duration_s=args.duration,
-            seed=args.seed,
-            rig=rig,
-            trial_length_s=args.trial_length_s,
-            progress=progress,
-            outputs=outputs,
+            out, args.duration, args.seed, rig=rig, trial_length_s=length, progress=progress, outputs=outputs
         )
         loop, sync, dataset = session.loop, session.sync, session.dataset
         extra = {"true_clock_offset_s": session.true_clock_offset_s}
@@ -487,13 +462,9 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     thread.join()
     if failure:
         raise failure[0]
+    length, notes = args.trial_length_s, f"rig babbling on {args.port}"
     dataset, sync = build_rig_dataset(
-        motor_log,
-        camera_csv,
-        out / "rig_dataset.npz",
-        params=params,
-        trial_length_s=args.trial_length_s,
-        notes=f"rig babbling on {args.port}",
+        motor_log, camera_csv, out / "rig_dataset.npz", params=params, trial_length_s=length, notes=notes
     )
     for name in PORT_BABBLE_FILES:
         outputs.done(out / name)

@@ -39,17 +39,12 @@ __all__ = [
     "run_episode",
 ]
 
-#: Length of the episodes from hanging that decide whether a controller balances [s]: the tests that select an
-#: agent or stop a learning run (``DQNConfig.eval_duration_s``, ``PilcoConfig.eval_duration_s``) and the fresh
-#: starts every reported figure is measured on.  One length for both, so that a policy which holds the rod for the
-#: selection tests and falls later is caught before it is selected.
+#: Length [s] of the episodes from hanging that select agents, stop learning runs and measure the fresh starts.
 TEST_EPISODE_S = 10.0
 
-#: Largest upright std [rad] of an episode that counts as a success (``success``, see the module docstring): the
-#: success of the selection tests and of the training logs.
+#: Largest upright std [rad] of an episode that counts as a success.
 SUCCESS_STD_RAD = 0.2
-#: Largest upright std [rad] of a start that *holds* the rod balanced: the stricter level the fresh-start figures
-#: (:func:`softpend.study.fresh_starts.fresh_start_row`) and the rig's closed loop count a start by.
+#: Largest upright std [rad] of a start that *holds* the rod balanced (fresh-start figures, the rig's closed loop).
 HOLD_STD_RAD = 0.1
 
 
@@ -104,7 +99,9 @@ def metrics_from_trajectory(
     hold_s: float = 1.0,
     success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
-    """Evaluation metrics of one sampled trajectory (see the module docstring)."""
+    """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below
+    ``upright_threshold_rad`` for ``hold_s``), upright std and mean after it (or over the second half), peak torque,
+    energy, and success (swung up, std at most ``success_std_rad``)."""
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
     t, theta, torque, phi_dot = arrays = [
         np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)
@@ -196,9 +193,6 @@ class EvaluationSummary:
 
     def median(self, metric: str) -> float:
         return float(np.median([getattr(r, metric) for r in self.results]))
-
-    def mean(self, metric: str) -> float:
-        return float(np.mean([getattr(r, metric) for r in self.results]))
 
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
@@ -296,11 +290,9 @@ class _Controllers:
 
 @dataclass
 class BatchPolicy:
-    """A policy of the vector environments: ``predict_batch(vectors) -> actions`` on the ``(B, 11)`` float32 batch of
-    observation vectors, called every ``action_repeat`` plant steps, its actions held in between (as
-    :class:`softpend.rl.training_env.HeldActionController` holds them): integers of shape ``(B,)`` on the
-    ``n_torque_levels`` levels when that is set, else fractions of the torque limit of shape ``(B, 1)`` or ``(B,)``
-    (for stable-baselines3: ``lambda v: model.predict(v, deterministic=True)[0]``).  Runs on the batched engine."""
+    """A batched-engine policy: ``predict_batch(vectors) -> actions`` on ``(B, 11)`` observation vectors every
+    ``action_repeat`` plant steps, held in between; actions are levels ``(B,)`` with ``n_torque_levels``, else
+    fractions of the torque limit."""
 
     predict_batch: Callable[[np.ndarray], Any]
     action_repeat: int = 1
@@ -501,7 +493,8 @@ def evaluate(
     rod_seed: int = 0,
     substeps: Optional[int] = None,
 ) -> EvaluationSummary:
-    """Evaluate a controller on the true plant of ``task`` from one start per seed (see the module docstring)."""
+    """Evaluate a controller on the true plant of ``task`` from one start per seed, on the Exudyn engine (one episode
+    after the other) or the batched one (all at once)."""
     task = task if task is not None else Task()
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")

@@ -15,7 +15,7 @@ from softpend.control.swingup import EnergySwingUpController
 from softpend.evaluation import evaluate, evaluate_batched, evaluate_controller
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
-from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agent_batched, evaluate_agents_batched
+from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agents_batched
 from softpend.rl.training_env import make_training_env
 from softpend.study.fresh_starts import fresh_start_row
 from softpend.task import Task
@@ -111,7 +111,7 @@ def test_energy_swing_up_matches_the_single_evaluation() -> None:
 def test_dqn_agent_matches_evaluate_agent(agent) -> None:
     model, config = agent
     seeds = (20_000, 20_001, 20_002)
-    batched = evaluate_agent_batched(model, config, seeds, 3.0)
+    (batched,) = evaluate_agents_batched([model], config, seeds, 3.0)
     converged = dataclasses.replace(config, task=config.task.replace(substeps=CONVERGED))
     single = evaluate_agent(model, converged, seeds, 3.0)
     _assert_same_fields(batched, single)
@@ -131,9 +131,9 @@ def test_dqn_agent_matches_evaluate_agent(agent) -> None:
 def test_batched_episodes_do_not_depend_on_each_other(agent) -> None:
     model, config = agent
     seeds = (4, 9, 2)
-    together = evaluate_agent_batched(model, config, seeds, 1.0).results
+    together = evaluate_agents_batched([model], config, seeds, 1.0)[0].results
     for seed, joint in zip(seeds, together):
-        (alone,) = evaluate_agent_batched(model, config, (seed,), 1.0).results
+        (alone,) = evaluate_agents_batched([model], config, (seed,), 1.0)[0].results
         np.testing.assert_allclose(joint.observations, alone.observations, rtol=0, atol=1e-12)  # measured: equal
         np.testing.assert_array_equal(joint.torque_nm, alone.torque_nm)
         assert joint.metrics() == pytest.approx(alone.metrics())
@@ -148,7 +148,9 @@ def test_agents_evaluated_in_one_batch_equal_their_own_evaluations(agent) -> Non
     seeds = (20_003, 20_004)
     together = evaluate_agents_batched([model, other, model], config, seeds, 1.5)
     assert [len(summary.results) for summary in together] == [2, 2, 2]
-    for summary, alone in zip(together, [evaluate_agent_batched(m, config, seeds, 1.5) for m in (model, other, model)]):
+    for summary, alone in zip(
+        together, [evaluate_agents_batched([m], config, seeds, 1.5)[0] for m in (model, other, model)]
+    ):
         for joint, own in zip(summary.results, alone.results):
             assert joint.seed == own.seed
             np.testing.assert_array_equal(joint.observations, own.observations)

@@ -653,9 +653,7 @@ class Pilco:
         return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)
 
     def start_policy(self) -> RBFPolicy:
-        """The first policy, random, its centres on the states of the trials so far (PILCO draws them from the
-        initial state distribution; spreading them over the visited states lets the first policy act away from
-        hanging), its length-scales the spread of each rate in the data and 0.7 for every sin/cos input."""
+        """The first policy: random (:func:`_random_policy`), its centres on the states of the trials so far."""
         self.policy = _random_policy(
             self.spec,
             np.vstack(self.real_states),

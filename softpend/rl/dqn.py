@@ -45,7 +45,6 @@ __all__ = [
     "agent_class",
     "build_dqn",
     "evaluate_agent",
-    "evaluate_agent_batched",
     "evaluate_agents_batched",
     "load_agent",
     "reset_q_network",
@@ -107,18 +106,6 @@ def _seeds_and_duration(config: DQNConfig, seeds: Any, duration_s: Any) -> tuple
     return seeds, positive("duration_s", duration_s if duration_s is not None else config.eval_duration_s)
 
 
-def evaluate_agent_batched(
-    model: Any,
-    config: DQNConfig,
-    seeds: Optional[tuple[int, ...]] = None,
-    duration_s: Optional[float] = None,
-    name: str = "agent",
-    **options: Any,
-):
-    """:func:`evaluate_agent` with every episode at once on the batched chain."""
-    return evaluate_agents_batched([model], config, seeds, duration_s, name, **options)[0]
-
-
 def evaluate_agents_batched(
     models: Sequence[Any],
     config: DQNConfig,
@@ -127,7 +114,7 @@ def evaluate_agents_batched(
     name: str = "agent",
     **options: Any,
 ) -> list:
-    """:func:`evaluate_agent_batched` for several agents in one batch (agent ``i`` drives the ``i``-th block of rods)."""
+    """:func:`evaluate_agent` of several agents at once on the batched chain (agent ``i`` drives rod block ``i``)."""
     from softpend.evaluation import EvaluationSummary, evaluate_batched
 
     models = list(models)
@@ -672,10 +659,7 @@ def run_training(
     if remaining > 0:
         callbacks = training_callbacks(config, log, episodes, run_dir, progress, part)
         evaluation, checkpoints = _member(callbacks, EvaluationCallback), _member(callbacks, CheckpointCallback)
-        # exactly the remaining episodes' steps, so that SB3 stores the last transition and stops by itself
-        # (the recorder also stops at the episode count, which matters only if an episode diverged early);
-        # the SB3 schedules (exploration) run over the whole run, resumed or not.  A logger of our own without
-        # outputs: SB3's default one creates an empty folder under the system's temp directory on every learn()
+        # exactly the remaining episodes' steps; a logger without outputs (SB3's default one creates a temp folder)
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
             model.learn(

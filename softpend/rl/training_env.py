@@ -63,9 +63,8 @@ def make_training_env(config: DQNConfig) -> gym.Env:
 
 
 class HeldActionController(GymPolicyController):
-    """:class:`~softpend.evaluation.GymPolicyController` that queries the policy every ``repeat`` plant steps
-    and holds the torque in between (the reward's bonus state is still advanced every step, as in
-    training)."""
+    """:class:`~softpend.evaluation.GymPolicyController` that queries the policy every ``repeat`` plant steps and
+    holds the torque in between."""
 
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
         super().__init__(predict, env)
@@ -88,9 +87,8 @@ class HeldActionController(GymPolicyController):
 
 
 def greedy_predictor(model: Any) -> Callable[[np.ndarray], Any]:
-    """The greedy action of a stable-baselines3 DQN model for one observation vector (an integer) or a batch of them
-    (an integer array): ``model.predict(vectors, deterministic=True)[0]`` without its per-call bookkeeping (input
-    checks, training-mode switches, tensor round trips), which costs more than the Q-network itself."""
+    """The greedy action of a stable-baselines3 DQN model for one observation vector or a batch of them:
+    ``model.predict(vectors, deterministic=True)[0]`` without its per-call overhead."""
     import torch
 
     q_net = model.q_net

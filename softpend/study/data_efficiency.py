@@ -3,27 +3,40 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Optional
+from typing import Any, Iterable, Optional, Sequence
 
 import numpy as np
 
 from softpend.control.identified import RouteConfig, identify_until_robust, simulated_recorder
 from softpend.evaluation import evaluate
 from softpend.plant import RodParams
+from softpend.stats import aggregate_interval
 from softpend.study.fresh_starts import fresh_start_row
 from softpend.study.greybox import perturbed_guess
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
-__all__ = ["greybox_route_rows", "greybox_route_figures"]
+__all__ = ["greybox_route_figures", "greybox_route_rows", "method_summary", "plant_seconds_rows", "plot_plant_seconds"]
+
+#: Methods of the plant-seconds chapter, in plot order: key -> label.
+METHODS = {
+    "dqn": "model-free DQN",
+    "mbpo": "DQN-MBPO",
+    "pilco": "PILCO",
+    "greybox": "grey-box route",
+    "greybox_beam": "grey-box route, beam as the rod",
+}
 
 
 def greybox_route_rows(
-    plant: str = "prb", seeds: Iterable[int] = range(10), config: Optional[RouteConfig] = None
+    plant: str = "prb",
+    seeds: Iterable[int] = range(10),
+    config: Optional[RouteConfig] = None,
+    report_seeds: Sequence[int] = REPORT_SEEDS,
 ) -> list[dict[str, Any]]:
     """One row per seed: the route on ``plant`` from the study's perturbed guess (plant seconds of excitation, how
     far it went), then its controller on the 20 fresh report starts; ``real_s_to_balance`` is infinite for a seed
-    whose controller does not balance them."""
+    whose controller does not balance them (starts: ``report_seeds``)."""
     config = config if config is not None else RouteConfig()
     task = Task(plant=plant)
     rows = []
@@ -31,7 +44,7 @@ def greybox_route_rows(
         route = identify_until_robust(
             simulated_recorder(task, config, seed), perturbed_guess(RodParams()), config, seed
         )
-        fresh = fresh_start_row(evaluate(route.controller, task, seeds=REPORT_SEEDS))
+        fresh = fresh_start_row(evaluate(route.controller, task, seeds=tuple(report_seeds)))
         rows.append(
             {
                 "plant": plant,
@@ -58,3 +71,86 @@ def greybox_route_figures(rows: list[dict[str, Any]], prefix: str, within_s: flo
         f"{prefix}_seeds_balanced": float(np.sum(np.isfinite(seconds))),
         f"{prefix}_seeds_within_{within_s:g}s": float(np.sum(seconds <= within_s)),
     }
+
+
+def plant_seconds_rows(
+    learned: list[dict[str, Any]], greybox: list[dict[str, Any]], beam: Sequence[dict[str, Any]] = ()
+) -> list[dict[str, Any]]:
+    """One row per (method, seed) on one axis: the learned methods' rows of
+    :func:`softpend.study.fresh_starts.seed_rows` and the grey-box route's rows (PRB rod, then beam)."""
+    label_to_key = {"model-free DQN": "dqn", "DQN-MBPO": "mbpo", "PILCO": "pilco"}
+    rows = [
+        {
+            "key": label_to_key[r["method"]],
+            "method": r["method"],
+            "seed": int(r["seed"]),
+            "plant_s_to_balance": float(r["plant_s_to_balance"]),
+            "balanced_starts": int(r["final_balanced_starts"]),
+            "starts": int(r["starts"]),
+        }
+        for r in learned
+    ]
+    for key, group in (("greybox", greybox), ("greybox_beam", beam)):
+        rows += [
+            {
+                "key": key,
+                "method": METHODS[key],
+                "seed": int(r["seed"]),
+                "plant_s_to_balance": float(r["real_s_to_balance"]),
+                "balanced_starts": int(r["balanced_starts"]),
+                "starts": int(r["starts"]),
+            }
+            for r in group
+        ]
+    return rows
+
+
+def method_summary(rows: list[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]]:
+    """Per method: seeds, seeds balanced, median plant seconds with its 95 % bootstrap interval, and the worst."""
+    out = []
+    for key in [k for k in METHODS if any(r["key"] == k for r in rows)]:
+        seconds = np.array([r["plant_s_to_balance"] for r in rows if r["key"] == key], float)
+        low = high = float(np.median(seconds))
+        if seconds.size >= 2 and np.all(np.isfinite(seconds)):
+            interval = aggregate_interval(seconds, "median", seed=seed)
+            low, high = interval.low, interval.high
+        out.append(
+            {
+                "key": key,
+                "method": METHODS[key],
+                "seeds": int(seconds.size),
+                "seeds_balanced": int(np.sum(np.isfinite(seconds))),
+                "median_plant_s": float(np.median(seconds)),
+                "low_plant_s": float(low),
+                "high_plant_s": float(high),
+                "worst_plant_s": float(np.max(seconds)),
+            }
+        )
+    return out
+
+
+def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
+    """Plant seconds to balance per seed (dots; crosses at the edge for seeds that never balanced), one line per
+    method, with the median and its interval (:func:`method_summary`); logarithmic axis."""
+    import matplotlib.pyplot as plt
+
+    summary = method_summary(rows)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 0.6 + 0.6 * len(summary)))
+    finite = [r["plant_s_to_balance"] for r in rows if math.isfinite(r["plant_s_to_balance"])]
+    edge = 2.0 * max(finite) if finite else 1.0
+    for y, row in enumerate(summary):
+        seconds = np.array([r["plant_s_to_balance"] for r in rows if r["key"] == row["key"]], float)
+        jitter = np.linspace(-0.15, 0.15, seconds.size) if seconds.size > 1 else np.zeros(1)
+        ok = np.isfinite(seconds)
+        ax.scatter(seconds[ok], y + jitter[ok], s=18, color=f"C{y}", zorder=3)
+        ax.scatter(np.full((~ok).sum(), edge), y + jitter[~ok], marker="x", color=f"C{y}", zorder=3)
+        if math.isfinite(row["median_plant_s"]):
+            ax.plot([row["low_plant_s"], row["high_plant_s"]], [y, y], color="k", lw=4, alpha=0.3)
+            ax.plot([row["median_plant_s"]] * 2, [y - 0.3, y + 0.3], color="k", lw=2)
+    ax.set_xscale("log")
+    ax.set_yticks(range(len(summary)), [r["method"] for r in summary])
+    ax.set_xlabel("plant seconds until the method has a controller that balances the fresh starts")
+    ax.invert_yaxis()
+    ax.grid(axis="x", alpha=0.3)
+    return ax.figure

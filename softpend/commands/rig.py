@@ -27,11 +27,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         parser.add_argument(flag, type=kind, default=default, help=text)
     parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
     parser.set_defaults(func=run)
-    from softpend.commands import rig_build, rig_control
+    from softpend.commands import rig_build, rig_commission, rig_control
 
     actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
     rig_control.register(actions)
     rig_build.register(actions)
+    rig_commission.register(actions)
     debug = dict(
         action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error instead of one line"
     )

@@ -286,9 +286,11 @@ def run_twin_control(
     on_frame: Optional[Callable] = None,
     camera_wait_s: float = 1.0,
     outputs: Optional[Any] = None,
+    estimator_task: Optional[Any] = None,
 ) -> TwinControlRun:
     """Run ``controller`` on the digital twin ``rig`` in simulated time, filmed by ``camera`` (None: none), once the
-    camera tracked a frame; writes :data:`TWIN_CONTROL_FILES` to ``workdir`` (the summary also when it raises)."""
+    camera tracked a frame; writes :data:`TWIN_CONTROL_FILES` to ``workdir`` (the summary also when it raises).  The
+    estimator's model is ``estimator_task`` (default ``rig.task``; an identified rod's, used by the commissioning)."""
     from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
@@ -302,7 +304,7 @@ def run_twin_control(
     for path in logs:
         outputs.live(path)
     config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
-    estimator = RigStateEstimator(rig.task, config)
+    estimator = RigStateEstimator(estimator_task if estimator_task is not None else rig.task, config)
     metadata = {
         "rig": rig.to_dict(),
         "estimator": dataclasses.asdict(estimator.config),

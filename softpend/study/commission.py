@@ -1,0 +1,390 @@
+"""Commissioning an unknown rod on the twin, in resumable stages, each writing its output in one folder:
+
+``excite`` (a multisine from hanging through the rig's own I/O, synchronised into a rig dataset), ``identify``
+(grey-box, from ``RodParams()``), ``design`` (energy swing-up + LQR on the observations of the identified rod,
+checked in the simulator on rods drawn from the identification's uncertainty), ``verify`` (that controller on the
+twin from fresh hanging starts under each sensor condition) and ``report``.  The twin's truth stays on the twin's
+side (:mod:`softpend.study.twin_side`, a child process); only the report's relative errors come from it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Callable, Optional
+
+from softpend.checks import in_range, int_at_least, positive, positive_int
+from softpend.plant import RodParams
+from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
+from softpend.study.unknown_rod import UNKNOWN_FIELDS
+
+__all__ = [
+    "IDENTIFIED_PARAMETERS",
+    "STAGES",
+    "CommissionConfig",
+    "commission",
+    "identified_values",
+    "verification_seeds",
+]
+
+#: The stages in order.
+STAGES = ("excite", "identify", "design", "verify", "report")
+#: What the identification estimates: the rod fields and the rod's mass, which with the mass known stands for the
+#: torque gain (a gain ``g`` is the rod with every mass, inertia, stiffness and damping over ``g``).
+IDENTIFIED_PARAMETERS: tuple[str, ...] = UNKNOWN_FIELDS + ("mass_kg",)
+#: Length of the start-up wiggle before the excitation program (the clock synchronisation's reference) [s].
+WIGGLE_S = 2.0
+#: Rest after the program, so the last trial ends within the session [s].
+REST_S = 0.5
+#: Verification seeds start here (commissioning seeds lie below it).
+VERIFY_SEED_OFFSET = 1_000_000_000
+#: Label of the commissioned controller.
+CONTROLLER = "energy swing-up + LQR (observations), identified rod"
+SETTINGS_FILE = "commission.json"
+
+
+@dataclass(frozen=True)
+class CommissionConfig:
+    """Budgets of :func:`commission`: ``excite_s`` of multisine (peak ``peak_fraction`` of the torque limit, up to
+    ``band_high_hz``) cut into trials of ``trial_length_s``; the identification's windows and iterations; the
+    design check's ``check_draws`` rods ``uncertainty_scale`` standard deviations wide, ``check_starts`` starts of
+    ``check_duration_s`` each; ``verify_starts`` twin starts of ``verify_duration_s`` per condition; ``seed``."""
+
+    excite_s: float = 20.0
+    peak_fraction: float = 0.8
+    band_high_hz: float = 6.0
+    trial_length_s: float = 3.0
+    window_s: float = 0.3
+    max_windows: int = 60
+    max_iterations: int = 25
+    check_draws: int = 8
+    check_starts: int = 2
+    check_duration_s: float = 10.0
+    uncertainty_scale: float = 2.0
+    verify_starts: int = 10
+    verify_duration_s: float = 10.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("excite_s", "trial_length_s", "window_s", "check_duration_s", "uncertainty_scale"):
+            positive(name, getattr(self, name))
+        positive("verify_duration_s", self.verify_duration_s)
+        in_range("peak_fraction", self.peak_fraction, 1e-3, 1.0)
+        in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
+        for name in ("max_windows", "max_iterations", "check_draws", "check_starts"):
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        object.__setattr__(self, "verify_starts", positive_int("verify_starts", self.verify_starts))
+        if self.verify_starts > 1000:
+            raise ValueError(f"verify_starts must be at most 1000, got {self.verify_starts}")
+        seed = int_at_least("seed", self.seed, 0)
+        if seed >= 10**6:
+            raise ValueError(f"seed must be below 1000000, got {seed}")
+        object.__setattr__(self, "seed", seed)
+        if self.session_s < self.trial_length_s + 3:
+            raise ValueError(
+                f"excite_s must be at least trial_length_s + {3 - WIGGLE_S - REST_S:g} s "
+                f"(the session, {self.session_s:g} s with the wiggle, must hold trial_length_s + 3 s), got "
+                f"{self.excite_s!r}"
+            )
+
+    @property
+    def session_s(self) -> float:
+        """The whole excitation session on the plant: wiggle, program, rest [s]."""
+        return WIGGLE_S + self.excite_s + REST_S
+
+    def commissioning_seeds(self) -> list[int]:
+        """Every seed the commissioning draws with: the session (its wiggle: the next), the identification's
+        windows, the uncertainty draws and the design check's starts."""
+        s = self.seed
+        return sorted({s, s + 1} | set(self.check_seeds()))
+
+    def check_seeds(self) -> list[int]:
+        return [self.seed + 2 + j for j in range(self.check_draws * self.check_starts)]
+
+
+def verification_seeds(config: CommissionConfig) -> list[int]:
+    """The fresh starts of the verification: disjoint from :meth:`CommissionConfig.commissioning_seeds`."""
+    seeds = [VERIFY_SEED_OFFSET + config.seed * 1000 + i for i in range(config.verify_starts)]
+    shared = set(seeds) & set(config.commissioning_seeds())
+    if shared:
+        raise AssertionError(f"verification seeds {sorted(shared)} were used by the commissioning")
+    return seeds
+
+
+def identified_values(estimates: dict[str, float], std: dict[str, float], nominal_mass_kg: float) -> dict[str, dict]:
+    """The rod fields and the torque gain with standard deviations from an identification of the effective rod
+    (``mass_kg`` estimated: gain = nominal mass / estimate, each field times the gain) or of the rod and
+    ``torque_gain``; relative standard deviations add in quadrature (the estimates' correlation is not kept)."""
+    if "torque_gain" in estimates:
+        gain, gain_rel = estimates["torque_gain"], std["torque_gain"] / estimates["torque_gain"]
+        scale, combine = 1.0, False
+    elif "mass_kg" in estimates:
+        gain = nominal_mass_kg / estimates["mass_kg"]
+        gain_rel = std["mass_kg"] / estimates["mass_kg"]
+        scale, combine = gain, True
+    else:
+        gain, gain_rel, scale, combine = 1.0, 0.0, 1.0, False
+    out: dict[str, dict] = {}
+    for name in UNKNOWN_FIELDS:
+        if name in estimates:
+            value = estimates[name]
+            rel = std[name] / value if value else math.inf
+            rel = math.hypot(rel, gain_rel) if combine else rel
+            out[name] = {"estimate": value * scale, "std": abs(value * scale) * rel, "relative_std": rel}
+    out["torque_gain"] = {"estimate": gain, "std": gain * gain_rel, "relative_std": gain_rel}
+    return out
+
+
+def _greybox_result(data: dict):
+    """The :class:`~softpend.sysid.greybox.GreyBoxResult` of its ``to_dict``."""
+    from softpend.sysid.greybox import GreyBoxResult
+
+    fit = dict(data["fit"])
+    keys = {f.name for f in fields(GreyBoxResult)}
+    return GreyBoxResult(
+        params=RodParams.from_dict(data["rod_params"]),
+        initial_params=RodParams.from_dict(fit.pop("initial_params")),
+        estimates=dict(data["estimates"]),
+        std=dict(data["std"]),
+        at_bounds=tuple(fit.pop("at_bounds")),
+        **{k: v for k, v in {**fit, **data["calibration"]}.items() if k in keys},
+    )
+
+
+class _Run:
+    """One commissioning folder: its stage files, planned and checked before any work."""
+
+    FILES = {
+        "excite": ("excite", ("rig_dataset.npz", "excite.json")),
+        "identify": ("identify", ("identification.json",)),
+        "design": ("design", ("design.json",)),
+        "verify": ("verify", ("verify.json",)),
+    }
+
+    def __init__(self, out: Path, truth: TwinTruth, config: CommissionConfig) -> None:
+        from softpend.io.outputs import Outputs
+
+        self.out, self.truth, self.config = out, truth, config
+        self.outputs = Outputs()
+        self.outputs.folder(out, (SETTINGS_FILE, "report.json"), what="--out")
+        for folder, names in self.FILES.values():
+            self.outputs.folder(out / folder, names, what="--out")
+        self.private = out / "twin"
+        settings = {"twin": truth.to_dict(), "config": asdict(config)}
+        path = out / SETTINGS_FILE
+        if path.is_file():
+            from softpend.io.reading import read_json_checked
+
+            earlier = read_json_checked(path, "--out settings file")
+            if earlier != json.loads(json.dumps(settings)):
+                raise ValueError(
+                    f"--out {out} holds a commissioning with other settings ({path}); pass the same settings to "
+                    "resume it, or another --out"
+                )
+        else:
+            self.outputs.write_json(path, settings)
+
+    def path(self, stage: str) -> Path:
+        if stage == "report":
+            return self.out / "report.json"
+        folder, names = self.FILES[stage]
+        return self.out / folder / names[-1]
+
+    def done(self, stage: str) -> bool:
+        return self.path(stage).is_file()
+
+    def read(self, stage: str) -> dict:
+        from softpend.io.reading import read_json_checked
+
+        return read_json_checked(self.path(stage), f"{stage} output")
+
+
+def _excite(run: _Run) -> dict:
+    from softpend.hardware.sync import build_rig_dataset
+    from softpend.sysid.excitation import multisine
+
+    config, guess = run.config, RodParams()
+    dt_s = 0.01
+    program = multisine(
+        int(round(config.excite_s / dt_s)),
+        dt_s,
+        config.peak_fraction * guess.torque_limit_nm,
+        band_hz=(0.2, config.band_high_hz),
+    )
+    folder = run.out / "excite"
+    figures = on_twin_side(
+        excite_on_twin,
+        run.truth,
+        str(run.private),
+        str(folder),
+        program.tolist(),
+        config.session_s,
+        config.trial_length_s,
+        config.seed,
+    )
+    dataset_path = run.outputs.live(folder / "rig_dataset.npz")
+    dataset, sync = build_rig_dataset(
+        folder / "motor_log.csv",
+        folder / "camera.csv",
+        dataset_path,
+        params=guess,
+        dt_s=dt_s,
+        trial_length_s=config.trial_length_s,
+        notes="commissioning excitation on the twin",
+    )
+    run.outputs.done(dataset_path)
+    return {
+        **figures,
+        "program": "multisine",
+        "program_s": config.excite_s,
+        "peak_torque_nm": float(abs(program).max()),
+        "n_trials": dataset.n_trials,
+        "clock_offset_s": sync.offset.offset_s,
+        "gaps": len(sync.gaps),
+    }
+
+
+def _identify(run: _Run) -> dict:
+    from softpend.sysid.dataset import load_dataset
+    from softpend.sysid.greybox import GreyBoxConfig, identify
+
+    config, guess = run.config, RodParams()
+    dataset = load_dataset(run.out / "excite" / "rig_dataset.npz")
+    settings = GreyBoxConfig(
+        parameters=IDENTIFIED_PARAMETERS,
+        window_s=config.window_s,
+        max_windows=config.max_windows,
+        max_iterations=config.max_iterations,
+        seed=config.seed,
+    )
+    result = identify(dataset, settings, initial_params=guess)
+    return {
+        "greybox": result.to_dict(),
+        "identified": identified_values(result.estimates, result.std, guess.mass_kg),
+        "model_rod": result.params.to_dict(),
+        "plant_s": 0.0,
+    }
+
+
+def _design(run: _Run) -> dict:
+    from softpend.control.identified import design_swingup, uncertainty_draws
+    from softpend.study.unknown_rod import balanced_starts
+
+    config = run.config
+    identification = run.read("identify")
+    model = RodParams.from_dict(identification["model_rod"])
+    design_swingup(model)  # a design that fails is an error here, not on the plant
+    draws = uncertainty_draws(
+        _greybox_result(identification["greybox"]), config.check_draws, config.seed + 1, config.uncertainty_scale
+    )
+    seeds = config.check_seeds()
+    k = config.check_starts
+    balanced = [
+        balanced_starts(rod, seeds[i * k : (i + 1) * k], config.check_duration_s, design_rod=model)
+        for i, rod in enumerate(draws)
+    ]
+    return {
+        "controller": CONTROLLER,
+        "model_rod": model.to_dict(),
+        "uncertainty_check": {
+            "draws": len(draws),
+            "starts_each": k,
+            "duration_s": config.check_duration_s,
+            "scale_std": config.uncertainty_scale,
+            "balanced_starts": balanced,
+            "all_balanced": all(b == k for b in balanced),
+        },
+        "simulator_s": len(draws) * k * config.check_duration_s,
+        "plant_s": 0.0,
+    }
+
+
+def _verify(run: _Run) -> dict:
+    config = run.config
+    model_rod = run.read("design")["model_rod"]
+    seeds = verification_seeds(config)
+    rows = on_twin_side(
+        verify_on_twin, run.truth, str(run.private), model_rod, list(CONDITIONS), seeds, config.verify_duration_s
+    )
+    return {
+        "seeds": seeds,
+        "rows": rows,
+        "plant_s": {name: sum(r["plant_s"] for r in group) for name, group in rows.items()},
+    }
+
+
+def _report(run: _Run) -> dict:
+    from softpend.study.rig_runs import summary_rows
+
+    config = run.config
+    excite, identification, design, verify = (run.read(s) for s in ("excite", "identify", "design", "verify"))
+    identified = identification["identified"]
+    truth = on_twin_side(truth_errors, run.truth, str(run.private), {n: v["estimate"] for n, v in identified.items()})
+    for name, entry in identified.items():
+        entry["truth"] = truth["truth"].get(name)
+        entry["relative_error"] = truth["relative_error"].get(name)
+    rows = [{**row, "controller": CONTROLLER} for group in verify["rows"].values() for row in group]
+    fit = identification["greybox"]["fit"]
+    return {
+        "twin": run.truth.to_dict(),
+        "settings": asdict(config),
+        "plant_s": {
+            "excite": excite["plant_s"],
+            "identify": 0.0,
+            "design": 0.0,
+            **{f"verify_{name}": s for name, s in verify["plant_s"].items()},
+            "commissioning": excite["plant_s"],
+        },
+        "simulator_s": {"design": design["simulator_s"]},
+        "identified": identified,
+        "truth_source": "the twin's side, for this report only (the commissioning never read it)",
+        "identification_fit": {
+            "parameters": list(IDENTIFIED_PARAMETERS),
+            "residual_rms_rad": fit["residual_rms_rad"],
+            "n_windows": fit["n_windows"],
+            "message": fit["message"],
+            "at_bounds": fit["at_bounds"],
+        },
+        "design": design["uncertainty_check"],
+        "verification": summary_rows(rows),
+        "seeds": {"commissioning": config.commissioning_seeds(), "verification": verify["seeds"]},
+    }
+
+
+_STAGE_WORK: dict[str, Callable[[_Run], dict]] = {
+    "excite": _excite,
+    "identify": _identify,
+    "design": _design,
+    "verify": _verify,
+    "report": _report,
+}
+
+
+def commission(
+    out: str | Path,
+    truth: TwinTruth,
+    config: Optional[CommissionConfig] = None,
+    on_stage: Optional[Callable[[str, bool, dict], None]] = None,
+) -> dict:
+    """Run the stages (module docstring) not yet done in ``out``, each writing its output there; the report.
+
+    ``on_stage(stage, ran, output)`` is told of every stage, ``ran`` False for one kept from an earlier run.
+    ``out`` holding another commissioning's settings is a ``ValueError``."""
+    if not isinstance(truth, TwinTruth):
+        raise ValueError(f"truth must be a TwinTruth, got {type(truth).__name__}")
+    config = config if config is not None else CommissionConfig()
+    if not isinstance(config, CommissionConfig):
+        raise ValueError(f"config must be a CommissionConfig, got {type(config).__name__}")
+    run = _Run(Path(out), truth, config)
+    output: dict = {}
+    for stage in STAGES:
+        ran = not run.done(stage)
+        if ran:
+            output = _STAGE_WORK[stage](run)
+            run.outputs.write_json(run.path(stage), output)
+        output = run.read(stage)
+        if on_stage is not None:
+            on_stage(stage, ran, output)
+    return output

@@ -1,0 +1,245 @@
+"""The twin's side of commissioning: the device and plant of an unknown rod, run in a spawned child process.
+
+The commissioning process hands a job the twin's truth only as a :class:`TwinTruth` (a rod file's path or a
+seed), never opened or drawn there; the child resolves it, keeps its own files (the rod, truth logs, video) in a
+private folder, and hands back what a rig gives its host: the motor log and the tracked camera log of an
+excitation, and the rows of a verification (measured on the true motion, as a reporting step).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import math
+import multiprocessing
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Optional, Sequence
+
+import numpy as np
+
+from softpend.checks import int_at_least, positive, positive_int
+from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S
+from softpend.study.rig_runs import RigCondition
+from softpend.study.unknown_rod import UnknownRod, draw_unknown_rod
+from softpend.vision.camera import CameraEffects
+
+__all__ = [
+    "CONDITIONS",
+    "TwinTruth",
+    "excite_on_twin",
+    "on_twin_side",
+    "truth_errors",
+    "verify_on_twin",
+]
+
+#: The verification's sensor conditions: the nominal rig camera, and a harsh one (30 fps, 50 ms, noisy image).
+CONDITIONS: dict[str, RigCondition] = {
+    "nominal": RigCondition("nominal"),
+    "harsh": RigCondition("harsh", fps=30.0, camera_latency_s=0.05, effects=CameraEffects.noisy()),
+}
+#: The files the excitation hands the host (in its public folder).
+EXCITATION_FILES = ("motor_log.csv", "camera.csv")
+
+
+@dataclass(frozen=True)
+class TwinTruth:
+    """Where the twin's unknown rod comes from: ``rod_file`` (a JSON of :meth:`UnknownRod.from_dict`) or ``seed``
+    (:func:`draw_unknown_rod` with ``draw_starts``, ``draw_needed`` and ``draw_duration_s``), exactly one."""
+
+    rod_file: Optional[str] = None
+    seed: Optional[int] = None
+    draw_starts: int = 10
+    draw_needed: int = 9
+    draw_duration_s: float = TEST_EPISODE_S
+
+    def __post_init__(self) -> None:
+        if (self.rod_file is None) == (self.seed is None):
+            raise ValueError("the twin's rod needs exactly one of rod_file (--twin-rod) and seed (--twin-seed)")
+        if self.rod_file is not None:
+            if not str(self.rod_file).strip():
+                raise ValueError("--twin-rod: the path is empty")
+            object.__setattr__(self, "rod_file", str(self.rod_file))
+        if self.seed is not None:
+            object.__setattr__(self, "seed", int_at_least("--twin-seed", self.seed, 0))
+        object.__setattr__(self, "draw_starts", positive_int("draw_starts", self.draw_starts))
+        object.__setattr__(self, "draw_needed", positive_int("draw_needed", self.draw_needed))
+        if self.draw_needed > self.draw_starts:
+            raise ValueError(f"draw_needed must be at most draw_starts ({self.draw_starts}), got {self.draw_needed}")
+        positive("draw_duration_s", self.draw_duration_s)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def on_twin_side(function: Callable[..., Any], *args: Any) -> Any:
+    """``function(*args)`` in a spawned child process (a fresh interpreter: nothing of this process's state goes
+    along but ``args``); its exceptions are raised here."""
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+        return pool.submit(function, *args).result()
+
+
+def _resolve(truth: TwinTruth, private: Path, outputs: Any) -> UnknownRod:
+    """The unknown rod: read from its file, or drawn from its seed once and kept in ``private/rod.json``."""
+    if truth.seed is None:
+        return UnknownRod.from_json(str(truth.rod_file))
+    path = private / "rod.json"
+    if path.is_file():
+        return UnknownRod.from_json(path)
+    rod, draws = draw_unknown_rod(truth.seed, truth.draw_starts, truth.draw_needed, truth.draw_duration_s)
+    outputs.folder(private, ("rod.json",), what="twin folder")
+    outputs.write_json(path, {**rod.to_dict(), "seed": truth.seed, "draws": draws})
+    return rod
+
+
+def excite_on_twin(
+    truth: TwinTruth,
+    private: str,
+    public: str,
+    program_nm: Sequence[float],
+    duration_s: float,
+    trial_length_s: float,
+    seed: int,
+) -> dict[str, float]:
+    """Play ``program_nm`` (after the start-up wiggle) on the twin from hanging at rest, filmed, through the rig's
+    own I/O (:func:`softpend.hardware.twin.run_twin_session` in ``private/excite``); copy the motor log (without
+    the device's settings) and the tracked camera log into ``public``; the plant seconds and loop counters."""
+    from softpend.hardware.emulator import RigConfig
+    from softpend.hardware.loop import LOOP_LOG_COLUMNS
+    from softpend.hardware.twin import run_twin_session
+    from softpend.io.outputs import Outputs
+    from softpend.io.samplelog import SampleLog, read_sample_log
+    from softpend.task import Task
+
+    outputs = Outputs()
+    private_dir, public_dir = Path(private), Path(public)
+    rod = _resolve(truth, private_dir, outputs)
+    task = Task(rod=rod.effective_rod(), start_noise_rad=0.0)
+    rig = RigConfig(task=task, seed=seed)
+    session = run_twin_session(
+        private_dir / "excite",
+        duration_s=duration_s,
+        seed=seed,
+        rig=rig,
+        trial_length_s=trial_length_s,
+        progress=False,
+        outputs=outputs,
+        program=np.asarray(program_nm, dtype=float),
+    )
+    outputs.folder(public_dir, EXCITATION_FILES, what="excitation folder")
+    motor = read_sample_log(session.motor_log)
+    motor_path = outputs.live(public_dir / "motor_log.csv")
+    metadata = {"rig": "digital twin", "torque_limit_nm": task.torque_limit_nm, "dt_s": task.dt_s}
+    with SampleLog(motor_path, LOOP_LOG_COLUMNS, metadata=metadata, fsync_every_s=None) as log:
+        for row in zip(*(motor[c] for c in LOOP_LOG_COLUMNS)):
+            log.append(row)
+    outputs.done(motor_path)
+    with open(session.camera_csv, "rb") as source, outputs.open(public_dir / "camera.csv", "wb") as copy:
+        copy.write(source.read())
+    return {
+        "plant_s": float(session.emulator_stats.get("ticks", 0.0)) * task.dt_s,
+        "samples": float(session.loop.samples),
+        "dropped_states": float(session.loop.dropped_states),
+    }
+
+
+def _verify_start(
+    design: Any, model: Any, true_task: Any, condition: RigCondition, seed: int, duration_s: float, workdir: Path
+) -> dict[str, Any]:
+    """One start of the controller designed on ``model`` (a RodParams; also the estimator's model) on the twin of
+    ``true_task``: a row of the true motion while the controller was in charge (a stop is a failed row)."""
+    from softpend.hardware.closed_loop import run_twin_control
+    from softpend.hardware.driver import LinkError
+    from softpend.plant import SimulationDiverged
+    from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
+    from softpend.task import Task
+
+    stop: Optional[str] = None
+    plant_s = 0.0
+    try:
+        run = run_twin_control(
+            design(model),
+            workdir,
+            duration_s,
+            rig=condition.rig(true_task, seed),
+            camera=condition.camera(seed),
+            estimator_config=condition.estimator(),
+            estimator_task=Task(rod=model),
+        )
+        plant_s = float(run.emulator_stats.get("ticks", 0.0)) * true_task.dt_s
+        if run.result.stop_reason is not None:
+            stop = f"{run.result.status.replace('_', ' ')}: {run.result.stop_reason}"
+    except LinkError as exc:
+        stop = f"link error: {type(exc).__name__}: {exc}"
+    except SimulationDiverged as exc:
+        stop = f"estimator model diverged: {exc}"
+    metrics: dict[str, Any] = {}
+    chatter = math.nan
+    motor, truth_log = workdir / "motor_log.csv", workdir / "truth_log.csv"
+    if motor.is_file() and truth_log.is_file():
+        metrics = run_truth_metrics(motor, truth_log, true_task, success_std_rad=HOLD_STD_RAD)
+        chatter = torque_chatter_nm_per_s(motor)
+    if not metrics and stop is None:
+        stop = "the controller never took charge"
+    return {
+        "condition": condition.name,
+        "seed": int(seed),
+        "success": bool(metrics.get("success", False)) and stop is None,
+        "swing_up_time_s": float(metrics.get("swing_up_time_s", math.inf)),
+        "upright_std_rad": float(metrics.get("upright_std_rad", math.nan)),
+        "peak_torque_nm": float(metrics.get("peak_torque_nm", math.nan)),
+        "torque_chatter_nm_per_s": float(chatter),
+        "stop": stop or "",
+        "plant_s": plant_s,
+    }
+
+
+def verify_on_twin(
+    truth: TwinTruth,
+    private: str,
+    model_rod: Mapping[str, Any],
+    conditions: Sequence[str],
+    seeds: Sequence[int],
+    duration_s: float,
+) -> dict[str, list[dict[str, Any]]]:
+    """The rows, by condition, of the energy swing-up + LQR on the observations designed on ``model_rod`` (its
+    estimator on the same model) from the hanging starts ``seeds`` of the twin's rod (logs in ``private``)."""
+    from softpend.control.identified import design_swingup
+    from softpend.io.outputs import Outputs
+    from softpend.plant import RodParams
+    from softpend.task import Task
+
+    unknown = [name for name in conditions if name not in CONDITIONS]
+    if unknown:
+        raise ValueError(f"conditions must be drawn from {sorted(CONDITIONS)}, got {unknown}")
+    private_dir = Path(private)
+    rod = _resolve(truth, private_dir, Outputs())
+    model = RodParams.from_dict(dict(model_rod))
+    true_task = Task(rod=rod.effective_rod())
+    return {
+        name: [
+            _verify_start(
+                design_swingup,
+                model,
+                true_task,
+                CONDITIONS[name],
+                seed,
+                duration_s,
+                private_dir / name / f"start_{seed}",
+            )
+            for seed in seeds
+        ]
+        for name in conditions
+    }
+
+
+def truth_errors(truth: TwinTruth, private: str, estimates: Mapping[str, float]) -> dict[str, dict[str, float]]:
+    """The twin's true values of the drawn fields and the torque gain, and ``estimate / truth - 1`` of each
+    name in ``estimates`` (for the report, after the commissioning)."""
+    from softpend.io.outputs import Outputs
+
+    values = _resolve(truth, Path(private), Outputs()).values()
+    return {
+        "truth": values,
+        "relative_error": {name: float(v) / values[name] - 1.0 for name, v in estimates.items() if name in values},
+    }

@@ -1,0 +1,259 @@
+"""Commissioning an unknown rod on the twin (softpend rig commission): every stage end to end on a tiny budget,
+resumed after an interruption, the twin's truth never opened by the commissioning process; unknown rods; the
+uncertainty draws; refusals."""
+
+from __future__ import annotations
+
+import builtins
+import io
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from softpend.cli import main
+from softpend.plant import RodParams
+from softpend.study import commission as commission_module
+from softpend.study import twin_side
+from softpend.study.commission import CommissionConfig, commission, identified_values, verification_seeds
+from softpend.study.twin_side import TwinTruth
+from softpend.study.unknown_rod import SPREAD_FACTOR, UNKNOWN_FIELDS, UnknownRod, draw_unknown_rod, effective_rod
+
+#: Every stage, each on the smallest budget that runs it.
+TINY = CommissionConfig(
+    excite_s=1.5,
+    trial_length_s=1.0,
+    window_s=0.2,
+    max_windows=6,
+    max_iterations=2,
+    check_draws=1,
+    check_starts=1,
+    check_duration_s=1.0,
+    verify_starts=1,
+    verify_duration_s=1.0,
+)
+#: A hand-made unknown rod.
+TRUTH = UnknownRod(
+    RodParams(
+        hub_inertia_kgm2=2.4e-4,
+        hub_friction_nms_per_rad=2.5e-3,
+        youngs_modulus_pa=60e6,
+        joint_damping_nms_per_rad=2.4e-4,
+        tip_mass_kg=0.012,
+    ),
+    torque_gain=1.15,
+)
+
+
+def _refuse_opening(monkeypatch, *forbidden: Path) -> list[str]:
+    """Make this process refuse to open anything at or under ``forbidden`` (a spawned child is not affected);
+    the refused paths."""
+    roots = [Path(p).resolve() for p in forbidden]
+    refused: list[str] = []
+
+    def guard(file) -> None:
+        if isinstance(file, int):
+            return
+        path = Path(os.fsdecode(file)).resolve()
+        if any(path == root or root in path.parents for root in roots):
+            refused.append(str(path))
+            raise PermissionError(f"the commissioning process may not open {path}")
+
+    real_open, real_os_open = builtins.open, os.open
+
+    def checked_open(file, *args, **kwargs):
+        guard(file)
+        return real_open(file, *args, **kwargs)
+
+    def checked_os_open(path, *args, **kwargs):
+        guard(path)
+        return real_os_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", checked_open)
+    monkeypatch.setattr(io, "open", checked_open)
+    monkeypatch.setattr(os, "open", checked_os_open)
+    return refused
+
+
+def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_its_truth_never_read(
+    tmp_path, monkeypatch
+):
+    rod_file = tmp_path / "secret" / "rod.json"
+    rod_file.parent.mkdir()
+    rod_file.write_text(json.dumps(TRUTH.to_dict()))
+    out = tmp_path / "commission"
+    refused = _refuse_opening(monkeypatch, rod_file, out / "twin")
+    for name in ("draw_unknown_rod", "_resolve"):  # nor is the truth drawn or resolved in this process
+        monkeypatch.setattr(twin_side, name, lambda *a, **k: pytest.fail("the truth was resolved on the host"))
+    jobs: list[str] = []
+    spawn = twin_side.on_twin_side
+
+    def counted(function, *args):
+        jobs.append(function.__name__)
+        return spawn(function, *args)
+
+    monkeypatch.setattr(commission_module, "on_twin_side", counted)
+    truth = TwinTruth(rod_file=str(rod_file))
+
+    identify = commission_module._STAGE_WORK["identify"]
+
+    def interrupted(run):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(commission_module._STAGE_WORK, "identify", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        commission(out, truth, TINY)
+    excite = out / "excite" / "excite.json"
+    assert excite.is_file() and not (out / "identify" / "identification.json").exists()
+    first = excite.read_bytes()
+
+    monkeypatch.setitem(commission_module._STAGE_WORK, "identify", identify)
+    told: list[tuple[str, bool]] = []
+    report = commission(out, truth, TINY, on_stage=lambda stage, ran, output: told.append((stage, ran)))
+    assert told == [("excite", False), ("identify", True), ("design", True), ("verify", True), ("report", True)]
+    assert excite.read_bytes() == first
+    assert jobs == ["excite_on_twin", "verify_on_twin", "truth_errors"]
+    assert refused == []
+
+    # the host's files hold no trace of the truth: no rig settings in the motor log, the guess in the dataset
+    motor_header = (out / "excite" / "motor_log.csv").read_text().splitlines()[0]
+    assert "rod" not in motor_header and "youngs" not in motor_header
+    from softpend.sysid.dataset import load_dataset
+
+    assert load_dataset(out / "excite" / "rig_dataset.npz").params == RodParams()
+
+    assert TINY.session_s <= report["plant_s"]["excite"] <= TINY.session_s + 0.3  # and the STOP after it
+    assert report["plant_s"]["identify"] == report["plant_s"]["design"] == 0.0
+    assert set(report["identified"]) == set(UNKNOWN_FIELDS) | {"torque_gain"}
+    gain = report["identified"]["torque_gain"]
+    assert gain["truth"] == pytest.approx(TRUTH.torque_gain)
+    assert gain["relative_error"] == pytest.approx(gain["estimate"] / TRUTH.torque_gain - 1)
+    assert all(math.isfinite(v["std"]) for v in report["identified"].values())
+    assert [r["condition"] for r in report["verification"]] == ["nominal", "harsh"]
+    for row in report["verification"]:
+        assert row["starts"] == 1 and 0.0 <= row["success_low"] <= row["success_rate"] <= row["success_high"] <= 1.0
+    assert not set(report["seeds"]["verification"]) & set(report["seeds"]["commissioning"])
+
+    # done: a third call redoes nothing and reads the same report
+    told.clear()
+    assert commission(out, truth, TINY, on_stage=lambda stage, ran, output: told.append((stage, ran))) == report
+    assert [ran for _, ran in told] == [False] * 5
+
+
+def test_the_uncertainty_draws_are_as_wide_as_the_identification_is_uncertain():
+    from softpend.control.identified import uncertainty_draws
+    from softpend.sysid.greybox import GreyBoxResult
+
+    guess = RodParams()
+    estimates = {"hub_inertia_kgm2": 3e-4, "tip_mass_kg": 0.02, "torque_gain": 1.3}
+    std = {"hub_inertia_kgm2": 3e-5, "tip_mass_kg": 0.0, "torque_gain": 0.5}
+    result = GreyBoxResult(
+        params=guess.replace(hub_inertia_kgm2=3e-4, tip_mass_kg=0.02),
+        initial_params=guess,
+        estimates=estimates,
+        std=std,
+        torque_gain=1.3,
+        encoder_offset_rad=0.0,
+        residual_rms_rad=0.0,
+        n_windows=1,
+        window_steps=2,
+        n_residuals=1,
+        n_variables=1,
+        identify_s=0.0,
+        nfev=1,
+        njev=1,
+        status=1,
+        message="",
+    )
+    draws = uncertainty_draws(result, 200, seed=5, scale=2.0)
+    inertia = np.array([d.hub_inertia_kgm2 for d in draws])
+    # a 10 % standard deviation, two of them wide on the log scale: within exp(+-0.2), and filling it
+    assert np.all(np.abs(np.log(inertia / 3e-4)) <= 0.2 + 1e-12)
+    assert np.abs(np.log(inertia / 3e-4)).max() > 0.18
+    assert all(d.tip_mass_kg == 0.02 for d in draws)  # no uncertainty: no spread
+    assert all(d.youngs_modulus_pa == guess.youngs_modulus_pa for d in draws)  # not estimated: held
+    assert draws == uncertainty_draws(result, 200, seed=5, scale=2.0)
+    wider = np.array([d.hub_inertia_kgm2 for d in uncertainty_draws(result, 200, seed=5, scale=4.0)])
+    assert np.abs(np.log(wider / 3e-4)).max() > 0.3
+
+
+def test_a_torque_gain_is_the_rod_with_its_masses_stiffness_and_damping_divided():
+    from softpend.plant import PRBPlant
+
+    rod = TRUTH.rod.replace(torque_limit_nm=10.0)
+    geared, effective = (PRBPlant(r, dt_s=0.01, substeps=2) for r in (rod, effective_rod(rod, TRUTH.torque_gain)))
+    for plant in (geared, effective):
+        plant.reset(*plant.hanging_state())
+    torque = 0.05 * np.sin(np.arange(150) * 0.07)
+    for u in torque:
+        a, b = geared.step(TRUTH.torque_gain * u), effective.step(u)
+        assert a.phi_rad == pytest.approx(b.phi_rad, abs=1e-4) and a.ex_m == pytest.approx(b.ex_m, abs=1e-5)
+
+    values = identified_values(
+        {**{n: getattr(TRUTH.effective_rod(), n) for n in UNKNOWN_FIELDS}, "mass_kg": TRUTH.effective_rod().mass_kg},
+        {**{n: 0.1 * getattr(TRUTH.effective_rod(), n) for n in UNKNOWN_FIELDS}, "mass_kg": 0.0},
+        RodParams().mass_kg,
+    )
+    assert values["torque_gain"]["estimate"] == pytest.approx(TRUTH.torque_gain)
+    for name in UNKNOWN_FIELDS:
+        assert values[name]["estimate"] == pytest.approx(getattr(TRUTH.rod, name))
+        assert values[name]["relative_std"] == pytest.approx(0.1)
+
+
+def test_unknown_rods_lie_within_a_factor_two_are_balanced_and_repeat_with_their_seed():
+    rod, draws = draw_unknown_rod(7, starts=2, needed=2, duration_s=6.0)
+    assert draws >= 1
+    default = RodParams()
+    for name in UNKNOWN_FIELDS:
+        assert 1 / SPREAD_FACTOR <= getattr(rod.rod, name) / getattr(default, name) <= SPREAD_FACTOR
+    assert 1 / SPREAD_FACTOR <= rod.torque_gain <= SPREAD_FACTOR
+    assert draw_unknown_rod(7, starts=2, needed=2, duration_s=6.0) == (rod, draws)
+    assert UnknownRod.from_dict(rod.to_dict()) == rod
+    with pytest.raises(ValueError, match="needed"):
+        draw_unknown_rod(7, starts=2, needed=3)
+
+
+def test_verification_seeds_are_fresh():
+    config = CommissionConfig(check_draws=3, check_starts=4, seed=12)
+    seeds = verification_seeds(config)
+    assert len(seeds) == 10 and not set(seeds) & set(config.commissioning_seeds())
+
+
+def test_bad_input_is_refused_by_name(tmp_path, capsys):
+    rod_file = tmp_path / "rod.json"
+    rod_file.write_text(json.dumps(TRUTH.to_dict()))
+    out = str(tmp_path / "out")
+    cases = [
+        (["--twin-rod", str(tmp_path / "missing.json")], "--twin-rod"),
+        (["--twin-rod", str(tmp_path)], "--twin-rod"),
+        (["--twin-rod", str(rod_file), "--verify-starts", "0"], "--verify-starts"),
+        (["--twin-rod", str(rod_file), "--seed", "-1"], "--seed"),
+        (["--twin-seed", "-3"], "--twin-seed"),
+        (["--twin-rod", str(rod_file), "--excite-s", "0.1"], "excite_s"),
+        (["--twin-rod", str(rod_file), "--excite-s", "nan"], "--excite-s"),
+    ]
+    for extra, name in cases:
+        assert main(["rig", "commission", "--out", out, *extra]) == 2, extra
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("softpend rig commission: error:") and name in err and "\n" not in err, err
+    assert not os.path.exists(out)
+    with pytest.raises(SystemExit):  # exactly one of the two
+        main(["rig", "commission", "--out", out, "--twin-rod", str(rod_file), "--twin-seed", "1"])
+    capsys.readouterr()
+
+    # another commissioning's folder
+    (tmp_path / "earlier").mkdir()
+    from softpend.io.outputs import Outputs
+
+    outputs = Outputs()
+    outputs.folder(tmp_path / "earlier", ("commission.json",))
+    outputs.write_json(tmp_path / "earlier" / "commission.json", {"twin": {}, "config": {}})
+    with pytest.raises(ValueError, match="other settings"):
+        commission(tmp_path / "earlier", TwinTruth(rod_file=str(rod_file)), TINY)
+    with pytest.raises(ValueError, match="exactly one"):
+        TwinTruth()
+    with pytest.raises(ValueError, match="rod file .*torque_gain"):
+        UnknownRod.from_dict({"rod_params": RodParams().to_dict(), "torque_gain": -1.0}, "rod file x")

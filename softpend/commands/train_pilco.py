@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 from softpend.io.outputs import check_output_folder, json_text
-from softpend.io.reading import read_json_object
-from softpend.io.runfolders import check_run_folder
 from softpend.pilco.loop import PilcoConfig, run_pilco
+from softpend.study.head_to_head import refuse_other_pilco_run
 from softpend.study.presets import load_hparams
 
 
@@ -39,17 +37,7 @@ def train_pilco_from_args(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     # before the work: a new or empty folder; one that holds a PILCO run (of any settings) is never trained over
     check_output_folder(args.out, what="run folder", owned=lambda folder: (folder / "pilco.json").is_file())
-    if (Path(args.out) / "pilco.json").is_file():
-        saved = read_json_object(Path(args.out) / "pilco.json", 10**8)
-        check_run_folder(
-            args.out,
-            saved.get("config") if saved else None,
-            json.loads(json.dumps(config.to_dict(), default=float)),
-            None,
-            config.seed,
-            resume=False,
-            can_resume=False,
-        )
+    refuse_other_pilco_run(args.out, config)
     result = run_pilco(config, progress=not getattr(args, "no_progress", False))
     out = result.save(Path(args.out))
     balance = result.real_seconds_to_balance

@@ -49,7 +49,6 @@ def pilco_runs(
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
     """The PILCO runs still missing under ``runs_root`` as ``(name, arguments of run_and_save)``; a folder holding
     a run of other settings raises ``ValueError``."""
-    from softpend.io.runfolders import check_run_folder
     from softpend.study.rl_runs import run_folder
 
     if len(seeds) == 0:
@@ -59,19 +58,19 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
         seeded = dataclasses.replace(config, seed=int(seed))
         folder = run_folder(runs_root, "pilco", int(seed), seeded)
         if folder.name not in jobs and _saved_run(folder, seeded) is None:
-            if (folder / "pilco.json").exists():
-                saved = read_json_object(folder / "pilco.json", 10**8)
-                check_run_folder(
-                    folder,
-                    saved.get("config") if saved else None,
-                    json.loads(json.dumps(seeded.to_dict(), default=float)),
-                    None,
-                    int(seed),
-                    resume=False,
-                    can_resume=False,
-                )
+            refuse_other_pilco_run(folder, seeded)
             jobs[folder.name] = (seeded, folder)
     return list(jobs.items())
+
+
+def refuse_other_pilco_run(folder: Path | str, config: PilcoConfig) -> None:
+    """``ValueError`` if ``folder`` holds a PILCO run of other settings than ``config``."""
+    from softpend.io.runfolders import check_run_folder
+
+    if (path := Path(folder) / "pilco.json").exists():
+        saved = read_json_object(path, 10**8)
+        settings = json.loads(json.dumps(config.to_dict(), default=float))
+        check_run_folder(folder, saved.get("config") if saved else None, settings, None, config.seed, False, False)
 
 
 def _saved_run(folder: Path, config: PilcoConfig) -> Optional[PilcoResult]:

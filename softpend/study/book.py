@@ -528,7 +528,7 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
     machine |= {"platform": platform.platform(), "python": platform.python_version()}
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     training = read_json_object(layout.training_path, MAX_CONFIG_BYTES)
-    record = {"date": date, "profile": profile, "overrides": dict(overrides), "training": training}
+    record: dict[str, Any] = {"date": date, "profile": profile, "overrides": dict(overrides), "training": training}
     record |= {"notebooks": notebooks, "machine": machine}
     with atomic_write(layout.record_path, "w") as handle:
         handle.write(json_text(record, indent=2) + "\n")

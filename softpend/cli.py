@@ -1,13 +1,6 @@
-"""The ``softpend`` command line.
-
-Each subcommand lives in its own module under :mod:`softpend.commands` and exposes
-``register(subparsers)``, which adds an ``argparse`` sub-parser whose ``func`` default runs the command
-and returns an exit code.  To add a command, create the module and list it in :data:`COMMAND_MODULES`.
-
-Errors: a usage error, and any error of the project or of its input (:func:`is_reported`: invalid values,
-files that cannot be read or written, a diverged simulation, a refused file, non-finite training) is printed
-as one line ``softpend COMMAND: error: ...`` on stderr with exit status 2; ``--debug`` (before or after the
-command) prints the traceback instead.  Anything else is a bug and propagates with its traceback.
+"""The ``softpend`` command line: one module per subcommand (:data:`COMMAND_MODULES`, each with
+``register(subparsers)``); an error of the input is one line ``softpend COMMAND: error: ...`` on stderr, exit 2
+(``--debug``: the traceback).
 """
 
 from __future__ import annotations
@@ -19,19 +12,12 @@ import sys
 import zipfile
 from typing import NoReturn, Sequence
 
-#: Modules that contribute subcommands (one line per module).
+#: Modules that contribute subcommands.
 COMMAND_MODULES: list[str] = [
-    "softpend.commands.bench",
-    "softpend.commands.book",
-    "softpend.commands.train",
-    "softpend.commands.evaluate",
-    "softpend.commands.rig",
-    "softpend.commands.track",
-    "softpend.commands.babble",
-    "softpend.commands.fit_model",
-    "softpend.commands.identify",
-    "softpend.commands.sweep",
+    f"softpend.commands.{name}"
+    for name in ("bench", "book", "train", "evaluate", "rig", "track", "babble", "fit_model", "identify", "sweep")
 ]
+DEBUG_HELP = "show the traceback of an error instead of one line"
 
 
 class CommandParser(argparse.ArgumentParser):
@@ -46,31 +32,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = CommandParser(prog="softpend", description="Learning to control a soft robotic pendulum.")
     parser.add_argument("--version", action="version", version=f"softpend {__version__}")
-    parser.add_argument("--debug", action="store_true", help="show the traceback of an error instead of one line")
+    parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
     for subparser in subparsers.choices.values():
-        subparser.add_argument(
-            "--debug",
-            action="store_true",
-            default=argparse.SUPPRESS,
-            help="show the traceback of an error instead of one line",
-        )
+        subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     return parser
 
 
 #: Exception types that are the input's or the environment's fault, reported in one line.
-REPORTED_ERRORS: tuple[type[BaseException], ...] = (
-    ValueError,
-    OSError,
-    EOFError,
-    RecursionError,
-    MemoryError,
-    OverflowError,
-    zipfile.BadZipFile,
-    pickle.UnpicklingError,
-)
+REPORTED_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, EOFError, RecursionError, MemoryError)
+REPORTED_ERRORS += (OverflowError, zipfile.BadZipFile, pickle.UnpicklingError)
 
 
 def is_reported(exc: BaseException) -> bool:

@@ -7,7 +7,7 @@ import json
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 import torch
@@ -222,6 +222,12 @@ def _filled(buffer: ReplayBuffer) -> int:
     return buffer.buffer_size if buffer.full else buffer.pos
 
 
+def _plant(buffer: ReplayBuffer) -> Optional[np.ndarray]:
+    """The plant observations an MBPO buffer keeps, else None."""
+    plant = getattr(buffer, "plant_observations", None)
+    return plant if isinstance(plant, np.ndarray) else None
+
+
 def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
     """Write the filled rows of ``buffer`` (and of an MBPO buffer's model part and real plant observations),
     its position and fill flag as an uncompressed ``.npz`` (plain arrays, no pickle)."""
@@ -232,8 +238,8 @@ def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
             arrays[prefix + name] = getattr(part, name)[:n]
         arrays[prefix + "pos"] = np.array(part.pos, dtype=np.int64)
         arrays[prefix + "full"] = np.array(bool(part.full))
-    plant = getattr(buffer, "plant_observations", None)
-    if isinstance(plant, np.ndarray):
+    plant = _plant(buffer)
+    if plant is not None:
         arrays["plant_observations"] = plant[: _filled(buffer)]
     with atomic_write(path) as handle:
         np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy's stub: no key is allow_pickle
@@ -242,19 +248,13 @@ def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
 
 def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
     """Fill ``buffer`` (freshly allocated, with the run's sizes) from a file of :func:`save_replay_buffer`."""
-    path = Path(path)
+    path, plant = Path(path), _plant(buffer)
     # the file can hold no more than the buffer it fills (its arrays, and the zip's and headers' overhead)
     arrays = [getattr(part, name) for part in _parts(buffer).values() for name in _BUFFER_ARRAYS]
-    plant_observations = getattr(buffer, "plant_observations", None)
-    if isinstance(plant_observations, np.ndarray):
-        arrays.append(plant_observations)
-    max_bytes = 2**20 + sum(int(array.nbytes) for array in arrays)
+    max_bytes = 2**20 + sum(int(array.nbytes) for array in arrays + ([] if plant is None else [plant]))
     saved = read_npz(path, "replay buffer file", AgentFileError, max_bytes=max_bytes)
-    expected: set[str] = set()
-    for prefix in _parts(buffer):
-        expected.update(prefix + name for name in _BUFFER_ARRAYS + ("pos", "full"))
-    plant = getattr(buffer, "plant_observations", None)  # MBPO's buffer keeps the plant's observations
-    if isinstance(plant, np.ndarray):
+    expected = {prefix + name for prefix in _parts(buffer) for name in _BUFFER_ARRAYS + ("pos", "full")}
+    if plant is not None:
         expected.add("plant_observations")
     if set(saved) != expected:
         raise AgentFileError(f"{path}: holds {sorted(saved)}, expected {sorted(expected)}")
@@ -268,7 +268,7 @@ def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
         n = _filled(part)
         for name in _BUFFER_ARRAYS:
             _restore(path, prefix + name, getattr(part, name), saved[prefix + name], n)
-    if isinstance(plant, np.ndarray):
+    if plant is not None:
         _restore(path, "plant_observations", plant, saved["plant_observations"], _filled(buffer))
 
 

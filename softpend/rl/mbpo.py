@@ -81,12 +81,7 @@ class MBPOReplayBuffer(ReplayBuffer):
         buf = self.model_buffer
         n = len(obs)
         if n > buf.buffer_size:  # keep the newest
-            obs, next_obs, actions, rewards = (
-                obs[-buf.buffer_size :],
-                next_obs[-buf.buffer_size :],
-                actions[-buf.buffer_size :],
-                rewards[-buf.buffer_size :],
-            )
+            obs, next_obs, actions, rewards = (a[-buf.buffer_size :] for a in (obs, next_obs, actions, rewards))
             n = buf.buffer_size
         index = (buf.pos + np.arange(n)) % buf.buffer_size
         buf.observations[index, 0] = obs

@@ -413,7 +413,7 @@ def test_malformed_calibration_file_is_a_named_error(tmp_path, content, field, c
 
 def test_calibration_round_trip_and_bad_markers():
     calibration = AffineCalibration(np.array([[0.002, 0.0, -0.6], [0.0, -0.002, 0.5]]), 1e-4)
-    again = AffineCalibration.from_json(calibration.to_json())
+    again = AffineCalibration.from_data(json.loads(calibration.to_json()))
     np.testing.assert_array_equal(again.pixel_to_metre, calibration.pixel_to_metre)
     frame = np.zeros((32, 32, 3), np.uint8)
     for markers in ("abc", [[0, 1], [2]], {"a": 1}, [[0, 1], [1, 0], [math.inf, 0]], [[0, 1]] * 7):
@@ -686,7 +686,7 @@ def test_fuzz_calibration_and_sidecar_contents():
             data["markers_m"] = rng.normal(size=(int(rng.integers(2, 8)), 2)).tolist()
         text = json.dumps(data, allow_nan=True)
         try:
-            calibration = AffineCalibration.from_json(text)
+            calibration = AffineCalibration.from_data(json.loads(text))
             assert np.all(np.isfinite(calibration.pixel_to_metre)) and calibration.residual_rms_m >= 0
             outcomes["calibration"] += 1
         except ValueError:

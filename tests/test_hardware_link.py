@@ -94,7 +94,7 @@ def test_torque_is_clamped_on_the_host_and_nan_stops(rig):
         link.send_torque(5.0)
         assert link.last_command_nm == pytest.approx(0.02)
         assert eventually(r, lambda: applied_now(link) == pytest.approx(0.02, rel=1e-6))
-        assert not link.read_state().saturated  # the device never saw more than its limit
+        assert not link.read_state().flags & proto.FLAG_SATURATED  # the device never saw more than its limit
         with pytest.raises(ValueError, match="torque_nm"):
             link.send_torque(float("nan"))
         assert eventually(r, lambda: r.session.torque_nm(0) == 0.0 and r.session.stopped)

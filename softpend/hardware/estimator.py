@@ -17,13 +17,8 @@ from softpend.plant import Observation, SimulationDiverged
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """Noise levels and limits of :class:`RigStateEstimator` (SI units).
-
-    ``hub_rate_std_rad_s`` None ignores the device's hub rate; ``accel_std_rad_s2`` is the unmodelled
-    acceleration of every coordinate [rad/s^2/sqrt(Hz)]; ``max_blind_s`` the longest time without a camera
-    correction; ``history_s`` how far back a late frame may reach; ``gate_sigma`` the innovation gate;
-    ``lead_steps`` the steps of prediction ahead for the actuation delay.
-    """
+    """Noise levels and limits of :class:`RigStateEstimator` (SI units; ``hub_rate_std_rad_s`` None ignores the
+    device's hub rate; ``history_s`` how far back a late frame may reach; ``lead_steps`` of prediction ahead)."""
 
     counts_per_rev: int = 4096
     hub_rate_std_rad_s: Optional[float] = 0.02
@@ -55,8 +50,7 @@ class EstimatorConfig:
 
 @dataclass(frozen=True)
 class Estimate:
-    """What the estimator hands a controller: the state at ``time_s`` (last encoder sample plus the lead), the
-    observed variables for it, and the standard deviation of the estimated tip position [m]."""
+    """What the estimator hands a controller: the state at ``time_s`` (last encoder sample plus the lead)."""
 
     time_s: float
     q: np.ndarray
@@ -78,8 +72,7 @@ class _Step:
 
 
 class DeviceClock:
-    """Map host time to device time: the offset is the smallest ``host - device`` of the last ``window`` STATE
-    frames, less the one-way link latency."""
+    """Host to device time: the smallest ``host - device`` of the last ``window`` STATE frames, less the latency."""
 
     def __init__(self, one_way_latency_s: float = 0.0, window: int = 500) -> None:
         self.one_way_latency_s = non_negative("one_way_latency_s", one_way_latency_s)
@@ -135,8 +128,7 @@ class RigStateEstimator:
         self.started = False
 
     def reset(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float = 0.0) -> None:
-        """Start from the straight rod at the measured hub angle and rate, with the config's prior uncertainty;
-        ``torque_nm`` is applied from ``time_s`` on."""
+        """Start from the straight rod at the measured hub angle and rate, with the config's prior uncertainty."""
         cfg, n = self.config, self.n
         q0, qd0 = np.zeros(n), np.zeros(n)
         q0[0], qd0[0] = phi_rad, phi_dot_rad_s
@@ -275,9 +267,8 @@ class RigStateEstimator:
                 self._apply_tip(*tip)
 
     def update_tip(self, capture_time_s: float, x_m: float, y_m: float) -> bool:
-        """A camera frame of the tip at ``(x_m, y_m)`` from the hub, captured at ``capture_time_s``: correct the
-        step nearest the capture and replay to now (a frame ahead of the encoder waits); whether it was used or
-        queued."""
+        """Correct the step nearest ``capture_time_s`` with a tip seen at ``(x_m, y_m)`` and replay to now (a frame
+        ahead of the encoder waits); whether it was used or queued."""
         self._require_started()
         if not (math.isfinite(x_m) and math.isfinite(y_m) and math.isfinite(capture_time_s)):
             return False

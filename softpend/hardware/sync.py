@@ -1,6 +1,5 @@
-"""Merge the motor log and the camera CSV into a system-identification dataset: the camera's clock offset from
-cross-correlating the hub rates of the start-up wiggle, both streams resampled onto the motor's grid, gaps marked,
-the valid stretches cut into trials with backward-difference velocities."""
+"""Merge the motor log and the camera CSV into a system-identification dataset: the clock offset from the start-up
+wiggle's hub rates, both streams on the motor's grid, gaps marked, the valid stretches cut into trials."""
 
 from __future__ import annotations
 
@@ -60,8 +59,6 @@ class Gap:
 
 @dataclass
 class SyncResult:
-    """Synchronised, resampled trials (see :mod:`softpend.sysid.dataset` for the array conventions)."""
-
     positions: np.ndarray
     velocities: np.ndarray
     torques_nm: np.ndarray
@@ -81,9 +78,8 @@ def estimate_clock_offset(
     max_offset_s: float = 1.0,
     resolution_s: float = 0.001,
 ) -> ClockOffset:
-    """Estimate ``camera clock - motor clock`` by cross-correlating the rates of the encoder's hub angle and the
-    camera's angle (NaN where lost) over the motor-clock ``window_s`` (default: all), on a ``resolution_s`` grid of
-    offsets up to ``max_offset_s``, refined by a parabola through the peak."""
+    """``camera clock - motor clock`` from cross-correlating the rates of the hub angle and the camera's angle (NaN
+    where lost) over the motor-clock ``window_s``, on a ``resolution_s`` grid refined by a parabola at the peak."""
     tm = np.asarray(motor_time_s, float)
     tc = np.asarray(camera_time_s, float)
     if tm.size < 10 or tc.size < 10:
@@ -141,7 +137,6 @@ def _gaps_from_times(t: np.ndarray, max_step_s: float, reason: str) -> list[Gap]
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Half-open index ranges of consecutive True values."""
     padded = np.concatenate([[False], mask, [False]]).astype(int)
     edges = np.diff(padded)
     return list(zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]))
@@ -158,14 +153,9 @@ def synchronise(
     gap_factor: float = 1.6,
     min_gap_s: float = 0.03,
 ) -> SyncResult:
-    """Merge a motor log (:data:`softpend.hardware.loop.LOOP_LOG_COLUMNS`) and a camera CSV
-    (:data:`softpend.vision.track_video.TRACK_COLUMNS`) into trials of ``trial_length_s`` sampled every ``dt_s``.
-
-    The clock ``offset`` is estimated from the first ``wiggle_window_s`` of the motor record when not given
-    (the hub marker's angle if tracked, else the tip angle).  A spacing above ``gap_factor`` times the median
-    period and ``min_gap_s`` is a gap.  ``ValueError`` when the logs lack columns, do not overlap, or hold no
-    gap-free trial.
-    """
+    """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into trials of
+    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first ``wiggle_window_s``; a
+    spacing above ``gap_factor`` times the median period and ``min_gap_s`` is a gap."""
     for name, log, needed in (
         ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
         ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost")),
@@ -235,16 +225,8 @@ def synchronise(
             k += n + 1
     if not positions:
         raise ValueError(f"no gap-free stretch of {trial_length_s} s in the synchronised record")
-    return SyncResult(
-        positions=np.stack(positions),
-        velocities=np.stack(velocities),
-        torques_nm=np.stack(torques),
-        dt_s=dt_s,
-        offset=offset,
-        gaps=gaps,
-        grid_valid_fraction=float(valid.mean()),
-        trial_start_s=starts,
-    )
+    stacked = (np.stack(positions), np.stack(velocities), np.stack(torques))
+    return SyncResult(*stacked, dt_s, offset, gaps, float(valid.mean()), starts)
 
 
 def build_rig_dataset(
@@ -257,8 +239,7 @@ def build_rig_dataset(
     notes: str = "",
     **sync_kwargs,
 ):
-    """Synchronise a motor log and a camera CSV and save them as a ``source="rig"`` dataset;
-    ``(dataset, sync_result)``."""
+    """Synchronise a motor log and a camera CSV into a ``source="rig"`` dataset; ``(dataset, sync_result)``."""
     from softpend.sysid.dataset import save_dataset
 
     result = synchronise(

@@ -120,16 +120,8 @@ class AffineCalibration:
         return json.dumps({"pixel_to_metre": self.pixel_to_metre.tolist(), "residual_rms_m": self.residual_rms_m})
 
     @classmethod
-    def from_json(cls, text: str) -> "AffineCalibration":
-        """Parse :meth:`to_json` output; anything else raises ``ValueError`` saying what is wrong."""
-        try:
-            data = json.loads(text)
-        except (ValueError, RecursionError) as exc:
-            raise ValueError(f"calibration is not valid JSON: {_short(exc)}") from None
-        return cls._from_data(data)
-
-    @classmethod
-    def _from_data(cls, data) -> "AffineCalibration":
+    def from_data(cls, data) -> "AffineCalibration":
+        """The calibration of parsed :meth:`to_json` output; anything else raises ``ValueError`` saying why."""
         if not isinstance(data, dict) or "pixel_to_metre" not in data:
             raise ValueError(
                 f"calibration must be a JSON object with a 'pixel_to_metre' 2x3 matrix, got {_short(data)}"
@@ -144,7 +136,7 @@ class AffineCalibration:
         """Read a file holding :meth:`to_json` output (``ValueError`` naming the file if it is not one)."""
         data = read_json_file("calibration", path, MAX_CALIBRATION_BYTES)
         try:
-            return cls._from_data(data)
+            return cls.from_data(data)
         except ValueError as exc:
             raise ValueError(f"calibration file {path}: {exc}") from None
 

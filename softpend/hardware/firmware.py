@@ -6,7 +6,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-
 BEGIN_MARKER = "# ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----\n"
 END_MARKER = "# ---- END softpend/hardware/protocol.py ----\n"
 FIRMWARE_PATH = Path(__file__).resolve().parents[2] / "firmware" / "vex_v5_motor.py"

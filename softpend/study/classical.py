@@ -16,18 +16,9 @@ from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_cont
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
-TABLE_COLUMNS = (
-    "controller",
-    "start",
-    "torque_limit_nm",
-    "seeds",
-    "success_rate",
-    "success_low",
-    "success_high",
-    "swing_up_time_s",
-    "upright_std_rad",
-    "peak_torque_nm",
-    "energy_used_j",
+TABLE_COLUMNS = tuple(
+    "controller start torque_limit_nm seeds success_rate success_low success_high swing_up_time_s upright_std_rad "
+    "peak_torque_nm energy_used_j".split()
 )
 
 

@@ -28,17 +28,10 @@ def pilco_runs(
 ) -> list[PilcoResult]:
     """Run (or reuse) PILCO once per seed under ``runs_root`` (:func:`softpend.study.rl_runs.run_folder`), the
     missing seeds in parallel, and load the results."""
-    jobs = pilco_jobs(config, seeds, runs_root)
-    run_jobs(
-        run_and_save,
-        [args for _, args in jobs],
-        [name for name, _ in jobs],
-        workers,
-        progress,
-        desc="PILCO runs",
-        backend=backend,
-    )
     from softpend.study.rl_runs import run_folder
+
+    jobs = pilco_jobs(config, seeds, runs_root)
+    run_jobs(run_and_save, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "PILCO runs", backend)
 
     return [
         PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))

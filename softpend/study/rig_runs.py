@@ -48,13 +48,15 @@ class RigCondition:
     faults: Optional[CameraFaults] = None
 
     def __post_init__(self) -> None:
-        positive("fps", self.fps)
-        non_negative("camera_latency_s", self.camera_latency_s)
+        for check, names in (
+            (positive, ("fps", "max_blind_s")),
+            (non_negative, ("camera_latency_s", "link_latency_s")),
+        ):
+            for name in names:
+                check(name, getattr(self, name))
         if not isinstance(self.effects, CameraEffects):
             raise ValueError(f"effects must be a CameraEffects, got {type(self.effects).__name__}")
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
-        non_negative("link_latency_s", self.link_latency_s)
-        positive("max_blind_s", self.max_blind_s)
         if self.faults is not None and not isinstance(self.faults, CameraFaults):
             raise ValueError(f"faults must be a CameraFaults or None, got {type(self.faults).__name__}")
 

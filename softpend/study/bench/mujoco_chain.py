@@ -5,9 +5,10 @@ MuJoCo's ``qpos``/``qvel`` are the Exudyn plant's joint state; MuJoCo is optiona
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from typing import Mapping, Optional
+from typing import Iterator, Mapping, Optional
 
 import numpy as np
 
@@ -148,19 +149,17 @@ class MuJoCoChain:
         return hub
 
 
-class _quiet_mujoco:
+@contextlib.contextmanager
+def _quiet_mujoco() -> Iterator[None]:
     """Context in which MuJoCo's warnings are not printed (``MjData.warning`` still counts them)."""
+    import mujoco
 
-    def __enter__(self):
-        import mujoco
-
-        self._mujoco = mujoco
-        self._before = mujoco.get_mju_user_warning()
-        mujoco.set_mju_user_warning(lambda message: None)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._mujoco.set_mju_user_warning(self._before)
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(before)
 
 
 def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]]) -> dict[str, float]:

@@ -18,6 +18,10 @@ _OPTIONS = (
 )
 
 
+def _integers(text: str) -> tuple[int, ...]:
+    return tuple(int(w) for w in text.split(",") if w.strip())
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid import TrainConfig
 
@@ -38,7 +42,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--velocity-source", choices=("observed", "true"), default=d.velocity_source, help="velocities (observed)"
     )
     parser.add_argument(
-        "--hidden-widths", default=",".join(map(str, d.hidden_widths)), help="comma-separated hidden widths (16,16,16)"
+        "--hidden-widths",
+        type=_integers,
+        default=",".join(map(str, d.hidden_widths)),
+        help="comma-separated hidden widths (16,16,16)",
     )
     for flag, field, kind, text, _ in _OPTIONS:
         parser.add_argument(flag, type=kind, default=getattr(d, field), help=f"{text} ({getattr(d, field)})")
@@ -56,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
     from softpend.sysid.model import model_paths
-    from softpend.sysid.training import parse_widths
 
     # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
     limits = {flag: bounds for flag, _, _, _, bounds in _OPTIONS if bounds is not None}
@@ -68,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(
         information=args.information,
         velocity_source=args.velocity_source,
-        hidden_widths=parse_widths(args.hidden_widths),
+        hidden_widths=args.hidden_widths,
         **{field: getattr(args, field) for _, field, _, _, _ in _OPTIONS},
     )
     dataset = load_dataset(args.dataset)

@@ -16,18 +16,9 @@ from softpend.plant import Observation, RodParams, SimulationDiverged, make_plan
 #: Rates are divided by this in the observation vector [1/s].
 VELOCITY_SCALE_PER_S = 10.0
 
-OBSERVATION_VECTOR_NAMES: tuple[str, ...] = (
-    "cos_phi",
-    "sin_phi",
-    "cos_theta",
-    "sin_theta",
-    "ex_over_L",
-    "ey_over_L",
-    "phi_dot_over_10",
-    "theta_dot_over_10",
-    "ex_dot_over_10L",
-    "ey_dot_over_10L",
-    "bonus",
+OBSERVATION_VECTOR_NAMES: tuple[str, ...] = tuple(
+    "cos_phi sin_phi cos_theta sin_theta ex_over_L ey_over_L phi_dot_over_10 theta_dot_over_10 ex_dot_over_10L "
+    "ey_dot_over_10L bonus".split()
 )
 
 #: Bound of the observation vector's entries (velocity entries clipped at 5, i.e. 50 rad/s).

@@ -17,12 +17,12 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
 from softpend import MAX_EPISODE_STEPS
-from softpend.checks import in_unit_interval, int_at_least, non_negative, one_of
+from softpend.checks import in_range, int_at_least, non_negative, one_of
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
 from softpend.envs.soft_pendulum import OBSERVATION_BOUND, STARTS, check_torque_levels, draw_start, reset_options
 from softpend.plant import OBSERVATION_NAMES, RodParams
-from softpend.plant.batched import INTEGRATORS, PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
+from softpend.plant.batched import PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
 from softpend.plant.randomisation import RANDOMISED_FIELDS
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
@@ -72,10 +72,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self.start = start
         self.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
         self.max_episode_steps = int_at_least("max_episode_steps", max_episode_steps, 1)
-        fraction = in_unit_interval("randomize_fraction", randomize_fraction)
-        if fraction > 0.9:
-            raise ValueError(f"randomize_fraction must be at most 0.9, got {randomize_fraction!r}")
-        self.randomize_fraction = fraction
+        self.randomize_fraction = in_range("randomize_fraction", randomize_fraction, 0.0, 0.9)
         fields = tuple(randomized_fields)
         unknown = [f for f in fields if f not in PARAMETER_FIELDS]
         if unknown or len(set(fields)) != len(fields):
@@ -85,7 +82,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
 
         nominal = BatchedRodParams.from_params(params, batch_size=self.num_envs)
         self._nominal = nominal
-        one_of("integrator", integrator, INTEGRATORS)
         if integrator == "rk4":
             stable = stable_substeps(self._corner_rods(), dt_s)
             if substeps is None:
@@ -114,7 +110,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self._autoreset = np.zeros(b, dtype=bool)
         self._observations: Optional[np.ndarray] = None
         self._rngs: list[Optional[np.random.Generator]] = [None] * b
-        self._seeds: list[Optional[int]] = [None] * b
 
     def _corner_rods(self) -> BatchedRodParams:
         """Every corner of the randomisation box."""
@@ -129,11 +124,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
     def rod_params(self) -> BatchedRodParams:
         """The rods now simulated (after randomisation)."""
         return self.chain.params
-
-    @property
-    def np_random_seed(self) -> tuple[Optional[int], ...]:  # type: ignore[override]  # one per rod
-        """The seed of each sub-environment's generator."""
-        return tuple(self._seeds)
 
     def joint_state(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(q, q_dot)`` of every rod, shape ``(num_envs, n + 1)`` (copies)."""
@@ -201,7 +191,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         indices = np.flatnonzero(mask)
         for i in indices:
             if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
         self._draw_starts(indices, start, exact)
         observations = self._observe()
         theta = observations[:, _THETA]

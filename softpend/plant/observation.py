@@ -8,17 +8,8 @@ from typing import NamedTuple
 import numpy as np
 
 #: Order of :meth:`Observation.as_array`.
-OBSERVATION_NAMES: tuple[str, ...] = (
-    "phi_rad",
-    "theta_rad",
-    "ex_m",
-    "ey_m",
-    "er_rad",
-    "phi_dot_rad_s",
-    "theta_dot_rad_s",
-    "ex_dot_m_s",
-    "ey_dot_m_s",
-    "er_dot_rad_s",
+OBSERVATION_NAMES: tuple[str, ...] = tuple(
+    "phi_rad theta_rad ex_m ey_m er_rad phi_dot_rad_s theta_dot_rad_s ex_dot_m_s ey_dot_m_s er_dot_rad_s".split()
 )
 
 

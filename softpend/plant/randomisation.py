@@ -8,12 +8,8 @@ from softpend.checks import in_unit_interval
 from softpend.plant.params import RodParams
 
 #: The fields scaled by :func:`randomised_rod`: what a built rig gets wrong.
-RANDOMISED_FIELDS = (
-    "mass_kg",
-    "youngs_modulus_pa",
-    "joint_damping_nms_per_rad",
-    "hub_friction_nms_per_rad",
-    "torque_limit_nm",
+RANDOMISED_FIELDS = tuple(
+    "mass_kg youngs_modulus_pa joint_damping_nms_per_rad hub_friction_nms_per_rad torque_limit_nm".split()
 )
 
 

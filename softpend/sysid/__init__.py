@@ -14,6 +14,7 @@ from softpend.sysid.metrics import (
     rollout_trial,
 )
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model
+from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "DynamicsModel",
     "load_model",
     "save_model",
+    "rollout",
     "TrainConfig",
     "fit_dynamics_model",
 ]

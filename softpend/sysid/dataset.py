@@ -14,6 +14,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from softpend.checks import in_range, one_of
 from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
 from softpend.plant import OBSERVATION_NAMES, RodParams
@@ -24,22 +25,9 @@ SCHEMA_VERSION = 1
 #: Every dataset has at least the limited-information variables: base angle and tip position.
 REQUIRED_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "ex_m", "ey_m")
 _SOURCES = ("simulation", "rig")
-_REQUIRED_METADATA = (
-    "schema",
-    "schema_version",
-    "softpend_version",
-    "source",
-    "dt_s",
-    "n_trials",
-    "n_samples",
-    "position_names",
-    "velocity_names",
-    "differentiation",
-    "plant",
-    "plant_params",
-    "seed",
-    "protocol",
-    "notes",
+_REQUIRED_METADATA = tuple(
+    "schema schema_version softpend_version source dt_s n_trials n_samples position_names velocity_names "
+    "differentiation plant plant_params seed protocol notes".split()
 )
 #: Accepted sampling steps [s]; a ``dt_s`` outside is a corrupt or mistyped file.
 DT_S_RANGE: tuple[float, float] = (1e-6, 10.0)
@@ -115,14 +103,6 @@ class TrajectoryDataset:
             raise ValueError(f"name must be one of {OBSERVATION_NAMES}, got {name!r}")
         return self.true_observations[..., OBSERVATION_NAMES.index(name)]
 
-    def select_trials(self, trials: np.ndarray | list[int]) -> "TrajectoryDataset":
-        """A dataset with only the given trials."""
-        index = np.asarray(trials, dtype=np.int64).reshape(-1)
-        if index.size == 0 or index.min() < 0 or index.max() >= self.n_trials:
-            raise ValueError(f"trials must be non-empty indices in [0, {self.n_trials}), got {trials!r}")
-        arrays = {name: value[index] for name, value in self.arrays().items()}
-        return TrajectoryDataset(metadata=dict(self.metadata, n_trials=int(index.size)), **arrays)
-
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays present, by file member name."""
         names = _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL
@@ -135,24 +115,18 @@ def _validate_metadata(meta: Any) -> None:
     missing = [key for key in _REQUIRED_METADATA if key not in meta]
     if missing:
         raise ValueError(f"metadata is missing keys {missing}")
-    if meta["schema"] != SCHEMA_NAME:
-        raise ValueError(f"metadata schema must be {SCHEMA_NAME!r}, got {meta['schema']!r}")
-    if meta["schema_version"] != SCHEMA_VERSION:
-        raise ValueError(
-            f"metadata schema_version {meta['schema_version']!r} is not supported (expected {SCHEMA_VERSION})"
-        )
-    if meta["source"] not in _SOURCES:
-        raise ValueError(f"metadata source must be one of {_SOURCES}, got {meta['source']!r}")
-    dt = meta["dt_s"]
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
-        raise ValueError(f"metadata dt_s must be a positive number, got {dt!r}")
-    if not DT_S_RANGE[0] <= dt <= DT_S_RANGE[1]:
-        raise ValueError(f"metadata dt_s must lie in [{DT_S_RANGE[0]:g}, {DT_S_RANGE[1]:g}] s, got {dt!r}")
+    for key, allowed in (("schema", (SCHEMA_NAME,)), ("schema_version", (SCHEMA_VERSION,)), ("source", _SOURCES)):
+        one_of(f"metadata {key}", meta[key], allowed)
+    in_range("metadata dt_s", meta["dt_s"], *DT_S_RANGE)
     names = meta["position_names"]
-    if not isinstance(names, (list, tuple)) or not names or any(n not in POSITION_NAMES for n in names):
-        raise ValueError(f"metadata position_names must be a list drawn from {POSITION_NAMES}, got {names!r}")
-    if len(set(names)) != len(names):
-        raise ValueError(f"metadata position_names has duplicates: {names!r}")
+    if (
+        not isinstance(names, (list, tuple))
+        or any(n not in POSITION_NAMES for n in names)
+        or len(set(names)) < len(names)
+    ):
+        raise ValueError(
+            f"metadata position_names must be a list of distinct names from {POSITION_NAMES}, got {names!r}"
+        )
     absent = [n for n in REQUIRED_POSITION_NAMES if n not in names]
     if absent:
         raise ValueError(f"metadata position_names must include {REQUIRED_POSITION_NAMES}; missing {absent}")
@@ -167,11 +141,9 @@ def _validate_metadata(meta: Any) -> None:
         raise ValueError(f"metadata seed must be an integer or null, got {meta['seed']!r}")
     if not isinstance(meta["protocol"], dict):
         raise ValueError(f"metadata protocol must be an object, got {meta['protocol']!r}")
-    for key in ("n_trials", "n_samples"):
-        if isinstance(meta[key], bool) or not isinstance(meta[key], int):
-            raise ValueError(f"metadata {key} must be an integer, got {meta[key]!r}")
-    if meta["n_trials"] < 1 or meta["n_samples"] < 2:
-        raise ValueError(f"need n_trials >= 1 and n_samples >= 2, got {meta['n_trials']} and {meta['n_samples']}")
+    for key, low in (("n_trials", 1), ("n_samples", 2)):
+        if isinstance(meta[key], bool) or not isinstance(meta[key], int) or meta[key] < low:
+            raise ValueError(f"metadata {key} must be an integer >= {low}, got {meta[key]!r}")
     try:
         json.dumps(meta, allow_nan=False)
     except (TypeError, ValueError) as exc:
@@ -182,37 +154,26 @@ def _validate(ds: TrajectoryDataset) -> None:
     meta = ds.metadata
     _validate_metadata(meta)
     names = meta["position_names"]
-    n_trials, n_samples = meta["n_trials"], meta["n_samples"]
-    shapes = {
-        "positions": (n_trials, n_samples, len(names)),
-        "velocities": (n_trials, n_samples, len(names)),
-        "torques_nm": (n_trials, n_samples - 1),
-        "true_observations": (n_trials, n_samples, len(OBSERVATION_NAMES)),
-    }
+    t, n = meta["n_trials"], meta["n_samples"]
+    shapes = {"positions": (t, n, len(names)), "velocities": (t, n, len(names)), "torques_nm": (t, n - 1)}
+    shapes["true_observations"] = (t, n, len(OBSERVATION_NAMES))
     for name in _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL:
         value = getattr(ds, name)
         if value is None:
             if name in _ARRAYS_REQUIRED:
-                raise ValueError(f"{name} is required")
+                raise ValueError(f"missing arrays: {name} is required")
             continue
-        if not isinstance(value, np.ndarray):
-            raise ValueError(f"{name} must be a numpy array, got {type(value).__name__}")
-        if value.dtype != np.float64:
-            raise ValueError(f"{name} must have dtype float64, got {value.dtype}")
-        expected = shapes.get(name)
-        if expected is None:  # joint arrays: (T, N, J)
-            if value.ndim != 3 or value.shape[:2] != (n_trials, n_samples) or value.shape[2] < 1:
-                raise ValueError(f"{name} must have shape ({n_trials}, {n_samples}, J), got {value.shape}")
-        elif value.shape != expected:
+        if not isinstance(value, np.ndarray) or value.dtype != np.float64:
+            raise ValueError(f"{name} must be a numpy array of dtype float64, got {getattr(value, 'dtype', value)!r}")
+        joints = value.shape[-1] if value.ndim == 3 and value.shape[-1] else "J"  # joint arrays: (T, N, J)
+        expected = shapes.get(name, (t, n, joints))
+        if value.shape != expected:
             raise ValueError(f"{name} must have shape {expected} (from metadata), got {value.shape}")
         if not np.all(np.isfinite(value)):
             bad = np.argwhere(~np.isfinite(value))[0]
             raise ValueError(f"{name} has non-finite values (first at index {tuple(int(i) for i in bad)})")
-    jp, jv = ds.joint_positions_rad, ds.joint_velocities_rad_s
-    if (jp is None) != (jv is None):
-        raise ValueError("joint_positions_rad and joint_velocities_rad_s must be given together")
-    if jp is not None and jv is not None and jp.shape != jv.shape:
-        raise ValueError(f"joint_positions_rad and joint_velocities_rad_s shapes differ: {jp.shape} vs {jv.shape}")
+    if getattr(ds.joint_positions_rad, "shape", None) != getattr(ds.joint_velocities_rad_s, "shape", None):
+        raise ValueError("joint_positions_rad and joint_velocities_rad_s must be given together, of one shape")
     wrapped = ds.positions[..., [i for i, n in enumerate(names) if n in ANGLE_NAMES]]
     if wrapped.size and (wrapped.min() < -np.pi - 1e-9 or wrapped.max() > np.pi + 1e-9):
         raise ValueError("angle columns of positions must be wrapped to [-pi, pi)")
@@ -276,15 +237,9 @@ def save_dataset(
     meta = dataset_metadata(positions, **metadata)
     if np.ndim(positions) != 3:
         raise ValueError(f"positions must have shape (T, N, P), got {np.shape(positions)}")
-    given = dict(
-        positions=positions,
-        velocities=velocities,
-        torques_nm=torques_nm,
-        true_observations=true_observations,
-        joint_positions_rad=joint_positions_rad,
-        joint_velocities_rad_s=joint_velocities_rad_s,
-    )
-    arrays = {name: _as_float64(name, value) for name, value in given.items() if value is not None}
+    given = (positions, velocities, torques_nm, true_observations, joint_positions_rad, joint_velocities_rad_s)
+    names = _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL
+    arrays = {name: _as_float64(name, value) for name, value in zip(names, given) if value is not None}
     dataset = TrajectoryDataset(metadata=meta, **arrays)
     write_dataset(path, dataset)
     return dataset
@@ -337,29 +292,21 @@ def load_dataset(
     """
     path = Path(path)
     members = read_npz(path, "dataset file")
-    if "metadata" not in members:
-        raise ValueError(f"{path} has no metadata member (not a softpend dataset)")
-    raw_metadata = members.pop("metadata")
-    if raw_metadata.ndim != 0 or raw_metadata.dtype.kind != "U":
+    raw = members.pop("metadata", np.array(None))
+    if raw.ndim != 0 or raw.dtype.kind != "U":
         raise ValueError(
-            f"{path}: metadata must be a 0-d unicode array, got dtype {raw_metadata.dtype} shape {raw_metadata.shape}"
+            f"{path}: metadata must be a 0-d unicode array (a softpend dataset's), got {raw.dtype} {raw.shape}"
         )
     try:
-        metadata = json.loads(str(raw_metadata[()]))
-        if not isinstance(metadata, dict):
-            raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
-    except (json.JSONDecodeError, TypeError) as exc:
-        raise ValueError(f"{path}: metadata is not valid JSON: {exc}") from exc
-    except RecursionError:
-        raise ValueError(f"{path}: metadata is nested too deeply to be a dataset's") from None
+        metadata = json.loads(str(raw[()]))
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"{path}: metadata is not valid JSON: {type(exc).__name__}: {exc}") from None
     unknown = set(members) - set(_ARRAYS_REQUIRED) - set(_ARRAYS_OPTIONAL)
     if unknown:
         raise ValueError(f"{path}: unexpected members {sorted(unknown)}")
-    missing = [name for name in _ARRAYS_REQUIRED if name not in members]
-    if missing:
-        raise ValueError(f"{path}: missing arrays {missing}")
+    arrays: dict[str, Any] = {name: None for name in _ARRAYS_REQUIRED} | members
     try:
-        dataset = TrajectoryDataset(metadata=metadata, **members)
+        dataset = TrajectoryDataset(metadata=metadata, **arrays)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
     if expected_dt_s is not None and not math.isclose(dataset.dt_s, expected_dt_s, rel_tol=1e-12):

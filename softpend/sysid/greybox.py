@@ -18,12 +18,8 @@ from softpend.plant import PRBPlant, RodParams, SimulationDiverged
 from softpend.sysid.dataset import TrajectoryDataset
 
 #: Rod parameters estimated by default.
-GREYBOX_PARAMETERS: tuple[str, ...] = (
-    "hub_inertia_kgm2",
-    "hub_friction_nms_per_rad",
-    "youngs_modulus_pa",
-    "joint_damping_nms_per_rad",
-    "tip_mass_kg",
+GREYBOX_PARAMETERS: tuple[str, ...] = tuple(
+    "hub_inertia_kgm2 hub_friction_nms_per_rad youngs_modulus_pa joint_damping_nms_per_rad tip_mass_kg".split()
 )
 #: Rod fields that may be estimated (``youngs_modulus_pa`` and ``stiffness_scale`` act alike: pick one).
 ESTIMABLE_ROD_FIELDS: tuple[str, ...] = GREYBOX_PARAMETERS + ("stiffness_scale", "mass_kg")

@@ -23,13 +23,9 @@ MODEL_SCHEMA_NAME = "softpend.sysid.model"
 MODEL_SCHEMA_VERSION = 1
 #: Largest network :func:`load_model` builds from a metadata file [weights over all members].
 MAX_LOADED_WEIGHTS = 10**8
-ACTIVATIONS: dict[str, type[nn.Module]] = {
-    "tanh": nn.Tanh,
-    "softsign": nn.Softsign,
-    "relu": nn.ReLU,
-    "silu": nn.SiLU,
-    "elu": nn.ELU,
-}
+ACTIVATIONS: dict[str, type[nn.Module]] = dict(
+    tanh=nn.Tanh, softsign=nn.Softsign, relu=nn.ReLU, silu=nn.SiLU, elu=nn.ELU
+)
 
 
 def wrap_tensor(x: Tensor) -> Tensor:
@@ -37,10 +33,11 @@ def wrap_tensor(x: Tensor) -> Tensor:
     return torch.remainder(x + math.pi, 2 * math.pi) - math.pi
 
 
-def _check_widths(hidden_widths: Sequence[int]) -> tuple[int, ...]:
-    widths = tuple(int(w) for w in hidden_widths)
-    if not widths or any(w < 1 or w != v for w, v in zip(widths, hidden_widths)):
-        raise ValueError(f"hidden_widths must be a non-empty list of positive integers, got {hidden_widths!r}")
+def check_widths(hidden_widths: Sequence[int]) -> tuple[int, ...]:
+    """The hidden layer widths as a non-empty tuple of positive ints, else ``ValueError``."""
+    widths = tuple(positive_int("hidden_widths", w) for w in hidden_widths)
+    if not widths:
+        raise ValueError("hidden_widths must hold at least one width")
     return widths
 
 
@@ -82,7 +79,7 @@ class DynamicsModel(nn.Module):
         self.layout = layout
         self.dt_s = positive("dt_s", dt_s)
         self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
-        self.hidden_widths = _check_widths(hidden_widths)
+        self.hidden_widths = check_widths(hidden_widths)
         self.activation = activation
         self.integrate_positions = bool(integrate_positions)
         self.tip_reach_m = optional_positive("tip_reach_m", tip_reach_m)
@@ -110,12 +107,10 @@ class DynamicsModel(nn.Module):
             self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
         n_angles = int(mask.sum())
         self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
-        self.register_buffer("feature_mean", torch.zeros(self.n_features, dtype=torch.float32))
-        self.register_buffer("feature_std", torch.ones(self.n_features, dtype=torch.float32))
-        self.register_buffer("feature_low", torch.full((self.n_features,), -math.inf, dtype=torch.float32))
-        self.register_buffer("feature_high", torch.full((self.n_features,), math.inf, dtype=torch.float32))
-        self.register_buffer("delta_mean", torch.zeros(self.n_outputs, dtype=torch.float32))
-        self.register_buffer("delta_std", torch.ones(self.n_outputs, dtype=torch.float32))
+        fills = {"feature_mean": 0.0, "feature_std": 1.0, "feature_low": -math.inf, "feature_high": math.inf}
+        for name, fill in (fills | {"delta_mean": 0.0, "delta_std": 1.0}).items():
+            size = self.n_outputs if name.startswith("delta") else self.n_features
+            self.register_buffer(name, torch.full((size,), fill, dtype=torch.float32))
         layers: list[nn.Module] = []
         width_in = self.n_features
         for width in self.hidden_widths:
@@ -248,14 +243,9 @@ class DynamicsModel(nn.Module):
 
     def config(self) -> dict[str, Any]:
         """Constructor arguments (for JSON metadata)."""
-        return {
-            "layout": self.layout.to_dict(),
-            "dt_s": self.dt_s,
-            "torque_limit_nm": self.torque_limit_nm,
-            "hidden_widths": list(self.hidden_widths),
-            "activation": self.activation,
-            "integrate_positions": self.integrate_positions,
-            "tip_reach_m": self.tip_reach_m,
+        names = ("dt_s", "torque_limit_nm", "activation", "integrate_positions", "tip_reach_m")
+        return {"layout": self.layout.to_dict(), "hidden_widths": list(self.hidden_widths)} | {
+            name: getattr(self, name) for name in names
         }
 
 

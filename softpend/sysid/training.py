@@ -8,7 +8,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 import numpy as np
 import torch
@@ -28,7 +28,7 @@ from softpend.checks import (
 from softpend.plant import wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
-from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, wrap_tensor
+from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, check_widths, wrap_tensor
 
 
 @dataclass(frozen=True)
@@ -60,17 +60,13 @@ class TrainConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden_widths", tuple(self.hidden_widths))
+        object.__setattr__(self, "hidden_widths", check_widths(self.hidden_widths))
         self.layout()  # validates information, history, velocity_source
         if self.integrate_positions is None:
             object.__setattr__(self, "integrate_positions", self.velocity_source == "observed")
         if not isinstance(self.integrate_positions, bool):
             raise ValueError(f"integrate_positions must be a bool or None, got {self.integrate_positions!r}")
         boolean("limit_tip_reach", self.limit_tip_reach)
-        if not self.hidden_widths or any(
-            isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden_widths
-        ):
-            raise ValueError(f"hidden_widths must be positive integers, got {self.hidden_widths!r}")
         one_of("activation", self.activation, ACTIVATIONS)
         for name in ("rollout_steps", "rollout_epochs", "seed"):
             object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
@@ -165,68 +161,57 @@ def _tensors(model: DynamicsModel, data: TransitionData) -> tuple[torch.Tensor, 
     return x.to(dtype).contiguous(), y.to(dtype).contiguous()
 
 
-def _epoch(
-    optimiser: torch.optim.Optimizer, n: int, batch_size: int, generator: torch.Generator, loss_of: Any
-) -> float:
-    """One pass over ``n`` samples in random minibatches; the mean of ``loss_of(batch)``."""
-    order = torch.randperm(n, generator=generator)
-    total = 0.0
-    for start in range(0, n, batch_size):
-        batch = order[start : start + batch_size]
-        loss = loss_of(batch)
-        optimiser.zero_grad(set_to_none=True)
-        loss.backward()
-        optimiser.step()
-        total += float(loss.detach()) * batch.shape[0]
-    return total / n
-
-
-def _train_member(
-    model: DynamicsModel,
-    x_train: torch.Tensor,
-    y_train: torch.Tensor,
-    x_val: torch.Tensor,
-    y_val: torch.Tensor,
+def _train(
+    net: torch.nn.Module,
+    optimiser: torch.optim.Optimizer,
+    n: int,
+    loss_of: Any,
+    val_loss: Any,
     config: TrainConfig,
     generator: torch.Generator,
     progress: bool,
     desc: str,
+    epochs: int,
+    scheduler: Optional[torch.optim.lr_scheduler.LRScheduler | torch.optim.lr_scheduler.ReduceLROnPlateau] = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    net = model.net
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
-    scheduler: torch.optim.lr_scheduler.LRScheduler
-    if config.lr_schedule == "cosine":
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
-            optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100
-        )
-    else:
-        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
-            optimiser, factor=0.5, patience=max(1, config.patience // 3)
-        )
-    best = (math.inf, 0, copy.deepcopy(net.state_dict()))
+    """Epochs of random minibatches of ``n`` samples (``loss_of(batch)``), keeping the weights of the lowest
+    ``val_loss()`` (with a scheduler: improved by 1e-4 of it, stopping after ``config.patience`` epochs without;
+    without: below the starting weights'); returns the losses per epoch and the epoch kept (0: the start)."""
+    with torch.no_grad():
+        best = (math.inf if scheduler is not None else float(val_loss()), 0, copy.deepcopy(net.state_dict()))
     train_losses: list[float] = []
     val_losses: list[float] = []
-    bar = tqdm(range(1, config.max_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
+    bar = tqdm(range(1, epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
     for epoch in bar:
         net.train()
-        train = _epoch(
-            optimiser,
-            x_train.shape[0],
-            config.batch_size,
-            generator,
-            lambda batch: torch.mean((net(x_train[batch]) - y_train[batch]) ** 2),
-        )
+        order = torch.randperm(n, generator=generator)
+        train = 0.0
+        for start in range(0, n, config.batch_size):
+            batch = order[start : start + config.batch_size]
+            loss = loss_of(batch)
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            train += float(loss.detach()) * batch.shape[0]
+        train /= n
         net.eval()
         with torch.no_grad():
-            val = float(torch.mean((net(x_val) - y_val) ** 2))
-        _check_finite_loss(desc, epoch, train, val, config)
+            val = float(val_loss())
+        if not (math.isfinite(train) and math.isfinite(val)):
+            raise NonFiniteError(
+                f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train!r}, validation loss "
+                f"{val!r} (lower learning_rate, now {config.learning_rate!r})"
+            )
         train_losses.append(train)
         val_losses.append(val)
-        scheduler.step(val) if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau) else scheduler.step()
-        if val < best[0] * (1 - 1e-4):
+        if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
+            scheduler.step(val)
+        elif scheduler is not None:
+            scheduler.step()
+        if val < best[0] * (1 - (1e-4 if scheduler is not None else 0.0)):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
         bar.set_postfix(train=f"{train:.2e}", val=f"{val:.2e}", best=best[1])
-        if epoch - best[1] >= config.patience:
+        if scheduler is not None and epoch - best[1] >= config.patience:
             break
     bar.close()
     net.load_state_dict(best[2])
@@ -247,15 +232,6 @@ def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: Tra
         data + networks,
         f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
     )
-
-
-def _check_finite_loss(desc: str, epoch: int, train_loss: float, val_loss: float, config: TrainConfig) -> None:
-    """``NonFiniteError`` if an epoch's training or validation loss is NaN or infinite (the fit diverged)."""
-    if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
-        raise NonFiniteError(
-            f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train_loss!r}, validation loss "
-            f"{val_loss!r} (lower learning_rate, now {config.learning_rate!r})"
-        )
 
 
 def _windows(
@@ -287,46 +263,6 @@ def _multistep_loss(
     return total / torques.shape[1]
 
 
-def _finetune_multistep(
-    model: DynamicsModel,
-    train: tuple[np.ndarray, np.ndarray],
-    val: tuple[np.ndarray, np.ndarray],
-    scale: torch.Tensor,
-    config: TrainConfig,
-    generator: torch.Generator,
-    progress: bool,
-    desc: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    dtype = model.feature_mean.dtype
-    xs, us = (torch.as_tensor(a, dtype=dtype) for a in train)
-    vs, vu = (torch.as_tensor(a, dtype=dtype) for a in val)
-    optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate / 10)
-    with torch.no_grad():
-        best = (float(_multistep_loss(model, vs, vu, scale)), copy.deepcopy(model.net.state_dict()))
-    train_losses: list[float] = []
-    val_losses: list[float] = []
-    bar = tqdm(range(1, config.rollout_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
-    for epoch in bar:
-        loss = _epoch(
-            optimiser,
-            xs.shape[0],
-            config.batch_size,
-            generator,
-            lambda batch: _multistep_loss(model, xs[batch], us[batch], scale),
-        )
-        with torch.no_grad():
-            val_loss = float(_multistep_loss(model, vs, vu, scale))
-        _check_finite_loss(desc, epoch, loss, val_loss, config)
-        train_losses.append(loss)
-        val_losses.append(val_loss)
-        if val_loss < best[0]:
-            best = (val_loss, copy.deepcopy(model.net.state_dict()))
-        bar.set_postfix(train=f"{loss:.2e}", val=f"{val_loss:.2e}")
-    bar.close()
-    model.net.load_state_dict(best[1])
-    return np.array(train_losses), np.array(val_losses)
-
-
 def fit_dynamics_model(
     dataset: TrajectoryDataset, config: Optional[TrainConfig] = None, progress: bool = True, **overrides: Any
 ) -> FitResult:
@@ -356,21 +292,13 @@ def fit_dynamics_model(
             "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
         )
     reach = _tip_reach_m(dataset) if config.limit_tip_reach else None
-    assert config.integrate_positions is not None  # set in TrainConfig.__post_init__
+    positions = bool(config.integrate_positions)  # set in TrainConfig.__post_init__
     members = []
     for index in range(config.ensemble_size):
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed * 1000 + index)
             members.append(
-                DynamicsModel(
-                    layout,
-                    dataset.dt_s,
-                    limit,
-                    config.hidden_widths,
-                    config.activation,
-                    config.integrate_positions,
-                    tip_reach_m=reach,
-                )
+                DynamicsModel(layout, dataset.dt_s, limit, config.hidden_widths, config.activation, positions, reach)
             )
     _, features, targets = _features_and_targets(members[0], train)
     stats = features.mean(0), features.std(0), targets.mean(0), targets.std(0)
@@ -383,12 +311,16 @@ def fit_dynamics_model(
     result = FitResult(model=members[0], config=config, train_trials=train_trials, val_trials=val_trials)
     multistep = bool(config.rollout_steps and config.rollout_epochs)
     if multistep:
-        windows_train = _windows(layout, dataset, train_trials, config.rollout_steps)
-        windows_val = _windows(layout, dataset, val_trials, config.rollout_steps)
+        dtype = members[0].feature_mean.dtype
+        xs, us, vs, vu = (
+            torch.as_tensor(a, dtype=dtype)
+            for trials in (train_trials, val_trials)
+            for a in _windows(layout, dataset, trials, config.rollout_steps)
+        )
         change = train.next_states[:, : layout.core_dim] - train.states[:, : layout.core_dim]
         mask = layout.angle_mask[: layout.core_dim]
         change[:, mask] = wrap_angle_rad(change[:, mask])
-        core_scale = torch.as_tensor(np.maximum(change.std(0), 1e-12), dtype=members[0].feature_mean.dtype)
+        scale = torch.as_tensor(np.maximum(change.std(0), 1e-12), dtype=dtype)
     for k, member in enumerate(members):
         generator = torch.Generator().manual_seed(config.seed * 1000 + k)
         if config.ensemble_size > 1 and config.bootstrap:
@@ -397,26 +329,42 @@ def fit_dynamics_model(
         else:
             xk, yk = x_train, y_train
         desc = "training" if config.ensemble_size == 1 else f"training member {k + 1}/{config.ensemble_size}"
-        tl, vl, best = _train_member(member, xk, yk, x_val, y_val, config, generator, progress, desc)
+        net = member.net
+        optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
+        lr = torch.optim.lr_scheduler
+        scheduler = (
+            lr.CosineAnnealingLR(optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100)
+            if config.lr_schedule == "cosine"
+            else lr.ReduceLROnPlateau(optimiser, factor=0.5, patience=max(1, config.patience // 3))
+        )
+        run = (config, generator, progress, desc)
+        tl, vl, best = _train(
+            net,
+            optimiser,
+            len(xk),
+            lambda b: torch.mean((net(xk[b]) - yk[b]) ** 2),
+            lambda: torch.mean((net(x_val) - y_val) ** 2),
+            *run,
+            config.max_epochs,
+            scheduler,
+        )
         result.train_loss.append(tl)
         result.val_loss.append(vl)
         result.best_epochs.append(best)
         if multistep:
-            mtl, mvl = _finetune_multistep(
-                member, windows_train, windows_val, core_scale, config, generator, progress, desc + " (multi-step)"
+            optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate / 10)
+            run = (config, generator, progress, desc + " (multi-step)")
+            mtl, mvl, _ = _train(
+                net,
+                optimiser,
+                len(xs),
+                lambda b: _multistep_loss(member, xs[b], us[b], scale),
+                lambda: _multistep_loss(member, vs, vu, scale),
+                *run,
+                config.rollout_epochs,
             )
             result.multistep_train_loss.append(mtl)
             result.multistep_val_loss.append(mvl)
     result.model = members[0] if config.ensemble_size == 1 else DynamicsEnsemble(members).eval()
     result.train_time_s = time.perf_counter() - started
     return result
-
-
-def parse_widths(widths: Sequence[int] | str) -> tuple[int, ...]:
-    """Parse ``"16,16,16"`` or a sequence into a tuple of ints (for the command line)."""
-    if isinstance(widths, str):
-        try:
-            return tuple(int(w) for w in widths.split(",") if w.strip())
-        except ValueError as exc:
-            raise ValueError(f"hidden_widths must be comma-separated integers, got {widths!r}") from exc
-    return tuple(int(w) for w in widths)

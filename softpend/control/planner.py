@@ -340,12 +340,13 @@ def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
 
 
 class ResidualPRBEnsemble(nn.Module):
-    """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` (``(B, 2 (n + 1))``): the identified
-    rod's batched RK4 step plus a Gaussian residual network of member ``k`` (drawn per row and step)."""
+    """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` (``(B, 2 (n + 1))``) over ``step_s``:
+    the identified rod's batched step (:class:`~softpend.plant.batched.BatchedPRBChain`, Rosenbrock, which stays
+    stable over a whole control step) plus a Gaussian residual network of member ``k`` (drawn per row and step)."""
 
-    def __init__(self, params: RodParams, dt_s: float, n_members: int, width: int) -> None:
+    def __init__(self, params: RodParams, step_s: float, n_members: int, width: int) -> None:
         super().__init__()
-        self.params, self.dt_s, self.torque_limit_nm = params, float(dt_s), params.torque_limit_nm
+        self.params, self.dt_s, self.torque_limit_nm = params, float(step_s), params.torque_limit_nm
         self.n_q = params.n_links + 1
         n_features = 2 * params.n_links + (params.n_links) + self.n_q + 1
         self.nets = nn.ModuleList([_mlp(n_features, 4 * self.n_q, width) for _ in range(n_members)])
@@ -364,7 +365,9 @@ class ResidualPRBEnsemble(nn.Module):
         """The identified PRB chain's step of joint states ``x (B, 2 (n + 1))``."""
         batch = x.shape[0]
         if batch not in self._chains:
-            self._chains[batch] = BatchedPRBChain(self.params, batch_size=batch, dt_s=self.dt_s)
+            self._chains[batch] = BatchedPRBChain(
+                self.params, batch_size=batch, dt_s=self.dt_s, integrator="rosenbrock"
+            )
         q, qd = self._chains[batch].step(x[:, : self.n_q].double(), x[:, self.n_q :].double(), torque_nm.double())
         return torch.cat([q, qd], dim=1).to(x.dtype)
 
@@ -525,12 +528,13 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
 
 class PlannerController:
     """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
-    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`); it reads
+    it), replanning every ``hold_steps`` plant steps, for one rod (a :class:`softpend.evaluation.Controller`) or a
+    batch (:meth:`batch_policy`); it reads
     observations only."""
 
-    def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float) -> None:
+    def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
-        self.capture_rad, self.hold_steps = float(capture_rad), mppi.hold_steps
+        self.capture_rad, self.hold_steps = float(capture_rad), positive_int("hold_steps", hold_steps)
         self.torque_limit_nm = lqr.torque_limit_nm
         self.reset()
 
@@ -695,12 +699,14 @@ class _Planner:
             self.model = fit_ensemble(s, u, s1, task, config.replace(seed=seed))
         else:
             xs, us, x1s = [], [], []
+            h = config.hold_steps  # one model step per control step, under the mean torque over it
             for positions, torques in self.trajectories:
-                x = joint_states(positions, self.rod, task.dt_s)
-                xs.append(x[:-1])
-                us.append(torques[1:])
-                x1s.append(x[1:])
-            self.model = ResidualPRBEnsemble(self.rod, task.dt_s, config.ensemble_size, config.hidden_width)
+                x = joint_states(positions, self.rod, task.dt_s)  # row j is sample j + 1
+                rows = np.arange(0, len(x) - h, h)
+                xs.append(x[rows])
+                us.append(np.array([torques[j + 1 : j + 1 + h].mean() for j in rows]))
+                x1s.append(x[rows + h])
+            self.model = ResidualPRBEnsemble(self.rod, config.control_dt_s, config.ensemble_size, config.hidden_width)
             self.model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
 
     def controller(self) -> PlannerController:
@@ -730,13 +736,13 @@ class _Planner:
             cost,
             task.torque_limit_nm,
             config.n_knots,
-            config.hold_steps,
+            config.hold_steps if config.model == "ensemble" else 1,
             config.n_samples,
             config.noise_fraction * task.torque_limit_nm,
             config.temperature,
             seed=config.seed,
         )
-        return PlannerController(mppi, tracker, self.lqr, config.capture_rad)
+        return PlannerController(mppi, tracker, self.lqr, config.capture_rad, config.hold_steps)
 
 
 def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) -> PlannerResult:

@@ -1,0 +1,105 @@
+"""Probe of the MPPI planner (issue 65): one run per seed, then its controller from 20 fresh starts.
+
+    .venv/bin/python scripts/probe_planner.py --seeds 0 1 2 [--set model=residual] [--tune] [--out PATH]
+
+Per seed: the plant seconds until the stopping rule fired (every excitation and trial second counted), the
+fresh starts balanced (swing-up found, upright std <= 0.1 rad) out of 20, and the wall and CPU seconds of the
+run.  The trials start from the first 16 SELECTION_SEEDS; ``--tune`` measures on the other 20 selection seeds
+instead of REPORT_SEEDS (for tuning), and writes nothing unless ``--out`` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
+from softpend.evaluation import HOLD_STD_RAD, evaluate
+from softpend.io.outputs import atomic_write
+from softpend.io.overrides import apply_overrides, parse_assignment
+from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIAL_SEEDS = SELECTION_SEEDS[:16]
+TUNING_SEEDS = SELECTION_SEEDS[16:36]
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--hparams", default=str(ROOT / "book" / "hparams" / "planner.yml"))
+    parser.add_argument("--tune", action="store_true", help="measure on selection starts, not REPORT_SEEDS")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    config = apply_overrides(PlannerConfig.from_yaml(args.hparams), [parse_assignment(item) for item in args.set])
+    config = config.replace(selection_seeds=TRIAL_SEEDS)
+    rows = []
+    for seed in args.seeds:
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = run_planner(config.replace(seed=seed), progress=True)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        started = time.perf_counter()
+        if args.tune:
+            policy = result.controller.batch_policy()
+            with torch.no_grad():
+                summary = evaluate(policy, config.task, engine="batched", seeds=TUNING_SEEDS)
+        else:
+            summary = fresh_start_evaluation(result, REPORT_SEEDS)
+        held = [math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= HOLD_STD_RAD for r in summary.results]
+        row = {
+            "seed": seed,
+            "plant_s_to_balance": result.plant_seconds_to_balance,
+            "plant_s_total": result.plant_seconds,
+            "trials": sum(r.kind == "trial" for r in result.records),
+            "fresh_balanced": int(sum(held)),
+            "fresh_starts": len(held),
+            "fresh_worst_std_rad": max(r.upright_std_rad for r in summary.results),
+            "fresh_median_swing_up_s": statistics.median(r.swing_up_time_s for r in summary.results),
+            "run_wall_s": wall,
+            "run_cpu_s": cpu,
+            "eval_wall_s": time.perf_counter() - started,
+            "identified_rod": result.rod.to_dict(),
+        }
+        rows.append(row)
+        print(json.dumps({k: v for k, v in row.items() if k != "identified_rod"}), flush=True)
+    seconds = [r["plant_s_to_balance"] for r in rows]
+    passed = [
+        r for r in rows if r["fresh_balanced"] >= 0.9 * r["fresh_starts"] and math.isfinite(r["plant_s_to_balance"])
+    ]
+    summary_row = {
+        "seeds": len(rows),
+        "seeds_balancing": len(passed),
+        "median_plant_s_to_balance": statistics.median(seconds),
+        "worst_plant_s_to_balance": max(seconds),
+        "max_run_cpu_s": max(r["run_cpu_s"] for r in rows),
+    }
+    print(json.dumps(summary_row), flush=True)
+    out = (
+        args.out
+        if args.out is not None
+        else (None if args.tune else str(ROOT / "book" / "records" / "planner_probe.json"))
+    )
+    if out is not None:
+        document = {
+            "command": "python scripts/probe_planner.py " + " ".join(argv),
+            "fresh_seeds": "selection starts (tuning)" if args.tune else list(REPORT_SEEDS),
+            "config": {k: v for k, v in vars(config).items() if k != "task"} | {"task": config.task.to_dict()},
+            "summary": summary_row,
+            "per_seed": rows,
+        }
+        with atomic_write(Path(out), "w") as handle:
+            handle.write(json.dumps(document, indent=2, default=float) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.rl.curves import run_to_asymptote
-from softpend.study.fresh_starts import BALANCED_FRACTION, held_starts
+from softpend.study.fresh_starts import BALANCED_FRACTION, _refuse_selection_starts, held_starts
 from softpend.study.rl_runs import METHOD_NAMES, plant_runs_root, run_folder
 
 NOT_COMPUTED = "not computed in this build"
@@ -130,8 +130,7 @@ def rl_fresh_start_summaries(
         agents = _runs(runs_root, plant, algo, seeds, load, (FileNotFoundError, ValueError, KeyError))
         summaries[method] = []
         for seed, model, config in agents:
-            if overlap := set(report_seeds) & set(config.selection_seeds):
-                raise ValueError(f"report seeds {sorted(overlap)} were used to select the agents of {algo} seed {seed}")
+            _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
             seeds_ = tuple(int(s) for s in report_seeds)
             summary = evaluate_agent(model, config, seeds=seeds_, duration_s=duration_s, name=f"{method} seed {seed}")
             summaries[method].append(summary)
@@ -217,23 +216,18 @@ def _sysid_row(glued) -> LedgerRow:
     return _row("sysid_mse", claim, "≈ 3e-9", "fig03-sysid", ours, 3e-9 / FACTOR <= full <= 3e-9 * FACTOR)
 
 
+_MF_ASYMPTOTE = (
+    "The model-free controller proved to successfully balance the pole reaching the asymptotic reward in "
+    "approximately 150 episodes of training, equivalent to around 4 hours of simulated time."
+)
+_MB_ASYMPTOTE = (
+    "The agent reached asymptotic performance in approximately 100 episodes of training as seen by the orange "
+    "line in Figure 4 (2 hours 45 minutes of simulated time)."
+)
+#: ``algo -> (key, claim, episodes, hours, report)``.
 _ASYMPTOTE_CLAIMS = {
-    "dqn": (
-        "mf_asymptote",
-        "The model-free controller proved to successfully balance the pole reaching the asymptotic "
-        "reward in approximately 150 episodes of training, equivalent to around 4 hours of simulated time.",
-        150,
-        4.0,
-        "≈ 150 episodes, ≈ 4 h",
-    ),
-    "mbpo": (
-        "mb_asymptote",
-        "The agent reached asymptotic performance in approximately 100 episodes of training as "
-        "seen by the orange line in Figure 4 (2 hours 45 minutes of simulated time).",
-        100,
-        2.75,
-        "≈ 100 episodes, 2 h 45 min",
-    ),
+    "dqn": ("mf_asymptote", _MF_ASYMPTOTE, 150, 4.0, "≈ 150 episodes, ≈ 4 h"),
+    "mbpo": ("mb_asymptote", _MB_ASYMPTOTE, 100, 2.75, "≈ 100 episodes, 2 h 45 min"),
 }
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from softpend.envs.soft_pendulum import OBSERVATION_VECTOR_NAMES, VELOCITY_SCALE_PER_S
+from softpend.envs.soft_pendulum import VELOCITY_SCALE_PER_S
 from softpend.plant import OBSERVATION_NAMES
 
 
@@ -18,22 +18,10 @@ def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: Any) ->
         raise ValueError(f"observations must have shape (B, {len(OBSERVATION_NAMES)}), got {observations.shape}")
     bonus = np.broadcast_to(np.asarray(bonus, dtype=np.float64), (observations.shape[0],))
     env = env.unwrapped if hasattr(env, "unwrapped") else env
-    inv_l = 1.0 / env.params.length_m
-    v = VELOCITY_SCALE_PER_S
-    o = dict(zip(OBSERVATION_NAMES, observations.T))
-    columns = {
-        "cos_phi": np.cos(o["phi_rad"]),
-        "sin_phi": np.sin(o["phi_rad"]),
-        "cos_theta": np.cos(o["theta_rad"]),
-        "sin_theta": np.sin(o["theta_rad"]),
-        "ex_over_L": o["ex_m"] * inv_l,
-        "ey_over_L": o["ey_m"] * inv_l,
-        "phi_dot_over_10": o["phi_dot_rad_s"] / v,
-        "theta_dot_over_10": o["theta_dot_rad_s"] / v,
-        "ex_dot_over_10L": o["ex_dot_m_s"] * inv_l / v,
-        "ey_dot_over_10L": o["ey_dot_m_s"] * inv_l / v,
-        "bonus": bonus,
-    }
-    vec = np.stack([columns[name] for name in OBSERVATION_VECTOR_NAMES], axis=1).astype(np.float32)
+    inv_l, v = 1.0 / env.params.length_m, VELOCITY_SCALE_PER_S
+    phi, theta, ex, ey, _, phi_dot, theta_dot, ex_dot, ey_dot, _ = observations.T
+    angles = [np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)]  # the order of OBSERVATION_VECTOR_NAMES
+    rates = [phi_dot / v, theta_dot / v, ex_dot * inv_l / v, ey_dot * inv_l / v]
+    vec = np.stack([*angles, ex * inv_l, ey * inv_l, *rates, bonus], axis=1).astype(np.float32)
     bound = env.observation_space.high
     return np.clip(vec, -bound, bound)

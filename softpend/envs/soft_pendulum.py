@@ -129,25 +129,12 @@ class SoftPendulumEnv(gym.Env):
 
     def observation_vector(self, o: Observation, bonus: float) -> np.ndarray:
         """The observation vector of plant observation ``o`` and the reward's bonus state ``bonus``."""
-        inv_l = 1.0 / self.params.length_m
-        inv_v = 1.0 / VELOCITY_SCALE_PER_S
-        cap = 5.0
-        return np.array(
-            (
-                math.cos(o.phi_rad),
-                math.sin(o.phi_rad),
-                math.cos(o.theta_rad),
-                math.sin(o.theta_rad),
-                o.ex_m * inv_l,
-                o.ey_m * inv_l,
-                min(max(o.phi_dot_rad_s * inv_v, -cap), cap),
-                min(max(o.theta_dot_rad_s * inv_v, -cap), cap),
-                min(max(o.ex_dot_m_s * inv_l * inv_v, -cap), cap),
-                min(max(o.ey_dot_m_s * inv_l * inv_v, -cap), cap),
-                bonus,
-            ),
-            dtype=np.float32,
-        )
+        inv_l, inv_v = 1.0 / self.params.length_m, 1.0 / VELOCITY_SCALE_PER_S
+        angles = (math.cos(o.phi_rad), math.sin(o.phi_rad), math.cos(o.theta_rad), math.sin(o.theta_rad))
+        tip_rates = (o.ex_dot_m_s * inv_l * inv_v, o.ey_dot_m_s * inv_l * inv_v)
+        rates = (o.phi_dot_rad_s * inv_v, o.theta_dot_rad_s * inv_v, *tip_rates)
+        clipped = [min(max(r, -5.0), 5.0) for r in rates]
+        return np.array((*angles, o.ex_m * inv_l, o.ey_m * inv_l, *clipped, bonus), dtype=np.float32)
 
     def _reward(self, theta: float) -> float:
         rp = self.reward_params

@@ -3,6 +3,7 @@ open-loop rollout error (ensembles through their mean prediction)."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -15,36 +16,24 @@ from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
-from softpend.sysid.rollout import rollout
 
 
-class _MeanOf:
-    """Adapter: an ensemble's mean prediction with the single-model signature."""
-
-    def __init__(self, ensemble: DynamicsEnsemble) -> None:
-        self.ensemble = ensemble
-        self.layout = ensemble.layout
-
-    def predict_next(self, state: torch.Tensor, torque_nm: torch.Tensor, generator: Any = None) -> torch.Tensor:
-        return self.ensemble.predict_next(state, torque_nm, member="mean")
-
-
-def _deterministic(model: Any) -> Any:
-    return _MeanOf(model) if isinstance(model, DynamicsEnsemble) else model
-
-
-def _dtype(model: Any) -> torch.dtype:
-    first = model.members[0] if isinstance(model, DynamicsEnsemble) else model
-    return first.feature_mean.dtype if isinstance(first, DynamicsModel) else torch.float64
+def _predictor(model: Any) -> tuple[Any, torch.dtype]:
+    """``predict_next`` of a model (of an ensemble: its members' mean) and the dtype it computes in."""
+    if isinstance(model, DynamicsEnsemble):
+        return functools.partial(model.predict_next, member="mean"), model.members[0].feature_mean.dtype
+    return model.predict_next, model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float64
 
 
 def open_loop(model: Any, x0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
     """Open-loop predictions ``(B, T + 1, d)`` (float64) of a model (ensembles: their mean) from states ``(B, d)``
     under torques ``(B, T)``."""
-    dtype = _dtype(model)
+    predict, dtype = _predictor(model)
     with torch.inference_mode():
-        x = rollout(_deterministic(model), torch.as_tensor(x0, dtype=dtype), torch.as_tensor(torques_nm, dtype=dtype))
-    return x.double().numpy()
+        x = [torch.as_tensor(x0, dtype=dtype)]
+        for torque in torch.as_tensor(torques_nm, dtype=dtype).T:
+            x.append(predict(x[-1], torque))
+    return torch.stack(x, dim=1).double().numpy()
 
 
 def one_step_errors(
@@ -57,11 +46,10 @@ def one_step_errors(
     beside the "next = current" predictor's, per variable, and the tip RMSE [m] when the layout has the tip."""
     layout: StateLayout = model.layout
     data = layout.transitions(dataset, trials)
-    dtype = _dtype(model)
+    predict, dtype = _predictor(model)
     with torch.inference_mode():
         states = torch.as_tensor(data.states, dtype=dtype)
-        torques = torch.as_tensor(data.torques_nm, dtype=dtype)
-        predicted = _deterministic(model).predict_next(states, torques).double().numpy()
+        predicted = predict(states, torch.as_tensor(data.torques_nm, dtype=dtype)).double().numpy()
     core = layout.core_dim
     mask = layout.angle_mask[:core]
     error = predicted[:, :core] - data.next_states[:, :core]
@@ -112,12 +100,8 @@ class RolloutErrors:
         if not 0 <= horizon_s <= self.horizon_s[-1] + 1e-9:
             raise ValueError(f"horizon_s must be in [0, {self.horizon_s[-1]}], got {horizon_s!r}")
         i = int(np.argmin(np.abs(self.horizon_s - horizon_s)))
-        return {
-            "tip_rmse_m": float(self.tip_rmse_m[i]),
-            "phi_rmse_rad": float(self.phi_rmse_rad[i]),
-            "hold_tip_rmse_m": float(self.hold_tip_rmse_m[i]),
-            "hold_phi_rmse_rad": float(self.hold_phi_rmse_rad[i]),
-        }
+        names = ("tip_rmse_m", "phi_rmse_rad", "hold_tip_rmse_m", "hold_phi_rmse_rad")
+        return {name: float(getattr(self, name)[i]) for name in names}
 
     def summary(self, horizons_s: tuple[float, ...] = (0.5, 1.0, 2.0)) -> dict[str, float]:
         """Flat dict ``{"tip_rmse_m@1s": ..., ...}`` at the given horizons (those within range)."""
@@ -162,14 +146,7 @@ def rollout_errors(
 
     tip, phi = errors(predicted)
     hold_tip, hold_phi = errors(np.repeat(windows[:, :1], steps + 1, axis=1))
-    return RolloutErrors(
-        horizon_s=np.arange(steps + 1) * dataset.dt_s,
-        tip_rmse_m=tip,
-        phi_rmse_rad=phi,
-        hold_tip_rmse_m=hold_tip,
-        hold_phi_rmse_rad=hold_phi,
-        n_rollouts=int(windows.shape[0]),
-    )
+    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, tip, phi, hold_tip, hold_phi, int(windows.shape[0]))
 
 
 def rollout_trial(
@@ -263,10 +240,7 @@ def perturbed_simulator_errors(
     rng = np.random.default_rng(seed)
     names = dataset.position_names
     i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
-    tip_sq = np.zeros(steps + 1)
-    phi_sq = np.zeros(steps + 1)
-    hold_tip_sq = np.zeros(steps + 1)
-    hold_phi_sq = np.zeros(steps + 1)
+    squares = np.zeros((4, steps + 1))  # tip, hub angle, and both for the rod held where it was
     count = 0
     for trial in trials:
         for start in range(history, history + n_states - steps, start_stride):
@@ -280,22 +254,13 @@ def perturbed_simulator_errors(
                 noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
                 path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
             truth = dataset.positions[trial, start : start + steps + 1]
-            ex = np.array([o.ex_m for o in path])
-            ey = np.array([o.ey_m for o in path])
-            phi = np.array([o.phi_rad for o in path])
-            tip_sq += (ex - truth[:, i_ex]) ** 2 + (ey - truth[:, i_ey]) ** 2
-            phi_sq += wrap_angle_rad(phi - truth[:, i_phi]) ** 2
-            hold_tip_sq += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
-            hold_phi_sq += wrap_angle_rad(truth[0, i_phi] - truth[:, i_phi]) ** 2
+            phi, _, ex, ey = np.array([o.as_array()[:4] for o in path]).T
+            squares[0] += (ex - truth[:, i_ex]) ** 2 + (ey - truth[:, i_ey]) ** 2
+            squares[1] += wrap_angle_rad(phi - truth[:, i_phi]) ** 2
+            squares[2] += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
+            squares[3] += wrap_angle_rad(truth[0, i_phi] - truth[:, i_phi]) ** 2
             count += 1
-    return RolloutErrors(
-        horizon_s=np.arange(steps + 1) * dataset.dt_s,
-        tip_rmse_m=np.sqrt(tip_sq / count),
-        phi_rmse_rad=np.sqrt(phi_sq / count),
-        hold_tip_rmse_m=np.sqrt(hold_tip_sq / count),
-        hold_phi_rmse_rad=np.sqrt(hold_phi_sq / count),
-        n_rollouts=count,
-    )
+    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, *np.sqrt(squares / count), n_rollouts=count)
 
 
 def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float, history: int = 0) -> float:

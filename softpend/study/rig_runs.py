@@ -48,12 +48,9 @@ class RigCondition:
     faults: Optional[CameraFaults] = None
 
     def __post_init__(self) -> None:
-        for check, names in (
-            (positive, ("fps", "max_blind_s")),
-            (non_negative, ("camera_latency_s", "link_latency_s")),
-        ):
-            for name in names:
-                check(name, getattr(self, name))
+        checks = {"fps": positive, "max_blind_s": positive, "camera_latency_s": non_negative}
+        for name, check in (checks | {"link_latency_s": non_negative}).items():
+            check(name, getattr(self, name))
         if not isinstance(self.effects, CameraEffects):
             raise ValueError(f"effects must be a CameraEffects, got {type(self.effects).__name__}")
         int_at_least("counts_per_rev", self.counts_per_rev, 4)

@@ -260,7 +260,8 @@ def perturbed_simulator_errors(
             squares[2] += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
             squares[3] += wrap_angle_rad(truth[0, i_phi] - truth[:, i_phi]) ** 2
             count += 1
-    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, *np.sqrt(squares / count), n_rollouts=count)
+    tip, phi, hold_tip, hold_phi = np.sqrt(squares / count)
+    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, tip, phi, hold_tip, hold_phi, count)
 
 
 def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float, history: int = 0) -> float:

@@ -186,3 +186,16 @@ def test_a_run_that_stopped_balanced_reaches_its_asymptote_at_the_stop():
     assert mb.verdict == "differs"  # 10 episodes against the report's 100
     fewer = rows["mb_fewer"]
     assert fewer.verdict == "reproduced" and "never" not in fewer.ours, fewer.ours
+
+
+def test_the_closer_to_pilco_row_compares_the_grey_box_route_with_pilco():
+    def glued(greybox_s, balanced):
+        values = {"median_pilco": 20.0, "seeds_balanced_pilco": 10, "seeds_pilco": 10}
+        values.update({"median_mbpo": 130.0, "seeds_balanced_mbpo": 10, "seeds_mbpo": 10})
+        values.update({"median_greybox": greybox_s, "seeds_balanced_greybox": balanced, "seeds_greybox": 10})
+        return {"data_efficiency": values}
+
+    row = {r.key: r for r in claims_ledger(glued(1.0, 10), {}, {}, [])}["closer_to_pilco"]
+    assert row.verdict == "reproduced" and "grey-box route 1" in row.ours and "10 of 10 seeds" in row.ours
+    assert {r.key: r for r in claims_ledger(glued(40.0, 10), {}, {}, [])}["closer_to_pilco"].verdict == "differs"
+    assert {r.key: r for r in claims_ledger(glued(1.0, 8), {}, {}, [])}["closer_to_pilco"].verdict == "differs"

@@ -460,6 +460,24 @@ def _pilco_row(pilco: Sequence[Any]) -> LedgerRow:
     return _row(*args, ours, "not comparable")
 
 
+def _closer_to_pilco_row(glued: Mapping[str, Mapping[str, Any]]) -> LedgerRow:
+    # reproduced when a route of this project needs at most PILCO's median plant seconds on >= 9 of 10 seeds
+    claim = "While our method requires more time on the system, there is potential to reach values closer to this."
+    values = glued.get("data_efficiency", {})
+    args = ("closer_to_pilco", claim, "a hope (no figure)", "data-efficiency")
+    needed = [f"{kind}_{key}" for key in ("greybox", "pilco", "mbpo") for kind in ("median", "seeds_balanced", "seeds")]
+    if any(not isinstance(values.get(name), (int, float)) for name in needed):
+        return _row(*args)
+    median = {key: float(values[f"median_{key}"]) for key in ("greybox", "pilco", "mbpo")}
+    share = {key: (int(values[f"seeds_balanced_{key}"]), int(values[f"seeds_{key}"])) for key in median}
+    ours = "median plant seconds to balance: " + ", ".join(
+        f"{name} {_seconds(median[key])} ({share[key][0]} of {share[key][1]} seeds)"
+        for key, name in (("greybox", "grey-box route"), ("pilco", "PILCO"), ("mbpo", "DQN-MBPO"))
+    )
+    balanced, seeds = share["greybox"]
+    return _row(*args, ours, seeds > 0 and balanced >= 0.9 * seeds and median["greybox"] <= median["pilco"])
+
+
 def claims_ledger(
     glued: Mapping[str, Mapping[str, Any]],
     rl_logs: Mapping[str, Sequence[Any]],
@@ -488,6 +506,7 @@ def claims_ledger(
         *_classical_rows(glued),
         _fewer_episodes_row(rl_logs),
         _pilco_row(pilco),
+        _closer_to_pilco_row(glued),
         tracker,
     ]
 

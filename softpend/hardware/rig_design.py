@@ -136,6 +136,10 @@ class RigDesign:
         """Area of the blue dot in the image [px^2]."""
         return math.pi * (self.dot_radius_m / self.pixel_size_m) ** 2
 
+    def depth_error_m(self, offset_m: float = 0.001) -> float:
+        """Tip position error of the affine map when the dot lies ``offset_m`` in front of the markers' plane [m]."""
+        return abs(offset_m) / self.camera_distance_m * self.swing_radius_m
+
     @property
     def min_marker_gap_m(self) -> float:
         """Least gap between a marker's edge and the swing circle [m]."""

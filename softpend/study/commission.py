@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Callable, Optional
@@ -252,17 +253,28 @@ def _identify(run: _Run) -> dict:
 
     config, guess = run.config, RodParams()
     dataset = load_dataset(run.out / "excite" / "rig_dataset.npz")
-    settings = GreyBoxConfig(
-        parameters=IDENTIFIED_PARAMETERS,
-        window_s=config.window_s,
-        max_windows=config.max_windows,
-        max_iterations=config.max_iterations,
-        seed=config.seed,
-    )
-    result = identify(dataset, settings, initial_params=guess)
+    parameters, held = list(IDENTIFIED_PARAMETERS), []
+    while True:  # a parameter the data do not determine is held at the guess and reported as not identified
+        settings = GreyBoxConfig(
+            parameters=tuple(parameters),
+            window_s=config.window_s,
+            max_windows=config.max_windows,
+            max_iterations=config.max_iterations,
+            seed=config.seed,
+        )
+        try:
+            result = identify(dataset, settings, initial_params=guess)
+            break
+        except ValueError as exc:
+            match = re.match(r"the dataset cannot identify (\w+)", str(exc))
+            if match is None or match.group(1) not in parameters or len(parameters) == 1:
+                raise
+            parameters.remove(match.group(1))
+            held.append(match.group(1))
     return {
         "greybox": result.to_dict(),
         "identified": identified_values(result.estimates, result.std, guess.mass_kg),
+        "not_identified": held,
         "model_rod": result.params.to_dict(),
         "plant_s": 0.0,
     }

@@ -1,57 +1,18 @@
-"""The grey-box route: its plant seconds are the seconds it excited, its draws are sized by the uncertainty, and the
-controller it designs balances the rod it identified."""
+"""The grey-box route: its plant seconds are the seconds it excited, and the controller it designs balances the rod
+it identified (its uncertainty draws are tested in tests/test_commission.py)."""
 
 import math
 
-import numpy as np
 import pytest
 
 from softpend.control.identified import (
     RouteConfig,
     identify_until_robust,
     simulated_recorder,
-    uncertainty_draws,
 )
 from softpend.evaluation import evaluate
 from softpend.plant import RodParams
-from softpend.sysid.greybox import GreyBoxResult
 from softpend.task import Task
-
-
-def _result(std_fraction: dict[str, float]) -> GreyBoxResult:
-    rod = RodParams()
-    estimates = {name: float(getattr(rod, name)) for name in std_fraction}
-    return GreyBoxResult(
-        params=rod,
-        initial_params=rod,
-        estimates=estimates,
-        std={name: estimates[name] * f for name, f in std_fraction.items()},
-        torque_gain=1.0,
-        encoder_offset_rad=0.0,
-        residual_rms_rad=0.0,
-        n_windows=1,
-        window_steps=2,
-        n_residuals=1,
-        n_variables=1,
-        identify_s=0.0,
-        nfev=1,
-        njev=1,
-        status=1,
-        message="",
-    )
-
-
-def test_uncertainty_draws_spread_as_far_as_the_standard_deviations_say():
-    result = _result({"hub_friction_nms_per_rad": 0.10, "tip_mass_kg": 0.001})
-    draws = uncertainty_draws(result, 200, seed=4, scale=2.0)
-    friction = np.log([d.hub_friction_nms_per_rad / RodParams().hub_friction_nms_per_rad for d in draws])
-    tip = np.log([d.tip_mass_kg / RodParams().tip_mass_kg for d in draws])
-    assert np.max(np.abs(friction)) <= 0.2 + 1e-12 and np.max(np.abs(friction)) > 0.18  # fills +-2 std
-    assert np.max(np.abs(tip)) <= 0.002 + 1e-12
-    untouched = {d.youngs_modulus_pa for d in draws}
-    assert untouched == {RodParams().youngs_modulus_pa}  # a field that was not estimated is not drawn
-    again = uncertainty_draws(result, 200, seed=4, scale=2.0)
-    assert [d.hub_friction_nms_per_rad for d in again] == [d.hub_friction_nms_per_rad for d in draws]
 
 
 def test_the_route_counts_the_seconds_its_plant_was_driven_and_its_controller_balances():

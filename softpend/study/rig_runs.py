@@ -130,14 +130,17 @@ def twin_start(
     workdir: str | Path,
     success_std_rad: float = HOLD_STD_RAD,
     on_frame: Optional[Callable] = None,
+    estimator_task: Optional[Task] = None,
 ) -> dict[str, Any]:
     """One start of ``controller`` on the twin under ``condition`` (logs in ``workdir``): the row of the rod's true
-    motion while the controller was in charge; a safe stop, link error or diverged estimator is a failed row whose
-    ``stop`` says why."""
+    motion while the controller was in charge and the plant seconds the twin ran; a safe stop, link error or
+    diverged estimator is a failed row whose ``stop`` says why.  ``estimator_task``: the estimator's model (default:
+    ``task``, the twin's true rod)."""
     positive("duration_s", duration_s)
     workdir = Path(workdir)
     stop: Optional[str] = None
     result = None
+    plant_s = 0.0
     try:
         run = run_twin_control(
             controller,
@@ -147,8 +150,10 @@ def twin_start(
             camera=condition.camera(seed),
             estimator_config=condition.estimator(),
             on_frame=on_frame,
+            estimator_task=estimator_task,
         )
         result = run.result
+        plant_s = float(run.emulator_stats.get("ticks", 0.0)) * task.dt_s
         if result.stop_reason is not None:
             stop = f"{result.status.replace('_', ' ')}: {result.stop_reason}"
     except LinkError as exc:
@@ -170,6 +175,7 @@ def twin_start(
         samples=int(result.samples) if result is not None else 0,
         frames_tracked=int(camera.get("frames_tracked", 0)),
         frames_lost=int(camera.get("frames_lost", 0)),
+        plant_s=plant_s,
     )
     return row
 

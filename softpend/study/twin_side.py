@@ -9,7 +9,6 @@ excitation, and the rows of a verification (measured on the true motion, as a re
 from __future__ import annotations
 
 import concurrent.futures
-import math
 import multiprocessing
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -18,7 +17,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.checks import int_at_least, positive, positive_int
-from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S
+from softpend.evaluation import TEST_EPISODE_S
 from softpend.study.rig_runs import RigCondition
 from softpend.study.unknown_rod import UnknownRod, draw_unknown_rod
 from softpend.vision.camera import CameraEffects
@@ -148,50 +147,12 @@ def _verify_start(
 ) -> dict[str, Any]:
     """One start of the controller designed on ``model`` (a RodParams; also the estimator's model) on the twin of
     ``true_task``: a row of the true motion while the controller was in charge (a stop is a failed row)."""
-    from softpend.hardware.closed_loop import run_twin_control
-    from softpend.hardware.driver import LinkError
-    from softpend.plant import SimulationDiverged
-    from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
+    from softpend.study.rig_runs import twin_start
     from softpend.task import Task
 
-    stop: Optional[str] = None
-    plant_s = 0.0
-    try:
-        run = run_twin_control(
-            design(model),
-            workdir,
-            duration_s,
-            rig=condition.rig(true_task, seed),
-            camera=condition.camera(seed),
-            estimator_config=condition.estimator(),
-            estimator_task=Task(rod=model),
-        )
-        plant_s = float(run.emulator_stats.get("ticks", 0.0)) * true_task.dt_s
-        if run.result.stop_reason is not None:
-            stop = f"{run.result.status.replace('_', ' ')}: {run.result.stop_reason}"
-    except LinkError as exc:
-        stop = f"link error: {type(exc).__name__}: {exc}"
-    except SimulationDiverged as exc:
-        stop = f"estimator model diverged: {exc}"
-    metrics: dict[str, Any] = {}
-    chatter = math.nan
-    motor, truth_log = workdir / "motor_log.csv", workdir / "truth_log.csv"
-    if motor.is_file() and truth_log.is_file():
-        metrics = run_truth_metrics(motor, truth_log, true_task, success_std_rad=HOLD_STD_RAD)
-        chatter = torque_chatter_nm_per_s(motor)
-    if not metrics and stop is None:
-        stop = "the controller never took charge"
-    return {
-        "condition": condition.name,
-        "seed": int(seed),
-        "success": bool(metrics.get("success", False)) and stop is None,
-        "swing_up_time_s": float(metrics.get("swing_up_time_s", math.inf)),
-        "upright_std_rad": float(metrics.get("upright_std_rad", math.nan)),
-        "peak_torque_nm": float(metrics.get("peak_torque_nm", math.nan)),
-        "torque_chatter_nm_per_s": float(chatter),
-        "stop": stop or "",
-        "plant_s": plant_s,
-    }
+    return twin_start(
+        design(model), "commissioned", true_task, condition, seed, duration_s, workdir, estimator_task=Task(rod=model)
+    )
 
 
 def verify_on_twin(

@@ -31,6 +31,36 @@ TRIAL_SEEDS = SELECTION_SEEDS[:16]
 TUNING_SEEDS = SELECTION_SEEDS[16:36]
 
 
+def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: PlannerConfig) -> None:
+    seconds = [r["plant_s_to_balance"] for r in rows]
+    passed = [
+        r for r in rows if r["fresh_balanced"] >= 0.9 * r["fresh_starts"] and math.isfinite(r["plant_s_to_balance"])
+    ]
+    summary_row = {
+        "seeds": len(rows),
+        "seeds_balancing": len(passed),
+        "median_plant_s_to_balance": statistics.median(seconds),
+        "worst_plant_s_to_balance": max(seconds),
+        "max_run_cpu_s": max(r["run_cpu_s"] for r in rows),
+    }
+    print(json.dumps(summary_row), flush=True)
+    out = (
+        args.out
+        if args.out is not None
+        else (None if args.tune else str(ROOT / "book" / "records" / "planner_probe.json"))
+    )
+    if out is not None:
+        document = {
+            "command": "python scripts/probe_planner.py " + " ".join(argv),
+            "fresh_seeds": "selection starts (tuning)" if args.tune else list(REPORT_SEEDS),
+            "config": {k: v for k, v in vars(config).items() if k != "task"} | {"task": config.task.to_dict()},
+            "summary": summary_row,
+            "per_seed": rows,
+        }
+        with atomic_write(Path(out), "w") as handle:
+            handle.write(json.dumps(document, indent=2, default=float) + "\n")
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -71,33 +101,7 @@ def main(argv: list[str]) -> int:
         }
         rows.append(row)
         print(json.dumps({k: v for k, v in row.items() if k != "identified_rod"}), flush=True)
-    seconds = [r["plant_s_to_balance"] for r in rows]
-    passed = [
-        r for r in rows if r["fresh_balanced"] >= 0.9 * r["fresh_starts"] and math.isfinite(r["plant_s_to_balance"])
-    ]
-    summary_row = {
-        "seeds": len(rows),
-        "seeds_balancing": len(passed),
-        "median_plant_s_to_balance": statistics.median(seconds),
-        "worst_plant_s_to_balance": max(seconds),
-        "max_run_cpu_s": max(r["run_cpu_s"] for r in rows),
-    }
-    print(json.dumps(summary_row), flush=True)
-    out = (
-        args.out
-        if args.out is not None
-        else (None if args.tune else str(ROOT / "book" / "records" / "planner_probe.json"))
-    )
-    if out is not None:
-        document = {
-            "command": "python scripts/probe_planner.py " + " ".join(argv),
-            "fresh_seeds": "selection starts (tuning)" if args.tune else list(REPORT_SEEDS),
-            "config": {k: v for k, v in vars(config).items() if k != "task"} | {"task": config.task.to_dict()},
-            "summary": summary_row,
-            "per_seed": rows,
-        }
-        with atomic_write(Path(out), "w") as handle:
-            handle.write(json.dumps(document, indent=2, default=float) + "\n")
+        _write(rows, args, argv, config)  # after every seed, so that a cut-short probe keeps its seeds
     return 0
 
 

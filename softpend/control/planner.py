@@ -529,8 +529,7 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
 class PlannerController:
     """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
     it), replanning every ``hold_steps`` plant steps, for one rod (a :class:`softpend.evaluation.Controller`) or a
-    batch (:meth:`batch_policy`); it reads
-    observations only."""
+    batch (:meth:`batch_policy`); it reads observations only."""
 
     def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr

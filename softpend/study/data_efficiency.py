@@ -154,3 +154,31 @@ def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
     ax.invert_yaxis()
     ax.grid(axis="x", alpha=0.3)
     return ax.figure
+
+
+def planner_rows(
+    model: str = "residual", seeds: Iterable[int] = range(10), report_seeds: Sequence[int] = REPORT_SEEDS
+) -> list[dict[str, Any]]:
+    """One row per seed of the planner (``book/hparams/planner.yml``, ``model`` = ``"residual"``: the PRB model
+    with a learned residual, ``"ensemble"``: the black-box ensemble), trials from the first 16 selection starts,
+    then its controller on ``report_seeds``; ``real_s_to_balance`` is infinite unless 90 % of them balance."""
+    from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
+    from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
+
+    config = PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml").replace(
+        model=model, selection_seeds=SELECTION_SEEDS[:16]
+    )
+    rows = []
+    for seed in seeds:
+        result = run_planner(config.replace(seed=int(seed)))
+        fresh = fresh_start_row(fresh_start_evaluation(result, tuple(report_seeds)))
+        rows.append(
+            {
+                "seed": int(seed),
+                "plant_s": result.plant_seconds,
+                "balanced_starts": fresh["balanced_starts"],
+                "starts": fresh["starts"],
+                "real_s_to_balance": result.plant_seconds_to_balance if fresh["run_balances"] else math.inf,
+            }
+        )
+    return rows

@@ -1,11 +1,13 @@
 """Probe of the MPPI planner (issue 65): one run per seed, then its controller from 20 fresh starts.
 
-    .venv/bin/python scripts/probe_planner.py --seeds 0 1 2 [--set model=residual] [--tune] [--out PATH]
+    .venv/bin/python scripts/probe_planner.py --seeds 0 1 2 [--set model=residual] [--plant beam] [--tune] [--out PATH]
 
 Per seed: the plant seconds until the stopping rule fired (every excitation and trial second counted), the
 fresh starts balanced (swing-up found, upright std <= 0.1 rad) out of 20, and the wall and CPU seconds of the
 run.  The trials start from the first 16 SELECTION_SEEDS; ``--tune`` measures on the other 20 selection seeds
-instead of REPORT_SEEDS (for tuning), and writes nothing unless ``--out`` is given.
+instead of REPORT_SEEDS (for tuning), and writes nothing unless ``--out`` is given.  ``--plant beam`` (the same as
+``--set task.plant=beam``) makes the continuum beam the real rod: excitation, trials and fresh starts on the beam
+(one start after the other, on the Exudyn engine).  The JSON is the stored probe summary of ``book/records``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -29,33 +32,62 @@ from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS
 ROOT = Path(__file__).resolve().parents[1]
 TRIAL_SEEDS = SELECTION_SEEDS[:16]
 TUNING_SEEDS = SELECTION_SEEDS[16:36]
+#: A seed balances when at least this share of its fresh starts balance; the target counts seeds within this.
+BALANCED_FRACTION, WITHIN_S = 0.9, 30.0
+
+
+def _seeds_text(seeds: tuple[int, ...] | list[int]) -> str:
+    """``"1000-1015"`` for consecutive seeds, else the seeds comma-separated."""
+    seeds = [int(s) for s in seeds]
+    if len(seeds) > 1 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
+
+
+def _flat(mapping: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested mappings as dotted names; tuples of seeds as :func:`_seeds_text`."""
+    out: dict[str, Any] = {}
+    for key, value in mapping.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[prefix + key] = _seeds_text(value) if isinstance(value, (tuple, list)) else value
+    return out
 
 
 def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: PlannerConfig) -> None:
     seconds = [r["plant_s_to_balance"] for r in rows]
-    passed = [
-        r for r in rows if r["fresh_balanced"] >= 0.9 * r["fresh_starts"] and math.isfinite(r["plant_s_to_balance"])
-    ]
-    summary_row = {
+    balancing = [r["fresh_balanced"] >= BALANCED_FRACTION * r["fresh_starts"] for r in rows]
+    to_balance = [s if ok else math.inf for s, ok in zip(seconds, balancing)]
+    figures = {
         "seeds": len(rows),
-        "seeds_balancing": len(passed),
+        "seeds_balancing": sum(ok and math.isfinite(s) for s, ok in zip(seconds, balancing)),
+        f"seeds_within_{WITHIN_S:g}s": sum(s <= WITHIN_S for s in to_balance),
         "median_plant_s_to_balance": statistics.median(seconds),
         "worst_plant_s_to_balance": max(seconds),
+        "median_real_s_to_balance": statistics.median(to_balance),
         "max_run_cpu_s": max(r["run_cpu_s"] for r in rows),
     }
-    print(json.dumps(summary_row), flush=True)
+    print(json.dumps(figures), flush=True)
     out = (
         args.out
         if args.out is not None
         else (None if args.tune else str(ROOT / "book" / "records" / "planner_probe.json"))
     )
     if out is not None:
+        settings = _flat({k: v for k, v in vars(config).items() if k not in ("task", "seed")})
+        settings.update(_flat(config.task.to_dict(), "task."))
+        settings["fresh_seeds"] = _seeds_text(TUNING_SEEDS if args.tune else REPORT_SEEDS)
+        settings["balanced_fraction"] = BALANCED_FRACTION
+        settings["hold_std_rad"] = HOLD_STD_RAD
+        plant = config.task.plant
         document = {
+            "title": f"MPPI planner ({config.model} model) on the {plant} rod, "
+            + ("tuning starts" if args.tune else "fresh report starts"),
             "command": "python scripts/probe_planner.py " + " ".join(argv),
-            "fresh_seeds": "selection starts (tuning)" if args.tune else list(REPORT_SEEDS),
-            "config": {k: v for k, v in vars(config).items() if k != "task"} | {"task": config.task.to_dict()},
-            "summary": summary_row,
-            "per_seed": rows,
+            "settings": settings,
+            "figures": figures,
+            "rows": rows,
         }
         with atomic_write(Path(out), "w") as handle:
             handle.write(json.dumps(document, indent=2, default=float) + "\n")
@@ -65,13 +97,19 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--plant", default=None, help="the real rod: prb or beam (default: the task's)")
     parser.add_argument("--hparams", default=str(ROOT / "book" / "hparams" / "planner.yml"))
     parser.add_argument("--tune", action="store_true", help="measure on selection starts, not REPORT_SEEDS")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    config = apply_overrides(PlannerConfig.from_yaml(args.hparams), [parse_assignment(item) for item in args.set])
+    overrides = [parse_assignment(item) for item in args.set]
+    if args.plant is not None:
+        overrides.append(("task.plant", args.plant))
+    config = apply_overrides(PlannerConfig.from_yaml(args.hparams), overrides)
     config = config.replace(selection_seeds=TRIAL_SEEDS)
+    # the batched engine simulates the PRB chain only: other rods run one start after the other
+    engine = "batched" if config.task.plant == "prb" else "exudyn"
     rows = []
     for seed in args.seeds:
         wall, cpu = time.perf_counter(), time.process_time()
@@ -79,11 +117,11 @@ def main(argv: list[str]) -> int:
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         started = time.perf_counter()
         if args.tune:
-            policy = result.controller.batch_policy()
+            policy = result.controller.batch_policy() if engine == "batched" else result.controller
             with torch.no_grad():
-                summary = evaluate(policy, config.task, engine="batched", seeds=TUNING_SEEDS)
+                summary = evaluate(policy, config.task, engine=engine, seeds=TUNING_SEEDS)
         else:
-            summary = fresh_start_evaluation(result, REPORT_SEEDS)
+            summary = fresh_start_evaluation(result, REPORT_SEEDS, engine=engine)
         held = [math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= HOLD_STD_RAD for r in summary.results]
         row = {
             "seed": seed,

@@ -1,12 +1,9 @@
 """Model-predictive swing-up on learned dynamics with few plant seconds.
 
-An ensemble of probabilistic (Gaussian-output) networks models the rod: either black-box on the observed
-variables (:class:`GaussianDynamicsModel`, a :class:`softpend.sysid.DynamicsModel` with a variance head, rolled
-out by :func:`softpend.sysid.rollout`) or as a residual on the identified PRB chain's batched step
-(:class:`ResidualPRBEnsemble`).  :class:`MPPI` plans held torques over sampled rollouts (each row draws its
-member at every step); an LQR on the identified rod takes over near upright.  :func:`run_planner` drives the
-plant: a multisine excitation, then planner trials from the selection starts, refitting between trials, until
-``stop_after_balanced`` trials in a row balance.  Every plant second driven is counted.
+An ensemble of Gaussian-output networks models the rod, black-box on the observed variables
+(:class:`GaussianDynamicsModel`) or as a residual on the identified PRB chain's step (:class:`ResidualPRBEnsemble`);
+:class:`MPPI` plans held torques on it and an LQR on the identified rod balances near upright.  :func:`run_planner`
+drives the plant (an excitation, then planner trials with refits between them) and counts every plant second.
 """
 
 from __future__ import annotations
@@ -22,7 +19,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from softpend.checks import in_range, int_at_least, non_negative, one_of, positive, positive_int
+from softpend.checks import in_range, int_at_least, one_of, positive
 from softpend.control.learned import LearnedStateTracker
 from softpend.control.lqr import LQRController
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
@@ -56,8 +53,7 @@ MODELS = ("ensemble", "residual")
 ENERGY_WEIGHT = 1.0
 #: The LQR hands back to the planner beyond this multiple of the capture angle.
 RELEASE_FACTOR = 2.0
-#: The grey-box identification starts from the task's rod with its estimated fields scaled by these factors (the
-#: task's rod is the simulated truth, so starting from it would tell the fit the answer).
+#: Factors on the task rod's estimated fields that give the grey-box identification its starting guess.
 IDENTIFY_GUESS_FACTORS = {
     "hub_inertia_kgm2": 1.5,
     "hub_friction_nms_per_rad": 0.5,
@@ -74,15 +70,13 @@ _ANGLE_MASK = np.array([is_angle(n) for n in POSITION_NAMES])
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """Settings of :func:`run_planner` (SI units; names carry them).
+    """Settings of :func:`run_planner` (SI units).
 
-    ``model``: :data:`MODELS`.  ``excitation_s``: multisine seconds from hanging before the first trial.
-    ``trial_s``: longest planner trial; a trial ends once the rod has been held (``|theta| < 0.2`` rad,
-    RMS at most ``target_std_rad``) for ``hold_s``.  ``stop_after_balanced``: balanced trials in a row that end
-    the run.  ``identify_windows``: windows of the grey-box identification of the rod (0: the task's nominal
-    rod) that the LQR, the energy cost and the residual model use.  ``horizon_s``, ``control_dt_s``,
-    ``n_samples``, ``temperature``, ``noise_fraction``: MPPI's horizon, torque hold, rollouts, temperature (cost
-    units) and sampling std (fraction of the torque limit).  ``selection_seeds``: the trials' start seeds.
+    ``excitation_s``: multisine seconds before the first trial.  A trial lasts at most ``trial_s`` and ends once
+    the rod has been held (``|theta| < 0.2`` rad, RMS at most ``HOLD_STD_RAD``) for ``hold_s``; the run ends after
+    ``stop_after_balanced`` such trials in a row.  ``identify_windows``: windows of the grey-box identification of
+    the rod (0: the task's rod).  ``horizon_s``, ``control_dt_s``, ``n_samples``, ``temperature``,
+    ``noise_fraction`` (of the torque limit): MPPI's settings.  ``selection_seeds``: the trials' start seeds.
     """
 
     task: Task = field(default_factory=Task)
@@ -102,44 +96,35 @@ class PlannerConfig:
     temperature: float = 0.3
     noise_fraction: float = 0.6
     capture_rad: float = 0.4
-    target_std_rad: float = HOLD_STD_RAD
     selection_seeds: tuple[int, ...] = (1000, 1001, 1002)
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.task, Task):
-            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
         one_of("model", self.model, MODELS)
         for name in ("excitation_s", "trial_s", "hold_s", "horizon_s", "control_dt_s", "temperature"):
             positive(name, getattr(self, name))
-        for name in ("max_trials", "stop_after_balanced", "ensemble_size", "hidden_width", "train_steps"):
-            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
-        for name in ("identify_windows", "seed"):
-            object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
-        object.__setattr__(self, "n_samples", int_at_least("n_samples", self.n_samples, 2))
+        lows = {"max_trials": 1, "stop_after_balanced": 1, "ensemble_size": 1, "hidden_width": 1, "train_steps": 1}
+        for name, low in {**lows, "identify_windows": 0, "seed": 0, "n_samples": 2}.items():
+            object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
         if self.n_samples % self.ensemble_size:
-            raise ValueError(
-                f"n_samples must be a multiple of ensemble_size ({self.ensemble_size}), got {self.n_samples!r}"
-            )
+            raise ValueError(f"n_samples must be a multiple of ensemble_size, got {self.n_samples!r}")
         in_range("noise_fraction", self.noise_fraction, 1e-6, 10.0)
         in_range("capture_rad", self.capture_rad, 1e-6, math.pi / RELEASE_FACTOR)
-        positive("target_std_rad", self.target_std_rad)
         if self.hold_s > self.trial_s:
-            raise ValueError(f"hold_s must be at most trial_s ({self.trial_s!r} s), got {self.hold_s!r}")
+            raise ValueError(f"hold_s must be at most trial_s, got {self.hold_s!r}")
         if self.excitation_s < 2 * self.task.dt_s:
-            raise ValueError(f"excitation_s must cover at least two steps of task.dt_s, got {self.excitation_s!r}")
-        for name, seconds in (("control_dt_s", self.control_dt_s), ("horizon_s", self.horizon_s)):
-            ratio = seconds / self.task.dt_s
-            if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9:
-                raise ValueError(f"{name} must be a whole multiple of task.dt_s, got {seconds!r}")
-        if self.n_knots < 1:
-            raise ValueError(f"horizon_s must hold at least one control_dt_s, got {self.horizon_s!r}")
+            raise ValueError(f"excitation_s must cover two steps of task.dt_s, got {self.excitation_s!r}")
+        ratios = [getattr(self, name) / self.task.dt_s for name in ("control_dt_s", "horizon_s")]
+        if self.n_knots < 1 or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
+            raise ValueError(
+                "control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s >= control_dt_s"
+            )
         try:
             seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
         except TypeError:
-            raise ValueError(f"selection_seeds must be integers >= 0, got {self.selection_seeds!r}") from None
+            seeds = ()
         if not seeds or len(set(seeds)) != len(seeds):
-            raise ValueError(f"selection_seeds must be distinct and non-empty, got {self.selection_seeds!r}")
+            raise ValueError(f"selection_seeds must be distinct seeds, at least one, got {self.selection_seeds!r}")
         object.__setattr__(self, "selection_seeds", seeds)
 
     @property
@@ -162,9 +147,9 @@ class PlannerConfig:
         from softpend.io.reading import read_yaml_checked
 
         data = read_yaml_checked(path, "settings file") or {}
-        if not isinstance(data, dict) or "task" in data:
-            raise ValueError(f"{path}: expected a mapping of PlannerConfig fields other than task")
         try:
+            if not isinstance(data, dict) or "task" in data:
+                raise ValueError("expected a mapping of PlannerConfig fields other than task")
             return apply_overrides(cls(task=task if task is not None else Task()), data)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
@@ -173,8 +158,14 @@ class PlannerConfig:
 # ---------------------------------------------------------------------- probabilistic networks
 
 
+def _bound_log_var(log_var: Tensor, max_log_var: Tensor, min_log_var: Tensor) -> Tensor:
+    """``log_var`` softly bounded to ``[min_log_var, max_log_var]`` (as in PETS)."""
+    log_var = max_log_var - nn.functional.softplus(max_log_var - log_var)
+    return min_log_var + nn.functional.softplus(log_var - min_log_var)
+
+
 class _GaussianHead(nn.Module):
-    """Mean and bounded log-variance from a network's ``2 m`` raw outputs (soft bounds learnt, as in PETS)."""
+    """Mean and bounded log-variance from a network's ``2 m`` raw outputs (the bounds are learnt)."""
 
     def __init__(self, n_outputs: int) -> None:
         super().__init__()
@@ -183,20 +174,22 @@ class _GaussianHead(nn.Module):
 
     def forward(self, raw: Tensor) -> tuple[Tensor, Tensor]:
         mean, log_var = raw.chunk(2, dim=-1)
-        log_var = self.max_log_var - nn.functional.softplus(self.max_log_var - log_var)
-        return mean, self.min_log_var + nn.functional.softplus(log_var - self.min_log_var)
-
-
-def _mlp(n_in: int, n_out: int, width: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(n_in, width), nn.SiLU(), nn.Linear(width, width), nn.SiLU(), nn.Linear(width, n_out))
+        return mean, _bound_log_var(log_var, self.max_log_var, self.min_log_var)
 
 
 def _sample(mean: Tensor, log_var: Tensor, generator: Optional[torch.Generator]) -> Tensor:
     """``mean`` plus Gaussian noise of ``exp(log_var)`` drawn from ``generator`` (``None``: the mean)."""
     if generator is None:
         return mean
-    noise = torch.randn(mean.shape, generator=generator, dtype=mean.dtype)
-    return mean + torch.exp(0.5 * log_var) * noise
+    return mean + torch.exp(0.5 * log_var) * torch.randn(mean.shape, generator=generator, dtype=mean.dtype)
+
+
+def _mlp(n_in: int, n_out: int, width: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(n_in, width), nn.SiLU(), nn.Linear(width, width), nn.SiLU(), nn.Linear(width, n_out))
+
+
+def _reset_linear_layers(net: nn.Module) -> None:
+    net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
 
 
 class GaussianDynamicsModel(DynamicsModel):
@@ -205,8 +198,7 @@ class GaussianDynamicsModel(DynamicsModel):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        width = self.hidden_widths[-1]
-        self.net[-1] = nn.Linear(width, 2 * self.n_outputs)
+        self.net[-1] = nn.Linear(self.hidden_widths[-1], 2 * self.n_outputs)
         self.head = _GaussianHead(self.n_outputs)
         self.noise_generator: Optional[torch.Generator] = None
 
@@ -223,17 +215,13 @@ class GaussianDynamicsModel(DynamicsModel):
 
 def _fit_gaussian(
     nets: Sequence[nn.Module], heads: Sequence[_GaussianHead], x: Tensor, y: Tensor, steps: int, seed: int
-) -> list[float]:
-    """Fit each ``(net, head)`` pair to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam;
-    returns each member's last minibatch loss."""
+) -> None:
+    """Fit each ``(net, head)`` pair to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam."""
     generator = torch.Generator().manual_seed(seed)
-    losses = []
     n = x.shape[0]
     for net, head in zip(nets, heads):
         rows = torch.randint(n, (n,), generator=generator)
-        params = list(net.parameters()) + list(head.parameters())
-        optimiser = torch.optim.Adam(params, lr=3e-3, weight_decay=1e-5)
-        loss = torch.zeros(())
+        optimiser = torch.optim.Adam(list(net.parameters()) + list(head.parameters()), lr=3e-3, weight_decay=1e-5)
         for _ in range(steps):
             batch = rows[torch.randint(n, (min(256, n),), generator=generator)]
             mean, log_var = head(net(x[batch]))
@@ -242,20 +230,15 @@ def _fit_gaussian(
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
-        losses.append(float(loss.detach()))
-    return losses
 
 
 class StackedEnsemble:
-    """Fast rollouts of a fitted black-box :class:`~softpend.sysid.DynamicsEnsemble` of
-    :class:`GaussianDynamicsModel` members sharing their standardisation (as :func:`fit_ensemble` makes them):
-    row ``i`` of a batch is predicted by member ``i % E`` throughout (trajectory sampling), the members' layers
-    applied as one batched matrix product; ``predict_next`` as the ensemble's, for :func:`softpend.sysid.rollout`."""
+    """Fast rollouts of a fitted black-box ensemble of :func:`fit_ensemble`: row ``i`` of a batch is predicted by
+    member ``i % E`` throughout, the members' layers applied as one batched matrix product."""
 
     def __init__(self, ensemble: DynamicsEnsemble) -> None:
         self.members: list[Any] = list(ensemble.members)
         self.first = self.members[0]
-        self.layout, self.dt_s = ensemble.layout, ensemble.dt_s
         layers = [[m.net[i] for m in self.members] for i in range(0, len(self.first.net), 2)]
         self.weights = [torch.stack([layer.weight.detach().T for layer in group]) for group in layers]
         self.biases = [torch.stack([layer.bias.detach()[None] for layer in group]) for group in layers]
@@ -267,8 +250,6 @@ class StackedEnsemble:
         first, n_members = self.first, len(self.members)
         state, torque_nm = first._check(state, torque_nm)
         batch = state.shape[0]
-        if batch % n_members:
-            raise ValueError(f"the batch ({batch}) must be a multiple of the ensemble size ({n_members})")
         torque_nm = torque_nm.clamp(-first.torque_limit_nm, first.torque_limit_nm)
         z = first.normalise_features(first.features(state, torque_nm))
         h = z.reshape(batch // n_members, n_members, -1).transpose(0, 1)
@@ -277,8 +258,7 @@ class StackedEnsemble:
             if i < len(self.weights) - 1:
                 h = nn.functional.silu(h)
         mean, log_var = h.chunk(2, dim=-1)
-        log_var = self.max_log_var - nn.functional.softplus(self.max_log_var - log_var)
-        log_var = self.min_log_var + nn.functional.softplus(log_var - self.min_log_var)
+        log_var = _bound_log_var(log_var, self.max_log_var, self.min_log_var)
         out = _sample(mean, log_var, self.noise_generator).transpose(0, 1).reshape(batch, -1)
         out = out * first.delta_std + first.delta_mean
         p = first._p
@@ -294,12 +274,12 @@ def _standardise(values: Tensor) -> tuple[Tensor, Tensor]:
 def fit_ensemble(
     states: np.ndarray, torques_nm: np.ndarray, next_states: np.ndarray, task: Task, config: PlannerConfig
 ) -> DynamicsEnsemble:
-    """The black-box ensemble: :class:`GaussianDynamicsModel` members on the full observed layout (differenced
-    velocities), fitted to the transitions ``states (M, 10) -> next_states`` under ``torques_nm (M,)``."""
-    layout = StateLayout.full()
+    """The black-box ensemble on the full observed layout (differenced velocities), fitted to the transitions
+    ``states (M, 10) -> next_states`` under ``torques_nm (M,)``."""
+    reach = 1.01 * task.rod.length_m
     members = [
         GaussianDynamicsModel(
-            layout, task.dt_s, task.torque_limit_nm, (config.hidden_width,) * 2, tip_reach_m=1.01 * task.rod.length_m
+            StateLayout.full(), task.dt_s, task.torque_limit_nm, (config.hidden_width,) * 2, tip_reach_m=reach
         )
         for _ in range(config.ensemble_size)
     ]
@@ -315,15 +295,9 @@ def fit_ensemble(
     x = first.normalise_features(features)
     torch.manual_seed(config.seed)  # the networks' initial weights
     for m in members:
-        m.net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
-    _fit_gaussian(
-        [m.net for m in members],
-        [m.head for m in members],
-        x,
-        (targets - d_mean) / d_std,
-        config.train_steps,
-        config.seed,
-    )
+        _reset_linear_layers(m.net)
+    y = (targets - d_mean) / d_std
+    _fit_gaussian([m.net for m in members], [m.head for m in members], x, y, config.train_steps, config.seed)
     return DynamicsEnsemble(members).eval()
 
 
@@ -341,14 +315,14 @@ def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
 
 class ResidualPRBEnsemble(nn.Module):
     """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` (``(B, 2 (n + 1))``) over ``step_s``:
-    the identified rod's batched step (:class:`~softpend.plant.batched.BatchedPRBChain`, Rosenbrock, which stays
-    stable over a whole control step) plus a Gaussian residual network of member ``k`` (drawn per row and step)."""
+    the identified rod's batched Rosenbrock step plus the Gaussian residual network of member ``k`` (drawn per
+    row and step)."""
 
     def __init__(self, params: RodParams, step_s: float, n_members: int, width: int) -> None:
         super().__init__()
         self.params, self.dt_s, self.torque_limit_nm = params, float(step_s), params.torque_limit_nm
         self.n_q = params.n_links + 1
-        n_features = 2 * params.n_links + (params.n_links) + self.n_q + 1
+        n_features = 3 * params.n_links + self.n_q + 1
         self.nets = nn.ModuleList([_mlp(n_features, 4 * self.n_q, width) for _ in range(n_members)])
         self.heads = nn.ModuleList([_GaussianHead(2 * self.n_q) for _ in range(n_members)])
         for name, size in (
@@ -387,7 +361,7 @@ class ResidualPRBEnsemble(nn.Module):
         residual = _sample(mean[pick, rows], log_var[pick, rows], self.noise_generator) * self.r_std + self.r_mean
         return self.physics(x, torque_nm) + residual
 
-    def fit(self, x: np.ndarray, torques_nm: np.ndarray, x_next: np.ndarray, steps: int, seed: int) -> list[float]:
+    def fit(self, x: np.ndarray, torques_nm: np.ndarray, x_next: np.ndarray, steps: int, seed: int) -> None:
         """Fit the residual networks to joint-state transitions (members on bootstraps)."""
         x_t, u, x1 = (torch.as_tensor(a, dtype=torch.float32) for a in (x, torques_nm, x_next))
         with torch.no_grad():
@@ -397,15 +371,14 @@ class ResidualPRBEnsemble(nn.Module):
         self.r_mean, self.r_std = _standardise(residual)
         torch.manual_seed(seed)
         for net in self.nets:
-            net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
+            _reset_linear_layers(net)
         z, y = (features - self.f_mean) / self.f_std, (residual - self.r_mean) / self.r_std
-        return _fit_gaussian(list(self.nets), list(self.heads), z, y, steps, seed)  # type: ignore[arg-type]
+        _fit_gaussian(list(self.nets), list(self.heads), z, y, steps, seed)  # type: ignore[arg-type]
 
 
 def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.ndarray:
-    """Joint states ``(N - 1, 2 (n + 1))`` of observed positions ``(N, 5)`` (phi, theta, ex, ey, er): angles
-    reconstructed (:func:`softpend.sysid.greybox.reconstruct_joint_states`), rates backward differences (hub
-    unwrapped), from the second sample on."""
+    """Joint states ``(N - 1, 2 (n + 1))`` of observed positions ``(N, 5)``: reconstructed angles (hub unwrapped)
+    and their backward differences, from the second sample on."""
     q = reconstruct_joint_states(positions[:, 0], positions[:, 2], positions[:, 3], positions[:, 4], params)
     q[:, 0] = np.unwrap(q[:, 0])
     return np.concatenate([q[1:], np.diff(q, axis=0) / dt_s], axis=1)
@@ -413,7 +386,7 @@ def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.nd
 
 class JointStateTracker:
     """The residual model's states ``(B, 2 (n + 1))`` from successive observations ``(B, 10)``, as
-    :func:`joint_states` builds them from data (before the first sample: one step back along the observed rates)."""
+    :func:`joint_states` builds them (before the first sample: one step back along the observed rates)."""
 
     def __init__(self, params: RodParams, dt_s: float) -> None:
         self.params, self.dt_s = params, float(dt_s)
@@ -430,7 +403,7 @@ class JointStateTracker:
 
 
 class ObservedStateTracker:
-    """The black-box model's states ``(B, d)`` from successive observations ``(B, 10)``: one
+    """The black-box model's states ``(B, d)`` from successive observations ``(B, 10)``, one
     :class:`softpend.control.learned.LearnedStateTracker` per rod."""
 
     def __init__(self, model: Any) -> None:
@@ -455,9 +428,8 @@ class MPPI:
     """Model-predictive path integral control of one torque held for ``hold_steps`` model steps per knot.
 
     ``rollout_fn(x0 (R, d), torques (R, T)) -> states (R, T + 1, d)``; ``cost_fn(states (R, T, d), torques
-    (R, T)) -> (R, T)``.  :meth:`optimise` refines the mean torque sequences of ``B`` starts ``iterations`` times
-    from ``n_samples`` perturbed copies each (the first unperturbed), weighted by ``exp(-cost / temperature)``;
-    :meth:`plan` does so for one start, returns the first torque and shifts its sequence by one knot.
+    (R, T)) -> (R, T)``.  :meth:`optimise` refines mean torque sequences ``iterations`` times from ``n_samples``
+    perturbed copies each (the first unperturbed), weighted by ``exp(-cost / temperature)``.
     """
 
     def __init__(
@@ -473,22 +445,14 @@ class MPPI:
         seed: int = 0,
         iterations: int = 1,
     ) -> None:
-        self.rollout_fn, self.cost_fn = rollout_fn, cost_fn
-        self.limit = positive("torque_limit_nm", torque_limit_nm)
-        self.n_knots, self.hold_steps = positive_int("n_knots", n_knots), positive_int("hold_steps", hold_steps)
-        self.n_samples = int_at_least("n_samples", n_samples, 2)
-        self.noise_std = positive("noise_std_nm", noise_std_nm)
-        self.temperature = positive("temperature", temperature)
-        self.iterations = positive_int("iterations", iterations)
-        self.generator = torch.Generator().manual_seed(int(non_negative("seed", seed)))
-        self.reset()
-
-    def reset(self) -> None:
-        self.mean = torch.zeros(1, self.n_knots, dtype=torch.float64)
+        self.rollout_fn, self.cost_fn, self.limit = rollout_fn, cost_fn, float(torque_limit_nm)
+        self.n_knots, self.hold_steps, self.n_samples = int(n_knots), int(hold_steps), int(n_samples)
+        self.noise_std, self.temperature, self.iterations = float(noise_std_nm), float(temperature), int(iterations)
+        self.generator = torch.Generator().manual_seed(int(seed))
 
     @torch.no_grad()
     def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:
-        """Refined mean sequences ``(B, n_knots)`` of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
+        """Refined mean sequences ``(B, n_knots)`` [N m] of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
         x = torch.as_tensor(states, dtype=torch.float32)
         batch, k = x.shape[0], self.n_samples
         x0 = x.repeat_interleave(k, dim=0)
@@ -504,20 +468,12 @@ class MPPI:
             mean = (weights[..., None] * knots).sum(1)
         return mean
 
-    def plan(self, state: np.ndarray | Tensor) -> float:
-        """The first torque [N m] for one start ``state (d,)``; keeps and shifts the mean sequence."""
-        self.mean = self.optimise(torch.as_tensor(state).reshape(1, -1), self.mean)
-        first = float(self.mean[0, 0])
-        self.mean = torch.cat([self.mean[:, 1:], self.mean[:, -1:]], dim=1)
-        return first
-
 
 def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor) -> Tensor:
-    """``1 - cos(theta)`` plus :data:`ENERGY_WEIGHT` times the squared rigid-pendulum energy error
-    (:func:`softpend.control.swingup.pendulum_energy_j`, zero upright) over the hanging energy gap."""
-    inertia = (
-        params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
-    )
+    """``1 - cos(theta)`` plus :data:`ENERGY_WEIGHT` times the squared rigid-pendulum energy error (zero upright)
+    over the hanging energy gap."""
+    length = params.length_m
+    inertia = params.hub_inertia_kgm2 + params.mass_kg * length**2 / 3 + params.tip_mass_kg * length**2
     moment = params.gravity_torque_horizontal_nm
     energy = 0.5 * inertia * theta_dot_rad_s**2 + moment * (torch.cos(theta_rad) - 1.0)
     return 1.0 - torch.cos(theta_rad) + ENERGY_WEIGHT * (energy / (2 * moment)) ** 2
@@ -533,7 +489,7 @@ class PlannerController:
 
     def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
-        self.capture_rad, self.hold_steps = float(capture_rad), positive_int("hold_steps", hold_steps)
+        self.capture_rad, self.hold_steps = float(capture_rad), int(hold_steps)
         self.torque_limit_nm = lqr.torque_limit_nm
         self.reset()
 
@@ -594,7 +550,7 @@ class _BatchPlanner(BatchPolicy):
 
 @dataclass
 class TrialRecord:
-    """One stretch of plant time: the excitation or a planner trial."""
+    """One stretch of plant time: the excitation or a planner trial (``start_seed`` None)."""
 
     kind: str
     start_seed: Optional[int]
@@ -602,7 +558,6 @@ class TrialRecord:
     plant_s_total: float
     balanced: bool
     upright_std_rad: float
-    fit_wall_s: float
     wall_s_total: float
 
 
@@ -649,8 +604,7 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
     observations, torques = [env.report_observation.as_array()], []
     balanced = False
     for k in range(int(round(config.trial_s / dt))):
-        observation = env.report_observation
-        torque = min(max(controller(observation, None, None, k * dt), -limit), limit)
+        torque = min(max(controller(env.report_observation, None, None, k * dt), -limit), limit)
         *_, truncated, _info = env.step(np.array([torque / limit]))
         torques.append(torque)
         observations.append(env.report_observation.as_array())
@@ -658,17 +612,16 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
             break
         theta = np.array(observations[-window:])[:, 1]
         if len(theta) == window and np.all(np.abs(theta) < UPRIGHT_RAD):
-            if math.sqrt(float(np.mean(theta**2))) <= config.target_std_rad:
+            if math.sqrt(float(np.mean(theta**2))) <= HOLD_STD_RAD:
                 balanced = True
                 break
     obs = np.array(observations)
-    tail = obs[-window:, 1]
     return {
         "positions": obs[:, :5],
         "torques": np.array(torques),
         "plant_s": len(torques) * dt,
         "balanced": balanced,
-        "upright_std_rad": float(np.sqrt(np.mean(tail**2))),
+        "upright_std_rad": float(np.sqrt(np.mean(obs[-window:, 1] ** 2))),
     }
 
 
@@ -696,39 +649,37 @@ class _Planner:
             parts = [_transitions(p, u, task.dt_s) for p, u in self.trajectories]
             s, u, s1 = (np.concatenate([part[i] for part in parts]) for i in range(3))
             self.model = fit_ensemble(s, u, s1, task, config.replace(seed=seed))
-        else:
-            xs, us, x1s = [], [], []
-            h = config.hold_steps  # one model step per control step, under the mean torque over it
-            for positions, torques in self.trajectories:
-                x = joint_states(positions, self.rod, task.dt_s)  # row j is sample j + 1
-                rows = np.arange(0, len(x) - h, h)
-                xs.append(x[rows])
-                us.append(np.array([torques[j + 1 : j + 1 + h].mean() for j in rows]))
-                x1s.append(x[rows + h])
-            self.model = ResidualPRBEnsemble(self.rod, config.control_dt_s, config.ensemble_size, config.hidden_width)
-            self.model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
+            return
+        xs, us, x1s = [], [], []
+        h = config.hold_steps  # one model step per control step, under the mean torque over it
+        for positions, torques in self.trajectories:
+            x = joint_states(positions, self.rod, task.dt_s)  # row j is sample j + 1
+            rows = np.arange(0, len(x) - h, h)
+            xs.append(x[rows])
+            us.append(np.array([torques[j + 1 : j + 1 + h].mean() for j in rows]))
+            x1s.append(x[rows + h])
+        self.model = ResidualPRBEnsemble(self.rod, config.control_dt_s, config.ensemble_size, config.hidden_width)
+        self.model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
 
     def controller(self) -> PlannerController:
-        config, task, rod = self.config, self.config.task, self.rod
-        model, generator = self.model, self.generator
-        model.noise_generator = generator
-        for member in getattr(model, "members", ()):
-            member.noise_generator = generator
+        config, task, rod, model, generator = self.config, self.config.task, self.rod, self.model, self.generator
+        for part in [model, *getattr(model, "members", ())]:
+            part.noise_generator = generator
         if config.model == "ensemble":
             tracker: Any = ObservedStateTracker(model)
+            fast: Any = StackedEnsemble(model)
             i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
 
             def cost(states: Tensor, torques: Tensor) -> Tensor:
                 return swing_up_cost(rod, states[..., i_theta], states[..., i_rate])
 
         else:
-            tracker = JointStateTracker(rod, task.dt_s)
+            tracker, fast = JointStateTracker(rod, task.dt_s), model
             n_q, link = rod.n_links + 1, rod.link_length_m
 
             def cost(states: Tensor, torques: Tensor) -> Tensor:
                 return swing_up_cost(rod, *_tip(states[..., :n_q], states[..., n_q:], link))
 
-        fast = StackedEnsemble(model) if config.model == "ensemble" else model
         fast.noise_generator = generator
         mppi = MPPI(
             lambda x0, torques: rollout(fast, x0, torques, generator),
@@ -744,6 +695,22 @@ class _Planner:
         return PlannerController(mppi, tracker, self.lqr, config.capture_rad, config.hold_steps)
 
 
+def _excitation(config: PlannerConfig) -> tuple[Any, float]:
+    """The multisine excitation from hanging: its data and plant seconds."""
+    task = config.task
+    protocol = BabbleProtocol(
+        program="multisine",
+        start="hanging",
+        feedback_trial_fraction=0.0,
+        n_trials=1,
+        trial_length_s=config.excitation_s,
+        dt_s=task.dt_s,
+        substeps=task.substeps,
+    )
+    data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
+    return data, protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
+
+
 def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) -> PlannerResult:
     """Excitation, identification, then planner trials from the selection starts until the stopping rule fires
     (or ``max_trials``); every plant second driven counts, failed trials included."""
@@ -753,40 +720,18 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
     config = config if config is not None else PlannerConfig()
     task = config.task
     started = time.perf_counter()
-    records: list[TrialRecord] = []
     with one_torch_thread():
-        protocol = BabbleProtocol(
-            program="multisine",
-            start="hanging",
-            feedback_trial_fraction=0.0,
-            n_trials=1,
-            trial_length_s=config.excitation_s,
-            dt_s=task.dt_s,
-            substeps=task.substeps,
-        )
-        data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
-        excitation_s = protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
-        fit_started = time.perf_counter()
+        data, excitation_s = _excitation(config)
         rod = task.rod
         if config.identify_windows:
-            guess = task.rod.replace(**{k: f * getattr(task.rod, k) for k, f in IDENTIFY_GUESS_FACTORS.items()})
+            guess = rod.replace(**{k: f * getattr(rod, k) for k, f in IDENTIFY_GUESS_FACTORS.items()})
             rod = identify(data, GreyBoxConfig(max_windows=config.identify_windows, seed=config.seed), guess).params
         planner = _Planner(config, rod)
         for i in range(data.n_trials):
             planner.add(data.positions[i], data.torques_nm[i])
         planner.fit(0)
-        records.append(
-            TrialRecord(
-                "excitation",
-                None,
-                excitation_s,
-                excitation_s,
-                False,
-                math.nan,
-                time.perf_counter() - fit_started,
-                time.perf_counter() - started,
-            )
-        )
+        wall_s = time.perf_counter() - started
+        records = [TrialRecord("excitation", None, excitation_s, excitation_s, False, math.nan, wall_s)]
         env = SoftPendulumEnv(**task.env_kwargs())
         in_a_row = 0
         for index in range(config.max_trials):
@@ -794,24 +739,14 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
             trial = _run_trial(env, planner.controller(), seed, config)
             planner.add(trial["positions"], trial["torques"])
             in_a_row = in_a_row + 1 if trial["balanced"] else 0
-            fit_started = time.perf_counter()
             if in_a_row < config.stop_after_balanced:
                 planner.fit(index + 1)
-            total = records[-1].plant_s_total + trial["plant_s"]
-            records.append(
-                TrialRecord(
-                    "trial",
-                    seed,
-                    trial["plant_s"],
-                    total,
-                    trial["balanced"],
-                    trial["upright_std_rad"],
-                    time.perf_counter() - fit_started,
-                    time.perf_counter() - started,
-                )
+            total, std = records[-1].plant_s_total + trial["plant_s"], trial["upright_std_rad"]
+            r = TrialRecord(
+                "trial", seed, trial["plant_s"], total, trial["balanced"], std, time.perf_counter() - started
             )
+            records.append(r)
             if progress:
-                r = records[-1]
                 print(
                     f"trial {index}: seed {seed} {r.plant_s:.2f} s (total {r.plant_s_total:.2f} s) balanced "
                     f"{r.balanced} std {r.upright_std_rad:.3f} wall {r.wall_s_total:.0f} s",
@@ -823,17 +758,17 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
 
 
 def fresh_start_evaluation(
-    result: PlannerResult, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S, engine: str = "batched"
+    result: PlannerResult, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S
 ) -> EvaluationSummary:
-    """The final controller from fresh starts (:func:`softpend.evaluation.evaluate`; the batched engine runs
-    every start at once); seeds shared with the run's selection starts raise ``ValueError``."""
+    """The final controller from fresh starts, all at once on the batched engine; seeds shared with the run's
+    selection starts raise ``ValueError``."""
     from softpend.torch_threads import one_torch_thread
 
     shared = sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds))
     if shared:
         raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
-    one_of("engine", engine, ("exudyn", "batched"))
-    controller = result.controller.batch_policy() if engine == "batched" else result.controller
     with torch.no_grad(), one_torch_thread():
-        task = result.config.task
-        return evaluate(controller, task, engine=engine, name="planner", seeds=seeds, duration_s=duration_s)
+        policy = result.controller.batch_policy()
+        return evaluate(
+            policy, result.config.task, engine="batched", name="planner", seeds=seeds, duration_s=duration_s
+        )

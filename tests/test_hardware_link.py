@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from softpend.hardware import protocol as proto
+from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS, run_control_loop
 from softpend.hardware.driver import HandshakeError, LinkChecksumError, LinkDisconnected, LinkTimeout, MotorLink
 from softpend.hardware.emulator import RigConfig, RigEmulator, SimRig, start_emulator_process
-from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
 from softpend.io.samplelog import SampleLog, read_sample_log
 
 

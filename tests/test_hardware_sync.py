@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from softpend.hardware.loop import LOOP_LOG_COLUMNS
+from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS
 from softpend.hardware.sync import build_rig_dataset, estimate_clock_offset, startup_wiggle_torque, synchronise
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.plant import RodParams, make_plant

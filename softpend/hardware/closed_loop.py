@@ -1,5 +1,7 @@
-"""Any controller on a rig (real, or the digital twin in simulated time) behind the state estimator: control arms
-with the first camera correction, a blind camera is a safe stop, any exception sends STOP and propagates."""
+"""The host's rig loop, paced by the device's STATE stream (STOP on any exception, every state logged first):
+:func:`run_control_loop` plays a program of time (babbling); :func:`run_closed_loop` runs any controller behind
+the state estimator (control arms with the first camera correction, a blind camera is a safe stop), on a rig or
+on the digital twin in simulated time (:func:`run_twin_control`)."""
 
 from __future__ import annotations
 
@@ -12,12 +14,161 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from softpend.checks import non_negative
-from softpend.hardware.driver import MotorLink
+from softpend.checks import non_negative, positive
+from softpend.hardware.driver import MotorLink, MotorState
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
-from softpend.hardware.loop import LoopResult, RigLoop, SecondsBar, check_run
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
+
+#: Columns of the motor log written by :func:`run_control_loop`.
+LOOP_LOG_COLUMNS: tuple[str, ...] = tuple(
+    "host_time_s device_time_s state_seq phi_rad phi_dot_rad_s applied_torque_nm command_torque_nm flags".split()
+)
+
+
+@dataclass(frozen=True)
+class RigObservation:
+    """What a program sees on the rig: device time since the loop's start [s], hub angle (unwrapped) and rate."""
+
+    time_s: float
+    phi_rad: float
+    phi_dot_rad_s: float
+
+
+@dataclass
+class LoopResult:
+    """Summary of one loop run."""
+
+    samples: int
+    command_periods_s: np.ndarray
+    dropped_states: int
+    bad_frames: int
+    watchdog_trips: int
+
+    @property
+    def jitter_ms_p95(self) -> float:
+        """95th percentile of ``|period - median period|`` between consecutive torque commands [ms]."""
+        periods = np.asarray(self.command_periods_s, dtype=float)
+        if periods.size == 0:
+            return math.nan
+        return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
+
+
+def _check_run(link: MotorLink, duration_s: float, *logs: tuple[str, Optional[SampleLog], Any, str]) -> None:
+    """Raise ``ValueError`` for a loop that cannot run: ``logs`` are ``(name, log, columns, columns' name)``."""
+    positive("duration_s", duration_s)
+    if not link.is_open:
+        raise ValueError("link must be open")
+    for name, log, columns, what in logs:
+        if log is not None and list(log.columns) != list(columns):
+            raise ValueError(f"{name} must have the columns {what}, got {log.columns}")
+
+
+class _RigLoop:
+    """One run paced by the STATE stream: each state read goes to :meth:`step` until ``duration_s`` of device time
+    or a safe stop (:attr:`stop_reason`); ``drains``: the states queued since the last one are processed too."""
+
+    drains = False
+
+    def __init__(self, link: MotorLink, duration_s: float, log: Optional[SampleLog], period_s: float) -> None:
+        self.link, self.duration_s, self.log = link, duration_s, log
+        self.nominal_period = 1.0 / link.device.state_rate_hz if link.device else period_s
+        self.send_times: list[float] = []
+        self.samples = self.dropped = self.watchdog = 0
+        self.t0: Optional[float] = None
+        self.last_device_time: Optional[float] = None
+        self.t = 0.0
+        self.stop_reason: Optional[str] = None
+
+    def count(self, state: MotorState) -> None:
+        if self.t0 is None:
+            self.t0 = state.device_time_s
+        self.t = state.device_time_s - self.t0
+        if self.last_device_time is not None:
+            self.dropped += max(0, int(round((state.device_time_s - self.last_device_time) / self.nominal_period)) - 1)
+        self.last_device_time = state.device_time_s
+        self.watchdog += int(state.watchdog_tripped)
+
+    def step(self, state: MotorState, newest: bool) -> None:
+        raise NotImplementedError
+
+    def postfix(self) -> Optional[str]:
+        return None
+
+    def run(self, desc: str, progress: bool) -> None:
+        from tqdm.auto import tqdm
+
+        link = self.link
+        bar = tqdm(total=round(self.duration_s, 1), unit="s", desc=desc, mininterval=0.5, disable=not progress)
+        try:
+            while True:
+                states = [link.read_state()]
+                if self.drains:
+                    states += link.drain_states()
+                for index, state in enumerate(states):
+                    self.step(state, newest=index == len(states) - 1)
+                    if self.stop_reason is not None:
+                        break
+                shown = round(min(self.t, self.duration_s), 1)
+                if progress and shown > bar.n:
+                    bar.update(round(shown - bar.n, 1))
+                    postfix = self.postfix()
+                    if postfix is not None:
+                        bar.set_postfix_str(postfix, refresh=False)
+                if self.stop_reason is not None or self.t >= self.duration_s:
+                    break
+        except BaseException:
+            link.emergency_stop()
+            raise
+        finally:
+            bar.close()
+
+    def loop_result(self) -> dict[str, Any]:
+        return dict(
+            samples=self.samples,
+            command_periods_s=np.diff(self.send_times),
+            dropped_states=self.dropped,
+            bad_frames=self.link.bad_frames,
+            watchdog_trips=self.watchdog,
+        )
+
+
+class _BabbleLoop(_RigLoop):
+    def __init__(self, link: MotorLink, controller: Callable, duration_s: float, log: Optional[SampleLog]) -> None:
+        super().__init__(link, duration_s, log, 0.01)
+        self.controller = controller
+
+    def step(self, state: MotorState, newest: bool) -> None:
+        self.count(state)
+        link, t = self.link, self.t
+        try:
+            link.send_torque(float(self.controller(RigObservation(t, state.phi_rad, state.phi_dot_rad_s), t)))
+        except BaseException:
+            link.emergency_stop()  # zero torque first, so the log records what is in force
+            raise
+        finally:
+            self.send_times.append(link.clock.now_s())
+            if self.log is not None:
+                names = ("host_time_s", "device_time_s", "seq", "phi_rad", "phi_dot_rad_s", "applied_torque_nm")
+                self.log.append([*(getattr(state, name) for name in names), link.last_command_nm, state.flags])
+        self.samples += 1
+
+
+def run_control_loop(
+    link: MotorLink,
+    controller: Callable[[RigObservation, float], float],
+    duration_s: float,
+    log: Optional[SampleLog] = None,
+    progress: bool = False,
+) -> LoopResult:
+    """Run ``controller(observation, time_s) -> torque_nm`` on the open ``link`` for ``duration_s`` of device time,
+    one row of :data:`LOOP_LOG_COLUMNS` in ``log`` per state; a link error stops the motor and propagates."""
+    _check_run(link, duration_s, ("log", log, LOOP_LOG_COLUMNS, "LOOP_LOG_COLUMNS"))
+    loop = _BabbleLoop(link, controller, duration_s, log)
+    loop.run("rig loop", progress)
+    link.send_torque(0.0)
+    return LoopResult(**loop.loop_result())
+
 
 #: ``status`` column of the motor log (``camera_blind`` and ``arm_timeout`` are safe stops).
 STATUS_CODES: dict[str, int] = {
@@ -78,13 +229,11 @@ def run_closed_loop(
 ) -> ClosedLoopResult:
     """Run ``controller(observation, q, q_dot, time_s)`` on the rig behind the open ``link`` for ``duration_s`` of
     device time; ``tip_source`` None starts control at once; ``clock`` defaults to half the shortest of 5 pings."""
-    check_run(
+    _check_run(
         link,
         duration_s,
-        [
-            ("log", log, rig_control_columns(estimator.n), f"rig_control_columns({estimator.n})"),
-            ("camera_log", camera_log, CAMERA_LOG_COLUMNS, "CAMERA_LOG_COLUMNS"),
-        ],
+        ("log", log, rig_control_columns(estimator.n), f"rig_control_columns({estimator.n})"),
+        ("camera_log", camera_log, CAMERA_LOG_COLUMNS, "CAMERA_LOG_COLUMNS"),
     )
     non_negative("arm_timeout_s", arm_timeout_s)
     if clock is None:
@@ -92,15 +241,13 @@ def run_closed_loop(
     if hasattr(controller, "reset"):
         controller.reset()
     link.drain_states()  # states queued before the run are stale
-    bar = SecondsBar(duration_s, "rig control", progress)
-    loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s)
-    loop.log, loop.camera_log = log, camera_log
+    loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s, log, camera_log)
     torch = sys.modules.get("torch")  # on one thread while the loop runs
     threads = torch.get_num_threads() if torch is not None else 0
     try:
         if torch is not None:
             torch.set_num_threads(1)
-        loop.run(bar)
+        loop.run("rig control", progress)
     finally:
         if torch is not None:
             torch.set_num_threads(threads)
@@ -117,10 +264,8 @@ class _Tick:
     commanded: int = 0
 
 
-class _ClosedLoop(RigLoop):
+class _ClosedLoop(_RigLoop):
     drains = True
-    log: Optional[SampleLog] = None
-    camera_log: Optional[SampleLog] = None
 
     def __init__(
         self,
@@ -131,8 +276,11 @@ class _ClosedLoop(RigLoop):
         tip_source: Any,
         clock: DeviceClock,
         arm_timeout_s: float,
+        log: Optional[SampleLog],
+        camera_log: Optional[SampleLog],
     ) -> None:
-        super().__init__(link, duration_s, 1.0 / link.device.state_rate_hz if link.device else estimator.dt_s)
+        super().__init__(link, duration_s, log, estimator.dt_s)
+        self.camera_log = camera_log
         self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
         self.clock, self.arm_timeout_s = clock, arm_timeout_s
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
@@ -144,13 +292,10 @@ class _ClosedLoop(RigLoop):
         self.blind_max = 0.0
         self.status = "arming" if not self.armed else "running"
 
-    def show(self, bar: SecondsBar) -> None:
-        if bar.advance(self.t):
-            theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan
-            bar.postfix(
-                f"theta {theta:+.2f} rad, torque {self.link.last_command_nm:+.3f} N m, "
-                f"blind {self.estimator.blind_s * 1e3:.0f} ms"
-            )
+    def postfix(self) -> str:
+        theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan
+        torque, blind_ms = self.link.last_command_nm, self.estimator.blind_s * 1e3
+        return f"theta {theta:+.2f} rad, torque {torque:+.3f} N m, blind {blind_ms:.0f} ms"
 
     def step(self, state: Any, newest: bool) -> None:
         self.clock.observe(state.host_time_s, state.device_time_s)
@@ -234,11 +379,7 @@ class _ClosedLoop(RigLoop):
     def result(self) -> ClosedLoopResult:
         tip_source = self.tip_source
         return ClosedLoopResult(
-            samples=self.samples,
-            command_periods_s=np.diff(self.send_times),
-            dropped_states=self.dropped,
-            bad_frames=self.link.bad_frames,
-            watchdog_trips=self.watchdog,
+            **self.loop_result(),
             duration_s=self.t,
             stop_reason=self.stop_reason,
             status=self.status if self.stop_reason is not None else "completed",

@@ -11,9 +11,9 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
 
+from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
 from softpend.hardware.driver import MotorLink
 from softpend.hardware.emulator import RigConfig, SimRig
-from softpend.hardware.loop import LOOP_LOG_COLUMNS, LoopResult, RigObservation, run_control_loop
 from softpend.hardware.sync import SyncResult, build_rig_dataset, startup_wiggle_torque
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.plant import RodParams, make_plant

@@ -13,7 +13,7 @@ import numpy as np
 
 from softpend.checks import in_unit_interval, int_at_least, positive
 from softpend.plant.base import PlantBase, energies
-from softpend.plant.beam_adapter import BeamSection, HubBeam2D
+from softpend.plant.exudyn_adapter import BeamSection, HubBeam2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
 
@@ -149,12 +149,12 @@ class BeamPlant(PlantBase):
         return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
-        self._beam.set_coordinates(*self.global_coordinates(q, q_dot))
+        self._beam.set_state(*self.global_coordinates(q, q_dot))
         self._beam.set_hub_torque(0.0)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` (hub angle unwrapped)."""
-        return self.state_from_global(*self._beam.get_coordinates())
+        return self.state_from_global(*self._beam.get_state())
 
     def _advance(self, torque_nm: float) -> None:
         self._beam.set_hub_torque(torque_nm)
@@ -162,12 +162,12 @@ class BeamPlant(PlantBase):
 
     def _solve_static(self) -> None:
         self._beam.set_hub_torque(0.0)
-        self._beam.solve_static()
+        self._beam.solve_static((1, 20), 1e-8)
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
         """Positions ``(n_elements + 1, 2)`` of the beam nodes, hub axis first [m]."""
         if q is None:
-            c, _ = self._beam.get_coordinates()
+            c, _ = self._beam.get_state()
         else:
             q = self._check_state(q, "q")
             c, _ = self.global_coordinates(q, np.zeros_like(q))
@@ -175,7 +175,7 @@ class BeamPlant(PlantBase):
         return np.stack([c[:, 0], c[:, 1] + self._s], axis=1)
 
     def observe(self) -> Observation:
-        return self._observation_from_global(*self._beam.get_coordinates())
+        return self._observation_from_global(*self._beam.get_state())
 
     def observation_from_state(self, q: np.ndarray, qd: np.ndarray) -> Observation:
         """Observation of a given state (the plant is not changed)."""
@@ -191,10 +191,10 @@ class BeamPlant(PlantBase):
         """Kinetic (Exudyn's mass matrix), gravitational and elastic (Simo-Reissner strain energy at each
         element's midpoint) energy [J]."""
         if q is None or qd is None:
-            c, c_t = self._beam.get_coordinates()
+            c, c_t = self._beam.get_state()
         else:
             c, c_t = self.global_coordinates(self._check_state(q, "q"), self._check_state(qd, "qd"))
-        kinetic = 0.5 * float(c_t @ self._beam.mass_matrix() @ c_t)
+        kinetic = 0.5 * float(c_t @ self._beam.mass_matrix @ c_t)
         nodes = c.reshape(-1, 3)
         x = nodes[:, 0]
         y = nodes[:, 1] + self._s

@@ -88,8 +88,7 @@ def _legacy_advance(self) -> None:
 
 
 def _legacy_observe(self):
-    q, qd = self._chain.get_state_views()
-    return self.observation_from_state(q.tolist(), qd.tolist())
+    return self.observation_from_state(self._chain._q.tolist(), self._chain._q_t.tolist())
 
 
 def make_legacy(env) -> None:

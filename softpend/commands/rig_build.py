@@ -420,8 +420,8 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     """Babble on the rig at ``args.port`` while a thread tracks ``args.camera``; synchronise the logs."""
     import threading
 
+    from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS, run_control_loop
     from softpend.hardware.driver import MotorLink
-    from softpend.hardware.loop import LOOP_LOG_COLUMNS, run_control_loop
     from softpend.hardware.sync import build_rig_dataset
     from softpend.hardware.twin import rig_babble_controller
     from softpend.io.samplelog import SampleLog

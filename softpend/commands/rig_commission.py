@@ -8,19 +8,24 @@ import os
 
 from softpend.commands.options import MAX_SESSION_S, check_numbers
 
+#: The :class:`~softpend.study.commission.CommissionConfig` options: field -> (low, high, help with the config's
+#: default); a field ending in ``_s`` is a float, the others integers.
+CONFIG_OPTIONS: dict[str, tuple[float, float, str]] = {
+    "seed": (0, 10**6 - 1, "seed of the commissioning (0)"),
+    "excite_s": (1e-3, MAX_SESSION_S, "seconds of multisine excitation (20)"),
+    "trial_length_s": (0.1, MAX_SESSION_S, "trial length of the rig dataset [s] (3)"),
+    "max_windows": (1, 10**5, "identification windows (60)"),
+    "max_iterations": (1, 10**4, "identification iterations (25)"),
+    "check_draws": (1, 10**4, "design check: rods drawn from the uncertainty (8)"),
+    "check_starts": (1, 10**4, "design check: simulator starts per rod (2)"),
+    "check_duration_s": (1e-3, MAX_SESSION_S, "design check: start length [s] (10)"),
+    "verify_starts": (1, 1000, "fresh twin starts per condition (10)"),
+    "verify_duration_s": (1e-3, MAX_SESSION_S, "length of a twin start [s] (10)"),
+}
 #: The closed interval of each numeric option, checked before anything starts.
 OPTION_RANGES: dict[str, tuple[float, float]] = {
     "--twin-seed": (0, 2**63 - 1),
-    "--seed": (0, 10**6 - 1),
-    "--excite-s": (1e-3, MAX_SESSION_S),
-    "--trial-length-s": (0.1, MAX_SESSION_S),
-    "--max-windows": (1, 10**5),
-    "--max-iterations": (1, 10**4),
-    "--check-draws": (1, 10**4),
-    "--check-starts": (1, 10**4),
-    "--check-duration-s": (1e-3, MAX_SESSION_S),
-    "--verify-starts": (1, 1000),
-    "--verify-duration-s": (1e-3, MAX_SESSION_S),
+    **{f"--{name.replace('_', '-')}": (low, high) for name, (low, high, _) in CONFIG_OPTIONS.items()},
 }
 
 
@@ -34,16 +39,8 @@ def register(actions: argparse._SubParsersAction) -> None:
     rod.add_argument("--twin-rod", metavar="FILE", help="the twin's rod: a rod JSON (optional torque_gain)")
     rod.add_argument("--twin-seed", type=int, metavar="N", help="the twin's rod: an unknown rod drawn from seed N")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder of the stages' outputs and report.json")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the commissioning (0)")
-    parser.add_argument("--excite-s", type=float, default=20.0, help="seconds of multisine excitation (20)")
-    parser.add_argument("--trial-length-s", type=float, default=3.0, help="trial length of the rig dataset [s] (3)")
-    parser.add_argument("--max-windows", type=int, default=60, help="identification windows (60)")
-    parser.add_argument("--max-iterations", type=int, default=25, help="identification iterations (25)")
-    parser.add_argument("--check-draws", type=int, default=8, help="design check: rods drawn from the uncertainty (8)")
-    parser.add_argument("--check-starts", type=int, default=2, help="design check: simulator starts per rod (2)")
-    parser.add_argument("--check-duration-s", type=float, default=10.0, help="design check: start length [s] (10)")
-    parser.add_argument("--verify-starts", type=int, default=10, help="fresh twin starts per condition (10)")
-    parser.add_argument("--verify-duration-s", type=float, default=10.0, help="length of a twin start [s] (10)")
+    for name, (_, _, text) in CONFIG_OPTIONS.items():
+        parser.add_argument(f"--{name.replace('_', '-')}", type=float if name.endswith("_s") else int, help=text)
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.set_defaults(func=run)
 
@@ -63,18 +60,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--twin-rod {args.twin_rod}: no such file")
         check_regular_file(args.twin_rod, "--twin-rod")
     truth = TwinTruth(rod_file=args.twin_rod, seed=args.twin_seed)
-    config = CommissionConfig(
-        excite_s=args.excite_s,
-        trial_length_s=args.trial_length_s,
-        max_windows=args.max_windows,
-        max_iterations=args.max_iterations,
-        check_draws=args.check_draws,
-        check_starts=args.check_starts,
-        check_duration_s=args.check_duration_s,
-        verify_starts=args.verify_starts,
-        verify_duration_s=args.verify_duration_s,
-        seed=args.seed,
-    )
+    config = CommissionConfig(**{k: getattr(args, k) for k in CONFIG_OPTIONS if getattr(args, k) is not None})
 
     def told(stage: str, ran: bool, output: dict) -> None:
         if not args.json:

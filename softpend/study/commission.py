@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Callable, Optional
 
-from softpend.checks import in_range, int_at_least, positive, positive_int
+from softpend.checks import in_range, int_at_least, positive
 from softpend.plant import RodParams
 from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
 from softpend.study.unknown_rod import UNKNOWN_FIELDS
@@ -74,20 +74,16 @@ class CommissionConfig:
         positive("verify_duration_s", self.verify_duration_s)
         in_range("peak_fraction", self.peak_fraction, 1e-3, 1.0)
         in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
-        for name in ("max_windows", "max_iterations", "check_draws", "check_starts"):
-            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
-        object.__setattr__(self, "verify_starts", positive_int("verify_starts", self.verify_starts))
-        if self.verify_starts > 1000:
-            raise ValueError(f"verify_starts must be at most 1000, got {self.verify_starts}")
-        seed = int_at_least("seed", self.seed, 0)
-        if seed >= 10**6:
-            raise ValueError(f"seed must be below 1000000, got {seed}")
-        object.__setattr__(self, "seed", seed)
+        integers = {"max_windows": 1, "max_iterations": 1, "check_draws": 1, "check_starts": 1, "verify_starts": 1}
+        for name, low in (integers | {"seed": 0}).items():
+            object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
+        for name, high in (("verify_starts", 1000), ("seed", 10**6 - 1)):
+            if getattr(self, name) > high:
+                raise ValueError(f"{name} must be at most {high}, got {getattr(self, name)}")
         if self.session_s < self.trial_length_s + 3:
             raise ValueError(
-                f"excite_s must be at least trial_length_s + {3 - WIGGLE_S - REST_S:g} s "
-                f"(the session, {self.session_s:g} s with the wiggle, must hold trial_length_s + 3 s), got "
-                f"{self.excite_s!r}"
+                f"excite_s must be at least trial_length_s + {3 - WIGGLE_S - REST_S:g} s (the session with the "
+                f"wiggle must hold trial_length_s + 3 s), got {self.excite_s!r}"
             )
 
     @property
@@ -96,10 +92,9 @@ class CommissionConfig:
         return WIGGLE_S + self.excite_s + REST_S
 
     def commissioning_seeds(self) -> list[int]:
-        """Every seed the commissioning draws with: the session (its wiggle: the next), the identification's
-        windows, the uncertainty draws and the design check's starts."""
-        s = self.seed
-        return sorted({s, s + 1} | set(self.check_seeds()))
+        """Every seed the commissioning draws with: the session and its wiggle, the uncertainty draws and the
+        design check's starts."""
+        return sorted({self.seed, self.seed + 1} | set(self.check_seeds()))
 
     def check_seeds(self) -> list[int]:
         return [self.seed + 2 + j for j in range(self.check_draws * self.check_starts)]

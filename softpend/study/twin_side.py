@@ -1,10 +1,6 @@
-"""The twin's side of commissioning: the device and plant of an unknown rod, run in a spawned child process.
-
-The commissioning process hands a job the twin's truth only as a :class:`TwinTruth` (a rod file's path or a
-seed), never opened or drawn there; the child resolves it, keeps its own files (the rod, truth logs, video) in a
-private folder, and hands back what a rig gives its host: the motor log and the tracked camera log of an
-excitation, and the rows of a verification (measured on the true motion, as a reporting step).
-"""
+"""The twin's side of commissioning, run in a spawned child process: the commissioning hands it the truth only as
+a :class:`TwinTruth` (a rod file's path or a seed); the child resolves it, keeps its own files in a private
+folder, and hands back what a rig gives its host (motor and camera logs, verification rows)."""
 
 from __future__ import annotations
 
@@ -54,9 +50,9 @@ class TwinTruth:
     def __post_init__(self) -> None:
         if (self.rod_file is None) == (self.seed is None):
             raise ValueError("the twin's rod needs exactly one of rod_file (--twin-rod) and seed (--twin-seed)")
+        if self.rod_file is not None and not str(self.rod_file).strip():
+            raise ValueError("--twin-rod: the path is empty")
         if self.rod_file is not None:
-            if not str(self.rod_file).strip():
-                raise ValueError("--twin-rod: the path is empty")
             object.__setattr__(self, "rod_file", str(self.rod_file))
         if self.seed is not None:
             object.__setattr__(self, "seed", int_at_least("--twin-seed", self.seed, 0))
@@ -103,8 +99,8 @@ def excite_on_twin(
     """Play ``program_nm`` (after the start-up wiggle) on the twin from hanging at rest, filmed, through the rig's
     own I/O (:func:`softpend.hardware.twin.run_twin_session` in ``private/excite``); copy the motor log (without
     the device's settings) and the tracked camera log into ``public``; the plant seconds and loop counters."""
+    from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS
     from softpend.hardware.emulator import RigConfig
-    from softpend.hardware.loop import LOOP_LOG_COLUMNS
     from softpend.hardware.twin import run_twin_session
     from softpend.io.outputs import Outputs
     from softpend.io.samplelog import SampleLog, read_sample_log
@@ -142,19 +138,6 @@ def excite_on_twin(
     }
 
 
-def _verify_start(
-    design: Any, model: Any, true_task: Any, condition: RigCondition, seed: int, duration_s: float, workdir: Path
-) -> dict[str, Any]:
-    """One start of the controller designed on ``model`` (a RodParams; also the estimator's model) on the twin of
-    ``true_task``: a row of the true motion while the controller was in charge (a stop is a failed row)."""
-    from softpend.study.rig_runs import twin_start
-    from softpend.task import Task
-
-    return twin_start(
-        design(model), "commissioned", true_task, condition, seed, duration_s, workdir, estimator_task=Task(rod=model)
-    )
-
-
 def verify_on_twin(
     truth: TwinTruth,
     private: str,
@@ -168,25 +151,26 @@ def verify_on_twin(
     from softpend.control.identified import design_swingup
     from softpend.io.outputs import Outputs
     from softpend.plant import RodParams
+    from softpend.study.rig_runs import twin_start
     from softpend.task import Task
 
     unknown = [name for name in conditions if name not in CONDITIONS]
     if unknown:
         raise ValueError(f"conditions must be drawn from {sorted(CONDITIONS)}, got {unknown}")
     private_dir = Path(private)
-    rod = _resolve(truth, private_dir, Outputs())
+    true_task = Task(rod=_resolve(truth, private_dir, Outputs()).effective_rod())
     model = RodParams.from_dict(dict(model_rod))
-    true_task = Task(rod=rod.effective_rod())
     return {
         name: [
-            _verify_start(
-                design_swingup,
-                model,
+            twin_start(
+                design_swingup(model),
+                "commissioned",
                 true_task,
                 CONDITIONS[name],
                 seed,
                 duration_s,
                 private_dir / name / f"start_{seed}",
+                estimator_task=Task(rod=model),
             )
             for seed in seeds
         ]

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Optional, Sequence
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -16,7 +17,17 @@ from softpend.study.greybox import perturbed_guess
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
-__all__ = ["greybox_route_figures", "greybox_route_rows", "method_summary", "plant_seconds_rows", "plot_plant_seconds"]
+__all__ = [
+    "greybox_route_figures",
+    "greybox_route_rows",
+    "method_summary",
+    "paired_ratio",
+    "paired_ratio_rows",
+    "pilco_rows_if_trained",
+    "planner_rows",
+    "plant_seconds_rows",
+    "plot_plant_seconds",
+]
 
 #: Methods of the plant-seconds chapter, in plot order: key -> label.
 METHODS = {
@@ -25,6 +36,9 @@ METHODS = {
     "pilco": "PILCO",
     "greybox": "grey-box route",
     "greybox_beam": "grey-box route, beam as the rod",
+    "mpc": "MPPI planner, PRB + residual",
+    "mpc_blackbox": "MPPI planner, black-box ensemble",
+    "mpc_beam": "MPPI planner, PRB + residual, beam as the rod",
 }
 
 
@@ -74,10 +88,14 @@ def greybox_route_figures(rows: list[dict[str, Any]], prefix: str, within_s: flo
 
 
 def plant_seconds_rows(
-    learned: list[dict[str, Any]], greybox: list[dict[str, Any]], beam: Sequence[dict[str, Any]] = ()
+    learned: list[dict[str, Any]],
+    greybox: list[dict[str, Any]],
+    beam: Sequence[dict[str, Any]] = (),
+    planner: Optional[Mapping[str, Sequence[dict[str, Any]]]] = None,
 ) -> list[dict[str, Any]]:
     """One row per (method, seed) on one axis: the learned methods' rows of
-    :func:`softpend.study.fresh_starts.seed_rows` and the grey-box route's rows (PRB rod, then beam)."""
+    :func:`softpend.study.fresh_starts.seed_rows`, the grey-box route's rows (PRB rod, then beam) and the planner's
+    (:func:`planner_rows`, ``planner``: ``{"mpc" | "mpc_blackbox" | "mpc_beam": rows}``)."""
     label_to_key = {"model-free DQN": "dqn", "DQN-MBPO": "mbpo", "PILCO": "pilco"}
     rows = [
         {
@@ -90,7 +108,7 @@ def plant_seconds_rows(
         }
         for r in learned
     ]
-    for key, group in (("greybox", greybox), ("greybox_beam", beam)):
+    for key, group in (("greybox", greybox), ("greybox_beam", beam), *(planner or {}).items()):
         rows += [
             {
                 "key": key,
@@ -157,23 +175,32 @@ def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
 
 
 def planner_rows(
-    model: str = "residual", seeds: Iterable[int] = range(10), report_seeds: Sequence[int] = REPORT_SEEDS
+    model: str = "residual",
+    seeds: Iterable[int] = range(10),
+    report_seeds: Sequence[int] = REPORT_SEEDS,
+    plant: str = "prb",
+    overrides: Optional[Mapping[str, Any]] = None,
 ) -> list[dict[str, Any]]:
-    """One row per seed of the planner (``book/hparams/planner.yml``, ``model`` = ``"residual"``: the PRB model
-    with a learned residual, ``"ensemble"``: the black-box ensemble), trials from the first 16 selection starts,
-    then its controller on ``report_seeds``; ``real_s_to_balance`` is infinite unless 90 % of them balance."""
+    """One row per seed of the planner (``book/hparams/planner.yml``, then ``overrides``; ``model`` =
+    ``"residual"``: the PRB model with a learned residual, ``"ensemble"``: the black-box ensemble) with ``plant``
+    as the real rod, trials from the first 16 selection starts, then its controller on ``report_seeds`` (the PRB
+    rod all at once on the batched engine, another rod one start after the other); ``real_s_to_balance`` is
+    infinite unless 90 % of them balance."""
     from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
+    from softpend.io.overrides import apply_overrides
     from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
 
-    config = PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml").replace(
-        model=model, selection_seeds=SELECTION_SEEDS[:16]
-    )
+    config = apply_overrides(
+        PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml", Task(plant=plant)), dict(overrides or {})
+    ).replace(model=model, selection_seeds=SELECTION_SEEDS[:16])
+    engine = "batched" if plant == "prb" else "exudyn"
     rows = []
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))
-        fresh = fresh_start_row(fresh_start_evaluation(result, tuple(report_seeds)))
+        fresh = fresh_start_row(fresh_start_evaluation(result, tuple(report_seeds), engine=engine))
         rows.append(
             {
+                "plant": plant,
                 "seed": int(seed),
                 "plant_s": result.plant_seconds,
                 "balanced_starts": fresh["balanced_starts"],
@@ -182,3 +209,44 @@ def planner_rows(
             }
         )
     return rows
+
+
+def pilco_rows_if_trained(
+    seeds: Iterable[int], runs_root: Path | str, report_seeds: Sequence[int] = REPORT_SEEDS
+) -> Optional[list[dict[str, Any]]]:
+    """The book's PILCO runs of ``seeds`` under ``runs_root`` (settings ``book/hparams/pilco.yml``, PRB rod) as
+    :func:`softpend.study.fresh_starts.seed_rows` rows (``plant_s_to_balance``: plant seconds to the first balancing
+    policy, infinite unless the final policy balances the fresh ``report_seeds``), or None if any is not trained;
+    nothing is trained here."""
+    from softpend.study.fresh_starts import pilco_fresh_start_rows, seed_rows
+    from softpend.study.head_to_head import pilco_jobs, pilco_runs
+    from softpend.study.presets import load_hparams
+
+    seeds, config = [int(s) for s in seeds], load_hparams("pilco", Task())
+    if not Path(runs_root).is_dir() or pilco_jobs(config, seeds, runs_root):
+        return None
+    results = pilco_runs(config, seeds, runs_root, progress=False)
+    return seed_rows({}, pilco_fresh_start_rows(results, report_seeds), results)
+
+
+def paired_ratio_rows(numerator: Mapping[int, float], denominator: Mapping[int, float]) -> list[dict[str, Any]]:
+    """Per seed held by both (in seed order): ``numerator`` over ``denominator`` plant seconds to balance.  A seed
+    that only the numerator's method balances has ratio 0, one that only the denominator's has ``inf``, and one that
+    neither balances counts as ``inf`` too (no credit to the numerator's method)."""
+    rows = []
+    for seed in sorted(set(numerator) & set(denominator)):
+        top, bottom = float(numerator[seed]), float(denominator[seed])
+        if not math.isfinite(top):
+            ratio = math.inf
+        elif not math.isfinite(bottom):
+            ratio = 0.0
+        else:
+            ratio = top / bottom
+        rows.append({"seed": int(seed), "numerator_s": top, "denominator_s": bottom, "ratio": ratio})
+    return rows
+
+
+def paired_ratio(numerator: Mapping[int, float], denominator: Mapping[int, float]) -> float:
+    """Median over seeds of :func:`paired_ratio_rows` (NaN when no seed is held by both)."""
+    ratios = [row["ratio"] for row in paired_ratio_rows(numerator, denominator)]
+    return float(np.median(ratios)) if ratios else math.nan

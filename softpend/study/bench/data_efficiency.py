@@ -2,15 +2,39 @@
 
 from __future__ import annotations
 
-from softpend.study.data_efficiency import greybox_route_figures, greybox_route_rows, planner_rows
+import math
+
+from softpend.study.data_efficiency import (
+    greybox_route_figures,
+    greybox_route_rows,
+    paired_ratio,
+    pilco_rows_if_trained,
+    planner_rows,
+)
 
 
 def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str, float]:
     """Ten seeds each: the grey-box route on the PRB rod and on the continuum beam (the PRB model fitted to beam
-    data), and the planner with the PRB-residual model (``mpc_*``) and the black-box ensemble
-    (``mpc_blackbox_*``): median and worst plant seconds to balance the fresh report starts, seeds balanced."""
+    data), the planner with the PRB-residual model (``mpc_*``), with the black-box ensemble (``mpc_blackbox_*``) and
+    with the PRB-residual model on the continuum beam (``mpc_beam_*``): median and worst plant seconds to balance
+    the fresh report starts, seeds balanced.  ``mpc_over_pilco_real_s_ratio``: the median over seeds of the
+    PRB-residual planner's plant seconds to balance over PILCO's, from the book's PILCO runs (trained by the
+    ``pilco`` group; NaN, with ``pilco_book_runs_found`` 0, where they are not all trained: none is trained here)."""
+    from softpend.study.presets import PILCO_BOOK
+
     figures = greybox_route_figures(greybox_route_rows("prb", seeds), "greybox", 5.0)
     figures.update(greybox_route_figures(greybox_route_rows("beam", seeds), "greybox_beam", 15.0))
-    figures.update(greybox_route_figures(planner_rows("residual", seeds), "mpc", 15.0))
+    mpc = planner_rows("residual", seeds)
+    figures.update(greybox_route_figures(mpc, "mpc", 15.0))
     figures.update(greybox_route_figures(planner_rows("ensemble", seeds), "mpc_blackbox", 15.0))
+    figures.update(greybox_route_figures(planner_rows("residual", seeds, plant="beam"), "mpc_beam", 30.0))
+    pilco = pilco_rows_if_trained(seeds, PILCO_BOOK.runs_root)
+    figures["pilco_book_runs_found"] = float(pilco is not None)
+    figures["mpc_over_pilco_real_s_ratio"] = (
+        math.nan
+        if pilco is None
+        else paired_ratio(
+            {r["seed"]: r["real_s_to_balance"] for r in mpc}, {r["seed"]: r["plant_s_to_balance"] for r in pilco}
+        )
+    )
     return figures

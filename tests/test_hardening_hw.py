@@ -273,23 +273,16 @@ def test_rig_port_replaces_a_stale_pty_symlink_and_removes_only_its_own(tmp_path
     assert path.read_text() == "made by someone else meanwhile\n"
 
 
-def test_twin_refuses_a_foreign_non_empty_workdir_and_touches_nothing(tmp_path):
-    from softpend.hardware.twin import TWIN_MARKER, _claim_workdir, run_twin_session
+def test_twin_refuses_a_foreign_file_in_its_workdir_and_touches_nothing(tmp_path):
+    from softpend.hardware.twin import run_twin_session
 
     (tmp_path / "motor_log.csv").write_text("my own log\n")
-    with pytest.raises(ValueError, match="not empty and was not written by run_twin_session"):
+    with pytest.raises(ValueError, match="not a file this command wrote"):
         run_twin_session(tmp_path, duration_s=7.0, trial_length_s=2.0, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["motor_log.csv"]
     assert (tmp_path / "motor_log.csv").read_text() == "my own log\n"
-    fresh = _claim_workdir(tmp_path / "new" / "twin")
-    assert (fresh / TWIN_MARKER).is_file()
-    (fresh / "camera.csv").write_text("an earlier session's output\n")
-    assert _claim_workdir(fresh) == fresh  # a folder the twin wrote can be reused
-    empty = tmp_path / "empty"
-    empty.mkdir()
-    assert (_claim_workdir(empty) / TWIN_MARKER).is_file()
     with pytest.raises(ValueError, match="not a folder"):
-        _claim_workdir(tmp_path / "motor_log.csv")
+        run_twin_session(tmp_path / "motor_log.csv", duration_s=7.0, trial_length_s=2.0, progress=False)
 
 
 # ---------------------------------------------------------------------- files: track

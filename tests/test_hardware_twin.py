@@ -27,7 +27,9 @@ def test_twin_session_produces_a_synchronised_rig_dataset(session):
     from softpend.sysid import load_dataset
 
     assert session.loop.samples == 701 and session.loop.dropped_states == 0  # 100 Hz for 7 s, simulated time
-    assert abs(session.offset_error_s) < 0.005  # clock offset recovered from the wiggle (hub marker)
+    assert (
+        abs(session.sync.offset.offset_s - session.true_clock_offset_s) < 0.005
+    )  # clock offset recovered from the wiggle (hub marker)
     dataset = load_dataset(session.dataset_path)
     assert dataset.metadata["source"] == "rig" and dataset.n_trials >= 2 and dataset.n_samples == 200
     camera = read_sample_log(session.camera_csv)

@@ -113,10 +113,13 @@ def test_a_capture_source_on_a_video_file_agrees_with_the_offline_tracker(clip, 
     capture = open_tip_source(str(path))
     assert isinstance(capture, CaptureTipSource)
     captured = []
-    with capture:
+    capture.start()
+    try:
         while not capture.finished:
             captured += capture.poll()
             time.sleep(0.005)
+    finally:
+        capture.close()
     assert len(captured) == len(offline) == len(rendered.timestamps_s)
     np.testing.assert_allclose([m.x_m for m in captured], offline["x_m"], atol=1e-12)
     np.testing.assert_allclose([m.y_m for m in captured], offline["y_m"], atol=1e-12)

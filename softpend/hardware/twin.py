@@ -21,7 +21,7 @@ from softpend.plant import RodParams, make_plant
 if TYPE_CHECKING:
     from softpend.sysid.dataset import TrajectoryDataset
 
-__all__ = ["TWIN_MARKER", "TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
+__all__ = ["TwinSession", "rig_babble_controller", "run_twin_session", "truth_link_points"]
 
 
 def rig_babble_controller(
@@ -84,10 +84,6 @@ class TwinSession:
     true_clock_offset_s: float
     emulator_stats: dict = field(default_factory=dict)
 
-    @property
-    def offset_error_s(self) -> float:
-        return self.sync.offset.offset_s - self.true_clock_offset_s
-
 
 def run_twin_session(
     workdir: str | Path,
@@ -105,8 +101,8 @@ def run_twin_session(
 ) -> TwinSession:
     """Run the rig pipeline on the twin (module docstring); the same seed gives the same files.
 
-    ``workdir`` must be new, empty or an earlier session's (marked ``.softpend-twin``; otherwise ``ValueError``,
-    nothing touched); ``seed`` seeds the torques, the emulator and the camera; ``clock_offset_s`` is the camera
+    files of ``workdir`` named as its outputs must be its own earlier ones (else ``ValueError``, nothing touched);
+    ``seed`` seeds the torques, the emulator and the camera; ``clock_offset_s`` is the camera
     clock minus the motor clock the synchronisation must recover; ``program`` replaces the babbling torque after
     the start-up wiggle (:func:`rig_babble_controller`).
     """
@@ -117,15 +113,10 @@ def run_twin_session(
     if not (math.isfinite(duration_s) and duration_s >= trial_length_s + 3):
         raise ValueError(f"duration_s must be at least trial_length_s + 3 s, got {duration_s!r}")
 
-    workdir = _claim_workdir(Path(workdir))
     outputs = outputs if outputs is not None else Outputs()
-    outputs.folder(workdir, _OUTPUTS, what="workdir")
+    workdir = outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
-    effects = (
-        camera_effects
-        if camera_effects is not None
-        else CameraEffects(noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
-    )
+    effects = camera_effects if camera_effects is not None else CameraEffects.rig()
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:
         outputs.live(workdir / name)
@@ -178,8 +169,6 @@ def _babble_on_twin(
     return loop, device.stats()
 
 
-#: Marker file of a folder written by :func:`run_twin_session`.
-TWIN_MARKER = ".softpend-twin"
 #: Every file :func:`run_twin_session` writes in its folder (besides the marker).
 _OUTPUTS = (
     "motor_log.csv",
@@ -190,24 +179,6 @@ _OUTPUTS = (
     "camera.avi.json",
     "emulator_stats.json",
 )
-
-
-def _claim_workdir(workdir: Path) -> Path:
-    """Create ``workdir`` or check that it is empty or marked as a twin folder; mark it; return it."""
-    marker = workdir / TWIN_MARKER
-    if workdir.exists() or workdir.is_symlink():
-        if not workdir.is_dir():
-            raise ValueError(f"workdir {workdir} exists and is not a folder")
-        if not marker.is_file() and any(workdir.iterdir()):
-            raise ValueError(
-                f"workdir {workdir} is not empty and was not written by run_twin_session "
-                f"(no {TWIN_MARKER} marker); pass a new or empty folder (nothing was changed)"
-            )
-    else:
-        workdir.mkdir(parents=True)
-    if not marker.is_file():
-        marker.write_text("written by softpend.hardware.twin.run_twin_session\n")
-    return workdir
 
 
 def compare_with_simulator_model(

@@ -94,25 +94,21 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
         raise ValueError(f"{type(instance).__name__}: {shown}: value of the wrong type or size ({exc})") from None
 
 
-def check_fields(cls: type, data: Mapping[str, Any], source: Any) -> None:
-    """Raise a one-line ``ValueError`` naming the first field of ``data`` that ``cls`` lacks, or the first field
-    of ``cls`` that ``data`` lacks (a config saved by a version with other fields)."""
-    names = [f.name for f in dataclasses.fields(cls) if f.init]
-    unknown = [k for k in data if k not in names]
-    if unknown:
-        raise ValueError(f"{source}: {unknown[0]!r} is not a {cls.__name__} field (a config of another version)")
-    missing = [k for k in names if k not in data]
-    if missing:
-        raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
-
-
 def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) -> D:
-    """The dataclass ``cls`` from JSON data as ``dataclasses.asdict`` gives it: every field present
-    (:func:`check_fields`), lists as tuples, a mapping for a field whose default is a dataclass built the same
+    """The dataclass ``cls`` from JSON data as ``dataclasses.asdict`` gives it: every field present (a
+    one-line ``ValueError`` names the first unknown or missing one), lists as tuples, a mapping for a field whose default is a dataclass built the same
     way; ``convert``: field name -> function building that field from its data."""
     if not isinstance(data, Mapping):
         raise ValueError(f"{source}: expected a JSON object for a {cls.__name__}, got {type(data).__name__}")
-    check_fields(cls, data, source)
+    names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    unknown, missing = [k for k in data if k not in names], [k for k in names if k not in data]
+    if unknown or missing:
+        what = (
+            f"{unknown[0]!r} is not a {cls.__name__} field"
+            if unknown
+            else f"the {cls.__name__} field {missing[0]!r} is missing"
+        )
+        raise ValueError(f"{source}: {what} (a config of another version)")
     values: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
         if not f.init:

@@ -72,8 +72,7 @@ FrameHook = Callable[[int, np.ndarray, Detection, "TipMeasurement"], None]
 
 class ThreadedTipSource:
     """A daemon thread runs :meth:`_run`, which calls :meth:`_deliver` per frame; :meth:`poll` drains the queue and
-    re-raises an error of the thread; ``on_frame(index, frame, detection, measurement)`` runs after each frame; a
-    context manager (``start`` on enter, ``close`` on exit)."""
+    re-raises an error of the thread; ``on_frame(index, frame, detection, measurement)`` runs after each frame."""
 
     name = "camera"
 
@@ -112,13 +111,6 @@ class ThreadedTipSource:
     def finished(self) -> bool:
         """The source has ended and everything was polled."""
         return self._thread is not None and not self._thread.is_alive() and not self._queue
-
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
     def poll(self) -> list[TipMeasurement]:
         with self._lock:

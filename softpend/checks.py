@@ -7,23 +7,6 @@ from typing import Any, Collection, Optional, TypeVar
 
 import numpy as np
 
-__all__ = [
-    "MAX_WORK_BYTES",
-    "NonFiniteError",
-    "boolean",
-    "check_notebook_parameters",
-    "check_work_size",
-    "finite",
-    "in_range",
-    "in_unit_interval",
-    "int_at_least",
-    "non_negative",
-    "one_of",
-    "optional_positive",
-    "positive",
-    "positive_int",
-]
-
 T = TypeVar("T")
 
 
@@ -32,9 +15,8 @@ class NonFiniteError(ValueError):
     infinite; the message names the quantity and where it happened."""
 
 
-#: Largest array memory [bytes] that one piece of work (a dataset, a set of evaluation trajectories) may
-#: plan for: 4 GiB.  Work whose estimate is larger is refused before it starts (:func:`check_work_size`)
-#: rather than running for hours and then failing, or swapping the machine to a halt.
+#: Largest array memory [bytes] that one piece of work (a dataset, a set of evaluation trajectories) may plan for;
+#: larger work is refused before it starts (:func:`check_work_size`).
 MAX_WORK_BYTES = 4 * 2**30
 
 
@@ -69,63 +51,53 @@ def _integer(value: Any) -> Optional[int]:
     return None
 
 
+def _checked(name: str, number: Any, value: Any, ok: bool, what: str) -> Any:
+    if number is None or not ok:
+        raise ValueError(f"{name} must be {what}, got {value!r}")
+    return number
+
+
 def finite(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    if number is None:
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return number
+    return _checked(name, number, value, True, "finite")
 
 
 def positive(name: str, value: Any) -> float:
     """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    if number is None or number <= 0.0:
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return number
+    return _checked(name, number, value, number is not None and number > 0.0, "positive and finite")
 
 
 def optional_positive(name: str, value: Any) -> Optional[float]:
     """``None`` for ``None``, else ``value`` as a float if it is a positive finite number; ``ValueError`` otherwise."""
-    if value is None:
-        return None
     number = _real(value)
-    if number is None or number <= 0.0:
-        raise ValueError(f"{name} must be positive and finite or None, got {value!r}")
-    return number
+    ok = number is not None and number > 0.0
+    return None if value is None else _checked(name, number, value, ok, "positive and finite or None")
 
 
 def non_negative(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number >= 0, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    if number is None or number < 0.0:
-        raise ValueError(f"{name} must be non-negative and finite, got {value!r}")
-    return number
+    return _checked(name, number, value, number is not None and number >= 0.0, "non-negative and finite")
 
 
 def positive_int(name: str, value: Any) -> int:
     """``value`` as an int if it is an integer >= 1, else ``ValueError`` naming ``name``."""
     number = _integer(value)
-    if number is None or number < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return number
+    return _checked(name, number, value, number is not None and number >= 1, "a positive integer")
 
 
 def int_at_least(name: str, value: Any, low: int) -> int:
     """``value`` as an int if it is an integer >= ``low``, else ``ValueError`` naming ``name``."""
     number = _integer(value)
-    if number is None or number < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return number
+    return _checked(name, number, value, number is not None and number >= low, f"an integer >= {low}")
 
 
 def in_range(name: str, value: Any, low: float, high: float) -> float:
-    """``value`` as a float if it is a finite number in ``[low, high]``, else ``ValueError`` naming ``name`` and
-    the range (for a number that reaches a loop or an allocation: refused before any work starts)."""
+    """``value`` as a float if it is a finite number in ``[low, high]``, else ``ValueError`` naming the range."""
     number = _real(value)
-    if number is None or not low <= number <= high:
-        raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {value!r}")
-    return number
+    return _checked(name, number, value, number is not None and low <= number <= high, f"lie in [{low:g}, {high:g}]")
 
 
 def in_unit_interval(name: str, value: Any, *, include_zero: bool = True, include_one: bool = True) -> float:

@@ -22,23 +22,6 @@ from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged
 from softpend.stats import wilson_interval
 from softpend.task import Task
 
-__all__ = [
-    "HOLD_STD_RAD",
-    "SUCCESS_STD_RAD",
-    "TEST_EPISODE_S",
-    "BatchPolicy",
-    "Controller",
-    "EvaluationResult",
-    "EvaluationSummary",
-    "FunctionController",
-    "GymPolicyController",
-    "evaluate",
-    "evaluate_batched",
-    "evaluate_controller",
-    "metrics_from_trajectory",
-    "run_episode",
-]
-
 #: Length [s] of the episodes from hanging that select agents, stop learning runs and measure the fresh starts.
 TEST_EPISODE_S = 10.0
 
@@ -187,16 +170,12 @@ class EvaluationSummary:
         """Episodes that succeeded."""
         return int(sum(r.success for r in self.results))
 
-    def success_interval(self, confidence: float = 0.95) -> tuple[float, float]:
-        """Wilson score interval of the success rate over these episodes (:func:`softpend.stats.wilson_interval`)."""
-        return wilson_interval(self.successes, len(self.results), confidence)
-
     def median(self, metric: str) -> float:
         return float(np.median([getattr(r, metric) for r in self.results]))
 
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
-        low, high = self.success_interval()
+        low, high = wilson_interval(self.successes, len(self.results))
         return {
             "controller": self.name,
             "seeds": len(self.results),
@@ -206,8 +185,6 @@ class EvaluationSummary:
             **{name: self.median(name) for name in _METRICS[:-1]},
         }
 
-
-# ---------------------------------------------------------------------- the one loop over both engines
 
 #: Metrics of an episode that ends before its second sample (a plant that diverged on the first step).
 _NO_EPISODE = dict(zip(_METRICS, (math.inf, math.pi, math.pi, 0.0, 0.0, False)))

@@ -13,14 +13,11 @@ from softpend.plant import RodParams, check_plant_name, make_plant, tilt_state
 from softpend.plant.params import GRAVITY_MPS2
 from softpend.plant.protocol import Plant
 
-__all__ = ["MAX_TORQUE_RATIO", "START_KINDS", "Task"]
-
 #: Start distributions of the environments (:class:`softpend.envs.SoftPendulumEnv` ``start``).
 START_KINDS = ("hanging", "upright", "random")
 
 #: Largest torque limit of a task, as a multiple of the torque that holds its rod horizontal against standard
-#: gravity (``(mass_kg / 2 + tip_mass_kg) * length_m * 9.81``): beyond it the plant's solver fails in the first
-#: steps, and a training run on such a task would learn from no plant seconds at all.
+#: gravity (beyond it the plant's solver fails in the first steps).
 MAX_TORQUE_RATIO = 100.0
 
 
@@ -52,7 +49,6 @@ class Task:
                 f"{rod.torque_limit_nm!r}"
             )
 
-    # ------------------------------------------------------------------ derived objects
     def make_plant(self, **options: Any) -> Plant:
         """A fresh plant of this task (``options``: plant-specific, e.g. ``hub_locked_at_rad``)."""
         return make_plant(self.plant, params=self.rod, dt_s=self.dt_s, substeps=self.substeps, **options)
@@ -77,7 +73,6 @@ class Task:
         """The motor's torque limit [N m] (``rod.torque_limit_nm``)."""
         return self.rod.torque_limit_nm
 
-    # ------------------------------------------------------------------ copies
     def replace(self, **changes: Any) -> "Task":
         """A copy with task fields changed; any :class:`~softpend.plant.RodParams` field name changes the rod
         (``task.replace(torque_limit_nm=0.05, start="upright")``)."""

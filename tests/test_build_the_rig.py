@@ -32,7 +32,7 @@ from softpend.study.build_rig import (
     choose_cartridge,
     motor_rows,
 )
-from softpend.study.figures.rig_design import dimension_labels, draw_rig_design
+from softpend.study.figures.rig_design import draw_rig_design
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 def _labels(params: RodParams) -> list[str]:
     fig = draw_rig_design(rig_design(params))
     try:
-        return dimension_labels(fig)
+        return [t.get_text() for ax in fig.axes for t in ax.texts if t.get_gid() == "dimension"]
     finally:
         plt.close(fig)
 

@@ -123,11 +123,8 @@ def classical_comparison(
         )
     lqr_state = "joint" if joint_state else "observation"
     add("LQR (true model)", LQRController.from_params(params, state=lqr_state), limit)
-    add(
-        "LQR (true model), no limit",
-        LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm),
-        unlimited_torque_nm,
-    )
+    unlimited_lqr = LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm)
+    add("LQR (true model), no limit", unlimited_lqr, unlimited_torque_nm)
     if joint_state:
         add("LQR (observations)", LQRController.from_params(params, state="observation"), limit)
     if learned_model is not None:
@@ -152,11 +149,8 @@ def classical_comparison(
         }
     for tuned_on, tuned in gains.items():
         add(f"PID (tuned on {tuned_on})", PIDController(tuned, torque_limit_nm=limit), limit)
-        add(
-            f"PID (tuned on {tuned_on}), no limit",
-            PIDController(tuned, torque_limit_nm=unlimited_torque_nm),
-            unlimited_torque_nm,
-        )
+        unlimited_pid = PIDController(tuned, torque_limit_nm=unlimited_torque_nm)
+        add(f"PID (tuned on {tuned_on}), no limit", unlimited_pid, unlimited_torque_nm)
 
     add_hanging("LQR (true model)", LQRController.from_params(params, state=lqr_state))
     add_hanging(
@@ -181,19 +175,10 @@ def pid_gain_sensitivity(
     limit = task.torque_limit_nm if torque_limit_nm is None else float(torque_limit_nm)
     rows = []
     for scale in scales:
-        scaled = PIDGains(*(float(scale) * gains.as_array()))
-        summary = run_from_tilt(
-            PIDController(scaled, torque_limit_nm=limit),
-            task,
-            tilt_rad,
-            list(starts),
-            duration_s,
-            limit,
-            f"PID x {float(scale):g}",
-        )
-        rows.append(
-            {**summary.row(), "gain_scale": float(scale), "start": f"tilt {tilt_rad:g} rad", "torque_limit_nm": limit}
-        )
+        pid = PIDController(PIDGains(*(float(scale) * gains.as_array())), torque_limit_nm=limit)
+        summary = run_from_tilt(pid, task, tilt_rad, list(starts), duration_s, limit, f"PID x {float(scale):g}")
+        start = f"tilt {tilt_rad:g} rad"
+        rows.append({**summary.row(), "gain_scale": float(scale), "start": start, "torque_limit_nm": limit})
     return rows
 
 

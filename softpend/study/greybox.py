@@ -90,13 +90,8 @@ def model_quality(
     lookback = int(round(lookback_s / upright.dt_s)) + 1 if start_state == "estimated" else 0
 
     def all_errors(data: TrajectoryDataset, starts: np.ndarray, n_steps: int) -> dict[str, np.ndarray]:
-        if start_state == "recorded":
-            errors = {"grey-box model": prb_rollout_tip_errors(identified, data, starts, n_steps)}
-        else:
-            states = estimate_joint_states(identified, data, starts, lookback_s=lookback_s)
-            errors = {
-                "grey-box model": prb_rollout_tip_errors(identified, data, starts, n_steps, initial_states=states)
-            }
+        states = None if start_state == "recorded" else estimate_joint_states(identified, data, starts, lookback_s)
+        errors = {"grey-box model": prb_rollout_tip_errors(identified, data, starts, n_steps, initial_states=states)}
         if recorded_prb:
             errors[YARDSTICK_LABEL] = prb_rollout_tip_errors(
                 truth, data, starts, n_steps, hub_offset_rad=YARDSTICK_OFFSET_RAD
@@ -178,12 +173,9 @@ def closed_loop_usefulness(
         swing_controller = (
             EnergySwingUpController(params) if joint else EnergySwingUpController.for_observations(params)
         )
+        hanging = task.replace(start="hanging")
         swing = evaluate_controller(
-            swing_controller,
-            task.replace(start="hanging"),
-            seeds=seeds,
-            duration_s=swingup_duration_s,
-            name="energy swing-up + LQR",
+            swing_controller, hanging, seeds=seeds, duration_s=swingup_duration_s, name="energy swing-up + LQR"
         )
         for summary, start in ((lqr, f"tilt {tilt_rad:g} rad"), (swing, "hanging")):
             rows.append(

@@ -191,14 +191,8 @@ def plot_predicted_and_real_cost(results: Sequence[PilcoResult]):
         records = [r for r in result.records if r.kind == "policy"]
         trials = [r.index for r in records]
         (line,) = ax.plot(trials, [r.predicted_cost for r in records], "x--", alpha=0.8)
-        ax.plot(
-            trials,
-            [r.real_cost for r in records],
-            "o-",
-            color=line.get_color(),
-            alpha=0.8,
-            label=f"seed {result.config.seed}",
-        )
+        real = [r.real_cost for r in records]
+        ax.plot(trials, real, "o-", color=line.get_color(), alpha=0.8, label=f"seed {result.config.seed}")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("trial")
     ax.set_ylabel("summed cost over the trial")

@@ -100,31 +100,13 @@ def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[st
     first_command_s = float(motor["time_s"][commanded][0]) if commanded.any() else 0.0
     fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     axes[0].plot(truth["time_s"] - t0_device, np.abs(truth["theta_rad"]), color="C0", label="twin: true tip angle")
-    axes[0].plot(
-        motor["est_time_s"],
-        np.abs(motor["est_theta_rad"]),
-        color="C1",
-        ls="--",
-        lw=1.0,
-        label="twin: estimate handed to the controller",
-    )
+    estimate = dict(color="C1", ls="--", lw=1.0, label="twin: estimate handed to the controller")
+    axes[0].plot(motor["est_time_s"], np.abs(motor["est_theta_rad"]), **estimate)
     axes[1].step(motor["time_s"], motor["command_torque_nm"], where="post", color="C0", label="twin: commanded")
     if simulator is not None:
-        axes[0].plot(
-            simulator.time_s + first_command_s,
-            np.abs(simulator.theta_rad),
-            color="C2",
-            lw=1.0,
-            label="ideal simulator, same start",
-        )
-        axes[1].step(
-            simulator.time_s + first_command_s,
-            simulator.torque_nm,
-            where="post",
-            color="C2",
-            lw=1.0,
-            label="ideal simulator",
-        )
+        sim_t = simulator.time_s + first_command_s
+        axes[0].plot(sim_t, np.abs(simulator.theta_rad), color="C2", lw=1.0, label="ideal simulator, same start")
+        axes[1].step(sim_t, simulator.torque_nm, where="post", color="C2", lw=1.0, label="ideal simulator")
     axes[0].set_ylabel(r"$|\theta|$ [rad]")
     axes[1].set_ylabel("torque [N m]")
     axes[1].set_xlabel("time since the loop's first state [s]")

@@ -164,8 +164,3 @@ def draw_rig_design(design: RigDesign, figsize=(15.0, 5.8)):
     )
     fig.tight_layout()
     return fig
-
-
-def dimension_labels(fig) -> list[str]:
-    """The texts of every dimension label of a figure of :func:`draw_rig_design` (what a test reads)."""
-    return [t.get_text() for ax in fig.axes for t in ax.texts if t.get_gid() == "dimension"]

@@ -32,13 +32,9 @@ def plot_learning_curves(
         color = COLORS.get(method, f"C{i}")
         for col, axis in enumerate(("episode", "plant_s")):
             for k, log in enumerate(logs):
+                smoothed = moving_average(log.column("return"), window)
                 axes[0, col].plot(
-                    log.column(axis),
-                    moving_average(log.column("return"), window),
-                    color=color,
-                    lw=0.8,
-                    alpha=0.6,
-                    label=method if k == 0 else None,
+                    log.column(axis), smoothed, color=color, lw=0.8, alpha=0.6, label=method if k == 0 else None
                 )
             if len(logs) >= 2:
                 band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed, failed_as=SUCCESS_STD_RAD)

@@ -372,7 +372,7 @@ def test_failing_notebook_names_notebook_and_cell_and_keeps_partial_output(tmp_p
     assert cli_main(["book", "--root", str(root)]) == 1  # and the CLI exits non-zero
 
 
-@pytest.mark.parametrize("folder, name", [("records", "what_we_tried.yml"), ("hparams", "dqn.yml")])
+@pytest.mark.parametrize("folder, name", [("records", "greybox_route.json"), ("hparams", "dqn.yml")])
 def test_data_files_enter_the_key_of_the_notebooks_whose_code_reads_them(tmp_path, folder, name):
     """softpend.study.records reads book/records/, softpend.study.presets book/hparams/: editing one changes the
     hashes that go into the key of every notebook using that code."""

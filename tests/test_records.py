@@ -1,90 +1,105 @@
-"""The appendix's record of settings tried (book/records/what_we_tried.yml): it loads, has the fields the
-appendix notebook uses, and the summaries are computed from it."""
+"""The appendix's stored probe summaries (book/records/*.json): every one loads in the record schema, a
+malformed one is refused naming the field, the render shows the stored figures; and the current runs are read
+from the run folders."""
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import pytest
 
 from softpend.study.records import (
+    FIELDS,
+    balance_summary,
     current_pilco_runs,
     current_rl_runs,
-    detail_rows,
+    flat_settings,
+    load_record,
     load_records,
-    run_rows,
-    summary_rows,
+    record_markdown,
+    record_text,
 )
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-RECORDS = REPO_ROOT / "book" / "records" / "what_we_tried.yml"
+RECORDS = REPO_ROOT / "book" / "records"
 
-#: The methods whose current runs the appendix notebook reads from the run folders.
-CURRENT = ("dqn_mbpo", "dqn", "pilco")
+GOOD = {
+    "title": "a probe",
+    "command": "scripts/probe.py --seeds 2",
+    "settings": {"seeds": 2, "model": "residual"},
+    "figures": {"median_plant_s": 12.345678, "worst_plant_s": "inf"},
+    "rows": [{"seed": 0, "plant_s": 1.5, "rod": {"mass_kg": 0.1}}, {"seed": 1, "plant_s": math.inf, "note": None}],
+}
 
 
-def test_the_record_loads_with_the_fields_the_appendix_uses():
+def test_every_stored_record_loads_in_the_schema():
     records = load_records(RECORDS)
-    assert set(CURRENT) <= set(records)
-    for key, method in records.items():
-        for field in ("title", "measure", "unit", "legend", "budget"):
-            assert isinstance(method[field], str), (key, field)
-        assert method["runs"], key
-        for run in method["runs"] + method["diagnostics"]:
-            assert isinstance(run["setting"], str) and run["setting"] and isinstance(run["notes"], str)
-            assert set(run["outcome"]) == (set(run["seeds"]) or {"all"}), run["setting"]
-            assert set(run.get("details", {})) <= set(run["outcome"]), run["setting"]
-        if method["unit"]:  # a method with a measure records the runs of its defaults, or the book runs them
-            assert any(run.get("defaults") for run in method["runs"]) or method.get("defaults_run_by_the_book"), key
-        rows, columns = run_rows(method)
-        assert len(rows) == len(method["runs"]) and {"row", "setting", "notes"} <= set(columns)
-        assert all(set(row) == set(columns) for row in rows)
-        assert all(row["seed"] in method["runs"][row["row"] - 1]["outcome"] for row in detail_rows(method))
+    assert records and all(path.stem in records for path in RECORDS.glob("*.json"))
+    for name, record in records.items():
+        assert set(record) == set(FIELDS), name
+        assert record["title"] and "scripts/probe_" in record["command"] and record["rows"], name
+        assert all(isinstance(v, (int, float)) for v in record["figures"].values()), name
 
 
-def test_summaries_count_a_run_that_never_balanced_as_infinitely_late():
-    method = {
-        "title": "m",
-        "measure": "plant s to balance",
-        "unit": "plant s",
-        "legend": "",
-        "budget": "",
-        "runs": [
-            {"setting": "a", "seeds": [0, 1, 2], "outcome": {0: 10, 1: "never", 2: 30}, "notes": "", "defaults": True},
-            {"setting": "b", "seeds": [3, 4], "outcome": {3: 20, 4: "-"}, "notes": "", "defaults": True},
-            {"setting": "c", "seeds": [], "outcome": {"all": "no seed got up"}, "notes": ""},
-        ],
-        "diagnostics": [],
-    }
-    rows, _ = run_rows(method)
-    assert [(r["balanced"], r["median"]) for r in rows] == [("2 of 3", "30"), ("1 of 1", "20"), ("", "")]
-    assert rows[0]["seed 3"] == "" and rows[2]["all seeds"] == "no seed got up"
-    (summary,) = summary_rows({"m": method})
-    assert summary["seeds"] == "0, 1, 2, 3, 4" and summary["balanced"] == "3 of 4" and summary["median"] == "25"
+def test_the_render_shows_the_stored_figures_and_rows(tmp_path):
+    path = tmp_path / "probe.json"
+    path.write_text(record_text(GOOD))
+    record = load_record(path)
+    assert record["figures"]["worst_plant_s"] == math.inf
+    text = record_markdown(record)
+    assert "### a probe" in text and "`scripts/probe.py --seeds 2`" in text and "`model` = residual" in text
+    assert "| median_plant_s | 12.3457 |" in text and "| worst_plant_s | inf |" in text
+    assert "| seed | plant_s | note |" in text and "| 1 | inf |  |" in text and "mass_kg" not in text
+    for record in load_records(RECORDS).values():  # a stored figure appears in its record's table
+        text = record_markdown(record)
+        assert all(f"| {name} |" in text for name in record["figures"])
 
 
 @pytest.mark.parametrize(
-    "text, field",
+    "change, field",
     [
-        ("methods: {m: {title: m}}", "lacks"),
-        (
-            "methods: {m: {title: m, measure: x, unit: s, legend: '', budget: '', diagnostics: [],\n"
-            "  runs: [{setting: a, seeds: [0, 1], outcome: {0: 5}, notes: ''}]}}",
-            "outcome",
-        ),
-        (
-            "methods: {m: {title: m, measure: x, unit: s, legend: '', budget: '', diagnostics: [],\n"
-            "  runs: [{setting: a, seeds: [zero], outcome: {zero: 5}, notes: ''}]}}",
-            "seeds",
-        ),
-        ("methods: []", "methods"),
+        ({"title": None}, "'title'"),
+        ({"summary": {}}, "'summary'"),
+        ({"settings": {"config": {"a": 1}}}, "settings.config"),
+        ({"figures": {"median": "12 s"}}, "figures.median"),
+        ({"figures": {"balanced": True}}, "figures.balanced"),
+        ({"rows": [{"seed": 0}, {"seeds": [0, 1]}]}, r"rows\[1\].seeds"),
+        ({"rows": [3]}, r"rows\[0\]"),
     ],
 )
-def test_a_malformed_record_is_a_value_error_naming_the_field(tmp_path, text, field):
-    path = tmp_path / "records.yml"
-    path.write_text(text)
+def test_a_malformed_record_is_a_value_error_naming_the_file_and_field(tmp_path, change, field):
+    path = tmp_path / "probe.json"
+    path.write_text(json.dumps(GOOD | change))
+    with pytest.raises(ValueError, match=field) as info:
+        load_record(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
     with pytest.raises(ValueError, match=field):
-        load_records(path)
+        record_text(GOOD | change)
+
+
+def test_a_record_that_is_not_json_or_absent_is_a_value_error(tmp_path):
+    (tmp_path / "probe.json").write_text("{")
+    with pytest.raises(ValueError, match="probe.json"):
+        load_records(tmp_path)
+    with pytest.raises(ValueError, match="no probe records"):
+        load_records(tmp_path / "absent")
+
+
+def test_flat_settings_name_nested_settings_with_dots():
+    assert flat_settings({"a": 1, "task": {"rod": {"m": 0.1}, "seeds": [1, 2]}}) == {
+        "a": 1,
+        "task.rod.m": 0.1,
+        "task.seeds": "1, 2",
+    }
+
+
+def test_the_summary_counts_a_run_that_never_balanced_as_infinitely_late():
+    rows = [{"seed": 0, "plant_s_to_balance": 10.0}, {"seed": 1, "plant_s_to_balance": math.inf}]
+    rows.append({"seed": 2, "plant_s_to_balance": 30.0})
+    assert balance_summary(rows) == {"seeds": "0, 1, 2", "balanced": "2 of 3", "median": "30"}
+    assert balance_summary(rows[1:2])["median"] == "inf"
 
 
 def test_current_runs_are_empty_without_run_folders(tmp_path):
@@ -105,10 +120,7 @@ def test_current_runs_are_read_from_the_run_folders(tmp_path):
         progress=False,
     )
     (run,) = current_rl_runs(tmp_path / "rl", "dqn", [0, 1])  # seed 0 has no folder
-    assert run["seeds"] == [1] and run["details"] == {1: "2 episodes"}
-    assert run["outcome"][1] == (
-        log.real_s_to_balance() if log.first_balanced() else f"never within {log.plant_s:g} plant s"
-    )
+    assert run == {"seed": 1, "plant_s_to_balance": log.real_s_to_balance(), "plant_s": log.plant_s, "episodes": 2}
     result = run_pilco(
         PilcoConfig(
             state="tip",
@@ -126,8 +138,6 @@ def test_current_runs_are_read_from_the_run_folders(tmp_path):
     )
     result.save(tmp_path / "pilco" / "pilco-seed0")
     (run,) = current_pilco_runs(tmp_path / "pilco", [0, 2])
-    assert run["seeds"] == [0] and "1 policy trials" in run["details"][0]
-    expected = result.real_seconds_to_balance
-    assert run["outcome"][0] == (
-        expected if expected < float("inf") else f"not within {result.plant_seconds_total:g} s"
-    )
+    assert run["seed"] == 0 and run["policy_trials"] == 1
+    assert run["plant_s_to_balance"] == result.real_seconds_to_balance
+    assert run["plant_s"] == result.plant_seconds_total

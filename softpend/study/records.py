@@ -1,167 +1,123 @@
-"""The record of settings tried for each method (``book/records/what_we_tried.yml``) as the appendix's tables
-and plot, beside the same figures read from the current run folders.  An outcome is a number (the measure at
-which the run first balanced), a string (did not balance) or ``"-"`` (a seed not run)."""
+"""The stored probe summaries (``book/records/*.json``, each written by a script in ``scripts/``) as the appendix's
+tables, and the book's current runs of the defaults read from their run folders.
+
+A record is ``{"title", "command", "settings", "figures", "rows"}``: the exact command that wrote it, its settings
+(name: scalar), its figures (name: number; an infinite one as ``"inf"`` or ``Infinity``) and one row per seed or
+rod (name: scalar or nested mapping; only the scalars are rendered)."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-#: The record, relative to the project root.
-RECORDS_PATH = Path("book/records/what_we_tried.yml")
+#: The records' folder, relative to the project root.
+RECORDS_DIR = Path("book/records")
 
-#: Required fields of a method and of a run.
-METHOD_FIELDS = ("title", "measure", "unit", "legend", "budget", "runs", "diagnostics")
-RUN_FIELDS = ("setting", "seeds", "outcome", "notes")
+#: A record's fields and their JSON types.
+FIELDS = {"title": str, "command": str, "settings": dict, "figures": dict, "rows": list}
 
-NOT_RUN = "-"
-
-
-def load_records(path: Path | str = RECORDS_PATH) -> dict[str, dict[str, Any]]:
-    """The methods of the record, by key, checked (``ValueError`` for a missing field, seeds that are not integers,
-    outcomes or details not keyed by the run's seeds, or ``"all"`` for a run without seeds)."""
-    from softpend.io.reading import read_yaml_checked
-
-    data = read_yaml_checked(path, "records file")
-    if not isinstance(data, dict) or not isinstance(data.get("methods"), dict) or not data["methods"]:
-        raise ValueError(f"{path}: methods must be a non-empty mapping")
-    for key, method in data["methods"].items():
-        missing = [f for f in METHOD_FIELDS if f not in (method or {})]
-        if missing:
-            raise ValueError(f"{path}: method {key!r} lacks {missing}")
-        for table in ("runs", "diagnostics"):
-            if not isinstance(method[table], list):
-                raise ValueError(f"{path}: {key}.{table} must be a list")
-            for index, run in enumerate(method[table]):
-                _check_run(run, f"{path}: {key}.{table}[{index}]")
-    return data["methods"]
+_SCALARS = (str, int, float, bool, type(None))
 
 
-def _check_run(run: Any, where: str) -> None:
-    if not isinstance(run, dict):
-        raise ValueError(f"{where} must be a mapping")
-    missing = [f for f in RUN_FIELDS if f not in run]
-    if missing:
-        raise ValueError(f"{where} lacks {missing}")
-    seeds = run["seeds"]
-    if not isinstance(seeds, list) or any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
-        raise ValueError(f"{where}: seeds must be a list of integers, got {seeds!r}")
-    keys = set(seeds) if seeds else {"all"}
-    if not isinstance(run["outcome"], dict) or set(run["outcome"]) != keys:
-        raise ValueError(
-            f"{where}: outcome must have one entry per seed ({sorted(keys, key=str)}), got {run['outcome']!r}"
-        )
-    details = run.get("details", {})
-    if not isinstance(details, dict) or not set(details) <= keys:
-        raise ValueError(f"{where}: details must be keyed by the run's seeds, got {details!r}")
-
-
-def _value(outcome: Any) -> Optional[float]:
-    """The measure of one outcome: the number, ``inf`` (did not balance), ``None`` (not run)."""
-    if isinstance(outcome, bool):
-        raise ValueError(f"an outcome must be a number or a string, got {outcome!r}")
-    if isinstance(outcome, (int, float)):
-        return float(outcome)
-    return None if str(outcome).strip() == NOT_RUN else math.inf
-
-
-def _summary(outcomes: Sequence[Any]) -> tuple[str, float]:
-    """``("k of n", median)`` over the seeds that were run."""
-    values = [v for v in (_value(o) for o in outcomes) if v is not None]
-    balanced = sum(math.isfinite(v) for v in values)
-    return f"{balanced} of {len(values)}", float(np.median(values)) if values else math.nan
-
-
-def _cell(value: Any) -> Any:
-    return value.replace("|", "\\|") if isinstance(value, str) else value
-
-
-def _format(value: float) -> str:
-    return "never" if math.isinf(value) else ("" if math.isnan(value) else f"{value:g}")
-
-
-def run_rows(
-    method: Mapping[str, Any], table: str = "runs", current: Sequence[Mapping[str, Any]] = ()
-) -> tuple[list[dict[str, Any]], list[str]]:
-    """Rows and columns of one table of a method: a row per run (``current`` rows last), a column per seed, then
-    for ``runs`` the seeds that balanced, the median, the unit; and the notes."""
-    runs = list(method[table]) + list(current)
-    seeds = sorted({s for run in runs for s in run["seeds"]})
-    seed_columns = [f"seed {s}" for s in seeds] + (["all seeds"] if any(not run["seeds"] for run in runs) else [])
-    summarise = table == "runs" and bool(method["unit"])
-    rows = []
-    for number, run in enumerate(runs, start=1):
-        row: dict[str, Any] = {
-            "row": number,
-            "setting": run["setting"] + (" **(defaults)**" if run.get("defaults") else ""),
-        }
-        row.update({column: "" for column in seed_columns})
-        for key, outcome in run["outcome"].items():
-            row["all seeds" if key == "all" else f"seed {key}"] = outcome
-        if summarise:
-            row["balanced"], row["median"] = "", ""
-            if run["seeds"]:  # a run that names no seeds says nothing about how many balanced
-                row["balanced"], median = _summary(list(run["outcome"].values()))
-                row["median"] = _format(median)
-            row["unit"] = run.get("unit", method["unit"])
-        row["notes"] = run["notes"]
-        rows.append({k: _cell(v) for k, v in row.items()})
-    columns = ["row", "setting", *seed_columns] + (["balanced", "median", "unit"] if summarise else []) + ["notes"]
-    return rows, columns
-
-
-def detail_rows(method: Mapping[str, Any], table: str = "runs") -> list[dict[str, Any]]:
-    """One row per run and seed with details: ``{row, seed, details}`` (``row`` as in :func:`run_rows`)."""
-    return [
-        {"row": number, "seed": seed, "details": _cell(text)}
-        for number, run in enumerate(method[table], start=1)
-        for seed, text in run.get("details", {}).items()
-    ]
-
-
-def summary_rows(
-    records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}
-) -> list[dict[str, Any]]:
-    """Per method, the recorded runs of the defaults and the current runs: seeds that balanced and the median."""
-    rows = []
-    for key, method in records.items():
-        if not method["unit"]:
-            continue
-        groups = [
-            ("recorded runs of the defaults", [r for r in method["runs"] if r.get("defaults")]),
-            ("the book's current runs", list(current.get(key, ()))),
-        ]
-        for what, runs in groups:
-            outcomes = [o for run in runs if run["seeds"] for o in run["outcome"].values()]
-            if not outcomes:
-                continue
-            seeds = sorted(s for run in runs for s in run["seeds"])
-            balanced, median = _summary(outcomes)
-            rows.append(
-                {
-                    "key": key,
-                    "current": what != groups[0][0],
-                    "method": method["title"],
-                    "runs": what,
-                    "seeds": ", ".join(map(str, seeds)),
-                    "balanced": balanced,
-                    "median": _format(median),
-                    "unit": method["unit"],
-                }
+def check_record(data: Any, where: str) -> dict[str, Any]:
+    """``data`` as a record (figures given as ``"inf"`` made floats); a ``ValueError`` naming ``where`` and the
+    field that is missing, unknown or of the wrong kind."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: a record must be a JSON object, got {type(data).__name__}")
+    if unknown := sorted(set(data) - set(FIELDS)):
+        raise ValueError(f"{where}: unknown field {unknown[0]!r} (a record has {', '.join(FIELDS)})")
+    for field, kind in FIELDS.items():
+        if not isinstance(data.get(field), kind):
+            raise ValueError(
+                f"{where}: field {field!r} must be a {kind.__name__}, got {type(data.get(field)).__name__}"
             )
-    return rows
+    for name, value in data["settings"].items():
+        if not isinstance(value, _SCALARS):
+            raise ValueError(f"{where}: settings.{name} must be a scalar, got {type(value).__name__}")
+    figures = {name: float(value) if value in ("inf", "-inf") else value for name, value in data["figures"].items()}
+    for name, value in figures.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{where}: figures.{name} must be a number, got {value!r}")
+    for index, row in enumerate(data["rows"]):
+        if not isinstance(row, dict):
+            raise ValueError(f"{where}: rows[{index}] must be a mapping, got {type(row).__name__}")
+        for name, value in row.items():
+            if not isinstance(value, (*_SCALARS, dict)):
+                raise ValueError(
+                    f"{where}: rows[{index}].{name} must be a scalar or a mapping, got {type(value).__name__}"
+                )
+    return data | {"figures": figures}
+
+
+def load_record(path: Path | str) -> dict[str, Any]:
+    """The record in the JSON file ``path``, checked (:func:`check_record`)."""
+    from softpend.io.reading import MAX_JSON_BYTES, read_json_checked
+
+    return check_record(read_json_checked(path, "probe record", MAX_JSON_BYTES), str(path))
+
+
+def load_records(folder: Path | str = RECORDS_DIR) -> dict[str, dict[str, Any]]:
+    """Every record in ``folder`` (``*.json``) by file stem, in name order; ``ValueError`` when there is none."""
+    paths = sorted(Path(folder).glob("*.json"))
+    if not paths:
+        raise ValueError(f"{folder}: no probe records (*.json)")
+    return {path.stem: load_record(path) for path in paths}
+
+
+def record_text(record: Mapping[str, Any]) -> str:
+    """``record`` as the JSON text a probe script stores (checked; numpy scalars as plain numbers)."""
+    text = json.dumps(record, indent=1, default=lambda value: value.item() if hasattr(value, "item") else str(value))
+    check_record(json.loads(text), f"record {record.get('title')!r}")
+    return text + "\n"
+
+
+def flat_settings(settings: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``settings`` with nested mappings as dotted names and lists as comma-separated text (record settings)."""
+    flat: dict[str, Any] = {}
+    for name, value in settings.items():
+        if isinstance(value, Mapping):
+            flat |= flat_settings(value, f"{prefix}{name}.")
+        else:
+            flat[f"{prefix}{name}"] = ", ".join(map(str, value)) if isinstance(value, (list, tuple)) else value
+    return flat
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}" if math.isfinite(value) else str(value)
+    return "" if value is None else str(value).replace("|", "\\|")
+
+
+def markdown_rows(rows: Sequence[Mapping[str, Any]]) -> str:
+    """A Markdown table of the scalar values of ``rows`` (a column per name, in order of first appearance)."""
+    from softpend.study.figures.fidelity import markdown_table
+
+    columns = list(dict.fromkeys(k for row in rows for k, v in row.items() if not isinstance(v, Mapping)))
+    return markdown_table([{c: _cell(row.get(c)) for c in columns} for row in rows], columns)
+
+
+def record_markdown(record: Mapping[str, Any], heading: str = "###") -> str:
+    """One record as Markdown: its title, the command that wrote it, its settings, its figures and its rows."""
+    settings = "; ".join(f"`{name}` = {_cell(value)}" for name, value in record["settings"].items())
+    figures = [{"figure": name, "value": value} for name, value in record["figures"].items()]
+    parts = [f"{heading} {record['title']}", f"Command: `{record['command']}`", f"Settings: {settings or 'none'}."]
+    parts += [markdown_rows(figures)] if figures else ["Figures: none."]
+    parts += [f"Rows ({len(record['rows'])}):", markdown_rows(record["rows"])] if record["rows"] else []
+    return "\n\n".join(parts)
 
 
 def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current runs of one RL method as a record run: plant seconds at the first balanced evaluation."""
+    """The book's current runs of one RL method, a row per seed with a run folder: plant seconds at the first
+    balanced evaluation (``inf``: never), the run's plant seconds and episodes."""
     from softpend.rl.config import load_config
     from softpend.rl.training_log import TrainingLog
     from softpend.study.rl_runs import plant_runs_root, run_folder
 
-    outcome, details = {}, {}
+    rows = []
     for seed in seeds:
         folder = run_folder(plant_runs_root(runs_root, plant), algo, int(seed))
         try:
@@ -169,86 +125,63 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
             log = TrainingLog.load(folder / "log.json")
         except (FileNotFoundError, ValueError, KeyError):
             continue
-        value = log.real_s_to_balance()
-        outcome[int(seed)] = float(value) if math.isfinite(value) else f"never within {log.plant_s:g} plant s"
-        details[int(seed)] = f"{log.n_episodes} episodes"
-    return _current_run(outcome, details, f"{runs_root} (plant {plant})")
+        to_balance = float(log.real_s_to_balance())
+        rows.append(
+            {"seed": int(seed), "plant_s_to_balance": to_balance, "plant_s": log.plant_s, "episodes": log.n_episodes}
+        )
+    return rows
 
 
 def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current PILCO runs as a record run: plant seconds up to the first policy that balances."""
+    """The book's current PILCO runs, a row per seed with a run folder: plant seconds up to the first policy that
+    balances (``inf``: none), the run's plant seconds, policy trials, worst test std and training CPU seconds."""
     from softpend.pilco.loop import PilcoResult
     from softpend.study.rl_runs import plant_runs_root, run_folder
 
-    outcome, details = {}, {}
+    rows = []
     for seed in seeds:
-        folder = run_folder(plant_runs_root(runs_root, plant), "pilco", int(seed))
         try:
-            result = PilcoResult.load(folder)
+            result = PilcoResult.load(run_folder(plant_runs_root(runs_root, plant), "pilco", int(seed)))
         except (FileNotFoundError, ValueError, KeyError, TypeError):
             continue
-        value = result.real_seconds_to_balance
-        outcome[int(seed)] = float(value) if math.isfinite(value) else f"not within {result.plant_seconds_total:g} s"
-        policy_trials = sum(r.kind == "policy" for r in result.records)
-        worst = result.records[-1].eval_upright_std_rad if result.records else math.nan
-        details[int(seed)] = (
-            f"{policy_trials} policy trials, worst test std {worst:.2g} rad, {result.train_cpu_s:.0f} CPU s"
+        rows.append(
+            {
+                "seed": int(seed),
+                "plant_s_to_balance": float(result.real_seconds_to_balance),
+                "plant_s": result.plant_seconds_total,
+                "policy_trials": sum(r.kind == "policy" for r in result.records),
+                "worst_test_std_rad": result.records[-1].eval_upright_std_rad if result.records else math.nan,
+                "train_cpu_s": result.train_cpu_s,
+            }
         )
-    return _current_run(outcome, details, f"{runs_root} (plant {plant})")
+    return rows
 
 
-def _current_run(outcome: dict, details: dict, where: str) -> list[dict[str, Any]]:
-    if not outcome:
-        return []
-    return [
-        {
-            "setting": f"the current defaults: the book's runs in {where}",
-            "seeds": sorted(outcome),
-            "outcome": outcome,
-            "details": details,
-            "notes": "computed from the run folders",
-        }
-    ]
+def balance_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, str]:
+    """The seeds of current-run rows, how many balanced (``"k of n"``) and the median plant seconds to balance,
+    in which a run that never balanced counts as infinitely late."""
+    values = [float(row["plant_s_to_balance"]) for row in rows]
+    median = float(np.median(values)) if values else math.nan
+    balanced = f"{sum(map(math.isfinite, values))} of {len(values)}"
+    return {"seeds": ", ".join(str(row["seed"]) for row in rows), "balanced": balanced, "median": _cell(median)}
 
 
-def plot_records(records: Mapping[str, Mapping[str, Any]], current: Mapping[str, Sequence[Mapping[str, Any]]] = {}):
-    """One panel per method with a unit: each run's outcome per seed (crosses at the right edge: did not balance)."""
+def plot_current(current: Mapping[str, Sequence[Mapping[str, Any]]]):
+    """One line per method: each seed's plant seconds to balance (crosses at the grey line: did not balance)."""
     import matplotlib.pyplot as plt
 
-    keys = [k for k, m in records.items() if m["unit"]]
-    heights = [len(records[k]["runs"]) + len(current.get(k, ())) for k in keys]
-    fig, axes = plt.subplots(
-        len(keys), 1, figsize=(8, 1.2 + 0.28 * sum(heights)), squeeze=False, gridspec_kw={"height_ratios": heights}
-    )
-    for ax, key in zip(axes[:, 0], keys):
-        method = records[key]
-        runs = list(method["runs"]) + list(current.get(key, ()))
-        finite = [
-            v
-            for run in runs
-            for v in map(_value, run["outcome"].values())
-            if v is not None and math.isfinite(v) and run.get("unit", method["unit"]) == method["unit"]
-        ]
-        edge = 1.15 * max(finite) if finite else 1.0
-        for number, run in enumerate(runs, start=1):
-            if not run["seeds"]:  # no per-seed outcome to draw
-                continue
-            same_unit = run.get("unit", method["unit"]) == method["unit"]
-            color = "C1" if run.get("defaults") else ("C2" if run in current.get(key, ()) else "C0")
-            for outcome in run["outcome"].values():
-                value = _value(outcome)
-                if value is None or not same_unit:
-                    continue
-                if math.isfinite(value):
-                    ax.plot(value, number, "o", color=color, alpha=0.8)
-                else:
-                    ax.plot(edge, number, "x", color=color, alpha=0.8)
-        ax.axvline(edge, color="0.8", lw=0.8)
-        ax.set_yticks(range(1, len(runs) + 1))
-        ax.set_ylim(len(runs) + 0.5, 0.5)
-        ax.set_xlim(0, 1.05 * edge)
-        ax.set_ylabel("row")
-        ax.set_title(method["title"], fontsize=10, loc="left")
-        ax.set_xlabel(f"{method['unit']} (crosses at the grey line: did not balance)")
+    labels = [label for label, rows in current.items() if rows]
+    finite = [r["plant_s_to_balance"] for k in labels for r in current[k] if math.isfinite(r["plant_s_to_balance"])]
+    edge = 1.15 * max(finite) if finite else 1.0
+    fig, ax = plt.subplots(figsize=(8, 1.2 + 0.5 * len(labels)))
+    for number, label in enumerate(labels):
+        for row in current[label]:
+            value = row["plant_s_to_balance"]
+            ax.plot(value if math.isfinite(value) else edge, number, "o" if math.isfinite(value) else "x", color="C0")
+    ax.axvline(edge, color="0.8", lw=0.8)
+    ax.set_yticks(range(len(labels)), labels)
+    ax.set_ylim(len(labels) - 0.5, -0.5)
+    ax.set_xlim(0, 1.05 * edge)
+    ax.set_xlabel("plant seconds to balance (crosses at the grey line: did not balance)")
     fig.tight_layout()
     return fig

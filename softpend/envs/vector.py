@@ -120,11 +120,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         base = BatchedRodParams.from_params(self.params, batch_size=len(corners))
         return base.scaled(**{name: corners[:, i] for i, name in enumerate(self.randomized_fields)})
 
-    @property
-    def rod_params(self) -> BatchedRodParams:
-        """The rods now simulated (after randomisation)."""
-        return self.chain.params
-
     def joint_state(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(q, q_dot)`` of every rod, shape ``(num_envs, n + 1)`` (copies)."""
         return self._q.clone(), self._qd.clone()

@@ -76,10 +76,8 @@ def bench_sysid() -> dict[str, float]:
                 out[f"{prefix}_phi_rmse_rad_{h}s"] = metrics[f"phi_rmse_rad@{h}s"]
                 out[f"{prefix}_hold_tip_rmse_m_{h}s"] = metrics[f"hold_tip_rmse_m@{h}s"]
             out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
-            if prefix == "model":
-                out["model_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
-            if prefix == "model_wide":
-                out["model_wide_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
+            if prefix in ("model", "model_wide"):
+                out[f"{prefix}_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
             if prefix == "model_best":
                 out["model_best_one_step_tip_rmse_m"] = metrics["one_step_tip_rmse_m"]
                 best_model = fit.model

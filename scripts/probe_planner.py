@@ -5,7 +5,14 @@
 Per seed: the plant seconds until the stopping rule fired (every excitation and trial second counted), the
 fresh starts balanced (swing-up found, upright std <= 0.1 rad) out of 20, and the wall and CPU seconds of the
 run.  The trials start from the first 16 SELECTION_SEEDS; ``--tune`` measures on the other 20 selection seeds
-instead of REPORT_SEEDS (for tuning), and writes nothing unless ``--out`` is given.  ``--plant beam`` (the same as
+instead of REPORT_SEEDS (for tuning), and writes nothing unless ``--out`` is given.
+
+    .venv/bin/python scripts/probe_planner.py --pair-with-pilco runs/pilco-book --planner-record PATH [--out PATH]
+
+pairs a stored probe of the planner on the PRB rod (``--planner-record``) with the book's PILCO runs of the same
+seeds (trained beforehand by ``softpend sweep --methods pilco``; PILCO's plant seconds to its first balancing
+policy, infinite unless its final policy balances the fresh report starts, as in the data-efficiency chapter):
+per seed the planner's plant seconds to balance over PILCO's, and their median.  ``--plant beam`` (the same as
 ``--set task.plant=beam``) makes the continuum beam the real rod: excitation, trials and fresh starts on the beam
 (one start after the other, on the Exudyn engine).  The JSON is the stored probe summary of ``book/records``.
 """
@@ -93,6 +100,59 @@ def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: 
             handle.write(json.dumps(document, indent=2, default=float) + "\n")
 
 
+def _pair_with_pilco(args: argparse.Namespace, argv: list[str]) -> int:
+    from softpend.study.data_efficiency import paired_ratio, paired_ratio_rows, pilco_rows_if_trained
+
+    record = json.loads(Path(args.planner_record).read_text())
+    planner = {
+        int(r["seed"]): r["plant_s_to_balance"]
+        if r["fresh_balanced"] >= BALANCED_FRACTION * r["fresh_starts"]
+        else math.inf
+        for r in record.get("rows", record.get("per_seed"))
+    }
+    pilco_rows = pilco_rows_if_trained(sorted(planner), args.pair_with_pilco)
+    if pilco_rows is None:
+        raise SystemExit(f"the book's PILCO runs of seeds {sorted(planner)} are not all in {args.pair_with_pilco}")
+    pilco = {int(r["seed"]): r for r in pilco_rows}
+    rows = [
+        {
+            "seed": row["seed"],
+            "planner_s_to_balance": row["numerator_s"],
+            "pilco_s_to_balance": row["denominator_s"],
+            "ratio": row["ratio"],
+            "pilco_plant_s": pilco[row["seed"]]["plant_s"],
+            "pilco_trials": pilco[row["seed"]]["episodes"],
+            "pilco_fresh_balanced": pilco[row["seed"]]["final_balanced_starts"],
+            "pilco_fresh_starts": pilco[row["seed"]]["starts"],
+        }
+        for row in paired_ratio_rows(planner, {s: r["plant_s_to_balance"] for s, r in pilco.items()})
+    ]
+    figures = {
+        "seeds": len(rows),
+        "mpc_over_pilco_real_s_ratio": paired_ratio(planner, {s: r["plant_s_to_balance"] for s, r in pilco.items()}),
+        "median_planner_s_to_balance": statistics.median(r["planner_s_to_balance"] for r in rows),
+        "median_pilco_s_to_balance": statistics.median(r["pilco_s_to_balance"] for r in rows),
+        "seeds_planner_fewer_s": sum(r["ratio"] < 1 for r in rows),
+    }
+    print(json.dumps(figures), flush=True)
+    document = {
+        "title": "MPPI planner (PRB-residual model) against PILCO: plant seconds to balance, paired by seed",
+        "command": "python scripts/probe_planner.py " + " ".join(argv),
+        "settings": {
+            "planner_record": args.planner_record,
+            "pilco_runs_root": args.pair_with_pilco,
+            "fresh_seeds": _seeds_text(REPORT_SEEDS),
+            "balanced_fraction": BALANCED_FRACTION,
+        },
+        "figures": figures,
+        "rows": rows,
+    }
+    out = args.out if args.out is not None else str(ROOT / "book" / "records" / "planner_vs_pilco.json")
+    with atomic_write(Path(out), "w") as handle:
+        handle.write(json.dumps(document, indent=2, default=float) + "\n")
+    return 0
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -101,8 +161,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--hparams", default=str(ROOT / "book" / "hparams" / "planner.yml"))
     parser.add_argument("--tune", action="store_true", help="measure on selection starts, not REPORT_SEEDS")
     parser.add_argument("--out", default=None)
+    parser.add_argument("--pair-with-pilco", default=None, metavar="RUNS_ROOT", help="pair with PILCO's book runs")
+    parser.add_argument("--planner-record", default=str(ROOT / "book" / "records" / "planner_probe_residual.json"))
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    if args.pair_with_pilco is not None:
+        return _pair_with_pilco(args, argv)
     overrides = [parse_assignment(item) for item in args.set]
     if args.plant is not None:
         overrides.append(("task.plant", args.plant))

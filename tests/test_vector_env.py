@@ -132,7 +132,7 @@ def test_per_rod_randomisation_stays_within_the_fraction_and_is_redrawn_at_reset
     nominal = RodParams()
     env = SoftPendulumVectorEnv(num_envs=64, randomize_fraction=0.15, max_episode_steps=2)
     env.reset(seed=0)
-    drawn = env.rod_params
+    drawn = env.chain.params
     for name in RANDOMISED_FIELDS:
         ratio = getattr(drawn, name).numpy() / getattr(nominal, name)
         assert ratio.min() >= 0.85 and ratio.max() <= 1.15 and ratio.std() > 0.05, name
@@ -141,11 +141,11 @@ def test_per_rod_randomisation_stays_within_the_fraction_and_is_redrawn_at_reset
     first_mass = drawn.mass_kg.clone()
     for _ in range(3):  # two steps, then the autoreset step
         env.step(np.zeros((64, 1), dtype=np.float32))
-    assert not np.allclose(env.rod_params.mass_kg.numpy(), first_mass.numpy())
+    assert not np.allclose(env.chain.params.mass_kg.numpy(), first_mass.numpy())
     # torque limit per rod: full action gives each rod's own limit
     env.reset(seed=1)
     _, _, _, _, info = env.step(np.ones((64, 1), dtype=np.float32))
-    np.testing.assert_allclose(info["torque_nm"], env.rod_params.torque_limit_nm.numpy())
+    np.testing.assert_allclose(info["torque_nm"], env.chain.params.torque_limit_nm.numpy())
 
 
 def test_reset_mask_resets_only_the_chosen_rods() -> None:

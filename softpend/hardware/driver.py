@@ -126,9 +126,7 @@ class MotorLink:
         self,
         port: str,
         torque_limit_nm: float,
-        baudrate: int = 115200,
         timeout_s: float = 0.25,
-        phi_at_zero_counts_rad: float = math.pi,
         max_consecutive_bad_frames: int = 3,
         install_exit_hooks: bool = True,
         serial=None,
@@ -137,9 +135,7 @@ class MotorLink:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
         self.port = port
         self.host_torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
-        self.baudrate = int(baudrate)
         self.timeout_s = positive("timeout_s", timeout_s)
-        self.phi_at_zero_counts_rad = float(phi_at_zero_counts_rad)
         self.max_consecutive_bad_frames = positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
         self.install_exit_hooks = install_exit_hooks
         self._transport = serial
@@ -173,9 +169,7 @@ class MotorLink:
         import serial
 
         try:
-            self._serial = self._transport or serial.Serial(
-                self.port, self.baudrate, timeout=0, write_timeout=self.timeout_s
-            )
+            self._serial = self._transport or serial.Serial(self.port, 115200, timeout=0, write_timeout=self.timeout_s)
         except (serial.SerialException, OSError) as exc:
             raise LinkDisconnected(f"cannot open serial port {self.port!r}: {exc}") from exc
         _OPEN_LINKS.add(self)
@@ -298,7 +292,7 @@ class MotorLink:
         return MotorState(
             host_time_s=self.clock.now_s(),
             device_time_s=device_us * 1e-6,
-            phi_rad=self.phi_at_zero_counts_rad + counts * (2 * math.pi / cpr),
+            phi_rad=math.pi + counts * (2 * math.pi / cpr),  # zero counts: hanging
             phi_dot_rad_s=float(velocity),
             applied_torque_nm=float(applied),
             last_cmd_seq=int(last_cmd),

@@ -17,23 +17,16 @@ from softpend.plant import RodParams, wrap_angle_rad
 RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
 
 
-def startup_wiggle_torque(
-    duration_s: float,
-    torque_nm: float,
-    seed: int,
-    dt_s: float = 0.01,
-    min_hold_s: float = 0.08,
-    max_hold_s: float = 0.3,
-) -> np.ndarray:
-    """The start-up wiggle: +-``torque_nm`` with random hold times, one torque per control step."""
-    if not (duration_s > 0 and torque_nm > 0 and dt_s > 0 and 0 < min_hold_s <= max_hold_s):
-        raise ValueError("duration_s, torque_nm, dt_s must be positive and min_hold_s <= max_hold_s")
+def startup_wiggle_torque(duration_s: float, torque_nm: float, seed: int, dt_s: float = 0.01) -> np.ndarray:
+    """The start-up wiggle: +-``torque_nm`` held for random times of 0.08 s to 0.3 s, one torque per control step."""
+    if not (duration_s > 0 and torque_nm > 0 and dt_s > 0):
+        raise ValueError("duration_s, torque_nm, dt_s must be positive")
     rng = np.random.default_rng(seed)
     n = int(round(duration_s / dt_s))
     out = np.empty(n)
     k, sign = 0, 1.0
     while k < n:
-        hold = max(1, int(round(rng.uniform(min_hold_s, max_hold_s) / dt_s)))
+        hold = max(1, int(round(rng.uniform(0.08, 0.3) / dt_s)))
         out[k : k + hold] = sign * torque_nm
         k += hold
         sign = -sign
@@ -148,14 +141,11 @@ def synchronise(
     dt_s: float = 0.01,
     trial_length_s: float = 5.0,
     offset: Optional[ClockOffset] = None,
-    wiggle_window_s: Optional[float] = 4.0,
     max_offset_s: float = 1.0,
-    gap_factor: float = 1.6,
-    min_gap_s: float = 0.03,
 ) -> SyncResult:
     """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into trials of
-    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first ``wiggle_window_s``; a
-    spacing above ``gap_factor`` times the median period and ``min_gap_s`` is a gap."""
+    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first 4 s (the wiggle); a
+    spacing above 1.6 times the median period and 0.03 s is a gap."""
     for name, log, needed in (
         ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
         ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost")),
@@ -172,18 +162,17 @@ def synchronise(
     lost = camera["lost"] > 0.5
     x_m, y_m = camera["x_m"].copy(), camera["y_m"].copy()
     if offset is None:
-        window = None if wiggle_window_s is None else (tm[0], tm[0] + wiggle_window_s)
         if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
             reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
         else:  # no hub marker: the tip angle (biased by the rod's lag)
             reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
-        offset = estimate_clock_offset(tm, phi, tc_cam, reference, window, max_offset_s)
+        offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0), max_offset_s)
     tc = tc_cam - offset.offset_s  # camera frames on the motor clock
 
     motor_period = float(np.median(np.diff(tm)))
     camera_period = float(np.median(np.diff(tc)))
-    gaps = _gaps_from_times(tm, max(gap_factor * motor_period, min_gap_s), "motor states missing")
-    gaps += _gaps_from_times(tc, max(gap_factor * camera_period, min_gap_s), "camera frames missing")
+    gaps = _gaps_from_times(tm, max(1.6 * motor_period, 0.03), "motor states missing")
+    gaps += _gaps_from_times(tc, max(1.6 * camera_period, 0.03), "camera frames missing")
     for a, b in _runs(lost):
         start = tc[a - 1] if a > 0 else tc[a]
         end = tc[b] if b < len(tc) else tc[b - 1]
@@ -237,13 +226,12 @@ def build_rig_dataset(
     dt_s: float = 0.01,
     trial_length_s: float = 5.0,
     notes: str = "",
-    **sync_kwargs,
 ):
     """Synchronise a motor log and a camera CSV into a ``source="rig"`` dataset; ``(dataset, sync_result)``."""
     from softpend.sysid.dataset import save_dataset
 
     result = synchronise(
-        read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s, trial_length_s=trial_length_s, **sync_kwargs
+        read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s, trial_length_s=trial_length_s
     )
     protocol = {
         "kind": "rig babbling, motor log + tracked camera (softpend.hardware.sync)",

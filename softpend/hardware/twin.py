@@ -28,21 +28,19 @@ def rig_babble_controller(
     duration_s: float,
     torque_limit_nm: float,
     seed: int,
-    wiggle_s: float = 2.0,
-    wiggle_fraction: float = 0.8,
     torque_std_fraction: float = 0.5,
     torque_bandwidth_hz: float = 2.0,
     dt_s: float = 0.01,
     program: Optional[np.ndarray] = None,
 ) -> Callable[[RigObservation, float], float]:
-    """The rig's babbling program, a function of time: the start-up wiggle for ``wiggle_s``, then band-limited
+    """The rig's babbling program, a function of time: the start-up wiggle (2 s at 0.8 of the limit), then band-limited
     Gaussian torque (:func:`softpend.sysid.band_limited_noise`), or the torques ``program`` [N m, one per
     ``dt_s``, then zero] when given; amplitudes are fractions of the limit."""
     from softpend.sysid.babble import band_limited_noise
 
     rng = np.random.default_rng(seed)
     n = int(math.ceil((duration_s + 1.0) / dt_s))
-    wiggle = startup_wiggle_torque(wiggle_s, wiggle_fraction * torque_limit_nm, seed=seed + 1, dt_s=dt_s)
+    wiggle = startup_wiggle_torque(2.0, 0.8 * torque_limit_nm, seed=seed + 1, dt_s=dt_s)
     if program is None:
         noise = band_limited_noise(rng, n, torque_std_fraction * torque_limit_nm, torque_bandwidth_hz, dt_s)
     else:
@@ -90,10 +88,8 @@ def run_twin_session(
     duration_s: float = 30.0,
     seed: int = 0,
     rig: Optional[RigConfig] = None,
-    camera_effects=None,
     camera_fps: float = 100.0,
     clock_offset_s: float = 0.137,
-    timestamp_jitter_s: float = 0.0005,
     trial_length_s: float = 5.0,
     progress: bool = True,
     outputs: Optional[Any] = None,
@@ -116,13 +112,12 @@ def run_twin_session(
     outputs = outputs if outputs is not None else Outputs()
     workdir = outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
-    effects = camera_effects if camera_effects is not None else CameraEffects.rig()
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:
         outputs.live(workdir / name)
     loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress, program)
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
-    camera = SyntheticCamera(effects=effects, seed=seed)
+    camera = SyntheticCamera(effects=CameraEffects.rig(), seed=seed)
     video, camera_csv = paths["camera.avi"], paths["camera.csv"]
     render_video(
         video,
@@ -132,7 +127,7 @@ def run_twin_session(
         hub,
         fps=camera_fps,
         clock_offset_s=clock_offset_s,
-        timestamp_jitter_s=timestamp_jitter_s,
+        timestamp_jitter_s=0.0005,
         progress=progress,
     )
     track_video(video, camera_csv, progress=progress)

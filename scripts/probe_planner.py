@@ -30,10 +30,11 @@ from typing import Any
 
 import torch
 
-from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
+from softpend.control.planner import PlannerConfig, run_planner
 from softpend.evaluation import HOLD_STD_RAD, evaluate
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import apply_overrides, parse_assignment
+from softpend.study.data_efficiency import planner_fresh_starts
 from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -185,7 +186,7 @@ def main(argv: list[str]) -> int:
             with torch.no_grad():
                 summary = evaluate(policy, config.task, engine=engine, seeds=TUNING_SEEDS)
         else:
-            summary = fresh_start_evaluation(result, REPORT_SEEDS, engine=engine)
+            summary = planner_fresh_starts(result, REPORT_SEEDS)
         held = [math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= HOLD_STD_RAD for r in summary.results]
         row = {
             "seed": seed,

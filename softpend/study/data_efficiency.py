@@ -24,6 +24,7 @@ __all__ = [
     "paired_ratio",
     "paired_ratio_rows",
     "pilco_rows_if_trained",
+    "planner_fresh_starts",
     "planner_rows",
     "plant_seconds_rows",
     "plot_plant_seconds",
@@ -186,18 +187,17 @@ def planner_rows(
     as the real rod, trials from the first 16 selection starts, then its controller on ``report_seeds`` (the PRB
     rod all at once on the batched engine, another rod one start after the other); ``real_s_to_balance`` is
     infinite unless 90 % of them balance."""
-    from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
+    from softpend.control.planner import PlannerConfig, run_planner
     from softpend.io.overrides import apply_overrides
     from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
 
     config = apply_overrides(
         PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml", Task(plant=plant)), dict(overrides or {})
     ).replace(model=model, selection_seeds=SELECTION_SEEDS[:16])
-    engine = "batched" if plant == "prb" else "exudyn"
     rows = []
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))
-        fresh = fresh_start_row(fresh_start_evaluation(result, tuple(report_seeds), engine=engine))
+        fresh = fresh_start_row(planner_fresh_starts(result, report_seeds))
         rows.append(
             {
                 "plant": plant,
@@ -209,6 +209,25 @@ def planner_rows(
             }
         )
     return rows
+
+
+def planner_fresh_starts(result: Any, seeds: Sequence[int]) -> Any:
+    """The final controller of a planner run (:class:`softpend.control.planner.PlannerResult`) from the fresh starts
+    ``seeds`` on the run's real rod: the PRB rod all at once on the batched engine
+    (:func:`softpend.control.planner.fresh_start_evaluation`), another one start after the other on the Exudyn
+    engine; seeds shared with the run's selection starts raise ``ValueError``."""
+    import torch
+
+    from softpend.control.planner import fresh_start_evaluation
+    from softpend.torch_threads import one_torch_thread
+
+    task = result.config.task
+    if task.plant == "prb":
+        return fresh_start_evaluation(result, tuple(seeds))
+    if shared := sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds)):
+        raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
+    with torch.no_grad(), one_torch_thread():
+        return evaluate(result.controller, task, engine="exudyn", name="planner", seeds=tuple(seeds))
 
 
 def pilco_rows_if_trained(

@@ -9,15 +9,16 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.stats
 
-from softpend.checks import in_unit_interval, int_at_least, one_of
-
 
 def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
     """Wilson score interval ``(low, high)`` of a success probability from ``successes`` of ``trials``."""
-    n = float(int_at_least("trials", trials, 1))
-    if int_at_least("successes", successes, 0) > trials:
+    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
+        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+    if isinstance(successes, bool) or int(successes) != successes or not 0 <= successes <= trials:
         raise ValueError(f"successes must be an integer in [0, trials={trials}], got {successes!r}")
-    in_unit_interval("confidence", confidence, include_zero=False, include_one=False)
+    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    n = float(trials)
     p = successes / n
     z = float(scipy.stats.norm.ppf(0.5 + confidence / 2.0))
     denominator = 1.0 + z**2 / n
@@ -63,7 +64,8 @@ def aggregate_interval(
     seed: int = 0,
 ) -> AggregateInterval:
     """Point estimate and stratified bootstrap interval of ``statistic`` over runs."""
-    one_of("statistic", statistic, AGGREGATES)
+    if statistic not in AGGREGATES:
+        raise ValueError(f"statistic must be one of {sorted(AGGREGATES)}, got {statistic!r}")
     data = np.asarray(scores, dtype=float)
     if data.ndim == 1:
         data = data[:, None]
@@ -71,8 +73,10 @@ def aggregate_interval(
         raise ValueError(f"scores must have shape (n_runs >= 2,) or (n_runs >= 2, n_tasks), got {np.shape(scores)}")
     if np.isnan(data).any():
         raise ValueError("scores must not contain NaN")
-    in_unit_interval("confidence", confidence, include_zero=False, include_one=False)
-    int_at_least("n_resamples", n_resamples, 100)
+    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    if isinstance(n_resamples, bool) or int(n_resamples) != n_resamples or n_resamples < 100:
+        raise ValueError(f"n_resamples must be an integer >= 100, got {n_resamples!r}")
     aggregate = AGGREGATES[statistic]
     value = float(aggregate(data))
 

@@ -77,7 +77,7 @@ class _ExudynSystem:
         # Any: exudyn's stubs declare these methods without self and GetSystemState as lists (it gives arrays)
         self._data: Any = mbs.systemData
         self._solver: Any = exu.MainSolverImplicitSecondOrder()
-        self._solver.InitializeSolver(mbs, settings)
+        self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
 
     def _set_coordinates(self, c: np.ndarray, c_t: np.ndarray, zero_rest: bool = False) -> None:
         """Set the coordinates and their rates (and zero the accelerations and algebraic coordinates if

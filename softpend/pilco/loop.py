@@ -15,7 +15,7 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import boolean, check_work_size, finite, int_at_least, non_negative, optional_positive, positive
+from softpend.checks import boolean, check_work_size, in_range, int_at_least, optional_positive, positive
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import dataclass_from_data
@@ -64,10 +64,7 @@ class CostSettings:
         positive("cost.width_m", self.width_m)
         for name in ("rate_width_rad_s", "rate_after_rad", "width_after_swing_up_m"):
             optional_positive(f"cost.{name}", getattr(self, name))
-        exploration = finite("cost.exploration", self.exploration)
-        if not -1.0 <= exploration <= 0.0:
-            raise ValueError(f"cost.exploration must be in [-1, 0], got {self.exploration!r}")
-        object.__setattr__(self, "exploration", exploration)
+        object.__setattr__(self, "exploration", in_range("cost.exploration", self.exploration, -1.0, 0.0))
 
 
 @dataclass(frozen=True)
@@ -96,11 +93,10 @@ class PolicySettings:
 
     def __post_init__(self) -> None:
         _set_ints(self, {"n_basis": 1}, "policy.")
-        optional_positive("policy.balance_within_rad", self.balance_within_rad)
+        if (optional_positive("policy.balance_within_rad", self.balance_within_rad) or 0.0) >= math.pi:
+            raise ValueError(f"policy.balance_within_rad must be below pi, got {self.balance_within_rad!r}")
         positive("policy.balance_prediction_s", self.balance_prediction_s)
         positive("policy.balance_within_rad_s", self.balance_within_rad_s)
-        if self.balance_within_rad is not None and self.balance_within_rad >= math.pi:
-            raise ValueError(f"policy.balance_within_rad must be below pi, got {self.balance_within_rad!r}")
 
 
 @dataclass(frozen=True)
@@ -117,11 +113,7 @@ class OptimiserSettings:
     def __post_init__(self) -> None:
         _set_ints(self, {"iterations": 1, "restarts": 0}, "optimiser.")
         positive("optimiser.restart_target_std", self.restart_target_std)
-        fraction = non_negative("optimiser.restart_above_cost_fraction", self.restart_above_cost_fraction)
-        if fraction >= 1.0:
-            raise ValueError(
-                f"optimiser.restart_above_cost_fraction must be in [0, 1), got {self.restart_above_cost_fraction!r}"
-            )
+        fraction = in_range("optimiser.restart_above_cost_fraction", self.restart_above_cost_fraction, 0.0, 1 - 1e-16)
         object.__setattr__(self, "restart_above_cost_fraction", fraction)
 
 
@@ -173,10 +165,7 @@ class PilcoConfig:
             raise ValueError(f"horizon_s must cover at least two control steps, got {self.horizon_s!r}")
         optional_positive("prediction_s", self.prediction_s)
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
-            raise ValueError(
-                f"prediction_s must be at least horizon_s ({self.horizon_s!r} s), got {self.prediction_s!r} "
-                "(None predicts the trial's length)"
-            )
+            raise ValueError(f"prediction_s must be None or at least horizon_s, got {self.prediction_s!r}")
         _set_ints(self, {"n_policy_trials": 0, "n_random_trials": 1})
         try:
             self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
@@ -248,7 +237,6 @@ class PilcoResult:
     gp_hyperparameters: Optional[GPHyperparameters]
     balance_policy: Optional[LinearPolicy] = None
     predicted_means: list[np.ndarray] = field(default_factory=list, repr=False)  # per policy trial (H+1, d)
-    predicted_stds: list[np.ndarray] = field(default_factory=list, repr=False)
     real_states: list[np.ndarray] = field(default_factory=list, repr=False)  # per trial (H+1, d)
 
     @property
@@ -368,15 +356,8 @@ def _trial_cost(
     """The cost (width ``width_m``, default ``config.cost.width_m``; tip-rate factor of width ``rate_width`` or
     none) summed along a real trial's states (H+1, d), the start excluded."""
     width_m = config.cost.width_m if width_m is None else width_m
-    return float(
-        real_cost(
-            states[1:, spec.tip_angle_index],
-            config.task.rod.length_m,
-            width_m,
-            states[1:, spec.tip_rate_index],
-            rate_width,
-        ).sum()
-    )
+    theta, theta_dot = states[1:, spec.tip_angle_index], states[1:, spec.tip_rate_index]
+    return float(real_cost(theta, config.task.rod.length_m, width_m, theta_dot, rate_width).sum())
 
 
 def _came_near_upright(spec: StateSpec, states: np.ndarray, within_rad: float) -> bool:
@@ -429,13 +410,8 @@ def _optimise_policy(
 
     start = policy.get_vector()
     start_value = objective(start)[0]
-    result = scipy.optimize.minimize(
-        objective,
-        start,
-        jac=True,
-        method="L-BFGS-B",
-        options={"maxiter": int(iterations), "maxfun": int(2 * iterations)},
-    )
+    options = {"maxiter": int(iterations), "maxfun": int(2 * iterations)}
+    result = scipy.optimize.minimize(objective, start, jac=True, method="L-BFGS-B", options=options)
     if result.fun <= start_value:
         policy.set_vector(result.x)
         return float(result.fun)
@@ -501,15 +477,8 @@ def _search_with_restarts(
         return best, 0
     best_vector = policy.get_vector()
     for _ in range(config.optimiser.restarts):
-        fresh = _random_policy(
-            spec,
-            states,
-            model_inputs,
-            config.policy.n_basis,
-            policy.torque_limit_nm,
-            rng,
-            config.optimiser.restart_target_std,
-        )
+        settings = (config.policy.n_basis, policy.torque_limit_nm, rng, config.optimiser.restart_target_std)
+        fresh = _random_policy(spec, states, model_inputs, *settings)
         policy.set_vector(fresh.get_vector())
         value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
         if value < best:
@@ -520,16 +489,10 @@ def _search_with_restarts(
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
     """The RBF policy, and the balancing policy within ``config.policy.balance_within_rad`` of upright, as a controller."""
-    spec = state_spec(config.state)
-    if balance is None or config.policy.balance_within_rad is None:
+    spec, band = state_spec(config.state), (config.policy.balance_within_rad, config.policy.balance_within_rad_s)
+    if balance is None or band[0] is None:
         return PilcoController(policy, spec, config.control_dt_s)
-    return PilcoController(
-        policy,
-        spec,
-        config.control_dt_s,
-        balance,
-        (config.policy.balance_within_rad, config.policy.balance_within_rad_s),
-    )
+    return PilcoController(policy, spec, config.control_dt_s, balance, band)
 
 
 def _upright_distribution(
@@ -625,7 +588,6 @@ class Pilco:
         self.records: list[TrialRecord] = []
         self.real_states: list[np.ndarray] = []  # per trial (H+1, d)
         self.predicted_means: list[np.ndarray] = []  # per policy trial (H+1, d)
-        self.predicted_stds: list[np.ndarray] = []
         self.policy: Optional[RBFPolicy] = None
         self.balance_policy: Optional[LinearPolicy] = None
         self.gp: Optional[MultiOutputGP] = None
@@ -654,26 +616,18 @@ class Pilco:
 
     def start_policy(self) -> RBFPolicy:
         """The first policy: random (:func:`_random_policy`), its centres on the states of the trials so far."""
-        self.policy = _random_policy(
-            self.spec,
-            np.vstack(self.real_states),
-            np.vstack(self.inputs)[:, :-1],
-            self.config.policy.n_basis,
-            self.config.task.rod.torque_limit_nm,
-            self.streams["policy_init"],
-        )
+        visited = (np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1])
+        torque_limit_nm = self.config.task.rod.torque_limit_nm
+        rng = self.streams["policy_init"]
+        self.policy = _random_policy(self.spec, *visited, self.config.policy.n_basis, torque_limit_nm, rng)
         return self.policy
 
     def optimize_models(self) -> MultiOutputGP:
         """Fit the GP dynamics on the data subsampled to ``gp.max_points`` (the latest trial kept), from the last
         fit's hyperparameters; with ``gp.all_data`` condition it on all the data."""
         x_all, y_all = np.vstack(self.inputs), np.vstack(self.targets)
-        subset = select_subset(
-            len(x_all),
-            self.config.gp.max_points,
-            recent=len(self.inputs[-1]),
-            seed=_draw_seed(self.streams["gp_subsets"]),
-        )
+        seed = _draw_seed(self.streams["gp_subsets"])
+        subset = select_subset(len(x_all), self.config.gp.max_points, recent=len(self.inputs[-1]), seed=seed)
         gp = MultiOutputGP(x_all[subset], y_all[subset], hyperparameters=self.gp_hyperparameters)
         gp.fit(self.config.gp.iterations)
         self.gp_hyperparameters = gp.hyperparameters
@@ -693,19 +647,9 @@ class Pilco:
             spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, compiled=config.compiled
         )
         restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
-        visited = (np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1])
-        objective, n_restarts = _search_with_restarts(
-            config,
-            propagator,
-            self.policy,
-            self.m0,
-            self.s0,
-            spec,
-            *visited,
-            restart_rng,
-            n_search,
-            self.n_searches > 0,
-        )
+        visited = (spec, np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1], restart_rng, n_search)
+        start = (config, propagator, self.policy, self.m0, self.s0)
+        objective, n_restarts = _search_with_restarts(*start, *visited, self.n_searches > 0)
         self.n_searches += 1
         predicted = self._predict(propagator, n_search, objective)
         return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
@@ -728,10 +672,8 @@ class Pilco:
         (the search's objective itself when the search neither explores nor predicts past the trial)."""
         n_steps = self.config.n_horizon_steps
         with torch.no_grad():
-            means, covs, costs, _ = propagator.rollout(self.m0, self.s0, n_search)
+            means, _, costs, _ = propagator.rollout(self.m0, self.s0, n_search)
         self.predicted_means.append(means[: n_steps + 1].numpy())
-        covs = covs[: n_steps + 1]
-        self.predicted_stds.append(np.sqrt(np.clip(np.diagonal(covs.numpy(), axis1=1, axis2=2), 0, None)))
         same = self.config.cost.exploration == 0.0 and n_search == n_steps
         return objective if same else float(costs[:n_steps].sum())
 
@@ -819,6 +761,5 @@ class Pilco:
             gp_hyperparameters=self.gp_hyperparameters,
             balance_policy=self.balance_policy,
             predicted_means=self.predicted_means,
-            predicted_stds=self.predicted_stds,
             real_states=self.real_states,
         )

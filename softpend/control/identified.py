@@ -23,16 +23,6 @@ from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import GreyBoxConfig, GreyBoxResult, identify
 from softpend.task import Task
 
-__all__ = [
-    "RouteConfig",
-    "RouteResult",
-    "design_swingup",
-    "excitation_protocol",
-    "identify_until_robust",
-    "simulated_recorder",
-    "uncertainty_draws",
-]
-
 #: First start seed of the stopping check's simulated starts (far from every training, selection and report seed).
 CHECK_SEED_BASE = 500_000
 #: Records ``seconds`` of the excitation program on the plant (from hanging) and returns the dataset.

@@ -14,17 +14,6 @@ from softpend.control.lqr import LQRController, LQRWeights, design_lqr, output_w
 from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
 from softpend.sysid.variables import velocity_name
 
-__all__ = [
-    "LearnedStateTracker",
-    "learned_model_simulator",
-    "linearise_learned_model",
-    "lqr_from_learned_model",
-    "reduce_learned_model",
-    "reduced_coordinate_names",
-    "reduction_matrices",
-    "upright_state_vector",
-]
-
 
 def _state_vector(names: tuple[str, ...], observation: Observation) -> np.ndarray:
     """The model state of an observation with every lagged frame equal to it."""

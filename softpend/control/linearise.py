@@ -14,17 +14,6 @@ import scipy.linalg
 from softpend.checks import optional_positive, positive
 from softpend.plant import PRBPlant, RodParams
 
-__all__ = [
-    "LinearModel",
-    "SecondOrderModel",
-    "discretise",
-    "linearise_exudyn",
-    "linearise_step_map",
-    "observation_coordinates_matrix",
-    "reduce_to_observation_coordinates",
-    "OBSERVATION_COORDINATE_NAMES",
-]
-
 #: Observed angles the observation-feedback controllers use.
 OBSERVATION_COORDINATE_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "er_rad")
 

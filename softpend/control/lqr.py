@@ -22,8 +22,6 @@ from softpend.control.linearise import (
 )
 from softpend.plant import Observation, RodParams, wrap_angle_rad
 
-__all__ = ["LQRController", "LQRWeights", "design_lqr", "output_weight_matrix"]
-
 StateFunction = Callable[[Observation, np.ndarray, np.ndarray], np.ndarray]
 
 

@@ -14,8 +14,6 @@ from softpend.checks import non_negative, positive
 from softpend.plant import Observation, RodParams, wrap_angle_rad
 from softpend.task import Task
 
-__all__ = ["PIDController", "PIDGains", "PIDTuningResult", "pid_rollout_cost", "plant_simulator", "tune_pid"]
-
 
 @dataclass(frozen=True)
 class PIDGains:

@@ -34,19 +34,6 @@ from softpend.sysid.rollout import rollout
 from softpend.sysid.variables import POSITION_NAMES, is_angle
 from softpend.task import Task
 
-__all__ = [
-    "MODELS",
-    "MPPI",
-    "GaussianDynamicsModel",
-    "PlannerConfig",
-    "PlannerController",
-    "PlannerResult",
-    "ResidualPRBEnsemble",
-    "TrialRecord",
-    "fresh_start_evaluation",
-    "run_planner",
-]
-
 #: The dynamics models of :class:`PlannerConfig` (``model``).
 MODELS = ("ensemble", "residual")
 #: Weight of the squared energy error (in units of the hanging energy gap) beside ``1 - cos(theta)``.

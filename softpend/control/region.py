@@ -13,8 +13,6 @@ from softpend.checks import positive
 from softpend.evaluation import Controller, evaluate_controller
 from softpend.task import Task
 
-__all__ = ["RegionOfAttraction", "recovers_from", "region_of_attraction_rad"]
-
 
 @dataclass(frozen=True)
 class RegionOfAttraction:

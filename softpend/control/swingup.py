@@ -18,8 +18,6 @@ from softpend.checks import finite, non_negative, one_of, positive
 from softpend.control.lqr import LQRController
 from softpend.plant import Observation, PRBPlant, RodParams
 
-__all__ = ["EnergySwingUpController", "pendulum_energy_j"]
-
 
 def pendulum_energy_j(params: RodParams, theta_rad: float, theta_dot_rad_s: float) -> float:
     """Rigid-pendulum energy of the rod seen through its tip, zero upright at rest [J]."""

@@ -11,8 +11,6 @@ from softpend.pilco.policy import LinearPolicy, RBFPolicy
 from softpend.pilco.propagation import StateSpec
 from softpend.plant import Observation, wrap_angle_rad
 
-__all__ = ["PilcoController", "RandomTorqueController", "in_balance_band"]
-
 
 class _HoldController:
     def __init__(self, control_dt_s: float) -> None:

@@ -12,8 +12,6 @@ import torch
 
 from softpend.pilco.moments import gp_moments, pair_weights
 
-__all__ = ["GPHyperparameters", "MultiOutputGP", "select_subset"]
-
 DTYPE = torch.float64
 
 

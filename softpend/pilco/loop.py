@@ -28,20 +28,6 @@ from softpend.plant import SimulationDiverged, wrap_angle_rad
 from softpend.task import Task
 from softpend.torch_threads import one_torch_thread
 
-__all__ = [
-    "CostSettings",
-    "GPSettings",
-    "OptimiserSettings",
-    "Pilco",
-    "PilcoConfig",
-    "PolicySettings",
-    "PilcoResult",
-    "PolicySearch",
-    "TrialRecord",
-    "run_pilco",
-    "real_cost",
-]
-
 DTYPE = torch.float64
 
 #: Prefix of the balancing policy's entries in ``policy.pt``.
@@ -489,10 +475,10 @@ def _search_with_restarts(
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
     """The RBF policy, and the balancing policy within ``config.policy.balance_within_rad`` of upright, as a controller."""
-    spec, band = state_spec(config.state), (config.policy.balance_within_rad, config.policy.balance_within_rad_s)
-    if balance is None or band[0] is None:
+    spec, within_rad = state_spec(config.state), config.policy.balance_within_rad
+    if balance is None or within_rad is None:
         return PilcoController(policy, spec, config.control_dt_s)
-    return PilcoController(policy, spec, config.control_dt_s, balance, band)
+    return PilcoController(policy, spec, config.control_dt_s, balance, (within_rad, config.policy.balance_within_rad_s))
 
 
 def _upright_distribution(

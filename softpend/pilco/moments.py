@@ -6,15 +6,6 @@ import functools
 
 import torch
 
-__all__ = [
-    "gp_moments",
-    "pair_weights",
-    "rbf_network_moments",
-    "saturating_cost_moments",
-    "sin_saturation_moments",
-    "trig_moments",
-]
-
 
 def _solve(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``torch.linalg.solve(a, b)`` without its check for a singular ``a``: the same factorisation and numbers,

@@ -10,8 +10,6 @@ import torch
 from softpend.checks import non_negative, positive
 from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
-__all__ = ["LinearPolicy", "RBFPolicy", "saturated_linear_moments", "saturated_rbf_moments", "sin_saturation"]
-
 DTYPE = torch.float64
 
 

@@ -14,8 +14,6 @@ from softpend.checks import boolean, finite, optional_positive, positive
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 from softpend.plant import OBSERVATION_NAMES
 
-__all__ = ["STATE_SPECS", "Propagator", "StateSpec", "silence_compiler_notes", "state_spec"]
-
 DTYPE = torch.float64
 
 

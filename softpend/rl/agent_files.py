@@ -21,16 +21,6 @@ from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_
 from softpend.rl.config import SB3_FIELDS, DQNConfig
 from softpend.rl.training_env import make_base_env
 
-__all__ = [
-    "AgentFileError",
-    "REBUILT_ATTRIBUTES",
-    "check_finite_weights",
-    "load_agent_file",
-    "load_replay_buffer",
-    "save_agent_file",
-    "save_replay_buffer",
-]
-
 #: The pickled (``":serialized:"``) attributes of a softpend DQN agent file, each rebuilt from the config.
 REBUILT_ATTRIBUTES: frozenset[str] = frozenset(
     {

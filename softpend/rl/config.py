@@ -16,20 +16,6 @@ from softpend.io.overrides import dataclass_from_data
 from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 from softpend.task import Task
 
-__all__ = [
-    "DQNConfig",
-    "DQNLearner",
-    "MBPOConfig",
-    "ModelSettings",
-    "RolloutSettings",
-    "SB3_FIELDS",
-    "StopRule",
-    "config_to_dict",
-    "load_config",
-    "saved_config_data",
-    "save_config",
-]
-
 #: The stable-baselines3 ``DQN`` arguments that are :class:`DQNLearner` fields of the same name.
 SB3_FIELDS = (
     "learning_rate buffer_size batch_size gamma train_freq gradient_steps target_update_interval "

@@ -11,16 +11,6 @@ from softpend.checks import in_unit_interval, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
-__all__ = [
-    "moving_average",
-    "episodes_to_asymptote",
-    "run_to_asymptote",
-    "failures_as",
-    "interval_band",
-    "plant_s_at_episode",
-    "worst_start_std_rad",
-]
-
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
     """Trailing moving average (the first ``window - 1`` entries average what is there)."""

@@ -34,25 +34,6 @@ from softpend.rl.target_dqn import TargetDQN
 from softpend.rl.training_env import greedy_predictor, make_training_env, policy_controller
 from softpend.rl.training_log import TrainingLog
 
-__all__ = [
-    "CheckpointCallback",
-    "ConfirmBalance",
-    "EpisodeRecorder",
-    "EvaluationCallback",
-    "ProgressBarCallback",
-    "ResetQNetworkCallback",
-    "StopTrainingOnBalance",
-    "agent_class",
-    "build_dqn",
-    "evaluate_agent",
-    "evaluate_agents_batched",
-    "load_agent",
-    "reset_q_network",
-    "train_dqn",
-    "run_training",
-    "training_callbacks",
-]
-
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 _PHI_DOT = OBSERVATION_NAMES.index("phi_dot_rad_s")
 

@@ -27,8 +27,6 @@ from softpend.rl.training_log import TrainingLog
 if TYPE_CHECKING:
     from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 
-__all__ = ["MBPOReplayBuffer", "MBPOTrainer", "ModelRefitCallback", "ModelRolloutCallback", "train_mbpo"]
-
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 

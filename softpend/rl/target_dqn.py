@@ -10,8 +10,6 @@ import torch
 import torch.nn.functional as F
 from stable_baselines3 import DQN
 
-__all__ = ["TargetDQN"]
-
 
 class TargetDQN(DQN):
     """:class:`stable_baselines3.DQN` whose gradient steps clamp the TD targets to ``q_target_bounds``."""

@@ -13,15 +13,6 @@ from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 from softpend.evaluation import GymPolicyController
 from softpend.rl.config import DQNConfig
 
-__all__ = [
-    "ActionRepeat",
-    "HeldActionController",
-    "greedy_predictor",
-    "make_base_env",
-    "make_training_env",
-    "policy_controller",
-]
-
 
 class ActionRepeat(gym.Wrapper):
     """Hold each action for ``repeat`` plant steps; the reward is the sum over those steps."""

@@ -14,8 +14,6 @@ from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.outputs import atomic_write
 from softpend.io.reading import MAX_JSON_BYTES, read_json_checked
 
-__all__ = ["TrainingLog"]
-
 
 @dataclass
 class TrainingLog:

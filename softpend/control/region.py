@@ -16,13 +16,10 @@ from softpend.task import Task
 
 @dataclass(frozen=True)
 class RegionOfAttraction:
-    """Largest tilt recovered from (every smaller one on the scan too), the first that failed (``inf`` if none),
-    and every tilt tried with its outcome."""
+    """Largest tilt recovered from (every smaller one on the scan too) and the first that failed (``inf`` if none)."""
 
     largest_recovered_rad: float
     smallest_failed_rad: float
-    tested_rad: np.ndarray
-    recovered: np.ndarray
 
 
 def recovers_from(
@@ -56,14 +53,9 @@ def region_of_attraction_rad(
     bisection to ``resolution_rad``."""
     positive("step_rad", step_rad)
     positive("resolution_rad", resolution_rad)
-    tested: list[float] = []
-    outcome: list[bool] = []
 
     def trial(angle: float) -> bool:
-        ok = recovers_from(controller, angle, task, duration_s=duration_s)
-        tested.append(angle)
-        outcome.append(ok)
-        return ok
+        return recovers_from(controller, angle, task, duration_s=duration_s)
 
     low, high = 0.0, math.inf
     grid = np.arange(step_rad, math.pi / 2 + 1e-12, step_rad)
@@ -80,4 +72,4 @@ def region_of_attraction_rad(
                 low = middle
             else:
                 high = middle
-    return RegionOfAttraction(low, high, np.array(tested), np.array(outcome))
+    return RegionOfAttraction(low, high)

@@ -227,8 +227,7 @@ class ProgressBarCallback(BaseCallback):
 
 
 class EpisodeEventCallback(BaseCallback):
-    """A task due after some episodes of ``recorder`` (:meth:`due`), run by :meth:`run` at the next rollout end,
-    or at once after the last episode of the budget (the run ends inside that step)."""
+    """A task (:meth:`run`) due after some episodes (:meth:`due`), run at the next rollout end or after the last."""
 
     model: DQN
 
@@ -263,8 +262,7 @@ class EpisodeEventCallback(BaseCallback):
 
 
 class EvaluationCallback(EpisodeEventCallback):
-    """Greedy evaluation on the true plant every ``eval_every_episodes`` episodes and after the last one, appending an
-    evaluation row and saving the best agent (``best_agent.zip``), as stable-baselines3's ``EvalCallback``."""
+    """Greedy evaluation every ``eval_every_episodes`` episodes and after the last, keeping ``best_agent.zip``."""
 
     def __init__(
         self, recorder: EpisodeRecorder, run_dir: Path, callback_after_eval: Optional[BaseCallback] = None
@@ -329,9 +327,8 @@ def _balanced(config: DQNConfig, all_swung_up: bool, max_upright_std_rad: float)
 
 
 class StopTrainingOnBalance(BaseCallback):
-    """The stop rule, called after each evaluation (``EvaluationCallback(callback_after_eval=...)``): stop once
-    the last ``stop.after_balanced_evaluations`` evaluations all balanced and ``confirmation`` (if any) agrees,
-    writing ``log.stop_reason``."""
+    """The stop rule after each evaluation: the last ``stop.after_balanced_evaluations`` balanced and
+    ``confirmation`` (if any) agrees; writes ``log.stop_reason``."""
 
     def __init__(self, config: DQNConfig, log: TrainingLog, confirmation: Optional[BaseCallback] = None) -> None:
         super().__init__()
@@ -365,9 +362,8 @@ class StopTrainingOnBalance(BaseCallback):
 
 
 class ConfirmBalance(BaseCallback):
-    """Confirmation of the stop rule: ``True`` if the agent balances from all ``stop.confirm_seeds`` starts but
-    at most ``stop.confirm_max_failures``, evaluated start by start up to the failure after those; the outcome
-    and the failures counted are kept in the last evaluation row (``confirmed``, ``confirm_failures``)."""
+    """Confirmation of the stop rule: at most ``stop.confirm_max_failures`` of ``stop.confirm_seeds`` fail;
+    recorded in the last evaluation row (``confirmed``, ``confirm_failures``)."""
 
     def __init__(self, config: DQNConfig, log: TrainingLog) -> None:
         super().__init__()
@@ -388,8 +384,7 @@ class ConfirmBalance(BaseCallback):
 
 
 class ResetQNetworkCallback(EpisodeEventCallback):
-    """Every ``reset_every_episodes`` episodes (not after the last), :func:`reset_q_network` at the rollout end,
-    after that episode's evaluation and before its checkpoint (a run stopped by the stop rule keeps its agent)."""
+    """:func:`reset_q_network` every ``reset_every_episodes`` episodes (not after the last), after the evaluation."""
 
     def due(self, n_episodes: int) -> bool:
         every = self.recorder.config.reset_every_episodes
@@ -400,8 +395,7 @@ class ResetQNetworkCallback(EpisodeEventCallback):
 
 
 class CheckpointCallback(EpisodeEventCallback):
-    """Every ``checkpoint_every_episodes`` episodes, a resumable checkpoint in ``run_dir/checkpoint`` (see
-    :meth:`checkpoint`); ``extra_files``: ``f(folder)`` writes algorithm-specific files into it."""
+    """A resumable checkpoint every ``checkpoint_every_episodes`` episodes (``extra_files(folder)`` adds files)."""
 
     def __init__(
         self, recorder: EpisodeRecorder, run_dir: Path, extra_files: Optional[Callable[[Path], None]] = None
@@ -456,9 +450,8 @@ class ModelBasedPart(Protocol):
 
 
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
-    """Re-initialise ``model``'s Q-network as a new agent's (PyTorch's default initialisation of each linear
-    layer, drawn from a generator seeded by ``seed``), copy it to the target network and clear the optimiser's
-    moments; the replay buffer, the exploration schedule and the step counters are kept."""
+    """Re-initialise ``model``'s Q-network (PyTorch's default, seeded by ``seed``) and its target and clear the
+    optimiser's moments; the replay buffer, exploration schedule and step counters are kept."""
     generator = torch.Generator().manual_seed(int(np.random.SeedSequence([int(s) for s in seed]).generate_state(1)[0]))
     with torch.no_grad():
         for layer in model.q_net.modules():
@@ -478,16 +471,13 @@ def _score(evaluation: dict[str, Any]) -> tuple[bool, float]:
 
 
 def is_run_folder(path: Path) -> bool:
-    """Whether ``path`` is a run folder of :func:`run_training`, of this or an earlier version: its
-    ``config.json`` is a JSON object naming a config class, as :func:`~softpend.rl.config.save_config` writes."""
+    """Whether ``path`` is a run folder of :func:`run_training` (its ``config.json`` names a config class)."""
     data = read_json_object(Path(path) / "config.json", 10**7)
     return data is not None and data.get("class") in ("DQNConfig", "MBPOConfig")
 
 
 def check_run_size(config: DQNConfig, observation_dim: int) -> None:
-    """``ValueError`` (with the estimate) if the arrays of a run of ``config`` -- replay buffers, networks and
-    their optimiser state, one episode's record, one evaluation's trajectories -- would exceed
-    :data:`softpend.checks.MAX_WORK_BYTES`."""
+    """``ValueError`` if a run's arrays (buffers, networks, records) would exceed :data:`softpend.checks.MAX_WORK_BYTES`."""
     from softpend.rl.config import MBPOConfig
 
     row = 2 * observation_dim * 4 + 8 + 3 * 4  # obs and next obs (float32), action (int64), reward/done/timeout
@@ -520,8 +510,7 @@ def _saved_run_seed(run_dir: Path) -> Optional[int]:
 
 
 def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed: int, resume: bool) -> Path:
-    """The run folder, checked before any work: new, empty, or holding this run (same config and seed) to
-    resume (:func:`softpend.io.runfolders.check_run_folder`)."""
+    """The run folder, checked before any work: new, empty, or holding this run (same config and seed)."""
     from softpend.io.runfolders import check_run_folder
 
     positive_int("episodes", episodes)
@@ -549,8 +538,7 @@ def _start_or_resume(
     replay_buffer_class: type[ReplayBuffer],
     part: Optional[ModelBasedPart],
 ) -> tuple[DQN, TrainingLog]:
-    """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (the config must match the saved
-    one; ``part`` restores its own state from the checkpoint)."""
+    """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (with the same config)."""
     checkpoint = run_dir / "checkpoint"
     if not (resume and (checkpoint / "agent.zip").exists()):
         save_config(config, run_dir / "config.json")
@@ -582,9 +570,7 @@ def training_callbacks(
     progress: bool,
     part: Optional[ModelBasedPart] = None,
 ) -> CallbackList:
-    """The callbacks of a training run, in the order they run each step: the model-based part's step callbacks,
-    the episode bookkeeping, the model-based part's episode callbacks, the progress bar, the evaluation (with
-    the stop rule and its confirmation), the Q-network reset and the checkpoint."""
+    """The callbacks of a training run, in the order they run each step."""
     recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
     before, after = part.callbacks(recorder) if part is not None else ([], [])
     stop = None
@@ -624,9 +610,7 @@ def run_training(
     replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
     part: Optional[ModelBasedPart] = None,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (see :func:`train_dqn`): the agent of ``make_model`` (with
-    the buffer ``replay_buffer_class``, allocated again on resume) learns with the :func:`training_callbacks`
-    (``part``: DQN-MBPO's model refits and rollouts)."""
+    """The training loop shared by DQN and DQN-MBPO (``part``: its model refits and rollouts)."""
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -41,11 +41,15 @@ IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
 @dataclass(frozen=True)
 class GreyBoxConfig:
     """Settings of :func:`identify`: what to estimate (:data:`ESTIMABLE_ROD_FIELDS`, :data:`CALIBRATION_PARAMETERS`),
-    the window length and count, the seed of the window draw, the iteration limit, the relative forward-difference
-    step, the convergence tolerance and the solver sub-steps (default: the dataset's protocol's, else 2)."""
+    the window length and count, the seed of the window draw, the iteration limit (of each stage), the relative
+    forward-difference step, the convergence tolerance and the solver sub-steps (default: the dataset's protocol's,
+    else 2).  A ``warmup_window_s`` shorter than ``window_s`` first fits the same windows cut to that length (nearly
+    linear in the parameters and states, so a poor guess converges), then the whole windows from there; None: the
+    whole windows only."""
 
     parameters: tuple[str, ...] = GREYBOX_PARAMETERS
     window_s: float = 0.3
+    warmup_window_s: Optional[float] = 0.1
     max_windows: int = 120
     seed: int = 0
     max_iterations: int = 25
@@ -65,6 +69,8 @@ class GreyBoxConfig:
             raise ValueError(f"parameters has duplicates: {names}")
         object.__setattr__(self, "parameters", names)
         positive("window_s", self.window_s)
+        if self.warmup_window_s is not None:
+            positive("warmup_window_s", self.warmup_window_s)
         positive("diff_step", self.diff_step)
         positive("tolerance", self.tolerance)
         object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
@@ -200,10 +206,11 @@ def simulate_windows(
     torque_gain: float = 1.0,
     has_er: bool = True,
     plant: Optional[PRBPlant] = None,
+    diverged_nan: bool = False,
 ) -> np.ndarray:
     """Open-loop PRB simulations from joint states ``(B, 2 (n + 1))`` under torques ``(B, W)`` times
     ``torque_gain``: ``phi, ex, ey`` (and ``er``) at every sample, ``(B, W + 1, 3 or 4)``.  A diverging
-    simulation keeps its last state to the end of its window."""
+    simulation keeps its last state to the end of its window (``diverged_nan``: the whole window is NaN)."""
     plant = plant if plant is not None else _free_plant(params, dt_s, substeps)
     n_q = plant.n_coordinates
     states = np.asarray(states, float)
@@ -218,7 +225,10 @@ def simulate_windows(
             try:
                 o = plant.step(tau)
             except SimulationDiverged:
-                row[i + 1 :] = row[i]
+                if diverged_nan:
+                    row[:] = np.nan
+                else:
+                    row[i + 1 :] = row[i]
                 break
             row[i + 1] = (o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[:k]
     return out
@@ -244,8 +254,10 @@ class _Problem:
         starts: np.ndarray,
         steps: int,
         substeps: int,
+        diverged_nan: bool = False,
     ) -> None:
         self.guess = guess
+        self.diverged_nan = diverged_nan
         self.names = tuple(names)
         self.dt_s = dataset.dt_s
         self.substeps = substeps
@@ -298,7 +310,9 @@ class _Problem:
             torques = (1.0 + delay) * torques - delay * np.concatenate(
                 [torques[:, 1:], self.next_torques[:, None]], axis=1
             )
-        sim = simulate_windows(plant.params, self.dt_s, self.substeps, states, torques, gain, self.has_er, plant)
+        sim = simulate_windows(
+            plant.params, self.dt_s, self.substeps, states, torques, gain, self.has_er, plant, self.diverged_nan
+        )
         sim[..., 0] += offset
         if "camera_delay_s" in self.names:  # the camera sees the tip of (k - b) dt at sample k
             b = float(theta[self.names.index("camera_delay_s")])
@@ -325,25 +339,34 @@ class _Problem:
         return self._cache[1]
 
     def jacobian(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Forward differences, every window's state component moved at once: ``(J_p, J_s)`` of shapes
-        ``(B, R, P)`` and ``(B, R, S)`` (each window's own state; the rest is zero)."""
+        """Forward differences, every window's state component moved at once (backward ones for a window whose
+        forward move diverges, zero if both do): ``(J_p, J_s)`` of shapes ``(B, R, P)`` and ``(B, R, S)`` (each
+        window's own state; the rest is zero)."""
         z = np.asarray(z, float)
         base = self.residuals(z).reshape(self.n_windows, -1)
-        moved_residuals = lambda zm: self.residual_blocks(zm).reshape(self.n_windows, -1) - base  # noqa: E731
+
+        def difference(move: np.ndarray) -> np.ndarray:
+            """``(r(z + move) - r(z - move)`` where that is finite, else one side) over the move, per window."""
+            ahead = self.residual_blocks(z + move).reshape(self.n_windows, -1) - base
+            bad = ~np.isfinite(ahead).all(axis=1)
+            if bad.any():
+                ahead[bad] = (base - self.residual_blocks(z - move).reshape(self.n_windows, -1))[bad]
+                ahead[~np.isfinite(ahead).all(axis=1)] = 0.0
+            return ahead
+
         dense = np.empty((self.n_windows, base.shape[1], self.n_p))
         for j in range(self.n_p):
-            h = self.diff_step * max(1.0, abs(z[j]))
-            zj = z.copy()
-            zj[j] += h
-            dense[:, :, j] = moved_residuals(zj) / h
+            move = np.zeros_like(z)
+            move[j] = self.diff_step * max(1.0, abs(z[j]))
+            dense[:, :, j] = difference(move) / move[j]
         n_s = 2 * self.n_q
         block = np.empty((self.n_windows, base.shape[1], n_s))
         states = z[self.n_p :].reshape(self.n_windows, n_s)
         for c in range(n_s):
             h = self.diff_step * np.maximum(1.0, np.abs(states[:, c]))
-            moved = states.copy()
-            moved[:, c] += h
-            block[:, :, c] = moved_residuals(np.concatenate([z[: self.n_p], moved.reshape(-1)])) / h[:, None]
+            moved = np.zeros_like(states)
+            moved[:, c] = h
+            block[:, :, c] = difference(np.concatenate([np.zeros(self.n_p), moved.reshape(-1)])) / h[:, None]
         return dense, block
 
     def parameter_information(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -373,8 +396,9 @@ def _levenberg_marquardt(
         a, d, b = _normal_blocks(dense, block)
         diag_a = np.maximum(np.diag(a), 1e-30)
         diag_d = np.maximum(np.diagonal(d, axis1=1, axis2=2), 1e-30)
-        accepted = False
+        accepted, tries = False, 0
         while mu < 1e12:
+            tries += 1
             d_mu = d + mu * (np.eye(d.shape[1])[None] * diag_d[:, None, :])
             a_mu = a + mu * np.diag(diag_a)
             solved = np.linalg.solve(d_mu, np.concatenate([np.transpose(b, (0, 2, 1)), g_s[:, :, None]], axis=2))
@@ -401,7 +425,8 @@ def _levenberg_marquardt(
         reduction = (cost - cost_new) / max(cost, 1e-300)
         z, r, cost = trial, r_new, cost_new
         mu = max(mu / 10.0, 1e-12)
-        if step < tolerance or reduction < tolerance**2 or cost < 1e-30:
+        # a step shrunk by raising the damping is small because larger ones failed, not because it converged
+        if (step < tolerance and tries == 1) or reduction < tolerance**2 or cost < 1e-30:
             status, message = 1, "the parameter step or the cost reduction fell below the tolerance"
             break
     return z, {"nfev": nfev, "njev": njev, "status": status, "message": message}
@@ -490,19 +515,39 @@ def identify(
     if steps < 2:
         raise ValueError(f"window_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {config.window_s!r}")
     starts = _window_starts(dataset, steps, config.max_windows, config.seed)
-    problem = _Problem(
-        dataset, guess, config.parameters, config.diff_step, starts, steps, dataset_substeps(dataset, config.substeps)
-    )
-    x0 = np.concatenate([np.zeros(problem.n_p), _initial_states(dataset, starts, guess).reshape(-1)])
-    _check_identifiable(config.parameters, *problem.parameter_information(x0), "at the initial guess")
-    lower = np.full(x0.size, -np.inf)
-    upper = np.full(x0.size, np.inf)
+    warmup = steps if config.warmup_window_s is None else int(round(config.warmup_window_s / dataset.dt_s))
+    n_p = len(config.parameters)
+    lower = np.full(n_p, -np.inf)
+    upper = np.full(n_p, np.inf)
     for j, name in enumerate(config.parameters):
         if name in _DELAYS:
             lower[j], upper[j] = -1.0, 1.0
         elif name != "encoder_offset_rad":
             lower[j], upper[j] = -_LOG_BOUND, _LOG_BOUND
-    z, fit = _levenberg_marquardt(problem, x0, lower, upper, config.max_iterations, config.tolerance)
+    z = np.concatenate([np.zeros(n_p), _initial_states(dataset, starts, guess).reshape(-1)])
+    fit: dict[str, Any] = {"nfev": 0, "njev": 0}
+    substeps = dataset_substeps(dataset, config.substeps)
+    for stage, stage_steps in enumerate(sorted({min(max(warmup, 2), steps), steps})):
+        problem = _Problem(dataset, guess, config.parameters, config.diff_step, starts, stage_steps, substeps, True)
+        finite = np.isfinite(problem.residual_blocks(z)).all(axis=(1, 2))
+        if not finite.any():
+            raise ValueError(f"the simulation diverges in every window of {stage_steps} samples; give a closer guess")
+        if not finite.all():  # a window whose simulation diverges has no derivative: left out
+            starts = starts[finite]
+            z = np.concatenate([z[:n_p], z[n_p:].reshape(finite.size, -1)[finite].reshape(-1)])
+            problem = _Problem(dataset, guess, config.parameters, config.diff_step, starts, stage_steps, substeps, True)
+        if stage == 0:
+            _check_identifiable(config.parameters, *problem.parameter_information(z), "at the initial guess")
+        free = np.full(z.size - n_p, np.inf)
+        z, stage_fit = _levenberg_marquardt(
+            problem,
+            z,
+            np.concatenate([lower, -free]),
+            np.concatenate([upper, free]),
+            config.max_iterations,
+            config.tolerance,
+        )
+        fit = {**stage_fit, "nfev": fit["nfev"] + stage_fit["nfev"], "njev": fit["njev"] + stage_fit["njev"]}
     a, s = problem.parameter_information(z)
     _check_identifiable(config.parameters, a, s, "at the optimum")
     r = problem.residuals(z)

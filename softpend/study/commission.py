@@ -54,7 +54,7 @@ class CommissionConfig:
     design check's ``check_draws`` rods ``uncertainty_scale`` standard deviations wide, ``check_starts`` starts of
     ``check_duration_s`` each; ``verify_starts`` twin starts of ``verify_duration_s`` per condition; ``seed``."""
 
-    excite_s: float = 20.0
+    excite_s: float = 10.0
     peak_fraction: float = 0.8
     band_high_hz: float = 6.0
     trial_length_s: float = 3.0

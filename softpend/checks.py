@@ -53,45 +53,45 @@ def _integer(value: Any) -> Optional[int]:
 
 def _checked(name: str, number: Any, value: Any, ok: bool, what: str) -> Any:
     if number is None or not ok:
-        raise ValueError(f"{name} must be {what}, got {value!r}")
+        raise ValueError(f"{name} must {what}, got {value!r}")
     return number
 
 
 def finite(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    return _checked(name, number, value, True, "finite")
+    return _checked(name, number, value, True, "be finite")
 
 
 def positive(name: str, value: Any) -> float:
     """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    return _checked(name, number, value, number is not None and number > 0.0, "positive and finite")
+    return _checked(name, number, value, number is not None and number > 0.0, "be positive and finite")
 
 
 def optional_positive(name: str, value: Any) -> Optional[float]:
     """``None`` for ``None``, else ``value`` as a float if it is a positive finite number; ``ValueError`` otherwise."""
     number = _real(value)
     ok = number is not None and number > 0.0
-    return None if value is None else _checked(name, number, value, ok, "positive and finite or None")
+    return None if value is None else _checked(name, number, value, ok, "be positive and finite or None")
 
 
 def non_negative(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number >= 0, else ``ValueError`` naming ``name``."""
     number = _real(value)
-    return _checked(name, number, value, number is not None and number >= 0.0, "non-negative and finite")
+    return _checked(name, number, value, number is not None and number >= 0.0, "be non-negative and finite")
 
 
 def positive_int(name: str, value: Any) -> int:
     """``value`` as an int if it is an integer >= 1, else ``ValueError`` naming ``name``."""
     number = _integer(value)
-    return _checked(name, number, value, number is not None and number >= 1, "a positive integer")
+    return _checked(name, number, value, number is not None and number >= 1, "be a positive integer")
 
 
 def int_at_least(name: str, value: Any, low: int) -> int:
     """``value`` as an int if it is an integer >= ``low``, else ``ValueError`` naming ``name``."""
     number = _integer(value)
-    return _checked(name, number, value, number is not None and number >= low, f"an integer >= {low}")
+    return _checked(name, number, value, number is not None and number >= low, f"be an integer >= {low}")
 
 
 def in_range(name: str, value: Any, low: float, high: float) -> float:

@@ -256,3 +256,31 @@ def test_bad_input_is_refused_by_name(tmp_path, capsys):
         TwinTruth()
     with pytest.raises(ValueError, match="rod file .*torque_gain"):
         UnknownRod.from_dict({"rod_params": RodParams().to_dict(), "torque_gain": -1.0}, "rod file x")
+
+
+def test_the_commission_bench_figures_are_the_worst_rod_and_count_a_held_parameter_as_unbounded_error():
+    """The bench's figures from two hand-made reports: the worst rod's successes (out of 10), the largest error,
+    infinite when a parameter was held at the guess, and the plant seconds."""
+    import math
+
+    from softpend.study.bench.commission import commission_figures
+
+    def report(nominal, harsh, errors, parameters, excite_s):
+        return {
+            "verification": [
+                {"condition": "nominal", "successes": nominal, "starts": 10},
+                {"condition": "harsh", "successes": harsh, "starts": 10},
+            ],
+            "identified": {name: {"relative_error": e} for name, e in errors.items()},
+            "identification_fit": {"parameters": parameters},
+            "plant_s": {"excite": excite_s, "commissioning": excite_s},
+        }
+
+    both = ["hub_inertia_kgm2", "tip_mass_kg"]
+    first = report(10, 9, {"hub_inertia_kgm2": 0.01, "tip_mass_kg": -0.04}, both, 12.0)
+    figures = commission_figures([first, report(9, 7, {"hub_inertia_kgm2": 0.02, "tip_mass_kg": 0.0}, both, 14.0)])
+    assert figures["commission_success_min"] == 9.0 and figures["commission_harsh_success_min"] == 7.0
+    assert figures["commission_max_param_error_pct"] == pytest.approx(4.0)
+    assert figures["commission_identify_s"] == 14.0 and figures["commission_plant_s_swingup_lqr"] == 13.0
+    held = report(10, 10, {"hub_inertia_kgm2": 0.0}, both, 12.0)  # tip mass held at the guess
+    assert math.isinf(commission_figures([first, held])["commission_max_param_error_pct"])

@@ -18,6 +18,7 @@ BENCHMARKS: list[tuple[str, str]] = [
     ("rig_control", "softpend.study.bench.rig_control:bench_rig_control"),
     ("sysid", "softpend.study.bench.sysid:bench_sysid"),
     ("data_efficiency", "softpend.study.bench.data_efficiency:bench_data_efficiency"),
+    ("commission", "softpend.study.bench.commission:bench_commission"),
 ]
 
 

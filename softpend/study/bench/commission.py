@@ -1,0 +1,41 @@
+"""``softpend bench --only commission``: ``softpend rig commission`` on the twins of five unknown rods (seeds no code
+was tuned on): the worst fresh-start success on the nominal and the harsh twin, the excitation seconds, the largest
+identification error (infinite when a parameter was held at the guess) and the plant seconds used."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import tempfile
+
+#: The unknown rods of the commissioning figures.
+UNKNOWN_ROD_SEEDS = (9001, 9002, 9003, 9004, 9005)
+
+
+def commission_figures(reports: list[dict]) -> dict[str, float]:
+    """The group's figures from the commissioning reports of :func:`softpend.study.commission.commission`."""
+    successes: dict[str, list[float]] = {}
+    errors = []
+    for report in reports:
+        for row in report["verification"]:
+            successes.setdefault(row["condition"], []).append(10.0 * row["successes"] / row["starts"])
+        identified = report["identified"]
+        errors += [abs(entry["relative_error"]) for entry in identified.values()]
+        errors += [math.inf] * (len(report["identification_fit"]["parameters"]) - len(identified))
+    return {
+        "commission_success_min": min(successes["nominal"]),
+        "commission_harsh_success_min": min(successes["harsh"]),
+        "commission_identify_s": max(r["plant_s"]["excite"] for r in reports),
+        "commission_max_param_error_pct": 100.0 * max(errors),
+        "commission_plant_s_swingup_lqr": statistics.median(r["plant_s"]["commissioning"] for r in reports),
+    }
+
+
+def bench_commission() -> dict[str, float]:
+    """The ``commission`` benchmark group (see the module docstring)."""
+    from softpend.study.commission import commission
+    from softpend.study.twin_side import TwinTruth
+
+    with tempfile.TemporaryDirectory(prefix="softpend-bench-commission-") as work:
+        reports = [commission(f"{work}/rod_{seed}", TwinTruth(seed=seed)) for seed in UNKNOWN_ROD_SEEDS]
+    return commission_figures(reports)

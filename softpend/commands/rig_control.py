@@ -1,7 +1,9 @@
 """``softpend rig control CONTROLLER``: run a controller on a rig (a serial port) or on the digital twin.
 
-CONTROLLER is ``lqr``, ``lqr-obs``, ``swingup``, ``swingup-obs``, ``pid`` or a DQN, DQN-MBPO or PILCO run folder;
-it runs behind the state estimator (:func:`softpend.hardware.closed_loop.run_closed_loop`), logs in ``--out``."""
+CONTROLLER is ``lqr``, ``lqr-obs``, ``swingup``, ``swingup-obs``, ``pid``, ``planner`` (the MPPI planner of
+``book/hparams/planner.yml`` learned on the task's rod in simulation first) or a DQN, DQN-MBPO or PILCO run folder;
+it runs behind the state estimator (:func:`softpend.hardware.closed_loop.run_closed_loop`), logs in ``--out``; the
+summary holds the wall time of the controller's calls beside the control period."""
 
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from softpend.plant.params import MAX_N_LINKS
 #: ``--camera-effects`` names: no imperfection, or the CameraEffects class method of that name.
 CAMERA_EFFECTS = ("clean", "rig", "noisy")
 
-BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid")
+BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid", "planner")
 
 #: The options after CONTROLLER: (flag, closed interval checked before anything starts, add_argument keywords).
 OPTIONS: tuple[tuple[str, Optional[tuple[float, float]], dict[str, Any]], ...] = (
@@ -60,8 +62,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tuple[Any, Any, str]:
-    """``(controller, task, label)`` for a controller name or run folder (whose own task it returns)."""
+def build_controller(
+    spec: str, task, which: str = "best", pid_gains=None, planner_overrides=None, progress: bool = False
+) -> tuple[Any, Any, str]:
+    """``(controller, task, label)`` for a controller name or run folder (whose own task it returns); the planner
+    (settings changed by ``planner_overrides``) comes as a :class:`softpend.study.rig_runs.TimedController` whose
+    ``info`` holds the plant seconds it learned in."""
     from softpend.control.lqr import LQRController
     from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
     from softpend.control.swingup import EnergySwingUpController
@@ -81,6 +87,12 @@ def build_controller(spec: str, task, which: str = "best", pid_gains=None) -> tu
         else:
             gains = PIDGains(*pid_gains)
         return PIDController(gains, dt_s=dt, torque_limit_nm=rod.torque_limit_nm), task, f"PID {gains}"
+    if spec == "planner":
+        from softpend.study.rig_runs import PLANNER, TimedController, planner_rig_controller
+
+        controller, result = planner_rig_controller(task, planner_overrides, progress=progress)
+        label = f"{PLANNER}, learned in {result.plant_seconds:.2f} plant s"
+        return TimedController(controller, {"planner_plant_s": result.plant_seconds}), task, label
     if not Path(spec).exists():
         raise ValueError(
             f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; {spec!r} is neither"
@@ -96,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.hardware.estimator import EstimatorConfig
     from softpend.io.outputs import Outputs, json_text
     from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
+    from softpend.study.rig_runs import TimedController, step_time_figures
     from softpend.task import Task
     from softpend.vision.camera import CameraEffects
 
@@ -109,12 +122,14 @@ def run(args: argparse.Namespace) -> int:
     base = Task(start_noise_rad=args.start_noise)
     if args.n_links is not None:
         base = base.replace(n_links=args.n_links)
-    controller, task, label = build_controller(args.controller, base, args.which, args.pid_gains)
+    progress = not args.no_progress
+    controller, task, label = build_controller(args.controller, base, args.which, args.pid_gains, progress=progress)
+    if not isinstance(controller, TimedController):
+        controller = TimedController(controller)
     task = task.replace(start_noise_rad=args.start_noise)
     if args.n_links is not None and task.rod.n_links != args.n_links:
         task = task.replace(n_links=args.n_links)
     estimator_config = EstimatorConfig(counts_per_rev=args.counts_per_rev, max_blind_s=args.max_blind_ms / 1000.0)
-    progress = not args.no_progress
     if args.twin:
         rig = RigConfig(
             task=task,
@@ -146,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
         target, extra = args.port, {}
         figures = _run_on_port(args, controller, task, estimator_config, out, progress, outputs)
     chatter = torque_chatter_nm_per_s(out / "motor_log.csv")
-    summary = {"controller": label, "target": target, **figures, "torque_chatter_nm_per_s": chatter, **extra}
+    steps = {**controller.info, **step_time_figures(controller.step_ms, task.dt_s)}
+    summary = {"controller": label, "target": target, **figures, "torque_chatter_nm_per_s": chatter, **steps, **extra}
     outputs.write_json(out / "summary.json", summary)
     if args.json:
         print(json_text(summary, indent=2))
@@ -155,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
             f"{label}: {summary['samples']} samples over {summary['duration_s']:.2f} s, "
             f"{'stopped: ' + summary['stop_reason'] if summary['stop_reason'] else 'completed'}; "
             + ("" if args.twin else f"loop jitter p95 {summary['jitter_ms_p95']:.2f} ms; ")
+            + f"controller step p95 {summary['step_ms_p95']:.2f} ms of a {summary['control_period_ms']:.1f} ms period; "
             + f"logs in {out}"
         )
         truth = summary.get("truth") or {}

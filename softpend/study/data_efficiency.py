@@ -24,6 +24,7 @@ __all__ = [
     "paired_ratio",
     "paired_ratio_rows",
     "pilco_rows_if_trained",
+    "planner_config",
     "planner_fresh_starts",
     "planner_rows",
     "plant_seconds_rows",
@@ -175,6 +176,17 @@ def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
     return ax.figure
 
 
+def planner_config(task: Task, overrides: Optional[Mapping[str, Any]] = None) -> Any:
+    """The planner's settings on ``task``: ``book/hparams/planner.yml``, then ``overrides``, with trials from the first
+    16 selection starts (a :class:`softpend.control.planner.PlannerConfig`)."""
+    from softpend.control.planner import PlannerConfig
+    from softpend.io.overrides import apply_overrides
+    from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
+
+    config = apply_overrides(PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml", task), dict(overrides or {}))
+    return config.replace(selection_seeds=SELECTION_SEEDS[:16])
+
+
 def planner_rows(
     model: str = "residual",
     seeds: Iterable[int] = range(10),
@@ -187,13 +199,9 @@ def planner_rows(
     as the real rod, trials from the first 16 selection starts, then its controller on ``report_seeds`` (the PRB
     rod all at once on the batched engine, another rod one start after the other); ``real_s_to_balance`` is
     infinite unless 90 % of them balance."""
-    from softpend.control.planner import PlannerConfig, run_planner
-    from softpend.io.overrides import apply_overrides
-    from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
+    from softpend.control.planner import run_planner
 
-    config = apply_overrides(
-        PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml", Task(plant=plant)), dict(overrides or {})
-    ).replace(model=model, selection_seeds=SELECTION_SEEDS[:16])
+    config = planner_config(Task(plant=plant), overrides).replace(model=model)
     rows = []
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))

@@ -1,9 +1,13 @@
 """Controllers through the whole rig stack on the digital twin (:func:`twin_start`) beside the same controllers in
-the ideal simulator (:func:`simulator_starts`), from the same seeded starts, one row per start."""
+the ideal simulator (:func:`simulator_starts`), from the same seeded starts, one row per start; the planner learned
+in simulation as a rig controller (:func:`planner_rig_controller`, :func:`planner_twin_figures`) with each call's wall
+time kept (:class:`TimedController`)."""
 
 from __future__ import annotations
 
 import math
+import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Sequence
@@ -31,6 +35,8 @@ CONFIDENCE = 0.95
 #: Labels of the controllers of :func:`rig_controllers`.
 OBSERVATION_SWINGUP = "swing-up + LQR (observations)"
 JOINT_SWINGUP = "swing-up + LQR (joint state)"
+#: Label of the planner on the rig (:func:`planner_rig_controller`).
+PLANNER = "MPPI planner (PRB + residual)"
 
 
 @dataclass(frozen=True)
@@ -290,3 +296,90 @@ def text_figures(
             out[f"{name}_chatter"] = fixed(r["torque_chatter_nm_per_s"], 2)
             out[f"{name}_stops"] = str(r["stops"])
     return out
+
+
+class TimedController:
+    """``controller(observation, q, q_dot, time_s)`` with each call's wall time kept in :attr:`step_ms` [ms];
+    :meth:`reset` clears them and resets ``controller`` where it has a ``reset``.  ``info``: figures of the
+    controller to report beside its step times."""
+
+    def __init__(self, controller: Any, info: Optional[Mapping[str, Any]] = None) -> None:
+        self.controller, self.info = controller, dict(info or {})
+        self.step_ms: list[float] = []
+
+    def reset(self) -> None:
+        self.step_ms = []
+        if hasattr(self.controller, "reset"):
+            self.controller.reset()
+
+    def __call__(self, observation: Any, q: Any, q_dot: Any, time_s: float) -> float:
+        started = time.perf_counter()
+        try:
+            return self.controller(observation, q, q_dot, time_s)
+        finally:
+            self.step_ms.append((time.perf_counter() - started) * 1e3)
+
+
+def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict[str, float]:
+    """Calls timed, median, 95th percentile and largest wall time of a controller's calls [ms] beside its control
+    period [ms] (NaN statistics for no call)."""
+    ms = np.asarray(step_ms, dtype=float)
+    stats = np.percentile(ms, [50, 95, 100]) if ms.size else np.full(3, math.nan)
+    return {
+        "steps_timed": int(ms.size),
+        "step_ms_median": float(stats[0]),
+        "step_ms_p95": float(stats[1]),
+        "step_ms_max": float(stats[2]),
+        "control_period_ms": float(control_period_s) * 1e3,
+    }
+
+
+def planner_rig_controller(
+    task: Task, overrides: Optional[Mapping[str, Any]] = None, progress: bool = False
+) -> tuple[Any, Any]:
+    """``(controller, result)``: the planner (``book/hparams/planner.yml``, then ``overrides``; trials from the first
+    16 selection starts) learned by :func:`softpend.control.planner.run_planner` on ``task``'s rod in simulation,
+    and its :class:`softpend.control.planner.PlannerResult` (``plant_seconds``); the controller reads the rig
+    estimator's observation as it read the simulator's."""
+    from softpend.control.planner import run_planner
+    from softpend.study.data_efficiency import planner_config
+
+    result = run_planner(planner_config(task, overrides), progress=progress)
+    return result.controller, result
+
+
+def planner_twin_figures(
+    seeds: Sequence[int],
+    duration_s: float = 10.0,
+    overrides: Optional[Mapping[str, Any]] = None,
+    task: Optional[Task] = None,
+    condition: Optional[RigCondition] = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """The planner of :func:`planner_rig_controller` learned on ``task`` (default: the nominal rod), then on the twin
+    of ``task`` under ``condition`` (default: the nominal twin) from ``seeds`` (fresh starts: seeds shared with its
+    selection starts raise ``ValueError``) with torch on one thread: successes of :func:`summary_rows`, the plant
+    seconds it learned in, and :func:`step_time_figures` over every controller call of every start."""
+    from softpend.torch_threads import one_torch_thread
+
+    task = task if task is not None else Task()
+    condition = condition if condition is not None else RigCondition("nominal twin")
+    with one_torch_thread():
+        controller, result = planner_rig_controller(task, overrides, progress=progress)
+        if shared := sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds)):
+            raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
+        timed, step_ms, rows = TimedController(controller), [], []
+        with tempfile.TemporaryDirectory() as tmp:
+            for seed in seeds:
+                rows.append(twin_start(timed, PLANNER, task, condition, seed, duration_s, Path(tmp) / str(seed)))
+                step_ms += timed.step_ms
+                if progress:
+                    print(f"twin start {seed}: success {rows[-1]['success']} {rows[-1]['stop']}", flush=True)
+    summary = summary_rows(rows)[0]
+    return {
+        "starts": len(rows),
+        "successes": summary["successes"],
+        "plant_s": result.plant_seconds,
+        **step_time_figures(step_ms, task.dt_s),
+        "rows": rows,
+    }

@@ -12,6 +12,10 @@ from softpend.study.data_efficiency import (
     planner_rows,
 )
 
+#: Fresh nominal twin starts of ``mpc_rig_*`` (the first report seeds, as the ``rig_control`` group) and their length.
+RIG_STARTS = 10
+RIG_DURATION_S = 10.0
+
 
 def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str, float]:
     """Ten seeds each: the grey-box route on the PRB rod and on the continuum beam (the PRB model fitted to beam
@@ -19,8 +23,12 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
     with the PRB-residual model on the continuum beam (``mpc_beam_*``): median and worst plant seconds to balance
     the fresh report starts, seeds balanced.  ``mpc_over_pilco_real_s_ratio``: the median over seeds of the
     PRB-residual planner's plant seconds to balance over PILCO's, from the book's PILCO runs (trained by the
-    ``pilco`` group; NaN, with ``pilco_book_runs_found`` 0, where they are not all trained: none is trained here)."""
-    from softpend.study.presets import PILCO_BOOK
+    ``pilco`` group; NaN, with ``pilco_book_runs_found`` 0, where they are not all trained: none is trained here).
+    ``mpc_rig_*``: the PRB-residual planner of seed 0 as a rig controller on the nominal twin, camera and estimator
+    in the loop, torch on one thread: successes of :data:`RIG_STARTS` fresh starts, the 95th percentile of its
+    calls' wall time and the control period."""
+    from softpend.study.presets import PILCO_BOOK, REPORT_SEEDS
+    from softpend.study.rig_runs import planner_twin_figures
 
     figures = greybox_route_figures(greybox_route_rows("prb", seeds), "greybox", 5.0)
     figures.update(greybox_route_figures(greybox_route_rows("beam", seeds), "greybox_beam", 15.0))
@@ -37,4 +45,8 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
             {r["seed"]: r["real_s_to_balance"] for r in mpc}, {r["seed"]: r["plant_s_to_balance"] for r in pilco}
         )
     )
+    rig = planner_twin_figures(REPORT_SEEDS[:RIG_STARTS], RIG_DURATION_S)
+    figures["mpc_rig_successes"] = float(rig["successes"])
+    figures["mpc_rig_step_ms_p95"] = rig["step_ms_p95"]
+    figures["mpc_rig_control_period_ms"] = rig["control_period_ms"]
     return figures

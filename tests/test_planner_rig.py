@@ -53,6 +53,7 @@ def test_the_planner_runs_on_the_twin_within_the_torque_limit(tmp_path):
     assert abs(log["command_torque_nm"]).max() <= limit and abs(log["applied_torque_nm"]).max() <= limit
     figures = step_time_figures(recording.step_ms, task.dt_s)
     assert figures["steps_timed"] == len(torques) and math.isfinite(figures["step_ms_p95"])
+    assert 0.0 <= figures["steps_over_period"] <= 1.0
     assert figures["control_period_ms"] == pytest.approx(10.0)
 
 

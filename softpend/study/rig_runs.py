@@ -322,7 +322,7 @@ class TimedController:
 
 def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict[str, float]:
     """Calls timed, median, 95th percentile and largest wall time of a controller's calls [ms] beside its control
-    period [ms] (NaN statistics for no call)."""
+    period [ms], and the fraction of calls longer than the period (NaN statistics for no call)."""
     ms = np.asarray(step_ms, dtype=float)
     stats = np.percentile(ms, [50, 95, 100]) if ms.size else np.full(3, math.nan)
     return {
@@ -331,6 +331,7 @@ def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict
         "step_ms_p95": float(stats[1]),
         "step_ms_max": float(stats[2]),
         "control_period_ms": float(control_period_s) * 1e3,
+        "steps_over_period": float(np.mean(ms > control_period_s * 1e3)) if ms.size else math.nan,
     }
 
 

@@ -26,7 +26,7 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
     ``pilco`` group; NaN, with ``pilco_book_runs_found`` 0, where they are not all trained: none is trained here).
     ``mpc_rig_*``: the PRB-residual planner of seed 0 as a rig controller on the nominal twin, camera and estimator
     in the loop, torch on one thread: successes of :data:`RIG_STARTS` fresh starts, the 95th percentile of its
-    calls' wall time and the control period."""
+    calls' wall time, the control period and the fraction of calls longer than it (the replanning calls)."""
     from softpend.study.presets import PILCO_BOOK, REPORT_SEEDS
     from softpend.study.rig_runs import planner_twin_figures
 
@@ -49,4 +49,5 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
     figures["mpc_rig_successes"] = float(rig["successes"])
     figures["mpc_rig_step_ms_p95"] = rig["step_ms_p95"]
     figures["mpc_rig_control_period_ms"] = rig["control_period_ms"]
+    figures["mpc_rig_steps_over_period"] = rig["steps_over_period"]
     return figures

@@ -36,7 +36,7 @@ GOOD = {
 
 def test_every_stored_record_loads_in_the_schema():
     records = load_records(RECORDS)
-    assert records and all(path.stem in records for path in RECORDS.glob("*.json"))
+    assert records and all(path.stem in records for path in RECORDS.glob("[!.]*.json"))
     for name, record in records.items():
         assert set(record) == set(FIELDS), name
         assert record["title"] and "scripts/probe_" in record["command"] and record["rows"], name
@@ -141,3 +141,10 @@ def test_current_runs_are_read_from_the_run_folders(tmp_path):
     assert run["seed"] == 0 and run["policy_trials"] == 1
     assert run["plant_s_to_balance"] == result.real_seconds_to_balance
     assert run["plant_s"] == result.plant_seconds_total
+
+
+def test_a_hidden_json_file_beside_the_records_is_not_a_record(tmp_path):
+    """A probe's output manifest (``.softpend-outputs.json``) lies beside the records it wrote: it is not read."""
+    (tmp_path / "probe.json").write_text(record_text(GOOD))
+    (tmp_path / ".softpend-outputs.json").write_text('{"files": {}}')
+    assert list(load_records(tmp_path)) == ["probe"]

@@ -61,8 +61,9 @@ def load_record(path: Path | str) -> dict[str, Any]:
 
 
 def load_records(folder: Path | str = RECORDS_DIR) -> dict[str, dict[str, Any]]:
-    """Every record in ``folder`` (``*.json``) by file stem, in name order; ``ValueError`` when there is none."""
-    paths = sorted(Path(folder).glob("*.json"))
+    """Every record in ``folder`` (``*.json``; hidden files such as the output manifest of a probe left out) by
+    file stem, in name order; ``ValueError`` when there is none."""
+    paths = sorted(path for path in Path(folder).glob("*.json") if not path.name.startswith("."))
     if not paths:
         raise ValueError(f"{folder}: no probe records (*.json)")
     return {path.stem: load_record(path) for path in paths}

@@ -3,8 +3,8 @@
 #   make book [PROFILE=full|quick]   train the runs the notebooks read (softpend sweep --book), then execute the
 #                                    notebooks and build the HTML book into _build/html (softpend book --html);
 #                                    BOOK_ARGS="--set plant=beam" regenerates the figure set on the continuum beam
-#   make test [TEST_WORKERS=auto|N]  the static checks (make lint), then the fast test suite (pytest -m 'not
-#                                    expensive') on pytest-xdist workers, one per CPU core by default
+#   make test [TEST_WORKERS=auto|N]  the static checks of make lint (mypy beside the tests), and the fast test
+#                                    suite (pytest -m 'not expensive') on pytest-xdist workers, one per CPU core
 #   make test-expensive              only the long checks
 #   make lint                        ruff check, ruff format --check (softpend, tests) and mypy (softpend)
 #   make format                      ruff format and the safe ruff fixes of softpend and tests
@@ -42,8 +42,9 @@ venv: $(STAMP)
 $(STAMP): environment.lock pyproject.toml
 	@echo "[make] installing .venv from environment.lock (takes about a minute on a fresh machine)"
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/pip install -q -r environment.lock $(PIP_QUIET)
-	$(VENV)/bin/pip install -q --no-deps -e . $(PIP_QUIET)
+	@# --no-compile: no bytecode for every installed file up front (Python compiles what it imports, once)
+	$(VENV)/bin/pip install -q --no-compile -r environment.lock $(PIP_QUIET)
+	$(VENV)/bin/pip install -q --no-compile --no-deps -e . $(PIP_QUIET)
 	@# fails when pyproject.toml names a dependency that environment.lock lacks
 	$(VENV)/bin/pip check $(PIP_QUIET) || { echo "[make] .venv does not satisfy pyproject.toml: run 'make lock'" >&2; exit 1; }
 	touch $(STAMP)
@@ -54,8 +55,17 @@ book: $(STAMP)
 	$(VENV)/bin/softpend sweep --book --profile $(PROFILE)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
-test: lint
-	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive' $(PYTEST_ARGS)
+# The same checks as `make lint`, with mypy running beside the tests (its report is printed after them; either
+# failing fails the target).
+test: $(STAMP)
+	$(VENV)/bin/ruff check softpend tests
+	$(VENV)/bin/ruff format --check softpend tests
+	@mypy_log=$$(mktemp /tmp/softpend-mypy.XXXXXX); trap 'rm -f "$$mypy_log"' EXIT; \
+	$(VENV)/bin/mypy > "$$mypy_log" 2>&1 & mypy_pid=$$!; \
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) -m 'not expensive' $(PYTEST_ARGS) && tests=0 || tests=$$?; \
+	wait $$mypy_pid && types=0 || types=$$?; \
+	echo "[make] mypy:"; cat "$$mypy_log"; \
+	exit $$(( tests != 0 ? tests : types ))
 
 test-expensive: $(STAMP)
 	$(VENV)/bin/python -m pytest -m expensive $(PYTEST_ARGS)

@@ -30,40 +30,27 @@ from typing import Any
 
 import torch
 
-from softpend.control.planner import PlannerConfig, run_planner
+from softpend.control.planner import run_planner
 from softpend.evaluation import HOLD_STD_RAD, evaluate
 from softpend.io.outputs import atomic_write
-from softpend.io.overrides import apply_overrides, parse_assignment
-from softpend.study.data_efficiency import planner_fresh_starts
+from softpend.io.overrides import parse_assignment
+from softpend.study.data_efficiency import planner_config, planner_fresh_starts
 from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS
+from softpend.study.records import flat_settings, load_record, record_text
+from softpend.task import Task
 
 ROOT = Path(__file__).resolve().parents[1]
-TRIAL_SEEDS = SELECTION_SEEDS[:16]
 TUNING_SEEDS = SELECTION_SEEDS[16:36]
 #: A seed balances when at least this share of its fresh starts balance; the target counts seeds within this.
 BALANCED_FRACTION, WITHIN_S = 0.9, 30.0
 
 
-def _seeds_text(seeds: tuple[int, ...] | list[int]) -> str:
-    """``"1000-1015"`` for consecutive seeds, else the seeds comma-separated."""
-    seeds = [int(s) for s in seeds]
-    if len(seeds) > 1 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}-{seeds[-1]}"
-    return ",".join(map(str, seeds))
+def _store(out: str, document: dict) -> None:
+    with atomic_write(Path(out), "w") as handle:
+        handle.write(record_text(document))
 
 
-def _flat(mapping: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested mappings as dotted names; tuples of seeds as :func:`_seeds_text`."""
-    out: dict[str, Any] = {}
-    for key, value in mapping.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[prefix + key] = _seeds_text(value) if isinstance(value, (tuple, list)) else value
-    return out
-
-
-def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: PlannerConfig) -> None:
+def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: Any) -> None:
     seconds = [r["plant_s_to_balance"] for r in rows]
     balancing = [r["fresh_balanced"] >= BALANCED_FRACTION * r["fresh_starts"] for r in rows]
     to_balance = [s if ok else math.inf for s, ok in zip(seconds, balancing)]
@@ -83,9 +70,9 @@ def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: 
         else (None if args.tune else str(ROOT / "book" / "records" / "planner_probe.json"))
     )
     if out is not None:
-        settings = _flat({k: v for k, v in vars(config).items() if k not in ("task", "seed")})
-        settings.update(_flat(config.task.to_dict(), "task."))
-        settings["fresh_seeds"] = _seeds_text(TUNING_SEEDS if args.tune else REPORT_SEEDS)
+        settings = flat_settings({k: v for k, v in vars(config).items() if k not in ("task", "seed")})
+        settings.update(flat_settings(config.task.to_dict(), "task."))
+        settings["fresh_seeds"] = ", ".join(map(str, TUNING_SEEDS if args.tune else REPORT_SEEDS))
         settings["balanced_fraction"] = BALANCED_FRACTION
         settings["hold_std_rad"] = HOLD_STD_RAD
         plant = config.task.plant
@@ -97,19 +84,18 @@ def _write(rows: list[dict], args: argparse.Namespace, argv: list[str], config: 
             "figures": figures,
             "rows": rows,
         }
-        with atomic_write(Path(out), "w") as handle:
-            handle.write(json.dumps(document, indent=2, default=float) + "\n")
+        _store(out, document)
 
 
 def _pair_with_pilco(args: argparse.Namespace, argv: list[str]) -> int:
     from softpend.study.data_efficiency import paired_ratio, paired_ratio_rows, pilco_rows_if_trained
 
-    record = json.loads(Path(args.planner_record).read_text())
+    record = load_record(args.planner_record)
     planner = {
         int(r["seed"]): r["plant_s_to_balance"]
         if r["fresh_balanced"] >= BALANCED_FRACTION * r["fresh_starts"]
         else math.inf
-        for r in record.get("rows", record.get("per_seed"))
+        for r in record["rows"]
     }
     pilco_rows = pilco_rows_if_trained(sorted(planner), args.pair_with_pilco)
     if pilco_rows is None:
@@ -142,15 +128,14 @@ def _pair_with_pilco(args: argparse.Namespace, argv: list[str]) -> int:
         "settings": {
             "planner_record": args.planner_record,
             "pilco_runs_root": args.pair_with_pilco,
-            "fresh_seeds": _seeds_text(REPORT_SEEDS),
+            "fresh_seeds": ", ".join(map(str, REPORT_SEEDS)),
             "balanced_fraction": BALANCED_FRACTION,
         },
         "figures": figures,
         "rows": rows,
     }
     out = args.out if args.out is not None else str(ROOT / "book" / "records" / "planner_vs_pilco.json")
-    with atomic_write(Path(out), "w") as handle:
-        handle.write(json.dumps(document, indent=2, default=float) + "\n")
+    _store(out, document)
     return 0
 
 
@@ -171,8 +156,7 @@ def main(argv: list[str]) -> int:
     overrides = [parse_assignment(item) for item in args.set]
     if args.plant is not None:
         overrides.append(("task.plant", args.plant))
-    config = apply_overrides(PlannerConfig.from_yaml(args.hparams), overrides)
-    config = config.replace(selection_seeds=TRIAL_SEEDS)
+    config = planner_config(Task(), overrides, args.hparams)
     # the batched engine simulates the PRB chain only: other rods run one start after the other
     engine = "batched" if config.task.plant == "prb" else "exudyn"
     rows = []

@@ -88,9 +88,12 @@ def build_controller(
             gains = PIDGains(*pid_gains)
         return PIDController(gains, dt_s=dt, torque_limit_nm=rod.torque_limit_nm), task, f"PID {gains}"
     if spec == "planner":
-        from softpend.study.rig_runs import PLANNER, TimedController, planner_rig_controller
+        from softpend.control.planner import run_planner
+        from softpend.study.data_efficiency import planner_config
+        from softpend.study.rig_runs import PLANNER, TimedController
 
-        controller, result = planner_rig_controller(task, planner_overrides, progress=progress)
+        result = run_planner(planner_config(task, planner_overrides), progress=progress)
+        controller = result.controller
         label = f"{PLANNER}, learned in {result.plant_seconds:.2f} plant s"
         return TimedController(controller, {"planner_plant_s": result.plant_seconds}), task, label
     if not Path(spec).exists():

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Callable, Optional
@@ -245,7 +244,7 @@ def _excite(run: _Run) -> dict:
 
 def _identify(run: _Run) -> dict:
     from softpend.sysid.dataset import load_dataset
-    from softpend.sysid.greybox import GreyBoxConfig, identify
+    from softpend.sysid.greybox import GreyBoxConfig, NotIdentifiable, identify
 
     config, guess = run.config, RodParams()
     dataset = load_dataset(run.out / "excite" / "rig_dataset.npz")
@@ -261,12 +260,11 @@ def _identify(run: _Run) -> dict:
         try:
             result = identify(dataset, settings, initial_params=guess)
             break
-        except ValueError as exc:
-            match = re.match(r"the dataset cannot identify (\w+)", str(exc))
-            if match is None or match.group(1) not in parameters or len(parameters) == 1:
+        except NotIdentifiable as exc:
+            if exc.parameter not in parameters or len(parameters) == 1:
                 raise
-            parameters.remove(match.group(1))
-            held.append(match.group(1))
+            parameters.remove(exc.parameter)
+            held.append(exc.parameter)
     return {
         "greybox": result.to_dict(),
         "identified": identified_values(result.estimates, result.std, guess.mass_kg),

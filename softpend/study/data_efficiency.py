@@ -176,14 +176,19 @@ def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
     return ax.figure
 
 
-def planner_config(task: Task, overrides: Optional[Mapping[str, Any]] = None) -> Any:
-    """The planner's settings on ``task``: ``book/hparams/planner.yml``, then ``overrides``, with trials from the first
-    16 selection starts (a :class:`softpend.control.planner.PlannerConfig`)."""
+def planner_config(
+    task: Task,
+    overrides: Optional[Mapping[str, Any] | Sequence[tuple[str, Any]]] = None,
+    hparams: Optional[str | Path] = None,
+) -> Any:
+    """The planner's settings on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``, with
+    trials from the first 16 selection starts (a :class:`softpend.control.planner.PlannerConfig`)."""
     from softpend.control.planner import PlannerConfig
     from softpend.io.overrides import apply_overrides
     from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
 
-    config = apply_overrides(PlannerConfig.from_yaml(HPARAMS_DIR / "planner.yml", task), dict(overrides or {}))
+    path = hparams if hparams is not None else HPARAMS_DIR / "planner.yml"
+    config = apply_overrides(PlannerConfig.from_yaml(path, task), overrides or {})
     return config.replace(selection_seeds=SELECTION_SEEDS[:16])
 
 

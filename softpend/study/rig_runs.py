@@ -1,7 +1,6 @@
 """Controllers through the whole rig stack on the digital twin (:func:`twin_start`) beside the same controllers in
 the ideal simulator (:func:`simulator_starts`), from the same seeded starts, one row per start; the planner learned
-in simulation as a rig controller (:func:`planner_rig_controller`, :func:`planner_twin_figures`) with each call's wall
-time kept (:class:`TimedController`)."""
+in simulation, on the twin (:func:`planner_twin_figures`), each call's wall time kept (:class:`TimedController`)."""
 
 from __future__ import annotations
 
@@ -35,7 +34,7 @@ CONFIDENCE = 0.95
 #: Labels of the controllers of :func:`rig_controllers`.
 OBSERVATION_SWINGUP = "swing-up + LQR (observations)"
 JOINT_SWINGUP = "swing-up + LQR (joint state)"
-#: Label of the planner on the rig (:func:`planner_rig_controller`).
+#: Label of the planner on the rig.
 PLANNER = "MPPI planner (PRB + residual)"
 
 
@@ -335,20 +334,6 @@ def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict
     }
 
 
-def planner_rig_controller(
-    task: Task, overrides: Optional[Mapping[str, Any]] = None, progress: bool = False
-) -> tuple[Any, Any]:
-    """``(controller, result)``: the planner (``book/hparams/planner.yml``, then ``overrides``; trials from the first
-    16 selection starts) learned by :func:`softpend.control.planner.run_planner` on ``task``'s rod in simulation,
-    and its :class:`softpend.control.planner.PlannerResult` (``plant_seconds``); the controller reads the rig
-    estimator's observation as it read the simulator's."""
-    from softpend.control.planner import run_planner
-    from softpend.study.data_efficiency import planner_config
-
-    result = run_planner(planner_config(task, overrides), progress=progress)
-    return result.controller, result
-
-
 def planner_twin_figures(
     seeds: Sequence[int],
     duration_s: float = 10.0,
@@ -357,16 +342,20 @@ def planner_twin_figures(
     condition: Optional[RigCondition] = None,
     progress: bool = False,
 ) -> dict[str, Any]:
-    """The planner of :func:`planner_rig_controller` learned on ``task`` (default: the nominal rod), then on the twin
+    """The planner (:func:`softpend.study.data_efficiency.planner_config` with ``overrides``) learned in simulation on
+    ``task`` (default: the nominal rod), then on the twin
     of ``task`` under ``condition`` (default: the nominal twin) from ``seeds`` (fresh starts: seeds shared with its
     selection starts raise ``ValueError``) with torch on one thread: successes of :func:`summary_rows`, the plant
     seconds it learned in, and :func:`step_time_figures` over every controller call of every start."""
+    from softpend.control.planner import run_planner
+    from softpend.study.data_efficiency import planner_config
     from softpend.torch_threads import one_torch_thread
 
     task = task if task is not None else Task()
     condition = condition if condition is not None else RigCondition("nominal twin")
     with one_torch_thread():
-        controller, result = planner_rig_controller(task, overrides, progress=progress)
+        result = run_planner(planner_config(task, overrides), progress=progress)
+        controller = result.controller
         if shared := sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds)):
             raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
         timed, step_ms, rows = TimedController(controller), [], []

@@ -38,6 +38,14 @@ IDENTIFIABILITY_TOLERANCE = 1e-9
 IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
 
 
+class NotIdentifiable(ValueError):
+    """The dataset does not determine ``parameter`` (the message says why)."""
+
+    def __init__(self, parameter: str, message: str) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+
+
 @dataclass(frozen=True)
 class GreyBoxConfig:
     """Settings of :func:`identify`: what to estimate (:data:`ESTIMABLE_ROD_FIELDS`, :data:`CALIBRATION_PARAMETERS`),
@@ -433,23 +441,25 @@ def _levenberg_marquardt(
 
 
 def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, where: str) -> None:
-    """``ValueError`` naming a parameter that the data do not determine (no effect, or a combination of others)."""
+    """:class:`NotIdentifiable` naming a parameter the data do not determine (no effect, or a mix of others)."""
     diag = np.diag(a)
     scale = float(diag.max(initial=0.0))
     for name, value in zip(names, diag):
         if not value > IDENTIFIABILITY_TOLERANCE * max(scale, 1e-300) or scale == 0.0:
-            raise ValueError(
+            raise NotIdentifiable(
+                name,
                 f"the dataset cannot identify {name} ({where}: the observations do not depend on it; "
-                "e.g. the torque does not excite it, or nothing moves)"
+                "e.g. the torque does not excite it, or nothing moves)",
             )
     norm = 1.0 / np.sqrt(diag)
     values, vectors = np.linalg.eigh(s * norm[:, None] * norm[None, :])
     if values[0] < IDENTIFIABILITY_TOLERANCE:
         worst = names[int(np.argmax(np.abs(vectors[:, 0])))]
         partners = [n for n, v in zip(names, vectors[:, 0]) if abs(v) > 0.2 and n != worst]
-        raise ValueError(
+        raise NotIdentifiable(
+            worst,
             f"the dataset cannot identify {worst} ({where}: its effect on the observations is that of "
-            f"{', '.join(partners) or 'the window initial states'}; rank-deficient Jacobian)"
+            f"{', '.join(partners) or 'the window initial states'}; rank-deficient Jacobian)",
         )
 
 
@@ -493,7 +503,9 @@ def _check_inputs(dataset: TrajectoryDataset, config: GreyBoxConfig, guess: RodP
                 f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
             )
         if name in ("torque_gain", "torque_delay_s") and not np.any(dataset.torques_nm != 0):
-            raise ValueError(f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)")
+            raise NotIdentifiable(
+                name, f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)"
+            )
     if "youngs_modulus_pa" in config.parameters and "stiffness_scale" in config.parameters:
         raise ValueError("parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one")
 

@@ -2,7 +2,7 @@
 summary per rod; a rod's folder under --work resumes where an earlier run stopped.
 
     .venv/bin/python scripts/probe_commission.py [--work runs/commission_probe]
-        [--out book/records/commission_probe.json] [--rods 5] [--verify-starts 10]
+        [--out book/records/commission_probe.json] [--rods 5] [--seeds 9001 ...] [--verify-starts 10]
 """
 
 import argparse
@@ -51,20 +51,24 @@ def main() -> None:  # the twin's side runs in spawned children, which import th
     parser.add_argument("--work", default="runs/commission_probe")
     parser.add_argument("--out", default="book/records/commission_probe.json")
     parser.add_argument("--rods", type=int, default=len(SEEDS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), help="the unknown rods' twin seeds")
     parser.add_argument("--verify-starts", type=int, default=10)
     args = parser.parse_args()
     config = CommissionConfig(verify_starts=args.verify_starts)
     outputs = Outputs()
     outputs.file(args.out, "--out")
     rods = []
-    for seed in SEEDS[: args.rods]:
+    for seed in args.seeds[: args.rods]:
         started = time.perf_counter()
         report = commission(f"{args.work}/rod_{seed}", TwinTruth(seed=seed), config)
         rods.append(rod_row(seed, report, time.perf_counter() - started))
         summary = {
             "title": "softpend rig commission (excite, identify, design, verify) on unknown twin rods, per rod",
             "command": "scripts/probe_commission.py "
-            + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()),
+            + " ".join(
+                f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+                for k, v in vars(args).items()
+            ),
             "settings": config.__dict__,
             "figures": rod_figures(rods),
             "rows": rods,

@@ -11,15 +11,17 @@ import pytest
 import scipy.linalg
 import torch
 
+from softpend.control.lqr import LQRController
 from softpend.control.planner import (
     MPPI,
     PlannerConfig,
+    PlannerController,
     StackedEnsemble,
     fit_ensemble,
     fresh_start_evaluation,
     run_planner,
 )
-from softpend.plant import PRBPlant
+from softpend.plant import PRBPlant, RodParams
 from softpend.task import Task
 
 HPARAMS = Path(__file__).resolve().parents[1] / "book" / "hparams" / "planner.yml"
@@ -35,27 +37,64 @@ def test_mppi_recovers_the_lqr_action_of_a_linear_system():
     x0 = np.array([0.2, -0.1])
     at, bt, qt, pt = (torch.as_tensor(m, dtype=torch.float32) for m in (a, b, q, p))
 
-    def rollout_fn(x: torch.Tensor, torques: torch.Tensor) -> torch.Tensor:
-        states = [x]
-        for k in range(torques.shape[1]):
-            states.append(states[-1] @ at.T + torques[:, k : k + 1] * bt.T)
-        return torch.stack(states, dim=1)
+    def step_fn(x: torch.Tensor, torque: torch.Tensor) -> torch.Tensor:
+        return x @ at.T + torque[:, None] * bt.T
 
-    def cost_fn(states: torch.Tensor, torques: torch.Tensor) -> torch.Tensor:
-        # x_k' Q x_k + r u_k^2 for k = 0..T-1 (states holds x_1..x_T), plus the Riccati terminal cost x_T' P x_T
-        previous = torch.cat(
-            [torch.as_tensor(x0, dtype=torch.float32).expand(states.shape[0], 1, 2), states[:, :-1]], 1
-        )
-        cost = ((previous @ qt) * previous).sum(-1) + r * torques.float() ** 2
-        cost[:, -1] += ((states[:, -1] @ pt) * states[:, -1]).sum(-1)
-        return cost
+    def cost_fn(x: torch.Tensor, torque: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
+        # x_k' Q x_k + r u_k^2 for k = 0..T-1, plus the Riccati terminal cost x_T' P x_T
+        return ((x @ qt) * x).sum(-1) + r * torque.float() ** 2
+
+    def terminal_fn(x: torch.Tensor) -> torch.Tensor:
+        return ((x @ pt) * x).sum(-1)
 
     mppi = MPPI(
-        rollout_fn, cost_fn, 10.0, 5, 1, n_samples=1000, noise_std_nm=0.1, temperature=0.01, seed=2, iterations=30
+        step_fn, cost_fn, 10.0, 5, 1, 1000, 0.1, temperature=0.01, seed=2, iterations=30, terminal_fn=terminal_fn
     )
     torque = float(mppi.optimise(x0[None], torch.zeros(1, 5, dtype=torch.float64))[0, 0])
     expected = float(-(gain @ x0)[0])
     assert torque == pytest.approx(expected, rel=0.05, abs=0.005)
+
+
+class _Identity:
+    def reset(self) -> None:
+        pass
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        return observations
+
+
+def test_the_controller_spreads_each_plan_over_a_knot_and_holds_its_first_torque_for_the_next_knot():
+    # a plan of 1 committed + 4 planned knots of 2 model steps = 10 steps, spread over hold_steps = 5 calls
+    calls: list[int] = []
+
+    def step_fn(x: torch.Tensor, torque: torch.Tensor) -> torch.Tensor:
+        calls[-1] += 1
+        return x + 0.01 * torque[:, None]
+
+    def cost_fn(x: torch.Tensor, torque: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
+        return (x_next[:, 1] - 10.0) ** 2
+
+    def make_mppi() -> MPPI:
+        return MPPI(step_fn, cost_fn, 0.5, n_knots=4, hold_steps=2, n_samples=16, noise_std_nm=0.2, temperature=0.01)
+
+    lqr = LQRController.from_params(RodParams(), dt_s=0.01, state="observation", torque_limit_nm=0.5)
+    controller = PlannerController(make_mppi(), _Identity(), lqr, capture_rad=0.4, hold_steps=5)
+    observation = np.zeros((1, 10))
+    observation[0, 1] = math.pi  # hanging: far from the LQR's region
+    torques = []
+    for k in range(15):
+        calls.append(0)
+        torques.append(float(controller.torques(observation, k * 0.01)[0]))
+    assert sum(calls) == 3 * 10 and max(calls) == 2  # each call one fifth of a plan, never more
+    assert torques[:5] == [0.0] * 5  # no plan is ready during the first knot
+    assert len(set(torques[5:10])) == 1 and len(set(torques[10:15])) == 1  # a planned torque held for its knot
+    # the same plans made at once: from the start under the torque committed for the knot, warm-started
+    calls.append(0)
+    mppi, mean = make_mppi(), torch.zeros(1, 4, dtype=torch.float64)
+    for held, applied in ((0.0, torques[5]), (torques[5], torques[10])):
+        mean = mppi.finish(mppi.begin(observation, mean, np.array([held])))
+        assert float(mean[0, 0]) == pytest.approx(applied, abs=1e-12) and abs(applied) <= 0.5
+        mean = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
 
 
 def _data(n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

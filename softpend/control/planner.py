@@ -30,7 +30,6 @@ from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
-from softpend.sysid.rollout import rollout
 from softpend.sysid.variables import POSITION_NAMES, is_angle
 from softpend.task import Task
 
@@ -219,6 +218,26 @@ def _fit_gaussian(
             optimiser.step()
 
 
+class _StackedNets:
+    """The Gaussian networks (``nets[i]``, ``heads[i]``) of an ensemble's members applied at once, each layer as one
+    batched matrix product: inputs ``(E, R, F)`` to means and bounded log-variances ``(E, R, n)``."""
+
+    def __init__(self, nets: Sequence[nn.Module], heads: Sequence[nn.Module]) -> None:
+        layers = [[net[i] for net in nets] for i in range(0, len(nets[0]), 2)]  # type: ignore[index, arg-type]
+        self.weights = [torch.stack([layer.weight.detach().T for layer in group]) for group in layers]
+        self.biases = [torch.stack([layer.bias.detach()[None] for layer in group]) for group in layers]
+        self.max_log_var = torch.stack([head.max_log_var.detach()[None] for head in heads])
+        self.min_log_var = torch.stack([head.min_log_var.detach()[None] for head in heads])
+
+    def __call__(self, h: Tensor) -> tuple[Tensor, Tensor]:
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = torch.baddbmm(b, h, w)
+            if i < len(self.weights) - 1:
+                h = nn.functional.silu(h)
+        mean, log_var = h.chunk(2, dim=-1)
+        return mean, _bound_log_var(log_var, self.max_log_var, self.min_log_var)
+
+
 class StackedEnsemble:
     """Fast rollouts of a fitted black-box ensemble of :func:`fit_ensemble`: row ``i`` of a batch is predicted by
     member ``i % E`` throughout, the members' layers applied as one batched matrix product."""
@@ -226,11 +245,7 @@ class StackedEnsemble:
     def __init__(self, ensemble: DynamicsEnsemble) -> None:
         self.members: list[Any] = list(ensemble.members)
         self.first = self.members[0]
-        layers = [[m.net[i] for m in self.members] for i in range(0, len(self.first.net), 2)]
-        self.weights = [torch.stack([layer.weight.detach().T for layer in group]) for group in layers]
-        self.biases = [torch.stack([layer.bias.detach()[None] for layer in group]) for group in layers]
-        self.max_log_var = torch.stack([m.head.max_log_var.detach()[None] for m in self.members])
-        self.min_log_var = torch.stack([m.head.min_log_var.detach()[None] for m in self.members])
+        self.nets = _StackedNets([m.net for m in self.members], [m.head for m in self.members])
         self.noise_generator: Optional[torch.Generator] = None
 
     def predict_next(self, state: Tensor, torque_nm: Tensor, generator: Optional[torch.Generator] = None) -> Tensor:
@@ -239,13 +254,7 @@ class StackedEnsemble:
         batch = state.shape[0]
         torque_nm = torque_nm.clamp(-first.torque_limit_nm, first.torque_limit_nm)
         z = first.normalise_features(first.features(state, torque_nm))
-        h = z.reshape(batch // n_members, n_members, -1).transpose(0, 1)
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = torch.baddbmm(b, h, w)
-            if i < len(self.weights) - 1:
-                h = nn.functional.silu(h)
-        mean, log_var = h.chunk(2, dim=-1)
-        log_var = _bound_log_var(log_var, self.max_log_var, self.min_log_var)
+        mean, log_var = self.nets(z.reshape(batch // n_members, n_members, -1).transpose(0, 1))
         out = _sample(mean, log_var, self.noise_generator).transpose(0, 1).reshape(batch, -1)
         out = out * first.delta_std + first.delta_mean
         p = first._p
@@ -320,14 +329,16 @@ class ResidualPRBEnsemble(nn.Module):
         ):
             self.register_buffer(name, torch.zeros(size) if name.endswith("mean") else torch.ones(size))
         self._chains: dict[int, BatchedPRBChain] = {}
+        self._stacked: Optional[_StackedNets] = None
         self.noise_generator: Optional[torch.Generator] = None
 
     def physics(self, x: Tensor, torque_nm: Tensor) -> Tensor:
-        """The identified PRB chain's step of joint states ``x (B, 2 (n + 1))``."""
+        """The identified PRB chain's step of joint states ``x (B, 2 (n + 1))``: one Rosenbrock step over ``step_s``
+        (the residual learns what it misses)."""
         batch = x.shape[0]
         if batch not in self._chains:
             self._chains[batch] = BatchedPRBChain(
-                self.params, batch_size=batch, dt_s=self.dt_s, integrator="rosenbrock"
+                self.params, batch_size=batch, dt_s=self.dt_s, integrator="rosenbrock", substeps=1
             )
         q, qd = self._chains[batch].step(x[:, : self.n_q].double(), x[:, self.n_q :].double(), torque_nm.double())
         return torch.cat([q, qd], dim=1).to(x.dtype)
@@ -341,8 +352,9 @@ class ResidualPRBEnsemble(nn.Module):
         x = x.float()
         torque_nm = torque_nm.reshape(-1).float().clamp(-self.torque_limit_nm, self.torque_limit_nm)
         z = (self.features(x, torque_nm) - self.f_mean) / self.f_std
-        outs = [head(net(z)) for net, head in zip(self.nets, self.heads)]
-        mean, log_var = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
+        if self._stacked is None:
+            self._stacked = _StackedNets(self.nets, self.heads)  # type: ignore[arg-type]
+        mean, log_var = self._stacked(z.expand(len(self.nets), -1, -1))
         pick = torch.randint(len(self.nets), (x.shape[0],), generator=generator)
         rows = torch.arange(x.shape[0])
         residual = _sample(mean[pick, rows], log_var[pick, rows], self.noise_generator) * self.r_std + self.r_mean
@@ -361,6 +373,7 @@ class ResidualPRBEnsemble(nn.Module):
             _reset_linear_layers(net)
         z, y = (features - self.f_mean) / self.f_std, (residual - self.r_mean) / self.r_std
         _fit_gaussian(list(self.nets), list(self.heads), z, y, steps, seed)  # type: ignore[arg-type]
+        self._stacked = None
 
 
 def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.ndarray:
@@ -411,18 +424,36 @@ class ObservedStateTracker:
 # ---------------------------------------------------------------------- MPPI
 
 
+@dataclass
+class MPPIPlan:
+    """One MPPI iteration under way (:meth:`MPPI.begin`): the perturbed knots ``(B, K, n_knots)``, the rollouts'
+    torques ``(B K, T)``, their current states, their summed costs and the model steps taken of ``T``."""
+
+    knots: Tensor
+    torques: Tensor
+    states: Tensor
+    cost: Tensor
+    steps_taken: int = 0
+
+    @property
+    def steps(self) -> int:
+        return int(self.torques.shape[1])
+
+
 class MPPI:
     """Model-predictive path integral control of one torque held for ``hold_steps`` model steps per knot.
 
-    ``rollout_fn(x0 (R, d), torques (R, T)) -> states (R, T + 1, d)``; ``cost_fn(states (R, T, d), torques
-    (R, T)) -> (R, T)``.  :meth:`optimise` refines mean torque sequences ``iterations`` times from ``n_samples``
-    perturbed copies each (the first unperturbed), weighted by ``exp(-cost / temperature)``.
+    ``step_fn(x (R, d), torque (R,)) -> x_next``; ``cost_fn(x, torque, x_next) -> (R,)`` the cost of a model step
+    and ``terminal_fn(x_T) -> (R,)`` (optional) that of the last state.  :meth:`optimise` refines mean torque
+    sequences ``iterations`` times from ``n_samples`` perturbed copies each (the first unperturbed), weighted by
+    ``exp(-cost / temperature)``; :meth:`begin`, :meth:`advance` and :meth:`finish` do one iteration a few model
+    steps at a time (a controller spreads it over the control periods of a knot).
     """
 
     def __init__(
         self,
-        rollout_fn: Callable[[Tensor, Tensor], Tensor],
-        cost_fn: Callable[[Tensor, Tensor], Tensor],
+        step_fn: Callable[[Tensor, Tensor], Tensor],
+        cost_fn: Callable[[Tensor, Tensor, Tensor], Tensor],
         torque_limit_nm: float,
         n_knots: int,
         hold_steps: int,
@@ -431,28 +462,56 @@ class MPPI:
         temperature: float,
         seed: int = 0,
         iterations: int = 1,
+        terminal_fn: Optional[Callable[[Tensor], Tensor]] = None,
     ) -> None:
-        self.rollout_fn, self.cost_fn, self.limit = rollout_fn, cost_fn, float(torque_limit_nm)
+        self.step_fn, self.cost_fn, self.terminal_fn = step_fn, cost_fn, terminal_fn
+        self.limit = float(torque_limit_nm)
         self.n_knots, self.hold_steps, self.n_samples = int(n_knots), int(hold_steps), int(n_samples)
         self.noise_std, self.temperature, self.iterations = float(noise_std_nm), float(temperature), int(iterations)
         self.generator = torch.Generator().manual_seed(int(seed))
 
     @torch.no_grad()
-    def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:
-        """Refined mean sequences ``(B, n_knots)`` [N m] of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
+    def begin(self, states: np.ndarray | Tensor, mean: Tensor, held_nm: Optional[np.ndarray] = None) -> MPPIPlan:
+        """An iteration from starts ``states (B, d)`` around mean sequences ``mean (B, n_knots)`` [N m]; with
+        ``held_nm (B,)`` the rollouts first hold those torques for one knot (already committed: not optimised)."""
         x = torch.as_tensor(states, dtype=torch.float32)
         batch, k = x.shape[0], self.n_samples
-        x0 = x.repeat_interleave(k, dim=0)
+        noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
+        noise[:, 0] = 0.0
+        knots = (mean[:, None] + noise).clamp(-self.limit, self.limit)
+        if held_nm is not None:
+            knots_ = torch.cat(
+                [torch.as_tensor(held_nm, dtype=torch.float64)[:, None, None].expand(-1, k, 1), knots], 2
+            )
+        torques = (knots if held_nm is None else knots_).reshape(batch * k, -1).repeat_interleave(self.hold_steps, 1)
+        cost = torch.zeros(batch * k, dtype=torch.float64)
+        return MPPIPlan(knots, torques, x.repeat_interleave(k, dim=0), cost)
+
+    @torch.no_grad()
+    def advance(self, plan: MPPIPlan, steps: int) -> None:
+        """Up to ``steps`` more model steps of ``plan``'s rollouts."""
+        for t in range(plan.steps_taken, min(plan.steps_taken + steps, plan.steps)):
+            u = plan.torques[:, t]
+            x_next = self.step_fn(plan.states, u.float())
+            plan.cost += self.cost_fn(plan.states, u, x_next).double()
+            plan.states = x_next
+            plan.steps_taken = t + 1
+
+    @torch.no_grad()
+    def finish(self, plan: MPPIPlan) -> Tensor:
+        """The refined means ``(B, n_knots)`` of a ``plan`` (its remaining steps taken first)."""
+        self.advance(plan, plan.steps)
+        batch, k = plan.knots.shape[:2]
+        cost = plan.cost if self.terminal_fn is None else plan.cost + self.terminal_fn(plan.states).double()
+        cost = cost.reshape(batch, k)
+        cost = torch.where(torch.isfinite(cost), cost, torch.full_like(cost, math.inf))
+        weights = torch.softmax(-(cost - cost.min(1, keepdim=True).values) / self.temperature, 1)
+        return (weights[..., None] * plan.knots).sum(1)
+
+    def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:
+        """Refined mean sequences ``(B, n_knots)`` [N m] of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
         for _ in range(self.iterations):
-            noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
-            noise[:, 0] = 0.0
-            knots = (mean[:, None] + noise).clamp(-self.limit, self.limit)
-            torques = knots.reshape(batch * k, -1).repeat_interleave(self.hold_steps, dim=1)
-            states_ = self.rollout_fn(x0, torques.float())
-            cost = self.cost_fn(states_[:, 1:], torques).double().sum(1).reshape(batch, k)
-            cost = torch.where(torch.isfinite(cost), cost, torch.full_like(cost, math.inf))
-            weights = torch.softmax(-(cost - cost.min(1, keepdim=True).values) / self.temperature, 1)
-            mean = (weights[..., None] * knots).sum(1)
+            mean = self.finish(self.begin(states, mean))
         return mean
 
 
@@ -471,43 +530,62 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
 
 class PlannerController:
     """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
-    it), replanning every ``hold_steps`` plant steps, for one rod (a :class:`softpend.evaluation.Controller`) or a
-    batch (:meth:`batch_policy`); it reads observations only."""
+    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`); it reads
+    observations only.
+
+    Planned torques are held for ``hold_steps`` calls (a knot).  At a knot's first call the plan finished over the
+    previous knot takes over, and the next plan starts: its rollouts hold that torque for one knot, then try the
+    planned ones; its work is spread over the knot's calls, so no call does more than a share of one plan (zero torque until the first plan
+    is ready, and after the LQR lets go until the next one is).
+    """
 
     def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
         self.capture_rad, self.hold_steps = float(capture_rad), int(hold_steps)
         self.torque_limit_nm = lqr.torque_limit_nm
+        steps = (self.mppi.n_knots + 1) * self.mppi.hold_steps  # the committed knot, then the planned ones
+        #: Model steps of the plan taken by the end of each call of a knot.
+        self._done_by = [(i + 1) * steps // self.hold_steps for i in range(self.hold_steps)]
         self.reset()
 
     def reset(self) -> None:
         self.tracker.reset()
         self._mean: Optional[Tensor] = None
+        self._plan: Optional[MPPIPlan] = None
 
     def torques(self, observations: np.ndarray, time_s: float) -> np.ndarray:
         """Torques ``(B,)`` [N m] for observations ``(B, 10)`` of ``B`` rods (the same ``B`` since :meth:`reset`)."""
         batch = len(observations)
         if self._mean is None or len(self._mean) != batch:
             self._mean = torch.zeros(batch, self.mppi.n_knots, dtype=torch.float64)
-            self.balancing, self._k, self._held = np.zeros(batch, bool), np.zeros(batch, int), np.zeros(batch)
+            self.balancing, self._held, self._next = np.zeros(batch, bool), np.zeros(batch), np.zeros(batch)
+            self._k, self._plan = 0, None
         states = self.tracker(observations)
         angle = np.abs(observations[:, 1])
         release = self.balancing & (angle > RELEASE_FACTOR * self.capture_rad)
         self._mean[torch.as_tensor(release)] = 0.0
-        self._k[release] = 0
+        self._held[release] = 0.0
         self.balancing = (self.balancing & ~release) | (angle < self.capture_rad)
         out = np.empty(batch)
         for i in np.flatnonzero(self.balancing):
             out[i] = self.lqr(Observation.from_array(observations[i]), _NO_STATE, _NO_STATE, time_s)
-        plan = np.flatnonzero(~self.balancing & (self._k % self.hold_steps == 0))
-        if plan.size:
-            rows = torch.as_tensor(plan)
-            mean = self.mppi.optimise(states[plan], self._mean[rows])
-            self._held[plan] = mean[:, 0].numpy()
-            self._mean[rows] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+        phase = self._k % self.hold_steps
+        if phase == 0:
+            self._held, self._next = self._next, np.zeros(batch)
+            self._rows = np.flatnonzero(~self.balancing)
+            if self._rows.size:
+                rows = self._rows
+                self._plan = self.mppi.begin(states[rows], self._mean[torch.as_tensor(rows)], self._held[rows])
+        if self._plan is not None:
+            self.mppi.advance(self._plan, self._done_by[phase] - self._plan.steps_taken)
+            if phase == self.hold_steps - 1:
+                mean, rows = self.mppi.finish(self._plan), torch.as_tensor(self._rows)
+                self._next[self._rows] = mean[:, 0].numpy()
+                self._mean[rows] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+                self._plan = None
         planning = ~self.balancing
         out[planning] = self._held[planning]
-        self._k[planning] += 1
+        self._k += 1
         return np.clip(out, -self.torque_limit_nm, self.torque_limit_nm)
 
     def __call__(self, observation: Observation, q: Any, q_dot: Any, time_s: float) -> float:
@@ -657,19 +735,19 @@ class _Planner:
             fast: Any = StackedEnsemble(model)
             i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
 
-            def cost(states: Tensor, torques: Tensor) -> Tensor:
-                return swing_up_cost(rod, states[..., i_theta], states[..., i_rate])
+            def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
+                return swing_up_cost(rod, x_next[:, i_theta], x_next[:, i_rate])
 
         else:
             tracker, fast = JointStateTracker(rod, task.dt_s), model
             n_q, link = rod.n_links + 1, rod.link_length_m
 
-            def cost(states: Tensor, torques: Tensor) -> Tensor:
-                return swing_up_cost(rod, *_tip(states[..., :n_q], states[..., n_q:], link))
+            def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
+                return swing_up_cost(rod, *_tip(x_next[:, :n_q], x_next[:, n_q:], link))
 
         fast.noise_generator = generator
         mppi = MPPI(
-            lambda x0, torques: rollout(fast, x0, torques, generator),
+            lambda x, torque: fast.predict_next(x, torque, generator=generator),
             cost,
             task.torque_limit_nm,
             config.n_knots,

@@ -3,6 +3,7 @@ it identified (its uncertainty draws are tested in tests/test_commission.py)."""
 
 import math
 
+import numpy as np
 import pytest
 
 from softpend.control.identified import (
@@ -34,6 +35,20 @@ def test_the_route_counts_the_seconds_its_plant_was_driven_and_its_controller_ba
     assert [s["plant_s"] for s in route.steps] == [0.5 * (k + 1) for k in range(len(route.steps))]
     summary = evaluate(route.controller, task, seeds=(20_000,), duration_s=6.0)
     assert math.isfinite(summary.results[0].swing_up_time_s) and summary.results[0].upright_std_rad < 0.1
+
+
+@pytest.mark.parametrize("program", ["noise", "multisine"])
+def test_the_recorder_drives_the_program_it_is_given_within_the_torque_limit(program):
+    task = Task()
+    data = simulated_recorder(task, RouteConfig(), seed=3, program=program)(2.0)
+    torques = data.torques_nm[0]
+    assert 0.2 * task.torque_limit_nm < np.max(np.abs(torques)) <= task.torque_limit_nm
+    spectrum = np.abs(np.fft.rfft(torques - torques.mean()))
+    frequencies = np.fft.rfftfreq(len(torques), data.dt_s)
+    in_band = spectrum[(frequencies > 0) & (frequencies <= RouteConfig().band_high_hz)] ** 2
+    share = in_band.sum() / (spectrum[frequencies > 0] ** 2).sum()
+    # the multisine puts its power in its band (but for the leakage of a 2 s record); random torque spreads it wider
+    assert share > 0.9 if program == "multisine" else share < 0.7
 
 
 @pytest.mark.parametrize(

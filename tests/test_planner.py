@@ -163,6 +163,7 @@ def test_trials_start_from_selection_seeds_and_fresh_starts_must_be_disjoint():
     "changes, field",
     [
         ({"model": "gp"}, "model"),
+        ({"excitation_program": "chirp"}, "excitation_program"),
         ({"n_samples": 7}, "n_samples"),
         ({"control_dt_s": 0.015}, "control_dt_s"),
         ({"hold_s": 20.0}, "hold_s"),

@@ -75,9 +75,15 @@ def design_swingup(params: RodParams, dt_s: float = 0.01) -> EnergySwingUpContro
 
 
 def excitation_protocol(
-    seconds: float, dt_s: float, config: RouteConfig, phi_noise_std_rad: float = 0.0, tip_noise_std_m: float = 0.0
+    seconds: float,
+    dt_s: float,
+    config: RouteConfig,
+    phi_noise_std_rad: float = 0.0,
+    tip_noise_std_m: float = 0.0,
+    program: str = "multisine",
 ) -> BabbleProtocol:
-    """One hanging trial of the multisine program, ``seconds`` long, no feedback, with encoder and camera noise."""
+    """One hanging trial of the multisine (or another babbling ``program``), ``seconds`` long, no feedback, with
+    encoder and camera noise."""
     return BabbleProtocol(
         n_trials=1,
         trial_length_s=seconds,
@@ -86,7 +92,7 @@ def excitation_protocol(
         start_angle_std_rad=0.05,
         start_rate_std_rad_s=0.1,
         feedback_trial_fraction=0.0,
-        program="multisine",
+        program=program,
         multisine_peak_fraction=config.peak_fraction,
         torque_bandwidth_hz=config.band_high_hz,
         phi_noise_std_rad=phi_noise_std_rad,
@@ -95,14 +101,20 @@ def excitation_protocol(
 
 
 def simulated_recorder(
-    task: Task, config: RouteConfig, seed: int, phi_noise_std_rad: float = 0.002, tip_noise_std_m: float = 0.002
+    task: Task,
+    config: RouteConfig,
+    seed: int,
+    phi_noise_std_rad: float = 0.002,
+    tip_noise_std_m: float = 0.002,
+    program: str = "multisine",
 ) -> Recorder:
-    """A recorder on ``task``'s simulated plant with encoder and camera noise (the rod is ``task.rod``)."""
+    """A recorder of the babbling ``program`` on ``task``'s simulated plant with encoder and camera noise (the rod is
+    ``task.rod``)."""
 
     def record(seconds: float) -> TrajectoryDataset:
-        protocol = excitation_protocol(
-            seconds, task.dt_s, config, phi_noise_std_rad=phi_noise_std_rad, tip_noise_std_m=tip_noise_std_m
-        ).replace(substeps=task.substeps)
+        protocol = excitation_protocol(seconds, task.dt_s, config, phi_noise_std_rad, tip_noise_std_m, program).replace(
+            substeps=task.substeps
+        )
         return babble(protocol, params=task.rod, seed=seed, plant=task.plant, progress=False)
 
     return record

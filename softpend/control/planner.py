@@ -25,7 +25,7 @@ from softpend.control.lqr import LQRController
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
 from softpend.plant import Observation, RodParams
 from softpend.plant.batched import BatchedPRBChain
-from softpend.sysid.babble import BabbleProtocol, babble
+from softpend.sysid.babble import PROGRAMS, BabbleProtocol, babble
 from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
 from softpend.sysid.layout import StateLayout
@@ -58,7 +58,7 @@ _ANGLE_MASK = np.array([is_angle(n) for n in POSITION_NAMES])
 class PlannerConfig:
     """Settings of :func:`run_planner` (SI units).
 
-    ``excitation_s``: multisine seconds before the first trial.  A trial lasts at most ``trial_s`` and ends once
+    ``excitation_s``: seconds of the babbling ``excitation_program`` (from hanging) before the first trial.  A trial lasts at most ``trial_s`` and ends once
     the rod has been held (``|theta| < 0.2`` rad, RMS at most ``HOLD_STD_RAD``) for ``hold_s``; the run ends after
     ``stop_after_balanced`` such trials in a row.  ``identify_windows``: windows of the grey-box identification of
     the rod (0: the task's rod).  ``horizon_s``, ``control_dt_s``, ``n_samples``, ``temperature``,
@@ -67,6 +67,7 @@ class PlannerConfig:
 
     task: Task = field(default_factory=Task)
     model: str = "ensemble"
+    excitation_program: str = "multisine"
     excitation_s: float = 5.0
     trial_s: float = TEST_EPISODE_S
     hold_s: float = 3.0
@@ -87,6 +88,7 @@ class PlannerConfig:
 
     def __post_init__(self) -> None:
         one_of("model", self.model, MODELS)
+        one_of("excitation_program", self.excitation_program, PROGRAMS)
         for name in ("excitation_s", "trial_s", "hold_s", "horizon_s", "control_dt_s", "temperature"):
             positive(name, getattr(self, name))
         lows = {"max_trials": 1, "stop_after_balanced": 1, "ensemble_size": 1, "hidden_width": 1, "train_steps": 1}
@@ -761,10 +763,10 @@ class _Planner:
 
 
 def _excitation(config: PlannerConfig) -> tuple[Any, float]:
-    """The multisine excitation from hanging: its data and plant seconds."""
+    """The excitation from hanging: its data and plant seconds."""
     task = config.task
     protocol = BabbleProtocol(
-        program="multisine",
+        program=config.excitation_program,
         start="hanging",
         feedback_trial_fraction=0.0,
         n_trials=1,

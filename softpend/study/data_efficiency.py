@@ -8,7 +8,7 @@ from typing import Any, Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from softpend.control.identified import RouteConfig, identify_until_robust, simulated_recorder
+from softpend.control.identified import RouteConfig, design_swingup, identify_until_robust, simulated_recorder
 from softpend.evaluation import evaluate
 from softpend.plant import RodParams
 from softpend.stats import aggregate_interval
@@ -18,6 +18,7 @@ from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
 __all__ = [
+    "excitation_rows",
     "greybox_route_figures",
     "greybox_route_rows",
     "method_summary",
@@ -28,6 +29,7 @@ __all__ = [
     "planner_fresh_starts",
     "planner_rows",
     "plant_seconds_rows",
+    "plot_excitation",
     "plot_plant_seconds",
 ]
 
@@ -76,6 +78,77 @@ def greybox_route_rows(
             }
         )
     return rows
+
+
+#: The babbling programs the chapter compares at equal length (:data:`softpend.sysid.babble.PROGRAMS`) -> label.
+EXCITATIONS = {"noise": "random torque", "multisine": "designed multisine"}
+
+
+def excitation_rows(
+    plant: str = "prb",
+    seeds: Iterable[int] = range(10),
+    lengths_s: Sequence[float] = (1.0, 2.0, 5.0),
+    report_seeds: Sequence[int] = REPORT_SEEDS,
+) -> list[dict[str, Any]]:
+    """One row per excitation program of :data:`EXCITATIONS`, length and seed: the rod identified from that many
+    seconds of it (the grey-box route's recorder on ``plant``, from the study's perturbed guess), the relative
+    error of each identified field (``error_<field>``, on the PRB chain only, whose truth is the default rod), and
+    the energy swing-up + LQR designed on the estimate on the fresh ``report_seeds``."""
+    from softpend.sysid.greybox import GreyBoxConfig, identify
+
+    task, truth, config = Task(plant=plant), RodParams(), RouteConfig()
+    rows = []
+    for program, label in EXCITATIONS.items():
+        for length_s in lengths_s:
+            for seed in seeds:
+                data = simulated_recorder(task, config, int(seed), program=program)(float(length_s))
+                result = identify(data, GreyBoxConfig(seed=int(seed)), initial_params=perturbed_guess(truth))
+                fresh = fresh_start_row(evaluate(design_swingup(result.params), task, seeds=tuple(report_seeds)))
+                errors = {
+                    f"error_{name}": value / getattr(truth, name) - 1.0
+                    for name, value in result.estimates.items()
+                    if hasattr(truth, name) and plant == "prb"
+                }
+                rows.append(
+                    {
+                        "program": program,
+                        "excitation": label,
+                        "plant_s": float(length_s),
+                        "seed": int(seed),
+                        **errors,
+                        "balanced_starts": fresh["balanced_starts"],
+                        "starts": fresh["starts"],
+                        "balances": fresh["run_balances"],
+                    }
+                )
+    return rows
+
+
+def plot_excitation(rows: list[dict[str, Any]]) -> Any:
+    """Per identified field, the median absolute relative error over seeds against the seconds of excitation, one
+    line per program (logarithmic error axis), and the seeds whose swing-up + LQR balances, per program and length."""
+    import matplotlib.pyplot as plt
+
+    fields = sorted({k[len("error_") :] for r in rows for k in r if k.startswith("error_")})
+    lengths = sorted({r["plant_s"] for r in rows})
+    fig, axes = plt.subplots(1, len(fields) + 1, figsize=(2.6 * (len(fields) + 1), 2.8), squeeze=False)
+    for i, (program, label) in enumerate(EXCITATIONS.items()):
+        mine = [r for r in rows if r["program"] == program]
+        for ax, name in zip(axes[0], fields):
+            median = [np.median([abs(r[f"error_{name}"]) for r in mine if r["plant_s"] == t]) for t in lengths]
+            ax.plot(lengths, median, "o-", color=f"C{i}", label=label)
+            ax.set_yscale("log")
+            ax.set_title(name.replace("_", " "), fontsize=8)
+            ax.set_xlabel("excitation [s]")
+        balancing = [sum(r["balances"] for r in mine if r["plant_s"] == t) for t in lengths]
+        axes[0, -1].plot(lengths, balancing, "o-", color=f"C{i}", label=label)
+    if fields:
+        axes[0, 0].set_ylabel("median |relative error|")
+    axes[0, -1].set_title("seeds whose swing-up + LQR balances", fontsize=8)
+    axes[0, -1].set_xlabel("excitation [s]")
+    axes[0, -1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
 
 
 def greybox_route_figures(rows: list[dict[str, Any]], prefix: str, within_s: float) -> dict[str, float]:

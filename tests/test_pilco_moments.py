@@ -272,17 +272,34 @@ def test_policy_reuses_its_beta_until_a_parameter_changes():
     assert not np.allclose(policy._beta().numpy(), changed.numpy())
 
 
-def test_the_compiled_rollout_equals_the_eager_one_with_its_gradient():
+def test_the_compiled_rollout_equals_the_eager_one_and_goes_through_torchs_disk_caches():
     """``compiled=True`` gives the eager objective and gradient (to rounding) with the book's state, the tip-rate
     cost and exploration, also when a later search changes the cost width and a restart brings new parameters;
     without gradients it runs eagerly, and it refuses models it cannot compile.  Torch runs two threads here: the
-    compiled loops must stay serial (with parallel ones the backward pass corrupted the heap)."""
+    compiled loops must stay serial (with parallel ones the backward pass corrupted the heap).
+
+    Compiling the step (for a GP size no other test uses, so it is compiled here) neither bypasses the FX graph
+    cache nor the AOT autograd cache, and it is saved to or read from them (a later process then reads it instead
+    of compiling it again): the step has no side effect (``torch.linalg.solve``'s singularity check had one) and
+    its custom autograd function is admitted to the AOT autograd cache."""
+    from torch._dynamo.utils import counters
+
+    keys = (
+        ("aot_autograd", "autograd_cache_bypass"),
+        ("inductor", "fxgraph_cache_bypass"),
+        ("aot_autograd", "autograd_cache_saved"),
+        ("aot_autograd", "autograd_cache_hit"),
+    )
+    before = {key: counters[key[0]][key[1]] for key in keys}
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
         _compare_compiled_and_eager_rollouts()
     finally:
         torch.set_num_threads(threads)
+    grown = {key: counters[key[0]][key[1]] - before[key] for key in keys}
+    assert grown[keys[0]] == 0 and grown[keys[1]] == 0, grown
+    assert grown[keys[2]] + grown[keys[3]] >= 1, grown
 
 
 def _compare_compiled_and_eager_rollouts() -> None:
@@ -320,37 +337,6 @@ def _compare_compiled_and_eager_rollouts() -> None:
         assert float(prop.rollout(m0, s0, 12)[3]) == pytest.approx(eager, rel=1e-12)
     with pytest.raises(ValueError, match="moment_function"):
         Propagator(spec, gp, object(), 0.3, 0.15, compiled=True)
-
-
-def test_the_compiled_rollout_goes_through_torchs_disk_caches():
-    """The compiled step has no side effect (``torch.linalg.solve``'s singularity check had one) and its custom
-    autograd function is admitted to the AOT autograd cache: compiling it (for a GP size no other test uses, so it
-    is compiled here) neither bypasses the FX graph cache nor the AOT autograd cache, and it is saved to or read
-    from them; a later process then reads it instead of compiling it again."""
-    from torch._dynamo.utils import counters
-
-    spec = state_spec("tip_bend")
-    rng = np.random.default_rng(21)
-    states = np.cumsum(rng.normal(0.0, 0.3, (18, 4)), axis=0) + np.array([0.0, 0.0, 0.0, np.pi])
-    x = np.hstack([spec.model_inputs(states[:-1]), rng.uniform(-0.06, 0.06, (17, 1))])
-    gp = MultiOutputGP(x, states[1:] - states[:-1])
-    policy = RBFPolicy(spec.model_inputs(states[:6]), np.ones(5), 0.06, seed=2, target_std=1.0)
-    m0 = torch.zeros(4, dtype=F64)
-    m0[3] = np.pi
-    keys = (
-        ("aot_autograd", "autograd_cache_bypass"),
-        ("inductor", "fxgraph_cache_bypass"),
-        ("aot_autograd", "autograd_cache_saved"),
-        ("aot_autograd", "autograd_cache_hit"),
-    )
-    before = {key: counters[key[0]][key[1]] for key in keys}
-    prop = Propagator(spec, gp, policy, 0.3, 0.15, cost_rate_width_rad_s=3.0, exploration=-0.2, compiled=True)
-    leaf = torch.tensor(policy.get_vector(), requires_grad=True)
-    policy.set_vector(leaf, requires_grad=True)
-    torch.autograd.grad(prop.rollout(m0, 0.05**2 * torch.eye(4, dtype=F64), 2)[3], leaf)
-    grown = {key: counters[key[0]][key[1]] - before[key] for key in keys}
-    assert grown[keys[0]] == 0 and grown[keys[1]] == 0, grown
-    assert grown[keys[2]] + grown[keys[3]] >= 1, grown
 
 
 def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monkeypatch):

@@ -133,7 +133,13 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     assert gain["relative_error"] == pytest.approx(gain["estimate"] / TRUTH.torque_gain - 1)
     assert all(math.isfinite(v["std"]) for v in report["identified"].values())
     assert [r["condition"] for r in report["verification"]] == ["nominal", "harsh"]
-    for row in report["verification"]:
+    # the controller designed on the default rod, from the same fresh starts of the same twin, beside it
+    assert [(r["condition"], r["controller"]) for r in report["default_rod_verification"]] == [
+        ("nominal", commission_module.DEFAULT_ROD_CONTROLLER),
+        ("harsh", commission_module.DEFAULT_ROD_CONTROLLER),
+    ]
+    assert {r["controller"] for r in report["verification"]} == {commission_module.CONTROLLER}
+    for row in report["verification"] + report["default_rod_verification"]:
         assert row["starts"] == 1 and 0.0 <= row["success_low"] <= row["success_rate"] <= row["success_high"] <= 1.0
     assert not set(report["seeds"]["verification"]) & set(report["seeds"]["commissioning"])
 

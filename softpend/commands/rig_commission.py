@@ -70,9 +70,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(report, indent=2))
         return 0
-    for row in report["verification"]:
+    for row in report["verification"] + report["default_rod_verification"]:
         print(
-            f"{row['condition']}: {row['successes']} of {row['starts']} balanced "
+            f"{row['controller']}, {row['condition']}: {row['successes']} of {row['starts']} balanced "
             f"(95% interval {row['success_low']:.2f} to {row['success_high']:.2f})"
         )
     print(f"plant seconds of the commissioning: {report['plant_s']['commissioning']:.1f}; report in {args.out}")

@@ -3,7 +3,8 @@
 ``excite`` (a multisine from hanging through the rig's own I/O, synchronised into a rig dataset), ``identify``
 (grey-box, from ``RodParams()``), ``design`` (energy swing-up + LQR on the observations of the identified rod,
 checked in the simulator on rods drawn from the identification's uncertainty), ``verify`` (that controller on the
-twin from fresh hanging starts under each sensor condition) and ``report``.  The twin's truth stays on the twin's
+twin from fresh hanging starts under each sensor condition, beside the same controller designed on the default rod)
+and ``report``.  The twin's truth stays on the twin's
 side (:mod:`softpend.study.twin_side`, a child process); only the report's relative errors come from it.
 """
 
@@ -13,7 +14,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 from softpend.checks import in_range, int_at_least, positive
 from softpend.plant import RodParams
@@ -25,6 +26,9 @@ __all__ = [
     "STAGES",
     "CommissionConfig",
     "commission",
+    "commission_table",
+    "commissioned_rods",
+    "identification_errors",
     "identified_values",
     "verification_seeds",
 ]
@@ -43,6 +47,8 @@ REST_S = 0.5
 VERIFY_SEED_OFFSET = 1_000_000_000
 #: Label of the commissioned controller.
 CONTROLLER = "energy swing-up + LQR (observations), identified rod"
+#: Label of the same controller designed on the default rod (what a user gets without commissioning), verified beside.
+DEFAULT_ROD_CONTROLLER = "energy swing-up + LQR (observations), default rod"
 SETTINGS_FILE = "commission.json"
 
 
@@ -309,15 +315,17 @@ def _design(run: _Run) -> dict:
 
 def _verify(run: _Run) -> dict:
     config = run.config
-    model_rod = run.read("design")["model_rod"]
+    models = {CONTROLLER: run.read("design")["model_rod"], DEFAULT_ROD_CONTROLLER: RodParams().to_dict()}
     seeds = verification_seeds(config)
     rows = on_twin_side(
-        verify_on_twin, run.truth, str(run.private), model_rod, list(CONDITIONS), seeds, config.verify_duration_s
+        verify_on_twin, run.truth, str(run.private), models, list(CONDITIONS), seeds, config.verify_duration_s
     )
     return {
         "seeds": seeds,
         "rows": rows,
-        "plant_s": {name: sum(r["plant_s"] for r in group) for name, group in rows.items()},
+        "plant_s": {
+            name: sum(r["plant_s"] for by_condition in rows.values() for r in by_condition[name]) for name in CONDITIONS
+        },
     }
 
 
@@ -331,7 +339,10 @@ def _report(run: _Run) -> dict:
     for name, entry in identified.items():
         entry["truth"] = truth["truth"].get(name)
         entry["relative_error"] = truth["relative_error"].get(name)
-    rows = [{**row, "controller": CONTROLLER} for group in verify["rows"].values() for row in group]
+    rows = {
+        label: [row for group in by_condition.values() for row in group]
+        for label, by_condition in verify["rows"].items()
+    }
     fit = identification["greybox"]["fit"]
     return {
         "twin": run.truth.to_dict(),
@@ -355,7 +366,8 @@ def _report(run: _Run) -> dict:
             "camera_delay_s": identification["greybox"]["calibration"]["camera_delay_s"],
         },
         "design": design["uncertainty_check"],
-        "verification": summary_rows(rows),
+        "verification": summary_rows(rows[CONTROLLER]),
+        "default_rod_verification": summary_rows(rows[DEFAULT_ROD_CONTROLLER]),
         "seeds": {"commissioning": config.commissioning_seeds(), "verification": verify["seeds"]},
     }
 
@@ -395,3 +407,39 @@ def commission(
         if on_stage is not None:
             on_stage(stage, ran, output)
     return output
+
+
+def identification_errors(report: dict) -> list[float]:
+    """The absolute relative errors of a report's identified parameters, infinite for each one held at the guess."""
+    identified = report["identified"]
+    errors = [abs(entry["relative_error"]) for entry in identified.values()]
+    return errors + [math.inf] * (len(report["identification_fit"]["parameters"]) - len(identified))
+
+
+def commissioned_rods(
+    root: str | Path, rod_seeds: Sequence[int], config: Optional[CommissionConfig] = None
+) -> list[dict]:
+    """The reports of the unknown rods ``TwinTruth(seed=s)`` of ``rod_seeds``, each commissioned in
+    ``root/rod_<s>`` (stages done there before are kept)."""
+    return [commission(Path(root) / f"rod_{int(seed)}", TwinTruth(seed=int(seed)), config) for seed in rod_seeds]
+
+
+def commission_table(reports: Sequence[dict]) -> list[dict]:
+    """One row per report: the rod's seed, the plant seconds of its commissioning, the largest relative error of an
+    identified parameter (infinite when one was held at the guess), and per sensor condition the fresh starts the
+    commissioned controller and the default rod's balanced."""
+    rows = []
+    for report in reports:
+        row = {
+            "rod": report["twin"]["seed"],
+            "plant_s": report["plant_s"]["commissioning"],
+            "max_error_pct": 100.0 * max(identification_errors(report)),
+        }
+        for key, summary in (
+            ("commissioned", report["verification"]),
+            ("default_rod", report["default_rod_verification"]),
+        ):
+            for entry in summary:
+                row[f"{key}_{entry['condition']}"] = f"{entry['successes']} of {entry['starts']}"
+        rows.append(row)
+    return rows

@@ -141,13 +141,14 @@ def excite_on_twin(
 def verify_on_twin(
     truth: TwinTruth,
     private: str,
-    model_rod: Mapping[str, Any],
+    model_rods: Mapping[str, Mapping[str, Any]],
     conditions: Sequence[str],
     seeds: Sequence[int],
     duration_s: float,
-) -> dict[str, list[dict[str, Any]]]:
-    """The rows, by condition, of the energy swing-up + LQR on the observations designed on ``model_rod`` (its
-    estimator on the same model) from the hanging starts ``seeds`` of the twin's rod (logs in ``private``)."""
+) -> dict[str, dict[str, list[dict[str, Any]]]]:
+    """The rows, by controller label of ``model_rods`` and by condition, of the energy swing-up + LQR on the
+    observations designed on each model rod (its estimator on the same model) from the hanging starts ``seeds`` of
+    the twin's rod (logs in ``private``)."""
     from softpend.control.identified import design_swingup
     from softpend.io.outputs import Outputs
     from softpend.plant import RodParams
@@ -159,23 +160,26 @@ def verify_on_twin(
         raise ValueError(f"conditions must be drawn from {sorted(CONDITIONS)}, got {unknown}")
     private_dir = Path(private)
     true_task = Task(rod=_resolve(truth, private_dir, Outputs()).effective_rod())
-    model = RodParams.from_dict(dict(model_rod))
-    return {
-        name: [
-            twin_start(
-                design_swingup(model),
-                "commissioned",
-                true_task,
-                CONDITIONS[name],
-                seed,
-                duration_s,
-                private_dir / name / f"start_{seed}",
-                estimator_task=Task(rod=model),
-            )
-            for seed in seeds
-        ]
-        for name in conditions
-    }
+    out: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for i, (label, rod) in enumerate(model_rods.items()):
+        model = RodParams.from_dict(dict(rod))
+        out[label] = {
+            name: [
+                twin_start(
+                    design_swingup(model),
+                    label,
+                    true_task,
+                    CONDITIONS[name],
+                    seed,
+                    duration_s,
+                    private_dir / f"model_{i}" / name / f"start_{seed}",
+                    estimator_task=Task(rod=model),
+                )
+                for seed in seeds
+            ]
+            for name in conditions
+        }
+    return out
 
 
 def truth_errors(truth: TwinTruth, private: str, estimates: Mapping[str, float]) -> dict[str, dict[str, float]]:

@@ -4,7 +4,6 @@ identification error (infinite when a parameter was held at the guess) and the p
 
 from __future__ import annotations
 
-import math
 import statistics
 import tempfile
 
@@ -14,14 +13,14 @@ UNKNOWN_ROD_SEEDS = (9101, 9102, 9103, 9104, 9105)
 
 def commission_figures(reports: list[dict]) -> dict[str, float]:
     """The group's figures from the commissioning reports of :func:`softpend.study.commission.commission`."""
+    from softpend.study.commission import identification_errors
+
     successes: dict[str, list[float]] = {}
     errors = []
     for report in reports:
         for row in report["verification"]:
             successes.setdefault(row["condition"], []).append(10.0 * row["successes"] / row["starts"])
-        identified = report["identified"]
-        errors += [abs(entry["relative_error"]) for entry in identified.values()]
-        errors += [math.inf] * (len(report["identification_fit"]["parameters"]) - len(identified))
+        errors += identification_errors(report)
     return {
         "commission_success_min": min(successes["nominal"]),
         "commission_harsh_success_min": min(successes["harsh"]),
@@ -33,9 +32,7 @@ def commission_figures(reports: list[dict]) -> dict[str, float]:
 
 def bench_commission() -> dict[str, float]:
     """The ``commission`` benchmark group (see the module docstring)."""
-    from softpend.study.commission import commission
-    from softpend.study.twin_side import TwinTruth
+    from softpend.study.commission import commissioned_rods
 
     with tempfile.TemporaryDirectory(prefix="softpend-bench-commission-") as work:
-        reports = [commission(f"{work}/rod_{seed}", TwinTruth(seed=seed)) for seed in UNKNOWN_ROD_SEEDS]
-    return commission_figures(reports)
+        return commission_figures(commissioned_rods(work, UNKNOWN_ROD_SEEDS))

@@ -6,32 +6,13 @@ from __future__ import annotations
 import json
 import os
 import re
-from pathlib import Path
 
 import pytest
+from sweep_jobs import always_die, die_once, write_pid
 
 from softpend.rl.config import DQNConfig
 from softpend.study.rl_runs import run_folder, train_seeds
 from softpend.study.sweep import SweepFailed, default_backend, default_workers, run_jobs
-
-
-def write_pid(folder: Path, value: int, progress: bool = True) -> None:
-    if value < 0:
-        raise ValueError(f"negative value {value}")
-    (folder / f"job{value}.txt").write_text(f"{value} {os.getpid()} {progress}")
-
-
-def die_once(folder: Path, value: int, progress: bool = True) -> None:
-    """Kill its own worker process the first time (as an out-of-memory kill would), succeed the second."""
-    marker = folder / f"died{value}"
-    if not marker.exists():
-        marker.write_text("x")
-        os._exit(9)
-    write_pid(folder, value, progress)
-
-
-def always_die(folder: Path, value: int, progress: bool = True) -> None:
-    os._exit(9)
 
 
 def test_jobs_run_in_worker_processes(tmp_path):

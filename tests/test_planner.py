@@ -55,6 +55,17 @@ def test_mppi_recovers_the_lqr_action_of_a_linear_system():
     assert torque == pytest.approx(expected, rel=0.05, abs=0.005)
 
 
+def test_mppi_keeps_its_mean_where_every_rollout_diverges():
+    def step_fn(x: torch.Tensor, torque: torch.Tensor) -> torch.Tensor:
+        return torch.where(x[:, :1] > 0, torch.full_like(x, math.nan), x + torque[:, None])  # start 0 diverges
+
+    mppi = MPPI(step_fn, lambda x, u, x_next: x_next[:, 0] ** 2, 1.0, 3, 1, 8, 0.3, temperature=0.1)
+    mean = torch.tensor([[0.2, -0.1, 0.3], [0.2, -0.1, 0.3]], dtype=torch.float64)
+    out = mppi.optimise(np.array([[1.0], [-1.0]]), mean)
+    assert torch.equal(out[0], mean[0])  # no finite rollout: the unperturbed sequence
+    assert torch.isfinite(out).all() and not torch.equal(out[1], mean[1])
+
+
 class _Identity:
     def reset(self) -> None:
         pass

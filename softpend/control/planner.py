@@ -448,7 +448,7 @@ class MPPI:
     ``step_fn(x (R, d), torque (R,)) -> x_next``; ``cost_fn(x, torque, x_next) -> (R,)`` the cost of a model step
     and ``terminal_fn(x_T) -> (R,)`` (optional) that of the last state.  :meth:`optimise` refines mean torque
     sequences ``iterations`` times from ``n_samples`` perturbed copies each (the first unperturbed), weighted by
-    ``exp(-cost / temperature)``; :meth:`begin`, :meth:`advance` and :meth:`finish` do one iteration a few model
+    ``exp(-cost / temperature)`` (where every rollout of a start diverged, its unperturbed copy); :meth:`begin`, :meth:`advance` and :meth:`finish` do one iteration a few model
     steps at a time (a controller spreads it over the control periods of a knot).
     """
 
@@ -507,7 +507,10 @@ class MPPI:
         cost = plan.cost if self.terminal_fn is None else plan.cost + self.terminal_fn(plan.states).double()
         cost = cost.reshape(batch, k)
         cost = torch.where(torch.isfinite(cost), cost, torch.full_like(cost, math.inf))
-        weights = torch.softmax(-(cost - cost.min(1, keepdim=True).values) / self.temperature, 1)
+        best = cost.min(1, keepdim=True).values
+        weights = torch.softmax(-(cost - torch.where(torch.isfinite(best), best, 0.0)) / self.temperature, 1)
+        lost = ~torch.isfinite(best[:, 0])  # every rollout diverged: keep the unperturbed (first) sequence
+        weights[lost] = nn.functional.one_hot(torch.zeros(int(lost.sum()), dtype=torch.long), k).to(weights.dtype)
         return (weights[..., None] * plan.knots).sum(1)
 
     def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:

@@ -224,8 +224,8 @@ class _StackedNets:
     """The Gaussian networks (``nets[i]``, ``heads[i]``) of an ensemble's members applied at once, each layer as one
     batched matrix product: inputs ``(E, R, F)`` to means and bounded log-variances ``(E, R, n)``."""
 
-    def __init__(self, nets: Sequence[nn.Module], heads: Sequence[nn.Module]) -> None:
-        layers = [[net[i] for net in nets] for i in range(0, len(nets[0]), 2)]  # type: ignore[index, arg-type]
+    def __init__(self, nets: Sequence[Any], heads: Sequence[Any]) -> None:
+        layers = [[net[i] for net in nets] for i in range(0, len(nets[0]), 2)]
         self.weights = [torch.stack([layer.weight.detach().T for layer in group]) for group in layers]
         self.biases = [torch.stack([layer.bias.detach()[None] for layer in group]) for group in layers]
         self.max_log_var = torch.stack([head.max_log_var.detach()[None] for head in heads])
@@ -355,7 +355,7 @@ class ResidualPRBEnsemble(nn.Module):
         torque_nm = torque_nm.reshape(-1).float().clamp(-self.torque_limit_nm, self.torque_limit_nm)
         z = (self.features(x, torque_nm) - self.f_mean) / self.f_std
         if self._stacked is None:
-            self._stacked = _StackedNets(self.nets, self.heads)  # type: ignore[arg-type]
+            self._stacked = _StackedNets(list(self.nets), list(self.heads))
         mean, log_var = self._stacked(z.expand(len(self.nets), -1, -1))
         pick = torch.randint(len(self.nets), (x.shape[0],), generator=generator)
         rows = torch.arange(x.shape[0])
@@ -584,9 +584,9 @@ class PlannerController:
         if self._plan is not None:
             self.mppi.advance(self._plan, self._done_by[phase] - self._plan.steps_taken)
             if phase == self.hold_steps - 1:
-                mean, rows = self.mppi.finish(self._plan), torch.as_tensor(self._rows)
+                mean = self.mppi.finish(self._plan)
                 self._next[self._rows] = mean[:, 0].numpy()
-                self._mean[rows] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+                self._mean[torch.as_tensor(self._rows)] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
                 self._plan = None
         planning = ~self.balancing
         out[planning] = self._held[planning]

@@ -73,16 +73,28 @@ def _build_quick_book(root: Path):
 #: The test files that read the quick book (fixture ``quick_book``).
 QUICK_BOOK_TEST_FILES = frozenset({"tests/test_book.py", "tests/test_book_browser.py"})
 
+#: The tests that run ``torch.compile``: the first compile in a process also pays the compiler's set-up (its
+#: probes of the C++ compiler and the processor, its pool of compile workers), once per process.
+TORCH_COMPILE_TESTS = frozenset(
+    {
+        "tests/test_pilco_moments.py::test_the_compiled_rollout_equals_the_eager_one_and_goes_through_torchs_disk_caches",
+        "tests/test_batched_chain.py::test_compiled_chain_equals_the_eager_one_and_differentiates_eagerly",
+    }
+)
+
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """Under pytest-xdist (``make test`` runs ``-n auto``): the tests of :data:`QUICK_BOOK_TEST_FILES` go to one
-    worker, so the quick book is built once per run rather than once per worker; every other test is scheduled
-    on its own, as ``--dist load`` does."""
+    worker, so the quick book is built once per run rather than once per worker, and those of
+    :data:`TORCH_COMPILE_TESTS` to one worker, so the compiler is set up once; every other test is scheduled on
+    its own, as ``--dist load`` does."""
     from xdist.scheduler import LoadScopeScheduling
 
-    class QuickBookOnOneWorker(LoadScopeScheduling):
+    class SharedSetUpOnOneWorker(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            return "quick_book" if nodeid.split("::", 1)[0] in QUICK_BOOK_TEST_FILES else nodeid
+            if nodeid.split("::", 1)[0] in QUICK_BOOK_TEST_FILES:
+                return "quick_book"
+            return "torch_compile" if nodeid in TORCH_COMPILE_TESTS else nodeid
 
-    return QuickBookOnOneWorker(config, log)
+    return SharedSetUpOnOneWorker(config, log)

@@ -9,7 +9,7 @@ from typing import Any, Iterable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.control.identified import RouteConfig, design_swingup, identify_until_robust, simulated_recorder
-from softpend.evaluation import evaluate
+from softpend.evaluation import TEST_EPISODE_S, evaluate
 from softpend.plant import RodParams
 from softpend.stats import aggregate_interval
 from softpend.study.fresh_starts import fresh_start_row
@@ -51,10 +51,11 @@ def greybox_route_rows(
     seeds: Iterable[int] = range(10),
     config: Optional[RouteConfig] = None,
     report_seeds: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
     """One row per seed: the route on ``plant`` from the study's perturbed guess (plant seconds of excitation, how
     far it went), then its controller on the 20 fresh report starts; ``real_s_to_balance`` is infinite for a seed
-    whose controller does not balance them (starts: ``report_seeds``)."""
+    whose controller does not balance them (starts: ``report_seeds``, each ``duration_s`` long)."""
     config = config if config is not None else RouteConfig()
     task = Task(plant=plant)
     rows = []
@@ -62,7 +63,7 @@ def greybox_route_rows(
         route = identify_until_robust(
             simulated_recorder(task, config, seed), perturbed_guess(RodParams()), config, seed
         )
-        fresh = fresh_start_row(evaluate(route.controller, task, seeds=tuple(report_seeds)))
+        fresh = fresh_start_row(evaluate(route.controller, task, seeds=tuple(report_seeds), duration_s=duration_s))
         rows.append(
             {
                 "plant": plant,
@@ -89,11 +90,12 @@ def excitation_rows(
     seeds: Iterable[int] = range(10),
     lengths_s: Sequence[float] = (1.0, 2.0, 5.0),
     report_seeds: Sequence[int] = REPORT_SEEDS,
+    duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
     """One row per excitation program of :data:`EXCITATIONS`, length and seed: the rod identified from that many
     seconds of it (the grey-box route's recorder on ``plant``, from the study's perturbed guess), the relative
     error of each identified field (``error_<field>``, on the PRB chain only, whose truth is the default rod), and
-    the energy swing-up + LQR designed on the estimate on the fresh ``report_seeds``."""
+    the energy swing-up + LQR designed on the estimate on the fresh ``report_seeds`` (each ``duration_s`` long)."""
     from softpend.sysid.greybox import GreyBoxConfig, identify
 
     task, truth, config = Task(plant=plant), RodParams(), RouteConfig()
@@ -103,7 +105,8 @@ def excitation_rows(
             for seed in seeds:
                 data = simulated_recorder(task, config, int(seed), program=program)(float(length_s))
                 result = identify(data, GreyBoxConfig(seed=int(seed)), initial_params=perturbed_guess(truth))
-                fresh = fresh_start_row(evaluate(design_swingup(result.params), task, seeds=tuple(report_seeds)))
+                controller = design_swingup(result.params)
+                fresh = fresh_start_row(evaluate(controller, task, seeds=tuple(report_seeds), duration_s=duration_s))
                 errors = {
                     f"error_{name}": value / getattr(truth, name) - 1.0
                     for name, value in result.estimates.items()
@@ -271,19 +274,20 @@ def planner_rows(
     report_seeds: Sequence[int] = REPORT_SEEDS,
     plant: str = "prb",
     overrides: Optional[Mapping[str, Any]] = None,
+    duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
     """One row per seed of the planner (``book/hparams/planner.yml``, then ``overrides``; ``model`` =
     ``"residual"``: the PRB model with a learned residual, ``"ensemble"``: the black-box ensemble) with ``plant``
     as the real rod, trials from the first 16 selection starts, then its controller on ``report_seeds`` (the PRB
     rod all at once on the batched engine, another rod one start after the other); ``real_s_to_balance`` is
-    infinite unless 90 % of them balance."""
+    infinite unless 90 % of them balance (each start ``duration_s`` long)."""
     from softpend.control.planner import run_planner
 
     config = planner_config(Task(plant=plant), overrides).replace(model=model)
     rows = []
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))
-        fresh = fresh_start_row(planner_fresh_starts(result, report_seeds))
+        fresh = fresh_start_row(planner_fresh_starts(result, report_seeds, duration_s))
         rows.append(
             {
                 "plant": plant,
@@ -297,7 +301,7 @@ def planner_rows(
     return rows
 
 
-def planner_fresh_starts(result: Any, seeds: Sequence[int]) -> Any:
+def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S) -> Any:
     """The final controller of a planner run (:class:`softpend.control.planner.PlannerResult`) from the fresh starts
     ``seeds`` on the run's real rod: the PRB rod all at once on the batched engine
     (:func:`softpend.control.planner.fresh_start_evaluation`), another one start after the other on the Exudyn
@@ -309,11 +313,13 @@ def planner_fresh_starts(result: Any, seeds: Sequence[int]) -> Any:
 
     task = result.config.task
     if task.plant == "prb":
-        return fresh_start_evaluation(result, tuple(seeds))
+        return fresh_start_evaluation(result, tuple(seeds), duration_s)
     if shared := sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds)):
         raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
     with torch.no_grad(), one_torch_thread():
-        return evaluate(result.controller, task, engine="exudyn", name="planner", seeds=tuple(seeds))
+        return evaluate(
+            result.controller, task, engine="exudyn", name="planner", seeds=tuple(seeds), duration_s=duration_s
+        )
 
 
 def pilco_rows_if_trained(

@@ -66,6 +66,26 @@ def test_mppi_keeps_its_mean_where_every_rollout_diverges():
     assert torch.isfinite(out).all() and not torch.equal(out[1], mean[1])
 
 
+def test_the_joint_state_tracker_reconstructs_as_the_training_data_does():
+    from softpend.control.planner import JointStateTracker, joint_states
+    from softpend.envs import SoftPendulumEnv
+
+    task = Task()
+    env = SoftPendulumEnv(**task.env_kwargs())
+    env.reset(seed=5)
+    rng = np.random.default_rng(5)
+    observations = [env.report_observation.as_array()]
+    for _ in range(150):
+        env.step(np.array([rng.uniform(-1.0, 1.0)]))
+        observations.append(env.report_observation.as_array())
+    tracker = JointStateTracker(task.rod, task.dt_s)
+    tracked = np.concatenate([tracker(o[None]) for o in observations])
+    positions = np.array(observations)[:, :5]
+    pairs = [joint_states(positions[k - 1 : k + 1], task.rod, task.dt_s)[0] for k in range(1, len(positions))]
+    assert np.allclose(tracked[1:], np.array(pairs), atol=1e-6)
+    assert np.ptp(tracked[:, 1:5]) > 0.05  # the springs did bend
+
+
 class _Identity:
     def reset(self) -> None:
         pass
@@ -177,6 +197,7 @@ def test_trials_start_from_selection_seeds_and_fresh_starts_must_be_disjoint():
         ({"excitation_program": "chirp"}, "excitation_program"),
         ({"n_samples": 7}, "n_samples"),
         ({"control_dt_s": 0.015}, "control_dt_s"),
+        ({"horizon_s": 0.05}, "horizon_s"),
         ({"hold_s": 20.0}, "hold_s"),
         ({"selection_seeds": ()}, "selection_seeds"),
         ({"capture_rad": -0.1}, "capture_rad"),

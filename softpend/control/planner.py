@@ -27,7 +27,7 @@ from softpend.plant import Observation, RodParams
 from softpend.plant.batched import BatchedPRBChain
 from softpend.sysid.babble import PROGRAMS, BabbleProtocol, babble
 from softpend.sysid.differentiation import backward_difference
-from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states
+from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states, wrap_diff
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.variables import POSITION_NAMES, is_angle
@@ -47,6 +47,8 @@ IDENTIFY_GUESS_FACTORS = {
     "joint_damping_nms_per_rad": 2.0,
     "tip_mass_kg": 0.7,
 }
+#: Gauss-Newton steps of a tracked observation's joint angles from the previous observation's.
+WARM_ITERATIONS = 10
 #: Upright threshold of a held rod [rad] (as :func:`softpend.evaluation.metrics_from_trajectory`).
 UPRIGHT_RAD = 0.2
 #: The joint state the controllers are handed in place of the plant's (they read observations only).
@@ -58,11 +60,12 @@ _ANGLE_MASK = np.array([is_angle(n) for n in POSITION_NAMES])
 class PlannerConfig:
     """Settings of :func:`run_planner` (SI units).
 
-    ``excitation_s``: seconds of the babbling ``excitation_program`` (from hanging) before the first trial.  A trial lasts at most ``trial_s`` and ends once
-    the rod has been held (``|theta| < 0.2`` rad, RMS at most ``HOLD_STD_RAD``) for ``hold_s``; the run ends after
-    ``stop_after_balanced`` such trials in a row.  ``identify_windows``: windows of the grey-box identification of
-    the rod (0: the task's rod).  ``horizon_s``, ``control_dt_s``, ``n_samples``, ``temperature``,
-    ``noise_fraction`` (of the torque limit): MPPI's settings.  ``selection_seeds``: the trials' start seeds.
+    ``excitation_s``: seconds of the babbling ``excitation_program`` (from hanging) before the first trial.  A trial
+    lasts at most ``trial_s`` and ends once the rod has been held (``|theta| < 0.2`` rad, RMS at most
+    ``HOLD_STD_RAD``) for ``hold_s``; the run ends after ``stop_after_balanced`` such trials in a row.
+    ``identify_windows``: windows of the grey-box identification of the rod (0: the task's rod).  MPPI's settings:
+    ``horizon_s`` (from now: the knot under way, then the planned ones), ``control_dt_s`` (a knot), ``n_samples``,
+    ``temperature``, ``noise_fraction`` (of the torque limit).  ``selection_seeds``: the trials' start seeds.
     """
 
     task: Task = field(default_factory=Task)
@@ -103,9 +106,9 @@ class PlannerConfig:
         if self.excitation_s < 2 * self.task.dt_s:
             raise ValueError(f"excitation_s must cover two steps of task.dt_s, got {self.excitation_s!r}")
         ratios = [getattr(self, name) / self.task.dt_s for name in ("control_dt_s", "horizon_s")]
-        if self.n_knots < 1 or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
+        if self.n_knots < 2 or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
             raise ValueError(
-                "control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s >= control_dt_s"
+                "control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s >= 2 control_dt_s"
             )
         try:
             seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
@@ -388,7 +391,9 @@ def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.nd
 
 class JointStateTracker:
     """The residual model's states ``(B, 2 (n + 1))`` from successive observations ``(B, 10)``, as
-    :func:`joint_states` builds them (before the first sample: one step back along the observed rates)."""
+    :func:`joint_states` builds them (before the first sample: one step back along the observed rates); each
+    observation's angles are reconstructed once, from the previous ones' spring angles (:data:`WARM_ITERATIONS`
+    Gauss-Newton steps)."""
 
     def __init__(self, params: RodParams, dt_s: float) -> None:
         self.params, self.dt_s = params, float(dt_s)
@@ -397,11 +402,22 @@ class JointStateTracker:
     def reset(self) -> None:
         self._previous: Optional[np.ndarray] = None
 
+    def _angles(self, positions: np.ndarray, springs: Optional[np.ndarray]) -> np.ndarray:
+        p = positions
+        if springs is None:
+            return reconstruct_joint_states(p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params)
+        return reconstruct_joint_states(
+            p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params, iterations=WARM_ITERATIONS, initial_springs_rad=springs
+        )
+
     def __call__(self, observations: np.ndarray) -> np.ndarray:
-        now = observations[:, :5]
-        previous = now - self.dt_s * observations[:, 5:] if self._previous is None else self._previous
+        if self._previous is None or len(self._previous) != len(observations):
+            self._previous = self._angles(observations[:, :5] - self.dt_s * observations[:, 5:], None)
+        previous, now = self._previous, self._angles(observations[:, :5], self._previous[:, 1:])
         self._previous = now
-        return np.stack([joint_states(np.stack([p, n]), self.params, self.dt_s)[0] for p, n in zip(previous, now)])
+        q = now.copy()
+        q[:, 0] = previous[:, 0] + wrap_diff(now[:, 0], previous[:, 0])  # the hub unwrapped, as np.unwrap
+        return np.concatenate([q, (q - previous) / self.dt_s], axis=1)
 
 
 class ObservedStateTracker:
@@ -472,7 +488,7 @@ class MPPI:
         self.noise_std, self.temperature, self.iterations = float(noise_std_nm), float(temperature), int(iterations)
         self.generator = torch.Generator().manual_seed(int(seed))
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def begin(self, states: np.ndarray | Tensor, mean: Tensor, held_nm: Optional[np.ndarray] = None) -> MPPIPlan:
         """An iteration from starts ``states (B, d)`` around mean sequences ``mean (B, n_knots)`` [N m]; with
         ``held_nm (B,)`` the rollouts first hold those torques for one knot (already committed: not optimised)."""
@@ -489,7 +505,7 @@ class MPPI:
         cost = torch.zeros(batch * k, dtype=torch.float64)
         return MPPIPlan(knots, torques, x.repeat_interleave(k, dim=0), cost)
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def advance(self, plan: MPPIPlan, steps: int) -> None:
         """Up to ``steps`` more model steps of ``plan``'s rollouts."""
         for t in range(plan.steps_taken, min(plan.steps_taken + steps, plan.steps)):
@@ -499,7 +515,7 @@ class MPPI:
             plan.states = x_next
             plan.steps_taken = t + 1
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def finish(self, plan: MPPIPlan) -> Tensor:
         """The refined means ``(B, n_knots)`` of a ``plan`` (its remaining steps taken first)."""
         self.advance(plan, plan.steps)
@@ -755,7 +771,7 @@ class _Planner:
             lambda x, torque: fast.predict_next(x, torque, generator=generator),
             cost,
             task.torque_limit_nm,
-            config.n_knots,
+            config.n_knots - 1,  # after the knot under way: the rollouts cover horizon_s from now
             config.hold_steps if config.model == "ensemble" else 1,
             config.n_samples,
             config.noise_fraction * task.torque_limit_nm,

@@ -155,14 +155,16 @@ def reconstruct_joint_states(
     params: RodParams,
     ridge: float = 1e-4,
     iterations: int = 20,
+    initial_springs_rad: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Joint angles ``(..., n + 1)`` of a PRB rod that put its tip at the observed position (and tip angle ``er``
-    when given), the spring angles as small as possible (a ridge on them); vectorised Gauss-Newton."""
+    when given), the spring angles as small as possible (a ridge on them); vectorised Gauss-Newton from the straight
+    rod (or from ``initial_springs_rad (..., n)``)."""
     phi = np.asarray(phi_rad, float)
     n = params.n_links
     length = params.link_length_m
     scale = params.length_m
-    b = np.zeros(phi.shape + (n,))
+    b = np.zeros(phi.shape + (n,)) if initial_springs_rad is None else np.array(initial_springs_rad, float)
     targets = [np.asarray(ex_m, float) / scale, np.asarray(ey_m, float) / scale]
     if er_rad is not None:
         targets.append(np.asarray(er_rad, float))

@@ -94,8 +94,10 @@ class _Identity:
         return observations
 
 
-def test_the_controller_spreads_each_plan_over_a_knot_and_holds_its_first_torque_for_the_next_knot():
-    # a plan of 1 committed + 4 planned knots of 2 model steps = 10 steps, spread over hold_steps = 5 calls
+@pytest.mark.parametrize("knots_per_plan", [1, 2])
+def test_the_controller_spreads_each_plan_over_its_knots_and_holds_its_torques_for_the_next_ones(knots_per_plan):
+    # a plan of c committed + 4 planned knots of 2 model steps, spread over the c knots' 5 c calls
+    c, hold, planned = knots_per_plan, 5, 4
     calls: list[int] = []
 
     def step_fn(x: torch.Tensor, torque: torch.Tensor) -> torch.Tensor:
@@ -106,26 +108,30 @@ def test_the_controller_spreads_each_plan_over_a_knot_and_holds_its_first_torque
         return (x_next[:, 1] - 10.0) ** 2
 
     def make_mppi() -> MPPI:
-        return MPPI(step_fn, cost_fn, 0.5, n_knots=4, hold_steps=2, n_samples=16, noise_std_nm=0.2, temperature=0.01)
+        return MPPI(step_fn, cost_fn, 0.5, planned, hold_steps=2, n_samples=16, noise_std_nm=0.2, temperature=0.01)
 
     lqr = LQRController.from_params(RodParams(), dt_s=0.01, state="observation", torque_limit_nm=0.5)
-    controller = PlannerController(make_mppi(), _Identity(), lqr, capture_rad=0.4, hold_steps=5)
+    controller = PlannerController(make_mppi(), _Identity(), lqr, 0.4, hold, knots_per_plan=c)
     observation = np.zeros((1, 10))
     observation[0, 1] = math.pi  # hanging: far from the LQR's region
     torques = []
-    for k in range(15):
+    for k in range(3 * hold * c):
         calls.append(0)
         torques.append(float(controller.torques(observation, k * 0.01)[0]))
-    assert sum(calls) == 3 * 10 and max(calls) == 2  # each call one fifth of a plan, never more
-    assert torques[:5] == [0.0] * 5  # no plan is ready during the first knot
-    assert len(set(torques[5:10])) == 1 and len(set(torques[10:15])) == 1  # a planned torque held for its knot
-    # the same plans made at once: from the start under the torque committed for the knot, warm-started
+    steps = (c + planned) * 2
+    assert sum(calls) == 3 * steps and max(calls) == -(-steps // (hold * c))  # each call its share, never more
+    assert torques[: hold * c] == [0.0] * hold * c  # no plan is ready during the first stretch
+    knots = [torques[i : i + hold] for i in range(hold * c, len(torques), hold)]
+    assert all(len(set(knot)) == 1 for knot in knots)  # a planned torque held for its knot
+    # the same plans made at once: from the start under the torques committed for the stretch, warm-started
     calls.append(0)
-    mppi, mean = make_mppi(), torch.zeros(1, 4, dtype=torch.float64)
-    for held, applied in ((0.0, torques[5]), (torques[5], torques[10])):
-        mean = mppi.finish(mppi.begin(observation, mean, np.array([held])))
-        assert float(mean[0, 0]) == pytest.approx(applied, abs=1e-12) and abs(applied) <= 0.5
-        mean = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+    mppi, mean, held = make_mppi(), torch.zeros(1, planned, dtype=torch.float64), np.zeros((1, c))
+    for plan in range(2):
+        mean = mppi.finish(mppi.begin(observation, mean, held))
+        padded = torch.cat([mean, mean[:, -1:].expand(-1, c)], dim=1)
+        held, mean = padded[:, :c].numpy(), padded[:, c : c + planned]
+        applied = [knot[0] for knot in knots[plan * c : (plan + 1) * c]]
+        assert held[0].tolist() == pytest.approx(applied, abs=1e-12) and max(map(abs, applied)) <= 0.5
 
 
 def _data(n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,7 +162,7 @@ TINY = dict(
     ensemble_size=2,
     hidden_width=8,
     train_steps=5,
-    horizon_s=0.1,
+    horizon_s=0.15,
     control_dt_s=0.05,
     n_samples=4,
     selection_seeds=(1000, 1001),
@@ -197,7 +203,7 @@ def test_trials_start_from_selection_seeds_and_fresh_starts_must_be_disjoint():
         ({"excitation_program": "chirp"}, "excitation_program"),
         ({"n_samples": 7}, "n_samples"),
         ({"control_dt_s": 0.015}, "control_dt_s"),
-        ({"horizon_s": 0.05}, "horizon_s"),
+        ({"horizon_s": 0.1}, "horizon_s"),
         ({"hold_s": 20.0}, "hold_s"),
         ({"selection_seeds": ()}, "selection_seeds"),
         ({"capture_rad": -0.1}, "capture_rad"),

@@ -26,7 +26,7 @@ TINY = dict(
     ensemble_size=2,
     hidden_width=8,
     train_steps=5,
-    horizon_s=0.1,
+    horizon_s=0.15,
     n_samples=4,
 )
 TASK = Task()

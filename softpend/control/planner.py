@@ -47,6 +47,8 @@ IDENTIFY_GUESS_FACTORS = {
     "joint_damping_nms_per_rad": 2.0,
     "tip_mass_kg": 0.7,
 }
+#: Knots planned at a time: a plan's work is spread over their control periods.
+KNOTS_PER_PLAN = 2
 #: Gauss-Newton steps of a tracked observation's joint angles from the previous observation's.
 WARM_ITERATIONS = 10
 #: Upright threshold of a held rod [rad] (as :func:`softpend.evaluation.metrics_from_trajectory`).
@@ -106,9 +108,9 @@ class PlannerConfig:
         if self.excitation_s < 2 * self.task.dt_s:
             raise ValueError(f"excitation_s must cover two steps of task.dt_s, got {self.excitation_s!r}")
         ratios = [getattr(self, name) / self.task.dt_s for name in ("control_dt_s", "horizon_s")]
-        if self.n_knots < 2 or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
+        if self.n_knots <= KNOTS_PER_PLAN or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
             raise ValueError(
-                "control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s >= 2 control_dt_s"
+                f"control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s > {KNOTS_PER_PLAN} control_dt_s"
             )
         try:
             seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
@@ -491,16 +493,15 @@ class MPPI:
     @torch.inference_mode()
     def begin(self, states: np.ndarray | Tensor, mean: Tensor, held_nm: Optional[np.ndarray] = None) -> MPPIPlan:
         """An iteration from starts ``states (B, d)`` around mean sequences ``mean (B, n_knots)`` [N m]; with
-        ``held_nm (B,)`` the rollouts first hold those torques for one knot (already committed: not optimised)."""
+        ``held_nm (B, c)`` the rollouts first hold those torques for ``c`` knots (already committed: not optimised)."""
         x = torch.as_tensor(states, dtype=torch.float32)
         batch, k = x.shape[0], self.n_samples
         noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
         noise[:, 0] = 0.0
         knots = (mean[:, None] + noise).clamp(-self.limit, self.limit)
         if held_nm is not None:
-            knots_ = torch.cat(
-                [torch.as_tensor(held_nm, dtype=torch.float64)[:, None, None].expand(-1, k, 1), knots], 2
-            )
+            held = torch.as_tensor(held_nm, dtype=torch.float64).reshape(batch, 1, -1).expand(-1, k, -1)
+            knots_ = torch.cat([held, knots], 2)
         torques = (knots if held_nm is None else knots_).reshape(batch * k, -1).repeat_interleave(self.hold_steps, 1)
         cost = torch.zeros(batch * k, dtype=torch.float64)
         return MPPIPlan(knots, torques, x.repeat_interleave(k, dim=0), cost)
@@ -554,19 +555,33 @@ class PlannerController:
     it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`); it reads
     observations only.
 
-    Planned torques are held for ``hold_steps`` calls (a knot).  At a knot's first call the plan finished over the
-    previous knot takes over, and the next plan starts: its rollouts hold that torque for one knot, then try the
-    planned ones; its work is spread over the knot's calls, so no call does more than a share of one plan (zero torque until the first plan
-    is ready, and after the LQR lets go until the next one is).
+    Planned torques are held for ``hold_steps`` calls (a knot) and planned ``knots_per_plan`` knots at a time.  At
+    the first call of such a stretch the plan finished over the previous one takes over with its first knots, and
+    the next plan starts: its rollouts hold those torques (already committed), then try the planned ones.  Its work
+    is spread over the stretch's calls, so no call does more than a share of one plan (zero torque until the first
+    plan is ready, and after the LQR lets go until the next one is).
     """
 
-    def __init__(self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int) -> None:
+    def __init__(
+        self,
+        mppi: MPPI,
+        tracker: Any,
+        lqr: LQRController,
+        capture_rad: float,
+        hold_steps: int,
+        knots_per_plan: int = 1,
+    ) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
-        self.capture_rad, self.hold_steps = float(capture_rad), int(hold_steps)
+        self.capture_rad, self.hold_steps, self.knots_per_plan = (
+            float(capture_rad),
+            int(hold_steps),
+            int(knots_per_plan),
+        )
         self.torque_limit_nm = lqr.torque_limit_nm
-        steps = (self.mppi.n_knots + 1) * self.mppi.hold_steps  # the committed knot, then the planned ones
-        #: Model steps of the plan taken by the end of each call of a knot.
-        self._done_by = [(i + 1) * steps // self.hold_steps for i in range(self.hold_steps)]
+        calls = self.hold_steps * self.knots_per_plan
+        steps = (self.mppi.n_knots + self.knots_per_plan) * self.mppi.hold_steps  # the committed, then the planned
+        #: Model steps of the plan taken by the end of each call of a stretch.
+        self._done_by = [(i + 1) * steps // calls for i in range(calls)]
         self.reset()
 
     def reset(self) -> None:
@@ -576,10 +591,10 @@ class PlannerController:
 
     def torques(self, observations: np.ndarray, time_s: float) -> np.ndarray:
         """Torques ``(B,)`` [N m] for observations ``(B, 10)`` of ``B`` rods (the same ``B`` since :meth:`reset`)."""
-        batch = len(observations)
+        batch, c = len(observations), self.knots_per_plan
         if self._mean is None or len(self._mean) != batch:
             self._mean = torch.zeros(batch, self.mppi.n_knots, dtype=torch.float64)
-            self.balancing, self._held, self._next = np.zeros(batch, bool), np.zeros(batch), np.zeros(batch)
+            self.balancing, self._held, self._next = np.zeros(batch, bool), np.zeros((batch, c)), np.zeros((batch, c))
             self._k, self._plan = 0, None
         states = self.tracker(observations)
         angle = np.abs(observations[:, 1])
@@ -590,22 +605,23 @@ class PlannerController:
         out = np.empty(batch)
         for i in np.flatnonzero(self.balancing):
             out[i] = self.lqr(Observation.from_array(observations[i]), _NO_STATE, _NO_STATE, time_s)
-        phase = self._k % self.hold_steps
+        phase = self._k % len(self._done_by)
         if phase == 0:
-            self._held, self._next = self._next, np.zeros(batch)
+            self._held, self._next = self._next, np.zeros((batch, c))
             self._rows = np.flatnonzero(~self.balancing)
             if self._rows.size:
                 rows = self._rows
                 self._plan = self.mppi.begin(states[rows], self._mean[torch.as_tensor(rows)], self._held[rows])
         if self._plan is not None:
             self.mppi.advance(self._plan, self._done_by[phase] - self._plan.steps_taken)
-            if phase == self.hold_steps - 1:
+            if phase == len(self._done_by) - 1:
                 mean = self.mppi.finish(self._plan)
-                self._next[self._rows] = mean[:, 0].numpy()
-                self._mean[torch.as_tensor(self._rows)] = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
+                padded = torch.cat([mean, mean[:, -1:].expand(-1, c)], dim=1)  # the last knot held on
+                self._next[self._rows] = padded[:, :c].numpy()
+                self._mean[torch.as_tensor(self._rows)] = padded[:, c : c + mean.shape[1]]
                 self._plan = None
         planning = ~self.balancing
-        out[planning] = self._held[planning]
+        out[planning] = self._held[planning, phase // self.hold_steps]
         self._k += 1
         return np.clip(out, -self.torque_limit_nm, self.torque_limit_nm)
 
@@ -771,14 +787,14 @@ class _Planner:
             lambda x, torque: fast.predict_next(x, torque, generator=generator),
             cost,
             task.torque_limit_nm,
-            config.n_knots - 1,  # after the knot under way: the rollouts cover horizon_s from now
+            config.n_knots - KNOTS_PER_PLAN,  # after the knots under way: the rollouts cover horizon_s from now
             config.hold_steps if config.model == "ensemble" else 1,
             config.n_samples,
             config.noise_fraction * task.torque_limit_nm,
             config.temperature,
             seed=config.seed,
         )
-        return PlannerController(mppi, tracker, self.lqr, config.capture_rad, config.hold_steps)
+        return PlannerController(mppi, tracker, self.lqr, config.capture_rad, config.hold_steps, KNOTS_PER_PLAN)
 
 
 def _excitation(config: PlannerConfig) -> tuple[Any, float]:

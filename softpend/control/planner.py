@@ -110,7 +110,8 @@ class PlannerConfig:
         ratios = [getattr(self, name) / self.task.dt_s for name in ("control_dt_s", "horizon_s")]
         if self.n_knots <= KNOTS_PER_PLAN or any(round(r) < 1 or abs(r - round(r)) > 1e-9 for r in ratios):
             raise ValueError(
-                f"control_dt_s and horizon_s must be whole multiples of task.dt_s, horizon_s > {KNOTS_PER_PLAN} control_dt_s"
+                "control_dt_s and horizon_s must be whole multiples of task.dt_s, "
+                f"horizon_s > {KNOTS_PER_PLAN} control_dt_s"
             )
         try:
             seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
@@ -466,8 +467,9 @@ class MPPI:
     ``step_fn(x (R, d), torque (R,)) -> x_next``; ``cost_fn(x, torque, x_next) -> (R,)`` the cost of a model step
     and ``terminal_fn(x_T) -> (R,)`` (optional) that of the last state.  :meth:`optimise` refines mean torque
     sequences ``iterations`` times from ``n_samples`` perturbed copies each (the first unperturbed), weighted by
-    ``exp(-cost / temperature)`` (where every rollout of a start diverged, its unperturbed copy); :meth:`begin`, :meth:`advance` and :meth:`finish` do one iteration a few model
-    steps at a time (a controller spreads it over the control periods of a knot).
+    ``exp(-cost / temperature)`` (a start whose every rollout diverged keeps its unperturbed copy).  :meth:`begin`,
+    :meth:`advance` and :meth:`finish` make one iteration a few model steps at a time (a controller spreads it over
+    its control periods).
     """
 
     def __init__(
@@ -499,10 +501,11 @@ class MPPI:
         noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
         noise[:, 0] = 0.0
         knots = (mean[:, None] + noise).clamp(-self.limit, self.limit)
+        rolled = knots
         if held_nm is not None:
             held = torch.as_tensor(held_nm, dtype=torch.float64).reshape(batch, 1, -1).expand(-1, k, -1)
-            knots_ = torch.cat([held, knots], 2)
-        torques = (knots if held_nm is None else knots_).reshape(batch * k, -1).repeat_interleave(self.hold_steps, 1)
+            rolled = torch.cat([held, knots], 2)
+        torques = rolled.reshape(batch * k, -1).repeat_interleave(self.hold_steps, 1)
         cost = torch.zeros(batch * k, dtype=torch.float64)
         return MPPIPlan(knots, torques, x.repeat_interleave(k, dim=0), cost)
 
@@ -572,11 +575,8 @@ class PlannerController:
         knots_per_plan: int = 1,
     ) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
-        self.capture_rad, self.hold_steps, self.knots_per_plan = (
-            float(capture_rad),
-            int(hold_steps),
-            int(knots_per_plan),
-        )
+        self.capture_rad, self.hold_steps = float(capture_rad), int(hold_steps)
+        self.knots_per_plan = int(knots_per_plan)
         self.torque_limit_nm = lqr.torque_limit_nm
         calls = self.hold_steps * self.knots_per_plan
         steps = (self.mppi.n_knots + self.knots_per_plan) * self.mppi.hold_steps  # the committed, then the planned

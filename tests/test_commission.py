@@ -282,11 +282,13 @@ def test_the_commission_bench_figures_are_the_worst_rod_and_count_a_held_paramet
             "plant_s": {"excite": excite_s, "commissioning": excite_s},
         }
 
-    both = ["hub_inertia_kgm2", "tip_mass_kg"]
-    first = report(10, 9, {"hub_inertia_kgm2": 0.01, "tip_mass_kg": -0.04}, both, 12.0)
-    figures = commission_figures([first, report(9, 7, {"hub_inertia_kgm2": 0.02, "tip_mass_kg": 0.0}, both, 14.0)])
+    # as a real report: the rod's mass stands for the torque gain; the camera's delay has no truth
+    both = ["hub_inertia_kgm2", "tip_mass_kg", "mass_kg", "camera_delay_s"]
+    first = report(10, 9, {"hub_inertia_kgm2": 0.01, "tip_mass_kg": -0.04, "torque_gain": 0.002}, both, 12.0)
+    second = report(9, 7, {"hub_inertia_kgm2": 0.02, "tip_mass_kg": 0.0, "torque_gain": -0.03}, both, 14.0)
+    figures = commission_figures([first, second])
     assert figures["commission_success_min"] == 9.0 and figures["commission_harsh_success_min"] == 7.0
     assert figures["commission_max_param_error_pct"] == pytest.approx(4.0)
     assert figures["commission_identify_s"] == 14.0 and figures["commission_plant_s_swingup_lqr"] == 13.0
-    held = report(10, 10, {"hub_inertia_kgm2": 0.0}, both, 12.0)  # tip mass held at the guess
+    held = report(10, 10, {"hub_inertia_kgm2": 0.0, "torque_gain": 0.0}, both, 12.0)  # tip mass held at the guess
     assert math.isinf(commission_figures([first, held])["commission_max_param_error_pct"])

@@ -410,10 +410,11 @@ def commission(
 
 
 def identification_errors(report: dict) -> list[float]:
-    """The absolute relative errors of a report's identified parameters, infinite for each one held at the guess."""
+    """The absolute relative errors of a report's identified rod parameters and torque gain, infinite for a rod
+    parameter held at the guess (the camera's delay has no truth to compare with)."""
     identified = report["identified"]
-    errors = [abs(entry["relative_error"]) for entry in identified.values()]
-    return errors + [math.inf] * (len(report["identification_fit"]["parameters"]) - len(identified))
+    names = [n for n in report["identification_fit"]["parameters"] if n in UNKNOWN_FIELDS] + ["torque_gain"]
+    return [abs(identified[n]["relative_error"]) if n in identified else math.inf for n in names]
 
 
 def commissioned_rods(

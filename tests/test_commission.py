@@ -126,6 +126,8 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     assert load_dataset(out / "excite" / "rig_dataset.npz").params == RodParams()
 
     assert TINY.session_s <= report["plant_s"]["excite"] <= TINY.session_s + 0.3  # and the STOP after it
+    excited = json.loads((out / "excite" / "excite.json").read_text())
+    assert excited["program"] == "noise" and 0.0 < excited["peak_torque_nm"] <= RodParams().torque_limit_nm
     assert report["plant_s"]["identify"] == report["plant_s"]["design"] == 0.0
     assert set(report["identified"]) == set(UNKNOWN_FIELDS) | {"torque_gain"}
     gain = report["identified"]["torque_gain"]
@@ -258,6 +260,9 @@ def test_bad_input_is_refused_by_name(tmp_path, capsys):
     outputs.write_json(tmp_path / "earlier" / "commission.json", {"twin": {}, "config": {}})
     with pytest.raises(ValueError, match="other settings"):
         commission(tmp_path / "earlier", TwinTruth(rod_file=str(rod_file)), TINY)
+    for changes, name in (({"program": "chirp"}, "program"), ({"noise_std_fraction": 1.5}, "noise_std_fraction")):
+        with pytest.raises(ValueError, match=name):
+            CommissionConfig(**changes)
     with pytest.raises(ValueError, match="exactly one"):
         TwinTruth()
     with pytest.raises(ValueError, match="rod file .*torque_gain"):

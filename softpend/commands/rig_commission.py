@@ -12,7 +12,7 @@ from softpend.commands.options import MAX_SESSION_S, check_numbers
 #: default); a field ending in ``_s`` is a float, the others integers.
 CONFIG_OPTIONS: dict[str, tuple[float, float, str]] = {
     "seed": (0, 10**6 - 1, "seed of the commissioning (0)"),
-    "excite_s": (1e-3, MAX_SESSION_S, "seconds of multisine excitation (10)"),
+    "excite_s": (1e-3, MAX_SESSION_S, "seconds of excitation (10)"),
     "trial_length_s": (0.1, MAX_SESSION_S, "trial length of the rig dataset [s] (3)"),
     "max_windows": (1, 10**5, "identification windows (60)"),
     "max_iterations": (1, 10**4, "identification iterations (25)"),

@@ -1,6 +1,6 @@
 """Commissioning an unknown rod on the twin, in resumable stages, each writing its output in one folder:
 
-``excite`` (a multisine from hanging through the rig's own I/O, synchronised into a rig dataset), ``identify``
+``excite`` (random torque, or a multisine, from hanging through the rig's own I/O, synchronised into a rig dataset), ``identify``
 (grey-box, from ``RodParams()``), ``design`` (energy swing-up + LQR on the observations of the identified rod,
 checked in the simulator on rods drawn from the identification's uncertainty), ``verify`` (that controller on the
 twin from fresh hanging starts under each sensor condition, beside the same controller designed on the default rod)
@@ -16,10 +16,13 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
-from softpend.checks import in_range, int_at_least, positive
+import numpy as np
+
+from softpend.checks import in_range, int_at_least, one_of, positive
 from softpend.plant import RodParams
 from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
 from softpend.study.unknown_rod import UNKNOWN_FIELDS
+from softpend.sysid.babble import PROGRAMS
 
 __all__ = [
     "IDENTIFIED_PARAMETERS",
@@ -54,12 +57,16 @@ SETTINGS_FILE = "commission.json"
 
 @dataclass(frozen=True)
 class CommissionConfig:
-    """Budgets of :func:`commission`: ``excite_s`` of multisine (peak ``peak_fraction`` of the torque limit, up to
-    ``band_high_hz``) cut into trials of ``trial_length_s``; the identification's windows and iterations; the
+    """Budgets of :func:`commission`: ``excite_s`` of the babbling ``program`` (``"noise"``: random torque of standard
+    deviation ``noise_std_fraction`` of the torque limit, low-passed at ``band_high_hz``, clipped at the limit;
+    ``"multisine"``: peak ``peak_fraction`` of the limit, up to ``band_high_hz``) cut into trials of
+    ``trial_length_s``; the identification's windows and iterations; the
     design check's ``check_draws`` rods ``uncertainty_scale`` standard deviations wide, ``check_starts`` starts of
     ``check_duration_s`` each; ``verify_starts`` twin starts of ``verify_duration_s`` per condition; ``seed``."""
 
     excite_s: float = 10.0
+    program: str = "noise"
+    noise_std_fraction: float = 0.5
     peak_fraction: float = 0.8
     band_high_hz: float = 6.0
     trial_length_s: float = 3.0
@@ -79,6 +86,8 @@ class CommissionConfig:
             positive(name, getattr(self, name))
         positive("verify_duration_s", self.verify_duration_s)
         in_range("peak_fraction", self.peak_fraction, 1e-3, 1.0)
+        in_range("noise_std_fraction", self.noise_std_fraction, 1e-3, 1.0)
+        one_of("program", self.program, PROGRAMS)
         in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
         integers = {"max_windows": 1, "max_iterations": 1, "check_draws": 1, "check_starts": 1, "verify_starts": 1}
         for name, low in (integers | {"seed": 0}).items():
@@ -205,16 +214,18 @@ class _Run:
 
 def _excite(run: _Run) -> dict:
     from softpend.hardware.sync import build_rig_dataset
+    from softpend.sysid.babble import band_limited_noise
     from softpend.sysid.excitation import multisine
 
     config, guess = run.config, RodParams()
-    dt_s = 0.01
-    program = multisine(
-        int(round(config.excite_s / dt_s)),
-        dt_s,
-        config.peak_fraction * guess.torque_limit_nm,
-        band_hz=(0.2, config.band_high_hz),
-    )
+    dt_s, limit = 0.01, guess.torque_limit_nm
+    n_steps = int(round(config.excite_s / dt_s))
+    if config.program == "multisine":
+        program = multisine(n_steps, dt_s, config.peak_fraction * limit, band_hz=(0.2, config.band_high_hz))
+    else:
+        rng = np.random.default_rng(config.seed)
+        noise = band_limited_noise(rng, n_steps, config.noise_std_fraction * limit, config.band_high_hz, dt_s)
+        program = np.clip(noise, -limit, limit)
     folder = run.out / "excite"
     figures = on_twin_side(
         excite_on_twin,
@@ -239,7 +250,7 @@ def _excite(run: _Run) -> dict:
     run.outputs.done(dataset_path)
     return {
         **figures,
-        "program": "multisine",
+        "program": config.program,
         "program_s": config.excite_s,
         "peak_torque_nm": float(abs(program).max()),
         "n_trials": dataset.n_trials,

@@ -46,9 +46,9 @@ def test_the_recorder_drives_the_program_it_is_given_within_the_torque_limit(pro
     spectrum = np.abs(np.fft.rfft(torques - torques.mean()))
     frequencies = np.fft.rfftfreq(len(torques), data.dt_s)
     in_band = spectrum[(frequencies > 0) & (frequencies <= RouteConfig().band_high_hz)] ** 2
-    share = in_band.sum() / (spectrum[frequencies > 0] ** 2).sum()
+    power_in_band = in_band.sum() / (spectrum[frequencies > 0] ** 2).sum()  # a fraction of the torque's power
     # the multisine puts its power in its band (but for the leakage of a 2 s record); random torque spreads it wider
-    assert share > 0.9 if program == "multisine" else share < 0.7
+    assert power_in_band > 0.9 if program == "multisine" else power_in_band < 0.7
 
 
 @pytest.mark.parametrize(

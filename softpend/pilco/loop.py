@@ -16,6 +16,7 @@ import scipy.optimize
 import torch
 
 from softpend.checks import boolean, check_work_size, in_range, int_at_least, optional_positive, positive
+from softpend.envs.randomised import RodUncertainty, optional_uncertainty, set_rod
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import dataclass_from_data
@@ -111,7 +112,8 @@ def _set_ints(settings: Any, lows: dict[str, int], prefix: str = "") -> None:
 
 @dataclass
 class PilcoConfig:
-    """Settings of a PILCO run (SI units)."""
+    """Settings of a PILCO run (SI units); with ``rod_uncertainty`` each trial runs on a rod drawn around
+    ``task.rod`` (:class:`~softpend.envs.randomised.RodUncertainty`)."""
 
     task: Task = field(default_factory=Task)
     state: str = "tip_bend"
@@ -132,8 +134,10 @@ class PilcoConfig:
     gp: GPSettings = field(default_factory=GPSettings)
     policy: PolicySettings = field(default_factory=PolicySettings)
     optimiser: OptimiserSettings = field(default_factory=OptimiserSettings)
+    rod_uncertainty: Optional[RodUncertainty] = None
 
     def __post_init__(self) -> None:
+        self.rod_uncertainty = optional_uncertainty(self.rod_uncertainty)
         groups = {"task": Task, "cost": CostSettings, "gp": GPSettings, "policy": PolicySettings}
         for name, cls in {**groups, "optimiser": OptimiserSettings}.items():
             if not isinstance(getattr(self, name), cls):
@@ -178,6 +182,9 @@ class PilcoConfig:
         data = dataclasses.asdict(self)
         data["task"] = self.task.to_dict()
         data["eval_seeds"] = list(self.eval_seeds)
+        data.pop("rod_uncertainty")
+        if self.rod_uncertainty is not None:
+            data["rod_uncertainty"] = self.rod_uncertainty.to_dict()
         return data
 
     @classmethod
@@ -186,7 +193,8 @@ class PilcoConfig:
         ``ValueError`` that starts with ``source``."""
         if not isinstance(data, dict):
             raise ValueError(f"{source}: not a PILCO config (expected a JSON object, got {type(data).__name__})")
-        return dataclass_from_data(cls, data, source, task=Task.from_dict)
+        data = {"rod_uncertainty": None, **data}
+        return dataclass_from_data(cls, data, source, task=Task.from_dict, rod_uncertainty=optional_uncertainty)
 
 
 @dataclass
@@ -406,7 +414,15 @@ def _optimise_policy(
 
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = ("random_starts", "random_torques", "policy_starts", "policy_init", "gp_subsets", "policy_restarts")
+RANDOM_STREAMS = (
+    "random_starts",
+    "random_torques",
+    "policy_starts",
+    "policy_init",
+    "gp_subsets",
+    "policy_restarts",
+    "rod_draws",
+)
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -706,7 +722,11 @@ class Pilco:
         return record
 
     def _trial(self, controller, seed: int) -> tuple[EvaluationResult, np.ndarray]:
-        """One real trial from start seed ``seed``, added to the data; the episode and its control-step states."""
+        """One real trial from start seed ``seed`` (on a rod drawn from ``rod_uncertainty`` when set), added to the
+        data; the episode and its control-step states."""
+        if self.config.rod_uncertainty is not None:
+            rod = self.config.rod_uncertainty.draw(self.config.task.rod, self.streams["rod_draws"])
+            set_rod(self.env, self.config.task, rod)
         episode, states, torques = _run_trial(self.config, controller, seed, self.env)
         self.inputs.append(np.hstack([self.spec.model_inputs(states[:-1]), torques[:, None]]))
         self.targets.append(states[1:] - states[:-1])

@@ -7,9 +7,10 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 from softpend.checks import boolean, in_range, in_unit_interval, int_at_least, one_of, positive, positive_int
+from softpend.envs.randomised import RodUncertainty, optional_uncertainty
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
 from softpend.io.overrides import dataclass_from_data
@@ -76,7 +77,8 @@ class StopRule:
 
 @dataclass(frozen=True)
 class DQNConfig:
-    """Model-free DQN on ``SoftPendulumDiscreteEnv``."""
+    """Model-free DQN on ``SoftPendulumDiscreteEnv``; with ``rod_uncertainty`` each training episode runs on a rod
+    drawn around ``task.rod`` (:class:`~softpend.envs.randomised.RandomisedRod`)."""
 
     task: Task = field(default_factory=Task)
     n_torque_levels: int = 5
@@ -92,10 +94,12 @@ class DQNConfig:
     eval_duration_s: float = TEST_EPISODE_S
     learner: DQNLearner = field(default_factory=DQNLearner)
     stop: StopRule = field(default_factory=StopRule)
+    rod_uncertainty: Optional[RodUncertainty] = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.task, Task):
             raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        object.__setattr__(self, "rod_uncertainty", optional_uncertainty(self.rod_uncertainty))
         for name, cls in (("learner", DQNLearner), ("stop", StopRule)):
             _check_group(self, name, cls)
         _set_ints(self, "n_torque_levels action_repeat eval_every_episodes checkpoint_every_episodes", 1)
@@ -263,9 +267,12 @@ def _set_ints(config: Any, names: str, low: int, prefix: str = "") -> None:
 
 
 def config_to_dict(config: DQNConfig) -> dict[str, Any]:
-    """The fields of ``config`` as plain JSON data, with its class name."""
+    """The fields of ``config`` as plain JSON data, with its class name (``rod_uncertainty`` only when set)."""
     data = dataclasses.asdict(config)
     data["task"] = config.task.to_dict()
+    data.pop("rod_uncertainty")
+    if config.rod_uncertainty is not None:
+        data["rod_uncertainty"] = config.rod_uncertainty.to_dict()
     return {"class": type(config).__name__, **data}
 
 
@@ -290,7 +297,8 @@ def load_config(path: Path) -> DQNConfig:
     cls = {"DQNConfig": DQNConfig, "MBPOConfig": MBPOConfig}.get(name) if isinstance(name, str) else None
     if cls is None:
         raise ValueError(f"{path}: unknown config class")
+    data.setdefault("rod_uncertainty", None)
     try:
-        return dataclass_from_data(cls, data, path, task=Task.from_dict)
+        return dataclass_from_data(cls, data, path, task=Task.from_dict, rod_uncertainty=optional_uncertainty)
     except (TypeError, KeyError, AttributeError) as exc:
         raise ValueError(f"{path}: not a {cls.__name__}: {exc}") from exc

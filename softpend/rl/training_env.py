@@ -10,6 +10,7 @@ from gymnasium.wrappers import TimeLimit
 
 from softpend.checks import positive_int
 from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
+from softpend.envs.randomised import RandomisedRod
 from softpend.evaluation import GymPolicyController
 from softpend.rl.config import DQNConfig
 
@@ -48,8 +49,11 @@ def make_base_env(config: DQNConfig, start: Optional[str] = None) -> SoftPendulu
 
 
 def make_training_env(config: DQNConfig) -> gym.Env:
-    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(start=config.training_start)), episode_agent_steps)``."""
+    """``TimeLimit(ActionRepeat(SoftPendulumDiscreteEnv(start=config.training_start)), episode_agent_steps)``, the
+    environment inside :class:`~softpend.envs.randomised.RandomisedRod` when ``config.rod_uncertainty`` is set."""
     env: gym.Env = make_base_env(config, config.training_start)
+    if config.rod_uncertainty is not None:
+        env = RandomisedRod(env, config.task, config.rod_uncertainty)
     return TimeLimit(ActionRepeat(env, config.action_repeat), config.episode_agent_steps)
 
 

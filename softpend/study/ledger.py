@@ -7,6 +7,7 @@ import ast
 import math
 import re
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Sequence
 
@@ -41,20 +42,6 @@ class LedgerRow:
     def __post_init__(self) -> None:
         if self.verdict not in VERDICTS:
             raise ValueError(f"verdict must be one of {VERDICTS}, got {self.verdict!r}")
-
-
-def _row(key: str, claim: str, report: str, chapter: str, ours: Optional[str] = None, verdict: Any = None):
-    """A :class:`LedgerRow`; no ``ours``: :data:`NOT_COMPUTED`; a bool ``verdict``: reproduced or differs."""
-    if ours is None:
-        return LedgerRow(key, claim, report, NOT_COMPUTED, NOT_COMPUTED, chapter)
-    return LedgerRow(
-        key,
-        claim,
-        report,
-        ours,
-        verdict if isinstance(verdict, str) else ("reproduced" if verdict else "differs"),
-        chapter,
-    )
 
 
 # ----------------------------------------------------------------------------- reading the evidence
@@ -199,70 +186,54 @@ def _to_asymptote(logs: Sequence[Any]) -> tuple[list[float], list[float], int]:
 
 
 # ----------------------------------------------------------------------------- the claims
-def _sysid_row(glued) -> LedgerRow:
+# Each claim's figures: None without evidence, else ``(ours, verdict)`` (a bool verdict: reproduced or differs).
+Found = Optional[tuple[str, Any]]
+
+
+@dataclass(frozen=True)
+class _Evidence:
+    glued: Mapping[str, Mapping[str, Any]]
+    logs: Mapping[str, Sequence[Any]]
+    fresh: Mapping[str, Sequence[Any]]
+    pilco: Sequence[Any]
+    std_rad: float
+
+
+def _sysid(e: _Evidence) -> Found:
     # reproduced: our held-out one-step MSE within FACTOR of the report's 3e-9
-    fig03 = glued.get("fig03_sysid", {})
+    fig03 = e.glued.get("fig03_sysid", {})
     full, limited, trials = (fig03.get(k) for k in ("one_step_mse_full", "one_step_mse_limited", "n_test_trials"))
-    claim = (
-        "By minimizing the mean squared error (MSE) between the predicted next state and the "
-        "actual next state the network achieved an error of ≈ 3e-9."
-    )
     if not isinstance(full, (int, float)):
-        return _row("sysid_mse", claim, "≈ 3e-9", "fig03-sysid")
+        return None
     ours = f"{full:.2g} (full information), " + (
         f"{limited:.2g} (limited)" if isinstance(limited, (int, float)) else ""
     )
     ours += f"; 1 seed, {trials} held-out trials" if trials is not None else "; 1 seed"
-    return _row("sysid_mse", claim, "≈ 3e-9", "fig03-sysid", ours, 3e-9 / FACTOR <= full <= 3e-9 * FACTOR)
+    return ours, 3e-9 / FACTOR <= full <= 3e-9 * FACTOR
 
 
-_MF_ASYMPTOTE = (
-    "The model-free controller proved to successfully balance the pole reaching the asymptotic reward in "
-    "approximately 150 episodes of training, equivalent to around 4 hours of simulated time."
-)
-_MB_ASYMPTOTE = (
-    "The agent reached asymptotic performance in approximately 100 episodes of training as seen by the orange "
-    "line in Figure 4 (2 hours 45 minutes of simulated time)."
-)
-#: ``algo -> (key, claim, episodes, hours, report)``.
-_ASYMPTOTE_CLAIMS = {
-    "dqn": ("mf_asymptote", _MF_ASYMPTOTE, 150, 4.0, "≈ 150 episodes, ≈ 4 h"),
-    "mbpo": ("mb_asymptote", _MB_ASYMPTOTE, 100, 2.75, "≈ 100 episodes, 2 h 45 min"),
-}
-
-
-def _asymptote_rows(logs: Mapping[str, Sequence[Any]]) -> list[LedgerRow]:
+def _asymptote(algo: str, episodes: float, hours: float, e: _Evidence) -> Found:
     # reproduced: the median episodes and plant time to the asymptote within FACTOR of the report's
-    rows = []
-    for algo, (key, claim, episodes, hours, report) in _ASYMPTOTE_CLAIMS.items():
-        runs = list(logs.get(METHOD_NAMES[algo], []))
-        if not runs:
-            rows.append(_row(key, claim, report, "fig-learning-curves"))
-            continue
-        to_asymptote, plant_s, stopped = _to_asymptote(runs)
-        plant_h = [value / 3600.0 for value in plant_s]
-        ours = (
-            f"{over_seeds(to_asymptote, 'episodes')}; {over_seeds(plant_h, 'h of plant time')}; "
-            f"{stopped} of {len(runs)} runs stopped balanced"
-            + (" (a stopped run reaches its asymptote at the stop episode)" if stopped else "")
-            + f", median {_median([log.n_episodes for log in runs]):.0f} episodes trained"
-        )
-        ok = (
-            episodes / FACTOR <= _median(to_asymptote) <= episodes * FACTOR
-            and hours / FACTOR <= _median(plant_h) <= hours * FACTOR
-        )
-        rows.append(_row(key, claim, report, "fig-learning-curves", ours, ok))
-    return rows
+    if not (runs := list(e.logs.get(METHOD_NAMES[algo], []))):
+        return None
+    to_asymptote, plant_s, stopped = _to_asymptote(runs)
+    plant_h = [value / 3600.0 for value in plant_s]
+    ours = (
+        f"{over_seeds(to_asymptote, 'episodes')}; {over_seeds(plant_h, 'h of plant time')}; "
+        f"{stopped} of {len(runs)} runs stopped balanced"
+        + (" (a stopped run reaches its asymptote at the stop episode)" if stopped else "")
+        + f", median {_median([log.n_episodes for log in runs]):.0f} episodes trained"
+    )
+    ok = episodes / FACTOR <= _median(to_asymptote) <= episodes * FACTOR
+    return ours, ok and hours / FACTOR <= _median(plant_h) <= hours * FACTOR
 
 
-def _fewer_episodes_row(logs: Mapping[str, Sequence[Any]]) -> LedgerRow:
+def _fewer_episodes(e: _Evidence) -> Found:
     # reproduced: DQN-MBPO's median plant time to the asymptote below model-free DQN's
-    claim = "The model-based approach successfully converged its performance in fewer episodes than model-free RL."
-    args = ("mb_fewer", claim, "≈ 100 against ≈ 150 episodes", "fig-learning-curves")
     medians = {}
     for algo, method in METHOD_NAMES.items():
-        if not (runs := list(logs.get(method, []))):
-            return _row(*args)
+        if not (runs := list(e.logs.get(method, []))):
+            return None
         episodes, plant_s, _ = _to_asymptote(runs)
         medians[algo] = (_median(episodes), _median(plant_s))
     (mb_episodes, mb_s), (mf_episodes, mf_s) = medians["mbpo"], medians["dqn"]
@@ -270,204 +241,140 @@ def _fewer_episodes_row(logs: Mapping[str, Sequence[Any]]) -> LedgerRow:
         f"plant time to the asymptote (median over seeds): DQN-MBPO {_hours(mb_s)} ({_number(mb_episodes)} episodes), "
         f"DQN {_hours(mf_s)} ({_number(mf_episodes)} episodes)"
     )
-    return _row(*args, ours, mb_s < mf_s)
+    return ours, mb_s < mf_s
 
 
-_HOLD_CLAIMS = {
-    "dqn": (
-        "mf_holds",
-        "After swinging up the rod remained within a standard deviation of 0.2 radians from the "
-        "upright position for an arbitrary time.",
-    ),
-    "mbpo": (
-        "mb_holds",
-        "The final performance is near-identical to the performance of the model-free controller, "
-        "reaching a standard deviation of 0.2 radians from the upright position.",
-    ),
-}
-
-
-def _hold_rows(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> list[LedgerRow]:
+def _holds(algo: str, e: _Evidence) -> Found:
     # reproduced: the median over runs of the share of fresh starts held within std_rad is at least BALANCED_FRACTION
     from softpend.stats import wilson_interval
 
-    rows = []
-    for algo, (key, claim) in _HOLD_CLAIMS.items():
-        summaries = list(fresh.get(METHOD_NAMES[algo], []))
-        if not summaries:
-            rows.append(_row(key, claim, "std 0.2 rad", "fig-upright-error"))
-            continue
-        held = [held_starts(s, std_rad) for s in summaries]
-        shares = [float(np.mean(h)) for h in held]
-        if len(held) == 1:
-            k, n = int(sum(held[0])), len(held[0])
-            low, high = wilson_interval(k, n)
-            share = f"{k} of {n} starts ({100 * low:.0f}-{100 * high:.0f} %)"
-            ours = f"{METHOD_NAMES[algo]}: held {share} within {std_rad:g} rad (1 seed)"
-        else:
-            ours = (
-                f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {std_rad:g} rad, "
-                + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %")
-            )
-        rows.append(_row(key, claim, "std 0.2 rad", "fig-upright-error", ours, _median(shares) >= BALANCED_FRACTION))
-    return rows
-
-
-def _steady_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
-    # reproduced: model-free DQN's median swing-up time on fresh starts (median over runs) at most 10 s
-    claim = "Typically the pendulum will reach steady state oscillatory behavior after 10 seconds."
-    summaries = list(fresh.get(METHOD_NAMES["dqn"], []))
-    if not summaries:
-        return _row("mf_steady", claim, "≈ 10 s", "fig-swingup")
-    times = [s.median("swing_up_time_s") for s in summaries]
-    ours = f"model-free DQN, swing-up time on fresh starts: {over_seeds(times, 's')}"
-    return _row("mf_steady", claim, "≈ 10 s", "fig-swingup", ours, _median(times) <= 10.0)
-
-
-def _same_final_row(fresh: Mapping[str, Sequence[Any]], std_rad: float) -> LedgerRow:
-    # reproduced: both methods hold (as in _hold_rows) and their median shares differ by at most SAME_SHARE
-    claim = (
-        "As seen in Figure 6, the final performance is near-identical to the performance of the model-free controller."
-    )
-    args = ("mb_matches_mf", claim, "near-identical", "fig-upright-error")
-    shares = _per_method_median(fresh, lambda s: float(np.mean(held_starts(s, std_rad))))
-    if shares is None:
-        return _row(*args)
-    ours = (
-        f"share of fresh starts held within {std_rad:g} rad (median over seeds): DQN-MBPO {100 * shares['mbpo']:.0f} %, "
-        f"DQN {100 * shares['dqn']:.0f} %"
-    )
-    ok = min(shares.values()) >= BALANCED_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
-    return _row(*args, ours, ok)
-
-
-def _faster_row(fresh: Mapping[str, Sequence[Any]]) -> LedgerRow:
-    # reproduced: model-free DQN's median swing-up time (median over runs) below DQN-MBPO's
-    claim = (
-        "Time-averaging smooths rapid changes in error, thereby masking small differences in the swingup velocity, "
-        "where the model free-controller shows a slight advantage."
-    )
-    args = ("mf_faster", claim, "model-free slightly faster", "fig-upright-error")
-    times = _per_method_median(fresh, lambda s: s.median("swing_up_time_s"))
-    if times is None:
-        return _row(*args)
-    ours = f"median swing-up time on fresh starts: DQN {_seconds(times['dqn'])}, DQN-MBPO {_seconds(times['mbpo'])}"
-    return _row(*args, ours, times["dqn"] < times["mbpo"])
-
-
-def _classical_rows(glued) -> list[LedgerRow]:
-    values = glued.get("fig07_classical", {})
-    near_tilt, far_tilt = values.get("near_tilt_rad"), values.get("far_tilt_rad")
-
-    def run(key: str) -> Optional[dict[str, Any]]:  # a run Figure 7 quotes: {rate, low, high, starts, time_s, text}
-        found = {name: values.get(f"{key}_{name}") for name in ("rate", "low", "high", "starts", "time_s")}
-        if any(not isinstance(value, (int, float)) for value in found.values()):
-            return None
-        return found | {"text": values.get(f"{key}_text")}
-
-    rows = []
-    # LQR far from upright -- reproduced: >= 90 % of near-upright starts balance, <= 10 % from hanging
-    claim = (
-        "For this method, the pendulum starts closer to the final position as convergance becomes more difficult as "
-        "the distance from the target increases for a nonlinear system."
-    )
-    near, far, hanging = (run(k) for k in ("lqr_near", "lqr_far", "lqr_hanging"))
-    args = ("lqr_far", claim, "a start near upright (Figure 7)", "fig07-classical")
-    if near is None or hanging is None:
-        rows.append(_row(*args))
+    if not (summaries := list(e.fresh.get(METHOD_NAMES[algo], []))):
+        return None
+    held = [held_starts(s, e.std_rad) for s in summaries]
+    shares = [float(np.mean(h)) for h in held]
+    if len(held) == 1:
+        k, n = int(sum(held[0])), len(held[0])
+        low, high = wilson_interval(k, n)
+        share = f"{k} of {n} starts ({100 * low:.0f}-{100 * high:.0f} %)"
+        ours = f"{METHOD_NAMES[algo]}: held {share} within {e.std_rad:g} rad (1 seed)"
     else:
-        ours = f"LQR (true model) balances {near['text']} from {near_tilt:g} rad"
-        if far is not None and far_tilt != near_tilt:
-            ours += f", {far['text']} from {far_tilt:g} rad"
-        ours += f" and {hanging['text']} from hanging"
-        rows.append(_row(*args, ours, near["rate"] >= BALANCED_FRACTION and hanging["rate"] <= 1 - BALANCED_FRACTION))
+        ours = (
+            f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {e.std_rad:g} rad, "
+            + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %")
+        )
+    return ours, _median(shares) >= BALANCED_FRACTION
 
-    # LQR needs the full model -- reproduced: the learned-model LQR balances fewer near-upright starts (the
-    # Wilson intervals of the two success rates do not overlap)
-    claim = (
-        "It requires a full state-space model of the system (matrices A, B, C, D) so it will not perform simply "
-        "with observed data of motor babbling with a physical system."
+
+def _steady(e: _Evidence) -> Found:
+    # reproduced: model-free DQN's median swing-up time on fresh starts (median over runs) at most 10 s
+    if not (summaries := list(e.fresh.get(METHOD_NAMES["dqn"], []))):
+        return None
+    times = [s.median("swing_up_time_s") for s in summaries]
+    return f"model-free DQN, swing-up time on fresh starts: {over_seeds(times, 's')}", _median(times) <= 10.0
+
+
+def _same_final(e: _Evidence) -> Found:
+    # reproduced: both methods hold (as in _holds) and their median shares differ by at most SAME_SHARE
+    if (shares := _per_method_median(e.fresh, lambda s: float(np.mean(held_starts(s, e.std_rad))))) is None:
+        return None
+    ours = (
+        f"share of fresh starts held within {e.std_rad:g} rad (median over seeds): "
+        f"DQN-MBPO {100 * shares['mbpo']:.0f} %, DQN {100 * shares['dqn']:.0f} %"
     )
-    learned = run("lqr_learned_near")
+    return ours, min(shares.values()) >= BALANCED_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
+
+
+def _faster(e: _Evidence) -> Found:
+    # reproduced: model-free DQN's median swing-up time (median over runs) below DQN-MBPO's
+    if (times := _per_method_median(e.fresh, lambda s: s.median("swing_up_time_s"))) is None:
+        return None
+    ours = f"median swing-up time on fresh starts: DQN {_seconds(times['dqn'])}, DQN-MBPO {_seconds(times['mbpo'])}"
+    return ours, times["dqn"] < times["mbpo"]
+
+
+def _fig07(e: _Evidence, *keys: str) -> tuple[dict[str, Any], list[Optional[dict[str, Any]]]]:
+    """Figure 7's glued values and each run ``keys`` names: ``{rate, low, high, starts, time_s, text}`` or None."""
+    values = e.glued.get("fig07_classical", {})
+    runs = []
+    for key in keys:
+        found = {name: values.get(f"{key}_{name}") for name in ("rate", "low", "high", "starts", "time_s")}
+        ok = all(isinstance(value, (int, float)) for value in found.values())
+        runs.append(found | {"text": values.get(f"{key}_text")} if ok else None)
+    return values, runs
+
+
+def _lqr_far(e: _Evidence) -> Found:
+    # reproduced: >= 90 % of near-upright starts balance, <= 10 % from hanging
+    values, (near, far, hanging) = _fig07(e, "lqr_near", "lqr_far", "lqr_hanging")
+    if near is None or hanging is None:
+        return None
+    near_tilt, far_tilt = values.get("near_tilt_rad"), values.get("far_tilt_rad")
+    ours = f"LQR (true model) balances {near['text']} from {near_tilt:g} rad"
+    if far is not None and far_tilt != near_tilt:
+        ours += f", {far['text']} from {far_tilt:g} rad"
+    ours += f" and {hanging['text']} from hanging"
+    return ours, near["rate"] >= BALANCED_FRACTION and hanging["rate"] <= 1 - BALANCED_FRACTION
+
+
+def _lqr_model(e: _Evidence) -> Found:
+    # reproduced: the learned-model LQR balances fewer near-upright starts (the Wilson intervals do not overlap)
+    values, (near, learned) = _fig07(e, "lqr_near", "lqr_learned_near")
     if near is None or learned is None:
         text = values.get("lqr_learned_near_text")
-        ours = NOT_COMPUTED if text is None else f"LQR on the learned model: {text}"
-        rows.append(LedgerRow("lqr_model", claim, "no figure", ours, NOT_COMPUTED, "fig07-classical"))
-    else:
-        ours = f"from {near_tilt:g} rad: LQR on the true model {near['text']}, on the learned model {learned['text']}"
-        rows.append(_row("lqr_model", claim, "no figure", "fig07-classical", ours, learned["high"] < near["low"]))
+        return None if text is None else (f"LQR on the learned model: {text}", NOT_COMPUTED)
+    ours = f"from {values.get('near_tilt_rad'):g} rad: LQR on the true model {near['text']}, on the learned model "
+    return ours + learned["text"], learned["high"] < near["low"]
 
-    # PID tuned on the learned model -- reproduced: it balances >= 50 % of the near-upright starts with the limit
-    claim = (
-        "PID parameters could be optimized for the model obtained from system identification and then applied to "
-        "the real system. This enabled testing on the actual system to be avoided, whilst still yielding reasonable "
-        "results, albeit to a limited degree."
-    )
-    learned_pid, true_pid = run("pid_learned_near"), run("pid_true_near")
-    args = ("pid_learned", claim, "some success (Figure 7)", "fig07-classical")
-    if learned_pid is None or true_pid is None:
-        rows.append(_row(*args))
-    else:
-        ours = (
-            f"from {near_tilt:g} rad with the torque limit: tuned on the learned model {learned_pid['text']}, "
-            f"tuned on the true plant {true_pid['text']}"
-        )
-        rows.append(_row(*args, ours, learned_pid["rate"] >= 0.5))
 
-    # PID with a very high torque limit is quicker than RL: the starts differ (near upright against hanging)
-    claim = (
-        "A very high torque limit was given to the controller meaning it naturally moved the pendulum upright much "
-        "quicker than the reinforcement-based methods."
+def _pid_learned(e: _Evidence) -> Found:
+    # reproduced: PID tuned on the learned model balances >= 50 % of the near-upright starts with the limit
+    values, (learned, true) = _fig07(e, "pid_learned_near", "pid_true_near")
+    if learned is None or true is None:
+        return None
+    ours = (
+        f"from {values.get('near_tilt_rad'):g} rad with the torque limit: tuned on the learned model "
+        f"{learned['text']}, tuned on the true plant {true['text']}"
     )
-    fast = run("pid_true_nolimit_far")
-    args = ("pid_fast", claim, "quicker than RL (Figure 7)", "fig07-classical")
+    return ours, learned["rate"] >= 0.5
+
+
+def _pid_fast(e: _Evidence) -> Found:
+    # not comparable: the starts differ (near upright against hanging)
+    values, (fast,) = _fig07(e, "pid_true_nolimit_far")
     if fast is None:
-        rows.append(_row(*args))
-    else:
-        ours = (
-            f"PID (true-plant gains) without a torque limit from {far_tilt:g} rad: {fast['text']}, median time to "
-            f"upright {_seconds(fast['time_s'])}; the RL agents start from hanging"
-        )
-        rows.append(_row(*args, ours, "not comparable"))
-
-    # PID hypersensitive -- reproduced: scaling the gains within 0.8-1.25 leaves the success interval below one half
-    claim = (
-        "Adding more links to the system increases the overall complexity making PID control hypersensitive to "
-        "its parameters."
+        return None
+    ours = (
+        f"PID (true-plant gains) without a torque limit from {values.get('far_tilt_rad'):g} rad: {fast['text']}, "
+        f"median time to upright {_seconds(fast['time_s'])}; the RL agents start from hanging"
     )
+    return ours, "not comparable"
+
+
+def _pid_sensitive(e: _Evidence) -> Found:
+    # reproduced: scaling the gains within 0.8-1.25 leaves the success interval below one half
+    values = e.glued.get("fig07_classical", {})
     failing, tried = values.get("pid_scales_failing"), values.get("pid_scales_tried")
-    sensitive = values.get("pid_sensitive_near_one")
-    if failing is None or tried is None or not isinstance(sensitive, bool):
-        rows.append(_row("pid_sensitive", claim, "no figure", "fig07-classical"))
-    else:
-        ours = f"gains scaled by {tried}: fails (success interval below one half) at the factors {failing}"
-        rows.append(_row("pid_sensitive", claim, "no figure", "fig07-classical", ours, sensitive))
-    return rows
+    if failing is None or tried is None or not isinstance(sensitive := values.get("pid_sensitive_near_one"), bool):
+        return None
+    return f"gains scaled by {tried}: fails (success interval below one half) at the factors {failing}", sensitive
 
 
-def _pilco_row(pilco: Sequence[Any]) -> LedgerRow:
+def _pilco(e: _Evidence) -> Found:
     # not comparable: the report quotes PILCO on the cart double pendulum, not on its rod
-    claim = (
-        "PILCO took less than 90 seconds of real experience to learn to stabilize the double pendulum cart model, "
-        "with computation time between trials."
-    )
-    args = ("pilco_90s", claim, "< 90 s (literature, cart double pendulum)", "fig-pilco")
-    if not pilco:
-        return _row(*args)
-    seconds = [r.real_seconds_to_balance for r in pilco]
+    if not e.pilco:
+        return None
+    seconds = [r.real_seconds_to_balance for r in e.pilco]
     balanced = sum(math.isfinite(s) for s in seconds)
     ours = f"PILCO on our rod, plant seconds to balance: {over_seeds(seconds, 's')}; {balanced} of {len(seconds)} runs balanced"
-    return _row(*args, ours, "not comparable")
+    return ours, "not comparable"
 
 
-def _closer_to_pilco_row(glued: Mapping[str, Mapping[str, Any]]) -> LedgerRow:
+def _closer_to_pilco(e: _Evidence) -> Found:
     # reproduced when a route of this project needs at most PILCO's median plant seconds on >= 9 of 10 seeds
-    claim = "While our method requires more time on the system, there is potential to reach values closer to this."
-    values = glued.get("data_efficiency", {})
-    args = ("closer_to_pilco", claim, "a hope (no figure)", "data-efficiency")
+    values = e.glued.get("data_efficiency", {})
     needed = [f"{kind}_{key}" for key in ("greybox", "pilco", "mbpo") for kind in ("median", "seeds_balanced", "seeds")]
     if any(not isinstance(values.get(name), (int, float)) for name in needed):
-        return _row(*args)
+        return None
     median = {key: float(values[f"median_{key}"]) for key in ("greybox", "pilco", "mbpo")}
     share = {key: (int(values[f"seeds_balanced_{key}"]), int(values[f"seeds_{key}"])) for key in median}
     ours = "median plant seconds to balance: " + ", ".join(
@@ -475,7 +382,58 @@ def _closer_to_pilco_row(glued: Mapping[str, Mapping[str, Any]]) -> LedgerRow:
         for key, name in (("greybox", "grey-box route"), ("pilco", "PILCO"), ("mbpo", "DQN-MBPO"))
     )
     balanced, seeds = share["greybox"]
-    return _row(*args, ours, seeds > 0 and balanced >= 0.9 * seeds and median["greybox"] <= median["pilco"])
+    return ours, seeds > 0 and balanced >= 0.9 * seeds and median["greybox"] <= median["pilco"]
+
+
+def _tracker(e: _Evidence) -> Found:
+    # the tracker's speed is a machine figure, measured by `softpend bench --only hardware`, not by the book
+    return f"{NOT_COMPUTED}: a property of the machine, measured by `softpend bench --only hardware`", NOT_COMPUTED
+
+
+#: The report's claims in its order: key -> (its figure, the label of the chapter that explains it, what measures ours).
+CLAIMS: dict[str, tuple[str, str, Callable[[_Evidence], Found]]] = {
+    "sysid_mse": ("≈ 3e-9", "fig03-sysid", _sysid),
+    "mf_asymptote": ("≈ 150 episodes, ≈ 4 h", "fig-learning-curves", partial(_asymptote, "dqn", 150, 4.0)),
+    "mb_asymptote": (
+        "≈ 100 episodes, 2 h 45 min",
+        "fig-learning-curves",
+        partial(_asymptote, "mbpo", 100, 2.75),
+    ),
+    "mf_holds": ("std 0.2 rad", "fig-upright-error", partial(_holds, "dqn")),
+    "mb_holds": ("std 0.2 rad", "fig-upright-error", partial(_holds, "mbpo")),
+    "mf_steady": ("≈ 10 s", "fig-swingup", _steady),
+    "mb_matches_mf": ("near-identical", "fig-upright-error", _same_final),
+    "mf_faster": ("model-free slightly faster", "fig-upright-error", _faster),
+    "lqr_far": ("a start near upright (Figure 7)", "fig07-classical", _lqr_far),
+    "lqr_model": ("no figure", "fig07-classical", _lqr_model),
+    "pid_learned": ("some success (Figure 7)", "fig07-classical", _pid_learned),
+    "pid_fast": ("quicker than RL (Figure 7)", "fig07-classical", _pid_fast),
+    "pid_sensitive": ("no figure", "fig07-classical", _pid_sensitive),
+    "mb_fewer": ("≈ 100 against ≈ 150 episodes", "fig-learning-curves", _fewer_episodes),
+    "pilco_90s": ("< 90 s (literature, cart double pendulum)", "fig-pilco", _pilco),
+    "closer_to_pilco": ("a hope (no figure)", "data-efficiency", _closer_to_pilco),
+    "tracker_real_time": ("real time (no figure)", "fig09-rig", _tracker),
+}
+#: The report's words of each claim.
+WORDS = {
+    "sysid_mse": "By minimizing the mean squared error (MSE) between the predicted next state and the actual next state the network achieved an error of ≈ 3e-9.",
+    "mf_asymptote": "The model-free controller proved to successfully balance the pole reaching the asymptotic reward in approximately 150 episodes of training, equivalent to around 4 hours of simulated time.",
+    "mb_asymptote": "The agent reached asymptotic performance in approximately 100 episodes of training as seen by the orange line in Figure 4 (2 hours 45 minutes of simulated time).",
+    "mf_holds": "After swinging up the rod remained within a standard deviation of 0.2 radians from the upright position for an arbitrary time.",
+    "mb_holds": "The final performance is near-identical to the performance of the model-free controller, reaching a standard deviation of 0.2 radians from the upright position.",
+    "mf_steady": "Typically the pendulum will reach steady state oscillatory behavior after 10 seconds.",
+    "mb_matches_mf": "As seen in Figure 6, the final performance is near-identical to the performance of the model-free controller.",
+    "mf_faster": "Time-averaging smooths rapid changes in error, thereby masking small differences in the swingup velocity, where the model free-controller shows a slight advantage.",
+    "lqr_far": "For this method, the pendulum starts closer to the final position as convergance becomes more difficult as the distance from the target increases for a nonlinear system.",
+    "lqr_model": "It requires a full state-space model of the system (matrices A, B, C, D) so it will not perform simply with observed data of motor babbling with a physical system.",
+    "pid_learned": "PID parameters could be optimized for the model obtained from system identification and then applied to the real system. This enabled testing on the actual system to be avoided, whilst still yielding reasonable results, albeit to a limited degree.",
+    "pid_fast": "A very high torque limit was given to the controller meaning it naturally moved the pendulum upright much quicker than the reinforcement-based methods.",
+    "pid_sensitive": "Adding more links to the system increases the overall complexity making PID control hypersensitive to its parameters.",
+    "mb_fewer": "The model-based approach successfully converged its performance in fewer episodes than model-free RL.",
+    "pilco_90s": "PILCO took less than 90 seconds of real experience to learn to stabilize the double pendulum cart model, with computation time between trials.",
+    "closer_to_pilco": "While our method requires more time on the system, there is potential to reach values closer to this.",
+    "tracker_real_time": "This was implemented on a raspberry pi module to remove possible sources of lag.",
+}
 
 
 def claims_ledger(
@@ -485,30 +443,15 @@ def claims_ledger(
     pilco: Sequence[Any],
     hold_std_rad: float = REPORT_HOLD_STD_RAD,
 ) -> list[LedgerRow]:
-    """One row per claim of the report, in the report's order, from ``{notebook: glued_values(...)}``,
-    :func:`rl_run_logs`, :func:`rl_fresh_start_summaries` and :func:`pilco_run_results`."""
-    # the tracker's speed is a machine figure, measured by `softpend bench --only hardware`, not by the book
-    tracker = LedgerRow(
-        "tracker_real_time",
-        "This was implemented on a raspberry pi module to remove possible sources of lag.",
-        "real time (no figure)",
-        f"{NOT_COMPUTED}: a property of the machine, measured by `softpend bench --only hardware`",
-        NOT_COMPUTED,
-        "fig09-rig",
-    )
-    return [
-        _sysid_row(glued),
-        *_asymptote_rows(rl_logs),
-        *_hold_rows(rl_fresh, hold_std_rad),
-        _steady_row(rl_fresh),
-        _same_final_row(rl_fresh, hold_std_rad),
-        _faster_row(rl_fresh),
-        *_classical_rows(glued),
-        _fewer_episodes_row(rl_logs),
-        _pilco_row(pilco),
-        _closer_to_pilco_row(glued),
-        tracker,
-    ]
+    """One row per claim of :data:`CLAIMS`, from ``{notebook: glued_values(...)}``, :func:`rl_run_logs`,
+    :func:`rl_fresh_start_summaries` and :func:`pilco_run_results`."""
+    evidence = _Evidence(glued, rl_logs, rl_fresh, pilco, hold_std_rad)
+    rows = []
+    for key, (report, chapter, measure) in CLAIMS.items():
+        ours, verdict = measure(evidence) or (NOT_COMPUTED, NOT_COMPUTED)
+        verdict = verdict if isinstance(verdict, str) else ("reproduced" if verdict else "differs")
+        rows.append(LedgerRow(key, WORDS[key], report, ours, verdict, chapter))
+    return rows
 
 
 def verdict_counts(rows: Sequence[LedgerRow]) -> dict[str, int]:

@@ -1,5 +1,5 @@
 """Fit a learned dynamics model (or an ensemble) to a babbling dataset: one-step regression with Adam, a
-validation split by trial, early stopping on the best validation weights, optional multi-step fine-tuning."""
+validation split by trial, early stopping on the best validation weights."""
 
 from __future__ import annotations
 
@@ -21,23 +21,20 @@ from softpend.checks import (
     in_range,
     in_unit_interval,
     int_at_least,
-    non_negative,
     one_of,
     positive_int,
 )
-from softpend.plant import wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.layout import StateLayout, TransitionData
-from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, check_widths, wrap_tensor
+from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, check_widths
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of :func:`fit_dynamics_model`: the state layout, the network, the ensemble, the optimiser and the
-    split.  ``integrate_positions=None`` means yes for observed velocities; ``limit_tip_reach`` keeps predicted
-    tips within the rod's reach plus :data:`TIP_REACH_SLACK`; ``rollout_steps``/``rollout_epochs`` fine-tune on
-    the model's own multi-step predictions (0: none); ``lr_schedule`` is cosine annealing to 1 % or halving on a
-    validation plateau."""
+    """Settings of :func:`fit_dynamics_model`: the state layout, the network, the ensemble (members on bootstraps of
+    the training transitions), Adam with cosine annealing to 1 % and early stopping, and the split by trial.
+    ``integrate_positions=None`` means yes for observed velocities; ``limit_tip_reach`` keeps predicted tips within
+    the rod's reach plus :data:`TIP_REACH_SLACK`."""
 
     information: str = "full"
     history: int = 0
@@ -47,14 +44,9 @@ class TrainConfig:
     integrate_positions: Optional[bool] = None
     limit_tip_reach: bool = True
     ensemble_size: int = 1
-    bootstrap: bool = True
     max_epochs: int = 300
-    rollout_steps: int = 0
-    rollout_epochs: int = 0
     batch_size: int = 512
     learning_rate: float = 5e-3
-    lr_schedule: str = "cosine"
-    weight_decay: float = 0.0
     patience: int = 30
     validation_fraction: float = 0.2
     seed: int = 0
@@ -68,13 +60,10 @@ class TrainConfig:
             raise ValueError(f"integrate_positions must be a bool or None, got {self.integrate_positions!r}")
         boolean("limit_tip_reach", self.limit_tip_reach)
         one_of("activation", self.activation, ACTIVATIONS)
-        for name in ("rollout_steps", "rollout_epochs", "seed"):
-            object.__setattr__(self, name, int_at_least(name, getattr(self, name), 0))
+        object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
         for name in ("ensemble_size", "max_epochs", "batch_size", "patience"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
         in_range("learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step, lr / (1 - beta1), stays a float32
-        one_of("lr_schedule", self.lr_schedule, ("cosine", "plateau"))
-        non_negative("weight_decay", self.weight_decay)
         in_unit_interval("validation_fraction", self.validation_fraction, include_zero=False, include_one=False)
 
     def layout(self) -> StateLayout:
@@ -104,8 +93,6 @@ class FitResult:
     train_loss: list[np.ndarray] = field(default_factory=list)
     val_loss: list[np.ndarray] = field(default_factory=list)
     best_epochs: list[int] = field(default_factory=list)
-    multistep_train_loss: list[np.ndarray] = field(default_factory=list)
-    multistep_val_loss: list[np.ndarray] = field(default_factory=list)
     train_time_s: float = 0.0
 
     def metadata(self) -> dict[str, Any]:
@@ -163,32 +150,34 @@ def _tensors(model: DynamicsModel, data: TransitionData) -> tuple[torch.Tensor, 
 
 def _train(
     net: torch.nn.Module,
-    optimiser: torch.optim.Optimizer,
-    n: int,
-    loss_of: Any,
-    val_loss: Any,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    x_val: torch.Tensor,
+    y_val: torch.Tensor,
     config: TrainConfig,
     generator: torch.Generator,
     progress: bool,
     desc: str,
-    epochs: int,
-    scheduler: Optional[torch.optim.lr_scheduler.LRScheduler | torch.optim.lr_scheduler.ReduceLROnPlateau] = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Epochs of random minibatches of ``n`` samples (``loss_of(batch)``), keeping the weights of the lowest
-    ``val_loss()`` (with a scheduler: improved by 1e-4 of it, stopping after ``config.patience`` epochs without;
-    without: below the starting weights'); returns the losses per epoch and the epoch kept (0: the start)."""
-    with torch.no_grad():
-        best = (math.inf if scheduler is not None else float(val_loss()), 0, copy.deepcopy(net.state_dict()))
+    """Epochs of random minibatches of the mean squared error with Adam and cosine annealing, keeping the weights
+    of the lowest validation loss (improved by 1e-4 of it; stop after ``config.patience`` epochs without); returns
+    the losses per epoch and the epoch kept."""
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+    scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
+        optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100
+    )
+    best = (math.inf, 0, copy.deepcopy(net.state_dict()))
     train_losses: list[float] = []
     val_losses: list[float] = []
-    bar = tqdm(range(1, epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
+    n = len(x)
+    bar = tqdm(range(1, config.max_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
     for epoch in bar:
         net.train()
         order = torch.randperm(n, generator=generator)
         train = 0.0
         for start in range(0, n, config.batch_size):
             batch = order[start : start + config.batch_size]
-            loss = loss_of(batch)
+            loss = torch.mean((net(x[batch]) - y[batch]) ** 2)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
@@ -196,7 +185,7 @@ def _train(
         train /= n
         net.eval()
         with torch.no_grad():
-            val = float(val_loss())
+            val = float(torch.mean((net(x_val) - y_val) ** 2))
         if not (math.isfinite(train) and math.isfinite(val)):
             raise NonFiniteError(
                 f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train!r}, validation loss "
@@ -204,14 +193,11 @@ def _train(
             )
         train_losses.append(train)
         val_losses.append(val)
-        if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
-            scheduler.step(val)
-        elif scheduler is not None:
-            scheduler.step()
-        if val < best[0] * (1 - (1e-4 if scheduler is not None else 0.0)):
+        scheduler.step()
+        if val < best[0] * (1 - 1e-4):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
         bar.set_postfix(train=f"{train:.2e}", val=f"{val:.2e}", best=best[1])
-        if scheduler is not None and epoch - best[1] >= config.patience:
+        if epoch - best[1] >= config.patience:
             break
     bar.close()
     net.load_state_dict(best[2])
@@ -232,35 +218,6 @@ def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: Tra
         data + networks,
         f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
     )
-
-
-def _windows(
-    layout: StateLayout, dataset: TrajectoryDataset, trials: np.ndarray, steps: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """All windows of ``steps + 1`` consecutive states (and their ``steps`` torques) of the trials."""
-    states = layout.states(dataset)[trials]
-    torques = layout.torques(dataset)[trials]
-    n = states.shape[1] - steps
-    if n < 1:
-        raise ValueError(f"rollout_steps={steps} is longer than the trials ({states.shape[1]} states)")
-    idx = np.arange(n)[:, None] + np.arange(steps + 1)[None, :]
-    return states[:, idx].reshape(-1, steps + 1, layout.dim), torques[:, idx[:, :-1]].reshape(-1, steps)
-
-
-def _multistep_loss(
-    model: DynamicsModel, states: torch.Tensor, torques: torch.Tensor, scale: torch.Tensor
-) -> torch.Tensor:
-    """Mean squared scaled core-state error of the model's open-loop predictions over a window."""
-    x = states[:, 0]
-    core = model.layout.core_dim
-    mask = torch.as_tensor(model.layout.angle_mask[:core])
-    total = states.new_zeros(())
-    for j in range(torques.shape[1]):
-        x = model.predict_next(x, torques[:, j])
-        err = x[:, :core] - states[:, j + 1, :core]
-        err = torch.where(mask, wrap_tensor(err), err)
-        total = total + torch.mean((err / scale) ** 2)
-    return total / torques.shape[1]
 
 
 def fit_dynamics_model(
@@ -309,62 +266,18 @@ def fit_dynamics_model(
     for m in members:
         m.set_feature_box(x_train.min(0).values, x_train.max(0).values)
     result = FitResult(model=members[0], config=config, train_trials=train_trials, val_trials=val_trials)
-    multistep = bool(config.rollout_steps and config.rollout_epochs)
-    if multistep:
-        dtype = members[0].feature_mean.dtype
-        xs, us, vs, vu = (
-            torch.as_tensor(a, dtype=dtype)
-            for trials in (train_trials, val_trials)
-            for a in _windows(layout, dataset, trials, config.rollout_steps)
-        )
-        change = train.next_states[:, : layout.core_dim] - train.states[:, : layout.core_dim]
-        mask = layout.angle_mask[: layout.core_dim]
-        change[:, mask] = wrap_angle_rad(change[:, mask])
-        scale = torch.as_tensor(np.maximum(change.std(0), 1e-12), dtype=dtype)
     for k, member in enumerate(members):
         generator = torch.Generator().manual_seed(config.seed * 1000 + k)
-        if config.ensemble_size > 1 and config.bootstrap:
+        if config.ensemble_size > 1:
             pick = torch.randint(x_train.shape[0], (x_train.shape[0],), generator=generator)
             xk, yk = x_train[pick], y_train[pick]
         else:
             xk, yk = x_train, y_train
         desc = "training" if config.ensemble_size == 1 else f"training member {k + 1}/{config.ensemble_size}"
-        net = member.net
-        optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
-        lr = torch.optim.lr_scheduler
-        scheduler = (
-            lr.CosineAnnealingLR(optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100)
-            if config.lr_schedule == "cosine"
-            else lr.ReduceLROnPlateau(optimiser, factor=0.5, patience=max(1, config.patience // 3))
-        )
-        run = (config, generator, progress, desc)
-        tl, vl, best = _train(
-            net,
-            optimiser,
-            len(xk),
-            lambda b: torch.mean((net(xk[b]) - yk[b]) ** 2),
-            lambda: torch.mean((net(x_val) - y_val) ** 2),
-            *run,
-            config.max_epochs,
-            scheduler,
-        )
+        tl, vl, best = _train(member.net, xk, yk, x_val, y_val, config, generator, progress, desc)
         result.train_loss.append(tl)
         result.val_loss.append(vl)
         result.best_epochs.append(best)
-        if multistep:
-            optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate / 10)
-            run = (config, generator, progress, desc + " (multi-step)")
-            mtl, mvl, _ = _train(
-                net,
-                optimiser,
-                len(xs),
-                lambda b: _multistep_loss(member, xs[b], us[b], scale),
-                lambda: _multistep_loss(member, vs, vu, scale),
-                *run,
-                config.rollout_epochs,
-            )
-            result.multistep_train_loss.append(mtl)
-            result.multistep_val_loss.append(mvl)
     result.model = members[0] if config.ensemble_size == 1 else DynamicsEnsemble(members).eval()
     result.train_time_s = time.perf_counter() - started
     return result

@@ -17,22 +17,6 @@ from softpend.study.greybox import perturbed_guess
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
-__all__ = [
-    "excitation_rows",
-    "greybox_route_figures",
-    "greybox_route_rows",
-    "method_summary",
-    "paired_ratio",
-    "paired_ratio_rows",
-    "pilco_rows_if_trained",
-    "planner_config",
-    "planner_fresh_starts",
-    "planner_rows",
-    "plant_seconds_rows",
-    "plot_excitation",
-    "plot_plant_seconds",
-]
-
 #: Methods of the plant-seconds chapter, in plot order: key -> label.
 METHODS = {
     "dqn": "model-free DQN",
@@ -49,36 +33,37 @@ METHODS = {
 def greybox_route_rows(
     plant: str = "prb",
     seeds: Iterable[int] = range(10),
-    config: Optional[RouteConfig] = None,
     report_seeds: Sequence[int] = REPORT_SEEDS,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
     """One row per seed: the route on ``plant`` from the study's perturbed guess (plant seconds of excitation, how
     far it went), then its controller on the 20 fresh report starts; ``real_s_to_balance`` is infinite for a seed
     whose controller does not balance them (starts: ``report_seeds``, each ``duration_s`` long)."""
-    config = config if config is not None else RouteConfig()
-    task = Task(plant=plant)
-    rows = []
+    task, config, rows = Task(plant=plant), RouteConfig(), []
     for seed in seeds:
         route = identify_until_robust(
             simulated_recorder(task, config, seed), perturbed_guess(RodParams()), config, seed
         )
-        fresh = fresh_start_row(evaluate(route.controller, task, seeds=tuple(report_seeds), duration_s=duration_s))
+        fresh = _on_fresh_starts(route.controller, task, report_seeds, duration_s)
         rows.append(
             {
                 "plant": plant,
                 "seed": int(seed),
                 "plant_s": route.plant_s,
                 "robust": route.robust,
-                "balanced_starts": fresh["balanced_starts"],
-                "starts": fresh["starts"],
-                "balances": fresh["run_balances"],
-                "real_s_to_balance": route.plant_s if fresh["run_balances"] else math.inf,
+                **fresh,
+                "real_s_to_balance": route.plant_s if fresh["balances"] else math.inf,
                 "max_relative_std": route.steps[-1]["max_relative_std"],
                 "identified": route.identification.estimates,
             }
         )
     return rows
+
+
+def _on_fresh_starts(controller: Any, task: Task, seeds: Sequence[int], duration_s: float) -> dict[str, Any]:
+    """``balanced_starts``, ``starts`` and ``balances`` (:func:`fresh_start_row`) of a controller on ``seeds``."""
+    fresh = fresh_start_row(evaluate(controller, task, seeds=tuple(seeds), duration_s=duration_s))
+    return {"balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"], "balances": fresh["run_balances"]}
 
 
 #: The babbling programs the chapter compares at equal length (:data:`softpend.sysid.babble.PROGRAMS`) -> label.
@@ -105,8 +90,6 @@ def excitation_rows(
             for seed in seeds:
                 data = simulated_recorder(task, config, int(seed), program=program)(float(length_s))
                 result = identify(data, GreyBoxConfig(seed=int(seed)), initial_params=perturbed_guess(truth))
-                controller = design_swingup(result.params)
-                fresh = fresh_start_row(evaluate(controller, task, seeds=tuple(report_seeds), duration_s=duration_s))
                 errors = {
                     f"error_{name}": value / getattr(truth, name) - 1.0
                     for name, value in result.estimates.items()
@@ -119,9 +102,7 @@ def excitation_rows(
                         "plant_s": float(length_s),
                         "seed": int(seed),
                         **errors,
-                        "balanced_starts": fresh["balanced_starts"],
-                        "starts": fresh["starts"],
-                        "balances": fresh["run_balances"],
+                        **_on_fresh_starts(design_swingup(result.params), task, report_seeds, duration_s),
                     }
                 )
     return rows
@@ -174,31 +155,24 @@ def plant_seconds_rows(
     """One row per (method, seed) on one axis: the learned methods' rows of
     :func:`softpend.study.fresh_starts.seed_rows`, the grey-box route's rows (PRB rod, then beam) and the planner's
     (:func:`planner_rows`, ``planner``: ``{"mpc" | "mpc_blackbox" | "mpc_beam": rows}``)."""
-    label_to_key = {"model-free DQN": "dqn", "DQN-MBPO": "mbpo", "PILCO": "pilco"}
-    rows = [
+    key_of = {label: key for key, label in METHODS.items()}
+    groups = [(key_of[r["method"]], [r], "plant_s_to_balance", "final_balanced_starts") for r in learned]
+    groups += [
+        (key, rows, "real_s_to_balance", "balanced_starts")
+        for key, rows in (("greybox", greybox), ("greybox_beam", beam), *(planner or {}).items())
+    ]
+    return [
         {
-            "key": label_to_key[r["method"]],
-            "method": r["method"],
+            "key": key,
+            "method": METHODS[key],
             "seed": int(r["seed"]),
-            "plant_s_to_balance": float(r["plant_s_to_balance"]),
-            "balanced_starts": int(r["final_balanced_starts"]),
+            "plant_s_to_balance": float(r[seconds]),
+            "balanced_starts": int(r[balanced]),
             "starts": int(r["starts"]),
         }
-        for r in learned
+        for key, rows, seconds, balanced in groups
+        for r in rows
     ]
-    for key, group in (("greybox", greybox), ("greybox_beam", beam), *(planner or {}).items()):
-        rows += [
-            {
-                "key": key,
-                "method": METHODS[key],
-                "seed": int(r["seed"]),
-                "plant_s_to_balance": float(r["real_s_to_balance"]),
-                "balanced_starts": int(r["balanced_starts"]),
-                "starts": int(r["starts"]),
-            }
-            for r in group
-        ]
-    return rows
 
 
 def method_summary(rows: list[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]]:

@@ -4,14 +4,13 @@ to clear the swing circle) and the camera square-on to the rod's plane."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
-from softpend.checks import int_at_least, positive
+from softpend.checks import positive
 from softpend.plant.params import RodParams
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraModel
 
@@ -32,11 +31,6 @@ class MotorCartridge:
     free_speed_rad_s: float
     stall_torque_nm: float
     encoder_ticks_per_rev: int
-
-    def __post_init__(self) -> None:
-        positive("free_speed_rad_s", self.free_speed_rad_s)
-        positive("stall_torque_nm", self.stall_torque_nm)
-        int_at_least("encoder_ticks_per_rev", self.encoder_ticks_per_rev, 4)
 
     def available_torque_nm(self, speed_rad_s: float) -> float:
         """Torque at ``speed_rad_s`` on the full supply (the DC motor line), 0 beyond the free speed [N m]."""
@@ -60,13 +54,6 @@ class CameraSpec:
     height_px: int = 480
     horizontal_fov_deg: float = 62.2
 
-    def __post_init__(self) -> None:
-        int_at_least("width_px", self.width_px, 16)
-        int_at_least("height_px", self.height_px, 16)
-        fov = positive("horizontal_fov_deg", self.horizontal_fov_deg)
-        if fov >= 180:
-            raise ValueError(f"horizontal_fov_deg must be below 180, got {self.horizontal_fov_deg!r}")
-
 
 @dataclass(frozen=True)
 class HubSpec:
@@ -83,17 +70,6 @@ class HubSpec:
     flag_gap_m: float = 0.003
     marker_clearance_m: float = 0.05
     keep_out_margin_m: float = 0.10
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            positive(f.name, getattr(self, f.name))
-        if not self.pocket_start_m < self.clamp_radius_m:
-            raise ValueError(f"pocket_start_m must be below clamp_radius_m, got {self.pocket_start_m!r}")
-        if self.pocket_start_m < self.shaft_side_m * math.sqrt(0.5):
-            raise ValueError(
-                f"pocket_start_m must clear the shaft's bore (half-diagonal "
-                f"{self.shaft_side_m * math.sqrt(0.5):.4g} m), got {self.pocket_start_m!r}"
-            )
 
 
 @dataclass(frozen=True)
@@ -159,52 +135,40 @@ class RigDesign:
 
     def to_dict(self) -> dict:
         """The design's figures as JSON numbers (millimetres where the key says ``_mm``)."""
-        fov_w, fov_h = self.field_of_view_m
+        mm = {name: getattr(self, name + "_m") for name in _MM_FIELDS}
+        mm.update(mount_boss_radius=self.hub.clamp_radius_m, mount_bore=self.hub.shaft_side_m)
+        mm.update(hub_marker_radius=self.hub.hub_marker_radius_m, marker_diameter=2 * MARKER_RADIUS_M)
+        mm.update(rod_length=self.params.length_m, tip_disc_diameter=2 * self.dot_radius_m)
         return {
-            "rod_length_mm": 1e3 * self.params.length_m,
+            **{f"{name}_mm": 1e3 * value for name, value in mm.items()},
             "bending_stiffness_nm2": self.params.bending_stiffness_nm2,
             "print_modulus_mpa": self.print_modulus_pa / 1e6,
-            "beam_length_mm": 1e3 * self.beam_length_m,
-            "beam_width_mm": 1e3 * self.beam_width_m,
-            "beam_thickness_mm": 1e3 * self.beam_thickness_m,
             "beam_mass_g": 1e3 * self.beam_mass_kg,
             "out_of_plane_stiffness_ratio": self.out_of_plane_stiffness_ratio,
             "tip_mass_g": 1e3 * self.params.tip_mass_kg,
-            "tip_disc_diameter_mm": 2e3 * self.dot_radius_m,
-            "tip_disc_thickness_mm": 1e3 * self.tip_disc_thickness_m,
-            "mount_boss_radius_mm": 1e3 * self.hub.clamp_radius_m,
-            "flag_length_mm": 1e3 * self.flag_length_m,
-            "mount_bore_mm": 1e3 * self.hub.shaft_side_m,
-            "hub_marker_radius_mm": 1e3 * self.hub.hub_marker_radius_m,
-            "swing_radius_mm": 1e3 * self.swing_radius_m,
-            "keep_out_radius_mm": 1e3 * self.keep_out_radius_m,
             "markers_m": [[float(x), float(y)] for x, y in self.markers_m],
-            "marker_diameter_mm": 2e3 * MARKER_RADIUS_M,
-            "min_marker_gap_mm": 1e3 * self.min_marker_gap_m,
-            "camera_distance_mm": 1e3 * self.camera_distance_m,
             "camera_px_per_m": self.camera_model.px_per_m,
-            "pixel_size_mm": 1e3 * self.pixel_size_m,
-            "field_of_view_mm": [1e3 * fov_w, 1e3 * fov_h],
+            "field_of_view_mm": [1e3 * side for side in self.field_of_view_m],
             "dot_area_px": self.dot_area_px,
             "markers_in_view": self.markers_in_view(),
             "swing_in_view": self.swing_in_view(),
         }
 
 
-def rig_design(
-    params: Optional[RodParams] = None,
-    print_modulus_pa: Optional[float] = None,
-    camera: Optional[CameraSpec] = None,
-    hub: Optional[HubSpec] = None,
-) -> RigDesign:
+_MM_FIELDS = (
+    "beam_length beam_width beam_thickness tip_disc_thickness flag_length swing_radius keep_out_radius min_marker_gap "
+    "camera_distance pixel_size"
+).split()
+
+
+def rig_design(params: Optional[RodParams] = None, print_modulus_pa: Optional[float] = None) -> RigDesign:
     """The rig's dimensions for the rod ``params`` (default rod), its beam printed from a material of modulus
     ``print_modulus_pa`` (default the rod's own); ``ValueError`` for a rod without bending stiffness, shorter
     than the mount's clamp, or a beam that cannot be printed."""
     params = params if params is not None else RodParams()
     if not isinstance(params, RodParams):
         raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
-    camera = camera if camera is not None else CameraSpec()
-    hub = hub if hub is not None else HubSpec()
+    camera, hub = CameraSpec(), HubSpec()
     modulus = positive("print_modulus_pa", params.youngs_modulus_pa if print_modulus_pa is None else print_modulus_pa)
     ei = params.bending_stiffness_nm2
     if not ei > 0:

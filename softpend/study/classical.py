@@ -16,6 +16,7 @@ from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_cont
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
+#: The columns of the table of :attr:`ClassicalComparison.rows` (``markdown_table(rows, TABLE_COLUMNS, 4)``).
 TABLE_COLUMNS = tuple(
     "controller start torque_limit_nm seeds success_rate success_low success_high swing_up_time_s upright_std_rad "
     "peak_torque_nm energy_used_j".split()
@@ -167,12 +168,11 @@ def pid_gain_sensitivity(
     tilt_rad: float = 0.2,
     starts: Sequence[int] = REPORT_SEEDS,
     duration_s: float = 5.0,
-    torque_limit_nm: Optional[float] = None,
 ) -> list[dict[str, Any]]:
     """The PID with its gains scaled by each of ``scales`` from the fresh starts of one tilt, one row per scale."""
     if len(scales) == 0 or any(not float(scale) > 0 for scale in scales):
         raise ValueError(f"scales must be positive numbers, got {list(scales)!r}")
-    limit = task.torque_limit_nm if torque_limit_nm is None else float(torque_limit_nm)
+    limit = task.torque_limit_nm
     rows = []
     for scale in scales:
         pid = PIDController(PIDGains(*(float(scale) * gains.as_array())), torque_limit_nm=limit)
@@ -202,14 +202,3 @@ def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None
     ax.set_ylim(1e-6, 3.5)
     ax.legend(fontsize="small")
     return ax
-
-
-def table_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] = TABLE_COLUMNS) -> str:
-    """A Markdown table of comparison rows (numbers to 4 significant digits)."""
-
-    def cell(value: Any) -> str:
-        return f"{value:.4g}" if isinstance(value, float) else str(value)
-
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(cell(row.get(c, "")) for c in columns) + " |" for row in rows]
-    return "\n".join(lines)

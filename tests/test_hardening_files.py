@@ -312,13 +312,11 @@ def test_fit_model_checks_its_outputs_before_fitting(tmp_path, monkeypatch, caps
 
 @pytest.mark.parametrize("algo", ["dqn", "pilco"])
 def test_train_checks_its_run_folder_before_training(tmp_path, monkeypatch, capsys, algo):
-    import softpend.commands.train_pilco
+    import softpend.pilco.loop
     import softpend.rl.dqn
 
     monkeypatch.setattr(softpend.rl.dqn, "make_training_env", lambda *a: pytest.fail("trained before checking"))
-    monkeypatch.setattr(
-        softpend.commands.train_pilco, "run_pilco", lambda *a, **k: pytest.fail("trained before checking")
-    )
+    monkeypatch.setattr(softpend.pilco.loop, "run_pilco", lambda *a, **k: pytest.fail("trained before checking"))
     foreign = tmp_path / "photos"
     foreign.mkdir()
     (foreign / "holiday.jpg").write_bytes(b"jpeg")

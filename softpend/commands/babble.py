@@ -6,11 +6,11 @@ import argparse
 import math
 import time
 
-from softpend.commands.options import check_numbers
+from softpend.commands.options import FieldOption, add_field_options, field_values
 
 #: ``(flag, BabbleProtocol field, type, help, allowed range)`` of the protocol options; a value outside the range
 #: gives a dataset of noise, or of saturated torques, that still passes as data.
-_OPTIONS = (
+_OPTIONS: tuple[FieldOption, ...] = (
     ("--n-trials", "n_trials", int, "number of trials", None),
     ("--trial-length-s", "trial_length_s", float, "trial length [s]", None),
     ("--dt-s", "dt_s", float, "sampling step [s]", None),
@@ -56,8 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="torque program: band-limited random torque, or a designed multisine from 0.2 Hz to "
         f"--torque-bandwidth-hz ({d.program})",
     )
-    for flag, field, kind, text, _ in _OPTIONS:
-        parser.add_argument(flag, type=kind, default=getattr(d, field), help=f"{text} ({getattr(d, field)})")
+    add_field_options(parser, d, _OPTIONS)
     parser.add_argument("--n-links", type=int, default=None, help="override the number of PRB links")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
@@ -68,13 +67,12 @@ def run(args: argparse.Namespace) -> int:
     from softpend.plant import RodParams
     from softpend.sysid import BabbleProtocol, babble
 
-    check_numbers(args, {flag: bounds for flag, _, _, _, bounds in _OPTIONS if bounds is not None})
     outputs = Outputs()  # before the work: a dataset this command wrote may be replaced, no other file
     output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset"))
     protocol = BabbleProtocol(
         start=args.start,
         program=args.program,
-        **{field: getattr(args, flag[2:].replace("-", "_")) for flag, field, _, _, _ in _OPTIONS},
+        **field_values(args, _OPTIONS),
     )
     params = RodParams() if args.n_links is None else RodParams(n_links=args.n_links)
     started = time.perf_counter()

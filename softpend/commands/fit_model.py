@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-#: ``(flag, TrainConfig field, type, help, allowed range)`` of the training options.
-_OPTIONS = (
+from softpend.commands.options import FieldOption, add_field_options, add_options, field_values
+
+#: ``(flag, TrainConfig field, type, help, allowed range)`` of the training options (the ranges bound the work).
+_OPTIONS: tuple[FieldOption, ...] = (
     ("--history", "history", int, "past position frames in the state", (0, 1000)),
     ("--activation", "activation", str, "hidden activation", None),
     ("--ensemble-size", "ensemble_size", int, "ensemble members", (1, 1000)),
@@ -47,10 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=",".join(map(str, d.hidden_widths)),
         help="comma-separated hidden widths (16,16,16)",
     )
-    for flag, field, kind, text, _ in _OPTIONS:
-        parser.add_argument(flag, type=kind, default=getattr(d, field), help=f"{text} ({getattr(d, field)})")
+    add_field_options(parser, d, _OPTIONS)
+    add_options(parser, [("--threads", (1, 1024), dict(type=int, default=1, help="torch threads (default 1)"))])
     parser.add_argument("--test-data", default=None, help="held-out dataset (.npz) to evaluate on as well")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
     parser.set_defaults(func=run)
 
@@ -58,15 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from softpend.commands.options import check_numbers
     from softpend.io.outputs import Outputs, finite_or_none, json_text, output_name
     from softpend.sysid import TrainConfig, fit_dynamics_model, load_dataset, save_model
     from softpend.sysid.metrics import evaluate_model
     from softpend.sysid.model import model_paths
 
-    # before anything starts: the epoch loop and the ensemble are bounded (work-size estimates bound the memory)
-    limits = {flag: bounds for flag, _, _, _, bounds in _OPTIONS if bounds is not None}
-    check_numbers(args, {"--threads": (1, 1024), **limits})
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
     # before the work: a model this command wrote may be replaced, nothing else
@@ -75,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         information=args.information,
         velocity_source=args.velocity_source,
         hidden_widths=args.hidden_widths,
-        **{field: getattr(args, field) for _, field, _, _, _ in _OPTIONS},
+        **field_values(args, _OPTIONS),
     )
     dataset = load_dataset(args.dataset)
     # a model predicts one step of the training data's dt_s: held-out data at another step is not a test of it

@@ -4,6 +4,16 @@ from __future__ import annotations
 
 import argparse
 
+from softpend.commands.options import FieldOption, add_field_options, field_values
+
+#: ``(flag, GreyBoxConfig field, type, help, allowed range)``: the ranges bound the fit's loop and window draw.
+_OPTIONS: tuple[FieldOption, ...] = (
+    ("--window-s", "window_s", float, "shooting window [s]", (1e-6, 3600.0)),
+    ("--max-windows", "max_windows", int, "most windows used", (1, 10**6)),
+    ("--max-iterations", "max_iterations", int, "most Levenberg-Marquardt steps", (1, 100_000)),
+    ("--seed", "seed", int, "seed of the window draw", None),
+)
+
 #: Calibration parameter -> (flag that adds it, what it is).
 _CALIBRATION_FLAGS = {
     "torque_gain": ("--torque-gain", "a gain on the recorded torque"),
@@ -37,25 +47,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     for flag, text in _CALIBRATION_FLAGS.values():
         parser.add_argument(flag, action="store_true", help=f"also estimate {text}")
-    parser.add_argument(
-        "--initial-params", default=None, help="JSON file of the initial guess (default: the dataset's plant_params)"
-    )
-    parser.add_argument("--window-s", type=float, default=d.window_s, help=f"shooting window [s] ({d.window_s})")
-    parser.add_argument("--max-windows", type=int, default=d.max_windows, help=f"most windows used ({d.max_windows})")
-    parser.add_argument("--max-iterations", type=int, default=d.max_iterations, help="most Levenberg-Marquardt steps")
-    parser.add_argument("--seed", type=int, default=d.seed, help=f"seed of the window draw ({d.seed})")
+    parser.add_argument("--initial-params", help="JSON file of the initial guess (default: the dataset's plant_params)")
+    add_field_options(parser, d, _OPTIONS)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.commands.options import check_numbers
     from softpend.io.outputs import Outputs, json_text
     from softpend.plant import RodParams
     from softpend.sysid import load_dataset
     from softpend.sysid.greybox import GreyBoxConfig, identify
 
-    # before anything starts: the Levenberg-Marquardt loop and the window draw are bounded
-    check_numbers(args, {"--max-iterations": (1, 100_000), "--max-windows": (1, 10**6), "--window-s": (1e-6, 3600.0)})
     outputs = Outputs()
     if args.out is not None:  # before the work: a file this command wrote may be replaced, no other
         outputs.file(args.out, what="identification file")
@@ -63,13 +65,7 @@ def run(args: argparse.Namespace) -> int:
     names += [
         n for n, (flag, _) in _CALIBRATION_FLAGS.items() if getattr(args, flag[2:].replace("-", "_")) and n not in names
     ]
-    config = GreyBoxConfig(
-        parameters=tuple(names),
-        window_s=args.window_s,
-        max_windows=args.max_windows,
-        max_iterations=args.max_iterations,
-        seed=args.seed,
-    )
+    config = GreyBoxConfig(parameters=tuple(names), **field_values(args, _OPTIONS))
     dataset = load_dataset(args.dataset)
     guess = RodParams.from_json(args.initial_params) if args.initial_params else None
     result = identify(dataset, config, initial_params=guess)

@@ -1,11 +1,45 @@
-"""Options shared by the subcommands: the repeatable ``--set NAME=VALUE`` (and its per-method forms)."""
+"""Options shared by the subcommands: option tables with checked number ranges, and the repeatable ``--set``."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import Any, Optional, Sequence
 
 from softpend.io.overrides import parse_assignment
+
+#: Longest session of a command that runs a rig, the twin or a camera for a duration [s]: one day.
+MAX_SESSION_S = 86_400.0
+
+#: A row of an option table: ``(flag, closed interval its value must lie in or None, add_argument keywords)``.
+Option = tuple[str, Optional[tuple[float, float]], dict[str, Any]]
+
+
+def add_options(parser: argparse.ArgumentParser, options: Sequence[Option]) -> None:
+    """Add the options of a table to ``parser``; :func:`softpend.cli.main` checks their intervals
+    (:func:`check_numbers`) before the command runs."""
+    for flag, _, keywords in options:
+        parser.add_argument(flag, **keywords)
+    limits = {flag: limits for flag, limits, _ in options if limits is not None}
+    parser.set_defaults(number_limits={**(parser.get_default("number_limits") or {}), **limits})
+
+
+#: A row of a table of config fields as options: ``(flag, field, type, help, closed interval or None)``.
+FieldOption = tuple[str, str, type, str, Optional[tuple[float, float]]]
+
+
+def add_field_options(parser: argparse.ArgumentParser, defaults: Any, rows: Sequence[FieldOption]) -> None:
+    """Add options that set fields of a config, each defaulting to (and its help showing) the field of
+    ``defaults``; :func:`field_values` reads them back."""
+    keywords = [
+        dict(type=kind, default=getattr(defaults, field), help=f"{text} ({getattr(defaults, field)})")
+        for _, field, kind, text, _ in rows
+    ]
+    add_options(parser, [(row[0], row[4], kw) for row, kw in zip(rows, keywords)])
+
+
+def field_values(args: argparse.Namespace, rows: Sequence[FieldOption]) -> dict[str, Any]:
+    """``field -> value`` of the options of :func:`add_field_options`."""
+    return {field: getattr(args, flag[2:].replace("-", "_")) for flag, field, *_ in rows}
 
 
 def assignment(text: str) -> tuple[str, Any]:
@@ -23,15 +57,9 @@ def add_set_option(parser: argparse.ArgumentParser, help: str, dest: str = "over
     parser.add_argument(flag, action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help)
 
 
-#: Longest session of a command that runs a rig, the twin or a camera for a duration [s]: one day.
-MAX_SESSION_S = 86_400.0
-
-
 def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float]]) -> None:
-    """Range-check numeric options before any work starts: ``limits`` maps an option's flag (``"--camera-fps"``)
-    to the closed interval ``(low, high)`` its value (or each of its values) must lie in; an option left at
-    ``None`` passes.  ``ValueError`` naming the flag, the interval and the value (NaN and infinities never
-    pass)."""
+    """``ValueError`` naming the flag, the interval and the value unless each option of ``limits`` (flag ->
+    ``(low, high)``) is None or lies in its interval (each value of a list; NaN and infinities never pass)."""
     from softpend.checks import in_range
 
     for flag, (low, high) in limits.items():

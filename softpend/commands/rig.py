@@ -5,48 +5,46 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import MAX_SESSION_S
+from softpend.commands.options import MAX_SESSION_S, Option, add_options
 
-#: The numeric options: (flag, type, default, closed interval checked before anything starts, help).
-NUMBERS = (
-    ("--duration", float, None, (1e-3, MAX_SESSION_S), "stop after this many seconds (default: run until killed)"),
-    ("--counts-per-rev", int, 4096, (4, 2**24), "encoder resolution (default 4096)"),
-    ("--latency-ms", float, 2.0, (0.0, 1000.0), "one-way link latency [ms] (default 2)"),
-    ("--drop", float, 0.0, (0.0, 1.0), "probability that a STATE frame is dropped"),
-    ("--garble", float, 0.0, (0.0, 1.0), "probability that a STATE frame is corrupted"),
-    ("--watchdog-ms", int, 100, (1, 65535), "device watchdog [ms] (default 100)"),
-    ("--n-links", int, 4, None, "PRB links of the simulated rod"),
-    ("--seed", int, 0, None, "seed for drops, garbling and start noise"),
+OPTIONS: tuple[Option, ...] = (
+    ("--port", None, dict(metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")),
+    (
+        "--duration",
+        (1e-3, MAX_SESSION_S),
+        dict(type=float, help="stop after this many seconds (default: until killed)"),
+    ),
+    ("--counts-per-rev", (4, 2**24), dict(type=int, default=4096, help="encoder resolution (default 4096)")),
+    ("--latency-ms", (0.0, 1000.0), dict(type=float, default=2.0, help="one-way link latency [ms] (default 2)")),
+    ("--drop", (0.0, 1.0), dict(type=float, default=0.0, help="probability that a STATE frame is dropped")),
+    ("--garble", (0.0, 1.0), dict(type=float, default=0.0, help="probability that a STATE frame is corrupted")),
+    ("--watchdog-ms", (1, 65535), dict(type=int, default=100, help="device watchdog [ms] (default 100)")),
+    ("--n-links", None, dict(type=int, default=4, help="PRB links of the simulated rod")),
+    ("--seed", None, dict(type=int, default=0, help="seed for drops, garbling and start noise")),
+    ("--truth-log", None, dict(metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")),
 )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
-    parser.add_argument("--port", metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")
-    for flag, kind, default, _, text in NUMBERS:
-        parser.add_argument(flag, type=kind, default=default, help=text)
-    parser.add_argument("--truth-log", metavar="CSV", help="record the true joint state every tick (crash-safe CSV)")
-    parser.set_defaults(func=run)
+    from softpend.cli import DEBUG_HELP
     from softpend.commands import rig_build, rig_commission, rig_control
 
+    parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
+    add_options(parser, OPTIONS)
+    parser.set_defaults(func=run)
     actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
-    rig_control.register(actions)
-    rig_build.register(actions)
-    rig_commission.register(actions)
-    debug = dict(
-        action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error instead of one line"
-    )
+    for module in (rig_control, rig_build, rig_commission):
+        module.register(actions)
     for action in actions.choices.values():
-        action.add_argument("--debug", **debug)
+        action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+        action.set_defaults(number_limits=action.get_default("number_limits") or {})  # not the server's
 
 
 def run(args: argparse.Namespace) -> int:
-    from softpend.commands.options import check_numbers
     from softpend.hardware.emulator import RigConfig, serve_forever
     from softpend.io.outputs import Outputs
     from softpend.task import Task
 
-    check_numbers(args, {flag: limits for flag, _, _, limits, _ in NUMBERS if limits is not None})
     outputs = Outputs()
     if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")
@@ -60,9 +58,9 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         duration_s=args.duration,
     )
-    if args.truth_log is None:
-        return serve_forever(config, link_path=args.port)
+    truth_log = None if args.truth_log is None else str(outputs.live(args.truth_log))
     try:
-        return serve_forever(config, truth_log=str(outputs.live(args.truth_log)), link_path=args.port)
+        return serve_forever(config, truth_log=truth_log, link_path=args.port)
     finally:
-        outputs.done(args.truth_log)
+        if truth_log is not None:
+            outputs.done(args.truth_log)

@@ -4,13 +4,12 @@ the digital twin (``--twin``, simulated time) from parts to data."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, add_set_option, check_numbers
+from softpend.commands.options import MAX_SESSION_S, add_options, add_set_option
 
 #: Accepted ``--print-modulus-mpa`` [MPa]: soft silicone to steel.
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
@@ -29,10 +28,11 @@ def register(actions: argparse._SubParsersAction) -> None:
     check = actions.add_parser("check", help="power-on checks of the motor link: handshake, rest, direction, watchdog")
     _add_link_target(check)
     check.add_argument("--out", metavar="JSON", help="also write the report to this file")
-    check.add_argument("--rest-s", type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
+    rest = dict(type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
+    counts = dict(type=int, default=4096, help="twin: encoder resolution (4096)")
+    add_options(check, [("--rest-s", (0.1, 600.0), rest), ("--counts-per-rev", (4, 2**24), counts)])
     text = "torque of the direction push as a fraction of the torque limit (0.3)"
     check.add_argument("--push-fraction", type=float, default=0.3, help=text)
-    check.add_argument("--counts-per-rev", type=int, default=4096, help="twin: encoder resolution (4096)")
     _add_rod_set(check)
     check.set_defaults(func=run_check)
 
@@ -54,10 +54,13 @@ def register(actions: argparse._SubParsersAction) -> None:
     babble.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
     babble.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
     babble.add_argument("--calibration", metavar="JSON", help="with --camera: a saved calibration")
-    babble.add_argument("--camera-latency-ms", type=float, default=0.0, help="with --camera: its latency [ms] (0)")
     babble.add_argument("--out", required=True, metavar="DIR", help="folder for the logs, the dataset and summary.json")
-    babble.add_argument("--duration", type=float, default=65.0, help="babbling time [s] (65)")
-    babble.add_argument("--trial-length-s", type=float, default=5.0, help="trial length of the dataset [s] (5)")
+    latency = dict(type=float, default=0.0, help="with --camera: its latency [ms] (0)")
+    duration = dict(type=float, default=65.0, help="babbling time [s] (65)")
+    length = dict(type=float, default=5.0, help="trial length of the dataset [s] (5)")
+    limits = ((0.0, 1000.0), (1e-3, MAX_SESSION_S), (0.1, MAX_SESSION_S))
+    flags = ("--camera-latency-ms", "--duration", "--trial-length-s")
+    add_options(babble, list(zip(flags, limits, (latency, duration, length))))
     babble.add_argument("--seed", type=int, default=0, help="seed of the babbling torques (and of the twin)")
     babble.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     babble.set_defaults(func=run_babble)
@@ -121,7 +124,6 @@ def run_check(args: argparse.Namespace) -> int:
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.task import Task
 
-    check_numbers(args, {"--rest-s": (0.1, 600.0), "--counts-per-rev": (4, 2**24)})
     outputs = Outputs()
     if args.out is not None:  # an empty --out is an error, not no report
         outputs.file(args.out, what="--out")
@@ -258,7 +260,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import CALIBRATION_MAX_RESIDUAL_PX, HANGING_TIP_TOLERANCE_M
-    from softpend.vision.calibration import calibrate_from_markers
+    from softpend.vision.calibration import calibrate_from_markers, read_markers
     from softpend.vision.tracker import TipTracker
 
     outputs = Outputs()
@@ -266,7 +268,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     report_path = outputs.file(
         out.with_name((out.stem if out.suffix else out.name) + ".report.json"), what="the calibration report"
     )
-    markers = _markers(args.markers)
+    markers = np.array(read_markers("--markers", args.markers or "[]"))
     params = _rod(args)
     frame = _twin_frame(params, markers, args.seed) if args.twin else _grab_frame(args.camera)
     calibration = calibrate_from_markers(frame, markers.tolist())
@@ -298,16 +300,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
         f"{HANGING_TIP_TOLERANCE_M * 1e3:g}) -> {out}"
     )
     return 0 if passed else 1
-
-
-def _markers(text: str):
-    """``--markers``: a JSON list of 3 to 6 points [m] or a file holding one."""
-    from softpend.vision.calibration import MAX_CALIBRATION_BYTES, points_array, read_json_file
-
-    raw = (
-        json.loads(text) if text.lstrip().startswith("[") else read_json_file("--markers", text, MAX_CALIBRATION_BYTES)
-    )
-    return points_array("--markers", raw, 3, 6)
 
 
 def _twin_frame(params, markers, seed: int):
@@ -374,8 +366,6 @@ def run_babble(args: argparse.Namespace) -> int:
         raise ValueError("--camera, --markers and --calibration are for --port; the twin films itself")
     if args.port and not args.camera:
         raise ValueError("--port needs --camera (index, URL or video file)")
-    limits = {"--duration": (1e-3, MAX_SESSION_S), "--trial-length-s": (0.1, MAX_SESSION_S)}
-    check_numbers(args, {**limits, "--camera-latency-ms": (0.0, 1000.0)})
     if not (math.isfinite(args.duration) and args.duration >= args.trial_length_s + 3):
         raise ValueError(f"--duration must be at least --trial-length-s + 3 s, got {args.duration!r}")
     outputs = Outputs()
@@ -426,14 +416,14 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     from softpend.hardware.twin import rig_babble_controller
     from softpend.io.samplelog import SampleLog
     from softpend.plant import RodParams
-    from softpend.vision.calibration import AffineCalibration
+    from softpend.vision.calibration import AffineCalibration, read_markers
     from softpend.vision.camera import DEFAULT_MARKERS_M
     from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live
 
     for name in PORT_BABBLE_FILES:
         outputs.live(out / name)
-    markers = _markers(args.markers).tolist() if args.markers else DEFAULT_MARKERS_M
+    markers = read_markers("--markers", args.markers) or DEFAULT_MARKERS_M
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
     source = open_tip_source(
         args.camera,

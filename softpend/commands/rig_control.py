@@ -10,9 +10,9 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, check_numbers
+from softpend.commands.options import MAX_SESSION_S, Option, add_options
 from softpend.plant.params import MAX_N_LINKS
 
 #: ``--camera-effects`` names: no imperfection, or the CameraEffects class method of that name.
@@ -21,7 +21,7 @@ CAMERA_EFFECTS = ("clean", "rig", "noisy")
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid", "planner")
 
 #: The options after CONTROLLER: (flag, closed interval checked before anything starts, add_argument keywords).
-OPTIONS: tuple[tuple[str, Optional[tuple[float, float]], dict[str, Any]], ...] = (
+OPTIONS: tuple[Option, ...] = (
     ("--out", None, dict(required=True, metavar="DIR", help="folder for the logs and summary.json")),
     ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, default=10.0, help="run length [s] (default 10)")),
     ("--camera", None, dict(metavar="CAMERA", help="with --port: camera index, stream URL or video file")),
@@ -44,7 +44,6 @@ OPTIONS: tuple[tuple[str, Optional[tuple[float, float]], dict[str, Any]], ...] =
     ("--no-progress", None, dict(action="store_true", help="hide the progress bar")),
     ("--json", None, dict(action="store_true", help="print the summary as JSON")),
 )
-OPTION_RANGES = {flag: limits for flag, limits, _ in OPTIONS if limits is not None}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,8 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
     target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
-    for flag, _, keywords in OPTIONS:
-        parser.add_argument(flag, **keywords)
+    add_options(parser, OPTIONS)
     parser.set_defaults(func=run)
 
 
@@ -73,14 +71,18 @@ def build_controller(
     from softpend.control.swingup import EnergySwingUpController
 
     rod, dt = task.rod, task.dt_s
-    if spec == "lqr":
-        return LQRController.from_params(rod, dt, state="joint"), task, "LQR (joint state)"
-    if spec == "lqr-obs":
-        return LQRController.from_params(rod, dt, state="observation"), task, "LQR (observations)"
-    if spec == "swingup":
-        return EnergySwingUpController(rod, dt_s=dt), task, "energy swing-up + LQR"
-    if spec == "swingup-obs":
-        return EnergySwingUpController.for_observations(rod, dt_s=dt), task, "energy swing-up + LQR (observations)"
+    builtin = {
+        "lqr": lambda: (LQRController.from_params(rod, dt, state="joint"), "LQR (joint state)"),
+        "lqr-obs": lambda: (LQRController.from_params(rod, dt, state="observation"), "LQR (observations)"),
+        "swingup": lambda: (EnergySwingUpController(rod, dt_s=dt), "energy swing-up + LQR"),
+        "swingup-obs": lambda: (
+            EnergySwingUpController.for_observations(rod, dt_s=dt),
+            "energy swing-up + LQR (observations)",
+        ),
+    }
+    if spec in builtin:
+        controller, label = builtin[spec]()
+        return controller, task, label
     if spec == "pid":
         if pid_gains is None:
             gains = tune_pid(plant_simulator(task), torque_limit_nm=rod.torque_limit_nm, max_evaluations=60).gains
@@ -93,9 +95,8 @@ def build_controller(
         from softpend.study.rig_runs import PLANNER, TimedController
 
         result = run_planner(planner_config(task, planner_overrides), progress=progress)
-        controller = result.controller
         label = f"{PLANNER}, learned in {result.plant_seconds:.2f} plant s"
-        return TimedController(controller, {"planner_plant_s": result.plant_seconds}), task, label
+        return TimedController(result.controller, {"planner_plant_s": result.plant_seconds}), task, label
     if not Path(spec).exists():
         raise ValueError(
             f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; {spec!r} is neither"
@@ -119,7 +120,6 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--camera is for --port; the twin films itself with the synthetic camera")
     if args.port and not (args.camera or args.no_camera):
         raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
-    check_numbers(args, OPTION_RANGES)
     outputs = Outputs()
     out = outputs.folder(args.out, TWIN_CONTROL_FILES if args.twin else PORT_CONTROL_FILES, what="--out")
     base = Task(start_noise_rad=args.start_noise)

@@ -5,39 +5,39 @@ from __future__ import annotations
 
 import argparse
 
+from softpend.commands.options import MAX_SESSION_S, Option, add_options
+
+OPTIONS: tuple[Option, ...] = (
+    ("--camera", None, dict(help="track live instead: a camera index (0), a stream URL or a video file")),
+    ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, help="with --camera: stop after this many seconds")),
+    ("--camera-latency-ms", (0.0, 1000.0), dict(type=float, default=0.0, help="with --camera: its latency [ms] (0)")),
+    ("--out", None, dict(required=True, metavar="CSV", help="output CSV, replaced once the video is tracked")),
+    ("--markers", None, dict(metavar="JSON", help="marker positions [m]: a JSON list [[x, y], ...] or file")),
+    ("--calibration", None, dict(metavar="JSON", help="a saved AffineCalibration instead of markers")),
+    ("--fps", (1e-3, 1e6), dict(type=float, help="frame rate of a video without a sidecar (timestamps)")),
+    ("--min-area", (0.0, 1e8), dict(type=float, default=20.0, help="smallest dot area [px^2] (default 20)")),
+    ("--no-hub", None, dict(action="store_true", help="do not track the magenta hub marker")),
+)
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("track", help="track the tip dot in a video file into a time-stamped CSV")
     parser.add_argument("video", nargs="?", help="video file (its sidecar VIDEO.json is used if present)")
-    parser.add_argument("--camera", help="track live instead: a camera index (0), a stream URL or a video file")
-    parser.add_argument("--duration", type=float, help="with --camera: stop after this many seconds")
-    parser.add_argument(
-        "--camera-latency-ms", type=float, default=0.0, help="with --camera: exposure-to-host latency [ms] (default 0)"
-    )
-    parser.add_argument("--out", required=True, metavar="CSV", help="output CSV, replaced once the video is tracked")
-    parser.add_argument("--markers", metavar="JSON", help="marker positions [m]: a JSON list [[x, y], ...] or file")
-    parser.add_argument("--calibration", metavar="JSON", help="a saved AffineCalibration instead of markers")
-    parser.add_argument("--fps", type=float, help="frame rate for timestamps when the video has no sidecar")
-    parser.add_argument("--min-area", type=float, default=20.0, help="smallest dot area [px^2] (default 20)")
-    parser.add_argument("--no-hub", action="store_true", help="do not track the magenta hub marker")
+    add_options(parser, OPTIONS)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from softpend.commands.options import MAX_SESSION_S, check_numbers
     from softpend.io.outputs import Outputs
     from softpend.vision.calibration import AffineCalibration, read_markers
-    from softpend.vision.camera import MAX_FPS
     from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live, track_video
     from softpend.vision.tracker import TipTracker
 
     outputs = Outputs()  # before the work: a CSV this command wrote may be replaced, no other file
     outputs.file(args.out, what="--out")
-    limits = {"--duration": (1e-3, MAX_SESSION_S), "--camera-latency-ms": (0.0, 1000.0), "--min-area": (0.0, 1e8)}
-    check_numbers(args, {**limits, "--fps": (1e-3, MAX_FPS)})
     markers = read_markers("--markers", args.markers)
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
     if (args.video is None) == (args.camera is None):

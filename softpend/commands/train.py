@@ -1,39 +1,34 @@
-"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder."""
+"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder;
+prints a JSON summary."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
-from typing import Callable
+import math
+from pathlib import Path
+from typing import Any
 
-from softpend.commands.options import add_set_option
+from softpend.commands.options import Option, add_options, add_set_option
 
-#: Training entry points, one line per algorithm: ``name -> "module:function(args) -> int"``.
-ALGORITHMS: dict[str, str] = {
-    "dqn": "softpend.commands.train_rl:train_dqn_from_args",
-    "mbpo": "softpend.commands.train_rl:train_mbpo_from_args",
-    "pilco": "softpend.commands.train_pilco:train_pilco_from_args",
-}
+#: Most training episodes one command may ask for (a million: far beyond any budget of the book).
+MAX_EPISODES = 1_000_000
 
-
-def resolve(algo: str) -> Callable[[argparse.Namespace], int]:
-    """The training function registered for ``algo``."""
-    if algo not in ALGORITHMS:
-        raise ValueError(f"algo must be one of {sorted(ALGORITHMS)}, got {algo!r}")
-    module_name, function_name = ALGORITHMS[algo].split(":")
-    return getattr(importlib.import_module(module_name), function_name)
+OPTIONS: tuple[Option, ...] = (
+    ("--algo", None, dict(required=True, choices=("dqn", "mbpo", "pilco"), help="training algorithm")),
+    ("--out", None, dict(help="run folder (default: runs/<algo>-seed<SEED>)")),
+    ("--seed", None, dict(type=int, default=0, help="seed of every random draw of the run")),
+    # 0: PILCO's random trials only
+    ("--episodes", (0, MAX_EPISODES), dict(type=int, help="training episodes (default: the algorithm's)")),
+    ("--torque-limit-nm", None, dict(type=float, help="motor torque limit [N m]")),
+    ("--n-links", None, dict(type=int, help="links of the PRB rod (default: RodParams)")),
+    ("--resume", None, dict(action="store_true", help="continue from the latest checkpoint in --out")),
+    ("--no-progress", None, dict(action="store_true", help="hide the progress bar")),
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("train", help="train a controller (DQN, DQN-MBPO, PILCO)")
-    parser.add_argument("--algo", required=True, choices=sorted(ALGORITHMS), help="training algorithm")
-    parser.add_argument("--out", default=None, help="run folder (default: runs/<algo>-seed<SEED>)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw of the run")
-    parser.add_argument("--episodes", type=int, default=None, help="training episodes (default: the algorithm's)")
-    parser.add_argument("--torque-limit-nm", type=float, default=None, help="motor torque limit [N m]")
-    parser.add_argument("--n-links", type=int, default=None, help="links of the PRB rod (default: RodParams)")
-    parser.add_argument("--resume", action="store_true", help="continue from the latest checkpoint in --out")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_options(parser, OPTIONS)
     add_set_option(
         parser,
         help="override a field of the algorithm's config (repeatable; VALUE parsed as JSON, else a string; "
@@ -42,15 +37,72 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-#: Most training episodes one command may ask for (a million: far beyond any budget of the book).
-MAX_EPISODES = 1_000_000
-
-
 def run(args: argparse.Namespace) -> int:
-    from softpend.commands.options import check_numbers
+    from softpend.io.outputs import json_text
+    from softpend.study.presets import load_hparams
 
-    check_numbers(args, {"--episodes": (0, MAX_EPISODES)})  # before anything starts (0: PILCO's random trials only)
-    if args.out is None:
-        args.out = f"runs/{args.algo}-seed{args.seed}"
-    args.overrides = dict(args.overrides or [])
-    return int(resolve(args.algo)(args) or 0)
+    out = args.out if args.out is not None else f"runs/{args.algo}-seed{args.seed}"
+    flags = {f"task.rod.{n}": getattr(args, n) for n in ("n_links", "torque_limit_nm") if getattr(args, n) is not None}
+    if args.algo == "pilco":  # the --set overrides win over the flags
+        if args.resume:
+            raise ValueError("--resume is not supported for pilco (runs are short; start a new run)")
+        episodes = {} if args.episodes is None else {"n_policy_trials": args.episodes}
+        config = load_hparams("pilco", overrides={"seed": args.seed, **episodes, **flags, **dict(args.overrides)})
+        summary = _train_pilco(config, out, progress=not args.no_progress)
+    else:  # the flags win over the --set overrides
+        summary = _train_rl(args, load_hparams(args.algo, overrides={**dict(args.overrides), **flags}), out)
+    print(json_text(summary, indent=2))
+    if args.algo != "pilco":
+        print(f"saved {out}/agent.zip")
+    return 0
+
+
+def _train_pilco(config, out: str, progress: bool) -> dict[str, Any]:
+    import torch
+
+    from softpend.io.outputs import check_output_folder
+    from softpend.pilco.loop import run_pilco
+    from softpend.study.head_to_head import refuse_other_pilco_run
+
+    torch.set_num_threads(1)
+    # before the work: a new or empty folder; one that holds a PILCO run (of any settings) is never trained over
+    check_output_folder(out, what="run folder", owned=lambda folder: (folder / "pilco.json").is_file())
+    refuse_other_pilco_run(out, config)
+    result = run_pilco(config, progress=progress)
+    balance = result.real_seconds_to_balance
+    return {
+        "out": str(result.save(Path(out))),
+        "trials": len(result.records),
+        "plant_seconds_total": result.plant_seconds_total,
+        "real_seconds_to_balance": balance if math.isfinite(balance) else None,
+        "train_wall_s": result.train_wall_s,
+        "final_eval_upright_std_rad": result.records[-1].eval_upright_std_rad,
+    }
+
+
+def _train_rl(args: argparse.Namespace, config, out: str) -> dict[str, Any]:
+    from softpend.rl.dqn import train_dqn
+    from softpend.rl.mbpo import train_mbpo
+    from softpend.study.presets import RL_EPISODES
+
+    if args.resume and not (Path(out) / "config.json").is_file():  # a mistyped --out would start a new run
+        raise ValueError(f"--resume: {out} holds no run to resume (no config.json); leave out --resume to start one")
+    episodes = args.episodes if args.episodes is not None else RL_EPISODES[args.algo]
+    train = train_dqn if args.algo == "dqn" else train_mbpo
+    _, log = train(
+        config, seed=args.seed, episodes=episodes, run_dir=out, resume=args.resume, progress=not args.no_progress
+    )
+    last = log.evaluations[-1] if log.evaluations else {}
+    finite = lambda x: None if math.isinf(x) else x  # noqa: E731
+    return {
+        "algo": log.algo,
+        "seed": log.seed,
+        "episodes": log.n_episodes,
+        "plant_s": log.plant_s,
+        "model_steps": log.model_steps,
+        "final_eval_starts": last.get("starts_evaluated"),  # fewer than the selection starts: stopped at a failure
+        "final_eval_max_upright_std_rad": last.get("max_upright_std_rad"),
+        "final_eval_median_swing_up_time_s": last.get("median_swing_up_time_s"),
+        "real_s_to_balance": finite(log.real_s_to_balance()),
+        "episodes_to_balance": finite(log.episodes_to_balance()),
+    }

@@ -15,7 +15,7 @@ import numpy as np
 
 from softpend.rl.curves import run_to_asymptote
 from softpend.study.fresh_starts import BALANCED_FRACTION, _refuse_selection_starts, held_starts
-from softpend.study.rl_runs import METHOD_NAMES, plant_runs_root, run_folder
+from softpend.study.rl_runs import METHOD_NAMES, load_runs
 
 NOT_COMPUTED = "not computed in this build"
 VERDICTS = ("reproduced", "differs", "not comparable", NOT_COMPUTED)
@@ -79,24 +79,13 @@ def glued_values(notebook_path: Path | str) -> dict[str, Any]:
     return values
 
 
-def _runs(runs_root: Path | str, plant: str, algo: str, seeds: Sequence[int], load: Callable, errors: tuple) -> list:
-    """``load(folder, seed)`` of each seed's run folder, skipping the runs it cannot read."""
-    root, loaded = plant_runs_root(runs_root, plant), []
-    for seed in seeds:
-        try:
-            loaded.append(load(run_folder(root, algo, int(seed)), int(seed)))
-        except errors:
-            continue
-    return loaded
-
-
 def rl_run_logs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> dict[str, list[Any]]:
     """``{method name: [TrainingLog of each seed whose run folder holds one]}`` of the RL runs of Figures 4-6."""
     from softpend.rl.training_log import TrainingLog
 
     load = lambda folder, seed: TrainingLog.load(folder / "log.json")  # noqa: E731
     errors = (FileNotFoundError, ValueError, KeyError)
-    return {method: _runs(runs_root, plant, algo, seeds, load, errors) for algo, method in METHOD_NAMES.items()}
+    return {method: load_runs(runs_root, plant, algo, seeds, load, errors) for algo, method in METHOD_NAMES.items()}
 
 
 def rl_fresh_start_summaries(
@@ -114,7 +103,7 @@ def rl_fresh_start_summaries(
     summaries: dict[str, list[Any]] = {}
     for algo, method in METHOD_NAMES.items():
         load = lambda folder, seed: (seed, *load_agent(folder, which))  # noqa: E731
-        agents = _runs(runs_root, plant, algo, seeds, load, (FileNotFoundError, ValueError, KeyError))
+        agents = load_runs(runs_root, plant, algo, seeds, load, (FileNotFoundError, ValueError, KeyError))
         summaries[method] = []
         for seed, model, config in agents:
             _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
@@ -129,7 +118,7 @@ def pilco_run_results(runs_root: Path | str, seeds: Sequence[int], plant: str = 
     from softpend.pilco.loop import PilcoResult
 
     load = lambda folder, seed: PilcoResult.load(folder)  # noqa: E731
-    return _runs(runs_root, plant, "pilco", seeds, load, (FileNotFoundError, ValueError, KeyError, TypeError))
+    return load_runs(runs_root, plant, "pilco", seeds, load, (FileNotFoundError, ValueError, KeyError, TypeError))
 
 
 # ----------------------------------------------------------------------------- figures over seeds

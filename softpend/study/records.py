@@ -116,46 +116,39 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
     balanced evaluation (``inf``: never), the run's plant seconds and episodes."""
     from softpend.rl.config import load_config
     from softpend.rl.training_log import TrainingLog
-    from softpend.study.rl_runs import plant_runs_root, run_folder
+    from softpend.study.rl_runs import load_runs
 
-    rows = []
-    for seed in seeds:
-        folder = run_folder(plant_runs_root(runs_root, plant), algo, int(seed))
-        try:
-            load_config(folder / "config.json")
-            log = TrainingLog.load(folder / "log.json")
-        except (FileNotFoundError, ValueError, KeyError):
-            continue
-        to_balance = float(log.real_s_to_balance())
-        rows.append(
-            {"seed": int(seed), "plant_s_to_balance": to_balance, "plant_s": log.plant_s, "episodes": log.n_episodes}
-        )
-    return rows
+    def row(folder: Path, seed: int) -> dict[str, Any]:
+        load_config(folder / "config.json")
+        log = TrainingLog.load(folder / "log.json")
+        return {
+            "seed": seed,
+            "plant_s_to_balance": float(log.real_s_to_balance()),
+            "plant_s": log.plant_s,
+            "episodes": log.n_episodes,
+        }
+
+    return load_runs(runs_root, plant, algo, seeds, row, (FileNotFoundError, ValueError, KeyError))
 
 
 def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
     """The book's current PILCO runs, a row per seed with a run folder: plant seconds up to the first policy that
     balances (``inf``: none), the run's plant seconds, policy trials, worst test std and training CPU seconds."""
     from softpend.pilco.loop import PilcoResult
-    from softpend.study.rl_runs import plant_runs_root, run_folder
+    from softpend.study.rl_runs import load_runs
 
-    rows = []
-    for seed in seeds:
-        try:
-            result = PilcoResult.load(run_folder(plant_runs_root(runs_root, plant), "pilco", int(seed)))
-        except (FileNotFoundError, ValueError, KeyError, TypeError):
-            continue
-        rows.append(
-            {
-                "seed": int(seed),
-                "plant_s_to_balance": float(result.real_seconds_to_balance),
-                "plant_s": result.plant_seconds_total,
-                "policy_trials": sum(r.kind == "policy" for r in result.records),
-                "worst_test_std_rad": result.records[-1].eval_upright_std_rad if result.records else math.nan,
-                "train_cpu_s": result.train_cpu_s,
-            }
-        )
-    return rows
+    def row(folder: Path, seed: int) -> dict[str, Any]:
+        result = PilcoResult.load(folder)
+        return {
+            "seed": seed,
+            "plant_s_to_balance": float(result.real_seconds_to_balance),
+            "plant_s": result.plant_seconds_total,
+            "policy_trials": sum(r.kind == "policy" for r in result.records),
+            "worst_test_std_rad": result.records[-1].eval_upright_std_rad if result.records else math.nan,
+            "train_cpu_s": result.train_cpu_s,
+        }
+
+    return load_runs(runs_root, plant, "pilco", seeds, row, (FileNotFoundError, ValueError, KeyError, TypeError))
 
 
 def balance_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, str]:

@@ -8,7 +8,7 @@ import json
 import math
 import re
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.overrides import apply_overrides
@@ -158,6 +158,20 @@ def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
     check_plant_name(plant)
     root = Path(runs_root)
     return root if plant == "prb" else root.with_name(f"{root.name}-{plant}")
+
+
+def load_runs(
+    runs_root: Path | str, plant: str, algo: str, seeds: Sequence[int], load: Callable, errors: tuple
+) -> list:
+    """``load(folder, seed)`` of each seed's run folder under :func:`plant_runs_root`, skipping the runs it cannot
+    read (``errors``)."""
+    root, loaded = plant_runs_root(runs_root, plant), []
+    for seed in seeds:
+        try:
+            loaded.append(load(run_folder(root, algo, int(seed)), int(seed)))
+        except errors:
+            continue
+    return loaded
 
 
 #: Method names used in the figures, by algorithm.

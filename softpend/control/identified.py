@@ -16,6 +16,7 @@ import numpy as np
 
 from softpend.checks import positive, positive_int
 from softpend.control.swingup import EnergySwingUpController
+from softpend.envs.randomised import RodUncertainty
 from softpend.evaluation import HOLD_STD_RAD, evaluate
 from softpend.plant import RodParams
 from softpend.sysid.babble import BabbleProtocol, babble
@@ -25,6 +26,8 @@ from softpend.task import Task
 
 #: First start seed of the stopping check's simulated starts (far from every training, selection and report seed).
 CHECK_SEED_BASE = 500_000
+#: Relative standard deviation standing for one that is not finite (a draw spans at most a factor ``e``).
+WIDEST_RELATIVE_STD = 1e3
 #: Records ``seconds`` of the excitation program on the plant (from hanging) and returns the dataset.
 Recorder = Callable[[float], TrajectoryDataset]
 
@@ -120,20 +123,23 @@ def simulated_recorder(
     return record
 
 
+def identified_uncertainty(result: GreyBoxResult, scale: float = 2.0) -> RodUncertainty:
+    """The estimated rod fields' relative standard deviations (a field estimated at 0 is not drawn; one whose
+    deviation is not finite is drawn over the widest range) and the draws' width ``scale`` in them."""
+    relative = {}
+    for name, value in result.estimates.items():
+        if hasattr(result.params, name):
+            ratio = result.std[name] / abs(value) if value else 0.0
+            relative[name] = ratio if math.isfinite(ratio) else WIDEST_RELATIVE_STD
+    return RodUncertainty(tuple(relative.items()), scale)
+
+
 def uncertainty_draws(result: GreyBoxResult, n: int, seed: int, scale: float = 2.0) -> list[RodParams]:
-    """``n`` rods around the estimate: each estimated rod field times ``exp(u)``, ``u`` uniform within
-    ``scale`` relative standard deviations (log scale, as the identification's)."""
+    """``n`` rods drawn from :func:`identified_uncertainty` around the estimate (log scale, as the
+    identification's)."""
     rng = np.random.default_rng(seed)
-    rod_fields = [name for name in result.estimates if hasattr(result.params, name)]
-    draws = []
-    for _ in range(positive_int("n", n)):
-        changes = {}
-        for name in rod_fields:
-            value = result.estimates[name]
-            spread = scale * result.std[name] / abs(value) if value else 0.0
-            changes[name] = value * math.exp(rng.uniform(-1.0, 1.0) * min(spread, 1.0))
-        draws.append(result.params.replace(**changes))
-    return draws
+    uncertainty = identified_uncertainty(result, scale)
+    return [uncertainty.draw(result.params, rng) for _ in range(positive_int("n", n))]
 
 
 def _balances_every_draw(

@@ -1,24 +1,28 @@
 """Commissioning an unknown rod on the twin, in resumable stages, each writing its output in one folder:
 
-``excite`` (random torque, or a multisine, from hanging through the rig's own I/O, synchronised into a rig dataset), ``identify``
-(grey-box, from ``RodParams()``), ``design`` (energy swing-up + LQR on the observations of the identified rod,
-checked in the simulator on rods drawn from the identification's uncertainty), ``verify`` (that controller on the
-twin from fresh hanging starts under each sensor condition, beside the same controller designed on the default rod)
-and ``report``.  The twin's truth stays on the twin's
-side (:mod:`softpend.study.twin_side`, a child process); only the report's relative errors come from it.
+``excite`` (random torque, or a multisine, from hanging through the rig's own I/O, synchronised into a rig
+dataset), ``identify`` (grey-box, from ``RodParams()``), ``design`` (energy swing-up + LQR on the observations of
+the identified rod, checked in the simulator on rods drawn from the identification's uncertainty), ``train`` (DQN,
+DQN-MBPO and PILCO from the book's settings in the simulator of the identified rod, each training episode or trial on
+a rod drawn from the identification's uncertainty), ``verify`` (every commissioned class on the twin from fresh
+hanging starts under each sensor condition, beside the same class for the default rod) and ``report``.  The twin's
+truth stays on the twin's side (:mod:`softpend.study.twin_side`, a child process); only the report's relative
+errors come from it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
 from softpend.checks import in_range, int_at_least, one_of, positive
+from softpend.envs.randomised import RodUncertainty
 from softpend.plant import RodParams
 from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
 from softpend.study.unknown_rod import UNKNOWN_FIELDS
@@ -37,7 +41,13 @@ __all__ = [
 ]
 
 #: The stages in order.
-STAGES = ("excite", "identify", "design", "verify", "report")
+STAGES = ("excite", "identify", "design", "train", "verify", "report")
+#: The learned controller classes, trained in the ``train`` stage.
+LEARNERS = ("dqn", "mbpo", "pilco")
+#: The controller classes commissioned (``swingup``: the energy swing-up + LQR on the observations).
+CLASSES = ("swingup",) + LEARNERS
+#: Each learner's changes to the book's settings (``episodes``: the training episodes of DQN and DQN-MBPO).
+DEFAULT_LEARNERS: dict[str, dict[str, Any]] = {"dqn": {"episodes": 250}, "mbpo": {"episodes": 80}, "pilco": {}}
 #: What the identification estimates: the rod fields and the rod's mass, which with the mass known stands for the
 #: torque gain (a gain ``g`` is the rod with every mass, inertia, stiffness and damping over ``g``), and the camera's
 #: delay within a sample left after the clock synchronisation (unmodelled, it biases the damping estimates).
@@ -48,10 +58,12 @@ WIGGLE_S = 2.0
 REST_S = 0.5
 #: Verification seeds start here (commissioning seeds lie below it).
 VERIFY_SEED_OFFSET = 1_000_000_000
-#: Label of the commissioned controller.
-CONTROLLER = "energy swing-up + LQR (observations), identified rod"
+#: Names of the classes in the report's rows.
+CLASS_NAMES = {"swingup": "energy swing-up + LQR (observations)", "dqn": "DQN", "mbpo": "DQN-MBPO", "pilco": "PILCO"}
+#: Label of the commissioned swing-up + LQR.
+CONTROLLER = f"{CLASS_NAMES['swingup']}, identified rod"
 #: Label of the same controller designed on the default rod (what a user gets without commissioning), verified beside.
-DEFAULT_ROD_CONTROLLER = "energy swing-up + LQR (observations), default rod"
+DEFAULT_ROD_CONTROLLER = f"{CLASS_NAMES['swingup']}, default rod"
 SETTINGS_FILE = "commission.json"
 
 
@@ -62,7 +74,10 @@ class CommissionConfig:
     ``"multisine"``: peak ``peak_fraction`` of the limit, up to ``band_high_hz``) cut into trials of
     ``trial_length_s``; the identification's windows and iterations; the
     design check's ``check_draws`` rods ``uncertainty_scale`` standard deviations wide, ``check_starts`` starts of
-    ``check_duration_s`` each; ``verify_starts`` twin starts of ``verify_duration_s`` per condition; ``seed``."""
+    ``check_duration_s`` each (the learners' training rods are drawn as wide); the ``controllers`` commissioned
+    (of :data:`CLASSES`), ``learners``: each learner's changes to the book's settings (:data:`DEFAULT_LEARNERS`);
+    ``default_rod_runs``: run folders of learners trained for the default rod, verified beside; ``verify_starts``
+    twin starts of ``verify_duration_s`` per condition; ``seed`` (also the learners' training seed)."""
 
     excite_s: float = 10.0
     program: str = "noise"
@@ -80,8 +95,27 @@ class CommissionConfig:
     verify_starts: int = 10
     verify_duration_s: float = 10.0
     seed: int = 0
+    controllers: tuple[str, ...] = CLASSES
+    learners: Mapping[str, Mapping[str, Any]] = field(default_factory=lambda: dict(DEFAULT_LEARNERS))
+    default_rod_runs: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        controllers = tuple(self.controllers) if isinstance(self.controllers, (list, tuple)) else ()
+        if not controllers or len(set(controllers)) != len(controllers) or not set(controllers) <= set(CLASSES):
+            raise ValueError(f"controllers must be distinct names of {list(CLASSES)}, got {self.controllers!r}")
+        object.__setattr__(self, "controllers", tuple(c for c in CLASSES if c in controllers))
+        for name, allowed in (("learners", dict), ("default_rod_runs", str)):
+            value = getattr(self, name)
+            if not isinstance(value, Mapping) or not set(value) <= set(LEARNERS):
+                raise ValueError(f"{name} must map names of {list(LEARNERS)}, got {value!r}")
+            if not all(isinstance(v, allowed) for v in value.values()):
+                raise ValueError(f"{name}: every value must be a {allowed.__name__}, got {value!r}")
+        learners = {k: dict(v) for k, v in {**DEFAULT_LEARNERS, **self.learners}.items()}
+        for name, settings in learners.items():
+            if name != "pilco":
+                settings["episodes"] = int_at_least(f"learners.{name}.episodes", settings.get("episodes", 1), 1)
+        object.__setattr__(self, "learners", learners)
+        object.__setattr__(self, "default_rod_runs", dict(self.default_rod_runs))
         for name in ("excite_s", "trial_length_s", "window_s", "check_duration_s", "uncertainty_scale"):
             positive(name, getattr(self, name))
         positive("verify_duration_s", self.verify_duration_s)
@@ -171,6 +205,7 @@ class _Run:
         "excite": ("excite", ("rig_dataset.npz", "excite.json")),
         "identify": ("identify", ("identification.json",)),
         "design": ("design", ("design.json",)),
+        "train": ("train", ("train.json",)),
         "verify": ("verify", ("verify.json",)),
     }
 
@@ -324,18 +359,101 @@ def _design(run: _Run) -> dict:
     }
 
 
+def learner_config(
+    learner: str, model: RodParams, uncertainty: RodUncertainty, settings: Mapping[str, Any], seed: int
+) -> Any:
+    """The book's settings of ``learner`` (:func:`~softpend.study.presets.load_hparams`) on the rod ``model``, with
+    ``settings`` (but ``episodes``) applied and each training episode (PILCO: trial) on a rod drawn from
+    ``uncertainty``; PILCO's seed ``seed``."""
+    from softpend.study.presets import load_hparams
+    from softpend.task import Task
+
+    config = load_hparams(learner, Task(rod=model), {k: v for k, v in settings.items() if k != "episodes"})
+    return dataclasses.replace(config, rod_uncertainty=uncertainty, **({"seed": seed} if learner == "pilco" else {}))
+
+
+def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) -> dict:
+    """Train (or keep the finished run of) one learner under ``root``; its run folder and training figures."""
+    from softpend.pilco.loop import PilcoResult
+    from softpend.rl.training_log import TrainingLog
+    from softpend.study.head_to_head import pilco_jobs, run_and_save
+    from softpend.study.rl_runs import rl_jobs, run_folder, train_run
+
+    folder = run_folder(root, learner, seed, config)
+    if learner == "pilco":
+        for _, args in pilco_jobs(config, [seed], root):
+            run_and_save(*args, progress=False)
+        result = PilcoResult.load(folder)
+        figures = {
+            "trials": len(result.records),
+            "simulator_s": result.plant_seconds_total,
+            "balanced": math.isfinite(result.real_seconds_to_balance),
+            "wall_s": result.train_wall_s,
+        }
+    else:
+        for _, args in rl_jobs([(learner, config, [seed], episodes)], root):
+            train_run(*args, progress=False)
+        log = TrainingLog.load(folder / "log.json")
+        rows = log.episodes[-1:] + log.evaluations[-1:]
+        figures = {
+            "episodes": log.n_episodes,
+            "simulator_s": log.plant_s,
+            "balanced": log.stop_reason is not None,
+            "wall_s": max((float(r.get("wall_s", 0.0)) for r in rows), default=0.0),
+        }
+    return {"folder": str(folder.relative_to(root.parent)), **figures}
+
+
+def _train(run: _Run) -> dict:
+    from softpend.control.identified import identified_uncertainty
+
+    config = run.config
+    identification = run.read("identify")
+    model = RodParams.from_dict(identification["model_rod"])
+    uncertainty = identified_uncertainty(_greybox_result(identification["greybox"]), config.uncertainty_scale)
+    runs = {}
+    for learner in (c for c in config.controllers if c in LEARNERS):
+        settings = config.learners[learner]
+        learner_settings = learner_config(learner, model, uncertainty, settings, config.seed)
+        runs[learner] = _train_one(
+            learner, learner_settings, config.seed, settings.get("episodes", 0), run.out / "train"
+        )
+    return {"rod_uncertainty": uncertainty.to_dict(), "runs": runs, "plant_s": 0.0}
+
+
+def _class_controllers(run: _Run) -> dict[str, dict[str, dict]]:
+    """Per commissioned class: the commissioned controller's and the default rod's (when there is one) label and
+    twin-side spec (``model_rod`` of a swing-up + LQR, or the ``run`` folder of a learner)."""
+    config = run.config
+    runs = run.read("train")["runs"]
+    model = run.read("design")["model_rod"]
+    out = {}
+    for name in config.controllers:
+        if name == "swingup":
+            specs = {"identified": {"model_rod": model}, "default": {"model_rod": RodParams().to_dict()}}
+        else:
+            specs = {"identified": {"run": str(run.out / runs[name]["folder"])}}
+            if name in config.default_rod_runs:
+                specs["default"] = {"run": config.default_rod_runs[name]}
+        out[name] = {
+            version: {"label": f"{CLASS_NAMES[name]}, {version} rod", "spec": spec} for version, spec in specs.items()
+        }
+    return out
+
+
 def _verify(run: _Run) -> dict:
     config = run.config
-    models = {CONTROLLER: run.read("design")["model_rod"], DEFAULT_ROD_CONTROLLER: RodParams().to_dict()}
+    specs = {v["label"]: v["spec"] for versions in _class_controllers(run).values() for v in versions.values()}
     seeds = verification_seeds(config)
     rows = on_twin_side(
-        verify_on_twin, run.truth, str(run.private), models, list(CONDITIONS), seeds, config.verify_duration_s
+        verify_on_twin, run.truth, str(run.private), specs, list(CONDITIONS), seeds, config.verify_duration_s
     )
     return {
         "seeds": seeds,
         "rows": rows,
         "plant_s": {
-            name: sum(r["plant_s"] for by_condition in rows.values() for r in by_condition[name]) for name in CONDITIONS
+            label: {name: sum(r["plant_s"] for r in by_condition[name]) for name in CONDITIONS}
+            for label, by_condition in rows.items()
         },
     }
 
@@ -344,7 +462,9 @@ def _report(run: _Run) -> dict:
     from softpend.study.rig_runs import summary_rows
 
     config = run.config
-    excite, identification, design, verify = (run.read(s) for s in ("excite", "identify", "design", "verify"))
+    excite, identification, design, train, verify = (
+        run.read(s) for s in ("excite", "identify", "design", "train", "verify")
+    )
     identified = identification["identified"]
     truth = on_twin_side(truth_errors, run.truth, str(run.private), {n: v["estimate"] for n, v in identified.items()})
     for name, entry in identified.items():
@@ -354,18 +474,26 @@ def _report(run: _Run) -> dict:
         label: [row for group in by_condition.values() for row in group]
         for label, by_condition in verify["rows"].items()
     }
+    classes = {}
+    for name, versions in _class_controllers(run).items():
+        label = versions["identified"]["label"]
+        default = versions.get("default")
+        classes[name] = {
+            "label": label,
+            "plant_s": excite["plant_s"] + sum(verify["plant_s"][label].values()),
+            "verify_plant_s": verify["plant_s"][label],
+            "simulator_s": design["simulator_s"] if name == "swingup" else train["runs"][name]["simulator_s"],
+            "training": train["runs"].get(name),
+            "verification": summary_rows(rows[label]),
+            "default_rod_verification": summary_rows(rows[default["label"]]) if default else None,
+        }
     fit = identification["greybox"]["fit"]
     return {
         "twin": run.truth.to_dict(),
         "settings": asdict(config),
-        "plant_s": {
-            "excite": excite["plant_s"],
-            "identify": 0.0,
-            "design": 0.0,
-            **{f"verify_{name}": s for name, s in verify["plant_s"].items()},
-            "commissioning": excite["plant_s"],
-        },
-        "simulator_s": {"design": design["simulator_s"]},
+        "plant_s": {"excite": excite["plant_s"], "identify": 0.0, "design": 0.0, "train": 0.0},
+        "simulator_s": {"design": design["simulator_s"], **{k: v["simulator_s"] for k, v in train["runs"].items()}},
+        "rod_uncertainty": train["rod_uncertainty"],
         "identified": identified,
         "truth_source": "the twin's side, for this report only (the commissioning never read it)",
         "identification_fit": {
@@ -377,8 +505,7 @@ def _report(run: _Run) -> dict:
             "camera_delay_s": identification["greybox"]["calibration"]["camera_delay_s"],
         },
         "design": design["uncertainty_check"],
-        "verification": summary_rows(rows[CONTROLLER]),
-        "default_rod_verification": summary_rows(rows[DEFAULT_ROD_CONTROLLER]),
+        "classes": classes,
         "seeds": {"commissioning": config.commissioning_seeds(), "verification": verify["seeds"]},
     }
 
@@ -387,6 +514,7 @@ _STAGE_WORK: dict[str, Callable[[_Run], dict]] = {
     "excite": _excite,
     "identify": _identify,
     "design": _design,
+    "train": _train,
     "verify": _verify,
     "report": _report,
 }
@@ -437,21 +565,24 @@ def commissioned_rods(
 
 
 def commission_table(reports: Sequence[dict]) -> list[dict]:
-    """One row per report: the rod's seed, the plant seconds of its commissioning, the largest relative error of an
+    """One row per report and class: the rod's seed, the class, the plant seconds of its commissioning (excitation
+    and its verification), the simulator seconds of its design check or training, the largest relative error of an
     identified parameter (infinite when one was held at the guess), and per sensor condition the fresh starts the
-    commissioned controller and the default rod's balanced."""
+    commissioned controller and the default rod's balanced ("not run" without a default-rod version)."""
     rows = []
     for report in reports:
-        row = {
-            "rod": report["twin"]["seed"],
-            "plant_s": report["plant_s"]["commissioning"],
-            "max_error_pct": 100.0 * max(identification_errors(report)),
-        }
-        for key, summary in (
-            ("commissioned", report["verification"]),
-            ("default_rod", report["default_rod_verification"]),
-        ):
-            for entry in summary:
-                row[f"{key}_{entry['condition']}"] = f"{entry['successes']} of {entry['starts']}"
-        rows.append(row)
+        max_error_pct = 100.0 * max(identification_errors(report))
+        for name, entry in report["classes"].items():
+            row = {
+                "rod": report["twin"]["seed"],
+                "controller": CLASS_NAMES[name],
+                "plant_s": entry["plant_s"],
+                "simulator_s": entry["simulator_s"],
+                "max_error_pct": max_error_pct,
+            }
+            for prefix, key in (("commissioned", "verification"), ("default_rod", "default_rod_verification")):
+                row.update({f"{prefix}_{condition}": "not run" for condition in CONDITIONS})
+                for summary in entry[key] or []:
+                    row[f"{prefix}_{summary['condition']}"] = f"{summary['successes']} of {summary['starts']}"
+            rows.append(row)
     return rows

@@ -141,18 +141,19 @@ def excite_on_twin(
 def verify_on_twin(
     truth: TwinTruth,
     private: str,
-    model_rods: Mapping[str, Mapping[str, Any]],
+    controllers: Mapping[str, Mapping[str, Any]],
     conditions: Sequence[str],
     seeds: Sequence[int],
     duration_s: float,
 ) -> dict[str, dict[str, list[dict[str, Any]]]]:
-    """The rows, by controller label of ``model_rods`` and by condition, of the energy swing-up + LQR on the
-    observations designed on each model rod (its estimator on the same model) from the hanging starts ``seeds`` of
-    the twin's rod (logs in ``private``)."""
+    """The rows, by controller label of ``controllers`` and by condition, from the hanging starts ``seeds`` of the
+    twin's rod (logs in ``private``) of each controller: ``{"model_rod": rod}``, the energy swing-up + LQR on the
+    observations designed on that rod, or ``{"run": folder}``, a DQN, DQN-MBPO or PILCO run's agent; the estimator
+    models the controller's rod (the run's task), never the twin's."""
     from softpend.control.identified import design_swingup
     from softpend.io.outputs import Outputs
     from softpend.plant import RodParams
-    from softpend.study.rig_runs import twin_start
+    from softpend.study.rig_runs import learned_controller, twin_start
     from softpend.task import Task
 
     unknown = [name for name in conditions if name not in CONDITIONS]
@@ -161,19 +162,24 @@ def verify_on_twin(
     private_dir = Path(private)
     true_task = Task(rod=_resolve(truth, private_dir, Outputs()).effective_rod())
     out: dict[str, dict[str, list[dict[str, Any]]]] = {}
-    for i, (label, rod) in enumerate(model_rods.items()):
-        model = RodParams.from_dict(dict(rod))
+    for i, (label, spec) in enumerate(controllers.items()):
+        if "run" in spec:
+            controller, model_task, _ = learned_controller(spec["run"], "best")
+            make = lambda: controller  # noqa: E731  (reset by the control loop at each start)
+        else:
+            model_task = Task(rod=RodParams.from_dict(dict(spec["model_rod"])))
+            make = lambda: design_swingup(model_task.rod)  # noqa: E731
         out[label] = {
             name: [
                 twin_start(
-                    design_swingup(model),
+                    make(),
                     label,
                     true_task,
                     CONDITIONS[name],
                     seed,
                     duration_s,
                     private_dir / f"model_{i}" / name / f"start_{seed}",
-                    estimator_task=Task(rod=model),
+                    estimator_task=Task(rod=model_task.rod),
                 )
                 for seed in seeds
             ]

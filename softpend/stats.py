@@ -9,16 +9,15 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.stats
 
+from softpend.checks import in_unit_interval, int_at_least
+
 
 def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
     """Wilson score interval ``(low, high)`` of a success probability from ``successes`` of ``trials``."""
-    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
-        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
-    if isinstance(successes, bool) or int(successes) != successes or not 0 <= successes <= trials:
+    n = float(int_at_least("trials", trials, 1))
+    if int_at_least("successes", successes, 0) > trials:
         raise ValueError(f"successes must be an integer in [0, trials={trials}], got {successes!r}")
-    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
-        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
-    n = float(trials)
+    in_unit_interval("confidence", confidence, include_zero=False, include_one=False)
     p = successes / n
     z = float(scipy.stats.norm.ppf(0.5 + confidence / 2.0))
     denominator = 1.0 + z**2 / n
@@ -73,10 +72,8 @@ def aggregate_interval(
         raise ValueError(f"scores must have shape (n_runs >= 2,) or (n_runs >= 2, n_tasks), got {np.shape(scores)}")
     if np.isnan(data).any():
         raise ValueError("scores must not contain NaN")
-    if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
-        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
-    if isinstance(n_resamples, bool) or int(n_resamples) != n_resamples or n_resamples < 100:
-        raise ValueError(f"n_resamples must be an integer >= 100, got {n_resamples!r}")
+    in_unit_interval("confidence", confidence, include_zero=False, include_one=False)
+    int_at_least("n_resamples", n_resamples, 100)
     aggregate = AGGREGATES[statistic]
     value = float(aggregate(data))
 

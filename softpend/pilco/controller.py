@@ -70,17 +70,12 @@ class PilcoController(_HoldController):
         super().__init__(control_dt_s)
 
     def _compute(self, observation: Observation) -> float:
-        values = observation.as_array()
-        state = self.spec.from_observations(values[None, :])
-        inputs = self.spec.model_inputs(state)
+        state = self.spec.from_observations(observation.as_array()[None, :])
         policy: RBFPolicy | LinearPolicy = self.policy
-        if (
-            self.balance_policy is not None
-            and self.balance_band is not None
-            and in_balance_band(self.spec, state, *self.balance_band)[0]
-        ):
+        band = self.balance_band
+        if self.balance_policy is not None and band is not None and in_balance_band(self.spec, state, *band)[0]:
             policy = self.balance_policy
-        return float(policy.torque_nm(inputs)[0])
+        return float(policy.torque_nm(self.spec.model_inputs(state))[0])
 
 
 class RandomTorqueController(_HoldController):
@@ -94,14 +89,12 @@ class RandomTorqueController(_HoldController):
         hold_s: tuple[float, float] | None = None,
         bang_bang: bool = False,
     ) -> None:
-        positive("torque_limit_nm", torque_limit_nm)
+        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
         positive("control_dt_s", control_dt_s)
         hold = (control_dt_s, control_dt_s) if hold_s is None else tuple(float(h) for h in hold_s)
         if len(hold) != 2 or not all(math.isfinite(h) and h > 0 for h in hold) or hold[0] > hold[1]:
             raise ValueError(f"hold_s must be (min, max) with 0 < min <= max, got {hold_s!r}")
-        self.torque_limit_nm = float(torque_limit_nm)
-        self.seed = int(seed)
-        self.bang_bang = bool(bang_bang)
+        self.seed, self.bang_bang = int(seed), bool(bang_bang)
         self.hold_periods = (max(1, int(round(hold[0] / control_dt_s))), max(1, int(round(hold[1] / control_dt_s))))
         super().__init__(control_dt_s)
 

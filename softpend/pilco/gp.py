@@ -43,20 +43,29 @@ def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.
     return np.sort(np.concatenate([np.sort(older), newest]))
 
 
+def _data(
+    inputs: np.ndarray, targets: np.ndarray, ok: Callable[..., bool], shapes: tuple[str, str]
+) -> tuple[np.ndarray, ...]:
+    """``inputs`` and ``targets`` as float arrays; ``ValueError`` unless ``ok(inputs, targets)`` and finite."""
+    x, y = np.asarray(inputs, dtype=float), np.asarray(targets, dtype=float)
+    if not ok(x, y):
+        raise ValueError(
+            f"inputs must be {shapes[0]} and targets {shapes[1]} with the same N, got {x.shape} and {y.shape}"
+        )
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("inputs and targets must be finite")
+    return x, y
+
+
 class MultiOutputGP:
     """``E`` independent GP regressors sharing the training inputs (SE-ARD kernel, zero prior mean)."""
 
     def __init__(self, inputs: np.ndarray, targets: np.ndarray, hyperparameters: Optional[GPHyperparameters] = None):
-        inputs = np.asarray(inputs, dtype=float)
-        targets = np.asarray(targets, dtype=float)
-        if inputs.ndim != 2 or targets.ndim != 2 or len(inputs) != len(targets):
-            raise ValueError(
-                f"inputs must be (N, D) and targets (N, E) with the same N, got {inputs.shape} and {targets.shape}"
-            )
+        inputs, targets = _data(
+            inputs, targets, lambda x, y: x.ndim == y.ndim == 2 and len(x) == len(y), ("(N, D)", "(N, E)")
+        )
         if len(inputs) < 2:
             raise ValueError(f"inputs must hold at least 2 points, got {len(inputs)}")
-        if not (np.all(np.isfinite(inputs)) and np.all(np.isfinite(targets))):
-            raise ValueError("inputs and targets must be finite")
         self.inputs_np = inputs
         self.targets_np = targets
         self.n_inputs = inputs.shape[1]
@@ -76,15 +85,13 @@ class MultiOutputGP:
     def condition_on(self, inputs: np.ndarray, targets: np.ndarray) -> None:
         """Condition the predictor on ``inputs`` (N, D) and ``targets`` (N, E), usually a superset of the training
         data, through FITC with the training inputs as the inducing inputs; the hyperparameters stay as they are."""
-        inputs = np.asarray(inputs, dtype=float)
-        targets = np.asarray(targets, dtype=float)
-        if inputs.ndim != 2 or inputs.shape[1] != self.n_inputs or targets.shape != (len(inputs), self.n_outputs):
-            raise ValueError(
-                f"inputs must be (N, {self.n_inputs}) and targets (N, {self.n_outputs}), "
-                f"got {inputs.shape} and {targets.shape}"
-            )
-        if not (np.all(np.isfinite(inputs)) and np.all(np.isfinite(targets))):
-            raise ValueError("inputs and targets must be finite")
+        d, e = self.n_inputs, self.n_outputs
+        inputs, targets = _data(
+            inputs,
+            targets,
+            lambda x, y: x.ndim == 2 and x.shape[1] == d and y.shape == (len(x), e),
+            (f"(N, {d})", f"(N, {e})"),
+        )
         self.conditioning = (inputs, targets)
         self._update_cache()
 
@@ -137,11 +144,8 @@ class MultiOutputGP:
             result = scipy.optimize.minimize(
                 objective, start, jac=True, method="L-BFGS-B", options={"maxiter": int(max_iterations)}
             )
-            theta = result.x
             d = self.n_inputs
-            h.log_lengthscales[a] = theta[:d]
-            h.log_signal_std[a] = theta[d]
-            h.log_noise_std[a] = theta[d + 1]
+            h.log_lengthscales[a], h.log_signal_std[a], h.log_noise_std[a] = result.x[:d], result.x[d], result.x[d + 1]
             objectives.append(float(result.fun))
         self._update_cache()
         return objectives

@@ -42,9 +42,65 @@ def saturated_linear_moments(
     return m_u, s_u, weights * c_u
 
 
-class LinearPolicy:
+class _Policy:
+    """What both policies share: parameters as named tensors (:data:`_PARAMS`), as one vector and as a state dict,
+    and the saturated torque of :meth:`pre_saturation`."""
+
+    _PARAMS: tuple[str, ...] = ()
+    torque_limit_nm: float
+
+    def parameters(self) -> list[torch.Tensor]:
+        return [getattr(self, name) for name in self._PARAMS]
+
+    def get_vector(self) -> np.ndarray:
+        """All parameters flattened, in :data:`_PARAMS` order."""
+        return torch.cat([p.reshape(-1) for p in self.parameters()]).detach().numpy().copy()
+
+    def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
+        """Inverse of :meth:`get_vector`; with ``requires_grad`` the parameters become views of the tensor given."""
+        v, start = torch.as_tensor(vector, dtype=DTYPE), 0
+        for name, p in zip(self._PARAMS, self.parameters()):
+            part = v[start : start + p.numel()].reshape(p.shape)
+            setattr(self, name, part if requires_grad else part.detach().clone())
+            start += p.numel()
+
+    def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def torque_nm(self, x: np.ndarray) -> np.ndarray:
+        """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
+        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
+        with torch.no_grad():
+            torque = sin_saturation(self.pre_saturation(xt), self.torque_limit_nm).numpy()
+        return torque if np.ndim(x) == 2 else torque[:1].reshape(())
+
+    def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
+        raise NotImplementedError
+
+    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
+        function, parameters = self.moment_function()
+        return function(mean, cov, *parameters)
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {name: p.detach().clone() for name, p in zip(self._PARAMS, self.parameters())}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        wrong = sorted(set(self._PARAMS) ^ set(state))
+        if wrong:
+            raise ValueError(f"policy state dict must hold {list(self._PARAMS)}, got {sorted(state)} ({wrong} differ)")
+        for name, p in zip(self._PARAMS, self.parameters()):
+            value = state[name].to(DTYPE)
+            if value.shape != p.shape:
+                raise ValueError(f"policy {name} must have shape {tuple(p.shape)}, got {tuple(value.shape)}")
+            setattr(self, name, value.clone())
+
+
+class LinearPolicy(_Policy):
     """Saturated linear policy ``u = u_max (9 sin z + sin 3z) / 8`` with ``z = w . x`` on ``D`` inputs (PILCO's
     ``conlin`` with ``gSat``)."""
+
+    _PARAMS = ("weights",)
 
     def __init__(self, n_inputs: int, torque_limit_nm: float, weights: np.ndarray | None = None) -> None:
         if int(n_inputs) < 1:
@@ -59,47 +115,18 @@ class LinearPolicy:
     def n_inputs(self) -> int:
         return self.weights.shape[0]
 
-    def get_vector(self) -> np.ndarray:
-        return self.weights.detach().numpy().copy()
-
-    def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
-        """Inverse of :meth:`get_vector`; with ``requires_grad`` the weights stay the (autograd) tensor given."""
-        v = torch.as_tensor(vector, dtype=DTYPE)
-        self.weights = v if requires_grad else v.detach().clone()
-
-    def torque_nm(self, x: np.ndarray) -> np.ndarray:
-        """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
-        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
-        with torch.no_grad():
-            z = xt @ self.weights
-            u = sin_saturation(z, self.torque_limit_nm)
-        torque = u.numpy()
-        return torque if np.ndim(x) == 2 else torque[:1].reshape(())
-
-    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
-        return saturated_linear_moments(mean, cov, self.weights, self.torque_limit_nm)
+    def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
+        return x @ self.weights
 
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
         """:meth:`moments` as a pure function and its arguments after ``(mean, cov)``."""
         return saturated_linear_moments, (self.weights, self.torque_limit_nm)
 
-    def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"weights": self.weights.detach().clone()}
 
-    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
-        if set(state) != {"weights"}:
-            raise ValueError(f"linear policy state dict must hold 'weights' only, got {sorted(state)}")
-        weights = state["weights"].to(DTYPE)
-        if weights.shape != self.weights.shape:
-            raise ValueError(
-                f"linear policy weights must have shape {tuple(self.weights.shape)}, got {tuple(weights.shape)}"
-            )
-        self.weights = weights.clone()
-
-
-class RBFPolicy:
+class RBFPolicy(_Policy):
     """Saturated RBF-network policy on ``D`` inputs with one scalar output (the base torque)."""
+
+    _PARAMS = ("centers", "targets", "log_lengthscales")
 
     def __init__(
         self,
@@ -129,25 +156,6 @@ class RBFPolicy:
     def n_inputs(self) -> int:
         return self.centers.shape[1]
 
-    # ------------------------------------------------------------------ parameters as one vector
-    def parameters(self) -> list[torch.Tensor]:
-        return [self.centers, self.targets, self.log_lengthscales]
-
-    def get_vector(self) -> np.ndarray:
-        """All parameters flattened (centres, targets, log length-scales)."""
-        return torch.cat([p.reshape(-1) for p in self.parameters()]).detach().numpy().copy()
-
-    def set_vector(self, vector: np.ndarray | torch.Tensor, requires_grad: bool = False) -> None:
-        """Inverse of :meth:`get_vector`; with ``requires_grad`` the parameters become autograd leaves' views."""
-        v = torch.as_tensor(vector, dtype=DTYPE)
-        n, d = self.centers.shape
-        self.centers = v[: n * d].reshape(n, d)
-        self.targets = v[n * d : n * d + n]
-        self.log_lengthscales = v[n * d + n : n * d + n + d]
-        if not requires_grad:
-            self.centers, self.targets, self.log_lengthscales = (p.detach().clone() for p in self.parameters())
-
-    # ------------------------------------------------------------------ evaluation
     def _beta(self) -> torch.Tensor:
         """``(K_cc + sn^2 I)^{-1} t``, computed once per set of parameters (a rollout's steps share it, and
         with autograd on, its gradient is accumulated once per rollout rather than once per step)."""
@@ -161,58 +169,19 @@ class RBFPolicy:
             and all(a is b for a, b in zip(cache[1], params))
         ):
             return cache[3]
-        beta = self._compute_beta()
-        self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
-        return beta
-
-    def _compute_beta(self) -> torch.Tensor:
         ell = torch.exp(self.log_lengthscales)
         d = (self.centers.unsqueeze(1) - self.centers.unsqueeze(0)) / ell
-        k = torch.exp(-0.5 * torch.sum(d * d, dim=2))
-        k = k + self.noise_var * torch.eye(k.shape[0], dtype=DTYPE)
-        return torch.linalg.solve(k, self.targets)
+        k = torch.exp(-0.5 * torch.sum(d * d, dim=2)) + self.noise_var * torch.eye(len(self.centers), dtype=DTYPE)
+        beta = torch.linalg.solve(k, self.targets)
+        self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
+        return beta
 
     def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
         """``pi~(x)`` for inputs ``x`` (M, D)."""
         d = (x.unsqueeze(1) - self.centers.unsqueeze(0)) / torch.exp(self.log_lengthscales)
         return torch.exp(-0.5 * torch.sum(d * d, dim=2)) @ self._beta()
 
-    def torque_nm(self, x: np.ndarray) -> np.ndarray:
-        """Saturated torque [N m] at deterministic inputs ``x`` (M, D) or (D,)."""
-        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
-        with torch.no_grad():
-            z = self.pre_saturation(xt)
-            u = sin_saturation(z, self.torque_limit_nm)
-        torque = u.numpy()
-        return torque if np.ndim(x) == 2 else torque[:1].reshape(())
-
-    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
-        function, parameters = self.moment_function()
-        return function(mean, cov, *parameters)
-
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
-        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)``: ``(f, params)`` with
-        ``f(mean, cov, *params) == moments(mean, cov)`` (for a compiled propagation, whose graph then holds no
-        reference to this object)."""
+        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)`` (for a compiled propagation,
+        whose graph then holds no reference to this object)."""
         return saturated_rbf_moments, (self.centers, self._beta(), self.log_lengthscales, self.torque_limit_nm)
-
-    # ------------------------------------------------------------------ persistence
-    def state_dict(self) -> dict[str, torch.Tensor]:
-        return {
-            "centers": self.centers.detach().clone(),
-            "targets": self.targets.detach().clone(),
-            "log_lengthscales": self.log_lengthscales.detach().clone(),
-        }
-
-    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
-        keys = ("centers", "targets", "log_lengthscales")
-        for key in keys:
-            if key not in state:
-                raise ValueError(f"policy state dict lacks {key!r}")
-        unknown = sorted(set(state) - set(keys))
-        if unknown:
-            raise ValueError(f"policy state dict has entries this policy does not have: {unknown}")
-        self.centers = state["centers"].to(DTYPE).clone()
-        self.targets = state["targets"].to(DTYPE).clone()
-        self.log_lengthscales = state["log_lengthscales"].to(DTYPE).clone()

@@ -169,12 +169,14 @@ class RBFPolicy(_Policy):
             and all(a is b for a, b in zip(cache[1], params))
         ):
             return cache[3]
-        ell = torch.exp(self.log_lengthscales)
-        d = (self.centers.unsqueeze(1) - self.centers.unsqueeze(0)) / ell
-        k = torch.exp(-0.5 * torch.sum(d * d, dim=2)) + self.noise_var * torch.eye(len(self.centers), dtype=DTYPE)
-        beta = torch.linalg.solve(k, self.targets)
+        beta = self._compute_beta()
         self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
         return beta
+
+    def _compute_beta(self) -> torch.Tensor:
+        d = (self.centers.unsqueeze(1) - self.centers.unsqueeze(0)) / torch.exp(self.log_lengthscales)
+        k = torch.exp(-0.5 * torch.sum(d * d, dim=2)) + self.noise_var * torch.eye(len(self.centers), dtype=DTYPE)
+        return torch.linalg.solve(k, self.targets)
 
     def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
         """``pi~(x)`` for inputs ``x`` (M, D)."""

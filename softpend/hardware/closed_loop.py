@@ -1,7 +1,6 @@
 """The host's rig loop, paced by the device's STATE stream (STOP on any exception, every state logged first):
-:func:`run_control_loop` plays a program of time (babbling); :func:`run_closed_loop` runs any controller behind
-the state estimator (control arms with the first camera correction, a blind camera is a safe stop), on a rig or
-on the digital twin in simulated time (:func:`run_twin_control`)."""
+:func:`run_control_loop` plays a program of time; :func:`run_closed_loop` runs a controller behind the state
+estimator, on a rig or on the digital twin in simulated time (:func:`run_twin_control`)."""
 
 from __future__ import annotations
 
@@ -14,7 +13,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from softpend.checks import non_negative, positive
+from softpend.checks import positive
 from softpend.hardware.driver import MotorLink, MotorState
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
 from softpend.io.samplelog import SampleLog
@@ -211,6 +210,10 @@ class ClosedLoopResult(LoopResult):
         return {**out, "jitter_ms_p95": self.jitter_ms_p95}
 
 
+#: Device time the camera has to make its first correction before the loop stops [s].
+ARM_TIMEOUT_S = 2.0
+
+
 class _SafeStop(Exception):
     """``(status, reason)``."""
 
@@ -223,25 +226,22 @@ def run_closed_loop(
     tip_source: Any = None,
     log: Optional[SampleLog] = None,
     camera_log: Optional[SampleLog] = None,
-    clock: Optional[DeviceClock] = None,
-    arm_timeout_s: float = 2.0,
     progress: bool = False,
 ) -> ClosedLoopResult:
     """Run ``controller(observation, q, q_dot, time_s)`` on the rig behind the open ``link`` for ``duration_s`` of
-    device time; ``tip_source`` None starts control at once; ``clock`` defaults to half the shortest of 5 pings."""
+    device time; ``tip_source`` None starts control at once, else the first camera correction within
+    :data:`ARM_TIMEOUT_S` does.  The device clock's latency is half the shortest of 5 pings."""
     _check_run(
         link,
         duration_s,
         ("log", log, rig_control_columns(estimator.n), f"rig_control_columns({estimator.n})"),
         ("camera_log", camera_log, CAMERA_LOG_COLUMNS, "CAMERA_LOG_COLUMNS"),
     )
-    non_negative("arm_timeout_s", arm_timeout_s)
-    if clock is None:
-        clock = DeviceClock(min(link.ping() for _ in range(5)) / 2)
+    clock = DeviceClock(min(link.ping() for _ in range(5)) / 2)
     if hasattr(controller, "reset"):
         controller.reset()
     link.drain_states()  # states queued before the run are stale
-    loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, arm_timeout_s, log, camera_log)
+    loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, log, camera_log)
     torch = sys.modules.get("torch")  # on one thread while the loop runs
     threads = torch.get_num_threads() if torch is not None else 0
     try:
@@ -255,34 +255,13 @@ def run_closed_loop(
     return loop.result()
 
 
-@dataclass
-class _Tick:
-    late_flag: int
-    row_status: str
-    estimate_values: list[float]
-    frames: int = 0
-    commanded: int = 0
-
-
 class _ClosedLoop(_RigLoop):
     drains = True
 
-    def __init__(
-        self,
-        link: MotorLink,
-        controller: Any,
-        estimator: RigStateEstimator,
-        duration_s: float,
-        tip_source: Any,
-        clock: DeviceClock,
-        arm_timeout_s: float,
-        log: Optional[SampleLog],
-        camera_log: Optional[SampleLog],
-    ) -> None:
+    def __init__(self, link, controller, estimator, duration_s, tip_source, clock, log, camera_log):
         super().__init__(link, duration_s, log, estimator.dt_s)
-        self.camera_log = camera_log
         self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
-        self.clock, self.arm_timeout_s = clock, arm_timeout_s
+        self.clock, self.camera_log = clock, camera_log
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
         self.estimate_values = self.nan_estimate
         self.late = 0
@@ -290,7 +269,7 @@ class _ClosedLoop(_RigLoop):
         self.armed = tip_source is None
         self.armed_at = 0.0 if self.armed else math.nan
         self.blind_max = 0.0
-        self.status = "arming" if not self.armed else "running"
+        self.status = "running" if self.armed else "arming"
 
     def postfix(self) -> str:
         theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan
@@ -300,10 +279,10 @@ class _ClosedLoop(_RigLoop):
     def step(self, state: Any, newest: bool) -> None:
         self.clock.observe(state.host_time_s, state.device_time_s)
         self.count(state)
-        late_flag = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
-        self.late += late_flag
+        late = int(self.expected_cmd_seq is not None and state.last_cmd_seq != self.expected_cmd_seq)
+        self.late += late
         self.expected_cmd_seq = None
-        tick = _Tick(late_flag, self.status, self.nan_estimate)
+        estimate, frames, commanded, status = self.nan_estimate, 0, 0, self.status
         try:
             measured = (self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
             if not self.estimator.started:
@@ -312,24 +291,33 @@ class _ClosedLoop(_RigLoop):
                 self.estimator.update_encoder(*measured)
             if newest:
                 self._check_safety()
-                self._command(tick)
+                e = self.estimator.estimate()
+                estimate = [e.time_s, *e.observation, *e.q, *e.q_dot, e.tip_std_m]
+                command = float(self.controller(e.observation, e.q, e.q_dot, e.time_s)) if self.armed else 0.0
+                self.expected_cmd_seq = self.link.send_torque(command)
+                self.send_times.append(self.link.clock.now_s())
+                commanded = int(self.armed)
                 if self.tip_source is not None:
-                    self._poll_camera(tick)
-            tick.row_status = self.status
+                    frames = self._poll_camera()
+            status = self.status
         except _SafeStop as stop:
             self.link.stop()
-            self.status = tick.row_status = stop.args[0]
-            self.stop_reason = stop.args[1]
+            status, self.stop_reason = stop.args
+            self.status = status
         except BaseException:
             self.link.emergency_stop()  # zero torque first, so the log records what is in force
-            tick.row_status = "error"
+            status = "error"
             raise
         finally:
-            if newest and self.stop_reason is None and tick.row_status != "error" and self.t >= self.duration_s:
-                tick.row_status = "completed"
-            self._log_row(state, tick)
+            if newest and self.stop_reason is None and status != "error" and self.t >= self.duration_s:
+                status = "completed"
+            if self.log is not None:
+                row = [state.host_time_s, state.device_time_s, self.t, state.seq, state.phi_rad, state.phi_dot_rad_s]
+                row += [state.applied_torque_nm, state.flags, self.link.last_command_nm, commanded, late, frames]
+                blind = self.estimator.blind_s if self.estimator.started else math.nan
+                self.log.append([*row, blind, *estimate, STATUS_CODES[status]])
         self.samples += 1
-        self.estimate_values = tick.estimate_values
+        self.estimate_values = estimate
 
     def _check_safety(self) -> None:
         estimator = self.estimator
@@ -341,25 +329,16 @@ class _ClosedLoop(_RigLoop):
                     f"no camera correction for {estimator.blind_s:.3f} s "
                     f"(max_blind_s {estimator.config.max_blind_s} s) at t = {self.t:.2f} s",
                 )
-        if not self.armed and self.t > self.arm_timeout_s:
-            raise _SafeStop(
-                "arm_timeout", f"the camera did not correct the estimate within arm_timeout_s = {self.arm_timeout_s} s"
-            )
+        if not self.armed and self.t > ARM_TIMEOUT_S:
+            raise _SafeStop("arm_timeout", f"the camera did not correct the estimate within {ARM_TIMEOUT_S} s")
 
-    def _command(self, tick: _Tick) -> None:
-        e = self.estimator.estimate()
-        tick.estimate_values = [e.time_s, *e.observation, *e.q, *e.q_dot, e.tip_std_m]
-        command = float(self.controller(e.observation, e.q, e.q_dot, e.time_s)) if self.armed else 0.0
-        self.expected_cmd_seq = self.link.send_torque(command)
-        self.send_times.append(self.link.clock.now_s())
-        tick.commanded = int(self.armed)
-
-    def _poll_camera(self, tick: _Tick) -> None:
-        """Feed the camera's new measurements to the estimator (after the command); the first accepted one arms."""
+    def _poll_camera(self) -> int:
+        """Feed the camera's new measurements to the estimator (after the command), the first accepted one arming
+        the loop; how many there were."""
         assert self.t0 is not None
         polled = self.link.clock.now_s()
-        for m in self.tip_source.poll():
-            tick.frames += 1
+        measurements = self.tip_source.poll()
+        for m in measurements:
             capture = self.clock.to_device(m.capture_time_s) - self.t0
             accepted = (not m.lost) and self.estimator.update_tip(capture, m.x_m, m.y_m)
             if accepted and not self.armed:
@@ -367,14 +346,7 @@ class _ClosedLoop(_RigLoop):
             if self.camera_log is not None:
                 times = [m.capture_time_s, m.delivered_time_s, polled, capture]
                 self.camera_log.append([m.frame, *times, m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
-
-    def _log_row(self, state: Any, tick: _Tick) -> None:
-        if self.log is None:
-            return
-        row = [state.host_time_s, state.device_time_s, self.t, state.seq, state.phi_rad, state.phi_dot_rad_s]
-        row += [state.applied_torque_nm, state.flags, self.link.last_command_nm, tick.commanded, tick.late_flag]
-        blind = self.estimator.blind_s if self.estimator.started else math.nan
-        self.log.append([*row, tick.frames, blind, *tick.estimate_values, STATUS_CODES[tick.row_status]])
+        return len(measurements)
 
     def result(self) -> ClosedLoopResult:
         tip_source = self.tip_source
@@ -458,8 +430,7 @@ def run_twin_control(
     error: Optional[str] = None
     try:
         if camera is not None:
-            settings = {f.name: getattr(camera, f.name) for f in dataclasses.fields(camera)}
-            source = SyntheticLiveCamera(device.poses, clock, **settings, on_frame=on_frame)
+            source = SyntheticLiveCamera(device.poses, clock, **vars(camera), on_frame=on_frame)
             source.start()
             if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
                 raise ValueError(

@@ -175,14 +175,14 @@ def plant_seconds_rows(
     ]
 
 
-def method_summary(rows: list[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]]:
+def method_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per method: seeds, seeds balanced, median plant seconds with its 95 % bootstrap interval, and the worst."""
     out = []
     for key in [k for k in METHODS if any(r["key"] == k for r in rows)]:
         seconds = np.array([r["plant_s_to_balance"] for r in rows if r["key"] == key], float)
         low = high = float(np.median(seconds))
         if seconds.size >= 2 and np.all(np.isfinite(seconds)):
-            interval = aggregate_interval(seconds, "median", seed=seed)
+            interval = aggregate_interval(seconds, "median", seed=0)
             low, high = interval.low, interval.high
         out.append(
             {
@@ -199,14 +199,13 @@ def method_summary(rows: list[dict[str, Any]], seed: int = 0) -> list[dict[str, 
     return out
 
 
-def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
+def plot_plant_seconds(rows: list[dict[str, Any]]) -> Any:
     """Plant seconds to balance per seed (dots; crosses at the edge for seeds that never balanced), one line per
     method, with the median and its interval (:func:`method_summary`); logarithmic axis."""
     import matplotlib.pyplot as plt
 
     summary = method_summary(rows)
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8, 0.6 + 0.6 * len(summary)))
+    fig, ax = plt.subplots(figsize=(8, 0.6 + 0.6 * len(summary)))
     finite = [r["plant_s_to_balance"] for r in rows if math.isfinite(r["plant_s_to_balance"])]
     edge = 2.0 * max(finite) if finite else 1.0
     for y, row in enumerate(summary):
@@ -223,7 +222,7 @@ def plot_plant_seconds(rows: list[dict[str, Any]], ax: Any = None) -> Any:
     ax.set_xlabel("plant seconds until the method has a controller that balances the fresh starts")
     ax.invert_yaxis()
     ax.grid(axis="x", alpha=0.3)
-    return ax.figure
+    return fig
 
 
 def planner_config(

@@ -35,11 +35,10 @@ def held_starts(summary: EvaluationSummary, hold_std_rad: float) -> list[bool]:
     ]
 
 
-def fresh_start_row(
-    summary: EvaluationSummary, hold_std_rad: float = HOLD_STD_RAD, balanced_fraction: float = BALANCED_FRACTION
-) -> dict[str, Any]:
-    """Success and balance figures of one controller over its fresh-start episodes."""
-    n, balanced = len(summary.results), held_starts(summary, hold_std_rad)
+def fresh_start_row(summary: EvaluationSummary) -> dict[str, Any]:
+    """Success and balance figures of one controller over its fresh-start episodes (held within
+    :data:`~softpend.evaluation.HOLD_STD_RAD`; the run balances when :data:`BALANCED_FRACTION` of them are held)."""
+    n, balanced = len(summary.results), held_starts(summary, HOLD_STD_RAD)
     k = int(sum(balanced))
     low, high = wilson_interval(k, n)
     stds = [r.upright_std_rad for r, ok in zip(summary.results, balanced) if ok]
@@ -52,7 +51,7 @@ def fresh_start_row(
         "success_rate": summary.success_rate,
         "worst_balanced_std_rad": float(max(stds)) if stds else math.nan,
         "median_swing_up_time_s": summary.median("swing_up_time_s"),
-        "run_balances": bool(k / n >= balanced_fraction),
+        "run_balances": bool(k / n >= BALANCED_FRACTION),
     }
 
 
@@ -136,7 +135,7 @@ def pilco_fresh_start_rows(
     return rows
 
 
-def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]]:
+def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (method, agent): runs that balance, and the IQM of the balanced-start rate over runs with its 95 %
     stratified bootstrap interval (a single run gets its own rate and no interval)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
@@ -146,7 +145,7 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]], seed: int = 0) ->
     for (method, agent), group in groups.items():
         rates = np.array([g["balanced_rate"] for g in group])
         if len(rates) >= 2:
-            interval = aggregate_interval(rates, "iqm", seed=seed)
+            interval = aggregate_interval(rates, "iqm", seed=0)
             value, low, high = interval.value, interval.low, interval.high
         else:
             value, low, high = float(rates[0]), math.nan, math.nan
@@ -204,13 +203,11 @@ def seed_rows(
     return rows
 
 
-def headline_figures(
-    rows: Sequence[dict[str, Any]], within_s: float = 30.0, ratio: float = 3.0, seed: int = 0
-) -> dict[str, float]:
+def headline_figures(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
     """The learning methods' figures over seeds from :func:`seed_rows` rows, per method ``m``: ``seeds_<m>``,
     ``seeds_balanced_<m>``, ``<m>_real_s_to_balance`` (median, with ``_low``/``_high`` bootstrap bounds);
-    ``mbpo_over_dqn_real_s_ratio``, ``mbpo_seeds_3x_fewer_than_dqn`` (seeds where DQN-MBPO needed at most
-    ``1 / ratio`` of DQN's plant seconds) and ``pilco_seeds_within_30s`` (within ``within_s``)."""
+    ``mbpo_over_dqn_real_s_ratio``, ``mbpo_seeds_3x_fewer_than_dqn`` (seeds where DQN-MBPO needed at most a third
+    of DQN's plant seconds) and ``pilco_seeds_within_30s``."""
     keys = {METHOD_NAMES["dqn"]: "dqn", METHOD_NAMES["mbpo"]: "mbpo", "PILCO": "pilco"}
     by_method: dict[str, dict[int, dict[str, Any]]] = {}
     for row in rows:
@@ -222,7 +219,7 @@ def headline_figures(
         out[f"seeds_balanced_{key}"] = float(sum(bool(r["final_balances"]) for r in group.values()))
         out[f"{key}_real_s_to_balance"] = float(np.median(seconds))
         if len(seconds) >= 2:
-            interval = aggregate_interval(seconds, "median", seed=seed)
+            interval = aggregate_interval(seconds, "median", seed=0)
             out[f"{key}_real_s_to_balance_low"], out[f"{key}_real_s_to_balance_high"] = interval.low, interval.high
     if "dqn" in by_method and "mbpo" in by_method:
         mf, mb = out["dqn_real_s_to_balance"], out["mbpo_real_s_to_balance"]
@@ -231,14 +228,12 @@ def headline_figures(
         out["mbpo_seeds_3x_fewer_than_dqn"] = float(
             sum(
                 math.isfinite(by_method["mbpo"][s]["plant_s_to_balance"])
-                and ratio * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
+                and 3.0 * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
                 for s in common
             )
         )
     if "pilco" in by_method:
-        out["pilco_seeds_within_30s"] = float(
-            sum(r["plant_s_to_balance"] <= within_s for r in by_method["pilco"].values())
-        )
+        out["pilco_seeds_within_30s"] = float(sum(r["plant_s_to_balance"] <= 30.0 for r in by_method["pilco"].values()))
     return out
 
 
@@ -258,21 +253,16 @@ def perturbed_rod_row(
 
 
 def converged_fresh_start_rows(
-    runs_root: Path | str,
-    seeds: Sequence[int],
-    algos: Sequence[str] = ("dqn", "mbpo"),
-    report_seeds: Sequence[int] = REPORT_SEEDS,
-    duration_s: float = TEST_EPISODE_S,
-    which: str = "final",
+    runs_root: Path | str, seeds: Sequence[int], report_seeds: Sequence[int] = REPORT_SEEDS
 ) -> list[dict[str, Any]]:
-    """:func:`rl_fresh_start_rows` of one agent per run on the batched chain at its default (converged) sub-steps
-    (:func:`softpend.rl.dqn.evaluate_agents_batched`), from the same starts."""
+    """:func:`rl_fresh_start_rows` of the final agent of each run on the batched chain at its default (converged)
+    sub-steps (:func:`softpend.rl.dqn.evaluate_agents_batched`), from the same starts."""
     from softpend.rl.dqn import evaluate_agents_batched, load_agent
 
-    runs = [(algo, int(seed)) for algo in algos for seed in seeds]
+    runs = [(algo, int(seed)) for algo in METHOD_NAMES for seed in seeds]
     agents = {}
     for algo, seed in runs:
-        agents[algo, seed] = load_agent(run_folder(runs_root, algo, seed), which)
+        agents[algo, seed] = load_agent(run_folder(runs_root, algo, seed), "final")
         _refuse_selection_starts(
             report_seeds, agents[algo, seed][1].selection_seeds, f"the agents of {algo} seed {seed}"
         )
@@ -284,14 +274,14 @@ def converged_fresh_start_rows(
     for members in groups.values():
         config = agents[members[0]][1]
         evaluated = evaluate_agents_batched(
-            [agents[run][0] for run in members], config, seeds=tuple(report_seeds), duration_s=duration_s
+            [agents[run][0] for run in members], config, seeds=tuple(report_seeds), duration_s=TEST_EPISODE_S
         )
         summaries.update(zip(members, evaluated))
     return [
         {
             "method": METHOD_NAMES[algo],
             "seed": seed,
-            "agent": AGENTS[which],
+            "agent": AGENTS["final"],
             "plant": "converged",
             **fresh_start_row(summaries[algo, seed]),
         }

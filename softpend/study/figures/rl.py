@@ -16,17 +16,11 @@ from softpend.rl.training_log import TrainingLog
 COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 
-def plot_learning_curves(
-    logs_by_method: Mapping[str, Sequence[TrainingLog]],
-    window: int = 10,
-    fig: Optional[plt.Figure] = None,
-    threshold_rad: float = SUCCESS_STD_RAD,
-    seed: int = 0,
-):
-    """Figure 4: each seed's smoothed return (``window`` episodes) with each method's median episode of reaching
+def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], threshold_rad: float = SUCCESS_STD_RAD):
+    """Figure 4: each seed's return (mean over 10 episodes) with each method's median episode of reaching
     the asymptote (dotted), and the worst start's evaluation upright std (IQM over seeds with its 95 % band; a
     failed start counts as :data:`~softpend.evaluation.SUCCESS_STD_RAD`), against episodes and plant seconds."""
-    fig = fig or plt.figure(figsize=(11, 7))
+    fig, window = plt.figure(figsize=(11, 7)), 10
     axes = fig.subplots(2, 2, sharey="row")
     for i, (method, logs) in enumerate(logs_by_method.items()):
         color = COLORS.get(method, f"C{i}")
@@ -37,7 +31,7 @@ def plot_learning_curves(
                     log.column(axis), smoothed, color=color, lw=0.8, alpha=0.6, label=method if k == 0 else None
                 )
             if len(logs) >= 2:
-                band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=seed, failed_as=SUCCESS_STD_RAD)
+                band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=0, failed_as=SUCCESS_STD_RAD)
                 axes[1, col].plot(band["x"], band["value"], color=color, label=method)
                 axes[1, col].fill_between(band["x"], band["low"], band["high"], color=color, alpha=0.2, lw=0)
             else:
@@ -129,32 +123,19 @@ def animate_swingup(result: EvaluationResult, link_points, length_m: float, ever
     return anim
 
 
-def upright_error_over_time(
-    results: Sequence[EvaluationResult], window_s: float = 0.5
-) -> tuple[np.ndarray, np.ndarray]:
-    """Time-averaged upright error ``|theta|`` (trailing ``window_s`` moving average) of every episode:
-    ``(time_s, errors)`` with ``errors`` of shape ``(n_episodes, n_steps)`` (the shortest episode's steps)."""
-    if len(results) == 0:
-        raise ValueError("results must not be empty")
-    n = min(len(r.time_s) for r in results)
-    dt = float(results[0].time_s[1] - results[0].time_s[0])
-    window = max(1, int(round(window_s / dt)))
-    errors = np.array([moving_average(np.abs(r.theta_rad[:n]), window) for r in results])
-    return results[0].time_s[:n], errors
-
-
 def plot_upright_error(
     results_by_method: Mapping[str, Sequence[EvaluationResult]],
     window_s: float = 0.5,
-    ax=None,
     threshold_rad: float = SUCCESS_STD_RAD,
 ):
-    """Figure 6: the time-averaged upright error of each method's controllers: the median over episodes (line)
-    and the band between the 25th and 75th percentiles (with one episode, that episode)."""
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8, 4))
+    """Figure 6: the upright error ``|theta|`` (trailing ``window_s`` moving average) of each method's episodes: the
+    median over episodes (line) and the band between the 25th and 75th percentiles (with one episode, that episode)."""
+    _, ax = plt.subplots(figsize=(8, 4))
     for i, (method, results) in enumerate(results_by_method.items()):
-        t, errors = upright_error_over_time(results, window_s)
+        n = min(len(r.time_s) for r in results)  # the shortest episode's steps
+        t = results[0].time_s[:n]
+        window = max(1, int(round(window_s / float(t[1] - t[0]))))
+        errors = np.array([moving_average(np.abs(r.theta_rad[:n]), window) for r in results])
         color = COLORS.get(method, f"C{i}")
         ax.plot(t, np.median(errors, axis=0), color=color, label=f"{method} (median of {len(results)})")
         if len(results) > 1:

@@ -17,19 +17,16 @@ _LABELS = {
 }
 
 
-def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.ndarray] = None, title: str = ""):
+def plot_rollout(curves: dict[str, np.ndarray], title: str = ""):
     """Four panels (phi, theta, ex, ey) of :func:`softpend.sysid.rollout_trial` ``curves``: data (solid) and the
-    open-loop model rollout (dashed), on ``axes`` or a new 2 x 2 figure."""
+    open-loop model rollout (dashed), on a new 2 x 2 figure; returns its axes."""
     import matplotlib.pyplot as plt
 
-    if axes is None:
-        fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), sharex=True, constrained_layout=True)
-        axes = np.ravel(axes)
-    t = curves["time_s"]
-    for ax, name in zip(axes, ("phi_rad", "theta_rad", "ex_m", "ey_m")):
-        ax.plot(t, curves[name], color="k", lw=1.5, label="simulator")
-        ax.plot(t, curves[f"{name}_model"], color="tab:orange", lw=1.5, ls="--", label="model rollout")
-        ax.set_ylabel(_LABELS[name])
+    axes = np.ravel(plt.subplots(2, 2, figsize=(9, 5.5), sharex=True, constrained_layout=True)[1])
+    for ax, (name, label) in zip(axes, _LABELS.items()):
+        ax.plot(curves["time_s"], curves[name], color="k", lw=1.5, label="simulator")
+        ax.plot(curves["time_s"], curves[f"{name}_model"], color="tab:orange", lw=1.5, ls="--", label="model rollout")
+        ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     for ax in axes[-2:]:
         ax.set_xlabel("time in trial [s]")
@@ -39,15 +36,12 @@ def plot_rollout(curves: dict[str, np.ndarray], axes: Optional[Sequence | np.nda
     return axes
 
 
-def plot_rollout_errors(
-    errors: dict[str, RolloutErrors], axes: Optional[Sequence] = None, length_m: Optional[float] = None
-):
+def plot_rollout_errors(errors: dict[str, RolloutErrors], length_m: Optional[float] = None):
     """Tip-position and base-angle RMSE against the horizon, one line per model (``errors``: label ->
     :class:`softpend.sysid.RolloutErrors`), the "hold" yardstick, and the 5 % line with ``length_m``."""
     import matplotlib.pyplot as plt
 
-    if axes is None:
-        fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
+    axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)[1]
     first = next(iter(errors.values()))
     for label, err in errors.items():
         axes[0].semilogy(err.horizon_s[1:], err.tip_rmse_m[1:], lw=1.8, label=label)
@@ -71,21 +65,20 @@ def plot_rollout_errors(
 def plot_rollout_overlay(axes: Sequence, curves: dict[str, np.ndarray], label: str, color: str = "tab:blue"):
     """Add a second model's rollout (dotted) to the panels of :func:`plot_rollout` (same keys: ``time_s`` and
     ``<name>_model`` for ``phi_rad, theta_rad, ex_m, ey_m``)."""
-    for ax, name in zip(axes, ("phi_rad", "theta_rad", "ex_m", "ey_m")):
+    for ax, name in zip(axes, _LABELS):
         ax.plot(curves["time_s"], curves[f"{name}_model"], color=color, lw=1.5, ls=":", label=label)
     axes[0].legend(loc="best", fontsize=8)
     return axes
 
 
 def plot_lyapunov_errors(
-    curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float, length_m: float, ax=None
+    curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float, length_m: float
 ):
     """RMS tip error of each model against the open-loop horizon in Lyapunov times ``t * lambda``, with the
     5 % of ``L`` line of the valid prediction time."""
     import matplotlib.pyplot as plt
 
-    if ax is None:
-        _, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)[1]
     x = np.asarray(horizon_s) * lyapunov_rate_per_s
     for label, curve in curves.items():
         ax.semilogy(x[1:], np.asarray(curve)[1:], lw=1.8, label=label)

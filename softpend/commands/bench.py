@@ -11,10 +11,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("bench", help="measure performance figures (see softpend.study.bench)")
     parser.add_argument("--json", action="store_true", help="print one JSON object (default: a table)")
     parser.add_argument(
-        "--only",
-        action="append",
-        metavar="GROUP",
-        help=f"run only this group (repeatable): {[n for n, _ in BENCHMARKS]}",
+        "--only", action="append", metavar="GROUP", help=f"run only this group (repeatable): {list(BENCHMARKS)}"
     )
     parser.set_defaults(func=run)
 
@@ -29,5 +26,5 @@ def run(args: argparse.Namespace) -> int:
     else:
         width = max(map(len, results), default=0)
         for key, value in results.items():
-            print(f"{key:<{width}}  {value:.6g}" if isinstance(value, float) else f"{key:<{width}}  {value}")
+            print(f"{key:<{width}}  {f'{value:.6g}' if isinstance(value, float) else value}")
     return 0

@@ -46,9 +46,6 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
         )
     )
     rig = planner_twin_figures(REPORT_SEEDS[:RIG_STARTS], RIG_DURATION_S)
-    figures["mpc_rig_successes"] = float(rig["successes"])
-    figures["mpc_rig_step_ms_p95"] = rig["step_ms_p95"]
-    figures["mpc_rig_step_ms_max"] = rig["step_ms_max"]
-    figures["mpc_rig_control_period_ms"] = rig["control_period_ms"]
-    figures["mpc_rig_steps_over_period"] = rig["steps_over_period"]
+    for key in ("successes", "step_ms_p95", "step_ms_max", "control_period_ms", "steps_over_period"):
+        figures[f"mpc_rig_{key}"] = float(rig[key])
     return figures

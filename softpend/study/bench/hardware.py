@@ -64,17 +64,9 @@ def bench_hardware() -> dict[str, float]:
 
     cv2.setNumThreads(1)
     trajectory = babbling_trajectory(N_FRAMES + 2)
-    rmse_clean, fps_clean, fps_full, lost_clean = _tracker_figures(CameraEffects(), 0, trajectory)
-    rmse_noisy, fps_noisy, fps_noisy_full, lost_noisy = _tracker_figures(CameraEffects.noisy(), 1, trajectory)
-    out = {
-        "tracker_fps_640x480": fps_clean,
-        "tracker_fps_640x480_full_frame": fps_full,
-        "tracker_fps_640x480_noisy": fps_noisy,
-        "tracker_fps_640x480_noisy_full_frame": fps_noisy_full,
-        "tracker_rmse_px_clean": rmse_clean,
-        "tracker_rmse_px_noisy": rmse_noisy,
-        "tracker_lost_frames_clean": lost_clean,
-        "tracker_lost_frames_noisy": lost_noisy,
-    }
-    out.update(_rig_loop_jitter())
-    return out
+    out: dict[str, float] = {}
+    for name, effects, seed in (("clean", CameraEffects(), 0), ("noisy", CameraEffects.noisy(), 1)):
+        fps = "tracker_fps_640x480" + ("_noisy" if seed else "")
+        rmse, out[fps], out[f"{fps}_full_frame"], lost = _tracker_figures(effects, seed, trajectory)
+        out[f"tracker_rmse_px_{name}"], out[f"tracker_lost_frames_{name}"] = rmse, lost
+    return out | _rig_loop_jitter()

@@ -22,23 +22,22 @@ from softpend.torch_threads import one_torch_thread
 N_STEPS = 4000
 
 
-def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb") -> float:
-    """Steps per second through the Gymnasium API under seeded random actions."""
+def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb", legacy: bool = False) -> float:
+    """Steps per second through the Gymnasium API under seeded random actions (``legacy``: the baseline step path
+    of :func:`make_legacy`)."""
     import softpend  # noqa: F401  (registers the environments)
 
     env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links), plant=plant)
-    return _timed_steps_per_s(env, np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32))
-
-
-def _timed_steps_per_s(env: gym.Env, actions: np.ndarray) -> float:
-    """Steps per second of ``env`` through ``actions``."""
+    if legacy:
+        make_legacy(env)
+    actions = np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32)
     env.reset(seed=0)
     start = time.perf_counter()
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             env.reset()
-    return len(actions) / (time.perf_counter() - start)
+    return n_steps / (time.perf_counter() - start)
 
 
 def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
@@ -96,22 +95,6 @@ def make_legacy(env) -> None:
     plant = env.unwrapped.plant
     plant._chain.advance = types.MethodType(_legacy_advance, plant._chain)
     plant.observe = types.MethodType(_legacy_observe, plant)
-
-
-def env_steps_per_s_paths(n_links: int = 4, n_steps: int = N_STEPS, repeats: int = 3) -> tuple[float, float]:
-    """Steps per second of the environment through today's step path and the legacy one, interleaved (best of
-    ``repeats``)."""
-    import softpend  # noqa: F401  (registers the environments)
-
-    actions = np.random.default_rng(0).uniform(-1, 1, size=(n_steps, 1)).astype(np.float32)
-    best = {"new": 0.0, "legacy": 0.0}
-    for _ in range(repeats):
-        for path in ("new", "legacy"):
-            env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links))
-            if path == "legacy":
-                make_legacy(env)
-            best[path] = max(best[path], _timed_steps_per_s(env, actions))
-    return best["new"], best["legacy"]
 
 
 def _best_times(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
@@ -188,7 +171,11 @@ def bench_plant() -> dict[str, float]:
     env4 = max(env_steps_per_s(4) for _ in range(2))
     solver4 = max(_solver_steps_per_s(4) for _ in range(2))
     env10 = env_steps_per_s(10)
-    new4, legacy4 = env_steps_per_s_paths(4)
+    paths = {False: 0.0, True: 0.0}  # today's step path and the legacy one, interleaved
+    for _ in range(3):
+        for legacy in paths:
+            paths[legacy] = max(paths[legacy], env_steps_per_s(4, legacy=legacy))
+    new4, legacy4 = paths[False], paths[True]
     dt_s = 0.01
     fast: dict[str, Any] = {"integrator": "rosenbrock", "compiled": True}
     batched4, batched4_cpu = batched_rod_steps_per_s(4, dtype_name="float32", **fast)

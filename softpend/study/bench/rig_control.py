@@ -1,5 +1,5 @@
 """Closed-loop figures on the digital twin (``softpend bench --only rig_control``): each controller of
-:data:`CONTROLLERS` from fresh hanging starts through the whole rig stack, in the ideal simulator, and on
+:func:`controller_factories` from fresh hanging starts through the whole rig stack, in the ideal simulator, and on
 perturbed rods."""
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ N_STARTS = 10
 DURATION_S = 10.0
 #: Spread of the rod-parameter changes of ``rig_perturbed_success_<c>``.
 PERTURBATION = 0.15
-CONTROLLERS = ("swingup_lqr", "dqn", "mbpo", "pilco")
 
 
 def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
@@ -26,46 +25,37 @@ def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
     from softpend.study.rig_runs import learned_controller
     from softpend.study.rl_runs import figure_configs, figure_runs, run_folder
 
-    def swingup():
-        return EnergySwingUpController(TASK.rod, dt_s=TASK.dt_s), TASK
-
     def rl(algo: str):
-        def make():
-            seed = RL_BOOK.seeds[0]
-            figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, (seed,), RL_BOOK.runs_root, progress=True)
-            config = figure_configs()[algo]
-            controller, task, _ = learned_controller(run_folder(RL_BOOK.runs_root, algo, seed, config), "final")
-            return controller, task
-
-        return make
+        seed = RL_BOOK.seeds[0]
+        figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, (seed,), RL_BOOK.runs_root, progress=True)
+        return learned_controller(run_folder(RL_BOOK.runs_root, algo, seed, figure_configs()[algo]), "final")[:2]
 
     def pilco():
         seed = PILCO_BOOK.seeds[0]
         pilco_runs(PILCO, (seed,), PILCO_BOOK.runs_root, progress=True)
-        folder = run_folder(PILCO_BOOK.runs_root, "pilco", seed, dataclasses.replace(PILCO, seed=seed))
-        controller, task, _ = learned_controller(folder)
-        return controller, task
+        return learned_controller(
+            run_folder(PILCO_BOOK.runs_root, "pilco", seed, dataclasses.replace(PILCO, seed=seed))
+        )[:2]
 
-    return {"swingup_lqr": swingup, "dqn": rl("dqn"), "mbpo": rl("mbpo"), "pilco": pilco}
+    return {
+        "swingup_lqr": lambda: (EnergySwingUpController(TASK.rod, dt_s=TASK.dt_s), TASK),
+        "dqn": lambda: rl("dqn"),
+        "mbpo": lambda: rl("mbpo"),
+        "pilco": pilco,
+    }
 
 
-def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int = N_STARTS) -> dict[str, float]:
+def bench_rig_control() -> dict[str, float]:
     """Per controller: success on the nominal twin, in the ideal simulator and on perturbed rods, the drop from
     simulator to twin, and the successes' worst upright std, median swing-up time and median chatter."""
     from softpend.study.fresh_starts import perturbed_rod_row
     from softpend.study.presets import REPORT_SEEDS
     from softpend.study.rig_runs import RigCondition, simulator_starts, summary_rows, twin_start
 
-    factories = controller_factories()
-    unknown = [c for c in controllers if c not in factories]
-    if unknown:
-        raise ValueError(f"unknown rig controller(s) {unknown}; choose from {sorted(factories)}")
-    seeds = REPORT_SEEDS[:n_starts]
-    condition = RigCondition("nominal twin")
-    out: dict[str, float] = {}
+    seeds, condition, out = REPORT_SEEDS[:N_STARTS], RigCondition("nominal twin"), dict[str, float]()
     with tempfile.TemporaryDirectory() as tmp:
-        for name in controllers:
-            controller, task = factories[name]()
+        for name, make in controller_factories().items():
+            controller, task = make()
             task = task.replace(start_noise_rad=0.05)
             folder = Path(tmp)
             rows = [
@@ -74,10 +64,8 @@ def bench_rig_control(controllers: tuple[str, ...] = CONTROLLERS, n_starts: int 
             ]
             sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=HOLD_STD_RAD)
             twin, ideal = summary_rows(rows)[0], summary_rows(sim)[0]
-            out[f"rig_success_{name}"] = twin["success_rate"]
-            out[f"rig_upright_std_rad_{name}"] = twin["upright_std_rad"]
-            out[f"rig_swing_up_time_s_{name}"] = twin["swing_up_time_s"]
-            out[f"rig_torque_chatter_nm_per_s_{name}"] = twin["torque_chatter_nm_per_s"]
+            for key in ("success_rate", "upright_std_rad", "swing_up_time_s", "torque_chatter_nm_per_s"):
+                out[f"rig_{key.removesuffix('_rate')}_{name}"] = twin[key]
             out[f"rig_sim_success_{name}"] = ideal["success_rate"]
             perturbed = perturbed_rod_row(controller, task, PERTURBATION, report_seeds=seeds, duration_s=DURATION_S)
             out[f"rig_perturbed_success_{name}"] = perturbed["balanced_rate"]

@@ -109,9 +109,9 @@ def simulator_yardsticks(
     return out
 
 
-def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object = None) -> dict[str, float]:
+def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object) -> dict[str, float]:
     """Grey-box identification of ``data`` from the perturbed guess, its parameter errors, model quality on held-out
-    data and closed-loop usefulness, beside ``network`` (keys ``nn_*``)."""
+    data (beside ``network``: keys ``nn_*``) and closed-loop usefulness."""
     from softpend.study.greybox import (
         HANGING_PROTOCOL,
         YARDSTICK_OFFSET_RAD,
@@ -127,10 +127,8 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
     result = identify(data, initial_params=perturbed_guess(truth))
     errors = result.relative_errors(truth)
     hanging = babble(HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
-    networks = {"nn": network} if network is not None else {}
-    quality = model_quality(result.params, test, hanging, networks=networks)
+    quality = model_quality(result.params, test, hanging, networks={"nn": network})
     rows = quality["rows"]
-    grey = rows["grey-box model"]
     yardstick = rows[f"simulator started {YARDSTICK_OFFSET_RAD:g} rad off"]
     out = {
         "identify_s": result.identify_s,
@@ -139,12 +137,13 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
         "greybox_max_param_std_pct": 100 * max(result.std[n] / abs(v) for n, v in result.estimates.items()),
         "lyapunov_rate_per_s": quality["lyapunov_rate_per_s"],
         "simulator_1e-4rad_off_valid_prediction_s": yardstick["valid_prediction_s"],
-        "greybox_valid_prediction_s": grey["valid_prediction_s"],
-        "greybox_valid_prediction_lyapunov": grey["valid_prediction_lyapunov"],
-        "greybox_valid_prediction_ratio": grey["valid_prediction_s"] / yardstick["valid_prediction_s"],
-        "greybox_hanging_tip_rmse_1s_pct_length": grey["hanging_tip_rmse_pct_length"],
-        "greybox_one_step_mse": grey["one_step_mse"],
+        "greybox_one_step_mse": rows["grey-box model"]["one_step_mse"],
     }
+    for prefix, row in (("greybox", rows["grey-box model"]), ("nn", rows["nn"])):
+        out[f"{prefix}_valid_prediction_s"] = row["valid_prediction_s"]
+        out[f"{prefix}_valid_prediction_lyapunov"] = row["valid_prediction_lyapunov"]
+        out[f"{prefix}_valid_prediction_ratio"] = row["valid_prediction_s"] / yardstick["valid_prediction_s"]
+        out[f"{prefix}_hanging_tip_rmse_1s_pct_length"] = row["hanging_tip_rmse_pct_length"]
     usefulness = {
         (r["designed_on"], r["controller"]): r
         for r in closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))
@@ -154,12 +153,6 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
         out[f"greybox_{key}_successes"] = grey_row["successes"]
         out[f"true_params_{key}_successes"] = true_row["successes"]
         out[f"greybox_{key}_upright_std_ratio"] = grey_row["upright_std_rad"] / true_row["upright_std_rad"]
-    if network is not None:
-        nn = rows["nn"]
-        out["nn_valid_prediction_s"] = nn["valid_prediction_s"]
-        out["nn_valid_prediction_lyapunov"] = nn["valid_prediction_lyapunov"]
-        out["nn_valid_prediction_ratio"] = nn["valid_prediction_s"] / yardstick["valid_prediction_s"]
-        out["nn_hanging_tip_rmse_1s_pct_length"] = nn["hanging_tip_rmse_pct_length"]
     return out
 
 

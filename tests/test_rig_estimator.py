@@ -139,7 +139,7 @@ def test_outliers_are_refused_and_lead_predicts_ahead(nominal):
         for capture, delivered, x, y in frames:
             if nominal.time_s[k - 1] < delivered <= nominal.time_s[k] + 1e-9:
                 assert estimator.update_tip(capture, x, y)
-    accepted = estimator.tips_accepted
+    accepted = estimator.counts["tips_accepted"]
     capture, _, x, y = frames[-1]
     assert not estimator.update_tip(capture, x + 0.05, y)  # 5 cm off: a reflection, not the dot
     assert not estimator.update_tip(-1.0, x, y)  # older than the history
@@ -181,8 +181,12 @@ def test_a_frame_from_after_the_newest_encoder_sample_waits_for_it(nominal):
     estimator = RigStateEstimator(Task(), EstimatorConfig(lead_steps=0))
     estimator.reset(0.0, _encoder(nominal.q[0, 0]), nominal.q_dot[0, 0], nominal.torque[0])
     capture, _, x, y = nominal.frames[3]  # captured at 0.07 s
-    assert estimator.update_tip(capture, x, y) and estimator.tips_deferred == 1 and estimator.tips_accepted == 0
+    assert (
+        estimator.update_tip(capture, x, y)
+        and estimator.counts["tips_deferred"] == 1
+        and estimator.counts["tips_accepted"] == 0
+    )
     for k in range(1, 10):
         estimator.update_encoder(nominal.time_s[k], _encoder(nominal.q[k, 0]), nominal.q_dot[k, 0], nominal.torque[k])
-    assert estimator.tips_accepted == 1
+    assert estimator.counts["tips_accepted"] == 1
     assert not estimator.update_tip(10.0, x, y)  # seconds ahead: a clock error

@@ -111,7 +111,8 @@ class SimRig:
                 truth_log, truth_columns(self.plant.n_coordinates), metadata={"rig": cfg.to_dict()}, fsync_every_s=None
             )
         self._released = False
-        self.ticks = self.states_sent = self.states_dropped = self.states_garbled = 0
+        self.ticks = 0
+        self.counts = dict.fromkeys(("states_sent", "states_dropped", "states_garbled"), 0)
         self.start_s = self.clock.now_s()
         self.host: Optional[SimSerial] = None
         self.clock.call_at(self.start_s, self._on_tick)
@@ -134,15 +135,15 @@ class SimRig:
         if frame is None:
             return None
         if cfg.drop_probability and self._rng.random() < cfg.drop_probability:
-            self.states_dropped += 1
+            self.counts["states_dropped"] += 1
             return None
         if cfg.garble_probability and self._rng.random() < cfg.garble_probability:
-            self.states_garbled += 1
+            self.counts["states_garbled"] += 1
             position = int(self._rng.integers(0, len(frame) - 1))
             garbled = bytearray(frame)
             garbled[position] = (garbled[position] ^ (1 << int(self._rng.integers(0, 8)))) or 0x5A
             frame = bytes(garbled)
-        self.states_sent += 1
+        self.counts["states_sent"] += 1
         return frame
 
     def close(self) -> None:
@@ -151,9 +152,7 @@ class SimRig:
             self._truth = None
 
     def stats(self) -> dict[str, float]:
-        return {
-            name: float(getattr(self, name)) for name in ("ticks", "states_sent", "states_dropped", "states_garbled")
-        }
+        return {"ticks": float(self.ticks), **{name: float(count) for name, count in self.counts.items()}}
 
     def _on_tick(self) -> None:
         dt = self.config.task.dt_s
@@ -325,21 +324,16 @@ class EmulatorProcess:
 
         config = config if config is not None else RigConfig()
         cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]
-        if truth_log is not None:
-            cmd += ["--truth-log", str(truth_log)]
-        self.config = config
+        cmd += [] if truth_log is None else ["--truth-log", str(truth_log)]
         self._stderr = tempfile.TemporaryFile(mode="w+")
         self.process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
         stdout = self.process.stdout
         assert stdout is not None
-        ready, _, _ = select.select([stdout], [], [], 20.0)
-        line = stdout.readline().strip() if ready else ""
+        line = stdout.readline().strip() if select.select([stdout], [], [], 20.0)[0] else ""
         if not line.startswith("/dev/"):
-            self.process.kill()
-            self.process.wait()
+            self.kill()
             self._stderr.seek(0)
-            err = self._stderr.read()
-            raise RuntimeError(f"rig emulator did not start within 20 s: {line!r} {err[-2000:]}")
+            raise RuntimeError(f"rig emulator did not start within 20 s: {line!r} {self._stderr.read()[-2000:]}")
         self.port = line.split()[0]
 
     def kill(self) -> None:
@@ -347,14 +341,13 @@ class EmulatorProcess:
         self.process.kill()
         self.process.wait()
 
-    def terminate(self, timeout_s: float = 5.0) -> None:
+    def terminate(self) -> None:
         if self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout_s)
+                self.process.wait(5.0)
             except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+                self.kill()
 
     def __enter__(self) -> "EmulatorProcess":
         return self

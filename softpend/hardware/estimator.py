@@ -110,7 +110,9 @@ class RigStateEstimator:
         self.dt_s = float(task.dt_s)
         self._history: collections.deque[_Step] = collections.deque()
         self._last_tip_time_s = -math.inf
-        self.tips_accepted = self.tips_refused = self.tips_too_old = self.tips_deferred = self.encoder_gaps = 0
+        self.counts = dict.fromkeys(
+            ("tips_accepted", "tips_refused", "tips_too_old", "tips_deferred", "encoder_gaps"), 0
+        )
         self._pending_tips: list[tuple[float, float, float]] = []
         h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * n))
         h[0, 0] = 1.0
@@ -130,18 +132,12 @@ class RigStateEstimator:
     def reset(self, time_s: float, phi_rad: float, phi_dot_rad_s: float, torque_nm: float = 0.0) -> None:
         """Start from the straight rod at the measured hub angle and rate, with the config's prior uncertainty."""
         cfg, n = self.config, self.n
-        q0, qd0 = np.zeros(n), np.zeros(n)
-        q0[0], qd0[0] = phi_rad, phi_dot_rad_s
-        variances = np.concatenate(
-            [
-                [cfg.encoder_std_rad**2],
-                np.full(n - 1, cfg.initial_bend_std_rad**2),
-                np.full(n, cfg.initial_rate_std_rad_s**2),
-            ]
-        )
+        x = np.zeros(2 * n)
+        x[0], x[n] = phi_rad, phi_dot_rad_s
+        bend, rate = cfg.initial_bend_std_rad**2, cfg.initial_rate_std_rad_s**2
+        variances = [cfg.encoder_std_rad**2] + [bend] * (n - 1) + [rate] * n
         self._history.clear()
         self._pending_tips.clear()
-        x = np.concatenate([q0, qd0])
         self._history.append(
             _Step(float(time_s), x, np.diag(variances), float(torque_nm), float(phi_rad), float(phi_dot_rad_s))
         )
@@ -255,7 +251,7 @@ class RigStateEstimator:
         steps = int(round((time_s - last.time_s) / self.dt_s))
         if steps < 1:
             return  # a repeated or out-of-order frame
-        self.encoder_gaps += int(steps > 1)
+        self.counts["encoder_gaps"] += int(steps > 1)
         x, p = self._advance(last.x, last.p, last.torque_nm, steps, phi_rad, phi_dot_rad_s)
         self._history.append(_Step(float(time_s), x, p, float(torque_nm), float(phi_rad), float(phi_dot_rad_s)))
         while len(self._history) > 2 and self._history[1].time_s < time_s - self.config.history_s:
@@ -274,13 +270,13 @@ class RigStateEstimator:
             return False
         history = self._history
         if capture_time_s < history[0].time_s - self.dt_s / 2:
-            self.tips_too_old += 1
+            self.counts["tips_too_old"] += 1
             return False
         if capture_time_s > history[-1].time_s + self.dt_s / 2:
             if capture_time_s > history[-1].time_s + self.config.history_s:
                 return False  # a clock error
             self._pending_tips.append((float(capture_time_s), float(x_m), float(y_m)))
-            self.tips_deferred += 1
+            self.counts["tips_deferred"] += 1
             return True
         return self._apply_tip(capture_time_s, x_m, y_m)
 
@@ -293,12 +289,12 @@ class RigStateEstimator:
         s = jac @ step.p @ jac.T + self._r_tip
         distance2 = float(innovation @ np.linalg.solve(s, innovation))
         if distance2 > self.config.gate_sigma**2:
-            self.tips_refused += 1
+            self.counts["tips_refused"] += 1
             return False
         step.x, step.p = self._update(step.x, step.p, jac, innovation, self._r_tip)
         step.tips.append((float(capture_time_s), float(x_m), float(y_m)))
         self._replay(index)
-        self.tips_accepted += 1
+        self.counts["tips_accepted"] += 1
         self._last_tip_time_s = max(self._last_tip_time_s, float(capture_time_s))
         return True
 
@@ -326,5 +322,4 @@ class RigStateEstimator:
         )
 
     def stats(self) -> dict[str, float]:
-        names = ("tips_accepted", "tips_refused", "tips_too_old", "tips_deferred", "encoder_gaps")
-        return {name: float(getattr(self, name)) for name in names}
+        return {name: float(count) for name, count in self.counts.items()}

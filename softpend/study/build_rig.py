@@ -111,27 +111,20 @@ class QuantisedHub:
         return float(self.controller(observation, q, q_dot, time_s))
 
 
-def lqr_torque_per_tick_nm(task: Task, counts_per_rev: int) -> dict[str, float]:
-    """Torque step of the rig's LQRs for one encoder tick of the hub angle [N m], by ``"observations"`` and (PRB
-    plant) ``"joint state"``."""
-    from softpend.control.lqr import LQRController
-
-    tick = 2.0 * math.pi / int_at_least("counts_per_rev", counts_per_rev, 4)
-    obs = LQRController.from_params(task.rod, task.dt_s, state="observation")
-    assert obs.model is not None  # from_params keeps its design model
-    out = {"observations": abs(float(obs.gain[0, obs.model.state_names.index("phi_rad")])) * tick}
-    if task.plant == "prb":
-        joint = LQRController.from_params(task.rod, task.dt_s, state="joint")
-        out["joint state"] = abs(float(joint.gain[0, 0])) * tick
-    return out
-
-
 def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
     """Per encoder resolution and rig controller: successes and worst upright std with the hub angle quantised
-    (:class:`QuantisedHub`), and the LQR's torque step per tick over the torque limit."""
+    (:class:`QuantisedHub`), and the torque step of its LQR (on the observations or the joint state) for one tick
+    of the hub angle over the torque limit."""
+    from softpend.control.lqr import LQRController
+
+    obs = LQRController.from_params(task.rod, task.dt_s, state="observation")
+    assert obs.model is not None  # from_params keeps its design model
+    gain = {"observations": abs(float(obs.gain[0, obs.model.state_names.index("phi_rad")]))}
+    if task.plant == "prb":
+        gain["joint state"] = abs(float(LQRController.from_params(task.rod, task.dt_s, state="joint").gain[0, 0]))
     rows = []
     for n in counts:
-        per_tick = lqr_torque_per_tick_nm(task, n)
+        tick = 2.0 * math.pi / int_at_least("counts_per_rev", n, 4)
         for label, make in rig_controllers(task).items():
             summary = evaluate_controller(
                 QuantisedHub(make(), n), task, name=label, seeds=list(seeds), duration_s=duration_s
@@ -144,7 +137,8 @@ def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], durati
                     "starts": len(summary.results),
                     "successes": summary.successes,
                     "worst_upright_std_rad": max(stds) if stds else math.nan,
-                    "torque_per_tick_fraction": per_tick["joint state" if "joint" in label else "observations"]
+                    "torque_per_tick_fraction": gain["joint state" if "joint" in label else "observations"]
+                    * tick
                     / task.torque_limit_nm,
                 }
             )

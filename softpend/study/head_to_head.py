@@ -84,41 +84,34 @@ def run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> No
     run_pilco(config, progress=progress).save(folder)
 
 
-def curve_rows_pilco(results: Sequence[PilcoResult], method: str = "PILCO") -> list[dict[str, Any]]:
+def _curve_row(method: str, seed: int, plant_s: float, success_rate: float, std_rad: float) -> dict[str, Any]:
+    return {
+        "method": method,
+        "seed": seed,
+        "plant_s": plant_s,
+        "success_rate": success_rate,
+        "max_upright_std_rad": std_rad,
+    }
+
+
+def curve_rows_pilco(results: Sequence[PilcoResult]) -> list[dict[str, Any]]:
     """One curve row per evaluated PILCO policy."""
-    rows = []
-    for result in results:
-        for record in result.records:
-            if record.kind != "policy" or math.isnan(record.eval_success_rate):
-                continue
-            rows.append(
-                {
-                    "method": method,
-                    "seed": result.config.seed,
-                    "plant_s": record.plant_seconds_total,
-                    "success_rate": record.eval_success_rate,
-                    "max_upright_std_rad": record.eval_upright_std_rad,
-                }
-            )
-    return rows
+    return [
+        _curve_row("PILCO", result.config.seed, r.plant_seconds_total, r.eval_success_rate, r.eval_upright_std_rad)
+        for result in results
+        for r in result.records
+        if r.kind == "policy" and not math.isnan(r.eval_success_rate)
+    ]
 
 
 def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
     """The curve rows of the evaluations of training logs, by method."""
-    rows = []
-    for method, logs in logs_by_method.items():
-        for log in logs:
-            for row in log.evaluations:
-                rows.append(
-                    {
-                        "method": method,
-                        "seed": log.seed,
-                        "plant_s": float(row["plant_s"]),
-                        "success_rate": float(row["success_rate"]),
-                        "max_upright_std_rad": float(row["max_upright_std_rad"]),
-                    }
-                )
-    return rows
+    return [
+        _curve_row(method, log.seed, *(float(row[k]) for k in ("plant_s", "success_rate", "max_upright_std_rad")))
+        for method, logs in logs_by_method.items()
+        for log in logs
+        for row in log.evaluations
+    ]
 
 
 def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:

@@ -49,7 +49,7 @@ class TransferCase:
     start_noise_rad: float = 0.05
 
 
-def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.01) -> list[TransferCase]:
+def default_transfer_cases(params: Optional[RodParams] = None) -> list[TransferCase]:
     """The observation-only classical controllers: the LQR from near upright and the energy swing-up + LQR from
     hanging."""
     from softpend.control.lqr import LQRController
@@ -59,14 +59,14 @@ def default_transfer_cases(params: Optional[RodParams] = None, dt_s: float = 0.0
     return [
         TransferCase(
             "LQR (observations), balance",
-            lambda: LQRController.from_params(params, dt_s=dt_s, state="observation"),
+            lambda: LQRController.from_params(params, state="observation"),
             start="upright",
             duration_s=3.0,
             start_noise_rad=0.2,
         ),
         TransferCase(
             "energy swing-up + LQR (observations)",
-            lambda: EnergySwingUpController(params, dt_s=dt_s, lqr_state="observation", energy_source="observation"),
+            lambda: EnergySwingUpController(params, lqr_state="observation", energy_source="observation"),
             start="hanging",
             duration_s=10.0,
         ),

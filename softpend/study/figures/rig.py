@@ -54,7 +54,6 @@ def draw_filmstrip(
     span_s: Optional[float] = None,
     centre_px=None,
     half_width_px: Optional[float] = None,
-    frame_width_in: float = 1.9,
 ):
     """A figure of ``n_frames`` of ``frames`` (``(time_s, frame_bgr, detection)``, in time order) evenly spaced up
     to ``span_s``, each with the tracker's overlay (:func:`draw_tracked_frame`), cropped to ``half_width_px``
@@ -71,9 +70,7 @@ def draw_filmstrip(
     chosen = sorted({int(np.argmin(np.abs(times - t))) for t in wanted})
     height, width = frames[0][1].shape[:2]
     aspect = 1.0 if half_width_px is not None else height / width
-    fig, axes = plt.subplots(
-        1, len(chosen), figsize=(frame_width_in * len(chosen), frame_width_in * aspect + 0.35), squeeze=False
-    )
+    fig, axes = plt.subplots(1, len(chosen), figsize=(1.9 * len(chosen), 1.9 * aspect + 0.35), squeeze=False)
     for ax, index in zip(axes[0], chosen):
         time_s, frame, detection = frames[index]
         draw_tracked_frame(ax, frame, detection, zoom_px=None)

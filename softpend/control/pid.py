@@ -59,20 +59,14 @@ class PIDController:
         self.derivative_filter_s = non_negative("derivative_filter_s", derivative_filter_s)
         if tracking_time_s is None:
             kp, ki, kd = gains.as_array()
-            if kp > 0 and ki > 0 and kd > 0:
-                tracking_time_s = math.sqrt((kp / ki) * (kd / kp))
-            else:
-                tracking_time_s = 10 * dt_s
+            tracking_time_s = math.sqrt((kp / ki) * (kd / kp)) if kp > 0 and ki > 0 and kd > 0 else 10 * dt_s
         self.tracking_time_s = positive("tracking_time_s", tracking_time_s)
-        self.gains = gains
-        self.anti_windup = bool(anti_windup)
-        self.name = name
+        self.gains, self.anti_windup, self.name = gains, bool(anti_windup), name
         self.reset()
 
     def reset(self) -> None:
         """Zero the integrator and the derivative filter."""
-        self.integral_nm = 0.0
-        self.derivative_rad_s = 0.0
+        self.integral_nm, self.derivative_rad_s = 0.0, 0.0
         self._last_error_rad: Optional[float] = None
 
     def update(self, theta_rad: float) -> float:
@@ -109,37 +103,32 @@ class PIDTuningResult:
 Simulator = Callable[[PIDController, float, float], tuple[np.ndarray, np.ndarray]]
 
 
+#: Weight of the mean squared torque fraction beside the mean squared tip angle in :func:`pid_rollout_cost`.
+TORQUE_WEIGHT = 0.1
+
+
 def pid_rollout_cost(
-    controller: PIDController,
-    simulate: Simulator,
-    tilts_rad: Sequence[float] = (0.1, -0.2),
-    duration_s: float = 3.0,
-    torque_weight: float = 0.1,
+    controller: PIDController, simulate: Simulator, tilts_rad: Sequence[float] = (0.1, -0.2), duration_s: float = 3.0
 ) -> float:
-    """Mean over starts of ``mean(theta^2) + torque_weight * mean((tau / tau_max)^2)``, 10 for a rollout that
+    """Mean over starts of ``mean(theta^2) + TORQUE_WEIGHT * mean((tau / tau_max)^2)``, 10 for a rollout that
     leaves 1 rad or is not finite."""
     total = 0.0
     for tilt in tilts_rad:
         controller.reset()
-        theta, torque = simulate(controller, float(tilt), duration_s)
-        theta = np.asarray(theta, float)
-        torque = np.asarray(torque, float)
+        theta, torque = (np.asarray(a, float) for a in simulate(controller, float(tilt), duration_s))
         if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > 1.0):
             total += 10.0
             continue
-        total += float(np.mean(theta**2) + torque_weight * np.mean((torque / controller.torque_limit_nm) ** 2))
+        total += float(np.mean(theta**2) + TORQUE_WEIGHT * np.mean((torque / controller.torque_limit_nm) ** 2))
     return total / len(tilts_rad)
 
 
 def tune_pid(
     simulate: Simulator,
     initial_gains: PIDGains = PIDGains(0.5, 0.5, 0.05),
-    dt_s: float = 0.01,
     torque_limit_nm: float = RodParams.torque_limit_nm,
-    derivative_filter_s: float = 0.02,
     tilts_rad: Sequence[float] = (0.1, -0.2),
     duration_s: float = 3.0,
-    torque_weight: float = 0.1,
     max_evaluations: int = 120,
     progress: bool = False,
 ) -> PIDTuningResult:
@@ -154,34 +143,22 @@ def tune_pid(
     bar = tqdm(total=int(max_evaluations), desc="PID tuning", disable=not progress, leave=False)
 
     def cost(log_gains: np.ndarray) -> float:
-        gains = PIDGains(*np.exp(np.clip(log_gains, -12, 6)))
-        controller = PIDController(
-            gains, dt_s=dt_s, torque_limit_nm=torque_limit_nm, derivative_filter_s=derivative_filter_s
-        )
+        controller = PIDController(PIDGains(*np.exp(np.clip(log_gains, -12, 6))), torque_limit_nm=torque_limit_nm)
         bar.update(1)
-        return pid_rollout_cost(controller, simulate, tilts_rad, duration_s, torque_weight)
+        return pid_rollout_cost(controller, simulate, tilts_rad, duration_s)
 
     x0 = np.log(initial_gains.as_array())
-    initial_cost = cost(x0)
+    initial_cost, simplex = cost(x0), np.vstack([np.zeros(3), np.eye(3)])
     result = scipy.optimize.minimize(
         cost,
         x0,
         method="Nelder-Mead",
-        options={
-            "maxfev": int(max_evaluations),
-            "xatol": 1e-3,
-            "fatol": 1e-7,
-            "initial_simplex": x0 + np.vstack([np.zeros(3), np.eye(3)]),
-        },
+        options={"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + simplex},
     )
     bar.close()
     best = result.x if result.fun <= initial_cost else x0
-    return PIDTuningResult(
-        PIDGains(*np.exp(np.clip(best, -12, 6))),
-        float(min(result.fun, initial_cost)),
-        initial_cost,
-        int(result.nfev) + 1,
-    )
+    gains = PIDGains(*np.exp(np.clip(best, -12, 6)))
+    return PIDTuningResult(gains, float(min(result.fun, initial_cost)), initial_cost, int(result.nfev) + 1)
 
 
 def plant_simulator(task: Optional[Task] = None) -> Simulator:

@@ -405,13 +405,11 @@ class JointStateTracker:
     def reset(self) -> None:
         self._previous: Optional[np.ndarray] = None
 
-    def _angles(self, positions: np.ndarray, springs: Optional[np.ndarray]) -> np.ndarray:
-        p = positions
-        if springs is None:
-            return reconstruct_joint_states(p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params)
-        return reconstruct_joint_states(
-            p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params, iterations=WARM_ITERATIONS, initial_springs_rad=springs
+    def _angles(self, p: np.ndarray, springs: Optional[np.ndarray]) -> np.ndarray:
+        warm: dict[str, Any] = (
+            {} if springs is None else {"iterations": WARM_ITERATIONS, "initial_springs_rad": springs}
         )
+        return reconstruct_joint_states(p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params, **warm)
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         if self._previous is None or len(self._previous) != len(observations):
@@ -486,8 +484,7 @@ class MPPI:
         iterations: int = 1,
         terminal_fn: Optional[Callable[[Tensor], Tensor]] = None,
     ) -> None:
-        self.step_fn, self.cost_fn, self.terminal_fn = step_fn, cost_fn, terminal_fn
-        self.limit = float(torque_limit_nm)
+        self.step_fn, self.cost_fn, self.terminal_fn, self.limit = step_fn, cost_fn, terminal_fn, float(torque_limit_nm)
         self.n_knots, self.hold_steps, self.n_samples = int(n_knots), int(hold_steps), int(n_samples)
         self.noise_std, self.temperature, self.iterations = float(noise_std_nm), float(temperature), int(iterations)
         self.generator = torch.Generator().manual_seed(int(seed))

@@ -50,34 +50,22 @@ class EnergySwingUpController:
         rate_filter_s: float = 0.0,
     ) -> None:
         self.params = params if params is not None else RodParams()
-        one_of("energy_source", energy_source, ("observation", "joint"))
-        for name, value in (
-            ("energy_gain_per_j_rad_s", energy_gain_per_j_rad_s),
-            ("capture_angle_rad", capture_angle_rad),
-            ("release_angle_rad", release_angle_rad),
-        ):
-            positive(name, value)
+        self.energy_source = one_of("energy_source", energy_source, ("observation", "joint"))
+        self.energy_gain = positive("energy_gain_per_j_rad_s", energy_gain_per_j_rad_s)
+        self.capture_angle_rad = positive("capture_angle_rad", capture_angle_rad)
+        self.release_angle_rad = positive("release_angle_rad", release_angle_rad)
         if release_angle_rad < capture_angle_rad:
             raise ValueError(
                 f"release_angle_rad ({release_angle_rad}) must not be smaller than capture_angle_rad ({capture_angle_rad})"
             )
-        finite("energy_margin_j", energy_margin_j)
+        self.energy_margin_j = finite("energy_margin_j", energy_margin_j)
         self._rate_gain = float(dt_s) / (non_negative("rate_filter_s", rate_filter_s) + float(dt_s))
         self.torque_limit_nm = positive(
             "torque_limit_nm", self.params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         )
-        self.balance = (
-            balance
-            if balance is not None
-            else LQRController.from_params(
-                self.params, dt_s=dt_s, state=lqr_state, torque_limit_nm=self.torque_limit_nm
-            )
+        self.balance = balance or LQRController.from_params(
+            self.params, dt_s=dt_s, state=lqr_state, torque_limit_nm=self.torque_limit_nm
         )
-        self.energy_source = energy_source
-        self.energy_gain = float(energy_gain_per_j_rad_s)
-        self.energy_margin_j = float(energy_margin_j)
-        self.capture_angle_rad = float(capture_angle_rad)
-        self.release_angle_rad = float(release_angle_rad)
         self._design_plant: Optional[PRBPlant] = None
         self._upright_energy_j = 0.0
         if energy_source == "joint":
@@ -92,15 +80,9 @@ class EnergySwingUpController:
         cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs
     ) -> "EnergySwingUpController":
         """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin, 50 ms rate filter."""
-        options: dict[str, Any] = dict(
-            lqr_state="observation",
-            energy_source="observation",
-            energy_gain_per_j_rad_s=50.0,
-            energy_margin_j=0.02,
-            rate_filter_s=0.05,
-        )
-        options.update(kwargs)
-        return cls(params, dt_s=dt_s, **options)
+        options: dict[str, Any] = dict(lqr_state="observation", energy_source="observation", rate_filter_s=0.05)
+        options.update(energy_gain_per_j_rad_s=50.0, energy_margin_j=0.02)
+        return cls(params, dt_s=dt_s, **{**options, **kwargs})
 
     def reset(self) -> None:
         """Start in pumping mode."""
@@ -113,10 +95,8 @@ class EnergySwingUpController:
     def energy_j(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
         """Energy relative to upright at rest [J]."""
         if self._design_plant is not None:
-            return (
-                self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"]
-                - self._upright_energy_j
-            )
+            energy = self._design_plant.energy_j(np.asarray(q, float), np.asarray(q_dot, float))["total_j"]
+            return energy - self._upright_energy_j
         return pendulum_energy_j(self.params, observation.theta_rad, self._tip_rate(observation))
 
     def _tip_rate(self, observation: Observation) -> float:

@@ -22,22 +22,10 @@ from softpend.rl.config import SB3_FIELDS, DQNConfig
 from softpend.rl.training_env import make_base_env
 
 #: The pickled (``":serialized:"``) attributes of a softpend DQN agent file, each rebuilt from the config.
-REBUILT_ATTRIBUTES: frozenset[str] = frozenset(
-    {
-        "policy_class",
-        "observation_space",
-        "action_space",
-        "replay_buffer_class",
-        "train_freq",
-        "lr_schedule",
-        "exploration_schedule",
-        "_last_obs",
-        "_last_original_obs",
-        "_last_episode_starts",
-        "ep_info_buffer",
-        "ep_success_buffer",
-    }
-)
+#: Those reset by ``DQN.learn`` before any use (a loaded agent starts a fresh rollout), unused by ``predict``.
+_RESET_ATTRIBUTES = ("_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer", "ep_success_buffer")
+_BUILT = ("policy_class", "observation_space", "action_space", "replay_buffer_class", "train_freq", "lr_schedule")
+REBUILT_ATTRIBUTES: frozenset[str] = frozenset({*_BUILT, "exploration_schedule", *_RESET_ATTRIBUTES})
 
 #: Hyperparameters stored as plain JSON in an agent file that must equal the run's config.
 _CONFIG_ATTRIBUTES = [name for name in SB3_FIELDS if name != "train_freq"]
@@ -112,12 +100,7 @@ def _rebuilt(cls: type[DQN], config: DQNConfig, replay_buffer_class: type[Replay
             config.learner.exploration_final_eps,
             config.learner.exploration_fraction,
         ),
-        # reset by DQN.learn before any use (a loaded agent starts a fresh rollout), unused by predict
-        "_last_obs": None,
-        "_last_original_obs": None,
-        "_last_episode_starts": None,
-        "ep_info_buffer": None,
-        "ep_success_buffer": None,
+        **dict.fromkeys(_RESET_ATTRIBUTES),
     }
 
 

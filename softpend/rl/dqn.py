@@ -16,7 +16,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 from tqdm import tqdm
 
-from softpend.checks import check_work_size, int_at_least, positive, positive_int
+from softpend.checks import check_work_size, int_at_least, one_of, positive, positive_int
 from softpend.evaluation import evaluate_controller, metrics_from_trajectory
 from softpend.io.outputs import check_output_folder
 from softpend.io.reading import read_json_object
@@ -72,14 +72,8 @@ def evaluate_agent(
         len(seeds) * steps * per_step,
         f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step",
     )
-    return evaluate_controller(
-        controller,
-        config.task,
-        name=name,
-        seeds=seeds,
-        duration_s=duration_s,
-        stop_at_first_failure=stop_at_first_failure,
-    )
+    kwargs = dict(name=name, seeds=seeds, duration_s=duration_s, stop_at_first_failure=stop_at_first_failure)
+    return evaluate_controller(controller, config.task, **kwargs)
 
 
 def _seeds_and_duration(config: DQNConfig, seeds: Any, duration_s: Any) -> tuple[tuple[int, ...], float]:
@@ -131,13 +125,10 @@ class EpisodeRecorder(BaseCallback):
         self, config: DQNConfig, log: TrainingLog, episodes: int, model_steps: Optional[Callable[[], int]] = None
     ) -> None:
         super().__init__()
-        self.config = config
-        self.log = log
-        self.episodes = int(episodes)
+        self.config, self.log, self.episodes = config, log, int(episodes)
         self.model_steps = model_steps or (lambda: 0)
         self.episode_ended = False
-        self._started = time.perf_counter()
-        self._cpu_started = time.process_time()
+        self._started, self._cpu_started = time.perf_counter(), time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
         self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
         self._reset_episode()
@@ -182,8 +173,7 @@ class EpisodeRecorder(BaseCallback):
             std, swing_up = metrics["upright_std_rad"], metrics["swing_up_time_s"]
         row.update(upright_std_rad=std, swing_up_time_s=swing_up, model_steps=int(self.model_steps()))
         row.update(wall_s=self.wall_s(), cpu_s=self.cpu_s())
-        self.last_episode_observations = observations
-        self.last_episode_torques = np.asarray(self._torques, dtype=float)
+        self.last_episode_observations, self.last_episode_torques = observations, np.asarray(self._torques, float)
         self.log.episodes.append(row)
         self._reset_episode()
         check_finite_weights(
@@ -196,8 +186,7 @@ class ProgressBarCallback(BaseCallback):
 
     def __init__(self, recorder: EpisodeRecorder, show: bool = True) -> None:
         super().__init__()
-        self.recorder = recorder
-        self.show = show
+        self.recorder, self.show = recorder, show
         self.bar: Optional[tqdm] = None
 
     def _on_training_start(self) -> None:
@@ -233,9 +222,7 @@ class EpisodeEventCallback(BaseCallback):
 
     def __init__(self, recorder: EpisodeRecorder) -> None:
         super().__init__()
-        self.recorder = recorder
-        self.log = recorder.log
-        self.pending = False
+        self.recorder, self.log, self.pending = recorder, recorder.log, False
 
     def due(self, n_episodes: int) -> bool:
         raise NotImplementedError
@@ -268,9 +255,7 @@ class EvaluationCallback(EpisodeEventCallback):
         self, recorder: EpisodeRecorder, run_dir: Path, callback_after_eval: Optional[BaseCallback] = None
     ) -> None:
         super().__init__(recorder)
-        self.config = recorder.config
-        self.run_dir = Path(run_dir)
-        self.callback_after_eval = callback_after_eval
+        self.config, self.run_dir, self.callback_after_eval = recorder.config, Path(run_dir), callback_after_eval
         if callback_after_eval is not None:
             callback_after_eval.parent = self
         self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
@@ -332,9 +317,7 @@ class StopTrainingOnBalance(BaseCallback):
 
     def __init__(self, config: DQNConfig, log: TrainingLog, confirmation: Optional[BaseCallback] = None) -> None:
         super().__init__()
-        self.config = config
-        self.log = log
-        self.confirmation = confirmation
+        self.config, self.log, self.confirmation = config, log, confirmation
 
     def _init_callback(self) -> None:
         if self.confirmation is not None:
@@ -367,8 +350,7 @@ class ConfirmBalance(BaseCallback):
 
     def __init__(self, config: DQNConfig, log: TrainingLog) -> None:
         super().__init__()
-        self.config = config
-        self.log = log
+        self.config, self.log = config, log
 
     def _on_step(self) -> bool:
         failures = 0
@@ -401,8 +383,7 @@ class CheckpointCallback(EpisodeEventCallback):
         self, recorder: EpisodeRecorder, run_dir: Path, extra_files: Optional[Callable[[Path], None]] = None
     ) -> None:
         super().__init__(recorder)
-        self.run_dir = Path(run_dir)
-        self.extra_files = extra_files
+        self.run_dir, self.extra_files = Path(run_dir), extra_files
 
     def due(self, n_episodes: int) -> bool:
         return n_episodes % self.recorder.config.checkpoint_every_episodes == 0
@@ -415,8 +396,7 @@ class CheckpointCallback(EpisodeEventCallback):
         check_finite_weights(
             self.model, f"{self.log.algo} seed {self.log.seed}, checkpoint at episode {self.log.n_episodes}"
         )
-        final = self.run_dir / "checkpoint"
-        tmp = self.run_dir / "checkpoint.tmp"
+        final, tmp, old = (self.run_dir / name for name in ("checkpoint", "checkpoint.tmp", "checkpoint.old"))
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         self.model.save(tmp / "agent.zip")
@@ -425,7 +405,6 @@ class CheckpointCallback(EpisodeEventCallback):
         self.log.save(tmp / "log.json")
         if self.extra_files is not None:
             self.extra_files(tmp)
-        old = self.run_dir / "checkpoint.old"
         shutil.rmtree(old, ignore_errors=True)
         if final.exists():
             final.rename(old)
@@ -486,9 +465,7 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
         buffers += config.learner.buffer_size * 8 * len(OBSERVATION_NAMES) + config.rollout.buffer_size * row
     widths = [observation_dim, *config.learner.net_arch, config.n_torque_levels]
     n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
-    networks = 4 * 4 * n_weights + 2 * 4 * config.learner.batch_size * sum(
-        widths
-    )  # online, target, Adam moments; a batch
+    networks = 4 * 4 * n_weights + 2 * 4 * config.learner.batch_size * sum(widths)  # nets, Adam moments; a batch
     plant_steps = config.episode_agent_steps * config.action_repeat + 1
     eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
     records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
@@ -659,8 +636,7 @@ def train_dqn(
 
 def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:
     """An agent of a run folder and its config."""
-    if which not in ("best", "final"):
-        raise ValueError(f"which must be 'best' or 'final', got {which!r}")
+    one_of("which", which, ("best", "final"))
     path = Path(run_dir)
     folder = path.parent if path.suffix == ".zip" else path
     agent = path if path.suffix == ".zip" else path / ("best_agent.zip" if which == "best" else "agent.zip")

@@ -47,26 +47,11 @@ class MBPOReplayBuffer(ReplayBuffer):
     ) -> None:
         if n_envs != 1:
             raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
-        in_unit_interval("real_ratio", real_ratio)
-        super().__init__(
-            buffer_size,
-            observation_space,
-            action_space,
-            device=device,
-            n_envs=1,
-            optimize_memory_usage=False,
-            handle_timeout_termination=handle_timeout_termination,
-        )
-        self.real_ratio = float(real_ratio)
+        self.real_ratio = in_unit_interval("real_ratio", real_ratio)
+        spaces_ = (observation_space, action_space)
+        super().__init__(buffer_size, *spaces_, device=device, handle_timeout_termination=handle_timeout_termination)
         self.plant_observations = np.zeros((self.buffer_size, len(OBSERVATION_NAMES)), dtype=np.float64)
-        self.model_buffer = ReplayBuffer(
-            model_buffer_size,
-            observation_space,
-            action_space,
-            device=device,
-            n_envs=1,
-            handle_timeout_termination=False,
-        )
+        self.model_buffer = ReplayBuffer(model_buffer_size, *spaces_, device=device, handle_timeout_termination=False)
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D102 (SB3 API)
         self.plant_observations[self.pos] = infos[0]["plant_observations"][0]
@@ -127,10 +112,7 @@ class MBPOTrainer:
     """The model-based part of DQN-MBPO: real-episode store, model refits and model rollouts."""
 
     def __init__(self, config: MBPOConfig, seed: int, run_dir: Path, progress: bool = False) -> None:
-        self.config = config
-        self.seed = int(seed)
-        self.run_dir = Path(run_dir)
-        self.progress = progress
+        self.config, self.seed, self.run_dir, self.progress = config, int(seed), Path(run_dir), progress
         self.env = make_base_env(config)
         self.rng = np.random.default_rng([self.seed, 1])
         # draws of the training episodes' start distribution, for rollouts branched from start states
@@ -210,8 +192,7 @@ class MBPOTrainer:
         buffer; returns the number of model transitions added."""
         if self.dynamics is None or buffer.size() == 0:
             return 0
-        c = self.config
-        env = self.env
+        c, env = self.config, self.env
         raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
         for i in range(int(round(c.rollout.start_branch_fraction * n_rollouts))):  # the first rows
             vec[i], info = self.start_env.reset()
@@ -220,8 +201,7 @@ class MBPOTrainer:
         bonus = vec[:, -1].astype(np.float64)
         levels = env.torque_levels_nm
         state = torch.as_tensor(raw, dtype=torch.float32)
-        added = 0
-        alive = np.ones(n_rollouts, dtype=bool)
+        added, alive = 0, np.ones(n_rollouts, dtype=bool)
         for _ in range(length):
             q = agent.q_net(torch.as_tensor(vec, dtype=torch.float32))
             actions = q.argmax(dim=1).numpy()
@@ -304,8 +284,7 @@ class ModelRolloutCallback(BaseCallback):
 
     def __init__(self, trainer: MBPOTrainer, log: TrainingLog) -> None:
         super().__init__()
-        self.trainer = trainer
-        self.log = log
+        self.trainer, self.log = trainer, log
 
     def _init_callback(self) -> None:
         if not isinstance(self.model.replay_buffer, MBPOReplayBuffer):
@@ -331,8 +310,7 @@ class ModelRefitCallback(BaseCallback):
 
     def __init__(self, trainer: MBPOTrainer, recorder: EpisodeRecorder) -> None:
         super().__init__()
-        self.trainer = trainer
-        self.recorder = recorder
+        self.trainer, self.recorder = trainer, recorder
 
     def _on_step(self) -> bool:
         if self.recorder.episode_ended:
@@ -360,30 +338,14 @@ def train_mbpo(
     trainer = MBPOTrainer(config, seed, run_dir, progress=False)
     learning_starts = max(config.learning_starts, config.initial_random_episodes * config.episode_agent_steps)
 
+    buffer_kwargs = {"model_buffer_size": config.rollout.buffer_size, "real_ratio": config.rollout.real_ratio}
+
     def make_model(env: Any, s: int) -> DQN:
         dqn = build_dqn(
-            config,
-            env,
-            s,
-            episodes,
-            replay_buffer_class=MBPOReplayBuffer,
-            replay_buffer_kwargs={
-                "model_buffer_size": config.rollout.buffer_size,
-                "real_ratio": config.rollout.real_ratio,
-            },
+            config, env, s, episodes, replay_buffer_class=MBPOReplayBuffer, replay_buffer_kwargs=buffer_kwargs
         )
         dqn.learning_starts = learning_starts
         return dqn
 
-    return run_training(
-        "mbpo",
-        config,
-        seed,
-        episodes,
-        run_dir,
-        resume,
-        progress,
-        make_model=make_model,
-        replay_buffer_class=MBPOReplayBuffer,
-        part=trainer,
-    )
+    args = (config, seed, episodes, run_dir, resume, progress)
+    return run_training("mbpo", *args, make_model=make_model, replay_buffer_class=MBPOReplayBuffer, part=trainer)

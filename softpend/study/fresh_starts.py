@@ -221,19 +221,14 @@ def headline_figures(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
         if len(seconds) >= 2:
             interval = aggregate_interval(seconds, "median", seed=0)
             out[f"{key}_real_s_to_balance_low"], out[f"{key}_real_s_to_balance_high"] = interval.low, interval.high
-    if "dqn" in by_method and "mbpo" in by_method:
-        mf, mb = out["dqn_real_s_to_balance"], out["mbpo_real_s_to_balance"]
+    seconds_of = {key: {seed: r["plant_s_to_balance"] for seed, r in group.items()} for key, group in by_method.items()}
+    if "dqn" in seconds_of and "mbpo" in seconds_of:
+        (mf, mf_s), (mb, mb_s) = ((out[f"{k}_real_s_to_balance"], seconds_of[k]) for k in ("dqn", "mbpo"))
         out["mbpo_over_dqn_real_s_ratio"] = mf / mb if math.isfinite(mb) and mb > 0 else math.nan
-        common = sorted(set(by_method["dqn"]) & set(by_method["mbpo"]))
-        out["mbpo_seeds_3x_fewer_than_dqn"] = float(
-            sum(
-                math.isfinite(by_method["mbpo"][s]["plant_s_to_balance"])
-                and 3.0 * by_method["mbpo"][s]["plant_s_to_balance"] <= by_method["dqn"][s]["plant_s_to_balance"]
-                for s in common
-            )
-        )
-    if "pilco" in by_method:
-        out["pilco_seeds_within_30s"] = float(sum(r["plant_s_to_balance"] <= 30.0 for r in by_method["pilco"].values()))
+        fewer = [math.isfinite(mb_s[seed]) and 3.0 * mb_s[seed] <= mf_s[seed] for seed in set(mf_s) & set(mb_s)]
+        out["mbpo_seeds_3x_fewer_than_dqn"] = float(sum(fewer))
+    if "pilco" in seconds_of:
+        out["pilco_seeds_within_30s"] = float(sum(value <= 30.0 for value in seconds_of["pilco"].values()))
     return out
 
 

@@ -19,11 +19,9 @@ def truth_trajectory(
     emulator's truth log, within the device-time window ``[start_time_s, end_time_s]`` when given."""
     log = read_sample_log(truth_log)
     time_s = log["device_time_s"]
-    keep = np.ones(len(time_s), dtype=bool)
-    if start_time_s is not None:
-        keep &= time_s >= start_time_s
-    if end_time_s is not None:
-        keep &= time_s <= end_time_s
+    keep = (time_s >= (-np.inf if start_time_s is None else start_time_s)) & (
+        time_s <= (np.inf if end_time_s is None else end_time_s)
+    )
     plant = task.make_plant()
     n = plant.n_coordinates
     q = np.column_stack([log[f"q{i}_rad"][keep] for i in range(n)])

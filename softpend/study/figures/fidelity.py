@@ -75,25 +75,12 @@ def plot_transfer_matrix(
 
     controllers, labels, values = transfer_matrix(rows, plant, metric)
     shown = np.where(np.isfinite(values), values, np.nan)
+    vmax = vmax if vmax is not None else np.nanmax(shown[np.isfinite(shown)], initial=1.0)
     cmap = "RdYlGn" if metric == "success_rate" else "RdYlGn_r"
-    image = ax.imshow(
-        shown,
-        cmap=cmap,
-        vmin=0.0,
-        vmax=vmax if vmax is not None else np.nanmax(shown[np.isfinite(shown)], initial=1.0),
-        aspect="auto",
-    )
-    for i in range(values.shape[0]):
-        for j in range(values.shape[1]):
-            v = values[i, j]
-            ax.text(
-                j,
-                i,
-                "inf" if math.isinf(v) else ("-" if math.isnan(v) else f"{v:.2g}"),
-                ha="center",
-                va="center",
-                fontsize=7,
-            )
+    image = ax.imshow(shown, cmap=cmap, vmin=0.0, vmax=vmax, aspect="auto")
+    for (i, j), v in np.ndenumerate(values):
+        text = "inf" if math.isinf(v) else ("-" if math.isnan(v) else f"{v:.2g}")
+        ax.text(j, i, text, ha="center", va="center", fontsize=7)
     ax.set_xticks(range(len(labels)), labels, rotation=40, ha="right", fontsize=8)
     ax.set_yticks(range(len(controllers)), controllers, fontsize=8)
     ax.set_title(f"{metric} on the {plant} plant", fontsize=9)

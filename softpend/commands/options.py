@@ -67,3 +67,14 @@ def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float
         for item in value if isinstance(value, (list, tuple)) else [value]:
             if item is not None:
                 in_range(flag, item, low, high)
+
+
+def camera_source(args: argparse.Namespace, tracker: Any = None) -> Any:
+    """The tip source of ``--camera`` (tracking with ``tracker``, a TipTracker), calibrated by ``--calibration`` or
+    on ``--markers``, with ``--camera-latency-ms``."""
+    from softpend.vision.calibration import AffineCalibration, read_markers
+    from softpend.vision.tip_source import FrameTracker, open_tip_source
+
+    calibration = AffineCalibration.load(args.calibration) if args.calibration else None
+    frame_tracker = FrameTracker(tracker, calibration, read_markers("--markers", args.markers))
+    return open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0, frame_tracker=frame_tracker)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, add_options, add_set_option
+from softpend.commands.options import MAX_SESSION_S, add_options, add_set_option, camera_source
 
 #: Accepted ``--print-modulus-mpa`` [MPa]: soft silicone to steel.
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
@@ -416,20 +416,11 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     from softpend.hardware.twin import rig_babble_controller
     from softpend.io.samplelog import SampleLog
     from softpend.plant import RodParams
-    from softpend.vision.calibration import AffineCalibration, read_markers
-    from softpend.vision.camera import DEFAULT_MARKERS_M
-    from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live
 
     for name in PORT_BABBLE_FILES:
         outputs.live(out / name)
-    markers = read_markers("--markers", args.markers) or DEFAULT_MARKERS_M
-    calibration = AffineCalibration.load(args.calibration) if args.calibration else None
-    source = open_tip_source(
-        args.camera,
-        latency_s=args.camera_latency_ms / 1000.0,
-        frame_tracker=FrameTracker(calibration=calibration, markers_m=markers),
-    )
+    source = camera_source(args)
     camera_csv, motor_log = out / "camera.csv", out / "motor_log.csv"
     failure: list[BaseException] = []
 

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, Option, add_options
+from softpend.commands.options import MAX_SESSION_S, Option, add_options, camera_source
 from softpend.plant.params import MAX_N_LINKS
 
 #: ``--camera-effects`` names: no imperfection, or the CameraEffects class method of that name.
@@ -195,15 +195,11 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
     from softpend.hardware.driver import MotorLink
     from softpend.hardware.estimator import RigStateEstimator
     from softpend.io.samplelog import SampleLog
-    from softpend.vision.calibration import AffineCalibration, read_markers
-    from softpend.vision.tip_source import FrameTracker, open_tip_source
 
     estimator = RigStateEstimator(task, estimator_config)
     source = None
     if not args.no_camera:
-        calibration = AffineCalibration.load(args.calibration) if args.calibration else None
-        tracker = FrameTracker(calibration=calibration, markers_m=read_markers("--markers", args.markers))
-        source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0, frame_tracker=tracker)
+        source = camera_source(args)
     metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
     logs = [outputs.live(out / name) for name in PORT_CONTROL_FILES[:2]]
     try:

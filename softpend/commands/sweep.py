@@ -7,7 +7,9 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+
+from softpend.commands.options import Option, add_options, add_set_option
+from softpend.commands.train import MAX_EPISODES
 
 METHODS = ("dqn", "mbpo", "pilco")
 #: Most seeds one sweep may train.
@@ -48,20 +50,18 @@ def method_list(text: str) -> list[str]:
     return list(dict.fromkeys(methods))
 
 
-#: ``(flag, type, default, help)`` of the options besides ``--book``, ``--backend``, the ``--<method>-set`` and
-#: ``--fresh``.
-OPTIONS: tuple[tuple[str, Any, Any, str], ...] = (
-    ("--profile", None, "full", "with --book: the profile of book/profiles.yml (default full)"),
-    ("--root", Path, Path("."), "with --book: the project root (default .)"),
-    ("--methods", method_list, list(METHODS), "comma-separated, default all"),
-    ("--seeds", seed_list, list(range(10)), "e.g. 0-9 (default) or 0,3,5"),
-)
-RUN_OPTIONS: tuple[tuple[str, Any, Any, str], ...] = (
-    ("--workers", int, None, "parallel runs (default $SOFTPEND_WORKERS or the CPU count)"),
-    ("--runs-root", Path, Path("runs/sweep"), "run folders (default runs/sweep)"),
-    ("--episodes-dqn", int, None, "DQN episodes per seed (default: the book's)"),
-    ("--episodes-mbpo", int, None, "DQN-MBPO episodes per seed (default: the book's)"),
-    ("--pilco-trials", int, None, "PILCO policy trials per seed (default: the book's)"),
+#: The options besides ``--book``, ``--backend`` and the ``--<method>-set`` (:func:`register`).
+OPTIONS: tuple[Option, ...] = (
+    ("--profile", None, dict(default="full", help="with --book: the profile of book/profiles.yml (default full)")),
+    ("--root", None, dict(type=Path, default=Path("."), help="with --book: the project root (default .)")),
+    ("--methods", None, dict(type=method_list, default=list(METHODS), help="comma-separated, default all")),
+    ("--seeds", None, dict(type=seed_list, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")),
+    ("--workers", (1, 1024), dict(type=int, help="parallel runs (default $SOFTPEND_WORKERS or the CPU count)")),
+    ("--runs-root", None, dict(type=Path, default=Path("runs/sweep"), help="run folders (default runs/sweep)")),
+    ("--episodes-dqn", (1, MAX_EPISODES), dict(type=int, help="DQN episodes per seed (default: the book's)")),
+    ("--episodes-mbpo", (1, MAX_EPISODES), dict(type=int, help="DQN-MBPO episodes per seed (default: the book's)")),
+    ("--pilco-trials", (0, 10_000), dict(type=int, help="PILCO policy trials per seed (default: the book's)")),
+    ("--fresh", None, dict(action="store_true", help="also measure every run on the fresh report starts")),
 )
 #: ``method -> (config class, method name, example of --<method>-set)``.
 SET_EXAMPLES = {
@@ -72,35 +72,23 @@ SET_EXAMPLES = {
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from softpend.commands.options import add_set_option
     from softpend.study.sweep import BACKENDS
 
     parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
-    parser.add_argument(
-        "--book",
-        action="store_true",
-        help="train the runs the book's notebooks read (for --profile), then stop; the other "
-        "training options are not used",
-    )
-    for flag, kind, default, text in OPTIONS:
-        parser.add_argument(flag, type=kind, default=default, help=text)
-    parser.add_argument(
-        "--backend", choices=BACKENDS, default=None, help="parallel engine (default $SOFTPEND_BACKEND or loky)"
-    )
-    for flag, kind, default, text in RUN_OPTIONS:
-        parser.add_argument(flag, type=kind, default=default, help=text)
+    text = "train the runs the book's notebooks read (for --profile), then stop; the other training options are unused"
+    parser.add_argument("--book", action="store_true", help=text)
+    text = "parallel engine (default $SOFTPEND_BACKEND or loky)"
+    parser.add_argument("--backend", choices=BACKENDS, default=None, help=text)
+    add_options(parser, OPTIONS)
     for method, (cls, name, example) in SET_EXAMPLES.items():
         text = f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})"
         add_set_option(parser, flag=f"--{method}-set", dest=f"{method}_overrides", help=text)
-    parser.add_argument("--fresh", action="store_true", help="also measure every run on the fresh report starts")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from softpend.commands.options import check_numbers
-    from softpend.commands.train import MAX_EPISODES
     from softpend.io.outputs import json_text
     from softpend.io.overrides import apply_overrides
     from softpend.study.head_to_head import pilco_runs
@@ -111,8 +99,6 @@ def run(args: argparse.Namespace) -> int:
 
     check_backend(args.backend or default_backend())  # before any run, whatever the number of runs to train
     if args.book:
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers must be at least 1, got {args.workers}")
         record = train_book(args.root, args.profile, workers=args.workers, backend=args.backend)
         print(
             f"[sweep] profile {args.profile!r}: trained {len(record['trained'])} of the book's runs in "
@@ -121,8 +107,6 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     root: Path = args.runs_root
-    limits = {"--episodes-dqn": (1, MAX_EPISODES), "--episodes-mbpo": (1, MAX_EPISODES)}
-    check_numbers(args, {**limits, "--pilco-trials": (0, 10_000), "--workers": (1, 1024)})
     if root.exists() and not root.is_dir():
         raise ValueError(f"--runs-root {root} exists and is not a folder")
     configs = {algo: apply_overrides(c, getattr(args, f"{algo}_overrides")) for algo, c in figure_configs().items()}

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import MAX_SESSION_S, Option, add_options
+from softpend.commands.options import MAX_SESSION_S, Option, add_options, camera_source
 
 OPTIONS: tuple[Option, ...] = (
     ("--camera", None, dict(help="track live instead: a camera index (0), a stream URL or a video file")),
@@ -32,7 +32,6 @@ def run(args: argparse.Namespace) -> int:
 
     from softpend.io.outputs import Outputs
     from softpend.vision.calibration import AffineCalibration, read_markers
-    from softpend.vision.tip_source import FrameTracker, open_tip_source
     from softpend.vision.track_video import track_live, track_video
     from softpend.vision.tracker import TipTracker
 
@@ -46,8 +45,7 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if args.fps is not None:
             raise ValueError("--fps is for video files; a live camera stamps each frame when it arrives")
-        frame_tracker = FrameTracker(tracker, calibration, markers)
-        source = open_tip_source(args.camera, latency_s=args.camera_latency_ms / 1000.0, frame_tracker=frame_tracker)
+        source = camera_source(args, tracker)
         try:
             rows = track_live(source, args.out, duration_s=args.duration, track_hub=not args.no_hub, progress=True)
         finally:

@@ -156,6 +156,7 @@ def plant_seconds_rows(
     :func:`softpend.study.fresh_starts.seed_rows`, the grey-box route's rows (PRB rod, then beam) and the planner's
     (:func:`planner_rows`, ``planner``: ``{"mpc" | "mpc_blackbox" | "mpc_beam": rows}``)."""
     key_of = {label: key for key, label in METHODS.items()}
+    groups: list[tuple[str, Sequence[dict[str, Any]], str, str]]
     groups = [(key_of[r["method"]], [r], "plant_s_to_balance", "final_balanced_starts") for r in learned]
     groups += [
         (key, rows, "real_s_to_balance", "balanced_starts")

@@ -281,10 +281,10 @@ def _faster(e: _Evidence) -> Found:
     return ours, times["dqn"] < times["mbpo"]
 
 
-def _fig07(e: _Evidence, *keys: str) -> tuple[dict[str, Any], list[Optional[dict[str, Any]]]]:
+def _fig07(e: _Evidence, *keys: str) -> tuple[Mapping[str, Any], list[Optional[dict[str, Any]]]]:
     """Figure 7's glued values and each run ``keys`` names: ``{rate, low, high, starts, time_s, text}`` or None."""
     values = e.glued.get("fig07_classical", {})
-    runs = []
+    runs: list[Optional[dict[str, Any]]] = []
     for key in keys:
         found = {name: values.get(f"{key}_{name}") for name in ("rate", "low", "high", "starts", "time_s")}
         ok = all(isinstance(value, (int, float)) for value in found.values())

@@ -78,13 +78,11 @@ def metrics_from_trajectory(
     theta_rad: np.ndarray,
     torque_nm: np.ndarray,
     phi_dot_rad_s: np.ndarray,
-    upright_threshold_rad: float = 0.2,
-    hold_s: float = 1.0,
     success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
-    """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below
-    ``upright_threshold_rad`` for ``hold_s``), upright std and mean after it (or over the second half), peak torque,
-    energy, and success (swung up, std at most ``success_std_rad``)."""
+    """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below 0.2 rad for 1 s), upright
+    std and mean after it (or over the second half), peak torque, energy, and success (swung up, std at most
+    ``success_std_rad``)."""
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
     t, theta, torque, phi_dot = arrays = [
         np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)
@@ -100,16 +98,12 @@ def metrics_from_trajectory(
     if dt <= 0:
         raise ValueError("time_s must be increasing")
     # the first index i such that |theta| stays below the threshold over samples i .. i + hold_steps
-    window = int(round(hold_s / dt)) + 1
-    inside = (np.abs(theta) < upright_threshold_rad).astype(int)
+    window = int(round(1.0 / dt)) + 1
+    inside = (np.abs(theta) < 0.2).astype(int)
     held = np.flatnonzero(np.convolve(inside, np.ones(window, dtype=int), "valid") == window)
     start_index = int(held[0]) if held.size else None
-    if start_index is not None:
-        after = theta[start_index:]
-        swing_up_time = float(t[start_index] - t[0])
-    else:
-        after = theta[len(theta) // 2 :]
-        swing_up_time = math.inf
+    after = theta[start_index if start_index is not None else len(theta) // 2 :]
+    swing_up_time = float(t[start_index] - t[0]) if start_index is not None else math.inf
     upright_std = float(np.sqrt(np.mean(after**2)))
     return {
         "swing_up_time_s": swing_up_time,
@@ -205,9 +199,6 @@ class _OneRod:
         self.last = (None, self.env.report_observation.as_array()[None], q[None], q_dot[None])
         return self.last
 
-    def torque_actions(self, torques: np.ndarray) -> np.ndarray:
-        return torques
-
     def step(self, torques: np.ndarray) -> tuple[Any, ...]:
         plant = self.env.plant
         try:
@@ -229,9 +220,6 @@ class _ManyRods:
     def reset(self, seeds: list[int], options: Optional[dict[str, Any]]) -> tuple[Any, ...]:
         vectors, info = self.env.reset(seed=seeds, options=options)
         return (vectors, info["observation"], *(x.numpy() for x in self.env.joint_state()))
-
-    def torque_actions(self, torques: np.ndarray) -> np.ndarray:
-        return (torques / self.env.torque_limit_nm)[:, None]
 
     def step(self, actions: Any) -> tuple[Any, ...]:
         torques = np.clip(self.env.torques_from_actions(actions), -self.limits, self.limits)
@@ -381,9 +369,8 @@ def run_episode(
 ) -> EvaluationResult:
     """One closed-loop episode of ``controller`` on ``env``, a :class:`~softpend.envs.SoftPendulumEnv` (see
     :func:`evaluate`)."""
-    return _roll(_OneRod(env), _Controllers([controller], lambda torques: torques), [seed], duration_s, initial_state)[
-        0
-    ]
+    (result,) = _roll(_OneRod(env), _Controllers([controller], lambda u: u), [seed], duration_s, initial_state)
+    return result
 
 
 def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float, o: dict) -> list[EvaluationResult]:
@@ -444,7 +431,8 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o
         # model of the motor), which the chain then saturates at the rod's own limit
         env.chain.set_params(rods)
     engine = _ManyRods(env)
-    batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, engine.torque_actions)
+    to_actions = lambda torques: (torques / env.torque_limit_nm)[:, None]  # noqa: E731
+    batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, to_actions)
     return _roll(engine, batch_policy, seeds, duration_s, o["initial_state"])
 
 

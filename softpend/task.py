@@ -78,9 +78,7 @@ class Task:
         (``task.replace(torque_limit_nm=0.05, start="upright")``)."""
         rod_fields = {f.name for f in dataclasses.fields(RodParams)}
         rod_changes = {k: changes.pop(k) for k in list(changes) if k in rod_fields}
-        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
-        if unknown:
-            raise ValueError(f"unknown Task fields: {sorted(unknown)}")
+        _check_fields(changes)
         if rod_changes:
             changes["rod"] = changes.get("rod", self.rod).replace(**rod_changes)
         return dataclasses.replace(self, **changes)
@@ -95,9 +93,13 @@ class Task:
     def from_dict(cls, data: Mapping[str, Any]) -> "Task":
         """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
         data = dict(data)
-        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f"unknown Task fields: {sorted(unknown)}")
+        _check_fields(data)
         if "rod" in data and not isinstance(data["rod"], RodParams):
             data["rod"] = RodParams.from_dict(data["rod"])
         return cls(**data)
+
+
+def _check_fields(data: Mapping[str, Any]) -> None:
+    unknown = set(data) - {f.name for f in dataclasses.fields(Task)}
+    if unknown:
+        raise ValueError(f"unknown Task fields: {sorted(unknown)}")

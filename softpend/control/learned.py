@@ -63,9 +63,7 @@ class LearnedStateTracker:
 
     def __init__(self, model: Any) -> None:
         layout = model.layout
-        self.names = tuple(layout.names)
-        self.dt_s = float(model.dt_s)
-        self.positions = tuple(layout.position_names)
+        self.names, self.dt_s, self.positions = tuple(layout.names), float(model.dt_s), tuple(layout.position_names)
         self.history = int(layout.history)
         self.differenced = getattr(layout, "velocity_source", "observed") == "observed"
         self.reset()
@@ -78,9 +76,8 @@ class LearnedStateTracker:
         frame = np.array([values[n] for n in self.positions])
         if self.differenced and self._frames:
             step = frame - self._frames[-1]
-            for i, name in enumerate(self.positions):
-                if name.endswith("_rad"):
-                    step[i] = (step[i] + math.pi) % (2 * math.pi) - math.pi
+            angles = [name.endswith("_rad") for name in self.positions]
+            step[angles] = (step[angles] + math.pi) % (2 * math.pi) - math.pi
             rates = step / self.dt_s
         else:
             rates = np.array([values[velocity_name(n)] for n in self.positions])
@@ -106,9 +103,7 @@ class _TrackedLQR(LQRController):
         design_model: LinearModel,
         design_gain: np.ndarray,
     ) -> None:
-        self.tracker = tracker
-        self.upright = upright
-        self.design_model = design_model
+        self.tracker, self.upright, self.design_model = tracker, upright, design_model
         self.design_gain = np.asarray(design_gain, dtype=float).reshape(1, -1)
         super().__init__(gain, self._state, torque_limit_nm, model=model, name=name)
 
@@ -216,11 +211,8 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
         for angle in ("theta_rad", "er_rad"):
             rate = angle.replace("_rad", "_dot_rad_s")
             if rate not in v:
-                v[rate] = (
-                    0.0
-                    if previous is None
-                    else ((v[angle] - previous[angle] + math.pi) % (2 * math.pi) - math.pi) / dt_s
-                )
+                step = 0.0 if previous is None else (v[angle] - previous[angle] + math.pi) % (2 * math.pi) - math.pi
+                v[rate] = step / dt_s
         return Observation(*[v[name] for name in OBSERVATION_NAMES]), v
 
     def simulate(controller: Any, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -237,15 +229,8 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
             for k in range(n_steps):
                 torque = min(max(float(controller(observation, None, None, k * dt_s)), -limit), limit)
                 torques[k] = torque
-                x = (
-                    net.predict_next(
-                        torch.as_tensor(x, dtype=torch.float32).reshape(1, -1),
-                        torch.tensor([torque], dtype=torch.float32),
-                    )
-                    .reshape(-1)
-                    .double()
-                    .numpy()
-                )
+                x_t = torch.as_tensor(x, dtype=torch.float32).reshape(1, -1)
+                x = net.predict_next(x_t, torch.tensor([torque], dtype=torch.float32)).reshape(-1).double().numpy()
                 if not np.all(np.isfinite(x)):
                     thetas[k + 1 :] = np.nan
                     break

@@ -123,11 +123,7 @@ def linearise_step_map(
         plant.step(torque)
         return np.concatenate(plant.joint_state())
 
-    a = np.empty((2 * n, 2 * n))
-    for i in range(2 * n):
-        e = np.zeros(2 * n)
-        e[i] = state_step
-        a[:, i] = (step(e, 0.0) - step(-e, 0.0)) / (2 * state_step)
+    a = np.column_stack([(step(e, 0.0) - step(-e, 0.0)) / (2 * state_step) for e in state_step * np.eye(2 * n)])
     zero = np.zeros(2 * n)
     b = (step(zero, torque_step_nm) - step(zero, -torque_step_nm)) / (2 * torque_step_nm)
     return LinearModel(a=a, b=b.reshape(-1, 1), dt_s=float(dt_s), state_names=_joint_names(n))

@@ -108,11 +108,8 @@ class LQRController:
         positive("torque_limit_nm", torque_limit_nm)
         if model is not None and model.n_states != gain.shape[1]:
             raise ValueError(f"gain has {gain.shape[1]} columns but the model has {model.n_states} states")
-        self.gain = gain
-        self.state_function = state_function
-        self.torque_limit_nm = float(torque_limit_nm)
-        self.model = model
-        self.name = name
+        self.gain, self.state_function, self.torque_limit_nm = gain, state_function, float(torque_limit_nm)
+        self.model, self.name = model, name
 
     @classmethod
     def from_params(
@@ -150,9 +147,7 @@ class LQRController:
             model = discretise(reduced.state_space(), dt_s)
             rates = tuple(n.replace("_rad", "_dot_rad_s") for n in names)
             model = LinearModel(model.a, model.b, model.dt_s, names + rates)
-            angles = np.zeros((2, len(names)))
-            angles[0, names.index("theta_rad")] = 1.0
-            angles[1, names.index("phi_rad")] = 1.0
+            angles = np.eye(len(names))[[names.index("theta_rad"), names.index("phi_rad")]]
             state_function, name = observation_state_function(names), "LQR (observations)"
         zero = np.zeros_like(angles)
         q = output_weight_matrix(np.block([[angles, zero], [zero, angles]]), weights)

@@ -53,10 +53,7 @@ def region_of_attraction_rad(
     bisection to ``resolution_rad``."""
     positive("step_rad", step_rad)
     positive("resolution_rad", resolution_rad)
-
-    def trial(angle: float) -> bool:
-        return recovers_from(controller, angle, task, duration_s=duration_s)
-
+    trial = lambda angle: recovers_from(controller, angle, task, duration_s=duration_s)  # noqa: E731
     low, high = 0.0, math.inf
     grid = np.arange(step_rad, math.pi / 2 + 1e-12, step_rad)
     for angle in tqdm(grid, desc="region of attraction", disable=not progress, leave=False):
@@ -65,11 +62,7 @@ def region_of_attraction_rad(
         else:
             high = float(angle)
             break
-    if math.isfinite(high):
-        while high - low > resolution_rad:
-            middle = 0.5 * (low + high)
-            if trial(middle):
-                low = middle
-            else:
-                high = middle
+    while math.isfinite(high) and high - low > resolution_rad:
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if trial(middle) else (low, middle)
     return RegionOfAttraction(low, high)

@@ -58,12 +58,7 @@ class StateSpec:
     def from_observations(self, observations: np.ndarray) -> np.ndarray:
         """State rows from observation rows ``(T, 10)`` (:data:`OBSERVATION_NAMES` order), angles unwrapped in time."""
         obs = np.atleast_2d(np.asarray(observations, dtype=float))
-        columns = []
-        for name in self.variables:
-            if name in DERIVED_VARIABLES:
-                columns.append(DERIVED_VARIABLES[name](obs))
-            else:
-                columns.append(obs[:, OBSERVATION_NAMES.index(name)])
+        columns = [DERIVED_VARIABLES.get(name, lambda o, n=name: _column(o, n))(obs) for name in self.variables]
         states = np.stack(columns, axis=1)
         states[:, self.angle_indices] = np.unwrap(states[:, self.angle_indices], axis=0)
         return states
@@ -105,20 +100,13 @@ class Propagator:
         exploration: float = 0.0,
         compiled: bool = False,
     ) -> None:
-        positive("length_m", length_m)
-        positive("cost_width_m", cost_width_m)
-        optional_positive("cost_rate_width_rad_s", cost_rate_width_rad_s)
-        boolean("compiled", compiled)
+        self.length_m, self.cost_width_m = positive("length_m", length_m), positive("cost_width_m", cost_width_m)
+        self.cost_rate_width_rad_s = optional_positive("cost_rate_width_rad_s", cost_rate_width_rad_s)
+        self.compiled = boolean("compiled", compiled)
         if compiled and not all(hasattr(m, "moment_function") for m in (dynamics, policy)):
             raise ValueError("a compiled propagation needs dynamics and a policy with moment_function()")
-        self.cost_rate_width_rad_s = None if cost_rate_width_rad_s is None else float(cost_rate_width_rad_s)
         self.exploration = finite("exploration", exploration)
-        self.compiled = compiled
-        self.spec = spec
-        self.dynamics = dynamics
-        self.policy = policy
-        self.length_m = float(length_m)
-        self.cost_width_m = float(cost_width_m)
+        self.spec, self.dynamics, self.policy = spec, dynamics, policy
         d = spec.dim
         k = d - spec.n_angles
         # positions in the augmented vector [state (d), trig (2A), u]

@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from softpend.checks import in_unit_interval, positive_int
+from softpend.checks import in_unit_interval, one_of, positive_int
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.rl.training_log import TrainingLog
 
@@ -94,8 +94,7 @@ def interval_band(
 
     if len(logs) < 2:
         raise ValueError(f"interval_band needs at least two runs, got {len(logs)}")
-    if axis not in ("episode", "plant_s"):
-        raise ValueError(f"axis must be 'episode' or 'plant_s', got {axis!r}")
+    one_of("axis", axis, ("episode", "plant_s"))
     xs = [log.column(axis, table) for log in logs]
     ys = [log.column(field, table) for log in logs]
     if failed_as is not None:
@@ -104,17 +103,12 @@ def interval_band(
         raise ValueError(f"every run needs at least one {table} row")
     if grid is None:
         grid = np.linspace(max(x[0] for x in xs), max(x[-1] for x in xs), 200)
-    grid = np.asarray(grid, dtype=float)
-    grid = grid[grid >= max(x[0] for x in xs)]
+    grid = np.asarray(grid, dtype=float)[np.asarray(grid) >= max(x[0] for x in xs)]
     per_seed = np.empty((len(logs), len(grid)))
     for i, (x, y) in enumerate(zip(xs, ys)):
         # a step function: the value of the latest row at or before each grid point
         index = np.searchsorted(x, grid, side="right") - 1
         per_seed[i] = y[np.clip(index, 0, len(y) - 1)]
-    value, low, high = np.empty(len(grid)), np.empty(len(grid)), np.empty(len(grid))
-    for j in range(len(grid)):
-        interval = aggregate_interval(
-            per_seed[:, j], statistic, confidence=confidence, n_resamples=n_resamples, seed=seed
-        )
-        value[j], low[j], high[j] = interval.value, interval.low, interval.high
-    return {"x": grid, "value": value, "low": low, "high": high, "per_seed": per_seed}
+    intervals = [aggregate_interval(column, statistic, confidence, n_resamples, seed) for column in per_seed.T]
+    band = {name: np.array([getattr(i, name) for i in intervals], dtype=float) for name in ("value", "low", "high")}
+    return {"x": grid, **band, "per_seed": per_seed}

@@ -4,6 +4,7 @@ device's limit (as the float32 on the wire), checked STATE frames, STOP on every
 from __future__ import annotations
 
 import atexit
+import contextlib
 import math
 import os
 import select
@@ -222,10 +223,8 @@ class MotorLink:
         self.close()
 
     def __del__(self) -> None:  # pragma: no cover - garbage collection timing
-        try:
+        with contextlib.suppress(Exception):
             self.close()
-        except Exception:
-            pass
 
     def send_torque(self, torque_nm: float) -> int:
         """Command a torque, clamped to :attr:`torque_limit_nm`; its seq (``ValueError``, motor stopped, if not finite)."""
@@ -326,10 +325,7 @@ class MotorLink:
         ser = self._serial
         if ser is None:
             return
-        acquired = (
-            self._write_lock.acquire(timeout=self.timeout_s) if wait else self._write_lock.acquire(blocking=False)
-        )
-        if not acquired:
+        if not self._write_lock.acquire(blocking=wait, timeout=self.timeout_s if wait else -1):
             self._stop_pending = True
             return
         try:

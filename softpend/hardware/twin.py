@@ -95,13 +95,9 @@ def run_twin_session(
     outputs: Optional[Any] = None,
     program: Optional[np.ndarray] = None,
 ) -> TwinSession:
-    """Run the rig pipeline on the twin (module docstring); the same seed gives the same files.
-
-    files of ``workdir`` named as its outputs must be its own earlier ones (else ``ValueError``, nothing touched);
-    ``seed`` seeds the torques, the emulator and the camera; ``clock_offset_s`` is the camera
-    clock minus the motor clock the synchronisation must recover; ``program`` replaces the babbling torque after
-    the start-up wiggle (:func:`rig_babble_controller`).
-    """
+    """Run the rig pipeline on the twin (module docstring) into ``workdir``; ``seed`` seeds the torques, the emulator
+    and the camera; ``clock_offset_s`` is the camera clock minus the motor clock the synchronisation must recover;
+    ``program`` replaces the babbling torque after the start-up wiggle (:func:`rig_babble_controller`)."""
     from softpend.io.outputs import Outputs
     from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
     from softpend.vision.track_video import track_video
@@ -119,17 +115,7 @@ def run_twin_session(
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=CameraEffects.rig(), seed=seed)
     video, camera_csv = paths["camera.avi"], paths["camera.csv"]
-    render_video(
-        video,
-        camera,
-        times,
-        points,
-        hub,
-        fps=camera_fps,
-        clock_offset_s=clock_offset_s,
-        timestamp_jitter_s=0.0005,
-        progress=progress,
-    )
+    render_video(video, camera, times, points, hub, camera_fps, clock_offset_s, 0.0005, progress=progress)
     track_video(video, camera_csv, progress=progress)
     dataset, sync = build_rig_dataset(
         paths["motor_log.csv"],
@@ -165,14 +151,8 @@ def _babble_on_twin(
 
 
 #: Every file :func:`run_twin_session` writes in its folder (besides the marker).
-_OUTPUTS = (
-    "motor_log.csv",
-    "truth_log.csv",
-    "camera.avi",
-    "camera.csv",
-    "rig_dataset.npz",
-    "camera.avi.json",
-    "emulator_stats.json",
+_OUTPUTS = tuple(
+    "motor_log.csv truth_log.csv camera.avi camera.csv rig_dataset.npz camera.avi.json emulator_stats.json".split()
 )
 
 

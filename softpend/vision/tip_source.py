@@ -84,9 +84,7 @@ class ThreadedTipSource:
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self._error: Optional[BaseException] = None
-        self.frames_tracked = 0
-        self.frames_lost = 0
-        self.frames_dropped = 0
+        self.frames_tracked = self.frames_lost = self.frames_dropped = 0
         self._ages_s: list[float] = []
 
     def start(self) -> None:
@@ -238,8 +236,7 @@ class SyntheticLiveCamera(ThreadedTipSource):
         self.camera = SyntheticCamera(model=model, effects=effects, seed=seed)
         self.faults = faults if faults is not None else CameraFaults()
         self._rng = np.random.default_rng(self.faults.seed)
-        self.frames_stalled = 0
-        self.frames_occluded = 0
+        self.frames_stalled = self.frames_occluded = 0
         self.first_frame_time_s: Optional[float] = None
         self._closed = False
 

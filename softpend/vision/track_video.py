@@ -36,23 +36,14 @@ def hub_marker_tracker(calibration: AffineCalibration, frame_shape: tuple[int, .
     return TipTracker(MAGENTA_HSV, min_area_px=6.0, region_px=(x0, y0, x1, y1))
 
 
-def _hub_angle(
-    hub_tracker: Optional[TipTracker], calibration: AffineCalibration, frame: np.ndarray
-) -> tuple[float, int]:
-    """``(hub_angle_rad, hub_lost)`` of a frame (NaN and 1 without a tracker or a marker)."""
-    if hub_tracker is not None:
-        hub = hub_tracker.track(frame)
-        if not hub.lost:
-            hx, hy = calibration.to_metres(np.array([hub.x_px, hub.y_px]))
-            return float(tip_angle_rad(hx, hy)), 0
-    return math.nan, 1
-
-
 def _row(index, time_s, x_m, y_m, detection, hub_tracker, calibration, frame) -> list:
-    """One row of :data:`TRACK_COLUMNS`."""
+    """One row of :data:`TRACK_COLUMNS` (the hub angle NaN and lost without a tracker or a marker)."""
     theta = math.nan if detection.lost else float(tip_angle_rad(x_m, y_m))
     row = [index, time_s, detection.x_px, detection.y_px, detection.area_px, x_m, y_m, theta, int(detection.lost)]
-    return row + [*_hub_angle(hub_tracker, calibration, frame)]
+    hub = hub_tracker.track(frame) if hub_tracker is not None else None
+    if hub is None or hub.lost:
+        return row + [math.nan, 1]
+    return row + [float(tip_angle_rad(*calibration.to_metres(np.array([hub.x_px, hub.y_px])))), 0]
 
 
 def _rows_array(rows: list) -> np.ndarray:

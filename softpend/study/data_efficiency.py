@@ -321,12 +321,7 @@ def paired_ratio_rows(numerator: Mapping[int, float], denominator: Mapping[int, 
     rows = []
     for seed in sorted(set(numerator) & set(denominator)):
         top, bottom = float(numerator[seed]), float(denominator[seed])
-        if not math.isfinite(top):
-            ratio = math.inf
-        elif not math.isfinite(bottom):
-            ratio = 0.0
-        else:
-            ratio = top / bottom
+        ratio = math.inf if not math.isfinite(top) else (top / bottom if math.isfinite(bottom) else 0.0)
         rows.append({"seed": int(seed), "numerator_s": top, "denominator_s": bottom, "ratio": ratio})
     return rows
 

@@ -191,15 +191,9 @@ def figure_runs(
 ) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs of Figures 4-6 (both methods in one pool); returns ``{method name: logs}``."""
     configs = figure_configs(plant=plant, **config_kwargs)
-    root = plant_runs_root(runs_root, plant)
-    dqn_logs, mbpo_logs = _train_runs(
-        [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)],
-        root,
-        progress,
-        workers,
-        backend,
-    )
-    return {METHOD_NAMES["dqn"]: dqn_logs, METHOD_NAMES["mbpo"]: mbpo_logs}
+    specs = [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)]
+    logs = _train_runs(specs, plant_runs_root(runs_root, plant), progress, workers, backend)
+    return {METHOD_NAMES[spec[0]]: spec_logs for spec, spec_logs in zip(specs, logs)}
 
 
 def run_config_data(algo: str, config: Any) -> dict[str, Any]:

@@ -258,7 +258,7 @@ def run_closed_loop(
 class _ClosedLoop(_RigLoop):
     drains = True
 
-    def __init__(self, link, controller, estimator, duration_s, tip_source, clock, log, camera_log):
+    def __init__(self, link, controller, estimator, duration_s, tip_source, clock, log, camera_log) -> None:
         super().__init__(link, duration_s, log, estimator.dt_s)
         self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
         self.clock, self.camera_log = clock, camera_log

@@ -462,12 +462,10 @@ class MPPIPlan:
 class MPPI:
     """Model-predictive path integral control of one torque held for ``hold_steps`` model steps per knot.
 
-    ``step_fn(x (R, d), torque (R,)) -> x_next``; ``cost_fn(x, torque, x_next) -> (R,)`` the cost of a model step
-    and ``terminal_fn(x_T) -> (R,)`` (optional) that of the last state.  :meth:`optimise` refines mean torque
-    sequences ``iterations`` times from ``n_samples`` perturbed copies each (the first unperturbed), weighted by
-    ``exp(-cost / temperature)`` (a start whose every rollout diverged keeps its unperturbed copy).  :meth:`begin`,
-    :meth:`advance` and :meth:`finish` make one iteration a few model steps at a time (a controller spreads it over
-    its control periods).
+    ``step_fn(x (R, d), torque (R,)) -> x_next``, ``cost_fn(x, torque, x_next) -> (R,)`` and optional
+    ``terminal_fn(x_T) -> (R,)``.  An iteration weights ``n_samples`` perturbed copies of each mean sequence (the
+    first unperturbed, kept alone where every rollout diverged) by ``exp(-cost / temperature)``; :meth:`begin`,
+    :meth:`advance` and :meth:`finish` run it a few model steps at a time, :meth:`optimise` ``iterations`` times.
     """
 
     def __init__(
@@ -552,14 +550,11 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
 
 class PlannerController:
     """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
-    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`); it reads
-    observations only.
+    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`), from observations.
 
-    Planned torques are held for ``hold_steps`` calls (a knot) and planned ``knots_per_plan`` knots at a time.  At
-    the first call of such a stretch the plan finished over the previous one takes over with its first knots, and
-    the next plan starts: its rollouts hold those torques (already committed), then try the planned ones.  Its work
-    is spread over the stretch's calls, so no call does more than a share of one plan (zero torque until the first
-    plan is ready, and after the LQR lets go until the next one is).
+    Torques are held for ``hold_steps`` calls (a knot) and planned ``knots_per_plan`` knots at a time: each plan's
+    rollouts first hold the knots already committed, and its work is spread over the calls of those knots (zero
+    torque until the first plan is ready, and after the LQR lets go until the next one is).
     """
 
     def __init__(

@@ -72,8 +72,8 @@ def evaluate_agent(
         len(seeds) * steps * per_step,
         f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step",
     )
-    kwargs = dict(name=name, seeds=seeds, duration_s=duration_s, stop_at_first_failure=stop_at_first_failure)
-    return evaluate_controller(controller, config.task, **kwargs)
+    kwargs: dict[str, Any] = dict(name=name, seeds=seeds, duration_s=duration_s)
+    return evaluate_controller(controller, config.task, stop_at_first_failure=stop_at_first_failure, **kwargs)
 
 
 def _seeds_and_duration(config: DQNConfig, seeds: Any, duration_s: Any) -> tuple[tuple[int, ...], float]:
@@ -529,9 +529,7 @@ def _start_or_resume(
             "(unpickling can run arbitrary code); start a new run"
         )
     log = TrainingLog.load(checkpoint / "log.json")
-    model = load_agent_file(
-        agent_class(config), checkpoint / "agent.zip", config, env=env, replay_buffer_class=replay_buffer_class
-    )
+    model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env, replay_buffer_class)
     assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
     load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
     if part is not None:
@@ -571,7 +569,6 @@ _C = TypeVar("_C", bound=BaseCallback)
 
 
 def _member(callbacks: CallbackList, cls: type[_C]) -> _C:
-    """The callback of class ``cls`` in ``callbacks``."""
     return next(c for c in callbacks.callbacks if isinstance(c, cls))
 
 
@@ -631,7 +628,7 @@ def train_dqn(
 ) -> tuple[DQN, TrainingLog]:
     """Train model-free DQN for ``episodes`` training episodes (see the module docstring)."""
     make_model = lambda env, s: build_dqn(config, env, s, episodes)  # noqa: E731
-    return run_training("dqn", config, seed, episodes, run_dir, resume, progress, make_model=make_model)
+    return run_training("dqn", config, seed, episodes, run_dir, resume, progress, make_model)
 
 
 def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:

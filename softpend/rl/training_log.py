@@ -77,13 +77,8 @@ class TrainingLog:
     def load(cls, path: Path) -> "TrainingLog":
         try:
             data = read_json_checked(path, "training log", MAX_JSON_BYTES)  # a regular file, read with a bound
-            log = cls(
-                algo=str(data["algo"]),
-                seed=int(data["seed"]),
-                episodes=list(data["episodes"]),
-                evaluations=list(data["evaluations"]),
-                stop_reason=data.get("stop_reason"),
-            )
+            rows = list(data["episodes"]), list(data["evaluations"])
+            log = cls(str(data["algo"]), int(data["seed"]), *rows, stop_reason=data.get("stop_reason"))
             if log.stop_reason is not None and not isinstance(log.stop_reason, str):
                 raise ValueError("stop_reason is not a string")
             for row in log.episodes + log.evaluations:

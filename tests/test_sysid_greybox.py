@@ -141,8 +141,6 @@ def test_valid_prediction_time_on_a_hand_made_trajectory():
     assert tip_rmse_at_s(errors, dt, 0.5) == pytest.approx(np.sqrt(np.mean(errors[:, 50] ** 2)))
     with pytest.raises(ValueError, match="tip_error_m"):
         valid_prediction(errors[:, :1], dt, length)
-    with pytest.raises(ValueError, match="fraction"):
-        valid_prediction(errors, dt, length, fraction=0.0)
 
 
 def test_prb_rollouts_with_the_true_parameters_reproduce_the_data(small):

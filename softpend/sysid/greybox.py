@@ -36,6 +36,10 @@ _LOG_BOUND = 5.0
 #: Numerical rank tolerance of the normalised parameter information matrix.
 IDENTIFIABILITY_TOLERANCE = 1e-9
 IDENTIFICATION_SCHEMA = "softpend.sysid.greybox"
+#: Length of the warm-up windows [s], relative forward-difference step and convergence tolerance of the fit.
+WARMUP_WINDOW_S = 0.1
+DIFF_STEP = 1e-6
+TOLERANCE = 1e-6
 
 
 class NotIdentifiable(ValueError):
@@ -49,21 +53,15 @@ class NotIdentifiable(ValueError):
 @dataclass(frozen=True)
 class GreyBoxConfig:
     """Settings of :func:`identify`: what to estimate (:data:`ESTIMABLE_ROD_FIELDS`, :data:`CALIBRATION_PARAMETERS`),
-    the window length and count, the seed of the window draw, the iteration limit (of each stage), the relative
-    forward-difference step, the convergence tolerance and the solver sub-steps (default: the dataset's protocol's,
-    else 2).  A ``warmup_window_s`` shorter than ``window_s`` first fits the same windows cut to that length (nearly
-    linear in the parameters and states, so a poor guess converges), then the whole windows from there; None: the
-    whole windows only."""
+    the window length and count, the seed of the window draw and the iteration limit (of each stage).  Windows
+    longer than :data:`WARMUP_WINDOW_S` are first fitted cut to that length (nearly linear in the parameters and
+    states, so a poor guess converges), then whole."""
 
     parameters: tuple[str, ...] = GREYBOX_PARAMETERS
     window_s: float = 0.3
-    warmup_window_s: Optional[float] = 0.1
     max_windows: int = 120
     seed: int = 0
     max_iterations: int = 25
-    diff_step: float = 1e-6
-    tolerance: float = 1e-6
-    substeps: Optional[int] = None
 
     def __post_init__(self) -> None:
         names = tuple(self.parameters)
@@ -77,27 +75,21 @@ class GreyBoxConfig:
             raise ValueError(f"parameters has duplicates: {names}")
         object.__setattr__(self, "parameters", names)
         positive("window_s", self.window_s)
-        if self.warmup_window_s is not None:
-            positive("warmup_window_s", self.warmup_window_s)
-        positive("diff_step", self.diff_step)
-        positive("tolerance", self.tolerance)
         object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
-        for name in ("max_windows", "max_iterations") + (() if self.substeps is None else ("substeps",)):
+        for name in ("max_windows", "max_iterations"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
 
 
 @dataclass
 class GreyBoxResult:
     """What :func:`identify` found: the rod with the estimated fields replaced, every estimate and its standard
-    deviation in its own unit, the calibrations (1, 0, 0, 0 when not estimated), how the fit went, and the
-    estimates that ended on a bound of the search (not determined by the data)."""
+    deviation in its own unit, how the fit went, and the estimates that ended on a bound of the search (not
+    determined by the data); the calibrations are properties (1, 0, 0, 0 when not estimated)."""
 
     params: RodParams
     initial_params: RodParams
     estimates: dict[str, float]
     std: dict[str, float]
-    torque_gain: float
-    encoder_offset_rad: float
     residual_rms_rad: float
     n_windows: int
     window_steps: int
@@ -109,8 +101,22 @@ class GreyBoxResult:
     status: int
     message: str
     at_bounds: tuple[str, ...] = ()
-    torque_delay_s: float = 0.0
-    camera_delay_s: float = 0.0
+
+    @property
+    def torque_gain(self) -> float:
+        return self.estimates.get("torque_gain", 1.0)
+
+    @property
+    def encoder_offset_rad(self) -> float:
+        return self.estimates.get("encoder_offset_rad", 0.0)
+
+    @property
+    def torque_delay_s(self) -> float:
+        return self.estimates.get("torque_delay_s", 0.0)
+
+    @property
+    def camera_delay_s(self) -> float:
+        return self.estimates.get("camera_delay_s", 0.0)
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
         """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""
@@ -195,10 +201,8 @@ def wrap_diff(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
     return (np.asarray(a) - b + np.pi) % (2 * np.pi) - np.pi
 
 
-def dataset_substeps(dataset: TrajectoryDataset, substeps: Optional[int] = None) -> int:
-    """``substeps`` if given, else the dataset's protocol's, else 2."""
-    if substeps is not None:
-        return int(substeps)
+def dataset_substeps(dataset: TrajectoryDataset) -> int:
+    """The dataset's protocol's solver sub-steps, else 2."""
     return int(dataset.metadata.get("protocol", {}).get("substeps", 2))
 
 
@@ -252,6 +256,20 @@ def _normal_blocks(dense: np.ndarray, block: np.ndarray) -> tuple[np.ndarray, np
     return a, d, b
 
 
+def _decode(names: Sequence[str], theta: np.ndarray, guess: RodParams) -> dict[str, float]:
+    """Each parameter's value of the decision variables: rod fields and the torque gain scaled by ``e^theta``, the
+    encoder offset by :data:`_OFFSET_SCALE_RAD`, the delays as fractions of ``dt``."""
+    out = {}
+    for name, value in zip(names, theta):
+        if name in _DELAYS:
+            out[name] = float(value)
+        elif name == "encoder_offset_rad":
+            out[name] = value * _OFFSET_SCALE_RAD
+        else:
+            out[name] = (getattr(guess, name) if name != "torque_gain" else 1.0) * math.exp(value)
+    return out
+
+
 class _Problem:
     """The multiple-shooting least-squares problem (decision vector: scaled parameters, then window states)."""
 
@@ -260,7 +278,6 @@ class _Problem:
         dataset: TrajectoryDataset,
         guess: RodParams,
         names: Sequence[str],
-        diff_step: float,
         starts: np.ndarray,
         steps: int,
         substeps: int,
@@ -271,7 +288,6 @@ class _Problem:
         self.names = tuple(names)
         self.dt_s = dataset.dt_s
         self.substeps = substeps
-        self.diff_step = diff_step
         observed, columns = _observed(dataset)
         self.has_er = "er_rad" in observed
         index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
@@ -288,18 +304,14 @@ class _Problem:
 
     def unpack(self, theta: np.ndarray) -> tuple[RodParams, float, float, float]:
         """``(rod, torque gain, encoder offset [rad], torque delay [fraction of dt])`` of scaled parameters."""
-        changes: dict[str, float] = {}
-        gain, offset, delay = 1.0, 0.0, 0.0
-        for name, value in zip(self.names, theta):
-            if name == "torque_gain":
-                gain = math.exp(value)
-            elif name == "encoder_offset_rad":
-                offset = value * _OFFSET_SCALE_RAD
-            elif name == "torque_delay_s":
-                delay = float(value)
-            elif name != "camera_delay_s":
-                changes[name] = getattr(self.guess, name) * math.exp(value)
-        return self.guess.replace(**changes), gain, offset, delay
+        values = _decode(self.names, theta, self.guess)
+        rod = self.guess.replace(**{n: v for n, v in values.items() if n in ESTIMABLE_ROD_FIELDS})
+        return (
+            rod,
+            values.get("torque_gain", 1.0),
+            values.get("encoder_offset_rad", 0.0),
+            values.get("torque_delay_s", 0.0),
+        )
 
     def simulate(self, z: np.ndarray) -> np.ndarray:
         theta = z[: self.n_p]
@@ -367,13 +379,13 @@ class _Problem:
         dense = np.empty((self.n_windows, base.shape[1], self.n_p))
         for j in range(self.n_p):
             move = np.zeros_like(z)
-            move[j] = self.diff_step * max(1.0, abs(z[j]))
+            move[j] = DIFF_STEP * max(1.0, abs(z[j]))
             dense[:, :, j] = difference(move) / move[j]
         n_s = 2 * self.n_q
         block = np.empty((self.n_windows, base.shape[1], n_s))
         states = z[self.n_p :].reshape(self.n_windows, n_s)
         for c in range(n_s):
-            h = self.diff_step * np.maximum(1.0, np.abs(states[:, c]))
+            h = DIFF_STEP * np.maximum(1.0, np.abs(states[:, c]))
             moved = np.zeros_like(states)
             moved[:, c] = h
             block[:, :, c] = difference(np.concatenate([np.zeros(self.n_p), moved.reshape(-1)])) / h[:, None]
@@ -529,64 +541,46 @@ def identify(
     if steps < 2:
         raise ValueError(f"window_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {config.window_s!r}")
     starts = _window_starts(dataset, steps, config.max_windows, config.seed)
-    warmup = steps if config.warmup_window_s is None else int(round(config.warmup_window_s / dataset.dt_s))
-    n_p = len(config.parameters)
-    lower = np.full(n_p, -np.inf)
-    upper = np.full(n_p, np.inf)
-    for j, name in enumerate(config.parameters):
-        if name in _DELAYS:
-            lower[j], upper[j] = -1.0, 1.0
-        elif name != "encoder_offset_rad":
-            lower[j], upper[j] = -_LOG_BOUND, _LOG_BOUND
+    warmup = int(round(WARMUP_WINDOW_S / dataset.dt_s))
+    names = config.parameters
+    n_p = len(names)
+    upper = np.array([1.0 if n in _DELAYS else np.inf if n == "encoder_offset_rad" else _LOG_BOUND for n in names])
     z = np.concatenate([np.zeros(n_p), _initial_states(dataset, starts, guess).reshape(-1)])
     fit: dict[str, Any] = {"nfev": 0, "njev": 0}
-    substeps = dataset_substeps(dataset, config.substeps)
+    substeps = dataset_substeps(dataset)
     for stage, stage_steps in enumerate(sorted({min(max(warmup, 2), steps), steps})):
-        problem = _Problem(dataset, guess, config.parameters, config.diff_step, starts, stage_steps, substeps, True)
+        problem = _Problem(dataset, guess, names, starts, stage_steps, substeps, True)
         finite = np.isfinite(problem.residual_blocks(z)).all(axis=(1, 2))
         if not finite.any():
             raise ValueError(f"the simulation diverges in every window of {stage_steps} samples; give a closer guess")
         if not finite.all():  # a window whose simulation diverges has no derivative: left out
             starts = starts[finite]
             z = np.concatenate([z[:n_p], z[n_p:].reshape(finite.size, -1)[finite].reshape(-1)])
-            problem = _Problem(dataset, guess, config.parameters, config.diff_step, starts, stage_steps, substeps, True)
+            problem = _Problem(dataset, guess, names, starts, stage_steps, substeps, True)
         if stage == 0:
-            _check_identifiable(config.parameters, *problem.parameter_information(z), "at the initial guess")
-        free = np.full(z.size - n_p, np.inf)
-        z, stage_fit = _levenberg_marquardt(
-            problem,
-            z,
-            np.concatenate([lower, -free]),
-            np.concatenate([upper, free]),
-            config.max_iterations,
-            config.tolerance,
-        )
+            _check_identifiable(names, *problem.parameter_information(z), "at the initial guess")
+        bound = np.concatenate([upper, np.full(z.size - n_p, np.inf)])
+        z, stage_fit = _levenberg_marquardt(problem, z, -bound, bound, config.max_iterations, TOLERANCE)
         fit = {**stage_fit, "nfev": fit["nfev"] + stage_fit["nfev"], "njev": fit["njev"] + stage_fit["njev"]}
     a, s = problem.parameter_information(z)
-    _check_identifiable(config.parameters, a, s, "at the optimum")
+    _check_identifiable(names, a, s, "at the optimum")
     r = problem.residuals(z)
     sigma2 = float(r @ r) / max(r.size - z.size, 1)
     sd = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(s)), 0.0, None))
-    rod, gain, offset, delay = problem.unpack(z[: problem.n_p])
     estimates: dict[str, float] = {}
     std: dict[str, float] = {}
-    for j, name in enumerate(config.parameters):
-        if name == "encoder_offset_rad":
-            estimates[name], std[name] = offset, float(sd[j] * _OFFSET_SCALE_RAD)
-        elif name in _DELAYS:
-            estimates[name], std[name] = float(z[j]) * dataset.dt_s, float(sd[j] * dataset.dt_s)
+    for j, (name, value) in enumerate(_decode(names, z[:n_p], guess).items()):
+        if name in _DELAYS:
+            estimates[name], std[name] = value * dataset.dt_s, float(sd[j] * dataset.dt_s)
+        elif name == "encoder_offset_rad":
+            estimates[name], std[name] = value, float(sd[j] * _OFFSET_SCALE_RAD)
         else:
-            value = gain if name == "torque_gain" else float(getattr(rod, name))
             estimates[name], std[name] = value, float(value * sd[j])  # delta method on the log scale
     return GreyBoxResult(
-        params=rod,
+        params=problem.unpack(z[:n_p])[0],
         initial_params=guess,
         estimates=estimates,
         std=std,
-        torque_gain=gain,
-        encoder_offset_rad=offset,
-        torque_delay_s=delay * dataset.dt_s,
-        camera_delay_s=estimates.get("camera_delay_s", 0.0),
         residual_rms_rad=float(np.sqrt(np.mean(r**2))),
         n_windows=problem.n_windows,
         window_steps=steps,
@@ -599,7 +593,7 @@ def identify(
         message=str(fit["message"]),
         at_bounds=tuple(
             name
-            for j, name in enumerate(config.parameters)
+            for j, name in enumerate(names)
             if (name in _DELAYS and abs(z[j]) >= 1.0)
             or (name not in _ZERO_CALIBRATIONS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))
         ),
@@ -611,8 +605,6 @@ def estimate_joint_states(
     dataset: TrajectoryDataset,
     samples: np.ndarray,
     lookback_s: float = 0.1,
-    substeps: Optional[int] = None,
-    max_iterations: int = 15,
 ) -> np.ndarray:
     """Causal PRB joint states ``(B, 2 (n + 1))`` at rows ``(trial, sample)``: the state ``lookback_s`` earlier is
     fitted to the observations up to ``sample`` (parameters held), then run forward under the recorded torques."""
@@ -624,13 +616,11 @@ def estimate_joint_states(
     starts[:, 1] -= steps
     if samples.size == 0 or starts[:, 1].min() < 1 or samples[:, 1].max() >= dataset.n_samples:
         raise ValueError(f"samples must lie in [{steps + 1}, {dataset.n_samples}) to look {lookback_s} s back")
-    substeps = dataset_substeps(dataset, substeps)
-    problem = _Problem(dataset, params, (), 1e-6, starts, steps, substeps)
+    substeps = dataset_substeps(dataset)
+    problem = _Problem(dataset, params, (), starts, steps, substeps)
     x0 = _initial_states(dataset, starts, params).reshape(-1)
     unbounded = np.full(x0.size, np.inf)
-    z, _ = _levenberg_marquardt(
-        problem, x0, -unbounded, unbounded, positive_int("max_iterations", max_iterations), 1e-8
-    )
+    z, _ = _levenberg_marquardt(problem, x0, -unbounded, unbounded, 15, 1e-8)
     fitted = z.reshape(problem.n_windows, -1)
     plant = _free_plant(params, dataset.dt_s, substeps)
     n_q = plant.n_coordinates

@@ -3,12 +3,13 @@ in seconds and Lyapunov times), the tip error at a fixed horizon, and the grey-b
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
 import numpy as np
 
-from softpend.checks import in_unit_interval, non_negative, positive, positive_int
+from softpend.checks import non_negative, positive, positive_int
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
@@ -27,48 +28,28 @@ class ValidPrediction:
     censored: np.ndarray
     threshold_m: float
     median_s: float
-    lyapunov_rate_per_s: Optional[float]
     median_lyapunov: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """Summary (JSON-ready)."""
-        return {
-            "median_s": self.median_s,
-            "median_lyapunov": self.median_lyapunov,
-            "threshold_m": self.threshold_m,
-            "n_rollouts": int(self.times_s.size),
-            "censored_fraction": float(np.mean(self.censored)),
-        }
 
 
 def valid_prediction(
-    tip_error_m: np.ndarray,
-    dt_s: float,
-    length_m: float,
-    fraction: float = VALID_TIP_FRACTION,
-    lyapunov_rate_per_s: Optional[float] = None,
+    tip_error_m: np.ndarray, dt_s: float, length_m: float, lyapunov_rate_per_s: Optional[float] = None
 ) -> ValidPrediction:
     """Valid prediction time of rollouts from their tip errors ``(B, H + 1)`` [m]: a rollout first above
-    ``fraction * length_m`` at sample ``k`` is valid for ``(k - 1) dt``, one never above for ``H dt`` (censored).
-    ``lyapunov_rate_per_s`` is the growth rate of the linearisation at upright."""
+    :data:`VALID_TIP_FRACTION` of ``length_m`` at sample ``k`` is valid for ``(k - 1) dt``, one never above for
+    ``H dt`` (censored).  ``lyapunov_rate_per_s`` is the growth rate of the linearisation at upright."""
     error = np.asarray(tip_error_m, dtype=float)
     if error.ndim != 2 or error.shape[0] < 1 or error.shape[1] < 2:
         raise ValueError(f"tip_error_m must have shape (B >= 1, H + 1 >= 2), got {error.shape}")
     if not np.all(np.isfinite(error)) or error.min() < 0:
         raise ValueError("tip_error_m must be finite and non-negative")
-    positive("dt_s", dt_s)
-    positive("length_m", length_m)
-    in_unit_interval("fraction", fraction, include_zero=False)
-    if lyapunov_rate_per_s is not None:
-        positive("lyapunov_rate_per_s", lyapunov_rate_per_s)
-    threshold = fraction * length_m
+    threshold = VALID_TIP_FRACTION * positive("length_m", length_m)
     above = error > threshold
     censored: np.ndarray = ~above.any(axis=1)  # type: ignore[assignment]  # numpy's stubs allow a scalar for an unknown ndim
     first = np.where(censored, error.shape[1], np.argmax(above, axis=1))
-    times = np.maximum(first - 1, 0) * dt_s
+    times = np.maximum(first - 1, 0) * positive("dt_s", dt_s)
     median = float(np.median(times))
-    lyapunov = median * lyapunov_rate_per_s if lyapunov_rate_per_s is not None else float("nan")
-    return ValidPrediction(times, censored, float(threshold), median, lyapunov_rate_per_s, float(lyapunov))
+    rate = math.nan if lyapunov_rate_per_s is None else positive("lyapunov_rate_per_s", lyapunov_rate_per_s)
+    return ValidPrediction(times, censored, float(threshold), median, float(median * rate))
 
 
 def tip_rmse_at_s(tip_error_m: np.ndarray, dt_s: float, horizon_s: float) -> float:
@@ -86,15 +67,13 @@ def rollout_starts(
     stride: int = 10,
     first: int = 0,
     max_tilt_rad: Optional[float] = None,
-    trials: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Rows ``(trial, sample)`` of every ``stride``-th sample from ``first`` that leaves ``steps`` samples after it,
     optionally only those with ``|theta| <= max_tilt_rad``."""
     steps = positive_int("steps", steps)
     stride = positive_int("stride", stride)
-    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     samples = np.arange(int(first), dataset.n_samples - steps, stride)
-    grid = np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2)
+    grid = np.array([(t, s) for t in range(dataset.n_trials) for s in samples], dtype=np.int64).reshape(-1, 2)
     if max_tilt_rad is not None and grid.size:
         theta = np.arctan2(-dataset.column("ex_m"), dataset.column("ey_m"))
         grid = grid[np.abs(theta[grid[:, 0], grid[:, 1]]) <= positive("max_tilt_rad", max_tilt_rad)]
@@ -121,7 +100,6 @@ def prb_rollout_tip_errors(
     starts: np.ndarray,
     steps: int,
     hub_offset_rad: float = 0.0,
-    substeps: Optional[int] = None,
     initial_states: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Tip errors ``(B, steps + 1)`` [m] of open-loop PRB rollouts with ``params`` from the recorded joint state (or
@@ -136,7 +114,7 @@ def prb_rollout_tip_errors(
     steps = positive_int("steps", steps)
     index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
     torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset, substeps), states, torques, has_er=False)
+    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), states, torques, has_er=False)
     ex = dataset.column("ex_m")[starts[:, :1], index]
     ey = dataset.column("ey_m")[starts[:, :1], index]
     return np.hypot(sim[..., 1] - ex, sim[..., 2] - ey)
@@ -148,7 +126,6 @@ def prb_rollout_trial(
     trial: int,
     start_sample: int,
     steps: int,
-    substeps: Optional[int] = None,
     initial_state: Optional[np.ndarray] = None,
 ) -> dict[str, np.ndarray]:
     """One open-loop PRB rollout from the recorded joint state (or ``initial_state``) in the format of
@@ -161,7 +138,7 @@ def prb_rollout_trial(
     )
     index = start_sample + np.arange(steps + 1)
     torques = dataset.torques_nm[trial, index[:-1]][None]
-    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset, substeps), state, torques, has_er=False)[0]
+    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), state, torques, has_er=False)[0]
     out = {"time_s": index * dataset.dt_s}
     for k, name in enumerate(("phi_rad", "ex_m", "ey_m")):
         out[name], out[f"{name}_model"] = dataset.column(name)[trial, index], sim[:, k]
@@ -192,16 +169,13 @@ def prb_one_step_errors(
     params: RodParams,
     dataset: TrajectoryDataset,
     trials: Optional[np.ndarray] = None,
-    substeps: Optional[int] = None,
 ) -> dict[str, float]:
     """One-step error of a PRB model from the recorded joint state at every sample of the trials, in the units of
     :func:`softpend.sysid.one_step_errors` at full information (velocities as backward differences)."""
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     starts = np.array([(t, s) for t in trials for s in range(dataset.n_samples - 1)], dtype=np.int64)
     states = _recorded_states(dataset, starts)
-    plant = PRBPlant(
-        params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset, substeps)
-    )
+    plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
     names = dataset.position_names
     predicted = np.empty((starts.shape[0], len(names)))
     for row, ((t, s), state) in enumerate(zip(starts, states)):

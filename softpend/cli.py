@@ -12,8 +12,6 @@ import sys
 import zipfile
 from typing import NoReturn, Sequence
 
-from softpend.commands.options import check_numbers
-
 #: Modules that contribute subcommands.
 COMMAND_MODULES: list[str] = [
     f"softpend.commands.{name}"
@@ -80,7 +78,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        check_numbers(args, getattr(args, "number_limits", {}))  # before the command starts any work
         return int(args.func(args) or 0)
     except Exception as exc:
         if getattr(args, "debug", False) or not is_reported(exc):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from softpend.io.overrides import parse_assignment
 
@@ -15,12 +15,26 @@ Option = tuple[str, Optional[tuple[float, float]], dict[str, Any]]
 
 
 def add_options(parser: argparse.ArgumentParser, options: Sequence[Option]) -> None:
-    """Add the options of a table to ``parser``; :func:`softpend.cli.main` checks their intervals
-    (:func:`check_numbers`) before the command runs."""
-    for flag, _, keywords in options:
+    """Add the options of a table to ``parser``; a value outside its interval is a usage error naming the flag."""
+    for flag, limits, keywords in options:
+        if limits is not None:
+            keywords = dict(keywords, type=_ranged(keywords["type"], flag, *limits))
         parser.add_argument(flag, **keywords)
-    limits = {flag: limits for flag, limits, _ in options if limits is not None}
-    parser.set_defaults(number_limits={**(parser.get_default("number_limits") or {}), **limits})
+
+
+def _ranged(kind: type, flag: str, low: float, high: float) -> Callable[[str], Any]:
+    def parse(text: str) -> Any:
+        from softpend.checks import in_range
+
+        value = kind(text)
+        try:
+            in_range(flag, value, low, high)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+
+    parse.__name__ = kind.__name__  # argparse's "invalid float value: ..."
+    return parse
 
 
 #: A row of a table of config fields as options: ``(flag, field, type, help, closed interval or None)``.

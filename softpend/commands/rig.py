@@ -7,6 +7,7 @@ import argparse
 
 from softpend.commands.options import MAX_SESSION_S, Option, add_options
 
+DEBUG_HELP = "show the traceback of an error instead of one line"
 OPTIONS: tuple[Option, ...] = (
     ("--port", None, dict(metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")),
     (
@@ -26,7 +27,6 @@ OPTIONS: tuple[Option, ...] = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from softpend.cli import DEBUG_HELP
     from softpend.commands import rig_build, rig_commission, rig_control
 
     parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
@@ -37,7 +37,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         module.register(actions)
     for action in actions.choices.values():
         action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
-        action.set_defaults(number_limits=action.get_default("number_limits") or {})  # not the server's
 
 
 def run(args: argparse.Namespace) -> int:

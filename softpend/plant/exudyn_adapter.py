@@ -4,6 +4,7 @@ elements on a driven hub node, both stepped by the implicit solver."""
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Optional, Sequence
@@ -31,53 +32,61 @@ class SolverFailure(RuntimeError):
     """The Exudyn solver failed (Newton did not converge or the state became non-finite)."""
 
 
-def _quiet_dense_settings() -> exu.SimulationSettings:
+def _settings(values: dict[str, Any]) -> exu.SimulationSettings:
+    """Quiet Exudyn settings with the dense linear solver and ``values`` set by dotted path."""
     settings = exu.SimulationSettings()
-    settings.solution.file.write = False
-    settings.show.computationTime = False
-    settings.linearSolver.solverType = exu.LinearSolverType.EXUdense
+    quiet = {"solution.file.write": False, "show.computationTime": False, "show.statistics": False}
+    for path, value in {**quiet, "linearSolver.solverType": exu.LinearSolverType.EXUdense, **values}.items():
+        *parents, name = path.split(".")
+        setattr(functools.reduce(getattr, parents, settings), name, value)
     return settings
 
 
 def static_solver_settings(load_steps: int, relative_tolerance: float) -> exu.SimulationSettings:
     """Settings of Exudyn's static solver: ``load_steps`` load steps, quiet, dense."""
-    settings = _quiet_dense_settings()
-    settings.staticSolver.numberOfLoadSteps = load_steps
-    settings.staticSolver.verboseMode = 0
-    settings.staticSolver.newton.relativeTolerance = relative_tolerance
-    return settings
+    return _settings(
+        {
+            "staticSolver.numberOfLoadSteps": load_steps,
+            "staticSolver.verboseMode": 0,
+            "staticSolver.newton.relativeTolerance": relative_tolerance,
+        }
+    )
 
 
 class _ExudynSystem:
     """What both models share: one Exudyn system stepped ``dt_s`` at a time by ``substeps`` generalized-alpha steps
-    (modified Newton, quiet, dense)."""
+    (modified Newton, quiet, dense), a failed step retried with each of ``refinements`` times the steps."""
 
     dt_s: float
     substeps: int
     spectral_radius: float
     newton_relative_tolerance: float
+    refinements: tuple[int, ...] = (1,)
 
     def _start_solver(self, mbs: Any) -> None:
         self._mbs = mbs
         self.time_s = 0.0
-        settings = self._settings = _quiet_dense_settings()
-        ti = self._time_integration = settings.timeIntegration
-        ti.numberOfSteps = int(self.substeps)
-        ti.startTime = 0.0
-        ti.endTime = self.dt_s
-        ti.verboseMode = 0
-        ti.adaptiveStep = False
-        ti.generalizedAlpha.spectralRadius = float(self.spectral_radius)
-        ti.newton.relativeTolerance = self.newton_relative_tolerance
-        ti.newton.absoluteTolerance = 1e-10
-        ti.newton.useModifiedNewton = True
-        ti.newton.maxIterations = 50
-        settings.solution.sensors.writePeriod = 1e9
-        settings.show.statistics = False
+        ti = "timeIntegration."
+        self._settings = _settings(
+            {
+                ti + "numberOfSteps": int(self.substeps),
+                ti + "startTime": 0.0,
+                ti + "endTime": self.dt_s,
+                ti + "verboseMode": 0,
+                ti + "adaptiveStep": False,
+                ti + "generalizedAlpha.spectralRadius": float(self.spectral_radius),
+                ti + "newton.relativeTolerance": self.newton_relative_tolerance,
+                ti + "newton.absoluteTolerance": 1e-10,
+                ti + "newton.useModifiedNewton": True,
+                ti + "newton.maxIterations": 50,
+                "solution.sensors.writePeriod": 1e9,
+            }
+        )
+        self._time_integration = self._settings.timeIntegration
         # Any: exudyn's stubs declare these methods without self and GetSystemState as lists (it gives arrays)
         self._data: Any = mbs.systemData
         self._solver: Any = exu.MainSolverImplicitSecondOrder()
-        self._solver.InitializeSolver(mbs, settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
+        self._solver.InitializeSolver(mbs, self._settings)  # type: ignore[call-arg,misc]  # exudyn's stub lacks self
 
     def _set_coordinates(self, c: np.ndarray, c_t: np.ndarray, zero_rest: bool = False) -> None:
         """Set the coordinates and their rates (and zero the accelerations and algebraic coordinates if
@@ -101,9 +110,35 @@ class _ExudynSystem:
     def set_state(self, q: np.ndarray, q_t: np.ndarray) -> None:
         raise NotImplementedError
 
-    def _accept_step(self, state: Any) -> None:
-        """Make the solved ``state`` the start of the next step."""
-        if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1]))):
+    def advance(self) -> None:
+        """Advance by one control step; ``SolverFailure`` if Newton fails at every refinement or the state is not
+        finite."""
+        settings, mbs, data, ti = self._settings, self._mbs, self._data, self._time_integration
+        start_state = data.GetSystemState() if len(self.refinements) > 1 else None
+        ok, reason = False, ""
+        for refinement in self.refinements:
+            if refinement > 1:  # again from the start of the step, with more solver steps
+                for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
+                    data.SetSystemState(systemStateList=start_state, configuration=configuration)
+                ti.numberOfSteps = int(self.substeps) * refinement
+            ti.startTime = self.time_s
+            ti.endTime = self.time_s + self.dt_s
+            self._solver.InitializeSolverInitialConditions(mbs, settings)
+            try:
+                ok = bool(self._solver.SolveSteps(mbs, settings))
+            except Exception as exc:  # Exudyn raises on e.g. singular Jacobians
+                ok, reason = False, ": " + " ".join(str(exc).split())
+            if ok:
+                break
+        if refinement > 1:
+            ti.numberOfSteps = int(self.substeps)
+        if not ok:
+            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s{reason}")
+        self._accept_step(data.GetSystemState())
+
+    def _accept_step(self, state: Any, total: Optional[float] = None) -> None:
+        """Make the solved ``state`` the start of the next step (``total``: the sum of its entries, if known)."""
+        if not math.isfinite(float(np.sum(state[0])) + float(np.sum(state[1])) if total is None else total):
             raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
         data, initial = self._data, exu.ConfigurationType.Initial
         data.SetSystemState(systemStateList=state, configuration=initial)
@@ -207,6 +242,11 @@ class KinematicChain2D(_ExudynSystem):
         self._q, self._q_t = q.copy(), q_t.copy()
         self._q_list, self._q_t_list = self._q.tolist(), self._q_t.tolist()
 
+    def _accept_step(self, state: Any, total: Optional[float] = None) -> None:
+        q_list, q_t_list = state[0].tolist(), state[1].tolist()
+        super()._accept_step(state, sum(q_list) + sum(q_t_list))
+        self._q, self._q_t, self._q_list, self._q_t_list = state[0], state[1], q_list, q_t_list
+
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint angles [rad] and rates [rad/s] (copies)."""
         return np.array(self._q, dtype=float), np.array(self._q_t, dtype=float)
@@ -219,33 +259,6 @@ class KinematicChain2D(_ExudynSystem):
         """Generalised joint forces (torques) [N m] applied during the following steps."""
         self._force[:] = forces
         self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._force)
-
-    def advance(self) -> None:
-        """Advance by one control step; ``SolverFailure`` if Newton fails or the state is not finite."""
-        settings, mbs, solver, ti = self._settings, self._mbs, self._solver, self._time_integration
-        ti.startTime = self.time_s
-        ti.endTime = self.time_s + self.dt_s
-        solver.InitializeSolverInitialConditions(mbs, settings)
-        try:
-            ok = solver.SolveSteps(mbs, settings)
-        except exu.ExudynError as exc:
-            raise SolverFailure(
-                f"Exudyn implicit solver failed at t = {self.time_s:.4f} s: {' '.join(str(exc).split())}"
-            ) from exc
-        data = self._data
-        state = data.GetSystemState()
-        if not ok:
-            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
-        q, q_t = state[0], state[1]
-        q_list, q_t_list = q.tolist(), q_t.tolist()
-        if not math.isfinite(sum(q_list) + sum(q_t_list)):
-            raise SolverFailure(f"non-finite state at t = {self.time_s + self.dt_s:.4f} s")
-        self._q, self._q_t = q, q_t
-        self._q_list, self._q_t_list = q_list, q_t_list
-        initial = exu.ConfigurationType.Initial
-        data.SetSystemState(systemStateList=state, configuration=initial)
-        data.SetODE2Coordinates_tt(coordinates=data.GetODE2Coordinates_tt(), configuration=initial)
-        self.time_s += self.dt_s
 
     def linearized_system(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(M, K, D)`` of ``M dq_dd + D dq_d + K dq = forces`` linearised at the current state."""
@@ -286,6 +299,7 @@ class HubBeam2D(_ExudynSystem):
     spectral_radius: float = 0.95
     newton_relative_tolerance: float = 1e-8
     time_s: float = field(init=False, default=0.0)
+    refinements: tuple[int, ...] = field(init=False, default=(1, 4, 16))
 
     def __post_init__(self) -> None:
         self.n_ode2 = 3 * (self.n_elements + 1)
@@ -368,28 +382,3 @@ class HubBeam2D(_ExudynSystem):
         """Hub torque [N m] for the following steps (ignored when the hub is locked)."""
         if self._torque_load is not None:
             self._mbs.SetLoadParameter(self._torque_load, "load", float(torque_nm))
-
-    def advance(self) -> None:
-        """Advance by one control step, retried with 4x and 16x the solver steps if Newton fails;
-        ``SolverFailure`` if every try fails or the state is not finite."""
-        settings, mbs, data, ti = self._settings, self._mbs, self._data, self._time_integration
-        start_state = data.GetSystemState()
-        ok = False
-        for refinement in (1, 4, 16):
-            if refinement > 1:
-                for configuration in (exu.ConfigurationType.Initial, exu.ConfigurationType.Current):
-                    data.SetSystemState(systemStateList=start_state, configuration=configuration)
-            ti.numberOfSteps = int(self.substeps) * refinement
-            ti.startTime = self.time_s
-            ti.endTime = self.time_s + self.dt_s
-            self._solver.InitializeSolverInitialConditions(mbs, settings)
-            try:
-                ok = bool(self._solver.SolveSteps(mbs, settings))
-            except Exception:  # Exudyn raises on e.g. singular Jacobians
-                ok = False
-            if ok:
-                break
-        ti.numberOfSteps = int(self.substeps)
-        if not ok:
-            raise SolverFailure(f"Exudyn implicit solver failed at t = {self.time_s:.4f} s")
-        self._accept_step(data.GetSystemState())

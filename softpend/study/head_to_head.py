@@ -15,6 +15,7 @@ from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.reading import read_json_object
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 from softpend.rl.curves import failures_as
+from softpend.study.rl_runs import run_folder
 from softpend.study.sweep import run_jobs
 
 
@@ -28,8 +29,6 @@ def pilco_runs(
 ) -> list[PilcoResult]:
     """Run (or reuse) PILCO once per seed under ``runs_root`` (:func:`softpend.study.rl_runs.run_folder`), the
     missing seeds in parallel, and load the results."""
-    from softpend.study.rl_runs import run_folder
-
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(run_and_save, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "PILCO runs", backend)
 
@@ -42,8 +41,6 @@ def pilco_runs(
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
     """The PILCO runs still missing under ``runs_root`` as ``(name, arguments of run_and_save)``; a folder holding
     a run of other settings raises ``ValueError``."""
-    from softpend.study.rl_runs import run_folder
-
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
     jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once

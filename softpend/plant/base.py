@@ -25,8 +25,9 @@ class SimulationDiverged(RuntimeError):
 
 
 class PlantBase:
-    """Shared part of the plants; a subclass sets ``n_coordinates`` and supplies ``_set_state``, ``observe``,
-    ``_advance(torque_nm)`` and ``_solve_static()``."""
+    """What every plant offers (environments, controllers, the evaluation and the rig emulator use it); ``q`` is the
+    coordinate vector, hub angle first (unwrapped) unless the hub is locked.  A subclass sets ``n_coordinates`` and
+    supplies the methods that raise ``NotImplementedError`` here."""
 
     params: RodParams
     dt_s: float
@@ -51,10 +52,32 @@ class PlantBase:
         self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
         self.last_torque_nm = 0.0
 
-    def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+    @property
+    def time_s(self) -> float:
+        """Simulated time since the last reset [s]."""
         raise NotImplementedError
 
     def observe(self) -> Observation:
+        """The observed variables now."""
+        raise NotImplementedError
+
+    def observation_from_state(self, q: np.ndarray, q_dot: np.ndarray) -> Observation:
+        """The observation of a given state (the plant is not changed)."""
+        raise NotImplementedError
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, q_dot)`` now (copies)."""
+        raise NotImplementedError
+
+    def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
+        """Points along the rod, hub first [m]."""
+        raise NotImplementedError
+
+    def energy_j(self, q: Optional[np.ndarray] = None, qd: Optional[np.ndarray] = None) -> dict[str, float]:
+        """Kinetic, gravitational, elastic and total energy [J]."""
+        raise NotImplementedError
+
+    def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
         raise NotImplementedError
 
     def _advance(self, torque_nm: float) -> None:
@@ -116,6 +139,10 @@ class PlantBase:
         except SolverFailure as exc:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()
+
+
+#: The type of :func:`softpend.plant.make_plant`'s plants.
+Plant = PlantBase
 
 
 def energies(kinetic, gravity, elastic) -> dict:

@@ -96,7 +96,6 @@ class BeamPlant(PlantBase):
 
     @property
     def time_s(self) -> float:
-        """Simulated time since the last reset [s]."""
         return self._beam.time_s
 
     def global_coordinates(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -83,7 +83,6 @@ class PRBPlant(PlantBase):
 
     @property
     def time_s(self) -> float:
-        """Simulated time since the last reset [s]."""
         return self._chain.time_s
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:

@@ -6,7 +6,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from softpend.plant.protocol import Plant
+    from softpend.plant.base import Plant
 
 _PLANTS: dict[str, str] = {"prb": "softpend.plant.prb:PRBPlant", "beam": "softpend.plant.beam:BeamPlant"}
 

@@ -12,7 +12,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "softpend"
 
 #: Floors from the bottom; a module may import its own unit and units of lower floors only.
 FLOORS = [
-    ["softpend", "softpend.checks", "softpend.stats"],
+    ["softpend", "softpend.checks"],
+    ["softpend.stats"],
     ["softpend.io"],
     ["softpend.plant"],
     ["softpend.task"],

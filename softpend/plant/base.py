@@ -148,13 +148,3 @@ Plant = PlantBase
 def energies(kinetic, gravity, elastic) -> dict:
     """The energy dict of :meth:`Plant.energy_j`."""
     return {"kinetic_j": kinetic, "gravity_j": gravity, "elastic_j": elastic, "total_j": kinetic + gravity + elastic}
-
-
-def tilt_state(params: RodParams, tilt_rad: float, plant: str = "prb") -> tuple[np.ndarray, np.ndarray]:
-    """``(q, q_dot)`` of the straight rod at rest tilted by ``tilt_rad`` from upright, for plant ``plant``."""
-    from softpend.plant.registry import make_plant
-
-    n = params.n_links + 1 if plant == "prb" else make_plant(plant, params=params).n_coordinates
-    q = np.zeros(n)
-    q[0] = tilt_rad
-    return q, np.zeros_like(q)

@@ -10,7 +10,13 @@ from typing import Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from softpend.fidelity.validation import cantilever_free_vibration, measured_bending_frequencies, static_tip_sag
+from softpend.fidelity.validation import (
+    _check_plant_resolution,
+    _plant_kwargs,
+    cantilever_free_vibration,
+    measured_bending_frequencies,
+    static_tip_sag,
+)
 from softpend.plant import RodParams, make_plant
 
 #: ``stiffness_scale`` of the small-deflection sag case.
@@ -28,12 +34,8 @@ def tip_trajectory_m(
     plant: str, params: RodParams, torques_nm: np.ndarray, dt_s: float = 0.01, resolution: Optional[int] = None
 ) -> np.ndarray:
     """Tip positions ``(T + 1, 2)`` [m] of a plant (``resolution``: elements or links) started hanging at rest."""
-    kwargs = {}
-    if plant == "prb" and resolution is not None:
-        params = params.replace(n_links=int(resolution))
-    elif plant == "beam" and resolution is not None:
-        kwargs["n_elements"] = int(resolution)
-    sim = make_plant(plant, params=params, dt_s=dt_s, **kwargs)
+    params, resolution = _check_plant_resolution(plant, params, resolution)
+    sim = make_plant(plant, params=params, dt_s=dt_s, **_plant_kwargs(plant, resolution))
     observation = sim.reset(*sim.hanging_state())
     tips = np.empty((len(torques_nm) + 1, 2))
     tips[0] = observation.ex_m, observation.ey_m

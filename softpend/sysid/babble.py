@@ -36,7 +36,7 @@ PROGRAMS = ("noise", "multisine")
 class BabbleProtocol:
     """How to babble: trials, start region and spread, the torque program (``"noise"``: random torque, std as a
     fraction of the torque limit, low-pass cut-off; ``"multisine"``: :func:`softpend.sysid.excitation.multisine`
-    from 0.2 Hz to ``torque_bandwidth_hz`` with peak ``multisine_peak_fraction`` of the limit), the PD on the hub (gains, fraction of trials, differenced or true rate), sensor noise and the
+    from 0.2 Hz to ``torque_bandwidth_hz`` with peak ``multisine_peak_fraction`` of the limit), the PD on the hub (gains, fraction of trials; on the differenced encoder rate), sensor noise and the
     camera delay [samples] of ``theta, ex, ey, er``."""
 
     n_trials: int = 60
@@ -52,7 +52,6 @@ class BabbleProtocol:
     feedback_kp_nm_per_rad: float = 0.8
     feedback_kd_nms_per_rad: float = 0.015
     feedback_trial_fraction: float = 0.8
-    feedback_velocity: str = "differenced"
     phi_noise_std_rad: float = 0.0
     tip_noise_std_m: float = 0.0
     er_noise_std_rad: float = 0.0
@@ -63,9 +62,8 @@ class BabbleProtocol:
     def __post_init__(self) -> None:
         one_of("start", self.start, _STARTS)
         one_of("program", self.program, PROGRAMS)
-        one_of("feedback_velocity", self.feedback_velocity, ("differenced", "true"))
         for f in dataclasses.fields(self):
-            if f.name not in ("start", "feedback_velocity", "program"):
+            if f.name not in ("start", "program"):
                 non_negative(f.name, getattr(self, f.name))
         for name in ("n_trials", "substeps"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
@@ -158,10 +156,7 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
         joint_q[k], joint_qd[k] = plant.joint_state()
         if k == n_steps:
             break
-        if protocol.feedback_velocity == "differenced":
-            phi_rate = float(wrap_angle_rad(o.phi_rad - phi_previous)) / protocol.dt_s
-        else:
-            phi_rate = o.phi_dot_rad_s
+        phi_rate = float(wrap_angle_rad(o.phi_rad - phi_previous)) / protocol.dt_s
         phi_previous = o.phi_rad
         torque = min(max(-kp * o.phi_rad - kd * phi_rate + babble[k], -limit), limit)
         torques[k] = torque

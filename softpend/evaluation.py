@@ -29,6 +29,9 @@ TEST_EPISODE_S = 10.0
 SUCCESS_STD_RAD = 0.2
 #: Largest upright std [rad] of a start that *holds* the rod balanced (fresh-start figures, the rig's closed loop).
 HOLD_STD_RAD = 0.1
+#: The swing-up ends when ``|theta|`` stays below ``UPRIGHT_THRESHOLD_RAD`` [rad] for ``SWING_UP_HOLD_S`` [s].
+UPRIGHT_THRESHOLD_RAD = 0.2
+SWING_UP_HOLD_S = 1.0
 
 
 class Controller(Protocol):
@@ -80,7 +83,8 @@ def metrics_from_trajectory(
     phi_dot_rad_s: np.ndarray,
     success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
-    """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below 0.2 rad for 1 s), upright
+    """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below
+    :data:`UPRIGHT_THRESHOLD_RAD` for :data:`SWING_UP_HOLD_S`), upright
     std and mean after it (or over the second half), peak torque, energy, and success (swung up, std at most
     ``success_std_rad``)."""
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
@@ -98,8 +102,8 @@ def metrics_from_trajectory(
     if dt <= 0:
         raise ValueError("time_s must be increasing")
     # the first index i such that |theta| stays below the threshold over samples i .. i + hold_steps
-    window = int(round(1.0 / dt)) + 1
-    inside = (np.abs(theta) < 0.2).astype(int)
+    window = int(round(SWING_UP_HOLD_S / dt)) + 1
+    inside = (np.abs(theta) < UPRIGHT_THRESHOLD_RAD).astype(int)
     held = np.flatnonzero(np.convolve(inside, np.ones(window, dtype=int), "valid") == window)
     start_index = int(held[0]) if held.size else None
     after = theta[start_index if start_index is not None else len(theta) // 2 :]

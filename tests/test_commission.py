@@ -22,8 +22,18 @@ from softpend.study.commission import CommissionConfig, commission, identified_v
 from softpend.study.twin_side import TwinTruth
 from softpend.study.unknown_rod import SPREAD_FACTOR, UNKNOWN_FIELDS, UnknownRod, draw_unknown_rod, effective_rod
 
+#: The learners on the smallest budgets that train them: an episode or trial of 1 s, one evaluation start.
+TINY_LEARNERS = {
+    "dqn": {"episodes": 2, "episode_s": 1.0, "learning_starts": 50, "eval_seeds": [1000], "stop.confirm_seeds": []},
+    "mbpo": {"episodes": 3, "episode_s": 1.0, "initial_random_episodes": 2, "eval_seeds": [1000]},
+    "pilco": {"n_policy_trials": 1, "horizon_s": 1.0, "prediction_s": None, "optimiser.iterations": 5},
+}
+for _settings in TINY_LEARNERS.values():
+    _settings.update({"eval_duration_s": 1.0} | ({"stop.confirm_seeds": []} if "episodes" in _settings else {}))
+TINY_LEARNERS["pilco"].update({"gp.max_points": 20, "compiled": False, "eval_seeds": [1000]})
 #: Every stage, each on the smallest budget that runs it.
 TINY = CommissionConfig(
+    learners=TINY_LEARNERS,
     excite_s=1.5,
     trial_length_s=1.0,
     window_s=0.2,
@@ -110,10 +120,27 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     assert excite.is_file() and not (out / "identify" / "identification.json").exists()
     first = excite.read_bytes()
 
+    # interrupted again in the training, after DQN's run: that run is kept, the others trained
     monkeypatch.setitem(commission_module._STAGE_WORK, "identify", identify)
+    train_one, trained = commission_module._train_one, []
+
+    def train_until_mbpo(learner, *args):
+        trained.append(learner)
+        if learner == "mbpo" and trained.count("mbpo") == 1:
+            raise KeyboardInterrupt
+        return train_one(learner, *args)
+
+    monkeypatch.setattr(commission_module, "_train_one", train_until_mbpo)
+    with pytest.raises(KeyboardInterrupt):
+        commission(out, truth, TINY)
+    dqn_log = next((out / "train").glob("dqn-*-seed0")) / "log.json"
+    dqn_logged = dqn_log.read_bytes()
     told: list[tuple[str, bool]] = []
     report = commission(out, truth, TINY, on_stage=lambda stage, ran, output: told.append((stage, ran)))
-    assert told == [("excite", False), ("identify", True), ("design", True), ("verify", True), ("report", True)]
+    assert told == [("excite", False), ("identify", False), ("design", False)] + [
+        (stage, True) for stage in ("train", "verify", "report")
+    ]
+    assert trained == ["dqn", "mbpo", "dqn", "mbpo", "pilco"] and dqn_log.read_bytes() == dqn_logged
     assert excite.read_bytes() == first
     assert jobs == ["excite_on_twin", "verify_on_twin", "truth_errors"]
     assert refused == []
@@ -128,27 +155,51 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     assert TINY.session_s <= report["plant_s"]["excite"] <= TINY.session_s + 0.3  # and the STOP after it
     excited = json.loads((out / "excite" / "excite.json").read_text())
     assert excited["program"] == "noise" and 0.0 < excited["peak_torque_nm"] <= RodParams().torque_limit_nm
-    assert report["plant_s"]["identify"] == report["plant_s"]["design"] == 0.0
+    assert report["plant_s"]["identify"] == report["plant_s"]["design"] == report["plant_s"]["train"] == 0.0
     assert set(report["identified"]) == set(UNKNOWN_FIELDS) | {"torque_gain"}
     gain = report["identified"]["torque_gain"]
     assert gain["truth"] == pytest.approx(TRUTH.torque_gain)
     assert gain["relative_error"] == pytest.approx(gain["estimate"] / TRUTH.torque_gain - 1)
     assert all(math.isfinite(v["std"]) for v in report["identified"].values())
-    assert [r["condition"] for r in report["verification"]] == ["nominal", "harsh"]
+    classes = report["classes"]
+    assert list(classes) == ["swingup", "dqn", "mbpo", "pilco"]
+    swingup = classes["swingup"]
+    assert [r["condition"] for r in swingup["verification"]] == ["nominal", "harsh"]
     # the controller designed on the default rod, from the same fresh starts of the same twin, beside it
-    assert [(r["condition"], r["controller"]) for r in report["default_rod_verification"]] == [
+    assert [(r["condition"], r["controller"]) for r in swingup["default_rod_verification"]] == [
         ("nominal", commission_module.DEFAULT_ROD_CONTROLLER),
         ("harsh", commission_module.DEFAULT_ROD_CONTROLLER),
     ]
-    assert {r["controller"] for r in report["verification"]} == {commission_module.CONTROLLER}
-    for row in report["verification"] + report["default_rod_verification"]:
-        assert row["starts"] == 1 and 0.0 <= row["success_low"] <= row["success_rate"] <= row["success_high"] <= 1.0
+    assert {r["controller"] for r in swingup["verification"]} == {commission_module.CONTROLLER}
+    for name, entry in classes.items():
+        rows = entry["verification"] + (entry["default_rod_verification"] or [])
+        assert [r["condition"] for r in entry["verification"]] == ["nominal", "harsh"], name
+        for row in rows:
+            assert row["starts"] == 1 and 0 <= row["success_low"] <= row["success_rate"] <= row["success_high"] <= 1
+        # plant seconds: the excitation and this class's verification, two twin starts of 1 s (and the STOP)
+        assert report["plant_s"]["excite"] + 2.0 <= entry["plant_s"] <= report["plant_s"]["excite"] + 2.5, name
     assert not set(report["seeds"]["verification"]) & set(report["seeds"]["commissioning"])
+
+    # the learners trained on the identified rod, each episode or trial on a rod drawn from its uncertainty
+    from softpend.control.identified import identified_uncertainty
+    from softpend.pilco.loop import PilcoResult
+    from softpend.rl.config import load_config
+
+    identification = json.loads((out / "identify" / "identification.json").read_text())
+    uncertainty = identified_uncertainty(commission_module._greybox_result(identification["greybox"]), 2.0)
+    assert report["rod_uncertainty"] == uncertainty.to_dict()
+    for name, training in ((n, classes[n]["training"]) for n in ("dqn", "mbpo", "pilco")):
+        folder = out / training["folder"]
+        saved = PilcoResult.load(folder).config if name == "pilco" else load_config(folder / "config.json")
+        assert saved.task.rod.to_dict() == identification["model_rod"] and saved.rod_uncertainty == uncertainty
+        assert training["simulator_s"] == classes[name]["simulator_s"] > 0
+    assert classes["dqn"]["training"]["episodes"] == 2 and classes["pilco"]["training"]["trials"] == 2
+    assert classes["dqn"]["default_rod_verification"] is None  # no default-rod run given
 
     # done: a third call redoes nothing and reads the same report
     told.clear()
     assert commission(out, truth, TINY, on_stage=lambda stage, ran, output: told.append((stage, ran))) == report
-    assert [ran for _, ran in told] == [False] * 5
+    assert [ran for _, ran in told] == [False] * 6
 
 
 def test_the_uncertainty_draws_are_as_wide_as_the_identification_is_uncertain():
@@ -163,8 +214,6 @@ def test_the_uncertainty_draws_are_as_wide_as_the_identification_is_uncertain():
         initial_params=guess,
         estimates=estimates,
         std=std,
-        torque_gain=1.3,
-        encoder_offset_rad=0.0,
         residual_rms_rad=0.0,
         n_windows=1,
         window_steps=2,
@@ -276,15 +325,21 @@ def test_the_commission_bench_figures_are_the_worst_rod_and_count_a_held_paramet
 
     from softpend.study.bench.commission import commission_figures
 
-    def report(nominal, harsh, errors, parameters, excite_s):
+    def report(nominal, harsh, errors, parameters, excite_s, dqn_nominal=10):
+        def entry(nominal, harsh, plant_s):
+            return {
+                "verification": [
+                    {"condition": "nominal", "successes": nominal, "starts": 10},
+                    {"condition": "harsh", "successes": harsh, "starts": 10},
+                ],
+                "plant_s": plant_s,
+            }
+
         return {
-            "verification": [
-                {"condition": "nominal", "successes": nominal, "starts": 10},
-                {"condition": "harsh", "successes": harsh, "starts": 10},
-            ],
+            "classes": {"swingup": entry(nominal, harsh, excite_s - 1), "dqn": entry(dqn_nominal, 10, excite_s + 10)},
             "identified": {name: {"relative_error": e} for name, e in errors.items()},
             "identification_fit": {"parameters": parameters},
-            "plant_s": {"excite": excite_s, "commissioning": excite_s},
+            "plant_s": {"excite": excite_s},
         }
 
     # as a real report: the rod's mass stands for the torque gain; the camera's delay has no truth
@@ -294,6 +349,10 @@ def test_the_commission_bench_figures_are_the_worst_rod_and_count_a_held_paramet
     figures = commission_figures([first, second])
     assert figures["commission_success_min"] == 9.0 and figures["commission_harsh_success_min"] == 7.0
     assert figures["commission_max_param_error_pct"] == pytest.approx(4.0)
-    assert figures["commission_identify_s"] == 14.0 and figures["commission_plant_s_swingup_lqr"] == 13.0
+    assert figures["commission_identify_s"] == 14.0 and figures["commission_plant_s_swingup_lqr"] == 12.0
+    assert figures["commission_plant_s_dqn"] == 23.0
+    # the worst class on the worst rod
+    worse = report(10, 9, {"torque_gain": 0.0}, both, 12.0, dqn_nominal=4)
+    assert commission_figures([first, worse])["commission_success_min"] == 4.0
     held = report(10, 10, {"hub_inertia_kgm2": 0.0, "torque_gain": 0.0}, both, 12.0)  # tip mass held at the guess
     assert math.isinf(commission_figures([first, held])["commission_max_param_error_pct"])

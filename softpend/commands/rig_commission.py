@@ -1,5 +1,6 @@
-"""``softpend rig commission``: commission an unknown rod on the digital twin (excite, identify, design, verify,
-report; :mod:`softpend.study.commission`), each stage's output in ``--out``, a stage already done there kept."""
+"""``softpend rig commission``: commission an unknown rod on the digital twin (excite, identify, design, train,
+verify, report; :mod:`softpend.study.commission`), each stage's output in ``--out``, a stage already done there
+kept."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ import argparse
 import os
 
 from softpend.commands.options import MAX_SESSION_S, check_numbers
+
+#: The controller classes (:data:`softpend.study.commission.CLASSES`, named here so the CLI starts without it).
+CLASSES = ("swingup", "dqn", "mbpo", "pilco")
 
 #: The :class:`~softpend.study.commission.CommissionConfig` options: field -> (low, high, help with the config's
 #: default); a field ending in ``_s`` is a float, the others integers.
@@ -32,7 +36,8 @@ OPTION_RANGES: dict[str, tuple[float, float]] = {
 def register(actions: argparse._SubParsersAction) -> None:
     parser = actions.add_parser(
         "commission",
-        help="commission an unknown rod on the twin: excite, identify, design swing-up + LQR, verify, report",
+        help="commission an unknown rod on the twin: excite, identify, design swing-up + LQR, train DQN, DQN-MBPO "
+        "and PILCO, verify, report",
         description=__doc__.split("\n\n")[0],
     )
     rod = parser.add_mutually_exclusive_group(required=True)
@@ -41,6 +46,21 @@ def register(actions: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="folder of the stages' outputs and report.json")
     for name, (_, _, text) in CONFIG_OPTIONS.items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=float if name.endswith("_s") else int, help=text)
+    parser.add_argument(
+        "--controllers",
+        nargs="+",
+        choices=CLASSES,
+        default=list(CLASSES),
+        help="the controller classes to commission (default: all)",
+    )
+    parser.add_argument(
+        "--default-run",
+        nargs=2,
+        action="append",
+        default=[],
+        metavar=("LEARNER", "DIR"),
+        help="a run folder of LEARNER (dqn, mbpo, pilco) trained for the default rod, verified beside (repeatable)",
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.set_defaults(func=run)
 
@@ -60,7 +80,11 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--twin-rod {args.twin_rod}: no such file")
         check_regular_file(args.twin_rod, "--twin-rod")
     truth = TwinTruth(rod_file=args.twin_rod, seed=args.twin_seed)
-    config = CommissionConfig(**{k: getattr(args, k) for k in CONFIG_OPTIONS if getattr(args, k) is not None})
+    config = CommissionConfig(
+        **{k: getattr(args, k) for k in CONFIG_OPTIONS if getattr(args, k) is not None},
+        controllers=tuple(args.controllers),
+        default_rod_runs=dict(args.default_run),
+    )
 
     def told(stage: str, ran: bool, output: dict) -> None:
         if not args.json:
@@ -70,10 +94,15 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(report, indent=2))
         return 0
-    for row in report["verification"] + report["default_rod_verification"]:
+    for entry in report["classes"].values():
+        for row in entry["verification"] + (entry["default_rod_verification"] or []):
+            print(
+                f"{row['controller']}, {row['condition']}: {row['successes']} of {row['starts']} balanced "
+                f"(95% interval {row['success_low']:.2f} to {row['success_high']:.2f})"
+            )
         print(
-            f"{row['controller']}, {row['condition']}: {row['successes']} of {row['starts']} balanced "
-            f"(95% interval {row['success_low']:.2f} to {row['success_high']:.2f})"
+            f"{entry['label']}: {entry['plant_s']:.1f} plant seconds (excitation and verification), "
+            f"{entry['simulator_s']:.1f} simulator seconds (design check or training)"
         )
-    print(f"plant seconds of the commissioning: {report['plant_s']['commissioning']:.1f}; report in {args.out}")
+    print(f"report in {args.out}")
     return 0

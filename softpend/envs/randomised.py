@@ -28,14 +28,14 @@ class RodUncertainty:
     scale: float = 2.0
 
     def __post_init__(self) -> None:
-        pairs = tuple(dict(self.relative_std).items()) if isinstance(self.relative_std, Mapping) else self.relative_std
+        pairs: Any = dict(self.relative_std).items() if isinstance(self.relative_std, Mapping) else self.relative_std
         rod_fields = {f.name for f in dataclasses.fields(RodParams)}
         try:
-            pairs = tuple((name, value) for name, value in pairs)
+            named = [(name, value) for name, value in pairs]
         except (TypeError, ValueError):
             raise ValueError(f"rod_uncertainty.relative_std must be (field, relative std) pairs, got {pairs!r}"[:300])
         checked = []
-        for name, value in pairs:
+        for name, value in named:
             if name not in rod_fields:
                 raise ValueError(f"rod_uncertainty: {name!r} is not a RodParams field")
             checked.append((str(name), non_negative(f"rod_uncertainty.{name}", value)))

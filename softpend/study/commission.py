@@ -381,8 +381,8 @@ def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) 
 
     folder = run_folder(root, learner, seed, config)
     if learner == "pilco":
-        for _, args in pilco_jobs(config, [seed], root):
-            run_and_save(*args, progress=False)
+        for _, (seeded, run_dir) in pilco_jobs(config, [seed], root):
+            run_and_save(seeded, run_dir, progress=False)
         result = PilcoResult.load(folder)
         figures = {
             "trials": len(result.records),
@@ -391,8 +391,10 @@ def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) 
             "wall_s": result.train_wall_s,
         }
     else:
-        for _, args in rl_jobs([(learner, config, [seed], episodes)], root):
-            train_run(*args, progress=False)
+        for _, (algo, settings, run_seed, budget, run_dir, resume) in rl_jobs(
+            [(learner, config, [seed], episodes)], root
+        ):
+            train_run(algo, settings, run_seed, budget, run_dir, resume, progress=False)
         log = TrainingLog.load(folder / "log.json")
         rows = log.episodes[-1:] + log.evaluations[-1:]
         figures = {

@@ -309,7 +309,15 @@ def test_bad_input_is_refused_by_name(tmp_path, capsys):
     outputs.write_json(tmp_path / "earlier" / "commission.json", {"twin": {}, "config": {}})
     with pytest.raises(ValueError, match="other settings"):
         commission(tmp_path / "earlier", TwinTruth(rod_file=str(rod_file)), TINY)
-    for changes, name in (({"program": "chirp"}, "program"), ({"noise_std_fraction": 1.5}, "noise_std_fraction")):
+    for changes, name in (
+        ({"program": "chirp"}, "program"),
+        ({"noise_std_fraction": 1.5}, "noise_std_fraction"),
+        ({"controllers": ("swingup", "ppo")}, "controllers"),
+        ({"controllers": ()}, "controllers"),
+        ({"learners": {"ppo": {}}}, "learners"),
+        ({"learners": {"dqn": {"episodes": 0}}}, "learners.dqn.episodes"),
+        ({"default_rod_runs": {"dqn": 3}}, "default_rod_runs"),
+    ):
         with pytest.raises(ValueError, match=name):
             CommissionConfig(**changes)
     with pytest.raises(ValueError, match="exactly one"):

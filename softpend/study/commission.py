@@ -110,10 +110,10 @@ class CommissionConfig:
                 raise ValueError(f"{name} must map names of {list(LEARNERS)}, got {value!r}")
             if not all(isinstance(v, allowed) for v in value.values()):
                 raise ValueError(f"{name}: every value must be a {allowed.__name__}, got {value!r}")
-        learners = {k: dict(v) for k, v in {**DEFAULT_LEARNERS, **self.learners}.items()}
+        learners = {k: {**v, **self.learners.get(k, {})} for k, v in DEFAULT_LEARNERS.items()}
         for name, settings in learners.items():
             if name != "pilco":
-                settings["episodes"] = int_at_least(f"learners.{name}.episodes", settings.get("episodes", 1), 1)
+                settings["episodes"] = int_at_least(f"learners.{name}.episodes", settings["episodes"], 1)
         object.__setattr__(self, "learners", learners)
         object.__setattr__(self, "default_rod_runs", dict(self.default_rod_runs))
         for name in ("excite_s", "trial_length_s", "window_s", "check_duration_s", "uncertainty_scale"):

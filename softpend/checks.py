@@ -130,6 +130,42 @@ def boolean(name: str, value: Any) -> bool:
     return bool(value)
 
 
+def set_ints(obj: Any, names: str, low: int, prefix: str = "") -> None:
+    """Check and store the int fields ``names`` (space-separated), each ``>= low``, of a (frozen) dataclass ``obj``."""
+    for name in names.split():
+        value, shown = getattr(obj, name), prefix + name
+        object.__setattr__(obj, name, positive_int(shown, value) if low == 1 else int_at_least(shown, value, low))
+
+
+def seed_tuple(name: str, value: Any, non_empty: bool = False) -> tuple[int, ...]:
+    """``value`` as a tuple of seeds (ints >= 0; at least one if ``non_empty``), else ``ValueError`` naming ``name``."""
+    try:
+        seeds = tuple(int_at_least(name, s, 0) for s in value)
+    except TypeError:
+        raise ValueError(f"{name} must be a tuple of integers >= 0, got {value!r}") from None
+    if non_empty and not seeds:
+        raise ValueError(f"{name} must not be empty")
+    return seeds
+
+
+def positive_ints(name: str, value: Any) -> tuple[int, ...]:
+    """``value`` as a non-empty tuple of positive ints, else ``ValueError`` naming ``name``."""
+    try:
+        widths = tuple(positive_int(name, w) for w in value)
+    except (TypeError, ValueError):
+        widths = ()
+    if not widths:
+        raise ValueError(f"{name} must be a non-empty tuple of positive integers, got {value!r}")
+    return widths
+
+
+def instance_of(name: str, value: Any, cls: type) -> Any:
+    """``value`` if it is a ``cls``, else ``ValueError`` naming ``name``."""
+    if not isinstance(value, cls):
+        raise ValueError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
+    return value
+
+
 def _assigned_names(source: str) -> set[str]:
     """Names bound by top-level assignments in Python ``source`` (empty if it does not parse)."""
     import ast

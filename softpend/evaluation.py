@@ -17,6 +17,7 @@ from softpend.checks import (
     one_of,
     positive,
     positive_int,
+    seed_tuple,
 )
 from softpend.plant import OBSERVATION_NAMES, Observation, SimulationDiverged
 from softpend.stats import wilson_interval
@@ -284,16 +285,6 @@ class BatchPolicy:
         return self._held
 
 
-def _check_seeds(seeds: Sequence[int]) -> list[int]:
-    try:
-        values = list(seeds)
-    except TypeError:
-        raise ValueError(f"seeds must be a sequence of integers >= 0, got {seeds!r}") from None
-    if not values:
-        raise ValueError("seeds must not be empty")
-    return [int_at_least("seeds", s, 0) for s in values]
-
-
 def _start_options(initial_state: Optional[tuple[Any, Any]]) -> Optional[dict[str, Any]]:
     """``reset``'s options for an exact start ``(q, q_dot)`` (``None``: the start distribution)."""
     if initial_state is None:
@@ -468,7 +459,7 @@ def evaluate(
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")
     one_of("engine", engine, ("exudyn", "batched"))
-    seeds = _check_seeds(seeds)
+    seeds = list(seed_tuple("seeds", seeds, non_empty=True))
     positive("duration_s", duration_s)
     options = dict(
         initial_state=initial_state,

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from softpend.checks import in_range, int_at_least, one_of, positive
+from softpend.checks import in_range, one_of, positive, seed_tuple, set_ints
 from softpend.control.learned import LearnedStateTracker
 from softpend.control.lqr import LQRController
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
@@ -96,9 +96,9 @@ class PlannerConfig:
         one_of("excitation_program", self.excitation_program, PROGRAMS)
         for name in ("excitation_s", "trial_s", "hold_s", "horizon_s", "control_dt_s", "temperature"):
             positive(name, getattr(self, name))
-        lows = {"max_trials": 1, "stop_after_balanced": 1, "ensemble_size": 1, "hidden_width": 1, "train_steps": 1}
-        for name, low in {**lows, "identify_windows": 0, "seed": 0, "n_samples": 2}.items():
-            object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
+        set_ints(self, "max_trials stop_after_balanced ensemble_size hidden_width train_steps", 1)
+        set_ints(self, "identify_windows seed", 0)
+        set_ints(self, "n_samples", 2)
         if self.n_samples % self.ensemble_size:
             raise ValueError(f"n_samples must be a multiple of ensemble_size, got {self.n_samples!r}")
         in_range("noise_fraction", self.noise_fraction, 1e-6, 10.0)
@@ -113,12 +113,9 @@ class PlannerConfig:
                 "control_dt_s and horizon_s must be whole multiples of task.dt_s, "
                 f"horizon_s > {KNOTS_PER_PLAN} control_dt_s"
             )
-        try:
-            seeds = tuple(int_at_least("selection_seeds", s, 0) for s in self.selection_seeds)
-        except TypeError:
-            seeds = ()
-        if not seeds or len(set(seeds)) != len(seeds):
-            raise ValueError(f"selection_seeds must be distinct seeds, at least one, got {self.selection_seeds!r}")
+        seeds = seed_tuple("selection_seeds", self.selection_seeds, non_empty=True)
+        if len(set(seeds)) != len(seeds):
+            raise ValueError(f"selection_seeds must be distinct, got {seeds!r}")
         object.__setattr__(self, "selection_seeds", seeds)
 
     @property

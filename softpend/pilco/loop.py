@@ -15,7 +15,16 @@ import numpy as np
 import scipy.optimize
 import torch
 
-from softpend.checks import boolean, check_work_size, in_range, int_at_least, optional_positive, positive
+from softpend.checks import (
+    boolean,
+    check_work_size,
+    in_range,
+    instance_of,
+    optional_positive,
+    positive,
+    seed_tuple,
+    set_ints,
+)
 from softpend.envs.randomised import RodUncertainty, optional_uncertainty, set_rod
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
 from softpend.io.outputs import atomic_write
@@ -64,7 +73,8 @@ class GPSettings:
     iterations: int = 100
 
     def __post_init__(self) -> None:
-        _set_ints(self, {"max_points": 10, "iterations": 1}, "gp.")
+        set_ints(self, "max_points", 10, "gp.")
+        set_ints(self, "iterations", 1, "gp.")
         boolean("gp.all_data", self.all_data)
 
 
@@ -79,7 +89,7 @@ class PolicySettings:
     balance_prediction_s: float = 3.0
 
     def __post_init__(self) -> None:
-        _set_ints(self, {"n_basis": 1}, "policy.")
+        set_ints(self, "n_basis", 1, "policy.")
         if (optional_positive("policy.balance_within_rad", self.balance_within_rad) or 0.0) >= math.pi:
             raise ValueError(f"policy.balance_within_rad must be below pi, got {self.balance_within_rad!r}")
         positive("policy.balance_prediction_s", self.balance_prediction_s)
@@ -98,16 +108,11 @@ class OptimiserSettings:
     restart_target_std: float = 1.0
 
     def __post_init__(self) -> None:
-        _set_ints(self, {"iterations": 1, "restarts": 0}, "optimiser.")
+        set_ints(self, "iterations", 1, "optimiser.")
+        set_ints(self, "restarts", 0, "optimiser.")
         positive("optimiser.restart_target_std", self.restart_target_std)
         fraction = in_range("optimiser.restart_above_cost_fraction", self.restart_above_cost_fraction, 0.0, 1 - 1e-16)
         object.__setattr__(self, "restart_above_cost_fraction", fraction)
-
-
-def _set_ints(settings: Any, lows: dict[str, int], prefix: str = "") -> None:
-    """Check and convert the int fields named in ``lows`` (name -> lowest value)."""
-    for name, low in lows.items():
-        object.__setattr__(settings, name, int_at_least(prefix + name, getattr(settings, name), low))
 
 
 @dataclass
@@ -140,8 +145,7 @@ class PilcoConfig:
         self.rod_uncertainty = optional_uncertainty(self.rod_uncertainty)
         groups = {"task": Task, "cost": CostSettings, "gp": GPSettings, "policy": PolicySettings}
         for name, cls in {**groups, "optimiser": OptimiserSettings}.items():
-            if not isinstance(getattr(self, name), cls):
-                raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
+            instance_of(name, getattr(self, name), cls)
         state_spec(self.state)
         positives = "control_dt_s horizon_s initial_std eval_duration_s target_std_rad random_hold_min_s"
         for name in f"{positives} random_hold_max_s".split():
@@ -156,11 +160,9 @@ class PilcoConfig:
         optional_positive("prediction_s", self.prediction_s)
         if self.prediction_s is not None and self.n_prediction_steps < self.n_horizon_steps:
             raise ValueError(f"prediction_s must be None or at least horizon_s, got {self.prediction_s!r}")
-        _set_ints(self, {"n_policy_trials": 0, "n_random_trials": 1})
-        try:
-            self.eval_seeds = tuple(int_at_least("eval_seeds", s, 0) for s in self.eval_seeds)
-        except TypeError:
-            raise ValueError(f"eval_seeds must be a tuple of integers >= 0, got {self.eval_seeds!r}") from None
+        set_ints(self, "n_policy_trials", 0)
+        set_ints(self, "n_random_trials", 1)
+        self.eval_seeds = seed_tuple("eval_seeds", self.eval_seeds)
         boolean("compiled", self.compiled)
 
     @property

@@ -9,7 +9,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-from softpend.checks import boolean, in_range, in_unit_interval, int_at_least, one_of, positive, positive_int
+from softpend.checks import (
+    boolean,
+    in_range,
+    in_unit_interval,
+    instance_of,
+    int_at_least,
+    one_of,
+    positive,
+    positive_ints,
+    seed_tuple,
+    set_ints,
+)
 from softpend.envs.randomised import RodUncertainty, optional_uncertainty
 from softpend.evaluation import SUCCESS_STD_RAD, TEST_EPISODE_S
 from softpend.io.outputs import atomic_write
@@ -43,14 +54,14 @@ class DQNLearner:
     clip_q_targets: bool = False
 
     def __post_init__(self) -> None:
-        _set_ints(self, "buffer_size batch_size train_freq gradient_steps target_update_interval", 1, "learner.")
+        set_ints(self, "buffer_size batch_size train_freq gradient_steps target_update_interval", 1, "learner.")
         for name in ("learning_rate", "max_grad_norm"):
             positive(f"learner.{name}", getattr(self, name))
         in_range("learner.learning_rate", self.learning_rate, 1e-12, 1e30)  # Adam's step stays a float32
         for name in ("gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
             in_unit_interval(f"learner.{name}", getattr(self, name))
         boolean("learner.clip_q_targets", self.clip_q_targets)
-        object.__setattr__(self, "net_arch", _positive_ints("learner.net_arch", self.net_arch))
+        object.__setattr__(self, "net_arch", positive_ints("learner.net_arch", self.net_arch))
 
 
 @dataclass(frozen=True)
@@ -64,9 +75,9 @@ class StopRule:
     confirm_max_failures: int = 0
 
     def __post_init__(self) -> None:
-        _set_ints(self, "after_balanced_evaluations confirm_max_failures", 0, "stop.")
+        set_ints(self, "after_balanced_evaluations confirm_max_failures", 0, "stop.")
         positive("stop.upright_std_rad", self.upright_std_rad)
-        confirm = _seed_tuple("stop.confirm_seeds", self.confirm_seeds)
+        confirm = seed_tuple("stop.confirm_seeds", self.confirm_seeds)
         if confirm and self.confirm_max_failures >= len(confirm):
             raise ValueError(
                 f"stop.confirm_max_failures ({self.confirm_max_failures}) must be less than the {len(confirm)} "
@@ -97,13 +108,12 @@ class DQNConfig:
     rod_uncertainty: Optional[RodUncertainty] = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.task, Task):
-            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        instance_of("task", self.task, Task)
         object.__setattr__(self, "rod_uncertainty", optional_uncertainty(self.rod_uncertainty))
         for name, cls in (("learner", DQNLearner), ("stop", StopRule)):
-            _check_group(self, name, cls)
-        _set_ints(self, "n_torque_levels action_repeat eval_every_episodes checkpoint_every_episodes", 1)
-        _set_ints(self, "learning_starts reset_every_episodes", 0)
+            instance_of(name, getattr(self, name), cls)
+        set_ints(self, "n_torque_levels action_repeat eval_every_episodes checkpoint_every_episodes", 1)
+        set_ints(self, "learning_starts reset_every_episodes", 0)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
         one_of("training_start", self.training_start, ("random", "hanging", "upright"))
         boolean("eval_until_first_failure", self.eval_until_first_failure)
@@ -114,9 +124,7 @@ class DQNConfig:
                 f"stop.upright_std_rad ({self.stop.upright_std_rad!r}) must be at most the success level "
                 f"{SUCCESS_STD_RAD:g} rad with eval_until_first_failure (a balanced evaluation must run every start)"
             )
-        seeds = _seed_tuple("eval_seeds", self.eval_seeds)
-        if len(seeds) == 0:
-            raise ValueError("eval_seeds must not be empty")
+        seeds = seed_tuple("eval_seeds", self.eval_seeds, non_empty=True)
         shared = set(self.stop.confirm_seeds) & set(seeds)
         if shared:
             raise ValueError(
@@ -176,8 +184,8 @@ class ModelSettings:
     refit_every_episodes: int = 2
 
     def __post_init__(self) -> None:
-        _set_ints(self, "ensemble_size fit_steps batch_size refit_every_episodes", 1, "model.")
-        object.__setattr__(self, "hidden_widths", _positive_ints("model.hidden_widths", self.hidden_widths))
+        set_ints(self, "ensemble_size fit_steps batch_size refit_every_episodes", 1, "model.")
+        object.__setattr__(self, "hidden_widths", positive_ints("model.hidden_widths", self.hidden_widths))
 
 
 @dataclass(frozen=True)
@@ -196,7 +204,7 @@ class RolloutSettings:
     within_data: bool = False
 
     def __post_init__(self) -> None:
-        _set_ints(self, "per_real_step every_steps buffer_size", 1, "rollout.")
+        set_ints(self, "per_real_step every_steps buffer_size", 1, "rollout.")
         for name in ("real_ratio", "start_branch_fraction"):
             in_unit_interval(f"rollout.{name}", getattr(self, name))
         boolean("rollout.within_data", self.within_data)
@@ -229,41 +237,8 @@ class MBPOConfig(DQNConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name, cls in (("model", ModelSettings), ("rollout", RolloutSettings)):
-            _check_group(self, name, cls)
-        _set_ints(self, "initial_random_episodes", 1)
-
-
-def _check_group(config: Any, name: str, cls: type) -> None:
-    """``ValueError`` unless field ``name`` of ``config`` holds a ``cls``."""
-    if not isinstance(getattr(config, name), cls):
-        raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(config, name)).__name__}")
-
-
-def _positive_ints(name: str, value: Any) -> tuple[int, ...]:
-    """``value`` as a non-empty tuple of positive ints, else ``ValueError`` naming ``name``."""
-    try:
-        widths = tuple(positive_int(name, w) for w in value)
-    except (TypeError, ValueError):
-        widths = ()
-    if not widths:
-        raise ValueError(f"{name} must be a non-empty tuple of positive integers, got {value!r}")
-    return widths
-
-
-def _seed_tuple(name: str, value: Any) -> tuple[int, ...]:
-    """``value`` as a tuple of seeds (ints >= 0), else ``ValueError`` naming ``name``."""
-    try:
-        return tuple(int_at_least(name, s, 0) for s in value)
-    except TypeError:
-        raise ValueError(f"{name} must be a tuple of integers >= 0, got {value!r}") from None
-
-
-def _set_ints(config: Any, names: str, low: int, prefix: str = "") -> None:
-    """Check and convert the int fields ``names`` (space-separated): positive when ``low`` is 1, else ``>= low``."""
-    for name in names.split():
-        value, shown = getattr(config, name), prefix + name
-        checked = positive_int(shown, value) if low == 1 else int_at_least(shown, value, low)
-        object.__setattr__(config, name, checked)
+            instance_of(name, getattr(self, name), cls)
+        set_ints(self, "initial_random_episodes", 1)
 
 
 def config_to_dict(config: DQNConfig) -> dict[str, Any]:

@@ -34,7 +34,6 @@ TESTED_CAMERAS: dict[str, tuple[float, float]] = {"nominal": (60.0, 0.020), "har
 def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
     """Per rig controller and seed: success, swing-up time, upright std and the peak torque, hub rate and tip speed
     of the swing-up and balance in the simulator."""
-    positive("duration_s", duration_s)
     phi_dot, ex_dot, ey_dot = (OBSERVATION_NAMES.index(n) for n in ("phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"))
     rows = []
     for label, make in rig_controllers(task).items():
@@ -55,14 +54,11 @@ def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[
     return rows
 
 
-def motor_rows(
-    peak_hub_rate_rad_s: float, torque_nm: float, cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
-) -> list[dict[str, Any]]:
-    """Each cartridge against the swing-up's peak hub rate and ``torque_nm``; it qualifies when faster than the
+def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float) -> list[dict[str, Any]]:
+    """Each V5 cartridge against the swing-up's peak hub rate and ``torque_nm``; it qualifies when faster than the
     peak rate with a torque margin of at least :data:`MIN_TORQUE_MARGIN` there."""
-    positive("torque_nm", torque_nm)
     rows = []
-    for c in cartridges:
+    for c in V5_CARTRIDGES:
         available = c.available_torque_nm(peak_hub_rate_rad_s)
         speed_margin = c.free_speed_rad_s / peak_hub_rate_rad_s if peak_hub_rate_rad_s > 0 else math.inf
         rows.append(
@@ -80,11 +76,9 @@ def motor_rows(
     return rows
 
 
-def choose_cartridge(
-    rows: Sequence[dict[str, Any]], cartridges: Sequence[MotorCartridge] = V5_CARTRIDGES
-) -> MotorCartridge:
+def choose_cartridge(rows: Sequence[dict[str, Any]]) -> MotorCartridge:
     """The qualifying cartridge of :func:`motor_rows` with the finest encoder."""
-    good = [c for c, r in zip(cartridges, rows) if r["qualifies"]]
+    good = [c for c, r in zip(V5_CARTRIDGES, rows) if r["qualifies"]]
     if not good:
         raise ValueError("rows: no cartridge gives the swing-up's torque at its peak hub rate")
     return max(good, key=lambda c: c.encoder_ticks_per_rev)
@@ -154,7 +148,6 @@ def camera_rows(
 ) -> list[dict[str, Any]]:
     """Per frame rate: the tip's largest step between frames against the tracker's search radius, and the motion
     blur of an ``exposure_s`` exposure against the dot's diameter [px]."""
-    positive("search_radius_px", search_radius_px)
     speed_px = peak_tip_speed_m_s * design.camera_model.px_per_m
     dot_px = 2.0 * design.dot_radius_m * design.camera_model.px_per_m
     return [
@@ -171,14 +164,11 @@ def camera_rows(
     ]
 
 
-def modulus_rows(
-    params: RodParams, moduli_pa: Sequence[Optional[float]] = (TPU_MODULUS_RANGE_PA[0], None, TPU_MODULUS_RANGE_PA[1])
-) -> list[dict[str, Any]]:
-    """Per modulus (``None``: the rod's own): the rod's design figures with the designed section printed in that
-    material, and the thickness that would keep the design's stiffness."""
+def modulus_rows(params: RodParams) -> list[dict[str, Any]]:
+    """Per modulus (the softest TPU, the rod's own, the stiffest TPU): the rod's design figures with the designed
+    section printed in that material, and the thickness that would keep the design's stiffness."""
     rows = []
-    for modulus in moduli_pa:
-        e = params.youngs_modulus_pa if modulus is None else float(modulus)
+    for e in (TPU_MODULUS_RANGE_PA[0], params.youngs_modulus_pa, TPU_MODULUS_RANGE_PA[1]):
         figures = rod_design(params.replace(youngs_modulus_pa=e))
         rows.append(
             {
@@ -400,8 +390,7 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
 
     f = Path(folder)
 
-    def read(*parts: str) -> Any:
-        return read_json_checked(f.joinpath(*parts), "build output", MAX_CONFIG_BYTES)
+    read = lambda *parts: read_json_checked(f.joinpath(*parts), "build output", MAX_CONFIG_BYTES)  # noqa: E731
 
     if step.key == "firmware":
         return {"good": True}
@@ -454,8 +443,7 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
             "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
             "upright_std_rad": truth.get("upright_std_rad", math.nan),
         }
-    keys = ["babble", "calibrate", "check", "control", "design", "firmware", "identify"]
-    raise ValueError(f"step.key must be one of {keys}, got {step.key!r}")
+    raise ValueError(f"unknown build step {step.key!r}")
 
 
 def design_figures(params: RodParams, design: Optional[RigDesign] = None) -> dict[str, Any]:

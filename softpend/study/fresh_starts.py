@@ -57,7 +57,6 @@ def fresh_start_row(summary: EvaluationSummary) -> dict[str, Any]:
 
 @functools.lru_cache(maxsize=1)
 def _scoring_source() -> bytes:
-    """The source of the code that scores an episode."""
     import inspect
 
     import softpend.evaluation as evaluation
@@ -66,9 +65,8 @@ def _scoring_source() -> bytes:
 
 
 def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
-    """Key of a fresh-start row: the agent's bytes, the starts, the duration and the scoring code."""
-    digest = hashlib.sha256(agent_path.read_bytes())
-    digest.update(_scoring_source())
+    """Key of a fresh-start row: the agent's bytes, the scoring code, the starts and the duration."""
+    digest = hashlib.sha256(agent_path.read_bytes() + _scoring_source())
     digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
     return digest.hexdigest()
 
@@ -102,9 +100,8 @@ def rl_fresh_start_rows(
             for agent_kind in which:
                 model, config = load_agent(folder, agent_kind)
                 _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
-                agent_file = folder / ("best_agent.zip" if agent_kind == "best" else "agent.zip")
-                if not agent_file.exists():
-                    agent_file = folder / "agent.zip"
+                best = folder / "best_agent.zip"
+                agent_file = best if agent_kind == "best" and best.exists() else folder / "agent.zip"
                 key = _evaluation_key(agent_file, report_seeds, duration_s)
                 cached = cache.get(agent_kind)
                 if isinstance(cached, dict) and cached.get("key") == key and isinstance(cached.get("row"), dict):
@@ -127,11 +124,10 @@ def pilco_fresh_start_rows(
     """One row per PILCO run (its final policy, on the run's task), measured on ``report_seeds``."""
     rows = []
     for result in results:
-        _refuse_selection_starts(
-            report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {result.config.seed}"
-        )
+        seed = int(result.config.seed)
+        _refuse_selection_starts(report_seeds, result.config.eval_seeds, f"the policy of PILCO seed {seed}")
         summary = evaluate(result.controller(), result.config.task, seeds=tuple(report_seeds), duration_s=duration_s)
-        rows.append({"method": "PILCO", "seed": int(result.config.seed), "agent": "final", **fresh_start_row(summary)})
+        rows.append({"method": "PILCO", "seed": seed, "agent": "final", **fresh_start_row(summary)})
     return rows
 
 
@@ -144,21 +140,16 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str,
     out = []
     for (method, agent), group in groups.items():
         rates = np.array([g["balanced_rate"] for g in group])
-        if len(rates) >= 2:
-            interval = aggregate_interval(rates, "iqm", seed=0)
-            value, low, high = interval.value, interval.low, interval.high
-        else:
-            value, low, high = float(rates[0]), math.nan, math.nan
+        iqm = aggregate_interval(rates, "iqm", seed=0) if len(rates) >= 2 else None
+        figures = (iqm.value, iqm.low, iqm.high) if iqm else (float(rates[0]), math.nan, math.nan)
         out.append(
             {
                 "method": method,
                 "agent": agent,
                 "runs": len(group),
-                "runs_balanced": int(sum(g["run_balances"] for g in group)),
-                "iqm_balanced_rate": value,
-                "iqm_low": low,
-                "iqm_high": high,
+                "runs_balanced": sum(g["run_balances"] for g in group),
             }
+            | dict(zip(("iqm_balanced_rate", "iqm_low", "iqm_high"), figures))
         )
     return out
 
@@ -197,8 +188,7 @@ def seed_rows(
                 METHOD_NAMES[algo], int(log.seed), log.n_episodes, log.plant_s, log.stop_reason is not None, log.plant_s
             )
     for result in pilco_results:
-        seconds = float(result.real_seconds_to_balance)
-        plant_s = float(result.plant_seconds_total)
+        seconds, plant_s = float(result.real_seconds_to_balance), float(result.plant_seconds_total)
         add("PILCO", int(result.config.seed), len(result.records), plant_s, math.isfinite(seconds), seconds)
     return rows
 
@@ -255,12 +245,9 @@ def converged_fresh_start_rows(
     from softpend.rl.dqn import evaluate_agents_batched, load_agent
 
     runs = [(algo, int(seed)) for algo in METHOD_NAMES for seed in seeds]
-    agents = {}
-    for algo, seed in runs:
-        agents[algo, seed] = load_agent(run_folder(runs_root, algo, seed), "final")
-        _refuse_selection_starts(
-            report_seeds, agents[algo, seed][1].selection_seeds, f"the agents of {algo} seed {seed}"
-        )
+    agents = {run: load_agent(run_folder(runs_root, *run), "final") for run in runs}
+    for (algo, seed), (_, config) in agents.items():
+        _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
     # agents that share what the batched episodes depend on step together
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
@@ -272,13 +259,5 @@ def converged_fresh_start_rows(
             [agents[run][0] for run in members], config, seeds=tuple(report_seeds), duration_s=TEST_EPISODE_S
         )
         summaries.update(zip(members, evaluated))
-    return [
-        {
-            "method": METHOD_NAMES[algo],
-            "seed": seed,
-            "agent": AGENTS["final"],
-            "plant": "converged",
-            **fresh_start_row(summaries[algo, seed]),
-        }
-        for algo, seed in runs
-    ]
+    final = {"agent": AGENTS["final"], "plant": "converged"}
+    return [{"method": METHOD_NAMES[a], "seed": s, **final, **fresh_start_row(summaries[a, s])} for a, s in runs]

@@ -128,7 +128,7 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
             "episodes": log.n_episodes,
         }
 
-    return load_runs(runs_root, plant, algo, seeds, row, (FileNotFoundError, ValueError, KeyError))
+    return load_runs(runs_root, plant, algo, seeds, row)
 
 
 def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
@@ -148,7 +148,7 @@ def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str =
             "train_cpu_s": result.train_cpu_s,
         }
 
-    return load_runs(runs_root, plant, "pilco", seeds, row, (FileNotFoundError, ValueError, KeyError, TypeError))
+    return load_runs(runs_root, plant, "pilco", seeds, row)
 
 
 def balance_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, str]:

@@ -160,16 +160,14 @@ def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
     return root if plant == "prb" else root.with_name(f"{root.name}-{plant}")
 
 
-def load_runs(
-    runs_root: Path | str, plant: str, algo: str, seeds: Sequence[int], load: Callable, errors: tuple
-) -> list:
+def load_runs(runs_root: Path | str, plant: str, algo: str, seeds: Sequence[int], load: Callable) -> list:
     """``load(folder, seed)`` of each seed's run folder under :func:`plant_runs_root`, skipping the runs it cannot
-    read (``errors``)."""
+    read (a missing file, a ``ValueError``, ``KeyError`` or ``TypeError``)."""
     root, loaded = plant_runs_root(runs_root, plant), []
     for seed in seeds:
         try:
             loaded.append(load(run_folder(root, algo, int(seed)), int(seed)))
-        except errors:
+        except (FileNotFoundError, ValueError, KeyError, TypeError):
             continue
     return loaded
 

@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 
 from softpend.checks import int_at_least, positive
-from softpend.plant.exudyn_adapter import SolverFailure
+from softpend.plant.exudyn_adapter import ExudynSystem, SolverFailure
 from softpend.plant.observation import Observation
 from softpend.plant.params import RodParams
 
@@ -24,10 +24,10 @@ class SimulationDiverged(RuntimeError):
         self.reason = reason
 
 
-class PlantBase:
+class PlantBase(ExudynSystem):
     """What every plant offers (environments, controllers, the evaluation and the rig emulator use it); ``q`` is the
-    coordinate vector, hub angle first (unwrapped) unless the hub is locked.  A subclass sets ``n_coordinates`` and
-    supplies the methods that raise ``NotImplementedError`` here."""
+    coordinate vector, hub angle first (unwrapped) unless the hub is locked.  A subclass builds its Exudyn system,
+    sets ``n_coordinates`` and supplies the methods that raise ``NotImplementedError`` here."""
 
     params: RodParams
     dt_s: float
@@ -52,11 +52,6 @@ class PlantBase:
         self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
         self.last_torque_nm = 0.0
 
-    @property
-    def time_s(self) -> float:
-        """Simulated time since the last reset [s]."""
-        raise NotImplementedError
-
     def observe(self) -> Observation:
         """The observed variables now."""
         raise NotImplementedError
@@ -78,12 +73,11 @@ class PlantBase:
         raise NotImplementedError
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
+        """Restart from ``(q, q_dot)`` at zero torque."""
         raise NotImplementedError
 
-    def _advance(self, torque_nm: float) -> None:
-        raise NotImplementedError
-
-    def _solve_static(self) -> None:
+    def _set_torque(self, torque_nm: float) -> None:
+        """The hub torque [N m] of the following steps."""
         raise NotImplementedError
 
     def _check_state(self, values: np.ndarray, name: str) -> np.ndarray:
@@ -126,16 +120,18 @@ class PlantBase:
             raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")
         limit = self.params.torque_limit_nm
         self.last_torque_nm = torque = min(max(torque, -limit), limit)
-        return self._solve(self._advance, torque)
+        self._set_torque(torque)
+        return self._solve(self.advance)
 
     def static_equilibrium(self) -> Observation:
         """Solve for static equilibrium at zero torque from the current state and make it the current state."""
         self.last_torque_nm = 0.0
-        return self._solve(self._solve_static)
+        self._set_torque(0.0)
+        return self._solve(self.solve_static)
 
-    def _solve(self, solver, *args) -> Observation:
+    def _solve(self, solver) -> Observation:
         try:
-            solver(*args)
+            solver()
         except SolverFailure as exc:
             raise SimulationDiverged(str(exc)) from exc
         return self.observe()

@@ -7,13 +7,28 @@ displacement in the hub frame from the straight rod (across, along) [m] and its 
 from __future__ import annotations
 
 import math
-from typing import Optional
+from dataclasses import dataclass
+from typing import Any, Optional
 
+import exudyn as exu
 import numpy as np
+from exudyn.itemInterface import (
+    LoadCoordinate,
+    LoadMassProportional,
+    MarkerBodyMass,
+    MarkerNodeCoordinate,
+    NodePointGround,
+    NodeRigidBody2D,
+    ObjectBeamGeometricallyExact2D,
+    ObjectConnectorCoordinate,
+    ObjectConnectorCoordinateSpringDamper,
+    ObjectMassPoint2D,
+    ObjectRigidBody2D,
+)
 
 from softpend.checks import in_unit_interval, int_at_least, positive
 from softpend.plant.base import PlantBase, energies
-from softpend.plant.exudyn_adapter import BeamSection, HubBeam2D
+from softpend.plant.exudyn_adapter import static_solver_settings
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
 
@@ -22,6 +37,20 @@ DEFAULT_N_ELEMENTS = 12
 POISSON_RATIO = 0.45
 #: Timoshenko shear correction factor of a rectangular cross-section.
 SHEAR_CORRECTION = 5.0 / 6.0
+
+
+@dataclass(frozen=True)
+class BeamSection:
+    """Cross-section properties of a uniform beam per unit length (SI units; Kelvin-Voigt dampings)."""
+
+    mass_per_length_kg_m: float
+    rotary_inertia_kg_m: float
+    bending_stiffness_nm2: float
+    axial_stiffness_n: float
+    shear_stiffness_n: float
+    bending_damping_nm2s: float
+    axial_damping_ns: float
+    shear_damping_ns: float
 
 
 def beam_section_from_params(params: RodParams) -> BeamSection:
@@ -60,6 +89,11 @@ class BeamPlant(PlantBase):
     tolerance.
     """
 
+    refinements = (1, 4, 16)
+    zero_rest = True
+    static_load_steps = (1, 20)
+    static_tolerance = 1e-8
+
     def __init__(
         self,
         params: Optional[RodParams] = None,
@@ -71,32 +105,75 @@ class BeamPlant(PlantBase):
         newton_relative_tolerance: float = 1e-6,
     ) -> None:
         self._init_common(params, dt_s, substeps, hub_locked_at_rad)
-        self.n_elements = int_at_least("n_elements", n_elements, 1)
+        self.n_elements = n = int_at_least("n_elements", n_elements, 1)
         in_unit_interval("spectral_radius", spectral_radius)
+        positive("newton_relative_tolerance", newton_relative_tolerance)
         p = self.params
-        self.section = beam_section_from_params(p)
-        self._beam = HubBeam2D(
-            section=self.section,
-            length_m=p.length_m,
-            n_elements=self.n_elements,
-            tip_mass_kg=p.tip_mass_kg,
-            hub_inertia_kgm2=p.hub_inertia_kgm2,
-            hub_friction_nms_per_rad=p.hub_friction_nms_per_rad,
-            gravity_mps2=p.gravity_mps2,
-            dt_s=self.dt_s,
-            substeps=self.substeps,
-            hub_locked_at_rad=hub_locked_at_rad,
-            spectral_radius=spectral_radius,
-            newton_relative_tolerance=positive("newton_relative_tolerance", newton_relative_tolerance),
-        )
-        self._s = self._beam.node_s_m
+        sec = self.section = beam_section_from_params(p)
         self._hub_offset = 0 if self.hub_locked else 1
-        self.n_coordinates = 3 * self.n_elements + self._hub_offset
+        self.n_coordinates = 3 * n + self._hub_offset
+        self.element_length_m = p.length_m / n
+        self._s = np.linspace(0.0, p.length_m, n + 1)
+        self._sc = exu.SystemContainer()
+        mbs = self._sc.AddSystem()
+        ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+        nodes = [
+            mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[0.0, float(s), 0.0], initialVelocities=[0.0, 0.0, 0.0]))
+            for s in self._s
+        ]
+        bodies = [
+            mbs.AddObject(
+                ObjectBeamGeometricallyExact2D(
+                    nodeNumbers=[nodes[i], nodes[i + 1]],
+                    length=self.element_length_m,
+                    massPerLength=sec.mass_per_length_kg_m,
+                    crossSectionInertia=sec.rotary_inertia_kg_m,
+                    bendingStiffness=sec.bending_stiffness_nm2,
+                    axialStiffness=sec.axial_stiffness_n,
+                    shearStiffness=sec.shear_stiffness_n,
+                    bendingDamping=sec.bending_damping_nm2s,
+                    axialDamping=sec.axial_damping_ns,
+                    shearDamping=sec.shear_damping_ns,
+                )
+            )
+            for i in range(n)
+        ]
+        if p.tip_mass_kg > 0:
+            bodies.append(mbs.AddObject(ObjectMassPoint2D(nodeNumber=nodes[-1], mass=p.tip_mass_kg)))
+        for body in bodies if p.gravity_mps2 != 0 else ():
+            marker = mbs.AddMarker(MarkerBodyMass(bodyNumber=body))
+            mbs.AddLoad(LoadMassProportional(markerNumber=marker, loadVector=[0.0, -p.gravity_mps2, 0.0]))
+        ground_marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground, coordinate=0))
+        hub = nodes[0]
+        for coordinate in (0, 1):
+            marker = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=coordinate))
+            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, marker]))
+        hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
+        self._torque_load = None
+        if hub_locked_at_rad is not None:
+            offset = float(hub_locked_at_rad)
+            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=offset))
+        else:
+            if p.hub_inertia_kgm2 > 0:
+                mbs.AddObject(ObjectRigidBody2D(nodeNumber=hub, mass=0.0, inertia=p.hub_inertia_kgm2))
+            if p.hub_friction_nms_per_rad > 0:
+                damper = ObjectConnectorCoordinateSpringDamper(
+                    markerNumbers=[ground_marker, hub_rotation], stiffness=0.0, damping=p.hub_friction_nms_per_rad
+                )
+                mbs.AddObject(damper)
+            self._torque_load = mbs.AddLoad(LoadCoordinate(markerNumber=hub_rotation, load=0.0))
+        mbs.Assemble()
+        solver: Any = exu.MainSolverStatic()  # Any: exudyn's stubs declare its methods without self
+        solver.InitializeSolver(mbs, static_solver_settings(1, 1e-8))
+        solver.ComputeMassMatrix(mbs)
+        #: The (constant) mass matrix of the nodal coordinates.
+        self.mass_matrix = np.array(solver.GetSystemMassMatrix(), dtype=float)[: 3 * (n + 1), : 3 * (n + 1)]
+        self._start_solver(mbs, spectral_radius, newton_relative_tolerance)
         self.reset()
 
-    @property
-    def time_s(self) -> float:
-        return self._beam.time_s
+    def _nodal_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exudyn's nodal coordinates and their rates (copies)."""
+        return np.array(self._data.GetODE2Coordinates()), np.array(self._data.GetODE2Coordinates_t())
 
     def global_coordinates(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exudyn's nodal coordinates ``(x, y, rotation)`` per node, hub first (displacements from the upright
@@ -148,25 +225,21 @@ class BeamPlant(PlantBase):
         return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
-        self._beam.set_state(*self.global_coordinates(q, q_dot))
-        self._beam.set_hub_torque(0.0)
+        self._set_coordinates(*self.global_coordinates(q, q_dot))
+        self._set_torque(0.0)
+
+    def _set_torque(self, torque_nm: float) -> None:
+        if self._torque_load is not None:
+            self._mbs.SetLoadParameter(self._torque_load, "load", float(torque_nm))
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` (hub angle unwrapped)."""
-        return self.state_from_global(*self._beam.get_state())
-
-    def _advance(self, torque_nm: float) -> None:
-        self._beam.set_hub_torque(torque_nm)
-        self._beam.advance()
-
-    def _solve_static(self) -> None:
-        self._beam.set_hub_torque(0.0)
-        self._beam.solve_static((1, 20), 1e-8)
+        return self.state_from_global(*self._nodal_state())
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
         """Positions ``(n_elements + 1, 2)`` of the beam nodes, hub axis first [m]."""
         if q is None:
-            c, _ = self._beam.get_state()
+            c, _ = self._nodal_state()
         else:
             q = self._check_state(q, "q")
             c, _ = self.global_coordinates(q, np.zeros_like(q))
@@ -174,7 +247,7 @@ class BeamPlant(PlantBase):
         return np.stack([c[:, 0], c[:, 1] + self._s], axis=1)
 
     def observe(self) -> Observation:
-        return self._observation_from_global(*self._beam.get_state())
+        return self._observation_from_global(*self._nodal_state())
 
     def observation_from_state(self, q: np.ndarray, qd: np.ndarray) -> Observation:
         """Observation of a given state (the plant is not changed)."""
@@ -190,16 +263,16 @@ class BeamPlant(PlantBase):
         """Kinetic (Exudyn's mass matrix), gravitational and elastic (Simo-Reissner strain energy at each
         element's midpoint) energy [J]."""
         if q is None or qd is None:
-            c, c_t = self._beam.get_state()
+            c, c_t = self._nodal_state()
         else:
             c, c_t = self.global_coordinates(self._check_state(q, "q"), self._check_state(qd, "qd"))
-        kinetic = 0.5 * float(c_t @ self._beam.mass_matrix @ c_t)
+        kinetic = 0.5 * float(c_t @ self.mass_matrix @ c_t)
         nodes = c.reshape(-1, 3)
         x = nodes[:, 0]
         y = nodes[:, 1] + self._s
         rot = nodes[:, 2]
         sec = self.section
-        h = self._beam.element_length_m
+        h = self.element_length_m
         g = self.params.gravity_mps2
         gravity = g * sec.mass_per_length_kg_m * h * float(
             np.sum(0.5 * (y[:-1] + y[1:]))

@@ -4,12 +4,13 @@ torsional springs and dampers; coordinates are the hub angle from upright and th
 from __future__ import annotations
 
 import math
-from typing import Optional
+from typing import Any, Optional
 
+import exudyn as exu
 import numpy as np
+from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
 from softpend.plant.base import PlantBase, energies
-from softpend.plant.exudyn_adapter import ChainLink, KinematicChain2D
 from softpend.plant.observation import Observation, observation_from_tip
 from softpend.plant.params import RodParams
 
@@ -48,67 +49,91 @@ class PRBPlant(PlantBase):
     ) -> None:
         self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         p = self.params
-        length = p.link_length_m
-        masses, coms, inertias = link_inertials(p)
-        self.link_masses_kg = masses
-        self.link_coms_m = coms
-        self.link_inertias_kgm2 = inertias
-        stiffness = p.spring_stiffnesses_nm_per_rad()
-        damping = p.spring_dampings_nms_per_rad()
+        self.link_masses_kg, self.link_coms_m, self.link_inertias_kgm2 = link_inertials(p)
+        stiffness, damping = p.spring_stiffnesses_nm_per_rad(), p.spring_dampings_nms_per_rad()
+        # per link: joint offset along the parent, mass, centre of mass, inertia about it, spring, damper
         links = [
-            ChainLink(
-                0.0 if i == 0 else length,
-                float(masses[i]),
-                float(coms[i]),
-                float(inertias[i]),
-                stiffness[i],
-                damping[i],
-            )
-            for i in range(p.n_links)
+            (0.0 if i == 0 else p.link_length_m, float(m), float(c), float(j), stiffness[i], damping[i])
+            for i, (m, c, j) in enumerate(zip(self.link_masses_kg, self.link_coms_m, self.link_inertias_kgm2))
         ]
-        if not self.hub_locked:
-            links.insert(0, ChainLink(0.0, 0.0, 0.0, p.hub_inertia_kgm2, 0.0, p.hub_friction_nms_per_rad))
+        if not self.hub_locked:  # the hub: a massless link of the rotor's inertia, damped by its friction
+            links.insert(0, (0.0, 0.0, 0.0, p.hub_inertia_kgm2, 0.0, p.hub_friction_nms_per_rad))
+        offsets, masses, coms, inertias, p_control, d_control = (list(column) for column in zip(*links))
+        n = self.n_coordinates = len(links)
         self._hub_offset = 0 if self.hub_locked else 1
-        self._chain = KinematicChain2D(
-            links=links,
-            gravity_mps2=p.gravity_mps2,
-            dt_s=self.dt_s,
-            substeps=self.substeps,
-            base_angle_rad=self._hub_angle_locked if self.hub_locked else 0.0,
-            spectral_radius=spectral_radius,
+        self._forces = np.zeros(n)
+        self._sc = exu.SystemContainer()
+        mbs = self._sc.AddSystem()
+        node = mbs.AddNode(
+            NodeGenericODE2(
+                referenceCoordinates=[0.0] * n,
+                initialCoordinates=[0.0] * n,
+                initialCoordinates_t=[0.0] * n,
+                numberOfODE2Coordinates=n,
+            )
         )
-        self.n_coordinates = self._chain.n
-        self._forces = np.zeros(self.n_coordinates)
+        c, s = np.cos(self._hub_angle_locked), np.sin(self._hub_angle_locked)
+        base_rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        # the ignores: exudyn's stub of these lists has no __init__
+        self._tree = mbs.AddObject(
+            ObjectKinematicTree(
+                nodeNumber=node,
+                jointTypes=[exu.JointType.RevoluteZ] * n,
+                linkParents=list(range(-1, n - 1)),
+                jointTransformations=exu.Matrix3DList([base_rotation] + [np.eye(3)] * (n - 1)),  # type: ignore[call-arg]
+                jointOffsets=exu.Vector3DList([[0.0, o, 0.0] for o in offsets]),  # type: ignore[call-arg]
+                linkInertiasCOM=exu.Matrix3DList([np.eye(3) * i for i in inertias]),  # type: ignore[call-arg]
+                linkCOMs=exu.Vector3DList([[0.0, c, 0.0] for c in coms]),  # type: ignore[call-arg]
+                linkMasses=masses,
+                gravity=[0.0, -p.gravity_mps2, 0.0],
+                jointForceVector=[0.0] * n,
+                jointPositionOffsetVector=[0.0] * n,
+                jointVelocityOffsetVector=[0.0] * n,
+                jointPControlVector=p_control,
+                jointDControlVector=d_control,
+            )
+        )
+        mbs.Assemble()
+        self._start_solver(mbs, spectral_radius, 1e-8)
         self.reset()
 
     @property
-    def time_s(self) -> float:
-        return self._chain.time_s
+    def _chain(self) -> "PRBPlant":
+        """The plant itself (the name ``softpend.study.bench.plant`` steps it by)."""
+        return self
+
+    def _set_coordinates(self, q: np.ndarray, q_t: np.ndarray) -> None:
+        super()._set_coordinates(q, q_t)
+        self._q, self._q_t = q.copy(), q_t.copy()
+        self._q_list, self._q_t_list = self._q.tolist(), self._q_t.tolist()
+
+    def _accept_step(self, state: Any, total: Optional[float] = None) -> None:
+        q_list, q_t_list = state[0].tolist(), state[1].tolist()
+        super()._accept_step(state, sum(q_list) + sum(q_t_list))
+        self._q, self._q_t, self._q_list, self._q_t_list = state[0], state[1], q_list, q_t_list
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
-        self._chain.set_state(q, q_dot)
-        self._forces[:] = 0.0
-        self._chain.set_joint_forces(self._forces)
+        self._set_coordinates(q, q_dot)
+        self.set_joint_forces(np.zeros(self.n_coordinates))
+
+    def set_joint_forces(self, forces: np.ndarray) -> None:
+        """Generalised joint forces (torques) [N m] applied during the following steps."""
+        self._forces[:] = forces
+        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
+
+    def _set_torque(self, torque_nm: float) -> None:
+        if not self.hub_locked:
+            self._forces[0] = torque_nm
+            self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
-        return self._chain.get_state()
-
-    def _advance(self, torque_nm: float) -> None:
-        if not self.hub_locked:
-            self._forces[0] = torque_nm
-            self._chain.set_joint_forces(self._forces)
-        self._chain.advance()
-
-    def _solve_static(self) -> None:
-        if not self.hub_locked:
-            self._forces[:] = 0.0
-            self._chain.set_joint_forces(self._forces)
-        self._chain.solve_static()
+        return np.array(self._q, dtype=float), np.array(self._q_t, dtype=float)
 
     def linearized_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(M, K, D)`` of ``M dq_dd + D dq_d + K dq = e_0 tau`` linearised at the current state by Exudyn."""
-        return self._chain.linearized_system()
+        mass, stiffness, damping = self._mbs.ComputeLinearizedSystem()
+        return np.asarray(mass), np.asarray(stiffness), np.asarray(damping)
 
     def _absolute_angles(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Absolute angle (from upright) and rate of each rod link."""
@@ -126,7 +151,7 @@ class PRBPlant(PlantBase):
         return np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
 
     def observe(self) -> Observation:
-        q, qd = self._chain.get_state_lists()
+        q, qd = self._q_list, self._q_t_list
         return self.observation_from_state(q, qd)
 
     def observation_from_state(self, q, qd) -> Observation:

@@ -4,6 +4,7 @@ estimator, on a rig or on the digital twin in simulated time (:func:`run_twin_co
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
@@ -18,6 +19,7 @@ from softpend.hardware.driver import MotorLink, MotorState
 from softpend.hardware.estimator import DeviceClock, EstimatorConfig, RigStateEstimator
 from softpend.io.samplelog import SampleLog
 from softpend.plant import OBSERVATION_NAMES
+from softpend.torch_threads import one_torch_thread
 
 #: Columns of the motor log written by :func:`run_control_loop`.
 LOOP_LOG_COLUMNS: tuple[str, ...] = tuple(
@@ -91,8 +93,8 @@ class _RigLoop:
     def step(self, state: MotorState, newest: bool) -> None:
         raise NotImplementedError
 
-    def postfix(self) -> Optional[str]:
-        return None
+    def postfix(self) -> str:
+        return ""
 
     def run(self, desc: str, progress: bool) -> None:
         from tqdm.auto import tqdm
@@ -111,9 +113,7 @@ class _RigLoop:
                 shown = round(min(self.t, self.duration_s), 1)
                 if progress and shown > bar.n:
                     bar.update(round(shown - bar.n, 1))
-                    postfix = self.postfix()
-                    if postfix is not None:
-                        bar.set_postfix_str(postfix, refresh=False)
+                    bar.set_postfix_str(self.postfix(), refresh=False)
                 if self.stop_reason is not None or self.t >= self.duration_s:
                     break
         except BaseException:
@@ -242,15 +242,8 @@ def run_closed_loop(
         controller.reset()
     link.drain_states()  # states queued before the run are stale
     loop = _ClosedLoop(link, controller, estimator, duration_s, tip_source, clock, log, camera_log)
-    torch = sys.modules.get("torch")  # on one thread while the loop runs
-    threads = torch.get_num_threads() if torch is not None else 0
-    try:
-        if torch is not None:
-            torch.set_num_threads(1)
+    with one_torch_thread() if "torch" in sys.modules else contextlib.nullcontext():  # torch on one thread
         loop.run("rig control", progress)
-    finally:
-        if torch is not None:
-            torch.set_num_threads(threads)
     link.stop()
     return loop.result()
 

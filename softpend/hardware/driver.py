@@ -9,11 +9,12 @@ import math
 import os
 import select
 import signal
-import struct
 import threading
 import weakref
 from dataclasses import dataclass
 from typing import Optional
+
+import numpy as np
 
 from softpend.checks import positive, positive_int
 from softpend.hardware import protocol as proto
@@ -304,15 +305,17 @@ class MotorLink:
             raise LinkDisconnected(f"link to {self.port!r} is not open")
         return self._serial
 
-    def _write(self, msg_type: int, values: tuple) -> int:
-        ser = self._require_open()
+    def _frame(self, msg_type: int, values: tuple) -> bytes:
         self._seq = (self._seq + 1) & 0xFFFF
-        frame = proto.encode_message(msg_type, self._seq, values)
+        return proto.encode_message(msg_type, self._seq, values)
+
+    def _write(self, msg_type: int, values: tuple) -> int:
         import serial
 
+        ser = self._require_open()
         try:
             with self._write_lock:
-                _write_frame(ser, frame, self.timeout_s)
+                _write_frame(ser, self._frame(msg_type, values), self.timeout_s)
         except (serial.SerialException, OSError) as exc:
             raise self._fail(LinkDisconnected(f"write to {self.port!r} failed: {exc}")) from exc
         finally:
@@ -330,8 +333,7 @@ class MotorLink:
             return
         try:
             self._stop_pending = False
-            self._seq = (self._seq + 1) & 0xFFFF
-            _write_frame(ser, proto.encode_message(proto.MSG_STOP, self._seq, ()), self.timeout_s)
+            _write_frame(ser, self._frame(proto.MSG_STOP, ()), self.timeout_s)
             ser.flush()
         except Exception:
             pass
@@ -434,7 +436,5 @@ def _error_meaning(code: int) -> str:
 
 def _float32_within(value: float, limit: float) -> float:
     """``value`` as the float32 on the wire, one float32 step towards zero if rounding took it beyond ``limit``."""
-    (bits,) = struct.unpack("<I", struct.pack("<f", value))
-    if abs(struct.unpack("<f", struct.pack("<I", bits))[0]) > limit:
-        bits -= 1
-    return struct.unpack("<f", struct.pack("<I", bits))[0]
+    wire = np.float32(value)
+    return float(np.nextafter(wire, np.float32(0)) if abs(float(wire)) > limit else wire)

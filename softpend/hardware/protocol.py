@@ -37,26 +37,18 @@ ERROR_MEANINGS = {
 
 HEADER_FORMAT = "<BH"
 HEADER_SIZE = 3
-MESSAGE_FORMATS = {
-    MSG_HELLO: "<HI",
-    MSG_TORQUE: "<f",
-    MSG_HEARTBEAT: "<",
-    MSG_STOP: "<",
-    MSG_HELLO_ACK: "<HIIfHH",
-    MSG_STATE: "<QiffHB",
-    MSG_HEARTBEAT_ACK: "<",
-    MSG_ERROR: "<B",
-}
-MESSAGE_NAMES = {
-    MSG_HELLO: "HELLO",
-    MSG_TORQUE: "TORQUE",
-    MSG_HEARTBEAT: "HEARTBEAT",
-    MSG_STOP: "STOP",
-    MSG_HELLO_ACK: "HELLO_ACK",
-    MSG_STATE: "STATE",
-    MSG_HEARTBEAT_ACK: "HEARTBEAT_ACK",
-    MSG_ERROR: "ERROR",
-}
+_MESSAGES = (
+    (MSG_HELLO, "HELLO", "<HI"),
+    (MSG_TORQUE, "TORQUE", "<f"),
+    (MSG_HEARTBEAT, "HEARTBEAT", "<"),
+    (MSG_STOP, "STOP", "<"),
+    (MSG_HELLO_ACK, "HELLO_ACK", "<HIIfHH"),
+    (MSG_STATE, "STATE", "<QiffHB"),
+    (MSG_HEARTBEAT_ACK, "HEARTBEAT_ACK", "<"),
+    (MSG_ERROR, "ERROR", "<B"),
+)
+MESSAGE_FORMATS = {t: fmt for t, _, fmt in _MESSAGES}
+MESSAGE_NAMES = {t: name for t, name, _ in _MESSAGES}
 MAX_FRAME_BYTES = 64
 
 
@@ -102,9 +94,7 @@ def cobs_encode(data):
 
 def cobs_decode(data):
     """Inverse of :func:`cobs_encode`; raises :class:`ProtocolError` on a malformed block."""
-    out = bytearray()
-    i = 0
-    n = len(data)
+    out, i, n = bytearray(), 0, len(data)
     while i < n:
         code = data[i]
         if code == 0:
@@ -157,22 +147,12 @@ class FrameDecoder:
         self._frame = bytearray()
         self._overflow = False
         self._validate = validate
-        self.bad_frames = 0
-        self.checksum_errors = 0
-        self.value_errors = 0
-        self.consecutive_bad = 0
+        self.bad_frames = self.checksum_errors = self.value_errors = self.consecutive_bad = 0
         self.last_error = None
-
-    def _bad(self, error):
-        self.consecutive_bad += 1
-        self.bad_frames += 1
-        self.last_error = error
-        return error
 
     def feed(self, data):
         """Add received bytes; ``(messages, errors)`` of the frames they complete."""
-        messages = []
-        errors = []
+        messages, errors = [], []
         for byte in data:
             if byte != 0:
                 if len(self._frame) < MAX_FRAME_BYTES:
@@ -180,28 +160,24 @@ class FrameDecoder:
                 else:
                     self._overflow = True
                 continue
-            frame = bytes(self._frame)
-            overflow = self._overflow
-            self._frame = bytearray()
-            self._overflow = False
+            frame, overflow = bytes(self._frame), self._overflow
+            self._frame, self._overflow = bytearray(), False
             if not frame:
                 continue
-            if overflow:
-                errors.append(self._bad("frame longer than %d bytes" % MAX_FRAME_BYTES))
-                continue
             try:
+                if overflow:
+                    raise ProtocolError("frame longer than %d bytes" % MAX_FRAME_BYTES)
                 message = decode_frame(frame)
                 problem = self._validate(message[0], message[2]) if self._validate is not None else None
-            except ChecksumMismatch as exc:
-                self.checksum_errors += 1
-                errors.append(self._bad(str(exc)))
-                continue
+                if problem is not None:
+                    self.value_errors += 1
+                    raise ProtocolError("%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem))
             except (ProtocolError, ValueError, struct.error) as exc:
-                errors.append(self._bad(str(exc)))
-                continue
-            if problem is not None:
-                self.value_errors += 1
-                errors.append(self._bad("%s frame refused: %s" % (MESSAGE_NAMES[message[0]], problem)))
+                self.checksum_errors += int(isinstance(exc, ChecksumMismatch))
+                self.consecutive_bad += 1
+                self.bad_frames += 1
+                self.last_error = str(exc)
+                errors.append(self.last_error)
                 continue
             messages.append(message)
             self.consecutive_bad = 0
@@ -216,7 +192,6 @@ class DeviceSession:
     def __init__(self, counts_per_rev, torque_limit_nm, watchdog_ms=100, state_rate_hz=100):
         self.counts_per_rev = int(counts_per_rev)
         self.torque_limit_nm = float(torque_limit_nm)
-        self.watchdog_us = int(watchdog_ms) * 1000
         self.watchdog_ms = int(watchdog_ms)
         self.state_rate_hz = int(state_rate_hz)
         self.decoder = FrameDecoder()
@@ -227,10 +202,6 @@ class DeviceSession:
         self.stopped = False
         self.saturated = False
         self.tx_seq = 0
-
-    def _next_seq(self):
-        self.tx_seq = (self.tx_seq + 1) & 0xFFFF
-        return self.tx_seq
 
     def receive(self, data, now_us):
         """Process received bytes at device time ``now_us``; the reply frames to send."""
@@ -270,7 +241,7 @@ class DeviceSession:
 
     def watchdog_tripped(self, now_us):
         """Commands were received, but none for ``watchdog_ms``."""
-        return self.last_cmd_us is not None and now_us - self.last_cmd_us > self.watchdog_us
+        return self.last_cmd_us is not None and now_us - self.last_cmd_us > self.watchdog_ms * 1000
 
     def torque_nm(self, now_us):
         """Torque to apply now [N m]: the clamped command, or 0 after STOP or a watchdog trip."""
@@ -279,21 +250,13 @@ class DeviceSession:
         return self.command_nm
 
     def flags(self, now_us):
-        bits = 0
-        if self.watchdog_tripped(now_us):
-            bits |= FLAG_WATCHDOG
-        if self.saturated:
-            bits |= FLAG_SATURATED
-        if self.stopped:
-            bits |= FLAG_STOPPED
-        return bits
+        watchdog = FLAG_WATCHDOG if self.watchdog_tripped(now_us) else 0
+        return watchdog | (FLAG_SATURATED if self.saturated else 0) | (FLAG_STOPPED if self.stopped else 0)
 
     def state_frame(self, now_us, encoder_counts, velocity_rad_s, applied_torque_nm):
         """A STATE frame for an encoder sample taken at ``now_us`` (None before the handshake)."""
         if not self.session_open:
             return None
-        return encode_message(
-            MSG_STATE,
-            self._next_seq(),
-            (now_us, encoder_counts, velocity_rad_s, applied_torque_nm, self.last_cmd_seq, self.flags(now_us)),
-        )
+        self.tx_seq = (self.tx_seq + 1) & 0xFFFF
+        values = (now_us, encoder_counts, velocity_rad_s, applied_torque_nm, self.last_cmd_seq, self.flags(now_us))
+        return encode_message(MSG_STATE, self.tx_seq, values)

@@ -354,7 +354,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
 
     config = DQNConfig(learning_starts=20, reset_every_episodes=2, **{**TINY, "eval_every_episodes": 1})
     events = []
-    real_reset, real_checkpoint = dqn.reset_q_network, dqn.CheckpointCallback.checkpoint
+    real_reset, real_checkpoint = dqn.reset_q_network, dqn.EpisodeEvents.checkpoint
 
     def reset(model, seed):
         trained = [p.detach().clone() for p in model.q_net.parameters()]
@@ -370,7 +370,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
         return real_checkpoint(self)
 
     monkeypatch.setattr(dqn, "reset_q_network", reset)
-    monkeypatch.setattr(dqn.CheckpointCallback, "checkpoint", checkpoint)
+    monkeypatch.setattr(dqn.EpisodeEvents, "checkpoint", checkpoint)
     _, log = train_dqn(config, seed=3, episodes=5, run_dir=tmp_path, progress=False)
     assert [e[:2] for e in events] == [
         ("reset", (3, 2)),
@@ -422,13 +422,13 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
         **{**TINY, "eval_every_episodes": 1},
     )
     evaluated = []
-    real_evaluate = dqn.EvaluationCallback.evaluate
+    real_evaluate = dqn.EpisodeEvents.evaluate
 
     def evaluate(self):
         evaluated.append([p.detach().clone() for p in self.model.q_net.parameters()])
         return real_evaluate(self)
 
-    monkeypatch.setattr(dqn.EvaluationCallback, "evaluate", evaluate)
+    monkeypatch.setattr(dqn.EpisodeEvents, "evaluate", evaluate)
     _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.05])  # episode 2, a reset episode, balances: the run stops
     model, log = train_dqn(config, seed=0, episodes=6, run_dir=tmp_path, progress=False)
     assert log.n_episodes == 2 and log.stop_reason is not None
@@ -465,12 +465,8 @@ def test_training_is_a_list_of_callbacks_in_order(tmp_path):
         ModelRolloutCallback,
         dqn.EpisodeRecorder,
         ModelRefitCallback,
-        dqn.ProgressBarCallback,
-        dqn.EvaluationCallback,
-        dqn.ResetQNetworkCallback,
-        dqn.CheckpointCallback,
+        dqn.EpisodeEvents,
     ]
-    stop = callbacks.callbacks[4].callback_after_eval
-    assert isinstance(stop, dqn.StopTrainingOnBalance) and isinstance(stop.confirmation, dqn.ConfirmBalance)
+    assert callbacks.callbacks[3].stop_rule
     plain = dqn.training_callbacks(DQNConfig(**TINY), TrainingLog(algo="dqn", seed=0), 4, tmp_path, progress=False)
-    assert len(plain.callbacks) == 5 and plain.callbacks[2].callback_after_eval is None
+    assert len(plain.callbacks) == 2 and not plain.callbacks[1].stop_rule

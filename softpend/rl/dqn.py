@@ -6,7 +6,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
+from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 import torch
@@ -181,102 +181,86 @@ class EpisodeRecorder(BaseCallback):
         )
 
 
-class ProgressBarCallback(BaseCallback):
-    """A tqdm bar over the episodes of ``recorder`` (hidden unless ``show``)."""
+class EpisodeEvents(BaseCallback):
+    """After each training episode of ``recorder``: the progress bar (hidden unless ``progress``), then, each when
+    due, the greedy evaluation (keeping ``best_agent.zip``), :func:`reset_q_network` (not after the last episode)
+    and a resumable checkpoint (``extra_files(folder)`` adds files), run at the next rollout end or after the last
+    episode; with the stop rule, the evaluation runs at once and the rule follows it."""
 
-    def __init__(self, recorder: EpisodeRecorder, show: bool = True) -> None:
+    model: DQN
+
+    def __init__(
+        self,
+        recorder: EpisodeRecorder,
+        run_dir: Path,
+        progress: bool = True,
+        extra_files: Optional[Callable[[Path], None]] = None,
+    ) -> None:
         super().__init__()
-        self.recorder, self.show = recorder, show
+        self.recorder, self.log, self.config = recorder, recorder.log, recorder.config
+        self.run_dir, self.progress, self.extra_files = Path(run_dir), progress, extra_files
+        self.stop_rule = bool(self.config.stop.after_balanced_evaluations)
+        self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
+        self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
         self.bar: Optional[tqdm] = None
 
     def _on_training_start(self) -> None:
         log = self.recorder.log
-        desc, off = f"{log.algo} seed {log.seed}", not self.show
         self.bar = tqdm(
-            total=self.recorder.episodes, initial=log.n_episodes, desc=desc, unit="episode", disable=off, leave=False
+            total=self.recorder.episodes,
+            initial=log.n_episodes,
+            desc=f"{log.algo} seed {log.seed}",
+            unit="episode",
+            disable=not self.progress,
+            leave=False,
         )
 
     def _on_step(self) -> bool:
-        if self.recorder.episode_ended and self.bar is not None:
-            log = self.recorder.log
+        if not self.recorder.episode_ended:
+            return True
+        log, c, last = self.log, self.config, self.recorder.episodes
+        if self.bar is not None:
             last_eval = log.evaluations[-1]["max_upright_std_rad"] if log.evaluations else math.nan
             self.bar.update(1)
             self.bar.set_postfix(
                 ret=f"{log.episodes[-1]['return']:.0f}", plant_s=f"{log.plant_s:.0f}", eval_std=f"{last_eval:.2f}"
             )
-        return True
+        n, go_on = log.n_episodes, True
+        due = {
+            "evaluate": n % c.eval_every_episodes == 0 or n >= last,
+            "reset_network": bool(c.reset_every_episodes) and n % c.reset_every_episodes == 0 and n < last,
+            "checkpoint": n % c.checkpoint_every_episodes == 0,
+        }
+        for task, now in due.items():
+            self.pending[task] = self.pending[task] or now
+            if n >= last:
+                self.flush(task)
+            elif task == "evaluate" and self.stop_rule and self.pending[task]:
+                self.pending[task] = False
+                self.evaluate()
+                go_on = not self.stop()
+        return go_on
+
+    def _on_rollout_end(self) -> None:
+        for task in self.pending:
+            self.flush(task)
 
     def _on_training_end(self) -> None:
         self.close()
 
     def close(self) -> None:
-        """Close the bar (also when training raised)."""
+        """Close the progress bar (also when training raised)."""
         if self.bar is not None:
             self.bar.close()
 
+    def flush(self, task: str) -> None:
+        """Run ``task`` (a method's name) if it is due."""
+        if self.pending[task]:
+            self.pending[task] = False
+            getattr(self, task)()
 
-class EpisodeEventCallback(BaseCallback):
-    """A task (:meth:`run`) due after some episodes (:meth:`due`), run at the next rollout end or after the last."""
-
-    model: DQN
-
-    def __init__(self, recorder: EpisodeRecorder) -> None:
-        super().__init__()
-        self.recorder, self.log, self.pending = recorder, recorder.log, False
-
-    def due(self, n_episodes: int) -> bool:
-        raise NotImplementedError
-
-    def run(self) -> Any:
-        raise NotImplementedError
-
-    def _on_step(self) -> bool:
-        if self.recorder.episode_ended:
-            n = self.log.n_episodes
-            self.pending = self.pending or self.due(n)
-            if n >= self.recorder.episodes:
-                self.flush()
-        return True
-
-    def _on_rollout_end(self) -> None:
-        self.flush()
-
-    def flush(self) -> None:
-        """Run the task if it is due."""
-        if self.pending:
-            self.pending = False
-            self.run()
-
-
-class EvaluationCallback(EpisodeEventCallback):
-    """Greedy evaluation every ``eval_every_episodes`` episodes and after the last, keeping ``best_agent.zip``."""
-
-    def __init__(
-        self, recorder: EpisodeRecorder, run_dir: Path, callback_after_eval: Optional[BaseCallback] = None
-    ) -> None:
-        super().__init__(recorder)
-        self.config, self.run_dir, self.callback_after_eval = recorder.config, Path(run_dir), callback_after_eval
-        if callback_after_eval is not None:
-            callback_after_eval.parent = self
-        self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
-
-    def _init_callback(self) -> None:
-        if self.callback_after_eval is not None:
-            self.callback_after_eval.init_callback(self.model)
-
-    def due(self, n_episodes: int) -> bool:
-        return n_episodes % self.config.eval_every_episodes == 0 or n_episodes >= self.recorder.episodes
-
-    def run(self) -> dict[str, Any]:
-        return self.evaluate()
-
-    def _on_step(self) -> bool:
-        super()._on_step()
-        if self.recorder.episode_ended and self.callback_after_eval is not None and self.pending:
-            self.pending = False
-            self.evaluate()
-            return self.callback_after_eval.on_step()
-        return True
+    def reset_network(self) -> None:
+        reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
 
     def evaluate(self) -> dict[str, Any]:
         """Evaluate the greedy policy on the true plant and append an evaluation row."""
@@ -305,91 +289,32 @@ class EvaluationCallback(EpisodeEventCallback):
             save_agent_file(self.model, self.run_dir / "best_agent.zip")
         return row
 
-
-def _balanced(config: DQNConfig, all_swung_up: bool, max_upright_std_rad: float) -> bool:
-    """The early-stopping criterion of one evaluation: every start swung up and held within the limit."""
-    return bool(all_swung_up) and max_upright_std_rad <= config.stop.upright_std_rad
-
-
-class StopTrainingOnBalance(BaseCallback):
-    """The stop rule after each evaluation: the last ``stop.after_balanced_evaluations`` balanced and
-    ``confirmation`` (if any) agrees; writes ``log.stop_reason``."""
-
-    def __init__(self, config: DQNConfig, log: TrainingLog, confirmation: Optional[BaseCallback] = None) -> None:
-        super().__init__()
-        self.config, self.log, self.confirmation = config, log, confirmation
-
-    def _init_callback(self) -> None:
-        if self.confirmation is not None:
-            self.confirmation.init_callback(self.model)
-
-    def balanced_streak(self) -> bool:
-        """Whether the last ``stop.after_balanced_evaluations`` evaluations all balanced."""
-        k = self.config.stop.after_balanced_evaluations
-        rows = self.log.evaluations[-k:] if k else []
-        return len(rows) == k > 0 and all(
-            _balanced(self.config, row["all_swung_up"], row["max_upright_std_rad"]) for row in rows
-        )
-
-    def _on_step(self) -> bool:
-        if not self.balanced_streak() or (self.confirmation is not None and not self.confirmation.on_step()):
-            return True
-        n = len(self.config.stop.confirm_seeds)
-        held = n - self.log.evaluations[-1].get("confirm_failures", 0)
+    def stop(self) -> bool:
+        """The stop rule after an evaluation: the last ``stop.after_balanced_evaluations`` balanced and at most
+        ``stop.confirm_max_failures`` of ``stop.confirm_seeds`` fail (recorded in the last evaluation row); writes
+        ``log.stop_reason``."""
+        rule, k = self.config.stop, self.config.stop.after_balanced_evaluations
+        balanced = lambda swung_up, std: bool(swung_up) and std <= rule.upright_std_rad  # noqa: E731
+        rows = self.log.evaluations[-k:]
+        if len(rows) < k or not all(balanced(r["all_swung_up"], r["max_upright_std_rad"]) for r in rows):
+            return False
+        if rule.confirm_seeds:
+            failures = 0
+            for seed in rule.confirm_seeds:
+                (result,) = evaluate_agent(self.model, self.config, seeds=(seed,)).results
+                failures += not balanced(math.isfinite(result.swing_up_time_s), result.upright_std_rad)
+                if failures > rule.confirm_max_failures:
+                    break
+            rows[-1].update(confirmed=failures <= rule.confirm_max_failures, confirm_failures=failures)
+            if not rows[-1]["confirmed"]:
+                return False
+        n = len(rule.confirm_seeds)
+        held = n - rows[-1].get("confirm_failures", 0)
         confirmation = "" if not n else f" and from {'the' if held == n else f'{held} of the'} {n} confirmation starts"
-        k = self.config.stop.after_balanced_evaluations
         self.log.stop_reason = (
             "balanced in an evaluation " if k == 1 else f"balanced in {k} consecutive evaluations "
-        ) + f"(upright std <= {self.config.stop.upright_std_rad:g} rad from every evaluation start){confirmation}"
-        return False
-
-
-class ConfirmBalance(BaseCallback):
-    """Confirmation of the stop rule: at most ``stop.confirm_max_failures`` of ``stop.confirm_seeds`` fail;
-    recorded in the last evaluation row (``confirmed``, ``confirm_failures``)."""
-
-    def __init__(self, config: DQNConfig, log: TrainingLog) -> None:
-        super().__init__()
-        self.config, self.log = config, log
-
-    def _on_step(self) -> bool:
-        failures = 0
-        for seed in self.config.stop.confirm_seeds:
-            (result,) = evaluate_agent(self.model, self.config, seeds=(seed,)).results
-            failures += not _balanced(self.config, math.isfinite(result.swing_up_time_s), float(result.upright_std_rad))
-            if failures > self.config.stop.confirm_max_failures:
-                break
-        ok = failures <= self.config.stop.confirm_max_failures
-        self.log.evaluations[-1]["confirmed"] = ok
-        self.log.evaluations[-1]["confirm_failures"] = failures
-        return ok
-
-
-class ResetQNetworkCallback(EpisodeEventCallback):
-    """:func:`reset_q_network` every ``reset_every_episodes`` episodes (not after the last), after the evaluation."""
-
-    def due(self, n_episodes: int) -> bool:
-        every = self.recorder.config.reset_every_episodes
-        return bool(every) and n_episodes % every == 0 and n_episodes < self.recorder.episodes
-
-    def run(self) -> None:
-        reset_q_network(self.model, seed=(self.log.seed, self.log.n_episodes))
-
-
-class CheckpointCallback(EpisodeEventCallback):
-    """A resumable checkpoint every ``checkpoint_every_episodes`` episodes (``extra_files(folder)`` adds files)."""
-
-    def __init__(
-        self, recorder: EpisodeRecorder, run_dir: Path, extra_files: Optional[Callable[[Path], None]] = None
-    ) -> None:
-        super().__init__(recorder)
-        self.run_dir, self.extra_files = Path(run_dir), extra_files
-
-    def due(self, n_episodes: int) -> bool:
-        return n_episodes % self.recorder.config.checkpoint_every_episodes == 0
-
-    def run(self) -> Path:
-        return self.checkpoint()
+        ) + f"(upright std <= {rule.upright_std_rad:g} rad from every evaluation start){confirmation}"
+        return True
 
     def checkpoint(self) -> Path:
         """Write agent, replay buffer (plain arrays), log (and extra files) to ``run_dir/checkpoint`` atomically."""
@@ -548,28 +473,8 @@ def training_callbacks(
     """The callbacks of a training run, in the order they run each step."""
     recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
     before, after = part.callbacks(recorder) if part is not None else ([], [])
-    stop = None
-    if config.stop.after_balanced_evaluations:
-        confirmation = ConfirmBalance(config, log) if config.stop.confirm_seeds else None
-        stop = StopTrainingOnBalance(config, log, confirmation)
-    return CallbackList(
-        [
-            *before,
-            recorder,
-            *after,
-            ProgressBarCallback(recorder, show=progress),
-            EvaluationCallback(recorder, run_dir, callback_after_eval=stop),
-            ResetQNetworkCallback(recorder),
-            CheckpointCallback(recorder, run_dir, extra_files=part.save if part is not None else None),
-        ]
-    )
-
-
-_C = TypeVar("_C", bound=BaseCallback)
-
-
-def _member(callbacks: CallbackList, cls: type[_C]) -> _C:
-    return next(c for c in callbacks.callbacks if isinstance(c, cls))
+    events = EpisodeEvents(recorder, run_dir, progress, extra_files=part.save if part is not None else None)
+    return CallbackList([*before, recorder, *after, events])
 
 
 def run_training(
@@ -597,7 +502,8 @@ def run_training(
     remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
     if remaining > 0:
         callbacks = training_callbacks(config, log, episodes, run_dir, progress, part)
-        evaluation, checkpoints = _member(callbacks, EvaluationCallback), _member(callbacks, CheckpointCallback)
+        events = callbacks.callbacks[-1]
+        assert isinstance(events, EpisodeEvents)
         # exactly the remaining episodes' steps; a logger without outputs (SB3's default one creates a temp folder)
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
@@ -608,10 +514,10 @@ def run_training(
                 progress_bar=False,
             )
         finally:
-            _member(callbacks, ProgressBarCallback).close()
+            events.close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:
-            evaluation.evaluate()
-        checkpoints.checkpoint()  # so that a longer run can resume from the end of this one
+            events.evaluate()
+        events.checkpoint()  # so that a longer run can resume from the end of this one
     check_finite_weights(model, f"{algo} seed {seed}, final agent")
     save_agent_file(model, run_dir / "agent.zip")
     log.save(run_dir / "log.json")

@@ -6,7 +6,7 @@ import argparse
 import math
 import time
 
-from softpend.commands.options import FieldOption, add_field_options, field_values
+from softpend.commands.options import FieldOption, add_command, field_options, field_values
 
 #: ``(flag, BabbleProtocol field, type, help, allowed range)`` of the protocol options; a value outside the range
 #: gives a dataset of noise, or of saturated torques, that still passes as data.
@@ -33,33 +33,27 @@ _OPTIONS: tuple[FieldOption, ...] = (
 )
 
 
+DESCRIPTION = """Drive the simulated soft rod with band-limited random torques (plus a weak stabilising PD on the hub
+in most trials) and save positions, differenced velocities and torques as a dataset file (softpend.sysid.dataset
+format)."""
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid import BabbleProtocol
 
     d = BabbleProtocol()
-    parser = subparsers.add_parser(
-        "babble",
-        help="record a motor-babbling dataset (random torques near upright) for system identification",
-        description="Drive the simulated soft rod with band-limited random torques (plus a weak stabilising PD "
-        "on the hub in most trials) and save positions, differenced velocities and torques as a dataset "
-        "file (softpend.sysid.dataset format).",
-    )
-    parser.add_argument("output", help="dataset file to write (.npz)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
-    parser.add_argument(
-        "--start", choices=("upright", "hanging", "random"), default=d.start, help=f"start region ({d.start})"
-    )
-    parser.add_argument(
-        "--program",
-        choices=("noise", "multisine"),
-        default=d.program,
-        help="torque program: band-limited random torque, or a designed multisine from 0.2 Hz to "
-        f"--torque-bandwidth-hz ({d.program})",
-    )
-    add_field_options(parser, d, _OPTIONS)
-    parser.add_argument("--n-links", type=int, default=None, help="override the number of PRB links")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.set_defaults(func=run)
+    program = f"torque program: band-limited random torque, or a multisine to --torque-bandwidth-hz ({d.program})"
+    options = [
+        ("output", None, dict(help="dataset file to write (.npz)")),
+        ("--seed", None, dict(type=int, default=0, help="seed of every random draw (default 0)")),
+        ("--start", None, dict(choices=("upright", "hanging", "random"), default=d.start, help=f"start ({d.start})")),
+        ("--program", None, dict(choices=("noise", "multisine"), default=d.program, help=program)),
+        *field_options(d, _OPTIONS),
+        ("--n-links", None, dict(type=int, default=None, help="override the number of PRB links")),
+        ("--no-progress", None, dict(action="store_true", help="hide the progress bar")),
+    ]
+    help = "record a motor-babbling dataset (random torques near upright) for system identification"
+    add_command(subparsers, "babble", help, options, run, description=DESCRIPTION)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,21 +63,11 @@ def run(args: argparse.Namespace) -> int:
 
     outputs = Outputs()  # before the work: a dataset this command wrote may be replaced, no other file
     output = str(outputs.file(output_name(args.output, ".npz", "dataset"), what="dataset"))
-    protocol = BabbleProtocol(
-        start=args.start,
-        program=args.program,
-        **field_values(args, _OPTIONS),
-    )
+    protocol = BabbleProtocol(start=args.start, program=args.program, **field_values(args, _OPTIONS))
     params = RodParams() if args.n_links is None else RodParams(n_links=args.n_links)
     started = time.perf_counter()
     dataset = babble(protocol, params=params, seed=args.seed, path=output, progress=not args.no_progress)
     outputs.done(output)  # written atomically by the dataset's writer
-    summary = {
-        "path": output,
-        "n_trials": dataset.n_trials,
-        "n_samples": dataset.n_samples,
-        "n_transitions": dataset.n_transitions,
-        "wall_s": round(time.perf_counter() - started, 2),
-    }
-    print(json_text(summary))
+    counts = {key: getattr(dataset, key) for key in ("n_trials", "n_samples", "n_transitions")}
+    print(json_text({"path": output, **counts, "wall_s": round(time.perf_counter() - started, 2)}))
     return 0

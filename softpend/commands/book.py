@@ -5,33 +5,29 @@ from __future__ import annotations
 import argparse
 import sys
 
-from softpend.commands.options import add_set_option
+from softpend.commands.options import add_command, set_option
+
+DESCRIPTION = """Execute the notebooks of _toc.yml (toc order, two at a time) with the parameters of a profile in
+book/profiles.yml into book/_generated/NAME.ipynb, skipping up-to-date ones unless --force. The runs they read are
+trained beforehand by `softpend sweep --book --profile PROFILE` (else by the notebook)."""
+SET_HELP = """set a parameter (VALUE as JSON, else a string) in every notebook that defines it, on top of the
+profile; repeatable. Example: --set plant=beam regenerates the figure set on the continuum beam"""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.book import DEFAULT_PROFILE
 
-    parser = subparsers.add_parser(
-        "book",
-        help="execute the book's notebooks into book/_generated (and build the HTML with --html)",
-        description="Execute the notebooks of _toc.yml (toc order, two at a time) with the parameters of a profile "
-        "in book/profiles.yml into book/_generated/NAME.ipynb, skipping up-to-date ones unless --force. The runs "
-        "they read are trained beforehand by `softpend sweep --book --profile PROFILE` (else by the notebook).",
-    )
-    add = parser.add_argument
-    add("--profile", default=DEFAULT_PROFILE, help=f"parameter profile (default: {DEFAULT_PROFILE}; 'quick' for tests)")
-    add("--only", action="append", metavar="NAME", help="execute only this notebook (repeatable), e.g. fig01_prb_rod")
-    add_set_option(
-        parser,
-        dest="set",
-        help="set a parameter (VALUE as JSON, else a string) in every notebook that defines it, on top of the "
-        "profile; repeatable. Example: --set plant=beam regenerates the figure set on the continuum beam",
-    )
-    add("--force", action="store_true", help="execute even if the cached output is up to date")
-    add("--html", action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)")
-    add("--root", default=".", help="project root holding _toc.yml (default: current directory)")
-    add("--path-output", help="with --html: write the HTML to PATH/_build/html (default: ROOT/_build/html)")
-    parser.set_defaults(func=run)
+    options = [
+        ("--profile", None, dict(default=DEFAULT_PROFILE, help=f"profile ({DEFAULT_PROFILE}; 'quick' for tests)")),
+        ("--only", None, dict(action="append", metavar="NAME", help="execute only this notebook (repeatable)")),
+        set_option(SET_HELP, dest="set"),
+        ("--force", None, dict(action="store_true", help="execute even if the cached output is up to date")),
+        ("--html", None, dict(action="store_true", help="then build the HTML book (jupyter-book, warnings as errors)")),
+        ("--root", None, dict(default=".", help="project root holding _toc.yml (default: current directory)")),
+        ("--path-output", None, dict(help="with --html: write the HTML to PATH/_build/html (default: ROOT)")),
+    ]
+    help = "execute the book's notebooks into book/_generated (and build the HTML with --html)"
+    add_command(subparsers, "book", help, options, run, description=DESCRIPTION)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import FieldOption, add_field_options, add_options, field_values
+from softpend.commands.options import FieldOption, add_command, field_options, field_values
 
 #: ``(flag, TrainConfig field, type, help, allowed range)`` of the training options (the ranges bound the work).
 _OPTIONS: tuple[FieldOption, ...] = (
@@ -24,36 +24,29 @@ def _integers(text: str) -> tuple[int, ...]:
     return tuple(int(w) for w in text.split(",") if w.strip())
 
 
+DESCRIPTION = """Fit the one-step dynamics network to a dataset written by `softpend babble` (or a rig), save it as
+OUTPUT.pt (state dict) + OUTPUT.json (metadata with metrics), and print one-step and open-loop rollout errors on the
+validation trials (and on --test-data if given) as JSON."""
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid import TrainConfig
 
     d = TrainConfig()
-    parser = subparsers.add_parser(
-        "fit-model",
-        help="train a learned dynamics model (softpend.sysid) on a dataset and report its accuracy",
-        description="Fit the one-step dynamics network to a dataset written by `softpend babble` (or a rig), save it "
-        "as OUTPUT.pt (state dict) + OUTPUT.json (metadata with metrics), and print one-step and open-loop "
-        "rollout errors on the validation trials (and on --test-data if given) as JSON.",
-    )
-    parser.add_argument("dataset", help="training dataset (.npz)")
-    parser.add_argument("output", help="model path stem: writes OUTPUT.pt and OUTPUT.json")
-    parser.add_argument(
-        "--information", choices=("full", "limited"), default=d.information, help=f"information level ({d.information})"
-    )
-    parser.add_argument(
-        "--velocity-source", choices=("observed", "true"), default=d.velocity_source, help="velocities (observed)"
-    )
-    parser.add_argument(
-        "--hidden-widths",
-        type=_integers,
-        default=",".join(map(str, d.hidden_widths)),
-        help="comma-separated hidden widths (16,16,16)",
-    )
-    add_field_options(parser, d, _OPTIONS)
-    add_options(parser, [("--threads", (1, 1024), dict(type=int, default=1, help="torch threads (default 1)"))])
-    parser.add_argument("--test-data", default=None, help="held-out dataset (.npz) to evaluate on as well")
-    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    parser.set_defaults(func=run)
+    widths = dict(type=_integers, default=",".join(map(str, d.hidden_widths)), help="comma-separated (16,16,16)")
+    options = [
+        ("dataset", None, dict(help="training dataset (.npz)")),
+        ("output", None, dict(help="model path stem: writes OUTPUT.pt and OUTPUT.json")),
+        ("--information", None, dict(choices=("full", "limited"), default=d.information, help=f"({d.information})")),
+        ("--velocity-source", None, dict(choices=("observed", "true"), default=d.velocity_source, help="(observed)")),
+        ("--hidden-widths", None, widths),
+        *field_options(d, _OPTIONS),
+        ("--threads", (1, 1024), dict(type=int, default=1, help="torch threads (default 1)")),
+        ("--test-data", None, dict(default=None, help="held-out dataset (.npz) to evaluate on as well")),
+        ("--no-progress", None, dict(action="store_true", help="hide progress bars")),
+    ]
+    help = "train a learned dynamics model (softpend.sysid) on a dataset and report its accuracy"
+    add_command(subparsers, "fit-model", help, options, run, description=DESCRIPTION)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,12 +61,8 @@ def run(args: argparse.Namespace) -> int:
     outputs = Outputs()
     # before the work: a model this command wrote may be replaced, nothing else
     model_files = [outputs.file(path, what="model file") for path in model_paths(args.output)]
-    config = TrainConfig(
-        information=args.information,
-        velocity_source=args.velocity_source,
-        hidden_widths=args.hidden_widths,
-        **field_values(args, _OPTIONS),
-    )
+    chosen = {key: getattr(args, key) for key in ("information", "velocity_source", "hidden_widths")}
+    config = TrainConfig(**chosen, **field_values(args, _OPTIONS))
     dataset = load_dataset(args.dataset)
     # a model predicts one step of the training data's dt_s: held-out data at another step is not a test of it
     test = load_dataset(args.test_data, expected_dt_s=dataset.dt_s) if args.test_data else None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import FieldOption, add_field_options, field_values
+from softpend.commands.options import FieldOption, add_command, field_options, field_values
 
 #: ``(flag, GreyBoxConfig field, type, help, allowed range)``: the ranges bound the fit's loop and window draw.
 _OPTIONS: tuple[FieldOption, ...] = (
@@ -19,37 +19,32 @@ _CALIBRATION_FLAGS = {
     "torque_gain": ("--torque-gain", "a gain on the recorded torque"),
     "encoder_offset_rad": ("--encoder-offset", "an offset of the hub encoder"),
     "torque_delay_s": ("--torque-delay", "a delay of the torque (within one sample either way)"),
-    "camera_delay_s": (
-        "--camera-delay",
-        "a delay of the camera against the encoder (within one sample either way; advised for rig data)",
-    ),
+    "camera_delay_s": ("--camera-delay", "a camera delay against the encoder (within one sample; advised for rigs)"),
 }
+
+DESCRIPTION = """Fit hub inertia, hub friction, Young's modulus, joint damping and tip mass of the PRB model
+(optionally a torque gain and an encoder offset) to a dataset written by `softpend babble` or a rig, by multiple
+shooting over short windows on the Exudyn plant (softpend.sysid.greybox). Prints each estimate with its standard
+deviation; --out writes a JSON document that RodParams.from_json reads."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid.greybox import CALIBRATION_PARAMETERS, ESTIMABLE_ROD_FIELDS, GREYBOX_PARAMETERS, GreyBoxConfig
 
-    d = GreyBoxConfig()
-    parser = subparsers.add_parser(
-        "identify",
-        help="estimate the rod's physical parameters (grey-box, multiple shooting) from a dataset",
-        description="Fit hub inertia, hub friction, Young's modulus, joint damping and tip mass of the PRB model "
-        "(optionally a torque gain and an encoder offset) to a dataset written by `softpend babble` or a rig, by "
-        "multiple shooting over short windows on the Exudyn plant (softpend.sysid.greybox). Prints each "
-        "estimate with its standard deviation; --out writes a JSON document that RodParams.from_json reads.",
-    )
-    parser.add_argument("dataset", help="dataset (.npz)")
-    parser.add_argument("--out", default=None, help="JSON file to write (rod_params, estimates, std, fit)")
-    parser.add_argument(
-        "--parameters",
-        default=",".join(GREYBOX_PARAMETERS),
-        help=f"comma-separated parameters to estimate, from {', '.join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)}",
-    )
-    for flag, text in _CALIBRATION_FLAGS.values():
-        parser.add_argument(flag, action="store_true", help=f"also estimate {text}")
-    parser.add_argument("--initial-params", help="JSON file of the initial guess (default: the dataset's plant_params)")
-    add_field_options(parser, d, _OPTIONS)
-    parser.set_defaults(func=run)
+    known = ", ".join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)
+    options = [
+        ("dataset", None, dict(help="dataset (.npz)")),
+        ("--out", None, dict(default=None, help="JSON file to write (rod_params, estimates, std, fit)")),
+        ("--parameters", None, dict(default=",".join(GREYBOX_PARAMETERS), help=f"comma-separated, from {known}")),
+        *(
+            (flag, None, dict(action="store_true", help=f"also estimate {t}"))
+            for flag, t in _CALIBRATION_FLAGS.values()
+        ),
+        ("--initial-params", None, dict(help="JSON file of the initial guess (default: the dataset's plant_params)")),
+        *field_options(GreyBoxConfig(), _OPTIONS),
+    ]
+    help = "estimate the rod's physical parameters (grey-box, multiple shooting) from a dataset"
+    add_command(subparsers, "identify", help, options, run, description=DESCRIPTION)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -22,6 +22,24 @@ def add_options(parser: argparse.ArgumentParser, options: Sequence[Option]) -> N
         parser.add_argument(flag, **keywords)
 
 
+def add_command(
+    subparsers: argparse._SubParsersAction, name: str, help: str, options: Sequence[Option], run: Callable, **kw: Any
+) -> argparse.ArgumentParser:
+    """A subcommand ``name`` with the options of a table (positionals included) that runs ``run(args)``."""
+    parser = subparsers.add_parser(name, help=help, **kw)
+    add_options(parser, options)
+    parser.set_defaults(func=run)
+    return parser
+
+
+def add_target(parser: argparse.ArgumentParser, flag: str = "--port") -> None:
+    """The required choice between ``--twin`` (the emulator and its synthetic camera) and ``flag`` (a rig's)."""
+    target = parser.add_mutually_exclusive_group(required=True)
+    target.add_argument("--twin", action="store_true", help="the digital twin (emulator + synthetic camera)")
+    text = "serial port of a rig (or the pty of `softpend rig`)" if flag == "--port" else "index, URL or image/video"
+    target.add_argument(flag, metavar=flag[2:].upper().replace("PORT", "PATH"), help=text)
+
+
 def _ranged(kind: type, flag: str, low: float, high: float) -> Callable[[str], Any]:
     def parse(text: str) -> Any:
         from softpend.checks import in_range
@@ -41,14 +59,13 @@ def _ranged(kind: type, flag: str, low: float, high: float) -> Callable[[str], A
 FieldOption = tuple[str, str, type, str, Optional[tuple[float, float]]]
 
 
-def add_field_options(parser: argparse.ArgumentParser, defaults: Any, rows: Sequence[FieldOption]) -> None:
-    """Add options that set fields of a config, each defaulting to (and its help showing) the field of
-    ``defaults``; :func:`field_values` reads them back."""
-    keywords = [
-        dict(type=kind, default=getattr(defaults, field), help=f"{text} ({getattr(defaults, field)})")
-        for _, field, kind, text, _ in rows
+def field_options(defaults: Any, rows: Sequence[FieldOption]) -> list[Option]:
+    """Options that set fields of a config, each defaulting to (and its help showing) the field of ``defaults``;
+    :func:`field_values` reads them back."""
+    return [
+        (flag, limits, dict(type=kind, default=getattr(defaults, field), help=f"{text} ({getattr(defaults, field)})"))
+        for flag, field, kind, text, limits in rows
     ]
-    add_options(parser, [(row[0], row[4], kw) for row, kw in zip(rows, keywords)])
 
 
 def field_values(args: argparse.Namespace, rows: Sequence[FieldOption]) -> dict[str, Any]:
@@ -65,10 +82,10 @@ def assignment(text: str) -> tuple[str, Any]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_set_option(parser: argparse.ArgumentParser, help: str, dest: str = "overrides", flag: str = "--set") -> None:
-    """Add the repeatable ``flag NAME=VALUE`` (``--set`` by default) to ``parser``; ``args.<dest>`` is the list of
-    ``(NAME, value)`` pairs in command-line order (VALUE parsed as JSON, else kept as a string)."""
-    parser.add_argument(flag, action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help)
+def set_option(help: str, dest: str = "overrides", flag: str = "--set") -> Option:
+    """The repeatable ``flag NAME=VALUE`` (``--set`` by default): ``args.<dest>`` is the list of ``(NAME, value)``
+    pairs in command-line order (VALUE parsed as JSON, else kept as a string)."""
+    return (flag, None, dict(action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help))
 
 
 def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float]]) -> None:

@@ -5,16 +5,11 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import MAX_SESSION_S, Option, add_options
+from softpend.commands.options import MAX_SESSION_S, Option, add_command
 
-DEBUG_HELP = "show the traceback of an error instead of one line"
 OPTIONS: tuple[Option, ...] = (
     ("--port", None, dict(metavar="PATH", help="also expose the pty at PATH (a symlink, like /tmp/ttyRIG)")),
-    (
-        "--duration",
-        (1e-3, MAX_SESSION_S),
-        dict(type=float, help="stop after this many seconds (default: until killed)"),
-    ),
+    ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, help="stop after this many seconds (default: never)")),
     ("--counts-per-rev", (4, 2**24), dict(type=int, default=4096, help="encoder resolution (default 4096)")),
     ("--latency-ms", (0.0, 1000.0), dict(type=float, default=2.0, help="one-way link latency [ms] (default 2)")),
     ("--drop", (0.0, 1.0), dict(type=float, default=0.0, help="probability that a STATE frame is dropped")),
@@ -29,14 +24,12 @@ OPTIONS: tuple[Option, ...] = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.commands import rig_build, rig_commission, rig_control
 
-    parser = subparsers.add_parser("rig", help="serve the emulated rig (motor protocol) on a pseudo-terminal")
-    add_options(parser, OPTIONS)
-    parser.set_defaults(func=run)
+    parser = add_command(
+        subparsers, "rig", "serve the emulated rig (motor protocol) on a pseudo-terminal", OPTIONS, run
+    )
     actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
     for module in (rig_control, rig_build, rig_commission):
         module.register(actions)
-    for action in actions.choices.values():
-        action.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -9,73 +9,54 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, add_options, add_set_option, camera_source
+from softpend.commands.options import MAX_SESSION_S, add_command, add_target, camera_source, set_option
 
 #: Accepted ``--print-modulus-mpa`` [MPa]: soft silicone to steel.
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
+ROD_SET = set_option("set a RodParams field of the rod (VALUE parsed as JSON), e.g. --set length_m=0.4; repeatable")
 
 
 def register(actions: argparse._SubParsersAction) -> None:
-    text = "the rig's dimensions, drawing and marker layout for the rod's parameters"
-    design = actions.add_parser("design", help=text)
-    text = "folder for rig_design.json, rig_design.png, markers.json"
-    design.add_argument("--out", required=True, metavar="DIR", help=text)
-    text = "modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)"
-    design.add_argument("--print-modulus-mpa", type=float, default=None, help=text)
-    _add_rod_set(design)
-    design.set_defaults(func=run_design)
-
-    check = actions.add_parser("check", help="power-on checks of the motor link: handshake, rest, direction, watchdog")
-    _add_link_target(check)
-    check.add_argument("--out", metavar="JSON", help="also write the report to this file")
-    rest = dict(type=float, default=1.0, help="time at zero torque for the rest check [s] (1)")
-    counts = dict(type=int, default=4096, help="twin: encoder resolution (4096)")
-    add_options(check, [("--rest-s", (0.1, 600.0), rest), ("--counts-per-rev", (4, 2**24), counts)])
-    text = "torque of the direction push as a fraction of the torque limit (0.3)"
-    check.add_argument("--push-fraction", type=float, default=0.3, help=text)
-    _add_rod_set(check)
-    check.set_defaults(func=run_check)
-
-    calibrate = actions.add_parser("calibrate", help="fit the camera's pixel-to-metre map to the markers and save it")
-    target = calibrate.add_mutually_exclusive_group(required=True)
-    target.add_argument("--twin", action="store_true", help="a frame of the synthetic camera")
-    target.add_argument("--camera", metavar="CAMERA", help="camera index, stream URL or image/video file")
-    text = "marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)"
-    calibrate.add_argument("--markers", required=True, metavar="JSON", help=text)
-    text = "calibration file to write (the report goes next to it as NAME.report.json)"
-    calibrate.add_argument("--out", required=True, metavar="JSON", help=text)
-    calibrate.add_argument("--seed", type=int, default=0, help="twin: seed of the image noise")
-    _add_rod_set(calibrate)
-    calibrate.set_defaults(func=run_calibrate)
-
-    text = "babble over the link with the camera tracking, synchronise into a dataset"
-    babble = actions.add_parser("babble", help=text)
-    _add_link_target(babble)
-    babble.add_argument("--camera", metavar="CAMERA", help="with --port: camera index, stream URL or video file")
-    babble.add_argument("--markers", metavar="JSON", help="with --camera: marker positions [m] (default layout)")
-    babble.add_argument("--calibration", metavar="JSON", help="with --camera: a saved calibration")
-    babble.add_argument("--out", required=True, metavar="DIR", help="folder for the logs, the dataset and summary.json")
-    latency = dict(type=float, default=0.0, help="with --camera: its latency [ms] (0)")
-    duration = dict(type=float, default=65.0, help="babbling time [s] (65)")
-    length = dict(type=float, default=5.0, help="trial length of the dataset [s] (5)")
-    limits = ((0.0, 1000.0), (1e-3, MAX_SESSION_S), (0.1, MAX_SESSION_S))
-    flags = ("--camera-latency-ms", "--duration", "--trial-length-s")
-    add_options(babble, list(zip(flags, limits, (latency, duration, length))))
-    babble.add_argument("--seed", type=int, default=0, help="seed of the babbling torques (and of the twin)")
-    babble.add_argument("--no-progress", action="store_true", help="hide the progress bars")
-    babble.set_defaults(func=run_babble)
-
-
-def _add_link_target(parser: argparse.ArgumentParser) -> None:
-    target = parser.add_mutually_exclusive_group(required=True)
-    target.add_argument("--twin", action="store_true", help="the rig emulator")
-    target.add_argument("--port", metavar="PATH", help="serial port of the rig (the V5 brain's user port)")
-
-
-def _add_rod_set(parser: argparse.ArgumentParser) -> None:
-    add_set_option(
-        parser, help="set a RodParams field of the rod (VALUE parsed as JSON), e.g. --set length_m=0.4; repeatable"
-    )
+    modulus = "modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)"
+    design = [
+        ("--out", None, dict(required=True, metavar="DIR", help="folder for rig_design.json/.png, markers.json")),
+        ("--print-modulus-mpa", PRINT_MODULUS_RANGE_MPA, dict(type=float, default=None, help=modulus)),
+        ROD_SET,
+    ]
+    help = "the rig's dimensions, drawing and marker layout for the rod's parameters"
+    add_command(actions, "design", help, design, run_design)
+    push = "torque of the direction push as a fraction of the torque limit (0.3)"
+    check = [
+        ("--out", None, dict(metavar="JSON", help="also write the report to this file")),
+        ("--rest-s", (0.1, 600.0), dict(type=float, default=1.0, help="zero-torque time of the rest check [s] (1)")),
+        ("--counts-per-rev", (4, 2**24), dict(type=int, default=4096, help="twin: encoder resolution (4096)")),
+        ("--push-fraction", None, dict(type=float, default=0.3, help=push)),
+        ROD_SET,
+    ]
+    help = "power-on checks of the motor link: handshake, rest, direction, watchdog"
+    add_target(add_command(actions, "check", help, check, run_check), "--port")
+    markers = "marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)"
+    calibrate = [
+        ("--markers", None, dict(required=True, metavar="JSON", help=markers)),
+        ("--out", None, dict(required=True, metavar="JSON", help="calibration file to write (and NAME.report.json)")),
+        ("--seed", None, dict(type=int, default=0, help="twin: seed of the image noise")),
+        ROD_SET,
+    ]
+    help = "fit the camera's pixel-to-metre map to the markers and save it"
+    add_target(add_command(actions, "calibrate", help, calibrate, run_calibrate), "--camera")
+    babble = [
+        ("--camera", None, dict(metavar="CAMERA", help="with --port: camera index, stream URL or video file")),
+        ("--markers", None, dict(metavar="JSON", help="with --camera: marker positions [m] (default layout)")),
+        ("--calibration", None, dict(metavar="JSON", help="with --camera: a saved calibration")),
+        ("--out", None, dict(required=True, metavar="DIR", help="folder for the logs, the dataset and summary.json")),
+        ("--camera-latency-ms", (0.0, 1000.0), dict(type=float, default=0.0, help="with --camera: latency [ms] (0)")),
+        ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, default=65.0, help="babbling time [s] (65)")),
+        ("--trial-length-s", (0.1, MAX_SESSION_S), dict(type=float, default=5.0, help="trial length [s] (5)")),
+        ("--seed", None, dict(type=int, default=0, help="seed of the babbling torques (and of the twin)")),
+        ("--no-progress", None, dict(action="store_true", help="hide the progress bars")),
+    ]
+    help = "babble over the link with the camera tracking, synchronise into a dataset"
+    add_target(add_command(actions, "babble", help, babble, run_babble), "--port")
 
 
 def _rod(args: argparse.Namespace):
@@ -91,15 +72,12 @@ def run_design(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from softpend.checks import in_range
     from softpend.hardware.rig_design import rig_design
     from softpend.io.outputs import Outputs, finite_or_none
     from softpend.study.build_rig import design_figures
     from softpend.study.figures.rig_design import draw_rig_design
 
-    modulus = None
-    if args.print_modulus_mpa is not None:
-        modulus = in_range("--print-modulus-mpa", args.print_modulus_mpa, *PRINT_MODULUS_RANGE_MPA) * 1e6
+    modulus = None if args.print_modulus_mpa is None else args.print_modulus_mpa * 1e6
     outputs = Outputs()
     out = outputs.folder(args.out, ("rig_design.json", "markers.json", "rig_design.png"), what="--out")
     params = _rod(args)

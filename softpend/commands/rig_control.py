@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, Option, add_options, camera_source
+from softpend.commands.options import MAX_SESSION_S, Option, add_command, add_target, camera_source
 from softpend.plant.params import MAX_N_LINKS
 
 #: ``--camera-effects`` names: no imperfection, or the CameraEffects class method of that name.
@@ -22,6 +22,7 @@ BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid", "plann
 
 #: The options after CONTROLLER: (flag, closed interval checked before anything starts, add_argument keywords).
 OPTIONS: tuple[Option, ...] = (
+    ("controller", None, dict(metavar="CONTROLLER", help=f"{', '.join(BUILTIN_CONTROLLERS)} or a run folder")),
     ("--out", None, dict(required=True, metavar="DIR", help="folder for the logs and summary.json")),
     ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, default=10.0, help="run length [s] (default 10)")),
     ("--camera", None, dict(metavar="CAMERA", help="with --port: camera index, stream URL or video file")),
@@ -47,17 +48,8 @@ OPTIONS: tuple[Option, ...] = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "control",
-        help="run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop",
-        description=__doc__.split("\n\n")[0],
-    )
-    parser.add_argument("controller", metavar="CONTROLLER", help=f"{', '.join(BUILTIN_CONTROLLERS)} or a run folder")
-    target = parser.add_mutually_exclusive_group(required=True)
-    target.add_argument("--twin", action="store_true", help="run on the digital twin (emulator + synthetic camera)")
-    target.add_argument("--port", metavar="PATH", help="serial port of a rig (or the pty of `softpend rig`)")
-    add_options(parser, OPTIONS)
-    parser.set_defaults(func=run)
+    help = "run a controller on a rig (--port) or on the digital twin (--twin), camera in the loop"
+    add_target(add_command(subparsers, "control", help, OPTIONS, run, description=__doc__.split("\n\n")[0]))
 
 
 def build_controller(

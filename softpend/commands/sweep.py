@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from softpend.commands.options import Option, add_options, add_set_option
+from softpend.commands.options import Option, add_command, set_option
 from softpend.commands.train import MAX_EPISODES
 
 METHODS = ("dqn", "mbpo", "pilco")
@@ -74,16 +74,16 @@ SET_EXAMPLES = {
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.sweep import BACKENDS
 
-    parser = subparsers.add_parser("sweep", help="train methods over many seeds on a parallel engine")
-    text = "train the runs the book's notebooks read (for --profile), then stop; the other training options are unused"
-    parser.add_argument("--book", action="store_true", help=text)
-    text = "parallel engine (default $SOFTPEND_BACKEND or loky)"
-    parser.add_argument("--backend", choices=BACKENDS, default=None, help=text)
-    add_options(parser, OPTIONS)
+    book = "train the runs the book's notebooks read (for --profile), then stop; the other training options are unused"
+    options = [
+        ("--book", None, dict(action="store_true", help=book)),
+        ("--backend", None, dict(choices=BACKENDS, default=None, help="parallel engine ($SOFTPEND_BACKEND or loky)")),
+        *OPTIONS,
+    ]
     for method, (cls, name, example) in SET_EXAMPLES.items():
         text = f"set a {cls} field for every {name} run, VALUE as JSON (repeatable; e.g. {example})"
-        add_set_option(parser, flag=f"--{method}-set", dest=f"{method}_overrides", help=text)
-    parser.set_defaults(func=run)
+        options.append(set_option(text, flag=f"--{method}-set", dest=f"{method}_overrides"))
+    add_command(subparsers, "sweep", "train methods over many seeds on a parallel engine", options, run)
 
 
 def run(args: argparse.Namespace) -> int:

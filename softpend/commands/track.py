@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import MAX_SESSION_S, Option, add_options, camera_source
+from softpend.commands.options import MAX_SESSION_S, Option, add_command, camera_source
 
 OPTIONS: tuple[Option, ...] = (
+    ("video", None, dict(nargs="?", help="video file (its sidecar VIDEO.json is used if present)")),
     ("--camera", None, dict(help="track live instead: a camera index (0), a stream URL or a video file")),
     ("--duration", (1e-3, MAX_SESSION_S), dict(type=float, help="with --camera: stop after this many seconds")),
     ("--camera-latency-ms", (0.0, 1000.0), dict(type=float, default=0.0, help="with --camera: its latency [ms] (0)")),
@@ -21,10 +22,7 @@ OPTIONS: tuple[Option, ...] = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("track", help="track the tip dot in a video file into a time-stamped CSV")
-    parser.add_argument("video", nargs="?", help="video file (its sidecar VIDEO.json is used if present)")
-    add_options(parser, OPTIONS)
-    parser.set_defaults(func=run)
+    add_command(subparsers, "track", "track the tip dot in a video file into a time-stamped CSV", OPTIONS, run)
 
 
 def run(args: argparse.Namespace) -> int:

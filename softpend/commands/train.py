@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import Option, add_options, add_set_option
+from softpend.commands.options import Option, add_command, set_option
 
 #: Most training episodes one command may ask for (a million: far beyond any budget of the book).
 MAX_EPISODES = 1_000_000
@@ -23,18 +23,15 @@ OPTIONS: tuple[Option, ...] = (
     ("--n-links", None, dict(type=int, help="links of the PRB rod (default: RodParams)")),
     ("--resume", None, dict(action="store_true", help="continue from the latest checkpoint in --out")),
     ("--no-progress", None, dict(action="store_true", help="hide the progress bar")),
+    set_option(
+        "override a field of the algorithm's config (repeatable; VALUE parsed as JSON, else a string; a dotted NAME "
+        "reaches a nested field, e.g. task.rod.mass_kg=0.07)"
+    ),
 )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("train", help="train a controller (DQN, DQN-MBPO, PILCO)")
-    add_options(parser, OPTIONS)
-    add_set_option(
-        parser,
-        help="override a field of the algorithm's config (repeatable; VALUE parsed as JSON, else a string; "
-        "a dotted NAME reaches a nested field, e.g. task.rod.mass_kg=0.07)",
-    )
-    parser.set_defaults(func=run)
+    add_command(subparsers, "train", "train a controller (DQN, DQN-MBPO, PILCO)", OPTIONS, run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -25,20 +25,18 @@ TABLE_COLUMNS = tuple(
 
 @dataclass
 class ClassicalComparison:
-    """Runs behind Figure 7: ``label -> [summary per tilt]`` near upright, ``label -> summary`` from hanging, one
-    table row per run, the PID gains by where they were tuned, and notes on designs left out."""
+    """Runs behind Figure 7: ``label -> [summary per tilt]`` near upright, one table row per run (near upright and
+    from hanging), the PID gains by where they were tuned, and notes on designs left out."""
 
     near_upright: dict[str, list[EvaluationSummary]]
-    from_hanging: dict[str, EvaluationSummary]
     rows: list[dict[str, Any]]
     pid_gains: dict[str, PIDGains]
     notes: list[str] = field(default_factory=list)
 
     def row(self, controller: str, start: str) -> dict[str, Any]:
         """The table row of one run (``start``: ``"tilt 0.2 rad"`` or ``"hanging"``)."""
-        for row in self.rows:
-            if row["controller"] == controller and row["start"] == start:
-                return row
+        if found := [r for r in self.rows if r["controller"] == controller and r["start"] == start]:
+            return found[0]
         raise KeyError(f"no run of {controller!r} from {start!r}")
 
 
@@ -64,12 +62,12 @@ def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> l
 def run_from_tilt(
     controller, task: Task, tilt_rad: float, starts: Sequence[int], duration_s: float, limit: float, name: str
 ) -> EvaluationSummary:
+    """``controller`` from :func:`near_upright_starts` with the torque limit ``limit``."""
     run_task = task.replace(start="upright", torque_limit_nm=limit)
     results = []
     for seed, state in zip(starts, near_upright_starts(task, tilt_rad, starts)):
-        results += evaluate_controller(
-            controller, run_task, seeds=(int(seed),), duration_s=duration_s, initial_state=state
-        ).results
+        one = evaluate_controller(controller, run_task, seeds=(int(seed),), duration_s=duration_s, initial_state=state)
+        results += one.results
     return EvaluationSummary(name=name, results=results)
 
 
@@ -83,45 +81,37 @@ def classical_comparison(
     swingup_duration_s: float = TEST_EPISODE_S,
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
-    progress: bool = False,
 ) -> ClassicalComparison:
-    """Evaluate every classical controller from the fresh starts ``starts``.
-
-    Off the PRB plant the joint-state designs become observation-only ones; without ``learned_model`` the
-    learned-model LQR and PID are left out; ``pid_gains`` skips the PID tunings.
-    """
+    """Evaluate every classical controller from the fresh starts ``starts``. Off the PRB plant the joint-state
+    designs become observation-only ones; without ``learned_model`` the learned-model LQR and PID are left out;
+    ``pid_gains`` skips the PID tunings."""
     task = task if task is not None else Task()
     starts = [int(seed) for seed in starts]
-    if not starts:
-        raise ValueError("starts must not be empty")
-    if len(tilts_rad) == 0:
-        raise ValueError("tilts_rad must not be empty")
-    params, plant = task.rod, task.plant
-    limit = params.torque_limit_nm
+    if not starts or len(tilts_rad) == 0:
+        raise ValueError("starts and tilts_rad must not be empty")
+    params, plant, limit = task.rod, task.plant, task.rod.torque_limit_nm
     notes: list[str] = []
     near: dict[str, list[EvaluationSummary]] = {}
-    hanging: dict[str, EvaluationSummary] = {}
     rows: list[dict[str, Any]] = []
 
     def add(label: str, controller, torque_limit: float) -> None:
-        near[label] = []
-        for tilt in tilts_rad:
-            summary = run_from_tilt(controller, task, tilt, starts, duration_s, torque_limit, label)
-            near[label].append(summary)
-            rows.append({**summary.row(), "start": f"tilt {tilt:g} rad", "torque_limit_nm": torque_limit})
+        near[label] = [
+            run_from_tilt(controller, task, tilt, starts, duration_s, torque_limit, label) for tilt in tilts_rad
+        ]
+        rows.extend(
+            {**s.row(), "start": f"tilt {t:g} rad", "torque_limit_nm": torque_limit}
+            for s, t in zip(near[label], tilts_rad)
+        )
 
     def add_hanging(label: str, controller) -> None:
         summary = evaluate_controller(
             controller, task.replace(start="hanging"), name=label, seeds=starts, duration_s=swingup_duration_s
         )
-        hanging[label] = summary
         rows.append({**summary.row(), "start": "hanging", "torque_limit_nm": limit})
 
     joint_state = plant == "prb"
     if not joint_state:
-        notes.append(
-            f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only versions"
-        )
+        notes.append(f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only ones")
     lqr_state = "joint" if joint_state else "observation"
     add("LQR (true model)", LQRController.from_params(params, state=lqr_state), limit)
     unlimited_lqr = LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm)
@@ -143,9 +133,7 @@ def classical_comparison(
         if learned_model is not None:
             simulators["learned model"] = learned_model_simulator(learned_model, params)
         gains = {
-            tuned_on: tune_pid(
-                simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations, progress=progress
-            ).gains
+            tuned_on: tune_pid(simulator, torque_limit_nm=limit, max_evaluations=pid_tuning_evaluations).gains
             for tuned_on, simulator in simulators.items()
         }
     for tuned_on, tuned in gains.items():
@@ -158,7 +146,7 @@ def classical_comparison(
         "energy swing-up + LQR",
         EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params),
     )
-    return ClassicalComparison(near, hanging, rows, gains, notes)
+    return ClassicalComparison(near, rows, gains, notes)
 
 
 def pid_gain_sensitivity(
@@ -172,13 +160,11 @@ def pid_gain_sensitivity(
     """The PID with its gains scaled by each of ``scales`` from the fresh starts of one tilt, one row per scale."""
     if len(scales) == 0 or any(not float(scale) > 0 for scale in scales):
         raise ValueError(f"scales must be positive numbers, got {list(scales)!r}")
-    limit = task.torque_limit_nm
-    rows = []
-    for scale in scales:
-        pid = PIDController(PIDGains(*(float(scale) * gains.as_array())), torque_limit_nm=limit)
-        summary = run_from_tilt(pid, task, tilt_rad, list(starts), duration_s, limit, f"PID x {float(scale):g}")
-        start = f"tilt {tilt_rad:g} rad"
-        rows.append({**summary.row(), "gain_scale": float(scale), "start": start, "torque_limit_nm": limit})
+    limit, rows = task.torque_limit_nm, []
+    for scale in map(float, scales):
+        pid = PIDController(PIDGains(*(scale * gains.as_array())), torque_limit_nm=limit)
+        summary = run_from_tilt(pid, task, tilt_rad, list(starts), duration_s, limit, f"PID x {scale:g}")
+        rows.append({**summary.row(), "gain_scale": scale, "start": f"tilt {tilt_rad:g} rad", "torque_limit_nm": limit})
     return rows
 
 
@@ -193,8 +179,7 @@ def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None
         time_s = results[0].time_s[:length]
         abs_theta = np.maximum(np.abs(np.stack([r.theta_rad[:length] for r in results])), 1e-6)
         low, median, high = np.percentile(abs_theta, [10, 50, 90], axis=0)
-        style = "--" if "no limit" in label else "-"
-        colour = f"C{index % 10}"
+        style, colour = "--" if "no limit" in label else "-", f"C{index % 10}"
         ax.semilogy(time_s, median, style, color=colour, label=f"{label} ({len(results)} starts)")
         ax.fill_between(time_s, low, high, color=colour, alpha=0.15, linewidth=0)
     ax.set_xlabel("time [s]")

@@ -46,16 +46,9 @@ def greybox_route_rows(
         )
         fresh = _on_fresh_starts(route.controller, task, report_seeds, duration_s)
         rows.append(
-            {
-                "plant": plant,
-                "seed": int(seed),
-                "plant_s": route.plant_s,
-                "robust": route.robust,
-                **fresh,
-                "real_s_to_balance": route.plant_s if fresh["balances"] else math.inf,
-                "max_relative_std": route.steps[-1]["max_relative_std"],
-                "identified": route.identification.estimates,
-            }
+            {"plant": plant, "seed": int(seed), "plant_s": route.plant_s, "robust": route.robust, **fresh}
+            | {"real_s_to_balance": route.plant_s if fresh["balances"] else math.inf}
+            | {"max_relative_std": route.steps[-1]["max_relative_std"], "identified": route.identification.estimates}
         )
     return rows
 
@@ -95,16 +88,9 @@ def excitation_rows(
                     for name, value in result.estimates.items()
                     if hasattr(truth, name) and plant == "prb"
                 }
-                rows.append(
-                    {
-                        "program": program,
-                        "excitation": label,
-                        "plant_s": float(length_s),
-                        "seed": int(seed),
-                        **errors,
-                        **_on_fresh_starts(design_swingup(result.params), task, report_seeds, duration_s),
-                    }
-                )
+                fresh = _on_fresh_starts(design_swingup(result.params), task, report_seeds, duration_s)
+                row = {"program": program, "excitation": label, "plant_s": float(length_s), "seed": int(seed)}
+                rows.append(row | errors | fresh)
     return rows
 
 
@@ -181,22 +167,13 @@ def method_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for key in [k for k in METHODS if any(r["key"] == k for r in rows)]:
         seconds = np.array([r["plant_s_to_balance"] for r in rows if r["key"] == key], float)
-        low = high = float(np.median(seconds))
+        median = low = high = float(np.median(seconds))
         if seconds.size >= 2 and np.all(np.isfinite(seconds)):
             interval = aggregate_interval(seconds, "median", seed=0)
             low, high = interval.low, interval.high
-        out.append(
-            {
-                "key": key,
-                "method": METHODS[key],
-                "seeds": int(seconds.size),
-                "seeds_balanced": int(np.sum(np.isfinite(seconds))),
-                "median_plant_s": float(np.median(seconds)),
-                "low_plant_s": float(low),
-                "high_plant_s": float(high),
-                "worst_plant_s": float(np.max(seconds)),
-            }
-        )
+        counts = {"seeds": int(seconds.size), "seeds_balanced": int(np.sum(np.isfinite(seconds)))}
+        figures = {"median_plant_s": median, "low_plant_s": float(low), "high_plant_s": float(high)}
+        out.append({"key": key, "method": METHODS[key], **counts, **figures, "worst_plant_s": float(np.max(seconds))})
     return out
 
 
@@ -262,16 +239,9 @@ def planner_rows(
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))
         fresh = fresh_start_row(planner_fresh_starts(result, report_seeds, duration_s))
-        rows.append(
-            {
-                "plant": plant,
-                "seed": int(seed),
-                "plant_s": result.plant_seconds,
-                "balanced_starts": fresh["balanced_starts"],
-                "starts": fresh["starts"],
-                "real_s_to_balance": result.plant_seconds_to_balance if fresh["run_balances"] else math.inf,
-            }
-        )
+        to_balance = result.plant_seconds_to_balance if fresh["run_balances"] else math.inf
+        row = {"plant": plant, "seed": int(seed), "plant_s": result.plant_seconds}
+        rows.append(row | {k: fresh[k] for k in ("balanced_starts", "starts")} | {"real_s_to_balance": to_balance})
     return rows
 
 

@@ -31,7 +31,6 @@ def pilco_runs(
     missing seeds in parallel, and load the results."""
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(run_and_save, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "PILCO runs", backend)
-
     return [
         PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))
         for seed in seeds
@@ -81,20 +80,15 @@ def run_and_save(config: PilcoConfig, folder: Path, progress: bool = True) -> No
     run_pilco(config, progress=progress).save(folder)
 
 
-def _curve_row(method: str, seed: int, plant_s: float, success_rate: float, std_rad: float) -> dict[str, Any]:
-    return {
-        "method": method,
-        "seed": seed,
-        "plant_s": plant_s,
-        "success_rate": success_rate,
-        "max_upright_std_rad": std_rad,
-    }
+#: The figures of a curve row, after ``method`` and ``seed``.
+_CURVE = ("plant_s", "success_rate", "max_upright_std_rad")
 
 
 def curve_rows_pilco(results: Sequence[PilcoResult]) -> list[dict[str, Any]]:
     """One curve row per evaluated PILCO policy."""
     return [
-        _curve_row("PILCO", result.config.seed, r.plant_seconds_total, r.eval_success_rate, r.eval_upright_std_rad)
+        {"method": "PILCO", "seed": result.config.seed}
+        | dict(zip(_CURVE, (r.plant_seconds_total, r.eval_success_rate, r.eval_upright_std_rad)))
         for result in results
         for r in result.records
         if r.kind == "policy" and not math.isnan(r.eval_success_rate)
@@ -104,7 +98,7 @@ def curve_rows_pilco(results: Sequence[PilcoResult]) -> list[dict[str, Any]]:
 def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
     """The curve rows of the evaluations of training logs, by method."""
     return [
-        _curve_row(method, log.seed, *(float(row[k]) for k in ("plant_s", "success_rate", "max_upright_std_rad")))
+        {"method": method, "seed": log.seed, **{k: float(row[k]) for k in _CURVE}}
         for method, logs in logs_by_method.items()
         for log in logs
         for row in log.evaluations
@@ -132,9 +126,8 @@ def seconds_to_balance_table(
             per_seed = [_first_balanced_s([r for r in mine if r["seed"] == s], level) for s in seeds]
             entry[f"plant_s_to_std_{level:g}_rad"] = float(np.median(per_seed))
         finals = [max((r for r in mine if r["seed"] == s), key=lambda r: r["plant_s"]) for s in seeds]
-        entry["training_plant_s"] = float(np.median([f["plant_s"] for f in finals]))
-        entry["final_success_rate"] = float(np.median([f["success_rate"] for f in finals]))
-        entry["final_max_upright_std_rad"] = float(np.median([f["max_upright_std_rad"] for f in finals]))
+        for key, name in zip(_CURVE, ("training_plant_s", "final_success_rate", "final_max_upright_std_rad")):
+            entry[name] = float(np.median([f[key] for f in finals]))
         table.append(entry)
     return table
 
@@ -150,13 +143,10 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
         mine = [r for r in rows if r["method"] == method]
         for j, seed in enumerate(sorted({r["seed"] for r in mine})):
             seq = sorted((r for r in mine if r["seed"] == seed), key=lambda r: r["plant_s"])
-            t = [max(r["plant_s"], 1e-3) for r in seq]
-            label = method if j == 0 else None
-            ax_s.plot(t, [r["success_rate"] for r in seq], "o-", color=colour, alpha=0.7, ms=3, label=label)
-            worst = failures_as(
-                [r["max_upright_std_rad"] for r in seq], [r["success_rate"] for r in seq], SUCCESS_STD_RAD
-            )
-            ax_e.plot(t, worst, "o-", color=colour, alpha=0.7, ms=3, label=label)
+            t, rate = [max(r["plant_s"], 1e-3) for r in seq], [r["success_rate"] for r in seq]
+            style = dict(color=colour, alpha=0.7, ms=3, label=method if j == 0 else None)
+            ax_s.plot(t, rate, "o-", **style)
+            ax_e.plot(t, failures_as([r["max_upright_std_rad"] for r in seq], rate, SUCCESS_STD_RAD), "o-", **style)
     for ax in (ax_s, ax_e):
         ax.set_xscale("log")
         ax.set_xlabel("training plant time [s]")

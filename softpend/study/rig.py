@@ -17,15 +17,14 @@ def truth_trajectory(
 ) -> dict[str, np.ndarray]:
     """``time_s`` (device time), ``theta_rad``, ``torque_nm`` (applied) and ``phi_dot_rad_s`` of a twin run from the
     emulator's truth log, within the device-time window ``[start_time_s, end_time_s]`` when given."""
-    log = read_sample_log(truth_log)
+    log, plant = read_sample_log(truth_log), task.make_plant()
     time_s = log["device_time_s"]
     keep = (time_s >= (-np.inf if start_time_s is None else start_time_s)) & (
         time_s <= (np.inf if end_time_s is None else end_time_s)
     )
-    plant = task.make_plant()
-    n = plant.n_coordinates
-    q = np.column_stack([log[f"q{i}_rad"][keep] for i in range(n)])
-    qd = np.column_stack([log[f"q{i}_dot_rad_s"][keep] for i in range(n)])
+    q, qd = (
+        np.column_stack([log[f"q{i}{s}"][keep] for i in range(plant.n_coordinates)]) for s in ("_rad", "_dot_rad_s")
+    )
     observations = [plant.observation_from_state(a, b) for a, b in zip(q, qd)]
     return {
         "time_s": time_s[keep],
@@ -47,9 +46,8 @@ def truth_metrics(
     truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
     if len(truth["time_s"]) < 3:
         return {}
-    metrics = metrics_from_trajectory(
-        truth["time_s"], truth["theta_rad"], truth["torque_nm"], truth["phi_dot_rad_s"], success_std_rad=success_std_rad
-    )
+    signals = (truth[k] for k in ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s"))
+    metrics = metrics_from_trajectory(*signals, success_std_rad=success_std_rad)
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
 
 
@@ -59,16 +57,10 @@ def run_truth_metrics(
     """:func:`truth_metrics` from the controller's first command to the motor log's last sample; empty when it never
     commanded."""
     motor = read_sample_log(motor_log)
-    commanded = motor["commanded"] > 0
-    if not commanded.any():
+    if not (commanded := motor["commanded"] > 0).any():
         return {}
-    return truth_metrics(
-        truth_log,
-        task,
-        success_std_rad=success_std_rad,
-        start_time_s=float(motor["device_time_s"][commanded][0]),
-        end_time_s=float(motor["device_time_s"][-1]),
-    )
+    start_s, end_s = float(motor["device_time_s"][commanded][0]), float(motor["device_time_s"][-1])
+    return truth_metrics(truth_log, task, success_std_rad, start_s, end_s)
 
 
 def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
@@ -80,12 +72,9 @@ def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
 
 def torque_total_variation_per_s(time_s: np.ndarray, torque_nm: np.ndarray) -> float:
     """``sum |tau[k+1] - tau[k]| / (t[-1] - t[0])`` [N m/s]; NaN for fewer than 2 samples or no elapsed time."""
-    time_s = np.asarray(time_s, dtype=float)
-    torque = np.asarray(torque_nm, dtype=float)
+    time_s, torque = np.asarray(time_s, dtype=float), np.asarray(torque_nm, dtype=float)
     if time_s.shape != torque.shape or time_s.ndim != 1:
-        raise ValueError(
-            f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape} and {torque.shape}"
-        )
+        raise ValueError(f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape}, {torque.shape}")
     if len(torque) < 2 or time_s[-1] <= time_s[0]:
         return float("nan")
     return float(np.sum(np.abs(np.diff(torque))) / (time_s[-1] - time_s[0]))

@@ -686,8 +686,9 @@ def _transitions(positions: np.ndarray, torques_nm: np.ndarray, dt_s: float) -> 
     return states[:-1], torques_nm[1:], states[1:]
 
 
-def _run_trial(env: Any, controller: PlannerController, seed: int, config: PlannerConfig) -> dict[str, Any]:
-    """One planner trial on the plant: until held for ``hold_s``, ``trial_s`` or a diverged simulation."""
+def _run_trial(env: Any, controller: PlannerController, seed: int, config: PlannerConfig) -> tuple[Any, ...]:
+    """One planner trial on the plant, until held for ``hold_s``, ``trial_s`` or a diverged simulation: positions,
+    torques, whether it balanced and the RMS tip angle over its last ``hold_s``."""
     env.reset(seed=seed)
     controller.reset()
     dt, limit = env.dt_s, env.torque_limit_nm
@@ -707,99 +708,64 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
                 balanced = True
                 break
     obs = np.array(observations)
-    return {
-        "positions": obs[:, :5],
-        "torques": np.array(torques),
-        "plant_s": len(torques) * dt,
-        "balanced": balanced,
-        "upright_std_rad": float(np.sqrt(np.mean(obs[-window:, 1] ** 2))),
-    }
+    return obs[:, :5], np.array(torques), balanced, float(np.sqrt(np.mean(obs[-window:, 1] ** 2)))
 
 
-class _Planner:
-    """Data, models and controller of one run."""
-
-    def __init__(self, config: PlannerConfig, rod: RodParams) -> None:
-        self.config, self.rod = config, rod
-        task = config.task
-        self.lqr = LQRController.from_params(
-            rod, dt_s=task.dt_s, state="observation", torque_limit_nm=task.torque_limit_nm
-        )
-        self.trajectories: list[tuple[np.ndarray, np.ndarray]] = []
-        self.generator = torch.Generator().manual_seed(config.seed)
-        self.model: Any = None
-
-    def add(self, positions: np.ndarray, torques_nm: np.ndarray) -> None:
-        if len(torques_nm) >= 3:
-            self.trajectories.append((positions, torques_nm))
-
-    def fit(self, refit: int) -> None:
-        config, task = self.config, self.config.task
-        seed = config.seed * 1000 + refit
-        if config.model == "ensemble":
-            parts = [_transitions(p, u, task.dt_s) for p, u in self.trajectories]
-            s, u, s1 = (np.concatenate([part[i] for part in parts]) for i in range(3))
-            self.model = fit_ensemble(s, u, s1, task, config.replace(seed=seed))
-            return
-        xs, us, x1s = [], [], []
-        h = config.hold_steps  # one model step per control step, under the mean torque over it
-        for positions, torques in self.trajectories:
-            x = joint_states(positions, self.rod, task.dt_s)  # row j is sample j + 1
-            rows = np.arange(0, len(x) - h, h)
-            xs.append(x[rows])
-            us.append(np.array([torques[j + 1 : j + 1 + h].mean() for j in rows]))
-            x1s.append(x[rows + h])
-        self.model = ResidualPRBEnsemble(self.rod, config.control_dt_s, config.ensemble_size, config.hidden_width)
-        self.model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
-
-    def controller(self) -> PlannerController:
-        config, task, rod, model, generator = self.config, self.config.task, self.rod, self.model, self.generator
-        for part in [model, *getattr(model, "members", ())]:
-            part.noise_generator = generator
-        if config.model == "ensemble":
-            tracker: Any = ObservedStateTracker(model)
-            fast: Any = StackedEnsemble(model)
-            i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
-
-            def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
-                return swing_up_cost(rod, x_next[:, i_theta], x_next[:, i_rate])
-
-        else:
-            tracker, fast = JointStateTracker(rod, task.dt_s), model
-            n_q, link = rod.n_links + 1, rod.link_length_m
-
-            def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
-                return swing_up_cost(rod, *_tip(x_next[:, :n_q], x_next[:, n_q:], link))
-
-        fast.noise_generator = generator
-        mppi = MPPI(
-            lambda x, torque: fast.predict_next(x, torque, generator=generator),
-            cost,
-            task.torque_limit_nm,
-            config.n_knots - KNOTS_PER_PLAN,  # after the knots under way: the rollouts cover horizon_s from now
-            config.hold_steps if config.model == "ensemble" else 1,
-            config.n_samples,
-            config.noise_fraction * task.torque_limit_nm,
-            config.temperature,
-            seed=config.seed,
-        )
-        return PlannerController(mppi, tracker, self.lqr, config.capture_rad, config.hold_steps, KNOTS_PER_PLAN)
+def _fit(config: PlannerConfig, rod: RodParams, trajectories: list[tuple[np.ndarray, np.ndarray]], refit: int) -> Any:
+    """The dynamics model of ``config.model`` fitted to the trajectories (positions, torques) so far."""
+    task, seed = config.task, config.seed * 1000 + refit
+    if config.model == "ensemble":
+        parts = [_transitions(p, u, task.dt_s) for p, u in trajectories]
+        s, u, s1 = (np.concatenate([part[i] for part in parts]) for i in range(3))
+        return fit_ensemble(s, u, s1, task, config.replace(seed=seed))
+    xs, us, x1s = [], [], []
+    h = config.hold_steps  # one model step per control step, under the mean torque over it
+    for positions, torques in trajectories:
+        x = joint_states(positions, rod, task.dt_s)  # row j is sample j + 1
+        rows = np.arange(0, len(x) - h, h)
+        xs.append(x[rows])
+        us.append(np.array([torques[j + 1 : j + 1 + h].mean() for j in rows]))
+        x1s.append(x[rows + h])
+    model = ResidualPRBEnsemble(rod, config.control_dt_s, config.ensemble_size, config.hidden_width)
+    model.fit(np.concatenate(xs), np.concatenate(us), np.concatenate(x1s), config.train_steps, seed)
+    return model
 
 
-def _excitation(config: PlannerConfig) -> tuple[Any, float]:
-    """The excitation from hanging: its data and plant seconds."""
+def _controller(
+    config: PlannerConfig, rod: RodParams, model: Any, lqr: LQRController, generator: torch.Generator
+) -> PlannerController:
+    """MPPI on ``model`` (its noise drawn from ``generator``) with the LQR near upright."""
     task = config.task
-    protocol = BabbleProtocol(
-        program=config.excitation_program,
-        start="hanging",
-        feedback_trial_fraction=0.0,
-        n_trials=1,
-        trial_length_s=config.excitation_s,
-        dt_s=task.dt_s,
-        substeps=task.substeps,
+    for part in [model, *getattr(model, "members", ())]:
+        part.noise_generator = generator
+    if config.model == "ensemble":
+        tracker: Any = ObservedStateTracker(model)
+        fast: Any = StackedEnsemble(model)
+        i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
+
+        def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
+            return swing_up_cost(rod, x_next[:, i_theta], x_next[:, i_rate])
+
+    else:
+        tracker, fast = JointStateTracker(rod, task.dt_s), model
+        n_q, link = rod.n_links + 1, rod.link_length_m
+
+        def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
+            return swing_up_cost(rod, *_tip(x_next[:, :n_q], x_next[:, n_q:], link))
+
+    fast.noise_generator = generator
+    mppi = MPPI(
+        lambda x, torque: fast.predict_next(x, torque, generator=generator),
+        cost,
+        task.torque_limit_nm,
+        config.n_knots - KNOTS_PER_PLAN,  # after the knots under way: the rollouts cover horizon_s from now
+        config.hold_steps if config.model == "ensemble" else 1,
+        config.n_samples,
+        config.noise_fraction * task.torque_limit_nm,
+        config.temperature,
+        seed=config.seed,
     )
-    data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
-    return data, protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
+    return PlannerController(mppi, tracker, lqr, config.capture_rad, config.hold_steps, KNOTS_PER_PLAN)
 
 
 def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) -> PlannerResult:
@@ -812,30 +778,41 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
     task = config.task
     started = time.perf_counter()
     with one_torch_thread():
-        data, excitation_s = _excitation(config)
+        protocol = BabbleProtocol(
+            program=config.excitation_program,
+            start="hanging",
+            feedback_trial_fraction=0.0,
+            n_trials=1,
+            trial_length_s=config.excitation_s,
+            dt_s=task.dt_s,
+            substeps=task.substeps,
+        )
+        data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
+        plant_s = protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
         rod = task.rod
         if config.identify_windows:
             guess = rod.replace(**{k: f * getattr(rod, k) for k, f in IDENTIFY_GUESS_FACTORS.items()})
             rod = identify(data, GreyBoxConfig(max_windows=config.identify_windows, seed=config.seed), guess).params
-        planner = _Planner(config, rod)
-        for i in range(data.n_trials):
-            planner.add(data.positions[i], data.torques_nm[i])
-        planner.fit(0)
-        wall_s = time.perf_counter() - started
-        records = [TrialRecord("excitation", None, excitation_s, excitation_s, False, math.nan, wall_s)]
+        lqr = LQRController.from_params(rod, dt_s=task.dt_s, state="observation", torque_limit_nm=task.torque_limit_nm)
+        generator = torch.Generator().manual_seed(config.seed)
+        trajectories = [(p, u) for p, u in zip(data.positions, data.torques_nm) if len(u) >= 3]
+        model = _fit(config, rod, trajectories, 0)
+        records = [TrialRecord("excitation", None, plant_s, plant_s, False, math.nan, time.perf_counter() - started)]
         env = SoftPendulumEnv(**task.env_kwargs())
         in_a_row = 0
         for index in range(config.max_trials):
             seed = config.selection_seeds[index % len(config.selection_seeds)]
-            trial = _run_trial(env, planner.controller(), seed, config)
-            planner.add(trial["positions"], trial["torques"])
-            in_a_row = in_a_row + 1 if trial["balanced"] else 0
-            if in_a_row < config.stop_after_balanced:
-                planner.fit(index + 1)
-            total, std = records[-1].plant_s_total + trial["plant_s"], trial["upright_std_rad"]
-            r = TrialRecord(
-                "trial", seed, trial["plant_s"], total, trial["balanced"], std, time.perf_counter() - started
+            positions, torques, balanced, std = _run_trial(
+                env, _controller(config, rod, model, lqr, generator), seed, config
             )
+            if len(torques) >= 3:
+                trajectories.append((positions, torques))
+            in_a_row = in_a_row + 1 if balanced else 0
+            if in_a_row < config.stop_after_balanced:
+                model = _fit(config, rod, trajectories, index + 1)
+            plant_s = len(torques) * task.dt_s
+            total = records[-1].plant_s_total + plant_s
+            r = TrialRecord("trial", seed, plant_s, total, balanced, std, time.perf_counter() - started)
             records.append(r)
             if progress:
                 print(
@@ -845,7 +822,7 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
                 )
             if in_a_row >= config.stop_after_balanced:
                 break
-    return PlannerResult(config, records, planner.controller(), rod, planner.model)
+    return PlannerResult(config, records, _controller(config, rod, model, lqr, generator), rod, model)
 
 
 def fresh_start_evaluation(

@@ -130,20 +130,24 @@ def _validate_metadata(meta: Any) -> None:
     absent = [n for n in REQUIRED_POSITION_NAMES if n not in names]
     if absent:
         raise ValueError(f"metadata position_names must include {REQUIRED_POSITION_NAMES}; missing {absent}")
-    expected_velocity_names = [velocity_name(n) for n in names]
-    if not isinstance(meta["velocity_names"], list) or meta["velocity_names"] != expected_velocity_names:
-        raise ValueError(f"metadata velocity_names must be {expected_velocity_names}, got {meta['velocity_names']!r}")
+
+    def integer(value: Any, low: float = -math.inf) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= low
+
+    velocity_names = [velocity_name(n) for n in names]
+    rules = {
+        "velocity_names": (meta["velocity_names"] == velocity_names, str(velocity_names)),
+        "plant_params": (meta["plant_params"] is None or isinstance(meta["plant_params"], dict), "an object or null"),
+        "seed": (meta["seed"] is None or integer(meta["seed"]), "an integer or null"),
+        "protocol": (isinstance(meta["protocol"], dict), "an object"),
+        "n_trials": (integer(meta["n_trials"], 1), "an integer >= 1"),
+        "n_samples": (integer(meta["n_samples"], 2), "an integer >= 2"),
+    }
+    for key, (ok, what) in rules.items():
+        if not ok:
+            raise ValueError(f"metadata {key} must be {what}, got {meta[key]!r}")
     if meta["plant_params"] is not None:
-        if not isinstance(meta["plant_params"], dict):
-            raise ValueError(f"metadata plant_params must be an object or null, got {meta['plant_params']!r}")
         RodParams.from_dict(meta["plant_params"])
-    if meta["seed"] is not None and (isinstance(meta["seed"], bool) or not isinstance(meta["seed"], int)):
-        raise ValueError(f"metadata seed must be an integer or null, got {meta['seed']!r}")
-    if not isinstance(meta["protocol"], dict):
-        raise ValueError(f"metadata protocol must be an object, got {meta['protocol']!r}")
-    for key, low in (("n_trials", 1), ("n_samples", 2)):
-        if isinstance(meta[key], bool) or not isinstance(meta[key], int) or meta[key] < low:
-            raise ValueError(f"metadata {key} must be an integer >= {low}, got {meta[key]!r}")
     try:
         json.dumps(meta, allow_nan=False)
     except (TypeError, ValueError) as exc:

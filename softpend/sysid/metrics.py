@@ -113,6 +113,31 @@ class RolloutErrors:
         return out
 
 
+def network_rollouts(
+    model: Any, dataset: TrajectoryDataset, starts: np.ndarray, steps: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Observed states ``(B, steps + 1, d)`` of a model's layout from each start ``(trial, sample)`` on, and the
+    model's open-loop predictions of them (ensembles: their mean) under the recorded torques."""
+    layout = model.layout
+    if np.any(starts[:, 1] < layout.history):
+        raise ValueError(f"rollout starts must be at sample {layout.history} or later (the model's history)")
+    i = starts[:, 1:2] - layout.history + np.arange(steps + 1)[None, :]
+    truth = layout.states(dataset)[starts[:, :1], i]
+    return truth, open_loop(model, truth[:, 0], layout.torques(dataset)[starts[:, :1], i[:, :-1]])
+
+
+def trial_curves(
+    time_s: np.ndarray, data: dict[str, np.ndarray], model: dict[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """``time_s`` and, for each of ``phi_rad, theta_rad, ex_m, ey_m``, the data (``name``) and the model
+    (``name_model``); theta from the tip position where not given."""
+    out = {"time_s": time_s}
+    for suffix, values in (("", data), ("_model", model)):
+        theta = values.get("theta_rad", np.arctan2(-values["ex_m"], values["ey_m"]))
+        out |= {f"{n}{suffix}": values[n] for n in ("phi_rad", "ex_m", "ey_m")} | {f"theta_rad{suffix}": theta}
+    return out
+
+
 def rollout_errors(
     model: DynamicsModel | DynamicsEnsemble,
     dataset: TrajectoryDataset,
@@ -128,15 +153,13 @@ def rollout_errors(
     if steps < 1:
         raise ValueError(f"horizon_s must be at least one step ({dataset.dt_s} s), got {horizon_s!r}")
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-    states = layout.states(dataset)[trials]
-    torques = layout.torques(dataset)[trials]
-    n_states = states.shape[1]
+    n_states = dataset.n_samples - layout.history
     if n_states < steps + 1:
         raise ValueError(f"horizon_s={horizon_s} needs {steps + 1} states a trial, the dataset has {n_states}")
-    starts = np.arange(0, n_states - steps, start_stride)
-    windows = np.stack([states[:, s : s + steps + 1] for s in starts], axis=1).reshape(-1, steps + 1, layout.dim)
-    actions = np.stack([torques[:, s : s + steps] for s in starts], axis=1).reshape(-1, steps)
-    predicted = open_loop(model, windows[:, 0], actions)
+    samples = range(layout.history, dataset.n_samples - steps, start_stride)
+    windows, predicted = network_rollouts(
+        model, dataset, np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2), steps
+    )
     i_phi, i_ex, i_ey = (layout.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
 
     def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,30 +179,18 @@ def rollout_trial(
     start_s: float = 0.0,
     duration_s: float = 2.0,
 ) -> dict[str, np.ndarray]:
-    """One open-loop model rollout on one trial next to the data, for plotting: ``time_s`` and, for each of
-    ``phi_rad, theta_rad, ex_m, ey_m``, the data (``name``) and the model (``name_model``)."""
+    """One open-loop model rollout on one trial next to the data, for plotting (:func:`trial_curves`)."""
     layout: StateLayout = model.layout
     if not 0 <= trial < dataset.n_trials:
         raise ValueError(f"trial must be in [0, {dataset.n_trials}), got {trial!r}")
-    states = layout.states(dataset)[trial]
-    torques = layout.torques(dataset)[trial]
     first = int(round(start_s / dataset.dt_s))
     steps = int(round(duration_s / dataset.dt_s))
-    if first < 0 or steps < 1 or first + steps >= states.shape[0]:
-        raise ValueError(
-            f"start_s={start_s}, duration_s={duration_s} do not fit in a trial of {states.shape[0]} states"
-        )
-    predicted = open_loop(model, states[first : first + 1], torques[None, first : first + steps])[0]
-    truth = states[first : first + steps + 1]
-    out = {"time_s": (np.arange(steps + 1) + first + layout.history) * dataset.dt_s}
-    for name in ("phi_rad", "theta_rad", "ex_m", "ey_m"):
-        if name in layout.names:
-            out[name], out[f"{name}_model"] = truth[:, layout.index(name)], predicted[:, layout.index(name)]
-        else:  # theta at limited information: from the tip position
-            ex, ey = layout.index("ex_m"), layout.index("ey_m")
-            out[name] = np.arctan2(-truth[:, ex], truth[:, ey])
-            out[f"{name}_model"] = np.arctan2(-predicted[:, ex], predicted[:, ey])
-    return out
+    n_states = dataset.n_samples - layout.history
+    if first < 0 or steps < 1 or first + steps >= n_states:
+        raise ValueError(f"start_s={start_s}, duration_s={duration_s} do not fit in a trial of {n_states} states")
+    truth, predicted = network_rollouts(model, dataset, np.array([[trial, first + layout.history]]), steps)
+    columns = [{n: x[0, :, layout.index(n)] for n in layout.position_names} for x in (truth, predicted)]
+    return trial_curves((np.arange(steps + 1) + first + layout.history) * dataset.dt_s, *columns)
 
 
 def evaluate_model(

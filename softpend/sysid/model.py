@@ -140,20 +140,13 @@ class DynamicsModel(nn.Module):
         delta = next_state[:, : self._core] - state[:, : self._core]
         return torch.where(self._core_angle_mask, wrap_tensor(delta), delta)
 
-    def forward(self, features_normalised: Tensor) -> Tensor:
-        """Network on standardised features -> standardised core-state change."""
-        return self.net(features_normalised)
-
     def normalise_features(self, features: Tensor) -> Tensor:
         """Standardise features with the stored training statistics and clamp them to the training box."""
         return torch.clamp((features - self.feature_mean) / self.feature_std, self.feature_low, self.feature_high)
 
     def set_feature_box(self, low: Tensor, high: Tensor, margin: float = 0.1) -> None:
         """Clamp standardised features to ``[low, high]`` widened by ``margin`` of the range on each side."""
-        low = torch.as_tensor(low, dtype=self.feature_low.dtype)
-        high = torch.as_tensor(high, dtype=self.feature_high.dtype)
-        if low.shape != self.feature_low.shape or high.shape != low.shape or not torch.all(high >= low):
-            raise ValueError(f"low and high must have shape {tuple(self.feature_low.shape)} with high >= low")
+        low, high = (torch.as_tensor(v, dtype=self.feature_low.dtype) for v in (low, high))
         span = (high - low).clamp_min(1e-6)
         self.feature_low.copy_(low - margin * span)
         self.feature_high.copy_(high + margin * span)
@@ -166,8 +159,6 @@ class DynamicsModel(nn.Module):
         for name, value in zip(("feature_mean", "feature_std", "delta_mean", "delta_std"), values):
             buffer = getattr(self, name)
             value = torch.as_tensor(value, dtype=buffer.dtype)
-            if value.shape != buffer.shape or not torch.all(torch.isfinite(value)):
-                raise ValueError(f"{name} must be finite with shape {tuple(buffer.shape)}, got {tuple(value.shape)}")
             if name.endswith("std"):
                 value = torch.where(value > 1e-12, value, torch.ones_like(value))
             buffer.copy_(value)
@@ -256,17 +247,11 @@ class DynamicsEnsemble(nn.Module):
     def __init__(self, members: Sequence[DynamicsModel]) -> None:
         super().__init__()
         members = list(members)
-        if not members or not all(isinstance(m, DynamicsModel) for m in members):
-            raise ValueError("members must be a non-empty list of DynamicsModel")
-        first = members[0].config()
-        for m in members[1:]:
-            if m.config() != first:
-                raise ValueError(f"all members must share one configuration; {m.config()} != {first}")
+        if not all(isinstance(m, DynamicsModel) for m in members) or len({str(m.config()) for m in members}) != 1:
+            raise ValueError("members must be a non-empty list of DynamicsModel of one configuration")
         # nn.ModuleList is not generic in torch's stubs: at run time it holds exactly these DynamicsModels
         self.members: Sequence[DynamicsModel] = nn.ModuleList(members)  # type: ignore[assignment]
-        self.layout = members[0].layout
-        self.dt_s = members[0].dt_s
-        self.torque_limit_nm = members[0].torque_limit_nm
+        self.layout, self.dt_s, self.torque_limit_nm = members[0].layout, members[0].dt_s, members[0].torque_limit_nm
 
     def __len__(self) -> int:
         return len(self.members)
@@ -319,14 +304,12 @@ def save_model(
         raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")
     weights, meta_path = model_paths(path)
     weights.parent.mkdir(parents=True, exist_ok=True)
-    kind = "ensemble" if isinstance(model, DynamicsEnsemble) else "single"
-    config = model.config()
     meta = {
         "schema": MODEL_SCHEMA_NAME,
         "schema_version": MODEL_SCHEMA_VERSION,
         "softpend_version": __version__,
-        "kind": kind,
-        "config": config,
+        "kind": "ensemble" if isinstance(model, DynamicsEnsemble) else "single",
+        "config": model.config(),
         "metadata": metadata or {},
     }
     text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)

@@ -13,7 +13,7 @@ from softpend.checks import non_negative, positive, positive_int
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
-from softpend.sysid.metrics import open_loop
+from softpend.sysid.metrics import network_rollouts, trial_curves
 
 #: Tip-error threshold of the valid prediction time, as a fraction of the rod length.
 VALID_TIP_FRACTION = 0.05
@@ -139,29 +139,16 @@ def prb_rollout_trial(
     index = start_sample + np.arange(steps + 1)
     torques = dataset.torques_nm[trial, index[:-1]][None]
     sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), state, torques, has_er=False)[0]
-    out = {"time_s": index * dataset.dt_s}
-    for k, name in enumerate(("phi_rad", "ex_m", "ey_m")):
-        out[name], out[f"{name}_model"] = dataset.column(name)[trial, index], sim[:, k]
-    out["theta_rad"] = np.arctan2(-out["ex_m"], out["ey_m"])
-    out["theta_rad_model"] = np.arctan2(-sim[:, 1], sim[:, 2])
-    return out
+    names = ("phi_rad", "ex_m", "ey_m")
+    data = {name: dataset.column(name)[trial, index] for name in names}
+    return trial_curves(index * dataset.dt_s, data, {name: sim[:, k] for k, name in enumerate(names)})
 
 
 def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: np.ndarray, steps: int) -> np.ndarray:
     """Tip errors ``(B, steps + 1)`` [m] of open-loop rollouts of a learned model (ensembles: their mean) from the
     observed state at each start under the recorded torques."""
-    layout = model.layout
-    h = layout.history
-    if np.any(starts[:, 1] < h):
-        raise ValueError(f"rollout starts must be at sample {h} or later (the model's history)")
-    states = layout.states(dataset)
-    torques = layout.torques(dataset)
-    steps = positive_int("steps", steps)
-    i = starts[:, 1:2] - h + np.arange(steps + 1)[None, :]
-    truth = states[starts[:, :1], i]
-    actions = torques[starts[:, :1], i[:, :-1]]
-    predicted = open_loop(model, truth[:, 0], actions)
-    i_ex, i_ey = layout.index("ex_m"), layout.index("ey_m")
+    truth, predicted = network_rollouts(model, dataset, starts, positive_int("steps", steps))
+    i_ex, i_ey = model.layout.index("ex_m"), model.layout.index("ey_m")
     return np.hypot(predicted[..., i_ex] - truth[..., i_ex], predicted[..., i_ey] - truth[..., i_ey])
 
 

@@ -46,13 +46,6 @@ YARDSTICK_OFFSET_RAD = 1e-4
 YARDSTICK_LABEL = f"simulator started {YARDSTICK_OFFSET_RAD:g} rad off"
 
 
-def upright_growth_rate_per_s(params: RodParams) -> float:
-    """The largest real part of the eigenvalues of the linearisation at upright [1/s]."""
-    from softpend.control.linearise import linearise_exudyn
-
-    return float(np.max(linearise_exudyn(params).state_space().eigenvalues().real))
-
-
 def perturbed_guess(truth: RodParams, factors: Mapping[str, float] = GUESS_FACTORS) -> RodParams:
     """``truth`` with each field of ``factors`` multiplied by its factor."""
     return truth.replace(**{name: getattr(truth, name) * factor for name, factor in factors.items()})
@@ -99,7 +92,11 @@ def model_quality(
             errors[label] = network_rollout_tip_errors(model, data, starts, n_steps)
         return errors
 
-    lam, length, dt = upright_growth_rate_per_s(truth), truth.length_m, upright.dt_s
+    from softpend.control.linearise import linearise_exudyn
+
+    # the growth rate at upright: the largest real part of the linearisation's eigenvalues [1/s]
+    lam = float(np.max(linearise_exudyn(truth).state_space().eigenvalues().real))
+    length, dt = truth.length_m, upright.dt_s
     steps = int(round(horizon_s / dt))
     first = max([lookback] + [m.layout.history for m in networks.values()])
     starts = rollout_starts(upright, steps, stride=stride, first=first, max_tilt_rad=0.3)
@@ -145,7 +142,6 @@ def closed_loop_usefulness(
     """LQR (5 s from a tilt of 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified``
     (label -> params) and on ``task.rod``, run on the true plant from the fresh starts ``seeds``: one row per design
     and start."""
-    tilt_rad = 0.2
     from softpend.control.lqr import LQRController
     from softpend.control.swingup import EnergySwingUpController
     from softpend.evaluation import evaluate_controller
@@ -160,24 +156,18 @@ def closed_loop_usefulness(
     for label, params in designs.items():
         params = params.replace(torque_limit_nm=task.rod.torque_limit_nm)
         lqr_controller = LQRController.from_params(params, state="joint" if joint else "observation")
-        lqr = run_from_tilt(lqr_controller, task, tilt_rad, seeds, 5.0, task.torque_limit_nm, "LQR")
+        lqr = run_from_tilt(lqr_controller, task, 0.2, seeds, 5.0, task.torque_limit_nm, "LQR")
         swing_controller = (
             EnergySwingUpController(params) if joint else EnergySwingUpController.for_observations(params)
         )
-        hanging = task.replace(start="hanging")
-        swing = evaluate_controller(
-            swing_controller, hanging, seeds=seeds, duration_s=TEST_EPISODE_S, name="energy swing-up + LQR"
-        )
-        for summary, start in ((lqr, f"tilt {tilt_rad:g} rad"), (swing, "hanging")):
-            rows.append(
-                {
-                    "designed_on": label,
-                    "controller": summary.name,
-                    "start": start,
-                    "success_rate": summary.success_rate,
-                    "successes": summary.successes,
-                    "episodes": len(summary.results),
-                    "upright_std_rad": summary.median("upright_std_rad"),
-                }
-            )
+        name, hanging = "energy swing-up + LQR", task.replace(start="hanging")
+        swing = evaluate_controller(swing_controller, hanging, seeds=seeds, duration_s=TEST_EPISODE_S, name=name)
+        for s, start in ((lqr, "tilt 0.2 rad"), (swing, "hanging")):
+            row = {"designed_on": label, "controller": s.name, "start": start, "success_rate": s.success_rate}
+            figures = {
+                "successes": s.successes,
+                "episodes": len(s.results),
+                "upright_std_rad": s.median("upright_std_rad"),
+            }
+            rows.append(row | figures)
     return rows

@@ -9,7 +9,6 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import positive
 from softpend.plant.base import PlantBase
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
@@ -44,15 +43,13 @@ def _hessian(function, n: int, step: float) -> np.ndarray:
     return hessian
 
 
-def clamped_upright_buckling_factor(params: Optional[RodParams] = None, step_rad: float = 1e-3) -> float:
+def clamped_upright_buckling_factor(params: RodParams) -> float:
     """Factor by which gravity would have to grow for the rod clamped upright to buckle: the smallest ``lambda`` of
-    ``K v = lambda G v``, the Hessians of the elastic and gravity energy by finite differences."""
-    positive("step_rad", step_rad)
-    plant = PRBPlant(params if params is not None else RodParams(), hub_locked_at_rad=0.0)
-    n = plant.n_coordinates
-    zeros = np.zeros(n)
-    elastic = _hessian(lambda q: plant.energy_j(q, zeros)["elastic_j"], n, step_rad)
-    destabilising = -_hessian(lambda q: plant.energy_j(q, zeros)["gravity_j"], n, step_rad)
+    ``K v = lambda G v``, the Hessians of the elastic and gravity energy by finite differences (steps of 1e-3 rad)."""
+    plant = PRBPlant(params, hub_locked_at_rad=0.0)
+    n, zeros = plant.n_coordinates, np.zeros(plant.n_coordinates)
+    elastic = _hessian(lambda q: plant.energy_j(q, zeros)["elastic_j"], n, 1e-3)
+    destabilising = -_hessian(lambda q: plant.energy_j(q, zeros)["gravity_j"], n, 1e-3)
     if not np.any(np.abs(destabilising) > 0):
         return math.inf
     # K v = lambda G v with K symmetric positive definite: lambda = 1 / eig(K^-1/2 G K^-1/2)
@@ -133,8 +130,6 @@ class RodDesign:
 def rod_design(params: Optional[RodParams] = None) -> RodDesign:
     """The design figures of a rod, from the PRB plant."""
     params = params if params is not None else RodParams()
-    if not isinstance(params, RodParams):
-        raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
     tip = horizontal_cantilever(Task(rod=params)).link_points_m()[-1]
     return RodDesign(
         params=params,
@@ -151,9 +146,8 @@ def rod_poses_m(task: Optional[Task] = None) -> dict[str, np.ndarray]:
     upright."""
     task = task if task is not None else Task()
     sim = task.make_plant()
-    hanging_q, _ = sim.hanging_state()
     return {
-        "hanging": sim.link_points_m(hanging_q),
+        "hanging": sim.link_points_m(sim.hanging_state()[0]),
         "horizontal": horizontal_cantilever(task).link_points_m(),
         "upright": sim.link_points_m(np.zeros(sim.n_coordinates)),
     }

@@ -26,8 +26,7 @@ def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodPara
         raise ValueError(f"fraction must be in [0, 1), got {fraction!r}")
     out = {"nominal": params}
     for sign, label in ((+1, "+"), (-1, "-")):
-        s = 1.0 + sign * fraction
-        pct = f"{label}{100 * fraction:g}%"
+        s, pct = 1.0 + sign * fraction, f"{label}{100 * fraction:g}%"
         out[f"stiffness {pct}"] = params.replace(stiffness_scale=params.stiffness_scale * s)
         out[f"mass {pct}"] = params.replace(mass_kg=params.mass_kg * s, tip_mass_kg=params.tip_mass_kg * s)
         out[f"damping {pct}"] = params.replace(
@@ -88,27 +87,19 @@ def rl_transfer_cases(
     from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
     params = params or RodParams()
+    if unknown := [algo for algo in algos if algo not in METHOD_NAMES]:
+        raise ValueError(f"algos must be among {sorted(METHOD_NAMES)}, got {unknown[0]!r}")
     cases = []
-    for algo in algos:
-        if algo not in METHOD_NAMES:
-            raise ValueError(f"algos must be among {sorted(METHOD_NAMES)}, got {algo!r}")
-        for seed in seeds:
-            model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
-            rod = config.task.rod
-            if rod.n_links != params.n_links or abs(rod.torque_limit_nm - params.torque_limit_nm) > 1e-12:
-                raise ValueError(
-                    f"{algo} seed {seed}: agent trained with n_links={rod.n_links}, torque_limit_nm="
-                    f"{rod.torque_limit_nm}, transfer study uses n_links={params.n_links}, "
-                    f"torque_limit_nm={params.torque_limit_nm}"
-                )
-            cases.append(
-                TransferCase(
-                    f"{METHOD_NAMES[algo]} (seed {seed})",
-                    functools.partial(policy_controller, model, config),
-                    start="hanging",
-                    duration_s=duration_s,
-                )
+    for algo, seed in ((algo, seed) for algo in algos for seed in seeds):
+        model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
+        rod = config.task.rod
+        if rod.n_links != params.n_links or abs(rod.torque_limit_nm - params.torque_limit_nm) > 1e-12:
+            raise ValueError(
+                f"{algo} seed {seed}: agent trained with n_links={rod.n_links}, torque_limit_nm={rod.torque_limit_nm}, "
+                f"transfer study uses n_links={params.n_links}, torque_limit_nm={params.torque_limit_nm}"
             )
+        controller = functools.partial(policy_controller, model, config)
+        cases.append(TransferCase(f"{METHOD_NAMES[algo]} (seed {seed})", controller, duration_s=duration_s))
     return cases
 
 
@@ -117,11 +108,8 @@ def transfer_matrix(
 ) -> tuple[list[str], list[str], np.ndarray]:
     """One metric of :func:`transfer_table` rows on one plant as ``(controllers, perturbations, matrix)`` (NaN
     where missing)."""
-    sel = [r for r in rows if r["plant"] == plant]
-    if not sel:
+    if not (sel := [r for r in rows if r["plant"] == plant]):
         raise ValueError(f"no rows for plant {plant!r}")
-    if metric not in sel[0]:
-        raise ValueError(f"unknown metric {metric!r}; rows have {sorted(sel[0])}")
     controllers = list(dict.fromkeys(r["controller"] for r in sel))
     labels = list(dict.fromkeys(r["perturbation"] for r in sel))
     values = np.full((len(controllers), len(labels)), np.nan)
@@ -150,14 +138,9 @@ def transfer_table(
     controllers = {case.name: case.make_controller() for case in cases}
     rows = []
     for case, plant, label in tqdm(jobs, desc="transfer", disable=not progress):
-        summary = evaluate_controller(
-            controllers[case.name],
-            Task(plant=plant, rod=variants[label], start=case.start, start_noise_rad=case.start_noise_rad),
-            name=case.name,
-            seeds=seeds,
-            duration_s=max(case.duration_s * duration_scale, MIN_DURATION_S),
-        )
-        row = summary.row()
-        row.update(plant=plant, perturbation=label, diverged=sum(r.diverged is not None for r in summary.results))
-        rows.append(row)
+        task = Task(plant=plant, rod=variants[label], start=case.start, start_noise_rad=case.start_noise_rad)
+        duration_s = max(case.duration_s * duration_scale, MIN_DURATION_S)
+        summary = evaluate_controller(controllers[case.name], task, name=case.name, seeds=seeds, duration_s=duration_s)
+        diverged = sum(r.diverged is not None for r in summary.results)
+        rows.append(summary.row() | {"plant": plant, "perturbation": label, "diverged": diverged})
     return rows

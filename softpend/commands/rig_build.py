@@ -133,61 +133,55 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
     from softpend.hardware import protocol
     from softpend.hardware.driver import MotorLink
 
-    rod = task.rod
-    checks: dict[str, dict] = {}
+    rod, checks = task.rod, dict[str, dict]()
+
+    def check(name: str, ok: Any, detail: str, **figures: float) -> None:
+        checks[name] = {"passed": bool(ok), "detail": detail, **figures}
+
     with MotorLink(port, torque_limit_nm=rod.torque_limit_nm, serial=serial) as link:
         info = link.device
         assert info is not None  # the handshake on opening the link sets it
-        rtt = float(np.median([link.ping() for _ in range(5)]))
-        expected_rate = 1.0 / task.dt_s
-        ok = (
+        rtt, rate, limit = float(np.median([link.ping() for _ in range(5)])), 1.0 / task.dt_s, rod.torque_limit_nm
+        watchdog_ms = info.watchdog_s * 1e3
+        check(
+            "handshake",
             info.protocol_version == protocol.PROTOCOL_VERSION
-            and math.isclose(info.torque_limit_nm, rod.torque_limit_nm, rel_tol=1e-5)
-            and math.isclose(info.state_rate_hz, expected_rate, rel_tol=1e-6)
-            and info.watchdog_s <= 0.1 + 1e-9
+            and math.isclose(info.torque_limit_nm, limit, rel_tol=1e-5)
+            and math.isclose(info.state_rate_hz, rate, rel_tol=1e-6)
+            and info.watchdog_s <= 0.1 + 1e-9,
+            f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit "
+            f"{info.torque_limit_nm:g} N m (rod {limit:g}), {info.state_rate_hz:g} states/s (host {rate:g}), watchdog "
+            f"{watchdog_ms:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms",
         )
-        checks["handshake"] = {
-            "passed": bool(ok),
-            "detail": (
-                f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit {info.torque_limit_nm:g} "
-                f"N m (rod {rod.torque_limit_nm:g}), {info.state_rate_hz:g} states/s (host {expected_rate:g}), watchdog "
-                f"{info.watchdog_s * 1e3:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms"
-            ),
-        }
         tick = 2 * math.pi / info.counts_per_rev
 
         link.drain_states()
         rest = _states_for(link, rest_s)
         phi = np.array([s.phi_rad for s in rest])
-        device_t = np.array([s.device_time_s for s in rest])
-        period = float(np.median(np.diff(device_t))) if len(rest) > 2 else math.nan
+        period = float(np.median(np.diff([s.device_time_s for s in rest]))) if len(rest) > 2 else math.nan
         offset = float(np.mean(phi) - math.pi) if len(phi) else math.nan
-        spread_ticks = float((phi.max() - phi.min()) / tick) if len(phi) else math.nan
-        ok = len(rest) > 2 and abs(period * expected_rate - 1) < 0.1 and abs(offset) <= 0.05 and spread_ticks <= 3
-        checks["rest"] = {
-            "passed": bool(ok),
-            "detail": (
-                f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
-                f"spread {spread_ticks:.0f} ticks"
-            ),
-            "offset_rad": offset,
-            "spread_ticks": spread_ticks,
-        }
+        spread = float((phi.max() - phi.min()) / tick) if len(phi) else math.nan
+        check(
+            "rest",
+            len(rest) > 2 and abs(period * rate - 1) < 0.1 and abs(offset) <= 0.05 and spread <= 3,
+            f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
+            f"spread {spread:.0f} ticks",
+            offset_rad=offset,
+            spread_ticks=spread,
+        )
 
-        push = push_fraction * rod.torque_limit_nm
-        start_phi = phi[-1] if len(phi) else math.pi
+        push = push_fraction * limit
         moved = _states_for(link, 0.15, push)
-        delta = (moved[-1].phi_rad - start_phi) if moved else math.nan
+        delta = (moved[-1].phi_rad - (phi[-1] if len(phi) else math.pi)) if moved else math.nan
         applied = max((s.applied_torque_nm for s in moved), default=math.nan)
         _states_for(link, 1.0, 0.0)  # let the swing settle, feeding the watchdog with zero torque
-        checks["direction"] = {
-            "passed": bool(delta > tick and math.isclose(applied, push, rel_tol=1e-3)),
-            "detail": (
-                f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
-                f"applied {applied:+.3g} N m"
-            ),
-            "delta_rad": delta,
-        }
+        check(
+            "direction",
+            delta > tick and math.isclose(applied, push, rel_tol=1e-3),
+            f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
+            f"applied {applied:+.3g} N m",
+            delta_rad=delta,
+        )
 
         last_seq = link.send_torque(0.0)
         silence = _states_for(link, 3 * info.watchdog_s + 0.2)
@@ -197,23 +191,18 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         trip_ms = (tripped[0].device_time_s - in_force) * 1e3 if tripped else math.nan
         zero = bool(tripped) and all(s.applied_torque_nm == 0.0 for s in tripped)
         slack_ms = WATCHDOG_SLACK_STATES * 1e3 / info.state_rate_hz
-        ok = zero and info.watchdog_s * 1e3 - slack_ms <= trip_ms <= info.watchdog_s * 1e3 + slack_ms
-        checks["watchdog"] = {
-            "passed": bool(ok),
-            "detail": (
-                f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog "
-                f"{info.watchdog_s * 1e3:g} ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} "
-                f"after the trip"
-            ),
-            "trip_ms": trip_ms,
-        }
+        check(
+            "watchdog",
+            zero and watchdog_ms - slack_ms <= trip_ms <= watchdog_ms + slack_ms,
+            f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog {watchdog_ms:g} "
+            f"ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} after the trip",
+            trip_ms=trip_ms,
+        )
         link.stop()
+    device = ("protocol_version", "counts_per_rev", "torque_limit_nm", "watchdog_s", "state_rate_hz")
     return {
         "port": port,
-        "device": {
-            k: getattr(info, k)
-            for k in ("protocol_version", "counts_per_rev", "torque_limit_nm", "watchdog_s", "state_rate_hz")
-        },
+        "device": {k: getattr(info, k) for k in device},
         "round_trip_ms": rtt * 1e3,
         "checks": checks,
         "passed": all(c["passed"] for c in checks.values()),

@@ -8,7 +8,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from typing import Iterator, Mapping, Optional
+from typing import Mapping, Optional
 
 import numpy as np
 
@@ -40,49 +40,31 @@ def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, in
     positive("timestep_s", timestep_s)
     one_of("integrator", integrator, INTEGRATORS)
     masses, coms, inertias = link_inertials(p)
-    stiffness = p.spring_stiffnesses_nm_per_rad()
-    damping = p.spring_dampings_nms_per_rad()
-    length = p.link_length_m
-    limit = p.torque_limit_nm
-    r = repr  # shortest round-trip decimal: the model holds the same doubles as RodParams
+    stiffness, damping = p.spring_stiffnesses_nm_per_rad(), p.spring_dampings_nms_per_rad()
+    r, limit, hub = repr, p.torque_limit_nm, repr(p.hub_inertia_kgm2)  # repr: the same doubles as RodParams
     # the hub's mass sits on the fixed axis, so any value is exact; MuJoCo wants one
-    lines = [
-        '<mujoco model="softpend_prb_chain">',
-        '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="{r(float(timestep_s))}" integrator="{integrator}" gravity="0 {r(-p.gravity_mps2)} 0">',
-        '    <flag contact="disable"/>',
-        "  </option>",
-        "  <worldbody>",
-        '    <body name="hub" pos="0 0 0">',
-        f'      <joint name="hub" type="hinge" axis="0 0 1" damping="{r(p.hub_friction_nms_per_rad)}"/>',
-        f'      <inertial pos="0 0 0" mass="{r(p.mass_kg)}" diaginertia="{r(p.hub_inertia_kgm2)} '
-        f'{r(p.hub_inertia_kgm2)} {r(p.hub_inertia_kgm2)}"/>',
-    ]
-    indent = "      "
+    body = f"""<body name="hub" pos="0 0 0">
+<joint name="hub" type="hinge" axis="0 0 1" damping="{r(p.hub_friction_nms_per_rad)}"/>
+<inertial pos="0 0 0" mass="{r(p.mass_kg)}" diaginertia="{hub} {hub} {hub}"/>\n"""
     for i in range(p.n_links):
-        offset = 0.0 if i == 0 else length
         inertia = r(float(inertias[i]))
-        lines += [
-            f'{indent}<body name="link{i + 1}" pos="0 {r(offset)} 0">',
-            f'{indent}  <joint name="spring{i + 1}" type="hinge" axis="0 0 1" stiffness="{r(stiffness[i])}" '
-            f'springref="0" damping="{r(damping[i])}"/>',
-            f'{indent}  <inertial pos="0 {r(float(coms[i]))} 0" mass="{r(float(masses[i]))}" '
-            f'diaginertia="{inertia} {inertia} {inertia}"/>',
-        ]
-        indent += "  "
-    for i in range(p.n_links, 0, -1):
-        indent = indent[:-2]
-        lines.append(f"{indent}</body>")
-    lines += [
-        "    </body>",
-        "  </worldbody>",
-        "  <actuator>",
-        f'    <motor name="hub_torque" joint="hub" gear="1" ctrlrange="{r(-limit)} {r(limit)}" '
-        f'forcerange="{r(-limit)} {r(limit)}"/>',
-        "  </actuator>",
-        "</mujoco>",
-    ]
-    return "\n".join(lines) + "\n"
+        body += f"""<body name="link{i + 1}" pos="0 {r(0.0 if i == 0 else p.link_length_m)} 0">
+<joint name="spring{i + 1}" type="hinge" axis="0 0 1" stiffness="{r(stiffness[i])}" springref="0" \
+damping="{r(damping[i])}"/>
+<inertial pos="0 {r(float(coms[i]))} 0" mass="{r(float(masses[i]))}" diaginertia="{inertia} {inertia} {inertia}"/>\n"""
+    body += "</body>\n" * (p.n_links + 1)
+    return f"""<mujoco model="softpend_prb_chain">
+<compiler angle="radian" autolimits="true"/>
+<option timestep="{r(float(timestep_s))}" integrator="{integrator}" gravity="0 {r(-p.gravity_mps2)} 0">
+<flag contact="disable"/>
+</option>
+<worldbody>
+{body}</worldbody>
+<actuator>
+<motor name="hub_torque" joint="hub" gear="1" ctrlrange="{r(-limit)} {r(limit)}" forcerange="{r(-limit)} {r(limit)}"/>
+</actuator>
+</mujoco>
+"""
 
 
 class MuJoCoChain:
@@ -95,14 +77,9 @@ class MuJoCoChain:
         import mujoco
 
         self.params = params if params is not None else RodParams()
-        positive("dt_s", dt_s)
-        positive("timestep_s", timestep_s)
-        ratio = dt_s / timestep_s
-        substeps = int(round(ratio))
-        if substeps < 1 or abs(ratio - substeps) > 1e-9 * ratio:
+        self.substeps = int(round(positive("dt_s", dt_s) / positive("timestep_s", timestep_s)))
+        if self.substeps < 1 or abs(dt_s / timestep_s - self.substeps) > 1e-9 * dt_s / timestep_s:
             raise ValueError(f"dt_s ({dt_s!r}) must be a whole number of timestep_s ({timestep_s!r})")
-        self.substeps = substeps
-        self.dt_s = float(dt_s)
         self._mujoco = mujoco
         self.model = mujoco.MjModel.from_xml_string(chain_mjcf(self.params, timestep_s, integrator))
         self.data = mujoco.MjData(self.model)
@@ -111,14 +88,14 @@ class MuJoCoChain:
 
     def set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
         """Set the joint state ``(q, q_dot)``; time and control back to zero."""
-        n = self.params.n_links + 1
-        q = np.asarray(q, dtype=float).reshape(n)
-        q_dot = np.asarray(q_dot, dtype=float).reshape(n)
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(q_dot))):
-            raise ValueError("joint state must be finite")
         self._mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:] = q
-        self.data.qvel[:] = q_dot
+        self.data.qpos[:], self.data.qvel[:] = q, q_dot
+
+    def hang(self) -> None:
+        """Set the state to hanging at rest."""
+        q0 = np.zeros(self.params.n_links + 1)
+        q0[0] = math.pi
+        self.set_state(q0, np.zeros_like(q0))
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """The joint state ``(q, q_dot)`` (copies)."""
@@ -132,53 +109,47 @@ class MuJoCoChain:
     @property
     def diverged(self) -> bool:
         """Whether MuJoCo met a bad position, velocity or acceleration since the last :meth:`set_state`."""
-        warnings = self.data.warning
-        return any(warnings[w].number > 0 for w in self._instability_warnings)
+        return any(self.data.warning[w].number > 0 for w in self._instability_warnings)
 
     def hub_trajectory_rad(self, q0: np.ndarray, qd0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
-        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` once diverged."""
+        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` once diverged;
+        MuJoCo's warnings are not printed (``MjData.warning`` still counts them)."""
         self.set_state(q0, qd0)
         hub = np.full(len(torques_nm), np.nan)
-        qpos = self.data.qpos
-        with _quiet_mujoco():
+        before = self._mujoco.get_mju_user_warning()
+        self._mujoco.set_mju_user_warning(lambda message: None)
+        with contextlib.ExitStack() as restore:
+            restore.callback(self._mujoco.set_mju_user_warning, before)
             for i, torque in enumerate(torques_nm):
                 self.step(float(torque))
                 if self.diverged:
                     break
-                hub[i] = qpos[0]
+                hub[i] = self.data.qpos[0]
         return hub
 
 
-@contextlib.contextmanager
-def _quiet_mujoco() -> Iterator[None]:
-    """Context in which MuJoCo's warnings are not printed (``MjData.warning`` still counts them)."""
-    import mujoco
-
-    before = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(lambda message: None)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(before)
+def _chain(params: RodParams | int, integrator: str, substeps: int) -> MuJoCoChain:
+    """The chain of ``params`` (or of the default rod with that many links) with control steps of ``substeps``."""
+    params = RodParams(n_links=params) if isinstance(params, int) else params
+    return MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
 
 
 def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]]) -> dict[str, float]:
     """``{stem}_hub_error_rad_n{n_links}``: largest hub-angle error of the MuJoCo chain against the Exudyn run
     ``reference`` (``inf`` if diverged), per ``stem -> (integrator, MuJoCo steps per control step)``."""
     figures = {}
-    n_links = reference.params.n_links
     for stem, (integrator, substeps) in configurations.items():
-        chain = MuJoCoChain(reference.params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+        chain = _chain(reference.params, integrator, substeps)
         hub = chain.hub_trajectory_rad(reference.q0, reference.qd0, reference.torques_nm)
         error = math.inf if chain.diverged else float(np.abs(hub - reference.hub_rad).max())
-        figures[f"{stem}_hub_error_rad_n{n_links}"] = error
+        figures[f"{stem}_hub_error_rad_n{reference.params.n_links}"] = error
     return figures
 
 
 def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
     """Whether the MuJoCo chain diverges along the inputs of :func:`~softpend.study.simulators.hub_error_inputs`."""
     params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
-    chain = MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+    chain = _chain(params, integrator, substeps)
     chain.hub_trajectory_rad(q0, qd0, torques)
     return chain.diverged
 
@@ -186,14 +157,11 @@ def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1
 def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 4000, repeats: int = 2) -> float:
     """Control steps per second of one MuJoCo rod stepped from Python from hanging under seeded random torques
     (best of ``repeats``)."""
-    chain = MuJoCoChain(RodParams(n_links=n_links), timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
+    chain = _chain(n_links, integrator, substeps)
     torques = (np.random.default_rng(0).uniform(-1, 1, n_steps) * chain.params.torque_limit_nm).tolist()
-    q0 = np.zeros(n_links + 1)
-    q0[0] = math.pi
-    best = math.inf
-    step = chain.step
+    best, step = math.inf, chain.step
     for _ in range(repeats):
-        chain.set_state(q0, np.zeros(n_links + 1))
+        chain.hang()
         start = time.perf_counter()
         for torque in torques:
             step(torque)
@@ -209,14 +177,12 @@ def rollout_rod_steps_per_s(
     n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3
 ) -> float:
     """Rod-steps per second of ``mujoco.rollout`` over ``batch_size`` hanging rods on one thread under seeded random
-    torques (best of ``repeats``)."""
+    torques (best of ``repeats``, after a warm-up)."""
     import mujoco
     from mujoco import rollout
 
-    chain = MuJoCoChain(RodParams(n_links=n_links), timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
-    q0 = np.zeros(n_links + 1)
-    q0[0] = math.pi
-    chain.set_state(q0, np.zeros(n_links + 1))
+    chain = _chain(n_links, integrator, substeps)
+    chain.hang()
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     initial = np.empty(mujoco.mj_stateSize(chain.model, spec))
     mujoco.mj_getState(chain.model, chain.data, initial, spec)
@@ -225,12 +191,11 @@ def rollout_rod_steps_per_s(
     control = np.repeat(torques, substeps, axis=1)[:, :, None]
     state = np.empty((batch_size, n_steps * substeps, initial.shape[1]))
     sensordata = np.empty((batch_size, n_steps * substeps, 0))
-    rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)  # warm-up
     best = math.inf
-    for _ in range(repeats):
+    for i in range(repeats + 1):
         start = time.perf_counter()
         rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)
-        best = min(best, time.perf_counter() - start)
+        best = min(best, time.perf_counter() - start) if i else best
     if not np.isfinite(state[:, -1]).all():
         raise RuntimeError(
             f"mujoco.rollout diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})"
@@ -247,6 +212,21 @@ CONFIGURATIONS_N10 = (("mujoco_rk4_stable", "RK4", None), ("mujoco_implicitfast_
 #: A converged RK4 run: the check that both models are the same chain.
 CONVERGED = ("mujoco_rk4_0p25ms", "RK4", 40)
 
+#: ``key -> (rate of the plant benchmark, MuJoCo rate)`` of the ratios :func:`bench_figures` adds.
+RATIOS = {
+    "exudyn_env_over_mujoco_rk4_n4": ("env_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
+    "exudyn_solver_over_mujoco_rk4_n4": ("solver_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
+    "batched_over_mujoco_rk4_n4": ("batched_rod_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
+    "batched_over_mujoco_rk4_n10": ("batched_rod_steps_per_s_n10", "mujoco_rk4_stable_steps_per_s_n10"),
+    "batched_rk4_over_mujoco_rk4_n4": ("batched_rk4_rod_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
+    "batched_rk4_over_mujoco_rk4_n10": ("batched_rk4_rod_steps_per_s_n10", "mujoco_rk4_stable_steps_per_s_n10"),
+    "batched_over_mujoco_rollout_n4": ("batched_rod_steps_per_s_n4", "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"),
+    "batched_rk4_over_mujoco_rollout_n4": (
+        "batched_rk4_rod_steps_per_s_n4",
+        "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4",
+    ),
+}
+
 
 def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> dict[str, float]:
     """The ``mujoco_*`` figures of the ``plant`` benchmark and their ratios to the rates in ``base``;
@@ -254,34 +234,15 @@ def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> d
     from softpend.plant.batched import stable_substeps
 
     figures: dict[str, float] = {}
-    n10 = tuple(
-        (stem, integrator, substeps if substeps is not None else stable_substeps(RodParams(n_links=10)))
-        for stem, integrator, substeps in CONFIGURATIONS_N10
-    )
+    n10 = tuple((stem, kind, k or stable_substeps(RodParams(n_links=10))) for stem, kind, k in CONFIGURATIONS_N10)
     for n_links, configurations in ((4, CONFIGURATIONS_N4), (10, n10)):
         for stem, integrator, substeps in configurations:
-            figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(
-                n_links, integrator, substeps, n_steps=4000 if n_links == 4 else 1000
-            )
+            n_steps = 4000 if n_links == 4 else 1000
+            figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(n_links, integrator, substeps, n_steps=n_steps)
             figures[f"{stem}_substeps_n{n_links}"] = float(substeps)
         compared = {stem: (integrator, substeps) for stem, integrator, substeps in configurations + (CONVERGED,)}
         figures.update(mujoco_hub_errors_rad(references[n_links], compared))
     for stem, integrator, substeps in CONFIGURATIONS_N4:
         figures[f"{stem}_diverges_n10"] = float(diverges(10, integrator, substeps))
-    rollout4 = rollout_rod_steps_per_s(4, "RK4", 2)
-    figures["mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"] = rollout4
-    rk4_4 = figures["mujoco_rk4_5ms_steps_per_s_n4"]
-    rk4_10 = figures["mujoco_rk4_stable_steps_per_s_n10"]
-    figures.update(
-        {
-            "exudyn_env_over_mujoco_rk4_n4": base["env_steps_per_s_n4"] / rk4_4,
-            "exudyn_solver_over_mujoco_rk4_n4": base["solver_steps_per_s_n4"] / rk4_4,
-            "batched_over_mujoco_rk4_n4": base["batched_rod_steps_per_s_n4"] / rk4_4,
-            "batched_over_mujoco_rk4_n10": base["batched_rod_steps_per_s_n10"] / rk4_10,
-            "batched_rk4_over_mujoco_rk4_n4": base["batched_rk4_rod_steps_per_s_n4"] / rk4_4,
-            "batched_rk4_over_mujoco_rk4_n10": base["batched_rk4_rod_steps_per_s_n10"] / rk4_10,
-            "batched_over_mujoco_rollout_n4": base["batched_rod_steps_per_s_n4"] / rollout4,
-            "batched_rk4_over_mujoco_rollout_n4": base["batched_rk4_rod_steps_per_s_n4"] / rollout4,
-        }
-    )
-    return figures
+    figures["mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"] = rollout_rod_steps_per_s(4, "RK4", 2)
+    return figures | {key: base[ours] / figures[theirs] for key, (ours, theirs) in RATIOS.items()}

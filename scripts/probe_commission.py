@@ -35,6 +35,7 @@ def rod_row(seed: int, report: dict, wall_s: float) -> dict:
         row[f"{name}_simulator_s"] = entry["simulator_s"]
         row[f"{name}_train_wall_s"] = training.get("wall_s")
         row[f"{name}_train_balanced"] = training.get("balanced")
+        row[f"{name}_train_attempts"] = training.get("attempts")
         for prefix, key in (("", "verification"), ("default_rod_", "default_rod_verification")):
             for summary in entry[key] or []:
                 row[f"{prefix}{name}_{summary['condition']}_successes"] = summary["successes"]

@@ -44,6 +44,7 @@ TINY = CommissionConfig(
     check_duration_s=1.0,
     verify_starts=1,
     verify_duration_s=1.0,
+    train_attempts=1,
 )
 #: A hand-made unknown rod.
 TRUTH = UnknownRod(
@@ -200,6 +201,66 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     told.clear()
     assert commission(out, truth, TINY, on_stage=lambda stage, ran, output: told.append((stage, ran))) == report
     assert [ran for _, ran in told] == [False] * 6
+
+
+class _FakeRun:
+    """A commissioning folder's stage outputs, read by a stage under test."""
+
+    def __init__(self, config: CommissionConfig, outputs: dict, out: Path) -> None:
+        self.config, self.outputs_by_stage, self.out = config, outputs, out
+
+    def read(self, stage: str) -> dict:
+        return self.outputs_by_stage[stage]
+
+
+def test_a_learner_is_trained_again_with_the_next_seed_until_a_run_balances(monkeypatch, tmp_path):
+    from softpend.control import identified
+
+    monkeypatch.setattr(commission_module, "_greybox_result", lambda data: data)
+    monkeypatch.setattr(identified, "identified_uncertainty", lambda result, scale: identified.RodUncertainty((), 2.0))
+    monkeypatch.setattr(commission_module, "learner_config", lambda learner, model, unc, settings, seed: seed)
+    balances = {("dqn", 5): False, ("dqn", 6): True, ("pilco", 5): False, ("pilco", 6): False, ("pilco", 7): False}
+    calls = []
+
+    def train_one(learner, seed_in_config, seed, episodes, root):
+        assert seed_in_config == seed
+        calls.append((learner, seed))
+        return {"folder": f"{learner}-{seed}", "simulator_s": 10.0, "wall_s": 1.0, "balanced": balances[learner, seed]}
+
+    monkeypatch.setattr(commission_module, "_train_one", train_one)
+    config = CommissionConfig(controllers=("dqn", "pilco"), seed=5, train_attempts=3)
+    run = _FakeRun(config, {"identify": {"model_rod": RodParams().to_dict(), "greybox": {}}}, tmp_path)
+    runs = commission_module._train(run)["runs"]
+    assert calls == [("dqn", 5), ("dqn", 6), ("pilco", 5), ("pilco", 6), ("pilco", 7)]
+    assert runs["dqn"]["folder"] == "dqn-6" and runs["dqn"]["balanced"] and runs["dqn"]["attempts"] == 2
+    assert runs["dqn"]["simulator_s"] == 20.0 and runs["dqn"]["seed"] == 6
+    assert runs["pilco"]["folder"] == "pilco-7" and not runs["pilco"]["balanced"] and runs["pilco"]["attempts"] == 3
+    assert runs["pilco"]["simulator_s"] == 30.0
+
+
+def test_a_parameter_held_at_the_guess_is_fitted_again_with_the_others_from_their_fit(monkeypatch, tmp_path):
+    from types import SimpleNamespace
+
+    from softpend.sysid import dataset, greybox
+
+    partial = RodParams(youngs_modulus_pa=70e6)
+    full = RodParams(youngs_modulus_pa=71e6, hub_inertia_kgm2=3e-4)
+    fits = []
+
+    def identify(data, settings, initial_params):
+        fits.append((settings.parameters, initial_params))
+        if "hub_inertia_kgm2" in settings.parameters and initial_params == RodParams():
+            raise greybox.NotIdentifiable("hub_inertia_kgm2", "not at the guess")
+        params = full if "hub_inertia_kgm2" in settings.parameters else partial
+        return SimpleNamespace(params=params, estimates={}, std={}, to_dict=lambda: {"rod": params.to_dict()})
+
+    monkeypatch.setattr(greybox, "identify", identify)
+    monkeypatch.setattr(dataset, "load_dataset", lambda path: None)
+    monkeypatch.setattr(commission_module, "identified_values", lambda *a: {})
+    out = commission_module._identify(_FakeRun(CommissionConfig(), {}, tmp_path))
+    every = commission_module.IDENTIFIED_PARAMETERS
+    assert [f[0] for f in fits] == [every, tuple(p for p in every if p != "hub_inertia_kgm2"), every]
+    assert fits[2][1] == partial and out["model_rod"] == full.to_dict() and out["not_identified"] == []
 
 
 def test_the_uncertainty_draws_are_as_wide_as_the_identification_is_uncertain():

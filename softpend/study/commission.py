@@ -76,8 +76,10 @@ class CommissionConfig:
     design check's ``check_draws`` rods ``uncertainty_scale`` standard deviations wide, ``check_starts`` starts of
     ``check_duration_s`` each (the learners' training rods are drawn as wide); the ``controllers`` commissioned
     (of :data:`CLASSES`), ``learners``: each learner's changes to the book's settings (:data:`DEFAULT_LEARNERS`);
-    ``default_rod_runs``: run folders of learners trained for the default rod, verified beside; ``verify_starts``
-    twin starts of ``verify_duration_s`` per condition; ``seed`` (also the learners' training seed)."""
+    ``default_rod_runs``: run folders of learners trained for the default rod, verified beside; ``train_attempts``:
+    training runs per learner at most, seeds ``seed``, ``seed + 1``, ... until one balances on its own evaluation
+    starts; ``verify_starts`` twin starts of ``verify_duration_s`` per condition; ``seed`` (also the first training
+    seed)."""
 
     excite_s: float = 10.0
     program: str = "noise"
@@ -98,6 +100,7 @@ class CommissionConfig:
     controllers: tuple[str, ...] = CLASSES
     learners: Mapping[str, Mapping[str, Any]] = field(default_factory=lambda: dict(DEFAULT_LEARNERS))
     default_rod_runs: Mapping[str, str] = field(default_factory=dict)
+    train_attempts: int = 3
 
     def __post_init__(self) -> None:
         controllers = tuple(self.controllers) if isinstance(self.controllers, (list, tuple)) else ()
@@ -124,9 +127,10 @@ class CommissionConfig:
         one_of("program", self.program, PROGRAMS)
         in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
         integers = {"max_windows": 1, "max_iterations": 1, "check_draws": 1, "check_starts": 1, "verify_starts": 1}
+        integers["train_attempts"] = 1
         for name, low in (integers | {"seed": 0}).items():
             object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
-        for name, high in (("verify_starts", 1000), ("seed", 10**6 - 1)):
+        for name, high in (("verify_starts", 1000), ("seed", 10**6 - 1), ("train_attempts", 100)):
             if getattr(self, name) > high:
                 raise ValueError(f"{name} must be at most {high}, got {getattr(self, name)}")
         if self.session_s < self.trial_length_s + 3:
@@ -300,8 +304,8 @@ def _identify(run: _Run) -> dict:
 
     config, guess = run.config, RodParams()
     dataset = load_dataset(run.out / "excite" / "rig_dataset.npz")
-    parameters, held = list(IDENTIFIED_PARAMETERS), []
-    while True:  # a parameter the data do not determine is held at the guess and reported as not identified
+
+    def fit(parameters: list[str], start: RodParams):
         settings = GreyBoxConfig(
             parameters=tuple(parameters),
             window_s=config.window_s,
@@ -309,14 +313,23 @@ def _identify(run: _Run) -> dict:
             max_iterations=config.max_iterations,
             seed=config.seed,
         )
+        return identify(dataset, settings, initial_params=start)
+
+    parameters, held = list(IDENTIFIED_PARAMETERS), []
+    while True:  # a parameter the data do not determine from the guess is held there, the others fitted ...
         try:
-            result = identify(dataset, settings, initial_params=guess)
+            result = fit(parameters, guess)
             break
         except NotIdentifiable as exc:
             if exc.parameter not in parameters or len(parameters) == 1:
                 raise
             parameters.remove(exc.parameter)
             held.append(exc.parameter)
+    if held:  # ... then every parameter is fitted again from there; one still not determined stays held
+        try:
+            result, held = fit(list(IDENTIFIED_PARAMETERS), result.params), []
+        except NotIdentifiable:
+            pass
     return {
         "greybox": result.to_dict(),
         "identified": identified_values(result.estimates, result.std, guess.mass_kg),
@@ -407,6 +420,8 @@ def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) 
 
 
 def _train(run: _Run) -> dict:
+    """Each learner trained on the identified rod, seed after seed up to ``train_attempts`` runs until one balances
+    on its own evaluation starts (the last run is kept when none does)."""
     from softpend.control.identified import identified_uncertainty
 
     config = run.config
@@ -416,10 +431,19 @@ def _train(run: _Run) -> dict:
     runs = {}
     for learner in (c for c in config.controllers if c in LEARNERS):
         settings = config.learners[learner]
-        learner_settings = learner_config(learner, model, uncertainty, settings, config.seed)
-        runs[learner] = _train_one(
-            learner, learner_settings, config.seed, settings.get("episodes", 0), run.out / "train"
-        )
+        attempts = []
+        for seed in range(config.seed, config.seed + config.train_attempts):
+            learner_settings = learner_config(learner, model, uncertainty, settings, seed)
+            attempts.append(_train_one(learner, learner_settings, seed, settings.get("episodes", 0), run.out / "train"))
+            if attempts[-1]["balanced"]:
+                break
+        runs[learner] = {
+            **attempts[-1],
+            "seed": seed,
+            "attempts": len(attempts),
+            "simulator_s": sum(a["simulator_s"] for a in attempts),
+            "wall_s": sum(a["wall_s"] for a in attempts),
+        }
     return {"rod_uncertainty": uncertainty.to_dict(), "runs": runs, "plant_s": 0.0}
 
 

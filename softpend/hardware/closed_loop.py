@@ -66,13 +66,16 @@ def _check_run(link: MotorLink, duration_s: float, *logs: tuple[str, Optional[Sa
 
 
 class _RigLoop:
-    """One run paced by the STATE stream: each state read goes to :meth:`step` until ``duration_s`` of device time
-    or a safe stop (:attr:`stop_reason`); ``drains``: the states queued since the last one are processed too."""
+    """One run paced by the STATE stream: each state read goes to :meth:`step` (here: ``controller(observation,
+    time_s)``, :func:`run_control_loop`) until ``duration_s`` of device time or a safe stop (:attr:`stop_reason`);
+    ``drains``: the states queued since the last one are processed too."""
 
     drains = False
 
-    def __init__(self, link: MotorLink, duration_s: float, log: Optional[SampleLog], period_s: float) -> None:
-        self.link, self.duration_s, self.log = link, duration_s, log
+    def __init__(
+        self, link: MotorLink, controller: Callable, duration_s: float, log: Optional[SampleLog], period_s: float = 0.01
+    ) -> None:
+        self.link, self.controller, self.duration_s, self.log = link, controller, duration_s, log
         self.nominal_period = 1.0 / link.device.state_rate_hz if link.device else period_s
         self.send_times: list[float] = []
         self.samples = self.dropped = self.watchdog = 0
@@ -89,9 +92,6 @@ class _RigLoop:
             self.dropped += max(0, int(round((state.device_time_s - self.last_device_time) / self.nominal_period)) - 1)
         self.last_device_time = state.device_time_s
         self.watchdog += int(state.watchdog_tripped)
-
-    def step(self, state: MotorState, newest: bool) -> None:
-        raise NotImplementedError
 
     def postfix(self) -> str:
         return ""
@@ -131,12 +131,6 @@ class _RigLoop:
             watchdog_trips=self.watchdog,
         )
 
-
-class _BabbleLoop(_RigLoop):
-    def __init__(self, link: MotorLink, controller: Callable, duration_s: float, log: Optional[SampleLog]) -> None:
-        super().__init__(link, duration_s, log, 0.01)
-        self.controller = controller
-
     def step(self, state: MotorState, newest: bool) -> None:
         self.count(state)
         link, t = self.link, self.t
@@ -163,7 +157,7 @@ def run_control_loop(
     """Run ``controller(observation, time_s) -> torque_nm`` on the open ``link`` for ``duration_s`` of device time,
     one row of :data:`LOOP_LOG_COLUMNS` in ``log`` per state; a link error stops the motor and propagates."""
     _check_run(link, duration_s, ("log", log, LOOP_LOG_COLUMNS, "LOOP_LOG_COLUMNS"))
-    loop = _BabbleLoop(link, controller, duration_s, log)
+    loop = _RigLoop(link, controller, duration_s, log)
     loop.run("rig loop", progress)
     link.send_torque(0.0)
     return LoopResult(**loop.loop_result())
@@ -252,8 +246,8 @@ class _ClosedLoop(_RigLoop):
     drains = True
 
     def __init__(self, link, controller, estimator, duration_s, tip_source, clock, log, camera_log) -> None:
-        super().__init__(link, duration_s, log, estimator.dt_s)
-        self.controller, self.estimator, self.tip_source = controller, estimator, tip_source
+        super().__init__(link, controller, duration_s, log, estimator.dt_s)
+        self.estimator, self.tip_source = estimator, tip_source
         self.clock, self.camera_log = clock, camera_log
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
         self.estimate_values = self.nan_estimate
@@ -425,7 +419,7 @@ def run_twin_control(
         if camera is not None:
             source = SyntheticLiveCamera(device.poses, clock, **vars(camera), on_frame=on_frame)
             source.start()
-            if not clock.wait_for(lambda: source.frames_tracked > 0, camera_wait_s):
+            if not clock.wait_for(lambda: source.counts["frames_tracked"] > 0, camera_wait_s):
                 raise ValueError(
                     f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
                     "time: a camera latency near that, or a dot the tracker cannot find)"

@@ -84,7 +84,7 @@ class ThreadedTipSource:
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self._error: Optional[BaseException] = None
-        self.frames_tracked = self.frames_lost = self.frames_dropped = 0
+        self.counts = dict.fromkeys(("frames_tracked", "frames_lost", "frames_dropped"), 0)
         self._ages_s: list[float] = []
 
     def start(self) -> None:
@@ -121,7 +121,7 @@ class ThreadedTipSource:
 
     def stats(self) -> dict[str, float]:
         ages = np.asarray(self._ages_s) * 1e3
-        out = {name: float(getattr(self, name)) for name in ("frames_tracked", "frames_lost", "frames_dropped")}
+        out = {name: float(count) for name, count in self.counts.items()}
         out["delivery_latency_ms_median"] = float(np.median(ages)) if ages.size else math.nan
         out["delivery_latency_ms_p95"] = float(np.percentile(ages, 95)) if ages.size else math.nan
         return out
@@ -139,8 +139,8 @@ class ThreadedTipSource:
         x_m, y_m, detection = self.frame_tracker(frame)
         delivered = time.monotonic() if delivered_time_s is None else delivered_time_s
         measurement = TipMeasurement(x_m, y_m, bool(detection.lost), float(capture_time_s), int(index), delivered)
-        self.frames_tracked += 1
-        self.frames_lost += int(measurement.lost)
+        self.counts["frames_tracked"] += 1
+        self.counts["frames_lost"] += int(measurement.lost)
         self._ages_s.append(measurement.age_s)
         if self.on_frame is not None:
             self.on_frame(index, frame, detection, measurement)
@@ -196,12 +196,14 @@ class CameraFaults:
     def __post_init__(self) -> None:
         in_unit_interval("drop_probability", self.drop_probability)
         try:
-            windows = [(float(start), float(end)) for start, end in self.occlusions_s]
+            windows = tuple((float(start), float(end)) for start, end in self.occlusions_s)
         except (TypeError, ValueError):
-            raise ValueError(f"occlusions_s must be (start, end) pairs [s], got {self.occlusions_s!r}") from None
-        if not all(math.isfinite(start) and math.isfinite(end) and 0 <= start < end for start, end in windows):
-            raise ValueError(f"occlusions_s must be pairs with 0 <= start < end, got {self.occlusions_s!r}")
-        object.__setattr__(self, "occlusions_s", tuple(windows))
+            windows = ((math.nan, math.nan),)
+        if not all(0 <= start < end < math.inf for start, end in windows):
+            raise ValueError(
+                f"occlusions_s must be (start, end) pairs [s], 0 <= start < end, got {self.occlusions_s!r}"
+            )
+        object.__setattr__(self, "occlusions_s", windows)
         if self.stall_after_s is not None:
             non_negative("stall_after_s", self.stall_after_s)
 
@@ -236,7 +238,7 @@ class SyntheticLiveCamera(ThreadedTipSource):
         self.camera = SyntheticCamera(model=model, effects=effects, seed=seed)
         self.faults = faults if faults is not None else CameraFaults()
         self._rng = np.random.default_rng(self.faults.seed)
-        self.frames_stalled = self.frames_occluded = 0
+        self.counts.update(frames_stalled=0, frames_occluded=0)
         self.first_frame_time_s: Optional[float] = None
         self._closed = False
 
@@ -260,20 +262,16 @@ class SyntheticLiveCamera(ThreadedTipSource):
         t_k = self.first_frame_time_s + k / self.fps
         elapsed = t_k - self.first_frame_time_s
         if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:
-            self.frames_stalled += 1
+            self.counts["frames_stalled"] += 1
             return
         if self.faults.drop_probability and self._rng.random() < self.faults.drop_probability:
-            self.frames_dropped += 1
+            self.counts["frames_dropped"] += 1
             return
         frame, tip_px = self.camera.render(self.scene.pose_at, t_k)
         if self.faults.occluded(elapsed):
             frame = _hide_dot(frame, tip_px, self.camera)
-            self.frames_occluded += 1
+            self.counts["frames_occluded"] += 1
         self._deliver(k, frame, t_k - self.camera.effects.exposure_s / 2, self.clock.now_s())
-
-    def stats(self) -> dict[str, float]:
-        stalled, occluded = float(self.frames_stalled), float(self.frames_occluded)
-        return {**super().stats(), "frames_stalled": stalled, "frames_occluded": occluded}
 
 
 class CaptureTipSource(ThreadedTipSource):

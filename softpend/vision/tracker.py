@@ -103,12 +103,6 @@ def find_blobs(frame_bgr: np.ndarray, colour: ColourRange, min_area_px: float = 
     ]
 
 
-def _shifted(detection: Detection, x_off: int, y_off: int) -> Detection:
-    assert detection.contour is not None  # a found blob has its contour
-    contour = detection.contour + np.array([[x_off, y_off]], dtype=detection.contour.dtype)
-    return Detection(detection.x_px + x_off, detection.y_px + y_off, detection.area_px, False, contour)
-
-
 class TipTracker:
     """Track the blue tip dot (Algorithm 1): a blob of ``min_area_px`` [px^2] to ``max_area_fraction`` of the frame,
     searched first within ``search_radius_px`` of the last dot, only ever inside ``region_px`` if given."""
@@ -144,62 +138,39 @@ class TipTracker:
         h, w = frame_bgr.shape[:2]
         max_area = self.max_area_fraction * h * w
         if self.region_px is not None:
-            x0, y0, x1, y1 = self.region_px
-            if x0 >= w or y0 >= h:
+            if self.region_px[0] >= w or self.region_px[1] >= h:
                 raise ValueError(f"region_px {self.region_px} lies outside the {w}x{h} frame")
-            crop = frame_bgr[y0:y1, x0:x1]
-            detection = self._track_image(crop, max_area)
-            if detection.lost:
-                return detection
-            if _touches_inner_edge(detection.contour, crop.shape, (x0, y0), (h, w)):
-                return Detection(math.nan, math.nan, detection.area_px, True, None)  # its centre is unknown
-            return _shifted(detection, x0, y0)
-        x_off = y_off = 0
-        image = frame_bgr
+            return self._track_window(frame_bgr, *self.region_px, max_area)
+        detection = _LOST
         if self.search_radius_px is not None and self._last is not None:
             r = int(math.ceil(min(self.search_radius_px, max(h, w))))
             cx, cy = int(round(self._last[0])), int(round(self._last[1]))
-            x_off, y_off = max(cx - r, 0), max(cy - r, 0)
-            image = frame_bgr[y_off : min(cy + r + 1, h), x_off : min(cx + r + 1, w)]
-            if image.size == 0:  # the last position lies outside this (smaller) frame
-                image, x_off, y_off = frame_bgr, 0, 0
-        detection = self._track_image(image, max_area)
-        if image is not frame_bgr and (
-            detection.lost or _touches_inner_edge(detection.contour, image.shape, (x_off, y_off), (h, w))
-        ):
-            detection = self._track_image(frame_bgr, max_area)  # nothing in the window, or a blob cut by it
-            x_off = y_off = 0
-        if detection.lost:
-            self._last = None
-            return detection
-        detection = _shifted(detection, x_off, y_off)
-        self._last = (detection.x_px, detection.y_px)
+            x0, y0 = max(cx - r, 0), max(cy - r, 0)
+            if x0 < w and y0 < h:  # else the last position lies outside this (smaller) frame
+                detection = self._track_window(frame_bgr, x0, y0, cx + r + 1, cy + r + 1, max_area)
+        if detection.lost:  # nothing in the window, or a blob cut by it
+            detection = self._track_window(frame_bgr, 0, 0, w, h, max_area)
+        self._last = None if detection.lost else (detection.x_px, detection.y_px)
         return detection
 
-    def _track_image(self, image: np.ndarray, max_area_px: float) -> Detection:
-        blurred = cv2.GaussianBlur(self.colour.mask(image), (3, 3), 0)
+    def _track_window(self, frame: np.ndarray, x0: int, y0: int, x1: int, y1: int, max_area_px: float) -> Detection:
+        """The dot in ``frame[y0:y1, x0:x1]`` in frame pixels (lost, its centre unknown, if cut by the window)."""
+        window = frame[y0:y1, x0:x1]
+        blurred = cv2.GaussianBlur(self.colour.mask(window), (3, 3), 0)
         blobs = _blobs(blurred, self.min_area_px)
         if not blobs:
             return _LOST
         area, contour = blobs[0]
         if area > max_area_px:  # too big to be the dot
             return Detection(math.nan, math.nan, area, True, contour)
-        return Detection(*_centroid(blurred, contour), area, False, contour)
-
-
-def _touches_inner_edge(
-    contour: Optional[np.ndarray], window_shape: tuple[int, ...], offset: tuple[int, int], frame_shape: tuple[int, int]
-) -> bool:
-    """Whether ``contour`` (window coordinates) reaches an edge of the window that is not an edge of the frame."""
-    if contour is None:
-        return False
-    x, y, w, h = cv2.boundingRect(contour)
-    win_h, win_w = window_shape[:2]
-    x_off, y_off = offset
-    frame_h, frame_w = frame_shape
-    return (
-        (x <= 0 and x_off > 0)
-        or (y <= 0 and y_off > 0)
-        or (x + w >= win_w and x_off + win_w < frame_w)
-        or (y + h >= win_h and y_off + win_h < frame_h)
-    )
+        bx, by, bw, bh = cv2.boundingRect(contour)
+        (win_h, win_w), (frame_h, frame_w) = window.shape[:2], frame.shape[:2]
+        if (
+            (bx <= 0 < x0)
+            or (by <= 0 < y0)
+            or (bx + bw >= win_w and x0 + win_w < frame_w)
+            or (by + bh >= win_h and y0 + win_h < frame_h)
+        ):
+            return Detection(math.nan, math.nan, area, True, None)
+        x, y = _centroid(blurred, contour)
+        return Detection(x + x0, y + y0, area, False, contour + np.array([[x0, y0]], dtype=contour.dtype))

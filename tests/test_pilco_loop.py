@@ -151,7 +151,7 @@ def test_pilco_object_steps_are_the_loop(tiny_run):
     gp = pilco.optimize_models()
     assert pilco.gp is gp and pilco.n_gp_points == tiny_run.records[1].n_gp_points
     search = pilco.optimize_policy()
-    assert search.predicted_cost == tiny_run.records[1].predicted_cost and search.n_restarts == 0
+    assert search.predicted_cost == tiny_run.records[1].predicted_cost and search.policy_restarts == 0
     assert same(pilco.policy_trial(search), tiny_run.records[1])
     np.testing.assert_array_equal(pilco.real_states[1], tiny_run.real_states[1])
     assert isinstance(pilco.controller(), PilcoController)

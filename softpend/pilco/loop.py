@@ -570,7 +570,7 @@ class PolicySearch:
     predicted_cost: float
     cost_width_m: Optional[float]
     cost_rate_width_rad_s: Optional[float]
-    n_restarts: int
+    policy_restarts: int
     balance_predicted_cost: float = float("nan")
 
 
@@ -745,17 +745,13 @@ class Pilco:
             kind=kind,
             duration_s=self.config.horizon_s,
             plant_seconds_total=self.plant_seconds,
-            predicted_cost=search.predicted_cost,
             real_cost=_trial_cost(self.config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m),
             swing_up_time_s=episode.swing_up_time_s,
             upright_std_rad=episode.upright_std_rad,
             n_gp_points=n_gp_points,
             wall_s_total=time.perf_counter() - self._start_wall,
             cpu_s_total=time.process_time() - self._start_cpu,
-            cost_rate_width_rad_s=search.cost_rate_width_rad_s,
-            policy_restarts=search.n_restarts,
-            cost_width_m=search.cost_width_m,
-            balance_predicted_cost=search.balance_predicted_cost,
+            **dataclasses.asdict(search),
         )
         self.records.append(record)
         return record

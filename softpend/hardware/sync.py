@@ -69,16 +69,16 @@ def estimate_clock_offset(
     camera_theta_rad: np.ndarray,
     window_s: Optional[tuple[float, float]] = None,
     max_offset_s: float = 1.0,
-    resolution_s: float = 0.001,
 ) -> ClockOffset:
     """``camera clock - motor clock`` from cross-correlating the rates of the hub angle and the camera's angle (NaN
-    where lost) over the motor-clock ``window_s``, on a ``resolution_s`` grid refined by a parabola at the peak."""
+    where lost) over the motor-clock ``window_s``, on a 1 ms grid refined by a parabola at the peak."""
     tm = np.asarray(motor_time_s, float)
     tc = np.asarray(camera_time_s, float)
     if tm.size < 10 or tc.size < 10:
         raise ValueError("need at least 10 motor and 10 camera samples")
-    if not (max_offset_s > 0 and resolution_s > 0):
-        raise ValueError("max_offset_s and resolution_s must be positive")
+    if not max_offset_s > 0:
+        raise ValueError(f"max_offset_s must be positive, got {max_offset_s!r}")
+    resolution_s = 0.001
     phi = np.unwrap(np.asarray(motor_phi_rad, float))
     theta_raw = np.asarray(camera_theta_rad, float)
     good = np.isfinite(theta_raw)
@@ -125,7 +125,8 @@ def estimate_clock_offset(
     return ClockOffset(float(refined), float(scores[best]))
 
 
-def _gaps_from_times(t: np.ndarray, max_step_s: float, reason: str) -> list[Gap]:
+def _gaps_from_times(t: np.ndarray, reason: str) -> list[Gap]:
+    max_step_s = max(1.6 * float(np.median(np.diff(t))), 0.03)
     return [Gap(float(t[i]), float(t[i + 1]), reason) for i in np.nonzero(np.diff(t) > max_step_s)[0]]
 
 
@@ -169,14 +170,11 @@ def synchronise(
         offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0), max_offset_s)
     tc = tc_cam - offset.offset_s  # camera frames on the motor clock
 
-    motor_period = float(np.median(np.diff(tm)))
-    camera_period = float(np.median(np.diff(tc)))
-    gaps = _gaps_from_times(tm, max(1.6 * motor_period, 0.03), "motor states missing")
-    gaps += _gaps_from_times(tc, max(1.6 * camera_period, 0.03), "camera frames missing")
-    for a, b in _runs(lost):
-        start = tc[a - 1] if a > 0 else tc[a]
-        end = tc[b] if b < len(tc) else tc[b - 1]
-        gaps.append(Gap(float(start), float(end), f"tip lost in {b - a} frame(s)"))
+    gaps = _gaps_from_times(tm, "motor states missing") + _gaps_from_times(tc, "camera frames missing")
+    gaps += [
+        Gap(float(tc[max(a - 1, 0)]), float(tc[min(b, len(tc) - 1)]), f"tip lost in {b - a} frame(s)")
+        for a, b in _runs(lost)
+    ]
     gaps.sort(key=lambda g: g.start_s)
 
     good = ~lost

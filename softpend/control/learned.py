@@ -114,17 +114,12 @@ class _TrackedLQR(LQRController):
         self.tracker.reset()
 
 
-def reduced_coordinate_names(names: tuple[str, ...]) -> tuple[str, ...]:
-    """Angles of the reduced model: hub and tip angle, and the tip rotation when the model observes it."""
-    return ("phi_rad", "theta_rad", "er_rad") if "er_rad" in names else ("phi_rad", "theta_rad")
-
-
 def reduction_matrices(
     names: tuple[str, ...], params: RodParams, dt_s: float
 ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """``(S, P, z_names)``: ``x ~ P z`` to first order about upright for ``z`` the reduced angles and their rates
     (``ex = -L theta``, a frame lagged ``k`` steps at ``position - k dt rate``), ``z = S x``, ``S P = I``."""
-    angles = reduced_coordinate_names(names)
+    angles = ("phi_rad", "theta_rad", "er_rad") if "er_rad" in names else ("phi_rad", "theta_rad")
     k = len(angles)
     length = params.length_m
     embed = {name: np.eye(k)[i] for i, name in enumerate(angles)}

@@ -103,24 +103,8 @@ class PIDTuningResult:
 Simulator = Callable[[PIDController, float, float], tuple[np.ndarray, np.ndarray]]
 
 
-#: Weight of the mean squared torque fraction beside the mean squared tip angle in :func:`pid_rollout_cost`.
+#: Weight of the mean squared torque fraction beside the mean squared tip angle in :func:`tune_pid`'s cost.
 TORQUE_WEIGHT = 0.1
-
-
-def pid_rollout_cost(
-    controller: PIDController, simulate: Simulator, tilts_rad: Sequence[float] = (0.1, -0.2), duration_s: float = 3.0
-) -> float:
-    """Mean over starts of ``mean(theta^2) + TORQUE_WEIGHT * mean((tau / tau_max)^2)``, 10 for a rollout that
-    leaves 1 rad or is not finite."""
-    total = 0.0
-    for tilt in tilts_rad:
-        controller.reset()
-        theta, torque = (np.asarray(a, float) for a in simulate(controller, float(tilt), duration_s))
-        if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > 1.0):
-            total += 10.0
-            continue
-        total += float(np.mean(theta**2) + TORQUE_WEIGHT * np.mean((torque / controller.torque_limit_nm) ** 2))
-    return total / len(tilts_rad)
 
 
 def tune_pid(
@@ -132,8 +116,9 @@ def tune_pid(
     max_evaluations: int = 120,
     progress: bool = False,
 ) -> PIDTuningResult:
-    """Gains minimising :func:`pid_rollout_cost` on ``simulate`` by Nelder-Mead on their logarithms, from
-    ``initial_gains`` (positive), in at most ``max_evaluations`` costs."""
+    """Gains minimising the mean over ``tilts_rad`` starts of ``mean(theta^2) + TORQUE_WEIGHT * mean((tau /
+    tau_max)^2)`` (10 for a rollout that leaves 1 rad or is not finite) on ``simulate``, by Nelder-Mead on their
+    logarithms from ``initial_gains`` (positive), in at most ``max_evaluations`` costs."""
     import scipy.optimize
 
     if np.any(initial_gains.as_array() <= 0):
@@ -145,7 +130,15 @@ def tune_pid(
     def cost(log_gains: np.ndarray) -> float:
         controller = PIDController(PIDGains(*np.exp(np.clip(log_gains, -12, 6))), torque_limit_nm=torque_limit_nm)
         bar.update(1)
-        return pid_rollout_cost(controller, simulate, tilts_rad, duration_s)
+        total = 0.0
+        for tilt in tilts_rad:
+            controller.reset()
+            theta, torque = (np.asarray(a, float) for a in simulate(controller, float(tilt), duration_s))
+            if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(torque))) or np.any(np.abs(theta) > 1.0):
+                total += 10.0
+                continue
+            total += float(np.mean(theta**2) + TORQUE_WEIGHT * np.mean((torque / torque_limit_nm) ** 2))
+        return total / len(tilts_rad)
 
     x0 = np.log(initial_gains.as_array())
     initial_cost, simplex = cost(x0), np.vstack([np.zeros(3), np.eye(3)])

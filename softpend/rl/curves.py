@@ -52,7 +52,7 @@ def run_to_asymptote(log: TrainingLog, window: int = 10) -> tuple[float, float]:
     if log.stop_reason is not None and log.n_episodes > 0:
         return float(log.n_episodes), float(log.plant_s)
     episodes = episodes_to_asymptote(log.column("return"), window=window)
-    return episodes, plant_s_at_episode(log, episodes)
+    return episodes, math.inf if math.isinf(episodes) else float(log.episodes[int(episodes) - 1]["plant_s"])
 
 
 def failures_as(
@@ -68,13 +68,6 @@ def worst_start_std_rad(log: TrainingLog, failed_as: float = SUCCESS_STD_RAD) ->
     return failures_as(
         log.column("max_upright_std_rad", "evaluations"), log.column("success_rate", "evaluations"), failed_as
     )
-
-
-def plant_s_at_episode(log: TrainingLog, episode: float) -> float:
-    """Real plant seconds consumed when ``episode`` (1-based) ended (``inf`` for ``inf``)."""
-    if math.isinf(episode):
-        return math.inf
-    return float(log.episodes[int(episode) - 1]["plant_s"])
 
 
 def interval_band(

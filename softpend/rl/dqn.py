@@ -6,7 +6,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional, Protocol, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import torch
@@ -338,21 +338,6 @@ class EpisodeEvents(BaseCallback):
         return final
 
 
-class ModelBasedPart(Protocol):
-    """What a model-based variant adds to :func:`run_training` (:class:`softpend.rl.mbpo.MBPOTrainer`)."""
-
-    model_steps: int
-
-    def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
-        """The callbacks that run before ``recorder`` in each step and those that run right after it."""
-
-    def save(self, folder: Path) -> None:
-        """Write the part's state into a checkpoint folder."""
-
-    def restore(self, folder: Path) -> None:
-        """Read the part's state back from a checkpoint folder."""
-
-
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
     """Re-initialise ``model``'s Q-network (PyTorch's default, seeded by ``seed``) and its target and clear the
     optimiser's moments; the replay buffer, exploration schedule and step counters are kept."""
@@ -438,7 +423,7 @@ def _start_or_resume(
     env: Any,
     make_model: Callable[[Any, int], DQN],
     replay_buffer_class: type[ReplayBuffer],
-    part: Optional[ModelBasedPart],
+    part: Any,
 ) -> tuple[DQN, TrainingLog]:
     """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (with the same config)."""
     checkpoint = run_dir / "checkpoint"
@@ -468,7 +453,7 @@ def training_callbacks(
     episodes: int,
     run_dir: Path,
     progress: bool,
-    part: Optional[ModelBasedPart] = None,
+    part: Any = None,
 ) -> CallbackList:
     """The callbacks of a training run, in the order they run each step."""
     recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
@@ -487,9 +472,10 @@ def run_training(
     progress: bool,
     make_model: Callable[[Any, int], DQN],
     replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
-    part: Optional[ModelBasedPart] = None,
+    part: Any = None,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (``part``: its model refits and rollouts)."""
+    """The training loop shared by DQN and DQN-MBPO (``part``, a :class:`softpend.rl.mbpo.MBPOTrainer`: its
+    callbacks before and after the episode bookkeeping, and its checkpoint files)."""
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)

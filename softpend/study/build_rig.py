@@ -29,6 +29,8 @@ HANGING_TIP_TOLERANCE_M = 0.005
 IDENTIFY_HORIZON_S = 0.5
 #: Cameras the closed loop has run under on the twin: name -> (frame rate [1/s], latency [s]).
 TESTED_CAMERAS: dict[str, tuple[float, float]] = {"nominal": (60.0, 0.020), "harsh": (30.0, 0.040)}
+#: The peaks :func:`swing_up_needs` reports (``peak_<name>``).
+_PEAKS = ("torque_nm", "hub_rate_rad_s", "tip_speed_m_s")
 
 
 def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
@@ -39,18 +41,10 @@ def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[
     for label, make in rig_controllers(task).items():
         for r in evaluate_controller(make(), task, name=label, seeds=list(seeds), duration_s=duration_s).results:
             obs = r.observations
-            rows.append(
-                {
-                    "controller": label,
-                    "seed": r.seed,
-                    "success": bool(r.success),
-                    "swing_up_time_s": float(r.swing_up_time_s),
-                    "upright_std_rad": float(r.upright_std_rad),
-                    "peak_torque_nm": float(np.max(np.abs(r.torque_nm))),
-                    "peak_hub_rate_rad_s": float(np.max(np.abs(obs[:, phi_dot]))),
-                    "peak_tip_speed_m_s": float(np.max(np.hypot(obs[:, ex_dot], obs[:, ey_dot]))),
-                }
-            )
+            peaks = (r.torque_nm, obs[:, phi_dot], np.hypot(obs[:, ex_dot], obs[:, ey_dot]))
+            row = {"controller": label, "seed": r.seed, "success": bool(r.success)}
+            row |= {k: float(getattr(r, k)) for k in ("swing_up_time_s", "upright_std_rad")}
+            rows.append(row | {f"peak_{k}": float(np.max(np.abs(v))) for k, v in zip(_PEAKS, peaks)})
     return rows
 
 
@@ -61,18 +55,14 @@ def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float) -> list[dict[str, A
     for c in V5_CARTRIDGES:
         available = c.available_torque_nm(peak_hub_rate_rad_s)
         speed_margin = c.free_speed_rad_s / peak_hub_rate_rad_s if peak_hub_rate_rad_s > 0 else math.inf
-        rows.append(
-            {
-                "cartridge": c.name,
-                "free_speed_rad_s": c.free_speed_rad_s,
-                "stall_torque_nm": c.stall_torque_nm,
-                "speed_margin": speed_margin,
-                "torque_at_peak_rate_nm": available,
-                "torque_margin": available / torque_nm,
-                "encoder_ticks_per_rev": c.encoder_ticks_per_rev,
-                "qualifies": bool(speed_margin > 1.0 and available / torque_nm >= MIN_TORQUE_MARGIN),
-            }
-        )
+        row = {"cartridge": c.name, "free_speed_rad_s": c.free_speed_rad_s, "stall_torque_nm": c.stall_torque_nm}
+        row |= {
+            "speed_margin": speed_margin,
+            "torque_at_peak_rate_nm": available,
+            "torque_margin": available / torque_nm,
+        }
+        qualifies = bool(speed_margin > 1.0 and available / torque_nm >= MIN_TORQUE_MARGIN)
+        rows.append(row | {"encoder_ticks_per_rev": c.encoder_ticks_per_rev, "qualifies": qualifies})
     return rows
 
 
@@ -124,18 +114,10 @@ def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], durati
                 QuantisedHub(make(), n), task, name=label, seeds=list(seeds), duration_s=duration_s
             )
             stds = [r.upright_std_rad for r in summary.results if r.success]
-            rows.append(
-                {
-                    "counts_per_rev": int(n),
-                    "controller": label,
-                    "starts": len(summary.results),
-                    "successes": summary.successes,
-                    "worst_upright_std_rad": max(stds) if stds else math.nan,
-                    "torque_per_tick_fraction": gain["joint state" if "joint" in label else "observations"]
-                    * tick
-                    / task.torque_limit_nm,
-                }
-            )
+            row = {"counts_per_rev": int(n), "controller": label, "starts": len(summary.results)}
+            row |= {"successes": summary.successes, "worst_upright_std_rad": max(stds) if stds else math.nan}
+            step = gain["joint state" if "joint" in label else "observations"] * tick / task.torque_limit_nm
+            rows.append(row | {"torque_per_tick_fraction": step})
     return rows
 
 
@@ -170,15 +152,9 @@ def modulus_rows(params: RodParams) -> list[dict[str, Any]]:
     rows = []
     for e in (TPU_MODULUS_RANGE_PA[0], params.youngs_modulus_pa, TPU_MODULUS_RANGE_PA[1]):
         figures = rod_design(params.replace(youngs_modulus_pa=e))
-        rows.append(
-            {
-                "modulus_mpa": e / 1e6,
-                "tip_sag_fraction": figures.tip_sag_fraction,
-                "torque_ratio": figures.torque_ratio,
-                "buckling_load_factor": figures.buckling_load_factor,
-                "thickness_for_design_mm": 1e3 * rig_design(params, print_modulus_pa=e).beam_thickness_m,
-            }
-        )
+        row = {k: getattr(figures, k) for k in ("tip_sag_fraction", "torque_ratio", "buckling_load_factor")}
+        thickness_mm = 1e3 * rig_design(params, print_modulus_pa=e).beam_thickness_m
+        rows.append({"modulus_mpa": e / 1e6, **row, "thickness_for_design_mm": thickness_mm})
     return rows
 
 
@@ -408,19 +384,16 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
         return {"good": bool(d["passed"]), **passed, "watchdog_trip_ms": trip_ms, "round_trip_ms": d["round_trip_ms"]}
     if step.key == "calibrate":
         d = read("calibration.report.json")
-        return {
-            "good": bool(d["passed"]),
-            "residual_px": d["residual_px"],
-            "tip_error_mm": 1e3 * d["tip_error_m"],
-            "px_per_m": d["px_per_m"],
-        }
+        figures = {"residual_px": d["residual_px"], "tip_error_mm": 1e3 * d["tip_error_m"], "px_per_m": d["px_per_m"]}
+        return {"good": bool(d["passed"]), **figures}
     if step.key == "babble":
         d = read("babble", "summary.json")
         good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5
+        good = bool(good and (f / "babble" / "rig_dataset.npz").is_file())
+        figures = {"n_trials": d["n_trials"], "clock_offset_ms": 1e3 * d["clock_offset_s"]}
         return {
-            "good": bool(good and (f / "babble" / "rig_dataset.npz").is_file()),
-            "n_trials": d["n_trials"],
-            "clock_offset_ms": 1e3 * d["clock_offset_s"],
+            "good": good,
+            **figures,
             "peak_correlation": d["peak_correlation"],
             "valid_fraction": d["grid_valid_fraction"],
         }
@@ -433,16 +406,10 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
     if step.key == "control":
         d = read("control", "summary.json")
         truth = d.get("truth") or {}
-        good = d["stop_reason"] is None and (bool(truth.get("success")) if truth else True)
-        return {
-            "good": bool(good),
-            "stop_reason": d["stop_reason"],
-            "samples": d["samples"],
-            "late_commands": d.get("late_commands", 0),
-            "success": bool(truth.get("success", False)),
-            "swing_up_time_s": truth.get("swing_up_time_s", math.nan),
-            "upright_std_rad": truth.get("upright_std_rad", math.nan),
-        }
+        good = bool(d["stop_reason"] is None and (bool(truth.get("success")) if truth else True))
+        run = {"stop_reason": d["stop_reason"], "samples": d["samples"], "late_commands": d.get("late_commands", 0)}
+        figures = {k: truth.get(k, math.nan) for k in ("swing_up_time_s", "upright_std_rad")}
+        return {"good": good, **run, "success": bool(truth.get("success", False)), **figures}
     raise ValueError(f"unknown build step {step.key!r}")
 
 

@@ -121,12 +121,8 @@ def _number(value: float, digits: int = 2) -> str:
     return f"{value:.{digits}g}" if abs(value) < 10**digits else f"{value:.0f}"
 
 
-def _seconds(value: float) -> str:
-    return "never" if math.isinf(value) else f"{_number(value)} s"
-
-
-def _hours(value_s: float) -> str:
-    return "never" if math.isinf(value_s) else f"{_number(value_s / 3600.0)} h"
+def _seconds(value: float, unit: str = "s", scale: float = 1.0) -> str:
+    return "never" if math.isinf(value) else f"{_number(value / scale)} {unit}"
 
 
 def over_seeds(values: Sequence[float], unit: str = "", fmt: Callable[[float], str] = _number) -> str:
@@ -212,16 +208,15 @@ def _asymptote(algo: str, episodes: float, hours: float, e: _Evidence) -> Found:
 
 def _fewer_episodes(e: _Evidence) -> Found:
     # reproduced: DQN-MBPO's median plant time to the asymptote below model-free DQN's
-    medians = {}
-    for algo, method in METHOD_NAMES.items():
-        if not (runs := list(e.logs.get(method, []))):
-            return None
-        episodes, plant_s, _ = _to_asymptote(runs)
-        medians[algo] = (_median(episodes), _median(plant_s))
-    (mb_episodes, mb_s), (mf_episodes, mf_s) = medians["mbpo"], medians["dqn"]
+    if not all(e.logs.get(method) for method in METHOD_NAMES.values()):
+        return None
+    (mb_episodes, mb_s), (mf_episodes, mf_s) = (
+        map(_median, _to_asymptote(list(e.logs[METHOD_NAMES[algo]]))[:2]) for algo in ("mbpo", "dqn")
+    )
+    hours = partial(_seconds, unit="h", scale=3600.0)
     ours = (
-        f"plant time to the asymptote (median over seeds): DQN-MBPO {_hours(mb_s)} ({_number(mb_episodes)} episodes), "
-        f"DQN {_hours(mf_s)} ({_number(mf_episodes)} episodes)"
+        f"plant time to the asymptote (median over seeds): DQN-MBPO {hours(mb_s)} ({_number(mb_episodes)} episodes), "
+        f"DQN {hours(mf_s)} ({_number(mf_episodes)} episodes)"
     )
     return ours, mb_s < mf_s
 

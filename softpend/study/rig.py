@@ -46,8 +46,8 @@ def truth_metrics(
     truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
     if len(truth["time_s"]) < 3:
         return {}
-    signals = (truth[k] for k in ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s"))
-    metrics = metrics_from_trajectory(*signals, success_std_rad=success_std_rad)
+    t = truth
+    metrics = metrics_from_trajectory(t["time_s"], t["theta_rad"], t["torque_nm"], t["phi_dot_rad_s"], success_std_rad)
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
 
 

@@ -77,20 +77,14 @@ class DeviceClock:
     def __init__(self, one_way_latency_s: float = 0.0, window: int = 500) -> None:
         self.one_way_latency_s = non_negative("one_way_latency_s", one_way_latency_s)
         self._delays: collections.deque[float] = collections.deque(maxlen=int_at_least("window", window, 1))
-        self._offset: Optional[float] = None
 
     def observe(self, host_time_s: float, device_time_s: float) -> None:
-        value = host_time_s - device_time_s
-        full = len(self._delays) == self._delays.maxlen
-        dropped = self._delays[0] if full else None
-        self._delays.append(value)
-        if self._offset is None or value < self._offset or dropped == self._offset:
-            self._offset = min(self._delays)
+        self._delays.append(host_time_s - device_time_s)
 
     @property
     def offset_s(self) -> float:
         """Host minus device clock [s] (NaN before the first frame)."""
-        return math.nan if self._offset is None else self._offset - self.one_way_latency_s
+        return min(self._delays) - self.one_way_latency_s if self._delays else math.nan
 
     def to_device(self, host_time_s: float) -> float:
         return host_time_s - self.offset_s
@@ -114,14 +108,9 @@ class RigStateEstimator:
             ("tips_accepted", "tips_refused", "tips_too_old", "tips_deferred", "encoder_gaps"), 0
         )
         self._pending_tips: list[tuple[float, float, float]] = []
-        h = np.zeros((2 if cfg.hub_rate_std_rad_s is not None else 1, 2 * n))
-        h[0, 0] = 1.0
-        noise = [cfg.encoder_std_rad**2]
-        if cfg.hub_rate_std_rad_s is not None:
-            h[1, n] = 1.0
-            noise.append(cfg.hub_rate_std_rad_s**2)
-        self._h_encoder = h
-        self._r_encoder = np.diag(noise)
+        stds = [cfg.encoder_std_rad] + ([] if cfg.hub_rate_std_rad_s is None else [cfg.hub_rate_std_rad_s])
+        self._h_encoder = np.eye(2 * n)[[0, n][: len(stds)]]  # measures the hub angle (and rate)
+        self._r_encoder = np.diag([std**2 for std in stds])
         self._r_tip = np.eye(2) * cfg.tip_std_m**2
         self._eye_2n = np.eye(2 * n)
         self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)

@@ -139,8 +139,3 @@ class PlantBase(ExudynSystem):
 
 #: The type of :func:`softpend.plant.make_plant`'s plants.
 Plant = PlantBase
-
-
-def energies(kinetic, gravity, elastic) -> dict:
-    """The energy dict of :meth:`Plant.energy_j`."""
-    return {"kinetic_j": kinetic, "gravity_j": gravity, "elastic_j": elastic, "total_j": kinetic + gravity + elastic}

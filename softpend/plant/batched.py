@@ -15,7 +15,8 @@ from typing import Any, Callable, Optional, Sequence, Union
 import numpy as np
 import torch
 
-from softpend.checks import int_at_least, one_of, positive
+from softpend.checks import boolean, int_at_least, one_of, positive
+from softpend.plant.observation import energies
 from softpend.plant.params import MAX_N_LINKS, RodParams
 
 #: The per-rod parameters of :class:`BatchedRodParams`: every float field of :class:`RodParams`.
@@ -439,9 +440,7 @@ class BatchedPRBChain:
         compiled: bool = False,
     ) -> None:
         self.integrator = one_of("integrator", integrator, INTEGRATORS)
-        if not isinstance(compiled, bool):
-            raise ValueError(f"compiled must be True or False, got {compiled!r}")
-        self.compiled = compiled
+        self.compiled = boolean("compiled", compiled)
         self._compiled_integrate: Optional[Callable[..., Any]] = None
         if isinstance(params, BatchedRodParams):
             if batch_size is not None and int_at_least("batch_size", batch_size, 1) != params.batch_size:
@@ -483,14 +482,6 @@ class BatchedPRBChain:
         q[:, 0] = math.pi
         return q, torch.zeros_like(q)
 
-    def _check_state(self, value: TensorLike, name: str) -> torch.Tensor:
-        tensor = torch.as_tensor(value, dtype=self.dtype)
-        if tuple(tensor.shape) != (self.batch_size, self.n_coordinates):
-            raise ValueError(
-                f"{name} must have shape ({self.batch_size}, {self.n_coordinates}), got {tuple(tensor.shape)}"
-            )
-        return tensor
-
     def _check_torque(self, torque_nm: TensorLike) -> torch.Tensor:
         torque = torch.as_tensor(torque_nm, dtype=self.dtype)
         if torque.ndim == 0:
@@ -503,16 +494,17 @@ class BatchedPRBChain:
             raise ValueError("torque_nm must be finite")
         return torch.minimum(torch.maximum(torque, -self._d.torque_limit_nm), self._d.torque_limit_nm)
 
-    @staticmethod
-    def _absolute(q: torch.Tensor) -> torch.Tensor:
-        return torch.cumsum(q, dim=1).T.contiguous()
-
     def _absolute_state(self, q: TensorLike, qd: TensorLike) -> tuple[torch.Tensor, torch.Tensor]:
         """Checked ``(q, q_dot)`` as absolute angles and rates ``(n + 1, B)``."""
-        return (
-            self._absolute(self._check_state(q, "joint_angles_rad")),
-            self._absolute(self._check_state(qd, "joint_velocities_rad_s")),
-        )
+        out = []
+        for value, name in ((q, "joint_angles_rad"), (qd, "joint_velocities_rad_s")):
+            tensor = torch.as_tensor(value, dtype=self.dtype)
+            if tuple(tensor.shape) != (self.batch_size, self.n_coordinates):
+                raise ValueError(
+                    f"{name} must have shape ({self.batch_size}, {self.n_coordinates}), got {tuple(tensor.shape)}"
+                )
+            out.append(torch.cumsum(tensor, dim=1).T.contiguous())
+        return out[0], out[1]
 
     @staticmethod
     def _relative(x: torch.Tensor) -> torch.Tensor:
@@ -567,10 +559,9 @@ class BatchedPRBChain:
         theta_dot = torch.where(
             r2 > 0, (ex * ey_dot - ey * ex_dot) / torch.where(r2 > 0, r2, torch.ones_like(r2)), torch.zeros_like(r2)
         )
-        two_pi = 2 * math.pi
 
         def wrap(angle: torch.Tensor) -> torch.Tensor:
-            return torch.remainder(angle + math.pi, two_pi) - math.pi
+            return torch.remainder(angle + math.pi, 2 * math.pi) - math.pi
 
         return torch.stack(
             [wrap(x[0]), wrap(theta), ex, ey, wrap(a[-1]), v[0], theta_dot, ex_dot, ey_dot, ad[-1]], dim=1
@@ -584,10 +575,4 @@ class BatchedPRBChain:
         s, c = torch.sin(a), torch.cos(a)
         kinetic = 0.5 * d.hub_inertia_kgm2 * v[0] ** 2 + 0.5 * (ad * _mass_times(d, c, s, ad)).sum(0)
         gravity = (d.gravity_moment_nm * c).sum(0)
-        elastic = 0.5 * (d.stiffness_nm_per_rad * (a - x[:-1]) ** 2).sum(0)
-        return {
-            "kinetic_j": kinetic,
-            "gravity_j": gravity,
-            "elastic_j": elastic,
-            "total_j": kinetic + gravity + elastic,
-        }
+        return energies(kinetic, gravity, 0.5 * (d.stiffness_nm_per_rad * (a - x[:-1]) ** 2).sum(0))

@@ -27,9 +27,9 @@ from exudyn.itemInterface import (
 )
 
 from softpend.checks import in_unit_interval, int_at_least, positive
-from softpend.plant.base import PlantBase, energies
+from softpend.plant.base import PlantBase
 from softpend.plant.exudyn_adapter import static_solver_settings
-from softpend.plant.observation import Observation, observation_from_tip
+from softpend.plant.observation import Observation, energies, observation_from_tip
 from softpend.plant.params import RodParams
 
 DEFAULT_N_ELEMENTS = 12

@@ -79,3 +79,8 @@ def observation_from_tip(
         ey_dot_m_s,
         er_dot_rad_s,
     )
+
+
+def energies(kinetic, gravity, elastic) -> dict:
+    """The energy dict of a plant's ``energy_j``."""
+    return {"kinetic_j": kinetic, "gravity_j": gravity, "elastic_j": elastic, "total_j": kinetic + gravity + elastic}

@@ -10,8 +10,8 @@ import exudyn as exu
 import numpy as np
 from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
 
-from softpend.plant.base import PlantBase, energies
-from softpend.plant.observation import Observation, observation_from_tip
+from softpend.plant.base import PlantBase
+from softpend.plant.observation import Observation, energies, observation_from_tip
 from softpend.plant.params import RodParams
 
 

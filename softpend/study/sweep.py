@@ -80,19 +80,18 @@ def _engine(backend: str) -> Iterator[None]:
     """Make ``backend`` joblib's active backend (registering Ray's or Dask's first)."""
     import joblib
 
-    if backend == "ray":
-        from ray.util.joblib import register_ray
+    with contextlib.ExitStack() as stack:
+        if backend == "ray":
+            from ray.util.joblib import register_ray
 
-        register_ray()
-        with joblib.parallel_config(backend="ray"):
-            yield
-    elif backend == "dask":
-        from dask.distributed import Client
+            register_ray()
+        elif backend == "dask":
+            from dask.distributed import Client
 
-        address = os.environ.get("DASK_SCHEDULER_ADDRESS")
-        with Client(address) if address else Client(processes=True), joblib.parallel_config(backend="dask"):
-            yield
-    else:
+            address = os.environ.get("DASK_SCHEDULER_ADDRESS")
+            stack.enter_context(Client(address) if address else Client(processes=True))
+        if backend != "loky":
+            stack.enter_context(joblib.parallel_config(backend=backend))
         yield
 
 
@@ -117,13 +116,10 @@ def run_jobs(
     workers = int_at_least("workers", default_workers() if workers is None else workers, 1)
     retries = int_at_least("retries", retries, 0)
     backend = check_backend(default_backend() if backend is None else backend)
-    workers = min(workers, max(1, len(jobs)))
-    pending = dict(zip(names, jobs))
-    failures: dict[str, str] = {}
+    workers, pending, failures = min(workers, max(1, len(jobs))), dict(zip(names, jobs)), dict[str, str]()
     for attempt in range(retries + 1):
-        raised, lost = _run_round(
-            job, pending, workers, progress, desc + (f" (retry {attempt})" if attempt else ""), backend
-        )
+        retry = f" (retry {attempt})" if attempt else ""
+        raised, lost = _run_round(job, pending, workers, progress, desc + retry, backend)
         failures.update(raised)
         pending = {name: pending[name] for name in lost}
         if not pending:
@@ -143,42 +139,28 @@ def _run_round(
 ) -> tuple[dict[str, str], set[str]]:
     """One pass over ``pending``: ``({name: traceback} of the jobs that raised, names of the lost jobs)``."""
     if workers <= 1:
-        raised: dict[str, str] = {}
-        for name, args in pending.items():
-            _, error = _guarded(job, args, name, progress, one_thread=False)
-            if error is not None:
-                raised[name] = error
-        return raised, set()
-
+        results = [_guarded(job, args, name, progress, one_thread=False) for name, args in pending.items()]
+        return {name: error for name, error in results if error is not None}, set()
     import joblib
     from tqdm.auto import tqdm
 
-    finished: set[str] = set()
-    raised = {}
+    finished: dict[str, Optional[str]] = {}
+    # loky replaces a worker that grew past its memory check; no job is lost
+    message = "A worker stopped while some jobs were given to the executor"
+    warnings.filterwarnings("ignore", message=message, category=UserWarning, module="joblib")
     try:
-        # loky replaces a worker that grew past its memory check; no job is lost
-        warnings.filterwarnings(
-            "ignore",
-            message="A worker stopped while some jobs were given to the executor",
-            category=UserWarning,
-            module="joblib",
-        )
         with _engine(backend):
-            parallel = joblib.Parallel(
-                n_jobs=min(workers, len(pending)),
-                return_as="generator_unordered",
-                **({"backend": "loky"} if backend == "loky" else {}),
-            )
+            loky = {"backend": "loky"} if backend == "loky" else {}
+            parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered", **loky)
             calls = (joblib.delayed(_guarded)(job, args, name, False, True) for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):
-                    finished.add(name)
-                    if error is not None:
-                        raised[name] = error
+                    finished[name] = error
                     bar.set_postfix_str(name)
                     bar.update(1)
     except ValueError:
         raise
     except Exception:  # noqa: BLE001 -- a worker died (loky's TerminatedWorkerError, a lost Ray/Dask task)
         pass
+    raised = {name: error for name, error in finished.items() if error is not None}
     return raised, {name for name in pending if name not in finished}

@@ -409,16 +409,9 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o
                 f"substeps must be at least {stable} for the rods drawn with rod_spread = {rod_spread:g} "
                 f"(softpend.plant.batched.stable_substeps), got {substeps!r}"
             )
-    kwargs = dict(
-        num_envs=len(seeds),
-        params=task.rod,
-        dt_s=task.dt_s,
-        substeps=substeps,
-        start=task.start,
-        start_noise_rad=task.start_noise_rad,
-        max_episode_steps=int(round(duration_s / task.dt_s)) + 1,
-        **o["env_kwargs"],
-    )
+    kwargs = {k: v for k, v in task.env_kwargs().items() if k != "plant"}
+    kwargs.update(substeps=substeps, num_envs=len(seeds), max_episode_steps=int(round(duration_s / task.dt_s)) + 1)
+    kwargs.update(o["env_kwargs"])
     levels = getattr(policy, "n_torque_levels", None)
     env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
     if rods is not None:

@@ -65,11 +65,7 @@ def reset_options(
 
 def draw_start(rng: np.random.Generator, start: str, noise_rad: float) -> tuple[float, float]:
     """Hub angle and rate of a start of kind ``start``, drawn from ``rng``."""
-    hub = math.pi
-    if start == "upright":
-        hub = 0.0
-    elif start == "random":
-        hub = float(rng.uniform(-math.pi, math.pi))
+    hub = float(rng.uniform(-math.pi, math.pi)) if start == "random" else {"hanging": math.pi, "upright": 0.0}[start]
     return hub + float(rng.uniform(-noise_rad, noise_rad)), float(rng.uniform(-noise_rad, noise_rad))
 
 
@@ -212,14 +208,10 @@ class SoftPendulumDiscreteEnv(SoftPendulumEnv):
 
     def torque_from_action(self, action) -> float:
         """Torque [N m] of an integer action (or a one-element integer array) in ``[0, n_torque_levels)``."""
-        value = action
-        if isinstance(value, (list, tuple)):
-            value = np.asarray(value) if all(isinstance(v, (int, np.integer)) for v in value) else None
-        if isinstance(value, np.ndarray):
-            value = value.reshape(-1)[0] if value.size == 1 and value.dtype.kind in "iu" else None
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        try:
+            value = np.asarray(action)
+        except ValueError:  # a ragged list
+            value = np.asarray(None)
+        if value.size != 1 or value.dtype.kind not in "iu" or not 0 <= value.reshape(-1)[0] < self.n_torque_levels:
             raise ValueError(f"action must be an integer in [0, {self.n_torque_levels}), got {action!r}")
-        index = int(value)
-        if not 0 <= index < self.n_torque_levels:
-            raise ValueError(f"action must be in [0, {self.n_torque_levels}), got {action!r}")
-        return float(self.torque_levels_nm[index])
+        return float(self.torque_levels_nm[value.reshape(-1)[0]])

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from softpend.checks import optional_positive
+from softpend.io.reading import check_regular_file
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
@@ -82,29 +83,24 @@ def track_video(
     if fps is not None:
         fps = check_fps("fps", fps)
     _check_output_path(out_csv, video)
-    if not video.exists():
-        raise FileNotFoundError(f"video not found: {video}")
-    if not video.is_file():
-        raise ValueError(f"video {video} is not a file")
+    check_regular_file(video, "video")
     sidecar = read_sidecar(video)
     if marker_positions_m is None:
         marker_positions_m = sidecar.get("markers_m")
-    if timestamps_s is None:
-        timestamps_s = sidecar.get("timestamps_s")
-    if timestamps_s is not None:
-        stamps_array = np.asarray(timestamps_s, dtype=float)
-        if stamps_array.ndim != 1 or not np.all(np.isfinite(stamps_array)):
+    stamps = sidecar.get("timestamps_s") if timestamps_s is None else timestamps_s
+    if stamps is not None:
+        stamps = np.asarray(stamps, dtype=float)
+        if stamps.ndim != 1 or not np.all(np.isfinite(stamps)):
             raise ValueError("timestamps_s must be a 1-D sequence of finite times [s]")
     capture = cv2.VideoCapture(str(video))
     if not capture.isOpened():
         raise ValueError(f"video {video} cannot be opened by OpenCV")
     try:
-        if fps is None:
-            fps = sidecar.get("fps")
+        fps = sidecar.get("fps") if fps is None else fps
         if fps is None:
             container_fps = float(capture.get(cv2.CAP_PROP_FPS) or 0)
             fps = container_fps if math.isfinite(container_fps) and 0 < container_fps <= MAX_FPS else None
-        if timestamps_s is None and fps is None:
+        if stamps is None and fps is None:
             raise ValueError("fps: the video has no usable frame rate; pass fps or timestamps")
         frames = _video_frames(capture)
         first = next(frames, None)
@@ -114,7 +110,6 @@ def track_video(
             if marker_positions_m is None:
                 raise ValueError("marker_positions_m: needed to calibrate (no calibration and no sidecar)")
             calibration = calibrate_from_markers(first, marker_positions_m)
-        stamps = None if timestamps_s is None else list(timestamps_s)
 
         def stamp(i: int) -> float:
             if stamps is None:

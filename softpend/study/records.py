@@ -121,12 +121,8 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
     def row(folder: Path, seed: int) -> dict[str, Any]:
         load_config(folder / "config.json")
         log = TrainingLog.load(folder / "log.json")
-        return {
-            "seed": seed,
-            "plant_s_to_balance": float(log.real_s_to_balance()),
-            "plant_s": log.plant_s,
-            "episodes": log.n_episodes,
-        }
+        figures = {"plant_s_to_balance": float(log.real_s_to_balance()), "plant_s": log.plant_s}
+        return {"seed": seed, **figures, "episodes": log.n_episodes}
 
     return load_runs(runs_root, plant, algo, seeds, row)
 

@@ -82,6 +82,14 @@ def rl_jobs(
     return [(names[i], jobs[i]) for i in order]
 
 
+def _saved_config(run_dir: Path) -> DQNConfig | None:
+    """The config saved in a run folder, or None if this version cannot read it."""
+    try:
+        return load_config(run_dir / "config.json")
+    except ValueError:
+        return None
+
+
 def train_run(
     algo: str, config: DQNConfig, seed: int, episodes: int, run_dir: Path, resume: bool, progress: bool = True
 ) -> None:
@@ -96,14 +104,6 @@ def train_run(
         train_mbpo(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
-def _saved_config(run_dir: Path) -> DQNConfig | None:
-    """The config saved in a run folder, or None if this version cannot read it."""
-    try:
-        return load_config(run_dir / "config.json")
-    except ValueError:
-        return None
-
-
 def summary_table(
     logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD
 ) -> list[dict[str, Any]]:
@@ -115,21 +115,15 @@ def summary_table(
         for log in logs:
             asym, asym_plant_s = run_to_asymptote(log)
             last = log.evaluations[-1] if log.evaluations else {}
-            rows.append(
-                {
-                    "method": method,
-                    "seed": log.seed,
-                    "episodes": log.n_episodes,
-                    "plant_s": log.plant_s,
-                    "episodes_to_asymptote": asym,
-                    "plant_s_to_asymptote": asym_plant_s,
-                    "episodes_to_balance": log.episodes_to_balance(std_rad),
-                    "plant_s_to_balance": log.real_s_to_balance(std_rad),
-                    "final_max_upright_std_rad": last.get("max_upright_std_rad", math.nan),
-                    "final_swing_up_time_s": last.get("median_swing_up_time_s", math.nan),
-                    "model_steps": log.model_steps,
-                }
-            )
+            row = {"method": method, "seed": log.seed, "episodes": log.n_episodes, "plant_s": log.plant_s}
+            row |= {"episodes_to_asymptote": asym, "plant_s_to_asymptote": asym_plant_s}
+            row |= {
+                "episodes_to_balance": log.episodes_to_balance(std_rad),
+                "plant_s_to_balance": log.real_s_to_balance(std_rad),
+            }
+            row["final_max_upright_std_rad"] = last.get("max_upright_std_rad", math.nan)
+            row["final_swing_up_time_s"] = last.get("median_swing_up_time_s", math.nan)
+            rows.append(row | {"model_steps": log.model_steps})
     return rows
 
 

@@ -39,10 +39,8 @@ def hub_error_inputs(
     """``(params, torques_nm, q0, qd0)``: ``duration_s`` of seeded random torque from the hanging rod, hub turned
     0.3 rad and spinning at 0.5 rad/s."""
     params = RodParams(n_links=n_links)
-    n_steps = int(round(duration_s / 0.01))
-    torques = np.random.default_rng(seed).uniform(-1, 1, n_steps) * params.torque_limit_nm
-    q0 = np.zeros(n_links + 1)
-    qd0 = np.zeros(n_links + 1)
+    torques = np.random.default_rng(seed).uniform(-1, 1, int(round(duration_s / 0.01))) * params.torque_limit_nm
+    q0, qd0 = np.zeros(n_links + 1), np.zeros(n_links + 1)
     q0[0], qd0[0] = math.pi - 0.3, 0.5
     return params, torques, q0, qd0
 
@@ -60,12 +58,8 @@ def hub_errors_rad(
     batched chain (RK4 in float64, Rosenbrock in float32) and of the default Exudyn plant."""
     from softpend.plant.batched import BatchedPRBChain
 
-    if reference is None:
-        reference = hub_error_reference(n_links, duration_s, seed)
-    elif reference.params.n_links != n_links:
-        raise ValueError(f"reference is of a rod of {reference.params.n_links} links, n_links is {n_links}")
-    params, torques, q0, qd0 = reference.params, reference.torques_nm, reference.q0, reference.qd0
-    reference_hub = reference.hub_rad
+    reference = reference if reference is not None else hub_error_reference(n_links, duration_s, seed)
+    params, torques, q0, qd0, reference_hub = reference
     figures = {}
     with one_torch_thread() as torch:
         for prefix, integrator, dtype in (

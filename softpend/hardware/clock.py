@@ -7,17 +7,12 @@ from __future__ import annotations
 import heapq
 import math
 import time
+import types
 from typing import Callable, Optional
 
 
-class WallClock:
-    """The computer's monotonic clock (a real rig)."""
-
-    now_s = staticmethod(time.monotonic)
-
-
-#: The wall clock, shared.
-WALL_CLOCK = WallClock()
+#: A real rig's clock: the computer's monotonic clock.
+WALL_CLOCK = types.SimpleNamespace(now_s=time.monotonic)
 
 
 class SimClock:

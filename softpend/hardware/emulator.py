@@ -105,11 +105,8 @@ class SimRig:
         self.session = proto.DeviceSession(
             cfg.counts_per_rev, cfg.task.torque_limit_nm, cfg.watchdog_ms, int(round(1.0 / cfg.task.dt_s))
         )
-        self._truth = None
-        if truth_log is not None:
-            self._truth = SampleLog(
-                truth_log, truth_columns(self.plant.n_coordinates), metadata={"rig": cfg.to_dict()}, fsync_every_s=None
-            )
+        columns, metadata = truth_columns(self.plant.n_coordinates), {"rig": cfg.to_dict()}
+        self._truth = None if truth_log is None else SampleLog(truth_log, columns, metadata, fsync_every_s=None)
         self._released = False
         self.ticks = 0
         self.counts = dict.fromkeys(("states_sent", "states_dropped", "states_garbled"), 0)
@@ -181,31 +178,6 @@ class SimRig:
         return self.host
 
 
-class _PtyHost:
-    """The pty's master end: a frame the pty has no room for is dropped; the tail of one taken in part goes first."""
-
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self._tail = b""
-
-    def _write(self, data: bytes) -> bytes:
-        try:
-            return data[os.write(self.fd, data) :]
-        except (BlockingIOError, InterruptedError):
-            return data
-        except OSError:
-            return b""  # no host has the pty open
-
-    def deliver(self, data: bytes) -> None:
-        if self._tail:
-            self._tail = self._write(self._tail)
-            if self._tail:
-                return
-        self._tail = self._write(data)
-        if self._tail == data:
-            self._tail = b""
-
-
 class RigEmulator(SimRig):
     """The device on a pseudo-terminal in real time, also exposed as the symlink ``link_path`` (replacing only a
     pty symlink an earlier emulator left)."""
@@ -224,7 +196,7 @@ class RigEmulator(SimRig):
         tty.setraw(self._slave_fd)
         os.set_blocking(self.master_fd, False)
         self.port = os.ttyname(self._slave_fd)
-        self.host = _PtyHost(self.master_fd)  # type: ignore[assignment]
+        self.host, self._tail = self, b""  # type: ignore[assignment]  # device bytes go to deliver()
         self._linked = False
         try:
             if self.link_path is not None:
@@ -237,6 +209,24 @@ class RigEmulator(SimRig):
             self.close()
             raise
         self._running = False
+
+    def _write(self, data: bytes) -> bytes:
+        try:
+            return data[os.write(self.master_fd, data) :]
+        except (BlockingIOError, InterruptedError):
+            return data
+        except OSError:
+            return b""  # no host has the pty open
+
+    def deliver(self, data: bytes) -> None:
+        """Write to the pty: a frame it has no room for is dropped; the tail of one taken in part goes first."""
+        if self._tail:
+            self._tail = self._write(self._tail)
+            if self._tail:
+                return
+        self._tail = self._write(data)
+        if self._tail == data:
+            self._tail = b""
 
     def stop(self) -> None:
         self._running = False

@@ -10,7 +10,6 @@ import time
 import types
 from typing import Callable, Optional
 
-
 #: A real rig's clock: the computer's monotonic clock.
 WALL_CLOCK = types.SimpleNamespace(now_s=time.monotonic)
 

@@ -118,13 +118,10 @@ def cantilever_free_vibration(
         kwargs["newton_relative_tolerance"] = 1e-10
     sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
 
-    def lateral(s):
-        return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[0] for m in modes)
+    def shape(s, k):  # k = 0: the lateral deflection, 1: its slope
+        return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[k] / (length if k else 1) for m in modes)
 
-    def slope(s):
-        return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[1] / length for m in modes)
-
-    sim.reset(*deflected_state(sim, lateral, slope))
+    sim.reset(*deflected_state(sim, lambda s: shape(s, 0), lambda s: shape(s, 1)))
     n_steps = int(round(duration_s / dt_s))
     tip = np.empty(n_steps + 1)
     tip[0] = sim.observe().ex_m
@@ -190,12 +187,8 @@ def measured_bending_frequencies(
 ) -> dict[str, float]:
     """First two cantilever frequencies from a free-vibration run and their error against theory."""
     run = cantilever_free_vibration(plant, params, resolution, **kwargs)
-    out = {}
-    for k in (0, 1):
-        out[f"f{k + 1}_hz"] = float(run.frequencies_hz[k])
-        out[f"f{k + 1}_theory_hz"] = float(run.theory_hz[k])
-        out[f"f{k + 1}_error_pct"] = float(run.error_pct[k])
-    return out
+    values = {"hz": run.frequencies_hz, "theory_hz": run.theory_hz, "error_pct": run.error_pct}
+    return {f"f{k + 1}_{key}": float(v[k]) for k in (0, 1) for key, v in values.items()}
 
 
 def static_tip_sag(

@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 
 from softpend.checks import (
     check_work_size,
+    in_range,
     in_unit_interval,
     int_at_least,
     non_negative,
@@ -68,13 +69,8 @@ class BabbleProtocol:
         for name in ("n_trials", "substeps"):
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
         object.__setattr__(self, "camera_delay_steps", int_at_least("camera_delay_steps", self.camera_delay_steps, 0))
-        for name in ("dt_s", "torque_bandwidth_hz"):
-            positive(name, getattr(self, name))
-        low, high = DT_S_RANGE
-        if not low <= self.dt_s <= high:
-            raise ValueError(
-                f"dt_s must lie in [{low:g}, {high:g}] s (the range a dataset file accepts), got {self.dt_s!r}"
-            )
+        positive("torque_bandwidth_hz", self.torque_bandwidth_hz)
+        in_range("dt_s", self.dt_s, *DT_S_RANGE)  # the range a dataset file accepts
         if self.n_samples < 2:
             raise ValueError(f"trial_length_s must cover at least 2 samples of dt_s, got {self.trial_length_s}")
         in_unit_interval("feedback_trial_fraction", self.feedback_trial_fraction)
@@ -167,11 +163,10 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     raw = np.empty((n + 1, 5))
     clock = np.arange(delay, delay + n + 1)  # encoder and torque clock
     i_phi, i_theta, i_ex, i_ey, i_er = range(5)
-    raw[:, i_phi] = true_positions[clock, i_phi] + protocol.phi_noise_std_rad * rng.standard_normal(n + 1)
-    raw[:, i_ex] = true_positions[: n + 1, i_ex] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
-    raw[:, i_ey] = true_positions[: n + 1, i_ey] + protocol.tip_noise_std_m * rng.standard_normal(n + 1)
+    noise = {i_phi: protocol.phi_noise_std_rad, i_ex: protocol.tip_noise_std_m, i_ey: protocol.tip_noise_std_m}
+    for i, std in (noise | {i_er: protocol.er_noise_std_rad}).items():  # the encoder on the torque's clock
+        raw[:, i] = true_positions[clock if i == i_phi else slice(n + 1), i] + std * rng.standard_normal(n + 1)
     raw[:, i_theta] = np.arctan2(-raw[:, i_ex], raw[:, i_ey])
-    raw[:, i_er] = true_positions[: n + 1, i_er] + protocol.er_noise_std_rad * rng.standard_normal(n + 1)
     angle_mask = np.array([is_angle(x) for x in POSITION_NAMES])
     raw[:, angle_mask] = wrap_angle_rad(raw[:, angle_mask])
     stored = clock[1:]
@@ -204,8 +199,7 @@ def babble(
     if not isinstance(protocol, BabbleProtocol):
         raise ValueError(f"protocol must be a BabbleProtocol, got {type(protocol).__name__}")
     params = params if params is not None else RodParams()
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    seed = int_at_least("seed", seed, 0)
     sim = make_plant(plant, params=params, dt_s=protocol.dt_s, substeps=protocol.substeps)
     per_sample = 8 * (2 * len(POSITION_NAMES) + 1 + len(OBSERVATION_NAMES) + 2 * sim.n_coordinates)
     n_samples = float(protocol.n_trials) * (protocol.n_samples + protocol.camera_delay_steps + 1)
@@ -214,7 +208,7 @@ def babble(
         2 * n_samples * per_sample,
         f"{n_samples:.3g} samples x {per_sample} bytes, held twice while the trials are stacked",
     )
-    streams = np.random.SeedSequence(int(seed)).spawn(protocol.n_trials)
+    streams = np.random.SeedSequence(seed).spawn(protocol.n_trials)
     trials = []
     for i in tqdm(range(protocol.n_trials), desc="babbling", unit="trial", disable=not progress):
         try:
@@ -229,7 +223,7 @@ def babble(
         source="simulation",
         plant=plant,
         plant_params=params,
-        seed=int(seed),
+        seed=seed,
         protocol=dict(protocol.to_dict(), feedback_trials=[int(t["feedback"]) for t in trials]),
         notes="motor babbling (softpend.sysid.babble)",
     )

@@ -4,11 +4,13 @@ angle, tip position and their differenced rates), each optionally followed by ``
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from softpend.checks import int_at_least, one_of
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.variables import POSITION_NAMES, is_angle, velocity_name
 
@@ -26,13 +28,9 @@ class StateLayout:
     velocity_source: str = "observed"
 
     def __post_init__(self) -> None:
-        if self.information not in INFORMATION_LEVELS:
-            raise ValueError(f"information must be one of {INFORMATION_LEVELS}, got {self.information!r}")
-        if isinstance(self.history, bool) or int(self.history) != self.history or self.history < 0:
-            raise ValueError(f"history must be a non-negative integer, got {self.history!r}")
-        object.__setattr__(self, "history", int(self.history))
-        if self.velocity_source not in ("observed", "true"):
-            raise ValueError(f"velocity_source must be 'observed' or 'true', got {self.velocity_source!r}")
+        one_of("information", self.information, INFORMATION_LEVELS)
+        object.__setattr__(self, "history", int_at_least("history", self.history, 0))
+        one_of("velocity_source", self.velocity_source, ("observed", "true"))
 
     @classmethod
     def full(cls, history: int = 0, velocity_source: str = "observed") -> "StateLayout":
@@ -87,7 +85,7 @@ class StateLayout:
         return self.names.index(name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"information": self.information, "history": self.history, "velocity_source": self.velocity_source}
+        return dataclasses.asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "StateLayout":

@@ -137,6 +137,15 @@ def load_profiles(path: Path | str) -> dict[str, dict[str, dict[str, Any]]]:
     return {str(p): {str(n): dict(v or {}) for n, v in (nbs or {}).items()} for p, nbs in data.items()}
 
 
+def book_profile(root: Path | str, profile: str) -> tuple[BookLayout, list[str], dict[str, dict[str, Any]]]:
+    """The book's layout at ``root``, its toc's notebooks and ``profile``'s parameters per notebook."""
+    layout = BookLayout.at(root)
+    toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
+    if profile not in profiles:
+        raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
+    return layout, toc, profiles[profile]
+
+
 def read_notebook(source_path: Path | str):
     """A jupytext MyST notebook as an ``nbformat`` notebook."""
     import jupytext
@@ -368,17 +377,14 @@ def run_notebooks(
     """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``) and
     write the execution page.  Every ``ValueError`` comes before anything executes; a failing notebook raises
     :class:`NotebookExecutionError` once the running ones end."""
-    layout = BookLayout.at(root)
-    toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
-    if profile not in profiles:
-        raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
-    for what, listed in ((f"profile {profile!r} names", profiles[profile]), ("--only names", only or [])):
+    layout, toc, given = book_profile(root, profile)
+    for what, listed in ((f"profile {profile!r} names", given), ("--only names", only or [])):
         if unknown := sorted(set(listed) - set(toc)):
             raise ValueError(f"{what} unknown notebook(s) {unknown}; _toc.yml lists {toc}")
     names = [name for name in toc if name in set(only)] if only else toc
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
-        plans, used = _plan(layout, names, toc, profile, profiles[profile], dict(overrides or {}), Path(scratch))
+        plans, used = _plan(layout, names, toc, profile, given, dict(overrides or {}), Path(scratch))
         order = execution_order(names, {name: plan["after"] for name, plan in plans.items()})
         for name in order:  # upstream keys: this run's, else the key files on disk
             plan = plans[name]

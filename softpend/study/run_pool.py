@@ -10,7 +10,7 @@ from typing import Any, Optional, Sequence
 
 from softpend.io.outputs import atomic_write, json_text
 from softpend.io.overrides import apply_overrides
-from softpend.study.book import BookLayout, front_matter, load_profiles, read_notebook, toc_notebooks
+from softpend.study.book import BookLayout, book_profile, front_matter, read_notebook
 from softpend.study.head_to_head import pilco_jobs, run_and_save
 from softpend.study.presets import PILCO_BOOK, RL_BOOK, TASK, load_hparams
 from softpend.study.rl_runs import figure_configs, rl_jobs, train_run
@@ -111,16 +111,12 @@ def book_run_jobs(
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
     """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook; a
     folder two notebooks read is the first's)."""
-    layout = BookLayout.at(root)
-    toc, profiles = toc_notebooks(layout.toc_path), load_profiles(layout.profiles_path)
-    if profile not in profiles:
-        raise ValueError(f"unknown profile {profile!r}; {layout.profiles_path} defines {sorted(profiles)}")
-    jobs: list[Job] = []
-    claimed: set[str] = set()
+    layout, toc, given = book_profile(root, profile)
+    jobs, claimed = list[Job](), set[str]()
     for name in toc:
         run_sets = front_matter(read_notebook(layout.source_path(name)), name, toc)["book_runs"]
         try:
-            jobs += book_run_jobs(run_sets, layout.root, profiles[profile].get(name), claimed) if run_sets else []
+            jobs += book_run_jobs(run_sets, layout.root, given.get(name), claimed) if run_sets else []
         except ValueError as exc:
             raise ValueError(f"notebook {name!r}: {exc}") from None
     return _order(jobs)
@@ -137,13 +133,11 @@ def train_book(
     jobs, start = book_jobs(root, profile), time.perf_counter()
     workers = default_workers() if workers is None else workers
     _train(jobs, workers, progress, backend)
-    record = {
-        "profile": profile,
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "trained": [name for name, _ in jobs],
-        "seconds": time.perf_counter() - start,
-        "workers": workers,
-    }
+    seconds, date = (
+        time.perf_counter() - start,
+        datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    )
+    record = dict(profile=profile, date=date, trained=[name for name, _ in jobs], seconds=seconds, workers=workers)
     layout = BookLayout.at(root)
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
     with atomic_write(layout.training_path, "w") as handle:

@@ -289,15 +289,10 @@ class MotorLink:
     def _state_from(self, seq: int, values: tuple) -> MotorState:
         device_us, counts, velocity, applied, last_cmd, flags = values
         cpr = self.device.counts_per_rev if self.device else 1
+        phi = math.pi + counts * (2 * math.pi / cpr)  # zero counts: hanging
+        host_time_s = self.clock.now_s()
         return MotorState(
-            host_time_s=self.clock.now_s(),
-            device_time_s=device_us * 1e-6,
-            phi_rad=math.pi + counts * (2 * math.pi / cpr),  # zero counts: hanging
-            phi_dot_rad_s=float(velocity),
-            applied_torque_nm=float(applied),
-            last_cmd_seq=int(last_cmd),
-            flags=int(flags),
-            seq=int(seq),
+            host_time_s, device_us * 1e-6, phi, float(velocity), float(applied), int(last_cmd), int(flags), int(seq)
         )
 
     def _require_open(self):

@@ -20,12 +20,7 @@ _MAGIC = "# softpend-log v1 "
 
 
 def _format(value: Any) -> str:
-    if isinstance(value, (bool, np.bool_)):
-        return "1" if value else "0"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    value = float(value)
-    return "nan" if math.isnan(value) else repr(value)
+    return str(int(value)) if isinstance(value, (bool, np.bool_, int, np.integer)) else repr(float(value))
 
 
 class SampleLog:

@@ -17,12 +17,12 @@ import torch
 
 from softpend.checks import boolean, int_at_least, one_of, positive
 from softpend.plant.observation import energies
-from softpend.plant.params import MAX_N_LINKS, RodParams
+from softpend.plant.params import MAX_N_LINKS, POSITIVE_FIELDS, RodParams
 
 #: The per-rod parameters of :class:`BatchedRodParams`: every float field of :class:`RodParams`.
 PARAMETER_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RodParams) if f.name != "n_links")
 
-_POSITIVE = ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm", "hub_inertia_kgm2")
+_POSITIVE = (*POSITIVE_FIELDS, "hub_inertia_kgm2")
 
 #: ``|lambda| h`` allowed by :func:`stable_substeps` (inside RK4's stability region).
 RK4_STABILITY_BOUND = 2.5

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from softpend.checks import finite, int_at_least, non_negative, positive
+from softpend.checks import int_at_least, non_negative, positive
 
 GRAVITY_MPS2 = 9.81
 
@@ -21,6 +21,10 @@ MAX_N_LINKS = 64
 
 #: Largest rod-parameter JSON file read by :meth:`RodParams.from_json` [bytes].
 _MAX_JSON_BYTES = 10**6
+
+
+#: The fields of :class:`RodParams` that must be positive (the other floats must be non-negative).
+POSITIVE_FIELDS = ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm")
 
 
 @dataclass(frozen=True)
@@ -47,18 +51,14 @@ class RodParams:
     stiffness_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            finite(field.name, getattr(self, field.name))
         n_links = int_at_least("n_links", self.n_links, 1)
         if n_links > MAX_N_LINKS:
             raise ValueError(
                 f"n_links must be at most {MAX_N_LINKS} (see softpend.plant.params.MAX_N_LINKS), got {self.n_links!r}"
             )
         for field in dataclasses.fields(self):
-            if field.name in ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm"):
-                positive(field.name, getattr(self, field.name))
-            elif field.name != "n_links":
-                non_negative(field.name, getattr(self, field.name))
+            if field.name != "n_links":
+                (positive if field.name in POSITIVE_FIELDS else non_negative)(field.name, getattr(self, field.name))
         object.__setattr__(self, "n_links", n_links)
 
     @property

@@ -158,21 +158,13 @@ class PRBPlant(PlantBase):
         """Observation of a joint state (scalar ``math``: faster than NumPy for a few links)."""
         length = self.params.link_length_m
         locked = self.hub_locked
-        if locked:
-            angle = phi = self._hub_angle_locked
-            rate = phi_dot = 0.0
-        else:
-            angle = phi = float(q[0])
-            rate = phi_dot = float(qd[0])
+        angle = phi = self._hub_angle_locked if locked else float(q[0])
+        rate = phi_dot = 0.0 if locked else float(qd[0])
         ex = ey = ex_dot = ey_dot = 0.0
         sin, cos = math.sin, math.cos
         for i in range(0 if locked else 1, len(q)):
-            if locked and i == 0:
-                angle = self._hub_angle_locked + float(q[0])
-                rate = float(qd[0])
-            else:
-                angle += float(q[i])
-                rate += float(qd[i])
+            angle += float(q[i])
+            rate += float(qd[i])
             s_a, c_a = sin(angle), cos(angle)
             ex -= length * s_a
             ey += length * c_a

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
@@ -30,16 +29,8 @@ def _setting_differences(saved: Any, wanted: Any, prefix: str = "") -> list[str]
             else:
                 names += _setting_differences(saved[key], wanted[key], name + ".")
         return names
-    same = _canonical_json(_plain(saved)) == _canonical_json(_plain(wanted))
+    same = _canonical_json(saved) == _canonical_json(wanted)  # tuples as lists, NaN equal to NaN
     return [] if same else [prefix.rstrip(".") or "(the whole config)"]
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, (tuple, list)):
-        return [_plain(v) for v in value]
-    if isinstance(value, float) and math.isnan(value):
-        return "NaN"
-    return value
 
 
 def check_run_folder(

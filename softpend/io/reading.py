@@ -160,14 +160,9 @@ def _line_loader():
 
     class Loader(yaml.SafeLoader):
         def construct_mapping(self, node, deep=False):
-            mapping = _LineDict(super().construct_mapping(node, deep=True))
+            mapping = _LineDict(super().construct_mapping(node, deep=True))  # refuses unhashable keys
             mapping.line = node.start_mark.line + 1
-            mapping.lines = {}
-            for key_node, _ in node.value:
-                try:
-                    mapping.lines[self.construct_object(key_node, deep=True)] = key_node.start_mark.line + 1
-                except TypeError:  # an unhashable key: reported by the base constructor already
-                    pass
+            mapping.lines = {self.construct_object(key, deep=True): key.start_mark.line + 1 for key, _ in node.value}
             return mapping
 
         def construct_sequence(self, node, deep=False):

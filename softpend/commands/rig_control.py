@@ -99,6 +99,8 @@ def build_controller(
 
 
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from softpend.hardware.closed_loop import TWIN_CONTROL_FILES, TwinCamera, run_twin_control
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.estimator import EstimatorConfig
@@ -114,41 +116,27 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--port needs --camera (index, URL or video file) or --no-camera")
     outputs = Outputs()
     out = outputs.folder(args.out, TWIN_CONTROL_FILES if args.twin else PORT_CONTROL_FILES, what="--out")
-    base = Task(start_noise_rad=args.start_noise)
-    if args.n_links is not None:
-        base = base.replace(n_links=args.n_links)
     progress = not args.no_progress
-    controller, task, label = build_controller(args.controller, base, args.which, args.pid_gains, progress=progress)
+
+    def ours(task: Task) -> Task:  # the start noise and link count of the options (a run folder brings its task)
+        task = task.replace(start_noise_rad=args.start_noise)
+        return task if args.n_links in (None, task.rod.n_links) else task.replace(n_links=args.n_links)
+
+    spec, base = args.controller, ours(Task())
+    controller, task, label = build_controller(spec, base, args.which, args.pid_gains, progress=progress)
     if not isinstance(controller, TimedController):
         controller = TimedController(controller)
-    task = task.replace(start_noise_rad=args.start_noise)
-    if args.n_links is not None and task.rod.n_links != args.n_links:
-        task = task.replace(n_links=args.n_links)
+    task = ours(task)
     estimator_config = EstimatorConfig(counts_per_rev=args.counts_per_rev, max_blind_s=args.max_blind_ms / 1000.0)
     if args.twin:
-        rig = RigConfig(
-            task=task,
-            counts_per_rev=args.counts_per_rev,
-            latency_s=args.latency_ms / 1000.0,
-            seed=args.seed,
-            initial_tilt_rad=args.tilt if args.start == "upright" else None,
-            hold_until_commanded=args.start == "upright",
-        )
-        name = args.camera_effects
+        upright = args.start == "upright"
+        rig = RigConfig(task, counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0, seed=args.seed)
+        rig = dataclasses.replace(rig, initial_tilt_rad=args.tilt if upright else None, hold_until_commanded=upright)
+        name, latency_s = args.camera_effects, args.camera_latency_ms / 1000.0
         effects = CameraEffects() if name == "clean" else getattr(CameraEffects, name)()
-        latency_s = args.camera_latency_ms / 1000.0
         camera = TwinCamera(args.camera_fps, latency_s, effects, seed=args.seed) if not args.no_camera else None
-        outcome = run_twin_control(
-            controller,
-            out,
-            args.duration,
-            rig,
-            camera,
-            estimator_config,
-            progress=progress,
-            outputs=outputs,
-            camera_wait_s=1.0 + latency_s + 2.0 / args.camera_fps,
-        )
+        run = dict(progress=progress, outputs=outputs, camera_wait_s=1.0 + latency_s + 2.0 / args.camera_fps)
+        outcome = run_twin_control(controller, out, args.duration, rig, camera, estimator_config, **run)
         target, figures = "twin", outcome.result.summary()
         truth = run_truth_metrics(outcome.motor_log, outcome.truth_log, task)
         extra = {"truth": truth, "emulator": outcome.emulator_stats}
@@ -188,10 +176,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
     from softpend.hardware.estimator import RigStateEstimator
     from softpend.io.samplelog import SampleLog
 
-    estimator = RigStateEstimator(task, estimator_config)
-    source = None
-    if not args.no_camera:
-        source = camera_source(args)
+    estimator, source = RigStateEstimator(task, estimator_config), None if args.no_camera else camera_source(args)
     metadata = {"task": task.to_dict(), "port": args.port, "camera": args.camera}
     logs = [outputs.live(out / name) for name in PORT_CONTROL_FILES[:2]]
     try:
@@ -202,9 +187,7 @@ def _run_on_port(args, controller, task, estimator_config, out: Path, progress: 
             SampleLog(out / "motor_log.csv", rig_control_columns(estimator.n), metadata=metadata) as log,
             SampleLog(out / "camera_log.csv", CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
         ):
-            result = run_closed_loop(
-                link, controller, estimator, args.duration, source, log, camera_log, progress=progress
-            )
+            result = run_closed_loop(link, controller, estimator, args.duration, source, log, camera_log, progress)
     finally:
         if source is not None:
             source.close()

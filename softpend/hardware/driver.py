@@ -228,7 +228,7 @@ class MotorLink:
             self.close()
 
     def send_torque(self, torque_nm: float) -> int:
-        """Command a torque, clamped to :attr:`torque_limit_nm`; its seq (``ValueError``, motor stopped, if not finite)."""
+        """Command a torque clamped to :attr:`torque_limit_nm`; its seq (``ValueError`` and a stop if not finite)."""
         try:
             torque = math.nan if isinstance(torque_nm, (str, bytes, bool)) else float(torque_nm)
         except (TypeError, ValueError):

@@ -1,5 +1,5 @@
 """The rig emulator: the device's protocol session in front of the simulated plant (quantised encoder, lost and
-garbled STATE frames, truth log), on a :class:`SimClock` (:class:`SimRig`) or a pseudo-terminal (:class:`RigEmulator`)."""
+garbled STATE frames, truth log), on a :class:`SimClock` (:class:`SimRig`) or a pty (:class:`RigEmulator`)."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ class SimRig:
         self.clock = clock if clock is not None else SimClock()
         self.config = cfg = config if config is not None else RigConfig()
         self.plant = cfg.task.make_plant()
-        self.poses = PoseHistory(self.plant.link_points_m, keep_s=2.0)
+        self.poses = PoseHistory(self.plant.link_points_m)
         self._rng = np.random.default_rng(cfg.seed)
         q, qd = (
             self.plant.hanging_state() if cfg.initial_tilt_rad is None else cfg.task.tilt_state(cfg.initial_tilt_rad)

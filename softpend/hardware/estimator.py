@@ -75,8 +75,8 @@ class DeviceClock:
     """Host to device time: the smallest ``host - device`` of the last ``window`` STATE frames, less the latency."""
 
     def __init__(self, one_way_latency_s: float = 0.0, window: int = 500) -> None:
-        self.one_way_latency_s = non_negative("one_way_latency_s", one_way_latency_s)
-        self._delays: collections.deque[float] = collections.deque(maxlen=int_at_least("window", window, 1))
+        self.one_way_latency_s = one_way_latency_s
+        self._delays: collections.deque[float] = collections.deque(maxlen=window)
 
     def observe(self, host_time_s: float, device_time_s: float) -> None:
         self._delays.append(host_time_s - device_time_s)

@@ -19,8 +19,6 @@ RIG_POSITION_NAMES: tuple[str, ...] = ("phi_rad", "theta_rad", "ex_m", "ey_m")
 
 def startup_wiggle_torque(duration_s: float, torque_nm: float, seed: int, dt_s: float = 0.01) -> np.ndarray:
     """The start-up wiggle: +-``torque_nm`` held for random times of 0.08 s to 0.3 s, one torque per control step."""
-    if not (duration_s > 0 and torque_nm > 0 and dt_s > 0):
-        raise ValueError("duration_s, torque_nm, dt_s must be positive")
     rng = np.random.default_rng(seed)
     n = int(round(duration_s / dt_s))
     out = np.empty(n)

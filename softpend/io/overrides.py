@@ -95,9 +95,9 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
 
 
 def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) -> D:
-    """The dataclass ``cls`` from JSON data as ``dataclasses.asdict`` gives it: every field present (a
-    one-line ``ValueError`` names the first unknown or missing one), lists as tuples, a mapping for a field whose default is a dataclass built the same
-    way; ``convert``: field name -> function building that field from its data."""
+    """The dataclass ``cls`` from JSON data as ``dataclasses.asdict`` gives it: every field present (a one-line
+    ``ValueError`` names the first unknown or missing one), lists as tuples, a mapping for a field whose default is a
+    dataclass built the same way; ``convert``: field name -> function building that field from its data."""
     if not isinstance(data, Mapping):
         raise ValueError(f"{source}: expected a JSON object for a {cls.__name__}, got {type(data).__name__}")
     names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]

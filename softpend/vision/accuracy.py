@@ -16,8 +16,6 @@ def babbling_trajectory(n_steps: int, seed: int = 0):
     from softpend.plant import RodParams, make_plant
     from softpend.sysid.babble import band_limited_noise
 
-    if n_steps < 2:
-        raise ValueError(f"n_steps must be >= 2, got {n_steps!r}")
     plant = make_plant("prb", params=RodParams())
     q, qd = plant.hanging_state()
     q[0] = 2.2

@@ -13,7 +13,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from softpend.checks import in_unit_interval, non_negative, positive
+from softpend.checks import in_unit_interval, non_negative
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot, check_fps
 from softpend.vision.tracker import Detection, TipTracker
@@ -150,11 +150,12 @@ class ThreadedTipSource:
 
 
 class PoseHistory:
-    """Recent joint positions of a PRB rod on the host clock; ``link_points(q)`` gives the rod's points [m]."""
+    """The last 2 s of joint positions of a PRB rod on the host clock; ``link_points(q)`` gives the rod's points [m]."""
 
-    def __init__(self, link_points: Callable[[np.ndarray], np.ndarray], keep_s: float = 2.0) -> None:
+    keep_s = 2.0
+
+    def __init__(self, link_points: Callable[[np.ndarray], np.ndarray]) -> None:
         self.link_points = link_points
-        self.keep_s = positive("keep_s", keep_s)
         self._times: collections.deque[float] = collections.deque()
         self._q: collections.deque[np.ndarray] = collections.deque()
 
@@ -169,8 +170,6 @@ class PoseHistory:
 
     def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
         """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``, linear between samples, clamped."""
-        if not self._times:
-            raise ValueError("PoseHistory is empty")
         times = self._times
         if time_s <= times[0]:
             q = self._q[0]

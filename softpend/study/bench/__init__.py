@@ -6,7 +6,7 @@ from __future__ import annotations
 import importlib
 import sys
 import time
-from typing import Iterable
+from typing import Any, Callable, Iterable
 
 BENCHMARKS: dict[str, str] = {
     "plant": "softpend.study.bench.plant:bench_plant",
@@ -37,3 +37,14 @@ def run_benchmarks(only: Iterable[str] | None = None, progress: bool = True) -> 
         results.update(getattr(importlib.import_module(module), function)())
         say(f"{name} done in {time.perf_counter() - start:.1f} s")
     return results
+
+
+def best_times(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
+    """Shortest wall-clock and CPU seconds of ``repeats`` calls of ``run``."""
+    best = best_cpu = float("inf")
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        run()
+        best = min(best, time.perf_counter() - start)
+        best_cpu = min(best_cpu, time.process_time() - start_cpu)
+    return best, best_cpu

@@ -8,14 +8,14 @@ import math
 import sys
 import time
 import types
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
-from softpend.study.bench import mujoco_chain
+from softpend.study.bench import best_times, mujoco_chain
 from softpend.study.simulators import hub_error_reference, hub_errors_rad
 from softpend.torch_threads import one_torch_thread
 
@@ -97,17 +97,6 @@ def make_legacy(env) -> None:
     plant.observe = types.MethodType(_legacy_observe, plant)
 
 
-def _best_times(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
-    """Shortest wall-clock and CPU seconds of ``repeats`` calls of ``run``."""
-    best = best_cpu = math.inf
-    for _ in range(repeats):
-        start, start_cpu = time.perf_counter(), time.process_time()
-        run()
-        best = min(best, time.perf_counter() - start)
-        best_cpu = min(best_cpu, time.process_time() - start_cpu)
-    return best, best_cpu
-
-
 def batched_rod_steps_per_s(
     n_links: int,
     batch_size: int = 4096,
@@ -137,7 +126,7 @@ def batched_rod_steps_per_s(
                 for torque in torques:
                     q, qd = chain.step(q, qd, torque)
 
-            best, best_cpu = _best_times(run, repeats)
+            best, best_cpu = best_times(run, repeats)
             if not bool(torch.isfinite(q).all()):
                 raise RuntimeError(f"the batched chain diverged in the benchmark ({integrator}, n = {n_links})")
     return batch_size * n_steps / best, batch_size * n_steps / max(best_cpu, 1e-9)
@@ -162,7 +151,7 @@ def vector_env_steps_per_s(
         actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)
         env.reset(seed=0)
         env.step(actions[0])
-        best, best_cpu = _best_times(lambda: [env.step(action) for action in actions], repeats)
+        best, best_cpu = best_times(lambda: [env.step(action) for action in actions], repeats)
     return num_envs * n_steps / best, num_envs * n_steps / max(best_cpu, 1e-9)
 
 
@@ -175,33 +164,24 @@ def bench_plant() -> dict[str, float]:
     for _ in range(3):
         for legacy in paths:
             paths[legacy] = max(paths[legacy], env_steps_per_s(4, legacy=legacy))
-    new4, legacy4 = paths[False], paths[True]
-    dt_s = 0.01
     fast: dict[str, Any] = {"integrator": "rosenbrock", "compiled": True}
-    batched4, batched4_cpu = batched_rod_steps_per_s(4, dtype_name="float32", **fast)
-    batched10, batched10_cpu = batched_rod_steps_per_s(10, dtype_name="float32", **fast)
-    batched4_64, _ = batched_rod_steps_per_s(4, **fast)
-    batched10_64, _ = batched_rod_steps_per_s(10, **fast)
-    rk4_4, _ = batched_rod_steps_per_s(4)
-    rk4_10, _ = batched_rod_steps_per_s(10, n_steps=2, repeats=2)
+    batched = {n: batched_rod_steps_per_s(n, dtype_name="float32", **fast) for n in (4, 10)}
+    batched64 = {n: batched_rod_steps_per_s(n, **fast)[0] for n in (4, 10)}
+    rk4 = {4: batched_rod_steps_per_s(4)[0], 10: batched_rod_steps_per_s(10, n_steps=2, repeats=2)[0]}
     vector4, vector4_cpu = vector_env_steps_per_s(4, **fast)
     vector4_default, _ = vector_env_steps_per_s(4)
     figures = {
         "env_steps_per_s_n4": env4,
         "env_steps_per_s_n10": env10,
         "solver_steps_per_s_n4": solver4,
-        "realtime_factor_n4": env4 * dt_s,
+        "realtime_factor_n4": env4 * 0.01,  # a control step of 0.01 s
         "wrapper_overhead_fraction_n4": solver4 / env4 - 1.0,
-        "env_steps_per_s_n4_legacy_path": legacy4,
-        "env_steps_per_s_n4_speedup": new4 / legacy4,
-        "batched_rod_steps_per_s_n4": batched4,
-        "batched_rod_steps_per_cpu_s_n4": batched4_cpu,
-        "batched_rod_steps_per_s_n10": batched10,
-        "batched_rod_steps_per_cpu_s_n10": batched10_cpu,
-        "batched_rod_steps_per_s_n4_float64": batched4_64,
-        "batched_rod_steps_per_s_n10_float64": batched10_64,
-        "batched_rk4_rod_steps_per_s_n4": rk4_4,
-        "batched_rk4_rod_steps_per_s_n10": rk4_10,
+        "env_steps_per_s_n4_legacy_path": paths[True],
+        "env_steps_per_s_n4_speedup": paths[False] / paths[True],
+        **{f"batched_rod_steps_per_s_n{n}": rate for n, (rate, _) in batched.items()},
+        **{f"batched_rod_steps_per_cpu_s_n{n}": cpu for n, (_, cpu) in batched.items()},
+        **{f"batched_rod_steps_per_s_n{n}_float64": rate for n, rate in batched64.items()},
+        **{f"batched_rk4_rod_steps_per_s_n{n}": rate for n, rate in rk4.items()},
         "vector_env_steps_per_s_n4": vector4,
         "vector_env_steps_per_cpu_s_n4": vector4_cpu,
         "vector_env_steps_per_s_n4_default": vector4_default,
@@ -210,11 +190,6 @@ def bench_plant() -> dict[str, float]:
     for n, d in ((4, 5.0), (10, 1.0)):
         figures.update(hub_errors_rad(n, duration_s=d, reference=references[n]))
     if mujoco_chain.mujoco_available():
-        figures.update(mujoco_chain.bench_figures(figures, references))
-    else:
-        print(
-            "[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures",
-            file=sys.stderr,
-            flush=True,
-        )
+        return figures | mujoco_chain.bench_figures(figures, references)
+    print("[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures", file=sys.stderr)
     return figures

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import torch
 
+from softpend.study.bench import best_times
 from softpend.sysid.babble import BabbleProtocol, babble
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
@@ -32,28 +33,20 @@ def rollout_steps_per_s(
     dtype = model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float32
     x0 = torch.randn(batch, model.layout.dim, generator=generator, dtype=dtype) * 0.1
     torques = (torch.rand(batch, steps, generator=generator, dtype=dtype) * 2 - 1) * model.torque_limit_nm
-    best = float("inf")
     with torch.inference_mode():
         rollout(model, x0, torques[:, :5])  # warm-up
-        for _ in range(repeats):
-            start = time.perf_counter()
-            rollout(model, x0, torques, generator=generator)
-            best = min(best, time.perf_counter() - start)
+        best, _ = best_times(lambda: rollout(model, x0, torques, generator=generator), repeats)
     return batch * steps / best
 
 
 def bench_sysid() -> dict[str, float]:
     """The ``sysid`` benchmark group (see the module docstring)."""
     with one_torch_thread():
-        protocol = BabbleProtocol()
-        start = time.perf_counter()
+        protocol, start = BabbleProtocol(), time.perf_counter()
         data = babble(protocol, seed=TRAIN_SEED, progress=False)
         babble_s = time.perf_counter() - start
         test = babble(protocol.replace(n_trials=12), seed=TEST_SEED, progress=False)
-        out: dict[str, float] = {
-            "babble_default_protocol_s": babble_s,
-            "babble_transitions_per_s": data.n_transitions / babble_s,
-        }
+        out = {"babble_default_protocol_s": babble_s, "babble_transitions_per_s": data.n_transitions / babble_s}
         configs = (
             ("model", TrainConfig()),  # the report's state and network
             ("model_history3", TrainConfig(history=3)),
@@ -72,9 +65,8 @@ def bench_sysid() -> dict[str, float]:
             for key in ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"):
                 out[f"{prefix}_one_step_{key}"] = metrics[key]
             for h in ("0.5", "1", "2"):
-                out[f"{prefix}_tip_rmse_m_{h}s"] = metrics[f"tip_rmse_m@{h}s"]
-                out[f"{prefix}_phi_rmse_rad_{h}s"] = metrics[f"phi_rmse_rad@{h}s"]
-                out[f"{prefix}_hold_tip_rmse_m_{h}s"] = metrics[f"hold_tip_rmse_m@{h}s"]
+                for name in ("tip_rmse_m", "phi_rmse_rad", "hold_tip_rmse_m"):
+                    out[f"{prefix}_{name}_{h}s"] = metrics[f"{name}@{h}s"]
             out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
             if prefix in ("model", "model_wide"):
                 out[f"{prefix}_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
@@ -94,12 +86,13 @@ def simulator_yardsticks(
     (within ``horizon_s``); ``model_one_step_tip_m`` sets the hub-rate offset of ``simulator_one_best_model_step``."""
     if not (np.isfinite(model_one_step_tip_m) and model_one_step_tip_m > 0):
         raise ValueError(f"model_one_step_tip_m must be positive, got {model_one_step_tip_m!r}")
-    out: dict[str, float] = {}
-    runs: dict[str, dict] = {"simulator_1e-4rad_off": dict(hub_offset_rad=1e-4)}
     rate_rad_s = hub_rate_offset_for_tip_error(test, model_one_step_tip_m, history)
-    out["simulator_one_best_model_step_hub_rate_offset_rad_s"] = rate_rad_s
-    runs["simulator_one_best_model_step"] = dict(hub_offset_rad=0.0, hub_rate_offset_rad_s=rate_rad_s)
-    runs["simulator_torque_noise_1e-4nm"] = dict(hub_offset_rad=0.0, torque_noise_std_nm=1e-4, seed=0)
+    out = {"simulator_one_best_model_step_hub_rate_offset_rad_s": rate_rad_s}
+    runs = {
+        "simulator_1e-4rad_off": dict(hub_offset_rad=1e-4),
+        "simulator_one_best_model_step": dict(hub_offset_rad=0.0, hub_rate_offset_rad_s=rate_rad_s),
+        "simulator_torque_noise_1e-4nm": dict(hub_offset_rad=0.0, torque_noise_std_nm=1e-4, seed=0),
+    }
     for prefix, kwargs in runs.items():
         sim = perturbed_simulator_errors(test, horizon_s=horizon_s, history=history, **kwargs)
         out[f"{prefix}_one_step_tip_rmse_m"] = float(sim.tip_rmse_m[1])

@@ -59,10 +59,10 @@ def _video_frames(capture: cv2.VideoCapture):
         yield frame
 
 
-def _progress(iterator, total: Optional[int] = None):
+def _progress(iterator=None, total: Optional[int] = None, progress: bool = True):
     from tqdm.auto import tqdm
 
-    return tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0)
+    return tqdm(iterator, total=total, desc="tracking", unit="frame", mininterval=1.0, disable=not progress)
 
 
 def track_video(
@@ -118,9 +118,8 @@ def track_video(
                 raise ValueError(f"timestamps_s has {len(stamps)} entries but the video has more frames")
             return float(stamps[i])
 
-        iterator = itertools.chain([first], frames)
-        if progress:
-            iterator = _progress(iterator, int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None)
+        total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None
+        iterator = _progress(itertools.chain([first], frames), total, progress)
         hub = hub_marker_tracker(calibration, first.shape) if track_hub else None
         metadata = {"video": str(video), "calibration": calibration.to_json()}
         frame_tracker = FrameTracker(tracker, calibration)
@@ -192,33 +191,27 @@ def track_live(
             previous_hook(index, frame, detection, measurement)
 
     source.on_frame = on_frame
-    bar = _progress(None) if progress else None
-    try:
-        with _replacing(out_csv, {"camera": getattr(source, "name", "camera")}) as log:
+    with _progress(progress=progress) as bar, _replacing(out_csv, {"camera": getattr(source, "name", "camera")}) as log:
 
-            def flush() -> None:
-                for row in rows[log.rows_written :]:  # a snapshot: the camera thread appends meanwhile
-                    log.append(row)
+        def flush() -> None:
+            for row in rows[log.rows_written :]:  # a snapshot: the camera thread appends meanwhile
+                log.append(row)
 
-            start = time.monotonic()
-            source.start()
-            try:
-                while duration_s is None or time.monotonic() - start < duration_s:
-                    source.poll()  # raises the camera thread's error
-                    flush()
-                    if bar is not None:
-                        bar.update(log.rows_written - bar.n)
-                    if source.finished:
-                        break
-                    time.sleep(0.01)
-            except KeyboardInterrupt:
-                pass
-            finally:
-                source.close()
-            flush()
-            if log.rows_written == 0:
-                raise ValueError("the camera delivered no frame")
-    finally:
-        if bar is not None:
-            bar.close()
+        start = time.monotonic()
+        source.start()
+        try:
+            while duration_s is None or time.monotonic() - start < duration_s:
+                source.poll()  # raises the camera thread's error
+                flush()
+                bar.update(log.rows_written - bar.n)
+                if source.finished:
+                    break
+                time.sleep(0.01)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            source.close()
+        flush()
+        if log.rows_written == 0:
+            raise ValueError("the camera delivered no frame")
     return _rows_array(rows)

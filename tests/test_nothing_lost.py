@@ -21,7 +21,8 @@ def test_emulator_ends_at_its_duration_after_a_host_connected_and_left(tmp_path)
     the pty until it is full.  The emulator drops what does not fit and exits at its duration (before the fix
     it blocked in the write to the full pty and only a signal ended it)."""
     process = subprocess.Popen(
-        [sys.executable, "-c", "from softpend.cli import main; main()", "rig", "--duration", "25"],
+        # 100 STATE frames of about 30 bytes a second fill the pty's 16 KiB in about 6 s; the duration leaves 6 s more
+        [sys.executable, "-c", "from softpend.cli import main; main()", "rig", "--duration", "12"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -38,7 +39,7 @@ def test_emulator_ends_at_its_duration_after_a_host_connected_and_left(tmp_path)
         finally:
             os.close(fd)
         try:
-            rc = process.wait(timeout=240)  # a hang, not a timing: 25 s of duration with ample room
+            rc = process.wait(timeout=240)  # a hang, not a timing: 12 s of duration with ample room
         except subprocess.TimeoutExpired:
             pytest.fail("the emulator did not end at its duration after the host left")
         assert rc == 0, process.stderr.read()

@@ -391,7 +391,6 @@ def run_twin_control(
     """Run ``controller`` on the digital twin ``rig`` in simulated time, filmed by ``camera`` (None: none), once the
     camera tracked a frame; writes :data:`TWIN_CONTROL_FILES` to ``workdir`` (the summary also when it raises).  The
     estimator's model is ``estimator_task`` (default ``rig.task``; an identified rod's, used by the commissioning)."""
-    from softpend.hardware.clock import SimClock
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
     from softpend.vision.tip_source import SyntheticLiveCamera
@@ -410,8 +409,8 @@ def run_twin_control(
         "estimator": dataclasses.asdict(estimator.config),
         "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
     }
-    clock = SimClock()
-    device = SimRig(rig, clock, truth_log=truth_path)
+    device = SimRig(rig, truth_log=truth_path)
+    clock = device.clock
     source = None
     result: Optional[ClosedLoopResult] = None
     error: Optional[str] = None

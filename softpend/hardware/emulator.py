@@ -82,15 +82,10 @@ class SimRig:
     """The device on a :class:`SimClock`: tick ``k`` at ``start + k dt``, bytes either way ``latency_s`` late;
     :attr:`poses` holds the joint positions of every tick (what the camera films)."""
 
-    def __init__(
-        self,
-        config: Optional[RigConfig] = None,
-        clock: Optional[SimClock] = None,
-        truth_log: Optional[str | os.PathLike] = None,
-    ) -> None:
+    def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None) -> None:
         from softpend.vision.tip_source import PoseHistory
 
-        self.clock = clock if clock is not None else SimClock()
+        self.clock = SimClock()
         self.config = cfg = config if config is not None else RigConfig()
         self.plant = cfg.task.make_plant()
         self.poses = PoseHistory(self.plant.link_points_m)
@@ -191,7 +186,7 @@ class RigEmulator(SimRig):
         self.link_path = Path(link_path) if link_path else None
         if self.link_path is not None:
             _check_link_path(self.link_path)
-        super().__init__(config, SimClock(), truth_log)
+        super().__init__(config, truth_log)
         self.master_fd, self._slave_fd = os.openpty()
         tty.setraw(self._slave_fd)
         os.set_blocking(self.master_fd, False)

@@ -38,9 +38,8 @@ def bench_control() -> dict[str, float]:
         "lqr_upright_std_rad": run.upright_std_rad,
         "lqr_hold_std_rad": float(np.sqrt(np.mean(run.theta_rad[-500:] ** 2))),
     }
-    out["lqr_observation_upright_std_rad"] = from_tilt(
-        LQRController.from_params(params, state="observation")
-    ).upright_std_rad
+    observation = LQRController.from_params(params, state="observation")
+    out["lqr_observation_upright_std_rad"] = from_tilt(observation).upright_std_rad
     out["lqr_region_of_attraction_rad"] = region_of_attraction_rad(lqr, task).largest_recovered_rad
     swing = evaluate_controller(EnergySwingUpController(params), task, seeds=SWINGUP_SEEDS, duration_s=10.0)
     out["swingup_lqr_time_s"] = float(max(r.swing_up_time_s for r in swing.results))

@@ -65,7 +65,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
     with one_torch_thread():
         config = PILCO
         spec = state_spec(config.state)
-        rng = np.random.default_rng(0)
+        rng, rng1 = np.random.default_rng(0), np.random.default_rng(1)
         n = config.gp.max_points
         states = np.cumsum(rng.normal(0.0, 0.3, (n + 1, spec.dim)), axis=0)
         states[:, spec.angle_indices] += np.pi
@@ -73,15 +73,8 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         inputs = np.hstack([spec.model_inputs(states[:-1]), torque_nm[:, None]])
         gp = MultiOutputGP(inputs, states[1:] - states[:-1])
         gp.fit(20)
-        policy = _random_policy(
-            spec,
-            states,
-            inputs[:, :-1],
-            config.policy.n_basis,
-            config.task.torque_limit_nm,
-            np.random.default_rng(1),
-            config.optimiser.restart_target_std,
-        )
+        limit, restart_std = config.task.torque_limit_nm, config.optimiser.restart_target_std
+        policy = _random_policy(spec, states, inputs[:, :-1], config.policy.n_basis, limit, rng1, restart_std)
         m0, s0 = _initial_distribution(spec, config.initial_std)
         vector = policy.get_vector()
 
@@ -93,19 +86,8 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
             (grad,) = torch.autograd.grad(total, leaf)
             return float(total.detach()), grad.numpy().copy(), time.process_time() - start
 
-        propagators = {
-            compiled: Propagator(
-                spec,
-                gp,
-                policy,
-                config.task.rod.length_m,
-                config.cost.width_m,
-                config.cost.rate_width_rad_s,
-                config.cost.exploration,
-                compiled=compiled,
-            )
-            for compiled in (False, True)
-        }
+        cost = (config.task.rod.length_m, config.cost.width_m, config.cost.rate_width_rad_s, config.cost.exploration)
+        propagators = {compiled: Propagator(spec, gp, policy, *cost, compiled=compiled) for compiled in (False, True)}
         eager_value, eager_grad, _ = objective(propagators[False])
         compiled_value, compiled_grad, compile_s = objective(propagators[True])
         times: dict[bool, list[float]] = {False: [], True: []}

@@ -15,14 +15,8 @@ def dqn_train_steps_per_s(episodes: int = 10) -> float:
     """Agent steps per second of DQN training between the ends of the first and the last of ``1 + episodes``."""
     from softpend.rl.dqn import train_dqn
 
-    config = dataclasses.replace(
-        DQN,
-        learning_starts=0,
-        eval_every_episodes=10_000,
-        checkpoint_every_episodes=10_000,
-        eval_seeds=(0,),
-        eval_duration_s=0.1,
-    )
+    rare = dict(eval_every_episodes=10_000, checkpoint_every_episodes=10_000)
+    config = dataclasses.replace(DQN, learning_starts=0, **rare, eval_seeds=(0,), eval_duration_s=0.1)
     with tempfile.TemporaryDirectory() as tmp:
         _, log = train_dqn(config, seed=0, episodes=1 + episodes, run_dir=tmp, progress=False)
     elapsed = log.episodes[-1]["wall_s"] - log.episodes[0]["wall_s"]
@@ -47,15 +41,11 @@ def bench_rl() -> dict[str, float]:
     fresh = rl_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds, which=("final",))
     converged = converged_fresh_start_rows(RL_BOOK.runs_root, RL_BOOK.seeds)
     cpu_s = sum(training_cpu_s(log) for group in logs.values() for log in group)
+    balanced = {algo: sum(r["run_balances"] for r in converged if r["method"] == METHOD_NAMES[algo]) for algo in logs}
     return {
         "dqn_train_steps_per_s": steps_per_s,
         **headline_figures(seed_rows(logs, fresh)),
-        **{
-            f"seeds_balanced_{algo}_converged_plant": float(
-                sum(r["run_balances"] for r in converged if r["method"] == METHOD_NAMES[algo])
-            )
-            for algo in ("dqn", "mbpo")
-        },
+        **{f"seeds_balanced_{algo}_converged_plant": float(count) for algo, count in balanced.items()},
         "full_profile_train_cpu_s": cpu_s,
         "full_profile_train_2core_s": cpu_s / 2.0,
     }

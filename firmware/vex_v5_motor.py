@@ -94,19 +94,14 @@ def crc16_ccitt(data, crc=0xFFFF):
 
 def cobs_encode(data):
     """COBS-encode ``data`` (no 0x00 byte in the result; no delimiter added)."""
-    out = bytearray()
-    block = bytearray()
+    out, block = bytearray(), bytearray()
     for byte in data:
-        if byte == 0:
+        if byte:
+            block.append(byte)
+        if not byte or len(block) == 254:  # a zero, or a full block (code 255: no zero follows)
             out.append(len(block) + 1)
             out.extend(block)
             block = bytearray()
-        else:
-            block.append(byte)
-            if len(block) == 254:
-                out.append(255)
-                out.extend(block)
-                block = bytearray()
     out.append(len(block) + 1)
     out.extend(block)
     return bytes(out)

@@ -1,5 +1,4 @@
-"""Why the default rod looks the way it does: it sags visibly, the motor cannot lift it straight, and clamped
-upright it does not buckle; figures computed from the plant itself."""
+"""The rod's design figures: its sag, the torque to lift it straight and its buckling load clamped upright."""
 
 from __future__ import annotations
 
@@ -29,23 +28,14 @@ def horizontal_cantilever(task: Optional[Task] = None) -> Plant:
 
 def _hessian(function, n: int, step: float) -> np.ndarray:
     """Central finite-difference Hessian of ``function(q)`` at ``q = 0``."""
-    hessian = np.zeros((n, n))
-    eye = np.eye(n) * step
-    for i in range(n):
-        for j in range(i, n):
-            value = (
-                function(eye[i] + eye[j])
-                - function(eye[i] - eye[j])
-                - function(-eye[i] + eye[j])
-                + function(-eye[i] - eye[j])
-            ) / (4 * step * step)
-            hessian[i, j] = hessian[j, i] = value
-    return hessian
+    e = np.eye(n) * step
+    d2 = lambda a, b: (function(a + b) - function(a - b) - function(-a + b) + function(-a - b)) / (4 * step * step)  # noqa: E731
+    return np.array([[d2(e[min(i, j)], e[max(i, j)]) for j in range(n)] for i in range(n)])
 
 
 def clamped_upright_buckling_factor(params: RodParams) -> float:
-    """Factor by which gravity would have to grow for the rod clamped upright to buckle: the smallest ``lambda`` of
-    ``K v = lambda G v``, the Hessians of the elastic and gravity energy by finite differences (steps of 1e-3 rad)."""
+    """Factor by which gravity would have to grow for the rod clamped upright to buckle (smallest ``lambda`` of
+    ``K v = lambda G v``, energy Hessians by finite differences)."""
     plant = PRBPlant(params, hub_locked_at_rad=0.0)
     n, zeros = plant.n_coordinates, np.zeros(plant.n_coordinates)
     elastic = _hessian(lambda q: plant.energy_j(q, zeros)["elastic_j"], n, 1e-3)
@@ -63,8 +53,7 @@ def clamped_upright_buckling_factor(params: RodParams) -> float:
 
 @dataclass(frozen=True)
 class RodDesign:
-    """Design figures of a rod: tip sag clamped horizontal (PRB statics, Euler-Bernoulli), the torque to hold the
-    straight rod horizontal, the torque limit, and the buckling load factor clamped upright."""
+    """Design figures of a rod: tip sag clamped horizontal, torque to hold it horizontal, buckling load factor."""
 
     params: RodParams
     tip_sag_horizontal_m: float
@@ -83,48 +72,24 @@ class RodDesign:
         """Torque limit over the torque to hold the rod horizontal."""
         return self.torque_limit_nm / self.gravity_torque_horizontal_nm
 
-    def rows(self) -> list[tuple[str, str, str]]:
+    def rows(self) -> list[tuple[str, ...]]:
         """The design table as ``(quantity, value, what it means)`` rows of formatted text."""
-        p = self.params
-        return [
-            ("rod length L, links n", f"{p.length_m:.3g} m, n = {p.n_links}", "PRB chain of n rigid links"),
-            (
-                "rod mass m, tip mass",
-                f"{p.mass_kg * 1e3:.3g} g, {p.tip_mass_kg * 1e3:.3g} g",
-                "uniform rod plus end mass",
-            ),
-            (
-                "bending stiffness EI",
-                f"{p.bending_stiffness_nm2:.3g} N m²",
-                f"joint springs k = EI/(L/n) = {p.joint_stiffness_nm_per_rad:.3g} N m/rad",
-            ),
-            (
-                "tip sag, clamped horizontal (PRB statics)",
-                f"{self.tip_sag_horizontal_m * 1e3:.1f} mm = {100 * self.tip_sag_fraction:.0f} % of L",
-                "the rod visibly bends (target 10-30 % of L)",
-            ),
-            (
-                "tip sag, Euler-Bernoulli (small deflection)",
-                f"{self.tip_sag_euler_bernoulli_m * 1e3:.1f} mm",
-                "linear beam theory, for comparison",
-            ),
-            (
-                "torque limit / torque to hold horizontal",
-                f"{self.torque_limit_nm:.3g} / {self.gravity_torque_horizontal_nm:.3g} N m = {self.torque_ratio:.2f}",
-                "< 1: the motor cannot lift the rod straight up; swing-up must pump energy",
-            ),
-            (
-                "buckling load factor, clamped upright",
-                f"{self.buckling_load_factor:.2f}",
-                "> 1: the clamped rod stands upright; feedback on the hub can balance it",
-            ),
+        p, sag_mm, hold_nm = self.params, self.tip_sag_horizontal_m * 1e3, self.gravity_torque_horizontal_nm
+        table = [
+            f"rod length L, links n | {p.length_m:.3g} m, n = {p.n_links} | PRB chain of n rigid links",
+            f"rod mass m, tip mass | {p.mass_kg * 1e3:.3g} g, {p.tip_mass_kg * 1e3:.3g} g | uniform rod plus end mass",
+            f"bending stiffness EI | {p.bending_stiffness_nm2:.3g} N m² | joint springs k = EI/(L/n) = {p.joint_stiffness_nm_per_rad:.3g} N m/rad",
+            f"tip sag, clamped horizontal (PRB statics) | {sag_mm:.1f} mm = {100 * self.tip_sag_fraction:.0f} % of L | the rod visibly bends (target 10-30 % of L)",
+            f"tip sag, Euler-Bernoulli (small deflection) | {self.tip_sag_euler_bernoulli_m * 1e3:.1f} mm | linear beam theory, for comparison",
+            f"torque limit / torque to hold horizontal | {self.torque_limit_nm:.3g} / {hold_nm:.3g} N m = {self.torque_ratio:.2f} | < 1: the motor cannot lift the rod straight up; swing-up must pump energy",
+            f"buckling load factor, clamped upright | {self.buckling_load_factor:.2f} | > 1: the clamped rod stands upright; feedback on the hub can balance it",
         ]
+        return [tuple(row.split(" | ")) for row in table]
 
     def to_markdown(self) -> str:
         """The design table as a Markdown table."""
-        lines = ["| quantity | value | meaning |", "| --- | --- | --- |"]
-        lines += [f"| {a} | {b} | {c} |" for a, b, c in self.rows()]
-        return "\n".join(lines)
+        rows = ["| quantity | value | meaning |", "| --- | --- | --- |"]
+        return "\n".join(rows + [f"| {a} | {b} | {c} |" for a, b, c in self.rows()])
 
 
 def rod_design(params: Optional[RodParams] = None) -> RodDesign:
@@ -142,8 +107,7 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
 
 
 def rod_poses_m(task: Optional[Task] = None) -> dict[str, np.ndarray]:
-    """Points along the rod ``(k, 2)`` [m] of the plant of ``task`` hanging, clamped horizontal (deflected) and
-    upright."""
+    """Points along the rod ``(k, 2)`` [m] hanging, clamped horizontal (deflected) and upright."""
     task = task if task is not None else Task()
     sim = task.make_plant()
     return {

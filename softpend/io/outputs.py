@@ -17,22 +17,19 @@ import numpy as np
 from softpend.io.reading import read_json_object
 
 
-def _check_writable(folder: Path, what: str, path: Path, where: str) -> None:
-    try:  # the only reliable writability test (permissions, read-only mounts, pseudo file systems, root)
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=".softpend-probe-"):
-            pass
-    except OSError as exc:
-        raise ValueError(f"{what} {path}: cannot write in {where}: {exc.strerror or exc}") from None
-
-
-def _check_parent(path: Path, what: str) -> None:
-    """The folder that will hold ``path`` exists or can be created, and a file can be created in it."""
-    ancestor = path.parent
+def _check_parent(path: Path, what: str, shown: Optional[Path] = None) -> None:
+    """The folder that will hold ``path`` exists or can be created, and a file can be created in it (errors name
+    ``shown``, default ``path``)."""
+    ancestor, shown = path.parent, shown or path
     while not os.path.lexists(ancestor) and ancestor.parent != ancestor:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise ValueError(f"{what} {path}: {ancestor} is not a folder, so {path.parent} cannot be created")
-    _check_writable(ancestor, what, path, str(ancestor))
+        raise ValueError(f"{what} {shown}: {ancestor} is not a folder, so {path.parent} cannot be created")
+    try:  # the only reliable writability test (permissions, read-only mounts, pseudo file systems, root)
+        with tempfile.NamedTemporaryFile(dir=ancestor, prefix=".softpend-probe-"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"{what} {shown}: cannot write in {ancestor}: {exc.strerror or exc}") from None
 
 
 def _not_empty(path: str | Path, what: str) -> Path:
@@ -55,17 +52,14 @@ def check_output_folder(
     """Check, before any work, that ``path`` can be created as a folder, or is empty, or is one that
     ``owned(path)`` claims; ``ValueError`` otherwise."""
     path = _not_empty(path, what)
-    if not os.path.lexists(path):
-        _check_parent(path / "x", what)
-        return path
-    if not path.is_dir():
+    if os.path.lexists(path) and not path.is_dir():
         raise ValueError(f"{what} {path} exists and is not a folder")
-    if any(path.iterdir()) and not _claims(owned, path):
+    if os.path.lexists(path) and any(path.iterdir()) and not _claims(owned, path):
         raise ValueError(
             f"{what} {path} is not empty and is not a folder this command wrote; refusing to "
             "write into it (choose another path)"
         )
-    _check_writable(path, what, path, "it")
+    _check_parent(path / "x", what, path)
     return path
 
 
@@ -134,11 +128,8 @@ _MANIFEST_KIND = "softpend-outputs"
 
 
 def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
     with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+        return hashlib.file_digest(handle, "sha256").hexdigest()
 
 
 def _read_manifest(folder: Path) -> Optional[dict]:

@@ -57,9 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:  # before the work: a file this command wrote may be replaced, no other
         outputs.file(args.out, what="identification file")
     names = [n.strip() for n in args.parameters.split(",") if n.strip()]
-    names += [
-        n for n, (flag, _) in _CALIBRATION_FLAGS.items() if getattr(args, flag[2:].replace("-", "_")) and n not in names
-    ]
+    added = [n for n, (flag, _) in _CALIBRATION_FLAGS.items() if getattr(args, flag[2:].replace("-", "_"))]
+    names += [n for n in added if n not in names]
     config = GreyBoxConfig(parameters=tuple(names), **field_values(args, _OPTIONS))
     dataset = load_dataset(args.dataset)
     guess = RodParams.from_json(args.initial_params) if args.initial_params else None
@@ -68,11 +67,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'parameter':28s} {'estimate':>14s} {'std':>12s} {'initial':>12s}" + (f" {'truth':>12s}" if truth else ""))
     calibration = {name: 0.0 for name in _CALIBRATION_FLAGS} | {"torque_gain": 1.0}  # a simulation's truth
     for name, value in result.estimates.items():
-        initial = calibration[name] if name in calibration else getattr(result.initial_params, name)
-        line = f"{name:28s} {value:14.6g} {result.std[name]:12.3g} {initial:12.6g}"
-        if truth:
-            line += f" {calibration[name] if name in calibration else getattr(truth, name):12.6g}"
-        print(line)
+        rods = (result.initial_params, truth or result.initial_params)
+        known = [calibration[name] if name in calibration else getattr(rod, name) for rod in rods]
+        line = f"{name:28s} {value:14.6g} {result.std[name]:12.3g} {known[0]:12.6g}"
+        print(line + (f" {known[1]:12.6g}" if truth else ""))
     print(
         f"{result.n_windows} windows of {result.window_steps} samples, residual RMS {result.residual_rms_rad:.3g} rad, "
         f"{result.njev} Jacobians, {result.identify_s:.1f} s: {result.message}"

@@ -232,9 +232,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     outputs = Outputs()
     out = outputs.file(args.out, what="--out")
-    report_path = outputs.file(
-        out.with_name((out.stem if out.suffix else out.name) + ".report.json"), what="the calibration report"
-    )
+    report_path = outputs.file(out.with_name(f"{out.stem}.report.json"), what="the calibration report")
     markers = np.array(read_markers("--markers", args.markers or "[]"))
     params = _rod(args)
     frame = _twin_frame(params, markers, args.seed) if args.twin else _grab_frame(args.camera)
@@ -291,6 +289,8 @@ def _twin_frame(params, markers, seed: int):
 
 def _grab_frame(camera: str, skip: int = 10):
     """The ``skip``-th frame of a camera (the first ones settle exposure), or an image file."""
+    import itertools
+
     import cv2
 
     from softpend.io.reading import check_capture_path
@@ -310,12 +310,8 @@ def _grab_frame(camera: str, skip: int = 10):
     try:
         if not capture.isOpened():
             raise ValueError(f"--camera {camera} cannot be opened")
-        frame = None
-        for _ in range(skip):
-            ok, grabbed = capture.read()
-            if not ok:
-                break
-            frame = grabbed
+        reads = list(itertools.takewhile(lambda read: read[0], (capture.read() for _ in range(skip))))
+        frame = reads[-1][1] if reads else None
     finally:
         capture.release()
     if frame is None:
@@ -338,23 +334,19 @@ def run_babble(args: argparse.Namespace) -> int:
     outputs = Outputs()
     out = outputs.folder(args.out, (*(_OUTPUTS if args.twin else PORT_BABBLE_FILES), "summary.json"), what="--out")
     progress = not args.no_progress
+    extra = {}
     if args.twin:
-        rig = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed)
-        length = args.trial_length_s
-        session = run_twin_session(
-            out, args.duration, args.seed, rig=rig, trial_length_s=length, progress=progress, outputs=outputs
-        )
+        rig, length = RigConfig(task=Task(start_noise_rad=0.0), seed=args.seed), args.trial_length_s
+        run = dict(rig=rig, trial_length_s=length, progress=progress, outputs=outputs)
+        session = run_twin_session(out, args.duration, args.seed, **run)
         loop, sync, dataset = session.loop, session.sync, session.dataset
-        extra = {"true_clock_offset_s": session.true_clock_offset_s}
+        extra["true_clock_offset_s"] = session.true_clock_offset_s
     else:
         loop, sync, dataset = _babble_on_port(args, out, progress, outputs)
-        extra = {}
     summary: dict[str, Any] = {
         "dataset": str(out / "rig_dataset.npz"),
         "n_trials": dataset.n_trials,
-        "samples": loop.samples,
-        "dropped_states": loop.dropped_states,
-        "jitter_ms_p95": loop.jitter_ms_p95,
+        **{key: getattr(loop, key) for key in ("samples", "dropped_states", "jitter_ms_p95")},
         "clock_offset_s": sync.offset.offset_s,
         "peak_correlation": sync.offset.peak_correlation,
         "gaps": len(sync.gaps),

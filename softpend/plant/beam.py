@@ -83,11 +83,8 @@ def beam_section_from_params(params: RodParams) -> BeamSection:
 
 
 class BeamPlant(PlantBase):
-    """Soft pendulum with the rod as a continuum beam; the interface of :class:`~softpend.plant.PRBPlant`.
-
-    ``n_links`` of ``params`` only sets the damping; ``newton_relative_tolerance`` is the solver's Newton
-    tolerance.
-    """
+    """Soft pendulum with the rod as a continuum beam; the interface of :class:`~softpend.plant.PRBPlant`
+    (``n_links`` of ``params`` only sets the damping)."""
 
     refinements = (1, 4, 16)
     zero_rest = True
@@ -151,8 +148,9 @@ class BeamPlant(PlantBase):
         hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
         self._torque_load = None
         if hub_locked_at_rad is not None:
-            offset = float(hub_locked_at_rad)
-            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=offset))
+            mbs.AddObject(
+                ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=self._hub_angle_locked)
+            )
         else:
             if p.hub_inertia_kgm2 > 0:
                 mbs.AddObject(ObjectRigidBody2D(nodeNumber=hub, mass=0.0, inertia=p.hub_inertia_kgm2))
@@ -172,7 +170,6 @@ class BeamPlant(PlantBase):
         self.reset()
 
     def _nodal_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Exudyn's nodal coordinates and their rates (copies)."""
         return np.array(self._data.GetODE2Coordinates()), np.array(self._data.GetODE2Coordinates_t())
 
     def global_coordinates(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,21 +182,11 @@ class BeamPlant(PlantBase):
         local = np.asarray(q[self._hub_offset :], float).reshape(self.n_elements, 3)
         local_dot = np.asarray(qd[self._hub_offset :], float).reshape(self.n_elements, 3)
         cs, sn = math.cos(phi), math.sin(phi)
-        px = local[:, 0]
-        py = self._s[1:] + local[:, 1]
-        gx = cs * px - sn * py
-        gy = sn * px + cs * py
-        c = np.zeros((self.n_elements + 1, 3))
-        c_t = np.zeros((self.n_elements + 1, 3))
-        c[0, 2] = phi
-        c_t[0, 2] = phi_dot
-        c[1:, 0] = gx
-        c[1:, 1] = gy - self._s[1:]
-        c[1:, 2] = phi + local[:, 2]
-        c_t[1:, 0] = cs * local_dot[:, 0] - sn * local_dot[:, 1] - phi_dot * gy
-        c_t[1:, 1] = sn * local_dot[:, 0] + cs * local_dot[:, 1] + phi_dot * gx
-        c_t[1:, 2] = phi_dot + local_dot[:, 2]
-        return c.reshape(-1), c_t.reshape(-1)
+        px, py, (u, v, w) = local[:, 0], self._s[1:] + local[:, 1], local_dot.T
+        gx, gy = cs * px - sn * py, sn * px + cs * py
+        c = np.column_stack([gx, gy - self._s[1:], phi + local[:, 2]])
+        c_t = np.column_stack([cs * u - sn * v - phi_dot * gy, sn * u + cs * v + phi_dot * gx, phi_dot + w])
+        return np.concatenate([[0.0, 0.0, phi], c.reshape(-1)]), np.concatenate([[0.0, 0.0, phi_dot], c_t.reshape(-1)])
 
     def state_from_global(self, c: np.ndarray, c_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Inverse of :meth:`global_coordinates`."""
@@ -212,16 +199,9 @@ class BeamPlant(PlantBase):
         gy = c[1:, 1] + self._s[1:]
         vx = c_t[1:, 0] + phi_dot * gy  # the rigid rotation removed
         vy = c_t[1:, 1] - phi_dot * gx
-        local = np.empty((self.n_elements, 3))
-        local_dot = np.empty((self.n_elements, 3))
-        local[:, 0] = cs * gx + sn * gy
-        local[:, 1] = -sn * gx + cs * gy - self._s[1:]
-        local[:, 2] = c[1:, 2] - phi
-        local_dot[:, 0] = cs * vx + sn * vy
-        local_dot[:, 1] = -sn * vx + cs * vy
-        local_dot[:, 2] = c_t[1:, 2] - phi_dot
-        head = [] if self.hub_locked else [phi]
-        head_dot = [] if self.hub_locked else [phi_dot]
+        local = np.column_stack([cs * gx + sn * gy, -sn * gx + cs * gy - self._s[1:], c[1:, 2] - phi])
+        local_dot = np.column_stack([cs * vx + sn * vy, -sn * vx + cs * vy, c_t[1:, 2] - phi_dot])
+        head, head_dot = ([], []) if self.hub_locked else ([phi], [phi_dot])
         return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
 
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
@@ -267,18 +247,12 @@ class BeamPlant(PlantBase):
         else:
             c, c_t = self.global_coordinates(self._check_state(q, "q"), self._check_state(qd, "qd"))
         kinetic = 0.5 * float(c_t @ self.mass_matrix @ c_t)
-        nodes = c.reshape(-1, 3)
-        x = nodes[:, 0]
-        y = nodes[:, 1] + self._s
-        rot = nodes[:, 2]
-        sec = self.section
-        h = self.element_length_m
-        g = self.params.gravity_mps2
-        gravity = g * sec.mass_per_length_kg_m * h * float(
-            np.sum(0.5 * (y[:-1] + y[1:]))
-        ) + g * self.params.tip_mass_kg * float(y[-1])
-        dx = np.diff(x) / h
-        dy = np.diff(y) / h
+        x, y, rot = c.reshape(-1, 3).T
+        y = y + self._s
+        sec, h, g = self.section, self.element_length_m, self.params.gravity_mps2
+        gravity = g * sec.mass_per_length_kg_m * h * float(np.sum(0.5 * (y[:-1] + y[1:])))
+        gravity += g * self.params.tip_mass_kg * float(y[-1])
+        dx, dy = np.diff(x) / h, np.diff(y) / h
         mid = 0.5 * (rot[:-1] + rot[1:])
         tangent = -np.sin(mid) * dx + np.cos(mid) * dy
         normal = np.cos(mid) * dx + np.sin(mid) * dy

@@ -32,7 +32,7 @@ _REQUIRED_METADATA = tuple(
 #: Accepted sampling steps [s]; a ``dt_s`` outside is a corrupt or mistyped file.
 DT_S_RANGE: tuple[float, float] = (1e-6, 10.0)
 _ARRAYS_REQUIRED = ("positions", "velocities", "torques_nm")
-_ARRAYS_OPTIONAL = ("true_observations", "joint_positions_rad", "joint_velocities_rad_s")
+_ARRAYS = (*_ARRAYS_REQUIRED, "true_observations", "joint_positions_rad", "joint_velocities_rad_s")
 _ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
 
 
@@ -57,7 +57,6 @@ class TrajectoryDataset:
 
     @property
     def n_samples(self) -> int:
-        """Samples per trial (``n_samples - 1`` transitions)."""
         return int(self.positions.shape[1])
 
     @property
@@ -78,7 +77,6 @@ class TrajectoryDataset:
 
     @property
     def params(self) -> Optional[RodParams]:
-        """The plant parameters, if recorded."""
         data = self.metadata.get("plant_params")
         return None if data is None else RodParams.from_dict(data)
 
@@ -105,8 +103,7 @@ class TrajectoryDataset:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays present, by file member name."""
-        names = _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL
-        return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
+        return {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
 
 
 def _validate_metadata(meta: Any) -> None:
@@ -161,7 +158,7 @@ def _validate(ds: TrajectoryDataset) -> None:
     t, n = meta["n_trials"], meta["n_samples"]
     shapes = {"positions": (t, n, len(names)), "velocities": (t, n, len(names)), "torques_nm": (t, n - 1)}
     shapes["true_observations"] = (t, n, len(OBSERVATION_NAMES))
-    for name in _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL:
+    for name in _ARRAYS:
         value = getattr(ds, name)
         if value is None:
             if name in _ARRAYS_REQUIRED:
@@ -242,20 +239,18 @@ def save_dataset(
     if np.ndim(positions) != 3:
         raise ValueError(f"positions must have shape (T, N, P), got {np.shape(positions)}")
     given = (positions, velocities, torques_nm, true_observations, joint_positions_rad, joint_velocities_rad_s)
-    names = _ARRAYS_REQUIRED + _ARRAYS_OPTIONAL
-    arrays = {name: _as_float64(name, value) for name, value in zip(names, given) if value is not None}
+    arrays = {name: _as_float64(name, value) for name, value in zip(_ARRAYS, given) if value is not None}
     dataset = TrajectoryDataset(metadata=meta, **arrays)
     write_dataset(path, dataset)
     return dataset
 
 
 def write_dataset(path: str | Path, dataset: TrajectoryDataset) -> Path:
-    """Write an already validated :class:`TrajectoryDataset`; returns the path written."""
+    """Write a :class:`TrajectoryDataset` (``.npz`` appended if missing); returns the path written."""
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
-    members = dict(dataset.arrays())
-    members["metadata"] = np.array(json.dumps(dataset.metadata, sort_keys=True, allow_nan=False))
+    members = dataset.arrays() | {"metadata": np.array(json.dumps(dataset.metadata, sort_keys=True, allow_nan=False))}
     with atomic_write(path) as handle, zipfile.ZipFile(handle, mode="w", compression=zipfile.ZIP_DEFLATED) as archive:
         for name in sorted(members):
             info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE_TIME)
@@ -290,10 +285,8 @@ def _jsonable(value: Any) -> Any:
 def load_dataset(
     path: str | Path, *, expected_params: Optional[RodParams] = None, expected_dt_s: Optional[float] = None
 ) -> TrajectoryDataset:
-    """Read and validate a dataset file (never unpickles), optionally checking its ``plant_params`` and ``dt_s``.
-
-    Raises ``FileNotFoundError`` if ``path`` does not exist, ``ValueError`` saying what is wrong otherwise.
-    """
+    """Read and validate a dataset file, optionally checking its ``plant_params`` and ``dt_s``; raises
+    ``FileNotFoundError`` if ``path`` does not exist, ``ValueError`` saying what is wrong otherwise."""
     path = Path(path)
     members = read_npz(path, "dataset file")
     raw = members.pop("metadata", np.array(None))
@@ -305,7 +298,7 @@ def load_dataset(
         metadata = json.loads(str(raw[()]))
     except (json.JSONDecodeError, RecursionError) as exc:
         raise ValueError(f"{path}: metadata is not valid JSON: {type(exc).__name__}: {exc}") from None
-    unknown = set(members) - set(_ARRAYS_REQUIRED) - set(_ARRAYS_OPTIONAL)
+    unknown = set(members) - set(_ARRAYS)
     if unknown:
         raise ValueError(f"{path}: unexpected members {sorted(unknown)}")
     arrays: dict[str, Any] = {name: None for name in _ARRAYS_REQUIRED} | members

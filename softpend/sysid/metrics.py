@@ -105,12 +105,20 @@ class RolloutErrors:
 
     def summary(self, horizons_s: tuple[float, ...] = (0.5, 1.0, 2.0)) -> dict[str, float]:
         """Flat dict ``{"tip_rmse_m@1s": ..., ...}`` at the given horizons (those within range)."""
-        out: dict[str, float] = {}
-        for h in horizons_s:
-            if h <= self.horizon_s[-1] + 1e-9:
-                for key, value in self.at(h).items():
-                    out[f"{key}@{h:g}s"] = value
-        return out
+        inside = [h for h in horizons_s if h <= self.horizon_s[-1] + 1e-9]
+        return {f"{key}@{h:g}s": value for h in inside for key, value in self.at(h).items()}
+
+
+def _rms_errors(predicted: np.ndarray, truth: np.ndarray, steps: int, dt_s: float) -> RolloutErrors:
+    """:class:`RolloutErrors` of predictions ``(B, H + 1, 3)`` of ``(phi, ex, ey)`` against the truth."""
+
+    def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        tip = (pred[..., 1] - truth[..., 1]) ** 2 + (pred[..., 2] - truth[..., 2]) ** 2
+        phi = np.asarray(wrap_angle_rad(pred[..., 0] - truth[..., 0])) ** 2
+        return np.sqrt(tip.mean(0)), np.sqrt(phi.mean(0))
+
+    hold = np.repeat(truth[:, :1], steps + 1, axis=1)
+    return RolloutErrors(np.arange(steps + 1) * dt_s, *errors(predicted), *errors(hold), int(truth.shape[0]))
 
 
 def network_rollouts(
@@ -160,16 +168,8 @@ def rollout_errors(
     windows, predicted = network_rollouts(
         model, dataset, np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2), steps
     )
-    i_phi, i_ex, i_ey = (layout.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
-
-    def errors(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        tip = (pred[..., i_ex] - windows[..., i_ex]) ** 2 + (pred[..., i_ey] - windows[..., i_ey]) ** 2
-        phi = np.asarray(wrap_angle_rad(pred[..., i_phi] - windows[..., i_phi])) ** 2
-        return np.sqrt(tip.mean(0)), np.sqrt(phi.mean(0))
-
-    tip, phi = errors(predicted)
-    hold_tip, hold_phi = errors(np.repeat(windows[:, :1], steps + 1, axis=1))
-    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, tip, phi, hold_tip, hold_phi, int(windows.shape[0]))
+    columns = [layout.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
+    return _rms_errors(predicted[..., columns], windows[..., columns], steps, dataset.dt_s)
 
 
 def rollout_trial(
@@ -208,12 +208,9 @@ def evaluate_model(
     errors = rollout_errors(model, dataset, trials, horizon_s=longest, start_stride=start_stride)
     out.update(errors.summary(horizons_s))
     out["n_rollouts"] = errors.n_rollouts
-    params = dataset.params
-    if params is not None:
-        for h in horizons_s:
-            key = f"tip_rmse_m@{h:g}s"
-            if key in out:
-                out[f"tip_rmse_over_length@{h:g}s"] = out[key] / params.length_m
+    if dataset.params is not None:
+        tips = {k: v for k, v in out.items() if k.startswith("tip_rmse_m@")}
+        out |= {k.replace("_m@", "_over_length@"): v / dataset.params.length_m for k, v in tips.items()}
     return out
 
 
@@ -249,10 +246,8 @@ def perturbed_simulator_errors(
     plant_name = dataset.metadata.get("plant") or "prb"
     plant = make_plant(plant_name, params=params, dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
     rng = np.random.default_rng(seed)
-    names = dataset.position_names
-    i_phi, i_ex, i_ey = (names.index(n) for n in ("phi_rad", "ex_m", "ey_m"))
-    squares = np.zeros((4, steps + 1))  # tip, hub angle, and both for the rod held where it was
-    count = 0
+    columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
+    predicted, truth = [], []
     for trial in trials:
         for start in range(history, history + n_states - steps, start_stride):
             q = dataset.joint_positions_rad[trial, start].copy()
@@ -264,15 +259,9 @@ def perturbed_simulator_errors(
             for k in range(steps):
                 noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
                 path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
-            truth = dataset.positions[trial, start : start + steps + 1]
-            phi, _, ex, ey = np.array([o.as_array()[:4] for o in path]).T
-            squares[0] += (ex - truth[:, i_ex]) ** 2 + (ey - truth[:, i_ey]) ** 2
-            squares[1] += wrap_angle_rad(phi - truth[:, i_phi]) ** 2
-            squares[2] += (truth[0, i_ex] - truth[:, i_ex]) ** 2 + (truth[0, i_ey] - truth[:, i_ey]) ** 2
-            squares[3] += wrap_angle_rad(truth[0, i_phi] - truth[:, i_phi]) ** 2
-            count += 1
-    tip, phi, hold_tip, hold_phi = np.sqrt(squares / count)
-    return RolloutErrors(np.arange(steps + 1) * dataset.dt_s, tip, phi, hold_tip, hold_phi, count)
+            truth.append(dataset.positions[trial, start : start + steps + 1][:, columns])
+            predicted.append(np.array([o.as_array()[[0, 2, 3]] for o in path]))
+    return _rms_errors(np.array(predicted), np.array(truth), steps, dataset.dt_s)
 
 
 def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float, history: int = 0) -> float:

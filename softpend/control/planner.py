@@ -1,10 +1,5 @@
-"""Model-predictive swing-up on learned dynamics with few plant seconds.
-
-An ensemble of Gaussian-output networks models the rod, black-box on the observed variables
-(:class:`GaussianDynamicsModel`) or as a residual on the identified PRB chain's step (:class:`ResidualPRBEnsemble`);
-:class:`MPPI` plans held torques on it and an LQR on the identified rod balances near upright.  :func:`run_planner`
-drives the plant (an excitation, then planner trials with refits between them) and counts every plant second.
-"""
+"""Model-predictive swing-up on learned dynamics (a black-box or PRB-residual Gaussian ensemble, MPPI, an LQR near
+upright) with every plant second counted (:func:`run_planner`)."""
 
 from __future__ import annotations
 
@@ -60,15 +55,9 @@ _ANGLE_MASK = np.array([is_angle(n) for n in POSITION_NAMES])
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """Settings of :func:`run_planner` (SI units).
-
-    ``excitation_s``: seconds of the babbling ``excitation_program`` (from hanging) before the first trial.  A trial
-    lasts at most ``trial_s`` and ends once the rod has been held (``|theta| < 0.2`` rad, RMS at most
-    ``HOLD_STD_RAD``) for ``hold_s``; the run ends after ``stop_after_balanced`` such trials in a row.
-    ``identify_windows``: windows of the grey-box identification of the rod (0: the task's rod).  MPPI's settings:
-    ``horizon_s`` (from now: the knot under way, then the planned ones), ``control_dt_s`` (a knot), ``n_samples``,
-    ``temperature``, ``noise_fraction`` (of the torque limit).  ``selection_seeds``: the trials' start seeds.
-    """
+    """Settings of :func:`run_planner` (SI units): ``excitation_s`` of babbling before the first trial; a trial lasts
+    at most ``trial_s``, ending once held (``|theta| < 0.2`` rad, RMS <= ``HOLD_STD_RAD``) for ``hold_s``; the run
+    ends after ``stop_after_balanced`` such trials in a row; ``identify_windows`` 0 keeps the task's rod."""
 
     task: Task = field(default_factory=Task)
     model: str = "ensemble"
@@ -119,13 +108,11 @@ class PlannerConfig:
         object.__setattr__(self, "selection_seeds", seeds)
 
     @property
-    def hold_steps(self) -> int:
-        """Plant steps per planned torque."""
+    def hold_steps(self) -> int:  # plant steps per planned torque
         return int(round(self.control_dt_s / self.task.dt_s))
 
     @property
-    def n_knots(self) -> int:
-        """Planned torques over the horizon."""
+    def n_knots(self) -> int:  # planned torques over the horizon
         return int(round(self.horizon_s / self.control_dt_s))
 
     def replace(self, **changes: Any) -> "PlannerConfig":
@@ -149,8 +136,7 @@ class PlannerConfig:
 # ---------------------------------------------------------------------- probabilistic networks
 
 
-def _bound_log_var(log_var: Tensor, max_log_var: Tensor, min_log_var: Tensor) -> Tensor:
-    """``log_var`` softly bounded to ``[min_log_var, max_log_var]`` (as in PETS)."""
+def _bound_log_var(log_var: Tensor, max_log_var: Tensor, min_log_var: Tensor) -> Tensor:  # as in PETS
     log_var = max_log_var - nn.functional.softplus(max_log_var - log_var)
     return min_log_var + nn.functional.softplus(log_var - min_log_var)
 
@@ -184,8 +170,8 @@ def _reset_linear_layers(net: nn.Module) -> None:
 
 
 class GaussianDynamicsModel(DynamicsModel):
-    """A :class:`~softpend.sysid.DynamicsModel` whose network also outputs a log-variance of the standardised
-    change; :meth:`predict_delta` adds a draw from ``self.noise_generator`` (``None``: the mean)."""
+    """A :class:`~softpend.sysid.DynamicsModel` with a log-variance output; :meth:`predict_delta` adds a draw from
+    ``self.noise_generator`` (``None``: the mean)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -207,7 +193,7 @@ class GaussianDynamicsModel(DynamicsModel):
 def _fit_gaussian(
     nets: Sequence[nn.Module], heads: Sequence[_GaussianHead], x: Tensor, y: Tensor, steps: int, seed: int
 ) -> None:
-    """Fit each ``(net, head)`` pair to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam."""
+    """Fit each ``(net, head)`` to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam."""
     generator = torch.Generator().manual_seed(seed)
     n = x.shape[0]
     for net, head in zip(nets, heads):
@@ -224,8 +210,8 @@ def _fit_gaussian(
 
 
 class _StackedNets:
-    """The Gaussian networks (``nets[i]``, ``heads[i]``) of an ensemble's members applied at once, each layer as one
-    batched matrix product: inputs ``(E, R, F)`` to means and bounded log-variances ``(E, R, n)``."""
+    """An ensemble's Gaussian networks at once, each layer one batched matrix product: ``(E, R, F)`` inputs to means
+    and bounded log-variances ``(E, R, n)``."""
 
     def __init__(self, nets: Sequence[Any], heads: Sequence[Any]) -> None:
         layers = [[net[i] for net in nets] for i in range(0, len(nets[0]), 2)]
@@ -244,8 +230,7 @@ class _StackedNets:
 
 
 class StackedEnsemble:
-    """Fast rollouts of a fitted black-box ensemble of :func:`fit_ensemble`: row ``i`` of a batch is predicted by
-    member ``i % E`` throughout, the members' layers applied as one batched matrix product."""
+    """Fast rollouts of a :func:`fit_ensemble` ensemble: row ``i`` of a batch is predicted by member ``i % E``."""
 
     def __init__(self, ensemble: DynamicsEnsemble) -> None:
         self.members: list[Any] = list(ensemble.members)
@@ -275,8 +260,8 @@ def _standardise(values: Tensor) -> tuple[Tensor, Tensor]:
 def fit_ensemble(
     states: np.ndarray, torques_nm: np.ndarray, next_states: np.ndarray, task: Task, config: PlannerConfig
 ) -> DynamicsEnsemble:
-    """The black-box ensemble on the full observed layout (differenced velocities), fitted to the transitions
-    ``states (M, 10) -> next_states`` under ``torques_nm (M,)``."""
+    """The black-box ensemble on the full observed layout fitted to ``states (M, 10) -> next_states`` under
+    ``torques_nm (M,)``."""
     reach = 1.01 * task.rod.length_m
     members = [
         GaussianDynamicsModel(
@@ -294,7 +279,7 @@ def fit_ensemble(
         m.set_normalisation(f_mean, f_std, d_mean, d_std)
         m.set_feature_box(z.min(0).values, z.max(0).values, margin=0.5)
     x = first.normalise_features(features)
-    torch.manual_seed(config.seed)  # the networks' initial weights
+    torch.manual_seed(config.seed)
     for m in members:
         _reset_linear_layers(m.net)
     y = (targets - d_mean) / d_std
@@ -306,7 +291,7 @@ def fit_ensemble(
 
 
 def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
-    """Tip angle ``theta`` and rate of joint states ``(..., n + 1)`` (as the plant observes them)."""
+    """Tip angle ``theta`` and rate of joint states ``(..., n + 1)``, as the plant observes them."""
     a, ad = torch.cumsum(q, -1)[..., 1:], torch.cumsum(qd, -1)[..., 1:]
     s, c = torch.sin(a), torch.cos(a)
     ex, ey = -link_length_m * s.sum(-1), link_length_m * c.sum(-1)
@@ -315,9 +300,8 @@ def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
 
 
 class ResidualPRBEnsemble(nn.Module):
-    """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` (``(B, 2 (n + 1))``) over ``step_s``:
-    the identified rod's batched Rosenbrock step plus the Gaussian residual network of member ``k`` (drawn per
-    row and step)."""
+    """``x' = PRB(x, tau) + r_k(x, tau)`` on joint states ``x = [q, q_dot]`` over ``step_s``: the identified rod's
+    Rosenbrock step plus the Gaussian residual of member ``k`` (drawn per row and step)."""
 
     def __init__(self, params: RodParams, step_s: float, n_members: int, width: int) -> None:
         super().__init__()
@@ -326,20 +310,15 @@ class ResidualPRBEnsemble(nn.Module):
         n_features = 3 * params.n_links + self.n_q + 1
         self.nets = nn.ModuleList([_mlp(n_features, 4 * self.n_q, width) for _ in range(n_members)])
         self.heads = nn.ModuleList([_GaussianHead(2 * self.n_q) for _ in range(n_members)])
-        for name, size in (
-            ("f_mean", n_features),
-            ("f_std", n_features),
-            ("r_mean", 2 * self.n_q),
-            ("r_std", 2 * self.n_q),
-        ):
-            self.register_buffer(name, torch.zeros(size) if name.endswith("mean") else torch.ones(size))
+        for prefix, size in (("f", n_features), ("r", 2 * self.n_q)):
+            self.register_buffer(f"{prefix}_mean", torch.zeros(size))
+            self.register_buffer(f"{prefix}_std", torch.ones(size))
         self._chains: dict[int, BatchedPRBChain] = {}
         self._stacked: Optional[_StackedNets] = None
         self.noise_generator: Optional[torch.Generator] = None
 
     def physics(self, x: Tensor, torque_nm: Tensor) -> Tensor:
-        """The identified PRB chain's step of joint states ``x (B, 2 (n + 1))``: one Rosenbrock step over ``step_s``
-        (the residual learns what it misses)."""
+        """The identified PRB chain's Rosenbrock step of joint states ``x (B, 2 (n + 1))`` over ``step_s``."""
         batch = x.shape[0]
         if batch not in self._chains:
             self._chains[batch] = BatchedPRBChain(
@@ -383,7 +362,7 @@ class ResidualPRBEnsemble(nn.Module):
 
 def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.ndarray:
     """Joint states ``(N - 1, 2 (n + 1))`` of observed positions ``(N, 5)``: reconstructed angles (hub unwrapped)
-    and their backward differences, from the second sample on."""
+    and their backward differences."""
     q = reconstruct_joint_states(positions[:, 0], positions[:, 2], positions[:, 3], positions[:, 4], params)
     q[:, 0] = np.unwrap(q[:, 0])
     return np.concatenate([q[1:], np.diff(q, axis=0) / dt_s], axis=1)
@@ -391,9 +370,7 @@ def joint_states(positions: np.ndarray, params: RodParams, dt_s: float) -> np.nd
 
 class JointStateTracker:
     """The residual model's states ``(B, 2 (n + 1))`` from successive observations ``(B, 10)``, as
-    :func:`joint_states` builds them (before the first sample: one step back along the observed rates); each
-    observation's angles are reconstructed once, from the previous ones' spring angles (:data:`WARM_ITERATIONS`
-    Gauss-Newton steps)."""
+    :func:`joint_states` builds them, each reconstruction warm-started from the previous one."""
 
     def __init__(self, params: RodParams, dt_s: float) -> None:
         self.params, self.dt_s = params, float(dt_s)
@@ -419,8 +396,7 @@ class JointStateTracker:
 
 
 class ObservedStateTracker:
-    """The black-box model's states ``(B, d)`` from successive observations ``(B, 10)``, one
-    :class:`softpend.control.learned.LearnedStateTracker` per rod."""
+    """The black-box model's states ``(B, d)`` from observations ``(B, 10)``, one ``LearnedStateTracker`` per rod."""
 
     def __init__(self, model: Any) -> None:
         self.model = model
@@ -442,8 +418,7 @@ class ObservedStateTracker:
 
 @dataclass
 class MPPIPlan:
-    """One MPPI iteration under way (:meth:`MPPI.begin`): the perturbed knots ``(B, K, n_knots)``, the rollouts'
-    torques ``(B K, T)``, their current states, their summed costs and the model steps taken of ``T``."""
+    """One MPPI iteration under way: knots ``(B, K, n_knots)``, rollout torques ``(B K, T)``, states, summed costs."""
 
     knots: Tensor
     torques: Tensor
@@ -457,13 +432,10 @@ class MPPIPlan:
 
 
 class MPPI:
-    """Model-predictive path integral control of one torque held for ``hold_steps`` model steps per knot.
-
+    """Model-predictive path integral control of torques held ``hold_steps`` model steps per knot, from
     ``step_fn(x (R, d), torque (R,)) -> x_next``, ``cost_fn(x, torque, x_next) -> (R,)`` and optional
-    ``terminal_fn(x_T) -> (R,)``.  An iteration weights ``n_samples`` perturbed copies of each mean sequence (the
-    first unperturbed, kept alone where every rollout diverged) by ``exp(-cost / temperature)``; :meth:`begin`,
-    :meth:`advance` and :meth:`finish` run it a few model steps at a time, :meth:`optimise` ``iterations`` times.
-    """
+    ``terminal_fn(x_T) -> (R,)``: ``n_samples`` perturbed copies of each mean (the first unperturbed, kept alone
+    where every rollout diverged) weighted by ``exp(-cost / temperature)``."""
 
     def __init__(
         self,
@@ -486,8 +458,7 @@ class MPPI:
 
     @torch.inference_mode()
     def begin(self, states: np.ndarray | Tensor, mean: Tensor, held_nm: Optional[np.ndarray] = None) -> MPPIPlan:
-        """An iteration from starts ``states (B, d)`` around mean sequences ``mean (B, n_knots)`` [N m]; with
-        ``held_nm (B, c)`` the rollouts first hold those torques for ``c`` knots (already committed: not optimised)."""
+        """An iteration from ``states (B, d)`` around ``mean (B, n_knots)`` [N m], first holding ``held_nm (B, c)``."""
         x = torch.as_tensor(states, dtype=torch.float32)
         batch, k = x.shape[0], self.n_samples
         noise = self.noise_std * torch.randn(batch, k, self.n_knots, generator=self.generator, dtype=torch.float64)
@@ -534,7 +505,7 @@ class MPPI:
 
 def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor) -> Tensor:
     """``1 - cos(theta)`` plus :data:`ENERGY_WEIGHT` times the squared rigid-pendulum energy error (zero upright)
-    over the hanging energy gap."""
+    in units of the hanging energy gap."""
     length = params.length_m
     inertia = params.hub_inertia_kgm2 + params.mass_kg * length**2 / 3 + params.tip_mass_kg * length**2
     moment = params.gravity_torque_horizontal_nm
@@ -546,13 +517,9 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
 
 
 class PlannerController:
-    """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times
-    it), for one rod (a :class:`softpend.evaluation.Controller`) or a batch (:meth:`batch_policy`), from observations.
-
-    Torques are held for ``hold_steps`` calls (a knot) and planned ``knots_per_plan`` knots at a time: each plan's
-    rollouts first hold the knots already committed, and its work is spread over the calls of those knots (zero
-    torque until the first plan is ready, and after the LQR lets go until the next one is).
-    """
+    """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times it),
+    for one rod (a ``Controller``) or a batch (:meth:`batch_policy`): torques held ``hold_steps`` calls and planned
+    ``knots_per_plan`` knots at a time, each plan's work spread over the calls of the knots already committed."""
 
     def __init__(
         self,
@@ -568,8 +535,7 @@ class PlannerController:
         self.knots_per_plan = int(knots_per_plan)
         self.torque_limit_nm = lqr.torque_limit_nm
         calls = self.hold_steps * self.knots_per_plan
-        steps = (self.mppi.n_knots + self.knots_per_plan) * self.mppi.hold_steps  # the committed, then the planned
-        #: Model steps of the plan taken by the end of each call of a stretch.
+        steps = (self.mppi.n_knots + self.knots_per_plan) * self.mppi.hold_steps
         self._done_by = [(i + 1) * steps // calls for i in range(calls)]
         self.reset()
 
@@ -618,12 +584,12 @@ class PlannerController:
         return float(self.torques(observation.as_array()[None], time_s)[0])
 
     def batch_policy(self) -> BatchPolicy:
-        """This controller as a policy of the batched engine (:func:`softpend.evaluation.evaluate`)."""
+        """This controller as a policy of the batched engine."""
         return _BatchPlanner(self)
 
 
 class _BatchPlanner(BatchPolicy):
-    """:class:`PlannerController` on the batched engine: the rods' raw observations in, torque fractions out."""
+    """:class:`PlannerController` on the batched engine: observations in, torque fractions out."""
 
     def __init__(self, controller: PlannerController) -> None:
         super().__init__(predict_batch=lambda vectors: None)
@@ -664,12 +630,11 @@ class PlannerResult:
 
     @property
     def plant_seconds(self) -> float:
-        """Every plant second driven (excitation and trials)."""
         return self.records[-1].plant_s_total
 
     @property
     def balanced(self) -> bool:
-        """Whether the stopping rule fired (``stop_after_balanced`` balanced trials in a row)."""
+        """Whether the stopping rule fired."""
         n = self.config.stop_after_balanced
         trials = [r for r in self.records if r.kind == "trial"]
         return len(trials) >= n and all(r.balanced for r in trials[-n:])
@@ -679,16 +644,8 @@ class PlannerResult:
         return self.plant_seconds if self.balanced else math.inf
 
 
-def _transitions(positions: np.ndarray, torques_nm: np.ndarray, dt_s: float) -> tuple[np.ndarray, ...]:
-    """Black-box transitions of one trajectory (positions ``(N, 5)``, torques ``(N - 1,)``): states ``[x, v]`` with
-    ``v`` the backward difference, from the second sample on."""
-    states = np.concatenate([positions[1:], backward_difference(positions, dt_s, _ANGLE_MASK)], axis=1)
-    return states[:-1], torques_nm[1:], states[1:]
-
-
 def _run_trial(env: Any, controller: PlannerController, seed: int, config: PlannerConfig) -> tuple[Any, ...]:
-    """One planner trial on the plant, until held for ``hold_s``, ``trial_s`` or a diverged simulation: positions,
-    torques, whether it balanced and the RMS tip angle over its last ``hold_s``."""
+    """One trial until held for ``hold_s``, ``trial_s`` or divergence: positions, torques, balanced, RMS angle."""
     env.reset(seed=seed)
     controller.reset()
     dt, limit = env.dt_s, env.torque_limit_nm
@@ -714,10 +671,12 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
 def _fit(config: PlannerConfig, rod: RodParams, trajectories: list[tuple[np.ndarray, np.ndarray]], refit: int) -> Any:
     """The dynamics model of ``config.model`` fitted to the trajectories (positions, torques) so far."""
     task, seed = config.task, config.seed * 1000 + refit
-    if config.model == "ensemble":
-        parts = [_transitions(p, u, task.dt_s) for p, u in trajectories]
-        s, u, s1 = (np.concatenate([part[i] for part in parts]) for i in range(3))
+    if config.model == "ensemble":  # states [x, backward difference] from the second sample on
+        xv = [np.concatenate([p[1:], backward_difference(p, task.dt_s, _ANGLE_MASK)], 1) for p, _ in trajectories]
+        s, s1 = np.concatenate([x[:-1] for x in xv]), np.concatenate([x[1:] for x in xv])
+        u = np.concatenate([t[1:] for _, t in trajectories])
         return fit_ensemble(s, u, s1, task, config.replace(seed=seed))
+
     xs, us, x1s = [], [], []
     h = config.hold_steps  # one model step per control step, under the mean torque over it
     for positions, torques in trajectories:
@@ -769,8 +728,8 @@ def _controller(
 
 
 def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) -> PlannerResult:
-    """Excitation, identification, then planner trials from the selection starts until the stopping rule fires
-    (or ``max_trials``); every plant second driven counts, failed trials included."""
+    """Excitation, identification, then planner trials from the selection starts until the stopping rule fires (or
+    ``max_trials``), every plant second counted."""
     from softpend.envs import SoftPendulumEnv
     from softpend.torch_threads import one_torch_thread
 
@@ -828,8 +787,8 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
 def fresh_start_evaluation(
     result: PlannerResult, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S
 ) -> EvaluationSummary:
-    """The final controller from fresh starts, all at once on the batched engine; seeds shared with the run's
-    selection starts raise ``ValueError``."""
+    """The final controller from fresh starts (disjoint from the selection starts) on the batched engine."""
+
     from softpend.torch_threads import one_torch_thread
 
     shared = sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds))

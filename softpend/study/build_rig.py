@@ -1,5 +1,4 @@
-"""Building the rig: the numbers that choose its parts (motor, encoder, camera, material) and the procedure from
-a box of parts to a balancing rod (:func:`build_steps`, :func:`check_step`)."""
+"""Building the rig: the numbers that choose its parts and the procedure from a box of parts to a balancing rod."""
 
 from __future__ import annotations
 
@@ -34,8 +33,7 @@ _PEAKS = ("torque_nm", "hub_rate_rad_s", "tip_speed_m_s")
 
 
 def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
-    """Per rig controller and seed: success, swing-up time, upright std and the peak torque, hub rate and tip speed
-    of the swing-up and balance in the simulator."""
+    """Per rig controller and seed: success, swing-up time, upright std and peak torque, hub rate and tip speed."""
     phi_dot, ex_dot, ey_dot = (OBSERVATION_NAMES.index(n) for n in ("phi_dot_rad_s", "ex_dot_m_s", "ey_dot_m_s"))
     rows = []
     for label, make in rig_controllers(task).items():
@@ -49,8 +47,7 @@ def swing_up_needs(task: Task, seeds: Sequence[int], duration_s: float) -> list[
 
 
 def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float) -> list[dict[str, Any]]:
-    """Each V5 cartridge against the swing-up's peak hub rate and ``torque_nm``; it qualifies when faster than the
-    peak rate with a torque margin of at least :data:`MIN_TORQUE_MARGIN` there."""
+    """Each V5 cartridge against the peak hub rate and ``torque_nm`` (qualifies: faster, :data:`MIN_TORQUE_MARGIN`)."""
     rows = []
     for c in V5_CARTRIDGES:
         available = c.available_torque_nm(peak_hub_rate_rad_s)
@@ -96,9 +93,8 @@ class QuantisedHub:
 
 
 def encoder_rows(task: Task, counts: Sequence[int], seeds: Sequence[int], duration_s: float) -> list[dict[str, Any]]:
-    """Per encoder resolution and rig controller: successes and worst upright std with the hub angle quantised
-    (:class:`QuantisedHub`), and the torque step of its LQR (on the observations or the joint state) for one tick
-    of the hub angle over the torque limit."""
+    """Per encoder resolution and rig controller: successes and worst upright std with the hub angle quantised, and
+    its LQR's torque step for one tick over the torque limit."""
     from softpend.control.lqr import LQRController
 
     obs = LQRController.from_params(task.rod, task.dt_s, state="observation")
@@ -128,8 +124,8 @@ def camera_rows(
     exposure_s: float,
     fps_values: Sequence[float],
 ) -> list[dict[str, Any]]:
-    """Per frame rate: the tip's largest step between frames against the tracker's search radius, and the motion
-    blur of an ``exposure_s`` exposure against the dot's diameter [px]."""
+    """Per frame rate: the tip's largest step between frames and its motion blur against the search radius and the
+    dot's diameter [px]."""
     speed_px = peak_tip_speed_m_s * design.camera_model.px_per_m
     dot_px = 2.0 * design.dot_radius_m * design.camera_model.px_per_m
     return [
@@ -147,8 +143,7 @@ def camera_rows(
 
 
 def modulus_rows(params: RodParams) -> list[dict[str, Any]]:
-    """Per modulus (the softest TPU, the rod's own, the stiffest TPU): the rod's design figures with the designed
-    section printed in that material, and the thickness that would keep the design's stiffness."""
+    """Per modulus (softest TPU, the rod's, stiffest TPU): the design figures, and the thickness keeping the stiffness."""
     rows = []
     for e in (TPU_MODULUS_RANGE_PA[0], params.youngs_modulus_pa, TPU_MODULUS_RANGE_PA[1]):
         figures = rod_design(params.replace(youngs_modulus_pa=e))
@@ -160,67 +155,23 @@ def modulus_rows(params: RodParams) -> list[dict[str, Any]]:
 
 def parts_list(design: RigDesign, cartridge: MotorCartridge, camera_fps: float) -> list[dict[str, str]]:
     """What to print and buy, with the dimensions of ``design`` (rows of ``part``, ``quantity``, ``spec``)."""
-    d = design.to_dict()
-    p = design.params
-    rows = [
-        (
-            "TPU beam (printed)",
-            "1",
-            f"{d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm "
-            f"(length x width out of plane x thickness in plane), E = {d['print_modulus_mpa']:.3g} MPa, "
-            f"solid infill, about {d['beam_mass_g']:.0f} g",
-        ),
-        (
-            "hub mount (printed, rigid: PLA or PETG)",
-            "1",
-            f"boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the "
-            f"shaft, beam pocket from {1e3 * design.hub.pocket_start_m:.0f} mm, marker flag "
-            f"{d['flag_length_mm']:.0f} mm long {1e3 * design.hub.flag_gap_m:.0f} mm in front of the beam",
-        ),
-        (
-            "tip mass (steel disc)",
-            "1",
-            f"diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, "
-            f"{d['tip_mass_g']:.3g} g, matte blue dot of the same diameter on its front",
-        ),
-        (
-            "calibration markers (matte green discs)",
-            str(len(design.markers_m)),
-            f"diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at "
-            + ", ".join(f"({x * 1e3:.0f}, {y * 1e3:.0f})" for x, y in design.markers_m)
-            + " mm from the hub axis",
-        ),
-        (
-            "hub marker (matte magenta disc)",
-            "1",
-            f"diameter {2e3 * design.hub.hub_marker_dot_radius_m:.0f} mm on the flag, "
-            f"{d['hub_marker_radius_mm']:.0f} mm from the hub axis",
-        ),
-        (
-            "VEX V5 Smart Motor",
-            "1",
-            f"{cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), "
-            f"torque limit {p.torque_limit_nm:g} N m set in the device program",
-        ),
-        (
-            "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat",
-            "1 each",
-            "the device program runs on the brain; USB to the host computer",
-        ),
-        (
-            "camera",
-            "1",
-            f"{design.camera.width_px} x {design.camera.height_px} px at >= {camera_fps:g} frames/s, horizontal "
-            f"field of view {design.camera.horizontal_fov_deg:g} deg, {d['camera_distance_mm']:.0f} mm from the "
-            f"rod plane, square on, optical axis through the hub axis",
-        ),
+    d, hub, cam, mm = design.to_dict(), design.hub, design.camera, 1e3
+    markers = ", ".join(f"({x * mm:.0f}, {y * mm:.0f})" for x, y in design.markers_m)
+    table = [
+        f"TPU beam (printed) | 1 | {d['beam_length_mm']:.1f} x {d['beam_width_mm']:.1f} x {d['beam_thickness_mm']:.2f} mm (length x width out of plane x thickness in plane), E = {d['print_modulus_mpa']:.3g} MPa, solid infill, about {d['beam_mass_g']:.0f} g",
+        f"hub mount (printed, rigid: PLA or PETG) | 1 | boss radius {d['mount_boss_radius_mm']:.0f} mm, square bore {d['mount_bore_mm']:.3f} mm for the shaft, beam pocket from {mm * hub.pocket_start_m:.0f} mm, marker flag {d['flag_length_mm']:.0f} mm long {mm * hub.flag_gap_m:.0f} mm in front of the beam",
+        f"tip mass (steel disc) | 1 | diameter {d['tip_disc_diameter_mm']:.0f} mm, thickness {d['tip_disc_thickness_mm']:.2f} mm, {d['tip_mass_g']:.3g} g, matte blue dot of the same diameter on its front",
+        f"calibration markers (matte green discs) | {len(design.markers_m)} | diameter {d['marker_diameter_mm']:.0f} mm on a board in the dot's plane, at {markers} mm from the hub axis",
+        f"hub marker (matte magenta disc) | 1 | diameter {2e3 * hub.hub_marker_dot_radius_m:.0f} mm on the flag, {d['hub_marker_radius_mm']:.0f} mm from the hub axis",
+        f"VEX V5 Smart Motor | 1 | {cartridge.name} cartridge ({cartridge.encoder_ticks_per_rev} encoder ticks per revolution), torque limit {design.params.torque_limit_nm:g} N m set in the device program",
+        "VEX V5 Robot Brain, battery, 1/8 inch square shaft, bearing flat | 1 each | the device program runs on the brain; USB to the host computer",
+        f"camera | 1 | {cam.width_px} x {cam.height_px} px at >= {camera_fps:g} frames/s, horizontal field of view {cam.horizontal_fov_deg:g} deg, {d['camera_distance_mm']:.0f} mm from the rod plane, square on, optical axis through the hub axis",
     ]
-    return [{"part": part, "quantity": quantity, "spec": spec} for part, quantity, spec in rows]
+    return [dict(zip(("part", "quantity", "spec"), row.split(" | "))) for row in table]
 
 
 def firmware_settings() -> dict[str, Any]:
-    """The literal settings of the device program (``COUNTS_PER_REV``, ``TORQUE_LIMIT_NM``, ...), read from its
-    source without running it, with ``gear_setting`` (the motor's ``GearSetting``)."""
+    """The literal settings of the device program's source (``COUNTS_PER_REV``, ...) and its ``gear_setting``."""
     import ast
 
     from softpend.hardware.firmware import FIRMWARE_PATH
@@ -241,15 +192,14 @@ def firmware_settings() -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class BuildTarget:
-    """Where the procedure runs: the digital twin, or a rig (serial ``port`` of the V5 brain, ``camera`` index or
-    URL)."""
+    """Where the procedure runs: the digital twin, or a rig (serial ``port`` of the brain, ``camera`` index or URL)."""
 
     twin: bool = True
     port: str = "/dev/ttyACM1"
     camera: str = "0"
 
     def args(self, *names: str) -> list[str]:
-        """``--twin``, or each of ``names`` (``port``, ``camera``) as ``--NAME VALUE``."""
+        """``--twin``, or each of ``names`` as ``--NAME VALUE``."""
         return ["--twin"] if self.twin else [a for name in names for a in (f"--{name}", getattr(self, name))]
 
 
@@ -297,8 +247,7 @@ class BuildStep:
 def build_steps(
     folder: str | Path, target: BuildTarget = TWIN, budget: BuildBudget = BuildBudget(), overrides: Sequence[str] = ()
 ) -> list[BuildStep]:
-    """The procedure from the design to the first closed-loop run, every output under ``folder``; ``overrides``:
-    ``NAME=VALUE`` rod parameters passed as ``--set``."""
+    """The procedure from the design to the first closed-loop run into ``folder``; ``overrides``: ``--set`` values."""
     f = Path(folder)
     sets = [a for item in overrides for a in ("--set", item)]
     counts = ["--counts-per-rev", str(firmware_settings()["COUNTS_PER_REV"])]
@@ -365,7 +314,6 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
     from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
 
     f = Path(folder)
-
     read = lambda *parts: read_json_checked(f.joinpath(*parts), "build output", MAX_CONFIG_BYTES)  # noqa: E731
 
     if step.key == "firmware":
@@ -391,12 +339,8 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
         good = d["n_trials"] >= 1 and d["gaps"] == 0 and d["peak_correlation"] > 0.5
         good = bool(good and (f / "babble" / "rig_dataset.npz").is_file())
         figures = {"n_trials": d["n_trials"], "clock_offset_ms": 1e3 * d["clock_offset_s"]}
-        return {
-            "good": good,
-            **figures,
-            "peak_correlation": d["peak_correlation"],
-            "valid_fraction": d["grid_valid_fraction"],
-        }
+        figures |= {"peak_correlation": d["peak_correlation"], "valid_fraction": d["grid_valid_fraction"]}
+        return {"good": good, **figures}
     if step.key == "identify":
         v = read("model.json")["metadata"]["metrics"]["validation"]
         tip, hold = v.get(f"tip_rmse_m@{IDENTIFY_HORIZON_S:g}s"), v.get(f"hold_tip_rmse_m@{IDENTIFY_HORIZON_S:g}s")
@@ -414,8 +358,7 @@ def check_step(step: BuildStep, folder: str | Path) -> dict[str, Any]:
 
 
 def design_figures(params: RodParams, design: Optional[RigDesign] = None) -> dict[str, Any]:
-    """:meth:`RigDesign.to_dict` with the clamped-horizontal tip sag (``tip_sag_horizontal_mm``, PRB statics) and
-    the tracker's smallest blob (``tracker_min_area_px``)."""
+    """:meth:`RigDesign.to_dict` with ``tip_sag_horizontal_mm`` (PRB statics) and ``tracker_min_area_px``."""
     from softpend.vision.tracker import TipTracker
 
     figures = (design if design is not None else rig_design(params)).to_dict()

@@ -18,15 +18,11 @@ RIG_DURATION_S = 10.0
 
 
 def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str, float]:
-    """Ten seeds each: the grey-box route on the PRB rod and on the continuum beam (the PRB model fitted to beam
-    data), the planner with the PRB-residual model (``mpc_*``), with the black-box ensemble (``mpc_blackbox_*``) and
-    with the PRB-residual model on the continuum beam (``mpc_beam_*``): median and worst plant seconds to balance
-    the fresh report starts, seeds balanced.  ``mpc_over_pilco_real_s_ratio``: the median over seeds of the
-    PRB-residual planner's plant seconds to balance over PILCO's, from the book's PILCO runs (trained by the
-    ``pilco`` group; NaN, with ``pilco_book_runs_found`` 0, where they are not all trained: none is trained here).
-    ``mpc_rig_*``: the PRB-residual planner of seed 0 as a rig controller on the nominal twin, camera and estimator
-    in the loop, torch on one thread: successes of :data:`RIG_STARTS` fresh starts, the 95th percentile and the
-    largest of its calls' wall times, the control period and the fraction of calls longer than it."""
+    """Median and worst plant seconds to balance the fresh report starts, and seeds balanced, of ten seeds of the
+    grey-box route (PRB rod; ``greybox_beam``: the PRB model fitted to beam data) and the planner (``mpc``: the
+    PRB-residual model, ``mpc_blackbox``: the black-box ensemble, ``mpc_beam``: on the beam); the planner's plant
+    seconds over PILCO's (median over seeds; NaN, with ``pilco_book_runs_found`` 0, unless the book's PILCO runs are
+    all trained); ``mpc_rig_*``: the seed-0 planner on the nominal twin (successes, step times against the period)."""
     from softpend.study.presets import PILCO_BOOK, REPORT_SEEDS
     from softpend.study.rig_runs import planner_twin_figures
 
@@ -38,13 +34,9 @@ def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str
     figures.update(greybox_route_figures(planner_rows("residual", seeds, plant="beam"), "mpc_beam", 30.0))
     pilco = pilco_rows_if_trained(seeds, PILCO_BOOK.runs_root)
     figures["pilco_book_runs_found"] = float(pilco is not None)
-    figures["mpc_over_pilco_real_s_ratio"] = (
-        math.nan
-        if pilco is None
-        else paired_ratio(
-            {r["seed"]: r["real_s_to_balance"] for r in mpc}, {r["seed"]: r["plant_s_to_balance"] for r in pilco}
-        )
-    )
+    mpc_s = {r["seed"]: r["real_s_to_balance"] for r in mpc}
+    ratio = math.nan if pilco is None else paired_ratio(mpc_s, {r["seed"]: r["plant_s_to_balance"] for r in pilco})
+    figures["mpc_over_pilco_real_s_ratio"] = ratio
     rig = planner_twin_figures(REPORT_SEEDS[:RIG_STARTS], RIG_DURATION_S)
     for key in ("successes", "step_ms_p95", "step_ms_max", "control_period_ms", "steps_over_period"):
         figures[f"mpc_rig_{key}"] = float(rig[key])

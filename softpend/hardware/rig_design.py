@@ -186,44 +186,33 @@ def rig_design(params: Optional[RodParams] = None, print_modulus_pa: Optional[fl
             f"length ({params.length_m * 1e3:g} mm) thick"
         )
     density = params.mass_kg / (params.width_m * params.depth_m * params.length_m)
-    beam_length = params.length_m - hub.pocket_start_m
     dot_radius = MARKER_RADIUS_M
-    tip_disc = params.tip_mass_kg / (STEEL_DENSITY_KG_M3 * math.pi * dot_radius**2)
     swing = params.length_m + dot_radius
     default_markers = np.array(DEFAULT_MARKERS_M, dtype=float)
     needed = swing + hub.marker_clearance_m + MARKER_RADIUS_M
     scale = max(1.0, needed / float(np.min(np.hypot(*default_markers.T))))
     base = CameraModel()
-    model = CameraModel(
-        width_px=camera.width_px,
-        height_px=camera.height_px,
-        px_per_m=base.px_per_m / scale,
-        centre_px=(
-            base.centre_px[0] * camera.width_px / base.width_px,
-            base.centre_px[1] * camera.height_px / base.height_px,
-        ),
-        roll_rad=0.0,
-    )
-    fov_width = camera.width_px / model.px_per_m
-    distance = fov_width / (2.0 * math.tan(math.radians(camera.horizontal_fov_deg) / 2.0))
-    flag_length = hub.hub_marker_radius_m + hub.hub_marker_dot_radius_m + 0.003
+    w, h = camera.width_px, camera.height_px
+    centre = (base.centre_px[0] * w / base.width_px, base.centre_px[1] * h / base.height_px)
+    model = CameraModel(width_px=w, height_px=h, px_per_m=base.px_per_m / scale, centre_px=centre, roll_rad=0.0)
+    fov_width = w / model.px_per_m
     return RigDesign(
         params=params,
         print_modulus_pa=modulus,
-        beam_length_m=beam_length,
+        beam_length_m=params.length_m - hub.pocket_start_m,
         beam_width_m=width,
         beam_thickness_m=thickness,
         beam_mass_kg=density * width * thickness * params.length_m,
         out_of_plane_stiffness_ratio=(width / thickness) ** 2,
-        tip_disc_thickness_m=tip_disc,
+        tip_disc_thickness_m=params.tip_mass_kg / (STEEL_DENSITY_KG_M3 * math.pi * dot_radius**2),
         dot_radius_m=dot_radius,
         swing_radius_m=swing,
         keep_out_radius_m=swing + hub.keep_out_margin_m,
-        flag_length_m=flag_length,
+        flag_length_m=hub.hub_marker_radius_m + hub.hub_marker_dot_radius_m + 0.003,
         markers_m=default_markers * scale,
         marker_scale=scale,
         camera_model=model,
-        camera_distance_m=distance,
+        camera_distance_m=fov_width / (2.0 * math.tan(math.radians(camera.horizontal_fov_deg) / 2.0)),
         hub=hub,
         camera=camera,
     )

@@ -1,5 +1,5 @@
-"""The claims ledger: each claim of the report beside what the book's executed notebooks and run folders measured
-(glued values, training logs, fresh-start evaluations), with a verdict; nothing here trains."""
+"""The claims ledger: each claim of the report beside what the book's notebooks and run folders measured, with a
+verdict; nothing here trains."""
 
 from __future__ import annotations
 
@@ -29,8 +29,7 @@ SAME_SHARE = 0.1
 
 @dataclass(frozen=True)
 class LedgerRow:
-    """One claim (``key``: glue name ``verdict_<key>``): the report's words and figure, ours, the verdict (one of
-    :data:`VERDICTS`) and the label of the chapter that explains it."""
+    """One claim (glued as ``verdict_<key>``): the report's words and figure, ours, the verdict and its chapter."""
 
     key: str
     claim: str
@@ -96,12 +95,11 @@ def rl_fresh_start_summaries(
     from softpend.rl.dqn import evaluate_agent, load_agent
 
     summaries: dict[str, list[Any]] = {}
+    starts, load = tuple(int(s) for s in report_seeds), lambda folder, seed: (seed, *load_agent(folder, which))
     for algo, method in METHOD_NAMES.items():
-        load = lambda folder, seed: (seed, *load_agent(folder, which))  # noqa: E731
         summaries[method] = []
         for seed, model, config in load_runs(runs_root, plant, algo, seeds, load):
             _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
-            starts = tuple(int(s) for s in report_seeds)
             name = f"{method} seed {seed}"
             summaries[method].append(evaluate_agent(model, config, seeds=starts, duration_s=duration_s, name=name))
     return summaries
@@ -183,9 +181,7 @@ def _sysid(e: _Evidence) -> Found:
     full, limited, trials = (fig03.get(k) for k in ("one_step_mse_full", "one_step_mse_limited", "n_test_trials"))
     if not isinstance(full, (int, float)):
         return None
-    ours = f"{full:.2g} (full information), " + (
-        f"{limited:.2g} (limited)" if isinstance(limited, (int, float)) else ""
-    )
+    ours = f"{full:.2g} (full information), " + (f"{limited:.2g} (limited)" if isinstance(limited, float | int) else "")
     ours += f"; 1 seed, {trials} held-out trials" if trials is not None else "; 1 seed"
     return ours, 3e-9 / FACTOR <= full <= 3e-9 * FACTOR
 

@@ -104,9 +104,7 @@ class RigStateEstimator:
         self.dt_s = float(task.dt_s)
         self._history: collections.deque[_Step] = collections.deque()
         self._last_tip_time_s = -math.inf
-        self.counts = dict.fromkeys(
-            ("tips_accepted", "tips_refused", "tips_too_old", "tips_deferred", "encoder_gaps"), 0
-        )
+        self.counts = dict.fromkeys("tips_accepted tips_refused tips_too_old tips_deferred encoder_gaps".split(), 0)
         self._pending_tips: list[tuple[float, float, float]] = []
         stds = [cfg.encoder_std_rad] + ([] if cfg.hub_rate_std_rad_s is None else [cfg.hub_rate_std_rad_s])
         self._h_encoder = np.eye(2 * n)[[0, n][: len(stds)]]  # measures the hub angle (and rate)
@@ -300,15 +298,9 @@ class RigStateEstimator:
                 self.model.step(last.torque_nm)
             q, qd = self.model.joint_state()
         _, _, jac = self._tip_model(last.x)
-        tip_cov = jac @ last.p @ jac.T
-        return Estimate(
-            last.time_s + lead * self.dt_s,
-            q,
-            qd,
-            self.model.observation_from_state(q, qd),
-            float(math.sqrt(max(np.trace(tip_cov) / 2, 0.0))),
-            self.blind_s,
-        )
+        tip_std = float(math.sqrt(max(np.trace(jac @ last.p @ jac.T) / 2, 0.0)))
+        observation = self.model.observation_from_state(q, qd)
+        return Estimate(last.time_s + lead * self.dt_s, q, qd, observation, tip_std, self.blind_s)
 
     def stats(self) -> dict[str, float]:
         return {name: float(count) for name, count in self.counts.items()}

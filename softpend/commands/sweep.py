@@ -20,14 +20,11 @@ def seed_list(text: str) -> list[int]:
     """``"0-9"``, ``"0,3,5"`` or a mix (``"0-2,7"``) as a sorted list of distinct seeds >= 0."""
     seeds: set[int] = set()
     for part in text.split(","):
-        part = part.strip()
         try:
-            if "-" in part:
-                low, high = (int(v) for v in part.split("-", 1))
-                if high < low:
-                    raise ValueError
-            else:
-                low = high = int(part)
+            first, dash, last = part.strip().partition("-")
+            low, high = int(first), int(last if dash else first)
+            if high < low:
+                raise ValueError
         except ValueError:
             raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}") from None
         if high - low + 1 > MAX_SEEDS - len(seeds):  # refused by its size before a single seed is listed

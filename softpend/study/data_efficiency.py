@@ -36,9 +36,8 @@ def greybox_route_rows(
     report_seeds: Sequence[int] = REPORT_SEEDS,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
-    """One row per seed: the route on ``plant`` from the study's perturbed guess (plant seconds of excitation, how
-    far it went), then its controller on the 20 fresh report starts; ``real_s_to_balance`` is infinite for a seed
-    whose controller does not balance them (starts: ``report_seeds``, each ``duration_s`` long)."""
+    """One row per seed: the route on ``plant`` from the perturbed guess, then its controller on ``report_seeds``
+    (``real_s_to_balance``: its plant seconds, infinite when it does not balance them)."""
     task, config, rows = Task(plant=plant), RouteConfig(), []
     for seed in seeds:
         route = identify_until_robust(
@@ -54,7 +53,7 @@ def greybox_route_rows(
 
 
 def _on_fresh_starts(controller: Any, task: Task, seeds: Sequence[int], duration_s: float) -> dict[str, Any]:
-    """``balanced_starts``, ``starts`` and ``balances`` (:func:`fresh_start_row`) of a controller on ``seeds``."""
+    """``balanced_starts``, ``starts`` and ``balances`` of a controller on ``seeds``."""
     fresh = fresh_start_row(evaluate(controller, task, seeds=tuple(seeds), duration_s=duration_s))
     return {"balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"], "balances": fresh["run_balances"]}
 
@@ -70,10 +69,8 @@ def excitation_rows(
     report_seeds: Sequence[int] = REPORT_SEEDS,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
-    """One row per excitation program of :data:`EXCITATIONS`, length and seed: the rod identified from that many
-    seconds of it (the grey-box route's recorder on ``plant``, from the study's perturbed guess), the relative
-    error of each identified field (``error_<field>``, on the PRB chain only, whose truth is the default rod), and
-    the energy swing-up + LQR designed on the estimate on the fresh ``report_seeds`` (each ``duration_s`` long)."""
+    """Per program of :data:`EXCITATIONS`, length and seed: the relative error of each field identified from that
+    much of it (``error_<field>``, PRB only) and the swing-up + LQR designed on the estimate on ``report_seeds``."""
     from softpend.sysid.greybox import GreyBoxConfig, identify
 
     task, truth, config = Task(plant=plant), RodParams(), RouteConfig()
@@ -95,8 +92,7 @@ def excitation_rows(
 
 
 def plot_excitation(rows: list[dict[str, Any]]) -> Any:
-    """Per identified field, the median absolute relative error over seeds against the seconds of excitation, one
-    line per program (logarithmic error axis), and the seeds whose swing-up + LQR balances, per program and length."""
+    """Per field, the median |relative error| against the seconds of excitation per program, and the seeds that balance."""
     import matplotlib.pyplot as plt
 
     fields = sorted({k[len("error_") :] for r in rows for k in r if k.startswith("error_")})
@@ -138,9 +134,8 @@ def plant_seconds_rows(
     beam: Sequence[dict[str, Any]] = (),
     planner: Optional[Mapping[str, Sequence[dict[str, Any]]]] = None,
 ) -> list[dict[str, Any]]:
-    """One row per (method, seed) on one axis: the learned methods' rows of
-    :func:`softpend.study.fresh_starts.seed_rows`, the grey-box route's rows (PRB rod, then beam) and the planner's
-    (:func:`planner_rows`, ``planner``: ``{"mpc" | "mpc_blackbox" | "mpc_beam": rows}``)."""
+    """One row per (method, seed): the learned methods' :func:`~softpend.study.fresh_starts.seed_rows`, the grey-box
+    route's rows (PRB, beam) and the planner's (``{"mpc" | "mpc_blackbox" | "mpc_beam": rows}``)."""
     key_of = {label: key for key, label in METHODS.items()}
     groups: list[tuple[str, Sequence[dict[str, Any]], str, str]]
     groups = [(key_of[r["method"]], [r], "plant_s_to_balance", "final_balanced_starts") for r in learned]
@@ -178,8 +173,7 @@ def method_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def plot_plant_seconds(rows: list[dict[str, Any]]) -> Any:
-    """Plant seconds to balance per seed (dots; crosses at the edge for seeds that never balanced), one line per
-    method, with the median and its interval (:func:`method_summary`); logarithmic axis."""
+    """Plant seconds to balance per seed (crosses: never balanced), one line per method, with median and interval."""
     import matplotlib.pyplot as plt
 
     summary = method_summary(rows)
@@ -208,8 +202,8 @@ def planner_config(
     overrides: Optional[Mapping[str, Any] | Sequence[tuple[str, Any]]] = None,
     hparams: Optional[str | Path] = None,
 ) -> Any:
-    """The planner's settings on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``, with
-    trials from the first 16 selection starts (a :class:`softpend.control.planner.PlannerConfig`)."""
+    """The ``PlannerConfig`` on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``;
+    trials from the first 16 selection starts."""
     from softpend.control.planner import PlannerConfig
     from softpend.io.overrides import apply_overrides
     from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
@@ -227,11 +221,8 @@ def planner_rows(
     overrides: Optional[Mapping[str, Any]] = None,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[dict[str, Any]]:
-    """One row per seed of the planner (``book/hparams/planner.yml``, then ``overrides``; ``model`` =
-    ``"residual"``: the PRB model with a learned residual, ``"ensemble"``: the black-box ensemble) with ``plant``
-    as the real rod, trials from the first 16 selection starts, then its controller on ``report_seeds`` (the PRB
-    rod all at once on the batched engine, another rod one start after the other); ``real_s_to_balance`` is
-    infinite unless 90 % of them balance (each start ``duration_s`` long)."""
+    """One row per seed of the planner (``model``: ``"residual"`` or ``"ensemble"``) on ``plant``, then its controller on
+    ``report_seeds`` (``real_s_to_balance``: infinite unless 90 % of them balance)."""
     from softpend.control.planner import run_planner
 
     config = planner_config(Task(plant=plant), overrides).replace(model=model)
@@ -246,10 +237,8 @@ def planner_rows(
 
 
 def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S) -> Any:
-    """The final controller of a planner run (:class:`softpend.control.planner.PlannerResult`) from the fresh starts
-    ``seeds`` on the run's real rod: the PRB rod all at once on the batched engine
-    (:func:`softpend.control.planner.fresh_start_evaluation`), another one start after the other on the Exudyn
-    engine; seeds shared with the run's selection starts raise ``ValueError``."""
+    """The final controller of a planner run from the fresh starts ``seeds`` on the run's rod (PRB: batched);
+    ``ValueError`` for seeds shared with the run's selection starts."""
     import torch
 
     from softpend.control.planner import fresh_start_evaluation
@@ -269,10 +258,8 @@ def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = 
 def pilco_rows_if_trained(
     seeds: Iterable[int], runs_root: Path | str, report_seeds: Sequence[int] = REPORT_SEEDS
 ) -> Optional[list[dict[str, Any]]]:
-    """The book's PILCO runs of ``seeds`` under ``runs_root`` (settings ``book/hparams/pilco.yml``, PRB rod) as
-    :func:`softpend.study.fresh_starts.seed_rows` rows (``plant_s_to_balance``: plant seconds to the first balancing
-    policy, infinite unless the final policy balances the fresh ``report_seeds``), or None if any is not trained;
-    nothing is trained here."""
+    """The book's PILCO runs of ``seeds`` as :func:`~softpend.study.fresh_starts.seed_rows` rows, or None if any is
+    not trained (nothing is trained here)."""
     from softpend.study.fresh_starts import pilco_fresh_start_rows, seed_rows
     from softpend.study.head_to_head import pilco_jobs, pilco_runs
     from softpend.study.presets import load_hparams
@@ -285,9 +272,8 @@ def pilco_rows_if_trained(
 
 
 def paired_ratio_rows(numerator: Mapping[int, float], denominator: Mapping[int, float]) -> list[dict[str, Any]]:
-    """Per seed held by both (in seed order): ``numerator`` over ``denominator`` plant seconds to balance.  A seed
-    that only the numerator's method balances has ratio 0, one that only the denominator's has ``inf``, and one that
-    neither balances counts as ``inf`` too (no credit to the numerator's method)."""
+    """Per seed held by both: ``numerator`` over ``denominator`` plant seconds to balance (0 when only the numerator's
+    method balances, ``inf`` when it does not)."""
     rows = []
     for seed in sorted(set(numerator) & set(denominator)):
         top, bottom = float(numerator[seed]), float(denominator[seed])

@@ -4,7 +4,6 @@ names) written one complete line per ``write(2)``, so a killed writer leaves eve
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -37,12 +36,7 @@ class SampleLog:
         columns = [str(c) for c in columns]
         if not columns or any((not c) or ("," in c) or ("\n" in c) for c in columns):
             raise ValueError(f"columns must be non-empty names without commas or newlines, got {columns!r}")
-        if fsync_every_s is not None and not (math.isfinite(fsync_every_s) and fsync_every_s >= 0):
-            raise ValueError(f"fsync_every_s must be None or a non-negative number, got {fsync_every_s!r}")
-        self.path = Path(path)
-        self.columns = columns
-        self.fsync_every_s = fsync_every_s
-        self.rows_written = 0
+        self.path, self.columns, self.fsync_every_s, self.rows_written = Path(path), columns, fsync_every_s, 0
         if os.path.exists(self.path):
             check_regular_file(self.path, "sample log")  # a FIFO or device would block or swallow the log
         exists = self.path.exists() and self.path.stat().st_size > 0
@@ -50,8 +44,7 @@ class SampleLog:
             existing = read_sample_log(self.path)
             if existing.columns != columns:
                 raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
-        fd = open_checked_fd(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, "sample log")
-        self._fd: Optional[int] = fd
+        self._fd: Optional[int] = open_checked_fd(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, "sample log")
         self._last_sync = time.monotonic()
         if not exists:
             header = _MAGIC + json.dumps(metadata or {}, sort_keys=True) + "\n" + ",".join(columns) + "\n"

@@ -21,16 +21,13 @@ def babbling_trajectory(n_steps: int, seed: int = 0):
     q[0] = 2.2
     plant.reset(q, qd)
     limit = plant.params.torque_limit_nm
-    torque = np.clip(
-        band_limited_noise(np.random.default_rng(seed), n_steps, 0.7 * limit, 2.0, plant.dt_s), -limit, limit
-    )
-    times, points, hub = [], [], []
-    for k in range(n_steps):
-        times.append(k * plant.dt_s)
+    noise = band_limited_noise(np.random.default_rng(seed), n_steps, 0.7 * limit, 2.0, plant.dt_s)
+    points, hub = [], []
+    for torque in np.clip(noise, -limit, limit):
         points.append(plant.link_points_m())
         hub.append(plant.joint_state()[0][0])
-        plant.step(float(torque[k]))
-    return np.array(times), np.array(points), np.array(hub)
+        plant.step(float(torque))
+    return np.arange(n_steps) * plant.dt_s, np.array(points), np.array(hub)
 
 
 @dataclass

@@ -1,5 +1,5 @@
-"""Trained controllers measured on fresh starts (:data:`softpend.study.presets.REPORT_SEEDS`, which no training
-or selection step sees): per-run rows, their aggregates over runs and the headline figures."""
+"""Trained controllers measured on fresh starts (:data:`~softpend.study.presets.REPORT_SEEDS`): per-run rows, their
+aggregates over runs and the headline figures."""
 
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ def _scoring_source() -> bytes:
 
 
 def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
-    """Key of a fresh-start row: the agent's bytes, the scoring code, the starts and the duration."""
+    """Hash of the agent's bytes, the scoring code, the starts and the duration."""
     digest = hashlib.sha256(agent_path.read_bytes() + _scoring_source())
     digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
     return digest.hexdigest()
@@ -85,9 +85,8 @@ def rl_fresh_start_rows(
     which: Sequence[str] = ("best", "final"),
     configs: Optional[Mapping[str, Any]] = None,
 ) -> list[dict[str, Any]]:
-    """One row per (method, seed, agent) of the RL runs under ``runs_root`` on ``report_seeds`` (``configs``:
-    ``{algo: config}`` picks the run folders), cached in each folder's :data:`FRESH_STARTS_FILE` by
-    :func:`_evaluation_key`; ``ValueError`` if a report seed selected a run's agents."""
+    """One row per (method, seed, agent) of the RL runs on ``report_seeds`` (``configs``: ``{algo: config}`` picks the
+    folders), cached in :data:`FRESH_STARTS_FILE`; ``ValueError`` if a report seed selected a run's agents."""
     from softpend.rl.dqn import evaluate_agent, load_agent
 
     rows = []
@@ -142,15 +141,9 @@ def aggregate_fresh_start_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str,
         rates = np.array([g["balanced_rate"] for g in group])
         iqm = aggregate_interval(rates, "iqm", seed=0) if len(rates) >= 2 else None
         figures = (iqm.value, iqm.low, iqm.high) if iqm else (float(rates[0]), math.nan, math.nan)
-        out.append(
-            {
-                "method": method,
-                "agent": agent,
-                "runs": len(group),
-                "runs_balanced": sum(g["run_balances"] for g in group),
-            }
-            | dict(zip(("iqm_balanced_rate", "iqm_low", "iqm_high"), figures))
-        )
+        balanced = sum(g["run_balances"] for g in group)
+        row = {"method": method, "agent": agent, "runs": len(group), "runs_balanced": balanced}
+        out.append(row | dict(zip(("iqm_balanced_rate", "iqm_low", "iqm_high"), figures)))
     return out
 
 
@@ -158,9 +151,7 @@ def seed_rows(
     logs_by_algo: Mapping[str, Sequence[Any]], fresh_rows: Sequence[dict[str, Any]], pilco_results: Sequence[Any] = ()
 ) -> list[dict[str, Any]]:
     """One row per (method, seed): what the run cost and whether its final agent balances the fresh starts
-    (``plant_s_to_balance``: the run's plant seconds if so, else ``inf``; PILCO: its seconds to its first
-    balancing policy).  ``logs_by_algo``: ``{"dqn": [TrainingLog, ...], "mbpo": [...]}``; ``fresh_rows``: rows of
-    :func:`rl_fresh_start_rows` and :func:`pilco_fresh_start_rows`."""
+    (``plant_s_to_balance``, else ``inf``); ``logs_by_algo``: ``{algo: [TrainingLog]}``."""
     final = {(r["method"], int(r["seed"])): r for r in fresh_rows if r["agent"] == "final"}
     rows = []
 
@@ -168,19 +159,10 @@ def seed_rows(
         if (fresh := final.get((method, seed))) is None:
             what = f"the final agent of {method} seed {seed}" if method != "PILCO" else f"PILCO seed {seed}"
             raise ValueError(f"no fresh-start row of {what}")
-        rows.append(
-            {
-                "method": method,
-                "seed": seed,
-                "episodes": episodes,
-                "plant_s": plant_s,
-                "stopped_balanced": stopped,
-                "final_balanced_starts": fresh["balanced_starts"],
-                "starts": fresh["starts"],
-                "final_balances": fresh["run_balances"],
-                "plant_s_to_balance": to_balance if fresh["run_balances"] else math.inf,
-            }
-        )
+        row = {"method": method, "seed": seed, "episodes": episodes, "plant_s": plant_s, "stopped_balanced": stopped}
+        row |= {"final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"]}
+        balances = fresh["run_balances"]
+        rows.append(row | {"final_balances": balances, "plant_s_to_balance": to_balance if balances else math.inf})
 
     for algo, logs in logs_by_algo.items():
         for log in logs:
@@ -194,10 +176,8 @@ def seed_rows(
 
 
 def headline_figures(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
-    """The learning methods' figures over seeds from :func:`seed_rows` rows, per method ``m``: ``seeds_<m>``,
-    ``seeds_balanced_<m>``, ``<m>_real_s_to_balance`` (median, with ``_low``/``_high`` bootstrap bounds);
-    ``mbpo_over_dqn_real_s_ratio``, ``mbpo_seeds_3x_fewer_than_dqn`` (seeds where DQN-MBPO needed at most a third
-    of DQN's plant seconds) and ``pilco_seeds_within_30s``."""
+    """Per method ``m`` of :func:`seed_rows` rows: ``seeds_<m>``, ``seeds_balanced_<m>``, ``<m>_real_s_to_balance``
+    (median, ``_low``/``_high``); ``mbpo_over_dqn_real_s_ratio``, ``mbpo_seeds_3x_fewer_than_dqn``, ``pilco_seeds_within_30s``."""
     keys = {METHOD_NAMES["dqn"]: "dqn", METHOD_NAMES["mbpo"]: "mbpo", "PILCO": "pilco"}
     by_method: dict[str, dict[int, dict[str, Any]]] = {}
     for row in rows:
@@ -229,8 +209,7 @@ def perturbed_rod_row(
     report_seeds: Sequence[int] = REPORT_SEEDS,
     duration_s: float = TEST_EPISODE_S,
 ) -> dict[str, Any]:
-    """:func:`fresh_start_row` of a controller over ``report_seeds``, the start seeded ``s`` on the rod
-    :func:`softpend.plant.randomisation.randomised_rod` draws from ``default_rng(s)`` with ``spread``."""
+    """:func:`fresh_start_row` of a controller over ``report_seeds``, each on a rod randomised by ``spread``."""
     summary = evaluate(
         controller, task, name="perturbed rods", seeds=report_seeds, duration_s=duration_s, rod_spread=spread
     )
@@ -240,15 +219,13 @@ def perturbed_rod_row(
 def converged_fresh_start_rows(
     runs_root: Path | str, seeds: Sequence[int], report_seeds: Sequence[int] = REPORT_SEEDS
 ) -> list[dict[str, Any]]:
-    """:func:`rl_fresh_start_rows` of the final agent of each run on the batched chain at its default (converged)
-    sub-steps (:func:`softpend.rl.dqn.evaluate_agents_batched`), from the same starts."""
+    """:func:`rl_fresh_start_rows` of each run's final agent on the batched chain at its default (converged) sub-steps."""
     from softpend.rl.dqn import evaluate_agents_batched, load_agent
 
     runs = [(algo, int(seed)) for algo in METHOD_NAMES for seed in seeds]
     agents = {run: load_agent(run_folder(runs_root, *run), "final") for run in runs}
     for (algo, seed), (_, config) in agents.items():
         _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
-    # agents that share what the batched episodes depend on step together
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
         groups.setdefault((config.task, config.action_repeat, config.n_torque_levels), []).append(run)

@@ -676,7 +676,6 @@ def _fit(config: PlannerConfig, rod: RodParams, trajectories: list[tuple[np.ndar
         s, s1 = np.concatenate([x[:-1] for x in xv]), np.concatenate([x[1:] for x in xv])
         u = np.concatenate([t[1:] for _, t in trajectories])
         return fit_ensemble(s, u, s1, task, config.replace(seed=seed))
-
     xs, us, x1s = [], [], []
     h = config.hold_steps  # one model step per control step, under the mean torque over it
     for positions, torques in trajectories:
@@ -788,7 +787,6 @@ def fresh_start_evaluation(
     result: PlannerResult, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S
 ) -> EvaluationSummary:
     """The final controller from fresh starts (disjoint from the selection starts) on the batched engine."""
-
     from softpend.torch_threads import one_torch_thread
 
     shared = sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds))

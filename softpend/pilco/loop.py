@@ -46,9 +46,9 @@ BALANCE_PREFIX = "balance."
 
 @dataclass(frozen=True)
 class CostSettings:
-    """The saturating cost: its width [m] of tip distance (``width_after_swing_up_m`` once a policy trial swung
-    up), a tip-rate factor of width ``rate_width_rad_s`` (None: none) once a trial came within ``rate_after_rad``
-    of upright (None: from the start), and the exploration weight in [-1, 0] of the cost's spread."""
+    """The saturating cost: width [m] of tip distance (``width_after_swing_up_m`` once a policy trial swung up),
+    tip-rate factor width ``rate_width_rad_s`` (None: none) once within ``rate_after_rad`` of upright (None: from
+    the start), exploration weight in [-1, 0] of the cost's spread."""
 
     width_m: float = 0.15
     width_after_swing_up_m: Optional[float] = None
@@ -98,9 +98,8 @@ class PolicySettings:
 
 @dataclass(frozen=True)
 class OptimiserSettings:
-    """L-BFGS-B policy search: ``iterations`` per search, then ``restarts`` searches from fresh policies (pseudo-
-    target spread ``restart_target_std``) when the predicted cost is above ``restart_above_cost_fraction`` of
-    the steps."""
+    """L-BFGS-B policy search: ``iterations`` per search, then ``restarts`` from fresh policies (pseudo-target
+    spread ``restart_target_std``) when the predicted cost exceeds ``restart_above_cost_fraction`` of the steps."""
 
     iterations: int = 80
     restarts: int = 0
@@ -166,18 +165,15 @@ class PilcoConfig:
         boolean("compiled", self.compiled)
 
     @property
-    def hold_steps(self) -> int:
-        """Plant steps per control step."""
+    def hold_steps(self) -> int:  # plant steps per control step
         return int(round(self.control_dt_s / self.task.dt_s))
 
     @property
-    def n_horizon_steps(self) -> int:
-        """Control steps per trial."""
+    def n_horizon_steps(self) -> int:  # control steps per trial
         return int(round(self.horizon_s / self.control_dt_s))
 
     @property
-    def n_prediction_steps(self) -> int:
-        """Control steps of the predicted rollout of each policy search."""
+    def n_prediction_steps(self) -> int:  # control steps of each policy search's predicted rollout
         return int(round((self.prediction_s if self.prediction_s is not None else self.horizon_s) / self.control_dt_s))
 
     def to_dict(self) -> dict[str, Any]:
@@ -191,8 +187,7 @@ class PilcoConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: Any = "PILCO config") -> "PilcoConfig":
-        """Inverse of :meth:`to_dict`; a field missing from ``data`` or unknown to this class is a one-line
-        ``ValueError`` that starts with ``source``."""
+        """Inverse of :meth:`to_dict`; a missing or unknown field is a one-line ``ValueError`` naming ``source``."""
         if not isinstance(data, dict):
             raise ValueError(f"{source}: not a PILCO config (expected a JSON object, got {type(data).__name__})")
         data = {"rod_uncertainty": None, **data}
@@ -249,7 +244,6 @@ class PilcoResult:
 
     @property
     def train_cpu_s(self) -> float:
-        """CPU seconds of this process over the run (``wall_s_total`` counts waiting for a busy machine too)."""
         return self.records[-1].cpu_s_total if self.records else 0.0
 
     @property
@@ -285,7 +279,7 @@ class PilcoResult:
 
     @classmethod
     def load(cls, directory: str | Path) -> "PilcoResult":
-        """Inverse of :meth:`save` (predicted and real trajectories are not stored)."""
+        """Inverse of :meth:`save` (without the predicted and real trajectories)."""
         directory = Path(directory)
         meta_path, weights_path = directory / "pilco.json", directory / "policy.pt"
         for path in (meta_path, weights_path):
@@ -300,7 +294,6 @@ class PilcoResult:
             raise ValueError(f"{meta_path}: not a PILCO result ({type(exc).__name__}: {exc})") from None
         try:
             spec = state_spec(config.state)
-            # a regular file no larger than the config's policies (float64 centres, weights, widths, twice over)
             bound = 2**20 + 16 * (config.policy.n_basis + 2) * (spec.n_model_inputs + 2)
             raw = read_bytes_checked(weights_path, "PILCO policy file", bound)
             state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
@@ -331,8 +324,7 @@ def real_cost(
     theta_dot_rad_s: np.ndarray | None = None,
     cost_rate_width_rad_s: float | None = None,
 ) -> np.ndarray:
-    """The saturating cost of :class:`~softpend.pilco.propagation.Propagator` at deterministic tip angles [rad]
-    (and, with ``cost_rate_width_rad_s``, tip rates ``theta_dot_rad_s`` [rad/s])."""
+    """The propagator's saturating cost at tip angles [rad] (and, with ``cost_rate_width_rad_s``, tip rates [rad/s])."""
     d2 = 2.0 * length_m**2 * (1.0 - np.cos(np.asarray(theta_rad, dtype=float)))
     exponent = 0.5 * d2 / cost_width_m**2
     if cost_rate_width_rad_s is not None:
@@ -349,15 +341,13 @@ def _trial_cost(
     rate_width: Optional[float],
     width_m: Optional[float] = None,
 ) -> float:
-    """The cost (width ``width_m``, default ``config.cost.width_m``; tip-rate factor of width ``rate_width`` or
-    none) summed along a real trial's states (H+1, d), the start excluded."""
+    """The cost (width ``width_m``, default ``config.cost.width_m``) summed over a real trial's states after the start."""
     width_m = config.cost.width_m if width_m is None else width_m
     theta, theta_dot = states[1:, spec.tip_angle_index], states[1:, spec.tip_rate_index]
     return float(real_cost(theta, config.task.rod.length_m, width_m, theta_dot, rate_width).sum())
 
 
 def _came_near_upright(spec: StateSpec, states: np.ndarray, within_rad: float) -> bool:
-    """Whether the tip angle of a real trial came within ``within_rad`` of upright."""
     theta = states[:, spec.tip_angle_index]
     return bool(np.min(np.abs((theta + np.pi) % (2 * np.pi) - np.pi)) < within_rad)
 
@@ -370,7 +360,7 @@ def _initial_distribution(spec: StateSpec, std: float) -> tuple[torch.Tensor, to
 
 
 def _run_trial(config: PilcoConfig, controller, seed: int, env) -> tuple[EvaluationResult, np.ndarray, np.ndarray]:
-    """One real trial; returns the episode, the states at the control steps (H+1, d) and the torques (H,)."""
+    """One real trial: the episode, the control steps' states (H+1, d) and torques (H,)."""
     episode = run_episode(controller, env, seed=seed, duration_s=config.horizon_s)
     if episode.diverged:
         raise SimulationDiverged(f"the plant diverged during a PILCO trial: {episode.diverged}")
@@ -389,8 +379,7 @@ def _optimise_policy(
     n_steps: int,
     iterations: int,
 ) -> float:
-    """Policy search: L-BFGS-B on the policy parameters from the policy's current ones; the policy keeps the
-    better of the start and the result, whose predicted total cost is returned."""
+    """L-BFGS-B on the policy's parameters from its current ones; it keeps the better, whose cost is returned."""
 
     def objective(vector: np.ndarray) -> tuple[float, np.ndarray]:
         leaf = torch.tensor(vector, dtype=DTYPE, requires_grad=True)
@@ -428,14 +417,12 @@ RANDOM_STREAMS = (
 
 
 def _random_streams(seed: int) -> dict[str, np.random.Generator]:
-    """One independent generator per purpose (:data:`RANDOM_STREAMS`), spawned from ``SeedSequence(seed)``
-    (child ``k`` depends on ``k`` only, so a stream appended to the list leaves the others' draws alone)."""
+    """One generator per purpose of :data:`RANDOM_STREAMS`, spawned from ``SeedSequence(seed)``."""
     children = np.random.SeedSequence(int(seed)).spawn(len(RANDOM_STREAMS))
     return {name: np.random.default_rng(child) for name, child in zip(RANDOM_STREAMS, children)}
 
 
 def _draw_seed(rng: np.random.Generator) -> int:
-    """One seed in ``[0, 2**31 - 1)`` from ``rng``."""
     return int(rng.integers(0, 2**31 - 1))
 
 
@@ -448,9 +435,8 @@ def _random_policy(
     rng: np.random.Generator,
     target_std: float = 0.1,
 ) -> RBFPolicy:
-    """A fresh policy: ``n_basis`` centres drawn from ``states`` (rows of visited states), pseudo-targets of
-    spread ``target_std`` from a seed drawn from ``rng`` (after the centres), length-scales the spread of each
-    rate in ``model_inputs`` (the state part of the GP inputs) and 0.7 for every sin/cos input (as in PILCO)."""
+    """A fresh policy: centres drawn from visited ``states``, pseudo-targets of spread ``target_std``, length-scales
+    the rates' spread in ``model_inputs`` and 0.7 for every sin/cos input (as in PILCO)."""
     chosen = states[rng.choice(len(states), size=n_basis, replace=n_basis > len(states))]
     lengthscales = np.where(
         np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles, np.maximum(model_inputs.std(axis=0), 1e-3), 0.7
@@ -473,9 +459,8 @@ def _search_with_restarts(
     n_steps: int,
     restart: bool = True,
 ) -> tuple[float, int]:
-    """One policy search over ``n_steps`` predicted control steps: from the current policy, then (when ``restart``,
-    ``config.optimiser.restarts`` and the cost threshold ask for it) from that many fresh random policies
-    (:func:`_random_policy`, draws from ``rng``); ``policy`` keeps the parameters of the lowest predicted cost."""
+    """A policy search over ``n_steps`` from the current policy, then (when due) from fresh random policies;
+    ``policy`` keeps the parameters of the lowest predicted cost."""
     best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
     if not restart or config.optimiser.restarts == 0 or best <= config.optimiser.restart_above_cost_fraction * n_steps:
         return best, 0
@@ -492,20 +477,17 @@ def _search_with_restarts(
 
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
-    """The RBF policy, and the balancing policy within ``config.policy.balance_within_rad`` of upright, as a controller."""
-    spec, within_rad = state_spec(config.state), config.policy.balance_within_rad
-    if balance is None or within_rad is None:
-        return PilcoController(policy, spec, config.control_dt_s)
-    return PilcoController(policy, spec, config.control_dt_s, balance, (within_rad, config.policy.balance_within_rad_s))
+    within_rad = config.policy.balance_within_rad
+    band = None if balance is None or within_rad is None else (within_rad, config.policy.balance_within_rad_s)
+    return PilcoController(policy, state_spec(config.state), config.control_dt_s, balance if band else None, band)
 
 
 def _upright_distribution(
     config: PilcoConfig, spec: StateSpec, states: np.ndarray
 ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
-    """Mean and covariance (plus ``initial_std**2 I``) of the real trials' states ``states`` (rows) in the balancing
-    policy's band (:func:`~softpend.pilco.controller.in_balance_band`), with the angles wrapped to ``[-pi, pi)``;
-    None when fewer than ``2 * dim`` states are in that band."""
-    assert config.policy.balance_within_rad is not None  # called only with a balancing policy
+    """Mean and covariance (plus ``initial_std**2 I``) of the states in the balancing band, angles wrapped; None
+    with fewer than ``2 * dim`` of them."""
+    assert config.policy.balance_within_rad is not None
     near = states[
         in_balance_band(spec, states, config.policy.balance_within_rad, config.policy.balance_within_rad_s)
     ].copy()
@@ -517,10 +499,8 @@ def _upright_distribution(
 
 
 def check_pilco_size(config: PilcoConfig) -> None:
-    """``ValueError`` (with the estimate) if a run of ``config`` would exceed
-    :data:`softpend.checks.MAX_WORK_BYTES`: the moment-matching rollout keeps, for every prediction step, a
-    matrix of ``gp.max_points**2`` entries per pair of state outputs (PILCO's predictive covariance) for the
-    policy gradient; the evaluation trajectories come on top."""
+    """``ValueError`` if a run of ``config`` (rollout covariances, policy gradient, evaluation trajectories) would
+    exceed :data:`softpend.checks.MAX_WORK_BYTES`."""
     dim = state_spec(config.state).dim
     rollout = 8.0 * config.n_prediction_steps * dim * dim * config.gp.max_points**2
     policy = 8.0 * config.n_prediction_steps * config.policy.n_basis * (config.gp.max_points + dim) * dim
@@ -565,7 +545,7 @@ def run_pilco(
 
 @dataclass
 class PolicySearch:
-    """What :meth:`Pilco.optimize_policy` searched with and predicted."""
+    """What :meth:`Pilco.optimize_policy` searched with and predicted (:class:`TrialRecord`'s fields)."""
 
     predicted_cost: float
     cost_width_m: Optional[float]
@@ -587,7 +567,7 @@ class Pilco:
         self.env = SoftPendulumEnv(**config.task.env_kwargs())
         self.streams = _random_streams(config.seed)
         self.m0, self.s0 = _initial_distribution(self.spec, config.initial_std)
-        self.inputs: list[np.ndarray] = []  # per trial: GP inputs (states' model inputs and torque)
+        self.inputs: list[np.ndarray] = []  # per trial: GP inputs (model inputs and torque)
         self.targets: list[np.ndarray] = []  # per trial: state differences
         self.records: list[TrialRecord] = []
         self.real_states: list[np.ndarray] = []  # per trial (H+1, d)
@@ -604,8 +584,7 @@ class Pilco:
         self._start_cpu = time.process_time()
 
     def random_trial(self) -> TrialRecord:
-        """One trial of held random torques (start and torques each from their own stream: trial ``k`` is the
-        same whatever the number of trials)."""
+        """One trial of held random torques (start and torques each from their own stream)."""
         config = self.config
         controller = RandomTorqueController(
             config.task.rod.torque_limit_nm,
@@ -619,7 +598,7 @@ class Pilco:
         return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)
 
     def start_policy(self) -> RBFPolicy:
-        """The first policy: random (:func:`_random_policy`), its centres on the states of the trials so far."""
+        """The first policy: random, its centres on the states visited so far."""
         visited = (np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1])
         torque_limit_nm = self.config.task.rod.torque_limit_nm
         rng = self.streams["policy_init"]
@@ -627,8 +606,8 @@ class Pilco:
         return self.policy
 
     def optimize_models(self) -> MultiOutputGP:
-        """Fit the GP dynamics on the data subsampled to ``gp.max_points`` (the latest trial kept), from the last
-        fit's hyperparameters; with ``gp.all_data`` condition it on all the data."""
+        """Fit the GP dynamics on at most ``gp.max_points`` points (the latest trial kept) from the last fit's
+        hyperparameters; with ``gp.all_data`` condition it on all the data."""
         x_all, y_all = np.vstack(self.inputs), np.vstack(self.targets)
         seed = _draw_seed(self.streams["gp_subsets"])
         subset = select_subset(len(x_all), self.config.gp.max_points, recent=len(self.inputs[-1]), seed=seed)
@@ -641,11 +620,19 @@ class Pilco:
         return gp
 
     def optimize_policy(self) -> PolicySearch:
-        """Search the RBF policy on the model from the current one (and, after the first search, with restarts),
-        predict its trial, and search the balancing policy when it is on."""
+        """Search the RBF policy on the model from the current one (with restarts after the first search), predict
+        its trial, and search the balancing policy when it is on."""
         config, spec = self.config, self.spec
         assert self.policy is not None and self.gp is not None, "start_policy and optimize_models come first"
-        rate_width, width_m, n_search = self._cost()
+        if not self.rate_on and config.cost.rate_width_rad_s is not None:
+            assert config.cost.rate_after_rad is not None  # without it the rate term is on from the start
+            self.rate_on = any(_came_near_upright(spec, st, config.cost.rate_after_rad) for st in self.real_states)
+        rate_width = config.cost.rate_width_rad_s if self.rate_on else None
+        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in self.records)
+        width_m = config.cost.width_m
+        if swung_up and config.cost.width_after_swing_up_m is not None:
+            width_m = config.cost.width_after_swing_up_m
+        n_search, n_steps = config.n_prediction_steps if swung_up else config.n_horizon_steps, config.n_horizon_steps
         length_m, exploration = config.task.rod.length_m, config.cost.exploration
         propagator = Propagator(
             spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, compiled=config.compiled
@@ -655,35 +642,15 @@ class Pilco:
         start = (config, propagator, self.policy, self.m0, self.s0)
         objective, n_restarts = _search_with_restarts(*start, *visited, self.n_searches > 0)
         self.n_searches += 1
-        predicted = self._predict(propagator, n_search, objective)
-        return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
-
-    def _cost(self) -> tuple[Optional[float], float, int]:
-        """The tip-rate width (``None``: off), the cost width [m] and the predicted steps of the next search."""
-        config = self.config
-        if not self.rate_on and config.cost.rate_width_rad_s is not None:
-            assert config.cost.rate_after_rad is not None  # without it the rate term is on from the start
-            self.rate_on = any(_came_near_upright(self.spec, st, config.cost.rate_after_rad) for st in self.real_states)
-        rate_width = config.cost.rate_width_rad_s if self.rate_on else None
-        swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in self.records)
-        width_m = config.cost.width_m
-        if swung_up and config.cost.width_after_swing_up_m is not None:
-            width_m = config.cost.width_after_swing_up_m
-        return rate_width, width_m, config.n_prediction_steps if swung_up else config.n_horizon_steps
-
-    def _predict(self, propagator: Propagator, n_search: int, objective: float) -> float:
-        """Keep the predicted trajectory of the searched policy over a trial and return its expected total cost
-        (the search's objective itself when the search neither explores nor predicts past the trial)."""
-        n_steps = self.config.n_horizon_steps
-        with torch.no_grad():
+        with torch.no_grad():  # the predicted trial (the objective itself when it neither explores nor looks past it)
             means, _, costs, _ = propagator.rollout(self.m0, self.s0, n_search)
         self.predicted_means.append(means[: n_steps + 1].numpy())
-        same = self.config.cost.exploration == 0.0 and n_search == n_steps
-        return objective if same else float(costs[:n_steps].sum())
+        same = exploration == 0.0 and n_search == n_steps
+        predicted = objective if same else float(costs[:n_steps].sum())
+        return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
 
     def _optimize_balance(self, width_m: float, rate_width: Optional[float]) -> float:
-        """Search the balancing policy from the real trials' upright band (once they have visited it); its
-        predicted cost, NaN when none was searched."""
+        """Search the balancing policy from the trials' upright band; its predicted cost (NaN: none searched)."""
         config, spec = self.config, self.spec
         if config.policy.balance_within_rad is None:
             return float("nan")
@@ -704,8 +671,8 @@ class Pilco:
         return _controller(self.config, self.policy, self.balance_policy)
 
     def policy_trial(self, search: PolicySearch) -> TrialRecord:
-        """Run the current policy on the plant (learnt from), then test it (``eval_seeds``: neither learnt from nor
-        counted as interaction); ``search`` is what :meth:`optimize_policy` returned for it."""
+        """Run the current policy on the plant (learnt from), then test it from ``eval_seeds`` (not learnt from,
+        not counted); ``search`` is what :meth:`optimize_policy` returned for it."""
         config = self.config
         episode, states = self._trial(self.controller(), _draw_seed(self.streams["policy_starts"]))
         record = self._record("policy", episode, states, search, self.n_gp_points)
@@ -724,8 +691,7 @@ class Pilco:
         return record
 
     def _trial(self, controller, seed: int) -> tuple[EvaluationResult, np.ndarray]:
-        """One real trial from start seed ``seed`` (on a rod drawn from ``rod_uncertainty`` when set), added to the
-        data; the episode and its control-step states."""
+        """One real trial (on a rod drawn from ``rod_uncertainty`` when set), added to the data."""
         if self.config.rod_uncertainty is not None:
             rod = self.config.rod_uncertainty.draw(self.config.task.rod, self.streams["rod_draws"])
             set_rod(self.env, self.config.task, rod)
@@ -739,7 +705,7 @@ class Pilco:
     def _record(
         self, kind: str, episode: EvaluationResult, states: np.ndarray, search: PolicySearch, n_gp_points: int
     ) -> TrialRecord:
-        """The :class:`TrialRecord` of the trial just run, added to the records (test results to come)."""
+        """The :class:`TrialRecord` of the trial just run, appended to the records."""
         record = TrialRecord(
             index=len(self.records),
             kind=kind,
@@ -757,7 +723,6 @@ class Pilco:
         return record
 
     def result(self) -> PilcoResult:
-        """The run so far as a :class:`PilcoResult`."""
         return PilcoResult(
             config=self.config,
             records=self.records,

@@ -210,13 +210,8 @@ class DeviceSession:
         self.watchdog_ms = int(watchdog_ms)
         self.state_rate_hz = int(state_rate_hz)
         self.decoder = FrameDecoder()
-        self.session_open = False
-        self.command_nm = 0.0
-        self.last_cmd_seq = 0
-        self.last_cmd_us = None
-        self.stopped = False
-        self.saturated = False
-        self.tx_seq = 0
+        self.session_open = self.stopped = self.saturated = False
+        self.command_nm, self.last_cmd_seq, self.last_cmd_us, self.tx_seq = 0.0, 0, None, 0
 
     def receive(self, data, now_us):
         """Process received bytes at device time ``now_us``; the reply frames to send."""
@@ -227,10 +222,7 @@ class DeviceSession:
                 if values[0] != PROTOCOL_VERSION:
                     replies.append(encode_message(MSG_ERROR, seq, (ERR_VERSION,)))
                     continue
-                self.session_open = True
-                self.command_nm = 0.0
-                self.last_cmd_us = None
-                self.stopped = False
+                self.session_open, self.command_nm, self.last_cmd_us, self.stopped = True, 0.0, None, False
                 ack = (PROTOCOL_VERSION, values[1], self.counts_per_rev, self.torque_limit_nm, self.watchdog_ms)
                 replies.append(encode_message(MSG_HELLO_ACK, seq, ack + (self.state_rate_hz,)))
             elif not self.session_open:
@@ -242,12 +234,9 @@ class DeviceSession:
                 limit = self.torque_limit_nm
                 self.saturated = torque > limit or torque < -limit
                 self.command_nm = min(max(torque, -limit), limit)
-                self.last_cmd_seq = seq
-                self.last_cmd_us = now_us
-                self.stopped = False
+                self.last_cmd_seq, self.last_cmd_us, self.stopped = seq, now_us, False
             elif msg_type == MSG_STOP:
-                self.command_nm = 0.0
-                self.stopped = True
+                self.command_nm, self.stopped = 0.0, True
             elif msg_type == MSG_HEARTBEAT:
                 replies.append(encode_message(MSG_HEARTBEAT_ACK, seq, ()))
             else:

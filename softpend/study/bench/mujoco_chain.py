@@ -68,18 +68,17 @@ damping="{r(damping[i])}"/>
 
 
 class MuJoCoChain:
-    """One rod of :func:`chain_mjcf` stepped by control steps of ``dt_s`` (a whole number of ``timestep_s``) with
-    the torque held."""
+    """One rod of :func:`chain_mjcf` stepped by control steps of :data:`CONTROL_STEP_S` (a whole number of
+    ``timestep_s``) with the torque held."""
 
-    def __init__(
-        self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4", dt_s: float = 0.01
-    ) -> None:
+    def __init__(self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> None:
         import mujoco
 
         self.params = params if params is not None else RodParams()
-        self.substeps = int(round(positive("dt_s", dt_s) / positive("timestep_s", timestep_s)))
-        if self.substeps < 1 or abs(dt_s / timestep_s - self.substeps) > 1e-9 * dt_s / timestep_s:
-            raise ValueError(f"dt_s ({dt_s!r}) must be a whole number of timestep_s ({timestep_s!r})")
+        ratio = CONTROL_STEP_S / positive("timestep_s", timestep_s)
+        self.substeps = int(round(ratio))
+        if self.substeps < 1 or abs(ratio - self.substeps) > 1e-9 * ratio:
+            raise ValueError(f"timestep_s ({timestep_s!r}) must divide the control step ({CONTROL_STEP_S!r} s)")
         self._mujoco = mujoco
         self.model = mujoco.MjModel.from_xml_string(chain_mjcf(self.params, timestep_s, integrator))
         self.data = mujoco.MjData(self.model)

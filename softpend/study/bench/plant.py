@@ -97,26 +97,22 @@ def make_legacy(env) -> None:
     plant.observe = types.MethodType(_legacy_observe, plant)
 
 
+#: Rods of the batched chain's timings, environments of the vector environment's.
+BATCH_SIZE, NUM_ENVS = 4096, 1024
+
+
 def batched_rod_steps_per_s(
-    n_links: int,
-    batch_size: int = 4096,
-    n_steps: int = 6,
-    repeats: int = 3,
-    integrator: str = "rk4",
-    compiled: bool = False,
-    dtype_name: str = "float64",
+    n_links: int, n_steps: int = 6, repeats: int = 3, dtype_name: str = "float64", **chain_options: Any
 ) -> tuple[float, float]:
-    """Rod-steps per wall-clock and per CPU second of the batched chain on one torch thread under random torques
-    (best of ``repeats``, after an untimed first step)."""
+    """Rod-steps per wall-clock and per CPU second of the batched chain (``integrator``, ``compiled``) on one torch
+    thread under random torques (best of ``repeats``, after an untimed first step)."""
     from softpend.plant.batched import BatchedPRBChain
 
     with one_torch_thread() as torch:
         dtype = getattr(torch, dtype_name)
-        chain = BatchedPRBChain(
-            RodParams(n_links=n_links), batch_size=batch_size, integrator=integrator, compiled=compiled, dtype=dtype
-        )
+        chain = BatchedPRBChain(RodParams(n_links=n_links), batch_size=BATCH_SIZE, dtype=dtype, **chain_options)
         generator = torch.Generator().manual_seed(0)
-        torques = ((torch.rand(n_steps, batch_size, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06).to(dtype)
+        torques = ((torch.rand(n_steps, BATCH_SIZE, generator=generator, dtype=torch.float64) * 2 - 1) * 0.06).to(dtype)
         with torch.no_grad():
             q, qd = chain.hanging_state()
             q, qd = chain.step(q, qd, torques[0])  # warm-up (and compilation)
@@ -128,31 +124,22 @@ def batched_rod_steps_per_s(
 
             best, best_cpu = best_times(run, repeats)
             if not bool(torch.isfinite(q).all()):
-                raise RuntimeError(f"the batched chain diverged in the benchmark ({integrator}, n = {n_links})")
-    return batch_size * n_steps / best, batch_size * n_steps / max(best_cpu, 1e-9)
+                raise RuntimeError(f"the batched chain diverged in the benchmark ({chain.integrator}, n = {n_links})")
+    return BATCH_SIZE * n_steps / best, BATCH_SIZE * n_steps / max(best_cpu, 1e-9)
 
 
-def vector_env_steps_per_s(
-    n_links: int = 4,
-    num_envs: int = 1024,
-    n_steps: int = 40,
-    repeats: int = 3,
-    integrator: str = "rk4",
-    compiled: bool = False,
-) -> tuple[float, float]:
-    """Steps per wall-clock and per CPU second of the vector environment on one torch thread under random actions
-    (best of ``repeats``)."""
+def vector_env_steps_per_s(n_links: int = 4, n_steps: int = 40, **env_options: Any) -> tuple[float, float]:
+    """Steps per wall-clock and per CPU second of the vector environment (``integrator``, ``compiled``) on one torch
+    thread under random actions (best of 3)."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
     with one_torch_thread():
-        env = SoftPendulumVectorEnv(
-            num_envs=num_envs, params=RodParams(n_links=n_links), integrator=integrator, compiled=compiled
-        )
-        actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, num_envs, 1)).astype(np.float32)
+        env = SoftPendulumVectorEnv(num_envs=NUM_ENVS, params=RodParams(n_links=n_links), **env_options)
+        actions = np.random.default_rng(0).uniform(-1, 1, (n_steps, NUM_ENVS, 1)).astype(np.float32)
         env.reset(seed=0)
         env.step(actions[0])
-        best, best_cpu = best_times(lambda: [env.step(action) for action in actions], repeats)
-    return num_envs * n_steps / best, num_envs * n_steps / max(best_cpu, 1e-9)
+        best, best_cpu = best_times(lambda: [env.step(action) for action in actions], 3)
+    return NUM_ENVS * n_steps / best, NUM_ENVS * n_steps / max(best_cpu, 1e-9)
 
 
 def bench_plant() -> dict[str, float]:

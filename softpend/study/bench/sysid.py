@@ -25,18 +25,17 @@ ROLLOUT_STEPS = 100
 BEST_FULL_CONFIG = TrainConfig(history=6, hidden_widths=(64, 64, 64), max_epochs=600, patience=600)
 
 
-def rollout_steps_per_s(
-    model: DynamicsModel | DynamicsEnsemble, batch: int = ROLLOUT_BATCH, steps: int = ROLLOUT_STEPS, repeats: int = 3
-) -> float:
-    """Model steps per second of batched rollouts (best of ``repeats``)."""
+def rollout_steps_per_s(model: DynamicsModel | DynamicsEnsemble) -> float:
+    """Model steps per second of batched rollouts (best of 3)."""
     generator = torch.Generator().manual_seed(0)
     dtype = model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float32
-    x0 = torch.randn(batch, model.layout.dim, generator=generator, dtype=dtype) * 0.1
-    torques = (torch.rand(batch, steps, generator=generator, dtype=dtype) * 2 - 1) * model.torque_limit_nm
+    x0 = torch.randn(ROLLOUT_BATCH, model.layout.dim, generator=generator, dtype=dtype) * 0.1
+    limit = model.torque_limit_nm
+    torques = (torch.rand(ROLLOUT_BATCH, ROLLOUT_STEPS, generator=generator, dtype=dtype) * 2 - 1) * limit
     with torch.inference_mode():
         rollout(model, x0, torques[:, :5])  # warm-up
-        best, _ = best_times(lambda: rollout(model, x0, torques, generator=generator), repeats)
-    return batch * steps / best
+        best, _ = best_times(lambda: rollout(model, x0, torques, generator=generator), 3)
+    return ROLLOUT_BATCH * ROLLOUT_STEPS / best
 
 
 def bench_sysid() -> dict[str, float]:

@@ -81,8 +81,8 @@ class _RigLoop:
         self.samples = self.dropped = self.watchdog = 0
         self.t0: Optional[float] = None
         self.last_device_time: Optional[float] = None
-        self.t = 0.0
         self.stop_reason: Optional[str] = None
+        self.t = 0.0
 
     def count(self, state: MotorState) -> None:
         if self.t0 is None:
@@ -247,16 +247,12 @@ class _ClosedLoop(_RigLoop):
 
     def __init__(self, link, controller, estimator, duration_s, tip_source, clock, log, camera_log) -> None:
         super().__init__(link, controller, duration_s, log, estimator.dt_s)
-        self.estimator, self.tip_source = estimator, tip_source
-        self.clock, self.camera_log = clock, camera_log
+        self.estimator, self.tip_source, self.clock, self.camera_log = estimator, tip_source, clock, camera_log
         self.nan_estimate = [math.nan] * (1 + len(OBSERVATION_NAMES) + 2 * estimator.n + 1)
-        self.estimate_values = self.nan_estimate
-        self.late = 0
+        self.estimate_values, self.late, self.blind_max = self.nan_estimate, 0, 0.0
         self.expected_cmd_seq: Optional[int] = None
         self.armed = tip_source is None
-        self.armed_at = 0.0 if self.armed else math.nan
-        self.blind_max = 0.0
-        self.status = "running" if self.armed else "arming"
+        self.armed_at, self.status = (0.0, "running") if self.armed else (math.nan, "arming")
 
     def postfix(self) -> str:
         theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan

@@ -135,21 +135,17 @@ class MotorLink:
     ) -> None:
         if not isinstance(port, str) or not port:
             raise ValueError(f"port must be a non-empty string, got {port!r}")
-        self.port = port
+        self.port, self.install_exit_hooks, self._transport = port, install_exit_hooks, serial
         self.host_torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
         self.timeout_s = positive("timeout_s", timeout_s)
         self.max_consecutive_bad_frames = positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
-        self.install_exit_hooks = install_exit_hooks
-        self._transport = serial
         self.clock = getattr(serial, "clock", None) or WALL_CLOCK
         self.device: Optional[DeviceInfo] = None
         self._serial = None
         self._decoder = proto.FrameDecoder(validate=self._check_message)
-        self._seq = 0
         self._pending: list[tuple[int, int, tuple]] = []
-        self.last_command_nm = 0.0
+        self._seq, self.last_command_nm, self._stop_pending = 0, 0.0, False
         self._write_lock = threading.Lock()
-        self._stop_pending = False
 
     @property
     def is_open(self) -> bool:

@@ -122,11 +122,8 @@ class LQRController:
         linearisation: str = "exudyn",
         substeps: int = 2,
     ) -> "LQRController":
-        """Discrete LQR designed on the PRB model of ``params``.
-
-        ``state``: ``"joint"`` or ``"observation"`` feedback; ``linearisation``: the joint-state design model,
-        Exudyn's matrices discretised (``"exudyn"``) or the simulator's step map (``"step_map"``, ``substeps``).
-        """
+        """Discrete LQR designed on the PRB model of ``params``, on ``"joint"`` or ``"observation"`` feedback; the
+        joint design model is Exudyn's matrices discretised (``"exudyn"``) or the step map (``"step_map"``)."""
         params = params if params is not None else RodParams()
         weights = weights if weights is not None else LQRWeights()
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm

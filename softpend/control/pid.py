@@ -32,15 +32,10 @@ class PIDGains:
 
 
 class PIDController:
-    """Discrete PID on the tip angle, setpoint upright::
-
-        D[k] = (T_f D[k-1] + (e[k] - e[k-1])) / (T_f + dt)
-        u[k] = K_p e[k] + I[k] + K_d D[k],   tau[k] = -sat(u[k])
-        I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) - u[k]) / T_t)
-
-    ``T_f = derivative_filter_s``; ``T_t = tracking_time_s`` (default ``sqrt(T_i T_d)``, or ``10 dt`` when a gain is
-    zero); ``anti_windup=False`` drops the back-calculation.
-    """
+    """Discrete PID on the tip angle, setpoint upright: ``D[k] = (T_f D[k-1] + e[k] - e[k-1]) / (T_f + dt)``,
+    ``u[k] = K_p e[k] + I[k] + K_d D[k]``, ``tau[k] = -sat(u[k])``, ``I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) -
+    u[k]) / T_t)`` with ``T_f = derivative_filter_s``, ``T_t = tracking_time_s`` (default ``sqrt(T_i T_d)``, or
+    ``10 dt`` when a gain is zero; the last term dropped without ``anti_windup``)."""
 
     def __init__(
         self,
@@ -65,7 +60,6 @@ class PIDController:
         self.reset()
 
     def reset(self) -> None:
-        """Zero the integrator and the derivative filter."""
         self.integral_nm, self.derivative_rad_s = 0.0, 0.0
         self._last_error_rad: Optional[float] = None
 

@@ -17,6 +17,7 @@ from torch import Tensor, nn
 from softpend.checks import in_range, one_of, positive, seed_tuple, set_ints
 from softpend.control.learned import LearnedStateTracker
 from softpend.control.lqr import LQRController
+from softpend.control.swingup import pendulum_energy_j
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
 from softpend.plant import Observation, RodParams
 from softpend.plant.batched import BatchedPRBChain
@@ -506,11 +507,8 @@ class MPPI:
 def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor) -> Tensor:
     """``1 - cos(theta)`` plus :data:`ENERGY_WEIGHT` times the squared rigid-pendulum energy error (zero upright)
     in units of the hanging energy gap."""
-    length = params.length_m
-    inertia = params.hub_inertia_kgm2 + params.mass_kg * length**2 / 3 + params.tip_mass_kg * length**2
-    moment = params.gravity_torque_horizontal_nm
-    energy = 0.5 * inertia * theta_dot_rad_s**2 + moment * (torch.cos(theta_rad) - 1.0)
-    return 1.0 - torch.cos(theta_rad) + ENERGY_WEIGHT * (energy / (2 * moment)) ** 2
+    energy = pendulum_energy_j(params, theta_rad, theta_dot_rad_s, torch.cos)
+    return 1.0 - torch.cos(theta_rad) + ENERGY_WEIGHT * (energy / (2 * params.gravity_torque_horizontal_nm)) ** 2
 
 
 # ---------------------------------------------------------------------- the controller on the plant

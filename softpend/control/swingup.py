@@ -1,16 +1,12 @@
-"""Energy-based swing-up that hands over to an LQR near upright.
-
-Pumping torque ``sat(k_E (E_up + E_margin - E) theta_dot)`` (the tip rate: feedback on the hub rate pumps the
-clamp mode), with ``E`` the rigid-pendulum energy seen through the tip (``"observation"``) or the PRB chain's
-mechanical energy (``"joint"``); the LQR takes over inside ``capture_angle_rad`` and lets go beyond
-``release_angle_rad``. With ``rate_filter_s > 0`` the pumping uses the tip rate through a first-order low-pass of
-that time constant, so bending vibration (the continuum beam, a camera's noise) does not make the pumping chatter.
-"""
+"""Energy-based swing-up that hands over to an LQR near upright: pumping torque ``sat(k_E (E_up + E_margin - E)
+theta_dot)`` on the tip rate (low-passed with ``rate_filter_s > 0``), ``E`` the rigid-pendulum energy seen through
+the tip (``"observation"``) or the PRB chain's (``"joint"``); the LQR holds inside ``capture_angle_rad`` until
+``release_angle_rad``."""
 
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -19,21 +15,16 @@ from softpend.control.lqr import LQRController
 from softpend.plant import Observation, PRBPlant, RodParams
 
 
-def pendulum_energy_j(params: RodParams, theta_rad: float, theta_dot_rad_s: float) -> float:
-    """Rigid-pendulum energy of the rod seen through its tip, zero upright at rest [J]."""
-    inertia = (
-        params.hub_inertia_kgm2 + params.mass_kg * params.length_m**2 / 3 + params.tip_mass_kg * params.length_m**2
-    )
-    return 0.5 * inertia * theta_dot_rad_s**2 + params.gravity_torque_horizontal_nm * (math.cos(theta_rad) - 1.0)
+def pendulum_energy_j(params: RodParams, theta_rad: Any, theta_dot_rad_s: Any, cos: Callable = math.cos) -> Any:
+    """Rigid-pendulum energy of the rod seen through its tip, zero upright at rest [J] (``cos``: e.g. ``torch.cos``)."""
+    length = params.length_m
+    inertia = params.hub_inertia_kgm2 + params.mass_kg * length**2 / 3 + params.tip_mass_kg * length**2
+    return 0.5 * inertia * theta_dot_rad_s**2 + params.gravity_torque_horizontal_nm * (cos(theta_rad) - 1.0)
 
 
 class EnergySwingUpController:
-    """Energy pumping from hanging plus LQR balance near upright (see the module docstring).
-
-    ``balance`` defaults to ``LQRController.from_params(params, dt_s, state=lqr_state)``; ``energy_margin_j``
-    is the target energy above upright; ``torque_limit_nm`` bounds the pumping torque; ``rate_filter_s`` is the
-    time constant of the low-pass on the tip rate that the pumping uses (0: none).
-    """
+    """Energy pumping from hanging plus LQR balance near upright (see the module docstring); ``balance`` defaults to
+    ``LQRController.from_params(params, dt_s, state=lqr_state)``."""
 
     def __init__(
         self,
@@ -100,7 +91,6 @@ class EnergySwingUpController:
         return pendulum_energy_j(self.params, observation.theta_rad, self._tip_rate(observation))
 
     def _tip_rate(self, observation: Observation) -> float:
-        """The tip rate the pumping uses (low-passed when ``rate_filter_s > 0``)."""
         return observation.theta_dot_rad_s if self._rate_rad_s is None else self._rate_rad_s
 
     def pumping_torque_nm(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:

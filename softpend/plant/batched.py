@@ -100,22 +100,17 @@ class BatchedRodParams:
         n_values = {r.n_links for r in rods}
         if len(n_values) != 1:
             raise ValueError(f"params must all have the same n_links, got {sorted(n_values)}")
-        fields = {}
-        for name in PARAMETER_FIELDS:
-            values = torch.tensor([getattr(r, name) for r in rods], dtype=dtype)
-            fields[name] = values.expand(size).clone() if len(rods) == 1 else values
-        return cls(n_links=rods[0].n_links, **fields)
+        columns = {name: torch.tensor([getattr(r, name) for r in rods], dtype=dtype) for name in PARAMETER_FIELDS}
+        return cls(rods[0].n_links, **{n: c.expand(size).clone() if len(rods) == 1 else c for n, c in columns.items()})
 
     def replace(self, **changes: TensorLike) -> "BatchedRodParams":
         """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
         unknown = set(changes) - set(PARAMETER_FIELDS)
         if unknown:
             raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
-        new: dict[str, Any] = {}
-        for name, value in changes.items():
-            base = getattr(self, name)
-            tensor = torch.as_tensor(value, dtype=base.dtype)
-            new[name] = torch.broadcast_to(tensor, base.shape).clone() if tensor.shape != base.shape else tensor
+        shape = self.length_m.shape
+        tensors = {name: torch.as_tensor(value, dtype=self.dtype) for name, value in changes.items()}
+        new = {n: t if t.shape == shape else torch.broadcast_to(t, shape).clone() for n, t in tensors.items()}
         return dataclasses.replace(self, **new)
 
     def scaled(self, **factors: TensorLike) -> "BatchedRodParams":
@@ -129,63 +124,40 @@ class BatchedRodParams:
         return self.length_m.dtype
 
 
-@dataclass(frozen=True)
 class _Derived:
-    """Per-rod constants of the equations, batch last."""
+    """Per-rod constants of the equations, batch last: ``(B,)`` per rod, ``(n, B)`` per link, ``gram`` ``(n, n, B)``."""
 
-    link_length_m: torch.Tensor  # (B,)
-    gram: torch.Tensor  # G, (n, n, B)
-    gram_diagonal: torch.Tensor  # G_ii, (n, B)
-    length_times_h: torch.Tensor  # L h_i, (n, B)
-    gram_diagonal_minus_lh: torch.Tensor  # G_ii - L h_i, (n, B)
-    first_moment_kgm: torch.Tensor  # h, (n, B)
-    gravity_moment_nm: torch.Tensor  # g h, (n, B)
-    stiffness_nm_per_rad: torch.Tensor  # (n, B), clamp first
-    damping_nms_per_rad: torch.Tensor  # (n, B), clamp first
-    negative_stiffness: torch.Tensor  # -k, (n, B)
-    negative_damping: torch.Tensor  # -d, (n, B)
-    hub_inertia_kgm2: torch.Tensor  # (B,)
-    inverse_hub_inertia: torch.Tensor  # 1 / J, (B,)
-    hub_friction_nms_per_rad: torch.Tensor  # (B,)
-    torque_limit_nm: torch.Tensor  # (B,)
-
-
-def _derive(p: BatchedRodParams) -> _Derived:
-    n = p.n_links
-    length = p.length_m / n
-    m_link = p.mass_kg / n
-    last = torch.zeros(n, 1, dtype=p.dtype)
-    last[-1] = 1.0
-    masses = m_link + last * p.tip_mass_kg
-    first = m_link * length / 2 + last * (p.tip_mass_kg * length)
-    second = m_link * length**2 / 3 + last * (p.tip_mass_kg * length**2)
-    beyond = torch.flip(torch.cumsum(torch.flip(masses, [0]), 0), [0]) - masses  # mass outboard of link i
-    h = first + length * beyond
-    diagonal = second + length**2 * beyond
-    index = torch.arange(n)
-    outer = torch.maximum(index[:, None], index[None, :])
-    gram = length * h[outer]  # (n, n, B): L h_max(i, j)
-    gram = torch.where((index[:, None] == index[None, :])[:, :, None], diagonal[:, None, :].expand(n, n, -1), gram)
-    k = p.youngs_modulus_pa * p.width_m * p.depth_m**3 / 12.0 * p.stiffness_scale / length
-    clamp = torch.ones(n, 1, dtype=p.dtype)
-    clamp[0] = 2.0
-    return _Derived(
-        link_length_m=length,
-        gram=gram,
-        gram_diagonal=diagonal,
-        length_times_h=length * h,
-        gram_diagonal_minus_lh=diagonal - length * h,
-        first_moment_kgm=h,
-        gravity_moment_nm=p.gravity_mps2 * h,
-        stiffness_nm_per_rad=clamp * k,
-        damping_nms_per_rad=clamp * p.joint_damping_nms_per_rad,
-        negative_stiffness=-(clamp * k),
-        negative_damping=-(clamp * p.joint_damping_nms_per_rad),
-        hub_inertia_kgm2=p.hub_inertia_kgm2,
-        inverse_hub_inertia=1.0 / p.hub_inertia_kgm2,
-        hub_friction_nms_per_rad=p.hub_friction_nms_per_rad,
-        torque_limit_nm=p.torque_limit_nm,
-    )
+    def __init__(self, p: BatchedRodParams) -> None:
+        n = p.n_links
+        self.link_length_m = length = p.length_m / n
+        m_link = p.mass_kg / n
+        last = torch.zeros(n, 1, dtype=p.dtype)
+        last[-1] = 1.0
+        masses = m_link + last * p.tip_mass_kg
+        first = m_link * length / 2 + last * (p.tip_mass_kg * length)
+        second = m_link * length**2 / 3 + last * (p.tip_mass_kg * length**2)
+        beyond = torch.flip(torch.cumsum(torch.flip(masses, [0]), 0), [0]) - masses  # mass outboard of link i
+        self.first_moment_kgm = h = first + length * beyond
+        self.gram_diagonal = diagonal = second + length**2 * beyond
+        index = torch.arange(n)
+        outer = torch.maximum(index[:, None], index[None, :])
+        gram = length * h[outer]  # (n, n, B): L h_max(i, j)
+        diagonal_matrix = diagonal[:, None, :].expand(n, n, -1)
+        self.gram = torch.where((index[:, None] == index[None, :])[:, :, None], diagonal_matrix, gram)
+        self.length_times_h = length * h
+        self.gram_diagonal_minus_lh = diagonal - length * h
+        self.gravity_moment_nm = p.gravity_mps2 * h
+        k = p.youngs_modulus_pa * p.width_m * p.depth_m**3 / 12.0 * p.stiffness_scale / length
+        clamp = torch.ones(n, 1, dtype=p.dtype)
+        clamp[0] = 2.0
+        self.stiffness_nm_per_rad = clamp * k  # clamp first
+        self.damping_nms_per_rad = clamp * p.joint_damping_nms_per_rad
+        self.negative_stiffness = -(clamp * k)
+        self.negative_damping = -(clamp * p.joint_damping_nms_per_rad)
+        self.hub_inertia_kgm2 = p.hub_inertia_kgm2
+        self.inverse_hub_inertia = 1.0 / p.hub_inertia_kgm2
+        self.hub_friction_nms_per_rad = p.hub_friction_nms_per_rad
+        self.torque_limit_nm = p.torque_limit_nm
 
 
 #: Longest chain solved with the written-out Cholesky factorisation; longer ones use batched LAPACK.
@@ -376,7 +348,7 @@ def stable_substeps(
     positive("dt_s", dt_s)
     positive("bound", bound)
     p = params if isinstance(params, BatchedRodParams) else BatchedRodParams.from_params(params)
-    d = _derive(
+    d = _Derived(
         BatchedRodParams(n_links=p.n_links, **{f: getattr(p, f).detach().to(torch.float64) for f in PARAMETER_FIELDS})
     )
     n = p.n_links
@@ -474,7 +446,7 @@ class BatchedPRBChain:
         self.n_coordinates = params.n_links + 1
         self.batch_size: int = params.batch_size
         self.dtype = params.dtype
-        self._d = _derive(params)
+        self._d = _Derived(params)
 
     def hanging_state(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The straight rods hanging down at rest, as ``(q, q_dot)`` of shape ``(B, n + 1)``."""

@@ -102,8 +102,7 @@ class SimRig:
         )
         columns, metadata = truth_columns(self.plant.n_coordinates), {"rig": cfg.to_dict()}
         self._truth = None if truth_log is None else SampleLog(truth_log, columns, metadata, fsync_every_s=None)
-        self._released = False
-        self.ticks = 0
+        self._released, self.ticks = False, 0
         self.counts = dict.fromkeys(("states_sent", "states_dropped", "states_garbled"), 0)
         self.start_s = self.clock.now_s()
         self.host: Optional[SimSerial] = None

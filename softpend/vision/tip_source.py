@@ -77,11 +77,9 @@ class ThreadedTipSource:
     name = "camera"
 
     def __init__(self, frame_tracker: Optional[FrameTracker] = None, on_frame: Optional[FrameHook] = None) -> None:
-        self.frame_tracker = frame_tracker if frame_tracker is not None else FrameTracker()
-        self.on_frame = on_frame
+        self.frame_tracker, self.on_frame = frame_tracker if frame_tracker is not None else FrameTracker(), on_frame
         self._queue: collections.deque[TipMeasurement] = collections.deque(maxlen=10000)
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
+        self._lock, self._stop = threading.Lock(), threading.Event()
         self._thread: Optional[threading.Thread] = None
         self._error: Optional[BaseException] = None
         self.counts = dict.fromkeys(("frames_tracked", "frames_lost", "frames_dropped"), 0)
@@ -229,8 +227,7 @@ class SyntheticLiveCamera(ThreadedTipSource):
         on_frame: Optional[FrameHook] = None,
     ) -> None:
         super().__init__(None, on_frame)
-        self.scene = scene
-        self.clock = clock
+        self.scene, self.clock = scene, clock
         self.fps = check_fps("fps", fps)
         self.latency_s = non_negative("latency_s", latency_s)
         effects = effects if effects is not None else CameraEffects.rig()

@@ -284,11 +284,7 @@ def _check_link_path(path: Path) -> None:
 def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path: Optional[str] = None) -> int:
     """Create an emulator, print its pty path (one line), serve until SIGTERM or its duration."""
     emulator = RigEmulator(config, truth_log=truth_log, link_path=link_path)
-
-    def _terminate(signum, frame):
-        emulator.stop()
-
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: emulator.stop())
     print(emulator.port if link_path is None else f"{emulator.port} -> {link_path}", flush=True)
     try:
         emulator.serve()

@@ -11,7 +11,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import int_at_least, non_negative, positive
+from softpend.checks import int_at_least, non_negative, optional_positive, positive
 from softpend.plant import Observation, SimulationDiverged
 
 
@@ -34,8 +34,7 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
-        if self.hub_rate_std_rad_s is not None:
-            positive("hub_rate_std_rad_s", self.hub_rate_std_rad_s)
+        optional_positive("hub_rate_std_rad_s", self.hub_rate_std_rad_s)
         for name in ("tip_std_m", "max_blind_s", "history_s", "gate_sigma"):
             positive(name, getattr(self, name))
         for name in ("torque_std_nm", "accel_std_rad_s2", "initial_bend_std_rad", "initial_rate_std_rad_s"):

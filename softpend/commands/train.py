@@ -86,20 +86,14 @@ def _train_rl(args: argparse.Namespace, config, out: str) -> dict[str, Any]:
         raise ValueError(f"--resume: {out} holds no run to resume (no config.json); leave out --resume to start one")
     episodes = args.episodes if args.episodes is not None else RL_EPISODES[args.algo]
     train = train_dqn if args.algo == "dqn" else train_mbpo
-    _, log = train(
-        config, seed=args.seed, episodes=episodes, run_dir=out, resume=args.resume, progress=not args.no_progress
-    )
+    run = dict(seed=args.seed, episodes=episodes, run_dir=out, resume=args.resume, progress=not args.no_progress)
+    _, log = train(config, **run)
     last = log.evaluations[-1] if log.evaluations else {}
     finite = lambda x: None if math.isinf(x) else x  # noqa: E731
     return {
-        "algo": log.algo,
-        "seed": log.seed,
-        "episodes": log.n_episodes,
-        "plant_s": log.plant_s,
-        "model_steps": log.model_steps,
+        **dict(algo=log.algo, seed=log.seed, episodes=log.n_episodes, plant_s=log.plant_s, model_steps=log.model_steps),
         "final_eval_starts": last.get("starts_evaluated"),  # fewer than the selection starts: stopped at a failure
-        "final_eval_max_upright_std_rad": last.get("max_upright_std_rad"),
-        "final_eval_median_swing_up_time_s": last.get("median_swing_up_time_s"),
+        **{f"final_eval_{key}": last.get(key) for key in ("max_upright_std_rad", "median_swing_up_time_s")},
         "real_s_to_balance": finite(log.real_s_to_balance()),
         "episodes_to_balance": finite(log.episodes_to_balance()),
     }

@@ -47,9 +47,8 @@ MAX_AGENT_DATA_BYTES = 16 * 2**20
 
 
 def agent_file_bounds(config: DQNConfig, observation_dim: int) -> tuple[int, int]:
-    """``(member, total)``: the most bytes one member of an agent file of ``config`` can unpack to, and the
-    file with all its members: the Q-network and its target (float32) and Adam's two moments, twice over, plus
-    :data:`MAX_AGENT_DATA_BYTES` for the metadata members."""
+    """``(member, total)``: the most bytes one member of an agent file of ``config`` (networks, Adam's moments,
+    metadata) and all its members can unpack to."""
     widths = [int(observation_dim), *(int(w) for w in config.learner.net_arch), int(config.n_torque_levels)]
     n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
     member = MAX_AGENT_DATA_BYTES + 16 * n_weights

@@ -190,10 +190,9 @@ class ModelSettings:
 
 @dataclass(frozen=True)
 class RolloutSettings:
-    """DQN-MBPO's model rollouts: ``per_real_step * every_steps`` rollouts every ``every_steps`` real agent steps,
-    of the length of ``schedule`` (first_episode, last_episode, min_length, max_length), into a model buffer of
-    ``buffer_size``; ``real_ratio`` of each batch real, ``start_branch_fraction`` of the rollouts from training
-    starts, ``within_data``: rollouts stop at states outside the real data's box."""
+    """DQN-MBPO's model rollouts: ``per_real_step * every_steps`` every ``every_steps`` real agent steps, of the
+    ``schedule``'s length (first_episode, last_episode, min_length, max_length); ``real_ratio`` of each batch real;
+    ``within_data``: rollouts stop outside the real data's box."""
 
     per_real_step: int = 9
     every_steps: int = 125

@@ -117,7 +117,7 @@ def evaluate_agents_batched(
 
 
 class EpisodeRecorder(BaseCallback):
-    """Bookkeeping: one :class:`TrainingLog` row per training episode; stops training at the episode budget."""
+    """One :class:`TrainingLog` row per training episode; stops training at the episode budget."""
 
     model: DQN
 
@@ -138,12 +138,10 @@ class EpisodeRecorder(BaseCallback):
         self._observations: list[np.ndarray] = []
         self._torques: list[float] = []
 
-    def wall_s(self) -> float:
-        """Wall-clock seconds of training so far (over resumed sessions)."""
+    def wall_s(self) -> float:  # seconds of training so far, over resumed sessions
         return self._wall_offset + time.perf_counter() - self._started
 
     def cpu_s(self) -> float:
-        """CPU seconds of training so far (over resumed sessions)."""
         return self._cpu_offset + time.process_time() - self._cpu_started
 
     def _on_step(self) -> bool:
@@ -182,10 +180,9 @@ class EpisodeRecorder(BaseCallback):
 
 
 class EpisodeEvents(BaseCallback):
-    """After each training episode of ``recorder``: the progress bar (hidden unless ``progress``), then, each when
-    due, the greedy evaluation (keeping ``best_agent.zip``), :func:`reset_q_network` (not after the last episode)
-    and a resumable checkpoint (``extra_files(folder)`` adds files), run at the next rollout end or after the last
-    episode; with the stop rule, the evaluation runs at once and the rule follows it."""
+    """After each training episode: the progress bar, then, when due, the greedy evaluation (keeping
+    ``best_agent.zip``), :func:`reset_q_network` and a checkpoint (plus ``extra_files(folder)``), at the next rollout
+    end or after the last episode; with the stop rule the evaluation runs at once and the rule follows it."""
 
     model: DQN
 
@@ -249,12 +246,10 @@ class EpisodeEvents(BaseCallback):
         self.close()
 
     def close(self) -> None:
-        """Close the progress bar (also when training raised)."""
         if self.bar is not None:
             self.bar.close()
 
     def flush(self, task: str) -> None:
-        """Run ``task`` (a method's name) if it is due."""
         if self.pending[task]:
             self.pending[task] = False
             getattr(self, task)()
@@ -290,9 +285,7 @@ class EpisodeEvents(BaseCallback):
         return row
 
     def stop(self) -> bool:
-        """The stop rule after an evaluation: the last ``stop.after_balanced_evaluations`` balanced and at most
-        ``stop.confirm_max_failures`` of ``stop.confirm_seeds`` fail (recorded in the last evaluation row); writes
-        ``log.stop_reason``."""
+        """The stop rule after an evaluation (see :class:`~softpend.rl.config.StopRule`); writes ``log.stop_reason``."""
         rule, k = self.config.stop, self.config.stop.after_balanced_evaluations
         balanced = lambda swung_up, std: bool(swung_up) and std <= rule.upright_std_rad  # noqa: E731
         rows = self.log.evaluations[-k:]
@@ -340,12 +333,11 @@ class EpisodeEvents(BaseCallback):
 
 def reset_q_network(model: DQN, seed: tuple[int, int]) -> None:
     """Re-initialise ``model``'s Q-network (PyTorch's default, seeded by ``seed``) and its target and clear the
-    optimiser's moments; the replay buffer, exploration schedule and step counters are kept."""
+    optimiser's moments."""
     generator = torch.Generator().manual_seed(int(np.random.SeedSequence([int(s) for s in seed]).generate_state(1)[0]))
     with torch.no_grad():
         for layer in model.q_net.modules():
             if isinstance(layer, torch.nn.Linear):
-                # torch.nn.Linear.reset_parameters, with an explicit generator
                 torch.nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5), generator=generator)
                 if layer.bias is not None:
                     bound = 1 / math.sqrt(layer.in_features)
@@ -474,8 +466,7 @@ def run_training(
     replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
     part: Any = None,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (``part``, a :class:`softpend.rl.mbpo.MBPOTrainer`: its
-    callbacks before and after the episode bookkeeping, and its checkpoint files)."""
+    """The training loop shared by DQN and DQN-MBPO (``part``: a :class:`softpend.rl.mbpo.MBPOTrainer`)."""
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -77,17 +77,13 @@ class MBPOReplayBuffer(ReplayBuffer):
         buf.pos = int((buf.pos + n) % buf.buffer_size)
 
     def sample_real_states(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """``n`` real starting states drawn uniformly from the real buffer with ``rng``: (plant observations
-        (n, 10), env vectors (n, 11))."""
+        """``n`` real states drawn from the real buffer: plant observations (n, 10), env vectors (n, 11)."""
         index = rng.integers(0, self.size(), size=n)
         return self.plant_observations[index].copy(), self.observations[index, 0].copy()
 
     def real_observation_box(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-        """Per-component ``(low, high)`` of the real observation vectors (both ends of each transition),
-        widened by ``margin`` of the range on each side."""
+        """Per-component ``(low, high)`` of the real observation vectors, widened by ``margin`` of the range."""
         size = self.size()
-        if size == 0:
-            raise ValueError("the real buffer is empty")
         both = np.concatenate([self.observations[:size, 0], self.next_observations[:size, 0]])
         low, high = both.min(axis=0), both.max(axis=0)
         span = high - low
@@ -188,8 +184,7 @@ class MBPOTrainer:
     # ------------------------------------------------------------------ rollouts
     @torch.no_grad()
     def rollouts(self, agent: DQN, buffer: MBPOReplayBuffer, n_rollouts: int, length: int, epsilon: float) -> int:
-        """Branch ``n_rollouts`` model rollouts of ``length`` agent steps from real states into the model
-        buffer; returns the number of model transitions added."""
+        """Branch ``n_rollouts`` model rollouts of ``length`` agent steps into the model buffer; transitions added."""
         if self.dynamics is None or buffer.size() == 0:
             return 0
         c, env = self.config, self.env
@@ -234,8 +229,7 @@ class MBPOTrainer:
 
     # ------------------------------------------------------------------ the training loop's callbacks
     def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
-        """The :class:`ModelRolloutCallback` (before the episode bookkeeping of
-        :func:`softpend.rl.dqn.training_callbacks`) and the :class:`ModelRefitCallback` (after it)."""
+        """The callbacks before and after the episode bookkeeping."""
         return [ModelRolloutCallback(self, recorder.log)], [ModelRefitCallback(self, recorder)]
 
     def save(self, folder: Path) -> None:
@@ -276,19 +270,14 @@ class MBPOTrainer:
 
 
 class ModelRolloutCallback(BaseCallback):
-    """Every ``rollout.every_steps`` real agent steps, once the model is fitted, branch
-    ``rollout.per_real_step * rollout.every_steps`` model rollouts of the scheduled length into the agent's
-    :class:`MBPOReplayBuffer`, acting epsilon-greedily with the agent's current exploration rate."""
+    """Every ``rollout.every_steps`` real agent steps, once the model is fitted, branch ``per_real_step *
+    every_steps`` epsilon-greedy model rollouts of the scheduled length into the agent's model buffer."""
 
     model: DQN
 
     def __init__(self, trainer: MBPOTrainer, log: TrainingLog) -> None:
         super().__init__()
         self.trainer, self.log = trainer, log
-
-    def _init_callback(self) -> None:
-        if not isinstance(self.model.replay_buffer, MBPOReplayBuffer):
-            raise ValueError("the agent's replay buffer must be an MBPOReplayBuffer")
 
     def _on_step(self) -> bool:
         c = self.trainer.config

@@ -11,8 +11,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from softpend.fidelity.validation import (
-    _check_plant_resolution,
-    _plant_kwargs,
+    _resolved,
     cantilever_free_vibration,
     measured_bending_frequencies,
     static_tip_sag,
@@ -34,15 +33,10 @@ def tip_trajectory_m(
     plant: str, params: RodParams, torques_nm: np.ndarray, dt_s: float = 0.01, resolution: Optional[int] = None
 ) -> np.ndarray:
     """Tip positions ``(T + 1, 2)`` [m] of a plant (``resolution``: elements or links) started hanging at rest."""
-    params, resolution = _check_plant_resolution(plant, params, resolution)
-    sim = make_plant(plant, params=params, dt_s=dt_s, **_plant_kwargs(plant, resolution))
-    observation = sim.reset(*sim.hanging_state())
-    tips = np.empty((len(torques_nm) + 1, 2))
-    tips[0] = observation.ex_m, observation.ey_m
-    for k, torque in enumerate(torques_nm):
-        observation = sim.step(float(torque))
-        tips[k + 1] = observation.ex_m, observation.ey_m
-    return tips
+    params, _, resolution_kwargs = _resolved(plant, params, resolution)
+    sim = make_plant(plant, params=params, dt_s=dt_s, **resolution_kwargs)
+    path = [sim.reset(*sim.hanging_state())] + [sim.step(float(torque)) for torque in torques_nm]
+    return np.array([(o.ex_m, o.ey_m) for o in path])
 
 
 @dataclass
@@ -107,12 +101,9 @@ def recommend_n_links(
     """Smallest PRB ``n_links`` whose first-frequency and sag errors (``tolerance_pct``) and tip RMS distance to the
     beam (``tip_rms_tolerance * L``) pass there and at every larger ``n`` tested; ``None`` if none does."""
     prb = sorted((r for r in rows if r.plant == "prb"), key=lambda r: r.resolution)
+    errors = ("f1_error_pct", "sag_small_error_pct", "sag_large_vs_beam_pct")
     ok = [
-        abs(r.f1_error_pct) <= tolerance_pct
-        and abs(r.sag_small_error_pct) <= tolerance_pct
-        and abs(r.sag_large_vs_beam_pct) <= tolerance_pct
-        and r.tip_rms_over_l <= tip_rms_tolerance
-        for r in prb
+        all(abs(getattr(r, e)) <= tolerance_pct for e in errors) and r.tip_rms_over_l <= tip_rms_tolerance for r in prb
     ]
     for i, r in enumerate(prb):
         if all(ok[i:]):

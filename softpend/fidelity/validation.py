@@ -76,11 +76,8 @@ class FreeVibration:
         return 100.0 * (self.frequencies_hz / self.theory_hz - 1.0)
 
 
-def _plant_kwargs(plant: str, resolution: int) -> dict[str, Any]:
-    return {"n_elements": resolution} if plant == "beam" else {}
-
-
-def _check_plant_resolution(plant: str, params: RodParams, resolution: Optional[int]) -> tuple[RodParams, int]:
+def _resolved(plant: str, params: RodParams, resolution: Optional[int]) -> tuple[RodParams, int, dict[str, Any]]:
+    """The parameters, the resolution (default: the plant's) and the plant's keyword for it."""
     one_of("plant", plant, ("beam", "prb"))
     if resolution is None:
         from softpend.plant.beam import DEFAULT_N_ELEMENTS
@@ -88,8 +85,8 @@ def _check_plant_resolution(plant: str, params: RodParams, resolution: Optional[
         resolution = DEFAULT_N_ELEMENTS if plant == "beam" else params.n_links
     resolution = int_at_least("resolution", resolution, 1)
     if plant == "prb":
-        params = params.replace(n_links=resolution)
-    return params, resolution
+        return params.replace(n_links=resolution), resolution, {}
+    return params, resolution, {"n_elements": resolution}
 
 
 def cantilever_free_vibration(
@@ -105,7 +102,7 @@ def cantilever_free_vibration(
     ``L/500`` each by default) and fit one frequency per mode.  ``resolution`` is the beam's ``n_elements`` or the
     chain's ``n_links``; ``duration_s`` defaults to six periods of the first mode."""
     params = (params or RodParams()).replace(gravity_mps2=0.0, joint_damping_nms_per_rad=0.0, tip_mass_kg=0.0)
-    params, resolution = _check_plant_resolution(plant, params, resolution)
+    params, resolution, resolution_kwargs = _resolved(plant, params, resolution)
     modes = [int(m) for m in modes]
     theory = euler_bernoulli_frequencies_hz(params, max(modes))[np.asarray(modes) - 1]
     if duration_s is None:
@@ -116,17 +113,14 @@ def cantilever_free_vibration(
     kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)
     if plant == "beam":
         kwargs["newton_relative_tolerance"] = 1e-10
-    sim = make_plant(plant, **kwargs, **_plant_kwargs(plant, resolution))
+    sim = make_plant(plant, **kwargs, **resolution_kwargs)
 
     def shape(s, k):  # k = 0: the lateral deflection, 1: its slope
         return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[k] / (length if k else 1) for m in modes)
 
     sim.reset(*deflected_state(sim, lambda s: shape(s, 0), lambda s: shape(s, 1)))
     n_steps = int(round(duration_s / dt_s))
-    tip = np.empty(n_steps + 1)
-    tip[0] = sim.observe().ex_m
-    for k in range(n_steps):
-        tip[k + 1] = sim.step(0.0).ex_m
+    tip = np.array([sim.observe().ex_m] + [sim.step(0.0).ex_m for _ in range(n_steps)])
     time = np.arange(n_steps + 1) * dt_s
     measured = fit_modal_frequencies_hz(time, tip, theory)
     return FreeVibration(plant, resolution, time, tip, measured, theory)
@@ -196,16 +190,11 @@ def static_tip_sag(
 ) -> dict[str, float]:
     """Tip drop of the horizontally clamped rod under gravity from the plant's static solver, beside the
     small-deflection theory's."""
-    params, resolution = _check_plant_resolution(plant, params or RodParams(), resolution)
-    sim = make_plant(plant, params=params, hub_locked_at_rad=math.pi / 2, **_plant_kwargs(plant, resolution))
+    params, _, resolution_kwargs = _resolved(plant, params or RodParams(), resolution)
+    sim = make_plant(plant, params=params, hub_locked_at_rad=math.pi / 2, **resolution_kwargs)
     assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     observation = sim.static_equilibrium()
     theory = params.static_sag_euler_bernoulli_m
-    sag = -observation.ey_m
-    return {
-        "sag_m": float(sag),
-        "tip_x_m": float(observation.ex_m),
-        "tip_y_m": float(observation.ey_m),
-        "theory_m": float(theory),
-        "error_pct": float(100.0 * (sag / theory - 1.0)),
-    }
+    sag, x, y = -observation.ey_m, observation.ex_m, observation.ey_m
+    values = {"sag_m": sag, "tip_x_m": x, "tip_y_m": y, "theory_m": theory, "error_pct": 100.0 * (sag / theory - 1.0)}
+    return {key: float(value) for key, value in values.items()}

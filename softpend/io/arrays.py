@@ -14,8 +14,8 @@ from softpend.checks import MAX_WORK_BYTES
 from softpend.io.reading import check_zip_members, open_regular_file
 
 #: What reading a corrupt, truncated or hostile archive can raise.
-_READ_ERRORS = (OSError, ValueError, EOFError, KeyError, MemoryError, NotImplementedError, SyntaxError, TypeError)
-_READ_ERRORS += (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error)
+_READ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, EOFError, KeyError, MemoryError, TypeError)
+_READ_ERRORS += (NotImplementedError, SyntaxError, zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error)
 
 
 def _read_npy_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:

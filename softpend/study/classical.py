@@ -1,5 +1,5 @@
-"""Figure 7: every classical controller through the shared evaluation from fresh starts (near upright and from
-hanging, with and without the torque limit), and the |theta| plot."""
+"""Figure 7: every classical controller from fresh starts (near upright and hanging, with and without the torque
+limit), and the |theta| plot."""
 
 from __future__ import annotations
 
@@ -25,8 +25,8 @@ TABLE_COLUMNS = tuple(
 
 @dataclass
 class ClassicalComparison:
-    """Runs behind Figure 7: ``label -> [summary per tilt]`` near upright, one table row per run (near upright and
-    from hanging), the PID gains by where they were tuned, and notes on designs left out."""
+    """Runs behind Figure 7: ``label -> [summary per tilt]`` near upright, one table row per run, the PID gains by
+    where they were tuned, and notes on designs left out."""
 
     near_upright: dict[str, list[EvaluationSummary]]
     rows: list[dict[str, Any]]
@@ -53,8 +53,7 @@ def train_learned_model(
 
 
 def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per seed, the straight rod at rest tilted by ``tilt_rad`` plus a uniform offset of at most
-    ``task.start_noise_rad`` from ``default_rng(seed)``."""
+    """Per seed, the straight rod at rest tilted by ``tilt_rad`` plus a seeded offset within ``task.start_noise_rad``."""
     offsets = [float(np.random.default_rng(int(seed)).uniform(-1.0, 1.0)) * task.start_noise_rad for seed in starts]
     return [task.tilt_state(float(tilt_rad) + offset) for offset in offsets]
 
@@ -82,9 +81,8 @@ def classical_comparison(
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
 ) -> ClassicalComparison:
-    """Evaluate every classical controller from the fresh starts ``starts``. Off the PRB plant the joint-state
-    designs become observation-only ones; without ``learned_model`` the learned-model LQR and PID are left out;
-    ``pid_gains`` skips the PID tunings."""
+    """Every classical controller from the fresh ``starts`` (off the PRB plant: observation-only designs; without
+    ``learned_model``: no learned-model LQR and PID; ``pid_gains`` skips the PID tunings)."""
     task = task if task is not None else Task()
     starts = [int(seed) for seed in starts]
     if not starts or len(tilts_rad) == 0:
@@ -142,10 +140,8 @@ def classical_comparison(
         add(f"PID (tuned on {tuned_on}), no limit", unlimited_pid, unlimited_torque_nm)
 
     add_hanging("LQR (true model)", LQRController.from_params(params, state=lqr_state))
-    add_hanging(
-        "energy swing-up + LQR",
-        EnergySwingUpController(params) if joint_state else EnergySwingUpController.for_observations(params),
-    )
+    swing = (EnergySwingUpController if joint_state else EnergySwingUpController.for_observations)(params)
+    add_hanging("energy swing-up + LQR", swing)
     return ClassicalComparison(near, rows, gains, notes)
 
 

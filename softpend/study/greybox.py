@@ -1,5 +1,4 @@
-"""Grey-box identification in the study: the initial guess, model quality against the networks, and closed-loop
-usefulness of the identified parameters."""
+"""Grey-box identification in the study: the initial guess, model quality, closed-loop usefulness."""
 
 from __future__ import annotations
 
@@ -59,13 +58,9 @@ def model_quality(
     horizon_s: float = 2.0,
     start_state: str = "recorded",
 ) -> dict[str, Any]:
-    """The model-quality table (valid prediction time, hanging tip error 1 s into a rollout, one-step error; rows by
-    model) of the grey-box model, the "simulator started 1e-4 rad off" yardstick and ``networks`` on held-out data,
-    rollouts started every 10 samples (upright: tilted at most 0.3 rad).
-
-    ``start_state``: grey-box rollouts start from the recorded joint state (simulated PRB data) or from the state
-    estimated from the preceding 0.1 s of observations (any plant).
-    """
+    """The model-quality table (valid prediction time, hanging tip error at 1 s, one-step error) of the grey-box
+    model, the yardstick and ``networks`` on held-out data; ``start_state``: ``"recorded"`` joint states (simulated
+    PRB data) or ``"estimated"`` from the preceding 0.1 s of observations."""
     stride, lookback_s, hanging_horizon_s = 10, 0.1, 1.0
     truth = upright.params
     if truth is None:
@@ -94,7 +89,7 @@ def model_quality(
 
     from softpend.control.linearise import linearise_exudyn
 
-    # the growth rate at upright: the largest real part of the linearisation's eigenvalues [1/s]
+    # the growth rate at upright [1/s]
     lam = float(np.max(linearise_exudyn(truth).state_space().eigenvalues().real))
     length, dt = truth.length_m, upright.dt_s
     steps = int(round(horizon_s / dt))
@@ -104,11 +99,8 @@ def model_quality(
     rows: dict[str, dict[str, float]] = {}
     for label, error in errors.items():
         vp = valid_prediction(error, dt, length, lyapunov_rate_per_s=lam)
-        rows[label] = {
-            "valid_prediction_s": vp.median_s,
-            "valid_prediction_lyapunov": vp.median_lyapunov,
-            "censored_fraction": float(np.mean(vp.censored)),
-        }
+        figures = (vp.median_s, vp.median_lyapunov, float(np.mean(vp.censored)))
+        rows[label] = dict(zip(("valid_prediction_s", "valid_prediction_lyapunov", "censored_fraction"), figures))
     if hanging is not None:
         h_steps = int(round(hanging_horizon_s / hanging.dt_s))
         h_starts = rollout_starts(hanging, h_steps, stride=stride, first=first)
@@ -139,9 +131,8 @@ def closed_loop_usefulness(
     task: Optional[Task] = None,
     seeds: Optional[Sequence[int]] = None,
 ) -> list[dict[str, Any]]:
-    """LQR (5 s from a tilt of 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified``
-    (label -> params) and on ``task.rod``, run on the true plant from the fresh starts ``seeds``: one row per design
-    and start."""
+    """LQR (from 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified`` and on
+    ``task.rod``, on the true plant from ``seeds``: one row per design and start."""
     from softpend.control.lqr import LQRController
     from softpend.control.swingup import EnergySwingUpController
     from softpend.evaluation import evaluate_controller
@@ -157,17 +148,11 @@ def closed_loop_usefulness(
         params = params.replace(torque_limit_nm=task.rod.torque_limit_nm)
         lqr_controller = LQRController.from_params(params, state="joint" if joint else "observation")
         lqr = run_from_tilt(lqr_controller, task, 0.2, seeds, 5.0, task.torque_limit_nm, "LQR")
-        swing_controller = (
-            EnergySwingUpController(params) if joint else EnergySwingUpController.for_observations(params)
-        )
+        swing_controller = (EnergySwingUpController if joint else EnergySwingUpController.for_observations)(params)
         name, hanging = "energy swing-up + LQR", task.replace(start="hanging")
         swing = evaluate_controller(swing_controller, hanging, seeds=seeds, duration_s=TEST_EPISODE_S, name=name)
         for s, start in ((lqr, "tilt 0.2 rad"), (swing, "hanging")):
             row = {"designed_on": label, "controller": s.name, "start": start, "success_rate": s.success_rate}
-            figures = {
-                "successes": s.successes,
-                "episodes": len(s.results),
-                "upright_std_rad": s.median("upright_std_rad"),
-            }
-            rows.append(row | figures)
+            row |= {"successes": s.successes, "episodes": len(s.results)}
+            rows.append(row | {"upright_std_rad": s.median("upright_std_rad")})
     return rows

@@ -1,5 +1,4 @@
-"""PILCO against DQN and DQN-MBPO in training plant seconds (Figure 10): PILCO's run cache, the curves of each
-method's policy tests on the true plant, the seconds-to-balance table and the plots."""
+"""PILCO against DQN and DQN-MBPO in training plant seconds (Figure 10): PILCO's run cache, curves, table and plots."""
 
 from __future__ import annotations
 
@@ -27,8 +26,7 @@ def pilco_runs(
     workers: Optional[int] = None,
     backend: Optional[str] = None,
 ) -> list[PilcoResult]:
-    """Run (or reuse) PILCO once per seed under ``runs_root`` (:func:`softpend.study.rl_runs.run_folder`), the
-    missing seeds in parallel, and load the results."""
+    """Run (or reuse) PILCO once per seed under ``runs_root``, the missing seeds in parallel; the results."""
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(run_and_save, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "PILCO runs", backend)
     return [
@@ -38,8 +36,8 @@ def pilco_runs(
 
 
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
-    """The PILCO runs still missing under ``runs_root`` as ``(name, arguments of run_and_save)``; a folder holding
-    a run of other settings raises ``ValueError``."""
+    """The PILCO runs missing under ``runs_root`` as ``(name, arguments of run_and_save)``; ``ValueError`` for a
+    folder holding a run of other settings."""
     if len(seeds) == 0:
         raise ValueError("seeds must not be empty")
     jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once
@@ -115,8 +113,8 @@ def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
 def seconds_to_balance_table(
     rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)
 ) -> list[dict[str, Any]]:
-    """Per method, medians over seeds: training plant seconds to the first evaluation that succeeds on every start
-    within each std level (``inf`` if never), and the final evaluation's figures."""
+    """Per method, medians over seeds: plant seconds to the first evaluation succeeding on every start within each
+    std level (``inf``: never), and the final evaluation's figures."""
     table = []
     for method in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == method]

@@ -1,5 +1,5 @@
-"""The book's multi-seed RL runs, cached in run folders ``<root>/<algo>-<hash>-seed<k>`` (``<hash>`` names the
-settings): a finished run is reused, a shorter one resumed."""
+"""The book's multi-seed RL runs, cached in run folders ``<root>/<algo>-<hash>-seed<k>``: a finished run is reused,
+a shorter one resumed."""
 
 from __future__ import annotations
 
@@ -54,8 +54,8 @@ def _train_runs(
 def rl_jobs(
     specs: Sequence[tuple[str, DQNConfig, Sequence[int], int]], root: Path | str
 ) -> list[tuple[str, tuple[Any, ...]]]:
-    """The runs ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root``: ``(name, arguments
-    of train_run)``, DQN-MBPO's first; a finished run is left out, a shorter one resumed."""
+    """The runs ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root`` as ``(name, arguments
+    of train_run)``, DQN-MBPO's first."""
     jobs, names = [], []
     for algo, config, seeds, episodes in specs:
         if algo not in ("dqn", "mbpo"):
@@ -117,10 +117,8 @@ def summary_table(
             last = log.evaluations[-1] if log.evaluations else {}
             row = {"method": method, "seed": log.seed, "episodes": log.n_episodes, "plant_s": log.plant_s}
             row |= {"episodes_to_asymptote": asym, "plant_s_to_asymptote": asym_plant_s}
-            row |= {
-                "episodes_to_balance": log.episodes_to_balance(std_rad),
-                "plant_s_to_balance": log.real_s_to_balance(std_rad),
-            }
+            balance = (log.episodes_to_balance(std_rad), log.real_s_to_balance(std_rad))
+            row |= dict(zip(("episodes_to_balance", "plant_s_to_balance"), balance))
             row["final_max_upright_std_rad"] = last.get("max_upright_std_rad", math.nan)
             row["final_swing_up_time_s"] = last.get("median_swing_up_time_s", math.nan)
             rows.append(row | {"model_steps": log.model_steps})
@@ -132,8 +130,8 @@ def figure_configs(
     task_overrides: Optional[Mapping[str, Any]] = None,
     rl_overrides: Optional[Mapping[str, Any]] = None,
 ) -> dict[str, DQNConfig]:
-    """The configs of Figures 4-6, ``{"dqn": ..., "mbpo": ...}``: the tuned settings on ``Task(plant=plant)`` with
-    ``task_overrides`` (dotted names), then ``rl_overrides`` (each applied to the configs that have the field)."""
+    """``{"dqn": ..., "mbpo": ...}``: the tuned settings on ``Task(plant=plant)`` with ``task_overrides``, then
+    ``rl_overrides`` (each applied to the configs that have the field)."""
     task = apply_overrides(Task(plant=plant), task_overrides or {})
     overrides = dict(rl_overrides or {})
     configs = {algo: load_hparams(algo, task) for algo in ("dqn", "mbpo")}
@@ -155,8 +153,7 @@ def plant_runs_root(runs_root: Path | str, plant: str) -> Path:
 
 
 def load_runs(runs_root: Path | str, plant: str, algo: str, seeds: Sequence[int], load: Callable) -> list:
-    """``load(folder, seed)`` of each seed's run folder under :func:`plant_runs_root`, skipping the runs it cannot
-    read (a missing file, a ``ValueError``, ``KeyError`` or ``TypeError``)."""
+    """``load(folder, seed)`` of each seed's run folder under :func:`plant_runs_root`, skipping unreadable runs."""
     root, loaded = plant_runs_root(runs_root, plant), []
     for seed in seeds:
         try:
@@ -196,9 +193,8 @@ def run_config_data(algo: str, config: Any) -> dict[str, Any]:
 
 
 def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) -> Path:
-    """Folder of one run: with ``config``, ``<algo>-<hash>-seed<seed>`` (``<hash>`` from :func:`run_config_data`);
-    without, the one folder of ``algo`` and ``seed`` under ``runs_root`` (``ValueError`` if runs of several
-    settings are there), else ``<algo>-seed<seed>``."""
+    """Folder of one run: with ``config``, ``<algo>-<hash>-seed<seed>``; without, the one folder of ``algo`` and
+    ``seed`` (``ValueError`` if there are several), else ``<algo>-seed<seed>``."""
     root = Path(runs_root)
     if config is not None:
         return root / run_folder_name(algo, run_config_data(algo, config), seed)

@@ -1,5 +1,5 @@
-"""Sim-to-"real" transfer: controllers designed on the PRB plant, evaluated on the PRB plant and the continuum beam
-at the nominal parameters and with the plant's stiffness, mass or damping perturbed."""
+"""Sim-to-"real" transfer: controllers designed on the PRB plant, evaluated on the PRB plant and the beam, nominal and
+with stiffness, mass or damping perturbed."""
 
 from __future__ import annotations
 
@@ -20,8 +20,7 @@ MIN_DURATION_S = 2.0
 
 
 def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodParams]:
-    """The nominal parameters and the six one-at-a-time perturbations by ``+-fraction``: stiffness scale, rod and
-    tip mass, joint damping and hub friction."""
+    """The nominal parameters and six one-at-a-time perturbations by ``+-fraction`` (stiffness, mass, damping)."""
     if not 0.0 <= fraction < 1.0:
         raise ValueError(f"fraction must be in [0, 1), got {fraction!r}")
     out = {"nominal": params}
@@ -38,8 +37,7 @@ def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodPara
 
 @dataclass
 class TransferCase:
-    """A controller factory (designed on the nominal PRB plant) and the start, episode length and start noise it is
-    evaluated with."""
+    """A controller factory and the start, episode length and start noise it is evaluated with."""
 
     name: str
     make_controller: Callable[[], Any]
@@ -49,26 +47,16 @@ class TransferCase:
 
 
 def default_transfer_cases(params: Optional[RodParams] = None) -> list[TransferCase]:
-    """The observation-only classical controllers: the LQR from near upright and the energy swing-up + LQR from
-    hanging."""
+    """The observation-only LQR from near upright and energy swing-up + LQR from hanging."""
     from softpend.control.lqr import LQRController
     from softpend.control.swingup import EnergySwingUpController
 
     params = params or RodParams()
+    lqr = lambda: LQRController.from_params(params, state="observation")  # noqa: E731
+    swing = lambda: EnergySwingUpController(params, lqr_state="observation", energy_source="observation")  # noqa: E731
     return [
-        TransferCase(
-            "LQR (observations), balance",
-            lambda: LQRController.from_params(params, state="observation"),
-            start="upright",
-            duration_s=3.0,
-            start_noise_rad=0.2,
-        ),
-        TransferCase(
-            "energy swing-up + LQR (observations)",
-            lambda: EnergySwingUpController(params, lqr_state="observation", energy_source="observation"),
-            start="hanging",
-            duration_s=10.0,
-        ),
+        TransferCase("LQR (observations), balance", lqr, start="upright", duration_s=3.0, start_noise_rad=0.2),
+        TransferCase("energy swing-up + LQR (observations)", swing, start="hanging", duration_s=10.0),
     ]
 
 
@@ -80,8 +68,8 @@ def rl_transfer_cases(
     params: Optional[RodParams] = None,
     duration_s: float = TEST_EPISODE_S,
 ) -> list[TransferCase]:
-    """The agents ``which`` of the RL runs under ``runs_root`` (one per method and seed) as swing-up cases; they must
-    have been trained on a rod with the links and torque limit of ``params``."""
+    """The agents ``which`` of the RL runs under ``runs_root`` as swing-up cases (trained with the links and torque
+    limit of ``params``)."""
     from softpend.rl.dqn import load_agent
     from softpend.rl.training_env import policy_controller
     from softpend.study.rl_runs import METHOD_NAMES, run_folder
@@ -106,8 +94,7 @@ def rl_transfer_cases(
 def transfer_matrix(
     rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate"
 ) -> tuple[list[str], list[str], np.ndarray]:
-    """One metric of :func:`transfer_table` rows on one plant as ``(controllers, perturbations, matrix)`` (NaN
-    where missing)."""
+    """One metric of :func:`transfer_table` rows on one plant as ``(controllers, perturbations, matrix)``."""
     if not (sel := [r for r in rows if r["plant"] == plant]):
         raise ValueError(f"no rows for plant {plant!r}")
     controllers = list(dict.fromkeys(r["controller"] for r in sel))
@@ -127,9 +114,8 @@ def transfer_table(
     duration_scale: float = 1.0,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Evaluate every case on every plant and perturbation: one :meth:`EvaluationSummary.row` each, with
-    ``plant``, ``perturbation`` and ``diverged``; ``duration_scale`` shortens every episode, down to
-    :data:`MIN_DURATION_S`."""
+    """Every case on every plant and perturbation: an :meth:`EvaluationSummary.row` with ``plant``, ``perturbation``
+    and ``diverged``; ``duration_scale`` shortens every episode, down to :data:`MIN_DURATION_S`."""
     params = params or RodParams()
     if duration_scale <= 0:
         raise ValueError(f"duration_scale must be positive, got {duration_scale!r}")

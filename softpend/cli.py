@@ -48,18 +48,12 @@ def _add_debug(parser: argparse.ArgumentParser) -> None:
             _add_debug(subparser)
 
 
-#: Exception types that are the input's or the environment's fault, reported in one line.
+#: Exception types that are the input's or the environment's fault, reported in one line (as are the error classes
+#: of softpend itself and of Exudyn).
 REPORTED_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, EOFError, RecursionError, MemoryError)
 REPORTED_ERRORS += (OverflowError, zipfile.BadZipFile, pickle.UnpicklingError)
-
-
-def is_reported(exc: BaseException) -> bool:
-    """Whether ``exc`` gets a one-line message: one of :data:`REPORTED_ERRORS`, or an error class defined by
-    softpend itself (``SimulationDiverged``, the hardware link errors, ...) or by Exudyn (its solver errors)."""
-    if isinstance(exc, REPORTED_ERRORS):
-        return True
-    module = type(exc).__module__ or ""
-    return module.split(".")[0] in ("softpend", "exudyn")
+#: The message of an error of these classes raised without one.
+SILENT_ERRORS = ((MemoryError, "not enough memory"), (RecursionError, "input nested too deeply"))
 
 
 def error_line(exc: BaseException) -> str:
@@ -68,10 +62,7 @@ def error_line(exc: BaseException) -> str:
     message = " ".join(str(exc).split())
     if type(exc) is ValueError and message:
         return message
-    if isinstance(exc, MemoryError):
-        message = message or "not enough memory"
-    elif isinstance(exc, RecursionError):
-        message = message or "input nested too deeply"
+    message = message or next((text for kind, text in SILENT_ERRORS if isinstance(exc, kind)), "")
     return f"{type(exc).__name__}: {message}" if message else type(exc).__name__
 
 
@@ -87,7 +78,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except Exception as exc:
-        if getattr(args, "debug", False) or not is_reported(exc):
+        ours = (type(exc).__module__ or "").split(".")[0] in ("softpend", "exudyn")
+        if getattr(args, "debug", False) or not (ours or isinstance(exc, REPORTED_ERRORS)):
             raise
         print(f"softpend {args.command}: error: {error_line(exc)}", file=sys.stderr)
         return 2

@@ -354,7 +354,10 @@ class MotorLink:
         messages, errors = self._decoder.feed(data)
         for message in messages:
             if message[0] == proto.MSG_ERROR:
-                meaning = _error_meaning(message[2][0])
+                code = message[2][0]
+                meaning = proto.ERROR_MEANINGS.get(
+                    code, f"unknown error code {code} (not in protocol version {proto.PROTOCOL_VERSION})"
+                )
                 if self.device is None:  # the answer to our HELLO
                     raise self._fail(HandshakeError(f"device {self.port!r} refused the handshake: {meaning}"))
                 raise self._fail(DeviceError(f"device {self.port!r} reported an error: {meaning}"))
@@ -410,19 +413,6 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
                     f"write timeout: the port took no byte for {timeout_s:g} s ({len(view)} of {len(frame)} "
                     "bytes unsent)"
                 )
-
-
-def _error_meaning(code: int) -> str:
-    """What a device ERROR code means, for the error message."""
-    meaning = proto.ERROR_MEANINGS.get(code)
-    if meaning is None:
-        return f"unknown error code {code} (not defined by protocol version {proto.PROTOCOL_VERSION})"
-    if code == proto.ERR_VERSION:
-        meaning += (
-            f"; the host speaks version {proto.PROTOCOL_VERSION}: flash firmware/vex_v5_motor.py from "
-            "this package, or use the package version that matches the device"
-        )
-    return meaning
 
 
 def _float32_within(value: float, limit: float) -> float:

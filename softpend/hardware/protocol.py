@@ -29,7 +29,9 @@ ERR_VERSION = 1
 ERR_NO_SESSION = 2
 ERR_BAD_MESSAGE = 3
 ERROR_MEANINGS = {
-    ERR_VERSION: "protocol version mismatch (ERR_VERSION): the device does not speak this protocol version",
+    ERR_VERSION: "protocol version mismatch (ERR_VERSION): the device does not speak version %d; flash"
+    " firmware/vex_v5_motor.py from this package, or use the package version that matches the device"
+    % PROTOCOL_VERSION,
     ERR_NO_SESSION: "no session open (ERR_NO_SESSION): a command arrived before the HELLO handshake"
     " (did the device restart?)",
     ERR_BAD_MESSAGE: "message type not accepted by the device (ERR_BAD_MESSAGE)",

@@ -39,29 +39,20 @@ def run(args: argparse.Namespace) -> int:
     calibration = AffineCalibration.load(args.calibration) if args.calibration else None
     if (args.video is None) == (args.camera is None):
         raise ValueError("give either a VIDEO file or --camera CAMERA")
-    tracker = TipTracker(min_area_px=args.min_area)
+    tracker, hub = TipTracker(min_area_px=args.min_area), not args.no_hub
     if args.camera is not None:
         if args.fps is not None:
             raise ValueError("--fps is for video files; a live camera stamps each frame when it arrives")
         source = camera_source(args, tracker)
         try:
-            rows = track_live(source, args.out, duration_s=args.duration, track_hub=not args.no_hub, progress=True)
+            rows = track_live(source, args.out, duration_s=args.duration, track_hub=hub, progress=True)
         finally:
             outputs.done(args.out)  # written atomically by track_live (also on Ctrl-C)
-        source_text = f"from camera {args.camera} "
     else:
-        rows = track_video(
-            args.video,
-            args.out,
-            marker_positions_m=markers,
-            fps=args.fps,
-            tracker=tracker,
-            calibration=calibration,
-            track_hub=not args.no_hub,
-            progress=True,
-        )
+        video = dict(marker_positions_m=markers, fps=args.fps, tracker=tracker, calibration=calibration)
+        rows = track_video(args.video, args.out, **video, track_hub=hub, progress=True)
         outputs.done(args.out)  # written atomically by track_video
-        source_text = ""
+    source_text = f"from camera {args.camera} " if args.camera is not None else ""
     lost = int(np.sum(rows[:, 8] > 0.5)) if len(rows) else 0
     print(f"tracked {len(rows)} frames ({lost} lost) {source_text}-> {args.out}")
     return 0

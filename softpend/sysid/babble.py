@@ -35,10 +35,9 @@ PROGRAMS = ("noise", "multisine")
 
 @dataclass(frozen=True)
 class BabbleProtocol:
-    """How to babble: trials, start region and spread, the torque program (``"noise"``: random torque, std as a
-    fraction of the torque limit, low-pass cut-off; ``"multisine"``: :func:`softpend.sysid.excitation.multisine`
-    from 0.2 Hz to ``torque_bandwidth_hz`` with peak ``multisine_peak_fraction`` of the limit), the PD on the hub (gains, fraction of trials; on the differenced encoder rate), sensor noise and the
-    camera delay [samples] of ``theta, ex, ey, er``."""
+    """How to babble: trials, start, the torque program (``"noise"``: low-pass noise, std a fraction of the torque
+    limit; ``"multisine"``: from 0.2 Hz to ``torque_bandwidth_hz``, peak a fraction of the limit), the PD on the
+    differenced hub encoder rate in a fraction of trials, sensor noise and the camera delay [samples]."""
 
     n_trials: int = 60
     trial_length_s: float = 5.0
@@ -104,32 +103,19 @@ def band_limited_noise(
     return u
 
 
-def _start_state(
-    rng: np.random.Generator, protocol: BabbleProtocol, n_coordinates: int, bend_joints: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Random start state; ``bend_joints`` bends the springs too (PRB chains only; the beam starts straight)."""
-    q = np.zeros(n_coordinates)
-    qd = np.zeros(n_coordinates)
-    centre = {"upright": 0.0, "hanging": math.pi}.get(protocol.start)
-    q[0] = (
-        rng.uniform(-math.pi, math.pi)
-        if centre is None
-        else centre + protocol.start_angle_std_rad * rng.standard_normal()
-    )
-    bends = protocol.start_bend_std_rad * rng.standard_normal(n_coordinates - 1)
-    if bend_joints:
-        q[1:] = bends
-    qd[0] = protocol.start_rate_std_rad_s * rng.standard_normal()
-    return q, qd
-
-
 def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Simulate one trial; returns its stored arrays."""
     n = protocol.n_samples
     delay = protocol.camera_delay_steps
     n_steps = n + delay  # one extra sample for the first backward difference
     limit = plant.params.torque_limit_nm
-    q0, qd0 = _start_state(rng, protocol, plant.n_coordinates, isinstance(plant, PRBPlant))
+    q0, qd0 = np.zeros(plant.n_coordinates), np.zeros(plant.n_coordinates)
+    centre = {"upright": 0.0, "hanging": math.pi}.get(protocol.start)
+    spread = protocol.start_angle_std_rad
+    q0[0] = rng.uniform(-math.pi, math.pi) if centre is None else centre + spread * rng.standard_normal()
+    bends = protocol.start_bend_std_rad * rng.standard_normal(plant.n_coordinates - 1)  # drawn for the beam too
+    if isinstance(plant, PRBPlant):  # the beam starts straight
+        q0[1:] = bends
+    qd0[0] = protocol.start_rate_std_rad_s * rng.standard_normal()
     use_feedback = bool(rng.uniform() < protocol.feedback_trial_fraction)
     if protocol.program == "multisine":
         babble = multisine(
@@ -189,12 +175,9 @@ def babble(
     path: Optional[str | Path] = None,
     progress: bool = True,
 ) -> TrajectoryDataset:
-    """Run the babbling protocol on a simulated plant (:func:`softpend.plant.make_plant` name) and return the
-    dataset, also written to ``path`` if given.
-
-    Raises ``ValueError`` on bad arguments or a dataset too large for :data:`softpend.checks.MAX_WORK_BYTES`
-    (before the first trial), ``SimulationDiverged`` naming the trial if the simulator fails.
-    """
+    """Run the babbling protocol on a simulated plant (a :func:`softpend.plant.make_plant` name); the dataset,
+    also written to ``path`` if given.  Raises ``ValueError`` on bad arguments or a dataset too large (before the
+    first trial), ``SimulationDiverged`` naming the trial if the simulator fails."""
     protocol = protocol if protocol is not None else BabbleProtocol()
     if not isinstance(protocol, BabbleProtocol):
         raise ValueError(f"protocol must be a BabbleProtocol, got {type(protocol).__name__}")

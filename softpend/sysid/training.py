@@ -31,8 +31,7 @@ from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, c
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of :func:`fit_dynamics_model`: the state layout, the network, the ensemble (members on bootstraps of
-    the training transitions), Adam with cosine annealing to 1 % and early stopping, and the split by trial.
+    """Settings of :func:`fit_dynamics_model` (ensemble members train on bootstraps of the transitions);
     ``integrate_positions=None`` means yes for observed velocities; ``limit_tip_reach`` keeps predicted tips within
     the rod's reach plus :data:`TIP_REACH_SLACK`."""
 
@@ -120,20 +119,10 @@ def split_trials(n_trials: int, validation_fraction: float, seed: int) -> tuple[
 TIP_REACH_SLACK = 0.01
 
 
-def _tip_reach_m(dataset: TrajectoryDataset) -> Optional[float]:
-    """The rod length of a simulated dataset, else the largest recorded tip distance, plus the slack."""
-    if dataset.params is not None:
-        return float(dataset.params.length_m) * (1 + TIP_REACH_SLACK)
-    if not all(n in dataset.position_names for n in ("ex_m", "ey_m")):
-        return None
-    radius = float(np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
-    return radius * (1 + TIP_REACH_SLACK) if radius > 0 else None
-
-
 def _features_and_targets(
     model: DynamicsModel, data: TransitionData
 ) -> tuple[DynamicsModel, torch.Tensor, torch.Tensor]:
-    """A float64 copy of the model, and the raw features and target changes of the transitions in float64."""
+    """A float64 copy of the model, the raw features and the target changes."""
     probe = copy.deepcopy(model).double()
     s, s1, u = (torch.as_tensor(a, dtype=torch.float64) for a in (data.states, data.next_states, data.torques_nm))
     return probe, probe.features(s, u), probe.target_delta(s, s1)
@@ -159,9 +148,7 @@ def _train(
     progress: bool,
     desc: str,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Epochs of random minibatches of the mean squared error with Adam and cosine annealing, keeping the weights
-    of the lowest validation loss (improved by 1e-4 of it; stop after ``config.patience`` epochs without); returns
-    the losses per epoch and the epoch kept."""
+    """Adam on minibatches with cosine annealing, early stopping on the validation loss; the losses and best epoch."""
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
     scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(
         optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100
@@ -205,9 +192,21 @@ def _train(
     return np.array(train_losses), np.array(val_losses), best[1]
 
 
-def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: TrainConfig) -> None:
-    """``ValueError`` before any work if the fit's arrays would exceed :data:`softpend.checks.MAX_WORK_BYTES`."""
-    dim = layout.dim
+def fit_dynamics_model(
+    dataset: TrajectoryDataset, config: Optional[TrainConfig] = None, progress: bool = True, **overrides: Any
+) -> FitResult:
+    """Train a dynamics model (``config`` with ``overrides`` of its fields) on a dataset of at least 2 trials;
+    raises ``ValueError`` on invalid settings or data, ``NonFiniteError`` if a loss becomes NaN or infinite."""
+    if not isinstance(dataset, TrajectoryDataset):
+        raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
+    config = config if config is not None else TrainConfig()
+    if not isinstance(config, TrainConfig):
+        raise ValueError(f"config must be a TrainConfig, got {type(config).__name__}")
+    if overrides:
+        config = config.replace(**overrides)
+    started = time.perf_counter()
+    layout = config.layout()
+    dim = layout.dim  # the work size checked before any work
     transitions = dataset.n_trials * max(dataset.n_samples - 1, 1)
     data = 8.0 * 8 * transitions * (dim + 1)
     widths = [2 * dim + 1, *config.hidden_widths, dim]
@@ -218,26 +217,6 @@ def _check_fit_size(layout: StateLayout, dataset: TrajectoryDataset, config: Tra
         data + networks,
         f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
     )
-
-
-def fit_dynamics_model(
-    dataset: TrajectoryDataset, config: Optional[TrainConfig] = None, progress: bool = True, **overrides: Any
-) -> FitResult:
-    """Train a dynamics model (``config`` with ``overrides`` of its fields) on a dataset of at least 2 trials.
-
-    Raises ``ValueError`` on invalid settings or a dataset that lacks the layout's variables, ``NonFiniteError``
-    if a loss becomes NaN or infinite.
-    """
-    if not isinstance(dataset, TrajectoryDataset):
-        raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
-    config = config if config is not None else TrainConfig()
-    if not isinstance(config, TrainConfig):
-        raise ValueError(f"config must be a TrainConfig, got {type(config).__name__}")
-    if overrides:
-        config = config.replace(**overrides)
-    started = time.perf_counter()
-    layout = config.layout()
-    _check_fit_size(layout, dataset, config)
     train_trials, val_trials = split_trials(dataset.n_trials, config.validation_fraction, config.seed)
     train = layout.transitions(dataset, train_trials)
     val = layout.transitions(dataset, val_trials)
@@ -248,7 +227,12 @@ def fit_dynamics_model(
         raise ValueError(
             "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
         )
-    reach = _tip_reach_m(dataset) if config.limit_tip_reach else None
+    reach = None  # the rod length of a simulated dataset, else the largest recorded tip distance, plus the slack
+    if config.limit_tip_reach and dataset.params is not None:
+        reach = float(dataset.params.length_m) * (1 + TIP_REACH_SLACK)
+    elif config.limit_tip_reach and all(n in dataset.position_names for n in ("ex_m", "ey_m")):
+        radius = float(np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
+        reach = radius * (1 + TIP_REACH_SLACK) if radius > 0 else None
     positions = bool(config.integrate_positions)  # set in TrainConfig.__post_init__
     members = []
     for index in range(config.ensemble_size):

@@ -261,9 +261,7 @@ class MotorLink:
 
     def drain_states(self) -> list[MotorState]:
         """Every STATE frame already received (without waiting), oldest first."""
-        data = self._read_bytes(0.0)
-        if data:
-            self._accept(data)
+        self._accept(self._read_bytes(0.0))
         states = [self._state_from(s, v) for t, s, v in self._pending if t == proto.MSG_STATE]
         self._pending = [m for m in self._pending if m[0] != proto.MSG_STATE]
         return states
@@ -386,9 +384,7 @@ class MotorLink:
                     names = "/".join(proto.MESSAGE_NAMES[w] for w in wanted)
                     raise self._fail(LinkTimeout(f"no {names} from {self.port!r} within the timeout; motor stopped"))
                 last_look, remaining = True, 0.0
-            data = self._read_bytes(remaining)
-            if data:
-                self._accept(data)
+            self._accept(self._read_bytes(remaining))
 
 
 def _write_frame(ser, frame: bytes, timeout_s: float) -> None:

@@ -30,14 +30,13 @@ def load_hparams(
     overrides: Optional[Mapping[str, Any]] = None,
     directory: Path | str = HPARAMS_DIR,
 ) -> Any:
-    """The config the book trains ``method`` (``"dqn"``, ``"mbpo"``, ``"pilco"``) with: the class's defaults, the
-    fields of ``<directory>/<method>.yml``, ``task`` (default :data:`TASK`), then ``overrides`` (dotted names reach
-    into the task); ``ValueError`` naming the file for an unknown field or a file that is not a mapping."""
+    """The config the book trains ``method`` with: the defaults, ``<directory>/<method>.yml``, ``task`` (default
+    :data:`TASK`), then ``overrides``; ``ValueError`` naming the file for an unknown field or a non-mapping."""
     if method not in CONFIG_CLASSES:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
     cls = CONFIG_CLASSES[method]
     path = Path(directory) / f"{method}.yml"
-    try:  # a regular file, read with a bound; a syntax error names the line
+    try:
         data = read_yaml_checked(path, "settings file") or {}
     except OSError as exc:
         raise ValueError(f"{path}: cannot read the settings ({' '.join(str(exc).split())})") from None
@@ -56,8 +55,7 @@ def load_hparams(
 
 @dataclass(frozen=True)
 class RLBudget:
-    """The RL runs of Figures 4-6 and 10: episodes per seed (a run stops earlier once it balances), seeds, and
-    the run folders (other plants: ``<runs_root>-<plant>``)."""
+    """The RL runs of Figures 4-6 and 10: episodes per seed, seeds, and the run folders."""
 
     episodes_dqn: int = 250
     episodes_mbpo: int = 80
@@ -80,7 +78,7 @@ PILCO = load_hparams("pilco")
 
 @dataclass(frozen=True)
 class PilcoBudget:
-    """The PILCO runs of Figure 10: one per seed, in ``runs_root`` (other plants: ``<runs_root>-<plant>``)."""
+    """The PILCO runs of Figure 10: one per seed, in ``runs_root``."""
 
     seeds: tuple[int, ...] = tuple(range(10))
     runs_root: str = "runs/pilco-book"

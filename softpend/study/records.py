@@ -1,9 +1,7 @@
-"""The stored probe summaries (``book/records/*.json``, each written by a script in ``scripts/``) as the appendix's
-tables, and the book's current runs of the defaults read from their run folders.
+"""The stored probe summaries (``book/records/*.json``) as the appendix's tables, and the book's current runs.
 
-A record is ``{"title", "command", "settings", "figures", "rows"}``: the exact command that wrote it, its settings
-(name: scalar), its figures (name: number; an infinite one as ``"inf"`` or ``Infinity``) and one row per seed or
-rod (name: scalar or nested mapping; only the scalars are rendered)."""
+A record is ``{"title", "command", "settings", "figures", "rows"}``: the command that wrote it, settings (scalars),
+figures (numbers; infinite as ``"inf"``) and one row per seed or rod (scalars or mappings; scalars rendered)."""
 
 from __future__ import annotations
 
@@ -24,8 +22,7 @@ _SCALARS = (str, int, float, bool, type(None))
 
 
 def check_record(data: Any, where: str) -> dict[str, Any]:
-    """``data`` as a record (figures given as ``"inf"`` made floats); a ``ValueError`` naming ``where`` and the
-    field that is missing, unknown or of the wrong kind."""
+    """``data`` as a record (``"inf"`` figures made floats); ``ValueError`` naming ``where`` and the bad field."""
     if not isinstance(data, dict):
         raise ValueError(f"{where}: a record must be a JSON object, got {type(data).__name__}")
     if unknown := sorted(set(data) - set(FIELDS)):
@@ -61,8 +58,7 @@ def load_record(path: Path | str) -> dict[str, Any]:
 
 
 def load_records(folder: Path | str = RECORDS_DIR) -> dict[str, dict[str, Any]]:
-    """Every record in ``folder`` (``*.json``; hidden files such as the output manifest of a probe left out) by
-    file stem, in name order; ``ValueError`` when there is none."""
+    """Every record in ``folder`` (``*.json``, not hidden) by file stem, in name order; ``ValueError`` when none."""
     paths = sorted(path for path in Path(folder).glob("*.json") if not path.name.startswith("."))
     if not paths:
         raise ValueError(f"{folder}: no probe records (*.json)")
@@ -112,8 +108,7 @@ def record_markdown(record: Mapping[str, Any], heading: str = "###") -> str:
 
 
 def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current runs of one RL method, a row per seed with a run folder: plant seconds at the first
-    balanced evaluation (``inf``: never), the run's plant seconds and episodes."""
+    """The book's current runs of one RL method, a row per seed: plant seconds to balance, plant seconds, episodes."""
     from softpend.rl.config import load_config
     from softpend.rl.training_log import TrainingLog
     from softpend.study.rl_runs import load_runs
@@ -128,28 +123,24 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
 
 
 def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> list[dict[str, Any]]:
-    """The book's current PILCO runs, a row per seed with a run folder: plant seconds up to the first policy that
-    balances (``inf``: none), the run's plant seconds, policy trials, worst test std and training CPU seconds."""
+    """The book's current PILCO runs, a row per seed: plant seconds to balance and in all, policy trials, worst test
+    std and training CPU seconds."""
     from softpend.pilco.loop import PilcoResult
     from softpend.study.rl_runs import load_runs
 
     def row(folder: Path, seed: int) -> dict[str, Any]:
         result = PilcoResult.load(folder)
-        return {
-            "seed": seed,
-            "plant_s_to_balance": float(result.real_seconds_to_balance),
-            "plant_s": result.plant_seconds_total,
-            "policy_trials": sum(r.kind == "policy" for r in result.records),
-            "worst_test_std_rad": result.records[-1].eval_upright_std_rad if result.records else math.nan,
-            "train_cpu_s": result.train_cpu_s,
-        }
+        records = result.records
+        row = {"seed": seed, "plant_s_to_balance": float(result.real_seconds_to_balance)}
+        row |= {"plant_s": result.plant_seconds_total, "policy_trials": sum(r.kind == "policy" for r in records)}
+        worst = records[-1].eval_upright_std_rad if records else math.nan
+        return row | {"worst_test_std_rad": worst, "train_cpu_s": result.train_cpu_s}
 
     return load_runs(runs_root, plant, "pilco", seeds, row)
 
 
 def balance_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, str]:
-    """The seeds of current-run rows, how many balanced (``"k of n"``) and the median plant seconds to balance,
-    in which a run that never balanced counts as infinitely late."""
+    """The seeds of current-run rows, how many balanced (``"k of n"``) and the median plant seconds to balance."""
     values = [float(row["plant_s_to_balance"]) for row in rows]
     median = float(np.median(values)) if values else math.nan
     balanced = f"{sum(map(math.isfinite, values))} of {len(values)}"

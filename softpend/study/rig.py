@@ -1,5 +1,4 @@
-"""Figures of a closed-loop twin run from its logs: the rod's true motion (emulator truth log) and the torque
-chatter (motor log)."""
+"""Figures of a closed-loop twin run from its logs: the rod's true motion and the torque chatter."""
 
 from __future__ import annotations
 
@@ -15,8 +14,8 @@ from softpend.task import Task
 def truth_trajectory(
     truth_log: str | Path, task: Task, start_time_s: float | None = None, end_time_s: float | None = None
 ) -> dict[str, np.ndarray]:
-    """``time_s`` (device time), ``theta_rad``, ``torque_nm`` (applied) and ``phi_dot_rad_s`` of a twin run from the
-    emulator's truth log, within the device-time window ``[start_time_s, end_time_s]`` when given."""
+    """``time_s`` (device), ``theta_rad``, ``torque_nm`` and ``phi_dot_rad_s`` from the emulator's truth log, within
+    the device-time window when given."""
     log, plant = read_sample_log(truth_log), task.make_plant()
     time_s = log["device_time_s"]
     keep = (time_s >= (-np.inf if start_time_s is None else start_time_s)) & (
@@ -41,12 +40,10 @@ def truth_metrics(
     start_time_s: float | None = None,
     end_time_s: float | None = None,
 ) -> dict[str, float]:
-    """The evaluation's metrics of the true motion in the window (:func:`truth_trajectory`); empty for fewer than
-    3 ticks."""
-    truth = truth_trajectory(truth_log, task, start_time_s, end_time_s)
-    if len(truth["time_s"]) < 3:
+    """The evaluation's metrics of the true motion in the window; empty for fewer than 3 ticks."""
+    t = truth_trajectory(truth_log, task, start_time_s, end_time_s)
+    if len(t["time_s"]) < 3:
         return {}
-    t = truth
     metrics = metrics_from_trajectory(t["time_s"], t["theta_rad"], t["torque_nm"], t["phi_dot_rad_s"], success_std_rad)
     return {key: (value if isinstance(value, bool) else float(value)) for key, value in metrics.items()}
 
@@ -54,8 +51,7 @@ def truth_metrics(
 def run_truth_metrics(
     motor_log: str | Path, truth_log: str | Path, task: Task, success_std_rad: float = SUCCESS_STD_RAD
 ) -> dict[str, float]:
-    """:func:`truth_metrics` from the controller's first command to the motor log's last sample; empty when it never
-    commanded."""
+    """:func:`truth_metrics` from the first command to the motor log's last sample; empty when it never commanded."""
     motor = read_sample_log(motor_log)
     if not (commanded := motor["commanded"] > 0).any():
         return {}

@@ -36,8 +36,7 @@ def _exudyn_hub_rad(
 def hub_error_inputs(
     n_links: int, duration_s: float, seed: int = 0
 ) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
-    """``(params, torques_nm, q0, qd0)``: ``duration_s`` of seeded random torque from the hanging rod, hub turned
-    0.3 rad and spinning at 0.5 rad/s."""
+    """``(params, torques_nm, q0, qd0)``: seeded random torque from the hanging rod, hub turned and spinning."""
     params = RodParams(n_links=n_links)
     torques = np.random.default_rng(seed).uniform(-1, 1, int(round(duration_s / 0.01))) * params.torque_limit_nm
     q0, qd0 = np.zeros(n_links + 1), np.zeros(n_links + 1)
@@ -54,8 +53,8 @@ def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubEr
 def hub_errors_rad(
     n_links: int, duration_s: float, seed: int = 0, reference: Optional[HubErrorReference] = None
 ) -> dict[str, float]:
-    """Largest hub-angle error against the converged Exudyn run (``reference``, computed when not given) of the
-    batched chain (RK4 in float64, Rosenbrock in float32) and of the default Exudyn plant."""
+    """Largest hub-angle error against the converged Exudyn run of the batched chain (RK4 float64, Rosenbrock
+    float32) and of the default Exudyn plant."""
     from softpend.plant.batched import BatchedPRBChain
 
     reference = reference if reference is not None else hub_error_reference(n_links, duration_s, seed)

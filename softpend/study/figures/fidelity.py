@@ -35,8 +35,7 @@ def plot_free_vibration(ax_time, ax_spectrum, run: FreeVibration) -> None:
 
 
 def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recommended: int | None = None) -> None:
-    """Errors against resolution: frequencies, sag (small and large deflection) and tip trajectory, one
-    panel each, beam and PRB on the same axes."""
+    """Errors against resolution (frequencies, sag, tip trajectory), one panel each, beam and PRB together."""
     panels = [
         ("f1_error_pct", "first frequency error [%]"),
         ("f2_error_pct", "second frequency error [%]"),
@@ -69,8 +68,7 @@ def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recomm
 def plot_transfer_matrix(
     ax, rows: Sequence[dict[str, Any]], plant: str, metric: str = "success_rate", vmax: float | None = None
 ) -> Any:
-    """Heat map of one transfer metric (controllers x parameter perturbations) on one plant, the values
-    written in the cells; returns the image for a colour bar."""
+    """Heat map of one transfer metric (controllers x perturbations) on one plant; the image, for a colour bar."""
     from softpend.study.transfer import transfer_matrix
 
     controllers, labels, values = transfer_matrix(rows, plant, metric)

@@ -10,8 +10,7 @@ _CDN_STYLESHEET = re.compile(r'<link rel="stylesheet"\s+href="https://[^"]*font-
 
 
 def offline_jshtml(animation: Any, **kwargs: Any) -> str:
-    """``animation.to_jshtml(**kwargs)`` without its link to the Font Awesome stylesheet on a CDN;
-    ``ValueError`` if the player does not link it once."""
+    """``animation.to_jshtml(**kwargs)`` without its CDN stylesheet link; ``ValueError`` unless there is one."""
     html = animation.to_jshtml(**kwargs)
     stripped, count = _CDN_STYLESHEET.subn("", html)
     if count != 1:

@@ -15,9 +15,8 @@ def draw_tracked_frame(
     markers_px: Optional[np.ndarray] = None,
     truth_px: Optional[np.ndarray] = None,
 ):
-    """Show a BGR camera frame on ``ax`` with the tracker's contour (green line) and centroid (red cross),
-    optional calibration-marker centres (white circles) and the true tip position (yellow plus); with
-    ``zoom_px`` an inset magnifies the dot.  Returns the inset axis (or None)."""
+    """A BGR camera frame on ``ax`` with the tracker's contour and centroid, optional marker centres and true tip;
+    ``zoom_px``: an inset magnifies the dot.  Returns the inset axis (or None)."""
     rgb = np.ascontiguousarray(frame_bgr[..., ::-1])
     ax.imshow(rgb)
     ax.set_axis_off()
@@ -55,9 +54,8 @@ def draw_filmstrip(
     centre_px=None,
     half_width_px: Optional[float] = None,
 ):
-    """A figure of ``n_frames`` of ``frames`` (``(time_s, frame_bgr, detection)``, in time order) evenly spaced up
-    to ``span_s``, each with the tracker's overlay (:func:`draw_tracked_frame`), cropped to ``half_width_px``
-    around ``centre_px`` if given."""
+    """A figure of ``n_frames`` of ``frames`` (``(time_s, frame_bgr, detection)``) evenly spaced up to ``span_s``,
+    with the tracker's overlay, cropped to ``half_width_px`` around ``centre_px`` if given."""
     import matplotlib.pyplot as plt
 
     if n_frames < 1:
@@ -83,8 +81,7 @@ def draw_filmstrip(
 
 
 def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[str] = None):
-    """A figure of ``|theta|`` and torque of one twin run against time: the true tip angle, the controller's
-    estimate and the commands, and optionally the ideal simulator's run from the same start (``simulator``)."""
+    """``|theta|`` (true and estimated) and torque of one twin run against time, optionally beside ``simulator``'s."""
     import matplotlib.pyplot as plt
 
     from softpend.io.samplelog import read_sample_log

@@ -1,5 +1,4 @@
-"""The rig's dimensioned drawing (:func:`draw_rig_design`), to scale and labelled from a
-:class:`~softpend.hardware.rig_design.RigDesign`."""
+"""The rig's dimensioned drawing, to scale, from a :class:`~softpend.hardware.rig_design.RigDesign`."""
 
 from __future__ import annotations
 
@@ -151,8 +150,7 @@ def _side(ax, d: RigDesign) -> None:
 
 
 def draw_rig_design(design: RigDesign, figsize=(15.0, 5.8)):
-    """The front view, the hub mount enlarged and the side view of ``design`` in one figure (returned; the caller
-    shows or saves it)."""
+    """The front view, the hub mount enlarged and the side view of ``design`` in one figure."""
     fig, (front, detail, side) = plt.subplots(1, 3, figsize=figsize, gridspec_kw={"width_ratios": [1.15, 0.45, 1.0]})
     _front(front, design)
     _hub_detail(detail, design)

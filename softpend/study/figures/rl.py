@@ -17,9 +17,8 @@ COLORS = {"model-free DQN": "C0", "DQN-MBPO": "C1"}
 
 
 def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], threshold_rad: float = SUCCESS_STD_RAD):
-    """Figure 4: each seed's return (mean over 10 episodes) with each method's median episode of reaching
-    the asymptote (dotted), and the worst start's evaluation upright std (IQM over seeds with its 95 % band; a
-    failed start counts as :data:`~softpend.evaluation.SUCCESS_STD_RAD`), against episodes and plant seconds."""
+    """Figure 4: each seed's smoothed return with the median episode reaching the asymptote, and the worst start's
+    upright std (IQM over seeds, 95 % band), against episodes and plant seconds."""
     fig, window = plt.figure(figsize=(11, 7)), 10
     axes = fig.subplots(2, 2, sharey="row")
     for i, (method, logs) in enumerate(logs_by_method.items()):
@@ -55,8 +54,8 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], th
 
 
 def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: Optional[plt.Figure] = None):
-    """Figure 5: tip angle, hub angle and torque of one episode against time, and ``n_frames`` rod shapes
-    (``link_points``: ``q -> (n + 1, 2)`` joint positions) up to a second after the swing-up."""
+    """Figure 5: tip and hub angle and torque of one episode, and ``n_frames`` rod shapes (``link_points(q)``) up to a
+    second after the swing-up."""
     fig = fig or plt.figure(figsize=(11, 8))
     grid = fig.add_gridspec(4, 1, height_ratios=[1, 1, 1, 1.3])
     t = result.time_s
@@ -90,7 +89,7 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
 
 
 def _break_at_wraps(angle_rad: np.ndarray) -> np.ndarray:
-    """A copy with NaN where a wrapped angle jumps across +-pi, so plotted lines do not draw the jump."""
+    """A copy with NaN where a wrapped angle jumps across +-pi."""
     out = np.asarray(angle_rad, dtype=float).copy()
     jumps = np.flatnonzero(np.abs(np.diff(out)) > np.pi) + 1
     out[jumps] = np.nan
@@ -128,8 +127,7 @@ def plot_upright_error(
     window_s: float = 0.5,
     threshold_rad: float = SUCCESS_STD_RAD,
 ):
-    """Figure 6: the upright error ``|theta|`` (trailing ``window_s`` moving average) of each method's episodes: the
-    median over episodes (line) and the band between the 25th and 75th percentiles (with one episode, that episode)."""
+    """Figure 6: each method's upright error ``|theta|`` (``window_s`` moving average): median and 25-75 % band."""
     _, ax = plt.subplots(figsize=(8, 4))
     for i, (method, results) in enumerate(results_by_method.items()):
         n = min(len(r.time_s) for r in results)  # the shortest episode's steps

@@ -1,5 +1,4 @@
-"""Matplotlib drawings of Figure 3 (model rollout against the data; rollout error against the horizon; the
-grey-box rollout beside the network's; tip error against the horizon in Lyapunov times)."""
+"""Figure 3: model rollouts against the data and rollout errors against the horizon."""
 
 from __future__ import annotations
 
@@ -18,8 +17,7 @@ _LABELS = {
 
 
 def plot_rollout(curves: dict[str, np.ndarray], title: str = ""):
-    """Four panels (phi, theta, ex, ey) of :func:`softpend.sysid.rollout_trial` ``curves``: data (solid) and the
-    open-loop model rollout (dashed), on a new 2 x 2 figure; returns its axes."""
+    """Four panels of :func:`softpend.sysid.rollout_trial` ``curves``: data (solid) and model rollout (dashed); axes."""
     import matplotlib.pyplot as plt
 
     axes = np.ravel(plt.subplots(2, 2, figsize=(9, 5.5), sharex=True, constrained_layout=True)[1])
@@ -37,8 +35,7 @@ def plot_rollout(curves: dict[str, np.ndarray], title: str = ""):
 
 
 def plot_rollout_errors(errors: dict[str, RolloutErrors], length_m: Optional[float] = None):
-    """Tip-position and base-angle RMSE against the horizon, one line per model (``errors``: label ->
-    :class:`softpend.sysid.RolloutErrors`), the "hold" yardstick, and the 5 % line with ``length_m``."""
+    """Tip and base-angle RMSE against the horizon per model (label -> ``RolloutErrors``), the "hold" yardstick."""
     import matplotlib.pyplot as plt
 
     axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)[1]
@@ -63,8 +60,7 @@ def plot_rollout_errors(errors: dict[str, RolloutErrors], length_m: Optional[flo
 
 
 def plot_rollout_overlay(axes: Sequence, curves: dict[str, np.ndarray], label: str, color: str = "tab:blue"):
-    """Add a second model's rollout (dotted) to the panels of :func:`plot_rollout` (same keys: ``time_s`` and
-    ``<name>_model`` for ``phi_rad, theta_rad, ex_m, ey_m``)."""
+    """Add a second model's rollout (dotted) to the panels of :func:`plot_rollout`."""
     for ax, name in zip(axes, _LABELS):
         ax.plot(curves["time_s"], curves[f"{name}_model"], color=color, lw=1.5, ls=":", label=label)
     axes[0].legend(loc="best", fontsize=8)
@@ -74,8 +70,7 @@ def plot_rollout_overlay(axes: Sequence, curves: dict[str, np.ndarray], label: s
 def plot_lyapunov_errors(
     curves: dict[str, np.ndarray], horizon_s: np.ndarray, lyapunov_rate_per_s: float, length_m: float
 ):
-    """RMS tip error of each model against the open-loop horizon in Lyapunov times ``t * lambda``, with the
-    5 % of ``L`` line of the valid prediction time."""
+    """RMS tip error of each model against the horizon in Lyapunov times, with the 5 % of ``L`` line."""
     import matplotlib.pyplot as plt
 
     ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)[1]

@@ -85,9 +85,8 @@ def metrics_from_trajectory(
     success_std_rad: float = SUCCESS_STD_RAD,
 ) -> dict[str, float]:
     """Metrics of one sampled trajectory: swing-up time (first time ``|theta|`` stays below
-    :data:`UPRIGHT_THRESHOLD_RAD` for :data:`SWING_UP_HOLD_S`), upright
-    std and mean after it (or over the second half), peak torque, energy, and success (swung up, std at most
-    ``success_std_rad``)."""
+    :data:`UPRIGHT_THRESHOLD_RAD` for :data:`SWING_UP_HOLD_S`), upright std and mean after it (or over the second
+    half), peak torque, energy, and success (swung up, std at most ``success_std_rad``)."""
     names = ("time_s", "theta_rad", "torque_nm", "phi_dot_rad_s")
     t, theta, torque, phi_dot = arrays = [
         np.asarray(a, dtype=float) for a in (time_s, theta_rad, torque_nm, phi_dot_rad_s)
@@ -102,7 +101,6 @@ def metrics_from_trajectory(
     dt = float(np.median(np.diff(t)))
     if dt <= 0:
         raise ValueError("time_s must be increasing")
-    # the first index i such that |theta| stays below the threshold over samples i .. i + hold_steps
     window = int(round(SWING_UP_HOLD_S / dt)) + 1
     inside = (np.abs(theta) < UPRIGHT_THRESHOLD_RAD).astype(int)
     held = np.flatnonzero(np.convolve(inside, np.ones(window, dtype=int), "valid") == window)
@@ -166,7 +164,6 @@ class EvaluationSummary:
 
     @property
     def successes(self) -> int:
-        """Episodes that succeeded."""
         return int(sum(r.success for r in self.results))
 
     def median(self, metric: str) -> float:
@@ -387,8 +384,7 @@ def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float
 
 
 def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o: dict) -> list[EvaluationResult]:
-    """The batched engine's episodes of :func:`evaluate`, all at once, rod ``i`` the one :func:`_rod` draws for
-    ``seeds[i]``."""
+    """The batched engine's episodes of :func:`evaluate`, all at once (rod ``i`` drawn for ``seeds[i]``)."""
     from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
     from softpend.plant.batched import BatchedRodParams, stable_substeps
 
@@ -415,9 +411,7 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o
     levels = getattr(policy, "n_torque_levels", None)
     env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
     if rods is not None:
-        # each rod its own parameters; actions keep mapping to torques with the task's torque limit (the agent's
-        # model of the motor), which the chain then saturates at the rod's own limit
-        env.chain.set_params(rods)
+        env.chain.set_params(rods)  # actions still map to torques by the task's limit; each rod saturates at its own
     engine = _ManyRods(env)
     to_actions = lambda torques: (torques / env.torque_limit_nm)[:, None]  # noqa: E731
     batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, to_actions)

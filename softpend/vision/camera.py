@@ -290,11 +290,10 @@ def render_video(
         raise ValueError(f"cannot open a video writer for {path}")
     hidden = set(int(i) for i in drop_dot_frames)
     tips = np.empty((len(frame_times), 2))
-    iterator = camera.frames(times_s, link_points_m, frame_times, hub_angles_rad)
-    if progress:
-        from tqdm.auto import tqdm
+    from tqdm.auto import tqdm
 
-        iterator = tqdm(iterator, total=len(frame_times), desc="rendering", unit="frame", mininterval=1.0)
+    frames = camera.frames(times_s, link_points_m, frame_times, hub_angles_rad)
+    iterator = tqdm(frames, total=len(frame_times), desc="rendering", unit="frame", mininterval=1, disable=not progress)
     try:
         for i, (frame, tip) in enumerate(iterator):
             if i in hidden:

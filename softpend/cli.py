@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:
     """Give every subcommand, at any depth, its own ``--debug``."""
-    for action in parser._subparsers._group_actions if parser._subparsers else ():
+    for action in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
         for subparser in action.choices.values():
             subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
             _add_debug(subparser)

@@ -6,7 +6,7 @@ import argparse
 import math
 import time
 
-from softpend.commands.options import FieldOption, add_command, field_options, field_values
+from softpend.commands.options import FieldOption, Option, add_command, field_options, field_values
 
 #: ``(flag, BabbleProtocol field, type, help, allowed range)`` of the protocol options; a value outside the range
 #: gives a dataset of noise, or of saturated torques, that still passes as data.
@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     d = BabbleProtocol()
     program = f"torque program: band-limited random torque, or a multisine to --torque-bandwidth-hz ({d.program})"
-    options = [
+    options: list[Option] = [
         ("output", None, dict(help="dataset file to write (.npz)")),
         ("--seed", None, dict(type=int, default=0, help="seed of every random draw (default 0)")),
         ("--start", None, dict(choices=("upright", "hanging", "random"), default=d.start, help=f"start ({d.start})")),

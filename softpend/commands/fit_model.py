@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import FieldOption, add_command, field_options, field_values
+from softpend.commands.options import FieldOption, Option, add_command, field_options, field_values
 
 #: ``(flag, TrainConfig field, type, help, allowed range)`` of the training options (the ranges bound the work).
 _OPTIONS: tuple[FieldOption, ...] = (
@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     d = TrainConfig()
     widths = dict(type=_integers, default=",".join(map(str, d.hidden_widths)), help="comma-separated (16,16,16)")
-    options = [
+    options: list[Option] = [
         ("dataset", None, dict(help="training dataset (.npz)")),
         ("output", None, dict(help="model path stem: writes OUTPUT.pt and OUTPUT.json")),
         ("--information", None, dict(choices=("full", "limited"), default=d.information, help=f"({d.information})")),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from softpend.commands.options import FieldOption, add_command, field_options, field_values
+from softpend.commands.options import FieldOption, Option, add_command, field_options, field_values
 
 #: ``(flag, GreyBoxConfig field, type, help, allowed range)``: the ranges bound the fit's loop and window draw.
 _OPTIONS: tuple[FieldOption, ...] = (
@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.sysid.greybox import CALIBRATION_PARAMETERS, ESTIMABLE_ROD_FIELDS, GREYBOX_PARAMETERS, GreyBoxConfig
 
     known = ", ".join(ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS)
-    options = [
+    options: list[Option] = [
         ("dataset", None, dict(help="dataset (.npz)")),
         ("--out", None, dict(default=None, help="JSON file to write (rod_params, estimates, std, fit)")),
         ("--parameters", None, dict(default=",".join(GREYBOX_PARAMETERS), help=f"comma-separated, from {known}")),

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softpend.commands.options import MAX_SESSION_S, add_command, add_target, camera_source, set_option
+from softpend.commands.options import MAX_SESSION_S, Option, add_command, add_target, camera_source, set_option
 
 #: Accepted ``--print-modulus-mpa`` [MPa]: soft silicone to steel.
 PRINT_MODULUS_RANGE_MPA = (0.1, 3.0e5)
@@ -18,7 +18,7 @@ ROD_SET = set_option("set a RodParams field of the rod (VALUE parsed as JSON), e
 
 def register(actions: argparse._SubParsersAction) -> None:
     modulus = "modulus of the beam's material [MPa] (default: the rod's youngs_modulus_pa)"
-    design = [
+    design: list[Option] = [
         ("--out", None, dict(required=True, metavar="DIR", help="folder for rig_design.json/.png, markers.json")),
         ("--print-modulus-mpa", PRINT_MODULUS_RANGE_MPA, dict(type=float, default=None, help=modulus)),
         ROD_SET,
@@ -26,7 +26,7 @@ def register(actions: argparse._SubParsersAction) -> None:
     help = "the rig's dimensions, drawing and marker layout for the rod's parameters"
     add_command(actions, "design", help, design, run_design)
     push = "torque of the direction push as a fraction of the torque limit (0.3)"
-    check = [
+    check: list[Option] = [
         ("--out", None, dict(metavar="JSON", help="also write the report to this file")),
         ("--rest-s", (0.1, 600.0), dict(type=float, default=1.0, help="zero-torque time of the rest check [s] (1)")),
         ("--counts-per-rev", (4, 2**24), dict(type=int, default=4096, help="twin: encoder resolution (4096)")),
@@ -36,7 +36,7 @@ def register(actions: argparse._SubParsersAction) -> None:
     help = "power-on checks of the motor link: handshake, rest, direction, watchdog"
     add_target(add_command(actions, "check", help, check, run_check), "--port")
     markers = "marker positions [m], JSON list [[x, y], ...] or file (softpend rig design's markers.json)"
-    calibrate = [
+    calibrate: list[Option] = [
         ("--markers", None, dict(required=True, metavar="JSON", help=markers)),
         ("--out", None, dict(required=True, metavar="JSON", help="calibration file to write (and NAME.report.json)")),
         ("--seed", None, dict(type=int, default=0, help="twin: seed of the image noise")),
@@ -44,7 +44,7 @@ def register(actions: argparse._SubParsersAction) -> None:
     ]
     help = "fit the camera's pixel-to-metre map to the markers and save it"
     add_target(add_command(actions, "calibrate", help, calibrate, run_calibrate), "--camera")
-    babble = [
+    babble: list[Option] = [
         ("--camera", None, dict(metavar="CAMERA", help="with --port: camera index, stream URL or video file")),
         ("--markers", None, dict(metavar="JSON", help="with --camera: marker positions [m] (default layout)")),
         ("--calibration", None, dict(metavar="JSON", help="with --camera: a saved calibration")),

@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.study.sweep import BACKENDS
 
     book = "train the runs the book's notebooks read (for --profile), then stop; the other training options are unused"
-    options = [
+    options: list[Option] = [
         ("--book", None, dict(action="store_true", help=book)),
         ("--backend", None, dict(choices=BACKENDS, default=None, help="parallel engine ($SOFTPEND_BACKEND or loky)")),
         *OPTIONS,

@@ -87,7 +87,7 @@ def simulator_yardsticks(
         raise ValueError(f"model_one_step_tip_m must be positive, got {model_one_step_tip_m!r}")
     rate_rad_s = hub_rate_offset_for_tip_error(test, model_one_step_tip_m, history)
     out = {"simulator_one_best_model_step_hub_rate_offset_rad_s": rate_rad_s}
-    runs = {
+    runs: dict[str, dict] = {
         "simulator_1e-4rad_off": dict(hub_offset_rad=1e-4),
         "simulator_one_best_model_step": dict(hub_offset_rad=0.0, hub_rate_offset_rad_s=rate_rad_s),
         "simulator_torque_noise_1e-4nm": dict(hub_offset_rad=0.0, torque_noise_std_nm=1e-4, seed=0),

@@ -42,14 +42,10 @@ def check_widths(hidden_widths: Sequence[int]) -> tuple[int, ...]:
 
 
 class DynamicsModel(nn.Module):
-    """One learned one-step dynamics model for states of ``layout`` at step ``dt_s``.
+    """One learned one-step dynamics model for states of ``layout`` at step ``dt_s``, torques clipped to
+    ``torque_limit_nm``.  ``integrate_positions``: predict the velocity change and integrate positions (exact for
+    backward-difference velocities); a predicted tip beyond ``tip_reach_m`` is pulled back radially onto it."""
 
-    Torques are clipped to ``torque_limit_nm``.  ``integrate_positions``: predict only the velocity change and
-    integrate positions (exact for backward-difference velocities).  ``tip_reach_m``: a predicted tip beyond it is
-    pulled back radially onto that circle (``None``: no limit).
-    """
-
-    # buffers (registered in __init__)
     _angle_idx: Tensor
     _linear_idx: Tensor
     _core_angle_mask: Tensor
@@ -89,20 +85,18 @@ class DynamicsModel(nn.Module):
         self._h = layout.history
         self._core = layout.core_dim
         self.n_outputs = p if self.integrate_positions else self._core
-        self.register_buffer("_angle_idx", torch.as_tensor(np.flatnonzero(mask), dtype=torch.long), persistent=False)
-        self.register_buffer("_linear_idx", torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long), persistent=False)
-        self.register_buffer(
-            "_core_angle_mask", torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])), persistent=False
-        )
-        self.register_buffer(
-            "_lag_angle_mask", torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]), persistent=False
-        )
-        # theta = atan2(-ex, ey) in the data: derived from the predicted tip, not predicted
         names = layout.names
-        self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
         self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
-        if self._has_tip:
-            self.register_buffer("_tip_idx", torch.tensor([names.index("ex_m"), names.index("ey_m")]), persistent=False)
+        indices = {
+            "_angle_idx": torch.as_tensor(np.flatnonzero(mask), dtype=torch.long),
+            "_linear_idx": torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long),
+            "_core_angle_mask": torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])),
+            "_lag_angle_mask": torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]),
+        } | ({"_tip_idx": torch.tensor([names.index("ex_m"), names.index("ey_m")])} if self._has_tip else {})
+        for name, value in indices.items():
+            self.register_buffer(name, value, persistent=False)
+        # theta = atan2(-ex, ey) in the data: derived from the predicted tip, not predicted
+        self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
         if self._derive_theta:
             self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
         n_angles = int(mask.sum())
@@ -241,8 +235,8 @@ class DynamicsModel(nn.Module):
 
 
 class DynamicsEnsemble(nn.Module):
-    """:class:`DynamicsModel` members of one configuration.  :meth:`predict_next` picks a random member per row
-    (from ``generator``), member ``k``, or the mean of the members' predicted changes (``"mean"``)."""
+    """:class:`DynamicsModel` members of one configuration; :meth:`predict_next` uses a random member per row (from
+    ``generator``), member ``k``, or the mean of the members' predicted changes (``"mean"``)."""
 
     def __init__(self, members: Sequence[DynamicsModel]) -> None:
         super().__init__()

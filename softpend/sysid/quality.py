@@ -21,8 +21,7 @@ VALID_TIP_FRACTION = 0.05
 
 @dataclass(frozen=True)
 class ValidPrediction:
-    """Valid prediction times [s] of rollouts, which never left the threshold (``censored``: a lower bound), and
-    their median in seconds and, given ``lambda``, in Lyapunov times (else NaN)."""
+    """Valid prediction times [s] (``censored``: never left the threshold), their median [s] and in Lyapunov times."""
 
     times_s: np.ndarray
     censored: np.ndarray
@@ -34,9 +33,8 @@ class ValidPrediction:
 def valid_prediction(
     tip_error_m: np.ndarray, dt_s: float, length_m: float, lyapunov_rate_per_s: Optional[float] = None
 ) -> ValidPrediction:
-    """Valid prediction time of rollouts from their tip errors ``(B, H + 1)`` [m]: a rollout first above
-    :data:`VALID_TIP_FRACTION` of ``length_m`` at sample ``k`` is valid for ``(k - 1) dt``, one never above for
-    ``H dt`` (censored).  ``lyapunov_rate_per_s`` is the growth rate of the linearisation at upright."""
+    """Valid prediction times of rollouts from their tip errors ``(B, H + 1)`` [m]: ``(k - 1) dt`` for a rollout
+    first above :data:`VALID_TIP_FRACTION` of ``length_m`` at sample ``k``, ``H dt`` (censored) if never."""
     error = np.asarray(tip_error_m, dtype=float)
     if error.ndim != 2 or error.shape[0] < 1 or error.shape[1] < 2:
         raise ValueError(f"tip_error_m must have shape (B >= 1, H + 1 >= 2), got {error.shape}")
@@ -145,8 +143,7 @@ def prb_rollout_trial(
 
 
 def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: np.ndarray, steps: int) -> np.ndarray:
-    """Tip errors ``(B, steps + 1)`` [m] of open-loop rollouts of a learned model (ensembles: their mean) from the
-    observed state at each start under the recorded torques."""
+    """Tip errors ``(B, steps + 1)`` [m] of a learned model's open-loop rollouts (:func:`network_rollouts`)."""
     truth, predicted = network_rollouts(model, dataset, starts, positive_int("steps", steps))
     i_ex, i_ey = model.layout.index("ex_m"), model.layout.index("ey_m")
     return np.hypot(predicted[..., i_ex] - truth[..., i_ex], predicted[..., i_ey] - truth[..., i_ey])

@@ -39,12 +39,10 @@ def _rig_loop_jitter() -> dict[str, float]:
     from softpend.hardware.estimator import RigStateEstimator
 
     rig = RigConfig()
-    task = rig.task
+    task, controller = rig.task, EnergySwingUpController(rig.task.rod, dt_s=rig.task.dt_s)
     with start_emulator_process(rig) as emulator:
         with MotorLink(emulator.port, torque_limit_nm=task.torque_limit_nm, timeout_s=1.0) as link:
-            result = run_closed_loop(
-                link, EnergySwingUpController(task.rod, dt_s=task.dt_s), RigStateEstimator(task), LOOP_SECONDS
-            )
+            result = run_closed_loop(link, controller, RigStateEstimator(task), LOOP_SECONDS)
     periods_ms = result.command_periods_s * 1e3
     return {
         "rig_loop_jitter_ms": result.jitter_ms_p95,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -239,16 +239,7 @@ def build_rig_dataset(
         "motor_log": str(motor_log),
         "camera_csv": str(camera_csv),
     }
-    dataset = save_dataset(
-        out_path,
-        result.positions,
-        result.velocities,
-        result.torques_nm,
-        dt_s=dt_s,
-        position_names=RIG_POSITION_NAMES,
-        source="rig",
-        plant_params=params,
-        protocol=protocol,
-        notes=notes,
-    )
+    meta: dict[str, Any] = dict(dt_s=dt_s, position_names=RIG_POSITION_NAMES, source="rig", plant_params=params)
+    meta.update(protocol=protocol, notes=notes)
+    dataset = save_dataset(out_path, result.positions, result.velocities, result.torques_nm, **meta)
     return dataset, result

@@ -146,11 +146,9 @@ def plot_head_to_head(rows: Sequence[dict[str, Any]], target_std_rad: float = 0.
             ax_s.plot(t, rate, "o-", **style)
             ax_e.plot(t, failures_as([r["max_upright_std_rad"] for r in seq], rate, SUCCESS_STD_RAD), "o-", **style)
     for ax in (ax_s, ax_e):
-        ax.set_xscale("log")
-        ax.set_xlabel("training plant time [s]")
+        ax.set(xscale="log", xlabel="training plant time [s]")
         ax.grid(True, which="both", alpha=0.3)
-    ax_s.set_ylabel("evaluation success rate\n(DQN, DQN-MBPO: the starts before the first failure)")
-    ax_s.set_ylim(-0.05, 1.05)
+    ax_s.set(ylabel="evaluation success rate\n(DQN, DQN-MBPO: the starts before the first failure)", ylim=(-0.05, 1.05))
     ax_e.set_yscale("log")
     ax_e.set_ylabel(f"worst-start upright error (std of theta) [rad]\n({SUCCESS_STD_RAD:g} when a start failed)")
     ax_e.axhline(target_std_rad, color="k", ls="--", lw=1, label=f"target {target_std_rad:g} rad")
@@ -173,7 +171,6 @@ def plot_predicted_and_real_cost(results: Sequence[PilcoResult]):
         ax.plot(trials, real, "o-", color=line.get_color(), alpha=0.8, label=f"seed {result.config.seed}")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("trial")
-    ax.set_ylabel("summed cost over the trial")
-    ax.set_title("predicted (dashed) and real (solid) cost per trial")
+    ax.set(ylabel="summed cost over the trial", title="predicted (dashed) and real (solid) cost per trial")
     ax.legend()
     return fig

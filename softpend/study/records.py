@@ -162,7 +162,6 @@ def plot_current(current: Mapping[str, Sequence[Mapping[str, Any]]]):
     ax.axvline(edge, color="0.8", lw=0.8)
     ax.set_yticks(range(len(labels)), labels)
     ax.set_ylim(len(labels) - 0.5, -0.5)
-    ax.set_xlim(0, 1.05 * edge)
-    ax.set_xlabel("plant seconds to balance (crosses at the grey line: did not balance)")
+    ax.set(xlim=(0, 1.05 * edge), xlabel="plant seconds to balance (crosses at the grey line: did not balance)")
     fig.tight_layout()
     return fig

@@ -18,8 +18,7 @@ def plot_free_vibration(ax_time, ax_spectrum, run: FreeVibration) -> None:
     """Tip signal of a free-vibration run and its spectrum, with the fitted and theoretical frequencies."""
     ax_time.plot(run.time_s, run.tip_x_m * 1e3, lw=0.8)
     ax_time.set_xlabel("time [s]")
-    ax_time.set_ylabel("tip $e_x$ [mm]")
-    ax_time.set_title(f"{run.plant}, resolution {run.resolution}: free vibration")
+    ax_time.set(ylabel="tip $e_x$ [mm]", title=f"{run.plant}, resolution {run.resolution}: free vibration")
     x = (run.tip_x_m - run.tip_x_m.mean()) * np.hanning(len(run.tip_x_m))
     n_fft = 8 * len(x)
     spectrum = np.abs(np.fft.rfft(x, n_fft))
@@ -29,8 +28,7 @@ def plot_free_vibration(ax_time, ax_spectrum, run: FreeVibration) -> None:
     for k, (f, f_th) in enumerate(zip(run.frequencies_hz, run.theory_hz)):
         ax_spectrum.axvline(f, color="C1", ls="-", lw=1, label="fitted" if k == 0 else None)
         ax_spectrum.axvline(f_th, color="k", ls=":", lw=1, label="Euler-Bernoulli" if k == 0 else None)
-    ax_spectrum.set_xlabel("frequency [Hz]")
-    ax_spectrum.set_ylabel("normalised magnitude")
+    ax_spectrum.set(xlabel="frequency [Hz]", ylabel="normalised magnitude")
     ax_spectrum.legend(fontsize=8)
 
 
@@ -59,8 +57,7 @@ def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recomm
         ax.set_xticks(resolutions)
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xlabel("n (links or elements)")
-        ax.set_ylabel(label)
+        ax.set(xlabel="n (links or elements)", ylabel=label)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=8)
 

@@ -39,8 +39,7 @@ def draw_tracked_frame(
         _overlay(inset)
         inset.set_xlim(detection.x_px - zoom_px / 2, detection.x_px + zoom_px / 2)
         inset.set_ylim(detection.y_px + zoom_px / 2, detection.y_px - zoom_px / 2)
-        inset.set_xticks([])
-        inset.set_yticks([])
+        inset.set(xticks=[], yticks=[])
         for spine in inset.spines.values():
             spine.set_edgecolor("white")
         return inset
@@ -102,8 +101,7 @@ def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[st
         axes[0].plot(sim_t, np.abs(simulator.theta_rad), color="C2", lw=1.0, label="ideal simulator, same start")
         axes[1].step(sim_t, simulator.torque_nm, where="post", color="C2", lw=1.0, label="ideal simulator")
     axes[0].set_ylabel(r"$|\theta|$ [rad]")
-    axes[1].set_ylabel("torque [N m]")
-    axes[1].set_xlabel("time since the loop's first state [s]")
+    axes[1].set(ylabel="torque [N m]", xlabel="time since the loop's first state [s]")
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper right")

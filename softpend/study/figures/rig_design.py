@@ -75,12 +75,8 @@ def _front(ax, d: RigDesign) -> None:
     _arrow(ax, tip, (0, -L), (0.05, -L - 0.01))
     ax.legend(loc="upper center", fontsize=7, framealpha=0.9, bbox_to_anchor=(0.5, -0.11), ncol=2)
     margin = 0.03
-    ax.set_xlim(x0 - margin, x0 + fov_w + margin)
-    ax.set_ylim(y0 - margin, y0 + fov_h + margin)
-    ax.set_aspect("equal")
-    ax.set_title("front view (camera plane), rod hanging")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    ax.set(xlim=(x0 - margin, x0 + fov_w + margin), ylim=(y0 - margin, y0 + fov_h + margin))
+    ax.set(aspect="equal", title="front view (camera plane), rod hanging", xlabel="x [m]", ylabel="y [m]")
 
 
 def _hub_detail(ax, d: RigDesign) -> None:
@@ -106,10 +102,7 @@ def _hub_detail(ax, d: RigDesign) -> None:
         f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)"
     )
     ax.text(0, -flag - 12, note, fontsize=7, ha="center", va="top")
-    ax.set_aspect("equal")
-    ax.set_xlim(-r - 14, r + 20)
-    ax.set_ylim(-flag - 24, r + 10)
-    ax.set_title("hub mount [mm]")
+    ax.set(aspect="equal", xlim=(-r - 14, r + 20), ylim=(-flag - 24, r + 10), title="hub mount [mm]")
 
 
 def _side(ax, d: RigDesign) -> None:
@@ -141,12 +134,8 @@ def _side(ax, d: RigDesign) -> None:
     _dimension(ax, (z_beam + W, 0.0), (zc, 0.0), distance, (0.0, reach + 0.05))
     fov = f"horizontal field of view {d.camera.horizontal_fov_deg:g} deg"
     ax.text(zc - 0.02, -reach + 0.02, fov, fontsize=7, ha="right")
-    ax.set_aspect("equal")
-    ax.set_xlim(-0.08, zc + 0.08)
-    ax.set_ylim(-max(L, reach) - 0.06, reach + 0.1)
-    ax.set_title("side view: the camera square on to the plane")
-    ax.set_xlabel("z, towards the camera [m]")
-    ax.set_ylabel("y [m]")
+    ax.set(aspect="equal", xlim=(-0.08, zc + 0.08), ylim=(-max(L, reach) - 0.06, reach + 0.1))
+    ax.set(title="side view: the camera square on to the plane", xlabel="z, towards the camera [m]", ylabel="y [m]")
 
 
 def draw_rig_design(design: RigDesign, figsize=(15.0, 5.8)):

@@ -66,8 +66,7 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
     ax[1].plot(t, _break_at_wraps(result.phi_rad), color="C1")
     ax[1].set_ylabel(r"hub angle $\phi$ [rad]")
     ax[2].step(t, result.torque_nm, where="post", color="C3")
-    ax[2].set_ylabel("torque [N m]")
-    ax[2].set_xlabel("time [s]")
+    ax[2].set(ylabel="torque [N m]", xlabel="time [s]")
     if math.isfinite(result.swing_up_time_s):
         for a in ax:
             a.axvline(result.swing_up_time_s, color="k", ls=":", lw=1)
@@ -81,8 +80,7 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
         draw_rod(strip, points, color="C0", joints=True)
         strip.plot(k * spacing, 0, "s", color="k", ms=6)
         strip.text(k * spacing, -0.42, f"{t[i]:.2f} s", ha="center", fontsize=8)
-    strip.set_ylim(-0.48, 0.36)
-    strip.set_xlim(-0.4, (n_frames - 1) * spacing + 0.4)
+    strip.set(ylim=(-0.48, 0.36), xlim=(-0.4, (n_frames - 1) * spacing + 0.4))
     strip.axis("off")
     fig.tight_layout()
     return fig
@@ -101,9 +99,7 @@ def animate_swingup(result: EvaluationResult, link_points, length_m: float, ever
     from matplotlib import animation
 
     fig, ax = plt.subplots(figsize=(4, 4))
-    ax.set_xlim(-1.2 * length_m, 1.2 * length_m)
-    ax.set_ylim(-1.2 * length_m, 1.2 * length_m)
-    ax.set_aspect("equal")
+    ax.set(xlim=(-1.2 * length_m, 1.2 * length_m), ylim=(-1.2 * length_m, 1.2 * length_m), aspect="equal")
     ax.axis("off")
     (line,) = ax.plot([], [], "-o", color="C0", lw=2.5, ms=3)
     text = ax.text(0.02, 0.95, "", transform=ax.transAxes)
@@ -140,8 +136,6 @@ def plot_upright_error(
             low, high = np.percentile(errors, [25, 75], axis=0)
             ax.fill_between(t, low, high, color=color, alpha=0.2, lw=0)
     ax.axhline(threshold_rad, color="k", ls="--", lw=0.8, label=f"{threshold_rad:g} rad")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(rf"$|\theta|$, {window_s:g} s moving average [rad]")
-    ax.set_yscale("log")
+    ax.set(xlabel="time [s]", ylabel=rf"$|\theta|$, {window_s:g} s moving average [rad]", yscale="log")
     ax.legend()
     return ax

@@ -79,8 +79,7 @@ def plot_lyapunov_errors(
         ax.semilogy(x[1:], np.asarray(curve)[1:], lw=1.8, label=label)
     ax.axhline(0.05 * length_m, color="tab:red", lw=0.8, ls="--", label="5% of rod length")
     ax.set_ylim(top=2 * length_m)
-    ax.set_xlabel(r"open-loop horizon [Lyapunov times $1/\lambda$]")
-    ax.set_ylabel("tip-position RMSE [m]")
+    ax.set(xlabel=r"open-loop horizon [Lyapunov times $1/\lambda$]", ylabel="tip-position RMSE [m]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     return ax

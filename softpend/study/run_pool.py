@@ -89,13 +89,10 @@ def book_run_jobs(
     jobs: list[Job] = []
     pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
     if pilco_seeds := fresh(pilco_root, "pilco", pilco_seeds):
-        config = load_hparams(
-            "pilco", apply_overrides(Task(plant=TASK.plant), task_overrides), given.get("pilco_overrides")
-        )
-        jobs += [
-            (f"{pilco_root}/{name}", (run_and_save, *args))
-            for name, args in pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)
-        ]
+        task = apply_overrides(Task(plant=TASK.plant), task_overrides)
+        config = load_hparams("pilco", task, given.get("pilco_overrides"))
+        found = pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)
+        jobs += [(f"{pilco_root}/{name}", (run_and_save, *args)) for name, args in found]
     rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
     if rl_seeds:
         configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides"))

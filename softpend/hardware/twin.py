@@ -179,25 +179,14 @@ def compare_with_simulator_model(
     torch.set_num_threads(1)
     params = params if params is not None else (rig_dataset.params or RodParams())
     trial_length_s = rig_dataset.n_samples * rig_dataset.dt_s
-    protocol = BabbleProtocol(
-        n_trials=rig_dataset.n_trials,
-        trial_length_s=trial_length_s,
-        dt_s=rig_dataset.dt_s,
-        start="hanging",
-        start_angle_std_rad=0.3,
-        start_rate_std_rad_s=1.0,
-        feedback_trial_fraction=0.0,
-        torque_std_fraction=0.5,
-        torque_bandwidth_hz=2.0,
-    )
-    sim_train = babble(protocol, params=params, seed=seed + 1000, progress=progress, plant=plant)
-    sim_test = babble(
-        protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0)),
-        params=params,
-        seed=seed + 2000,
-        progress=progress,
-        plant=plant,
-    )
+    size: dict[str, Any] = dict(n_trials=rig_dataset.n_trials, trial_length_s=trial_length_s, dt_s=rig_dataset.dt_s)
+    start: dict[str, Any] = dict(start="hanging", start_angle_std_rad=0.3, start_rate_std_rad_s=1.0)
+    torques: dict[str, Any] = dict(feedback_trial_fraction=0.0, torque_std_fraction=0.5, torque_bandwidth_hz=2.0)
+    protocol = BabbleProtocol(**size, **start, **torques)  # the twin's torque process (rig_babble_controller)
+    common: dict[str, Any] = dict(params=params, progress=progress, plant=plant)
+    sim_train = babble(protocol, seed=seed + 1000, **common)
+    test_protocol = protocol.replace(n_trials=n_test_trials, trial_length_s=max(trial_length_s, horizon_s + 1.0))
+    sim_test = babble(test_protocol, seed=seed + 2000, **common)
     settings: dict[str, Any] = dict(information="limited", history=history, max_epochs=max_epochs, patience=20)
     errors = {
         name: rollout_errors(

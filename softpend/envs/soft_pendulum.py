@@ -39,9 +39,8 @@ def reset_options(
     num_envs: Optional[int] = None,
     extra: tuple[str, ...] = (),
 ) -> tuple[str, Optional[tuple[np.ndarray, np.ndarray]]]:
-    """The start kind (``options["start"]``, default ``start``) and the exact start state ``(q, q_dot)`` of
-    ``options["q"]``, ``options["q_dot"]`` (one, or one per rod of a vector environment) or ``None``; keys in
-    ``extra`` are the caller's."""
+    """The start kind (``options["start"]``, default ``start``) and the exact start state of ``options["q"]`` and
+    ``options["q_dot"]`` (one, or one per rod of a vector environment) or ``None``; ``extra``: the caller's keys."""
     options = options or {}
     unknown = sorted(set(options) - {"start", "q", "q_dot", *extra})
     if unknown:
@@ -77,15 +76,11 @@ def check_torque_levels(n_torque_levels: int) -> int:
 
 
 class SoftPendulumEnv(gym.Env):
-    """Swing-up and balance of a soft rod driven by a torque-limited motor at its base.
-
-    Actions: ``Box(-1, 1, (1,))``, the torque as a fraction of ``torque_limit_nm``.  Observations:
-    :data:`OBSERVATION_VECTOR_NAMES` (rates clipped at 50 rad/s); ``info["observation"]`` holds the plant's.
-    Reward: :mod:`softpend.envs.reward`.  Starts: ``"hanging"``, ``"upright"`` (plus uniform noise of
-    ``start_noise_rad`` on hub angle and rate) or ``"random"``; ``reset(options={"q": ..., "q_dot": ...})``
-    starts at an exact state.  No terminal state; a diverged simulation truncates the episode with
-    ``info["truncation_reason"]``.  ``plant``: any name of :func:`softpend.plant.make_plant`.
-    """
+    """Swing-up and balance of a soft rod driven by a torque-limited motor at its base: actions ``Box(-1, 1, (1,))``
+    (fractions of ``torque_limit_nm``), observations :data:`OBSERVATION_VECTOR_NAMES` (the plant's in
+    ``info["observation"]``), reward :mod:`softpend.envs.reward`, starts :data:`STARTS` (uniform noise of
+    ``start_noise_rad`` on hub angle and rate) or ``reset(options={"q": ..., "q_dot": ...})``; a diverged
+    simulation truncates the episode with ``info["truncation_reason"]``."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 

@@ -29,13 +29,9 @@ _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 
 class SoftPendulumVectorEnv(gym.vector.VectorEnv):
-    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod).
-
-    ``substeps``: integrator sub-steps (RK4: at least the stability limit of the stiffest rod randomisation can
-    draw); ``randomize_fraction``: half-width ``f`` in ``[0, 0.9]`` of the factors on ``randomized_fields``;
-    ``plant``: only ``"prb"``.  The other arguments are those of :class:`~softpend.envs.SoftPendulumEnv` and
-    :class:`~softpend.plant.batched.BatchedPRBChain`.
-    """
+    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod);
+    ``randomize_fraction``: half-width in ``[0, 0.9]`` of the factors on ``randomized_fields``; ``plant``: only
+    ``"prb"``; the other arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
@@ -112,7 +108,6 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         self._rngs: list[Optional[np.random.Generator]] = [None] * b
 
     def _corner_rods(self) -> BatchedRodParams:
-        """Every corner of the randomisation box."""
         f = self.randomize_fraction
         if f == 0 or not self.randomized_fields:
             return BatchedRodParams.from_params(self.params)
@@ -137,9 +132,8 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
 
     def _draw_starts(
         self, indices: np.ndarray, start: str, exact: Optional[tuple[np.ndarray, np.ndarray]] = None
-    ) -> None:
-        """New start states (and parameters) of the rods ``indices``, each from its own generator; rows
-        ``indices`` of ``exact`` replace the drawn states."""
+    ) -> np.ndarray:
+        """Restart the rods ``indices`` (states drawn from their generators, or rows of ``exact``); the observations."""
         q = np.zeros((len(indices), self.chain.n_coordinates))
         qd = np.zeros_like(q)
         for row, i in enumerate(indices):
@@ -159,6 +153,10 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             self._torque_limits = rods.torque_limit_nm.numpy().copy()
         self._steps[indices] = 0
         self._autoreset[indices] = False
+        observations = self._observe()
+        theta = observations[indices, _THETA]
+        self._bonus[indices] = next_bonus(theta, np.zeros(len(indices)), self.dt_s, self.reward_params)
+        return observations
 
     def _observe(self) -> np.ndarray:
         with torch.no_grad():
@@ -187,11 +185,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         for i in indices:
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
-        self._draw_starts(indices, start, exact)
-        observations = self._observe()
-        theta = observations[:, _THETA]
-        self._bonus[indices] = next_bonus(theta[indices], np.zeros(len(indices)), self.dt_s, self.reward_params)
-        self._observations = observations
+        self._observations = observations = self._draw_starts(indices, start, exact)
         vectors = observation_vector(observations, self._bonus, self)
         return vectors, {"observation": observations.copy(), "_observation": mask.copy()}
 
@@ -223,12 +217,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             info["_truncation_reason"] = diverged.copy()
         if resetting.any():
             indices = np.flatnonzero(resetting)
-            self._draw_starts(indices, self.start)
-            reset_obs = self._observe()
-            observations[indices] = reset_obs[indices]
-            self._bonus[indices] = next_bonus(
-                reset_obs[indices, _THETA], np.zeros(len(indices)), self.dt_s, self.reward_params
-            )
+            observations[indices] = self._draw_starts(indices, self.start)[indices]
             reward[indices] = 0.0
             truncated[indices] = False
         self._autoreset = truncated | terminated

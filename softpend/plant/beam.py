@@ -7,7 +7,6 @@ displacement in the hub frame from the straight rod (across, along) [m] and its 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Optional
 
 import exudyn as exu
@@ -39,23 +38,9 @@ POISSON_RATIO = 0.45
 SHEAR_CORRECTION = 5.0 / 6.0
 
 
-@dataclass(frozen=True)
-class BeamSection:
-    """Cross-section properties of a uniform beam per unit length (SI units; Kelvin-Voigt dampings)."""
-
-    mass_per_length_kg_m: float
-    rotary_inertia_kg_m: float
-    bending_stiffness_nm2: float
-    axial_stiffness_n: float
-    shear_stiffness_n: float
-    bending_damping_nm2s: float
-    axial_damping_ns: float
-    shear_damping_ns: float
-
-
-def beam_section_from_params(params: RodParams) -> BeamSection:
-    """Section of the rod of ``params``: the PRB chain's ``E*I``; bending damping ``zeta * L/n_links`` and the
-    same retardation time ``d_b/(E*I)`` for the axial and shear strains."""
+def _section(params: RodParams) -> dict[str, float]:
+    """Exudyn's section properties of the rod per unit length (SI units): the PRB chain's ``E*I``, bending damping
+    ``zeta * L/n_links`` and its retardation time ``d_b/(E*I)`` for the axial and shear strains (Kelvin-Voigt)."""
     ei = params.bending_stiffness_nm2
     if ei <= 0:
         raise ValueError(
@@ -68,18 +53,12 @@ def beam_section_from_params(params: RodParams) -> BeamSection:
     shear_modulus = params.youngs_modulus_pa / (2.0 * (1.0 + POISSON_RATIO))
     ga = SHEAR_CORRECTION * shear_modulus * area * scale
     mu = params.mass_kg / params.length_m
-    bending_damping = params.joint_damping_nms_per_rad * params.link_length_m
-    retardation_s = bending_damping / ei
-    return BeamSection(
-        mass_per_length_kg_m=mu,
-        rotary_inertia_kg_m=mu * params.depth_m**2 / 12.0,
-        bending_stiffness_nm2=ei,
-        axial_stiffness_n=ea,
-        shear_stiffness_n=ga,
-        bending_damping_nm2s=bending_damping,
-        axial_damping_ns=retardation_s * ea,
-        shear_damping_ns=retardation_s * ga,
+    damping = params.joint_damping_nms_per_rad * params.link_length_m
+    values = (mu, mu * params.depth_m**2 / 12.0, ei, ea, ga, damping, damping / ei * ea, damping / ei * ga)
+    names = (
+        "massPerLength crossSectionInertia bendingStiffness axialStiffness shearStiffness bendingDamping axialDamping"
     )
+    return dict(zip((*names.split(), "shearDamping"), values))
 
 
 class BeamPlant(PlantBase):
@@ -106,7 +85,7 @@ class BeamPlant(PlantBase):
         in_unit_interval("spectral_radius", spectral_radius)
         positive("newton_relative_tolerance", newton_relative_tolerance)
         p = self.params
-        sec = self.section = beam_section_from_params(p)
+        sec = self.section = _section(p)
         self._hub_offset = 0 if self.hub_locked else 1
         self.n_coordinates = 3 * n + self._hub_offset
         self.element_length_m = p.length_m / n
@@ -121,16 +100,7 @@ class BeamPlant(PlantBase):
         bodies = [
             mbs.AddObject(
                 ObjectBeamGeometricallyExact2D(
-                    nodeNumbers=[nodes[i], nodes[i + 1]],
-                    length=self.element_length_m,
-                    massPerLength=sec.mass_per_length_kg_m,
-                    crossSectionInertia=sec.rotary_inertia_kg_m,
-                    bendingStiffness=sec.bending_stiffness_nm2,
-                    axialStiffness=sec.axial_stiffness_n,
-                    shearStiffness=sec.shear_stiffness_n,
-                    bendingDamping=sec.bending_damping_nm2s,
-                    axialDamping=sec.axial_damping_ns,
-                    shearDamping=sec.shear_damping_ns,
+                    nodeNumbers=[nodes[i], nodes[i + 1]], length=self.element_length_m, **sec
                 )
             )
             for i in range(n)
@@ -250,7 +220,7 @@ class BeamPlant(PlantBase):
         x, y, rot = c.reshape(-1, 3).T
         y = y + self._s
         sec, h, g = self.section, self.element_length_m, self.params.gravity_mps2
-        gravity = g * sec.mass_per_length_kg_m * h * float(np.sum(0.5 * (y[:-1] + y[1:])))
+        gravity = g * sec["massPerLength"] * h * float(np.sum(0.5 * (y[:-1] + y[1:])))
         gravity += g * self.params.tip_mass_kg * float(y[-1])
         dx, dy = np.diff(x) / h, np.diff(y) / h
         mid = 0.5 * (rot[:-1] + rot[1:])
@@ -258,8 +228,8 @@ class BeamPlant(PlantBase):
         normal = np.cos(mid) * dx + np.sin(mid) * dy
         curvature = np.diff(rot) / h
         strain = (
-            sec.axial_stiffness_n * (tangent - 1.0) ** 2
-            + sec.shear_stiffness_n * normal**2
-            + sec.bending_stiffness_nm2 * curvature**2
+            sec["axialStiffness"] * (tangent - 1.0) ** 2
+            + sec["shearStiffness"] * normal**2
+            + sec["bendingStiffness"] * curvature**2
         )
         return energies(kinetic, gravity, 0.5 * h * float(np.sum(strain)))

@@ -71,9 +71,8 @@ def run(args: argparse.Namespace) -> int:
     metrics = {"validation": evaluate_model(result.model, dataset, result.val_trials)}
     if test is not None:
         metrics["test"] = evaluate_model(result.model, test)
-    metadata = finite_or_none(
-        dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data)
-    )
+    metadata = dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data)
+    metadata = finite_or_none(metadata)
     weights, meta = save_model(args.output, result.model, metadata)
     for path in model_files:  # written atomically by the model's writer
         outputs.done(path)

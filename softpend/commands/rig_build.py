@@ -402,10 +402,8 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     thread.join()
     if failure:
         raise failure[0]
-    length, notes = args.trial_length_s, f"rig babbling on {args.port}"
-    dataset, sync = build_rig_dataset(
-        motor_log, camera_csv, out / "rig_dataset.npz", params=params, trial_length_s=length, notes=notes
-    )
+    settings = dict(params=params, trial_length_s=args.trial_length_s, notes=f"rig babbling on {args.port}")
+    dataset, sync = build_rig_dataset(motor_log, camera_csv, out / "rig_dataset.npz", **settings)
     for name in PORT_BABBLE_FILES:
         outputs.done(out / name)
     return loop, sync, dataset

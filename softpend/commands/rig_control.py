@@ -90,9 +90,7 @@ def build_controller(
         label = f"{PLANNER}, learned in {result.plant_seconds:.2f} plant s"
         return TimedController(result.controller, {"planner_plant_s": result.plant_seconds}), task, label
     if not Path(spec).exists():
-        raise ValueError(
-            f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder; {spec!r} is neither"
-        )
+        raise ValueError(f"controller must be one of {', '.join(BUILTIN_CONTROLLERS)} or a run folder, got {spec!r}")
     from softpend.study.rig_runs import learned_controller
 
     return learned_controller(spec, which)

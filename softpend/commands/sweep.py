@@ -134,8 +134,7 @@ def run(args: argparse.Namespace) -> int:
             rows += fs.rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs), configs=configs)
         per_seed = fs.seed_rows(rl_logs, rows, pilco_results)
         summary = fs.aggregate_fresh_start_rows(rows)
-        out.update(
-            fresh_starts=rows, fresh_start_summary=summary, per_seed=per_seed, headline=fs.headline_figures(per_seed)
-        )
+        headline = fs.headline_figures(per_seed)
+        out.update(fresh_starts=rows, fresh_start_summary=summary, per_seed=per_seed, headline=headline)
     print(json_text(out, indent=2))
     return 0

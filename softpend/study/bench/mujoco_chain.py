@@ -166,9 +166,7 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
             step(torque)
         best = min(best, time.perf_counter() - start)
         if chain.diverged:
-            raise RuntimeError(
-                f"the MuJoCo chain diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})"
-            )
+            raise RuntimeError(f"the MuJoCo chain diverged ({integrator}, {substeps} sub-steps, n = {n_links})")
     return n_steps / best
 
 
@@ -196,9 +194,7 @@ def rollout_rod_steps_per_s(
         rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)
         best = min(best, time.perf_counter() - start) if i else best
     if not np.isfinite(state[:, -1]).all():
-        raise RuntimeError(
-            f"mujoco.rollout diverged in the benchmark ({integrator}, {substeps} sub-steps, n = {n_links})"
-        )
+        raise RuntimeError(f"mujoco.rollout diverged ({integrator}, {substeps} sub-steps, n = {n_links})")
     return batch_size * n_steps / best
 
 

@@ -122,14 +122,9 @@ class _RigLoop:
         finally:
             bar.close()
 
-    def loop_result(self) -> dict[str, Any]:
-        return dict(
-            samples=self.samples,
-            command_periods_s=np.diff(self.send_times),
-            dropped_states=self.dropped,
-            bad_frames=self.link.bad_frames,
-            watchdog_trips=self.watchdog,
-        )
+    def loop_result(self) -> tuple[int, np.ndarray, int, int, int]:
+        """The fields of :class:`LoopResult`, in order."""
+        return self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog
 
     def step(self, state: MotorState, newest: bool) -> None:
         self.count(state)
@@ -160,7 +155,7 @@ def run_control_loop(
     loop = _RigLoop(link, controller, duration_s, log)
     loop.run("rig loop", progress)
     link.send_torque(0.0)
-    return LoopResult(**loop.loop_result())
+    return LoopResult(*loop.loop_result())
 
 
 #: ``status`` column of the motor log (``camera_blind`` and ``arm_timeout`` are safe stops).
@@ -334,7 +329,7 @@ class _ClosedLoop(_RigLoop):
     def result(self) -> ClosedLoopResult:
         tip_source = self.tip_source
         return ClosedLoopResult(
-            **self.loop_result(),
+            *self.loop_result(),
             duration_s=self.t,
             stop_reason=self.stop_reason,
             status=self.status if self.stop_reason is not None else "completed",

@@ -361,12 +361,9 @@ class MotorLink:
                 raise self._fail(DeviceError(f"device {self.port!r} reported an error: {meaning}"))
         self._pending.extend(messages)
         if errors and self._decoder.consecutive_bad >= self.max_consecutive_bad_frames:
-            raise self._fail(
-                LinkChecksumError(
-                    f"{self._decoder.consecutive_bad} consecutive bad frames from {self.port!r} "
-                    f"(last: {self._decoder.last_error}); motor stopped"
-                )
-            )
+            bad, last = self._decoder.consecutive_bad, self._decoder.last_error
+            message = f"{bad} consecutive bad frames from {self.port!r} (last: {last}); motor stopped"
+            raise self._fail(LinkChecksumError(message))
 
     def _next_message(self, deadline: float, wanted: tuple[int, ...]) -> tuple[int, int, tuple]:
         """The oldest wanted message, waiting until ``deadline`` for one (the port is read once more at it)."""

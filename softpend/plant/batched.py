@@ -356,9 +356,7 @@ def stable_substeps(
     mass = torch.zeros(size, n + 1, n + 1, dtype=torch.float64)
     mass[:, 0, 0] = d.hub_inertia_kgm2
     mass[:, 1:, 1:] = d.gram.permute(2, 0, 1)
-    difference = torch.zeros(n, n + 1, dtype=torch.float64)
-    difference[torch.arange(n), torch.arange(1, n + 1)] = 1.0
-    difference[torch.arange(n), torch.arange(n)] = -1.0
+    difference = torch.diff(torch.eye(n + 1, dtype=torch.float64), dim=0)  # spring angles from the coordinates
     k = d.stiffness_nm_per_rad.T  # (B, n)
     z = d.damping_nms_per_rad.T
     stiffness = torch.einsum("ki,bk,kj->bij", difference, k, difference)
@@ -375,7 +373,6 @@ def stable_substeps(
 def _integrate(
     integrator: str, substeps: int, h: float, d: _Derived, x: torch.Tensor, v: torch.Tensor, torque: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """``substeps`` steps of ``h``."""
     acc = _accelerations
     for _ in range(substeps):
         if integrator == "rosenbrock":
@@ -394,12 +391,9 @@ def _integrate(
 
 
 class BatchedPRBChain:
-    """``B`` PRB rods of one ``n_links`` stepped together, statelessly (a step maps a state to the next).
-
-    ``substeps`` defaults to :func:`stable_substeps` (RK4) or :data:`ROSENBROCK_SUBSTEPS`; ``compiled`` runs the
-    steps that need no gradient through ``torch.compile``.  Torques are saturated per rod; a rod whose state
-    becomes non-finite stays so, without an exception.
-    """
+    """``B`` PRB rods of one ``n_links`` stepped together, statelessly; ``substeps`` defaults to
+    :func:`stable_substeps` (RK4) or :data:`ROSENBROCK_SUBSTEPS`; ``compiled``: the steps that need no gradient
+    through ``torch.compile``.  Torques are saturated per rod; a non-finite state stays so, without an exception."""
 
     def __init__(
         self,

@@ -27,12 +27,9 @@ def _settings(values: dict[str, Any]) -> exu.SimulationSettings:
 
 def static_solver_settings(load_steps: int, relative_tolerance: float) -> exu.SimulationSettings:
     """Settings of Exudyn's static solver: ``load_steps`` load steps, quiet, dense."""
+    s = "staticSolver."
     return _settings(
-        {
-            "staticSolver.numberOfLoadSteps": load_steps,
-            "staticSolver.verboseMode": 0,
-            "staticSolver.newton.relativeTolerance": relative_tolerance,
-        }
+        {s + "numberOfLoadSteps": load_steps, s + "verboseMode": 0, s + "newton.relativeTolerance": relative_tolerance}
     )
 
 

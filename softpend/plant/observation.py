@@ -63,22 +63,11 @@ def observation_from_tip(
     er_rad: float,
     er_dot_rad_s: float,
 ) -> Observation:
-    """The :class:`Observation` of a hub angle, tip position and tip rotation (with rates); ``theta = atan2(-ex, ey)``."""
+    """The :class:`Observation` of a hub angle, tip position and tip rotation (with rates)."""
     r2 = ex_m * ex_m + ey_m * ey_m
-    theta = math.atan2(-ex_m, ey_m)
     theta_dot = (ex_m * ey_dot_m_s - ey_m * ex_dot_m_s) / r2 if r2 > 0 else 0.0
-    return Observation(
-        (phi_rad + math.pi) % _TWO_PI - math.pi,
-        (theta + math.pi) % _TWO_PI - math.pi,
-        ex_m,
-        ey_m,
-        (er_rad + math.pi) % _TWO_PI - math.pi,
-        phi_dot_rad_s,
-        theta_dot,
-        ex_dot_m_s,
-        ey_dot_m_s,
-        er_dot_rad_s,
-    )
+    phi, theta, er = ((x + math.pi) % _TWO_PI - math.pi for x in (phi_rad, math.atan2(-ex_m, ey_m), er_rad))
+    return Observation(phi, theta, ex_m, ey_m, er, phi_dot_rad_s, theta_dot, ex_dot_m_s, ey_dot_m_s, er_dot_rad_s)
 
 
 def energies(kinetic, gravity, elastic) -> dict:

@@ -151,8 +151,7 @@ class PRBPlant(PlantBase):
         return np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
 
     def observe(self) -> Observation:
-        q, qd = self._q_list, self._q_t_list
-        return self.observation_from_state(q, qd)
+        return self.observation_from_state(self._q_list, self._q_t_list)
 
     def observation_from_state(self, q, qd) -> Observation:
         """Observation of a joint state (scalar ``math``: faster than NumPy for a few links)."""

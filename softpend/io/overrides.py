@@ -102,13 +102,10 @@ def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) ->
         raise ValueError(f"{source}: expected a JSON object for a {cls.__name__}, got {type(data).__name__}")
     names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
     unknown, missing = [k for k in data if k not in names], [k for k in names if k not in data]
-    if unknown or missing:
-        what = (
-            f"{unknown[0]!r} is not a {cls.__name__} field"
-            if unknown
-            else f"the {cls.__name__} field {missing[0]!r} is missing"
-        )
-        raise ValueError(f"{source}: {what} (a config of another version)")
+    if unknown:
+        raise ValueError(f"{source}: {unknown[0]!r} is not a {cls.__name__} field (a config of another version)")
+    if missing:
+        raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
     values: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
         if not f.init:

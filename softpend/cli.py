@@ -13,10 +13,8 @@ import zipfile
 from typing import NoReturn, Sequence
 
 #: Modules that contribute subcommands.
-COMMAND_MODULES: list[str] = [
-    f"softpend.commands.{name}"
-    for name in ("bench", "book", "train", "evaluate", "rig", "track", "babble", "fit_model", "identify", "sweep")
-]
+COMMANDS = "bench book train evaluate rig track babble fit_model identify sweep".split()
+COMMAND_MODULES: list[str] = [f"softpend.commands.{name}" for name in COMMANDS]
 DEBUG_HELP = "show the traceback of an error instead of one line"
 
 

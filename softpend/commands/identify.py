@@ -22,6 +22,7 @@ _CALIBRATION_FLAGS = {
     "camera_delay_s": ("--camera-delay", "a camera delay against the encoder (within one sample; advised for rigs)"),
 }
 
+
 DESCRIPTION = """Fit hub inertia, hub friction, Young's modulus, joint damping and tip mass of the PRB model
 (optionally a torque gain and an encoder offset) to a dataset written by `softpend babble` or a rig, by multiple
 shooting over short windows on the Exudyn plant (softpend.sysid.greybox). Prints each estimate with its standard
@@ -36,10 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ("dataset", None, dict(help="dataset (.npz)")),
         ("--out", None, dict(default=None, help="JSON file to write (rod_params, estimates, std, fit)")),
         ("--parameters", None, dict(default=",".join(GREYBOX_PARAMETERS), help=f"comma-separated, from {known}")),
-        *(
-            (flag, None, dict(action="store_true", help=f"also estimate {t}"))
-            for flag, t in _CALIBRATION_FLAGS.values()
-        ),
+        *[(f, None, dict(action="store_true", help=f"also estimate {t}")) for f, t in _CALIBRATION_FLAGS.values()],
         ("--initial-params", None, dict(help="JSON file of the initial guess (default: the dataset's plant_params)")),
         *field_options(GreyBoxConfig(), _OPTIONS),
     ]

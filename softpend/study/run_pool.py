@@ -130,10 +130,8 @@ def train_book(
     jobs, start = book_jobs(root, profile), time.perf_counter()
     workers = default_workers() if workers is None else workers
     _train(jobs, workers, progress, backend)
-    seconds, date = (
-        time.perf_counter() - start,
-        datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-    )
+    seconds = time.perf_counter() - start
+    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     record = dict(profile=profile, date=date, trained=[name for name, _ in jobs], seconds=seconds, workers=workers)
     layout = BookLayout.at(root)
     layout.generated_dir.mkdir(parents=True, exist_ok=True)

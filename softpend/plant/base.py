@@ -111,10 +111,8 @@ class PlantBase(ExudynSystem):
         return q, np.zeros(self.n_coordinates)
 
     def step(self, torque_nm: float) -> Observation:
-        """Hold a base torque (clipped to ``params.torque_limit_nm``) for one step ``dt_s``.
-
-        Raises ``ValueError`` for a non-finite torque, :class:`SimulationDiverged` if the solver fails.
-        """
+        """Hold a base torque (clipped to ``params.torque_limit_nm``) for one step ``dt_s``; raises ``ValueError`` for
+        a non-finite torque, :class:`SimulationDiverged` if the solver fails."""
         torque = float(torque_nm)
         if not math.isfinite(torque):
             raise ValueError(f"torque_nm must be finite, got {torque_nm!r}")

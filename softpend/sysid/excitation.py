@@ -30,11 +30,8 @@ def multisine(
     band_hz: tuple[float, float] = (0.2, 6.0),
     period_s: float = 5.0,
 ) -> np.ndarray:
-    """A periodic multisine of equal-amplitude harmonics in ``band_hz``, peak exactly ``peak_nm``.
-
-    Schroeder phases (``-pi k (k - 1) / K``) keep the crest factor low, so most of the torque limit goes into
-    excitation. The signal has period ``period_s`` (sampled at ``dt_s``) and is deterministic.
-    """
+    """``n_steps`` samples (step ``dt_s``) of a multisine of period ``period_s``: equal-amplitude harmonics in
+    ``band_hz`` with Schroeder phases ``-pi k (k - 1) / K`` (a low crest factor), peak exactly ``peak_nm``."""
     n_steps = positive_int("n_steps", n_steps)
     positive("dt_s", dt_s)
     positive("peak_nm", peak_nm)
@@ -43,7 +40,6 @@ def multisine(
     f = multisine_frequencies_hz(period_s, band_hz)
     k = np.arange(1, f.size + 1)
     phase = -math.pi * k * (k - 1) / f.size
-    # the peak over one whole period (the same for every window that covers it)
     period_steps = max(int(round(period_s / dt_s)), 1)
     t_period = np.arange(period_steps) * dt_s
     one_period = np.cos(2 * math.pi * np.outer(t_period, f) + phase).sum(axis=1)

@@ -26,8 +26,7 @@ def _predictor(model: Any) -> tuple[Any, torch.dtype]:
 
 
 def open_loop(model: Any, x0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
-    """Open-loop predictions ``(B, T + 1, d)`` (float64) of a model (ensembles: their mean) from states ``(B, d)``
-    under torques ``(B, T)``."""
+    """Open-loop predictions ``(B, T + 1, d)`` of a model (ensembles: their mean) under torques ``(B, T)``."""
     predict, dtype = _predictor(model)
     with torch.inference_mode():
         x = [torch.as_tensor(x0, dtype=dtype)]
@@ -41,9 +40,8 @@ def one_step_errors(
     dataset: TrajectoryDataset,
     trials: Optional[np.ndarray] = None,
 ) -> dict[str, Any]:
-    """One-step prediction error over all transitions of the given trials: the mean squared error of the next
-    core state (angle errors wrapped) in the report's units and in the network's standardised target space, each
-    beside the "next = current" predictor's, per variable, and the tip RMSE [m] when the layout has the tip."""
+    """One-step mean squared error of the next core state (angles wrapped) over the trials' transitions, in the
+    report's units and standardised, beside "next = current", per variable, and the tip RMSE [m] if observed."""
     layout: StateLayout = model.layout
     data = layout.transitions(dataset, trials)
     predict, dtype = _predictor(model)
@@ -153,8 +151,7 @@ def rollout_errors(
     horizon_s: float = 2.0,
     start_stride: int = 10,
 ) -> RolloutErrors:
-    """Open-loop rollouts from every ``start_stride``-th state of the trials that leaves ``horizon_s`` after it,
-    under the recorded torques, in one batch."""
+    """Open-loop rollouts from every ``start_stride``-th state that leaves ``horizon_s`` in its trial."""
     layout: StateLayout = model.layout
     start_stride = positive_int("start_stride", start_stride)
     steps = int(round(horizon_s / dataset.dt_s))
@@ -225,9 +222,8 @@ def perturbed_simulator_errors(
     torque_noise_std_nm: float = 0.0,
     seed: int = 0,
 ) -> RolloutErrors:
-    """Yardstick: the simulator itself restarted from the recorded joint state with the hub angle (and rate) off,
-    optionally with Gaussian torque noise (seeded, not clipped) at every step, at the start points of
-    :func:`rollout_errors` with ``history``; needs a simulated dataset."""
+    """Yardstick: the simulator restarted from the recorded joint states (simulated datasets) with the hub angle
+    and rate off and seeded Gaussian torque noise, at the start points of :func:`rollout_errors` with ``history``."""
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
     assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad

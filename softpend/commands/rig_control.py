@@ -62,15 +62,12 @@ def build_controller(
     from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
     from softpend.control.swingup import EnergySwingUpController
 
-    rod, dt = task.rod, task.dt_s
+    rod, dt, swingup = task.rod, task.dt_s, "energy swing-up + LQR"
     builtin = {
         "lqr": lambda: (LQRController.from_params(rod, dt, state="joint"), "LQR (joint state)"),
         "lqr-obs": lambda: (LQRController.from_params(rod, dt, state="observation"), "LQR (observations)"),
-        "swingup": lambda: (EnergySwingUpController(rod, dt_s=dt), "energy swing-up + LQR"),
-        "swingup-obs": lambda: (
-            EnergySwingUpController.for_observations(rod, dt_s=dt),
-            "energy swing-up + LQR (observations)",
-        ),
+        "swingup": lambda: (EnergySwingUpController(rod, dt_s=dt), swingup),
+        "swingup-obs": lambda: (EnergySwingUpController.for_observations(rod, dt_s=dt), f"{swingup} (observations)"),
     }
     if spec in builtin:
         controller, label = builtin[spec]()

@@ -8,18 +8,10 @@ import sys
 import time
 from typing import Any, Callable, Iterable
 
+#: The groups in the order they run; ``pilco_search`` lives in the ``pilco`` module.
+GROUPS = "plant control beam rl pilco pilco_search hardware rig_control sysid data_efficiency commission".split()
 BENCHMARKS: dict[str, str] = {
-    "plant": "softpend.study.bench.plant:bench_plant",
-    "control": "softpend.study.bench.control:bench_control",
-    "beam": "softpend.study.bench.beam:bench_beam",
-    "rl": "softpend.study.bench.rl:bench_rl",
-    "pilco": "softpend.study.bench.pilco:bench_pilco",
-    "pilco_search": "softpend.study.bench.pilco:bench_pilco_search",
-    "hardware": "softpend.study.bench.hardware:bench_hardware",
-    "rig_control": "softpend.study.bench.rig_control:bench_rig_control",
-    "sysid": "softpend.study.bench.sysid:bench_sysid",
-    "data_efficiency": "softpend.study.bench.data_efficiency:bench_data_efficiency",
-    "commission": "softpend.study.bench.commission:bench_commission",
+    name: f"softpend.study.bench.{name.removesuffix('_search')}:bench_{name}" for name in GROUPS
 }
 
 

@@ -377,10 +377,8 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
     from softpend.plant import RodParams
     from softpend.vision.track_video import track_live
 
-    for name in PORT_BABBLE_FILES:
-        outputs.live(out / name)
-    source = camera_source(args)
-    camera_csv, motor_log = out / "camera.csv", out / "motor_log.csv"
+    files = [outputs.live(out / name) for name in PORT_BABBLE_FILES]
+    source, camera_csv, motor_log = camera_source(args), out / "camera.csv", out / "motor_log.csv"
     failure: list[BaseException] = []
 
     def film() -> None:
@@ -404,6 +402,6 @@ def _babble_on_port(args: argparse.Namespace, out: Path, progress: bool, outputs
         raise failure[0]
     settings = dict(params=params, trial_length_s=args.trial_length_s, notes=f"rig babbling on {args.port}")
     dataset, sync = build_rig_dataset(motor_log, camera_csv, out / "rig_dataset.npz", **settings)
-    for name in PORT_BABBLE_FILES:
-        outputs.done(out / name)
+    for path in files:
+        outputs.done(path)
     return loop, sync, dataset

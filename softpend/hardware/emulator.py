@@ -21,7 +21,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import finite, in_range, in_unit_interval, int_at_least, optional_positive
+from softpend.checks import finite, in_range, in_unit_interval, instance_of, int_at_least, optional_positive
 from softpend.hardware import protocol as proto
 from softpend.hardware.clock import SimClock, SimSerial
 from softpend.io.samplelog import SampleLog
@@ -45,8 +45,7 @@ class RigConfig:
     hold_until_commanded: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.task, Task):
-            raise ValueError(f"task must be a Task, got {type(self.task).__name__}")
+        instance_of("task", self.task, Task)
         in_range("task.dt_s", self.task.dt_s, 0.001, 0.1)
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
         for name in ("latency_s", "drop_probability", "garble_probability"):

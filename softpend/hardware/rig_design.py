@@ -10,7 +10,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import positive
+from softpend.checks import instance_of, positive
 from softpend.plant.params import RodParams
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraModel
 
@@ -166,8 +166,7 @@ def rig_design(params: Optional[RodParams] = None, print_modulus_pa: Optional[fl
     ``print_modulus_pa`` (default the rod's own); ``ValueError`` for a rod without bending stiffness, shorter
     than the mount's clamp, or a beam that cannot be printed."""
     params = params if params is not None else RodParams()
-    if not isinstance(params, RodParams):
-        raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
+    instance_of("params", params, RodParams)
     camera, hub = CameraSpec(), HubSpec()
     modulus = positive("print_modulus_pa", params.youngs_modulus_pa if print_modulus_pa is None else print_modulus_pa)
     ei = params.bending_stiffness_nm2

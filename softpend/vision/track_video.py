@@ -14,7 +14,7 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from softpend.checks import optional_positive
+from softpend.checks import instance_of, optional_positive
 from softpend.io.reading import check_regular_file
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
@@ -170,8 +170,7 @@ def track_live(
 ) -> np.ndarray:
     """Track a live camera (not yet started) into ``out_csv`` (host capture times), replaced when ``duration_s``
     has passed, the source ends or on Ctrl-C; on an error ``out_csv`` is left as it was."""
-    if not isinstance(source, ThreadedTipSource):
-        raise ValueError(f"source must be a ThreadedTipSource, got {type(source).__name__}")
+    instance_of("source", source, ThreadedTipSource)
     optional_positive("duration_s", duration_s)
     out_csv = Path(out_csv)
     _check_output_path(out_csv, None)

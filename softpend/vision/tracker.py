@@ -10,7 +10,7 @@ from typing import Any, Optional
 import cv2
 import numpy as np
 
-from softpend.checks import in_unit_interval, int_at_least, non_negative, optional_positive
+from softpend.checks import in_unit_interval, instance_of, int_at_least, non_negative, optional_positive
 
 #: Smallest frame height and width the tracker accepts [px].
 MIN_FRAME_SIDE_PX = 8
@@ -115,9 +115,7 @@ class TipTracker:
         region_px: Optional[tuple[int, int, int, int]] = None,
         max_area_fraction: float = 0.05,
     ) -> None:
-        if not isinstance(colour, ColourRange):
-            raise ValueError(f"colour must be a ColourRange, got {type(colour).__name__}")
-        self.colour = colour
+        self.colour = instance_of("colour", colour, ColourRange)
         self.min_area_px = non_negative("min_area_px", min_area_px)
         self.search_radius_px = optional_positive("search_radius_px", search_radius_px)
         self.max_area_fraction = in_unit_interval("max_area_fraction", max_area_fraction, include_zero=False)

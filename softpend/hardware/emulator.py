@@ -50,8 +50,7 @@ class RigConfig:
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
         for name in ("latency_s", "drop_probability", "garble_probability"):
             in_unit_interval(name, getattr(self, name))
-        if int(self.watchdog_ms) != self.watchdog_ms or not 1 <= self.watchdog_ms <= 65535:
-            raise ValueError(f"watchdog_ms must be an integer in [1, 65535], got {self.watchdog_ms!r}")
+        in_range("watchdog_ms", int_at_least("watchdog_ms", self.watchdog_ms, 1), 1, 65535)  # a u16 on the wire
         optional_positive("duration_s", self.duration_s)
         if self.initial_tilt_rad is not None:
             finite("initial_tilt_rad", self.initial_tilt_rad)

@@ -12,7 +12,7 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from softpend.checks import finite, int_at_least, non_negative, positive
+from softpend.checks import finite, in_unit_interval, int_at_least, non_negative, positive
 from softpend.vision.calibration import points_array, read_json_file
 
 #: Highest frame rate accepted [1/s].
@@ -84,10 +84,9 @@ class CameraEffects:
     clutter: bool = False
 
     def __post_init__(self) -> None:
-        for name in ("noise_std_dn", "exposure_s", "lighting_amplitude", "gradient"):
+        for name in ("noise_std_dn", "exposure_s", "gradient"):
             non_negative(name, getattr(self, name))
-        if self.lighting_amplitude >= 1:
-            raise ValueError(f"lighting_amplitude must be < 1, got {self.lighting_amplitude!r}")
+        in_unit_interval("lighting_amplitude", self.lighting_amplitude, include_one=False)
         int_at_least("blur_subframes", self.blur_subframes, 1)
 
     @classmethod

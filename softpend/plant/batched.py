@@ -108,9 +108,9 @@ class BatchedRodParams:
         unknown = set(changes) - set(PARAMETER_FIELDS)
         if unknown:
             raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
-        shape = self.length_m.shape
+        s = self.length_m.shape
         tensors = {name: torch.as_tensor(value, dtype=self.dtype) for name, value in changes.items()}
-        new = {n: t if t.shape == shape else torch.broadcast_to(t, shape).clone() for n, t in tensors.items()}
+        new: dict[str, Any] = {n: t if t.shape == s else torch.broadcast_to(t, s).clone() for n, t in tensors.items()}
         return dataclasses.replace(self, **new)
 
     def scaled(self, **factors: TensorLike) -> "BatchedRodParams":

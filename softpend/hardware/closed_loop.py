@@ -263,10 +263,7 @@ class _ClosedLoop(_RigLoop):
         estimate, frames, commanded, status = self.nan_estimate, 0, 0, self.status
         try:
             measured = (self.t, state.phi_rad, state.phi_dot_rad_s, state.applied_torque_nm)
-            if not self.estimator.started:
-                self.estimator.reset(*measured)
-            else:
-                self.estimator.update_encoder(*measured)
+            (self.estimator.update_encoder if self.estimator.started else self.estimator.reset)(*measured)
             if newest:
                 self._check_safety()
                 e = self.estimator.estimate()

@@ -92,13 +92,8 @@ class PlantBase(ExudynSystem):
         self, joint_angles_rad: Optional[np.ndarray] = None, joint_velocities_rad_s: Optional[np.ndarray] = None
     ) -> Observation:
         """Restart from ``(q, q_dot)`` (default: the straight rod upright at rest)."""
-        q, qd = (
-            np.zeros(self.n_coordinates) if value is None else self._check_state(value, name)
-            for value, name in (
-                (joint_angles_rad, "joint_angles_rad"),
-                (joint_velocities_rad_s, "joint_velocities_rad_s"),
-            )
-        )
+        given = {"joint_angles_rad": joint_angles_rad, "joint_velocities_rad_s": joint_velocities_rad_s}
+        q, qd = (np.zeros(self.n_coordinates) if v is None else self._check_state(v, n) for n, v in given.items())
         self._set_state(q, qd)
         self.last_torque_nm = 0.0
         return self.observe()

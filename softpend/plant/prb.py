@@ -178,9 +178,8 @@ class PRBPlant(PlantBase):
         a, ad = self._absolute_angles(q, qd)
         length = self.params.link_length_m
         uy = np.cos(a)
-        joint_y = np.concatenate([[0.0], np.cumsum(length * uy)[:-1]])
-        joint_vx = np.concatenate([[0.0], np.cumsum(-length * np.cos(a) * ad)[:-1]])
-        joint_vy = np.concatenate([[0.0], np.cumsum(-length * np.sin(a) * ad)[:-1]])
+        steps = (length * uy, -length * np.cos(a) * ad, -length * np.sin(a) * ad)
+        joint_y, joint_vx, joint_vy = (np.concatenate([[0.0], np.cumsum(x)[:-1]]) for x in steps)
         c = self.link_coms_m
         com_vx = joint_vx - c * np.cos(a) * ad
         com_vy = joint_vy - c * np.sin(a) * ad

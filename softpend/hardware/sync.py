@@ -200,14 +200,12 @@ def synchronise(
     angle_mask = np.array([True, True, False, False])
     positions, velocities, torques, starts = [], [], [], []
     for a, b in _runs(valid):
-        k = a
-        while k + n + 1 <= b:
+        for k in range(a, b - n, n + 1):  # trials of n + 1 samples, the first one for the velocities
             chunk = raw[k : k + n + 1]
             positions.append(chunk[1:])
             velocities.append(backward_difference(chunk, dt_s, angle_mask))
             torques.append(torque_g[k + 1 : k + n])
             starts.append(float(grid[k + 1]))
-            k += n + 1
     if not positions:
         raise ValueError(f"no gap-free stretch of {trial_length_s} s in the synchronised record")
     stacked = (np.stack(positions), np.stack(velocities), np.stack(torques))

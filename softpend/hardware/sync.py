@@ -80,11 +80,9 @@ def estimate_clock_offset(
     phi = np.unwrap(np.asarray(motor_phi_rad, float))
     theta_raw = np.asarray(camera_theta_rad, float)
     good = np.isfinite(theta_raw)
-    theta = np.full_like(theta_raw, np.nan)
-    theta[good] = np.unwrap(theta_raw[good])
     if good.sum() < 2:
         raise ValueError("camera log has fewer than 2 tracked frames")
-    theta = np.interp(tc, tc[good], theta[good])
+    theta = np.interp(tc, tc[good], np.unwrap(theta_raw[good]))
     start, end = (tm[0], tm[-1]) if window_s is None else (float(window_s[0]), float(window_s[1]))
     if end - start < 20 * resolution_s:
         raise ValueError(f"window_s {window_s} is too short")

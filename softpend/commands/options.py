@@ -69,7 +69,7 @@ def field_options(defaults: Any, rows: Sequence[FieldOption]) -> list[Option]:
 
 
 def field_values(args: argparse.Namespace, rows: Sequence[FieldOption]) -> dict[str, Any]:
-    """``field -> value`` of the options of :func:`add_field_options`."""
+    """``field -> value`` of the options of :func:`field_options`."""
     return {field: getattr(args, flag[2:].replace("-", "_")) for flag, field, *_ in rows}
 
 

@@ -297,7 +297,6 @@ def save_model(
     if not isinstance(model, (DynamicsModel, DynamicsEnsemble)):
         raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")
     weights, meta_path = model_paths(path)
-    weights.parent.mkdir(parents=True, exist_ok=True)
     meta = {
         "schema": MODEL_SCHEMA_NAME,
         "schema_version": MODEL_SCHEMA_VERSION,
@@ -307,10 +306,8 @@ def save_model(
         "metadata": metadata or {},
     }
     text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)
-    state = io.BytesIO()
-    torch.save(model.state_dict(), state)
     with atomic_write(weights) as handle:
-        handle.write(state.getvalue())
+        torch.save(model.state_dict(), handle)
     with atomic_write(meta_path, "w") as handle:
         handle.write(text + "\n")
     return weights, meta_path

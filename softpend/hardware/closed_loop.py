@@ -324,7 +324,6 @@ class _ClosedLoop(_RigLoop):
         return len(measurements)
 
     def result(self) -> ClosedLoopResult:
-        tip_source = self.tip_source
         return ClosedLoopResult(
             *self.loop_result(),
             duration_s=self.t,
@@ -333,7 +332,7 @@ class _ClosedLoop(_RigLoop):
             late_commands=self.late,
             blind_max_s=self.blind_max,
             armed_at_s=self.armed_at,
-            camera=tip_source.stats() if tip_source is not None and hasattr(tip_source, "stats") else {},
+            camera=self.tip_source.stats() if hasattr(self.tip_source, "stats") else {},
             estimator=self.estimator.stats(),
         )
 

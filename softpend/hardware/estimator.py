@@ -150,13 +150,11 @@ class RigStateEstimator:
             raise ValueError("estimator: call reset() with the first encoder sample first")
 
     def _predict(self, x: np.ndarray, p: np.ndarray, torque_nm: float) -> tuple[np.ndarray, np.ndarray]:
-        n, dt, cfg = self.n, self.dt_s, self.config
-        model = self.model
+        n, dt, cfg, model = self.n, self.dt_s, self.config, self.model
         model.reset(x[:n], x[n:])
         mass, stiffness, damping = model.linearized_matrices()
         model.step(torque_nm)
-        q, qd = model.joint_state()
-        x_next = np.concatenate([q, qd])
+        x_next = np.concatenate(model.joint_state())
         if not np.all(np.isfinite(x_next)):
             raise SimulationDiverged("estimator model state is not finite")
         m_inv = np.linalg.inv(mass)
@@ -242,11 +240,10 @@ class RigStateEstimator:
         self._history.append(_Step(float(time_s), x, p, float(torque_nm), float(phi_rad), float(phi_dot_rad_s)))
         while len(self._history) > 2 and self._history[1].time_s < time_s - self.config.history_s:
             self._history.popleft()
-        if self._pending_tips:
-            due = [tip for tip in self._pending_tips if tip[0] <= time_s + self.dt_s / 2]
-            self._pending_tips = [tip for tip in self._pending_tips if tip[0] > time_s + self.dt_s / 2]
-            for tip in due:
-                self._apply_tip(*tip)
+        due = [tip for tip in self._pending_tips if tip[0] <= time_s + self.dt_s / 2]
+        self._pending_tips = [tip for tip in self._pending_tips if tip[0] > time_s + self.dt_s / 2]
+        for tip in due:
+            self._apply_tip(*tip)
 
     def update_tip(self, capture_time_s: float, x_m: float, y_m: float) -> bool:
         """Correct the step nearest ``capture_time_s`` with a tip seen at ``(x_m, y_m)`` and replay to now (a frame

@@ -25,9 +25,8 @@ class SimulationDiverged(RuntimeError):
 
 
 class PlantBase(ExudynSystem):
-    """What every plant offers (environments, controllers, the evaluation and the rig emulator use it); ``q`` is the
-    coordinate vector, hub angle first (unwrapped) unless the hub is locked.  A subclass builds its Exudyn system,
-    sets ``n_coordinates`` and supplies the methods that raise ``NotImplementedError`` here."""
+    """What every plant offers; ``q``: the coordinates, hub angle first (unwrapped) unless the hub is locked.  A
+    subclass builds its Exudyn system, sets ``n_coordinates`` and supplies the methods that raise here."""
 
     params: RodParams
     dt_s: float

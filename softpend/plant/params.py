@@ -29,12 +29,9 @@ POSITIVE_FIELDS = ("length_m", "mass_kg", "width_m", "depth_m", "torque_limit_nm
 
 @dataclass(frozen=True)
 class RodParams:
-    """Parameters of the motor hub and the soft rod (SI units).
-
-    ``width_m``, ``depth_m``: cross-section (``depth_m`` in the bending direction); ``joint_damping_nms_per_rad``:
-    ``zeta`` of each interior joint; ``hub_inertia_kgm2``: rotor inertia reflected through the gearbox;
-    ``stiffness_scale`` multiplies every joint stiffness (0: freely hinged links).
-    """
+    """Parameters of the motor hub and the soft rod (SI units; ``depth_m`` in the bending direction,
+    ``joint_damping_nms_per_rad`` of each interior joint, ``hub_inertia_kgm2`` reflected through the gearbox,
+    ``stiffness_scale`` multiplies every joint stiffness: 0 for freely hinged links)."""
 
     length_m: float = 0.30
     n_links: int = 4

@@ -4,6 +4,7 @@ garbled STATE frames, truth log), on a :class:`SimClock` (:class:`SimRig`) or a 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
@@ -249,10 +250,8 @@ class RigEmulator(SimRig):
 
     def close(self) -> None:
         for fd in (self.master_fd, self._slave_fd):
-            try:
+            with contextlib.suppress(OSError):
                 os.close(fd)
-            except OSError:
-                pass
         super().close()
         link = self.link_path
         if self._linked and link is not None and link.is_symlink() and os.readlink(link) == self.port:
@@ -285,9 +284,8 @@ def serve_forever(config: RigConfig, truth_log: Optional[str] = None, link_path:
     previous = signal.signal(signal.SIGTERM, lambda signum, frame: emulator.stop())
     print(emulator.port if link_path is None else f"{emulator.port} -> {link_path}", flush=True)
     try:
-        emulator.serve()
-    except KeyboardInterrupt:
-        pass
+        with contextlib.suppress(KeyboardInterrupt):
+            emulator.serve()
     finally:
         signal.signal(signal.SIGTERM, previous)
         emulator.close()

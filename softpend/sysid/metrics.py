@@ -144,6 +144,21 @@ def trial_curves(
     return out
 
 
+def _starts(
+    dataset: TrajectoryDataset, trials: Optional[np.ndarray], horizon_s: float, history: int, start_stride: int
+) -> tuple[int, np.ndarray]:
+    """Steps of ``horizon_s`` and rows ``(trial, sample)`` of every ``start_stride``-th sample from ``history`` on
+    that leaves them in its trial."""
+    start_stride = positive_int("start_stride", start_stride)
+    steps = int(round(horizon_s / dataset.dt_s))
+    n_states = dataset.n_samples - history
+    if steps < 1 or n_states < steps + 1:
+        raise ValueError(f"horizon_s={horizon_s} must be at least one step and fit in trials of {n_states} states")
+    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
+    samples = range(history, dataset.n_samples - steps, start_stride)
+    return steps, np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2)
+
+
 def rollout_errors(
     model: DynamicsModel | DynamicsEnsemble,
     dataset: TrajectoryDataset,
@@ -153,18 +168,8 @@ def rollout_errors(
 ) -> RolloutErrors:
     """Open-loop rollouts from every ``start_stride``-th state that leaves ``horizon_s`` in its trial."""
     layout: StateLayout = model.layout
-    start_stride = positive_int("start_stride", start_stride)
-    steps = int(round(horizon_s / dataset.dt_s))
-    if steps < 1:
-        raise ValueError(f"horizon_s must be at least one step ({dataset.dt_s} s), got {horizon_s!r}")
-    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-    n_states = dataset.n_samples - layout.history
-    if n_states < steps + 1:
-        raise ValueError(f"horizon_s={horizon_s} needs {steps + 1} states a trial, the dataset has {n_states}")
-    samples = range(layout.history, dataset.n_samples - steps, start_stride)
-    windows, predicted = network_rollouts(
-        model, dataset, np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2), steps
-    )
+    steps, starts = _starts(dataset, trials, horizon_s, layout.history, start_stride)
+    windows, predicted = network_rollouts(model, dataset, starts, steps)
     columns = [layout.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
     return _rms_errors(predicted[..., columns], windows[..., columns], steps, dataset.dt_s)
 
@@ -227,15 +232,10 @@ def perturbed_simulator_errors(
     if dataset.joint_positions_rad is None or dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
     assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
-    start_stride = positive_int("start_stride", start_stride)
     finite("hub_offset_rad", hub_offset_rad)
     finite("hub_rate_offset_rad_s", hub_rate_offset_rad_s)
     non_negative("torque_noise_std_nm", torque_noise_std_nm)
-    steps = int(round(horizon_s / dataset.dt_s))
-    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-    n_states = dataset.n_samples - history
-    if steps < 1 or n_states < steps + 1:
-        raise ValueError(f"horizon_s={horizon_s} does not fit in trials of {n_states} states")
+    steps, starts = _starts(dataset, trials, horizon_s, history, start_stride)
     params = dataset.params
     if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
         params = params.replace(torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
@@ -244,19 +244,18 @@ def perturbed_simulator_errors(
     rng = np.random.default_rng(seed)
     columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
     predicted, truth = [], []
-    for trial in trials:
-        for start in range(history, history + n_states - steps, start_stride):
-            q = dataset.joint_positions_rad[trial, start].copy()
-            q[0] += hub_offset_rad
-            qd = dataset.joint_velocities_rad_s[trial, start].copy()
-            qd[0] += hub_rate_offset_rad_s
-            plant.reset(q, qd)
-            path = [plant.observe()]
-            for k in range(steps):
-                noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
-                path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
-            truth.append(dataset.positions[trial, start : start + steps + 1][:, columns])
-            predicted.append(np.array([o.as_array()[[0, 2, 3]] for o in path]))
+    for trial, start in starts:
+        q = dataset.joint_positions_rad[trial, start].copy()
+        q[0] += hub_offset_rad
+        qd = dataset.joint_velocities_rad_s[trial, start].copy()
+        qd[0] += hub_rate_offset_rad_s
+        plant.reset(q, qd)
+        path = [plant.observe()]
+        for k in range(steps):
+            noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
+            path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
+        truth.append(dataset.positions[trial, start : start + steps + 1][:, columns])
+        predicted.append(np.array([o.as_array()[[0, 2, 3]] for o in path]))
     return _rms_errors(np.array(predicted), np.array(truth), steps, dataset.dt_s)
 
 

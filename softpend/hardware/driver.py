@@ -395,10 +395,8 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
         return
     view = memoryview(frame)
     while view:
-        try:
+        with contextlib.suppress(BlockingIOError, InterruptedError):
             view = view[os.write(fd, view) :]
-        except (BlockingIOError, InterruptedError):
-            pass
         if view:
             _, writable, _ = select.select([], [fd], [], timeout_s)
             if not writable:

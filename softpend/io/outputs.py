@@ -149,14 +149,11 @@ def _ours(path: Path) -> bool:
     entry = (_read_manifest(path.parent) or {}).get(path.name)
     if not isinstance(entry, dict) or path.is_symlink() or not path.is_file():  # a FIFO would block the read
         return False
-    try:
-        if isinstance(entry.get("sha256"), str):
-            return _sha256(path) == entry["sha256"]
-        if "sha256" in entry and entry["sha256"] is None:
-            with open(path, "rb") as handle:
-                return handle.read(18) == b"# softpend-log v1 "
-    except OSError:
-        pass
+    if isinstance(entry.get("sha256"), str):  # an OSError reading it: not ours (_claims)
+        return _sha256(path) == entry["sha256"]
+    if "sha256" in entry and entry["sha256"] is None:
+        with open(path, "rb") as handle:
+            return handle.read(18) == b"# softpend-log v1 "
     return False
 
 

@@ -176,9 +176,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or hold {self.num_envs} seeds, got {len(seeds)}")
         mask = (options or {}).get("reset_mask")
-        if mask is None:
-            mask = np.ones(self.num_envs, dtype=bool)
-        mask = np.asarray(mask)
+        mask = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask)
         if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
             raise ValueError(f"options['reset_mask'] must be a boolean array of shape ({self.num_envs},) with a True")
         indices = np.flatnonzero(mask)

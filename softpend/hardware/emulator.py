@@ -14,6 +14,7 @@ import select
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import tty
 from dataclasses import dataclass, field
@@ -296,8 +297,6 @@ class EmulatorProcess:
     """A rig emulator in a child process, a context manager; :attr:`port` is its pty path."""
 
     def __init__(self, config: Optional[RigConfig] = None, truth_log: Optional[str | os.PathLike] = None) -> None:
-        import tempfile
-
         config = config if config is not None else RigConfig()
         cmd = [sys.executable, "-m", "softpend.hardware.emulator", "--config-json", json.dumps(config.to_dict())]
         cmd += [] if truth_log is None else ["--truth-log", str(truth_log)]

@@ -6,6 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from softpend.io.outputs import atomic_write
+
 BEGIN_MARKER = "# ---- BEGIN softpend/hardware/protocol.py (verbatim copy; do not edit here) ----\n"
 END_MARKER = "# ---- END softpend/hardware/protocol.py ----\n"
 FIRMWARE_PATH = Path(__file__).resolve().parents[2] / "firmware" / "vex_v5_motor.py"
@@ -30,8 +32,6 @@ def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
     text = Path(firmware_path).read_text()
     head = text.split(BEGIN_MARKER, 1)[0]
     tail = text.split(END_MARKER, 1)[1]
-    from softpend.io.outputs import atomic_write
-
     with atomic_write(firmware_path, "w") as handle:
         handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
 

@@ -13,6 +13,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from softpend.checks import non_negative
+from softpend.io.reading import read_json_checked
 from softpend.vision.tracker import GREEN_HSV, find_blobs
 
 #: Largest calibration or marker file read [bytes].
@@ -35,8 +36,6 @@ def points_array(name: str, value, n_min: int = 3, n_max: int = 6) -> np.ndarray
 
 def read_json_file(name: str, path: str | Path, max_bytes: int):
     """The JSON document in the regular file at ``path`` (``ValueError`` naming ``name`` and the file)."""
-    from softpend.io.reading import read_json_checked
-
     return read_json_checked(path, f"{name} file", max_bytes)
 
 

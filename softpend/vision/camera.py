@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from softpend.checks import finite, in_unit_interval, int_at_least, non_negative, positive
+from softpend.io.outputs import atomic_write
 from softpend.vision.calibration import points_array, read_json_file
 
 #: Highest frame rate accepted [1/s].
@@ -313,8 +314,6 @@ def render_video(
         "camera_model": asdict(camera.model),
         "effects": asdict(camera.effects),
     }
-    from softpend.io.outputs import atomic_write
-
     with atomic_write(str(path) + ".json", "w") as handle:
         handle.write(json.dumps(sidecar))
     return RenderedClip(stamps, tips)

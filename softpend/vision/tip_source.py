@@ -14,6 +14,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from softpend.checks import in_unit_interval, non_negative
+from softpend.io.reading import check_capture_path
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, CameraModel, SyntheticCamera, _hide_dot, check_fps
 from softpend.vision.tracker import Detection, TipTracker
@@ -321,8 +322,6 @@ def open_tip_source(
     stream URL or a file."""
     if not isinstance(camera, str) or not camera.strip():
         raise ValueError(f"camera must be a device index or a URL, got {camera!r}")
-    from softpend.io.reading import check_capture_path
-
     check_capture_path("camera", camera)  # a FIFO or folder would block the capture
     device: int | str = int(camera) if camera.strip().isdigit() else camera
     if isinstance(device, int) and device > MAX_DEVICE_INDEX:

@@ -154,9 +154,8 @@ class MotorLink:
     @property
     def torque_limit_nm(self) -> float:
         """The smaller of the host's and the device's limit [N m]."""
-        if self.device is None:
-            return self.host_torque_limit_nm
-        return min(self.host_torque_limit_nm, self.device.torque_limit_nm)
+        device_limit = math.inf if self.device is None else self.device.torque_limit_nm
+        return min(self.host_torque_limit_nm, device_limit)
 
     @property
     def bad_frames(self) -> int:
@@ -212,9 +211,7 @@ class MotorLink:
             _OPEN_LINKS.discard(self)
 
     def __enter__(self) -> "MotorLink":
-        if not self.is_open:
-            self.open()
-        return self
+        return self if self.is_open else self.open()
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.close()

@@ -58,9 +58,7 @@ class RigConfig:
             finite("initial_tilt_rad", self.initial_tilt_rad)
 
     def to_dict(self) -> dict:
-        data = dataclasses.asdict(self)
-        data["task"] = self.task.to_dict()
-        return data
+        return {**dataclasses.asdict(self), "task": self.task.to_dict()}
 
     @classmethod
     def from_dict(cls, data: dict) -> "RigConfig":

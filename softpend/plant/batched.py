@@ -525,13 +525,8 @@ class BatchedPRBChain:
         theta_dot = torch.where(
             r2 > 0, (ex * ey_dot - ey * ex_dot) / torch.where(r2 > 0, r2, torch.ones_like(r2)), torch.zeros_like(r2)
         )
-
-        def wrap(angle: torch.Tensor) -> torch.Tensor:
-            return torch.remainder(angle + math.pi, 2 * math.pi) - math.pi
-
-        return torch.stack(
-            [wrap(x[0]), wrap(theta), ex, ey, wrap(a[-1]), v[0], theta_dot, ex_dot, ey_dot, ad[-1]], dim=1
-        )
+        phi, theta, er = torch.remainder(torch.stack([x[0], theta, a[-1]]) + math.pi, 2 * math.pi) - math.pi
+        return torch.stack([phi, theta, ex, ey, er, v[0], theta_dot, ex_dot, ey_dot, ad[-1]], dim=1)
 
     def energy_j(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> dict[str, torch.Tensor]:
         """Energies of each rod [J] (tensors ``(B,)``), as :meth:`softpend.plant.PRBPlant.energy_j`."""

@@ -18,9 +18,8 @@ class SimClock:
     """Simulated time [s] from 0: a queue of events that run when the clock reaches them."""
 
     def __init__(self) -> None:
-        self._now = 0.0
         self._events: list[tuple[float, int, Callable[[], None]]] = []
-        self._order = 0
+        self._now, self._order = 0.0, 0  # the time, and the count of events scheduled (their order at one time)
 
     def now_s(self) -> float:
         return self._now
@@ -57,11 +56,8 @@ class SimSerial:
     ``send(data)`` takes the bytes the host writes, :meth:`deliver` brings the device's."""
 
     def __init__(self, clock: SimClock, send: Callable[[bytes], None]) -> None:
-        self.clock = clock
-        self._send = send
-        self._rx = bytearray()
+        self.clock, self._send, self._rx, self.is_open = clock, send, bytearray(), True
         self.timeout: Optional[float] = 0.0
-        self.is_open = True
 
     def deliver(self, data: bytes) -> None:
         """Bytes from the device reach the host."""

@@ -291,8 +291,7 @@ class CaptureTipSource(ThreadedTipSource):
             raise ValueError(f"camera {device!r} cannot be opened by OpenCV (no such device or stream)")
 
     def _run(self) -> None:
-        index = 0
-        last_frame = time.monotonic()
+        index, last_frame = 0, time.monotonic()
         while not self._stop.is_set():
             ok, frame = self._capture.read()
             now = time.monotonic()

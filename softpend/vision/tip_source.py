@@ -242,22 +242,20 @@ class SyntheticLiveCamera(ThreadedTipSource):
     def start(self) -> None:
         if self.first_frame_time_s is None:
             self.first_frame_time_s = self.clock.now_s() + self.camera.effects.exposure_s
-            self._schedule(0)
+            self.clock.call_at(self.first_frame_time_s + self.latency_s, lambda: self._frame(0))
 
     def close(self, timeout_s: float = 0.0) -> None:
         self._closed = True
 
-    def _schedule(self, k: int) -> None:
-        assert self.first_frame_time_s is not None  # set by start()
-        self.clock.call_at(self.first_frame_time_s + k / self.fps + self.latency_s, lambda: self._frame(k))
-
     def _frame(self, k: int) -> None:
+        """Frame ``k``, ready now; the next one scheduled."""
+        first = self.first_frame_time_s
+        assert first is not None  # set by start()
         if self._closed:
             return
-        self._schedule(k + 1)
-        assert self.first_frame_time_s is not None  # set by start()
-        t_k = self.first_frame_time_s + k / self.fps
-        elapsed = t_k - self.first_frame_time_s
+        self.clock.call_at(first + (k + 1) / self.fps + self.latency_s, lambda: self._frame(k + 1))
+        t_k = first + k / self.fps
+        elapsed = t_k - first
         if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:
             self.counts["frames_stalled"] += 1
             return

@@ -60,9 +60,8 @@ def check_run_folder(
             "only for the same settings and seed: choose another folder"
         )
     if not resume:
-        advice = (
-            "resume it (softpend train --resume) or choose another folder: a run folder is never trained over"
-            if can_resume
-            else "a run folder is never trained over: choose another folder"
+        advice = "resume it (softpend train --resume) or " if can_resume else ""
+        raise ValueError(
+            f"run folder {folder} already holds this run (same settings, seed {seed}); {advice}choose another "
+            "folder: a run folder is never trained over"
         )
-        raise ValueError(f"run folder {folder} already holds this run (same settings, seed {seed}); {advice}")

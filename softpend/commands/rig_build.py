@@ -108,12 +108,12 @@ def run_check(args: argparse.Namespace) -> int:
     if not 0 < args.push_fraction <= 0.5:
         raise ValueError(f"--push-fraction must lie in (0, 0.5], got {args.push_fraction!r}")
     task = Task(rod=_rod(args), start_noise_rad=0.0)
-    if args.twin:
-        rig = SimRig(RigConfig(task=task, counts_per_rev=args.counts_per_rev))
-        report = rig_check("twin", task, args.rest_s, args.push_fraction, serial=rig.connect())
+    rig = SimRig(RigConfig(task=task, counts_per_rev=args.counts_per_rev)) if args.twin else None
+    report = rig_check(
+        "twin" if args.twin else args.port, task, args.rest_s, args.push_fraction, serial=rig and rig.connect()
+    )
+    if rig is not None:
         rig.close()
-    else:
-        report = rig_check(args.port, task, args.rest_s, args.push_fraction)
     if args.out is not None:
         outputs.write_json(args.out, finite_or_none(report))
     for name, check in report["checks"].items():
@@ -142,18 +142,16 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         info = link.device
         assert info is not None  # the handshake on opening the link sets it
         rtt, rate, limit = float(np.median([link.ping() for _ in range(5)])), 1.0 / task.dt_s, rod.torque_limit_nm
-        watchdog_ms = info.watchdog_s * 1e3
-        check(
-            "handshake",
-            info.protocol_version == protocol.PROTOCOL_VERSION
-            and math.isclose(info.torque_limit_nm, limit, rel_tol=1e-5)
-            and math.isclose(info.state_rate_hz, rate, rel_tol=1e-6)
-            and info.watchdog_s <= 0.1 + 1e-9,
+        watchdog_ms, tick = info.watchdog_s * 1e3, 2 * math.pi / info.counts_per_rev
+        ok = info.protocol_version == protocol.PROTOCOL_VERSION and info.watchdog_s <= 0.1 + 1e-9
+        ok &= math.isclose(info.torque_limit_nm, limit, rel_tol=1e-5)
+        ok &= math.isclose(info.state_rate_hz, rate, rel_tol=1e-6)
+        detail = (
             f"protocol {info.protocol_version} (host {protocol.PROTOCOL_VERSION}), torque limit "
             f"{info.torque_limit_nm:g} N m (rod {limit:g}), {info.state_rate_hz:g} states/s (host {rate:g}), watchdog "
-            f"{watchdog_ms:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms",
+            f"{watchdog_ms:g} ms (at most 100), {info.counts_per_rev} counts/rev, round trip {rtt * 1e3:.2f} ms"
         )
-        tick = 2 * math.pi / info.counts_per_rev
+        check("handshake", ok, detail)
 
         link.drain_states()
         rest = _states_for(link, rest_s)
@@ -161,27 +159,23 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         period = float(np.median(np.diff([s.device_time_s for s in rest]))) if len(rest) > 2 else math.nan
         offset = float(np.mean(phi) - math.pi) if len(phi) else math.nan
         spread = float((phi.max() - phi.min()) / tick) if len(phi) else math.nan
-        check(
-            "rest",
-            len(rest) > 2 and abs(period * rate - 1) < 0.1 and abs(offset) <= 0.05 and spread <= 3,
+        ok = len(rest) > 2 and abs(period * rate - 1) < 0.1 and abs(offset) <= 0.05 and spread <= 3
+        detail = (
             f"{len(rest)} states in {rest_s:g} s (period {period * 1e3:.2f} ms), hub {offset:+.4f} rad from hanging, "
-            f"spread {spread:.0f} ticks",
-            offset_rad=offset,
-            spread_ticks=spread,
+            f"spread {spread:.0f} ticks"
         )
+        check("rest", ok, detail, offset_rad=offset, spread_ticks=spread)
 
         push = push_fraction * limit
         moved = _states_for(link, 0.15, push)
         delta = (moved[-1].phi_rad - (phi[-1] if len(phi) else math.pi)) if moved else math.nan
         applied = max((s.applied_torque_nm for s in moved), default=math.nan)
         _states_for(link, 1.0, 0.0)  # let the swing settle, feeding the watchdog with zero torque
-        check(
-            "direction",
-            delta > tick and math.isclose(applied, push, rel_tol=1e-3),
+        detail = (
             f"a push of {push:+.3g} N m for 0.15 s turned the hub {delta:+.4f} rad (positive expected), device "
-            f"applied {applied:+.3g} N m",
-            delta_rad=delta,
+            f"applied {applied:+.3g} N m"
         )
+        check("direction", delta > tick and math.isclose(applied, push, rel_tol=1e-3), detail, delta_rad=delta)
 
         last_seq = link.send_torque(0.0)
         silence = _states_for(link, 3 * info.watchdog_s + 0.2)
@@ -191,13 +185,11 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         trip_ms = (tripped[0].device_time_s - in_force) * 1e3 if tripped else math.nan
         zero = bool(tripped) and all(s.applied_torque_nm == 0.0 for s in tripped)
         slack_ms = WATCHDOG_SLACK_STATES * 1e3 / info.state_rate_hz
-        check(
-            "watchdog",
-            zero and watchdog_ms - slack_ms <= trip_ms <= watchdog_ms + slack_ms,
+        detail = (
             f"tripped {trip_ms:.0f} ms (device clock) after the last command took effect (watchdog {watchdog_ms:g} "
-            f"ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} after the trip",
-            trip_ms=trip_ms,
+            f"ms, within {slack_ms:.0f} ms passes), torque {'zero' if zero else 'NOT zero'} after the trip"
         )
+        check("watchdog", zero and watchdog_ms - slack_ms <= trip_ms <= watchdog_ms + slack_ms, detail, trip_ms=trip_ms)
         link.stop()
     device = ("protocol_version", "counts_per_rev", "torque_limit_nm", "watchdog_s", "state_rate_hz")
     return {

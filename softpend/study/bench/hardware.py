@@ -35,12 +35,12 @@ def _rig_loop_jitter() -> dict[str, float]:
     from softpend.control.swingup import EnergySwingUpController
     from softpend.hardware.closed_loop import run_closed_loop
     from softpend.hardware.driver import MotorLink
-    from softpend.hardware.emulator import RigConfig, start_emulator_process
+    from softpend.hardware.emulator import EmulatorProcess, RigConfig
     from softpend.hardware.estimator import RigStateEstimator
 
     rig = RigConfig()
     task, controller = rig.task, EnergySwingUpController(rig.task.rod, dt_s=rig.task.dt_s)
-    with start_emulator_process(rig) as emulator:
+    with EmulatorProcess(rig) as emulator:
         with MotorLink(emulator.port, torque_limit_nm=task.torque_limit_nm, timeout_s=1.0) as link:
             result = run_closed_loop(link, controller, RigStateEstimator(task), LOOP_SECONDS)
     periods_ms = result.command_periods_s * 1e3

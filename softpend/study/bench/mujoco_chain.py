@@ -1,7 +1,5 @@
-"""The PRB chain of :class:`softpend.plant.PRBPlant` as a MuJoCo model, for the ``plant`` benchmark's comparison.
-
-MuJoCo's ``qpos``/``qvel`` are the Exudyn plant's joint state; MuJoCo is optional (``pip install softpend[bench]``).
-"""
+"""The PRB chain of :class:`softpend.plant.PRBPlant` as a MuJoCo model (``qpos``/``qvel``: the Exudyn plant's joint
+state) for the ``plant`` benchmark; MuJoCo is optional (``pip install softpend[bench]``)."""
 
 from __future__ import annotations
 
@@ -42,7 +40,6 @@ def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, in
     masses, coms, inertias = link_inertials(p)
     stiffness, damping = p.spring_stiffnesses_nm_per_rad(), p.spring_dampings_nms_per_rad()
     r, limit, hub = repr, p.torque_limit_nm, repr(p.hub_inertia_kgm2)  # repr: the same doubles as RodParams
-    # the hub's mass sits on the fixed axis, so any value is exact; MuJoCo wants one
     body = f"""<body name="hub" pos="0 0 0">
 <joint name="hub" type="hinge" axis="0 0 1" damping="{r(p.hub_friction_nms_per_rad)}"/>
 <inertial pos="0 0 0" mass="{r(p.mass_kg)}" diaginertia="{hub} {hub} {hub}"/>\n"""
@@ -68,8 +65,7 @@ damping="{r(damping[i])}"/>
 
 
 class MuJoCoChain:
-    """One rod of :func:`chain_mjcf` stepped by control steps of :data:`CONTROL_STEP_S` (a whole number of
-    ``timestep_s``) with the torque held."""
+    """One rod of :func:`chain_mjcf` stepped by control steps of :data:`CONTROL_STEP_S` with the torque held."""
 
     def __init__(self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> None:
         import mujoco
@@ -111,8 +107,8 @@ class MuJoCoChain:
         return any(self.data.warning[w].number > 0 for w in self._instability_warnings)
 
     def hub_trajectory_rad(self, q0: np.ndarray, qd0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
-        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad]; ``nan`` once diverged;
-        MuJoCo's warnings are not printed (``MjData.warning`` still counts them)."""
+        """Hub angle after each control step of ``torques_nm`` from ``(q0, qd0)`` [rad] (``nan`` once diverged),
+        MuJoCo's warnings silenced."""
         self.set_state(q0, qd0)
         hub = np.full(len(torques_nm), np.nan)
         before = self._mujoco.get_mju_user_warning()
@@ -128,7 +124,6 @@ class MuJoCoChain:
 
 
 def _chain(params: RodParams | int, integrator: str, substeps: int) -> MuJoCoChain:
-    """The chain of ``params`` (or of the default rod with that many links) with control steps of ``substeps``."""
     params = RodParams(n_links=params) if isinstance(params, int) else params
     return MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
 
@@ -154,8 +149,7 @@ def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1
 
 
 def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 4000, repeats: int = 2) -> float:
-    """Control steps per second of one MuJoCo rod stepped from Python from hanging under seeded random torques
-    (best of ``repeats``)."""
+    """Control steps per second of one MuJoCo rod from hanging under seeded random torques (best of ``repeats``)."""
     chain = _chain(n_links, integrator, substeps)
     torques = (np.random.default_rng(0).uniform(-1, 1, n_steps) * chain.params.torque_limit_nm).tolist()
     best, step = math.inf, chain.step
@@ -173,8 +167,8 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
 def rollout_rod_steps_per_s(
     n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3
 ) -> float:
-    """Rod-steps per second of ``mujoco.rollout`` over ``batch_size`` hanging rods on one thread under seeded random
-    torques (best of ``repeats``, after a warm-up)."""
+    """Rod-steps per second of ``mujoco.rollout`` over ``batch_size`` hanging rods, one thread, seeded random torques
+    (best of ``repeats`` after a warm-up)."""
     import mujoco
     from mujoco import rollout
 
@@ -207,19 +201,18 @@ CONFIGURATIONS_N10 = (("mujoco_rk4_stable", "RK4", None), ("mujoco_implicitfast_
 #: A converged RK4 run: the check that both models are the same chain.
 CONVERGED = ("mujoco_rk4_0p25ms", "RK4", 40)
 
+_RK4_N4, _RK4_N10 = "mujoco_rk4_5ms_steps_per_s_n4", "mujoco_rk4_stable_steps_per_s_n10"
+_ROLLOUT_N4 = "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"
 #: ``key -> (rate of the plant benchmark, MuJoCo rate)`` of the ratios :func:`bench_figures` adds.
 RATIOS = {
-    "exudyn_env_over_mujoco_rk4_n4": ("env_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
-    "exudyn_solver_over_mujoco_rk4_n4": ("solver_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
-    "batched_over_mujoco_rk4_n4": ("batched_rod_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
-    "batched_over_mujoco_rk4_n10": ("batched_rod_steps_per_s_n10", "mujoco_rk4_stable_steps_per_s_n10"),
-    "batched_rk4_over_mujoco_rk4_n4": ("batched_rk4_rod_steps_per_s_n4", "mujoco_rk4_5ms_steps_per_s_n4"),
-    "batched_rk4_over_mujoco_rk4_n10": ("batched_rk4_rod_steps_per_s_n10", "mujoco_rk4_stable_steps_per_s_n10"),
-    "batched_over_mujoco_rollout_n4": ("batched_rod_steps_per_s_n4", "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"),
-    "batched_rk4_over_mujoco_rollout_n4": (
-        "batched_rk4_rod_steps_per_s_n4",
-        "mujoco_rollout_rk4_5ms_rod_steps_per_s_n4",
-    ),
+    "exudyn_env_over_mujoco_rk4_n4": ("env_steps_per_s_n4", _RK4_N4),
+    "exudyn_solver_over_mujoco_rk4_n4": ("solver_steps_per_s_n4", _RK4_N4),
+    "batched_over_mujoco_rk4_n4": ("batched_rod_steps_per_s_n4", _RK4_N4),
+    "batched_over_mujoco_rk4_n10": ("batched_rod_steps_per_s_n10", _RK4_N10),
+    "batched_rk4_over_mujoco_rk4_n4": ("batched_rk4_rod_steps_per_s_n4", _RK4_N4),
+    "batched_rk4_over_mujoco_rk4_n10": ("batched_rk4_rod_steps_per_s_n10", _RK4_N10),
+    "batched_over_mujoco_rollout_n4": ("batched_rod_steps_per_s_n4", _ROLLOUT_N4),
+    "batched_rk4_over_mujoco_rollout_n4": ("batched_rk4_rod_steps_per_s_n4", _ROLLOUT_N4),
 }
 
 
@@ -239,5 +232,5 @@ def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> d
         figures.update(mujoco_hub_errors_rad(references[n_links], compared))
     for stem, integrator, substeps in CONFIGURATIONS_N4:
         figures[f"{stem}_diverges_n10"] = float(diverges(10, integrator, substeps))
-    figures["mujoco_rollout_rk4_5ms_rod_steps_per_s_n4"] = rollout_rod_steps_per_s(4, "RK4", 2)
+    figures[_ROLLOUT_N4] = rollout_rod_steps_per_s(4, "RK4", 2)
     return figures | {key: base[ours] / figures[theirs] for key, (ours, theirs) in RATIOS.items()}

@@ -230,7 +230,8 @@ class MotorLink:
             self.emergency_stop()
             raise ValueError(f"torque_nm must be a finite number, got {torque_nm!r} (motor stopped)")
         limit = self.torque_limit_nm
-        torque = _float32_within(min(max(torque, -limit), limit), limit)
+        wire = np.float32(min(max(torque, -limit), limit))  # the float32 on the wire, one step in if beyond the limit
+        torque = float(np.nextafter(wire, np.float32(0)) if abs(float(wire)) > limit else wire)
         seq = self._write(proto.MSG_TORQUE, (torque,))
         self.last_command_nm = torque
         return seq
@@ -401,9 +402,3 @@ def _write_frame(ser, frame: bytes, timeout_s: float) -> None:
                     f"write timeout: the port took no byte for {timeout_s:g} s ({len(view)} of {len(frame)} "
                     "bytes unsent)"
                 )
-
-
-def _float32_within(value: float, limit: float) -> float:
-    """``value`` as the float32 on the wire, one float32 step towards zero if rounding took it beyond ``limit``."""
-    wire = np.float32(value)
-    return float(np.nextafter(wire, np.float32(0)) if abs(float(wire)) > limit else wire)

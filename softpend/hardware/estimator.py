@@ -108,8 +108,7 @@ class RigStateEstimator:
         stds = [cfg.encoder_std_rad] + ([] if cfg.hub_rate_std_rad_s is None else [cfg.hub_rate_std_rad_s])
         self._h_encoder = np.eye(2 * n)[[0, n][: len(stds)]]  # measures the hub angle (and rate)
         self._r_encoder = np.diag([std**2 for std in stds])
-        self._r_tip = np.eye(2) * cfg.tip_std_m**2
-        self._eye_2n = np.eye(2 * n)
+        self._r_tip, self._eye_2n = np.eye(2) * cfg.tip_std_m**2, np.eye(2 * n)
         self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)
         self._a = np.zeros((2 * n, 2 * n))
         self._a[:n, n:] = np.eye(n)
@@ -157,11 +156,8 @@ class RigStateEstimator:
         x_next = np.concatenate(model.joint_state())
         if not np.all(np.isfinite(x_next)):
             raise SimulationDiverged("estimator model state is not finite")
-        m_inv = np.linalg.inv(mass)
-        a = self._a
-        a[n:, :n] = -m_inv @ stiffness
-        a[n:, n:] = -m_inv @ damping
-        eye = self._eye_2n
+        m_inv, a, eye = np.linalg.inv(mass), self._a, self._eye_2n
+        a[n:, :n], a[n:, n:] = -m_inv @ stiffness, -m_inv @ damping
         f = np.linalg.solve(eye - 0.5 * dt * a, eye + 0.5 * dt * a)
         b = m_inv[:, 0]
         sigma = self._accel_sigma + cfg.torque_std_nm**2 / dt * np.outer(b, b)
@@ -176,12 +172,9 @@ class RigStateEstimator:
     def _update(
         x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: np.ndarray, r: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        s = h @ p @ h.T + r
-        gain = np.linalg.solve(s, h @ p).T
-        x = x + gain @ innovation
+        gain = np.linalg.solve(h @ p @ h.T + r, h @ p).T
         i_kh = np.eye(len(x)) - gain @ h
-        p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form
-        return x, p
+        return x + gain @ innovation, i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form
 
     def _advance(
         self, x: np.ndarray, p: np.ndarray, torque_nm: float, steps: int, phi_rad: float, phi_dot_rad_s: float
@@ -196,19 +189,15 @@ class RigStateEstimator:
     def _tip_model(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Tip position [m], its velocity [m/s] and the Jacobian ``d tip / d x`` ``(2, 2n)`` at ``x``."""
         n = self.n
-        q = x[:n]
-        angles = np.cumsum(q)[1:]  # absolute angle of each link from upright
+        angles = np.cumsum(x[:n])[1:]  # absolute angle of each link from upright
         rates = np.cumsum(x[n:])[1:]
         length = self.task.rod.link_length_m
         s, c = np.sin(angles), np.cos(angles)
         tip = np.array([-length * s.sum(), length * c.sum()])
         velocity = np.array([-length * (c * rates).sum(), -length * (s * rates).sum()])
         jac = np.zeros((2, 2 * n))
-        tail_c = np.cumsum(c[::-1])[::-1]  # sum over links k >= i
-        tail_s = np.cumsum(s[::-1])[::-1]
-        jac[0, 0], jac[1, 0] = -length * tail_c[0], -length * tail_s[0]
-        jac[0, 1:n] = -length * tail_c
-        jac[1, 1:n] = -length * tail_s
+        tails = -length * np.cumsum(np.stack([c, s])[:, ::-1], axis=1)[:, ::-1]  # sums over links k >= i
+        jac[:, 0], jac[:, 1:n] = tails[:, 0], tails
         return tip, velocity, jac
 
     def _tip_innovation(self, step: _Step, x: np.ndarray, capture_time_s: float, x_m: float, y_m: float):
@@ -269,8 +258,7 @@ class RigStateEstimator:
         index = int(np.argmin(np.abs(times - capture_time_s)))
         step = history[index]
         innovation, jac = self._tip_innovation(step, step.x, capture_time_s, x_m, y_m)
-        s = jac @ step.p @ jac.T + self._r_tip
-        distance2 = float(innovation @ np.linalg.solve(s, innovation))
+        distance2 = float(innovation @ np.linalg.solve(jac @ step.p @ jac.T + self._r_tip, innovation))
         if distance2 > self.config.gate_sigma**2:
             self.counts["tips_refused"] += 1
             return False
@@ -285,8 +273,7 @@ class RigStateEstimator:
         """The estimate at the newest encoder sample, predicted ``lead_steps`` ahead (default: the config's)."""
         self._require_started()
         lead = self.config.lead_steps if lead_steps is None else int_at_least("lead_steps", lead_steps, 0)
-        last = self._history[-1]
-        n = self.n
+        last, n = self._history[-1], self.n
         q, qd = last.x[:n].copy(), last.x[n:].copy()
         if lead:
             self.model.reset(q, qd)

@@ -70,8 +70,7 @@ def estimate_clock_offset(
 ) -> ClockOffset:
     """``camera clock - motor clock`` from cross-correlating the rates of the hub angle and the camera's angle (NaN
     where lost) over the motor-clock ``window_s``, on a 1 ms grid refined by a parabola at the peak."""
-    tm = np.asarray(motor_time_s, float)
-    tc = np.asarray(camera_time_s, float)
+    tm, tc = np.asarray(motor_time_s, float), np.asarray(camera_time_s, float)
     if tm.size < 10 or tc.size < 10:
         raise ValueError("need at least 10 motor and 10 camera samples")
     if not max_offset_s > 0:
@@ -138,7 +137,6 @@ def synchronise(
     dt_s: float = 0.01,
     trial_length_s: float = 5.0,
     offset: Optional[ClockOffset] = None,
-    max_offset_s: float = 1.0,
 ) -> SyncResult:
     """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into trials of
     ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first 4 s (the wiggle); a
@@ -152,18 +150,15 @@ def synchronise(
             raise ValueError(f"{name} log is missing columns {missing}")
     if not (dt_s > 0 and trial_length_s >= 2 * dt_s):
         raise ValueError(f"dt_s must be positive and trial_length_s >= 2 dt_s, got {dt_s}, {trial_length_s}")
-    tm = motor["device_time_s"]
-    phi = np.unwrap(motor["phi_rad"])
-    torque = motor["applied_torque_nm"]
-    tc_cam = camera["camera_time_s"]
-    lost = camera["lost"] > 0.5
+    tm, phi, torque = motor["device_time_s"], np.unwrap(motor["phi_rad"]), motor["applied_torque_nm"]
+    tc_cam, lost = camera["camera_time_s"], camera["lost"] > 0.5
     x_m, y_m = camera["x_m"].copy(), camera["y_m"].copy()
     if offset is None:
         if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
             reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
         else:  # no hub marker: the tip angle (biased by the rod's lag)
             reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
-        offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0), max_offset_s)
+        offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0))
     tc = tc_cam - offset.offset_s  # camera frames on the motor clock
 
     gaps = _gaps_from_times(tm, "motor states missing") + _gaps_from_times(tc, "camera frames missing")
@@ -174,8 +169,7 @@ def synchronise(
     gaps.sort(key=lambda g: g.start_s)
 
     good = ~lost
-    start = max(tm[0], tc[good][0])
-    end = min(tm[-1], tc[good][-1])
+    start, end = max(tm[0], tc[good][0]), min(tm[-1], tc[good][-1])
     if end - start < trial_length_s:
         raise ValueError(f"the motor and camera records overlap for {max(end - start, 0):.3f} s, less than one trial")
     first = tm[0] + math.ceil((start - tm[0]) / dt_s - 1e-9) * dt_s

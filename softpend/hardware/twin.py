@@ -28,28 +28,22 @@ def rig_babble_controller(
     duration_s: float,
     torque_limit_nm: float,
     seed: int,
-    torque_std_fraction: float = 0.5,
-    torque_bandwidth_hz: float = 2.0,
-    dt_s: float = 0.01,
     program: Optional[np.ndarray] = None,
 ) -> Callable[[RigObservation, float], float]:
-    """The rig's babbling program, a function of time: the start-up wiggle (2 s at 0.8 of the limit), then band-limited
-    Gaussian torque (:func:`softpend.sysid.band_limited_noise`), or the torques ``program`` [N m, one per
-    ``dt_s``, then zero] when given; amplitudes are fractions of the limit."""
+    """The rig's babbling program, a function of time every 0.01 s: the start-up wiggle (2 s at 0.8 of the limit),
+    then band-limited Gaussian torque (std half the limit, 2 Hz), or the torques ``program`` [N m] then zero."""
     from softpend.sysid.babble import band_limited_noise
 
-    rng = np.random.default_rng(seed)
-    n = int(math.ceil((duration_s + 1.0) / dt_s))
+    dt_s, n = 0.01, int(math.ceil((duration_s + 1.0) / 0.01))
     wiggle = startup_wiggle_torque(2.0, 0.8 * torque_limit_nm, seed=seed + 1, dt_s=dt_s)
     if program is None:
-        noise = band_limited_noise(rng, n, torque_std_fraction * torque_limit_nm, torque_bandwidth_hz, dt_s)
+        noise = band_limited_noise(np.random.default_rng(seed), n, 0.5 * torque_limit_nm, 2.0, dt_s)
     else:
         noise = np.append(np.asarray(program, dtype=float), 0.0)
     sequence = np.concatenate([wiggle, noise])
 
     def controller(observation: RigObservation, time_s: float) -> float:
-        k = min(int(time_s / dt_s + 0.5), len(sequence) - 1)
-        return float(sequence[k])
+        return float(sequence[min(int(time_s / dt_s + 0.5), len(sequence) - 1)])
 
     return controller
 
@@ -111,7 +105,18 @@ def run_twin_session(
     paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
     for name in _OUTPUTS:
         outputs.live(workdir / name)
-    loop, emulator_stats = _babble_on_twin(rig, duration_s, seed, paths, progress, program)
+    limit = rig.task.torque_limit_nm
+    device = SimRig(rig, truth_log=paths["truth_log.csv"])
+    try:
+        with (
+            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
+            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
+        ):
+            controller = rig_babble_controller(duration_s, limit, seed, program=program)
+            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
+        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
+    finally:
+        device.close()
     times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=CameraEffects.rig(), seed=seed)
     video, camera_csv = paths["camera.avi"], paths["camera.csv"]
@@ -128,26 +133,7 @@ def run_twin_session(
     for name in _OUTPUTS:
         outputs.done(workdir / name)
     files = (paths["motor_log.csv"], paths["truth_log.csv"], video, camera_csv, paths["rig_dataset.npz"])
-    return TwinSession(workdir, *files, loop, sync, dataset, clock_offset_s, emulator_stats)
-
-
-def _babble_on_twin(
-    rig: RigConfig, duration_s: float, seed: int, paths: dict[str, Path], progress: bool, program=None
-) -> tuple[LoopResult, dict]:
-    """Babble on the twin over the in-memory link; the loop's result and the device's counters."""
-    limit = rig.task.torque_limit_nm
-    controller = rig_babble_controller(duration_s, limit, seed, program=program)
-    device = SimRig(rig, truth_log=paths["truth_log.csv"])
-    try:
-        with (
-            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
-            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
-        ):
-            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
-        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
-    finally:
-        device.close()
-    return loop, device.stats()
+    return TwinSession(workdir, *files, loop, sync, dataset, clock_offset_s, device.stats())
 
 
 #: Every file :func:`run_twin_session` writes in its folder (besides the marker).

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import math
 import time
@@ -27,9 +26,9 @@ from softpend.checks import (
 )
 from softpend.envs.randomised import RodUncertainty, optional_uncertainty, set_rod
 from softpend.evaluation import TEST_EPISODE_S, EvaluationResult, evaluate_controller, run_episode
-from softpend.io.outputs import atomic_write
 from softpend.io.overrides import dataclass_from_data
-from softpend.io.reading import MAX_JSON_BYTES, read_bytes_checked, read_json_checked
+from softpend.io.reading import MAX_JSON_BYTES, read_json_checked
+from softpend.io.torchfiles import load_state, refused, save_state
 from softpend.pilco.controller import PilcoController, RandomTorqueController, in_balance_band
 from softpend.pilco.gp import GPHyperparameters, MultiOutputGP, select_subset
 from softpend.pilco.policy import LinearPolicy, RBFPolicy
@@ -256,15 +255,9 @@ class PilcoResult:
 
     def save(self, directory: str | Path) -> Path:
         """Write ``policy.pt`` (state dict) and ``pilco.json`` (config, trial records, GP hyperparameters)."""
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        weights = io.BytesIO()
         state = self.policy.state_dict()
         if self.balance_policy is not None:
             state.update({BALANCE_PREFIX + k: v for k, v in self.balance_policy.state_dict().items()})
-        torch.save(state, weights)
-        with atomic_write(directory / "policy.pt") as handle:
-            handle.write(weights.getvalue())
         meta = {
             "config": self.config.to_dict(),
             "records": [dataclasses.asdict(r) for r in self.records],
@@ -272,9 +265,8 @@ class PilcoResult:
             "real_seconds_to_balance": self.real_seconds_to_balance,
             "train_wall_s": self.train_wall_s,
         }
-        text = json.dumps(meta, indent=2, default=float)
-        with atomic_write(directory / "pilco.json", "w") as handle:
-            handle.write(text)
+        directory = Path(directory)
+        save_state(directory / "policy.pt", state, directory / "pilco.json", json.dumps(meta, indent=2, default=float))
         return directory
 
     @classmethod
@@ -292,28 +284,18 @@ class PilcoResult:
             hyper = GPHyperparameters.from_dict(meta["gp_hyperparameters"]) if meta["gp_hyperparameters"] else None
         except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{meta_path}: not a PILCO result ({type(exc).__name__}: {exc})") from None
-        try:
-            spec = state_spec(config.state)
+        spec = state_spec(config.state)
+        with refused(f"{weights_path}: not a PILCO policy written by softpend"):
             bound = 2**20 + 16 * (config.policy.n_basis + 2) * (spec.n_model_inputs + 2)
-            raw = read_bytes_checked(weights_path, "PILCO policy file", bound)
-            state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
+            state = load_state(weights_path, "PILCO policy file", bound)
             balance_state = {k[len(BALANCE_PREFIX) :]: v for k, v in state.items() if k.startswith(BALANCE_PREFIX)}
             state = {k: v for k, v in state.items() if not k.startswith(BALANCE_PREFIX)}
-            policy = RBFPolicy(
-                np.zeros((state["centers"].shape[0], spec.n_model_inputs)),
-                np.ones(spec.n_model_inputs),
-                config.task.torque_limit_nm,
-            )
+            n_inputs, limit_nm = spec.n_model_inputs, config.task.torque_limit_nm
+            policy = RBFPolicy(np.zeros((state["centers"].shape[0], n_inputs)), np.ones(n_inputs), limit_nm)
             policy.load_state_dict(state)
-            balance = None
-            if balance_state:
-                balance = LinearPolicy(spec.n_model_inputs, config.task.torque_limit_nm)
+            balance = LinearPolicy(n_inputs, limit_nm) if balance_state else None
+            if balance is not None:
                 balance.load_state_dict(balance_state)
-        except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
-            message = " ".join(str(exc).split())[:300]
-            raise ValueError(
-                f"{weights_path}: not a PILCO policy written by softpend ({type(exc).__name__}: {message})"
-            ) from None
         return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper, balance_policy=balance)
 
 

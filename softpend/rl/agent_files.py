@@ -18,6 +18,7 @@ from softpend.checks import NonFiniteError
 from softpend.io.arrays import read_npz
 from softpend.io.outputs import atomic_write
 from softpend.io.reading import check_zip_members, read_bytes_checked, read_zip_member
+from softpend.io.torchfiles import refused
 from softpend.rl.config import SB3_FIELDS, DQNConfig
 from softpend.rl.training_env import make_base_env
 
@@ -151,21 +152,18 @@ def load_agent_file(
     # read once (what is checked is what is loaded), a regular file of the size such an agent can have
     raw = read_bytes_checked(path, "agent file", max_total, AgentFileError)
     data = _read_data(path, raw, max_member)
-    refused = [k for k in _serialized_entries(data) if k not in REBUILT_ATTRIBUTES]
-    if refused:
+    pickled = [k for k in _serialized_entries(data) if k not in REBUILT_ATTRIBUTES]
+    if pickled:
         raise AgentFileError(
-            f"{path}: refusing to load it: its entries {refused} are pickled Python objects, and unpickling can run "
+            f"{path}: refusing to load it: its entries {pickled} are pickled Python objects, and unpickling can run "
             f"arbitrary code (softpend rebuilds only {sorted(REBUILT_ATTRIBUTES)} from the run's config)"
         )
     _check_matches(path, data, config)
     custom = _rebuilt(cls, config, replay_buffer_class)
     if replay_buffer_class is ReplayBuffer:
         custom["replay_buffer_kwargs"] = {}
-    try:
+    with refused(f"{path}: cannot load the agent", AgentFileError):
         model = cls.load(io.BytesIO(raw), env=env, device="cpu", custom_objects=custom)
-    except Exception as exc:  # a corrupt or foreign file can fail inside SB3's or torch's reader in any way
-        message = " ".join(str(exc).split())[:300]
-        raise AgentFileError(f"{path}: cannot load the agent ({type(exc).__name__}: {message})") from exc
     check_finite_weights(model, str(path))
     return model
 

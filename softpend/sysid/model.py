@@ -4,7 +4,6 @@ ensemble of them; saved as a state dict plus JSON metadata and read back with ``
 
 from __future__ import annotations
 
-import io
 import json
 import math
 from pathlib import Path
@@ -15,8 +14,8 @@ import torch
 from torch import Tensor, nn
 
 from softpend.checks import one_of, optional_positive, positive, positive_int
-from softpend.io.outputs import atomic_write
-from softpend.io.reading import MAX_CONFIG_BYTES, read_bytes_checked, read_json_checked
+from softpend.io.reading import MAX_CONFIG_BYTES, read_json_checked
+from softpend.io.torchfiles import load_state, refused, save_state
 from softpend.sysid.layout import StateLayout
 
 MODEL_SCHEMA_NAME = "softpend.sysid.model"
@@ -306,10 +305,7 @@ def save_model(
         "metadata": metadata or {},
     }
     text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)
-    with atomic_write(weights) as handle:
-        torch.save(model.state_dict(), handle)
-    with atomic_write(meta_path, "w") as handle:
-        handle.write(text + "\n")
+    save_state(weights, model.state_dict(), meta_path, text + "\n")
     return weights, meta_path
 
 
@@ -344,16 +340,8 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
             raise TypeError(f"metadata must be an object, got {type(meta['metadata']).__name__}")
     except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
         raise ValueError(f"{meta_path}: not a model of this version ({type(exc).__name__}: {exc})") from None
-    try:
-        # a regular file no larger than the weights the metadata allows (float32, with room for the format)
-        raw = read_bytes_checked(weights, "model weights file", MAX_CONFIG_BYTES + 8 * n_weights)
-        state = torch.load(io.BytesIO(raw), weights_only=True, map_location="cpu")
-        model.load_state_dict(state, strict=True)
-    except Exception as exc:  # a corrupt or foreign file can fail inside torch's reader in any way
-        message = " ".join(str(exc).split())[:300]
-        raise ValueError(
-            f"{weights}: weights do not match {meta_path} or are not weights written by softpend "
-            f"({type(exc).__name__}: {message})"
-        ) from None
+    failure = f"{weights}: weights do not match {meta_path} or are not weights written by softpend"
+    with refused(failure):  # a regular file no larger than the weights the metadata allows (float32, and the format)
+        model.load_state_dict(load_state(weights, "model weights file", MAX_CONFIG_BYTES + 8 * n_weights), strict=True)
     model.eval()
     return model, meta["metadata"]

@@ -34,11 +34,6 @@ def points_array(name: str, value, n_min: int = 3, n_max: int = 6) -> np.ndarray
     return array
 
 
-def read_json_file(name: str, path: str | Path, max_bytes: int):
-    """The JSON document in the regular file at ``path`` (``ValueError`` naming ``name`` and the file)."""
-    return read_json_checked(path, f"{name} file", max_bytes)
-
-
 def read_markers(name: str, text: Optional[str]) -> Optional[list]:
     """A ``--markers`` argument, a JSON list ``[[x, y], ...]`` or a file holding one, as 3 to 6 marker
     positions [m] (None for None or an empty argument)."""
@@ -50,7 +45,7 @@ def read_markers(name: str, text: Optional[str]) -> Optional[list]:
         except (ValueError, RecursionError) as exc:
             raise ValueError(f"{name} is not a valid JSON list: {exc}") from None
     else:
-        markers = read_json_file(name, text, MAX_CALIBRATION_BYTES)
+        markers = read_json_checked(text, f"{name} file", MAX_CALIBRATION_BYTES)
     return points_array(name, markers).tolist()
 
 
@@ -61,8 +56,7 @@ def _short(value, limit: int = 120) -> str:
 
 def fit_affine(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Least-squares 2x3 affine ``A`` with ``target ~ A @ [source, 1]`` (needs >= 3 non-collinear points)."""
-    source = np.asarray(source, dtype=float)
-    target = np.asarray(target, dtype=float)
+    source, target = np.asarray(source, dtype=float), np.asarray(target, dtype=float)
     if source.ndim != 2 or source.shape[1] != 2 or source.shape != target.shape:
         raise ValueError(f"source and target must both have shape (n, 2), got {source.shape} and {target.shape}")
     if source.shape[0] < 3:
@@ -101,8 +95,7 @@ class AffineCalibration:
 
     def to_metres(self, points_px: np.ndarray) -> np.ndarray:
         """Map ``(..., 2)`` pixel coordinates to metres (NaN stays NaN)."""
-        p = np.asarray(points_px, dtype=float)
-        return p @ self.pixel_to_metre[:, :2].T + self.pixel_to_metre[:, 2]
+        return np.asarray(points_px, dtype=float) @ self.pixel_to_metre[:, :2].T + self.pixel_to_metre[:, 2]
 
     def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
         """Map ``(..., 2)`` metre coordinates to pixels."""
@@ -133,7 +126,7 @@ class AffineCalibration:
     @classmethod
     def load(cls, path: str | Path) -> "AffineCalibration":
         """Read a file holding :meth:`to_json` output (``ValueError`` naming the file if it is not one)."""
-        data = read_json_file("calibration", path, MAX_CALIBRATION_BYTES)
+        data = read_json_checked(path, "calibration file", MAX_CALIBRATION_BYTES)
         try:
             return cls.from_data(data)
         except ValueError as exc:
@@ -155,11 +148,8 @@ def calibrate_from_markers(frame_bgr: np.ndarray, marker_positions_m: Sequence[S
             a = fit_affine(pixels, target)
         except ValueError:
             continue
-        residual = target - (pixels @ a[:, :2].T + a[:, 2])
-        rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-        if np.linalg.det(a[:, :2]) >= 0:  # a mirror image (image y points down, metre y up: det(A) < 0)
-            continue
-        if best is None or rms < best[0]:
+        rms = float(np.sqrt(np.mean(np.sum((target - (pixels @ a[:, :2].T + a[:, 2])) ** 2, axis=1))))
+        if np.linalg.det(a[:, :2]) < 0 and (best is None or rms < best[0]):  # >= 0: a mirror image (y up/down)
             best = (rms, a)
     if best is None:
         raise ValueError("marker_positions_m: no marker correspondence gives a valid affine map")

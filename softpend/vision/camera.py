@@ -14,7 +14,8 @@ import numpy as np
 
 from softpend.checks import finite, in_unit_interval, int_at_least, non_negative, positive
 from softpend.io.outputs import atomic_write
-from softpend.vision.calibration import points_array, read_json_file
+from softpend.io.reading import read_json_checked
+from softpend.vision.calibration import points_array
 
 #: Highest frame rate accepted [1/s].
 MAX_FPS = 1e6
@@ -129,22 +130,8 @@ class SyntheticCamera:
         self.markers_m = np.asarray(markers_m, dtype=float)
         self.seed = int(seed)
         self._rng = np.random.default_rng(seed)
-        self._background = self._make_background()
         m = self.model
-        yy, xx = np.mgrid[0 : m.height_px, 0 : m.width_px].astype(np.float32)
-        gradient = (1.0 + self.effects.gradient * ((xx / m.width_px) - 0.5)).astype(np.float32)
-        self._gradient3 = cv2.merge([gradient, gradient, gradient])
-        # sensor noise: per frame a random crop of one larger noise field
-        self._noise_margin = 97
-        self._noise_field: Optional[np.ndarray] = None
-        if self.effects.noise_std_dn > 0:
-            shape = (m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3)
-            noise = self._rng.standard_normal(shape, dtype=np.float32)
-            self._noise_field = noise * np.float32(self.effects.noise_std_dn)
-
-    def _make_background(self) -> np.ndarray:
-        m = self.model
-        image = np.full((m.height_px, m.width_px, 3), (205, 210, 215), dtype=np.uint8)
+        self._background = image = np.full((m.height_px, m.width_px, 3), (205, 210, 215), dtype=np.uint8)
         if self.effects.clutter:
             rng = np.random.default_rng(self.seed + 7919)
             # reds, oranges, yellows, greys, browns: no blue, green or magenta
@@ -167,7 +154,15 @@ class SyntheticCamera:
                 cv2.circle(image, (x, y), 1, _TIP_BGR, -1)
         for centre in self.model.to_pixels(self.markers_m):
             _circle(image, centre, 7.0, _MARKER_BGR)
-        return image
+        yy, xx = np.mgrid[0 : m.height_px, 0 : m.width_px].astype(np.float32)
+        gradient = (1.0 + self.effects.gradient * ((xx / m.width_px) - 0.5)).astype(np.float32)
+        self._gradient3 = cv2.merge([gradient, gradient, gradient])
+        self._noise_margin = 97  # sensor noise: per frame a random crop of one larger noise field
+        self._noise_field: Optional[np.ndarray] = None
+        if self.effects.noise_std_dn > 0:
+            shape = (m.height_px + self._noise_margin, m.width_px + self._noise_margin, 3)
+            noise = self._rng.standard_normal(shape, dtype=np.float32)
+            self._noise_field = noise * np.float32(self.effects.noise_std_dn)
 
     def draw(self, link_points_m: np.ndarray, hub_angle_rad: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
         """A sharp, noise-free frame of the rod at ``link_points_m`` ``(n + 1, 2)`` (hub first) [m] and the
@@ -180,11 +175,8 @@ class SyntheticCamera:
         width = max(1, int(round(self.rod_width_m * self.model.px_per_m)))
         fixed = np.round(pixels * (1 << 4)).astype(np.int32).reshape(-1, 1, 2)
         cv2.polylines(image, [fixed], False, _ROD_BGR, width, cv2.LINE_AA, 4)
-        hub = pixels[0]
-        half = 0.6 * width + 3
-        cv2.rectangle(
-            image, (int(hub[0] - half), int(hub[1] - half)), (int(hub[0] + half), int(hub[1] + half)), _HUB_BGR, -1
-        )
+        hub, half = pixels[0], 0.6 * width + 3
+        cv2.rectangle(image, tuple(int(v - half) for v in hub), tuple(int(v + half) for v in hub), _HUB_BGR, -1)
         if hub_angle_rad is None:
             d = points[1] - points[0]
             hub_angle_rad = math.atan2(-d[0], d[1])
@@ -332,7 +324,7 @@ def read_sidecar(video_path: str | Path) -> dict:
     path = Path(str(video_path) + ".json")
     if not path.exists():
         return {}
-    data = read_json_file("sidecar", path, MAX_SIDECAR_BYTES)
+    data = read_json_checked(path, "sidecar file", MAX_SIDECAR_BYTES)
     try:
         return check_sidecar(data)
     except ValueError as exc:

@@ -55,8 +55,7 @@ SILENT_ERRORS = ((MemoryError, "not enough memory"), (RecursionError, "input nes
 
 
 def error_line(exc: BaseException) -> str:
-    """``exc`` as one line: its message with whitespace collapsed, prefixed by its class name unless it is a
-    plain ``ValueError``."""
+    """``exc``'s message on one line, prefixed by its class name unless it is a plain ``ValueError``."""
     message = " ".join(str(exc).split())
     if type(exc) is ValueError and message:
         return message

@@ -60,8 +60,7 @@ FieldOption = tuple[str, str, type, str, Optional[tuple[float, float]]]
 
 
 def field_options(defaults: Any, rows: Sequence[FieldOption]) -> list[Option]:
-    """Options that set fields of a config, each defaulting to (and its help showing) the field of ``defaults``;
-    :func:`field_values` reads them back."""
+    """Options that set config fields, each defaulting to (and its help showing) the field of ``defaults``."""
     return [
         (flag, limits, dict(type=kind, default=getattr(defaults, field), help=f"{text} ({getattr(defaults, field)})"))
         for flag, field, kind, text, limits in rows
@@ -74,8 +73,7 @@ def field_values(args: argparse.Namespace, rows: Sequence[FieldOption]) -> dict[
 
 
 def assignment(text: str) -> tuple[str, Any]:
-    """``argparse`` type of ``--set``: :func:`softpend.io.overrides.parse_assignment`, its ``ValueError``
-    turned into an ``argparse`` error that shows the message."""
+    """``argparse`` type of ``--set``: :func:`softpend.io.overrides.parse_assignment` as an ``argparse`` error."""
     try:
         return parse_assignment(text)
     except ValueError as exc:
@@ -83,14 +81,13 @@ def assignment(text: str) -> tuple[str, Any]:
 
 
 def set_option(help: str, dest: str = "overrides", flag: str = "--set") -> Option:
-    """The repeatable ``flag NAME=VALUE`` (``--set`` by default): ``args.<dest>`` is the list of ``(NAME, value)``
-    pairs in command-line order (VALUE parsed as JSON, else kept as a string)."""
+    """The repeatable ``flag NAME=VALUE``: ``args.<dest>`` lists the ``(NAME, value)`` pairs (VALUE as JSON, else text)."""
     return (flag, None, dict(action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help))
 
 
 def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float]]) -> None:
-    """``ValueError`` naming the flag, the interval and the value unless each option of ``limits`` (flag ->
-    ``(low, high)``) is None or lies in its interval (each value of a list; NaN and infinities never pass)."""
+    """``ValueError`` naming the flag unless each option of ``limits`` (flag -> ``(low, high)``) is None or lies in its
+    closed interval (each value of a list; NaN and infinities never do)."""
     from softpend.checks import in_range
 
     for flag, (low, high) in limits.items():
@@ -101,8 +98,7 @@ def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float
 
 
 def camera_source(args: argparse.Namespace, tracker: Any = None) -> Any:
-    """The tip source of ``--camera`` (tracking with ``tracker``, a TipTracker), calibrated by ``--calibration`` or
-    on ``--markers``, with ``--camera-latency-ms``."""
+    """The tip source of ``--camera`` (``tracker``: a TipTracker), calibrated by ``--calibration`` or ``--markers``."""
     from softpend.vision.calibration import AffineCalibration, read_markers
     from softpend.vision.tip_source import FrameTracker, open_tip_source
 

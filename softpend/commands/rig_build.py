@@ -126,8 +126,7 @@ WATCHDOG_SLACK_STATES = 3
 
 
 def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None) -> dict:
-    """The report of the power-on checks (handshake, rest, direction, watchdog) on the link at ``port`` (or the twin's
-    in-memory ``serial``)."""
+    """The report of the power-on checks on the link at ``port`` (or the twin's in-memory ``serial``)."""
     import numpy as np
 
     from softpend.hardware import protocol

@@ -55,9 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def build_controller(
     spec: str, task, which: str = "best", pid_gains=None, planner_overrides=None, progress: bool = False
 ) -> tuple[Any, Any, str]:
-    """``(controller, task, label)`` for a controller name or run folder (whose own task it returns); the planner
-    (settings changed by ``planner_overrides``) comes as a :class:`softpend.study.rig_runs.TimedController` whose
-    ``info`` holds the plant seconds it learned in."""
+    """``(controller, task, label)`` for a controller name or run folder (with its own task); the planner
+    (``planner_overrides``) is a :class:`softpend.study.rig_runs.TimedController` (``info``: plant seconds learned)."""
     from softpend.control.lqr import LQRController
     from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_pid
     from softpend.control.swingup import EnergySwingUpController

@@ -38,8 +38,7 @@ def train_in_one_pool(
     backend: Optional[str] = None,
 ) -> int:
     """Train the missing runs of ``rl_specs`` (``(algo, config, seeds, episodes)`` each, under ``rl_root``) and of
-    ``pilco_config`` over ``pilco_seeds`` (under ``pilco_root``, default ``rl_root``) in one pool; returns how
-    many were trained."""
+    ``pilco_config`` over ``pilco_seeds`` (under ``pilco_root`` or ``rl_root``) in one pool; returns their number."""
     jobs: list[Job] = []
     if pilco_config is not None and len(pilco_seeds):
         root = Path(rl_root if pilco_root is None else pilco_root)
@@ -66,10 +65,9 @@ def book_run_jobs(
     parameters: Optional[dict[str, Any]] = None,
     claimed: Optional[set[str]] = None,
 ) -> list[Job]:
-    """The missing runs of ``run_sets`` under ``root``, named by folder, with the settings the notebooks train
-    with and a notebook's profile ``parameters`` (``episodes_dqn``, ``seeds``, ``runs_root``, ``rl_overrides``,
-    ``pilco_seeds``, ...) in their place; a folder in ``claimed`` (an earlier notebook's) is left out, and this
-    call's folders are added to it."""
+    """The missing runs of ``run_sets`` under ``root``, named by folder, as the notebooks train them under a profile's
+    ``parameters`` (``seeds``, ``runs_root``, ``rl_overrides``, ...); folders in ``claimed`` are left out, and this
+    call's are added to it."""
     if not isinstance(run_sets, (list, tuple)) or not set(run_sets) <= set(BOOK_RUN_SETS):
         raise ValueError(f"run sets (softpend.book_runs) must be a list among {list(BOOK_RUN_SETS)}, got {run_sets!r}")
     given = dict(parameters or {})
@@ -106,8 +104,7 @@ def book_run_jobs(
 
 
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
-    """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook; a
-    folder two notebooks read is the first's)."""
+    """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook)."""
     layout, toc, given = book_profile(root, profile)
     jobs, claimed = list[Job](), set[str]()
     for name in toc:

@@ -105,10 +105,9 @@ def run_jobs(
     backend: Optional[str] = None,
     retries: int = 1,
 ) -> None:
-    """Call ``job(*args, progress=...)`` (a module-level function that writes its results to disk; ``progress``
-    False in a worker) for every ``args`` of ``jobs`` (named by ``names``, started in order), ``workers`` at a
-    time (1: one after another in this process), retrying ``retries`` times a job whose worker died;
-    :class:`SweepFailed` names the jobs that still failed once every other job has finished."""
+    """Call the module-level ``job(*args, progress=...)`` for every ``args`` of ``jobs`` (named by ``names``), ``workers``
+    at a time (1: in this process), retrying ``retries`` times a job whose worker died; then :class:`SweepFailed`
+    names the jobs that failed."""
     if len(jobs) != len(names):
         raise ValueError(f"got {len(jobs)} jobs but {len(names)} names")
     if len(set(names)) != len(names):

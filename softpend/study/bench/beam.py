@@ -10,8 +10,7 @@ N_STEPS = 2000
 
 
 def bench_beam() -> dict[str, float]:
-    """Beam environment step rate and real-time factor, and the beam's frequency and static-sag errors against
-    Euler-Bernoulli [%]."""
+    """Beam environment step rate, real-time factor, frequency and static-sag errors against Euler-Bernoulli [%]."""
     steps = max(env_steps_per_s(n_steps=N_STEPS, plant="beam") for _ in range(2))
     freqs = measured_bending_frequencies("beam")
     sag = static_tip_sag("beam", RodParams(stiffness_scale=100.0))

@@ -17,8 +17,7 @@ TEN_SEEDS = tuple(range(10))
 
 
 def bench_pilco() -> dict[str, float]:
-    """The ``pilco`` benchmark group: runs saved to ``runs/bench-pilco/seed<k>``, always rerun (their time is the
-    measurement)."""
+    """The ``pilco`` benchmark group: runs saved to ``runs/bench-pilco/seed<k>``, always rerun."""
     torch.set_num_threads(1)
     out: dict[str, float] = {}
     for seed in SEEDS:
@@ -52,8 +51,8 @@ def ten_seed_figures(seeds: tuple[int, ...] = TEN_SEEDS) -> dict[str, float]:
 
 
 def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
-    """CPU milliseconds of one policy-search objective and gradient at the book's sizes, eager and compiled, and how
-    far apart their results are; the GP is fitted to a random walk."""
+    """CPU milliseconds of one policy-search objective and gradient (GP fitted to a random walk), eager and compiled,
+    and how far apart their results are."""
     import time
 
     import numpy as np

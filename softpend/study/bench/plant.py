@@ -23,9 +23,8 @@ N_STEPS = 4000
 
 
 def env_steps_per_s(n_links: int = 4, n_steps: int = N_STEPS, plant: str = "prb", legacy: bool = False) -> float:
-    """Steps per second through the Gymnasium API under seeded random actions (``legacy``: the baseline step path
-    of :func:`make_legacy`)."""
-    import softpend  # noqa: F401  (registers the environments)
+    """Steps per second through the Gymnasium API under seeded random actions (``legacy``: :func:`make_legacy`)."""
+    import softpend  # noqa: F401
 
     env = gym.make("softpend/SoftPendulum-v0", params=RodParams(n_links=n_links), plant=plant)
     if legacy:
@@ -53,9 +52,6 @@ def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
         chain.set_joint_forces(forces)
         chain.advance()
     return n_steps / (time.perf_counter() - start)
-
-
-# The baseline of ``env_steps_per_s_n4_speedup``: the step path with more Python-C++ crossings, same numbers.
 
 
 def _legacy_advance(self) -> None:
@@ -91,7 +87,7 @@ def _legacy_observe(self):
 
 
 def make_legacy(env) -> None:
-    """Give ``env`` (on the PRB plant) the baseline step path above."""
+    """Give ``env`` (PRB plant) the baseline step path of ``env_steps_per_s_n4_speedup`` (more Python-C++ crossings)."""
     plant = env.unwrapped.plant
     plant._chain.advance = types.MethodType(_legacy_advance, plant._chain)
     plant.observe = types.MethodType(_legacy_observe, plant)
@@ -104,8 +100,7 @@ BATCH_SIZE, NUM_ENVS = 4096, 1024
 def batched_rod_steps_per_s(
     n_links: int, n_steps: int = 6, repeats: int = 3, dtype_name: str = "float64", **chain_options: Any
 ) -> tuple[float, float]:
-    """Rod-steps per wall-clock and per CPU second of the batched chain (``integrator``, ``compiled``) on one torch
-    thread under random torques (best of ``repeats``, after an untimed first step)."""
+    """Rod-steps per wall-clock and CPU second of the batched chain on one torch thread (best of ``repeats``)."""
     from softpend.plant.batched import BatchedPRBChain
 
     with one_torch_thread() as torch:
@@ -129,8 +124,7 @@ def batched_rod_steps_per_s(
 
 
 def vector_env_steps_per_s(n_links: int = 4, n_steps: int = 40, **env_options: Any) -> tuple[float, float]:
-    """Steps per wall-clock and per CPU second of the vector environment (``integrator``, ``compiled``) on one torch
-    thread under random actions (best of 3)."""
+    """Steps per wall-clock and CPU second of the vector environment on one torch thread (best of 3)."""
     from softpend.envs.vector import SoftPendulumVectorEnv
 
     with one_torch_thread():

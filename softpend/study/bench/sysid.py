@@ -81,8 +81,8 @@ def bench_sysid() -> dict[str, float]:
 def simulator_yardsticks(
     test: TrajectoryDataset, model_one_step_tip_m: float, history: int = 0, horizon_s: float = 2.0
 ) -> dict[str, float]:
-    """Tip RMSE [m] of the perturbed-simulator yardsticks on held-out trials after one step and at 0.5, 1 and 2 s
-    (within ``horizon_s``); ``model_one_step_tip_m`` sets the hub-rate offset of ``simulator_one_best_model_step``."""
+    """Tip RMSE [m] of the perturbed-simulator yardsticks on ``test`` after one step and at 0.5, 1, 2 s (within
+    ``horizon_s``); ``model_one_step_tip_m`` sets ``simulator_one_best_model_step``'s hub-rate offset."""
     if not (np.isfinite(model_one_step_tip_m) and model_one_step_tip_m > 0):
         raise ValueError(f"model_one_step_tip_m must be positive, got {model_one_step_tip_m!r}")
     rate_rad_s = hub_rate_offset_for_tip_error(test, model_one_step_tip_m, history)

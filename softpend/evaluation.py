@@ -371,6 +371,7 @@ def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float
 
     if isinstance(controller, BatchPolicy) or o["substeps"] is not None:
         raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
+    _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)  # all the episodes' trajectories are kept
     env = SoftPendulumEnv(**task.env_kwargs(), **o["env_kwargs"])
     results: list[EvaluationResult] = []
     for seed in seeds:

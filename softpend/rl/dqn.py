@@ -64,15 +64,8 @@ def evaluate_agent(
 ):
     """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``."""
     seeds, duration_s = _seeds_and_duration(config, seeds, duration_s)
-    controller = policy_controller(model, config)
-    steps = duration_s / config.dt_s + 1
-    per_step = 8 * (len(OBSERVATION_NAMES) + 2 + controller.env.plant.n_coordinates)
-    check_work_size(
-        f"evaluating {len(seeds)} episode(s) of {duration_s:g} s",
-        len(seeds) * steps * per_step,
-        f"{steps:.3g} steps of {config.dt_s:g} s per episode, {per_step} bytes of trajectory a step",
-    )
     kwargs: dict[str, Any] = dict(name=name, seeds=seeds, duration_s=duration_s)
+    controller = policy_controller(model, config)
     return evaluate_controller(controller, config.task, stop_at_first_failure=stop_at_first_failure, **kwargs)
 
 
@@ -104,14 +97,7 @@ def evaluate_agents_batched(
 
     levels, repeat = config.n_torque_levels, config.action_repeat
     summary = evaluate_batched(
-        predict,
-        config.task,
-        seeds * len(models),
-        duration_s,
-        action_repeat=repeat,
-        n_torque_levels=levels,
-        name=name,
-        **options,
+        predict, config.task, seeds * len(models), duration_s, action_repeat=repeat, n_torque_levels=levels, **options
     )
     return [EvaluationSummary(name=name, results=summary.results[i * n : (i + 1) * n]) for i in range(len(models))]
 

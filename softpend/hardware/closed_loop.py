@@ -66,9 +66,7 @@ def _check_run(link: MotorLink, duration_s: float, *logs: tuple[str, Optional[Sa
 
 
 class _RigLoop:
-    """One run paced by the STATE stream: each state read goes to :meth:`step` (here: ``controller(observation,
-    time_s)``, :func:`run_control_loop`) until ``duration_s`` of device time or a safe stop (:attr:`stop_reason`);
-    ``drains``: the states queued since the last one are processed too."""
+    """A run paced by the STATE stream: each state (and, if ``drains``, those queued) goes to :meth:`step`."""
 
     drains = False
 
@@ -123,7 +121,6 @@ class _RigLoop:
             bar.close()
 
     def loop_result(self) -> tuple[int, np.ndarray, int, int, int]:
-        """The fields of :class:`LoopResult`, in order."""
         return self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog
 
     def step(self, state: MotorState, newest: bool) -> None:
@@ -203,8 +200,8 @@ class ClosedLoopResult(LoopResult):
 ARM_TIMEOUT_S = 2.0
 
 
-class _SafeStop(Exception):
-    """``(status, reason)``."""
+class _SafeStop(Exception):  # args: (status, reason)
+    pass
 
 
 def run_closed_loop(
@@ -308,8 +305,7 @@ class _ClosedLoop(_RigLoop):
             raise _SafeStop("arm_timeout", f"the camera did not correct the estimate within {ARM_TIMEOUT_S} s")
 
     def _poll_camera(self) -> int:
-        """Feed the camera's new measurements to the estimator (after the command), the first accepted one arming
-        the loop; how many there were."""
+        """Feed the camera's new measurements to the estimator, the first accepted one arming the loop; how many."""
         assert self.t0 is not None
         polled = self.link.clock.now_s()
         measurements = self.tip_source.poll()

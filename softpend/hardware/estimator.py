@@ -169,16 +169,12 @@ class RigStateEstimator:
         return x_next, 0.5 * (p_next + p_next.T)
 
     @staticmethod
-    def _update(
-        x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: np.ndarray, r: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _update(x, p, h, innovation, r) -> tuple[np.ndarray, np.ndarray]:
         gain = np.linalg.solve(h @ p @ h.T + r, h @ p).T
         i_kh = np.eye(len(x)) - gain @ h
         return x + gain @ innovation, i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form
 
-    def _advance(
-        self, x: np.ndarray, p: np.ndarray, torque_nm: float, steps: int, phi_rad: float, phi_dot_rad_s: float
-    ):
+    def _advance(self, x, p, torque_nm: float, steps: int, phi_rad: float, phi_dot_rad_s: float):
         """Predict ``steps`` steps with ``torque_nm``, then correct with an encoder sample."""
         for _ in range(steps):
             x, p = self._predict(x, p, torque_nm)

@@ -18,8 +18,7 @@ from softpend.io.reading import read_json_object
 
 
 def _check_parent(path: Path, what: str, shown: Optional[Path] = None) -> None:
-    """The folder that will hold ``path`` exists or can be created, and a file can be created in it (errors name
-    ``shown``, default ``path``)."""
+    """Refuse ``path`` (shown as ``shown``) unless its folder exists or can be created, and is writable."""
     ancestor, shown = path.parent, shown or path
     while not os.path.lexists(ancestor) and ancestor.parent != ancestor:
         ancestor = ancestor.parent
@@ -144,8 +143,7 @@ def _read_manifest(folder: Path) -> Optional[dict]:
 
 
 def _ours(path: Path) -> bool:
-    """Whether the manifest records ``path`` with the SHA-256 of its bytes, or as a sample log being written by
-    a command that never finished."""
+    """Whether the manifest records ``path`` with its SHA-256, or as a sample log still being written."""
     entry = (_read_manifest(path.parent) or {}).get(path.name)
     if not isinstance(entry, dict) or path.is_symlink() or not path.is_file():  # a FIFO would block the read
         return False

@@ -106,11 +106,7 @@ def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
     return SecondOrderModel(np.asarray(mass), np.asarray(stiffness), np.asarray(damping), input_vector)
 
 
-def linearise_step_map(
-    params: Optional[RodParams] = None,
-    dt_s: float = 0.01,
-    substeps: int = 2,
-) -> LinearModel:
+def linearise_step_map(params: Optional[RodParams] = None, dt_s: float = 0.01, substeps: int = 2) -> LinearModel:
     """Discrete model from central differences of one control step of :class:`~softpend.plant.PRBPlant` about
     the straight rod upright at rest."""
     params = params if params is not None else RodParams()

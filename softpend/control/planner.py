@@ -520,13 +520,7 @@ class PlannerController:
     ``knots_per_plan`` knots at a time, each plan's work spread over the calls of the knots already committed."""
 
     def __init__(
-        self,
-        mppi: MPPI,
-        tracker: Any,
-        lqr: LQRController,
-        capture_rad: float,
-        hold_steps: int,
-        knots_per_plan: int = 1,
+        self, mppi: MPPI, tracker: Any, lqr: LQRController, capture_rad: float, hold_steps: int, knots_per_plan: int = 1
     ) -> None:
         self.mppi, self.tracker, self.lqr = mppi, tracker, lqr
         self.capture_rad, self.hold_steps = float(capture_rad), int(hold_steps)

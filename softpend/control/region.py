@@ -23,10 +23,7 @@ class RegionOfAttraction:
 
 
 def recovers_from(
-    controller: Controller,
-    tilt_rad: float,
-    task: Optional[Task] = None,
-    duration_s: float = 4.0,
+    controller: Controller, tilt_rad: float, task: Optional[Task] = None, duration_s: float = 4.0
 ) -> bool:
     """Whether ``controller`` brings the straight rod released at rest at ``tilt_rad`` back within
     0.02 rad of upright for the last second of ``duration_s``."""

@@ -3,12 +3,4 @@
 from softpend.rl.config import DQNConfig, DQNLearner, MBPOConfig, ModelSettings, RolloutSettings, StopRule
 from softpend.rl.training_log import TrainingLog
 
-__all__ = [
-    "DQNConfig",
-    "DQNLearner",
-    "MBPOConfig",
-    "ModelSettings",
-    "RolloutSettings",
-    "StopRule",
-    "TrainingLog",
-]
+__all__ = ["DQNConfig", "DQNLearner", "MBPOConfig", "ModelSettings", "RolloutSettings", "StopRule", "TrainingLog"]

@@ -426,12 +426,7 @@ def _start_or_resume(
 
 
 def training_callbacks(
-    config: DQNConfig,
-    log: TrainingLog,
-    episodes: int,
-    run_dir: Path,
-    progress: bool,
-    part: Any = None,
+    config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool, part: Any = None
 ) -> CallbackList:
     """The callbacks of a training run, in the order they run each step."""
     recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
@@ -488,12 +483,7 @@ def run_training(
 
 
 def train_dqn(
-    config: DQNConfig,
-    seed: int,
-    episodes: int,
-    run_dir: Path | str,
-    resume: bool = False,
-    progress: bool = True,
+    config: DQNConfig, seed: int, episodes: int, run_dir: Path | str, resume: bool = False, progress: bool = True
 ) -> tuple[DQN, TrainingLog]:
     """Train model-free DQN for ``episodes`` training episodes (see the module docstring)."""
     make_model = lambda env, s: build_dqn(config, env, s, episodes)  # noqa: E731

@@ -312,12 +312,7 @@ class ModelRefitCallback(BaseCallback):
 
 
 def train_mbpo(
-    config: MBPOConfig,
-    seed: int,
-    episodes: int,
-    run_dir: Path | str,
-    resume: bool = False,
-    progress: bool = True,
+    config: MBPOConfig, seed: int, episodes: int, run_dir: Path | str, resume: bool = False, progress: bool = True
 ) -> tuple[DQN, TrainingLog]:
     """Train DQN-MBPO for ``episodes`` real training episodes (see the module docstring; arguments as
     :func:`softpend.rl.dqn.train_dqn`)."""

@@ -87,10 +87,7 @@ def crc16_ccitt(data, crc=0xFFFF):
     for byte in data:
         crc ^= byte << 8
         for _ in range(8):
-            if crc & 0x8000:
-                crc = ((crc << 1) ^ 0x1021) & 0xFFFF
-            else:
-                crc = (crc << 1) & 0xFFFF
+            crc = ((crc << 1) ^ (0x1021 if crc & 0x8000 else 0)) & 0xFFFF
     return crc
 
 
@@ -140,8 +137,7 @@ def decode_frame(frame):
     raw = cobs_decode(frame)
     if len(raw) < HEADER_SIZE + 2:
         raise ProtocolError("frame too short (%d bytes)" % len(raw))
-    payload = raw[:-2]
-    received = (raw[-2] << 8) | raw[-1]
+    payload, received = raw[:-2], (raw[-2] << 8) | raw[-1]
     if crc16_ccitt(payload) != received:
         raise ChecksumMismatch("CRC mismatch (got 0x%04x, computed 0x%04x)" % (received, crc16_ccitt(payload)))
     msg_type, seq = struct.unpack(HEADER_FORMAT, payload[:HEADER_SIZE])
@@ -161,9 +157,7 @@ class FrameDecoder:
     ``validate(msg_type, values)`` returns None or what is wrong with the values (then a bad frame too)."""
 
     def __init__(self, validate=None):
-        self._frame = bytearray()
-        self._overflow = False
-        self._validate = validate
+        self._frame, self._overflow, self._validate = bytearray(), False, validate
         self.bad_frames = self.checksum_errors = self.value_errors = self.consecutive_bad = 0
         self.last_error = None
 
@@ -207,10 +201,8 @@ class DeviceSession:
     and the encoder: it feeds bytes to :meth:`receive`, applies :meth:`torque_nm`, sends :meth:`state_frame`."""
 
     def __init__(self, counts_per_rev, torque_limit_nm, watchdog_ms=100, state_rate_hz=100):
-        self.counts_per_rev = int(counts_per_rev)
-        self.torque_limit_nm = float(torque_limit_nm)
-        self.watchdog_ms = int(watchdog_ms)
-        self.state_rate_hz = int(state_rate_hz)
+        self.counts_per_rev, self.torque_limit_nm = int(counts_per_rev), float(torque_limit_nm)
+        self.watchdog_ms, self.state_rate_hz = int(watchdog_ms), int(state_rate_hz)
         self.decoder = FrameDecoder()
         self.session_open = self.stopped = self.saturated = False
         self.command_nm, self.last_cmd_seq, self.last_cmd_us, self.tx_seq = 0.0, 0, None, 0

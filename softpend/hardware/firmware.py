@@ -30,8 +30,7 @@ def check_firmware(firmware_path: Path = FIRMWARE_PATH) -> bool:
 def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
     """Replace the embedded copy with the current protocol module."""
     text = Path(firmware_path).read_text()
-    head = text.split(BEGIN_MARKER, 1)[0]
-    tail = text.split(END_MARKER, 1)[1]
+    head, tail = text.split(BEGIN_MARKER, 1)[0], text.split(END_MARKER, 1)[1]
     with atomic_write(firmware_path, "w") as handle:
         handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
 

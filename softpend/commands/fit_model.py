@@ -59,12 +59,10 @@ def run(args: argparse.Namespace) -> int:
 
     output_name(args.output, ".json" if args.output.endswith(".json") else ".pt", "model path")  # a file's name
     outputs = Outputs()
-    # before the work: a model this command wrote may be replaced, nothing else
     model_files = [outputs.file(path, what="model file") for path in model_paths(args.output)]
     chosen = {key: getattr(args, key) for key in ("information", "velocity_source", "hidden_widths")}
     config = TrainConfig(**chosen, **field_values(args, _OPTIONS))
     dataset = load_dataset(args.dataset)
-    # a model predicts one step of the training data's dt_s: held-out data at another step is not a test of it
     test = load_dataset(args.test_data, expected_dt_s=dataset.dt_s) if args.test_data else None
     torch.set_num_threads(args.threads)
     result = fit_dynamics_model(dataset, config, progress=not args.no_progress)

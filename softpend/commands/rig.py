@@ -24,10 +24,8 @@ OPTIONS: tuple[Option, ...] = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     from softpend.commands import rig_build, rig_commission, rig_control
 
-    parser = add_command(
-        subparsers, "rig", "serve the emulated rig (motor protocol) on a pseudo-terminal", OPTIONS, run
-    )
-    actions = parser.add_subparsers(dest="rig_action", metavar="ACTION")
+    help = "serve the emulated rig (motor protocol) on a pseudo-terminal"
+    actions = add_command(subparsers, "rig", help, OPTIONS, run).add_subparsers(dest="rig_action", metavar="ACTION")
     for module in (rig_control, rig_build, rig_commission):
         module.register(actions)
 
@@ -40,16 +38,9 @@ def run(args: argparse.Namespace) -> int:
     outputs = Outputs()
     if args.truth_log is not None:  # an empty one is an error, not no log
         outputs.file(args.truth_log, what="--truth-log")
-    config = RigConfig(
-        task=Task(start_noise_rad=0.0).replace(n_links=args.n_links),
-        counts_per_rev=args.counts_per_rev,
-        latency_s=args.latency_ms / 1000.0,
-        drop_probability=args.drop,
-        garble_probability=args.garble,
-        watchdog_ms=args.watchdog_ms,
-        seed=args.seed,
-        duration_s=args.duration,
-    )
+    link = dict(counts_per_rev=args.counts_per_rev, latency_s=args.latency_ms / 1000.0, watchdog_ms=args.watchdog_ms)
+    faults = dict(drop_probability=args.drop, garble_probability=args.garble, seed=args.seed, duration_s=args.duration)
+    config = RigConfig(task=Task(start_noise_rad=0.0).replace(n_links=args.n_links), **link, **faults)
     truth_log = None if args.truth_log is None else str(outputs.live(args.truth_log))
     try:
         return serve_forever(config, truth_log=truth_log, link_path=args.port)

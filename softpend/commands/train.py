@@ -17,7 +17,6 @@ OPTIONS: tuple[Option, ...] = (
     ("--algo", None, dict(required=True, choices=("dqn", "mbpo", "pilco"), help="training algorithm")),
     ("--out", None, dict(help="run folder (default: runs/<algo>-seed<SEED>)")),
     ("--seed", None, dict(type=int, default=0, help="seed of every random draw of the run")),
-    # 0: PILCO's random trials only
     ("--episodes", (0, MAX_EPISODES), dict(type=int, help="training episodes (default: the algorithm's)")),
     ("--torque-limit-nm", None, dict(type=float, help="motor torque limit [N m]")),
     ("--n-links", None, dict(type=int, help="links of the PRB rod (default: RodParams)")),

@@ -49,12 +49,8 @@ def linearise_learned_model(
     x = torch.as_tensor(x0, dtype=torch.float64)
     u = torch.tensor([float(torque_nm)], dtype=torch.float64)
     a, b = torch.autograd.functional.jacobian(step, (x, u))
-    return LinearModel(
-        a=a.detach().numpy(),
-        b=b.detach().numpy().reshape(-1, 1),
-        dt_s=float(model.dt_s),
-        state_names=tuple(model.layout.names),
-    )
+    b = b.detach().numpy().reshape(-1, 1)
+    return LinearModel(a=a.detach().numpy(), b=b, dt_s=float(model.dt_s), state_names=tuple(model.layout.names))
 
 
 class LearnedStateTracker:

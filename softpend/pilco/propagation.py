@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from softpend.checks import boolean, finite, optional_positive, positive
+from softpend.checks import boolean, finite, one_of, optional_positive, positive
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 from softpend.plant import OBSERVATION_NAMES
 
@@ -81,9 +81,7 @@ STATE_SPECS: dict[str, StateSpec] = {
 
 def state_spec(name: str) -> StateSpec:
     """The :class:`StateSpec` called ``name``; unknown names raise ``ValueError``."""
-    if name not in STATE_SPECS:
-        raise ValueError(f"state must be one of {sorted(STATE_SPECS)}, got {name!r}")
-    return STATE_SPECS[name]
+    return STATE_SPECS[one_of("state", name, STATE_SPECS)]
 
 
 class Propagator:

@@ -26,7 +26,6 @@ class TrainingLog:
     #: Why training ended before its episode budget (early stopping), or ``None``.
     stop_reason: Optional[str] = None
 
-    # ------------------------------------------------------------------ counters
     @property
     def n_episodes(self) -> int:
         return len(self.episodes)
@@ -46,7 +45,6 @@ class TrainingLog:
         rows = self.episodes if table == "episodes" else self.evaluations
         return np.array([row[name] for row in rows], dtype=float)
 
-    # ------------------------------------------------------------------ derived figures
     def first_balanced(self, std_rad: float = SUCCESS_STD_RAD) -> Optional[dict[str, Any]]:
         """The first evaluation in which every seed swung up and held ``upright_std_rad <= std_rad``."""
         for row in self.evaluations:
@@ -54,17 +52,14 @@ class TrainingLog:
                 return row
         return None
 
-    def real_s_to_balance(self, std_rad: float = SUCCESS_STD_RAD) -> float:
-        """Training plant seconds at the first balanced evaluation (``inf`` if none)."""
+    def real_s_to_balance(self, std_rad: float = SUCCESS_STD_RAD, key: str = "plant_s") -> float:
+        """Training plant seconds (``key="episode"``: episodes) at the first balanced evaluation (``inf`` if none)."""
         row = self.first_balanced(std_rad)
-        return float(row["plant_s"]) if row is not None else math.inf
+        return float(row[key]) if row is not None else math.inf
 
     def episodes_to_balance(self, std_rad: float = SUCCESS_STD_RAD) -> float:
-        """Training episodes at the first balanced evaluation (``inf`` if none)."""
-        row = self.first_balanced(std_rad)
-        return float(row["episode"]) if row is not None else math.inf
+        return self.real_s_to_balance(std_rad, "episode")
 
-    # ------------------------------------------------------------------ files
     def save(self, path: Path) -> None:
         data = {"algo": self.algo, "seed": self.seed, "episodes": self.episodes, "evaluations": self.evaluations}
         if self.stop_reason is not None:
@@ -90,8 +85,6 @@ class TrainingLog:
 
 
 def _json_default(value: Any) -> Any:
-    if isinstance(value, (np.floating, np.integer)):
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
-    if isinstance(value, np.bool_):
-        return bool(value)
     raise TypeError(f"cannot serialise {type(value).__name__}")

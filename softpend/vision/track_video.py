@@ -51,14 +51,6 @@ def _rows_array(rows: list) -> np.ndarray:
     return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
 
 
-def _video_frames(capture: cv2.VideoCapture):
-    while True:
-        ok, frame = capture.read()
-        if not ok:
-            return
-        yield frame
-
-
 def _progress(iterator=None, total: Optional[int] = None, progress: bool = True):
     from tqdm.auto import tqdm
 
@@ -78,15 +70,13 @@ def track_video(
 ) -> np.ndarray:
     """Track every frame of a video file (and the hub marker if ``track_hub``) into ``out_csv``, replaced only
     once the whole video is tracked; missing timestamps, frame rate and markers come from its sidecar."""
-    video = Path(video)
-    out_csv = Path(out_csv)
+    video, out_csv = Path(video), Path(out_csv)
     if fps is not None:
         fps = check_fps("fps", fps)
     _check_output_path(out_csv, video)
     check_regular_file(video, "video")
     sidecar = read_sidecar(video)
-    if marker_positions_m is None:
-        marker_positions_m = sidecar.get("markers_m")
+    marker_positions_m = sidecar.get("markers_m") if marker_positions_m is None else marker_positions_m
     stamps = sidecar.get("timestamps_s") if timestamps_s is None else timestamps_s
     if stamps is not None:
         stamps = np.asarray(stamps, dtype=float)
@@ -102,7 +92,7 @@ def track_video(
             fps = container_fps if math.isfinite(container_fps) and 0 < container_fps <= MAX_FPS else None
         if stamps is None and fps is None:
             raise ValueError("fps: the video has no usable frame rate; pass fps or timestamps")
-        frames = _video_frames(capture)
+        frames = (frame for _, frame in itertools.takewhile(lambda read: read[0], iter(capture.read, None)))
         first = next(frames, None)
         if first is None:
             raise ValueError(f"video {video} has no frames")

@@ -69,8 +69,7 @@ def _validate_frame(frame_bgr: np.ndarray) -> None:
     if not isinstance(frame_bgr, np.ndarray) or frame_bgr.ndim != 3 or shape[2] != 3 or frame_bgr.dtype != np.uint8:
         dtype = getattr(frame_bgr, "dtype", type(frame_bgr).__name__)
         raise ValueError(f"frame_bgr must be an (H, W, 3) uint8 BGR image, got shape {shape} of {dtype}")
-    if min(shape[:2]) < MIN_FRAME_SIDE_PX:
-        side = MIN_FRAME_SIDE_PX
+    if min(shape[:2]) < (side := MIN_FRAME_SIDE_PX):
         raise ValueError(f"frame_bgr must be at least {side}x{side} pixels, got {shape[1]}x{shape[0]}")
 
 
@@ -155,8 +154,7 @@ class TipTracker:
         """The dot in ``frame[y0:y1, x0:x1]`` in frame pixels (lost, its centre unknown, if cut by the window)."""
         window = frame[y0:y1, x0:x1]
         blurred = cv2.GaussianBlur(self.colour.mask(window), (3, 3), 0)
-        blobs = _blobs(blurred, self.min_area_px)
-        if not blobs:
+        if not (blobs := _blobs(blurred, self.min_area_px)):
             return _LOST
         area, contour = blobs[0]
         if area > max_area_px:  # too big to be the dot

@@ -104,24 +104,18 @@ def simulator_yardsticks(
 def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object) -> dict[str, float]:
     """Grey-box identification of ``data`` from the perturbed guess, its parameter errors, model quality on held-out
     data (beside ``network``: keys ``nn_*``) and closed-loop usefulness."""
-    from softpend.study.greybox import (
-        HANGING_PROTOCOL,
-        YARDSTICK_OFFSET_RAD,
-        closed_loop_usefulness,
-        model_quality,
-        perturbed_guess,
-    )
+    from softpend.study import greybox as gb
     from softpend.sysid.greybox import identify
     from softpend.task import Task
 
     truth = data.params
     assert truth is not None  # simulated babbling records its rod
-    result = identify(data, initial_params=perturbed_guess(truth))
+    result = identify(data, initial_params=gb.perturbed_guess(truth))
     errors = result.relative_errors(truth)
-    hanging = babble(HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
-    quality = model_quality(result.params, test, hanging, networks={"nn": network})
+    hanging = babble(gb.HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
+    quality = gb.model_quality(result.params, test, hanging, networks={"nn": network})
     rows = quality["rows"]
-    yardstick = rows[f"simulator started {YARDSTICK_OFFSET_RAD:g} rad off"]
+    yardstick = rows[f"simulator started {gb.YARDSTICK_OFFSET_RAD:g} rad off"]
     out = {
         "identify_s": result.identify_s,
         "identify_windows": float(result.n_windows),
@@ -136,10 +130,8 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
         out[f"{prefix}_valid_prediction_lyapunov"] = row["valid_prediction_lyapunov"]
         out[f"{prefix}_valid_prediction_ratio"] = row["valid_prediction_s"] / yardstick["valid_prediction_s"]
         out[f"{prefix}_hanging_tip_rmse_1s_pct_length"] = row["hanging_tip_rmse_pct_length"]
-    usefulness = {
-        (r["designed_on"], r["controller"]): r
-        for r in closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))
-    }
+    closed_loop = gb.closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))
+    usefulness = {(r["designed_on"], r["controller"]): r for r in closed_loop}
     for key, controller in (("lqr", "LQR"), ("swingup", "energy swing-up + LQR")):
         grey_row, true_row = usefulness[("grey-box", controller)], usefulness[("true parameters", controller)]
         out[f"greybox_{key}_successes"] = grey_row["successes"]

@@ -14,20 +14,16 @@ MAX_SESSION_S = 86_400.0
 Option = tuple[str, Optional[tuple[float, float]], dict[str, Any]]
 
 
-def add_options(parser: argparse.ArgumentParser, options: Sequence[Option]) -> None:
-    """Add the options of a table to ``parser``; a value outside its interval is a usage error naming the flag."""
+def add_command(
+    subparsers: argparse._SubParsersAction, name: str, help: str, options: Sequence[Option], run: Callable, **kw: Any
+) -> argparse.ArgumentParser:
+    """A subcommand ``name`` with the options of a table (positionals included) that runs ``run(args)``; a value
+    outside an option's interval is a usage error naming the flag."""
+    parser = subparsers.add_parser(name, help=help, **kw)
     for flag, limits, keywords in options:
         if limits is not None:
             keywords = dict(keywords, type=_ranged(keywords["type"], flag, *limits))
         parser.add_argument(flag, **keywords)
-
-
-def add_command(
-    subparsers: argparse._SubParsersAction, name: str, help: str, options: Sequence[Option], run: Callable, **kw: Any
-) -> argparse.ArgumentParser:
-    """A subcommand ``name`` with the options of a table (positionals included) that runs ``run(args)``."""
-    parser = subparsers.add_parser(name, help=help, **kw)
-    add_options(parser, options)
     parser.set_defaults(func=run)
     return parser
 

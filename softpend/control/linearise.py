@@ -77,12 +77,10 @@ class LinearModel:
         """``A - B K`` for ``u = -K x``."""
         return self.a - self.b @ np.asarray(gain, dtype=float).reshape(1, -1)
 
-    def is_stable_closed_loop(self, gain: np.ndarray, margin: float = 0.0) -> bool:
+    def is_stable_closed_loop(self, gain: np.ndarray) -> bool:
         """All closed-loop eigenvalues inside the unit circle (discrete) or the left half-plane."""
         eig = np.linalg.eigvals(self.closed_loop(gain))
-        if self.is_discrete:
-            return bool(np.all(np.abs(eig) < 1.0 - margin))
-        return bool(np.all(eig.real < -margin))
+        return bool(np.all(np.abs(eig) < 1.0) if self.is_discrete else np.all(eig.real < 0.0))
 
 
 def discretise(model: LinearModel, dt_s: float) -> LinearModel:

@@ -153,10 +153,6 @@ class LQRController:
     def reset(self) -> None:
         pass
 
-    def state(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
-        """The feedback state ``x`` for the current step."""
-        return self.state_function(observation, q, q_dot)
-
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        torque = -float(self.gain[0] @ self.state(observation, q, q_dot))
+        torque = -float(self.gain[0] @ self.state_function(observation, q, q_dot))
         return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)

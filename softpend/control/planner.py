@@ -134,9 +134,6 @@ class PlannerConfig:
             raise ValueError(f"{path}: {exc}") from None
 
 
-# ---------------------------------------------------------------------- probabilistic networks
-
-
 def _bound_log_var(log_var: Tensor, max_log_var: Tensor, min_log_var: Tensor) -> Tensor:  # as in PETS
     log_var = max_log_var - nn.functional.softplus(max_log_var - log_var)
     return min_log_var + nn.functional.softplus(log_var - min_log_var)
@@ -288,9 +285,6 @@ def fit_ensemble(
     return DynamicsEnsemble(members).eval()
 
 
-# ---------------------------------------------------------------------- physics-structured residual model
-
-
 def _tip(q: Tensor, qd: Tensor, link_length_m: float) -> tuple[Tensor, Tensor]:
     """Tip angle ``theta`` and rate of joint states ``(..., n + 1)``, as the plant observes them."""
     a, ad = torch.cumsum(q, -1)[..., 1:], torch.cumsum(qd, -1)[..., 1:]
@@ -414,9 +408,6 @@ class ObservedStateTracker:
         )
 
 
-# ---------------------------------------------------------------------- MPPI
-
-
 @dataclass
 class MPPIPlan:
     """One MPPI iteration under way: knots ``(B, K, n_knots)``, rollout torques ``(B K, T)``, states, summed costs."""
@@ -511,9 +502,6 @@ def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor)
     return 1.0 - torch.cos(theta_rad) + ENERGY_WEIGHT * (energy / (2 * params.gravity_torque_horizontal_nm)) ** 2
 
 
-# ---------------------------------------------------------------------- the controller on the plant
-
-
 class PlannerController:
     """MPPI on a learned model away from upright, the LQR inside ``capture_rad`` (until ``RELEASE_FACTOR`` times it),
     for one rod (a ``Controller``) or a batch (:meth:`batch_policy`): torques held ``hold_steps`` calls and planned
@@ -592,9 +580,6 @@ class _BatchPlanner(BatchPolicy):
 
     def __call__(self, k: int, time_s: float, vectors: np.ndarray, *state: Any) -> Any:
         return (self.controller.torques(np.asarray(state[0]), time_s) / self.controller.torque_limit_nm)[:, None]
-
-
-# ---------------------------------------------------------------------- the trial loop
 
 
 @dataclass

@@ -18,9 +18,7 @@ class _HoldController:
         self.reset()
 
     def reset(self) -> None:
-        self._next_update_s = 0.0
-        self._torque_nm = 0.0
-        self._n_updates = 0
+        self._next_update_s, self._torque_nm, self._n_updates = 0.0, 0.0, 0
 
     def _compute(self, observation: Observation) -> float:
         raise NotImplementedError
@@ -63,10 +61,7 @@ class PilcoController(_HoldController):
                     f"balance_band must be (within_rad, within_rad_s) with a balance_policy, got {balance_band!r}"
                 )
             balance_band = (positive("balance_band[0]", balance_band[0]), positive("balance_band[1]", balance_band[1]))
-        self.policy = policy
-        self.balance_policy = balance_policy
-        self.balance_band = balance_band
-        self.spec = spec
+        self.policy, self.balance_policy, self.balance_band, self.spec = policy, balance_policy, balance_band, spec
         super().__init__(control_dt_s)
 
     def _compute(self, observation: Observation) -> float:
@@ -100,9 +95,7 @@ class RandomTorqueController(_HoldController):
 
     def reset(self) -> None:
         super().reset()
-        self._rng = np.random.default_rng(self.seed)
-        self._periods_left = 0
-        self._held_nm = 0.0
+        self._rng, self._periods_left, self._held_nm = np.random.default_rng(self.seed), 0, 0.0
 
     def _compute(self, observation: Observation) -> float:
         if self._periods_left <= 0:

@@ -66,10 +66,8 @@ class MultiOutputGP:
         )
         if len(inputs) < 2:
             raise ValueError(f"inputs must hold at least 2 points, got {len(inputs)}")
-        self.inputs_np = inputs
-        self.targets_np = targets
-        self.n_inputs = inputs.shape[1]
-        self.n_outputs = targets.shape[1]
+        self.inputs_np, self.targets_np = inputs, targets
+        self.n_inputs, self.n_outputs = inputs.shape[1], targets.shape[1]
         self.input_std = np.maximum(inputs.std(axis=0), 1e-6)
         if hyperparameters is None:
             target_std = np.maximum(targets.std(axis=0), 1e-6)
@@ -95,7 +93,6 @@ class MultiOutputGP:
         self.conditioning = (inputs, targets)
         self._update_cache()
 
-    # ------------------------------------------------------------------ fitting
     @staticmethod
     def _neg_log_likelihood(
         params: torch.Tensor,
@@ -150,7 +147,6 @@ class MultiOutputGP:
         self._update_cache()
         return objectives
 
-    # ------------------------------------------------------------------ prediction
     def _update_cache(self) -> None:
         """Precompute ``beta = (K + sn^2 I)^{-1} y``, ``(K + sn^2 I)^{-1}`` per output and the pair weights of the
         second moments (:func:`~softpend.pilco.moments.pair_weights`): constants for the policy search."""
@@ -225,11 +221,5 @@ class MultiOutputGP:
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
         """:meth:`moments` as a pure function and its arguments after ``(mean, cov)`` (see
         :meth:`softpend.pilco.policy.RBFPolicy.moment_function`)."""
-        return gp_moments, (
-            self.inputs,
-            self.beta,
-            self.log_lengthscales,
-            self.log_signal_var,
-            self.inv_kernel,
-            self.pair_weights,
-        )
+        kernel = (self.log_lengthscales, self.log_signal_var, self.inv_kernel, self.pair_weights)
+        return gp_moments, (self.inputs, self.beta, *kernel)

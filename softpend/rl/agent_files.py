@@ -178,7 +178,6 @@ def save_agent_file(model: DQN, path: str | Path) -> Path:
     return Path(path)
 
 
-# ---------------------------------------------------------------------------------------- replay buffers
 def _parts(buffer: ReplayBuffer) -> dict[str, ReplayBuffer]:
     """The SB3 buffers inside ``buffer`` by key prefix (an MBPO buffer carries a model buffer)."""
     parts = {"": buffer}

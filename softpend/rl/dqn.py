@@ -228,9 +228,6 @@ class EpisodeEvents(BaseCallback):
         for task in self.pending:
             self.flush(task)
 
-    def _on_training_end(self) -> None:
-        self.close()
-
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()

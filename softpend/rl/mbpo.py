@@ -121,7 +121,6 @@ class MBPOTrainer:
         self.n_fits = 0
         self.model_steps = 0
 
-    # ------------------------------------------------------------------ the model
     def add_episode(self, observations: np.ndarray, torques_nm: np.ndarray) -> None:
         """Store one real episode (plant observations (N, 10), torques (N - 1,))."""
         expected = self.config.episode_agent_steps * self.config.action_repeat + 1
@@ -181,7 +180,6 @@ class MBPOTrainer:
             self.run_dir / "dynamics", self.dynamics, {"fits": self.n_fits, "episodes": len(self.trials_observations)}
         )
 
-    # ------------------------------------------------------------------ rollouts
     @torch.no_grad()
     def rollouts(self, agent: DQN, buffer: MBPOReplayBuffer, n_rollouts: int, length: int, epsilon: float) -> int:
         """Branch ``n_rollouts`` model rollouts of ``length`` agent steps into the model buffer; transitions added."""
@@ -227,7 +225,6 @@ class MBPOTrainer:
         self.model_steps += added
         return added
 
-    # ------------------------------------------------------------------ the training loop's callbacks
     def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
         """The callbacks before and after the episode bookkeeping."""
         return [ModelRolloutCallback(self, recorder.log)], [ModelRefitCallback(self, recorder)]
@@ -251,13 +248,9 @@ class MBPOTrainer:
             raise ValueError(f"{path}: not an MBPO checkpoint (no {exc} array)") from None
         steps = self.config.episode_agent_steps * self.config.action_repeat
         n = len(observations)
-        if (
-            observations.dtype != np.float64
-            or torques.dtype != np.float64
-            or counters.shape != (2,)
-            or counters.dtype.kind not in "iu"
-            or (n and (observations.shape != (n, steps + 1, len(OBSERVATION_NAMES)) or torques.shape != (n, steps)))
-        ):
+        shapes = not n or (observations.shape == (n, steps + 1, len(OBSERVATION_NAMES)) and torques.shape == (n, steps))
+        counted = counters.shape == (2,) and counters.dtype.kind in "iu"
+        if not (observations.dtype == torques.dtype == np.float64 and counted and shapes):
             raise ValueError(
                 f"{path}: its arrays do not match the run's episodes ({observations.shape}, {torques.shape}, "
                 f"{counters.shape})"
@@ -283,13 +276,8 @@ class ModelRolloutCallback(BaseCallback):
         c = self.trainer.config
         if self.model.num_timesteps % c.rollout.every_steps == 0 and self.trainer.dynamics is not None:
             assert isinstance(self.model.replay_buffer, MBPOReplayBuffer)
-            self.trainer.rollouts(
-                self.model,
-                self.model.replay_buffer,
-                c.rollout.per_real_step * c.rollout.every_steps,
-                c.rollout.length(self.log.n_episodes),
-                self.model.exploration_rate,
-            )
+            n_rollouts, length = c.rollout.per_real_step * c.rollout.every_steps, c.rollout.length(self.log.n_episodes)
+            self.trainer.rollouts(self.model, self.model.replay_buffer, n_rollouts, length, self.model.exploration_rate)
         return True
 
 

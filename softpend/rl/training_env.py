@@ -35,9 +35,7 @@ class ActionRepeat(gym.Wrapper):
             observations.append(base.report_observation.as_array())
             if terminated or truncated:
                 break
-        info = dict(info)
-        info["plant_observations"] = np.array(observations)
-        info["plant_steps"] = len(observations) - 1
+        info = dict(info, plant_observations=np.array(observations), plant_steps=len(observations) - 1)
         return obs, total, terminated, truncated, info
 
 
@@ -62,12 +60,9 @@ class HeldActionController(GymPolicyController):
     holds the torque in between."""
 
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
-        super().__init__(predict, env)
-        self.repeat = positive_int("repeat", repeat)
-        self._step = 0
-        self._held_action: Any = None
-        self._inner_predict = predict
-        self.predict = self._held_predict
+        super().__init__(self._held_predict, env)
+        self.repeat, self._inner_predict = positive_int("repeat", repeat), predict
+        self.reset()
 
     def _held_predict(self, vector: np.ndarray) -> Any:
         if self._step % self.repeat == 0 or self._held_action is None:
@@ -77,8 +72,7 @@ class HeldActionController(GymPolicyController):
 
     def reset(self) -> None:
         super().reset()
-        self._step = 0
-        self._held_action = None
+        self._step, self._held_action = 0, None
 
 
 def greedy_predictor(model: Any) -> Callable[[np.ndarray], Any]:

@@ -31,16 +31,12 @@ class SweepFailed(RuntimeError):
 
 def default_workers() -> int:
     """``$SOFTPEND_WORKERS`` if set, else the CPU cores this process may use."""
-    value = os.environ.get(WORKERS_ENV)
-    if value is None:
+    if (value := os.environ.get(WORKERS_ENV)) is None:
         return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
-    try:
-        workers = int(value)
-    except ValueError:
-        workers = 0
-    if workers < 1:
-        raise ValueError(f"{WORKERS_ENV} must be a positive integer, got {value!r}")
-    return workers
+    with contextlib.suppress(ValueError):
+        if (workers := int(value)) >= 1:
+            return workers
+    raise ValueError(f"{WORKERS_ENV} must be a positive integer, got {value!r}")
 
 
 def default_backend() -> str:

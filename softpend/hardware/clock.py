@@ -1,6 +1,5 @@
-"""Clocks of the rig stack: the wall clock of a real rig, and the twin's :class:`SimClock`, an event queue whose
-time jumps from event to event when someone waits (events at the same time run in the order scheduled, so a run
-depends on its inputs and seeds only); :class:`SimSerial` is the host's end of an in-memory link on it."""
+"""Clocks of the rig stack: a real rig's wall clock; the twin's :class:`SimClock`, a deterministic event queue;
+:class:`SimSerial`, the host's end of an in-memory link on it."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""The host's rig loop, paced by the device's STATE stream (STOP on any exception, every state logged first):
-:func:`run_control_loop` plays a program of time; :func:`run_closed_loop` runs a controller behind the state
-estimator, on a rig or on the digital twin in simulated time (:func:`run_twin_control`)."""
+"""The host's rig loops, paced by the STATE stream, STOP on any exception: :func:`run_control_loop` (a program
+of time), :func:`run_closed_loop` and :func:`run_twin_control` (a controller behind the state estimator)."""
 
 from __future__ import annotations
 

@@ -189,7 +189,7 @@ class RigEmulator(SimRig):
         os.set_blocking(self.master_fd, False)
         self.port = os.ttyname(self._slave_fd)
         self.host, self._tail = self, b""  # type: ignore[assignment]  # device bytes go to deliver()
-        self._linked = False
+        self._linked = self._running = False
         try:
             if self.link_path is not None:
                 _check_link_path(self.link_path)  # again: something may have appeared meanwhile
@@ -200,7 +200,6 @@ class RigEmulator(SimRig):
         except BaseException:
             self.close()
             raise
-        self._running = False
 
     def _write(self, data: bytes) -> bytes:
         try:
@@ -236,11 +235,10 @@ class RigEmulator(SimRig):
                 if ready:
                     try:
                         data = os.read(self.master_fd, 4096)
-                    except BlockingIOError:
+                    except OSError as exc:  # EIO: no host has the pty open
                         data = b""
-                    except OSError:  # no host has the pty open (EIO): nothing to read
-                        data = b""
-                        time.sleep(min(0.01, max(0.0, wait)))
+                        if not isinstance(exc, BlockingIOError):
+                            time.sleep(min(0.01, max(0.0, wait)))
                     if data:
                         self.clock.sleep_until(time.monotonic() - start)
                         self._from_host(data)

@@ -1,6 +1,5 @@
 """Rig state estimation: an extended Kalman filter on the PRB model, fed by the encoder every STATE frame and by
-late camera frames at their capture time (the filter's history is corrected there and replayed to now); the
-controller gets the joint state and the observed variables, predicted ``lead_steps`` ahead."""
+late camera frames at their capture time (the history corrected there and replayed to now)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""The rig's geometry and parts from the rod's parameters: a printed beam of the rod's flexural rigidity
-(``D_print = (12 EI / (E_print W)) ** (1/3)``), the hub mount, the steel tip disc, the calibration markers (scaled
-to clear the swing circle) and the camera square-on to the rod's plane."""
+"""The rig's geometry from the rod's parameters: a printed beam of the rod's flexural rigidity (thickness
+``(12 EI / (E_print W)) ** (1/3)``), hub mount, steel tip disc, calibration markers and a square-on camera."""
 
 from __future__ import annotations
 
@@ -57,9 +56,7 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class HubSpec:
-    """The printed hub mount and the clearances around the rod [m]: the beam leaves the mount's boss at
-    ``clamp_radius_m``; the magenta hub marker sits ``hub_marker_radius_m`` from the axis on a rigid flag
-    ``flag_gap_m`` in front of the beam; ``keep_out_margin_m`` beyond the swing circle stays clear."""
+    """The printed hub mount, hub marker flag and clearances around the rod [m]."""
 
     shaft_side_m: float = 0.125 * 0.0254
     clamp_radius_m: float = 0.012
@@ -74,9 +71,8 @@ class HubSpec:
 
 @dataclass(frozen=True)
 class RigDesign:
-    """Dimensions of the rig for one rod (:func:`rig_design`; SI units): the printed beam (length from the
-    pocket's inner end, width out of plane, thickness in plane), the tip disc, the swing and keep-out radii, the
-    marker flag, the calibration markers (hub at the origin, y up), the affine camera and its distance."""
+    """Dimensions of the rig for one rod (:func:`rig_design`; SI units; beam width out of plane, thickness in
+    plane; markers with the hub at the origin, y up)."""
 
     params: RodParams
     print_modulus_pa: float

@@ -1,6 +1,5 @@
-"""A rig session end to end on the digital twin, in simulated time: babble over the emulated serial link (truth
-logged), film the true motion with the synthetic camera on an offset clock, track the video, synchronise the two
-logs into a ``source="rig"`` dataset."""
+"""A rig session on the digital twin: babble over the emulated link, film the true motion on an offset clock,
+track the video, synchronise both logs into a ``source="rig"`` dataset."""
 
 from __future__ import annotations
 

@@ -166,9 +166,8 @@ def _record(path: Path, sha256: Optional[str]) -> None:
 
 
 class Outputs:
-    """The files one command writes: each planned and checked (:meth:`file`, :meth:`folder`) before the work,
-    then written atomically and recorded in its folder's manifest (:data:`MANIFEST`), or written in place as a
-    crash-safe log (:meth:`live`, then :meth:`done`).  Only files the manifest records as ours are replaced."""
+    """The files one command writes: planned and checked before the work (:meth:`file`, :meth:`folder`), then
+    written atomically or as a live log (:meth:`live`, :meth:`done`) and recorded in the folder's :data:`MANIFEST`."""
 
     def __init__(self) -> None:
         self._planned: dict[Path, str] = {}

@@ -1,6 +1,5 @@
-"""Reading input files with a bound: regular files only (checked before opening and again on the descriptor,
-opened non-blocking, so a FIFO or device cannot block or flood a read), never more bytes than the format can
-have, zip members bounded from the central directory; every refusal is one line naming the file."""
+"""Bounded reads of input files: regular files only (checked before and after a non-blocking open), never more
+bytes than the format can have, zip members bounded by the central directory; each refusal one line."""
 
 from __future__ import annotations
 

@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     config = PILCO if args.pilco_trials is None else dataclasses.replace(PILCO, n_policy_trials=args.pilco_trials)
     config = apply_overrides(config, args.pilco_overrides)
     pool = dict(workers=args.workers, backend=args.backend)
-    # every method's runs in one pool; the per-method calls below then find them finished
+    # every method's runs in one pool; the per-method calls below find them finished
     rl_specs = [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos]
     train_in_one_pool(rl_specs, root, config if "pilco" in args.methods else None, args.seeds, root, **pool)
     out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
@@ -133,8 +133,7 @@ def run(args: argparse.Namespace) -> int:
         if rl_logs:
             rows += fs.rl_fresh_start_rows(root, args.seeds, algos=list(rl_logs), configs=configs)
         per_seed = fs.seed_rows(rl_logs, rows, pilco_results)
-        summary = fs.aggregate_fresh_start_rows(rows)
-        headline = fs.headline_figures(per_seed)
-        out.update(fresh_starts=rows, fresh_start_summary=summary, per_seed=per_seed, headline=headline)
+        out.update(fresh_starts=rows, fresh_start_summary=fs.aggregate_fresh_start_rows(rows), per_seed=per_seed)
+        out["headline"] = fs.headline_figures(per_seed)
     print(json_text(out, indent=2))
     return 0

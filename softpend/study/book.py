@@ -374,9 +374,8 @@ def run_notebooks(
     progress: bool = True,
     overrides: Optional[dict[str, Any]] = None,
 ) -> list[NotebookRun]:
-    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``) and
-    write the execution page.  Every ``ValueError`` comes before anything executes; a failing notebook raises
-    :class:`NotebookExecutionError` once the running ones end."""
+    """Execute the toc's notebooks (``only``: these) with a profile's parameters and ``overrides`` (``--set``), write
+    the execution page; ``ValueError`` before anything runs, :class:`NotebookExecutionError` for a failing notebook."""
     layout, toc, given = book_profile(root, profile)
     for what, listed in ((f"profile {profile!r} names", given), ("--only names", only or [])):
         if unknown := sorted(set(listed) - set(toc)):
@@ -405,7 +404,7 @@ def _key_on_disk(layout: BookLayout, name: str) -> str:
 
 
 def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict, overrides: dict, scratch: Path):
-    """Check every notebook and plan its run; returns the plans and the overrides used."""
+    """The run plan of every notebook (checked) and the overrides used."""
     import nbformat
 
     package_code, plans, used = PackageCode(), dict[str, dict[str, Any]](), dict[str, Any]()
@@ -434,9 +433,8 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
 
 
 def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> None:
-    """Execute the uncached notebooks of ``order`` (their ``seconds`` into ``plans``), :data:`WORKERS` at a time, each
-    once the selected notebooks of its ``after`` have finished; after a failure nothing more starts and the first
-    error is raised."""
+    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each after its ``after``; raise the first
+    error once the running ones end."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
     done = {name for name in order if plans[name]["status"] == "cached"}
     pending, errors = [name for name in order if name not in done], list[BaseException]()
@@ -580,8 +578,7 @@ Sum of the last execution times: {sum(e["executed_s"] or 0.0 for e in notebooks)
 
 
 def build_html(root: Path | str = ".", path_output: Optional[Path | str] = None, quiet: bool = False) -> Path:
-    """``jupyter-book build`` (warnings as errors) of the executed notebooks; returns the HTML folder
-    ``<path_output or root>/_build/html`` (``RuntimeError`` on failure)."""
+    """``jupyter-book build -W`` of the executed notebooks into ``<path_output or root>/_build/html`` (returned)."""
     layout = BookLayout.at(root)
     script = Path(sys.executable).parent / "jupyter-book"
     output = Path(path_output if path_output is not None else layout.root).resolve()

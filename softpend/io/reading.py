@@ -40,6 +40,16 @@ def _described(what: str, path: PathLike) -> str:
     return f"{what} {Path(path)}" if what else str(Path(path))
 
 
+def _os_call(call: Any, path: PathLike, what: str, doing: str, error: type[Exception]) -> Any:
+    """``call()``, its failure as ``FileNotFoundError`` or ``error`` naming the file."""
+    try:
+        return call()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{_described(what, path)}: no such file") from None
+    except (OSError, ValueError) as exc:  # permission, a name too long, a NUL byte in the name
+        raise error(f"{_described(what, path)}: cannot be {doing} ({getattr(exc, 'strerror', None) or exc})") from None
+
+
 def _check_stat(
     info: os.stat_result, path: PathLike, what: str, max_bytes: Optional[int], error: type[Exception]
 ) -> None:
@@ -57,12 +67,7 @@ def check_regular_file(
     """``os.stat(path)`` if ``path`` is a regular file (links followed) of at most ``max_bytes``; else
     ``FileNotFoundError`` (nothing there) or ``error`` naming ``what``, the file and the reason."""
     path = Path(path)
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{_described(what, path)}: no such file") from None
-    except (OSError, ValueError) as exc:  # permission, a name too long, a NUL byte in the name
-        raise error(f"{_described(what, path)}: cannot be read ({getattr(exc, 'strerror', None) or exc})") from None
+    info = _os_call(lambda: os.stat(path), path, what, "read", error)
     _check_stat(info, path, what, max_bytes, error)
     return info
 
@@ -73,12 +78,7 @@ def open_checked_fd(
     """``os.open(path, flags)`` made non-blocking for the open, so a FIFO cannot block it, and refused (closed)
     unless the descriptor is a regular file of at most ``max_bytes``."""
     flags |= os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
-    try:
-        fd = os.open(path, flags, 0o644)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{_described(what, path)}: no such file") from None
-    except OSError as exc:
-        raise error(f"{_described(what, path)}: cannot be opened ({exc.strerror or exc})") from None
+    fd = _os_call(lambda: os.open(path, flags, 0o644), path, what, "opened", error)
     try:
         _check_stat(os.fstat(fd), path, what, max_bytes, error)
         fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
@@ -102,10 +102,7 @@ def open_regular_file(
 def read_bytes_checked(path: PathLike, what: str, max_bytes: int, error: type[Exception] = ValueError) -> bytes:
     """The bytes of the regular file at ``path``, refused beyond ``max_bytes`` (also if it grows while read)."""
     with open_regular_file(path, what, max_bytes, error) as handle:
-        try:
-            data = handle.read(max_bytes + 1)
-        except OSError as exc:
-            raise error(f"{_described(what, path)}: cannot be read ({exc.strerror or exc})") from None
+        data = _os_call(lambda: handle.read(max_bytes + 1), path, what, "read", error)
     if len(data) > max_bytes:
         raise error(f"{_described(what, path)} has more than the {max_bytes} bytes a {what or 'file'} can have")
     return data

@@ -8,8 +8,7 @@ import time
 
 from softpend.commands.options import FieldOption, Option, add_command, field_options, field_values
 
-#: ``(flag, BabbleProtocol field, type, help, allowed range)`` of the protocol options; a value outside the range
-#: gives a dataset of noise, or of saturated torques, that still passes as data.
+#: ``(flag, BabbleProtocol field, type, help, allowed range)`` of the protocol options.
 _OPTIONS: tuple[FieldOption, ...] = (
     ("--n-trials", "n_trials", int, "number of trials", None),
     ("--trial-length-s", "trial_length_s", float, "trial length [s]", None),
@@ -27,9 +26,8 @@ _OPTIONS: tuple[FieldOption, ...] = (
 )
 
 
-DESCRIPTION = """Drive the simulated soft rod with band-limited random torques (plus a weak stabilising PD on the hub
-in most trials) and save positions, differenced velocities and torques as a dataset file (softpend.sysid.dataset
-format)."""
+DESCRIPTION = """Drive the simulated rod with band-limited random torques (a weak stabilising PD in most trials) and
+save positions, differenced velocities and torques as a dataset (softpend.sysid.dataset)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -7,11 +7,9 @@ import sys
 
 from softpend.commands.options import add_command, set_option
 
-DESCRIPTION = """Execute the notebooks of _toc.yml (toc order, two at a time) with the parameters of a profile in
-book/profiles.yml into book/_generated/NAME.ipynb, skipping up-to-date ones unless --force. The runs they read are
-trained beforehand by `softpend sweep --book --profile PROFILE` (else by the notebook)."""
-SET_HELP = """set a parameter (VALUE as JSON, else a string) in every notebook that defines it, on top of the
-profile; repeatable. Example: --set plant=beam regenerates the figure set on the continuum beam"""
+DESCRIPTION = """Execute the notebooks of _toc.yml with a profile of book/profiles.yml into book/_generated/NAME.ipynb,
+skipping up-to-date ones unless --force (`softpend sweep --book` trains the runs they read beforehand)."""
+SET_HELP = "set a parameter (VALUE as JSON, else text) in each notebook that defines it (repeatable; e.g. plant=beam)"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

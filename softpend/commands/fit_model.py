@@ -24,9 +24,8 @@ def _integers(text: str) -> tuple[int, ...]:
     return tuple(int(w) for w in text.split(",") if w.strip())
 
 
-DESCRIPTION = """Fit the one-step dynamics network to a dataset written by `softpend babble` (or a rig), save it as
-OUTPUT.pt (state dict) + OUTPUT.json (metadata with metrics), and print one-step and open-loop rollout errors on the
-validation trials (and on --test-data if given) as JSON."""
+DESCRIPTION = """Fit the one-step dynamics network to a babbling dataset, save OUTPUT.pt + OUTPUT.json (metadata,
+metrics) and print one-step and rollout errors on the validation trials (and --test-data) as JSON."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -23,10 +23,8 @@ _CALIBRATION_FLAGS = {
 }
 
 
-DESCRIPTION = """Fit hub inertia, hub friction, Young's modulus, joint damping and tip mass of the PRB model
-(optionally a torque gain and an encoder offset) to a dataset written by `softpend babble` or a rig, by multiple
-shooting over short windows on the Exudyn plant (softpend.sysid.greybox). Prints each estimate with its standard
-deviation; --out writes a JSON document that RodParams.from_json reads."""
+DESCRIPTION = """Fit the PRB model's physical parameters (and optional calibration terms) to a babbling dataset by
+multiple shooting on the Exudyn plant; prints each estimate with its std; --out is read by RodParams.from_json."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -1,9 +1,7 @@
 """``softpend rig control CONTROLLER``: run a controller on a rig (a serial port) or on the digital twin.
 
-CONTROLLER is ``lqr``, ``lqr-obs``, ``swingup``, ``swingup-obs``, ``pid``, ``planner`` (the MPPI planner of
-``book/hparams/planner.yml`` learned on the task's rod in simulation first) or a DQN, DQN-MBPO or PILCO run folder;
-it runs behind the state estimator (:func:`softpend.hardware.closed_loop.run_closed_loop`), logs in ``--out``; the
-summary holds the wall time of the controller's calls beside the control period."""
+CONTROLLER is a built-in controller (``planner``: the MPPI planner of ``book/hparams/planner.yml``, learned in
+simulation first) or a DQN, DQN-MBPO or PILCO run folder; it runs behind the state estimator, logs in ``--out``."""
 
 from __future__ import annotations
 

@@ -213,9 +213,8 @@ def run_closed_loop(
     camera_log: Optional[SampleLog] = None,
     progress: bool = False,
 ) -> ClosedLoopResult:
-    """Run ``controller(observation, q, q_dot, time_s)`` on the rig behind the open ``link`` for ``duration_s`` of
-    device time; ``tip_source`` None starts control at once, else the first camera correction within
-    :data:`ARM_TIMEOUT_S` does.  The device clock's latency is half the shortest of 5 pings."""
+    """Run ``controller(observation, q, q_dot, time_s)`` on the open ``link`` for ``duration_s`` of device time,
+    starting at once without a ``tip_source``, else at the first camera correction (within :data:`ARM_TIMEOUT_S`)."""
     _check_run(
         link,
         duration_s,
@@ -370,9 +369,8 @@ def run_twin_control(
     outputs: Optional[Any] = None,
     estimator_task: Optional[Any] = None,
 ) -> TwinControlRun:
-    """Run ``controller`` on the digital twin ``rig`` in simulated time, filmed by ``camera`` (None: none), once the
-    camera tracked a frame; writes :data:`TWIN_CONTROL_FILES` to ``workdir`` (the summary also when it raises).  The
-    estimator's model is ``estimator_task`` (default ``rig.task``; an identified rod's, used by the commissioning)."""
+    """Run ``controller`` on the twin ``rig`` in simulated time, filmed by ``camera`` (None: none), writing
+    :data:`TWIN_CONTROL_FILES` to ``workdir``; the estimator's model is ``estimator_task`` (default ``rig.task``)."""
     from softpend.hardware.emulator import RigConfig, SimRig
     from softpend.io.outputs import Outputs
     from softpend.vision.tip_source import SyntheticLiveCamera

@@ -158,9 +158,8 @@ _MM_FIELDS = (
 
 
 def rig_design(params: Optional[RodParams] = None, print_modulus_pa: Optional[float] = None) -> RigDesign:
-    """The rig's dimensions for the rod ``params`` (default rod), its beam printed from a material of modulus
-    ``print_modulus_pa`` (default the rod's own); ``ValueError`` for a rod without bending stiffness, shorter
-    than the mount's clamp, or a beam that cannot be printed."""
+    """The rig's dimensions for the rod ``params``, its beam printed at ``print_modulus_pa`` (default the rod's
+    modulus); ``ValueError`` for a rod without bending stiffness or shorter than the clamp, or an unprintable beam."""
     params = params if params is not None else RodParams()
     instance_of("params", params, RodParams)
     camera, hub = CameraSpec(), HubSpec()

@@ -138,9 +138,8 @@ def synchronise(
     trial_length_s: float = 5.0,
     offset: Optional[ClockOffset] = None,
 ) -> SyncResult:
-    """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into trials of
-    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first 4 s (the wiggle); a
-    spacing above 1.6 times the median period and 0.03 s is a gap."""
+    """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into gap-free trials of
+    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first 4 s (the wiggle)."""
     for name, log, needed in (
         ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
         ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost")),

@@ -88,9 +88,8 @@ def run_twin_session(
     outputs: Optional[Any] = None,
     program: Optional[np.ndarray] = None,
 ) -> TwinSession:
-    """Run the rig pipeline on the twin (module docstring) into ``workdir``; ``seed`` seeds the torques, the emulator
-    and the camera; ``clock_offset_s`` is the camera clock minus the motor clock the synchronisation must recover;
-    ``program`` replaces the babbling torque after the start-up wiggle (:func:`rig_babble_controller`)."""
+    """Run the rig pipeline on the twin into ``workdir`` (``seed``: torques, emulator, camera; ``clock_offset_s``:
+    camera minus motor clock; ``program``: torques after the wiggle, :func:`rig_babble_controller`)."""
     from softpend.io.outputs import Outputs
     from softpend.vision.camera import CameraEffects, SyntheticCamera, render_video
     from softpend.vision.track_video import track_video
@@ -152,9 +151,8 @@ def compare_with_simulator_model(
     progress: bool = False,
     plant: str = "prb",
 ) -> dict[str, object]:
-    """Fit the same limited-information dynamics model on the twin's rig dataset and on clean simulator babbling of
-    the same size and torque process (of ``plant``), and compare their rollout errors at ``horizon_s`` on held-out
-    simulator trials: ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, their ``ratio``, ``errors_twin`` and ``errors_sim``."""
+    """Rollout errors at ``horizon_s`` on held-out simulator trials of a model fitted on the twin's dataset and one
+    on like simulator babbling: ``tip_rmse_m_twin``, ``tip_rmse_m_sim``, ``ratio``, ``errors_twin``, ``errors_sim``."""
     import torch
 
     from softpend.sysid import BabbleProtocol, babble

@@ -1,7 +1,5 @@
-"""The ``softpend`` command line: one module per subcommand (:data:`COMMAND_MODULES`, each with
-``register(subparsers)``); an error of the input is one line ``softpend COMMAND: error: ...`` on stderr, exit 2
-(``--debug``: the traceback).
-"""
+"""The ``softpend`` command line (a module with ``register(subparsers)`` per subcommand); an input error is one line
+``softpend COMMAND: error: ...`` on stderr, exit 2 (``--debug``: the traceback)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``softpend rig``: serve the emulated rig on a pseudo-terminal (its path printed on one line) until Ctrl-C, SIGTERM
-or ``--duration``; ``softpend rig control`` and the build actions are its sub-commands."""
+"""``softpend rig``: serve the emulated rig on a pseudo-terminal (path printed) until Ctrl-C, SIGTERM or --duration."""
 
 from __future__ import annotations
 

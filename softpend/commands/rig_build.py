@@ -1,5 +1,4 @@
-"""``softpend rig design | check | calibrate | babble``: the commands that take a rig (``--port``, ``--camera``) or
-the digital twin (``--twin``, simulated time) from parts to data."""
+"""``softpend rig design | check | calibrate | babble``: take a rig (``--port``, ``--camera``) or the twin to data."""
 
 from __future__ import annotations
 

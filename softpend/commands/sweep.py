@@ -1,6 +1,5 @@
-"""``softpend sweep``: train every method over many seeds on a parallel engine (run folders reused, resumed,
-retried) and summarise the runs; ``--book`` trains the runs the book's notebooks read; ``--fresh`` measures the
-agents on the fresh report starts."""
+"""``softpend sweep``: train every method over many seeds on a parallel engine and summarise the runs; ``--book``
+trains the runs the book's notebooks read; ``--fresh`` measures the agents on the fresh report starts."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``softpend track``: track the blue tip dot in a video file, or live from a camera (``--camera``: a device
-index, a stream URL or a video file read as a stream), into a time-stamped CSV."""
+"""``softpend track``: track the blue tip dot in a video file or live from ``--camera`` into a time-stamped CSV."""
 
 from __future__ import annotations
 

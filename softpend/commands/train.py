@@ -1,5 +1,4 @@
-"""``softpend train --algo dqn|mbpo|pilco``: train a controller and save it (with checkpoints) to a run folder;
-prints a JSON summary."""
+"""``softpend train --algo dqn|mbpo|pilco``: train a controller into a run folder; prints a JSON summary."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""The training runs of several methods in one pool of workers (PILCO's first, DQN's last), and the runs the
-book's notebooks read (``softpend sweep --book``); the pool changes when a run trains, never what it computes."""
+"""The training runs of several methods in one pool of workers, and the runs the book's notebooks read
+(``softpend sweep --book``)."""
 
 from __future__ import annotations
 

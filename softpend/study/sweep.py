@@ -1,6 +1,5 @@
-"""Independent jobs (methods x seeds) that write their results to disk, on joblib's ``loky`` process pool or on
-Ray or Dask: a job that raises is reported by name, one whose worker dies is retried, finished jobs are kept.
-``$SOFTPEND_BACKEND`` picks the default backend, ``$SOFTPEND_WORKERS`` caps the workers (1: run in-process)."""
+"""Independent jobs that write their results to disk, on joblib's ``loky`` pool, Ray or Dask (``$SOFTPEND_BACKEND``)
+with ``$SOFTPEND_WORKERS`` workers: a job that raises is reported by name, one whose worker dies is retried."""
 
 from __future__ import annotations
 
@@ -101,9 +100,9 @@ def run_jobs(
     backend: Optional[str] = None,
     retries: int = 1,
 ) -> None:
-    """Call the module-level ``job(*args, progress=...)`` for every ``args`` of ``jobs`` (named by ``names``), ``workers``
-    at a time (1: in this process), retrying ``retries`` times a job whose worker died; then :class:`SweepFailed`
-    names the jobs that failed."""
+    """Call the module-level ``job(*args, progress=...)`` for every ``args`` of ``jobs`` (named by ``names``),
+    ``workers`` at a time (1: in this process), retrying ``retries`` times a job whose worker died; then
+    :class:`SweepFailed` names the jobs that failed."""
     if len(jobs) != len(names):
         raise ValueError(f"got {len(jobs)} jobs but {len(names)} names")
     if len(set(names)) != len(names):

@@ -1,5 +1,4 @@
-"""Benchmarks: ``softpend bench`` runs the groups of :data:`BENCHMARKS` (``name -> "module:function"``, each
-returning ``dict[str, float]``) and merges their figures."""
+"""Benchmarks: ``softpend bench`` merges the figures (``dict[str, float]``) of the groups of :data:`BENCHMARKS`."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""PILCO benchmarks: plant seconds to balance and compute of the book's runs (worst of :data:`SEEDS`, and the
-ten-seed figures on fresh starts), and the policy-search objective eager against ``torch.compile``."""
+"""PILCO benchmarks: plant seconds to balance and compute of the book's runs; policy search eager vs compiled."""
 
 from __future__ import annotations
 

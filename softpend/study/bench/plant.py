@@ -1,6 +1,5 @@
-"""Plant and environment speed and accuracy (``softpend bench --only plant``): the Exudyn environment and solver,
-its step path against the legacy one, the batched torch chain, the vector environment, hub-angle errors against a
-converged Exudyn run, and, where ``import mujoco`` works, the same chain in MuJoCo."""
+"""Plant and environment speed and accuracy (``softpend bench --only plant``): Exudyn environment and solver, batched
+chain, vector environment, hub-angle errors against a converged run and, where installed, the chain in MuJoCo."""
 
 from __future__ import annotations
 

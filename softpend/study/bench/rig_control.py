@@ -1,6 +1,5 @@
-"""Closed-loop figures on the digital twin (``softpend bench --only rig_control``): each controller of
-:func:`controller_factories` from fresh hanging starts through the whole rig stack, in the ideal simulator, and on
-perturbed rods."""
+"""Closed-loop figures (``softpend bench --only rig_control``): each controller of :func:`controller_factories` from
+fresh hanging starts on the digital twin, in the ideal simulator and on perturbed rods."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``softpend bench --only rl``: DQN training speed, and the ten-seed figures of the book's DQN and DQN-MBPO runs on
-fresh starts and on a converged simulation, with their training CPU time."""
+"""``softpend bench --only rl``: DQN training speed and the book's DQN and DQN-MBPO ten-seed figures and CPU time."""
 
 from __future__ import annotations
 

@@ -74,12 +74,10 @@ MESSAGE_NAMES = {t: name for t, name, _ in _MESSAGES}
 MAX_FRAME_BYTES = 64
 
 
-class ProtocolError(Exception):
-    """A frame that cannot be decoded."""
+class ProtocolError(Exception): ...  # a frame that cannot be decoded
 
 
-class ChecksumMismatch(ProtocolError):
-    """The CRC of a frame does not match its payload."""
+class ChecksumMismatch(ProtocolError): ...  # the CRC of a frame does not match its payload
 
 
 def crc16_ccitt(data, crc=0xFFFF):

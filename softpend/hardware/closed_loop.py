@@ -199,8 +199,7 @@ class ClosedLoopResult(LoopResult):
 ARM_TIMEOUT_S = 2.0
 
 
-class _SafeStop(Exception):  # args: (status, reason)
-    pass
+class _SafeStop(Exception): ...  # args: (status, reason)
 
 
 def run_closed_loop(

@@ -25,8 +25,7 @@ MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
 MAX_HUB_SPEED_RAD_S = 1000.0
 
 
-class LinkError(RuntimeError):
-    """Base class of every motor-link failure."""
+class LinkError(RuntimeError): ...  # every motor-link failure
 
 
 class LinkTimeout(LinkError): ...
@@ -35,8 +34,7 @@ class LinkTimeout(LinkError): ...
 class LinkDisconnected(LinkError): ...
 
 
-class LinkChecksumError(LinkError):
-    """Too many consecutive frames failed their CRC, framing or value checks."""
+class LinkChecksumError(LinkError): ...  # too many consecutive frames failed their CRC, framing or value checks
 
 
 class HandshakeError(LinkError): ...

@@ -10,9 +10,8 @@ import sys
 import zipfile
 from typing import NoReturn, Sequence
 
-#: Modules that contribute subcommands.
+#: Modules of softpend.commands that contribute subcommands.
 COMMANDS = "bench book train evaluate rig track babble fit_model identify sweep".split()
-COMMAND_MODULES: list[str] = [f"softpend.commands.{name}" for name in COMMANDS]
 DEBUG_HELP = "show the traceback of an error instead of one line"
 
 
@@ -30,8 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"softpend {__version__}")
     parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        importlib.import_module(name).register(subparsers)
+    for name in COMMANDS:
+        importlib.import_module(f"softpend.commands.{name}").register(subparsers)
     _add_debug(parser)
     return parser
 

@@ -18,7 +18,6 @@ CAMERA_EFFECTS = ("clean", "rig", "noisy")
 
 BUILTIN_CONTROLLERS = ("lqr", "lqr-obs", "swingup", "swingup-obs", "pid", "planner")
 
-#: The options after CONTROLLER: (flag, closed interval checked before anything starts, add_argument keywords).
 OPTIONS: tuple[Option, ...] = (
     ("controller", None, dict(metavar="CONTROLLER", help=f"{', '.join(BUILTIN_CONTROLLERS)} or a run folder")),
     ("--out", None, dict(required=True, metavar="DIR", help="folder for the logs and summary.json")),

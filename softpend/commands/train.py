@@ -9,7 +9,7 @@ from typing import Any
 
 from softpend.commands.options import Option, add_command, set_option
 
-#: Most training episodes one command may ask for (a million: far beyond any budget of the book).
+#: Most training episodes one command may ask for.
 MAX_EPISODES = 1_000_000
 
 OPTIONS: tuple[Option, ...] = (

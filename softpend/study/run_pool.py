@@ -54,8 +54,7 @@ def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend:
     return len(jobs)
 
 
-#: The run sets a notebook may read (front matter ``softpend: {book_runs: [...]}``): DQN and DQN-MBPO over the
-#: book's seeds, PILCO over its seeds, the three methods' runs of the first seed.
+#: The run sets a notebook may read (front matter ``softpend: {book_runs: [...]}``).
 BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 

@@ -205,9 +205,6 @@ class CameraFaults:
         if self.stall_after_s is not None:
             non_negative("stall_after_s", self.stall_after_s)
 
-    def occluded(self, elapsed_s: float) -> bool:
-        return any(start <= elapsed_s < end for start, end in self.occlusions_s)
-
 
 class SyntheticLiveCamera(ThreadedTipSource):
     """The twin's camera on its simulated ``clock``: frame ``k``, exposed until ``t_k = t_first + k / fps``, is
@@ -263,7 +260,7 @@ class SyntheticLiveCamera(ThreadedTipSource):
             self.counts["frames_dropped"] += 1
             return
         frame, tip_px = self.camera.render(self.scene.pose_at, t_k)
-        if self.faults.occluded(elapsed):
+        if any(start <= elapsed < end for start, end in self.faults.occlusions_s):
             frame = _hide_dot(frame, tip_px, self.camera)
             self.counts["frames_occluded"] += 1
         self._deliver(k, frame, t_k - self.camera.effects.exposure_s / 2, self.clock.now_s())

@@ -91,8 +91,8 @@ class PolicySettings:
         set_ints(self, "n_basis", 1, "policy.")
         if (optional_positive("policy.balance_within_rad", self.balance_within_rad) or 0.0) >= math.pi:
             raise ValueError(f"policy.balance_within_rad must be below pi, got {self.balance_within_rad!r}")
-        positive("policy.balance_prediction_s", self.balance_prediction_s)
-        positive("policy.balance_within_rad_s", self.balance_within_rad_s)
+        for name in ("balance_prediction_s", "balance_within_rad_s"):
+            positive(f"policy.{name}", getattr(self, name))
 
 
 @dataclass(frozen=True)
@@ -141,9 +141,9 @@ class PilcoConfig:
 
     def __post_init__(self) -> None:
         self.rod_uncertainty = optional_uncertainty(self.rod_uncertainty)
-        groups = {"task": Task, "cost": CostSettings, "gp": GPSettings, "policy": PolicySettings}
-        for name, cls in {**groups, "optimiser": OptimiserSettings}.items():
-            instance_of(name, getattr(self, name), cls)
+        for f in dataclasses.fields(self):
+            if isinstance(f.default_factory, type):  # the settings groups
+                instance_of(f.name, getattr(self, f.name), f.default_factory)
         state_spec(self.state)
         positives = "control_dt_s horizon_s initial_std eval_duration_s target_std_rad random_hold_min_s"
         for name in f"{positives} random_hold_max_s".split():
@@ -441,8 +441,7 @@ def _search_with_restarts(
     n_steps: int,
     restart: bool = True,
 ) -> tuple[float, int]:
-    """A policy search over ``n_steps`` from the current policy, then (when due) from fresh random policies;
-    ``policy`` keeps the parameters of the lowest predicted cost."""
+    """Search from ``policy``, then (when due) from fresh random ones; ``policy`` keeps the lowest predicted cost's."""
     best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
     if not restart or config.optimiser.restarts == 0 or best <= config.optimiser.restart_above_cost_fraction * n_steps:
         return best, 0
@@ -558,12 +557,9 @@ class Pilco:
         self.balance_policy: Optional[LinearPolicy] = None
         self.gp: Optional[MultiOutputGP] = None
         self.gp_hyperparameters: Optional[GPHyperparameters] = None
-        self.n_gp_points = 0
-        self.n_searches = 0
-        self.plant_seconds = 0.0
+        self.n_gp_points, self.n_searches, self.plant_seconds = 0, 0, 0.0
         self.rate_on = config.cost.rate_width_rad_s is not None and config.cost.rate_after_rad is None
-        self._start_wall = time.perf_counter()
-        self._start_cpu = time.process_time()
+        self._start_wall, self._start_cpu = time.perf_counter(), time.process_time()
 
     def random_trial(self) -> TrialRecord:
         """One trial of held random torques (start and torques each from their own stream)."""
@@ -705,12 +701,5 @@ class Pilco:
         return record
 
     def result(self) -> PilcoResult:
-        return PilcoResult(
-            config=self.config,
-            records=self.records,
-            policy=self.policy,  # type: ignore[arg-type]
-            gp_hyperparameters=self.gp_hyperparameters,
-            balance_policy=self.balance_policy,
-            predicted_means=self.predicted_means,
-            real_states=self.real_states,
-        )
+        parts = (self.gp_hyperparameters, self.balance_policy, self.predicted_means, self.real_states)
+        return PilcoResult(self.config, self.records, self.policy, *parts)  # type: ignore[arg-type]

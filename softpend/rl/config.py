@@ -108,10 +108,10 @@ class DQNConfig:
     rod_uncertainty: Optional[RodUncertainty] = None
 
     def __post_init__(self) -> None:
-        instance_of("task", self.task, Task)
         object.__setattr__(self, "rod_uncertainty", optional_uncertainty(self.rod_uncertainty))
-        for name, cls in (("learner", DQNLearner), ("stop", StopRule)):
-            instance_of(name, getattr(self, name), cls)
+        for f in dataclasses.fields(self):
+            if isinstance(f.default_factory, type):  # task and the settings groups
+                instance_of(f.name, getattr(self, f.name), f.default_factory)
         set_ints(self, "n_torque_levels action_repeat eval_every_episodes checkpoint_every_episodes", 1)
         set_ints(self, "learning_starts reset_every_episodes", 0)
         int_at_least("n_torque_levels", self.n_torque_levels, 2)
@@ -235,8 +235,6 @@ class MBPOConfig(DQNConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name, cls in (("model", ModelSettings), ("rollout", RolloutSettings)):
-            instance_of(name, getattr(self, name), cls)
         set_ints(self, "initial_random_episodes", 1)
 
 

@@ -190,13 +190,8 @@ def rig_check(port: str, task, rest_s: float, push_fraction: float, serial=None)
         check("watchdog", zero and watchdog_ms - slack_ms <= trip_ms <= watchdog_ms + slack_ms, detail, trip_ms=trip_ms)
         link.stop()
     device = ("protocol_version", "counts_per_rev", "torque_limit_nm", "watchdog_s", "state_rate_hz")
-    return {
-        "port": port,
-        "device": {k: getattr(info, k) for k in device},
-        "round_trip_ms": rtt * 1e3,
-        "checks": checks,
-        "passed": all(c["passed"] for c in checks.values()),
-    }
+    report: dict[str, Any] = {"port": port, "device": {k: getattr(info, k) for k in device}, "round_trip_ms": rtt * 1e3}
+    return report | {"checks": checks, "passed": all(c["passed"] for c in checks.values())}
 
 
 def _states_for(link, duration_s: float, torque_nm: float | None = None) -> list:
@@ -237,17 +232,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     residual_px = calibration.residual_rms_m / calibration.metres_per_pixel
     passed = residual_px <= CALIBRATION_MAX_RESIDUAL_PX and error <= HANGING_TIP_TOLERANCE_M
     outputs.write_text(out, calibration.to_json())
-    report = {
-        "calibration": str(out),
-        "residual_px": residual_px,
-        "residual_m": calibration.residual_rms_m,
-        "px_per_m": 1.0 / calibration.metres_per_pixel,
-        "hub_px": calibration.to_pixels(np.zeros(2)).tolist(),
-        "tip_m": tip,
-        "expected_tip_m": expected.tolist(),
-        "tip_error_m": error,
-        "passed": bool(passed),
-    }
+    report: dict[str, Any] = dict(calibration=str(out), residual_px=residual_px, residual_m=calibration.residual_rms_m)
+    report |= dict(px_per_m=1.0 / calibration.metres_per_pixel, hub_px=calibration.to_pixels(np.zeros(2)).tolist())
+    report |= dict(tip_m=tip, expected_tip_m=expected.tolist(), tip_error_m=error, passed=bool(passed))
     outputs.write_json(report_path, finite_or_none(report))
     print(
         f"{'ok  ' if passed else 'FAIL'} markers fit to {residual_px:.3f} px RMS (at most {CALIBRATION_MAX_RESIDUAL_PX:g}), "
@@ -333,16 +320,10 @@ def run_babble(args: argparse.Namespace) -> int:
         extra["true_clock_offset_s"] = session.true_clock_offset_s
     else:
         loop, sync, dataset = _babble_on_port(args, out, progress, outputs)
-    summary: dict[str, Any] = {
-        "dataset": str(out / "rig_dataset.npz"),
-        "n_trials": dataset.n_trials,
-        **{key: getattr(loop, key) for key in ("samples", "dropped_states", "jitter_ms_p95")},
-        "clock_offset_s": sync.offset.offset_s,
-        "peak_correlation": sync.offset.peak_correlation,
-        "gaps": len(sync.gaps),
-        "grid_valid_fraction": sync.grid_valid_fraction,
-        **extra,
-    }
+    summary: dict[str, Any] = {"dataset": str(out / "rig_dataset.npz"), "n_trials": dataset.n_trials}
+    summary |= {key: getattr(loop, key) for key in ("samples", "dropped_states", "jitter_ms_p95")}
+    summary |= dict(clock_offset_s=sync.offset.offset_s, peak_correlation=sync.offset.peak_correlation)
+    summary |= dict(gaps=len(sync.gaps), grid_valid_fraction=sync.grid_valid_fraction, **extra)
     outputs.write_json(out / "summary.json", finite_or_none(summary))
     print(
         f"{summary['n_trials']} trials x {args.trial_length_s:g} s, clock offset {summary['clock_offset_s'] * 1e3:.1f} ms "

@@ -98,10 +98,7 @@ def discretise(model: LinearModel, dt_s: float) -> LinearModel:
 def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
     """Mechanics about upright from Exudyn's ``ComputeLinearizedSystem``; the torque enters the hub (``e_0``)."""
     plant = PRBPlant(params if params is not None else RodParams())
-    mass, stiffness, damping = plant.linearized_matrices()
-    input_vector = np.zeros(plant.n_coordinates)
-    input_vector[0] = 1.0
-    return SecondOrderModel(np.asarray(mass), np.asarray(stiffness), np.asarray(damping), input_vector)
+    return SecondOrderModel(*(np.asarray(m) for m in plant.linearized_matrices()), np.eye(plant.n_coordinates)[0])
 
 
 def linearise_step_map(params: Optional[RodParams] = None, dt_s: float = 0.01, substeps: int = 2) -> LinearModel:
@@ -155,10 +152,6 @@ def reduce_to_observation_coordinates(
     kkt = np.block([[k_elastic, c.T], [c, np.zeros((len(kept), len(kept)))]])
     rhs = np.vstack([np.zeros((n, len(kept))), np.eye(len(kept))])
     shape = scipy.linalg.lstsq(kkt, rhs)[0][:n]
-    reduced = SecondOrderModel(
-        mass=shape.T @ model.mass @ shape,
-        stiffness=shape.T @ model.stiffness @ shape,
-        damping=shape.T @ model.damping @ shape,
-        input_vector=shape.T @ model.input_vector,
-    )
+    matrices = (shape.T @ m @ shape for m in (model.mass, model.stiffness, model.damping))
+    reduced = SecondOrderModel(*matrices, input_vector=shape.T @ model.input_vector)
     return reduced, shape, tuple(kept)

@@ -136,12 +136,8 @@ def tune_pid(
 
     x0 = np.log(initial_gains.as_array())
     initial_cost, simplex = cost(x0), np.vstack([np.zeros(3), np.eye(3)])
-    result = scipy.optimize.minimize(
-        cost,
-        x0,
-        method="Nelder-Mead",
-        options={"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + simplex},
-    )
+    options = {"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + simplex}
+    result = scipy.optimize.minimize(cost, x0, method="Nelder-Mead", options=options)
     bar.close()
     best = result.x if result.fun <= initial_cost else x0
     gains = PIDGains(*np.exp(np.clip(best, -12, 6)))

@@ -260,13 +260,8 @@ def fit_ensemble(
 ) -> DynamicsEnsemble:
     """The black-box ensemble on the full observed layout fitted to ``states (M, 10) -> next_states`` under
     ``torques_nm (M,)``."""
-    reach = 1.01 * task.rod.length_m
-    members = [
-        GaussianDynamicsModel(
-            StateLayout.full(), task.dt_s, task.torque_limit_nm, (config.hidden_width,) * 2, tip_reach_m=reach
-        )
-        for _ in range(config.ensemble_size)
-    ]
+    args = (StateLayout.full(), task.dt_s, task.torque_limit_nm, (config.hidden_width,) * 2)
+    members = [GaussianDynamicsModel(*args, tip_reach_m=1.01 * task.rod.length_m) for _ in range(config.ensemble_size)]
     first = members[0]
     s, u, s1 = (torch.as_tensor(a, dtype=torch.float32) for a in (states, torques_nm, next_states))
     features, targets = first.features(s, u), first.target_delta(s, s1)
@@ -689,17 +684,11 @@ def _controller(
             return swing_up_cost(rod, *_tip(x_next[:, :n_q], x_next[:, n_q:], link))
 
     fast.noise_generator = generator
-    mppi = MPPI(
-        lambda x, torque: fast.predict_next(x, torque, generator=generator),
-        cost,
-        task.torque_limit_nm,
-        config.n_knots - KNOTS_PER_PLAN,  # after the knots under way: the rollouts cover horizon_s from now
-        config.hold_steps if config.model == "ensemble" else 1,
-        config.n_samples,
-        config.noise_fraction * task.torque_limit_nm,
-        config.temperature,
-        seed=config.seed,
-    )
+    step = lambda x, torque: fast.predict_next(x, torque, generator=generator)  # noqa: E731
+    n_knots = config.n_knots - KNOTS_PER_PLAN  # after the knots under way: the rollouts cover horizon_s from now
+    hold, limit = (config.hold_steps if config.model == "ensemble" else 1), task.torque_limit_nm
+    settings = (config.n_samples, config.noise_fraction * limit, config.temperature)
+    mppi = MPPI(step, cost, limit, n_knots, hold, *settings, seed=config.seed)
     return PlannerController(mppi, tracker, lqr, config.capture_rad, config.hold_steps, KNOTS_PER_PLAN)
 
 
@@ -713,15 +702,9 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
     task = config.task
     started = time.perf_counter()
     with one_torch_thread():
-        protocol = BabbleProtocol(
-            program=config.excitation_program,
-            start="hanging",
-            feedback_trial_fraction=0.0,
-            n_trials=1,
-            trial_length_s=config.excitation_s,
-            dt_s=task.dt_s,
-            substeps=task.substeps,
-        )
+        timing: dict[str, Any] = dict(trial_length_s=config.excitation_s, dt_s=task.dt_s, substeps=task.substeps)
+        start: dict[str, Any] = dict(start="hanging", feedback_trial_fraction=0.0, n_trials=1)
+        protocol = BabbleProtocol(program=config.excitation_program, **start, **timing)
         data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
         plant_s = protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
         rod = task.rod

@@ -8,9 +8,7 @@ import torch
 
 
 def _solve(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """``torch.linalg.solve(a, b)`` without its check for a singular ``a``: the same factorisation and numbers,
-    and no error-raising side effect in a compiled graph (with one, torch neither reuses a compiled rollout from
-    its disk caches nor caches it).  A singular ``a`` gives non-finite moments, which the policy search scores as a failed rollout."""
+    """``torch.linalg.solve(a, b)`` without its singularity check (which keeps a compiled graph out of the caches)."""
     return torch.linalg.solve_ex(a, b)[0]
 
 
@@ -43,8 +41,7 @@ def pair_weights(beta: torch.Tensor, inv_kernel: torch.Tensor | None = None) -> 
 
 
 class _WeightedExpSum(torch.autograd.Function):
-    """``sum_{n,m} W[p, n, m] exp(X[p, n] . Y[p, m])`` per ``p``, with its gradient in ``X`` and ``Y`` written out:
-    autograd through the (P, N, N) intermediate tensors of the expression costs several times more."""
+    """``sum_{n,m} W[p, n, m] exp(X[p, n] . Y[p, m])`` per ``p``, with its gradient in ``X`` and ``Y`` written out."""
 
     @staticmethod
     def forward(ctx, x: torch.Tensor, y: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:

@@ -157,20 +157,13 @@ class RBFPolicy(_Policy):
         return self.centers.shape[1]
 
     def _beta(self) -> torch.Tensor:
-        """``(K_cc + sn^2 I)^{-1} t``, computed once per set of parameters (a rollout's steps share it, and
-        with autograd on, its gradient is accumulated once per rollout rather than once per step)."""
+        """``(K_cc + sn^2 I)^{-1} t``, computed once per set of parameters (and grad mode)."""
         params = self.parameters()
-        versions = tuple(p._version for p in params)
-        cache = self._beta_cache
-        if (
-            cache is not None
-            and cache[0] == torch.is_grad_enabled()
-            and cache[2] == versions
-            and all(a is b for a, b in zip(cache[1], params))
-        ):
-            return cache[3]
+        key, cache = (torch.is_grad_enabled(), tuple(p._version for p in params)), self._beta_cache
+        if cache is not None and cache[0] == key and all(a is b for a, b in zip(cache[1], params)):
+            return cache[2]
         beta = self._compute_beta()
-        self._beta_cache = (torch.is_grad_enabled(), tuple(params), versions, beta)
+        self._beta_cache = (key, tuple(params), beta)
         return beta
 
     def _compute_beta(self) -> torch.Tensor:

@@ -246,8 +246,7 @@ _COMPILED: list = []
 
 
 def _compiled_step_and_cost():
-    """:func:`_step_and_cost` through ``torch.compile`` (static shapes: one graph per number of GP points), or the
-    eager function, with a warning, where the compiler cannot be used."""
+    """:func:`_step_and_cost` through ``torch.compile``, or eagerly (with a warning) where the compiler fails."""
     if not _COMPILED:
         logging.getLogger("torch._inductor.ir").addFilter(_quiet_c_shim_notes)
         silence_compiler_notes()
@@ -287,8 +286,7 @@ def silence_compiler_notes() -> None:
 
 
 def _quiet_c_shim_notes(record: logging.LogRecord) -> bool:
-    """Drop the compiler's note that an operator (``linalg_lu_solve``) has no C shim and goes through its proxy
-    executor: a fact of ``cpp_wrapper``, logged as a warning at every compilation."""
+    """Drop the compiler's note, at every compilation, that ``linalg_lu_solve`` has no C shim."""
     return "c-shim implementation" not in record.getMessage()
 
 

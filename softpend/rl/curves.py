@@ -75,25 +75,22 @@ def interval_band(
     field: str = "max_upright_std_rad",
     axis: str = "plant_s",
     grid: np.ndarray | None = None,
-    table: str = "evaluations",
-    statistic: str = "iqm",
-    confidence: float = 0.95,
     n_resamples: int = 1000,
     seed: int = 0,
     failed_as: float | None = None,
 ) -> dict[str, np.ndarray]:
-    """An aggregate over seeds of one logged quantity with its bootstrap interval at every point of a common axis."""
+    """The IQM over seeds of one evaluation field with its 95 % bootstrap interval at every point of a common axis."""
     from softpend.stats import aggregate_interval
 
     if len(logs) < 2:
         raise ValueError(f"interval_band needs at least two runs, got {len(logs)}")
     one_of("axis", axis, ("episode", "plant_s"))
-    xs = [log.column(axis, table) for log in logs]
-    ys = [log.column(field, table) for log in logs]
+    xs = [log.column(axis, "evaluations") for log in logs]
+    ys = [log.column(field, "evaluations") for log in logs]
     if failed_as is not None:
-        ys = [failures_as(y, log.column("success_rate", table), failed_as) for log, y in zip(logs, ys)]
+        ys = [failures_as(y, log.column("success_rate", "evaluations"), failed_as) for log, y in zip(logs, ys)]
     if any(len(x) == 0 for x in xs):
-        raise ValueError(f"every run needs at least one {table} row")
+        raise ValueError("every run needs at least one evaluation row")
     if grid is None:
         grid = np.linspace(max(x[0] for x in xs), max(x[-1] for x in xs), 200)
     grid = np.asarray(grid, dtype=float)[np.asarray(grid) >= max(x[0] for x in xs)]
@@ -102,6 +99,6 @@ def interval_band(
         # a step function: the value of the latest row at or before each grid point
         index = np.searchsorted(x, grid, side="right") - 1
         per_seed[i] = y[np.clip(index, 0, len(y) - 1)]
-    intervals = [aggregate_interval(column, statistic, confidence, n_resamples, seed) for column in per_seed.T]
+    intervals = [aggregate_interval(column, "iqm", 0.95, n_resamples, seed) for column in per_seed.T]
     band = {name: np.array([getattr(i, name) for i in intervals], dtype=float) for name in ("value", "low", "high")}
     return {"x": grid, **band, "per_seed": per_seed}

@@ -189,14 +189,10 @@ class EpisodeEvents(BaseCallback):
 
     def _on_training_start(self) -> None:
         log = self.recorder.log
-        self.bar = tqdm(
-            total=self.recorder.episodes,
-            initial=log.n_episodes,
-            desc=f"{log.algo} seed {log.seed}",
-            unit="episode",
-            disable=not self.progress,
-            leave=False,
+        shown: dict[str, Any] = dict(
+            desc=f"{log.algo} seed {log.seed}", unit="episode", disable=not self.progress, leave=False
         )
+        self.bar = tqdm(total=self.recorder.episodes, initial=log.n_episodes, **shown)
 
     def _on_step(self) -> bool:
         if not self.recorder.episode_ended:
@@ -378,14 +374,8 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
     positive_int("episodes", episodes)
     run_dir = check_output_folder(run_dir, what="run folder", owned=is_run_folder)
     if is_run_folder(run_dir):
-        check_run_folder(
-            run_dir,
-            read_json_object(run_dir / "config.json", 10**7),
-            saved_config_data(config),
-            _saved_run_seed(run_dir),
-            seed,
-            resume,
-        )
+        saved = read_json_object(run_dir / "config.json", 10**7)
+        check_run_folder(run_dir, saved, saved_config_data(config), _saved_run_seed(run_dir), seed, resume)
     return run_dir
 
 
@@ -462,12 +452,8 @@ def run_training(
         # exactly the remaining episodes' steps; a logger without outputs (SB3's default one creates a temp folder)
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
-            model.learn(
-                total_timesteps=remaining * config.episode_agent_steps,
-                callback=callbacks,
-                reset_num_timesteps=log.n_episodes == 0,
-                progress_bar=False,
-            )
+            steps = remaining * config.episode_agent_steps
+            model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=log.n_episodes == 0)
         finally:
             events.close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:

@@ -29,8 +29,7 @@ class SimClock:
         heapq.heappush(self._events, (max(float(time_s), self._now), self._order, action))
 
     def wait_for(self, ready: Callable[[], bool], deadline_s: float) -> bool:
-        """Run events in time order until ``ready()`` or the next event is after ``deadline_s`` (the clock then
-        stands there); whether ``ready()``."""
+        """Run events until ``ready()``, or else up to ``deadline_s`` (the clock left there); whether ``ready()``."""
         while not ready():
             if not self._events or self._events[0][0] > deadline_s:
                 if math.isfinite(deadline_s):

@@ -171,8 +171,7 @@ class SimRig:
 
 
 class RigEmulator(SimRig):
-    """The device on a pseudo-terminal in real time, also exposed as the symlink ``link_path`` (replacing only a
-    pty symlink an earlier emulator left)."""
+    """The device on a pseudo-terminal in real time, also as the symlink ``link_path`` (replacing only a pty link)."""
 
     def __init__(
         self,

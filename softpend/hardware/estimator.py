@@ -89,8 +89,7 @@ class DeviceClock:
 
 
 class RigStateEstimator:
-    """Extended Kalman filter on the PRB chain of ``task.rod`` with delay-compensated camera corrections; times
-    are device time [s]."""
+    """EKF on the PRB chain of ``task.rod`` with delay-compensated camera corrections; times in device time [s]."""
 
     def __init__(self, task, config: Optional[EstimatorConfig] = None) -> None:
         if task.plant != "prb":

@@ -71,8 +71,7 @@ class HubSpec:
 
 @dataclass(frozen=True)
 class RigDesign:
-    """Dimensions of the rig for one rod (:func:`rig_design`; SI units; beam width out of plane, thickness in
-    plane; markers with the hub at the origin, y up)."""
+    """Dimensions of the rig for one rod (:func:`rig_design`) [SI; beam thickness in plane; markers: hub at 0, y up]."""
 
     params: RodParams
     print_modulus_pa: float

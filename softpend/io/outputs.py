@@ -85,8 +85,7 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[Any]:
 
 
 def finite_or_none(value: Any) -> Any:
-    """``value`` with every non-finite float replaced by ``None`` through dicts, lists and tuples (NumPy values
-    as Python numbers and lists)."""
+    """``value`` as plain JSON data (NumPy values as Python ones), every non-finite float as ``None``."""
     if isinstance(value, dict):
         return {k: finite_or_none(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -92,8 +92,7 @@ def open_checked_fd(
 def open_regular_file(
     path: PathLike, what: str, max_bytes: Optional[int] = None, error: type[Exception] = ValueError
 ) -> Iterator[BinaryIO]:
-    """The regular file at ``path`` opened for binary reading, checked before opening and again on the
-    descriptor; the caller bounds its reads by ``max_bytes``."""
+    """The regular file at ``path`` (checked before and after opening) for binary reads bounded by the caller."""
     check_regular_file(path, what, max_bytes, error)
     with os.fdopen(open_checked_fd(path, os.O_RDONLY, what, max_bytes, error), "rb") as handle:
         yield handle
@@ -173,8 +172,7 @@ def _line_loader():
 
 
 def yaml_line(node: Any, key: Any = None, default: int = 1) -> int:
-    """The line of ``key`` (a mapping key or sequence index) in ``node`` read with ``lines=True``, or of
-    ``node`` itself; ``default`` for scalars."""
+    """The line of ``key`` (or of ``node`` itself) in ``node`` read with ``lines=True``; ``default`` for scalars."""
     if not isinstance(node, (_LineDict, _LineList)):
         return default
     return node.line if key is None else node.lines.get(key, node.line)
@@ -244,8 +242,7 @@ def _check_member_size(
 def read_zip_member(
     archive: zipfile.ZipFile, name: str, path: PathLike, what: str, max_bytes: int, error: type[Exception] = ValueError
 ) -> bytes:
-    """The bytes of member ``name`` of ``archive`` (opened from ``path``), at most ``max_bytes``
-    (``KeyError`` if there is no such member)."""
+    """The bytes (at most ``max_bytes``) of member ``name`` of ``archive`` from ``path`` (``KeyError``: none)."""
     info = archive.getinfo(name)
     _check_member_size(info, path, what, max_bytes, error)
     with archive.open(info) as member:  # zipfile reads no more than the directory's size

@@ -21,8 +21,7 @@ MAX_CALIBRATION_BYTES = 1 << 20
 
 
 def points_array(name: str, value, n_min: int = 3, n_max: int = 6) -> np.ndarray:
-    """``value`` as a finite ``(n, 2)`` float array with ``n_min <= n <= n_max``, else ``ValueError`` naming
-    ``name``."""
+    """``value`` as a finite ``(n, 2)`` float array, ``n_min <= n <= n_max`` (``ValueError`` naming ``name``)."""
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -75,8 +74,7 @@ def tip_angle_rad(x_m: np.ndarray | float, y_m: np.ndarray | float) -> np.ndarra
 
 @dataclass(frozen=True)
 class AffineCalibration:
-    """The pixel -> metre map ``[x_m, y_m] = pixel_to_metre @ [x_px, y_px, 1]`` and the RMS residual of the
-    markers after the fit [m]."""
+    """The map ``[x_m, y_m] = pixel_to_metre @ [x_px, y_px, 1]`` and the markers' RMS residual of the fit [m]."""
 
     pixel_to_metre: np.ndarray
     residual_rms_m: float = 0.0

@@ -44,8 +44,7 @@ class TipMeasurement:
 
 
 class FrameTracker:
-    """A :class:`TipTracker` plus a pixel -> metre calibration (fitted on the first frame from ``markers_m``
-    unless given)."""
+    """A :class:`TipTracker` and a pixel -> metre calibration (unless given, fitted on the first frame)."""
 
     def __init__(
         self,
@@ -312,8 +311,7 @@ MAX_DEVICE_INDEX = 10_000
 def open_tip_source(
     camera: str, latency_s: float = 0.0, frame_tracker: Optional[FrameTracker] = None
 ) -> CaptureTipSource:
-    """The :class:`CaptureTipSource` of a ``--camera`` argument: digits are a device index, anything else a
-    stream URL or a file."""
+    """The :class:`CaptureTipSource` of a ``--camera`` argument: a device index (digits), stream URL or file."""
     if not isinstance(camera, str) or not camera.strip():
         raise ValueError(f"camera must be a device index or a URL, got {camera!r}")
     check_capture_path("camera", camera)  # a FIFO or folder would block the capture

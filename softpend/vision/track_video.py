@@ -140,8 +140,7 @@ def _check_output_path(out_csv: Path, video: Optional[Path]) -> None:
 
 @contextlib.contextmanager
 def _replacing(out_csv: Path, metadata: dict) -> Iterator[SampleLog]:
-    """A :class:`SampleLog` in a new temporary file next to ``out_csv`` that replaces ``out_csv`` on a clean
-    exit and is removed on an error."""
+    """A :class:`SampleLog` in a temporary file that replaces ``out_csv`` on a clean exit, removed on an error."""
     fd, name = tempfile.mkstemp(prefix=f".{out_csv.name}.", suffix=".partial", dir=out_csv.parent)
     os.close(fd)
     partial = Path(name)

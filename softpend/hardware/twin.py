@@ -178,10 +178,5 @@ def compare_with_simulator_model(
         for name, data in (("twin", rig_dataset), ("sim", sim_train))
     }
     twin, sim = (errors[name].at(horizon_s)["tip_rmse_m"] for name in ("twin", "sim"))
-    return {
-        "tip_rmse_m_twin": twin,
-        "tip_rmse_m_sim": sim,
-        "ratio": twin / sim,
-        "errors_twin": errors["twin"],
-        "errors_sim": errors["sim"],
-    }
+    out: dict[str, object] = {"tip_rmse_m_twin": twin, "tip_rmse_m_sim": sim, "ratio": twin / sim}
+    return out | {f"errors_{name}": value for name, value in errors.items()}

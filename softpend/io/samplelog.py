@@ -107,8 +107,7 @@ def read_sample_log(path: str | os.PathLike, max_bytes: int = MAX_WORK_BYTES) ->
     metadata = json.loads(lines[0][len(_MAGIC) :])
     if len(lines) < 2 or not lines[1]:
         raise ValueError(f"path {path} has no column line")
-    columns = lines[1].split(",")
-    body = lines[2:]
+    columns, body = lines[1].split(","), lines[2:]
     torn = int(bool(body) and body[-1] != "")  # the file does not end with a newline
     rows = [line for line in body[:-1] if line]
     values = np.array([[float(v) for v in line.split(",")] for line in rows], dtype=float).reshape(-1, len(columns))

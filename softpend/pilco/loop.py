@@ -176,13 +176,9 @@ class PilcoConfig:
         return int(round((self.prediction_s if self.prediction_s is not None else self.horizon_s) / self.control_dt_s))
 
     def to_dict(self) -> dict[str, Any]:
-        data = dataclasses.asdict(self)
-        data["task"] = self.task.to_dict()
-        data["eval_seeds"] = list(self.eval_seeds)
-        data.pop("rod_uncertainty")
-        if self.rod_uncertainty is not None:
-            data["rod_uncertainty"] = self.rod_uncertainty.to_dict()
-        return data
+        data = dataclasses.asdict(self) | {"task": self.task.to_dict(), "eval_seeds": list(self.eval_seeds)}
+        uncertainty, data = self.rod_uncertainty, {k: v for k, v in data.items() if k != "rod_uncertainty"}
+        return data if uncertainty is None else data | {"rod_uncertainty": uncertainty.to_dict()}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: Any = "PILCO config") -> "PilcoConfig":

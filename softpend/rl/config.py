@@ -240,12 +240,9 @@ class MBPOConfig(DQNConfig):
 
 def config_to_dict(config: DQNConfig) -> dict[str, Any]:
     """The fields of ``config`` as plain JSON data, with its class name (``rod_uncertainty`` only when set)."""
-    data = dataclasses.asdict(config)
-    data["task"] = config.task.to_dict()
-    data.pop("rod_uncertainty")
-    if config.rod_uncertainty is not None:
-        data["rod_uncertainty"] = config.rod_uncertainty.to_dict()
-    return {"class": type(config).__name__, **data}
+    data = {"class": type(config).__name__, **dataclasses.asdict(config), "task": config.task.to_dict()}
+    uncertainty, data = config.rod_uncertainty, {k: v for k, v in data.items() if k != "rod_uncertainty"}
+    return data if uncertainty is None else data | {"rod_uncertainty": uncertainty.to_dict()}
 
 
 def saved_config_data(config: DQNConfig) -> dict[str, Any]:

@@ -58,11 +58,10 @@ def bench_sysid() -> dict[str, float]:
             fit = fit_dynamics_model(data, config, progress=False)
             metrics = evaluate_model(fit.model, test)
             near = evaluate_model(fit.model, test, upright, horizons_s=(0.5, 1.0))
-            out[f"{prefix}_upright_trials_tip_rmse_m_0.5s"] = near["tip_rmse_m@0.5s"]
-            out[f"{prefix}_upright_trials_tip_rmse_m_1s"] = near["tip_rmse_m@1s"]
+            out |= {f"{prefix}_upright_trials_tip_rmse_m_{h}s": near[f"tip_rmse_m@{h}s"] for h in ("0.5", "1")}
             out[f"{prefix}_train_s"] = fit.train_time_s
-            for key in ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"):
-                out[f"{prefix}_one_step_{key}"] = metrics[key]
+            keys = ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial")
+            out |= {f"{prefix}_one_step_{key}": metrics[key] for key in keys}
             for h in ("0.5", "1", "2"):
                 for name in ("tip_rmse_m", "phi_rmse_rad", "hold_tip_rmse_m"):
                     out[f"{prefix}_{name}_{h}s"] = metrics[f"{name}@{h}s"]

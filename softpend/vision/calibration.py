@@ -98,8 +98,7 @@ class AffineCalibration:
     def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
         """Map ``(..., 2)`` metre coordinates to pixels."""
         linear = np.linalg.inv(self.pixel_to_metre[:, :2])
-        inverse = np.column_stack([linear, -linear @ self.pixel_to_metre[:, 2]])
-        return np.asarray(points_m, dtype=float) @ inverse[:, :2].T + inverse[:, 2]
+        return np.asarray(points_m, dtype=float) @ linear.T + -linear @ self.pixel_to_metre[:, 2]
 
     @property
     def metres_per_pixel(self) -> float:

@@ -148,10 +148,10 @@ def run(args: argparse.Namespace) -> int:
             + f"controller step p95 {summary['step_ms_p95']:.2f} ms of a {summary['control_period_ms']:.1f} ms period; "
             + f"logs in {out}"
         )
-        if truth := summary.get("truth"):
+        if t := summary.get("truth"):
             print(
-                f"truth: swing-up {truth['swing_up_time_s']:.2f} s, upright std {truth['upright_std_rad']:.3f} rad, "
-                f"peak torque {truth['peak_torque_nm']:.3f} N m, success {truth['success']}"
+                f"truth: swing-up {t['swing_up_time_s']:.2f} s, upright std {t['upright_std_rad']:.3f} rad, "
+                f"peak torque {t['peak_torque_nm']:.3f} N m, success {t['success']}"
             )
     return 0 if summary["stop_reason"] is None else 1
 

@@ -98,7 +98,8 @@ def discretise(model: LinearModel, dt_s: float) -> LinearModel:
 def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
     """Mechanics about upright from Exudyn's ``ComputeLinearizedSystem``; the torque enters the hub (``e_0``)."""
     plant = PRBPlant(params if params is not None else RodParams())
-    return SecondOrderModel(*(np.asarray(m) for m in plant.linearized_matrices()), np.eye(plant.n_coordinates)[0])
+    mass, stiffness, damping = (np.asarray(m) for m in plant.linearized_matrices())
+    return SecondOrderModel(mass, stiffness, damping, np.eye(plant.n_coordinates)[0])
 
 
 def linearise_step_map(params: Optional[RodParams] = None, dt_s: float = 0.01, substeps: int = 2) -> LinearModel:
@@ -152,6 +153,6 @@ def reduce_to_observation_coordinates(
     kkt = np.block([[k_elastic, c.T], [c, np.zeros((len(kept), len(kept)))]])
     rhs = np.vstack([np.zeros((n, len(kept))), np.eye(len(kept))])
     shape = scipy.linalg.lstsq(kkt, rhs)[0][:n]
-    matrices = (shape.T @ m @ shape for m in (model.mass, model.stiffness, model.damping))
-    reduced = SecondOrderModel(*matrices, input_vector=shape.T @ model.input_vector)
+    mass, stiffness, damping = (shape.T @ m @ shape for m in (model.mass, model.stiffness, model.damping))
+    reduced = SecondOrderModel(mass, stiffness, damping, shape.T @ model.input_vector)
     return reduced, shape, tuple(kept)

@@ -370,9 +370,7 @@ class JointStateTracker:
         self._previous: Optional[np.ndarray] = None
 
     def _angles(self, p: np.ndarray, springs: Optional[np.ndarray]) -> np.ndarray:
-        warm: dict[str, Any] = (
-            {} if springs is None else {"iterations": WARM_ITERATIONS, "initial_springs_rad": springs}
-        )
+        warm: dict[str, Any] = {} if springs is None else dict(iterations=WARM_ITERATIONS, initial_springs_rad=springs)
         return reconstruct_joint_states(p[:, 0], p[:, 2], p[:, 3], p[:, 4], self.params, **warm)
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:

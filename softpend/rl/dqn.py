@@ -146,8 +146,6 @@ class EpisodeRecorder(BaseCallback):
         observations = np.concatenate(self._observations)
         plant_steps = len(observations) - 1
         dt = self.config.dt_s
-        row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return}
-        row["plant_s"] = self.log.plant_s + plant_steps * dt
         std, swing_up = math.pi, math.inf
         if plant_steps >= 2:
             torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
@@ -155,8 +153,9 @@ class EpisodeRecorder(BaseCallback):
                 np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT]
             )
             std, swing_up = metrics["upright_std_rad"], metrics["swing_up_time_s"]
-        row.update(upright_std_rad=std, swing_up_time_s=swing_up, model_steps=int(self.model_steps()))
-        row.update(wall_s=self.wall_s(), cpu_s=self.cpu_s())
+        row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return}
+        row |= dict(plant_s=self.log.plant_s + plant_steps * dt, upright_std_rad=std, swing_up_time_s=swing_up)
+        row |= dict(model_steps=int(self.model_steps()), wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.last_episode_observations, self.last_episode_torques = observations, np.asarray(self._torques, float)
         self.log.episodes.append(row)
         self._reset_episode()

@@ -59,6 +59,8 @@ class HeldActionController(GymPolicyController):
     """:class:`~softpend.evaluation.GymPolicyController` that queries the policy every ``repeat`` plant steps and
     holds the torque in between."""
 
+    _held_action: Any
+
     def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
         super().__init__(self._held_predict, env)
         self.repeat, self._inner_predict = positive_int("repeat", repeat), predict

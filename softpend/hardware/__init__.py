@@ -1,2 +1,1 @@
-"""The hardware rig: serial motor link, rig emulator and digital twin, host control loops, state estimator, time
-synchronisation of the motor and camera streams."""
+"""The hardware rig: motor link, rig emulator and twin, control loops, state estimator, stream synchronisation."""

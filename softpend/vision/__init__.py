@@ -1,5 +1,4 @@
-"""Vision: the report's tip tracker (Algorithm 1), affine calibration, the synthetic camera, and tracking video files
-into time-stamped CSV logs."""
+"""Vision: the tip tracker (Algorithm 1), affine calibration, the synthetic camera, video tracking into CSV logs."""
 
 from softpend.vision.camera import DEFAULT_MARKERS_M, CameraEffects, SyntheticCamera
 from softpend.vision.tracker import TipTracker

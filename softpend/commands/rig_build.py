@@ -271,15 +271,13 @@ def _grab_frame(camera: str, skip: int = 10):
     import cv2
 
     from softpend.io.reading import check_capture_path
+    from softpend.vision.tip_source import MAX_DEVICE_INDEX
 
     check_capture_path("--camera", camera)
     if Path(camera).is_file() and cv2.haveImageReader(camera):
-        frame = cv2.imread(camera)
-        if frame is None:
+        if (image := cv2.imread(camera)) is None:
             raise ValueError(f"--camera {camera}: the image cannot be read")
-        return frame
-    from softpend.vision.tip_source import MAX_DEVICE_INDEX
-
+        return image
     device: int | str = int(camera) if camera.strip().isdigit() else camera
     if isinstance(device, int) and device > MAX_DEVICE_INDEX:  # OpenCV takes a C int
         raise ValueError(f"--camera index must lie in [0, {MAX_DEVICE_INDEX}], got {camera!r}")

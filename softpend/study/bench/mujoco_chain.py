@@ -164,13 +164,15 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
     return n_steps / best
 
 
-def rollout_rod_steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 6) -> float:
-    """Rod-steps per second of ``mujoco.rollout`` over 4096 hanging rods, one thread, seeded random torques (best of 3
-    after a warm-up)."""
+def rollout_rod_steps_per_s(
+    n_links: int, integrator: str, substeps: int, batch_size: int = 4096, n_steps: int = 6, repeats: int = 3
+) -> float:
+    """Rod-steps per second of ``mujoco.rollout`` over ``batch_size`` hanging rods, one thread, seeded random torques
+    (best of ``repeats`` after a warm-up)."""
     import mujoco
     from mujoco import rollout
 
-    chain, batch_size, repeats = _chain(n_links, integrator, substeps), 4096, 3
+    chain = _chain(n_links, integrator, substeps)
     chain.hang()
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     initial = np.empty(mujoco.mj_stateSize(chain.model, spec))

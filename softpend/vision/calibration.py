@@ -33,6 +33,11 @@ def points_array(name: str, value, n_min: int = 3, n_max: int = 6) -> np.ndarray
     return array
 
 
+def read_json_file(name: str, path: str | Path, max_bytes: int):
+    """The JSON document in the regular file at ``path`` (``ValueError`` naming ``name`` and the file)."""
+    return read_json_checked(path, f"{name} file", max_bytes)
+
+
 def read_markers(name: str, text: Optional[str]) -> Optional[list]:
     """A ``--markers`` argument, a JSON list ``[[x, y], ...]`` or a file holding one, as 3 to 6 marker
     positions [m] (None for None or an empty argument)."""
@@ -44,7 +49,7 @@ def read_markers(name: str, text: Optional[str]) -> Optional[list]:
         except (ValueError, RecursionError) as exc:
             raise ValueError(f"{name} is not a valid JSON list: {exc}") from None
     else:
-        markers = read_json_checked(text, f"{name} file", MAX_CALIBRATION_BYTES)
+        markers = read_json_file(name, text, MAX_CALIBRATION_BYTES)
     return points_array(name, markers).tolist()
 
 
@@ -123,7 +128,7 @@ class AffineCalibration:
     @classmethod
     def load(cls, path: str | Path) -> "AffineCalibration":
         """Read a file holding :meth:`to_json` output (``ValueError`` naming the file if it is not one)."""
-        data = read_json_checked(path, "calibration file", MAX_CALIBRATION_BYTES)
+        data = read_json_file("calibration", path, MAX_CALIBRATION_BYTES)
         try:
             return cls.from_data(data)
         except ValueError as exc:

@@ -14,8 +14,7 @@ import numpy as np
 
 from softpend.checks import finite, in_unit_interval, int_at_least, non_negative, positive
 from softpend.io.outputs import atomic_write
-from softpend.io.reading import read_json_checked
-from softpend.vision.calibration import points_array
+from softpend.vision.calibration import points_array, read_json_file
 
 #: Highest frame rate accepted [1/s].
 MAX_FPS = 1e6
@@ -324,7 +323,7 @@ def read_sidecar(video_path: str | Path) -> dict:
     path = Path(str(video_path) + ".json")
     if not path.exists():
         return {}
-    data = read_json_checked(path, "sidecar file", MAX_SIDECAR_BYTES)
+    data = read_json_file("sidecar", path, MAX_SIDECAR_BYTES)
     try:
         return check_sidecar(data)
     except ValueError as exc:

@@ -464,10 +464,9 @@ def _upright_distribution(
 ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
     """Mean and covariance (plus ``initial_std**2 I``) of the states in the balancing band, angles wrapped; None
     with fewer than ``2 * dim`` of them."""
-    assert config.policy.balance_within_rad is not None
-    near = states[
-        in_balance_band(spec, states, config.policy.balance_within_rad, config.policy.balance_within_rad_s)
-    ].copy()
+    band = (config.policy.balance_within_rad, config.policy.balance_within_rad_s)
+    assert band[0] is not None
+    near = states[in_balance_band(spec, states, band[0], band[1])].copy()
     if len(near) < 2 * spec.dim:
         return None
     near[:, spec.angle_indices] = wrap_angle_rad(near[:, spec.angle_indices])
@@ -510,10 +509,8 @@ def run_pilco(
             search = pilco.optimize_policy()
             record = pilco.policy_trial(search)
             callback(record)
-            cost = f"{record.real_cost:.1f}/{search.predicted_cost:.1f}"
-            bar.set_postfix(
-                real_s=f"{record.plant_seconds_total:.0f}", cost=cost, std=f"{record.eval_upright_std_rad:.2f}"
-            )
+            real_s, std = f"{record.plant_seconds_total:.0f}", f"{record.eval_upright_std_rad:.2f}"
+            bar.set_postfix(real_s=real_s, cost=f"{record.real_cost:.1f}/{search.predicted_cost:.1f}", std=std)
             if record.balanced:
                 break
         bar.close()
@@ -560,13 +557,9 @@ class Pilco:
     def random_trial(self) -> TrialRecord:
         """One trial of held random torques (start and torques each from their own stream)."""
         config = self.config
-        controller = RandomTorqueController(
-            config.task.rod.torque_limit_nm,
-            config.control_dt_s,
-            seed=_draw_seed(self.streams["random_torques"]),
-            hold_s=(config.random_hold_min_s, config.random_hold_max_s),
-            bang_bang=True,
-        )
+        limit_nm, hold_s = config.task.rod.torque_limit_nm, (config.random_hold_min_s, config.random_hold_max_s)
+        seed = _draw_seed(self.streams["random_torques"])
+        controller = RandomTorqueController(limit_nm, config.control_dt_s, seed, hold_s, bang_bang=True)
         episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
         rate_width = config.cost.rate_width_rad_s if self.rate_on else None
         return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)

@@ -39,10 +39,6 @@ class AgentFileError(ValueError):
     the run's config); the message names the file and the reason."""
 
 
-def _serialized_entries(data: dict[str, Any]) -> list[str]:
-    return sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
-
-
 #: Largest ``data`` member (the JSON of the agent's plain attributes) of an agent file [bytes].
 MAX_AGENT_DATA_BYTES = 16 * 2**20
 
@@ -152,7 +148,8 @@ def load_agent_file(
     # read once (what is checked is what is loaded), a regular file of the size such an agent can have
     raw = read_bytes_checked(path, "agent file", max_total, AgentFileError)
     data = _read_data(path, raw, max_member)
-    pickled = [k for k in _serialized_entries(data) if k not in REBUILT_ATTRIBUTES]
+    pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+    pickled = [k for k in pickled if k not in REBUILT_ATTRIBUTES]
     if pickled:
         raise AgentFileError(
             f"{path}: refusing to load it: its entries {pickled} are pickled Python objects, and unpickling can run "

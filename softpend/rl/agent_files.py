@@ -52,26 +52,19 @@ def agent_file_bounds(config: DQNConfig, observation_dim: int) -> tuple[int, int
     return member, 4 * member
 
 
+#: What a corrupt or foreign agent file raises while its ``data`` member is read (JSON and UTF-8 errors included).
+_CORRUPT = (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, ValueError, EOFError, NotImplementedError, OSError)
+
+
 def _read_data(path: Path, raw: bytes, max_member_bytes: int = MAX_AGENT_DATA_BYTES) -> dict[str, Any]:
     try:
         with zipfile.ZipFile(io.BytesIO(raw)) as archive:
             check_zip_members(archive, path, "agent file", max_member_bytes, error=AgentFileError)
-            text = read_zip_member(archive, "data", path, "agent file", MAX_AGENT_DATA_BYTES, AgentFileError).decode(
-                "utf-8"
-            )
-        data = json.loads(text)
-    except (
-        zipfile.BadZipFile,
-        zipfile.LargeZipFile,
-        KeyError,
-        UnicodeDecodeError,
-        json.JSONDecodeError,
-        RecursionError,
-        EOFError,
-        NotImplementedError,
-        OSError,
-        zlib.error,
-    ) as exc:
+            member = read_zip_member(archive, "data", path, "agent file", MAX_AGENT_DATA_BYTES, AgentFileError)
+        data = json.loads(member.decode("utf-8"))
+    except AgentFileError:
+        raise
+    except (*_CORRUPT, RecursionError, zlib.error) as exc:
         raise AgentFileError(f"{path}: not a stable-baselines3 agent file ({type(exc).__name__}: {exc})") from None
     if not isinstance(data, dict):
         raise AgentFileError(f"{path}: its 'data' member is not a JSON object")

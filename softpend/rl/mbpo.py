@@ -159,26 +159,15 @@ class MBPOTrainer:
         c = self.config
         n_transitions = sum(len(t) for t in self.trials_torques)
         epochs = max(3, math.ceil(c.model.fit_steps * c.model.batch_size / n_transitions))
-        result = fit_dynamics_model(
-            self.dataset(),
-            TrainConfig(
-                information="full",
-                hidden_widths=c.model.hidden_widths,
-                ensemble_size=c.model.ensemble_size,
-                limit_tip_reach=False,
-                max_epochs=epochs,
-                patience=max(3, epochs // 4),
-                batch_size=c.model.batch_size,
-                learning_rate=3e-3,
-                seed=self.seed * 1000 + self.n_fits,
-            ),
-            progress=self.progress,
-        )
+        fixed: dict[str, Any] = dict(information="full", limit_tip_reach=False, learning_rate=3e-3)
+        sizes: dict[str, Any] = dict(hidden_widths=c.model.hidden_widths, ensemble_size=c.model.ensemble_size)
+        schedule: dict[str, Any] = dict(max_epochs=epochs, patience=max(3, epochs // 4), batch_size=c.model.batch_size)
+        train = TrainConfig(**fixed, **sizes, **schedule, seed=self.seed * 1000 + self.n_fits)
+        result = fit_dynamics_model(self.dataset(), train, progress=self.progress)
         self.dynamics = result.model.eval()
         self.n_fits += 1
-        save_model(
-            self.run_dir / "dynamics", self.dynamics, {"fits": self.n_fits, "episodes": len(self.trials_observations)}
-        )
+        fits = {"fits": self.n_fits, "episodes": len(self.trials_observations)}
+        save_model(self.run_dir / "dynamics", self.dynamics, fits)
 
     @torch.no_grad()
     def rollouts(self, agent: DQN, buffer: MBPOReplayBuffer, n_rollouts: int, length: int, epsilon: float) -> int:

@@ -718,9 +718,8 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
         in_a_row = 0
         for index in range(config.max_trials):
             seed = config.selection_seeds[index % len(config.selection_seeds)]
-            positions, torques, balanced, std = _run_trial(
-                env, _controller(config, rod, model, lqr, generator), seed, config
-            )
+            controller = _controller(config, rod, model, lqr, generator)
+            positions, torques, balanced, std = _run_trial(env, controller, seed, config)
             if len(torques) >= 3:
                 trajectories.append((positions, torques))
             in_a_row = in_a_row + 1 if balanced else 0

@@ -28,10 +28,8 @@ def recovers_from(
     """Whether ``controller`` brings the straight rod released at rest at ``tilt_rad`` back within
     0.02 rad of upright for the last second of ``duration_s``."""
     task = (task if task is not None else Task()).replace(start="upright")
-    summary = evaluate_controller(
-        controller, task, seeds=(0,), duration_s=duration_s, initial_state=task.tilt_state(float(tilt_rad))
-    )
-    result = summary.results[0]
+    start = task.tilt_state(float(tilt_rad))
+    (result,) = evaluate_controller(controller, task, seeds=(0,), duration_s=duration_s, initial_state=start).results
     if result.diverged is not None:
         return False
     last = result.theta_rad[-int(round(1.0 / task.dt_s)) :]

@@ -348,6 +348,7 @@ def test_bad_input_is_refused_by_name(tmp_path, capsys):
         (["--twin-rod", str(tmp_path / "missing.json")], "--twin-rod"),
         (["--twin-rod", str(tmp_path)], "--twin-rod"),
         (["--twin-rod", str(rod_file), "--verify-starts", "0"], "--verify-starts"),
+        (["--twin-rod", str(rod_file), "--train-attempts", "0"], "--train-attempts"),
         (["--twin-rod", str(rod_file), "--seed", "-1"], "--seed"),
         (["--twin-seed", "-3"], "--twin-seed"),
         (["--twin-rod", str(rod_file), "--excite-s", "0.1"], "excite_s"),
@@ -378,6 +379,8 @@ def test_bad_input_is_refused_by_name(tmp_path, capsys):
         ({"learners": {"ppo": {}}}, "learners"),
         ({"learners": {"dqn": {"episodes": 0}}}, "learners.dqn.episodes"),
         ({"default_rod_runs": {"dqn": 3}}, "default_rod_runs"),
+        ({"train_attempts": 0}, "train_attempts"),
+        ({"train_attempts": 101}, "train_attempts"),
     ):
         with pytest.raises(ValueError, match=name):
             CommissionConfig(**changes)

@@ -23,6 +23,7 @@ CONFIG_OPTIONS: dict[str, tuple[float, float, str]] = {
     "check_draws": (1, 10**4, "design check: rods drawn from the uncertainty (8)"),
     "check_starts": (1, 10**4, "design check: simulator starts per rod (2)"),
     "check_duration_s": (1e-3, MAX_SESSION_S, "design check: start length [s] (10)"),
+    "train_attempts": (1, 100, "training runs per learner at most, until one balances on its own starts (3)"),
     "verify_starts": (1, 1000, "fresh twin starts per condition (10)"),
     "verify_duration_s": (1e-3, MAX_SESSION_S, "length of a twin start [s] (10)"),
 }

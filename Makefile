@@ -42,8 +42,7 @@ venv: $(STAMP)
 $(STAMP): environment.lock pyproject.toml
 	@echo "[make] installing .venv from environment.lock (takes about a minute on a fresh machine)"
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
-	@# --no-compile: a module's bytecode is written when it is first imported, not for all of torch's files here
-	$(VENV)/bin/pip install -q --no-compile -r environment.lock $(PIP_QUIET)
+	$(VENV)/bin/pip install -q -r environment.lock $(PIP_QUIET)
 	$(VENV)/bin/pip install -q --no-deps -e . $(PIP_QUIET)
 	@# fails when pyproject.toml names a dependency that environment.lock lacks
 	$(VENV)/bin/pip check $(PIP_QUIET) || { echo "[make] .venv does not satisfy pyproject.toml: run 'make lock'" >&2; exit 1; }

@@ -126,9 +126,8 @@ class CommissionConfig:
         in_range("noise_std_fraction", self.noise_std_fraction, 1e-3, 1.0)
         one_of("program", self.program, PROGRAMS)
         in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
-        integers = {"max_windows": 1, "max_iterations": 1, "check_draws": 1, "check_starts": 1, "verify_starts": 1}
-        integers["train_attempts"] = 1
-        for name, low in (integers | {"seed": 0}).items():
+        integers = ("max_windows", "max_iterations", "check_draws", "check_starts", "verify_starts", "train_attempts")
+        for name, low in ({n: 1 for n in integers} | {"seed": 0}).items():
             object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
         for name, high in (("verify_starts", 1000), ("seed", 10**6 - 1), ("train_attempts", 100)):
             if getattr(self, name) > high:

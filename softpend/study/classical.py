@@ -4,7 +4,7 @@ limit), and the |theta| plot."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -16,6 +16,8 @@ from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_cont
 from softpend.study.presets import REPORT_SEEDS
 from softpend.task import Task
 
+#: Torque limit of the runs "without the limit" [N m].
+UNLIMITED_TORQUE_NM = 1.0
 #: The columns of the table of :attr:`ClassicalComparison.rows` (``markdown_table(rows, TABLE_COLUMNS, 4)``).
 TABLE_COLUMNS = tuple(
     "controller start torque_limit_nm seeds success_rate success_low success_high swing_up_time_s upright_std_rad "
@@ -75,55 +77,46 @@ def classical_comparison(
     learned_model: Any = None,
     tilts_rad: Sequence[float] = (0.2, 0.4),
     duration_s: float = 5.0,
-    unlimited_torque_nm: float = 1.0,
     starts: Sequence[int] = REPORT_SEEDS,
     swingup_duration_s: float = TEST_EPISODE_S,
     pid_tuning_evaluations: int = 60,
     pid_gains: Optional[PIDGains] = None,
 ) -> ClassicalComparison:
     """Every classical controller from the fresh ``starts`` (off the PRB plant: observation-only designs; without
-    ``learned_model``: no learned-model LQR and PID; ``pid_gains`` skips the PID tunings)."""
+    ``learned_model``: no learned-model LQR and PID; ``pid_gains`` skips the PID tunings); the LQR on the true model
+    and the PIDs also without the torque limit (:data:`UNLIMITED_TORQUE_NM`)."""
     task = task if task is not None else Task()
     starts = [int(seed) for seed in starts]
     if not starts or len(tilts_rad) == 0:
         raise ValueError("starts and tilts_rad must not be empty")
     params, plant, limit = task.rod, task.plant, task.rod.torque_limit_nm
+    joint_state = plant == "prb"
+    lqr_state = "joint" if joint_state else "observation"
     notes: list[str] = []
+    if not joint_state:
+        notes.append(f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only ones")
     near: dict[str, list[EvaluationSummary]] = {}
     rows: list[dict[str, Any]] = []
 
-    def add(label: str, controller, torque_limit: float) -> None:
-        near[label] = [
-            run_from_tilt(controller, task, tilt, starts, duration_s, torque_limit, label) for tilt in tilts_rad
-        ]
-        rows.extend(
-            {**s.row(), "start": f"tilt {t:g} rad", "torque_limit_nm": torque_limit}
-            for s, t in zip(near[label], tilts_rad)
-        )
+    def add(label: str, make: Callable[[float], Any], unlimited: bool = False) -> None:
+        for name, torque_limit in ((label, limit), (f"{label}, no limit", UNLIMITED_TORQUE_NM))[: 1 + unlimited]:
+            controller = make(torque_limit)
+            near[name] = [run_from_tilt(controller, task, t, starts, duration_s, torque_limit, name) for t in tilts_rad]
+            rows.extend(
+                {**s.row(), "start": f"tilt {t:g} rad", "torque_limit_nm": torque_limit}
+                for s, t in zip(near[name], tilts_rad)
+            )
 
-    def add_hanging(label: str, controller) -> None:
-        summary = evaluate_controller(
-            controller, task.replace(start="hanging"), name=label, seeds=starts, duration_s=swingup_duration_s
-        )
-        rows.append({**summary.row(), "start": "hanging", "torque_limit_nm": limit})
-
-    joint_state = plant == "prb"
-    if not joint_state:
-        notes.append(f"plant {plant!r}: joint-state LQR and joint-energy swing-up replaced by observation-only ones")
-    lqr_state = "joint" if joint_state else "observation"
-    add("LQR (true model)", LQRController.from_params(params, state=lqr_state), limit)
-    unlimited_lqr = LQRController.from_params(params, state=lqr_state, torque_limit_nm=unlimited_torque_nm)
-    add("LQR (true model), no limit", unlimited_lqr, unlimited_torque_nm)
+    add("LQR (true model)", lambda lim: LQRController.from_params(params, state=lqr_state, torque_limit_nm=lim), True)
     if joint_state:
-        add("LQR (observations)", LQRController.from_params(params, state="observation"), limit)
-    if learned_model is not None:
+        add("LQR (observations)", lambda lim: LQRController.from_params(params, state="observation"))
+    if learned_model is None:
+        notes.append("no learned model given: the learned-model LQR and the PID tuned on it are left out")
+    else:
         try:
-            add("LQR (learned model)", lqr_from_learned_model(learned_model, params), limit)
+            add("LQR (learned model)", lambda lim: lqr_from_learned_model(learned_model, params))
         except ValueError as exc:
             notes.append(f"LQR on the learned model: design failed ({exc})")
-    else:
-        notes.append("no learned model given: the learned-model LQR and the PID tuned on it are left out")
-
     if pid_gains is not None:
         gains = {"given": pid_gains}
     else:
@@ -135,13 +128,12 @@ def classical_comparison(
             for tuned_on, simulator in simulators.items()
         }
     for tuned_on, tuned in gains.items():
-        add(f"PID (tuned on {tuned_on})", PIDController(tuned, torque_limit_nm=limit), limit)
-        unlimited_pid = PIDController(tuned, torque_limit_nm=unlimited_torque_nm)
-        add(f"PID (tuned on {tuned_on}), no limit", unlimited_pid, unlimited_torque_nm)
-
-    add_hanging("LQR (true model)", LQRController.from_params(params, state=lqr_state))
+        add(f"PID (tuned on {tuned_on})", lambda lim: PIDController(tuned, torque_limit_nm=lim), True)
     swing = (EnergySwingUpController if joint_state else EnergySwingUpController.for_observations)(params)
-    add_hanging("energy swing-up + LQR", swing)
+    hanging, lqr = task.replace(start="hanging"), LQRController.from_params(params, state=lqr_state)
+    for label, controller in (("LQR (true model)", lqr), ("energy swing-up + LQR", swing)):
+        summary = evaluate_controller(controller, hanging, name=label, seeds=starts, duration_s=swingup_duration_s)
+        rows.append({**summary.row(), "start": "hanging", "torque_limit_nm": limit})
     return ClassicalComparison(near, rows, gains, notes)
 
 

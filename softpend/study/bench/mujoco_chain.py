@@ -5,15 +5,15 @@ from __future__ import annotations
 
 import contextlib
 import math
-import time
-from typing import Mapping, Optional
+from typing import Mapping
 
 import numpy as np
 
 from softpend.checks import one_of, positive
 from softpend.plant.params import RodParams
 from softpend.plant.prb import link_inertials
-from softpend.study.simulators import hub_error_inputs
+from softpend.study.bench import best_times
+from softpend.study.simulators import HubErrorReference, hub_error_inputs
 
 #: Control step of the comparisons [s].
 CONTROL_STEP_S = 0.01
@@ -22,19 +22,9 @@ CONTROL_STEP_S = 0.01
 INTEGRATORS = ("RK4", "implicitfast", "implicit", "Euler")
 
 
-def mujoco_available() -> bool:
-    """Whether ``import mujoco`` works."""
-    try:
-        import mujoco  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def chain_mjcf(params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> str:
+def chain_mjcf(p: RodParams, timestep_s: float = 0.005, integrator: str = "RK4") -> str:
     """MJCF text of the PRB chain of ``params``: hub and ``n`` links with the Exudyn plant's inertias, joint springs
     and dampers, gravity along ``-y``, a torque-limited hub motor, no contacts."""
-    p = params if params is not None else RodParams()
     positive("timestep_s", timestep_s)
     one_of("integrator", integrator, INTEGRATORS)
     masses, coms, inertias = link_inertials(p)
@@ -67,10 +57,10 @@ damping="{r(damping[i])}"/>
 class MuJoCoChain:
     """One rod of :func:`chain_mjcf` stepped by control steps of :data:`CONTROL_STEP_S` with the torque held."""
 
-    def __init__(self, params: Optional[RodParams] = None, timestep_s: float = 0.005, integrator: str = "RK4") -> None:
+    def __init__(self, params: RodParams, timestep_s: float = 0.005, integrator: str = "RK4") -> None:
         import mujoco
 
-        self.params = params if params is not None else RodParams()
+        self.params = params
         ratio = CONTROL_STEP_S / positive("timestep_s", timestep_s)
         self.substeps = int(round(ratio))
         if self.substeps < 1 or abs(ratio - self.substeps) > 1e-9 * ratio:
@@ -128,18 +118,6 @@ def _chain(params: RodParams | int, integrator: str, substeps: int) -> MuJoCoCha
     return MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
 
 
-def mujoco_hub_errors_rad(reference, configurations: dict[str, tuple[str, int]]) -> dict[str, float]:
-    """``{stem}_hub_error_rad_n{n_links}``: largest hub-angle error of the MuJoCo chain against the Exudyn run
-    ``reference`` (``inf`` if diverged), per ``stem -> (integrator, MuJoCo steps per control step)``."""
-    figures = {}
-    for stem, (integrator, substeps) in configurations.items():
-        chain = _chain(reference.params, integrator, substeps)
-        hub = chain.hub_trajectory_rad(reference.q0, reference.qd0, reference.torques_nm)
-        error = math.inf if chain.diverged else float(np.abs(hub - reference.hub_rad).max())
-        figures[f"{stem}_hub_error_rad_n{reference.params.n_links}"] = error
-    return figures
-
-
 def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
     """Whether the MuJoCo chain diverges along the inputs of :func:`~softpend.study.simulators.hub_error_inputs`."""
     params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
@@ -152,15 +130,16 @@ def steps_per_s(n_links: int, integrator: str, substeps: int, n_steps: int = 400
     """Control steps per second of one MuJoCo rod from hanging under seeded random torques (best of ``repeats``)."""
     chain = _chain(n_links, integrator, substeps)
     torques = (np.random.default_rng(0).uniform(-1, 1, n_steps) * chain.params.torque_limit_nm).tolist()
-    best, step = math.inf, chain.step
-    for _ in range(repeats):
+    step = chain.step
+
+    def run() -> None:
         chain.hang()
-        start = time.perf_counter()
         for torque in torques:
             step(torque)
-        best = min(best, time.perf_counter() - start)
-        if chain.diverged:
-            raise RuntimeError(f"the MuJoCo chain diverged ({integrator}, {substeps} sub-steps, n = {n_links})")
+
+    best, _ = best_times(run, repeats)
+    if chain.diverged:
+        raise RuntimeError(f"the MuJoCo chain diverged ({integrator}, {substeps} sub-steps, n = {n_links})")
     return n_steps / best
 
 
@@ -182,11 +161,9 @@ def rollout_rod_steps_per_s(
     control = np.repeat(torques, substeps, axis=1)[:, :, None]
     state = np.empty((batch_size, n_steps * substeps, initial.shape[1]))
     sensordata = np.empty((batch_size, n_steps * substeps, 0))
-    best = math.inf
-    for i in range(repeats + 1):
-        start = time.perf_counter()
-        rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)
-        best = min(best, time.perf_counter() - start) if i else best
+    run = lambda: rollout.rollout(chain.model, chain.data, initial, control, state=state, sensordata=sensordata)  # noqa: E731
+    run()  # warm-up
+    best, _ = best_times(run, repeats)
     if not np.isfinite(state[:, -1]).all():
         raise RuntimeError(f"mujoco.rollout diverged ({integrator}, {substeps} sub-steps, n = {n_links})")
     return batch_size * n_steps / best
@@ -216,7 +193,7 @@ RATIOS = {
 }
 
 
-def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> dict[str, float]:
+def bench_figures(base: dict[str, float], references: Mapping[int, HubErrorReference]) -> dict[str, float]:
     """The ``mujoco_*`` figures of the ``plant`` benchmark and their ratios to the rates in ``base``;
     ``references``: ``n_links`` (4, 10) -> :func:`~softpend.study.simulators.hub_error_reference`."""
     from softpend.plant.batched import stable_substeps
@@ -228,8 +205,12 @@ def bench_figures(base: dict[str, float], references: Mapping[int, object]) -> d
             n_steps = 4000 if n_links == 4 else 1000
             figures[f"{stem}_steps_per_s_n{n_links}"] = steps_per_s(n_links, integrator, substeps, n_steps=n_steps)
             figures[f"{stem}_substeps_n{n_links}"] = float(substeps)
-        compared = {stem: (integrator, substeps) for stem, integrator, substeps in configurations + (CONVERGED,)}
-        figures.update(mujoco_hub_errors_rad(references[n_links], compared))
+        ref = references[n_links]  # the hub-angle error against the Exudyn run (inf if diverged)
+        for stem, integrator, substeps in configurations + (CONVERGED,):
+            chain = _chain(ref.params, integrator, substeps)
+            hub = chain.hub_trajectory_rad(ref.q0, ref.qd0, ref.torques_nm)
+            error = math.inf if chain.diverged else float(np.abs(hub - ref.hub_rad).max())
+            figures[f"{stem}_hub_error_rad_n{n_links}"] = error
     for stem, integrator, substeps in CONFIGURATIONS_N4:
         figures[f"{stem}_diverges_n10"] = float(diverges(10, integrator, substeps))
     figures[_ROLLOUT_N4] = rollout_rod_steps_per_s(4, "RK4", 2)

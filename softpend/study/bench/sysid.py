@@ -60,12 +60,10 @@ def bench_sysid() -> dict[str, float]:
             near = evaluate_model(fit.model, test, upright, horizons_s=(0.5, 1.0))
             out |= {f"{prefix}_upright_trials_tip_rmse_m_{h}s": near[f"tip_rmse_m@{h}s"] for h in ("0.5", "1")}
             out[f"{prefix}_train_s"] = fit.train_time_s
-            keys = ("mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial")
+            keys = [f"{n}@{h}s" for h in ("0.5", "1", "2") for n in ("tip_rmse_m", "phi_rmse_rad", "hold_tip_rmse_m")]
+            out |= {f"{prefix}_{k.replace('@', '_')}": metrics[k] for k in keys + ["tip_rmse_over_length@1s"]}
+            keys = ["mse", "mse_trivial", "mse_normalised", "mse_normalised_trivial"]
             out |= {f"{prefix}_one_step_{key}": metrics[key] for key in keys}
-            for h in ("0.5", "1", "2"):
-                for name in ("tip_rmse_m", "phi_rmse_rad", "hold_tip_rmse_m"):
-                    out[f"{prefix}_{name}_{h}s"] = metrics[f"{name}@{h}s"]
-            out[f"{prefix}_tip_rmse_over_length_1s"] = metrics["tip_rmse_over_length@1s"]
             if prefix in ("model", "model_wide"):
                 out[f"{prefix}_rollout_steps_per_s"] = rollout_steps_per_s(fit.model)
             if prefix == "model_best":
@@ -125,8 +123,7 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
         "greybox_one_step_mse": rows["grey-box model"]["one_step_mse"],
     }
     for prefix, row in (("greybox", rows["grey-box model"]), ("nn", rows["nn"])):
-        out[f"{prefix}_valid_prediction_s"] = row["valid_prediction_s"]
-        out[f"{prefix}_valid_prediction_lyapunov"] = row["valid_prediction_lyapunov"]
+        out |= {f"{prefix}_{k}": row[k] for k in ("valid_prediction_s", "valid_prediction_lyapunov")}
         out[f"{prefix}_valid_prediction_ratio"] = row["valid_prediction_s"] / yardstick["valid_prediction_s"]
         out[f"{prefix}_hanging_tip_rmse_1s_pct_length"] = row["hanging_tip_rmse_pct_length"]
     closed_loop = gb.closed_loop_usefulness({"grey-box": result.params}, Task(rod=truth))

@@ -11,7 +11,6 @@ import softpend  # noqa: F401  (registers the environments)
 from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
 from softpend.plant import RodParams
-from softpend.plant.randomisation import RANDOMISED_FIELDS
 
 
 def _single_runs(env_class, seeds, actions, **kwargs):
@@ -106,7 +105,7 @@ def test_autoreset_is_next_step_and_keeps_each_generator() -> None:
 
 def test_spaces_dtypes_and_determinism() -> None:
     def run(seed):
-        env = SoftPendulumVectorEnv(num_envs=4, start="random", randomize_fraction=0.15)
+        env = SoftPendulumVectorEnv(num_envs=4, start="random")
         env.action_space.seed(seed)
         obs, info = env.reset(seed=seed)
         out = [obs]
@@ -126,26 +125,6 @@ def test_spaces_dtypes_and_determinism() -> None:
     assert env.single_action_space == SoftPendulumEnv().action_space
     assert data_equivalence(first, second)
     assert not np.allclose(first, third)
-
-
-def test_per_rod_randomisation_stays_within_the_fraction_and_is_redrawn_at_resets() -> None:
-    nominal = RodParams()
-    env = SoftPendulumVectorEnv(num_envs=64, randomize_fraction=0.15, max_episode_steps=2)
-    env.reset(seed=0)
-    drawn = env.chain.params
-    for name in RANDOMISED_FIELDS:
-        ratio = getattr(drawn, name).numpy() / getattr(nominal, name)
-        assert ratio.min() >= 0.85 and ratio.max() <= 1.15 and ratio.std() > 0.05, name
-    assert np.all(drawn.length_m.numpy() == nominal.length_m)
-    assert env.chain.substeps >= 2  # stable for the stiffest corner of the box
-    first_mass = drawn.mass_kg.clone()
-    for _ in range(3):  # two steps, then the autoreset step
-        env.step(np.zeros((64, 1), dtype=np.float32))
-    assert not np.allclose(env.chain.params.mass_kg.numpy(), first_mass.numpy())
-    # torque limit per rod: full action gives each rod's own limit
-    env.reset(seed=1)
-    _, _, _, _, info = env.step(np.ones((64, 1), dtype=np.float32))
-    np.testing.assert_allclose(info["torque_nm"], env.chain.params.torque_limit_nm.numpy())
 
 
 def test_reset_mask_resets_only_the_chosen_rods() -> None:
@@ -175,8 +154,6 @@ def test_make_vec_builds_both_action_spaces() -> None:
     "kwargs, name",
     [
         ({"num_envs": 0}, "num_envs"),
-        ({"randomize_fraction": 1.5}, "randomize_fraction"),
-        ({"randomized_fields": ("colour",)}, "randomized_fields"),
         ({"plant": "beam"}, "plant"),
         ({"start": "sideways"}, "start"),
         ({"max_episode_steps": 0}, "max_episode_steps"),

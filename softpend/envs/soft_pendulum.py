@@ -68,6 +68,25 @@ def draw_start(rng: np.random.Generator, start: str, noise_rad: float) -> tuple[
     return hub + float(rng.uniform(-noise_rad, noise_rad)), float(rng.uniform(-noise_rad, noise_rad))
 
 
+def set_task(
+    env: Any,
+    params: Optional[RodParams],
+    torque_limit_nm: Optional[float],
+    reward_params: Optional[RewardParams],
+    start: str,
+    start_noise_rad: float,
+) -> None:
+    """Set (checked) the rod, torque limit, reward and start distribution shared by the single and vector envs."""
+    params = params if params is not None else RodParams()
+    if not isinstance(params, RodParams):
+        raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
+    env.params = params if torque_limit_nm is None else params.replace(torque_limit_nm=torque_limit_nm)
+    env.torque_limit_nm = env.params.torque_limit_nm
+    env.reward_params = reward_params if reward_params is not None else RewardParams()
+    env.start = one_of("start", start, STARTS)
+    env.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
+
+
 def check_torque_levels(n_torque_levels: int) -> int:
     n_torque_levels = int_at_least("n_torque_levels", n_torque_levels, 2)
     if n_torque_levels > MAX_TORQUE_LEVELS:
@@ -96,20 +115,11 @@ class SoftPendulumEnv(gym.Env):
         plant: str = "prb",
         render_mode: Optional[str] = None,
     ) -> None:
-        params = params if params is not None else RodParams()
-        if torque_limit_nm is not None:
-            params = params.replace(torque_limit_nm=torque_limit_nm)
-        one_of("start", start, STARTS)
-        non_negative("start_noise_rad", start_noise_rad)
+        set_task(self, params, torque_limit_nm, reward_params, start, start_noise_rad)
         if render_mode is not None:
             one_of("render_mode", render_mode, self.metadata["render_modes"])
-        self.params = params
-        self.reward_params = reward_params if reward_params is not None else RewardParams()
-        self.plant = make_plant(plant, params=params, dt_s=dt_s, substeps=substeps)
+        self.plant = make_plant(plant, params=self.params, dt_s=dt_s, substeps=substeps)
         self.dt_s = self.plant.dt_s
-        self.torque_limit_nm = params.torque_limit_nm
-        self.start = start
-        self.start_noise_rad = float(start_noise_rad)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         bound = OBSERVATION_BOUND.copy()
@@ -127,17 +137,12 @@ class SoftPendulumEnv(gym.Env):
         clipped = [min(max(r, -5.0), 5.0) for r in rates]
         return np.array((*angles, o.ex_m * inv_l, o.ey_m * inv_l, *clipped, bonus), dtype=np.float32)
 
-    def _reward(self, theta: float) -> float:
+    def _reward(self, theta: float) -> float:  # step_reward's arithmetic on floats
         rp = self.reward_params
-        if abs(theta) < rp.epsilon_rad:
-            self._bonus = 1.0
-        else:
-            self._bonus *= self._bonus_decay
-        s = abs(math.sin(theta))
-        c = math.cos(theta)
+        self._bonus = 1.0 if abs(theta) < rp.epsilon_rad else self._bonus * self._bonus_decay
+        s, c = abs(math.sin(theta)), math.cos(theta)
         ratio = c / s if s > 0 else math.copysign(math.inf, c)
-        shaping = min(max(ratio, -rp.clip_value), rp.clip_value) / rp.clip_value
-        return shaping + rp.bonus_weight * self._bonus
+        return min(max(ratio, -rp.clip_value), rp.clip_value) / rp.clip_value + rp.bonus_weight * self._bonus
 
     def torque_from_action(self, action: np.ndarray) -> float:
         """Base torque [N m] for an action of this environment."""

@@ -1,11 +1,8 @@
 """Gymnasium vector environments of the soft pendulum task on the batched torch chain: ``num_envs`` copies of
-:class:`~softpend.envs.SoftPendulumEnv` (same observations, rewards, seeded starts), autoreset ``NEXT_STEP``,
-optional per-rod parameter randomisation drawn at each reset from the rod's own generator.
-"""
+:class:`~softpend.envs.SoftPendulumEnv` (same observations, rewards, seeded starts), autoreset ``NEXT_STEP``."""
 
 from __future__ import annotations
 
-import itertools
 from typing import Any, Optional, Sequence
 
 import gymnasium as gym
@@ -17,21 +14,19 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
 from softpend import MAX_EPISODE_STEPS
-from softpend.checks import in_range, int_at_least, non_negative, one_of
+from softpend.checks import int_at_least, one_of
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
-from softpend.envs.soft_pendulum import OBSERVATION_BOUND, STARTS, check_torque_levels, draw_start, reset_options
+from softpend.envs.soft_pendulum import OBSERVATION_BOUND, check_torque_levels, draw_start, reset_options, set_task
 from softpend.plant import OBSERVATION_NAMES, RodParams
-from softpend.plant.batched import PARAMETER_FIELDS, BatchedPRBChain, BatchedRodParams, stable_substeps
-from softpend.plant.randomisation import RANDOMISED_FIELDS
+from softpend.plant.batched import BatchedPRBChain, BatchedRodParams, stable_substeps
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 
 class SoftPendulumVectorEnv(gym.vector.VectorEnv):
-    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod);
-    ``randomize_fraction``: half-width in ``[0, 0.9]`` of the factors on ``randomized_fields``; ``plant``: only
-    ``"prb"``; the other arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
+    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod); ``plant``:
+    only ``"prb"``; the other arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
@@ -48,48 +43,29 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         start: str = "hanging",
         start_noise_rad: float = 0.05,
         max_episode_steps: int = MAX_EPISODE_STEPS,
-        randomize_fraction: float = 0.0,
-        randomized_fields: Sequence[str] = RANDOMISED_FIELDS,
         plant: str = "prb",
         render_mode: Optional[str] = None,
     ) -> None:
         self.num_envs = int_at_least("num_envs", num_envs, 1)
-        params = params if params is not None else RodParams()
-        if not isinstance(params, RodParams):
-            raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
-        if torque_limit_nm is not None:
-            params = params.replace(torque_limit_nm=torque_limit_nm)
-        one_of("start", start, STARTS)
+        set_task(self, params, torque_limit_nm, reward_params, start, start_noise_rad)
         one_of("plant", plant, ("prb",))
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")
-        self.params = params
-        self.reward_params = reward_params if reward_params is not None else RewardParams()
-        self.start = start
-        self.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
         self.max_episode_steps = int_at_least("max_episode_steps", max_episode_steps, 1)
-        self.randomize_fraction = in_range("randomize_fraction", randomize_fraction, 0.0, 0.9)
-        fields = tuple(randomized_fields)
-        unknown = [f for f in fields if f not in PARAMETER_FIELDS]
-        if unknown or len(set(fields)) != len(fields):
-            raise ValueError(f"randomized_fields must be distinct fields of {PARAMETER_FIELDS}, got {fields}")
-        self.randomized_fields = fields
         self.render_mode = None
 
-        nominal = BatchedRodParams.from_params(params, batch_size=self.num_envs)
-        self._nominal = nominal
         if integrator == "rk4":
-            stable = stable_substeps(self._corner_rods(), dt_s)
+            stable = stable_substeps(self.params, dt_s)
             if substeps is None:
                 substeps = stable
             elif int_at_least("substeps", substeps, 1) < stable:
                 raise ValueError(
-                    f"substeps must be at least {stable} (RK4 diverges with fewer for the stiffest rod that can be "
-                    f"drawn, see softpend.plant.batched.stable_substeps), got {substeps!r}"
+                    f"substeps must be at least {stable} (RK4 diverges with fewer, see "
+                    f"softpend.plant.batched.stable_substeps), got {substeps!r}"
                 )
+        nominal = BatchedRodParams.from_params(self.params, batch_size=self.num_envs)
         self.chain = BatchedPRBChain(nominal, dt_s=dt_s, substeps=substeps, integrator=integrator, compiled=compiled)
         self.dt_s = self.chain.dt_s
-        self.torque_limit_nm = params.torque_limit_nm
 
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.single_observation_space = spaces.Box(-OBSERVATION_BOUND, OBSERVATION_BOUND, dtype=np.float32)
@@ -99,21 +75,11 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         b, n = self.num_envs, self.chain.n_coordinates
         self._q = torch.zeros(b, n, dtype=torch.float64)
         self._qd = torch.zeros(b, n, dtype=torch.float64)
-        self._factors = np.ones((b, len(fields)))
-        self._torque_limits = np.full(b, params.torque_limit_nm)
         self._bonus = np.zeros(b)
         self._steps = np.zeros(b, dtype=np.int64)
         self._autoreset = np.zeros(b, dtype=bool)
         self._observations: Optional[np.ndarray] = None
         self._rngs: list[Optional[np.random.Generator]] = [None] * b
-
-    def _corner_rods(self) -> BatchedRodParams:
-        f = self.randomize_fraction
-        if f == 0 or not self.randomized_fields:
-            return BatchedRodParams.from_params(self.params)
-        corners = np.array(list(itertools.product((1 - f, 1 + f), repeat=len(self.randomized_fields))))
-        base = BatchedRodParams.from_params(self.params, batch_size=len(corners))
-        return base.scaled(**{name: corners[:, i] for i, name in enumerate(self.randomized_fields)})
 
     def joint_state(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(q, q_dot)`` of every rod, shape ``(num_envs, n + 1)`` (copies)."""
@@ -128,7 +94,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"actions must have shape ({self.num_envs}, 1), got {np.shape(actions)}")
         if not np.all(np.isfinite(a)):
             raise ValueError("actions must be finite")
-        return np.clip(a, -1.0, 1.0) * self._torque_limits
+        return np.clip(a, -1.0, 1.0) * self.torque_limit_nm
 
     def _draw_starts(
         self, indices: np.ndarray, start: str, exact: Optional[tuple[np.ndarray, np.ndarray]] = None
@@ -137,20 +103,12 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         q = np.zeros((len(indices), self.chain.n_coordinates))
         qd = np.zeros_like(q)
         for row, i in enumerate(indices):
-            rng = self._rngs[i]
-            q[row, 0], qd[row, 0] = draw_start(rng, start, self.start_noise_rad)
-            if self.randomize_fraction > 0 and self.randomized_fields:
-                f = self.randomize_fraction
-                self._factors[i] = 1.0 + rng.uniform(-f, f, len(self.randomized_fields))
+            q[row, 0], qd[row, 0] = draw_start(self._rngs[i], start, self.start_noise_rad)
         if exact is not None:
             q, qd = exact[0][indices], exact[1][indices]
         index = torch.as_tensor(indices)
         self._q[index] = torch.as_tensor(q)
         self._qd[index] = torch.as_tensor(qd)
-        if self.randomize_fraction > 0 and self.randomized_fields:
-            rods = self._nominal.scaled(**{name: self._factors[:, k] for k, name in enumerate(self.randomized_fields)})
-            self.chain.set_params(rods)
-            self._torque_limits = rods.torque_limit_nm.numpy().copy()
         self._steps[indices] = 0
         self._autoreset[indices] = False
         observations = self._observe()
@@ -244,4 +202,4 @@ class SoftPendulumDiscreteVectorEnv(SoftPendulumVectorEnv):
             raise ValueError(f"actions must be integers of shape ({self.num_envs},), got {a.dtype} {a.shape}")
         if a.min() < 0 or a.max() >= self.n_torque_levels:
             raise ValueError(f"actions must lie in [0, {self.n_torque_levels}), got {a.min()}..{a.max()}")
-        return self._levels[a] * self._torque_limits
+        return self._levels[a] * self.torque_limit_nm

@@ -4,7 +4,6 @@ cached by source, parameters and the ``softpend`` code they use; write the execu
 from __future__ import annotations
 
 import ast
-import contextlib
 import hashlib
 import io
 import json
@@ -19,7 +18,7 @@ import tempfile
 import time
 import tokenize
 from collections import namedtuple
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
@@ -85,37 +84,37 @@ class BookLayout:
 NotebookRun = namedtuple("NotebookRun", "name status seconds output_path")
 
 
-def _shape_error(path: Path | str, node: Any, key: Any, expected: str, got: Any) -> ValueError:
+def _expect(ok: bool, path: Path | str, node: Any, key: Any, expected: str, got: Any) -> None:
+    """``ValueError`` naming the file, the line of ``node[key]`` and what was expected unless ``ok``."""
     kind = "nothing" if got is None else f"{type(got).__name__.removeprefix('_Line').lower()} {got!r}"[:80]
-    return ValueError(f"{path}, line {yaml_line(node, key)}: expected {expected}, got {kind}")
+    if not ok:
+        raise ValueError(f"{path}, line {yaml_line(node, key)}: expected {expected}, got {kind}")
 
 
 def toc_notebooks(toc_path: Path | str) -> list[str]:
     """Names of the executed notebooks of a ``_toc.yml`` (entries under ``book/_generated/``), in reading order;
     ``ValueError`` unless it has the shape jupyter-book reads (a mapping with ``root``, lists of mappings)."""
     toc, entries = read_yaml_checked(Path(toc_path), "table of contents", lines=True), list[str]()
-    if not isinstance(toc, dict):
-        raise _shape_error(toc_path, toc, None, "a mapping with format, root and parts or chapters", toc)
+    _expect(isinstance(toc, dict), toc_path, toc, None, "a mapping with format, root and parts or chapters", toc)
     if "root" not in toc:
         raise ValueError(f"{toc_path}, line {yaml_line(toc)}: expected a 'root' entry (the book's first page)")
 
     def walk(node: dict) -> None:
         for key, value in node.items():
-            if key in ("file", "root", "caption", "format", "title", "url") and not isinstance(value, str):
-                raise _shape_error(toc_path, node, key, f"'{key}' to be a string", value)
+            strings = ("file", "root", "caption", "format", "title", "url")
+            _expect(key not in strings or isinstance(value, str), toc_path, node, key, f"'{key}' to be a string", value)
             entries.extend([value.removesuffix(".ipynb")] if key in ("file", "root") else [])
             if key in ("parts", "chapters", "sections") and value is not None:
-                if not isinstance(value, list):
-                    raise _shape_error(toc_path, node, key, f"'{key}' to be a list of entries", value)
+                _expect(isinstance(value, list), toc_path, node, key, f"'{key}' to be a list of entries", value)
                 for index, entry in enumerate(value):
-                    if not isinstance(entry, dict):
-                        expected = f"each of '{key}' to be a mapping (file: ...)"
-                        raise _shape_error(toc_path, value, index, expected, entry)
+                    expected = f"each of '{key}' to be a mapping (file: ...)"
+                    _expect(isinstance(entry, dict), toc_path, value, index, expected, entry)
                     walk(entry)
 
     walk(toc)
-    names = [e[len(GENERATED_PREFIX) :] for e in entries if e.startswith(GENERATED_PREFIX)]
-    names = [name for name in names if name != EXECUTION_PAGE]
+    names = [
+        n for e in entries if e.startswith(GENERATED_PREFIX) and (n := e[len(GENERATED_PREFIX) :]) != EXECUTION_PAGE
+    ]
     if duplicates := sorted({name for name in names if names.count(name) > 1}):
         raise ValueError(f"{toc_path}: notebook(s) listed more than once: {duplicates}")
     return names
@@ -124,16 +123,14 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
 def load_profiles(path: Path | str) -> dict[str, dict[str, dict[str, Any]]]:
     """``profiles.yml`` as ``profile -> notebook -> {parameter: value}``."""
     data = read_yaml_checked(path, "profiles file", lines=True) or {}
-    if not isinstance(data, dict):
-        raise _shape_error(path, data, None, "a mapping profile -> notebook -> parameters", data)
+    _expect(isinstance(data, dict), path, data, None, "a mapping profile -> notebook -> parameters", data)
     for profile, notebooks in data.items():
-        if not isinstance(notebooks or {}, dict):
-            expected = f"a mapping notebook -> parameters for profile {profile!r}"
-            raise _shape_error(path, data, profile, expected, notebooks)
+        expected = f"a mapping notebook -> parameters for profile {profile!r}"
+        _expect(isinstance(notebooks or {}, dict), path, data, profile, expected, notebooks)
         for notebook, parameters in (notebooks or {}).items():
-            if not isinstance(parameters or {}, dict) or not all(isinstance(key, str) for key in parameters or {}):
-                expected = f"a mapping parameter -> value for notebook {notebook!r} of profile {profile!r}"
-                raise _shape_error(path, notebooks, notebook, expected, parameters)
+            ok = isinstance(parameters or {}, dict) and all(isinstance(key, str) for key in parameters or {})
+            expected = f"a mapping parameter -> value for notebook {notebook!r} of profile {profile!r}"
+            _expect(ok, path, notebooks, notebook, expected, parameters)
     return {str(p): {str(n): dict(v or {}) for n, v in (nbs or {}).items()} for p, nbs in data.items()}
 
 
@@ -195,25 +192,6 @@ def execution_order(names: Sequence[str], after: Mapping[str, Sequence[str]]) ->
     return done
 
 
-def _drop_docstrings(tree: ast.AST) -> ast.AST:
-    """Remove every bare string statement from ``tree``; an emptied body becomes ``pass``."""
-    is_text = lambda s: isinstance(s, ast.Expr) and isinstance(getattr(s.value, "value", None), str)  # noqa: E731
-    for node in ast.walk(tree):
-        if isinstance(body := getattr(node, "body", None), list) and any(map(is_text, body)):
-            setattr(node, "body", [s for s in body if not is_text(s)] or [ast.Pass()])
-    return tree
-
-
-def _parse_cell(source: str) -> Optional[ast.Module]:
-    """A code cell as an ``ast`` tree (IPython magics translated); None when it does not parse."""
-    from IPython.core.inputtransformer2 import TransformerManager
-
-    for text in (source, TransformerManager().transform_cell(source)):
-        with contextlib.suppress(SyntaxError):
-            return ast.parse(text)
-    return None
-
-
 class PackageCode:
     """A package's modules (default ``softpend``) read with ``ast``: the closure of some code's imports (strings
     naming a module or an entry point ``"pkg.a:Name"`` included) and each module's hash without docstrings."""
@@ -234,14 +212,14 @@ class PackageCode:
     def _module(self, module: str) -> tuple[str, frozenset[str]]:
         if module not in self._read:
             path = self.modules[module]
-            tree = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+            tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+            is_text = lambda s: isinstance(s, ast.Expr) and isinstance(getattr(s.value, "value", None), str)  # noqa: E731
+            for node in ast.walk(tree):  # without docstrings (an emptied body becomes ``pass``)
+                if isinstance(body := getattr(node, "body", None), list) and any(map(is_text, body)):
+                    setattr(node, "body", [s for s in body if not is_text(s)] or [ast.Pass()])
             digest = hashlib.sha256(ast.dump(tree).encode()).hexdigest()
             self._read[module] = (digest, frozenset(self._tree_imports(tree, module)))
         return self._read[module]
-
-    def _with_parents(self, module: str) -> set[str]:
-        parts = module.split(".")
-        return {name for name in (".".join(parts[: i + 1]) for i in range(len(parts))) if name in self.modules}
 
     def _tree_imports(self, tree: ast.AST, module: Optional[str] = None) -> set[str]:
         found: set[str] = set()
@@ -259,16 +237,24 @@ class PackageCode:
                 targets += [node.value.strip()] if node.value.strip() in self.modules else []
             else:
                 continue
-            found = found.union(*map(self._with_parents, targets))
+            parents = (".".join(t.split(".")[:i]) for t in targets for i in range(1, t.count(".") + 2))
+            found.update(name for name in parents if name in self.modules)
         found.discard(module)
         return found
 
     def closure(self, code_cells: Iterable[str]) -> set[str]:
         """Modules the code uses, directly or through the package; all of them when a cell does not parse."""
+        from IPython.core.inputtransformer2 import TransformerManager
+
         pending: set[str] = set()
         for cell in code_cells:
-            if (tree := _parse_cell(cell)) is None:
-                return set(self.modules)
+            try:
+                tree = ast.parse(cell)
+            except SyntaxError:  # IPython's magics translated; every module where it still does not parse
+                try:
+                    tree = ast.parse(TransformerManager().transform_cell(cell))
+                except SyntaxError:
+                    return set(self.modules)
             pending |= self._tree_imports(tree)
         used: set[str] = set()
         while pending:
@@ -433,32 +419,28 @@ def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict,
 
 
 def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> None:
-    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each after its ``after``; raise the first
-    error once the running ones end."""
+    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each after its ``after``; once one fails
+    no other starts, and the first error is raised when the running ones end."""
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
-    done = {name for name in order if plans[name]["status"] == "cached"}
-    pending, errors = [name for name in order if name not in done], list[BaseException]()
-    running: dict[Future[float], str] = {}
-    for name in (name for name in order if name in done):
+    futures: dict[str, Future[None]] = {}
+    errors: list[BaseException] = []
+
+    def run(name: str) -> None:  # the pool starts jobs in order: those it waits for have started
+        wait([futures[dep] for dep in plans[name]["after"] if dep in futures])
+        if not errors:
+            say(f"{name}: executing")
+            try:
+                plans[name]["seconds"] = _execute_one(layout, name, plans[name])
+                say(f"{name}: executed in {plans[name]['seconds']:.1f} s")
+            except BaseException as error:  # noqa: BLE001 -- raised below once the running notebooks end
+                errors.append(error)
+                say(f"{name} failed")
+
+    for name in (name for name in order if plans[name]["status"] == "cached"):
         say(f"{name}: up to date (cached)")
     with ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="softpend-book") as pool:
-        while pending or running:
-            ready = [n for n in pending if all(dep in done or dep not in order for dep in plans[n]["after"])]
-            for name in ready[: WORKERS - len(running)] if not errors else []:
-                pending.remove(name)
-                say(f"{name}: executing")
-                running[pool.submit(_execute_one, layout, name, plans[name])] = name
-            if not running:
-                break
-            for future in wait(running, return_when=FIRST_COMPLETED).done:
-                name = running.pop(future)
-                if (error := future.exception()) is not None:
-                    errors.append(error)
-                    say(f"{name} failed" + ("; waiting for the running notebooks" if running else ""))
-                else:
-                    done.add(name)
-                    plans[name]["seconds"] = future.result()
-                    say(f"{name}: executed in {plans[name]['seconds']:.1f} s")
+        for name in (name for name in order if plans[name]["status"] != "cached"):
+            futures[name] = pool.submit(run, name)
     if errors:
         raise errors[0]
 

@@ -64,15 +64,13 @@ class GreyBoxConfig:
     max_iterations: int = 25
 
     def __post_init__(self) -> None:
-        names = tuple(self.parameters)
-        if not names:
-            raise ValueError("parameters must name at least one parameter")
-        allowed = ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS
-        bad = [n for n in names if n not in allowed]
-        if bad:
-            raise ValueError(f"parameters must be drawn from {allowed}, got {bad}")
-        if len(set(names)) != len(names):
-            raise ValueError(f"parameters has duplicates: {names}")
+        names, allowed = tuple(self.parameters), ESTIMABLE_ROD_FIELDS + CALIBRATION_PARAMETERS
+        if not names or len(set(names)) < len(names) or not set(names) <= set(allowed):
+            raise ValueError(f"parameters must be one or more distinct names from {allowed}, got {names}")
+        if {"youngs_modulus_pa", "stiffness_scale"} <= set(names):
+            raise ValueError(
+                "parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one"
+            )
         object.__setattr__(self, "parameters", names)
         positive("window_s", self.window_s)
         object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
@@ -102,21 +100,10 @@ class GreyBoxResult:
     message: str
     at_bounds: tuple[str, ...] = ()
 
-    @property
-    def torque_gain(self) -> float:
-        return self.estimates.get("torque_gain", 1.0)
-
-    @property
-    def encoder_offset_rad(self) -> float:
-        return self.estimates.get("encoder_offset_rad", 0.0)
-
-    @property
-    def torque_delay_s(self) -> float:
-        return self.estimates.get("torque_delay_s", 0.0)
-
-    @property
-    def camera_delay_s(self) -> float:
-        return self.estimates.get("camera_delay_s", 0.0)
+    def __getattr__(self, name: str) -> float:
+        if name not in CALIBRATION_PARAMETERS:  # the calibrations: 1, 0, 0, 0 when not estimated
+            raise AttributeError(name)
+        return self.estimates.get(name, float(name == "torque_gain"))
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
         """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""
@@ -248,6 +235,16 @@ def simulate_windows(
     return out
 
 
+def _shifted(x: np.ndarray, fraction: float, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """``x`` along axis 1 delayed by ``fraction`` of a sample (advanced if negative), linearly interpolated; ``before``
+    and ``after`` are the samples beyond either end."""
+    if fraction > 0.0:
+        return (1.0 - fraction) * x + fraction * np.concatenate([before, x[:, :-1]], axis=1)
+    if fraction < 0.0:
+        return (1.0 + fraction) * x - fraction * np.concatenate([x[:, 1:], after], axis=1)
+    return x
+
+
 def _normal_blocks(dense: np.ndarray, block: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``J_p^T J_p``, the windows' ``J_s^T J_s`` and ``J_p^T J_s``."""
     a = np.einsum("wrp,wrq->pq", dense, dense)
@@ -323,27 +320,15 @@ class _Problem:
                 self._plants.clear()
             self._plants[key] = _free_plant(rod, self.dt_s, self.substeps)
         plant = self._plants[key]
-        torques = self.torques
-        if delay > 0.0:
-            torques = (1.0 - delay) * torques + delay * np.concatenate(
-                [self.previous_torques[:, None], torques[:, :-1]], axis=1
-            )
-        elif delay < 0.0:
-            torques = (1.0 + delay) * torques - delay * np.concatenate(
-                [torques[:, 1:], self.next_torques[:, None]], axis=1
-            )
+        torques = _shifted(self.torques, delay, self.previous_torques[:, None], self.next_torques[:, None])
         sim = simulate_windows(
             plant.params, self.dt_s, self.substeps, states, torques, gain, self.has_er, plant, self.diverged_nan
         )
         sim[..., 0] += offset
         if "camera_delay_s" in self.names:  # the camera sees the tip of (k - b) dt at sample k
+            c = sim[:, :, 1:]
             b = float(theta[self.names.index("camera_delay_s")])
-            camera = sim[..., 1:]
-            if b > 0.0:
-                step = np.concatenate([camera[:, 1:2] - camera[:, :1], np.diff(camera, axis=1)], axis=1)
-            else:
-                step = np.concatenate([np.diff(camera, axis=1), camera[:, -1:] - camera[:, -2:-1]], axis=1)
-            sim[..., 1:] = camera - b * step
+            sim[:, :, 1:] = _shifted(c, b, 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1])
         return sim
 
     def residual_blocks(self, z: np.ndarray) -> np.ndarray:
@@ -376,20 +361,16 @@ class _Problem:
                 ahead[~np.isfinite(ahead).all(axis=1)] = 0.0
             return ahead
 
-        dense = np.empty((self.n_windows, base.shape[1], self.n_p))
-        for j in range(self.n_p):
+        def column(index: np.ndarray) -> np.ndarray:
+            """The derivative along the entries ``index`` of ``z``, moved together (one per window at most)."""
             move = np.zeros_like(z)
-            move[j] = DIFF_STEP * max(1.0, abs(z[j]))
-            dense[:, :, j] = difference(move) / move[j]
+            move[index] = DIFF_STEP * np.maximum(1.0, np.abs(z[index]))
+            return difference(move) / move[index][:, None]
+
         n_s = 2 * self.n_q
-        block = np.empty((self.n_windows, base.shape[1], n_s))
-        states = z[self.n_p :].reshape(self.n_windows, n_s)
-        for c in range(n_s):
-            h = DIFF_STEP * np.maximum(1.0, np.abs(states[:, c]))
-            moved = np.zeros_like(states)
-            moved[:, c] = h
-            block[:, :, c] = difference(np.concatenate([np.zeros(self.n_p), moved.reshape(-1)])) / h[:, None]
-        return dense, block
+        windows = self.n_p + n_s * np.arange(self.n_windows)
+        jac = np.stack([column(np.array([j])) for j in range(self.n_p)] + [column(windows + c) for c in range(n_s)], -1)
+        return jac[..., : self.n_p], jac[..., self.n_p :]
 
     def parameter_information(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(A, S)`` at ``z``: ``J_p^T J_p`` and its Schur complement after eliminating the window states."""
@@ -504,26 +485,6 @@ def _initial_states(dataset: TrajectoryDataset, starts: np.ndarray, guess: RodPa
     return np.concatenate([q[1], rate], axis=1)
 
 
-def _check_inputs(dataset: TrajectoryDataset, config: GreyBoxConfig, guess: RodParams) -> None:
-    if not isinstance(config, GreyBoxConfig):
-        raise ValueError(f"config must be a GreyBoxConfig, got {type(config).__name__}")
-    if not isinstance(dataset, TrajectoryDataset):
-        raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
-    if not isinstance(guess, RodParams):
-        raise ValueError(f"initial_params must be a RodParams, got {type(guess).__name__}")
-    for name in config.parameters:
-        if name in ESTIMABLE_ROD_FIELDS and not getattr(guess, name) > 0:
-            raise ValueError(
-                f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
-            )
-        if name in ("torque_gain", "torque_delay_s") and not np.any(dataset.torques_nm != 0):
-            raise NotIdentifiable(
-                name, f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)"
-            )
-    if "youngs_modulus_pa" in config.parameters and "stiffness_scale" in config.parameters:
-        raise ValueError("parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one")
-
-
 def identify(
     dataset: TrajectoryDataset, config: Optional[GreyBoxConfig] = None, initial_params: Optional[RodParams] = None
 ) -> GreyBoxResult:
@@ -535,8 +496,16 @@ def identify(
     """
     started = time.perf_counter()
     config = config if config is not None else GreyBoxConfig()
-    guess = initial_params if initial_params is not None else (getattr(dataset, "params", None) or RodParams())
-    _check_inputs(dataset, config, guess)
+    guess = initial_params if initial_params is not None else (dataset.params or RodParams())
+    for name in config.parameters:
+        if name in ESTIMABLE_ROD_FIELDS and not getattr(guess, name) > 0:
+            raise ValueError(
+                f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
+            )
+        if name in ("torque_gain", "torque_delay_s") and not np.any(dataset.torques_nm != 0):
+            raise NotIdentifiable(
+                name, f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)"
+            )
     steps = int(round(config.window_s / dataset.dt_s))
     if steps < 2:
         raise ValueError(f"window_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {config.window_s!r}")
@@ -567,20 +536,16 @@ def identify(
     r = problem.residuals(z)
     sigma2 = float(r @ r) / max(r.size - z.size, 1)
     sd = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(s)), 0.0, None))
-    estimates: dict[str, float] = {}
-    std: dict[str, float] = {}
-    for j, (name, value) in enumerate(_decode(names, z[:n_p], guess).items()):
-        if name in _DELAYS:
-            estimates[name], std[name] = value * dataset.dt_s, float(sd[j] * dataset.dt_s)
-        elif name == "encoder_offset_rad":
-            estimates[name], std[name] = value, float(sd[j] * _OFFSET_SCALE_RAD)
-        else:
-            estimates[name], std[name] = value, float(value * sd[j])  # delta method on the log scale
+    values = _decode(names, z[:n_p], guess)  # the delays' units are dt, their derivative too; log scale: the value
+    unit = {n: dataset.dt_s if n in _DELAYS else 1.0 for n in names}
+    slope = {
+        n: _OFFSET_SCALE_RAD if n == "encoder_offset_rad" else unit[n] if n in _DELAYS else values[n] for n in names
+    }
     return GreyBoxResult(
         params=problem.unpack(z[:n_p])[0],
         initial_params=guess,
-        estimates=estimates,
-        std=std,
+        estimates={n: values[n] * unit[n] for n in names},
+        std={n: float(slope[n] * sd[j]) for j, n in enumerate(names)},
         residual_rms_rad=float(np.sqrt(np.mean(r**2))),
         n_windows=problem.n_windows,
         window_steps=steps,
@@ -591,12 +556,7 @@ def identify(
         njev=int(fit["njev"]),
         status=int(fit["status"]),
         message=str(fit["message"]),
-        at_bounds=tuple(
-            name
-            for j, name in enumerate(names)
-            if (name in _DELAYS and abs(z[j]) >= 1.0)
-            or (name not in _ZERO_CALIBRATIONS and abs(z[j]) >= _LOG_BOUND * (1 - 1e-9))
-        ),
+        at_bounds=tuple(n for n, hit in zip(names, np.abs(z[:n_p]) >= upper * (1 - 1e-9)) if hit),
     )
 
 

@@ -7,7 +7,7 @@ import json
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import torch
@@ -168,12 +168,14 @@ def save_agent_file(model: DQN, path: str | Path) -> Path:
     return Path(path)
 
 
-def _parts(buffer: ReplayBuffer) -> dict[str, ReplayBuffer]:
-    """The SB3 buffers inside ``buffer`` by key prefix (an MBPO buffer carries a model buffer)."""
-    parts = {"": buffer}
+def _parts(buffer: ReplayBuffer) -> dict[str, tuple[ReplayBuffer, tuple[str, ...]]]:
+    """The SB3 buffers inside ``buffer`` by key prefix (an MBPO buffer carries a model buffer and the real plant
+    observations), each with the names of its arrays."""
+    plant = isinstance(getattr(buffer, "plant_observations", None), np.ndarray)
+    parts = {"": (buffer, _BUFFER_ARRAYS + ("plant_observations",) * plant)}
     model_buffer = getattr(buffer, "model_buffer", None)
     if isinstance(model_buffer, ReplayBuffer):
-        parts["model/"] = model_buffer
+        parts["model/"] = (model_buffer, _BUFFER_ARRAYS)
     return parts
 
 
@@ -181,25 +183,13 @@ def _filled(buffer: ReplayBuffer) -> int:
     return buffer.buffer_size if buffer.full else buffer.pos
 
 
-def _plant(buffer: ReplayBuffer) -> Optional[np.ndarray]:
-    """The plant observations an MBPO buffer keeps, else None."""
-    plant = getattr(buffer, "plant_observations", None)
-    return plant if isinstance(plant, np.ndarray) else None
-
-
 def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
     """Write the filled rows of ``buffer`` (and of an MBPO buffer's model part and real plant observations),
     its position and fill flag as an uncompressed ``.npz`` (plain arrays, no pickle)."""
     arrays: dict[str, np.ndarray] = {}
-    for prefix, part in _parts(buffer).items():
-        n = _filled(part)
-        for name in _BUFFER_ARRAYS:
-            arrays[prefix + name] = getattr(part, name)[:n]
-        arrays[prefix + "pos"] = np.array(part.pos, dtype=np.int64)
-        arrays[prefix + "full"] = np.array(bool(part.full))
-    plant = _plant(buffer)
-    if plant is not None:
-        arrays["plant_observations"] = plant[: _filled(buffer)]
+    for prefix, (part, names) in _parts(buffer).items():
+        arrays |= {prefix + name: getattr(part, name)[: _filled(part)] for name in names}
+        arrays[prefix + "pos"], arrays[prefix + "full"] = np.array(part.pos, dtype=np.int64), np.array(bool(part.full))
     with atomic_write(path) as handle:
         np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy's stub: no key is allow_pickle
     return Path(path)
@@ -207,28 +197,22 @@ def save_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> Path:
 
 def load_replay_buffer(buffer: ReplayBuffer, path: str | Path) -> None:
     """Fill ``buffer`` (freshly allocated, with the run's sizes) from a file of :func:`save_replay_buffer`."""
-    path, plant = Path(path), _plant(buffer)
+    path, parts = Path(path), _parts(buffer)
     # the file can hold no more than the buffer it fills (its arrays, and the zip's and headers' overhead)
-    arrays = [getattr(part, name) for part in _parts(buffer).values() for name in _BUFFER_ARRAYS]
-    max_bytes = 2**20 + sum(int(array.nbytes) for array in arrays + ([] if plant is None else [plant]))
+    max_bytes = 2**20 + sum(int(getattr(part, name).nbytes) for part, names in parts.values() for name in names)
     saved = read_npz(path, "replay buffer file", AgentFileError, max_bytes=max_bytes)
-    expected = {prefix + name for prefix in _parts(buffer) for name in _BUFFER_ARRAYS + ("pos", "full")}
-    if plant is not None:
-        expected.add("plant_observations")
+    expected = {prefix + name for prefix, (_, names) in parts.items() for name in names + ("pos", "full")}
     if set(saved) != expected:
         raise AgentFileError(f"{path}: holds {sorted(saved)}, expected {sorted(expected)}")
-    for prefix, part in _parts(buffer).items():
+    for prefix, (part, names) in parts.items():
         pos, full = saved[prefix + "pos"], saved[prefix + "full"]
         if pos.shape != () or pos.dtype.kind not in "iu" or full.shape != () or full.dtype != np.bool_:
             raise AgentFileError(f"{path}: {prefix}pos and {prefix}full must be an integer and a bool")
         if not 0 <= int(pos) < part.buffer_size:
             raise AgentFileError(f"{path}: {prefix}pos {int(pos)} outside [0, {part.buffer_size})")
         part.pos, part.full = int(pos), bool(full)
-        n = _filled(part)
-        for name in _BUFFER_ARRAYS:
-            _restore(path, prefix + name, getattr(part, name), saved[prefix + name], n)
-    if plant is not None:
-        _restore(path, "plant_observations", plant, saved["plant_observations"], _filled(buffer))
+        for name in names:
+            _restore(path, prefix + name, getattr(part, name), saved[prefix + name], _filled(part))
 
 
 def _restore(path: Path, name: str, target: np.ndarray, value: np.ndarray, n: int) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Logger
 from tqdm import tqdm
 
@@ -102,27 +102,32 @@ def evaluate_agents_batched(
     return [EvaluationSummary(name=name, results=summary.results[i * n : (i + 1) * n]) for i in range(len(models))]
 
 
-class EpisodeRecorder(BaseCallback):
-    """One :class:`TrainingLog` row per training episode; stops training at the episode budget."""
+class TrainingCallback(BaseCallback):
+    """Every step: ``part.before_step`` (MBPO's model rollouts), then at each episode end one :class:`TrainingLog`
+    row, ``part.episode_ended`` (MBPO's refit), the progress bar and, when due, the greedy evaluation (keeping
+    ``best_agent.zip``), :func:`reset_q_network` and a checkpoint (plus ``part.save(folder)``), at the next rollout
+    end or after the last episode; with the stop rule the evaluation runs at once and the rule follows it.  Training
+    stops at the episode budget."""
 
     model: DQN
 
     def __init__(
-        self, config: DQNConfig, log: TrainingLog, episodes: int, model_steps: Optional[Callable[[], int]] = None
+        self, config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool = True, part: Any = None
     ) -> None:
         super().__init__()
-        self.config, self.log, self.episodes = config, log, int(episodes)
-        self.model_steps = model_steps or (lambda: 0)
-        self.episode_ended = False
+        self.config, self.log, self.episodes, self.part = config, log, int(episodes), part
+        self.run_dir, self.progress = Path(run_dir), progress
+        self.stop_rule = bool(config.stop.after_balanced_evaluations)
+        self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
+        self.best_score = min((_score(row) for row in log.evaluations), default=None)
+        self.bar: Optional[tqdm] = None
         self._started, self._cpu_started = time.perf_counter(), time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
         self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
-        self._reset_episode()
+        self._return, self._observations, self._torques = 0.0, [], []
 
-    def _reset_episode(self) -> None:
-        self._return = 0.0
-        self._observations: list[np.ndarray] = []
-        self._torques: list[float] = []
+    def model_steps(self) -> int:
+        return int(self.part.model_steps) if self.part is not None else 0
 
     def wall_s(self) -> float:  # seconds of training so far, over resumed sessions
         return self._wall_offset + time.perf_counter() - self._started
@@ -130,73 +135,48 @@ class EpisodeRecorder(BaseCallback):
     def cpu_s(self) -> float:
         return self._cpu_offset + time.process_time() - self._cpu_started
 
+    def _on_training_start(self) -> None:
+        shown: dict[str, Any] = dict(desc=f"{self.log.algo} seed {self.log.seed}", unit="episode", leave=False)
+        self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, disable=not self.progress, **shown)
+
     def _on_step(self) -> bool:
+        if self.part is not None:
+            self.part.before_step(self.model, self.log)
         info = self.locals["infos"][0]
         plant = info["plant_observations"]
         self._observations.append(plant if not self._observations else plant[1:])
         self._torques.extend([info["torque_nm"]] * int(info["plant_steps"]))
         self._return += float(self.locals["rewards"][0])
-        self.episode_ended = bool(self.locals["dones"][0])
-        if not self.episode_ended:
+        if not self.locals["dones"][0]:
             return True
-        self._end_episode()
-        return not (self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps)
+        observations, torques = self._end_episode()
+        go_on = not (self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps)
+        if self.part is not None:
+            self.part.episode_ended(observations, torques, self.log.n_episodes)
+        return self._events() and go_on
 
-    def _end_episode(self) -> None:
-        observations = np.concatenate(self._observations)
-        plant_steps = len(observations) - 1
-        dt = self.config.dt_s
+    def _end_episode(self) -> tuple[np.ndarray, np.ndarray]:
+        """Append the episode's row to the log; its plant observations and torques."""
+        observations, torques = np.concatenate(self._observations), np.asarray(self._torques, float)
+        plant_steps, dt = len(observations) - 1, self.config.dt_s
         std, swing_up = math.pi, math.inf
         if plant_steps >= 2:
-            torques = np.append(np.asarray(self._torques, dtype=float), 0.0)
-            metrics = metrics_from_trajectory(
-                np.arange(plant_steps + 1) * dt, observations[:, _THETA], torques, observations[:, _PHI_DOT]
-            )
+            times = np.arange(plant_steps + 1) * dt
+            theta, phi_dot = observations[:, _THETA], observations[:, _PHI_DOT]
+            metrics = metrics_from_trajectory(times, theta, np.append(torques, 0.0), phi_dot)
             std, swing_up = metrics["upright_std_rad"], metrics["swing_up_time_s"]
         row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return}
         row |= dict(plant_s=self.log.plant_s + plant_steps * dt, upright_std_rad=std, swing_up_time_s=swing_up)
-        row |= dict(model_steps=int(self.model_steps()), wall_s=self.wall_s(), cpu_s=self.cpu_s())
-        self.last_episode_observations, self.last_episode_torques = observations, np.asarray(self._torques, float)
+        row |= dict(model_steps=self.model_steps(), wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.log.episodes.append(row)
-        self._reset_episode()
+        self._return, self._observations, self._torques = 0.0, [], []
         check_finite_weights(
             self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}"
         )
+        return observations, torques
 
-
-class EpisodeEvents(BaseCallback):
-    """After each training episode: the progress bar, then, when due, the greedy evaluation (keeping
-    ``best_agent.zip``), :func:`reset_q_network` and a checkpoint (plus ``extra_files(folder)``), at the next rollout
-    end or after the last episode; with the stop rule the evaluation runs at once and the rule follows it."""
-
-    model: DQN
-
-    def __init__(
-        self,
-        recorder: EpisodeRecorder,
-        run_dir: Path,
-        progress: bool = True,
-        extra_files: Optional[Callable[[Path], None]] = None,
-    ) -> None:
-        super().__init__()
-        self.recorder, self.log, self.config = recorder, recorder.log, recorder.config
-        self.run_dir, self.progress, self.extra_files = Path(run_dir), progress, extra_files
-        self.stop_rule = bool(self.config.stop.after_balanced_evaluations)
-        self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
-        self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
-        self.bar: Optional[tqdm] = None
-
-    def _on_training_start(self) -> None:
-        log = self.recorder.log
-        shown: dict[str, Any] = dict(
-            desc=f"{log.algo} seed {log.seed}", unit="episode", disable=not self.progress, leave=False
-        )
-        self.bar = tqdm(total=self.recorder.episodes, initial=log.n_episodes, **shown)
-
-    def _on_step(self) -> bool:
-        if not self.recorder.episode_ended:
-            return True
-        log, c, last = self.log, self.config, self.recorder.episodes
+    def _events(self) -> bool:
+        log, c, last = self.log, self.config, self.episodes
         if self.bar is not None:
             last_eval = log.evaluations[-1]["max_upright_std_rad"] if log.evaluations else math.nan
             self.bar.update(1)
@@ -245,15 +225,15 @@ class EpisodeEvents(BaseCallback):
         row = {
             "episode": self.log.n_episodes,
             "plant_s": self.log.plant_s,
-            "model_steps": int(self.recorder.model_steps()),
+            "model_steps": self.model_steps(),
             "starts_evaluated": len(results),
             "median_upright_std_rad": float(np.median(stds)) if complete else math.nan,
             "max_upright_std_rad": float(np.max(stds)),
             "median_swing_up_time_s": summary.median("swing_up_time_s") if complete else math.nan,
             "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in results)),
             "success_rate": summary.successes / len(seeds),
-            "wall_s": self.recorder.wall_s(),
-            "cpu_s": self.recorder.cpu_s(),
+            "wall_s": self.wall_s(),
+            "cpu_s": self.cpu_s(),
         }
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
@@ -299,8 +279,8 @@ class EpisodeEvents(BaseCallback):
         assert self.model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
         save_replay_buffer(self.model.replay_buffer, tmp / "replay_buffer.npz")
         self.log.save(tmp / "log.json")
-        if self.extra_files is not None:
-            self.extra_files(tmp)
+        if self.part is not None:
+            self.part.save(tmp)
         shutil.rmtree(old, ignore_errors=True)
         if final.exists():
             final.rename(old)
@@ -411,16 +391,6 @@ def _start_or_resume(
     return model, log
 
 
-def training_callbacks(
-    config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool, part: Any = None
-) -> CallbackList:
-    """The callbacks of a training run, in the order they run each step."""
-    recorder = EpisodeRecorder(config, log, episodes, model_steps=(lambda: part.model_steps) if part else None)
-    before, after = part.callbacks(recorder) if part is not None else ([], [])
-    events = EpisodeEvents(recorder, run_dir, progress, extra_files=part.save if part is not None else None)
-    return CallbackList([*before, recorder, *after, events])
-
-
 def run_training(
     algo: str,
     config: DQNConfig,
@@ -445,14 +415,12 @@ def run_training(
     env.reset(seed=int(seed) * 100_003 + log.n_episodes)
     remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
     if remaining > 0:
-        callbacks = training_callbacks(config, log, episodes, run_dir, progress, part)
-        events = callbacks.callbacks[-1]
-        assert isinstance(events, EpisodeEvents)
+        events = TrainingCallback(config, log, episodes, run_dir, progress, part)
         # exactly the remaining episodes' steps; a logger without outputs (SB3's default one creates a temp folder)
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
             steps = remaining * config.episode_agent_steps
-            model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=log.n_episodes == 0)
+            model.learn(total_timesteps=steps, callback=events, reset_num_timesteps=log.n_episodes == 0)
         finally:
             events.close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:

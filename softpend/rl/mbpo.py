@@ -11,7 +11,6 @@ import torch
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
@@ -20,7 +19,7 @@ from softpend.envs.observation_vector import observation_vector
 from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
-from softpend.rl.dqn import EpisodeRecorder, build_dqn, run_training
+from softpend.rl.dqn import build_dqn, run_training
 from softpend.rl.training_env import make_base_env
 from softpend.rl.training_log import TrainingLog
 
@@ -214,9 +213,25 @@ class MBPOTrainer:
         self.model_steps += added
         return added
 
-    def callbacks(self, recorder: EpisodeRecorder) -> tuple[list[BaseCallback], list[BaseCallback]]:
-        """The callbacks before and after the episode bookkeeping."""
-        return [ModelRolloutCallback(self, recorder.log)], [ModelRefitCallback(self, recorder)]
+    def before_step(self, agent: DQN, log: TrainingLog) -> None:
+        """Every ``rollout.every_steps`` real agent steps, once the model is fitted, branch ``per_real_step *
+        every_steps`` epsilon-greedy model rollouts of the scheduled length into the agent's model buffer."""
+        c = self.config.rollout
+        if agent.num_timesteps % c.every_steps == 0 and self.dynamics is not None:
+            assert isinstance(agent.replay_buffer, MBPOReplayBuffer)
+            n_rollouts, length = c.per_real_step * c.every_steps, c.length(log.n_episodes)
+            self.rollouts(agent, agent.replay_buffer, n_rollouts, length, agent.exploration_rate)
+
+    def episode_ended(self, observations: np.ndarray, torques_nm: np.ndarray, n_episodes: int) -> None:
+        """Store the real episode; refit the dynamics ensemble after ``initial_random_episodes`` episodes and
+        every ``model.refit_every_episodes`` after those."""
+        c = self.config
+        self.add_episode(observations, torques_nm)
+        if (
+            n_episodes >= c.initial_random_episodes
+            and (n_episodes - c.initial_random_episodes) % c.model.refit_every_episodes == 0
+        ):
+            self.refit()
 
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
@@ -249,43 +264,6 @@ class MBPOTrainer:
         self.n_fits, self.model_steps = (int(v) for v in counters)
         if len(self.trials_observations) >= 2:
             self.refit()
-
-
-class ModelRolloutCallback(BaseCallback):
-    """Every ``rollout.every_steps`` real agent steps, once the model is fitted, branch ``per_real_step *
-    every_steps`` epsilon-greedy model rollouts of the scheduled length into the agent's model buffer."""
-
-    model: DQN
-
-    def __init__(self, trainer: MBPOTrainer, log: TrainingLog) -> None:
-        super().__init__()
-        self.trainer, self.log = trainer, log
-
-    def _on_step(self) -> bool:
-        c = self.trainer.config
-        if self.model.num_timesteps % c.rollout.every_steps == 0 and self.trainer.dynamics is not None:
-            assert isinstance(self.model.replay_buffer, MBPOReplayBuffer)
-            n_rollouts, length = c.rollout.per_real_step * c.rollout.every_steps, c.rollout.length(self.log.n_episodes)
-            self.trainer.rollouts(self.model, self.model.replay_buffer, n_rollouts, length, self.model.exploration_rate)
-        return True
-
-
-class ModelRefitCallback(BaseCallback):
-    """After each real episode (logged by ``recorder``), store it and refit the dynamics ensemble after
-    ``initial_random_episodes`` episodes and every ``model.refit_every_episodes`` after those."""
-
-    def __init__(self, trainer: MBPOTrainer, recorder: EpisodeRecorder) -> None:
-        super().__init__()
-        self.trainer, self.recorder = trainer, recorder
-
-    def _on_step(self) -> bool:
-        if self.recorder.episode_ended:
-            c = self.trainer.config
-            self.trainer.add_episode(self.recorder.last_episode_observations, self.recorder.last_episode_torques)
-            n = self.recorder.log.n_episodes
-            if n >= c.initial_random_episodes and (n - c.initial_random_episodes) % c.model.refit_every_episodes == 0:
-                self.trainer.refit()
-        return True
 
 
 def train_mbpo(

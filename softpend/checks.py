@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Collection, Optional, TypeVar
+from typing import Any, Callable, Collection, Optional, TypeVar
 
 import numpy as np
 
@@ -51,64 +51,53 @@ def _integer(value: Any) -> Optional[int]:
     return None
 
 
-def _checked(name: str, number: Any, value: Any, ok: bool, what: str) -> Any:
-    if number is None or not ok:
+def _checked(name: str, number: Any, value: Any, ok: Callable[[Any], bool], what: str) -> Any:
+    if number is None or not ok(number):
         raise ValueError(f"{name} must {what}, got {value!r}")
     return number
 
 
 def finite(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number, else ``ValueError`` naming ``name``."""
-    number = _real(value)
-    return _checked(name, number, value, True, "be finite")
+    return _checked(name, _real(value), value, lambda n: True, "be finite")
 
 
 def positive(name: str, value: Any) -> float:
     """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
-    number = _real(value)
-    return _checked(name, number, value, number is not None and number > 0.0, "be positive and finite")
+    return _checked(name, _real(value), value, lambda n: n > 0.0, "be positive and finite")
 
 
 def optional_positive(name: str, value: Any) -> Optional[float]:
     """``None`` for ``None``, else ``value`` as a float if it is a positive finite number; ``ValueError`` otherwise."""
-    number = _real(value)
-    ok = number is not None and number > 0.0
-    return None if value is None else _checked(name, number, value, ok, "be positive and finite or None")
+    ok, what = lambda n: n > 0, "be positive and finite or None"  # noqa: E731
+    return None if value is None else _checked(name, _real(value), value, ok, what)
 
 
 def non_negative(name: str, value: Any) -> float:
     """``value`` as a float if it is a finite number >= 0, else ``ValueError`` naming ``name``."""
-    number = _real(value)
-    return _checked(name, number, value, number is not None and number >= 0.0, "be non-negative and finite")
+    return _checked(name, _real(value), value, lambda n: n >= 0.0, "be non-negative and finite")
 
 
 def positive_int(name: str, value: Any) -> int:
     """``value`` as an int if it is an integer >= 1, else ``ValueError`` naming ``name``."""
-    number = _integer(value)
-    return _checked(name, number, value, number is not None and number >= 1, "be a positive integer")
+    return _checked(name, _integer(value), value, lambda n: n >= 1, "be a positive integer")
 
 
 def int_at_least(name: str, value: Any, low: int) -> int:
     """``value`` as an int if it is an integer >= ``low``, else ``ValueError`` naming ``name``."""
-    number = _integer(value)
-    return _checked(name, number, value, number is not None and number >= low, f"be an integer >= {low}")
+    return _checked(name, _integer(value), value, lambda n: n >= low, f"be an integer >= {low}")
 
 
 def in_range(name: str, value: Any, low: float, high: float) -> float:
     """``value`` as a float if it is a finite number in ``[low, high]``, else ``ValueError`` naming the range."""
-    number = _real(value)
-    return _checked(name, number, value, number is not None and low <= number <= high, f"lie in [{low:g}, {high:g}]")
+    return _checked(name, _real(value), value, lambda n: low <= n <= high, f"lie in [{low:g}, {high:g}]")
 
 
 def in_unit_interval(name: str, value: Any, *, include_zero: bool = True, include_one: bool = True) -> float:
     """``value`` as a float if it lies in the unit interval, else ``ValueError`` naming ``name``."""
-    number = _real(value)
-    above = number is not None and (number >= 0.0 if include_zero else number > 0.0)
-    below = number is not None and (number <= 1.0 if include_one else number < 1.0)
-    if not (above and below):
-        interval = f"{'[' if include_zero else '('}0, 1{']' if include_one else ')'}"
-        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
-    return float(number)  # type: ignore[arg-type]
+    ok = lambda n: (n >= 0.0 if include_zero else n > 0.0) and (n <= 1.0 if include_one else n < 1.0)  # noqa: E731
+    interval = f"{'[' if include_zero else '('}0, 1{']' if include_one else ')'}"
+    return float(_checked(name, _real(value), value, ok, f"lie in {interval}"))
 
 
 def one_of(name: str, value: T, choices: Collection[Any]) -> T:
@@ -171,37 +160,26 @@ def _assigned_names(source: str) -> set[str]:
     import ast
 
     try:
-        tree = ast.parse(source)
+        body = ast.parse(source).body
     except SyntaxError:
         return set()
-    names: set[str] = set()
-    for node in tree.body:
-        targets = (
-            node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
-        )
-        for target in targets:
-            names.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
-    return names
+    targets = [t for n in body if isinstance(n, ast.Assign) for t in n.targets]
+    targets += [n.target for n in body if isinstance(n, ast.AnnAssign)]
+    return {n.id for target in targets for n in ast.walk(target) if isinstance(n, ast.Name)}
 
 
 def check_notebook_parameters() -> None:
     """In a notebook executed by papermill: ``ValueError`` if a parameter was given that the notebook's
     ``parameters`` cell does not define."""
-    try:
-        from IPython import get_ipython
-    except ImportError:  # pragma: no cover - IPython is a dependency of every notebook kernel
-        return
-    shell = get_ipython()
-    history = list(shell.user_ns.get("In", [])) if shell is not None else []
+    from IPython import get_ipython
+
+    history = list(shell.user_ns.get("In", [])) if (shell := get_ipython()) is not None else []
     injected = [
-        i for i, source in enumerate(history) if isinstance(source, str) and source.lstrip().startswith("# Parameters")
+        i for i, text in enumerate(history) if isinstance(text, str) and text.lstrip().startswith("# Parameters")
     ]
-    if not injected or injected[-1] < 1:
-        return
-    index = injected[-1]
-    declared = _assigned_names(history[index - 1])
-    unknown = sorted(_assigned_names(history[index]) - declared)
-    if unknown:
-        raise ValueError(
-            f"parameter(s) {unknown} are not defined in this notebook's parameters cell (it defines {sorted(declared)})"
-        )
+    if injected and injected[-1] >= 1:
+        declared = _assigned_names(history[injected[-1] - 1])
+        if unknown := sorted(_assigned_names(history[injected[-1]]) - declared):
+            raise ValueError(
+                f"parameter(s) {unknown} are not defined in this notebook's parameters cell (it defines {sorted(declared)})"
+            )

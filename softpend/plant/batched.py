@@ -87,21 +87,17 @@ class BatchedRodParams:
         dtype: torch.dtype = torch.float64,
     ) -> "BatchedRodParams":
         """One rod repeated ``batch_size`` times, or a list of rods of one ``n_links``."""
-        if params is None or isinstance(params, RodParams):
-            rods = [params if params is not None else RodParams()]
-            size = 1 if batch_size is None else int_at_least("batch_size", batch_size, 1)
-        else:
-            rods = list(params)
-            if not rods or not all(isinstance(r, RodParams) for r in rods):
-                raise ValueError("params must be a RodParams or a non-empty sequence of RodParams")
-            if batch_size is not None and int_at_least("batch_size", batch_size, 1) != len(rods):
-                raise ValueError(f"batch_size is {batch_size} but params holds {len(rods)} rods")
-            size = len(rods)
-        n_values = {r.n_links for r in rods}
-        if len(n_values) != 1:
-            raise ValueError(f"params must all have the same n_links, got {sorted(n_values)}")
+        one = params is None or isinstance(params, RodParams)
+        rods = [params or RodParams()] if one else list(params)  # type: ignore[arg-type]
+        if not rods or not all(isinstance(r, RodParams) for r in rods):
+            raise ValueError("params must be a RodParams or a non-empty sequence of RodParams")
+        size = (1 if one else len(rods)) if batch_size is None else int_at_least("batch_size", batch_size, 1)
+        if not one and size != len(rods):
+            raise ValueError(f"batch_size is {batch_size} but params holds {len(rods)} rods")
+        if len({r.n_links for r in rods}) != 1:
+            raise ValueError(f"params must all have the same n_links, got {sorted({r.n_links for r in rods})}")
         columns = {name: torch.tensor([getattr(r, name) for r in rods], dtype=dtype) for name in PARAMETER_FIELDS}
-        return cls(rods[0].n_links, **{n: c.expand(size).clone() if len(rods) == 1 else c for n, c in columns.items()})
+        return cls(rods[0].n_links, **{n: c.expand(size).clone() if one else c for n, c in columns.items()})
 
     def replace(self, **changes: TensorLike) -> "BatchedRodParams":
         """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
@@ -340,34 +336,30 @@ def _rosenbrock_step(
     )
 
 
-def stable_substeps(
-    params: Union[RodParams, BatchedRodParams], dt_s: float = 0.01, bound: float = RK4_STABILITY_BOUND
-) -> int:
-    """RK4 sub-steps per ``dt_s`` keeping ``|lambda| h <= bound`` for every rod, ``lambda`` the eigenvalues of
-    the chain linearised about the straight rod hanging at rest."""
+def stable_substeps(params: Union[RodParams, BatchedRodParams], dt_s: float = 0.01) -> int:
+    """RK4 sub-steps per ``dt_s`` keeping ``|lambda| h <=`` :data:`RK4_STABILITY_BOUND` for every rod, ``lambda``
+    the eigenvalues of the chain linearised about the straight rod hanging at rest."""
     positive("dt_s", dt_s)
-    positive("bound", bound)
     p = params if isinstance(params, BatchedRodParams) else BatchedRodParams.from_params(params)
     d = _Derived(
         BatchedRodParams(n_links=p.n_links, **{f: getattr(p, f).detach().to(torch.float64) for f in PARAMETER_FIELDS})
     )
-    n = p.n_links
-    size = p.batch_size
+    n, size = p.n_links, p.batch_size
     mass = torch.zeros(size, n + 1, n + 1, dtype=torch.float64)
     mass[:, 0, 0] = d.hub_inertia_kgm2
     mass[:, 1:, 1:] = d.gram.permute(2, 0, 1)
     difference = torch.diff(torch.eye(n + 1, dtype=torch.float64), dim=0)  # spring angles from the coordinates
-    k = d.stiffness_nm_per_rad.T  # (B, n)
-    z = d.damping_nms_per_rad.T
-    stiffness = torch.einsum("ki,bk,kj->bij", difference, k, difference)
+    stiffness, damping = (
+        torch.einsum("ki,bk,kj->bij", difference, k.T, difference)
+        for k in (d.stiffness_nm_per_rad, d.damping_nms_per_rad)
+    )
     stiffness[:, 1:, 1:] += torch.diag_embed(d.gravity_moment_nm.T)
-    damping = torch.einsum("ki,bk,kj->bij", difference, z, difference)
     damping[:, 0, 0] += d.hub_friction_nms_per_rad
     inv_mass = torch.linalg.inv(mass)
     top = torch.cat([torch.zeros_like(mass), torch.eye(n + 1, dtype=torch.float64).expand(size, -1, -1)], dim=2)
     bottom = torch.cat([-inv_mass @ stiffness, -inv_mass @ damping], dim=2)
     largest = float(torch.linalg.eigvals(torch.cat([top, bottom], dim=1)).abs().max())
-    return max(1, math.ceil(largest * dt_s / bound))
+    return max(1, math.ceil(largest * dt_s / RK4_STABILITY_BOUND))
 
 
 def _integrate(
@@ -408,15 +400,12 @@ class BatchedPRBChain:
         self.integrator = one_of("integrator", integrator, INTEGRATORS)
         self.compiled = boolean("compiled", compiled)
         self._compiled_integrate: Optional[Callable[..., Any]] = None
-        if isinstance(params, BatchedRodParams):
-            if batch_size is not None and int_at_least("batch_size", batch_size, 1) != params.batch_size:
-                raise ValueError(f"batch_size is {batch_size} but params holds {params.batch_size} rods")
-        elif params is None or isinstance(params, RodParams):
-            params = BatchedRodParams.from_params(
-                params, batch_size=1 if batch_size is None else batch_size, dtype=dtype
-            )
-        else:
+        if not isinstance(params, (BatchedRodParams, RodParams, type(None))):
             raise ValueError(f"params must be a BatchedRodParams or a RodParams, got {type(params).__name__}")
+        if not isinstance(params, BatchedRodParams):
+            params = BatchedRodParams.from_params(params, batch_size, dtype)
+        elif batch_size is not None and int_at_least("batch_size", batch_size, 1) != params.batch_size:
+            raise ValueError(f"batch_size is {batch_size} but params holds {params.batch_size} rods")
         self.dt_s = positive("dt_s", dt_s)
         if substeps is None:
             substeps = stable_substeps(params, self.dt_s) if self.integrator == "rk4" else ROSENBROCK_SUBSTEPS
@@ -427,8 +416,6 @@ class BatchedPRBChain:
 
     def set_params(self, params: BatchedRodParams) -> None:
         """Use new per-rod parameters (same ``n_links`` and batch size; the sub-step count is kept)."""
-        if not isinstance(params, BatchedRodParams):
-            raise ValueError(f"params must be a BatchedRodParams, got {type(params).__name__}")
         if hasattr(self, "params") and (params.n_links, params.batch_size) != (self.n_links, self.batch_size):
             raise ValueError(
                 f"params must keep n_links = {self.n_links} and batch size {self.batch_size}, "

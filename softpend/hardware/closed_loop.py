@@ -119,8 +119,9 @@ class _RigLoop:
         finally:
             bar.close()
 
-    def loop_result(self) -> tuple[int, np.ndarray, int, int, int]:
-        return self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog
+    def result(self, cls: Any = None, **extra: Any) -> Any:
+        fields = (self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog)
+        return (cls or LoopResult)(*fields, **extra)
 
     def step(self, state: MotorState, newest: bool) -> None:
         self.count(state)
@@ -151,7 +152,7 @@ def run_control_loop(
     loop = _RigLoop(link, controller, duration_s, log)
     loop.run("rig loop", progress)
     link.send_torque(0.0)
-    return LoopResult(*loop.loop_result())
+    return loop.result()
 
 
 #: ``status`` column of the motor log (``camera_blind`` and ``arm_timeout`` are safe stops).
@@ -228,7 +229,17 @@ def run_closed_loop(
     with one_torch_thread() if "torch" in sys.modules else contextlib.nullcontext():  # torch on one thread
         loop.run("rig control", progress)
     link.stop()
-    return loop.result()
+    return loop.result(
+        ClosedLoopResult,
+        duration_s=loop.t,
+        stop_reason=loop.stop_reason,
+        status=loop.status if loop.stop_reason is not None else "completed",
+        late_commands=loop.late,
+        blind_max_s=loop.blind_max,
+        armed_at_s=loop.armed_at,
+        camera=tip_source.stats() if hasattr(tip_source, "stats") else {},
+        estimator=estimator.stats(),
+    )
 
 
 class _ClosedLoop(_RigLoop):
@@ -316,19 +327,6 @@ class _ClosedLoop(_RigLoop):
                 self.camera_log.append([m.frame, *times, m.x_m, m.y_m, m.theta_rad, m.lost, accepted])
         return len(measurements)
 
-    def result(self) -> ClosedLoopResult:
-        return ClosedLoopResult(
-            *self.loop_result(),
-            duration_s=self.t,
-            stop_reason=self.stop_reason,
-            status=self.status if self.stop_reason is not None else "completed",
-            late_commands=self.late,
-            blind_max_s=self.blind_max,
-            armed_at_s=self.armed_at,
-            camera=self.tip_source.stats() if hasattr(self.tip_source, "stats") else {},
-            estimator=self.estimator.stats(),
-        )
-
 
 @dataclass(frozen=True)
 class TwinCamera:
@@ -377,8 +375,7 @@ def run_twin_control(
     rig = rig if rig is not None else RigConfig()
     outputs = outputs if outputs is not None else Outputs()
     workdir = outputs.folder(workdir, TWIN_CONTROL_FILES, what="workdir")
-    motor_path, camera_path, truth_path, summary_path = (workdir / name for name in TWIN_CONTROL_FILES)
-    logs = (motor_path, camera_path, truth_path)
+    *logs, summary_path = (workdir / name for name in TWIN_CONTROL_FILES)
     for path in logs:
         outputs.live(path)
     config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
@@ -388,42 +385,30 @@ def run_twin_control(
         "estimator": dataclasses.asdict(estimator.config),
         "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
     }
-    device = SimRig(rig, truth_log=truth_path)
-    clock = device.clock
-    source = None
-    result: Optional[ClosedLoopResult] = None
-    error: Optional[str] = None
     try:
-        if camera is not None:
-            source = SyntheticLiveCamera(device.poses, clock, **vars(camera), on_frame=on_frame)
-            source.start()
-            if not clock.wait_for(lambda: source.counts["frames_tracked"] > 0, camera_wait_s):
-                raise ValueError(
-                    f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
-                    "time: a camera latency near that, or a dot the tracker cannot find)"
-                )
-            source.poll()  # the frames of the rod before the run
-        with (
-            MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
-            SampleLog(motor_path, rig_control_columns(estimator.n), metadata=metadata) as log,
-            SampleLog(camera_path, CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
-        ):
-            try:
-                result = run_closed_loop(
-                    link, controller, estimator, duration_s, source, log, camera_log, progress=progress
-                )
-            except Exception as exc:
-                error = f"{type(exc).__name__}: {exc}"
-                raise
-            finally:
-                summary = {"result": result.summary() if result is not None else None, "error": error}
-                outputs.write_json(summary_path, summary)
+        with SimRig(rig, truth_log=logs[2]) as device, contextlib.ExitStack() as closing:
+            source = None
+            if camera is not None:
+                source = SyntheticLiveCamera(device.poses, device.clock, **vars(camera), on_frame=on_frame)
+                closing.enter_context(contextlib.closing(source)).start()
+                if not device.clock.wait_for(lambda: source.counts["frames_tracked"] > 0, camera_wait_s):
+                    raise ValueError(
+                        f"the twin's camera delivered no frame within {camera_wait_s} s (of simulated "
+                        "time: a camera latency near that, or a dot the tracker cannot find)"
+                    )
+                source.poll()  # the frames of the rod before the run
+            with (
+                MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
+                SampleLog(logs[0], rig_control_columns(estimator.n), metadata=metadata) as log,
+                SampleLog(logs[1], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
+            ):
+                try:
+                    result = run_closed_loop(link, controller, estimator, duration_s, source, log, camera_log, progress)
+                except BaseException as exc:
+                    outputs.write_json(summary_path, {"result": None, "error": f"{type(exc).__name__}: {exc}"})
+                    raise
+                outputs.write_json(summary_path, {"result": result.summary(), "error": None})
     finally:
-        if source is not None:
-            source.close()
-        clock.sleep_until(clock.now_s() + 0.1)  # the truth log records the motor after the STOP
-        device.close()
         for path in logs:
             outputs.done(path)
-    assert result is not None
-    return TwinControlRun(motor_path, camera_path, truth_path, result, device.stats())
+    return TwinControlRun(*logs, result, device.stats())

@@ -140,6 +140,16 @@ class SimRig:
             self._truth.close()
             self._truth = None
 
+    def __enter__(self) -> "SimRig":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Run 0.1 s on (the truth log records the motor after the STOP), then close."""
+        try:
+            self.clock.sleep_until(self.clock.now_s() + 0.1)
+        finally:
+            self.close()
+
     def stats(self) -> dict[str, float]:
         return {"ticks": float(self.ticks), **{name: float(count) for name, count in self.counts.items()}}
 

@@ -81,7 +81,6 @@ def run_twin_session(
     duration_s: float = 30.0,
     seed: int = 0,
     rig: Optional[RigConfig] = None,
-    camera_fps: float = 100.0,
     clock_offset_s: float = 0.137,
     trial_length_s: float = 5.0,
     progress: bool = True,
@@ -100,37 +99,27 @@ def run_twin_session(
     outputs = outputs if outputs is not None else Outputs()
     workdir = outputs.folder(workdir, _OUTPUTS, what="workdir")
     rig = rig if rig is not None else RigConfig(seed=seed)
-    paths = {name: workdir / name for name in _OUTPUTS if name.endswith((".csv", ".avi", ".npz"))}
+    files = motor_log, truth_log, video, camera_csv, dataset_path = [workdir / name for name in _OUTPUTS[:5]]
     for name in _OUTPUTS:
         outputs.live(workdir / name)
     limit = rig.task.torque_limit_nm
-    device = SimRig(rig, truth_log=paths["truth_log.csv"])
-    try:
-        with (
-            MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
-            SampleLog(paths["motor_log.csv"], LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
-        ):
-            controller = rig_babble_controller(duration_s, limit, seed, program=program)
-            loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
-        device.clock.sleep_until(device.clock.now_s() + 0.1)  # the truth log records the STOP
-    finally:
-        device.close()
-    times, points, hub = truth_link_points(paths["truth_log.csv"], rig.task.rod, rig.task.plant)
+    with (
+        SimRig(rig, truth_log=truth_log) as device,
+        MotorLink("twin", torque_limit_nm=limit, serial=device.connect()) as link,
+        SampleLog(motor_log, LOOP_LOG_COLUMNS, metadata={"rig": rig.to_dict()}) as log,
+    ):
+        controller = rig_babble_controller(duration_s, limit, seed, program=program)
+        loop = run_control_loop(link, controller, duration_s, log=log, progress=progress)
+    times, points, hub = truth_link_points(truth_log, rig.task.rod, rig.task.plant)
     camera = SyntheticCamera(effects=CameraEffects.rig(), seed=seed)
-    video, camera_csv = paths["camera.avi"], paths["camera.csv"]
-    render_video(video, camera, times, points, hub, camera_fps, clock_offset_s, 0.0005, progress=progress)
+    render_video(video, camera, times, points, hub, 100.0, clock_offset_s, 0.0005, progress=progress)
     track_video(video, camera_csv, progress=progress)
+    notes = "digital twin: emulated serial link + synthetic camera"
     dataset, sync = build_rig_dataset(
-        paths["motor_log.csv"],
-        camera_csv,
-        paths["rig_dataset.npz"],
-        params=rig.task.rod,
-        trial_length_s=trial_length_s,
-        notes="digital twin: emulated serial link + synthetic camera",
+        motor_log, camera_csv, dataset_path, rig.task.rod, trial_length_s=trial_length_s, notes=notes
     )
     for name in _OUTPUTS:
         outputs.done(workdir / name)
-    files = (paths["motor_log.csv"], paths["truth_log.csv"], video, camera_csv, paths["rig_dataset.npz"])
     return TwinSession(workdir, *files, loop, sync, dataset, clock_offset_s, device.stats())
 
 

@@ -6,15 +6,33 @@ import pytest
 import torch
 
 from softpend.control.linearise import (
+    LinearModel,
     SecondOrderModel,
     discretise,
     linearise_exudyn,
-    linearise_step_map,
     observation_coordinates_matrix,
     reduce_to_observation_coordinates,
 )
+from softpend.control.lqr import LQRController
 from softpend.plant import PRBPlant, RodParams
 from softpend.task import Task
+
+
+def linearise_step_map(params: RodParams, dt_s: float = 0.01, substeps: int = 2) -> LinearModel:
+    """Discrete model from central differences of one control step of the PRB plant about upright at rest."""
+    state_step, torque_step_nm = 1e-6, 1e-5
+    plant = PRBPlant(params, dt_s=dt_s, substeps=substeps)
+    n = plant.n_coordinates
+
+    def step(x: np.ndarray, torque: float) -> np.ndarray:
+        plant.reset(x[:n], x[n:])
+        plant.step(torque)
+        return np.concatenate(plant.joint_state())
+
+    a = np.column_stack([(step(e, 0.0) - step(-e, 0.0)) / (2 * state_step) for e in state_step * np.eye(2 * n)])
+    zero = np.zeros(2 * n)
+    b = (step(zero, torque_step_nm) - step(zero, -torque_step_nm)) / (2 * torque_step_nm)
+    return LinearModel(a=a, b=b.reshape(-1, 1), dt_s=float(dt_s))
 
 
 def _unstable(eig: np.ndarray) -> float:
@@ -67,6 +85,8 @@ def test_step_map_matches_exudyn_default_rod_slow_modes():
     assert z[-1] > 1.05 and abs(s[-1] - z[-1]) < 1e-3
     # hub response to the torque over one step
     assert step.b[0, 0] == pytest.approx(zoh.b[0, 0], rel=0.03)
+    # the gain designed on Exudyn's matrices also stabilises the step map (another linearisation of the plant)
+    assert np.max(np.abs(np.linalg.eigvals(step.closed_loop(LQRController.from_params(params).gain)))) < 1.0
     n = params.n_links + 1
     assert step.b[n, 0] == pytest.approx(zoh.b[n, 0], rel=0.03)
 
@@ -169,7 +189,6 @@ def test_lqr_from_learned_model_stabilises_true_plant(trained_model):
 
     params = RodParams()
     controller = lqr_from_learned_model(trained_model, params)
-    assert controller.design_model.is_stable_closed_loop(controller.design_gain)
     q = np.zeros(params.n_links + 1)
     q[0] = 0.2
     result = evaluate_controller(

@@ -55,10 +55,10 @@ def linearise_learned_model(
 
 class LearnedStateTracker:
     """The model's state from successive observations as in its training data: positions, their rates
-    (backward differences of the unwrapped positions, or the observed rates) and lagged frames."""
+    (backward differences of the unwrapped positions, or the observed rates) and lagged frames, minus ``offset``."""
 
-    def __init__(self, model: Any) -> None:
-        layout = model.layout
+    def __init__(self, model: Any, offset: Any = 0.0) -> None:
+        layout, self.offset = model.layout, offset
         self.names, self.dt_s, self.positions = tuple(layout.names), float(model.dt_s), tuple(layout.position_names)
         self.history = int(layout.history)
         self.differenced = getattr(layout, "velocity_source", "observed") == "observed"
@@ -80,34 +80,7 @@ class LearnedStateTracker:
         lags = [self._frames[-k] if len(self._frames) >= k else frame for k in range(1, self.history + 1)]
         self._frames.append(frame)
         del self._frames[: -max(self.history, 1)]
-        return np.concatenate([frame, rates] + lags)
-
-
-class _TrackedLQR(LQRController):
-    """LQR on the tracked model state minus its upright value; ``design_model``, ``design_gain``: the reduced
-    model the Riccati equation was solved on and the gain on its state."""
-
-    def __init__(
-        self,
-        gain: np.ndarray,
-        torque_limit_nm: float,
-        *,
-        tracker: LearnedStateTracker,
-        upright: np.ndarray,
-        model: LinearModel,
-        name: str,
-        design_model: LinearModel,
-        design_gain: np.ndarray,
-    ) -> None:
-        self.tracker, self.upright, self.design_model = tracker, upright, design_model
-        self.design_gain = np.asarray(design_gain, dtype=float).reshape(1, -1)
-        super().__init__(gain, self._state, torque_limit_nm, model=model, name=name)
-
-    def _state(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
-        return self.tracker(observation, q, q_dot) - self.upright
-
-    def reset(self) -> None:
-        self.tracker.reset()
+        return np.concatenate([frame, rates] + lags) - self.offset
 
 
 def reduction_matrices(
@@ -170,17 +143,10 @@ def lqr_from_learned_model(
     output_map = np.zeros((4, len(design.state_names)))  # y = [theta, phi, theta_dot, phi_dot] from z
     for row, name in enumerate(("theta_rad", "phi_rad", "theta_dot_rad_s", "phi_dot_rad_s")):
         output_map[row, design.state_names.index(name)] = 1.0
-    design_gain = design_lqr(design, output_weight_matrix(output_map, weights), weights.r)
-    return _TrackedLQR(
-        design_gain @ select,
-        params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm,
-        model=model_lin,
-        name="LQR (learned model)",
-        tracker=LearnedStateTracker(model),
-        upright=upright_state_vector(model, params),
-        design_model=design,
-        design_gain=design_gain,
-    )
+    gain = design_lqr(design, output_weight_matrix(output_map, weights), weights.r) @ select
+    tracker = LearnedStateTracker(model, upright_state_vector(model, params))
+    limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
+    return LQRController(gain, tracker, limit, model=model_lin, name="LQR (learned model)")
 
 
 def learned_model_simulator(model: Any, params: Optional[RodParams] = None):

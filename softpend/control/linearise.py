@@ -1,7 +1,5 @@
-"""Linear models of the PRB chain about upright, joint state ``x = [q, q_dot]``: from Exudyn's linearised
-matrices (:func:`linearise_exudyn`) or from finite differences of the simulator's step
-(:func:`linearise_step_map`), and condensed onto the observed angles (:func:`reduce_to_observation_coordinates`).
-"""
+"""Linear models of the PRB chain about upright, joint state ``x = [q, q_dot]``, from Exudyn's linearised matrices
+(:func:`linearise_exudyn`), and condensed onto the observed angles (:func:`reduce_to_observation_coordinates`)."""
 
 from __future__ import annotations
 
@@ -77,11 +75,6 @@ class LinearModel:
         """``A - B K`` for ``u = -K x``."""
         return self.a - self.b @ np.asarray(gain, dtype=float).reshape(1, -1)
 
-    def is_stable_closed_loop(self, gain: np.ndarray) -> bool:
-        """All closed-loop eigenvalues inside the unit circle (discrete) or the left half-plane."""
-        eig = np.linalg.eigvals(self.closed_loop(gain))
-        return bool(np.all(np.abs(eig) < 1.0) if self.is_discrete else np.all(eig.real < 0.0))
-
 
 def discretise(model: LinearModel, dt_s: float) -> LinearModel:
     """Zero-order-hold discretisation (``control.c2d``)."""
@@ -100,25 +93,6 @@ def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
     plant = PRBPlant(params if params is not None else RodParams())
     mass, stiffness, damping = (np.asarray(m) for m in plant.linearized_matrices())
     return SecondOrderModel(mass, stiffness, damping, np.eye(plant.n_coordinates)[0])
-
-
-def linearise_step_map(params: Optional[RodParams] = None, dt_s: float = 0.01, substeps: int = 2) -> LinearModel:
-    """Discrete model from central differences of one control step of :class:`~softpend.plant.PRBPlant` about
-    the straight rod upright at rest."""
-    params = params if params is not None else RodParams()
-    state_step, torque_step_nm = 1e-6, 1e-5
-    plant = PRBPlant(params, dt_s=dt_s, substeps=substeps)
-    n = plant.n_coordinates
-
-    def step(x: np.ndarray, torque: float) -> np.ndarray:
-        plant.reset(x[:n], x[n:])
-        plant.step(torque)
-        return np.concatenate(plant.joint_state())
-
-    a = np.column_stack([(step(e, 0.0) - step(-e, 0.0)) / (2 * state_step) for e in state_step * np.eye(2 * n)])
-    zero = np.zeros(2 * n)
-    b = (step(zero, torque_step_nm) - step(zero, -torque_step_nm)) / (2 * torque_step_nm)
-    return LinearModel(a=a, b=b.reshape(-1, 1), dt_s=float(dt_s), state_names=_joint_names(n))
 
 
 def observation_coordinates_matrix(

@@ -16,7 +16,6 @@ from softpend.control.linearise import (
     LinearModel,
     discretise,
     linearise_exudyn,
-    linearise_step_map,
     observation_coordinates_matrix,
     reduce_to_observation_coordinates,
 )
@@ -91,8 +90,8 @@ def observation_state_function(names: tuple[str, ...]) -> StateFunction:
 
 
 class LQRController:
-    """State feedback ``tau = sat(-K x)``, ``x = state_function(observation, q, q_dot)`` (deviation from upright);
-    ``model`` is the design model."""
+    """State feedback ``tau = sat(-K x)``, ``x = state_function(observation, q, q_dot)`` (deviation from upright;
+    its ``reset()``, if any, called by :meth:`reset`); ``model`` is the design model."""
 
     def __init__(
         self,
@@ -119,27 +118,19 @@ class LQRController:
         state: str = "joint",
         weights: Optional[LQRWeights] = None,
         torque_limit_nm: Optional[float] = None,
-        linearisation: str = "exudyn",
-        substeps: int = 2,
     ) -> "LQRController":
-        """Discrete LQR designed on the PRB model of ``params``, on ``"joint"`` or ``"observation"`` feedback; the
-        joint design model is Exudyn's matrices discretised (``"exudyn"``) or the step map (``"step_map"``)."""
+        """Discrete LQR designed on Exudyn's linearisation of the PRB model of ``params`` (condensed onto the
+        observed angles for ``"observation"`` feedback), on ``"joint"`` or ``"observation"`` feedback."""
         params = params if params is not None else RodParams()
         weights = weights if weights is not None else LQRWeights()
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         one_of("state", state, ("joint", "observation"))
-        one_of("linearisation", linearisation, ("exudyn", "step_map"))
         state_function: StateFunction
         if state == "joint":
-            if linearisation == "exudyn":
-                model = discretise(linearise_exudyn(params).state_space(), dt_s)
-            else:
-                model = linearise_step_map(params, dt_s=dt_s, substeps=substeps)
+            model = discretise(linearise_exudyn(params).state_space(), dt_s)
             angles = observation_coordinates_matrix(params, ("theta_rad", "phi_rad"))
             state_function, name = _joint_state, "LQR (joint state)"
         else:
-            if linearisation != "exudyn":
-                raise ValueError("state='observation' uses the condensed Exudyn model; use linearisation='exudyn'")
             reduced, _, names = reduce_to_observation_coordinates(linearise_exudyn(params), params)
             model = discretise(reduced.state_space(), dt_s)
             rates = tuple(n.replace("_rad", "_dot_rad_s") for n in names)
@@ -151,7 +142,7 @@ class LQRController:
         return cls(design_lqr(model, q, weights.r), state_function, limit, model=model, name=name)
 
     def reset(self) -> None:
-        pass
+        getattr(self.state_function, "reset", lambda: None)()
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
         torque = -float(self.gain[0] @ self.state_function(observation, q, q_dot))

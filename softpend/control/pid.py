@@ -35,7 +35,7 @@ class PIDController:
     """Discrete PID on the tip angle, setpoint upright: ``D[k] = (T_f D[k-1] + e[k] - e[k-1]) / (T_f + dt)``,
     ``u[k] = K_p e[k] + I[k] + K_d D[k]``, ``tau[k] = -sat(u[k])``, ``I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) -
     u[k]) / T_t)`` with ``T_f = derivative_filter_s``, ``T_t = tracking_time_s`` (default ``sqrt(T_i T_d)``, or
-    ``10 dt`` when a gain is zero; the last term dropped without ``anti_windup``)."""
+    ``10 dt`` when a gain is zero)."""
 
     def __init__(
         self,
@@ -44,7 +44,6 @@ class PIDController:
         torque_limit_nm: float = RodParams.torque_limit_nm,
         derivative_filter_s: float = 0.02,
         tracking_time_s: Optional[float] = None,
-        anti_windup: bool = True,
         name: str = "PID",
     ) -> None:
         if not isinstance(gains, PIDGains):
@@ -56,7 +55,7 @@ class PIDController:
             kp, ki, kd = gains.as_array()
             tracking_time_s = math.sqrt((kp / ki) * (kd / kp)) if kp > 0 and ki > 0 and kd > 0 else 10 * dt_s
         self.tracking_time_s = positive("tracking_time_s", tracking_time_s)
-        self.gains, self.anti_windup, self.name = gains, bool(anti_windup), name
+        self.gains, self.name = gains, name
         self.reset()
 
     def reset(self) -> None:
@@ -75,8 +74,7 @@ class PIDController:
         self.derivative_rad_s = (tf * self.derivative_rad_s + increment) / (tf + dt)
         effort = kp * error + self.integral_nm + kd * self.derivative_rad_s
         saturated = min(max(effort, -self.torque_limit_nm), self.torque_limit_nm)
-        tracking = (saturated - effort) / self.tracking_time_s if self.anti_windup else 0.0
-        self.integral_nm += dt * (ki * error + tracking)
+        self.integral_nm += dt * (ki * error + (saturated - effort) / self.tracking_time_s)
         return -saturated
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:

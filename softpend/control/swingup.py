@@ -80,8 +80,7 @@ class EnergySwingUpController:
         self.balancing = False
         self.handover_time_s: Optional[float] = None
         self._rate_rad_s: Optional[float] = None
-        if hasattr(self.balance, "reset"):
-            self.balance.reset()
+        self.balance.reset()
 
     def energy_j(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
         """Energy relative to upright at rest [J]."""
@@ -92,15 +91,6 @@ class EnergySwingUpController:
 
     def _tip_rate(self, observation: Observation) -> float:
         return observation.theta_dot_rad_s if self._rate_rad_s is None else self._rate_rad_s
-
-    def pumping_torque_nm(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> float:
-        """The energy-pumping torque [N m] (saturated)."""
-        error = self.energy_margin_j - self.energy_j(observation, q, q_dot)
-        rate = self._tip_rate(observation)
-        torque = self.energy_gain * error * rate
-        if rate == 0.0 and error > 0:  # at rest: a kick starts the first swing
-            torque = self.torque_limit_nm
-        return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)
 
     def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
         if self._rate_gain < 1.0:
@@ -114,8 +104,10 @@ class EnergySwingUpController:
             self.balancing = True
             if self.handover_time_s is None:
                 self.handover_time_s = float(time_s)
-            if hasattr(self.balance, "reset"):
-                self.balance.reset()
+            self.balance.reset()
         if self.balancing:
             return float(self.balance(observation, q, q_dot, time_s))
-        return self.pumping_torque_nm(observation, q, q_dot)
+        error, rate = self.energy_margin_j - self.energy_j(observation, q, q_dot), self._tip_rate(observation)
+        # pumping; at rest below the target energy a kick starts the first swing
+        torque = self.torque_limit_nm if rate == 0.0 and error > 0 else self.energy_gain * error * rate
+        return min(max(torque, -self.torque_limit_nm), self.torque_limit_nm)

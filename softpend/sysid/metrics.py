@@ -10,7 +10,7 @@ from typing import Any, Optional
 import numpy as np
 import torch
 
-from softpend.checks import finite, non_negative, positive_int
+from softpend.checks import finite, non_negative, positive, positive_int
 from softpend.plant import make_plant, wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps
@@ -144,19 +144,44 @@ def trial_curves(
     return out
 
 
-def _starts(
-    dataset: TrajectoryDataset, trials: Optional[np.ndarray], horizon_s: float, history: int, start_stride: int
-) -> tuple[int, np.ndarray]:
-    """Steps of ``horizon_s`` and rows ``(trial, sample)`` of every ``start_stride``-th sample from ``history`` on
-    that leaves them in its trial."""
-    start_stride = positive_int("start_stride", start_stride)
-    steps = int(round(horizon_s / dataset.dt_s))
-    n_states = dataset.n_samples - history
-    if steps < 1 or n_states < steps + 1:
-        raise ValueError(f"horizon_s={horizon_s} must be at least one step and fit in trials of {n_states} states")
+def rollout_starts(
+    dataset: TrajectoryDataset,
+    steps: int,
+    stride: int = 10,
+    first: int = 0,
+    max_tilt_rad: Optional[float] = None,
+    trials: Optional[np.ndarray] = None,
+) -> np.ndarray:
+    """Rows ``(trial, sample)`` of every ``stride``-th sample from ``first`` that leaves ``steps`` samples after it,
+    in ``trials`` (default: all), optionally only those with ``|theta| <= max_tilt_rad``."""
+    steps, stride = positive_int("steps", steps), positive_int("stride", stride)
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-    samples = range(history, dataset.n_samples - steps, start_stride)
-    return steps, np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2)
+    samples = np.arange(int(first), dataset.n_samples - steps, stride)
+    grid = np.array([(t, s) for t in trials for s in samples], dtype=np.int64).reshape(-1, 2)
+    if max_tilt_rad is not None and grid.size:
+        theta = np.arctan2(-dataset.column("ex_m"), dataset.column("ey_m"))
+        grid = grid[np.abs(theta[grid[:, 0], grid[:, 1]]) <= positive("max_tilt_rad", max_tilt_rad)]
+    if grid.shape[0] == 0:
+        raise ValueError(
+            f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples"
+            + ("" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start")
+        )
+    return grid
+
+
+def recorded_states(dataset: TrajectoryDataset, starts: np.ndarray) -> np.ndarray:
+    """The recorded joint states ``(B, 2 J)`` at rows ``(trial, sample)`` of a simulated dataset."""
+    if dataset.joint_positions_rad is None or dataset.joint_velocities_rad_s is None:
+        raise ValueError("dataset has no recorded joint states (needs a simulated dataset)")
+    q = dataset.joint_positions_rad[starts[:, 0], starts[:, 1]]
+    return np.concatenate([q, dataset.joint_velocities_rad_s[starts[:, 0], starts[:, 1]]], axis=1)
+
+
+def _steps(horizon_s: float, dt_s: float) -> int:
+    steps = int(round(horizon_s / dt_s))
+    if steps < 1:
+        raise ValueError(f"horizon_s={horizon_s} must be at least one step of {dt_s} s")
+    return steps
 
 
 def rollout_errors(
@@ -168,7 +193,8 @@ def rollout_errors(
 ) -> RolloutErrors:
     """Open-loop rollouts from every ``start_stride``-th state that leaves ``horizon_s`` in its trial."""
     layout: StateLayout = model.layout
-    steps, starts = _starts(dataset, trials, horizon_s, layout.history, start_stride)
+    steps = _steps(horizon_s, dataset.dt_s)
+    starts = rollout_starts(dataset, steps, start_stride, layout.history, trials=trials)
     windows, predicted = network_rollouts(model, dataset, starts, steps)
     columns = [layout.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
     return _rms_errors(predicted[..., columns], windows[..., columns], steps, dataset.dt_s)
@@ -229,13 +255,14 @@ def perturbed_simulator_errors(
 ) -> RolloutErrors:
     """Yardstick: the simulator restarted from the recorded joint states (simulated datasets) with the hub angle
     and rate off and seeded Gaussian torque noise, at the start points of :func:`rollout_errors` with ``history``."""
-    if dataset.joint_positions_rad is None or dataset.params is None:
+    if dataset.params is None:
         raise ValueError("perturbed_simulator_errors needs a simulated dataset (joint states and plant_params)")
-    assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
     finite("hub_offset_rad", hub_offset_rad)
     finite("hub_rate_offset_rad_s", hub_rate_offset_rad_s)
     non_negative("torque_noise_std_nm", torque_noise_std_nm)
-    steps, starts = _starts(dataset, trials, horizon_s, history, start_stride)
+    steps = _steps(horizon_s, dataset.dt_s)
+    starts = rollout_starts(dataset, steps, start_stride, history, trials=trials)
+    states = recorded_states(dataset, starts)
     params = dataset.params
     if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
         params = params.replace(torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
@@ -244,12 +271,10 @@ def perturbed_simulator_errors(
     rng = np.random.default_rng(seed)
     columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
     predicted, truth = [], []
-    for trial, start in starts:
-        q = dataset.joint_positions_rad[trial, start].copy()
-        q[0] += hub_offset_rad
-        qd = dataset.joint_velocities_rad_s[trial, start].copy()
-        qd[0] += hub_rate_offset_rad_s
-        plant.reset(q, qd)
+    n_q = plant.n_coordinates
+    states[:, [0, n_q]] += (hub_offset_rad, hub_rate_offset_rad_s)
+    for (trial, start), state in zip(starts, states):
+        plant.reset(state[:n_q], state[n_q:])
         path = [plant.observe()]
         for k in range(steps):
             noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0

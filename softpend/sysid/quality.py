@@ -13,7 +13,8 @@ from softpend.checks import non_negative, positive, positive_int
 from softpend.plant import PRBPlant, RodParams
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
-from softpend.sysid.metrics import network_rollouts, trial_curves
+from softpend.sysid.metrics import network_rollouts, recorded_states, trial_curves
+from softpend.sysid.metrics import rollout_starts as rollout_starts  # re-exported
 
 #: Tip-error threshold of the valid prediction time, as a fraction of the rod length.
 VALID_TIP_FRACTION = 0.05
@@ -59,37 +60,27 @@ def tip_rmse_at_s(tip_error_m: np.ndarray, dt_s: float, horizon_s: float) -> flo
     return float(np.sqrt(np.mean(error[:, k] ** 2)))
 
 
-def rollout_starts(
+def _prb_rollouts(
+    params: RodParams,
     dataset: TrajectoryDataset,
+    starts: np.ndarray,
     steps: int,
-    stride: int = 10,
-    first: int = 0,
-    max_tilt_rad: Optional[float] = None,
-) -> np.ndarray:
-    """Rows ``(trial, sample)`` of every ``stride``-th sample from ``first`` that leaves ``steps`` samples after it,
-    optionally only those with ``|theta| <= max_tilt_rad``."""
-    steps = positive_int("steps", steps)
-    stride = positive_int("stride", stride)
-    samples = np.arange(int(first), dataset.n_samples - steps, stride)
-    grid = np.array([(t, s) for t in range(dataset.n_trials) for s in samples], dtype=np.int64).reshape(-1, 2)
-    if max_tilt_rad is not None and grid.size:
-        theta = np.arctan2(-dataset.column("ex_m"), dataset.column("ey_m"))
-        grid = grid[np.abs(theta[grid[:, 0], grid[:, 1]]) <= positive("max_tilt_rad", max_tilt_rad)]
-    if grid.shape[0] == 0:
+    initial_states: Optional[np.ndarray] = None,
+    hub_offset_rad: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop PRB rollouts ``(B, steps + 1, 3)`` of ``phi, ex, ey`` with ``params`` from the recorded joint states
+    (or ``initial_states``), the hub angle moved by ``hub_offset_rad``, under the recorded torques; and their samples."""
+    states = recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
+    states = states.reshape(starts.shape[0], -1)
+    if states.shape[1] != 2 * (params.n_links + 1):
         raise ValueError(
-            f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples"
-            + ("" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start")
+            f"the dataset's joint states have {states.shape[1] // 2} coordinates; a PRB rod of "
+            f"{params.n_links} links has {params.n_links + 1} (another plant?)"
         )
-    return grid
-
-
-def _recorded_states(dataset: TrajectoryDataset, starts: np.ndarray) -> np.ndarray:
-    if dataset.joint_positions_rad is None:
-        raise ValueError("dataset has no recorded joint states (needs a simulated PRB dataset)")
-    assert dataset.joint_velocities_rad_s is not None  # given together with joint_positions_rad
-    q = dataset.joint_positions_rad[starts[:, 0], starts[:, 1]]
-    qd = dataset.joint_velocities_rad_s[starts[:, 0], starts[:, 1]]
-    return np.concatenate([q, qd], axis=1)
+    states[:, 0] += hub_offset_rad
+    index = starts[:, 1:2] + np.arange(positive_int("steps", steps) + 1)[None, :]
+    torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
+    return simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), states, torques, has_er=False), index
 
 
 def prb_rollout_tip_errors(
@@ -100,22 +91,12 @@ def prb_rollout_tip_errors(
     hub_offset_rad: float = 0.0,
     initial_states: Optional[np.ndarray] = None,
 ) -> np.ndarray:
-    """Tip errors ``(B, steps + 1)`` [m] of open-loop PRB rollouts with ``params`` from the recorded joint state (or
-    ``initial_states``), the hub angle moved by ``hub_offset_rad``, under the recorded torques."""
-    states = _recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
-    if states.shape != (starts.shape[0], 2 * (params.n_links + 1)):
-        raise ValueError(
-            f"the dataset's joint states have {states.shape[1] // 2} coordinates; a PRB rod of "
-            f"{params.n_links} links has {params.n_links + 1} (another plant?)"
-        )
-    states[:, 0] += hub_offset_rad
-    steps = positive_int("steps", steps)
-    index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
-    torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), states, torques, has_er=False)
-    ex = dataset.column("ex_m")[starts[:, :1], index]
-    ey = dataset.column("ey_m")[starts[:, :1], index]
-    return np.hypot(sim[..., 1] - ex, sim[..., 2] - ey)
+    """Tip errors ``(B, steps + 1)`` [m] of :func:`_prb_rollouts` against the data."""
+    sim, index = _prb_rollouts(params, dataset, starts, steps, initial_states, hub_offset_rad)
+    rows = starts[:, :1]
+    return np.hypot(
+        sim[..., 1] - dataset.column("ex_m")[rows, index], sim[..., 2] - dataset.column("ey_m")[rows, index]
+    )
 
 
 def prb_rollout_trial(
@@ -128,18 +109,12 @@ def prb_rollout_trial(
 ) -> dict[str, np.ndarray]:
     """One open-loop PRB rollout from the recorded joint state (or ``initial_state``) in the format of
     :func:`softpend.sysid.rollout_trial`."""
-    starts = np.array([[int(trial), int(start_sample)]], dtype=np.int64)
     if not 0 <= trial < dataset.n_trials or not 0 <= start_sample < dataset.n_samples - steps:
         raise ValueError(f"trial {trial}, start_sample {start_sample} and {steps} steps do not fit the dataset")
-    state = (
-        _recorded_states(dataset, starts) if initial_state is None else np.asarray(initial_state, float).reshape(1, -1)
-    )
-    index = start_sample + np.arange(steps + 1)
-    torques = dataset.torques_nm[trial, index[:-1]][None]
-    sim = simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), state, torques, has_er=False)[0]
+    sim, index = _prb_rollouts(params, dataset, np.array([[trial, start_sample]]), steps, initial_state)
     names = ("phi_rad", "ex_m", "ey_m")
-    data = {name: dataset.column(name)[trial, index] for name in names}
-    return trial_curves(index * dataset.dt_s, data, {name: sim[:, k] for k, name in enumerate(names)})
+    data = {name: dataset.column(name)[trial, index[0]] for name in names}
+    return trial_curves(index[0] * dataset.dt_s, data, {name: sim[0, :, k] for k, name in enumerate(names)})
 
 
 def network_rollout_tip_errors(model: Any, dataset: TrajectoryDataset, starts: np.ndarray, steps: int) -> np.ndarray:
@@ -158,7 +133,7 @@ def prb_one_step_errors(
     :func:`softpend.sysid.one_step_errors` at full information (velocities as backward differences)."""
     trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
     starts = np.array([(t, s) for t in trials for s in range(dataset.n_samples - 1)], dtype=np.int64)
-    states = _recorded_states(dataset, starts)
+    states = recorded_states(dataset, starts)
     plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
     names = dataset.position_names
     predicted = np.empty((starts.shape[0], len(names)))

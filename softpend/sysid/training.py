@@ -71,13 +71,7 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (for JSON metadata)."""
-        out = dataclasses.asdict(self)
-        out["hidden_widths"] = list(self.hidden_widths)
-        return out
-
-    def replace(self, **changes: Any) -> "TrainConfig":
-        """A copy with some fields changed (validated again)."""
-        return dataclasses.replace(self, **changes)
+        return dataclasses.asdict(self) | {"hidden_widths": list(self.hidden_widths)}
 
 
 @dataclass
@@ -197,13 +191,7 @@ def fit_dynamics_model(
 ) -> FitResult:
     """Train a dynamics model (``config`` with ``overrides`` of its fields) on a dataset of at least 2 trials;
     raises ``ValueError`` on invalid settings or data, ``NonFiniteError`` if a loss becomes NaN or infinite."""
-    if not isinstance(dataset, TrajectoryDataset):
-        raise ValueError(f"dataset must be a TrajectoryDataset, got {type(dataset).__name__}")
-    config = config if config is not None else TrainConfig()
-    if not isinstance(config, TrainConfig):
-        raise ValueError(f"config must be a TrainConfig, got {type(config).__name__}")
-    if overrides:
-        config = config.replace(**overrides)
+    config = dataclasses.replace(config if config is not None else TrainConfig(), **overrides)
     started = time.perf_counter()
     layout = config.layout()
     dim = layout.dim  # the work size checked before any work
@@ -227,12 +215,9 @@ def fit_dynamics_model(
         raise ValueError(
             "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
         )
-    reach = None  # the rod length of a simulated dataset, else the largest recorded tip distance, plus the slack
-    if config.limit_tip_reach and dataset.params is not None:
-        reach = float(dataset.params.length_m) * (1 + TIP_REACH_SLACK)
-    elif config.limit_tip_reach and all(n in dataset.position_names for n in ("ex_m", "ey_m")):
-        radius = float(np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
-        reach = radius * (1 + TIP_REACH_SLACK) if radius > 0 else None
+    # the rod length of a simulated dataset, else the largest recorded tip distance, plus the slack
+    radius = float(params.length_m if params else np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
+    reach = radius * (1 + TIP_REACH_SLACK) if config.limit_tip_reach and radius > 0 else None
     positions = bool(config.integrate_positions)  # set in TrainConfig.__post_init__
     members = []
     for index in range(config.ensemble_size):

@@ -103,9 +103,8 @@ def plot_excitation(rows: list[dict[str, Any]]) -> Any:
         for ax, name in zip(axes[0], fields):
             median = [np.median([abs(r[f"error_{name}"]) for r in mine if r["plant_s"] == t]) for t in lengths]
             ax.plot(lengths, median, "o-", color=f"C{i}", label=label)
-            ax.set_yscale("log")
+            ax.set(yscale="log", xlabel="excitation [s]")
             ax.set_title(name.replace("_", " "), fontsize=8)
-            ax.set_xlabel("excitation [s]")
         balancing = [sum(r["balances"] for r in mine if r["plant_s"] == t) for t in lengths]
         axes[0, -1].plot(lengths, balancing, "o-", color=f"C{i}", label=label)
     if fields:
@@ -189,9 +188,8 @@ def plot_plant_seconds(rows: list[dict[str, Any]]) -> Any:
         if math.isfinite(row["median_plant_s"]):
             ax.plot([row["low_plant_s"], row["high_plant_s"]], [y, y], color="k", lw=4, alpha=0.3)
             ax.plot([row["median_plant_s"]] * 2, [y - 0.3, y + 0.3], color="k", lw=2)
-    ax.set_xscale("log")
+    ax.set(xscale="log", xlabel="plant seconds until the method has a controller that balances the fresh starts")
     ax.set_yticks(range(len(summary)), [r["method"] for r in summary])
-    ax.set_xlabel("plant seconds until the method has a controller that balances the fresh starts")
     ax.invert_yaxis()
     ax.grid(axis="x", alpha=0.3)
     return fig

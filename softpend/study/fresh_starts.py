@@ -103,14 +103,12 @@ def rl_fresh_start_rows(
                 agent_file = best if agent_kind == "best" and best.exists() else folder / "agent.zip"
                 key = _evaluation_key(agent_file, report_seeds, duration_s)
                 cached = cache.get(agent_kind)
-                if isinstance(cached, dict) and cached.get("key") == key and isinstance(cached.get("row"), dict):
-                    figures = cached["row"]
-                else:
+                if not (isinstance(cached, dict) and cached.get("key") == key and isinstance(cached.get("row"), dict)):
                     summary = evaluate_agent(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
-                    figures = fresh_start_row(summary)
-                    cache[agent_kind] = {"key": key, "row": figures}
+                    cached = cache[agent_kind] = {"key": key, "row": fresh_start_row(summary)}
                     changed = True
-                rows.append({"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[agent_kind], **figures})
+                row = {"method": METHOD_NAMES[algo], "seed": int(seed), "agent": AGENTS[agent_kind]}
+                rows.append(row | cached["row"])
             if changed:
                 with atomic_write(cache_path, "w") as handle:
                     handle.write(json.dumps(cache, indent=1))  # Infinity and NaN kept (read back by Python only)
@@ -153,9 +151,16 @@ def seed_rows(
     """One row per (method, seed): what the run cost and whether its final agent balances the fresh starts
     (``plant_s_to_balance``, else ``inf``); ``logs_by_algo``: ``{algo: [TrainingLog]}``."""
     final = {(r["method"], int(r["seed"])): r for r in fresh_rows if r["agent"] == "final"}
+    runs = [
+        (METHOD_NAMES[algo], int(log.seed), log.n_episodes, log.plant_s, log.stop_reason is not None, log.plant_s)
+        for algo, logs in logs_by_algo.items()
+        for log in logs
+    ]
+    for result in pilco_results:
+        seconds, plant_s = float(result.real_seconds_to_balance), float(result.plant_seconds_total)
+        runs.append(("PILCO", int(result.config.seed), len(result.records), plant_s, math.isfinite(seconds), seconds))
     rows = []
-
-    def add(method: str, seed: int, episodes: int, plant_s: float, stopped: bool, to_balance: float) -> None:
+    for method, seed, episodes, plant_s, stopped, to_balance in runs:
         if (fresh := final.get((method, seed))) is None:
             what = f"the final agent of {method} seed {seed}" if method != "PILCO" else f"PILCO seed {seed}"
             raise ValueError(f"no fresh-start row of {what}")
@@ -163,15 +168,6 @@ def seed_rows(
         row |= {"final_balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"]}
         balances = fresh["run_balances"]
         rows.append(row | {"final_balances": balances, "plant_s_to_balance": to_balance if balances else math.inf})
-
-    for algo, logs in logs_by_algo.items():
-        for log in logs:
-            add(
-                METHOD_NAMES[algo], int(log.seed), log.n_episodes, log.plant_s, log.stop_reason is not None, log.plant_s
-            )
-    for result in pilco_results:
-        seconds, plant_s = float(result.real_seconds_to_balance), float(result.plant_seconds_total)
-        add("PILCO", int(result.config.seed), len(result.records), plant_s, math.isfinite(seconds), seconds)
     return rows
 
 

@@ -58,12 +58,6 @@ def rl_jobs(
     of train_run)``, DQN-MBPO's first."""
     jobs, names = [], []
     for algo, config, seeds, episodes in specs:
-        if algo not in ("dqn", "mbpo"):
-            raise ValueError(f"algo must be 'dqn' or 'mbpo', got {algo!r}")
-        if len(seeds) == 0:
-            raise ValueError("seeds must not be empty")
-        if algo == "mbpo" and not isinstance(config, MBPOConfig):
-            raise ValueError("algo 'mbpo' needs an MBPOConfig")
         for seed in seeds:
             run_dir = run_folder(root, algo, int(seed), config)
             if run_dir.name in names:
@@ -100,7 +94,7 @@ def train_run(
     if algo == "dqn":
         train_dqn(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
     else:
-        assert isinstance(config, MBPOConfig)  # rl_jobs checks it
+        assert isinstance(config, MBPOConfig)
         train_mbpo(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
@@ -113,12 +107,11 @@ def summary_table(
     rows = []
     for method, logs in logs_by_method.items():
         for log in logs:
-            asym, asym_plant_s = run_to_asymptote(log)
             last = log.evaluations[-1] if log.evaluations else {}
             row = {"method": method, "seed": log.seed, "episodes": log.n_episodes, "plant_s": log.plant_s}
-            row |= {"episodes_to_asymptote": asym, "plant_s_to_asymptote": asym_plant_s}
-            balance = (log.episodes_to_balance(std_rad), log.real_s_to_balance(std_rad))
-            row |= dict(zip(("episodes_to_balance", "plant_s_to_balance"), balance))
+            row |= dict(zip(("episodes_to_asymptote", "plant_s_to_asymptote"), run_to_asymptote(log)))
+            row |= {"episodes_to_balance": log.episodes_to_balance(std_rad)}
+            row["plant_s_to_balance"] = log.real_s_to_balance(std_rad)
             row["final_max_upright_std_rad"] = last.get("max_upright_std_rad", math.nan)
             row["final_swing_up_time_s"] = last.get("median_swing_up_time_s", math.nan)
             rows.append(row | {"model_steps": log.model_steps})
@@ -136,8 +129,7 @@ def figure_configs(
     overrides = dict(rl_overrides or {})
     configs = {algo: load_hparams(algo, task) for algo in ("dqn", "mbpo")}
     names = {algo: {f.name for f in dataclasses.fields(config)} for algo, config in configs.items()}
-    unknown = sorted(k for k in overrides if k.partition(".")[0] not in names["mbpo"])
-    if unknown:
+    if unknown := sorted(k for k in overrides if k.partition(".")[0] not in names["mbpo"]):
         raise ValueError(f"rl_overrides: {unknown[0]!r} is not a DQNConfig or MBPOConfig field")
     return {
         algo: apply_overrides(config, {k: v for k, v in overrides.items() if k.partition(".")[0] in names[algo]})
@@ -185,19 +177,16 @@ def figure_runs(
     return {METHOD_NAMES[spec[0]]: spec_logs for spec, spec_logs in zip(specs, logs)}
 
 
-def run_config_data(algo: str, config: Any) -> dict[str, Any]:
-    """The settings that name a run's folder, as JSON data (PILCO's with the seed set to 0)."""
-    if algo == "pilco":
-        return json.loads(json.dumps(dataclasses.replace(config, seed=0).to_dict(), default=float))
-    return saved_config_data(config)
-
-
 def run_folder(runs_root: Path | str, algo: str, seed: int, config: Any = None) -> Path:
     """Folder of one run: with ``config``, ``<algo>-<hash>-seed<seed>``; without, the one folder of ``algo`` and
-    ``seed`` (``ValueError`` if there are several), else ``<algo>-seed<seed>``."""
+    ``seed`` (``ValueError`` if there are several), else ``<algo>-seed<seed>``; the hash: of the settings as JSON data
+    (PILCO's with the seed set to 0)."""
     root = Path(runs_root)
+    if config is not None and algo == "pilco":
+        data = json.loads(json.dumps(dataclasses.replace(config, seed=0).to_dict(), default=float))
+        return root / run_folder_name(algo, data, seed)
     if config is not None:
-        return root / run_folder_name(algo, run_config_data(algo, config), seed)
+        return root / run_folder_name(algo, saved_config_data(config), seed)
     pattern = re.compile(rf"{re.escape(algo)}-[0-9a-f]{{8}}-seed{int(seed)}")
     found = sorted(p for p in root.glob(f"{algo}-*-seed{int(seed)}") if pattern.fullmatch(p.name) and p.is_dir())
     if len(found) > 1:

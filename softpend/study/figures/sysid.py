@@ -40,20 +40,18 @@ def plot_rollout_errors(errors: dict[str, RolloutErrors], length_m: Optional[flo
 
     axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)[1]
     first = next(iter(errors.values()))
-    for label, err in errors.items():
-        axes[0].semilogy(err.horizon_s[1:], err.tip_rmse_m[1:], lw=1.8, label=label)
-        axes[1].semilogy(err.horizon_s[1:], err.phi_rmse_rad[1:], lw=1.8, label=label)
-    axes[0].semilogy(first.horizon_s[1:], first.hold_tip_rmse_m[1:], color="grey", ls=":", label="hold (no model)")
-    axes[1].semilogy(first.horizon_s[1:], first.hold_phi_rmse_rad[1:], color="grey", ls=":", label="hold (no model)")
-    if length_m is not None:
-        axes[0].axhline(0.05 * length_m, color="tab:red", lw=0.8, ls="--", label="5% of rod length")
     # a diverged rollout leaves the physical range; clip there (tip errors above 2 L, angles above pi)
-    axes[0].set_ylim(top=2 * length_m if length_m is not None else 1.0)
-    axes[1].set_ylim(top=np.pi)
-    axes[0].set_ylabel("tip-position RMSE [m]")
-    axes[1].set_ylabel("base-angle RMSE [rad]")
-    for ax in axes:
-        ax.set_xlabel("open-loop horizon [s]")
+    tip_top = 2 * length_m if length_m is not None else 1.0
+    panels = (("tip_rmse_m", tip_top, "tip-position RMSE [m]"), ("phi_rmse_rad", np.pi, "base-angle RMSE [rad]"))
+    for ax, (name, top, ylabel) in zip(axes, panels):
+        for label, err in errors.items():
+            ax.semilogy(err.horizon_s[1:], getattr(err, name)[1:], lw=1.8, label=label)
+        hold = getattr(first, f"hold_{name}")[1:]
+        ax.semilogy(first.horizon_s[1:], hold, color="grey", ls=":", label="hold (no model)")
+        if length_m is not None and name == "tip_rmse_m":
+            ax.axhline(0.05 * length_m, color="tab:red", lw=0.8, ls="--", label="5% of rod length")
+        ax.set_ylim(top=top)
+        ax.set(xlabel="open-loop horizon [s]", ylabel=ylabel)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     return axes

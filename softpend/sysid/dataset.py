@@ -116,17 +116,12 @@ def _validate_metadata(meta: Any) -> None:
         one_of(f"metadata {key}", meta[key], allowed)
     in_range("metadata dt_s", meta["dt_s"], *DT_S_RANGE)
     names = meta["position_names"]
-    if (
-        not isinstance(names, (list, tuple))
-        or any(n not in POSITION_NAMES for n in names)
-        or len(set(names)) < len(names)
-    ):
+    known = isinstance(names, (list, tuple)) and all(n in POSITION_NAMES for n in names)
+    if not (known and len(set(names)) == len(names) and set(REQUIRED_POSITION_NAMES) <= set(names)):
         raise ValueError(
-            f"metadata position_names must be a list of distinct names from {POSITION_NAMES}, got {names!r}"
+            f"metadata position_names must include {REQUIRED_POSITION_NAMES} in distinct names of {POSITION_NAMES}, "
+            f"got {names!r}"
         )
-    absent = [n for n in REQUIRED_POSITION_NAMES if n not in names]
-    if absent:
-        raise ValueError(f"metadata position_names must include {REQUIRED_POSITION_NAMES}; missing {absent}")
 
     def integer(value: Any, low: float = -math.inf) -> bool:
         return isinstance(value, int) and not isinstance(value, bool) and value >= low

@@ -177,10 +177,10 @@ def recorded_states(dataset: TrajectoryDataset, starts: np.ndarray) -> np.ndarra
     return np.concatenate([q, dataset.joint_velocities_rad_s[starts[:, 0], starts[:, 1]]], axis=1)
 
 
-def _steps(horizon_s: float, dt_s: float) -> int:
-    steps = int(round(horizon_s / dt_s))
-    if steps < 1:
-        raise ValueError(f"horizon_s={horizon_s} must be at least one step of {dt_s} s")
+def _steps(horizon_s: float, dataset: TrajectoryDataset, history: int) -> int:
+    steps, n_states = int(round(horizon_s / dataset.dt_s)), dataset.n_samples - history
+    if steps < 1 or n_states < steps + 1:
+        raise ValueError(f"horizon_s={horizon_s} must be at least one step and fit in trials of {n_states} states")
     return steps
 
 
@@ -193,7 +193,7 @@ def rollout_errors(
 ) -> RolloutErrors:
     """Open-loop rollouts from every ``start_stride``-th state that leaves ``horizon_s`` in its trial."""
     layout: StateLayout = model.layout
-    steps = _steps(horizon_s, dataset.dt_s)
+    steps = _steps(horizon_s, dataset, layout.history)
     starts = rollout_starts(dataset, steps, start_stride, layout.history, trials=trials)
     windows, predicted = network_rollouts(model, dataset, starts, steps)
     columns = [layout.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
@@ -260,7 +260,7 @@ def perturbed_simulator_errors(
     finite("hub_offset_rad", hub_offset_rad)
     finite("hub_rate_offset_rad_s", hub_rate_offset_rad_s)
     non_negative("torque_noise_std_nm", torque_noise_std_nm)
-    steps = _steps(horizon_s, dataset.dt_s)
+    steps = _steps(horizon_s, dataset, history)
     starts = rollout_starts(dataset, steps, start_stride, history, trials=trials)
     states = recorded_states(dataset, starts)
     params = dataset.params

@@ -22,7 +22,7 @@ import pytest
 from softpend.hardware import protocol as proto
 from softpend.hardware.closed_loop import LOOP_LOG_COLUMNS, run_control_loop
 from softpend.hardware.driver import HandshakeError, LinkChecksumError, LinkDisconnected, LinkTimeout, MotorLink
-from softpend.hardware.emulator import RigConfig, RigEmulator, SimRig, start_emulator_process
+from softpend.hardware.emulator import EmulatorProcess, RigConfig, RigEmulator, SimRig
 from softpend.io.samplelog import SampleLog, read_sample_log
 
 
@@ -177,7 +177,7 @@ def test_missing_port_is_a_clear_disconnect():
 @pytest.mark.realtime
 def test_killed_emulator_is_a_clear_disconnect_and_no_sample_is_lost(tmp_path):
     calls = []
-    with start_emulator_process(RigConfig(), truth_log=tmp_path / "truth.csv") as emulator:
+    with EmulatorProcess(RigConfig(), truth_log=tmp_path / "truth.csv") as emulator:
         with (
             MotorLink(emulator.port, torque_limit_nm=0.06, install_exit_hooks=False) as link,
             SampleLog(tmp_path / "motor.csv", LOOP_LOG_COLUMNS) as log,

@@ -254,10 +254,10 @@ def test_a_short_closed_loop_through_a_pseudo_terminal_completes_and_stops_the_m
 
     from softpend.hardware.closed_loop import run_closed_loop
     from softpend.hardware.driver import MotorLink
-    from softpend.hardware.emulator import start_emulator_process
+    from softpend.hardware.emulator import EmulatorProcess
     from softpend.hardware.estimator import RigStateEstimator
 
-    with start_emulator_process(UPRIGHT, truth_log=tmp_path / "truth.csv") as emulator:
+    with EmulatorProcess(UPRIGHT, truth_log=tmp_path / "truth.csv") as emulator:
         with MotorLink(emulator.port, torque_limit_nm=TASK.torque_limit_nm, timeout_s=2.0) as link:
             result = run_closed_loop(link, LQRController.from_params(TASK.rod, TASK.dt_s), RigStateEstimator(TASK), 1.0)
         deadline = time.monotonic() + 10.0  # the STOP reaches the device, which logs the ticks after it

@@ -60,13 +60,6 @@ class RigConfig:
     def to_dict(self) -> dict:
         return {**dataclasses.asdict(self), "task": self.task.to_dict()}
 
-    @classmethod
-    def from_dict(cls, data: dict) -> "RigConfig":
-        data = dict(data)
-        if "task" in data:
-            data["task"] = Task.from_dict(data["task"])
-        return cls(**data)
-
 
 def truth_columns(n_coordinates: int) -> list[str]:
     return (
@@ -339,15 +332,13 @@ class EmulatorProcess:
         self._stderr.close()
 
 
-start_emulator_process = EmulatorProcess
-
-
 def _main(argv: Optional[list[str]] = None) -> int:  # the child process entry point
     parser = argparse.ArgumentParser(prog="python -m softpend.hardware.emulator")
-    parser.add_argument("--config-json", default="{}")
+    parser.add_argument("--config-json", required=True)  # RigConfig.to_dict()
     parser.add_argument("--truth-log")
     args = parser.parse_args(argv)
-    return serve_forever(RigConfig.from_dict(json.loads(args.config_json)), truth_log=args.truth_log)
+    config = json.loads(args.config_json)
+    return serve_forever(RigConfig(**config | {"task": Task.from_dict(config["task"])}), truth_log=args.truth_log)
 
 
 if __name__ == "__main__":

@@ -10,17 +10,17 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import int_at_least, non_negative, optional_positive, positive
+from softpend.checks import int_at_least, non_negative, positive
 from softpend.plant import Observation, SimulationDiverged
 
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """Noise levels and limits of :class:`RigStateEstimator` (SI units; ``hub_rate_std_rad_s`` None ignores the
-    device's hub rate; ``history_s`` how far back a late frame may reach; ``lead_steps`` of prediction ahead)."""
+    """Noise levels and limits of :class:`RigStateEstimator` (SI units; ``history_s`` how far back a late frame may
+    reach; ``lead_steps`` of prediction ahead)."""
 
     counts_per_rev: int = 4096
-    hub_rate_std_rad_s: Optional[float] = 0.02
+    hub_rate_std_rad_s: float = 0.02
     tip_std_m: float = 0.002
     torque_std_nm: float = 0.003
     accel_std_rad_s2: float = 0.5
@@ -33,8 +33,7 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
-        optional_positive("hub_rate_std_rad_s", self.hub_rate_std_rad_s)
-        for name in ("tip_std_m", "max_blind_s", "history_s", "gate_sigma"):
+        for name in ("hub_rate_std_rad_s", "tip_std_m", "max_blind_s", "history_s", "gate_sigma"):
             positive(name, getattr(self, name))
         for name in ("torque_std_nm", "accel_std_rad_s2", "initial_bend_std_rad", "initial_rate_std_rad_s"):
             non_negative(name, getattr(self, name))
@@ -103,9 +102,8 @@ class RigStateEstimator:
         self._last_tip_time_s = -math.inf
         self.counts = dict.fromkeys("tips_accepted tips_refused tips_too_old tips_deferred encoder_gaps".split(), 0)
         self._pending_tips: list[tuple[float, float, float]] = []
-        stds = [cfg.encoder_std_rad] + ([] if cfg.hub_rate_std_rad_s is None else [cfg.hub_rate_std_rad_s])
-        self._h_encoder = np.eye(2 * n)[[0, n][: len(stds)]]  # measures the hub angle (and rate)
-        self._r_encoder = np.diag([std**2 for std in stds])
+        self._h_encoder = np.eye(2 * n)[[0, n]]  # measures the hub angle and rate
+        self._r_encoder = np.diag([cfg.encoder_std_rad**2, cfg.hub_rate_std_rad_s**2])
         self._r_tip, self._eye_2n = np.eye(2) * cfg.tip_std_m**2, np.eye(2 * n)
         self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)
         self._a = np.zeros((2 * n, 2 * n))
@@ -176,8 +174,7 @@ class RigStateEstimator:
         """Predict ``steps`` steps with ``torque_nm``, then correct with an encoder sample."""
         for _ in range(steps):
             x, p = self._predict(x, p, torque_nm)
-        z = [phi_rad] if self.config.hub_rate_std_rad_s is None else [phi_rad, phi_dot_rad_s]
-        innovation = np.asarray(z) - self._h_encoder @ x
+        innovation = np.array([phi_rad, phi_dot_rad_s]) - self._h_encoder @ x
         return self._update(x, p, self._h_encoder, innovation, self._r_encoder)
 
     def _tip_model(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -65,26 +65,21 @@ def estimate_clock_offset(
     motor_phi_rad: np.ndarray,
     camera_time_s: np.ndarray,
     camera_theta_rad: np.ndarray,
-    window_s: Optional[tuple[float, float]] = None,
-    max_offset_s: float = 1.0,
+    window_s: tuple[float, float],
 ) -> ClockOffset:
-    """``camera clock - motor clock`` from cross-correlating the rates of the hub angle and the camera's angle (NaN
-    where lost) over the motor-clock ``window_s``, on a 1 ms grid refined by a parabola at the peak."""
+    """``camera clock - motor clock`` (within 1 s) from cross-correlating the rates of the hub angle and the camera's
+    angle (NaN where lost) over the motor-clock ``window_s``, on a 1 ms grid refined by a parabola at the peak."""
     tm, tc = np.asarray(motor_time_s, float), np.asarray(camera_time_s, float)
     if tm.size < 10 or tc.size < 10:
         raise ValueError("need at least 10 motor and 10 camera samples")
-    if not max_offset_s > 0:
-        raise ValueError(f"max_offset_s must be positive, got {max_offset_s!r}")
-    resolution_s = 0.001
+    resolution_s, max_offset_s = 0.001, 1.0
     phi = np.unwrap(np.asarray(motor_phi_rad, float))
     theta_raw = np.asarray(camera_theta_rad, float)
     good = np.isfinite(theta_raw)
     if good.sum() < 2:
         raise ValueError("camera log has fewer than 2 tracked frames")
     theta = np.interp(tc, tc[good], np.unwrap(theta_raw[good]))
-    start, end = (tm[0], tm[-1]) if window_s is None else (float(window_s[0]), float(window_s[1]))
-    if end - start < 20 * resolution_s:
-        raise ValueError(f"window_s {window_s} is too short")
+    start, end = float(window_s[0]), float(window_s[1])
     grid = np.arange(start, end, resolution_s)
     motor_rate = np.gradient(np.interp(grid, tm, phi), resolution_s)
     motor_rate -= motor_rate.mean()
@@ -136,10 +131,9 @@ def synchronise(
     camera: LogContents,
     dt_s: float = 0.01,
     trial_length_s: float = 5.0,
-    offset: Optional[ClockOffset] = None,
 ) -> SyncResult:
     """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into gap-free trials of
-    ``trial_length_s`` every ``dt_s``; ``offset`` defaults to an estimate from the first 4 s (the wiggle)."""
+    ``trial_length_s`` every ``dt_s``, the clock offset estimated from the first 4 s (the wiggle)."""
     for name, log, needed in (
         ("motor", motor, ("device_time_s", "phi_rad", "applied_torque_nm")),
         ("camera", camera, ("camera_time_s", "x_m", "y_m", "lost")),
@@ -152,12 +146,11 @@ def synchronise(
     tm, phi, torque = motor["device_time_s"], np.unwrap(motor["phi_rad"]), motor["applied_torque_nm"]
     tc_cam, lost = camera["camera_time_s"], camera["lost"] > 0.5
     x_m, y_m = camera["x_m"].copy(), camera["y_m"].copy()
-    if offset is None:
-        if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
-            reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
-        else:  # no hub marker: the tip angle (biased by the rod's lag)
-            reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
-        offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0))
+    if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
+        reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
+    else:  # no hub marker: the tip angle (biased by the rod's lag)
+        reference = np.where(lost, np.nan, np.arctan2(-x_m, y_m))
+    offset = estimate_clock_offset(tm, phi, tc_cam, reference, (tm[0], tm[0] + 4.0))
     tc = tc_cam - offset.offset_s  # camera frames on the motor clock
 
     gaps = _gaps_from_times(tm, "motor states missing") + _gaps_from_times(tc, "camera frames missing")

@@ -41,16 +41,16 @@ def test_mppi_recovers_the_lqr_action_of_a_linear_system():
         return x @ at.T + torque[:, None] * bt.T
 
     def cost_fn(x: torch.Tensor, torque: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
-        # x_k' Q x_k + r u_k^2 for k = 0..T-1, plus the Riccati terminal cost x_T' P x_T
-        return ((x @ qt) * x).sum(-1) + r * torque.float() ** 2
+        # x_k' Q x_k + r u_k^2 plus x_{k+1}' P x_{k+1} - x_k' P x_k: summed over k = 0..T-1, the stage costs plus the
+        # Riccati terminal cost x_T' P x_T less x_0' P x_0 (the same for every rollout)
+        quadratic = lambda y, m: ((y @ m) * y).sum(-1)  # noqa: E731
+        return quadratic(x, qt) + r * torque.float() ** 2 + quadratic(x_next, pt) - quadratic(x, pt)
 
-    def terminal_fn(x: torch.Tensor) -> torch.Tensor:
-        return ((x @ pt) * x).sum(-1)
-
-    mppi = MPPI(
-        step_fn, cost_fn, 10.0, 5, 1, 1000, 0.1, temperature=0.01, seed=2, iterations=30, terminal_fn=terminal_fn
-    )
-    torque = float(mppi.optimise(x0[None], torch.zeros(1, 5, dtype=torch.float64))[0, 0])
+    mppi = MPPI(step_fn, cost_fn, 10.0, 5, 1, 1000, 0.1, temperature=0.01, seed=2)
+    mean = torch.zeros(1, 5, dtype=torch.float64)
+    for _ in range(30):
+        mean = mppi.finish(mppi.begin(x0[None], mean))
+    torque = float(mean[0, 0])
     expected = float(-(gain @ x0)[0])
     assert torque == pytest.approx(expected, rel=0.05, abs=0.005)
 
@@ -61,7 +61,7 @@ def test_mppi_keeps_its_mean_where_every_rollout_diverges():
 
     mppi = MPPI(step_fn, lambda x, u, x_next: x_next[:, 0] ** 2, 1.0, 3, 1, 8, 0.3, temperature=0.1)
     mean = torch.tensor([[0.2, -0.1, 0.3], [0.2, -0.1, 0.3]], dtype=torch.float64)
-    out = mppi.optimise(np.array([[1.0], [-1.0]]), mean)
+    out = mppi.finish(mppi.begin(np.array([[1.0], [-1.0]]), mean))
     assert torch.equal(out[0], mean[0])  # no finite rollout: the unperturbed sequence
     assert torch.isfinite(out).all() and not torch.equal(out[1], mean[1])
 

@@ -163,10 +163,6 @@ def _mlp(n_in: int, n_out: int, width: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(n_in, width), nn.SiLU(), nn.Linear(width, width), nn.SiLU(), nn.Linear(width, n_out))
 
 
-def _reset_linear_layers(net: nn.Module) -> None:
-    net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
-
-
 class GaussianDynamicsModel(DynamicsModel):
     """A :class:`~softpend.sysid.DynamicsModel` with a log-variance output; :meth:`predict_delta` adds a draw from
     ``self.noise_generator`` (``None``: the mean)."""
@@ -191,7 +187,11 @@ class GaussianDynamicsModel(DynamicsModel):
 def _fit_gaussian(
     nets: Sequence[nn.Module], heads: Sequence[_GaussianHead], x: Tensor, y: Tensor, steps: int, seed: int
 ) -> None:
-    """Fit each ``(net, head)`` to a bootstrap of ``(x, y)`` by Gaussian negative log-likelihood with Adam."""
+    """Fit each ``(net, head)``, its layers reset under ``torch.manual_seed(seed)``, to a bootstrap of ``(x, y)`` by
+    Gaussian negative log-likelihood with Adam."""
+    torch.manual_seed(seed)
+    for net in nets:
+        net.apply(lambda layer: layer.reset_parameters() if isinstance(layer, nn.Linear) else None)
     generator = torch.Generator().manual_seed(seed)
     n = x.shape[0]
     for net, head in zip(nets, heads):
@@ -265,17 +265,12 @@ def fit_ensemble(
     first = members[0]
     s, u, s1 = (torch.as_tensor(a, dtype=torch.float32) for a in (states, torques_nm, next_states))
     features, targets = first.features(s, u), first.target_delta(s, s1)
-    f_mean, f_std = _standardise(features)
-    d_mean, d_std = _standardise(targets)
-    z = (features - f_mean) / f_std
+    for m in members:  # unclamped until the box is set: the standardised features
+        m.set_normalisation(features.mean(0), features.std(0), targets.mean(0), targets.std(0))
+    z = first.normalise_features(features)
     for m in members:
-        m.set_normalisation(f_mean, f_std, d_mean, d_std)
         m.set_feature_box(z.min(0).values, z.max(0).values, margin=0.5)
-    x = first.normalise_features(features)
-    torch.manual_seed(config.seed)
-    for m in members:
-        _reset_linear_layers(m.net)
-    y = (targets - d_mean) / d_std
+    x, y = first.normalise_features(features), (targets - first.delta_mean) / first.delta_std
     _fit_gaussian([m.net for m in members], [m.head for m in members], x, y, config.train_steps, config.seed)
     return DynamicsEnsemble(members).eval()
 
@@ -342,9 +337,6 @@ class ResidualPRBEnsemble(nn.Module):
             features = self.features(x_t, u)
         self.f_mean, self.f_std = _standardise(features)
         self.r_mean, self.r_std = _standardise(residual)
-        torch.manual_seed(seed)
-        for net in self.nets:
-            _reset_linear_layers(net)
         z, y = (features - self.f_mean) / self.f_std, (residual - self.r_mean) / self.r_std
         _fit_gaussian(list(self.nets), list(self.heads), z, y, steps, seed)  # type: ignore[arg-type]
         self._stacked = None
@@ -418,8 +410,7 @@ class MPPIPlan:
 
 class MPPI:
     """Model-predictive path integral control of torques held ``hold_steps`` model steps per knot, from
-    ``step_fn(x (R, d), torque (R,)) -> x_next``, ``cost_fn(x, torque, x_next) -> (R,)`` and optional
-    ``terminal_fn(x_T) -> (R,)``: ``n_samples`` perturbed copies of each mean (the first unperturbed, kept alone
+    ``step_fn(x (R, d), torque (R,)) -> x_next`` and ``cost_fn(x, torque, x_next) -> (R,)``: ``n_samples`` perturbed copies of each mean (the first unperturbed, kept alone
     where every rollout diverged) weighted by ``exp(-cost / temperature)``."""
 
     def __init__(
@@ -433,12 +424,10 @@ class MPPI:
         noise_std_nm: float,
         temperature: float,
         seed: int = 0,
-        iterations: int = 1,
-        terminal_fn: Optional[Callable[[Tensor], Tensor]] = None,
     ) -> None:
-        self.step_fn, self.cost_fn, self.terminal_fn, self.limit = step_fn, cost_fn, terminal_fn, float(torque_limit_nm)
+        self.step_fn, self.cost_fn, self.limit = step_fn, cost_fn, float(torque_limit_nm)
         self.n_knots, self.hold_steps, self.n_samples = int(n_knots), int(hold_steps), int(n_samples)
-        self.noise_std, self.temperature, self.iterations = float(noise_std_nm), float(temperature), int(iterations)
+        self.noise_std, self.temperature = float(noise_std_nm), float(temperature)
         self.generator = torch.Generator().manual_seed(int(seed))
 
     @torch.inference_mode()
@@ -472,20 +461,13 @@ class MPPI:
         """The refined means ``(B, n_knots)`` of a ``plan`` (its remaining steps taken first)."""
         self.advance(plan, plan.steps)
         batch, k = plan.knots.shape[:2]
-        cost = plan.cost if self.terminal_fn is None else plan.cost + self.terminal_fn(plan.states).double()
-        cost = cost.reshape(batch, k)
+        cost = plan.cost.reshape(batch, k)
         cost = torch.where(torch.isfinite(cost), cost, torch.full_like(cost, math.inf))
         best = cost.min(1, keepdim=True).values
         weights = torch.softmax(-(cost - torch.where(torch.isfinite(best), best, 0.0)) / self.temperature, 1)
         lost = ~torch.isfinite(best[:, 0])  # every rollout diverged: keep the unperturbed (first) sequence
         weights[lost] = nn.functional.one_hot(torch.zeros(int(lost.sum()), dtype=torch.long), k).to(weights.dtype)
         return (weights[..., None] * plan.knots).sum(1)
-
-    def optimise(self, states: np.ndarray | Tensor, mean: Tensor) -> Tensor:
-        """Refined mean sequences ``(B, n_knots)`` [N m] of starts ``states (B, d)`` from ``mean (B, n_knots)``."""
-        for _ in range(self.iterations):
-            mean = self.finish(self.begin(states, mean))
-        return mean
 
 
 def swing_up_cost(params: RodParams, theta_rad: Tensor, theta_dot_rad_s: Tensor) -> Tensor:

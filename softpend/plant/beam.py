@@ -26,8 +26,7 @@ from exudyn.itemInterface import (
 )
 
 from softpend.checks import in_unit_interval, int_at_least, positive
-from softpend.plant.base import PlantBase
-from softpend.plant.exudyn_adapter import static_solver_settings
+from softpend.plant.base import PlantBase, static_solver_settings
 from softpend.plant.observation import Observation, energies, observation_from_tip
 from softpend.plant.params import RodParams
 
@@ -47,13 +46,9 @@ def _section(params: RodParams) -> dict[str, float]:
             "params.youngs_modulus_pa and params.stiffness_scale must be positive for the beam plant, got "
             f"E = {params.youngs_modulus_pa!r}, stiffness_scale = {params.stiffness_scale!r}"
         )
-    area = params.width_m * params.depth_m
-    scale = params.stiffness_scale
-    ea = params.youngs_modulus_pa * area * scale
-    shear_modulus = params.youngs_modulus_pa / (2.0 * (1.0 + POISSON_RATIO))
-    ga = SHEAR_CORRECTION * shear_modulus * area * scale
-    mu = params.mass_kg / params.length_m
-    damping = params.joint_damping_nms_per_rad * params.link_length_m
+    area, scale, e = params.width_m * params.depth_m, params.stiffness_scale, params.youngs_modulus_pa
+    ea, ga = e * area * scale, SHEAR_CORRECTION * (e / (2.0 * (1.0 + POISSON_RATIO))) * area * scale
+    mu, damping = params.mass_kg / params.length_m, params.joint_damping_nms_per_rad * params.link_length_m
     values = (mu, mu * params.depth_m**2 / 12.0, ei, ea, ga, damping, damping / ei * ea, damping / ei * ga)
     names = (
         "massPerLength crossSectionInertia bendingStiffness axialStiffness shearStiffness bendingDamping axialDamping"
@@ -117,18 +112,16 @@ class BeamPlant(PlantBase):
             mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, marker]))
         hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
         self._torque_load = None
+        markers = [ground_marker, hub_rotation]
         if hub_locked_at_rad is not None:
-            mbs.AddObject(
-                ObjectConnectorCoordinate(markerNumbers=[ground_marker, hub_rotation], offset=self._hub_angle_locked)
-            )
+            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=markers, offset=self._hub_angle_locked))
         else:
             if p.hub_inertia_kgm2 > 0:
                 mbs.AddObject(ObjectRigidBody2D(nodeNumber=hub, mass=0.0, inertia=p.hub_inertia_kgm2))
-            if p.hub_friction_nms_per_rad > 0:
-                damper = ObjectConnectorCoordinateSpringDamper(
-                    markerNumbers=[ground_marker, hub_rotation], stiffness=0.0, damping=p.hub_friction_nms_per_rad
+            if (friction := p.hub_friction_nms_per_rad) > 0:
+                mbs.AddObject(
+                    ObjectConnectorCoordinateSpringDamper(markerNumbers=markers, stiffness=0.0, damping=friction)
                 )
-                mbs.AddObject(damper)
             self._torque_load = mbs.AddLoad(LoadCoordinate(markerNumber=hub_rotation, load=0.0))
         mbs.Assemble()
         solver: Any = exu.MainSolverStatic()  # Any: exudyn's stubs declare its methods without self
@@ -145,10 +138,7 @@ class BeamPlant(PlantBase):
     def global_coordinates(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exudyn's nodal coordinates ``(x, y, rotation)`` per node, hub first (displacements from the upright
         straight rod), and their rates, for a state."""
-        if self.hub_locked:
-            phi, phi_dot = self._hub_angle_locked, 0.0
-        else:
-            phi, phi_dot = float(q[0]), float(qd[0])
+        phi, phi_dot = (self._hub_angle_locked, 0.0) if self.hub_locked else (float(q[0]), float(qd[0]))
         local = np.asarray(q[self._hub_offset :], float).reshape(self.n_elements, 3)
         local_dot = np.asarray(qd[self._hub_offset :], float).reshape(self.n_elements, 3)
         cs, sn = math.cos(phi), math.sin(phi)
@@ -162,13 +152,10 @@ class BeamPlant(PlantBase):
         """Inverse of :meth:`global_coordinates`."""
         c = np.asarray(c, float).reshape(-1, 3)
         c_t = np.asarray(c_t, float).reshape(-1, 3)
-        phi = self._hub_angle_locked if self.hub_locked else float(c[0, 2])
-        phi_dot = 0.0 if self.hub_locked else float(c_t[0, 2])
+        phi, phi_dot = (self._hub_angle_locked, 0.0) if self.hub_locked else (float(c[0, 2]), float(c_t[0, 2]))
         cs, sn = math.cos(phi), math.sin(phi)
-        gx = c[1:, 0]
-        gy = c[1:, 1] + self._s[1:]
-        vx = c_t[1:, 0] + phi_dot * gy  # the rigid rotation removed
-        vy = c_t[1:, 1] - phi_dot * gx
+        gx, gy = c[1:, 0], c[1:, 1] + self._s[1:]
+        vx, vy = c_t[1:, 0] + phi_dot * gy, c_t[1:, 1] - phi_dot * gx  # the rigid rotation removed
         local = np.column_stack([cs * gx + sn * gy, -sn * gx + cs * gy - self._s[1:], c[1:, 2] - phi])
         local_dot = np.column_stack([cs * vx + sn * vy, -sn * vx + cs * vy, c_t[1:, 2] - phi_dot])
         head, head_dot = ([], []) if self.hub_locked else ([phi], [phi_dot])
@@ -188,12 +175,8 @@ class BeamPlant(PlantBase):
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
         """Positions ``(n_elements + 1, 2)`` of the beam nodes, hub axis first [m]."""
-        if q is None:
-            c, _ = self._nodal_state()
-        else:
-            q = self._check_state(q, "q")
-            c, _ = self.global_coordinates(q, np.zeros_like(q))
-        c = c.reshape(-1, 3)
+        q = None if q is None else self._check_state(q, "q")
+        c = (self._nodal_state() if q is None else self.global_coordinates(q, np.zeros_like(q)))[0].reshape(-1, 3)
         return np.stack([c[:, 0], c[:, 1] + self._s], axis=1)
 
     def observe(self) -> Observation:

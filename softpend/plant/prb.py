@@ -18,17 +18,12 @@ from softpend.plant.params import RodParams
 def link_inertials(params: RodParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Masses [kg], centres of mass from the joint [m] and inertias about them [kg m^2] of the rod's links,
     the tip mass on the last."""
-    n = params.n_links
-    length = params.link_length_m
-    masses = np.full(n, params.link_mass_kg)
-    coms = np.full(n, length / 2)
-    inertias = np.full(n, params.link_mass_kg * length**2 / 12)
-    if params.tip_mass_kg > 0:
-        m_l, m_t = params.link_mass_kg, params.tip_mass_kg
-        c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
+    n, length, m_l, m_t = params.n_links, params.link_length_m, params.link_mass_kg, params.tip_mass_kg
+    masses, coms, inertias = np.full(n, m_l), np.full(n, length / 2), np.full(n, m_l * length**2 / 12)
+    if m_t > 0:
+        coms[-1] = c = (m_l * length / 2 + m_t * length) / (m_l + m_t)
         inertias[-1] = m_l * length**2 / 12 + m_l * (length / 2 - c) ** 2 + m_t * (length - c) ** 2
         masses[-1] = m_l + m_t
-        coms[-1] = c
     return masses, coms, inertias
 
 
@@ -64,14 +59,8 @@ class PRBPlant(PlantBase):
         self._forces = np.zeros(n)
         self._sc = exu.SystemContainer()
         mbs = self._sc.AddSystem()
-        node = mbs.AddNode(
-            NodeGenericODE2(
-                referenceCoordinates=[0.0] * n,
-                initialCoordinates=[0.0] * n,
-                initialCoordinates_t=[0.0] * n,
-                numberOfODE2Coordinates=n,
-            )
-        )
+        zeros = dict.fromkeys(("referenceCoordinates", "initialCoordinates", "initialCoordinates_t"), [0.0] * n)
+        node = mbs.AddNode(NodeGenericODE2(**zeros, numberOfODE2Coordinates=n))
         c, s = np.cos(self._hub_angle_locked), np.sin(self._hub_angle_locked)
         base_rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         # the ignores: exudyn's stub of these lists has no __init__
@@ -86,9 +75,9 @@ class PRBPlant(PlantBase):
                 linkCOMs=exu.Vector3DList([[0.0, c, 0.0] for c in coms]),  # type: ignore[call-arg]
                 linkMasses=masses,
                 gravity=[0.0, -p.gravity_mps2, 0.0],
-                jointForceVector=[0.0] * n,
-                jointPositionOffsetVector=[0.0] * n,
-                jointVelocityOffsetVector=[0.0] * n,
+                **dict.fromkeys(
+                    ("jointForceVector", "jointPositionOffsetVector", "jointVelocityOffsetVector"), [0.0] * n
+                ),
                 jointPControlVector=p_control,
                 jointDControlVector=d_control,
             )
@@ -124,7 +113,7 @@ class PRBPlant(PlantBase):
     def _set_torque(self, torque_nm: float) -> None:
         if not self.hub_locked:
             self._forces[0] = torque_nm
-            self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
+            self.set_joint_forces(self._forces)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""
@@ -155,12 +144,10 @@ class PRBPlant(PlantBase):
 
     def observation_from_state(self, q, qd) -> Observation:
         """Observation of a joint state (scalar ``math``: faster than NumPy for a few links)."""
-        length = self.params.link_length_m
-        locked = self.hub_locked
+        length, locked, sin, cos = self.params.link_length_m, self.hub_locked, math.sin, math.cos
         angle = phi = self._hub_angle_locked if locked else float(q[0])
         rate = phi_dot = 0.0 if locked else float(qd[0])
         ex = ey = ex_dot = ey_dot = 0.0
-        sin, cos = math.sin, math.cos
         for i in range(0 if locked else 1, len(q)):
             angle += float(q[i])
             rate += float(qd[i])
@@ -176,14 +163,10 @@ class PRBPlant(PlantBase):
         if q is None or qd is None:
             q, qd = self.joint_state()
         a, ad = self._absolute_angles(q, qd)
-        length = self.params.link_length_m
-        uy = np.cos(a)
+        length, c, m, uy = self.params.link_length_m, self.link_coms_m, self.link_masses_kg, np.cos(a)
         steps = (length * uy, -length * np.cos(a) * ad, -length * np.sin(a) * ad)
         joint_y, joint_vx, joint_vy = (np.concatenate([[0.0], np.cumsum(x)[:-1]]) for x in steps)
-        c = self.link_coms_m
-        com_vx = joint_vx - c * np.cos(a) * ad
-        com_vy = joint_vy - c * np.sin(a) * ad
-        m = self.link_masses_kg
+        com_vx, com_vy = joint_vx - c * np.cos(a) * ad, joint_vy - c * np.sin(a) * ad
         kinetic = float(np.sum(0.5 * m * (com_vx**2 + com_vy**2) + 0.5 * self.link_inertias_kgm2 * ad**2))
         if not self.hub_locked:
             kinetic += 0.5 * self.params.hub_inertia_kgm2 * float(qd[0]) ** 2

@@ -101,23 +101,23 @@ def test_softpend_track_writes_a_timestamped_csv(tmp_path, swing, capsys):
 
     times, points, hub = swing
     video = tmp_path / "clip.avi"
-    clip = render_video(
+    stamps, tips = render_video(
         video, SyntheticCamera(seed=4), times, points, hub, fps=100.0, clock_offset_s=12.5, drop_dot_frames=[7]
     )
-    assert video.exists() and len(clip.timestamps_s) > 40
+    assert video.exists() and len(stamps) > 40
     out = tmp_path / "track.csv"
     assert main(["track", str(video), "--out", str(out)]) == 0
     assert "1 lost" in capsys.readouterr().out
     data = read_sample_log(out)
-    assert data.columns == list(TRACK_COLUMNS) and len(data) == len(clip.timestamps_s)
-    np.testing.assert_allclose(data["camera_time_s"], clip.timestamps_s)
+    assert data.columns == list(TRACK_COLUMNS) and len(data) == len(stamps)
+    np.testing.assert_allclose(data["camera_time_s"], stamps)
     lost = data["lost"] > 0.5
     assert lost.tolist().index(True) == 7 and lost.sum() == 1 and np.isnan(data["x_m"][7])
     # through the MJPG codec the tip is still within a pixel of the truth
-    err = np.hypot(data["x_px"] - clip.tip_px[:, 0], data["y_px"] - clip.tip_px[:, 1])[~lost]
+    err = np.hypot(data["x_px"] - tips[:, 0], data["y_px"] - tips[:, 1])[~lost]
     assert np.sqrt(np.mean(err**2)) < 1.0
     # the camera's view of the hub angle matches the simulated hub
     hub_cam = data["hub_angle_rad"]
-    hub_true = (np.interp(np.asarray(clip.timestamps_s) - 12.5, times, hub) + np.pi) % (2 * np.pi) - np.pi
+    hub_true = (np.interp(np.asarray(stamps) - 12.5, times, hub) + np.pi) % (2 * np.pi) - np.pi
     assert np.max(np.abs(np.angle(np.exp(1j * (hub_cam - hub_true))))) < 0.06
     assert main(["track", str(tmp_path / "missing.avi"), "--out", str(out)]) == 2

@@ -101,14 +101,6 @@ class CameraEffects:
         return cls(noise_std_dn=3.0, exposure_s=0.004, blur_subframes=3, lighting_amplitude=0.1, gradient=0.1)
 
 
-@dataclass
-class RenderedClip:
-    """The camera-clock timestamps and true tip pixel positions of a rendered video."""
-
-    timestamps_s: np.ndarray
-    tip_px: np.ndarray
-
-
 class SyntheticCamera:
     """Render the rod to BGR frames through ``model`` with ``effects``; ``seed`` draws clutter and noise."""
 
@@ -264,9 +256,10 @@ def render_video(
     duration_s: Optional[float] = None,
     drop_dot_frames: Sequence[int] = (),
     progress: bool = False,
-) -> RenderedClip:
+) -> tuple[np.ndarray, np.ndarray]:
     """Render a trajectory (:meth:`SyntheticCamera.frames`) to an MJPG video and a sidecar ``<path>.json``; a frame
-    exposed until ``t`` is stamped ``t + clock_offset_s`` (+ jitter), ``drop_dot_frames`` have the dot hidden."""
+    exposed until ``t`` is stamped ``t + clock_offset_s`` (+ jitter), ``drop_dot_frames`` have the dot hidden.
+    Returns the camera-clock timestamps and the true tip pixel positions (NaN: hidden)."""
     path = Path(path)
     check_fps("fps", fps)
     times_s = np.asarray(times_s, dtype=float)
@@ -307,7 +300,7 @@ def render_video(
     }
     with atomic_write(str(path) + ".json", "w") as handle:
         handle.write(json.dumps(sidecar))
-    return RenderedClip(stamps, tips)
+    return stamps, tips
 
 
 def _hide_dot(frame: np.ndarray, tip_px: np.ndarray, camera: SyntheticCamera) -> np.ndarray:

@@ -18,23 +18,10 @@ MIN_FRAME_SIDE_PX = 8
 
 @dataclass(frozen=True)
 class ColourRange:
-    """An HSV box in OpenCV units (H in [0, 180), S and V in [0, 255])."""
+    """An HSV box in OpenCV units (H in [0, 180), S and V in [0, 255]; lower <= upper)."""
 
     lower_hsv: tuple[int, int, int]
     upper_hsv: tuple[int, int, int]
-
-    def __post_init__(self) -> None:
-        for name in ("lower_hsv", "upper_hsv"):
-            value = getattr(self, name)
-            ok = (
-                isinstance(value, (tuple, list))
-                and len(value) == 3
-                and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)
-            )
-            if not ok:
-                raise ValueError(f"{name} must be three integers in [0, 255], got {value!r}")
-        if any(lo > hi for lo, hi in zip(self.lower_hsv, self.upper_hsv)):
-            raise ValueError(f"lower_hsv {self.lower_hsv} must not exceed upper_hsv {self.upper_hsv}")
 
     def mask(self, frame_bgr: np.ndarray) -> np.ndarray:
         """Binary (0/255) mask of the pixels in range."""

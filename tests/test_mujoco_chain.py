@@ -33,7 +33,7 @@ def _mujoco_angles(q0_mujoco: np.ndarray, substeps: int = 40, integrator: str = 
     rows = []
     for torque in TORQUES_NM:
         chain.step(float(torque))
-        rows.append(chain.joint_state()[0])
+        rows.append(chain.data.qpos.copy())
     assert not chain.diverged
     return np.array(rows)
 

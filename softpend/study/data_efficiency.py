@@ -142,15 +142,9 @@ def plant_seconds_rows(
         (key, rows, "real_s_to_balance", "balanced_starts")
         for key, rows in (("greybox", greybox), ("greybox_beam", beam), *(planner or {}).items())
     ]
+    fields = ("key", "method", "seed", "plant_s_to_balance", "balanced_starts", "starts")
     return [
-        {
-            "key": key,
-            "method": METHODS[key],
-            "seed": int(r["seed"]),
-            "plant_s_to_balance": float(r[seconds]),
-            "balanced_starts": int(r[balanced]),
-            "starts": int(r["starts"]),
-        }
+        dict(zip(fields, (key, METHODS[key], int(r["seed"]), float(r[seconds]), int(r[balanced]), int(r["starts"]))))
         for key, rows, seconds, balanced in groups
         for r in rows
     ]
@@ -253,11 +247,9 @@ def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = 
         )
 
 
-def pilco_rows_if_trained(
-    seeds: Iterable[int], runs_root: Path | str, report_seeds: Sequence[int] = REPORT_SEEDS
-) -> Optional[list[dict[str, Any]]]:
-    """The book's PILCO runs of ``seeds`` as :func:`~softpend.study.fresh_starts.seed_rows` rows, or None if any is
-    not trained (nothing is trained here)."""
+def pilco_rows_if_trained(seeds: Iterable[int], runs_root: Path | str) -> Optional[list[dict[str, Any]]]:
+    """The book's PILCO runs of ``seeds`` as :func:`~softpend.study.fresh_starts.seed_rows` rows on the report starts,
+    or None if any is not trained (nothing is trained here)."""
     from softpend.study.fresh_starts import pilco_fresh_start_rows, seed_rows
     from softpend.study.head_to_head import pilco_jobs, pilco_runs
     from softpend.study.presets import load_hparams
@@ -266,7 +258,7 @@ def pilco_rows_if_trained(
     if not Path(runs_root).is_dir() or pilco_jobs(config, seeds, runs_root):
         return None
     results = pilco_runs(config, seeds, runs_root, progress=False)
-    return seed_rows({}, pilco_fresh_start_rows(results, report_seeds), results)
+    return seed_rows({}, pilco_fresh_start_rows(results), results)
 
 
 def paired_ratio_rows(numerator: Mapping[int, float], denominator: Mapping[int, float]) -> list[dict[str, Any]]:

@@ -64,13 +64,6 @@ def _scoring_source() -> bytes:
     return "".join(inspect.getsource(code) for code in (evaluation, held_starts, fresh_start_row)).encode()
 
 
-def _evaluation_key(agent_path: Path, report_seeds: Sequence[int], duration_s: float) -> str:
-    """Hash of the agent's bytes, the scoring code, the starts and the duration."""
-    digest = hashlib.sha256(agent_path.read_bytes() + _scoring_source())
-    digest.update(json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode())
-    return digest.hexdigest()
-
-
 def _refuse_selection_starts(report_seeds: Sequence[int], selection_seeds: Sequence[int], what: str) -> None:
     if overlap := set(report_seeds) & set(selection_seeds):
         raise ValueError(f"report seeds {sorted(overlap)} were used to select {what}")
@@ -86,7 +79,8 @@ def rl_fresh_start_rows(
     configs: Optional[Mapping[str, Any]] = None,
 ) -> list[dict[str, Any]]:
     """One row per (method, seed, agent) of the RL runs on ``report_seeds`` (``configs``: ``{algo: config}`` picks the
-    folders), cached in :data:`FRESH_STARTS_FILE`; ``ValueError`` if a report seed selected a run's agents."""
+    folders), cached in :data:`FRESH_STARTS_FILE` under a hash of the agent, the scoring code, the starts and the
+    duration; ``ValueError`` if a report seed selected a run's agents."""
     from softpend.rl.dqn import evaluate_agent, load_agent
 
     rows = []
@@ -101,7 +95,8 @@ def rl_fresh_start_rows(
                 _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
                 best = folder / "best_agent.zip"
                 agent_file = best if agent_kind == "best" and best.exists() else folder / "agent.zip"
-                key = _evaluation_key(agent_file, report_seeds, duration_s)
+                starts = json.dumps([list(map(int, report_seeds)), float(duration_s)]).encode()
+                key = hashlib.sha256(agent_file.read_bytes() + _scoring_source() + starts).hexdigest()
                 cached = cache.get(agent_kind)
                 if not (isinstance(cached, dict) and cached.get("key") == key and isinstance(cached.get("row"), dict)):
                     summary = evaluate_agent(model, config, seeds=tuple(report_seeds), duration_s=duration_s)
@@ -220,10 +215,9 @@ def converged_fresh_start_rows(
 
     runs = [(algo, int(seed)) for algo in METHOD_NAMES for seed in seeds]
     agents = {run: load_agent(run_folder(runs_root, *run), "final") for run in runs}
-    for (algo, seed), (_, config) in agents.items():
-        _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {algo} seed {seed}")
     groups: dict[tuple[Any, ...], list[tuple[str, int]]] = {}
     for run, (_, config) in agents.items():
+        _refuse_selection_starts(report_seeds, config.selection_seeds, f"the agents of {run[0]} seed {run[1]}")
         groups.setdefault((config.task, config.action_repeat, config.n_torque_levels), []).append(run)
     summaries: dict[tuple[str, int], EvaluationSummary] = {}
     for members in groups.values():

@@ -78,13 +78,7 @@ class MuJoCoChain:
 
     def hang(self) -> None:
         """Set the state to hanging at rest."""
-        q0 = np.zeros(self.params.n_links + 1)
-        q0[0] = math.pi
-        self.set_state(q0, np.zeros_like(q0))
-
-    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """The joint state ``(q, q_dot)`` (copies)."""
-        return self.data.qpos.copy(), self.data.qvel.copy()
+        self.set_state(np.r_[math.pi, np.zeros(self.params.n_links)], np.zeros(self.params.n_links + 1))
 
     def step(self, torque_nm: float) -> None:
         """Hold ``torque_nm`` (clamped by the actuator) for one control step."""

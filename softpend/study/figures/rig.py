@@ -57,16 +57,13 @@ def draw_filmstrip(
     with the tracker's overlay, cropped to ``half_width_px`` around ``centre_px`` if given."""
     import matplotlib.pyplot as plt
 
-    if n_frames < 1:
-        raise ValueError(f"n_frames must be >= 1, got {n_frames!r}")
     frames = [f for f in frames if span_s is None or f[0] <= span_s]
     if not frames:
         raise ValueError("frames must hold at least one frame (within span_s)")
     times = np.array([f[0] for f in frames])
     wanted = np.linspace(times[0], times[-1], min(n_frames, len(frames)))
     chosen = sorted({int(np.argmin(np.abs(times - t))) for t in wanted})
-    height, width = frames[0][1].shape[:2]
-    aspect = 1.0 if half_width_px is not None else height / width
+    aspect = 1.0 if half_width_px is not None else frames[0][1].shape[0] / frames[0][1].shape[1]
     fig, axes = plt.subplots(1, len(chosen), figsize=(1.9 * len(chosen), 1.9 * aspect + 0.35), squeeze=False)
     for ax, index in zip(axes[0], chosen):
         time_s, frame, detection = frames[index]
@@ -105,7 +102,6 @@ def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[st
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper right")
-    if title:
-        axes[0].set_title(title)
+    axes[0].set_title(title or "")
     fig.tight_layout()
     return fig

@@ -40,9 +40,8 @@ def _front(ax, d: RigDesign) -> None:
     p, hub, add = d.params, d.hub, ax.add_patch
     L, D = p.length_m, d.beam_thickness_m
     fov_w, fov_h = d.field_of_view_m
-    centre_px = np.array(d.camera_model.centre_px)
-    x0 = -centre_px[0] * d.pixel_size_m
-    y0 = -(d.camera.height_px - centre_px[1]) * d.pixel_size_m
+    cx, cy = d.camera_model.centre_px
+    x0, y0 = -cx * d.pixel_size_m, -(d.camera.height_px - cy) * d.pixel_size_m
     add(Rectangle((x0, y0), fov_w, fov_h, fill=False, ls="--", lw=0.8, ec="0.3"))
     field = (
         f"camera field {fov_w * 1e3:.0f} x {fov_h * 1e3:.0f} mm, "
@@ -74,8 +73,7 @@ def _front(ax, d: RigDesign) -> None:
     tip = f"tip mass {p.tip_mass_kg * 1e3:.3g} g, dot diameter {2e3 * d.dot_radius_m:.0f} mm"
     _arrow(ax, tip, (0, -L), (0.05, -L - 0.01))
     ax.legend(loc="upper center", fontsize=7, framealpha=0.9, bbox_to_anchor=(0.5, -0.11), ncol=2)
-    margin = 0.03
-    ax.set(xlim=(x0 - margin, x0 + fov_w + margin), ylim=(y0 - margin, y0 + fov_h + margin))
+    ax.set(xlim=(x0 - 0.03, x0 + fov_w + 0.03), ylim=(y0 - 0.03, y0 + fov_h + 0.03))
     ax.set(aspect="equal", title="front view (camera plane), rod hanging", xlabel="x [m]", ylabel="y [m]")
 
 
@@ -97,10 +95,7 @@ def _hub_detail(ax, d: RigDesign) -> None:
     _dimension(ax, (0, -pocket), (0, -r), f"pocket {r - pocket:.0f}", (-r - 6, 0), fontsize=7)
     _dimension(ax, (0, 0), (0, -flag), f"flag {flag:.0f}", (r + 8, 0), fontsize=7)
     _dimension(ax, (0, 0), (0, -marker), f"{marker:.0f}", (-flag_w / 2 - 5, 0), fontsize=7)
-    note = (
-        f"flag {hub.flag_gap_m * mm:.0f} mm in front of the beam,\n"
-        f"mount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)"
-    )
+    note = f"flag {hub.flag_gap_m * mm:.0f} mm in front of the beam,\nmount {hub.mount_thickness_m * mm:.0f} mm thick (PLA/PETG)"
     ax.text(0, -flag - 12, note, fontsize=7, ha="center", va="top")
     ax.set(aspect="equal", xlim=(-r - 14, r + 20), ylim=(-flag - 24, r + 10), title="hub mount [mm]")
 

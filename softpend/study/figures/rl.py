@@ -25,17 +25,15 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], th
         color = COLORS.get(method, f"C{i}")
         for col, axis in enumerate(("episode", "plant_s")):
             for k, log in enumerate(logs):
-                smoothed = moving_average(log.column("return"), window)
-                axes[0, col].plot(
-                    log.column(axis), smoothed, color=color, lw=0.8, alpha=0.6, label=method if k == 0 else None
-                )
+                style = dict(color=color, lw=0.8, alpha=0.6, label=method if k == 0 else None)
+                axes[0, col].plot(log.column(axis), moving_average(log.column("return"), window), **style)
             if len(logs) >= 2:
                 band = interval_band(logs, "max_upright_std_rad", axis=axis, seed=0, failed_as=SUCCESS_STD_RAD)
                 axes[1, col].plot(band["x"], band["value"], color=color, label=method)
                 axes[1, col].fill_between(band["x"], band["low"], band["high"], color=color, alpha=0.2, lw=0)
             else:
-                log = logs[0]
-                axes[1, col].plot(log.column(axis, "evaluations"), worst_start_std_rad(log), color=color, label=method)
+                worst = worst_start_std_rad(logs[0])
+                axes[1, col].plot(logs[0].column(axis, "evaluations"), worst, color=color, label=method)
         asym = float(np.median([run_to_asymptote(log, window=window)[0] for log in logs]))
         if math.isfinite(asym):
             axes[0, 0].axvline(asym, color=color, ls=":", lw=1)
@@ -43,11 +41,9 @@ def plot_learning_curves(logs_by_method: Mapping[str, Sequence[TrainingLog]], th
     axes[1, 0].set_ylabel(
         f"evaluation upright std [rad]\n(worst start, {SUCCESS_STD_RAD:g} if one failed; IQM over seeds)"
     )
-    for col in range(2):
-        axes[1, col].axhline(threshold_rad, color="k", ls="--", lw=0.8)
-        axes[1, col].set_yscale("log")
-    axes[1, 0].set_xlabel("training episodes")
-    axes[1, 1].set_xlabel("real plant time [s]")
+    for ax, xlabel in zip(axes[1], ("training episodes", "real plant time [s]")):
+        ax.axhline(threshold_rad, color="k", ls="--", lw=0.8)
+        ax.set(yscale="log", xlabel=xlabel)
     axes[0, 0].legend()
     fig.tight_layout()
     return fig
@@ -72,8 +68,7 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
             a.axvline(result.swing_up_time_s, color="k", ls=":", lw=1)
     end = min(t[-1], (result.swing_up_time_s + 1.0) if math.isfinite(result.swing_up_time_s) else t[-1])
     times = np.linspace(0.0, end, n_frames)
-    strip = fig.add_subplot(grid[3])
-    spacing = 0.7
+    strip, spacing = fig.add_subplot(grid[3]), 0.7
     for k, time_s in enumerate(times):
         i = int(np.argmin(np.abs(t - time_s)))
         points = np.asarray(link_points(result.joint_angles_rad[i])) + np.array([k * spacing, 0.0])
@@ -88,9 +83,8 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
 
 def _break_at_wraps(angle_rad: np.ndarray) -> np.ndarray:
     """A copy with NaN where a wrapped angle jumps across +-pi."""
-    out = np.asarray(angle_rad, dtype=float).copy()
-    jumps = np.flatnonzero(np.abs(np.diff(out)) > np.pi) + 1
-    out[jumps] = np.nan
+    out = np.array(angle_rad, dtype=float)
+    out[1:][np.abs(np.diff(out)) > np.pi] = np.nan
     return out
 
 

@@ -170,32 +170,28 @@ class MotorLink:
         _OPEN_LINKS.add(self)
         if self.install_exit_hooks:
             _install_exit_hooks()
+        self.device, nonce = None, int.from_bytes(os.urandom(4), "little")
         try:
-            self._handshake()
+            self._write(proto.MSG_HELLO, (proto.PROTOCOL_VERSION, nonce))
+            deadline = self.clock.now_s() + self.timeout_s
+            while self.device is None:
+                try:
+                    _, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK,))
+                except LinkTimeout as exc:
+                    raise HandshakeError(f"no HELLO_ACK from {self.port!r} within {self.timeout_s:.3f} s") from exc
+                version, echoed, cpr, limit, watchdog_ms, rate_hz = values
+                if echoed != nonce:
+                    continue  # a stale answer to an earlier session
+                if version != proto.PROTOCOL_VERSION:
+                    raise HandshakeError(f"device speaks protocol version {version}, host {proto.PROTOCOL_VERSION}")
+                try:
+                    self.device = DeviceInfo(version, cpr, limit, watchdog_ms / 1000.0, float(rate_hz))
+                except ValueError as exc:
+                    raise HandshakeError(f"device {self.port!r} announced an impossible HELLO_ACK: {exc}") from exc
         except BaseException:
             self.close()
             raise
         return self
-
-    def _handshake(self) -> None:
-        nonce = int.from_bytes(os.urandom(4), "little")
-        self._write(proto.MSG_HELLO, (proto.PROTOCOL_VERSION, nonce))
-        deadline = self.clock.now_s() + self.timeout_s
-        while True:
-            try:
-                _, _, values = self._next_message(deadline, (proto.MSG_HELLO_ACK,))
-            except LinkTimeout as exc:
-                raise HandshakeError(f"no HELLO_ACK from {self.port!r} within {self.timeout_s:.3f} s") from exc
-            version, echoed, cpr, limit, watchdog_ms, rate_hz = values
-            if echoed != nonce:
-                continue  # a stale answer to an earlier session
-            if version != proto.PROTOCOL_VERSION:
-                raise HandshakeError(f"device speaks protocol version {version}, host {proto.PROTOCOL_VERSION}")
-            try:
-                self.device = DeviceInfo(version, int(cpr), float(limit), watchdog_ms / 1000.0, float(rate_hz))
-                return
-            except ValueError as exc:
-                raise HandshakeError(f"device {self.port!r} announced an impossible HELLO_ACK: {exc}") from exc
 
     def close(self) -> None:
         """Send STOP (zero torque) and close the port.  Safe to call more than once."""
@@ -211,7 +207,7 @@ class MotorLink:
     def __enter__(self) -> "MotorLink":
         return self if self.is_open else self.open()
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, *exc) -> None:
         self.close()
 
     def __del__(self) -> None:  # pragma: no cover - garbage collection timing
@@ -277,13 +273,9 @@ class MotorLink:
         return None
 
     def _state_from(self, seq: int, values: tuple) -> MotorState:
-        device_us, counts, velocity, applied, last_cmd, flags = values
-        cpr = self.device.counts_per_rev if self.device else 1
-        phi = math.pi + counts * (2 * math.pi / cpr)  # zero counts: hanging
-        host_time_s = self.clock.now_s()
-        return MotorState(
-            host_time_s, device_us * 1e-6, phi, float(velocity), float(applied), int(last_cmd), int(flags), int(seq)
-        )
+        device_us, counts, velocity, applied, last_cmd, flags = values  # the struct's ints and floats
+        phi = math.pi + counts * (2 * math.pi / (self.device.counts_per_rev if self.device else 1))  # 0: hanging
+        return MotorState(self.clock.now_s(), device_us * 1e-6, phi, velocity, applied, last_cmd, flags, seq)
 
     def _require_open(self):
         if self._serial is None:

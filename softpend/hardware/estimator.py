@@ -54,7 +54,6 @@ class Estimate:
     q_dot: np.ndarray
     observation: Observation
     tip_std_m: float
-    blind_s: float
 
 
 @dataclass
@@ -126,15 +125,10 @@ class RigStateEstimator:
         self.started = True
 
     @property
-    def time_s(self) -> float:
-        """Time of the newest encoder sample [s]."""
-        self._require_started()
-        return self._history[-1].time_s
-
-    @property
     def blind_s(self) -> float:
         """Time from the capture of the last correcting frame to the newest encoder sample [s]."""
-        return self.time_s - self._last_tip_time_s
+        self._require_started()
+        return self._history[-1].time_s - self._last_tip_time_s
 
     @property
     def is_blind(self) -> bool:
@@ -274,7 +268,7 @@ class RigStateEstimator:
         _, _, jac = self._tip_model(last.x)
         tip_std = float(math.sqrt(max(np.trace(jac @ last.p @ jac.T) / 2, 0.0)))
         observation = self.model.observation_from_state(q, qd)
-        return Estimate(last.time_s + lead * self.dt_s, q, qd, observation, tip_std, self.blind_s)
+        return Estimate(last.time_s + lead * self.dt_s, q, qd, observation, tip_std)
 
     def stats(self) -> dict[str, float]:
         return {name: float(count) for name, count in self.counts.items()}

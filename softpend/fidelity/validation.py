@@ -9,7 +9,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from softpend.checks import int_at_least, one_of, positive
+from softpend.checks import int_at_least, one_of
 from softpend.plant import RodParams, make_plant
 from softpend.plant.base import PlantBase
 
@@ -18,9 +18,7 @@ EULER_BERNOULLI_BETA_L: tuple[float, ...] = (1.875104068711961, 4.69409113297417
 
 
 def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.ndarray:
-    """Bending frequencies [Hz] of the clamped-free rod without tip mass."""
-    if not 1 <= n_modes <= len(EULER_BERNOULLI_BETA_L):
-        raise ValueError(f"n_modes must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {n_modes!r}")
+    """Bending frequencies [Hz] of the clamped-free rod without tip mass (at most three modes)."""
     mu = params.mass_kg / params.length_m
     beta_l = np.asarray(EULER_BERNOULLI_BETA_L[:n_modes])
     return beta_l**2 / (2 * math.pi * params.length_m**2) * math.sqrt(params.bending_stiffness_nm2 / mu)
@@ -28,8 +26,6 @@ def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.nd
 
 def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cantilever mode shape ``w_k(s / L)`` (1-based ``mode``, tip value 2 in magnitude) and its slope ``L dw_k/ds``."""
-    if not 1 <= mode <= len(EULER_BERNOULLI_BETA_L):
-        raise ValueError(f"mode must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {mode!r}")
     b = EULER_BERNOULLI_BETA_L[mode - 1]
     x = b * np.asarray(s_over_l, dtype=float)
     sigma = (math.cosh(b) + math.cos(b)) / (math.sinh(b) + math.sin(b))
@@ -41,8 +37,6 @@ def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndar
 def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarray]:
     """State at rest of a hub-locked plant whose rod follows a lateral deflection ``lateral_m(s)`` [m] with slope
     ``slope(s)`` (arc length ``s`` [m], in the hub frame)."""
-    if not getattr(plant, "hub_locked", False):
-        raise ValueError("plant must have its hub locked (hub_locked_at_rad set)")
     p = plant.params
     q = np.zeros(plant.n_coordinates)
     if hasattr(plant, "n_elements"):  # the beam: (u, v, psi) per node after the hub
@@ -93,23 +87,19 @@ def cantilever_free_vibration(
     plant: str = "beam",
     params: Optional[RodParams] = None,
     resolution: Optional[int] = None,
-    duration_s: Optional[float] = None,
     dt_s: float = 5e-4,
-    amplitude_m: Optional[float] = None,
     modes: Sequence[int] = (1, 2),
 ) -> FreeVibration:
     """Release the hub-locked, gravity-free, undamped rod from the sum of the ``modes``' shapes (tip amplitude
-    ``L/500`` each by default) and fit one frequency per mode.  ``resolution`` is the beam's ``n_elements`` or the
-    chain's ``n_links``; ``duration_s`` defaults to six periods of the first mode."""
+    ``L/500`` each) and fit one frequency per mode over six periods of the slowest.  ``resolution`` is the beam's
+    ``n_elements`` or the chain's ``n_links``."""
     params = (params or RodParams()).replace(gravity_mps2=0.0, joint_damping_nms_per_rad=0.0, tip_mass_kg=0.0)
     params, resolution, resolution_kwargs = _resolved(plant, params, resolution)
     modes = [int(m) for m in modes]
     theory = euler_bernoulli_frequencies_hz(params, max(modes))[np.asarray(modes) - 1]
-    if duration_s is None:
-        duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
-    positive("duration_s", duration_s)
+    duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
     length = params.length_m
-    amplitude = length / 500.0 if amplitude_m is None else float(amplitude_m)
+    amplitude = length / 500.0
     kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)
     if plant == "beam":
         kwargs["newton_relative_tolerance"] = 1e-10
@@ -155,20 +145,13 @@ def fit_modal_frequencies_hz(time_s: np.ndarray, signal: np.ndarray, centres_hz:
     if t.shape != y.shape or t.ndim != 1 or len(t) < 16:
         raise ValueError("time_s and signal must be 1-D arrays of the same length (>= 16 samples)")
     centres = np.sort(np.asarray(centres_hz, dtype=float))
-    edges = [c / 2 for c in centres] + [centres[-1] * 2]
-    lows = [edges[0]] + [math.sqrt(a * b) for a, b in zip(centres[:-1], centres[1:])]
-    highs = lows[1:] + [edges[-1]]
+    lows = [centres[0] / 2] + [math.sqrt(a * b) for a, b in zip(centres[:-1], centres[1:])]
+    highs = lows[1:] + [centres[-1] * 2]
     start = np.array([_fft_peak_hz(t, y, (lo, hi)) for lo, hi in zip(lows, highs)])
     scale = float(np.max(np.abs(y))) or 1.0
 
-    def design(freqs):
-        cols = [np.ones_like(t)]
-        for f in freqs:
-            cols += [np.cos(2 * math.pi * f * t), np.sin(2 * math.pi * f * t)]
-        return np.stack(cols, axis=1)
-
-    def residual(freqs):
-        a = design(freqs)
+    def residual(freqs):  # of the best fit of a constant and the sinusoids
+        a = np.stack([np.ones_like(t)] + [w(2 * math.pi * f * t) for f in freqs for w in (np.cos, np.sin)], axis=1)
         coef, *_ = np.linalg.lstsq(a, y / scale, rcond=None)
         return a @ coef - y / scale
 
@@ -177,10 +160,10 @@ def fit_modal_frequencies_hz(time_s: np.ndarray, signal: np.ndarray, centres_hz:
 
 
 def measured_bending_frequencies(
-    plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None, **kwargs: Any
+    plant: str = "beam", params: Optional[RodParams] = None, resolution: Optional[int] = None
 ) -> dict[str, float]:
     """First two cantilever frequencies from a free-vibration run and their error against theory."""
-    run = cantilever_free_vibration(plant, params, resolution, **kwargs)
+    run = cantilever_free_vibration(plant, params, resolution)
     values = {"hz": run.frequencies_hz, "theory_hz": run.theory_hz, "error_pct": run.error_pct}
     return {f"f{k + 1}_{key}": float(v[k]) for k in (0, 1) for key, v in values.items()}
 

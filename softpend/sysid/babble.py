@@ -80,9 +80,6 @@ class BabbleProtocol:
         """Stored samples per trial."""
         return int(round(self.trial_length_s / self.dt_s))
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
     def replace(self, **changes: Any) -> "BabbleProtocol":
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
@@ -145,14 +142,12 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
         o = plant.step(torque)
 
     # sensor model: noise on the sampled positions, camera quantities delayed by `delay` samples
-    true_positions = obs[:, :5]
-    raw = np.empty((n + 1, 5))
+    raw = np.empty((n + 1, 5))  # phi, theta, ex, ey, er
     clock = np.arange(delay, delay + n + 1)  # encoder and torque clock
-    i_phi, i_theta, i_ex, i_ey, i_er = range(5)
-    noise = {i_phi: protocol.phi_noise_std_rad, i_ex: protocol.tip_noise_std_m, i_ey: protocol.tip_noise_std_m}
-    for i, std in (noise | {i_er: protocol.er_noise_std_rad}).items():  # the encoder on the torque's clock
-        raw[:, i] = true_positions[clock if i == i_phi else slice(n + 1), i] + std * rng.standard_normal(n + 1)
-    raw[:, i_theta] = np.arctan2(-raw[:, i_ex], raw[:, i_ey])
+    tip = protocol.tip_noise_std_m
+    for i, std in zip((0, 2, 3, 4), (protocol.phi_noise_std_rad, tip, tip, protocol.er_noise_std_rad)):
+        raw[:, i] = obs[clock if i == 0 else slice(n + 1), i] + std * rng.standard_normal(n + 1)  # the encoder: clock
+    raw[:, 1] = np.arctan2(-raw[:, 2], raw[:, 3])
     angle_mask = np.array([is_angle(x) for x in POSITION_NAMES])
     raw[:, angle_mask] = wrap_angle_rad(raw[:, angle_mask])
     stored = clock[1:]
@@ -179,8 +174,6 @@ def babble(
     also written to ``path`` if given.  Raises ``ValueError`` on bad arguments or a dataset too large (before the
     first trial), ``SimulationDiverged`` naming the trial if the simulator fails."""
     protocol = protocol if protocol is not None else BabbleProtocol()
-    if not isinstance(protocol, BabbleProtocol):
-        raise ValueError(f"protocol must be a BabbleProtocol, got {type(protocol).__name__}")
     params = params if params is not None else RodParams()
     seed = int_at_least("seed", seed, 0)
     sim = make_plant(plant, params=params, dt_s=protocol.dt_s, substeps=protocol.substeps)
@@ -207,7 +200,7 @@ def babble(
         plant=plant,
         plant_params=params,
         seed=seed,
-        protocol=dict(protocol.to_dict(), feedback_trials=[int(t["feedback"]) for t in trials]),
+        protocol=dict(dataclasses.asdict(protocol), feedback_trials=[int(t["feedback"]) for t in trials]),
         notes="motor babbling (softpend.sysid.babble)",
     )
     dataset = TrajectoryDataset(metadata=metadata, **arrays)

@@ -4,9 +4,8 @@ angle, tip position and their differenced rates), each optionally followed by ``
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
 
@@ -84,13 +83,6 @@ class StateLayout:
             raise ValueError(f"name must be one of {self.names}, got {name!r}")
         return self.names.index(name)
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "StateLayout":
-        return cls(**data)
-
     def states(self, dataset: TrajectoryDataset) -> np.ndarray:
         """State vectors of every trial, ``(T, N - history, d)``: sample ``i`` is the dataset's ``i + history``."""
         missing = [n for n in self.position_names if n not in dataset.position_names]
@@ -128,13 +120,9 @@ class StateLayout:
         )
 
 
-@dataclass(frozen=True, eq=False)
-class TransitionData:
+class TransitionData(NamedTuple):
     """Flattened one-step transitions: ``states`` and ``next_states`` ``(M, d)``, ``torques_nm`` ``(M,)``."""
 
     states: np.ndarray
     torques_nm: np.ndarray
     next_states: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.states.shape[0])

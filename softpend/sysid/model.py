@@ -4,6 +4,7 @@ ensemble of them; saved as a state dict plus JSON metadata and read back with ``
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -228,7 +229,7 @@ class DynamicsModel(nn.Module):
     def config(self) -> dict[str, Any]:
         """Constructor arguments (for JSON metadata)."""
         names = ("dt_s", "torque_limit_nm", "activation", "integrate_positions", "tip_reach_m")
-        return {"layout": self.layout.to_dict(), "hidden_widths": list(self.hidden_widths)} | {
+        return {"layout": dataclasses.asdict(self.layout), "hidden_widths": list(self.hidden_widths)} | {
             name: getattr(self, name) for name in names
         }
 
@@ -331,7 +332,7 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
         n_weights = size * sum((a + 1) * b for a, b in zip(edges[:-1], edges[1:]))
         if n_weights > MAX_LOADED_WEIGHTS:
             raise ValueError(f"the network would have about {n_weights:.3g} weights, above {MAX_LOADED_WEIGHTS:.0e}")
-        config["layout"] = StateLayout.from_dict(config["layout"])
+        config["layout"] = StateLayout(**config["layout"])
         members = [DynamicsModel(**config) for _ in range(size)]
         model: DynamicsModel | DynamicsEnsemble = (
             DynamicsEnsemble(members) if meta["kind"] == "ensemble" else members[0]

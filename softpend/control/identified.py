@@ -14,7 +14,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from softpend.checks import positive, positive_int
+from softpend.checks import in_range, positive, positive_int, set_ints
 from softpend.control.swingup import EnergySwingUpController
 from softpend.envs.randomised import RodUncertainty
 from softpend.evaluation import HOLD_STD_RAD, evaluate
@@ -28,6 +28,8 @@ from softpend.task import Task
 CHECK_SEED_BASE = 500_000
 #: Relative standard deviation standing for one that is not finite (a draw spans at most a factor ``e``).
 WIDEST_RELATIVE_STD = 1e3
+#: Standard deviation of the simulated recorder's encoder [rad] and camera [m] noise.
+SENSOR_NOISE_STD = 0.002
 #: Records ``seconds`` of the excitation program on the plant (from hanging) and returns the dataset.
 Recorder = Callable[[float], TrajectoryDataset]
 
@@ -49,13 +51,10 @@ class RouteConfig:
     uncertainty_scale: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("step_s", "max_excitation_s", "peak_fraction", "band_high_hz", "check_duration_s"):
+        for name in ("step_s", "max_excitation_s", "band_high_hz", "check_duration_s", "uncertainty_scale"):
             positive(name, getattr(self, name))
-        positive("uncertainty_scale", self.uncertainty_scale)
-        for name in ("check_draws", "check_starts"):
-            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
-        if self.peak_fraction > 1:
-            raise ValueError(f"peak_fraction must be at most 1 (of the torque limit), got {self.peak_fraction!r}")
+        in_range("peak_fraction", self.peak_fraction, 1e-3, 1)
+        set_ints(self, "check_draws check_starts", 1)
         if self.step_s > self.max_excitation_s:
             raise ValueError(f"step_s ({self.step_s}) must not exceed max_excitation_s ({self.max_excitation_s})")
 
@@ -77,46 +76,26 @@ def design_swingup(params: RodParams, dt_s: float = 0.01) -> EnergySwingUpContro
     return EnergySwingUpController.for_observations(params, dt_s=dt_s)
 
 
-def excitation_protocol(
-    seconds: float,
-    dt_s: float,
-    config: RouteConfig,
-    phi_noise_std_rad: float = 0.0,
-    tip_noise_std_m: float = 0.0,
-    program: str = "multisine",
-) -> BabbleProtocol:
-    """One hanging trial of the multisine (or another babbling ``program``), ``seconds`` long, no feedback, with
-    encoder and camera noise."""
-    return BabbleProtocol(
-        n_trials=1,
-        trial_length_s=seconds,
-        dt_s=dt_s,
-        start="hanging",
-        start_angle_std_rad=0.05,
-        start_rate_std_rad_s=0.1,
-        feedback_trial_fraction=0.0,
-        program=program,
-        multisine_peak_fraction=config.peak_fraction,
-        torque_bandwidth_hz=config.band_high_hz,
-        phi_noise_std_rad=phi_noise_std_rad,
-        tip_noise_std_m=tip_noise_std_m,
-    )
-
-
-def simulated_recorder(
-    task: Task,
-    config: RouteConfig,
-    seed: int,
-    phi_noise_std_rad: float = 0.002,
-    tip_noise_std_m: float = 0.002,
-    program: str = "multisine",
-) -> Recorder:
-    """A recorder of the babbling ``program`` on ``task``'s simulated plant with encoder and camera noise (the rod is
-    ``task.rod``)."""
+def simulated_recorder(task: Task, config: RouteConfig, seed: int, program: str = "multisine") -> Recorder:
+    """A recorder of one hanging trial of the babbling ``program`` (multisine to ``band_high_hz`` with peak
+    ``peak_fraction``), no feedback, on ``task``'s simulated plant with encoder and camera noise of
+    :data:`SENSOR_NOISE_STD` rad and m."""
 
     def record(seconds: float) -> TrajectoryDataset:
-        protocol = excitation_protocol(seconds, task.dt_s, config, phi_noise_std_rad, tip_noise_std_m, program).replace(
-            substeps=task.substeps
+        protocol = BabbleProtocol(
+            n_trials=1,
+            trial_length_s=seconds,
+            dt_s=task.dt_s,
+            substeps=task.substeps,
+            start="hanging",
+            start_angle_std_rad=0.05,
+            start_rate_std_rad_s=0.1,
+            feedback_trial_fraction=0.0,
+            program=program,
+            multisine_peak_fraction=config.peak_fraction,
+            torque_bandwidth_hz=config.band_high_hz,
+            phi_noise_std_rad=SENSOR_NOISE_STD,
+            tip_noise_std_m=SENSOR_NOISE_STD,
         )
         return babble(protocol, params=task.rod, seed=seed, plant=task.plant, progress=False)
 
@@ -146,13 +125,9 @@ def _balances_every_draw(
     controller: EnergySwingUpController, draws: list[RodParams], config: RouteConfig, seed: int
 ) -> bool:
     for i, rod in enumerate(draws):
-        summary = evaluate(
-            controller,
-            Task(rod=rod),
-            seeds=[CHECK_SEED_BASE + seed * 1000 + i * config.check_starts + j for j in range(config.check_starts)],
-            duration_s=config.check_duration_s,
-            stop_at_first_failure=True,
-        )
+        seeds = [CHECK_SEED_BASE + seed * 1000 + i * config.check_starts + j for j in range(config.check_starts)]
+        task, duration_s = Task(rod=rod), config.check_duration_s
+        summary = evaluate(controller, task, seeds=seeds, duration_s=duration_s, stop_at_first_failure=True)
         if not all(math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= HOLD_STD_RAD for r in summary.results):
             return False
     return True

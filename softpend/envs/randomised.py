@@ -28,18 +28,14 @@ class RodUncertainty:
     scale: float = 2.0
 
     def __post_init__(self) -> None:
-        pairs: Any = dict(self.relative_std).items() if isinstance(self.relative_std, Mapping) else self.relative_std
-        rod_fields = {f.name for f in dataclasses.fields(RodParams)}
+        pairs: Any = self.relative_std.items() if isinstance(self.relative_std, Mapping) else self.relative_std
         try:
-            named = [(name, value) for name, value in pairs]
+            named = [(str(name), value) for name, value in pairs]
         except (TypeError, ValueError):
             raise ValueError(f"rod_uncertainty.relative_std must be (field, relative std) pairs, got {pairs!r}"[:300])
-        checked = []
-        for name, value in named:
-            if name not in rod_fields:
-                raise ValueError(f"rod_uncertainty: {name!r} is not a RodParams field")
-            checked.append((str(name), non_negative(f"rod_uncertainty.{name}", value)))
-        object.__setattr__(self, "relative_std", tuple(checked))
+        if unknown := [name for name, _ in named if name not in {f.name for f in dataclasses.fields(RodParams)}]:
+            raise ValueError(f"rod_uncertainty: {unknown[0]!r} is not a RodParams field")
+        object.__setattr__(self, "relative_std", tuple((n, non_negative(f"rod_uncertainty.{n}", v)) for n, v in named))
         positive("rod_uncertainty.scale", self.scale)
 
     def to_dict(self) -> dict[str, Any]:
@@ -47,11 +43,10 @@ class RodUncertainty:
 
     @classmethod
     def from_dict(cls, data: Any) -> "RodUncertainty":
-        if not isinstance(data, Mapping) or set(data) != {"relative_std", "scale"}:
+        std = data.get("relative_std") if isinstance(data, Mapping) and set(data) == {"relative_std", "scale"} else None
+        if not isinstance(std, Mapping):
             raise ValueError(f"rod_uncertainty must be an object of relative_std and scale, got {data!r}"[:300])
-        if not isinstance(data["relative_std"], Mapping):
-            raise ValueError("rod_uncertainty.relative_std must be an object of rod field -> relative std")
-        return cls(tuple(data["relative_std"].items()), data["scale"])
+        return cls(tuple(std.items()), data["scale"])
 
     def draw(self, rod: RodParams, rng: np.random.Generator) -> RodParams:
         """``rod`` with each field times ``exp(u)``, ``u`` uniform within ``min(scale * relative_std, 1)``."""

@@ -15,30 +15,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from softpend.checks import in_range, int_at_least, one_of, positive
+from softpend.checks import in_range, instance_of, int_at_least, one_of, positive, set_ints
 from softpend.envs.randomised import RodUncertainty
 from softpend.plant import RodParams
 from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
 from softpend.study.unknown_rod import UNKNOWN_FIELDS
 from softpend.sysid.babble import PROGRAMS
-
-__all__ = [
-    "IDENTIFIED_PARAMETERS",
-    "STAGES",
-    "CommissionConfig",
-    "commission",
-    "commission_table",
-    "commissioned_rods",
-    "identification_errors",
-    "identified_values",
-    "verification_seeds",
-]
 
 #: The stages in order.
 STAGES = ("excite", "identify", "design", "train", "verify", "report")
@@ -114,24 +103,26 @@ class CommissionConfig:
             if not all(isinstance(v, allowed) for v in value.values()):
                 raise ValueError(f"{name}: every value must be a {allowed.__name__}, got {value!r}")
         learners = {k: {**v, **self.learners.get(k, {})} for k, v in DEFAULT_LEARNERS.items()}
-        for name, settings in learners.items():
-            if name != "pilco":
-                settings["episodes"] = int_at_least(f"learners.{name}.episodes", settings["episodes"], 1)
+        for name in ("dqn", "mbpo"):
+            learners[name]["episodes"] = int_at_least(f"learners.{name}.episodes", learners[name]["episodes"], 1)
         object.__setattr__(self, "learners", learners)
         object.__setattr__(self, "default_rod_runs", dict(self.default_rod_runs))
-        for name in ("excite_s", "trial_length_s", "window_s", "check_duration_s", "uncertainty_scale"):
+        for name in (
+            "excite_s",
+            "trial_length_s",
+            "window_s",
+            "check_duration_s",
+            "uncertainty_scale",
+            "verify_duration_s",
+        ):
             positive(name, getattr(self, name))
-        positive("verify_duration_s", self.verify_duration_s)
-        in_range("peak_fraction", self.peak_fraction, 1e-3, 1.0)
-        in_range("noise_std_fraction", self.noise_std_fraction, 1e-3, 1.0)
+        for name, low, high in (("peak_fraction", 1e-3, 1), ("noise_std_fraction", 1e-3, 1), ("band_high_hz", 0.5, 20)):
+            in_range(name, getattr(self, name), low, high)
         one_of("program", self.program, PROGRAMS)
-        in_range("band_high_hz", self.band_high_hz, 0.5, 20.0)
-        integers = ("max_windows", "max_iterations", "check_draws", "check_starts", "verify_starts", "train_attempts")
-        for name, low in ({n: 1 for n in integers} | {"seed": 0}).items():
-            object.__setattr__(self, name, int_at_least(name, getattr(self, name), low))
+        set_ints(self, "max_windows max_iterations check_draws check_starts verify_starts train_attempts", 1)
+        set_ints(self, "seed", 0)
         for name, high in (("verify_starts", 1000), ("seed", 10**6 - 1), ("train_attempts", 100)):
-            if getattr(self, name) > high:
-                raise ValueError(f"{name} must be at most {high}, got {getattr(self, name)}")
+            in_range(name, getattr(self, name), 0, high)
         if self.session_s < self.trial_length_s + 3:
             raise ValueError(
                 f"excite_s must be at least trial_length_s + {3 - WIGGLE_S - REST_S:g} s (the session with the "
@@ -163,91 +154,60 @@ def verification_seeds(config: CommissionConfig) -> list[int]:
 
 def identified_values(estimates: dict[str, float], std: dict[str, float], nominal_mass_kg: float) -> dict[str, dict]:
     """The rod fields and the torque gain with standard deviations from an identification of the effective rod
-    (``mass_kg`` estimated: gain = nominal mass / estimate, each field times the gain) or of the rod and
-    ``torque_gain``; relative standard deviations add in quadrature (the estimates' correlation is not kept)."""
-    if "torque_gain" in estimates:
-        gain, gain_rel = estimates["torque_gain"], std["torque_gain"] / estimates["torque_gain"]
-        scale, combine = 1.0, False
-    elif "mass_kg" in estimates:
-        gain = nominal_mass_kg / estimates["mass_kg"]
-        gain_rel = std["mass_kg"] / estimates["mass_kg"]
-        scale, combine = gain, True
-    else:
-        gain, gain_rel, scale, combine = 1.0, 0.0, 1.0, False
+    (``mass_kg`` estimated: gain = nominal mass / estimate, each field times the gain; held: gain 1); relative
+    standard deviations add in quadrature (the estimates' correlation is not kept)."""
+    mass_kg = estimates.get("mass_kg", nominal_mass_kg)
+    gain, gain_rel = nominal_mass_kg / mass_kg, std.get("mass_kg", 0.0) / mass_kg
     out: dict[str, dict] = {}
-    for name in UNKNOWN_FIELDS:
-        if name in estimates:
-            value = estimates[name]
-            rel = std[name] / value if value else math.inf
-            rel = math.hypot(rel, gain_rel) if combine else rel
-            out[name] = {"estimate": value * scale, "std": abs(value * scale) * rel, "relative_std": rel}
+    for name in (n for n in UNKNOWN_FIELDS if n in estimates):
+        value, rel = estimates[name], math.hypot(std[name] / estimates[name] if estimates[name] else math.inf, gain_rel)
+        out[name] = {"estimate": value * gain, "std": abs(value * gain) * rel, "relative_std": rel}
     out["torque_gain"] = {"estimate": gain, "std": gain * gain_rel, "relative_std": gain_rel}
     return out
 
 
-def _greybox_result(data: dict):
-    """The :class:`~softpend.sysid.greybox.GreyBoxResult` of its ``to_dict``."""
-    from softpend.sysid.greybox import GreyBoxResult
+def _greybox_result(data: dict) -> Any:
+    """What the uncertainty draws need of an identification's :meth:`GreyBoxResult.to_dict`: rod, estimates, std."""
+    return SimpleNamespace(params=RodParams.from_dict(data["rod_params"]), estimates=data["estimates"], std=data["std"])
 
-    fit = dict(data["fit"])
-    keys = {f.name for f in fields(GreyBoxResult)}
-    return GreyBoxResult(
-        params=RodParams.from_dict(data["rod_params"]),
-        initial_params=RodParams.from_dict(fit.pop("initial_params")),
-        estimates=dict(data["estimates"]),
-        std=dict(data["std"]),
-        at_bounds=tuple(fit.pop("at_bounds")),
-        **{k: v for k, v in {**fit, **data["calibration"]}.items() if k in keys},
-    )
+
+#: Each stage's output in a commissioning folder (the excitation's also its rig dataset).
+OUTPUTS = {stage: f"{stage}/{stage}.json" for stage in STAGES} | {
+    "identify": "identify/identification.json",
+    "report": "report.json",
+}
 
 
 class _Run:
     """One commissioning folder: its stage files, planned and checked before any work."""
 
-    FILES = {
-        "excite": ("excite", ("rig_dataset.npz", "excite.json")),
-        "identify": ("identify", ("identification.json",)),
-        "design": ("design", ("design.json",)),
-        "train": ("train", ("train.json",)),
-        "verify": ("verify", ("verify.json",)),
-    }
-
     def __init__(self, out: Path, truth: TwinTruth, config: CommissionConfig) -> None:
         from softpend.io.outputs import Outputs
+        from softpend.io.reading import read_json_checked
 
-        self.out, self.truth, self.config = out, truth, config
-        self.outputs = Outputs()
-        self.outputs.folder(out, (SETTINGS_FILE, "report.json"), what="--out")
-        for folder, names in self.FILES.values():
-            self.outputs.folder(out / folder, names, what="--out")
-        self.private = out / "twin"
-        settings = {"twin": truth.to_dict(), "config": asdict(config)}
-        path = out / SETTINGS_FILE
-        if path.is_file():
-            from softpend.io.reading import read_json_checked
-
-            earlier = read_json_checked(path, "--out settings file")
-            if earlier != json.loads(json.dumps(settings)):
-                raise ValueError(
-                    f"--out {out} holds a commissioning with other settings ({path}); pass the same settings to "
-                    "resume it, or another --out"
-                )
-        else:
+        self.out, self.truth, self.config, self.outputs = out, truth, config, Outputs()
+        for relative in (SETTINGS_FILE, "excite/rig_dataset.npz", *OUTPUTS.values()):
+            self.outputs.folder((out / relative).parent, ((out / relative).name,), what="--out")
+        settings, path = {"twin": truth.to_dict(), "config": asdict(config)}, out / SETTINGS_FILE
+        if not path.is_file():
             self.outputs.write_json(path, settings)
+        elif read_json_checked(path, "--out settings file") != json.loads(json.dumps(settings)):
+            raise ValueError(
+                f"--out {out} holds a commissioning with other settings ({path}); pass the same settings to "
+                "resume it, or another --out"
+            )
 
     def path(self, stage: str) -> Path:
-        if stage == "report":
-            return self.out / "report.json"
-        folder, names = self.FILES[stage]
-        return self.out / folder / names[-1]
-
-    def done(self, stage: str) -> bool:
-        return self.path(stage).is_file()
+        return self.out / OUTPUTS[stage]
 
     def read(self, stage: str) -> dict:
         from softpend.io.reading import read_json_checked
 
         return read_json_checked(self.path(stage), f"{stage} output")
+
+    def twin(self, function: Callable[..., Any], *args: Any) -> Any:
+        """``function(truth, private folder, *args)`` on the twin's side."""
+        return on_twin_side(function, self.truth, str(self.out / "twin"), *args)
 
 
 def _excite(run: _Run) -> dict:
@@ -255,41 +215,20 @@ def _excite(run: _Run) -> dict:
     from softpend.sysid.babble import band_limited_noise
     from softpend.sysid.excitation import multisine
 
-    config, guess = run.config, RodParams()
-    dt_s, limit = 0.01, guess.torque_limit_nm
-    n_steps = int(round(config.excite_s / dt_s))
-    if config.program == "multisine":
-        program = multisine(n_steps, dt_s, config.peak_fraction * limit, band_hz=(0.2, config.band_high_hz))
+    c, guess, dt_s, folder = run.config, RodParams(), 0.01, run.out / "excite"
+    n_steps, limit = int(round(c.excite_s / dt_s)), guess.torque_limit_nm
+    if c.program == "multisine":
+        program = multisine(n_steps, dt_s, c.peak_fraction * limit, band_hz=(0.2, c.band_high_hz))
     else:
-        rng = np.random.default_rng(config.seed)
-        noise = band_limited_noise(rng, n_steps, config.noise_std_fraction * limit, config.band_high_hz, dt_s)
-        program = np.clip(noise, -limit, limit)
-    folder = run.out / "excite"
-    figures = on_twin_side(
-        excite_on_twin,
-        run.truth,
-        str(run.private),
-        str(folder),
-        program.tolist(),
-        config.session_s,
-        config.trial_length_s,
-        config.seed,
-    )
-    dataset_path = run.outputs.live(folder / "rig_dataset.npz")
-    dataset, sync = build_rig_dataset(
-        folder / "motor_log.csv",
-        folder / "camera.csv",
-        dataset_path,
-        params=guess,
-        dt_s=dt_s,
-        trial_length_s=config.trial_length_s,
-        notes="commissioning excitation on the twin",
-    )
-    run.outputs.done(dataset_path)
-    return {
-        **figures,
-        "program": config.program,
-        "program_s": config.excite_s,
+        rng, std = np.random.default_rng(c.seed), c.noise_std_fraction * limit
+        program = np.clip(band_limited_noise(rng, n_steps, std, c.band_high_hz, dt_s), -limit, limit)
+    figures = run.twin(excite_on_twin, str(folder), program.tolist(), c.session_s, c.trial_length_s, c.seed)
+    files = (folder / "motor_log.csv", folder / "camera.csv", run.outputs.live(folder / "rig_dataset.npz"))
+    dataset, sync = build_rig_dataset(*files, guess, dt_s, c.trial_length_s, "commissioning excitation on the twin")
+    run.outputs.done(files[-1])
+    return figures | {
+        "program": c.program,
+        "program_s": c.excite_s,
         "peak_torque_nm": float(abs(program).max()),
         "n_trials": dataset.n_trials,
         "clock_offset_s": sync.offset.offset_s,
@@ -301,17 +240,11 @@ def _identify(run: _Run) -> dict:
     from softpend.sysid.dataset import load_dataset
     from softpend.sysid.greybox import GreyBoxConfig, NotIdentifiable, identify
 
-    config, guess = run.config, RodParams()
+    c, guess = run.config, RodParams()
     dataset = load_dataset(run.out / "excite" / "rig_dataset.npz")
 
     def fit(parameters: list[str], start: RodParams):
-        settings = GreyBoxConfig(
-            parameters=tuple(parameters),
-            window_s=config.window_s,
-            max_windows=config.max_windows,
-            max_iterations=config.max_iterations,
-            seed=config.seed,
-        )
+        settings = GreyBoxConfig(tuple(parameters), c.window_s, c.max_windows, c.seed, c.max_iterations)
         return identify(dataset, settings, initial_params=start)
 
     parameters, held = list(IDENTIFIED_PARAMETERS), []
@@ -342,31 +275,22 @@ def _design(run: _Run) -> dict:
     from softpend.control.identified import design_swingup, uncertainty_draws
     from softpend.study.unknown_rod import balanced_starts
 
-    config = run.config
-    identification = run.read("identify")
+    c, identification = run.config, run.read("identify")
     model = RodParams.from_dict(identification["model_rod"])
     design_swingup(model)  # a design that fails is an error here, not on the plant
     draws = uncertainty_draws(
-        _greybox_result(identification["greybox"]), config.check_draws, config.seed + 1, config.uncertainty_scale
+        _greybox_result(identification["greybox"]), c.check_draws, c.seed + 1, c.uncertainty_scale
     )
-    seeds = config.check_seeds()
-    k = config.check_starts
+    seeds, k = c.check_seeds(), c.check_starts
     balanced = [
-        balanced_starts(rod, seeds[i * k : (i + 1) * k], config.check_duration_s, design_rod=model)
-        for i, rod in enumerate(draws)
+        balanced_starts(rod, seeds[i * k : (i + 1) * k], c.check_duration_s, model) for i, rod in enumerate(draws)
     ]
+    check = {"draws": len(draws), "starts_each": k, "duration_s": c.check_duration_s, "scale_std": c.uncertainty_scale}
     return {
         "controller": CONTROLLER,
         "model_rod": model.to_dict(),
-        "uncertainty_check": {
-            "draws": len(draws),
-            "starts_each": k,
-            "duration_s": config.check_duration_s,
-            "scale_std": config.uncertainty_scale,
-            "balanced_starts": balanced,
-            "all_balanced": all(b == k for b in balanced),
-        },
-        "simulator_s": len(draws) * k * config.check_duration_s,
+        "uncertainty_check": check | {"balanced_starts": balanced, "all_balanced": all(b == k for b in balanced)},
+        "simulator_s": len(draws) * k * c.check_duration_s,
         "plant_s": 0.0,
     }
 
@@ -423,8 +347,7 @@ def _train(run: _Run) -> dict:
     on its own evaluation starts (the last run is kept when none does)."""
     from softpend.control.identified import identified_uncertainty
 
-    config = run.config
-    identification = run.read("identify")
+    config, identification = run.config, run.read("identify")
     model = RodParams.from_dict(identification["model_rod"])
     uncertainty = identified_uncertainty(_greybox_result(identification["greybox"]), config.uncertainty_scale)
     runs = {}
@@ -436,23 +359,15 @@ def _train(run: _Run) -> dict:
             attempts.append(_train_one(learner, learner_settings, seed, settings.get("episodes", 0), run.out / "train"))
             if attempts[-1]["balanced"]:
                 break
-        runs[learner] = {
-            **attempts[-1],
-            "seed": seed,
-            "attempts": len(attempts),
-            "simulator_s": sum(a["simulator_s"] for a in attempts),
-            "wall_s": sum(a["wall_s"] for a in attempts),
-        }
+        totals = {key: sum(a[key] for a in attempts) for key in ("simulator_s", "wall_s")}
+        runs[learner] = attempts[-1] | {"seed": seed, "attempts": len(attempts)} | totals
     return {"rod_uncertainty": uncertainty.to_dict(), "runs": runs, "plant_s": 0.0}
 
 
 def _class_controllers(run: _Run) -> dict[str, dict[str, dict]]:
     """Per commissioned class: the commissioned controller's and the default rod's (when there is one) label and
     twin-side spec (``model_rod`` of a swing-up + LQR, or the ``run`` folder of a learner)."""
-    config = run.config
-    runs = run.read("train")["runs"]
-    model = run.read("design")["model_rod"]
-    out = {}
+    config, runs, model, out = run.config, run.read("train")["runs"], run.read("design")["model_rod"], {}
     for name in config.controllers:
         if name == "swingup":
             specs = {"identified": {"model_rod": model}, "default": {"model_rod": RodParams().to_dict()}}
@@ -467,12 +382,9 @@ def _class_controllers(run: _Run) -> dict[str, dict[str, dict]]:
 
 
 def _verify(run: _Run) -> dict:
-    config = run.config
     specs = {v["label"]: v["spec"] for versions in _class_controllers(run).values() for v in versions.values()}
-    seeds = verification_seeds(config)
-    rows = on_twin_side(
-        verify_on_twin, run.truth, str(run.private), specs, list(CONDITIONS), seeds, config.verify_duration_s
-    )
+    seeds = verification_seeds(run.config)
+    rows = run.twin(verify_on_twin, specs, seeds, run.config.verify_duration_s)
     return {
         "seeds": seeds,
         "rows": rows,
@@ -486,23 +398,16 @@ def _verify(run: _Run) -> dict:
 def _report(run: _Run) -> dict:
     from softpend.study.rig_runs import summary_rows
 
-    config = run.config
-    excite, identification, design, train, verify = (
-        run.read(s) for s in ("excite", "identify", "design", "train", "verify")
-    )
+    config, (excite, identification, design, train, verify) = run.config, (run.read(s) for s in STAGES[:5])
     identified = identification["identified"]
-    truth = on_twin_side(truth_errors, run.truth, str(run.private), {n: v["estimate"] for n, v in identified.items()})
+    truth = run.twin(truth_errors, {n: v["estimate"] for n, v in identified.items()})
     for name, entry in identified.items():
         entry["truth"] = truth["truth"].get(name)
         entry["relative_error"] = truth["relative_error"].get(name)
-    rows = {
-        label: [row for group in by_condition.values() for row in group]
-        for label, by_condition in verify["rows"].items()
-    }
+    rows: dict[str, list] = {label: sum(by_condition.values(), []) for label, by_condition in verify["rows"].items()}
     classes = {}
     for name, versions in _class_controllers(run).items():
-        label = versions["identified"]["label"]
-        default = versions.get("default")
+        label, default = versions["identified"]["label"], versions.get("default")
         classes[name] = {
             "label": label,
             "plant_s": excite["plant_s"] + sum(verify["plant_s"][label].values()),
@@ -523,10 +428,7 @@ def _report(run: _Run) -> dict:
         "truth_source": "the twin's side, for this report only (the commissioning never read it)",
         "identification_fit": {
             "parameters": list(IDENTIFIED_PARAMETERS),
-            "residual_rms_rad": fit["residual_rms_rad"],
-            "n_windows": fit["n_windows"],
-            "message": fit["message"],
-            "at_bounds": fit["at_bounds"],
+            **{key: fit[key] for key in ("residual_rms_rad", "n_windows", "message", "at_bounds")},
             "camera_delay_s": identification["greybox"]["calibration"]["camera_delay_s"],
         },
         "design": design["uncertainty_check"],
@@ -535,14 +437,9 @@ def _report(run: _Run) -> dict:
     }
 
 
-_STAGE_WORK: dict[str, Callable[[_Run], dict]] = {
-    "excite": _excite,
-    "identify": _identify,
-    "design": _design,
-    "train": _train,
-    "verify": _verify,
-    "report": _report,
-}
+_STAGE_WORK: dict[str, Callable[[_Run], dict]] = dict(
+    zip(STAGES, (_excite, _identify, _design, _train, _verify, _report))
+)
 
 
 def commission(
@@ -555,15 +452,11 @@ def commission(
 
     ``on_stage(stage, ran, output)`` is told of every stage, ``ran`` False for one kept from an earlier run.
     ``out`` holding another commissioning's settings is a ``ValueError``."""
-    if not isinstance(truth, TwinTruth):
-        raise ValueError(f"truth must be a TwinTruth, got {type(truth).__name__}")
-    config = config if config is not None else CommissionConfig()
-    if not isinstance(config, CommissionConfig):
-        raise ValueError(f"config must be a CommissionConfig, got {type(config).__name__}")
-    run = _Run(Path(out), truth, config)
+    config = instance_of("config", config if config is not None else CommissionConfig(), CommissionConfig)
+    run = _Run(Path(out), instance_of("truth", truth, TwinTruth), config)
     output: dict = {}
     for stage in STAGES:
-        ran = not run.done(stage)
+        ran = not run.path(stage).is_file()
         if ran:
             output = _STAGE_WORK[stage](run)
             run.outputs.write_json(run.path(stage), output)

@@ -4,6 +4,7 @@ in simulation, on the twin (:func:`planner_twin_figures`), each call's wall time
 
 from __future__ import annotations
 
+import itertools
 import math
 import tempfile
 import time
@@ -13,7 +14,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from softpend.checks import int_at_least, non_negative, positive
+from softpend.checks import instance_of, int_at_least, non_negative, positive
 from softpend.evaluation import HOLD_STD_RAD, evaluate_controller, metrics_from_trajectory
 from softpend.hardware.closed_loop import TwinCamera, run_twin_control
 from softpend.hardware.driver import LinkError
@@ -53,14 +54,12 @@ class RigCondition:
     faults: Optional[CameraFaults] = None
 
     def __post_init__(self) -> None:
-        checks = {"fps": positive, "max_blind_s": positive, "camera_latency_s": non_negative}
-        for name, check in (checks | {"link_latency_s": non_negative}).items():
-            check(name, getattr(self, name))
-        if not isinstance(self.effects, CameraEffects):
-            raise ValueError(f"effects must be a CameraEffects, got {type(self.effects).__name__}")
+        for name in ("fps", "max_blind_s", "camera_latency_s", "link_latency_s"):
+            (positive if name in ("fps", "max_blind_s") else non_negative)(name, getattr(self, name))
+        instance_of("effects", self.effects, CameraEffects)
         int_at_least("counts_per_rev", self.counts_per_rev, 4)
-        if self.faults is not None and not isinstance(self.faults, CameraFaults):
-            raise ValueError(f"faults must be a CameraFaults or None, got {type(self.faults).__name__}")
+        if self.faults is not None:
+            instance_of("faults", self.faults, CameraFaults)
 
     def rig(self, task: Task, seed: int) -> RigConfig:
         """The emulated rig of a start seeded ``seed``."""
@@ -142,20 +141,11 @@ def twin_start(
     diverged estimator is a failed row whose ``stop`` says why.  ``estimator_task``: the estimator's model (default:
     ``task``, the twin's true rod)."""
     positive("duration_s", duration_s)
-    workdir = Path(workdir)
-    stop: Optional[str] = None
-    result = None
-    plant_s = 0.0
+    workdir, stop, result, plant_s = Path(workdir), None, None, 0.0
     try:
+        sensors = (condition.rig(task, seed), condition.camera(seed), condition.estimator())
         run = run_twin_control(
-            controller,
-            workdir,
-            duration_s,
-            rig=condition.rig(task, seed),
-            camera=condition.camera(seed),
-            estimator_config=condition.estimator(),
-            on_frame=on_frame,
-            estimator_task=estimator_task,
+            controller, workdir, duration_s, *sensors, on_frame=on_frame, estimator_task=estimator_task
         )
         result = run.result
         plant_s = float(run.emulator_stats.get("ticks", 0.0)) * task.dt_s
@@ -166,23 +156,17 @@ def twin_start(
     except SimulationDiverged as exc:
         stop = f"estimator model diverged: {exc}"
     metrics: dict[str, Any] = {}
-    chatter = math.nan
-    motor_path, truth_path = workdir / "motor_log.csv", workdir / "truth_log.csv"
+    chatter, motor_path, truth_path = math.nan, workdir / "motor_log.csv", workdir / "truth_log.csv"
     if motor_path.is_file() and truth_path.is_file():
         metrics = run_truth_metrics(motor_path, truth_path, task, success_std_rad=success_std_rad)
         chatter = torque_chatter_nm_per_s(motor_path)
     if not metrics and stop is None:
         stop = "the controller never took charge"
-    row = _row(condition.name, label, seed, metrics, chatter, stop)
-    camera = result.camera if result is not None else {}
-    row.update(
-        late_commands=int(result.late_commands) if result is not None else 0,
-        samples=int(result.samples) if result is not None else 0,
-        frames_tracked=int(camera.get("frames_tracked", 0)),
-        frames_lost=int(camera.get("frames_lost", 0)),
-        plant_s=plant_s,
+    stats = (
+        {} if result is None else {**result.camera, "late_commands": result.late_commands, "samples": result.samples}
     )
-    return row
+    counts = {key: int(stats.get(key, 0)) for key in ("late_commands", "samples", "frames_tracked", "frames_lost")}
+    return _row(condition.name, label, seed, metrics, chatter, stop) | counts | {"plant_s": plant_s}
 
 
 def simulator_starts(
@@ -196,22 +180,16 @@ def simulator_starts(
     """The starts ``seeds`` of ``controller`` in the ideal simulator of ``task``, one row each (a diverged
     simulation is a failed row)."""
     summary = evaluate_controller(controller, task, name=label, seeds=list(seeds), duration_s=duration_s)
-    rows = []
-    theta_index, rate_index = OBSERVATION_NAMES.index("theta_rad"), OBSERVATION_NAMES.index("phi_dot_rad_s")
-    for result in summary.results:
+    rows, theta, rate = [], OBSERVATION_NAMES.index("theta_rad"), OBSERVATION_NAMES.index("phi_dot_rad_s")
+    for r in summary.results:
         metrics: dict[str, Any] = {}
-        if len(result.time_s) >= 2:
-            metrics = metrics_from_trajectory(
-                result.time_s,
-                result.observations[:, theta_index],
-                result.torque_nm,
-                result.observations[:, rate_index],
-                success_std_rad=success_std_rad,
-            )
-        stop = f"simulation diverged: {result.diverged}" if result.diverged is not None else None
+        if len(r.time_s) >= 2:
+            obs = r.observations
+            metrics = metrics_from_trajectory(r.time_s, obs[:, theta], r.torque_nm, obs[:, rate], success_std_rad)
+        stop = f"simulation diverged: {r.diverged}" if r.diverged is not None else None
         # the torque of every step the controller commanded (the last sample has none)
-        chatter = torque_total_variation_per_s(result.time_s[:-1], result.torque_nm[:-1])
-        rows.append(_row(SIMULATOR, label, result.seed, metrics, chatter, stop))
+        chatter = torque_total_variation_per_s(r.time_s[:-1], r.torque_nm[:-1])
+        rows.append(_row(SIMULATOR, label, r.seed, metrics, chatter, stop))
     return rows
 
 
@@ -249,15 +227,16 @@ def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDEN
 
 class FrameKeeper:
     """An ``on_frame`` hook that keeps every ``every``-th frame as ``(index, frame_bgr, detection)`` in
-    :attr:`frames` (at most ``max_frames``)."""
+    :attr:`frames` (at most :attr:`MAX_FRAMES`)."""
 
-    def __init__(self, every: int = 15, max_frames: int = 200) -> None:
+    MAX_FRAMES = 200
+
+    def __init__(self, every: int = 15) -> None:
         self.every = int_at_least("every", every, 1)
-        self.max_frames = int_at_least("max_frames", max_frames, 1)
         self.frames: list[tuple[int, np.ndarray, Any]] = []
 
     def __call__(self, index: int, frame: np.ndarray, detection: Any, measurement: Any) -> None:
-        if index % self.every == 0 and len(self.frames) < self.max_frames:
+        if index % self.every == 0 and len(self.frames) < self.MAX_FRAMES:
             self.frames.append((int(index), frame.copy(), detection))
 
     def at_loop_times(self, camera_log: str | Path) -> list[tuple[float, np.ndarray, Any]]:
@@ -280,20 +259,18 @@ def text_figures(
 
     by_key = {(r["controller"], r["condition"]): r for r in summary}
     out: dict[str, str] = {}
-    for short, label in controllers.items():
-        for key, condition in conditions.items():
-            r = by_key.get((label, condition))
-            name = f"{short}_{key}"
-            if r is None:
-                for figure in ("success", "interval", "swing_up_s", "std_rad", "chatter", "stops"):
-                    out[f"{name}_{figure}"] = "not run"
-                continue
-            out[f"{name}_success"] = f"{r['successes']} of {r['starts']}"
-            out[f"{name}_interval"] = f"{r['success_low']:.2f} to {r['success_high']:.2f}"
-            out[f"{name}_swing_up_s"] = fixed(r["swing_up_time_s"], 2)
-            out[f"{name}_std_rad"] = fixed(r["upright_std_rad"], 3)
-            out[f"{name}_chatter"] = fixed(r["torque_chatter_nm_per_s"], 2)
-            out[f"{name}_stops"] = str(r["stops"])
+    for (short, label), (key, condition) in itertools.product(controllers.items(), conditions.items()):
+        r = by_key.get((label, condition))
+        texts = ["not run"] * 6
+        if r is not None:
+            texts = [f"{r['successes']} of {r['starts']}", f"{r['success_low']:.2f} to {r['success_high']:.2f}"]
+            texts += [
+                fixed(r[k], n)
+                for k, n in (("swing_up_time_s", 2), ("upright_std_rad", 3), ("torque_chatter_nm_per_s", 2))
+            ]
+            texts.append(str(r["stops"]))
+        names = ("success", "interval", "swing_up_s", "std_rad", "chatter", "stops")
+        out |= {f"{short}_{key}_{name}": text for name, text in zip(names, texts)}
     return out
 
 
@@ -335,40 +312,29 @@ def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict
 
 
 def planner_twin_figures(
-    seeds: Sequence[int],
-    duration_s: float = 10.0,
-    overrides: Optional[Mapping[str, Any]] = None,
-    task: Optional[Task] = None,
-    condition: Optional[RigCondition] = None,
-    progress: bool = False,
+    seeds: Sequence[int], duration_s: float = 10.0, overrides: Optional[Mapping[str, Any]] = None
 ) -> dict[str, Any]:
     """The planner (:func:`softpend.study.data_efficiency.planner_config` with ``overrides``) learned in simulation on
-    ``task`` (default: the nominal rod), then on the twin
-    of ``task`` under ``condition`` (default: the nominal twin) from ``seeds`` (fresh starts: seeds shared with its
-    selection starts raise ``ValueError``) with torch on one thread: successes of :func:`summary_rows`, the plant
-    seconds it learned in, and :func:`step_time_figures` over every controller call of every start."""
+    the nominal rod, then on the nominal twin from ``seeds`` (fresh starts: seeds shared with its selection starts
+    raise ``ValueError``) with torch on one thread: successes of :func:`summary_rows`, the plant seconds it learned
+    in, and :func:`step_time_figures` over every controller call of every start."""
     from softpend.control.planner import run_planner
     from softpend.study.data_efficiency import planner_config
     from softpend.torch_threads import one_torch_thread
 
-    task = task if task is not None else Task()
-    condition = condition if condition is not None else RigCondition("nominal twin")
+    task, condition = Task(), RigCondition("nominal twin")
     with one_torch_thread():
-        result = run_planner(planner_config(task, overrides), progress=progress)
-        controller = result.controller
+        result = run_planner(planner_config(task, overrides), progress=False)
         if shared := sorted(set(int(s) for s in seeds) & set(result.config.selection_seeds)):
             raise ValueError(f"seeds must be fresh starts, disjoint from selection_seeds; shared: {shared}")
-        timed, step_ms, rows = TimedController(controller), [], []
+        timed, step_ms, rows = TimedController(result.controller), [], []
         with tempfile.TemporaryDirectory() as tmp:
             for seed in seeds:
                 rows.append(twin_start(timed, PLANNER, task, condition, seed, duration_s, Path(tmp) / str(seed)))
                 step_ms += timed.step_ms
-                if progress:
-                    print(f"twin start {seed}: success {rows[-1]['success']} {rows[-1]['stop']}", flush=True)
-    summary = summary_rows(rows)[0]
     return {
         "starts": len(rows),
-        "successes": summary["successes"],
+        "successes": summary_rows(rows)[0]["successes"],
         "plant_s": result.plant_seconds,
         **step_time_figures(step_ms, task.dt_s),
         "rows": rows,

@@ -12,20 +12,11 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from softpend.checks import int_at_least, positive, positive_int
+from softpend.checks import int_at_least
 from softpend.evaluation import TEST_EPISODE_S
 from softpend.study.rig_runs import RigCondition
 from softpend.study.unknown_rod import UnknownRod, draw_unknown_rod
 from softpend.vision.camera import CameraEffects
-
-__all__ = [
-    "CONDITIONS",
-    "TwinTruth",
-    "excite_on_twin",
-    "on_twin_side",
-    "truth_errors",
-    "verify_on_twin",
-]
 
 #: The verification's sensor conditions: the nominal rig camera, and a harsh one (30 fps, 50 ms, noisy image).
 CONDITIONS: dict[str, RigCondition] = {
@@ -36,16 +27,17 @@ CONDITIONS: dict[str, RigCondition] = {
 EXCITATION_FILES = ("motor_log.csv", "camera.csv")
 
 
+#: How a seeded twin's rod is drawn (:func:`draw_unknown_rod`): hanging starts, of them balanced, their length [s].
+DRAW_STARTS, DRAW_NEEDED, DRAW_DURATION_S = 10, 9, TEST_EPISODE_S
+
+
 @dataclass(frozen=True)
 class TwinTruth:
     """Where the twin's unknown rod comes from: ``rod_file`` (a JSON of :meth:`UnknownRod.from_dict`) or ``seed``
-    (:func:`draw_unknown_rod` with ``draw_starts``, ``draw_needed`` and ``draw_duration_s``), exactly one."""
+    (:func:`draw_unknown_rod`), exactly one."""
 
     rod_file: Optional[str] = None
     seed: Optional[int] = None
-    draw_starts: int = 10
-    draw_needed: int = 9
-    draw_duration_s: float = TEST_EPISODE_S
 
     def __post_init__(self) -> None:
         if (self.rod_file is None) == (self.seed is None):
@@ -56,14 +48,10 @@ class TwinTruth:
             object.__setattr__(self, "rod_file", str(self.rod_file))
         if self.seed is not None:
             object.__setattr__(self, "seed", int_at_least("--twin-seed", self.seed, 0))
-        object.__setattr__(self, "draw_starts", positive_int("draw_starts", self.draw_starts))
-        object.__setattr__(self, "draw_needed", positive_int("draw_needed", self.draw_needed))
-        if self.draw_needed > self.draw_starts:
-            raise ValueError(f"draw_needed must be at most draw_starts ({self.draw_starts}), got {self.draw_needed}")
-        positive("draw_duration_s", self.draw_duration_s)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        draw = {"draw_starts": DRAW_STARTS, "draw_needed": DRAW_NEEDED, "draw_duration_s": DRAW_DURATION_S}
+        return asdict(self) | draw
 
 
 def on_twin_side(function: Callable[..., Any], *args: Any) -> Any:
@@ -81,7 +69,7 @@ def _resolve(truth: TwinTruth, private: Path, outputs: Any) -> UnknownRod:
     path = private / "rod.json"
     if path.is_file():
         return UnknownRod.from_json(path)
-    rod, draws = draw_unknown_rod(truth.seed, truth.draw_starts, truth.draw_needed, truth.draw_duration_s)
+    rod, draws = draw_unknown_rod(truth.seed, DRAW_STARTS, DRAW_NEEDED, DRAW_DURATION_S)
     outputs.folder(private, ("rod.json",), what="twin folder")
     outputs.write_json(path, {**rod.to_dict(), "seed": truth.seed, "draws": draws})
     return rod
@@ -106,24 +94,13 @@ def excite_on_twin(
     from softpend.io.samplelog import SampleLog, read_sample_log
     from softpend.task import Task
 
-    outputs = Outputs()
-    private_dir, public_dir = Path(private), Path(public)
-    rod = _resolve(truth, private_dir, outputs)
-    task = Task(rod=rod.effective_rod(), start_noise_rad=0.0)
-    rig = RigConfig(task=task, seed=seed)
-    session = run_twin_session(
-        private_dir / "excite",
-        duration_s=duration_s,
-        seed=seed,
-        rig=rig,
-        trial_length_s=trial_length_s,
-        progress=False,
-        outputs=outputs,
-        program=np.asarray(program_nm, dtype=float),
-    )
+    outputs, private_dir, public_dir = Outputs(), Path(private), Path(public)
+    task = Task(rod=_resolve(truth, private_dir, outputs).effective_rod(), start_noise_rad=0.0)
+    rig, program = RigConfig(task=task, seed=seed), np.asarray(program_nm, dtype=float)
+    run: dict[str, Any] = dict(trial_length_s=trial_length_s, progress=False, outputs=outputs, program=program)
+    session = run_twin_session(private_dir / "excite", duration_s, seed, rig, **run)
     outputs.folder(public_dir, EXCITATION_FILES, what="excitation folder")
-    motor = read_sample_log(session.motor_log)
-    motor_path = outputs.live(public_dir / "motor_log.csv")
+    motor, motor_path = read_sample_log(session.motor_log), outputs.live(public_dir / "motor_log.csv")
     metadata = {"rig": "digital twin", "torque_limit_nm": task.torque_limit_nm, "dt_s": task.dt_s}
     with SampleLog(motor_path, LOOP_LOG_COLUMNS, metadata=metadata, fsync_every_s=None) as log:
         for row in zip(*(motor[c] for c in LOOP_LOG_COLUMNS)):
@@ -142,11 +119,10 @@ def verify_on_twin(
     truth: TwinTruth,
     private: str,
     controllers: Mapping[str, Mapping[str, Any]],
-    conditions: Sequence[str],
     seeds: Sequence[int],
     duration_s: float,
 ) -> dict[str, dict[str, list[dict[str, Any]]]]:
-    """The rows, by controller label of ``controllers`` and by condition, from the hanging starts ``seeds`` of the
+    """The rows, by controller label of ``controllers`` and by condition of :data:`CONDITIONS`, from the hanging starts ``seeds`` of the
     twin's rod (logs in ``private``) of each controller: ``{"model_rod": rod}``, the energy swing-up + LQR on the
     observations designed on that rod, or ``{"run": folder}``, a DQN, DQN-MBPO or PILCO run's agent; the estimator
     models the controller's rod (the run's task), never the twin's."""
@@ -156,9 +132,6 @@ def verify_on_twin(
     from softpend.study.rig_runs import learned_controller, twin_start
     from softpend.task import Task
 
-    unknown = [name for name in conditions if name not in CONDITIONS]
-    if unknown:
-        raise ValueError(f"conditions must be drawn from {sorted(CONDITIONS)}, got {unknown}")
     private_dir = Path(private)
     true_task = Task(rod=_resolve(truth, private_dir, Outputs()).effective_rod())
     out: dict[str, dict[str, list[dict[str, Any]]]] = {}
@@ -169,22 +142,14 @@ def verify_on_twin(
         else:
             model_task = Task(rod=RodParams.from_dict(dict(spec["model_rod"])))
             make = lambda: design_swingup(model_task.rod)  # noqa: E731
-        out[label] = {
-            name: [
-                twin_start(
-                    make(),
-                    label,
-                    true_task,
-                    CONDITIONS[name],
-                    seed,
-                    duration_s,
-                    private_dir / f"model_{i}" / name / f"start_{seed}",
-                    estimator_task=Task(rod=model_task.rod),
+        out[label], estimator = {name: [] for name in CONDITIONS}, Task(rod=model_task.rod)
+        for name in CONDITIONS:
+            for seed in seeds:
+                workdir = private_dir / f"model_{i}" / name / f"start_{seed}"
+                row = twin_start(
+                    make(), label, true_task, CONDITIONS[name], seed, duration_s, workdir, estimator_task=estimator
                 )
-                for seed in seeds
-            ]
-            for name in conditions
-        }
+                out[label][name].append(row)
     return out
 
 

@@ -15,19 +15,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from softpend.checks import int_at_least, positive, positive_int
+from softpend.checks import instance_of, positive
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, evaluate
 from softpend.plant import RodParams
 from softpend.task import Task
-
-__all__ = [
-    "SPREAD_FACTOR",
-    "UNKNOWN_FIELDS",
-    "UnknownRod",
-    "balanced_starts",
-    "draw_unknown_rod",
-    "effective_rod",
-]
 
 #: The rod fields an unknown rod draws (besides the torque gain).
 UNKNOWN_FIELDS: tuple[str, ...] = (
@@ -48,6 +39,8 @@ _GAIN_DIVIDES: tuple[str, ...] = (
     "youngs_modulus_pa",
     "joint_damping_nms_per_rad",
 )
+#: Most rods :func:`draw_unknown_rod` draws.
+MAX_DRAWS = 50
 #: Largest unknown-rod JSON file [bytes].
 _MAX_JSON_BYTES = 10**6
 
@@ -67,8 +60,7 @@ class UnknownRod:
     torque_gain: float = 1.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.rod, RodParams):
-            raise ValueError(f"rod must be a RodParams, got {type(self.rod).__name__}")
+        instance_of("rod", self.rod, RodParams)
         object.__setattr__(self, "torque_gain", positive("torque_gain", self.torque_gain))
 
     def effective_rod(self) -> RodParams:
@@ -125,29 +117,18 @@ def balanced_starts(
 
 
 def draw_unknown_rod(
-    seed: int,
-    starts: int = 10,
-    needed: int = 9,
-    duration_s: float = TEST_EPISODE_S,
-    max_draws: int = 50,
-    base: RodParams | None = None,
+    seed: int, starts: int = 10, needed: int = 9, duration_s: float = TEST_EPISODE_S
 ) -> tuple[UnknownRod, int]:
     """``(rod, draws)``: the first rod drawn from ``seed`` whose :data:`UNKNOWN_FIELDS` and torque gain lie
-    log-uniformly within :data:`SPREAD_FACTOR` of ``base`` (default ``RodParams()``, gain 1) that the controller
-    designed on its true parameters balances from at least ``needed`` of ``starts`` hanging starts, and how many
-    rods were drawn; ``ValueError`` when none of ``max_draws`` is."""
-    rng = np.random.default_rng(int_at_least("seed", seed, 0))
-    starts = positive_int("starts", starts)
-    needed = positive_int("needed", needed)
-    if needed > starts:
-        raise ValueError(f"needed must be at most starts ({starts}), got {needed}")
-    base = base if base is not None else RodParams()
-    spread = math.log(SPREAD_FACTOR)
-    for draw in range(1, positive_int("max_draws", max_draws) + 1):
+    log-uniformly within :data:`SPREAD_FACTOR` of ``RodParams()`` (gain 1) that the controller designed on its true
+    parameters balances from at least ``needed`` of ``starts`` hanging starts, and how many rods were drawn;
+    ``ValueError`` when none of :data:`MAX_DRAWS` is."""
+    rng, base, spread = np.random.default_rng(seed), RodParams(), math.log(SPREAD_FACTOR)
+    for draw in range(1, MAX_DRAWS + 1):
         factors = np.exp(rng.uniform(-spread, spread, len(UNKNOWN_FIELDS) + 1))
         rod = base.replace(**{name: getattr(base, name) * f for name, f in zip(UNKNOWN_FIELDS, factors)})
         candidate = UnknownRod(rod, float(factors[-1]))
         seeds = [int(s) for s in rng.integers(0, 2**31 - 1, starts)]
         if balanced_starts(candidate.effective_rod(), seeds, duration_s) >= needed:
             return candidate, draw
-    raise ValueError(f"seed {seed}: none of {max_draws} drawn rods is balanced from {needed} of {starts} starts")
+    raise ValueError(f"seed {seed}: none of {MAX_DRAWS} drawn rods is balanced from {needed} of {starts} starts")

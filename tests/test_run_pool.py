@@ -38,18 +38,8 @@ def test_one_pool_trains_the_runs_each_method_trains_on_its_own(tmp_path):
 
     tiny_pilco = PilcoConfig(n_policy_trials=0, horizon_s=1.0, prediction_s=None)
     pool, here = tmp_path / "pool", tmp_path / "here"
-    assert (
-        train_in_one_pool(
-            [("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], pool / "pilco", workers=2, progress=False
-        )
-        == 3
-    )
-    assert (
-        train_in_one_pool(
-            [("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], pool / "pilco", workers=2, progress=False
-        )
-        == 0
-    )  # finished runs are kept
+    assert train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], workers=2, progress=False) == 3
+    assert train_in_one_pool([("dqn", TINY_DQN, [0, 1], 2)], pool, tiny_pilco, [0], workers=2, progress=False) == 0
     stamp = (run_folder(pool, "dqn", 0) / "log.json").stat().st_mtime_ns
     from_pool = train_seeds("dqn", TINY_DQN, [0, 1], 2, pool, progress=False, workers=1)  # found, not trained
     assert (run_folder(pool, "dqn", 0) / "log.json").stat().st_mtime_ns == stamp
@@ -70,7 +60,7 @@ def test_one_pool_trains_the_runs_each_method_trains_on_its_own(tmp_path):
             ]
         )
 
-    [pilco_pool] = pilco_runs(tiny_pilco, [0], pool / "pilco", progress=False, workers=1)
+    [pilco_pool] = pilco_runs(tiny_pilco, [0], pool, progress=False, workers=1)
     [pilco_own] = pilco_runs(tiny_pilco, [0], here / "pilco", progress=False, workers=1)
     assert pilco_pool.config == pilco_own.config and records(pilco_pool) == records(pilco_own)
 

@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     pool = dict(workers=args.workers, backend=args.backend)
     # every method's runs in one pool; the per-method calls below find them finished
     rl_specs = [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos]
-    train_in_one_pool(rl_specs, root, config if "pilco" in args.methods else None, args.seeds, root, **pool)
+    train_in_one_pool(rl_specs, root, config if "pilco" in args.methods else None, args.seeds, **pool)
     out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
     rl_logs = {algo: train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, **pool) for algo in rl_algos}
     for algo, logs in rl_logs.items():

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import datetime
+import posixpath
 import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -27,28 +28,26 @@ def _order(jobs: Sequence[Job]) -> list[Job]:
     return sorted(jobs, key=lambda job: rank.get(job[0].rsplit("/", 1)[-1].split("-")[0], 3))
 
 
+def _jobs(
+    root: Path | str, folders: tuple[str, str], pilco_config: Any, pilco_seeds: Sequence, rl_specs: Sequence
+) -> list[Job]:
+    """The missing runs of ``pilco_config`` over ``pilco_seeds`` and of ``rl_specs`` under ``root``, in ``folders``
+    (PILCO's, the RL methods'), as pool jobs named by folder."""
+    pilco = pilco_jobs(pilco_config, pilco_seeds, Path(root, folders[0])) if pilco_config is not None else []
+    jobs = [(posixpath.join(folders[0], n), (run_and_save, *a)) for n, a in pilco]
+    jobs += [(posixpath.join(folders[1], n), (train_run, *a)) for n, a in rl_jobs(rl_specs, Path(root, folders[1]))]
+    return _order(jobs)
+
+
 def train_in_one_pool(
-    rl_specs: Sequence[tuple[str, Any, Sequence[int], int]],
-    rl_root: Path | str,
-    pilco_config: Any = None,
-    pilco_seeds: Sequence[int] = (),
-    pilco_root: Path | str | None = None,
-    workers: Optional[int] = None,
-    progress: bool = True,
-    backend: Optional[str] = None,
+    rl_specs: Sequence, root: Path | str, pilco_config: Any = None, pilco_seeds: Sequence = (), **pool
 ) -> int:
-    """Train the missing runs of ``rl_specs`` (``(algo, config, seeds, episodes)`` each, under ``rl_root``) and of
-    ``pilco_config`` over ``pilco_seeds`` (under ``pilco_root`` or ``rl_root``) in one pool; returns their number."""
-    jobs: list[Job] = []
-    if pilco_config is not None and len(pilco_seeds):
-        root = Path(rl_root if pilco_root is None else pilco_root)
-        jobs += [(name, (run_and_save, *args)) for name, args in pilco_jobs(pilco_config, pilco_seeds, root)]
-    if rl_specs:
-        jobs += [(name, (train_run, *args)) for name, args in rl_jobs(rl_specs, rl_root)]
-    return _train(_order(jobs), workers, progress, backend)
+    """Train the missing runs of ``rl_specs`` (``(algo, config, seeds, episodes)`` each) and of ``pilco_config`` over
+    ``pilco_seeds`` under ``root`` in one pool (``pool``: ``workers``, ``progress``, ``backend``); returns their number."""
+    return _train(_jobs(root, ("", ""), pilco_config, pilco_seeds, rl_specs), **pool)
 
 
-def _train(jobs: Sequence[Job], workers: Optional[int], progress: bool, backend: Optional[str]) -> int:
+def _train(jobs: Sequence[Job], workers: Optional[int] = None, progress: bool = True, backend=None) -> int:
     if jobs:
         run_jobs(call_job, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "training runs", backend)
     return len(jobs)
@@ -83,23 +82,18 @@ def book_run_jobs(
         claimed.update(names.values())
         return kept
 
-    jobs: list[Job] = []
-    pilco_root = str(given.get("pilco_runs_root", PILCO_BOOK.runs_root))
-    if pilco_seeds := fresh(pilco_root, "pilco", pilco_seeds):
+    folders = (str(given.get("pilco_runs_root", PILCO_BOOK.runs_root)), str(given.get("runs_root", RL_BOOK.runs_root)))
+    pilco_config = None
+    if pilco_seeds := fresh(folders[0], "pilco", pilco_seeds):
         task = apply_overrides(Task(plant=TASK.plant), task_overrides)
-        config = load_hparams("pilco", task, given.get("pilco_overrides"))
-        found = pilco_jobs(config, pilco_seeds, Path(root) / pilco_root)
-        jobs += [(f"{pilco_root}/{name}", (run_and_save, *args)) for name, args in found]
-    rl_root = str(given.get("runs_root", RL_BOOK.runs_root))
-    if rl_seeds:
-        configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides"))
-        specs = [
-            (algo, configs[algo], kept, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
-            for algo in ("dqn", "mbpo")
-            if (kept := fresh(rl_root, algo, rl_seeds))
-        ]
-        jobs += [(f"{rl_root}/{name}", (train_run, *args)) for name, args in rl_jobs(specs, Path(root) / rl_root)]
-    return _order(jobs)
+        pilco_config = load_hparams("pilco", task, given.get("pilco_overrides"))
+    configs = figure_configs(task_overrides=task_overrides, rl_overrides=given.get("rl_overrides")) if rl_seeds else {}
+    specs = [
+        (algo, configs[algo], kept, given.get(f"episodes_{algo}", getattr(RL_BOOK, f"episodes_{algo}")))
+        for algo in ("dqn", "mbpo")
+        if (kept := fresh(folders[1], algo, rl_seeds))
+    ]
+    return _jobs(root, folders, pilco_config, pilco_seeds, specs)
 
 
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
@@ -115,17 +109,11 @@ def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
     return _order(jobs)
 
 
-def train_book(
-    root: Path | str = ".",
-    profile: str = "full",
-    workers: Optional[int] = None,
-    progress: bool = True,
-    backend: Optional[str] = None,
-) -> dict[str, Any]:
+def train_book(root: Path | str = ".", profile: str = "full", workers: Optional[int] = None, backend=None) -> dict:
     """Train :func:`book_jobs` in one pool and write (and return) the record the execution page shows."""
     jobs, start = book_jobs(root, profile), time.perf_counter()
     workers = default_workers() if workers is None else workers
-    _train(jobs, workers, progress, backend)
+    _train(jobs, workers, True, backend)
     seconds = time.perf_counter() - start
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     record = dict(profile=profile, date=date, trained=[name for name, _ in jobs], seconds=seconds, workers=workers)

@@ -7,7 +7,7 @@ import contextlib
 import os
 import traceback
 import warnings
-from typing import Any, Callable, Iterator, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from softpend.checks import int_at_least, one_of
 
@@ -70,26 +70,6 @@ def check_backend(backend: str) -> str:
     return backend
 
 
-@contextlib.contextmanager
-def _engine(backend: str) -> Iterator[None]:
-    """Make ``backend`` joblib's active backend (registering Ray's or Dask's first)."""
-    import joblib
-
-    with contextlib.ExitStack() as stack:
-        if backend == "ray":
-            from ray.util.joblib import register_ray
-
-            register_ray()
-        elif backend == "dask":
-            from dask.distributed import Client
-
-            address = os.environ.get("DASK_SCHEDULER_ADDRESS")
-            stack.enter_context(Client(address) if address else Client(processes=True))
-        if backend != "loky":
-            stack.enter_context(joblib.parallel_config(backend=backend))
-        yield
-
-
 def run_jobs(
     job: Callable[..., None],
     jobs: Sequence[tuple[Any, ...]],
@@ -103,14 +83,9 @@ def run_jobs(
     """Call the module-level ``job(*args, progress=...)`` for every ``args`` of ``jobs`` (named by ``names``),
     ``workers`` at a time (1: in this process), retrying ``retries`` times a job whose worker died; then
     :class:`SweepFailed` names the jobs that failed."""
-    if len(jobs) != len(names):
-        raise ValueError(f"got {len(jobs)} jobs but {len(names)} names")
-    if len(set(names)) != len(names):
-        raise ValueError(f"job names must be distinct, got {list(names)}")
     workers = int_at_least("workers", default_workers() if workers is None else workers, 1)
-    retries = int_at_least("retries", retries, 0)
     backend = check_backend(default_backend() if backend is None else backend)
-    workers, pending, failures = min(workers, max(1, len(jobs))), dict(zip(names, jobs)), dict[str, str]()
+    workers, pending, failures = min(workers, max(1, len(jobs))), dict(zip(names, jobs, strict=True)), dict[str, str]()
     for attempt in range(retries + 1):
         retry = f" (retry {attempt})" if attempt else ""
         raised, lost = _run_round(job, pending, workers, progress, desc + retry, backend)
@@ -143,9 +118,18 @@ def _run_round(
     message = "A worker stopped while some jobs were given to the executor"
     warnings.filterwarnings("ignore", message=message, category=UserWarning, module="joblib")
     try:
-        with _engine(backend):
-            loky = {"backend": "loky"} if backend == "loky" else {}
-            parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered", **loky)
+        with contextlib.ExitStack() as stack:  # backend: joblib's active backend, Ray's or Dask's registered first
+            if backend == "ray":
+                from ray.util.joblib import register_ray
+
+                register_ray()
+            elif backend == "dask":
+                from dask.distributed import Client
+
+                address = os.environ.get("DASK_SCHEDULER_ADDRESS")
+                stack.enter_context(Client(address) if address else Client(processes=True))
+            stack.enter_context(joblib.parallel_config(backend=backend))
+            parallel = joblib.Parallel(n_jobs=min(workers, len(pending)), return_as="generator_unordered")
             calls = (joblib.delayed(_guarded)(job, args, name, False, True) for name, args in pending.items())
             with tqdm(total=len(pending), desc=desc, unit="run", disable=not progress) as bar:
                 for name, error in parallel(calls):

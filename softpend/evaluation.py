@@ -45,19 +45,6 @@ class Controller(Protocol):
         """Base torque [N m] for the current step (the plant saturates it at its limit)."""
 
 
-@dataclass
-class FunctionController:
-    """Wrap a plain function ``f(observation, q, q_dot, time_s) -> torque_nm`` as a :class:`Controller`."""
-
-    function: Callable[[Observation, np.ndarray, np.ndarray, float], float]
-
-    def reset(self) -> None:
-        pass
-
-    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        return float(self.function(observation, q, q_dot, time_s))
-
-
 class GymPolicyController:
     """Run a policy trained on a softpend Gymnasium environment (e.g. a stable-baselines3 model)."""
 
@@ -284,13 +271,10 @@ class BatchPolicy:
 
 def _start_options(initial_state: Optional[tuple[Any, Any]]) -> Optional[dict[str, Any]]:
     """``reset``'s options for an exact start ``(q, q_dot)`` (``None``: the start distribution)."""
-    if initial_state is None:
-        return None
     try:
-        q, q_dot = initial_state
+        return None if initial_state is None else dict(zip(("q", "q_dot"), initial_state, strict=True))
     except (TypeError, ValueError):
         raise ValueError("initial_state must be a pair (q, q_dot)") from None
-    return {"q": q, "q_dot": q_dot}
 
 
 def _steps(duration_s: float, dt_s: float, batch: int, n_coordinates: int) -> int:
@@ -369,15 +353,11 @@ def _one_by_one(controller: Any, task: Task, seeds: list[int], duration_s: float
     """The Exudyn engine's episodes of :func:`evaluate`, one after the other (none after a failure if asked)."""
     from softpend.envs import SoftPendulumEnv
 
-    if isinstance(controller, BatchPolicy) or o["substeps"] is not None:
-        raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
-    _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)  # all the episodes' trajectories are kept
-    env = SoftPendulumEnv(**task.env_kwargs(), **o["env_kwargs"])
     results: list[EvaluationResult] = []
-    for seed in seeds:
-        if o["rod_spread"] > 0:
-            rod = _rod(task, o["rod_spread"], o["rod_seed"] + seed)
-            env = SoftPendulumEnv(**task.replace(rod=rod).env_kwargs(), **o["env_kwargs"])
+    env = SoftPendulumEnv(**task.env_kwargs())
+    for i, seed in enumerate(seeds):
+        if o["rods"] is not None:
+            env = SoftPendulumEnv(**task.replace(rod=o["rods"][i]).env_kwargs())
         results.append(run_episode(controller, env, seed, duration_s, initial_state=o["initial_state"]))
         if o["stop_at_first_failure"] and not results[-1].success:
             break
@@ -389,41 +369,27 @@ def _batched(controller: Any, task: Task, seeds: list[int], duration_s: float, o
     from softpend.envs.vector import SoftPendulumDiscreteVectorEnv, SoftPendulumVectorEnv
     from softpend.plant.batched import BatchedRodParams, stable_substeps
 
-    if task.plant != "prb":
-        raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
-    _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)
-    rod_spread, rod_seed, substeps = o["rod_spread"], o["rod_seed"], o["substeps"]
     policy = controller if isinstance(controller, BatchPolicy) else _copies(controller, len(seeds))
-    rods = (
-        None if rod_spread == 0 else BatchedRodParams.from_params([_rod(task, rod_spread, rod_seed + s) for s in seeds])
-    )
+    rods = None if o["rods"] is None else BatchedRodParams.from_params(o["rods"])
+    substeps = o["substeps"]
     if rods is not None:
         stable = stable_substeps(rods, task.dt_s)
         if substeps is None:
             substeps = max(stable, stable_substeps(task.rod, task.dt_s))
         elif int_at_least("substeps", substeps, 1) < stable:
             raise ValueError(
-                f"substeps must be at least {stable} for the rods drawn with rod_spread = {rod_spread:g} "
+                f"substeps must be at least {stable} for the rods drawn with rod_spread = {o['rod_spread']:g} "
                 f"(softpend.plant.batched.stable_substeps), got {substeps!r}"
             )
     kwargs = {k: v for k, v in task.env_kwargs().items() if k != "plant"}
     kwargs.update(substeps=substeps, num_envs=len(seeds), max_episode_steps=int(round(duration_s / task.dt_s)) + 1)
-    kwargs.update(o["env_kwargs"])
     levels = getattr(policy, "n_torque_levels", None)
     env = SoftPendulumDiscreteVectorEnv(n_torque_levels=levels, **kwargs) if levels else SoftPendulumVectorEnv(**kwargs)
     if rods is not None:
         env.chain.set_params(rods)  # actions still map to torques by the task's limit; each rod saturates at its own
-    engine = _ManyRods(env)
     to_actions = lambda torques: (torques / env.torque_limit_nm)[:, None]  # noqa: E731
     batch_policy = policy if isinstance(policy, BatchPolicy) else _Controllers(policy, to_actions)
-    return _roll(engine, batch_policy, seeds, duration_s, o["initial_state"])
-
-
-def _rod(task: Task, rod_spread: float, seed: int) -> Any:
-    """:func:`softpend.plant.randomisation.randomised_rod` of ``task.rod`` from ``default_rng(seed)``."""
-    from softpend.plant.randomisation import randomised_rod
-
-    return randomised_rod(task.rod, np.random.default_rng(seed), rod_spread)
+    return _roll(_ManyRods(env), batch_policy, seeds, duration_s, o["initial_state"])
 
 
 def evaluate(
@@ -435,28 +401,34 @@ def evaluate(
     seeds: Sequence[int] = (0, 1, 2),
     duration_s: float = TEST_EPISODE_S,
     initial_state: Optional[tuple[Any, Any]] = None,
-    env_kwargs: Optional[dict[str, Any]] = None,
     stop_at_first_failure: bool = False,
     rod_spread: float = 0.0,
     rod_seed: int = 0,
     substeps: Optional[int] = None,
 ) -> EvaluationSummary:
     """Evaluate a controller on the true plant of ``task`` from one start per seed, on the Exudyn engine (one episode
-    after the other) or the batched one (all at once)."""
+    after the other) or the batched one (all at once); ``rod_spread > 0``: the rod of seed ``s``
+    :func:`softpend.plant.randomisation.randomised_rod` from ``default_rng(rod_seed + s)``."""
+    from softpend.plant.randomisation import randomised_rod
+
     task = task if task is not None else Task()
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")
     one_of("engine", engine, ("exudyn", "batched"))
     seeds = list(seed_tuple("seeds", seeds, non_empty=True))
     positive("duration_s", duration_s)
-    options = dict(
-        initial_state=initial_state,
-        env_kwargs=dict(env_kwargs or {}),
-        stop_at_first_failure=boolean("stop_at_first_failure", stop_at_first_failure),
-        rod_spread=in_unit_interval("rod_spread", rod_spread, include_one=False),
-        rod_seed=int_at_least("rod_seed", rod_seed, 0),
-        substeps=substeps,
-    )
+    stop_at_first_failure = boolean("stop_at_first_failure", stop_at_first_failure)
+    rod_spread = in_unit_interval("rod_spread", rod_spread, include_one=False)
+    rod_seed = int_at_least("rod_seed", rod_seed, 0)
+    if engine == "exudyn" and (isinstance(controller, BatchPolicy) or substeps is not None):
+        raise ValueError("a BatchPolicy and substeps are the batched engine's: pass engine='batched'")
+    if engine == "batched" and task.plant != "prb":
+        raise ValueError(f"task.plant must be 'prb' (the batched chain simulates the PRB rod), got {task.plant!r}")
+    _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)  # all the episodes' trajectories are kept
+    draw = lambda s: randomised_rod(task.rod, np.random.default_rng(rod_seed + s), rod_spread)  # noqa: E731
+    rods = None if rod_spread == 0 else [draw(s) for s in seeds]
+    options = dict(initial_state=initial_state, stop_at_first_failure=stop_at_first_failure, rods=rods)
+    options.update(rod_spread=rod_spread, substeps=substeps)
     results = (_batched if engine == "batched" else _one_by_one)(controller, task, seeds, duration_s, options)
     failed = [i for i, r in enumerate(results) if not r.success]
     if stop_at_first_failure and failed:

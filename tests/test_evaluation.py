@@ -10,7 +10,6 @@ import pytest
 from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.evaluation import (
     BatchPolicy,
-    FunctionController,
     GymPolicyController,
     evaluate,
     evaluate_controller,
@@ -18,6 +17,12 @@ from softpend.evaluation import (
     run_episode,
 )
 from softpend.task import Task
+
+
+def as_controller(function):
+    """A plain function ``f(observation, q, q_dot, time_s) -> torque_nm`` as a controller."""
+    function.reset = lambda: None
+    return function
 
 
 def _trajectory(theta: np.ndarray, dt: float = 0.01):
@@ -72,18 +77,18 @@ def test_metric_input_validation() -> None:
 
 def test_closed_loop_hub_feedback_keeps_the_soft_rod_upright() -> None:
     # a PD loop on the hub angle: the rod is stiff enough to stand when its base is held
-    controller = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
+    controller = as_controller(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
     summary = evaluate_controller(controller, Task(start="upright"), seeds=[0, 1], duration_s=3.0)
     assert summary.success_rate == 1.0
     assert summary.median("upright_std_rad") < 0.1
     assert summary.results[0].observations.shape == (301, 10)
     # doing nothing from hanging never swings up
-    idle = evaluate_controller(FunctionController(lambda o, q, qd, t: 0.0), seeds=[0], duration_s=2.0)
+    idle = evaluate_controller(as_controller(lambda o, q, qd, t: 0.0), seeds=[0], duration_s=2.0)
     assert idle.success_rate == 0.0 and math.isinf(idle.results[0].swing_up_time_s)
 
 
 def test_evaluation_is_reproducible_per_seed() -> None:
-    controller = FunctionController(lambda o, q, qd, t: 0.06 * math.copysign(1.0, o.phi_dot_rad_s))
+    controller = as_controller(lambda o, q, qd, t: 0.06 * math.copysign(1.0, o.phi_dot_rad_s))
     a = evaluate_controller(controller, seeds=[5], duration_s=1.0).results[0]
     b = evaluate_controller(controller, seeds=[5], duration_s=1.0).results[0]
     np.testing.assert_array_equal(a.observations, b.observations)
@@ -91,18 +96,18 @@ def test_evaluation_is_reproducible_per_seed() -> None:
 
 def test_non_finite_controller_output_is_an_error() -> None:
     with pytest.raises(ValueError, match="non-finite torque"):
-        evaluate_controller(FunctionController(lambda o, q, qd, t: float("nan")), seeds=[0], duration_s=0.5)
+        evaluate_controller(as_controller(lambda o, q, qd, t: float("nan")), seeds=[0], duration_s=0.5)
 
 
 def test_an_evaluation_can_stop_at_its_first_failing_start_with_the_same_episodes() -> None:
     seeds = [3, 4, 5]
-    holding = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
+    holding = as_controller(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
     full = evaluate_controller(holding, Task(start="upright"), seeds=seeds, duration_s=2.0)
     early = evaluate_controller(holding, Task(start="upright"), seeds=seeds, duration_s=2.0, stop_at_first_failure=True)
     assert full.successes == early.successes == 3  # every start succeeds: every start runs
     for a, b in zip(full.results, early.results):
         np.testing.assert_array_equal(a.observations, b.observations)
-    idle = FunctionController(lambda o, q, qd, t: 0.0)
+    idle = as_controller(lambda o, q, qd, t: 0.0)
     full = evaluate_controller(idle, seeds=seeds, duration_s=1.5)
     early = evaluate_controller(idle, seeds=seeds, duration_s=1.5, stop_at_first_failure=True)
     assert len(full.results) == 3 and [r.seed for r in early.results] == [3]  # stops after the first failure
@@ -113,8 +118,8 @@ def test_an_evaluation_can_stop_at_its_first_failing_start_with_the_same_episode
 
 @pytest.mark.parametrize("engine", ["exudyn", "batched"])
 def test_stop_at_first_failure_keeps_the_episodes_up_to_the_first_failure_on_either_engine(engine: str) -> None:
-    idle = FunctionController(lambda o, q, qd, t: 0.0)
-    holding = FunctionController(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
+    idle = as_controller(lambda o, q, qd, t: 0.0)
+    holding = as_controller(lambda o, q, qd, t: -0.5 * q[0] - 0.05 * qd[0])
     upright = Task(start="upright")
     held = evaluate(holding, upright, engine=engine, seeds=[3, 4], duration_s=1.5, stop_at_first_failure=True)
     assert [r.seed for r in held.results] == [3, 4] and held.successes == 2
@@ -161,7 +166,7 @@ def test_a_gym_policy_sees_what_its_environment_shows_and_leaves_the_environment
 
 
 def test_engine_arguments_are_refused_where_they_do_not_belong() -> None:
-    idle = FunctionController(lambda o, q, qd, t: 0.0)
+    idle = as_controller(lambda o, q, qd, t: 0.0)
     with pytest.raises(ValueError, match="engine must be one of"):
         evaluate(idle, engine="mujoco", seeds=(0,), duration_s=0.5)
     with pytest.raises(ValueError, match="batched engine"):

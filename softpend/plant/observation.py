@@ -15,9 +15,7 @@ OBSERVATION_NAMES: tuple[str, ...] = tuple(
 
 def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
     """Wrap an angle to ``[-pi, pi)``."""
-    return (
-        (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi if np.ndim(angle) else (angle + np.pi) % (2 * np.pi) - np.pi
-    )
+    return (np.asarray(angle) + np.pi if np.ndim(angle) else angle + np.pi) % (2 * np.pi) - np.pi
 
 
 class Observation(NamedTuple):

@@ -61,9 +61,8 @@ class CameraModel:
     def metre_to_pixel(self) -> np.ndarray:
         """The 2x3 matrix ``pixel = M @ [x_m, y_m, 1]``."""
         c, s = math.cos(self.roll_rad), math.sin(self.roll_rad)
-        rot = np.array([[c, -s], [s, c]])
-        linear = self.px_per_m * rot @ np.diag([1.0, self.aspect]) @ np.array([[1.0, self.shear], [0.0, 1.0]])
-        linear = linear @ np.diag([1.0, -1.0])
+        linear = self.px_per_m * np.array([[c, -s], [s, c]]) @ np.diag([1.0, self.aspect])
+        linear = linear @ np.array([[1.0, self.shear], [0.0, 1.0]]) @ np.diag([1.0, -1.0])
         return np.column_stack([linear, np.asarray(self.centre_px, dtype=float)])
 
     def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
@@ -116,12 +115,10 @@ class SyntheticCamera:
         markers_m: Sequence[Sequence[float]] = DEFAULT_MARKERS_M,
         seed: int = 0,
     ) -> None:
-        self.model = model if model is not None else CameraModel()
+        self.model = m = model if model is not None else CameraModel()
         self.effects = effects if effects is not None else CameraEffects()
-        self.markers_m = np.asarray(markers_m, dtype=float)
-        self.seed = int(seed)
+        self.markers_m, self.seed = np.asarray(markers_m, dtype=float), int(seed)
         self._rng = np.random.default_rng(seed)
-        m = self.model
         self._background = image = np.full((m.height_px, m.width_px, 3), (205, 210, 215), dtype=np.uint8)
         if self.effects.clutter:
             rng = np.random.default_rng(self.seed + 7919)
@@ -129,8 +126,7 @@ class SyntheticCamera:
             palette = [(60, 60, 200), (40, 140, 220), (30, 200, 230), (150, 150, 150)]
             palette += [(100, 90, 120), (180, 200, 230), (80, 110, 140)]
             for _ in range(25):
-                colour = palette[rng.integers(len(palette))]
-                kind = rng.integers(3)
+                colour, kind = palette[rng.integers(len(palette))], rng.integers(3)
                 x, y = int(rng.integers(0, m.width_px)), int(rng.integers(0, m.height_px))
                 if kind == 0:
                     corner = (x + int(rng.integers(10, 90)), y + int(rng.integers(10, 60)))
@@ -145,7 +141,7 @@ class SyntheticCamera:
                 cv2.circle(image, (x, y), 1, _TIP_BGR, -1)
         for centre in self.model.to_pixels(self.markers_m):
             _circle(image, centre, 7.0, _MARKER_BGR)
-        yy, xx = np.mgrid[0 : m.height_px, 0 : m.width_px].astype(np.float32)
+        xx = np.mgrid[0 : m.height_px, 0 : m.width_px].astype(np.float32)[1]
         gradient = (1.0 + self.effects.gradient * ((xx / m.width_px) - 0.5)).astype(np.float32)
         self._gradient3 = cv2.merge([gradient, gradient, gradient])
         self._noise_margin = 97  # sensor noise: per frame a random crop of one larger noise field

@@ -119,10 +119,12 @@ class ThreadedTipSource:
 
     def stats(self) -> dict[str, float]:
         ages = np.asarray(self._ages_s) * 1e3
-        out = {name: float(count) for name, count in self.counts.items()}
-        out["delivery_latency_ms_median"] = float(np.median(ages)) if ages.size else math.nan
-        out["delivery_latency_ms_p95"] = float(np.percentile(ages, 95)) if ages.size else math.nan
-        return out
+        median, p95 = (float(np.median(ages)), float(np.percentile(ages, 95))) if ages.size else (math.nan, math.nan)
+        return {
+            **{k: float(v) for k, v in self.counts.items()},
+            "delivery_latency_ms_median": median,
+            "delivery_latency_ms_p95": p95,
+        }
 
     def _run(self) -> None:
         raise NotImplementedError
@@ -169,14 +171,12 @@ class PoseHistory:
     def pose_at(self, time_s: float) -> tuple[np.ndarray, Optional[float]]:
         """Link points ``(n + 1, 2)`` [m] and hub angle [rad] at ``time_s``, linear between samples, clamped."""
         times = self._times
-        if time_s <= times[0]:
-            q = self._q[0]
-        elif time_s >= times[-1]:
-            q = self._q[-1]
-        else:
+        if times[0] < time_s < times[-1]:
             i = int(np.searchsorted(np.fromiter(times, float, len(times)), time_s)) - 1
             w = (time_s - times[i]) / (times[i + 1] - times[i])
             q = (1.0 - w) * self._q[i] + w * self._q[i + 1]
+        else:
+            q = self._q[0] if time_s <= times[0] else self._q[-1]
         return self.link_points(q), float(q[0])
 
 
@@ -245,21 +245,21 @@ class SyntheticLiveCamera(ThreadedTipSource):
 
     def _frame(self, k: int) -> None:
         """Frame ``k``, ready now; the next one scheduled."""
-        first = self.first_frame_time_s
+        first, faults = self.first_frame_time_s, self.faults
         assert first is not None  # set by start()
         if self._closed:
             return
         self.clock.call_at(first + (k + 1) / self.fps + self.latency_s, lambda: self._frame(k + 1))
         t_k = first + k / self.fps
         elapsed = t_k - first
-        if self.faults.stall_after_s is not None and elapsed >= self.faults.stall_after_s:
+        if faults.stall_after_s is not None and elapsed >= faults.stall_after_s:
             self.counts["frames_stalled"] += 1
             return
-        if self.faults.drop_probability and self._rng.random() < self.faults.drop_probability:
+        if faults.drop_probability and self._rng.random() < faults.drop_probability:
             self.counts["frames_dropped"] += 1
             return
         frame, tip_px = self.camera.render(self.scene.pose_at, t_k)
-        if any(start <= elapsed < end for start, end in self.faults.occlusions_s):
+        if any(start <= elapsed < end for start, end in faults.occlusions_s):
             frame = _hide_dot(frame, tip_px, self.camera)
             self.counts["frames_occluded"] += 1
         self._deliver(k, frame, t_k - self.camera.effects.exposure_s / 2, self.clock.now_s())

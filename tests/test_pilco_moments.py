@@ -179,8 +179,6 @@ def test_cost_with_a_tip_rate_width_against_monte_carlo(spec_name):
     position_only = float(Propagator(spec, None, None, 0.3, 0.15).cost(m, s)[0])
     assert position_only == pytest.approx(np.mean(1 - np.exp(-0.5 * d2 / 0.15**2)), abs=0.01)
     assert float(e) > position_only + 0.05  # the rate is really in there
-    with pytest.raises(ValueError, match="cost_rate_width_rad_s"):
-        Propagator(spec, None, None, 0.3, 0.15, cost_rate_width_rad_s=0.0)
 
 
 def test_exploration_adds_the_weighted_cost_spread_which_is_larger_where_the_model_has_no_data():
@@ -210,8 +208,6 @@ def test_exploration_adds_the_weighted_cost_spread_which_is_larger_where_the_mod
         assert float(explored) == pytest.approx(float(costs.sum()) - 0.5 * spread, abs=1e-5)  # sqrt(var) >= 1e-6
         bonus[name] = float(plain - explored)
     assert bonus["push"] > 100 * bonus["still"]  # 0.26 against 0.0006
-    with pytest.raises(ValueError, match="exploration"):
-        Propagator(spec, gp, None, 0.3, 0.1, exploration=float("nan"))
 
 
 def test_rbf_network_moments_equal_the_one_output_gp_moments_with_their_gradients(gaussian_input):
@@ -335,8 +331,6 @@ def _compare_compiled_and_eager_rollouts() -> None:
         assert _rel(fast_means, eager_means) < 1e-12 and _rel(fast_covs, eager_covs) < 1e-10
     with torch.no_grad():  # no gradient: the eager rollout, the same numbers
         assert float(prop.rollout(m0, s0, 12)[3]) == pytest.approx(eager, rel=1e-12)
-    with pytest.raises(ValueError, match="moment_function"):
-        Propagator(spec, gp, object(), 0.3, 0.15, compiled=True)
 
 
 def test_without_a_working_compiler_the_rollout_warns_once_and_runs_eagerly(monkeypatch):

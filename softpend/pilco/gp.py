@@ -33,8 +33,6 @@ class GPHyperparameters:
 
 def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.ndarray:
     """Indices of at most ``max_points`` of ``n_points`` data points: the last ``recent`` always, the rest at random."""
-    if max_points < 1:
-        raise ValueError(f"max_points must be >= 1, got {max_points!r}")
     if n_points <= max_points:
         return np.arange(n_points)
     recent = min(max(int(recent), 0), max_points)
@@ -43,15 +41,11 @@ def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.
     return np.sort(np.concatenate([np.sort(older), newest]))
 
 
-def _data(
-    inputs: np.ndarray, targets: np.ndarray, ok: Callable[..., bool], shapes: tuple[str, str]
-) -> tuple[np.ndarray, ...]:
-    """``inputs`` and ``targets`` as float arrays; ``ValueError`` unless ``ok(inputs, targets)`` and finite."""
+def _data(inputs: np.ndarray, targets: np.ndarray, d: object = "D", e: object = "E") -> tuple[np.ndarray, ...]:
+    """``inputs`` (N, d) and ``targets`` (N, e) as finite float arrays, else ``ValueError`` (``"D"``: any width)."""
     x, y = np.asarray(inputs, dtype=float), np.asarray(targets, dtype=float)
-    if not ok(x, y):
-        raise ValueError(
-            f"inputs must be {shapes[0]} and targets {shapes[1]} with the same N, got {x.shape} and {y.shape}"
-        )
+    if not (x.ndim == y.ndim == 2 and len(x) == len(y) and d in ("D", x.shape[1]) and e in ("E", y.shape[1])):
+        raise ValueError(f"inputs must be (N, {d}) and targets (N, {e}) with the same N, got {x.shape} and {y.shape}")
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
         raise ValueError("inputs and targets must be finite")
     return x, y
@@ -61,9 +55,7 @@ class MultiOutputGP:
     """``E`` independent GP regressors sharing the training inputs (SE-ARD kernel, zero prior mean)."""
 
     def __init__(self, inputs: np.ndarray, targets: np.ndarray, hyperparameters: Optional[GPHyperparameters] = None):
-        inputs, targets = _data(
-            inputs, targets, lambda x, y: x.ndim == y.ndim == 2 and len(x) == len(y), ("(N, D)", "(N, E)")
-        )
+        inputs, targets = _data(inputs, targets)
         if len(inputs) < 2:
             raise ValueError(f"inputs must hold at least 2 points, got {len(inputs)}")
         self.inputs_np, self.targets_np = inputs, targets
@@ -83,14 +75,7 @@ class MultiOutputGP:
     def condition_on(self, inputs: np.ndarray, targets: np.ndarray) -> None:
         """Condition the predictor on ``inputs`` (N, D) and ``targets`` (N, E), usually a superset of the training
         data, through FITC with the training inputs as the inducing inputs; the hyperparameters stay as they are."""
-        d, e = self.n_inputs, self.n_outputs
-        inputs, targets = _data(
-            inputs,
-            targets,
-            lambda x, y: x.ndim == 2 and x.shape[1] == d and y.shape == (len(x), e),
-            (f"(N, {d})", f"(N, {e})"),
-        )
-        self.conditioning = (inputs, targets)
+        self.conditioning = _data(inputs, targets, self.n_inputs, self.n_outputs)
         self._update_cache()
 
     @staticmethod
@@ -119,8 +104,6 @@ class MultiOutputGP:
 
     def fit(self, max_iterations: int = 100, lengthscale_curb: float = 100.0, snr_curb: float = 500.0) -> list[float]:
         """Maximise each output's penalised log marginal likelihood (L-BFGS-B); returns the final objectives."""
-        if max_iterations < 1:
-            raise ValueError(f"max_iterations must be >= 1, got {max_iterations!r}")
         x = torch.as_tensor(self.inputs_np, dtype=DTYPE)
         log_input_std = torch.as_tensor(np.log(self.input_std), dtype=DTYPE)
         h = self.hyperparameters

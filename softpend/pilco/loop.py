@@ -295,23 +295,6 @@ class PilcoResult:
         return cls(config=config, records=records, policy=policy, gp_hyperparameters=hyper, balance_policy=balance)
 
 
-def real_cost(
-    theta_rad: np.ndarray,
-    length_m: float,
-    cost_width_m: float,
-    theta_dot_rad_s: np.ndarray | None = None,
-    cost_rate_width_rad_s: float | None = None,
-) -> np.ndarray:
-    """The propagator's saturating cost at tip angles [rad] (and, with ``cost_rate_width_rad_s``, tip rates [rad/s])."""
-    d2 = 2.0 * length_m**2 * (1.0 - np.cos(np.asarray(theta_rad, dtype=float)))
-    exponent = 0.5 * d2 / cost_width_m**2
-    if cost_rate_width_rad_s is not None:
-        if theta_dot_rad_s is None:
-            raise ValueError("theta_dot_rad_s must be given with cost_rate_width_rad_s")
-        exponent = exponent + 0.5 * (np.asarray(theta_dot_rad_s, dtype=float) / cost_rate_width_rad_s) ** 2
-    return 1.0 - np.exp(-exponent)
-
-
 def _trial_cost(
     config: PilcoConfig,
     spec: StateSpec,
@@ -319,10 +302,14 @@ def _trial_cost(
     rate_width: Optional[float],
     width_m: Optional[float] = None,
 ) -> float:
-    """The cost (width ``width_m``, default ``config.cost.width_m``) summed over a real trial's states after the start."""
+    """The propagator's saturating cost (width ``width_m``, default ``config.cost.width_m``; with ``rate_width`` a
+    tip-rate term) summed over a real trial's states after the start."""
     width_m = config.cost.width_m if width_m is None else width_m
     theta, theta_dot = states[1:, spec.tip_angle_index], states[1:, spec.tip_rate_index]
-    return float(real_cost(theta, config.task.rod.length_m, width_m, theta_dot, rate_width).sum())
+    exponent = 0.5 * (2.0 * config.task.rod.length_m**2 * (1.0 - np.cos(theta))) / width_m**2
+    if rate_width is not None:
+        exponent = exponent + 0.5 * (theta_dot / rate_width) ** 2
+    return float((1.0 - np.exp(-exponent)).sum())
 
 
 def _came_near_upright(spec: StateSpec, states: np.ndarray, within_rad: float) -> bool:
@@ -454,9 +441,10 @@ def _search_with_restarts(
 
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
-    within_rad = config.policy.balance_within_rad
-    band = None if balance is None or within_rad is None else (within_rad, config.policy.balance_within_rad_s)
-    return PilcoController(policy, state_spec(config.state), config.control_dt_s, balance if band else None, band)
+    within_rad, spec = config.policy.balance_within_rad, state_spec(config.state)
+    if balance is None or within_rad is None:
+        return PilcoController(policy, spec, config.control_dt_s)
+    return PilcoController(policy, spec, config.control_dt_s, balance, (within_rad, config.policy.balance_within_rad_s))
 
 
 def _upright_distribution(
@@ -559,7 +547,7 @@ class Pilco:
         config = self.config
         limit_nm, hold_s = config.task.rod.torque_limit_nm, (config.random_hold_min_s, config.random_hold_max_s)
         seed = _draw_seed(self.streams["random_torques"])
-        controller = RandomTorqueController(limit_nm, config.control_dt_s, seed, hold_s, bang_bang=True)
+        controller = RandomTorqueController(limit_nm, config.control_dt_s, seed, hold_s)
         episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
         rate_width = config.cost.rate_width_rad_s if self.rate_on else None
         return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)

@@ -7,7 +7,6 @@ from typing import Callable
 import numpy as np
 import torch
 
-from softpend.checks import non_negative, positive
 from softpend.pilco.moments import rbf_network_moments, sin_saturation_moments
 
 DTYPE = torch.float64
@@ -103,13 +102,8 @@ class LinearPolicy(_Policy):
     _PARAMS = ("weights",)
 
     def __init__(self, n_inputs: int, torque_limit_nm: float, weights: np.ndarray | None = None) -> None:
-        if int(n_inputs) < 1:
-            raise ValueError(f"n_inputs must be >= 1, got {n_inputs!r}")
-        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
-        w = np.zeros(int(n_inputs)) if weights is None else np.asarray(weights, dtype=float)
-        if w.shape != (int(n_inputs),) or not np.all(np.isfinite(w)):
-            raise ValueError(f"weights must be {int(n_inputs)} finite numbers, got {weights!r}")
-        self.weights = torch.tensor(w, dtype=DTYPE)
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.weights = torch.tensor(np.zeros(n_inputs) if weights is None else np.asarray(weights, float), dtype=DTYPE)
 
     @property
     def n_inputs(self) -> int:
@@ -134,22 +128,13 @@ class RBFPolicy(_Policy):
         lengthscales: np.ndarray,
         torque_limit_nm: float,
         seed: int = 0,
-        noise_std: float = 0.01,
         target_std: float = 0.1,
     ) -> None:
-        centers = np.asarray(centers, dtype=float)
-        lengthscales = np.asarray(lengthscales, dtype=float)
-        if centers.ndim != 2 or centers.shape[0] < 1:
-            raise ValueError(f"centers must be a non-empty (n_basis, D) array, got shape {centers.shape}")
-        if lengthscales.shape != (centers.shape[1],) or np.any(lengthscales <= 0):
-            raise ValueError(f"lengthscales must be {centers.shape[1]} positive numbers, got {lengthscales}")
-        self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
-        non_negative("target_std", target_std)
-        self.noise_var = float(noise_std) ** 2
+        self.torque_limit_nm, self.noise_var = float(torque_limit_nm), 0.01**2  # the pseudo-targets' noise std 0.01
         generator = torch.Generator().manual_seed(int(seed))
-        self.centers = torch.tensor(centers, dtype=DTYPE)
-        self.targets = float(target_std) * torch.randn(centers.shape[0], generator=generator, dtype=DTYPE)
-        self.log_lengthscales = torch.log(torch.tensor(lengthscales, dtype=DTYPE))
+        self.centers = torch.tensor(np.asarray(centers, dtype=float), dtype=DTYPE)
+        self.targets = float(target_std) * torch.randn(len(self.centers), generator=generator, dtype=DTYPE)
+        self.log_lengthscales = torch.log(torch.tensor(np.asarray(lengthscales, dtype=float), dtype=DTYPE))
         self._beta_cache: tuple | None = None
 
     @property

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from softpend.checks import boolean, finite, one_of, optional_positive, positive
+from softpend.checks import one_of
 from softpend.pilco.moments import saturating_cost_moments, trig_moments
 from softpend.plant import OBSERVATION_NAMES
 
@@ -98,13 +98,14 @@ class Propagator:
         exploration: float = 0.0,
         compiled: bool = False,
     ) -> None:
-        self.length_m, self.cost_width_m = positive("length_m", length_m), positive("cost_width_m", cost_width_m)
-        self.cost_rate_width_rad_s = optional_positive("cost_rate_width_rad_s", cost_rate_width_rad_s)
-        self.compiled = boolean("compiled", compiled)
-        if compiled and not all(hasattr(m, "moment_function") for m in (dynamics, policy)):
-            raise ValueError("a compiled propagation needs dynamics and a policy with moment_function()")
-        self.exploration = finite("exploration", exploration)
-        self.spec, self.dynamics, self.policy = spec, dynamics, policy
+        self.length_m, self.cost_width_m, self.cost_rate_width_rad_s = length_m, cost_width_m, cost_rate_width_rad_s
+        self.spec, self.dynamics, self.policy, self.exploration, self.compiled = (
+            spec,
+            dynamics,
+            policy,
+            exploration,
+            compiled,
+        )
         d = spec.dim
         k = d - spec.n_angles
         # positions in the augmented vector [state (d), trig (2A), u]
@@ -126,15 +127,9 @@ class Propagator:
             torch.tensor(self.cost_width_m / (self.cost_rate_width_rad_s or 1.0), dtype=DTYPE),
         )
 
-    @staticmethod
-    def _moment_function(model) -> tuple:
-        if hasattr(model, "moment_function"):
-            return model.moment_function()
-        return (lambda mean, cov: model.moments(mean, cov)), ()
-
     def step(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Distribution of the next state given ``x_t ~ N(m, s)`` under the current policy."""
-        return _step(self._layout, self._moment_function(self.policy), self._moment_function(self.dynamics), m, s)
+        return _step(self._layout, self.policy.moment_function(), self.dynamics.moment_function(), m, s)
 
     def cost(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Expected saturating cost and its variance for ``x ~ N(m, s)``."""
@@ -148,7 +143,7 @@ class Propagator:
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps!r}")
         means, covs, costs, stds = [m0], [s0], [], []
-        policy, dynamics = self._moment_function(self.policy), self._moment_function(self.dynamics)
+        policy, dynamics = self.policy.moment_function(), self.dynamics.moment_function()
         step_and_cost = _step_and_cost
         m, s = m0, s0
         if self.compiled and torch.is_grad_enabled():

@@ -4,6 +4,7 @@ trains the runs the book's notebooks read; ``--fresh`` measures the agents on th
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -19,29 +20,22 @@ def seed_list(text: str) -> list[int]:
     """``"0-9"``, ``"0,3,5"`` or a mix (``"0-2,7"``) as a sorted list of distinct seeds >= 0."""
     seeds: set[int] = set()
     for part in text.split(","):
-        try:
-            first, dash, last = part.strip().partition("-")
-            low, high = int(first), int(last if dash else first)
-            if high < low:
-                raise ValueError
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}") from None
+        match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
+        low, high = (int(match[1]), int(match[2] or match[1])) if match else (0, -1)
+        if high < low:
+            raise argparse.ArgumentTypeError(f"seeds must look like 0-9 or 0,3,5, got {text!r}")
         if high - low + 1 > MAX_SEEDS - len(seeds):  # refused by its size before a single seed is listed
             raise argparse.ArgumentTypeError(
                 f"seeds {text!r} name {high - low + 1 + len(seeds)} or more seeds, more "
                 f"than the {MAX_SEEDS} one sweep may train"
             )
         seeds.update(range(low, high + 1))
-    if not seeds or min(seeds) < 0:
-        raise argparse.ArgumentTypeError(f"seeds must be 1 to {MAX_SEEDS} integers >= 0, got {text!r}")
     return sorted(seeds)
 
 
 def method_list(text: str) -> list[str]:
     """Comma-separated method names among :data:`METHODS`."""
-    methods = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = sorted(set(methods) - set(METHODS))
-    if not methods or unknown:
+    if not (methods := [m.strip() for m in text.split(",") if m.strip()]) or not set(methods) <= set(METHODS):
         raise argparse.ArgumentTypeError(f"methods must be among {list(METHODS)}, got {text!r}")
     return list(dict.fromkeys(methods))
 
@@ -114,10 +108,11 @@ def run(args: argparse.Namespace) -> int:
     # every method's runs in one pool; the per-method calls below find them finished
     rl_specs = [(algo, configs[algo], args.seeds, episodes[algo]) for algo in rl_algos]
     train_in_one_pool(rl_specs, root, config if "pilco" in args.methods else None, args.seeds, **pool)
-    out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": {}}
     rl_logs = {algo: train_seeds(algo, configs[algo], args.seeds, episodes[algo], root, **pool) for algo in rl_algos}
-    for algo, logs in rl_logs.items():
-        out["methods"][algo] = {"episodes": episodes[algo], "runs": summary_table({algo: logs})}
+    methods = {
+        algo: {"episodes": episodes[algo], "runs": summary_table({algo: logs})} for algo, logs in rl_logs.items()
+    }
+    out: dict = {"seeds": args.seeds, "runs_root": str(root), "methods": methods}
     pilco_results = pilco_runs(config, args.seeds, root, **pool) if "pilco" in args.methods else []
     if pilco_results:
         keys = ("seed", "plant_s_to_balance", "plant_s", "cpu_s")

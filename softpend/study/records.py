@@ -27,26 +27,20 @@ def check_record(data: Any, where: str) -> dict[str, Any]:
         raise ValueError(f"{where}: a record must be a JSON object, got {type(data).__name__}")
     if unknown := sorted(set(data) - set(FIELDS)):
         raise ValueError(f"{where}: unknown field {unknown[0]!r} (a record has {', '.join(FIELDS)})")
-    for field, kind in FIELDS.items():
-        if not isinstance(data.get(field), kind):
-            raise ValueError(
-                f"{where}: field {field!r} must be a {kind.__name__}, got {type(data.get(field)).__name__}"
-            )
-    for name, value in data["settings"].items():
-        if not isinstance(value, _SCALARS):
-            raise ValueError(f"{where}: settings.{name} must be a scalar, got {type(value).__name__}")
+
+    def check(items: Any) -> None:  # (name, value, types, what it must be)
+        for at, value, kind, what in items:
+            if not isinstance(value, kind) or (isinstance(value, bool) and what == "a number"):
+                shown = repr(value) if what == "a number" else type(value).__name__
+                raise ValueError(f"{where}: {at} must be {what}, got {shown}")
+
+    check((f"field {field!r}", data.get(field), kind, f"a {kind.__name__}") for field, kind in FIELDS.items())
     figures = {name: float(value) if value in ("inf", "-inf") else value for name, value in data["figures"].items()}
-    for name, value in figures.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{where}: figures.{name} must be a number, got {value!r}")
-    for index, row in enumerate(data["rows"]):
-        if not isinstance(row, dict):
-            raise ValueError(f"{where}: rows[{index}] must be a mapping, got {type(row).__name__}")
-        for name, value in row.items():
-            if not isinstance(value, (*_SCALARS, dict)):
-                raise ValueError(
-                    f"{where}: rows[{index}].{name} must be a scalar or a mapping, got {type(value).__name__}"
-                )
+    check((f"settings.{name}", value, _SCALARS, "a scalar") for name, value in data["settings"].items())
+    check((f"figures.{name}", value, (int, float), "a number") for name, value in figures.items())
+    check((f"rows[{i}]", row, dict, "a mapping") for i, row in enumerate(data["rows"]))
+    cells = [(f"rows[{i}].{name}", value) for i, row in enumerate(data["rows"]) for name, value in row.items()]
+    check((at, value, (*_SCALARS, dict), "a scalar or a mapping") for at, value in cells)
     return data | {"figures": figures}
 
 
@@ -116,8 +110,9 @@ def current_rl_runs(runs_root: Path | str, algo: str, seeds: Sequence[int], plan
     def row(folder: Path, seed: int) -> dict[str, Any]:
         load_config(folder / "config.json")
         log = TrainingLog.load(folder / "log.json")
-        figures = {"plant_s_to_balance": float(log.real_s_to_balance()), "plant_s": log.plant_s}
-        return {"seed": seed, **figures, "episodes": log.n_episodes}
+        return dict(
+            seed=seed, plant_s_to_balance=float(log.real_s_to_balance()), plant_s=log.plant_s, episodes=log.n_episodes
+        )
 
     return load_runs(runs_root, plant, algo, seeds, row)
 
@@ -129,8 +124,7 @@ def current_pilco_runs(runs_root: Path | str, seeds: Sequence[int], plant: str =
     from softpend.study.rl_runs import load_runs
 
     def row(folder: Path, seed: int) -> dict[str, Any]:
-        result = PilcoResult.load(folder)
-        records = result.records
+        records = (result := PilcoResult.load(folder)).records
         row = {"seed": seed, "plant_s_to_balance": float(result.real_seconds_to_balance)}
         row |= {"plant_s": result.plant_seconds_total, "policy_trials": sum(r.kind == "policy" for r in records)}
         worst = records[-1].eval_upright_std_rad if records else math.nan

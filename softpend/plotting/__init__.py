@@ -13,8 +13,6 @@ def draw_rod(
 ):
     """Draw a rod given its ``(n + 1, 2)`` joint positions [m] (hub first) on a matplotlib axis."""
     points_m = np.asarray(points_m, dtype=float)
-    if points_m.ndim != 2 or points_m.shape[1] != 2 or points_m.shape[0] < 2:
-        raise ValueError(f"points_m must have shape (n + 1, 2) with n >= 1, got {points_m.shape}")
     (line,) = ax.plot(points_m[:, 0], points_m[:, 1], "-", color=color, lw=2.5, alpha=alpha, label=label)
     if joints:
         ax.plot(points_m[1:-1, 0], points_m[1:-1, 1], "o", color=color, ms=4, alpha=alpha)

@@ -7,11 +7,13 @@ from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from softpend.control.linearise import linearise_exudyn
 from softpend.evaluation import TEST_EPISODE_S
 from softpend.plant import RodParams
 from softpend.sysid.babble import BabbleProtocol
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import estimate_joint_states
+from softpend.sysid.metrics import one_step_errors
 from softpend.sysid.quality import (
     network_rollout_tip_errors,
     prb_one_step_errors,
@@ -87,8 +89,6 @@ def model_quality(
             errors[label] = network_rollout_tip_errors(model, data, starts, n_steps)
         return errors
 
-    from softpend.control.linearise import linearise_exudyn
-
     # the growth rate at upright [1/s]
     lam = float(np.max(linearise_exudyn(truth).state_space().eigenvalues().real))
     length, dt = truth.length_m, upright.dt_s
@@ -105,11 +105,8 @@ def model_quality(
         h_steps = int(round(hanging_horizon_s / hanging.dt_s))
         h_starts = rollout_starts(hanging, h_steps, stride=stride, first=first)
         for label, error in all_errors(hanging, h_starts, h_steps).items():
-            rows[label]["hanging_tip_rmse_pct_length"] = (
-                100 * tip_rmse_at_s(error, hanging.dt_s, hanging_horizon_s) / length
-            )
-    from softpend.sysid.metrics import one_step_errors
-
+            rmse = tip_rmse_at_s(error, hanging.dt_s, hanging_horizon_s)
+            rows[label]["hanging_tip_rmse_pct_length"] = 100 * rmse / length
     one_step = {label: one_step_errors(model, upright) for label, model in networks.items()}
     if recorded_prb:
         one_step["grey-box model"] = prb_one_step_errors(identified, upright)

@@ -7,11 +7,10 @@ import sys
 import time
 from typing import Any, Callable, Iterable
 
-#: The groups in the order they run; ``pilco_search`` lives in the ``pilco`` module.
+#: The groups in the order they run, and the modules of those not in a module of their name.
 GROUPS = "plant control beam rl pilco pilco_search hardware rig_control sysid data_efficiency commission".split()
-BENCHMARKS: dict[str, str] = {
-    name: f"softpend.study.bench.{name.removesuffix('_search')}:bench_{name}" for name in GROUPS
-}
+MODULES = {"beam": "plant", "pilco_search": "pilco", "rig_control": "control", "data_efficiency": "control"}
+BENCHMARKS = {name: f"softpend.study.bench.{MODULES.get(name, name)}:bench_{name}" for name in GROUPS}
 
 
 def run_benchmarks(only: Iterable[str] | None = None, progress: bool = True) -> dict[str, float]:

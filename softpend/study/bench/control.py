@@ -1,11 +1,20 @@
-"""Classical-control figures on the default rod (``softpend bench --only control``)."""
+"""Control benchmarks: classical control on the default rod (``softpend bench --only control``); each controller of
+:func:`controller_factories` from fresh hanging starts on the digital twin, in the ideal simulator and on perturbed rods
+(``--only rig_control``); the plant seconds each route needs to balance (``--only data_efficiency``)."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
 import numpy as np
 
-from softpend.evaluation import evaluate_controller
+from softpend.evaluation import HOLD_STD_RAD, evaluate_controller
 from softpend.plant import RodParams
+from softpend.study import data_efficiency as de
 from softpend.task import Task
 
 SWINGUP_SEEDS = (0, 1, 2, 3, 4)
@@ -48,3 +57,89 @@ def bench_control() -> dict[str, float]:
     model = fit_dynamics_model(babble(params=params, seed=0, progress=False), progress=False).model
     out["learned_lqr_upright_std_rad"] = from_tilt(lqr_from_learned_model(model, params)).upright_std_rad
     return out
+
+
+N_STARTS = 10
+DURATION_S = 10.0
+#: Spread of the rod-parameter changes of ``rig_perturbed_success_<c>``.
+PERTURBATION = 0.15
+
+
+def controller_factories() -> dict[str, Callable[[], tuple[Any, Any]]]:
+    """``name -> () -> (controller, task)``; the learned ones are the final policies of the book's first seed."""
+    from softpend.control.swingup import EnergySwingUpController
+    from softpend.study.head_to_head import pilco_runs
+    from softpend.study.presets import PILCO, PILCO_BOOK, RL_BOOK, TASK
+    from softpend.study.rig_runs import learned_controller
+    from softpend.study.rl_runs import figure_configs, figure_runs, run_folder
+
+    def rl(algo: str):
+        seed = RL_BOOK.seeds[0]
+        figure_runs(RL_BOOK.episodes_dqn, RL_BOOK.episodes_mbpo, (seed,), RL_BOOK.runs_root, progress=True)
+        return learned_controller(run_folder(RL_BOOK.runs_root, algo, seed, figure_configs()[algo]), "final")[:2]
+
+    def pilco():
+        seed = PILCO_BOOK.seeds[0]
+        pilco_runs(PILCO, (seed,), PILCO_BOOK.runs_root, progress=True)
+        return learned_controller(
+            run_folder(PILCO_BOOK.runs_root, "pilco", seed, dataclasses.replace(PILCO, seed=seed))
+        )[:2]
+
+    return {
+        "swingup_lqr": lambda: (EnergySwingUpController(TASK.rod, dt_s=TASK.dt_s), TASK),
+        "dqn": lambda: rl("dqn"),
+        "mbpo": lambda: rl("mbpo"),
+        "pilco": pilco,
+    }
+
+
+def bench_rig_control() -> dict[str, float]:
+    """Per controller: success on the nominal twin, in the ideal simulator and on perturbed rods, the drop from
+    simulator to twin, and the successes' worst upright std, median swing-up time and median chatter."""
+    from softpend.study.fresh_starts import perturbed_rod_row
+    from softpend.study.presets import REPORT_SEEDS
+    from softpend.study.rig_runs import RigCondition, simulator_starts, summary_rows, twin_start
+
+    seeds, condition, out = REPORT_SEEDS[:N_STARTS], RigCondition("nominal twin"), dict[str, float]()
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, make in controller_factories().items():
+            controller, task = make()
+            task = task.replace(start_noise_rad=0.05)
+            folders = {seed: Path(tmp) / f"{name}-{seed}" for seed in seeds}
+            rows = [
+                twin_start(controller, name, task, condition, s, DURATION_S, folders[s], HOLD_STD_RAD) for s in seeds
+            ]
+            sim = simulator_starts(controller, name, task, seeds, DURATION_S, success_std_rad=HOLD_STD_RAD)
+            twin, ideal = summary_rows(rows)[0], summary_rows(sim)[0]
+            for key in ("success_rate", "upright_std_rad", "swing_up_time_s", "torque_chatter_nm_per_s"):
+                out[f"rig_{key.removesuffix('_rate')}_{name}"] = twin[key]
+            out[f"rig_sim_success_{name}"] = ideal["success_rate"]
+            perturbed = perturbed_rod_row(controller, task, PERTURBATION, report_seeds=seeds, duration_s=DURATION_S)
+            out[f"rig_perturbed_success_{name}"] = perturbed["balanced_rate"]
+            out[f"rig_success_drop_pp_{name}"] = 100.0 * (ideal["success_rate"] - twin["success_rate"])
+    return out
+
+
+def bench_data_efficiency(seeds: tuple[int, ...] = tuple(range(10))) -> dict[str, float]:
+    """Median and worst plant seconds to balance the fresh report starts, and seeds balanced, of the grey-box route
+    (``greybox_beam``: PRB model fitted to beam data) and the planner (``mpc``: PRB-residual model, ``mpc_blackbox``:
+    black-box ensemble, ``mpc_beam``: on the beam); the planner's plant seconds over PILCO's (NaN unless the book's
+    PILCO runs are trained); ``mpc_rig_*``: the seed-0 planner on the nominal twin from the ``rig_control`` starts."""
+    from softpend.study.presets import PILCO_BOOK, REPORT_SEEDS
+    from softpend.study.rig_runs import planner_twin_figures
+
+    figures = de.greybox_route_figures(de.greybox_route_rows("prb", seeds), "greybox", 5.0)
+    figures.update(de.greybox_route_figures(de.greybox_route_rows("beam", seeds), "greybox_beam", 15.0))
+    mpc = de.planner_rows("residual", seeds)
+    figures.update(de.greybox_route_figures(mpc, "mpc", 15.0))
+    figures.update(de.greybox_route_figures(de.planner_rows("ensemble", seeds), "mpc_blackbox", 15.0))
+    figures.update(de.greybox_route_figures(de.planner_rows("residual", seeds, plant="beam"), "mpc_beam", 30.0))
+    pilco = de.pilco_rows_if_trained(seeds, PILCO_BOOK.runs_root)
+    figures["pilco_book_runs_found"] = float(pilco is not None)
+    mpc_s = {r["seed"]: r["real_s_to_balance"] for r in mpc}
+    ratio = math.nan if pilco is None else de.paired_ratio(mpc_s, {r["seed"]: r["plant_s_to_balance"] for r in pilco})
+    figures["mpc_over_pilco_real_s_ratio"] = ratio
+    rig = planner_twin_figures(REPORT_SEEDS[:N_STARTS], DURATION_S)
+    for key in ("successes", "step_ms_p95", "step_ms_max", "control_period_ms", "steps_over_period"):
+        figures[f"mpc_rig_{key}"] = float(rig[key])
+    return figures

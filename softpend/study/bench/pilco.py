@@ -61,10 +61,8 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
     from softpend.pilco.propagation import Propagator, state_spec
 
     with one_torch_thread():
-        config = PILCO
-        spec = state_spec(config.state)
+        config, spec, n = PILCO, state_spec(PILCO.state), PILCO.gp.max_points
         rng, rng1 = np.random.default_rng(0), np.random.default_rng(1)
-        n = config.gp.max_points
         states = np.cumsum(rng.normal(0.0, 0.3, (n + 1, spec.dim)), axis=0)
         states[:, spec.angle_indices] += np.pi
         torque_nm = rng.uniform(-1.0, 1.0, n) * config.task.torque_limit_nm

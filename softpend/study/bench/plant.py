@@ -1,5 +1,6 @@
 """Plant and environment speed and accuracy (``softpend bench --only plant``): Exudyn environment and solver, batched
-chain, vector environment, hub-angle errors against a converged run and, where installed, the chain in MuJoCo."""
+chain, vector environment, hub-angle errors against a converged run and, where installed, the chain in MuJoCo; the
+beam plant's speed and accuracy (``--only beam``)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from softpend.fidelity.validation import measured_bending_frequencies, static_tip_sag
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
 from softpend.study.bench import best_times, mujoco_chain
@@ -169,3 +171,17 @@ def bench_plant() -> dict[str, float]:
         return figures | mujoco_chain.bench_figures(figures, references)
     print("[bench] plant: MuJoCo is not installed (pip install softpend[bench]): no mujoco_* figures", file=sys.stderr)
     return figures
+
+
+def bench_beam() -> dict[str, float]:
+    """Beam environment step rate, real-time factor, frequency and static-sag errors against Euler-Bernoulli [%]."""
+    steps = max(env_steps_per_s(n_steps=2000, plant="beam") for _ in range(2))
+    freqs = measured_bending_frequencies("beam")
+    sag = static_tip_sag("beam", RodParams(stiffness_scale=100.0))
+    return {
+        "beam_env_steps_per_s": steps,
+        "beam_realtime_factor": steps * 0.01,
+        "beam_first_freq_error_pct": abs(freqs["f1_error_pct"]),
+        "beam_second_freq_error_pct": abs(freqs["f2_error_pct"]),
+        "beam_static_sag_error_pct": abs(sag["error_pct"]),
+    }

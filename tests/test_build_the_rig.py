@@ -22,9 +22,9 @@ from softpend.hardware.rig_design import V5_CARTRIDGES, rig_design
 from softpend.io.overrides import apply_overrides, parse_assignment
 from softpend.plant import RodParams
 from softpend.study.build_rig import (
-    QUICK_BUDGET,
     TESTED_CAMERAS,
     TWIN,
+    BuildBudget,
     BuildTarget,
     QuantisedHub,
     build_steps,
@@ -33,6 +33,9 @@ from softpend.study.build_rig import (
     motor_rows,
 )
 from softpend.study.figures.rig_design import draw_rig_design
+
+#: A dry run's budget: a few seconds per real-time run.
+QUICK_BUDGET = BuildBudget(babble_s=8.0, trial_length_s=2.0, max_epochs=5, control_s=4.0)
 
 REPO = Path(__file__).resolve().parents[1]
 

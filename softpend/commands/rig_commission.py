@@ -47,21 +47,10 @@ def register(actions: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="folder of the stages' outputs and report.json")
     for name, (_, _, text) in CONFIG_OPTIONS.items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=float if name.endswith("_s") else int, help=text)
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        choices=CLASSES,
-        default=list(CLASSES),
-        help="the controller classes to commission (default: all)",
-    )
-    parser.add_argument(
-        "--default-run",
-        nargs=2,
-        action="append",
-        default=[],
-        metavar=("LEARNER", "DIR"),
-        help="a run folder of LEARNER (dqn, mbpo, pilco) trained for the default rod, verified beside (repeatable)",
-    )
+    classes = "controller classes to commission (default: all)"
+    parser.add_argument("--controllers", nargs="+", choices=CLASSES, default=list(CLASSES), help=classes)
+    default = "a run folder of LEARNER (dqn, mbpo, pilco) trained for the default rod, verified beside (repeatable)"
+    parser.add_argument("--default-run", nargs=2, action="append", default=[], metavar=("LEARNER", "DIR"), help=default)
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.set_defaults(func=run)
 
@@ -73,10 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.twin_side import TwinTruth
 
     check_numbers(args, OPTION_RANGES)
-    if args.twin_rod is not None:
-        if not args.twin_rod.strip():
-            raise ValueError("--twin-rod: the path is empty")
-        # its kind only: the file is read on the twin's side, never here
+    if args.twin_rod is not None:  # its kind only: the file is read on the twin's side, never here
         if not os.path.exists(args.twin_rod):
             raise ValueError(f"--twin-rod {args.twin_rod}: no such file")
         check_regular_file(args.twin_rod, "--twin-rod")

@@ -134,21 +134,15 @@ def _balances_every_draw(
 
 
 def identify_until_robust(
-    record: Recorder,
-    guess: RodParams,
-    config: Optional[RouteConfig] = None,
-    seed: int = 0,
-    dt_s: float = 0.01,
-    identification: Optional[GreyBoxConfig] = None,
+    record: Recorder, guess: RodParams, config: Optional[RouteConfig] = None, seed: int = 0
 ) -> RouteResult:
     """Excite for ``step_s``, ``2 step_s``, ... seconds, identify from ``guess`` each time, and stop at the first
     length whose controller balances every uncertainty draw (or at ``max_excitation_s``).
 
-    ``seed`` seeds the identification's window draw, the uncertainty draws and the check's starts (hanging
+    ``seed`` seeds the identification's window draw (:class:`GreyBoxConfig`'s defaults otherwise), the uncertainty draws and the check's starts (hanging
     starts of the simulator, never the plant's).
     """
-    config = config if config is not None else RouteConfig()
-    identification = identification if identification is not None else GreyBoxConfig(seed=seed)
+    config, identification = config if config is not None else RouteConfig(), GreyBoxConfig(seed=seed)
     steps: list[dict[str, float]] = []
     n_steps = max(int(math.floor(config.max_excitation_s / config.step_s + 1e-9)), 1)
     for k in range(1, n_steps + 1):
@@ -156,19 +150,12 @@ def identify_until_robust(
         started = time.perf_counter()
         result = identify(record(seconds), identification, initial_params=guess)
         identified = time.perf_counter()
-        controller = design_swingup(result.params, dt_s)
+        controller = design_swingup(result.params)
         draws = uncertainty_draws(result, config.check_draws, seed + k, config.uncertainty_scale)
         robust = _balances_every_draw(controller, [result.params] + draws, config, seed + k)
-        relative = [result.std[n] / abs(v) for n, v in result.estimates.items() if v]
-        steps.append(
-            {
-                "plant_s": seconds,
-                "max_relative_std": float(max(relative)),
-                "robust": float(robust),
-                "identify_wall_s": identified - started,
-                "check_wall_s": time.perf_counter() - identified,
-            }
-        )
+        relative = max(result.std[n] / abs(v) for n, v in result.estimates.items() if v)
+        walls = {"identify_wall_s": identified - started, "check_wall_s": time.perf_counter() - identified}
+        steps.append({"plant_s": seconds, "max_relative_std": float(relative), "robust": float(robust), **walls})
         if robust or k == n_steps:
             return RouteResult(seconds, result, controller, robust, steps)
     raise AssertionError("unreachable")

@@ -225,10 +225,6 @@ class BuildBudget:
         positive("control_s", self.control_s)
 
 
-#: A dry run's budget: a few seconds per real-time run.
-QUICK_BUDGET = BuildBudget(babble_s=8.0, trial_length_s=2.0, max_epochs=5, control_s=4.0)
-
-
 @dataclass(frozen=True)
 class BuildStep:
     """One step of the procedure: short name, what it does, its command line and what a good result looks like."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,21 +13,18 @@ from softpend.task import Task
 
 
 def truth_trajectory(
-    truth_log: str | Path, task: Task, start_time_s: float | None = None, end_time_s: float | None = None
+    truth_log: str | Path, task: Task, start_time_s: float = -math.inf, end_time_s: float = math.inf
 ) -> dict[str, np.ndarray]:
     """``time_s`` (device), ``theta_rad``, ``torque_nm`` and ``phi_dot_rad_s`` from the emulator's truth log, within
-    the device-time window when given."""
+    the device-time window."""
     log, plant = read_sample_log(truth_log), task.make_plant()
-    time_s = log["device_time_s"]
-    keep = (time_s >= (-np.inf if start_time_s is None else start_time_s)) & (
-        time_s <= (np.inf if end_time_s is None else end_time_s)
-    )
+    keep = (log["device_time_s"] >= start_time_s) & (log["device_time_s"] <= end_time_s)
     q, qd = (
         np.column_stack([log[f"q{i}{s}"][keep] for i in range(plant.n_coordinates)]) for s in ("_rad", "_dot_rad_s")
     )
     observations = [plant.observation_from_state(a, b) for a, b in zip(q, qd)]
     return {
-        "time_s": time_s[keep],
+        "time_s": log["device_time_s"][keep],
         "theta_rad": np.array([o.theta_rad for o in observations]),
         "torque_nm": log["applied_torque_nm"][keep],
         "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations]),
@@ -37,8 +35,8 @@ def truth_metrics(
     truth_log: str | Path,
     task: Task,
     success_std_rad: float = SUCCESS_STD_RAD,
-    start_time_s: float | None = None,
-    end_time_s: float | None = None,
+    start_time_s: float = -math.inf,
+    end_time_s: float = math.inf,
 ) -> dict[str, float]:
     """The evaluation's metrics of the true motion in the window; empty for fewer than 3 ticks."""
     t = truth_trajectory(truth_log, task, start_time_s, end_time_s)
@@ -69,8 +67,6 @@ def torque_chatter_nm_per_s(motor_log: str | Path) -> float:
 def torque_total_variation_per_s(time_s: np.ndarray, torque_nm: np.ndarray) -> float:
     """``sum |tau[k+1] - tau[k]| / (t[-1] - t[0])`` [N m/s]; NaN for fewer than 2 samples or no elapsed time."""
     time_s, torque = np.asarray(time_s, dtype=float), np.asarray(torque_nm, dtype=float)
-    if time_s.shape != torque.shape or time_s.ndim != 1:
-        raise ValueError(f"time_s and torque_nm must be 1-D arrays of one length, got {time_s.shape}, {torque.shape}")
     if len(torque) < 2 or time_s[-1] <= time_s[0]:
         return float("nan")
     return float(np.sum(np.abs(np.diff(torque))) / (time_s[-1] - time_s[0]))

@@ -6,10 +6,9 @@ from __future__ import annotations
 import ast
 import math
 import re
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence
 
 import numpy as np
 
@@ -27,8 +26,7 @@ REPORT_HOLD_STD_RAD = 0.2
 SAME_SHARE = 0.1
 
 
-@dataclass(frozen=True)
-class LedgerRow:
+class LedgerRow(NamedTuple):
     """One claim (glued as ``verdict_<key>``): the report's words and figure, ours, the verdict and its chapter."""
 
     key: str
@@ -60,18 +58,12 @@ def glued_values(notebook_path: Path | str) -> dict[str, Any]:
     """The values glued as text in an executed notebook (``{name: value}``); empty when the file is missing."""
     import nbformat
 
-    path = Path(notebook_path)
-    if not path.is_file():
-        return {}
-    values: dict[str, Any] = {}
-    for cell in nbformat.read(str(path), as_version=4).cells:
-        for output in cell.get("outputs", []):
-            scrap = output.get("metadata", {}).get("scrapbook")
-            if scrap and "name" in scrap:
-                text = output.get("data", {}).get(f"{scrap.get('mime_prefix', '')}text/plain")
-                if text is not None:
-                    values[scrap["name"]] = _parse_glued(text)
-    return values
+    cells = nbformat.read(str(notebook_path), as_version=4).cells if Path(notebook_path).is_file() else []
+    outputs = [(o, o.get("metadata", {}).get("scrapbook") or {}) for cell in cells for o in cell.get("outputs", [])]
+    texts = [
+        (s["name"], o.get("data", {}).get(f"{s.get('mime_prefix', '')}text/plain")) for o, s in outputs if "name" in s
+    ]
+    return {name: _parse_glued(text) for name, text in texts if text is not None}
 
 
 def rl_run_logs(runs_root: Path | str, seeds: Sequence[int], plant: str = "prb") -> dict[str, list[Any]]:
@@ -166,8 +158,7 @@ def _to_asymptote(logs: Sequence[Any]) -> tuple[list[float], list[float], int]:
 Found = Optional[tuple[str, Any]]
 
 
-@dataclass(frozen=True)
-class _Evidence:
+class _Evidence(NamedTuple):
     glued: Mapping[str, Mapping[str, Any]]
     logs: Mapping[str, Sequence[Any]]
     fresh: Mapping[str, Sequence[Any]]

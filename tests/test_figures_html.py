@@ -1,4 +1,4 @@
-"""Figures as HTML that reads offline (softpend.study.figures.html)."""
+"""Figures as HTML that reads offline (softpend.study.figures.rl)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ def test_offline_animation_html_links_nothing_outside_the_page():
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation
 
-    from softpend.study.figures.html import offline_jshtml
+    from softpend.study.figures.rl import offline_jshtml
 
     fig, ax = plt.subplots()
     (line,) = ax.plot([0, 1], [0, 0])

@@ -1,9 +1,11 @@
-"""Figures 4-6: learning curves, the swing-up time course and the upright error over time."""
+"""Figures 4-6: learning curves, the swing-up time course (and its animation as HTML that reads offline) and the upright
+error over time."""
 
 from __future__ import annotations
 
 import math
-from typing import Mapping, Optional, Sequence
+import re
+from typing import Any, Mapping, Optional, Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -110,6 +112,19 @@ def animate_swingup(result: EvaluationResult, link_points, length_m: float, ever
     )
     plt.close(fig)
     return anim
+
+
+#: The Font Awesome 4 stylesheet that matplotlib's JavaScript player links from a CDN (its button icons).
+_CDN_STYLESHEET = re.compile(r'<link rel="stylesheet"\s+href="https://[^"]*font-awesome[^"]*">\s*')
+
+
+def offline_jshtml(animation: Any, **kwargs: Any) -> str:
+    """``animation.to_jshtml(**kwargs)`` without its CDN stylesheet link; ``ValueError`` unless there is one."""
+    html = animation.to_jshtml(**kwargs)
+    stripped, count = _CDN_STYLESHEET.subn("", html)
+    if count != 1:
+        raise ValueError(f"expected one CDN stylesheet link in the animation's HTML, found {count}")
+    return stripped
 
 
 def plot_upright_error(

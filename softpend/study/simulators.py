@@ -59,23 +59,17 @@ def hub_errors_rad(
 
     reference = reference if reference is not None else hub_error_reference(n_links, duration_s, seed)
     params, torques, q0, qd0, reference_hub = reference
-    figures = {}
+    error = lambda hub: float(np.abs(hub - reference_hub).max())  # noqa: E731
+    figures = {f"exudyn_default_hub_error_rad_n{n_links}": error(_exudyn_hub_rad(params, q0, qd0, torques, 2))}
     with one_torch_thread() as torch:
         for prefix, integrator, dtype in (
             ("batched_chain", "rk4", torch.float64),
             ("batched_rosenbrock", "rosenbrock", torch.float32),
         ):
             chain = BatchedPRBChain(params, batch_size=1, integrator=integrator, dtype=dtype)
+            start, speed, torque = (torch.tensor(a, dtype=dtype) for a in (q0, qd0, torques))
             with torch.no_grad():
-                qs, _ = chain.rollout(
-                    torch.tensor(q0, dtype=dtype)[None],
-                    torch.tensor(qd0, dtype=dtype)[None],
-                    torch.tensor(torques, dtype=dtype)[:, None],
-                )
-            batched = qs[:, 0, 0].double().numpy()
-            figures[f"{prefix}_hub_error_rad_n{n_links}"] = float(np.abs(batched - reference_hub).max())
+                qs, _ = chain.rollout(start[None], speed[None], torque[:, None])
+            figures[f"{prefix}_hub_error_rad_n{n_links}"] = error(qs[:, 0, 0].double().numpy())
             figures[f"{prefix}_substeps_n{n_links}"] = float(chain.substeps)
-    figures[f"exudyn_default_hub_error_rad_n{n_links}"] = float(
-        np.abs(_exudyn_hub_rad(params, q0, qd0, torques, 2) - reference_hub).max()
-    )
     return figures

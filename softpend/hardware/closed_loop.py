@@ -255,8 +255,7 @@ class _ClosedLoop(_RigLoop):
         self.armed_at, self.status = (0.0, "running") if self.armed else (math.nan, "arming")
 
     def postfix(self) -> str:
-        theta = self.estimate_values[2] if self.estimate_values is not self.nan_estimate else math.nan
-        torque, blind_ms = self.link.last_command_nm, self.estimator.blind_s * 1e3
+        theta, torque, blind_ms = self.estimate_values[2], self.link.last_command_nm, self.estimator.blind_s * 1e3
         return f"theta {theta:+.2f} rad, torque {torque:+.3f} N m, blind {blind_ms:.0f} ms"
 
     def step(self, state: Any, newest: bool) -> None:
@@ -375,7 +374,8 @@ def run_twin_control(
     rig = rig if rig is not None else RigConfig()
     outputs = outputs if outputs is not None else Outputs()
     workdir = outputs.folder(workdir, TWIN_CONTROL_FILES, what="workdir")
-    *logs, summary_path = (workdir / name for name in TWIN_CONTROL_FILES)
+    motor_path, camera_path, truth_path, summary_path = (workdir / name for name in TWIN_CONTROL_FILES)
+    logs = (motor_path, camera_path, truth_path)
     for path in logs:
         outputs.live(path)
     config = estimator_config if estimator_config is not None else EstimatorConfig(counts_per_rev=rig.counts_per_rev)
@@ -386,7 +386,7 @@ def run_twin_control(
         "camera": None if camera is None else {"fps": camera.fps, "latency_s": camera.latency_s, "seed": camera.seed},
     }
     try:
-        with SimRig(rig, truth_log=logs[2]) as device, contextlib.ExitStack() as closing:
+        with SimRig(rig, truth_log=truth_path) as device, contextlib.ExitStack() as closing:
             source = None
             if camera is not None:
                 source = SyntheticLiveCamera(device.poses, device.clock, **vars(camera), on_frame=on_frame)
@@ -399,8 +399,8 @@ def run_twin_control(
                 source.poll()  # the frames of the rod before the run
             with (
                 MotorLink("twin", torque_limit_nm=rig.task.torque_limit_nm, serial=device.connect()) as link,
-                SampleLog(logs[0], rig_control_columns(estimator.n), metadata=metadata) as log,
-                SampleLog(logs[1], CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
+                SampleLog(motor_path, rig_control_columns(estimator.n), metadata=metadata) as log,
+                SampleLog(camera_path, CAMERA_LOG_COLUMNS, metadata=metadata) as camera_log,
             ):
                 try:
                     result = run_closed_loop(link, controller, estimator, duration_s, source, log, camera_log, progress)

@@ -105,7 +105,7 @@ def estimate_clock_offset(
     )
     best = int(np.argmax(scores))
     if not np.isfinite(scores[best]):
-        raise ValueError("the camera and motor records do not overlap for any offset within max_offset_s")
+        raise ValueError("the camera and motor records do not overlap for any offset within 1 s")
     refined = offsets[best]
     if 0 < best < len(offsets) - 1 and np.all(np.isfinite(scores[best - 1 : best + 2])):
         y0, y1, y2 = scores[best - 1 : best + 2]

@@ -322,17 +322,8 @@ def _roll(
         if end >= 2:
             metrics = metrics_from_trajectory(times[:end], obs[:, _THETA], torque, obs[:, _PHI_DOT])
         metrics["success"] = metrics["success"] and reasons[i] is None
-        results.append(
-            EvaluationResult(
-                seed=seed,
-                time_s=times[:end].copy(),
-                observations=obs,
-                torque_nm=torque,
-                joint_angles_rad=recorded_q[:end, i].copy(),
-                diverged=reasons[i],
-                **metrics,
-            )
-        )
+        trajectory = dict(time_s=times[:end].copy(), observations=obs, torque_nm=torque, diverged=reasons[i])
+        results.append(EvaluationResult(seed, **metrics, **trajectory, joint_angles_rad=recorded_q[:end, i].copy()))
     return results
 
 
@@ -427,8 +418,8 @@ def evaluate(
     _steps(duration_s, task.dt_s, len(seeds), task.rod.n_links + 1)  # all the episodes' trajectories are kept
     draw = lambda s: randomised_rod(task.rod, np.random.default_rng(rod_seed + s), rod_spread)  # noqa: E731
     rods = None if rod_spread == 0 else [draw(s) for s in seeds]
-    options = dict(initial_state=initial_state, stop_at_first_failure=stop_at_first_failure, rods=rods)
-    options.update(rod_spread=rod_spread, substeps=substeps)
+    options: dict[str, Any] = dict(initial_state=initial_state, stop_at_first_failure=stop_at_first_failure)
+    options.update(rods=rods, rod_spread=rod_spread, substeps=substeps)
     results = (_batched if engine == "batched" else _one_by_one)(controller, task, seeds, duration_s, options)
     failed = [i for i, r in enumerate(results) if not r.success]
     if stop_at_first_failure and failed:

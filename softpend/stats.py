@@ -47,12 +47,9 @@ AGGREGATES: dict[str, Callable[..., np.ndarray | float]] = {"median": median, "i
 class AggregateInterval:
     """An aggregate of per-run scores with its bootstrap confidence interval."""
 
-    statistic: str
     value: float
     low: float
     high: float
-    n_runs: int
-    confidence: float
 
 
 def aggregate_interval(
@@ -80,13 +77,12 @@ def aggregate_interval(
     def stratified(*columns: np.ndarray, axis: int = -1) -> np.ndarray | float:
         return aggregate(np.concatenate(columns, axis=axis), axis=axis)
 
-    columns = [data[:, j] for j in range(data.shape[1])]
     if np.all(data == data.flat[0]):  # every resample gives the same value; scipy would warn about it
         low = high = value
     else:
         with np.errstate(invalid="ignore"):
             result = scipy.stats.bootstrap(
-                columns,
+                list(data.T),
                 stratified,
                 n_resamples=int(n_resamples),
                 confidence_level=confidence,
@@ -95,4 +91,4 @@ def aggregate_interval(
                 rng=np.random.default_rng(seed),
             )
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    return AggregateInterval(statistic, value, low, high, int(data.shape[0]), float(confidence))
+    return AggregateInterval(value, low, high)

@@ -9,7 +9,7 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg
 
-from softpend.checks import optional_positive, positive
+from softpend.checks import positive
 from softpend.plant import PRBPlant, RodParams
 
 #: Observed angles the observation-feedback controllers use.
@@ -49,16 +49,8 @@ class LinearModel:
 
     def __post_init__(self) -> None:
         a = np.asarray(self.a, dtype=float)
-        b = np.asarray(self.b, dtype=float).reshape(a.shape[0], -1)
-        if a.ndim != 2 or a.shape[0] != a.shape[1]:
-            raise ValueError(f"a must be square, got shape {a.shape}")
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-            raise ValueError("a and b must be finite")
-        optional_positive("dt_s", self.dt_s)
         object.__setattr__(self, "a", a)
-        object.__setattr__(self, "b", b)
-        if self.state_names and len(self.state_names) != a.shape[0]:
-            raise ValueError(f"state_names must have {a.shape[0]} entries, got {len(self.state_names)}")
+        object.__setattr__(self, "b", np.asarray(self.b, dtype=float).reshape(a.shape[0], -1))
 
     @property
     def n_states(self) -> int:

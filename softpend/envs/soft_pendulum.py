@@ -12,6 +12,7 @@ from gymnasium import spaces
 from softpend.checks import int_at_least, non_negative, one_of
 from softpend.envs.reward import RewardParams
 from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
+from softpend.task import START_KINDS as STARTS
 
 #: Rates are divided by this in the observation vector [1/s].
 VELOCITY_SCALE_PER_S = 10.0
@@ -27,9 +28,6 @@ OBSERVATION_BOUND = np.array([1, 1, 1, 1, 2, 2, 5, 5, 5, 5, 1], dtype=np.float32
 
 #: Most torque levels of the discrete environments.
 MAX_TORQUE_LEVELS = 1001
-
-#: Start kinds of ``start`` and ``options["start"]``.
-STARTS = ("hanging", "upright", "random")
 
 
 def reset_options(
@@ -68,23 +66,31 @@ def draw_start(rng: np.random.Generator, start: str, noise_rad: float) -> tuple[
     return hub + float(rng.uniform(-noise_rad, noise_rad)), float(rng.uniform(-noise_rad, noise_rad))
 
 
-def set_task(
-    env: Any,
-    params: Optional[RodParams],
-    torque_limit_nm: Optional[float],
-    reward_params: Optional[RewardParams],
-    start: str,
-    start_noise_rad: float,
-) -> None:
-    """Set (checked) the rod, torque limit, reward and start distribution shared by the single and vector envs."""
-    params = params if params is not None else RodParams()
-    if not isinstance(params, RodParams):
-        raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
-    env.params = params if torque_limit_nm is None else params.replace(torque_limit_nm=torque_limit_nm)
-    env.torque_limit_nm = env.params.torque_limit_nm
-    env.reward_params = reward_params if reward_params is not None else RewardParams()
-    env.start = one_of("start", start, STARTS)
-    env.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
+class TaskSettings:
+    """The (checked) rod, torque limit, reward and start distribution of the single and the vector environments."""
+
+    params: RodParams
+    torque_limit_nm: float
+    reward_params: RewardParams
+    start: str
+    start_noise_rad: float
+
+    def set_task(
+        self,
+        params: Optional[RodParams],
+        torque_limit_nm: Optional[float],
+        reward_params: Optional[RewardParams],
+        start: str,
+        start_noise_rad: float,
+    ) -> None:
+        params = params if params is not None else RodParams()
+        if not isinstance(params, RodParams):
+            raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
+        self.params = params if torque_limit_nm is None else params.replace(torque_limit_nm=torque_limit_nm)
+        self.torque_limit_nm = self.params.torque_limit_nm
+        self.reward_params = reward_params if reward_params is not None else RewardParams()
+        self.start = one_of("start", start, STARTS)
+        self.start_noise_rad = non_negative("start_noise_rad", start_noise_rad)
 
 
 def check_torque_levels(n_torque_levels: int) -> int:
@@ -94,11 +100,11 @@ def check_torque_levels(n_torque_levels: int) -> int:
     return n_torque_levels
 
 
-class SoftPendulumEnv(gym.Env):
+class SoftPendulumEnv(TaskSettings, gym.Env):
     """Swing-up and balance of a soft rod driven by a torque-limited motor at its base: actions ``Box(-1, 1, (1,))``
     (fractions of ``torque_limit_nm``), observations :data:`OBSERVATION_VECTOR_NAMES` (the plant's in
-    ``info["observation"]``), reward :mod:`softpend.envs.reward`, starts :data:`STARTS` (uniform noise of
-    ``start_noise_rad`` on hub angle and rate) or ``reset(options={"q": ..., "q_dot": ...})``; a diverged
+    ``info["observation"]``), reward :mod:`softpend.envs.reward`, starts :data:`~softpend.task.START_KINDS` (uniform
+    noise of ``start_noise_rad`` on hub angle and rate) or ``reset(options={"q": ..., "q_dot": ...})``; a diverged
     simulation truncates the episode with ``info["truncation_reason"]``."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
@@ -115,7 +121,7 @@ class SoftPendulumEnv(gym.Env):
         plant: str = "prb",
         render_mode: Optional[str] = None,
     ) -> None:
-        set_task(self, params, torque_limit_nm, reward_params, start, start_noise_rad)
+        self.set_task(params, torque_limit_nm, reward_params, start, start_noise_rad)
         if render_mode is not None:
             one_of("render_mode", render_mode, self.metadata["render_modes"])
         self.plant = make_plant(plant, params=self.params, dt_s=dt_s, substeps=substeps)

@@ -17,14 +17,14 @@ from softpend import MAX_EPISODE_STEPS
 from softpend.checks import int_at_least, one_of
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
-from softpend.envs.soft_pendulum import OBSERVATION_BOUND, check_torque_levels, draw_start, reset_options, set_task
+from softpend.envs.soft_pendulum import OBSERVATION_BOUND, TaskSettings, check_torque_levels, draw_start, reset_options
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import BatchedPRBChain, BatchedRodParams, stable_substeps
 
 _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 
-class SoftPendulumVectorEnv(gym.vector.VectorEnv):
+class SoftPendulumVectorEnv(TaskSettings, gym.vector.VectorEnv):
     """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod); ``plant``:
     only ``"prb"``; the other arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
 
@@ -47,7 +47,7 @@ class SoftPendulumVectorEnv(gym.vector.VectorEnv):
         render_mode: Optional[str] = None,
     ) -> None:
         self.num_envs = int_at_least("num_envs", num_envs, 1)
-        set_task(self, params, torque_limit_nm, reward_params, start, start_noise_rad)
+        self.set_task(params, torque_limit_nm, reward_params, start, start_noise_rad)
         one_of("plant", plant, ("prb",))
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")

@@ -13,8 +13,8 @@ pytest.importorskip(
 
 from softpend.plant import RodParams  # noqa: E402
 from softpend.plant.prb import PRBPlant  # noqa: E402
-from softpend.study.bench import mujoco_chain  # noqa: E402
-from softpend.study.bench.mujoco_chain import MuJoCoChain  # noqa: E402
+from softpend.study.bench import plant as mujoco_chain  # noqa: E402
+from softpend.study.bench.plant import MuJoCoChain  # noqa: E402
 
 PARAMS = RodParams(n_links=4)
 #: A bent, moving start: a wrong map between the two sets of joint coordinates shows at once.
@@ -122,7 +122,7 @@ def test_the_large_steps_diverge_at_ten_links_and_are_reported_so() -> None:
     assert not mujoco_chain.diverges(4, "RK4", 2, duration_s=0.1)
 
 
-def test_bench_figures_returns_every_key(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_mujoco_figures_returns_every_key(monkeypatch: pytest.MonkeyPatch) -> None:
     from softpend.study.simulators import hub_error_reference
 
     real_steps, real_rollout = mujoco_chain.steps_per_s, mujoco_chain.rollout_rod_steps_per_s
@@ -142,7 +142,7 @@ def test_bench_figures_returns_every_key(monkeypatch: pytest.MonkeyPatch) -> Non
             "batched_rk4_rod_steps_per_s_n10",
         )
     }
-    figures = mujoco_chain.bench_figures(base, references)
+    figures = mujoco_chain.mujoco_figures(base, references)
     expected = {
         "mujoco_rk4_5ms_steps_per_s_n4",
         "mujoco_implicitfast_2p5ms_steps_per_s_n4",

@@ -58,7 +58,6 @@ def test_the_recorder_drives_the_program_it_is_given_within_the_torque_limit(pro
         (dict(step_s=2.0, max_excitation_s=1.0), "step_s"),
         (dict(peak_fraction=1.5), "peak_fraction"),
         (dict(check_draws=0), "check_draws"),
-        (dict(uncertainty_scale=-1.0), "uncertainty_scale"),
     ],
 )
 def test_route_settings_are_checked_by_name(kwargs, name):

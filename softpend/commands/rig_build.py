@@ -264,8 +264,8 @@ def _twin_frame(params, markers, seed: int):
     return frame
 
 
-def _grab_frame(camera: str, skip: int = 10):
-    """The ``skip``-th frame of a camera (the first ones settle exposure), or an image file."""
+def _grab_frame(camera: str):
+    """The tenth frame of a camera (the first ones settle exposure), or an image file."""
     import itertools
 
     import cv2
@@ -285,7 +285,7 @@ def _grab_frame(camera: str, skip: int = 10):
     try:
         if not capture.isOpened():
             raise ValueError(f"--camera {camera} cannot be opened")
-        reads = list(itertools.takewhile(lambda read: read[0], (capture.read() for _ in range(skip))))
+        reads = list(itertools.takewhile(lambda read: read[0], (capture.read() for _ in range(10))))
         frame = reads[-1][1] if reads else None
     finally:
         capture.release()

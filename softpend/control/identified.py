@@ -37,8 +37,7 @@ Recorder = Callable[[float], TrajectoryDataset]
 @dataclass(frozen=True)
 class RouteConfig:
     """Settings of :func:`identify_until_robust`: excitation in steps of ``step_s`` up to ``max_excitation_s``
-    (multisine to ``band_high_hz`` with peak ``peak_fraction`` of the torque limit), and the stopping check:
-    ``check_draws`` rods drawn ``uncertainty_scale`` standard deviations wide, each from ``check_starts``
+    (multisine to ``band_high_hz`` with peak ``peak_fraction`` of the torque limit), and the stopping check: ``check_draws`` rods drawn two standard deviations wide, each from ``check_starts``
     hanging starts of ``check_duration_s``."""
 
     step_s: float = 1.0
@@ -48,10 +47,9 @@ class RouteConfig:
     check_draws: int = 8
     check_starts: int = 2
     check_duration_s: float = 8.0
-    uncertainty_scale: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("step_s", "max_excitation_s", "band_high_hz", "check_duration_s", "uncertainty_scale"):
+        for name in ("step_s", "max_excitation_s", "band_high_hz", "check_duration_s"):
             positive(name, getattr(self, name))
         in_range("peak_fraction", self.peak_fraction, 1e-3, 1)
         set_ints(self, "check_draws check_starts", 1)
@@ -151,7 +149,7 @@ def identify_until_robust(
         result = identify(record(seconds), identification, initial_params=guess)
         identified = time.perf_counter()
         controller = design_swingup(result.params)
-        draws = uncertainty_draws(result, config.check_draws, seed + k, config.uncertainty_scale)
+        draws = uncertainty_draws(result, config.check_draws, seed + k)
         robust = _balances_every_draw(controller, [result.params] + draws, config, seed + k)
         relative = max(result.std[n] / abs(v) for n, v in result.estimates.items() if v)
         walls = {"identify_wall_s": identified - started, "check_wall_s": time.perf_counter() - identified}

@@ -146,8 +146,7 @@ class CommissionConfig:
 def verification_seeds(config: CommissionConfig) -> list[int]:
     """The fresh starts of the verification: disjoint from :meth:`CommissionConfig.commissioning_seeds`."""
     seeds = [VERIFY_SEED_OFFSET + config.seed * 1000 + i for i in range(config.verify_starts)]
-    shared = set(seeds) & set(config.commissioning_seeds())
-    if shared:
+    if shared := set(seeds) & set(config.commissioning_seeds()):
         raise AssertionError(f"verification seeds {sorted(shared)} were used by the commissioning")
     return seeds
 

@@ -193,35 +193,33 @@ def simulator_starts(
     return rows
 
 
-def summary_rows(rows: Sequence[Mapping[str, Any]], confidence: float = CONFIDENCE) -> list[dict[str, Any]]:
+def summary_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per (condition, controller): success rate with its Wilson interval, median swing-up time and worst
-    upright std of the successes, largest peak torque, median torque chatter, and runs that ended early."""
+    upright std of the successes, largest peak torque, median torque chatter, and runs that ended early (Wilson
+    intervals of :data:`CONFIDENCE`)."""
     groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["condition"], row["controller"]), []).append(row)
+
+    def stat(function: Callable, values: list[float]) -> float:
+        return float(function(values)) if values else math.nan
+
     out = []
     for (condition, controller), group in groups.items():
-        successes = sum(bool(r["success"]) for r in group)
-        good = [r for r in group if r["success"]]
-        low, high = wilson_interval(successes, len(group), confidence)
-        chatter = [r["torque_chatter_nm_per_s"] for r in group if math.isfinite(r["torque_chatter_nm_per_s"])]
-        peaks = [r["peak_torque_nm"] for r in group if math.isfinite(r["peak_torque_nm"])]
-        out.append(
-            {
-                "condition": condition,
-                "controller": controller,
-                "starts": len(group),
-                "successes": successes,
-                "success_rate": successes / len(group),
-                "success_low": low,
-                "success_high": high,
-                "swing_up_time_s": float(np.median([r["swing_up_time_s"] for r in good])) if good else math.nan,
-                "upright_std_rad": float(max(r["upright_std_rad"] for r in good)) if good else math.nan,
-                "peak_torque_nm": float(max(peaks)) if peaks else math.nan,
-                "torque_chatter_nm_per_s": float(np.median(chatter)) if chatter else math.nan,
-                "stops": sum(bool(r["stop"]) for r in group),
-            }
-        )
+        good, n = [r for r in group if r["success"]], len(group)
+        finite = {
+            k: [r[k] for r in group if math.isfinite(r[k])] for k in ("torque_chatter_nm_per_s", "peak_torque_nm")
+        }
+        low, high = wilson_interval(len(good), n, CONFIDENCE)
+        summary = {"condition": condition, "controller": controller, "starts": n, "successes": len(good)}
+        summary |= {"success_rate": len(good) / n, "success_low": low, "success_high": high}
+        summary |= {
+            "swing_up_time_s": stat(np.median, [r["swing_up_time_s"] for r in good]),
+            "upright_std_rad": stat(max, [r["upright_std_rad"] for r in good]),
+            "peak_torque_nm": stat(max, finite["peak_torque_nm"]),
+            "torque_chatter_nm_per_s": stat(np.median, finite["torque_chatter_nm_per_s"]),
+        }
+        out.append(summary | {"stops": sum(bool(r["stop"]) for r in group)})
     return out
 
 

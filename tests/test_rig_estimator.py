@@ -153,7 +153,8 @@ def test_outliers_are_refused_and_lead_predicts_ahead(nominal):
     }
     ahead = estimator.estimate()
     assert ahead.time_s == pytest.approx(nominal.time_s[60] + 0.01)
-    now = estimator.estimate(lead_steps=0)
+    estimator.config = EstimatorConfig(lead_steps=0)
+    now = estimator.estimate()
     assert abs(ahead.q[0] - nominal.q[61, 0]) < 0.2 * abs(now.q[0] - nominal.q[61, 0])
 
 

@@ -90,9 +90,7 @@ class RigStateEstimator:
     """EKF on the PRB chain of ``task.rod`` with delay-compensated camera corrections; times in device time [s]."""
 
     def __init__(self, task, config: Optional[EstimatorConfig] = None) -> None:
-        if task.plant != "prb":
-            task = task.replace(plant="prb")
-        self.task = task
+        self.task = task = task.replace(plant="prb")
         self.config = cfg = config if config is not None else EstimatorConfig()
         self.model = task.make_plant()
         self.n = n = self.model.n_coordinates
@@ -254,11 +252,10 @@ class RigStateEstimator:
         self._last_tip_time_s = max(self._last_tip_time_s, float(capture_time_s))
         return True
 
-    def estimate(self, lead_steps: Optional[int] = None) -> Estimate:
-        """The estimate at the newest encoder sample, predicted ``lead_steps`` ahead (default: the config's)."""
+    def estimate(self) -> Estimate:
+        """The estimate at the newest encoder sample, predicted the config's ``lead_steps`` ahead."""
         self._require_started()
-        lead = self.config.lead_steps if lead_steps is None else int_at_least("lead_steps", lead_steps, 0)
-        last, n = self._history[-1], self.n
+        lead, last, n = self.config.lead_steps, self._history[-1], self.n
         q, qd = last.x[:n].copy(), last.x[n:].copy()
         if lead:
             self.model.reset(q, qd)

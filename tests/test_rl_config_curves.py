@@ -136,7 +136,7 @@ def test_real_s_to_balance_needs_every_seed_up_and_steady():
 def test_asymptote_of_a_saturating_curve():
     episodes = np.arange(1, 201)
     returns = 1000 * (1 - np.exp(-episodes / 30.0))
-    e = episodes_to_asymptote(returns, window=1, level=0.9)
+    e = episodes_to_asymptote(returns, window=1)
     # the final 20 % average ~ 998; 90 % of the rise from ~33 is reached near -30 ln(0.1) ~ 69 episodes
     assert 60 <= e <= 75
     assert episodes_to_asymptote(np.full(50, 3.0)) == 1.0

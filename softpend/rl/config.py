@@ -218,10 +218,8 @@ class RolloutSettings:
     def length(self, episode: int) -> int:
         """Rollout length (agent steps) at a training episode (mbrl-lib's linear schedule)."""
         first, last, low, high = self.schedule
-        if episode <= first or last == first:
+        if episode <= first or episode >= last:
             return low if episode <= first else high
-        if episode >= last:
-            return high
         return int(round(low + (episode - first) / (last - first) * (high - low)))
 
 

@@ -6,7 +6,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 import torch
@@ -48,10 +48,9 @@ def build_dqn(config: DQNConfig, env: Any, seed: int, episodes: int, **kwargs: A
     cls = agent_class(config)
     if issubclass(cls, TargetDQN):
         kwargs["q_target_bounds"] = config.q_target_bounds
-    hyper = {name: getattr(config.learner, name) for name in SB3_FIELDS}
-    hyper["learning_starts"] = config.learning_starts
+    hyper = {name: getattr(config.learner, name) for name in SB3_FIELDS} | {"learning_starts": config.learning_starts}
     net = {"net_arch": list(config.learner.net_arch)}
-    return cls("MlpPolicy", env, tau=1.0, policy_kwargs=net, seed=int(seed), device="cpu", verbose=0, **hyper, **kwargs)
+    return cls("MlpPolicy", env, tau=1.0, policy_kwargs=net, seed=int(seed), device="cpu", verbose=0, **hyper | kwargs)
 
 
 def evaluate_agent(
@@ -217,24 +216,16 @@ class TrainingCallback(BaseCallback):
 
     def evaluate(self) -> dict[str, Any]:
         """Evaluate the greedy policy on the true plant and append an evaluation row."""
-        seeds = self.config.eval_seeds
         summary = evaluate_agent(self.model, self.config, stop_at_first_failure=self.config.eval_until_first_failure)
-        results = summary.results
-        complete = len(results) == len(seeds)
-        stds = [r.upright_std_rad for r in results]
-        row = {
-            "episode": self.log.n_episodes,
-            "plant_s": self.log.plant_s,
-            "model_steps": self.model_steps(),
-            "starts_evaluated": len(results),
-            "median_upright_std_rad": float(np.median(stds)) if complete else math.nan,
-            "max_upright_std_rad": float(np.max(stds)),
-            "median_swing_up_time_s": summary.median("swing_up_time_s") if complete else math.nan,
-            "all_swung_up": complete and bool(all(math.isfinite(r.swing_up_time_s) for r in results)),
-            "success_rate": summary.successes / len(seeds),
-            "wall_s": self.wall_s(),
-            "cpu_s": self.cpu_s(),
-        }
+        results, seeds, nan = summary.results, self.config.eval_seeds, math.nan
+        complete, stds = len(results) == len(seeds), [r.upright_std_rad for r in results]
+        row: dict[str, Any] = {"episode": self.log.n_episodes, "plant_s": self.log.plant_s}
+        row |= dict(model_steps=self.model_steps(), starts_evaluated=len(results))
+        row |= dict(median_upright_std_rad=float(np.median(stds)) if complete else nan)
+        swing_up = summary.median("swing_up_time_s") if complete else nan
+        row |= dict(max_upright_std_rad=float(np.max(stds)), median_swing_up_time_s=swing_up)
+        row |= dict(all_swung_up=complete and all(math.isfinite(r.swing_up_time_s) for r in results))
+        row |= dict(success_rate=summary.successes / len(seeds), wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
             self.best_score = _score(row)
@@ -358,39 +349,6 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
     return run_dir
 
 
-def _start_or_resume(
-    algo: str,
-    config: DQNConfig,
-    seed: int,
-    run_dir: Path,
-    resume: bool,
-    env: Any,
-    make_model: Callable[[Any, int], DQN],
-    replay_buffer_class: type[ReplayBuffer],
-    part: Any,
-) -> tuple[DQN, TrainingLog]:
-    """A new agent and log, or those of ``run_dir/checkpoint`` when resuming (with the same config)."""
-    checkpoint = run_dir / "checkpoint"
-    if not (resume and (checkpoint / "agent.zip").exists()):
-        save_config(config, run_dir / "config.json")
-        return make_model(env, int(seed)), TrainingLog(algo=algo, seed=int(seed))
-    saved = load_config(run_dir / "config.json")
-    if saved != config:
-        raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
-    if not (checkpoint / "replay_buffer.npz").exists() and (checkpoint / "replay_buffer.pkl").exists():
-        raise AgentFileError(
-            f"{checkpoint} holds a pickled replay buffer (replay_buffer.pkl), which softpend does not load "
-            "(unpickling can run arbitrary code); start a new run"
-        )
-    log = TrainingLog.load(checkpoint / "log.json")
-    model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env, replay_buffer_class)
-    assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
-    load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
-    if part is not None:
-        part.restore(checkpoint)
-    return model, log
-
-
 def run_training(
     algo: str,
     config: DQNConfig,
@@ -399,18 +357,35 @@ def run_training(
     run_dir: Path | str,
     resume: bool,
     progress: bool,
-    make_model: Callable[[Any, int], DQN],
-    replay_buffer_class: type[ReplayBuffer] = ReplayBuffer,
     part: Any = None,
 ) -> tuple[DQN, TrainingLog]:
-    """The training loop shared by DQN and DQN-MBPO (``part``: a :class:`softpend.rl.mbpo.MBPOTrainer`)."""
+    """The training loop shared by DQN and DQN-MBPO (``part``: a :class:`softpend.rl.mbpo.MBPOTrainer`, whose
+    ``dqn_kwargs`` go to :func:`build_dqn`); a resumed run goes on from ``run_dir/checkpoint`` (same config)."""
     run_dir = _check_run_args(episodes, run_dir, config, seed, resume)
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     env = make_training_env(config)
     assert env.observation_space.shape is not None  # a Box
     check_run_size(config, int(np.prod(env.observation_space.shape)))
-    model, log = _start_or_resume(algo, config, seed, run_dir, resume, env, make_model, replay_buffer_class, part)
+    kwargs, checkpoint = part.dqn_kwargs() if part is not None else {}, run_dir / "checkpoint"
+    if not (resume and (checkpoint / "agent.zip").exists()):
+        save_config(config, run_dir / "config.json")
+        model, log = build_dqn(config, env, int(seed), episodes, **kwargs), TrainingLog(algo=algo, seed=int(seed))
+    else:
+        if load_config(run_dir / "config.json") != config:
+            raise ValueError(f"config differs from the one saved in {run_dir / 'config.json'}; cannot resume")
+        if not (checkpoint / "replay_buffer.npz").exists() and (checkpoint / "replay_buffer.pkl").exists():
+            raise AgentFileError(
+                f"{checkpoint} holds a pickled replay buffer (replay_buffer.pkl), which softpend does not load "
+                "(unpickling can run arbitrary code); start a new run"
+            )
+        log = TrainingLog.load(checkpoint / "log.json")
+        buffer_class = kwargs.get("replay_buffer_class", ReplayBuffer)
+        model = load_agent_file(agent_class(config), checkpoint / "agent.zip", config, env, buffer_class)
+        assert model.replay_buffer is not None  # an off-policy agent's, set up by _setup_model
+        load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
+        if part is not None:
+            part.restore(checkpoint)
     # a resumed run continues with fresh start-noise draws (one seed per episode count)
     env.reset(seed=int(seed) * 100_003 + log.n_episodes)
     remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
@@ -436,18 +411,16 @@ def train_dqn(
     config: DQNConfig, seed: int, episodes: int, run_dir: Path | str, resume: bool = False, progress: bool = True
 ) -> tuple[DQN, TrainingLog]:
     """Train model-free DQN for ``episodes`` training episodes (see the module docstring)."""
-    make_model = lambda env, s: build_dqn(config, env, s, episodes)  # noqa: E731
-    return run_training("dqn", config, seed, episodes, run_dir, resume, progress, make_model)
+    return run_training("dqn", config, seed, episodes, run_dir, resume, progress)
 
 
 def load_agent(run_dir: Path | str, which: str = "best") -> tuple[DQN, DQNConfig]:
     """An agent of a run folder and its config."""
     one_of("which", which, ("best", "final"))
     path = Path(run_dir)
-    folder = path.parent if path.suffix == ".zip" else path
-    agent = path if path.suffix == ".zip" else path / ("best_agent.zip" if which == "best" else "agent.zip")
-    if which == "best" and path.suffix != ".zip" and not agent.exists():  # a run without evaluations
-        agent = path / "agent.zip"
+    folder, agent = (path.parent, path) if path.suffix == ".zip" else (path, path / "agent.zip")
+    if path.suffix != ".zip" and which == "best" and (path / "best_agent.zip").exists():  # else: no evaluations
+        agent = path / "best_agent.zip"
     if not agent.exists():
         raise FileNotFoundError(f"no agent at {agent}")
     config = load_config(folder / "config.json")

@@ -19,7 +19,7 @@ from softpend.envs.observation_vector import observation_vector
 from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig
-from softpend.rl.dqn import build_dqn, run_training
+from softpend.rl.dqn import run_training
 from softpend.rl.training_env import make_base_env
 from softpend.rl.training_log import TrainingLog
 
@@ -39,16 +39,14 @@ class MBPOReplayBuffer(ReplayBuffer):
         action_space: spaces.Space,
         device: Any = "cpu",
         n_envs: int = 1,
-        optimize_memory_usage: bool = False,
-        handle_timeout_termination: bool = True,
         model_buffer_size: int = 60_000,
         real_ratio: float = 0.1,
+        **_: Any,  # SB3's optimize_memory_usage (left off)
     ) -> None:
         if n_envs != 1:
             raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
-        self.real_ratio = in_unit_interval("real_ratio", real_ratio)
-        spaces_ = (observation_space, action_space)
-        super().__init__(buffer_size, *spaces_, device=device, handle_timeout_termination=handle_timeout_termination)
+        self.real_ratio, spaces_ = in_unit_interval("real_ratio", real_ratio), (observation_space, action_space)
+        super().__init__(buffer_size, *spaces_, device=device)
         self.plant_observations = np.zeros((self.buffer_size, len(OBSERVATION_NAMES)), dtype=np.float64)
         self.model_buffer = ReplayBuffer(model_buffer_size, *spaces_, device=device, handle_timeout_termination=False)
 
@@ -119,6 +117,15 @@ class MBPOTrainer:
         self.dynamics: Optional[DynamicsModel | DynamicsEnsemble] = None
         self.n_fits = 0
         self.model_steps = 0
+
+    def dqn_kwargs(self) -> dict[str, Any]:
+        """The arguments of DQN-MBPO's agent beyond DQN's: the MBPO buffer, learning after the random episodes."""
+        c = self.config
+        buffer_kwargs = {"model_buffer_size": c.rollout.buffer_size, "real_ratio": c.rollout.real_ratio}
+        learning_starts = max(c.learning_starts, c.initial_random_episodes * c.episode_agent_steps)
+        return dict(
+            replay_buffer_class=MBPOReplayBuffer, replay_buffer_kwargs=buffer_kwargs, learning_starts=learning_starts
+        )
 
     def add_episode(self, observations: np.ndarray, torques_nm: np.ndarray) -> None:
         """Store one real episode (plant observations (N, 10), torques (N - 1,))."""
@@ -273,18 +280,5 @@ def train_mbpo(
     :func:`softpend.rl.dqn.train_dqn`)."""
     if not isinstance(config, MBPOConfig):
         raise ValueError(f"config must be an MBPOConfig, got {type(config).__name__}")
-    run_dir = Path(run_dir)
-    trainer = MBPOTrainer(config, seed, run_dir, progress=False)
-    learning_starts = max(config.learning_starts, config.initial_random_episodes * config.episode_agent_steps)
-
-    buffer_kwargs = {"model_buffer_size": config.rollout.buffer_size, "real_ratio": config.rollout.real_ratio}
-
-    def make_model(env: Any, s: int) -> DQN:
-        dqn = build_dqn(
-            config, env, s, episodes, replay_buffer_class=MBPOReplayBuffer, replay_buffer_kwargs=buffer_kwargs
-        )
-        dqn.learning_starts = learning_starts
-        return dqn
-
-    args = (config, seed, episodes, run_dir, resume, progress)
-    return run_training("mbpo", *args, make_model=make_model, replay_buffer_class=MBPOReplayBuffer, part=trainer)
+    trainer = MBPOTrainer(config, seed, Path(run_dir), progress=False)
+    return run_training("mbpo", config, seed, episodes, run_dir, resume, progress, part=trainer)

@@ -45,17 +45,11 @@ class TrainingLog:
         rows = self.episodes if table == "episodes" else self.evaluations
         return np.array([row[name] for row in rows], dtype=float)
 
-    def first_balanced(self, std_rad: float = SUCCESS_STD_RAD) -> Optional[dict[str, Any]]:
-        """The first evaluation in which every seed swung up and held ``upright_std_rad <= std_rad``."""
-        for row in self.evaluations:
-            if row["all_swung_up"] and row["max_upright_std_rad"] <= std_rad:
-                return row
-        return None
-
     def real_s_to_balance(self, std_rad: float = SUCCESS_STD_RAD, key: str = "plant_s") -> float:
-        """Training plant seconds (``key="episode"``: episodes) at the first balanced evaluation (``inf`` if none)."""
-        row = self.first_balanced(std_rad)
-        return float(row[key]) if row is not None else math.inf
+        """Training plant seconds (``key="episode"``: episodes) at the first evaluation in which every seed swung up
+        and held ``upright_std_rad <= std_rad`` (``inf`` if none)."""
+        rows = (r for r in self.evaluations if r["all_swung_up"] and r["max_upright_std_rad"] <= std_rad)
+        return float(next(rows, {key: math.inf})[key])
 
     def episodes_to_balance(self, std_rad: float = SUCCESS_STD_RAD) -> float:
         return self.real_s_to_balance(std_rad, "episode")

@@ -55,14 +55,8 @@ class Task:
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :class:`softpend.envs.SoftPendulumEnv` for this task."""
-        return {
-            "params": self.rod,
-            "plant": self.plant,
-            "dt_s": self.dt_s,
-            "substeps": self.substeps,
-            "start": self.start,
-            "start_noise_rad": self.start_noise_rad,
-        }
+        names = ("plant", "dt_s", "substeps", "start", "start_noise_rad")
+        return {"params": self.rod, **{name: getattr(self, name) for name in names}}
 
     def tilt_state(self, tilt_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` of the straight rod at rest, hub and tip tilted by ``tilt_rad`` [rad] from upright."""

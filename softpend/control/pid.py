@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from softpend.checks import non_negative, positive
 from softpend.plant import Observation, RodParams, wrap_angle_rad
@@ -44,7 +43,6 @@ class PIDController:
         torque_limit_nm: float = RodParams.torque_limit_nm,
         derivative_filter_s: float = 0.02,
         tracking_time_s: Optional[float] = None,
-        name: str = "PID",
     ) -> None:
         if not isinstance(gains, PIDGains):
             raise ValueError(f"gains must be a PIDGains, got {type(gains).__name__}")
@@ -55,7 +53,7 @@ class PIDController:
             kp, ki, kd = gains.as_array()
             tracking_time_s = math.sqrt((kp / ki) * (kd / kp)) if kp > 0 and ki > 0 and kd > 0 else 10 * dt_s
         self.tracking_time_s = positive("tracking_time_s", tracking_time_s)
-        self.gains, self.name = gains, name
+        self.gains, self.name = gains, "PID"
         self.reset()
 
     def reset(self) -> None:
@@ -106,7 +104,6 @@ def tune_pid(
     tilts_rad: Sequence[float] = (0.1, -0.2),
     duration_s: float = 3.0,
     max_evaluations: int = 120,
-    progress: bool = False,
 ) -> PIDTuningResult:
     """Gains minimising the mean over ``tilts_rad`` starts of ``mean(theta^2) + TORQUE_WEIGHT * mean((tau /
     tau_max)^2)`` (10 for a rollout that leaves 1 rad or is not finite) on ``simulate``, by Nelder-Mead on their
@@ -117,11 +114,9 @@ def tune_pid(
         raise ValueError("initial_gains must all be positive (the search is on their logarithms)")
     if int(max_evaluations) < 1:
         raise ValueError(f"max_evaluations must be >= 1, got {max_evaluations!r}")
-    bar = tqdm(total=int(max_evaluations), desc="PID tuning", disable=not progress, leave=False)
 
     def cost(log_gains: np.ndarray) -> float:
         controller = PIDController(PIDGains(*np.exp(np.clip(log_gains, -12, 6))), torque_limit_nm=torque_limit_nm)
-        bar.update(1)
         total = 0.0
         for tilt in tilts_rad:
             controller.reset()
@@ -136,7 +131,6 @@ def tune_pid(
     initial_cost, simplex = cost(x0), np.vstack([np.zeros(3), np.eye(3)])
     options = {"maxfev": int(max_evaluations), "xatol": 1e-3, "fatol": 1e-7, "initial_simplex": x0 + simplex}
     result = scipy.optimize.minimize(cost, x0, method="Nelder-Mead", options=options)
-    bar.close()
     best = result.x if result.fun <= initial_cost else x0
     gains = PIDGains(*np.exp(np.clip(best, -12, 6)))
     return PIDTuningResult(gains, float(min(result.fun, initial_cost)), initial_cost, int(result.nfev) + 1)

@@ -25,8 +25,6 @@ def parse_value(text: str) -> Any:
 def parse_assignment(item: str) -> tuple[str, Any]:
     """``"NAME=VALUE"`` -> ``(NAME, parse_value(VALUE))``, split at the first ``=``; ``NAME`` is a dotted
     identifier (``task.rod.mass_kg``), else ``ValueError`` quoting ``item``."""
-    if not isinstance(item, str):
-        raise ValueError(f"--set expects NAME=VALUE as a string, got {item!r}")
     name, sep, value = item.partition("=")
     name = name.strip()
     if not sep or not name or not all(part.isidentifier() for part in name.split(".")):
@@ -64,16 +62,13 @@ def apply_overrides(instance: D, overrides: Overrides, *, prefix: str = "") -> D
         raise ValueError(f"apply_overrides needs a dataclass instance, got {type(instance).__name__}")
     items = overrides.items() if isinstance(overrides, Mapping) else overrides
     fields = [f.name for f in dataclasses.fields(instance) if f.init]
-    direct: dict[str, Any] = {}
-    nested: dict[str, dict[str, Any]] = {}
+    direct, nested = dict[str, Any](), dict[str, dict[str, Any]]()
     for name, value in items:
         head, _, rest = str(name).partition(".")
         if head not in fields:
             raise ValueError(f"unknown {type(instance).__name__} field {prefix + head!r}; known: {sorted(fields)}")
-        if rest:
-            nested.setdefault(head, {})[rest] = value
-        elif isinstance(value, dict) and dataclasses.is_dataclass(getattr(instance, head)):
-            nested.setdefault(head, {}).update(value)
+        if rest or (isinstance(value, dict) and dataclasses.is_dataclass(getattr(instance, head))):
+            nested.setdefault(head, {}).update({rest: value} if rest else value)
         else:
             direct[head] = _as_tuple(value) if _holds_tuple(instance, head) else value
     changes = dict(direct)
@@ -100,22 +95,18 @@ def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) ->
     dataclass built the same way; ``convert``: field name -> function building that field from its data."""
     if not isinstance(data, Mapping):
         raise ValueError(f"{source}: expected a JSON object for a {cls.__name__}, got {type(data).__name__}")
-    names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
-    unknown, missing = [k for k in data if k not in names], [k for k in names if k not in data]
+    factories = {f.name: f.default_factory for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    unknown, missing = [k for k in data if k not in factories], [k for k in factories if k not in data]
     if unknown:
         raise ValueError(f"{source}: {unknown[0]!r} is not a {cls.__name__} field (a config of another version)")
     if missing:
         raise ValueError(f"{source}: the {cls.__name__} field {missing[0]!r} is missing (a config of another version)")
-    values: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
-        if not f.init:
-            continue
-        value = data[f.name]
-        if f.name in convert:
-            value = convert[f.name](value)
-        elif dataclasses.is_dataclass(f.default_factory):
-            value = dataclass_from_data(f.default_factory, value, source)
-        elif isinstance(value, list):
-            value = tuple(value)
-        values[f.name] = value
-    return cls(**values)
+
+    def build(name: str, value: Any) -> Any:  # nested dataclasses the same way, lists as tuples
+        if name in convert:
+            return convert[name](value)
+        if dataclasses.is_dataclass(factory := factories[name]):
+            return dataclass_from_data(factory, value, source)  # type: ignore[arg-type]
+        return tuple(value) if isinstance(value, list) else value
+
+    return cls(**{name: build(name, data[name]) for name in factories})

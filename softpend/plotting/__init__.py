@@ -8,15 +8,12 @@ import numpy as np
 __all__ = ["draw_rod", "render_rod_rgb"]
 
 
-def draw_rod(
-    ax, points_m: np.ndarray, color: str = "C0", alpha: float = 1.0, label: str | None = None, joints: bool = True
-):
+def draw_rod(ax, points_m: np.ndarray, color: str = "C0", label: str | None = None):
     """Draw a rod given its ``(n + 1, 2)`` joint positions [m] (hub first) on a matplotlib axis."""
     points_m = np.asarray(points_m, dtype=float)
-    (line,) = ax.plot(points_m[:, 0], points_m[:, 1], "-", color=color, lw=2.5, alpha=alpha, label=label)
-    if joints:
-        ax.plot(points_m[1:-1, 0], points_m[1:-1, 1], "o", color=color, ms=4, alpha=alpha)
-    ax.plot(points_m[-1, 0], points_m[-1, 1], "o", color="tab:blue", ms=7, alpha=alpha)
+    (line,) = ax.plot(points_m[:, 0], points_m[:, 1], "-", color=color, lw=2.5, label=label)
+    ax.plot(points_m[1:-1, 0], points_m[1:-1, 1], "o", color=color, ms=4)
+    ax.plot(points_m[-1, 0], points_m[-1, 1], "o", color="tab:blue", ms=7)
     ax.plot(0, 0, "s", color="k", ms=8)
     ax.set_aspect("equal")
     return line

@@ -42,16 +42,14 @@ class ClassicalComparison:
         raise KeyError(f"no run of {controller!r} from {start!r}")
 
 
-def train_learned_model(
-    task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0, progress: bool = False
-):
+def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0):
     """Babble ``n_trials`` x 5 s on the task's plant and fit the default learned model."""
     from softpend.sysid import BabbleProtocol, babble
     from softpend.sysid.training import fit_dynamics_model
 
     task = task if task is not None else Task()
-    dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=progress)
-    return fit_dynamics_model(dataset, progress=progress, max_epochs=max_epochs, seed=seed).model
+    dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=False)
+    return fit_dynamics_model(dataset, progress=False, max_epochs=max_epochs, seed=seed).model
 
 
 def near_upright_starts(task: Task, tilt_rad: float, starts: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:

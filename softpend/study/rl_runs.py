@@ -98,10 +98,9 @@ def train_run(
         train_mbpo(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
-def summary_table(
-    logs_by_method: dict[str, Sequence[TrainingLog]], std_rad: float = SUCCESS_STD_RAD
-) -> list[dict[str, Any]]:
-    """One row per method and seed: episodes and plant seconds to balance and to the asymptote, final std."""
+def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]]) -> list[dict[str, Any]]:
+    """One row per method and seed: episodes and plant seconds to balance (within :data:`SUCCESS_STD_RAD`) and to the
+    asymptote, final std."""
     from softpend.rl.curves import run_to_asymptote
 
     rows = []
@@ -110,8 +109,8 @@ def summary_table(
             last = log.evaluations[-1] if log.evaluations else {}
             row = {"method": method, "seed": log.seed, "episodes": log.n_episodes, "plant_s": log.plant_s}
             row |= dict(zip(("episodes_to_asymptote", "plant_s_to_asymptote"), run_to_asymptote(log)))
-            row |= {"episodes_to_balance": log.episodes_to_balance(std_rad)}
-            row["plant_s_to_balance"] = log.real_s_to_balance(std_rad)
+            row |= {"episodes_to_balance": log.episodes_to_balance(SUCCESS_STD_RAD)}
+            row["plant_s_to_balance"] = log.real_s_to_balance(SUCCESS_STD_RAD)
             row["final_max_upright_std_rad"] = last.get("max_upright_std_rad", math.nan)
             row["final_swing_up_time_s"] = last.get("median_swing_up_time_s", math.nan)
             rows.append(row | {"model_steps": log.model_steps})

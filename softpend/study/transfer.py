@@ -81,11 +81,8 @@ def rl_transfer_cases(
     for algo, seed in ((algo, seed) for algo in algos for seed in seeds):
         model, config = load_agent(run_folder(runs_root, algo, int(seed)), which)
         rod = config.task.rod
-        if rod.n_links != params.n_links or abs(rod.torque_limit_nm - params.torque_limit_nm) > 1e-12:
-            raise ValueError(
-                f"{algo} seed {seed}: agent trained with n_links={rod.n_links}, torque_limit_nm={rod.torque_limit_nm}, "
-                f"transfer study uses n_links={params.n_links}, torque_limit_nm={params.torque_limit_nm}"
-            )
+        if (trained := (rod.n_links, rod.torque_limit_nm)) != (used := (params.n_links, params.torque_limit_nm)):
+            raise ValueError(f"{algo} seed {seed}: (n_links, torque_limit_nm) {trained} in training, {used} here")
         controller = functools.partial(policy_controller, model, config)
         cases.append(TransferCase(f"{METHOD_NAMES[algo]} (seed {seed})", controller, duration_s=duration_s))
     return cases

@@ -74,7 +74,7 @@ def plot_swingup(result: EvaluationResult, link_points, n_frames: int = 8, fig: 
     for k, time_s in enumerate(times):
         i = int(np.argmin(np.abs(t - time_s)))
         points = np.asarray(link_points(result.joint_angles_rad[i])) + np.array([k * spacing, 0.0])
-        draw_rod(strip, points, color="C0", joints=True)
+        draw_rod(strip, points, color="C0")
         strip.plot(k * spacing, 0, "s", color="k", ms=6)
         strip.text(k * spacing, -0.42, f"{t[i]:.2f} s", ha="center", fontsize=8)
     strip.set(ylim=(-0.48, 0.36), xlim=(-0.4, (n_frames - 1) * spacing + 0.4))

@@ -32,9 +32,8 @@ def load_hparams(
 ) -> Any:
     """The config the book trains ``method`` with: the defaults, ``<directory>/<method>.yml``, ``task`` (default
     :data:`TASK`), then ``overrides``; ``ValueError`` naming the file for an unknown field or a non-mapping."""
-    if method not in CONFIG_CLASSES:
+    if (cls := CONFIG_CLASSES.get(method)) is None:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
-    cls = CONFIG_CLASSES[method]
     path = Path(directory) / f"{method}.yml"
     try:
         data = read_yaml_checked(path, "settings file") or {}
@@ -42,10 +41,8 @@ def load_hparams(
         raise ValueError(f"{path}: cannot read the settings ({' '.join(str(exc).split())})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a mapping of {cls.__name__} fields, got {type(data).__name__}")
-    fields = {f.name for f in dataclasses.fields(cls)}
-    for name in data:
-        if name not in fields or name == "task":
-            raise ValueError(f"{path}: {name!r} is not a {cls.__name__} setting")
+    if unknown := [name for name in data if name not in {f.name for f in dataclasses.fields(cls)} - {"task"}]:
+        raise ValueError(f"{path}: {unknown[0]!r} is not a {cls.__name__} setting")
     try:
         config = apply_overrides(cls(task=task if task is not None else TASK), data)
     except ValueError as exc:

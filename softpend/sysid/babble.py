@@ -101,8 +101,7 @@ def band_limited_noise(
 
 
 def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    n = protocol.n_samples
-    delay = protocol.camera_delay_steps
+    n, delay = protocol.n_samples, protocol.camera_delay_steps
     n_steps = n + delay  # one extra sample for the first backward difference
     limit = plant.params.torque_limit_nm
     q0, qd0 = np.zeros(plant.n_coordinates), np.zeros(plant.n_coordinates)
@@ -122,8 +121,7 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
         babble = band_limited_noise(
             rng, n_steps, protocol.torque_std_fraction * limit, protocol.torque_bandwidth_hz, protocol.dt_s
         )
-    kp = protocol.feedback_kp_nm_per_rad if use_feedback else 0.0
-    kd = protocol.feedback_kd_nms_per_rad if use_feedback else 0.0
+    kp, kd = (protocol.feedback_kp_nm_per_rad, protocol.feedback_kd_nms_per_rad) if use_feedback else (0.0, 0.0)
     obs = np.empty((n_steps + 1, len(OBSERVATION_NAMES)))
     joint_q = np.empty((n_steps + 1, plant.n_coordinates))
     joint_qd = np.empty_like(joint_q)
@@ -137,9 +135,8 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
             break
         phi_rate = float(wrap_angle_rad(o.phi_rad - phi_previous)) / protocol.dt_s
         phi_previous = o.phi_rad
-        torque = min(max(-kp * o.phi_rad - kd * phi_rate + babble[k], -limit), limit)
-        torques[k] = torque
-        o = plant.step(torque)
+        torques[k] = min(max(-kp * o.phi_rad - kd * phi_rate + babble[k], -limit), limit)
+        o = plant.step(torques[k])
 
     # sensor model: noise on the sampled positions, camera quantities delayed by `delay` samples
     raw = np.empty((n + 1, 5))  # phi, theta, ex, ey, er

@@ -27,8 +27,6 @@ ESTIMABLE_ROD_FIELDS: tuple[str, ...] = GREYBOX_PARAMETERS + ("stiffness_scale",
 CALIBRATION_PARAMETERS: tuple[str, ...] = ("torque_gain", "encoder_offset_rad", "torque_delay_s", "camera_delay_s")
 #: Calibrations that are delays within one sample either way (decision variable: the fraction of ``dt``).
 _DELAYS = ("torque_delay_s", "camera_delay_s")
-#: Calibrations whose truth is zero (no relative error, not log-scaled).
-_ZERO_CALIBRATIONS = ("encoder_offset_rad",) + _DELAYS
 #: Scale of the encoder-offset decision variable [rad].
 _OFFSET_SCALE_RAD = 0.01
 #: Bounds of the log-scaled parameters (a factor e^5 either side of the initial guess).
@@ -107,14 +105,9 @@ class GreyBoxResult:
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
         """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""
-        out = {}
-        for name, value in self.estimates.items():
-            if name == "torque_gain":
-                out[name] = abs(value - 1.0)
-            elif name not in _ZERO_CALIBRATIONS:
-                reference = getattr(truth, name)
-                out[name] = abs(value / reference - 1.0) if reference != 0 else abs(value)
-        return out
+        rated = [n for n in self.estimates if n in ESTIMABLE_ROD_FIELDS + ("torque_gain",)]  # the rest: truth zero
+        truths = {n: 1.0 if n == "torque_gain" else getattr(truth, n) for n in rated}
+        return {n: abs(self.estimates[n] / t - 1.0) if t != 0 else abs(self.estimates[n]) for n, t in truths.items()}
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; its ``rod_params`` is what :meth:`RodParams.from_json` reads."""
@@ -146,38 +139,27 @@ def reconstruct_joint_states(
     ey_m: np.ndarray,
     er_rad: Optional[np.ndarray],
     params: RodParams,
-    ridge: float = 1e-4,
     iterations: int = 20,
     initial_springs_rad: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Joint angles ``(..., n + 1)`` of a PRB rod that put its tip at the observed position (and tip angle ``er``
     when given), the spring angles as small as possible (a ridge on them); vectorised Gauss-Newton from the straight
     rod (or from ``initial_springs_rad (..., n)``)."""
-    phi = np.asarray(phi_rad, float)
-    n = params.n_links
-    length = params.link_length_m
-    scale = params.length_m
+    ridge = 1e-4
+    phi, has_er = np.asarray(phi_rad, float), er_rad is not None
+    n, length, scale = params.n_links, params.link_length_m, params.length_m
     b = np.zeros(phi.shape + (n,)) if initial_springs_rad is None else np.array(initial_springs_rad, float)
-    targets = [np.asarray(ex_m, float) / scale, np.asarray(ey_m, float) / scale]
-    if er_rad is not None:
-        targets.append(np.asarray(er_rad, float))
-    target = np.stack(targets, axis=-1)
-    eye = np.eye(n)
+    observed = [np.asarray(ex_m, float) / scale, np.asarray(ey_m, float) / scale]
+    target = np.stack(observed + [np.asarray(er_rad, float)] * has_er, axis=-1)
     for _ in range(iterations):
         a = phi[..., None] + np.cumsum(b, axis=-1)
         sin, cos = np.sin(a), np.cos(a)
-        model = [-length * sin.sum(-1) / scale, length * cos.sum(-1) / scale]
-        tail_cos = np.cumsum(cos[..., ::-1], axis=-1)[..., ::-1]
-        tail_sin = np.cumsum(sin[..., ::-1], axis=-1)[..., ::-1]
-        rows = [-length * tail_cos / scale, -length * tail_sin / scale]
-        if er_rad is not None:
-            model.append(wrap_diff(a[..., -1], 0.0))
-            rows.append(np.ones_like(b))
-        r = np.stack(model, axis=-1) - target
-        if er_rad is not None:
+        r = np.stack([-length * sin.sum(-1) / scale, length * cos.sum(-1) / scale] + [a[..., -1]] * has_er, -1) - target
+        if has_er:
             r[..., 2] = wrap_diff(a[..., -1], target[..., 2])
-        jac = np.stack(rows, axis=-2)
-        jtj = np.einsum("...ki,...kj->...ij", jac, jac) + ridge * eye
+        tail_cos, tail_sin = (np.cumsum(x[..., ::-1], axis=-1)[..., ::-1] for x in (cos, sin))
+        jac = np.stack([-length * tail_cos / scale, -length * tail_sin / scale] + [np.ones_like(b)] * has_er, axis=-2)
+        jtj = np.einsum("...ki,...kj->...ij", jac, jac) + ridge * np.eye(n)
         rhs = np.einsum("...ki,...k->...i", jac, r) + ridge * b
         b = b - np.linalg.solve(jtj, rhs[..., None])[..., 0]
     return np.concatenate([phi[..., None], b], axis=-1)
@@ -193,45 +175,30 @@ def dataset_substeps(dataset: TrajectoryDataset) -> int:
     return int(dataset.metadata.get("protocol", {}).get("substeps", 2))
 
 
-def _free_plant(params: RodParams, dt_s: float, substeps: int) -> PRBPlant:
-    """A PRB plant whose torque is not clipped (the recorded one already was)."""
-    return PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dt_s, substeps=substeps)
+def free_plant(params: RodParams, dataset: TrajectoryDataset) -> PRBPlant:
+    """A PRB plant at the dataset's step and sub-steps whose torque is not clipped (the recorded one already was)."""
+    return PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
 
 
 def simulate_windows(
-    params: RodParams,
-    dt_s: float,
-    substeps: int,
-    states: np.ndarray,
-    torques_nm: np.ndarray,
-    torque_gain: float = 1.0,
-    has_er: bool = True,
-    plant: Optional[PRBPlant] = None,
-    diverged_nan: bool = False,
+    plant: PRBPlant, states: np.ndarray, torques_nm: np.ndarray, has_er: bool = True, diverged_nan: bool = False
 ) -> np.ndarray:
-    """Open-loop PRB simulations from joint states ``(B, 2 (n + 1))`` under torques ``(B, W)`` times
-    ``torque_gain``: ``phi, ex, ey`` (and ``er``) at every sample, ``(B, W + 1, 3 or 4)``.  A diverging
-    simulation keeps its last state to the end of its window (``diverged_nan``: the whole window is NaN)."""
-    plant = plant if plant is not None else _free_plant(params, dt_s, substeps)
+    """Open-loop simulations from joint states ``(B, 2 (n + 1))`` under torques ``(B, W)``: ``phi, ex, ey`` (and
+    ``er``) at every sample, ``(B, W + 1, 3 or 4)``.  A diverging simulation keeps its last state to the end of its
+    window (``diverged_nan``: the whole window is NaN)."""
     n_q = plant.n_coordinates
-    states = np.asarray(states, float)
-    torques = np.asarray(torques_nm, float) * torque_gain
-    k = 4 if has_er else 3
-    out = np.empty((states.shape[0], torques.shape[1] + 1, k))
-    for w in range(states.shape[0]):
-        o = plant.reset(states[w, :n_q], states[w, n_q:])
-        row = out[w]
-        row[0] = (o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[:k]
-        for i, tau in enumerate(torques[w]):
-            try:
-                o = plant.step(tau)
-            except SimulationDiverged:
-                if diverged_nan:
-                    row[:] = np.nan
-                else:
-                    row[i + 1 :] = row[i]
-                break
-            row[i + 1] = (o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[:k]
+    torques = np.asarray(torques_nm, float)
+    out = np.full((len(states), torques.shape[1] + 1, 4 if has_er else 3), np.nan)
+    for w, row in enumerate(out):
+        path = [plant.reset(states[w, :n_q], states[w, n_q:])]
+        try:
+            for tau in torques[w]:
+                path.append(plant.step(tau))
+        except SimulationDiverged:
+            if diverged_nan:
+                continue
+            path += path[-1:] * (len(row) - len(path))
+        row[:] = [(o.phi_rad, o.ex_m, o.ey_m, o.er_rad)[: row.shape[1]] for o in path]
     return out
 
 
@@ -277,14 +244,9 @@ class _Problem:
         names: Sequence[str],
         starts: np.ndarray,
         steps: int,
-        substeps: int,
         diverged_nan: bool = False,
     ) -> None:
-        self.guess = guess
-        self.diverged_nan = diverged_nan
-        self.names = tuple(names)
-        self.dt_s = dataset.dt_s
-        self.substeps = substeps
+        self.dataset, self.guess, self.names, self.diverged_nan = dataset, guess, tuple(names), diverged_nan
         observed, columns = _observed(dataset)
         self.has_er = "er_rad" in observed
         index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
@@ -299,36 +261,30 @@ class _Problem:
         self._plants: dict[bytes, PRBPlant] = {}
         self._cache: tuple[bytes, np.ndarray] | None = None
 
-    def unpack(self, theta: np.ndarray) -> tuple[RodParams, float, float, float]:
-        """``(rod, torque gain, encoder offset [rad], torque delay [fraction of dt])`` of scaled parameters."""
+    def unpack(self, theta: np.ndarray) -> tuple[RodParams, dict[str, float]]:
+        """The rod and every parameter's value (:func:`_decode`) of scaled parameters."""
         values = _decode(self.names, theta, self.guess)
-        rod = self.guess.replace(**{n: v for n, v in values.items() if n in ESTIMABLE_ROD_FIELDS})
-        return (
-            rod,
-            values.get("torque_gain", 1.0),
-            values.get("encoder_offset_rad", 0.0),
-            values.get("torque_delay_s", 0.0),
-        )
+        return self.guess.replace(**{n: v for n, v in values.items() if n in ESTIMABLE_ROD_FIELDS}), values
 
     def simulate(self, z: np.ndarray) -> np.ndarray:
         theta = z[: self.n_p]
         states = z[self.n_p :].reshape(self.n_windows, 2 * self.n_q)
         key = np.asarray(theta, float).tobytes()
-        rod, gain, offset, delay = self.unpack(theta)
+        rod, values = self.unpack(theta)
         if key not in self._plants:
             if len(self._plants) > 4:
                 self._plants.clear()
-            self._plants[key] = _free_plant(rod, self.dt_s, self.substeps)
-        plant = self._plants[key]
+            self._plants[key] = free_plant(rod, self.dataset)
+        delay = values.get("torque_delay_s", 0.0)
         torques = _shifted(self.torques, delay, self.previous_torques[:, None], self.next_torques[:, None])
         sim = simulate_windows(
-            plant.params, self.dt_s, self.substeps, states, torques, gain, self.has_er, plant, self.diverged_nan
+            self._plants[key], states, torques * values.get("torque_gain", 1.0), self.has_er, self.diverged_nan
         )
-        sim[..., 0] += offset
-        if "camera_delay_s" in self.names:  # the camera sees the tip of (k - b) dt at sample k
-            c = sim[:, :, 1:]
-            b = float(theta[self.names.index("camera_delay_s")])
-            sim[:, :, 1:] = _shifted(c, b, 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1])
+        sim[..., 0] += values.get("encoder_offset_rad", 0.0)
+        c = sim[:, :, 1:]  # the camera sees the tip of (k - b) dt at sample k
+        sim[:, :, 1:] = _shifted(
+            c, values.get("camera_delay_s", 0.0), 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1]
+        )
         return sim
 
     def residual_blocks(self, z: np.ndarray) -> np.ndarray:
@@ -380,10 +336,10 @@ class _Problem:
 
 
 def _levenberg_marquardt(
-    problem: _Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray, max_iterations: int, tolerance: float
+    problem: _Problem, z0: np.ndarray, bound: np.ndarray, max_iterations: int, tolerance: float
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Levenberg-Marquardt with Marquardt's scaling, each step solved exactly with the window states eliminated,
-    the parameters kept within ``[lower, upper]``; stops on a small step or cost reduction, or the limit."""
+    the variables kept within ``[-bound, bound]``; stops on a small step or cost reduction, or the limit."""
     n_p = problem.n_p
     z = z0.copy()
     r = problem.residuals(z)
@@ -399,7 +355,7 @@ def _levenberg_marquardt(
         a, d, b = _normal_blocks(dense, block)
         diag_a = np.maximum(np.diag(a), 1e-30)
         diag_d = np.maximum(np.diagonal(d, axis1=1, axis2=2), 1e-30)
-        accepted, tries = False, 0
+        tries = 0
         while mu < 1e12:
             tries += 1
             d_mu = d + mu * (np.eye(d.shape[1])[None] * diag_d[:, None, :])
@@ -410,15 +366,14 @@ def _levenberg_marquardt(
             rhs = -g_p + np.einsum("wpi,wi->p", b, inv_g)
             dp = np.linalg.solve(schur, rhs) if n_p else np.zeros(0)
             ds = -inv_g - np.einsum("wip,p->wi", inv_bt, dp)
-            trial = np.clip(z + np.concatenate([dp, ds.reshape(-1)]), lower, upper)
+            trial = np.clip(z + np.concatenate([dp, ds.reshape(-1)]), -bound, bound)
             r_new = problem.residuals(trial)
             nfev += 1
             cost_new = 0.5 * float(r_new @ r_new)
             if np.isfinite(cost_new) and cost_new < cost:
-                accepted = True
                 break
             mu *= 4.0
-        if not accepted:
+        else:
             status, message = 2, "no step lowers the cost (converged to the numerical precision)"
             break
         if n_p:
@@ -516,20 +471,19 @@ def identify(
     upper = np.array([1.0 if n in _DELAYS else np.inf if n == "encoder_offset_rad" else _LOG_BOUND for n in names])
     z = np.concatenate([np.zeros(n_p), _initial_states(dataset, starts, guess).reshape(-1)])
     fit: dict[str, Any] = {"nfev": 0, "njev": 0}
-    substeps = dataset_substeps(dataset)
     for stage, stage_steps in enumerate(sorted({min(max(warmup, 2), steps), steps})):
-        problem = _Problem(dataset, guess, names, starts, stage_steps, substeps, True)
+        problem = _Problem(dataset, guess, names, starts, stage_steps, True)
         finite = np.isfinite(problem.residual_blocks(z)).all(axis=(1, 2))
         if not finite.any():
             raise ValueError(f"the simulation diverges in every window of {stage_steps} samples; give a closer guess")
         if not finite.all():  # a window whose simulation diverges has no derivative: left out
             starts = starts[finite]
             z = np.concatenate([z[:n_p], z[n_p:].reshape(finite.size, -1)[finite].reshape(-1)])
-            problem = _Problem(dataset, guess, names, starts, stage_steps, substeps, True)
+            problem = _Problem(dataset, guess, names, starts, stage_steps, True)
         if stage == 0:
             _check_identifiable(names, *problem.parameter_information(z), "at the initial guess")
         bound = np.concatenate([upper, np.full(z.size - n_p, np.inf)])
-        z, stage_fit = _levenberg_marquardt(problem, z, -bound, bound, config.max_iterations, TOLERANCE)
+        z, stage_fit = _levenberg_marquardt(problem, z, bound, config.max_iterations, TOLERANCE)
         fit = {**stage_fit, "nfev": fit["nfev"] + stage_fit["nfev"], "njev": fit["njev"] + stage_fit["njev"]}
     a, s = problem.parameter_information(z)
     _check_identifiable(names, a, s, "at the optimum")
@@ -572,17 +526,14 @@ def estimate_joint_states(
     steps = int(round(positive("lookback_s", lookback_s) / dataset.dt_s))
     if steps < 2:
         raise ValueError(f"lookback_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {lookback_s!r}")
-    starts = samples.copy()
-    starts[:, 1] -= steps
+    starts = samples - np.array([0, steps])
     if samples.size == 0 or starts[:, 1].min() < 1 or samples[:, 1].max() >= dataset.n_samples:
         raise ValueError(f"samples must lie in [{steps + 1}, {dataset.n_samples}) to look {lookback_s} s back")
-    substeps = dataset_substeps(dataset)
-    problem = _Problem(dataset, params, (), starts, steps, substeps)
+    problem = _Problem(dataset, params, (), starts, steps)
     x0 = _initial_states(dataset, starts, params).reshape(-1)
-    unbounded = np.full(x0.size, np.inf)
-    z, _ = _levenberg_marquardt(problem, x0, -unbounded, unbounded, 15, 1e-8)
+    z, _ = _levenberg_marquardt(problem, x0, np.full(x0.size, np.inf), 15, 1e-8)
     fitted = z.reshape(problem.n_windows, -1)
-    plant = _free_plant(params, dataset.dt_s, substeps)
+    plant = free_plant(params, dataset)
     n_q = plant.n_coordinates
     out = np.empty_like(fitted)
     for w in range(problem.n_windows):

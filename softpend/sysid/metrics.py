@@ -18,16 +18,11 @@ from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 
 
-def _predictor(model: Any) -> tuple[Any, torch.dtype]:
-    """``predict_next`` of a model (of an ensemble: its members' mean) and the dtype it computes in."""
-    if isinstance(model, DynamicsEnsemble):
-        return functools.partial(model.predict_next, member="mean"), model.members[0].feature_mean.dtype
-    return model.predict_next, model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float64
-
-
 def open_loop(model: Any, x0: np.ndarray, torques_nm: np.ndarray) -> np.ndarray:
     """Open-loop predictions ``(B, T + 1, d)`` of a model (ensembles: their mean) under torques ``(B, T)``."""
-    predict, dtype = _predictor(model)
+    predict, dtype = model.predict_next, model.feature_mean.dtype if isinstance(model, DynamicsModel) else torch.float64
+    if isinstance(model, DynamicsEnsemble):
+        predict, dtype = functools.partial(model.predict_next, member="mean"), model.members[0].feature_mean.dtype
     with torch.inference_mode():
         x = [torch.as_tensor(x0, dtype=dtype)]
         for torque in torch.as_tensor(torques_nm, dtype=dtype).T:
@@ -44,39 +39,28 @@ def one_step_errors(
     report's units and standardised, beside "next = current", per variable, and the tip RMSE [m] if observed."""
     layout: StateLayout = model.layout
     data = layout.transitions(dataset, trials)
-    predict, dtype = _predictor(model)
+    predicted = open_loop(model, data.states, data.torques_nm[:, None])[:, 1]
+    core, mask = layout.core_dim, layout.angle_mask[: layout.core_dim]
+    error, change = predicted[:, :core] - data.next_states[:, :core], data.next_states[:, :core] - data.states[:, :core]
+    for x in (error, change):
+        x[:, mask] = wrap_angle_rad(x[:, mask])
+    first = model.members[0] if isinstance(model, DynamicsEnsemble) else model
+    dtype = first.feature_mean.dtype
+    first.double()
     with torch.inference_mode():
-        states = torch.as_tensor(data.states, dtype=dtype)
-        predicted = predict(states, torch.as_tensor(data.torques_nm, dtype=dtype)).double().numpy()
-    core = layout.core_dim
-    mask = layout.angle_mask[:core]
-    error = predicted[:, :core] - data.next_states[:, :core]
-    error[:, mask] = wrap_angle_rad(error[:, mask])
-    change = data.next_states[:, :core] - data.states[:, :core]
-    change[:, mask] = wrap_angle_rad(change[:, mask])
-    first = (model.members[0] if isinstance(model, DynamicsEnsemble) else model).double()
-    with torch.inference_mode():
-        s0 = torch.as_tensor(data.states, dtype=torch.float64)
-        target = first.target_delta(s0, torch.as_tensor(data.next_states, dtype=torch.float64))
-        guess = first.target_delta(s0, torch.as_tensor(predicted, dtype=torch.float64))
-        scale = first.delta_std
-        normalised = float(torch.mean(((guess - target) / scale) ** 2))
-        normalised_trivial = float(torch.mean((target / scale) ** 2))
+        s0, s1, guess = (torch.as_tensor(x, dtype=torch.float64) for x in (data.states, data.next_states, predicted))
+        target, guess = first.target_delta(s0, s1), first.target_delta(s0, guess)
+        normalised = float(torch.mean(((guess - target) / first.delta_std) ** 2))
+        normalised_trivial = float(torch.mean((target / first.delta_std) ** 2))
     first.to(dtype)
-    names = layout.names[:core]
-    by_variable = {n: float(v) for n, v in zip(names, np.mean(error**2, axis=0))}
-    tip = (
-        {"one_step_tip_rmse_m": float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))}
-        if "ex_m" in by_variable
-        else {}
-    )
+    by_variable = {n: float(v) for n, v in zip(layout.names[:core], np.mean(error**2, axis=0))}
     return {
         "mse": float(np.mean(error**2)),
         "mse_trivial": float(np.mean(change**2)),
         "mse_normalised": normalised,
         "mse_normalised_trivial": normalised_trivial,
         "mse_by_variable": by_variable,
-        **tip,
+        "one_step_tip_rmse_m": float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"])),
         "n_transitions": int(error.shape[0]),
     }
 

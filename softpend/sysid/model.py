@@ -69,8 +69,6 @@ class DynamicsModel(nn.Module):
         tip_reach_m: Optional[float] = None,
     ) -> None:
         super().__init__()
-        if not isinstance(layout, StateLayout):
-            raise ValueError(f"layout must be a StateLayout, got {type(layout).__name__}")
         one_of("activation", activation, ACTIVATIONS)
         self.layout = layout
         self.dt_s = positive("dt_s", dt_s)
@@ -79,11 +77,8 @@ class DynamicsModel(nn.Module):
         self.activation = activation
         self.integrate_positions = bool(integrate_positions)
         self.tip_reach_m = optional_positive("tip_reach_m", tip_reach_m)
-        p = layout.n_positions
-        mask = layout.position_angle_mask
-        self._p = p
-        self._h = layout.history
-        self._core = layout.core_dim
+        p, mask = layout.n_positions, layout.position_angle_mask
+        self._p, self._h, self._core = p, layout.history, layout.core_dim
         self.n_outputs = p if self.integrate_positions else self._core
         names = layout.names
         self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
@@ -105,13 +100,9 @@ class DynamicsModel(nn.Module):
         for name, fill in (fills | {"delta_mean": 0.0, "delta_std": 1.0}).items():
             size = self.n_outputs if name.startswith("delta") else self.n_features
             self.register_buffer(name, torch.full((size,), fill, dtype=torch.float32))
-        layers: list[nn.Module] = []
-        width_in = self.n_features
-        for width in self.hidden_widths:
-            layers += [nn.Linear(width_in, width, dtype=torch.float32), ACTIVATIONS[activation]()]
-            width_in = width
-        layers.append(nn.Linear(width_in, self.n_outputs, dtype=torch.float32))
-        self.net = nn.Sequential(*layers)
+        widths = (self.n_features, *self.hidden_widths)
+        hidden = [(nn.Linear(a, b, dtype=torch.float32), ACTIVATIONS[activation]()) for a, b in zip(widths, widths[1:])]
+        self.net = nn.Sequential(*sum(hidden, ()), nn.Linear(widths[-1], self.n_outputs, dtype=torch.float32))
 
     def features(self, state: Tensor, torque_nm: Tensor) -> Tensor:
         """Raw (not standardised) network input features, shape ``(B, n_features)``."""
@@ -261,19 +252,17 @@ class DynamicsEnsemble(nn.Module):
             if not 0 <= member < len(self.members):
                 raise ValueError(f"member must be in [0, {len(self.members)}), got {member}")
             return self.members[member].predict_next(state, torque_nm)
+        if member not in (None, "mean"):
+            raise ValueError(f"member must be an int, 'mean' or None, got {member!r}")
         first = self.members[0]
         state, torque_nm = first._check(state, torque_nm)
-        if member == "mean":
-            delta = torch.stack([m.predict_delta(state, torque_nm) for m in self.members]).mean(0)
-            return first.next_from_delta(state, delta)
-        if member is not None:
-            raise ValueError(f"member must be an int, 'mean' or None, got {member!r}")
-        if len(self.members) == 1:
+        if member is None and len(self.members) == 1:
             return first.predict_next(state, torque_nm)
         deltas = torch.stack([m.predict_delta(state, torque_nm) for m in self.members])  # (K, B, 2P)
+        if member == "mean":
+            return first.next_from_delta(state, deltas.mean(0))
         pick = torch.randint(len(self.members), (state.shape[0],), generator=generator, device=state.device)
-        delta = deltas[pick, torch.arange(state.shape[0], device=state.device)]
-        return first.next_from_delta(state, delta)
+        return first.next_from_delta(state, deltas[pick, torch.arange(state.shape[0], device=state.device)])
 
     def config(self) -> dict[str, Any]:
         """Members' constructor arguments plus the ensemble size."""
@@ -283,9 +272,8 @@ class DynamicsEnsemble(nn.Module):
 def model_paths(path: str | Path) -> tuple[Path, Path]:
     """``(<path>.pt, <path>.json)``, the two files of :func:`save_model` (``path`` may end in either suffix)."""
     path = Path(path)
-    if path.suffix in (".pt", ".json"):
-        path = path.with_suffix("")
-    return path.with_name(path.name + ".pt"), path.with_name(path.name + ".json")
+    stem = path.with_suffix("") if path.suffix in (".pt", ".json") else path
+    return stem.with_name(stem.name + ".pt"), stem.with_name(stem.name + ".json")
 
 
 def save_model(

@@ -10,11 +10,10 @@ from typing import Any, Optional
 import numpy as np
 
 from softpend.checks import non_negative, positive, positive_int
-from softpend.plant import PRBPlant, RodParams
+from softpend.plant import RodParams
 from softpend.sysid.dataset import TrajectoryDataset
-from softpend.sysid.greybox import dataset_substeps, simulate_windows, wrap_diff
-from softpend.sysid.metrics import network_rollouts, recorded_states, trial_curves
-from softpend.sysid.metrics import rollout_starts as rollout_starts  # re-exported
+from softpend.sysid.greybox import free_plant, simulate_windows, wrap_diff
+from softpend.sysid.metrics import network_rollouts, recorded_states, rollout_starts, trial_curves
 
 #: Tip-error threshold of the valid prediction time, as a fraction of the rod length.
 VALID_TIP_FRACTION = 0.05
@@ -80,7 +79,7 @@ def _prb_rollouts(
     states[:, 0] += hub_offset_rad
     index = starts[:, 1:2] + np.arange(positive_int("steps", steps) + 1)[None, :]
     torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-    return simulate_windows(params, dataset.dt_s, dataset_substeps(dataset), states, torques, has_er=False), index
+    return simulate_windows(free_plant(params, dataset), states, torques, has_er=False), index
 
 
 def prb_rollout_tip_errors(
@@ -131,10 +130,9 @@ def prb_one_step_errors(
 ) -> dict[str, float]:
     """One-step error of a PRB model from the recorded joint state at every sample of the trials, in the units of
     :func:`softpend.sysid.one_step_errors` at full information (velocities as backward differences)."""
-    trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-    starts = np.array([(t, s) for t in trials for s in range(dataset.n_samples - 1)], dtype=np.int64)
+    starts = rollout_starts(dataset, 1, stride=1, trials=trials)
     states = recorded_states(dataset, starts)
-    plant = PRBPlant(params.replace(torque_limit_nm=1e6), dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
+    plant = free_plant(params, dataset)
     names = dataset.position_names
     predicted = np.empty((starts.shape[0], len(names)))
     for row, ((t, s), state) in enumerate(zip(starts, states)):
@@ -145,8 +143,7 @@ def prb_one_step_errors(
     angle = np.array([n in ("phi_rad", "theta_rad", "er_rad") for n in names])
     position_error = predicted - nxt
     position_error[:, angle] = wrap_diff(position_error[:, angle], 0.0)
-    velocity_error = position_error / dataset.dt_s
-    error = np.concatenate([position_error, velocity_error], axis=1)
+    error = np.concatenate([position_error, position_error / dataset.dt_s], axis=1)
     i_ex, i_ey = names.index("ex_m"), names.index("ey_m")
     return {
         "mse": float(np.mean(error**2)),

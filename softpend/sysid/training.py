@@ -206,8 +206,7 @@ def fit_dynamics_model(
         f"{transitions} transitions of a {dim}-dimensional state, {config.ensemble_size} member(s) of {weights} weights",
     )
     train_trials, val_trials = split_trials(dataset.n_trials, config.validation_fraction, config.seed)
-    train = layout.transitions(dataset, train_trials)
-    val = layout.transitions(dataset, val_trials)
+    train, val = (layout.transitions(dataset, trials) for trials in (train_trials, val_trials))
     params = dataset.params
     # without plant parameters (a rig file), the largest recorded torque stands in for the limit
     limit = params.torque_limit_nm if params is not None else float(np.abs(dataset.torques_nm).max())
@@ -230,20 +229,16 @@ def fit_dynamics_model(
     stats = features.mean(0), features.std(0), targets.mean(0), targets.std(0)
     for m in members:
         m.set_normalisation(*stats)
-    x_train, y_train = _tensors(members[0], train)
-    x_val, y_val = _tensors(members[0], val)
+    (x_train, y_train), (x_val, y_val) = (_tensors(members[0], data) for data in (train, val))
     for m in members:
         m.set_feature_box(x_train.min(0).values, x_train.max(0).values)
     result = FitResult(model=members[0], config=config, train_trials=train_trials, val_trials=val_trials)
     for k, member in enumerate(members):
         generator = torch.Generator().manual_seed(config.seed * 1000 + k)
-        if config.ensemble_size > 1:
-            pick = torch.randint(x_train.shape[0], (x_train.shape[0],), generator=generator)
-            xk, yk = x_train[pick], y_train[pick]
-        else:
-            xk, yk = x_train, y_train
+        n = x_train.shape[0]  # a bootstrap of the transitions for each member of an ensemble
+        pick = torch.randint(n, (n,), generator=generator) if config.ensemble_size > 1 else slice(None)
         desc = "training" if config.ensemble_size == 1 else f"training member {k + 1}/{config.ensemble_size}"
-        tl, vl, best = _train(member.net, xk, yk, x_val, y_val, config, generator, progress, desc)
+        tl, vl, best = _train(member.net, x_train[pick], y_train[pick], x_val, y_val, config, generator, progress, desc)
         result.train_loss.append(tl)
         result.val_loss.append(vl)
         result.best_epochs.append(best)

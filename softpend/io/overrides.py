@@ -106,7 +106,7 @@ def dataclass_from_data(cls: type[D], data: Any, source: Any, **convert: Any) ->
         if name in convert:
             return convert[name](value)
         if dataclasses.is_dataclass(factory := factories[name]):
-            return dataclass_from_data(factory, value, source)  # type: ignore[arg-type]
+            return dataclass_from_data(factory, value, source)
         return tuple(value) if isinstance(value, list) else value
 
     return cls(**{name: build(name, data[name]) for name in factories})

@@ -70,14 +70,9 @@ class BookLayout:
     execution_page_path = property(lambda self: self.generated_dir / f"{EXECUTION_PAGE}.md")
     training_path = property(lambda self: self.generated_dir / "training.json")  # written by `softpend sweep --book`
 
-    def source_path(self, name: str) -> Path:
-        return self.root / "notebooks" / f"{name}.md"
-
-    def output_path(self, name: str) -> Path:
-        return self.generated_dir / f"{name}.ipynb"
-
-    def key_path(self, name: str) -> Path:
-        return self.generated_dir / f"{name}.sha256"
+    source_path = lambda self, name: self.root / "notebooks" / f"{name}.md"  # noqa: E731
+    output_path = lambda self, name: self.generated_dir / f"{name}.ipynb"  # noqa: E731
+    key_path = lambda self, name: self.generated_dir / f"{name}.sha256"  # noqa: E731
 
 
 #: One notebook of :func:`run_notebooks`: ``status`` is ``"executed"`` or ``"cached"``.

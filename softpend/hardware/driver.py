@@ -23,6 +23,9 @@ from softpend.hardware.clock import WALL_CLOCK
 #: Largest values a device may announce or report (beyond them a value is garbage).
 MAX_DEVICE_TORQUE_LIMIT_NM = 1000.0
 MAX_HUB_SPEED_RAD_S = 1000.0
+_DEVICE_LIMITS = dict(
+    counts_per_rev=1 << 24, torque_limit_nm=MAX_DEVICE_TORQUE_LIMIT_NM, watchdog_s=65.535, state_rate_hz=1e4
+)
 
 
 class LinkError(RuntimeError): ...  # every motor-link failure
@@ -54,18 +57,11 @@ class DeviceInfo:
     state_rate_hz: float
 
     def __post_init__(self) -> None:
-        checks = (
-            ("counts_per_rev", self.counts_per_rev, 1, 1 << 24, True),
-            ("torque_limit_nm", self.torque_limit_nm, 0.0, MAX_DEVICE_TORQUE_LIMIT_NM, False),
-            ("watchdog_s", self.watchdog_s, 0.0, 65.535, False),
-            ("state_rate_hz", self.state_rate_hz, 1, 10000, True),
-        )
-        for name, value, low, high, closed_low in checks:
+        for name, high in _DEVICE_LIMITS.items():
+            value = getattr(self, name)
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-            ok = ok and (low <= value if closed_low else low < value) and value <= high
-            if not ok:
-                interval = f"[{low}, {high}]" if closed_low else f"({low}, {high}]"
-                raise ValueError(f"{name} must be in {interval}, got {value!r}")
+            if not (ok and 0 < value <= high):
+                raise ValueError(f"{name} must be in (0, {high}], got {value!r}")
 
 
 @dataclass(frozen=True)

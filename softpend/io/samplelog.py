@@ -37,13 +37,10 @@ class SampleLog:
         if not columns or any((not c) or ("," in c) or ("\n" in c) for c in columns):
             raise ValueError(f"columns must be non-empty names without commas or newlines, got {columns!r}")
         self.path, self.columns, self.fsync_every_s, self.rows_written = Path(path), columns, fsync_every_s, 0
-        if os.path.exists(self.path):
-            check_regular_file(self.path, "sample log")  # a FIFO or device would block or swallow the log
-        exists = self.path.exists() and self.path.stat().st_size > 0
-        if exists:
-            existing = read_sample_log(self.path)
-            if existing.columns != columns:
-                raise ValueError(f"path {self.path} holds a log with columns {existing.columns}, not {columns}")
+        # a FIFO or device would block or swallow the log
+        exists = os.path.exists(self.path) and check_regular_file(self.path, "sample log").st_size > 0
+        if exists and (existing := read_sample_log(self.path).columns) != columns:
+            raise ValueError(f"path {self.path} holds a log with columns {existing}, not {columns}")
         self._fd: Optional[int] = open_checked_fd(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, "sample log")
         self._last_sync = time.monotonic()
         if not exists:

@@ -88,7 +88,7 @@ class BatchedRodParams:
     ) -> "BatchedRodParams":
         """One rod repeated ``batch_size`` times, or a list of rods of one ``n_links``."""
         one = params is None or isinstance(params, RodParams)
-        rods = [params or RodParams()] if one else list(params)  # type: ignore[arg-type]
+        rods: list[RodParams] = [params or RodParams()] if one else list(params)  # type: ignore[list-item,arg-type]
         if not rods or not all(isinstance(r, RodParams) for r in rods):
             raise ValueError("params must be a RodParams or a non-empty sequence of RodParams")
         size = (1 if one else len(rods)) if batch_size is None else int_at_least("batch_size", batch_size, 1)
@@ -101,8 +101,7 @@ class BatchedRodParams:
 
     def replace(self, **changes: TensorLike) -> "BatchedRodParams":
         """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
-        unknown = set(changes) - set(PARAMETER_FIELDS)
-        if unknown:
+        if unknown := set(changes) - set(PARAMETER_FIELDS):
             raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
         s = self.length_m.shape
         tensors = {name: torch.as_tensor(value, dtype=self.dtype) for name, value in changes.items()}

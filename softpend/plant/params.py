@@ -112,8 +112,7 @@ class RodParams:
     @classmethod
     def from_dict(cls, data: dict) -> "RodParams":
         """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
-        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
+        if unknown := set(data) - {f.name for f in dataclasses.fields(cls)}:
             raise ValueError(f"unknown RodParams fields: {sorted(unknown)}")
         return cls(**data)
 

@@ -75,9 +75,9 @@ class PRBPlant(PlantBase):
                 linkCOMs=exu.Vector3DList([[0.0, c, 0.0] for c in coms]),  # type: ignore[call-arg]
                 linkMasses=masses,
                 gravity=[0.0, -p.gravity_mps2, 0.0],
-                **dict.fromkeys(
-                    ("jointForceVector", "jointPositionOffsetVector", "jointVelocityOffsetVector"), [0.0] * n
-                ),
+                jointForceVector=[0.0] * n,
+                jointPositionOffsetVector=[0.0] * n,
+                jointVelocityOffsetVector=[0.0] * n,
                 jointPControlVector=p_control,
                 jointDControlVector=d_control,
             )

@@ -120,8 +120,7 @@ class AffineCalibration:
             raise ValueError(
                 f"calibration must be a JSON object with a 'pixel_to_metre' 2x3 matrix, got {_short(data)}"
             )
-        unknown = sorted(set(data) - {"pixel_to_metre", "residual_rms_m"})
-        if unknown:
+        if unknown := sorted(set(data) - {"pixel_to_metre", "residual_rms_m"}):
             raise ValueError(f"calibration has unknown keys {unknown}")
         return cls(data["pixel_to_metre"], data.get("residual_rms_m", 0.0))
 

@@ -47,10 +47,6 @@ def _row(index, time_s, x_m, y_m, detection, hub_tracker, calibration, frame) ->
     return row + [float(tip_angle_rad(*calibration.to_metres(np.array([hub.x_px, hub.y_px])))), 0]
 
 
-def _rows_array(rows: list) -> np.ndarray:
-    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
-
-
 def _progress(iterator=None, total: Optional[int] = None, progress: bool = True):
     from tqdm.auto import tqdm
 
@@ -71,8 +67,7 @@ def track_video(
     """Track every frame of a video file (and the hub marker if ``track_hub``) into ``out_csv``, replaced only
     once the whole video is tracked; missing timestamps, frame rate and markers come from its sidecar."""
     video, out_csv = Path(video), Path(out_csv)
-    if fps is not None:
-        fps = check_fps("fps", fps)
+    fps = None if fps is None else check_fps("fps", fps)
     _check_output_path(out_csv, video)
     check_regular_file(video, "video")
     sidecar = read_sidecar(video)
@@ -119,7 +114,7 @@ def track_video(
                 x_m, y_m, detection = frame_tracker(frame)
                 rows.append(_row(i, stamp(i), x_m, y_m, detection, hub, calibration, frame))
                 log.append(rows[-1])
-        return _rows_array(rows)
+        return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))
     finally:
         capture.release()
 
@@ -202,4 +197,4 @@ def track_live(
         flush()
         if log.rows_written == 0:
             raise ValueError("the camera delivered no frame")
-    return _rows_array(rows)
+    return np.array(rows, dtype=float).reshape(-1, len(TRACK_COLUMNS))

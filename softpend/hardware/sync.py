@@ -92,12 +92,8 @@ def estimate_clock_offset(
 
     m = grid.size
     dot = correlate(cam_rate, motor_rate, mode="valid", method="fft")  # length 2 n_lag + 1
-    csum = np.concatenate([[0.0], np.cumsum(cam_rate)])
-    csum2 = np.concatenate([[0.0], np.cumsum(cam_rate**2)])
-    count = np.concatenate([[0], np.cumsum(inside)])
-    seg_sum = csum[m:] - csum[:-m]
-    seg_sq = csum2[m:] - csum2[:-m]
-    seg_n = count[m:] - count[:-m]
+    sums = [np.concatenate([[0.0], np.cumsum(values)]) for values in (cam_rate, cam_rate**2, inside)]
+    seg_sum, seg_sq, seg_n = (total[m:] - total[:-m] for total in sums)  # over the window at each lag
     seg_var = np.maximum(seg_sq - seg_sum**2 / m, 0.0)
     denominator = np.sqrt(seg_var * float(motor_rate @ motor_rate))
     scores = np.where(

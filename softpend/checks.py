@@ -46,9 +46,7 @@ def _integer(value: Any) -> Optional[int]:
     if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
         return int(value)
     number = _real(value)
-    if number is not None and number.is_integer():
-        return int(number)
-    return None
+    return int(number) if number is not None and number.is_integer() else None
 
 
 def _checked(name: str, number: Any, value: Any, ok: Callable[[Any], bool], what: str) -> Any:

@@ -321,12 +321,11 @@ def _md(value: Any, limit: int = 0) -> str:
 
 def rerun_section(name: str, cell: str, profile: str, used: dict[str, Any]) -> str:
     """The generated closing section of an executed notebook: its parameters and the command that reruns it."""
-    rows, table = notebook_parameters(cell), ""
-    for row in rows:
-        build = f"`{_md(_value(used[row['name']]), 60)}`" if row["name"] in used else ""
-        table += (
-            f"| `{row['name']}` | `{_md(row['default'], 60)}` | {build} | {row['unit']} | {_md(row['comment'], 90)} |\n"
-        )
+    rows, build = notebook_parameters(cell), lambda name: f"`{_md(_value(used[name]), 60)}`" if name in used else ""
+    table = "".join(
+        f"| `{r['name']}` | `{_md(r['default'], 60)}` | {build(r['name'])} | {r['unit']} | {_md(r['comment'], 90)} |\n"
+        for r in rows
+    )
     example = next((f"{row['name']}={row['default']}" for row in rows if row["evaluated"]), "NAME=VALUE")
     profile_option = ["--profile", profile] if profile != DEFAULT_PROFILE else []
     command = shlex.join(["softpend", "book", "--only", name, *profile_option, "--set", example])

@@ -32,7 +32,7 @@ BOOK_ARGS ?=
 # `|| true` keeps grep's "no lines left" status from failing the recipe; with pipefail pip's own status still does.
 PIP_QUIET := 2>&1 | { grep -v -E 'Location .* is ignored' || true; }
 
-.PHONY: help venv book test test-expensive lint format bench lock clean
+.PHONY: bytecode help venv book test test-expensive lint format bench lock clean
 
 help:
 	@sed -n '3,13p' Makefile | sed 's/^# \{0,1\}//'
@@ -48,15 +48,20 @@ $(STAMP): environment.lock pyproject.toml
 	$(VENV)/bin/pip check $(PIP_QUIET) || { echo "[make] .venv does not satisfy pyproject.toml: run 'make lock'" >&2; exit 1; }
 	touch $(STAMP)
 
+# softpend's bytecode, written before the book or the tests: the editable install has none, and where
+# PYTHONDONTWRITEBYTECODE is set every test process, notebook kernel and spawned worker would compile it again
+bytecode: $(STAMP)
+	$(VENV)/bin/python -m compileall -q softpend
+
 # Two steps: the training runs first (one pool of workers over every run still missing), then the notebooks
 # (which find their runs finished) and the HTML.
-book: $(STAMP)
+book: $(STAMP) bytecode
 	$(VENV)/bin/softpend sweep --book --profile $(PROFILE)
 	$(VENV)/bin/softpend book --profile $(PROFILE) --html $(BOOK_ARGS)
 
 # The same checks as `make lint`, with mypy running beside the tests (its report is printed after them; either
 # failing fails the target).
-test: $(STAMP)
+test: $(STAMP) bytecode
 	$(VENV)/bin/ruff check softpend tests
 	$(VENV)/bin/ruff format --check softpend tests
 	@mypy_log=$$(mktemp /tmp/softpend-mypy.XXXXXX); trap 'rm -f "$$mypy_log"' EXIT; \

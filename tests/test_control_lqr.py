@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from softpend.control.lqr import LQRController, LQRWeights, design_lqr
+from softpend.control.lqr import LQRController, design_lqr
 from softpend.control.region import region_of_attraction_rad
 from softpend.evaluation import evaluate_controller
 from softpend.plant import Observation, RodParams
@@ -79,7 +79,5 @@ def test_region_of_attraction_is_bounded_by_the_torque_limit(joint_lqr):
 def test_bad_arguments():
     with pytest.raises(ValueError, match="state"):
         LQRController.from_params(PARAMS, state="tip")
-    with pytest.raises(ValueError, match="theta_max_rad"):
-        LQRWeights(theta_max_rad=0.0)
     with pytest.raises(ValueError, match="torque_limit_nm"):
         LQRController(np.zeros((1, 2)), lambda o, q, qd: np.zeros(2), torque_limit_nm=-1.0)

@@ -10,7 +10,7 @@ from typing import Any, Optional
 import numpy as np
 
 from softpend.control.linearise import LinearModel
-from softpend.control.lqr import LQRController, LQRWeights, design_lqr, output_weight_matrix
+from softpend.control.lqr import TORQUE_WEIGHT, LQRController, design_lqr, output_weight_matrix
 from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
 from softpend.sysid.variables import velocity_name
 
@@ -29,16 +29,11 @@ def upright_state_vector(model: Any, params: RodParams) -> np.ndarray:
     return _state_vector(tuple(model.layout.names), PRBPlant(params).reset())
 
 
-def linearise_learned_model(
-    model: Any, params: Optional[RodParams] = None, state: Optional[np.ndarray] = None, torque_nm: float = 0.0
-) -> LinearModel:
-    """Jacobians ``A``, ``B`` of the model's one-step map (an ensemble's mean) at ``state`` (default upright)."""
+def linearise_learned_model(model: Any, params: Optional[RodParams] = None) -> LinearModel:
+    """Jacobians ``A``, ``B`` of the model's one-step map (an ensemble's mean) at upright at rest, no torque."""
     import torch
 
-    params = params if params is not None else RodParams()
-    x0 = upright_state_vector(model, params) if state is None else np.asarray(state, dtype=float)
-    if x0.shape != (len(model.layout.names),):
-        raise ValueError(f"state must have shape ({len(model.layout.names)},), got {x0.shape}")
+    x0 = upright_state_vector(model, params if params is not None else RodParams())
     net = copy.deepcopy(model).double().eval()
     members = list(net.members) if hasattr(net, "members") else [net]
 
@@ -47,7 +42,7 @@ def linearise_learned_model(
         return torch.stack(outs).mean(dim=0).reshape(-1)
 
     x = torch.as_tensor(x0, dtype=torch.float64)
-    u = torch.tensor([float(torque_nm)], dtype=torch.float64)
+    u = torch.tensor([0.0], dtype=torch.float64)
     a, b = torch.autograd.functional.jacobian(step, (x, u))
     b = b.detach().numpy().reshape(-1, 1)
     return LinearModel(a=a.detach().numpy(), b=b, dt_s=float(model.dt_s), state_names=tuple(model.layout.names))
@@ -127,26 +122,19 @@ def reduce_learned_model(model_lin: LinearModel, params: RodParams) -> tuple[Lin
     return reduced, s
 
 
-def lqr_from_learned_model(
-    model: Any,
-    params: Optional[RodParams] = None,
-    weights: Optional[LQRWeights] = None,
-    torque_limit_nm: Optional[float] = None,
-) -> LQRController:
+def lqr_from_learned_model(model: Any, params: Optional[RodParams] = None) -> LQRController:
     """Discrete LQR designed on the reduced autograd linearisation of the learned model (the true-model
-    design's weights), fed back from the model's state built as in training; ``ValueError`` if the
+    design's default weights), fed back from the model's state built as in training; ``ValueError`` if the
     linearisation is not stabilisable."""
     params = params if params is not None else RodParams()
-    weights = weights if weights is not None else LQRWeights()
     model_lin = linearise_learned_model(model, params)
     design, select = reduce_learned_model(model_lin, params)
     output_map = np.zeros((4, len(design.state_names)))  # y = [theta, phi, theta_dot, phi_dot] from z
     for row, name in enumerate(("theta_rad", "phi_rad", "theta_dot_rad_s", "phi_dot_rad_s")):
         output_map[row, design.state_names.index(name)] = 1.0
-    gain = design_lqr(design, output_weight_matrix(output_map, weights), weights.r) @ select
+    gain = design_lqr(design, output_weight_matrix(output_map), TORQUE_WEIGHT) @ select
     tracker = LearnedStateTracker(model, upright_state_vector(model, params))
-    limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
-    return LQRController(gain, tracker, limit, model=model_lin, name="LQR (learned model)")
+    return LQRController(gain, tracker, params.torque_limit_nm, model=model_lin, name="LQR (learned model)")
 
 
 def learned_model_simulator(model: Any, params: Optional[RodParams] = None):

@@ -6,12 +6,11 @@ the condensed model); cost ``y' Q_y y + R tau^2`` by Bryson's rule on ``y = [the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
-from softpend.checks import non_negative, one_of, positive
+from softpend.checks import one_of, positive
 from softpend.control.linearise import (
     LinearModel,
     discretise,
@@ -24,47 +23,25 @@ from softpend.plant import Observation, RodParams, wrap_angle_rad
 StateFunction = Callable[[Observation, np.ndarray, np.ndarray], np.ndarray]
 
 
-@dataclass(frozen=True)
-class LQRWeights:
-    """Bryson's-rule tolerances of ``y`` and the torque; ``regularisation`` (relative to ``Q``'s largest
-    diagonal entry) is added to ``Q``'s diagonal."""
-
-    theta_max_rad: float = 0.01
-    phi_max_rad: float = 0.5
-    theta_dot_max_rad_s: float = 2.0
-    phi_dot_max_rad_s: float = 10.0
-    torque_max_nm: float = RodParams.torque_limit_nm
-    regularisation: float = 1e-6
-
-    def __post_init__(self) -> None:
-        for name in ("theta_max_rad", "phi_max_rad", "theta_dot_max_rad_s", "phi_dot_max_rad_s", "torque_max_nm"):
-            positive(name, getattr(self, name))
-        non_negative("regularisation", self.regularisation)
-
-    @property
-    def r(self) -> float:
-        return 1.0 / self.torque_max_nm**2
+#: Bryson's-rule tolerances of ``y = [theta, phi, theta_dot, phi_dot]`` [rad, rad/s]: ``Q_y`` their inverse squares.
+OUTPUT_TOLERANCES = np.array([0.01, 0.5, 2.0, 10.0])
+#: ``R``: the inverse square of the torque tolerance, the default rod's torque limit.
+TORQUE_WEIGHT = 1.0 / RodParams.torque_limit_nm**2
+#: Added to ``Q``'s diagonal, relative to its largest diagonal entry.
+REGULARISATION = 1e-6
 
 
-def output_weight_matrix(output_map: np.ndarray, weights: LQRWeights) -> np.ndarray:
+def output_weight_matrix(output_map: np.ndarray) -> np.ndarray:
     """``Q = C_y' Q_y C_y + eps I`` for outputs ``y = C_y x`` (``output_map`` is ``C_y``, shape ``(4, nx)``)."""
     c = np.asarray(output_map, dtype=float)
-    if c.ndim != 2 or c.shape[0] != 4:
-        raise ValueError(f"output_map must have shape (4, n_states), got {c.shape}")
-    w = weights
-    tolerances = np.array([w.theta_max_rad, w.phi_max_rad, w.theta_dot_max_rad_s, w.phi_dot_max_rad_s])
-    q = c.T @ np.diag(1.0 / tolerances**2) @ c
-    return q + weights.regularisation * float(np.max(np.diag(q))) * np.eye(c.shape[1])
+    q = c.T @ np.diag(1.0 / OUTPUT_TOLERANCES**2) @ c
+    return q + REGULARISATION * float(np.max(np.diag(q))) * np.eye(c.shape[1])
 
 
 def design_lqr(model: LinearModel, q: np.ndarray, r: float) -> np.ndarray:
     """Optimal gain ``K`` (``u = -K x``); ``ValueError`` if the Riccati equation has no stabilising solution."""
     import control
 
-    q = np.asarray(q, dtype=float)
-    if q.shape != (model.n_states, model.n_states):
-        raise ValueError(f"q must have shape {(model.n_states, model.n_states)}, got {q.shape}")
-    positive("r", r)
     solve = control.dlqr if model.is_discrete else control.lqr
     try:
         gain, _, _ = solve(model.a, model.b, q, np.array([[r]]))
@@ -116,13 +93,11 @@ class LQRController:
         params: Optional[RodParams] = None,
         dt_s: float = 0.01,
         state: str = "joint",
-        weights: Optional[LQRWeights] = None,
         torque_limit_nm: Optional[float] = None,
     ) -> "LQRController":
         """Discrete LQR designed on Exudyn's linearisation of the PRB model of ``params`` (condensed onto the
         observed angles for ``"observation"`` feedback), on ``"joint"`` or ``"observation"`` feedback."""
         params = params if params is not None else RodParams()
-        weights = weights if weights is not None else LQRWeights()
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         one_of("state", state, ("joint", "observation"))
         state_function: StateFunction
@@ -138,8 +113,8 @@ class LQRController:
             angles = np.eye(len(names))[[names.index("theta_rad"), names.index("phi_rad")]]
             state_function, name = observation_state_function(names), "LQR (observations)"
         zero = np.zeros_like(angles)
-        q = output_weight_matrix(np.block([[angles, zero], [zero, angles]]), weights)
-        return cls(design_lqr(model, q, weights.r), state_function, limit, model=model, name=name)
+        q = output_weight_matrix(np.block([[angles, zero], [zero, angles]]))
+        return cls(design_lqr(model, q, TORQUE_WEIGHT), state_function, limit, model=model, name=name)
 
     def reset(self) -> None:
         getattr(self.state_function, "reset", lambda: None)()

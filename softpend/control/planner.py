@@ -646,8 +646,6 @@ def _controller(
 ) -> PlannerController:
     """MPPI on ``model`` (its noise drawn from ``generator``) with the LQR near upright."""
     task = config.task
-    for part in [model, *getattr(model, "members", ())]:
-        part.noise_generator = generator
     if config.model == "ensemble":
         tracker: Any = ObservedStateTracker(model)
         fast: Any = StackedEnsemble(model)

@@ -121,10 +121,7 @@ def over_seeds(values: Sequence[float], unit: str = "", fmt: Callable[[float], s
     from softpend.stats import aggregate_interval
 
     values = [float(v) for v in values if not math.isnan(float(v))]
-
-    def text(value: float) -> str:  # "never" alone: a run that never got there has no unit
-        return fmt(value) if math.isinf(value) else (f"{fmt(value)} {unit}" if unit else fmt(value))
-
+    text = lambda v: f"{fmt(v)} {unit}" if unit and not math.isinf(v) else fmt(v)  # noqa: E731 -- "never": no unit
     if not values:
         return NOT_COMPUTED
     if len(values) == 1:

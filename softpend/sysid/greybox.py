@@ -15,6 +15,7 @@ import numpy as np
 
 from softpend.checks import int_at_least, positive, positive_int
 from softpend.plant import PRBPlant, RodParams, SimulationDiverged
+from softpend.plant.base import PlantBase
 from softpend.sysid.dataset import TrajectoryDataset
 
 #: Rod parameters estimated by default.
@@ -181,7 +182,7 @@ def free_plant(params: RodParams, dataset: TrajectoryDataset) -> PRBPlant:
 
 
 def simulate_windows(
-    plant: PRBPlant, states: np.ndarray, torques_nm: np.ndarray, has_er: bool = True, diverged_nan: bool = False
+    plant: PlantBase, states: np.ndarray, torques_nm: np.ndarray, has_er: bool = True, diverged_nan: bool = False
 ) -> np.ndarray:
     """Open-loop simulations from joint states ``(B, 2 (n + 1))`` under torques ``(B, W)``: ``phi, ex, ey`` (and
     ``er``) at every sample, ``(B, W + 1, 3 or 4)``.  A diverging simulation keeps its last state to the end of its

@@ -13,7 +13,7 @@ import torch
 from softpend.checks import finite, non_negative, positive, positive_int
 from softpend.plant import make_plant, wrap_angle_rad
 from softpend.sysid.dataset import TrajectoryDataset
-from softpend.sysid.greybox import dataset_substeps
+from softpend.sysid.greybox import dataset_substeps, simulate_windows
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 
@@ -252,34 +252,19 @@ def perturbed_simulator_errors(
         params = params.replace(torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
     plant_name = dataset.metadata.get("plant") or "prb"
     plant = make_plant(plant_name, params=params, dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
-    rng = np.random.default_rng(seed)
-    columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
-    predicted, truth = [], []
     n_q = plant.n_coordinates
     states[:, [0, n_q]] += (hub_offset_rad, hub_rate_offset_rad_s)
-    for (trial, start), state in zip(starts, states):
-        plant.reset(state[:n_q], state[n_q:])
-        path = [plant.observe()]
-        for k in range(steps):
-            noise = torque_noise_std_nm * rng.standard_normal() if torque_noise_std_nm > 0 else 0.0
-            path.append(plant.step(dataset.torques_nm[trial, start + k] + noise))
-        truth.append(dataset.positions[trial, start : start + steps + 1][:, columns])
-        predicted.append(np.array([o.as_array()[[0, 2, 3]] for o in path]))
-    return _rms_errors(np.array(predicted), np.array(truth), steps, dataset.dt_s)
+    index = starts[:, 1:2] + np.arange(steps + 1)
+    noise = torque_noise_std_nm * np.random.default_rng(seed).standard_normal((len(starts), steps))
+    predicted = simulate_windows(plant, states, dataset.torques_nm[starts[:, :1], index[:, :-1]] + noise, has_er=False)
+    columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
+    return _rms_errors(predicted, dataset.positions[starts[:, :1], index][..., columns], steps, dataset.dt_s)
 
 
 def hub_rate_offset_for_tip_error(dataset: TrajectoryDataset, tip_error_m: float, history: int = 0) -> float:
     """The hub-rate offset [rad/s] that makes :func:`perturbed_simulator_errors` miss the recorded tip by
     ``tip_error_m`` (RMS) after its first step (the error is proportional to the offset)."""
-    if not (np.isfinite(tip_error_m) and tip_error_m > 0):
-        raise ValueError(f"tip_error_m must be positive, got {tip_error_m!r}")
-    reference_rad_s = 1e-2
-    first_step = perturbed_simulator_errors(
-        dataset,
-        hub_offset_rad=0.0,
-        hub_rate_offset_rad_s=reference_rad_s,
-        horizon_s=dataset.dt_s,
-        start_stride=1,
-        history=history,
-    )
-    return reference_rad_s * tip_error_m / float(first_step.tip_rmse_m[1])
+    tip_error_m = positive("tip_error_m", tip_error_m)
+    settings: dict[str, Any] = dict(hub_offset_rad=0.0, hub_rate_offset_rad_s=1e-2, horizon_s=dataset.dt_s)
+    first_step = perturbed_simulator_errors(dataset, start_stride=1, history=history, **settings)
+    return 1e-2 * tip_error_m / float(first_step.tip_rmse_m[1])

@@ -306,11 +306,8 @@ def load_model(path: str | Path) -> tuple[DynamicsModel | DynamicsEnsemble, dict
         if not p.exists():
             raise ValueError(f"model file not found: {p}")
     meta = read_json_checked(meta_path, "model metadata file", MAX_CONFIG_BYTES)  # a regular file, bounded
-    if (
-        not isinstance(meta, dict)
-        or meta.get("schema") != MODEL_SCHEMA_NAME
-        or meta.get("schema_version") != MODEL_SCHEMA_VERSION
-    ):
+    schema = (MODEL_SCHEMA_NAME, MODEL_SCHEMA_VERSION)
+    if not isinstance(meta, dict) or (meta.get("schema"), meta.get("schema_version")) != schema:
         raise ValueError(f"{meta_path}: not a {MODEL_SCHEMA_NAME} v{MODEL_SCHEMA_VERSION} file")
     try:
         config = dict(meta["config"])

@@ -31,16 +31,15 @@ from softpend.sysid.model import ACTIVATIONS, DynamicsEnsemble, DynamicsModel, c
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of :func:`fit_dynamics_model` (ensemble members train on bootstraps of the transitions);
-    ``integrate_positions=None`` means yes for observed velocities; ``limit_tip_reach`` keeps predicted tips within
-    the rod's reach plus :data:`TIP_REACH_SLACK`."""
+    """Settings of :func:`fit_dynamics_model` (ensemble members train on bootstraps of the transitions; the model
+    integrates positions from observed velocities); ``limit_tip_reach`` keeps predicted tips within the rod's reach
+    plus :data:`TIP_REACH_SLACK`."""
 
     information: str = "full"
     history: int = 0
     velocity_source: str = "observed"
     hidden_widths: tuple[int, ...] = (16, 16, 16)
     activation: str = "silu"
-    integrate_positions: Optional[bool] = None
     limit_tip_reach: bool = True
     ensemble_size: int = 1
     max_epochs: int = 300
@@ -53,10 +52,6 @@ class TrainConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden_widths", check_widths(self.hidden_widths))
         self.layout()  # validates information, history, velocity_source
-        if self.integrate_positions is None:
-            object.__setattr__(self, "integrate_positions", self.velocity_source == "observed")
-        if not isinstance(self.integrate_positions, bool):
-            raise ValueError(f"integrate_positions must be a bool or None, got {self.integrate_positions!r}")
         boolean("limit_tip_reach", self.limit_tip_reach)
         one_of("activation", self.activation, ACTIVATIONS)
         object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
@@ -217,7 +212,7 @@ def fit_dynamics_model(
     # the rod length of a simulated dataset, else the largest recorded tip distance, plus the slack
     radius = float(params.length_m if params else np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
     reach = radius * (1 + TIP_REACH_SLACK) if config.limit_tip_reach and radius > 0 else None
-    positions = bool(config.integrate_positions)  # set in TrainConfig.__post_init__
+    positions = config.velocity_source == "observed"  # integrated from differenced velocities
     members = []
     for index in range(config.ensemble_size):
         with torch.random.fork_rng(devices=[]):

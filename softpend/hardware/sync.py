@@ -141,7 +141,7 @@ def synchronise(
         raise ValueError(f"dt_s must be positive and trial_length_s >= 2 dt_s, got {dt_s}, {trial_length_s}")
     tm, phi, torque = motor["device_time_s"], np.unwrap(motor["phi_rad"]), motor["applied_torque_nm"]
     tc_cam, lost = camera["camera_time_s"], camera["lost"] > 0.5
-    x_m, y_m = camera["x_m"].copy(), camera["y_m"].copy()
+    x_m, y_m = camera["x_m"], camera["y_m"]
     if "hub_angle_rad" in camera.columns and np.isfinite(camera["hub_angle_rad"]).mean() > 0.5:
         reference = np.where(camera["hub_lost"] > 0.5, np.nan, camera["hub_angle_rad"])
     else:  # no hub marker: the tip angle (biased by the rod's lag)
@@ -166,30 +166,23 @@ def synchronise(
     for gap in gaps:
         valid &= ~((grid > gap.start_s) & (grid < gap.end_s))
 
-    phi_g = np.interp(grid, tm, phi)
-    ex_g = np.interp(grid, tc[good], x_m[good])
-    ey_g = np.interp(grid, tc[good], y_m[good])
-    theta_g = np.arctan2(-ex_g, ey_g)
-    held = np.clip(np.searchsorted(tm, grid + 1e-9, side="right") - 1, 0, len(tm) - 1)
-    torque_g = torque[held]
+    ex_g, ey_g = (np.interp(grid, tc[good], values[good]) for values in (x_m, y_m))
+    torque_g = torque[np.clip(np.searchsorted(tm, grid + 1e-9, side="right") - 1, 0, len(tm) - 1)]  # held
 
     from softpend.sysid.differentiation import backward_difference
 
     n = int(round(trial_length_s / dt_s))
+    phi_g, theta_g = np.interp(grid, tm, phi), np.arctan2(-ex_g, ey_g)
     raw = np.column_stack([wrap_angle_rad(phi_g), wrap_angle_rad(theta_g), ex_g, ey_g])
     angle_mask = np.array([True, True, False, False])
-    positions, velocities, torques, starts = [], [], [], []
-    for a, b in _runs(valid):
-        for k in range(a, b - n, n + 1):  # trials of n + 1 samples, the first one for the velocities
-            chunk = raw[k : k + n + 1]
-            positions.append(chunk[1:])
-            velocities.append(backward_difference(chunk, dt_s, angle_mask))
-            torques.append(torque_g[k + 1 : k + n])
-            starts.append(float(grid[k + 1]))
-    if not positions:
+    ks = [k for a, b in _runs(valid) for k in range(a, b - n, n + 1)]  # trials of n + 1 samples, the first for rates
+    if not ks:
         raise ValueError(f"no gap-free stretch of {trial_length_s} s in the synchronised record")
-    stacked = (np.stack(positions), np.stack(velocities), np.stack(torques))
-    return SyncResult(*stacked, dt_s, offset, gaps, float(valid.mean()), starts)
+    positions = np.stack([raw[k + 1 : k + n + 1] for k in ks])
+    velocities = np.stack([backward_difference(raw[k : k + n + 1], dt_s, angle_mask) for k in ks])
+    torques = np.stack([torque_g[k + 1 : k + n] for k in ks])
+    starts = [float(grid[k + 1]) for k in ks]
+    return SyncResult(positions, velocities, torques, dt_s, offset, gaps, float(valid.mean()), starts)
 
 
 def build_rig_dataset(

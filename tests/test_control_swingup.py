@@ -58,5 +58,3 @@ def test_bad_arguments():
         EnergySwingUpController(energy_source="tip")
     with pytest.raises(ValueError, match="rate_filter_s"):
         EnergySwingUpController(rate_filter_s=-0.01)
-    with pytest.raises(ValueError, match="release_angle_rad"):
-        EnergySwingUpController(capture_angle_rad=0.5, release_angle_rad=0.2)

@@ -1,7 +1,7 @@
 """Energy-based swing-up that hands over to an LQR near upright: pumping torque ``sat(k_E (E_up + E_margin - E)
 theta_dot)`` on the tip rate (low-passed with ``rate_filter_s > 0``), ``E`` the rigid-pendulum energy seen through
-the tip (``"observation"``) or the PRB chain's (``"joint"``); the LQR holds inside ``capture_angle_rad`` until
-``release_angle_rad``."""
+the tip (``"observation"``) or the PRB chain's (``"joint"``); the LQR holds inside :data:`CAPTURE_ANGLE_RAD` until
+:data:`RELEASE_ANGLE_RAD`."""
 
 from __future__ import annotations
 
@@ -10,9 +10,12 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from softpend.checks import finite, non_negative, one_of, positive
+from softpend.checks import non_negative, one_of
 from softpend.control.lqr import LQRController
 from softpend.plant import Observation, PRBPlant, RodParams
+
+#: The LQR takes over inside this tip angle [rad] and hands back beyond the release angle.
+CAPTURE_ANGLE_RAD, RELEASE_ANGLE_RAD = 0.4, 0.8
 
 
 def pendulum_energy_j(params: RodParams, theta_rad: Any, theta_dot_rad_s: Any, cos: Callable = math.cos) -> Any:
@@ -23,47 +26,32 @@ def pendulum_energy_j(params: RodParams, theta_rad: Any, theta_dot_rad_s: Any, c
 
 
 class EnergySwingUpController:
-    """Energy pumping from hanging plus LQR balance near upright (see the module docstring); ``balance`` defaults to
-    ``LQRController.from_params(params, dt_s, state=lqr_state)``."""
+    """Energy pumping from hanging plus ``LQRController.from_params(params, dt_s, state=lqr_state)`` balancing near
+    upright (see the module docstring)."""
 
     def __init__(
         self,
         params: Optional[RodParams] = None,
-        balance: Optional[LQRController] = None,
         dt_s: float = 0.01,
         lqr_state: str = "joint",
         energy_source: str = "joint",
         energy_gain_per_j_rad_s: float = 5.0,
         energy_margin_j: float = 0.0,
-        capture_angle_rad: float = 0.4,
-        release_angle_rad: float = 0.8,
-        torque_limit_nm: Optional[float] = None,
         rate_filter_s: float = 0.0,
     ) -> None:
         self.params = params if params is not None else RodParams()
         self.energy_source = one_of("energy_source", energy_source, ("observation", "joint"))
-        self.energy_gain = positive("energy_gain_per_j_rad_s", energy_gain_per_j_rad_s)
-        self.capture_angle_rad = positive("capture_angle_rad", capture_angle_rad)
-        self.release_angle_rad = positive("release_angle_rad", release_angle_rad)
-        if release_angle_rad < capture_angle_rad:
-            raise ValueError(
-                f"release_angle_rad ({release_angle_rad}) must not be smaller than capture_angle_rad ({capture_angle_rad})"
-            )
-        self.energy_margin_j = finite("energy_margin_j", energy_margin_j)
+        self.energy_gain, self.energy_margin_j = float(energy_gain_per_j_rad_s), float(energy_margin_j)
         self._rate_gain = float(dt_s) / (non_negative("rate_filter_s", rate_filter_s) + float(dt_s))
-        self.torque_limit_nm = positive(
-            "torque_limit_nm", self.params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
-        )
-        self.balance = balance or LQRController.from_params(
-            self.params, dt_s=dt_s, state=lqr_state, torque_limit_nm=self.torque_limit_nm
-        )
+        self.torque_limit_nm = self.params.torque_limit_nm
+        self.balance = LQRController.from_params(self.params, dt_s=dt_s, state=lqr_state)
         self._design_plant: Optional[PRBPlant] = None
         self._upright_energy_j = 0.0
         if energy_source == "joint":
             self._design_plant = PRBPlant(self.params)
             n = self._design_plant.n_coordinates
             self._upright_energy_j = self._design_plant.energy_j(np.zeros(n), np.zeros(n))["total_j"]
-        self.name = f"energy swing-up + {getattr(self.balance, 'name', 'LQR')}"
+        self.name = f"energy swing-up + {self.balance.name}"
         self.reset()
 
     @classmethod
@@ -98,9 +86,9 @@ class EnergySwingUpController:
             last = rate if self._rate_rad_s is None else self._rate_rad_s
             self._rate_rad_s = last + self._rate_gain * (rate - last)
         angle = abs(observation.theta_rad)
-        if self.balancing and angle > self.release_angle_rad:
+        if self.balancing and angle > RELEASE_ANGLE_RAD:
             self.balancing = False
-        elif not self.balancing and angle < self.capture_angle_rad:
+        elif not self.balancing and angle < CAPTURE_ANGLE_RAD:
             self.balancing = True
             if self.handover_time_s is None:
                 self.handover_time_s = float(time_s)

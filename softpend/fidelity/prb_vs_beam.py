@@ -22,12 +22,11 @@ from softpend.plant import RodParams, make_plant
 SMALL_DEFLECTION_STIFFNESS_SCALE = 100.0
 
 
-def tip_trajectory_m(
-    plant: str, params: RodParams, torques_nm: np.ndarray, dt_s: float = 0.01, resolution: Optional[int] = None
-) -> np.ndarray:
-    """Tip positions ``(T + 1, 2)`` [m] of a plant (``resolution``: elements or links) started hanging at rest."""
+def tip_trajectory_m(plant: str, params: RodParams, torques_nm: np.ndarray, resolution: Optional[int]) -> np.ndarray:
+    """Tip positions ``(T + 1, 2)`` [m] of a plant (``resolution``: elements or links) started hanging at rest, at
+    0.01 s steps."""
     params, _, resolution_kwargs = _resolved(plant, params, resolution)
-    sim = make_plant(plant, params=params, dt_s=dt_s, **resolution_kwargs)
+    sim = make_plant(plant, params=params, dt_s=0.01, **resolution_kwargs)
     path = [sim.reset(*sim.hanging_state())] + [sim.step(float(torque)) for torque in torques_nm]
     return np.array([(o.ex_m, o.ey_m) for o in path])
 
@@ -79,11 +78,8 @@ def convergence_table(
         sag_large = 100.0 * (static_tip_sag(plant, params, n)["sag_m"] / beam_sag - 1.0)
         tip = tip_trajectory_m(plant, params, torques, resolution=n)
         distance = np.linalg.norm(tip - beam_tip, axis=1) / params.length_m
-        rows.append(
-            ConvergenceRow(
-                plant, n, f1, f2, sag_small, sag_large, float(np.sqrt(np.mean(distance**2))), float(distance.max())
-            )
-        )
+        rms, worst = float(np.sqrt(np.mean(distance**2))), float(distance.max())
+        rows.append(ConvergenceRow(plant, n, f1, f2, sag_small, sag_large, rms, worst))
     return rows
 
 
@@ -97,7 +93,4 @@ def recommend_n_links(
     ok = [
         all(abs(getattr(r, e)) <= tolerance_pct for e in errors) and r.tip_rms_over_l <= tip_rms_tolerance for r in prb
     ]
-    for i, r in enumerate(prb):
-        if all(ok[i:]):
-            return r.resolution
-    return None
+    return next((r.resolution for i, r in enumerate(prb) if all(ok[i:])), None)

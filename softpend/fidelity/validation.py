@@ -29,9 +29,9 @@ def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndar
     b = EULER_BERNOULLI_BETA_L[mode - 1]
     x = b * np.asarray(s_over_l, dtype=float)
     sigma = (math.cosh(b) + math.cos(b)) / (math.sinh(b) + math.sin(b))
-    shape = np.cosh(x) - np.cos(x) - sigma * (np.sinh(x) - np.sin(x))
-    slope = b * (np.sinh(x) + np.sin(x) - sigma * (np.cosh(x) - np.cos(x)))
-    return shape, slope
+    return np.cosh(x) - np.cos(x) - sigma * (np.sinh(x) - np.sin(x)), b * (
+        np.sinh(x) + np.sin(x) - sigma * (np.cosh(x) - np.cos(x))
+    )
 
 
 def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarray]:
@@ -45,10 +45,8 @@ def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarra
         local[:, 0] = lateral_m(s)
         local[:, 2] = -np.arctan(slope(s))  # the tangent (-sin psi, cos psi) follows (u', 1)
     else:  # the PRB chain: joints at s_j = j L/n, link angles follow the chords of u(s)
-        n = p.n_links
-        s = np.linspace(0.0, p.length_m, n + 1)
-        u = lateral_m(s)
-        absolute = -np.arctan2(np.diff(u), np.diff(s))
+        s = np.linspace(0.0, p.length_m, p.n_links + 1)
+        absolute = -np.arctan2(np.diff(lateral_m(s)), np.diff(s))
         q[:] = np.diff(np.concatenate([[0.0], absolute]))
     return q, np.zeros(plant.n_coordinates)
 
@@ -99,7 +97,7 @@ def cantilever_free_vibration(
     theory = euler_bernoulli_frequencies_hz(params, max(modes))[np.asarray(modes) - 1]
     duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
     length = params.length_m
-    amplitude = length / 500.0
+    amplitude = length / 500.0  # of each mode at the tip
     kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)
     if plant == "beam":
         kwargs["newton_relative_tolerance"] = 1e-10

@@ -20,7 +20,7 @@ from softpend.study import commission as commission_module
 from softpend.study import twin_side
 from softpend.study.commission import CommissionConfig, commission, identified_values, verification_seeds
 from softpend.study.twin_side import TwinTruth
-from softpend.study.unknown_rod import SPREAD_FACTOR, UNKNOWN_FIELDS, UnknownRod, draw_unknown_rod, effective_rod
+from softpend.study.unknown_rod import SPREAD_FACTOR, UNKNOWN_FIELDS, UnknownRod, draw_unknown_rod
 
 #: The learners on the smallest budgets that train them: an episode or trial of 1 s, one evaluation start.
 TINY_LEARNERS = {
@@ -302,7 +302,9 @@ def test_a_torque_gain_is_the_rod_with_its_masses_stiffness_and_damping_divided(
     from softpend.plant import PRBPlant
 
     rod = TRUTH.rod.replace(torque_limit_nm=10.0)
-    geared, effective = (PRBPlant(r, dt_s=0.01, substeps=2) for r in (rod, effective_rod(rod, TRUTH.torque_gain)))
+    geared, effective = (
+        PRBPlant(r, dt_s=0.01, substeps=2) for r in (rod, UnknownRod(rod, TRUTH.torque_gain).effective_rod())
+    )
     for plant in (geared, effective):
         plant.reset(*plant.hanging_state())
     torque = 0.05 * np.sin(np.arange(150) * 0.07)

@@ -25,8 +25,6 @@ CONDITIONS: dict[str, RigCondition] = {
 }
 #: The files the excitation hands the host (in its public folder).
 EXCITATION_FILES = ("motor_log.csv", "camera.csv")
-
-
 #: How a seeded twin's rod is drawn (:func:`draw_unknown_rod`): hanging starts, of them balanced, their length [s].
 DRAW_STARTS, DRAW_NEEDED, DRAW_DURATION_S = 10, 9, TEST_EPISODE_S
 

@@ -3,7 +3,7 @@ factor of the default, kept only when the controller designed on its true parame
 
 A torque gain ``g`` (the motor gives ``g`` N m per commanded N m) is exactly a rod whose masses, inertias,
 friction, stiffness and damping are divided by ``g``: the PRB equations are linear in those and in the torque
-(:func:`effective_rod`). The twin simulates that rod, so the emulator needs no torque-gain setting.
+(:meth:`UnknownRod.effective_rod`). The twin simulates that rod, so the emulator needs no torque-gain setting.
 """
 
 from __future__ import annotations
@@ -45,13 +45,6 @@ MAX_DRAWS = 50
 _MAX_JSON_BYTES = 10**6
 
 
-def effective_rod(rod: RodParams, torque_gain: float) -> RodParams:
-    """The rod that moves under a commanded torque as ``rod`` moves under ``torque_gain`` times it (same torque
-    limit on the command)."""
-    gain = positive("torque_gain", torque_gain)
-    return rod.replace(**{name: getattr(rod, name) / gain for name in _GAIN_DIVIDES})
-
-
 @dataclass(frozen=True)
 class UnknownRod:
     """A rod and the motor's torque gain [N m per commanded N m]."""
@@ -64,8 +57,9 @@ class UnknownRod:
         object.__setattr__(self, "torque_gain", positive("torque_gain", self.torque_gain))
 
     def effective_rod(self) -> RodParams:
-        """:func:`effective_rod` of this rod and gain: what the twin simulates."""
-        return effective_rod(self.rod, self.torque_gain)
+        """The rod that moves under a commanded torque as :attr:`rod` moves under :attr:`torque_gain` times it (same
+        torque limit on the command): what the twin simulates."""
+        return self.rod.replace(**{name: getattr(self.rod, name) / self.torque_gain for name in _GAIN_DIVIDES})
 
     def values(self) -> dict[str, float]:
         """The drawn fields and ``torque_gain`` by name."""

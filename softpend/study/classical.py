@@ -14,6 +14,8 @@ from softpend.control.pid import PIDController, PIDGains, plant_simulator, tune_
 from softpend.control.swingup import EnergySwingUpController
 from softpend.evaluation import TEST_EPISODE_S, EvaluationSummary, evaluate_controller
 from softpend.study.presets import REPORT_SEEDS
+from softpend.sysid import BabbleProtocol, babble
+from softpend.sysid.training import fit_dynamics_model
 from softpend.task import Task
 
 #: Torque limit of the runs "without the limit" [N m].
@@ -44,8 +46,6 @@ class ClassicalComparison:
 
 def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0):
     """Babble ``n_trials`` x 5 s on the task's plant and fit the default learned model."""
-    from softpend.sysid import BabbleProtocol, babble
-    from softpend.sysid.training import fit_dynamics_model
 
     task = task if task is not None else Task()
     dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=False)

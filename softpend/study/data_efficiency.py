@@ -7,15 +7,21 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
 
 import numpy as np
+import torch
 
 from softpend.control.identified import RouteConfig, design_swingup, identify_until_robust, simulated_recorder
+from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
 from softpend.evaluation import TEST_EPISODE_S, evaluate
+from softpend.io.overrides import apply_overrides
 from softpend.plant import RodParams
 from softpend.stats import aggregate_interval
-from softpend.study.fresh_starts import fresh_start_row
+from softpend.study.fresh_starts import fresh_start_row, pilco_fresh_start_rows, seed_rows
 from softpend.study.greybox import perturbed_guess
-from softpend.study.presets import REPORT_SEEDS
+from softpend.study.head_to_head import pilco_jobs, pilco_runs
+from softpend.study.presets import HPARAMS_DIR, REPORT_SEEDS, SELECTION_SEEDS, load_hparams
+from softpend.sysid.greybox import GreyBoxConfig, identify
 from softpend.task import Task
+from softpend.torch_threads import one_torch_thread
 
 #: Methods of the plant-seconds chapter, in plot order: key -> label.
 METHODS = {
@@ -71,7 +77,6 @@ def excitation_rows(
 ) -> list[dict[str, Any]]:
     """Per program of :data:`EXCITATIONS`, length and seed: the relative error of each field identified from that
     much of it (``error_<field>``, PRB only) and the swing-up + LQR designed on the estimate on ``report_seeds``."""
-    from softpend.sysid.greybox import GreyBoxConfig, identify
 
     task, truth, config = Task(plant=plant), RodParams(), RouteConfig()
     rows = []
@@ -196,9 +201,6 @@ def planner_config(
 ) -> Any:
     """The ``PlannerConfig`` on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``;
     trials from the first 16 selection starts."""
-    from softpend.control.planner import PlannerConfig
-    from softpend.io.overrides import apply_overrides
-    from softpend.study.presets import HPARAMS_DIR, SELECTION_SEEDS
 
     path = hparams if hparams is not None else HPARAMS_DIR / "planner.yml"
     config = apply_overrides(PlannerConfig.from_yaml(path, task), overrides or {})
@@ -215,7 +217,6 @@ def planner_rows(
 ) -> list[dict[str, Any]]:
     """One row per seed of the planner (``model``: ``"residual"`` or ``"ensemble"``) on ``plant``, then its controller on
     ``report_seeds`` (``real_s_to_balance``: infinite unless 90 % of them balance)."""
-    from softpend.control.planner import run_planner
 
     config = planner_config(Task(plant=plant), overrides).replace(model=model)
     rows = []
@@ -231,10 +232,6 @@ def planner_rows(
 def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S) -> Any:
     """The final controller of a planner run from the fresh starts ``seeds`` on the run's rod (PRB: batched);
     ``ValueError`` for seeds shared with the run's selection starts."""
-    import torch
-
-    from softpend.control.planner import fresh_start_evaluation
-    from softpend.torch_threads import one_torch_thread
 
     task = result.config.task
     if task.plant == "prb":
@@ -250,9 +247,6 @@ def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = 
 def pilco_rows_if_trained(seeds: Iterable[int], runs_root: Path | str) -> Optional[list[dict[str, Any]]]:
     """The book's PILCO runs of ``seeds`` as :func:`~softpend.study.fresh_starts.seed_rows` rows on the report starts,
     or None if any is not trained (nothing is trained here)."""
-    from softpend.study.fresh_starts import pilco_fresh_start_rows, seed_rows
-    from softpend.study.head_to_head import pilco_jobs, pilco_runs
-    from softpend.study.presets import load_hparams
 
     seeds, config = [int(s) for s in seeds], load_hparams("pilco", Task())
     if not Path(runs_root).is_dir() or pilco_jobs(config, seeds, runs_root):

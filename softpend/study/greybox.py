@@ -8,8 +8,12 @@ from typing import Any, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.control.linearise import linearise_exudyn
-from softpend.evaluation import TEST_EPISODE_S
+from softpend.control.lqr import LQRController
+from softpend.control.swingup import EnergySwingUpController
+from softpend.evaluation import TEST_EPISODE_S, evaluate_controller
 from softpend.plant import RodParams
+from softpend.study.classical import run_from_tilt
+from softpend.study.presets import REPORT_SEEDS
 from softpend.sysid.babble import BabbleProtocol
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import estimate_joint_states
@@ -130,11 +134,6 @@ def closed_loop_usefulness(
 ) -> list[dict[str, Any]]:
     """LQR (from 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified`` and on
     ``task.rod``, on the true plant from ``seeds``: one row per design and start."""
-    from softpend.control.lqr import LQRController
-    from softpend.control.swingup import EnergySwingUpController
-    from softpend.evaluation import evaluate_controller
-    from softpend.study.classical import run_from_tilt
-    from softpend.study.presets import REPORT_SEEDS
 
     task = task if task is not None else Task()
     joint = task.plant == "prb"  # other plants (the beam): the observation-feedback versions of both designs

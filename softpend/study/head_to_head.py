@@ -12,6 +12,7 @@ import numpy as np
 
 from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.reading import read_json_object
+from softpend.io.runfolders import check_run_folder
 from softpend.pilco.loop import PilcoConfig, PilcoResult, run_pilco
 from softpend.rl.curves import failures_as
 from softpend.study.rl_runs import run_folder
@@ -50,7 +51,6 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
 
 def refuse_other_pilco_run(folder: Path | str, config: PilcoConfig) -> None:
     """``ValueError`` if ``folder`` holds a PILCO run of other settings than ``config``."""
-    from softpend.io.runfolders import check_run_folder
 
     if (path := Path(folder) / "pilco.json").exists():
         saved = read_json_object(path, 10**8)

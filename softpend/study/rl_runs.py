@@ -15,6 +15,7 @@ from softpend.io.overrides import apply_overrides
 from softpend.io.runfolders import run_folder_name
 from softpend.plant import check_plant_name
 from softpend.rl.config import DQNConfig, MBPOConfig, load_config, saved_config_data
+from softpend.rl.curves import run_to_asymptote
 from softpend.rl.training_log import TrainingLog
 from softpend.study.presets import TASK, load_hparams
 from softpend.study.sweep import run_jobs
@@ -101,7 +102,6 @@ def train_run(
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]]) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance (within :data:`SUCCESS_STD_RAD`) and to the
     asymptote, final std."""
-    from softpend.rl.curves import run_to_asymptote
 
     rows = []
     for method, logs in logs_by_method.items():

@@ -13,6 +13,9 @@ from softpend.checks import non_negative, positive
 from softpend.plant import Observation, RodParams, wrap_angle_rad
 from softpend.task import Task
 
+#: Time constant ``T_f`` [s] of the PID's derivative filter.
+DERIVATIVE_FILTER_S = 0.02
+
 
 @dataclass(frozen=True)
 class PIDGains:
@@ -33,26 +36,21 @@ class PIDGains:
 class PIDController:
     """Discrete PID on the tip angle, setpoint upright: ``D[k] = (T_f D[k-1] + e[k] - e[k-1]) / (T_f + dt)``,
     ``u[k] = K_p e[k] + I[k] + K_d D[k]``, ``tau[k] = -sat(u[k])``, ``I[k+1] = I[k] + dt (K_i e[k] + (sat(u[k]) -
-    u[k]) / T_t)`` with ``T_f = derivative_filter_s``, ``T_t = tracking_time_s`` (default ``sqrt(T_i T_d)``, or
-    ``10 dt`` when a gain is zero)."""
+    u[k]) / T_t)`` with ``T_f =`` :data:`DERIVATIVE_FILTER_S`, ``T_t = sqrt(T_i T_d)`` (``10 dt`` when a gain is
+    zero)."""
 
     def __init__(
         self,
         gains: PIDGains,
         dt_s: float = 0.01,
         torque_limit_nm: float = RodParams.torque_limit_nm,
-        derivative_filter_s: float = 0.02,
-        tracking_time_s: Optional[float] = None,
     ) -> None:
         if not isinstance(gains, PIDGains):
             raise ValueError(f"gains must be a PIDGains, got {type(gains).__name__}")
         self.dt_s = positive("dt_s", dt_s)
         self.torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
-        self.derivative_filter_s = non_negative("derivative_filter_s", derivative_filter_s)
-        if tracking_time_s is None:
-            kp, ki, kd = gains.as_array()
-            tracking_time_s = math.sqrt((kp / ki) * (kd / kp)) if kp > 0 and ki > 0 and kd > 0 else 10 * dt_s
-        self.tracking_time_s = positive("tracking_time_s", tracking_time_s)
+        kp, ki, kd = gains.as_array()
+        self.tracking_time_s = math.sqrt((kp / ki) * (kd / kp)) if kp > 0 and ki > 0 and kd > 0 else 10 * self.dt_s
         self.gains, self.name = gains, "PID"
         self.reset()
 
@@ -68,7 +66,7 @@ class PIDController:
         error = float(wrap_angle_rad(theta_rad))
         increment = 0.0 if self._last_error_rad is None else float(wrap_angle_rad(error - self._last_error_rad))
         self._last_error_rad = error
-        tf, dt = self.derivative_filter_s, self.dt_s
+        tf, dt = DERIVATIVE_FILTER_S, self.dt_s
         self.derivative_rad_s = (tf * self.derivative_rad_s + increment) / (tf + dt)
         effort = kp * error + self.integral_nm + kd * self.derivative_rad_s
         saturated = min(max(effort, -self.torque_limit_nm), self.torque_limit_nm)

@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import tokenize
 from collections import namedtuple
@@ -418,10 +419,13 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bo
     say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
     futures: dict[str, Future[None]] = {}
     errors: list[BaseException] = []
+    slots = threading.Semaphore(WORKERS)
 
-    def run(name: str) -> None:  # the pool starts jobs in order: those it waits for have started
+    def run(name: str) -> None:  # a thread per notebook; WORKERS of them execute at once
         wait([futures[dep] for dep in plans[name]["after"] if dep in futures])
-        if not errors:
+        with slots:
+            if errors:
+                return
             say(f"{name}: executing")
             try:
                 plans[name]["seconds"] = _execute_one(layout, name, plans[name])
@@ -432,7 +436,7 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bo
 
     for name in (name for name in order if plans[name]["status"] == "cached"):
         say(f"{name}: up to date (cached)")
-    with ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="softpend-book") as pool:
+    with ThreadPoolExecutor(max_workers=max(1, len(order)), thread_name_prefix="softpend-book") as pool:
         for name in (name for name in order if plans[name]["status"] != "cached"):
             futures[name] = pool.submit(run, name)
     if errors:

@@ -40,10 +40,9 @@ def multisine(
     f = multisine_frequencies_hz(period_s, band_hz)
     k = np.arange(1, f.size + 1)
     phase = -math.pi * k * (k - 1) / f.size
-    period_steps = max(int(round(period_s / dt_s)), 1)
-    t_period = np.arange(period_steps) * dt_s
-    one_period = np.cos(2 * math.pi * np.outer(t_period, f) + phase).sum(axis=1)
-    scale = peak_nm / np.max(np.abs(one_period))
-    t = np.arange(n_steps) * dt_s
-    u = scale * np.cos(2 * math.pi * np.outer(t, f) + phase).sum(axis=1)
-    return np.clip(u, -peak_nm, peak_nm)
+
+    def wave(steps: int) -> np.ndarray:
+        return np.cos(2 * math.pi * np.outer(np.arange(steps) * dt_s, f) + phase).sum(axis=1)
+
+    scale = peak_nm / np.max(np.abs(wave(max(int(round(period_s / dt_s)), 1))))  # the peak of one period
+    return np.clip(scale * wave(n_steps), -peak_nm, peak_nm)

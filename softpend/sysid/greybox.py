@@ -419,26 +419,20 @@ def _window_starts(dataset: TrajectoryDataset, steps: int, max_windows: int, see
     drawn."""
     n = dataset.n_samples
     firsts = np.arange(1, n - steps, steps)
-    firsts = firsts[firsts + steps <= n - 1]
     if firsts.size == 0:
         raise ValueError(f"window_s covers {steps} samples; trials of {n} samples are too short for one window")
     grid = np.array([(t, s) for t in range(dataset.n_trials) for s in firsts], dtype=np.int64)
     if len(grid) > max_windows:
-        chosen = np.sort(np.random.default_rng(seed).choice(len(grid), size=max_windows, replace=False))
-        grid = grid[chosen]
+        grid = grid[np.sort(np.random.default_rng(seed).choice(len(grid), size=max_windows, replace=False))]
     return grid
 
 
 def _initial_states(dataset: TrajectoryDataset, starts: np.ndarray, guess: RodParams) -> np.ndarray:
     """Window start states: the reconstructed bent rod, rates by central differences of the reconstructions."""
     names, columns = _observed(dataset)
-    trial, first = starts[:, 0], starts[:, 1]
-    q = []
-    for shift in (-1, 0, 1):
-        c = columns[trial, first + shift]
-        q.append(reconstruct_joint_states(c[:, 0], c[:, 1], c[:, 2], c[:, 3] if "er_rad" in names else None, guess))
-    rate = (wrap_diff(q[2], q[0])) / (2 * dataset.dt_s)
-    return np.concatenate([q[1], rate], axis=1)
+    shifted = (columns[starts[:, 0], starts[:, 1] + shift] for shift in (-1, 0, 1))
+    q = [reconstruct_joint_states(*c[:, :3].T, c[:, 3] if len(names) > 3 else None, guess) for c in shifted]
+    return np.concatenate([q[1], wrap_diff(q[2], q[0]) / (2 * dataset.dt_s)], axis=1)
 
 
 def identify(

@@ -98,10 +98,8 @@ class StateLayout:
         positions = np.stack([dataset.column(n) for n in self.position_names], axis=-1)
         column = dataset.true_column if self.velocity_source == "true" else dataset.column
         velocities = np.stack([column(velocity_name(n)) for n in self.position_names], axis=-1)
-        h = self.history
-        n = dataset.n_samples
-        parts = [positions[:, h:], velocities[:, h:]]
-        parts += [positions[:, h - k : n - k] for k in range(1, h + 1)]
+        h, n = self.history, dataset.n_samples
+        parts = [positions[:, h:], velocities[:, h:]] + [positions[:, h - k : n - k] for k in range(1, h + 1)]
         return np.ascontiguousarray(np.concatenate(parts, axis=-1))
 
     def torques(self, dataset: TrajectoryDataset) -> np.ndarray:
@@ -111,13 +109,8 @@ class StateLayout:
     def transitions(self, dataset: TrajectoryDataset, trials: np.ndarray | None = None) -> "TransitionData":
         """All ``(state, torque, next state)`` triples of the given trials (default: all), flattened."""
         trials = np.arange(dataset.n_trials) if trials is None else np.asarray(trials, dtype=np.int64)
-        states = self.states(dataset)[trials]
-        torques = self.torques(dataset)[trials]
-        return TransitionData(
-            states=states[:, :-1].reshape(-1, self.dim),
-            torques_nm=torques.reshape(-1),
-            next_states=states[:, 1:].reshape(-1, self.dim),
-        )
+        states, torques = self.states(dataset)[trials], self.torques(dataset)[trials].reshape(-1)
+        return TransitionData(states[:, :-1].reshape(-1, self.dim), torques, states[:, 1:].reshape(-1, self.dim))
 
 
 class TransitionData(NamedTuple):

@@ -111,8 +111,7 @@ class DynamicsModel(nn.Module):
         angles = pos.index_select(1, self._angle_idx)
         parts = [torch.sin(angles), torch.cos(angles), pos.index_select(1, self._linear_idx), state[:, p : 2 * p]]
         if h:
-            lags = state[:, 2 * p :]
-            rel = pos.repeat(1, h) - lags
+            rel = pos.repeat(1, h) - state[:, 2 * p :]  # the lagged frames relative to now
             parts.append(torch.where(self._lag_angle_mask, wrap_tensor(rel), rel))
         parts.append(torque_nm.reshape(-1, 1))
         return torch.cat(parts, dim=1)
@@ -161,8 +160,7 @@ class DynamicsModel(nn.Module):
         """Predicted core-state change over one step, in the report's units, shape ``(B, 2P)``."""
         state, torque_nm = self._check(state, torque_nm)
         torque_nm = torque_nm.clamp(-self.torque_limit_nm, self.torque_limit_nm)
-        z = self.net(self.normalise_features(self.features(state, torque_nm)))
-        out = z * self.delta_std + self.delta_mean
+        out = self.net(self.normalise_features(self.features(state, torque_nm))) * self.delta_std + self.delta_mean
         if not self.integrate_positions:
             return out
         p = self._p
@@ -179,8 +177,7 @@ class DynamicsModel(nn.Module):
         if not self._h:
             return core
         p = self._p
-        previous = state[:, :p]
-        previous = torch.where(self._core_angle_mask[:p], wrap_tensor(previous), previous)
+        previous = torch.where(self._core_angle_mask[:p], wrap_tensor(state[:, :p]), state[:, :p])
         return torch.cat([core, previous, state[:, 2 * p : 2 * p + p * (self._h - 1)]], dim=1)
 
     def _within_reach(self, state: Tensor, core: Tensor) -> Tensor:

@@ -143,8 +143,7 @@ def _train(
         optimiser, T_max=config.max_epochs, eta_min=config.learning_rate / 100
     )
     best = (math.inf, 0, copy.deepcopy(net.state_dict()))
-    train_losses: list[float] = []
-    val_losses: list[float] = []
+    losses: list[tuple[float, float]] = []  # training and validation, per epoch
     n = len(x)
     bar = tqdm(range(1, config.max_epochs + 1), desc=desc, unit="epoch", disable=not progress, leave=False)
     for epoch in bar:
@@ -167,8 +166,7 @@ def _train(
                 f"dynamics model fit diverged ({desc}, epoch {epoch}): training loss {train!r}, validation loss "
                 f"{val!r} (lower learning_rate, now {config.learning_rate!r})"
             )
-        train_losses.append(train)
-        val_losses.append(val)
+        losses.append((train, val))
         scheduler.step()
         if val < best[0] * (1 - 1e-4):
             best = (val, epoch, copy.deepcopy(net.state_dict()))
@@ -178,7 +176,7 @@ def _train(
     bar.close()
     net.load_state_dict(best[2])
     net.eval()
-    return np.array(train_losses), np.array(val_losses), best[1]
+    return np.array(losses)[:, 0], np.array(losses)[:, 1], best[1]
 
 
 def fit_dynamics_model(

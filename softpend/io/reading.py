@@ -221,8 +221,7 @@ def check_zip_members(
     all together to more than ``max_total_bytes``, from its central directory before anything is unpacked."""
     for info in archive.infolist():
         _check_member_size(info, path, what, max_member_bytes, error)
-    total = sum(info.file_size for info in archive.infolist())
-    if max_total_bytes is not None and total > max_total_bytes:
+    if max_total_bytes is not None and (total := sum(i.file_size for i in archive.infolist())) > max_total_bytes:
         raise error(
             f"{_described(what, path)}: its members would unpack to {total} bytes, more than the "
             f"{max_total_bytes} a {what or 'file'} can have"

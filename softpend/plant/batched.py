@@ -126,8 +126,7 @@ class _Derived:
         n = p.n_links
         self.link_length_m = length = p.length_m / n
         m_link = p.mass_kg / n
-        last = torch.zeros(n, 1, dtype=p.dtype)
-        last[-1] = 1.0
+        last = torch.eye(n, dtype=p.dtype)[:, -1:]  # 1 for the last link, else 0
         masses = m_link + last * p.tip_mass_kg
         first = m_link * length / 2 + last * (p.tip_mass_kg * length)
         second = m_link * length**2 / 3 + last * (p.tip_mass_kg * length**2)
@@ -135,16 +134,15 @@ class _Derived:
         self.first_moment_kgm = h = first + length * beyond
         self.gram_diagonal = diagonal = second + length**2 * beyond
         index = torch.arange(n)
-        outer = torch.maximum(index[:, None], index[None, :])
-        gram = length * h[outer]  # (n, n, B): L h_max(i, j)
-        diagonal_matrix = diagonal[:, None, :].expand(n, n, -1)
-        self.gram = torch.where((index[:, None] == index[None, :])[:, :, None], diagonal_matrix, gram)
+        gram = length * h[torch.maximum(index[:, None], index[None, :])]  # (n, n, B): L h_max(i, j)
+        self.gram = torch.where(
+            (index[:, None] == index[None, :])[:, :, None], diagonal[:, None, :].expand(n, n, -1), gram
+        )
         self.length_times_h = length * h
         self.gram_diagonal_minus_lh = diagonal - length * h
         self.gravity_moment_nm = p.gravity_mps2 * h
         k = p.youngs_modulus_pa * p.width_m * p.depth_m**3 / 12.0 * p.stiffness_scale / length
-        clamp = torch.ones(n, 1, dtype=p.dtype)
-        clamp[0] = 2.0
+        clamp = 1.0 + torch.eye(n, dtype=p.dtype)[:, :1]  # 2 at the clamp, else 1
         self.stiffness_nm_per_rad = clamp * k  # clamp first
         self.damping_nms_per_rad = clamp * p.joint_damping_nms_per_rad
         self.negative_stiffness = -(clamp * k)
@@ -499,13 +497,10 @@ class BatchedPRBChain:
     def observations(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> torch.Tensor:
         """Plant observations ``(B, 10)`` in :data:`softpend.plant.OBSERVATION_NAMES` order."""
         x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
-        length = self._d.link_length_m
-        a, ad = x[1:], v[1:]
+        length, a, ad = self._d.link_length_m, x[1:], v[1:]
         s, c = torch.sin(a), torch.cos(a)
-        ex = -(length * s).sum(0)
-        ey = (length * c).sum(0)
-        ex_dot = -(length * c * ad).sum(0)
-        ey_dot = -(length * s * ad).sum(0)
+        ex, ey = -(length * s).sum(0), (length * c).sum(0)
+        ex_dot, ey_dot = -(length * c * ad).sum(0), -(length * s * ad).sum(0)
         r2 = ex * ex + ey * ey
         theta = torch.atan2(-ex, ey)
         theta_dot = torch.where(
@@ -517,8 +512,7 @@ class BatchedPRBChain:
     def energy_j(self, joint_angles_rad: TensorLike, joint_velocities_rad_s: TensorLike) -> dict[str, torch.Tensor]:
         """Energies of each rod [J] (tensors ``(B,)``), as :meth:`softpend.plant.PRBPlant.energy_j`."""
         x, v = self._absolute_state(joint_angles_rad, joint_velocities_rad_s)
-        d = self._d
-        a, ad = x[1:], v[1:]
+        d, a, ad = self._d, x[1:], v[1:]
         s, c = torch.sin(a), torch.cos(a)
         kinetic = 0.5 * d.hub_inertia_kgm2 * v[0] ** 2 + 0.5 * (ad * _mass_times(d, c, s, ad)).sum(0)
         gravity = (d.gravity_moment_nm * c).sum(0)

@@ -53,9 +53,8 @@ def read_markers(name: str, text: Optional[str]) -> Optional[list]:
     return points_array(name, markers).tolist()
 
 
-def _short(value, limit: int = 120) -> str:
-    text = repr(value) if not isinstance(value, BaseException) else str(value)
-    return text if len(text) <= limit else text[:limit] + "..."
+def _short(value) -> str:
+    return text if len(text := repr(value)) <= 120 else text[:120] + "..."
 
 
 def fit_affine(source: np.ndarray, target: np.ndarray) -> np.ndarray:

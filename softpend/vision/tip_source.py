@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
+import cv2
 import numpy as np
 
 from softpend.checks import in_unit_interval, non_negative
@@ -273,13 +274,8 @@ class CaptureTipSource(ThreadedTipSource):
     timeout_s = 2.0
 
     def __init__(self, device: int | str, latency_s: float = 0.0, frame_tracker: Optional[FrameTracker] = None) -> None:
-        import cv2
-
-        if isinstance(device, bool) or not isinstance(device, (int, str)) or device == "":
-            raise ValueError(f"device must be a camera index or a URL, got {device!r}")
         super().__init__(frame_tracker)
-        self.device = device
-        self.latency_s = non_negative("latency_s", latency_s)
+        self.device, self.latency_s = device, non_negative("latency_s", latency_s)
         self._capture = cv2.VideoCapture(device)
         if not self._capture.isOpened():
             raise ValueError(f"camera {device!r} cannot be opened by OpenCV (no such device or stream)")

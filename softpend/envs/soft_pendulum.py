@@ -76,17 +76,11 @@ class TaskSettings:
     start_noise_rad: float
 
     def set_task(
-        self,
-        params: Optional[RodParams],
-        torque_limit_nm: Optional[float],
-        reward_params: Optional[RewardParams],
-        start: str,
-        start_noise_rad: float,
+        self, params: Optional[RodParams], reward_params: Optional[RewardParams], start: str, start_noise_rad: float
     ) -> None:
-        params = params if params is not None else RodParams()
-        if not isinstance(params, RodParams):
+        self.params = params if params is not None else RodParams()
+        if not isinstance(self.params, RodParams):
             raise ValueError(f"params must be a RodParams, got {type(params).__name__}")
-        self.params = params if torque_limit_nm is None else params.replace(torque_limit_nm=torque_limit_nm)
         self.torque_limit_nm = self.params.torque_limit_nm
         self.reward_params = reward_params if reward_params is not None else RewardParams()
         self.start = one_of("start", start, STARTS)
@@ -114,14 +108,13 @@ class SoftPendulumEnv(TaskSettings, gym.Env):
         params: Optional[RodParams] = None,
         dt_s: float = 0.01,
         substeps: int = 2,
-        torque_limit_nm: Optional[float] = None,
         reward_params: Optional[RewardParams] = None,
         start: str = "hanging",
         start_noise_rad: float = 0.05,
         plant: str = "prb",
         render_mode: Optional[str] = None,
     ) -> None:
-        self.set_task(params, torque_limit_nm, reward_params, start, start_noise_rad)
+        self.set_task(params, reward_params, start, start_noise_rad)
         if render_mode is not None:
             one_of("render_mode", render_mode, self.metadata["render_modes"])
         self.plant = make_plant(plant, params=self.params, dt_s=dt_s, substeps=substeps)

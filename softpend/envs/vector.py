@@ -38,7 +38,6 @@ class SoftPendulumVectorEnv(TaskSettings, gym.vector.VectorEnv):
         substeps: Optional[int] = None,
         integrator: str = "rk4",
         compiled: bool = False,
-        torque_limit_nm: Optional[float] = None,
         reward_params: Optional[RewardParams] = None,
         start: str = "hanging",
         start_noise_rad: float = 0.05,
@@ -47,7 +46,7 @@ class SoftPendulumVectorEnv(TaskSettings, gym.vector.VectorEnv):
         render_mode: Optional[str] = None,
     ) -> None:
         self.num_envs = int_at_least("num_envs", num_envs, 1)
-        self.set_task(params, torque_limit_nm, reward_params, start, start_noise_rad)
+        self.set_task(params, reward_params, start, start_noise_rad)
         one_of("plant", plant, ("prb",))
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")

@@ -334,12 +334,10 @@ class MotorLink:
 
     def _accept(self, data: bytes) -> None:
         messages, errors = self._decoder.feed(data)
-        for message in messages:
-            if message[0] == proto.MSG_ERROR:
-                code = message[2][0]
-                meaning = proto.ERROR_MEANINGS.get(
-                    code, f"unknown error code {code} (not in protocol version {proto.PROTOCOL_VERSION})"
-                )
+        for msg_type, _, values in messages:
+            if msg_type == proto.MSG_ERROR:
+                unknown = f"unknown error code {values[0]} (not in protocol version {proto.PROTOCOL_VERSION})"
+                meaning = proto.ERROR_MEANINGS.get(values[0], unknown)
                 if self.device is None:  # the answer to our HELLO
                     raise self._fail(HandshakeError(f"device {self.port!r} refused the handshake: {meaning}"))
                 raise self._fail(DeviceError(f"device {self.port!r} reported an error: {meaning}"))

@@ -43,15 +43,6 @@ class AgentFileError(ValueError):
 MAX_AGENT_DATA_BYTES = 16 * 2**20
 
 
-def agent_file_bounds(config: DQNConfig, observation_dim: int) -> tuple[int, int]:
-    """``(member, total)``: the most bytes one member of an agent file of ``config`` (networks, Adam's moments,
-    metadata) and all its members can unpack to."""
-    widths = [int(observation_dim), *(int(w) for w in config.learner.net_arch), int(config.n_torque_levels)]
-    n_weights = sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
-    member = MAX_AGENT_DATA_BYTES + 16 * n_weights
-    return member, 4 * member
-
-
 #: What a corrupt or foreign agent file raises while its ``data`` member is read (JSON and UTF-8 errors included).
 _CORRUPT = (zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, ValueError, EOFError, NotImplementedError, OSError)
 
@@ -135,11 +126,12 @@ def load_agent_file(
 ) -> DQN:
     """Load a DQN agent file written by softpend without unpickling anything (see the module docstring)."""
     path = Path(path)
-    spaces_env = make_base_env(config)
-    observation_dim = int(np.prod(spaces_env.observation_space.shape or (1,)))
-    max_member, max_total = agent_file_bounds(config, observation_dim)
+    # the most bytes one member (networks, Adam's moments, metadata) and all members of such an agent file unpack to
+    widths = [int(np.prod(make_base_env(config).observation_space.shape or (1,))), *config.learner.net_arch]
+    widths.append(config.n_torque_levels)
+    max_member = MAX_AGENT_DATA_BYTES + 16 * sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
     # read once (what is checked is what is loaded), a regular file of the size such an agent can have
-    raw = read_bytes_checked(path, "agent file", max_total, AgentFileError)
+    raw = read_bytes_checked(path, "agent file", 4 * max_member, AgentFileError)
     data = _read_data(path, raw, max_member)
     pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
     pickled = [k for k in pickled if k not in REBUILT_ATTRIBUTES]

@@ -123,7 +123,7 @@ class TrainingCallback(BaseCallback):
         self._started, self._cpu_started = time.perf_counter(), time.process_time()
         self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
         self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
-        self._return, self._observations, self._torques = 0.0, [], []
+        self._return, self._observations, self._torques = 0.0, list[np.ndarray](), list[float]()
 
     def model_steps(self) -> int:
         return int(self.part.model_steps) if self.part is not None else 0

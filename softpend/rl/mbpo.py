@@ -140,21 +140,12 @@ class MBPOTrainer:
 
         obs = np.stack(self.trials_observations)
         p = 5  # positions then velocities in OBSERVATION_NAMES order
-        return save_dataset(
-            self.run_dir / "real_data.npz",
-            obs[:, :, :p],
-            obs[:, :, p:],
-            np.stack(self.trials_torques),
-            dt_s=self.config.dt_s,
-            position_names=OBSERVATION_NAMES[:p],
-            source="simulation",
-            plant=self.config.task.plant,
-            plant_params=self.env.params,
-            seed=self.seed,
-            protocol={"kind": "dqn-mbpo training episodes"},
-            differentiation="exact (simulator velocities, as the environment observes them)",
-            notes="real plant episodes of a DQN-MBPO run",
-        )
+        meta: dict[str, Any] = dict(dt_s=self.config.dt_s, position_names=OBSERVATION_NAMES[:p], source="simulation")
+        meta |= dict(plant=self.config.task.plant, plant_params=self.env.params, seed=self.seed)
+        meta |= dict(protocol={"kind": "dqn-mbpo training episodes"}, notes="real plant episodes of a DQN-MBPO run")
+        meta["differentiation"] = "exact (simulator velocities, as the environment observes them)"
+        arrays = (obs[:, :, :p], obs[:, :, p:], np.stack(self.trials_torques))
+        return save_dataset(self.run_dir / "real_data.npz", *arrays, **meta)
 
     def refit(self) -> None:
         """Refit the dynamics ensemble from scratch on all real episodes so far."""
@@ -266,8 +257,7 @@ class MBPOTrainer:
                 f"{path}: its arrays do not match the run's episodes ({observations.shape}, {torques.shape}, "
                 f"{counters.shape})"
             )
-        self.trials_observations = list(observations)
-        self.trials_torques = list(torques)
+        self.trials_observations, self.trials_torques = list(observations), list(torques)
         self.n_fits, self.model_steps = (int(v) for v in counters)
         if len(self.trials_observations) >= 2:
             self.refit()

@@ -35,12 +35,8 @@ def iqm(values: np.ndarray, axis: int | None = None) -> np.ndarray | float:
     return scipy.stats.trim_mean(values, 0.25, axis=axis)
 
 
-def median(values: np.ndarray, axis: int | None = None) -> np.ndarray | float:
-    """The median (``inf`` values count as the largest)."""
-    return np.median(np.asarray(values, dtype=float), axis=axis)
-
-
-AGGREGATES: dict[str, Callable[..., np.ndarray | float]] = {"median": median, "iqm": iqm}
+#: The aggregates of :func:`aggregate_interval` (``inf`` values count as the largest).
+AGGREGATES: dict[str, Callable[..., np.ndarray | float]] = {"median": np.median, "iqm": iqm}
 
 
 @dataclass(frozen=True)

@@ -7,11 +7,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: Order of :meth:`Observation.as_array`.
-OBSERVATION_NAMES: tuple[str, ...] = tuple(
-    "phi_rad theta_rad ex_m ey_m er_rad phi_dot_rad_s theta_dot_rad_s ex_dot_m_s ey_dot_m_s er_dot_rad_s".split()
-)
-
 
 def wrap_angle_rad(angle: np.ndarray | float) -> np.ndarray | float:
     """Wrap an angle to ``[-pi, pi)``."""
@@ -41,12 +36,13 @@ class Observation(NamedTuple):
     @classmethod
     def from_array(cls, values: np.ndarray) -> "Observation":
         values = np.asarray(values, dtype=float).reshape(-1)
-        if values.shape[0] != len(OBSERVATION_NAMES):
-            raise ValueError(f"expected {len(OBSERVATION_NAMES)} values, got {values.shape[0]}")
+        if values.shape[0] != len(cls._fields):
+            raise ValueError(f"expected {len(cls._fields)} values, got {values.shape[0]}")
         return cls(*map(float, values))
 
 
-assert Observation._fields == OBSERVATION_NAMES
+#: The field names: the order of :meth:`Observation.as_array`.
+OBSERVATION_NAMES: tuple[str, ...] = Observation._fields
 
 _TWO_PI = 2 * math.pi
 

@@ -17,7 +17,5 @@ def randomised_rod(rod: RodParams, rng: np.random.Generator, spread: float) -> R
     """``rod`` with each of :data:`RANDOMISED_FIELDS` scaled by a factor uniform in ``[1 - spread, 1 + spread]``
     drawn from ``rng`` in that order (``spread`` in ``[0, 1)``)."""
     spread = in_unit_interval("spread", spread, include_one=False)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     factors = rng.uniform(1.0 - spread, 1.0 + spread, size=len(RANDOMISED_FIELDS))
     return rod.replace(**{name: getattr(rod, name) * float(f) for name, f in zip(RANDOMISED_FIELDS, factors)})

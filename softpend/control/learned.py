@@ -11,7 +11,7 @@ import numpy as np
 
 from softpend.control.linearise import LinearModel
 from softpend.control.lqr import TORQUE_WEIGHT, LQRController, design_lqr, output_weight_matrix
-from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams
+from softpend.plant import OBSERVATION_NAMES, Observation, PRBPlant, RodParams, tilt_state
 from softpend.sysid.variables import velocity_name
 
 
@@ -54,8 +54,7 @@ class LearnedStateTracker:
 
     def __init__(self, model: Any, offset: Any = 0.0) -> None:
         layout, self.offset = model.layout, offset
-        self.names, self.dt_s, self.positions = tuple(layout.names), float(model.dt_s), tuple(layout.position_names)
-        self.history = int(layout.history)
+        self.dt_s, self.positions, self.history = float(model.dt_s), tuple(layout.position_names), int(layout.history)
         self.differenced = getattr(layout, "velocity_source", "observed") == "observed"
         self.reset()
 
@@ -161,10 +160,7 @@ def learned_model_simulator(model: Any, params: Optional[RodParams] = None):
         return Observation(*[v[name] for name in OBSERVATION_NAMES]), v
 
     def simulate(controller: Any, tilt_rad: float, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
-        plant = PRBPlant(params, dt_s=dt_s)
-        q = np.zeros(plant.n_coordinates)
-        q[0] = tilt_rad
-        x = _state_vector(names, plant.reset(q, np.zeros_like(q)))
+        x = _state_vector(names, PRBPlant(params, dt_s=dt_s).reset(*tilt_state(params, tilt_rad)))
         n_steps = int(round(duration_s / dt_s))
         thetas, torques = np.empty(n_steps + 1), np.zeros(n_steps + 1)
         observation, previous = to_observation(x, None)

@@ -99,7 +99,8 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
         for key, value in node.items():
             strings = ("file", "root", "caption", "format", "title", "url")
             _expect(key not in strings or isinstance(value, str), toc_path, node, key, f"'{key}' to be a string", value)
-            entries.extend([value.removesuffix(".ipynb")] if key in ("file", "root") else [])
+            if key in ("file", "root") and value.startswith(GENERATED_PREFIX):
+                entries.append(value[len(GENERATED_PREFIX) :].removesuffix(".ipynb"))
             if key in ("parts", "chapters", "sections") and value is not None:
                 _expect(isinstance(value, list), toc_path, node, key, f"'{key}' to be a list of entries", value)
                 for index, entry in enumerate(value):
@@ -108,9 +109,7 @@ def toc_notebooks(toc_path: Path | str) -> list[str]:
                     walk(entry)
 
     walk(toc)
-    names = [
-        n for e in entries if e.startswith(GENERATED_PREFIX) and (n := e[len(GENERATED_PREFIX) :]) != EXECUTION_PAGE
-    ]
+    names = [name for name in entries if name != EXECUTION_PAGE]
     if duplicates := sorted({name for name in names if names.count(name) > 1}):
         raise ValueError(f"{toc_path}: notebook(s) listed more than once: {duplicates}")
     return names

@@ -24,8 +24,9 @@ GREYBOX_PARAMETERS: tuple[str, ...] = tuple(
 )
 #: Rod fields that may be estimated (``youngs_modulus_pa`` and ``stiffness_scale`` act alike: pick one).
 ESTIMABLE_ROD_FIELDS: tuple[str, ...] = GREYBOX_PARAMETERS + ("stiffness_scale", "mass_kg")
-#: Rig calibrations that may be estimated besides the rod fields.
-CALIBRATION_PARAMETERS: tuple[str, ...] = ("torque_gain", "encoder_offset_rad", "torque_delay_s", "camera_delay_s")
+#: Rig calibrations that may be estimated besides the rod fields, and their values when not estimated.
+_CALIBRATIONS = {"torque_gain": 1.0, "encoder_offset_rad": 0.0, "torque_delay_s": 0.0, "camera_delay_s": 0.0}
+CALIBRATION_PARAMETERS: tuple[str, ...] = tuple(_CALIBRATIONS)
 #: Calibrations that are delays within one sample either way (decision variable: the fraction of ``dt``).
 _DELAYS = ("torque_delay_s", "camera_delay_s")
 #: Scale of the encoder-offset decision variable [rad].
@@ -100,9 +101,9 @@ class GreyBoxResult:
     at_bounds: tuple[str, ...] = ()
 
     def __getattr__(self, name: str) -> float:
-        if name not in CALIBRATION_PARAMETERS:  # the calibrations: 1, 0, 0, 0 when not estimated
+        if name not in _CALIBRATIONS:
             raise AttributeError(name)
-        return self.estimates.get(name, float(name == "torque_gain"))
+        return self.estimates.get(name, _CALIBRATIONS[name])
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
         """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""
@@ -223,8 +224,9 @@ def _normal_blocks(dense: np.ndarray, block: np.ndarray) -> tuple[np.ndarray, np
 
 def _decode(names: Sequence[str], theta: np.ndarray, guess: RodParams) -> dict[str, float]:
     """Each parameter's value of the decision variables: rod fields and the torque gain scaled by ``e^theta``, the
-    encoder offset by :data:`_OFFSET_SCALE_RAD`, the delays as fractions of ``dt``."""
-    out = {}
+    encoder offset by :data:`_OFFSET_SCALE_RAD`, the delays as fractions of ``dt``; the calibrations not estimated
+    at their defaults."""
+    out = dict(_CALIBRATIONS)
     for name, value in zip(names, theta):
         if name in _DELAYS:
             out[name] = float(value)
@@ -253,8 +255,8 @@ class _Problem:
         index = starts[:, 1:2] + np.arange(steps + 1)[None, :]
         self.measured = columns[starts[:, :1], index]
         self.torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-        self.previous_torques = dataset.torques_nm[starts[:, 0], np.maximum(starts[:, 1] - 1, 0)]
-        self.next_torques = dataset.torques_nm[starts[:, 0], np.minimum(starts[:, 1] + steps, dataset.n_samples - 2)]
+        self.previous_torques = dataset.torques_nm[starts[:, :1], np.maximum(starts[:, 1:] - 1, 0)]
+        self.next_torques = dataset.torques_nm[starts[:, :1], np.minimum(starts[:, 1:] + steps, dataset.n_samples - 2)]
         self.n_windows = int(starts.shape[0])
         self.n_q = guess.n_links + 1
         self.n_p = len(self.names)
@@ -276,24 +278,19 @@ class _Problem:
             if len(self._plants) > 4:
                 self._plants.clear()
             self._plants[key] = free_plant(rod, self.dataset)
-        delay = values.get("torque_delay_s", 0.0)
-        torques = _shifted(self.torques, delay, self.previous_torques[:, None], self.next_torques[:, None])
+        torques = _shifted(self.torques, values["torque_delay_s"], self.previous_torques, self.next_torques)
         sim = simulate_windows(
-            self._plants[key], states, torques * values.get("torque_gain", 1.0), self.has_er, self.diverged_nan
+            self._plants[key], states, torques * values["torque_gain"], self.has_er, self.diverged_nan
         )
-        sim[..., 0] += values.get("encoder_offset_rad", 0.0)
+        sim[..., 0] += values["encoder_offset_rad"]
         c = sim[:, :, 1:]  # the camera sees the tip of (k - b) dt at sample k
-        sim[:, :, 1:] = _shifted(
-            c, values.get("camera_delay_s", 0.0), 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1]
-        )
+        sim[:, :, 1:] = _shifted(c, values["camera_delay_s"], 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1])
         return sim
 
     def residual_blocks(self, z: np.ndarray) -> np.ndarray:
         """Residuals ``(B, W + 1, k)``, angles wrapped, tip coordinates over the rod length."""
         r = self.simulate(z) - self.measured
-        r[..., 0] = wrap_diff(r[..., 0], 0.0)
-        if self.has_er:
-            r[..., 3] = wrap_diff(r[..., 3], 0.0)
+        r[..., ::3] = wrap_diff(r[..., ::3], 0.0)  # phi and er, the angles
         return r * self.weights
 
     def residuals(self, z: np.ndarray) -> np.ndarray:

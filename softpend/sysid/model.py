@@ -279,8 +279,6 @@ def save_model(
     """Write ``<path>.pt`` (state dict) and ``<path>.json`` (architecture and ``metadata``); returns both paths."""
     from softpend import __version__
 
-    if not isinstance(model, (DynamicsModel, DynamicsEnsemble)):
-        raise ValueError(f"model must be a DynamicsModel or DynamicsEnsemble, got {type(model).__name__}")
     weights, meta_path = model_paths(path)
     meta = {
         "schema": MODEL_SCHEMA_NAME,

@@ -60,10 +60,6 @@ def _short(value) -> str:
 def fit_affine(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Least-squares 2x3 affine ``A`` with ``target ~ A @ [source, 1]`` (needs >= 3 non-collinear points)."""
     source, target = np.asarray(source, dtype=float), np.asarray(target, dtype=float)
-    if source.ndim != 2 or source.shape[1] != 2 or source.shape != target.shape:
-        raise ValueError(f"source and target must both have shape (n, 2), got {source.shape} and {target.shape}")
-    if source.shape[0] < 3:
-        raise ValueError(f"need at least 3 point pairs, got {source.shape[0]}")
     design = np.column_stack([source, np.ones(len(source))])
     if np.linalg.matrix_rank(design) < 3:
         raise ValueError("source points are collinear: the affine map is not determined")

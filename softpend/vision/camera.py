@@ -155,8 +155,6 @@ class SyntheticCamera:
         """A sharp, noise-free frame of the rod at ``link_points_m`` ``(n + 1, 2)`` (hub first) [m] and the
         tip's pixel position; ``hub_angle_rad`` defaults to the first link's direction."""
         points = np.asarray(link_points_m, dtype=float)
-        if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
-            raise ValueError(f"link_points_m must have shape (n + 1, 2), got {points.shape}")
         image = self._background.copy()
         pixels = self.model.to_pixels(points)
         width = max(1, int(round(self.rod_width_m * self.model.px_per_m)))

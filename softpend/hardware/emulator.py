@@ -229,23 +229,20 @@ class RigEmulator(SimRig):
         duration = self.config.duration_s
         start = time.monotonic() - self.clock.now_s()
         self._running = True
-        try:
-            while self._running and (duration is None or self.clock.now_s() < duration):
-                self.clock.sleep_until(time.monotonic() - start)
-                wait = self.clock.next_event_s() - (time.monotonic() - start)
-                ready, _, _ = select.select([self.master_fd], [], [], min(max(0.0, wait), 0.1))
-                if ready:
-                    try:
-                        data = os.read(self.master_fd, 4096)
-                    except OSError as exc:  # EIO: no host has the pty open
-                        data = b""
-                        if not isinstance(exc, BlockingIOError):
-                            time.sleep(min(0.01, max(0.0, wait)))
-                    if data:
-                        self.clock.sleep_until(time.monotonic() - start)
-                        self._from_host(data)
-        finally:
-            self._running = False
+        while self._running and (duration is None or self.clock.now_s() < duration):
+            self.clock.sleep_until(time.monotonic() - start)
+            wait = self.clock.next_event_s() - (time.monotonic() - start)
+            ready, _, _ = select.select([self.master_fd], [], [], min(max(0.0, wait), 0.1))
+            if ready:
+                try:
+                    data = os.read(self.master_fd, 4096)
+                except OSError as exc:  # EIO: no host has the pty open
+                    data = b""
+                    if not isinstance(exc, BlockingIOError):
+                        time.sleep(min(0.01, max(0.0, wait)))
+                if data:
+                    self.clock.sleep_until(time.monotonic() - start)
+                    self._from_host(data)
 
     def close(self) -> None:
         for fd in (self.master_fd, self._slave_fd):
@@ -259,21 +256,16 @@ class RigEmulator(SimRig):
 
 
 def _check_link_path(path: Path) -> None:
+    refusal = "refusing to replace it (remove it or choose another path)"
     if path.is_symlink():
         target = os.readlink(path)
-        if re.fullmatch(r"/dev/pts/\d+|/dev/ttys\d+", target):
-            return
-        raise ValueError(
-            f"link_path (--port) {path} is a symlink to {target!r}, not to a pseudo-terminal; "
-            "refusing to replace it (remove it or choose another path)"
-        )
-    if path.exists():
-        kind = "folder" if path.is_dir() else "file"
-        raise ValueError(
-            f"link_path (--port) {path} is an existing {kind}; refusing to replace it "
-            "(remove it or choose another path)"
-        )
-    if not path.parent.is_dir():
+        if not re.fullmatch(r"/dev/pts/\d+|/dev/ttys\d+", target):
+            raise ValueError(
+                f"link_path (--port) {path} is a symlink to {target!r}, not to a pseudo-terminal; {refusal}"
+            )
+    elif path.exists():
+        raise ValueError(f"link_path (--port) {path} is an existing {'folder' if path.is_dir() else 'file'}; {refusal}")
+    elif not path.parent.is_dir():
         raise ValueError(f"link_path (--port) {path}: folder {path.parent} does not exist")
 
 

@@ -14,12 +14,11 @@ from typing import Iterator, Optional, Sequence
 import cv2
 import numpy as np
 
-from softpend.checks import instance_of, optional_positive
 from softpend.io.reading import check_regular_file
 from softpend.io.samplelog import SampleLog
 from softpend.vision.calibration import AffineCalibration, calibrate_from_markers, tip_angle_rad
 from softpend.vision.camera import MAX_FPS, check_fps, read_sidecar
-from softpend.vision.tip_source import FrameTracker, ThreadedTipSource
+from softpend.vision.tip_source import FrameTracker
 from softpend.vision.tracker import MAGENTA_HSV, TipTracker
 
 #: Columns of the tracking CSV.
@@ -154,8 +153,6 @@ def track_live(
 ) -> np.ndarray:
     """Track a live camera (not yet started) into ``out_csv`` (host capture times), replaced when ``duration_s``
     has passed, the source ends or on Ctrl-C; on an error ``out_csv`` is left as it was."""
-    instance_of("source", source, ThreadedTipSource)
-    optional_positive("duration_s", duration_s)
     out_csv = Path(out_csv)
     _check_output_path(out_csv, None)
     rows: list[list[float]] = []

@@ -122,12 +122,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]))
 
 
-def synchronise(
-    motor: LogContents,
-    camera: LogContents,
-    dt_s: float = 0.01,
-    trial_length_s: float = 5.0,
-) -> SyncResult:
+def synchronise(motor: LogContents, camera: LogContents, dt_s: float = 0.01, trial_length_s: float = 5.0) -> SyncResult:
     """Merge a motor log (``LOOP_LOG_COLUMNS``) and a camera CSV (``TRACK_COLUMNS``) into gap-free trials of
     ``trial_length_s`` every ``dt_s``, the clock offset estimated from the first 4 s (the wiggle)."""
     for name, log, needed in (
@@ -197,9 +192,7 @@ def build_rig_dataset(
     """Synchronise a motor log and a camera CSV into a ``source="rig"`` dataset; ``(dataset, sync_result)``."""
     from softpend.sysid.dataset import save_dataset
 
-    result = synchronise(
-        read_sample_log(motor_log), read_sample_log(camera_csv), dt_s=dt_s, trial_length_s=trial_length_s
-    )
+    result = synchronise(read_sample_log(motor_log), read_sample_log(camera_csv), dt_s, trial_length_s)
     protocol = {
         "kind": "rig babbling, motor log + tracked camera (softpend.hardware.sync)",
         "clock_offset_s": result.offset.offset_s,

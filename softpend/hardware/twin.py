@@ -24,10 +24,7 @@ __all__ = ["TwinSession", "rig_babble_controller", "run_twin_session", "truth_li
 
 
 def rig_babble_controller(
-    duration_s: float,
-    torque_limit_nm: float,
-    seed: int,
-    program: Optional[np.ndarray] = None,
+    duration_s: float, torque_limit_nm: float, seed: int, program: Optional[np.ndarray] = None
 ) -> Callable[[RigObservation, float], float]:
     """The rig's babbling program, a function of time every 0.01 s: the start-up wiggle (2 s at 0.8 of the limit),
     then band-limited Gaussian torque (std half the limit, 2 Hz), or the torques ``program`` [N m] then zero."""

@@ -57,11 +57,11 @@ def rl_jobs(
 ) -> list[tuple[str, tuple[Any, ...]]]:
     """The runs ``specs`` (``(algo, config, seeds, episodes)`` each) still need under ``root`` as ``(name, arguments
     of train_run)``, DQN-MBPO's first."""
-    jobs, names = [], []
+    jobs: dict[str, tuple[Any, ...]] = {}
     for algo, config, seeds, episodes in specs:
         for seed in seeds:
             run_dir = run_folder(root, algo, int(seed), config)
-            if run_dir.name in names:
+            if run_dir.name in jobs:
                 continue  # a seed listed twice is trained once (two workers must not share a folder)
             log_path = run_dir / "log.json"
             if log_path.exists() and (run_dir / "config.json").exists() and _saved_config(run_dir) == config:
@@ -71,10 +71,8 @@ def rl_jobs(
                 resume = done.n_episodes < episodes
             else:  # an unfinished run resumes; a folder holding another run is refused by the training
                 resume = (run_dir / "config.json").exists()
-            jobs.append((algo, config, int(seed), int(episodes), run_dir, resume))
-            names.append(run_dir.name)
-    order = sorted(range(len(jobs)), key=lambda i: (jobs[i][0] != "mbpo", i))
-    return [(names[i], jobs[i]) for i in order]
+            jobs[run_dir.name] = (algo, config, int(seed), int(episodes), run_dir, resume)
+    return sorted(jobs.items(), key=lambda job: job[1][0] != "mbpo")  # stable: in order within each algorithm
 
 
 def _saved_config(run_dir: Path) -> DQNConfig | None:

@@ -3,18 +3,22 @@ held-out trials, the simulator-as-model yardsticks, and grey-box identification 
 
 from __future__ import annotations
 
+import tempfile
 import time
 
 import numpy as np
 import torch
 
+from softpend.study import greybox as gb
 from softpend.study.bench import best_times
 from softpend.sysid.babble import BabbleProtocol, babble
 from softpend.sysid.dataset import TrajectoryDataset
+from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
 from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
 from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
+from softpend.task import Task
 from softpend.torch_threads import one_torch_thread
 
 TRAIN_SEED = 0
@@ -101,10 +105,6 @@ def simulator_yardsticks(
 def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: object) -> dict[str, float]:
     """Grey-box identification of ``data`` from the perturbed guess, its parameter errors, model quality on held-out
     data (beside ``network``: keys ``nn_*``) and closed-loop usefulness."""
-    from softpend.study import greybox as gb
-    from softpend.sysid.greybox import identify
-    from softpend.task import Task
-
     truth = data.params
     assert truth is not None  # simulated babbling records its rod
     result = identify(data, initial_params=gb.perturbed_guess(truth))
@@ -112,7 +112,7 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
     hanging = babble(gb.HANGING_PROTOCOL, params=truth, seed=TEST_SEED + 1, progress=False)
     quality = gb.model_quality(result.params, test, hanging, networks={"nn": network})
     rows = quality["rows"]
-    yardstick = rows[f"simulator started {gb.YARDSTICK_OFFSET_RAD:g} rad off"]
+    yardstick = rows[gb.YARDSTICK_LABEL]
     out = {
         "identify_s": result.identify_s,
         "identify_windows": float(result.n_windows),
@@ -138,11 +138,7 @@ def greybox_figures(data: TrajectoryDataset, test: TrajectoryDataset, network: o
 
 def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, float]:
     """Grey-box identification (rod fields and camera delay) of ``duration_s`` of babbling on the digital twin."""
-    import tempfile
-
     from softpend.hardware.twin import run_twin_session
-    from softpend.study.greybox import perturbed_guess
-    from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="softpend-bench-twin-") as workdir:
@@ -152,7 +148,7 @@ def greybox_twin_figures(seed: int = 0, duration_s: float = 33.0) -> dict[str, f
     truth = dataset.params
     assert truth is not None  # the twin's rod, given to build_rig_dataset
     config = GreyBoxConfig(parameters=GREYBOX_PARAMETERS + ("camera_delay_s",))
-    result = identify(dataset, config, initial_params=perturbed_guess(truth))
+    result = identify(dataset, config, initial_params=gb.perturbed_guess(truth))
     errors = result.relative_errors(truth)
     out = {
         "twin_session_s": session_s,

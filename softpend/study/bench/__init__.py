@@ -7,10 +7,12 @@ import sys
 import time
 from typing import Any, Callable, Iterable
 
-#: The groups in the order they run, and the modules of those not in a module of their name.
-GROUPS = "plant control beam rl pilco pilco_search hardware rig_control sysid data_efficiency commission".split()
-MODULES = {"beam": "plant", "pilco_search": "pilco", "rig_control": "control", "data_efficiency": "control"}
-BENCHMARKS = {name: f"softpend.study.bench.{MODULES.get(name, name)}:bench_{name}" for name in GROUPS}
+#: The groups in the order they run; ``group:module`` where ``bench_<group>`` is not in a module of the group's name.
+GROUPS = (
+    "plant control beam:plant rl pilco pilco_search:pilco hardware:control rig_control:control sysid "
+    "data_efficiency:control commission"
+).split()
+BENCHMARKS = {g: f"softpend.study.bench.{m or g}:bench_{g}" for g, _, m in (group.partition(":") for group in GROUPS)}
 
 
 def run_benchmarks(only: Iterable[str] | None = None, progress: bool = True) -> dict[str, float]:

@@ -41,7 +41,7 @@ def select_subset(n_points: int, max_points: int, recent: int, seed: int) -> np.
     return np.sort(np.concatenate([np.sort(older), newest]))
 
 
-def _data(inputs: np.ndarray, targets: np.ndarray, d: object = "D", e: object = "E") -> tuple[np.ndarray, ...]:
+def _data(inputs: np.ndarray, targets: np.ndarray, d: object = "D", e: object = "E") -> tuple[np.ndarray, np.ndarray]:
     """``inputs`` (N, d) and ``targets`` (N, e) as finite float arrays, else ``ValueError`` (``"D"``: any width)."""
     x, y = np.asarray(inputs, dtype=float), np.asarray(targets, dtype=float)
     if not (x.ndim == y.ndim == 2 and len(x) == len(y) and d in ("D", x.shape[1]) and e in ("E", y.shape[1])):
@@ -80,13 +80,9 @@ class MultiOutputGP:
 
     @staticmethod
     def _neg_log_likelihood(
-        params: torch.Tensor,
-        x: torch.Tensor,
-        y: torch.Tensor,
-        log_input_std: torch.Tensor,
-        lengthscale_curb: float,
-        snr_curb: float,
+        params: torch.Tensor, x: torch.Tensor, y: torch.Tensor, log_input_std: torch.Tensor
     ) -> torch.Tensor:
+        """Negative log marginal likelihood, penalised (PILCO) beyond 100 input spreads and a 500 signal-to-noise."""
         d = x.shape[1]
         log_ell, log_sf, log_sn = params[:d], params[d], params[d + 1]
         scaled = x / torch.exp(log_ell)
@@ -98,11 +94,11 @@ class MultiOutputGP:
         alpha = torch.cholesky_solve(y.unsqueeze(1), chol).squeeze(1)
         nll = 0.5 * y @ alpha + torch.sum(torch.log(torch.diagonal(chol))) + 0.5 * n * math.log(2 * math.pi)
         p = 30
-        penalty = torch.sum(((log_ell - log_input_std) / math.log(lengthscale_curb)) ** p)
-        penalty = penalty + ((log_sf - log_sn) / math.log(snr_curb)) ** p
+        penalty = torch.sum(((log_ell - log_input_std) / math.log(100.0)) ** p)
+        penalty = penalty + ((log_sf - log_sn) / math.log(500.0)) ** p
         return nll + penalty
 
-    def fit(self, max_iterations: int = 100, lengthscale_curb: float = 100.0, snr_curb: float = 500.0) -> list[float]:
+    def fit(self, max_iterations: int = 100) -> list[float]:
         """Maximise each output's penalised log marginal likelihood (L-BFGS-B); returns the final objectives."""
         x = torch.as_tensor(self.inputs_np, dtype=DTYPE)
         log_input_std = torch.as_tensor(np.log(self.input_std), dtype=DTYPE)
@@ -115,7 +111,7 @@ class MultiOutputGP:
             def objective(theta: np.ndarray) -> tuple[float, np.ndarray]:
                 params = torch.tensor(theta, dtype=DTYPE, requires_grad=True)
                 try:
-                    value = self._neg_log_likelihood(params, x, y, log_input_std, lengthscale_curb, snr_curb)
+                    value = self._neg_log_likelihood(params, x, y, log_input_std)
                 except torch.linalg.LinAlgError:
                     return 1e10, np.zeros_like(theta)
                 (grad,) = torch.autograd.grad(value, params)

@@ -370,14 +370,8 @@ def _optimise_policy(
 
 
 #: The purposes of a run's random draws, each with its own child stream of ``SeedSequence(seed)`` (in this order).
-RANDOM_STREAMS = (
-    "random_starts",
-    "random_torques",
-    "policy_starts",
-    "policy_init",
-    "gp_subsets",
-    "policy_restarts",
-    "rod_draws",
+RANDOM_STREAMS = tuple(
+    "random_starts random_torques policy_starts policy_init gp_subsets policy_restarts rod_draws".split()
 )
 
 
@@ -548,9 +542,8 @@ class Pilco:
         limit_nm, hold_s = config.task.rod.torque_limit_nm, (config.random_hold_min_s, config.random_hold_max_s)
         seed = _draw_seed(self.streams["random_torques"])
         controller = RandomTorqueController(limit_nm, config.control_dt_s, seed, hold_s)
-        episode, states = self._trial(controller, _draw_seed(self.streams["random_starts"]))
-        rate_width = config.cost.rate_width_rad_s if self.rate_on else None
-        return self._record("random", episode, states, PolicySearch(float("nan"), None, rate_width, 0), n_gp_points=0)
+        search = PolicySearch(float("nan"), None, config.cost.rate_width_rad_s if self.rate_on else None, 0)
+        return self._trial("random", controller, _draw_seed(self.streams["random_starts"]), search, n_gp_points=0)
 
     def start_policy(self) -> RBFPolicy:
         """The first policy: random, its centres on the states visited so far."""
@@ -584,14 +577,11 @@ class Pilco:
             self.rate_on = any(_came_near_upright(spec, st, config.cost.rate_after_rad) for st in self.real_states)
         rate_width = config.cost.rate_width_rad_s if self.rate_on else None
         swung_up = any(r.kind == "policy" and math.isfinite(r.swing_up_time_s) for r in self.records)
-        width_m = config.cost.width_m
-        if swung_up and config.cost.width_after_swing_up_m is not None:
-            width_m = config.cost.width_after_swing_up_m
+        width_after = config.cost.width_after_swing_up_m
+        width_m = width_after if swung_up and width_after is not None else config.cost.width_m
         n_search, n_steps = config.n_prediction_steps if swung_up else config.n_horizon_steps, config.n_horizon_steps
         length_m, exploration = config.task.rod.length_m, config.cost.exploration
-        propagator = Propagator(
-            spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, compiled=config.compiled
-        )
+        propagator = Propagator(spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, config.compiled)
         restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
         visited = (spec, np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1], restart_rng, n_search)
         start = (config, propagator, self.policy, self.m0, self.s0)
@@ -607,16 +597,13 @@ class Pilco:
     def _optimize_balance(self, width_m: float, rate_width: Optional[float]) -> float:
         """Search the balancing policy from the trials' upright band; its predicted cost (NaN: none searched)."""
         config, spec = self.config, self.spec
-        if config.policy.balance_within_rad is None:
-            return float("nan")
-        upright = _upright_distribution(config, spec, np.vstack(self.real_states))
+        on = config.policy.balance_within_rad is not None
+        upright = _upright_distribution(config, spec, np.vstack(self.real_states)) if on else None
         if upright is None:
             return float("nan")
         if self.balance_policy is None:
             self.balance_policy = LinearPolicy(spec.n_model_inputs, config.task.rod.torque_limit_nm)
-        propagator = Propagator(
-            spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width, compiled=False
-        )
+        propagator = Propagator(spec, self.gp, self.balance_policy, config.task.rod.length_m, width_m, rate_width)
         n_balance = int(round(config.policy.balance_prediction_s / config.control_dt_s))
         return _optimise_policy(propagator, self.balance_policy, *upright, n_balance, config.optimiser.iterations)
 
@@ -629,8 +616,8 @@ class Pilco:
         """Run the current policy on the plant (learnt from), then test it from ``eval_seeds`` (not learnt from,
         not counted); ``search`` is what :meth:`optimize_policy` returned for it."""
         config = self.config
-        episode, states = self._trial(self.controller(), _draw_seed(self.streams["policy_starts"]))
-        record = self._record("policy", episode, states, search, self.n_gp_points)
+        seed = _draw_seed(self.streams["policy_starts"])
+        record = self._trial("policy", self.controller(), seed, search, self.n_gp_points)
         if config.eval_seeds:
             summary = evaluate_controller(
                 self.controller(), config.task, name="pilco", seeds=config.eval_seeds, duration_s=config.eval_duration_s
@@ -641,41 +628,33 @@ class Pilco:
             record.balanced = bool(
                 all(math.isfinite(r.swing_up_time_s) for r in summary.results) and max(stds) <= config.target_std_rad
             )
-        record.wall_s_total = time.perf_counter() - self._start_wall
-        record.cpu_s_total = time.process_time() - self._start_cpu
+        vars(record).update(self._clocks())
         return record
 
-    def _trial(self, controller, seed: int) -> tuple[EvaluationResult, np.ndarray]:
-        """One real trial (on a rod drawn from ``rod_uncertainty`` when set), added to the data."""
-        if self.config.rod_uncertainty is not None:
-            rod = self.config.rod_uncertainty.draw(self.config.task.rod, self.streams["rod_draws"])
-            set_rod(self.env, self.config.task, rod)
-        episode, states, torques = _run_trial(self.config, controller, seed, self.env)
+    def _trial(self, kind: str, controller, seed: int, search: PolicySearch, n_gp_points: int) -> TrialRecord:
+        """One real trial (on a rod drawn from ``rod_uncertainty`` when set), added to the data; its
+        :class:`TrialRecord`, appended to the records."""
+        config = self.config
+        if config.rod_uncertainty is not None:
+            set_rod(self.env, config.task, config.rod_uncertainty.draw(config.task.rod, self.streams["rod_draws"]))
+        episode, states, torques = _run_trial(config, controller, seed, self.env)
         self.inputs.append(np.hstack([self.spec.model_inputs(states[:-1]), torques[:, None]]))
         self.targets.append(states[1:] - states[:-1])
         self.real_states.append(states)
-        self.plant_seconds += self.config.horizon_s
-        return episode, states
-
-    def _record(
-        self, kind: str, episode: EvaluationResult, states: np.ndarray, search: PolicySearch, n_gp_points: int
-    ) -> TrialRecord:
-        """The :class:`TrialRecord` of the trial just run, appended to the records."""
-        record = TrialRecord(
-            index=len(self.records),
-            kind=kind,
-            duration_s=self.config.horizon_s,
-            plant_seconds_total=self.plant_seconds,
-            real_cost=_trial_cost(self.config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m),
-            swing_up_time_s=episode.swing_up_time_s,
-            upright_std_rad=episode.upright_std_rad,
-            n_gp_points=n_gp_points,
-            wall_s_total=time.perf_counter() - self._start_wall,
-            cpu_s_total=time.process_time() - self._start_cpu,
-            **dataclasses.asdict(search),
-        )
+        self.plant_seconds += config.horizon_s
+        cost = _trial_cost(config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m)
+        trial: dict[str, Any] = dict(real_cost=cost, swing_up_time_s=episode.swing_up_time_s)
+        trial |= dict(upright_std_rad=episode.upright_std_rad, n_gp_points=n_gp_points, **self._clocks())
+        trial |= dataclasses.asdict(search)
+        record = TrialRecord(len(self.records), kind, config.horizon_s, self.plant_seconds, **trial)
         self.records.append(record)
         return record
+
+    def _clocks(self) -> dict[str, float]:
+        """Wall and CPU seconds since the run started."""
+        return dict(
+            wall_s_total=time.perf_counter() - self._start_wall, cpu_s_total=time.process_time() - self._start_cpu
+        )
 
     def result(self) -> PilcoResult:
         parts = (self.gp_hyperparameters, self.balance_policy, self.predicted_means, self.real_states)

@@ -99,15 +99,8 @@ class Propagator:
         compiled: bool = False,
     ) -> None:
         self.length_m, self.cost_width_m, self.cost_rate_width_rad_s = length_m, cost_width_m, cost_rate_width_rad_s
-        self.spec, self.dynamics, self.policy, self.exploration, self.compiled = (
-            spec,
-            dynamics,
-            policy,
-            exploration,
-            compiled,
-        )
-        d = spec.dim
-        k = d - spec.n_angles
+        self.spec, self.dynamics, self.policy, self.exploration = spec, dynamics, policy, exploration
+        d, k, self.compiled = spec.dim, spec.dim - spec.n_angles, compiled
         # positions in the augmented vector [state (d), trig (2A), u]
         model_inputs = tuple(range(k)) + tuple(range(d, d + 2 * spec.n_angles))
         self._layout = _Layout(

@@ -244,13 +244,15 @@ class _Controllers:
 
 @dataclass
 class BatchPolicy:
-    """A batched-engine policy: ``predict_batch(vectors) -> actions`` on ``(B, 11)`` observation vectors every
-    ``action_repeat`` plant steps, held in between; actions are levels ``(B,)`` with ``n_torque_levels``, else
-    fractions of the torque limit."""
+    """A batched-engine policy: ``predict_batch(vectors) -> actions`` on ``(B, 11)`` observation vectors (the plant's
+    ``(B, 10)`` observations if ``observed``) every ``action_repeat`` plant steps, held in between; actions are levels
+    ``(B,)`` with ``n_torque_levels``, else fractions of the torque limit; ``on_reset`` is called before an episode."""
 
     predict_batch: Callable[[np.ndarray], Any]
     action_repeat: int = 1
     n_torque_levels: Optional[int] = None
+    observed: bool = False
+    on_reset: Optional[Callable[[], None]] = None
     _held: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -260,10 +262,12 @@ class BatchPolicy:
 
     def reset(self) -> None:
         self._held = None
+        if self.on_reset is not None:
+            self.on_reset()
 
     def __call__(self, k: int, time_s: float, vectors: np.ndarray, *state: Any) -> Any:
         if k % self.action_repeat == 0:
-            self._held = np.asarray(self.predict_batch(vectors))
+            self._held = np.asarray(self.predict_batch(state[0] if self.observed else vectors))
             if self._held.shape == (len(vectors), 1) and self.n_torque_levels is not None:
                 self._held = self._held[:, 0]
         return self._held

@@ -539,22 +539,10 @@ class PlannerController:
         return float(self.torques(observation.as_array()[None], time_s)[0])
 
     def batch_policy(self) -> BatchPolicy:
-        """This controller as a policy of the batched engine."""
-        return _BatchPlanner(self)
-
-
-class _BatchPlanner(BatchPolicy):
-    """:class:`PlannerController` on the batched engine: observations in, torque fractions out."""
-
-    def __init__(self, controller: PlannerController) -> None:
-        super().__init__(predict_batch=lambda vectors: None)
-        self.controller = controller
-
-    def reset(self) -> None:
-        self.controller.reset()
-
-    def __call__(self, k: int, time_s: float, vectors: np.ndarray, *state: Any) -> Any:
-        return (self.controller.torques(np.asarray(state[0]), time_s) / self.controller.torque_limit_nm)[:, None]
+        """This controller as a policy of the batched engine: observations in, torque fractions out (the time its
+        LQR is handed is 0: it does not read it)."""
+        fractions = lambda observations: (self.torques(observations, 0.0) / self.torque_limit_nm)[:, None]  # noqa: E731
+        return BatchPolicy(fractions, observed=True, on_reset=self.reset)
 
 
 @dataclass

@@ -109,9 +109,9 @@ class _RigLoop:
         finally:
             bar.close()
 
-    def result(self, cls: Any = None, **extra: Any) -> Any:
+    def result(self, cls: Any = None, *extra: Any) -> Any:
         fields = (self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog)
-        return (cls or LoopResult)(*fields, **extra)
+        return (cls or LoopResult)(*fields, *extra)
 
     def step(self, state: MotorState, newest: bool) -> None:
         self.count(state)
@@ -215,17 +215,10 @@ def run_closed_loop(
     with one_torch_thread() if "torch" in sys.modules else contextlib.nullcontext():  # torch on one thread
         loop.run("rig control", progress)
     link.stop()
-    return loop.result(
-        ClosedLoopResult,
-        duration_s=loop.t,
-        stop_reason=loop.stop_reason,
-        status=loop.status if loop.stop_reason is not None else "completed",
-        late_commands=loop.late,
-        blind_max_s=loop.blind_max,
-        armed_at_s=loop.armed_at,
-        camera=tip_source.stats() if hasattr(tip_source, "stats") else {},
-        estimator=estimator.stats(),
-    )
+    status = loop.status if loop.stop_reason is not None else "completed"
+    camera = tip_source.stats() if hasattr(tip_source, "stats") else {}
+    extra = (loop.t, loop.stop_reason, status, loop.late, loop.blind_max, loop.armed_at, camera, estimator.stats())
+    return loop.result(ClosedLoopResult, *extra)
 
 
 class _ClosedLoop(_RigLoop):

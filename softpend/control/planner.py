@@ -410,8 +410,9 @@ class MPPIPlan:
 
 class MPPI:
     """Model-predictive path integral control of torques held ``hold_steps`` model steps per knot, from
-    ``step_fn(x (R, d), torque (R,)) -> x_next`` and ``cost_fn(x, torque, x_next) -> (R,)``: ``n_samples`` perturbed copies of each mean (the first unperturbed, kept alone
-    where every rollout diverged) weighted by ``exp(-cost / temperature)``."""
+    ``step_fn(x (R, d), torque (R,)) -> x_next`` and ``cost_fn(x, torque, x_next) -> (R,)``: ``n_samples`` perturbed
+    copies of each mean (the first unperturbed, kept alone where every rollout diverged) weighted by
+    ``exp(-cost / temperature)``."""
 
     def __init__(
         self,

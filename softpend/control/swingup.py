@@ -58,7 +58,7 @@ class EnergySwingUpController:
     def for_observations(
         cls, params: Optional[RodParams] = None, dt_s: float = 0.01, **kwargs
     ) -> "EnergySwingUpController":
-        """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin, 50 ms rate filter."""
+        """The variant for any plant: tip energy, LQR on observations, ``k_E = 50``, 0.02 J margin, 50 ms filter."""
         options: dict[str, Any] = dict(lqr_state="observation", energy_source="observation", rate_filter_s=0.05)
         options.update(energy_gain_per_j_rad_s=50.0, energy_margin_j=0.02)
         return cls(params, dt_s=dt_s, **{**options, **kwargs})

@@ -79,9 +79,7 @@ class Task:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain ``dict`` (for JSON), the rod as a nested ``dict``."""
-        data = dataclasses.asdict(self)
-        data["rod"] = self.rod.to_dict()
-        return data
+        return {**dataclasses.asdict(self), "rod": self.rod.to_dict()}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Task":

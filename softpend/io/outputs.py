@@ -31,10 +31,13 @@ def _check_parent(path: Path, what: str, shown: Optional[Path] = None) -> None:
         raise ValueError(f"{what} {shown}: cannot write in {ancestor}: {exc.strerror or exc}") from None
 
 
-def _not_empty(path: str | Path, what: str) -> Path:
-    """``path`` as a ``Path``; ``ValueError`` when empty (``Path("")`` is the current folder)."""
+def _not_empty(path: str | Path, what: str, folder: bool = False) -> Path:
+    """``path`` as a ``Path``; ``ValueError`` when empty (``Path("")`` is the current folder) or, for a ``folder``,
+    when something else is there."""
     if not os.fspath(path).strip():
         raise ValueError(f"{what}: the path is empty")
+    if folder and os.path.lexists(path) and not os.path.isdir(path):
+        raise ValueError(f"{what} {path} exists and is not a folder")
     return Path(path)
 
 
@@ -50,9 +53,7 @@ def check_output_folder(
 ) -> Path:
     """Check, before any work, that ``path`` can be created as a folder, or is empty, or is one that
     ``owned(path)`` claims; ``ValueError`` otherwise."""
-    path = _not_empty(path, what)
-    if os.path.lexists(path) and not path.is_dir():
-        raise ValueError(f"{what} {path} exists and is not a folder")
+    path = _not_empty(path, what, folder=True)
     if os.path.lexists(path) and any(path.iterdir()) and not _claims(owned, path):
         raise ValueError(
             f"{what} {path} is not empty and is not a folder this command wrote; refusing to "
@@ -154,12 +155,11 @@ def _ours(path: Path) -> bool:
 
 def _record(path: Path, sha256: Optional[str]) -> None:
     """Record ``path`` (its SHA-256, or None: being written) in the manifest of its folder, atomically."""
-    files = _read_manifest(path.parent)
-    if files is None:
+    if (files := _read_manifest(path.parent)) is None:
         raise ValueError(f"{path.parent / MANIFEST} is not a softpend manifest; refusing to replace it")
-    files = {**files, path.name: {"sha256": sha256}}
+    data = {"kind": _MANIFEST_KIND, "files": {**files, path.name: {"sha256": sha256}}}
     with atomic_write(path.parent / MANIFEST, "w") as handle:
-        handle.write(json.dumps({"kind": _MANIFEST_KIND, "files": files}, indent=1, sort_keys=True) + "\n")
+        handle.write(json.dumps(data, indent=1, sort_keys=True) + "\n")
 
 
 class Outputs:
@@ -178,9 +178,7 @@ class Outputs:
 
     def folder(self, path: str | Path, names: tuple[str, ...] | list[str], what: str = "output folder") -> Path:
         """Plan and check the folder ``path`` and the files ``names`` in it (other files there are left alone)."""
-        path = _not_empty(path, what)
-        if os.path.lexists(path) and not path.is_dir():
-            raise ValueError(f"{what} {path} exists and is not a folder")
+        path = _not_empty(path, what, folder=True)
         self._check_manifest(path, what, path)
         for name in names:
             self.file(path / name, f"{what} {path}: file")

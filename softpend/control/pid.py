@@ -39,12 +39,7 @@ class PIDController:
     u[k]) / T_t)`` with ``T_f =`` :data:`DERIVATIVE_FILTER_S`, ``T_t = sqrt(T_i T_d)`` (``10 dt`` when a gain is
     zero)."""
 
-    def __init__(
-        self,
-        gains: PIDGains,
-        dt_s: float = 0.01,
-        torque_limit_nm: float = RodParams.torque_limit_nm,
-    ) -> None:
+    def __init__(self, gains: PIDGains, dt_s: float = 0.01, torque_limit_nm: float = RodParams.torque_limit_nm) -> None:
         if not isinstance(gains, PIDGains):
             raise ValueError(f"gains must be a PIDGains, got {type(gains).__name__}")
         self.dt_s = positive("dt_s", dt_s)

@@ -170,7 +170,8 @@ class PlantBase:
 
     def _init_common(
         self, params: Optional[RodParams], dt_s: float, substeps: int, hub_locked_at_rad: Optional[float]
-    ) -> None:
+    ) -> Any:
+        """Check and keep the common arguments; returns a new Exudyn system to build the plant in."""
         self.params = params if params is not None else RodParams()
         if not isinstance(self.params, RodParams):
             raise ValueError(f"params must be a RodParams, got {type(self.params).__name__}")
@@ -181,8 +182,11 @@ class PlantBase:
         if hub_locked_at_rad is not None and not math.isfinite(hub_locked_at_rad):
             raise ValueError(f"hub_locked_at_rad must be finite, got {hub_locked_at_rad!r}")
         self.hub_locked = hub_locked_at_rad is not None
+        self._hub_offset = 0 if self.hub_locked else 1
         self._hub_angle_locked = float(hub_locked_at_rad or 0.0)
         self.last_torque_nm = 0.0
+        self._sc = exu.SystemContainer()
+        return self._sc.AddSystem()
 
     @abstractmethod
     def observe(self) -> Observation: ...

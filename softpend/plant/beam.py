@@ -75,30 +75,23 @@ class BeamPlant(PlantBase):
         spectral_radius: float = 0.95,
         newton_relative_tolerance: float = 1e-6,
     ) -> None:
-        self._init_common(params, dt_s, substeps, hub_locked_at_rad)
+        mbs = self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         self.n_elements = n = int_at_least("n_elements", n_elements, 1)
         in_unit_interval("spectral_radius", spectral_radius)
         positive("newton_relative_tolerance", newton_relative_tolerance)
         p = self.params
         sec = self.section = _section(p)
-        self._hub_offset = 0 if self.hub_locked else 1
         self.n_coordinates = 3 * n + self._hub_offset
         self.element_length_m = p.length_m / n
         self._s = np.linspace(0.0, p.length_m, n + 1)
-        self._sc = exu.SystemContainer()
-        mbs = self._sc.AddSystem()
         ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         nodes = [
             mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[0.0, float(s), 0.0], initialVelocities=[0.0, 0.0, 0.0]))
             for s in self._s
         ]
         bodies = [
-            mbs.AddObject(
-                ObjectBeamGeometricallyExact2D(
-                    nodeNumbers=[nodes[i], nodes[i + 1]], length=self.element_length_m, **sec
-                )
-            )
-            for i in range(n)
+            mbs.AddObject(ObjectBeamGeometricallyExact2D(nodeNumbers=[a, b], length=self.element_length_m, **sec))
+            for a, b in zip(nodes, nodes[1:])
         ]
         if p.tip_mass_kg > 0:
             bodies.append(mbs.AddObject(ObjectMassPoint2D(nodeNumber=nodes[-1], mass=p.tip_mass_kg)))
@@ -112,15 +105,15 @@ class BeamPlant(PlantBase):
             mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=[ground_marker, marker]))
         hub_rotation = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=hub, coordinate=2))
         self._torque_load = None
-        markers = [ground_marker, hub_rotation]
+        ends = [ground_marker, hub_rotation]
         if hub_locked_at_rad is not None:
-            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=markers, offset=self._hub_angle_locked))
+            mbs.AddObject(ObjectConnectorCoordinate(markerNumbers=ends, offset=self._hub_angle_locked))
         else:
             if p.hub_inertia_kgm2 > 0:
                 mbs.AddObject(ObjectRigidBody2D(nodeNumber=hub, mass=0.0, inertia=p.hub_inertia_kgm2))
             if (friction := p.hub_friction_nms_per_rad) > 0:
                 mbs.AddObject(
-                    ObjectConnectorCoordinateSpringDamper(markerNumbers=markers, stiffness=0.0, damping=friction)
+                    ObjectConnectorCoordinateSpringDamper(markerNumbers=ends, stiffness=0.0, damping=friction)
                 )
             self._torque_load = mbs.AddLoad(LoadCoordinate(markerNumber=hub_rotation, load=0.0))
         mbs.Assemble()

@@ -42,7 +42,7 @@ class PRBPlant(PlantBase):
         hub_locked_at_rad: Optional[float] = None,
         spectral_radius: float = 0.95,
     ) -> None:
-        self._init_common(params, dt_s, substeps, hub_locked_at_rad)
+        mbs = self._init_common(params, dt_s, substeps, hub_locked_at_rad)
         p = self.params
         self.link_masses_kg, self.link_coms_m, self.link_inertias_kgm2 = link_inertials(p)
         stiffness, damping = p.spring_stiffnesses_nm_per_rad(), p.spring_dampings_nms_per_rad()
@@ -55,10 +55,7 @@ class PRBPlant(PlantBase):
             links.insert(0, (0.0, 0.0, 0.0, p.hub_inertia_kgm2, 0.0, p.hub_friction_nms_per_rad))
         offsets, masses, coms, inertias, p_control, d_control = (list(column) for column in zip(*links))
         n = self.n_coordinates = len(links)
-        self._hub_offset = 0 if self.hub_locked else 1
         self._forces = np.zeros(n)
-        self._sc = exu.SystemContainer()
-        mbs = self._sc.AddSystem()
         zeros = dict.fromkeys(("referenceCoordinates", "initialCoordinates", "initialCoordinates_t"), [0.0] * n)
         node = mbs.AddNode(NodeGenericODE2(**zeros, numberOfODE2Coordinates=n))
         c, s = np.cos(self._hub_angle_locked), np.sin(self._hub_angle_locked)

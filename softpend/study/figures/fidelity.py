@@ -55,8 +55,7 @@ def plot_convergence(axes: Sequence[Any], rows: Sequence[ConvergenceRow], recomm
             ax.axhline(2.0, color="k", ls=":", lw=1, label="2 %")
         if recommended is not None:
             ax.axvline(recommended, color="C2", ls="--", lw=1, label=f"recommended n = {recommended}")
-        resolutions = sorted({r.resolution for r in rows})
-        ax.set_xticks(resolutions)
+        ax.set_xticks(sorted({r.resolution for r in rows}))
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set(xlabel="n (links or elements)", ylabel=label)

@@ -69,8 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if test is not None:
         metrics["test"] = evaluate_model(result.model, test)
     metadata = dict(result.metadata(), metrics=metrics, dataset=str(args.dataset), test_dataset=args.test_data)
-    metadata = finite_or_none(metadata)
-    weights, meta = save_model(args.output, result.model, metadata)
+    weights, meta = save_model(args.output, result.model, finite_or_none(metadata))
     for path in model_files:  # written atomically by the model's writer
         outputs.done(path)
     summary = {"weights": str(weights), "metadata": str(meta), "train_time_s": round(result.train_time_s, 2)}

@@ -106,7 +106,8 @@ class TrajectoryDataset:
         return {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
 
 
-def _validate_metadata(meta: Any) -> None:
+def _validate(ds: TrajectoryDataset) -> None:
+    meta = ds.metadata
     if not isinstance(meta, dict):
         raise ValueError(f"metadata must be a dict, got {type(meta).__name__}")
     missing = [key for key in _REQUIRED_METADATA if key not in meta]
@@ -144,12 +145,6 @@ def _validate_metadata(meta: Any) -> None:
         json.dumps(meta, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"metadata must be JSON-serialisable without NaN: {exc}") from exc
-
-
-def _validate(ds: TrajectoryDataset) -> None:
-    meta = ds.metadata
-    _validate_metadata(meta)
-    names = meta["position_names"]
     t, n = meta["n_trials"], meta["n_samples"]
     shapes = {"positions": (t, n, len(names)), "velocities": (t, n, len(names)), "torques_nm": (t, n - 1)}
     shapes["true_observations"] = (t, n, len(OBSERVATION_NAMES))

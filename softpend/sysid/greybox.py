@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Optional, Sequence
 
 import numpy as np
@@ -113,7 +113,6 @@ class GreyBoxResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; its ``rod_params`` is what :meth:`RodParams.from_json` reads."""
-        fit_keys = ("residual_rms_rad", "n_windows", "window_steps", "n_residuals", "n_variables", "identify_s")
         return {
             "schema": IDENTIFICATION_SCHEMA,
             "rod_params": self.params.to_dict(),
@@ -122,7 +121,7 @@ class GreyBoxResult:
             "calibration": {name: getattr(self, name) for name in CALIBRATION_PARAMETERS},
             "fit": {
                 "method": "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)",
-                **{key: getattr(self, key) for key in fit_keys + ("nfev", "njev", "status", "message")},
+                **{f.name: getattr(self, f.name) for f in fields(self)[4:-1]},  # residual_rms_rad to message
                 "at_bounds": list(self.at_bounds),
                 "initial_params": self.initial_params.to_dict(),
             },
@@ -428,7 +427,8 @@ def _initial_states(dataset: TrajectoryDataset, starts: np.ndarray, guess: RodPa
     """Window start states: the reconstructed bent rod, rates by central differences of the reconstructions."""
     names, columns = _observed(dataset)
     shifted = (columns[starts[:, 0], starts[:, 1] + shift] for shift in (-1, 0, 1))
-    q = [reconstruct_joint_states(*c[:, :3].T, c[:, 3] if len(names) > 3 else None, guess) for c in shifted]
+    er = len(names) > 3
+    q = [reconstruct_joint_states(c[:, 0], c[:, 1], c[:, 2], c[:, 3] if er else None, guess) for c in shifted]
     return np.concatenate([q[1], wrap_diff(q[2], q[0]) / (2 * dataset.dt_s)], axis=1)
 
 

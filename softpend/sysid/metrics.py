@@ -108,9 +108,7 @@ def network_rollouts(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Observed states ``(B, steps + 1, d)`` of a model's layout from each start ``(trial, sample)`` on, and the
     model's open-loop predictions of them (ensembles: their mean) under the recorded torques."""
-    layout = model.layout
-    if np.any(starts[:, 1] < layout.history):
-        raise ValueError(f"rollout starts must be at sample {layout.history} or later (the model's history)")
+    layout = model.layout  # the starts are at sample history or later
     i = starts[:, 1:2] - layout.history + np.arange(steps + 1)[None, :]
     truth = layout.states(dataset)[starts[:, :1], i]
     return truth, open_loop(model, truth[:, 0], layout.torques(dataset)[starts[:, :1], i[:, :-1]])
@@ -218,8 +216,7 @@ def evaluate_model(
     out: dict[str, float] = {k: v for k, v in one.items() if k != "mse_by_variable"}
     longest = min(max(horizons_s), (dataset.n_samples - 1 - model.layout.history) * dataset.dt_s)
     errors = rollout_errors(model, dataset, trials, horizon_s=longest, start_stride=start_stride)
-    out.update(errors.summary(horizons_s))
-    out["n_rollouts"] = errors.n_rollouts
+    out |= errors.summary(horizons_s) | {"n_rollouts": errors.n_rollouts}
     if dataset.params is not None:
         tips = {k: v for k, v in out.items() if k.startswith("tip_rmse_m@")}
         out |= {k.replace("_m@", "_over_length@"): v / dataset.params.length_m for k, v in tips.items()}

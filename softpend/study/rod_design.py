@@ -72,10 +72,12 @@ class RodDesign:
         """Torque limit over the torque to hold the rod horizontal."""
         return self.torque_limit_nm / self.gravity_torque_horizontal_nm
 
-    def rows(self) -> list[tuple[str, ...]]:
-        """The design table as ``(quantity, value, what it means)`` rows of formatted text."""
+    def to_markdown(self) -> str:
+        """The design table as a Markdown table: quantity, value, what it means."""
         p, sag_mm, hold_nm = self.params, self.tip_sag_horizontal_m * 1e3, self.gravity_torque_horizontal_nm
         table = [
+            "quantity | value | meaning",
+            "--- | --- | ---",
             f"rod length L, links n | {p.length_m:.3g} m, n = {p.n_links} | PRB chain of n rigid links",
             f"rod mass m, tip mass | {p.mass_kg * 1e3:.3g} g, {p.tip_mass_kg * 1e3:.3g} g | uniform rod plus end mass",
             f"bending stiffness EI | {p.bending_stiffness_nm2:.3g} N m² | joint springs k = EI/(L/n) = {p.joint_stiffness_nm_per_rad:.3g} N m/rad",
@@ -84,12 +86,7 @@ class RodDesign:
             f"torque limit / torque to hold horizontal | {self.torque_limit_nm:.3g} / {hold_nm:.3g} N m = {self.torque_ratio:.2f} | < 1: the motor cannot lift the rod straight up; swing-up must pump energy",
             f"buckling load factor, clamped upright | {self.buckling_load_factor:.2f} | > 1: the clamped rod stands upright; feedback on the hub can balance it",
         ]
-        return [tuple(row.split(" | ")) for row in table]
-
-    def to_markdown(self) -> str:
-        """The design table as a Markdown table."""
-        rows = ["| quantity | value | meaning |", "| --- | --- | --- |"]
-        return "\n".join(rows + [f"| {a} | {b} | {c} |" for a, b, c in self.rows()])
+        return "\n".join(f"| {row} |" for row in table)
 
 
 def rod_design(params: Optional[RodParams] = None) -> RodDesign:

@@ -273,14 +273,6 @@ class BatchPolicy:
         return self._held
 
 
-def _start_options(initial_state: Optional[tuple[Any, Any]]) -> Optional[dict[str, Any]]:
-    """``reset``'s options for an exact start ``(q, q_dot)`` (``None``: the start distribution)."""
-    try:
-        return None if initial_state is None else dict(zip(("q", "q_dot"), initial_state, strict=True))
-    except (TypeError, ValueError):
-        raise ValueError("initial_state must be a pair (q, q_dot)") from None
-
-
 def _steps(duration_s: float, dt_s: float, batch: int, n_coordinates: int) -> int:
     """Plant steps of an episode, refusing fewer than two or trajectories that do not fit in memory."""
     n_steps = int(round(duration_s / dt_s))
@@ -300,7 +292,11 @@ def _roll(
 ) -> list[EvaluationResult]:
     """The one evaluation loop: ``len(seeds)`` episodes at once on ``rods`` (an engine), one per seed."""
     n_steps, batch = _steps(duration_s, rods.dt_s, len(seeds), rods.n_coordinates), len(seeds)
-    vectors, observations, q, q_dot = rods.reset(seeds, _start_options(initial_state))
+    try:  # reset's options for an exact start (q, q_dot); None: the start distribution
+        options = None if initial_state is None else dict(zip(("q", "q_dot"), initial_state, strict=True))
+    except (TypeError, ValueError):
+        raise ValueError("initial_state must be a pair (q, q_dot)") from None
+    vectors, observations, q, q_dot = rods.reset(seeds, options)
     policy.reset()
     recorded_obs = np.empty((n_steps + 1, batch, len(OBSERVATION_NAMES)))
     recorded_torque = np.zeros((n_steps + 1, batch))

@@ -46,7 +46,6 @@ class ClassicalComparison:
 
 def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0):
     """Babble ``n_trials`` x 5 s on the task's plant and fit the default learned model."""
-
     task = task if task is not None else Task()
     dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=False)
     return fit_dynamics_model(dataset, progress=False, max_epochs=max_epochs, seed=seed).model

@@ -49,19 +49,20 @@ def greybox_route_rows(
         route = identify_until_robust(
             simulated_recorder(task, config, seed), perturbed_guess(RodParams()), config, seed
         )
-        fresh = _on_fresh_starts(route.controller, task, report_seeds, duration_s)
-        rows.append(
-            {"plant": plant, "seed": int(seed), "plant_s": route.plant_s, "robust": route.robust, **fresh}
-            | {"real_s_to_balance": route.plant_s if fresh["balances"] else math.inf}
-            | {"max_relative_std": route.steps[-1]["max_relative_std"], "identified": route.identification.estimates}
-        )
+        summary = evaluate(route.controller, task, seeds=tuple(report_seeds), duration_s=duration_s)
+        row = _route_row(plant, seed, route.plant_s, route.plant_s, summary) | {"robust": route.robust}
+        extra = {"max_relative_std": route.steps[-1]["max_relative_std"], "identified": route.identification.estimates}
+        rows.append(row | extra)
     return rows
 
 
-def _on_fresh_starts(controller: Any, task: Task, seeds: Sequence[int], duration_s: float) -> dict[str, Any]:
-    """``balanced_starts``, ``starts`` and ``balances`` of a controller on ``seeds``."""
-    fresh = fresh_start_row(evaluate(controller, task, seeds=tuple(seeds), duration_s=duration_s))
-    return {"balanced_starts": fresh["balanced_starts"], "starts": fresh["starts"], "balances": fresh["run_balances"]}
+def _route_row(plant: str, seed: int, plant_s: float, to_balance_s: float, summary: Any) -> dict[str, Any]:
+    """A run's row: ``balanced_starts``, ``starts`` and ``balances`` of its controller's fresh-start ``summary``, and
+    ``real_s_to_balance`` (``to_balance_s``, infinite when it does not balance them)."""
+    fresh = fresh_start_row(summary)
+    to_balance_s = to_balance_s if fresh["run_balances"] else math.inf
+    row = {"plant": plant, "seed": int(seed), "plant_s": plant_s, "balanced_starts": fresh["balanced_starts"]}
+    return row | {"starts": fresh["starts"], "balances": fresh["run_balances"], "real_s_to_balance": to_balance_s}
 
 
 #: The babbling programs the chapter compares at equal length (:data:`softpend.sysid.babble.PROGRAMS`) -> label.
@@ -77,7 +78,6 @@ def excitation_rows(
 ) -> list[dict[str, Any]]:
     """Per program of :data:`EXCITATIONS`, length and seed: the relative error of each field identified from that
     much of it (``error_<field>``, PRB only) and the swing-up + LQR designed on the estimate on ``report_seeds``."""
-
     task, truth, config = Task(plant=plant), RodParams(), RouteConfig()
     rows = []
     for program, label in EXCITATIONS.items():
@@ -90,9 +90,11 @@ def excitation_rows(
                     for name, value in result.estimates.items()
                     if hasattr(truth, name) and plant == "prb"
                 }
-                fresh = _on_fresh_starts(design_swingup(result.params), task, report_seeds, duration_s)
-                row = {"program": program, "excitation": label, "plant_s": float(length_s), "seed": int(seed)}
-                rows.append(row | errors | fresh)
+                summary = evaluate(
+                    design_swingup(result.params), task, seeds=tuple(report_seeds), duration_s=duration_s
+                )
+                row = {"program": program, "excitation": label}
+                rows.append(row | _route_row(plant, seed, float(length_s), float(length_s), summary) | errors)
     return rows
 
 
@@ -201,7 +203,6 @@ def planner_config(
 ) -> Any:
     """The ``PlannerConfig`` on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``;
     trials from the first 16 selection starts."""
-
     path = hparams if hparams is not None else HPARAMS_DIR / "planner.yml"
     config = apply_overrides(PlannerConfig.from_yaml(path, task), overrides or {})
     return config.replace(selection_seeds=SELECTION_SEEDS[:16])
@@ -217,22 +218,18 @@ def planner_rows(
 ) -> list[dict[str, Any]]:
     """One row per seed of the planner (``model``: ``"residual"`` or ``"ensemble"``) on ``plant``, then its controller on
     ``report_seeds`` (``real_s_to_balance``: infinite unless 90 % of them balance)."""
-
     config = planner_config(Task(plant=plant), overrides).replace(model=model)
     rows = []
     for seed in seeds:
         result = run_planner(config.replace(seed=int(seed)))
-        fresh = fresh_start_row(planner_fresh_starts(result, report_seeds, duration_s))
-        to_balance = result.plant_seconds_to_balance if fresh["run_balances"] else math.inf
-        row = {"plant": plant, "seed": int(seed), "plant_s": result.plant_seconds}
-        rows.append(row | {k: fresh[k] for k in ("balanced_starts", "starts")} | {"real_s_to_balance": to_balance})
+        summary = planner_fresh_starts(result, report_seeds, duration_s)
+        rows.append(_route_row(plant, seed, result.plant_seconds, result.plant_seconds_to_balance, summary))
     return rows
 
 
 def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = TEST_EPISODE_S) -> Any:
     """The final controller of a planner run from the fresh starts ``seeds`` on the run's rod (PRB: batched);
     ``ValueError`` for seeds shared with the run's selection starts."""
-
     task = result.config.task
     if task.plant == "prb":
         return fresh_start_evaluation(result, tuple(seeds), duration_s)
@@ -247,7 +244,6 @@ def planner_fresh_starts(result: Any, seeds: Sequence[int], duration_s: float = 
 def pilco_rows_if_trained(seeds: Iterable[int], runs_root: Path | str) -> Optional[list[dict[str, Any]]]:
     """The book's PILCO runs of ``seeds`` as :func:`~softpend.study.fresh_starts.seed_rows` rows on the report starts,
     or None if any is not trained (nothing is trained here)."""
-
     seeds, config = [int(s) for s in seeds], load_hparams("pilco", Task())
     if not Path(runs_root).is_dir() or pilco_jobs(config, seeds, runs_root):
         return None

@@ -51,7 +51,6 @@ def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str)
 
 def refuse_other_pilco_run(folder: Path | str, config: PilcoConfig) -> None:
     """``ValueError`` if ``folder`` holds a PILCO run of other settings than ``config``."""
-
     if (path := Path(folder) / "pilco.json").exists():
         saved = read_json_object(path, 10**8)
         settings = json.loads(json.dumps(config.to_dict(), default=float))

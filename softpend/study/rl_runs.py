@@ -100,7 +100,6 @@ def train_run(
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]]) -> list[dict[str, Any]]:
     """One row per method and seed: episodes and plant seconds to balance (within :data:`SUCCESS_STD_RAD`) and to the
     asymptote, final std."""
-
     rows = []
     for method, logs in logs_by_method.items():
         for log in logs:

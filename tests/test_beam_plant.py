@@ -9,8 +9,8 @@ from gymnasium.utils.env_checker import check_env
 
 import softpend  # noqa: F401  (registers the environments)
 from softpend.plant import Observation, PRBPlant, RodParams, SimulationDiverged, make_plant, plant_names
+from softpend.plant.base import SolverFailure
 from softpend.plant.beam import BeamPlant
-from softpend.plant.exudyn_adapter import SolverFailure
 from softpend.task import Task
 
 

@@ -90,25 +90,21 @@ def linearise_exudyn(params: Optional[RodParams] = None) -> SecondOrderModel:
 def observation_coordinates_matrix(
     params: RodParams, names: Sequence[str] = OBSERVATION_COORDINATE_NAMES
 ) -> np.ndarray:
-    """``C`` of ``y = C q``, the observed angles ``names`` about upright (``theta`` the mean link angle, ``e_r``
-    the last), shape ``(len(names), n_links + 1)``."""
+    """``C`` of ``y = C q``, the observed angles ``names`` (of :data:`OBSERVATION_COORDINATE_NAMES`) about upright
+    (``theta`` the mean link angle, ``e_r`` the last), shape ``(len(names), n_links + 1)``."""
     n = params.n_links
     absolute = np.hstack([np.ones((n, 1)), np.tril(np.ones((n, n)))])  # a_i = phi + sum_{j<=i} q_j
     rows = {"phi_rad": np.eye(1, n + 1, 0)[0], "theta_rad": absolute.mean(axis=0), "er_rad": absolute[-1]}
-    unknown = [name for name in names if name not in rows]
-    if unknown:
-        raise ValueError(f"names must be among {sorted(rows)}, got {unknown}")
     return np.array([rows[name] for name in names])
 
 
 def reduce_to_observation_coordinates(
-    model: SecondOrderModel, params: RodParams, names: Optional[Sequence[str]] = None
+    model: SecondOrderModel, params: RodParams
 ) -> tuple[SecondOrderModel, np.ndarray, tuple[str, ...]]:
     """Guyan reduction onto observed angles: ``q = T y`` with ``T`` the shape of least spring energy with
     ``C q = y``; returns ``(T' M T, ...)``, ``T`` and the kept names (linearly dependent ones dropped)."""
-    names = tuple(names) if names is not None else OBSERVATION_COORDINATE_NAMES
     kept: list[str] = []
-    for name in names:
+    for name in OBSERVATION_COORDINATE_NAMES:
         trial = observation_coordinates_matrix(params, kept + [name])
         if np.linalg.matrix_rank(trial, tol=1e-9) == len(kept) + 1:
             kept.append(name)

@@ -167,7 +167,6 @@ def plot_abs_theta(comparison: ClassicalComparison, tilt_index: int = 0, ax=None
         style, colour = "--" if "no limit" in label else "-", f"C{index % 10}"
         ax.semilogy(time_s, median, style, color=colour, label=f"{label} ({len(results)} starts)")
         ax.fill_between(time_s, low, high, color=colour, alpha=0.15, linewidth=0)
-    ax.set(xlabel="time [s]", ylabel=r"$|\theta|$ [rad]")
-    ax.set_ylim(1e-6, 3.5)
+    ax.set(xlabel="time [s]", ylabel=r"$|\theta|$ [rad]", ylim=(1e-6, 3.5))
     ax.legend(fontsize="small")
     return ax

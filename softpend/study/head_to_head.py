@@ -101,10 +101,8 @@ def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, An
 
 
 def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
-    for row in sorted(rows, key=lambda r: r["plant_s"]):
-        if row["success_rate"] >= 1.0 and row["max_upright_std_rad"] <= std_rad:
-            return float(row["plant_s"])
-    return math.inf
+    balanced = [float(r["plant_s"]) for r in rows if r["success_rate"] >= 1.0 and r["max_upright_std_rad"] <= std_rad]
+    return min(balanced, default=math.inf)
 
 
 def seconds_to_balance_table(

@@ -269,9 +269,7 @@ def load_dataset(path: str | Path, *, expected_dt_s: Optional[float] = None) -> 
     members = read_npz(path, "dataset file")
     raw = members.pop("metadata", np.array(None))
     if raw.ndim != 0 or raw.dtype.kind != "U":
-        raise ValueError(
-            f"{path}: metadata must be a 0-d unicode array (a softpend dataset's), got {raw.dtype} {raw.shape}"
-        )
+        raise ValueError(f"{path}: metadata must be a 0-d unicode array, got {raw.dtype} {raw.shape}")
     try:
         metadata = json.loads(str(raw[()]))
     except (json.JSONDecodeError, RecursionError) as exc:

@@ -68,9 +68,7 @@ class GreyBoxConfig:
         if not names or len(set(names)) < len(names) or not set(names) <= set(allowed):
             raise ValueError(f"parameters must be one or more distinct names from {allowed}, got {names}")
         if {"youngs_modulus_pa", "stiffness_scale"} <= set(names):
-            raise ValueError(
-                "parameters: youngs_modulus_pa and stiffness_scale act alike (both scale E I); estimate one"
-            )
+            raise ValueError("parameters: youngs_modulus_pa and stiffness_scale both scale E I; estimate one")
         object.__setattr__(self, "parameters", names)
         positive("window_s", self.window_s)
         object.__setattr__(self, "seed", int_at_least("seed", self.seed, 0))
@@ -446,32 +444,26 @@ def identify(
     guess = initial_params if initial_params is not None else (dataset.params or RodParams())
     for name in config.parameters:
         if name in ESTIMABLE_ROD_FIELDS and not getattr(guess, name) > 0:
-            raise ValueError(
-                f"initial_params.{name} must be positive to be estimated (it is scaled), got {getattr(guess, name)!r}"
-            )
+            raise ValueError(f"initial_params.{name} must be positive to be estimated, got {getattr(guess, name)!r}")
         if name in ("torque_gain", "torque_delay_s") and not np.any(dataset.torques_nm != 0):
-            raise NotIdentifiable(
-                name, f"the dataset cannot identify {name}: its torques_nm are all zero (no torque excitation)"
-            )
+            raise NotIdentifiable(name, f"the dataset cannot identify {name}: its torques_nm are all zero")
     steps = int(round(config.window_s / dataset.dt_s))
     if steps < 2:
         raise ValueError(f"window_s must cover at least 2 samples of dt_s = {dataset.dt_s} s, got {config.window_s!r}")
     starts = _window_starts(dataset, steps, config.max_windows, config.seed)
     warmup = int(round(WARMUP_WINDOW_S / dataset.dt_s))
-    names = config.parameters
-    n_p = len(names)
+    names, n_p = config.parameters, len(config.parameters)
     upper = np.array([1.0 if n in _DELAYS else np.inf if n == "encoder_offset_rad" else _LOG_BOUND for n in names])
     z = np.concatenate([np.zeros(n_p), _initial_states(dataset, starts, guess).reshape(-1)])
     fit: dict[str, Any] = {"nfev": 0, "njev": 0}
     for stage, stage_steps in enumerate(sorted({min(max(warmup, 2), steps), steps})):
-        problem = _Problem(dataset, guess, names, starts, stage_steps, True)
-        finite = np.isfinite(problem.residual_blocks(z)).all(axis=(1, 2))
+        probe = _Problem(dataset, guess, names, starts, stage_steps, True)
+        finite = np.isfinite(probe.residual_blocks(z)).all(axis=(1, 2))
         if not finite.any():
             raise ValueError(f"the simulation diverges in every window of {stage_steps} samples; give a closer guess")
-        if not finite.all():  # a window whose simulation diverges has no derivative: left out
-            starts = starts[finite]
-            z = np.concatenate([z[:n_p], z[n_p:].reshape(finite.size, -1)[finite].reshape(-1)])
-            problem = _Problem(dataset, guess, names, starts, stage_steps, True)
+        starts = starts[finite]  # a window whose simulation diverges has no derivative: left out
+        z = np.concatenate([z[:n_p], z[n_p:].reshape(finite.size, -1)[finite].reshape(-1)])
+        problem = probe if finite.all() else _Problem(dataset, guess, names, starts, stage_steps, True)
         if stage == 0:
             _check_identifiable(names, *problem.parameter_information(z), "at the initial guess")
         bound = np.concatenate([upper, np.full(z.size - n_p, np.inf)])

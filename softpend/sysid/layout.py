@@ -92,9 +92,7 @@ class StateLayout:
                 + ("; use information='limited'" if self.information == "full" else "")
             )
         if dataset.n_samples < self.history + 2:
-            raise ValueError(
-                f"dataset has {dataset.n_samples} samples a trial; history={self.history} needs at least {self.history + 2}"
-            )
+            raise ValueError(f"trials of {dataset.n_samples} samples are too short for history={self.history}")
         positions = np.stack([dataset.column(n) for n in self.position_names], axis=-1)
         column = dataset.true_column if self.velocity_source == "true" else dataset.column
         velocities = np.stack([column(velocity_name(n)) for n in self.position_names], axis=-1)

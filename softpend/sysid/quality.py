@@ -72,10 +72,7 @@ def _prb_rollouts(
     states = recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
     states = states.reshape(starts.shape[0], -1)
     if states.shape[1] != 2 * (params.n_links + 1):
-        raise ValueError(
-            f"the dataset's joint states have {states.shape[1] // 2} coordinates; a PRB rod of "
-            f"{params.n_links} links has {params.n_links + 1} (another plant?)"
-        )
+        raise ValueError(f"the joint states have {states.shape[1] // 2} coordinates, not {params.n_links + 1}")
     states[:, 0] += hub_offset_rad
     index = starts[:, 1:2] + np.arange(positive_int("steps", steps) + 1)[None, :]
     torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
@@ -131,17 +128,14 @@ def prb_one_step_errors(
     """One-step error of a PRB model from the recorded joint state at every sample of the trials, in the units of
     :func:`softpend.sysid.one_step_errors` at full information (velocities as backward differences)."""
     starts = rollout_starts(dataset, 1, stride=1, trials=trials)
-    states = recorded_states(dataset, starts)
-    plant = free_plant(params, dataset)
-    names = dataset.position_names
+    plant, names = free_plant(params, dataset), dataset.position_names
     predicted = np.empty((starts.shape[0], len(names)))
-    for row, ((t, s), state) in enumerate(zip(starts, states)):
+    for row, ((t, s), state) in enumerate(zip(starts, recorded_states(dataset, starts))):
         plant.reset(state[: plant.n_coordinates], state[plant.n_coordinates :])
         o = plant.step(dataset.torques_nm[t, s])
         predicted[row] = [getattr(o, n) for n in names]
-    nxt = dataset.positions[starts[:, 0], starts[:, 1] + 1]
     angle = np.array([n in ("phi_rad", "theta_rad", "er_rad") for n in names])
-    position_error = predicted - nxt
+    position_error = predicted - dataset.positions[starts[:, 0], starts[:, 1] + 1]
     position_error[:, angle] = wrap_diff(position_error[:, angle], 0.0)
     error = np.concatenate([position_error, position_error / dataset.dt_s], axis=1)
     i_ex, i_ey = names.index("ex_m"), names.index("ey_m")

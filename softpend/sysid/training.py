@@ -204,9 +204,7 @@ def fit_dynamics_model(
     # without plant parameters (a rig file), the largest recorded torque stands in for the limit
     limit = params.torque_limit_nm if params is not None else float(np.abs(dataset.torques_nm).max())
     if limit <= 0:
-        raise ValueError(
-            "dataset torques_nm are all zero and it has no plant_params: nothing to learn the torque's effect from"
-        )
+        raise ValueError("dataset torques_nm are all zero and it has no plant_params (nothing to learn from)")
     # the rod length of a simulated dataset, else the largest recorded tip distance, plus the slack
     radius = float(params.length_m if params else np.hypot(dataset.column("ex_m"), dataset.column("ey_m")).max())
     reach = radius * (1 + TIP_REACH_SLACK) if config.limit_tip_reach and radius > 0 else None

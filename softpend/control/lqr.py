@@ -56,16 +56,6 @@ def _joint_state(observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> 
     return np.concatenate([q, np.asarray(q_dot, dtype=float)])
 
 
-def observation_state_function(names: tuple[str, ...]) -> StateFunction:
-    """State ``[angles..., rates...]`` read from an :class:`Observation`."""
-    rate_names = tuple(name.replace("_rad", "_dot_rad_s") for name in names)
-
-    def state(observation: Observation, q: np.ndarray, q_dot: np.ndarray) -> np.ndarray:
-        return np.array([getattr(observation, n) for n in names] + [getattr(observation, n) for n in rate_names])
-
-    return state
-
-
 class LQRController:
     """State feedback ``tau = sat(-K x)``, ``x = state_function(observation, q, q_dot)`` (deviation from upright;
     its ``reset()``, if any, called by :meth:`reset`); ``model`` is the design model."""
@@ -108,10 +98,11 @@ class LQRController:
         else:
             reduced, _, names = reduce_to_observation_coordinates(linearise_exudyn(params), params)
             model = discretise(reduced.state_space(), dt_s)
-            rates = tuple(n.replace("_rad", "_dot_rad_s") for n in names)
-            model = LinearModel(model.a, model.b, model.dt_s, names + rates)
+            observed = names + tuple(n.replace("_rad", "_dot_rad_s") for n in names)  # the angles, then their rates
+            model = LinearModel(model.a, model.b, model.dt_s, observed)
             angles = np.eye(len(names))[[names.index("theta_rad"), names.index("phi_rad")]]
-            state_function, name = observation_state_function(names), "LQR (observations)"
+            state_function = lambda o, q, q_dot: np.array([getattr(o, n) for n in observed])  # noqa: E731
+            name = "LQR (observations)"
         zero = np.zeros_like(angles)
         q = output_weight_matrix(np.block([[angles, zero], [zero, angles]]))
         return cls(design_lqr(model, q, TORQUE_WEIGHT), state_function, limit, model=model, name=name)

@@ -44,9 +44,8 @@ class ClassicalComparison:
         raise KeyError(f"no run of {controller!r} from {start!r}")
 
 
-def train_learned_model(task: Optional[Task] = None, n_trials: int = 60, max_epochs: int = 300, seed: int = 0):
+def train_learned_model(task: Task = Task(), n_trials: int = 60, max_epochs: int = 300, seed: int = 0):
     """Babble ``n_trials`` x 5 s on the task's plant and fit the default learned model."""
-    task = task if task is not None else Task()
     dataset = babble(BabbleProtocol(n_trials=n_trials), params=task.rod, seed=seed, plant=task.plant, progress=False)
     return fit_dynamics_model(dataset, progress=False, max_epochs=max_epochs, seed=seed).model
 
@@ -70,7 +69,7 @@ def run_from_tilt(
 
 
 def classical_comparison(
-    task: Optional[Task] = None,
+    task: Task = Task(),
     learned_model: Any = None,
     tilts_rad: Sequence[float] = (0.2, 0.4),
     duration_s: float = 5.0,
@@ -82,7 +81,6 @@ def classical_comparison(
     """Every classical controller from the fresh ``starts`` (off the PRB plant: observation-only designs; without
     ``learned_model``: no learned-model LQR and PID; ``pid_gains`` skips the PID tunings); the LQR on the true model
     and the PIDs also without the torque limit (:data:`UNLIMITED_TORQUE_NM`)."""
-    task = task if task is not None else Task()
     starts = [int(seed) for seed in starts]
     if not starts or len(tilts_rad) == 0:
         raise ValueError("starts and tilts_rad must not be empty")

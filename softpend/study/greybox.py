@@ -129,12 +129,11 @@ def model_quality(
 
 def closed_loop_usefulness(
     identified: Mapping[str, RodParams],
-    task: Optional[Task] = None,
+    task: Task = Task(),
     seeds: Optional[Sequence[int]] = None,
 ) -> list[dict[str, Any]]:
     """LQR (from 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified`` and on
     ``task.rod``, on the true plant from ``seeds``: one row per design and start."""
-    task = task if task is not None else Task()
     joint = task.plant == "prb"  # other plants (the beam): the observation-feedback versions of both designs
     seeds = [int(s) for s in (seeds if seeds is not None else REPORT_SEEDS[:10])]
     designs = {"true parameters": task.rod, **dict(identified)}

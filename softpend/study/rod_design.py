@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -18,9 +17,9 @@ from softpend.task import Task
 HORIZONTAL_HUB_ANGLE_RAD = -math.pi / 2
 
 
-def horizontal_cantilever(task: Optional[Task] = None) -> Plant:
+def horizontal_cantilever(task: Task = Task()) -> Plant:
     """The rod of ``task`` clamped horizontally, resting in its static equilibrium under gravity."""
-    sim = (task if task is not None else Task()).make_plant(hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
+    sim = task.make_plant(hub_locked_at_rad=HORIZONTAL_HUB_ANGLE_RAD)
     assert isinstance(sim, PlantBase)  # the PRB and beam plants: Exudyn's static solver
     sim.static_equilibrium()
     return sim
@@ -89,9 +88,8 @@ class RodDesign:
         return "\n".join(f"| {row} |" for row in table)
 
 
-def rod_design(params: Optional[RodParams] = None) -> RodDesign:
+def rod_design(params: RodParams = RodParams()) -> RodDesign:
     """The design figures of a rod, from the PRB plant."""
-    params = params if params is not None else RodParams()
     tip = horizontal_cantilever(Task(rod=params)).link_points_m()[-1]
     return RodDesign(
         params=params,
@@ -103,9 +101,8 @@ def rod_design(params: Optional[RodParams] = None) -> RodDesign:
     )
 
 
-def rod_poses_m(task: Optional[Task] = None) -> dict[str, np.ndarray]:
+def rod_poses_m(task: Task = Task()) -> dict[str, np.ndarray]:
     """Points along the rod ``(k, 2)`` [m] hanging, clamped horizontal (deflected) and upright."""
-    task = task if task is not None else Task()
     sim = task.make_plant()
     return {
         "hanging": sim.link_points_m(sim.hanging_state()[0]),

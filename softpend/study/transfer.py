@@ -6,7 +6,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -46,12 +46,11 @@ class TransferCase:
     start_noise_rad: float = 0.05
 
 
-def default_transfer_cases(params: Optional[RodParams] = None) -> list[TransferCase]:
+def default_transfer_cases(params: RodParams = RodParams()) -> list[TransferCase]:
     """The observation-only LQR from near upright and energy swing-up + LQR from hanging."""
     from softpend.control.lqr import LQRController
     from softpend.control.swingup import EnergySwingUpController
 
-    params = params or RodParams()
     lqr = lambda: LQRController.from_params(params, state="observation")  # noqa: E731
     swing = lambda: EnergySwingUpController(params, lqr_state="observation", energy_source="observation")  # noqa: E731
     return [
@@ -65,7 +64,7 @@ def rl_transfer_cases(
     algos: Sequence[str] = ("dqn", "mbpo"),
     seeds: Sequence[int] = (0, 1, 2),
     which: str = "best",
-    params: Optional[RodParams] = None,
+    params: RodParams = RodParams(),
     duration_s: float = TEST_EPISODE_S,
 ) -> list[TransferCase]:
     """The agents ``which`` of the RL runs under ``runs_root`` as swing-up cases (trained with the links and torque
@@ -74,7 +73,6 @@ def rl_transfer_cases(
     from softpend.rl.training_env import policy_controller
     from softpend.study.rl_runs import METHOD_NAMES, run_folder
 
-    params = params or RodParams()
     if unknown := [algo for algo in algos if algo not in METHOD_NAMES]:
         raise ValueError(f"algos must be among {sorted(METHOD_NAMES)}, got {unknown[0]!r}")
     cases = []
@@ -104,7 +102,7 @@ def transfer_matrix(
 
 def transfer_table(
     cases: Sequence[TransferCase],
-    params: Optional[RodParams] = None,
+    params: RodParams = RodParams(),
     plants: Sequence[str] = ("prb", "beam"),
     fraction: float = 0.2,
     seeds: Sequence[int] = (0, 1, 2),
@@ -113,7 +111,6 @@ def transfer_table(
 ) -> list[dict[str, Any]]:
     """Every case on every plant and perturbation: an :meth:`EvaluationSummary.row` with ``plant``, ``perturbation``
     and ``diverged``; ``duration_scale`` shortens every episode, down to :data:`MIN_DURATION_S`."""
-    params = params or RodParams()
     if duration_scale <= 0:
         raise ValueError(f"duration_scale must be positive, got {duration_scale!r}")
     variants = perturbations(params, fraction)

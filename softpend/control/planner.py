@@ -634,24 +634,18 @@ def _controller(
     config: PlannerConfig, rod: RodParams, model: Any, lqr: LQRController, generator: torch.Generator
 ) -> PlannerController:
     """MPPI on ``model`` (its noise drawn from ``generator``) with the LQR near upright."""
-    task = config.task
+    task, n_q = config.task, rod.n_links + 1
+    tracker: Any
     if config.model == "ensemble":
-        tracker: Any = ObservedStateTracker(model)
-        fast: Any = StackedEnsemble(model)
+        tracker, fast = ObservedStateTracker(model), StackedEnsemble(model)
         i_theta, i_rate = model.layout.index("theta_rad"), model.layout.index("theta_dot_rad_s")
-
-        def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
-            return swing_up_cost(rod, x_next[:, i_theta], x_next[:, i_rate])
-
+        tip = lambda x: (x[:, i_theta], x[:, i_rate])  # noqa: E731
     else:
         tracker, fast = JointStateTracker(rod, task.dt_s), model
-        n_q, link = rod.n_links + 1, rod.link_length_m
-
-        def cost(x: Tensor, torque: Tensor, x_next: Tensor) -> Tensor:
-            return swing_up_cost(rod, *_tip(x_next[:, :n_q], x_next[:, n_q:], link))
-
+        tip = lambda x: _tip(x[:, :n_q], x[:, n_q:], rod.link_length_m)  # noqa: E731
     fast.noise_generator = generator
     step = lambda x, torque: fast.predict_next(x, torque, generator=generator)  # noqa: E731
+    cost = lambda x, torque, x_next: swing_up_cost(rod, *tip(x_next))  # noqa: E731
     n_knots = config.n_knots - KNOTS_PER_PLAN  # after the knots under way: the rollouts cover horizon_s from now
     hold, limit = (config.hold_steps if config.model == "ensemble" else 1), task.torque_limit_nm
     settings = (config.n_samples, config.noise_fraction * limit, config.temperature)

@@ -105,8 +105,7 @@ def _hub_detail(ax, d: RigDesign) -> None:
 def _side(ax, d: RigDesign) -> None:
     """Side view: the motor, the mount, the beam's width and the camera at its distance (z towards the camera)."""
     p, hub, add = d.params, d.hub, ax.add_patch
-    L, W = p.length_m, d.beam_width_m
-    t = hub.mount_thickness_m
+    L, W, t = p.length_m, d.beam_width_m, hub.mount_thickness_m
     # motor body behind the mount (not to scale in depth), the mount boss and the flag in front of the beam
     add(Rectangle((-0.06, -0.035), 0.05, 0.07, fc="0.25", ec="k", lw=0.6))
     ax.text(-0.035, 0.045, "V5 motor", fontsize=7, ha="center")

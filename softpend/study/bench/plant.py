@@ -181,12 +181,11 @@ class MuJoCoChain:
     def __init__(self, params: RodParams, timestep_s: float = 0.005, integrator: str = "RK4") -> None:
         import mujoco
 
-        self.params = params
+        self.params, self._mujoco = params, mujoco
         ratio = CONTROL_STEP_S / positive("timestep_s", timestep_s)
         self.substeps = int(round(ratio))
         if self.substeps < 1 or abs(ratio - self.substeps) > 1e-9 * ratio:
             raise ValueError(f"timestep_s ({timestep_s!r}) must divide the control step ({CONTROL_STEP_S!r} s)")
-        self._mujoco = mujoco
         self.model = mujoco.MjModel.from_xml_string(chain_mjcf(self.params, timestep_s, integrator))
         self.data = mujoco.MjData(self.model)
         kinds = mujoco.mjtWarning

@@ -144,10 +144,8 @@ def rollout_starts(
         theta = np.arctan2(-dataset.column("ex_m"), dataset.column("ey_m"))
         grid = grid[np.abs(theta[grid[:, 0], grid[:, 1]]) <= positive("max_tilt_rad", max_tilt_rad)]
     if grid.shape[0] == 0:
-        raise ValueError(
-            f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples"
-            + ("" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start")
-        )
+        tilt = "" if max_tilt_rad is None else f" with |theta| <= {max_tilt_rad} rad at its start"
+        raise ValueError(f"no rollout of {steps} steps fits the dataset's trials of {dataset.n_samples} samples{tilt}")
     return grid
 
 

@@ -280,14 +280,9 @@ def save_model(
     from softpend import __version__
 
     weights, meta_path = model_paths(path)
-    meta = {
-        "schema": MODEL_SCHEMA_NAME,
-        "schema_version": MODEL_SCHEMA_VERSION,
-        "softpend_version": __version__,
-        "kind": "ensemble" if isinstance(model, DynamicsEnsemble) else "single",
-        "config": model.config(),
-        "metadata": metadata or {},
-    }
+    kind = "ensemble" if isinstance(model, DynamicsEnsemble) else "single"
+    meta = dict(schema=MODEL_SCHEMA_NAME, schema_version=MODEL_SCHEMA_VERSION, softpend_version=__version__, kind=kind)
+    meta |= {"config": model.config(), "metadata": metadata or {}}
     text = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False)
     save_state(weights, model.state_dict(), meta_path, text + "\n")
     return weights, meta_path

@@ -18,10 +18,7 @@ from softpend.sysid.variables import velocity_name
 def _state_vector(names: tuple[str, ...], observation: Observation) -> np.ndarray:
     """The model state of an observation with every lagged frame equal to it."""
     values = dict(zip(OBSERVATION_NAMES, observation.as_array()))
-    try:
-        return np.array([values[name.split("_lag")[0]] for name in names])
-    except KeyError as exc:
-        raise ValueError(f"model state entry {exc} is not an observed variable") from exc
+    return np.array([values[name.split("_lag")[0]] for name in names])
 
 
 def upright_state_vector(model: Any, params: RodParams) -> np.ndarray:

@@ -9,7 +9,6 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg
 
-from softpend.checks import positive
 from softpend.plant import PRBPlant, RodParams
 
 #: Observed angles the observation-feedback controllers use.
@@ -72,9 +71,6 @@ def discretise(model: LinearModel, dt_s: float) -> LinearModel:
     """Zero-order-hold discretisation (``control.c2d``)."""
     import control
 
-    if model.is_discrete:
-        raise ValueError("model is already discrete")
-    positive("dt_s", dt_s)
     n = model.n_states
     sys_d = control.c2d(control.ss(model.a, model.b, np.eye(n), np.zeros((n, 1)), 0), dt_s, method="zoh")
     return LinearModel(a=np.asarray(sys_d.A), b=np.asarray(sys_d.B), dt_s=float(dt_s), state_names=model.state_names)

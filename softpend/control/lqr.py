@@ -72,8 +72,6 @@ class LQRController:
         if not np.all(np.isfinite(gain)):
             raise ValueError("gain must be finite")
         positive("torque_limit_nm", torque_limit_nm)
-        if model is not None and model.n_states != gain.shape[1]:
-            raise ValueError(f"gain has {gain.shape[1]} columns but the model has {model.n_states} states")
         self.gain, self.state_function, self.torque_limit_nm = gain, state_function, float(torque_limit_nm)
         self.model, self.name = model, name
 
@@ -90,6 +88,7 @@ class LQRController:
         params = params if params is not None else RodParams()
         limit = params.torque_limit_nm if torque_limit_nm is None else torque_limit_nm
         one_of("state", state, ("joint", "observation"))
+        positive("dt_s", dt_s)
         state_function: StateFunction
         if state == "joint":
             model = discretise(linearise_exudyn(params).state_space(), dt_s)

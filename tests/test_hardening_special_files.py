@@ -536,7 +536,7 @@ CASES = _cases()
 
 
 #: Options that take a folder: only a FIFO is a wrong kind of file for them.
-FOLDER_OPTIONS = ("rig design --out", "rig control --out", "sweep --runs-root")
+FOLDER_OPTIONS = ("rig design --out", "rig control --out", "rig babble --out", "sweep --runs-root")
 SPECIAL_CASES = [
     (kind, *case)
     for case in CASES

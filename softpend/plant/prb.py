@@ -83,11 +83,6 @@ class PRBPlant(PlantBase):
         self._start_solver(mbs, spectral_radius, 1e-8)
         self.reset()
 
-    @property
-    def _chain(self) -> "PRBPlant":
-        """The plant itself (the name ``softpend.study.bench.plant`` steps it by)."""
-        return self
-
     def _set_coordinates(self, q: np.ndarray, q_t: np.ndarray) -> None:
         super()._set_coordinates(q, q_t)
         self._q, self._q_t = q.copy(), q_t.copy()

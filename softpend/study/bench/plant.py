@@ -48,21 +48,20 @@ def _solver_steps_per_s(n_links: int, n_steps: int = N_STEPS) -> float:
     """Steps per second of the bare Exudyn loop: set the joint torque, advance."""
     plant = PRBPlant(RodParams(n_links=n_links))
     plant.reset(*plant.hanging_state())
-    chain = plant._chain
     torques = np.random.default_rng(0).uniform(-1, 1, size=n_steps) * plant.params.torque_limit_nm
     forces = np.zeros(plant.n_coordinates)
     start = time.perf_counter()
     for torque in torques:
         forces[0] = torque
-        chain.set_joint_forces(forces)
-        chain.advance()
+        plant.set_joint_forces(forces)
+        plant.advance()
     return n_steps / (time.perf_counter() - start)
 
 
 def _legacy_advance(self) -> None:
     import exudyn as exu
 
-    from softpend.plant.exudyn_adapter import SolverFailure
+    from softpend.plant.base import SolverFailure
 
     settings, mbs = self._settings, self._mbs
     settings.timeIntegration.startTime = self.time_s
@@ -83,13 +82,13 @@ def _legacy_advance(self) -> None:
 
 
 def _legacy_observe(self):
-    return self.observation_from_state(self._chain._q.tolist(), self._chain._q_t.tolist())
+    return self.observation_from_state(self._q.tolist(), self._q_t.tolist())
 
 
 def make_legacy(env) -> None:
     """Give ``env`` (PRB plant) the baseline step path of ``env_steps_per_s_n4_speedup`` (more Python-C++ crossings)."""
     plant = env.unwrapped.plant
-    plant._chain.advance = types.MethodType(_legacy_advance, plant._chain)
+    plant.advance = types.MethodType(_legacy_advance, plant)
     plant.observe = types.MethodType(_legacy_observe, plant)
 
 

@@ -479,22 +479,17 @@ def identify(
     slope = {
         n: _OFFSET_SCALE_RAD if n == "encoder_offset_rad" else unit[n] if n in _DELAYS else values[n] for n in names
     }
+    record: dict[str, Any] = {k: int(fit[k]) for k in ("nfev", "njev", "status")} | {"message": str(fit["message"])}
+    record |= dict(n_windows=problem.n_windows, window_steps=steps, n_residuals=r.size, n_variables=z.size)
     return GreyBoxResult(
         params=problem.unpack(z[:n_p])[0],
         initial_params=guess,
         estimates={n: values[n] * unit[n] for n in names},
         std={n: float(slope[n] * sd[j]) for j, n in enumerate(names)},
         residual_rms_rad=float(np.sqrt(np.mean(r**2))),
-        n_windows=problem.n_windows,
-        window_steps=steps,
-        n_residuals=int(r.size),
-        n_variables=int(z.size),
         identify_s=time.perf_counter() - started,
-        nfev=int(fit["nfev"]),
-        njev=int(fit["njev"]),
-        status=int(fit["status"]),
-        message=str(fit["message"]),
         at_bounds=tuple(n for n, hit in zip(names, np.abs(z[:n_p]) >= upper * (1 - 1e-9)) if hit),
+        **record,
     )
 
 

@@ -138,9 +138,6 @@ def prb_one_step_errors(
     position_error = predicted - dataset.positions[starts[:, 0], starts[:, 1] + 1]
     position_error[:, angle] = wrap_diff(position_error[:, angle], 0.0)
     error = np.concatenate([position_error, position_error / dataset.dt_s], axis=1)
-    i_ex, i_ey = names.index("ex_m"), names.index("ey_m")
-    return {
-        "mse": float(np.mean(error**2)),
-        "one_step_tip_rmse_m": float(np.sqrt(np.mean(position_error[:, i_ex] ** 2 + position_error[:, i_ey] ** 2))),
-        "n_transitions": int(starts.shape[0]),
-    }
+    tip_x, tip_y = position_error[:, names.index("ex_m")], position_error[:, names.index("ey_m")]
+    tip = float(np.sqrt(np.mean(tip_x**2 + tip_y**2)))
+    return {"mse": float(np.mean(error**2)), "one_step_tip_rmse_m": tip, "n_transitions": int(starts.shape[0])}

@@ -189,17 +189,10 @@ def babble(
         except SimulationDiverged as exc:
             raise SimulationDiverged(f"trial {i}: {exc.reason}") from exc
     arrays = {key: np.ascontiguousarray(np.stack([t[key] for t in trials])) for key in trials[0] if key != "feedback"}
-    metadata = dataset_metadata(
-        arrays["positions"],
-        dt_s=float(protocol.dt_s),
-        position_names=POSITION_NAMES,
-        source="simulation",
-        plant=plant,
-        plant_params=params,
-        seed=seed,
-        protocol=dict(dataclasses.asdict(protocol), feedback_trials=[int(t["feedback"]) for t in trials]),
-        notes="motor babbling (softpend.sysid.babble)",
-    )
+    record = dict(dataclasses.asdict(protocol), feedback_trials=[int(t["feedback"]) for t in trials])
+    notes = "motor babbling (softpend.sysid.babble)"
+    described: dict[str, Any] = dict(source="simulation", plant=plant, plant_params=params, seed=seed, notes=notes)
+    metadata = dataset_metadata(arrays["positions"], dt_s=protocol.dt_s, protocol=record, **described)
     dataset = TrajectoryDataset(metadata=metadata, **arrays)
     if path is not None:
         write_dataset(path, dataset)

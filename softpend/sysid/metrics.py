@@ -54,8 +54,8 @@ def one_step_errors(
         normalised_trivial = float(torch.mean((target / first.delta_std) ** 2))
     first.to(dtype)
     by_variable = {n: float(v) for n, v in zip(layout.names[:core], np.mean(error**2, axis=0))}
-    out = {"mse": float(np.mean(error**2)), "mse_trivial": float(np.mean(change**2)), "mse_normalised": normalised}
-    out |= {"mse_normalised_trivial": normalised_trivial, "mse_by_variable": by_variable}
+    out: dict[str, Any] = {"mse": float(np.mean(error**2)), "mse_trivial": float(np.mean(change**2))}
+    out |= {"mse_normalised": normalised, "mse_normalised_trivial": normalised_trivial, "mse_by_variable": by_variable}
     tip = float(np.sqrt(by_variable["ex_m"] + by_variable["ey_m"]))
     return out | {"one_step_tip_rmse_m": tip, "n_transitions": int(error.shape[0])}
 

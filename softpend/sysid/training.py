@@ -85,14 +85,10 @@ class FitResult:
 
     def metadata(self) -> dict[str, Any]:
         """JSON-ready summary (config, split, losses) for :func:`softpend.sysid.save_model`."""
-        return {
-            "train_config": self.config.to_dict(),
-            "train_trials": self.train_trials.tolist(),
-            "val_trials": self.val_trials.tolist(),
-            "best_epochs": list(self.best_epochs),
-            "best_val_loss": [float(v[b - 1]) for v, b in zip(self.val_loss, self.best_epochs)],
-            "train_time_s": self.train_time_s,
-        }
+        out = {"train_config": self.config.to_dict(), "train_trials": self.train_trials.tolist()}
+        out |= {"val_trials": self.val_trials.tolist(), "best_epochs": list(self.best_epochs)}
+        best = [float(v[b - 1]) for v, b in zip(self.val_loss, self.best_epochs)]
+        return out | {"best_val_loss": best, "train_time_s": self.train_time_s}
 
 
 def split_trials(n_trials: int, validation_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

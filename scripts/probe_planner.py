@@ -26,7 +26,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import torch
 
@@ -36,13 +36,24 @@ from softpend.io.outputs import atomic_write
 from softpend.io.overrides import parse_assignment
 from softpend.study.data_efficiency import planner_config, planner_fresh_starts
 from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS
-from softpend.study.records import flat_settings, load_record, record_text
+from softpend.study.records import load_record, record_text
 from softpend.task import Task
 
 ROOT = Path(__file__).resolve().parents[1]
 TUNING_SEEDS = SELECTION_SEEDS[16:36]
 #: A seed balances when at least this share of its fresh starts balance; the target counts seeds within this.
 BALANCED_FRACTION, WITHIN_S = 0.9, 30.0
+
+
+def flat_settings(settings: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``settings`` with nested mappings as dotted names and lists as comma-separated text (record settings)."""
+    flat: dict[str, Any] = {}
+    for name, value in settings.items():
+        if isinstance(value, Mapping):
+            flat |= flat_settings(value, f"{prefix}{name}.")
+        else:
+            flat[f"{prefix}{name}"] = ", ".join(map(str, value)) if isinstance(value, (list, tuple)) else value
+    return flat
 
 
 def _store(out: str, document: dict) -> None:

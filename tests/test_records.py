@@ -15,7 +15,6 @@ from softpend.study.records import (
     balance_summary,
     current_pilco_runs,
     current_rl_runs,
-    flat_settings,
     load_record,
     load_records,
     record_markdown,
@@ -85,14 +84,6 @@ def test_a_record_that_is_not_json_or_absent_is_a_value_error(tmp_path):
         load_records(tmp_path)
     with pytest.raises(ValueError, match="no probe records"):
         load_records(tmp_path / "absent")
-
-
-def test_flat_settings_name_nested_settings_with_dots():
-    assert flat_settings({"a": 1, "task": {"rod": {"m": 0.1}, "seeds": [1, 2]}}) == {
-        "a": 1,
-        "task.rod.m": 0.1,
-        "task.seeds": "1, 2",
-    }
 
 
 def test_the_summary_counts_a_run_that_never_balanced_as_infinitely_late():

@@ -41,28 +41,24 @@ _HUB_BGR = (20, 20, 20)
 
 @dataclass(frozen=True)
 class CameraModel:
-    """Affine camera on the rod's plane, metres (hub at the origin, y up) to pixels (y down):
-    ``pixel = centre + s * R(roll) @ diag(1, aspect) @ [[1, shear], [0, 1]] @ [x, -y]``."""
+    """Camera on the rod's plane, metres (hub at the origin, y up) to pixels (y down):
+    ``pixel = centre + s * R(roll) @ [x, -y]``."""
 
     width_px: int = 640
     height_px: int = 480
     px_per_m: float = 640.0
     centre_px: tuple[float, float] = (320.0, 238.0)
     roll_rad: float = 0.03
-    aspect: float = 1.0
-    shear: float = 0.0
 
     def __post_init__(self) -> None:
         if self.width_px < 16 or self.height_px < 16:
             raise ValueError(f"width_px and height_px must be >= 16, got {self.width_px}x{self.height_px}")
         positive("px_per_m", self.px_per_m)
-        positive("aspect", self.aspect)
 
     def metre_to_pixel(self) -> np.ndarray:
         """The 2x3 matrix ``pixel = M @ [x_m, y_m, 1]``."""
         c, s = math.cos(self.roll_rad), math.sin(self.roll_rad)
-        linear = self.px_per_m * np.array([[c, -s], [s, c]]) @ np.diag([1.0, self.aspect])
-        linear = linear @ np.array([[1.0, self.shear], [0.0, 1.0]]) @ np.diag([1.0, -1.0])
+        linear = self.px_per_m * np.array([[c, s], [s, -c]])  # R(roll) @ diag(1, -1)
         return np.column_stack([linear, np.asarray(self.centre_px, dtype=float)])
 
     def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
@@ -247,7 +243,6 @@ def render_video(
     fps: float = 100.0,
     clock_offset_s: float = 0.0,
     timestamp_jitter_s: float = 0.0,
-    duration_s: Optional[float] = None,
     drop_dot_frames: Sequence[int] = (),
     progress: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -257,9 +252,7 @@ def render_video(
     path = Path(path)
     check_fps("fps", fps)
     times_s = np.asarray(times_s, dtype=float)
-    start = times_s[0] + camera.effects.exposure_s
-    end = times_s[-1] if duration_s is None else start + float(duration_s)
-    frame_times = np.arange(start, end + 1e-9, 1.0 / fps)
+    frame_times = np.arange(times_s[0] + camera.effects.exposure_s, times_s[-1] + 1e-9, 1.0 / fps)
     rng = np.random.default_rng(camera.seed + 104729)
     stamps = frame_times + clock_offset_s + timestamp_jitter_s * rng.standard_normal(len(frame_times))
     size = (camera.model.width_px, camera.model.height_px)

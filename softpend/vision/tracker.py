@@ -10,10 +10,12 @@ from typing import Any, Optional
 import cv2
 import numpy as np
 
-from softpend.checks import in_unit_interval, instance_of, int_at_least, non_negative, optional_positive
+from softpend.checks import instance_of, int_at_least, non_negative, optional_positive
 
 #: Smallest frame height and width the tracker accepts [px].
 MIN_FRAME_SIDE_PX = 8
+#: Largest share of the frame a blob may cover and still be the tip dot.
+MAX_AREA_FRACTION = 0.05
 
 
 @dataclass(frozen=True)
@@ -90,7 +92,7 @@ def find_blobs(frame_bgr: np.ndarray, colour: ColourRange, min_area_px: float = 
 
 
 class TipTracker:
-    """Track the blue tip dot (Algorithm 1): a blob of ``min_area_px`` [px^2] to ``max_area_fraction`` of the frame,
+    """Track the blue tip dot (Algorithm 1): a blob of ``min_area_px`` [px^2] to :data:`MAX_AREA_FRACTION` of the frame,
     searched first within ``search_radius_px`` of the last dot, only ever inside ``region_px`` if given."""
 
     def __init__(
@@ -99,12 +101,10 @@ class TipTracker:
         min_area_px: float = 20.0,
         search_radius_px: Optional[float] = 48.0,
         region_px: Optional[tuple[int, int, int, int]] = None,
-        max_area_fraction: float = 0.05,
     ) -> None:
         self.colour = instance_of("colour", colour, ColourRange)
         self.min_area_px = non_negative("min_area_px", min_area_px)
         self.search_radius_px = optional_positive("search_radius_px", search_radius_px)
-        self.max_area_fraction = in_unit_interval("max_area_fraction", max_area_fraction, include_zero=False)
         if region_px is not None:
             try:
                 x0, y0, x1, y1 = (int_at_least("region_px", v, 0) for v in region_px)
@@ -120,7 +120,7 @@ class TipTracker:
         """Locate the dot in one BGR frame; ``lost=True`` (NaN position) when no blob qualifies."""
         _validate_frame(frame_bgr)
         h, w = frame_bgr.shape[:2]
-        max_area = self.max_area_fraction * h * w
+        max_area = MAX_AREA_FRACTION * h * w
         if self.region_px is not None:
             if self.region_px[0] >= w or self.region_px[1] >= h:
                 raise ValueError(f"region_px {self.region_px} lies outside the {w}x{h} frame")

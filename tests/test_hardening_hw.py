@@ -11,7 +11,9 @@ import collections
 import json
 import math
 import os
+import shutil
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -320,15 +322,21 @@ def test_track_checks_inputs_before_touching_the_output(tmp_path, capsys):
 def test_track_failing_mid_video_leaves_the_output_and_no_partial_file(tmp_path, clip):
     from softpend.io.samplelog import read_sample_log
 
-    out = tmp_path / "existing.csv"
+    short = tmp_path / "short" / "clip.avi"  # a sidecar with too few timestamps: tracking fails at frame 3
+    short.parent.mkdir()
+    shutil.copyfile(clip, short)
+    sidecar = json.loads(Path(f"{clip}.json").read_text()) | {"timestamps_s": [0.0, 0.01, 0.02]}
+    Path(f"{short}.json").write_text(json.dumps(sidecar))
+    out = tmp_path / "out" / "existing.csv"
+    out.parent.mkdir()
     out.write_text("results I want to keep\n")
     with pytest.raises(ValueError, match="timestamps_s has 3 entries"):
-        track_video(clip, out, timestamps_s=[0.0, 0.01, 0.02])
+        track_video(short, out)
     assert out.read_text() == "results I want to keep\n"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.csv"]
+    assert sorted(p.name for p in out.parent.iterdir()) == ["existing.csv"]
     rows = track_video(clip, out)  # a whole video tracked: only now is the output replaced
     assert len(read_sample_log(out)) == len(rows) == 12
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.csv"]
+    assert sorted(p.name for p in out.parent.iterdir()) == ["existing.csv"]
 
 
 @pytest.mark.parametrize("fps", ["inf", "0", "nan", "-5", "1e300"])

@@ -56,7 +56,6 @@ def track_video(
     video: str | Path,
     out_csv: str | Path,
     marker_positions_m: Optional[Sequence[Sequence[float]]] = None,
-    timestamps_s: Optional[Sequence[float]] = None,
     fps: Optional[float] = None,
     tracker: Optional[TipTracker] = None,
     calibration: Optional[AffineCalibration] = None,
@@ -64,18 +63,14 @@ def track_video(
     progress: bool = False,
 ) -> np.ndarray:
     """Track every frame of a video file (and the hub marker if ``track_hub``) into ``out_csv``, replaced only
-    once the whole video is tracked; missing timestamps, frame rate and markers come from its sidecar."""
+    once the whole video is tracked; timestamps, and a missing frame rate and markers, come from its sidecar."""
     video, out_csv = Path(video), Path(out_csv)
     fps = None if fps is None else check_fps("fps", fps)
     _check_output_path(out_csv, video)
     check_regular_file(video, "video")
     sidecar = read_sidecar(video)
     marker_positions_m = sidecar.get("markers_m") if marker_positions_m is None else marker_positions_m
-    stamps = sidecar.get("timestamps_s") if timestamps_s is None else timestamps_s
-    if stamps is not None:
-        stamps = np.asarray(stamps, dtype=float)
-        if stamps.ndim != 1 or not np.all(np.isfinite(stamps)):
-            raise ValueError("timestamps_s must be a 1-D sequence of finite times [s]")
+    stamps = sidecar.get("timestamps_s")  # checked finite by read_sidecar
     capture = cv2.VideoCapture(str(video))
     if not capture.isOpened():
         raise ValueError(f"video {video} cannot be opened by OpenCV")

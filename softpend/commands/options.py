@@ -22,7 +22,7 @@ def add_command(
     parser = subparsers.add_parser(name, help=help, **kw)
     for flag, limits, keywords in options:
         if limits is not None:
-            keywords = dict(keywords, type=_ranged(keywords["type"], flag, *limits))
+            keywords = dict(keywords, type=ranged(keywords["type"], flag, *limits))
         parser.add_argument(flag, **keywords)
     parser.set_defaults(func=run)
     return parser
@@ -36,7 +36,7 @@ def add_target(parser: argparse.ArgumentParser, flag: str = "--port") -> None:
     target.add_argument(flag, metavar=flag[2:].upper().replace("PORT", "PATH"), help=text)
 
 
-def _ranged(kind: type, flag: str, low: float, high: float) -> Callable[[str], Any]:
+def ranged(kind: type, flag: str, low: float, high: float) -> Callable[[str], Any]:
     def parse(text: str) -> Any:
         from softpend.checks import in_range
 
@@ -79,18 +79,6 @@ def assignment(text: str) -> tuple[str, Any]:
 def set_option(help: str, dest: str = "overrides", flag: str = "--set") -> Option:
     """The repeatable ``flag NAME=VALUE``: ``args.<dest>`` lists the ``(NAME, value)`` pairs (VALUE as JSON, else text)."""
     return (flag, None, dict(action="append", default=[], type=assignment, metavar="NAME=VALUE", dest=dest, help=help))
-
-
-def check_numbers(args: argparse.Namespace, limits: dict[str, tuple[float, float]]) -> None:
-    """``ValueError`` naming the flag unless each option of ``limits`` (flag -> ``(low, high)``) is None or lies in its
-    closed interval (each value of a list; NaN and infinities never do)."""
-    from softpend.checks import in_range
-
-    for flag, (low, high) in limits.items():
-        value = getattr(args, flag.lstrip("-").replace("-", "_"))
-        for item in value if isinstance(value, (list, tuple)) else [value]:
-            if item is not None:
-                in_range(flag, item, low, high)
 
 
 def camera_source(args: argparse.Namespace, tracker: Any = None) -> Any:

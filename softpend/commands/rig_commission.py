@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from softpend.commands.options import MAX_SESSION_S, check_numbers
+from softpend.commands.options import MAX_SESSION_S, Option, add_command, ranged
 
 #: The controller classes (:data:`softpend.study.commission.CLASSES`, named here so the CLI starts without it).
 CLASSES = ("swingup", "dqn", "mbpo", "pilco")
@@ -27,32 +27,33 @@ CONFIG_OPTIONS: dict[str, tuple[float, float, str]] = {
     "verify_starts": (1, 1000, "fresh twin starts per condition (10)"),
     "verify_duration_s": (1e-3, MAX_SESSION_S, "length of a twin start [s] (10)"),
 }
-#: The closed interval of each numeric option, checked before anything starts.
-OPTION_RANGES: dict[str, tuple[float, float]] = {
-    "--twin-seed": (0, 2**63 - 1),
-    **{f"--{name.replace('_', '-')}": (low, high) for name, (low, high, _) in CONFIG_OPTIONS.items()},
-}
 
 
 def register(actions: argparse._SubParsersAction) -> None:
-    parser = actions.add_parser(
-        "commission",
-        help="commission an unknown rod on the twin: excite, identify, design swing-up + LQR, train DQN, DQN-MBPO "
-        "and PILCO, verify, report",
-        description=__doc__.split("\n\n")[0],
+    help = (
+        "commission an unknown rod on the twin: excite, identify, design swing-up + LQR, train DQN, DQN-MBPO and "
+        "PILCO, verify, report"
     )
+    default = "a run folder of LEARNER (dqn, mbpo, pilco) trained for the default rod, verified beside (repeatable)"
+    options: list[Option] = [
+        ("--out", None, dict(required=True, metavar="DIR", help="folder of the stages' outputs and report.json")),
+        *(
+            (f"--{name.replace('_', '-')}", (low, high), dict(type=float if name.endswith("_s") else int, help=text))
+            for name, (low, high, text) in CONFIG_OPTIONS.items()
+        ),
+        (
+            "--controllers",
+            None,
+            dict(nargs="+", choices=CLASSES, default=list(CLASSES), help="controller classes (default: all)"),
+        ),
+        ("--default-run", None, dict(nargs=2, action="append", default=[], metavar=("LEARNER", "DIR"), help=default)),
+        ("--json", None, dict(action="store_true", help="print the report as JSON")),
+    ]
+    parser = add_command(actions, "commission", help, options, run, description=__doc__.split("\n\n")[0])
     rod = parser.add_mutually_exclusive_group(required=True)
     rod.add_argument("--twin-rod", metavar="FILE", help="the twin's rod: a rod JSON (optional torque_gain)")
-    rod.add_argument("--twin-seed", type=int, metavar="N", help="the twin's rod: an unknown rod drawn from seed N")
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder of the stages' outputs and report.json")
-    for name, (_, _, text) in CONFIG_OPTIONS.items():
-        parser.add_argument(f"--{name.replace('_', '-')}", type=float if name.endswith("_s") else int, help=text)
-    classes = "controller classes to commission (default: all)"
-    parser.add_argument("--controllers", nargs="+", choices=CLASSES, default=list(CLASSES), help=classes)
-    default = "a run folder of LEARNER (dqn, mbpo, pilco) trained for the default rod, verified beside (repeatable)"
-    parser.add_argument("--default-run", nargs=2, action="append", default=[], metavar=("LEARNER", "DIR"), help=default)
-    parser.add_argument("--json", action="store_true", help="print the report as JSON")
-    parser.set_defaults(func=run)
+    seed = ranged(int, "--twin-seed", 0, 2**63 - 1)
+    rod.add_argument("--twin-seed", type=seed, metavar="N", help="the twin's rod: an unknown rod drawn from seed N")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.commission import CommissionConfig, commission
     from softpend.study.twin_side import TwinTruth
 
-    check_numbers(args, OPTION_RANGES)
     if args.twin_rod is not None:  # its kind only: the file is read on the twin's side, never here
         if not os.path.exists(args.twin_rod):
             raise ValueError(f"--twin-rod {args.twin_rod}: no such file")

@@ -111,19 +111,12 @@ class GreyBoxResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; its ``rod_params`` is what :meth:`RodParams.from_json` reads."""
-        return {
-            "schema": IDENTIFICATION_SCHEMA,
-            "rod_params": self.params.to_dict(),
-            "estimates": dict(self.estimates),
-            "std": dict(self.std),
-            "calibration": {name: getattr(self, name) for name in CALIBRATION_PARAMETERS},
-            "fit": {
-                "method": "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)",
-                **{f.name: getattr(self, f.name) for f in fields(self)[4:-1]},  # residual_rms_rad to message
-                "at_bounds": list(self.at_bounds),
-                "initial_params": self.initial_params.to_dict(),
-            },
-        }
+        method = "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)"
+        fit = {"method": method} | {f.name: getattr(self, f.name) for f in fields(self)[4:-1]}  # rms to message
+        fit |= {"at_bounds": list(self.at_bounds), "initial_params": self.initial_params.to_dict()}
+        out = {"schema": IDENTIFICATION_SCHEMA, "rod_params": self.params.to_dict(), "estimates": dict(self.estimates)}
+        calibration = {name: getattr(self, name) for name in CALIBRATION_PARAMETERS}
+        return out | {"std": dict(self.std), "calibration": calibration, "fit": fit}
 
 
 def _observed(dataset: TrajectoryDataset) -> tuple[list[str], np.ndarray]:

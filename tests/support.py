@@ -69,3 +69,17 @@ kernelspec:
   name: python3
 {extra}---
 """
+
+
+def gp_predict(gp, x):
+    """Posterior mean and variance (M, E) of a :class:`~softpend.pilco.gp.MultiOutputGP`'s latent function at
+    deterministic inputs ``x`` (M, D): what the tests sample the moment-matched predictions against."""
+    import numpy as np
+    import torch
+
+    xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=torch.float64)
+    with torch.no_grad():
+        ks = [gp._kernel(xt, gp.inputs, a) for a in range(gp.n_outputs)]
+        means = [k @ gp.beta[a] for a, k in enumerate(ks)]
+        variances = [torch.exp(gp.log_signal_var[a]) - ((k @ gp.inv_kernel[a]) * k).sum(1) for a, k in enumerate(ks)]
+    return torch.stack(means, 1).numpy(), torch.clamp(torch.stack(variances, 1), min=0.0).numpy()

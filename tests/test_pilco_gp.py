@@ -5,10 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from support import gp_predict
 
 from softpend.pilco.gp import MultiOutputGP, select_subset
 
 torch.set_num_threads(1)
+
+
+def _moments(gp: MultiOutputGP, mean: torch.Tensor, cov: torch.Tensor):
+    function, parameters = gp.moment_function()
+    return function(mean, cov, *parameters)
 
 
 def _data(n: int, noise_std: float, seed: int):
@@ -23,7 +29,7 @@ def test_gp_fit_recovers_a_known_function():
     gp = MultiOutputGP(x, y_noisy)
     gp.fit(80)
     x_test, y_true, _ = _data(300, 0.0, seed=1)
-    mean, var = gp.predict(x_test)
+    mean, var = gp_predict(gp, x_test)
     rmse = np.sqrt(np.mean((mean - y_true) ** 2, axis=0))
     assert np.all(rmse < 0.1), rmse  # signal std is about 0.8 and 0.9
     # calibrated: the errors are of the size of the predicted standard deviation
@@ -39,9 +45,9 @@ def test_fit_beats_the_initial_guess_and_noise_free_data_stays_well_posed():
     x, y, _ = _data(80, 0.0, seed=2)
     gp = MultiOutputGP(x, y)
     x_test, y_true, _ = _data(200, 0.0, seed=3)
-    before = np.sqrt(np.mean((gp.predict(x_test)[0] - y_true) ** 2))
+    before = np.sqrt(np.mean((gp_predict(gp, x_test)[0] - y_true) ** 2))
     gp.fit(80)
-    after = np.sqrt(np.mean((gp.predict(x_test)[0] - y_true) ** 2))
+    after = np.sqrt(np.mean((gp_predict(gp, x_test)[0] - y_true) ** 2))
     assert after < 0.5 * before
     # the signal-to-noise penalty keeps sf/sn at most about 500 even without noise in the data
     h = gp.hyperparameters
@@ -66,15 +72,15 @@ def test_fitc_on_the_training_data_is_the_exact_gp(noise_std):
     gp = MultiOutputGP(x, y_noisy)
     gp.fit(60)
     x_test = x[:30] + 0.1
-    mean0, var0 = gp.predict(x_test)
+    mean0, var0 = gp_predict(gp, x_test)
     mu = torch.tensor([0.3, -0.2, 0.1], dtype=torch.float64)
-    moments0 = [gp.moments(mu, scale * torch.eye(3, dtype=torch.float64)) for scale in (0.01, 0.3)]
+    moments0 = [_moments(gp, mu, scale * torch.eye(3, dtype=torch.float64)) for scale in (0.01, 0.3)]
     gp.condition_on(x, y_noisy)
-    mean1, var1 = gp.predict(x_test)
+    mean1, var1 = gp_predict(gp, x_test)
     np.testing.assert_allclose(mean1, mean0, atol=1e-4 * np.abs(mean0).max())
     np.testing.assert_allclose(var1, var0, rtol=0.05, atol=1e-3 * var0.max())
     for scale, (m0, s0, c0) in zip((0.01, 0.3), moments0):
-        m1, s1, c1 = gp.moments(mu, scale * torch.eye(3, dtype=torch.float64))
+        m1, s1, c1 = _moments(gp, mu, scale * torch.eye(3, dtype=torch.float64))
         np.testing.assert_allclose(m1.numpy(), m0.numpy(), atol=1e-5)
         np.testing.assert_allclose(s1.numpy(), s0.numpy(), atol=1e-5)
         np.testing.assert_allclose(c1.numpy(), c0.numpy(), atol=1e-4)
@@ -86,9 +92,9 @@ def test_fitc_on_all_data_predicts_better_than_the_subset_and_stays_calibrated()
     gp = MultiOutputGP(x[subset], y_noisy[subset])
     gp.fit(60)
     x_test, y_true, _ = _data(400, 0.0, seed=5)
-    mean_subset, var_subset = gp.predict(x_test)
+    mean_subset, var_subset = gp_predict(gp, x_test)
     gp.condition_on(x, y_noisy)
-    mean_all, var_all = gp.predict(x_test)
+    mean_all, var_all = gp_predict(gp, x_test)
     rmse_subset = np.sqrt(np.mean((mean_subset - y_true) ** 2, axis=0))
     rmse_all = np.sqrt(np.mean((mean_all - y_true) ** 2, axis=0))
     assert np.all(rmse_all < 0.8 * rmse_subset), (rmse_all, rmse_subset)
@@ -104,8 +110,6 @@ def test_bad_inputs_raise_value_errors():
     with pytest.raises(ValueError, match="finite"):
         MultiOutputGP(np.full((5, 2), np.nan), np.zeros((5, 1)))
     gp = MultiOutputGP(np.random.default_rng(0).normal(size=(5, 2)), np.zeros((5, 1)))
-    with pytest.raises(ValueError, match="columns"):
-        gp.predict(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="inputs must be"):
         gp.condition_on(np.zeros((8, 3)), np.zeros((8, 1)))
     with pytest.raises(ValueError, match="finite"):

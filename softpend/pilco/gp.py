@@ -179,26 +179,8 @@ class MultiOutputGP:
         d = (x1.unsqueeze(1) - x2.unsqueeze(0)) / ell
         return torch.exp(self.log_signal_var[a] - 0.5 * torch.sum(d * d, dim=2))
 
-    def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Posterior mean and variance of the latent function at deterministic inputs ``x`` (M, D)."""
-        xt = torch.as_tensor(np.atleast_2d(np.asarray(x, dtype=float)), dtype=DTYPE)
-        if xt.shape[1] != self.n_inputs:
-            raise ValueError(f"x must have {self.n_inputs} columns, got {xt.shape[1]}")
-        means, variances = [], []
-        with torch.no_grad():
-            for a in range(self.n_outputs):
-                ks = self._kernel(xt, self.inputs, a)
-                means.append(ks @ self.beta[a])
-                variances.append(torch.exp(self.log_signal_var[a]) - torch.sum((ks @ self.inv_kernel[a]) * ks, dim=1))
-        return torch.stack(means, 1).numpy(), torch.clamp(torch.stack(variances, 1), min=0.0).numpy()
-
-    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Exact moment matching at a Gaussian input, with model uncertainty (see :func:`~softpend.pilco.moments.gp_moments`)."""
-        function, parameters = self.moment_function()
-        return function(mean, cov, *parameters)
-
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
-        """:meth:`moments` as a pure function and its arguments after ``(mean, cov)`` (see
-        :meth:`softpend.pilco.policy.RBFPolicy.moment_function`)."""
+        """Exact moment matching at a Gaussian input, with model uncertainty, as a pure function and its arguments
+        after ``(mean, cov)`` (see :func:`~softpend.pilco.moments.gp_moments`)."""
         kernel = (self.log_lengthscales, self.log_signal_var, self.inv_kernel, self.pair_weights)
         return gp_moments, (self.inputs, self.beta, *kernel)

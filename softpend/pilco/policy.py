@@ -74,12 +74,9 @@ class _Policy:
         return torque if np.ndim(x) == 2 else torque[:1].reshape(())
 
     def moment_function(self) -> tuple[Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]], tuple]:
+        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input: a pure function
+        and its arguments after ``(mean, cov)``."""
         raise NotImplementedError
-
-    def moments(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Mean, variance and ``cov^{-1} cov(x, u)`` (D,) of the saturated torque at a Gaussian input."""
-        function, parameters = self.moment_function()
-        return function(mean, cov, *parameters)
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {name: p.detach().clone() for name, p in zip(self._PARAMS, self.parameters())}

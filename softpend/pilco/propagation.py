@@ -120,14 +120,6 @@ class Propagator:
             torch.tensor(self.cost_width_m / (self.cost_rate_width_rad_s or 1.0), dtype=DTYPE),
         )
 
-    def step(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Distribution of the next state given ``x_t ~ N(m, s)`` under the current policy."""
-        return _step(self._layout, self.policy.moment_function(), self.dynamics.moment_function(), m, s)
-
-    def cost(self, m: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Expected saturating cost and its variance for ``x ~ N(m, s)``."""
-        return _cost(self._layout, self._cost_terms, m, s)
-
     def rollout(
         self, m0: torch.Tensor, s0: torch.Tensor, n_steps: int
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -33,6 +33,7 @@ from softpend.study.build_rig import (
     motor_rows,
 )
 from softpend.study.figures.rig_design import draw_rig_design
+from softpend.vision.camera import DEFAULT_MARKERS_M
 
 #: A dry run's budget: a few seconds per real-time run.
 QUICK_BUDGET = BuildBudget(babble_s=8.0, trial_length_s=2.0, max_epochs=5, control_s=4.0)
@@ -56,7 +57,7 @@ def test_the_drawing_changes_with_a_set_override_of_the_rod_length():
     a, b = rig_design(default), rig_design(longer)
     assert b.beam_length_m - a.beam_length_m == pytest.approx(0.1)
     # the longer rod pushes the markers and the field of view out, keeping the markers clear and in view
-    assert a.marker_scale == 1.0 and b.marker_scale > 1.0
+    assert np.array_equal(a.markers_m, DEFAULT_MARKERS_M) and np.all(abs(b.markers_m) > abs(a.markers_m))
     for design in (a, b):
         assert design.min_marker_gap_m > 0 and design.markers_in_view() and design.swing_in_view()
     assert b.camera_model.px_per_m < a.camera_model.px_per_m

@@ -86,7 +86,6 @@ class RigDesign:
     keep_out_radius_m: float
     flag_length_m: float
     markers_m: np.ndarray = field(repr=False)
-    marker_scale: float
     camera_model: CameraModel
     camera_distance_m: float
     hub: HubSpec
@@ -203,7 +202,6 @@ def rig_design(params: Optional[RodParams] = None, print_modulus_pa: Optional[fl
         keep_out_radius_m=swing + hub.keep_out_margin_m,
         flag_length_m=hub.hub_marker_radius_m + hub.hub_marker_dot_radius_m + 0.003,
         markers_m=default_markers * scale,
-        marker_scale=scale,
         camera_model=model,
         camera_distance_m=fov_width / (2.0 * math.tan(math.radians(camera.horizontal_fov_deg) / 2.0)),
         hub=hub,

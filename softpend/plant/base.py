@@ -3,6 +3,7 @@ solver: one system stepped ``dt_s`` at a time by the implicit (generalized-alpha
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from abc import abstractmethod
@@ -69,7 +70,7 @@ class PlantBase:
     refinements: tuple[int, ...] = (1,)
     #: Whether a restart zeroes the accelerations and algebraic coordinates.
     zero_rest = False
-    #: Load steps tried in turn and Newton tolerance of :meth:`solve_static`.
+    #: Load steps tried in turn and Newton tolerance of :meth:`static_equilibrium`.
     static_load_steps: tuple[int, ...] = (20,)
     static_tolerance = 1e-12
 
@@ -149,25 +150,6 @@ class PlantBase:
         data.SetODE2Coordinates_tt(coordinates=data.GetODE2Coordinates_tt(), configuration=initial)
         self.time_s += self.dt_s
 
-    def solve_static(self) -> None:
-        """Static equilibrium under gravity, springs and the current loads (the first of ``static_load_steps`` that
-        converges), made the resting state."""
-        start = np.array(self._data.GetODE2Coordinates())
-        ok = False
-        for steps in self.static_load_steps:
-            try:
-                settings = static_solver_settings(steps, self.static_tolerance)
-                ok = exu.SolveStatic(self._mbs, settings, updateInitialValues=True)
-            except Exception:  # Exudyn raises on e.g. singular Jacobians
-                ok = False
-            if ok:
-                break
-            self._set_coordinates(start, np.zeros(start.size))
-        if not ok:
-            raise SolverFailure("Exudyn static solver did not converge")
-        c = np.array(self._data.GetODE2Coordinates())
-        self._set_coordinates(c, np.zeros(c.size))
-
     def _init_common(
         self, params: Optional[RodParams], dt_s: float, substeps: int, hub_locked_at_rad: Optional[float]
     ) -> Any:
@@ -241,10 +223,21 @@ class PlantBase:
         return self.observe()
 
     def static_equilibrium(self) -> Observation:
-        """Solve for static equilibrium at zero torque from the current state and make it the current state."""
+        """Static equilibrium at zero torque from the current state (the first of ``static_load_steps`` that
+        converges), made the resting and current state."""
         self.last_torque_nm = 0.0
         self._set_torque(0.0)
-        self.solve_static()
+        start = np.array(self._data.GetODE2Coordinates())
+        for steps in self.static_load_steps:
+            settings = static_solver_settings(steps, self.static_tolerance)
+            with contextlib.suppress(Exception):  # Exudyn raises on e.g. singular Jacobians
+                if exu.SolveStatic(self._mbs, settings, updateInitialValues=True):
+                    break
+            self._set_coordinates(start, np.zeros(start.size))
+        else:
+            raise SolverFailure("Exudyn static solver did not converge")
+        c = np.array(self._data.GetODE2Coordinates())
+        self._set_coordinates(c, np.zeros(c.size))
         return self.observe()
 
 

@@ -98,10 +98,8 @@ def cantilever_free_vibration(
     duration_s = 6.0 / float(theory[0]) if 1 in modes else 6.0 / float(np.min(theory))
     length = params.length_m
     amplitude = length / 500.0  # of each mode at the tip
-    kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0)
-    if plant == "beam":
-        kwargs["newton_relative_tolerance"] = 1e-10
-    sim = make_plant(plant, **kwargs, **resolution_kwargs)
+    kwargs = dict(params=params, dt_s=dt_s, substeps=1, hub_locked_at_rad=0.0, spectral_radius=1.0, **resolution_kwargs)
+    sim = make_plant(plant, **kwargs, **({"newton_relative_tolerance": 1e-10} if plant == "beam" else {}))
 
     def shape(s, k):  # k = 0: the lateral deflection, 1: its slope
         return sum(0.5 * amplitude * euler_bernoulli_mode_shape(m, s / length)[k] / (length if k else 1) for m in modes)
@@ -110,8 +108,7 @@ def cantilever_free_vibration(
     n_steps = int(round(duration_s / dt_s))
     tip = np.array([sim.observe().ex_m] + [sim.step(0.0).ex_m for _ in range(n_steps)])
     time = np.arange(n_steps + 1) * dt_s
-    measured = fit_modal_frequencies_hz(time, tip, theory)
-    return FreeVibration(plant, resolution, time, tip, measured, theory)
+    return FreeVibration(plant, resolution, time, tip, fit_modal_frequencies_hz(time, tip, theory), theory)
 
 
 def _fft_peak_hz(time_s: np.ndarray, signal: np.ndarray, band_hz: tuple[float, float]) -> float:

@@ -168,8 +168,8 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     assert [r["condition"] for r in swingup["verification"]] == ["nominal", "harsh"]
     # the controller designed on the default rod, from the same fresh starts of the same twin, beside it
     assert [(r["condition"], r["controller"]) for r in swingup["default_rod_verification"]] == [
-        ("nominal", commission_module.DEFAULT_ROD_CONTROLLER),
-        ("harsh", commission_module.DEFAULT_ROD_CONTROLLER),
+        ("nominal", "energy swing-up + LQR (observations), default rod"),
+        ("harsh", "energy swing-up + LQR (observations), default rod"),
     ]
     assert {r["controller"] for r in swingup["verification"]} == {commission_module.CONTROLLER}
     for name, entry in classes.items():

@@ -51,8 +51,6 @@ VERIFY_SEED_OFFSET = 1_000_000_000
 CLASS_NAMES = {"swingup": "energy swing-up + LQR (observations)", "dqn": "DQN", "mbpo": "DQN-MBPO", "pilco": "PILCO"}
 #: Label of the commissioned swing-up + LQR.
 CONTROLLER = f"{CLASS_NAMES['swingup']}, identified rod"
-#: Label of the same controller designed on the default rod (what a user gets without commissioning), verified beside.
-DEFAULT_ROD_CONTROLLER = f"{CLASS_NAMES['swingup']}, default rod"
 SETTINGS_FILE = "commission.json"
 
 
@@ -107,14 +105,7 @@ class CommissionConfig:
             learners[name]["episodes"] = int_at_least(f"learners.{name}.episodes", learners[name]["episodes"], 1)
         object.__setattr__(self, "learners", learners)
         object.__setattr__(self, "default_rod_runs", dict(self.default_rod_runs))
-        for name in (
-            "excite_s",
-            "trial_length_s",
-            "window_s",
-            "check_duration_s",
-            "uncertainty_scale",
-            "verify_duration_s",
-        ):
+        for name in "excite_s trial_length_s window_s check_duration_s uncertainty_scale verify_duration_s".split():
             positive(name, getattr(self, name))
         for name, low, high in (("peak_fraction", 1e-3, 1), ("noise_std_fraction", 1e-3, 1), ("band_high_hz", 0.5, 20)):
             in_range(name, getattr(self, name), low, high)
@@ -319,12 +310,8 @@ def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) 
         for _, (seeded, run_dir) in pilco_jobs(config, [seed], root):
             run_and_save(seeded, run_dir, progress=False)
         result = PilcoResult.load(folder)
-        figures = {
-            "trials": len(result.records),
-            "simulator_s": result.plant_seconds_total,
-            "balanced": math.isfinite(result.real_seconds_to_balance),
-            "wall_s": result.train_wall_s,
-        }
+        figures = {"trials": len(result.records), "simulator_s": result.plant_seconds_total}
+        figures |= {"balanced": math.isfinite(result.real_seconds_to_balance), "wall_s": result.train_wall_s}
     else:
         for _, (algo, settings, run_seed, budget, run_dir, resume) in rl_jobs(
             [(learner, config, [seed], episodes)], root
@@ -332,12 +319,8 @@ def _train_one(learner: str, config: Any, seed: int, episodes: int, root: Path) 
             train_run(algo, settings, run_seed, budget, run_dir, resume, progress=False)
         log = TrainingLog.load(folder / "log.json")
         rows = log.episodes[-1:] + log.evaluations[-1:]
-        figures = {
-            "episodes": log.n_episodes,
-            "simulator_s": log.plant_s,
-            "balanced": log.stop_reason is not None,
-            "wall_s": max((float(r.get("wall_s", 0.0)) for r in rows), default=0.0),
-        }
+        figures = {"episodes": log.n_episodes, "simulator_s": log.plant_s, "balanced": log.stop_reason is not None}
+        figures["wall_s"] = max((float(r.get("wall_s", 0.0)) for r in rows), default=0.0)
     return {"folder": str(folder.relative_to(root.parent)), **figures}
 
 
@@ -490,13 +473,8 @@ def commission_table(reports: Sequence[dict]) -> list[dict]:
     for report in reports:
         max_error_pct = 100.0 * max(identification_errors(report))
         for name, entry in report["classes"].items():
-            row = {
-                "rod": report["twin"]["seed"],
-                "controller": CLASS_NAMES[name],
-                "plant_s": entry["plant_s"],
-                "simulator_s": entry["simulator_s"],
-                "max_error_pct": max_error_pct,
-            }
+            row = {"rod": report["twin"]["seed"], "controller": CLASS_NAMES[name], "plant_s": entry["plant_s"]}
+            row |= {"simulator_s": entry["simulator_s"], "max_error_pct": max_error_pct}
             for prefix, key in (("commissioned", "verification"), ("default_rod", "default_rod_verification")):
                 row.update({f"{prefix}_{condition}": "not run" for condition in CONDITIONS})
                 for summary in entry[key] or []:

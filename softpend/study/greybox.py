@@ -128,9 +128,7 @@ def model_quality(
 
 
 def closed_loop_usefulness(
-    identified: Mapping[str, RodParams],
-    task: Task = Task(),
-    seeds: Optional[Sequence[int]] = None,
+    identified: Mapping[str, RodParams], task: Task = Task(), seeds: Optional[Sequence[int]] = None
 ) -> list[dict[str, Any]]:
     """LQR (from 0.2 rad) and energy swing-up + LQR (from hanging) designed on each of ``identified`` and on
     ``task.rod``, on the true plant from ``seeds``: one row per design and start."""

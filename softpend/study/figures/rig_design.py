@@ -189,11 +189,7 @@ def draw_tracked_frame(
 
 
 def draw_filmstrip(
-    frames,
-    n_frames: int = 8,
-    span_s: Optional[float] = None,
-    centre_px=None,
-    half_width_px: Optional[float] = None,
+    frames, n_frames: int = 8, span_s: Optional[float] = None, centre_px=None, half_width_px: Optional[float] = None
 ):
     """A figure of ``n_frames`` of ``frames`` (``(time_s, frame_bgr, detection)``) evenly spaced up to ``span_s``,
     with the tracker's overlay, cropped to ``half_width_px`` around ``centre_px`` if given."""

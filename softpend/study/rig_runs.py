@@ -111,17 +111,10 @@ def _row(
     condition: str, controller: str, seed: int, metrics: Mapping[str, Any], chatter: float, stop: Optional[str]
 ) -> dict[str, Any]:
     success = bool(metrics.get("success", False)) and stop is None
-    return {
-        "condition": condition,
-        "controller": controller,
-        "seed": int(seed),
-        "success": success,
-        "swing_up_time_s": float(metrics.get("swing_up_time_s", math.inf)),
-        "upright_std_rad": float(metrics.get("upright_std_rad", math.nan)),
-        "peak_torque_nm": float(metrics.get("peak_torque_nm", math.nan)),
-        "torque_chatter_nm_per_s": float(chatter),
-        "stop": stop if stop is not None else "",
-    }
+    row = {"condition": condition, "controller": controller, "seed": int(seed), "success": success}
+    for key, missing in (("swing_up_time_s", math.inf), ("upright_std_rad", math.nan), ("peak_torque_nm", math.nan)):
+        row[key] = float(metrics.get(key, missing))
+    return row | {"torque_chatter_nm_per_s": float(chatter), "stop": stop if stop is not None else ""}
 
 
 def twin_start(
@@ -299,14 +292,10 @@ def step_time_figures(step_ms: Sequence[float], control_period_s: float) -> dict
     period [ms], and the fraction of calls longer than the period (NaN statistics for no call)."""
     ms = np.asarray(step_ms, dtype=float)
     stats = np.percentile(ms, [50, 95, 100]) if ms.size else np.full(3, math.nan)
-    return {
-        "steps_timed": int(ms.size),
-        "step_ms_median": float(stats[0]),
-        "step_ms_p95": float(stats[1]),
-        "step_ms_max": float(stats[2]),
-        "control_period_ms": float(control_period_s) * 1e3,
-        "steps_over_period": float(np.mean(ms > control_period_s * 1e3)) if ms.size else math.nan,
-    }
+    names = ("step_ms_median", "step_ms_p95", "step_ms_max")
+    figures = {"steps_timed": int(ms.size)} | dict(zip(names, map(float, stats)))
+    over = float(np.mean(ms > control_period_s * 1e3)) if ms.size else math.nan
+    return figures | {"control_period_ms": float(control_period_s) * 1e3, "steps_over_period": over}
 
 
 def planner_twin_figures(
@@ -330,10 +319,5 @@ def planner_twin_figures(
             for seed in seeds:
                 rows.append(twin_start(timed, PLANNER, task, condition, seed, duration_s, Path(tmp) / str(seed)))
                 step_ms += timed.step_ms
-    return {
-        "starts": len(rows),
-        "successes": summary_rows(rows)[0]["successes"],
-        "plant_s": result.plant_seconds,
-        **step_time_figures(step_ms, task.dt_s),
-        "rows": rows,
-    }
+    figures = {"starts": len(rows), "successes": summary_rows(rows)[0]["successes"], "plant_s": result.plant_seconds}
+    return figures | step_time_figures(step_ms, task.dt_s) | {"rows": rows}

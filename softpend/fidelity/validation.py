@@ -135,10 +135,7 @@ def fit_modal_frequencies_hz(time_s: np.ndarray, signal: np.ndarray, centres_hz:
     from the largest FFT peak within bands cut half-way between neighbouring centres)."""
     from scipy.optimize import least_squares
 
-    t = np.asarray(time_s, dtype=float)
-    y = np.asarray(signal, dtype=float)
-    if t.shape != y.shape or t.ndim != 1 or len(t) < 16:
-        raise ValueError("time_s and signal must be 1-D arrays of the same length (>= 16 samples)")
+    t, y = np.asarray(time_s, dtype=float), np.asarray(signal, dtype=float)
     centres = np.sort(np.asarray(centres_hz, dtype=float))
     lows = [centres[0] / 2] + [math.sqrt(a * b) for a, b in zip(centres[:-1], centres[1:])]
     highs = lows[1:] + [centres[-1] * 2]

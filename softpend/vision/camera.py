@@ -207,16 +207,8 @@ class SyntheticCamera:
         """Frames (and true tip pixels) at ``frame_times_s`` of a trajectory sampled at increasing ``times_s``:
         link points ``(T, n + 1, 2)`` [m] and optional hub angles ``(T,)``, linear in between."""
         times_s = np.asarray(times_s, dtype=float)
-        link_points_m = np.asarray(link_points_m, dtype=float)
-        if link_points_m.ndim != 3 or link_points_m.shape[0] != len(times_s) or link_points_m.shape[2] != 2:
-            raise ValueError(f"link_points_m must have shape (len(times_s), n + 1, 2), got {link_points_m.shape}")
-        if len(times_s) < 2 or np.any(np.diff(times_s) <= 0):
-            raise ValueError("times_s must be increasing with at least 2 samples")
-        flat = link_points_m.reshape(len(times_s), -1)
-        if hub_angles_rad is not None:
-            hub_angles_rad = np.asarray(hub_angles_rad, dtype=float)
-            if hub_angles_rad.shape != times_s.shape:
-                raise ValueError(f"hub_angles_rad must have shape {times_s.shape}, got {hub_angles_rad.shape}")
+        flat = np.asarray(link_points_m, dtype=float).reshape(len(times_s), -1)
+        hub_angles_rad = None if hub_angles_rad is None else np.asarray(hub_angles_rad, dtype=float)
 
         def sample(t: float) -> tuple[np.ndarray, Optional[float]]:
             i = int(np.clip(np.searchsorted(times_s, t) - 1, 0, len(times_s) - 2))

@@ -119,7 +119,7 @@ def test_stalled_host_trips_the_watchdog(rig):
 
 def test_garbled_link_raises_clear_error_and_stops_motor(rig):
     r = rig(garble_probability=1.0)
-    link = link_to(r, max_consecutive_bad_frames=3)
+    link = link_to(r)
     link.open()  # the handshake reply is not garbled (only STATE frames are)
     link.send_torque(0.03)
     with pytest.raises(LinkChecksumError, match="3 consecutive bad frames.*motor stopped"):
@@ -131,7 +131,9 @@ def test_garbled_link_raises_clear_error_and_stops_motor(rig):
 
 def test_isolated_garbled_frames_are_counted_not_fatal(rig, tmp_path):
     r = rig(garble_probability=0.15, drop_probability=0.1, seed=3)
-    with link_to(r, max_consecutive_bad_frames=4) as link, SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
+    link = link_to(r)
+    link.max_consecutive_bad_frames = 4
+    with link, SampleLog(tmp_path / "log.csv", LOOP_LOG_COLUMNS) as log:
         result = run_control_loop(link, lambda obs, t: 0.01, duration_s=0.6, log=log)
     assert result.bad_frames > 0 and result.dropped_states > 0
     assert len(read_sample_log(tmp_path / "log.csv")) == result.samples

@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from softpend.checks import positive, positive_int
+from softpend.checks import positive
 from softpend.hardware import protocol as proto
 from softpend.hardware.clock import WALL_CLOCK
 
@@ -116,14 +116,15 @@ def _install_exit_hooks() -> None:
 
 class MotorLink:
     """A session with the motor controller on the serial port ``port`` (or the open transport ``serial``, timed
-    by its ``clock``); ``max_consecutive_bad_frames`` bad frames in a row raise :class:`LinkChecksumError`."""
+    by its ``clock``); :attr:`max_consecutive_bad_frames` bad frames in a row raise :class:`LinkChecksumError`."""
+
+    max_consecutive_bad_frames = 3
 
     def __init__(
         self,
         port: str,
         torque_limit_nm: float,
         timeout_s: float = 0.25,
-        max_consecutive_bad_frames: int = 3,
         install_exit_hooks: bool = True,
         serial=None,
     ) -> None:
@@ -132,7 +133,6 @@ class MotorLink:
         self.port, self.install_exit_hooks, self._transport = port, install_exit_hooks, serial
         self.host_torque_limit_nm = positive("torque_limit_nm", torque_limit_nm)
         self.timeout_s = positive("timeout_s", timeout_s)
-        self.max_consecutive_bad_frames = positive_int("max_consecutive_bad_frames", max_consecutive_bad_frames)
         self.clock = getattr(serial, "clock", None) or WALL_CLOCK
         self.device: Optional[DeviceInfo] = None
         self._serial = None

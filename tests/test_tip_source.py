@@ -50,7 +50,9 @@ def test_synthetic_live_camera_stamps_frames_with_their_capture_time():
     assert len(measurements) == math.floor((1.2 - exposure - 0.02) * 60) + 1
     captures = np.array([m.capture_time_s for m in measurements])
     np.testing.assert_allclose(np.diff(captures), 1 / 60, rtol=1e-9)
-    np.testing.assert_allclose([m.age_s for m in measurements], 0.02 + exposure / 2, rtol=1e-9)
+    np.testing.assert_allclose(
+        [m.delivered_time_s - m.capture_time_s for m in measurements], 0.02 + exposure / 2, rtol=1e-9
+    )
     seen = [m for m in measurements if not m.lost]
     errors = [np.hypot(*(rig.poses.pose_at(m.capture_time_s)[0][-1] - (m.x_m, m.y_m))) for m in seen]
     # the tip moves up to ~2 m/s: a stamp 10 ms off would show as ~2 cm; blur and noise leave ~1 mm

@@ -55,15 +55,10 @@ class CameraModel:
             raise ValueError(f"width_px and height_px must be >= 16, got {self.width_px}x{self.height_px}")
         positive("px_per_m", self.px_per_m)
 
-    def metre_to_pixel(self) -> np.ndarray:
-        """The 2x3 matrix ``pixel = M @ [x_m, y_m, 1]``."""
+    def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
         c, s = math.cos(self.roll_rad), math.sin(self.roll_rad)
         linear = self.px_per_m * np.array([[c, s], [s, -c]])  # R(roll) @ diag(1, -1)
-        return np.column_stack([linear, np.asarray(self.centre_px, dtype=float)])
-
-    def to_pixels(self, points_m: np.ndarray) -> np.ndarray:
-        m = self.metre_to_pixel()
-        return np.asarray(points_m, dtype=float) @ m[:, :2].T + m[:, 2]
+        return np.asarray(points_m, dtype=float) @ linear.T + np.asarray(self.centre_px, dtype=float)
 
 
 @dataclass(frozen=True)

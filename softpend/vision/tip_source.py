@@ -38,11 +38,6 @@ class TipMeasurement:
         """Tip angle from upright (NaN when lost) [rad]."""
         return float(tip_angle_rad(self.x_m, self.y_m)) if not self.lost else math.nan
 
-    @property
-    def age_s(self) -> float:
-        """Delivery minus capture time [s]."""
-        return self.delivered_time_s - self.capture_time_s
-
 
 class FrameTracker:
     """A :class:`TipTracker` and a pixel -> metre calibration (unless given, fitted on the first frame)."""
@@ -142,7 +137,7 @@ class ThreadedTipSource:
         measurement = TipMeasurement(x_m, y_m, bool(detection.lost), float(capture_time_s), int(index), delivered)
         self.counts["frames_tracked"] += 1
         self.counts["frames_lost"] += int(measurement.lost)
-        self._ages_s.append(measurement.age_s)
+        self._ages_s.append(delivered - measurement.capture_time_s)
         if self.on_frame is not None:
             self.on_frame(index, frame, detection, measurement)
         with self._lock:

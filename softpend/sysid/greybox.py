@@ -384,21 +384,14 @@ def _check_identifiable(names: tuple[str, ...], a: np.ndarray, s: np.ndarray, wh
     scale = float(diag.max(initial=0.0))
     for name, value in zip(names, diag):
         if not value > IDENTIFIABILITY_TOLERANCE * max(scale, 1e-300) or scale == 0.0:
-            raise NotIdentifiable(
-                name,
-                f"the dataset cannot identify {name} ({where}: the observations do not depend on it; "
-                "e.g. the torque does not excite it, or nothing moves)",
-            )
+            raise NotIdentifiable(name, f"the dataset cannot identify {name} ({where}: nothing observed depends on it)")
     norm = 1.0 / np.sqrt(diag)
     values, vectors = np.linalg.eigh(s * norm[:, None] * norm[None, :])
     if values[0] < IDENTIFIABILITY_TOLERANCE:
         worst = names[int(np.argmax(np.abs(vectors[:, 0])))]
         partners = [n for n, v in zip(names, vectors[:, 0]) if abs(v) > 0.2 and n != worst]
-        raise NotIdentifiable(
-            worst,
-            f"the dataset cannot identify {worst} ({where}: its effect on the observations is that of "
-            f"{', '.join(partners) or 'the window initial states'}; rank-deficient Jacobian)",
-        )
+        mixed = ", ".join(partners) or "the window initial states"
+        raise NotIdentifiable(worst, f"the dataset cannot identify {worst} ({where}: its effect is that of {mixed})")
 
 
 def _window_starts(dataset: TrajectoryDataset, steps: int, max_windows: int, seed: int) -> np.ndarray:

@@ -104,16 +104,6 @@ def _signal_handler(signum, frame) -> None:  # pragma: no cover - exercised in a
         raise SystemExit(128 + signum)
 
 
-def _install_exit_hooks() -> None:
-    with _HANDLERS_LOCK:
-        if _PREVIOUS_HANDLERS or threading.current_thread() is not threading.main_thread():
-            return
-        atexit.register(_stop_all_open_links)
-        for signum in (signal.SIGTERM, signal.SIGINT):
-            _PREVIOUS_HANDLERS[signum] = signal.getsignal(signum)
-            signal.signal(signum, _signal_handler)
-
-
 class MotorLink:
     """A session with the motor controller on the serial port ``port`` (or the open transport ``serial``, timed
     by its ``clock``); :attr:`max_consecutive_bad_frames` bad frames in a row raise :class:`LinkChecksumError`."""
@@ -164,8 +154,13 @@ class MotorLink:
         except (serial.SerialException, OSError) as exc:
             raise LinkDisconnected(f"cannot open serial port {self.port!r}: {exc}") from exc
         _OPEN_LINKS.add(self)
-        if self.install_exit_hooks:
-            _install_exit_hooks()
+        with _HANDLERS_LOCK:  # STOP at exit and on SIGTERM/SIGINT, hooked once from the main thread
+            main = threading.current_thread() is threading.main_thread()
+            if self.install_exit_hooks and main and not _PREVIOUS_HANDLERS:
+                atexit.register(_stop_all_open_links)
+                for signum in (signal.SIGTERM, signal.SIGINT):
+                    _PREVIOUS_HANDLERS[signum] = signal.getsignal(signum)
+                    signal.signal(signum, _signal_handler)
         self.device, nonce = None, int.from_bytes(os.urandom(4), "little")
         try:
             self._write(proto.MSG_HELLO, (proto.PROTOCOL_VERSION, nonce))

@@ -47,21 +47,13 @@ OBSERVATION_NAMES: tuple[str, ...] = Observation._fields
 _TWO_PI = 2 * math.pi
 
 
-def observation_from_tip(
-    phi_rad: float,
-    phi_dot_rad_s: float,
-    ex_m: float,
-    ey_m: float,
-    ex_dot_m_s: float,
-    ey_dot_m_s: float,
-    er_rad: float,
-    er_dot_rad_s: float,
-) -> Observation:
-    """The :class:`Observation` of a hub angle, tip position and tip rotation (with rates)."""
-    r2 = ex_m * ex_m + ey_m * ey_m
-    theta_dot = (ex_m * ey_dot_m_s - ey_m * ex_dot_m_s) / r2 if r2 > 0 else 0.0
-    phi, theta, er = ((x + math.pi) % _TWO_PI - math.pi for x in (phi_rad, math.atan2(-ex_m, ey_m), er_rad))
-    return Observation(phi, theta, ex_m, ey_m, er, phi_dot_rad_s, theta_dot, ex_dot_m_s, ey_dot_m_s, er_dot_rad_s)
+def observation_from_tip(phi, phi_dot, ex, ey, ex_dot, ey_dot, er, er_dot) -> Observation:
+    """The :class:`Observation` of a hub angle [rad] and rate [rad/s], a tip position [m] and velocity [m/s], and a
+    tip rotation [rad] and rate [rad/s]."""
+    r2 = ex * ex + ey * ey
+    theta_dot = (ex * ey_dot - ey * ex_dot) / r2 if r2 > 0 else 0.0
+    phi, theta, er = ((x + math.pi) % _TWO_PI - math.pi for x in (phi, math.atan2(-ex, ey), er))
+    return Observation(phi, theta, ex, ey, er, phi_dot, theta_dot, ex_dot, ey_dot, er_dot)
 
 
 def energies(kinetic, gravity, elastic) -> dict:

@@ -64,15 +64,10 @@ def _train_pilco(config, out: str, progress: bool) -> dict[str, Any]:
     check_output_folder(out, what="run folder", owned=lambda folder: (folder / "pilco.json").is_file())
     refuse_other_pilco_run(out, config)
     result = run_pilco(config, progress=progress)
-    balance = result.real_seconds_to_balance
-    return {
-        "out": str(result.save(Path(out))),
-        "trials": len(result.records),
-        "plant_seconds_total": result.plant_seconds_total,
-        "real_seconds_to_balance": balance if math.isfinite(balance) else None,
-        "train_wall_s": result.train_wall_s,
-        "final_eval_upright_std_rad": result.records[-1].eval_upright_std_rad,
-    }
+    r, balance = result, result.real_seconds_to_balance
+    figures = {"out": str(r.save(Path(out))), "trials": len(r.records), "plant_seconds_total": r.plant_seconds_total}
+    figures |= {"real_seconds_to_balance": balance if math.isfinite(balance) else None, "train_wall_s": r.train_wall_s}
+    return figures | {"final_eval_upright_std_rad": r.records[-1].eval_upright_std_rad}
 
 
 def _train_rl(args: argparse.Namespace, config, out: str) -> dict[str, Any]:

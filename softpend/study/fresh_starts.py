@@ -42,17 +42,10 @@ def fresh_start_row(summary: EvaluationSummary) -> dict[str, Any]:
     k = int(sum(balanced))
     low, high = wilson_interval(k, n)
     stds = [r.upright_std_rad for r, ok in zip(summary.results, balanced) if ok]
-    return {
-        "starts": n,
-        "balanced_starts": k,
-        "balanced_rate": k / n,
-        "balanced_low": low,
-        "balanced_high": high,
-        "success_rate": summary.success_rate,
-        "worst_balanced_std_rad": float(max(stds)) if stds else math.nan,
-        "median_swing_up_time_s": summary.median("swing_up_time_s"),
-        "run_balances": bool(k / n >= BALANCED_FRACTION),
-    }
+    row = {"starts": n, "balanced_starts": k, "balanced_rate": k / n, "balanced_low": low, "balanced_high": high}
+    row |= {"success_rate": summary.success_rate, "worst_balanced_std_rad": float(max(stds)) if stds else math.nan}
+    row["median_swing_up_time_s"] = summary.median("swing_up_time_s")
+    return row | {"run_balances": bool(k / n >= BALANCED_FRACTION)}
 
 
 @functools.lru_cache(maxsize=1)

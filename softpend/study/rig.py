@@ -23,12 +23,9 @@ def truth_trajectory(
         np.column_stack([log[f"q{i}{s}"][keep] for i in range(plant.n_coordinates)]) for s in ("_rad", "_dot_rad_s")
     )
     observations = [plant.observation_from_state(a, b) for a, b in zip(q, qd)]
-    return {
-        "time_s": log["device_time_s"][keep],
-        "theta_rad": np.array([o.theta_rad for o in observations]),
-        "torque_nm": log["applied_torque_nm"][keep],
-        "phi_dot_rad_s": np.array([o.phi_dot_rad_s for o in observations]),
-    }
+    theta, rate = (np.array([getattr(o, name) for o in observations]) for name in ("theta_rad", "phi_dot_rad_s"))
+    time_s, torque = log["device_time_s"][keep], log["applied_torque_nm"][keep]
+    return {"time_s": time_s, "theta_rad": theta, "torque_nm": torque, "phi_dot_rad_s": rate}
 
 
 def truth_metrics(

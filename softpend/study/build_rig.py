@@ -53,12 +53,9 @@ def motor_rows(peak_hub_rate_rad_s: float, torque_nm: float) -> list[dict[str, A
         available = c.available_torque_nm(peak_hub_rate_rad_s)
         speed_margin = c.free_speed_rad_s / peak_hub_rate_rad_s if peak_hub_rate_rad_s > 0 else math.inf
         row = {"cartridge": c.name, "free_speed_rad_s": c.free_speed_rad_s, "stall_torque_nm": c.stall_torque_nm}
-        row |= {
-            "speed_margin": speed_margin,
-            "torque_at_peak_rate_nm": available,
-            "torque_margin": available / torque_nm,
-        }
-        qualifies = bool(speed_margin > 1.0 and available / torque_nm >= MIN_TORQUE_MARGIN)
+        torque_margin = available / torque_nm
+        row |= {"speed_margin": speed_margin, "torque_at_peak_rate_nm": available, "torque_margin": torque_margin}
+        qualifies = bool(speed_margin > 1.0 and torque_margin >= MIN_TORQUE_MARGIN)
         rows.append(row | {"encoder_ticks_per_rev": c.encoder_ticks_per_rev, "qualifies": qualifies})
     return rows
 

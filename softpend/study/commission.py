@@ -216,14 +216,8 @@ def _excite(run: _Run) -> dict:
     files = (folder / "motor_log.csv", folder / "camera.csv", run.outputs.live(folder / "rig_dataset.npz"))
     dataset, sync = build_rig_dataset(*files, guess, dt_s, c.trial_length_s, "commissioning excitation on the twin")
     run.outputs.done(files[-1])
-    return figures | {
-        "program": c.program,
-        "program_s": c.excite_s,
-        "peak_torque_nm": float(abs(program).max()),
-        "n_trials": dataset.n_trials,
-        "clock_offset_s": sync.offset.offset_s,
-        "gaps": len(sync.gaps),
-    }
+    figures |= {"program": c.program, "program_s": c.excite_s, "peak_torque_nm": float(abs(program).max())}
+    return figures | {"n_trials": dataset.n_trials, "clock_offset_s": sync.offset.offset_s, "gaps": len(sync.gaps)}
 
 
 def _identify(run: _Run) -> dict:
@@ -252,13 +246,9 @@ def _identify(run: _Run) -> dict:
             result, held = fit(list(IDENTIFIED_PARAMETERS), result.params), []
         except NotIdentifiable:
             pass
-    return {
-        "greybox": result.to_dict(),
-        "identified": identified_values(result.estimates, result.std, guess.mass_kg),
-        "not_identified": held,
-        "model_rod": result.params.to_dict(),
-        "plant_s": 0.0,
-    }
+    identified = identified_values(result.estimates, result.std, guess.mass_kg)
+    output = {"greybox": result.to_dict(), "identified": identified, "not_identified": held}
+    return output | {"model_rod": result.params.to_dict(), "plant_s": 0.0}
 
 
 def _design(run: _Run) -> dict:
@@ -367,14 +357,8 @@ def _verify(run: _Run) -> dict:
     specs = {v["label"]: v["spec"] for versions in _class_controllers(run).values() for v in versions.values()}
     seeds = verification_seeds(run.config)
     rows = run.twin(verify_on_twin, specs, seeds, run.config.verify_duration_s)
-    return {
-        "seeds": seeds,
-        "rows": rows,
-        "plant_s": {
-            label: {name: sum(r["plant_s"] for r in by_condition[name]) for name in CONDITIONS}
-            for label, by_condition in rows.items()
-        },
-    }
+    plant_s = {label: {c: sum(r["plant_s"] for r in by[c]) for c in CONDITIONS} for label, by in rows.items()}
+    return {"seeds": seeds, "rows": rows, "plant_s": plant_s}
 
 
 def _report(run: _Run) -> dict:

@@ -125,13 +125,10 @@ def plot_excitation(rows: list[dict[str, Any]]) -> Any:
 
 def greybox_route_figures(rows: list[dict[str, Any]], prefix: str, within_s: float) -> dict[str, float]:
     """Median and worst plant seconds to balance, seeds balanced, and seeds balanced within ``within_s``."""
-    seconds = np.array([row["real_s_to_balance"] for row in rows], float)
-    return {
-        f"{prefix}_real_s_to_balance": float(np.median(seconds)),
-        f"{prefix}_real_s_to_balance_worst": float(np.max(seconds)),
-        f"{prefix}_seeds_balanced": float(np.sum(np.isfinite(seconds))),
-        f"{prefix}_seeds_within_{within_s:g}s": float(np.sum(seconds <= within_s)),
-    }
+    s = np.array([row["real_s_to_balance"] for row in rows], float)
+    figures = {"real_s_to_balance": np.median(s), "real_s_to_balance_worst": np.max(s)}
+    figures |= {"seeds_balanced": np.sum(np.isfinite(s)), f"seeds_within_{within_s:g}s": np.sum(s <= within_s)}
+    return {f"{prefix}_{key}": float(value) for key, value in figures.items()}
 
 
 def plant_seconds_rows(

@@ -117,14 +117,8 @@ def model_quality(
     for label, one in one_step.items():
         rows[label] |= {"one_step_mse": one["mse"], "one_step_tip_rmse_m": one.get("one_step_tip_rmse_m", math.nan)}
     curves = {label: np.sqrt(np.mean(error**2, axis=0)) for label, error in errors.items()}
-    return {
-        "lyapunov_rate_per_s": lam,
-        "length_m": length,
-        "rows": rows,
-        "curves": curves,
-        "horizon_s": np.arange(steps + 1) * dt,
-        "n_rollouts": int(starts.shape[0]),
-    }
+    quality = {"lyapunov_rate_per_s": lam, "length_m": length, "rows": rows, "curves": curves}
+    return quality | {"horizon_s": np.arange(steps + 1) * dt, "n_rollouts": int(starts.shape[0])}
 
 
 def closed_loop_usefulness(

@@ -80,22 +80,21 @@ class DynamicsModel(nn.Module):
         p, mask = layout.n_positions, layout.position_angle_mask
         self._p, self._h, self._core = p, layout.history, layout.core_dim
         self.n_outputs = p if self.integrate_positions else self._core
-        names = layout.names
-        self._has_tip = all(n in names for n in ("ex_m", "ey_m"))
+        names = layout.names  # every layout holds the tip
         indices = {
             "_angle_idx": torch.as_tensor(np.flatnonzero(mask), dtype=torch.long),
             "_linear_idx": torch.as_tensor(np.flatnonzero(~mask), dtype=torch.long),
             "_core_angle_mask": torch.as_tensor(np.concatenate([mask, np.zeros(p, bool)])),
             "_lag_angle_mask": torch.as_tensor(np.tile(mask, max(self._h, 1))[: p * self._h]),
-        } | ({"_tip_idx": torch.tensor([names.index("ex_m"), names.index("ey_m")])} if self._has_tip else {})
+            "_tip_idx": torch.tensor([names.index("ex_m"), names.index("ey_m")]),
+        }
         for name, value in indices.items():
             self.register_buffer(name, value, persistent=False)
         # theta = atan2(-ex, ey) in the data: derived from the predicted tip, not predicted
         self._derive_theta = all(n in names for n in ("theta_rad", "ex_m", "ey_m"))
         if self._derive_theta:
             self._i_theta, self._i_ex, self._i_ey = (names.index(n) for n in ("theta_rad", "ex_m", "ey_m"))
-        n_angles = int(mask.sum())
-        self.n_features = 2 * n_angles + (p - n_angles) + p + p * self._h + 1
+        self.n_features = 2 * p + int(mask.sum()) + p * self._h + 1  # sin, cos of angles; the rest once; torque
         fills = {"feature_mean": 0.0, "feature_std": 1.0, "feature_low": -math.inf, "feature_high": math.inf}
         for name, fill in (fills | {"delta_mean": 0.0, "delta_std": 1.0}).items():
             size = self.n_outputs if name.startswith("delta") else self.n_features
@@ -170,7 +169,7 @@ class DynamicsModel(nn.Module):
         """Apply a core-state change: add, wrap angles, shift the lagged frames."""
         core = state[:, : self._core] + delta
         core = torch.where(self._core_angle_mask, wrap_tensor(core), core)
-        if self.tip_reach_m is not None and self._has_tip:
+        if self.tip_reach_m is not None:
             core = self._within_reach(state, core)
         if self._derive_theta:
             core = self._with_derived_theta(state, core)

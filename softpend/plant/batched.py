@@ -99,21 +99,6 @@ class BatchedRodParams:
         columns = {name: torch.tensor([getattr(r, name) for r in rods], dtype=dtype) for name in PARAMETER_FIELDS}
         return cls(rods[0].n_links, **{n: c.expand(size).clone() if one else c for n, c in columns.items()})
 
-    def replace(self, **changes: TensorLike) -> "BatchedRodParams":
-        """A copy with some fields replaced (broadcast to ``(B,)``; checked again)."""
-        if unknown := set(changes) - set(PARAMETER_FIELDS):
-            raise ValueError(f"unknown BatchedRodParams fields: {sorted(unknown)}")
-        s = self.length_m.shape
-        tensors = {name: torch.as_tensor(value, dtype=self.dtype) for name, value in changes.items()}
-        new: dict[str, Any] = {n: t if t.shape == s else torch.broadcast_to(t, s).clone() for n, t in tensors.items()}
-        return dataclasses.replace(self, **new)
-
-    def scaled(self, **factors: TensorLike) -> "BatchedRodParams":
-        """A copy with some fields multiplied by per-rod factors."""
-        return self.replace(
-            **{n: getattr(self, n, 1.0) * torch.as_tensor(f, dtype=self.dtype) for n, f in factors.items()}
-        )
-
     @property
     def dtype(self) -> torch.dtype:
         return self.length_m.dtype

@@ -31,7 +31,6 @@ from softpend.pilco.loop import (
     _came_near_upright,
     _optimise_policy,
     _random_streams,
-    _search_with_restarts,
     _upright_distribution,
 )
 from softpend.pilco.policy import LinearPolicy
@@ -297,37 +296,17 @@ def test_search_with_restarts_keeps_the_best_and_reports_it():
 
     warm_policy = fresh_policy()
     warm = _optimise_policy(Propagator(spec, gp, warm_policy, 0.3, 0.15), warm_policy, m0, s0, 8, iterations=5)
-    policy = fresh_policy()
+    pilco = Pilco(config)  # its visited states: the GP's, under no torque
+    pilco.real_states, pilco.inputs = [states], [np.hstack([spec.model_inputs(states), np.zeros((len(states), 1))])]
+    pilco.m0, pilco.s0 = m0, s0
+    pilco.policy = policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
-    best, made = _search_with_restarts(
-        config,
-        prop,
-        policy,
-        m0,
-        s0,
-        spec,
-        states,
-        spec.model_inputs(states),
-        np.random.default_rng(0),
-        config.n_horizon_steps,
-    )
+    best, made = pilco._search(prop, config.n_horizon_steps, np.random.default_rng(0), restart=True)
     assert made == 3 and best <= warm
     assert float(prop.rollout(m0, s0, 8)[3]) == pytest.approx(best)  # the policy holds the kept parameters
-    policy = fresh_policy()
+    pilco.policy = policy = fresh_policy()
     prop = Propagator(spec, gp, policy, 0.3, 0.15)
-    assert _search_with_restarts(
-        config,
-        prop,
-        policy,
-        m0,
-        s0,
-        spec,
-        states,
-        spec.model_inputs(states),
-        np.random.default_rng(0),
-        config.n_horizon_steps,
-        restart=False,
-    ) == (warm, 0)
+    assert pilco._search(prop, config.n_horizon_steps, np.random.default_rng(0), restart=False) == (warm, 0)
 
 
 def test_a_run_saved_with_other_config_fields_is_an_error_and_not_reused(tiny_run_without_restarts, tmp_path):

@@ -154,7 +154,6 @@ def test_make_vec_builds_both_action_spaces() -> None:
     "kwargs, name",
     [
         ({"num_envs": 0}, "num_envs"),
-        ({"plant": "beam"}, "plant"),
         ({"start": "sideways"}, "start"),
         ({"max_episode_steps": 0}, "max_episode_steps"),
         ({"params": RodParams(n_links=10), "substeps": 2}, "substeps"),

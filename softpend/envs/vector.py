@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
 from softpend import MAX_EPISODE_STEPS
-from softpend.checks import int_at_least, one_of
+from softpend.checks import int_at_least
 from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
 from softpend.envs.soft_pendulum import OBSERVATION_BOUND, TaskSettings, check_torque_levels, draw_start, reset_options
@@ -25,10 +25,11 @@ _THETA = OBSERVATION_NAMES.index("theta_rad")
 
 
 class SoftPendulumVectorEnv(TaskSettings, gym.vector.VectorEnv):
-    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod); ``plant``:
-    only ``"prb"``; the other arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
+    """``num_envs`` soft-pendulum environments stepped together (``Box(-1, 1, (1,))`` actions per rod) on the
+    PRB chain; the arguments as :class:`~softpend.envs.SoftPendulumEnv` and the batched chain take them."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    render_mode = None
 
     def __init__(
         self,
@@ -42,16 +43,10 @@ class SoftPendulumVectorEnv(TaskSettings, gym.vector.VectorEnv):
         start: str = "hanging",
         start_noise_rad: float = 0.05,
         max_episode_steps: int = MAX_EPISODE_STEPS,
-        plant: str = "prb",
-        render_mode: Optional[str] = None,
     ) -> None:
         self.num_envs = int_at_least("num_envs", num_envs, 1)
         self.set_task(params, reward_params, start, start_noise_rad)
-        one_of("plant", plant, ("prb",))
-        if render_mode is not None:
-            raise ValueError(f"render_mode must be None (the vector environment does not render), got {render_mode!r}")
         self.max_episode_steps = int_at_least("max_episode_steps", max_episode_steps, 1)
-        self.render_mode = None
 
         if integrator == "rk4":
             stable = stable_substeps(self.params, dt_s)

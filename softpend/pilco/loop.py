@@ -385,55 +385,6 @@ def _draw_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**31 - 1))
 
 
-def _random_policy(
-    spec: StateSpec,
-    states: np.ndarray,
-    model_inputs: np.ndarray,
-    n_basis: int,
-    torque_limit_nm: float,
-    rng: np.random.Generator,
-    target_std: float = 0.1,
-) -> RBFPolicy:
-    """A fresh policy: centres drawn from visited ``states``, pseudo-targets of spread ``target_std``, length-scales
-    the rates' spread in ``model_inputs`` and 0.7 for every sin/cos input (as in PILCO)."""
-    chosen = states[rng.choice(len(states), size=n_basis, replace=n_basis > len(states))]
-    lengthscales = np.where(
-        np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles, np.maximum(model_inputs.std(axis=0), 1e-3), 0.7
-    )
-    return RBFPolicy(
-        spec.model_inputs(chosen), lengthscales, torque_limit_nm, seed=_draw_seed(rng), target_std=target_std
-    )
-
-
-def _search_with_restarts(
-    config: PilcoConfig,
-    propagator: Propagator,
-    policy: RBFPolicy,
-    m0: torch.Tensor,
-    s0: torch.Tensor,
-    spec: StateSpec,
-    states: np.ndarray,
-    model_inputs: np.ndarray,
-    rng: np.random.Generator,
-    n_steps: int,
-    restart: bool = True,
-) -> tuple[float, int]:
-    """Search from ``policy``, then (when due) from fresh random ones; ``policy`` keeps the lowest predicted cost's."""
-    best = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
-    if not restart or config.optimiser.restarts == 0 or best <= config.optimiser.restart_above_cost_fraction * n_steps:
-        return best, 0
-    best_vector = policy.get_vector()
-    for _ in range(config.optimiser.restarts):
-        settings = (config.policy.n_basis, policy.torque_limit_nm, rng, config.optimiser.restart_target_std)
-        fresh = _random_policy(spec, states, model_inputs, *settings)
-        policy.set_vector(fresh.get_vector())
-        value = _optimise_policy(propagator, policy, m0, s0, n_steps, config.optimiser.iterations)
-        if value < best:
-            best, best_vector = value, policy.get_vector()
-    policy.set_vector(best_vector)
-    return best, config.optimiser.restarts
-
-
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
     within_rad, spec = config.policy.balance_within_rad, state_spec(config.state)
     if balance is None or within_rad is None:
@@ -547,11 +498,18 @@ class Pilco:
 
     def start_policy(self) -> RBFPolicy:
         """The first policy: random, its centres on the states visited so far."""
-        visited = (np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1])
-        torque_limit_nm = self.config.task.rod.torque_limit_nm
-        rng = self.streams["policy_init"]
-        self.policy = _random_policy(self.spec, *visited, self.config.policy.n_basis, torque_limit_nm, rng)
+        self.policy = self._random_policy(self.streams["policy_init"])
         return self.policy
+
+    def _random_policy(self, rng: np.random.Generator, target_std: float = 0.1) -> RBFPolicy:
+        """A fresh policy: centres drawn from the visited states, pseudo-targets of spread ``target_std``,
+        length-scales the rates' spread in the model inputs and 0.7 for every sin/cos input (as in PILCO)."""
+        spec, states, n_basis = self.spec, np.vstack(self.real_states), self.config.policy.n_basis
+        chosen = states[rng.choice(len(states), size=n_basis, replace=n_basis > len(states))]
+        spread = np.maximum(np.vstack(self.inputs)[:, :-1].std(axis=0), 1e-3)
+        lengthscales = np.where(np.arange(spec.n_model_inputs) < spec.dim - spec.n_angles, spread, 0.7)
+        limit_nm = self.config.task.rod.torque_limit_nm
+        return RBFPolicy(spec.model_inputs(chosen), lengthscales, limit_nm, seed=_draw_seed(rng), target_std=target_std)
 
     def optimize_models(self) -> MultiOutputGP:
         """Fit the GP dynamics on at most ``gp.max_points`` points (the latest trial kept) from the last fit's
@@ -583,9 +541,7 @@ class Pilco:
         length_m, exploration = config.task.rod.length_m, config.cost.exploration
         propagator = Propagator(spec, self.gp, self.policy, length_m, width_m, rate_width, exploration, config.compiled)
         restart_rng = np.random.default_rng(_draw_seed(self.streams["policy_restarts"]))  # one draw per search
-        visited = (spec, np.vstack(self.real_states), np.vstack(self.inputs)[:, :-1], restart_rng, n_search)
-        start = (config, propagator, self.policy, self.m0, self.s0)
-        objective, n_restarts = _search_with_restarts(*start, *visited, self.n_searches > 0)
+        objective, n_restarts = self._search(propagator, n_search, restart_rng, self.n_searches > 0)
         self.n_searches += 1
         with torch.no_grad():  # the predicted trial (the objective itself when it neither explores nor looks past it)
             means, _, costs, _ = propagator.rollout(self.m0, self.s0, n_search)
@@ -593,6 +549,22 @@ class Pilco:
         same = exploration == 0.0 and n_search == n_steps
         predicted = objective if same else float(costs[:n_steps].sum())
         return PolicySearch(predicted, width_m, rate_width, n_restarts, self._optimize_balance(width_m, rate_width))
+
+    def _search(self, prop: Propagator, n_steps: int, rng: np.random.Generator, restart: bool) -> tuple[float, int]:
+        """Search from the policy, then (when due) from fresh random ones; it keeps the lowest predicted cost's."""
+        o, policy = self.config.optimiser, self.policy
+        assert policy is not None
+        search = lambda: _optimise_policy(prop, policy, self.m0, self.s0, n_steps, o.iterations)  # noqa: E731
+        best = search()
+        if not restart or o.restarts == 0 or best <= o.restart_above_cost_fraction * n_steps:
+            return best, 0
+        best_vector = policy.get_vector()
+        for _ in range(o.restarts):
+            policy.set_vector(self._random_policy(rng, o.restart_target_std).get_vector())
+            if (value := search()) < best:
+                best, best_vector = value, policy.get_vector()
+        policy.set_vector(best_vector)
+        return best, o.restarts
 
     def _optimize_balance(self, width_m: float, rate_width: Optional[float]) -> float:
         """Search the balancing policy from the trials' upright band; its predicted cost (NaN: none searched)."""

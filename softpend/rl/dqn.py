@@ -169,10 +169,11 @@ class TrainingCallback(BaseCallback):
         row |= dict(model_steps=self.model_steps(), wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.log.episodes.append(row)
         self._return, self._observations, self._torques = 0.0, [], []
-        check_finite_weights(
-            self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}"
-        )
+        self._check_weights(f"after training episode {row['episode']}")
         return observations, torques
+
+    def _check_weights(self, when: str) -> None:
+        check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, {when}")
 
     def _events(self) -> bool:
         log, c, last = self.log, self.config, self.episodes
@@ -219,17 +220,16 @@ class TrainingCallback(BaseCallback):
         summary = evaluate_agent(self.model, self.config, stop_at_first_failure=self.config.eval_until_first_failure)
         results, seeds, nan = summary.results, self.config.eval_seeds, math.nan
         complete, stds = len(results) == len(seeds), [r.upright_std_rad for r in results]
-        row: dict[str, Any] = {"episode": self.log.n_episodes, "plant_s": self.log.plant_s}
-        row |= dict(model_steps=self.model_steps(), starts_evaluated=len(results))
-        row |= dict(median_upright_std_rad=float(np.median(stds)) if complete else nan)
-        swing_up = summary.median("swing_up_time_s") if complete else nan
-        row |= dict(max_upright_std_rad=float(np.max(stds)), median_swing_up_time_s=swing_up)
+        swing_up, median_std = (summary.median("swing_up_time_s"), float(np.median(stds))) if complete else (nan, nan)
+        row: dict[str, Any] = dict(episode=self.log.n_episodes, plant_s=self.log.plant_s)
+        row |= dict(model_steps=self.model_steps(), starts_evaluated=len(results), median_upright_std_rad=median_std)
+        row |= dict(max_upright_std_rad=max(stds), median_swing_up_time_s=swing_up)
         row |= dict(all_swung_up=complete and all(math.isfinite(r.swing_up_time_s) for r in results))
         row |= dict(success_rate=summary.successes / len(seeds), wall_s=self.wall_s(), cpu_s=self.cpu_s())
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
             self.best_score = _score(row)
-            check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, episode {row['episode']}")
+            self._check_weights(f"episode {row['episode']}")
             save_agent_file(self.model, self.run_dir / "best_agent.zip")
         return row
 
@@ -260,9 +260,7 @@ class TrainingCallback(BaseCallback):
 
     def checkpoint(self) -> Path:
         """Write agent, replay buffer (plain arrays), log (and extra files) to ``run_dir/checkpoint`` atomically."""
-        check_finite_weights(
-            self.model, f"{self.log.algo} seed {self.log.seed}, checkpoint at episode {self.log.n_episodes}"
-        )
+        self._check_weights(f"checkpoint at episode {self.log.n_episodes}")
         final, tmp, old = (self.run_dir / name for name in ("checkpoint", "checkpoint.tmp", "checkpoint.old"))
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)

@@ -59,16 +59,11 @@ class MBPOReplayBuffer(ReplayBuffer):
     ) -> None:
         """Append a batch of model transitions (no terminal states) to the model part (FIFO)."""
         buf = self.model_buffer
+        obs, next_obs, actions, rewards = (a[-buf.buffer_size :] for a in (obs, next_obs, actions, rewards))  # newest
         n = len(obs)
-        if n > buf.buffer_size:  # keep the newest
-            obs, next_obs, actions, rewards = (a[-buf.buffer_size :] for a in (obs, next_obs, actions, rewards))
-            n = buf.buffer_size
         index = (buf.pos + np.arange(n)) % buf.buffer_size
-        buf.observations[index, 0] = obs
-        buf.next_observations[index, 0] = next_obs
-        buf.actions[index, 0] = actions.reshape(n, -1)
-        buf.rewards[index, 0] = rewards
-        buf.dones[index, 0] = 0.0
+        buf.observations[index, 0], buf.next_observations[index, 0] = obs, next_obs
+        buf.actions[index, 0], buf.rewards[index, 0], buf.dones[index, 0] = actions.reshape(n, -1), rewards, 0.0
         if buf.pos + n >= buf.buffer_size:
             buf.full = True
         buf.pos = int((buf.pos + n) % buf.buffer_size)
@@ -78,17 +73,14 @@ class MBPOReplayBuffer(ReplayBuffer):
         index = rng.integers(0, self.size(), size=n)
         return self.plant_observations[index].copy(), self.observations[index, 0].copy()
 
-    def real_observation_box(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-        """Per-component ``(low, high)`` of the real observation vectors, widened by ``margin`` of the range."""
-        size = self.size()
-        both = np.concatenate([self.observations[:size, 0], self.next_observations[:size, 0]])
+    def real_observation_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-component ``(low, high)`` of the real observation vectors, widened by a tenth of the range."""
+        both = np.concatenate([self.observations[: self.size(), 0], self.next_observations[: self.size(), 0]])
         low, high = both.min(axis=0), both.max(axis=0)
-        span = high - low
-        return low - margin * span, high + margin * span
+        return low - 0.1 * (high - low), high + 0.1 * (high - low)
 
     def sample(self, batch_size: int, env: Any = None) -> ReplayBufferSamples:
-        n_model_available = self.model_buffer.size()
-        n_real = batch_size if n_model_available == 0 else int(round(self.real_ratio * batch_size))
+        n_real = batch_size if self.model_buffer.size() == 0 else int(round(self.real_ratio * batch_size))
         parts = []
         if n_real > 0:
             parts.append(super().sample(n_real, env=env))
@@ -115,8 +107,7 @@ class MBPOTrainer:
         self.trials_observations: list[np.ndarray] = []
         self.trials_torques: list[np.ndarray] = []
         self.dynamics: Optional[DynamicsModel | DynamicsEnsemble] = None
-        self.n_fits = 0
-        self.model_steps = 0
+        self.n_fits = self.model_steps = 0
 
     def dqn_kwargs(self) -> dict[str, Any]:
         """The arguments of DQN-MBPO's agent beyond DQN's: the MBPO buffer, learning after the random episodes."""
@@ -223,22 +214,15 @@ class MBPOTrainer:
     def episode_ended(self, observations: np.ndarray, torques_nm: np.ndarray, n_episodes: int) -> None:
         """Store the real episode; refit the dynamics ensemble after ``initial_random_episodes`` episodes and
         every ``model.refit_every_episodes`` after those."""
-        c = self.config
         self.add_episode(observations, torques_nm)
-        if (
-            n_episodes >= c.initial_random_episodes
-            and (n_episodes - c.initial_random_episodes) % c.model.refit_every_episodes == 0
-        ):
+        after = n_episodes - self.config.initial_random_episodes
+        if after >= 0 and after % self.config.model.refit_every_episodes == 0:
             self.refit()
 
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
-        np.savez(
-            folder / "mbpo_state.npz",
-            observations=np.array(self.trials_observations),
-            torques=np.array(self.trials_torques),
-            counters=np.array([self.n_fits, self.model_steps]),
-        )
+        arrays = dict(observations=np.array(self.trials_observations), torques=np.array(self.trials_torques))
+        np.savez(folder / "mbpo_state.npz", **arrays, counters=np.array([self.n_fits, self.model_steps]))
 
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""

@@ -30,10 +30,8 @@ def pilco_runs(
     """Run (or reuse) PILCO once per seed under ``runs_root``, the missing seeds in parallel; the results."""
     jobs = pilco_jobs(config, seeds, runs_root)
     run_jobs(run_and_save, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "PILCO runs", backend)
-    return [
-        PilcoResult.load(run_folder(runs_root, "pilco", int(seed), dataclasses.replace(config, seed=int(seed))))
-        for seed in seeds
-    ]
+    seeded = (dataclasses.replace(config, seed=int(seed)) for seed in seeds)
+    return [PilcoResult.load(run_folder(runs_root, "pilco", c.seed, c)) for c in seeded]
 
 
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
@@ -100,11 +98,6 @@ def curve_rows_rl(logs_by_method: dict[str, Sequence[Any]]) -> list[dict[str, An
     ]
 
 
-def _first_balanced_s(rows: Sequence[dict[str, Any]], std_rad: float) -> float:
-    balanced = [float(r["plant_s"]) for r in rows if r["success_rate"] >= 1.0 and r["max_upright_std_rad"] <= std_rad]
-    return min(balanced, default=math.inf)
-
-
 def seconds_to_balance_table(
     rows: Sequence[dict[str, Any]], std_levels_rad: Sequence[float] = (0.2, 0.1)
 ) -> list[dict[str, Any]]:
@@ -116,7 +109,8 @@ def seconds_to_balance_table(
         seeds = sorted({r["seed"] for r in mine})
         entry: dict[str, Any] = {"method": method, "seeds": len(seeds)}
         for level in std_levels_rad:
-            per_seed = [_first_balanced_s([r for r in mine if r["seed"] == s], level) for s in seeds]
+            ok = [r for r in mine if r["success_rate"] >= 1.0 and r["max_upright_std_rad"] <= level]
+            per_seed = [min((float(r["plant_s"]) for r in ok if r["seed"] == s), default=math.inf) for s in seeds]
             entry[f"plant_s_to_std_{level:g}_rad"] = float(np.median(per_seed))
         finals = [max((r for r in mine if r["seed"] == s), key=lambda r: r["plant_s"]) for s in seeds]
         for key, name in zip(_CURVE, ("training_plant_s", "final_success_rate", "final_max_upright_std_rad")):

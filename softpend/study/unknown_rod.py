@@ -21,24 +21,14 @@ from softpend.plant import RodParams
 from softpend.task import Task
 
 #: The rod fields an unknown rod draws (besides the torque gain).
-UNKNOWN_FIELDS: tuple[str, ...] = (
-    "hub_inertia_kgm2",
-    "hub_friction_nms_per_rad",
-    "youngs_modulus_pa",
-    "joint_damping_nms_per_rad",
-    "tip_mass_kg",
+UNKNOWN_FIELDS: tuple[str, ...] = tuple(
+    "hub_inertia_kgm2 hub_friction_nms_per_rad youngs_modulus_pa joint_damping_nms_per_rad tip_mass_kg".split()
 )
 #: Each drawn value lies log-uniformly in ``[default / SPREAD_FACTOR, default * SPREAD_FACTOR]``.
 SPREAD_FACTOR = 2.0
-#: The rod fields a torque gain divides (every term of the equations of motion but the torque).
-_GAIN_DIVIDES: tuple[str, ...] = (
-    "mass_kg",
-    "tip_mass_kg",
-    "hub_inertia_kgm2",
-    "hub_friction_nms_per_rad",
-    "youngs_modulus_pa",
-    "joint_damping_nms_per_rad",
-)
+#: The rod fields a torque gain divides (every term of the equations of motion but the torque): the mass and the
+#: unknown fields.
+_GAIN_DIVIDES: tuple[str, ...] = ("mass_kg", *UNKNOWN_FIELDS)
 #: Most rods :func:`draw_unknown_rod` draws.
 MAX_DRAWS = 50
 #: Largest unknown-rod JSON file [bytes].

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -37,8 +37,9 @@ Recorder = Callable[[float], TrajectoryDataset]
 @dataclass(frozen=True)
 class RouteConfig:
     """Settings of :func:`identify_until_robust`: excitation in steps of ``step_s`` up to ``max_excitation_s``
-    (multisine to ``band_high_hz`` with peak ``peak_fraction`` of the torque limit), and the stopping check: ``check_draws`` rods drawn two standard deviations wide, each from ``check_starts``
-    hanging starts of ``check_duration_s``."""
+    (multisine to ``band_high_hz`` with peak ``peak_fraction`` of the torque limit), and the stopping check:
+    ``check_draws`` rods drawn two standard deviations wide, each from ``check_starts`` hanging starts of
+    ``check_duration_s``."""
 
     step_s: float = 1.0
     max_excitation_s: float = 10.0
@@ -80,20 +81,12 @@ def simulated_recorder(task: Task, config: RouteConfig, seed: int, program: str 
     :data:`SENSOR_NOISE_STD` rad and m."""
 
     def record(seconds: float) -> TrajectoryDataset:
+        start: dict[str, Any] = dict(start="hanging", start_angle_std_rad=0.05, start_rate_std_rad_s=0.1)
+        excitation = dict(multisine_peak_fraction=config.peak_fraction, torque_bandwidth_hz=config.band_high_hz)
+        noise = dict(phi_noise_std_rad=SENSOR_NOISE_STD, tip_noise_std_m=SENSOR_NOISE_STD)
+        timing: dict[str, Any] = dict(n_trials=1, trial_length_s=seconds, dt_s=task.dt_s, substeps=task.substeps)
         protocol = BabbleProtocol(
-            n_trials=1,
-            trial_length_s=seconds,
-            dt_s=task.dt_s,
-            substeps=task.substeps,
-            start="hanging",
-            start_angle_std_rad=0.05,
-            start_rate_std_rad_s=0.1,
-            feedback_trial_fraction=0.0,
-            program=program,
-            multisine_peak_fraction=config.peak_fraction,
-            torque_bandwidth_hz=config.band_high_hz,
-            phi_noise_std_rad=SENSOR_NOISE_STD,
-            tip_noise_std_m=SENSOR_NOISE_STD,
+            program=program, feedback_trial_fraction=0.0, **timing, **start, **excitation, **noise
         )
         return babble(protocol, params=task.rod, seed=seed, plant=task.plant, progress=False)
 
@@ -137,8 +130,8 @@ def identify_until_robust(
     """Excite for ``step_s``, ``2 step_s``, ... seconds, identify from ``guess`` each time, and stop at the first
     length whose controller balances every uncertainty draw (or at ``max_excitation_s``).
 
-    ``seed`` seeds the identification's window draw (:class:`GreyBoxConfig`'s defaults otherwise), the uncertainty draws and the check's starts (hanging
-    starts of the simulator, never the plant's).
+    ``seed`` seeds the identification's window draw (:class:`GreyBoxConfig`'s defaults otherwise), the uncertainty
+    draws and the check's starts (hanging starts of the simulator, never the plant's).
     """
     config, identification = config if config is not None else RouteConfig(), GreyBoxConfig(seed=seed)
     steps: list[dict[str, float]] = []

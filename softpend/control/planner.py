@@ -591,8 +591,7 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
     controller.reset()
     dt, limit = env.dt_s, env.torque_limit_nm
     window = int(round(config.hold_s / dt))
-    observations, torques = [env.report_observation.as_array()], []
-    balanced = False
+    observations, torques, balanced = [env.report_observation.as_array()], [], False
     for k in range(int(round(config.trial_s / dt))):
         torque = min(max(controller(env.report_observation, None, None, k * dt), -limit), limit)
         *_, truncated, _info = env.step(np.array([torque / limit]))
@@ -601,10 +600,9 @@ def _run_trial(env: Any, controller: PlannerController, seed: int, config: Plann
         if truncated:
             break
         theta = np.array(observations[-window:])[:, 1]
-        if len(theta) == window and np.all(np.abs(theta) < UPRIGHT_RAD):
-            if math.sqrt(float(np.mean(theta**2))) <= HOLD_STD_RAD:
-                balanced = True
-                break
+        held = len(theta) == window and np.all(np.abs(theta) < UPRIGHT_RAD)
+        if balanced := bool(held and math.sqrt(float(np.mean(theta**2))) <= HOLD_STD_RAD):
+            break
     obs = np.array(observations)
     return obs[:, :5], np.array(torques), balanced, float(np.sqrt(np.mean(obs[-window:, 1] ** 2)))
 

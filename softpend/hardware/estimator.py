@@ -39,11 +39,6 @@ class EstimatorConfig:
             non_negative(name, getattr(self, name))
         int_at_least("lead_steps", self.lead_steps, 0)
 
-    @property
-    def encoder_std_rad(self) -> float:
-        """Quantisation noise of the hub angle [rad]."""
-        return 2 * math.pi / self.counts_per_rev / math.sqrt(12.0)
-
 
 @dataclass(frozen=True)
 class Estimate:
@@ -100,7 +95,8 @@ class RigStateEstimator:
         self.counts = dict.fromkeys("tips_accepted tips_refused tips_too_old tips_deferred encoder_gaps".split(), 0)
         self._pending_tips: list[tuple[float, float, float]] = []
         self._h_encoder = np.eye(2 * n)[[0, n]]  # measures the hub angle and rate
-        self._r_encoder = np.diag([cfg.encoder_std_rad**2, cfg.hub_rate_std_rad_s**2])
+        self._encoder_var = (2 * math.pi / cfg.counts_per_rev / math.sqrt(12.0)) ** 2  # quantisation noise
+        self._r_encoder = np.diag([self._encoder_var, cfg.hub_rate_std_rad_s**2])
         self._r_tip, self._eye_2n = np.eye(2) * cfg.tip_std_m**2, np.eye(2 * n)
         self._accel_sigma = cfg.accel_std_rad_s2**2 * np.eye(n)
         self._a = np.zeros((2 * n, 2 * n))
@@ -113,7 +109,7 @@ class RigStateEstimator:
         x = np.zeros(2 * n)
         x[0], x[n] = phi_rad, phi_dot_rad_s
         bend, rate = cfg.initial_bend_std_rad**2, cfg.initial_rate_std_rad_s**2
-        variances = [cfg.encoder_std_rad**2] + [bend] * (n - 1) + [rate] * n
+        variances = [self._encoder_var] + [bend] * (n - 1) + [rate] * n
         self._history.clear()
         self._pending_tips.clear()
         self._history.append(

@@ -101,11 +101,6 @@ class RigDesign:
         """Width and height of the rod's plane the image covers [m]."""
         return self.camera.width_px * self.pixel_size_m, self.camera.height_px * self.pixel_size_m
 
-    @property
-    def dot_area_px(self) -> float:
-        """Area of the blue dot in the image [px^2]."""
-        return math.pi * (self.dot_radius_m / self.pixel_size_m) ** 2
-
     def depth_error_m(self, offset_m: float = 0.001) -> float:
         """Tip position error of the affine map when the dot lies ``offset_m`` in front of the markers' plane [m]."""
         return abs(offset_m) / self.camera_distance_m * self.swing_radius_m
@@ -143,7 +138,7 @@ class RigDesign:
             "markers_m": [[float(x), float(y)] for x, y in self.markers_m],
             "camera_px_per_m": self.camera_model.px_per_m,
             "field_of_view_mm": [1e3 * side for side in self.field_of_view_m],
-            "dot_area_px": self.dot_area_px,
+            "dot_area_px": math.pi * (self.dot_radius_m / self.pixel_size_m) ** 2,
             "markers_in_view": self.markers_in_view(),
             "swing_in_view": self.swing_in_view(),
         }

@@ -141,19 +141,6 @@ class BeamPlant(PlantBase):
         c_t = np.column_stack([cs * u - sn * v - phi_dot * gy, sn * u + cs * v + phi_dot * gx, phi_dot + w])
         return np.concatenate([[0.0, 0.0, phi], c.reshape(-1)]), np.concatenate([[0.0, 0.0, phi_dot], c_t.reshape(-1)])
 
-    def state_from_global(self, c: np.ndarray, c_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Inverse of :meth:`global_coordinates`."""
-        c = np.asarray(c, float).reshape(-1, 3)
-        c_t = np.asarray(c_t, float).reshape(-1, 3)
-        phi, phi_dot = (self._hub_angle_locked, 0.0) if self.hub_locked else (float(c[0, 2]), float(c_t[0, 2]))
-        cs, sn = math.cos(phi), math.sin(phi)
-        gx, gy = c[1:, 0], c[1:, 1] + self._s[1:]
-        vx, vy = c_t[1:, 0] + phi_dot * gy, c_t[1:, 1] - phi_dot * gx  # the rigid rotation removed
-        local = np.column_stack([cs * gx + sn * gy, -sn * gx + cs * gy - self._s[1:], c[1:, 2] - phi])
-        local_dot = np.column_stack([cs * vx + sn * vy, -sn * vx + cs * vy, c_t[1:, 2] - phi_dot])
-        head, head_dot = ([], []) if self.hub_locked else ([phi], [phi_dot])
-        return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
-
     def _set_state(self, q: np.ndarray, q_dot: np.ndarray) -> None:
         self._set_coordinates(*self.global_coordinates(q, q_dot))
         self._set_torque(0.0)
@@ -163,8 +150,16 @@ class BeamPlant(PlantBase):
             self._mbs.SetLoadParameter(self._torque_load, "load", float(torque_nm))
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(q, q_dot)`` (hub angle unwrapped)."""
-        return self.state_from_global(*self._nodal_state())
+        """``(q, q_dot)`` (hub angle unwrapped): :meth:`global_coordinates` inverted."""
+        c, c_t = (values.reshape(-1, 3) for values in self._nodal_state())
+        phi, phi_dot = (self._hub_angle_locked, 0.0) if self.hub_locked else (float(c[0, 2]), float(c_t[0, 2]))
+        cs, sn = math.cos(phi), math.sin(phi)
+        gx, gy = c[1:, 0], c[1:, 1] + self._s[1:]
+        vx, vy = c_t[1:, 0] + phi_dot * gy, c_t[1:, 1] - phi_dot * gx  # the rigid rotation removed
+        local = np.column_stack([cs * gx + sn * gy, -sn * gx + cs * gy - self._s[1:], c[1:, 2] - phi])
+        local_dot = np.column_stack([cs * vx + sn * vy, -sn * vx + cs * vy, c_t[1:, 2] - phi_dot])
+        head, head_dot = ([], []) if self.hub_locked else ([phi], [phi_dot])
+        return np.concatenate([head, local.reshape(-1)]), np.concatenate([head_dot, local_dot.reshape(-1)])
 
     def link_points_m(self, q: Optional[np.ndarray] = None) -> np.ndarray:
         """Positions ``(n_elements + 1, 2)`` of the beam nodes, hub axis first [m]."""

@@ -45,25 +45,6 @@ class Controller(Protocol):
         """Base torque [N m] for the current step (the plant saturates it at its limit)."""
 
 
-class GymPolicyController:
-    """Run a policy trained on a softpend Gymnasium environment (e.g. a stable-baselines3 model)."""
-
-    def __init__(self, predict: Callable[[np.ndarray], Any], env: Any) -> None:
-        self.predict = predict
-        self.env = env.unwrapped if hasattr(env, "unwrapped") else env
-        self.bonus = 0.0
-
-    def reset(self) -> None:
-        self.bonus = 0.0
-
-    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
-        from softpend.envs.reward import next_bonus
-
-        env = self.env  # the bonus advances exactly as the environment's reward advances it
-        self.bonus = float(next_bonus(observation.theta_rad, self.bonus, env.dt_s, env.reward_params))
-        return env.torque_from_action(self.predict(env.observation_vector(observation, self.bonus)))
-
-
 def metrics_from_trajectory(
     time_s: np.ndarray,
     theta_rad: np.ndarray,
@@ -441,20 +422,3 @@ def _copies(controller: Any, batch: int) -> list[Any]:
         return [copy.deepcopy(controller) for _ in range(batch)]
     except Exception as exc:  # objects holding a simulator or a file handle cannot be copied
         raise ValueError(f"controller cannot be copied for every rod ({exc}); pass one controller per seed") from exc
-
-
-def evaluate_batched(
-    predict_batch: Callable[[np.ndarray], Any],
-    task: Optional[Task] = None,
-    seeds: Sequence[int] = (0, 1, 2),
-    duration_s: float = TEST_EPISODE_S,
-    *,
-    action_repeat: int = 1,
-    n_torque_levels: Optional[int] = None,
-    name: str = "policy",
-    **options: Any,
-) -> EvaluationSummary:
-    """:func:`evaluate` of ``BatchPolicy(predict_batch, action_repeat, n_torque_levels)`` on the batched engine
-    (``options``: ``rod_spread``, ``rod_seed``, ``substeps``, ``initial_state``)."""
-    policy = BatchPolicy(predict_batch, action_repeat, n_torque_levels)
-    return evaluate(policy, task, engine="batched", name=name, seeds=seeds, duration_s=duration_s, **options)

@@ -10,12 +10,12 @@ import pytest
 from softpend.envs import SoftPendulumDiscreteEnv
 from softpend.evaluation import (
     BatchPolicy,
-    GymPolicyController,
     evaluate,
     evaluate_controller,
     metrics_from_trajectory,
     run_episode,
 )
+from softpend.rl.training_env import HeldActionController
 from softpend.task import Task
 
 
@@ -141,7 +141,7 @@ def test_an_exact_start_is_where_the_episode_starts_and_lqr_holds_it(engine: str
 
 
 def test_a_gym_policy_sees_what_its_environment_shows_and_leaves_the_environment_alone() -> None:
-    """The vectors :class:`GymPolicyController` rebuilds (the reward's bonus included) are the ones the environment
+    """The vectors :class:`HeldActionController` rebuilds (the reward's bonus included) are the ones the environment
     returns when stepped with the same actions, and the environment it reads is not written to."""
     task = Task(start="upright", start_noise_rad=0.1)
     env = SoftPendulumDiscreteEnv(n_torque_levels=5, **task.env_kwargs())
@@ -152,7 +152,7 @@ def test_a_gym_policy_sees_what_its_environment_shows_and_leaves_the_environment
         return int(np.clip(np.round(2 + 2 * np.tanh(weights @ vector)), 0, 4))
 
     before = env.__dict__.copy()
-    controller = GymPolicyController(lambda vector: seen.append(vector.copy()) or policy(vector), env)
+    controller = HeldActionController(lambda vector: seen.append(vector.copy()) or policy(vector), env)
     result = evaluate(controller, task, seeds=(2,), duration_s=1.0).results[0]
     assert env.__dict__.keys() == before.keys() and all(env.__dict__[k] is v for k, v in before.items())
     shown = SoftPendulumDiscreteEnv(n_torque_levels=5, **task.env_kwargs())

@@ -12,7 +12,7 @@ import torch
 
 from softpend.control.lqr import LQRController
 from softpend.control.swingup import EnergySwingUpController
-from softpend.evaluation import evaluate, evaluate_batched, evaluate_controller
+from softpend.evaluation import BatchPolicy, evaluate, evaluate_controller
 from softpend.plant.randomisation import randomised_rod
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agents_batched
@@ -174,6 +174,11 @@ def test_a_diverging_rod_is_reported_and_the_others_run_on() -> None:
         assert all(not isinstance(v, float) or not math.isnan(v) for v in r.metrics().values())
     (alone,) = evaluate(lqr, UPRIGHT, engine="batched", seeds=(0,), duration_s=1.0, initial_state=(q, q_dot[0])).results
     np.testing.assert_allclose(ok.observations, alone.observations, rtol=0, atol=1e-12)
+
+
+def evaluate_batched(predict, task, seeds, duration_s, action_repeat=1, n_torque_levels=None, **options):
+    policy = BatchPolicy(predict, action_repeat, n_torque_levels)
+    return evaluate(policy, task, engine="batched", seeds=seeds, duration_s=duration_s, **options)
 
 
 @pytest.mark.parametrize(

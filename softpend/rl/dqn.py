@@ -82,7 +82,7 @@ def evaluate_agents_batched(
     **options: Any,
 ) -> list:
     """:func:`evaluate_agent` of several agents at once on the batched chain (agent ``i`` drives rod block ``i``)."""
-    from softpend.evaluation import EvaluationSummary, evaluate_batched
+    from softpend.evaluation import BatchPolicy, EvaluationSummary, evaluate
 
     models = list(models)
     if not models:
@@ -94,9 +94,9 @@ def evaluate_agents_batched(
     def predict(vectors: np.ndarray) -> np.ndarray:
         return np.concatenate([np.asarray(p(vectors[i * n : (i + 1) * n])) for i, p in enumerate(predictors)])
 
-    levels, repeat = config.n_torque_levels, config.action_repeat
-    summary = evaluate_batched(
-        predict, config.task, seeds * len(models), duration_s, action_repeat=repeat, n_torque_levels=levels, **options
+    policy = BatchPolicy(predict, config.action_repeat, config.n_torque_levels)
+    summary = evaluate(
+        policy, config.task, engine="batched", seeds=seeds * len(models), duration_s=duration_s, **options
     )
     return [EvaluationSummary(name=name, results=summary.results[i * n : (i + 1) * n]) for i in range(len(models))]
 

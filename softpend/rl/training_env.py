@@ -11,7 +11,8 @@ from gymnasium.wrappers import TimeLimit
 from softpend.checks import positive_int
 from softpend.envs import SoftPendulumDiscreteEnv, SoftPendulumEnv
 from softpend.envs.randomised import RandomisedRod
-from softpend.evaluation import GymPolicyController
+from softpend.envs.reward import next_bonus
+from softpend.plant import Observation
 from softpend.rl.config import DQNConfig
 
 
@@ -55,26 +56,26 @@ def make_training_env(config: DQNConfig) -> gym.Env:
     return TimeLimit(ActionRepeat(env, config.action_repeat), config.episode_agent_steps)
 
 
-class HeldActionController(GymPolicyController):
-    """:class:`~softpend.evaluation.GymPolicyController` that queries the policy every ``repeat`` plant steps and
-    holds the torque in between."""
+class HeldActionController:
+    """Runs a policy trained on a softpend Gymnasium environment (e.g. a stable-baselines3 model) as a controller:
+    the observation vectors rebuilt as the environment builds them (the reward's bonus advancing exactly as its
+    reward advances it), the policy queried every ``repeat`` plant steps and its torque held in between."""
 
-    _held_action: Any
-
-    def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int) -> None:
-        super().__init__(self._held_predict, env)
-        self.repeat, self._inner_predict = positive_int("repeat", repeat), predict
+    def __init__(self, predict: Callable[[np.ndarray], Any], env: Any, repeat: int = 1) -> None:
+        self.predict, self.env = predict, env.unwrapped if hasattr(env, "unwrapped") else env
+        self.repeat = positive_int("repeat", repeat)
         self.reset()
 
-    def _held_predict(self, vector: np.ndarray) -> Any:
-        if self._step % self.repeat == 0 or self._held_action is None:
-            self._held_action = self._inner_predict(vector)
-        self._step += 1
-        return self._held_action
-
     def reset(self) -> None:
-        super().reset()
-        self._step, self._held_action = 0, None
+        self.bonus, self._step, self._held_action = 0.0, 0, None
+
+    def __call__(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray, time_s: float) -> float:
+        env = self.env
+        self.bonus = float(next_bonus(observation.theta_rad, self.bonus, env.dt_s, env.reward_params))
+        if self._step % self.repeat == 0:
+            self._held_action = self.predict(env.observation_vector(observation, self.bonus))
+        self._step += 1
+        return env.torque_from_action(self._held_action)
 
 
 def greedy_predictor(model: Any) -> Callable[[np.ndarray], Any]:

@@ -22,22 +22,12 @@ def embedded_protocol(firmware_path: Path = FIRMWARE_PATH) -> str:
     return text.split(BEGIN_MARKER, 1)[1].split(END_MARKER, 1)[0]
 
 
-def check_firmware(firmware_path: Path = FIRMWARE_PATH) -> bool:
-    """True if the firmware's embedded protocol equals ``softpend/hardware/protocol.py`` byte for byte."""
-    return embedded_protocol(firmware_path) == PROTOCOL_PATH.read_text()
-
-
-def update_firmware(firmware_path: Path = FIRMWARE_PATH) -> None:
-    """Replace the embedded copy with the current protocol module."""
-    text = Path(firmware_path).read_text()
-    head, tail = text.split(BEGIN_MARKER, 1)[0], text.split(END_MARKER, 1)[1]
-    with atomic_write(firmware_path, "w") as handle:
-        handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
-
-
 if __name__ == "__main__":  # pragma: no cover
-    if "--update" in sys.argv:
-        update_firmware()
-    ok = check_firmware()
+    if "--update" in sys.argv:  # replace the embedded copy with the current protocol module
+        text = FIRMWARE_PATH.read_text()
+        head, tail = text.split(BEGIN_MARKER, 1)[0], text.split(END_MARKER, 1)[1]
+        with atomic_write(FIRMWARE_PATH, "w") as handle:
+            handle.write(head + BEGIN_MARKER + PROTOCOL_PATH.read_text() + END_MARKER + tail)
+    ok = embedded_protocol() == PROTOCOL_PATH.read_text()
     print("firmware protocol copy is", "up to date" if ok else "OUT OF DATE (run with --update)")
     sys.exit(0 if ok else 1)

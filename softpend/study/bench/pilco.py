@@ -56,7 +56,7 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
     import numpy as np
 
     from softpend.pilco.gp import MultiOutputGP
-    from softpend.pilco.loop import DTYPE, _initial_distribution, _random_policy
+    from softpend.pilco.loop import DTYPE, Pilco
     from softpend.pilco.propagation import Propagator, state_spec
 
     with one_torch_thread():
@@ -68,9 +68,9 @@ def bench_pilco_search(repeats: int = 5) -> dict[str, float]:
         inputs = np.hstack([spec.model_inputs(states[:-1]), torque_nm[:, None]])
         gp = MultiOutputGP(inputs, states[1:] - states[:-1])
         gp.fit(20)
-        limit, restart_std = config.task.torque_limit_nm, config.optimiser.restart_target_std
-        policy = _random_policy(spec, states, inputs[:, :-1], config.policy.n_basis, limit, rng1, restart_std)
-        m0, s0 = _initial_distribution(spec, config.initial_std)
+        pilco = Pilco(config)  # its first policy drawn from this random walk
+        pilco.real_states, pilco.inputs = [states], [inputs]
+        policy, m0, s0 = pilco._random_policy(rng1, config.optimiser.restart_target_std), pilco.m0, pilco.s0
         vector = policy.get_vector()
 
         def objective(propagator: Propagator) -> tuple[float, np.ndarray, float]:

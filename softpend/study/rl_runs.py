@@ -14,7 +14,7 @@ from softpend.evaluation import SUCCESS_STD_RAD
 from softpend.io.overrides import apply_overrides
 from softpend.io.runfolders import run_folder_name
 from softpend.plant import check_plant_name
-from softpend.rl.config import DQNConfig, MBPOConfig, load_config, saved_config_data
+from softpend.rl.config import DQNConfig, load_config, saved_config_data
 from softpend.rl.curves import run_to_asymptote
 from softpend.rl.training_log import TrainingLog
 from softpend.study.presets import TASK, load_hparams
@@ -90,11 +90,8 @@ def train_run(
     from softpend.rl.dqn import train_dqn
     from softpend.rl.mbpo import train_mbpo
 
-    if algo == "dqn":
-        train_dqn(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
-    else:
-        assert isinstance(config, MBPOConfig)
-        train_mbpo(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
+    train: Callable[..., Any] = train_dqn if algo == "dqn" else train_mbpo
+    train(config, seed=seed, episodes=episodes, run_dir=run_dir, resume=resume, progress=progress)
 
 
 def summary_table(logs_by_method: dict[str, Sequence[TrainingLog]]) -> list[dict[str, Any]]:

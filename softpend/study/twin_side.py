@@ -106,11 +106,8 @@ def excite_on_twin(
     outputs.done(motor_path)
     with open(session.camera_csv, "rb") as source, outputs.open(public_dir / "camera.csv", "wb") as copy:
         copy.write(source.read())
-    return {
-        "plant_s": float(session.emulator_stats.get("ticks", 0.0)) * task.dt_s,
-        "samples": float(session.loop.samples),
-        "dropped_states": float(session.loop.dropped_states),
-    }
+    loop, plant_s = session.loop, float(session.emulator_stats.get("ticks", 0.0)) * task.dt_s
+    return {"plant_s": plant_s, "samples": float(loop.samples), "dropped_states": float(loop.dropped_states)}
 
 
 def verify_on_twin(
@@ -144,10 +141,8 @@ def verify_on_twin(
         for name in CONDITIONS:
             for seed in seeds:
                 workdir = private_dir / f"model_{i}" / name / f"start_{seed}"
-                row = twin_start(
-                    make(), label, true_task, CONDITIONS[name], seed, duration_s, workdir, estimator_task=estimator
-                )
-                out[label][name].append(row)
+                start = (make(), label, true_task, CONDITIONS[name], seed, duration_s, workdir)
+                out[label][name].append(twin_start(*start, estimator_task=estimator))
     return out
 
 
@@ -157,7 +152,5 @@ def truth_errors(truth: TwinTruth, private: str, estimates: Mapping[str, float])
     from softpend.io.outputs import Outputs
 
     values = _resolve(truth, Path(private), Outputs()).values()
-    return {
-        "truth": values,
-        "relative_error": {name: float(v) / values[name] - 1.0 for name, v in estimates.items() if name in values},
-    }
+    errors = {name: float(v) / values[name] - 1.0 for name, v in estimates.items() if name in values}
+    return {"truth": values, "relative_error": errors}

@@ -205,5 +205,4 @@ def build_rig_dataset(
     }
     meta: dict[str, Any] = dict(dt_s=dt_s, position_names=RIG_POSITION_NAMES, source="rig", plant_params=params)
     meta.update(protocol=protocol, notes=notes)
-    dataset = save_dataset(out_path, result.positions, result.velocities, result.torques_nm, **meta)
-    return dataset, result
+    return save_dataset(out_path, result.positions, result.velocities, result.torques_nm, **meta), result

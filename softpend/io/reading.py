@@ -107,28 +107,26 @@ def read_bytes_checked(path: PathLike, what: str, max_bytes: int, error: type[Ex
     return data
 
 
-def read_text_checked(path: PathLike, what: str, max_bytes: int, error: type[Exception] = ValueError) -> str:
+def read_text_checked(path: PathLike, what: str, max_bytes: int) -> str:
     """The UTF-8 text of the regular file at ``path`` (:func:`read_bytes_checked`)."""
-    data = read_bytes_checked(path, what, max_bytes, error)
+    data = read_bytes_checked(path, what, max_bytes)
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise error(f"{_described(what, path)}: not UTF-8 text (byte {exc.start})") from None
+        raise ValueError(f"{_described(what, path)}: not UTF-8 text (byte {exc.start})") from None
 
 
-def read_json_checked(
-    path: PathLike, what: str, max_bytes: int = MAX_CONFIG_BYTES, error: type[Exception] = ValueError
-) -> Any:
+def read_json_checked(path: PathLike, what: str, max_bytes: int = MAX_CONFIG_BYTES) -> Any:
     """The JSON document in the regular file at ``path``; invalid JSON is refused with the file and line."""
-    text = read_text_checked(path, what, max_bytes, error)
+    text = read_text_checked(path, what, max_bytes)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise error(
+        raise ValueError(
             f"{_described(what, path)}, line {exc.lineno} column {exc.colno}: not valid JSON ({exc.msg})"
         ) from None
     except RecursionError:
-        raise error(f"{_described(what, path)}: not valid JSON (nested too deeply)") from None
+        raise ValueError(f"{_described(what, path)}: not valid JSON (nested too deeply)") from None
 
 
 def read_json_object(path: PathLike, max_bytes: int) -> Optional[dict]:
@@ -178,24 +176,22 @@ def yaml_line(node: Any, key: Any = None, default: int = 1) -> int:
     return node.line if key is None else node.lines.get(key, node.line)
 
 
-def read_yaml_checked(
-    path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES, error: type[Exception] = ValueError, lines: bool = False
-) -> Any:
+def read_yaml_checked(path: PathLike, what: str, max_bytes: int = MAX_YAML_BYTES, lines: bool = False) -> Any:
     """The YAML document in the regular file at ``path`` (safe loading: plain data only); a syntax error is
     refused with the file and line.  With ``lines``, :func:`yaml_line` finds the lines of its parts."""
     import yaml
 
-    text = read_text_checked(path, what, max_bytes, error)
+    text = read_text_checked(path, what, max_bytes)
     try:
         return yaml.load(text, Loader=_line_loader()) if lines else yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f", line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
         reason = " ".join(str(exc.problem or exc.context or "invalid syntax").split())
-        raise error(f"{_described(what, path)}{where}: not valid YAML ({reason})") from None
+        raise ValueError(f"{_described(what, path)}{where}: not valid YAML ({reason})") from None
     except (yaml.YAMLError, RecursionError) as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise error(f"{_described(what, path)}: not valid YAML ({reason})") from None
+        raise ValueError(f"{_described(what, path)}: not valid YAML ({reason})") from None
 
 
 def check_capture_path(name: str, source: str) -> None:

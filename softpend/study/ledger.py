@@ -160,7 +160,6 @@ class _Evidence(NamedTuple):
     logs: Mapping[str, Sequence[Any]]
     fresh: Mapping[str, Sequence[Any]]
     pilco: Sequence[Any]
-    std_rad: float
 
 
 def _sysid(e: _Evidence) -> Found:
@@ -211,16 +210,16 @@ def _holds(algo: str, e: _Evidence) -> Found:
 
     if not (summaries := list(e.fresh.get(METHOD_NAMES[algo], []))):
         return None
-    held = [held_starts(s, e.std_rad) for s in summaries]
+    held = [held_starts(s, REPORT_HOLD_STD_RAD) for s in summaries]
     shares = [float(np.mean(h)) for h in held]
     if len(held) == 1:
         k, n = int(sum(held[0])), len(held[0])
         low, high = wilson_interval(k, n)
         share = f"{k} of {n} starts ({100 * low:.0f}-{100 * high:.0f} %)"
-        ours = f"{METHOD_NAMES[algo]}: held {share} within {e.std_rad:g} rad (1 seed)"
+        ours = f"{METHOD_NAMES[algo]}: held {share} within {REPORT_HOLD_STD_RAD:g} rad (1 seed)"
     else:
         ours = (
-            f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {e.std_rad:g} rad, "
+            f"{METHOD_NAMES[algo]}: share of {len(held[0])} fresh starts held within {REPORT_HOLD_STD_RAD:g} rad, "
             + over_seeds(shares, fmt=lambda v: f"{100 * v:.0f} %")
         )
     return ours, _median(shares) >= BALANCED_FRACTION
@@ -236,10 +235,10 @@ def _steady(e: _Evidence) -> Found:
 
 def _same_final(e: _Evidence) -> Found:
     # reproduced: both methods hold (as in _holds) and their median shares differ by at most SAME_SHARE
-    if (shares := _per_method_median(e.fresh, lambda s: float(np.mean(held_starts(s, e.std_rad))))) is None:
+    if (shares := _per_method_median(e.fresh, lambda s: float(np.mean(held_starts(s, REPORT_HOLD_STD_RAD))))) is None:
         return None
     ours = (
-        f"share of fresh starts held within {e.std_rad:g} rad (median over seeds): "
+        f"share of fresh starts held within {REPORT_HOLD_STD_RAD:g} rad (median over seeds): "
         f"DQN-MBPO {100 * shares['mbpo']:.0f} %, DQN {100 * shares['dqn']:.0f} %"
     )
     return ours, min(shares.values()) >= BALANCED_FRACTION and abs(shares["mbpo"] - shares["dqn"]) <= SAME_SHARE
@@ -398,11 +397,10 @@ def claims_ledger(
     rl_logs: Mapping[str, Sequence[Any]],
     rl_fresh: Mapping[str, Sequence[Any]],
     pilco: Sequence[Any],
-    hold_std_rad: float = REPORT_HOLD_STD_RAD,
 ) -> list[LedgerRow]:
     """One row per claim of :data:`CLAIMS`, from ``{notebook: glued_values(...)}``, :func:`rl_run_logs`,
     :func:`rl_fresh_start_summaries` and :func:`pilco_run_results`."""
-    evidence = _Evidence(glued, rl_logs, rl_fresh, pilco, hold_std_rad)
+    evidence = _Evidence(glued, rl_logs, rl_fresh, pilco)
     rows = []
     for key, (report, chapter, measure) in CLAIMS.items():
         ours, verdict = measure(evidence) or (NOT_COMPUTED, NOT_COMPUTED)

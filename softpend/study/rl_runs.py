@@ -159,14 +159,12 @@ def figure_runs(
     runs_root: Path | str = "runs/rl-book",
     progress: bool = True,
     plant: str = TASK.plant,
-    workers: Optional[int] = None,
-    backend: Optional[str] = None,
     **config_kwargs: Any,
 ) -> dict[str, list[TrainingLog]]:
     """Train (or reuse) the runs of Figures 4-6 (both methods in one pool); returns ``{method name: logs}``."""
     configs = figure_configs(plant=plant, **config_kwargs)
     specs = [("dqn", configs["dqn"], seeds, episodes_dqn), ("mbpo", configs["mbpo"], seeds, episodes_mbpo)]
-    logs = _train_runs(specs, plant_runs_root(runs_root, plant), progress, workers, backend)
+    logs = _train_runs(specs, plant_runs_root(runs_root, plant), progress, None)
     return {METHOD_NAMES[spec[0]]: spec_logs for spec, spec_logs in zip(specs, logs)}
 
 

@@ -84,46 +84,21 @@ def gp_moments(
     scaled = inp.unsqueeze(0) * inv_ell.unsqueeze(1)  # (E, N, D)
     b_mat = inv_ell.unsqueeze(2) * cov.unsqueeze(0) * inv_ell.unsqueeze(1) + eye  # (E, D, D)
     t = _solve(b_mat, scaled.transpose(1, 2)).transpose(1, 2)  # (E, N, D) = scaled @ B^-1
-    ell_weights = torch.exp(-0.5 * torch.sum(scaled * t, dim=2))  # (E, N)
-    lb = ell_weights * beta
+    lb = torch.exp(-0.5 * torch.sum(scaled * t, dim=2)) * beta  # (E, N)
     signal_var = torch.exp(log_signal_var)
     c = signal_var / torch.sqrt(torch.linalg.det(b_mat))  # (E,)
     mean_out = torch.sum(lb, dim=1) * c
-    t_scaled = t * inv_ell.unsqueeze(1)  # (E, N, D)
-    io_cov = torch.einsum("end,en->de", t_scaled, lb) * c  # (D, E)
-
-    second = _second_moments(
-        cov, inp, scaled, log_lengthscales, log_signal_var, signal_var, beta, inv_kernel, weights, eye
-    )
-    s_mat = second - torch.outer(mean_out, mean_out)
-    return mean_out, s_mat, io_cov
-
-
-def _second_moments(
-    cov: torch.Tensor,
-    inp: torch.Tensor,
-    scaled: torch.Tensor,
-    log_lengthscales: torch.Tensor,
-    log_signal_var: torch.Tensor,
-    signal_var: torch.Tensor,
-    beta: torch.Tensor,
-    inv_kernel: torch.Tensor | None,
-    weights: torch.Tensor | None,
-    eye: torch.Tensor,
-) -> torch.Tensor:
-    """The (E, E) second moments ``E[f_i f_j]`` of :func:`gp_moments` (``inp``: the inputs less the input mean,
-    ``scaled``: those over each output's length-scales), computed once per pair ``i <= j``."""
-    n_outputs = log_lengthscales.shape[0]
+    io_cov = torch.einsum("end,en->de", t * inv_ell.unsqueeze(1), lb) * c  # (D, E)
+    # the (E, E) second moments E[f_i f_j], computed once per output pair i <= j
     log_k = log_signal_var.unsqueeze(1) - 0.5 * torch.sum(scaled * scaled, dim=2)  # (E, N)
-    rows, cols, diag, table = _pair_tables(n_outputs, inp.device)
+    rows, cols, diag, table = _pair_tables(log_lengthscales.shape[0], inp.device)
     inv_ell2 = torch.exp(-2.0 * log_lengthscales)  # (E, D)
     r_mat = cov.unsqueeze(0) * (inv_ell2[rows] + inv_ell2[cols]).unsqueeze(1) + eye  # (P, D, D)
     t_pair = 1.0 / torch.sqrt(torch.linalg.det(r_mat))  # (P,)
     q_mat = 0.5 * _solve(r_mat, cov.expand_as(r_mat))  # (P, D, D), symmetric
     ii = inp.unsqueeze(0) * inv_ell2[rows].unsqueeze(1)  # (P, N, D)
     ij = inp.unsqueeze(0) * inv_ell2[cols].unsqueeze(1)
-    ii_q = ii @ q_mat
-    ij_q = ij @ q_mat
+    ii_q, ij_q = ii @ q_mat, ij @ q_mat
     half_i = (log_k[rows] + torch.sum(ii_q * ii, dim=2)).unsqueeze(2)  # (P, N, 1)
     half_j = (log_k[cols] + torch.sum(ij_q * ij, dim=2)).unsqueeze(2)
     # L_ij[n, m] = exp(half_i[n] + half_j[m] + 2 ii_q[n] . ij[m]) = exp(X[n] . Y[m]) with the two halves as extra
@@ -132,12 +107,12 @@ def _second_moments(
     x_aug = torch.cat([2.0 * ii_q, half_i, ones], dim=2)  # (P, N, D + 2)
     y_aug = torch.cat([ij, ones, half_j], dim=2)
     weights = pair_weights(beta, inv_kernel) if weights is None else weights
-    second = _weighted_exp_sum(x_aug, y_aug, weights)
-    second = second * t_pair
+    second = _weighted_exp_sum(x_aug, y_aug, weights) * t_pair
     if inv_kernel is not None:
         # model uncertainty on the diagonal pairs: sf2_i - tr(K_i^{-1} L_ii) (the trace is in the weights)
         second = second.index_add(0, diag, signal_var)
-    return second[table]  # symmetric: both halves read the same pair
+    second = second[table]  # symmetric: both halves read the same pair
+    return mean_out, second - torch.outer(mean_out, mean_out), io_cov
 
 
 def rbf_network_moments(
@@ -171,8 +146,7 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
     n = mean.shape[0]
     var = torch.diagonal(cov)
     decay = torch.exp(-0.5 * var)
-    e_sin = decay * torch.sin(mean)
-    e_cos = decay * torch.cos(mean)
+    e_sin, e_cos = decay * torch.sin(mean), decay * torch.cos(mean)
     if n == 1:  # one angle (the propagation's case, twice per step): the formulas below with fewer operations
         plus = 1.0 - decay * decay
         minus = (decay * decay - 1.0) * decay * decay
@@ -182,17 +156,10 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
         return torch.cat([e_sin, e_cos]), s_out, torch.stack([e_cos, -e_sin], dim=1)
     lq = -0.5 * (var.unsqueeze(1) + var.unsqueeze(0))
     q = torch.exp(lq)
-    plus = torch.exp(lq + cov) - q
-    minus = torch.exp(lq - cov) - q
-    diff = mean.unsqueeze(1) - mean.unsqueeze(0)
-    summ = mean.unsqueeze(1) + mean.unsqueeze(0)
-    u1 = plus * torch.sin(diff)
-    u2 = minus * torch.sin(summ)
-    u3 = plus * torch.cos(diff)
-    u4 = minus * torch.cos(summ)
-    ss = 0.5 * (u3 - u4)
-    cc = 0.5 * (u3 + u4)
-    sc = 0.5 * (u1 + u2)  # cov(sin a_i, cos a_j)
+    plus, minus = torch.exp(lq + cov) - q, torch.exp(lq - cov) - q
+    diff, summ = mean.unsqueeze(1) - mean.unsqueeze(0), mean.unsqueeze(1) + mean.unsqueeze(0)
+    u1, u2, u3, u4 = plus * torch.sin(diff), minus * torch.sin(summ), plus * torch.cos(diff), minus * torch.cos(summ)
+    ss, cc, sc = 0.5 * (u3 - u4), 0.5 * (u3 + u4), 0.5 * (u1 + u2)  # sc: cov(sin a_i, cos a_j)
     s_out = torch.stack([torch.stack([ss, sc], dim=2), torch.stack([sc.T, cc], dim=2)], dim=1)  # (A, 2, A, 2)
     s_out = s_out.reshape(2 * n, 2 * n)
     m_out = torch.stack([e_sin, e_cos], dim=1).reshape(2 * n)
@@ -208,9 +175,7 @@ def sin_saturation_moments(
     e = lambda k: torch.exp(-0.5 * k * k * var)  # noqa: E731  (E[cos kx] = e(k) cos(k m))
     a = limit / 8.0
     m_u = a * (9.0 * e(1.0) * torch.sin(mean) + e(3.0) * torch.sin(3.0 * mean))
-    cos2 = e(2.0) * torch.cos(2.0 * mean)
-    cos4 = e(4.0) * torch.cos(4.0 * mean)
-    cos6 = e(6.0) * torch.cos(6.0 * mean)
+    cos2, cos4, cos6 = [e(k) * torch.cos(k * mean) for k in (2.0, 4.0, 6.0)]
     second = a * a * (40.5 * (1.0 - cos2) + 9.0 * (cos2 - cos4) + 0.5 * (1.0 - cos6))
     s_u = torch.clamp(second - m_u * m_u, min=0.0)
     c_u = a * (9.0 * e(1.0) * torch.cos(mean) + 3.0 * e(3.0) * torch.cos(3.0 * mean))
@@ -229,6 +194,5 @@ def saturating_cost_moments(
     s1 = w @ _inv(sw)
     e_exp = torch.exp(-0.5 * delta @ s1 @ delta) / torch.sqrt(torch.linalg.det(sw))
     s2w = 2.0 * cov @ w + eye
-    s2 = w @ _inv(s2w)
-    e2 = torch.exp(-delta @ s2 @ delta) / torch.sqrt(torch.linalg.det(s2w))
+    e2 = torch.exp(-delta @ (w @ _inv(s2w)) @ delta) / torch.sqrt(torch.linalg.det(s2w))
     return 1.0 - e_exp, torch.clamp(e2 - e_exp * e_exp, min=0.0)

@@ -4,8 +4,8 @@ are data (``book/hparams/<method>.yml``, :func:`load_hparams`)."""
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Mapping, Optional
 
 from softpend.io.overrides import apply_overrides
@@ -50,18 +50,8 @@ def load_hparams(
     return apply_overrides(config, overrides or {})
 
 
-@dataclass(frozen=True)
-class RLBudget:
-    """The RL runs of Figures 4-6 and 10: episodes per seed, seeds, and the run folders."""
-
-    episodes_dqn: int = 250
-    episodes_mbpo: int = 80
-    seeds: tuple[int, ...] = tuple(range(10))
-    runs_root: str = "runs/rl-book"
-
-
-#: The published RL budget.
-RL_BOOK = RLBudget()
+#: The published RL runs of Figures 4-6 and 10: episodes per seed, seeds, and the run folders.
+RL_BOOK = SimpleNamespace(episodes_dqn=250, episodes_mbpo=80, seeds=tuple(range(10)), runs_root="runs/rl-book")
 
 #: Training episodes of each RL method: the ``softpend train`` default, the book and the benchmark runs.
 RL_EPISODES = {"dqn": RL_BOOK.episodes_dqn, "mbpo": RL_BOOK.episodes_mbpo}
@@ -73,16 +63,8 @@ MBPO = load_hparams("mbpo")
 PILCO = load_hparams("pilco")
 
 
-@dataclass(frozen=True)
-class PilcoBudget:
-    """The PILCO runs of Figure 10: one per seed, in ``runs_root``."""
-
-    seeds: tuple[int, ...] = tuple(range(10))
-    runs_root: str = "runs/pilco-book"
-
-
-#: The published PILCO budget.
-PILCO_BOOK = PilcoBudget()
+#: The published PILCO runs of Figure 10: one per seed, in ``runs_root``.
+PILCO_BOOK = SimpleNamespace(seeds=tuple(range(10)), runs_root="runs/pilco-book")
 
 
 #: Start seeds that training and model selection see (the configs' ``selection_seeds`` and ``eval_seeds``).

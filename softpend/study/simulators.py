@@ -33,31 +33,27 @@ def _exudyn_hub_rad(
     return np.array([(plant.step(t), plant.joint_state()[0][0])[1] for t in torques])
 
 
-def hub_error_inputs(
-    n_links: int, duration_s: float, seed: int = 0
-) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
-    """``(params, torques_nm, q0, qd0)``: seeded random torque from the hanging rod, hub turned and spinning."""
+def hub_error_inputs(n_links: int, duration_s: float) -> tuple[RodParams, np.ndarray, np.ndarray, np.ndarray]:
+    """``(params, torques_nm, q0, qd0)``: random torque (seed 0) from the hanging rod, hub turned and spinning."""
     params = RodParams(n_links=n_links)
-    torques = np.random.default_rng(seed).uniform(-1, 1, int(round(duration_s / 0.01))) * params.torque_limit_nm
+    torques = np.random.default_rng(0).uniform(-1, 1, int(round(duration_s / 0.01))) * params.torque_limit_nm
     q0, qd0 = np.zeros(n_links + 1), np.zeros(n_links + 1)
     q0[0], qd0[0] = math.pi - 0.3, 0.5
     return params, torques, q0, qd0
 
 
-def hub_error_reference(n_links: int, duration_s: float, seed: int = 0) -> HubErrorReference:
+def hub_error_reference(n_links: int, duration_s: float) -> HubErrorReference:
     """The inputs of :func:`hub_error_inputs` and the converged Exudyn plant's hub angle along them."""
-    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
+    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s)
     return HubErrorReference(params, torques, q0, qd0, _exudyn_hub_rad(params, q0, qd0, torques, REFERENCE_SUBSTEPS))
 
 
-def hub_errors_rad(
-    n_links: int, duration_s: float, seed: int = 0, reference: Optional[HubErrorReference] = None
-) -> dict[str, float]:
+def hub_errors_rad(n_links: int, duration_s: float, reference: Optional[HubErrorReference] = None) -> dict[str, float]:
     """Largest hub-angle error against the converged Exudyn run of the batched chain (RK4 float64, Rosenbrock
     float32) and of the default Exudyn plant."""
     from softpend.plant.batched import BatchedPRBChain
 
-    reference = reference if reference is not None else hub_error_reference(n_links, duration_s, seed)
+    reference = reference if reference is not None else hub_error_reference(n_links, duration_s)
     params, torques, q0, qd0, reference_hub = reference
     error = lambda hub: float(np.abs(hub - reference_hub).max())  # noqa: E731
     figures = {f"exudyn_default_hub_error_rad_n{n_links}": error(_exudyn_hub_rad(params, q0, qd0, torques, 2))}

@@ -227,9 +227,9 @@ def _chain(params: RodParams | int, integrator: str, substeps: int) -> MuJoCoCha
     return MuJoCoChain(params, timestep_s=CONTROL_STEP_S / substeps, integrator=integrator)
 
 
-def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0, seed: int = 0) -> bool:
+def diverges(n_links: int, integrator: str, substeps: int, duration_s: float = 1.0) -> bool:
     """Whether the MuJoCo chain diverges along the inputs of :func:`~softpend.study.simulators.hub_error_inputs`."""
-    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s, seed)
+    params, torques, q0, qd0 = hub_error_inputs(n_links, duration_s)
     chain = _chain(params, integrator, substeps)
     chain.hub_trajectory_rad(q0, qd0, torques)
     return chain.diverged

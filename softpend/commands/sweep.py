@@ -116,10 +116,8 @@ def run(args: argparse.Namespace) -> int:
     pilco_results = pilco_runs(config, args.seeds, root, **pool) if "pilco" in args.methods else []
     if pilco_results:
         keys = ("seed", "plant_s_to_balance", "plant_s", "cpu_s")
-        values = [
-            (r.config.seed, r.real_seconds_to_balance, r.plant_seconds_total, r.train_cpu_s) for r in pilco_results
-        ]
-        out["methods"]["pilco"] = {"runs": [dict(zip(keys, v)) for v in values]}
+        runs = [(r.config.seed, r.real_seconds_to_balance, r.plant_seconds_total, r.train_cpu_s) for r in pilco_results]
+        out["methods"]["pilco"] = {"runs": [dict(zip(keys, run)) for run in runs]}
     if args.fresh:
         from softpend.study import fresh_starts as fs
 

@@ -28,10 +28,8 @@ def perturbations(params: RodParams, fraction: float = 0.2) -> dict[str, RodPara
         s, pct = 1.0 + sign * fraction, f"{label}{100 * fraction:g}%"
         out[f"stiffness {pct}"] = params.replace(stiffness_scale=params.stiffness_scale * s)
         out[f"mass {pct}"] = params.replace(mass_kg=params.mass_kg * s, tip_mass_kg=params.tip_mass_kg * s)
-        out[f"damping {pct}"] = params.replace(
-            joint_damping_nms_per_rad=params.joint_damping_nms_per_rad * s,
-            hub_friction_nms_per_rad=params.hub_friction_nms_per_rad * s,
-        )
+        damping = {n: getattr(params, n) * s for n in ("joint_damping_nms_per_rad", "hub_friction_nms_per_rad")}
+        out[f"damping {pct}"] = params.replace(**damping)
     return out
 
 

@@ -91,14 +91,9 @@ class RodDesign:
 def rod_design(params: RodParams = RodParams()) -> RodDesign:
     """The design figures of a rod, from the PRB plant."""
     tip = horizontal_cantilever(Task(rod=params)).link_points_m()[-1]
-    return RodDesign(
-        params=params,
-        tip_sag_horizontal_m=float(-tip[1]),
-        tip_sag_euler_bernoulli_m=params.static_sag_euler_bernoulli_m,
-        gravity_torque_horizontal_nm=params.gravity_torque_horizontal_nm,
-        torque_limit_nm=params.torque_limit_nm,
-        buckling_load_factor=clamped_upright_buckling_factor(params),
-    )
+    sag = dict(tip_sag_horizontal_m=float(-tip[1]), tip_sag_euler_bernoulli_m=params.static_sag_euler_bernoulli_m)
+    same = {name: getattr(params, name) for name in ("gravity_torque_horizontal_nm", "torque_limit_nm")}
+    return RodDesign(params, **sag, **same, buckling_load_factor=clamped_upright_buckling_factor(params))
 
 
 def rod_poses_m(task: Task = Task()) -> dict[str, np.ndarray]:

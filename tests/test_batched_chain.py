@@ -154,7 +154,7 @@ def test_compiled_chain_equals_the_eager_one_and_differentiates_eagerly() -> Non
     mass = torch.tensor([0.058, 0.066], dtype=torch.float64, requires_grad=True)
     grads = []
     for chain in (eager, compiled):
-        chain.set_params(rods.replace(mass_kg=mass))
+        chain.set_params(dataclasses.replace(rods, mass_kg=mass))
         (grad,) = torch.autograd.grad(chain.step(q, qd, torques[0])[0].sum(), mass)
         grads.append(grad)
     torch.testing.assert_close(grads[1], grads[0], rtol=1e-12, atol=1e-14)

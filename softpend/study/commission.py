@@ -258,9 +258,8 @@ def _design(run: _Run) -> dict:
     c, identification = run.config, run.read("identify")
     model = RodParams.from_dict(identification["model_rod"])
     design_swingup(model)  # a design that fails is an error here, not on the plant
-    draws = uncertainty_draws(
-        _greybox_result(identification["greybox"]), c.check_draws, c.seed + 1, c.uncertainty_scale
-    )
+    fit = _greybox_result(identification["greybox"])
+    draws = uncertainty_draws(fit, c.check_draws, c.seed + 1, c.uncertainty_scale)
     seeds, k = c.check_seeds(), c.check_starts
     balanced = [
         balanced_starts(rod, seeds[i * k : (i + 1) * k], c.check_duration_s, model) for i, rod in enumerate(draws)

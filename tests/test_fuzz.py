@@ -710,7 +710,6 @@ def test_fuzz_readers_on_special_files(world, reader, kind):
 ENV_SANE = {
     "dt_s": [0.01, 0.02],
     "substeps": [1, 2],
-    "torque_limit_nm": [0.06, 0.03],
     "start": ["hanging", "upright", "random"],
     "start_noise_rad": [0.05, 0.0],
     "plant": ["prb"],

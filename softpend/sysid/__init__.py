@@ -17,8 +17,28 @@ from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, sa
 from softpend.sysid.rollout import rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 
-__all__ = ["BabbleProtocol", "TrajectoryDataset", "babble", "backward_difference", "band_limited_noise", "load_dataset"]
-__all__ += ["save_dataset", "write_dataset", "StateLayout", "RolloutErrors", "evaluate_model"]
-__all__ += ["hub_rate_offset_for_tip_error", "one_step_errors", "perturbed_simulator_errors", "rollout_errors"]
-__all__ += ["rollout_trial", "DynamicsEnsemble", "DynamicsModel", "load_model", "save_model", "rollout", "TrainConfig"]
-__all__ += ["fit_dynamics_model"]
+__all__ = [
+    "BabbleProtocol",
+    "TrajectoryDataset",
+    "babble",
+    "backward_difference",
+    "band_limited_noise",
+    "load_dataset",
+    "save_dataset",
+    "write_dataset",
+    "StateLayout",
+    "RolloutErrors",
+    "evaluate_model",
+    "hub_rate_offset_for_tip_error",
+    "one_step_errors",
+    "perturbed_simulator_errors",
+    "rollout_errors",
+    "rollout_trial",
+    "DynamicsEnsemble",
+    "DynamicsModel",
+    "load_model",
+    "save_model",
+    "rollout",
+    "TrainConfig",
+    "fit_dynamics_model",
+]

@@ -76,14 +76,9 @@ def metrics_from_trajectory(
     after = theta[start_index if start_index is not None else len(theta) // 2 :]
     swing_up_time = float(t[start_index] - t[0]) if start_index is not None else math.inf
     upright_std = float(np.sqrt(np.mean(after**2)))
-    return {
-        "swing_up_time_s": swing_up_time,
-        "upright_std_rad": upright_std,
-        "upright_mean_abs_rad": float(np.mean(np.abs(after))),
-        "peak_torque_nm": float(np.max(np.abs(torque))),
-        "energy_used_j": float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt),
-        "success": bool(start_index is not None and upright_std <= success_std_rad),
-    }
+    peak, energy = float(np.max(np.abs(torque))), float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt)
+    success = bool(start_index is not None and upright_std <= success_std_rad)
+    return dict(zip(_METRICS, (swing_up_time, upright_std, float(np.mean(np.abs(after))), peak, energy, success)))
 
 
 #: The metrics of an episode, in the order :func:`metrics_from_trajectory` returns them.
@@ -140,14 +135,8 @@ class EvaluationSummary:
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
         low, high = wilson_interval(self.successes, len(self.results))
-        return {
-            "controller": self.name,
-            "seeds": len(self.results),
-            "success_rate": self.success_rate,
-            "success_low": low,
-            "success_high": high,
-            **{name: self.median(name) for name in _METRICS[:-1]},
-        }
+        row = dict(controller=self.name, seeds=len(self.results), success_rate=self.success_rate, success_low=low)
+        return row | {"success_high": high, **{name: self.median(name) for name in _METRICS[:-1]}}
 
 
 #: Metrics of an episode that ends before its second sample (a plant that diverged on the first step).
@@ -260,11 +249,8 @@ def _steps(duration_s: float, dt_s: float, batch: int, n_coordinates: int) -> in
     if n_steps < 2:
         raise ValueError(f"duration_s must cover at least two steps of {dt_s} s, got {duration_s!r}")
     per_step = 8 * (len(OBSERVATION_NAMES) + 2 + n_coordinates)
-    check_work_size(
-        f"evaluating {batch} episode(s) of {duration_s:g} s",
-        batch * (n_steps + 1) * per_step,
-        f"{n_steps + 1} steps of {dt_s:g} s per episode, {per_step} bytes of trajectory a step",
-    )
+    detail = f"{n_steps + 1} steps of {dt_s:g} s per episode, {per_step} bytes of trajectory a step"
+    check_work_size(f"evaluating {batch} episode(s) of {duration_s:g} s", batch * (n_steps + 1) * per_step, detail)
     return n_steps
 
 

@@ -81,13 +81,11 @@ def simulated_recorder(task: Task, config: RouteConfig, seed: int, program: str 
     :data:`SENSOR_NOISE_STD` rad and m."""
 
     def record(seconds: float) -> TrajectoryDataset:
-        start: dict[str, Any] = dict(start="hanging", start_angle_std_rad=0.05, start_rate_std_rad_s=0.1)
-        excitation = dict(multisine_peak_fraction=config.peak_fraction, torque_bandwidth_hz=config.band_high_hz)
-        noise = dict(phi_noise_std_rad=SENSOR_NOISE_STD, tip_noise_std_m=SENSOR_NOISE_STD)
-        timing: dict[str, Any] = dict(n_trials=1, trial_length_s=seconds, dt_s=task.dt_s, substeps=task.substeps)
-        protocol = BabbleProtocol(
-            program=program, feedback_trial_fraction=0.0, **timing, **start, **excitation, **noise
-        )
+        kwargs: dict[str, Any] = dict(start="hanging", start_angle_std_rad=0.05, start_rate_std_rad_s=0.1)
+        kwargs |= dict(n_trials=1, trial_length_s=seconds, dt_s=task.dt_s, substeps=task.substeps, program=program)
+        kwargs |= dict(multisine_peak_fraction=config.peak_fraction, torque_bandwidth_hz=config.band_high_hz)
+        kwargs |= dict(phi_noise_std_rad=SENSOR_NOISE_STD, tip_noise_std_m=SENSOR_NOISE_STD)
+        protocol = BabbleProtocol(feedback_trial_fraction=0.0, **kwargs)
         return babble(protocol, params=task.rod, seed=seed, plant=task.plant, progress=False)
 
     return record

@@ -414,12 +414,9 @@ def check_pilco_size(config: PilcoConfig) -> None:
     rollout = 8.0 * config.n_prediction_steps * dim * dim * config.gp.max_points**2
     policy = 8.0 * config.n_prediction_steps * config.policy.n_basis * (config.gp.max_points + dim) * dim
     evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
-    check_work_size(
-        "this PILCO run",
-        rollout + policy + evaluation,
-        f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.gp.max_points}**2 GP points, "
-        f"{config.policy.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s",
-    )
+    detail = f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.gp.max_points}**2 GP points, "
+    detail += f"{config.policy.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of "
+    check_work_size("this PILCO run", rollout + policy + evaluation, f"{detail}{config.eval_duration_s:g} s")
 
 
 def run_pilco(
@@ -624,9 +621,8 @@ class Pilco:
 
     def _clocks(self) -> dict[str, float]:
         """Wall and CPU seconds since the run started."""
-        return dict(
-            wall_s_total=time.perf_counter() - self._start_wall, cpu_s_total=time.process_time() - self._start_cpu
-        )
+        wall, cpu = time.perf_counter() - self._start_wall, time.process_time() - self._start_cpu
+        return dict(wall_s_total=wall, cpu_s_total=cpu)
 
     def result(self) -> PilcoResult:
         parts = (self.gp_hyperparameters, self.balance_policy, self.predicted_means, self.real_states)

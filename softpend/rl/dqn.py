@@ -63,9 +63,8 @@ def evaluate_agent(
 ):
     """Shared evaluation (:func:`softpend.evaluation.evaluate_controller`) of a trained agent on ``config.task``."""
     seeds, duration_s = _seeds_and_duration(config, seeds, duration_s)
-    kwargs: dict[str, Any] = dict(name=name, seeds=seeds, duration_s=duration_s)
-    controller = policy_controller(model, config)
-    return evaluate_controller(controller, config.task, stop_at_first_failure=stop_at_first_failure, **kwargs)
+    options: dict[str, Any] = dict(seeds=seeds, duration_s=duration_s, stop_at_first_failure=stop_at_first_failure)
+    return evaluate_controller(policy_controller(model, config), config.task, name=name, **options)
 
 
 def _seeds_and_duration(config: DQNConfig, seeds: Any, duration_s: Any) -> tuple[tuple[int, ...], float]:
@@ -120,19 +119,17 @@ class TrainingCallback(BaseCallback):
         self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
         self.best_score = min((_score(row) for row in log.evaluations), default=None)
         self.bar: Optional[tqdm] = None
-        self._started, self._cpu_started = time.perf_counter(), time.process_time()
-        self._wall_offset = float(log.episodes[-1]["wall_s"]) if log.episodes else 0.0
-        self._cpu_offset = float(log.episodes[-1].get("cpu_s", math.nan)) if log.episodes else 0.0
+        last = log.episodes[-1] if log.episodes else {"wall_s": 0.0, "cpu_s": 0.0}  # a resumed run's clocks go on
+        self._wall_from = float(last["wall_s"]) - time.perf_counter()
+        self._cpu_from = float(last.get("cpu_s", math.nan)) - time.process_time()
         self._return, self._observations, self._torques = 0.0, list[np.ndarray](), list[float]()
 
     def model_steps(self) -> int:
         return int(self.part.model_steps) if self.part is not None else 0
 
-    def wall_s(self) -> float:  # seconds of training so far, over resumed sessions
-        return self._wall_offset + time.perf_counter() - self._started
-
-    def cpu_s(self) -> float:
-        return self._cpu_offset + time.process_time() - self._cpu_started
+    def clocks(self) -> dict[str, float]:
+        """Wall and CPU seconds of training so far, over resumed sessions."""
+        return dict(wall_s=self._wall_from + time.perf_counter(), cpu_s=self._cpu_from + time.process_time())
 
     def _on_training_start(self) -> None:
         shown: dict[str, Any] = dict(desc=f"{self.log.algo} seed {self.log.seed}", unit="episode", leave=False)
@@ -166,7 +163,7 @@ class TrainingCallback(BaseCallback):
             std, swing_up = metrics["upright_std_rad"], metrics["swing_up_time_s"]
         row: dict[str, Any] = {"episode": self.log.n_episodes + 1, "return": self._return}
         row |= dict(plant_s=self.log.plant_s + plant_steps * dt, upright_std_rad=std, swing_up_time_s=swing_up)
-        row |= dict(model_steps=self.model_steps(), wall_s=self.wall_s(), cpu_s=self.cpu_s())
+        row |= dict(model_steps=self.model_steps(), **self.clocks())
         self.log.episodes.append(row)
         self._return, self._observations, self._torques = 0.0, [], []
         self._check_weights(f"after training episode {row['episode']}")
@@ -225,7 +222,7 @@ class TrainingCallback(BaseCallback):
         row |= dict(model_steps=self.model_steps(), starts_evaluated=len(results), median_upright_std_rad=median_std)
         row |= dict(max_upright_std_rad=max(stds), median_swing_up_time_s=swing_up)
         row |= dict(all_swung_up=complete and all(math.isfinite(r.swing_up_time_s) for r in results))
-        row |= dict(success_rate=summary.successes / len(seeds), wall_s=self.wall_s(), cpu_s=self.cpu_s())
+        row |= dict(success_rate=summary.successes / len(seeds), **self.clocks())
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
             self.best_score = _score(row)
@@ -318,12 +315,8 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     plant_steps = config.episode_agent_steps * config.action_repeat + 1
     eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
     records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
-    check_work_size(
-        "this training run",
-        buffers + networks + records,
-        f"replay buffers {buffers / 2**20:.3g} MiB, networks {networks / 2**20:.3g} MiB, episode and evaluation "
-        f"records {records / 2**20:.3g} MiB",
-    )
+    sizes = f"replay buffers {buffers / 2**20:.3g} MiB, networks {networks / 2**20:.3g} MiB, episode and evaluation "
+    check_work_size("this training run", buffers + networks + records, f"{sizes}records {records / 2**20:.3g} MiB")
 
 
 def _saved_run_seed(run_dir: Path) -> Optional[int]:

@@ -68,11 +68,6 @@ class MBPOReplayBuffer(ReplayBuffer):
             buf.full = True
         buf.pos = int((buf.pos + n) % buf.buffer_size)
 
-    def sample_real_states(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """``n`` real states drawn from the real buffer: plant observations (n, 10), env vectors (n, 11)."""
-        index = rng.integers(0, self.size(), size=n)
-        return self.plant_observations[index].copy(), self.observations[index, 0].copy()
-
     def real_observation_box(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-component ``(low, high)`` of the real observation vectors, widened by a tenth of the range."""
         both = np.concatenate([self.observations[: self.size(), 0], self.next_observations[: self.size(), 0]])
@@ -163,7 +158,8 @@ class MBPOTrainer:
         if self.dynamics is None or buffer.size() == 0:
             return 0
         c, env = self.config, self.env
-        raw, vec = buffer.sample_real_states(n_rollouts, self.rng)
+        index = self.rng.integers(0, buffer.size(), size=n_rollouts)  # real states: plant observations, env vectors
+        raw, vec = buffer.plant_observations[index].copy(), buffer.observations[index, 0].copy()
         for i in range(int(round(c.rollout.start_branch_fraction * n_rollouts))):  # the first rows
             vec[i], info = self.start_env.reset()
             raw[i] = info["observation"]
@@ -173,28 +169,22 @@ class MBPOTrainer:
         state = torch.as_tensor(raw, dtype=torch.float32)
         added, alive = 0, np.ones(n_rollouts, dtype=bool)
         for _ in range(length):
-            q = agent.q_net(torch.as_tensor(vec, dtype=torch.float32))
-            actions = q.argmax(dim=1).numpy()
+            actions = agent.q_net(torch.as_tensor(vec, dtype=torch.float32)).argmax(dim=1).numpy()
             explore = self.rng.random(len(actions)) < epsilon
             actions[explore] = self.rng.integers(0, len(levels), size=int(explore.sum()))
             torque = torch.as_tensor(levels[actions], dtype=torch.float32)
             reward = np.zeros(len(actions))
             for _ in range(c.action_repeat):
                 state = self.dynamics.predict_next(state, torque, generator=self.generator)
-                theta = state[:, _THETA].double().numpy()
-                r, bonus = step_reward(theta, bonus, c.dt_s, env.reward_params)
+                r, bonus = step_reward(state[:, _THETA].double().numpy(), bonus, c.dt_s, env.reward_params)
                 reward += r
             plant = state.double().numpy()
             finite = np.all(np.isfinite(plant), axis=1) & np.isfinite(reward)
-            alive &= finite
-            if not alive.any():
-                break
             plant[~finite] = 0.0
             next_vec = observation_vector(plant, np.asarray(bonus), env)
-            if box is not None:
-                alive &= np.all((next_vec >= box[0]) & (next_vec <= box[1]), axis=1)
-                if not alive.any():
-                    break
+            alive &= finite if box is None else finite & np.all((next_vec >= box[0]) & (next_vec <= box[1]), axis=1)
+            if not alive.any():
+                break
             buffer.add_model_transitions(vec[alive], next_vec[alive], actions[alive], reward[alive])
             added += int(alive.sum())
             vec = next_vec
@@ -221,8 +211,9 @@ class MBPOTrainer:
 
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
-        arrays = dict(observations=np.array(self.trials_observations), torques=np.array(self.trials_torques))
-        np.savez(folder / "mbpo_state.npz", **arrays, counters=np.array([self.n_fits, self.model_steps]))
+        counters = np.array([self.n_fits, self.model_steps])
+        observations, torques = np.array(self.trials_observations), np.array(self.trials_torques)
+        np.savez(folder / "mbpo_state.npz", observations=observations, torques=torques, counters=counters)
 
     def restore(self, folder: Path) -> None:
         """Inverse of :meth:`save`; refits the model on the restored episodes."""

@@ -69,10 +69,14 @@ def main() -> None:  # the twin's side runs in spawned children, which import th
     parser.add_argument("--verify-starts", type=int, default=10)
     parser.add_argument("--controllers", nargs="+", default=list(CLASSES), choices=CLASSES)
     parser.add_argument("--default-runs", nargs="*", default=[], metavar="LEARNER=FOLDER")
+    parser.add_argument("--uncertainty-scale", type=float, default=None, help="CommissionConfig.uncertainty_scale")
     args = parser.parse_args()
     default_runs = dict(item.split("=", 1) for item in args.default_runs)
     config = CommissionConfig(
-        verify_starts=args.verify_starts, controllers=tuple(args.controllers), default_rod_runs=default_runs
+        verify_starts=args.verify_starts,
+        controllers=tuple(args.controllers),
+        default_rod_runs=default_runs,
+        **({} if args.uncertainty_scale is None else {"uncertainty_scale": args.uncertainty_scale}),
     )
     outputs = Outputs()
     outputs.file(args.out, "--out")

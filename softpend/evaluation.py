@@ -366,8 +366,8 @@ def evaluate(
 ) -> EvaluationSummary:
     """Evaluate a controller on the true plant of ``task`` from one start per seed, on the Exudyn engine (one episode
     after the other) or the batched one (all at once); ``rod_spread > 0``: the rod of seed ``s``
-    :func:`softpend.plant.randomisation.randomised_rod` from ``default_rng(rod_seed + s)``."""
-    from softpend.plant.randomisation import randomised_rod
+    :func:`softpend.plant.params.randomised_rod` from ``default_rng(rod_seed + s)``."""
+    from softpend.plant.params import randomised_rod
 
     task = task if task is not None else Task()
     if not isinstance(task, Task):

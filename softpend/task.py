@@ -10,8 +10,8 @@ import numpy as np
 
 from softpend.checks import int_at_least, non_negative, one_of, positive
 from softpend.plant import RodParams, check_plant_name, make_plant, tilt_state
+from softpend.plant.base import Plant
 from softpend.plant.params import GRAVITY_MPS2
-from softpend.plant.protocol import Plant
 
 #: Start distributions of the environments (:class:`softpend.envs.SoftPendulumEnv` ``start``).
 START_KINDS = ("hanging", "upright", "random")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from softpend.envs import SoftPendulumDiscreteEnv
-from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import next_bonus
+from softpend.envs.soft_pendulum import observation_vector
 from softpend.plant import OBSERVATION_NAMES
 
 

@@ -13,7 +13,7 @@ import torch
 from softpend.control.lqr import LQRController
 from softpend.control.swingup import EnergySwingUpController
 from softpend.evaluation import BatchPolicy, evaluate, evaluate_controller
-from softpend.plant.randomisation import randomised_rod
+from softpend.plant.params import randomised_rod
 from softpend.rl.config import DQNConfig
 from softpend.rl.dqn import build_dqn, evaluate_agent, evaluate_agents_batched
 from softpend.rl.training_env import make_training_env

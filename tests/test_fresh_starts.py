@@ -160,7 +160,7 @@ def test_headline_figures_count_final_agents_and_compare_plant_seconds_seed_by_s
 
 def test_randomised_rods_scale_each_field_within_the_spread_reproducibly():
     from softpend.plant import RodParams
-    from softpend.plant.randomisation import RANDOMISED_FIELDS, randomised_rod
+    from softpend.plant.params import RANDOMISED_FIELDS, randomised_rod
 
     rod = RodParams()
     rods = [randomised_rod(rod, np.random.default_rng(s), 0.15) for s in range(50)]
@@ -180,7 +180,7 @@ def test_perturbed_rod_row_runs_each_start_on_its_own_rod():
     evaluations on those rods built by hand, and differs from the nominal rod's."""
     from softpend.control.swingup import EnergySwingUpController
     from softpend.evaluation import evaluate
-    from softpend.plant.randomisation import randomised_rod
+    from softpend.plant.params import randomised_rod
     from softpend.study.fresh_starts import perturbed_rod_row
     from softpend.task import Task
 

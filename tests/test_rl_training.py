@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from softpend.cli import main
-from softpend.envs.observation_vector import observation_vector
+from softpend.envs.soft_pendulum import observation_vector
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import DQNConfig, MBPOConfig, ModelSettings, RolloutSettings, StopRule
 from softpend.rl.dqn import evaluate_agent, load_agent, train_dqn

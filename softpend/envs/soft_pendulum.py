@@ -11,7 +11,7 @@ from gymnasium import spaces
 
 from softpend.checks import int_at_least, non_negative, one_of
 from softpend.envs.reward import RewardParams
-from softpend.plant import Observation, RodParams, SimulationDiverged, make_plant
+from softpend.plant import OBSERVATION_NAMES, Observation, RodParams, SimulationDiverged, make_plant
 from softpend.task import START_KINDS as STARTS
 
 #: Rates are divided by this in the observation vector [1/s].
@@ -214,3 +214,20 @@ class SoftPendulumDiscreteEnv(SoftPendulumEnv):
         if value.size != 1 or value.dtype.kind not in "iu" or not 0 <= value.reshape(-1)[0] < self.n_torque_levels:
             raise ValueError(f"action must be an integer in [0, {self.n_torque_levels}), got {action!r}")
         return float(self.torque_levels_nm[value.reshape(-1)[0]])
+
+
+def observation_vector(observations: np.ndarray, bonus: np.ndarray, env: Any) -> np.ndarray:
+    """Rows ``env.observation_vector(observation, bonus)`` (float32, ``(B, 11)``) for plant observations
+    ``(B, 10)`` and the reward's bonus state after each; ``env`` (single or vector) is not stepped."""
+    observations = np.asarray(observations, dtype=np.float64)
+    if observations.ndim != 2 or observations.shape[1] != len(OBSERVATION_NAMES):
+        raise ValueError(f"observations must have shape (B, {len(OBSERVATION_NAMES)}), got {observations.shape}")
+    bonus = np.broadcast_to(np.asarray(bonus, dtype=np.float64), (observations.shape[0],))
+    env = env.unwrapped if hasattr(env, "unwrapped") else env
+    inv_l, v = 1.0 / env.params.length_m, VELOCITY_SCALE_PER_S
+    phi, theta, ex, ey, _, phi_dot, theta_dot, ex_dot, ey_dot, _ = observations.T
+    angles = [np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)]  # the order of OBSERVATION_VECTOR_NAMES
+    rates = [phi_dot / v, theta_dot / v, ex_dot * inv_l / v, ey_dot * inv_l / v]
+    vec = np.stack([*angles, ex * inv_l, ey * inv_l, *rates, bonus], axis=1).astype(np.float32)
+    bound = env.observation_space.high
+    return np.clip(vec, -bound, bound)

@@ -15,9 +15,15 @@ from gymnasium.vector.vector_env import AutoresetMode
 
 from softpend import MAX_EPISODE_STEPS
 from softpend.checks import int_at_least
-from softpend.envs.observation_vector import observation_vector
 from softpend.envs.reward import RewardParams, next_bonus, step_reward
-from softpend.envs.soft_pendulum import OBSERVATION_BOUND, TaskSettings, check_torque_levels, draw_start, reset_options
+from softpend.envs.soft_pendulum import (
+    OBSERVATION_BOUND,
+    TaskSettings,
+    check_torque_levels,
+    draw_start,
+    observation_vector,
+    reset_options,
+)
 from softpend.plant import OBSERVATION_NAMES, RodParams
 from softpend.plant.batched import BatchedPRBChain, BatchedRodParams, stable_substeps
 

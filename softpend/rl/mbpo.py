@@ -15,7 +15,7 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
 from softpend.envs import step_reward
-from softpend.envs.observation_vector import observation_vector
+from softpend.envs.soft_pendulum import observation_vector
 from softpend.io.arrays import read_npz
 from softpend.plant import OBSERVATION_NAMES
 from softpend.rl.config import MBPOConfig

@@ -7,10 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softpend.plant.base import PlantBase
+from softpend.plant.base import Plant, PlantBase
 from softpend.plant.params import RodParams
 from softpend.plant.prb import PRBPlant
-from softpend.plant.protocol import Plant
 from softpend.task import Task
 
 #: Hub angle that points the clamped rod horizontally (to +x) [rad].

@@ -13,8 +13,7 @@ from softpend.sysid.metrics import (
     rollout_errors,
     rollout_trial,
 )
-from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, save_model
-from softpend.sysid.rollout import rollout
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, rollout, save_model
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 
 __all__ = [

@@ -15,8 +15,7 @@ from softpend.sysid.babble import BabbleProtocol, babble
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import GREYBOX_PARAMETERS, GreyBoxConfig, identify
 from softpend.sysid.metrics import evaluate_model, hub_rate_offset_for_tip_error, perturbed_simulator_errors
-from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
-from softpend.sysid.rollout import rollout
+from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, rollout
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
 from softpend.task import Task
 from softpend.torch_threads import one_torch_thread

@@ -7,8 +7,7 @@ import torch.nn.functional as F
 from stable_baselines3 import DQN
 
 from softpend.rl.config import DQNConfig, DQNLearner
-from softpend.rl.dqn import agent_class, build_dqn
-from softpend.rl.target_dqn import TargetDQN
+from softpend.rl.dqn import TargetDQN, agent_class, build_dqn
 from softpend.rl.training_env import make_training_env
 
 

@@ -214,7 +214,7 @@ def test_two_twin_runs_of_the_same_start_and_seed_give_identical_logs_and_swing_
     """Simulated time: the same start and seeds give byte-identical motor, camera and truth logs; and the
     closed loop (energy swing-up, then LQR, behind the estimator and the camera) brings the rod up and holds it."""
     from softpend.control.swingup import EnergySwingUpController
-    from softpend.study.rig import run_truth_metrics
+    from softpend.study.rig_runs import run_truth_metrics
 
     task = Task(start_noise_rad=0.05)
     runs = [

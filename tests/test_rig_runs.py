@@ -14,7 +14,6 @@ from softpend.hardware.emulator import RigConfig, SimRig, truth_columns
 from softpend.io.samplelog import SampleLog, read_sample_log
 from softpend.stats import wilson_interval
 from softpend.study.presets import REPORT_SEEDS
-from softpend.study.rig import run_truth_metrics, torque_total_variation_per_s, truth_metrics
 from softpend.study.rig_runs import (
     JOINT_SWINGUP,
     OBSERVATION_SWINGUP,
@@ -22,9 +21,12 @@ from softpend.study.rig_runs import (
     FrameKeeper,
     RigCondition,
     rig_controllers,
+    run_truth_metrics,
     simulator_starts,
     summary_rows,
     text_figures,
+    torque_total_variation_per_s,
+    truth_metrics,
     twin_start,
 )
 from softpend.task import Task

@@ -96,8 +96,7 @@ def run(args: argparse.Namespace) -> int:
     from softpend.hardware.emulator import RigConfig
     from softpend.hardware.estimator import EstimatorConfig
     from softpend.io.outputs import Outputs, json_text
-    from softpend.study.rig import run_truth_metrics, torque_chatter_nm_per_s
-    from softpend.study.rig_runs import TimedController, step_time_figures
+    from softpend.study.rig_runs import TimedController, run_truth_metrics, step_time_figures, torque_chatter_nm_per_s
     from softpend.task import Task
     from softpend.vision.camera import CameraEffects
 

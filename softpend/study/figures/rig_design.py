@@ -215,7 +215,7 @@ def draw_filmstrip(
 def plot_twin_run(motor_log, truth_log, task, simulator=None, title: Optional[str] = None):
     """``|theta|`` (true and estimated) and torque of one twin run against time, optionally beside ``simulator``'s."""
     from softpend.io.samplelog import read_sample_log
-    from softpend.study.rig import truth_trajectory
+    from softpend.study.rig_runs import truth_trajectory
 
     motor = read_sample_log(motor_log)
     t0_device = float(motor["device_time_s"][0])

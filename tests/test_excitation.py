@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from softpend.plant import RodParams
-from softpend.sysid.babble import BabbleProtocol, babble
-from softpend.sysid.excitation import multisine, multisine_frequencies_hz
+from softpend.sysid.babble import BabbleProtocol, babble, multisine, multisine_frequencies_hz
 
 
 def test_multisine_power_lies_in_its_band_with_equal_lines_and_its_peak_is_the_limit():

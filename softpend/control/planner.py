@@ -22,11 +22,10 @@ from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, Evalu
 from softpend.plant import Observation, RodParams
 from softpend.plant.batched import BatchedPRBChain
 from softpend.sysid.babble import PROGRAMS, BabbleProtocol, babble
-from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states, wrap_diff
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
-from softpend.sysid.variables import POSITION_NAMES, is_angle
+from softpend.sysid.variables import POSITION_NAMES, backward_difference, is_angle
 from softpend.task import Task
 
 #: The dynamics models of :class:`PlannerConfig` (``model``).

@@ -164,7 +164,7 @@ def synchronise(motor: LogContents, camera: LogContents, dt_s: float = 0.01, tri
     ex_g, ey_g = (np.interp(grid, tc[good], values[good]) for values in (x_m, y_m))
     torque_g = torque[np.clip(np.searchsorted(tm, grid + 1e-9, side="right") - 1, 0, len(tm) - 1)]  # held
 
-    from softpend.sysid.differentiation import backward_difference
+    from softpend.sysid.variables import backward_difference
 
     n = int(round(trial_length_s / dt_s))
     phi_g, theta_g = np.interp(grid, tm, phi), np.arctan2(-ex_g, ey_g)

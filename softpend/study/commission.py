@@ -202,8 +202,7 @@ class _Run:
 
 def _excite(run: _Run) -> dict:
     from softpend.hardware.sync import build_rig_dataset
-    from softpend.sysid.babble import band_limited_noise
-    from softpend.sysid.excitation import multisine
+    from softpend.sysid.babble import band_limited_noise, multisine
 
     c, guess, dt_s, folder = run.config, RodParams(), 0.01, run.out / "excite"
     n_steps, limit = int(round(c.excite_s / dt_s)), guess.torque_limit_nm

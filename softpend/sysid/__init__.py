@@ -2,10 +2,8 @@
 
 from softpend.sysid.babble import BabbleProtocol, babble, band_limited_noise
 from softpend.sysid.dataset import TrajectoryDataset, load_dataset, save_dataset, write_dataset
-from softpend.sysid.differentiation import backward_difference
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.metrics import (
-    RolloutErrors,
     evaluate_model,
     hub_rate_offset_for_tip_error,
     one_step_errors,
@@ -15,6 +13,7 @@ from softpend.sysid.metrics import (
 )
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel, load_model, rollout, save_model
 from softpend.sysid.training import TrainConfig, fit_dynamics_model
+from softpend.sysid.variables import backward_difference
 
 __all__ = [
     "BabbleProtocol",
@@ -26,7 +25,6 @@ __all__ = [
     "save_dataset",
     "write_dataset",
     "StateLayout",
-    "RolloutErrors",
     "evaluate_model",
     "hub_rate_offset_for_tip_error",
     "one_step_errors",

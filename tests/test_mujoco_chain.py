@@ -123,7 +123,7 @@ def test_the_large_steps_diverge_at_ten_links_and_are_reported_so() -> None:
 
 
 def test_mujoco_figures_returns_every_key(monkeypatch: pytest.MonkeyPatch) -> None:
-    from softpend.study.simulators import hub_error_reference
+    from softpend.study.bench.plant import hub_error_reference
 
     real_steps, real_rollout = mujoco_chain.steps_per_s, mujoco_chain.rollout_rod_steps_per_s
     monkeypatch.setattr(mujoco_chain, "steps_per_s", lambda *a, n_steps=0: real_steps(*a, n_steps=20, repeats=1))

@@ -395,7 +395,7 @@ def test_the_commission_bench_figures_are_the_worst_rod_and_count_a_held_paramet
     infinite when a parameter was held at the guess, and the plant seconds."""
     import math
 
-    from softpend.study.bench.commission import commission_figures
+    from softpend.study.bench.control import commission_figures
 
     def report(nominal, harsh, errors, parameters, excite_s, dqn_nominal=10):
         def entry(nominal, harsh, plant_s):

@@ -177,7 +177,7 @@ def test_interval_band_holds_a_stopped_run_at_its_last_value_and_brackets_the_iq
 
 
 def test_training_cpu_s_of_a_log():
-    from softpend.study.bench.rl import training_cpu_s
+    from softpend.study.bench.learning import training_cpu_s
 
     log = _log(np.zeros(3), [{"episode": 3, "cpu_s": 7.5}])
     for row, cpu in zip(log.episodes, (2.0, 4.0, 6.0)):

@@ -9,8 +9,8 @@ from typing import Any, Callable, Iterable
 
 #: The groups in the order they run; ``group:module`` where ``bench_<group>`` is not in a module of the group's name.
 GROUPS = (
-    "plant control beam:plant rl pilco pilco_search:pilco hardware:control rig_control:control sysid "
-    "data_efficiency:control commission"
+    "plant control beam:plant rl:learning pilco:learning pilco_search:learning hardware:control rig_control:control "
+    "sysid data_efficiency:control commission:control"
 ).split()
 BENCHMARKS = {g: f"softpend.study.bench.{m or g}:bench_{g}" for g, _, m in (group.partition(":") for group in GROUPS)}
 

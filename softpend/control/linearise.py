@@ -51,27 +51,15 @@ class LinearModel:
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", np.asarray(self.b, dtype=float).reshape(a.shape[0], -1))
 
-    @property
-    def n_states(self) -> int:
-        return self.a.shape[0]
-
-    @property
-    def is_discrete(self) -> bool:
-        return self.dt_s is not None
-
     def eigenvalues(self) -> np.ndarray:
         return np.linalg.eigvals(self.a)
-
-    def closed_loop(self, gain: np.ndarray) -> np.ndarray:
-        """``A - B K`` for ``u = -K x``."""
-        return self.a - self.b @ np.asarray(gain, dtype=float).reshape(1, -1)
 
 
 def discretise(model: LinearModel, dt_s: float) -> LinearModel:
     """Zero-order-hold discretisation (``control.c2d``)."""
     import control
 
-    n = model.n_states
+    n = model.a.shape[0]
     sys_d = control.c2d(control.ss(model.a, model.b, np.eye(n), np.zeros((n, 1)), 0), dt_s, method="zoh")
     return LinearModel(a=np.asarray(sys_d.A), b=np.asarray(sys_d.B), dt_s=float(dt_s), state_names=model.state_names)
 

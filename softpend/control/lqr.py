@@ -42,7 +42,7 @@ def design_lqr(model: LinearModel, q: np.ndarray, r: float) -> np.ndarray:
     """Optimal gain ``K`` (``u = -K x``); ``ValueError`` if the Riccati equation has no stabilising solution."""
     import control
 
-    solve = control.dlqr if model.is_discrete else control.lqr
+    solve = control.lqr if model.dt_s is None else control.dlqr
     try:
         gain, _, _ = solve(model.a, model.b, q, np.array([[r]]))
     except Exception as exc:  # python-control raises several types for a failed Riccati solve

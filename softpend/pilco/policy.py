@@ -102,10 +102,6 @@ class LinearPolicy(_Policy):
         self.torque_limit_nm = float(torque_limit_nm)
         self.weights = torch.tensor(np.zeros(n_inputs) if weights is None else np.asarray(weights, float), dtype=DTYPE)
 
-    @property
-    def n_inputs(self) -> int:
-        return self.weights.shape[0]
-
     def pre_saturation(self, x: torch.Tensor) -> torch.Tensor:
         return x @ self.weights
 
@@ -133,10 +129,6 @@ class RBFPolicy(_Policy):
         self.targets = float(target_std) * torch.randn(len(self.centers), generator=generator, dtype=DTYPE)
         self.log_lengthscales = torch.log(torch.tensor(np.asarray(lengthscales, dtype=float), dtype=DTYPE))
         self._beta_cache: tuple | None = None
-
-    @property
-    def n_inputs(self) -> int:
-        return self.centers.shape[1]
 
     def _beta(self) -> torch.Tensor:
         """``(K_cc + sn^2 I)^{-1} t``, computed once per set of parameters (and grad mode)."""

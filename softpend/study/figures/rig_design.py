@@ -158,7 +158,7 @@ def draw_tracked_frame(
     truth_px: Optional[np.ndarray] = None,
 ):
     """A BGR camera frame on ``ax`` with the tracker's contour and centroid, optional marker centres and true tip;
-    ``zoom_px``: an inset magnifies the dot.  Returns the inset axis (or None)."""
+    ``zoom_px``: an inset magnifies the dot."""
     rgb = np.ascontiguousarray(frame_bgr[..., ::-1])
     ax.imshow(rgb)
     ax.set_axis_off()
@@ -184,8 +184,6 @@ def draw_tracked_frame(
         inset.set(xticks=[], yticks=[])
         for spine in inset.spines.values():
             spine.set_edgecolor("white")
-        return inset
-    return None
 
 
 def draw_filmstrip(

@@ -48,7 +48,7 @@ def test_static_sag_within_two_percent_and_large_deflection_is_not_linear():
 
 
 def test_prb_converges_to_beam_and_recommendation():
-    rows = convergence_table(n_links=(2, 8), beam_elements=(), trajectory_s=1.0, progress=False)
+    rows = convergence_table(n_links=(2, 8), beam_elements=(), trajectory_s=1.0)
     by_n = {r.resolution: r for r in rows}
     for key in ("f1_error_pct", "sag_small_error_pct", "sag_large_vs_beam_pct"):
         assert abs(getattr(by_n[8], key)) < abs(getattr(by_n[2], key))

@@ -135,7 +135,6 @@ def test_valid_prediction_time_on_a_hand_made_trajectory():
     result = valid_prediction(errors, dt, length, lyapunov_rate_per_s=6.0)
     np.testing.assert_allclose(result.times_s, [1.0, 0.15, 0.5], atol=1e-12)
     assert result.censored.tolist() == [True, False, False]
-    assert result.threshold_m == pytest.approx(threshold)
     assert result.median_s == pytest.approx(0.5)
     assert result.median_lyapunov == pytest.approx(3.0)
     assert tip_rmse_at_s(errors, dt, 0.5) == pytest.approx(np.sqrt(np.mean(errors[:, 50] ** 2)))

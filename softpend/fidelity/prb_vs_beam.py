@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from softpend.fidelity.validation import (
     _resolved,
@@ -51,7 +50,6 @@ def convergence_table(
     params: Optional[RodParams] = None,
     trajectory_s: float = 4.0,
     reference_elements: Optional[int] = None,
-    progress: bool = True,
 ) -> list[ConvergenceRow]:
     """PRB chains of ``n_links`` and beams of ``beam_elements`` against theory and the reference beam (default:
     the beam plant's default elements); beam rows first, a one-link chain has no second mode (``nan``)."""
@@ -67,7 +65,7 @@ def convergence_table(
     beam_tip = tip_trajectory_m("beam", params, torques, resolution=reference)
     jobs = [("beam", int(n)) for n in beam_elements] + [("prb", int(n)) for n in n_links]
     rows = []
-    for plant, n in tqdm(jobs, desc="PRB vs beam", disable=not progress):
+    for plant, n in jobs:
         if plant == "prb" and n == 1:
             f1 = float(cantilever_free_vibration("prb", params, 1, modes=(1,)).error_pct[0])
             f2 = math.nan

@@ -25,7 +25,6 @@ class ValidPrediction:
 
     times_s: np.ndarray
     censored: np.ndarray
-    threshold_m: float
     median_s: float
     median_lyapunov: float
 
@@ -47,7 +46,7 @@ def valid_prediction(
     times = np.maximum(first - 1, 0) * positive("dt_s", dt_s)
     median = float(np.median(times))
     rate = math.nan if lyapunov_rate_per_s is None else positive("lyapunov_rate_per_s", lyapunov_rate_per_s)
-    return ValidPrediction(times, censored, float(threshold), median, float(median * rate))
+    return ValidPrediction(times, censored, median, float(median * rate))
 
 
 def tip_rmse_at_s(tip_error_m: np.ndarray, dt_s: float, horizon_s: float) -> float:

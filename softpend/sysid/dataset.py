@@ -194,12 +194,23 @@ def dataset_metadata(
     names = [str(n) for n in position_names]
     shape = np.shape(positions) if np.ndim(positions) == 3 else (-1, -1)
     dt = float(dt_s) if isinstance(dt_s, (int, float, np.floating)) and not isinstance(dt_s, bool) else dt_s
-    meta: dict[str, Any] = dict(schema=SCHEMA_NAME, schema_version=SCHEMA_VERSION, softpend_version=__version__)
-    meta |= dict(source=source, dt_s=dt, n_trials=int(shape[0]), n_samples=int(shape[1]), position_names=names)
-    meta |= dict(velocity_names=[velocity_name(n) if n in POSITION_NAMES else n for n in names], plant=plant)
-    meta |= dict(differentiation=str(differentiation), seed=None if seed is None else int(seed), notes=str(notes))
-    meta |= dict(plant_params=plant_params)
-    return meta | {"protocol": json.loads(json.dumps(protocol or {}, default=np.generic.item))}  # numpy scalars, tuples
+    return {
+        "schema": SCHEMA_NAME,
+        "schema_version": SCHEMA_VERSION,
+        "softpend_version": __version__,
+        "source": source,
+        "dt_s": dt,
+        "n_trials": int(shape[0]),
+        "n_samples": int(shape[1]),
+        "position_names": names,
+        "velocity_names": [velocity_name(n) if n in POSITION_NAMES else n for n in names],
+        "plant": plant,
+        "differentiation": str(differentiation),
+        "seed": None if seed is None else int(seed),
+        "notes": str(notes),
+        "plant_params": plant_params,
+        "protocol": json.loads(json.dumps(protocol or {}, default=np.generic.item)),  # numpy scalars, tuples
+    }
 
 
 def save_dataset(

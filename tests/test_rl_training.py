@@ -354,7 +354,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
 
     config = DQNConfig(learning_starts=20, reset_every_episodes=2, **{**TINY, "eval_every_episodes": 1})
     events = []
-    real_reset, real_checkpoint = dqn.reset_q_network, dqn.TrainingCallback.checkpoint
+    real_reset, real_checkpoint = dqn.reset_q_network, dqn.EpisodeEvents.checkpoint
 
     def reset(model, seed):
         trained = [p.detach().clone() for p in model.q_net.parameters()]
@@ -370,7 +370,7 @@ def test_q_network_reset_comes_after_the_evaluation_and_before_the_checkpoint(tm
         return real_checkpoint(self)
 
     monkeypatch.setattr(dqn, "reset_q_network", reset)
-    monkeypatch.setattr(dqn.TrainingCallback, "checkpoint", checkpoint)
+    monkeypatch.setattr(dqn.EpisodeEvents, "checkpoint", checkpoint)
     _, log = train_dqn(config, seed=3, episodes=5, run_dir=tmp_path, progress=False)
     assert [e[:2] for e in events] == [
         ("reset", (3, 2)),
@@ -422,13 +422,13 @@ def test_a_run_that_stops_at_a_reset_episode_keeps_the_agent_that_balanced(tmp_p
         **{**TINY, "eval_every_episodes": 1},
     )
     evaluated = []
-    real_evaluate = dqn.TrainingCallback.evaluate
+    real_evaluate = dqn.EpisodeEvents.evaluate
 
     def evaluate(self):
         evaluated.append([p.detach().clone() for p in self.model.q_net.parameters()])
         return real_evaluate(self)
 
-    monkeypatch.setattr(dqn.TrainingCallback, "evaluate", evaluate)
+    monkeypatch.setattr(dqn.EpisodeEvents, "evaluate", evaluate)
     _scripted_evaluations(monkeypatch, [0.3, 0.05, 0.05])  # episode 2, a reset episode, balances: the run stops
     model, log = train_dqn(config, seed=0, episodes=6, run_dir=tmp_path, progress=False)
     assert log.n_episodes == 2 and log.stop_reason is not None
@@ -453,15 +453,16 @@ def test_a_training_evaluation_stops_at_its_first_failing_start(tmp_path, monkey
     assert log.n_episodes == 2 and log.stop_reason is not None
 
 
-def test_the_stop_rule_is_on_with_balanced_evaluations_to_stop_after(tmp_path):
+def test_training_is_a_list_of_callbacks_in_order(tmp_path):
     from softpend.rl import dqn
-    from softpend.rl.mbpo import MBPOTrainer
+    from softpend.rl.mbpo import MBPOTrainer, ModelRefit, ModelRollouts
     from softpend.rl.training_log import TrainingLog
 
     config = MBPOConfig(stop=StopRule(after_balanced_evaluations=1, confirm_seeds=(5,)), **TINY)
     log = TrainingLog(algo="mbpo", seed=0)
-    assert dqn.TrainingCallback(
-        config, log, 4, tmp_path, progress=False, part=MBPOTrainer(config, 0, tmp_path)
-    ).stop_rule
-    plain = dqn.TrainingCallback(DQNConfig(**TINY), TrainingLog(algo="dqn", seed=0), 4, tmp_path, progress=False)
-    assert not plain.stop_rule and plain.model_steps() == 0
+    callbacks = dqn.training_callbacks(config, log, 4, tmp_path, progress=False, part=MBPOTrainer(config, 0, tmp_path))
+    kinds = [ModelRollouts, dqn.EpisodeRecorder, ModelRefit, dqn.EpisodeEvents]
+    assert [type(c) for c in callbacks.callbacks] == kinds and callbacks.callbacks[-1].stop_rule
+    plain = dqn.training_callbacks(DQNConfig(**TINY), TrainingLog(algo="dqn", seed=0), 4, tmp_path, progress=False)
+    recorder, events = plain.callbacks
+    assert [type(c) for c in plain.callbacks] == kinds[1::2] and not events.stop_rule and recorder.model_steps() == 0

@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 from tqdm import tqdm
 
@@ -148,29 +148,22 @@ def evaluate_agents_batched(
     return [EvaluationSummary(name=name, results=summary.results[i * n : (i + 1) * n]) for i in range(len(models))]
 
 
-class TrainingCallback(BaseCallback):
-    """Every step: ``part.before_step`` (MBPO's model rollouts), then at each episode end one :class:`TrainingLog`
-    row, ``part.episode_ended`` (MBPO's refit), the progress bar and, when due, the greedy evaluation (keeping
-    ``best_agent.zip``), :func:`reset_q_network` and a checkpoint (plus ``part.save(folder)``), at the next rollout
-    end or after the last episode; with the stop rule the evaluation runs at once and the rule follows it.  Training
-    stops at the episode budget."""
+class EpisodeRecorder(BaseCallback):
+    """Each agent step's plant observations, torques and reward; at an episode end one :class:`TrainingLog` row
+    (return, plant seconds, upright std and swing-up time, model steps of ``part``, clocks).  ``ended`` holds that
+    episode's plant observations and torques for the callbacks after this one in the list, ``None`` between episode
+    ends."""
 
     model: DQN
 
-    def __init__(
-        self, config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool = True, part: Any = None
-    ) -> None:
+    def __init__(self, config: DQNConfig, log: TrainingLog, part: Any = None) -> None:
         super().__init__()
-        self.config, self.log, self.episodes, self.part = config, log, int(episodes), part
-        self.run_dir, self.progress = Path(run_dir), progress
-        self.stop_rule = bool(config.stop.after_balanced_evaluations)
-        self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
-        self.best_score = min((_score(row) for row in log.evaluations), default=None)
-        self.bar: Optional[tqdm] = None
+        self.config, self.log, self.part = config, log, part
         last = log.episodes[-1] if log.episodes else {"wall_s": 0.0, "cpu_s": 0.0}  # a resumed run's clocks go on
         self._wall_from = float(last["wall_s"]) - time.perf_counter()
         self._cpu_from = float(last.get("cpu_s", math.nan)) - time.process_time()
         self._return, self._observations, self._torques = 0.0, list[np.ndarray](), list[float]()
+        self.ended: Optional[tuple[np.ndarray, np.ndarray]] = None
 
     def model_steps(self) -> int:
         return int(self.part.model_steps) if self.part is not None else 0
@@ -179,25 +172,14 @@ class TrainingCallback(BaseCallback):
         """Wall and CPU seconds of training so far, over resumed sessions."""
         return dict(wall_s=self._wall_from + time.perf_counter(), cpu_s=self._cpu_from + time.process_time())
 
-    def _on_training_start(self) -> None:
-        shown: dict[str, Any] = dict(desc=f"{self.log.algo} seed {self.log.seed}", unit="episode", leave=False)
-        self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, disable=not self.progress, **shown)
-
     def _on_step(self) -> bool:
-        if self.part is not None:
-            self.part.before_step(self.model, self.log)
         info = self.locals["infos"][0]
         plant = info["plant_observations"]
         self._observations.append(plant if not self._observations else plant[1:])
         self._torques.extend([info["torque_nm"]] * int(info["plant_steps"]))
         self._return += float(self.locals["rewards"][0])
-        if not self.locals["dones"][0]:
-            return True
-        observations, torques = self._end_episode()
-        go_on = not (self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps)
-        if self.part is not None:
-            self.part.episode_ended(observations, torques, self.log.n_episodes)
-        return self._events() and go_on
+        self.ended = self._end_episode() if self.locals["dones"][0] else None
+        return True
 
     def _end_episode(self) -> tuple[np.ndarray, np.ndarray]:
         """Append the episode's row to the log; its plant observations and torques."""
@@ -214,8 +196,46 @@ class TrainingCallback(BaseCallback):
         row |= dict(model_steps=self.model_steps(), **self.clocks())
         self.log.episodes.append(row)
         self._return, self._observations, self._torques = 0.0, [], []
-        self._check_weights(f"after training episode {row['episode']}")
+        check_finite_weights(
+            self.model, f"{self.log.algo} seed {self.log.seed}, after training episode {row['episode']}"
+        )
         return observations, torques
+
+
+class EpisodeEvents(BaseCallback):
+    """After the recorder, at each episode end: the progress bar and, when due, the greedy evaluation (keeping
+    ``best_agent.zip``), :func:`reset_q_network` and a checkpoint (plus ``part.save(folder)``), at the next rollout
+    end or after the last episode; with the stop rule the evaluation runs at once and the rule follows it.  Training
+    stops at the episode budget."""
+
+    model: DQN
+
+    def __init__(
+        self,
+        config: DQNConfig,
+        recorder: EpisodeRecorder,
+        episodes: int,
+        run_dir: Path,
+        progress: bool = True,
+        part: Any = None,
+    ) -> None:
+        super().__init__()
+        self.config, self.recorder, self.log, self.episodes, self.part = config, recorder, recorder.log, episodes, part
+        self.run_dir, self.progress = Path(run_dir), progress
+        self.stop_rule = bool(config.stop.after_balanced_evaluations)
+        self.pending = dict.fromkeys(("evaluate", "reset_network", "checkpoint"), False)
+        self.best_score = min((_score(row) for row in self.log.evaluations), default=None)
+        self.bar: Optional[tqdm] = None
+
+    def _on_training_start(self) -> None:
+        shown: dict[str, Any] = dict(desc=f"{self.log.algo} seed {self.log.seed}", unit="episode", leave=False)
+        self.bar = tqdm(total=self.episodes, initial=self.log.n_episodes, disable=not self.progress, **shown)
+
+    def _on_step(self) -> bool:
+        if self.recorder.ended is None:
+            return True
+        go_on = not (self.log.n_episodes >= self.episodes and self.num_timesteps < self.model._total_timesteps)
+        return self._events() and go_on
 
     def _check_weights(self, when: str) -> None:
         check_finite_weights(self.model, f"{self.log.algo} seed {self.log.seed}, {when}")
@@ -267,10 +287,11 @@ class TrainingCallback(BaseCallback):
         complete, stds = len(results) == len(seeds), [r.upright_std_rad for r in results]
         swing_up, median_std = (summary.median("swing_up_time_s"), float(np.median(stds))) if complete else (nan, nan)
         row: dict[str, Any] = dict(episode=self.log.n_episodes, plant_s=self.log.plant_s)
-        row |= dict(model_steps=self.model_steps(), starts_evaluated=len(results), median_upright_std_rad=median_std)
+        row |= dict(model_steps=self.recorder.model_steps(), starts_evaluated=len(results))
+        row |= dict(median_upright_std_rad=median_std)
         row |= dict(max_upright_std_rad=max(stds), median_swing_up_time_s=swing_up)
         row |= dict(all_swung_up=complete and all(math.isfinite(r.swing_up_time_s) for r in results))
-        row |= dict(success_rate=summary.successes / len(seeds), **self.clocks())
+        row |= dict(success_rate=summary.successes / len(seeds), **self.recorder.clocks())
         self.log.evaluations.append(row)
         if self.best_score is None or _score(row) <= self.best_score:
             self.best_score = _score(row)
@@ -388,6 +409,16 @@ def _check_run_args(episodes: int, run_dir: Path | str, config: DQNConfig, seed:
     return run_dir
 
 
+def training_callbacks(
+    config: DQNConfig, log: TrainingLog, episodes: int, run_dir: Path, progress: bool, part: Any = None
+) -> CallbackList:
+    """The training's callbacks in their order: ``part``'s before the recorder (MBPO's model rollouts), the
+    :class:`EpisodeRecorder`, ``part``'s after it (MBPO's refit), the :class:`EpisodeEvents` last."""
+    recorder = EpisodeRecorder(config, log, part)
+    before, after = part.callbacks(recorder) if part is not None else ([], [])
+    return CallbackList([*before, recorder, *after, EpisodeEvents(config, recorder, episodes, run_dir, progress, part)])
+
+
 def run_training(
     algo: str,
     config: DQNConfig,
@@ -429,12 +460,14 @@ def run_training(
     env.reset(seed=int(seed) * 100_003 + log.n_episodes)
     remaining = 0 if log.stop_reason is not None else int(episodes) - log.n_episodes
     if remaining > 0:
-        events = TrainingCallback(config, log, episodes, run_dir, progress, part)
+        callbacks = training_callbacks(config, log, episodes, run_dir, progress, part)
+        events = callbacks.callbacks[-1]
+        assert isinstance(events, EpisodeEvents)
         # exactly the remaining episodes' steps; a logger without outputs (SB3's default one creates a temp folder)
         model.set_logger(Logger(folder=None, output_formats=[]))
         try:
             steps = remaining * config.episode_agent_steps
-            model.learn(total_timesteps=steps, callback=events, reset_num_timesteps=log.n_episodes == 0)
+            model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=log.n_episodes == 0)
         finally:
             events.close()
         if not log.evaluations or log.evaluations[-1]["episode"] != log.n_episodes:

@@ -11,6 +11,7 @@ import torch
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from softpend.checks import in_unit_interval
@@ -209,6 +210,10 @@ class MBPOTrainer:
         if after >= 0 and after % self.config.model.refit_every_episodes == 0:
             self.refit()
 
+    def callbacks(self, recorder: Any) -> tuple[list[BaseCallback], list[BaseCallback]]:
+        """The callbacks before and after the episode bookkeeping (:class:`softpend.rl.dqn.EpisodeRecorder`)."""
+        return [ModelRollouts(self, recorder.log)], [ModelRefit(self, recorder)]
+
     def save(self, folder: Path) -> None:
         """Write the real episodes and the counters into a checkpoint folder (the model is refitted on resume)."""
         counters = np.array([self.n_fits, self.model_steps])
@@ -236,6 +241,35 @@ class MBPOTrainer:
         self.n_fits, self.model_steps = (int(v) for v in counters)
         if len(self.trials_observations) >= 2:
             self.refit()
+
+
+class ModelRollouts(BaseCallback):
+    """Before the episode bookkeeping of every agent step: :meth:`MBPOTrainer.before_step`, the model rollouts."""
+
+    model: DQN
+
+    def __init__(self, trainer: MBPOTrainer, log: TrainingLog) -> None:
+        super().__init__()
+        self.trainer, self.log = trainer, log
+
+    def _on_step(self) -> bool:
+        self.trainer.before_step(self.model, self.log)
+        return True
+
+
+class ModelRefit(BaseCallback):
+    """After the episode bookkeeping, at an episode end: :meth:`MBPOTrainer.episode_ended`, the real episode stored
+    and the dynamics ensemble refitted when due."""
+
+    def __init__(self, trainer: MBPOTrainer, recorder: Any) -> None:
+        super().__init__()
+        self.trainer, self.recorder = trainer, recorder
+
+    def _on_step(self) -> bool:
+        if self.recorder.ended is not None:
+            observations, torques_nm = self.recorder.ended
+            self.trainer.episode_ended(observations, torques_nm, self.recorder.log.n_episodes)
+        return True
 
 
 def train_mbpo(

@@ -45,6 +45,8 @@ def main() -> None:  # the twin's side may spawn children, which import this fil
     parser.add_argument("--out", required=True)
     parser.add_argument("cases", nargs="+", metavar="ROD:LEARNER")
     args = parser.parse_args()
+    outputs = Outputs()
+    outputs.file(args.out, "--out")  # refused before any work when it cannot be written
     rows = []
     for case in args.cases:
         rod_seed, learner = int(case.split(":")[0]), case.split(":")[1]
@@ -68,7 +70,7 @@ def main() -> None:  # the twin's side may spawn children, which import this fil
         "figures": {key: sum(r[key] for r in rows) for key in rows[0] if key.endswith("_successes")},
         "rows": rows,
     }
-    Outputs().write_text(args.out, record_text(record))
+    outputs.write_text(args.out, record_text(record))
 
 
 if __name__ == "__main__":

@@ -78,10 +78,17 @@ def metrics_from_trajectory(
     upright_std = float(np.sqrt(np.mean(after**2)))
     peak, energy = float(np.max(np.abs(torque))), float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt)
     success = bool(start_index is not None and upright_std <= success_std_rad)
-    return dict(zip(_METRICS, (swing_up_time, upright_std, float(np.mean(np.abs(after))), peak, energy, success)))
+    return {
+        "swing_up_time_s": swing_up_time,
+        "upright_std_rad": upright_std,
+        "upright_mean_abs_rad": float(np.mean(np.abs(after))),
+        "peak_torque_nm": peak,
+        "energy_used_j": energy,
+        "success": success,
+    }
 
 
-#: The metrics of an episode, in the order :func:`metrics_from_trajectory` returns them.
+#: The metrics of an episode (the keys of :func:`metrics_from_trajectory`).
 _METRICS = ("swing_up_time_s", "upright_std_rad", "upright_mean_abs_rad", "peak_torque_nm", "energy_used_j", "success")
 
 

@@ -62,11 +62,11 @@ def run(args: argparse.Namespace) -> int:
     from softpend.study.commission import CommissionConfig, commission
     from softpend.study.twin_side import TwinTruth
 
+    truth = TwinTruth(rod_file=args.twin_rod, seed=args.twin_seed)  # an empty path is refused here
     if args.twin_rod is not None:  # its kind only: the file is read on the twin's side, never here
         if not os.path.exists(args.twin_rod):
             raise ValueError(f"--twin-rod {args.twin_rod}: no such file")
         check_regular_file(args.twin_rod, "--twin-rod")
-    truth = TwinTruth(rod_file=args.twin_rod, seed=args.twin_seed)
     config = CommissionConfig(
         **{k: getattr(args, k) for k in CONFIG_OPTIONS if getattr(args, k) is not None},
         controllers=tuple(args.controllers),

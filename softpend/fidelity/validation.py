@@ -19,6 +19,8 @@ EULER_BERNOULLI_BETA_L: tuple[float, ...] = (1.875104068711961, 4.69409113297417
 
 def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.ndarray:
     """Bending frequencies [Hz] of the clamped-free rod without tip mass (at most three modes)."""
+    if not 1 <= n_modes <= len(EULER_BERNOULLI_BETA_L):
+        raise ValueError(f"n_modes must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {n_modes!r}")
     mu = params.mass_kg / params.length_m
     beta_l = np.asarray(EULER_BERNOULLI_BETA_L[:n_modes])
     return beta_l**2 / (2 * math.pi * params.length_m**2) * math.sqrt(params.bending_stiffness_nm2 / mu)
@@ -26,12 +28,14 @@ def euler_bernoulli_frequencies_hz(params: RodParams, n_modes: int = 2) -> np.nd
 
 def euler_bernoulli_mode_shape(mode: int, s_over_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cantilever mode shape ``w_k(s / L)`` (1-based ``mode``, tip value 2 in magnitude) and its slope ``L dw_k/ds``."""
+    if not 1 <= mode <= len(EULER_BERNOULLI_BETA_L):
+        raise ValueError(f"mode must be in [1, {len(EULER_BERNOULLI_BETA_L)}], got {mode!r}")
     b = EULER_BERNOULLI_BETA_L[mode - 1]
     x = b * np.asarray(s_over_l, dtype=float)
     sigma = (math.cosh(b) + math.cos(b)) / (math.sinh(b) + math.sin(b))
-    return np.cosh(x) - np.cos(x) - sigma * (np.sinh(x) - np.sin(x)), b * (
-        np.sinh(x) + np.sin(x) - sigma * (np.cosh(x) - np.cos(x))
-    )
+    shape = np.cosh(x) - np.cos(x) - sigma * (np.sinh(x) - np.sin(x))
+    slope = b * (np.sinh(x) + np.sin(x) - sigma * (np.cosh(x) - np.cos(x)))
+    return shape, slope
 
 
 def deflected_state(plant: Any, lateral_m, slope) -> tuple[np.ndarray, np.ndarray]:

@@ -54,6 +54,16 @@ class LoopResult:
         return float(np.percentile(np.abs(periods - float(np.median(periods))), 95) * 1e3)
 
 
+def _check_run(link: MotorLink, duration_s: float, *logs: tuple[str, Optional[SampleLog], Any, str]) -> None:
+    """Raise ``ValueError`` for a loop that cannot run: ``logs`` are ``(name, log, columns, columns' name)``."""
+    positive("duration_s", duration_s)
+    if not link.is_open:
+        raise ValueError("link must be open")
+    for name, log, columns, what in logs:
+        if log is not None and list(log.columns) != list(columns):
+            raise ValueError(f"{name} must have the columns {what}, got {log.columns}")
+
+
 class _RigLoop:
     """A run paced by the STATE stream: each state (and, if ``drains``, those queued) goes to :meth:`step`."""
 
@@ -138,7 +148,7 @@ def run_control_loop(
 ) -> LoopResult:
     """Run ``controller(observation, time_s) -> torque_nm`` on the open ``link`` for ``duration_s`` of device time,
     one row of :data:`LOOP_LOG_COLUMNS` in ``log`` per state; a link error stops the motor and propagates."""
-    positive("duration_s", duration_s)
+    _check_run(link, duration_s, ("log", log, LOOP_LOG_COLUMNS, "LOOP_LOG_COLUMNS"))
     loop = _RigLoop(link, controller, duration_s, log)
     loop.run("rig loop", progress)
     link.send_torque(0.0)
@@ -206,7 +216,12 @@ def run_closed_loop(
     """Run ``controller(observation, q, q_dot, time_s)`` on the open ``link`` for ``duration_s`` of device time (rows
     of :func:`rig_control_columns` in ``log``, of :data:`CAMERA_LOG_COLUMNS` in ``camera_log``), starting at once
     without a ``tip_source``, else at the first camera correction (within :data:`ARM_TIMEOUT_S`)."""
-    positive("duration_s", duration_s)
+    _check_run(
+        link,
+        duration_s,
+        ("log", log, rig_control_columns(estimator.n), f"rig_control_columns({estimator.n})"),
+        ("camera_log", camera_log, CAMERA_LOG_COLUMNS, "CAMERA_LOG_COLUMNS"),
+    )
     clock = DeviceClock(min(link.ping() for _ in range(5)) / 2)
     if hasattr(controller, "reset"):
         controller.reset()

@@ -80,6 +80,8 @@ def estimate_clock_offset(
         raise ValueError("camera log has fewer than 2 tracked frames")
     theta = np.interp(tc, tc[good], np.unwrap(theta_raw[good]))
     start, end = float(window_s[0]), float(window_s[1])
+    if end - start < 20 * resolution_s:
+        raise ValueError(f"window_s {window_s} is too short")
     grid = np.arange(start, end, resolution_s)
     motor_rate = np.gradient(np.interp(grid, tm, phi), resolution_s)
     motor_rate -= motor_rate.mean()

@@ -67,6 +67,8 @@ def check_output_folder(
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[Any]:
     """A temporary file next to ``path`` (``mode`` ``"wb"`` or ``"w"``, UTF-8) that is synced and renamed over
     ``path`` on a clean exit and removed on an exception; missing parent folders are created."""
+    if mode not in ("wb", "w"):
+        raise ValueError(f"mode must be 'wb' or 'w', got {mode!r}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".partial")

@@ -33,7 +33,9 @@ class SampleLog:
         metadata: Optional[dict] = None,
         fsync_every_s: Optional[float] = 1.0,
     ) -> None:
-        columns = list(columns)
+        columns = [str(c) for c in columns]
+        if not columns or any((not c) or ("," in c) or ("\n" in c) for c in columns):
+            raise ValueError(f"columns must be non-empty names without commas or newlines, got {columns!r}")
         self.path, self.columns, self.fsync_every_s, self.rows_written = Path(path), columns, fsync_every_s, 0
         # a FIFO or device would block or swallow the log
         exists = os.path.exists(self.path) and check_regular_file(self.path, "sample log").st_size > 0

@@ -47,15 +47,22 @@ class PilcoController(_HoldController):
         spec: StateSpec,
         control_dt_s: float,
         balance_policy: LinearPolicy | None = None,
-        balance_band: tuple[float, float] = (0.0, 0.0),
+        balance_band: tuple[float, float] | None = None,
     ) -> None:
+        if balance_policy is not None:
+            if balance_band is None or len(balance_band) != 2:
+                raise ValueError(
+                    f"balance_band must be (within_rad, within_rad_s) with a balance_policy, got {balance_band!r}"
+                )
+            balance_band = (positive("balance_band[0]", balance_band[0]), positive("balance_band[1]", balance_band[1]))
         self.policy, self.balance_policy, self.balance_band, self.spec = policy, balance_policy, balance_band, spec
         super().__init__(control_dt_s)
 
     def _compute(self, observation: Observation) -> float:
         state = self.spec.from_observations(observation.as_array()[None, :])
         policy: RBFPolicy | LinearPolicy = self.policy
-        if self.balance_policy is not None and in_balance_band(self.spec, state, *self.balance_band)[0]:
+        band = self.balance_band
+        if self.balance_policy is not None and band is not None and in_balance_band(self.spec, state, *band)[0]:
             policy = self.balance_policy
         return float(policy.torque_nm(self.spec.model_inputs(state))[0])
 
@@ -67,6 +74,8 @@ class RandomTorqueController(_HoldController):
     def __init__(self, torque_limit_nm: float, control_dt_s: float, seed: int, hold_s: tuple[float, float]) -> None:
         self.torque_limit_nm, self.seed = positive("torque_limit_nm", torque_limit_nm), int(seed)
         dt = positive("control_dt_s", control_dt_s)
+        if len(hold_s) != 2 or not 0 < hold_s[0] <= hold_s[1]:
+            raise ValueError(f"hold_s must be (min, max) with 0 < min <= max, got {hold_s!r}")
         self.hold_periods = (max(1, int(round(hold_s[0] / dt))), max(1, int(round(hold_s[1] / dt))))
         super().__init__(control_dt_s)
 

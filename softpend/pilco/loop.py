@@ -386,10 +386,9 @@ def _draw_seed(rng: np.random.Generator) -> int:
 
 
 def _controller(config: PilcoConfig, policy: RBFPolicy, balance: Optional[LinearPolicy]) -> PilcoController:
-    within_rad, spec = config.policy.balance_within_rad, state_spec(config.state)
-    if balance is None or within_rad is None:
-        return PilcoController(policy, spec, config.control_dt_s)
-    return PilcoController(policy, spec, config.control_dt_s, balance, (within_rad, config.policy.balance_within_rad_s))
+    within_rad = config.policy.balance_within_rad
+    band = None if balance is None or within_rad is None else (within_rad, config.policy.balance_within_rad_s)
+    return PilcoController(policy, state_spec(config.state), config.control_dt_s, balance if band else None, band)
 
 
 def _upright_distribution(
@@ -612,18 +611,34 @@ class Pilco:
         self.real_states.append(states)
         self.plant_seconds += config.horizon_s
         cost = _trial_cost(config, self.spec, states, search.cost_rate_width_rad_s, search.cost_width_m)
-        trial: dict[str, Any] = dict(real_cost=cost, swing_up_time_s=episode.swing_up_time_s)
-        trial |= dict(upright_std_rad=episode.upright_std_rad, n_gp_points=n_gp_points, **self._clocks())
-        trial |= dataclasses.asdict(search)
-        record = TrialRecord(len(self.records), kind, config.horizon_s, self.plant_seconds, **trial)
+        record = TrialRecord(
+            index=len(self.records),
+            kind=kind,
+            duration_s=config.horizon_s,
+            plant_seconds_total=self.plant_seconds,
+            real_cost=cost,
+            swing_up_time_s=episode.swing_up_time_s,
+            upright_std_rad=episode.upright_std_rad,
+            n_gp_points=n_gp_points,
+            **self._clocks(),
+            **dataclasses.asdict(search),
+        )
         self.records.append(record)
         return record
 
-    def _clocks(self) -> dict[str, float]:
+    def _clocks(self) -> dict[str, Any]:
         """Wall and CPU seconds since the run started."""
         wall, cpu = time.perf_counter() - self._start_wall, time.process_time() - self._start_cpu
         return dict(wall_s_total=wall, cpu_s_total=cpu)
 
     def result(self) -> PilcoResult:
-        parts = (self.gp_hyperparameters, self.balance_policy, self.predicted_means, self.real_states)
-        return PilcoResult(self.config, self.records, self.policy, *parts)  # type: ignore[arg-type]
+        assert self.policy is not None  # set before the first trial
+        return PilcoResult(
+            config=self.config,
+            records=self.records,
+            policy=self.policy,
+            gp_hyperparameters=self.gp_hyperparameters,
+            balance_policy=self.balance_policy,
+            predicted_means=self.predicted_means,
+            real_states=self.real_states,
+        )

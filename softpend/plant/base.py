@@ -6,7 +6,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-from abc import abstractmethod
+from abc import ABC, abstractmethod
 from typing import Any, Optional
 
 import exudyn as exu
@@ -50,7 +50,7 @@ def static_solver_settings(load_steps: int, relative_tolerance: float) -> exu.Si
     )
 
 
-class PlantBase:
+class PlantBase(ABC):
     """What every plant offers; ``q``: the coordinates, hub angle first (unwrapped) unless the hub is locked.  A
     subclass builds its Exudyn system, sets ``n_coordinates`` and supplies the abstract methods: :meth:`observe`
     (the observation now), :meth:`observation_from_state` (of a given state, the plant unchanged),

@@ -26,6 +26,8 @@ def episodes_to_asymptote(returns: Sequence[float] | np.ndarray, window: int = 1
     """Episode (1-based) at which a return curve reaches 90 % of the way from its start to its asymptotic reward, the
     mean of its final 20 % (see the module docstring)."""
     r, level = np.asarray(returns, dtype=float), 0.9
+    if r.ndim != 1:
+        raise ValueError(f"returns must be 1-D, got shape {r.shape}")
     if len(r) == 0:
         return math.inf
     smooth = moving_average(r, window)

@@ -40,14 +40,15 @@ class MBPOReplayBuffer(ReplayBuffer):
         action_space: spaces.Space,
         device: Any = "cpu",
         n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
         model_buffer_size: int = 60_000,
         real_ratio: float = 0.1,
-        **_: Any,  # SB3's optimize_memory_usage (left off)
     ) -> None:
         if n_envs != 1:
             raise ValueError(f"n_envs must be 1 for MBPOReplayBuffer, got {n_envs}")
         self.real_ratio, spaces_ = in_unit_interval("real_ratio", real_ratio), (observation_space, action_space)
-        super().__init__(buffer_size, *spaces_, device=device)
+        super().__init__(buffer_size, *spaces_, device=device, handle_timeout_termination=handle_timeout_termination)
         self.plant_observations = np.zeros((self.buffer_size, len(OBSERVATION_NAMES)), dtype=np.float64)
         self.model_buffer = ReplayBuffer(model_buffer_size, *spaces_, device=device, handle_timeout_termination=False)
 

@@ -37,6 +37,8 @@ def pilco_runs(
 def pilco_jobs(config: PilcoConfig, seeds: Sequence[int], runs_root: Path | str) -> list[tuple[str, tuple[Any, ...]]]:
     """The PILCO runs missing under ``runs_root`` as ``(name, arguments of run_and_save)``; ``ValueError`` for a
     folder holding a run of other settings."""
+    if len(seeds) == 0:
+        raise ValueError("seeds must not be empty")
     jobs: dict[str, tuple[Any, ...]] = {}  # by folder name: a seed listed twice runs once
     for seed in seeds:
         seeded = dataclasses.replace(config, seed=int(seed))

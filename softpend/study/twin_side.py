@@ -13,9 +13,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from softpend.checks import int_at_least
-from softpend.evaluation import TEST_EPISODE_S
 from softpend.study.rig_runs import RigCondition
-from softpend.study.unknown_rod import UnknownRod, draw_unknown_rod
+from softpend.study.unknown_rod import DRAW_DURATION_S, DRAW_NEEDED, DRAW_STARTS, UnknownRod, draw_unknown_rod
 from softpend.vision.camera import CameraEffects
 
 #: The verification's sensor conditions: the nominal rig camera, and a harsh one (30 fps, 50 ms, noisy image).
@@ -26,7 +25,6 @@ CONDITIONS: dict[str, RigCondition] = {
 #: The files the excitation hands the host (in its public folder).
 EXCITATION_FILES = ("motor_log.csv", "camera.csv")
 #: How a seeded twin's rod is drawn (:func:`draw_unknown_rod`): hanging starts, of them balanced, their length [s].
-DRAW_STARTS, DRAW_NEEDED, DRAW_DURATION_S = 10, 9, TEST_EPISODE_S
 
 
 @dataclass(frozen=True)

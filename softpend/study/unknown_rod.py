@@ -15,7 +15,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from softpend.checks import instance_of, positive
+from softpend.checks import instance_of, int_at_least, positive, positive_int
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, evaluate
 from softpend.plant import RodParams
 from softpend.task import Task
@@ -100,14 +100,22 @@ def balanced_starts(
     return sum(math.isfinite(r.swing_up_time_s) and r.upright_std_rad <= HOLD_STD_RAD for r in summary.results)
 
 
+#: A drawn rod counts when the swing-up + LQR designed on its true parameters balances DRAW_NEEDED of DRAW_STARTS
+#: hanging starts of DRAW_DURATION_S each.
+DRAW_STARTS, DRAW_NEEDED, DRAW_DURATION_S = 10, 9, TEST_EPISODE_S
+
+
 def draw_unknown_rod(
-    seed: int, starts: int = 10, needed: int = 9, duration_s: float = TEST_EPISODE_S
+    seed: int, starts: int = DRAW_STARTS, needed: int = DRAW_NEEDED, duration_s: float = DRAW_DURATION_S
 ) -> tuple[UnknownRod, int]:
     """``(rod, draws)``: the first rod drawn from ``seed`` whose :data:`UNKNOWN_FIELDS` and torque gain lie
     log-uniformly within :data:`SPREAD_FACTOR` of ``RodParams()`` (gain 1) that the controller designed on its true
     parameters balances from at least ``needed`` of ``starts`` hanging starts, and how many rods were drawn;
     ``ValueError`` when none of :data:`MAX_DRAWS` is."""
-    rng, base, spread = np.random.default_rng(seed), RodParams(), math.log(SPREAD_FACTOR)
+    starts, needed = positive_int("starts", starts), positive_int("needed", needed)
+    if needed > starts:
+        raise ValueError(f"needed must be at most starts ({starts}), got {needed}")
+    rng, base, spread = np.random.default_rng(int_at_least("seed", seed, 0)), RodParams(), math.log(SPREAD_FACTOR)
     for draw in range(1, MAX_DRAWS + 1):
         factors = np.exp(rng.uniform(-spread, spread, len(UNKNOWN_FIELDS) + 1))
         rod = base.replace(**{name: getattr(base, name) * f for name, f in zip(UNKNOWN_FIELDS, factors)})

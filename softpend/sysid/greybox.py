@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Optional, Sequence
 
 import numpy as np
@@ -76,6 +76,21 @@ class GreyBoxConfig:
             object.__setattr__(self, name, positive_int(name, getattr(self, name)))
 
 
+#: The fit's figures that :meth:`GreyBoxResult.to_dict` writes under ``fit``.
+_FIT_FIELDS = (
+    "residual_rms_rad",
+    "n_windows",
+    "window_steps",
+    "n_residuals",
+    "n_variables",
+    "identify_s",
+    "nfev",
+    "njev",
+    "status",
+    "message",
+)
+
+
 @dataclass
 class GreyBoxResult:
     """What :func:`identify` found: the rod with the estimated fields replaced, every estimate and its standard
@@ -112,7 +127,7 @@ class GreyBoxResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; its ``rod_params`` is what :meth:`RodParams.from_json` reads."""
         method = "multiple shooting, Levenberg-Marquardt with the window states eliminated (Schur complement)"
-        fit = {"method": method} | {f.name: getattr(self, f.name) for f in fields(self)[4:-1]}  # rms to message
+        fit = {"method": method} | {name: getattr(self, name) for name in _FIT_FIELDS}
         fit |= {"at_bounds": list(self.at_bounds), "initial_params": self.initial_params.to_dict()}
         out = {"schema": IDENTIFICATION_SCHEMA, "rod_params": self.params.to_dict(), "estimates": dict(self.estimates)}
         calibration = {name: getattr(self, name) for name in CALIBRATION_PARAMETERS}

@@ -103,7 +103,9 @@ def network_rollouts(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Observed states ``(B, steps + 1, d)`` of a model's layout from each start ``(trial, sample)`` on, and the
     model's open-loop predictions of them (ensembles: their mean) under the recorded torques."""
-    layout = model.layout  # the starts are at sample history or later
+    layout = model.layout
+    if np.any(starts[:, 1] < layout.history):
+        raise ValueError(f"rollout starts must be at sample {layout.history} or later (the model's history)")
     i = starts[:, 1:2] - layout.history + np.arange(steps + 1)[None, :]
     truth = layout.states(dataset)[starts[:, :1], i]
     return truth, open_loop(model, truth[:, 0], layout.torques(dataset)[starts[:, :1], i[:, :-1]])

@@ -105,7 +105,7 @@ class PRBPlant(PlantBase):
     def _set_torque(self, torque_nm: float) -> None:
         if not self.hub_locked:
             self._forces[0] = torque_nm
-            self.set_joint_forces(self._forces)
+            self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""

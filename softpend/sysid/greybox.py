@@ -288,8 +288,9 @@ class _Problem:
             self._plants[key], states, torques * values["torque_gain"], self.has_er, self.diverged_nan
         )
         sim[..., 0] += values["encoder_offset_rad"]
-        c = sim[:, :, 1:]  # the camera sees the tip of (k - b) dt at sample k
-        sim[:, :, 1:] = _shifted(c, values["camera_delay_s"], 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1])
+        if values["camera_delay_s"]:  # the camera sees the tip of (k - b) dt at sample k
+            c = sim[:, :, 1:]
+            sim[:, :, 1:] = _shifted(c, values["camera_delay_s"], 2 * c[:, :1] - c[:, 1:2], 2 * c[:, -1:] - c[:, -2:-1])
         return sim
 
     def residual_blocks(self, z: np.ndarray) -> np.ndarray:

@@ -193,9 +193,15 @@ def twin_start(
     positive("duration_s", duration_s)
     workdir, stop, result, plant_s = Path(workdir), None, None, 0.0
     try:
-        sensors = (condition.rig(task, seed), condition.camera(seed), condition.estimator())
         run = run_twin_control(
-            controller, workdir, duration_s, *sensors, on_frame=on_frame, estimator_task=estimator_task
+            controller,
+            workdir,
+            duration_s,
+            rig=condition.rig(task, seed),
+            camera=condition.camera(seed),
+            estimator_config=condition.estimator(),
+            on_frame=on_frame,
+            estimator_task=estimator_task,
         )
         result = run.result
         plant_s = float(run.emulator_stats.get("ticks", 0.0)) * task.dt_s
@@ -309,16 +315,17 @@ def text_figures(
     out: dict[str, str] = {}
     for (short, label), (key, condition) in itertools.product(controllers.items(), conditions.items()):
         r = by_key.get((label, condition))
-        texts = ["not run"] * 6
+        cells = dict.fromkeys(("success", "interval", "swing_up_s", "std_rad", "chatter", "stops"), "not run")
         if r is not None:
-            texts = [f"{r['successes']} of {r['starts']}", f"{r['success_low']:.2f} to {r['success_high']:.2f}"]
-            texts += [
-                fixed(r[k], n)
-                for k, n in (("swing_up_time_s", 2), ("upright_std_rad", 3), ("torque_chatter_nm_per_s", 2))
-            ]
-            texts.append(str(r["stops"]))
-        names = ("success", "interval", "swing_up_s", "std_rad", "chatter", "stops")
-        out |= {f"{short}_{key}_{name}": text for name, text in zip(names, texts)}
+            cells = {
+                "success": f"{r['successes']} of {r['starts']}",
+                "interval": f"{r['success_low']:.2f} to {r['success_high']:.2f}",
+                "swing_up_s": fixed(r["swing_up_time_s"], 2),
+                "std_rad": fixed(r["upright_std_rad"], 3),
+                "chatter": fixed(r["torque_chatter_nm_per_s"], 2),
+                "stops": str(r["stops"]),
+            }
+        out |= {f"{short}_{key}_{name}": text for name, text in cells.items()}
     return out
 
 

@@ -113,10 +113,24 @@ class GreyBoxResult:
     message: str
     at_bounds: tuple[str, ...] = ()
 
-    def __getattr__(self, name: str) -> float:
-        if name not in _CALIBRATIONS:
-            raise AttributeError(name)
+    def _calibration(self, name: str) -> float:
         return self.estimates.get(name, _CALIBRATIONS[name])
+
+    @property
+    def torque_gain(self) -> float:
+        return self._calibration("torque_gain")
+
+    @property
+    def encoder_offset_rad(self) -> float:
+        return self._calibration("encoder_offset_rad")
+
+    @property
+    def torque_delay_s(self) -> float:
+        return self._calibration("torque_delay_s")
+
+    @property
+    def camera_delay_s(self) -> float:
+        return self._calibration("camera_delay_s")
 
     def relative_errors(self, truth: RodParams) -> dict[str, float]:
         """``|estimate / truth - 1|`` of every estimated rod field and of the torque gain (against 1)."""

@@ -12,6 +12,7 @@ import torch
 
 from softpend.checks import finite, non_negative, positive, positive_int
 from softpend.plant import make_plant, wrap_angle_rad
+from softpend.plant.base import PlantBase
 from softpend.sysid.dataset import TrajectoryDataset
 from softpend.sysid.greybox import dataset_substeps, simulate_windows
 from softpend.sysid.layout import StateLayout
@@ -218,6 +219,30 @@ def evaluate_model(
     return out
 
 
+def simulator_rollouts(
+    plant: PlantBase,
+    dataset: TrajectoryDataset,
+    starts: np.ndarray,
+    steps: int,
+    initial_states: Optional[np.ndarray] = None,
+    hub_offset_rad: float = 0.0,
+    hub_rate_offset_rad_s: float = 0.0,
+    torque_noise_nm: float | np.ndarray = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop rollouts ``(B, steps + 1, 3)`` of ``phi, ex, ey`` of ``plant`` from the recorded joint states (or
+    ``initial_states``) with the hub angle and rate moved by the offsets, under the recorded torques plus
+    ``torque_noise_nm``; and their samples ``(B, steps + 1)``."""
+    states = recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
+    states = states.reshape(starts.shape[0], -1)
+    n_q = plant.n_coordinates
+    if states.shape[1] != 2 * n_q:
+        raise ValueError(f"the joint states have {states.shape[1] // 2} coordinates, not {n_q}")
+    states[:, [0, n_q]] += (hub_offset_rad, hub_rate_offset_rad_s)
+    index = starts[:, 1:2] + np.arange(positive_int("steps", steps) + 1)
+    torques = dataset.torques_nm[starts[:, :1], index[:, :-1]] + torque_noise_nm
+    return simulate_windows(plant, states, torques, has_er=False), index
+
+
 def perturbed_simulator_errors(
     dataset: TrajectoryDataset,
     trials: Optional[np.ndarray] = None,
@@ -238,17 +263,21 @@ def perturbed_simulator_errors(
     non_negative("torque_noise_std_nm", torque_noise_std_nm)
     steps = _steps(horizon_s, dataset, history)
     starts = rollout_starts(dataset, steps, start_stride, history, trials=trials)
-    states = recorded_states(dataset, starts)
     params = dataset.params
     if torque_noise_std_nm > 0:  # the recorded torques are within the limit already; the error is not clipped
         params = params.replace(torque_limit_nm=params.torque_limit_nm + 100 * torque_noise_std_nm)
     plant_name = dataset.metadata.get("plant") or "prb"
     plant = make_plant(plant_name, params=params, dt_s=dataset.dt_s, substeps=dataset_substeps(dataset))
-    n_q = plant.n_coordinates
-    states[:, [0, n_q]] += (hub_offset_rad, hub_rate_offset_rad_s)
-    index = starts[:, 1:2] + np.arange(steps + 1)
     noise = torque_noise_std_nm * np.random.default_rng(seed).standard_normal((len(starts), steps))
-    predicted = simulate_windows(plant, states, dataset.torques_nm[starts[:, :1], index[:, :-1]] + noise, has_er=False)
+    predicted, index = simulator_rollouts(
+        plant,
+        dataset,
+        starts,
+        steps,
+        hub_offset_rad=hub_offset_rad,
+        hub_rate_offset_rad_s=hub_rate_offset_rad_s,
+        torque_noise_nm=noise,
+    )
     columns = [dataset.position_names.index(n) for n in ("phi_rad", "ex_m", "ey_m")]
     return _rms_errors(predicted, dataset.positions[starts[:, :1], index][..., columns], steps, dataset.dt_s)
 

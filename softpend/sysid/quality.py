@@ -12,8 +12,8 @@ import numpy as np
 from softpend.checks import non_negative, positive, positive_int
 from softpend.plant import RodParams
 from softpend.sysid.dataset import TrajectoryDataset
-from softpend.sysid.greybox import free_plant, simulate_windows, wrap_diff
-from softpend.sysid.metrics import network_rollouts, recorded_states, rollout_starts, trial_curves
+from softpend.sysid.greybox import free_plant, wrap_diff
+from softpend.sysid.metrics import network_rollouts, recorded_states, rollout_starts, simulator_rollouts, trial_curves
 
 #: Tip-error threshold of the valid prediction time, as a fraction of the rod length.
 VALID_TIP_FRACTION = 0.05
@@ -58,26 +58,6 @@ def tip_rmse_at_s(tip_error_m: np.ndarray, dt_s: float, horizon_s: float) -> flo
     return float(np.sqrt(np.mean(error[:, k] ** 2)))
 
 
-def _prb_rollouts(
-    params: RodParams,
-    dataset: TrajectoryDataset,
-    starts: np.ndarray,
-    steps: int,
-    initial_states: Optional[np.ndarray] = None,
-    hub_offset_rad: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop PRB rollouts ``(B, steps + 1, 3)`` of ``phi, ex, ey`` with ``params`` from the recorded joint states
-    (or ``initial_states``), the hub angle moved by ``hub_offset_rad``, under the recorded torques; and their samples."""
-    states = recorded_states(dataset, starts) if initial_states is None else np.array(initial_states, dtype=float)
-    states = states.reshape(starts.shape[0], -1)
-    if states.shape[1] != 2 * (params.n_links + 1):
-        raise ValueError(f"the joint states have {states.shape[1] // 2} coordinates, not {params.n_links + 1}")
-    states[:, 0] += hub_offset_rad
-    index = starts[:, 1:2] + np.arange(positive_int("steps", steps) + 1)[None, :]
-    torques = dataset.torques_nm[starts[:, :1], index[:, :-1]]
-    return simulate_windows(free_plant(params, dataset), states, torques, has_er=False), index
-
-
 def prb_rollout_tip_errors(
     params: RodParams,
     dataset: TrajectoryDataset,
@@ -86,8 +66,10 @@ def prb_rollout_tip_errors(
     hub_offset_rad: float = 0.0,
     initial_states: Optional[np.ndarray] = None,
 ) -> np.ndarray:
-    """Tip errors ``(B, steps + 1)`` [m] of :func:`_prb_rollouts` against the data."""
-    sim, index = _prb_rollouts(params, dataset, starts, steps, initial_states, hub_offset_rad)
+    """Tip errors ``(B, steps + 1)`` [m] against the data of open-loop PRB rollouts with ``params`` from the recorded
+    joint states (or ``initial_states``), the hub angle moved by ``hub_offset_rad``, under the recorded torques."""
+    plant = free_plant(params, dataset)
+    sim, index = simulator_rollouts(plant, dataset, starts, steps, initial_states, hub_offset_rad)
     rows = starts[:, :1]
     return np.hypot(
         sim[..., 1] - dataset.column("ex_m")[rows, index], sim[..., 2] - dataset.column("ey_m")[rows, index]
@@ -106,7 +88,8 @@ def prb_rollout_trial(
     :func:`softpend.sysid.rollout_trial`."""
     if not 0 <= trial < dataset.n_trials or not 0 <= start_sample < dataset.n_samples - steps:
         raise ValueError(f"trial {trial}, start_sample {start_sample} and {steps} steps do not fit the dataset")
-    sim, index = _prb_rollouts(params, dataset, np.array([[trial, start_sample]]), steps, initial_state)
+    plant, starts = free_plant(params, dataset), np.array([[trial, start_sample]])
+    sim, index = simulator_rollouts(plant, dataset, starts, steps, initial_state)
     names = ("phi_rad", "ex_m", "ey_m")
     data = {name: dataset.column(name)[trial, index[0]] for name in names}
     return trial_curves(index[0] * dataset.dt_s, data, {name: sim[0, :, k] for k, name in enumerate(names)})

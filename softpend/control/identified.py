@@ -75,17 +75,23 @@ def design_swingup(params: RodParams, dt_s: float = 0.01) -> EnergySwingUpContro
     return EnergySwingUpController.for_observations(params, dt_s=dt_s)
 
 
+def hanging_protocol(task: Task, seconds: float, program: str, **fields: Any) -> BabbleProtocol:
+    """The babbling that identifies the rod: one trial of ``seconds`` of the torque ``program`` from hanging, no
+    feedback, at ``task``'s step and sub-steps; ``fields``: the protocol's other fields."""
+    timing: dict[str, Any] = dict(n_trials=1, trial_length_s=seconds, dt_s=task.dt_s, substeps=task.substeps)
+    return BabbleProtocol(start="hanging", feedback_trial_fraction=0.0, program=program, **timing, **fields)
+
+
 def simulated_recorder(task: Task, config: RouteConfig, seed: int, program: str = "multisine") -> Recorder:
     """A recorder of one hanging trial of the babbling ``program`` (multisine to ``band_high_hz`` with peak
     ``peak_fraction``), no feedback, on ``task``'s simulated plant with encoder and camera noise of
     :data:`SENSOR_NOISE_STD` rad and m."""
 
     def record(seconds: float) -> TrajectoryDataset:
-        kwargs: dict[str, Any] = dict(start="hanging", start_angle_std_rad=0.05, start_rate_std_rad_s=0.1)
-        kwargs |= dict(n_trials=1, trial_length_s=seconds, dt_s=task.dt_s, substeps=task.substeps, program=program)
-        kwargs |= dict(multisine_peak_fraction=config.peak_fraction, torque_bandwidth_hz=config.band_high_hz)
-        kwargs |= dict(phi_noise_std_rad=SENSOR_NOISE_STD, tip_noise_std_m=SENSOR_NOISE_STD)
-        protocol = BabbleProtocol(feedback_trial_fraction=0.0, **kwargs)
+        start = dict(start_angle_std_rad=0.05, start_rate_std_rad_s=0.1)
+        shape = dict(multisine_peak_fraction=config.peak_fraction, torque_bandwidth_hz=config.band_high_hz)
+        noise = dict(phi_noise_std_rad=SENSOR_NOISE_STD, tip_noise_std_m=SENSOR_NOISE_STD)
+        protocol = hanging_protocol(task, seconds, program, **start, **shape, **noise)
         return babble(protocol, params=task.rod, seed=seed, plant=task.plant, progress=False)
 
     return record

@@ -15,13 +15,14 @@ import torch
 from torch import Tensor, nn
 
 from softpend.checks import in_range, one_of, positive, seed_tuple, set_ints
+from softpend.control.identified import hanging_protocol
 from softpend.control.learned import LearnedStateTracker
 from softpend.control.lqr import LQRController
 from softpend.control.swingup import pendulum_energy_j
 from softpend.evaluation import HOLD_STD_RAD, TEST_EPISODE_S, BatchPolicy, EvaluationSummary, evaluate
 from softpend.plant import Observation, RodParams
 from softpend.plant.batched import BatchedPRBChain
-from softpend.sysid.babble import PROGRAMS, BabbleProtocol, babble
+from softpend.sysid.babble import PROGRAMS, babble
 from softpend.sysid.greybox import GreyBoxConfig, identify, reconstruct_joint_states, wrap_diff
 from softpend.sysid.layout import StateLayout
 from softpend.sysid.model import DynamicsEnsemble, DynamicsModel
@@ -660,9 +661,7 @@ def run_planner(config: Optional[PlannerConfig] = None, progress: bool = False) 
     task = config.task
     started = time.perf_counter()
     with one_torch_thread():
-        timing: dict[str, Any] = dict(trial_length_s=config.excitation_s, dt_s=task.dt_s, substeps=task.substeps)
-        start: dict[str, Any] = dict(start="hanging", feedback_trial_fraction=0.0, n_trials=1)
-        protocol = BabbleProtocol(program=config.excitation_program, **start, **timing)
+        protocol = hanging_protocol(task, config.excitation_s, config.excitation_program)
         data = babble(protocol, params=task.rod, seed=config.seed, plant=task.plant, progress=False)
         plant_s = protocol.n_trials * (protocol.n_samples + protocol.camera_delay_steps) * task.dt_s
         rod = task.rod

@@ -4,7 +4,6 @@ seconds, fresh starts, and its settings."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,9 +21,8 @@ from softpend.control.planner import (
     run_planner,
 )
 from softpend.plant import PRBPlant, RodParams
+from softpend.study.presets import load_hparams
 from softpend.task import Task
-
-HPARAMS = Path(__file__).resolve().parents[1] / "book" / "hparams" / "planner.yml"
 
 
 def test_mppi_recovers_the_lqr_action_of_a_linear_system():
@@ -217,9 +215,9 @@ def test_bad_settings_are_refused_naming_the_field(changes, field):
 
 
 def test_settings_file_is_read_and_checked(tmp_path):
-    config = PlannerConfig.from_yaml(HPARAMS)
+    config = load_hparams("planner")
     assert len([f for f in config.__dataclass_fields__]) <= 20
     bad = tmp_path / "planner.yml"
     bad.write_text("horizon_seconds: 1.0\n")
     with pytest.raises(ValueError, match="planner.yml"):
-        PlannerConfig.from_yaml(bad)
+        load_hparams("planner", path=bad)

@@ -7,7 +7,6 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
@@ -118,20 +117,6 @@ class PlannerConfig:
 
     def replace(self, **changes: Any) -> "PlannerConfig":
         return dataclasses.replace(self, **changes)
-
-    @classmethod
-    def from_yaml(cls, path: str | Path, task: Optional[Task] = None) -> "PlannerConfig":
-        """The defaults, then the ``field: value`` mapping of a YAML file (e.g. ``book/hparams/planner.yml``)."""
-        from softpend.io.overrides import apply_overrides
-        from softpend.io.reading import read_yaml_checked
-
-        data = read_yaml_checked(path, "settings file") or {}
-        try:
-            if not isinstance(data, dict) or "task" in data:
-                raise ValueError("expected a mapping of PlannerConfig fields other than task")
-            return apply_overrides(cls(task=task if task is not None else Task()), data)
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
 
 
 def _bound_log_var(log_var: Tensor, max_log_var: Tensor, min_log_var: Tensor) -> Tensor:  # as in PETS

@@ -6,9 +6,10 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any, Mapping, Optional
+from typing import Any, Optional
 
-from softpend.io.overrides import apply_overrides
+from softpend.control.planner import PlannerConfig
+from softpend.io.overrides import Overrides, apply_overrides
 from softpend.io.reading import read_yaml_checked
 from softpend.pilco.loop import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
@@ -17,24 +18,25 @@ from softpend.task import Task
 #: The task of every figure: the default rod on the PRB plant, hanging starts.
 TASK = Task()
 
-#: The folder of the tuned settings, one YAML file per method (``dqn.yml``, ``mbpo.yml``, ``pilco.yml``).
+#: The folder of the tuned settings, one YAML file per method of :data:`CONFIG_CLASSES` (``<method>.yml``).
 HPARAMS_DIR = Path(__file__).resolve().parents[2] / "book" / "hparams"
 
 #: The config class of each method of :func:`load_hparams`.
-CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
+CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig, "planner": PlannerConfig}
 
 
 def load_hparams(
     method: str,
     task: Optional[Task] = None,
-    overrides: Optional[Mapping[str, Any]] = None,
-    directory: Path | str = HPARAMS_DIR,
+    overrides: Optional[Overrides] = None,
+    path: Optional[Path | str] = None,
 ) -> Any:
-    """The config the book trains ``method`` with: the defaults, ``<directory>/<method>.yml``, ``task`` (default
-    :data:`TASK`), then ``overrides``; ``ValueError`` naming the file for an unknown field or a non-mapping."""
+    """The config the book trains ``method`` with: the defaults, the settings file ``path`` (default
+    ``<HPARAMS_DIR>/<method>.yml``), ``task`` (default :data:`TASK`), then ``overrides``; ``ValueError`` naming the
+    file for an unknown field or a non-mapping."""
     if (cls := CONFIG_CLASSES.get(method)) is None:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
-    path = Path(directory) / f"{method}.yml"
+    path = Path(path) if path is not None else HPARAMS_DIR / f"{method}.yml"
     try:
         data = read_yaml_checked(path, "settings file") or {}
     except OSError as exc:

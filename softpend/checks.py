@@ -67,8 +67,9 @@ def positive(name: str, value: Any) -> float:
 
 def optional_positive(name: str, value: Any) -> Optional[float]:
     """``None`` for ``None``, else ``value`` as a float if it is a positive finite number; ``ValueError`` otherwise."""
-    ok, what = lambda n: n > 0, "be positive and finite or None"  # noqa: E731
-    return None if value is None else _checked(name, _real(value), value, ok, what)
+    if value is None:
+        return None
+    return _checked(name, _real(value), value, lambda n: n > 0, "be positive and finite or None")
 
 
 def non_negative(name: str, value: Any) -> float:
@@ -93,9 +94,12 @@ def in_range(name: str, value: Any, low: float, high: float) -> float:
 
 def in_unit_interval(name: str, value: Any, *, include_zero: bool = True, include_one: bool = True) -> float:
     """``value`` as a float if it lies in the unit interval, else ``ValueError`` naming ``name``."""
-    ok = lambda n: (n >= 0.0 if include_zero else n > 0.0) and (n <= 1.0 if include_one else n < 1.0)  # noqa: E731
+
+    def inside(n: float) -> bool:
+        return (n >= 0.0 if include_zero else n > 0.0) and (n <= 1.0 if include_one else n < 1.0)
+
     interval = f"{'[' if include_zero else '('}0, 1{']' if include_one else ')'}"
-    return float(_checked(name, _real(value), value, ok, f"lie in {interval}"))
+    return float(_checked(name, _real(value), value, inside, f"lie in {interval}"))
 
 
 def one_of(name: str, value: T, choices: Collection[Any]) -> T:

@@ -119,9 +119,15 @@ class _RigLoop:
         finally:
             bar.close()
 
-    def result(self, cls: Any = None, *extra: Any) -> Any:
-        fields = (self.samples, np.diff(self.send_times), self.dropped, self.link.bad_frames, self.watchdog)
-        return (cls or LoopResult)(*fields, *extra)
+    def counts(self) -> dict[str, Any]:
+        """The :class:`LoopResult` fields of the run, by name."""
+        return dict(
+            samples=self.samples,
+            command_periods_s=np.diff(self.send_times),
+            dropped_states=self.dropped,
+            bad_frames=self.link.bad_frames,
+            watchdog_trips=self.watchdog,
+        )
 
     def step(self, state: MotorState, newest: bool) -> None:
         self.count(state)
@@ -152,7 +158,7 @@ def run_control_loop(
     loop = _RigLoop(link, controller, duration_s, log)
     loop.run("rig loop", progress)
     link.send_torque(0.0)
-    return loop.result()
+    return LoopResult(**loop.counts())
 
 
 #: ``status`` column of the motor log (``camera_blind`` and ``arm_timeout`` are safe stops).
@@ -231,9 +237,17 @@ def run_closed_loop(
         loop.run("rig control", progress)
     link.stop()
     status = loop.status if loop.stop_reason is not None else "completed"
-    camera = tip_source.stats() if hasattr(tip_source, "stats") else {}
-    extra = (loop.t, loop.stop_reason, status, loop.late, loop.blind_max, loop.armed_at, camera, estimator.stats())
-    return loop.result(ClosedLoopResult, *extra)
+    return ClosedLoopResult(
+        **loop.counts(),
+        duration_s=loop.t,
+        stop_reason=loop.stop_reason,
+        status=status,
+        late_commands=loop.late,
+        blind_max_s=loop.blind_max,
+        armed_at_s=loop.armed_at,
+        camera=tip_source.stats() if hasattr(tip_source, "stats") else {},
+        estimator=estimator.stats(),
+    )
 
 
 class _ClosedLoop(_RigLoop):

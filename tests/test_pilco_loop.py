@@ -543,6 +543,13 @@ def test_the_balancing_policy_acts_only_in_its_band_about_upright():
     assert controller(_observation(0.3, 0.0), np.zeros(4), np.zeros(4), 0.0) < 0.0
 
 
+def test_a_policy_for_another_state_is_refused_at_construction():
+    spec = state_spec("tip_bend")
+    other = RBFPolicy(np.zeros((3, spec.n_model_inputs - 1)), np.ones(spec.n_model_inputs - 1), 0.06)
+    with pytest.raises(ValueError, match=f"policy takes {spec.n_model_inputs - 1} inputs but state 'tip_bend'"):
+        PilcoController(other, spec, 0.1)
+
+
 @pytest.fixture(scope="module")
 def tiny_balancing_run() -> PilcoResult:
     """A tiny run whose balancing band (3 rad, 20 rad/s: all but the hanging rod) the random trial visits."""

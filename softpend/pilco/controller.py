@@ -49,6 +49,9 @@ class PilcoController(_HoldController):
         balance_policy: LinearPolicy | None = None,
         balance_band: tuple[float, float] | None = None,
     ) -> None:
+        n_inputs = policy.centers.shape[1]
+        if n_inputs != spec.n_model_inputs:
+            raise ValueError(f"policy takes {n_inputs} inputs but state {spec.name!r} gives {spec.n_model_inputs}")
         if balance_policy is not None:
             if balance_band is None or len(balance_band) != 2:
                 raise ValueError(

@@ -4,6 +4,7 @@ cached by source, parameters and the ``softpend`` code they use; write the execu
 from __future__ import annotations
 
 import ast
+import datetime
 import hashlib
 import io
 import json
@@ -20,10 +21,10 @@ import time
 import tokenize
 from collections import namedtuple
 from concurrent.futures import Future, ThreadPoolExecutor, wait
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Sequence
 
+from softpend.io.outputs import atomic_write, json_text
 from softpend.io.reading import MAX_CONFIG_BYTES, read_json_object, read_text_checked, read_yaml_checked, yaml_line
 
 DEFAULT_PROFILE = "full"
@@ -49,11 +50,17 @@ class NotebookExecutionError(RuntimeError):
         self.cell_index, self.code_cell_number, self.output_path = cell_index, code_cell_number, output_path
 
 
-@dataclass(frozen=True)
 class BookLayout:
-    """Where the book's files live below a project root."""
+    """Where the book's files live below a project root (:meth:`at`: one that holds a ``_toc.yml``)."""
 
-    root: Path
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.toc_path = root / "_toc.yml"
+        self.profiles_path = root / "book" / "profiles.yml"
+        self.generated_dir = root / GENERATED_PREFIX.rstrip("/")
+        self.record_path = self.generated_dir / f"{EXECUTION_PAGE}.json"
+        self.execution_page_path = self.generated_dir / f"{EXECUTION_PAGE}.md"
+        self.training_path = self.generated_dir / "training.json"  # written by `softpend sweep --book`
 
     @classmethod
     def at(cls, root: Path | str = ".") -> "BookLayout":
@@ -64,16 +71,14 @@ class BookLayout:
             raise FileNotFoundError(f"no _toc.yml in {layout.root} (run from the project root or pass --root)")
         return layout
 
-    toc_path = property(lambda self: self.root / "_toc.yml")
-    profiles_path = property(lambda self: self.root / "book" / "profiles.yml")
-    generated_dir = property(lambda self: self.root / GENERATED_PREFIX.rstrip("/"))
-    record_path = property(lambda self: self.generated_dir / f"{EXECUTION_PAGE}.json")
-    execution_page_path = property(lambda self: self.generated_dir / f"{EXECUTION_PAGE}.md")
-    training_path = property(lambda self: self.generated_dir / "training.json")  # written by `softpend sweep --book`
+    def source_path(self, name: str) -> Path:
+        return self.root / "notebooks" / f"{name}.md"
 
-    source_path = lambda self, name: self.root / "notebooks" / f"{name}.md"  # noqa: E731
-    output_path = lambda self, name: self.generated_dir / f"{name}.ipynb"  # noqa: E731
-    key_path = lambda self, name: self.generated_dir / f"{name}.sha256"  # noqa: E731
+    def output_path(self, name: str) -> Path:
+        return self.generated_dir / f"{name}.ipynb"
+
+    def key_path(self, name: str) -> Path:
+        return self.generated_dir / f"{name}.sha256"
 
 
 #: One notebook of :func:`run_notebooks`: ``status`` is ``"executed"`` or ``"cached"``.
@@ -208,10 +213,9 @@ class PackageCode:
         if module not in self._read:
             path = self.modules[module]
             tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-            is_text = lambda s: isinstance(s, ast.Expr) and isinstance(getattr(s.value, "value", None), str)  # noqa: E731
             for node in ast.walk(tree):  # without docstrings (an emptied body becomes ``pass``)
-                if isinstance(body := getattr(node, "body", None), list) and any(map(is_text, body)):
-                    setattr(node, "body", [s for s in body if not is_text(s)] or [ast.Pass()])
+                if isinstance(body := getattr(node, "body", None), list):
+                    setattr(node, "body", [s for s in body if not _is_text(s)] or [ast.Pass()])
             digest = hashlib.sha256(ast.dump(tree).encode()).hexdigest()
             self._read[module] = (digest, frozenset(self._tree_imports(tree, module)))
         return self._read[module]
@@ -243,13 +247,10 @@ class PackageCode:
 
         pending: set[str] = set()
         for cell in code_cells:
-            try:
-                tree = ast.parse(cell)
-            except SyntaxError:  # IPython's magics translated; every module where it still does not parse
-                try:
-                    tree = ast.parse(TransformerManager().transform_cell(cell))
-                except SyntaxError:
-                    return set(self.modules)
+            try:  # as IPython runs it (magics translated); every module where it does not parse
+                tree = ast.parse(TransformerManager().transform_cell(cell))
+            except SyntaxError:
+                return set(self.modules)
             pending |= self._tree_imports(tree)
         used: set[str] = set()
         while pending:
@@ -262,6 +263,11 @@ class PackageCode:
         """The hash of each module the code uses and of each data file of the package."""
         hashes = {module: self._module(module)[0] for module in sorted(self.closure(code_cells))}
         return hashes | _file_hashes(self.root, self.name, DATA_SUFFIXES)
+
+
+def _is_text(statement: ast.stmt) -> bool:
+    """Whether a statement is a bare string (a docstring)."""
+    return isinstance(statement, ast.Expr) and isinstance(getattr(statement.value, "value", None), str)
 
 
 def _file_hashes(folder: Path, prefix: str, suffixes: Sequence[str] = ()) -> dict[str, str]:
@@ -321,11 +327,11 @@ def _md(value: Any, limit: int = 0) -> str:
 
 def rerun_section(name: str, cell: str, profile: str, used: dict[str, Any]) -> str:
     """The generated closing section of an executed notebook: its parameters and the command that reruns it."""
-    rows, build = notebook_parameters(cell), lambda name: f"`{_md(_value(used[name]), 60)}`" if name in used else ""
-    table = "".join(
-        f"| `{r['name']}` | `{_md(r['default'], 60)}` | {build(r['name'])} | {r['unit']} | {_md(r['comment'], 90)} |\n"
-        for r in rows
-    )
+    rows, table = notebook_parameters(cell), ""
+    for row in rows:
+        build = f"`{_md(_value(used[row['name']]), 60)}`" if row["name"] in used else ""
+        default, meaning = _md(row["default"], 60), _md(row["comment"], 90)
+        table += f"| `{row['name']}` | `{default}` | {build} | {row['unit']} | {meaning} |\n"
     example = next((f"{row['name']}={row['default']}" for row in rows if row["evaluated"]), "NAME=VALUE")
     profile_option = ["--profile", profile] if profile != DEFAULT_PROFILE else []
     command = shlex.join(["softpend", "book", "--only", name, *profile_option, "--set", example])
@@ -364,16 +370,10 @@ def run_notebooks(
     layout.generated_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
         plans, used = _plan(layout, names, toc, profile, given, dict(overrides or {}), Path(scratch))
-        order = execution_order(names, {name: plan["after"] for name, plan in plans.items()})
-        for name in order:  # upstream keys: this run's, else the key files on disk
-            plan = plans[name]
-            upstream = {dep: plans[dep]["key"] if dep in plans else _key_on_disk(layout, dep) for dep in plan["after"]}
-            source = _source_text(layout.source_path(name))
-            plan["key"] = key = cache_key(source, plan["parameters"], plan["hashes"], upstream)
-            cached = not force and layout.output_path(name).is_file() and _key_on_disk(layout, name) == key
-            plan["status"] = "cached" if cached else "executed"
-        _execute(layout, order, plans, progress)
-    runs = [NotebookRun(n, plans[n]["status"], plans[n].get("seconds", 0.0), layout.output_path(n)) for n in order]
+        _execute(layout, plans, force, progress)
+    runs = [
+        NotebookRun(name, p["status"], p.get("seconds", 0.0), layout.output_path(name)) for name, p in plans.items()
+    ]
     write_execution_record(layout, profile, runs, used)
     return runs
 
@@ -384,41 +384,51 @@ def _key_on_disk(layout: BookLayout, name: str) -> str:
 
 
 def _plan(layout: BookLayout, names: list, toc: list, profile: str, given: dict, overrides: dict, scratch: Path):
-    """The run plan of every notebook (checked) and the overrides used."""
+    """The checked run plan of every notebook, in execution order (its cache key holds those of its ``after``: this
+    run's, else the key files on disk), and the overrides used."""
     import nbformat
 
+    notebooks = {name: read_notebook(layout.source_path(name)) for name in names}
+    after = {name: front_matter(nb, name, toc)["after"] for name, nb in notebooks.items()}
     package_code, plans, used = PackageCode(), dict[str, dict[str, Any]](), dict[str, Any]()
-    for name in names:
-        nb = read_notebook(layout.source_path(name))
-        after = front_matter(nb, name, toc)["after"]
-        if (cell := _parameters_cell(nb)) is None:
+    for name in execution_order(names, after):
+        nb = notebooks[name]
+        if (parameters_cell := _parameters_cell(nb)) is None:
             raise ValueError(f"notebook {name!r} has no code cell tagged 'parameters'")
-        parameters = dict(given.get(name, {}))
         nbformat.write(nb, str(converted := scratch / f"{name}.ipynb"))
-        declared = check_parameters(converted, name, parameters)
+        declared = check_parameters(converted, name, given.get(name, {}))
         applied = {key: value for key, value in overrides.items() if key in declared}
-        record = {"profile": profile, "parameters": dict(parameters), "overrides": applied}
         used |= applied
-        parameters |= applied
+        parameters = given.get(name, {}) | applied
         hashes = package_code.code_hashes(cell.source for cell in nb.cells if cell.cell_type == "code")
         for module, folder in (("softpend.study.records", "records"), ("softpend.study.presets", "hparams")):
             if module in hashes:  # the book's data files that this code reads
                 hashes |= _file_hashes(layout.root / "book" / folder, f"book/{folder}")
-        plans[name] = dict(after=after, parameters=parameters, converted=converted, hashes=hashes, record=record)
-        plans[name]["kernel"] = nb.metadata.get("kernelspec", {}).get("name", "python3")
-        plans[name]["rerun"] = rerun_section(name, cell, profile, parameters)
+        upstream = {dep: plans[dep]["key"] if dep in plans else _key_on_disk(layout, dep) for dep in after[name]}
+        plans[name] = {
+            "after": after[name],
+            "parameters": parameters,
+            "converted": converted,
+            "key": cache_key(_source_text(layout.source_path(name)), parameters, hashes, upstream),
+            "record": {"profile": profile, "parameters": given.get(name, {}), "overrides": applied},
+            "rerun": rerun_section(name, parameters_cell, profile, parameters),
+        }
     if unused := sorted(set(overrides) - set(used)):
         raise ValueError(f"override(s) {unused} are not parameters of any selected notebook ({list(names)})")
     return plans, used
 
 
-def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bool) -> None:
-    """Execute the uncached notebooks of ``order``, :data:`WORKERS` at a time, each after its ``after``; once one fails
-    no other starts, and the first error is raised when the running ones end."""
-    say = (lambda text: print(f"[book] {text}", file=sys.stderr, flush=True)) if progress else (lambda text: None)
+def _execute(layout: BookLayout, plans: dict[str, dict[str, Any]], force: bool, progress: bool) -> None:
+    """Execute the notebooks of ``plans`` whose output is not up to date (``force``: all), :data:`WORKERS` at a time,
+    each after its ``after``, and set each one's ``status``; once one fails no other starts, and the first error is
+    raised when the running ones end."""
     futures: dict[str, Future[None]] = {}
     errors: list[BaseException] = []
     slots = threading.Semaphore(WORKERS)
+
+    def say(text: str) -> None:
+        if progress:
+            print(f"[book] {text}", file=sys.stderr, flush=True)
 
     def run(name: str) -> None:  # a thread per notebook; WORKERS of them execute at once
         wait([futures[dep] for dep in plans[name]["after"] if dep in futures])
@@ -433,11 +443,14 @@ def _execute(layout: BookLayout, order: Sequence[str], plans: dict, progress: bo
                 errors.append(error)
                 say(f"{name} failed")
 
-    for name in (name for name in order if plans[name]["status"] == "cached"):
-        say(f"{name}: up to date (cached)")
-    with ThreadPoolExecutor(max_workers=max(1, len(order)), thread_name_prefix="softpend-book") as pool:
-        for name in (name for name in order if plans[name]["status"] != "cached"):
-            futures[name] = pool.submit(run, name)
+    with ThreadPoolExecutor(max_workers=max(1, len(plans)), thread_name_prefix="softpend-book") as pool:
+        for name, plan in plans.items():
+            cached = not force and layout.output_path(name).is_file() and _key_on_disk(layout, name) == plan["key"]
+            plan["status"] = "cached" if cached else "executed"
+            if cached:
+                say(f"{name}: up to date (cached)")
+            else:
+                futures[name] = pool.submit(run, name)
     if errors:
         raise errors[0]
 
@@ -453,7 +466,7 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
     start = time.perf_counter()
     try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
         where = {"metadata": {"path": str(layout.root)}}
-        options = dict(kernel_name=plan["kernel"], progress_bar=False, extra_arguments=_KERNEL_ARGS, resources=where)
+        options = dict(progress_bar=False, extra_arguments=_KERNEL_ARGS, resources=where)
         papermill.execute_notebook(str(plan["converted"]), str(output), plan["parameters"], **options)
     except PapermillExecutionError as exc:
         cells, at = nbformat.read(str(plan["converted"]), as_version=4).cells, exc.cell_index
@@ -488,13 +501,14 @@ def _processor(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     return platform.processor() or platform.machine() or "-"
 
 
+def _when(iso: Optional[str]) -> str:
+    """An ISO date and time as ``YYYY-MM-DD HH:MM:SS``; ``-`` for none."""
+    return str(iso).replace("T", " ")[:19] if iso else "-"
+
+
 def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[NotebookRun], overrides: dict) -> None:
     """Write the record of what produced ``book/_generated/`` (``execution.json``) and the execution page (MyST)."""
-    import datetime
-
     import nbformat
-
-    from softpend.io.outputs import atomic_write, json_text
 
     this_run, notebooks = {run.name: run.status for run in runs}, []
     for name in toc_notebooks(layout.toc_path):
@@ -515,14 +529,13 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
     record |= {"notebooks": notebooks, "machine": machine}
     with atomic_write(layout.record_path, "w") as handle:
         handle.write(json_text(record, indent=2) + "\n")
-    when = lambda iso: str(iso).replace("T", " ")[:19] if iso else "-"  # noqa: E731
     rows = ""
     for e in notebooks:
         title = f"{{doc}}`{_md(e['title'])} <{e['name']}>`" if e["executed_at"] else _md(e["title"])
         seconds = "-" if e["executed_s"] is None else f"{e['executed_s']:.1f}"
-        rows += f"| {title} | {e['this_run']} | {seconds} | {when(e['executed_at'])} | {_md(e['profile'])} |\n"
+        rows += f"| {title} | {e['this_run']} | {seconds} | {_when(e['executed_at'])} | {_md(e['profile'])} |\n"
     trained = (
-        f"`softpend sweep --book --profile {training['profile']}` on {when(training['date'])} UTC trained "
+        f"`softpend sweep --book --profile {training['profile']}` on {_when(training['date'])} UTC trained "
         f"{len(training['trained'])} run(s) the notebooks read (the others were there already) in "
         f"{training['seconds']:.0f} s, with {training['workers']} worker(s)."
         if training
@@ -533,7 +546,7 @@ def write_execution_record(layout: BookLayout, profile: str, runs: Sequence[Note
         handle.write(f"""(execution)=
 # Execution
 
-Written by `softpend book --profile {profile}` on {when(date)} UTC{with_overrides}. Per notebook: what this run did \
+Written by `softpend book --profile {profile}` on {_when(date)} UTC{with_overrides}. Per notebook: what this run did \
 (*executed*; *cached*: its source, parameters and the code it uses were unchanged; *not run*: not \
 selected) and its last execution. Each chapter ends with its parameters and the command that reruns it.
 

@@ -20,23 +20,8 @@ from softpend.task import Task
 
 #: A job of the pool: ``(name, (function, *arguments))``.
 Job = tuple[str, tuple[Any, ...]]
-
-
-def _order(jobs: Sequence[Job]) -> list[Job]:
-    """PILCO's runs first (the longest), then DQN-MBPO's, then DQN's; a name ends with ``<method>-seed<k>``."""
-    rank = {"pilco": 0, "mbpo": 1, "dqn": 2}
-    return sorted(jobs, key=lambda job: rank.get(job[0].rsplit("/", 1)[-1].split("-")[0], 3))
-
-
-def _jobs(
-    root: Path | str, folders: tuple[str, str], pilco_config: Any, pilco_seeds: Sequence, rl_specs: Sequence
-) -> list[Job]:
-    """The missing runs of ``pilco_config`` over ``pilco_seeds`` and of ``rl_specs`` under ``root``, in ``folders``
-    (PILCO's, the RL methods'), as pool jobs named by folder."""
-    pilco = pilco_jobs(pilco_config, pilco_seeds, Path(root, folders[0])) if pilco_config is not None else []
-    jobs = [(posixpath.join(folders[0], n), (run_and_save, *a)) for n, a in pilco]
-    jobs += [(posixpath.join(folders[1], n), (train_run, *a)) for n, a in rl_jobs(rl_specs, Path(root, folders[1]))]
-    return _order(jobs)
+#: The run sets a notebook may read (front matter ``softpend: {book_runs: [...]}``).
+BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 
 def train_in_one_pool(
@@ -47,14 +32,21 @@ def train_in_one_pool(
     return _train(_jobs(root, ("", ""), pilco_config, pilco_seeds, rl_specs), **pool)
 
 
+def _jobs(
+    root: Path | str, folders: tuple[str, str], pilco_config: Any, pilco_seeds: Sequence, rl_specs: Sequence
+) -> list[Job]:
+    """The missing runs of ``pilco_config`` over ``pilco_seeds`` and of ``rl_specs`` under ``root``, in ``folders``
+    (PILCO's, the RL methods'), as pool jobs named by folder: PILCO's first (the longest), then DQN-MBPO's, then DQN's."""
+    pilco_folder, rl_folder = folders
+    pilco = pilco_jobs(pilco_config, pilco_seeds, Path(root, pilco_folder)) if pilco_config is not None else []
+    jobs = [(posixpath.join(pilco_folder, n), (run_and_save, *a)) for n, a in pilco]
+    return jobs + [(posixpath.join(rl_folder, n), (train_run, *a)) for n, a in rl_jobs(rl_specs, Path(root, rl_folder))]
+
+
 def _train(jobs: Sequence[Job], workers: Optional[int] = None, progress: bool = True, backend=None) -> int:
     if jobs:
         run_jobs(call_job, [a for _, a in jobs], [n for n, _ in jobs], workers, progress, "training runs", backend)
     return len(jobs)
-
-
-#: The run sets a notebook may read (front matter ``softpend: {book_runs: [...]}``).
-BOOK_RUN_SETS = ("rl", "pilco", "first_seed")
 
 
 def book_run_jobs(
@@ -78,7 +70,7 @@ def book_run_jobs(
 
     def fresh(folder: str, method: str, seeds: Sequence[int]) -> list[int]:  # and claim them
         names = {seed: f"{folder}/{method}-seed{seed}" for seed in seeds}
-        kept = [seed for seed in dict.fromkeys(seeds) if names[seed] not in claimed]
+        kept = [seed for seed in seeds if names[seed] not in claimed]
         claimed.update(names.values())
         return kept
 
@@ -97,7 +89,8 @@ def book_run_jobs(
 
 
 def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
-    """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook)."""
+    """The missing runs that the toc's notebooks read under ``profile`` (:func:`book_run_jobs` per notebook), PILCO's
+    first (the longest), then DQN-MBPO's, then DQN's (a name ends with ``<method>-<hash>-seed<k>``)."""
     layout, toc, given = book_profile(root, profile)
     jobs, claimed = list[Job](), set[str]()
     for name in toc:
@@ -106,7 +99,8 @@ def book_jobs(root: Path | str = ".", profile: str = "full") -> list[Job]:
             jobs += book_run_jobs(run_sets, layout.root, given.get(name), claimed) if run_sets else []
         except ValueError as exc:
             raise ValueError(f"notebook {name!r}: {exc}") from None
-    return _order(jobs)
+    rank = {"pilco": 0, "mbpo": 1, "dqn": 2}
+    return sorted(jobs, key=lambda job: rank[job[0].rsplit("/", 1)[-1].split("-")[0]])
 
 
 def train_book(root: Path | str = ".", profile: str = "full", workers: Optional[int] = None, backend=None) -> dict:

@@ -371,9 +371,7 @@ def run_notebooks(
     with tempfile.TemporaryDirectory(prefix="softpend-book-") as scratch:
         plans, used = _plan(layout, names, toc, profile, given, dict(overrides or {}), Path(scratch))
         _execute(layout, plans, force, progress)
-    runs = [
-        NotebookRun(name, p["status"], p.get("seconds", 0.0), layout.output_path(name)) for name, p in plans.items()
-    ]
+    runs = [NotebookRun(n, p["status"], p.get("seconds", 0.0), layout.output_path(n)) for n, p in plans.items()]
     write_execution_record(layout, profile, runs, used)
     return runs
 

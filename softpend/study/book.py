@@ -465,7 +465,7 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
     try:  # nbclient starts the kernel in resources' path: papermill's own cwd= would chdir this whole process
         where = {"metadata": {"path": str(layout.root)}}
         options = dict(progress_bar=False, extra_arguments=_KERNEL_ARGS, resources=where)
-        papermill.execute_notebook(str(plan["converted"]), str(output), plan["parameters"], **options)
+        nb = papermill.execute_notebook(str(plan["converted"]), str(output), plan["parameters"], **options)
     except PapermillExecutionError as exc:
         cells, at = nbformat.read(str(plan["converted"]), as_version=4).cells, exc.cell_index
         matches = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.source == exc.source]
@@ -478,12 +478,10 @@ def _execute_one(layout: BookLayout, name: str, plan: dict[str, Any]) -> float:
         )
         raise NotebookExecutionError(message, index, number, output) from None
     seconds = time.perf_counter() - start
-    nb = nbformat.read(str(output), as_version=4)
     nb.metadata["softpend"] = plan["record"]  # read back by the execution record
-    for cell in nb.cells:
-        tags = cell.get("metadata", {}).get("tags", [])
-        if "injected-parameters" in tags and "hide-input" not in tags:
-            cell.metadata["tags"] = [*tags, "hide-input"]
+    for cell in nb.cells:  # papermill gives every cell a list of tags
+        if "injected-parameters" in cell.metadata.tags:
+            cell.metadata.tags.append("hide-input")
     nb.cells.append(nbformat.v4.new_markdown_cell(plan["rerun"]))
     nbformat.write(nb, str(output))
     key_path.write_text(plan["key"] + "\n", encoding="utf-8")

@@ -11,6 +11,7 @@ from browser import chromium_executable
 
 from softpend.study import book
 from softpend.study.book import build_html, run_notebooks
+from softpend.study.run_pool import train_book
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,8 +21,9 @@ _CHROMIUM: list[Future] = []
 
 @pytest.fixture(scope="session")
 def quick_book(tmp_path_factory):
-    """The whole book built once per test session with the quick profile, in a temporary copy of the project
-    (so neither ``_build`` nor ``book/_generated`` of the working tree is touched): ``(root, runs, html_dir)``."""
+    """The whole book built once per test session with the quick profile as ``make book PROFILE=quick`` builds it
+    (training step, notebooks, HTML), in a temporary copy of the project (so neither ``_build`` nor
+    ``book/_generated`` of the working tree is touched): ``(root, runs, html_dir)``."""
     # others edit the package while the tests run: hash each notebook's code once, so the cache check of
     # tests/test_book.py is stable
     # (only softpend's own code: other tests hash packages of their own, which must be read every time)
@@ -65,6 +67,8 @@ def _build_quick_book(root: Path):
     (root / "kernel-tmp").mkdir()
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("TMPDIR", str(root / "kernel-tmp"))
+        # as `make book` does: the training step first (each run once, in one pool), then the notebooks
+        train_book(root, profile="quick")
         runs = run_notebooks(root, profile="quick", progress=False)
     html_dir = build_html(root, quiet=True)
     return root, runs, html_dir

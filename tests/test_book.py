@@ -54,6 +54,10 @@ def test_execution_page_is_in_the_book_and_lists_every_notebook(quick_book):
     for run in runs:  # each notebook's row links to its page
         assert f'href="{run.name}.html"' in page.read_text(encoding="utf-8"), run.name
     assert "--profile quick" in text and "environment.lock" in text and "CPU cores" in text and "processor" in text
+    # the training step of the build (the fixture trains as `make book` does) is on the page, with what it trained
+    training = json.loads(BookLayout.at(root).training_path.read_text())
+    assert training["profile"] == "quick" and training["trained"], training
+    assert "softpend sweep --book --profile quick" in text and f"{len(training['trained'])} run(s)" in text
 
 
 def test_every_chapter_ends_with_its_generated_rerun_section(quick_book):

@@ -102,9 +102,9 @@ def test_a_tiny_unknown_rod_is_commissioned_resumed_after_an_interruption_and_it
     jobs: list[str] = []
     spawn = twin_side.on_twin_side
 
-    def counted(function, *args):
+    def counted(twin, function, *args):
         jobs.append(function.__name__)
-        return spawn(function, *args)
+        return spawn(twin, function, *args)
 
     monkeypatch.setattr(commission_module, "on_twin_side", counted)
     truth = TwinTruth(rod_file=str(rod_file))

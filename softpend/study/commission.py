@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -25,7 +26,15 @@ import numpy as np
 from softpend.checks import in_range, instance_of, int_at_least, one_of, positive, set_ints
 from softpend.envs.randomised import RodUncertainty
 from softpend.plant import RodParams
-from softpend.study.twin_side import CONDITIONS, TwinTruth, excite_on_twin, on_twin_side, truth_errors, verify_on_twin
+from softpend.study.twin_side import (
+    CONDITIONS,
+    TwinTruth,
+    excite_on_twin,
+    on_twin_side,
+    truth_errors,
+    twin_process,
+    verify_on_twin,
+)
 from softpend.study.unknown_rod import UNKNOWN_FIELDS
 from softpend.sysid.babble import PROGRAMS
 
@@ -171,11 +180,11 @@ OUTPUTS = {stage: f"{stage}/{stage}.json" for stage in STAGES} | {
 class _Run:
     """One commissioning folder: its stage files, planned and checked before any work."""
 
-    def __init__(self, out: Path, truth: TwinTruth, config: CommissionConfig) -> None:
+    def __init__(self, out: Path, truth: TwinTruth, config: CommissionConfig, twin: Executor) -> None:
         from softpend.io.outputs import Outputs
         from softpend.io.reading import read_json_checked
 
-        self.out, self.truth, self.config, self.outputs = out, truth, config, Outputs()
+        self.out, self.truth, self.config, self.outputs, self.process = out, truth, config, Outputs(), twin
         for relative in (SETTINGS_FILE, "excite/rig_dataset.npz", *OUTPUTS.values()):
             self.outputs.folder((out / relative).parent, ((out / relative).name,), what="--out")
         settings, path = {"twin": truth.to_dict(), "config": asdict(config)}, out / SETTINGS_FILE
@@ -197,7 +206,7 @@ class _Run:
 
     def twin(self, function: Callable[..., Any], *args: Any) -> Any:
         """``function(truth, private folder, *args)`` on the twin's side."""
-        return on_twin_side(function, self.truth, str(self.out / "twin"), *args)
+        return on_twin_side(self.process, function, self.truth, str(self.out / "twin"), *args)
 
 
 def _excite(run: _Run) -> dict:
@@ -417,16 +426,17 @@ def commission(
     ``on_stage(stage, ran, output)`` is told of every stage, ``ran`` False for one kept from an earlier run.
     ``out`` holding another commissioning's settings is a ``ValueError``."""
     config = instance_of("config", config if config is not None else CommissionConfig(), CommissionConfig)
-    run = _Run(Path(out), instance_of("truth", truth, TwinTruth), config)
     output: dict = {}
-    for stage in STAGES:
-        ran = not run.path(stage).is_file()
-        if ran:
-            output = _STAGE_WORK[stage](run)
-            run.outputs.write_json(run.path(stage), output)
-        output = run.read(stage)
-        if on_stage is not None:
-            on_stage(stage, ran, output)
+    with twin_process() as twin:  # one child for the stages that run on the twin's side
+        run = _Run(Path(out), instance_of("truth", truth, TwinTruth), config, twin)
+        for stage in STAGES:
+            ran = not run.path(stage).is_file()
+            if ran:
+                output = _STAGE_WORK[stage](run)
+                run.outputs.write_json(run.path(stage), output)
+            output = run.read(stage)
+            if on_stage is not None:
+                on_stage(stage, ran, output)
     return output
 
 

@@ -50,12 +50,15 @@ class TwinTruth:
         return asdict(self) | draw
 
 
-def on_twin_side(function: Callable[..., Any], *args: Any) -> Any:
-    """``function(*args)`` in a spawned child process (a fresh interpreter: nothing of this process's state goes
-    along but ``args``); its exceptions are raised here."""
-    context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
-        return pool.submit(function, *args).result()
+def twin_process() -> concurrent.futures.ProcessPoolExecutor:
+    """The twin's side: one spawned child process (a fresh interpreter: nothing of this process's state goes
+    along but the arguments of each call), started at the first call and kept for the next ones."""
+    return concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+
+
+def on_twin_side(twin: concurrent.futures.Executor, function: Callable[..., Any], *args: Any) -> Any:
+    """``function(*args)`` in the ``twin`` process (:func:`twin_process`); its exceptions are raised here."""
+    return twin.submit(function, *args).result()
 
 
 def _resolve(truth: TwinTruth, private: Path, outputs: Any) -> UnknownRod:

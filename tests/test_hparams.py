@@ -8,22 +8,25 @@ import yaml
 from softpend.control.planner import PlannerConfig
 from softpend.pilco import PilcoConfig
 from softpend.rl.config import DQNConfig, MBPOConfig
-from softpend.study.presets import CONFIG_CLASSES, HPARAMS_DIR, load_hparams
+from softpend.study.presets import CONFIG_CLASSES, HPARAMS_DIR, load_hparams, load_settings
 from softpend.task import Task
 
 #: The settings files that list the settings they run with in full, defaults included.
 LISTS_DEFAULTS = {"planner"}
+#: Every settings file's config class: the book's training methods, and the planner.
+SETTINGS = {**CONFIG_CLASSES, "planner": PlannerConfig}
 
 
-@pytest.mark.parametrize("method", sorted(CONFIG_CLASSES))
+@pytest.mark.parametrize("method", sorted(SETTINGS))
 def test_every_setting_in_a_file_is_a_field_of_its_config_and_is_applied(method):
-    cls = CONFIG_CLASSES[method]
+    cls = SETTINGS[method]
     data = yaml.safe_load((HPARAMS_DIR / f"{method}.yml").read_text())
     assert isinstance(data, dict) and data
     fields = {f.name for f in dataclasses.fields(cls)}
     assert set(data) <= fields - {"task"}
-    config = load_hparams(method)
+    config = load_settings(cls, HPARAMS_DIR / f"{method}.yml")
     assert type(config) is cls
+    assert method == "planner" or load_hparams(method) == config
     _assert_applied(config, cls(), data, may_repeat=method in LISTS_DEFAULTS)
 
 
@@ -44,7 +47,8 @@ def _assert_applied(config, default, data, prefix="", may_repeat=False):
 
 
 def test_the_classes_and_the_files():
-    assert CONFIG_CLASSES == {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig, "planner": PlannerConfig}
+    assert CONFIG_CLASSES == {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
+    assert sorted(path.stem for path in HPARAMS_DIR.glob("*.yml")) == sorted(SETTINGS)
 
 
 def test_an_unknown_setting_is_a_one_line_error_naming_it_and_the_file(tmp_path):

@@ -21,7 +21,7 @@ from softpend.control.planner import (
     run_planner,
 )
 from softpend.plant import PRBPlant, RodParams
-from softpend.study.presets import load_hparams
+from softpend.study.data_efficiency import planner_config
 from softpend.task import Task
 
 
@@ -215,9 +215,9 @@ def test_bad_settings_are_refused_naming_the_field(changes, field):
 
 
 def test_settings_file_is_read_and_checked(tmp_path):
-    config = load_hparams("planner")
+    config = planner_config(Task())
     assert len([f for f in config.__dataclass_fields__]) <= 20
     bad = tmp_path / "planner.yml"
     bad.write_text("horizon_seconds: 1.0\n")
-    with pytest.raises(ValueError, match="planner.yml"):
-        load_hparams("planner", path=bad)
+    with pytest.raises(ValueError, match="planner.yml: 'horizon_seconds' is not a PlannerConfig setting"):
+        planner_config(Task(), hparams=bad)

@@ -10,14 +10,14 @@ import numpy as np
 import torch
 
 from softpend.control.identified import RouteConfig, design_swingup, identify_until_robust, simulated_recorder
-from softpend.control.planner import fresh_start_evaluation, run_planner
+from softpend.control.planner import PlannerConfig, fresh_start_evaluation, run_planner
 from softpend.evaluation import TEST_EPISODE_S, evaluate
 from softpend.plant import RodParams
 from softpend.stats import aggregate_interval
 from softpend.study.fresh_starts import fresh_start_row, pilco_fresh_start_rows, seed_rows
 from softpend.study.greybox import perturbed_guess
 from softpend.study.head_to_head import pilco_jobs, pilco_runs
-from softpend.study.presets import REPORT_SEEDS, SELECTION_SEEDS, load_hparams
+from softpend.study.presets import HPARAMS_DIR, REPORT_SEEDS, SELECTION_SEEDS, load_hparams, load_settings
 from softpend.sysid.greybox import GreyBoxConfig, identify
 from softpend.task import Task
 from softpend.torch_threads import one_torch_thread
@@ -199,7 +199,8 @@ def planner_config(
 ) -> Any:
     """The ``PlannerConfig`` on ``task``: ``hparams`` (default ``book/hparams/planner.yml``), then ``overrides``;
     trials from the first 16 selection starts."""
-    return load_hparams("planner", task, overrides, hparams).replace(selection_seeds=SELECTION_SEEDS[:16])
+    path = hparams if hparams is not None else HPARAMS_DIR / "planner.yml"
+    return load_settings(PlannerConfig, path, task, overrides).replace(selection_seeds=SELECTION_SEEDS[:16])
 
 
 def planner_rows(

@@ -8,7 +8,6 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Optional
 
-from softpend.control.planner import PlannerConfig
 from softpend.io.overrides import Overrides, apply_overrides
 from softpend.io.reading import read_yaml_checked
 from softpend.pilco.loop import PilcoConfig
@@ -18,11 +17,12 @@ from softpend.task import Task
 #: The task of every figure: the default rod on the PRB plant, hanging starts.
 TASK = Task()
 
-#: The folder of the tuned settings, one YAML file per method of :data:`CONFIG_CLASSES` (``<method>.yml``).
+#: The folder of the tuned settings, one YAML file per method (``<method>.yml``).
 HPARAMS_DIR = Path(__file__).resolve().parents[2] / "book" / "hparams"
 
-#: The config class of each method of :func:`load_hparams`.
-CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig, "planner": PlannerConfig}
+#: The config class of each method of :func:`load_hparams` (the planner's file is read by
+#: :func:`softpend.study.data_efficiency.planner_config`: the figures that read these presets do not use its code).
+CONFIG_CLASSES: dict[str, type] = {"dqn": DQNConfig, "mbpo": MBPOConfig, "pilco": PilcoConfig}
 
 
 def load_hparams(
@@ -31,12 +31,19 @@ def load_hparams(
     overrides: Optional[Overrides] = None,
     path: Optional[Path | str] = None,
 ) -> Any:
-    """The config the book trains ``method`` with: the defaults, the settings file ``path`` (default
-    ``<HPARAMS_DIR>/<method>.yml``), ``task`` (default :data:`TASK`), then ``overrides``; ``ValueError`` naming the
-    file for an unknown field or a non-mapping."""
+    """The config the book trains ``method`` with: :func:`load_settings` of its class from the settings file
+    ``path`` (default ``<HPARAMS_DIR>/<method>.yml``)."""
     if (cls := CONFIG_CLASSES.get(method)) is None:
         raise ValueError(f"unknown method {method!r}; known: {sorted(CONFIG_CLASSES)}")
-    path = Path(path) if path is not None else HPARAMS_DIR / f"{method}.yml"
+    return load_settings(cls, path if path is not None else HPARAMS_DIR / f"{method}.yml", task, overrides)
+
+
+def load_settings(
+    cls: type, path: Path | str, task: Optional[Task] = None, overrides: Optional[Overrides] = None
+) -> Any:
+    """``cls``'s defaults, then the settings file ``path``, ``task`` (default :data:`TASK`) and ``overrides``;
+    ``ValueError`` naming the file for an unknown field or a non-mapping."""
+    path = Path(path)
     try:
         data = read_yaml_checked(path, "settings file") or {}
     except OSError as exc:

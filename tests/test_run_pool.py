@@ -102,6 +102,23 @@ def test_a_folder_an_earlier_notebook_reads_is_left_to_it(tmp_path):
     assert [plain(name) for name, _ in rig] == ["runs/p/pilco-seed0"]
 
 
+def test_a_seed_listed_twice_is_one_run(tmp_path):
+    """Two jobs for one folder would train the same run twice, at once, in two workers."""
+    jobs = book_run_jobs(["rl", "pilco"], tmp_path, {"seeds": [1, 1, 0], "pilco_seeds": [2, 2], "runs_root": "runs/q"})
+    names = [plain(name) for name, _ in jobs]
+    assert (
+        sorted(names)
+        == sorted(set(names))
+        == [
+            "runs/pilco-book/pilco-seed2",
+            "runs/q/dqn-seed0",
+            "runs/q/dqn-seed1",
+            "runs/q/mbpo-seed0",
+            "runs/q/mbpo-seed1",
+        ]
+    )
+
+
 def test_the_book_runs_of_a_profile_are_those_its_notebooks_train(tmp_path):
     """``softpend sweep --book --profile quick`` trains the quick runs with the settings Figures 4 and 10 use under
     that profile (so that the notebooks find them finished): each folder once, the first notebook's settings."""

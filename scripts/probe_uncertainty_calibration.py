@@ -7,7 +7,8 @@ the tuning records only, then its coverage is measured on the HELD-OUT records; 
 the 5 % target on some parameter is reported and left out of the calibration (no scale of its deviation covers it).
 
     .venv/bin/python scripts/probe_uncertainty_calibration.py --out book/records/NAME.json \
-        --tuning book/records/commission_probe.json ... --held-out book/records/commission_unseen_rods_9201_9205.json
+        --tuning book/records/commission_probe.json ... --held-out book/records/commission_unseen_rods_9201_9205.json \
+        --compare-scale 2
 """
 
 import argparse
@@ -19,8 +20,6 @@ from softpend.study.records import load_record, record_text
 
 #: The identification's accuracy target (relative error); a rod beyond it on any parameter failed its identification.
 TARGET_ERROR = 0.05
-#: The scale the commissioning draws with today (``CommissionConfig.uncertainty_scale``).
-CURRENT_SCALE = 2.0
 
 
 def rod_rows(path: str, role: str) -> list[dict]:
@@ -54,6 +53,7 @@ def main() -> None:
     parser.add_argument("--out", required=True, help="the record to write (JSON)")
     parser.add_argument("--tuning", nargs="+", required=True, help="records the scale is calibrated on")
     parser.add_argument("--held-out", nargs="+", required=True, help="records its coverage is measured on")
+    parser.add_argument("--compare-scale", type=float, required=True, help="the scale to compare it with")
     args = parser.parse_args()
     outputs = Outputs()
     outputs.file(Path(args.out))
@@ -64,21 +64,22 @@ def main() -> None:
     judged = [row for row in held_out if row["identified_within_target"]]
     figures = {
         "calibrated_scale": scale,
-        "current_scale": CURRENT_SCALE,
+        "compared_scale": args.compare_scale,
         "tuning_rods": len(calibrated_on),
         "tuning_rods_failed_identification": len(tuning) - len(calibrated_on),
         "tuning_max_z": max(row["max_z"] for row in calibrated_on),
         "held_out_rods": len(judged),
         "held_out_rods_failed_identification": len(held_out) - len(judged),
         "held_out_max_z": max(row["max_z"] for row in judged),
-        "held_out_covered_at_current_scale": coverage(judged, CURRENT_SCALE)[0],
+        "held_out_covered_at_compared_scale": coverage(judged, args.compare_scale)[0],
         "held_out_covered_at_calibrated_scale": coverage(judged, scale)[0],
     }
     record = {
         "title": "identification uncertainty: errors in standard deviations, the scale that covers them",
         "command": "scripts/probe_uncertainty_calibration.py --out "
-        + f"{args.out} --tuning {' '.join(args.tuning)} --held-out {' '.join(args.held_out)}",
-        "settings": {"target_error": TARGET_ERROR, "current_scale": CURRENT_SCALE},
+        + f"{args.out} --tuning {' '.join(args.tuning)} --held-out {' '.join(args.held_out)} "
+        + f"--compare-scale {args.compare_scale:g}",
+        "settings": {"target_error": TARGET_ERROR},
         "figures": figures,
         "rows": tuning + held_out,
     }

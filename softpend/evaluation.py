@@ -76,15 +76,13 @@ def metrics_from_trajectory(
     after = theta[start_index if start_index is not None else len(theta) // 2 :]
     swing_up_time = float(t[start_index] - t[0]) if start_index is not None else math.inf
     upright_std = float(np.sqrt(np.mean(after**2)))
-    peak, energy = float(np.max(np.abs(torque))), float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt)
-    success = bool(start_index is not None and upright_std <= success_std_rad)
     return {
         "swing_up_time_s": swing_up_time,
         "upright_std_rad": upright_std,
         "upright_mean_abs_rad": float(np.mean(np.abs(after))),
-        "peak_torque_nm": peak,
-        "energy_used_j": energy,
-        "success": success,
+        "peak_torque_nm": float(np.max(np.abs(torque))),
+        "energy_used_j": float(np.sum(np.abs(torque[:-1] * phi_dot[:-1])) * dt),
+        "success": bool(start_index is not None and upright_std <= success_std_rad),
     }
 
 
@@ -142,8 +140,14 @@ class EvaluationSummary:
     def row(self) -> dict[str, Any]:
         """One table row: medians over seeds plus the success rate and its Wilson 95 % interval."""
         low, high = wilson_interval(self.successes, len(self.results))
-        row = dict(controller=self.name, seeds=len(self.results), success_rate=self.success_rate, success_low=low)
-        return row | {"success_high": high, **{name: self.median(name) for name in _METRICS[:-1]}}
+        return {
+            "controller": self.name,
+            "seeds": len(self.results),
+            "success_rate": self.success_rate,
+            "success_low": low,
+            "success_high": high,
+            **{name: self.median(name) for name in _METRICS[:-1]},
+        }
 
 
 #: Metrics of an episode that ends before its second sample (a plant that diverged on the first step).

@@ -413,9 +413,10 @@ def check_pilco_size(config: PilcoConfig) -> None:
     rollout = 8.0 * config.n_prediction_steps * dim * dim * config.gp.max_points**2
     policy = 8.0 * config.n_prediction_steps * config.policy.n_basis * (config.gp.max_points + dim) * dim
     evaluation = 8.0 * 20 * len(config.eval_seeds) * (config.eval_duration_s / config.task.dt_s + 1)
-    detail = f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.gp.max_points}**2 GP points, "
-    detail += f"{config.policy.n_basis} basis functions, {len(config.eval_seeds)} evaluation episodes of "
-    check_work_size("this PILCO run", rollout + policy + evaluation, f"{detail}{config.eval_duration_s:g} s")
+    steps = f"{config.n_prediction_steps} prediction steps x {dim}**2 outputs x {config.gp.max_points}**2 GP points"
+    policy_size = f"{config.policy.n_basis} basis functions"
+    episodes = f"{len(config.eval_seeds)} evaluation episodes of {config.eval_duration_s:g} s"
+    check_work_size("this PILCO run", rollout + policy + evaluation, f"{steps}, {policy_size}, {episodes}")
 
 
 def run_pilco(

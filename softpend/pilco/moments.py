@@ -146,7 +146,8 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
     n = mean.shape[0]
     var = torch.diagonal(cov)
     decay = torch.exp(-0.5 * var)
-    e_sin, e_cos = decay * torch.sin(mean), decay * torch.cos(mean)
+    e_sin = decay * torch.sin(mean)
+    e_cos = decay * torch.cos(mean)
     if n == 1:  # one angle (the propagation's case, twice per step): the formulas below with fewer operations
         plus = 1.0 - decay * decay
         minus = (decay * decay - 1.0) * decay * decay
@@ -156,10 +157,17 @@ def trig_moments(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, t
         return torch.cat([e_sin, e_cos]), s_out, torch.stack([e_cos, -e_sin], dim=1)
     lq = -0.5 * (var.unsqueeze(1) + var.unsqueeze(0))
     q = torch.exp(lq)
-    plus, minus = torch.exp(lq + cov) - q, torch.exp(lq - cov) - q
-    diff, summ = mean.unsqueeze(1) - mean.unsqueeze(0), mean.unsqueeze(1) + mean.unsqueeze(0)
-    u1, u2, u3, u4 = plus * torch.sin(diff), minus * torch.sin(summ), plus * torch.cos(diff), minus * torch.cos(summ)
-    ss, cc, sc = 0.5 * (u3 - u4), 0.5 * (u3 + u4), 0.5 * (u1 + u2)  # sc: cov(sin a_i, cos a_j)
+    plus = torch.exp(lq + cov) - q
+    minus = torch.exp(lq - cov) - q
+    diff = mean.unsqueeze(1) - mean.unsqueeze(0)
+    summ = mean.unsqueeze(1) + mean.unsqueeze(0)
+    u1 = plus * torch.sin(diff)
+    u2 = minus * torch.sin(summ)
+    u3 = plus * torch.cos(diff)
+    u4 = minus * torch.cos(summ)
+    ss = 0.5 * (u3 - u4)
+    cc = 0.5 * (u3 + u4)
+    sc = 0.5 * (u1 + u2)  # cov(sin a_i, cos a_j)
     s_out = torch.stack([torch.stack([ss, sc], dim=2), torch.stack([sc.T, cc], dim=2)], dim=1)  # (A, 2, A, 2)
     s_out = s_out.reshape(2 * n, 2 * n)
     m_out = torch.stack([e_sin, e_cos], dim=1).reshape(2 * n)
@@ -175,7 +183,9 @@ def sin_saturation_moments(
     e = lambda k: torch.exp(-0.5 * k * k * var)  # noqa: E731  (E[cos kx] = e(k) cos(k m))
     a = limit / 8.0
     m_u = a * (9.0 * e(1.0) * torch.sin(mean) + e(3.0) * torch.sin(3.0 * mean))
-    cos2, cos4, cos6 = [e(k) * torch.cos(k * mean) for k in (2.0, 4.0, 6.0)]
+    cos2 = e(2.0) * torch.cos(2.0 * mean)
+    cos4 = e(4.0) * torch.cos(4.0 * mean)
+    cos6 = e(6.0) * torch.cos(6.0 * mean)
     second = a * a * (40.5 * (1.0 - cos2) + 9.0 * (cos2 - cos4) + 0.5 * (1.0 - cos6))
     s_u = torch.clamp(second - m_u * m_u, min=0.0)
     c_u = a * (9.0 * e(1.0) * torch.cos(mean) + 3.0 * e(3.0) * torch.cos(3.0 * mean))
@@ -194,5 +204,6 @@ def saturating_cost_moments(
     s1 = w @ _inv(sw)
     e_exp = torch.exp(-0.5 * delta @ s1 @ delta) / torch.sqrt(torch.linalg.det(sw))
     s2w = 2.0 * cov @ w + eye
-    e2 = torch.exp(-delta @ (w @ _inv(s2w)) @ delta) / torch.sqrt(torch.linalg.det(s2w))
+    s2 = w @ _inv(s2w)
+    e2 = torch.exp(-delta @ s2 @ delta) / torch.sqrt(torch.linalg.det(s2w))
     return 1.0 - e_exp, torch.clamp(e2 - e_exp * e_exp, min=0.0)

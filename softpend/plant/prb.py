@@ -100,12 +100,15 @@ class PRBPlant(PlantBase):
     def set_joint_forces(self, forces: np.ndarray) -> None:
         """Generalised joint forces (torques) [N m] applied during the following steps."""
         self._forces[:] = forces
-        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
+        self._apply_forces()
 
     def _set_torque(self, torque_nm: float) -> None:
         if not self.hub_locked:
             self._forces[0] = torque_nm
-            self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
+            self._apply_forces()
+
+    def _apply_forces(self) -> None:
+        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._forces)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q, q_dot)`` [rad, rad/s] (copies; hub angle unwrapped)."""

@@ -384,8 +384,9 @@ def check_run_size(config: DQNConfig, observation_dim: int) -> None:
     plant_steps = config.episode_agent_steps * config.action_repeat + 1
     eval_steps = len(config.eval_seeds) * (config.eval_duration_s / config.dt_s + 1)
     records = 8 * (len(OBSERVATION_NAMES) + 2) * 2 * (plant_steps + eval_steps)
-    sizes = f"replay buffers {buffers / 2**20:.3g} MiB, networks {networks / 2**20:.3g} MiB, episode and evaluation "
-    check_work_size("this training run", buffers + networks + records, f"{sizes}records {records / 2**20:.3g} MiB")
+    sizes = [f"replay buffers {buffers / 2**20:.3g} MiB", f"networks {networks / 2**20:.3g} MiB"]
+    sizes.append(f"episode and evaluation records {records / 2**20:.3g} MiB")
+    check_work_size("this training run", buffers + networks + records, ", ".join(sizes))
 
 
 def _saved_run_seed(run_dir: Path) -> Optional[int]:

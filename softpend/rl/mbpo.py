@@ -184,7 +184,8 @@ class MBPOTrainer:
             finite = np.all(np.isfinite(plant), axis=1) & np.isfinite(reward)
             plant[~finite] = 0.0
             next_vec = observation_vector(plant, np.asarray(bonus), env)
-            alive &= finite if box is None else finite & np.all((next_vec >= box[0]) & (next_vec <= box[1]), axis=1)
+            inside = finite if box is None else finite & np.all((next_vec >= box[0]) & (next_vec <= box[1]), axis=1)
+            alive &= inside
             if not alive.any():
                 break
             buffer.add_model_transitions(vec[alive], next_vec[alive], actions[alive], reward[alive])

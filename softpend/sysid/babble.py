@@ -177,8 +177,13 @@ def _run_trial(plant: Any, protocol: BabbleProtocol, rng: np.random.Generator) -
     raw = np.empty((n + 1, 5))
     clock = np.arange(delay, delay + n + 1)  # encoder and torque clock
     i_phi, i_theta, i_ex, i_ey, i_er = range(5)
-    noise = {i_phi: protocol.phi_noise_std_rad, i_ex: protocol.tip_noise_std_m, i_ey: protocol.tip_noise_std_m}
-    for i, std in (noise | {i_er: protocol.er_noise_std_rad}).items():  # the encoder on the torque's clock
+    noise_std = {
+        i_phi: protocol.phi_noise_std_rad,
+        i_ex: protocol.tip_noise_std_m,
+        i_ey: protocol.tip_noise_std_m,
+        i_er: protocol.er_noise_std_rad,
+    }
+    for i, std in noise_std.items():  # drawn in this order; the encoder on the torque's clock
         raw[:, i] = obs[clock if i == i_phi else slice(n + 1), i] + std * rng.standard_normal(n + 1)
     raw[:, i_theta] = np.arctan2(-raw[:, i_ex], raw[:, i_ey])
     angle_mask = np.array([is_angle(x) for x in POSITION_NAMES])

@@ -4,7 +4,7 @@ for DQN and DQN-MBPO every field of every episode and evaluation record is compa
 seconds excepted), and the tensors of the final and best agents (and of DQN-MBPO's dynamics model); for PILCO every
 field of every trial record (but the measured seconds), the GP hyperparameters and the policy tensors.
 
-    .venv/bin/python scripts/compare_runs.py --old OLD_ROOT --new NEW_ROOT --out book/records/NAME.json \
+    .venv/bin/python scripts/probe_compare_runs.py --old OLD_ROOT --new NEW_ROOT --out book/records/NAME.json \
         [--seeds 0 1 ...] [--note "what OLD and NEW were trained from"]
 """
 
@@ -116,7 +116,7 @@ def main() -> None:
     identical = [r for r in rows if r["differing_fields"] == 0 and r["weights_equal"]]
     record = {
         "title": "the book's runs trained twice: episode for episode (" + args.note + ")",
-        "command": f"scripts/compare_runs.py --old {args.old} --new {args.new} --out {args.out} "
+        "command": f"scripts/probe_compare_runs.py --old {args.old} --new {args.new} --out {args.out} "
         + f"--seeds {' '.join(map(str, args.seeds))}",
         "settings": {"seeds": " ".join(map(str, args.seeds))},
         "figures": {"runs": len(rows), "runs_identical": len(identical)},
